@@ -1,0 +1,79 @@
+"""Turning the caller's arrays into device arrays and back.
+
+Every op takes numpy arrays (and returns numpy) or ``pyopencl.array.Array``
+(and returns device arrays on the same queue, with no host round trip).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+
+from . import runtime
+
+
+def is_device(x) -> bool:
+    return isinstance(x, cla.Array)
+
+
+def resolve_queue(queue, **arrays) -> cl.CommandQueue:
+    """The queue to run on: `queue`, else the first device array's, else the default.
+    Every device array must live in that queue's context."""
+    dev = [(k, a) for k, a in arrays.items() if is_device(a)]
+    if queue is None:
+        queue = dev[0][1].queue if dev else runtime.default_queue()
+        if queue is None:
+            raise ValueError(f"{dev[0][0]}: the device array has no queue; pass queue=")
+    elif not isinstance(queue, cl.CommandQueue):
+        raise TypeError(f"queue: expected a pyopencl.CommandQueue, got {type(queue).__name__}")
+    for name, a in dev:
+        if a.context.int_ptr != queue.context.int_ptr:
+            raise ValueError(f"{name}: the device array belongs to another OpenCL context than the queue")
+    return queue
+
+
+def _dtype_names(dtypes) -> str:
+    return ", ".join(np.dtype(d).name for d in dtypes)
+
+
+def check_array(name: str, x, dtypes=None, ndim=None, min_ndim=None):
+    """Check dtype and rank; returns x (a device array) or a C-contiguous numpy array."""
+    if not is_device(x):
+        if isinstance(x, (str, bytes)) or x is None:
+            raise TypeError(f"{name}: expected an array, got {type(x).__name__}")
+        x = np.asarray(x)
+    if dtypes is not None and np.dtype(x.dtype) not in [np.dtype(d) for d in dtypes]:
+        raise TypeError(f"{name}: dtype {np.dtype(x.dtype).name} is not supported; "
+                        f"expected one of {_dtype_names(dtypes)}")
+    if ndim is not None and x.ndim != ndim:
+        raise ValueError(f"{name}: expected a {ndim}-D array, got shape {tuple(x.shape)}")
+    if min_ndim is not None and x.ndim < min_ndim:
+        raise ValueError(f"{name}: expected at least {min_ndim}-D, got shape {tuple(x.shape)}")
+    if is_device(x):
+        if not x.flags.c_contiguous:
+            raise ValueError(f"{name}: the device array is not C-contiguous")
+    else:
+        x = np.ascontiguousarray(x)
+    return x
+
+
+def to_device(queue, name: str, x) -> cla.Array:
+    """x (checked) on the device: device arrays as they are, numpy copied in."""
+    if is_device(x):
+        if x.offset:
+            x = x.copy()        # kernels take whole buffers; a view with an offset is copied once
+        return x
+    d = runtime.empty(queue, x.shape, x.dtype, name)
+    if x.size:
+        d.set(x, queue=queue)
+    return d
+
+
+def buf(a: cla.Array):
+    """The cl.Buffer behind a device array (None for an empty array)."""
+    return a.base_data if a.size else None
+
+
+def result(a: cla.Array, host: bool):
+    return a.get() if host else a

@@ -1,0 +1,38 @@
+"""clvis exceptions.
+
+Every error clvis raises on purpose is a :class:`ClvisError` (or, for a wrong
+argument type or value, a :class:`TypeError` / :class:`ValueError` naming the
+argument). Catch ``ClvisError`` to handle all of clvis's own failures.
+"""
+
+
+class ClvisError(Exception):
+    """Base class of clvis's errors."""
+
+
+class KernelBuildError(ClvisError):
+    """An OpenCL program failed to build.
+
+    Attributes: ``path`` (the ``.cl`` file), ``defines`` (dict of ``-D``
+    defines), ``device`` (name) and ``log`` (the driver's build log).
+    """
+
+    def __init__(self, path, defines, device, log):
+        self.path = str(path)
+        self.defines = dict(defines)
+        self.device = device
+        self.log = log
+        flags = " ".join(f"-D{k}={v}" for k, v in sorted(self.defines.items()))
+        super().__init__(
+            f"building {self.path} for {device} failed (defines: {flags or 'none'})\n"
+            f"--- build log ---\n{log.strip()}"
+        )
+
+
+class DeviceError(ClvisError):
+    """No usable device, or a request beyond what the device can do."""
+
+
+class DataError(ClvisError, ValueError):
+    """Input data that clvis cannot use (malformed files, keys outside a promised
+    range, ...). Also a ValueError, so code that catches bad values catches it."""

@@ -1,0 +1,534 @@
+"""Device choice, capabilities, program cache, allocation and launch helpers.
+
+Device choice (first that applies):
+
+1. ``CLVIS_DEVICE``: an index into :func:`devices` (as ``clvis info`` numbers
+   them) or a case-insensitive substring of "platform name device name";
+2. ``PYOPENCL_CTX``, with pyopencl's own meaning;
+3. the first GPU;
+4. PoCL's CPU device;
+5. any device.
+
+Programs are built from ``kernels_cl/<family>/<file>.cl`` with
+``-I kernels_cl/include`` and ``-D`` defines only. Built programs are cached in
+the process per (context, file, options) and on disk per (device, driver,
+sources including every included header, options) under ``CLVIS_CACHE_DIR``
+(default ``$XDG_CACHE_HOME/clvis`` or ``~/.cache/clvis``; ``CLVIS_CACHE=0``
+turns the disk cache off).
+
+Options (:func:`configure`, or the environment at import):
+
+- ``tuning``: ``None`` (by device type), ``"cpu"`` or ``"gpu"``: which set of
+  ``-D`` work shapes the families build with (``CLVIS_TUNING``). Both give the
+  same results; tests run both on every device.
+- ``int64_atomics``: ``False`` builds every kernel as if the device lacked
+  ``cl_khr_int64_base_atomics``/``cl_khr_int64_extended_atomics``, so fallback
+  paths can be tested on devices that have them (``CLVIS_NO_INT64_ATOMICS=1``).
+- ``max_alloc_bytes``: a cap on one allocation, below the device's own limit,
+  to emulate a smaller device (``CLVIS_MAX_ALLOC``).
+- ``disk_cache``, ``cache_dir``: the on-disk program cache.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import hashlib
+import os
+import re
+import threading
+from pathlib import Path
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+import pyopencl.tools
+
+from ._version import __version__
+from .errors import ClvisError, DeviceError, KernelBuildError
+
+__all__ = [
+    "Capabilities", "Options", "KERNEL_ROOT", "INCLUDE_DIR", "capabilities",
+    "configure", "default_queue", "describe", "devices", "get_kernel",
+    "options", "queue_for", "select_device", "set_default_device",
+    "set_options", "tuning_profile",
+]
+
+
+# --------------------------------------------------------------------------
+# kernel sources
+
+def _find_kernel_root() -> Path:
+    here = Path(__file__).resolve().parent
+    # installed wheel: clvis/kernels_cl; source checkout: <repo>/kernels_cl
+    for cand in (here / "kernels_cl", here.parent / "kernels_cl"):
+        if (cand / "include" / "clvis").is_dir():
+            return cand
+    raise ClvisError(f"clvis's OpenCL sources (kernels_cl/) were not found beside {here}")
+
+
+KERNEL_ROOT = _find_kernel_root()
+INCLUDE_DIR = KERNEL_ROOT / "include"
+
+
+# --------------------------------------------------------------------------
+# options
+
+@dataclasses.dataclass
+class Options:
+    tuning: str | None = None
+    int64_atomics: bool = True
+    max_alloc_bytes: int | None = None
+    disk_cache: bool = True
+    cache_dir: str | None = None
+
+
+def _env_options() -> Options:
+    env = os.environ
+    tuning = env.get("CLVIS_TUNING") or None
+    max_alloc = env.get("CLVIS_MAX_ALLOC")
+    return Options(
+        tuning=tuning,
+        int64_atomics=env.get("CLVIS_NO_INT64_ATOMICS", "0") in ("", "0", "false", "no"),
+        max_alloc_bytes=int(max_alloc) if max_alloc else None,
+        disk_cache=env.get("CLVIS_CACHE", "1") not in ("0", "false", "no"),
+        cache_dir=env.get("CLVIS_CACHE_DIR") or None,
+    )
+
+
+_options = _env_options()
+_TUNINGS = ("cpu", "gpu")
+
+
+def _check_options(o: Options) -> None:
+    if o.tuning not in (None,) + _TUNINGS:
+        raise ValueError(f"tuning: expected None, 'cpu' or 'gpu', got {o.tuning!r}")
+    if o.max_alloc_bytes is not None and o.max_alloc_bytes <= 0:
+        raise ValueError(f"max_alloc_bytes: expected a positive size, got {o.max_alloc_bytes!r}")
+
+
+_check_options(_options)
+
+
+def options() -> Options:
+    """A copy of the options in force."""
+    return dataclasses.replace(_options)
+
+
+def set_options(**changes) -> None:
+    """Change options for the rest of the process (see the module docstring)."""
+    global _options
+    new = dataclasses.replace(_options, **changes)
+    _check_options(new)
+    _options = new
+
+
+@contextlib.contextmanager
+def configure(**changes):
+    """Change options inside a ``with`` block, e.g.
+    ``with clvis.runtime.configure(int64_atomics=False): ...``."""
+    global _options
+    saved = _options
+    set_options(**changes)
+    try:
+        yield options()
+    finally:
+        _options = saved
+
+
+# --------------------------------------------------------------------------
+# devices
+
+def devices() -> list[cl.Device]:
+    """Every OpenCL device of every platform, in platform order."""
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:     # no ICD at all: PLATFORM_NOT_FOUND_KHR
+        return []
+    out = []
+    for p in platforms:
+        try:
+            out.extend(p.get_devices())
+        except cl.Error:
+            pass
+    return out
+
+
+def describe(device: cl.Device) -> str:
+    return f"{device.platform.name.strip()} / {device.name.strip()}"
+
+
+def _device_type(device: cl.Device) -> str:
+    t = device.type
+    if t & cl.device_type.GPU:
+        return "GPU"
+    if t & cl.device_type.CPU:
+        return "CPU"
+    if t & cl.device_type.ACCELERATOR:
+        return "ACCELERATOR"
+    return "OTHER"
+
+
+def select_device(spec: str | int | None = None) -> cl.Device:
+    """The device clvis uses by default (rules in the module docstring)."""
+    found = devices()
+    if spec is None:
+        spec = os.environ.get("CLVIS_DEVICE") or None
+    if spec is not None:
+        spec_s = str(spec).strip()
+        if spec_s.isdigit():
+            i = int(spec_s)
+            if i < len(found):
+                return found[i]
+            raise DeviceError(f"CLVIS_DEVICE={spec_s}: there are {len(found)} devices "
+                              f"({_listing(found)})")
+        for d in found:
+            if spec_s.lower() in f"{d.platform.name} {d.name}".lower():
+                return d
+        raise DeviceError(f"CLVIS_DEVICE={spec_s!r} matches no device ({_listing(found)})")
+    if os.environ.get("PYOPENCL_CTX"):
+        try:
+            return cl.create_some_context(interactive=False).devices[0]
+        except (cl.Error, RuntimeError, ValueError) as e:
+            raise DeviceError(f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']!r}: {e}") from e
+    if not found:
+        raise DeviceError(
+            "no OpenCL device found: install a driver, e.g. PoCL with "
+            "pip install 'pyopencl[pocl]' (or clvis[pocl])")
+    for d in found:
+        if _device_type(d) == "GPU":
+            return d
+    for d in found:
+        if "portable computing language" in d.platform.name.lower():
+            return d
+    return found[0]
+
+
+def _listing(found) -> str:
+    return "; ".join(f"{i}: {describe(d)}" for i, d in enumerate(found)) or "none"
+
+
+class _ContextState:
+    """What clvis keeps per OpenCL context: programs, kernels, memory pool."""
+
+    def __init__(self, context: cl.Context):
+        self.context = context
+        self.programs: dict = {}
+        self.kernels: dict = {}
+        self.pools: dict = {}
+
+
+_lock = threading.RLock()
+_queues: dict[int, cl.CommandQueue] = {}
+_queue_contexts: dict[int, cl.Context] = {}   # Intel's CPU runtime frees a context
+                                              # its queues still use unless we hold it
+_contexts: dict[int, _ContextState] = {}
+_default: cl.CommandQueue | None = None
+
+
+def queue_for(device: cl.Device) -> cl.CommandQueue:
+    """clvis's in-order queue (and context) for `device`, made once."""
+    with _lock:
+        q = _queues.get(device.int_ptr)
+        if q is None:
+            try:
+                ctx = cl.Context([device])
+                q = cl.CommandQueue(ctx, device)
+            except cl.Error as e:
+                raise DeviceError(f"cannot open {describe(device)}: {e}") from e
+            _queues[device.int_ptr] = q
+            _queue_contexts[device.int_ptr] = ctx
+        return q
+
+
+def default_queue() -> cl.CommandQueue:
+    """The queue clvis runs on when given numpy arrays and no `queue`."""
+    global _default
+    with _lock:
+        if _default is None:
+            _default = queue_for(select_device())
+        return _default
+
+
+def set_default_device(spec: str | int | cl.Device | None) -> cl.CommandQueue:
+    """Make `spec` (a device, or as CLVIS_DEVICE) the default; returns its queue."""
+    global _default
+    device = spec if isinstance(spec, cl.Device) else select_device(spec)
+    with _lock:
+        _default = queue_for(device)
+        return _default
+
+
+def _state(context: cl.Context) -> _ContextState:
+    with _lock:
+        s = _contexts.get(context.int_ptr)
+        if s is None:
+            s = _contexts[context.int_ptr] = _ContextState(context)
+        return s
+
+
+# --------------------------------------------------------------------------
+# capabilities
+
+@dataclasses.dataclass(frozen=True)
+class Capabilities:
+    platform: str
+    device: str
+    device_type: str
+    driver_version: str
+    opencl_version: str
+    compute_units: int
+    max_work_group_size: int
+    local_mem_bytes: int
+    max_alloc_bytes: int            # after the max_alloc_bytes option
+    global_mem_bytes: int
+    int64_atomics: bool             # what kernels are built for (option applied)
+    int64_atomics_native: bool      # what the device reports
+    subgroups: bool
+    fp64: bool
+
+
+def _as_device(obj) -> cl.Device:
+    if isinstance(obj, cl.Device):
+        return obj
+    if isinstance(obj, cl.CommandQueue):
+        return obj.device
+    if isinstance(obj, cl.Context):
+        return obj.devices[0]
+    raise TypeError(f"expected a pyopencl Device, CommandQueue or Context, got {type(obj).__name__}")
+
+
+_caps_cache: dict[int, Capabilities] = {}
+
+
+def _native_capabilities(device: cl.Device) -> Capabilities:
+    """What the device reports, queried once per device."""
+    caps = _caps_cache.get(device.int_ptr)
+    if caps is not None:
+        return caps
+    ext = device.extensions.split()
+    native64 = ("cl_khr_int64_base_atomics" in ext and "cl_khr_int64_extended_atomics" in ext)
+    subgroups = "cl_khr_subgroups" in ext or "cl_intel_subgroups" in ext
+    if not subgroups:
+        with contextlib.suppress(Exception):
+            subgroups = device.max_num_sub_groups > 0
+    caps = Capabilities(
+        platform=device.platform.name.strip(),
+        device=device.name.strip(),
+        device_type=_device_type(device),
+        driver_version=device.driver_version.strip(),
+        opencl_version=device.version.strip(),
+        compute_units=int(device.max_compute_units),
+        max_work_group_size=int(device.max_work_group_size),
+        local_mem_bytes=int(device.local_mem_size),
+        max_alloc_bytes=int(device.max_mem_alloc_size),
+        global_mem_bytes=int(device.global_mem_size),
+        int64_atomics=native64,
+        int64_atomics_native=native64,
+        subgroups=bool(subgroups),
+        fp64="cl_khr_fp64" in ext,
+    )
+    _caps_cache[device.int_ptr] = caps
+    return caps
+
+
+def capabilities(obj=None) -> Capabilities:
+    """What `obj` (a device, queue or context; default: the default queue's
+    device) offers, as clvis sees it under the current options."""
+    device = _as_device(obj if obj is not None else default_queue())
+    caps = _native_capabilities(device)
+    o = _options
+    if o.int64_atomics and o.max_alloc_bytes is None:
+        return caps
+    max_alloc = caps.max_alloc_bytes
+    if o.max_alloc_bytes is not None:
+        max_alloc = min(max_alloc, int(o.max_alloc_bytes))
+    return dataclasses.replace(caps, max_alloc_bytes=max_alloc,
+                               int64_atomics=caps.int64_atomics_native and o.int64_atomics)
+
+
+def tuning_profile(obj=None) -> str:
+    """'cpu' or 'gpu': the work shapes the kernel families use on this device."""
+    if _options.tuning is not None:
+        return _options.tuning
+    device = _as_device(obj if obj is not None else default_queue())
+    return "gpu" if _device_type(device) in ("GPU", "ACCELERATOR") else "cpu"
+
+
+def device_slug(obj=None) -> str:
+    """A short file-name-safe name of the device, for benchmark result folders."""
+    caps = capabilities(obj)
+    plat = caps.platform.lower()
+    if "portable computing language" in plat:
+        plat = "pocl"
+    elif "intel" in plat:
+        plat = "intel"
+    elif "nvidia" in plat:
+        plat = "nvidia"
+    name = re.sub(r"^(pthread|cpu)-", "", caps.device.lower())
+    slug = re.sub(r"[^a-z0-9]+", "-", f"{plat} {name}").strip("-")
+    return slug[:60]
+
+
+# --------------------------------------------------------------------------
+# programs
+
+_INCLUDE_RE = re.compile(r'^\s*#\s*include\s*[<"]([^">]+)[">]', re.MULTILINE)
+
+
+def _sources_digest(path: Path) -> str:
+    """sha256 over the file and, recursively, every header it includes."""
+    h = hashlib.sha256()
+    seen = set()
+
+    def visit(p: Path):
+        rp = p.resolve()
+        if rp in seen:
+            return
+        seen.add(rp)
+        text = rp.read_bytes()
+        h.update(str(rp.relative_to(KERNEL_ROOT.resolve())).encode() + b"\0" + text + b"\0")
+        for inc in _INCLUDE_RE.findall(text.decode("utf-8", "replace")):
+            for base in (INCLUDE_DIR, rp.parent):
+                cand = base / inc
+                if cand.is_file():
+                    visit(cand)
+                    break
+
+    visit(path)
+    return h.hexdigest()
+
+
+def build_options(device: cl.Device, defines: dict) -> list[str]:
+    opts = ["-I", str(INCLUDE_DIR)]
+    for k, v in sorted(defines.items()):
+        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", k):
+            raise ValueError(f"define name {k!r} is not a C identifier")
+        opts.append(f"-D{k}={v}")
+    if capabilities(device).int64_atomics:
+        opts.append("-DCLVIS_INT64_ATOMICS=1")
+    return opts
+
+
+def _cache_dir() -> Path:
+    if _options.cache_dir:
+        return Path(_options.cache_dir)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "clvis"
+
+
+def _build(context: cl.Context, path: Path, defines: dict) -> cl.Program:
+    device = context.devices[0]
+    opts = build_options(device, defines)
+    key = None
+    if _options.disk_cache:
+        ident = "\0".join([
+            __version__, device.platform.name, device.platform.version, device.name,
+            device.driver_version, device.version, " ".join(opts),
+            _sources_digest(path)])
+        key = hashlib.sha256(ident.encode()).hexdigest()
+        cached = _cache_dir() / f"{key}.bin"
+        if cached.is_file():
+            try:
+                return cl.Program(context, [device], [cached.read_bytes()]).build(opts)
+            except (cl.Error, OSError):
+                pass      # stale or foreign binary: rebuild below and replace it
+    source = path.read_text()
+    prg = cl.Program(context, source)
+    try:
+        prg.build(opts)
+    except cl.Error as e:
+        log = ""
+        with contextlib.suppress(Exception):
+            log = prg.get_build_info(device, cl.program_build_info.LOG)
+        raise KernelBuildError(path.relative_to(KERNEL_ROOT), defines, describe(device),
+                               log or str(e)) from None
+    if key is not None:
+        with contextlib.suppress(OSError, cl.Error):
+            binary = prg.get_info(cl.program_info.BINARIES)[0]
+            if binary:
+                d = _cache_dir()
+                d.mkdir(parents=True, exist_ok=True)
+                tmp = d / f".{key}.{os.getpid()}.tmp"
+                tmp.write_bytes(binary)
+                os.replace(tmp, d / f"{key}.bin")
+    return prg
+
+
+def get_program(context: cl.Context, relpath: str, defines: dict) -> cl.Program:
+    """The built program kernels_cl/`relpath` with `defines`, cached."""
+    state = _state(context)
+    device = context.devices[0]
+    key = (relpath, tuple(build_options(device, defines)))
+    with _lock:
+        prg = state.programs.get(key)
+        if prg is None:
+            path = KERNEL_ROOT / relpath
+            if not path.is_file():
+                raise ClvisError(f"no kernel source {path}")
+            prg = state.programs[key] = _build(context, path, defines)
+        return prg
+
+
+def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: dict) -> cl.Kernel:
+    """Kernel `name` of kernels_cl/`relpath` built with `defines` for the queue's device."""
+    prg = get_program(queue.context, relpath, defines)
+    state = _state(queue.context)
+    key = (id(prg), name)
+    with _lock:
+        k = state.kernels.get(key)
+        if k is None:
+            k = state.kernels[key] = cl.Kernel(prg, name)
+        return k
+
+
+def launch(queue, kernel: cl.Kernel, global_size: int, local_size: int | None, *args,
+           wait_for=None) -> cl.Event:
+    """Set `args` and enqueue a 1-D launch (serialised: kernels hold their args)."""
+    with _lock:
+        kernel.set_args(*args)
+        return cl.enqueue_nd_range_kernel(
+            queue, kernel, (int(global_size),),
+            None if local_size is None else (int(local_size),), wait_for=wait_for)
+
+
+# --------------------------------------------------------------------------
+# memory
+
+def allocator(queue: cl.CommandQueue):
+    """A memory pool for the queue: repeated calls reuse device buffers."""
+    state = _state(queue.context)
+    with _lock:
+        pool = state.pools.get(queue.int_ptr)
+        if pool is None:
+            pool = state.pools[queue.int_ptr] = cl.tools.MemoryPool(cl.tools.ImmediateAllocator(queue))
+        return pool
+
+
+def free_pools() -> None:
+    """Give every pooled buffer back to the drivers."""
+    with _lock:
+        for s in _contexts.values():
+            for pool in s.pools.values():
+                pool.free_held()
+
+
+def check_alloc(queue, nbytes: int, what: str) -> None:
+    """DeviceError if one buffer of `nbytes` exceeds the device's max single allocation."""
+    limit = capabilities(queue).max_alloc_bytes
+    if nbytes > limit:
+        raise DeviceError(
+            f"{what}: needs one buffer of {nbytes} bytes, more than the max single allocation "
+            f"of {limit} bytes on {describe(queue.device)}")
+
+
+def empty(queue, shape, dtype, what: str) -> cla.Array:
+    """A device array from the pool, after check_alloc; DeviceError if the driver refuses."""
+    shape = (shape,) if np.isscalar(shape) else tuple(shape)
+    dtype = np.dtype(dtype)
+    nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    check_alloc(queue, nbytes, what)
+    try:
+        return cla.empty(queue, shape, dtype, allocator=allocator(queue))
+    except (cl.MemoryError, cl.Error) as e:
+        raise DeviceError(f"{what}: allocating {nbytes} bytes on {describe(queue.device)} failed: {e}") from e

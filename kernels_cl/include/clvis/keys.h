@@ -1,0 +1,38 @@
+/* clvis/keys.h — order-preserving maps from numbers to unsigned integer keys.
+ *
+ * Each function takes the raw bits of a value (loaded as uint or ulong, whatever
+ * the value's type) and returns an unsigned key whose unsigned order is the
+ * total order of the values:
+ *
+ *   unsigned  identity
+ *   signed    two's complement: flip the sign bit, so INT_MIN maps to 0
+ *   float     IEEE 754: -inf < ... < -0.0 < +0.0 < ... < +inf < NaN
+ *             (every NaN, whatever its sign or payload, maps to the largest key,
+ *             so NaNs sort last and keep their input order in a stable sort)
+ *
+ * Only integer operations are used: no fp64 support is needed for the 64-bit
+ * float keys. Radix sort moves the raw bits and calls these on the fly, so the
+ * sorted output keeps every bit of the input (NaN payloads included).
+ */
+#ifndef CLVIS_KEYS_H
+#define CLVIS_KEYS_H
+
+inline uint clvis_key_u32(uint bits) { return bits; }
+inline uint clvis_key_i32(uint bits) { return bits ^ 0x80000000u; }
+inline uint clvis_key_f32(uint bits)
+{
+    if ((bits & 0x7FFFFFFFu) > 0x7F800000u)     /* NaN */
+        return 0xFFFFFFFFu;
+    return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
+}
+
+inline ulong clvis_key_u64(ulong bits) { return bits; }
+inline ulong clvis_key_i64(ulong bits) { return bits ^ 0x8000000000000000ul; }
+inline ulong clvis_key_f64(ulong bits)
+{
+    if ((bits & 0x7FFFFFFFFFFFFFFFul) > 0x7FF0000000000000ul)   /* NaN */
+        return 0xFFFFFFFFFFFFFFFFul;
+    return (bits & 0x8000000000000000ul) ? ~bits : (bits | 0x8000000000000000ul);
+}
+
+#endif /* CLVIS_KEYS_H */

@@ -1,0 +1,258 @@
+/* radix_sort.cl — one pass of a stable LSD radix sort (keys, optional values).
+ *
+ * ABI
+ * ---
+ * Defines (all optional):
+ *   KEY_T       key storage word: uint (32-bit keys) or ulong (64-bit)  (uint)
+ *   KEY_ORDER   how the bits order: 0 unsigned, 1 signed two's complement,
+ *               2 IEEE float (-inf < -0.0 < +0.0 < +inf < NaN; see
+ *               clvis/keys.h)                                           (0)
+ *   HAS_VALUES  1: move a value with each key                           (0)
+ *   VAL_T       value type (any 32-bit type as uint)                    (uint)
+ *   RADIX_BITS  bits per pass; RADIX = 2^RADIX_BITS digits              (8)
+ *   WG          work-group size, a power of two; launch with exactly
+ *               this local size                                         (1)
+ *   ITEMS       keys per work-item per tile (used when WG > 1)          (8)
+ *   Include path: -I kernels_cl/include (clvis/keys.h, clvis/workgroup.h).
+ *
+ * Partition (as scan.cl): n keys, 0 < n < 2^32, in G contiguous ranges of
+ * per_group keys (the last may be shorter), G = ceil(n / per_group); global
+ * size G * WG, local size WG. With WG == 1 per_group is any positive count;
+ * with WG > 1 it must be TILE = WG * ITEMS (one tile per group, so hist holds
+ * per-tile counts).
+ * digit(k) = (key(k) >> shift) & (RADIX - 1), key() from KEY_ORDER.
+ *
+ * kernel radix_upsweep(global const KEY_T *keys, ulong n, ulong per_group,
+ *                      uint shift, global uint *hist, global KEY_T *orbits)
+ *     hist[d * G + g] = number of keys with digit d in group g's range
+ *     (RADIX * G elements, digit-major); orbits[g] = bitwise OR of the raw key
+ *     words of the range (the host checks a key_bits promise with it).
+ *
+ * kernel radix_scatter(global const KEY_T *keys_in, global KEY_T *keys_out,
+ *                      global const VAL_T *vals_in, global VAL_T *vals_out,
+ *                      ulong n, ulong per_group, uint shift,
+ *                      global const uint *offsets)
+ *     offsets = exclusive prefix sum of hist (RADIX * G elements, as above):
+ *     offsets[d * G + g] is where group g's first key of digit d goes. Writes
+ *     every key (and value) to its place in keys_out (vals_out), stably. The
+ *     in and out buffers must not overlap. With HAS_VALUES == 0 the value
+ *     arguments are not read and may be NULL.
+ *
+ * A sort of B-bit keys is ceil(B / RADIX_BITS) passes with shift = 0,
+ * RADIX_BITS, ..., each upsweep -> exclusive scan of hist (scan.cl with
+ * T = uint) -> scatter, ping-ponging between two buffers. Keys are moved as raw
+ * words, so the output holds the input's exact bits.
+ *
+ * Memory traffic per pass: n K (upsweep) + n (2K + 2V) (scatter), K and V the
+ * key and value sizes.
+ *
+ * With WG == 1 a work-item walks its range in order and writes each key to its
+ * digit's next slot (the fast form for CPU devices; RADIX_BITS 8). With
+ * WG > 1 a group's tile of WG * ITEMS keys is ranked in local memory
+ * (per-work-item digit counters, scanned digit-major), reordered by digit in
+ * local memory and written out in runs of equal digits (the GPU form;
+ * RADIX * WG counters must fit in local memory, so RADIX_BITS 4 suits WG
+ * 128-256). Groups carry no state from tile to tile: an earlier form that did
+ * was miscompiled by PoCL 3.0 (LLVM 14), and per-tile counts are the usual
+ * GPU layout anyway.
+ */
+#include "clvis/keys.h"
+#include "clvis/workgroup.h"
+
+#ifndef KEY_T
+#define KEY_T uint
+#endif
+#ifndef KEY_ORDER
+#define KEY_ORDER 0
+#endif
+#ifndef HAS_VALUES
+#define HAS_VALUES 0
+#endif
+#ifndef VAL_T
+#define VAL_T uint
+#endif
+#ifndef RADIX_BITS
+#define RADIX_BITS 8
+#endif
+#ifndef WG
+#define WG 1
+#endif
+#ifndef ITEMS
+#define ITEMS 8
+#endif
+#define RADIX (1u << RADIX_BITS)
+#define TILE (WG * ITEMS)
+
+#if KEY_ORDER == 0
+#define KEY(k) (k)
+#elif KEY_ORDER == 1
+#define KEY(k) (sizeof(KEY_T) == 8 ? clvis_key_i64(k) : clvis_key_i32(k))
+#else
+#define KEY(k) (sizeof(KEY_T) == 8 ? clvis_key_f64(k) : clvis_key_f32(k))
+#endif
+#define DIGIT(k, shift) ((uint)(KEY(k) >> (shift)) & (RADIX - 1))
+
+CLVIS_DEFINE_WG_SCAN(wg_scan, uint)
+
+kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
+void radix_upsweep(global const KEY_T *restrict keys, const ulong n,
+                   const ulong per_group, const uint shift,
+                   global uint *restrict hist, global KEY_T *restrict orbits)
+{
+    const ulong g = get_group_id(0);
+    const ulong G = get_num_groups(0);
+    const uint lid = get_local_id(0);
+    const ulong start = g * per_group;
+    const ulong end = min(n, start + per_group);
+    KEY_T ors = 0;
+
+#if WG == 1
+    uint count[RADIX];
+    for (uint d = 0; d < RADIX; ++d)
+        count[d] = 0;
+    for (ulong i = start; i < end; ++i) {
+        const KEY_T k = keys[i];
+        ors |= k;
+        count[DIGIT(k, shift)]++;
+    }
+    for (uint d = 0; d < RADIX; ++d)
+        hist[d * G + g] = count[d];
+    orbits[g] = ors;
+#else
+    local uint count[RADIX];
+    local KEY_T or_scratch[WG];
+    for (uint d = lid; d < RADIX; d += WG)
+        count[d] = 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (ulong i = start + lid; i < end; i += WG) {
+        const KEY_T k = keys[i];
+        ors |= k;
+        atomic_inc(&count[DIGIT(k, shift)]);
+    }
+    or_scratch[lid] = ors;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (uint s = WG / 2; s > 0; s >>= 1) {
+        if (lid < s)
+            or_scratch[lid] |= or_scratch[lid + s];
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    for (uint d = lid; d < RADIX; d += WG)
+        hist[d * G + g] = count[d];
+    if (lid == 0)
+        orbits[g] = or_scratch[0];
+#endif
+}
+
+kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
+void radix_scatter(global const KEY_T *restrict keys_in,
+                   global KEY_T *restrict keys_out,
+                   global const VAL_T *restrict vals_in,
+                   global VAL_T *restrict vals_out,
+                   const ulong n, const ulong per_group, const uint shift,
+                   global const uint *restrict offsets)
+{
+    const ulong g = get_group_id(0);
+    const ulong G = get_num_groups(0);
+    const uint lid = get_local_id(0);
+    const ulong start = g * per_group;
+    const ulong end = min(n, start + per_group);
+
+#if WG == 1
+    uint next[RADIX];
+    for (uint d = 0; d < RADIX; ++d)
+        next[d] = offsets[d * G + g];
+    for (ulong i = start; i < end; ++i) {
+        const KEY_T k = keys_in[i];
+        const uint p = next[DIGIT(k, shift)]++;
+        keys_out[p] = k;
+#if HAS_VALUES
+        vals_out[p] = vals_in[i];
+#endif
+    }
+#else
+    /* One tile per group: the host sets per_group = TILE. */
+    local KEY_T tkeys[TILE];
+#if HAS_VALUES
+    local VAL_T tvals[TILE];
+#endif
+    local uint counters[RADIX * WG];    /* counters[d * WG + t] */
+    local uint dest_base[RADIX];        /* output slot of the tile's digit-d run, minus its start in the tile */
+    local uint scratch[WG];
+    const ulong base = start;
+    const uint valid = (uint)(end - start);
+
+    /* coalesced load; then each work-item takes ITEMS consecutive keys */
+    for (uint i = 0; i < ITEMS; ++i) {
+        const uint j = i * WG + lid;
+        if (j < valid) {
+            tkeys[j] = keys_in[base + j];
+#if HAS_VALUES
+            tvals[j] = vals_in[base + j];
+#endif
+        }
+    }
+    for (uint d = 0; d < RADIX; ++d)
+        counters[d * WG + lid] = 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
+
+    KEY_T k[ITEMS];
+#if HAS_VALUES
+    VAL_T v[ITEMS];
+#endif
+    uint rank[ITEMS];
+    for (uint i = 0; i < ITEMS; ++i) {
+        const uint j = lid * ITEMS + i;
+        if (j < valid) {
+            k[i] = tkeys[j];
+#if HAS_VALUES
+            v[i] = tvals[j];
+#endif
+            const uint c = DIGIT(k[i], shift) * WG + lid;
+            rank[i] = counters[c];      /* this work-item's column only */
+            counters[c] = rank[i] + 1;
+        }
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+
+    /* exclusive scan of counters in digit-major order: work-item t scans the
+     * RADIX consecutive words [t * RADIX, (t + 1) * RADIX) */
+    uint run = 0;
+    for (uint d = 0; d < RADIX; ++d) {
+        const uint c = counters[lid * RADIX + d];
+        counters[lid * RADIX + d] = run;
+        run += c;
+    }
+    uint all;
+    const uint before = wg_scan(run, scratch, &all);
+    for (uint d = 0; d < RADIX; ++d)
+        counters[lid * RADIX + d] += before;
+    barrier(CLK_LOCAL_MEM_FENCE);
+
+    /* counters[d * WG] is where digit d's run starts in the tile */
+    for (uint d = lid; d < RADIX; d += WG)
+        dest_base[d] = offsets[d * G + g] - counters[d * WG];
+    for (uint i = 0; i < ITEMS; ++i) {
+        if (lid * ITEMS + i < valid) {
+            const uint r = counters[DIGIT(k[i], shift) * WG + lid] + rank[i];
+            tkeys[r] = k[i];
+#if HAS_VALUES
+            tvals[r] = v[i];
+#endif
+        }
+    }
+    barrier(CLK_LOCAL_MEM_FENCE);
+
+    /* runs of equal digits go to consecutive global slots */
+    for (uint i = 0; i < ITEMS; ++i) {
+        const uint j = i * WG + lid;
+        if (j < valid) {
+            const KEY_T key = tkeys[j];
+            const uint p = dest_base[DIGIT(key, shift)] + j;
+            keys_out[p] = key;
+#if HAS_VALUES
+            vals_out[p] = tvals[j];
+#endif
+        }
+    }
+#endif
+}

@@ -37,11 +37,13 @@
  * differs from a sequential sum, so results differ from it by rounding.
  * NaN and Inf propagate as IEEE 754 says.
  *
- * Within a range each group walks tiles of TILE elements in order, carrying the
- * running sum. With WG == 1 a tile is ITEMS consecutive elements handled by one
- * work-item (the fast form for CPU devices); with WG > 1 a tile is loaded
- * coalesced into local memory, each work-item scans ITEMS consecutive elements
- * and a work-group scan joins the work-items (the GPU form).
+ * Within a range each group walks tiles in order, carrying the running sum.
+ * With WG == 1 one work-item takes two 32-byte vectors of consecutive elements
+ * at a time with an in-register prefix (the fast form for CPU devices; ITEMS
+ * then only sets the reduce's independent accumulators); with WG > 1 a
+ * tile of TILE elements is loaded coalesced into local memory, each work-item
+ * scans ITEMS consecutive elements and a work-group scan joins the work-items
+ * (the GPU form).
  */
 #include "clvis/workgroup.h"
 
@@ -55,6 +57,48 @@
 #define ITEMS 16
 #endif
 #define TILE (WG * ITEMS)
+
+/* WG == 1 works on 32-byte vectors (8 lanes of 32-bit T, 4 of 64-bit T): the
+ * widest that CPU drivers without AVX-512 code generation handle well (PoCL
+ * 3.0 fails to build kernels using 512-bit vectors on such targets). */
+#define CAT_(a, b) a##b
+#define CAT(a, b) CAT_(a, b)
+#define SIZEOF_int 4
+#define SIZEOF_uint 4
+#define SIZEOF_float 4
+#define SIZEOF_long 8
+#define SIZEOF_ulong 8
+#if CAT(SIZEOF_, T) == 8
+#define VW 4
+#else
+#define VW 8
+#endif
+#define TV CAT(T, VW)           /* e.g. int8, long4 */
+#define VLOAD CAT(vload, VW)
+#define VSTORE CAT(vstore, VW)
+
+#if VW == 8
+/* in-register inclusive prefix: shift by 1, 2, 4 lanes and add */
+inline TV vprefix(TV a)
+{
+    a += (TV)((T)0, a.s0123, a.s456);
+    a += (TV)((T)0, (T)0, a.s0123, a.s45);
+    a += (TV)((T)0, (T)0, (T)0, (T)0, a.s0123);
+    return a;
+}
+/* the lanes moved up by one, `first` in lane 0 */
+inline TV vshift(TV a, T first) { return (TV)(first, a.s0123, a.s456); }
+#define VLAST(a) ((a).s7)
+#else
+inline TV vprefix(TV a)
+{
+    a += (TV)((T)0, a.s012);
+    a += (TV)((T)0, (T)0, a.s01);
+    return a;
+}
+inline TV vshift(TV a, T first) { return (TV)(first, a.s012); }
+#define VLAST(a) ((a).s3)
+#endif
 
 CLVIS_DEFINE_WG_SCAN(wg_scan, T)
 CLVIS_DEFINE_WG_SUM(sum_before, T, wg_scan)
@@ -151,34 +195,28 @@ void scan_downsweep(global const T *in, global T *out, const ulong n,
 
 #if WG > 1
     local T tile[TILE_LOCAL];
-    for (; base + TILE <= end; base += TILE)
-        carry += scan_tile(in, out, base, TILE, carry, exclusive, tile, scratch);
-    if (base < end)
-        carry += scan_tile(in, out, base, (uint)(end - base), carry, exclusive,
-                           tile, scratch);
+    for (; base < end; base += TILE)
+        carry += scan_tile(in, out, base, (uint)min((ulong)TILE, end - base), carry,
+                           exclusive, tile, scratch);
     if (get_local_id(0) == 0 && g == get_num_groups(0) - 1)
         total[0] = carry;
 #else
-    /* One work-item: the in-tile prefix starts from zero and the carry is
-     * added afterwards, so the carried dependency is one add per tile. */
-    for (; base + ITEMS <= end; base += ITEMS) {
-        T v[ITEMS];
-        T s[ITEMS];
-        T run = 0;
-        for (int i = 0; i < ITEMS; ++i) {
-            v[i] = in[base + i];
-            s[i] = run + v[i];
-            run = s[i];
-        }
+    /* One work-item walks its range two vectors (2 * VW elements) at a time:
+     * an in-register prefix of each, then the carry added to all lanes, so the
+     * carried dependency is one add per 2 * VW elements and the rest
+     * vectorises. */
+    for (; base + 2 * VW <= end; base += 2 * VW) {
+        TV a = vprefix(VLOAD(0, in + base));
+        TV b = vprefix(VLOAD(1, in + base));
+        b += VLAST(a);
+        const T sum = VLAST(b);
         if (exclusive) {
-            out[base] = carry;
-            for (int i = 1; i < ITEMS; ++i)
-                out[base + i] = carry + s[i - 1];
-        } else {
-            for (int i = 0; i < ITEMS; ++i)
-                out[base + i] = carry + s[i];
+            b = vshift(b, VLAST(a));
+            a = vshift(a, (T)0);
         }
-        carry += run;
+        VSTORE(a + carry, 0, out + base);
+        VSTORE(b + carry, 1, out + base);
+        carry += sum;
     }
     for (; base < end; ++base) {
         const T x = in[base];

@@ -10,11 +10,14 @@ Device choice (first that applies):
 5. any device.
 
 Programs are built from ``kernels_cl/<family>/<file>.cl`` with
-``-I kernels_cl/include`` and ``-D`` defines only. Built programs are cached in
-the process per (context, file, options) and on disk per (device, driver,
-sources including every included header, options) under ``CLVIS_CACHE_DIR``
-(default ``$XDG_CACHE_HOME/clvis`` or ``~/.cache/clvis``; ``CLVIS_CACHE=0``
-turns the disk cache off).
+``-I kernels_cl/include`` and ``-D`` defines only, and cached in the process
+per (context, file, options). On disk, builds are cached where the driver
+allows, through pyopencl's policy: drivers that cache compiled kernels
+themselves (PoCL's kcache, NVIDIA's compute cache) are left to it, and for the
+others (Intel's CPU runtime, ...) pyopencl keeps program binaries keyed by the
+source, every included header and the options. (clvis once exported binaries
+itself: on PoCL that compiles every kernel of a program up front, ~6 s a
+program, more than any cache hit saves.)
 
 Options (:func:`configure`, or the environment at import):
 
@@ -26,17 +29,16 @@ Options (:func:`configure`, or the environment at import):
   paths can be tested on devices that have them (``CLVIS_NO_INT64_ATOMICS=1``).
 - ``max_alloc_bytes``: a cap on one allocation, below the device's own limit,
   to emulate a smaller device (``CLVIS_MAX_ALLOC``).
-- ``disk_cache``, ``cache_dir``: the on-disk program cache.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
-import hashlib
 import os
 import re
 import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +46,6 @@ import pyopencl as cl
 import pyopencl.array as cla
 import pyopencl.tools
 
-from ._version import __version__
 from .errors import ClvisError, DeviceError, KernelBuildError
 
 __all__ = [
@@ -79,8 +80,6 @@ class Options:
     tuning: str | None = None
     int64_atomics: bool = True
     max_alloc_bytes: int | None = None
-    disk_cache: bool = True
-    cache_dir: str | None = None
 
 
 def _env_options() -> Options:
@@ -91,8 +90,6 @@ def _env_options() -> Options:
         tuning=tuning,
         int64_atomics=env.get("CLVIS_NO_INT64_ATOMICS", "0") in ("", "0", "false", "no"),
         max_alloc_bytes=int(max_alloc) if max_alloc else None,
-        disk_cache=env.get("CLVIS_CACHE", "1") not in ("0", "false", "no"),
-        cache_dir=env.get("CLVIS_CACHE_DIR") or None,
     )
 
 
@@ -373,32 +370,6 @@ def device_slug(obj=None) -> str:
 # --------------------------------------------------------------------------
 # programs
 
-_INCLUDE_RE = re.compile(r'^\s*#\s*include\s*[<"]([^">]+)[">]', re.MULTILINE)
-
-
-def _sources_digest(path: Path) -> str:
-    """sha256 over the file and, recursively, every header it includes."""
-    h = hashlib.sha256()
-    seen = set()
-
-    def visit(p: Path):
-        rp = p.resolve()
-        if rp in seen:
-            return
-        seen.add(rp)
-        text = rp.read_bytes()
-        h.update(str(rp.relative_to(KERNEL_ROOT.resolve())).encode() + b"\0" + text + b"\0")
-        for inc in _INCLUDE_RE.findall(text.decode("utf-8", "replace")):
-            for base in (INCLUDE_DIR, rp.parent):
-                cand = base / inc
-                if cand.is_file():
-                    visit(cand)
-                    break
-
-    visit(path)
-    return h.hexdigest()
-
-
 def build_options(device: cl.Device, defines: dict) -> list[str]:
     opts = ["-I", str(INCLUDE_DIR)]
     for k, v in sorted(defines.items()):
@@ -410,53 +381,34 @@ def build_options(device: cl.Device, defines: dict) -> list[str]:
     return opts
 
 
-def _cache_dir() -> Path:
-    if _options.cache_dir:
-        return Path(_options.cache_dir)
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "clvis"
-
-
 def _build(context: cl.Context, path: Path, defines: dict) -> cl.Program:
     device = context.devices[0]
-    opts = build_options(device, defines)
-    key = None
-    if _options.disk_cache:
-        ident = "\0".join([
-            __version__, device.platform.name, device.platform.version, device.name,
-            device.driver_version, device.version, " ".join(opts),
-            _sources_digest(path)])
-        key = hashlib.sha256(ident.encode()).hexdigest()
-        cached = _cache_dir() / f"{key}.bin"
-        if cached.is_file():
-            try:
-                return cl.Program(context, [device], [cached.read_bytes()]).build(opts)
-            except (cl.Error, OSError):
-                pass      # stale or foreign binary: rebuild below and replace it
-    source = path.read_text()
-    prg = cl.Program(context, source)
-    try:
-        prg.build(opts)
-    except cl.Error as e:
-        log = ""
-        with contextlib.suppress(Exception):
-            log = prg.get_build_info(device, cl.program_build_info.LOG)
-        raise KernelBuildError(path.relative_to(KERNEL_ROOT), defines, describe(device),
-                               log or str(e)) from None
-    if key is not None:
-        with contextlib.suppress(OSError, cl.Error):
-            binary = prg.get_info(cl.program_info.BINARIES)[0]
-            if binary:
-                d = _cache_dir()
-                d.mkdir(parents=True, exist_ok=True)
-                tmp = d / f".{key}.{os.getpid()}.tmp"
-                tmp.write_bytes(binary)
-                os.replace(tmp, d / f"{key}.bin")
+    prg = cl.Program(context, path.read_text())
+    with warnings.catch_warnings():
+        # drivers log remarks on success (Intel: vectorisation reports);
+        # pyopencl turns each into a CompilerWarning. Failures raise below.
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        try:
+            prg.build(build_options(device, defines))
+        except cl.Error as e:
+            log = ""
+            with contextlib.suppress(Exception):
+                warnings.simplefilter("ignore", UserWarning)
+                log = prg.get_build_info(device, cl.program_build_info.LOG)
+            raise KernelBuildError(_display(path), defines, describe(device), log or str(e)) from None
     return prg
 
 
+def _display(path: Path) -> str:
+    try:
+        return str(path.relative_to(KERNEL_ROOT))
+    except ValueError:
+        return str(path)
+
+
 def get_program(context: cl.Context, relpath: str, defines: dict) -> cl.Program:
-    """The built program kernels_cl/`relpath` with `defines`, cached."""
+    """The built program kernels_cl/`relpath` (or an absolute path: a kernel
+    of your own, built the same way) with `defines`, cached."""
     state = _state(context)
     device = context.devices[0]
     key = (relpath, tuple(build_options(device, defines)))
@@ -478,7 +430,17 @@ def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: dict) -
     with _lock:
         k = state.kernels.get(key)
         if k is None:
-            k = state.kernels[key] = cl.Kernel(prg, name)
+            try:
+                k = cl.Kernel(prg, name)
+            except cl.Error as e:
+                # a build the driver reported as successful but without the
+                # kernel: report it like a failed build, with the log
+                log = ""
+                with contextlib.suppress(Exception):
+                    log = prg.get_build_info(queue.device, cl.program_build_info.LOG)
+                raise KernelBuildError(_display(KERNEL_ROOT / relpath), defines, describe(queue.device),
+                                       f"kernel {name!r} unavailable after the build: {e}\n{log}") from None
+            state.kernels[key] = k
         return k
 
 

@@ -1,0 +1,178 @@
+"""Benchmarks of clvis.primitives with their peers in the same session.
+
+Each op has: clvis on device arrays (role "clvis"), clvis from numpy to numpy
+(role "clvis-host", transfers included, for reference), the peers a user
+would otherwise call (numpy; pyopencl's own algorithms), and a device copy
+kernel over the op's main array (role "copy"), the bandwidth limit.
+extra_info carries the bytes model of DESIGN.md, so the report can give
+throughput, % of copy bandwidth and the ratio to each peer:
+
+    clvis bench primitives        (runs this file and prints the table)
+"""
+
+import numpy as np
+import pyopencl.array as cla
+import pytest
+
+import clvis
+from clvis import primitives as P
+from benchutil import run, scaled
+
+
+# --------------------------------------------------------------------------
+# scan: bytes model 2 n w
+
+SCAN_N = scaled(1 << 24)
+
+
+@pytest.fixture(scope="module", params=["int32", "float32"])
+def scan_data(request, queue):
+    dt = np.dtype(request.param)
+    rng = np.random.default_rng(0)
+    x = rng.integers(0, 100, SCAN_N).astype(dt)
+    return dt, x, cla.to_device(queue, x)
+
+
+@pytest.mark.parametrize("impl", ["clvis", "clvis-host", "numpy", "pyopencl", "copy"])
+def test_scan(benchmark, queue, scan_data, impl):
+    dt, x, xd = scan_data
+    n = x.size
+    op = f"scan[{dt.name}]"
+    model = 2 * n * dt.itemsize
+    if impl == "clvis":
+        out = cla.empty_like(xd)
+        run(benchmark, lambda: clvis.scan(xd, out=out), op=op, impl=impl, role="clvis",
+            n=n, nbytes=model, queue=queue)
+    elif impl == "clvis-host":
+        run(benchmark, lambda: clvis.scan(x), op=op, impl=impl, role="clvis-host", n=n, nbytes=model)
+    elif impl == "numpy":
+        run(benchmark, lambda: np.cumsum(x, dtype=dt), op=op, impl="numpy.cumsum", role="peer",
+            n=n, nbytes=model)
+    elif impl == "pyopencl":
+        from pyopencl.scan import ExclusiveScanKernel
+        knl = ExclusiveScanKernel(queue.context, dt, "a+b", "0")
+        out = cla.empty_like(xd)
+        run(benchmark, lambda: knl(xd, out), op=op, impl="pyopencl.ExclusiveScanKernel",
+            role="peer", n=n, nbytes=model, queue=queue)
+    else:
+        run(benchmark, lambda: P.copy(xd), op=op, impl="copy kernel", role="copy", n=n,
+            nbytes=2 * xd.nbytes, queue=queue)
+
+
+# --------------------------------------------------------------------------
+# compaction, half kept: bytes model n w + k w
+
+COMPACT_N = scaled(1 << 24)
+
+
+@pytest.fixture(scope="module")
+def compact_data(queue):
+    rng = np.random.default_rng(1)
+    x = rng.integers(0, 1 << 30, COMPACT_N).astype(np.int32)
+    mask = rng.random(COMPACT_N) < 0.5
+    return x, mask, cla.to_device(queue, x), cla.to_device(queue, mask.view(np.uint8))
+
+
+@pytest.mark.parametrize("impl", ["clvis", "clvis-host", "numpy", "pyopencl", "copy"])
+def test_compact(benchmark, queue, compact_data, impl):
+    x, mask, xd, fd = compact_data
+    n, k = x.size, int(mask.sum())
+    op = "compact[int32, half kept]"
+    model = (n + k) * x.itemsize
+    if impl == "clvis":
+        run(benchmark, lambda: clvis.compact(xd, fd), op=op, impl=impl, role="clvis", n=n,
+            nbytes=model, queue=queue)
+    elif impl == "clvis-host":
+        run(benchmark, lambda: clvis.compact(x, mask), op=op, impl=impl, role="clvis-host",
+            n=n, nbytes=model)
+    elif impl == "numpy":
+        run(benchmark, lambda: x[mask], op=op, impl="numpy boolean mask", role="peer", n=n,
+            nbytes=model)
+    elif impl == "pyopencl":
+        from pyopencl.algorithm import copy_if
+        run(benchmark, lambda: copy_if(xd, "flags[i] != 0", extra_args=[("flags", fd)]),
+            op=op, impl="pyopencl.algorithm.copy_if", role="peer", n=n, nbytes=model,
+            queue=queue, rounds=3)
+    else:
+        run(benchmark, lambda: P.copy(xd), op=op, impl="copy kernel", role="copy", n=n,
+            nbytes=2 * xd.nbytes, queue=queue)
+
+
+# --------------------------------------------------------------------------
+# radix sort, uint32 keys with uint32 values: bytes model P n (3K + 2V)
+
+SORT_N = scaled(1 << 22)
+
+
+@pytest.fixture(scope="module")
+def sort_data(queue):
+    rng = np.random.default_rng(2)
+    keys = rng.integers(0, 1 << 32, SORT_N, dtype=np.uint64).astype(np.uint32)
+    vals = np.arange(SORT_N, dtype=np.uint32)
+    return keys, vals, cla.to_device(queue, keys), cla.to_device(queue, vals)
+
+
+def _passes(queue):
+    bits = P.PROFILES[clvis.runtime.tuning_profile(queue)]["radix"]["RADIX_BITS"]
+    return -(-32 // bits)
+
+
+@pytest.mark.parametrize("impl", ["clvis", "clvis-host", "numpy", "pyopencl", "copy"])
+def test_radix_sort(benchmark, queue, sort_data, impl):
+    keys, vals, kd, vd = sort_data
+    n = keys.size
+    op = "radix_sort[uint32 keys + uint32 values]"
+    passes = _passes(queue)
+    model = passes * n * (3 * 4 + 2 * 4)
+    if impl == "clvis":
+        run(benchmark, lambda: clvis.radix_sort(kd, vd), op=op, impl=impl, role="clvis", n=n,
+            nbytes=model, queue=queue, passes=passes)
+    elif impl == "clvis-host":
+        run(benchmark, lambda: clvis.radix_sort(keys, vals), op=op, impl=impl,
+            role="clvis-host", n=n, nbytes=model, passes=passes)
+    elif impl == "numpy":
+        def np_sort():
+            order = np.argsort(keys, kind="stable")
+            return keys[order], vals[order]
+        run(benchmark, np_sort, op=op, impl="numpy argsort(stable) + gather", role="peer", n=n,
+            nbytes=model, rounds=3)
+    elif impl == "pyopencl":
+        from pyopencl.algorithm import RadixSort
+        sorter = RadixSort(queue.context, "unsigned *keys, unsigned *vals", key_expr="keys[i]",
+                           sort_arg_names=["keys", "vals"], key_dtype=np.uint32)
+        run(benchmark, lambda: sorter(kd, vd, key_bits=32, queue=queue), op=op,
+            impl="pyopencl.algorithm.RadixSort", role="peer", n=n, nbytes=model,
+            queue=queue, rounds=2)
+    else:
+        run(benchmark, lambda: P.copy(kd), op=op, impl="copy kernel", role="copy", n=n,
+            nbytes=2 * kd.nbytes, queue=queue)
+
+
+# --------------------------------------------------------------------------
+# histogram, 256 bins: bytes model n w
+
+HIST_N = scaled(1 << 24)
+
+
+@pytest.fixture(scope="module")
+def hist_data(queue):
+    rng = np.random.default_rng(3)
+    keys = rng.integers(0, 256, HIST_N).astype(np.int32)
+    return keys, cla.to_device(queue, keys)
+
+
+@pytest.mark.parametrize("impl", ["clvis", "numpy", "copy"])
+def test_histogram(benchmark, queue, hist_data, impl):
+    keys, kd = hist_data
+    n = keys.size
+    op = "histogram[256 bins]"
+    model = n * keys.itemsize
+    if impl == "clvis":
+        run(benchmark, lambda: clvis.histogram(kd, 256), op=op, impl=impl, role="clvis", n=n,
+            nbytes=model, queue=queue)
+    elif impl == "numpy":
+        run(benchmark, lambda: np.bincount(keys, minlength=256), op=op, impl="numpy.bincount",
+            role="peer", n=n, nbytes=model)
+    else:
+        run(benchmark, lambda: P.copy(kd), op=op, impl="copy kernel", role="copy", n=n,
+            nbytes=2 * kd.nbytes, queue=queue)

@@ -1,0 +1,26 @@
+"""Helpers shared by the bench/ suites."""
+
+import os
+
+
+def scaled(n: int) -> int:
+    """n times CLVIS_BENCH_SCALE (default 1), at least 1024: CI's smoke runs
+    shrink every size; the figures come from full runs."""
+    scale = float(os.environ.get("CLVIS_BENCH_SCALE", "1"))
+    return max(1024, int(n * scale))
+
+
+def run(benchmark, fn, *, op, impl, role, n, nbytes, queue=None, rounds=7, **info):
+    """Time fn (finishing `queue` inside the timing) and record what the
+    report needs: op (the benchmark group), impl, role ("clvis", "clvis-host",
+    "peer" or "copy"), n elements and the bytes model."""
+    benchmark.group = op
+    benchmark.extra_info.update(op=op, impl=impl, role=role, n=int(n), bytes=int(nbytes), **info)
+
+    def call():
+        r = fn()
+        if queue is not None:
+            queue.finish()
+        return r
+
+    benchmark.pedantic(call, rounds=rounds, warmup_rounds=1, iterations=1)

@@ -1,0 +1,151 @@
+"""Tables and target checks from pytest-benchmark JSON written by bench/.
+
+Every benchmark's extra_info names its op, impl, role ("clvis", "clvis-host",
+"peer" or "copy"), element count n and bytes model (DESIGN.md). For each op
+the report gives, per implementation, the median time, throughput (elements
+per second), GB/s by the bytes model and % of the copy kernel's GB/s measured
+in the same run; and for clvis on device arrays its speed-up over each peer
+(peer time / clvis time). Targets are checked on those ratios.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+
+@dataclasses.dataclass
+class Row:
+    op: str
+    impl: str
+    role: str
+    n: int
+    bytes: int
+    median_s: float
+    min_s: float
+    rounds: int
+    copy_gbs: float | None = None
+
+    @property
+    def elems_per_s(self) -> float:
+        return self.n / self.median_s
+
+    @property
+    def gbs(self) -> float:
+        return self.bytes / self.median_s / 1e9
+
+    @property
+    def copy_pct(self) -> float | None:
+        return None if not self.copy_gbs else 100.0 * self.gbs / self.copy_gbs
+
+
+@dataclasses.dataclass
+class Target:
+    op: str
+    what: str          # "copy_pct" or the impl name of a peer
+    at_least: float
+    devices: str       # "cpu" or "gpu": the tuning profile it applies to
+
+    def describe(self) -> str:
+        if self.what == "copy_pct":
+            return f"{self.op}: >= {self.at_least:g}% of copy bandwidth"
+        return f"{self.op}: >= {self.at_least:g}x {self.what}"
+
+
+SORT_OP = "radix_sort[uint32 keys + uint32 values]"
+TARGETS = {
+    "primitives": [
+        # issue 2, on PoCL's CPU device (2 cores)
+        Target("scan[int32]", "pyopencl.ExclusiveScanKernel", 5, "cpu"),
+        Target("scan[int32]", "numpy.cumsum", 2, "cpu"),
+        Target("scan[int32]", "copy_pct", 40, "cpu"),
+        Target("compact[int32, half kept]", "numpy boolean mask", 2, "cpu"),
+        Target(SORT_OP, "numpy argsort(stable) + gather", 4, "cpu"),
+        Target(SORT_OP, "pyopencl.algorithm.RadixSort", 10, "cpu"),
+        # goals on a GPU with NVIDIA's OpenCL
+        Target("scan[int32]", "copy_pct", 70, "gpu"),
+        Target(SORT_OP, "copy_pct", 40, "gpu"),
+    ],
+}
+
+
+def load(path) -> tuple[list[Row], dict]:
+    """Rows (copy bandwidth filled in) and the run's clvis section."""
+    data = json.loads(Path(path).read_text())
+    rows = []
+    for b in data.get("benchmarks", []):
+        info = b.get("extra_info", {})
+        if "op" not in info:
+            continue
+        st = b["stats"]
+        rows.append(Row(op=info["op"], impl=info["impl"], role=info["role"], n=info["n"],
+                        bytes=info["bytes"], median_s=st["median"], min_s=st["min"],
+                        rounds=st["rounds"]))
+    copy = {r.op: r.gbs for r in rows if r.role == "copy"}
+    for r in rows:
+        r.copy_gbs = copy.get(r.op)
+    return rows, data.get("clvis", {})
+
+
+def ratios(rows: list[Row]) -> dict[tuple[str, str], float]:
+    """(op, peer impl) -> peer median / clvis (device arrays) median."""
+    clv = {r.op: r for r in rows if r.role == "clvis"}
+    out = {}
+    for r in rows:
+        if r.role == "peer" and r.op in clv:
+            out[(r.op, r.impl)] = r.median_s / clv[r.op].median_s
+    return out
+
+
+def check(rows: list[Row], family: str, profile: str) -> list[tuple[Target, float | None, bool]]:
+    """Each target of `family` for `profile`: (target, measured, met)."""
+    rat = ratios(rows)
+    clv = {r.op: r for r in rows if r.role == "clvis"}
+    results = []
+    for t in TARGETS.get(family, []):
+        if t.devices != profile:
+            continue
+        if t.what == "copy_pct":
+            value = clv[t.op].copy_pct if t.op in clv else None
+        else:
+            value = rat.get((t.op, t.what))
+        results.append((t, value, value is not None and value >= t.at_least))
+    return results
+
+
+def _si(x: float) -> str:
+    for unit, f in (("G", 1e9), ("M", 1e6), ("k", 1e3)):
+        if x >= f:
+            return f"{x / f:.2f} {unit}"
+    return f"{x:.0f} "
+
+
+def format_table(rows: list[Row], meta: dict | None = None) -> str:
+    rat = ratios(rows)
+    lines = []
+    if meta:
+        lines.append(f"device: {meta.get('device', '?')}   tuning: {meta.get('tuning', '?')}   "
+                     f"clvis {meta.get('version', '?')}   scale {meta.get('scale', 1)}")
+    head = f"{'implementation':38} {'median':>10} {'throughput':>14} {'GB/s':>7} {'% copy':>7} {'clvis speed-up':>15}"
+    for op in dict.fromkeys(r.op for r in rows):
+        ops = [r for r in rows if r.op == op]
+        n = ops[0].n
+        lines += ["", f"{op}   n = {n:,}", head, "-" * len(head)]
+        for r in sorted(ops, key=lambda r: ["clvis", "clvis-host", "peer", "copy"].index(r.role)):
+            name = r.impl if r.role != "clvis" else "clvis (device arrays)"
+            if r.role == "clvis-host":
+                name = "clvis (numpy in/out, transfers)"
+            pct = f"{r.copy_pct:6.0f}%" if r.copy_pct is not None else "      -"
+            speed = f"{rat[(op, r.impl)]:14.1f}x" if (op, r.impl) in rat else ""
+            lines.append(f"{name:38} {r.median_s * 1e3:8.2f}ms {_si(r.elems_per_s) + 'el/s':>14} "
+                         f"{r.gbs:7.1f} {pct} {speed:>15}")
+    return "\n".join(lines)
+
+
+def format_checks(results) -> str:
+    lines = []
+    for t, value, ok in results:
+        v = "not measured" if value is None else (f"{value:.0f}%" if t.what == "copy_pct" else f"{value:.1f}x")
+        lines.append(f"  [{'met' if ok else 'MISSED'}] {t.describe()}: {v}")
+    return "\n".join(lines)

@@ -1,0 +1,53 @@
+"""Fixtures: every OpenCL device found, and both tuning profiles.
+
+- ``device``: each device of each platform (PoCL always; Intel's CPU runtime
+  when the test command exposes it).
+- ``queue``: each (device, tuning profile) pair. The "gpu" profile's wide
+  work-groups and local-memory tiles run on CPU devices too, so the GPU code
+  paths are checked here even without a GPU.
+
+CLVIS_REQUIRE_PLATFORMS (e.g. "portable,intel", set by the test command) makes
+test_required_platforms fail when a named platform is missing, so a driver
+that silently stops loading cannot shrink the matrix unnoticed.
+"""
+
+import os
+
+import hypothesis
+import pytest
+
+from clvis import runtime
+
+hypothesis.settings.register_profile(
+    "clvis", deadline=None, max_examples=int(os.environ.get("CLVIS_HYPOTHESIS_EXAMPLES", "40")),
+    suppress_health_check=[hypothesis.HealthCheck.too_slow])
+hypothesis.settings.load_profile("clvis")
+
+DEVICES = runtime.devices()
+
+
+def _id(device):
+    return runtime.device_slug(device)
+
+
+@pytest.fixture(scope="session", params=DEVICES, ids=[_id(d) for d in DEVICES])
+def device(request):
+    return request.param
+
+
+@pytest.fixture(scope="session", params=["cpu", "gpu"])
+def profile(request):
+    return request.param
+
+
+@pytest.fixture
+def queue(device, profile):
+    """The device's clvis queue, with the tuning profile in force for the test."""
+    with runtime.configure(tuning=profile):
+        yield runtime.queue_for(device)
+
+
+def pytest_report_header(config):
+    lines = ["clvis devices:"]
+    lines += [f"  {i}: {runtime.describe(d)}" for i, d in enumerate(DEVICES)] or ["  none"]
+    return lines

@@ -1,0 +1,63 @@
+"""The clvis command line and the benchmark report."""
+
+import json
+
+import pytest
+
+from clvis import benchreport, cli
+
+
+def test_info(capsys):
+    assert cli.main(["info"]) == 0
+    out = capsys.readouterr().out
+    assert "clvis uses:" in out and "64-bit atomics" in out and "tuning profile" in out
+
+
+def test_demo(capsys):
+    assert cli.main(["demo", "--n", "30000"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("matches") == 4 and "MISMATCH" not in out
+
+
+def _bench_json(tmp_path, tuning="cpu"):
+    def b(op, impl, role, n, nbytes, median):
+        return {"extra_info": {"op": op, "impl": impl, "role": role, "n": n, "bytes": nbytes},
+                "stats": {"median": median, "min": median * 0.9, "rounds": 5}}
+    op = "scan[int32]"
+    data = {"clvis": {"device": "test device", "tuning": tuning, "version": "x", "scale": 1},
+            "benchmarks": [
+                b(op, "clvis", "clvis", 1000, 8000, 1e-3),
+                b(op, "numpy.cumsum", "peer", 1000, 8000, 3e-3),
+                b(op, "pyopencl.ExclusiveScanKernel", "peer", 1000, 8000, 4e-3),
+                b(op, "copy kernel", "copy", 1000, 8000, 0.5e-3),
+                {"stats": {"median": 1, "min": 1, "rounds": 1}},     # not ours: ignored
+            ]}
+    p = tmp_path / "r.json"
+    p.write_text(json.dumps(data))
+    return p
+
+
+def test_report_math(tmp_path):
+    rows, meta = benchreport.load(_bench_json(tmp_path))
+    clv = next(r for r in rows if r.role == "clvis")
+    assert clv.elems_per_s == pytest.approx(1e6)
+    assert clv.gbs == pytest.approx(8e-3)
+    assert clv.copy_pct == pytest.approx(50.0)       # copy moves the same bytes in half the time
+    rat = benchreport.ratios(rows)
+    assert rat[("scan[int32]", "numpy.cumsum")] == pytest.approx(3.0)
+    checks = {t.describe(): (v, ok) for t, v, ok in benchreport.check(rows, "primitives", "cpu")}
+    assert checks["scan[int32]: >= 2x numpy.cumsum"] == (pytest.approx(3.0), True)
+    assert checks["scan[int32]: >= 5x pyopencl.ExclusiveScanKernel"] == (pytest.approx(4.0), False)
+    assert checks["scan[int32]: >= 40% of copy bandwidth"] == (pytest.approx(50.0), True)
+    missing = [k for k, (v, ok) in checks.items() if v is None]
+    assert all(not checks[k][1] for k in missing)    # unmeasured targets are not met
+    table = benchreport.format_table(rows, meta)
+    assert "3.0x" in table and "50%" in table
+
+
+def test_bench_report_command(tmp_path, capsys):
+    path = _bench_json(tmp_path)
+    assert cli.main(["bench", "primitives", "--report", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "[MISSED] scan[int32]: >= 5x pyopencl.ExclusiveScanKernel: 4.0x" in out
+    assert cli.main(["bench", "primitives", "--report", str(path), "--check"]) == 1

@@ -1,0 +1,204 @@
+"""clvis.radix_sort against clvis.reference.primitives.radix_sort.
+
+Keys are compared bit for bit (so -0.0/+0.0 and NaN payloads count), values
+carry the input positions (so stability is checked too).
+"""
+
+import os
+
+import numpy as np
+import pyopencl.array as cla
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+import clvis
+from clvis.reference import primitives as ref
+
+KEY_DTYPES = [np.uint32, np.int32, np.float32, np.uint64, np.int64, np.float64]
+SIZES = [0, 1, 2, 3, 255, 256, 257, 1023, 1024, 1025, 4097, 65537]
+
+
+def bits(a):
+    a = np.asarray(a)
+    return a.view(f"u{a.dtype.itemsize}")
+
+
+def random_keys(n, dtype, rng):
+    dtype = np.dtype(dtype)
+    if dtype.kind == "f":
+        return (rng.standard_normal(n) * rng.choice([1e-3, 1.0, 1e6], n)).astype(dtype)
+    info = np.iinfo(dtype)
+    return rng.integers(info.min, info.max, n, dtype=dtype, endpoint=True)
+
+
+def check(keys, queue, with_values=True, key_bits=None):
+    n = keys.shape[0]
+    if with_values:
+        vals = np.arange(n, dtype=np.uint32)
+        gk, gv = clvis.radix_sort(keys, vals, key_bits=key_bits, queue=queue)
+        wk, wv = ref.radix_sort(keys, vals, key_bits=key_bits)
+        np.testing.assert_array_equal(gv, wv)
+    else:
+        gk = clvis.radix_sort(keys, key_bits=key_bits, queue=queue)
+        wk = ref.radix_sort(keys, key_bits=key_bits)
+    assert gk.dtype == keys.dtype
+    np.testing.assert_array_equal(bits(gk), bits(wk))
+
+
+@pytest.mark.parametrize("with_values", [True, False], ids=["pairs", "keys"])
+@pytest.mark.parametrize("dtype", KEY_DTYPES, ids=lambda d: np.dtype(d).name)
+def test_parity_sizes(queue, dtype, with_values):
+    rng = np.random.default_rng(13)
+    for n in SIZES:
+        check(random_keys(n, dtype, rng), queue, with_values)
+
+
+@pytest.mark.parametrize("dtype", KEY_DTYPES, ids=lambda d: np.dtype(d).name)
+@pytest.mark.parametrize("kind", ["equal", "sorted", "reversed", "extremes", "few"])
+def test_adversarial(queue, dtype, kind):
+    rng = np.random.default_rng(17)
+    n = 20011
+    dt = np.dtype(dtype)
+    info = np.finfo(dt) if dt.kind == "f" else np.iinfo(dt)
+    if kind == "equal":
+        keys = np.full(n, info.max, dt)
+    elif kind == "sorted":
+        keys = np.sort(random_keys(n, dt, rng))
+    elif kind == "reversed":
+        keys = np.sort(random_keys(n, dt, rng))[::-1].copy()
+    elif kind == "extremes":
+        keys = rng.choice(np.array([info.min, info.max, 0, 1], dt), n)
+    else:
+        keys = rng.integers(0, 3, n).astype(dt)
+    check(keys, queue)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64], ids=lambda d: np.dtype(d).name)
+def test_float_total_order(queue, dtype):
+    """-inf < ... < -0.0 < +0.0 < ... < +inf < NaN; NaNs of either sign and any
+    payload come last, in input order, with their bits intact."""
+    dt = np.dtype(dtype)
+    u = np.dtype(f"u{dt.itemsize}")
+    if dt.itemsize == 4:
+        nans = np.array([0x7FC00000, 0xFFC00000, 0x7F800001, 0xFFFFFFFF], u).view(dt)
+    else:
+        nans = np.array([0x7FF8000000000000, 0xFFF8000000000000, 0x7FF0000000000001,
+                         0xFFFFFFFFFFFFFFFF], u).view(dt)
+    tiny = np.finfo(dt).smallest_subnormal
+    special = np.concatenate([nans, np.array([np.inf, -np.inf, 0.0, -0.0, tiny, -tiny,
+                                              np.finfo(dt).max, np.finfo(dt).min, 1, -1], dt)])
+    rng = np.random.default_rng(3)
+    keys = rng.choice(special, 10007)
+    check(keys, queue)
+    got = clvis.radix_sort(keys, queue=queue)
+    finite = got[~np.isnan(got)]
+    assert np.all(finite[1:] >= finite[:-1])
+    assert np.isnan(got[-int(np.isnan(keys).sum()):]).all()
+    zeros = bits(got[got == 0])
+    neg_zero = bits(np.array([-0.0], dt))[0]
+    assert np.all(np.diff((zeros != neg_zero).astype(int)) >= 0)   # all -0.0 before +0.0
+    np.testing.assert_array_equal(bits(got[np.isnan(got)]), bits(keys[np.isnan(keys)]))
+
+
+@pytest.mark.parametrize("dtype,key_bits", [(np.uint32, 12), (np.uint32, 1), (np.int32, 20),
+                                            (np.uint64, 40), (np.int64, 33), (np.uint32, 32)])
+def test_key_bits(queue, dtype, key_bits):
+    rng = np.random.default_rng(5)
+    keys = rng.integers(0, 1 << min(key_bits, 62), 50001, dtype=np.uint64).astype(dtype)
+    check(keys, queue, key_bits=key_bits)
+
+
+def test_key_bits_violation(queue):
+    keys = np.arange(5000, dtype=np.uint32)
+    keys[1234] = 1 << 20
+    saved = keys.copy()
+    with pytest.raises(clvis.DataError, match=r"key_bits=16 .*0x10"):
+        clvis.radix_sort(keys, key_bits=16, queue=queue)
+    np.testing.assert_array_equal(keys, saved)      # input untouched
+    with pytest.raises(clvis.DataError, match="key_bits=31"):
+        clvis.radix_sort(np.array([5, -1, 3], np.int32), key_bits=31, queue=queue)
+    with pytest.raises(clvis.DataError, match="key_bits=0"):
+        clvis.radix_sort(np.array([0, 1], np.uint32), key_bits=0, queue=queue)
+    np.testing.assert_array_equal(
+        clvis.radix_sort(np.zeros(7, np.uint32), key_bits=0, queue=queue), np.zeros(7))
+
+
+def test_values_dtypes(queue):
+    rng = np.random.default_rng(8)
+    keys = rng.integers(0, 100, 9999).astype(np.uint32)
+    for vdt in (np.int32, np.float32):
+        vals = rng.standard_normal(9999).astype(vdt)
+        gk, gv = clvis.radix_sort(keys, vals, queue=queue)
+        wk, wv = ref.radix_sort(keys, vals)
+        assert gv.dtype == vdt
+        np.testing.assert_array_equal(bits(gv), bits(wv))
+
+
+def _check_sorted_permutation(keys, gk, gv):
+    """Sorted, a permutation (the values index the input), stable — O(n)."""
+    k = ref.sort_key(gk)
+    assert np.all(k[1:] >= k[:-1])
+    np.testing.assert_array_equal(bits(keys[gv]), bits(gk))
+    assert np.bincount(gv, minlength=gv.size).max() == 1     # each input position once
+    same = k[1:] == k[:-1]
+    assert np.all(gv[1:][same] > gv[:-1][same])
+
+
+@pytest.mark.parametrize("dtype", [np.uint32, np.float32], ids=lambda d: np.dtype(d).name)
+def test_2_24(device, dtype):
+    q = clvis.runtime.queue_for(device)
+    rng = np.random.default_rng(24)
+    keys = random_keys(1 << 24, dtype, rng)
+    vals = np.arange(keys.size, dtype=np.uint32)
+    gk, gv = clvis.radix_sort(keys, vals, queue=q)
+    _check_sorted_permutation(keys, gk, gv)
+
+
+@pytest.mark.large
+@pytest.mark.skipif(os.environ.get("CLVIS_LARGE") != "1", reason="set CLVIS_LARGE=1 (2^27 keys, ~2 GB)")
+def test_2_27(device):
+    q = clvis.runtime.queue_for(device)
+    rng = np.random.default_rng(27)
+    keys = rng.integers(0, 1 << 32, 1 << 27, dtype=np.uint64).astype(np.uint32)
+    vals = np.arange(keys.size, dtype=np.uint32)
+    gk, gv = clvis.radix_sort(keys, vals, queue=q)
+    _check_sorted_permutation(keys, gk, gv)
+
+
+def test_device_arrays(queue):
+    rng = np.random.default_rng(1)
+    keys = rng.integers(0, 1000, 30000).astype(np.uint32)
+    kd = cla.to_device(queue, keys)
+    vd = cla.to_device(queue, np.arange(30000, dtype=np.uint32))
+    gk, gv = clvis.radix_sort(kd, vd)
+    assert isinstance(gk, cla.Array) and isinstance(gv, cla.Array)
+    assert gk.data is not kd.data
+    np.testing.assert_array_equal(kd.get(), keys)       # input untouched
+    wk, wv = ref.radix_sort(keys, np.arange(30000, dtype=np.uint32))
+    np.testing.assert_array_equal(gk.get(), wk)
+    np.testing.assert_array_equal(gv.get(), wv)
+
+
+@given(keys=hnp.arrays(st.sampled_from([np.uint32, np.int32, np.int64, np.float32]),
+                       st.integers(0, 3000)))
+def test_property(device, keys):
+    check(keys, clvis.runtime.queue_for(device))
+
+
+def test_bad_input():
+    with pytest.raises(TypeError, match="keys: dtype int16"):
+        clvis.radix_sort(np.zeros(4, np.int16))
+    with pytest.raises(ValueError, match="keys: expected a 1-D array"):
+        clvis.radix_sort(np.zeros((2, 2), np.uint32))
+    with pytest.raises(ValueError, match="values: length 3 differs from keys' 4"):
+        clvis.radix_sort(np.zeros(4, np.uint32), np.zeros(3, np.uint32))
+    with pytest.raises(TypeError, match="values: dtype uint64"):
+        clvis.radix_sort(np.zeros(4, np.uint32), np.zeros(4, np.uint64))
+    with pytest.raises(ValueError, match="key_bits: only integer keys"):
+        clvis.radix_sort(np.zeros(4, np.float32), key_bits=8)
+    with pytest.raises(ValueError, match="key_bits: expected 0..32"):
+        clvis.radix_sort(np.zeros(4, np.uint32), key_bits=33)
+    with pytest.raises(TypeError, match="key_bits: expected an int"):
+        clvis.radix_sort(np.zeros(4, np.uint32), key_bits=8.0)

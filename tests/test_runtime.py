@@ -1,0 +1,202 @@
+"""clvis.runtime: device choice, capabilities, builds, options, errors."""
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+import pytest
+
+import clvis
+from clvis import runtime
+
+PROBE = str(Path(__file__).parent / "kernels" / "probe.cl")
+
+
+def test_some_device_found():
+    assert runtime.devices(), "no OpenCL device: install pyopencl[pocl]"
+
+
+def test_required_platforms():
+    """The test command names the platforms it installed; each must load."""
+    wanted = [p.strip().lower() for p in os.environ.get("CLVIS_REQUIRE_PLATFORMS", "").split(",") if p.strip()]
+    if not wanted:
+        pytest.skip("CLVIS_REQUIRE_PLATFORMS is not set (the README's test command sets it)")
+    names = [d.platform.name.lower() for d in runtime.devices()]
+    missing = [w for w in wanted if not any(w in n for n in names)]
+    assert not missing, f"platforms not found: {missing}; found {names}"
+
+
+def test_select_device(monkeypatch):
+    devs = runtime.devices()
+    monkeypatch.delenv("CLVIS_DEVICE", raising=False)
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    assert runtime.select_device(0) == devs[0]
+    assert runtime.select_device(str(len(devs) - 1)) == devs[-1]
+    d = runtime.select_device("portable")
+    assert "portable computing language" in d.platform.name.lower()
+    monkeypatch.setenv("CLVIS_DEVICE", "PORTABLE")
+    assert runtime.select_device() == d
+    with pytest.raises(clvis.DeviceError, match="matches no device"):
+        runtime.select_device("no-such-device-anywhere")
+    with pytest.raises(clvis.DeviceError, match=f"there are {len(devs)} devices"):
+        runtime.select_device(len(devs) + 3)
+
+
+def test_default_order(monkeypatch):
+    """No CLVIS_DEVICE or PYOPENCL_CTX: a GPU, else PoCL, else the first."""
+    monkeypatch.delenv("CLVIS_DEVICE", raising=False)
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    devs = runtime.devices()
+    gpus = [d for d in devs if d.type & cl.device_type.GPU]
+    pocl = [d for d in devs if "portable" in d.platform.name.lower()]
+    assert runtime.select_device() == (gpus or pocl or devs)[0]
+
+
+def test_pyopencl_ctx(monkeypatch):
+    monkeypatch.delenv("CLVIS_DEVICE", raising=False)
+    monkeypatch.setenv("PYOPENCL_CTX", "0:0")
+    assert runtime.select_device() == cl.get_platforms()[0].get_devices()[0]
+
+
+def test_capabilities(device):
+    caps = runtime.capabilities(device)
+    ext = device.extensions.split()
+    assert caps.compute_units >= 1 and caps.max_work_group_size >= 1
+    assert caps.max_alloc_bytes == device.max_mem_alloc_size
+    assert caps.int64_atomics_native == ("cl_khr_int64_base_atomics" in ext
+                                         and "cl_khr_int64_extended_atomics" in ext)
+    assert caps.int64_atomics == caps.int64_atomics_native
+    assert caps.device_type in ("CPU", "GPU", "ACCELERATOR", "OTHER")
+
+
+def _probe(queue):
+    out = cla.to_device(queue, np.array([9, 1 << 50], np.uint64))
+    k = runtime.get_kernel(queue, PROBE, "probe", {})
+    runtime.launch(queue, k, 1, 1, out.data)
+    return out.get()
+
+
+def test_int64_atomics_forced_off(device):
+    """Kernels see CLVIS_INT64_ATOMICS exactly when the device has the
+    extensions and the option allows; with it, the 64-bit atomic really runs."""
+    q = runtime.queue_for(device)
+    native = runtime.capabilities(device).int64_atomics_native
+    got = _probe(q)
+    assert got[0] == int(native)
+    if native:
+        assert got[1] == 7 | (1 << 40)
+    with runtime.configure(int64_atomics=False):
+        assert not runtime.capabilities(device).int64_atomics
+        assert "-DCLVIS_INT64_ATOMICS=1" not in runtime.build_options(device, {})
+        assert _probe(q)[0] == 0
+    assert runtime.capabilities(device).int64_atomics == native
+
+
+def test_int64_atomics_env():
+    code = "import clvis; print(clvis.capabilities().int64_atomics)"
+    env = dict(os.environ, CLVIS_NO_INT64_ATOMICS="1")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"
+
+
+def test_kernel_build_error(device, tmp_path):
+    bad = tmp_path / "bad.cl"
+    bad.write_text("kernel void k(global int *a) { a[0] = undefined_thing; }\n")
+    q = runtime.queue_for(device)
+    with pytest.raises(clvis.KernelBuildError) as info:
+        runtime.get_kernel(q, str(bad), "k", {"FOO": 3})
+    e = info.value
+    assert e.path == str(bad) and e.defines == {"FOO": 3}
+    assert "undefined_thing" in e.log
+    assert "-DFOO=3" in str(e) and str(bad) in str(e)
+    assert isinstance(e, clvis.ClvisError)
+
+
+def test_bad_define_name(device):
+    with pytest.raises(ValueError, match="not a C identifier"):
+        runtime.get_kernel(runtime.queue_for(device), "primitives/scan.cl", "scan_reduce",
+                           {"T=int -DX": 1})
+
+
+def test_program_cache(device):
+    ctx = runtime.queue_for(device).context
+    a = runtime.get_program(ctx, "primitives/scan.cl", {"T": "int"})
+    assert runtime.get_program(ctx, "primitives/scan.cl", {"T": "int"}) is a
+    assert runtime.get_program(ctx, "primitives/scan.cl", {"T": "uint"}) is not a
+
+
+def test_max_alloc_cap():
+    with runtime.configure(max_alloc_bytes=1000):
+        assert runtime.capabilities().max_alloc_bytes == 1000
+        with pytest.raises(clvis.DeviceError,
+                           match=r"x: needs one buffer of 4000 bytes, more than the max single "
+                                 r"allocation of 1000 bytes"):
+            clvis.scan(np.zeros(1000, np.int32))
+        clvis.scan(np.zeros(250, np.int32))     # exactly at the cap
+    with pytest.raises(ValueError, match="max_alloc_bytes"):
+        runtime.set_options(max_alloc_bytes=0)
+
+
+def test_beyond_device_alloc(device):
+    """An input larger than the device's max single allocation gets a clear
+    DeviceError naming the sizes before anything is allocated or run
+    (np.zeros is only reserved address space until touched)."""
+    q = runtime.queue_for(device)
+    limit = runtime.capabilities(device).max_alloc_bytes
+    x = np.zeros(limit // 4 + 1, np.int32)
+    with pytest.raises(clvis.DeviceError, match=rf"x: needs one buffer of {x.nbytes} bytes.*"
+                                                rf"allocation of {limit} bytes"):
+        clvis.scan(x, queue=q)
+
+
+def test_tuning_profiles(device):
+    expected = "gpu" if device.type & (cl.device_type.GPU | cl.device_type.ACCELERATOR) else "cpu"
+    assert runtime.tuning_profile(device) == expected
+    with runtime.configure(tuning="gpu"):
+        assert runtime.tuning_profile(device) == "gpu"
+    with pytest.raises(ValueError, match="tuning"):
+        runtime.set_options(tuning="fast")
+
+
+def test_default_queue():
+    q = clvis.default_queue()
+    assert isinstance(q, cl.CommandQueue) and clvis.default_queue() is q
+
+
+def test_other_context_rejected(device):
+    ctx = cl.Context([device])          # not clvis's context for this device
+    x = cla.to_device(cl.CommandQueue(ctx), np.arange(10, dtype=np.int32))
+    with pytest.raises(ValueError, match="x: the device array belongs to another OpenCL context"):
+        clvis.scan(x, queue=runtime.queue_for(device))
+
+
+def test_view_with_offset(device):
+    q = runtime.queue_for(device)
+    x = cla.to_device(q, np.arange(100, dtype=np.int32))[10:]
+    np.testing.assert_array_equal(clvis.scan(x, False).get(), np.cumsum(np.arange(10, 100)))
+
+
+def test_device_slug(device):
+    slug = runtime.device_slug(device)
+    assert re.fullmatch(r"[a-z0-9-]+", slug)
+
+
+def test_every_kernel_file_documents_its_abi():
+    """Each .cl file opens with its ABI comment, which names every kernel."""
+    files = sorted(runtime.KERNEL_ROOT.glob("*/*.cl"))
+    assert files
+    for f in files:
+        text = f.read_text()
+        assert text.lstrip().startswith("/*"), f
+        comment = text[: text.index("*/")]
+        assert "ABI" in comment, f
+        names = re.findall(r"^kernel\b[^;{]*?\bvoid\s+(\w+)\s*\(", text, re.MULTILINE | re.DOTALL)
+        assert names, f
+        for name in names:
+            assert f"kernel {name}(" in comment, (f, name)

@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# The project's commands. Each makes (or refreshes) its own virtual environment,
+# so a fresh machine needs only python3.
+#
+#   ./dev.sh demo    .venv: clvis + PoCL; runs `clvis demo`
+#   ./dev.sh test    .venv-test: clvis + PoCL + Intel's CPU OpenCL runtime (x86-64
+#                    Linux) + test tools; runs the tests on every OpenCL device
+#                    found, then the benchmark suites once each at a tiny scale
+#   ./dev.sh bench   .venv-test; runs `clvis bench primitives` (full sizes)
+#
+# Extra arguments go to the command (pytest, clvis demo, clvis bench).
+set -euo pipefail
+cd "$(dirname "$0")"
+PY=${PYTHON:-python3}
+
+venv() { # venv DIR EXTRAS
+    [ -x "$1/bin/python" ] || "$PY" -m venv "$1"
+    "$1/bin/python" -m pip install -q --disable-pip-version-check --upgrade pip
+    "$1/bin/python" -m pip install -q --disable-pip-version-check -e ".[$2]"
+}
+
+with_intel() { # Intel's runtime only ships for x86-64 Linux
+    [ "$(uname -s)" = Linux ] && [ "$(uname -m)" = x86_64 ]
+}
+
+intel_env() { # VENV: point the ICD loader at Intel's runtime inside the venv
+    local lib
+    lib=$(ls "$PWD/$1"/lib/libintelocl.so 2>/dev/null || true)
+    [ -n "$lib" ] || { echo "dev.sh: intel-opencl-rt is not in $1" >&2; return 1; }
+    mkdir -p "$1/etc/clvis-icd"
+    echo "$lib" > "$1/etc/clvis-icd/intel.icd"
+    # pyopencl's bundled loader reads this folder and still finds its own PoCL
+    export OCL_ICD_VENDORS="$PWD/$1/etc/clvis-icd"
+    # libintelocl.so finds its compiler runtime (libimf, libsvml, tbb) here
+    export LD_LIBRARY_PATH="$PWD/$1/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+}
+
+cmd=${1:-}
+shift || true
+case "$cmd" in
+demo)
+    venv .venv pocl
+    exec .venv/bin/clvis demo "$@"
+    ;;
+test | bench)
+    if with_intel; then
+        venv .venv-test pocl,test,intel
+        intel_env .venv-test
+        export CLVIS_REQUIRE_PLATFORMS=${CLVIS_REQUIRE_PLATFORMS:-portable,intel}
+    else
+        venv .venv-test pocl,test
+        export CLVIS_REQUIRE_PLATFORMS=${CLVIS_REQUIRE_PLATFORMS:-portable}
+    fi
+    if [ "$cmd" = bench ]; then
+        exec .venv-test/bin/clvis bench primitives "$@"
+    fi
+    CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001} exec .venv-test/bin/python -m pytest \
+        tests bench --benchmark-disable -q "$@"
+    ;;
+*)
+    echo "usage: ./dev.sh demo | test | bench  [args]" >&2
+    exit 2
+    ;;
+esac

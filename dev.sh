@@ -5,7 +5,8 @@
 #   ./dev.sh demo    .venv: clvis + PoCL; runs `clvis demo`
 #   ./dev.sh test    .venv-test: clvis + PoCL + Intel's CPU OpenCL runtime (x86-64
 #                    Linux) + test tools; runs the tests on every OpenCL device
-#                    found, then the benchmark suites once each at a tiny scale
+#                    found (2^27-element cases included), then the benchmark
+#                    suites once each at a tiny scale
 #   ./dev.sh bench   .venv-test; runs `clvis bench primitives` (full sizes)
 #
 # Extra arguments go to the command (pytest, clvis demo, clvis bench).
@@ -54,8 +55,9 @@ test | bench)
     if [ "$cmd" = bench ]; then
         exec .venv-test/bin/clvis bench primitives "$@"
     fi
-    CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001} exec .venv-test/bin/python -m pytest \
-        tests bench --benchmark-disable -q "$@"
+    # CLVIS_LARGE=1: the 2^27-element tests too (~1.5 min, ~8 GB)
+    CLVIS_LARGE=${CLVIS_LARGE:-1} CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001} \
+        exec .venv-test/bin/python -m pytest tests bench --benchmark-disable -q "$@"
     ;;
 *)
     echo "usage: ./dev.sh demo | test | bench  [args]" >&2

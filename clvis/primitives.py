@@ -134,10 +134,10 @@ def scan(x, exclusive: bool = True, *, return_total: bool = False, out=None, que
         res = out
     else:
         res = runtime.empty(queue, n, xd.dtype, "scan output")
-    total = runtime.empty(queue, 1, xd.dtype, "scan total")
     if n == 0:
-        total.fill(0)
+        total = runtime.zeros(queue, 1, xd.dtype, "scan total")
     else:
+        total = runtime.empty(queue, 1, xd.dtype, "scan total")
         _check_size(n, "scan")
         _scan_into(queue, xd, res, total, exclusive)
     out_res = result(res, host)
@@ -233,7 +233,7 @@ def compact(x, flags, *, out=None, count=None, queue=None):
     xd = to_device(queue, "x", x)
     out, count_d = _compact_outputs(queue, n, x.shape[1:], xd.dtype, out, count, "compaction")
     if n == 0:
-        count_d.fill(0)
+        runtime.fill_zero(queue, count_d)
     else:
         _check_size(n, "compact")
         rowbytes = xd.dtype.itemsize * math.prod(x.shape[1:])
@@ -253,7 +253,7 @@ def compact_indices(flags, *, out=None, count=None, queue=None):
     fd = _flags_input(queue, flags, n)
     out, count_d = _compact_outputs(queue, n, (), np.dtype(np.uint32), out, count, "compact_indices")
     if n == 0:
-        count_d.fill(0)
+        runtime.fill_zero(queue, count_d)
     else:
         _check_size(n, "compact_indices")
         _compact(queue, fd, None, 0, out, count_d)
@@ -384,10 +384,8 @@ def histogram(keys, nbins: int, *, check: bool = True, queue=None):
     nbins = int(nbins)
     kd = to_device(queue, "keys", keys)
     n = kd.size
-    counts = runtime.empty(queue, nbins, np.uint32, "histogram counts")
-    overflow = runtime.empty(queue, 1, np.uint32, "histogram overflow")
-    counts.fill(0)
-    overflow.fill(0)
+    counts = runtime.zeros(queue, nbins, np.uint32, "histogram counts")
+    overflow = runtime.zeros(queue, 1, np.uint32, "histogram overflow")
     if n:
         _check_size(n, "histogram")
         shape, groups = _shape(queue, "histogram")

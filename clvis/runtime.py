@@ -494,3 +494,16 @@ def empty(queue, shape, dtype, what: str) -> cla.Array:
         return cla.empty(queue, shape, dtype, allocator=allocator(queue))
     except (cl.MemoryError, cl.Error) as e:
         raise DeviceError(f"{what}: allocating {nbytes} bytes on {describe(queue.device)} failed: {e}") from e
+
+
+def fill_zero(queue, a: cla.Array) -> cla.Array:
+    """Zero a device array's bytes with clEnqueueFillBuffer (pyopencl's
+    Array.fill would build a kernel of its own)."""
+    if a.nbytes:
+        cl.enqueue_fill_buffer(queue, a.base_data, np.zeros(1, np.uint8), a.offset, a.nbytes)
+    return a
+
+
+def zeros(queue, shape, dtype, what: str) -> cla.Array:
+    """empty(), zeroed."""
+    return fill_zero(queue, empty(queue, shape, dtype, what))

@@ -10,7 +10,7 @@ def scaled(n: int) -> int:
     return max(1024, int(n * scale))
 
 
-def run(benchmark, fn, *, op, impl, role, n, nbytes, queue=None, rounds=7, **info):
+def run(benchmark, fn, *, op, impl, role, n, nbytes, queue=None, rounds=11, **info):
     """Time fn (finishing `queue` inside the timing) and record what the
     report needs: op (the benchmark group), impl, role ("clvis", "clvis-host",
     "peer" or "copy"), n elements and the bytes model."""

@@ -112,7 +112,7 @@ def _cmd_demo(args) -> int:
 
     cases = [
         ("scan int32 (exclusive)", lambda: primitives.scan(xd),
-         lambda: np.cumsum(x, dtype=np.int32), "np.cumsum",
+         lambda: np.cumsum(x, dtype=np.int32), "np.cumsum",   # the same int32 output
          lambda: np.array_equal(primitives.scan(xd).get(), ref.scan(x))),
         ("compact int32, half kept", lambda: primitives.compact(xd, md),
          lambda: x[mask], "boolean mask",

@@ -91,19 +91,42 @@ def _check_size(n: int, what: str) -> None:
 # --------------------------------------------------------------------------
 # scan
 
+# testing only: make scan_chained ignore what other groups publish, so every
+# look-back takes the fallback path (scan.cl's SCAN_TEST_FALLBACK)
+_SCAN_TEST_FALLBACK = False
+
+
 def _scan_into(queue, src, dst, total, exclusive: bool) -> None:
-    """Enqueue the scan of device array `src` (n > 0) into `dst`; total[0] = sum."""
+    """Enqueue the scan of device array `src` (n > 0) into `dst`; total[0] = sum.
+
+    32-bit integers on the CPU work shape take the single-pass chained scan
+    when the device has 64-bit atomics (else, or in place, reduce-then-scan:
+    the same result)."""
     n = src.size
     shape, groups = _shape(queue, "scan")
-    per, G = _partition(n, shape["WG"] * shape["ITEMS"], groups)
-    defines = {"T": _SCAN_T[src.dtype], "WG": shape["WG"], "ITEMS": shape["ITEMS"]}
+    wg, tile = shape["WG"], shape["WG"] * shape["ITEMS"]
+    defines = {"T": _SCAN_T[src.dtype], "WG": wg, "ITEMS": shape["ITEMS"]}
+    exclusive = np.uint32(1 if exclusive else 0)
+    chained = (wg == 1 and src.dtype.itemsize == 4 and src.dtype.kind in "iu"
+               and runtime.capabilities(queue).int64_atomics
+               and src.base_data.int_ptr != dst.base_data.int_ptr)
+    if chained:
+        # ~4 ranges per group slot: each stays in cache between its two reads
+        per, G = _partition(n, tile, 4 * groups)
+        if _SCAN_TEST_FALLBACK:
+            defines["SCAN_TEST_FALLBACK"] = 1
+        status = runtime.zeros(queue, G + 1, np.uint64, "scan status")
+        k = runtime.get_kernel(queue, "primitives/scan.cl", "scan_chained", defines)
+        runtime.launch(queue, k, G, 1, buf(src), buf(dst), _u64(n), _u64(per), buf(status),
+                       exclusive, buf(total))
+        return
+    per, G = _partition(n, tile, groups)
     partials = runtime.empty(queue, G, src.dtype, "scan partials")
     k_reduce = runtime.get_kernel(queue, "primitives/scan.cl", "scan_reduce", defines)
     k_down = runtime.get_kernel(queue, "primitives/scan.cl", "scan_downsweep", defines)
-    wg = shape["WG"]
     runtime.launch(queue, k_reduce, G * wg, wg, buf(src), _u64(n), _u64(per), buf(partials))
     runtime.launch(queue, k_down, G * wg, wg, buf(src), buf(dst), _u64(n), _u64(per),
-                   buf(partials), np.uint32(1 if exclusive else 0), buf(total))
+                   buf(partials), exclusive, buf(total))
 
 
 def scan(x, exclusive: bool = True, *, return_total: bool = False, out=None, queue=None):
@@ -414,13 +437,22 @@ def histogram(keys, nbins: int, *, check: bool = True, queue=None):
 # --------------------------------------------------------------------------
 # copy
 
-def copy(x, *, queue=None):
-    """A copy of x made by a device kernel: the benchmarks' bandwidth yardstick."""
-    queue = resolve_queue(queue, x=x)
+def copy(x, *, out=None, queue=None):
+    """A copy of x made by a device kernel: the benchmarks' bandwidth yardstick.
+    out: a device array of x's dtype and shape to copy into (e.g. the very
+    buffer an op under test writes, so both see the same memory placement)."""
+    queue = resolve_queue(queue, x=x, out=out)
     host = not is_device(x)
     x = check_array("x", x)
     xd = to_device(queue, "x", x)
-    out = runtime.empty(queue, xd.shape, xd.dtype, "copy output")
+    if out is None:
+        out = runtime.empty(queue, xd.shape, xd.dtype, "copy output")
+    else:
+        if not is_device(out):
+            raise TypeError("out: expected a pyopencl.array.Array")
+        out = check_array("out", out, dtypes=[xd.dtype])
+        if out.shape != xd.shape or out.offset:
+            raise ValueError(f"out: expected shape {xd.shape} without offset, got {out.shape}")
     nbytes = xd.nbytes
     if nbytes:
         k = runtime.get_kernel(queue, "primitives/copy.cl", "copy_bytes", {})

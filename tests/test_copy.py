@@ -21,3 +21,13 @@ def test_shapes_and_device_arrays(device):
     got = primitives.copy(cla.to_device(q, x))
     assert isinstance(got, cla.Array) and got.shape == x.shape and got.dtype == x.dtype
     np.testing.assert_array_equal(got.get(), x)
+
+
+def test_into_out(device):
+    q = primitives.runtime.queue_for(device)
+    x = cla.to_device(q, np.arange(1000, dtype=np.int32))
+    out = cla.zeros(q, 1000, np.int32)
+    assert primitives.copy(x, out=out) is out
+    np.testing.assert_array_equal(out.get(), np.arange(1000))
+    with pytest.raises(ValueError, match="out: expected shape"):
+        primitives.copy(x, out=cla.zeros(q, 999, np.int32))

@@ -138,6 +138,45 @@ def test_negative_zero(queue):
     np.testing.assert_array_equal(clvis.scan(x, False, queue=queue), [0.0, 0.0, 1.0, 0.0])
 
 
+CHAIN_SIZES = [1, 15, 16, 17, 4095, 4096, 4097, 65537, 1_000_003]
+
+
+@pytest.mark.parametrize("dtype", [np.int32, np.uint32], ids=lambda d: np.dtype(d).name)
+def test_chained_scan_used_and_matches_fallback_build(device, dtype, monkeypatch):
+    """32-bit integers on the CPU shape take the single-pass chained scan when
+    the device has 64-bit atomics; built without them (forced) they take
+    reduce-then-scan. Both equal the reference."""
+    q = clvis.runtime.queue_for(device)
+    used = []
+    real = clvis.runtime.get_kernel
+    monkeypatch.setattr(clvis.runtime, "get_kernel",
+                        lambda queue, path, name, defines: used.append(name) or real(queue, path, name, defines))
+    rng = np.random.default_rng(5)
+    with clvis.runtime.configure(tuning="cpu"):
+        for n in CHAIN_SIZES:
+            check(data(n, dtype, rng), True, q)
+        assert ("scan_chained" in used) == clvis.runtime.capabilities(q).int64_atomics
+        used.clear()
+        with clvis.runtime.configure(int64_atomics=False):
+            for n in CHAIN_SIZES:
+                check(data(n, dtype, rng), False, q)
+        assert "scan_chained" not in used and "scan_downsweep" in used
+
+
+def test_chained_scan_fallback_path(device, monkeypatch):
+    """Every look-back summing its predecessors' ranges itself (what happens
+    when a predecessor has not published) gives the same result."""
+    q = clvis.runtime.queue_for(device)
+    if not clvis.runtime.capabilities(q).int64_atomics:
+        pytest.skip("no 64-bit atomics: scan_chained is not built on this device")
+    monkeypatch.setattr(clvis.primitives, "_SCAN_TEST_FALLBACK", True)
+    rng = np.random.default_rng(6)
+    with clvis.runtime.configure(tuning="cpu"):
+        for n in CHAIN_SIZES:
+            check(data(n, np.int32, rng), True, q)
+            check(data(n, np.uint32, rng), False, q)
+
+
 def test_device_arrays_stay_on_device(queue, monkeypatch):
     x = np.arange(10000, dtype=np.int64)
     xd = cla.to_device(queue, x)

@@ -1,4 +1,6 @@
-/* scan.cl — prefix sums (inclusive or exclusive) by reduce-then-scan.
+/* scan.cl — prefix sums (inclusive or exclusive): reduce-then-scan, and a
+ * single-pass chained scan with decoupled fallback for 32-bit integers on
+ * CPU devices.
  *
  * ABI
  * ---
@@ -7,17 +9,23 @@
  *   WG     work-group size, a power of two; launch with exactly
  *          this local size (reqd_work_group_size)                  (default 1)
  *   ITEMS  elements per work-item per tile; TILE = WG * ITEMS      (default 16)
+ *   CLVIS_INT64_ATOMICS  set by the host when the device has
+ *          cl_khr_int64_base_atomics: enables scan_chained
+ *   SCAN_TEST_FALLBACK   testing only: scan_chained ignores what other
+ *          groups publish, so every look-back takes the fallback
  *   Include path: -I kernels_cl/include (uses clvis/workgroup.h).
  *
- * Partition shared by both kernels: the n elements are split into G contiguous
+ * Partition shared by the kernels: the n elements are split into G contiguous
  * ranges of `per_group` elements (a multiple of TILE; the last range may be
- * shorter), G = ceil(n / per_group), n > 0. Group g owns
- * [g * per_group, min(n, (g + 1) * per_group)). Both kernels are launched with
- * global size G * WG and local size WG.
+ * shorter), G = ceil(n / per_group), n > 0. Range g is
+ * [g * per_group, min(n, (g + 1) * per_group)). Launch with global size
+ * G * WG and local size WG.
+ *
+ * Reduce-then-scan (any T, any WG), two launches:
  *
  * kernel scan_reduce(global const T *in, ulong n, ulong per_group,
  *                    global T *partials)
- *     partials[g] = sum of group g's range. partials holds G elements.
+ *     partials[g] = sum of range g. partials holds G elements.
  *
  * kernel scan_downsweep(global const T *in, global T *out, ulong n,
  *                       ulong per_group, global const T *partials,
@@ -28,8 +36,31 @@
  *     partials must hold scan_reduce's output for the same n, per_group, G.
  *     out may be the same buffer as in (in-place scan).
  *
- * Memory traffic: reads n + writes 0 (reduce), reads n + writes n (downsweep):
- * 3 n words, plus G words of partials.
+ *     Memory traffic: reads n (reduce), reads n + writes n (downsweep):
+ *     3 n words, plus G words of partials.
+ *
+ * Chained scan (WG == 1, T int or uint, CLVIS_INT64_ATOMICS), one launch:
+ *
+ * kernel scan_chained(global const T *in, global T *out, ulong n,
+ *                     ulong per_group, global ulong *status, uint exclusive,
+ *                     global T *total)
+ *     out and total as scan_downsweep (out must not overlap in). status holds
+ *     G + 1 ulongs, zero before the launch. Global size G, local size 1.
+ *     Each group takes the next range index from the counter status[G] (so
+ *     ranges are handed out in the order groups start), sums its range,
+ *     publishes status[g] = 1 << 32 | sum, then looks back: a predecessor's
+ *     published word (1: its range's sum, 2: the sum of everything up to its
+ *     end) is added; an unpublished range is summed by this group itself, 4096
+ *     elements at a time, stopping as soon as its owner publishes. No group
+ *     ever waits for another (no forward-progress assumption). Then it
+ *     publishes 2 << 32 | inclusive sum and scans its range, which its first
+ *     read left in cache. State and value share one word written and read
+ *     with 64-bit atomics, so no ordering between memory locations is needed.
+ *     Integer sums are exact in any order: the output is identical to the
+ *     reduce-then-scan's.
+ *
+ *     Memory traffic: reads n + writes n from memory (the second read of a
+ *     range hits the cache), plus any ranges summed in fallback.
  *
  * Arithmetic: integers wrap modulo 2^bits (as numpy's cumsum with the same
  * dtype). float sums are rounded in a fixed order that depends only on n,
@@ -40,10 +71,10 @@
  * Within a range each group walks tiles in order, carrying the running sum.
  * With WG == 1 one work-item takes two 32-byte vectors of consecutive elements
  * at a time with an in-register prefix (the fast form for CPU devices; ITEMS
- * then only sets the reduce's independent accumulators); with WG > 1 a
- * tile of TILE elements is loaded coalesced into local memory, each work-item
- * scans ITEMS consecutive elements and a work-group scan joins the work-items
- * (the GPU form).
+ * then only sets the number of independent accumulators of its sums); with
+ * WG > 1 a tile of TILE elements is loaded coalesced into local memory, each
+ * work-item scans ITEMS consecutive elements and a work-group scan joins the
+ * work-items (the GPU form).
  */
 #include "clvis/workgroup.h"
 
@@ -68,6 +99,11 @@
 #define SIZEOF_float 4
 #define SIZEOF_long 8
 #define SIZEOF_ulong 8
+#define INT32_int 1
+#define INT32_uint 1
+#define INT32_long 0
+#define INT32_ulong 0
+#define INT32_float 0
 #if CAT(SIZEOF_, T) == 8
 #define VW 4
 #else
@@ -109,17 +145,12 @@ CLVIS_DEFINE_WG_SUM(sum_before, T, wg_scan)
 #define TILE_LOCAL (TILE + (TILE >> 5) + 1)
 #endif
 
-kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
-void scan_reduce(global const T *restrict in, const ulong n,
-                 const ulong per_group, global T *restrict partials)
+/* This work-item's share of the sum of in[start, end): elements lid,
+ * lid + WG, ... in ITEMS independent accumulators (a fixed summation order
+ * for floats that the compiler can still vectorise). */
+inline T reduce_items(global const T *in, const ulong start, const ulong end)
 {
-    const ulong g = get_group_id(0);
     const uint lid = get_local_id(0);
-    const ulong start = g * per_group;
-    const ulong end = min(n, start + per_group);
-
-    /* ITEMS independent accumulators: a fixed summation order for floats that
-     * the compiler can still vectorise. */
     T lane[ITEMS];
     for (int i = 0; i < ITEMS; ++i)
         lane[i] = 0;
@@ -131,14 +162,22 @@ void scan_reduce(global const T *restrict in, const ulong n,
     }
     for (ulong i = base + lid; i < end; i += WG)
         lane[0] += in[i];
-
     T acc = 0;
     for (int i = 0; i < ITEMS; ++i)
         acc += lane[i];
+    return acc;
+}
+
+kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
+void scan_reduce(global const T *restrict in, const ulong n,
+                 const ulong per_group, global T *restrict partials)
+{
+    const ulong g = get_group_id(0);
+    const ulong start = g * per_group;
     local T scratch[WG];
     T total;
-    wg_scan(acc, scratch, &total);
-    if (lid == 0)
+    wg_scan(reduce_items(in, start, min(n, start + per_group)), scratch, &total);
+    if (get_local_id(0) == 0)
         partials[g] = total;
 }
 
@@ -181,6 +220,36 @@ inline T scan_tile(global const T *in, global T *out, const ulong base,
 }
 #endif
 
+#if WG == 1
+/* One work-item scans in[base, end) into out from `carry`, two vectors
+ * (2 * VW elements) at a time: an in-register prefix of each, then the carry
+ * added to all lanes, so the carried dependency is one add per 2 * VW
+ * elements and the rest vectorises. Returns the carry after the range. */
+inline T scan_serial(global const T *in, global T *out, ulong base,
+                     const ulong end, T carry, const uint exclusive)
+{
+    for (; base + 2 * VW <= end; base += 2 * VW) {
+        TV a = vprefix(VLOAD(0, in + base));
+        TV b = vprefix(VLOAD(1, in + base));
+        b += VLAST(a);
+        const T sum = VLAST(b);
+        if (exclusive) {
+            b = vshift(b, VLAST(a));
+            a = vshift(a, (T)0);
+        }
+        VSTORE(a + carry, 0, out + base);
+        VSTORE(b + carry, 1, out + base);
+        carry += sum;
+    }
+    for (; base < end; ++base) {
+        const T x = in[base];
+        out[base] = exclusive ? carry : carry + x;
+        carry += x;
+    }
+    return carry;
+}
+#endif
+
 kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
 void scan_downsweep(global const T *in, global T *out, const ulong n,
                     const ulong per_group, global const T *partials,
@@ -201,29 +270,73 @@ void scan_downsweep(global const T *in, global T *out, const ulong n,
     if (get_local_id(0) == 0 && g == get_num_groups(0) - 1)
         total[0] = carry;
 #else
-    /* One work-item walks its range two vectors (2 * VW elements) at a time:
-     * an in-register prefix of each, then the carry added to all lanes, so the
-     * carried dependency is one add per 2 * VW elements and the rest
-     * vectorises. */
-    for (; base + 2 * VW <= end; base += 2 * VW) {
-        TV a = vprefix(VLOAD(0, in + base));
-        TV b = vprefix(VLOAD(1, in + base));
-        b += VLAST(a);
-        const T sum = VLAST(b);
-        if (exclusive) {
-            b = vshift(b, VLAST(a));
-            a = vshift(a, (T)0);
-        }
-        VSTORE(a + carry, 0, out + base);
-        VSTORE(b + carry, 1, out + base);
-        carry += sum;
-    }
-    for (; base < end; ++base) {
-        const T x = in[base];
-        out[base] = exclusive ? carry : carry + x;
-        carry += x;
-    }
+    carry = scan_serial(in, out, base, end, carry, exclusive);
     if (g == get_num_groups(0) - 1)
         total[0] = carry;
 #endif
 }
+
+
+#if WG == 1 && CAT(INT32_, T) && defined(CLVIS_INT64_ATOMICS)
+#pragma OPENCL EXTENSION cl_khr_int64_base_atomics : enable
+#define CAT_AS(t) CAT(as_, t)
+#define PUBLISHED_SUM 1ul         /* status word: the range's sum */
+#define PUBLISHED_PREFIX 2ul      /* status word: the sum through the range's end */
+#define FALLBACK_CHUNK 4096
+
+inline ulong status_word(const ulong state, const T value)
+{
+    return (state << 32) | (ulong)as_uint(value);
+}
+
+inline ulong read_status(volatile global ulong *status, const ulong k)
+{
+#ifdef SCAN_TEST_FALLBACK
+    (void)status; (void)k;
+    return 0;
+#else
+    return atom_add(&status[k], 0ul);
+#endif
+}
+
+kernel __attribute__((reqd_work_group_size(1, 1, 1)))
+void scan_chained(global const T *restrict in, global T *restrict out,
+                  const ulong n, const ulong per_group,
+                  volatile global ulong *status, const uint exclusive,
+                  global T *restrict total)
+{
+    const ulong G = get_num_groups(0);
+    const ulong g = atom_inc(&status[G]);       /* ranges in start order */
+    const ulong start = g * per_group;
+    const ulong end = min(n, start + per_group);
+    const T sum = reduce_items(in, start, end);
+    atom_xchg(&status[g], status_word(PUBLISHED_SUM, sum));
+
+    T prefix = 0;
+    for (long k = (long)g - 1; k >= 0; --k) {
+        ulong w = read_status(status, (ulong)k);
+        if ((w >> 32) == 0) {
+            /* not published: sum range k here, chunk by chunk, until done or
+             * until its group publishes after all */
+            const ulong ks = (ulong)k * per_group;
+            const ulong ke = min(n, ks + per_group);
+            T own = 0;
+            for (ulong pos = ks; pos < ke && (w >> 32) == 0; pos += FALLBACK_CHUNK) {
+                own += reduce_items(in, pos, min(ke, pos + FALLBACK_CHUNK));
+                w = read_status(status, (ulong)k);
+            }
+            if ((w >> 32) == 0) {
+                prefix += own;
+                continue;
+            }
+        }
+        prefix += CAT_AS(T)((uint)w);
+        if ((w >> 32) == PUBLISHED_PREFIX)
+            break;
+    }
+    atom_xchg(&status[g], status_word(PUBLISHED_PREFIX, prefix + sum));
+    const T last = scan_serial(in, out, start, end, prefix, exclusive);
+    if (g == G - 1)
+        total[0] = last;
+}
+#endif

@@ -154,6 +154,9 @@ def format_table(rows: list[Row], meta: dict | None = None) -> str:
 def format_checks(results) -> str:
     lines = []
     for t, value, ok in results:
-        v = "not measured" if value is None else (f"{value:.0f}%" if t.what == "copy_pct" else f"{value:.1f}x")
+        if value is None:   # not in this run; --check still counts it as unmet
+            lines.append(f"  [not measured] {t.describe()}")
+            continue
+        v = f"{value:.0f}%" if t.what == "copy_pct" else f"{value:.1f}x"
         lines.append(f"  [{'met' if ok else 'MISSED'}] {t.describe()}: {v}")
     return "\n".join(lines)

@@ -413,11 +413,14 @@ def histogram(keys, nbins: int, *, check: bool = True, queue=None):
         _check_size(n, "histogram")
         shape, groups = _shape(queue, "histogram")
         wg = shape["WG"]
-        local_bins = shape["LOCAL_BINS"]
+        # local counters for the bins needed (a power of two, so few variants),
+        # if the profile and the device's local memory allow
+        local_bins = max(256, 1 << (nbins - 1).bit_length())
+        fits = (local_bins <= shape["LOCAL_BINS"]
+                and 4 * (local_bins + 1) <= runtime.capabilities(queue).local_mem_bytes)
         defines = {"KEY_T": "int" if kd.dtype == np.int32 else "uint", "WG": wg,
                    "LOCAL_BINS": local_bins}
-        caps = runtime.capabilities(queue)
-        if nbins <= local_bins and 4 * (local_bins + 1) <= caps.local_mem_bytes and n >= nbins:
+        if fits and n >= nbins:
             per, G = _partition(n, wg, groups)
             k = runtime.get_kernel(queue, "primitives/histogram.cl", "histogram_local", defines)
             runtime.launch(queue, k, G * wg, wg, buf(kd), _u64(n), _u64(per), np.uint32(nbins),

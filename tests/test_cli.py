@@ -60,4 +60,5 @@ def test_bench_report_command(tmp_path, capsys):
     assert cli.main(["bench", "primitives", "--report", str(path)]) == 0
     out = capsys.readouterr().out
     assert "[MISSED] scan[int32]: >= 5x pyopencl.ExclusiveScanKernel: 4.0x" in out
+    assert "[not measured] compact[int32, half kept]" in out
     assert cli.main(["bench", "primitives", "--report", str(path), "--check"]) == 1

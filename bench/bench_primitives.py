@@ -16,7 +16,7 @@ import pytest
 
 import clvis
 from clvis import primitives as P
-from benchutil import run, scaled
+from benchutil import run, run_copy, scaled
 
 
 # --------------------------------------------------------------------------
@@ -63,10 +63,7 @@ def test_scan(benchmark, queue, scan_data, impl):
         run(benchmark, lambda: knl(xd, out), op=op, impl="pyopencl.ExclusiveScanKernel",
             role="peer", n=n, nbytes=model, queue=queue)
     else:
-        # into the buffer clvis's scan writes: the same placement of both streams
-        out = scan_data[3]
-        run(benchmark, lambda: P.copy(xd, out=out), op=op, impl="copy kernel", role="copy",
-            n=n, nbytes=2 * xd.nbytes, queue=queue)
+        run_copy(benchmark, queue, op, xd, n, out=scan_data[3])
 
 
 # --------------------------------------------------------------------------
@@ -104,8 +101,7 @@ def test_compact(benchmark, queue, compact_data, impl):
             op=op, impl="pyopencl.algorithm.copy_if", role="peer", n=n, nbytes=model,
             queue=queue, rounds=3)
     else:
-        run(benchmark, lambda: P.copy(xd), op=op, impl="copy kernel", role="copy", n=n,
-            nbytes=2 * xd.nbytes, queue=queue)
+        run_copy(benchmark, queue, op, xd, n)
 
 
 # --------------------------------------------------------------------------
@@ -154,8 +150,7 @@ def test_radix_sort(benchmark, queue, sort_data, impl):
             impl="pyopencl.algorithm.RadixSort", role="peer", n=n, nbytes=model,
             queue=queue, rounds=2)
     else:
-        run(benchmark, lambda: P.copy(kd), op=op, impl="copy kernel", role="copy", n=n,
-            nbytes=2 * kd.nbytes, queue=queue)
+        run_copy(benchmark, queue, op, kd, n)
 
 
 # --------------------------------------------------------------------------
@@ -184,5 +179,4 @@ def test_histogram(benchmark, queue, hist_data, impl):
         run(benchmark, lambda: np.bincount(keys, minlength=256), op=op, impl="numpy.bincount",
             role="peer", n=n, nbytes=model)
     else:
-        run(benchmark, lambda: P.copy(kd), op=op, impl="copy kernel", role="copy", n=n,
-            nbytes=2 * kd.nbytes, queue=queue)
+        run_copy(benchmark, queue, op, kd, n)

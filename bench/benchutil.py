@@ -24,3 +24,11 @@ def run(benchmark, fn, *, op, impl, role, n, nbytes, queue=None, rounds=11, **in
         return r
 
     benchmark.pedantic(call, rounds=rounds, warmup_rounds=1, iterations=1)
+
+
+def run_copy(benchmark, queue, op, xd, n, out=None):
+    """The op's bandwidth limit: the device copy kernel over its main array
+    (into `out`, the buffer the op itself writes, where there is one)."""
+    from clvis import primitives
+    run(benchmark, lambda: primitives.copy(xd, out=out), op=op, impl="copy kernel", role="copy",
+        n=n, nbytes=2 * xd.nbytes, queue=queue)

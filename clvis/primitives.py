@@ -322,24 +322,32 @@ def radix_sort(keys, values=None, *, key_bits: int | None = None, queue=None):
     vd = to_device(queue, "values", values) if values is not None else None
     shape, groups = _shape(queue, "radix")
     radix_bits = shape["RADIX_BITS"]
-    passes = -(-sort_bits // radix_bits)
+    radix = 1 << radix_bits
+    # key_bits=0 still runs one pass: a stable sort all the same, and its
+    # upsweep checks the keys on the device
+    passes = max(1, -(-sort_bits // radix_bits))
 
-    if n <= 1 or passes == 0:
+    if n <= 1:
         ko = kd.copy() if not host else kd
         vo = (vd.copy() if not host else vd) if vd is not None else None
         if key_bits is not None and n and key_bits < bits:
-            _check_key_bits(int(np.bitwise_or.reduce(kd.get().view(f"u{kd.dtype.itemsize}"))),
-                            key_bits, keys.dtype)
+            _check_key_bits(int(kd.get().view(f"u{kd.dtype.itemsize}")[0]), key_bits, keys.dtype)
         return _sorted_result(ko, vo, host)
     _check_size(n, "radix_sort")
 
     wg = shape["WG"]
+    if wg > 1:
+        # the tiled kernel's local memory: counters, the tile's keys and values
+        def local_bytes(w):
+            tile_bytes = w * shape["ITEMS"] * (kd.dtype.itemsize + (4 if vd is not None else 0))
+            return 4 * radix * w + tile_bytes + 4 * (radix + w)
+        while wg > 1 and local_bytes(wg) > runtime.capabilities(queue).local_mem_bytes:
+            wg //= 2
     tile = wg * shape["ITEMS"]
     if wg == 1:
         per, G = _partition(n, tile, groups)
     else:       # the tiled kernel ranks one tile per group (radix_sort.cl)
         per, G = tile, -(-n // tile)
-    radix = 1 << radix_bits
     defines = {"KEY_T": key_t, "KEY_ORDER": order, "HAS_VALUES": int(vd is not None),
                "RADIX_BITS": radix_bits, "WG": wg, "ITEMS": shape["ITEMS"]}
     k_up = runtime.get_kernel(queue, "primitives/radix_sort.cl", "radix_upsweep", defines)

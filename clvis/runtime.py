@@ -49,10 +49,11 @@ import pyopencl.tools
 from .errors import ClvisError, DeviceError, KernelBuildError
 
 __all__ = [
-    "Capabilities", "Options", "KERNEL_ROOT", "INCLUDE_DIR", "capabilities",
-    "configure", "default_queue", "describe", "devices", "get_kernel",
-    "options", "queue_for", "select_device", "set_default_device",
-    "set_options", "tuning_profile",
+    "Capabilities", "Options", "KERNEL_ROOT", "INCLUDE_DIR", "allocator",
+    "build_options", "capabilities", "check_alloc", "configure", "default_queue",
+    "describe", "device_slug", "devices", "empty", "fill_zero", "free_pools",
+    "get_kernel", "get_program", "launch", "options", "queue_for",
+    "select_device", "set_default_device", "set_options", "tuning_profile", "zeros",
 ]
 
 

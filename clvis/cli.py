@@ -66,21 +66,21 @@ def _int64_text(caps) -> str:
 
 
 def _timed(fn, queue=None, repeat=3) -> float:
-    """Best of `repeat` runs (one if a run takes over half a second), after one
-    warm-up (which builds the kernels)."""
-    t0 = time.perf_counter()
-    fn()
-    if queue is not None:
-        queue.finish()
-    if time.perf_counter() - t0 > 0.5:
-        repeat = 1
-    best = float("inf")
-    for _ in range(repeat):
+    """Best of `repeat` timed runs after one warm-up (which builds the
+    kernels); a single timed run when that one takes over half a second."""
+    def once():
         t0 = time.perf_counter()
         fn()
         if queue is not None:
             queue.finish()
-        best = min(best, time.perf_counter() - t0)
+        return time.perf_counter() - t0
+
+    once()
+    best = once()
+    if best > 0.5:
+        return best
+    for _ in range(repeat - 1):
+        best = min(best, once())
     return best
 
 

@@ -144,6 +144,7 @@ def scan(x, exclusive: bool = True, *, return_total: bool = False, out=None, que
     queue = resolve_queue(queue, x=x, out=out)
     host = not is_device(x)
     x = check_array("x", x, dtypes=_SCAN_T, ndim=1)
+    _check_size(x.size, "scan")
     xd = to_device(queue, "x", x)
     n = xd.size
     if out is not None:
@@ -161,7 +162,6 @@ def scan(x, exclusive: bool = True, *, return_total: bool = False, out=None, que
         total = runtime.zeros(queue, 1, xd.dtype, "scan total")
     else:
         total = runtime.empty(queue, 1, xd.dtype, "scan total")
-        _check_size(n, "scan")
         _scan_into(queue, xd, res, total, exclusive)
     out_res = result(res, host)
     if not return_total:
@@ -252,16 +252,16 @@ def compact(x, flags, *, out=None, count=None, queue=None):
     host = not is_device(x) and not is_device(flags)
     x = check_array("x", x, min_ndim=1)
     n = x.shape[0]
+    _check_size(n, "compact")
+    rowbytes = np.dtype(x.dtype).itemsize * math.prod(x.shape[1:])
+    if rowbytes == 0:
+        raise ValueError(f"x: rows of shape {tuple(x.shape[1:])} hold no data")
     fd = _flags_input(queue, flags, n)
     xd = to_device(queue, "x", x)
     out, count_d = _compact_outputs(queue, n, x.shape[1:], xd.dtype, out, count, "compaction")
     if n == 0:
         runtime.fill_zero(queue, count_d)
     else:
-        _check_size(n, "compact")
-        rowbytes = xd.dtype.itemsize * math.prod(x.shape[1:])
-        if rowbytes == 0:
-            raise ValueError(f"x: rows of shape {tuple(x.shape[1:])} hold no data")
         _compact(queue, fd, xd, rowbytes, out, count_d)
     return _finish_compact(out, count_d, host, sync=count is None)
 
@@ -273,12 +273,12 @@ def compact_indices(flags, *, out=None, count=None, queue=None):
     host = not is_device(flags)
     flags = check_array("flags", flags, dtypes=_FLAG_DTYPES, ndim=1)
     n = flags.shape[0]
+    _check_size(n, "compact_indices")
     fd = _flags_input(queue, flags, n)
     out, count_d = _compact_outputs(queue, n, (), np.dtype(np.uint32), out, count, "compact_indices")
     if n == 0:
         runtime.fill_zero(queue, count_d)
     else:
-        _check_size(n, "compact_indices")
         _compact(queue, fd, None, 0, out, count_d)
     return _finish_compact(out, count_d, host, sync=count is None)
 
@@ -317,6 +317,7 @@ def radix_sort(keys, values=None, *, key_bits: int | None = None, queue=None):
         if not 0 <= key_bits <= bits:
             raise ValueError(f"key_bits: expected 0..{bits} for {np.dtype(keys.dtype).name} keys, got {key_bits}")
     sort_bits = bits if key_bits is None else int(key_bits)
+    _check_size(n, "radix_sort")
 
     kd = to_device(queue, "keys", keys)
     vd = to_device(queue, "values", values) if values is not None else None
@@ -333,7 +334,6 @@ def radix_sort(keys, values=None, *, key_bits: int | None = None, queue=None):
         if key_bits is not None and n and key_bits < bits:
             _check_key_bits(int(kd.get().view(f"u{kd.dtype.itemsize}")[0]), key_bits, keys.dtype)
         return _sorted_result(ko, vo, host)
-    _check_size(n, "radix_sort")
 
     wg = shape["WG"]
     if wg > 1:
@@ -413,12 +413,12 @@ def histogram(keys, nbins: int, *, check: bool = True, queue=None):
     if not 1 <= nbins <= _MAX_N:
         raise ValueError(f"nbins: expected 1..2^32-1, got {nbins}")
     nbins = int(nbins)
+    _check_size(keys.shape[0], "histogram")
     kd = to_device(queue, "keys", keys)
     n = kd.size
     counts = runtime.zeros(queue, nbins, np.uint32, "histogram counts")
     overflow = runtime.zeros(queue, 1, np.uint32, "histogram overflow")
     if n:
-        _check_size(n, "histogram")
         shape, groups = _shape(queue, "histogram")
         wg = shape["WG"]
         # local counters for the bins needed (a power of two, so few variants),

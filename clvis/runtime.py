@@ -371,8 +371,16 @@ def device_slug(obj=None) -> str:
 # --------------------------------------------------------------------------
 # programs
 
-def build_options(device: cl.Device, defines: dict) -> list[str]:
-    opts = ["-I", str(INCLUDE_DIR)]
+# OpenCL compiler flags a kernel file may ask for (its ABI comment says which);
+# anything else would make what is built differ from what is in the file
+_FLAGS = {"-cl-fp32-correctly-rounded-divide-sqrt"}
+
+
+def build_options(device: cl.Device, defines: dict, flags: tuple = ()) -> list[str]:
+    for f in flags:
+        if f not in _FLAGS:
+            raise ValueError(f"compiler flag {f!r} is not one clvis kernels use")
+    opts = ["-I", str(INCLUDE_DIR), *flags]
     for k, v in sorted(defines.items()):
         if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", k):
             raise ValueError(f"define name {k!r} is not a C identifier")
@@ -382,7 +390,7 @@ def build_options(device: cl.Device, defines: dict) -> list[str]:
     return opts
 
 
-def _build(context: cl.Context, path: Path, defines: dict) -> cl.Program:
+def _build(context: cl.Context, path: Path, defines: dict, flags: tuple) -> cl.Program:
     device = context.devices[0]
     prg = cl.Program(context, path.read_text())
     with warnings.catch_warnings():
@@ -390,7 +398,7 @@ def _build(context: cl.Context, path: Path, defines: dict) -> cl.Program:
         # pyopencl turns each into a CompilerWarning. Failures raise below.
         warnings.simplefilter("ignore", cl.CompilerWarning)
         try:
-            prg.build(build_options(device, defines))
+            prg.build(build_options(device, defines, flags))
         except cl.Error as e:
             log = ""
             with contextlib.suppress(Exception):
@@ -407,25 +415,27 @@ def _display(path: Path) -> str:
         return str(path)
 
 
-def get_program(context: cl.Context, relpath: str, defines: dict) -> cl.Program:
+def get_program(context: cl.Context, relpath: str, defines: dict, flags: tuple = ()) -> cl.Program:
     """The built program kernels_cl/`relpath` (or an absolute path: a kernel
-    of your own, built the same way) with `defines`, cached."""
+    of your own, built the same way) with `defines` and compiler `flags`, cached."""
     state = _state(context)
     device = context.devices[0]
-    key = (relpath, tuple(build_options(device, defines)))
+    key = (relpath, tuple(build_options(device, defines, flags)))
     with _lock:
         prg = state.programs.get(key)
         if prg is None:
             path = KERNEL_ROOT / relpath
             if not path.is_file():
                 raise ClvisError(f"no kernel source {path}")
-            prg = state.programs[key] = _build(context, path, defines)
+            prg = state.programs[key] = _build(context, path, defines, flags)
         return prg
 
 
-def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: dict) -> cl.Kernel:
-    """Kernel `name` of kernels_cl/`relpath` built with `defines` for the queue's device."""
-    prg = get_program(queue.context, relpath, defines)
+def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: dict,
+               flags: tuple = ()) -> cl.Kernel:
+    """Kernel `name` of kernels_cl/`relpath` built with `defines` (and compiler
+    `flags`) for the queue's device."""
+    prg = get_program(queue.context, relpath, defines, flags)
     state = _state(queue.context)
     key = (id(prg), name)
     with _lock:

@@ -1,0 +1,141 @@
+"""Colormap lookup tables from matplotlib's data, and the rule that maps a scalar
+through one.
+
+``lut(name, n)`` is an ``(n, 4)`` uint8 RGBA table: entry ``i`` is matplotlib's
+own colour for index ``i`` of the colormap resampled to ``n`` entries. The
+tables are read from matplotlib (imported on first use), never typed in here.
+
+Index rule (what the kernels compute; ``apply`` is its reference), for a table
+of ``n`` entries (1 <= n <= 2**24) and finite ``vmin <= vmax``, with every
+operation in IEEE float32 round-to-nearest (no fused or reassociated
+arithmetic)::
+
+    scale = float32(1 / (vmax - vmin))   # divided in float64, then rounded
+                                         # (scale = 0 when vmax == vmin)
+    t     = (float32(v) - float32(vmin)) * scale
+    x     = floor(t * float32(n))
+    i     = 0 if x < 0 or x is NaN, n - 1 if x >= n - 1, else int(x)
+    rgba  = (0, 0, 0, 0) if v is NaN, else lut[i]
+
+So ``v <= vmin`` gives entry 0 and ``v >= vmax`` entry ``n - 1``, as
+matplotlib's "int(t * N), clipped" does, and ±inf clamp to the ends. ``t`` is
+NaN for a non-NaN ``v`` only when ``v`` is ±inf and ``scale`` is 0, or when
+``v == vmin`` and ``scale`` overflowed to inf (``vmax - vmin`` below about
+3e-39); those give entry 0, as matplotlib's ``vmin == vmax`` case does.
+"""
+
+from __future__ import annotations
+
+import difflib
+import functools
+import numbers
+import operator
+
+import numpy as np
+
+__all__ = ["apply", "lut", "names", "value_range"]
+
+_MAX_ENTRIES = 2**24       # float32(n) and float32(n - 1) are exact up to here
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+def names() -> list[str]:
+    """Every colormap name matplotlib knows (``_r`` reversed ones included), sorted."""
+    import matplotlib
+
+    return sorted(matplotlib.colormaps)
+
+
+def lut(name: str = "viridis", n: int = 256) -> np.ndarray:
+    """The ``(n, 4)`` uint8 RGBA table of matplotlib colormap `name` with `n`
+    entries: ``matplotlib.colormaps[name].resampled(n)(np.arange(n), bytes=True)``.
+
+    Raises ValueError for an unknown name (listing some valid ones) or
+    ``n`` outside 1..2**24; TypeError for a name that is not a string or an
+    `n` that is not an integer.
+    """
+    if not isinstance(name, str):
+        raise TypeError(f"name: expected a colormap name (str), got {type(name).__name__}")
+    n = _count("n", n)
+    if not 1 <= n <= _MAX_ENTRIES:
+        raise ValueError(f"n: a colormap table needs 1..{_MAX_ENTRIES} entries, got {n}")
+    return _table(name, n).copy()
+
+
+@functools.lru_cache(maxsize=64)
+def _table(name: str, n: int) -> np.ndarray:
+    import matplotlib
+
+    try:
+        cmap = matplotlib.colormaps[name]
+    except KeyError:
+        known = sorted(matplotlib.colormaps)
+        close = difflib.get_close_matches(name, known, n=5)
+        some = close or [k for k in ("viridis", "magma", "inferno", "plasma", "twilight") if k in known]
+        raise ValueError(f"unknown colormap {name!r}; valid names include {', '.join(some)} "
+                         f"(clvis.colormap.names() lists all {len(known)})") from None
+    table = np.ascontiguousarray(cmap.resampled(n)(np.arange(n), bytes=True), dtype=np.uint8)
+    table.flags.writeable = False
+    return table
+
+
+def apply(values, lut, vmin, vmax) -> np.ndarray:
+    """Colours of `values` through `lut` by the module's index rule: an array of
+    shape ``values.shape + (4,)``, uint8, NaN values ``(0, 0, 0, 0)``.
+
+    `values`: real numbers (converted to float32 first); `lut`: ``(n, 4)``
+    uint8; `vmin`, `vmax`: finite in float32, ``vmin <= vmax``.
+    """
+    table = np.asarray(lut)
+    if table.dtype != np.uint8:
+        raise TypeError(f"lut: expected uint8, got {table.dtype.name}")
+    if table.ndim != 2 or table.shape[1] != 4 or not 1 <= table.shape[0] <= _MAX_ENTRIES:
+        raise ValueError(f"lut: expected shape (n, 4) with 1 <= n <= {_MAX_ENTRIES}, "
+                         f"got {table.shape}")
+    v = np.asarray(values)
+    if v.dtype.kind not in "biuf":
+        raise TypeError(f"values: expected real numbers, got dtype {v.dtype.name}")
+    lo, hi = _limit("vmin", vmin), _limit("vmax", vmax)
+    if lo > hi:
+        raise ValueError(f"vmin ({lo!r}) must be <= vmax ({hi!r})")
+    n = table.shape[0]
+    with np.errstate(over="ignore", invalid="ignore"):
+        v = v.astype(np.float32)
+        scale = np.float32(np.float64(1.0) / (np.float64(hi) - np.float64(lo))) if hi != lo \
+            else np.float32(0.0)
+        t = (v - np.float32(lo)) * scale
+        x = np.floor(t * np.float32(n))
+    i = np.where(x >= n - 1, n - 1, np.where(x > 0, x, 0)).astype(np.intp)
+    out = table[i]
+    out[np.isnan(v)] = 0
+    return out
+
+
+def value_range(values) -> tuple[float, float]:
+    """``(min, max)`` of the finite `values` as Python floats; ``(0.0, 1.0)``
+    when none is finite."""
+    v = np.asarray(values)
+    if v.dtype.kind not in "biuf":
+        raise TypeError(f"values: expected real numbers, got dtype {v.dtype.name}")
+    finite = v[np.isfinite(v)]
+    if finite.size == 0:
+        return 0.0, 1.0
+    return float(finite.min()), float(finite.max())
+
+
+def _count(name: str, n) -> int:
+    if isinstance(n, bool):
+        raise TypeError(f"{name}: expected an integer, got bool")
+    try:
+        return operator.index(n)
+    except TypeError:
+        raise TypeError(f"{name}: expected an integer, got {type(n).__name__}") from None
+
+
+def _limit(name: str, x) -> float:
+    if not isinstance(x, numbers.Real):
+        raise TypeError(f"{name}: expected a real number, got {type(x).__name__}")
+    x = float(x)
+    if not abs(x) <= _F32_MAX:
+        raise ValueError(f"{name}: expected a number finite in float32, got {x!r}")
+    return x

@@ -1,0 +1,424 @@
+"""Cameras: view and projection matrices, the pixel convention, viewpoint samplers.
+
+Conventions (DESIGN.md): right-handed world, OpenGL clip space, column vectors::
+
+    clip = projection @ view @ [x, y, z, 1]
+
+The view looks down its −z axis; ``projection`` is the standard gluPerspective or
+glOrtho matrix. A point's depth is its view-space distance along the view axis,
+``depth_row · [x, y, z, 1]``, positive in front of the camera (it equals clip w
+for a perspective camera; for an orthographic one clip w is 1).
+
+:meth:`Camera.project` is the pixel convention, written in float32 exactly as the
+OpenCL kernels compute it; kernel tests compare against it bit for bit.
+
+The samplers :func:`grid_cameras` and :func:`hemisphere_cameras` produce the
+NARVis training viewpoints (z is up).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Camera", "Projected", "grid_cameras", "hemisphere_cameras"]
+
+# Camera.fit frames the bounding sphere enlarged by this factor, so rounding never
+# pushes a box corner out of the image.
+_FIT_MARGIN = 1.05
+# A box smaller than this (relative to its distance from the origin, or absolute
+# below 1) is treated as a sphere of this radius, so a single point still gets a
+# camera whose float32 matrices resolve it.
+_MIN_RADIUS = 1e-4
+
+
+def _vec3(name: str, v) -> np.ndarray:
+    try:
+        a = np.array(v, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"{name}: expected 3 real numbers, got {v!r}") from e
+    if a.shape != (3,):
+        raise ValueError(f"{name}: expected 3 numbers, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name}: must be finite, got {a.tolist()}")
+    return a
+
+
+def _real(name: str, v) -> float:
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}: expected a real number, got {type(v).__name__}")
+    v = float(v)
+    if not math.isfinite(v):
+        raise ValueError(f"{name}: must be finite, got {v}")
+    return v
+
+
+def _positive(name: str, v) -> float:
+    v = _real(name, v)
+    if v <= 0:
+        raise ValueError(f"{name}: must be > 0, got {v}")
+    return v
+
+
+def _fov(fov_y) -> float:
+    fov_y = _real("fov_y", fov_y)
+    if not 0 < fov_y < 180:
+        raise ValueError(f"fov_y: must be in (0, 180) degrees, got {fov_y}")
+    return fov_y
+
+
+def _near_far(near, far, perspective: bool) -> tuple[float, float]:
+    near, far = _real("near", near), _real("far", far)
+    if perspective and near <= 0:
+        raise ValueError(f"near: must be > 0 for a perspective camera, got {near}")
+    if far <= near:
+        raise ValueError(f"far: must be > near ({near}), got {far}")
+    return near, far
+
+
+def _image_size(name: str, v) -> int:
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+        raise TypeError(f"{name}: expected an int, got {type(v).__name__}")
+    if not 0 < v <= 2**24:
+        raise ValueError(f"{name}: must be in 1..2^24 (exact in float32), got {v}")
+    return int(v)
+
+
+def _bounds(bounds_min, bounds_max) -> tuple[np.ndarray, np.ndarray]:
+    lo, hi = _vec3("bounds_min", bounds_min), _vec3("bounds_max", bounds_max)
+    if (hi < lo).any():
+        raise ValueError(f"bounds_max: must be >= bounds_min component-wise, got {hi.tolist()} "
+                         f"< {lo.tolist()}")
+    return lo, hi
+
+
+def _sphere(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre and radius of the box's bounding sphere (radius at least _MIN_RADIUS-scaled)."""
+    centre = 0.5 * (lo + hi)
+    floor = _MIN_RADIUS * max(1.0, float(np.abs(centre).max()))
+    return centre, max(0.5 * float(np.linalg.norm(hi - lo)), floor)
+
+
+def _view_matrix(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """gluLookAt: rows s, u, −f (right, up, backward) and the translation to the eye."""
+    f = target - eye
+    dist = np.linalg.norm(f)
+    if dist == 0:
+        raise ValueError(f"target: must differ from eye, both are {eye.tolist()}")
+    f = f / dist
+    up_len = np.linalg.norm(up)
+    if up_len == 0:
+        raise ValueError("up: must be a non-zero vector")
+    s = np.cross(f, up / up_len)
+    s_len = np.linalg.norm(s)
+    if s_len < 1e-6:
+        raise ValueError(f"up: {up.tolist()} is parallel to the view direction {f.tolist()}")
+    s = s / s_len
+    u = np.cross(s, f)
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = s, u, -f
+    view[:3, 3] = -view[:3, :3] @ eye
+    return view
+
+
+def _perspective(fov_y: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """gluPerspective."""
+    f = 1.0 / math.tan(math.radians(fov_y) / 2)
+    p = np.zeros((4, 4))
+    p[0, 0], p[1, 1] = f / aspect, f
+    p[2, 2], p[2, 3] = (far + near) / (near - far), 2 * far * near / (near - far)
+    p[3, 2] = -1.0
+    return p
+
+
+def _ortho(height: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """glOrtho(−w/2, w/2, −h/2, h/2, near, far) with w = height · aspect."""
+    p = np.eye(4)
+    p[0, 0], p[1, 1] = 2 / (height * aspect), 2 / height
+    p[2, 2], p[2, 3] = -2 / (far - near), -(far + near) / (far - near)
+    return p
+
+
+@dataclass(frozen=True)
+class Projected:
+    """Points in pixels, as :meth:`Camera.project` defines them; arrays of length N.
+
+    ``sx``, ``sy`` (float32): continuous pixel coordinates, (0, 0) the top-left corner
+    of the image; ``px``, ``py`` (int32): the pixel, ``floor(sx)``, ``floor(sy)``
+    where visible and −1 elsewhere; ``depth`` (float32): the view-axis distance;
+    ``visible`` (bool): the point lands in the image and within [near, far].
+    """
+
+    sx: np.ndarray
+    sy: np.ndarray
+    px: np.ndarray
+    py: np.ndarray
+    depth: np.ndarray
+    visible: np.ndarray
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class Camera:
+    """A pinhole or orthographic camera.
+
+    Build one with :meth:`look_at`, :meth:`ortho` or :meth:`fit`. The arrays are
+    read-only float64 copies.
+
+    Attributes
+    ----------
+    view, projection : (4, 4) float64
+        clip = projection @ view @ [x, y, z, 1].
+    near, far : float
+        The depth range drawn (view-axis distances).
+    orthographic : bool
+        True for a glOrtho projection.
+    eye : (3,) float64
+        The camera position in world space.
+    """
+
+    view: np.ndarray
+    projection: np.ndarray
+    near: float
+    far: float
+    orthographic: bool
+    eye: np.ndarray
+
+    def __post_init__(self):
+        for name in ("view", "projection"):
+            m = np.array(getattr(self, name), dtype=np.float64)
+            if m.shape != (4, 4):
+                raise ValueError(f"{name}: expected a 4x4 matrix, got shape {m.shape}")
+            if not np.isfinite(m).all():
+                raise ValueError(f"{name}: must be finite")
+            m.setflags(write=False)
+            object.__setattr__(self, name, m)
+        if not isinstance(self.orthographic, (bool, np.bool_)):
+            raise TypeError(f"orthographic: expected a bool, got {type(self.orthographic).__name__}")
+        near, far = _near_far(self.near, self.far, not self.orthographic)
+        eye = _vec3("eye", self.eye)
+        eye.setflags(write=False)
+        object.__setattr__(self, "near", near)
+        object.__setattr__(self, "far", far)
+        object.__setattr__(self, "orthographic", bool(self.orthographic))
+        object.__setattr__(self, "eye", eye)
+
+    def __repr__(self) -> str:
+        kind = "orthographic" if self.orthographic else "perspective"
+        return (f"Camera({kind}, eye={self.eye.tolist()}, forward={self.forward.tolist()}, "
+                f"near={self.near:g}, far={self.far:g})")
+
+    @classmethod
+    def look_at(cls, eye, target, up=(0, 0, 1), fov_y: float = 60.0, aspect: float = 1.0,
+                near: float = 0.1, far: float = 1000.0) -> Camera:
+        """A perspective camera at `eye` looking at `target`.
+
+        `fov_y` is the vertical field of view in degrees, `aspect` = width / height.
+        """
+        eye, target, up = _vec3("eye", eye), _vec3("target", target), _vec3("up", up)
+        fov_y, aspect = _fov(fov_y), _positive("aspect", aspect)
+        near, far = _near_far(near, far, perspective=True)
+        return cls(_view_matrix(eye, target, up), _perspective(fov_y, aspect, near, far),
+                   near, far, False, eye)
+
+    @classmethod
+    def ortho(cls, eye, target, up=(0, 0, 1), height: float = 2.0, aspect: float = 1.0,
+              near: float = 0.1, far: float = 1000.0) -> Camera:
+        """An orthographic camera at `eye` looking at `target`.
+
+        `height` is the world-space height of the view volume (its width is
+        ``height * aspect``); `near` may be zero or negative (behind the eye).
+        """
+        eye, target, up = _vec3("eye", eye), _vec3("target", target), _vec3("up", up)
+        height, aspect = _positive("height", height), _positive("aspect", aspect)
+        near, far = _near_far(near, far, perspective=False)
+        return cls(_view_matrix(eye, target, up), _ortho(height, aspect, near, far),
+                   near, far, True, eye)
+
+    @classmethod
+    def fit(cls, bounds_min, bounds_max, direction=(-1, -1, -0.6), up=(0, 0, 1),
+            fov_y: float = 60.0, aspect: float = 1.0) -> Camera:
+        """A perspective camera that frames the whole box.
+
+        It looks at the box centre along `direction` (the view direction, from the
+        eye towards the centre: the default looks down from the +x, +y, +z side),
+        from the distance at which the box's bounding sphere fits the narrower of
+        the two fields of view. near and far enclose the sphere with margin.
+        """
+        lo, hi = _bounds(bounds_min, bounds_max)
+        direction, up = _vec3("direction", direction), _vec3("up", up)
+        fov_y, aspect = _fov(fov_y), _positive("aspect", aspect)
+        length = np.linalg.norm(direction)
+        if length == 0:
+            raise ValueError("direction: must be a non-zero vector")
+        centre, radius = _sphere(lo, hi)
+        half_y = math.radians(fov_y) / 2
+        half = min(half_y, math.atan(aspect * math.tan(half_y)))
+        dist = _FIT_MARGIN * radius / math.sin(half)
+        eye = centre - dist * direction / length
+        return cls.look_at(eye, centre, up, fov_y, aspect, *_sphere_depths(dist, radius))
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """projection @ view, (4, 4) float64."""
+        return self.projection @ self.view
+
+    @property
+    def depth_row(self) -> np.ndarray:
+        """(4,) float64 row with depth = depth_row · [x, y, z, 1] (= −view[2, :])."""
+        return -self.view[2, :]
+
+    @property
+    def forward(self) -> np.ndarray:
+        """The unit view direction in world space, (3,) float64."""
+        return -self.view[2, :3]
+
+    def focal_px(self, height: int) -> float:
+        """Pixels per world unit at depth 1 (perspective) or anywhere (orthographic),
+        for an image `height` pixels tall."""
+        return 0.5 * height * float(self.projection[1, 1])
+
+    def project(self, points, width: int, height: int) -> Projected:
+        """Project (N, 3) points to a `width` x `height` image, in float32 as the kernels do.
+
+        With M = float32(matrix), D = float32(depth_row) and (x, y, z) the float32
+        point, each product and sum rounded to float32 separately (no fma), in order::
+
+            clip_i = ((M[i,0]*x + M[i,1]*y) + M[i,2]*z) + M[i,3]      i = 0, 1, 3
+            depth  = ((D[0]*x + D[1]*y) + D[2]*z) + D[3]
+            r = 1 / clip_3                                           (one division)
+            sx = ((clip_0 * r) * 0.5 + 0.5) * W,  sy = (0.5 - (clip_1 * r) * 0.5) * H
+
+        (correctly rounded division). A point is visible when x, y, z are finite,
+        near <= depth <= far (near, far rounded to float32), clip_3 > 0,
+        0 <= sx < W and 0 <= sy < H; then px = floor(sx), py = floor(sy).
+        """
+        w, h = np.float32(_image_size("width", width)), np.float32(_image_size("height", height))
+        p = _points_f32(points)
+        m = self.matrix.astype(np.float32)
+        d = self.depth_row.astype(np.float32)
+        x, y, z = p[:, 0], p[:, 1], p[:, 2]
+        half = np.float32(0.5)
+        with np.errstate(all="ignore"):
+            clip_x, clip_y, clip_w = (((m[i, 0] * x + m[i, 1] * y) + m[i, 2] * z) + m[i, 3]
+                                      for i in (0, 1, 3))
+            depth = ((d[0] * x + d[1] * y) + d[2] * z) + d[3]
+            r = np.float32(1) / clip_w
+            sx = ((clip_x * r) * half + half) * w
+            sy = (half - (clip_y * r) * half) * h
+            visible = (np.isfinite(p).all(axis=1)
+                       & (depth >= np.float32(self.near)) & (depth <= np.float32(self.far))
+                       & (clip_w > 0) & (sx >= 0) & (sx < w) & (sy >= 0) & (sy < h))
+        px = np.where(visible, np.floor(sx), -1).astype(np.int32)
+        py = np.where(visible, np.floor(sy), -1).astype(np.int32)
+        return Projected(sx, sy, px, py, depth, visible)
+
+
+def _points_f32(points) -> np.ndarray:
+    if isinstance(points, (str, bytes)) or points is None:
+        raise TypeError(f"points: expected an (N, 3) array, got {type(points).__name__}")
+    a = np.asarray(points)
+    if a.dtype == np.bool_ or a.dtype.kind not in "iuf":
+        raise TypeError(f"points: expected real numbers, got dtype {a.dtype}")
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"points: expected shape (N, 3), got {a.shape}")
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
+def _sphere_depths(dist: float, radius: float) -> tuple[float, float]:
+    """near, far for a camera `dist` from the centre of a sphere of `radius` (dist > radius):
+    the sphere's depth range [dist − radius, dist + radius] with margin on both sides."""
+    return 0.5 * (dist - radius), 1.5 * (dist + radius)
+
+
+def grid_cameras(bounds_min, bounds_max, count=4, spacing: float | None = None,
+                 height: float | None = None, fov_y: float = 60.0, aspect: float = 1.0,
+                 near: float | None = None, far: float | None = None) -> Iterator[Camera]:
+    """NARVis grid viewpoints: 24 cameras at each position of a grid over the box.
+
+    Positions are the centres of an nx x ny grid of cells covering the box's x–y
+    extent, at z = box top + `height` (default: a tenth of the box diagonal; may
+    be negative). nx, ny come from `count` (an int, or (nx, ny)) or, when given,
+    from `spacing`: ceil(extent / spacing) cells along each axis. An axis with no
+    extent gets one position.
+
+    At each position the camera yaws through 0°, 45°, ..., 315° (from +x towards
+    +y) and for each yaw pitches 1°, 30° and 60° below the horizon: 8 x 3 = 24
+    cameras per position, ordered position (x fastest), yaw, pitch. The up vector
+    is +z. near defaults to 1e-3 of the scene scale; far to the distance from the
+    farthest camera to the farthest box corner, with margin, so every part of the
+    box a camera faces is within [near, far].
+    """
+    lo, hi = _bounds(bounds_min, bounds_max)
+    fov_y, aspect = _fov(fov_y), _positive("aspect", aspect)
+    _, radius = _sphere(lo, hi)
+    height = 0.2 * radius if height is None else _real("height", height)
+    xs, ys = (_grid_axis(lo[i], hi[i], n) for i, n in enumerate(_grid_counts(lo, hi, count, spacing)))
+    z = hi[2] + height
+    eyes = [np.array([x, y, z]) for y in ys for x in xs]
+    corners = np.array([[cx, cy, cz] for cx in (lo[0], hi[0]) for cy in (lo[1], hi[1])
+                        for cz in (lo[2], hi[2])])
+    reach = max(np.linalg.norm(corners - e, axis=1).max() for e in eyes)
+    scale = max(2 * radius, abs(height))
+    near = 1e-3 * scale if near is None else near
+    far = 1.01 * reach + 1e-3 * scale if far is None else far
+    near, far = _near_far(near, far, perspective=True)
+    return _grid(eyes, fov_y, aspect, near, far)
+
+
+def _grid_counts(lo, hi, count, spacing) -> tuple[int, int]:
+    extent = hi[:2] - lo[:2]
+    if spacing is not None:
+        spacing = _positive("spacing", spacing)
+        return tuple(max(1, math.ceil(e / spacing)) for e in extent)
+    counts = (count, count) if isinstance(count, (int, np.integer)) else tuple(count)
+    if len(counts) != 2 or not all(isinstance(c, (int, np.integer)) and not isinstance(c, bool)
+                                   and c > 0 for c in counts):
+        raise ValueError(f"count: expected a positive int or two positive ints, got {count!r}")
+    return tuple(int(c) if e > 0 else 1 for c, e in zip(counts, extent))
+
+
+def _grid_axis(lo: float, hi: float, n: int) -> np.ndarray:
+    return lo + (np.arange(n) + 0.5) * ((hi - lo) / n)
+
+
+def _grid(eyes, fov_y, aspect, near, far) -> Iterator[Camera]:
+    for eye in eyes:
+        for yaw in range(0, 360, 45):
+            for pitch in (1, 30, 60):
+                y, p = math.radians(yaw), math.radians(pitch)
+                forward = np.array([math.cos(p) * math.cos(y), math.cos(p) * math.sin(y), -math.sin(p)])
+                yield Camera.look_at(eye, eye + forward, (0, 0, 1), fov_y, aspect, near, far)
+
+
+def hemisphere_cameras(bounds_min, bounds_max, fov_y: float = 60.0, aspect: float = 1.0,
+                       near: float | None = None, far: float | None = None) -> Iterator[Camera]:
+    """NARVis hemisphere viewpoints: 128 cameras looking at the box centre.
+
+    The eyes lie on the upper hemisphere around the centre with radius 0.75 x the
+    box diagonal, at polar angles θ = π/8, π/4, 3π/8, π/2 from +z (the pole θ = 0,
+    where +z is parallel to the view, is left out) and azimuths φ = kπ/16,
+    k = 0..31, from +x towards +y: 4 x 32 = 128 cameras, ordered θ then φ. Up is
+    +z. near and far default to the box's bounding-sphere depth range with
+    margin, so the whole box lies within [near, far].
+    """
+    lo, hi = _bounds(bounds_min, bounds_max)
+    fov_y, aspect = _fov(fov_y), _positive("aspect", aspect)
+    centre, radius = _sphere(lo, hi)
+    dist = 1.5 * radius          # 0.75 x diagonal
+    default_near, default_far = _sphere_depths(dist, radius)
+    near, far = _near_far(default_near if near is None else near,
+                          default_far if far is None else far, perspective=True)
+    return _hemisphere(centre, dist, fov_y, aspect, near, far)
+
+
+def _hemisphere(centre, dist, fov_y, aspect, near, far) -> Iterator[Camera]:
+    for i in range(1, 5):
+        theta = i * math.pi / 8
+        for k in range(32):
+            phi = k * math.pi / 16
+            offset = dist * np.array([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi),
+                                      math.cos(theta)])
+            yield Camera.look_at(centre + offset, centre, (0, 0, 1), fov_y, aspect, near, far)

@@ -1,0 +1,348 @@
+"""Camera matrices, the float32 pixel convention, the viewpoint samplers, bad input."""
+
+import math
+
+import numpy as np
+import pytest
+
+from clvis.camera import Camera, grid_cameras, hemisphere_cameras
+
+
+def _h(m, p):
+    """m @ [p, 1] in float64."""
+    return m @ np.append(np.asarray(p, dtype=np.float64), 1.0)
+
+
+# ---------------------------------------------------------------- matrices
+
+def test_look_at_basis_and_translation():
+    cam = Camera.look_at((1, 2, 3), (1, 7, 3), up=(0, 0, 1))
+    # looking along +y with z up: right is +x
+    np.testing.assert_allclose(cam.view[:3, :3], [[1, 0, 0], [0, 0, 1], [0, -1, 0]], atol=1e-15)
+    np.testing.assert_allclose(_h(cam.view, (1, 2, 3)), [0, 0, 0, 1], atol=1e-15)   # eye -> origin
+    np.testing.assert_allclose(_h(cam.view, (1, 6, 3))[:3], [0, 0, -4], atol=1e-15)  # ahead -> -z
+    np.testing.assert_allclose(cam.forward, [0, 1, 0], atol=1e-15)
+    np.testing.assert_array_equal(cam.eye, [1, 2, 3])
+    assert not cam.orthographic
+
+
+def test_view_is_rigid():
+    cam = Camera.look_at((3, -2, 5), (-1, 4, 0.5), up=(0.1, 0.2, 1))
+    r = cam.view[:3, :3]
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-14)
+    assert np.linalg.det(r) == pytest.approx(1.0)        # right-handed
+    np.testing.assert_array_equal(cam.view[3], [0, 0, 0, 1])
+
+
+@pytest.mark.parametrize("d", [0.1, 0.5, 3.0, 99.0, 100.0])
+def test_perspective_depth_is_clip_w(d):
+    near, far = 0.1, 100.0
+    cam = Camera.look_at((2, 1, 1), (2, 1, -5), up=(0, 1, 0), fov_y=45, aspect=1.5, near=near, far=far)
+    p = (2, 1, 1 - d)                                   # on the view axis, d in front
+    clip = _h(cam.matrix, p)
+    assert clip[3] == pytest.approx(d)
+    assert cam.depth_row @ np.append(p, 1) == pytest.approx(d)
+    np.testing.assert_allclose(clip[:2], 0, atol=1e-12)
+    ndc_z = clip[2] / clip[3]
+    if d == near:
+        assert ndc_z == pytest.approx(-1)
+    elif d == far:
+        assert ndc_z == pytest.approx(1)
+    else:
+        assert -1 < ndc_z < 1
+
+
+def test_perspective_field_of_view():
+    fov, aspect = 50.0, 2.0
+    cam = Camera.look_at((0, 0, 0), (0, 0, -1), up=(0, 1, 0), fov_y=fov, aspect=aspect)
+    t = math.tan(math.radians(fov / 2))
+    top = _h(cam.matrix, (0, 3 * t, -3))                 # on the top edge at depth 3
+    right = _h(cam.matrix, (3 * t * aspect, 0, -3))      # on the right edge
+    assert top[1] / top[3] == pytest.approx(1)
+    assert right[0] / right[3] == pytest.approx(1)
+    assert cam.focal_px(480) == pytest.approx(240 / t)
+
+
+def test_orthographic():
+    cam = Camera.ortho((0, 0, 10), (0, 0, 0), up=(0, 1, 0), height=4.0, aspect=2.0, near=-1, far=20)
+    assert cam.orthographic
+    for p in [(0, 0, 0), (4, 2, 5), (-4, -2, -9)]:
+        clip = _h(cam.matrix, p)
+        assert clip[3] == 1.0
+        assert cam.depth_row @ np.append(p, 1) == pytest.approx(10 - p[2])
+    np.testing.assert_allclose(_h(cam.matrix, (4, 2, 0))[:2], [1, 1])       # width 8, height 4
+    np.testing.assert_allclose(_h(cam.matrix, (0, 0, 11))[2], -1)          # depth -1 = near
+    np.testing.assert_allclose(_h(cam.matrix, (0, 0, -10))[2], 1)          # depth 20 = far
+    assert cam.focal_px(100) == pytest.approx(25)                          # 100 px for 4 units
+
+
+def test_camera_is_immutable():
+    cam = Camera.look_at((1, 0, 0), (0, 0, 0))
+    with pytest.raises(AttributeError):
+        cam.near = 1.0
+    with pytest.raises(ValueError):
+        cam.view[0, 0] = 2.0
+    assert cam.matrix.dtype == np.float64 and cam.depth_row.shape == (4,)
+
+
+# ---------------------------------------------------------------- pixel convention
+
+def test_pixel_convention():
+    cam = Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0), fov_y=90)
+    w, h = 64, 48
+    r = cam.project(np.array([[0, 0, 0], [0, 1, 0], [0, -1, 0], [1, 0, 0], [-1, 0, 0]]), w, h)
+    assert (r.sx[0], r.sy[0]) == (w / 2, h / 2)
+    assert (r.px[0], r.py[0]) == (w // 2, h // 2)
+    assert r.py[1] < h / 2 < r.py[2]                     # above the axis: a row near the top
+    assert r.px[4] < w / 2 < r.px[3]                     # right of the axis: a column on the right
+    assert r.visible.all()
+    np.testing.assert_array_equal(r.depth, 5)
+    assert r.sx.dtype == r.sy.dtype == r.depth.dtype == np.float32
+    assert r.px.dtype == r.py.dtype == np.int32
+
+
+def test_pixel_edges_half_open():
+    cam = Camera.ortho((0, 0, 1), (0, 0, 0), up=(0, 1, 0), height=2.0, near=0, far=2)
+    # ndc -1 and +1 exactly: the left/top edges are in, the right/bottom edges out
+    r = cam.project(np.array([[-1, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0]]), 8, 8)
+    np.testing.assert_array_equal(r.sx, [0, 8, 4, 4])
+    np.testing.assert_array_equal(r.sy, [4, 4, 0, 8])
+    np.testing.assert_array_equal(r.visible, [True, False, True, False])
+    np.testing.assert_array_equal(r.px, [0, -1, 4, -1])
+
+
+def _f32(v):
+    """A Python float rounded to float32 (double rounding from a double result is
+    exact for +, -, *, / of float32 operands)."""
+    return float(np.float32(v))
+
+
+def _div(a, b):
+    if b == 0:
+        if a == 0 or math.isnan(a):
+            return math.nan
+        return math.copysign(math.inf, a) * math.copysign(1.0, b)
+    return a / b
+
+
+def _project_scalar(cam, p, w, h):
+    """The spec of Camera.project, one point at a time in Python floats."""
+    m = [[_f32(v) for v in row] for row in cam.matrix]
+    d = [_f32(v) for v in cam.depth_row]
+    x, y, z = (_f32(v) for v in p)
+
+    def dot(r):
+        return _f32(_f32(_f32(_f32(r[0] * x) + _f32(r[1] * y)) + _f32(r[2] * z)) + r[3])
+
+    cx, cy, cw, depth = dot(m[0]), dot(m[1]), dot(m[3]), dot(d)
+    r = _f32(_div(1.0, cw))
+    sx = _f32(_f32(_f32(_f32(cx * r) * 0.5) + 0.5) * w)
+    sy = _f32(_f32(0.5 - _f32(_f32(cy * r) * 0.5)) * h)
+    vis = (all(math.isfinite(v) for v in (x, y, z)) and _f32(cam.near) <= depth <= _f32(cam.far)
+           and cw > 0 and 0 <= sx < w and 0 <= sy < h)
+    return sx, sy, (math.floor(sx) if vis else -1), (math.floor(sy) if vis else -1), depth, vis
+
+
+def _same_f32(a, b):
+    a, b = np.float32(a), np.float32(b)
+    return (np.isnan(a) and np.isnan(b)) or a.view(np.uint32) == b.view(np.uint32)
+
+
+def _adversarial_points(cam, w, h, rng):
+    fwd, eye = cam.forward, cam.eye
+    right, up = cam.view[0, :3], cam.view[1, :3]
+    pts = [eye + fwd * rng.uniform(cam.near, cam.far, 1)[0]
+           + right * rng.normal(0, 20) + up * rng.normal(0, 20) for _ in range(200)]
+    pts += [eye + fwd * cam.near, eye + fwd * cam.far,                        # near/far planes
+            eye + fwd * np.nextafter(cam.near, 0), eye + fwd * np.nextafter(cam.far, np.inf),
+            eye, eye - fwd * 3, eye - fwd * 3 + right, eye + right,            # behind, at the eye plane
+            [np.nan, 0, 0], [0, np.inf, 0], [0, 0, -np.inf], [1e38, 1e38, 1e38], [-3e38, 0, 0]]
+    # points aimed at pixel edges: ndc = 2 k / W - 1 exactly, at a few depths
+    inv = np.linalg.inv(cam.matrix)
+    for k in [0, 1, w // 2, w - 1, w]:
+        for j in [0, 1, h // 3, h - 1, h]:
+            for depth in [cam.near, 1.0, 0.5 * (cam.near + cam.far), cam.far]:
+                ndc = np.array([2 * k / w - 1, 1 - 2 * j / h])
+                q = inv @ np.array([ndc[0] * depth, ndc[1] * depth, 0, depth])
+                q = q[:3] / q[3]
+                q = eye + (q - eye) * depth / (fwd @ (q - eye))
+                pts.append(q)
+    return np.array(pts, dtype=np.float64)
+
+
+@pytest.mark.parametrize("kind", ["perspective", "orthographic"])
+def test_project_bit_exact(kind):
+    rng = np.random.default_rng(7)
+    w, h = 640, 361
+    if kind == "perspective":
+        cam = Camera.look_at((3.3, -7.1, 2.9), (0.2, 0.4, -0.3), up=(0, 0, 1), fov_y=55, aspect=w / h,
+                             near=0.7, far=90.0)
+    else:
+        cam = Camera.ortho((3.3, -7.1, 2.9), (0.2, 0.4, -0.3), up=(0, 0, 1), height=31.0, aspect=w / h,
+                           near=0.7, far=90.0)
+    pts = _adversarial_points(cam, w, h, rng)
+    r = cam.project(pts, w, h)
+    assert 0 < r.visible.sum() < len(pts)
+    assert r.px[r.visible].max() <= w - 1 and r.py[r.visible].max() <= h - 1
+    with np.errstate(all="ignore"):
+        for i, p in enumerate(pts):
+            sx, sy, px, py, depth, vis = _project_scalar(cam, p, w, h)
+            assert _same_f32(r.sx[i], sx), (i, p, r.sx[i], sx)
+            assert _same_f32(r.sy[i], sy), (i, p, r.sy[i], sy)
+            assert _same_f32(r.depth[i], depth), (i, p)
+            assert (bool(r.visible[i]), int(r.px[i]), int(r.py[i])) == (vis, px, py), (i, p)
+
+
+def test_project_empty_and_dtypes():
+    cam = Camera.look_at((5, 0, 0), (0, 0, 0))
+    r = cam.project(np.zeros((0, 3)), 4, 4)
+    assert r.sx.shape == r.px.shape == r.visible.shape == (0,)
+    r64 = cam.project(np.array([[0.1, 0.2, 0.3]]), 4, 4)
+    r32 = cam.project(np.array([[0.1, 0.2, 0.3]], dtype=np.float32), 4, 4)
+    assert r64.sx[0] == r32.sx[0]
+    assert cam.project([[1, 2, 3]], 4, 4).sx.dtype == np.float32
+
+
+# ---------------------------------------------------------------- fit and samplers
+
+@pytest.mark.parametrize("lo,hi", [((0, 0, 0), (10, 5, 2)), ((-1e3, 2e3, 7), (-1e3 + 1, 2e3 + 4, 7)),
+                                   ((1, 1, 1), (1, 1, 1))])
+@pytest.mark.parametrize("aspect", [0.5, 1.0, 2.5])
+@pytest.mark.parametrize("fov", [20.0, 60.0, 150.0])
+def test_fit_frames_the_box(lo, hi, aspect, fov):
+    cam = Camera.fit(lo, hi, fov_y=fov, aspect=aspect)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    centre = 0.5 * (np.array(lo) + np.array(hi))
+    r = cam.project(np.vstack([corners, centre]), 100, 100)
+    assert r.visible.all()
+    np.testing.assert_allclose(cam.forward, -np.array([1, 1, 0.6]) / np.linalg.norm([1, 1, 0.6]))
+    assert cam.forward @ (centre - cam.eye) > 0      # direction points from the eye to the centre
+
+
+def _corners(lo, hi):
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+
+@pytest.mark.parametrize("lo,hi", [((0, 0, 0), (8, 4, 2)), ((-3, 5, 1), (3, 5, 1))])
+def test_hemisphere_cameras(lo, hi):
+    cams = list(hemisphere_cameras(lo, hi, fov_y=40, aspect=1.5))
+    assert len(cams) == 4 * 32
+    lo, hi = np.array(lo, float), np.array(hi, float)
+    centre = 0.5 * (lo + hi)
+    radius = 0.75 * np.linalg.norm(hi - lo)
+    thetas, phis = set(), set()
+    for cam in cams:
+        assert np.linalg.norm(cam.eye - centre) == pytest.approx(radius)
+        off = cam.eye - centre
+        thetas.add(round(math.degrees(math.acos(off[2] / radius)), 6))
+        phis.add(round(math.degrees(math.atan2(off[1], off[0])) % 360, 6))
+        r = cam.project(centre[None], 300, 200)
+        assert r.visible[0]
+        assert (r.sx[0], r.sy[0]) == pytest.approx((150, 100), abs=1e-3)
+        depth = _corners(lo, hi) @ cam.forward - cam.eye @ cam.forward
+        assert (depth > cam.near).all() and (depth < cam.far).all()
+    assert thetas == {22.5, 45.0, 67.5, 90.0}
+    assert phis == {round(k * 11.25, 6) for k in range(32)}
+
+
+def test_grid_cameras():
+    lo, hi = np.array([0.0, 0, 0]), np.array([8.0, 4, 2])
+    cams = list(grid_cameras(lo, hi, count=(4, 2), height=1.5))
+    assert len(cams) == 4 * 2 * 8 * 3
+    eyes = np.array([c.eye for c in cams])
+    np.testing.assert_allclose(eyes[:, 2], 3.5)
+    np.testing.assert_allclose(sorted(set(eyes[:, 0])), [1, 3, 5, 7])
+    np.testing.assert_allclose(sorted(set(eyes[:, 1])), [1, 3])
+    for i, cam in enumerate(cams[:24]):                    # one position: yaw outer, pitch inner
+        yaw, pitch = math.radians(45 * (i // 3)), math.radians((1, 30, 60)[i % 3])
+        np.testing.assert_allclose(cam.forward, [math.cos(pitch) * math.cos(yaw),
+                                                 math.cos(pitch) * math.sin(yaw), -math.sin(pitch)],
+                                   atol=1e-12)
+    for cam in cams:
+        assert cam.view[1, 2] > 0                             # z up stays up in the image
+        far_corner = np.linalg.norm(_corners(lo, hi) - cam.eye, axis=1).max()
+        assert cam.far >= far_corner
+        on_axis = cam.eye + cam.forward * 0.5 * (cam.near + cam.far)
+        r = cam.project(on_axis[None], 100, 100)
+        assert r.visible[0] and (r.sx[0], r.sy[0]) == pytest.approx((50, 50), abs=1e-3)
+    # every box corner and the centre are seen by some camera
+    pts = np.vstack([_corners(lo, hi), 0.5 * (lo + hi)])
+    seen = np.zeros(len(pts), bool)
+    for cam in cams:
+        seen |= cam.project(pts, 100, 100).visible
+    assert seen.all()
+
+
+def test_grid_spacing_and_flat_box():
+    cams = list(grid_cameras((0, 0, 0), (10, 0, 0), spacing=3.0))     # flat in y and z
+    assert len(cams) == 4 * 1 * 24
+    assert len(list(grid_cameras((0, 0, 0), (0, 0, 0)))) == 24
+    assert len(list(grid_cameras((0, 0, 0), (1, 1, 1)))) == 16 * 24
+
+
+# ---------------------------------------------------------------- bad input
+
+@pytest.mark.parametrize("kwargs,name", [
+    ({"eye": (1, 2, 3), "target": (1, 2, 3)}, "target"),
+    ({"eye": (0, 0, 1), "target": (0, 0, 0)}, "up"),
+    ({"eye": (0, 0, 1), "target": (0, 0, 0), "up": (0, 0, 0)}, "up"),
+    ({"eye": (1, 0, 0), "target": (0, 0, 0), "fov_y": 0}, "fov_y"),
+    ({"eye": (1, 0, 0), "target": (0, 0, 0), "fov_y": 180}, "fov_y"),
+    ({"eye": (1, 0, 0), "target": (0, 0, 0), "aspect": 0}, "aspect"),
+    ({"eye": (1, 0, 0), "target": (0, 0, 0), "aspect": np.inf}, "aspect"),
+    ({"eye": (1, 0, 0), "target": (0, 0, 0), "near": 0}, "near"),
+    ({"eye": (1, 0, 0), "target": (0, 0, 0), "near": -1}, "near"),
+    ({"eye": (1, 0, 0), "target": (0, 0, 0), "near": 2, "far": 2}, "far"),
+    ({"eye": (1, 0, 0), "target": (0, 0, 0), "far": np.nan}, "far"),
+    ({"eye": (np.nan, 0, 0), "target": (0, 0, 0)}, "eye"),
+    ({"eye": (1, 0), "target": (0, 0, 0)}, "eye"),
+    ({"eye": (1, 0, 0), "target": (0, np.inf, 0)}, "target"),
+])
+def test_look_at_bad_input(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        Camera.look_at(**kwargs)
+
+
+def test_ortho_bad_input():
+    Camera.ortho((1, 0, 0), (0, 0, 0), near=-5, far=5)                 # near may be <= 0
+    with pytest.raises(ValueError, match="far"):
+        Camera.ortho((1, 0, 0), (0, 0, 0), near=1, far=-1)
+    with pytest.raises(ValueError, match="height"):
+        Camera.ortho((1, 0, 0), (0, 0, 0), height=0)
+    with pytest.raises(TypeError, match="height"):
+        Camera.ortho((1, 0, 0), (0, 0, 0), height="2")
+
+
+def test_project_bad_input():
+    cam = Camera.look_at((1, 0, 0), (0, 0, 0))
+    with pytest.raises(ValueError, match="points"):
+        cam.project(np.zeros((5, 2)), 4, 4)
+    with pytest.raises(TypeError, match="points"):
+        cam.project(np.array([["a", "b", "c"]]), 4, 4)
+    with pytest.raises(ValueError, match="width"):
+        cam.project(np.zeros((1, 3)), 0, 4)
+    with pytest.raises(TypeError, match="height"):
+        cam.project(np.zeros((1, 3)), 4, 4.0)
+
+
+@pytest.mark.parametrize("sampler", [grid_cameras, hemisphere_cameras, Camera.fit])
+def test_sampler_bad_bounds(sampler):
+    with pytest.raises(ValueError, match="bounds_max"):
+        sampler((0, 0, 0), (1, -1, 1))                 # raised on the call, before iterating
+    with pytest.raises(ValueError, match="bounds_min"):
+        sampler((0, np.nan, 0), (1, 1, 1))
+    with pytest.raises(ValueError, match="bounds_max"):
+        sampler((0, 0, 0), (1, 1))
+
+
+def test_sampler_bad_options():
+    with pytest.raises(ValueError, match="count"):
+        grid_cameras((0, 0, 0), (1, 1, 1), count=0)
+    with pytest.raises(ValueError, match="spacing"):
+        grid_cameras((0, 0, 0), (1, 1, 1), spacing=-1.0)
+    with pytest.raises(ValueError, match="far"):
+        hemisphere_cameras((0, 0, 0), (1, 1, 1), near=5.0, far=1.0)
+    with pytest.raises(ValueError, match="direction"):
+        Camera.fit((0, 0, 0), (1, 1, 1), direction=(0, 0, 0))
+    with pytest.raises(ValueError, match="up"):
+        Camera.fit((0, 0, 0), (1, 1, 1), direction=(0, 0, -1))

@@ -1,0 +1,216 @@
+"""clvis.depthfilter against clvis.reference.depthfilter (exact), plus the
+filter's meaning on a synthetic scene and its bad-input errors."""
+
+import inspect
+
+import numpy as np
+import pyopencl.array as cla
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+import clvis
+from clvis import depthfilter as df
+from clvis.reference import depthfilter as ref
+
+INF = np.float32(np.inf)
+
+
+def layered(shape, density, seed, layers=(2.0, 5.0, 20.0), noise=0.01):
+    """Sparse depth: each pixel on one of a few noisy layers, present with
+    probability `density` (+inf elsewhere)."""
+    rng = np.random.default_rng(seed)
+    base = np.asarray(layers, np.float32)[rng.integers(0, len(layers), shape)]
+    d = base * (1 + noise * rng.standard_normal(shape)).astype(np.float32)
+    return np.where(rng.random(shape) < density, d, INF).astype(np.float32)
+
+
+def scene(h, w, hole_fraction, seed, noise=0.002):
+    """A near plane (depth 5, a rectangle with random holes) over a far plane
+    (depth 10, dense). Returns depth, the rectangle (y0, y1, x0, x1), holes."""
+    rng = np.random.default_rng(seed)
+    far = 10 * (1 + noise * rng.standard_normal((h, w)))
+    near = 5 * (1 + noise * rng.standard_normal((h, w)))
+    y0, y1, x0, x1 = h // 4, 3 * h // 4, w // 4, 3 * w // 4
+    yy, xx = np.mgrid[:h, :w]
+    inside = (yy >= y0) & (yy < y1) & (xx >= x0) & (xx < x1)
+    holes = rng.random((h, w)) < hole_fraction
+    depth = np.where(inside & ~holes, near, far).astype(np.float32)
+    return depth, (y0, y1, x0, x1), holes
+
+
+def check(depth, queue, *args, **kw):
+    got = df.depth_filter_mask(depth, *args, queue=queue, **kw)
+    want = ref.depth_filter_mask(depth, *args, **kw)
+    assert got.dtype == np.bool_ and got.shape == depth.shape
+    np.testing.assert_array_equal(got, want)
+    assert not (got & ~np.isfinite(depth)).any()      # only present points are kept
+    return got
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (7, 1), (2, 2), (3, 5), (33, 17), (64, 65),
+                                   (255, 257)])
+def test_parity_random(queue, shape):
+    for i, density in enumerate((0.2, 0.6, 1.0)):
+        d = layered(shape, density, seed=hash((shape, i)) % 2**32)
+        for levels in (0, 1, 2, 3, 4, 6, 9, 16):
+            check(d, queue, levels)
+        for strength, edge in ((1.0, 0.0), (1.01, 0.01), (1.3, 0.0), (1.025, 0.5), (3.0, 0.01)):
+            check(d, queue, 4, strength, edge_threshold=edge)
+
+
+def test_parity_large(queue):
+    d = layered((1081, 1921), 0.5, seed=7)
+    kept = check(d, queue)
+    assert 0 < kept.sum() < np.isfinite(d).sum()
+
+
+def test_parity_continuous(queue):
+    """Uniformly random depths (ties and near-ties of s * ref everywhere)."""
+    rng = np.random.default_rng(3)
+    d = rng.uniform(0, 1e3, (97, 131)).astype(np.float32)
+    d[rng.random(d.shape) < 0.3] = INF
+    d[5, :] = 0.0
+    for levels in (1, 4, 8):
+        for strength in (1.0, 1.0001, 1.025, 2.0):
+            check(d, queue, levels, strength)
+
+
+@pytest.mark.parametrize("hole_fraction", [0.1, 0.3, 0.5])
+def test_scene(queue, hole_fraction):
+    """Far points seen through the holes of a near plane go; the near plane and
+    the far plane around it stay."""
+    levels = 4
+    d, (y0, y1, x0, x1), holes = scene(128, 192, hole_fraction, seed=11)
+    keep = check(d, queue, levels)
+    yy, xx = np.mgrid[:d.shape[0], :d.shape[1]]
+    inside = (yy >= y0) & (yy < y1) & (xx >= x0) & (xx < x1)
+    into = np.minimum(np.minimum(yy - y0, y1 - 1 - yy), np.minimum(xx - x0, x1 - 1 - xx))
+    assert keep[inside & ~holes].all()                         # near plane kept
+    assert keep[~inside].all()                                 # far plane around it kept
+    through = inside & holes
+    # see-through points removed, but for a band along the silhouette (the
+    # near side of an edge compares with the far plane beside it)
+    assert not keep[through & (into >= 8)].any()
+    assert keep[through & (into >= 2)].mean() < 0.1
+    # no pyramid: nothing removed; a tolerance beyond the depth ratio: nothing removed
+    assert check(d, queue, 0).all()
+    assert check(d, queue, levels, 2.5).all()
+
+
+def test_uniform_and_empty(queue):
+    for shape in [(0, 0), (0, 5), (4, 0)]:
+        got = df.depth_filter_mask(np.zeros(shape, np.float32), queue=queue)
+        assert got.shape == shape and got.dtype == np.bool_
+    for shape in [(1, 1), (1, 9), (17, 33), (128, 128)]:
+        for levels in (0, 1, 4, 16):
+            assert not check(np.full(shape, INF), queue, levels).any()
+            for value in (0.0, 1.0, 7.5, 3e38):
+                assert check(np.full(shape, value, np.float32), queue, levels).all()
+
+
+def test_single_point_and_steps(queue):
+    """One point alone, and two planes side by side: nothing occludes anything."""
+    d = np.full((40, 50), INF)
+    d[17, 23] = 3.0
+    assert check(d, queue, 5).sum() == 1
+    step = np.full((40, 50), 4.0, np.float32)
+    step[:, 25:] = 9.0
+    assert check(step, queue, 4).all()
+    step[:17, :] = 1.0                     # three planes, T-junction
+    assert check(step, queue, 4).all()
+
+
+def test_device_arrays(queue):
+    d = layered((70, 90), 0.6, seed=5)
+    got = df.depth_filter_mask(cla.to_device(queue, d), 3)
+    assert isinstance(got, cla.Array) and got.dtype == np.uint8 and got.shape == d.shape
+    np.testing.assert_array_equal(got.get(), ref.depth_filter_mask(d, 3).astype(np.uint8))
+    empty = df.depth_filter_mask(cla.to_device(queue, np.zeros((0, 3), np.float32)))
+    assert isinstance(empty, cla.Array) and empty.shape == (0, 3)
+
+
+def test_rgbda(queue):
+    rng = np.random.default_rng(9)
+    d = layered((45, 61), 0.7, seed=9)
+    keep = ref.depth_filter_mask(d)
+    for channels in (3, 4):
+        rgba = rng.integers(0, 256, (45, 61, channels), dtype=np.uint8)
+        rgba[0, 0, :3] = (0, 128, 255)
+        for k in (keep, keep.astype(np.uint8)):
+            got = df.rgbda(rgba, d, k, queue=queue)
+            want = ref.rgbda(rgba, d, k)
+            assert got.dtype == np.float32 and got.shape == (45, 61, 5)
+            np.testing.assert_array_equal(got, want)
+    assert got[keep, 4].min() == 1 and got[~keep, 4].max() == 0
+    assert np.isinf(got[~keep, 3]).all() and (got[keep, 3] == d[keep]).all()
+    assert (got[~keep, :3] == 0).all()
+    if keep[0, 0]:
+        assert got[0, 0, 0] == 0 and got[0, 0, 2] == 1.0
+    dev = df.rgbda(cla.to_device(queue, rgba), d, df.depth_filter_mask(cla.to_device(queue, d)))
+    assert isinstance(dev, cla.Array)
+    np.testing.assert_array_equal(dev.get(), want)
+    assert df.rgbda(np.zeros((0, 4, 4), np.uint8), np.zeros((0, 4), np.float32),
+                    np.zeros((0, 4), bool), queue=queue).shape == (0, 4, 5)
+
+
+@given(d=hnp.arrays(np.float32, st.tuples(st.integers(1, 24), st.integers(1, 24)),
+                    elements=st.sampled_from([0.0, 1.0, 1.02, 1.03, 2.0, 2.05, 10.0, np.inf])),
+       levels=st.integers(0, 6), strength=st.sampled_from([1.0, 1.025, 1.5]),
+       edge=st.sampled_from([0.0, 0.01, 1.0]))
+def test_property(device, d, levels, strength, edge):
+    q = clvis.runtime.queue_for(device)
+    got = check(d, q, levels, strength, edge_threshold=edge)
+    if levels == 0:
+        np.testing.assert_array_equal(got, np.isfinite(d))
+
+
+def test_defaults_match_reference():
+    a = inspect.signature(df.depth_filter_mask).parameters
+    b = inspect.signature(ref.depth_filter_mask).parameters
+    for name in ("levels", "filter_strength", "edge_threshold"):
+        assert a[name].default == b[name].default
+    assert df.level_shapes((1081, 1921), 3) == [(1081, 1921), (541, 961), (271, 481), (136, 241)]
+
+
+def test_bad_input(device):
+    q = clvis.runtime.queue_for(device)
+    d = np.ones((4, 5), np.float32)
+    with pytest.raises(TypeError, match="depth: dtype float64"):
+        df.depth_filter_mask(d.astype(np.float64), queue=q)
+    with pytest.raises(ValueError, match="depth: expected a 2-D array"):
+        df.depth_filter_mask(np.ones(5, np.float32), queue=q)
+    with pytest.raises(TypeError, match="depth: expected an array"):
+        df.depth_filter_mask(None, queue=q)
+    for levels, exc in ((-1, ValueError), (17, ValueError), (2.0, TypeError), (True, TypeError)):
+        with pytest.raises(exc, match="levels"):
+            df.depth_filter_mask(d, levels, queue=q)
+    for s in (0.99, 0.0, -1.0, float("nan"), float("inf"), 1e39):
+        with pytest.raises(ValueError, match="filter_strength"):
+            df.depth_filter_mask(d, 4, s, queue=q)
+    with pytest.raises(TypeError, match="filter_strength"):
+        df.depth_filter_mask(d, 4, "1.1", queue=q)
+    for t in (-0.01, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="edge_threshold"):
+            df.depth_filter_mask(d, edge_threshold=t, queue=q)
+    for bad, what in ((np.nan, "1 NaN and 0 negative"), (-1.0, "0 NaN and 1 negative"),
+                      (-np.inf, "0 NaN and 1 negative")):
+        x = d.copy()
+        x[2, 3] = bad
+        for levels in (0, 4):
+            with pytest.raises(clvis.DataError, match=what):
+                df.depth_filter_mask(x, levels, queue=q)
+        with pytest.raises(clvis.DataError, match="depth"):
+            df.depth_filter_mask(cla.to_device(q, x))
+    rgba = np.zeros((4, 5, 4), np.uint8)
+    with pytest.raises(TypeError, match="rgba: dtype float32"):
+        df.rgbda(rgba.astype(np.float32), d, d > 0, queue=q)
+    with pytest.raises(ValueError, match="rgba: expected 3 or 4 channels"):
+        df.rgbda(np.zeros((4, 5, 2), np.uint8), d, d > 0, queue=q)
+    with pytest.raises(ValueError, match="depth: shape"):
+        df.rgbda(rgba, d[:3], d > 0, queue=q)
+    with pytest.raises(ValueError, match="keep: shape"):
+        df.rgbda(rgba, d, (d > 0)[:, :4], queue=q)
+    with pytest.raises(TypeError, match="keep: dtype"):
+        df.rgbda(rgba, d, d, queue=q)

@@ -1,0 +1,468 @@
+"""PointCloud validation, file round trips, and malformed files raising DataError."""
+
+import numpy as np
+import pytest
+
+from clvis.errors import DataError
+from clvis.io import PointCloud, read_points, save_npz, write_ply
+
+plyfile = pytest.importorskip("plyfile")
+laspy = pytest.importorskip("laspy")
+
+
+def _cloud(n=50, seed=0, **extra):
+    rng = np.random.default_rng(seed)
+    return PointCloud(rng.normal(0, 10, (n, 3)), **extra)
+
+
+def _full_cloud(n=50, seed=0):
+    rng = np.random.default_rng(seed)
+    return PointCloud(rng.normal(0, 10, (n, 3)),
+                      colors=rng.integers(0, 256, (n, 4), dtype=np.uint8),
+                      attributes={"intensity": rng.random(n).astype(np.float32),
+                                  "label": rng.integers(0, 9, n).astype(np.uint8)},
+                      velocity=rng.normal(0, 1, (n, 3)), radius=rng.random(n), origin=(1e6, -2.5, 0.125))
+
+
+def _assert_same(a: PointCloud, b: PointCloud):
+    assert len(a) == len(b)
+    np.testing.assert_array_equal(a.positions, b.positions)
+    for name in ("colors", "velocity", "radius"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert (x is None) == (y is None), name
+        if x is not None:
+            assert x.dtype == y.dtype
+            np.testing.assert_array_equal(x, y)
+    assert a.attribute_names == b.attribute_names
+    for k in a.attributes:
+        assert a.attributes[k].dtype == b.attributes[k].dtype
+        np.testing.assert_array_equal(a.attributes[k], b.attributes[k])
+    np.testing.assert_array_equal(a.origin, b.origin)
+
+
+# ---------------------------------------------------------------- PointCloud
+
+def test_pointcloud_conversions():
+    n = 4
+    pc = PointCloud(np.arange(12, dtype=np.int64).reshape(n, 3),
+                    colors=np.array([[0, 0.5, 1]] * n),
+                    attributes={"f64": np.arange(n, dtype=np.float64), "i32": np.arange(n, dtype=np.int32),
+                                "u8": np.arange(n, dtype=np.uint8), "flag": np.array([True, False] * 2)},
+                    radius=[1, 2, 3, 4])
+    assert pc.positions.dtype == np.float32 and pc.positions.flags.c_contiguous
+    np.testing.assert_array_equal(pc.colors, [[0, 128, 255, 255]] * n)
+    assert pc.attributes["f64"].dtype == np.float32
+    assert pc.attributes["i32"].dtype == np.float32
+    assert pc.attributes["u8"].dtype == np.uint8
+    assert pc.attributes["flag"].dtype == np.uint8
+    np.testing.assert_array_equal(pc.attributes["flag"], [1, 0, 1, 0])
+    assert pc.radius.dtype == np.float32 and pc.velocity is None
+    np.testing.assert_array_equal(pc.origin, 0)
+    assert len(pc) == n and pc.attribute_names == ("f64", "i32", "u8", "flag")
+
+
+def test_pointcloud_colors():
+    p = np.zeros((2, 3))
+    u16 = PointCloud(p, colors=np.array([[65535, 256, 255], [0, 511, 32768]], dtype=np.uint16))
+    np.testing.assert_array_equal(u16.colors, [[255, 1, 0, 255], [0, 1, 128, 255]])
+    rgba = PointCloud(p, colors=np.array([[1, 2, 3, 4], [5, 6, 7, 8]], dtype=np.uint8))
+    np.testing.assert_array_equal(rgba.colors, [[1, 2, 3, 4], [5, 6, 7, 8]])
+    ints = PointCloud(p, colors=[[255, 0, 10], [1, 2, 3]])              # int64 within 0..255
+    np.testing.assert_array_equal(ints.colors, [[255, 0, 10, 255], [1, 2, 3, 255]])
+    assert ints.colors.dtype == np.uint8
+
+
+def test_bounds_and_subset():
+    p = np.array([[0, 1, 2], [np.nan, 100, 100], [-1, 5, 3], [4, -2, np.inf]])
+    pc = PointCloud(p, colors=np.zeros((4, 3), np.uint8), attributes={"a": np.arange(4.0)},
+                    velocity=np.ones((4, 3)), radius=np.arange(4.0), origin=(1, 2, 3))
+    lo, hi = pc.bounds()
+    assert lo.dtype == np.float64
+    np.testing.assert_array_equal(lo, [-1, 1, 2])
+    np.testing.assert_array_equal(hi, [0, 5, 3])
+    sub = pc.subset(np.array([True, False, True, False]))
+    assert len(sub) == 2
+    np.testing.assert_array_equal(sub.attributes["a"], [0, 2])
+    np.testing.assert_array_equal(sub.radius, [0, 2])
+    np.testing.assert_array_equal(sub.origin, [1, 2, 3])
+    np.testing.assert_array_equal(pc.subset([3, 0]).positions[1], [0, 1, 2])
+    assert len(pc.subset(slice(1, None))) == 3
+    with pytest.raises(ValueError, match="no finite points"):
+        PointCloud([[np.nan, 0, 0]]).bounds()
+    with pytest.raises(ValueError, match="index"):
+        pc.subset(np.array([True, False]))
+    with pytest.raises(TypeError, match="index"):
+        pc.subset(np.array([0.5]))
+
+
+@pytest.mark.parametrize("kwargs,exc,name", [
+    ({"positions": np.zeros((3, 2))}, ValueError, "positions"),
+    ({"positions": np.zeros(3)}, ValueError, "positions"),
+    ({"positions": np.array([["a", "b", "c"]])}, TypeError, "positions"),
+    ({"positions": np.zeros((3, 3), bool)}, TypeError, "positions"),
+    ({"positions": None}, TypeError, "positions"),
+    ({"positions": np.zeros((3, 3)), "colors": np.zeros((2, 3), np.uint8)}, ValueError, "colors"),
+    ({"positions": np.zeros((3, 3)), "colors": np.zeros((3, 2), np.uint8)}, ValueError, "colors"),
+    ({"positions": np.zeros((3, 3)), "colors": np.full((3, 3), 1.5)}, ValueError, "colors"),
+    ({"positions": np.zeros((3, 3)), "colors": np.full((3, 3), np.nan)}, ValueError, "colors"),
+    ({"positions": np.zeros((3, 3)), "colors": np.full((3, 3), 300)}, ValueError, "colors"),
+    ({"positions": np.zeros((3, 3)), "velocity": np.zeros((4, 3))}, ValueError, "velocity"),
+    ({"positions": np.zeros((3, 3)), "radius": np.zeros(2)}, ValueError, "radius"),
+    ({"positions": np.zeros((3, 3)), "radius": np.zeros((3, 1))}, ValueError, "radius"),
+    ({"positions": np.zeros((3, 3)), "attributes": {"t": np.zeros(4)}}, ValueError, "'t'"),
+    ({"positions": np.zeros((3, 3)), "attributes": {"t": np.zeros((3, 2))}}, ValueError, "'t'"),
+    ({"positions": np.zeros((3, 3)), "attributes": {"t": np.array(["a"] * 3)}}, TypeError, "'t'"),
+    ({"positions": np.zeros((3, 3)), "attributes": {1: np.zeros(3)}}, TypeError, "attributes"),
+    ({"positions": np.zeros((3, 3)), "attributes": [np.zeros(3)]}, TypeError, "attributes"),
+    ({"positions": np.zeros((3, 3)), "origin": (0, 0)}, ValueError, "origin"),
+    ({"positions": np.zeros((3, 3)), "origin": (0, 0, np.nan)}, ValueError, "origin"),
+])
+def test_pointcloud_bad_input(kwargs, exc, name):
+    with pytest.raises(exc, match=name):
+        PointCloud(**kwargs)
+
+
+def test_empty_cloud_round_trips(tmp_path):
+    pc = PointCloud(np.zeros((0, 3)), colors=np.zeros((0, 3), np.uint8))
+    for name in ("e.ply", "e.npz"):
+        (write_ply if name.endswith("ply") else save_npz)(tmp_path / name, pc)
+        _assert_same(read_points(tmp_path / name), pc)
+
+
+# ---------------------------------------------------------------- PLY
+
+@pytest.mark.parametrize("text", [False, True])
+@pytest.mark.parametrize("full", [False, True])
+def test_ply_round_trip(tmp_path, text, full):
+    pc = _full_cloud() if full else _cloud()
+    path = tmp_path / "c.ply"
+    write_ply(path, pc, text=text)
+    assert path.read_bytes().startswith(b"ply\nformat " + (b"ascii" if text else b"binary_little_endian"))
+    _assert_same(read_points(path), pc)
+
+
+def test_ply_foreign_properties(tmp_path):
+    """A PLY written by someone else: r/g/b naming, velocity_*, doubles, extra elements."""
+    n = 6
+    v = np.zeros(n, dtype=[("x", ">f8"), ("y", ">f8"), ("z", ">f8"), ("r", "u1"), ("g", "u1"), ("b", "u1"),
+                           ("velocity_x", "f4"), ("velocity_y", "f4"), ("velocity_z", "f4"),
+                           ("nx", "f4"), ("scalar_temp", "i2"), ("red", "u1")])
+    v["x"] = np.arange(n) + 0.25
+    v["r"], v["g"], v["b"], v["red"] = 10, 20, 30, 99
+    v["velocity_y"] = 2
+    v["scalar_temp"] = -7
+    faces = np.array([([0, 1, 2],)], dtype=[("vertex_indices", "i4", (3,))])
+    path = tmp_path / "FOREIGN.PLY"
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex"), plyfile.PlyElement.describe(faces, "face")],
+                    byte_order=">").write(str(path))
+    pc = read_points(path)
+    np.testing.assert_array_equal(pc.positions[:, 0], np.arange(n) + 0.25)
+    np.testing.assert_array_equal(pc.colors, [[10, 20, 30, 255]] * n)
+    np.testing.assert_array_equal(pc.velocity, [[0, 2, 0]] * n)
+    assert pc.attribute_names == ("nx", "scalar_temp", "red")     # a lone "red" stays an attribute
+    assert pc.attributes["scalar_temp"].dtype == np.float32
+    np.testing.assert_array_equal(pc.attributes["scalar_temp"], -7)
+
+
+def test_ply_list_property_in_vertex_is_skipped(tmp_path):
+    v = np.empty(2, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("nbrs", object)])
+    v["x"], v["y"], v["z"] = 1, 2, 3
+    v["nbrs"] = [np.array([1], np.int32), np.array([0, 1], np.int32)]
+    path = tmp_path / "l.ply"
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")]).write(str(path))
+    pc = read_points(path)
+    assert len(pc) == 2 and pc.attribute_names == ()
+
+
+def test_write_ply_rejects_bad_attribute_names(tmp_path):
+    with pytest.raises(ValueError, match="'red'"):
+        write_ply(tmp_path / "a.ply", _cloud(attributes={"red": np.zeros(50)}))
+    with pytest.raises(ValueError, match="'two words'"):
+        write_ply(tmp_path / "a.ply", _cloud(attributes={"two words": np.zeros(50)}))
+    with pytest.raises(TypeError, match="cloud"):
+        write_ply(tmp_path / "a.ply", np.zeros((3, 3)))
+    assert not (tmp_path / "a.ply").exists()
+
+
+def _binary_ply(tmp_path):
+    path = tmp_path / "good.ply"
+    write_ply(path, _full_cloud(n=40))
+    return path.read_bytes()
+
+
+def _expect_data_error(path, match=None):
+    with pytest.raises(DataError) as info:
+        read_points(path)
+    assert str(path) in str(info.value)
+    if match:
+        assert match in str(info.value)
+    return info.value
+
+
+def test_ply_truncated(tmp_path):
+    data = _binary_ply(tmp_path)
+    header_end = data.index(b"end_header\n") + len(b"end_header\n")
+    row = (len(data) - header_end) // 40
+    cuts = [0, 3, 20, header_end - 5, header_end, header_end + 1, header_end + row, header_end + row + 7,
+            len(data) - row, len(data) - 1]
+    for cut in cuts:
+        path = tmp_path / f"cut{cut}.ply"
+        path.write_bytes(data[:cut])
+        _expect_data_error(path)
+
+
+def test_ply_ascii_truncated(tmp_path):
+    path = tmp_path / "t.ply"
+    write_ply(path, _cloud(n=10), text=True)
+    lines = path.read_bytes().splitlines(keepends=True)
+    path.write_bytes(b"".join(lines[:-3]) + lines[-3][:5])      # two rows missing, one cut short
+    _expect_data_error(path)
+
+
+@pytest.mark.parametrize("content", [
+    b"hello, this is not a point cloud\n",
+    b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nend_header\n",
+    (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+     b"end_header\n1 2 banana\n"),
+    b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n",
+    b"ply\nformat ascii 1.0\nelement face 1\nproperty float x\nend_header\n1\n",
+    bytes(range(256)) * 4,
+])
+def test_ply_malformed(tmp_path, content):
+    path = tmp_path / "bad.ply"
+    path.write_bytes(content)
+    _expect_data_error(path)
+
+
+def test_ply_bad_colors_become_data_error(tmp_path):
+    v = np.zeros(2, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("red", "f4"), ("green", "f4"),
+                           ("blue", "f4")])
+    v["red"] = 200.0                    # float colors must be in [0, 1]
+    path = tmp_path / "c.ply"
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")]).write(str(path))
+    _expect_data_error(path, "colors")
+
+
+# ---------------------------------------------------------------- LAS / LAZ
+
+def _write_las(path, n=300, point_format=3, big_colors=True, seed=0):
+    rng = np.random.default_rng(seed)
+    header = laspy.LasHeader(point_format=point_format, version="1.2" if point_format < 6 else "1.4")
+    header.scales = [0.001, 0.001, 0.001]
+    header.offsets = [600000.0, 5200000.0, 100.0]
+    las = laspy.LasData(header)
+    x = 600000 + np.round(rng.random(n) * 50000) / 1000 + 123.0
+    y = 5200000 + np.round(rng.random(n) * 80000) / 1000 + 456.0
+    z = 100 + np.round(rng.random(n) * 30000) / 1000
+    las.x, las.y, las.z = x, y, z
+    top = 65536 if big_colors else 256
+    rgb = rng.integers(0, top, (3, n)).astype(np.uint16)
+    las.red, las.green, las.blue = rgb
+    las.intensity = rng.integers(0, 65536, n)
+    las.classification = rng.integers(0, 20, n)
+    las.return_number = rng.integers(1, 4, n)
+    las.gps_time = 3.5e8 + np.arange(n) * 0.25
+    las.write(str(path))
+    return np.stack([x, y, z], axis=1), rgb.T
+
+
+@pytest.mark.parametrize("ext", ["las", "laz", "LAZ"])
+@pytest.mark.parametrize("point_format", [3, 7])
+def test_las_round_trip(tmp_path, ext, point_format):
+    path = tmp_path / f"c.{ext}"
+    xyz, rgb = _write_las(path, point_format=point_format)
+    pc = read_points(path)
+    assert len(pc) == len(xyz)
+    np.testing.assert_array_equal(pc.origin, xyz.min(axis=0))
+    assert pc.positions.min() == 0
+    # float32 relative coordinates keep millimetres where absolute ones would not
+    np.testing.assert_allclose(pc.origin + pc.positions.astype(np.float64), xyz, rtol=0, atol=2e-4)
+    assert np.abs(xyz.astype(np.float32).astype(np.float64) - xyz).max() > 0.01
+    np.testing.assert_array_equal(pc.colors[:, :3], rgb >> 8)
+    np.testing.assert_array_equal(pc.colors[:, 3], 255)
+    for name in ("intensity", "classification", "return_number", "gps_time"):
+        assert name in pc.attributes
+    assert pc.attributes["classification"].dtype == np.uint8
+    assert pc.attributes["intensity"].dtype == np.float32
+    np.testing.assert_array_equal(pc.attributes["gps_time"], np.arange(len(xyz)) * np.float32(0.25))
+    assert not {"X", "Y", "Z", "red", "green", "blue"} & set(pc.attribute_names)
+
+
+def test_las_8bit_colors_kept(tmp_path):
+    path = tmp_path / "c.las"
+    _, rgb = _write_las(path, big_colors=False)
+    np.testing.assert_array_equal(read_points(path).colors[:, :3], rgb)
+
+
+def test_las_without_colors(tmp_path):
+    path = tmp_path / "c.las"
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = [1.0, 2.0], [3.0, 4.0], [5.0, 6.0]
+    las.write(str(path))
+    pc = read_points(path)
+    assert pc.colors is None and len(pc) == 2
+    np.testing.assert_array_equal(pc.origin, [1, 3, 5])
+
+
+@pytest.mark.parametrize("ext", ["las", "laz"])
+def test_las_truncated(tmp_path, ext):
+    path = tmp_path / f"good.{ext}"
+    _write_las(path, point_format=7)
+    data = path.read_bytes()
+    start = laspy.read(str(path)).header.offset_to_point_data
+    for cut in sorted({0, 4, 100, 226, 300, start - 1, start, start + 1, start + 36, start + 36 * 5,
+                       (start + len(data)) // 2, len(data) - 36, len(data) - 1}):
+        bad = tmp_path / f"cut{cut}.{ext}"
+        bad.write_bytes(data[:cut])
+        _expect_data_error(bad)
+
+
+def test_las_garbage(tmp_path):
+    rng = np.random.default_rng(3)
+    path = tmp_path / "garbage.las"
+    path.write_bytes(rng.integers(0, 256, 5000, dtype=np.uint8).tobytes())
+    _expect_data_error(path)
+    path.write_bytes(b"LASF" + rng.integers(0, 256, 5000, dtype=np.uint8).tobytes())
+    _expect_data_error(path)
+    path.write_bytes(b"x,y,z\n1,2,3\n")
+    _expect_data_error(path)
+
+
+@pytest.mark.parametrize("ext", ["las", "laz"])
+@pytest.mark.parametrize("offset,fmt,value", [
+    (100, "<I", 0xFFFFFFF0),        # number of VLRs (laspy would loop over them for hours)
+    (96, "<I", 0xFFFFFFF0),         # offset to point data past the end
+    (94, "<H", 10),                 # header size
+    (243, "<I", 0xFFFFFFF0),        # number of extended VLRs (LAS 1.4)
+    (247, "<Q", 1 << 40),           # point count (LAS 1.4)
+    (247, "<Q", (1 << 64) - 1),
+])
+def test_las_corrupt_header_fields(tmp_path, ext, offset, fmt, value):
+    import struct
+
+    path = tmp_path / f"c.{ext}"
+    _write_las(path, n=50, point_format=7)
+    data = bytearray(path.read_bytes())
+    struct.pack_into(fmt, data, offset, value)
+    path.write_bytes(bytes(data))
+    _expect_data_error(path)
+
+
+# ---------------------------------------------------------------- NPY / NPZ
+
+def test_npy_plain(tmp_path):
+    p = np.random.default_rng(1).normal(size=(20, 3))
+    np.save(tmp_path / "p.npy", p)
+    pc = read_points(tmp_path / "p.npy")
+    np.testing.assert_array_equal(pc.positions, p.astype(np.float32))
+    assert pc.colors is None and pc.attribute_names == ()
+
+
+def test_npy_structured(tmp_path):
+    n = 5
+    a = np.zeros(n, dtype=[("x", "f8"), ("y", "f4"), ("z", "i4"), ("red", "u1"), ("green", "u1"),
+                           ("blue", "u1"), ("temperature", "f8"), ("valid", "?"), ("rgb3", "u1", (3,))])
+    a["x"], a["z"], a["red"], a["temperature"], a["valid"] = np.arange(n), 7, 200, 1.5, True
+    np.save(tmp_path / "s.npy", a)
+    pc = read_points(tmp_path / "s.npy")
+    np.testing.assert_array_equal(pc.positions[:, 0], np.arange(n))
+    np.testing.assert_array_equal(pc.positions[:, 2], 7)
+    np.testing.assert_array_equal(pc.colors[:, 0], 200)
+    assert pc.attribute_names == ("temperature", "valid")        # the sub-array field is skipped
+    assert pc.attributes["valid"].dtype == np.uint8
+
+
+@pytest.mark.parametrize("full", [False, True])
+def test_npz_round_trip(tmp_path, full):
+    pc = _full_cloud() if full else _cloud()
+    save_npz(tmp_path / "c.npz", pc)
+    _assert_same(read_points(tmp_path / "c.npz"), pc)
+
+
+def test_npz_attribute_named_like_savez_keywords(tmp_path):
+    pc = _cloud(n=3, attributes={"file": np.ones(3), "allow_pickle": np.zeros(3)})
+    save_npz(tmp_path / "c.npz", pc)
+    _assert_same(read_points(tmp_path / "c.npz"), pc)
+    with pytest.raises(ValueError, match="origin"):
+        save_npz(tmp_path / "d.npz", _cloud(n=3, attributes={"origin": np.ones(3)}))
+    assert not (tmp_path / "d.npz").exists()
+
+
+@pytest.mark.parametrize("arrays,match", [
+    ({"points": np.zeros((3, 3))}, "positions"),
+    ({"positions": np.zeros((3, 2))}, "positions"),
+    ({"positions": np.zeros((3, 3)), "colors": np.zeros((4, 3), np.uint8)}, "colors"),
+    ({"positions": np.zeros((3, 3)), "extra": np.zeros((3, 2))}, "extra"),
+    ({"positions": np.zeros((3, 3)), "origin": np.zeros(2)}, "origin"),
+])
+def test_npz_malformed(tmp_path, arrays, match):
+    path = tmp_path / "bad.npz"
+    np.savez(path, **arrays)
+    _expect_data_error(path, match)
+
+
+@pytest.mark.parametrize("make", [
+    lambda p: np.save(p, np.zeros((4, 2))),
+    lambda p: np.save(p, np.zeros((4, 3, 1))),
+    lambda p: np.save(p, np.array(["a", "b", "c"] * 2).reshape(2, 3)),
+    lambda p: np.save(p, np.array([None, 1], dtype=object)),          # needs pickle
+    lambda p: np.save(p, np.zeros(3, dtype=[("x", "f4"), ("y", "f4")])),
+    lambda p: p.write_bytes(b"\x93NUMPY\x01\x00garbage"),
+    lambda p: p.write_bytes(b"not numpy at all"),
+])
+def test_npy_malformed(tmp_path, make):
+    path = tmp_path / "bad.npy"
+    make(path)
+    _expect_data_error(path)
+
+
+@pytest.mark.parametrize("ext", ["npy", "npz"])
+def test_npy_npz_truncated(tmp_path, ext):
+    path = tmp_path / f"good.{ext}"
+    if ext == "npy":
+        np.save(path, np.zeros((100, 3)))
+    else:
+        save_npz(path, _full_cloud())
+    data = path.read_bytes()
+    for cut in [0, 5, 60, len(data) // 2, len(data) - 30, len(data) - 1]:
+        bad = tmp_path / f"cut{cut}.{ext}"
+        bad.write_bytes(data[:cut])
+        _expect_data_error(bad)
+
+
+def test_npz_named_npy_and_back(tmp_path):
+    path = tmp_path / "archive.npy"
+    save_npz(path, _cloud())
+    _expect_data_error(path, "NPZ")
+    path = tmp_path / "array.npz"
+    with open(path, "wb") as f:
+        np.save(f, np.zeros((3, 3)))
+    assert "malformed" not in str(_expect_data_error(path, "found an NPY array"))
+
+
+# ---------------------------------------------------------------- dispatch
+
+def test_missing_file(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        read_points(tmp_path / "nope.ply")
+
+
+@pytest.mark.parametrize("name", ["points.xyz", "points", "points.ply.gz"])
+def test_unknown_extension(tmp_path, name):
+    path = tmp_path / name
+    path.write_bytes(b"1 2 3\n")
+    _expect_data_error(path, "unknown")
+
+
+def test_text_file_named_ply(tmp_path):
+    path = tmp_path / "notes.ply"
+    path.write_text("x y z\n1 2 3\n")
+    _expect_data_error(path)
+
+
+def test_str_paths(tmp_path):
+    pc = _full_cloud()
+    write_ply(str(tmp_path / "a.ply"), pc)
+    save_npz(str(tmp_path / "a.npz"), pc)
+    _assert_same(read_points(str(tmp_path / "a.ply")), read_points(str(tmp_path / "a.npz")))

@@ -26,6 +26,13 @@ inline uint clvis_key_f32(uint bits)
     return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
 }
 
+/* clvis_key_f32 on 8 lanes */
+inline uint8 clvis_key_f32_8(uint8 bits)
+{
+    uint8 key = select(bits | 0x80000000u, ~bits, (bits & 0x80000000u) != 0u);
+    return select(key, (uint8)(0xFFFFFFFFu), (bits & 0x7FFFFFFFu) > 0x7F800000u);
+}
+
 inline ulong clvis_key_u64(ulong bits) { return bits; }
 inline ulong clvis_key_i64(ulong bits) { return bits ^ 0x8000000000000000ul; }
 inline ulong clvis_key_f64(ulong bits)

@@ -1,0 +1,562 @@
+"""Point rasterization into multi-attribute G-buffers.
+
+The compute rasterizer of Schütz, Kerbl and Wimmer (2021, 2022) as NARVis
+uses it ("MACR": render, then resolve):
+
+1. render: every point is projected; a 64-bit ``atom_min`` of
+   ``depth key << 32 | index`` into a W×H visibility buffer keeps the nearest
+   point of each pixel, ties to the lowest index (deterministic). An early-z
+   read skips points that cannot win. Devices without 64-bit atomics take two
+   passes (32-bit depth min, then index min among the points at that depth)
+   that give the same buffer bit for bit.
+2. resolve: per pixel, the winner's data into G-buffers — index, depth,
+   RGBA (per-point colors, or a transfer function of an attribute through a
+   matplotlib colormap), up to 8 float32/uint8 attributes, the screen-space
+   velocity with its angle and magnitude, and the splat radius in pixels.
+
+Optional: a soft z-buffer (the colors of every point within a relative depth
+tolerance of the nearest, averaged), and :func:`depth_filter` (the LiDAR
+paper's hierarchical filter of background points seen through holes).
+
+Points are processed in batches of ``batch_size`` consecutive points with a
+bounding box each; batches the camera cannot see are skipped without reading
+a point. :class:`Rasterizer` keeps a cloud on the device (optionally in Morton
+order, so batches are compact and early-z rejects most points) for rendering
+many views; :func:`rasterize` is the one-call form. Kernels:
+``kernels_cl/raster/*.cl``; NumPy definitions: ``clvis.reference.raster``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+
+from . import colormap as _colormap
+from . import depthfilter as _depth_filter
+from . import runtime
+from ._arrays import check_array, is_device, resolve_queue
+from .errors import DeviceError
+from .primitives import radix_sort
+
+__all__ = ["GBuffers", "Rasterizer", "rasterize", "morton_order", "camera_buffer",
+           "depth_filter", "FilteredImage",
+           "EMPTY", "VIS_DTYPE", "CAMERA_DTYPE", "MAX_ATTRIBUTES", "MAX_IMAGE_SIDE"]
+
+EMPTY = np.uint32(0xFFFFFFFF)       # index of an empty pixel
+MAX_ATTRIBUTES = 8
+MAX_IMAGE_SIDE = 1 << 15            # W, H: exact as float32 and addressable as uint
+BATCH_SIZE = 10240
+# a visibility word as two uints (little-endian ulong: dkey << 32 | id)
+VIS_DTYPE = np.dtype([("id", "<u4"), ("dkey", "<u4")])
+# the camera buffer of clvis/camera.h
+CAMERA_DTYPE = np.dtype([("m", "<f4", (4, 4)), ("d", "<f4", (4,))])
+_FLAGS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+# local size of the per-batch kernels: one work-item walking a batch on CPUs,
+# a group striding through it on GPUs
+# (VEC: float8 projection in render.cl); "item_wg": the fixed local size of the
+# one-work-item-per-pixel/point kernels (a driver-chosen one would make PoCL
+# compile a work-group function per image size)
+PROFILES = {"cpu": {"L": 1, "VEC": 8, "item_wg": 64}, "gpu": {"L": 256, "VEC": 1, "item_wg": 256}}
+
+
+@dataclasses.dataclass
+class GBuffers:
+    """The G-buffers of one view, [H, W] planes, row 0 on top.
+
+    index: uint32, the winning point (its index in the caller's order), or
+    ``EMPTY`` (0xFFFFFFFF). depth: float32 view depth, +inf where empty.
+    rgba: uint8 [H, W, 4], (0, 0, 0, 0) where empty. attributes: name → plane
+    (float32, NaN where empty; uint8, 0 where empty). vel2d: float32 [H, W, 2]
+    screen velocity in pixels per unit time (x right, y down), vel_angle
+    (atan2(vy, vx), radians) and vel_speed (its length), NaN where empty;
+    radius_px: the splat radius in pixels. Planes the cloud has no data for are
+    None. stats: batches, batches_drawn, points_read.
+    """
+
+    index: np.ndarray
+    depth: np.ndarray
+    rgba: np.ndarray
+    attributes: dict
+    vel2d: np.ndarray | None = None
+    vel_angle: np.ndarray | None = None
+    vel_speed: np.ndarray | None = None
+    radius_px: np.ndarray | None = None
+    stats: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def covered(self) -> np.ndarray:
+        """bool [H, W]: a point was drawn there."""
+        return self.index != EMPTY
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.index.shape
+
+
+def camera_buffer(camera) -> np.ndarray:
+    """The 20 float32 of clvis/camera.h: M = projection @ view, then the depth row."""
+    m = np.asarray(camera.matrix, np.float64)
+    d = np.asarray(camera.depth_row, np.float64)
+    if m.shape != (4, 4) or d.shape != (4,) or not (np.isfinite(m).all() and np.isfinite(d).all()):
+        raise ValueError("camera: its matrix must be a finite 4x4 array and its depth row finite")
+    out = np.zeros(1, CAMERA_DTYPE)
+    out["m"][0] = m
+    out["d"][0] = d
+    return out.view(np.float32)
+
+
+def _check_camera(camera):
+    for attr in ("matrix", "depth_row", "near", "far", "projection"):
+        if not hasattr(camera, attr):
+            raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
+    near, far = float(camera.near), float(camera.far)
+    if not (math.isfinite(near) and math.isfinite(far) and near < far):
+        raise ValueError(f"camera: needs finite near < far, got near={near}, far={far}")
+    return camera_buffer(camera), np.float32(near), np.float32(far)
+
+
+def _check_size(width, height):
+    for name, v in (("width", width), ("height", height)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            raise TypeError(f"{name}: expected an int, got {type(v).__name__}")
+        if not 1 <= int(v) <= MAX_IMAGE_SIDE:
+            raise ValueError(f"{name}: {int(v)} is outside [1, {MAX_IMAGE_SIDE}]")
+    return int(width), int(height)
+
+
+def _soft_tolerance(soft_z, camera) -> float | None:
+    if soft_z is None or soft_z is False:
+        return None
+    tol = 1.01 if soft_z is True else soft_z
+    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating, np.integer)):
+        raise TypeError(f"soft_z: expected None, True or a tolerance factor, got {type(soft_z).__name__}")
+    tol = float(tol)
+    if not (math.isfinite(tol) and tol >= 1.0):
+        raise ValueError(f"soft_z: the tolerance factor must be finite and >= 1, got {tol}")
+    if not float(camera.near) > 0.0:
+        raise ValueError("soft_z: needs a camera with near > 0 (a relative depth tolerance)")
+    return tol
+
+
+class _Input:
+    """The caller's cloud, checked; host arrays (or device arrays) per field."""
+
+    def __init__(self, cloud, colors, attributes, velocity, radius):
+        if hasattr(cloud, "positions"):
+            positions = cloud.positions
+            colors = colors if colors is not None else getattr(cloud, "colors", None)
+            attributes = attributes if attributes is not None else getattr(cloud, "attributes", None)
+            velocity = velocity if velocity is not None else getattr(cloud, "velocity", None)
+            radius = radius if radius is not None else getattr(cloud, "radius", None)
+        else:
+            positions = cloud
+        if not is_device(positions) and not isinstance(positions, np.ndarray):
+            positions = np.asarray(positions)
+        if not is_device(positions) and positions.dtype == np.float64:
+            positions = positions.astype(np.float32)
+        self.positions = check_array("positions", positions, dtypes=[np.float32], ndim=2)
+        if self.positions.shape[1] != 3:
+            raise ValueError(f"positions: expected shape (N, 3), got {tuple(self.positions.shape)}")
+        n = self.n = int(self.positions.shape[0])
+        if n >= 0xFFFFFFFF:
+            raise DeviceError(f"positions: {n} points; at most 2^32 - 2 (0xFFFFFFFF marks empty pixels)")
+        self.colors = None
+        if colors is not None:
+            c = check_array("colors", colors, dtypes=[np.uint8], ndim=2)
+            if c.shape[0] != n or c.shape[1] not in (3, 4):
+                raise ValueError(f"colors: expected shape ({n}, 4) or ({n}, 3), got {tuple(c.shape)}")
+            if c.shape[1] == 3:
+                c = c.get() if is_device(c) else c
+                c = np.concatenate([c, np.full((n, 1), 255, np.uint8)], axis=1)
+            self.colors = c
+        self.velocity = None
+        if velocity is not None:
+            v = check_array("velocity", velocity, dtypes=[np.float32, np.float64], ndim=2)
+            if v.shape != (n, 3):
+                raise ValueError(f"velocity: expected shape ({n}, 3), got {tuple(v.shape)}")
+            self.velocity = v.astype(np.float32) if v.dtype != np.float32 else v
+        self.radius = None
+        if radius is not None:
+            r = check_array("radius", radius, dtypes=[np.float32, np.float64], ndim=1)
+            if r.shape != (n,):
+                raise ValueError(f"radius: expected shape ({n},), got {tuple(r.shape)}")
+            self.radius = r.astype(np.float32) if r.dtype != np.float32 else r
+        self.f32, self.u8 = {}, {}
+        attributes = dict(attributes or {})
+        if len(attributes) > MAX_ATTRIBUTES:
+            raise ValueError(f"attributes: {len(attributes)} given; at most {MAX_ATTRIBUTES}")
+        for name, a in attributes.items():
+            if not isinstance(name, str):
+                raise TypeError(f"attributes: names must be strings, got {name!r}")
+            a = a.get() if is_device(a) else np.asarray(a)
+            if a.shape != (n,):
+                raise ValueError(f"attributes[{name!r}]: expected shape ({n},), got {a.shape}")
+            if a.dtype == np.uint8 or a.dtype == np.bool_:
+                self.u8[name] = np.ascontiguousarray(a, np.uint8)
+            elif a.dtype.kind in "iuf":
+                self.f32[name] = np.ascontiguousarray(a, np.float32)
+            else:
+                raise TypeError(f"attributes[{name!r}]: dtype {a.dtype} is not numeric")
+
+
+class Rasterizer:
+    """A point cloud on the device, ready to render from many cameras.
+
+    cloud_or_positions: a ``clvis.PointCloud`` (its colors, attributes,
+    velocity and radius are used unless given here) or positions, float32
+    (N, 3) (float64 is converted; a ``pyopencl.array.Array`` stays on the
+    device). colors: uint8 (N, 4) or (N, 3). attributes: up to 8 name → (N,)
+    arrays (uint8/bool kept as uint8, other numbers as float32). velocity:
+    (N, 3) per point; radius: (N,) world radius per point.
+
+    morton=True reorders the points along a Morton curve on the device (the
+    radix sort of 30-bit codes): batches become compact boxes that frustum
+    culling can skip, and early-z rejects most points. Indices in the output
+    still refer to the caller's order, and ties still go to the lowest of
+    them, so the result does not depend on the order.
+    """
+
+    def __init__(self, cloud_or_positions, *, colors=None, attributes=None, velocity=None,
+                 radius=None, morton: bool = True, batch_size: int = BATCH_SIZE, queue=None):
+        if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) \
+                or not 1 <= batch_size <= 1 << 24:
+            raise ValueError(f"batch_size: expected an int in [1, 2^24], got {batch_size!r}")
+        inp = _Input(cloud_or_positions, colors, attributes, velocity, radius)
+        self.queue = q = resolve_queue(queue, positions=inp.positions)
+        self.n = n = inp.n
+        self.batch_size = int(batch_size)
+        self.nbatches = -(-n // self.batch_size)
+        self.attribute_names = list(inp.f32) + list(inp.u8)
+        self._f32_names, self._u8_names = list(inp.f32), list(inp.u8)
+        self._host_attr = {**inp.f32, **inp.u8}
+        self._ranges: dict = {}
+        self._tf_cache: dict = {}
+        self._luts: dict = {}
+        self.has_colors = inp.colors is not None
+        self.has_velocity = inp.velocity is not None
+        self.has_radius = inp.radius is not None
+
+        pos = self._upload("positions", inp.positions)
+        self.ids = self.inv = None
+        if morton and n > 1:
+            perm = morton_order(pos, queue=q)
+            self.ids = perm
+            self.positions = runtime.empty(q, (n, 3), np.float32, "Morton-ordered positions")
+            self.inv = runtime.empty(q, n, np.uint32, "inverse permutation")
+            k = runtime.get_kernel(q, "raster/morton.cl", "gather_points", {})
+            runtime.launch(q, k, *_items(q, n), pos.base_data, perm.base_data, np.uint32(n),
+                           self.positions.base_data)
+            k = runtime.get_kernel(q, "raster/morton.cl", "invert_permutation", {})
+            runtime.launch(q, k, *_items(q, n), perm.base_data, np.uint32(n), self.inv.base_data)
+        else:
+            self.positions = pos
+        self.bounds = _batch_bounds(q, self.positions, self.batch_size)
+        self.colors = self._upload("colors", inp.colors)
+        self.velocity = self._upload("velocity", inp.velocity)
+        self.radius = self._upload("radius", inp.radius)
+        nf, nu = len(inp.f32), len(inp.u8)
+        self.attr_f32 = self._upload("attributes", np.stack(list(inp.f32.values()), axis=1)) if nf else None
+        self.attr_u8 = self._upload("attributes", np.stack(list(inp.u8.values()), axis=1)) if nu else None
+
+    def _upload(self, name, a):
+        if a is None:
+            return None
+        if is_device(a):
+            if a.context.int_ptr != self.queue.context.int_ptr:
+                raise ValueError(f"{name}: the device array belongs to another OpenCL context")
+            return a if not a.offset else a.copy()
+        d = runtime.empty(self.queue, a.shape, a.dtype, name)
+        if a.size:
+            d.set(np.ascontiguousarray(a), queue=self.queue)
+        return d
+
+    # ------------------------------------------------------------------
+    def _program_args(self, camera, width, height):
+        cam, near, far = _check_camera(camera)
+        width, height = _check_size(width, height)
+        return cam, near, far, width, height
+
+    def visibility(self, camera, width: int, height: int) -> tuple[cla.Array, cla.Array]:
+        """Run the render pass only: the (H, W) uint64 visibility buffer
+        (``dkey << 32 | index``, all ones where empty) and the per-batch
+        drawn flags (uint8), both on the device."""
+        cam, near, far, W, H = self._program_args(camera, width, height)
+        return self._render(cam, near, far, W, H)
+
+    def _render(self, cam, near, far, W, H):
+        q = self.queue
+        vis = runtime.empty(q, (H, W), np.uint64, "visibility buffer")
+        cl.enqueue_fill_buffer(q, vis.base_data, np.full(1, 0xFF, np.uint8), 0, vis.nbytes)
+        drawn = runtime.empty(q, max(self.nbatches, 1), np.uint8, "batch flags")
+        self._cam = cam_d = self._camera_device(cam)
+        if self.n == 0:
+            runtime.fill_zero(q, drawn)
+            return vis, drawn
+        L = _local_size(q)
+        args = (self.positions.base_data, _opt(self.ids), np.uint32(self.n),
+                np.uint32(self.batch_size), self.bounds.base_data, cam_d.base_data, near, far,
+                np.uint32(W), np.uint32(H), vis.base_data, drawn.base_data)
+        G = self.nbatches * L
+        if runtime.capabilities(q).int64_atomics:
+            k = runtime.get_kernel(q, "raster/render.cl", "render_visibility", _render_defines(q), _FLAGS)
+            runtime.launch(q, k, G, L, *args)
+        else:
+            for name in ("render_depth", "render_index"):
+                k = runtime.get_kernel(q, "raster/render.cl", name, _render_defines(q), _FLAGS)
+                runtime.launch(q, k, G, L, *args)
+        return vis, drawn
+
+    def _camera_device(self, cam):
+        d = runtime.empty(self.queue, cam.size, np.float32, "camera")
+        d.set(cam, queue=self.queue)
+        return d
+
+    def _lut(self, name):
+        lut = self._luts.get(name)
+        if lut is None:
+            host = np.ascontiguousarray(_colormap.lut(name))
+            lut = self._luts[name] = self._upload("colormap", host)
+        return lut
+
+    def _tf(self, color_by, colormap, value_range):
+        """(color_mode, tf_src, stride, offset, lut, lut_n, vmin, scale)."""
+        if color_by is None:
+            return (1 if self.has_colors else 0), None, 0, 0, None, 0, np.float32(0), np.float32(0)
+        if color_by not in self._host_attr:
+            raise ValueError(f"color_by: no attribute {color_by!r}; the cloud has "
+                             f"{', '.join(self.attribute_names) or 'none'}")
+        if value_range is None:
+            vr = self._ranges.get(color_by)
+            if vr is None:
+                vr = self._ranges[color_by] = _colormap.value_range(self._host_attr[color_by])
+        else:
+            vr = tuple(float(v) for v in value_range)
+            if len(vr) != 2 or not all(math.isfinite(v) for v in vr) or vr[0] > vr[1]:
+                raise ValueError(f"value_range: expected finite (vmin, vmax) with vmin <= vmax, got {value_range!r}")
+        vmin, vmax = vr
+        scale = np.float32(0.0 if vmax == vmin else 1.0 / (vmax - vmin))
+        lut = self._lut(colormap)
+        if color_by in self._f32_names:
+            src, stride, offset = self.attr_f32, len(self._f32_names), self._f32_names.index(color_by)
+        else:       # a uint8 attribute: the kernels read float32, so a float copy
+            src = self._tf_cache.get(color_by)
+            if src is None:
+                src = self._tf_cache[color_by] = self._upload(
+                    "attributes", self._host_attr[color_by].astype(np.float32))
+            stride, offset = 1, 0
+        return 2, src, stride, offset, lut, lut.shape[0], np.float32(vmin), scale
+
+    def render(self, camera, width: int, height: int, *, color_by: str | None = None,
+               colormap: str = "viridis", value_range=None, soft_z=None,
+               host: bool = True) -> GBuffers:
+        """Render and resolve one view; numpy G-buffers (host=False: the planes
+        stay on the device as ``pyopencl.array.Array``, nothing is read back,
+        and stats is empty).
+
+        color_by: an attribute name to color by through `colormap` (matplotlib
+        name) over `value_range` (default: the attribute's finite min and max);
+        else the cloud's colors, else white. soft_z: None (off), True (factor
+        1.01) or a factor >= 1: rgba becomes the mean color of every point
+        within factor × the nearest depth of its pixel (needs near > 0).
+        """
+        cam, near, far, W, H = self._program_args(camera, width, height)
+        tol = _soft_tolerance(soft_z, camera)
+        tf = self._tf(color_by, colormap, value_range)
+        focal = np.float32(0.5 * H * float(np.asarray(camera.projection)[1, 1]))
+        vis, drawn = self._render(cam, near, far, W, H)
+        out = self._resolve(vis, W, H, focal, tf, tol, near, far)
+        if not host:
+            return _gbuffers(out, self._f32_names, self._u8_names, lambda a: a)
+        g = _gbuffers(out, self._f32_names, self._u8_names, lambda a: a.get())
+        d = drawn.get()[: self.nbatches].astype(bool)
+        sizes = np.minimum(self.batch_size, self.n - np.arange(self.nbatches) * self.batch_size)
+        g.stats = {"points": self.n, "batches": self.nbatches, "batches_drawn": int(d.sum()),
+                   "points_read": int(sizes[d].sum()) if self.nbatches else 0}
+        return g
+
+    def _resolve(self, vis, W, H, focal, tf, tol, near, far):
+        q = self.queue
+        npix = W * H
+        color_mode, tf_buf, stride, offset, lut, lut_n, vmin, scale = tf
+        accum = None
+        if tol is not None and self.n:
+            accum = runtime.zeros(q, npix * 5, np.uint32, "soft z accumulation")
+            L = _local_size(q)
+            k = runtime.get_kernel(q, "raster/render.cl", "soft_accumulate", _render_defines(q), _FLAGS)
+            runtime.launch(q, k, self.nbatches * L, L, self.positions.base_data, _opt(self.ids),
+                           np.uint32(self.n), np.uint32(self.batch_size), self.bounds.base_data,
+                           self._cam.base_data, near, far, np.uint32(W), np.uint32(H),
+                           vis.base_data, np.float32(tol), np.uint32(color_mode),
+                           _opt(self.colors), _opt(tf_buf), np.uint32(stride), np.uint32(offset),
+                           _opt(lut), np.uint32(lut_n), vmin, scale, accum.base_data)
+        flags = (1 if self.has_velocity else 0) | (2 if self.has_radius else 0)
+        nf, nu = len(self._f32_names), len(self._u8_names)
+        e = runtime.empty
+        out = {
+            "index": e(q, (H, W), np.uint32, "index buffer"),
+            "depth": e(q, (H, W), np.float32, "depth buffer"),
+            "rgba": e(q, (H, W, 4), np.uint8, "rgba buffer"),
+            "f32": e(q, (nf, H, W), np.float32, "attribute planes") if nf else None,
+            "u8": e(q, (nu, H, W), np.uint8, "attribute planes") if nu else None,
+            "vel": e(q, (H, W, 2), np.float32, "velocity planes") if flags & 1 else None,
+            "angle": e(q, (H, W), np.float32, "velocity angle") if flags & 1 else None,
+            "speed": e(q, (H, W), np.float32, "velocity magnitude") if flags & 1 else None,
+            "radius": e(q, (H, W), np.float32, "radius plane") if flags & 2 else None,
+        }
+        k = runtime.get_kernel(q, "raster/resolve.cl", "resolve", {}, _FLAGS)
+        runtime.launch(q, k, *_items(q, npix), vis.base_data, np.uint32(W), np.uint32(H),
+                       np.uint32(color_mode), _opt(self.colors), _opt(tf_buf), np.uint32(stride),
+                       np.uint32(offset), _opt(lut), np.uint32(lut_n), vmin, scale, _opt(accum),
+                       out["index"].base_data, out["depth"].base_data, out["rgba"].base_data)
+        if flags or nf or nu:
+            k = runtime.get_kernel(q, "raster/resolve.cl", "resolve_attributes", {}, _FLAGS)
+            runtime.launch(
+                q, k, *_items(q, npix), vis.base_data, np.uint32(W), np.uint32(H),
+                self.positions.base_data, _opt(self.inv), self._cam.base_data, focal,
+                np.uint32(flags), np.uint32(nf), _opt(self.attr_f32), np.uint32(nu),
+                _opt(self.attr_u8), _opt(self.velocity), _opt(self.radius), _opt(out["f32"]),
+                _opt(out["u8"]), _opt(out["vel"]), _opt(out["angle"]), _opt(out["speed"]),
+                _opt(out["radius"]))
+        return out
+
+
+def _opt(a):
+    """The buffer of an optional device array; None (a NULL argument) when absent or empty."""
+    return a.base_data if a is not None and a.size else None
+
+
+def _local_size(queue) -> int:
+    L = PROFILES[runtime.tuning_profile(queue)]["L"]
+    return max(1, min(L, runtime.capabilities(queue).max_work_group_size))
+
+
+def _items(queue, n: int) -> tuple[int, int]:
+    """(global, local) sizes for one work-item per element of n."""
+    wg = max(1, min(PROFILES[runtime.tuning_profile(queue)]["item_wg"],
+                    runtime.capabilities(queue).max_work_group_size))
+    return -(-n // wg) * wg, wg
+
+
+def _render_defines(queue) -> dict:
+    return {"VEC": PROFILES[runtime.tuning_profile(queue)]["VEC"]}
+
+
+def _batch_bounds(queue, positions, batch: int) -> cla.Array:
+    n = positions.shape[0]
+    nb = -(-n // batch)
+    bounds = runtime.empty(queue, (max(nb, 1), 6), np.float32, "batch bounds")
+    if n:
+        k = runtime.get_kernel(queue, "raster/render.cl", "batch_bounds", _render_defines(queue),
+                               _FLAGS)
+        runtime.launch(queue, k, *_items(queue, nb), positions.base_data, np.uint32(n), np.uint32(batch),
+                       bounds.base_data)
+    return bounds
+
+
+def _gbuffers(out, f32_names, u8_names, get) -> GBuffers:
+    def g(a):
+        return None if a is None else get(a)
+    attrs = {}
+    f32, u8 = g(out["f32"]), g(out["u8"])
+    for i, name in enumerate(f32_names):
+        attrs[name] = f32[i]
+    for i, name in enumerate(u8_names):
+        attrs[name] = u8[i]
+    return GBuffers(index=g(out["index"]), depth=g(out["depth"]), rgba=g(out["rgba"]),
+                    attributes=attrs, vel2d=g(out["vel"]), vel_angle=g(out["angle"]),
+                    vel_speed=g(out["speed"]), radius_px=g(out["radius"]))
+
+
+def morton_order(positions, *, queue=None):
+    """The permutation that sorts points along a 30-bit Morton curve over
+    their finite bounding box (10 bits per axis; ties keep input order;
+    points with a NaN or infinite coordinate last). positions: float32 (N, 3).
+    Returns uint32 (N,): numpy for numpy input, a device array for device input."""
+    queue = resolve_queue(queue, positions=positions)
+    host = not is_device(positions)
+    p = check_array("positions", positions, dtypes=[np.float32], ndim=2)
+    if p.shape[1] != 3:
+        raise ValueError(f"positions: expected shape (N, 3), got {tuple(p.shape)}")
+    n = p.shape[0]
+    if n >= 0xFFFFFFFF:
+        raise DeviceError(f"positions: {n} points; at most 2^32 - 2")
+    if host:
+        d = runtime.empty(queue, p.shape, np.float32, "positions")
+        if n:
+            d.set(p, queue=queue)
+        p = d
+    elif p.offset:
+        p = p.copy()
+    if n == 0:
+        out = runtime.empty(queue, 0, np.uint32, "Morton permutation")
+        return out.get() if host else out
+    bounds = _batch_bounds(queue, p, BATCH_SIZE).get()
+    lo, hi = bounds[:, :3].min(axis=0), bounds[:, 3:].max(axis=0)
+    if not (lo <= hi).all():            # no finite point: every code is 0xFFFFFFFF
+        lo = hi = np.zeros(3, np.float32)
+    ext = hi.astype(np.float64) - lo
+    scale = np.where(ext > 0, 1023.0 / np.where(ext > 0, ext, 1.0), 0.0).astype(np.float32)
+    codes = runtime.empty(queue, n, np.uint32, "Morton codes")
+    k = runtime.get_kernel(queue, "raster/morton.cl", "morton_codes", {}, ())
+    runtime.launch(queue, k, *_items(queue, n), p.base_data, np.uint32(n), *lo.astype(np.float32),
+                   *scale, codes.base_data)
+    iota = runtime.empty(queue, n, np.uint32, "Morton permutation")
+    k = runtime.get_kernel(queue, "raster/morton.cl", "iota", {}, ())
+    runtime.launch(queue, k, *_items(queue, n), np.uint32(n), iota.base_data)
+    _, perm = radix_sort(codes, iota)
+    return perm.get() if host else perm
+
+
+def rasterize(cloud_or_positions, camera, width: int, height: int, *, colors=None,
+              attributes=None, velocity=None, radius=None, soft_z=None, color_by=None,
+              colormap: str = "viridis", value_range=None, morton: bool = False,
+              batch_size: int = BATCH_SIZE, queue=None) -> GBuffers:
+    """Render and resolve one view of a point cloud: :class:`Rasterizer`
+    (``cloud_or_positions``, colors, attributes, velocity, radius, morton,
+    batch_size) followed by its ``render`` (camera, size, color_by, colormap,
+    value_range, soft_z). For many views of one cloud, keep a Rasterizer."""
+    r = Rasterizer(cloud_or_positions, colors=colors, attributes=attributes, velocity=velocity,
+                   radius=radius, morton=morton, batch_size=batch_size, queue=queue)
+    return r.render(camera, width, height, color_by=color_by, colormap=colormap,
+                    value_range=value_range, soft_z=soft_z)
+
+
+@dataclasses.dataclass
+class FilteredImage:
+    """What :func:`depth_filter` keeps. keep: bool [H, W] (a point is there and
+    kept); depth: float32, +inf where removed or empty; rgba: uint8 [H, W, 4]
+    with alpha 0 where removed (None for a depth-only input); rgbda: float32
+    [H, W, 5] = (r, g, b in [0, 1], depth, alpha in {0, 1}), the input of the
+    LiDAR paper's network."""
+
+    keep: np.ndarray
+    depth: np.ndarray
+    rgba: np.ndarray | None
+    rgbda: np.ndarray
+
+
+def depth_filter(gbuffers_or_depth, levels: int = _depth_filter.LEVELS,
+                 filter_strength: float = _depth_filter.FILTER_STRENGTH, *,
+                 edge_threshold: float = _depth_filter.EDGE_THRESHOLD, queue=None) -> FilteredImage:
+    """Remove background points seen through holes in the foreground (the
+    hierarchical min-pool filter of Vanherck, Zoomers et al. 2025; the rules
+    are in ``clvis.reference.depthfilter``). gbuffers_or_depth: a
+    :class:`GBuffers` or an [H, W] float32 depth image (+inf = empty)."""
+    if isinstance(gbuffers_or_depth, GBuffers):
+        depth, rgba = gbuffers_or_depth.depth, gbuffers_or_depth.rgba
+    else:
+        depth, rgba = gbuffers_or_depth, None
+    keep = _depth_filter.depth_filter_mask(depth, levels, filter_strength,
+                                           edge_threshold=edge_threshold, queue=queue)
+    depth = np.asarray(depth)
+    colors = rgba if rgba is not None else np.zeros(depth.shape + (4,), np.uint8)
+    out_rgbda = _depth_filter.rgbda(colors, depth, keep, queue=queue)
+    kept_rgba = None
+    if rgba is not None:
+        kept_rgba = np.where(keep[..., None], rgba, 0).astype(np.uint8)
+    return FilteredImage(keep=keep, depth=np.where(keep, depth, np.float32(np.inf)).astype(np.float32),
+                         rgba=kept_rgba, rgbda=out_rgbda)

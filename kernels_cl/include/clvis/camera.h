@@ -1,0 +1,132 @@
+/* clvis/camera.h — the camera and pixel conventions of clvis, in OpenCL C.
+ *
+ * Camera buffer: 20 floats, row-major.
+ *   cam[0..15]   M = projection @ view (column vectors: clip = M [x y z 1]^T)
+ *   cam[16..19]  D = -view[2, :], so depth = D . [x y z 1] is the view-space
+ *                distance along the view axis (clip w for a perspective camera;
+ *                for an orthographic one clip w is 1 and depth comes from D)
+ *
+ * Projection of a point p = (x, y, z), in float32 with every multiply and add
+ * rounded separately (the including file must say #pragma OPENCL FP_CONTRACT
+ * OFF, and be built with -cl-fp32-correctly-rounded-divide-sqrt, for results
+ * bit-identical to clvis.camera.Camera.project):
+ *   clip_i = ((M[i,0]*x + M[i,1]*y) + M[i,2]*z) + M[i,3]
+ *   depth  = ((D[0]*x + D[1]*y) + D[2]*z) + D[3]
+ *   r = 1 / clip_3 (one division; correctly rounded)
+ *   sx = ((clip_0 * r) * 0.5 + 0.5) * W,  sy = (0.5 - (clip_1 * r) * 0.5) * H
+ *   drawn when x, y, z are finite, near <= depth <= far, clip_3 > 0,
+ *   0 <= sx < W and 0 <= sy < H; pixel (floor(sx), floor(sy)), row 0 on top.
+ */
+#ifndef CLVIS_CAMERA_H
+#define CLVIS_CAMERA_H
+
+typedef struct {
+    float4 r0, r1, r2, r3;  /* rows of M */
+    float4 d;               /* depth row D */
+} clvis_camera;
+
+inline clvis_camera clvis_load_camera(global const float *cam)
+{
+    clvis_camera c;
+    c.r0 = vload4(0, cam);
+    c.r1 = vload4(1, cam);
+    c.r2 = vload4(2, cam);
+    c.r3 = vload4(3, cam);
+    c.d = vload4(4, cam);
+    return c;
+}
+
+/* ((r.x*x + r.y*y) + r.z*z) + r.w, each operation rounded */
+inline float clvis_row_dot(float4 r, float x, float y, float z)
+{
+    return ((r.x * x + r.y * y) + r.z * z) + r.w;
+}
+
+/* The linear part only (a direction, such as a velocity): (r.x*x + r.y*y) + r.z*z */
+inline float clvis_row_dir(float4 r, float x, float y, float z)
+{
+    return (r.x * x + r.y * y) + r.z * z;
+}
+
+/* Project p; returns 1 when it is drawn, with its continuous pixel position
+ * (*sx, *sy) and *depth. fw, fh: the image size as floats (exact: W, H <= 2^24). */
+inline int clvis_project(const clvis_camera *c, float x, float y, float z,
+                         float near, float far, float fw, float fh,
+                         float *sx, float *sy, float *depth)
+{
+    float cx = clvis_row_dot(c->r0, x, y, z);
+    float cy = clvis_row_dot(c->r1, x, y, z);
+    float cw = clvis_row_dot(c->r3, x, y, z);
+    float d = clvis_row_dot(c->d, x, y, z);
+    float r = 1.0f / cw;
+    float px = ((cx * r) * 0.5f + 0.5f) * fw;
+    float py = (0.5f - (cy * r) * 0.5f) * fh;
+    *sx = px;
+    *sy = py;
+    *depth = d;
+    return isfinite(x) && isfinite(y) && isfinite(z) && d >= near && d <= far && cw > 0.0f
+        && px >= 0.0f && px < fw && py >= 0.0f && py < fh;
+}
+
+/* clvis_project on 8 points at once (the same operations lane by lane, so
+ * the same results); returns -1 in the lanes drawn, 0 elsewhere. */
+inline int8 clvis_project8(const clvis_camera *c, float8 x, float8 y, float8 z,
+                           float near, float far, float fw, float fh,
+                           float8 *sx, float8 *sy, float8 *depth)
+{
+    float8 cx = ((c->r0.x * x + c->r0.y * y) + c->r0.z * z) + c->r0.w;
+    float8 cy = ((c->r1.x * x + c->r1.y * y) + c->r1.z * z) + c->r1.w;
+    float8 cw = ((c->r3.x * x + c->r3.y * y) + c->r3.z * z) + c->r3.w;
+    float8 d = ((c->d.x * x + c->d.y * y) + c->d.z * z) + c->d.w;
+    float8 r = 1.0f / cw;
+    float8 px = ((cx * r) * 0.5f + 0.5f) * fw;
+    float8 py = (0.5f - (cy * r) * 0.5f) * fh;
+    *sx = px;
+    *sy = py;
+    *depth = d;
+    return isfinite(x) & isfinite(y) & isfinite(z) & (d >= near) & (d <= far) & (cw > 0.0f)
+        & (px >= 0.0f) & (px < fw) & (py >= 0.0f) & (py < fh);
+}
+
+/* 1 when no point of the box [lo, hi] can be drawn: all eight corners lie
+ * beyond one of the planes x = -w, x = w, y = -w, y = w, w = 0, depth = near,
+ * depth = far, by a margin of 1e-5 of the largest magnitude any point of the
+ * box can give those sums (sum_j |M[i,j]| * max(|lo_j|, |hi_j|) + |M[i,3]|).
+ * That is far above the float32 rounding of a point's own projection (a few
+ * ulp of the same magnitudes), so a point that clvis_project draws is never
+ * culled. An empty box (lo > hi, or NaN) is culled. */
+inline int clvis_box_culled(const clvis_camera *c, float3 lo, float3 hi, float near, float far)
+{
+    if (!(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z))
+        return 1;
+    float4 a = (float4)(fmax(fabs(lo), fabs(hi)), 1.0f);
+    float4 ax = fabs(c->r0) * a, ay = fabs(c->r1) * a, aw = fabs(c->r3) * a, ad = fabs(c->d) * a;
+    float sw = (aw.x + aw.y) + (aw.z + aw.w);
+    float mx = 1e-5f * ((ax.x + ax.y) + (ax.z + ax.w) + sw);
+    float my = 1e-5f * ((ay.x + ay.y) + (ay.z + ay.w) + sw);
+    float mw = 1e-5f * sw;
+    float md = 1e-5f * ((ad.x + ad.y) + (ad.z + ad.w) + fabs(near) + fabs(far));
+    /* bit k set: every corner so far is beyond plane k */
+    uint all_out = 0x7Fu;
+    for (int k = 0; k < 8; ++k) {
+        float x = (k & 1) ? hi.x : lo.x;
+        float y = (k & 2) ? hi.y : lo.y;
+        float z = (k & 4) ? hi.z : lo.z;
+        float cx = clvis_row_dot(c->r0, x, y, z);
+        float cy = clvis_row_dot(c->r1, x, y, z);
+        float cw = clvis_row_dot(c->r3, x, y, z);
+        float d = clvis_row_dot(c->d, x, y, z);
+        uint out = 0;
+        out |= (cx + cw < -mx) ? 0x01u : 0u;    /* x < -w */
+        out |= (cx - cw > mx) ? 0x02u : 0u;     /* x > w */
+        out |= (cy + cw < -my) ? 0x04u : 0u;    /* y < -w */
+        out |= (cy - cw > my) ? 0x08u : 0u;     /* y > w */
+        out |= (cw < -mw) ? 0x10u : 0u;         /* w < 0 */
+        out |= (d - near < -md) ? 0x20u : 0u;   /* depth < near */
+        out |= (d - far > md) ? 0x40u : 0u;     /* depth > far */
+        all_out &= out;
+    }
+    return all_out != 0u;
+}
+
+#endif /* CLVIS_CAMERA_H */

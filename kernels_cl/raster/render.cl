@@ -1,0 +1,243 @@
+/* render.cl — point rasterization into a 64-bit depth|index visibility buffer
+ * (Schütz, Kerbl, Wimmer 2021/2022), with a two-pass fallback for devices
+ * without 64-bit atomics, and the soft z-buffer's color accumulation.
+ *
+ * ABI
+ * ---
+ * Build options: -cl-fp32-correctly-rounded-divide-sqrt (for pixels
+ * bit-identical to the NumPy reference; see clvis/camera.h). The clvis
+ * runtime adds -DCLVIS_INT64_ATOMICS=1 when the device has 64-bit atomics;
+ * render_visibility exists only then.
+ * Defines (optional): VEC = 1 (default) or 8. With VEC 8, a group of one
+ * work-item projects 8 points at a time in float8 registers (CPU devices:
+ * SIMD); results are identical. Any local size works (the CPU work shape
+ * launches 1 work-item per group, the GPU shape 256).
+ *
+ * Points and batches. positions: n points, 3 floats each (x, y, z), in render
+ * order. They are cut into nb = ceil(n / batch) batches of `batch` consecutive
+ * points; bounds[6*b .. 6*b+5] = (min x, min y, min z, max x, max y, max z) of
+ * the finite points of batch b (batch_bounds computes it; min > max for a batch
+ * with none). Launch every per-batch kernel with global size nb * L and local
+ * size L: group b walks batch b, item l takes points l, l + L, ... A batch
+ * whose box the camera cannot see (clvis_box_culled) reads no point at all.
+ * ids: NULL, or n uints: ids[i] = the index reported for point i (its index in
+ * the caller's order when the points were reordered, e.g. by Morton code).
+ * Ties (equal depth) go to the lowest id.
+ *
+ * Camera: cam, 20 floats (clvis/camera.h); near, far; W, H: image size
+ * (1 <= W, H <= 2^24).
+ *
+ * Visibility buffer vis: W*H ulongs, vis[py*W + px] = dkey << 32 | id, dkey =
+ * clvis_key_f32(bits of depth) (order-preserving; for positive depths the
+ * float bits with the sign bit set). Cleared to all ones (= empty) by the host.
+ * Seen as uints, word 2p is the id and word 2p + 1 the dkey (little-endian).
+ *
+ * kernel batch_bounds(global const float *positions, uint n, uint batch,
+ *                     global float *bounds)
+ *     Global size >= nb, any local size; item b computes bounds of batch b.
+ *
+ * kernel render_visibility(positions, ids, n, batch, bounds, cam, near, far,
+ *                          W, H, global ulong *vis, global uchar *drawn)
+ *     (64-bit atomics only.) Per drawn point: early-z (skip when its dkey
+ *     exceeds the pixel's current dkey), else atom_min(vis + p, dkey<<32|id).
+ *     drawn[b] = 1 if batch b was not culled, else 0 (written by item 0).
+ *
+ * kernel render_depth(... same arguments ..., global uint *vis, drawn)
+ * kernel render_index(... same arguments ..., global uint *vis, drawn)
+ *     The fallback, in this order: render_depth takes atomic_min of dkey into
+ *     word 2p + 1; render_index, for every point whose dkey equals that word,
+ *     takes atomic_min of its id into word 2p. The result is the same vis
+ *     buffer, bit for bit.
+ *
+ * kernel soft_accumulate(positions, ids, n, batch, bounds, cam, near, far, W,
+ *                        H, global const uint *vis, float tolerance,
+ *                        uint color_mode, global const uchar4 *colors,
+ *                        global const float *tf_src, uint tf_stride, uint tf_offset,
+ *                        global const uchar4 *lut, uint lut_n, float tf_min,
+ *                        float tf_scale, global uint *accum)
+ *     After the visibility pass. For every drawn point whose depth <=
+ *     tolerance * (the pixel's nearest depth) (float32 product), adds its color
+ *     (clvis_point_color) to accum[5p .. 5p+3] (r, g, b, a sums) and 1 to
+ *     accum[5p+4] (the count), with atomic_add. accum is zeroed by the host.
+ *     Integer sums: the result does not depend on the order of the additions.
+ *     A pixel overflows after 2^32 / 255 (16.8 M) points within tolerance.
+ *
+ * Colors: clvis_point_color of clvis/colormap.h (color_mode 0 white, 1
+ * colors[id], 2 the transfer function of tf_src[id * tf_stride + tf_offset] through lut).
+ * colors and tf_src are indexed by id (the caller's order); buffers a mode
+ * does not use may be NULL.
+ *
+ * Memory traffic per point: 12 bytes of position (+4 of id when it passes
+ * early-z with ids); one 4-byte read of vis, and an atomic on it when the
+ * point may win. Culled batches: 24 bytes of bounds.
+ */
+#pragma OPENCL FP_CONTRACT OFF
+
+#include "clvis/atomics.h"
+#include "clvis/camera.h"
+#include "clvis/colormap.h"
+#include "clvis/keys.h"
+
+#ifndef VEC
+#define VEC 1
+#endif
+
+#define MODE_VIS64 0
+#define MODE_DEPTH 1
+#define MODE_INDEX 2
+
+kernel void batch_bounds(global const float *positions, uint n, uint batch, global float *bounds)
+{
+    uint b = get_global_id(0);
+    uint nb = (n + batch - 1) / batch;
+    if (b >= nb)
+        return;
+    float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
+    uint end = min(n, (b + 1) * batch);
+    for (uint i = b * batch; i < end; ++i) {
+        float3 p = vload3(i, positions);
+        if (isfinite(p.x) && isfinite(p.y) && isfinite(p.z)) {
+            lo = fmin(lo, p);
+            hi = fmax(hi, p);
+        }
+    }
+    vstore3(lo, 0, bounds + 6 * b);
+    vstore3(hi, 0, bounds + 6 * b + 3);
+}
+
+/* One drawn point i at pixel p with depth key dkey, as `mode` says. */
+inline void raster_point(int mode, uint i, uint p, uint dkey, global const uint *ids,
+                         volatile global uint *words)
+{
+    if (mode == MODE_INDEX) {
+        if (dkey == words[clvis_hi_word(p)])
+            clvis_atomic_min_u32(words + clvis_lo_word(p), ids ? ids[i] : i);
+        return;
+    }
+    if (dkey > words[clvis_hi_word(p)])     /* early-z: it cannot win */
+        return;
+    if (mode == MODE_DEPTH) {
+        clvis_atomic_min_u32(words + clvis_hi_word(p), dkey);
+    } else {
+#ifdef CLVIS_INT64_ATOMICS
+        uint id = ids ? ids[i] : i;
+        clvis_atomic_min_u64((volatile global ulong *)words + p, ((ulong)dkey << 32) | id);
+#endif
+    }
+}
+
+/* The body of the three visibility kernels; `mode` is a constant at each call
+ * site, so each kernel compiles to its own loop. */
+inline void raster_batch(int mode, global const float *positions, global const uint *ids,
+                         uint n, uint batch, global const float *bounds, global const float *cam,
+                         float near, float far, uint W, uint H, global uint *vis,
+                         global uchar *drawn)
+{
+    uint b = get_group_id(0);
+    uint l = get_local_id(0), L = get_local_size(0);
+    clvis_camera c = clvis_load_camera(cam);
+    float3 lo = vload3(0, bounds + 6 * b), hi = vload3(0, bounds + 6 * b + 3);
+    int culled = clvis_box_culled(&c, lo, hi, near, far);
+    if (l == 0 && mode != MODE_INDEX)
+        drawn[b] = culled ? 0 : 1;
+    if (culled)
+        return;
+    float fw = (float)W, fh = (float)H;
+    uint i = b * batch + l, end = min(n, (b + 1) * batch);
+    volatile global uint *words = vis;
+#if VEC == 8
+    /* 8 points a step (one work-item per batch: L == 1): the projection in
+     * vector registers, then the drawn lanes one by one */
+    for (; L == 1 && i + 8 <= end; i += 8) {
+        float8 v0 = vload8(0, positions + 3 * (size_t)i);
+        float8 v1 = vload8(1, positions + 3 * (size_t)i);
+        float8 v2 = vload8(2, positions + 3 * (size_t)i);
+        float8 x = (float8)(v0.s0, v0.s3, v0.s6, v1.s1, v1.s4, v1.s7, v2.s2, v2.s5);
+        float8 y = (float8)(v0.s1, v0.s4, v0.s7, v1.s2, v1.s5, v2.s0, v2.s3, v2.s6);
+        float8 z = (float8)(v0.s2, v0.s5, v1.s0, v1.s3, v1.s6, v2.s1, v2.s4, v2.s7);
+        float8 sx, sy, depth;
+        int8 drawn8 = clvis_project8(&c, x, y, z, near, far, fw, fh, &sx, &sy, &depth);
+        if (!any(drawn8))
+            continue;
+        uint pix[8], key[8];
+        int ok[8];
+        vstore8(convert_uint8(sy) * W + convert_uint8(sx), 0, pix);
+        vstore8(clvis_key_f32_8(as_uint8(depth)), 0, key);
+        vstore8(drawn8, 0, ok);
+        for (int k = 0; k < 8; ++k)
+            if (ok[k])
+                raster_point(mode, i + k, pix[k], key[k], ids, words);
+    }
+#endif
+    for (; i < end; i += L) {
+        float x = positions[3 * i], y = positions[3 * i + 1], z = positions[3 * i + 2];
+        float sx, sy, depth;
+        if (clvis_project(&c, x, y, z, near, far, fw, fh, &sx, &sy, &depth))
+            raster_point(mode, i, (uint)sy * W + (uint)sx, clvis_key_f32(as_uint(depth)), ids,
+                         words);
+    }
+}
+
+#ifdef CLVIS_INT64_ATOMICS
+kernel void render_visibility(global const float *positions, global const uint *ids, uint n,
+                              uint batch, global const float *bounds, global const float *cam,
+                              float near, float far, uint W, uint H, global ulong *vis,
+                              global uchar *drawn)
+{
+    raster_batch(MODE_VIS64, positions, ids, n, batch, bounds, cam, near, far, W, H,
+                 (global uint *)vis, drawn);
+}
+#endif
+
+kernel void render_depth(global const float *positions, global const uint *ids, uint n,
+                         uint batch, global const float *bounds, global const float *cam,
+                         float near, float far, uint W, uint H, global uint *vis,
+                         global uchar *drawn)
+{
+    raster_batch(MODE_DEPTH, positions, ids, n, batch, bounds, cam, near, far, W, H, vis, drawn);
+}
+
+kernel void render_index(global const float *positions, global const uint *ids, uint n,
+                         uint batch, global const float *bounds, global const float *cam,
+                         float near, float far, uint W, uint H, global uint *vis,
+                         global uchar *drawn)
+{
+    raster_batch(MODE_INDEX, positions, ids, n, batch, bounds, cam, near, far, W, H, vis, drawn);
+}
+
+kernel void soft_accumulate(global const float *positions, global const uint *ids, uint n,
+                            uint batch, global const float *bounds, global const float *cam,
+                            float near, float far, uint W, uint H, global const uint *vis,
+                            float tolerance, uint color_mode, global const uchar4 *colors,
+                            global const float *tf_src, uint tf_stride, uint tf_offset, global const uchar4 *lut,
+                            uint lut_n, float tf_min, float tf_scale, global uint *accum)
+{
+    uint b = get_group_id(0);
+    uint l = get_local_id(0), L = get_local_size(0);
+    clvis_camera c = clvis_load_camera(cam);
+    float3 lo = vload3(0, bounds + 6 * b), hi = vload3(0, bounds + 6 * b + 3);
+    if (clvis_box_culled(&c, lo, hi, near, far))
+        return;
+    float fw = (float)W, fh = (float)H;
+    uint end = min(n, (b + 1) * batch);
+    for (uint i = b * batch + l; i < end; i += L) {
+        float x = positions[3 * i], y = positions[3 * i + 1], z = positions[3 * i + 2];
+        float sx, sy, depth;
+        if (!clvis_project(&c, x, y, z, near, far, fw, fh, &sx, &sy, &depth))
+            continue;
+        uint p = (uint)sy * W + (uint)sx;
+        uint k = vis[clvis_hi_word(p)];
+        float nearest = as_float((k & 0x80000000u) ? (k ^ 0x80000000u) : ~k);
+        if (!(depth <= tolerance * nearest))
+            continue;
+        uint id = ids ? ids[i] : i;
+        uint4 col = clvis_point_color(id, color_mode, colors, tf_src, tf_stride, tf_offset, lut, lut_n, tf_min,
+                                 tf_scale);
+        volatile global uint *a = accum + 5 * (size_t)p;
+        atomic_add(a + 0, col.x);
+        atomic_add(a + 1, col.y);
+        atomic_add(a + 2, col.z);
+        atomic_add(a + 3, col.w);
+        atomic_add(a + 4, 1u);
+    }
+}

@@ -1,0 +1,397 @@
+"""clvis.raster against clvis.reference.raster: visibility exactly, G-buffers
+exactly (the velocity angle within atan2's few ulp), on every device and both
+work shapes, through the 64-bit path and the two-pass fallback."""
+
+import warnings
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import clvis
+from clvis import raster, runtime
+from clvis.camera import Camera
+from clvis.reference import raster as ref
+
+W, H = 64, 48
+
+
+def _scene(n, seed=0, spread=1.0):
+    rng = np.random.default_rng(seed)
+    return (rng.normal(size=(n, 3)) * spread).astype(np.float32)
+
+
+def _cam(aspect=W / H, **kw):
+    kw.setdefault("near", 0.5)
+    kw.setdefault("far", 20.0)
+    return Camera.look_at((0.3, -6.0, 1.2), (0.0, 0.0, 0.0), (0, 0, 1), fov_y=50.0, aspect=aspect, **kw)
+
+
+def _vis(queue, pos, cam, w=W, h=H, morton=False, batch_size=raster.BATCH_SIZE):
+    r = clvis.Rasterizer(pos, morton=morton, batch_size=batch_size, queue=queue)
+    vis, _ = r.visibility(cam, w, h)
+    return vis.get()
+
+
+def _assert_gbuffers(got, want):
+    np.testing.assert_array_equal(got.index, want.index)
+    np.testing.assert_array_equal(got.depth, want.depth)
+    np.testing.assert_array_equal(got.rgba, want.rgba)
+    assert got.attributes.keys() == want.attributes.keys()
+    for k in want.attributes:
+        assert got.attributes[k].dtype == want.attributes[k].dtype
+        np.testing.assert_array_equal(got.attributes[k], want.attributes[k])
+    for k in ("vel2d", "vel_speed", "radius_px"):
+        a, b = getattr(got, k), getattr(want, k)
+        assert (a is None) == (b is None), k
+        if a is not None:
+            np.testing.assert_array_equal(a, b)
+    if want.vel_angle is not None:
+        np.testing.assert_allclose(got.vel_angle, want.vel_angle, rtol=0, atol=4e-7)
+        np.testing.assert_array_equal(np.isnan(got.vel_angle), np.isnan(want.vel_angle))
+
+
+@pytest.mark.parametrize("n", [0, 1, 1000, 1_000_000])
+@pytest.mark.parametrize("morton", [False, True], ids=["input-order", "morton"])
+def test_visibility_parity(queue, n, morton):
+    pos = _scene(n, seed=n)
+    cam = _cam()
+    got = _vis(queue, pos, cam, morton=morton)
+    want = ref.visibility(pos, cam, W, H)
+    np.testing.assert_array_equal(got, want)
+    if n >= 1000:
+        assert (want != np.iinfo(np.uint64).max).sum() > min(n // 3, W * H // 4)  # a real picture
+
+
+def test_many_points_per_pixel_and_ties(queue):
+    """200k points on a 4x3 image; many share a position, so ties in depth go
+    to the lowest index (also after the Morton reordering)."""
+    rng = np.random.default_rng(5)
+    base = _scene(2000, seed=1, spread=0.3)
+    pos = base[rng.integers(0, 2000, 200_000)]
+    cam = _cam(aspect=4 / 3)
+    want = ref.visibility(pos, cam, 4, 3)
+    for morton in (False, True):
+        got = _vis(queue, pos, cam, 4, 3, morton=morton, batch_size=777)
+        np.testing.assert_array_equal(got, want)
+    ids = (want & np.uint64(0xFFFFFFFF)).astype(np.int64)
+    # the winner is the first occurrence of its position
+    first = {tuple(p): i for i, p in reversed(list(enumerate(map(tuple, pos[:5000]))))}
+    for i in ids.ravel():
+        if i < 5000:
+            assert first[tuple(pos[i])] == i
+
+
+def test_near_far_behind_and_edges(queue):
+    """An orthographic camera with dyadic pixel edges: points exactly on the
+    near and far planes and on pixel edges, just outside them, and behind."""
+    cam = Camera.ortho((0, 0, 0), (0, 0, -1), (0, 1, 0), height=2.0, aspect=1.0, near=1.0, far=8.0)
+    depth = cam.depth_row
+    assert np.array_equal(depth, [0, 0, -1, 0])          # depth = -z, exactly
+    e = np.float32(np.spacing(np.float32(1.0)))
+    xs = np.array([-1.0, -0.75, -0.5, 0.0, 0.25, 0.5, 1.0 - e, 1.0, -1.0 - e], np.float32)
+    zs = np.array([-1.0, -8.0, -1.0 + e, -8.0 - 8 * e, -4.0, 3.0, 0.0], np.float32)
+    pts = np.array([(x, y, z) for x in xs for y in xs[::-1] for z in zs], np.float32)
+    pr = cam.project(pts, 8, 8)
+    drawn = pts[pr.visible]
+    assert ((drawn[:, 2] == -1.0) | (drawn[:, 2] == -8.0) | (drawn[:, 2] == -4.0)).all()
+    assert (pts[pr.visible][:, 0] >= -1).all() and (pts[pr.visible][:, 0] < 1).all()
+    assert pr.visible[(pts[:, 0] == -1) & (pts[:, 1] == 0) & (pts[:, 2] == -1)].all()
+    assert not pr.visible[pts[:, 0] == 1].any()
+    for morton in (False, True):
+        np.testing.assert_array_equal(_vis(queue, pts, cam, 8, 8, morton=morton),
+                                      ref.visibility(pts, cam, 8, 8))
+
+
+def test_nan_inf_never_drawn(queue):
+    pos = _scene(50_000, seed=3)
+    rng = np.random.default_rng(3)
+    bad = rng.random(pos.shape) < 0.05
+    pos[bad] = rng.choice(np.array([np.nan, np.inf, -np.inf], np.float32), int(bad.sum()))
+    pos[:20_000] = np.nan                       # whole batches with no finite point
+    cam = _cam()
+    want = ref.visibility(pos, cam, W, H)
+    ids = want[want != np.iinfo(np.uint64).max] & np.uint64(0xFFFFFFFF)
+    assert np.isfinite(pos[ids.astype(np.int64)]).all()
+    for morton in (False, True):
+        np.testing.assert_array_equal(_vis(queue, pos, cam, morton=morton, batch_size=4096), want)
+
+
+def test_fallback_without_int64_atomics(device):
+    """The two-pass path gives the same buffer bit for bit, forced off on a
+    device that has the extension."""
+    pos = _scene(300_000, seed=9)
+    rng = np.random.default_rng(9)
+    pos = np.concatenate([pos, pos[rng.integers(0, len(pos), 100_000)]])    # exact ties
+    cam = _cam()
+    q = runtime.queue_for(device)
+    fast = _vis(q, pos, cam)
+    with runtime.configure(int64_atomics=False):
+        assert not runtime.capabilities(q).int64_atomics
+        for profile in ("cpu", "gpu"):
+            with runtime.configure(tuning=profile):
+                slow = _vis(q, pos, cam, morton=profile == "gpu")
+                np.testing.assert_array_equal(slow, fast)
+                got = clvis.rasterize(pos, cam, W, H, queue=q, soft_z=True)
+                _assert_gbuffers(got, ref.rasterize(pos, cam, W, H, soft_z=True))
+    np.testing.assert_array_equal(fast, ref.visibility(pos, cam, W, H))
+
+
+def _full_cloud(n, seed=0):
+    rng = np.random.default_rng(seed)
+    pos = _scene(n, seed)
+    colors = rng.integers(0, 256, (n, 4), dtype=np.uint8)
+    attrs = {"temperature": rng.normal(300, 20, n).astype(np.float32),
+             "pressure": rng.random(n).astype(np.float64),        # converted to float32
+             "label": rng.integers(0, 7, n).astype(np.uint8),
+             "flag": rng.random(n) < 0.5}
+    attrs["temperature"][::97] = np.nan
+    vel = rng.normal(size=(n, 3)).astype(np.float32)
+    radius = rng.random(n).astype(np.float32) * 0.05
+    return pos, colors, attrs, vel, radius
+
+
+@pytest.mark.parametrize("morton", [False, True], ids=["input-order", "morton"])
+def test_gbuffers_parity(queue, morton):
+    pos, colors, attrs, vel, radius = _full_cloud(60_000)
+    cam = _cam()
+    kw = {"colors": colors, "attributes": attrs, "velocity": vel, "radius": radius}
+    got = clvis.rasterize(pos, cam, W, H, morton=morton, queue=queue, **kw)
+    want = ref.rasterize(pos, cam, W, H, **kw)
+    _assert_gbuffers(got, want)
+    assert got.attributes["pressure"].dtype == np.float32
+    assert got.attributes["flag"].dtype == np.uint8
+    assert got.covered.sum() > W * H // 4
+    empty = ~got.covered
+    assert np.isinf(got.depth[empty]).all() and (got.rgba[empty] == 0).all()
+    assert np.isnan(got.vel2d[empty]).all() and np.isnan(got.radius_px[empty]).all()
+    # velocity planes are consistent with each other
+    c = got.covered
+    np.testing.assert_allclose(got.vel_speed[c], np.hypot(got.vel2d[c, 0], got.vel2d[c, 1]),
+                               rtol=1e-6)
+
+
+def test_screen_velocity_is_the_pixel_motion(device):
+    """vel2d is the derivative of the pixel position: compare with a finite
+    difference of the projection."""
+    q = runtime.queue_for(device)
+    pos, _, _, vel, _ = _full_cloud(5000, seed=2)
+    cam = _cam()
+    g = clvis.rasterize(pos, cam, W, H, velocity=vel, queue=q)
+    idx = g.index[g.covered].astype(np.int64)
+    h = 1e-3
+    p0 = cam.project(pos[idx].astype(np.float64), W, H)
+    p1 = cam.project((pos[idx] + h * vel[idx]).astype(np.float64), W, H)
+    fd = np.stack([(p1.sx - p0.sx) / h, (p1.sy - p0.sy) / h], axis=1)
+    got = g.vel2d[g.covered]
+    np.testing.assert_allclose(got, fd, rtol=0.05, atol=0.05 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize("color_by", ["temperature", "label"])
+def test_transfer_function(queue, color_by):
+    pos, _, attrs, _, _ = _full_cloud(40_000, seed=4)
+    cam = _cam()
+    for cmap, vr in (("viridis", None), ("magma", (290.0, 310.0)), ("jet", (3.0, 3.0))):
+        got = clvis.rasterize(pos, cam, W, H, attributes=attrs, color_by=color_by, colormap=cmap,
+                              value_range=vr, queue=queue)
+        want = ref.rasterize(pos, cam, W, H, attributes=attrs, color_by=color_by, colormap=cmap,
+                             value_range=vr)
+        _assert_gbuffers(got, want)
+        colors = len(np.unique(got.rgba[got.covered & ~np.isnan(got.attributes[color_by])], axis=0))
+        if vr is None:
+            assert colors >= 5          # the data's own range spreads over the colormap
+        elif vr[0] == vr[1]:
+            assert colors == 1
+
+
+@pytest.mark.parametrize("soft_z", [True, 1.0, 1.2])
+def test_soft_z(queue, soft_z):
+    pos, colors, attrs, _, _ = _full_cloud(80_000, seed=6)
+    cam = _cam()
+    got = clvis.rasterize(pos, cam, W, H, colors=colors, soft_z=soft_z, queue=queue, morton=True)
+    want = ref.rasterize(pos, cam, W, H, colors=colors, soft_z=soft_z)
+    _assert_gbuffers(got, want)
+    hard = ref.rasterize(pos, cam, W, H, colors=colors)
+    if soft_z == 1.2:       # averaging many colours differs from the nearest point's
+        assert (got.rgba != hard.rgba).any()
+    got = clvis.rasterize(pos, cam, W, H, attributes=attrs, color_by="temperature", soft_z=soft_z,
+                          queue=queue)
+    _assert_gbuffers(got, ref.rasterize(pos, cam, W, H, attributes=attrs, color_by="temperature",
+                                        soft_z=soft_z))
+
+
+def test_batch_culling(queue):
+    """A Morton-ordered cloud seen in part: culled batches read no point, and
+    the image is still exact."""
+    rng = np.random.default_rng(8)
+    pos = (rng.random((400_000, 3)) * [100, 100, 2]).astype(np.float32)
+    cam = Camera.look_at((10, 10, 8), (12, 12, 0), (0, 1, 0), fov_y=40, aspect=W / H, near=0.1, far=50)
+    r = clvis.Rasterizer(pos, morton=True, batch_size=2048, queue=queue)
+    g = r.render(cam, W, H)
+    s = g.stats
+    assert s["batches"] == -(-400_000 // 2048)
+    assert s["batches_drawn"] < s["batches"] // 4
+    assert s["points_read"] < 400_000 // 4
+    np.testing.assert_array_equal(g.index, ref.rasterize(pos, cam, W, H).index)
+    assert g.covered.sum() > W * H // 3
+
+
+@given(seed=st.integers(0, 2**32 - 1), ortho=st.booleans(), batch=st.sampled_from([1, 7, 256, 10240]))
+def test_property_random_cameras(device, seed, ortho, batch):
+    """Random clouds, random cameras (inside the cloud too), every batch size:
+    culling never drops a point that the projection draws."""
+    rng = np.random.default_rng(seed)
+    pos = (rng.normal(size=(3000, 3)) * rng.uniform(0.1, 10)).astype(np.float32)
+    eye = rng.normal(size=3) * rng.uniform(0.1, 20)
+    target = eye + rng.normal(size=3)
+    kw = {"aspect": float(rng.uniform(0.5, 2)), "near": float(rng.uniform(0.01, 1)),
+          "far": float(rng.uniform(2, 40))}
+    cam = (Camera.ortho(eye, target, (0, 0, 1), height=float(rng.uniform(0.5, 20)), **kw) if ortho
+           else Camera.look_at(eye, target, (0, 0, 1), fov_y=float(rng.uniform(10, 120)), **kw))
+    w, h = int(rng.integers(1, 40)), int(rng.integers(1, 40))
+    q = runtime.queue_for(device)
+    got = _vis(q, pos, cam, w, h, morton=bool(seed % 2), batch_size=batch)
+    np.testing.assert_array_equal(got, ref.visibility(pos, cam, w, h))
+
+
+def test_morton_order(queue):
+    pos = _scene(100_000, seed=11)
+    pos[::1000] = np.nan
+    perm = clvis.morton_order(pos, queue=queue)
+    np.testing.assert_array_equal(perm, ref.morton_order(pos))
+    assert np.array_equal(np.sort(perm), np.arange(len(pos)))
+    assert np.isnan(pos[perm[-100:]]).any(axis=1).all()
+    assert clvis.morton_order(np.zeros((0, 3), np.float32), queue=queue).shape == (0,)
+
+
+def test_device_arrays(queue):
+    pos, colors, *_ = _full_cloud(20_000, seed=12)
+    cam = _cam()
+    g = clvis.rasterize(cla.to_device(queue, pos), cam, W, H, colors=cla.to_device(queue, colors),
+                        morton=True)
+    _assert_gbuffers(g, ref.rasterize(pos, cam, W, H, colors=colors))
+
+
+def test_point_cloud_input(queue):
+    pos, colors, attrs, vel, radius = _full_cloud(10_000, seed=13)
+    cloud = clvis.PointCloud(pos, colors=colors, attributes=attrs, velocity=vel, radius=radius)
+    cam = _cam()
+    g = clvis.rasterize(cloud, cam, W, H, color_by="label", queue=queue)
+    _assert_gbuffers(g, ref.rasterize(pos, cam, W, H, colors=colors, attributes=cloud.attributes,
+                                      velocity=vel, radius=radius, color_by="label"))
+
+
+def test_layouts(device):
+    """The host's dtypes match the kernels' layouts: the camera buffer as
+    clvis/camera.h loads it, and the visibility word as two uints."""
+    q = runtime.queue_for(device)
+    cam = _cam()
+    buf = raster.camera_buffer(cam)
+    assert raster.CAMERA_DTYPE.itemsize == 80 and buf.dtype == np.float32 and buf.size == 20
+    rec = buf.view(raster.CAMERA_DTYPE)[0]
+    np.testing.assert_array_equal(rec["m"], cam.matrix.astype(np.float32))
+    np.testing.assert_array_equal(rec["d"], cam.depth_row.astype(np.float32))
+    src = """
+    #include "clvis/camera.h"
+    kernel void probe(global const float *cam, global float *out) {
+        clvis_camera c = clvis_load_camera(cam);
+        vstore4(c.r0, 0, out); vstore4(c.r1, 1, out); vstore4(c.r2, 2, out);
+        vstore4(c.r3, 3, out); vstore4(c.d, 4, out);
+    }"""
+    with warnings.catch_warnings():       # drivers may log remarks on success
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        prg = cl.Program(q.context, src).build(["-I", str(runtime.INCLUDE_DIR)])
+    d_cam = cla.to_device(q, buf)
+    out = cla.empty(q, 20, np.float32)
+    prg.probe(q, (1,), (1,), d_cam.data, out.data)
+    np.testing.assert_array_equal(out.get(), buf)
+    pos = _scene(5000)
+    vis = _vis(q, pos, cam)
+    words = vis.view(raster.VIS_DTYPE)
+    g = ref.rasterize(pos, cam, W, H)
+    np.testing.assert_array_equal(words["id"], g.index)
+    covered = g.covered
+    np.testing.assert_array_equal(ref.key_depth(words["dkey"][covered]), g.depth[covered])
+
+
+def test_depth_filter(queue):
+    """clvis.depth_filter on G-buffers: a near wall with holes over a far wall;
+    the far points seen through the holes are removed."""
+    rng = np.random.default_rng(14)
+    n = 4000        # about one point per pixel of the near wall: it has holes
+    near = np.column_stack([rng.uniform(-1, 1, n), np.full(n, -2.0), rng.uniform(-1, 1, n)])
+    m = 300_000
+    far = np.column_stack([rng.uniform(-6, 6, m), np.full(m, 6.0), rng.uniform(-6, 6, m)])
+    pos = np.concatenate([near, far]).astype(np.float32)
+    cam = Camera.look_at((0, -6, 0), (0, 0, 0), (0, 0, 1), fov_y=40, aspect=1.0, near=0.5, far=20)
+    g = clvis.rasterize(pos, cam, 96, 96, queue=queue)
+    f = clvis.depth_filter(g, levels=4, queue=queue)
+    from clvis.reference import depthfilter as ref_df
+    np.testing.assert_array_equal(f.keep, ref_df.depth_filter_mask(g.depth, 4))
+    from_near = g.covered & (g.index < n)
+    from_far = g.covered & (g.index >= n)
+    pr = cam.project(np.array([[-0.8, -2, -0.8], [0.8, -2, 0.8]], np.float32), 96, 96)
+    inner = np.zeros_like(from_far)
+    inner[pr.py[1] + 3:pr.py[0] - 3, pr.px[0] + 3:pr.px[1] - 3] = True
+    assert from_far[inner].sum() > 50                    # see-through points exist
+    assert f.keep[from_far & inner].mean() < 0.1        # and are removed
+    assert f.keep[from_near].mean() > 0.95
+    assert f.rgbda.shape == (96, 96, 5)
+    np.testing.assert_array_equal(f.rgbda[..., 4], f.keep.astype(np.float32))
+    assert np.isinf(f.depth[~f.keep]).all() and (f.rgba[~f.keep] == 0).all()
+    f2 = clvis.depth_filter(g.depth, levels=4, queue=queue)
+    np.testing.assert_array_equal(f2.keep, f.keep)
+    assert f2.rgba is None
+
+
+def test_bad_input(queue):
+    cam = _cam()
+    pos = _scene(10)
+    with pytest.raises(TypeError, match="positions"):
+        clvis.rasterize(pos.astype(np.int32), cam, W, H, queue=queue)
+    with pytest.raises(ValueError, match="positions"):
+        clvis.rasterize(pos[:, :2], cam, W, H, queue=queue)
+    with pytest.raises(ValueError, match="colors"):
+        clvis.rasterize(pos, cam, W, H, colors=np.zeros((9, 4), np.uint8), queue=queue)
+    with pytest.raises(TypeError, match="colors"):
+        clvis.rasterize(pos, cam, W, H, colors=np.zeros((10, 4), np.float32), queue=queue)
+    with pytest.raises(ValueError, match="velocity"):
+        clvis.rasterize(pos, cam, W, H, velocity=np.zeros((10, 2), np.float32), queue=queue)
+    with pytest.raises(ValueError, match="radius"):
+        clvis.rasterize(pos, cam, W, H, radius=np.zeros(11, np.float32), queue=queue)
+    with pytest.raises(ValueError, match="at most 8"):
+        clvis.rasterize(pos, cam, W, H, attributes={str(i): np.zeros(10) for i in range(9)},
+                        queue=queue)
+    with pytest.raises(ValueError, match=r"attributes\['a'\]"):
+        clvis.rasterize(pos, cam, W, H, attributes={"a": np.zeros(3)}, queue=queue)
+    with pytest.raises(TypeError, match=r"attributes\['a'\]"):
+        clvis.rasterize(pos, cam, W, H, attributes={"a": np.array(["x"] * 10)}, queue=queue)
+    for w in (0, raster.MAX_IMAGE_SIDE + 1):
+        with pytest.raises(ValueError, match="width"):
+            clvis.rasterize(pos, cam, w, H, queue=queue)
+    with pytest.raises(TypeError, match="height"):
+        clvis.rasterize(pos, cam, W, 4.5, queue=queue)
+    with pytest.raises(TypeError, match="camera"):
+        clvis.rasterize(pos, np.eye(4), W, H, queue=queue)
+    for bad in (0.5, float("nan"), "x"):
+        with pytest.raises((TypeError, ValueError), match="soft_z"):
+            clvis.rasterize(pos, cam, W, H, soft_z=bad, queue=queue)
+    with pytest.raises(ValueError, match="color_by"):
+        clvis.rasterize(pos, cam, W, H, color_by="nope", queue=queue)
+    with pytest.raises(ValueError, match="value_range"):
+        clvis.rasterize(pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a",
+                        value_range=(1.0, 0.0), queue=queue)
+    with pytest.raises(ValueError, match="viridi"):
+        clvis.rasterize(pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a",
+                        colormap="viridi", queue=queue)
+    with pytest.raises(ValueError, match="batch_size"):
+        clvis.Rasterizer(pos, batch_size=0, queue=queue)
+    ortho = Camera.ortho((0, 0, 5), (0, 0, 0), (0, 1, 0), near=-1.0, far=10.0)
+    with pytest.raises(ValueError, match="near > 0"):
+        clvis.rasterize(pos, ortho, W, H, soft_z=True, queue=queue)
+    with runtime.configure(max_alloc_bytes=1 << 20), \
+            pytest.raises(clvis.DeviceError, match="visibility buffer"):
+            clvis.rasterize(pos, cam, 1024, 1024, queue=queue)

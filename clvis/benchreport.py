@@ -74,6 +74,14 @@ TARGETS = {
         Target("scan[int32]", "copy_pct", 70, "gpu"),
         Target(SORT_OP, "copy_pct", 40, "gpu"),
     ],
+    "raster": [
+        # issue 3, on PoCL's CPU device (2 cores), 2^24 points at 1920x1080
+        Target("raster[morton order]", "numpy reference render (np.minimum.at)", 12, "cpu"),
+        Target("raster[morton order]", "copy_pct", 25, "cpu"),
+        Target("raster[morton order]", "np.minimum.at alone (keys precomputed)", 1, "cpu"),
+        # goal on a GPU with NVIDIA's OpenCL
+        Target("raster[morton order]", "copy_pct", 60, "gpu"),
+    ],
 }
 
 

@@ -7,7 +7,9 @@
 #                    Linux) + test tools; runs the tests on every OpenCL device
 #                    found (2^27-element cases included), then the benchmark
 #                    suites once each at a tiny scale
-#   ./dev.sh bench   .venv-test; runs `clvis bench primitives` (full sizes)
+#   ./dev.sh bench [FAMILY]
+#                    .venv-test; runs `clvis bench FAMILY` (full sizes) for
+#                    primitives and raster, or the family named
 #
 # Extra arguments go to the command (pytest, clvis demo, clvis bench).
 set -euo pipefail
@@ -53,7 +55,13 @@ test | bench)
         export CLVIS_REQUIRE_PLATFORMS=${CLVIS_REQUIRE_PLATFORMS:-portable}
     fi
     if [ "$cmd" = bench ]; then
-        exec .venv-test/bin/clvis bench primitives "$@"
+        case "${1:-}" in
+        primitives | raster)
+            exec .venv-test/bin/clvis bench "$@"
+            ;;
+        esac
+        .venv-test/bin/clvis bench primitives "$@"
+        exec .venv-test/bin/clvis bench raster "$@"
     fi
     # CLVIS_LARGE=1: the 2^27-element tests too (~1.5 min, ~8 GB)
     CLVIS_LARGE=${CLVIS_LARGE:-1} CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001} \

@@ -37,13 +37,20 @@
  *     Global size >= nb, any local size; item b computes bounds of batch b.
  *
  * kernel render_visibility(positions, ids, n, batch, bounds, cam, near, far,
- *                          W, H, global ulong *vis, global uchar *drawn)
+ *                          W, H, global ulong *vis, global uchar *drawn,
+ *                          uint reverse)
  *     (64-bit atomics only.) Per drawn point: early-z (skip when its dkey
  *     exceeds the pixel's current dkey), else atom_min(vis + p, dkey<<32|id).
  *     drawn[b] = 1 if batch b was not culled, else 0 (written by item 0).
+ *     reverse = 1 walks each batch from its last point to its first. The
+ *     result is the same either way; the speed is not: early-z rejects most
+ *     when near points come first. For a Morton-ordered cloud the host passes
+ *     1 when the view direction f has f.x + 2 f.y + 4 f.z < 0 (the code's z
+ *     bit is the most significant of each level, x the least), so the points
+ *     of each cell come nearest first.
  *
- * kernel render_depth(... same arguments ..., global uint *vis, drawn)
- * kernel render_index(... same arguments ..., global uint *vis, drawn)
+ * kernel render_depth(... same arguments ..., global uint *vis, drawn, reverse)
+ * kernel render_index(... same arguments ..., global uint *vis, drawn, reverse)
  *     The fallback, in this order: render_depth takes atomic_min of dkey into
  *     word 2p + 1; render_index, for every point whose dkey equals that word,
  *     takes atomic_min of its id into word 2p. The result is the same vis
@@ -131,7 +138,7 @@ inline void raster_point(int mode, uint i, uint p, uint dkey, global const uint 
 inline void raster_batch(int mode, global const float *positions, global const uint *ids,
                          uint n, uint batch, global const float *bounds, global const float *cam,
                          float near, float far, uint W, uint H, global uint *vis,
-                         global uchar *drawn)
+                         global uchar *drawn, uint reverse)
 {
     uint b = get_group_id(0);
     uint l = get_local_id(0), L = get_local_size(0);
@@ -143,12 +150,13 @@ inline void raster_batch(int mode, global const float *positions, global const u
     if (culled)
         return;
     float fw = (float)W, fh = (float)H;
-    uint i = b * batch + l, end = min(n, (b + 1) * batch);
+    uint start = b * batch, end = min(n, (b + 1) * batch), count = end - start, t = l;
     volatile global uint *words = vis;
 #if VEC == 8
     /* 8 points a step (one work-item per batch: L == 1): the projection in
      * vector registers, then the drawn lanes one by one */
-    for (; L == 1 && i + 8 <= end; i += 8) {
+    for (; L == 1 && t + 8 <= count; t += 8) {
+        uint i = reverse ? end - t - 8 : start + t;
         float8 v0 = vload8(0, positions + 3 * (size_t)i);
         float8 v1 = vload8(1, positions + 3 * (size_t)i);
         float8 v2 = vload8(2, positions + 3 * (size_t)i);
@@ -164,12 +172,15 @@ inline void raster_batch(int mode, global const float *positions, global const u
         vstore8(convert_uint8(sy) * W + convert_uint8(sx), 0, pix);
         vstore8(clvis_key_f32_8(as_uint8(depth)), 0, key);
         vstore8(drawn8, 0, ok);
-        for (int k = 0; k < 8; ++k)
+        for (int kk = 0; kk < 8; ++kk) {
+            int k = reverse ? 7 - kk : kk;
             if (ok[k])
                 raster_point(mode, i + k, pix[k], key[k], ids, words);
+        }
     }
 #endif
-    for (; i < end; i += L) {
+    for (; t < count; t += L) {
+        uint i = reverse ? end - 1 - t : start + t;
         float x = positions[3 * i], y = positions[3 * i + 1], z = positions[3 * i + 2];
         float sx, sy, depth;
         if (clvis_project(&c, x, y, z, near, far, fw, fh, &sx, &sy, &depth))
@@ -182,27 +193,29 @@ inline void raster_batch(int mode, global const float *positions, global const u
 kernel void render_visibility(global const float *positions, global const uint *ids, uint n,
                               uint batch, global const float *bounds, global const float *cam,
                               float near, float far, uint W, uint H, global ulong *vis,
-                              global uchar *drawn)
+                              global uchar *drawn, uint reverse)
 {
     raster_batch(MODE_VIS64, positions, ids, n, batch, bounds, cam, near, far, W, H,
-                 (global uint *)vis, drawn);
+                 (global uint *)vis, drawn, reverse);
 }
 #endif
 
 kernel void render_depth(global const float *positions, global const uint *ids, uint n,
                          uint batch, global const float *bounds, global const float *cam,
                          float near, float far, uint W, uint H, global uint *vis,
-                         global uchar *drawn)
+                         global uchar *drawn, uint reverse)
 {
-    raster_batch(MODE_DEPTH, positions, ids, n, batch, bounds, cam, near, far, W, H, vis, drawn);
+    raster_batch(MODE_DEPTH, positions, ids, n, batch, bounds, cam, near, far, W, H, vis, drawn,
+                 reverse);
 }
 
 kernel void render_index(global const float *positions, global const uint *ids, uint n,
                          uint batch, global const float *bounds, global const float *cam,
                          float near, float far, uint W, uint H, global uint *vis,
-                         global uchar *drawn)
+                         global uchar *drawn, uint reverse)
 {
-    raster_batch(MODE_INDEX, positions, ids, n, batch, bounds, cam, near, far, W, H, vis, drawn);
+    raster_batch(MODE_INDEX, positions, ids, n, batch, bounds, cam, near, far, W, H, vis, drawn,
+                 reverse);
 }
 
 kernel void soft_accumulate(global const float *positions, global const uint *ids, uint n,

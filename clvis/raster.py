@@ -50,6 +50,7 @@ EMPTY = np.uint32(0xFFFFFFFF)       # index of an empty pixel
 MAX_ATTRIBUTES = 8
 MAX_IMAGE_SIDE = 1 << 15            # W, H: exact as float32 and addressable as uint
 BATCH_SIZE = 10240
+_F32_MAX = float(np.finfo(np.float32).max)
 # a visibility word as two uints (little-endian ulong: dkey << 32 | id)
 VIS_DTYPE = np.dtype([("id", "<u4"), ("dkey", "<u4")])
 # the camera buffer of clvis/camera.h
@@ -339,7 +340,9 @@ class Rasterizer:
                 vr = self._ranges[color_by] = _colormap.value_range(self._host_attr[color_by])
         else:
             vr = tuple(float(v) for v in value_range)
-            if len(vr) != 2 or not all(math.isfinite(v) for v in vr) or vr[0] > vr[1]:
+            # finite as float32 too: the kernels take vmin as a float
+            if len(vr) != 2 or not all(math.isfinite(v) and abs(v) <= _F32_MAX for v in vr) \
+                    or vr[0] > vr[1]:
                 raise ValueError(f"value_range: expected finite (vmin, vmax) with vmin <= vmax, got {value_range!r}")
         vmin, vmax = vr
         scale = np.float32(0.0 if vmax == vmin else 1.0 / (vmax - vmin))

@@ -384,6 +384,9 @@ def test_bad_input(queue):
     with pytest.raises(ValueError, match="value_range"):
         clvis.rasterize(pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a",
                         value_range=(1.0, 0.0), queue=queue)
+    with pytest.raises(ValueError, match="value_range"):
+        clvis.rasterize(pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a",
+                        value_range=(0.0, 1e39), queue=queue)
     with pytest.raises(ValueError, match="viridi"):
         clvis.rasterize(pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a",
                         colormap="viridi", queue=queue)

@@ -6,6 +6,8 @@ Every op takes numpy arrays (and returns numpy) or ``pyopencl.array.Array``
 
 from __future__ import annotations
 
+import operator
+
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
@@ -77,3 +79,16 @@ def buf(a: cla.Array):
 
 def result(a: cla.Array, host: bool):
     return a.get() if host else a
+
+
+def nonnegative_int(name: str, v) -> int:
+    """v as an int >= 0: TypeError for a non-integer (bool included), ValueError below 0."""
+    if isinstance(v, bool):
+        raise TypeError(f"{name}: expected an integer, got bool")
+    try:
+        v = operator.index(v)
+    except TypeError:
+        raise TypeError(f"{name}: expected an integer, got {type(v).__name__}") from None
+    if v < 0:
+        raise ValueError(f"{name}: expected >= 0, got {v}")
+    return v

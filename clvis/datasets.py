@@ -12,9 +12,9 @@ right-handed with z up.
 
 from __future__ import annotations
 
-import operator
-
 import numpy as np
+
+from ._arrays import nonnegative_int
 
 __all__ = ["hurricane", "terrain"]
 
@@ -252,15 +252,7 @@ def _ground(x, y):
 
 
 def _count(n) -> int:
-    if isinstance(n, bool):
-        raise TypeError("n: expected an integer, got bool")
-    try:
-        n = operator.index(n)
-    except TypeError:
-        raise TypeError(f"n: expected an integer, got {type(n).__name__}") from None
-    if n < 0:
-        raise ValueError(f"n: expected >= 0, got {n}")
-    return n
+    return nonnegative_int("n", n)
 
 
 def _split(n: int, fractions) -> list[int]:

@@ -8,7 +8,6 @@ name or an ``(n, 4)`` uint8 table.
 
 from __future__ import annotations
 
-import operator
 import os
 import secrets
 from pathlib import Path
@@ -16,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from . import colormap as cm
+from ._arrays import nonnegative_int
 
 __all__ = ["attribute_image", "depth_image", "save_png", "side_by_side", "velocity_images"]
 
@@ -108,14 +108,7 @@ def side_by_side(images, pad=4) -> np.ndarray:
     """RGBA images ``(H_i, W_i, 4)`` uint8 placed left to right, `pad`
     transparent columns between neighbours, each top-aligned and padded with
     transparent rows to the tallest."""
-    if isinstance(pad, bool):
-        raise TypeError("pad: expected an integer, got bool")
-    try:
-        pad = operator.index(pad)
-    except TypeError:
-        raise TypeError(f"pad: expected an integer, got {type(pad).__name__}") from None
-    if pad < 0:
-        raise ValueError(f"pad: expected >= 0, got {pad}")
+    pad = nonnegative_int("pad", pad)
     images = [np.asarray(im) for im in images]
     if not images:
         raise ValueError("images: expected at least one image")

@@ -286,17 +286,18 @@ class Rasterizer:
         (``dkey << 32 | index``, all ones where empty) and the per-batch
         drawn flags (uint8), both on the device."""
         cam, near, far, W, H = self._program_args(camera, width, height)
-        return self._render(cam, near, far, W, H)
+        vis, drawn, _ = self._render(cam, near, far, W, H)
+        return vis, drawn
 
     def _render(self, cam, near, far, W, H):
         q = self.queue
         vis = runtime.empty(q, (H, W), np.uint64, "visibility buffer")
         cl.enqueue_fill_buffer(q, vis.base_data, np.full(1, 0xFF, np.uint8), 0, vis.nbytes)
         drawn = runtime.empty(q, max(self.nbatches, 1), np.uint8, "batch flags")
-        self._cam = cam_d = self._camera_device(cam)
+        cam_d = self._camera_device(cam)
         if self.n == 0:
             runtime.fill_zero(q, drawn)
-            return vis, drawn
+            return vis, drawn, cam_d
         L = _local_size(q)
         # walk batches backwards when that visits the points of each Morton
         # cell nearest first (render.cl's ABI comment): far fewer atomics
@@ -313,7 +314,7 @@ class Rasterizer:
             for name in ("render_depth", "render_index"):
                 k = runtime.get_kernel(q, "raster/render.cl", name, _render_defines(q), _FLAGS)
                 runtime.launch(q, k, G, L, *args)
-        return vis, drawn
+        return vis, drawn, cam_d
 
     def _camera_device(self, cam):
         d = runtime.empty(self.queue, cam.size, np.float32, "camera")
@@ -374,8 +375,8 @@ class Rasterizer:
         tol = _soft_tolerance(soft_z, camera)
         tf = self._tf(color_by, colormap, value_range)
         focal = np.float32(0.5 * H * float(np.asarray(camera.projection)[1, 1]))
-        vis, drawn = self._render(cam, near, far, W, H)
-        out = self._resolve(vis, W, H, focal, tf, tol, near, far)
+        vis, drawn, cam_d = self._render(cam, near, far, W, H)
+        out = self._resolve(vis, cam_d, W, H, focal, tf, tol, near, far)
         if not host:
             return _gbuffers(out, self._f32_names, self._u8_names, lambda a: a)
         g = _gbuffers(out, self._f32_names, self._u8_names, lambda a: a.get())
@@ -385,7 +386,7 @@ class Rasterizer:
                    "points_read": int(sizes[d].sum()) if self.nbatches else 0}
         return g
 
-    def _resolve(self, vis, W, H, focal, tf, tol, near, far):
+    def _resolve(self, vis, cam_d, W, H, focal, tf, tol, near, far):
         q = self.queue
         npix = W * H
         color_mode, tf_buf, stride, offset, lut, lut_n, vmin, scale = tf
@@ -396,7 +397,7 @@ class Rasterizer:
             k = runtime.get_kernel(q, "raster/render.cl", "soft_accumulate", _render_defines(q), _FLAGS)
             runtime.launch(q, k, self.nbatches * L, L, self.positions.base_data, _opt(self.ids),
                            np.uint32(self.n), np.uint32(self.batch_size), self.bounds.base_data,
-                           self._cam.base_data, near, far, np.uint32(W), np.uint32(H),
+                           cam_d.base_data, near, far, np.uint32(W), np.uint32(H),
                            vis.base_data, np.float32(tol), np.uint32(color_mode),
                            _opt(self.colors), _opt(tf_buf), np.uint32(stride), np.uint32(offset),
                            _opt(lut), np.uint32(lut_n), vmin, scale, accum.base_data)
@@ -423,7 +424,7 @@ class Rasterizer:
             k = runtime.get_kernel(q, "raster/resolve.cl", "resolve_attributes", {}, _FLAGS)
             runtime.launch(
                 q, k, *_items(q, npix), vis.base_data, np.uint32(W), np.uint32(H),
-                self.positions.base_data, _opt(self.inv), self._cam.base_data, focal,
+                self.positions.base_data, _opt(self.inv), cam_d.base_data, focal,
                 np.uint32(flags), np.uint32(nf), _opt(self.attr_f32), np.uint32(nu),
                 _opt(self.attr_u8), _opt(self.velocity), _opt(self.radius), _opt(out["f32"]),
                 _opt(out["u8"]), _opt(out["vel"]), _opt(out["angle"]), _opt(out["speed"]),

@@ -1,0 +1,145 @@
+"""The Gaussians container shared by the gauss family.
+
+A Gaussian i is a density  opacity_i * exp(-1/2 (x - mu_i)^T Sigma_i^-1 (x - mu_i))
+(peak 1 at its mean, not normalised), with Sigma_i = R_i diag(scales_i)^2 R_i^T:
+``scales`` are the standard deviations along the Gaussian's own axes, which are
+the columns of ``rotations[i]``. ``values`` is the scalar a transfer function
+maps to a colour (and an opacity factor).
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+
+__all__ = ["Gaussians"]
+
+
+def _real(name: str, x, shape_tail: tuple, n: int | None) -> np.ndarray:
+    if isinstance(x, (str, bytes)) or x is None:
+        raise TypeError(f"{name}: expected an array, got {type(x).__name__}")
+    a = np.asarray(x)
+    if a.dtype == bool or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        raise TypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
+    if a.ndim != 1 + len(shape_tail) or tuple(a.shape[1:]) != shape_tail:
+        want = "(N" + "".join(f", {s}" for s in shape_tail) + ")"
+        raise ValueError(f"{name}: expected shape {want}, got {a.shape}")
+    if n is not None and a.shape[0] != n:
+        raise ValueError(f"{name}: {a.shape[0]} rows, but there are {n} Gaussians")
+    a = np.ascontiguousarray(a, dtype=np.float32)
+    if a.size and not np.isfinite(a).all():
+        bad = int(np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(axis=1))[0])
+        raise DataError(f"{name}: row {bad} is not finite (NaN or Inf)")
+    return a
+
+
+class Gaussians:
+    """N anisotropic 3-D Gaussians.
+
+    Parameters
+    ----------
+    means : (N, 3) world positions (float32).
+    scales : (N, 3) standard deviations along the local axes, >= 0 (world units).
+        A zero scale is a flat (degenerate) Gaussian; renderers clamp it (see
+        ``clvis.gauss.render``).
+    rotations : (N, 3, 3), optional; columns are the local axes (orthonormal
+        within 1e-3). Identity when omitted.
+    values : (N,), optional scalar per Gaussian (0 when omitted).
+    opacities : (N,), optional, in [0, 1] (1 when omitted).
+    """
+
+    def __init__(self, means, scales, rotations=None, values=None, opacities=None):
+        self.means = _real("means", means, (3,), None)
+        n = len(self.means)
+        self.scales = _real("scales", scales, (3,), n)
+        if n and (self.scales < 0).any():
+            raise DataError(f"scales: row {int(np.flatnonzero((self.scales < 0).any(axis=1))[0])} "
+                            "is negative")
+        if rotations is None:
+            self.rotations = np.ascontiguousarray(np.broadcast_to(np.eye(3, dtype=np.float32), (n, 3, 3)))
+        else:
+            self.rotations = _real("rotations", rotations, (3, 3), n)
+            if n:
+                r = self.rotations.astype(np.float64)
+                err = np.abs(np.einsum("nji,njk->nik", r, r) - np.eye(3)).max(axis=(1, 2))
+                if (err > 1e-3).any():
+                    raise DataError(f"rotations: matrix {int(np.flatnonzero(err > 1e-3)[0])} is not "
+                                    "orthonormal (R^T R differs from I by more than 1e-3)")
+        self.values = (np.zeros(n, np.float32) if values is None else _real("values", values, (), n))
+        self.opacities = (np.ones(n, np.float32) if opacities is None
+                          else _real("opacities", opacities, (), n))
+        if n and ((self.opacities < 0) | (self.opacities > 1)).any():
+            raise DataError("opacities: values must lie in [0, 1]")
+
+    def __len__(self) -> int:
+        return len(self.means)
+
+    @property
+    def n(self) -> int:
+        return len(self.means)
+
+    @property
+    def covariances(self) -> np.ndarray:
+        """(N, 3, 3) float32: R diag(scales)^2 R^T."""
+        r = self.rotations.astype(np.float64)
+        s2 = self.scales.astype(np.float64) ** 2
+        return np.einsum("nij,nj,nkj->nik", r, s2, r).astype(np.float32)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in (self.means, self.scales, self.rotations, self.values, self.opacities))
+
+    def bounds(self, cutoff: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) float64 of the boxes holding every Gaussian's `cutoff`-sigma ellipsoid."""
+        if not self.n:
+            return np.zeros(3), np.zeros(3)
+        half = cutoff * np.sqrt(np.einsum("nij,nj->ni", self.rotations.astype(np.float64) ** 2,
+                                          self.scales.astype(np.float64) ** 2))
+        m = self.means.astype(np.float64)
+        return (m - half).min(axis=0), (m + half).max(axis=0)
+
+    def subset(self, index) -> Gaussians:
+        return Gaussians(self.means[index], self.scales[index], self.rotations[index],
+                         self.values[index], self.opacities[index])
+
+    @staticmethod
+    def concatenate(parts) -> Gaussians:
+        parts = list(parts)
+        if not parts:
+            return Gaussians(np.zeros((0, 3)), np.zeros((0, 3)))
+        cat = np.concatenate
+        return Gaussians(cat([p.means for p in parts]), cat([p.scales for p in parts]),
+                         cat([p.rotations for p in parts]), cat([p.values for p in parts]),
+                         cat([p.opacities for p in parts]))
+
+    def save(self, path) -> None:
+        """Write a .npz (means, scales, rotations, values, opacities)."""
+        np.savez(path, means=self.means, scales=self.scales, rotations=self.rotations,
+                 values=self.values, opacities=self.opacities)
+
+    @classmethod
+    def load(cls, path) -> Gaussians:
+        """Read a .npz written by :meth:`save`; DataError naming the file when malformed."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                missing = [k for k in ("means", "scales") if k not in z.files]
+                if missing:
+                    raise DataError(f"{path}: not a Gaussians file (missing {', '.join(missing)})")
+                get = {k: z[k] for k in ("means", "scales", "rotations", "values", "opacities")
+                       if k in z.files}
+        except DataError:
+            raise
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
+            raise DataError(f"{path}: cannot read Gaussians: {e}") from None
+        try:
+            return cls(**get)
+        except (TypeError, ValueError) as e:
+            raise DataError(f"{path}: {e}") from None
+
+    def __repr__(self) -> str:
+        return f"Gaussians(n={self.n})"

@@ -1,0 +1,439 @@
+"""A VDB-like sparse layout of a scalar volume (Sharma & Schmalstieg, Section 3).
+
+The volume is cut into leaves of 8x8x8 voxels, as OpenVDB's leaf nodes are. A
+voxel is *active* (part of the data) or not; a leaf without an active voxel is
+not stored, and a leaf whose 512 voxels are all active and hold the same value
+(bit for bit) is stored as a *tile*: one value and no voxel array. Voxels
+outside the volume (in the last leaves of a volume whose size is not a
+multiple of 8) are inactive.
+
+Volumes are numpy arrays indexed [z, y, x]; spacing is (dz, dy, dx) and the
+sample [z, y, x] sits at world position (x*dx, y*dy, z*dz) + origin, origin
+being (ox, oy, oz) (DESIGN.md).
+
+:func:`read_vdb` reads a float grid of an OpenVDB file into this layout
+through the optional ``tinyvdb`` package (``pip install clvis[vdb]``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+
+__all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb"]
+
+LEAF = 8                      # voxels along each side of a leaf
+LEAF_VOXELS = LEAF ** 3       # 512
+_MASK_WORDS = LEAF_VOXELS // 32
+_MAX_SIDE = 2**31 - LEAF      # voxel indices stay int32 in the kernels
+_BITS = (np.uint32(1) << np.arange(32, dtype=np.uint32)).astype(np.uint32)
+
+
+def _pack_masks(active: np.ndarray) -> np.ndarray:
+    """(L, 512) bool -> (L, 16) uint32, bit i of the leaf = voxel i."""
+    a = active.reshape(len(active), _MASK_WORDS, 32).astype(np.uint32)
+    return (a * _BITS).sum(axis=2, dtype=np.uint32).astype(np.uint32)
+
+
+def _unpack_masks(masks: np.ndarray) -> np.ndarray:
+    """(L, 16) uint32 -> (L, 512) bool."""
+    return ((masks[:, :, None] & _BITS) != 0).reshape(len(masks), LEAF_VOXELS)
+
+
+def _triple(name: str, v, positive: bool) -> tuple[float, float, float]:
+    if isinstance(v, (str, bytes)):
+        raise TypeError(f"{name}: expected 3 numbers, got {type(v).__name__}")
+    try:
+        t = tuple(float(x) for x in v)
+    except TypeError:
+        raise TypeError(f"{name}: expected 3 numbers, got {type(v).__name__}") from None
+    if len(t) != 3:
+        raise ValueError(f"{name}: expected 3 numbers, got {len(t)}")
+    f32 = np.asarray(t, np.float32)
+    if not np.isfinite(f32).all():
+        raise ValueError(f"{name}: {t} is not finite as float32")
+    if positive and not (f32 > 0).all():
+        raise ValueError(f"{name}: {t} must be > 0 on every axis")
+    return t
+
+
+class SparseVolume:
+    """A scalar volume as 8^3 leaves of active voxels (VDB-like).
+
+    Fields
+    ------
+    shape : (Z, Y, X) ints, the size of the volume in voxels.
+    spacing : (dz, dy, dx) floats > 0, the voxel size per axis.
+    origin : (ox, oy, oz) floats, the world position of sample [0, 0, 0].
+    coords : (L, 3) int32, voxel index [z, y, x] of each leaf's first voxel
+        (multiples of 8), leaves in z-y-x order of the leaf grid.
+    masks : (L, 16) uint32 active masks: bit i (word i // 32, bit i % 32) is
+        voxel i of the leaf, i = 64*z + 8*y + x in leaf-local coordinates.
+        Every stored leaf has an active voxel; voxels outside the volume are
+        never active.
+    tiles : (L,) bool, the leaf is a tile: all 512 voxels active, one value.
+    tile_values : (L,) float32, the value of each tile leaf (0 for the others).
+    values : (V, 512) float32, the voxels of the V non-tile leaves, in leaf
+        order, [z, y, x] order within a leaf (index 64*z + 8*y + x); inactive
+        voxels hold 0. :attr:`value_rows` maps a leaf to its row.
+
+    Active values are finite (NaN or Inf in an active voxel is a DataError).
+    Build one with :meth:`from_dense` or :func:`read_vdb`; the constructor
+    takes the fields above and checks them.
+    """
+
+    def __init__(self, shape, spacing, origin, coords, masks, tiles, tile_values, values):
+        shape = tuple(int(s) for s in shape)
+        if len(shape) != 3 or min(shape) < 0 or max(shape) > _MAX_SIDE:
+            raise ValueError(f"shape: expected 3 sizes in [0, {_MAX_SIDE}], got {shape}")
+        self.shape = shape
+        self.spacing = _triple("spacing", spacing, positive=True)
+        self.origin = _triple("origin", origin, positive=False)
+        self.coords = np.ascontiguousarray(coords, np.int32).reshape(-1, 3)
+        n = len(self.coords)
+        self.masks = np.ascontiguousarray(masks, np.uint32)
+        self.tiles = np.ascontiguousarray(tiles, bool)
+        self.tile_values = np.ascontiguousarray(tile_values, np.float32)
+        self.values = np.ascontiguousarray(values, np.float32)
+        if self.masks.shape != (n, _MASK_WORDS):
+            raise ValueError(f"masks: expected shape ({n}, {_MASK_WORDS}), got {self.masks.shape}")
+        if self.tiles.shape != (n,) or self.tile_values.shape != (n,):
+            raise ValueError(f"tiles, tile_values: expected shape ({n},), got {self.tiles.shape}, "
+                             f"{self.tile_values.shape}")
+        nv = n - int(self.tiles.sum())
+        if self.values.shape != (nv, LEAF_VOXELS):
+            raise ValueError(f"values: expected shape ({nv}, {LEAF_VOXELS}) for {nv} non-tile leaves, "
+                             f"got {self.values.shape}")
+        self._check()
+
+    # ------------------------------------------------------------------
+    def _check(self) -> None:
+        c = self.coords.astype(np.int64)
+        n = len(c)
+        if n:
+            if (c % LEAF).any() or (c < 0).any() or (c >= np.asarray(self.shape)).any():
+                raise DataError("coords: leaf origins must be multiples of 8 inside the volume")
+            d = np.diff(c, axis=0)                  # consecutive leaves: lexicographically increasing
+            first = d[np.arange(len(d)), (d != 0).argmax(axis=1)] if len(d) else d[:, 0]
+            if (first <= 0).any():
+                raise DataError("coords: leaves must be unique and in z-y-x order")
+        active = _unpack_masks(self.masks)
+        if n and not active.any(axis=1).all():
+            raise DataError(f"masks: leaf {int(np.flatnonzero(~active.any(axis=1))[0])} has no active voxel")
+        if n and not active[self.tiles].all():
+            raise DataError("masks: a tile leaf must have all 512 voxels active")
+        inside = self._inside()
+        if (active & ~inside).any():
+            raise DataError(f"masks: leaf {int(np.flatnonzero((active & ~inside).any(axis=1))[0])} has "
+                            "active voxels outside the volume")
+        if not np.isfinite(self.tile_values[self.tiles]).all():
+            bad = int(np.flatnonzero(self.tiles & ~np.isfinite(self.tile_values))[0])
+            raise DataError(f"tile_values: tile leaf {bad} at voxel {self.coords[bad].tolist()} "
+                            "is not finite")
+        vals = self.values
+        act = active[~self.tiles]
+        if vals.size and not np.isfinite(vals[act]).all():
+            r, i = np.argwhere(act & ~np.isfinite(vals))[0]
+            leaf = int(np.flatnonzero(~self.tiles)[r])
+            zyx = self.coords[leaf].astype(np.int64) + [i // 64, i // 8 % 8, i % 8]
+            raise DataError(f"volume: active voxel [z, y, x] = {zyx.tolist()} is {vals[r, i]} "
+                            "(not finite)")
+
+    def _inside(self) -> np.ndarray:
+        """(L, 512) bool: the voxel lies inside the volume."""
+        room = np.asarray(self.shape, np.int64) - self.coords.astype(np.int64)     # (L, 3) z, y, x
+        r = np.arange(LEAF)
+        inside = ((r < room[:, 0:1])[:, :, None, None] & (r < room[:, 1:2])[:, None, :, None]
+                  & (r < room[:, 2:3])[:, None, None, :])
+        return inside.reshape(len(room), LEAF_VOXELS)
+
+    # ------------------------------------------------------------------
+    @property
+    def n_leaves(self) -> int:
+        return len(self.coords)
+
+    @property
+    def n_tiles(self) -> int:
+        return int(self.tiles.sum())
+
+    @property
+    def n_active(self) -> int:
+        """Number of active voxels."""
+        return int(_unpack_masks(self.masks).sum())
+
+    @property
+    def value_rows(self) -> np.ndarray:
+        """(L,) int32: the row of :attr:`values` of each leaf, -1 for a tile."""
+        rows = np.cumsum(~self.tiles, dtype=np.int64) - 1
+        return np.where(self.tiles, -1, rows).astype(np.int32)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the layout's arrays: leaf coords (12 B), masks (64 B), tile
+        flag (1 B) and tile value (4 B) per leaf, 2048 B per non-tile leaf."""
+        return sum(a.nbytes for a in (self.coords, self.masks, self.tiles, self.tile_values, self.values))
+
+    def active_masks(self) -> np.ndarray:
+        """(L, 512) bool: the active voxels of each leaf ([z, y, x] order)."""
+        return _unpack_masks(self.masks)
+
+    def leaf_values(self) -> np.ndarray:
+        """(L, 512) float32: the voxels of every leaf, tiles expanded."""
+        out = np.zeros((self.n_leaves, LEAF_VOXELS), np.float32)
+        out[~self.tiles] = self.values
+        out[self.tiles] = self.tile_values[self.tiles, None]
+        return out
+
+    def to_dense(self, background: float = 0.0) -> np.ndarray:
+        """The float32 [Z, Y, X] volume: active voxels' values, `background` elsewhere."""
+        vol, _ = self._dense(background)
+        return vol
+
+    def active(self) -> np.ndarray:
+        """bool [Z, Y, X]: the active voxels."""
+        _, act = self._dense(0.0)
+        return act
+
+    def _dense(self, background):
+        Z, Y, X = self.shape
+        pz, py, px = (-(-s // LEAF) * LEAF for s in self.shape)
+        vol = np.full((pz, py, px), np.float32(background), np.float32)
+        act = np.zeros((pz, py, px), bool)
+        if self.n_leaves:
+            a = self.active_masks()
+            v = np.where(a, self.leaf_values(), np.float32(background))
+            lz, ly, lx = (self.coords[:, k] // LEAF for k in range(3))
+            _leaf_view(vol)[lz, ly, lx] = v.reshape(-1, LEAF, LEAF, LEAF)
+            _leaf_view(act)[lz, ly, lx] = a.reshape(-1, LEAF, LEAF, LEAF)
+        return vol[:Z, :Y, :X].copy(), act[:Z, :Y, :X].copy()
+
+    # ------------------------------------------------------------------
+    @classmethod
+    def from_dense(cls, volume, threshold=None, mask=None, spacing=(1.0, 1.0, 1.0),
+                   origin=(0.0, 0.0, 0.0)) -> SparseVolume:
+        """The sparse layout of a [Z, Y, X] volume (any real dtype, stored as float32).
+
+        Active voxels: ``volume > threshold`` (NaN is never above it), or
+        ``mask`` (a bool array of the volume's shape), not both; with neither,
+        every voxel is active. A non-finite active value raises DataError
+        naming the voxel.
+        """
+        vol = _check_volume(volume)
+        act = _active(vol, threshold, mask)
+        spacing = _triple("spacing", spacing, positive=True)
+        origin = _triple("origin", origin, positive=False)
+        if act.any() and not np.isfinite(vol[act]).all():
+            zyx = np.argwhere(act & ~np.isfinite(vol))[0]
+            raise DataError(f"volume: active voxel [z, y, x] = {zyx.tolist()} is "
+                            f"{vol[tuple(zyx)]} (not finite)")
+        Z, Y, X = vol.shape
+        pz, py, px = (-(-s // LEAF) * LEAF for s in vol.shape)
+        pv = np.zeros((pz, py, px), np.float32)
+        pa = np.zeros((pz, py, px), bool)
+        pv[:Z, :Y, :X] = np.where(act, vol, np.float32(0))
+        pa[:Z, :Y, :X] = act
+
+        lv = _leaf_view(pv).reshape(-1, LEAF_VOXELS)
+        la = _leaf_view(pa).reshape(-1, LEAF_VOXELS)
+        keep = la.any(axis=1)
+        idx = np.flatnonzero(keep)
+        nly, nlx = py // LEAF, px // LEAF
+        coords = np.stack([idx // (nly * nlx), idx // nlx % nly, idx % nlx], axis=1) * LEAF
+        return cls._from_leaves(vol.shape, spacing, origin, coords, lv[keep], la[keep])
+
+    @classmethod
+    def _from_leaves(cls, shape, spacing, origin, coords, lv, la) -> SparseVolume:
+        """From (L, 512) leaf values and active flags (leaves already in order)."""
+        lv = np.where(la, lv, np.float32(0)).astype(np.float32)
+        bits = lv.view(np.uint32)
+        tiles = la.all(axis=1) & (bits == bits[:, :1]).all(axis=1)
+        tile_values = np.where(tiles, lv[:, 0] if len(lv) else np.zeros(0, np.float32),
+                               np.float32(0)).astype(np.float32)
+        return cls(shape, spacing, origin, coords.astype(np.int32), _pack_masks(la), tiles, tile_values,
+                   lv[~tiles])
+
+    def __repr__(self) -> str:
+        return (f"SparseVolume(shape={self.shape}, leaves={self.n_leaves}, tiles={self.n_tiles}, "
+                f"active={self.n_active})")
+
+
+def _leaf_view(a: np.ndarray) -> np.ndarray:
+    """A [Z, Y, X] array with sides multiple of 8 seen as [lz, ly, lx, z, y, x] (a view)."""
+    pz, py, px = a.shape
+    return a.reshape(pz // LEAF, LEAF, py // LEAF, LEAF, px // LEAF, LEAF).transpose(0, 2, 4, 1, 3, 5)
+
+
+def _check_volume(volume) -> np.ndarray:
+    if isinstance(volume, (str, bytes)) or volume is None:
+        raise TypeError(f"volume: expected a 3-D array, got {type(volume).__name__}")
+    v = np.asarray(volume)
+    if v.dtype == bool or not (np.issubdtype(v.dtype, np.floating) or np.issubdtype(v.dtype, np.integer)):
+        raise TypeError(f"volume: expected real numbers, got dtype {v.dtype}")
+    if v.ndim != 3:
+        raise ValueError(f"volume: expected a 3-D [z, y, x] array, got shape {v.shape}")
+    if max(v.shape) > _MAX_SIDE:
+        raise ValueError(f"volume: sides must be at most {_MAX_SIDE}, got {v.shape}")
+    return np.ascontiguousarray(v, np.float32)
+
+
+def _active(vol: np.ndarray, threshold, mask) -> np.ndarray:
+    if threshold is not None and mask is not None:
+        raise ValueError("threshold, mask: give one of them, not both")
+    if mask is not None:
+        if isinstance(mask, (str, bytes)):
+            raise TypeError(f"mask: expected a bool array, got {type(mask).__name__}")
+        m = np.asarray(mask)
+        if m.dtype != bool:
+            raise TypeError(f"mask: expected a bool array, got dtype {m.dtype}")
+        if m.shape != vol.shape:
+            raise ValueError(f"mask: shape {m.shape} differs from the volume's {vol.shape}")
+        return np.ascontiguousarray(m)
+    if threshold is not None:
+        if isinstance(threshold, (bool, np.bool_)) or not isinstance(threshold, (int, float, np.number)):
+            raise TypeError(f"threshold: expected a number, got {type(threshold).__name__}")
+        t = float(threshold)
+        if math.isnan(t):
+            raise ValueError("threshold: NaN")
+        return np.greater(vol, np.float64(t))     # compared exactly, in float64
+    return np.ones(vol.shape, bool)
+
+
+# --------------------------------------------------------------------------
+# OpenVDB files through tinyvdb
+
+def _tinyvdb():
+    try:
+        import tinyvdb
+    except ImportError as e:
+        raise ImportError("read_vdb needs the tinyvdb package: pip install clvis[vdb]") from e
+    return tinyvdb
+
+
+def read_vdb(path, grid=None) -> SparseVolume:
+    """The active voxels of a float grid of an OpenVDB file, as a SparseVolume.
+
+    grid: the grid's name, or its index in the file; default: the first float
+    grid. VDB index coordinates (i, j, k) = (x, y, z) are shifted by the
+    leaf-aligned offset ``off = 8 * floor(min active coordinate / 8)`` so the
+    smallest active coordinate lands in the first leaf: voxel (i, j, k) is
+    array sample [k - off_z, j - off_y, i - off_x], VDB leaves stay leaves, and
+    the shape reaches the largest active coordinate. spacing is the grid's
+    voxel size (dz, dy, dx), origin the world position of sample [0, 0, 0]
+    (translation + voxel size * off). Only scale/translate transforms (or an
+    affine map without rotation) are accepted.
+
+    Active tiles of the VDB tree (regions stored above leaf level) are not
+    read: tinyvdb exposes leaf voxels only. A missing file raises
+    FileNotFoundError; a malformed one DataError naming the file.
+    """
+    if grid is not None and (isinstance(grid, bool) or not isinstance(grid, (str, int, np.integer))):
+        raise TypeError(f"grid: expected a name, an index or None, got {type(grid).__name__}")
+    tinyvdb = _tinyvdb()
+    p = Path(os.fspath(path))
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such file")
+    try:
+        f = tinyvdb.open(str(p))
+    except (RuntimeError, ValueError, OSError, MemoryError, IndexError) as e:
+        raise DataError(f"{p}: not a readable VDB file: {e}") from None
+    try:
+        return _read_grid(f, p, grid)
+    except DataError:
+        raise
+    except (RuntimeError, ValueError, OSError, MemoryError, IndexError, KeyError, TypeError) as e:
+        raise DataError(f"{p}: not a readable VDB file: {e}") from None
+    finally:
+        f.close()
+
+
+def _is_float(type_name: str) -> bool:
+    return type_name.startswith("Tree_float_")
+
+
+def _read_grid(f, p: Path, grid) -> SparseVolume:
+    f.read_grids()
+    n = int(f.grid_count)
+    names = [f.grid_name(i) for i in range(n)]
+    types = [f.grid_type_name(i) for i in range(n)]
+    if grid is None:
+        idx = next((i for i in range(n) if _is_float(types[i])), None)
+        if idx is None:
+            raise DataError(f"{p}: no float grid (grids: {_listing(names, types)})")
+    elif isinstance(grid, str):
+        if grid not in names:
+            raise DataError(f"{p}: no grid named {grid!r} (grids: {_listing(names, types)})")
+        idx = names.index(grid)
+    else:
+        if not 0 <= int(grid) < n:
+            raise DataError(f"{p}: no grid {int(grid)}; the file has {n}")
+        idx = int(grid)
+    if not _is_float(types[idx]):
+        raise DataError(f"{p}: grid {names[idx]!r} is a {types[idx]}, not a float grid")
+    g = f.grid(idx)
+    voxel_size, translation = _transform(p, g.transform)
+    sp = g.to_sparse()
+    count = int(sp["count"])
+    ijk = np.frombuffer(sp["coords"], np.int32).reshape(-1, 3).astype(np.int64)
+    vals = np.frombuffer(sp["values"], np.float32)
+    if len(ijk) != count or len(vals) != count:
+        raise DataError(f"{p}: grid {names[idx]!r}: inconsistent voxel data")
+    spacing = (voxel_size[2], voxel_size[1], voxel_size[0])
+    if count == 0:
+        return SparseVolume((0, 0, 0), spacing, translation, np.zeros((0, 3), np.int32),
+                            np.zeros((0, _MASK_WORDS), np.uint32), np.zeros(0, bool),
+                            np.zeros(0, np.float32), np.zeros((0, LEAF_VOXELS), np.float32))
+    zyx = ijk[:, ::-1]
+    off = np.floor_divide(zyx.min(axis=0), LEAF) * LEAF
+    zyx = zyx - off
+    shape = tuple(int(s) for s in zyx.max(axis=0) + 1)
+    if max(shape) > _MAX_SIDE:
+        raise DataError(f"{p}: grid {names[idx]!r} spans {shape[::-1]} voxels (x, y, z); "
+                        f"at most {_MAX_SIDE} per axis")
+    bad = ~np.isfinite(vals)
+    if bad.any():
+        raise DataError(f"{p}: grid {names[idx]!r}: active voxel (x, y, z) = "
+                        f"{ijk[np.flatnonzero(bad)[0]].tolist()} is not finite")
+    leaf = zyx // LEAF
+    coords, inv = np.unique(leaf, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    local = zyx % LEAF
+    li = local[:, 0] * 64 + local[:, 1] * 8 + local[:, 2]
+    lv = np.zeros((len(coords), LEAF_VOXELS), np.float32)
+    la = np.zeros((len(coords), LEAF_VOXELS), bool)
+    if (np.bincount(inv * LEAF_VOXELS + li, minlength=1) > 1).any():
+        raise DataError(f"{p}: grid {names[idx]!r}: a voxel appears twice")
+    lv[inv, li] = vals
+    la[inv, li] = True
+    off_xyz = off[::-1].astype(np.float64)
+    origin = tuple(float(t + s * o) for t, s, o in zip(translation, voxel_size, off_xyz, strict=True))
+    return SparseVolume._from_leaves(shape, spacing, origin, coords * LEAF, lv, la)
+
+
+def _listing(names, types) -> str:
+    return ", ".join(f"{n!r} ({t})" for n, t in zip(names, types, strict=True)) or "none"
+
+
+def _transform(p: Path, t: dict):
+    kind = t.get("type")
+    if kind in ("uniform_scale", "uniform_scale_translate", "scale", "scale_translate", "translation"):
+        vs = tuple(float(v) for v in t["voxel_size"])
+        tr = tuple(float(v) for v in t["translation"])
+    elif kind == "affine":
+        m = np.asarray(t["matrix"], np.float64)
+        lin = m[:3, :3]
+        if (lin != np.diag(np.diag(lin))).any():
+            raise DataError(f"{p}: the grid's transform rotates or shears; only axis-aligned "
+                            "scale/translate maps are supported")
+        vs = tuple(float(v) for v in np.diag(lin))
+        tr = tuple(float(v) for v in m[3, :3])
+    else:
+        raise DataError(f"{p}: unsupported grid transform {kind!r}")
+    if not all(math.isfinite(v) and v > 0 for v in vs) or not all(math.isfinite(v) for v in tr):
+        raise DataError(f"{p}: the grid's voxel size {vs} / translation {tr} is not usable "
+                        "(needs finite sizes > 0)")
+    return vs, tr

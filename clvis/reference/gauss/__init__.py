@@ -1,0 +1,1 @@
+"""NumPy references of the gauss family (clvis/gauss/), module for module."""

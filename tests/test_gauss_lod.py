@@ -1,0 +1,417 @@
+"""Sparse volumes (clvis.gauss.sparse) and their Gaussian levels of detail
+(clvis.gauss.lod, kernels_cl/gauss/lod.cl) against clvis.reference.gauss.lod,
+bit for bit, on every device and both tuning profiles; VDB files through
+tinyvdb."""
+
+import struct
+import sys
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import clvis
+from clvis import runtime
+from clvis.gauss.gaussians import Gaussians
+from clvis.gauss.lod import (
+    BYTES_PER_AXIS_ALIGNED_GAUSSIAN,
+    BYTES_PER_GAUSSIAN,
+    LODS,
+    gaussians_from_volume,
+    lod_table,
+)
+from clvis.gauss.sparse import SparseVolume, read_vdb
+from clvis.reference.gauss import lod as ref
+
+F32 = np.float32
+
+
+def _same(got: Gaussians, want: Gaussians):
+    assert isinstance(got, Gaussians)
+    assert len(got) == len(want)
+    for k in ("means", "scales", "values"):
+        a, b = getattr(got, k), getattr(want, k)
+        assert a.dtype == np.float32
+        # bit for bit (-0.0 and +0.0 differ, NaN never appears)
+        np.testing.assert_array_equal(a.view(np.uint32), b.view(np.uint32), err_msg=k)
+    np.testing.assert_array_equal(got.rotations, np.broadcast_to(np.eye(3, dtype=F32), (len(got), 3, 3)))
+    np.testing.assert_array_equal(got.opacities, np.ones(len(got), F32))
+
+
+def _check(queue, vol, lod, **kw):
+    got = gaussians_from_volume(vol, lod, queue=queue, **kw)
+    want = ref.gaussians_from_volume(vol, lod, **kw)
+    _same(got, want)
+    return got
+
+
+def _cases():
+    rng = np.random.default_rng(7)
+    one = np.zeros((9, 10, 11), F32)
+    one[4, 7, 9] = -2.5
+    odd = rng.standard_normal((13, 17, 9)).astype(F32)
+    neg = (rng.standard_normal((20, 12, 18)) * 100 - 30).astype(F32)
+    equal = np.full((11, 19, 8), 3.25, F32)
+    dense = rng.random((16, 16, 24)).astype(F32)
+    dense[8:, 8:, :8] = -0.75          # one tile beside voxel leaves
+    return [
+        ("empty", np.zeros((5, 6, 7), F32), {"threshold": 0.0}),
+        ("zero-size", np.zeros((0, 4, 4), F32), {}),
+        ("one voxel", one, {"mask": one != 0}),
+        ("full, tiles", np.full((16, 16, 16), 2.0, F32), {}),
+        ("full, one tile", dense, {"spacing": (0.5, 0.25, 2.0)}),
+        ("13x17x9 threshold", odd, {"threshold": 0.3}),
+        ("random mask, negative", neg, {"mask": rng.random(neg.shape) < 0.35,
+                                        "spacing": (0.1, 0.2, 0.3), "origin": (-5.0, 7.5, 1e3)}),
+        ("dense blocks", neg, {"mask": np.kron(rng.random((10, 6, 9)) < 0.7, np.ones((2, 2, 2), bool))}),
+        ("all equal", equal, {"threshold": 3.0, "origin": (1.0, 2.0, 3.0)}),
+    ]
+
+
+@pytest.mark.parametrize("lod", LODS)
+def test_matches_reference(queue, lod):
+    for name, vol, kw in _cases():
+        try:
+            _check(queue, vol, lod, **kw)
+        except AssertionError as e:
+            raise AssertionError(f"case {name!r}: {e}") from None
+
+
+def test_known_values(queue):
+    # a full 16^3 volume of 2.0: 8 tiles
+    vol = np.full((16, 16, 16), 2.0, F32)
+    sp = (1.0, 2.0, 4.0)     # dz, dy, dx
+    low = gaussians_from_volume(vol, "low", spacing=sp, queue=queue)
+    assert len(low) == 8
+    np.testing.assert_array_equal(low.scales, np.tile([[16.0, 8.0, 4.0]], (8, 1)))
+    np.testing.assert_array_equal(low.means[0], [3.5 * 4, 3.5 * 2, 3.5])
+    np.testing.assert_array_equal(low.means[1], [11.5 * 4, 3.5 * 2, 3.5])   # x fastest
+    np.testing.assert_array_equal(low.values, np.full(8, 2.0, F32))
+    med = gaussians_from_volume(vol, "medium", spacing=sp, queue=queue)
+    assert len(med) == 64
+    np.testing.assert_array_equal(med.scales[0], [8.0, 4.0, 2.0])
+    np.testing.assert_array_equal(med.means[:2], [[1.5 * 4, 1.5 * 2, 1.5], [5.5 * 4, 1.5 * 2, 1.5]])
+    high = gaussians_from_volume(vol, "high", spacing=sp, queue=queue)
+    assert len(high) == 512
+    np.testing.assert_array_equal(high.scales[0], [4.0, 2.0, 1.0])
+    # one active voxel: one Gaussian at the voxel, sigma = spacing / 2, at every LOD
+    one = np.zeros((9, 10, 11), F32)
+    one[4, 7, 9] = -2.5
+    for lod in LODS:
+        g = gaussians_from_volume(one, lod, mask=one != 0, spacing=(0.5, 2.0, 3.0), origin=(1, 2, 3),
+                                  queue=queue)
+        np.testing.assert_array_equal(g.means, [[9 * 3.0 + 1, 7 * 2.0 + 2, 4 * 0.5 + 3]])
+        np.testing.assert_array_equal(g.scales, [[1.5, 1.0, 0.25]])
+        np.testing.assert_array_equal(g.values, [-2.5])
+
+
+def test_medium_sparse_order(queue):
+    """A full 2^3 block, a partial block and a lone voxel of one sparse leaf."""
+    vol = np.arange(512, dtype=F32).reshape(8, 8, 8)
+    m = np.zeros((8, 8, 8), bool)
+    m[0:2, 0:2, 0:2] = True            # block 0: full
+    m[1, 0, 2] = m[0, 1, 3] = True     # block 1 (x 2..3): voxels [0,1,3] then [1,0,2]
+    m[7, 7, 7] = True                  # block 63
+    g = gaussians_from_volume(vol, "medium", mask=m, queue=queue)
+    np.testing.assert_array_equal(g.means, [[0.5, 0.5, 0.5], [3, 1, 0], [2, 0, 1], [7, 7, 7]])
+    np.testing.assert_array_equal(g.scales, [[1, 1, 1], [0.5] * 3, [0.5] * 3, [0.5] * 3])
+    np.testing.assert_array_equal(g.values, [np.mean(vol[0:2, 0:2, 0:2]), vol[0, 1, 3], vol[1, 0, 2], 511])
+    high = gaussians_from_volume(vol, "high", mask=m, queue=queue)
+    np.testing.assert_array_equal(high.values, vol[m])      # z-y-x order
+    low = gaussians_from_volume(vol, "low", mask=m, queue=queue)
+    np.testing.assert_array_equal(low.means, [[3.5, 3.5, 3.5]])
+    np.testing.assert_array_equal(low.scales, [[4, 4, 4]])
+    np.testing.assert_allclose(low.values, [vol[m].mean()], rtol=1e-6)
+    _same(low, ref.gaussians_from_volume(vol, "low", mask=m))
+
+
+def test_low_mean(queue):
+    """The low LOD's value is the mean of the active values (float32, fixed order)."""
+    rng = np.random.default_rng(11)
+    vol = (rng.standard_normal((24, 16, 16)) * 1e3).astype(F32)
+    mask = rng.random(vol.shape) < 0.6
+    g = _check(queue, vol, "low", mask=mask)
+    sv = SparseVolume.from_dense(vol, mask=mask)
+    for i, (z, y, x) in enumerate(sv.coords):
+        leaf, lm = vol[z:z + 8, y:y + 8, x:x + 8], mask[z:z + 8, y:y + 8, x:x + 8]
+        np.testing.assert_allclose(g.values[i], leaf[lm].astype(np.float64).mean(), rtol=1e-5, atol=1e-3)
+
+
+@given(shape=st.tuples(st.integers(1, 20), st.integers(1, 20), st.integers(1, 20)),
+       density=st.sampled_from([0.0, 0.05, 0.5, 0.95, 1.0]), seed=st.integers(0, 2**31),
+       lod=st.sampled_from(LODS), blocky=st.booleans())
+def test_property(device, profile, shape, density, seed, lod, blocky):
+    rng = np.random.default_rng(seed)
+    vol = (rng.standard_normal(shape) * 10).astype(F32)
+    if blocky:     # 2^3 blocks all active or not: full blocks in sparse leaves
+        m = np.kron(rng.random([-(-s // 2) for s in shape]) < density, np.ones((2, 2, 2), bool))
+        m = m[:shape[0], :shape[1], :shape[2]]
+    else:
+        m = rng.random(shape) < density
+    with runtime.configure(tuning=profile):
+        _check(runtime.queue_for(device), vol, lod, mask=m, spacing=(0.5, 1.5, 2.0), origin=(3.0, -1.0, 0.25))
+
+
+# --------------------------------------------------------------------------
+# the sparse layout
+
+def test_sparse_from_dense_matches_reference():
+    rng = np.random.default_rng(5)
+    vols = [(rng.standard_normal((13, 17, 9)).astype(F32), {"threshold": 0.2}),
+            (np.full((16, 8, 24), 1.5, F32), {}),
+            (rng.standard_normal((8, 8, 8)).astype(np.float64), {"mask": rng.random((8, 8, 8)) < 0.1}),
+            (np.zeros((3, 0, 2), F32), {})]
+    for vol, kw in vols:
+        sv = SparseVolume.from_dense(vol, **kw)
+        want = ref.sparse_from_dense(vol, **kw)
+        assert sv.shape == want["shape"]
+        for k in ("coords", "masks", "tiles", "tile_values", "values"):
+            np.testing.assert_array_equal(getattr(sv, k), want[k], err_msg=k)
+            assert getattr(sv, k).dtype == want[k].dtype
+        act = (vol > 0.2) if "threshold" in kw else kw.get("mask", np.ones(vol.shape, bool))
+        np.testing.assert_array_equal(sv.active(), act)
+        np.testing.assert_array_equal(sv.to_dense(), np.where(act, vol, 0).astype(F32))
+        np.testing.assert_array_equal(sv.to_dense(background=-1), np.where(act, vol, -1).astype(F32))
+        assert sv.n_active == act.sum()
+
+
+def test_sparse_layout_details():
+    vol = np.zeros((16, 16, 16), F32)
+    vol[:8, :8, :8] = 4.0                  # a tile
+    vol[:8, :8, 8:] = 4.0
+    vol[0, 0, 8] = 0.0                     # one voxel differs: not a tile
+    vol[8:, :8, :8] = 0.0                  # all-active zeros: a tile of 0.0
+    vol[8, 0, 0] = -0.0                    # -0.0 differs in bits: not a tile
+    sv = SparseVolume.from_dense(vol)
+    np.testing.assert_array_equal(sv.coords[:3], [[0, 0, 0], [0, 0, 8], [0, 8, 0]])
+    assert sv.tiles.tolist() == [True, False, True, True, False, True, True, True]
+    assert sv.tile_values[0] == 4.0 and len(sv.values) == 2
+    assert sv.nbytes == 8 * (12 + 64 + 1 + 4) + 2 * 2048
+    assert (sv.masks == 0xFFFFFFFF).all()
+    np.testing.assert_array_equal(sv.to_dense().view(np.uint32), vol.view(np.uint32))
+    # sizes not a multiple of 8: voxels outside the volume are inactive
+    sv = SparseVolume.from_dense(np.ones((9, 9, 9), F32))
+    assert sv.n_leaves == 8 and sv.n_tiles == 1 and sv.n_active == 729
+    np.testing.assert_array_equal(sv.active_masks()[1].reshape(8, 8, 8)[:, :, 0], True)
+    np.testing.assert_array_equal(sv.active_masks()[1].reshape(8, 8, 8)[:, :, 1:], False)
+
+
+def test_bad_input():
+    vol = np.ones((4, 5, 6), F32)
+    with pytest.raises(ValueError, match="volume: expected a 3-D"):
+        gaussians_from_volume(np.ones((4, 5)), "low")
+    with pytest.raises(TypeError, match="volume: expected real numbers"):
+        gaussians_from_volume(np.ones((4, 5, 6), bool), "low")
+    with pytest.raises(ValueError, match="lod: expected one of"):
+        gaussians_from_volume(vol, "ultra")
+    with pytest.raises(ValueError, match="threshold, mask"):
+        gaussians_from_volume(vol, "low", threshold=0.5, mask=vol > 0)
+    with pytest.raises(TypeError, match="mask: expected a bool array"):
+        gaussians_from_volume(vol, "low", mask=np.ones(vol.shape, np.uint8))
+    with pytest.raises(ValueError, match=r"mask: shape \(4, 5, 5\) differs"):
+        gaussians_from_volume(vol, "low", mask=np.ones((4, 5, 5), bool))
+    with pytest.raises(ValueError, match="spacing"):
+        gaussians_from_volume(vol, "low", spacing=(1, 0, 1))
+    with pytest.raises(ValueError, match="origin"):
+        gaussians_from_volume(vol, "low", origin=(1, np.inf, 1))
+    with pytest.raises(ValueError, match="threshold: NaN"):
+        gaussians_from_volume(vol, "low", threshold=float("nan"))
+    sv = SparseVolume.from_dense(vol)
+    with pytest.raises(ValueError, match="threshold: a SparseVolume already"):
+        gaussians_from_volume(sv, "low", threshold=0)
+    bad = vol.copy()
+    bad[2, 3, 4] = np.nan
+    with pytest.raises(clvis.DataError, match=r"active voxel \[z, y, x\] = \[2, 3, 4\] is nan"):
+        gaussians_from_volume(bad, "medium")
+    bad[2, 3, 4] = -np.inf
+    with pytest.raises(clvis.DataError, match=r"\[2, 3, 4\] is -inf"):
+        SparseVolume.from_dense(bad, mask=np.ones(bad.shape, bool))
+    # NaN in an inactive voxel is fine (NaN is never above a threshold)
+    bad[2, 3, 4] = np.nan
+    assert SparseVolume.from_dense(bad, threshold=0.5).n_active == vol.size - 1
+    with pytest.raises(clvis.DataError, match="leaves must be unique"):
+        SparseVolume((16, 8, 8), (1, 1, 1), (0, 0, 0), [[8, 0, 0], [0, 0, 0]],
+                     np.ones((2, 16), np.uint32), [False, False], [0, 0], np.zeros((2, 512)))
+    with pytest.raises(clvis.DataError, match="outside the volume"):
+        SparseVolume((4, 8, 8), (1, 1, 1), (0, 0, 0), [[0, 0, 0]], np.full((1, 16), 0xFFFFFFFF, np.uint32),
+                     [False], [0], np.zeros((1, 512)))
+
+
+def test_lod_table(queue):
+    rng = np.random.default_rng(2)
+    vol = rng.standard_normal((20, 24, 16)).astype(F32)
+    vol[:8, :8, :8] = 1.0
+    sv = SparseVolume.from_dense(vol, threshold=-0.5)
+    table = lod_table(sv, queue=queue)
+    assert (table.leaves, table.tiles, table.active_voxels) == (sv.n_leaves, 1, int((vol > -0.5).sum()))
+    assert table.sparse_bytes == sv.nbytes
+    want = ref.lod_table(sv)
+    for lod in LODS:
+        n = len(gaussians_from_volume(sv, lod, queue=queue))
+        row = table[lod]
+        assert row.gaussians == n == want[lod]
+        assert row.bytes == n * BYTES_PER_GAUSSIAN == Gaussians(np.zeros((n, 3)), np.zeros((n, 3))).nbytes
+        assert row.axis_aligned_bytes == n * BYTES_PER_AXIS_ALIGNED_GAUSSIAN
+    assert table["low"].gaussians == sv.n_leaves
+    assert "medium" in table.format()
+    empty = lod_table(SparseVolume.from_dense(np.zeros((4, 4, 4)), threshold=1), queue=queue)
+    assert [r.gaussians for r in empty.rows] == [0, 0, 0]
+
+
+# --------------------------------------------------------------------------
+# OpenVDB files: tinyvdb 0.9 writes a file only from one it has read, so the
+# tests make a minimal OpenVDB file (header, grid descriptors, transform, an
+# empty tree), let tinyvdb fill a grid and save it, and read that back.
+
+def _s(text: str) -> bytes:
+    b = text.encode()
+    return struct.pack("<I", len(b)) + b
+
+
+def _scale_translate(voxel_size, translation) -> bytes:
+    vs, t = np.asarray(voxel_size, float), np.asarray(translation, float)
+    return _s("ScaleTranslateMap") + b"".join(struct.pack("<3d", *v)
+                                              for v in (t, vs, vs, 1 / vs, 1 / vs**2, 0.5 / vs))
+
+
+def _affine(m) -> bytes:
+    return _s("AffineMap") + struct.pack("<16d", *np.asarray(m, float).ravel())
+
+
+def _vdb_template(grids) -> bytes:
+    """An OpenVDB (format 224) file of empty grids: (name, type, transform bytes)."""
+    out = struct.pack("<qIIIB", 0x56444220, 224, 11, 0, 1) + b"0EA4B2C5-0F55-4B24-9C25-5CFD16E1E1CE"
+    out += struct.pack("<II", 0, len(grids))        # no file metadata; grid count
+    for name, type_name, transform in grids:
+        body = struct.pack("<II", 0, 0) + transform + struct.pack("<I", 1)    # no compression, no metadata
+        body += struct.pack("<i" if "int" in type_name else "<f", 0)          # background
+        body += struct.pack("<ii", 0, 0)                                      # no root tiles, no children
+        out += _s(name) + _s(type_name) + _s("")
+        pos = len(out) + 24
+        out += struct.pack("<qqq", pos, pos + len(body), pos + len(body)) + body
+    return out
+
+
+def _write_vdb(tmp_path, name, grids, fill):
+    """Write the template, fill grids with tinyvdb ({index: (ijk (N, 3), values)}) and save."""
+    import tinyvdb  # a test dependency: fails (not skips) when missing
+    template = tmp_path / f"{name}-template.vdb"
+    template.write_bytes(_vdb_template(grids))
+    path = tmp_path / f"{name}.vdb"
+    with tinyvdb.open(str(template)) as f:
+        f.read_grids()
+        for i, (ijk, vals) in fill.items():
+            f.extend_grid_from_sparse(i, np.ascontiguousarray(ijk, np.int32).tobytes(),
+                                      np.ascontiguousarray(vals, np.float32).tobytes(), grids[i][0])
+        f.save(str(path))
+    return path
+
+
+def _random_voxels(seed=4):
+    rng = np.random.default_rng(seed)
+    vol = (rng.standard_normal((19, 14, 23)) * 5).astype(F32)
+    act = rng.random(vol.shape) < 0.2
+    act[:8, :8, :8] = True
+    vol[:8, :8, :8] = 0.5                           # a tile once aligned
+    shift = np.array([-37, 5, 250])                 # VDB index (i, j, k) = (x, y, z) + shift
+    zyx = np.argwhere(act)
+    return vol, act, zyx[:, ::-1] + shift, vol[act], shift
+
+
+def test_vdb_round_trip(tmp_path):
+    vol, act, ijk, vals, shift = _random_voxels()
+    grids = [("labels", "Tree_int32_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0))),
+             ("temperature", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0))),
+             ("density", "Tree_float_5_4_3", _scale_translate((0.5, 0.25, 2.0), (1.0, -2.0, 3.5)))]
+    path = _write_vdb(tmp_path, "rt", grids, {1: (ijk[:5], vals[:5]), 2: (ijk, vals)})
+    sv = read_vdb(path, grid="density")
+    # the offset is leaf-aligned: x = -37 -> leaf origin -40; y = 5 -> 0; z = 250 -> 248
+    off_xyz = np.array([-40, 0, 248])
+    rel = shift - off_xyz                            # where the volume's [0, 0, 0] lands
+    assert sv.shape == tuple(int(s) for s in (np.argwhere(act).max(axis=0) + 1 + rel[::-1]))
+    assert sv.spacing == (2.0, 0.25, 0.5)
+    np.testing.assert_allclose(sv.origin, np.array([1.0, -2.0, 3.5]) + np.array([0.5, 0.25, 2.0]) * off_xyz)
+    dense, active = sv.to_dense(), sv.active()
+    z0, y0, x0 = rel[::-1]
+    Z, Y, X = vol.shape
+    np.testing.assert_array_equal(active[z0:z0 + Z, y0:y0 + Y, x0:x0 + X], act)
+    assert active.sum() == act.sum()
+    np.testing.assert_array_equal(dense[z0:z0 + Z, y0:y0 + Y, x0:x0 + X], np.where(act, vol, 0))
+    # world positions agree: VDB's voxel_size * ijk + translation
+    w_vdb = np.array([0.5, 0.25, 2.0]) * ijk + [1.0, -2.0, 3.5]
+    idx = np.argwhere(active)[:, ::-1]
+    w_sv = np.asarray(sv.origin) + idx * np.asarray(sv.spacing)[::-1]
+    np.testing.assert_allclose(np.sort(w_sv, axis=0), np.sort(w_vdb, axis=0), rtol=1e-12)
+    # default: the first float grid; by index
+    assert read_vdb(path).n_active == 5
+    assert read_vdb(path, grid=2).n_active == act.sum()
+    assert sv.n_leaves == SparseVolume.from_dense(dense, mask=active).n_leaves
+    for lod in LODS:
+        _same(gaussians_from_volume(sv, lod), ref.gaussians_from_volume(sv, lod))
+
+
+def test_vdb_grids_and_transforms(tmp_path):
+    ijk = np.array([[0, 0, 0], [-8, 3, 17]])
+    c, s = np.cos(0.3), np.sin(0.3)
+    grids = [("labels", "Tree_int32_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0))),
+             ("rot", "Tree_float_5_4_3", _affine([[c, s, 0, 0], [-s, c, 0, 0], [0, 0, 1, 0], [1, 2, 3, 1]])),
+             ("diag", "Tree_float_5_4_3", _affine([[2, 0, 0, 0], [0, 3, 0, 0], [0, 0, 4, 0], [5, 6, 7, 1]])),
+             ("empty", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
+    path = _write_vdb(tmp_path, "grids", grids, {1: (ijk, [1, 2]), 2: (ijk, [1, 2])})
+    sv = read_vdb(path, grid="diag")
+    assert sv.spacing == (4.0, 3.0, 2.0) and sv.shape == (18, 4, 9)
+    np.testing.assert_allclose(sv.origin, [5 - 16, 6, 7])
+    np.testing.assert_array_equal(sv.to_dense()[17, 3, 0], 2.0)
+    with pytest.raises(clvis.DataError, match="rotates or shears") as e:
+        read_vdb(path)                                  # the first float grid is "rot"
+    assert str(path) in str(e.value)
+    with pytest.raises(clvis.DataError, match="'labels' is a Tree_int32_5_4_3, not a float grid"):
+        read_vdb(path, grid="labels")
+    with pytest.raises(clvis.DataError, match="no grid named 'nope'"):
+        read_vdb(path, grid="nope")
+    with pytest.raises(clvis.DataError, match="no grid 9"):
+        read_vdb(path, grid=9)
+    empty = read_vdb(path, grid="empty")
+    assert empty.n_leaves == 0 and empty.shape == (0, 0, 0)
+    assert len(gaussians_from_volume(empty, "high")) == 0
+    only_int = tmp_path / "int.vdb"
+    only_int.write_bytes(_vdb_template(grids[:1]))
+    with pytest.raises(clvis.DataError, match="no float grid"):
+        read_vdb(only_int)
+
+
+def test_vdb_malformed(tmp_path):
+    _, _, ijk, vals, _ = _random_voxels(seed=9)
+    grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
+    good = _write_vdb(tmp_path, "good", grids, {0: (ijk, vals)}).read_bytes()
+    bad = tmp_path / "bad.vdb"
+    for cut in (0, 3, 8, 11, 20, 50, 60, 70, 100, 140, 300, len(good) // 2, len(good) - 1):
+        bad.write_bytes(good[:cut])
+        with pytest.raises(clvis.DataError, match="bad.vdb"):
+            read_vdb(bad)
+    for junk in (b"not a VDB file at all\n" * 20, bytes(range(256)) * 4, b"\x20BDV" + b"\xff" * 500):
+        bad.write_bytes(junk)
+        with pytest.raises(clvis.DataError, match="bad.vdb"):
+            read_vdb(bad)
+    # flipped bytes: a DataError naming the file, or a volume; never another error
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        b = bytearray(good)
+        for i in rng.integers(0, len(b), 4):
+            b[i] = rng.integers(0, 256)
+        bad.write_bytes(bytes(b))
+        try:
+            assert isinstance(read_vdb(bad), SparseVolume)
+        except clvis.DataError as e:
+            assert "bad.vdb" in str(e)
+    with pytest.raises(FileNotFoundError):
+        read_vdb(tmp_path / "missing.vdb")
+    with pytest.raises(TypeError, match="grid: expected a name"):
+        read_vdb(bad, grid=1.5)
+
+
+def test_vdb_needs_tinyvdb(monkeypatch, tmp_path):
+    monkeypatch.setitem(sys.modules, "tinyvdb", None)
+    with pytest.raises(ImportError, match=r"pip install clvis\[vdb\]"):
+        read_vdb(tmp_path / "x.vdb")

@@ -5,9 +5,21 @@ Arrays in, arrays out: numpy arrays come back as numpy arrays, and
 See ``clvis.runtime`` for device choice and options.
 """
 
+from . import datasets
 from ._version import __version__
 from .camera import Camera, grid_cameras, hemisphere_cameras
 from .errors import ClvisError, DataError, DeviceError, KernelBuildError
+from .gauss import (
+    GaussianImage,
+    GaussianRenderer,
+    Gaussians,
+    SparseVolume,
+    TransferFunction,
+    gaussians_from_points,
+    gaussians_from_volume,
+    read_vdb,
+    render_gaussians,
+)
 from .io import PointCloud, read_points
 from .primitives import compact, compact_indices, histogram, radix_sort, scan
 from .raster import (
@@ -21,9 +33,38 @@ from .raster import (
 from .runtime import capabilities, default_queue, set_default_device
 
 __all__ = [
-    "__version__", "ClvisError", "DataError", "DeviceError", "KernelBuildError",
-    "Camera", "FilteredImage", "GBuffers", "PointCloud", "Rasterizer",
-    "capabilities", "compact", "compact_indices", "default_queue", "depth_filter",
-    "grid_cameras", "histogram", "hemisphere_cameras", "morton_order", "radix_sort",
-    "rasterize", "read_points", "scan", "set_default_device",
+    "Camera",
+    "ClvisError",
+    "DataError",
+    "DeviceError",
+    "FilteredImage",
+    "GBuffers",
+    "GaussianImage",
+    "GaussianRenderer",
+    "Gaussians",
+    "KernelBuildError",
+    "PointCloud",
+    "Rasterizer",
+    "SparseVolume",
+    "TransferFunction",
+    "__version__",
+    "capabilities",
+    "compact",
+    "compact_indices",
+    "datasets",
+    "default_queue",
+    "depth_filter",
+    "gaussians_from_points",
+    "gaussians_from_volume",
+    "grid_cameras",
+    "hemisphere_cameras",
+    "histogram",
+    "morton_order",
+    "radix_sort",
+    "rasterize",
+    "read_points",
+    "read_vdb",
+    "render_gaussians",
+    "scan",
+    "set_default_device",
 ]

@@ -5,7 +5,35 @@ depth order (Sharma & Schmalstieg; 3D Gaussian Ray Tracing)."""
 from .bvh import BVH, BVH_NODE_DTYPE, build_bvh
 from .gaussians import Gaussians
 from .lod import LODS, LodRow, LodTable, gaussians_from_volume, lod_table
+from .points import gaussians_from_points, knn_mean_distance
+from .render import (
+           GAUSSIAN_DTYPE,
+           GaussianImage,
+           GaussianRenderer,
+           TransferFunction,
+           ray_buffer,
+           render_gaussians,
+)
 from .sparse import SparseVolume, read_vdb
 
-__all__ = ["BVH", "BVH_NODE_DTYPE", "Gaussians", "LODS", "LodRow", "LodTable", "SparseVolume", "build_bvh",
-           "gaussians_from_volume", "lod_table", "read_vdb"]
+__all__ = [
+           "BVH",
+           "BVH_NODE_DTYPE",
+           "GAUSSIAN_DTYPE",
+           "LODS",
+           "GaussianImage",
+           "GaussianRenderer",
+           "Gaussians",
+           "LodRow",
+           "LodTable",
+           "SparseVolume",
+           "TransferFunction",
+           "build_bvh",
+           "gaussians_from_points",
+           "gaussians_from_volume",
+           "knn_mean_distance",
+           "lod_table",
+           "ray_buffer",
+           "read_vdb",
+           "render_gaussians",
+]

@@ -1,0 +1,303 @@
+"""Gaussian ray marching over a device LBVH (kernels_cl/gauss/march.cl).
+
+Every Gaussian a ray meets is composited front to back in the order of the
+ray parameter t of its closest approach (3D Gaussian Ray Tracing's k-buffer
+rounds: each round traverses the BVH for the K nearest hits beyond the last
+one composited). Two compositing models:
+
+- ``"max_response"`` (3DGRT): alpha = min(0.99, opacity * tf_alpha * exp(-m^2 / 2)),
+  m the Mahalanobis distance at the closest approach along the ray (t >= 0).
+- ``"absorption"`` (Sharma & Schmalstieg's density model): alpha =
+  1 - exp(-density * opacity * tf_alpha * I), I the line integral of the
+  Gaussian over the ray's t >= 0 in closed form (erfc). The transmittance
+  after all Gaussians is exact; colours are composited per Gaussian in
+  hit order.
+
+A ray hits a Gaussian when m <= cutoff (3 by default) at t >= 0; the ray
+starts on the camera's near plane. Compositing stops once the transmittance
+T < 1e-3. ``rgba`` is premultiplied colour with alpha = 1 - T; ``depth`` is
+the view depth (the camera's depth row) of the hit that first brought T
+below 0.5, +inf where T never got there.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import colormap as _colormap
+from .. import runtime
+from .._arrays import nonnegative_int, resolve_queue
+from ..camera import Camera
+from ..errors import DeviceError
+from .bvh import build_bvh
+from .gaussians import Gaussians
+
+__all__ = [
+    "GAUSSIAN_DTYPE",
+    "MODELS",
+    "GaussianImage",
+    "GaussianRenderer",
+    "TransferFunction",
+    "ray_buffer",
+    "render_gaussians",
+]
+
+_FLAGS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+MODELS = {"max_response": 0, "absorption": 1}
+MAX_K = 64
+TILE = 8
+
+GAUSSIAN_DTYPE = np.dtype([("mean", np.float32, 3), ("value", np.float32), ("w", np.float32, 9),
+                           ("opacity", np.float32)])
+
+
+class TransferFunction:
+    """A Gaussian's value -> colour (a matplotlib colormap) and an opacity factor
+    (piecewise linear).
+
+    Parameters
+    ----------
+    colormap : matplotlib colormap name.
+    opacity : None (1 everywhere) or a sequence of (x, alpha) points, x in [0, 1]
+        along the normalised value range (ascending), alpha in [0, 1]; linear
+        in between, constant beyond the ends.
+    value_range : (vmin, vmax) or None (the finite min and max of the values).
+    entries : table size n. Value v takes entry
+        clamp(floor(((v - vmin) * scale) * n), 0, n - 1), scale = 1 / (vmax - vmin)
+        (0 when vmin == vmax), as clvis.colormap.apply does; entry i has the
+        colormap's colour i and the opacity map at (i + 0.5) / n.
+    """
+
+    def __init__(self, colormap: str = "viridis", opacity=None, value_range=None, entries: int = 256):
+        self.colormap = colormap
+        self.lut = _colormap.lut(colormap, entries)
+        self.entries = int(entries)
+        if opacity is None:
+            self.opacity_points = np.array([[0.0, 1.0], [1.0, 1.0]])
+        else:
+            pts = np.asarray(opacity, dtype=np.float64)
+            if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 1:
+                raise ValueError(f"opacity: expected a sequence of (x, alpha) points, got shape {pts.shape}")
+            if not np.isfinite(pts).all():
+                raise ValueError("opacity: points must be finite")
+            if (np.diff(pts[:, 0]) < 0).any():
+                raise ValueError("opacity: x must be ascending")
+            if ((pts[:, 1] < 0) | (pts[:, 1] > 1)).any():
+                raise ValueError("opacity: alpha must lie in [0, 1]")
+            self.opacity_points = pts
+        if value_range is not None:
+            lo, hi = (float(v) for v in value_range)
+            if not (np.isfinite(np.float32(lo)) and np.isfinite(np.float32(hi))) or lo > hi:
+                raise ValueError(f"value_range: expected finite vmin <= vmax, got {value_range!r}")
+            value_range = (lo, hi)
+        self.value_range = value_range
+
+    def table(self) -> np.ndarray:
+        """(entries, 4) float32: r, g, b in [0, 1] and the opacity factor."""
+        n = self.entries
+        x = (np.arange(n) + 0.5) / n
+        pts = self.opacity_points
+        t = np.empty((n, 4), np.float32)
+        t[:, :3] = self.lut[:, :3].astype(np.float32) / np.float32(255)
+        t[:, 3] = np.interp(x, pts[:, 0], pts[:, 1])
+        return t
+
+    def limits(self, values) -> tuple[np.float32, np.float32]:
+        """(vmin, scale) as float32 for `values`."""
+        lo, hi = self.value_range if self.value_range is not None else _colormap.value_range(values)
+        scale = np.float32(1.0 / (np.float64(hi) - np.float64(lo))) if hi != lo else np.float32(0)
+        return np.float32(lo), scale
+
+    def __repr__(self):
+        return f"TransferFunction({self.colormap!r}, value_range={self.value_range})"
+
+
+def ray_buffer(camera: Camera, width: int, height: int) -> np.ndarray:
+    """The 22 float32 camera-ray coefficients of clvis/gauss.h for a
+    `width` x `height` image: pixel centre (u, v) = (px + 0.5, py + 0.5) has its
+    ray origin on the near plane, o = o0 + u ou + v ov, and direction
+    dd = d0 + u du + v dv towards the far plane (computed in float64 from the
+    inverse of projection @ view, then rounded), plus the depth row."""
+    if not isinstance(camera, Camera):
+        raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
+    w, h = _size("width", width), _size("height", height)
+    inv = np.linalg.inv(camera.matrix)
+
+    def point(u, v, zn):
+        p = inv @ np.array([u / w * 2 - 1, 1 - v / h * 2, zn, 1.0])
+        return p[:3] / p[3]
+
+    near = [point(0, 0, -1), point(1, 0, -1), point(0, 1, -1)]
+    far = [point(0, 0, 1), point(1, 0, 1), point(0, 1, 1)]
+    o0, ou, ov = near[0], near[1] - near[0], near[2] - near[0]
+    f0, fu, fv = far[0], far[1] - far[0], far[2] - far[0]
+    buf = np.concatenate([o0, ou, ov, f0 - o0, fu - ou, fv - ov, camera.depth_row])
+    return buf.astype(np.float32)
+
+
+def _size(name, v) -> int:
+    v = nonnegative_int(name, v)
+    if v < 1:
+        raise ValueError(f"{name}: must be at least 1, got {v}")
+    return v
+
+
+@dataclass
+class GaussianImage:
+    """A rendered frame: ``rgba`` (H, W, 4) float32 premultiplied, alpha = 1 - T;
+    ``depth`` (H, W) float32 view depth where T first fell below 0.5 (+inf
+    elsewhere); ``hits`` and ``rounds`` (H, W) uint32 per ray (Gaussians
+    composited, k-buffer rounds); ``stats`` a dict."""
+    rgba: np.ndarray
+    depth: np.ndarray
+    hits: np.ndarray
+    rounds: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+    def to_uint8(self, background=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """(H, W, 3) uint8 over a background colour (components in [0, 1])."""
+        bg = np.asarray(background, np.float32).reshape(1, 1, 3)
+        rgb = self.rgba[..., :3] + (1 - self.rgba[..., 3:4]) * bg
+        return np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8)
+
+
+# per tuning profile: work-items per group of the march kernel (a divisor of
+# 64) and the default k-buffer size. CPUs: fewer, longer rounds pay (a round
+# re-traverses the BVH); GPUs: 3DGRT's k = 16 keeps the buffer in registers.
+PROFILES = {"cpu": {"march_wg": 8, "k": 64}, "gpu": {"march_wg": 64, "k": 16}}
+
+
+def _local(q) -> int:
+    return min(PROFILES[runtime.tuning_profile(q)]["march_wg"], runtime.capabilities(q).max_work_group_size)
+
+
+def _items(n: int, wg: int = 64) -> tuple[int, int]:
+    return max(-(-n // wg), 1) * wg, wg
+
+
+class GaussianRenderer:
+    """Gaussians on the device with their LBVH, for many views.
+
+    Parameters
+    ----------
+    gaussians : clvis.Gaussians
+    transfer_function : TransferFunction (default viridis, opacity 1)
+    model : "max_response" or "absorption" (see the module doc)
+    k : hits per k-buffer round (1..64); None: the tuning profile's (64 on CPUs, 16 on GPUs)
+    cutoff : hit radius in standard deviations (Mahalanobis), also the BVH boxes'
+    density : extinction scale of the absorption model (per world unit)
+    """
+
+    def __init__(self, gaussians: Gaussians, transfer_function: TransferFunction | None = None,
+                 model: str = "max_response", k: int | None = None, cutoff: float = 3.0,
+                 density: float = 1.0, queue=None):
+        if not isinstance(gaussians, Gaussians):
+            raise TypeError(f"gaussians: expected clvis.Gaussians, got {type(gaussians).__name__}")
+        if model not in MODELS:
+            raise ValueError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
+        self.queue = q = resolve_queue(queue)
+        k = PROFILES[runtime.tuning_profile(q)]["k"] if k is None else nonnegative_int("k", k)
+        if not 1 <= k <= MAX_K:
+            raise ValueError(f"k: expected 1..{MAX_K}, got {k}")
+        cutoff, density = float(cutoff), float(density)
+        if not (np.isfinite(cutoff) and cutoff > 0):
+            raise ValueError(f"cutoff: expected a positive finite number, got {cutoff!r}")
+        if not (np.isfinite(density) and density >= 0):
+            raise ValueError(f"density: expected a finite number >= 0, got {density!r}")
+        if transfer_function is None:
+            transfer_function = TransferFunction()
+        if not isinstance(transfer_function, TransferFunction):
+            raise TypeError("transfer_function: expected a clvis.TransferFunction, got "
+                            f"{type(transfer_function).__name__}")
+        self.gaussians, self.model, self.k = gaussians, model, k
+        self.cutoff, self.density, self.transfer_function = cutoff, density, transfer_function
+        n = gaussians.n
+        if n >= 2 ** 31:
+            raise DeviceError(f"gaussians: {n} Gaussians; at most 2^31 - 1")
+        self.n = n
+        t0 = time.perf_counter()
+        m = max(n, 1)
+        arrays = {}
+        for name, a in (("means", gaussians.means), ("scales", gaussians.scales),
+                        ("rotations", gaussians.rotations), ("values", gaussians.values),
+                        ("opacities", gaussians.opacities)):
+            d = runtime.empty(q, (m,) + a.shape[1:], np.float32, f"Gaussian {name}")
+            if n:
+                d.set(a, queue=q)
+            arrays[name] = d
+        records = runtime.empty(q, m * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records")
+        boxes = runtime.empty(q, (m, 6), np.float32, "Gaussian boxes")
+        if n:
+            kr = runtime.get_kernel(q, "gauss/gaussians.cl", "gaussian_records", {}, _FLAGS)
+            runtime.launch(q, kr, *_items(n), *(arrays[k_].base_data for k_ in
+                                                ("means", "scales", "rotations", "values", "opacities")),
+                           np.uint32(n), np.float32(cutoff), records.base_data, boxes.base_data)
+        q.finish()
+        self.upload_seconds = time.perf_counter() - t0
+        self.bvh = build_bvh(boxes[:n] if n else np.zeros((0, 6), np.float32), queue=q)
+        self.build_seconds = self.bvh.build_seconds
+        self.records = runtime.empty(q, m * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records (BVH order)")
+        if n:
+            kg = runtime.get_kernel(q, "gauss/gaussians.cl", "gather_records", {}, _FLAGS)
+            runtime.launch(q, kg, *_items(n), records.base_data, self.bvh.order.base_data, np.uint32(n),
+                           self.records.base_data)
+        self._dummy = runtime.zeros(q, 64, np.float32, "empty BVH") if n == 0 else None
+        q.finish()
+
+    def _buf(self, a):
+        return a.base_data if a is not None and a.size else self._dummy.base_data
+
+    def render(self, camera: Camera, width: int, height: int, *, transfer_function=None) -> GaussianImage:
+        """One frame; see the module doc for what the planes hold."""
+        q = self.queue
+        w, h = _size("width", width), _size("height", height)
+        if w * h >= 2 ** 32:
+            raise DeviceError(f"width x height: {w * h} pixels; at most 2^32 - 1")
+        cam = ray_buffer(camera, w, h)
+        tf = transfer_function or self.transfer_function
+        if not isinstance(tf, TransferFunction):
+            raise TypeError(f"transfer_function: expected a clvis.TransferFunction, got {type(tf).__name__}")
+        tmin, tscale = tf.limits(self.gaussians.values)
+        table = tf.table()
+        runtime.check_alloc(q, w * h * 28, "Gaussian image")
+        t0 = time.perf_counter()
+        camd = runtime.empty(q, cam.size, np.float32, "camera rays")
+        camd.set(cam, queue=q)
+        tfd = runtime.empty(q, table.shape, np.float32, "transfer function")
+        tfd.set(table, queue=q)
+        rgba = runtime.empty(q, (h, w, 4), np.float32, "rgba")
+        depth = runtime.empty(q, (h, w), np.float32, "depth")
+        stats = runtime.empty(q, (h, w, 2), np.uint32, "ray stats")
+        kern = runtime.get_kernel(q, "gauss/march.cl", "march",
+                                  {"K": self.k, "MODEL": MODELS[self.model]}, _FLAGS)
+        tiles = (-(-w // TILE)) * (-(-h // TILE))
+        bvh = self.bvh
+        nodes = bvh.nodes if self.n else None
+        runtime.launch(q, kern, tiles * TILE * TILE, _local(q),
+                       self._buf(nodes), self._buf(bvh.leaf_boxes if self.n else None),
+                       self.records.base_data, self._buf(bvh.order if self.n else None),
+                       np.uint32(self.n), camd.base_data, np.uint32(w), np.uint32(h),
+                       tfd.base_data, np.uint32(table.shape[0]), tmin, tscale,
+                       np.float32(self.cutoff * self.cutoff), np.float32(self.density),
+                       rgba.base_data, depth.base_data, stats.base_data)
+        q.finish()
+        seconds = time.perf_counter() - t0
+        st = stats.get()
+        hits, rounds = st[..., 0], st[..., 1]
+        info = {"gaussians": self.n, "model": self.model, "k": self.k, "bvh_build_s": self.build_seconds,
+                "render_s": seconds, "rays": w * h, "hits_per_ray_mean": float(hits.mean()),
+                "hits_per_ray_max": int(hits.max()), "rounds_per_ray_mean": float(rounds.mean()),
+                "bvh_nodes": max(self.n - 1, 0)}
+        return GaussianImage(rgba.get(), depth.get(), hits, rounds, info)
+
+
+def render_gaussians(gaussians: Gaussians, camera: Camera, width: int, height: int, *,
+                     transfer_function: TransferFunction | None = None, model: str = "max_response",
+                     k: int | None = None, cutoff: float = 3.0, density: float = 1.0, queue=None) -> GaussianImage:
+    """One frame of `gaussians`: a :class:`GaussianRenderer` and its ``render``."""
+    r = GaussianRenderer(gaussians, transfer_function, model=model, k=k, cutoff=cutoff, density=density,
+                         queue=queue)
+    return r.render(camera, width, height)

@@ -1,0 +1,157 @@
+"""Brute-force reference of clvis/gauss/render.py: every ray against every
+Gaussian, hits sorted by (t, id), composited front to back.
+
+The per-Gaussian records, the rays and the hit test repeat march.cl's float32
+operations one by one (numpy float32 arithmetic is IEEE, as is OpenCL's with
+FP_CONTRACT OFF and correctly rounded division and sqrt), so the set of hits
+and their order are the kernel's exactly. exp and erfc are evaluated in
+float64 here; compositing is in float64. Tests compare with a tolerance.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+FLAT = np.float32(1e-3)
+TINY = np.float32(1e-30)
+T_STOP = 1e-3
+
+
+def gaussian_records(means, scales, rotations, values, opacities):
+    """(mean (N,3), value (N,), w (N,9), opacity (N,)) float32 as gaussian_records writes them."""
+    s = np.asarray(scales, np.float32)
+    r = np.asarray(rotations, np.float32).reshape(-1, 3, 3)
+    lim = np.maximum(FLAT * np.maximum(np.maximum(s[:, 0], s[:, 1]), s[:, 2]), TINY)
+    se = np.maximum(s, lim[:, None])
+    w = np.empty((len(s), 9), np.float32)
+    for k in range(3):
+        for j in range(3):
+            w[:, 3 * k + j] = r[:, j, k] / se[:, k]
+    return (np.asarray(means, np.float32), np.asarray(values, np.float32), w,
+            np.asarray(opacities, np.float32))
+
+
+def gaussian_boxes(means, scales, rotations, cutoff):
+    """(N, 6) float32 boxes as gaussian_records writes them."""
+    s = np.asarray(scales, np.float32)
+    r = np.asarray(rotations, np.float32).reshape(-1, 3, 3)
+    m = np.asarray(means, np.float32)
+    lim = np.maximum(FLAT * np.maximum(np.maximum(s[:, 0], s[:, 1]), s[:, 2]), TINY)
+    se = np.maximum(s, lim[:, None])
+    out = np.empty((len(s), 6), np.float32)
+    c = np.float32(cutoff)
+    for j in range(3):
+        a, b, cc = r[:, j, 0] * se[:, 0], r[:, j, 1] * se[:, 1], r[:, j, 2] * se[:, 2]
+        h = c * np.sqrt((a * a + b * b) + cc * cc)
+        h = (h * np.float32(1.01) + np.float32(1e-6) * np.abs(m[:, j])) + np.float32(1e-30)
+        out[:, j] = m[:, j] - h
+        out[:, 3 + j] = m[:, j] + h
+    return out
+
+
+def camera_rays(cam, width, height):
+    """Origins and unit directions (H*W, 3) float32 from the 22-float ray buffer."""
+    cam = np.asarray(cam, np.float32)
+    py, px = np.mgrid[0:height, 0:width]
+    u = (px.ravel().astype(np.float32) + np.float32(0.5))[:, None]
+    v = (py.ravel().astype(np.float32) + np.float32(0.5))[:, None]
+    o = (cam[0:3] + u * cam[3:6]) + v * cam[6:9]
+    dd = (cam[9:12] + u * cam[12:15]) + v * cam[15:18]
+    length = np.sqrt((dd[:, 0] * dd[:, 0] + dd[:, 1] * dd[:, 1]) + dd[:, 2] * dd[:, 2])
+    return o, dd / length[:, None]
+
+
+def _dot(a0, a1, a2, b0, b1, b2):
+    return (a0 * b0 + a1 * b1) + a2 * b2
+
+
+def hits(o, d, mean, w):
+    """For rays (R, 3) and Gaussians: t, m2, ts, a, ms2 (R, N) float32, as clvis_gauss_hit."""
+    r = [o[:, None, j] - mean[None, :, j] for j in range(3)]
+    op = [_dot(w[None, :, 3 * k], w[None, :, 3 * k + 1], w[None, :, 3 * k + 2], r[0], r[1], r[2])
+          for k in range(3)]
+    dp = [_dot(w[None, :, 3 * k], w[None, :, 3 * k + 1], w[None, :, 3 * k + 2],
+               d[:, None, 0], d[:, None, 1], d[:, None, 2]) for k in range(3)]
+    a = _dot(*dp, *dp)
+    b = _dot(*op, *dp)
+    ts = -b / a
+    t = np.fmax(ts, np.float32(0))
+    p = [op[k] + t * dp[k] for k in range(3)]
+    m2 = _dot(*p, *p)
+    s = [op[k] + ts * dp[k] for k in range(3)]
+    ms2 = _dot(*s, *s)
+    return t, m2, ts, a, ms2
+
+
+def tf_lookup(values, table, vmin, scale):
+    """Transfer-function entries (N, 4) float32 by march.cl's index rule."""
+    n = table.shape[0]
+    x = np.floor(((np.asarray(values, np.float32) - np.float32(vmin)) * np.float32(scale)) * np.float32(n))
+    i = np.where(x >= n - 1, n - 1, np.where(x > 0, x, 0)).astype(np.intp)
+    return table[i]
+
+
+def render(means, scales, rotations, values, opacities, cam, width, height, table, vmin, scale, *,
+           model="max_response", cutoff=3.0, density=1.0):
+    """rgba (H, W, 4), depth (H, W), hits (H, W): brute force.
+
+    cam: the 22-float ray buffer (clvis.gauss.render.ray_buffer); table, vmin,
+    scale: the transfer function (TransferFunction.table() and .limits())."""
+    o, d = camera_rays(cam, width, height)
+    rgba, depth, count = render_rays(means, scales, rotations, values, opacities, o, d, cam, table, vmin,
+                                     scale, model=model, cutoff=cutoff, density=density)
+    return rgba.reshape(height, width, 4), depth.reshape(height, width), count.reshape(height, width)
+
+
+def render_rays(means, scales, rotations, values, opacities, o, d, cam, table, vmin, scale, *,
+                model="max_response", cutoff=3.0, density=1.0, chunk=1 << 22):
+    """rgba (R, 4) float32, depth (R,), hits (R,) for rays o, d (R, 3) float32
+    (camera_rays); cam supplies the depth row."""
+    mean, value, w, opac = gaussian_records(means, scales, rotations, values, opacities)
+    nrays, n = len(o), len(mean)
+    rgba = np.zeros((nrays, 4), np.float64)
+    depth = np.full(nrays, np.inf, np.float32)
+    count = np.zeros(nrays, np.uint32)
+    if n == 0:
+        return rgba.astype(np.float32), depth, count
+    c2 = np.float32(np.float32(cutoff) * np.float32(cutoff))
+    tfv = tf_lookup(value, table, vmin, scale).astype(np.float64)
+    eff = opac.astype(np.float64) * tfv[:, 3]
+    camf = np.asarray(cam, np.float32)
+    step = max(1, chunk // max(n, 1))
+    ids = np.arange(n)
+    for start in range(0, nrays, step):
+        sl = slice(start, min(start + step, nrays))
+        with np.errstate(all="ignore"):
+            t, m2, ts, a, ms2 = hits(o[sl], d[sl], mean, w)
+        hit = m2 <= c2
+        for rr in range(t.shape[0]):
+            sel = np.flatnonzero(hit[rr])
+            if not sel.size:
+                continue
+            order = sel[np.lexsort((ids[sel], t[rr, sel]))]
+            if model == "max_response":
+                alpha = np.minimum(0.99, eff[order] * np.exp(-0.5 * m2[rr, order].astype(np.float64)))
+            else:
+                aa = a[rr, order].astype(np.float64)
+                arg = -ts[rr, order].astype(np.float64) * np.sqrt(0.5 * aa)
+                integral = (np.exp(-0.5 * ms2[rr, order].astype(np.float64)) * np.sqrt(np.pi / (2 * aa))
+                            * np.array([math.erfc(x) for x in arg]))
+                alpha = 1 - np.exp(-density * eff[order] * integral)
+            after = np.cumprod(1 - alpha)
+            before = np.concatenate([[1.0], after[:-1]])
+            keep = before >= T_STOP            # composited: T had not yet dropped below 1e-3
+            m = int(keep.sum())
+            wgt = before[:m] * alpha[:m]
+            rgba[sl.start + rr, :3] = (wgt[:, None] * tfv[order[:m], :3]).sum(axis=0)
+            rgba[sl.start + rr, 3] = 1 - after[m - 1]
+            count[sl.start + rr] = m
+            below = np.flatnonzero(after[:m] < 0.5)
+            if below.size:
+                tt = t[rr, order[below[0]]]
+                oo, dd = o[sl.start + rr], d[sl.start + rr]
+                p = [oo[k] + tt * dd[k] for k in range(3)]
+                depth[sl.start + rr] = _dot(camf[18], camf[19], camf[20], *p) + camf[21]
+    return rgba.astype(np.float32), depth, count

@@ -1,0 +1,220 @@
+/* march.cl — ray marching through Gaussians in depth order over an LBVH
+ * (3D Gaussian Ray Tracing's k-buffer rounds; Sharma & Schmalstieg's
+ * absorption model as the alternative).
+ *
+ * ABI
+ * ---
+ * Build options: -cl-fp32-correctly-rounded-divide-sqrt.
+ * Defines:
+ *   K      hits gathered per round (k-buffer size, 1..64; default 16)
+ *   MODEL  0: max response (3DGRT): alpha = min(0.99, opacity' * exp(-m2 / 2)),
+ *             m2 at the ray's closest approach t (clvis/gauss.h)
+ *          1: absorption: alpha = 1 - exp(-density * opacity' * I), I the line
+ *             integral of exp(-|W(x - mean)|^2 / 2) over the ray's t >= 0:
+ *             I = exp(-ms2 / 2) * sqrt(pi / (2a)) * erfc(-ts * sqrt(a / 2)),
+ *             ms2 = |o' + ts d'|^2 at the unclamped ts
+ *   (default 0). opacity' = record opacity * the transfer function's alpha.
+ *
+ * kernel march(global const clvis_bvh_node *nodes,  the LBVH of clvis/bvh.h (n - 1 nodes, root 0;
+ *                                                   one node with right = NONE when n == 1)
+ *              global const float *leaf_boxes,      n x 6 (lo xyz, hi xyz), leaf order
+ *              global const clvis_gaussian *recs,   n records in leaf order (clvis/gauss.h)
+ *              global const uint *order,            leaf j is Gaussian order[j] (its id)
+ *              uint n, global const float *cam,     22 floats (clvis/gauss.h)
+ *              uint W, uint H,
+ *              global const float4 *tf, uint tf_n,  transfer function: rgb colour, alpha factor
+ *              float tf_min, float tf_scale,        entry i = clamp(floor((value - tf_min) * tf_scale * tf_n), 0, tf_n - 1)
+ *              float cutoff2, float density,
+ *              global float4 *rgba,                 W * H: premultiplied rgb, alpha = 1 - T
+ *              global float *depth,                 W * H: view depth where T first drops below 0.5, else +inf
+ *              global uint2 *stats)                 W * H: (Gaussians composited, rounds)
+ *     Global size: 64 * ceil(W / 8) * ceil(H / 8), a work-item per pixel of 8 x 8 pixel
+ *     tiles (work-item i: tile i / 64, pixel i % 64 in it, row-major); any local size
+ *     dividing 64 (64 on GPUs: a tile a group).
+ *     Per ray: rounds of a full BVH traversal collecting the K nearest hits
+ *     whose key (t, id) is beyond the last key composited, then compositing
+ *     them front to back: C += T * alpha * rgb, T *= 1 - alpha, until T < 1e-3
+ *     (after the Gaussian that brought it there) or a round finds fewer than K.
+ *     A hit is m2 <= cutoff2 at t >= 0; the hit order is (t, id) ascending.
+ */
+#pragma OPENCL FP_CONTRACT OFF
+
+#include "clvis/bvh.h"
+#include "clvis/gauss.h"
+
+#ifndef K
+#define K 16
+#endif
+#ifndef MODEL
+#define MODEL 0
+#endif
+#define STACK 64
+#define T_STOP 1e-3f
+
+/* (ta, ia) < (tb, ib) */
+inline bool key_less(float ta, uint ia, float tb, uint ib)
+{
+    return ta < tb || (ta == tb && ia < ib);
+}
+
+/* Slab test of the box lo = b[0..2], hi = b[3..5]; inv: 1 / d with zero
+ * components replaced by a signed 1e-20 (no NaN from 0 * inf). */
+inline void slab(float lo0, float lo1, float lo2, float hi0, float hi1, float hi2, const float *o,
+                 const float *inv, float *t0, float *t1)
+{
+    float a0 = (lo0 - o[0]) * inv[0], b0 = (hi0 - o[0]) * inv[0];
+    float a1 = (lo1 - o[1]) * inv[1], b1 = (hi1 - o[1]) * inv[1];
+    float a2 = (lo2 - o[2]) * inv[2], b2 = (hi2 - o[2]) * inv[2];
+    *t0 = fmax(fmax(fmin(a0, b0), fmin(a1, b1)), fmin(a2, b2));
+    *t1 = fmin(fmin(fmax(a0, b0), fmax(a1, b1)), fmax(a2, b2));
+}
+
+kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_boxes,
+                  global const clvis_gaussian *recs, global const uint *order, uint n,
+                  global const float *cam, uint W, uint H, global const float4 *tf, uint tf_n,
+                  float tf_min, float tf_scale, float cutoff2, float density,
+                  global float4 *rgba, global float *depth, global uint2 *stats)
+{
+    uint tiles_x = (W + 7) / 8;
+    uint tile = get_global_id(0) / 64, l = get_global_id(0) % 64;
+    uint px = (tile % tiles_x) * 8 + (l & 7), py = (tile / tiles_x) * 8 + (l >> 3);
+    if (px >= W || py >= H)
+        return;
+    size_t pix = (size_t)py * W + px;
+
+    float o[3], d[3], inv[3];
+    clvis_camera_ray(cam, px, py, o, d);
+    for (int k = 0; k < 3; ++k)
+        inv[k] = 1.0f / (d[k] != 0.0f ? d[k] : copysign(1e-20f, d[k]));
+
+    float T = 1.0f, cr = 0.0f, cg = 0.0f, cb = 0.0f, z = INFINITY;
+    float last_t = -1.0f;   /* every hit has t >= 0 */
+    uint last_id = 0, hits = 0, rounds = 0;
+    bool done = n == 0;
+    float kt[K];           /* the round's hits: t ascending, ties by id */
+    uint kj[K];            /* their leaf positions (id = order[j]) */
+    uint stack[STACK];
+    float stack_t[STACK];
+
+    while (!done) {
+        ++rounds;
+        int kn = 0;
+        int sp = 0;
+        float lower = fmax(last_t, 0.0f);
+        /* root */
+        {
+            float t0, t1;
+            global const clvis_bvh_node *r = nodes;
+            slab(r->lo[0], r->lo[1], r->lo[2], r->hi[0], r->hi[1], r->hi[2], o, inv, &t0, &t1);
+            if (t1 >= t0 && t1 >= lower) {
+                stack[sp] = 0;
+                stack_t[sp++] = t0;
+            }
+        }
+        while (sp > 0) {
+            --sp;
+            uint node = stack[sp];
+            if (kn == K && stack_t[sp] > kt[K - 1])
+                continue;
+            global const clvis_bvh_node *nd = nodes + node;
+            uint ch[2] = {nd->left, nd->right};
+            uint push[2];
+            float push_t[2];
+            int np = 0;
+            for (int c = 0; c < 2; ++c) {
+                uint child = ch[c];
+                if (child == CLVIS_BVH_NONE)
+                    continue;
+                float t0, t1;
+                if (child & CLVIS_BVH_LEAF) {
+                    uint j = child & ~CLVIS_BVH_LEAF;
+                    global const float *bx = leaf_boxes + 6 * (size_t)j;
+                    slab(bx[0], bx[1], bx[2], bx[3], bx[4], bx[5], o, inv, &t0, &t1);
+                    if (!(t1 >= t0 && t1 >= lower) || (kn == K && t0 > kt[K - 1]))
+                        continue;
+                    float t, m2, ts, a, op[3], dp[3];
+                    clvis_gauss_hit(recs + j, o, d, &t, &m2, &ts, &a, op, dp);
+                    if (!(m2 <= cutoff2))
+                        continue;
+                    uint id = order[j];
+                    if (!key_less(last_t, last_id, t, id))
+                        continue;
+                    int pos;
+                    if (kn < K)
+                        pos = kn++;
+                    else if (key_less(t, id, kt[K - 1], order[kj[K - 1]]))
+                        pos = K - 1;
+                    else
+                        continue;
+                    while (pos > 0 && key_less(t, id, kt[pos - 1], order[kj[pos - 1]])) {
+                        kt[pos] = kt[pos - 1];
+                        kj[pos] = kj[pos - 1];
+                        --pos;
+                    }
+                    kt[pos] = t;
+                    kj[pos] = j;
+                } else {
+                    global const clvis_bvh_node *cn = nodes + child;
+                    slab(cn->lo[0], cn->lo[1], cn->lo[2], cn->hi[0], cn->hi[1], cn->hi[2], o, inv, &t0, &t1);
+                    if (!(t1 >= t0 && t1 >= lower) || (kn == K && t0 > kt[K - 1]))
+                        continue;
+                    push[np] = child;
+                    push_t[np++] = t0;
+                }
+            }
+            /* the nearer child on top */
+            if (np == 2 && push_t[0] < push_t[1]) {
+                stack[sp] = push[1];
+                stack_t[sp++] = push_t[1];
+                stack[sp] = push[0];
+                stack_t[sp++] = push_t[0];
+            } else {
+                for (int c = 0; c < np; ++c) {
+                    stack[sp] = push[c];
+                    stack_t[sp++] = push_t[c];
+                }
+            }
+        }
+
+        for (int h = 0; h < kn; ++h) {
+            global const clvis_gaussian *g = recs + kj[h];
+            float t, m2, ts, a, op[3], dp[3];
+            clvis_gauss_hit(g, o, d, &t, &m2, &ts, &a, op, dp);   /* the same bits as when found */
+            float x = floor(((g->value - tf_min) * tf_scale) * (float)tf_n);
+            uint ti = x >= (float)(tf_n - 1) ? tf_n - 1 : x > 0.0f ? (uint)x : 0u;
+            float4 c = tf[ti];
+            float opac = g->opacity * c.w;
+#if MODEL == 1
+            float s0 = op[0] + ts * dp[0], s1 = op[1] + ts * dp[1], s2 = op[2] + ts * dp[2];
+            float ms2 = clvis_dot3(s0, s1, s2, s0, s1, s2);
+            float integral = (exp(-0.5f * ms2) * sqrt(M_PI_F / (2.0f * a))) * erfc(-ts * sqrt(0.5f * a));
+            float alpha = 1.0f - exp(-((density * opac) * integral));
+#else
+            float alpha = fmin(0.99f, opac * exp(-0.5f * m2));
+#endif
+            float wgt = T * alpha;
+            cr += wgt * c.x;
+            cg += wgt * c.y;
+            cb += wgt * c.z;
+            T = T * (1.0f - alpha);
+            ++hits;
+            if (T < 0.5f && z == INFINITY) {
+                float p0 = o[0] + kt[h] * d[0], p1 = o[1] + kt[h] * d[1], p2 = o[2] + kt[h] * d[2];
+                z = clvis_dot3(cam[18], cam[19], cam[20], p0, p1, p2) + cam[21];
+            }
+            if (T < T_STOP) {
+                done = true;
+                break;
+            }
+        }
+        if (kn < K)
+            done = true;
+        else {
+            last_t = kt[K - 1];
+            last_id = order[kj[K - 1]];
+        }
+    }
+    rgba[pix] = (float4)(cr, cg, cb, 1.0f - T);
+    depth[pix] = z;
+    stats[pix] = (uint2)(hits, rounds);
+}

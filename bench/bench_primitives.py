@@ -13,11 +13,10 @@ throughput, % of copy bandwidth and the ratio to each peer:
 import numpy as np
 import pyopencl.array as cla
 import pytest
+from benchutil import run, run_copy, scaled
 
 import clvis
 from clvis import primitives as P
-from benchutil import run, run_copy, scaled
-
 
 # --------------------------------------------------------------------------
 # scan: bytes model 2 n w

@@ -4,7 +4,9 @@
     clvis demo                   runs the kernel families on generated data and prints the figures
     clvis render [FILE]          renders a point cloud (default: an embedded synthetic hurricane)
                                  and writes PNGs of its G-buffers
-    clvis bench primitives|raster
+    clvis gauss [FILE]           Gaussians from a volume at three levels of detail, ray marched
+                                 (default: an embedded explosion), PNGs side by side
+    clvis bench primitives|raster|gauss
                                  a benchmark suite with its peers, as a table (and JSON)
 """
 
@@ -25,6 +27,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from . import cli_gauss
 
 
 def _cmd_info(args) -> int:
@@ -146,6 +150,7 @@ def _cmd_demo(args) -> int:
               f"{npname:>14} {t_np * 1e3:7.2f} ms {t_np / t_cl:8.1f}x  {'matches' if ok else 'MISMATCH'}")
     print("\nfull benchmarks with every peer: clvis bench primitives")
     ok_all &= _demo_raster(args, q)
+    ok_all &= cli_gauss.demo(args.out, q, size=args.gauss_size)
     return 0 if ok_all else 1
 
 
@@ -722,17 +727,20 @@ def main(argv=None) -> int:
                    help="particles of the rendered hurricane (default 500,000)")
     d.add_argument("--size", type=_size, default=(1920, 1080), metavar="WxH",
                    help="image size of the render (default 1920x1080)")
+    d.add_argument("--gauss-size", type=_size, default=(480, 480), metavar="WxH",
+                   help="each Gaussian LOD panel (default 480x480)")
     d.add_argument("--out", default="clvis-demo", metavar="DIR",
-                   help="where the overview PNG goes (default ./clvis-demo)")
+                   help="where the PNGs go (default ./clvis-demo)")
     _add_render_parser(sub)
+    cli_gauss.add_parser(sub)
     b = sub.add_parser("bench", help="run a benchmark suite and print its table")
-    b.add_argument("family", choices=["primitives", "raster"])
+    b.add_argument("family", choices=["primitives", "raster", "gauss"])
     b.add_argument("--scale", type=float, help="multiply every size (e.g. 0.01 for a smoke run)")
     b.add_argument("--json", help="where to write the JSON (default bench/results/<device>/<family>.json)")
     b.add_argument("--report", help="print the table of an existing JSON instead of running")
     b.add_argument("--check", action="store_true", help="exit 1 if a target is missed")
     args = p.parse_args(argv)
-    return {"info": _cmd_info, "demo": _cmd_demo, "render": _cmd_render,
+    return {"info": _cmd_info, "demo": _cmd_demo, "render": _cmd_render, "gauss": cli_gauss.cmd,
             "bench": _cmd_bench}[args.cmd](args)
 
 

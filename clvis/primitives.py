@@ -21,7 +21,7 @@ from . import runtime
 from ._arrays import buf, check_array, is_device, resolve_queue, result, to_device
 from .errors import DataError, DeviceError
 
-__all__ = ["scan", "compact", "compact_indices", "radix_sort", "histogram", "copy"]
+__all__ = ["compact", "compact_indices", "copy", "histogram", "radix_sort", "scan"]
 
 # -D work shapes per tuning profile (runtime.tuning_profile). "cpu": one
 # work-item per group walking a contiguous range (PoCL and other CPU drivers

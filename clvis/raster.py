@@ -42,9 +42,20 @@ from ._arrays import check_array, is_device, resolve_queue
 from .errors import DeviceError
 from .primitives import radix_sort
 
-__all__ = ["GBuffers", "Rasterizer", "rasterize", "morton_order", "camera_buffer",
-           "depth_filter", "FilteredImage",
-           "EMPTY", "VIS_DTYPE", "CAMERA_DTYPE", "MAX_ATTRIBUTES", "MAX_IMAGE_SIDE"]
+__all__ = [
+    "CAMERA_DTYPE",
+    "EMPTY",
+    "MAX_ATTRIBUTES",
+    "MAX_IMAGE_SIDE",
+    "VIS_DTYPE",
+    "FilteredImage",
+    "GBuffers",
+    "Rasterizer",
+    "camera_buffer",
+    "depth_filter",
+    "morton_order",
+    "rasterize",
+]
 
 EMPTY = np.uint32(0xFFFFFFFF)       # index of an empty pixel
 MAX_ATTRIBUTES = 8

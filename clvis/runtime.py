@@ -49,11 +49,32 @@ import pyopencl.tools
 from .errors import ClvisError, DeviceError, KernelBuildError
 
 __all__ = [
-    "Capabilities", "Options", "KERNEL_ROOT", "INCLUDE_DIR", "allocator",
-    "build_options", "capabilities", "check_alloc", "configure", "default_queue",
-    "describe", "device_slug", "devices", "empty", "fill_zero", "free_pools",
-    "get_kernel", "get_program", "launch", "options", "queue_for",
-    "select_device", "set_default_device", "set_options", "tuning_profile", "zeros",
+    "INCLUDE_DIR",
+    "KERNEL_ROOT",
+    "Capabilities",
+    "Options",
+    "allocator",
+    "build_options",
+    "capabilities",
+    "check_alloc",
+    "configure",
+    "default_queue",
+    "describe",
+    "device_slug",
+    "devices",
+    "empty",
+    "fill_zero",
+    "free_pools",
+    "get_kernel",
+    "get_program",
+    "launch",
+    "options",
+    "queue_for",
+    "select_device",
+    "set_default_device",
+    "set_options",
+    "tuning_profile",
+    "zeros",
 ]
 
 

@@ -23,9 +23,11 @@ def test_info(capsys):
 
 def test_demo(capsys, tmp_path):
     assert cli.main(["demo", "--n", "30000", "--points", "20000", "--size", "160x90",
-                     "--out", str(tmp_path)]) == 0
+                     "--gauss-size", "64x64", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert out.count("matches") == 5 and "MISMATCH" not in out     # 4 primitives, 1 raster
+    assert out.count("matches") == 6 and "MISMATCH" not in out     # 4 primitives, raster, gauss
+    with Image.open(tmp_path / "gauss.png") as im:
+        assert im.size == (3 * 64, 64)
     assert "M points/s" in out
     with Image.open(tmp_path / "overview.png") as im:
         assert im.width > 160

@@ -13,7 +13,7 @@ import numpy as np
 from .. import colormap as _colormap
 from ..raster import EMPTY, GBuffers, camera_buffer
 
-__all__ = ["depth_key", "key_depth", "visibility", "rasterize", "morton_codes", "morton_order"]
+__all__ = ["depth_key", "key_depth", "morton_codes", "morton_order", "rasterize", "visibility"]
 
 
 def depth_key(depth: np.ndarray) -> np.ndarray:

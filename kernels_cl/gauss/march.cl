@@ -97,6 +97,8 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
     bool done = n == 0;
     float kt[K];           /* the round's hits: t ascending, ties by id */
     uint kj[K];            /* their leaf positions (id = order[j]) */
+    float ka[K];           /* their alpha */
+    uint kc[K];            /* their transfer-function entry */
     uint stack[STACK];
     float stack_t[STACK];
 
@@ -150,13 +152,29 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
                         pos = K - 1;
                     else
                         continue;
+                    global const clvis_gaussian *g = recs + j;
+                    float x = floor(((g->value - tf_min) * tf_scale) * (float)tf_n);
+                    uint ti = x >= (float)(tf_n - 1) ? tf_n - 1 : x > 0.0f ? (uint)x : 0u;
+                    float opac = g->opacity * tf[ti].w;
+#if MODEL == 1
+                    float s0 = op[0] + ts * dp[0], s1 = op[1] + ts * dp[1], s2 = op[2] + ts * dp[2];
+                    float ms2 = clvis_dot3(s0, s1, s2, s0, s1, s2);
+                    float integral = (exp(-0.5f * ms2) * sqrt(M_PI_F / (2.0f * a))) * erfc(-ts * sqrt(0.5f * a));
+                    float alpha = 1.0f - exp(-((density * opac) * integral));
+#else
+                    float alpha = fmin(0.99f, opac * exp(-0.5f * m2));
+#endif
                     while (pos > 0 && key_less(t, id, kt[pos - 1], order[kj[pos - 1]])) {
                         kt[pos] = kt[pos - 1];
                         kj[pos] = kj[pos - 1];
+                        ka[pos] = ka[pos - 1];
+                        kc[pos] = kc[pos - 1];
                         --pos;
                     }
                     kt[pos] = t;
                     kj[pos] = j;
+                    ka[pos] = alpha;
+                    kc[pos] = ti;
                 } else {
                     global const clvis_bvh_node *cn = nodes + child;
                     slab(cn->lo[0], cn->lo[1], cn->lo[2], cn->hi[0], cn->hi[1], cn->hi[2], o, inv, &t0, &t1);
@@ -181,21 +199,8 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
         }
 
         for (int h = 0; h < kn; ++h) {
-            global const clvis_gaussian *g = recs + kj[h];
-            float t, m2, ts, a, op[3], dp[3];
-            clvis_gauss_hit(g, o, d, &t, &m2, &ts, &a, op, dp);   /* the same bits as when found */
-            float x = floor(((g->value - tf_min) * tf_scale) * (float)tf_n);
-            uint ti = x >= (float)(tf_n - 1) ? tf_n - 1 : x > 0.0f ? (uint)x : 0u;
-            float4 c = tf[ti];
-            float opac = g->opacity * c.w;
-#if MODEL == 1
-            float s0 = op[0] + ts * dp[0], s1 = op[1] + ts * dp[1], s2 = op[2] + ts * dp[2];
-            float ms2 = clvis_dot3(s0, s1, s2, s0, s1, s2);
-            float integral = (exp(-0.5f * ms2) * sqrt(M_PI_F / (2.0f * a))) * erfc(-ts * sqrt(0.5f * a));
-            float alpha = 1.0f - exp(-((density * opac) * integral));
-#else
-            float alpha = fmin(0.99f, opac * exp(-0.5f * m2));
-#endif
+            float alpha = ka[h];
+            float4 c = tf[kc[h]];
             float wgt = T * alpha;
             cr += wgt * c.x;
             cg += wgt * c.y;

@@ -6,7 +6,11 @@
  * ---
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt.
  * Defines:
- *   K      hits gathered per round (k-buffer size, 1..64; default 16)
+ *   K      the k-buffer size, 1..64 (default 16): hits gathered per round at most
+ *   K0     hits gathered in the first round (default K); each later round
+ *          doubles it, up to K. A small K0 stops the first traversal early for
+ *          rays that turn opaque after a few hits; a large K needs fewer rounds
+ *          for rays that go through many.
  *   MODEL  0: max response (3DGRT): alpha = min(0.99, opacity' * exp(-m2 / 2)),
  *             m2 at the ray's closest approach t (clvis/gauss.h)
  *          1: absorption: alpha = 1 - exp(-density * opacity' * I), I the line
@@ -31,10 +35,10 @@
  *     Global size: 64 * ceil(W / 8) * ceil(H / 8), a work-item per pixel of 8 x 8 pixel
  *     tiles (work-item i: tile i / 64, pixel i % 64 in it, row-major); any local size
  *     dividing 64 (64 on GPUs: a tile a group).
- *     Per ray: rounds of a full BVH traversal collecting the K nearest hits
+ *     Per ray: rounds of a full BVH traversal collecting the k nearest hits (k = K0, 2 K0, ... K)
  *     whose key (t, id) is beyond the last key composited, then compositing
  *     them front to back: C += T * alpha * rgb, T *= 1 - alpha, until T < 1e-3
- *     (after the Gaussian that brought it there) or a round finds fewer than K.
+ *     (after the Gaussian that brought it there) or a round finds fewer than k.
  *     A hit is m2 <= cutoff2 at t >= 0; the hit order is (t, id) ascending.
  */
 #pragma OPENCL FP_CONTRACT OFF
@@ -44,6 +48,9 @@
 
 #ifndef K
 #define K 16
+#endif
+#ifndef K0
+#define K0 K
 #endif
 #ifndef MODEL
 #define MODEL 0
@@ -102,6 +109,9 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
     uint stack[STACK];
     float stack_t[STACK];
 
+    /* the round's capacity: K0 in the first round, doubling up to K, so a ray
+     * that turns opaque early does not traverse its whole length for K hits */
+    int cap = K0 < K ? K0 : K;
     while (!done) {
         ++rounds;
         int kn = 0;
@@ -120,7 +130,7 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
         while (sp > 0) {
             --sp;
             uint node = stack[sp];
-            if (kn == K && stack_t[sp] > kt[K - 1])
+            if (kn == cap && stack_t[sp] > kt[cap - 1])
                 continue;
             global const clvis_bvh_node *nd = nodes + node;
             uint ch[2] = {nd->left, nd->right};
@@ -136,7 +146,7 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
                     uint j = child & ~CLVIS_BVH_LEAF;
                     global const float *bx = leaf_boxes + 6 * (size_t)j;
                     slab(bx[0], bx[1], bx[2], bx[3], bx[4], bx[5], o, inv, &t0, &t1);
-                    if (!(t1 >= t0 && t1 >= lower) || (kn == K && t0 > kt[K - 1]))
+                    if (!(t1 >= t0 && t1 >= lower) || (kn == cap && t0 > kt[cap - 1]))
                         continue;
                     float t, m2, ts, a, op[3], dp[3];
                     clvis_gauss_hit(recs + j, o, d, &t, &m2, &ts, &a, op, dp);
@@ -146,10 +156,10 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
                     if (!key_less(last_t, last_id, t, id))
                         continue;
                     int pos;
-                    if (kn < K)
+                    if (kn < cap)
                         pos = kn++;
-                    else if (key_less(t, id, kt[K - 1], order[kj[K - 1]]))
-                        pos = K - 1;
+                    else if (key_less(t, id, kt[cap - 1], order[kj[cap - 1]]))
+                        pos = cap - 1;
                     else
                         continue;
                     global const clvis_gaussian *g = recs + j;
@@ -178,7 +188,7 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
                 } else {
                     global const clvis_bvh_node *cn = nodes + child;
                     slab(cn->lo[0], cn->lo[1], cn->lo[2], cn->hi[0], cn->hi[1], cn->hi[2], o, inv, &t0, &t1);
-                    if (!(t1 >= t0 && t1 >= lower) || (kn == K && t0 > kt[K - 1]))
+                    if (!(t1 >= t0 && t1 >= lower) || (kn == cap && t0 > kt[cap - 1]))
                         continue;
                     push[np] = child;
                     push_t[np++] = t0;
@@ -216,11 +226,12 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
                 break;
             }
         }
-        if (kn < K)
+        if (kn < cap)
             done = true;
         else {
-            last_t = kt[K - 1];
-            last_id = order[kj[K - 1]];
+            last_t = kt[cap - 1];
+            last_id = order[kj[cap - 1]];
+            cap = 2 * cap < K ? 2 * cap : K;
         }
     }
     rgba[pix] = (float4)(cr, cg, cb, 1.0f - T);

@@ -5,7 +5,7 @@ Arrays in, arrays out: numpy arrays come back as numpy arrays, and
 See ``clvis.runtime`` for device choice and options.
 """
 
-from . import datasets
+from . import datasets, zfp
 from ._version import __version__
 from .camera import Camera, grid_cameras, hemisphere_cameras
 from .errors import ClvisError, DataError, DeviceError, KernelBuildError

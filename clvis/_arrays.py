@@ -92,3 +92,14 @@ def nonnegative_int(name: str, v) -> int:
     if v < 0:
         raise ValueError(f"{name}: expected >= 0, got {v}")
     return v
+
+
+def real_array(name: str, a) -> np.ndarray:
+    """`a` as a numpy array of real numbers (integers or floats, not bool):
+    TypeError naming `name` otherwise."""
+    if isinstance(a, (str, bytes)) or a is None:
+        raise TypeError(f"{name}: expected an array, got {type(a).__name__}")
+    a = np.asarray(a)
+    if a.dtype == np.bool_ or a.dtype.kind not in "iuf":
+        raise TypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
+    return a

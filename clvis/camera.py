@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._arrays import real_array
+
 __all__ = ["Camera", "Projected", "grid_cameras", "hemisphere_cameras"]
 
 # Camera.fit frames the bounding sphere enlarged by this factor, so rounding never
@@ -317,11 +319,7 @@ class Camera:
 
 
 def _points_f32(points) -> np.ndarray:
-    if isinstance(points, (str, bytes)) or points is None:
-        raise TypeError(f"points: expected an (N, 3) array, got {type(points).__name__}")
-    a = np.asarray(points)
-    if a.dtype == np.bool_ or a.dtype.kind not in "iuf":
-        raise TypeError(f"points: expected real numbers, got dtype {a.dtype}")
+    a = real_array("points", points)
     if a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"points: expected shape (N, 3), got {a.shape}")
     return np.ascontiguousarray(a, dtype=np.float32)

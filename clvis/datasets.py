@@ -16,7 +16,7 @@ import numpy as np
 
 from ._arrays import nonnegative_int
 
-__all__ = ["explosion", "hurricane", "terrain"]
+__all__ = ["explosion", "hurricane", "marschner_lobb", "terrain", "turbulence"]
 
 # hurricane parameters (km, m/s, hPa, K)
 R_MAX_WIND = 30.0          # radius of maximum wind
@@ -318,3 +318,94 @@ def explosion(shape=(96, 96, 96)) -> dict:
     step = 2.0 / (np.array([zs, ys, xs]) - 1)
     return {"volume": density.astype(np.float32), "spacing": tuple(float(v) for v in step),
             "origin": (-1.0, -1.0, -1.0)}
+
+
+# ---------------------------------------------------------------------------
+# volumes for isosurface raycasting (the iso family): dense, closed form
+
+MARSCHNER_LOBB_FM = 6.0          # f_M
+MARSCHNER_LOBB_ALPHA = 0.25      # alpha
+MARSCHNER_LOBB_ISOVALUE = 0.5
+TURBULENCE_ISOVALUE = 0.5
+# turbulence octaves: (frequency in radians per unit, amplitude, rotation axis, angle in radians)
+_TURBULENCE_OCTAVES = (
+    (2.3, 1.0, (1.0, 2.0, 3.0), 0.4),
+    (4.9, 0.6, (-2.0, 1.0, 1.0), 1.1),
+    (9.7, 0.36, (3.0, -1.0, 2.0), 1.9),
+    (19.1, 0.22, (1.0, 1.0, -2.0), 2.6),
+)
+
+
+def _grid_axis_coords(n: int, name: str = "n"):
+    n = nonnegative_int(name, n)
+    if n < 2:
+        raise ValueError(f"{name}: must be at least 2, got {n}")
+    return n, np.linspace(-1.0, 1.0, n)
+
+
+def _cube_volume(values, n: int) -> dict:
+    step = 2.0 / (n - 1)
+    return {"volume": values.astype(np.float32), "spacing": (step, step, step), "origin": (-1.0, -1.0, -1.0)}
+
+
+def marschner_lobb(n: int = 64) -> dict:
+    """The Marschner–Lobb test signal (Marschner & Lobb 1994) sampled on an
+    n^3 grid over [-1, 1]^3 (both ends included)::
+
+        rho(x, y, z) = (1 - sin(pi z / 2) + alpha (1 + rho_r(sqrt(x^2 + y^2)))) / (2 (1 + alpha))
+        rho_r(r) = cos(2 pi f_M cos(pi r / 2))
+
+    with f_M = 6 and alpha = 0.25; values in [0, 1]. The isosurface usually
+    drawn is rho = 0.5 (``MARSCHNER_LOBB_ISOVALUE``): rings of ripples about
+    the z axis on a surface near z = 0, a hard case for reconstruction filters.
+
+    Returns ``{"volume": (n, n, n) float32 [z, y, x], "spacing": (dz, dy, dx)
+    = 2 / (n - 1) each, "origin": (-1, -1, -1)}`` (sample [k, j, i] at
+    origin + (i dx, j dy, k dz)). Deterministic.
+    """
+    n, c = _grid_axis_coords(n)
+    z, y, x = np.meshgrid(c, c, c, indexing="ij")
+    rho_r = np.cos(2 * np.pi * MARSCHNER_LOBB_FM * np.cos(np.pi * np.sqrt(x * x + y * y) / 2))
+    rho = (1 - np.sin(np.pi * z / 2) + MARSCHNER_LOBB_ALPHA * (1 + rho_r)) / (2 * (1 + MARSCHNER_LOBB_ALPHA))
+    return _cube_volume(rho, n)
+
+
+def _rotation(axis, angle) -> np.ndarray:
+    """Rodrigues' rotation matrix about `axis` by `angle` radians."""
+    k = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * (kx @ kx)
+
+
+def turbulence(n: int = 128) -> dict:
+    """A dense turbulent field on an n^3 grid over [-1, 1]^3, in closed form
+    (no randomness): four octaves (frequencies 2.3, 4.9, 9.7, 19.1 radians per
+    unit, amplitudes 1, 0.6, 0.36, 0.22), each the product of sines along
+    three axes rotated by a fixed rotation per octave plus a sine along their
+    diagonal::
+
+        p' = R_o p;  o-th term = a_o (sin(f p'x + 1.3 o) sin(f p'y + 0.7) sin(f p'z + 2.1 o)
+                                      + 0.5 sin(f (p'x + p'y + p'z) / sqrt(3) + o))
+        value = clamp(0.5 + 0.5 * sum / 1.6, 0, 1)
+
+    (R_o: the rotation about the axis by the angle in ``_TURBULENCE_OCTAVES``.)
+    Values lie in [0, 1] (0.3 % clamped), mean about 0.49. The isosurface
+    value 0.5 (``TURBULENCE_ISOVALUE``) is a labyrinth of sheets filling the
+    whole volume: in a frame filled by the volume 96 % of the rays hit, after
+    a median of 31 cells at n = 128 (16 at n = 64), and about a quarter of the 4^3 blocks hold surface
+    at n = 128 (45 % at n = 64). The finest octave has a wavelength of about
+    0.33, i.e. 21 samples at n = 128 (10 at n = 64).
+
+    Returns ``{"volume": (n, n, n) float32 [z, y, x], "spacing": 2 / (n - 1)
+    each, "origin": (-1, -1, -1)}``.
+    """
+    n, c = _grid_axis_coords(n)
+    z, y, x = np.meshgrid(c, c, c, indexing="ij")
+    p = np.stack([x, y, z], axis=-1)
+    total = np.zeros(x.shape)
+    for o, (f, a, axis, angle) in enumerate(_TURBULENCE_OCTAVES):
+        q = p @ _rotation(axis, angle).T
+        total += a * (np.sin(f * q[..., 0] + 1.3 * o) * np.sin(f * q[..., 1] + 0.7)
+                      * np.sin(f * q[..., 2] + 2.1 * o)
+                      + 0.5 * np.sin(f * q.sum(axis=-1) / np.sqrt(3.0) + o))
+    return _cube_volume(np.clip(0.5 + 0.5 * total / 1.6, 0.0, 1.0), n)

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._arrays import real_array
 from .errors import DataError
 
 __all__ = ["PointCloud", "read_points", "save_npz", "write_ply"]
@@ -46,17 +47,8 @@ _NPZ_ERRORS = (*_NPY_ERRORS, zipfile.BadZipFile, zlib.error, NotImplementedError
 _ORIGIN_COMMENT = "clvis origin"
 
 
-def _real_array(name: str, a) -> np.ndarray:
-    if isinstance(a, (str, bytes)) or a is None:
-        raise TypeError(f"{name}: expected an array, got {type(a).__name__}")
-    a = np.asarray(a)
-    if a.dtype == np.bool_ or a.dtype.kind not in "iuf":
-        raise TypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
-    return a
-
-
 def _vectors(name: str, a, n: int | None) -> np.ndarray:
-    a = _real_array(name, a)
+    a = real_array(name, a)
     if a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"{name}: expected shape (N, 3), got {a.shape}")
     _check_length(name, len(a), n)
@@ -69,7 +61,7 @@ def _check_length(name: str, length: int, n: int | None) -> None:
 
 
 def _colors(a, n: int) -> np.ndarray:
-    a = _real_array("colors", a)
+    a = real_array("colors", a)
     if a.ndim != 2 or a.shape[1] not in (3, 4):
         raise ValueError(f"colors: expected shape (N, 3) or (N, 4), got {a.shape}")
     _check_length("colors", len(a), n)
@@ -138,7 +130,7 @@ class PointCloud:
         if radius is None:
             self.radius = None
         else:
-            r = _real_array("radius", radius)
+            r = real_array("radius", radius)
             if r.ndim != 1:
                 raise ValueError(f"radius: expected shape (N,), got {r.shape}")
             _check_length("radius", len(r), n)
@@ -148,7 +140,7 @@ class PointCloud:
         if not isinstance(attributes, dict):
             raise TypeError(f"attributes: expected a dict, got {type(attributes).__name__}")
         self.attributes = {k: _attribute(k, v, n) for k, v in attributes.items()}
-        o = np.zeros(3) if origin is None else np.asarray(_real_array("origin", origin), dtype=np.float64)
+        o = np.zeros(3) if origin is None else np.asarray(real_array("origin", origin), dtype=np.float64)
         if o.shape != (3,) or not np.isfinite(o).all():
             raise ValueError(f"origin: expected 3 finite numbers, got {o.tolist()}")
         self.origin = o
@@ -353,7 +345,9 @@ def _read_las(path: Path) -> PointCloud:
     return _cloud(path, **fields)
 
 
-def _read_npy(path: Path) -> PointCloud:
+def load_npy(path) -> np.ndarray:
+    """The array of a .npy file; DataError naming the file when it is malformed
+    or is an .npz archive (no pickles)."""
     with open(path, "rb") as f:                     # np.load leaks its own handle on bad files
         try:
             a = np.load(f, allow_pickle=False)
@@ -361,6 +355,11 @@ def _read_npy(path: Path) -> PointCloud:
             raise DataError(f"{path}: malformed NPY file: {e}") from e
     if not isinstance(a, np.ndarray):
         raise DataError(f"{path}: expected an NPY array, found an NPZ archive")
+    return a
+
+
+def _read_npy(path: Path) -> PointCloud:
+    a = load_npy(path)
     if a.dtype.names:
         if a.ndim != 1:
             raise DataError(f"{path}: expected a 1-D structured array, got shape {a.shape}")

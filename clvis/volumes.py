@@ -1,0 +1,216 @@
+"""Volume files: :func:`read_volume` and the :class:`Volume` it returns.
+
+Formats, chosen by the file name (case-insensitive):
+
+- ``.raw``: headerless samples, little-endian, x fastest on disk (then y,
+  then z), named like the Open SciVis datasets
+  ``<name>_<X>x<Y>x<Z>_<type>.raw`` (e.g. ``bonsai_256x256x256_uint8.raw``),
+  type one of uint8, int8, uint16, int16, uint32, int32, float32, float64.
+  The keywords ``shape`` (numpy order ``(Z, Y, X)``, *not* the X x Y x Z of
+  the name) and ``dtype`` give or override what the name says. The file size
+  must be exactly Z * Y * X * itemsize bytes.
+- ``.npy``: a 3-D array of real numbers, taken as [z, y, x].
+- ``.nii``, ``.nii.gz``: NIfTI-1/2 through nibabel (an optional dependency:
+  ``pip install clvis[nifti]``). NIfTI's data array is indexed [i, j, k] with
+  i the fastest on disk; it is transposed to [k, j, i] = [z, y, x]. Trailing
+  axes of size 1 (a 3-D image stored as 4-D) are dropped. The header's scale
+  (scl_slope, scl_inter) is applied when set, as nibabel does.
+
+The samples are returned as stored (uint8 stays uint8: volumes can be large;
+convert where needed, e.g. ``volume.data.astype(np.float32)``), in native
+byte order and C order, with the library's conventions: ``data`` [z, y, x];
+``spacing`` (dz, dy, dx): 1 for raw and NPY files, for NIfTI the header's
+zooms (pixdim, (dx, dy, dz)) reversed, as nibabel reads them (0 as 1, a
+negative size as its absolute value; NaN or inf is an error); ``origin``
+(x, y, z) = 0 for every format (sample [k, j, i] at world (i dx, j dy, k dz)).
+A NIfTI file's voxel-to-world affine (which may rotate or flip the axes) is
+kept, unused, in ``affine``.
+
+A missing file raises FileNotFoundError (as :func:`clvis.read_points` does);
+a file clvis cannot read (an unknown extension, a raw name without shape or
+type, a file size that does not match, a malformed NPY or NIfTI file, data
+that is not 3-D or not real numbers, an unreadable path) raises
+:class:`clvis.errors.DataError` naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+import errno
+import operator
+import os
+import re
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DataError
+from .io import load_npy
+
+__all__ = ["RAW_TYPES", "Volume", "read_volume"]
+
+RAW_TYPES = {name: np.dtype(name) for name in
+             ("uint8", "int8", "uint16", "int16", "uint32", "int32", "float32", "float64")}
+_RAW_NAME = re.compile(r"^(?P<name>.*)_(?P<x>\d+)x(?P<y>\d+)x(?P<z>\d+)_(?P<type>[A-Za-z0-9]+)\.raw$",
+                       re.IGNORECASE)
+# What np.load raises on a malformed file (the header is parsed as a Python literal).
+
+
+@dataclass(frozen=True, eq=False)
+class Volume:
+    """A volume read from a file.
+
+    Attributes
+    ----------
+    data : (Z, Y, X) array, as stored (native byte order, C order).
+    spacing : (dz, dy, dx) floats.
+    origin : (x, y, z) floats, (0, 0, 0).
+    path : the file it came from.
+    affine : (4, 4) float64 voxel [i, j, k, 1] -> world of a NIfTI file, else None.
+    """
+
+    data: np.ndarray
+    spacing: tuple = (1.0, 1.0, 1.0)
+    origin: tuple = (0.0, 0.0, 0.0)
+    path: str | None = None
+    affine: np.ndarray | None = None
+
+    @property
+    def shape(self) -> tuple:
+        """(Z, Y, X)."""
+        return self.data.shape
+
+    def __repr__(self) -> str:
+        return (f"Volume({self.path!r}, shape={self.data.shape}, dtype={self.data.dtype}, "
+                f"spacing={self.spacing})")
+
+
+def read_volume(path, *, shape=None, dtype=None) -> Volume:
+    """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``; see the
+    module docstring).
+
+    `shape` (Z, Y, X) and `dtype` apply to ``.raw`` files only: they give the
+    shape and the sample type when the file name does not, and override the
+    name when it does."""
+    if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"path: expected a str or path, got {type(path).__name__}")
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), str(path))
+    if not path.is_file():
+        raise DataError(f"{path}: not a file")
+    name = path.name.lower()
+    if name.endswith(".raw"):
+        return _read_raw(path, shape, dtype)
+    if shape is not None or dtype is not None:
+        raise ValueError(f"shape, dtype: only for .raw files, not {path.name}")
+    if name.endswith(".npy"):
+        return _read_npy(path)
+    if name.endswith((".nii", ".nii.gz")):
+        return _read_nifti(path)
+    raise DataError(f"{path}: unknown volume format (expected .raw, .npy, .nii or .nii.gz)")
+
+
+def _raw_layout(path: Path, shape, dtype):
+    """(shape (Z, Y, X), little-endian dtype) from the name and the keywords."""
+    m = _RAW_NAME.match(path.name)
+    if shape is None:
+        if m is None:
+            raise DataError(f"{path}: the name does not give the shape; expected "
+                            f"<name>_<X>x<Y>x<Z>_<type>.raw (e.g. bonsai_256x256x256_uint8.raw), "
+                            f"or pass shape=(Z, Y, X)")
+        shape = (int(m["z"]), int(m["y"]), int(m["x"]))
+    else:
+        try:
+            shape = tuple(_index(s) for s in shape)
+        except TypeError:
+            raise TypeError(f"shape: expected three ints (Z, Y, X), got {shape!r}") from None
+        if len(shape) != 3:
+            raise ValueError(f"shape: expected three ints (Z, Y, X), got {shape!r}")
+    if min(shape) < 1:
+        raise DataError(f"{path}: the shape (Z, Y, X) = {shape} has an empty axis")
+    if dtype is None:
+        if m is None:
+            raise DataError(f"{path}: the name does not give the sample type; expected "
+                            f"<name>_<X>x<Y>x<Z>_<type>.raw with type one of {', '.join(RAW_TYPES)}, "
+                            f"or pass dtype=")
+        kind = m["type"].lower()
+        if kind not in RAW_TYPES:
+            raise DataError(f"{path}: unknown sample type {m['type']!r} in the name; expected one of "
+                            f"{', '.join(RAW_TYPES)}")
+        dt = RAW_TYPES[kind]
+    else:
+        try:
+            dt = np.dtype(dtype)
+        except TypeError:
+            raise TypeError(f"dtype: not a numpy dtype: {dtype!r}") from None
+        if dt.newbyteorder("=") not in RAW_TYPES.values():
+            raise ValueError(f"dtype: expected one of {', '.join(RAW_TYPES)}, got {dt}")
+    return shape, dt.newbyteorder("<")
+
+
+def _index(v) -> int:
+    """v as an int, for ints and numpy integers only."""
+    if isinstance(v, bool):
+        raise TypeError("bool")
+    return operator.index(v)
+
+
+def _read_raw(path: Path, shape, dtype) -> Volume:
+    shape, dt = _raw_layout(path, shape, dtype)
+    count = shape[0] * shape[1] * shape[2]
+    need = count * dt.itemsize
+    try:
+        size = path.stat().st_size
+        if size != need:
+            what = "short" if size < need else "long"
+            raise DataError(f"{path}: {size} bytes, but {shape[2]}x{shape[1]}x{shape[0]} {dt.newbyteorder('=')} "
+                            f"samples need {need} (the file is {what} by {abs(size - need)} bytes)")
+        data = np.fromfile(path, dtype=dt, count=count)
+    except OSError as e:
+        raise DataError(f"{path}: cannot read: {e.strerror or e}") from e
+    if data.size != count:           # the file shrank while we read it
+        raise DataError(f"{path}: expected {count} samples, read {data.size}")
+    data = data.reshape(shape).astype(dt.newbyteorder("="), copy=False)
+    return Volume(data, (1.0, 1.0, 1.0), (0.0, 0.0, 0.0), str(path))
+
+
+def _real_volume(path: Path, a: np.ndarray) -> np.ndarray:
+    if a.dtype == np.bool_ or a.dtype.kind not in "iuf":
+        raise DataError(f"{path}: expected real numbers, got dtype {a.dtype}")
+    if a.ndim != 3:
+        raise DataError(f"{path}: expected a 3-D volume, got shape {a.shape}")
+    if min(a.shape) < 1:
+        raise DataError(f"{path}: the volume is empty, shape {a.shape}")
+    return np.ascontiguousarray(a.astype(a.dtype.newbyteorder("="), copy=False))
+
+
+def _read_npy(path: Path) -> Volume:
+    a = load_npy(path)
+    return Volume(_real_volume(path, a), (1.0, 1.0, 1.0), (0.0, 0.0, 0.0), str(path))
+
+
+def _read_nifti(path: Path) -> Volume:
+    try:
+        import nibabel
+    except ImportError:
+        raise ImportError(f"reading {path.name} (NIfTI) needs nibabel: pip install clvis[nifti]") from None
+    from nibabel.filebasedimages import ImageFileError
+    errors = (ImageFileError, OSError, EOFError, ValueError, zlib.error, KeyError)
+    try:
+        img = nibabel.load(path)
+        data = np.asanyarray(img.dataobj)
+        zooms = tuple(float(z) for z in img.header.get_zooms())
+        affine = np.array(img.affine, dtype=np.float64)
+    except errors as e:
+        raise DataError(f"{path}: not a readable NIfTI file: {e}") from e
+    if data.ndim > 3 and all(s == 1 for s in data.shape[3:]):
+        data = data.reshape(data.shape[:3])
+    if data.ndim != 3:
+        raise DataError(f"{path}: expected a 3-D volume, got shape {data.shape} (i, j, k, ...)")
+    spacing = zooms[:3]
+    if len(spacing) != 3 or not all(np.isfinite(z) and z > 0 for z in spacing):
+        raise DataError(f"{path}: the voxel size (pixdim) must be three positive numbers, got {zooms[:3]}")
+    data = _real_volume(path, data.transpose(2, 1, 0))
+    return Volume(data, spacing[::-1], (0.0, 0.0, 0.0), str(path), affine)

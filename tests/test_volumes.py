@@ -1,0 +1,234 @@
+"""clvis.volumes.read_volume: raw files named like the Open SciVis datasets,
+.npy and NIfTI, and a DataError naming the file for everything it cannot read."""
+
+import gzip
+import struct
+import sys
+
+import nibabel
+import numpy as np
+import pytest
+
+from clvis import DataError
+from clvis.volumes import RAW_TYPES, Volume, read_volume
+
+
+def _sample(shape, dtype, seed=0):
+    rng = np.random.default_rng(seed)
+    dt = np.dtype(dtype)
+    if dt.kind == "f":
+        return rng.normal(size=shape).astype(dt)
+    info = np.iinfo(dt)
+    return rng.integers(info.min, info.max, size=shape, endpoint=True, dtype=dt)
+
+
+def _write_raw(path, a):
+    a.astype(a.dtype.newbyteorder("<")).tofile(path)
+    return path
+
+
+@pytest.mark.parametrize("dtype", sorted(RAW_TYPES))
+def test_raw_round_trip(tmp_path, dtype):
+    a = _sample((3, 4, 5), dtype)                                  # Z, Y, X
+    path = _write_raw(tmp_path / f"thing_5x4x3_{dtype}.raw", a)
+    v = read_volume(path)
+    assert isinstance(v, Volume)
+    assert v.data.dtype == np.dtype(dtype) and v.data.dtype.isnative
+    assert v.data.shape == (3, 4, 5) and v.shape == (3, 4, 5) and v.data.flags.c_contiguous
+    np.testing.assert_array_equal(v.data, a)
+    assert v.spacing == (1.0, 1.0, 1.0) and v.origin == (0.0, 0.0, 0.0) and v.affine is None
+    assert v.path == str(path)
+
+
+def test_raw_is_little_endian_with_x_fastest(tmp_path):
+    # samples numbered 0.. in file order: x fastest, then y, then z
+    path = tmp_path / "ramp_3x2x2_uint16.raw"
+    path.write_bytes(struct.pack("<12H", *range(256, 268)))
+    v = read_volume(path)
+    assert v.data[0, 0, 1] == 257 and v.data[0, 1, 0] == 259 and v.data[1, 0, 0] == 262
+    np.testing.assert_array_equal(v.data.ravel(), np.arange(256, 268))
+
+
+def test_raw_open_scivis_names(tmp_path):
+    a = _sample((2, 3, 4), np.uint8)
+    for name in ("bonsai_4x3x2_uint8.raw", "a_b_c_4x3x2_UINT8.RAW", "x_1_2_4x3x2_uint8.raw"):
+        np.testing.assert_array_equal(read_volume(_write_raw(tmp_path / name, a)).data, a)
+
+
+def test_raw_keywords_give_or_override_the_name(tmp_path):
+    a = _sample((2, 3, 4), np.float32)
+    path = _write_raw(tmp_path / "plain.raw", a)
+    np.testing.assert_array_equal(read_volume(path, shape=(2, 3, 4), dtype=np.float32).data, a)
+    np.testing.assert_array_equal(read_volume(path, shape=(np.int64(4), 3, 2), dtype="float32").data,
+                                  a.reshape(4, 3, 2))
+    # a name that says something else is overridden
+    named = _write_raw(tmp_path / "x_2x2x2_uint8.raw", a)
+    np.testing.assert_array_equal(read_volume(named, shape=(2, 3, 4), dtype=np.float32).data, a)
+    np.testing.assert_array_equal(read_volume(named, shape=(6, 4, 4)).data.ravel(), a.view(np.uint8).ravel())
+
+
+@pytest.mark.parametrize("name, message", [
+    ("plain.raw", "the name does not give the shape"),
+    ("thing_4x3_uint8.raw", "the name does not give the shape"),
+    ("thing_4x3x2.raw", "the name does not give the shape"),
+    ("thing_4x3x2_uint12.raw", "unknown sample type 'uint12'"),
+    ("thing_4x0x2_uint8.raw", "empty axis"),
+])
+def test_raw_bad_names(tmp_path, name, message):
+    path = tmp_path / name
+    path.write_bytes(bytes(24))
+    with pytest.raises(DataError, match=message) as e:
+        read_volume(path)
+    assert str(path) in str(e.value)
+
+
+@pytest.mark.parametrize("size, what", [(59, "short by 1"), (61, "long by 1"), (0, "short by 60"),
+                                        (120, "long by 60")])
+def test_raw_wrong_sizes(tmp_path, size, what):
+    path = tmp_path / "thing_5x3x2_uint16.raw"
+    path.write_bytes(bytes(size))
+    with pytest.raises(DataError, match=what) as e:
+        read_volume(path)
+    assert str(path) in str(e.value) and f"{size} bytes" in str(e.value)
+
+
+def test_raw_bad_keywords(tmp_path):
+    path = _write_raw(tmp_path / "plain.raw", np.zeros(8, np.uint8))
+    with pytest.raises(TypeError, match="shape"):
+        read_volume(path, shape=(2, 2.0, 2), dtype=np.uint8)
+    with pytest.raises(ValueError, match="shape"):
+        read_volume(path, shape=(2, 4), dtype=np.uint8)
+    with pytest.raises(ValueError, match="dtype"):
+        read_volume(path, shape=(2, 2, 2), dtype=np.complex64)
+    with pytest.raises(DataError, match="sample type"):
+        read_volume(path, shape=(2, 2, 2))
+    with pytest.raises(ValueError, match="only for .raw"):
+        read_volume(_npy(tmp_path, np.zeros((2, 2, 2))), dtype=np.uint8)
+
+
+def _npy(tmp_path, a, name="v.npy"):
+    path = tmp_path / name
+    np.save(path, a)
+    return path
+
+
+@pytest.mark.parametrize("dtype", ["uint8", "int16", ">f4", "float64"])
+def test_npy_round_trip(tmp_path, dtype):
+    a = _sample((4, 3, 5), np.dtype(dtype).newbyteorder("="), seed=2).astype(dtype)
+    v = read_volume(_npy(tmp_path, a))
+    assert v.data.dtype.isnative and v.data.dtype == np.dtype(dtype).newbyteorder("=")
+    np.testing.assert_array_equal(v.data, a)
+    assert v.spacing == (1.0, 1.0, 1.0)
+    f = read_volume(_npy(tmp_path, np.asfortranarray(a), "f.npy"))
+    assert f.data.flags.c_contiguous
+    np.testing.assert_array_equal(f.data, a)
+
+
+@pytest.mark.parametrize("a, message", [
+    (np.zeros((3, 4)), "expected a 3-D volume"),
+    (np.zeros((2, 3, 4, 5)), "expected a 3-D volume"),
+    (np.zeros((2, 3, 4), bool), "real numbers"),
+    (np.zeros((2, 3, 4), np.complex64), "real numbers"),
+    (np.zeros((2, 0, 4)), "empty"),
+])
+def test_npy_bad_arrays(tmp_path, a, message):
+    path = _npy(tmp_path, a)
+    with pytest.raises(DataError, match=message) as e:
+        read_volume(path)
+    assert str(path) in str(e.value)
+
+
+def test_npy_malformed_and_object_arrays(tmp_path):
+    good = _npy(tmp_path, np.zeros((3, 3, 3), np.float32))
+    truncated = tmp_path / "t.npy"
+    truncated.write_bytes(good.read_bytes()[:-5])
+    garbage = tmp_path / "g.npy"
+    garbage.write_bytes(b"not an npy file at all")
+    objects = tmp_path / "o.npy"
+    np.save(objects, np.array([[[{}]]], dtype=object), allow_pickle=True)
+    for path in (truncated, garbage, objects):
+        with pytest.raises(DataError) as e:
+            read_volume(path)
+        assert str(path) in str(e.value)
+
+
+def _nifti(path, data, zooms=(1.0, 1.0, 1.0), slope=None):
+    img = nibabel.Nifti1Image(data, np.diag([*zooms, 1.0]))
+    img.header.set_zooms(zooms[:data.ndim] if data.ndim < 3 else (*zooms, *([1.0] * (data.ndim - 3))))
+    if slope is not None:
+        img.header.set_slope_inter(slope, 0.5)
+    nibabel.save(img, path)
+    return path
+
+
+@pytest.mark.parametrize("suffix", [".nii", ".nii.gz", ".NII.GZ"])
+@pytest.mark.parametrize("dtype", [np.int16, np.float32])
+def test_nifti_round_trip(tmp_path, suffix, dtype):
+    ijk = _sample((5, 4, 3), dtype, seed=3)                        # NIfTI order: i (x), j (y), k (z)
+    path = _nifti(tmp_path / f"brain{suffix}", ijk, zooms=(0.5, 0.75, 2.0))
+    v = read_volume(path)
+    assert v.data.shape == (3, 4, 5) and v.data.dtype == dtype and v.data.flags.c_contiguous
+    np.testing.assert_array_equal(v.data, ijk.transpose(2, 1, 0))  # [z, y, x]
+    assert v.spacing == (2.0, 0.75, 0.5)                           # (dz, dy, dx)
+    assert v.origin == (0.0, 0.0, 0.0)
+    np.testing.assert_allclose(v.affine, np.diag([0.5, 0.75, 2.0, 1.0]))
+
+
+def test_nifti_scaling_and_trailing_axes(tmp_path):
+    ijk = np.arange(24, dtype=np.int16).reshape(4, 3, 2)
+    v = read_volume(_nifti(tmp_path / "s.nii", ijk, slope=2.0))
+    np.testing.assert_allclose(v.data, ijk.transpose(2, 1, 0) * 2.0 + 0.5)
+    v = read_volume(_nifti(tmp_path / "four.nii", ijk[..., None]))
+    np.testing.assert_array_equal(v.data, ijk.transpose(2, 1, 0))
+    with pytest.raises(DataError, match="3-D") as e:
+        read_volume(_nifti(tmp_path / "series.nii", np.stack([ijk, ijk], axis=-1)))
+    assert "series.nii" in str(e.value)
+    with pytest.raises(DataError, match="3-D"):
+        read_volume(_nifti(tmp_path / "flat.nii", ijk[:, :, 0]))
+
+
+def test_nifti_broken_files(tmp_path):
+    good = _nifti(tmp_path / "g.nii.gz", np.ones((8, 8, 8), np.float32))
+    truncated = tmp_path / "t.nii.gz"
+    truncated.write_bytes(good.read_bytes()[:len(good.read_bytes()) // 2])
+    short = tmp_path / "short.nii"
+    short.write_bytes(gzip.decompress(good.read_bytes())[:600])
+    garbage = tmp_path / "x.nii"
+    garbage.write_bytes(b"\0" * 400)
+    for path in (truncated, short, garbage):
+        with pytest.raises(DataError) as e:
+            read_volume(path)
+        assert str(path) in str(e.value)
+    # voxel sizes: pixdim[2] (dy) of the NIfTI-1 header at byte 76 + 2 * 4. nibabel reads 0
+    # as 1 and -2 as 2 (with a warning); NaN and inf are an error
+    path = _nifti(tmp_path / "z.nii", np.ones((2, 2, 2), np.float32), zooms=(1.5, 1.0, 3.0))
+    raw = bytearray(path.read_bytes())
+    for value, spacing in ((0.0, (3.0, 1.0, 1.5)), (-2.0, (3.0, 2.0, 1.5)), (np.nan, None), (np.inf, None)):
+        raw[84:88] = struct.pack("<f", value)
+        path.write_bytes(bytes(raw))
+        if spacing is not None:
+            assert read_volume(path).spacing == spacing
+        else:
+            with pytest.raises(DataError, match="pixdim"):
+                read_volume(path)
+
+
+def test_nifti_without_nibabel(tmp_path, monkeypatch):
+    path = _nifti(tmp_path / "v.nii", np.ones((2, 2, 2), np.float32))
+    monkeypatch.setitem(sys.modules, "nibabel", None)
+    with pytest.raises(ImportError, match=r"pip install clvis\[nifti\]"):
+        read_volume(path)
+
+
+def test_missing_unknown_and_unreadable(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        read_volume(tmp_path / "nope_2x2x2_uint8.raw")
+    with pytest.raises(DataError, match="not a file"):
+        read_volume(tmp_path)
+    other = tmp_path / "v.vtk"
+    other.write_bytes(b"x")
+    with pytest.raises(DataError, match="unknown volume format") as e:
+        read_volume(other)
+    assert str(other) in str(e.value)
+    with pytest.raises(TypeError, match="path"):
+        read_volume(None)

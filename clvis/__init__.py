@@ -67,4 +67,5 @@ __all__ = [
     "render_gaussians",
     "scan",
     "set_default_device",
+    "zfp",
 ]

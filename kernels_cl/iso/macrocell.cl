@@ -1,0 +1,113 @@
+/* macrocell.cl — the macrocell grids of the progressive isosurface raycaster
+ * (Dyken, Usher, Kumar 2024), built from a ZFP fixed-rate stream on the device.
+ *
+ * ABI
+ * ---
+ * No defines, no compiler flags. Includes clvis/zfp.h (stream layout and the
+ * per-block decode). Volume [nz][ny][nx], blocks (bx, by, bz) of 4^3 samples,
+ * block b = bx + nbx (by + nby bz), nb_ = ceil(n_ / 4), as in zfp.cl.
+ *
+ * The fine grid is the ZFP blocks. Block B's range is the value range of every
+ * dual-grid cell whose minimum corner lies in B: the samples
+ * [4 B_a .. min(4 B_a + 4, n_a - 1)] per axis a, the block dilated by its +x,
+ * +y, +z neighbour samples. A block that holds no cell's minimum corner
+ * (4 B_a >= n_a - 1 on some axis) gets the empty range (+inf, -inf). The
+ * coarse grid: per 4^3 group of blocks, the min of their lo and the max of
+ * their hi (the last group partial). clvis/reference/iso.py block_ranges and
+ * coarse_ranges give the same floats.
+ *
+ * kernel block_faces(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,
+ *                    global float2 *faces)
+ *     Decodes each block once. faces[8 b + e] = (min, max) over the block's
+ *     in-volume samples whose local coordinate is 0 along every axis in e
+ *     (bit 0: x, bit 1: y, bit 2: z; e = 0: all its samples), (+inf, -inf)
+ *     when there is none. One work-item per block: global >= nblocks, any
+ *     local size.
+ *
+ * kernel block_ranges(global const float2 *faces, uint nx, uint ny, uint nz,
+ *                     global float2 *ranges)
+ *     ranges[b] = (lo, hi) of block b: the union of faces[8 (b + e) + e] over
+ *     the neighbours b + e (e in {0, 1}^3) inside the grid, or (+inf, -inf)
+ *     for a block without cells. One work-item per block.
+ *
+ * kernel coarse_ranges(global const float2 *ranges, uint nbx, uint nby, uint nbz,
+ *                      global float2 *coarse)
+ *     coarse[c] = the union of ranges over blocks [4 c_a .. 4 c_a + 3] per
+ *     axis (inside the block grid), c = cx + ncx (cy + ncy cz), nc_ =
+ *     ceil(nb_ / 4). One work-item per coarse cell.
+ */
+#include "clvis/zfp.h"
+
+inline float2 merge(float2 a, float2 b)
+{
+    return (float2)(fmin(a.x, b.x), fmax(a.y, b.y));
+}
+
+kernel void block_faces(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,
+                        global float2 *faces)
+{
+    uint nbx = (nx + 3u) >> 2, nby = (ny + 3u) >> 2, nbz = (nz + 3u) >> 2;
+    ulong b = get_global_id(0);
+    if (b >= (ulong)nbx * nby * nbz)
+        return;
+    uint bx = (uint)(b % nbx);
+    ulong rest = b / nbx;
+    uint by = (uint)(rest % nby), bz = (uint)(rest / nby);
+
+    int q[64];
+    int emax = zfp_decode_block3i(stream, b, rate, q);
+    uint ex = min(4u, nx - 4u * bx), ey = min(4u, ny - 4u * by), ez = min(4u, nz - 4u * bz);
+    float2 f[8];
+    for (uint e = 0; e < 8u; ++e)
+        f[e] = (float2)(INFINITY, -INFINITY);
+    for (uint z = 0; z < ez; ++z)
+        for (uint y = 0; y < ey; ++y)
+            for (uint x = 0; x < ex; ++x) {
+                float v = emax == ZFP_ZERO_BLOCK ? 0.0f : zfp_dequantize(q[16u * z + 4u * y + x], emax);
+                /* the faces this sample lies on: every e whose axes all have coordinate 0 */
+                uint on = (x == 0u ? 1u : 0u) | (y == 0u ? 2u : 0u) | (z == 0u ? 4u : 0u);
+                for (uint e = 0; e < 8u; ++e)
+                    if ((e & on) == e)
+                        f[e] = merge(f[e], (float2)(v, v));
+            }
+    for (uint e = 0; e < 8u; ++e)
+        faces[8u * b + e] = f[e];
+}
+
+kernel void block_ranges(global const float2 *faces, uint nx, uint ny, uint nz, global float2 *ranges)
+{
+    uint nbx = (nx + 3u) >> 2, nby = (ny + 3u) >> 2, nbz = (nz + 3u) >> 2;
+    ulong b = get_global_id(0);
+    if (b >= (ulong)nbx * nby * nbz)
+        return;
+    uint bx = (uint)(b % nbx);
+    ulong rest = b / nbx;
+    uint by = (uint)(rest % nby), bz = (uint)(rest / nby);
+    float2 r = (float2)(INFINITY, -INFINITY);
+    /* no cell has its minimum corner in the block: the block starts at the last sample */
+    if (4u * bx + 1u < nx && 4u * by + 1u < ny && 4u * bz + 1u < nz) {
+        for (uint e = 0; e < 8u; ++e) {
+            uint x = bx + (e & 1u), y = by + ((e >> 1) & 1u), z = bz + (e >> 2);
+            if (x < nbx && y < nby && z < nbz)
+                r = merge(r, faces[8u * (((ulong)z * nby + y) * nbx + x) + e]);
+        }
+    }
+    ranges[b] = r;
+}
+
+kernel void coarse_ranges(global const float2 *ranges, uint nbx, uint nby, uint nbz, global float2 *coarse)
+{
+    uint ncx = (nbx + 3u) >> 2, ncy = (nby + 3u) >> 2, ncz = (nbz + 3u) >> 2;
+    ulong c = get_global_id(0);
+    if (c >= (ulong)ncx * ncy * ncz)
+        return;
+    uint cx = (uint)(c % ncx);
+    ulong rest = c / ncx;
+    uint cy = (uint)(rest % ncy), cz = (uint)(rest / ncy);
+    float2 r = (float2)(INFINITY, -INFINITY);
+    for (uint z = 4u * cz; z < min(4u * cz + 4u, nbz); ++z)
+        for (uint y = 4u * cy; y < min(4u * cy + 4u, nby); ++y)
+            for (uint x = 4u * cx; x < min(4u * cx + 4u, nbx); ++x)
+                r = merge(r, ranges[((ulong)z * nby + y) * nbx + x]);
+    coarse[c] = r;
+}

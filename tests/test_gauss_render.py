@@ -270,3 +270,14 @@ def test_save_load(tmp_path):
     np.savez(tmp_path / "nan.npz", means=np.full((1, 3), np.nan), scales=np.ones((1, 3)))
     with pytest.raises(clvis.DataError, match="nan.npz"):
         Gaussians.load(tmp_path / "nan.npz")
+
+
+def test_device_output(queue):
+    g = _random(100, seed=13)
+    r = gr.GaussianRenderer(g, queue=queue)
+    a = r.render(_cam(), W, H)
+    b = r.render(_cam(), W, H, host=False)
+    assert isinstance(b.rgba, cla.Array) and b.hits is None
+    np.testing.assert_array_equal(b.rgba.get(), a.rgba)
+    np.testing.assert_array_equal(b.depth.get(), a.depth)
+    np.testing.assert_array_equal(b.stats["ray_stats"].get()[..., 0], a.hits)

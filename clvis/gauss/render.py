@@ -253,8 +253,14 @@ class GaussianRenderer:
     def _buf(self, a):
         return a.base_data if a is not None and a.size else self._dummy.base_data
 
-    def render(self, camera: Camera, width: int, height: int, *, transfer_function=None) -> GaussianImage:
-        """One frame; see the module doc for what the planes hold."""
+    def render(self, camera: Camera, width: int, height: int, *, transfer_function=None,
+               host: bool = True) -> GaussianImage:
+        """One frame; see the module doc for what the planes hold.
+
+        host=False leaves ``rgba`` and ``depth`` on the device (pyopencl
+        arrays on the renderer's queue, for a pipeline such as post-processing)
+        and reads nothing back: ``hits`` and ``rounds`` are then None and
+        ``stats["ray_stats"]`` is the (H, W, 2) uint32 device array of both."""
         q = self.queue
         w, h = _size("width", width), _size("height", height)
         if w * h >= 2 ** 32:
@@ -289,6 +295,10 @@ class GaussianRenderer:
                        rgba.base_data, depth.base_data, stats.base_data)
         q.finish()
         seconds = time.perf_counter() - t0
+        if not host:
+            info = {"gaussians": self.n, "model": self.model, "k": self.k, "bvh_build_s": self.build_seconds,
+                    "render_s": seconds, "rays": w * h, "bvh_nodes": max(self.n - 1, 0), "ray_stats": stats}
+            return GaussianImage(rgba, depth, None, None, info)
         st = stats.get()
         hits, rounds = st[..., 0], st[..., 1]
         info = {"gaussians": self.n, "model": self.model, "k": self.k, "bvh_build_s": self.build_seconds,

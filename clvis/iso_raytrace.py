@@ -1,0 +1,54 @@
+"""iso family, internal: the block-raytracing launch (kernels_cl/iso/raytrace.cl).
+
+The progressive pass loop calls :func:`raytrace_blocks` once per pass with the
+rays grouped by the block they wait at; it is not public API. Everything
+stays on the device: the arguments are ``pyopencl.array.Array`` objects (or
+raw ``cl.Buffer`` for the cache), nothing is read back.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import runtime
+
+__all__ = ["LOCAL_SIZE", "raytrace_blocks"]
+
+_SRC = "iso/raytrace.cl"
+_FLAGS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+# work-items per block group, per tuning profile (any size works; see the ABI)
+LOCAL_SIZE = {"cpu": 16, "gpu": 64}
+
+
+def _buf(a):
+    return a.base_data if hasattr(a, "base_data") else a
+
+
+def raytrace_blocks(queue, bricks, slot_of_block, shape, spacing, origin, isovalue, cam, width,
+                    groups, ray_ids, ray_t, outputs, *, refine_steps: int = 8, wait_for=None):
+    """Launch ``raytrace_blocks`` (internal; see kernels_cl/iso/raytrace.cl's ABI).
+
+    bricks (slots, 64) float32 and slot_of_block (nblocks,) int32: the block
+    cache; shape (nz, ny, nx), spacing (dz, dy, dx), origin (x, y, z) of the
+    volume; cam the 22-float ray buffer (device array); width the image width;
+    groups = (group_blocks, group_offsets, group_counts), three uint32 device
+    arrays of one length (the number of work-groups; 0 launches nothing);
+    ray_ids uint32 pixel indices; ray_t float32 per pixel (in/out);
+    outputs = (ray_hit uint8, hit_t float32, rgba float32 (.., 4), depth
+    float32), per pixel, written at hits only. Returns the event (or None)."""
+    group_blocks, group_offsets, group_counts = groups
+    ngroups = int(group_blocks.size)
+    if ngroups == 0:
+        return None
+    nz, ny, nx = (int(s) for s in shape)
+    dz, dy, dx = (np.float32(s) for s in spacing)
+    ox, oy, oz = (np.float32(s) for s in origin)
+    ray_hit, hit_t, rgba, depth = outputs
+    wg = LOCAL_SIZE[runtime.tuning_profile(queue)]
+    k = runtime.get_kernel(queue, _SRC, "raytrace_blocks", {"REFINE_STEPS": int(refine_steps)}, _FLAGS)
+    return runtime.launch(queue, k, ngroups * wg, wg,
+                          _buf(bricks), _buf(slot_of_block), np.uint32(nx), np.uint32(ny), np.uint32(nz),
+                          dx, dy, dz, ox, oy, oz, np.float32(isovalue), _buf(cam), np.uint32(width),
+                          _buf(group_blocks), _buf(group_offsets), _buf(group_counts), _buf(ray_ids),
+                          _buf(ray_t), _buf(ray_hit), _buf(hit_t), _buf(rgba), _buf(depth),
+                          wait_for=wait_for)

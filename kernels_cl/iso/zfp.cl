@@ -62,15 +62,5 @@ kernel void decode_blocks(global const ulong *stream, uint rate, uint nblocks_to
     uint j = get_global_id(0);
     if (j >= count)
         return;
-    global float *brick = out_bricks + (ulong)j * 64u;
-    uint b = ids[j];
-    if (b >= nblocks_total) {
-        for (uint i = 0; i < 64u; ++i)
-            brick[i] = NAN;
-        return;
-    }
-    int q[64];
-    int emax = zfp_decode_block3i(stream, b, rate, q);
-    for (uint i = 0; i < 64u; ++i)
-        brick[i] = emax == ZFP_ZERO_BLOCK ? 0.0f : zfp_dequantize(q[i], emax);
+    zfp_decode_brick(stream, rate, nblocks_total, ids[j], out_bricks + (ulong)j * 64u);
 }

@@ -35,6 +35,10 @@
  *       the integer values of block `block` into private q[64]; returns
  *       emax, or ZFP_ZERO_BLOCK for an all-zero block. Reads only words
  *       [block * rate, (block + 1) * rate) of `stream`.
+ *   void zfp_decode_brick(global const ulong *stream, uint rate, uint nblocks, uint b,
+ *                         global float *brick)
+ *       block b's 64 values into brick (x + 4 y + 16 z); NaN without reading
+ *       when b >= nblocks.
  *   float zfp_dequantize(int i, int emax)
  *       value of integer i of a block with exponent emax (not for
  *       ZFP_ZERO_BLOCK: those values are +0.0f). So value k of a block is
@@ -251,6 +255,22 @@ inline float zfp_dequantize(int i, int emax)
     if (rem > tie || (rem == tie && (q & 1u)))
         q += 1u;                           /* may carry into the smallest normal: still right */
     return as_float(sign | q);
+}
+
+/* Block b of the stream decoded into brick[0..63] (x + 4 y + 16 z); NaN
+ * everywhere, reading nothing, when b >= nblocks (the stream's block count). */
+inline void zfp_decode_brick(global const ulong *stream, uint rate, uint nblocks, uint b,
+                             global float *brick)
+{
+    if (b >= nblocks) {
+        for (uint i = 0; i < 64u; ++i)
+            brick[i] = NAN;
+        return;
+    }
+    int q[64];
+    int emax = zfp_decode_block3i(stream, b, rate, q);
+    for (uint i = 0; i < 64u; ++i)
+        brick[i] = emax == ZFP_ZERO_BLOCK ? 0.0f : zfp_dequantize(q[i], emax);
 }
 
 #endif

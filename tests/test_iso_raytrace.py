@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from clvis import datasets, runtime, zfp
+from clvis._arrays import to_device
 from clvis.camera import Camera
 from clvis.gauss.render import ray_buffer
 from clvis.iso_raytrace import raytrace_blocks
@@ -22,11 +23,7 @@ TINY = np.float32(iso.TINY_DIR)
 
 
 def _upload(q, a, dtype):
-    a = np.ascontiguousarray(a, dtype)
-    d = runtime.empty(q, a.shape if a.size else (1,), dtype, "test array")
-    if a.size:
-        d.set(a, queue=q)
-    return d
+    return to_device(q, "test array", np.ascontiguousarray(a, dtype))
 
 
 def _raycast(q, vol, cam, w, h, isovalue, spacing=(1, 1, 1), origin=(0, 0, 0), rate=24,

@@ -10,7 +10,8 @@
  *   REFINE_STEPS  Illinois steps of the root refinement (default 8; the
  *                 reference docstring asks for >= 6)
  * Includes clvis/gauss.h (the 22-float camera-ray buffer and clvis_camera_ray)
- * and clvis/bvh.h (CLVIS_BVH_TINY_DIR, the 1/d convention).
+ * and clvis/bvh.h (CLVIS_BVH_TINY_DIR, the 1/d convention), clvis/iso.h
+ * (clvis_iso_ray_setup: the ray in index space and its box interval).
  *
  * Volume [nz][ny][nx] samples, nx, ny, nz >= 2; blocks (bx, by, bz) of 4^3
  * samples, block id b = bx + nbx (by + nby bz), nb_ = ceil(n_ / 4) (the ZFP
@@ -57,10 +58,14 @@
  * block (ray_t = t_out). Shading: Blinn–Phong headlight with the gradient of
  * the hit cell's trilinear interpolant divided by spacing (constants below).
  */
+/* before the includes: clvis_camera_ray must not contract either */
+#pragma OPENCL FP_CONTRACT OFF
+
 #include "clvis/bvh.h"
 #include "clvis/gauss.h"
+#include "clvis/iso.h"
 
-#pragma OPENCL FP_CONTRACT OFF
+
 
 #ifndef REFINE_STEPS
 #define REFINE_STEPS 8
@@ -190,18 +195,8 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
 
     for (uint r = lid; r < count; r += lsize) {
         const uint p = ray_ids[offset + r];
-        float o[3], d[3];
-        clvis_camera_ray(cam, p % W, p / W, o, d);
-        float O[3], D[3], inv[3];
-        float t_exit = INFINITY;
-        for (int a = 0; a < 3; ++a) {
-            float ds = fabs(d[a]) < CLVIS_BVH_TINY_DIR ? copysign(CLVIS_BVH_TINY_DIR, d[a]) : d[a];
-            inv[a] = sp[a] / ds;
-            O[a] = (o[a] - org[a]) / sp[a];
-            D[a] = d[a] / sp[a];
-            float t0 = (0.0f - O[a]) * inv[a], t1 = ((float)(n[a] - 1) - O[a]) * inv[a];
-            t_exit = fmin(t_exit, fmax(t0, t1));
-        }
+        float o[3], d[3], O[3], D[3], inv[3], t_enter, t_exit;
+        clvis_iso_ray_setup(cam, p, W, n, sp, org, o, d, O, D, inv, &t_enter, &t_exit);
         float t_in = ray_t[p];
         int c[3];
         for (int a = 0; a < 3; ++a) {

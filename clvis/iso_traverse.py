@@ -1,0 +1,88 @@
+"""iso family, internal: macrocell traversal with speculation
+(kernels_cl/iso/traverse.cl; reference clvis/reference/iso_traverse.py).
+
+The progressive pass loop calls :func:`init_rays` once per frame and
+:func:`macro_traverse` once per pass; not public API. Device arrays in, device
+arrays out; the only transfer is none (the active-ray count stays on the
+device: ``count`` is a 1-element uint32 device array).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import runtime
+from .primitives import compact_indices
+
+__all__ = ["LOCAL_SIZE", "MAX_SPEC", "init_rays", "macro_traverse"]
+
+_SRC = "iso/traverse.cl"
+_FLAGS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+# work-items per group, per tuning profile (any size works; see the ABI)
+LOCAL_SIZE = {"cpu": 16, "gpu": 64}
+MAX_SPEC = 64
+
+
+def _buf(a):
+    return a.base_data if hasattr(a, "base_data") else a
+
+
+def _volume_args(shape, spacing, origin):
+    nz, ny, nx = (int(s) for s in shape)
+    if min(nx, ny, nz) < 2:
+        raise ValueError(f"shape: every axis needs at least 2 samples, got {tuple(shape)}")
+    dz, dy, dx = (np.float32(s) for s in spacing)
+    ox, oy, oz = (np.float32(s) for s in origin)
+    return (np.uint32(nx), np.uint32(ny), np.uint32(nz), dx, dy, dz, ox, oy, oz)
+
+
+def init_rays(queue, cam, width, height, shape, spacing, origin, *, wait_for=None):
+    """Per pixel the box entry t (+inf on a miss) and the list of rays that
+    meet the volume box. cam: the 22-float ray buffer (device array).
+    Returns (ray_t float32 (W * H,), active uint32 (W * H,), count uint32 (1,)),
+    device arrays; the first count[0] entries of active are the pixel ids in
+    ascending order (clvis.primitives.compact_indices)."""
+    w, h = int(width), int(height)
+    npix = w * h
+    if npix == 0:
+        raise ValueError(f"width, height: need at least one pixel, got {w} x {h}")
+    ray_t = runtime.empty(queue, npix, np.float32, "ray_t")
+    enters = runtime.empty(queue, npix, np.uint8, "ray enters flags")
+    wg = LOCAL_SIZE[runtime.tuning_profile(queue)]
+    k = runtime.get_kernel(queue, _SRC, "init_rays", {}, _FLAGS)
+    runtime.launch(queue, k, -(-npix // wg) * wg, wg, _buf(cam), np.uint32(w), np.uint32(h),
+                   *_volume_args(shape, spacing, origin), ray_t.base_data, enters.base_data,
+                   wait_for=wait_for)
+    count = runtime.empty(queue, 1, np.uint32, "active ray count")
+    active, count = compact_indices(enters, count=count, queue=queue)
+    return ray_t, active, count
+
+
+def macro_traverse(queue, shape, spacing, origin, isovalue, cam, width, fine, coarse, active, count,
+                   max_rays, ray_t, n_spec, cand_block, cand_t, *, wait_for=None):
+    """Launch ``macro_traverse`` (see kernels_cl/iso/traverse.cl's ABI).
+
+    fine, coarse: float32 device arrays (.., 2) (clvis.iso.macrocell_grids,
+    host=False); active uint32 pixel ids; count uint32 (1,) how many;
+    max_rays an upper bound of count[0] (sizes the launch; <= active.size);
+    ray_t float32 per pixel (in/out); cand_block uint32 and cand_t float32
+    with room for max_rays * n_spec entries (out). Returns the event (None
+    when max_rays is 0)."""
+    n_spec = int(n_spec)
+    if not 1 <= n_spec <= MAX_SPEC:
+        raise ValueError(f"n_spec: must be in 1..{MAX_SPEC}, got {n_spec}")
+    max_rays = int(max_rays)
+    if max_rays == 0:
+        return None
+    if max_rays > active.size:
+        raise ValueError(f"max_rays: {max_rays} exceeds the active list's {active.size} entries")
+    if cand_block.size < max_rays * n_spec or cand_t.size < max_rays * n_spec:
+        raise ValueError(f"cand_block, cand_t: need room for {max_rays * n_spec} entries, "
+                         f"got {cand_block.size} and {cand_t.size}")
+    wg = LOCAL_SIZE[runtime.tuning_profile(queue)]
+    k = runtime.get_kernel(queue, _SRC, "macro_traverse", {}, _FLAGS)
+    return runtime.launch(queue, k, -(-max_rays // wg) * wg, wg,
+                          *_volume_args(shape, spacing, origin), np.float32(isovalue),
+                          _buf(cam), np.uint32(width), _buf(fine), _buf(coarse), _buf(active), _buf(count),
+                          _buf(ray_t), np.uint32(n_spec), _buf(cand_block), _buf(cand_t),
+                          wait_for=wait_for)

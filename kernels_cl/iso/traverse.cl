@@ -1,0 +1,198 @@
+/* traverse.cl — macrocell traversal with speculation of the progressive
+ * isosurface raycaster (Dyken, Usher, Kumar 2024): per ray, walk the coarse
+ * macrocell grid (4^3 ZFP blocks per cell) and, inside the coarse cells whose
+ * range holds the isovalue, the fine grid (the ZFP blocks), and record up to
+ * n_spec candidate blocks (fine range holds the isovalue) in front-to-back
+ * order. The traversal state between passes is the ray's t alone.
+ *
+ * ABI
+ * ---
+ * Build options: -cl-fp32-correctly-rounded-divide-sqrt (FP_CONTRACT is OFF
+ * below: every float operation rounds on its own, so clvis/reference/
+ * iso_traverse.py reproduces the results bit for bit). No defines.
+ * Includes clvis/gauss.h (the 22-float camera-ray buffer, clvis_camera_ray)
+ * and clvis/bvh.h (CLVIS_BVH_TINY_DIR, the 1/d convention), clvis/iso.h
+ * (clvis_iso_ray_setup: the ray in index space and its box interval).
+ *
+ * Volume [nz][ny][nx] samples, nx, ny, nz >= 2; ZFP blocks of 4^3 samples,
+ * block id b = bx + nbx (by + nby bz), nb_ = ceil(n_ / 4); coarse cell id
+ * c = cx + ncx (cy + ncy cz), nc_ = ceil(nb_ / 4) (clvis.iso.macrocell_grids,
+ * kernels_cl/iso/macrocell.cl). A float2 range is (lo, hi); a block or coarse
+ * cell is active iff lo <= isovalue <= hi ((+inf, -inf) and NaN: never).
+ *
+ * Per ray (float32, the rules of clvis/reference/iso.py): o, d from the ray
+ * buffer; O = (o - origin) / spacing, D = d / spacing, inv = spacing / d_safe
+ * (|d| < TINY -> copysign(TINY, d)); t0 = (0 - O) inv, t1 = ((n - 1) - O) inv;
+ * t_enter = max(0, max_a min(t0, t1)), t_exit = min_a max(t0, t1); the ray
+ * meets the box iff t_enter <= t_exit.
+ *
+ * Blocks along the ray. Block b_a spans index space [4 b_a, min(4 b_a + 4,
+ * n_a - 1)] (the dual cells whose minimum corner lies in it), b_a in [0,
+ * ceil((n_a - 1) / 4)). With T_a(x) = (x - O_a) inv_a (a float32 boundary
+ * parameter, monotone in x), the ray is in block b_a along axis a for t in
+ * the half-open [T_a(entry bound), T_a(exit bound)) (entry bound 4 b_a, exit
+ * min(4 b_a + 4, n_a - 1) when inv_a > 0; swapped when inv_a < 0), and in
+ * block b for t in the intersection over the axes. This is the block DDA of
+ * tests/test_iso_raytrace.py (t_next recomputed from the block index, the
+ * same T) except that blocks whose segment has zero length (a ray through a
+ * block edge or corner, where the DDA steps two axes at one t; ties x < y < z
+ * only order those) are never candidates. So the candidate sequence does not
+ * depend on how it is split into passes, and every candidate has
+ * t_out > t_in (a pass always makes progress).
+ *
+ * Locating the block at t (t < t_exit): start from the raytrace first-cell
+ * rule, b_a = clamp(floor(O_a + t D_a), 0, n_a - 2) >> 2, then move each axis
+ * back while t < T_a(entry bound) and forward while t >= T_a(exit bound).
+ * Then loop: if the block's coarse cell is inactive, t = min_a T_a(coarse
+ * exit bound) (the coarse cell's exit: the exit bound of its last block
+ * along the ray) and locate again; else the block's segment is
+ * [t, t_out = min(t_exit, min_a T_a(exit bound))]; an active block is a
+ * candidate (entered at t); t = t_out. The ray ends when t >= t_exit.
+ * Coarse skipping gives exactly the sequence of the fine grid alone.
+ *
+ * kernel init_rays(
+ *     global const float *cam,           22 floats (clvis/gauss.h)
+ *     uint W, uint H,                    image size: pixel p = py * W + px
+ *     uint nx, uint ny, uint nz, float dx, float dy, float dz, float ox, float oy, float oz,
+ *     global float *ray_t,               out, per pixel: t_enter, +INFINITY when the ray misses
+ *     global uchar *enters)              out, per pixel: 1 when the ray meets the box, else 0
+ *   Global size >= W * H, any local size. (The host compacts `enters` into the
+ *   active list with clvis.primitives.compact_indices: deterministic order.)
+ *
+ * kernel macro_traverse(
+ *     uint nx, uint ny, uint nz,         volume samples per axis
+ *     float dx, float dy, float dz,      spacing
+ *     float ox, float oy, float oz,      origin: world position of sample (0, 0, 0)
+ *     float isovalue,
+ *     global const float *cam, uint W,   ray buffer, image width
+ *     global const float2 *fine,         nbx * nby * nbz block ranges
+ *     global const float2 *coarse,       ncx * ncy * ncz coarse ranges
+ *     global const uint *active,         pixel ids of the rays to traverse
+ *     global const uint *count,          count[0]: how many entries of `active`
+ *     global float *ray_t,               per pixel, in: resume t (t_enter for a new ray);
+ *                                        out: the exit t of the last candidate when n_spec
+ *                                        were recorded and the ray goes on, else +INFINITY
+ *     uint n_spec,                       1..64 candidates per ray
+ *     global uint *cand_block,           count x n_spec: [i * n_spec + k] the k-th candidate
+ *                                        block id of ray active[i], 0xFFFFFFFF past the last
+ *     global float *cand_t)              count x n_spec: the t where the ray enters it (the
+ *                                        ray_t to hand to raytrace_blocks), +INFINITY past the last
+ *   Global size >= count (a multiple of the local size), one work-item per
+ *   listed ray; any local size (the host uses 64, or 16 on the cpu profile).
+ *   A ray whose ray_t is not finite or exceeds t_exit gets no candidates and
+ *   ray_t = +INFINITY.
+ */
+/* before the includes: clvis_camera_ray must not contract either */
+#pragma OPENCL FP_CONTRACT OFF
+
+#include "clvis/bvh.h"
+#include "clvis/gauss.h"
+#include "clvis/iso.h"
+
+#define NO_BLOCK 0xFFFFFFFFu
+
+
+kernel void init_rays(global const float *cam, uint W, uint H, uint nx, uint ny, uint nz,
+                      float dx, float dy, float dz, float ox, float oy, float oz,
+                      global float *ray_t, global uchar *enters)
+{
+    const uint p = get_global_id(0);
+    if (p >= W * H)
+        return;
+    const int n[3] = {(int)nx, (int)ny, (int)nz};
+    const float sp[3] = {dx, dy, dz}, org[3] = {ox, oy, oz};
+    float o[3], d[3], O[3], D[3], inv[3], te, tx;
+    clvis_iso_ray_setup(cam, p, W, n, sp, org, o, d, O, D, inv, &te, &tx);
+    const int in = te <= tx;
+    ray_t[p] = in ? te : INFINITY;
+    enters[p] = (uchar)in;
+}
+
+/* T_a of the block b's exit bound along the ray (the entry bound when `entry`) */
+inline float block_bound_t(int b, int size, int n, float O, float inv, int entry)
+{
+    int up = inv > 0.0f;
+    int hi = min(size * b + size, n - 1), lo = size * b;
+    int x = (up != entry) ? hi : lo;
+    return ((float)x - O) * inv;
+}
+
+kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float dz,
+                           float ox, float oy, float oz, float isovalue,
+                           global const float *cam, uint W,
+                           global const float2 *fine, global const float2 *coarse,
+                           global const uint *active, global const uint *count,
+                           global float *ray_t, uint n_spec,
+                           global uint *cand_block, global float *cand_t)
+{
+    const uint i = get_global_id(0);
+    if (i >= count[0])
+        return;
+    const uint p = active[i];
+    const int n[3] = {(int)nx, (int)ny, (int)nz};
+    const float sp[3] = {dx, dy, dz}, org[3] = {ox, oy, oz};
+    const int nb[3] = {(n[0] + 3) >> 2, (n[1] + 3) >> 2, (n[2] + 3) >> 2};
+    const int ncb[3] = {(n[0] + 2) >> 2, (n[1] + 2) >> 2, (n[2] + 2) >> 2};  /* blocks with cells */
+    const int nc[3] = {(nb[0] + 3) >> 2, (nb[1] + 3) >> 2, (nb[2] + 3) >> 2};
+    float o[3], d[3], O[3], D[3], inv[3], te, t_exit;
+    clvis_iso_ray_setup(cam, p, W, n, sp, org, o, d, O, D, inv, &te, &t_exit);
+
+    float t = ray_t[p];
+    uint found = 0;
+    float resume = INFINITY;
+    if (t < t_exit) {   /* false for +INFINITY and NaN */
+        int b[3];
+        for (int a = 0; a < 3; ++a) {
+            float g = floor(O[a] + t * D[a]);
+            int c = g >= 0.0f ? (g <= (float)(n[a] - 2) ? (int)g : n[a] - 2) : 0;
+            b[a] = c >> 2;
+            /* back while t is before the block's entry along a */
+            int step = inv[a] > 0.0f ? 1 : -1;
+            while (b[a] - step >= 0 && b[a] - step < ncb[a]
+                   && t < block_bound_t(b[a], 4, n[a], O[a], inv[a], 1))
+                b[a] -= step;
+        }
+        for (;;) {
+            if (!(t < t_exit))
+                break;
+            /* forward while t is at or past the block's exit along a (stays in range: t < t_exit) */
+            for (int a = 0; a < 3; ++a) {
+                int step = inv[a] > 0.0f ? 1 : -1;
+                while (b[a] + step >= 0 && b[a] + step < ncb[a]
+                       && t >= block_bound_t(b[a], 4, n[a], O[a], inv[a], 0))
+                    b[a] += step;
+            }
+            const int c[3] = {b[0] >> 2, b[1] >> 2, b[2] >> 2};
+            const float2 cr = coarse[c[0] + nc[0] * (c[1] + nc[1] * c[2])];
+            if (!(cr.x <= isovalue && isovalue <= cr.y)) {
+                float tc = INFINITY;
+                for (int a = 0; a < 3; ++a)
+                    tc = fmin(tc, block_bound_t(c[a], 16, n[a], O[a], inv[a], 0));
+                if (!(tc > t))   /* cannot happen (the block's exit is > t); never loop */
+                    break;
+                t = tc;
+                continue;
+            }
+            float t_out = t_exit;
+            for (int a = 0; a < 3; ++a)
+                t_out = fmin(t_out, block_bound_t(b[a], 4, n[a], O[a], inv[a], 0));
+            const uint id = (uint)b[0] + (uint)nb[0] * ((uint)b[1] + (uint)nb[1] * (uint)b[2]);
+            const float2 fr = fine[id];
+            if (fr.x <= isovalue && isovalue <= fr.y) {
+                cand_block[i * n_spec + found] = id;
+                cand_t[i * n_spec + found] = t;
+                ++found;
+                if (found == n_spec) {
+                    resume = t_out < t_exit ? t_out : INFINITY;
+                    break;
+                }
+            }
+            t = t_out;
+        }
+    }
+    for (uint k = found; k < n_spec; ++k) {
+        cand_block[i * n_spec + k] = NO_BLOCK;
+        cand_t[i * n_spec + k] = INFINITY;
+    }
+    ray_t[p] = resume;
+}

@@ -1,23 +1,50 @@
 """iso family: progressive isosurface raycasting over ZFP-compressed volumes
-(Dyken, Usher, Kumar, TVCG 2024). So far: the macrocell grids.
+(Dyken, Usher, Kumar, TVCG 2024).
 
-The pass loop (ray generation, macrocell traversal, the LRU block cache,
-speculation, block raytracing) is the rest of issue 4; its reference is
-clvis/reference/iso.py.
+A pass, for the rays still active (kernels_cl/iso/):
+
+1. macrocell traversal (traverse.cl): each ray walks the coarse grid, then
+   the fine grid (the ZFP blocks) inside active coarse cells, and records up
+   to n_spec candidate blocks whose range holds the isovalue (speculation:
+   n_spec = min(floor(W H s / active rays), 64), s the starting count; 1
+   without speculation);
+2. grouping: the (ray, candidate) items are compacted and sorted by block
+   (clvis.compact_indices, clvis.radix_sort);
+3. the LRU block cache (clvis.iso_cache) decodes the blocks the pass needs
+   (the candidates and their +x/+y/+z neighbours) that it does not hold;
+4. block raytracing (raytrace.cl, ITEMS mode): a work-group per block with
+   its 5^3 dual brick in local memory, the first root of each cell's cubic;
+5. resolve (pass.cl): each ray keeps its nearest hit over its candidates,
+   by a 64-bit atomic min of (t bits << 32 | item) where the device has
+   64-bit atomics, else by scanning its candidates in order (same result);
+   rays without a hit go on from where the traversal left them.
+
+The rules (rays, dual grid, root finding, shading) are clvis/reference/iso.py's.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import runtime
 from ._arrays import resolve_queue
+from .camera import Camera
+from .errors import DataError
+from .gauss.render import ray_buffer
+from .iso_cache import BlockCache, mark_blocks
+from .iso_raytrace import raytrace_blocks
+from .iso_traverse import init_rays, macro_traverse
+from .primitives import compact, compact_indices, radix_sort
 from .zfp import PROFILES as _ZFP_PROFILES
-from .zfp import ZfpVolume, _stream_buffer
+from .zfp import ZfpVolume, _stream_buffer, compress
 
-__all__ = ["MacrocellGrids", "macrocell_grids"]
+__all__ = ["IsoImage", "IsoRenderer", "MacrocellGrids", "macrocell_grids"]
+
+MAX_SPEC = 64
+_PASS = "iso/pass.cl"
 
 _SRC = "iso/macrocell.cl"
 
@@ -68,3 +95,205 @@ def macrocell_grids(volume: ZfpVolume, *, queue=None, host: bool = True) -> Macr
     if host:
         return MacrocellGrids(fine.get(), coarse.get())
     return MacrocellGrids(fine, coarse)
+
+
+@dataclass
+class IsoImage:
+    """The image after a pass: ``rgba`` (H, W, 4) float32 (shaded surface,
+    alpha 1 at hits), ``depth`` (H, W) view depth (+inf where no hit yet),
+    ``hit`` (H, W) bool, ``active`` (H, W) bool (rays still running),
+    ``completion`` (the fraction of the rays entering the volume that are
+    finished) and ``stats``."""
+    rgba: np.ndarray
+    depth: np.ndarray
+    hit: np.ndarray
+    active: np.ndarray
+    completion: float
+    stats: dict
+
+
+def _items(queue, n: int) -> tuple[int, int]:
+    wg = _ZFP_PROFILES[runtime.tuning_profile(queue)]["wg"]
+    return max(-(-n // wg), 1) * wg, wg
+
+
+class IsoRenderer:
+    """A ZFP-compressed volume on the device with its macrocell grids and a
+    block cache, for progressive isosurface renders.
+
+    Parameters
+    ----------
+    volume_or_zfp : a 3-D [z, y, x] array (compressed with `rate` through
+        clvis.zfp.compress) or a clvis.zfp.ZfpVolume.
+    rate : ZFP fixed rate in bits per value (1..32).
+    spacing : (dz, dy, dx); origin : world (x, y, z) of sample [0, 0, 0].
+    cache_capacity : initial block-cache slots (default: BlockCache's); the
+        cache grows when a pass needs more.
+    """
+
+    def __init__(self, volume_or_zfp, rate: int = 8, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), *,
+                 cache_capacity=None, queue=None):
+        self.queue = q = resolve_queue(queue)
+        zv = volume_or_zfp if isinstance(volume_or_zfp, ZfpVolume) else compress(volume_or_zfp, rate)
+        if min(zv.shape) < 2:
+            raise DataError(f"volume: every axis needs at least 2 samples, got shape {zv.shape}")
+        self.volume = zv
+        self.spacing = _triple("spacing", spacing, positive=True)
+        self.origin = _triple("origin", origin, positive=False)
+        self.grids = macrocell_grids(zv, queue=q, host=False)
+        self.cache = BlockCache(zv, cache_capacity, queue=q)
+
+    @property
+    def shape(self):
+        return self.volume.shape
+
+    def render(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
+               speculation: bool = True, start_speculation: int = 1) -> IsoImage:
+        """Passes until `completion` of the rays are finished; the last image."""
+        img = None
+        for img in self.passes(camera, width, height, isovalue, completion=completion,
+                               speculation=speculation, start_speculation=start_speculation):
+            pass
+        return img
+
+    def passes(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
+               speculation: bool = True, start_speculation: int = 1):
+        """Yield the partial image after each pass (see the module doc)."""
+        if not isinstance(camera, Camera):
+            raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
+        w, h = _positive_int("width", width), _positive_int("height", height)
+        iso = float(isovalue)
+        if not np.isfinite(np.float32(iso)):
+            raise ValueError(f"isovalue: expected a finite number, got {isovalue!r}")
+        completion = float(completion)
+        if not 0.0 < completion <= 1.0:
+            raise ValueError(f"completion: expected a fraction in (0, 1], got {completion!r}")
+        s = _positive_int("start_speculation", start_speculation)
+        q, zv = self.queue, self.volume
+        npix = w * h
+        shape, spacing, origin = zv.shape, self.spacing, self.origin
+        t_start = time.perf_counter()
+        cam = runtime.empty(q, 22, np.float32, "camera rays")
+        cam.set(ray_buffer(camera, w, h), queue=q)
+        ray_t, active_all, count = init_rays(q, cam, w, h, shape, spacing, origin)
+        n_active = int(count.get()[0])
+        active = active_all[:n_active]
+        n_enter = max(n_active, 1)
+        hit = runtime.zeros(q, npix, np.uint8, "hit mask")
+        hit_t = runtime.empty(q, npix, np.float32, "hit t")
+        depth = runtime.empty(q, npix, np.float32, "depth")
+        for a in (hit_t, depth):
+            _fill(q, a, np.float32(np.inf))
+        rgba = runtime.zeros(q, (npix, 4), np.float32, "rgba")
+        int64 = runtime.capabilities(q).int64_atomics
+        hitkey = runtime.empty(q, npix, np.uint64, "hit keys") if int64 else None
+        stats = {"passes": 0, "active_per_pass": [], "n_spec_per_pass": [], "items_per_pass": [],
+                 "blocks_per_pass": [], "decoded_per_pass": [], "rays_entering": n_active,
+                 "speculation": bool(speculation), "int64_atomics": bool(int64)}
+        decoded0 = self.cache.decoded_total
+        done = n_active == 0
+        if done:            # no ray meets the volume: the (empty) image at once
+            stats.update(blocks_decoded=0, cache_slots=self.cache.capacity,
+                         seconds=time.perf_counter() - t_start)
+            yield self._image(w, h, hit, rgba, depth, active, 1.0, stats)
+        while not done:
+            n_spec = min(MAX_SPEC, max(1, (npix * s) // n_active)) if speculation else 1
+            n_items = n_active * n_spec
+            cnt = runtime.empty(q, 1, np.uint32, "active count")
+            cnt.set(np.array([n_active], np.uint32), queue=q)
+            cand_block = runtime.empty(q, n_items, np.uint32, "candidate blocks")
+            cand_t = runtime.empty(q, n_items, np.float32, "candidate t")
+            macro_traverse(q, shape, spacing, origin, iso, cam, w, self.grids.fine, self.grids.coarse,
+                           active, cnt, n_active, ray_t, n_spec, cand_block, cand_t)
+            valid = runtime.empty(q, n_items, np.uint8, "valid items")
+            self._launch("valid_items", n_items, cand_block.base_data, np.uint32(n_items), valid.base_data)
+            item_ids = compact_indices(valid, queue=q)
+            m = int(item_ids.size)
+            item_hit = runtime.zeros(q, max(n_items, 1), np.uint8, "item hits")
+            item_t = runtime.empty(q, max(n_items, 1), np.float32, "item t")
+            item_rgba = runtime.empty(q, (max(n_items, 1), 4), np.float32, "item rgba")
+            item_depth = runtime.empty(q, max(n_items, 1), np.float32, "item depth")
+            if hitkey is not None:
+                _fill(q, hitkey, np.uint64(0xFFFFFFFFFFFFFFFF))
+            ngroups = 0
+            if m:
+                keys = runtime.empty(q, m, np.uint32, "item blocks")
+                self._launch("gather_u32", m, cand_block.base_data, item_ids.base_data, np.uint32(m),
+                             keys.base_data)
+                skeys, sitems = radix_sort(keys, item_ids, queue=q)
+                heads = runtime.empty(q, m, np.uint8, "group heads")
+                self._launch("group_heads", m, skeys.base_data, np.uint32(m), heads.base_data)
+                starts = compact_indices(heads, queue=q)
+                ngroups = int(starts.size)
+                gblocks = runtime.empty(q, ngroups, np.uint32, "group blocks")
+                gcounts = runtime.empty(q, ngroups, np.uint32, "group counts")
+                self._launch("group_info", ngroups, skeys.base_data, starts.base_data, np.uint32(ngroups),
+                             np.uint32(m), gblocks.base_data, gcounts.base_data)
+                needed = mark_blocks(gblocks, zv, queue=q)
+                decoded = self.cache.update(needed)
+                raytrace_blocks(q, self.cache.bricks, self.cache.slot_of_block, shape, spacing, origin, iso,
+                                cam, w, (gblocks, starts, gcounts), sitems, cand_t,
+                                (item_hit, item_t, item_rgba, item_depth), items=(active, n_spec, hitkey))
+            else:
+                decoded = 0
+            still = runtime.empty(q, max(n_active, 1), np.uint8, "still active")
+            k = runtime.get_kernel(q, _PASS, "resolve_hits", {})
+            runtime.launch(q, k, *_items(q, n_active), active.base_data, np.uint32(n_active), np.uint32(n_spec),
+                           item_hit.base_data, item_t.base_data, item_rgba.base_data, item_depth.base_data,
+                           hitkey.base_data if hitkey is not None else None, ray_t.base_data, hit.base_data,
+                           hit_t.base_data, rgba.base_data, depth.base_data, still.base_data)
+            stats["passes"] += 1
+            stats["active_per_pass"].append(n_active)
+            stats["n_spec_per_pass"].append(n_spec)
+            stats["items_per_pass"].append(m)
+            stats["blocks_per_pass"].append(ngroups)
+            stats["decoded_per_pass"].append(decoded)
+            active = compact(active, still[:n_active], queue=q)
+            n_active = int(active.size)
+            frac = 1.0 - n_active / n_enter
+            done = n_active == 0 or frac >= completion
+            stats["blocks_decoded"] = self.cache.decoded_total - decoded0
+            stats["cache_slots"] = self.cache.capacity
+            stats["seconds"] = time.perf_counter() - t_start
+            stats["device_bytes"] = {
+                "compressed volume": zv.nbytes, "block cache": self.cache.nbytes,
+                "macrocell grids": self.grids.fine.nbytes + self.grids.coarse.nbytes,
+                "rays and image": npix * (4 + 1 + 4 + 4 + 16 + 4) + (npix * 8 if hitkey is not None else 0),
+                "pass items": n_items * (4 + 4 + 1 + 4 + 16 + 4)}
+            yield self._image(w, h, hit, rgba, depth, active, frac, dict(stats))
+
+    def _launch(self, name, n, *args):
+        k = runtime.get_kernel(self.queue, _PASS, name, {})
+        runtime.launch(self.queue, k, *_items(self.queue, n), *args)
+
+    def _image(self, w, h, hit, rgba, depth, active, frac, stats) -> IsoImage:
+        act = np.zeros(w * h, bool)
+        if active.size:
+            act[active.get()] = True
+        return IsoImage(rgba.get().reshape(h, w, 4), depth.get().reshape(h, w),
+                        hit.get().reshape(h, w).astype(bool), act.reshape(h, w), frac, stats)
+
+
+def _fill(q, a, value) -> None:
+    import pyopencl as cl
+    cl.enqueue_fill_buffer(q, a.base_data, np.array([value]), 0, a.nbytes)
+
+
+def _positive_int(name, v) -> int:
+    from ._arrays import nonnegative_int
+    v = nonnegative_int(name, v)
+    if v < 1:
+        raise ValueError(f"{name}: must be at least 1, got {v}")
+    return v
+
+
+def _triple(name, v, positive: bool) -> tuple:
+    try:
+        t = tuple(float(x) for x in v)
+    except TypeError:
+        raise TypeError(f"{name}: expected 3 numbers, got {type(v).__name__}") from None
+    if len(t) != 3 or not all(np.isfinite(np.float32(x)) for x in t):
+        raise ValueError(f"{name}: expected 3 finite numbers, got {v!r}")
+    if positive and min(t) <= 0:
+        raise ValueError(f"{name}: expected positive numbers, got {v!r}")
+    return t

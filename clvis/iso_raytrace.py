@@ -25,7 +25,7 @@ def _buf(a):
 
 
 def raytrace_blocks(queue, bricks, slot_of_block, shape, spacing, origin, isovalue, cam, width,
-                    groups, ray_ids, ray_t, outputs, *, refine_steps: int = 8, wait_for=None):
+                    groups, ray_ids, ray_t, outputs, *, refine_steps: int = 8, items=None, wait_for=None):
     """Launch ``raytrace_blocks`` (internal; see kernels_cl/iso/raytrace.cl's ABI).
 
     bricks (slots, 64) float32 and slot_of_block (nblocks,) int32: the block
@@ -35,7 +35,12 @@ def raytrace_blocks(queue, bricks, slot_of_block, shape, spacing, origin, isoval
     arrays of one length (the number of work-groups; 0 launches nothing);
     ray_ids uint32 pixel indices; ray_t float32 per pixel (in/out);
     outputs = (ray_hit uint8, hit_t float32, rgba float32 (.., 4), depth
-    float32), per pixel, written at hits only. Returns the event (or None)."""
+    float32), per pixel, written at hits only. Returns the event (or None).
+
+    items = (item_pixel uint32, n_spec, hitkey uint64 or None): the
+    speculation mode (-D ITEMS=1): ray_ids are item ids, ray_t and the
+    outputs are per item, and hitkey (per pixel) receives the 64-bit atomic
+    min of (t bits << 32 | item) where the device has 64-bit atomics."""
     group_blocks, group_offsets, group_counts = groups
     ngroups = int(group_blocks.size)
     if ngroups == 0:
@@ -45,10 +50,12 @@ def raytrace_blocks(queue, bricks, slot_of_block, shape, spacing, origin, isoval
     ox, oy, oz = (np.float32(s) for s in origin)
     ray_hit, hit_t, rgba, depth = outputs
     wg = LOCAL_SIZE[runtime.tuning_profile(queue)]
-    k = runtime.get_kernel(queue, _SRC, "raytrace_blocks", {"REFINE_STEPS": int(refine_steps)}, _FLAGS)
+    defines = {"REFINE_STEPS": int(refine_steps), "ITEMS": int(items is not None)}
+    k = runtime.get_kernel(queue, _SRC, "raytrace_blocks", defines, _FLAGS)
+    item_pixel, n_spec, hitkey = items if items is not None else (None, 1, None)
     return runtime.launch(queue, k, ngroups * wg, wg,
                           _buf(bricks), _buf(slot_of_block), np.uint32(nx), np.uint32(ny), np.uint32(nz),
                           dx, dy, dz, ox, oy, oz, np.float32(isovalue), _buf(cam), np.uint32(width),
                           _buf(group_blocks), _buf(group_offsets), _buf(group_counts), _buf(ray_ids),
                           _buf(ray_t), _buf(ray_hit), _buf(hit_t), _buf(rgba), _buf(depth),
-                          wait_for=wait_for)
+                          _buf(item_pixel), np.uint32(n_spec), _buf(hitkey), wait_for=wait_for)

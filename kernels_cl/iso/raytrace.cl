@@ -7,6 +7,16 @@
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (FP_CONTRACT is OFF
  * below: every float operation rounds on its own).
  * Defines:
+ *   ITEMS         0 (default): ray_ids are pixels, ray_t / ray_hit / hit_t /
+ *                 rgba / depth are per pixel, as described below.
+ *                 1: speculation. ray_ids are *items* e = i * n_spec + k, the
+ *                 k-th candidate block of active ray i (pixel item_pixel[i]);
+ *                 ray_t[e] is the t where item e enters its block (cand_t of
+ *                 traverse.cl; read only), and ray_hit / hit_t / rgba / depth
+ *                 are per item. With CLVIS_INT64_ATOMICS, a hit also does
+ *                 atom_min(hitkey[p], as_uint(t) << 32 | e): the pixel's
+ *                 nearest hit over its items (the host fills hitkey with ones
+ *                 first); without it, pass.cl's resolve scans the items.
  *   REFINE_STEPS  Illinois steps of the root refinement (default 8; the
  *                 reference docstring asks for >= 6)
  * Includes clvis/gauss.h (the 22-float camera-ray buffer and clvis_camera_ray)
@@ -37,7 +47,10 @@
  *     global uchar *ray_hit,             per pixel: set to 1 at a hit (else not written)
  *     global float *hit_t,               per pixel: the hit's t (written at hits only)
  *     global float4 *rgba,               per pixel: shaded colour, alpha 1 (hits only)
- *     global float *depth)               per pixel: view depth cam[18..21] . (o + t d, 1) (hits only)
+ *     global float *depth,               per pixel: view depth cam[18..21] . (o + t d, 1) (hits only)
+ *     global const uint *item_pixel,     ITEMS only (else unused, may be NULL): see below
+ *     uint n_spec,                       ITEMS only
+ *     volatile global ulong *hitkey)     ITEMS only, with CLVIS_INT64_ATOMICS (may be NULL otherwise)
  *   Global size: groups x L, local size L (any L; the host uses 64 or 16): work-group g
  *   traces block group_blocks[g], work-item i its rays i, i + L, ... < group_counts[g].
  *   Local memory: 125 floats (the dual brick).
@@ -64,9 +77,11 @@
 #include "clvis/bvh.h"
 #include "clvis/gauss.h"
 #include "clvis/iso.h"
+#include "clvis/atomics.h"
 
-
-
+#ifndef ITEMS
+#define ITEMS 0
+#endif
 #ifndef REFINE_STEPS
 #define REFINE_STEPS 8
 #endif
@@ -160,7 +175,8 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
                             global const uint *group_blocks, global const uint *group_offsets,
                             global const uint *group_counts, global const uint *ray_ids,
                             global float *ray_t, global uchar *ray_hit, global float *hit_t,
-                            global float4 *rgba, global float *depth)
+                            global float4 *rgba, global float *depth,
+                            global const uint *item_pixel, uint n_spec, volatile global ulong *hitkey)
 {
     local float brick[BRICK_SIDE * BRICK_SIDE * BRICK_SIDE];
     const uint g = get_group_id(0), lid = get_local_id(0), lsize = get_local_size(0);
@@ -194,10 +210,15 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
     const uint count = group_counts[g], offset = group_offsets[g];
 
     for (uint r = lid; r < count; r += lsize) {
-        const uint p = ray_ids[offset + r];
+#if ITEMS
+        const uint e = ray_ids[offset + r];             /* the item: (ray e / n_spec, candidate) */
+        const uint p = item_pixel[e / n_spec];
+#else
+        const uint p = ray_ids[offset + r], e = p;      /* outputs and state per pixel */
+#endif
         float o[3], d[3], O[3], D[3], inv[3], t_enter, t_exit;
         clvis_iso_ray_setup(cam, p, W, n, sp, org, o, d, O, D, inv, &t_enter, &t_exit);
-        float t_in = ray_t[p];
+        float t_in = ray_t[e];
         int c[3];
         for (int a = 0; a < 3; ++a) {
             float gpos = floor(O[a] + t_in * D[a]);
@@ -270,12 +291,16 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
                     float x2 = x * x, x4 = x2 * x2, x8 = x4 * x4, x16 = x8 * x8, x32 = x16 * x16;
                     float lit = SHADE_AMBIENT + SHADE_DIFFUSE * x, spec = SHADE_SPECULAR * x32;
                     float px = o[0] + t * d[0], py = o[1] + t * d[1], pz = o[2] + t * d[2];
-                    ray_hit[p] = 1;
-                    hit_t[p] = t;
-                    rgba[p] = (float4)(clamp(SHADE_BASE_R * lit + spec, 0.0f, 1.0f),
+                    ray_hit[e] = 1;
+                    hit_t[e] = t;
+#if ITEMS && CLVIS_INT64_ATOMICS
+                    /* the nearest hit of the pixel's items: t >= 0, so its bits order as uints */
+                    clvis_atomic_min_u64(hitkey + p, ((ulong)as_uint(t) << 32) | e);
+#endif
+                    rgba[e] = (float4)(clamp(SHADE_BASE_R * lit + spec, 0.0f, 1.0f),
                                        clamp(SHADE_BASE_G * lit + spec, 0.0f, 1.0f),
                                        clamp(SHADE_BASE_B * lit + spec, 0.0f, 1.0f), 1.0f);
-                    depth[p] = clvis_dot3(cam[18], cam[19], cam[20], px, py, pz) + cam[21];
+                    depth[e] = clvis_dot3(cam[18], cam[19], cam[20], px, py, pz) + cam[21];
                     out_t = -1.0f; /* marks the hit: ray_t stays */
                     break;
                 }
@@ -295,7 +320,9 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
             }
             t_in = t_out;
         }
+#if !ITEMS
         if (out_t >= 0.0f)
             ray_t[p] = out_t;
+#endif
     }
 }

@@ -1,0 +1,113 @@
+/* pass.cl — the bookkeeping of one pass of the progressive isosurface
+ * raycaster (Dyken, Usher, Kumar 2024): grouping the pass's items by block,
+ * and resolving each ray's nearest hit over its speculated candidates.
+ *
+ * ABI
+ * ---
+ * Includes clvis/atomics.h. Defines: CLVIS_INT64_ATOMICS (set by the clvis
+ * runtime where the device has 64-bit atomics and they are not forced off)
+ * selects how resolve_hits finds the nearest hit (see there). One work-item
+ * per element; global size >= the element count, any local size.
+ * An item e = i * n_spec + k is the k-th candidate block of active ray i
+ * (clvis/iso/traverse.cl writes cand_block[e], cand_t[e]).
+ *
+ * kernel valid_items(global const uint *cand_block, uint n, global uchar *valid)
+ *     valid[e] = cand_block[e] != 0xFFFFFFFF.
+ *
+ * kernel gather_u32(global const uint *src, global const uint *index, uint n, global uint *dst)
+ *     dst[j] = src[index[j]].
+ *
+ * kernel group_heads(global const uint *keys, uint n, global uchar *heads)
+ *     heads[j] = 1 where j == 0 or keys[j] != keys[j - 1] (keys sorted: the
+ *     items' block ids), else 0.
+ *
+ * kernel group_info(global const uint *keys, global const uint *starts, uint ngroups, uint n,
+ *                   global uint *group_blocks, global uint *group_counts)
+ *     For group g (starts: the positions of the heads, ascending):
+ *     group_blocks[g] = keys[starts[g]], group_counts[g] = (g + 1 < ngroups ?
+ *     starts[g + 1] : n) - starts[g].
+ *
+ * kernel resolve_hits(global const uint *active, uint count, uint n_spec,
+ *                     global const uchar *item_hit, global const float *item_t,
+ *                     global const float4 *item_rgba, global const float *item_depth,
+ *                     global const ulong *hitkey,
+ *                     global float *ray_t, global uchar *hit, global float *hit_t,
+ *                     global float4 *rgba, global float *depth, global uchar *still)
+ *     Per active ray i (pixel p = active[i]): the winning item is, with
+ *     CLVIS_INT64_ATOMICS, the low word of hitkey[p] unless hitkey[p] is all
+ *     ones (raytrace.cl ITEMS mode did the 64-bit atomic min of (t bits << 32
+ *     | e)); without, the first item e = i n_spec + k (k ascending) with
+ *     item_hit[e] — the same item, since candidates run front to back and
+ *     their blocks do not overlap in t (and ties in t go to the lower e in
+ *     both). A winner's t, rgba and depth go to pixel p, hit[p] = 1,
+ *     ray_t[p] = +INFINITY and still[i] = 0; otherwise still[i] = 1 when
+ *     ray_t[p] (where traverse.cl left the ray) is finite, else 0.
+ */
+#include "clvis/atomics.h"
+
+kernel void valid_items(global const uint *cand_block, uint n, global uchar *valid)
+{
+    uint e = get_global_id(0);
+    if (e < n)
+        valid[e] = cand_block[e] != 0xFFFFFFFFu ? 1 : 0;
+}
+
+kernel void gather_u32(global const uint *src, global const uint *index, uint n, global uint *dst)
+{
+    uint j = get_global_id(0);
+    if (j < n)
+        dst[j] = src[index[j]];
+}
+
+kernel void group_heads(global const uint *keys, uint n, global uchar *heads)
+{
+    uint j = get_global_id(0);
+    if (j < n)
+        heads[j] = (j == 0u || keys[j] != keys[j - 1u]) ? 1 : 0;
+}
+
+kernel void group_info(global const uint *keys, global const uint *starts, uint ngroups, uint n,
+                       global uint *group_blocks, global uint *group_counts)
+{
+    uint g = get_global_id(0);
+    if (g >= ngroups)
+        return;
+    uint s = starts[g];
+    group_blocks[g] = keys[s];
+    group_counts[g] = (g + 1u < ngroups ? starts[g + 1u] : n) - s;
+}
+
+kernel void resolve_hits(global const uint *active, uint count, uint n_spec,
+                         global const uchar *item_hit, global const float *item_t,
+                         global const float4 *item_rgba, global const float *item_depth,
+                         global const ulong *hitkey,
+                         global float *ray_t, global uchar *hit, global float *hit_t,
+                         global float4 *rgba, global float *depth, global uchar *still)
+{
+    uint i = get_global_id(0);
+    if (i >= count)
+        return;
+    uint p = active[i];
+    uint win = 0xFFFFFFFFu;
+#ifdef CLVIS_INT64_ATOMICS
+    ulong key = hitkey[p];
+    if (key != 0xFFFFFFFFFFFFFFFFul)
+        win = (uint)key;
+#else
+    for (uint k = 0; k < n_spec; ++k)
+        if (item_hit[i * n_spec + k]) {
+            win = i * n_spec + k;
+            break;
+        }
+#endif
+    if (win != 0xFFFFFFFFu) {
+        hit[p] = 1;
+        hit_t[p] = item_t[win];
+        rgba[p] = item_rgba[win];
+        depth[p] = item_depth[win];
+        ray_t[p] = INFINITY;
+        still[i] = 0;
+    } else {
+        still[i] = isfinite(ray_t[p]) ? 1 : 0;
+    }
+}

@@ -4,9 +4,11 @@
     clvis demo                   runs the kernel families on generated data and prints the figures
     clvis render [FILE]          renders a point cloud (default: an embedded synthetic hurricane)
                                  and writes PNGs of its G-buffers
+    clvis iso [FILE]             progressive isosurface raycasting of a ZFP-compressed volume
+                                 (default: an embedded Marschner-Lobb volume)
     clvis gauss [FILE]           Gaussians from a volume at three levels of detail, ray marched
                                  (default: an embedded explosion), PNGs side by side
-    clvis bench primitives|raster|gauss
+    clvis bench primitives|raster|gauss|iso
                                  a benchmark suite with its peers, as a table (and JSON)
 """
 
@@ -28,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import cli_gauss
+from . import cli_gauss, cli_iso
 
 
 def _cmd_info(args) -> int:
@@ -151,6 +153,7 @@ def _cmd_demo(args) -> int:
     print("\nfull benchmarks with every peer: clvis bench primitives")
     ok_all &= _demo_raster(args, q)
     ok_all &= cli_gauss.demo(args.out, q, size=args.gauss_size)
+    ok_all &= cli_iso.demo(args.out, q, size=args.iso_size)
     return 0 if ok_all else 1
 
 
@@ -727,20 +730,23 @@ def main(argv=None) -> int:
                    help="particles of the rendered hurricane (default 500,000)")
     d.add_argument("--size", type=_size, default=(1920, 1080), metavar="WxH",
                    help="image size of the render (default 1920x1080)")
+    d.add_argument("--iso-size", type=_size, default=(640, 480), metavar="WxH",
+                   help="the isosurface picture (default 640x480)")
     d.add_argument("--gauss-size", type=_size, default=(480, 480), metavar="WxH",
                    help="each Gaussian LOD panel (default 480x480)")
     d.add_argument("--out", default="clvis-demo", metavar="DIR",
                    help="where the PNGs go (default ./clvis-demo)")
     _add_render_parser(sub)
     cli_gauss.add_parser(sub)
+    cli_iso.add_parser(sub)
     b = sub.add_parser("bench", help="run a benchmark suite and print its table")
-    b.add_argument("family", choices=["primitives", "raster", "gauss"])
+    b.add_argument("family", choices=["primitives", "raster", "gauss", "iso"])
     b.add_argument("--scale", type=float, help="multiply every size (e.g. 0.01 for a smoke run)")
     b.add_argument("--json", help="where to write the JSON (default bench/results/<device>/<family>.json)")
     b.add_argument("--report", help="print the table of an existing JSON instead of running")
     b.add_argument("--check", action="store_true", help="exit 1 if a target is missed")
     args = p.parse_args(argv)
-    return {"info": _cmd_info, "demo": _cmd_demo, "render": _cmd_render, "gauss": cli_gauss.cmd,
+    return {"info": _cmd_info, "demo": _cmd_demo, "render": _cmd_render, "gauss": cli_gauss.cmd, "iso": cli_iso.cmd,
             "bench": _cmd_bench}[args.cmd](args)
 
 

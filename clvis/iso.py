@@ -198,6 +198,8 @@ class IsoRenderer:
             yield self._image(w, h, hit, rgba, depth, active, 1.0, stats)
         while not done:
             n_spec = min(MAX_SPEC, max(1, (npix * s) // n_active)) if speculation else 1
+            if speculation and stats["passes"] == 0:
+                n_spec = max(n_spec, 2)     # the paper's two macro-traversal steps in the first pass
             n_items = n_active * n_spec
             cnt = runtime.empty(q, 1, np.uint32, "active count")
             cnt.set(np.array([n_active], np.uint32), queue=q)

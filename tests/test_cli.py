@@ -23,9 +23,11 @@ def test_info(capsys):
 
 def test_demo(capsys, tmp_path):
     assert cli.main(["demo", "--n", "30000", "--points", "20000", "--size", "160x90",
-                     "--gauss-size", "64x64", "--out", str(tmp_path)]) == 0
+                     "--gauss-size", "64x64", "--iso-size", "80x60", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert out.count("matches") == 6 and "MISMATCH" not in out     # 4 primitives, raster, gauss
+    assert out.count("matches") == 7 and "MISMATCH" not in out     # 4 primitives, raster, gauss, iso
+    with Image.open(tmp_path / "iso.png") as im:
+        assert im.size == (80, 60)
     with Image.open(tmp_path / "gauss.png") as im:
         assert im.size == (3 * 64, 64)
     assert "M points/s" in out

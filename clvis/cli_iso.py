@@ -1,0 +1,177 @@
+"""`clvis iso`: progressive isosurface raycasting of a ZFP-compressed volume
+(Dyken, Usher, Kumar 2024): the image (rays still active marked) and the
+figures of each pass."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+_HELP = """\
+Compress a volume with ZFP (fixed rate), then ray march its isosurface in
+passes: each pass traverses the macrocell grids, decodes only the blocks its
+rays need into an LRU cache, and intersects them. Writes iso.png (rays still
+running at the stop shown in magenta) and prints the figures of each pass.
+
+Without a FILE it renders an embedded volume: marschner-lobb (64^3, iso 0.5)
+or turbulence (128^3, iso 0.5). FILE: a raw volume named like the Open SciVis
+datasets (<name>_<X>x<Y>x<Z>_<type>.raw), a .npy volume [z, y, x], or a NIfTI
+file (.nii, .nii.gz; needs nibabel).
+"""
+_DATASETS = ("marschner-lobb", "turbulence")
+_ACTIVE_COLOUR = (1.0, 0.0, 1.0)
+_BACKGROUND = (0.08, 0.08, 0.1)
+
+
+class _IsoError(Exception):
+    pass
+
+
+def add_parser(sub):
+    p = sub.add_parser("iso", help="progressive isosurface raycasting of a ZFP-compressed volume",
+                       description=_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("file", nargs="?", help="a .raw (Open SciVis naming), .npy or NIfTI volume")
+    p.add_argument("--dataset", choices=_DATASETS, help="an embedded volume (default marschner-lobb)")
+    p.add_argument("--isovalue", type=float, default=None, help="default: 0.5 for the embedded volumes, "
+                   "else the middle of the value range")
+    p.add_argument("--rate", type=int, default=8, help="ZFP bits per value, 1..32 (default 8)")
+    p.add_argument("--completion", type=float, default=1.0, help="stop once this fraction of the rays "
+                   "is finished (default 1.0)")
+    p.add_argument("--no-speculation", action="store_true", help="one candidate block per ray and pass")
+    p.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH", help="default 1280x720")
+    p.add_argument("--out", default="clvis-iso", metavar="DIR", help="output folder (default ./clvis-iso)")
+    return p
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WxH such as 1280x720, got {text!r}") from None
+    if not (1 <= w <= 16384 and 1 <= h <= 16384):
+        raise argparse.ArgumentTypeError(f"sizes must lie in 1..16384, got {text!r}")
+    return w, h
+
+
+def _load(args):
+    """(volume, spacing, origin, default isovalue, description)."""
+    from . import datasets
+    from .volumes import read_volume
+
+    if args.file is not None:
+        if args.dataset is not None:
+            raise _IsoError("--dataset chooses an embedded volume; leave it out with a FILE")
+        path = Path(args.file)
+        if not path.exists():
+            raise _IsoError(f"{path}: no such file")
+        v = read_volume(path)
+        data = np.asarray(v.data, np.float32)
+        lo, hi = float(np.nanmin(data)), float(np.nanmax(data))
+        return data, v.spacing, v.origin, (lo + hi) / 2, str(path)
+    name = args.dataset or "marschner-lobb"
+    d = datasets.marschner_lobb(64) if name == "marschner-lobb" else datasets.turbulence(128)
+    return d["volume"], d["spacing"], d["origin"], 0.5, f"the embedded {name} ({d['volume'].shape[0]}^3)"
+
+
+def picture(img) -> np.ndarray:
+    """(H, W, 3) uint8: the shaded surface over a dark background, rays still
+    running in magenta."""
+    rgb = np.where(img.hit[..., None], img.rgba[..., :3], np.float32(_BACKGROUND))
+    rgb = np.where(img.active[..., None], np.float32(_ACTIVE_COLOUR), rgb)
+    return np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8)
+
+
+def render(volume, spacing, origin, isovalue, width, height, *, rate=8, completion=1.0, speculation=True,
+           queue=None):
+    """(renderer, camera, [IsoImage per pass])."""
+    from . import Camera
+    from .iso import IsoRenderer
+
+    r = IsoRenderer(volume, rate=rate, spacing=spacing, origin=origin, queue=queue)
+    lo = np.asarray(origin, np.float64)
+    hi = lo + (np.array(r.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
+    cam = Camera.fit(lo, hi, direction=(-0.6, 1.0, -0.45), aspect=width / height, fov_y=35)
+    images = list(r.passes(cam, width, height, isovalue, completion=completion, speculation=speculation))
+    return r, cam, images
+
+
+def cmd(args) -> int:
+    from .errors import ClvisError
+
+    try:
+        return _run(args)
+    except (_IsoError, ClvisError, ImportError) as e:
+        msg = str(e)
+    except OSError as e:
+        msg = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
+    print(f"clvis iso: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def _run(args) -> int:
+    from . import images, runtime
+
+    if not 1 <= args.rate <= 32:
+        raise _IsoError(f"--rate: expected 1..32, got {args.rate}")
+    if not 0 < args.completion <= 1:
+        raise _IsoError(f"--completion: expected a fraction in (0, 1], got {args.completion}")
+    volume, spacing, origin, default_iso, source = _load(args)
+    iso = args.isovalue if args.isovalue is not None else default_iso
+    w, h = args.size
+    q = runtime.default_queue()
+    t0 = time.perf_counter()
+    r, _, passes = render(volume, spacing, origin, iso, w, h, rate=args.rate, completion=args.completion,
+                          speculation=not args.no_speculation, queue=q)
+    total = time.perf_counter() - t0
+    img = passes[-1]
+    out = Path(args.out)
+    path = images.save_png(out / "iso.png", picture(img))
+    st = img.stats
+    print(f"clvis iso: {source}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
+    print(f"  device      {runtime.describe(q.device)}")
+    print(f"  volume      {r.shape} = {volume.nbytes / 1e6:.1f} MB decoded, {r.volume.nbytes / 1e6:.1f} MB "
+          f"compressed, {r.volume.nblocks:,} blocks")
+    print(f"  passes      {st['passes']} (speculation {'on' if st['speculation'] else 'off'}), "
+          f"completion {img.completion:.3f}, {st['rays_entering']:,} rays enter the volume")
+    print(f"  per pass    active rays {st['active_per_pass']}")
+    print(f"              candidates per ray {st['n_spec_per_pass']}")
+    print(f"  blocks      {st['blocks_decoded']:,} decoded, cache of {st['cache_slots']:,} slots")
+    dev = st.get("device_bytes", {})
+    if dev:
+        print("  device MB   " + ", ".join(f"{k} {v / 1e6:.1f}" for k, v in dev.items()))
+    print(f"  time        {st['seconds'] * 1e3:.1f} ms of passes; {total:.2f} s with compression and setup")
+    print(f"wrote {path}{os.sep if path.is_dir() else ''}")
+    return 0
+
+
+def demo(out_dir, q, size=(640, 480)) -> bool:
+    """The demo's iso part: Marschner-Lobb, progressive, checked against the reference."""
+    from . import datasets, images, zfp
+    from .reference import iso as ref
+
+    w, h = size
+    d = datasets.marschner_lobb(64)
+    print(f"\niso: Marschner-Lobb 64^3 at iso 0.5, ZFP rate 8, {w}x{h}, progressive passes with speculation:\n")
+    r, cam, _ = render(d["volume"], d["spacing"], d["origin"], 0.5, w, h, queue=q)
+    r.cache.__init__(r.volume, None, queue=q)        # a cold cache for the timed run
+    t = time.perf_counter()
+    img = r.render(cam, w, h, 0.5)
+    dt = time.perf_counter() - t
+    st = img.stats
+    print(f"  {st['passes']} passes in {dt * 1e3:.1f} ms; active rays per pass {st['active_per_pass']}; "
+          f"{st['blocks_decoded']:,} of {r.volume.nblocks:,} blocks decoded")
+    cw, ch = 64, 48
+    small = r.render(cam, cw, ch, 0.5)
+    want = ref.render(zfp.decode(r.volume), cam, cw, ch, 0.5, spacing=d["spacing"], origin=d["origin"])
+    a = ref.agreement(want, small.hit, small.depth)
+    print(f"  image vs clvis.reference.iso ({cw}x{ch}, hit mask and depth on reliable pixels): "
+          f"{'matches' if a['ok'] else 'MISMATCH'} (depth error {a['depth_error']:.1e} of the diagonal)")
+    path = images.save_png(Path(out_dir) / "iso.png", picture(img))
+    print(f"  the surface: {path}")
+    print("\nmore: clvis iso --help")
+    return bool(a["ok"])

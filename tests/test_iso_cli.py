@@ -1,0 +1,51 @@
+"""clvis iso on the embedded volumes and on files, and its errors."""
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from clvis import cli, datasets
+
+
+@pytest.mark.parametrize("dataset", ["marschner-lobb", "turbulence"])
+def test_iso_embedded(tmp_path, capsys, dataset):
+    assert cli.main(["iso", "--dataset", dataset, "--size", "64x48", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "passes" in out and "blocks" in out and "completion 1.000" in out
+    with Image.open(tmp_path / "iso.png") as im:
+        assert im.size == (64, 48) and np.asarray(im).std() > 1
+
+
+def test_iso_partial_marks_active_rays(tmp_path, capsys):
+    assert cli.main(["iso", "--dataset", "turbulence", "--no-speculation", "--completion", "0.5",
+                     "--size", "64x48", "--out", str(tmp_path)]) == 0
+    with Image.open(tmp_path / "iso.png") as im:
+        a = np.asarray(im)
+    assert ((a[..., 0] == 255) & (a[..., 1] == 0) & (a[..., 2] == 255)).any()     # magenta: still running
+
+
+def test_iso_files(tmp_path, capsys):
+    v = datasets.marschner_lobb(20)["volume"]
+    np.save(tmp_path / "v.npy", v)
+    assert cli.main(["iso", str(tmp_path / "v.npy"), "--isovalue", "0.5", "--rate", "12", "--size", "40x30",
+                     "--out", str(tmp_path / "a")]) == 0
+    assert (tmp_path / "a" / "iso.png").is_file()
+    (v * 255).astype(np.uint8).tofile(tmp_path / "ml_20x20x20_uint8.raw")
+    assert cli.main(["iso", str(tmp_path / "ml_20x20x20_uint8.raw"), "--size", "40x30",
+                     "--out", str(tmp_path / "b")]) == 0
+
+
+@pytest.mark.parametrize("args,message", [
+    (["nope.raw"], "no such file"),
+    (["--rate", "40"], "--rate"),
+    (["--completion", "0"], "--completion"),
+])
+def test_iso_errors(tmp_path, capsys, args, message):
+    assert cli.main(["iso", *args, "--size", "16x16", "--out", str(tmp_path)]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_iso_bad_raw(tmp_path, capsys):
+    (tmp_path / "x_4x4x4_uint8.raw").write_bytes(b"\0" * 10)
+    assert cli.main(["iso", str(tmp_path / "x_4x4x4_uint8.raw"), "--out", str(tmp_path)]) == 2
+    assert "x_4x4x4_uint8.raw" in capsys.readouterr().err

@@ -56,13 +56,14 @@ test | bench)
     fi
     if [ "$cmd" = bench ]; then
         case "${1:-}" in
-        primitives | raster | gauss)
+        primitives | raster | gauss | iso)
             exec .venv-test/bin/clvis bench "$@"
             ;;
         esac
         .venv-test/bin/clvis bench primitives "$@"
         .venv-test/bin/clvis bench raster "$@"
-        exec .venv-test/bin/clvis bench gauss "$@"
+        .venv-test/bin/clvis bench gauss "$@"
+        exec .venv-test/bin/clvis bench iso "$@"
     fi
     # CLVIS_LARGE=1: the 2^27-element tests too (~1.5 min, ~8 GB)
     CLVIS_LARGE=${CLVIS_LARGE:-1} CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001} \

@@ -31,6 +31,7 @@ class Row:
     min_s: float
     rounds: int
     copy_gbs: float | None = None
+    info: dict = dataclasses.field(default_factory=dict)
 
     @property
     def elems_per_s(self) -> float:
@@ -48,17 +49,22 @@ class Row:
 @dataclasses.dataclass
 class Target:
     op: str
-    what: str          # "copy_pct" or the impl name of a peer
+    what: str          # "copy_pct", the impl name of a peer, or "info:<key>" (a figure the clvis row records)
     at_least: float
     devices: str       # "cpu" or "gpu": the tuning profile it applies to
+    at_most: bool = False   # for "info:" targets: the figure must be <= at_least instead
+    label: str = ""
 
     def describe(self) -> str:
         if self.what == "copy_pct":
             return f"{self.op}: >= {self.at_least:g}% of copy bandwidth"
+        if self.what.startswith("info:"):
+            return f"{self.op}: {self.label or self.what[5:]} {'<=' if self.at_most else '>='} {self.at_least:g}"
         return f"{self.op}: >= {self.at_least:g}x {self.what}"
 
 
 SORT_OP = "radix_sort[uint32 keys + uint32 values]"
+ISO_OP = "iso[turbulence 256^3, 512x512, to 100%]"
 TARGETS = {
     "primitives": [
         # issue 2, on PoCL's CPU device (2 cores). "np.cumsum" as the issue
@@ -81,6 +87,15 @@ TARGETS = {
         Target("raster[morton order]", "np.minimum.at alone (keys precomputed)", 1, "cpu"),
         # goal on a GPU with NVIDIA's OpenCL
         Target("raster[morton order]", "copy_pct", 60, "gpu"),
+    ],
+    "iso": [
+        # issue 4, on PoCL's CPU device (2 cores): a 256^3 volume at 512x512
+        Target(ISO_OP, "info:pass_reduction", 5, "cpu", label="passes without / with speculation"),
+        Target(ISO_OP, "info:decoded_per_isovalue_block", 1 / 3, "cpu", at_most=True,
+               label="blocks decoded / blocks holding the isovalue (BCMC's)"),
+        Target(ISO_OP, "info:device_memory_fraction", 0.25, "cpu", at_most=True,
+               label="device memory / decoded volume"),
+        Target(ISO_OP, "skimage.measure.marching_cubes", 1, "cpu"),
     ],
     "gauss": [
         # issue 5, on PoCL's CPU device (2 cores)
@@ -105,7 +120,7 @@ def load(path) -> tuple[list[Row], dict]:
         f = float(info.get("time_scale", 1.0))
         rows.append(Row(op=info["op"], impl=info["impl"], role=info["role"], n=info["n"],
                         bytes=info["bytes"], median_s=st["median"] * f, min_s=st["min"] * f,
-                        rounds=st["rounds"]))
+                        rounds=st["rounds"], info=info))
     copy = {r.op: r.gbs for r in rows if r.role == "copy"}
     for r in rows:
         r.copy_gbs = copy.get(r.op)
@@ -132,9 +147,12 @@ def check(rows: list[Row], family: str, profile: str) -> list[tuple[Target, floa
             continue
         if t.what == "copy_pct":
             value = clv[t.op].copy_pct if t.op in clv else None
+        elif t.what.startswith("info:"):
+            value = clv[t.op].info.get(t.what[5:]) if t.op in clv else None
         else:
             value = rat.get((t.op, t.what))
-        results.append((t, value, value is not None and value >= t.at_least))
+        met = value is not None and (value <= t.at_least if t.at_most else value >= t.at_least)
+        results.append((t, value, met))
     return results
 
 
@@ -174,6 +192,7 @@ def format_checks(results) -> str:
         if value is None:   # not in this run; --check still counts it as unmet
             lines.append(f"  [not measured] {t.describe()}")
             continue
-        v = f"{value:.0f}%" if t.what == "copy_pct" else f"{value:.1f}x"
+        v = (f"{value:.0f}%" if t.what == "copy_pct" else f"{value:.3g}" if t.what.startswith("info:")
+             else f"{value:.1f}x")
         lines.append(f"  [{'met' if ok else 'MISSED'}] {t.describe()}: {v}")
     return "\n".join(lines)

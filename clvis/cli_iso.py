@@ -158,7 +158,7 @@ def demo(out_dir, q, size=(640, 480)) -> bool:
     d = datasets.marschner_lobb(64)
     print(f"\niso: Marschner-Lobb 64^3 at iso 0.5, ZFP rate 8, {w}x{h}, progressive passes with speculation:\n")
     r, cam, _ = render(d["volume"], d["spacing"], d["origin"], 0.5, w, h, queue=q)
-    r.cache.__init__(r.volume, None, queue=q)        # a cold cache for the timed run
+    r.reset_cache()                                   # a cold cache for the timed run
     t = time.perf_counter()
     img = r.render(cam, w, h, 0.5)
     dt = time.perf_counter() - t

@@ -101,12 +101,15 @@ def macrocell_grids(volume: ZfpVolume, *, queue=None, host: bool = True) -> Macr
 class IsoImage:
     """The image after a pass: ``rgba`` (H, W, 4) float32 (shaded surface,
     alpha 1 at hits), ``depth`` (H, W) view depth (+inf where no hit yet),
-    ``hit`` (H, W) bool, ``active`` (H, W) bool (rays still running),
+    ``hit`` (H, W) bool, ``t`` (H, W) the hit's ray parameter (world distance
+    from the ray's origin on the near plane; +inf elsewhere), ``active``
+    (H, W) bool (rays still running),
     ``completion`` (the fraction of the rays entering the volume that are
     finished) and ``stats``."""
     rgba: np.ndarray
     depth: np.ndarray
     hit: np.ndarray
+    t: np.ndarray
     active: np.ndarray
     completion: float
     stats: dict
@@ -146,6 +149,10 @@ class IsoRenderer:
     @property
     def shape(self):
         return self.volume.shape
+
+    def reset_cache(self, capacity=None) -> None:
+        """Start over with an empty block cache (a cold start, e.g. for timings)."""
+        self.cache = BlockCache(self.volume, capacity, queue=self.queue)
 
     def render(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
                speculation: bool = True, start_speculation: int = 1) -> IsoImage:
@@ -195,7 +202,7 @@ class IsoRenderer:
         if done:            # no ray meets the volume: the (empty) image at once
             stats.update(blocks_decoded=0, cache_slots=self.cache.capacity,
                          seconds=time.perf_counter() - t_start)
-            yield self._image(w, h, hit, rgba, depth, active, 1.0, stats)
+            yield self._image(w, h, hit, hit_t, rgba, depth, active, 1.0, stats)
         while not done:
             n_spec = min(MAX_SPEC, max(1, (npix * s) // n_active)) if speculation else 1
             if speculation and stats["passes"] == 0:
@@ -262,18 +269,19 @@ class IsoRenderer:
                 "macrocell grids": self.grids.fine.nbytes + self.grids.coarse.nbytes,
                 "rays and image": npix * (4 + 1 + 4 + 4 + 16 + 4) + (npix * 8 if hitkey is not None else 0),
                 "pass items": n_items * (4 + 4 + 1 + 4 + 16 + 4)}
-            yield self._image(w, h, hit, rgba, depth, active, frac, dict(stats))
+            yield self._image(w, h, hit, hit_t, rgba, depth, active, frac, dict(stats))
 
     def _launch(self, name, n, *args):
         k = runtime.get_kernel(self.queue, _PASS, name, {})
         runtime.launch(self.queue, k, *_items(self.queue, n), *args)
 
-    def _image(self, w, h, hit, rgba, depth, active, frac, stats) -> IsoImage:
+    def _image(self, w, h, hit, hit_t, rgba, depth, active, frac, stats) -> IsoImage:
         act = np.zeros(w * h, bool)
         if active.size:
             act[active.get()] = True
         return IsoImage(rgba.get().reshape(h, w, 4), depth.get().reshape(h, w),
-                        hit.get().reshape(h, w).astype(bool), act.reshape(h, w), frac, stats)
+                        hit.get().reshape(h, w).astype(bool), hit_t.get().reshape(h, w), act.reshape(h, w),
+                        frac, stats)
 
 
 def _fill(q, a, value) -> None:

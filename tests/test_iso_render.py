@@ -148,3 +148,47 @@ def test_dense_input_and_bad_arguments(queue):
         iso.IsoRenderer(np.zeros((1, 8, 8), np.float32), queue=queue)
     with pytest.raises(ValueError, match="spacing"):
         iso.IsoRenderer(v, spacing=(1, 0, 1), queue=queue)
+
+
+def test_hits_lie_on_the_marching_cubes_mesh(queue):
+    """The renderer's hit points (o + t d) against scikit-image's mesh of the decoded volume."""
+    from skimage.measure import marching_cubes
+    from test_iso_reference import _mesh_distance
+
+    from clvis.gauss.render import ray_buffer
+    from clvis.reference.gauss.render import camera_rays
+
+    d = datasets.marschner_lobb(64)
+    zv = zfp.compress(d["volume"], 16)
+    vol, sp, org = zfp.decode(zv), d["spacing"], d["origin"]
+    w, h = 96, 80
+    cam = Camera.look_at((2.2, -2.9, 2.0), (0, 0, 0), (0, 0, 1), fov_y=40, aspect=w / h, near=0.1, far=20)
+    img = iso.IsoRenderer(zv, spacing=sp, origin=org, queue=queue).render(cam, w, h, 0.5)
+    o, dd = camera_rays(ray_buffer(cam, w, h), w, h)
+    hit = img.hit.ravel()
+    pts = o[hit].astype(np.float64) + img.t.ravel()[hit, None] * dd[hit].astype(np.float64)
+    verts, faces, _, _ = marching_cubes(vol, 0.5, spacing=sp)
+    dist = _mesh_distance(pts, verts[:, ::-1] + np.asarray(org), faces) / sp[0]
+    assert hit.sum() > 1000
+    assert dist.mean() < 0.1 and dist.max() < 0.6, (dist.mean(), dist.max())
+
+
+def test_empty_volume(queue):
+    zv = zfp.compress(np.zeros((20, 24, 28), np.float32), 8)
+    img = iso.IsoRenderer(zv, queue=queue).render(_cam(eye=(40, -30, 30), target=(14, 12, 10)), W, H, 0.5)
+    assert not img.hit.any() and img.stats["blocks_decoded"] == 0 and img.completion == 1.0
+
+
+@pytest.mark.parametrize("axis", [0, 2])
+def test_surface_on_block_and_coarse_boundaries(queue, axis):
+    """A plane exactly on sample 16: a ZFP block boundary and a coarse-cell boundary."""
+    n = 33
+    idx = np.arange(n, dtype=np.float32) - 16
+    vol = np.broadcast_to(idx.reshape([-1 if a == axis else 1 for a in range(3)]), (n, n, n))
+    zv = zfp.compress(np.ascontiguousarray(vol), 32)          # lossless enough for integers
+    cam = Camera.look_at((45, -20, 38), (16, 16, 16), (0, 0, 1), fov_y=40, aspect=W / H, near=0.1, far=200)
+    img = iso.IsoRenderer(zv, queue=queue).render(cam, W, H, 0.0)
+    want = ref.render(zfp.decode(zv), cam, W, H, 0.0)
+    np.testing.assert_array_equal(img.hit, want.hit)
+    assert want.hit.mean() > 0.2
+    np.testing.assert_allclose(img.depth[img.hit], want.depth[want.hit], rtol=0, atol=1e-4 * want.diagonal)

@@ -1,0 +1,98 @@
+"""Benchmarks of the iso family (progressive isosurface raycasting over a
+ZFP-compressed volume) with their peers in one session.
+
+The volume: clvis.datasets.turbulence(256) (a labyrinth of sheets filling the
+volume), isovalue 0.5, ZFP rate 8, seen whole by Camera.fit. Each clvis round
+starts from a cold block cache (IsoRenderer.reset_cache), so the times
+include decoding; compression and the macrocell grids are set-up.
+
+- iso[..., to 100%] / [..., to 85%]: IsoRenderer.render with speculation,
+  at 512x512 and 1280x720; the clvis row records passes with and without
+  speculation, blocks decoded against the blocks whose range holds the
+  isovalue (what an extract-everything method such as BCMC decodes), and the
+  device memory against the decoded volume.
+- peers: scikit-image marching_cubes of the decoded volume (the whole
+  surface, once), and the dense NumPy reference raycaster
+  (clvis.reference.iso.render_rays) on a subset of the rays, scaled to the
+  frame ("time_scale").
+
+    clvis bench iso
+"""
+
+import numpy as np
+import pytest
+from benchutil import run, scaled
+
+from clvis import Camera, datasets, iso, zfp
+from clvis.gauss.render import ray_buffer
+from clvis.reference import iso as ref
+from clvis.reference.gauss.render import camera_rays
+
+N = max(32, round(256 * min(1.0, scaled(1 << 24) / (1 << 24)) ** (1 / 3)))
+RATE = 8
+ISO = 0.5
+SIZES = {"512x512": (512, 512), "1280x720": (1280, 720)}
+_cache = {}
+
+
+def scene(queue):
+    if "scene" not in _cache:
+        d = datasets.turbulence(N)
+        zv = zfp.compress(d["volume"], RATE)
+        r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
+        lo = np.asarray(d["origin"], np.float64)
+        hi = lo + (np.array(d["volume"].shape[::-1]) - 1) * np.asarray(d["spacing"][::-1])
+        _cache["scene"] = (d, zv, r, lo, hi)
+    return _cache["scene"]
+
+
+def _camera(lo, hi, w, h):
+    return Camera.fit(lo, hi, direction=(-0.6, 1.0, -0.45), aspect=w / h, fov_y=35)
+
+
+def _cold(r, cam, w, h, completion, speculation=True):
+    r.reset_cache()
+    return r.render(cam, w, h, ISO, completion=completion, speculation=speculation)
+
+
+# the peers render whole frames / extract the whole surface: compared at 100% only
+CASES = [(s, c, i) for s in SIZES for c in (1.0, 0.85) for i in ("clvis", "marching_cubes", "numpy")
+         if c == 1.0 or i == "clvis"]
+
+
+@pytest.mark.parametrize("size,completion,impl", CASES,
+                         ids=[f"{s}-{round(c * 100)}%-{i}" for s, c, i in CASES])
+def test_iso(benchmark, queue, size, completion, impl):
+    d, zv, r, lo, hi = scene(queue)
+    w, h = SIZES[size]
+    cam = _camera(lo, hi, w, h)
+    op = f"iso[turbulence {N}^3, {size}, to {round(completion * 100)}%]"
+    rays = w * h
+    if impl == "clvis":
+        spec = _cold(r, cam, w, h, completion)
+        plain = _cold(r, cam, w, h, completion, speculation=False)
+        fine, _ = r.grids.active(ISO)
+        st = spec.stats
+        dev = sum(st["device_bytes"].values())
+        run(benchmark, lambda: _cold(r, cam, w, h, completion), op=op, impl=impl, role="clvis", n=rays,
+            nbytes=zv.nbytes, rounds=3, passes=st["passes"], passes_without_speculation=plain.stats["passes"],
+            pass_reduction=plain.stats["passes"] / max(st["passes"], 1),
+            blocks_decoded=st["blocks_decoded"], blocks_decoded_without_speculation=plain.stats["blocks_decoded"],
+            isovalue_blocks=int(fine.sum()), blocks=zv.nblocks,
+            decoded_per_isovalue_block=st["blocks_decoded"] / max(int(fine.sum()), 1),
+            device_bytes=st["device_bytes"], device_memory_fraction=dev / d["volume"].nbytes,
+            completion=spec.completion, hits=int(spec.hit.sum()))
+    elif impl == "marching_cubes":
+        from skimage.measure import marching_cubes
+        vol = zfp.decode(zv)
+        run(benchmark, lambda: marching_cubes(vol, ISO), op=op, impl="skimage.measure.marching_cubes",
+            role="peer", n=rays, nbytes=zv.nbytes, rounds=3)
+    else:
+        vol = zfp.decode(zv)
+        o, dd = camera_rays(ray_buffer(cam, w, h), w, h)
+        m = 2048
+        pick = np.linspace(0, rays - 1, m).astype(np.intp)
+        run(benchmark, lambda: ref.render_rays(vol, o[pick], dd[pick], ISO, spacing=d["spacing"],
+                                               origin=d["origin"]),
+            op=op, impl="numpy dense reference (extrapolated from a ray subset)", role="peer", n=rays,
+            nbytes=zv.nbytes, rounds=3, time_scale=rays / m, subset_rays=m)

@@ -5,7 +5,7 @@ Arrays in, arrays out: numpy arrays come back as numpy arrays, and
 See ``clvis.runtime`` for device choice and options.
 """
 
-from . import datasets, zfp
+from . import datasets, volumes, zfp
 from ._version import __version__
 from .camera import Camera, grid_cameras, hemisphere_cameras
 from .errors import ClvisError, DataError, DeviceError, KernelBuildError
@@ -21,6 +21,7 @@ from .gauss import (
     render_gaussians,
 )
 from .io import PointCloud, read_points
+from .iso import IsoImage, IsoRenderer
 from .primitives import compact, compact_indices, histogram, radix_sort, scan
 from .raster import (
     FilteredImage,
@@ -42,6 +43,8 @@ __all__ = [
     "GaussianImage",
     "GaussianRenderer",
     "Gaussians",
+    "IsoImage",
+    "IsoRenderer",
     "KernelBuildError",
     "PointCloud",
     "Rasterizer",
@@ -67,5 +70,6 @@ __all__ = [
     "render_gaussians",
     "scan",
     "set_default_device",
+    "volumes",
     "zfp",
 ]

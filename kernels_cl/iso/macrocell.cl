@@ -48,11 +48,10 @@ kernel void block_faces(global const ulong *stream, uint rate, uint nx, uint ny,
 {
     uint nbx = (nx + 3u) >> 2, nby = (ny + 3u) >> 2, nbz = (nz + 3u) >> 2;
     ulong b = get_global_id(0);
-    if (b >= (ulong)nbx * nby * nbz)
+    uint c[3];
+    if (!zfp_grid_cell(b, nbx, nby, nbz, c))
         return;
-    uint bx = (uint)(b % nbx);
-    ulong rest = b / nbx;
-    uint by = (uint)(rest % nby), bz = (uint)(rest / nby);
+    uint bx = c[0], by = c[1], bz = c[2];
 
     int q[64];
     int emax = zfp_decode_block3i(stream, b, rate, q);
@@ -78,11 +77,10 @@ kernel void block_ranges(global const float2 *faces, uint nx, uint ny, uint nz, 
 {
     uint nbx = (nx + 3u) >> 2, nby = (ny + 3u) >> 2, nbz = (nz + 3u) >> 2;
     ulong b = get_global_id(0);
-    if (b >= (ulong)nbx * nby * nbz)
+    uint c[3];
+    if (!zfp_grid_cell(b, nbx, nby, nbz, c))
         return;
-    uint bx = (uint)(b % nbx);
-    ulong rest = b / nbx;
-    uint by = (uint)(rest % nby), bz = (uint)(rest / nby);
+    uint bx = c[0], by = c[1], bz = c[2];
     float2 r = (float2)(INFINITY, -INFINITY);
     /* no cell has its minimum corner in the block: the block starts at the last sample */
     if (4u * bx + 1u < nx && 4u * by + 1u < ny && 4u * bz + 1u < nz) {
@@ -99,11 +97,10 @@ kernel void coarse_ranges(global const float2 *ranges, uint nbx, uint nby, uint 
 {
     uint ncx = (nbx + 3u) >> 2, ncy = (nby + 3u) >> 2, ncz = (nbz + 3u) >> 2;
     ulong c = get_global_id(0);
-    if (c >= (ulong)ncx * ncy * ncz)
+    uint cc[3];
+    if (!zfp_grid_cell(c, ncx, ncy, ncz, cc))
         return;
-    uint cx = (uint)(c % ncx);
-    ulong rest = c / ncx;
-    uint cy = (uint)(rest % ncy), cz = (uint)(rest / ncy);
+    uint cx = cc[0], cy = cc[1], cz = cc[2];
     float2 r = (float2)(INFINITY, -INFINITY);
     for (uint z = 4u * cz; z < min(4u * cz + 4u, nbz); ++z)
         for (uint y = 4u * cy; y < min(4u * cy + 4u, nby); ++y)

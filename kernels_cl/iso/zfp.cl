@@ -36,11 +36,10 @@ kernel void decode_volume(global const ulong *stream, uint rate, uint nx, uint n
 {
     uint nbx = (nx + 3u) >> 2, nby = (ny + 3u) >> 2, nbz = (nz + 3u) >> 2;
     ulong b = get_global_id(0);
-    if (b >= (ulong)nbx * nby * nbz)
+    uint c[3];
+    if (!zfp_grid_cell(b, nbx, nby, nbz, c))
         return;
-    uint bx = (uint)(b % nbx);
-    ulong rest = b / nbx;
-    uint by = (uint)(rest % nby), bz = (uint)(rest / nby);
+    uint bx = c[0], by = c[1], bz = c[2];
 
     int q[64];
     int emax = zfp_decode_block3i(stream, b, rate, q);

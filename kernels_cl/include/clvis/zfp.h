@@ -39,6 +39,9 @@
  *                         global float *brick)
  *       block b's 64 values into brick (x + 4 y + 16 z); NaN without reading
  *       when b >= nblocks.
+ *   int zfp_grid_cell(ulong b, uint nx, uint ny, uint nz, uint *c)
+ *       cell b of an x-fastest grid as c = (x, y, z); 0 if b is beyond it
+ *       (the block grid: nx = ceil(X / 4), ...).
  *   float zfp_dequantize(int i, int emax)
  *       value of integer i of a block with exponent emax (not for
  *       ZFP_ZERO_BLOCK: those values are +0.0f). So value k of a block is
@@ -271,6 +274,19 @@ inline void zfp_decode_brick(global const ulong *stream, uint rate, uint nblocks
     int emax = zfp_decode_block3i(stream, b, rate, q);
     for (uint i = 0; i < 64u; ++i)
         brick[i] = emax == ZFP_ZERO_BLOCK ? 0.0f : zfp_dequantize(q[i], emax);
+}
+
+/* Cell b of a grid of nx x ny x nz cells, x fastest: its (x, y, z) into c[3];
+ * 0 when b lies beyond the grid (the caller's work-item then has nothing to do). */
+inline int zfp_grid_cell(ulong b, uint nx, uint ny, uint nz, uint *c)
+{
+    if (b >= (ulong)nx * ny * nz)
+        return 0;
+    c[0] = (uint)(b % nx);
+    ulong rest = b / nx;
+    c[1] = (uint)(rest % ny);
+    c[2] = (uint)(rest / ny);
+    return 1;
 }
 
 #endif

@@ -156,16 +156,21 @@ class IsoRenderer:
 
     def render(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
                speculation: bool = True, start_speculation: int = 1) -> IsoImage:
-        """Passes until `completion` of the rays are finished; the last image."""
-        img = None
-        for img in self.passes(camera, width, height, isovalue, completion=completion,
-                               speculation=speculation, start_speculation=start_speculation):
+        """Passes until `completion` of the rays are finished; the last image
+        (read back once, at the end)."""
+        last = None
+        for last in self._run(camera, width, height, isovalue, completion, speculation, start_speculation):
             pass
-        return img
+        return last()
 
     def passes(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
                speculation: bool = True, start_speculation: int = 1):
         """Yield the partial image after each pass (see the module doc)."""
+        for image in self._run(camera, width, height, isovalue, completion, speculation, start_speculation):
+            yield image()
+
+    def _run(self, camera, width, height, isovalue, completion, speculation, start_speculation):
+        """The pass loop: after each pass, a function that reads the image back."""
         if not isinstance(camera, Camera):
             raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
         w, h = _positive_int("width", width), _positive_int("height", height)
@@ -202,7 +207,7 @@ class IsoRenderer:
         if done:            # no ray meets the volume: the (empty) image at once
             stats.update(blocks_decoded=0, cache_slots=self.cache.capacity,
                          seconds=time.perf_counter() - t_start)
-            yield self._image(w, h, hit, hit_t, rgba, depth, active, 1.0, stats)
+            yield lambda: self._image(w, h, hit, hit_t, rgba, depth, active, 1.0, stats)
         while not done:
             n_spec = min(MAX_SPEC, max(1, (npix * s) // n_active)) if speculation else 1
             if speculation and stats["passes"] == 0:
@@ -269,7 +274,7 @@ class IsoRenderer:
                 "macrocell grids": self.grids.fine.nbytes + self.grids.coarse.nbytes,
                 "rays and image": npix * (4 + 1 + 4 + 4 + 16 + 4) + (npix * 8 if hitkey is not None else 0),
                 "pass items": n_items * (4 + 4 + 1 + 4 + 16 + 4)}
-            yield self._image(w, h, hit, hit_t, rgba, depth, active, frac, dict(stats))
+            yield lambda a=active, f=frac, st=dict(stats): self._image(w, h, hit, hit_t, rgba, depth, a, f, st)
 
     def _launch(self, name, n, *args):
         k = runtime.get_kernel(self.queue, _PASS, name, {})

@@ -28,9 +28,10 @@ import pytest
 from benchutil import run, scaled
 
 from clvis import Camera, datasets, runtime
+from clvis.camera import ray_buffer
+from clvis.colormap import TransferFunction
 from clvis import primitives as P
 from clvis.gauss import GaussianRenderer, Gaussians, build_bvh, gaussians_from_volume
-from clvis.gauss import render as gr
 from clvis.gauss.points import frames_along
 from clvis.reference.gauss import bvh as ref_bvh
 from clvis.reference.gauss import lod as ref_lod
@@ -92,9 +93,9 @@ def test_render(benchmark, queue, label, impl):
             nbytes=rays * 16, rounds=3, hits_per_ray=info["hits_per_ray_mean"],
             rounds_per_ray=info["rounds_per_ray_mean"], k=info["k"], bvh_build_s=info["bvh_build_s"])
     else:
-        tf = gr.TransferFunction()
+        tf = TransferFunction()
         vmin, scale = tf.limits(g.values)
-        cam_buf = gr.ray_buffer(cam, W, H)
+        cam_buf = ray_buffer(cam, W, H)
         o, d = ref_render.camera_rays(cam_buf, W, H)
         m = min(SUBSET[label], rays)
         pick = np.linspace(0, rays - 1, m).astype(np.intp)

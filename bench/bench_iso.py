@@ -24,9 +24,9 @@ import pytest
 from benchutil import run, scaled
 
 from clvis import Camera, datasets, iso, zfp
-from clvis.gauss.render import ray_buffer
+from clvis.camera import ray_buffer
 from clvis.reference import iso as ref
-from clvis.reference.gauss.render import camera_rays
+from clvis.reference.camera import camera_rays
 
 N = max(32, round(256 * min(1.0, scaled(1 << 24) / (1 << 24)) ** (1 / 3)))
 RATE = 8

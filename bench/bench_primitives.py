@@ -55,7 +55,7 @@ def test_scan(benchmark, queue, dtype, impl):
     elif impl == "clvis-host":
         run(benchmark, lambda: clvis.scan(x), op=op, impl=impl, role="clvis-host", n=n, nbytes=model)
     elif impl == "numpy":
-        # as users call it (and as the issue measured it): int32 sums in int64
+        # as users call it: int32 sums in int64
         run(benchmark, lambda: np.cumsum(x), op=op, impl="numpy.cumsum(x)", role="peer",
             n=n, nbytes=model)
     elif impl == "numpy-same-dtype":

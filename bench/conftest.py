@@ -1,6 +1,6 @@
 """pytest-benchmark setup shared by the bench/ suites.
 
-Sizes follow the issue's targets; set CLVIS_BENCH_SCALE (e.g. 0.001) to shrink
+Sizes follow the targets in clvis.benchreport; set CLVIS_BENCH_SCALE (e.g. 0.001) to shrink
 every size for a quick smoke run (CI runs the suites that way, with
 --benchmark-disable, to keep the code working; figures come from full runs).
 """

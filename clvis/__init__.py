@@ -5,23 +5,25 @@ Arrays in, arrays out: numpy arrays come back as numpy arrays, and
 See ``clvis.runtime`` for device choice and options.
 """
 
-from . import datasets, volumes, zfp
+import sys as _sys
+
+from . import datasets, volumes
 from ._version import __version__
 from .camera import Camera, grid_cameras, hemisphere_cameras
+from .colormap import TransferFunction
 from .errors import ClvisError, DataError, DeviceError, KernelBuildError
 from .gauss import (
     GaussianImage,
     GaussianRenderer,
     Gaussians,
     SparseVolume,
-    TransferFunction,
     gaussians_from_points,
     gaussians_from_volume,
     read_vdb,
     render_gaussians,
 )
 from .io import PointCloud, read_points
-from .iso import IsoImage, IsoRenderer
+from .iso import IsoImage, IsoRenderer, zfp
 from .primitives import compact, compact_indices, histogram, radix_sort, scan
 from .raster import (
     FilteredImage,
@@ -73,3 +75,6 @@ __all__ = [
     "volumes",
     "zfp",
 ]
+
+# ``import clvis.zfp`` keeps working: the module lives in the iso family now
+_sys.modules[__name__ + ".zfp"] = zfp

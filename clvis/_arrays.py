@@ -94,6 +94,14 @@ def nonnegative_int(name: str, v) -> int:
     return v
 
 
+def positive_int(name: str, v) -> int:
+    """v as an int >= 1: TypeError for a non-integer (bool included), ValueError below 1."""
+    v = nonnegative_int(name, v)
+    if v < 1:
+        raise ValueError(f"{name}: must be at least 1, got {v}")
+    return v
+
+
 def real_array(name: str, a) -> np.ndarray:
     """`a` as a numpy array of real numbers (integers or floats, not bool):
     TypeError naming `name` otherwise."""

@@ -67,9 +67,9 @@ SORT_OP = "radix_sort[uint32 keys + uint32 values]"
 ISO_OP = "iso[turbulence 256^3, 512x512, to 100%]"
 TARGETS = {
     "primitives": [
-        # issue 2, on PoCL's CPU device (2 cores). "np.cumsum" as the issue
-        # measured it (~350 M/s): np.cumsum(x), which sums int32 in int64; the
-        # report also shows np.cumsum(x, dtype=x.dtype), clvis's exact output.
+        # on PoCL's CPU device (2 cores). "np.cumsum" as users call it
+        # (~350 M/s): np.cumsum(x), which sums int32 in int64; the report
+        # also shows np.cumsum(x, dtype=x.dtype), clvis's exact output.
         Target("scan[int32]", "pyopencl.ExclusiveScanKernel", 5, "cpu"),
         Target("scan[int32]", "numpy.cumsum(x)", 2, "cpu"),
         Target("scan[int32]", "copy_pct", 40, "cpu"),
@@ -81,7 +81,7 @@ TARGETS = {
         Target(SORT_OP, "copy_pct", 40, "gpu"),
     ],
     "raster": [
-        # issue 3, on PoCL's CPU device (2 cores), 2^24 points at 1920x1080
+        # on PoCL's CPU device (2 cores), 2^24 points at 1920x1080
         Target("raster[morton order]", "numpy reference render (np.minimum.at)", 12, "cpu"),
         Target("raster[morton order]", "copy_pct", 25, "cpu"),
         Target("raster[morton order]", "np.minimum.at alone (keys precomputed)", 1, "cpu"),
@@ -89,7 +89,7 @@ TARGETS = {
         Target("raster[morton order]", "copy_pct", 60, "gpu"),
     ],
     "iso": [
-        # issue 4, on PoCL's CPU device (2 cores): a 256^3 volume at 512x512
+        # on PoCL's CPU device (2 cores): a 256^3 volume at 512x512
         Target(ISO_OP, "info:pass_reduction", 5, "cpu", label="passes without / with speculation"),
         Target(ISO_OP, "info:decoded_per_isovalue_block", 1 / 3, "cpu", at_most=True,
                label="blocks decoded / blocks holding the isovalue (BCMC's)"),
@@ -98,7 +98,7 @@ TARGETS = {
         Target(ISO_OP, "skimage.measure.marching_cubes", 1, "cpu"),
     ],
     "gauss": [
-        # issue 5, on PoCL's CPU device (2 cores)
+        # on PoCL's CPU device (2 cores)
         Target("render[1e5 Gaussians, 512x512]", "numpy brute force (extrapolated from a ray subset)", 500,
                "cpu"),
         Target("bvh_build[1e6 Gaussians]", "np.argsort of the Morton codes alone", 1, "cpu"),

@@ -24,9 +24,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._arrays import real_array
+from ._arrays import positive_int, real_array
 
-__all__ = ["Camera", "Projected", "grid_cameras", "hemisphere_cameras"]
+__all__ = ["CAMERA_DTYPE", "Camera", "Projected", "camera_buffer", "grid_cameras", "hemisphere_cameras",
+           "ray_buffer"]
 
 # Camera.fit frames the bounding sphere enlarged by this factor, so rounding never
 # pushes a box corner out of the image.
@@ -420,3 +421,44 @@ def _hemisphere(centre, dist, fov_y, aspect, near, far) -> Iterator[Camera]:
             offset = dist * np.array([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi),
                                       math.cos(theta)])
             yield Camera.look_at(centre + offset, centre, (0, 0, 1), fov_y, aspect, near, far)
+
+
+# --------------------------------------------------------------------------
+# the camera as kernels read it (kernels_cl/include/clvis/camera.h)
+
+CAMERA_DTYPE = np.dtype([("m", "<f4", (4, 4)), ("d", "<f4", (4,))])
+
+
+def camera_buffer(camera) -> np.ndarray:
+    """The 20 float32 of clvis/camera.h: M = projection @ view, then the depth row."""
+    m = np.asarray(camera.matrix, np.float64)
+    d = np.asarray(camera.depth_row, np.float64)
+    if m.shape != (4, 4) or d.shape != (4,) or not (np.isfinite(m).all() and np.isfinite(d).all()):
+        raise ValueError("camera: its matrix must be a finite 4x4 array and its depth row finite")
+    out = np.zeros(1, CAMERA_DTYPE)
+    out["m"][0] = m
+    out["d"][0] = d
+    return out.view(np.float32)
+
+
+def ray_buffer(camera: Camera, width: int, height: int) -> np.ndarray:
+    """The 22 float32 camera-ray coefficients of clvis/camera.h for a
+    `width` x `height` image: pixel centre (u, v) = (px + 0.5, py + 0.5) has its
+    ray origin on the near plane, o = o0 + u ou + v ov, and direction
+    dd = d0 + u du + v dv towards the far plane (computed in float64 from the
+    inverse of projection @ view, then rounded), plus the depth row."""
+    if not isinstance(camera, Camera):
+        raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
+    w, h = positive_int("width", width), positive_int("height", height)
+    inv = np.linalg.inv(camera.matrix)
+
+    def point(u, v, zn):
+        p = inv @ np.array([u / w * 2 - 1, 1 - v / h * 2, zn, 1.0])
+        return p[:3] / p[3]
+
+    near = [point(0, 0, -1), point(1, 0, -1), point(0, 1, -1)]
+    far = [point(0, 0, 1), point(1, 0, 1), point(0, 1, 1)]
+    o0, ou, ov = near[0], near[1] - near[0], near[2] - near[0]
+    f0, fu, fv = far[0], far[1] - far[0], far[2] - far[0]
+    buf = np.concatenate([o0, ou, ov, f0 - o0, fu - ou, fv - ov, camera.depth_row])
+    return buf.astype(np.float32)

@@ -584,7 +584,7 @@ def _cmd_render(args) -> int:
 
 def _render(args, progress) -> int:
     from . import colormap, runtime
-    from .depthfilter import LEVELS
+    from .raster.depth_filter import LEVELS
     from .raster import Rasterizer
 
     width, height = args.size

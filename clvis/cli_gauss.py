@@ -127,7 +127,8 @@ def render_panels(lods, sv, gaussians, width, height, *, model="absorption", den
                   colormap="inferno", k=None, queue=None):
     """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given Gaussians)."""
     from . import Camera
-    from .gauss import GaussianRenderer, TransferFunction, gaussians_from_volume
+    from .colormap import TransferFunction
+    from .gauss import GaussianRenderer, gaussians_from_volume
 
     items = []
     for name in lods:
@@ -191,13 +192,9 @@ def demo(out_dir, q, size=(480, 480)) -> bool:
     """The demo's gauss part: the explosion at three LODs (figures, PNG) and a
     small frame checked against the brute-force reference."""
     from . import Camera, datasets, images
-    from .gauss import (
-        GaussianRenderer,
-        SparseVolume,
-        TransferFunction,
-        lod_table,
-        ray_buffer,
-    )
+    from .camera import ray_buffer
+    from .colormap import TransferFunction
+    from .gauss import GaussianRenderer, SparseVolume, lod_table
     from .reference.gauss import render as ref
 
     w, h = size

@@ -139,3 +139,64 @@ def _limit(name: str, x) -> float:
     if not abs(x) <= _F32_MAX:
         raise ValueError(f"{name}: expected a number finite in float32, got {x!r}")
     return x
+
+
+class TransferFunction:
+    """A Gaussian's value -> colour (a matplotlib colormap) and an opacity factor
+    (piecewise linear).
+
+    Parameters
+    ----------
+    colormap : matplotlib colormap name.
+    opacity : None (1 everywhere) or a sequence of (x, alpha) points, x in [0, 1]
+        along the normalised value range (ascending), alpha in [0, 1]; linear
+        in between, constant beyond the ends.
+    value_range : (vmin, vmax) or None (the finite min and max of the values).
+    entries : table size n. Value v takes entry
+        clamp(floor(((v - vmin) * scale) * n), 0, n - 1), scale = 1 / (vmax - vmin)
+        (0 when vmin == vmax), as clvis.colormap.apply does; entry i has the
+        colormap's colour i and the opacity map at (i + 0.5) / n.
+    """
+
+    def __init__(self, colormap: str = "viridis", opacity=None, value_range=None, entries: int = 256):
+        self.colormap = colormap
+        self.lut = lut(colormap, entries)
+        self.entries = int(entries)
+        if opacity is None:
+            self.opacity_points = np.array([[0.0, 1.0], [1.0, 1.0]])
+        else:
+            pts = np.asarray(opacity, dtype=np.float64)
+            if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 1:
+                raise ValueError(f"opacity: expected a sequence of (x, alpha) points, got shape {pts.shape}")
+            if not np.isfinite(pts).all():
+                raise ValueError("opacity: points must be finite")
+            if (np.diff(pts[:, 0]) < 0).any():
+                raise ValueError("opacity: x must be ascending")
+            if ((pts[:, 1] < 0) | (pts[:, 1] > 1)).any():
+                raise ValueError("opacity: alpha must lie in [0, 1]")
+            self.opacity_points = pts
+        if value_range is not None:
+            lo, hi = (float(v) for v in value_range)
+            if not (np.isfinite(np.float32(lo)) and np.isfinite(np.float32(hi))) or lo > hi:
+                raise ValueError(f"value_range: expected finite vmin <= vmax, got {value_range!r}")
+            value_range = (lo, hi)
+        self.value_range = value_range
+
+    def table(self) -> np.ndarray:
+        """(entries, 4) float32: r, g, b in [0, 1] and the opacity factor."""
+        n = self.entries
+        x = (np.arange(n) + 0.5) / n
+        pts = self.opacity_points
+        t = np.empty((n, 4), np.float32)
+        t[:, :3] = self.lut[:, :3].astype(np.float32) / np.float32(255)
+        t[:, 3] = np.interp(x, pts[:, 0], pts[:, 1])
+        return t
+
+    def limits(self, values) -> tuple[np.float32, np.float32]:
+        """(vmin, scale) as float32 for `values`."""
+        lo, hi = self.value_range if self.value_range is not None else value_range(values)
+        scale = np.float32(1.0 / (np.float64(hi) - np.float64(lo))) if hi != lo else np.float32(0)
+        return np.float32(lo), scale
+
+    def __repr__(self):
+        return f"TransferFunction({self.colormap!r}, value_range={self.value_range})"

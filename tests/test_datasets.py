@@ -140,3 +140,14 @@ def test_bad_n(make):
         with pytest.raises(TypeError, match="n"):
             make(bad)
     assert make(np.int64(3))["positions"].shape == (3, 3)
+
+
+def test_explosion():
+    e = datasets.explosion()
+    v = e["volume"]
+    assert v.shape == (96, 96, 96) and v.dtype == np.float32
+    assert 0.05 < (v > 0).mean() < 0.3 and v.max() <= 1 and v.min() >= 0
+    np.testing.assert_array_equal(v, datasets.explosion()["volume"])     # closed form: deterministic
+    assert np.allclose(np.array(e["origin"]) + (np.array(v.shape[::-1]) - 1) * e["spacing"][::-1], 1.0)
+    with pytest.raises(ValueError, match="shape"):
+        datasets.explosion((1, 4, 4))

@@ -2,6 +2,7 @@
 device LBVH, and ray marching that composites every Gaussian a ray meets in
 depth order (Sharma & Schmalstieg; 3D Gaussian Ray Tracing)."""
 
+from ..colormap import TransferFunction  # noqa: F401  (clvis.gauss.TransferFunction, as before)
 from .bvh import BVH, BVH_NODE_DTYPE, build_bvh
 from .gaussians import Gaussians
 from .lod import LODS, LodRow, LodTable, gaussians_from_volume, lod_table
@@ -10,8 +11,6 @@ from .render import (
            GAUSSIAN_DTYPE,
            GaussianImage,
            GaussianRenderer,
-           TransferFunction,
-           ray_buffer,
            render_gaussians,
 )
 from .sparse import SparseVolume, read_vdb
@@ -27,13 +26,11 @@ __all__ = [
            "LodRow",
            "LodTable",
            "SparseVolume",
-           "TransferFunction",
            "build_bvh",
            "gaussians_from_points",
            "gaussians_from_volume",
            "knn_mean_distance",
            "lod_table",
-           "ray_buffer",
            "read_vdb",
            "render_gaussians",
 ]

@@ -31,7 +31,7 @@ import time
 import numpy as np
 import pyopencl as cl
 
-from .. import runtime
+from .. import morton, runtime
 from .._arrays import check_array, resolve_queue, to_device
 from ..errors import DataError, DeviceError
 from ..primitives import radix_sort
@@ -136,12 +136,6 @@ def _read_bounds(queue, bd, n: int):
     return clo, chi, blo, bhi
 
 
-def _scale(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """1023 / extent per axis as float32 (0 for a flat axis): raster.morton_order's rule."""
-    ext = hi.astype(np.float64) - lo
-    return np.where(ext > 0, 1023.0 / np.where(ext > 0, ext, 1.0), 0.0).astype(np.float32)
-
-
 def build_bvh(boxes, *, queue=None) -> BVH:
     """Build an LBVH over axis-aligned boxes on the device.
 
@@ -173,7 +167,7 @@ def build_bvh(boxes, *, queue=None) -> BVH:
     # -0.0 -> +0.0 (which zero an item keeps depends on the rows it saw): the
     # same codes, and bounds that do not depend on how rows fell to items
     clo, chi, blo, bhi = (a + np.float32(0) for a in (clo, chi, blo, bhi))
-    scale = _scale(clo, chi)
+    scale = morton.scale(clo, chi)
 
     codes = e(queue, n, np.uint32, "BVH Morton codes")
     iota = e(queue, n, np.uint32, "BVH order")

@@ -27,10 +27,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import colormap as _colormap
 from .. import runtime
-from .._arrays import nonnegative_int, resolve_queue
-from ..camera import Camera
+from .._arrays import nonnegative_int, positive_int, resolve_queue
+from ..camera import Camera, ray_buffer
+from ..colormap import TransferFunction
 from ..errors import DeviceError
 from .bvh import build_bvh
 from .gaussians import Gaussians
@@ -40,8 +40,6 @@ __all__ = [
     "MODELS",
     "GaussianImage",
     "GaussianRenderer",
-    "TransferFunction",
-    "ray_buffer",
     "render_gaussians",
 ]
 
@@ -52,97 +50,6 @@ TILE = 8
 
 GAUSSIAN_DTYPE = np.dtype([("mean", np.float32, 3), ("value", np.float32), ("w", np.float32, 9),
                            ("opacity", np.float32)])
-
-
-class TransferFunction:
-    """A Gaussian's value -> colour (a matplotlib colormap) and an opacity factor
-    (piecewise linear).
-
-    Parameters
-    ----------
-    colormap : matplotlib colormap name.
-    opacity : None (1 everywhere) or a sequence of (x, alpha) points, x in [0, 1]
-        along the normalised value range (ascending), alpha in [0, 1]; linear
-        in between, constant beyond the ends.
-    value_range : (vmin, vmax) or None (the finite min and max of the values).
-    entries : table size n. Value v takes entry
-        clamp(floor(((v - vmin) * scale) * n), 0, n - 1), scale = 1 / (vmax - vmin)
-        (0 when vmin == vmax), as clvis.colormap.apply does; entry i has the
-        colormap's colour i and the opacity map at (i + 0.5) / n.
-    """
-
-    def __init__(self, colormap: str = "viridis", opacity=None, value_range=None, entries: int = 256):
-        self.colormap = colormap
-        self.lut = _colormap.lut(colormap, entries)
-        self.entries = int(entries)
-        if opacity is None:
-            self.opacity_points = np.array([[0.0, 1.0], [1.0, 1.0]])
-        else:
-            pts = np.asarray(opacity, dtype=np.float64)
-            if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 1:
-                raise ValueError(f"opacity: expected a sequence of (x, alpha) points, got shape {pts.shape}")
-            if not np.isfinite(pts).all():
-                raise ValueError("opacity: points must be finite")
-            if (np.diff(pts[:, 0]) < 0).any():
-                raise ValueError("opacity: x must be ascending")
-            if ((pts[:, 1] < 0) | (pts[:, 1] > 1)).any():
-                raise ValueError("opacity: alpha must lie in [0, 1]")
-            self.opacity_points = pts
-        if value_range is not None:
-            lo, hi = (float(v) for v in value_range)
-            if not (np.isfinite(np.float32(lo)) and np.isfinite(np.float32(hi))) or lo > hi:
-                raise ValueError(f"value_range: expected finite vmin <= vmax, got {value_range!r}")
-            value_range = (lo, hi)
-        self.value_range = value_range
-
-    def table(self) -> np.ndarray:
-        """(entries, 4) float32: r, g, b in [0, 1] and the opacity factor."""
-        n = self.entries
-        x = (np.arange(n) + 0.5) / n
-        pts = self.opacity_points
-        t = np.empty((n, 4), np.float32)
-        t[:, :3] = self.lut[:, :3].astype(np.float32) / np.float32(255)
-        t[:, 3] = np.interp(x, pts[:, 0], pts[:, 1])
-        return t
-
-    def limits(self, values) -> tuple[np.float32, np.float32]:
-        """(vmin, scale) as float32 for `values`."""
-        lo, hi = self.value_range if self.value_range is not None else _colormap.value_range(values)
-        scale = np.float32(1.0 / (np.float64(hi) - np.float64(lo))) if hi != lo else np.float32(0)
-        return np.float32(lo), scale
-
-    def __repr__(self):
-        return f"TransferFunction({self.colormap!r}, value_range={self.value_range})"
-
-
-def ray_buffer(camera: Camera, width: int, height: int) -> np.ndarray:
-    """The 22 float32 camera-ray coefficients of clvis/gauss.h for a
-    `width` x `height` image: pixel centre (u, v) = (px + 0.5, py + 0.5) has its
-    ray origin on the near plane, o = o0 + u ou + v ov, and direction
-    dd = d0 + u du + v dv towards the far plane (computed in float64 from the
-    inverse of projection @ view, then rounded), plus the depth row."""
-    if not isinstance(camera, Camera):
-        raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
-    w, h = _size("width", width), _size("height", height)
-    inv = np.linalg.inv(camera.matrix)
-
-    def point(u, v, zn):
-        p = inv @ np.array([u / w * 2 - 1, 1 - v / h * 2, zn, 1.0])
-        return p[:3] / p[3]
-
-    near = [point(0, 0, -1), point(1, 0, -1), point(0, 1, -1)]
-    far = [point(0, 0, 1), point(1, 0, 1), point(0, 1, 1)]
-    o0, ou, ov = near[0], near[1] - near[0], near[2] - near[0]
-    f0, fu, fv = far[0], far[1] - far[0], far[2] - far[0]
-    buf = np.concatenate([o0, ou, ov, f0 - o0, fu - ou, fv - ov, camera.depth_row])
-    return buf.astype(np.float32)
-
-
-def _size(name, v) -> int:
-    v = nonnegative_int(name, v)
-    if v < 1:
-        raise ValueError(f"{name}: must be at least 1, got {v}")
-    return v
 
 
 @dataclass
@@ -262,7 +169,7 @@ class GaussianRenderer:
         and reads nothing back: ``hits`` and ``rounds`` are then None and
         ``stats["ray_stats"]`` is the (H, W, 2) uint32 device array of both."""
         q = self.queue
-        w, h = _size("width", width), _size("height", height)
+        w, h = positive_int("width", width), positive_int("height", height)
         if w * h >= 2 ** 32:
             raise DeviceError(f"width x height: {w * h} pixels; at most 2^32 - 1")
         cam = ray_buffer(camera, w, h)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..raster import morton_codes as _point_codes
+from ..morton import morton_codes as _point_codes
 
 __all__ = ["BVH_LEAF", "BVH_NODE_DTYPE", "BVH_NONE", "build_bvh", "check_bvh", "morton_codes"]
 
@@ -25,7 +25,7 @@ BVH_NONE = np.uint32(0xFFFFFFFF)
 
 def morton_codes(boxes) -> np.ndarray:
     """30-bit Morton codes of the centres (lo + hi) * 0.5 (float32) over their
-    bounding box (clvis.reference.raster.morton_codes's quantization)."""
+    bounding box (clvis.reference.morton.morton_codes's quantization)."""
     b = np.asarray(boxes, np.float32).reshape(-1, 6)
     centres = (b[:, :3] + b[:, 3:]) * np.float32(0.5)
     return _point_codes(centres)

@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from ..camera import camera_rays
+
 FLAT = np.float32(1e-3)
 TINY = np.float32(1e-30)
 T_STOP = 1e-3
@@ -51,18 +53,6 @@ def gaussian_boxes(means, scales, rotations, cutoff):
     return out
 
 
-def camera_rays(cam, width, height):
-    """Origins and unit directions (H*W, 3) float32 from the 22-float ray buffer."""
-    cam = np.asarray(cam, np.float32)
-    py, px = np.mgrid[0:height, 0:width]
-    u = (px.ravel().astype(np.float32) + np.float32(0.5))[:, None]
-    v = (py.ravel().astype(np.float32) + np.float32(0.5))[:, None]
-    o = (cam[0:3] + u * cam[3:6]) + v * cam[6:9]
-    dd = (cam[9:12] + u * cam[12:15]) + v * cam[15:18]
-    length = np.sqrt((dd[:, 0] * dd[:, 0] + dd[:, 1] * dd[:, 1]) + dd[:, 2] * dd[:, 2])
-    return o, dd / length[:, None]
-
-
 def _dot(a0, a1, a2, b0, b1, b2):
     return (a0 * b0 + a1 * b1) + a2 * b2
 
@@ -97,7 +87,7 @@ def render(means, scales, rotations, values, opacities, cam, width, height, tabl
            model="max_response", cutoff=3.0, density=1.0):
     """rgba (H, W, 4), depth (H, W), hits (H, W): brute force.
 
-    cam: the 22-float ray buffer (clvis.gauss.render.ray_buffer); table, vmin,
+    cam: the 22-float ray buffer (clvis.camera.ray_buffer); table, vmin,
     scale: the transfer function (TransferFunction.table() and .limits())."""
     o, d = camera_rays(cam, width, height)
     rgba, depth, count = render_rays(means, scales, rotations, values, opacities, o, d, cam, table, vmin,

@@ -14,10 +14,10 @@ import pytest
 from clvis import datasets, runtime, zfp
 from clvis._arrays import to_device
 from clvis.camera import Camera
-from clvis.gauss.render import ray_buffer
-from clvis.iso_raytrace import raytrace_blocks
+from clvis.camera import ray_buffer
+from clvis.iso.raytrace import raytrace_blocks
 from clvis.reference import iso
-from clvis.reference.gauss.render import camera_rays
+from clvis.reference.camera import camera_rays
 
 TINY = np.float32(iso.TINY_DIR)
 

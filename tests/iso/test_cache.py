@@ -1,5 +1,5 @@
-"""The device LRU block cache (clvis.iso_cache, kernels_cl/iso/cache.cl):
-equal, update by update, to the NumPy model (clvis.reference.iso_cache) —
+"""The device LRU block cache (clvis.iso.cache, kernels_cl/iso/cache.cl):
+equal, update by update, to the NumPy model (clvis.reference.iso.cache) —
 slot_of_block, block_of_slot, ages, capacity, stats — over random sequences
 of needed sets (growth, all, none, repeats, marked neighbourhoods); the
 cached bricks equal clvis.zfp.decode_blocks bit for bit; mark_blocks equals
@@ -13,8 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from clvis import runtime, zfp
-from clvis.iso_cache import BlockCache, mark_blocks
-from clvis.reference import iso_cache as ref
+from clvis.iso.cache import BlockCache, mark_blocks
+from clvis.reference.iso import cache as ref
 
 SHAPES = [(4, 4, 4), (9, 10, 11), (13, 8, 21), (1, 30, 5)]
 

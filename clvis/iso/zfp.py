@@ -14,7 +14,7 @@ The format: rate r (an integer, 1..32) gives every 4x4x4 block exactly
 nx = X, ny = Y, nz = Z of a [Z, Y, X] volume, partial blocks at the edges
 padded by zfp on encode. Inside a brick, value i is voxel (x, y, z) of the
 block with i = x + 4 y + 16 z. The steps are spelled out in
-``clvis.reference.zfp``.
+``clvis.reference.iso.zfp``.
 
 Validation: a stream's length is fixed by its shape and rate
 (:func:`expected_nbytes`); a shorter or longer one raises
@@ -32,9 +32,9 @@ import math
 
 import numpy as np
 
-from . import runtime
-from ._arrays import is_device, nonnegative_int, resolve_queue, result
-from .errors import DataError
+from .. import runtime
+from .._arrays import is_device, nonnegative_int, resolve_queue, result
+from ..errors import DataError
 
 __all__ = ["BRICK_VALUES", "MAX_RATE", "MIN_RATE", "PROFILES", "ZfpVolume", "compress", "decode",
            "decode_blocks", "expected_nbytes"]

@@ -1,4 +1,4 @@
-"""NumPy model of the device LRU block cache (clvis.iso_cache, kernels_cl/iso/cache.cl).
+"""NumPy model of the device LRU block cache (clvis.iso.cache, kernels_cl/iso/cache.cl).
 
 The policy, one :meth:`BlockCache.update` per pass (the same steps, the same
 tie rules as the device):
@@ -17,14 +17,14 @@ tie rules as the device):
    take the missing blocks: missing[j] goes to slot order[j]; a previous
    block there is evicted (slot_of_block = -1). New blocks get age 0.
 5. the new blocks are decoded into their slots (the device does it; this
-   model keeps no bricks: they are clvis.zfp.decode_blocks of block_of_slot).
+   model keeps no bricks: they are clvis.iso.zfp.decode_blocks of block_of_slot).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-FREE = 0xFFFFFFFF
+FREE = 0xFFFFFFFF          # restated from clvis.iso.cache (the library never imports this module)
 AGE_MAX = 0xFFFFFFFE
 
 

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 import clvis
 from clvis import raster, runtime
-from clvis.camera import Camera
+from clvis.camera import CAMERA_DTYPE, Camera, camera_buffer
 from clvis.reference import raster as ref
 
 W, H = 64, 48
@@ -289,9 +289,9 @@ def test_layouts(device):
     clvis/camera.h loads it, and the visibility word as two uints."""
     q = runtime.queue_for(device)
     cam = _cam()
-    buf = raster.camera_buffer(cam)
-    assert raster.CAMERA_DTYPE.itemsize == 80 and buf.dtype == np.float32 and buf.size == 20
-    rec = buf.view(raster.CAMERA_DTYPE)[0]
+    buf = camera_buffer(cam)
+    assert CAMERA_DTYPE.itemsize == 80 and buf.dtype == np.float32 and buf.size == 20
+    rec = buf.view(CAMERA_DTYPE)[0]
     np.testing.assert_array_equal(rec["m"], cam.matrix.astype(np.float32))
     np.testing.assert_array_equal(rec["d"], cam.depth_row.astype(np.float32))
     src = """
@@ -329,7 +329,7 @@ def test_depth_filter(queue):
     cam = Camera.look_at((0, -6, 0), (0, 0, 0), (0, 0, 1), fov_y=40, aspect=1.0, near=0.5, far=20)
     g = clvis.rasterize(pos, cam, 96, 96, queue=queue)
     f = clvis.depth_filter(g, levels=4, queue=queue)
-    from clvis.reference import depthfilter as ref_df
+    from clvis.reference.raster import depth_filter as ref_df
     np.testing.assert_array_equal(f.keep, ref_df.depth_filter_mask(g.depth, 4))
     from_near = g.covered & (g.index < n)
     from_far = g.covered & (g.index >= n)

@@ -1,6 +1,6 @@
 """Macrocell traversal with speculation (kernels_cl/iso/traverse.cl) against
-clvis.reference.iso_traverse (bit for bit), against a plain fine-grid block DDA
-(the host loop of tests/test_iso_raytrace.py, zero-length blocks dropped), and
+clvis.reference.iso.traverse (bit for bit), against a plain fine-grid block DDA
+(the host loop of tests/iso/test_raytrace.py, zero-length blocks dropped), and
 end to end: candidates handed to raytrace_blocks give the image of
 clvis.reference.iso.render by clvis.reference.iso.agreement."""
 
@@ -14,13 +14,13 @@ from hypothesis import strategies as st
 from clvis import datasets, runtime, zfp
 from clvis._arrays import to_device
 from clvis.camera import Camera
-from clvis.gauss.render import ray_buffer
-from clvis.iso import macrocell_grids
-from clvis.iso_raytrace import raytrace_blocks
-from clvis.iso_traverse import init_rays, macro_traverse
+from clvis.camera import ray_buffer
+from clvis.iso.macrocell import macrocell_grids
+from clvis.iso.raytrace import raytrace_blocks
+from clvis.iso.traverse import init_rays, macro_traverse
 from clvis.reference import iso
-from clvis.reference import iso_traverse as ref
-from clvis.reference.gauss.render import camera_rays
+from clvis.reference.iso import traverse as ref
+from clvis.reference.camera import camera_rays
 
 NO = 0xFFFFFFFF
 CAM = Camera.look_at((1.7, -2.2, 1.5), (0, 0, 0), (0, 0, 1), fov_y=40, near=0.1, far=20)
@@ -109,7 +109,7 @@ def _scene(q, name, n, cam, w, h, isovalue, no_coarse=False):
 
 
 def _plain_dda(s: Scene):
-    """The fine block DDA of tests/test_iso_raytrace.py (ties x < y < z) over
+    """The fine block DDA of tests/iso/test_raytrace.py (ties x < y < z) over
     every block, keeping active blocks with a segment of positive length."""
     O, D, inv, t_enter, t_exit = ref.ray_setup(s.buf, s.w, s.h, s.shape, s.spacing, s.origin)
     n = np.array(s.shape[::-1], np.int64)

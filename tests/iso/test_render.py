@@ -153,10 +153,10 @@ def test_dense_input_and_bad_arguments(queue):
 def test_hits_lie_on_the_marching_cubes_mesh(queue):
     """The renderer's hit points (o + t d) against scikit-image's mesh of the decoded volume."""
     from skimage.measure import marching_cubes
-    from test_iso_reference import _mesh_distance
+    from meshes import mesh_distance as _mesh_distance
 
-    from clvis.gauss.render import ray_buffer
-    from clvis.reference.gauss.render import camera_rays
+    from clvis.camera import ray_buffer
+    from clvis.reference.camera import camera_rays
 
     d = datasets.marschner_lobb(64)
     zv = zfp.compress(d["volume"], 16)

@@ -23,7 +23,9 @@ bounding box each; batches the camera cannot see are skipped without reading
 a point. :class:`Rasterizer` keeps a cloud on the device (optionally in Morton
 order, so batches are compact and early-z rejects most points) for rendering
 many views; :func:`rasterize` is the one-call form. Kernels:
-``kernels_cl/raster/*.cl``; NumPy definitions: ``clvis.reference.raster``.
+``kernels_cl/raster/render.cl`` and ``resolve.cl`` (this module drives both:
+MACR is render, then resolve), ``morton.cl``; NumPy definitions:
+``clvis.reference.raster``.
 """
 
 from __future__ import annotations
@@ -35,24 +37,20 @@ import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 
-from . import colormap as _colormap
-from . import depthfilter as _depth_filter
-from . import runtime
-from ._arrays import check_array, is_device, resolve_queue
-from .errors import DeviceError
-from .primitives import radix_sort
+from .. import colormap as _colormap
+from .. import morton, runtime
+from .._arrays import check_array, is_device, resolve_queue
+from ..camera import CAMERA_DTYPE, camera_buffer  # noqa: F401  (re-exported)
+from ..errors import DeviceError
+from ..primitives import radix_sort
 
 __all__ = [
-    "CAMERA_DTYPE",
     "EMPTY",
     "MAX_ATTRIBUTES",
     "MAX_IMAGE_SIDE",
     "VIS_DTYPE",
-    "FilteredImage",
     "GBuffers",
     "Rasterizer",
-    "camera_buffer",
-    "depth_filter",
     "morton_order",
     "rasterize",
 ]
@@ -65,7 +63,6 @@ _F32_MAX = float(np.finfo(np.float32).max)
 # a visibility word as two uints (little-endian ulong: dkey << 32 | id)
 VIS_DTYPE = np.dtype([("id", "<u4"), ("dkey", "<u4")])
 # the camera buffer of clvis/camera.h
-CAMERA_DTYPE = np.dtype([("m", "<f4", (4, 4)), ("d", "<f4", (4,))])
 _FLAGS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 # local size of the per-batch kernels: one work-item walking a batch on CPUs,
 # a group striding through it on GPUs
@@ -107,18 +104,6 @@ class GBuffers:
     @property
     def shape(self) -> tuple[int, int]:
         return self.index.shape
-
-
-def camera_buffer(camera) -> np.ndarray:
-    """The 20 float32 of clvis/camera.h: M = projection @ view, then the depth row."""
-    m = np.asarray(camera.matrix, np.float64)
-    d = np.asarray(camera.depth_row, np.float64)
-    if m.shape != (4, 4) or d.shape != (4,) or not (np.isfinite(m).all() and np.isfinite(d).all()):
-        raise ValueError("camera: its matrix must be a finite 4x4 array and its depth row finite")
-    out = np.zeros(1, CAMERA_DTYPE)
-    out["m"][0] = m
-    out["d"][0] = d
-    return out.view(np.float32)
 
 
 def _check_camera(camera):
@@ -517,8 +502,7 @@ def morton_order(positions, *, queue=None):
     lo, hi = bounds[:, :3].min(axis=0), bounds[:, 3:].max(axis=0)
     if not (lo <= hi).all():            # no finite point: every code is 0xFFFFFFFF
         lo = hi = np.zeros(3, np.float32)
-    ext = hi.astype(np.float64) - lo
-    scale = np.where(ext > 0, 1023.0 / np.where(ext > 0, ext, 1.0), 0.0).astype(np.float32)
+    scale = morton.scale(lo, hi)
     codes = runtime.empty(queue, n, np.uint32, "Morton codes")
     k = runtime.get_kernel(queue, "raster/morton.cl", "morton_codes", {}, ())
     runtime.launch(queue, k, *_items(queue, n), p.base_data, np.uint32(n), *lo.astype(np.float32),
@@ -542,40 +526,3 @@ def rasterize(cloud_or_positions, camera, width: int, height: int, *, colors=Non
                    radius=radius, morton=morton, batch_size=batch_size, queue=queue)
     return r.render(camera, width, height, color_by=color_by, colormap=colormap,
                     value_range=value_range, soft_z=soft_z)
-
-
-@dataclasses.dataclass
-class FilteredImage:
-    """What :func:`depth_filter` keeps. keep: bool [H, W] (a point is there and
-    kept); depth: float32, +inf where removed or empty; rgba: uint8 [H, W, 4]
-    with alpha 0 where removed (None for a depth-only input); rgbda: float32
-    [H, W, 5] = (r, g, b in [0, 1], depth, alpha in {0, 1}), the input of the
-    LiDAR paper's network."""
-
-    keep: np.ndarray
-    depth: np.ndarray
-    rgba: np.ndarray | None
-    rgbda: np.ndarray
-
-
-def depth_filter(gbuffers_or_depth, levels: int = _depth_filter.LEVELS,
-                 filter_strength: float = _depth_filter.FILTER_STRENGTH, *,
-                 edge_threshold: float = _depth_filter.EDGE_THRESHOLD, queue=None) -> FilteredImage:
-    """Remove background points seen through holes in the foreground (the
-    hierarchical min-pool filter of Vanherck, Zoomers et al. 2025; the rules
-    are in ``clvis.reference.depthfilter``). gbuffers_or_depth: a
-    :class:`GBuffers` or an [H, W] float32 depth image (+inf = empty)."""
-    if isinstance(gbuffers_or_depth, GBuffers):
-        depth, rgba = gbuffers_or_depth.depth, gbuffers_or_depth.rgba
-    else:
-        depth, rgba = gbuffers_or_depth, None
-    keep = _depth_filter.depth_filter_mask(depth, levels, filter_strength,
-                                           edge_threshold=edge_threshold, queue=queue)
-    depth = np.asarray(depth)
-    colors = rgba if rgba is not None else np.zeros(depth.shape + (4,), np.uint8)
-    out_rgbda = _depth_filter.rgbda(colors, depth, keep, queue=queue)
-    kept_rgba = None
-    if rgba is not None:
-        kept_rgba = np.where(keep[..., None], rgba, 0).astype(np.uint8)
-    return FilteredImage(keep=keep, depth=np.where(keep, depth, np.float32(np.inf)).astype(np.float32),
-                         rgba=kept_rgba, rgbda=out_rgbda)

@@ -10,7 +10,7 @@ A pass, for the rays still active (kernels_cl/iso/):
    without speculation);
 2. grouping: the (ray, candidate) items are compacted and sorted by block
    (clvis.compact_indices, clvis.radix_sort);
-3. the LRU block cache (clvis.iso_cache) decodes the blocks the pass needs
+3. the LRU block cache (clvis.iso.cache) decodes the blocks the pass needs
    (the candidates and their +x/+y/+z neighbours) that it does not hold;
 4. block raytracing (raytrace.cl, ITEMS mode): a work-group per block with
    its 5^3 dual brick in local memory, the first root of each cell's cubic;
@@ -19,7 +19,7 @@ A pass, for the rays still active (kernels_cl/iso/):
    64-bit atomics, else by scanning its candidates in order (same result);
    rays without a hit go on from where the traversal left them.
 
-The rules (rays, dual grid, root finding, shading) are clvis/reference/iso.py's.
+The rules (rays, dual grid, root finding, shading) are clvis.reference.iso's.
 """
 
 from __future__ import annotations
@@ -29,73 +29,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import runtime
-from ._arrays import resolve_queue
-from .camera import Camera
-from .errors import DataError
-from .gauss.render import ray_buffer
-from .iso_cache import BlockCache, mark_blocks
-from .iso_raytrace import raytrace_blocks
-from .iso_traverse import init_rays, macro_traverse
-from .primitives import compact, compact_indices, radix_sort
+from .. import runtime
+from .._arrays import positive_int, resolve_queue
+from ..camera import Camera, ray_buffer
+from ..errors import DataError
+from ..primitives import compact, compact_indices, radix_sort
+from .cache import BlockCache, mark_blocks
+from .macrocell import macrocell_grids
+from .raytrace import raytrace_blocks
+from .traverse import init_rays, macro_traverse
 from .zfp import PROFILES as _ZFP_PROFILES
-from .zfp import ZfpVolume, _stream_buffer, compress
+from .zfp import ZfpVolume, compress
 
-__all__ = ["IsoImage", "IsoRenderer", "MacrocellGrids", "macrocell_grids"]
+__all__ = ["IsoImage", "IsoRenderer"]
 
 MAX_SPEC = 64
 _PASS = "iso/pass.cl"
-
-_SRC = "iso/macrocell.cl"
-
-
-@dataclass
-class MacrocellGrids:
-    """Value ranges of the fine grid (one cell per ZFP block, dilated by the
-    +x/+y/+z neighbour samples: the dual grid) and the coarse grid (4^3
-    blocks). Each is a (Z, Y, X, 2) float32 array of (lo, hi); (+inf, -inf)
-    where a block holds no dual cell. Device arrays when built with host=False."""
-    fine: object
-    coarse: object
-
-    def active(self, isovalue: float):
-        """Host boolean masks (fine, coarse): the cells whose range holds `isovalue`."""
-        f = self.fine if isinstance(self.fine, np.ndarray) else self.fine.get()
-        c = self.coarse if isinstance(self.coarse, np.ndarray) else self.coarse.get()
-        v = np.float32(isovalue)
-        return (f[..., 0] <= v) & (v <= f[..., 1]), (c[..., 0] <= v) & (v <= c[..., 1])
-
-
-def macrocell_grids(volume: ZfpVolume, *, queue=None, host: bool = True) -> MacrocellGrids:
-    """The fine and coarse macrocell grids of a compressed volume, built on the
-    device from its stream (each block decoded once, kernels_cl/iso/macrocell.cl).
-    Equal to clvis.reference.iso.block_ranges / coarse_ranges of the decoded volume."""
-    if not isinstance(volume, ZfpVolume):
-        raise TypeError(f"volume: expected a clvis.zfp.ZfpVolume, got {type(volume).__name__}")
-    q = resolve_queue(queue)
-    nz, ny, nx = volume.shape
-    if min(volume.shape) < 2:
-        raise ValueError(f"volume: every axis needs at least 2 samples for a dual grid, got {volume.shape}")
-    nbz, nby, nbx = (-(-n // 4) for n in volume.shape)
-    ncz, ncy, ncx = (-(-n // 4) for n in (nbz, nby, nbx))
-    nb, nc = nbx * nby * nbz, ncx * ncy * ncz
-    wg = _ZFP_PROFILES[runtime.tuning_profile(q)]["wg"]
-    faces = runtime.empty(q, (nb, 8, 2), np.float32, "block faces")
-    fine = runtime.empty(q, (nbz, nby, nbx, 2), np.float32, "fine macrocells")
-    coarse = runtime.empty(q, (ncz, ncy, ncx, 2), np.float32, "coarse macrocells")
-    dims = (np.uint32(nx), np.uint32(ny), np.uint32(nz))
-    k = runtime.get_kernel(q, _SRC, "block_faces", {})
-    runtime.launch(q, k, -(-nb // wg) * wg, wg, _stream_buffer(q, volume.stream), np.uint32(volume.rate),
-                   *dims, faces.base_data)
-    k = runtime.get_kernel(q, _SRC, "block_ranges", {})
-    runtime.launch(q, k, -(-nb // wg) * wg, wg, faces.base_data, *dims, fine.base_data)
-    k = runtime.get_kernel(q, _SRC, "coarse_ranges", {})
-    runtime.launch(q, k, -(-nc // wg) * wg, wg, fine.base_data, np.uint32(nbx), np.uint32(nby),
-                   np.uint32(nbz), coarse.base_data)
-    if host:
-        return MacrocellGrids(fine.get(), coarse.get())
-    return MacrocellGrids(fine, coarse)
-
 
 @dataclass
 class IsoImage:
@@ -173,14 +122,14 @@ class IsoRenderer:
         """The pass loop: after each pass, a function that reads the image back."""
         if not isinstance(camera, Camera):
             raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
-        w, h = _positive_int("width", width), _positive_int("height", height)
+        w, h = positive_int("width", width), positive_int("height", height)
         iso = float(isovalue)
         if not np.isfinite(np.float32(iso)):
             raise ValueError(f"isovalue: expected a finite number, got {isovalue!r}")
         completion = float(completion)
         if not 0.0 < completion <= 1.0:
             raise ValueError(f"completion: expected a fraction in (0, 1], got {completion!r}")
-        s = _positive_int("start_speculation", start_speculation)
+        s = positive_int("start_speculation", start_speculation)
         q, zv = self.queue, self.volume
         npix = w * h
         shape, spacing, origin = zv.shape, self.spacing, self.origin
@@ -292,14 +241,6 @@ class IsoRenderer:
 def _fill(q, a, value) -> None:
     import pyopencl as cl
     cl.enqueue_fill_buffer(q, a.base_data, np.array([value]), 0, a.nbytes)
-
-
-def _positive_int(name, v) -> int:
-    from ._arrays import nonnegative_int
-    v = nonnegative_int(name, v)
-    if v < 1:
-        raise ValueError(f"{name}: must be at least 1, got {v}")
-    return v
 
 
 def _triple(name, v, positive: bool) -> tuple:

@@ -7,7 +7,7 @@ Neural Rendering of LiDAR Point Clouds" (Eurographics 2025 short papers), and
 :func:`rgbda` assembles the filtered RGBDA image their network takes.
 
 The exact definition (and which parts follow the paper) is the docstring of
-:mod:`clvis.reference.depthfilter`; the kernels are
+:mod:`clvis.reference.raster.depth_filter`; the kernels are
 ``kernels_cl/raster/depth_filter.cl`` and give identical masks on every device.
 Each function takes numpy arrays (returns numpy) or ``pyopencl.array.Array``
 (returns device arrays on the same queue, no host round trip beyond the
@@ -16,20 +16,24 @@ Each function takes numpy arrays (returns numpy) or ``pyopencl.array.Array``
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 
 import numpy as np
 
-from . import runtime
-from ._arrays import buf, check_array, is_device, resolve_queue, result, to_device
-from .errors import DataError
+from .. import runtime
+from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device
+from ..errors import DataError
+from .render import GBuffers
 
 __all__ = [
     "EDGE_THRESHOLD",
     "FILTER_STRENGTH",
     "LEVELS",
     "MAX_LEVELS",
+    "FilteredImage",
+    "depth_filter",
     "depth_filter_mask",
     "level_shapes",
     "rgbda",
@@ -196,3 +200,40 @@ def rgbda(rgba, depth, keep, *, queue=None):
         _launcher(queue)("depth_rgbda", n, buf(rd), np.uint32(c), buf(dd), buf(kd),
                          np.uint64(n), buf(out))
     return result(out, host)
+
+
+@dataclasses.dataclass
+class FilteredImage:
+    """What :func:`depth_filter` keeps. keep: bool [H, W] (a point is there and
+    kept); depth: float32, +inf where removed or empty; rgba: uint8 [H, W, 4]
+    with alpha 0 where removed (None for a depth-only input); rgbda: float32
+    [H, W, 5] = (r, g, b in [0, 1], depth, alpha in {0, 1}), the input of the
+    LiDAR paper's network."""
+
+    keep: np.ndarray
+    depth: np.ndarray
+    rgba: np.ndarray | None
+    rgbda: np.ndarray
+
+
+def depth_filter(gbuffers_or_depth, levels: int = LEVELS,
+                 filter_strength: float = FILTER_STRENGTH, *,
+                 edge_threshold: float = EDGE_THRESHOLD, queue=None) -> FilteredImage:
+    """Remove background points seen through holes in the foreground (the
+    hierarchical min-pool filter of Vanherck, Zoomers et al. 2025; the rules
+    are in ``clvis.reference.raster.depth_filter``). gbuffers_or_depth: a
+    :class:`GBuffers` or an [H, W] float32 depth image (+inf = empty)."""
+    if isinstance(gbuffers_or_depth, GBuffers):
+        depth, rgba = gbuffers_or_depth.depth, gbuffers_or_depth.rgba
+    else:
+        depth, rgba = gbuffers_or_depth, None
+    keep = depth_filter_mask(depth, levels, filter_strength,
+                                           edge_threshold=edge_threshold, queue=queue)
+    depth = np.asarray(depth)
+    colors = rgba if rgba is not None else np.zeros(depth.shape + (4,), np.uint8)
+    out_rgbda = rgbda(colors, depth, keep, queue=queue)
+    kept_rgba = None
+    if rgba is not None:
+        kept_rgba = np.where(keep[..., None], rgba, 0).astype(np.uint8)
+    return FilteredImage(keep=keep, depth=np.where(keep, depth, np.float32(np.inf)).astype(np.float32),
+                         rgba=kept_rgba, rgbda=out_rgbda)

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 import clvis
 from clvis import runtime
-from clvis.camera import Camera
+from clvis.camera import Camera, ray_buffer
+from clvis.colormap import TransferFunction
 from clvis.gauss import render as gr
 from clvis.gauss.gaussians import Gaussians
 from clvis.gauss.points import frames_along, gaussians_from_points
@@ -39,12 +40,12 @@ def _random(n, seed=0, spread=1.0, scale=(0.05, 0.3), opacity=(0.05, 0.9)):
 
 def _reference(g, cam, w, h, tf, model, cutoff=3.0, density=1.0):
     vmin, scale = tf.limits(g.values)
-    return ref.render(g.means, g.scales, g.rotations, g.values, g.opacities, gr.ray_buffer(cam, w, h), w, h,
+    return ref.render(g.means, g.scales, g.rotations, g.values, g.opacities, ray_buffer(cam, w, h), w, h,
                       tf.table(), vmin, scale, model=model, cutoff=cutoff, density=density)
 
 
 def _check(queue, g, cam, w=W, h=H, model="max_response", k=16, tf=None, cutoff=3.0, density=1.0):
-    tf = tf or gr.TransferFunction("jet")
+    tf = tf or TransferFunction("jet")
     img = gr.GaussianRenderer(g, tf, model=model, k=k, cutoff=cutoff, density=density,
                               queue=queue).render(cam, w, h)
     rgba, depth, hits = _reference(g, cam, w, h, tf, model, cutoff, density)
@@ -147,7 +148,7 @@ def test_axis_aligned_rays(queue):
 
 
 def test_transfer_function_and_density(queue):
-    tf = gr.TransferFunction("viridis", opacity=[(0.0, 0.0), (0.3, 0.0), (0.6, 1.0), (1.0, 0.5)],
+    tf = TransferFunction("viridis", opacity=[(0.0, 0.0), (0.3, 0.0), (0.6, 1.0), (1.0, 0.5)],
                              value_range=(-0.5, 1.5))
     g = _random(250, seed=8)
     _check(queue, g, _cam(), tf=tf)
@@ -240,9 +241,9 @@ def test_bad_input(queue):
     with pytest.raises(ValueError, match="width"):
         r.render(_cam(), 0, 4)
     with pytest.raises(ValueError, match="opacity"):
-        gr.TransferFunction(opacity=[(0, 2.0)])
+        TransferFunction(opacity=[(0, 2.0)])
     with pytest.raises(ValueError, match="colormap"):
-        gr.TransferFunction("no-such-map")
+        TransferFunction("no-such-map")
     with pytest.raises(clvis.DataError, match="means"):
         Gaussians([[0, np.nan, 0]], [[1, 1, 1]])
     with pytest.raises(clvis.DataError, match="scales"):

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import runtime
+from .. import runtime
 
 __all__ = ["LOCAL_SIZE", "raytrace_blocks"]
 

@@ -1,5 +1,5 @@
 """iso family, internal: macrocell traversal with speculation
-(kernels_cl/iso/traverse.cl; reference clvis/reference/iso_traverse.py).
+(kernels_cl/iso/traverse.cl; reference clvis/reference/iso/traverse.py).
 
 The progressive pass loop calls :func:`init_rays` once per frame and
 :func:`macro_traverse` once per pass; not public API. Device arrays in, device
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import runtime
-from .primitives import compact_indices
+from .. import runtime
+from ..primitives import compact_indices
 
 __all__ = ["LOCAL_SIZE", "MAX_SPEC", "init_rays", "macro_traverse"]
 

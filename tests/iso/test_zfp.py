@@ -1,7 +1,7 @@
 """ZFP fixed-rate 3-D float decoding (clvis.zfp, kernels_cl/iso/zfp.cl,
 kernels_cl/include/clvis/zfp.h): the OpenCL decode equals zfpy's own
 decompression bit for bit for every integer rate 1..32 on every device and
-both tuning profiles; the NumPy reference (clvis.reference.zfp) equals zfpy
+both tuning profiles; the NumPy reference (clvis.reference.iso.zfp) equals zfpy
 too; bad streams and arguments raise clear errors."""
 
 import functools
@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 import clvis
 from clvis import runtime, zfp
-from clvis.reference import zfp as ref
+from clvis.reference.iso import zfp as ref
 
 F32 = np.float32
 RATES = range(1, 33)

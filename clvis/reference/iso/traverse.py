@@ -1,5 +1,5 @@
 """NumPy reference of the iso family's macrocell traversal with speculation
-(kernels_cl/iso/traverse.cl, wrapped by clvis.iso_traverse).
+(kernels_cl/iso/traverse.cl, wrapped by clvis.iso.traverse).
 
 Everything is float32 with the kernel's operation order (FP_CONTRACT off,
 correctly rounded division), so device and reference give the same block
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gauss.render import camera_rays
+from ..camera import camera_rays
 
 __all__ = ["NO_BLOCK", "init_rays", "macro_traverse", "ray_setup"]
 

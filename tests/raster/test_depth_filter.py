@@ -1,4 +1,4 @@
-"""clvis.depthfilter against clvis.reference.depthfilter (exact), plus the
+"""clvis.raster.depth_filter against clvis.reference.raster.depth_filter (exact), plus the
 filter's meaning on a synthetic scene and its bad-input errors."""
 
 import inspect
@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import clvis
-from clvis import depthfilter as df
-from clvis.reference import depthfilter as ref
+from clvis.raster import depth_filter as df
+from clvis.reference.raster import depth_filter as ref
 
 INF = np.float32(np.inf)
 

@@ -1,4 +1,4 @@
-"""NumPy reference of clvis.depthfilter (clvis.depth_filter): the hierarchical depth filter.
+"""NumPy reference of clvis.raster.depth_filter (clvis.depth_filter): the hierarchical depth filter.
 
 A point cloud rasterized with one pixel per point shows background points
 through the holes between foreground points. Vanherck, Zoomers et al. ("Real-
@@ -64,7 +64,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from clvis.errors import DataError
+from ...errors import DataError
 
 LEVELS = 4
 FILTER_STRENGTH = 1.025

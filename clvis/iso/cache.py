@@ -4,7 +4,7 @@
 Per pass the renderer marks the blocks it needs (:func:`mark_blocks`: the
 visible blocks and their +x/+y/+z/+xy/+xz/+yz/+xyz neighbours, which the dual
 grid's cells reach) and calls :meth:`BlockCache.update` with those flags.
-The policy (``clvis.reference.iso_cache`` is the same, step by step, on the host):
+The policy (``clvis.reference.iso.cache`` is the same, step by step, on the host):
 
 1. missing = the needed blocks not cached, ascending block id (m of them).
 2. candidate slots = free slots and slots whose block is not needed this
@@ -37,14 +37,28 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from . import runtime
-from ._arrays import check_array, is_device, resolve_queue, to_device
-from .errors import DataError
-from .primitives import compact_indices, radix_sort
-from .reference.iso_cache import AGE_MAX, FREE, default_capacity, grown_capacity
+from .. import runtime
+from .._arrays import check_array, is_device, resolve_queue, to_device
+from ..errors import DataError
+from ..primitives import compact_indices, radix_sort
 from .zfp import BRICK_VALUES, ZfpVolume
 
-__all__ = ["AGE_MAX", "FREE", "BlockCache", "mark_blocks"]
+__all__ = ["AGE_MAX", "FREE", "BlockCache", "default_capacity", "grown_capacity", "mark_blocks"]
+
+FREE = 0xFFFFFFFF                  # slot_of_block / block_of_slot: none
+AGE_MAX = 0xFFFFFFFE               # ages saturate here
+
+
+def default_capacity(nblocks: int) -> int:
+    """The initial capacity when none is given: 1/16 of the blocks, at least
+    64, at most nblocks, at least 1."""
+    return max(1, min(nblocks, max(64, -(-nblocks // 16))))
+
+
+def grown_capacity(capacity: int, n_needed: int, nblocks: int) -> int:
+    """The capacity after a pass that needs more free slots than there are:
+    max(n_needed, min(nblocks, ceil(1.5 capacity)))."""
+    return max(n_needed, min(nblocks, -(-3 * capacity // 2)))
 
 _SRC = "iso/cache.cl"
 _WG = 64                           # fixed local size of every cache kernel

@@ -1,0 +1,27 @@
+"""iso family: progressive isosurface raycasting over ZFP-compressed volumes
+(Dyken, Usher, Kumar, TVCG 2024). Module ↔ kernel: zfp.py ↔ zfp.cl,
+macrocell.py ↔ macrocell.cl, traverse.py ↔ traverse.cl, cache.py ↔ cache.cl,
+raytrace.py ↔ raytrace.cl, render.py ↔ pass.cl (the pass loop; ``pass`` is a
+Python keyword)."""
+
+from . import zfp
+from .cache import BlockCache, mark_blocks
+from .macrocell import MacrocellGrids, macrocell_grids
+from .raytrace import raytrace_blocks
+from .render import IsoImage, IsoRenderer
+from .traverse import init_rays, macro_traverse
+from .zfp import ZfpVolume
+
+__all__ = [
+    "BlockCache",
+    "IsoImage",
+    "IsoRenderer",
+    "MacrocellGrids",
+    "ZfpVolume",
+    "init_rays",
+    "macro_traverse",
+    "macrocell_grids",
+    "mark_blocks",
+    "raytrace_blocks",
+    "zfp",
+]

@@ -1,0 +1,66 @@
+"""Macrocell grids of a ZFP-compressed volume (kernels_cl/iso/macrocell.cl):
+the value range of every block's dual cells (fine) and of 4^3 blocks (coarse),
+which the traversal skips where they cannot hold the isovalue."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import runtime
+from .._arrays import resolve_queue
+from .zfp import PROFILES as _ZFP_PROFILES
+from .zfp import ZfpVolume, _stream_buffer
+
+__all__ = ["MacrocellGrids", "macrocell_grids"]
+
+_SRC = "iso/macrocell.cl"
+
+
+@dataclass
+class MacrocellGrids:
+    """Value ranges of the fine grid (one cell per ZFP block, dilated by the
+    +x/+y/+z neighbour samples: the dual grid) and the coarse grid (4^3
+    blocks). Each is a (Z, Y, X, 2) float32 array of (lo, hi); (+inf, -inf)
+    where a block holds no dual cell. Device arrays when built with host=False."""
+    fine: object
+    coarse: object
+
+    def active(self, isovalue: float):
+        """Host boolean masks (fine, coarse): the cells whose range holds `isovalue`."""
+        f = self.fine if isinstance(self.fine, np.ndarray) else self.fine.get()
+        c = self.coarse if isinstance(self.coarse, np.ndarray) else self.coarse.get()
+        v = np.float32(isovalue)
+        return (f[..., 0] <= v) & (v <= f[..., 1]), (c[..., 0] <= v) & (v <= c[..., 1])
+
+
+def macrocell_grids(volume: ZfpVolume, *, queue=None, host: bool = True) -> MacrocellGrids:
+    """The fine and coarse macrocell grids of a compressed volume, built on the
+    device from its stream (each block decoded once, kernels_cl/iso/macrocell.cl).
+    Equal to clvis.reference.iso.macrocell.block_ranges / coarse_ranges of the decoded volume."""
+    if not isinstance(volume, ZfpVolume):
+        raise TypeError(f"volume: expected a clvis.zfp.ZfpVolume, got {type(volume).__name__}")
+    q = resolve_queue(queue)
+    nz, ny, nx = volume.shape
+    if min(volume.shape) < 2:
+        raise ValueError(f"volume: every axis needs at least 2 samples for a dual grid, got {volume.shape}")
+    nbz, nby, nbx = (-(-n // 4) for n in volume.shape)
+    ncz, ncy, ncx = (-(-n // 4) for n in (nbz, nby, nbx))
+    nb, nc = nbx * nby * nbz, ncx * ncy * ncz
+    wg = _ZFP_PROFILES[runtime.tuning_profile(q)]["wg"]
+    faces = runtime.empty(q, (nb, 8, 2), np.float32, "block faces")
+    fine = runtime.empty(q, (nbz, nby, nbx, 2), np.float32, "fine macrocells")
+    coarse = runtime.empty(q, (ncz, ncy, ncx, 2), np.float32, "coarse macrocells")
+    dims = (np.uint32(nx), np.uint32(ny), np.uint32(nz))
+    k = runtime.get_kernel(q, _SRC, "block_faces", {})
+    runtime.launch(q, k, -(-nb // wg) * wg, wg, _stream_buffer(q, volume.stream), np.uint32(volume.rate),
+                   *dims, faces.base_data)
+    k = runtime.get_kernel(q, _SRC, "block_ranges", {})
+    runtime.launch(q, k, -(-nb // wg) * wg, wg, faces.base_data, *dims, fine.base_data)
+    k = runtime.get_kernel(q, _SRC, "coarse_ranges", {})
+    runtime.launch(q, k, -(-nc // wg) * wg, wg, fine.base_data, np.uint32(nbx), np.uint32(nby),
+                   np.uint32(nbz), coarse.base_data)
+    if host:
+        return MacrocellGrids(fine.get(), coarse.get())
+    return MacrocellGrids(fine, coarse)

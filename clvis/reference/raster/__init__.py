@@ -1,0 +1,6 @@
+"""NumPy references of the raster family (clvis/raster/), module for module."""
+
+from . import depth_filter, render
+from .render import depth_key, key_depth, morton_order, rasterize, visibility
+
+__all__ = ["depth_filter", "depth_key", "key_depth", "morton_order", "rasterize", "render", "visibility"]

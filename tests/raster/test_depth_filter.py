@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import clvis
-from clvis.raster import depth_filter as df
+from clvis.raster.depth_filter import depth_filter_mask, level_shapes, rgbda
 from clvis.reference.raster import depth_filter as ref
 
 INF = np.float32(np.inf)
@@ -41,7 +41,7 @@ def scene(h, w, hole_fraction, seed, noise=0.002):
 
 
 def check(depth, queue, *args, **kw):
-    got = df.depth_filter_mask(depth, *args, queue=queue, **kw)
+    got = depth_filter_mask(depth, *args, queue=queue, **kw)
     want = ref.depth_filter_mask(depth, *args, **kw)
     assert got.dtype == np.bool_ and got.shape == depth.shape
     np.testing.assert_array_equal(got, want)
@@ -101,7 +101,7 @@ def test_scene(queue, hole_fraction):
 
 def test_uniform_and_empty(queue):
     for shape in [(0, 0), (0, 5), (4, 0)]:
-        got = df.depth_filter_mask(np.zeros(shape, np.float32), queue=queue)
+        got = depth_filter_mask(np.zeros(shape, np.float32), queue=queue)
         assert got.shape == shape and got.dtype == np.bool_
     for shape in [(1, 1), (1, 9), (17, 33), (128, 128)]:
         for levels in (0, 1, 4, 16):
@@ -124,10 +124,10 @@ def test_single_point_and_steps(queue):
 
 def test_device_arrays(queue):
     d = layered((70, 90), 0.6, seed=5)
-    got = df.depth_filter_mask(cla.to_device(queue, d), 3)
+    got = depth_filter_mask(cla.to_device(queue, d), 3)
     assert isinstance(got, cla.Array) and got.dtype == np.uint8 and got.shape == d.shape
     np.testing.assert_array_equal(got.get(), ref.depth_filter_mask(d, 3).astype(np.uint8))
-    empty = df.depth_filter_mask(cla.to_device(queue, np.zeros((0, 3), np.float32)))
+    empty = depth_filter_mask(cla.to_device(queue, np.zeros((0, 3), np.float32)))
     assert isinstance(empty, cla.Array) and empty.shape == (0, 3)
 
 
@@ -139,7 +139,7 @@ def test_rgbda(queue):
         rgba = rng.integers(0, 256, (45, 61, channels), dtype=np.uint8)
         rgba[0, 0, :3] = (0, 128, 255)
         for k in (keep, keep.astype(np.uint8)):
-            got = df.rgbda(rgba, d, k, queue=queue)
+            got = rgbda(rgba, d, k, queue=queue)
             want = ref.rgbda(rgba, d, k)
             assert got.dtype == np.float32 and got.shape == (45, 61, 5)
             np.testing.assert_array_equal(got, want)
@@ -148,10 +148,10 @@ def test_rgbda(queue):
     assert (got[~keep, :3] == 0).all()
     if keep[0, 0]:
         assert got[0, 0, 0] == 0 and got[0, 0, 2] == 1.0
-    dev = df.rgbda(cla.to_device(queue, rgba), d, df.depth_filter_mask(cla.to_device(queue, d)))
+    dev = rgbda(cla.to_device(queue, rgba), d, depth_filter_mask(cla.to_device(queue, d)))
     assert isinstance(dev, cla.Array)
     np.testing.assert_array_equal(dev.get(), want)
-    assert df.rgbda(np.zeros((0, 4, 4), np.uint8), np.zeros((0, 4), np.float32),
+    assert rgbda(np.zeros((0, 4, 4), np.uint8), np.zeros((0, 4), np.float32),
                     np.zeros((0, 4), bool), queue=queue).shape == (0, 4, 5)
 
 
@@ -167,50 +167,50 @@ def test_property(device, d, levels, strength, edge):
 
 
 def test_defaults_match_reference():
-    a = inspect.signature(df.depth_filter_mask).parameters
+    a = inspect.signature(depth_filter_mask).parameters
     b = inspect.signature(ref.depth_filter_mask).parameters
     for name in ("levels", "filter_strength", "edge_threshold"):
         assert a[name].default == b[name].default
-    assert df.level_shapes((1081, 1921), 3) == [(1081, 1921), (541, 961), (271, 481), (136, 241)]
+    assert level_shapes((1081, 1921), 3) == [(1081, 1921), (541, 961), (271, 481), (136, 241)]
 
 
 def test_bad_input(device):
     q = clvis.runtime.queue_for(device)
     d = np.ones((4, 5), np.float32)
     with pytest.raises(TypeError, match="depth: dtype float64"):
-        df.depth_filter_mask(d.astype(np.float64), queue=q)
+        depth_filter_mask(d.astype(np.float64), queue=q)
     with pytest.raises(ValueError, match="depth: expected a 2-D array"):
-        df.depth_filter_mask(np.ones(5, np.float32), queue=q)
+        depth_filter_mask(np.ones(5, np.float32), queue=q)
     with pytest.raises(TypeError, match="depth: expected an array"):
-        df.depth_filter_mask(None, queue=q)
+        depth_filter_mask(None, queue=q)
     for levels, exc in ((-1, ValueError), (17, ValueError), (2.0, TypeError), (True, TypeError)):
         with pytest.raises(exc, match="levels"):
-            df.depth_filter_mask(d, levels, queue=q)
+            depth_filter_mask(d, levels, queue=q)
     for s in (0.99, 0.0, -1.0, float("nan"), float("inf"), 1e39):
         with pytest.raises(ValueError, match="filter_strength"):
-            df.depth_filter_mask(d, 4, s, queue=q)
+            depth_filter_mask(d, 4, s, queue=q)
     with pytest.raises(TypeError, match="filter_strength"):
-        df.depth_filter_mask(d, 4, "1.1", queue=q)
+        depth_filter_mask(d, 4, "1.1", queue=q)
     for t in (-0.01, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="edge_threshold"):
-            df.depth_filter_mask(d, edge_threshold=t, queue=q)
+            depth_filter_mask(d, edge_threshold=t, queue=q)
     for bad, what in ((np.nan, "1 NaN and 0 negative"), (-1.0, "0 NaN and 1 negative"),
                       (-np.inf, "0 NaN and 1 negative")):
         x = d.copy()
         x[2, 3] = bad
         for levels in (0, 4):
             with pytest.raises(clvis.DataError, match=what):
-                df.depth_filter_mask(x, levels, queue=q)
+                depth_filter_mask(x, levels, queue=q)
         with pytest.raises(clvis.DataError, match="depth"):
-            df.depth_filter_mask(cla.to_device(q, x))
+            depth_filter_mask(cla.to_device(q, x))
     rgba = np.zeros((4, 5, 4), np.uint8)
     with pytest.raises(TypeError, match="rgba: dtype float32"):
-        df.rgbda(rgba.astype(np.float32), d, d > 0, queue=q)
+        rgbda(rgba.astype(np.float32), d, d > 0, queue=q)
     with pytest.raises(ValueError, match="rgba: expected 3 or 4 channels"):
-        df.rgbda(np.zeros((4, 5, 2), np.uint8), d, d > 0, queue=q)
+        rgbda(np.zeros((4, 5, 2), np.uint8), d, d > 0, queue=q)
     with pytest.raises(ValueError, match="depth: shape"):
-        df.rgbda(rgba, d[:3], d > 0, queue=q)
+        rgbda(rgba, d[:3], d > 0, queue=q)
     with pytest.raises(ValueError, match="keep: shape"):
-        df.rgbda(rgba, d, (d > 0)[:, :4], queue=q)
+        rgbda(rgba, d, (d > 0)[:, :4], queue=q)
     with pytest.raises(TypeError, match="keep: dtype"):
-        df.rgbda(rgba, d, d, queue=q)
+        rgbda(rgba, d, d, queue=q)

@@ -170,7 +170,8 @@ class PointCloud:
 
     def subset(self, index) -> PointCloud:
         """A new cloud with the points selected by `index`: a boolean mask of length
-        N, an array of indices, or a slice."""
+        N, an array of indices, or a slice. An index out of range raises
+        DataError."""
         if not isinstance(index, slice):
             index = np.asarray(index)
             if index.dtype == np.bool_:
@@ -179,6 +180,10 @@ class PointCloud:
             elif index.dtype.kind not in "iu" or index.ndim != 1:
                 raise TypeError(f"index: expected a boolean mask, 1-D integer indices or a slice, "
                                 f"got {index.dtype} with shape {index.shape}")
+
+            elif index.size and not (-len(self) <= index.min() and index.max() < len(self)):
+                raise DataError(f"index: indices must lie in [-{len(self)}, {len(self)}), got "
+                                f"{int(index.min())}..{int(index.max())}")
 
         def pick(a):
             return None if a is None else a[index]

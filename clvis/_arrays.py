@@ -39,12 +39,29 @@ def _dtype_names(dtypes) -> str:
     return ", ".join(np.dtype(d).name for d in dtypes)
 
 
+# The longest first axis a host array may have: kernels index items with 32-bit
+# unsigned ints. Checked before the array is copied, so that a huge broadcast
+# view fails with this message rather than a MemoryError.
+MAX_LENGTH = 2**32 - 1
+
+
 def check_array(name: str, x, dtypes=None, ndim=None, min_ndim=None):
-    """Check dtype and rank; returns x (a device array) or a C-contiguous numpy array."""
+    """Check dtype and rank; returns x (a device array) or a C-contiguous numpy array.
+
+    Object arrays raise a TypeError naming the argument; host arrays in the
+    other byte order (big-endian) are converted to native order (the kernels
+    read native values); a first axis longer than MAX_LENGTH raises a
+    ValueError before anything is copied."""
     if not is_device(x):
         if isinstance(x, (str, bytes)) or x is None:
             raise TypeError(f"{name}: expected an array, got {type(x).__name__}")
         x = np.asarray(x)
+        if x.dtype.hasobject:
+            raise TypeError(f"{name}: expected numbers, got an object array (dtype {x.dtype})")
+        if x.ndim and x.shape[0] > MAX_LENGTH:
+            raise ValueError(f"{name}: {x.shape[0]} items; at most 2^32 - 1 per array")
+        if not x.dtype.isnative:
+            x = x.astype(x.dtype.newbyteorder("="))
     if dtypes is not None and np.dtype(x.dtype) not in [np.dtype(d) for d in dtypes]:
         raise TypeError(f"{name}: dtype {np.dtype(x.dtype).name} is not supported; "
                         f"expected one of {_dtype_names(dtypes)}")
@@ -103,8 +120,10 @@ def positive_int(name: str, v) -> int:
 
 
 def real_array(name: str, a) -> np.ndarray:
-    """`a` as a numpy array of real numbers (integers or floats, not bool):
-    TypeError naming `name` otherwise."""
+    """`a` as a numpy array of real numbers (integers or floats, not bool;
+    object, complex and string arrays are refused): TypeError naming `name`
+    otherwise. Nothing is copied: the byte order is kept (big-endian arrays are
+    converted by the caller's astype / ascontiguousarray to its dtype)."""
     if isinstance(a, (str, bytes)) or a is None:
         raise TypeError(f"{name}: expected an array, got {type(a).__name__}")
     a = np.asarray(a)

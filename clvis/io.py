@@ -18,7 +18,9 @@ extension, malformed or truncated content, wrong shapes) raises
 
 from __future__ import annotations
 
+import ast
 import errno
+import math
 import os
 import struct
 import tokenize
@@ -38,11 +40,6 @@ _COLOR_NAMES = (("red", "green", "blue", "alpha"), ("r", "g", "b", "a"))
 _VELOCITY_NAMES = (("vx", "vy", "vz"), ("velocity_x", "velocity_y", "velocity_z"))
 _RESERVED_COLUMNS = frozenset({"x", "y", "z", "radius"}.union(*_COLOR_NAMES, *_VELOCITY_NAMES))
 _NPZ_KEYS = ("positions", "colors", "velocity", "radius", "origin")
-# What np.load raises on a malformed file (the header is parsed as a Python literal).
-_NPY_ERRORS = (ValueError, EOFError, SyntaxError, tokenize.TokenError)
-# ... and on a malformed zip archive (NotImplementedError: unknown compression;
-# RuntimeError: a member marked encrypted).
-_NPZ_ERRORS = (*_NPY_ERRORS, zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError)
 # The PLY header comment that carries a cloud's origin.
 _ORIGIN_COMMENT = "clvis origin"
 
@@ -173,7 +170,8 @@ class PointCloud:
 
     def subset(self, index) -> PointCloud:
         """A new cloud with the points selected by `index`: a boolean mask of length
-        N, an array of indices, or a slice."""
+        N, an array of indices, or a slice. An index out of range raises
+        DataError."""
         if not isinstance(index, slice):
             index = np.asarray(index)
             if index.dtype == np.bool_:
@@ -182,6 +180,10 @@ class PointCloud:
             elif index.dtype.kind not in "iu" or index.ndim != 1:
                 raise TypeError(f"index: expected a boolean mask, 1-D integer indices or a slice, "
                                 f"got {index.dtype} with shape {index.shape}")
+
+            elif index.size and not (-len(self) <= index.min() and index.max() < len(self)):
+                raise DataError(f"index: indices must lie in [-{len(self)}, {len(self)}), got "
+                                f"{int(index.min())}..{int(index.max())}")
 
         def pick(a):
             return None if a is None else a[index]
@@ -254,15 +256,67 @@ def _from_columns(path: Path, columns: dict[str, np.ndarray], origin=None) -> Po
     return _cloud(path, **fields)
 
 
+# PLY property types and their sizes in bytes
+_PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2,
+              "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4,
+              "double": 8, "float64": 8}
+
+
+def _check_ply_header(path: Path) -> None:
+    """Compare the rows the PLY header declares with the bytes after it: plyfile
+    allocates every element's rows before reading them (and loops over them one by
+    one), so a header declaring 10^12 vertices must be refused first. A binary row
+    takes at least its scalar properties plus its list lengths; an ASCII row at
+    least two bytes per property (a digit and a separator). What the check cannot
+    follow (unknown types, no end_header) is left to plyfile to refuse."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        return
+    nl = head.find(b"\n", end)
+    data_start = size if nl < 0 else nl + 1
+    fmt, elements = None, []
+    for line in head[:end].decode("ascii", "replace").splitlines():
+        words = line.split()
+        if not words:
+            continue
+        if words[0] == "format" and len(words) > 1:
+            fmt = words[1]
+        elif words[0] == "element" and len(words) == 3:
+            try:
+                elements.append([words[1], int(words[2]), 0, 0])   # name, count, min bytes, properties
+            except ValueError:
+                return
+        elif words[0] == "property" and elements:
+            el = elements[-1]
+            el[3] += 1
+            if len(words) >= 5 and words[1] == "list":
+                el[2] += _PLY_SIZES.get(words[2], 1)
+            elif len(words) >= 3:
+                el[2] += _PLY_SIZES.get(words[1], 1)
+    need = 0
+    for _, count, row, props in elements:
+        if count < 0:
+            raise DataError(f"{path}: malformed PLY header: a negative element count {count}")
+        need += count * max(1, row if fmt != "ascii" else 2 * props - 1)
+    have = size - data_start
+    if need > have:
+        declared = ", ".join(f"{count} {name}" for name, count, _, _ in elements)
+        raise DataError(f"{path}: truncated or malformed PLY file: the header declares {declared} "
+                        f"rows, at least {_size(need)}, but the file holds {have} bytes after the header")
+
+
 def _read_ply(path: Path) -> PointCloud:
     import plyfile
 
+    _check_ply_header(path)
     try:
         ply = plyfile.PlyData.read(str(path), mmap=False)
-    except (plyfile.PlyParseError, ValueError, OverflowError, EOFError, struct.error) as e:
-        raise DataError(f"{path}: malformed PLY file: {e}") from e
-    except MemoryError as e:
-        raise DataError(f"{path}: the PLY header declares more data than fits in memory") from e
+    except (plyfile.PlyParseError, ValueError, OverflowError, EOFError, struct.error, TypeError,
+            IndexError, KeyError, UnicodeDecodeError) as e:
+        raise DataError(f"{path}: malformed PLY file: {type(e).__name__}: {e}") from e
     names = [el.name for el in ply.elements]
     if "vertex" not in names:
         raise DataError(f"{path}: the PLY file has no vertex element "
@@ -279,48 +333,207 @@ def _read_ply(path: Path) -> PointCloud:
     return _from_columns(path, columns, origin)
 
 
-def _check_las_header(path: Path) -> None:
+# A LAZ file's point data cannot decompress to more points than this per byte.
+# LASzip codes each point with an adaptive arithmetic coder and stores the first
+# point of every chunk raw; a million identical points compress to about 140
+# points per byte (point format 0, the most compressible), so 1000 is seven
+# times what the best case reaches, while a header that lies by a factor of
+# 10^4 (50 M points in 1.5 kB) is refused before anything is decompressed.
+_LAZ_MAX_POINTS_PER_BYTE = 1000
+# Points decompressed at a time (laspy's chunk iterator): 256 Ki points of at
+# most 67 bytes (point format 10), ~17 MB per chunk.
+_LAS_READ_CHUNK = 1 << 18
+_LASZIP_VLR = (b"laszip encoded", 22204)
+
+
+def _check_las_header(path: Path) -> tuple[int, int]:
     """Reject header counts the file cannot hold before laspy sees them: laspy loops
-    over a corrupt VLR count (up to 2^32) reading empty records, for hours."""
+    over a corrupt VLR count (up to 2^32) reading empty records, for hours; laspy
+    allocates the declared points; lazrs aborts the process (an uncatchable
+    allocation failure) on a corrupt chunk count. Returns (point count, record
+    length)."""
     size = path.stat().st_size
     with open(path, "rb") as f:
         head = f.read(375)
-    if len(head) < 227 or head[:4] != b"LASF":
-        raise DataError(f"{path}: not a LAS/LAZ file (no LASF signature, or shorter than a header)")
-    # public header fields from byte 94: header size, offset to point data, number of VLRs,
-    # point data format, record length, legacy point count
-    header_size, data_offset, n_vlr, point_format, record_len, count = struct.unpack_from(
-        "<HIIBHI", head, 94)
-    if header_size < 227 or header_size + 54 * n_vlr > data_offset:
-        raise DataError(f"{path}: malformed LAS/LAZ header: header size {header_size} and {n_vlr} VLRs "
-                        f"do not fit before the point data at byte {data_offset}")
-    if data_offset > size:
-        raise DataError(f"{path}: truncated LAS/LAZ file: the point data should start at byte {data_offset}, "
-                        f"the file has {size} bytes")
-    if (head[24], head[25]) >= (1, 4) and header_size >= 375:
-        evlr_start, n_evlr, count64 = struct.unpack_from("<QIQ", head, 235)
-        count = count64 or count
-        if n_evlr and evlr_start + 60 * n_evlr > size:
-            raise DataError(f"{path}: malformed LAS/LAZ header: {n_evlr} extended VLRs from byte "
-                            f"{evlr_start} of {size}")
-    compressed = point_format & 0xC0
-    if not compressed and data_offset + count * record_len > size:
-        raise DataError(f"{path}: truncated LAS file: the header declares {count} points of {record_len} "
-                        f"bytes from byte {data_offset}, the file has {size} bytes")
+        if len(head) < 227 or head[:4] != b"LASF":
+            raise DataError(f"{path}: not a LAS/LAZ file (no LASF signature, or shorter than a header)")
+        # public header fields from byte 94: header size, offset to point data, number of VLRs,
+        # point data format, record length, legacy point count
+        header_size, data_offset, n_vlr, point_format, record_len, count = struct.unpack_from(
+            "<HIIBHI", head, 94)
+        if header_size < 227 or header_size + 54 * n_vlr > data_offset:
+            raise DataError(f"{path}: malformed LAS/LAZ header: header size {header_size} and {n_vlr} VLRs "
+                            f"do not fit before the point data at byte {data_offset}")
+        if data_offset > size:
+            raise DataError(f"{path}: truncated LAS/LAZ file: the point data should start at byte "
+                            f"{data_offset}, the file has {size} bytes")
+        evlr_start = n_evlr = 0
+        if (head[24], head[25]) >= (1, 4) and header_size >= 375:
+            evlr_start, n_evlr, count64 = struct.unpack_from("<QIQ", head, 235)
+            count = count64 or count
+            if n_evlr and evlr_start + 60 * n_evlr > size:
+                raise DataError(f"{path}: malformed LAS/LAZ header: {n_evlr} extended VLRs from byte "
+                                f"{evlr_start} of {size}")
+        vlrs = _las_records(f, path, header_size, n_vlr, data_offset, 54, "<H", "VLR")
+        if n_evlr:
+            _las_records(f, path, evlr_start, n_evlr, size, 60, "<Q", "extended VLR")
+        compressed = point_format & 0xC0
+        if not compressed:
+            if data_offset + count * record_len > size:
+                raise DataError(f"{path}: truncated LAS file: the header declares {count} points of "
+                                f"{record_len} bytes from byte {data_offset}, the file has {size} bytes")
+            return count, record_len
+        laszip = vlrs.get(_LASZIP_VLR)
+        if laszip is None:
+            raise DataError(f"{path}: malformed LAZ file: no laszip VLR (the compression parameters)")
+        _check_laz(f, path, size, data_offset, count, record_len, laszip)
+    return count, record_len
+
+
+def _las_records(f, path, start: int, n: int, end: int, head_len: int, len_fmt: str, what: str) -> dict:
+    """Walk n (E)VLRs from `start`: each must end by `end`. {(user id, record id): (data start, length)}."""
+    found = {}
+    pos = start
+    for i in range(n):
+        f.seek(pos)
+        h = f.read(head_len)
+        if len(h) < head_len:
+            raise DataError(f"{path}: truncated LAS/LAZ file: {what} {i} of {n} at byte {pos}")
+        (length,) = struct.unpack_from(len_fmt, h, 20)
+        if pos + head_len + length > end:
+            raise DataError(f"{path}: malformed LAS/LAZ file: {what} {i} at byte {pos} declares "
+                            f"{length} bytes, past byte {end}")
+        key = (h[2:18].rstrip(b"\0"), struct.unpack_from("<H", h, 18)[0])
+        found.setdefault(key, (pos + head_len, length))
+        pos += head_len + length
+    return found
+
+
+def _check_laz(f, path, size: int, data_offset: int, count: int, record_len: int, laszip) -> None:
+    """The laszip VLR, the chunk table and the declared point count against the file."""
+    vlr_start, vlr_len = laszip
+    f.seek(vlr_start)
+    vlr = f.read(vlr_len)
+    if len(vlr) < 34:
+        raise DataError(f"{path}: malformed LAZ file: a laszip VLR of {len(vlr)} bytes")
+    chunk_size = struct.unpack_from("<I", vlr, 12)[0]
+    (n_items,) = struct.unpack_from("<H", vlr, 32)
+    if 34 + 6 * n_items > len(vlr):
+        raise DataError(f"{path}: malformed LAZ file: the laszip VLR lists {n_items} items "
+                        f"in {len(vlr)} bytes")
+    item_bytes = sum(struct.unpack_from("<H", vlr, 34 + 6 * i + 2)[0] for i in range(n_items))
+    if item_bytes != record_len:
+        raise DataError(f"{path}: malformed LAZ file: the laszip items take {item_bytes} bytes per point, "
+                        f"the header says {record_len}")
+    data_bytes = size - data_offset
+    if count > _LAZ_MAX_POINTS_PER_BYTE * data_bytes:
+        raise DataError(f"{path}: the header declares {count} points of {record_len} bytes = "
+                        f"{_size(count * record_len)} but the file holds {data_bytes} bytes of compressed "
+                        f"point data (at most {_LAZ_MAX_POINTS_PER_BYTE} points per byte)")
+    if count == 0:
+        return
+    # the chunk table: its offset (int64) starts the point data; -1 means "at the end,
+    # the offset in the last 8 bytes"; then version (uint32), number of chunks (uint32)
+    f.seek(data_offset)
+    raw = f.read(8)
+    if len(raw) < 8:
+        raise DataError(f"{path}: truncated LAZ file: no chunk table offset at byte {data_offset}")
+    (table,) = struct.unpack("<q", raw)
+    if table == -1 and size >= 8:
+        f.seek(size - 8)
+        (table,) = struct.unpack("<q", f.read(8))
+    if not data_offset + 8 <= table <= size - 8:
+        raise DataError(f"{path}: malformed LAZ file: the chunk table offset {table} lies outside the "
+                        f"point data (bytes {data_offset + 8}..{size - 8})")
+    f.seek(table)
+    version, n_chunks = struct.unpack("<II", f.read(8))
+    # every chunk stores its first point raw: a chunk takes at least record_len bytes
+    room = (table - data_offset - 8) // max(record_len, 1)
+    if n_chunks > room:
+        raise DataError(f"{path}: malformed LAZ file: the chunk table declares {n_chunks} chunks, "
+                        f"the {table - data_offset - 8} bytes of point data hold at most {room}")
+    if chunk_size != 0xFFFFFFFF and count > n_chunks * chunk_size:
+        raise DataError(f"{path}: malformed LAZ file: {count} points do not fit in {n_chunks} chunks "
+                        f"of {chunk_size}")
+    _check_laz_chunks(f, path, data_offset, table, count, record_len, vlr, chunk_size, n_chunks)
+
+
+# Layers per item of LASzip's layered compression (point formats 6-10): the
+# point (10) has 9, RGB (11) 1, RGB+NIR (12) 2, the wave packet (13) 1, the
+# extra bytes (14) one per byte.
+_LAZ_LAYERS = {10: lambda size: 9, 11: lambda size: 1, 12: lambda size: 2, 13: lambda size: 1,
+               14: lambda size: size}
+
+
+def _check_laz_chunks(f, path, data_offset, table, count, record_len, vlr, chunk_size, n_chunks):
+    """The chunk table's entries (decoded by lazrs, whose table of n_chunks entries
+    is now small) and, for layered compression, each chunk's layer sizes: lazrs
+    allocates what these declare, and a failed allocation aborts the process."""
+    import lazrs
+
+    f.seek(data_offset)
+    try:
+        entries = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr))
+    except (RuntimeError, ValueError, OSError, OverflowError) as e:
+        raise DataError(f"{path}: malformed LAZ file: unreadable chunk table: {e}") from None
+    room = table - data_offset - 8
+    if len(entries) != n_chunks or sum(b for _, b in entries) > room:
+        raise DataError(f"{path}: malformed LAZ file: the chunk table's {len(entries)} chunks take "
+                        f"{sum(b for _, b in entries)} bytes, the point data has {room}")
+    if chunk_size == 0xFFFFFFFF:                   # variable-size chunks: each says its count
+        if sum(p for p, _ in entries) < count or any(
+                p > _LAZ_MAX_POINTS_PER_BYTE * b for p, b in entries):
+            raise DataError(f"{path}: malformed LAZ file: the chunk table's point counts do not match "
+                            f"the header's {count} points or their bytes")
+    elif not 0 < chunk_size <= _LAZ_MAX_POINTS_PER_BYTE * max((b for _, b in entries), default=0):
+        # lazrs sizes its buffers by the chunk size
+        raise DataError(f"{path}: malformed LAZ file: a chunk size of {chunk_size} points, for chunks of "
+                        f"at most {max((b for _, b in entries), default=0)} bytes")
+    compressor = struct.unpack_from("<H", vlr, 0)[0]
+    items = [struct.unpack_from("<HH", vlr, 34 + 6 * i) for i in range(struct.unpack_from("<H", vlr, 32)[0])]
+    if compressor != 3 or not all(t in _LAZ_LAYERS for t, _ in items):
+        return
+    n_layers = sum(_LAZ_LAYERS[t](size) for t, size in items)
+    pos = data_offset + 8
+    left = count
+    for i, (points, nbytes) in enumerate(entries):
+        points = points if chunk_size == 0xFFFFFFFF else chunk_size
+        # a layered chunk: the first point raw, the number of points (uint32), then the
+        # byte count of every layer (uint32 each), then the layers
+        f.seek(pos + record_len)
+        raw = f.read(4 + 4 * n_layers)
+        if len(raw) < 4 + 4 * n_layers:
+            raise DataError(f"{path}: truncated LAZ file: chunk {i} at byte {pos}")
+        in_chunk, *layers = struct.unpack(f"<{1 + n_layers}I", raw)
+        if in_chunk > min(points, left) or sum(layers) > nbytes:
+            raise DataError(f"{path}: malformed LAZ file: chunk {i} at byte {pos} declares {in_chunk} "
+                            f"points in layers of {sum(layers)} bytes; the chunk table gives it "
+                            f"{min(points, left)} points in {nbytes} bytes")
+        left -= in_chunk
+        pos += nbytes
 
 
 def _read_las(path: Path) -> PointCloud:
     import laspy
 
-    _check_las_header(path)
+    count, _ = _check_las_header(path)
     try:
-        las = laspy.read(str(path))
-        n, declared = len(las.points), las.header.point_count
+        with laspy.open(str(path)) as reader:
+            header = reader.header
+            if header.point_count != count:
+                raise DataError(f"{path}: malformed LAS/LAZ header: laspy reads {header.point_count} "
+                                f"points, the header fields say {count}")
+            parts = [chunk.array for chunk in reader.chunk_iterator(_LAS_READ_CHUNK)]
+        point_format = header.point_format
+        array = np.concatenate(parts) if parts else np.zeros(0, point_format.dtype())
+        las = laspy.ScaleAwarePointRecord(array, point_format, header.scales, header.offsets)
+        n, declared = len(las), header.point_count
+    except DataError:
+        raise
     except (laspy.errors.LaspyException, ValueError, RuntimeError, OverflowError, EOFError,
-            struct.error) as e:                     # RuntimeError: lazrs's decompression errors
-        raise DataError(f"{path}: malformed LAS/LAZ file: {e}") from e
-    except MemoryError as e:
-        raise DataError(f"{path}: the file declares more points than fit in memory") from e
+            struct.error, OSError, KeyError, IndexError, TypeError) as e:
+        # RuntimeError / lazrs.LazrsError: lazrs's decompression errors
+        raise DataError(f"{path}: malformed LAS/LAZ file: {type(e).__name__}: {e}") from e
     if n != declared:
         raise DataError(f"{path}: truncated LAS/LAZ file: the header declares {declared} points, "
                         f"{n} were read")
@@ -345,19 +558,6 @@ def _read_las(path: Path) -> PointCloud:
     return _cloud(path, **fields)
 
 
-def load_npy(path) -> np.ndarray:
-    """The array of a .npy file; DataError naming the file when it is malformed
-    or is an .npz archive (no pickles)."""
-    with open(path, "rb") as f:                     # np.load leaks its own handle on bad files
-        try:
-            a = np.load(f, allow_pickle=False)
-        except _NPY_ERRORS as e:
-            raise DataError(f"{path}: malformed NPY file: {e}") from e
-    if not isinstance(a, np.ndarray):
-        raise DataError(f"{path}: expected an NPY array, found an NPZ archive")
-    return a
-
-
 def _read_npy(path: Path) -> PointCloud:
     a = load_npy(path)
     if a.dtype.names:
@@ -371,21 +571,159 @@ def _read_npy(path: Path) -> PointCloud:
 
 
 def _read_npz(path: Path) -> PointCloud:
-    with open(path, "rb") as f:                     # np.load leaks its own handle on bad files
-        try:
-            z = np.load(f, allow_pickle=False)
-            if isinstance(z, np.lib.npyio.NpzFile):
-                with z:
-                    arrays = {k: z[k] for k in z.files}
-        except _NPZ_ERRORS as e:
-            raise DataError(f"{path}: malformed NPZ file: {e}") from e
-    if not isinstance(z, np.lib.npyio.NpzFile):
-        raise DataError(f"{path}: expected an NPZ archive, found an NPY array")
+    arrays = load_npz(path)
     if "positions" not in arrays:
         raise DataError(f"{path}: no 'positions' array (keys: {', '.join(arrays) or 'none'})")
     fields = {k: arrays.pop(k) for k in _NPZ_KEYS if k in arrays}
     fields["attributes"] = arrays
     return _cloud(path, **fields)
+
+
+# ---------------------------------------------------------------- NPY / NPZ
+#
+# np.load trusts the header: it allocates what the shape declares (MemoryError,
+# or an OverflowError for a shape whose product overflows) before it finds the
+# file too short, and its header parser leaks TypeError / TokenError on odd
+# headers. These readers parse the header themselves, check the declared size
+# against the bytes present, and only then read.
+
+_NPY_MAGIC = b"\x93NUMPY"
+_NPY_MAX_HEADER = 10000          # numpy's own limit on the header's length
+_ZIP_MAGIC = b"PK\x03\x04"
+# zlib's deflate expands at most 1032:1 (a run of one byte), so a deflated NPZ
+# member cannot hold more than this many bytes per compressed byte.
+_DEFLATE_MAX_RATIO = 1032
+
+
+def _npy_header(f, name: str, available: int):
+    """Parse an NPY header from `f` (at the magic): (dtype, shape, fortran_order,
+    nbytes). `available` is the number of bytes from the magic to the end."""
+    magic = f.read(8)
+    if magic[:6] != _NPY_MAGIC:
+        if magic[:4] == _ZIP_MAGIC:
+            raise DataError(f"{name}: expected an NPY array, found an NPZ archive")
+        raise DataError(f"{name}: not a NumPy file (no NPY magic)")
+    if len(magic) < 8 or magic[6] not in (1, 2, 3) or magic[7] != 0:
+        raise DataError(f"{name}: malformed NPY file: unknown format version {tuple(magic[6:8])}")
+    width = 2 if magic[6] == 1 else 4
+    raw = f.read(width)
+    if len(raw) < width:
+        raise DataError(f"{name}: malformed NPY file: truncated header")
+    length = int.from_bytes(raw, "little")
+    if length > _NPY_MAX_HEADER:
+        raise DataError(f"{name}: malformed NPY file: a header of {length} bytes "
+                        f"(at most {_NPY_MAX_HEADER})")
+    text = f.read(length)
+    if len(text) < length:
+        raise DataError(f"{name}: malformed NPY file: truncated header")
+    try:
+        header = ast.literal_eval(text.decode("utf8" if magic[6] == 3 else "latin1"))
+    except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError, UnicodeDecodeError,
+            tokenize.TokenError) as e:
+        raise DataError(f"{name}: malformed NPY file: unreadable header ({type(e).__name__})") from None
+    if (not isinstance(header, dict) or set(header) != {"descr", "fortran_order", "shape"}
+            or not isinstance(header["fortran_order"], bool) or not isinstance(header["shape"], tuple)
+            or not all(type(s) is int and s >= 0 for s in header["shape"])):
+        raise DataError(f"{name}: malformed NPY file: the header is not a dict of descr, fortran_order "
+                        f"and a shape of non-negative ints: {text[:200]!r}")
+    try:
+        dtype = np.lib.format.descr_to_dtype(header["descr"])
+    except Exception as e:          # numpy's dtype parser raises anything on hostile descr
+        raise DataError(f"{name}: malformed NPY file: bad dtype {header['descr']!r:.100}: "
+                        f"{type(e).__name__}") from None
+    if dtype.hasobject:
+        raise DataError(f"{name}: the NPY array holds Python objects (dtype {dtype}), which would "
+                        "need pickle; clvis reads numeric arrays only")
+    shape = header["shape"]
+    count = math.prod(shape)
+    nbytes = count * dtype.itemsize
+    have = available - 8 - width - length
+    if count * max(dtype.itemsize, 1) > have:
+        raise DataError(f"{name}: truncated or malformed NPY file: the header declares shape {shape} "
+                        f"of {dtype} = {_size(nbytes)} but the file holds {max(have, 0)} bytes of data")
+    return dtype, shape, header["fortran_order"], nbytes
+
+
+def _read_npy_stream(f, name: str, available: int) -> np.ndarray:
+    """The array of the NPY stream `f` holding `available` bytes (checked first)."""
+    dtype, shape, fortran, nbytes = _npy_header(f, name, available)
+    buf = bytearray(nbytes)
+    got = f.readinto(buf) if nbytes else 0
+    if got != nbytes:
+        raise DataError(f"{name}: truncated NPY file: {got} of {nbytes} bytes of data")
+    if dtype.itemsize == 0:              # e.g. void0 / empty structs: nothing to read
+        return np.zeros(shape, dtype, order="F" if fortran else "C")
+    a = np.frombuffer(buf, dtype=dtype, count=math.prod(shape))
+    return a.reshape(shape, order="F" if fortran else "C")
+
+
+def _size(n: int) -> str:
+    """n bytes, readably."""
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit} ({n} bytes)"
+    return f"{n} bytes"
+
+
+def load_npy(path) -> np.ndarray:
+    """The array of a .npy file; DataError naming the file when it is malformed,
+    truncated, declares more data than it holds, holds objects (no pickles) or
+    is an .npz archive."""
+    try:
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            return _read_npy_stream(f, str(path), size)
+    except OSError as e:
+        if isinstance(e, FileNotFoundError):
+            raise
+        raise DataError(f"{path}: cannot read: {e.strerror or e}") from e
+
+
+def load_npz(path) -> dict[str, np.ndarray]:
+    """The arrays of an .npz archive by key (the member name without .npy);
+    DataError naming the file when it is malformed, truncated, an NPY array, or
+    declares more data than it holds."""
+    name = str(path)
+    try:
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            if f.read(6) == _NPY_MAGIC:
+                raise DataError(f"{name}: expected an NPZ archive, found an NPY array")
+            f.seek(0)
+            with zipfile.ZipFile(f) as z:
+                arrays = {}
+                for info in z.infolist():
+                    arrays[_npz_key(info.filename)] = _npz_member(z, info, name, size)
+                return arrays
+    except DataError:
+        raise
+    except FileNotFoundError:
+        raise
+    except (zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError, EOFError, OSError,
+            ValueError, struct.error, OverflowError, UnicodeDecodeError, KeyError) as e:
+        # NotImplementedError: an unknown compression; RuntimeError: an encrypted member
+        raise DataError(f"{name}: malformed NPZ file: {type(e).__name__}: {e}") from None
+
+
+def _npz_key(member: str) -> str:
+    return member[:-4] if member.endswith(".npy") else member
+
+
+def _npz_member(z: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, size: int) -> np.ndarray:
+    where = f"{name} (member {info.filename!r})"
+    if info.compress_size > size:
+        raise DataError(f"{where}: {info.compress_size} compressed bytes in a file of {size}")
+    if info.compress_type == zipfile.ZIP_STORED:
+        limit = info.compress_size
+    elif info.compress_type == zipfile.ZIP_DEFLATED:
+        limit = info.compress_size * _DEFLATE_MAX_RATIO
+    else:
+        raise DataError(f"{where}: unsupported zip compression {info.compress_type}")
+    if info.file_size > limit:
+        raise DataError(f"{where}: declares {_size(info.file_size)} uncompressed from "
+                        f"{info.compress_size} compressed bytes")
+    with z.open(info) as member:
+        return _read_npy_stream(member, where, info.file_size)
 
 
 # ---------------------------------------------------------------- writing

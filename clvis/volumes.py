@@ -36,9 +36,11 @@ that is not 3-D or not real numbers, an unreadable path) raises
 from __future__ import annotations
 
 import errno
+import math
 import operator
 import os
 import re
+import struct
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,7 +56,6 @@ RAW_TYPES = {name: np.dtype(name) for name in
              ("uint8", "int8", "uint16", "int16", "uint32", "int32", "float32", "float64")}
 _RAW_NAME = re.compile(r"^(?P<name>.*)_(?P<x>\d+)x(?P<y>\d+)x(?P<z>\d+)_(?P<type>[A-Za-z0-9]+)\.raw$",
                        re.IGNORECASE)
-# What np.load raises on a malformed file (the header is parsed as a Python literal).
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,20 +192,37 @@ def _read_npy(path: Path) -> Volume:
     return Volume(_real_volume(path, a), (1.0, 1.0, 1.0), (0.0, 0.0, 0.0), str(path))
 
 
+# gzip (deflate) expands at most 1032:1, so a .nii.gz cannot decompress to more
+# than this many bytes per byte of the file.
+_DEFLATE_MAX_RATIO = 1032
+
+
 def _read_nifti(path: Path) -> Volume:
     try:
         import nibabel
     except ImportError:
         raise ImportError(f"reading {path.name} (NIfTI) needs nibabel: pip install clvis[nifti]") from None
     from nibabel.filebasedimages import ImageFileError
-    errors = (ImageFileError, OSError, EOFError, ValueError, zlib.error, KeyError)
+    from nibabel.spatialimages import HeaderDataError
+    # what nibabel raises on malformed headers and data (OverflowError: an infinite
+    # vox_offset; HeaderDataError: an unknown datatype code)
+    errors = (ImageFileError, HeaderDataError, OSError, EOFError, ValueError, zlib.error, KeyError,
+              OverflowError, TypeError, IndexError, struct.error)
     try:
-        img = nibabel.load(path)
-        data = np.asanyarray(img.dataobj)
-        zooms = tuple(float(z) for z in img.header.get_zooms())
+        img = nibabel.load(path)            # the header only; the data is read below
+        header = img.header
+        shape = tuple(int(s) for s in header.get_data_shape())
+        dtype = np.dtype(header.get_data_dtype())
+        offset = int(header.get_data_offset())
+        zooms = tuple(float(z) for z in header.get_zooms())
         affine = np.array(img.affine, dtype=np.float64)
     except errors as e:
-        raise DataError(f"{path}: not a readable NIfTI file: {e}") from e
+        raise DataError(f"{path}: not a readable NIfTI file: {type(e).__name__}: {e}") from e
+    _check_nifti_layout(path, shape, dtype, offset)
+    try:
+        data = np.asanyarray(img.dataobj)
+    except errors as e:
+        raise DataError(f"{path}: not a readable NIfTI file: {type(e).__name__}: {e}") from e
     if data.ndim > 3 and all(s == 1 for s in data.shape[3:]):
         data = data.reshape(data.shape[:3])
     if data.ndim != 3:
@@ -214,3 +232,26 @@ def _read_nifti(path: Path) -> Volume:
         raise DataError(f"{path}: the voxel size (pixdim) must be three positive numbers, got {zooms[:3]}")
     data = _real_volume(path, data.transpose(2, 1, 0))
     return Volume(data, spacing[::-1], (0.0, 0.0, 0.0), str(path), affine)
+
+
+def _check_nifti_layout(path: Path, shape: tuple, dtype: np.dtype, offset: int) -> None:
+    """The header's shape, type and data offset against the file, before nibabel
+    allocates the data (it allocates what the header declares, then reads)."""
+    if dtype == np.bool_ or dtype.kind not in "iuf":
+        raise DataError(f"{path}: expected real numbers, got NIfTI data type {dtype}")
+    if len(shape) > 3 and any(s != 1 for s in shape[3:]) or len(shape) < 3:
+        raise DataError(f"{path}: expected a 3-D volume, got shape {shape} (i, j, k, ...)")
+    if min(shape) < 1:
+        raise DataError(f"{path}: the volume is empty, shape {shape} (i, j, k, ...)")
+    if offset < 0:
+        raise DataError(f"{path}: malformed NIfTI header: data offset (vox_offset) {offset}")
+    size = path.stat().st_size
+    nbytes = math.prod(shape) * dtype.itemsize
+    if path.name.lower().endswith(".gz"):
+        if offset + nbytes > size * _DEFLATE_MAX_RATIO:
+            raise DataError(f"{path}: the header declares {shape} {dtype} samples = {nbytes} bytes from "
+                            f"byte {offset}, more than a gzip file of {size} bytes can hold "
+                            f"(at most {_DEFLATE_MAX_RATIO}:1)")
+    elif offset + nbytes > size:
+        raise DataError(f"{path}: truncated NIfTI file: the header declares {shape} {dtype} samples = "
+                        f"{nbytes} bytes from byte {offset}, the file has {size} bytes")

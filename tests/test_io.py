@@ -466,3 +466,150 @@ def test_str_paths(tmp_path):
     write_ply(str(tmp_path / "a.ply"), pc)
     save_npz(str(tmp_path / "a.npz"), pc)
     _assert_same(read_points(str(tmp_path / "a.ply")), read_points(str(tmp_path / "a.npz")))
+
+
+# ---------------------------------------------------------------- hostile files
+
+def _npy_with_header(path, header: bytes, data=b""):
+    header += b" " * (-(len(header) + 11) % 64) + b"\n"
+    path.write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header + data)
+    return path
+
+
+@pytest.mark.parametrize("header,match", [
+    (b"{'descr': '<f4', 'fortran_order': False, 'shape': (1000000000, 3)}", "declares shape"),
+    (b"{'descr': '<f8', 'fortran_order': False, 'shape': (4611686018427387904, 4611686018427387904, 3)}", "declares shape"),
+    (b"{'descr': '<f8', 'fortran_order': False, 'shape': (9223372036854775807, 3)}", "declares shape"),
+    (b"{b'descr': '<f8', 'fortran_order': False, 'shape': (4, 3)}", "malformed NPY"),
+    (b"{'descr': '<f8', 'fortran_order': False, 'shape': (4, 3)", "malformed NPY"),       # unterminated
+    (b"{'descr': '''<f8", "malformed NPY"),                                              # TokenError
+    (b"{'descr': 'nonsense', 'fortran_order': False, 'shape': (4, 3)}", "bad dtype"),
+    (b"{'descr': '<f8', 'fortran_order': False, 'shape': (4, -3)}", "malformed NPY"),
+    (b"{'descr': '|O', 'fortran_order': False, 'shape': (4, 3)}", "pickle"),
+])
+def test_npy_hostile_headers(tmp_path, header, match):
+    _expect_data_error(_npy_with_header(tmp_path / "h.npy", header, bytes(96)), match)
+
+
+def test_text_file_named_npy(tmp_path):
+    path = tmp_path / "notes.npy"
+    path.write_text("x y z\n1 2 3\n")
+    err = _expect_data_error(path, "not a NumPy file")
+    assert "pickle" not in str(err)
+
+
+def test_npz_truncated_and_lying(tmp_path):
+    path = tmp_path / "c.npz"
+    save_npz(path, _cloud(n=200))
+    data = path.read_bytes()
+    for cut in range(0, len(data), 97):
+        bad = tmp_path / f"cut{cut}.npz"
+        bad.write_bytes(data[:cut])
+        _expect_data_error(bad)
+    # a stored member whose NPY header declares 10^9 rows
+    import zipfile
+    with zipfile.ZipFile(tmp_path / "lie.npz", "w") as z:
+        z.writestr("positions.npy", _npy_with_header(
+            tmp_path / "x.npy", b"{'descr': '<f4', 'fortran_order': False, 'shape': (1000000000, 3)}",
+            bytes(36)).read_bytes())
+    _expect_data_error(tmp_path / "lie.npz", "declares shape (1000000000, 3)")
+
+
+def test_subset_out_of_range_is_a_clvis_error():
+    pc = _cloud(n=5)
+    for index in ([5], [-6], np.array([0, 1, 99])):
+        with pytest.raises(DataError, match="index"):
+            pc.subset(index)
+    assert len(pc.subset([-5, 4])) == 2
+
+
+def _laz_with_header_count(tmp_path, count):
+    import struct
+
+    path = tmp_path / "lie.laz"
+    _write_las(path, n=20, point_format=3)
+    data = bytearray(path.read_bytes())
+    struct.pack_into("<I", data, 107, count)                  # legacy point count (LAS 1.2)
+    path.write_bytes(bytes(data))
+    return path
+
+
+def test_laz_declaring_more_points_than_it_can_hold(tmp_path):
+    path = _laz_with_header_count(tmp_path, 50_000_000)
+    err = _expect_data_error(path, "declares 50000000 points of 34 bytes")
+    assert "points per byte" in str(err)
+
+
+def test_laz_corrupt_chunk_table(tmp_path):
+    import struct
+
+    path = tmp_path / "c.laz"
+    _write_las(path, n=60, point_format=7)
+    data = bytearray(path.read_bytes())
+    start = laspy.read(str(path)).header.offset_to_point_data
+    table = struct.unpack_from("<q", data, start)[0]
+    for value in (0xFFFF0001, 0x7FFFFFFF, 1000):             # the number of chunks (lazrs aborted on these)
+        bad = bytearray(data)
+        struct.pack_into("<I", bad, table + 4, value)
+        path.write_bytes(bytes(bad))
+        _expect_data_error(path, "chunk")
+    for value in (-5, len(data) + 100, start):                # the chunk table's offset
+        bad = bytearray(data)
+        struct.pack_into("<q", bad, start, value)
+        path.write_bytes(bytes(bad))
+        _expect_data_error(path, "chunk table")
+
+
+# Mutates a LAZ file at many positions and reads each in a child process under
+# an address-space limit, printing one JSON line per case: a lazrs abort
+# (SIGABRT, uncatchable) fails the test instead of killing pytest.
+_LAZ_FUZZ_CHILD = r"""
+import json, resource, sys
+import numpy as np
+import laspy, lazrs
+import clvis.io
+from clvis.errors import ClvisError
+limit = 1536 << 20
+resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+src, out = sys.argv[1], sys.argv[2]
+data = open(src, "rb").read()
+rng = np.random.default_rng(600)
+for i in range(int(sys.argv[3])):
+    b = bytearray(data)
+    for _ in range(rng.integers(1, 4)):
+        b[rng.integers(0, len(b))] = rng.integers(0, 256)
+    open(out, "wb").write(bytes(b))
+    print(json.dumps({"i": i, "start": True}), flush=True)
+    try:
+        clvis.io.read_points(out)
+        r = "ok"
+    except ClvisError as e:
+        r = "clvis" if out in str(e) else "unnamed"
+    except BaseException as e:
+        r = f"{type(e).__name__}: {e}"[:200]
+    print(json.dumps({"i": i, "r": r}), flush=True)
+"""
+
+
+@pytest.mark.parametrize("point_format", [3, 7])
+def test_laz_mutations_never_abort(tmp_path, point_format):
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    src = tmp_path / "good.laz"
+    _write_las(src, n=80, point_format=point_format)
+    root = str(Path(__file__).resolve().parents[1])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root, os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run([sys.executable, "-c", _LAZ_FUZZ_CHILD, str(src), str(tmp_path / "m.laz"), "300"],
+                          capture_output=True, text=True, env=env, timeout=240)
+    lines = [json.loads(line) for line in proc.stdout.splitlines()]
+    results = [r["r"] for r in lines if "r" in r]
+    assert proc.returncode == 0, (f"the child died (rc {proc.returncode}) at case {lines[-1]['i'] if lines else '?'}: "
+                                  f"{proc.stderr[-1500:]}")
+    assert len(results) == 300
+    bad = [r for r in results if r not in ("ok", "clvis")]
+    assert not bad, bad[:10]
+    assert results.count("clvis") > 10          # the mutations do break files

@@ -232,3 +232,64 @@ def test_missing_unknown_and_unreadable(tmp_path):
     assert str(other) in str(e.value)
     with pytest.raises(TypeError, match="path"):
         read_volume(None)
+
+
+def _nifti_header(shape, datatype=16, bitpix=32, vox_offset=352.0):
+    """A NIfTI-1 header (348 bytes + 4 extension bytes) declaring shape, nothing after it."""
+    h = bytearray(352)
+    struct.pack_into("<i", h, 0, 348)
+    struct.pack_into("<8h", h, 40, len(shape), *shape, *([1] * (7 - len(shape))))
+    struct.pack_into("<hh", h, 70, datatype, bitpix)
+    struct.pack_into("<8f", h, 76, 1, 1, 1, 1, 1, 1, 1, 1)
+    struct.pack_into("<f", h, 108, vox_offset)
+    h[344:348] = b"n+1\0"
+    return bytes(h)
+
+
+def test_nifti_declaring_more_than_it_holds(tmp_path):
+    tiny = tmp_path / "tiny.nii"
+    tiny.write_bytes(_nifti_header((700, 700, 700)) + bytes(256))         # 608 bytes
+    assert tiny.stat().st_size == 608
+    with pytest.raises(DataError, match="the file has 608 bytes") as e:
+        read_volume(tiny)
+    assert str(tiny) in str(e.value)
+    gz = tmp_path / "tiny.nii.gz"
+    gz.write_bytes(gzip.compress(tiny.read_bytes()))
+    with pytest.raises(DataError, match="more than a gzip file") as e:
+        read_volume(gz)
+    assert str(gz) in str(e.value)
+
+
+@pytest.mark.parametrize("header, message", [
+    (_nifti_header((2, 2, 2), datatype=999), "not a readable NIfTI"),        # unknown datatype
+    (_nifti_header((2, 2, 2), datatype=32, bitpix=64), "real numbers"),      # complex64
+    (_nifti_header((2, 2, 2), datatype=128, bitpix=24), "real numbers"),     # RGB24
+    (_nifti_header((2, 2, 2), vox_offset=float("inf")), "NIfTI"),
+    (_nifti_header((2, 2, 2), vox_offset=3e38), "NIfTI"),
+    (_nifti_header((2, 2, 2), vox_offset=-1e9), "NIfTI"),
+])
+def test_nifti_hostile_headers(tmp_path, header, message):
+    path = tmp_path / "h.nii"
+    path.write_bytes(header + bytes(64))
+    with pytest.raises(DataError, match=message) as e:
+        read_volume(path)
+    assert str(path) in str(e.value)
+
+
+@pytest.mark.parametrize("a", [np.zeros((2, 2, 2), np.complex128), np.array(["ab"] * 8).reshape(2, 2, 2),
+                               np.zeros((2, 2, 2), ">c8")])
+def test_npy_string_and_complex_volumes(tmp_path, a):
+    path = _npy(tmp_path, a)
+    with pytest.raises(DataError, match="real numbers") as e:
+        read_volume(path)
+    assert str(path) in str(e.value)
+
+
+def test_npy_volume_declaring_more_than_it_holds(tmp_path):
+    path = tmp_path / "big.npy"
+    header = b"{'descr': '<f4', 'fortran_order': False, 'shape': (700, 700, 700), }"
+    header += b" " * (-(len(header) + 11) % 64) + b"\n"
+    path.write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header + bytes(100))
+    with pytest.raises(DataError, match=r"declares shape \(700, 700, 700\)") as e:
+        read_volume(path)
+    assert str(path) in str(e.value)

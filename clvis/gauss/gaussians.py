@@ -9,7 +9,6 @@ maps to a colour (and an opacity factor).
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -124,18 +123,14 @@ class Gaussians:
     @classmethod
     def load(cls, path) -> Gaussians:
         """Read a .npz written by :meth:`save`; DataError naming the file when malformed."""
+        from ..io import load_npz
+
         path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                missing = [k for k in ("means", "scales") if k not in z.files]
-                if missing:
-                    raise DataError(f"{path}: not a Gaussians file (missing {', '.join(missing)})")
-                get = {k: z[k] for k in ("means", "scales", "rotations", "values", "opacities")
-                       if k in z.files}
-        except DataError:
-            raise
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
-            raise DataError(f"{path}: cannot read Gaussians: {e}") from None
+        z = load_npz(path)
+        missing = [k for k in ("means", "scales") if k not in z]
+        if missing:
+            raise DataError(f"{path}: not a Gaussians file (missing {', '.join(missing)})")
+        get = {k: z[k] for k in ("means", "scales", "rotations", "values", "opacities") if k in z}
         try:
             return cls(**get)
         except (TypeError, ValueError) as e:

@@ -9,7 +9,10 @@
 #                    suites once each at a tiny scale
 #   ./dev.sh bench [FAMILY]
 #                    .venv-test; runs `clvis bench FAMILY` (full sizes) for
-#                    primitives and raster, or the family named
+#                    every family, or the family named
+#   ./dev.sh lint    .venv-lint: ruff (lint + format check) on the whole tree and
+#                    mypy on the runtime, primitives, camera and the public API
+#   ./dev.sh fmt     .venv-lint: ruff format + ruff check --fix
 #
 # Extra arguments go to the command (pytest, clvis demo, clvis bench).
 set -euo pipefail
@@ -38,9 +41,25 @@ intel_env() { # VENV: point the ICD loader at Intel's runtime inside the venv
     export LD_LIBRARY_PATH="$PWD/$1/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 }
 
+# mypy's scope: the runtime, the primitives, the camera and the public API
+TYPED="clvis/__init__.py clvis/runtime.py clvis/primitives.py clvis/camera.py clvis/errors.py
+       clvis/_arrays.py clvis/colormap.py clvis/morton.py"
+
 cmd=${1:-}
 shift || true
 case "$cmd" in
+lint)
+    venv .venv-lint lint
+    .venv-lint/bin/ruff check clvis tests bench
+    .venv-lint/bin/ruff format --check clvis tests bench
+    # shellcheck disable=SC2086
+    exec .venv-lint/bin/mypy $TYPED
+    ;;
+fmt)
+    venv .venv-lint lint
+    .venv-lint/bin/ruff format clvis tests bench
+    exec .venv-lint/bin/ruff check --fix clvis tests bench
+    ;;
 demo)
     venv .venv pocl
     exec .venv/bin/clvis demo "$@"
@@ -70,7 +89,7 @@ test | bench)
         exec .venv-test/bin/python -m pytest tests bench --benchmark-disable -q "$@"
     ;;
 *)
-    echo "usage: ./dev.sh demo | test | bench  [args]" >&2
+    echo "usage: ./dev.sh demo | test | bench | lint | fmt  [args]" >&2
     exit 2
     ;;
 esac

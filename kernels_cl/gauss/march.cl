@@ -24,7 +24,7 @@
  *              global const float *leaf_boxes,      n x 6 (lo xyz, hi xyz), leaf order
  *              global const clvis_gaussian *recs,   n records in leaf order (clvis/gauss.h)
  *              global const uint *order,            leaf j is Gaussian order[j] (its id)
- *              uint n, global const float *cam,     22 floats (clvis/gauss.h)
+ *              uint n, global const float *cam,     22 floats: the camera rays of clvis/camera.h
  *              uint W, uint H,
  *              global const float4 *tf, uint tf_n,  transfer function: rgb colour, alpha factor
  *              float tf_min, float tf_scale,        entry i = clamp(floor((value - tf_min) * tf_scale * tf_n), 0, tf_n - 1)

@@ -19,7 +19,7 @@
  *                 first); without it, pass.cl's resolve scans the items.
  *   REFINE_STEPS  Illinois steps of the root refinement (default 8; the
  *                 reference docstring asks for >= 6)
- * Includes clvis/gauss.h (the 22-float camera-ray buffer and clvis_camera_ray)
+ * Includes clvis/camera.h (the 22-float camera-ray buffer and clvis_camera_ray)
  * and clvis/bvh.h (CLVIS_BVH_TINY_DIR, the 1/d convention), clvis/iso.h
  * (clvis_iso_ray_setup: the ray in index space and its box interval).
  *
@@ -35,7 +35,7 @@
  *     float dx, float dy, float dz,      spacing (world units per sample step)
  *     float ox, float oy, float oz,      origin: world position of sample (0, 0, 0)
  *     float isovalue,
- *     global const float *cam,           22 floats (clvis/gauss.h)
+ *     global const float *cam,           22 floats: the camera rays of clvis/camera.h
  *     uint W,                            image width: ray p = py * W + px
  *     global const uint *group_blocks,   per work-group: the block id it traces
  *     global const uint *group_offsets,  per work-group: first index of its rays in ray_ids
@@ -75,7 +75,7 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #include "clvis/bvh.h"
-#include "clvis/gauss.h"
+#include "clvis/camera.h"
 #include "clvis/iso.h"
 #include "clvis/atomics.h"
 

@@ -10,7 +10,7 @@
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (FP_CONTRACT is OFF
  * below: every float operation rounds on its own, so clvis/reference/
  * iso_traverse.py reproduces the results bit for bit). No defines.
- * Includes clvis/gauss.h (the 22-float camera-ray buffer, clvis_camera_ray)
+ * Includes clvis/camera.h (the 22-float camera-ray buffer, clvis_camera_ray)
  * and clvis/bvh.h (CLVIS_BVH_TINY_DIR, the 1/d convention), clvis/iso.h
  * (clvis_iso_ray_setup: the ray in index space and its box interval).
  *
@@ -51,7 +51,7 @@
  * Coarse skipping gives exactly the sequence of the fine grid alone.
  *
  * kernel init_rays(
- *     global const float *cam,           22 floats (clvis/gauss.h)
+ *     global const float *cam,           22 floats: the camera rays of clvis/camera.h
  *     uint W, uint H,                    image size: pixel p = py * W + px
  *     uint nx, uint ny, uint nz, float dx, float dy, float dz, float ox, float oy, float oz,
  *     global float *ray_t,               out, per pixel: t_enter, +INFINITY when the ray misses
@@ -86,7 +86,7 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #include "clvis/bvh.h"
-#include "clvis/gauss.h"
+#include "clvis/camera.h"
 #include "clvis/iso.h"
 
 #define NO_BLOCK 0xFFFFFFFFu

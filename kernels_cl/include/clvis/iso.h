@@ -1,13 +1,13 @@
 /* clvis/iso.h — shared by the iso kernels (traverse.cl, raytrace.cl).
  *
  * clvis_iso_ray_setup(cam, p, W, n, sp, org, o, d, O, D, inv, &t_enter, &t_exit):
- * pixel p's ray o, d (world; clvis_camera_ray of clvis/gauss.h, p = py * W + px) in the
+ * pixel p's ray o, d (world; clvis_camera_ray of clvis/camera.h, p = py * W + px) in the
  * volume's index space: O = (o - origin) / spacing, D = d / spacing, inv =
  * spacing / d_safe (|d| < CLVIS_BVH_TINY_DIR -> copysign(TINY, d), the
  * convention of clvis/bvh.h); with t0 = (0 - O) inv, t1 = ((n - 1) - O) inv
  * per axis, t_enter = max(0, max_a min(t0, t1)) and t_exit = min_a max(t0, t1)
  * (the ray meets the box [0, n - 1] iff t_enter <= t_exit). n, sp, org are
- * per axis x, y, z. Include after clvis/bvh.h and clvis/gauss.h, with
+ * per axis x, y, z. Include after clvis/bvh.h and clvis/camera.h, with
  * FP_CONTRACT OFF set before the includes (clvis/reference/iso_traverse.py
  * repeats these float32 operations).
  */

@@ -40,11 +40,14 @@
  *     them front to back: C += T * alpha * rgb, T *= 1 - alpha, until T < 1e-3
  *     (after the Gaussian that brought it there) or a round finds fewer than k.
  *     A hit is m2 <= cutoff2 at t >= 0; the hit order is (t, id) ascending.
+ *     Boxes are culled by clvis_ray_slab of clvis/ray.h (1/d by its tiny-direction
+ *     rule); the Gaussians by clvis_gauss_hit of clvis/gauss.h.
  */
 #pragma OPENCL FP_CONTRACT OFF
 
 #include "clvis/bvh.h"
 #include "clvis/gauss.h"
+#include "clvis/ray.h"
 
 #ifndef K
 #define K 16
@@ -64,22 +67,6 @@ inline bool key_less(float ta, uint ia, float tb, uint ib)
     return ta < tb || (ta == tb && ia < ib);
 }
 
-/* Slab test of the box [lo, hi]; inv: 1 / d with zero components replaced by
- * a signed 1e-20 (finite, so no NaN from 0 * inf). Minimum and maximum by
- * compare and select (PoCL's fmin/fmax are about twice as slow); no input is NaN. */
-inline float mn(float a, float b) { return a < b ? a : b; }
-inline float mx(float a, float b) { return a > b ? a : b; }
-
-inline void slab(float lo0, float lo1, float lo2, float hi0, float hi1, float hi2, const float *o,
-                 const float *inv, float *t0, float *t1)
-{
-    float a0 = (lo0 - o[0]) * inv[0], b0 = (hi0 - o[0]) * inv[0];
-    float a1 = (lo1 - o[1]) * inv[1], b1 = (hi1 - o[1]) * inv[1];
-    float a2 = (lo2 - o[2]) * inv[2], b2 = (hi2 - o[2]) * inv[2];
-    *t0 = mx(mx(mn(a0, b0), mn(a1, b1)), mn(a2, b2));
-    *t1 = mn(mn(mx(a0, b0), mx(a1, b1)), mx(a2, b2));
-}
-
 kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_boxes,
                   global const clvis_gaussian *recs, global const uint *order, uint n,
                   global const float *cam, uint W, uint H, global const float4 *tf, uint tf_n,
@@ -96,7 +83,7 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
     float o[3], d[3], inv[3];
     clvis_camera_ray(cam, px, py, o, d);
     for (int k = 0; k < 3; ++k)
-        inv[k] = 1.0f / (d[k] != 0.0f ? d[k] : copysign(1e-20f, d[k]));
+        inv[k] = clvis_ray_inv_dir(d[k]);
 
     float T = 1.0f, cr = 0.0f, cg = 0.0f, cb = 0.0f, z = INFINITY;
     float last_t = -1.0f;   /* every hit has t >= 0 */
@@ -121,7 +108,7 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
         {
             float t0, t1;
             global const clvis_bvh_node *r = nodes;
-            slab(r->lo[0], r->lo[1], r->lo[2], r->hi[0], r->hi[1], r->hi[2], o, inv, &t0, &t1);
+            clvis_ray_slab(o, inv, r->lo[0], r->lo[1], r->lo[2], r->hi[0], r->hi[1], r->hi[2], &t0, &t1);
             if (t1 >= t0 && t1 >= lower) {
                 stack[sp] = 0;
                 stack_t[sp++] = t0;
@@ -145,7 +132,7 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
                 if (child & CLVIS_BVH_LEAF) {
                     uint j = child & ~CLVIS_BVH_LEAF;
                     global const float *bx = leaf_boxes + 6 * (size_t)j;
-                    slab(bx[0], bx[1], bx[2], bx[3], bx[4], bx[5], o, inv, &t0, &t1);
+                    clvis_ray_slab(o, inv, bx[0], bx[1], bx[2], bx[3], bx[4], bx[5], &t0, &t1);
                     if (!(t1 >= t0 && t1 >= lower) || (kn == cap && t0 > kt[cap - 1]))
                         continue;
                     float t, m2, ts, a, op[3], dp[3];
@@ -187,7 +174,7 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
                     kc[pos] = ti;
                 } else {
                     global const clvis_bvh_node *cn = nodes + child;
-                    slab(cn->lo[0], cn->lo[1], cn->lo[2], cn->hi[0], cn->hi[1], cn->hi[2], o, inv, &t0, &t1);
+                    clvis_ray_slab(o, inv, cn->lo[0], cn->lo[1], cn->lo[2], cn->hi[0], cn->hi[1], cn->hi[2], &t0, &t1);
                     if (!(t1 >= t0 && t1 >= lower) || (kn == cap && t0 > kt[cap - 1]))
                         continue;
                     push[np] = child;

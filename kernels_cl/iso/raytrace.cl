@@ -19,9 +19,9 @@
  *                 first); without it, pass.cl's resolve scans the items.
  *   REFINE_STEPS  Illinois steps of the root refinement (default 8; the
  *                 reference docstring asks for >= 6)
- * Includes clvis/camera.h (the 22-float camera-ray buffer and clvis_camera_ray)
- * and clvis/bvh.h (CLVIS_BVH_TINY_DIR, the 1/d convention), clvis/iso.h
- * (clvis_iso_ray_setup: the ray in index space and its box interval).
+ * Includes clvis/camera.h (the 22-float camera-ray buffer and clvis_camera_ray),
+ * clvis/iso.h (clvis_iso_ray_setup: the ray in index space and its box
+ * interval; the 1/d convention of clvis/ray.h).
  *
  * Volume [nz][ny][nx] samples, nx, ny, nz >= 2; blocks (bx, by, bz) of 4^3
  * samples, block id b = bx + nbx (by + nby bz), nb_ = ceil(n_ / 4) (the ZFP
@@ -74,7 +74,6 @@
 /* before the includes: clvis_camera_ray must not contract either */
 #pragma OPENCL FP_CONTRACT OFF
 
-#include "clvis/bvh.h"
 #include "clvis/camera.h"
 #include "clvis/iso.h"
 #include "clvis/atomics.h"

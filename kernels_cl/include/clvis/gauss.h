@@ -23,6 +23,19 @@
  *   a = |d'|^2, b = o'.d', ts = -b / a            (ts: the unclamped maximum)
  *   t = fmax(ts, 0); m2 = |o' + t d'|^2
  * A ray hits g when m2 <= cutoff^2; t orders the hits (ties by Gaussian id).
+ *
+ * The stages of compositing a hit (gauss/march.cl; clvis.reference.gauss.render's
+ * tf_lookup and render_rays repeat them, render_rays in float64):
+ *   uint clvis_gauss_tf_index(value, tf_min, tf_scale, tf_n): the transfer-function
+ *       entry clamp(floor(((value - tf_min) * tf_scale) * tf_n), 0, tf_n - 1)
+ *   float clvis_gauss_alpha_max_response(opac, m2) = min(0.99, opac exp(-m2 / 2))
+ *   float clvis_gauss_alpha_absorption(opac, density, ts, a, op, dp)
+ *       = 1 - exp(-(density opac) I), I = (exp(-ms2 / 2) sqrt(pi / (2a)))
+ *       erfc(-ts sqrt(a / 2)), ms2 = |o' + ts d'|^2 (op = o', dp = d' of
+ *       clvis_gauss_hit)
+ *   clvis_gauss_composite(alpha, c, &T, &cr, &cg, &cb): one front-to-back step,
+ *       w = T alpha; cr += w c.x, cg += w c.y, cb += w c.z; T = T (1 - alpha)
+ * (opac: the record's opacity times the transfer function's alpha factor.)
  */
 #ifndef CLVIS_GAUSS_H
 #define CLVIS_GAUSS_H
@@ -53,6 +66,35 @@ inline void clvis_gauss_hit(global const clvis_gaussian *g, const float *o, cons
     *t = fmax(*ts, 0.0f);
     float p0 = op[0] + *t * dp[0], p1 = op[1] + *t * dp[1], p2 = op[2] + *t * dp[2];
     *m2 = clvis_dot3(p0, p1, p2, p0, p1, p2);
+}
+
+inline uint clvis_gauss_tf_index(float value, float tf_min, float tf_scale, uint tf_n)
+{
+    float x = floor(((value - tf_min) * tf_scale) * (float)tf_n);
+    return x >= (float)(tf_n - 1) ? tf_n - 1 : x > 0.0f ? (uint)x : 0u;
+}
+
+inline float clvis_gauss_alpha_max_response(float opac, float m2)
+{
+    return fmin(0.99f, opac * exp(-0.5f * m2));
+}
+
+inline float clvis_gauss_alpha_absorption(float opac, float density, float ts, float a,
+                                          const float *op, const float *dp)
+{
+    float s0 = op[0] + ts * dp[0], s1 = op[1] + ts * dp[1], s2 = op[2] + ts * dp[2];
+    float ms2 = clvis_dot3(s0, s1, s2, s0, s1, s2);
+    float integral = (exp(-0.5f * ms2) * sqrt(M_PI_F / (2.0f * a))) * erfc(-ts * sqrt(0.5f * a));
+    return 1.0f - exp(-((density * opac) * integral));
+}
+
+inline void clvis_gauss_composite(float alpha, float4 c, float *T, float *cr, float *cg, float *cb)
+{
+    float wgt = *T * alpha;
+    *cr += wgt * c.x;
+    *cg += wgt * c.y;
+    *cb += wgt * c.z;
+    *T = *T * (1.0f - alpha);
 }
 
 #endif /* CLVIS_GAUSS_H */

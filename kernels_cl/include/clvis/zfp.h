@@ -1,7 +1,9 @@
 /* clvis/zfp.h — decoding one block of a ZFP fixed-rate stream of 3-D float32 data.
  *
  * Inline functions only, for kernels that decode whole volumes
- * (iso/zfp.cl) or just the blocks they need (a block cache). The format, as
+ * (iso/zfp.cl, iso/macrocell.cl) or just the blocks they need (iso/cache.cl),
+ * and the block-grid helpers (iso/raytrace.cl too). No other header needed;
+ * include guard CLVIS_ZFP_H. The format, as
  * zfp 1.0 writes it in fixed-rate mode (zfp_stream_set_rate(rate, float, 3,
  * align 0); zfpy.compress_numpy(v, rate=r, write_header=False)):
  *
@@ -335,4 +337,4 @@ inline int clvis_zfp_decode_volume_block(global const ulong *stream, uint rate, 
     return 1;
 }
 
-#endif
+#endif /* CLVIS_ZFP_H */

@@ -40,7 +40,8 @@
  *                      float loz, float sx, float sy, float sz,
  *                      global uint *codes, global uint *iota)
  *      One item per box: codes[i] = clvis_morton3(q_x, q_y, q_z) of its centre
- *      c (as above), q_a = clamp(trunc((c_a - lo_a) * s_a), 0, 1023) in float32,
+ *      c (as above), q_a = clamp(trunc((c_a - lo_a) * s_a), 0, 1023) in float32
+ *      (clvis_morton_quantize of clvis/morton.h),
  *      exactly as raster/morton.cl's morton_codes: lo = the min centre and s_a
  *      = (float)(1023.0 / (double)(max_a - lo_a)), or 0 for a flat axis.
  *      iota[i] = i.
@@ -146,11 +147,6 @@ kernel void bvh_bounds(global const float *boxes, uint n, uint chunk, global uin
 
 /* ---------------------------------------------------------------- 2. Morton codes */
 
-inline uint bvh_quantize(float v)
-{
-    return v <= 0.0f ? 0u : v >= 1023.0f ? 1023u : (uint)v;
-}
-
 kernel void bvh_morton(global const float *boxes, uint n, float lox, float loy, float loz,
                        float sx, float sy, float sz, global uint *codes, global uint *iota)
 {
@@ -160,8 +156,8 @@ kernel void bvh_morton(global const float *boxes, uint n, float lox, float loy, 
     global const float2 *r = (global const float2 *)boxes + 3 * (size_t)i;
     const float2 a = r[0], b = r[1], c = r[2];      /* lo x, lo y | lo z, hi x | hi y, hi z */
     const float cx = (a.x + b.y) * 0.5f, cy = (a.y + c.x) * 0.5f, cz = (b.x + c.y) * 0.5f;
-    codes[i] = clvis_morton3(bvh_quantize((cx - lox) * sx), bvh_quantize((cy - loy) * sy),
-                             bvh_quantize((cz - loz) * sz));
+    codes[i] = clvis_morton3(clvis_morton_quantize((cx - lox) * sx), clvis_morton_quantize((cy - loy) * sy),
+                             clvis_morton_quantize((cz - loz) * sz));
     iota[i] = i;
 }
 
@@ -182,13 +178,6 @@ kernel void bvh_gather(global const float *boxes, global const uint *order, uint
 }
 
 /* ---------------------------------------------------------------- 4. hierarchy and boxes */
-
-inline void bvh_load_box(global const float *boxes, uint j, float3 *lo, float3 *hi)
-{
-    global const float *r = boxes + 6 * (size_t)j;
-    *lo = (float3)(r[0], r[1], r[2]);
-    *hi = (float3)(r[3], r[4], r[5]);
-}
 
 inline void bvh_store(global clvis_bvh_node *node, float3 lo, float3 hi, uint left, uint right)
 {
@@ -223,7 +212,7 @@ void bvh_build(global const uint *codes, global const float *leaf_boxes, uint n,
         return;
     float3 lo, hi;
     if (n == 1) {
-        bvh_load_box(leaf_boxes, 0, &lo, &hi);
+        clvis_bvh_leaf_box(leaf_boxes, 0, &lo, &hi);
         bvh_store(nodes, lo, hi, CLVIS_BVH_LEAF, CLVIS_BVH_NONE);
         return;
     }
@@ -242,11 +231,11 @@ void bvh_build(global const uint *codes, global const float *leaf_boxes, uint n,
             if (word & CLVIS_BVH_LEAF) {
                 if (!left)
                     return;
-                bvh_load_box(leaf_boxes, j, &lo, &hi);
+                clvis_bvh_leaf_box(leaf_boxes, j, &lo, &hi);
             }
             end = s;
             sword = CLVIS_BVH_LEAF | s;
-            bvh_load_box(leaf_boxes, s, &slo, &shi);
+            clvis_bvh_leaf_box(leaf_boxes, s, &slo, &shi);
         } else {
             if (word & CLVIS_BVH_LEAF)
                 return;                 /* the internal sibling's item finishes the parent */

@@ -24,7 +24,7 @@
  *              global const float *leaf_boxes,      n x 6 (lo xyz, hi xyz), leaf order
  *              global const clvis_gaussian *recs,   n records in leaf order (clvis/gauss.h)
  *              global const uint *order,            leaf j is Gaussian order[j] (its id)
- *              uint n, global const float *cam,     22 floats (clvis/gauss.h)
+ *              uint n, global const float *cam,     22 floats: the camera rays of clvis/camera.h
  *              uint W, uint H,
  *              global const float4 *tf, uint tf_n,  transfer function: rgb colour, alpha factor
  *              float tf_min, float tf_scale,        entry i = clamp(floor((value - tf_min) * tf_scale * tf_n), 0, tf_n - 1)
@@ -40,11 +40,16 @@
  *     them front to back: C += T * alpha * rgb, T *= 1 - alpha, until T < 1e-3
  *     (after the Gaussian that brought it there) or a round finds fewer than k.
  *     A hit is m2 <= cutoff2 at t >= 0; the hit order is (t, id) ascending.
+ *     Boxes are culled by clvis_ray_slab of clvis/ray.h (1/d by its tiny-direction
+ *     rule); the Gaussians by clvis_gauss_hit of clvis/gauss.h.
+ *     Stages: collect_round (the traversal: clvis_ray_slab, clvis_gauss_hit,
+ *     hit_alpha, kbuffer_insert), then clvis_gauss_composite per hit.
  */
 #pragma OPENCL FP_CONTRACT OFF
 
 #include "clvis/bvh.h"
 #include "clvis/gauss.h"
+#include "clvis/ray.h"
 
 #ifndef K
 #define K 16
@@ -64,20 +69,125 @@ inline bool key_less(float ta, uint ia, float tb, uint ib)
     return ta < tb || (ta == tb && ia < ib);
 }
 
-/* Slab test of the box [lo, hi]; inv: 1 / d with zero components replaced by
- * a signed 1e-20 (finite, so no NaN from 0 * inf). Minimum and maximum by
- * compare and select (PoCL's fmin/fmax are about twice as slow); no input is NaN. */
-inline float mn(float a, float b) { return a < b ? a : b; }
-inline float mx(float a, float b) { return a > b ? a : b; }
-
-inline void slab(float lo0, float lo1, float lo2, float hi0, float hi1, float hi2, const float *o,
-                 const float *inv, float *t0, float *t1)
+/* The hit alpha of record g (MODEL), and its transfer-function entry *ti. */
+inline float hit_alpha(global const clvis_gaussian *g, global const float4 *tf, uint tf_n, float tf_min,
+                       float tf_scale, float density, float m2, float ts, float a, const float *op,
+                       const float *dp, uint *ti)
 {
-    float a0 = (lo0 - o[0]) * inv[0], b0 = (hi0 - o[0]) * inv[0];
-    float a1 = (lo1 - o[1]) * inv[1], b1 = (hi1 - o[1]) * inv[1];
-    float a2 = (lo2 - o[2]) * inv[2], b2 = (hi2 - o[2]) * inv[2];
-    *t0 = mx(mx(mn(a0, b0), mn(a1, b1)), mn(a2, b2));
-    *t1 = mn(mn(mx(a0, b0), mx(a1, b1)), mx(a2, b2));
+    *ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
+    float opac = g->opacity * tf[*ti].w;
+#if MODEL == 1
+    return clvis_gauss_alpha_absorption(opac, density, ts, a, op, dp);
+#else
+    return clvis_gauss_alpha_max_response(opac, m2);
+#endif
+}
+
+/* Put hit (t, id) of leaf j at position pos of the k-buffer (pos: its free
+ * slot or the last one), moving it forward to keep (t, id) ascending. */
+inline void kbuffer_insert(float *kt, uint *kj, float *ka, uint *kc, global const uint *order, int pos,
+                           float t, uint id, uint j, float alpha, uint ti)
+{
+    while (pos > 0 && key_less(t, id, kt[pos - 1], order[kj[pos - 1]])) {
+        kt[pos] = kt[pos - 1];
+        kj[pos] = kj[pos - 1];
+        ka[pos] = ka[pos - 1];
+        kc[pos] = kc[pos - 1];
+        --pos;
+    }
+    kt[pos] = t;
+    kj[pos] = j;
+    ka[pos] = alpha;
+    kc[pos] = ti;
+}
+
+/* One round: a full traversal of the BVH collecting into the k-buffer (kt,
+ * kj, ka, kc) the cap nearest hits whose key is beyond (last_t, last_id);
+ * returns how many it holds (< cap: the ray has no more hits). A subtree is
+ * skipped when its box misses the ray at t >= lower or, with the buffer
+ * full, the box starts beyond the buffer's last hit. */
+inline int collect_round(global const clvis_bvh_node *nodes, global const float *leaf_boxes,
+                         global const clvis_gaussian *recs, global const uint *order,
+                         const float *o, const float *d, const float *inv, float last_t, uint last_id,
+                         int cap, global const float4 *tf, uint tf_n, float tf_min, float tf_scale,
+                         float cutoff2, float density, float *kt, uint *kj, float *ka, uint *kc)
+{
+    uint stack[STACK];
+    float stack_t[STACK];
+    int kn = 0;
+    int sp = 0;
+    float lower = fmax(last_t, 0.0f);
+    /* root */
+    {
+        float t0, t1;
+        global const clvis_bvh_node *r = nodes;
+        clvis_ray_slab(o, inv, r->lo[0], r->lo[1], r->lo[2], r->hi[0], r->hi[1], r->hi[2], &t0, &t1);
+        if (t1 >= t0 && t1 >= lower) {
+            stack[sp] = 0;
+            stack_t[sp++] = t0;
+        }
+    }
+    while (sp > 0) {
+        --sp;
+        uint node = stack[sp];
+        if (kn == cap && stack_t[sp] > kt[cap - 1])
+            continue;
+        global const clvis_bvh_node *nd = nodes + node;
+        uint ch[2] = {nd->left, nd->right};
+        uint push[2];
+        float push_t[2];
+        int np = 0;
+        for (int c = 0; c < 2; ++c) {
+            uint child = ch[c];
+            if (child == CLVIS_BVH_NONE)
+                continue;
+            float t0, t1;
+            if (child & CLVIS_BVH_LEAF) {
+                uint j = child & ~CLVIS_BVH_LEAF;
+                global const float *bx = leaf_boxes + 6 * (size_t)j;
+                clvis_ray_slab(o, inv, bx[0], bx[1], bx[2], bx[3], bx[4], bx[5], &t0, &t1);
+                if (!(t1 >= t0 && t1 >= lower) || (kn == cap && t0 > kt[cap - 1]))
+                    continue;
+                float t, m2, ts, a, op[3], dp[3];
+                clvis_gauss_hit(recs + j, o, d, &t, &m2, &ts, &a, op, dp);
+                if (!(m2 <= cutoff2))
+                    continue;
+                uint id = order[j];
+                if (!key_less(last_t, last_id, t, id))
+                    continue;
+                int pos;
+                if (kn < cap)
+                    pos = kn++;
+                else if (key_less(t, id, kt[cap - 1], order[kj[cap - 1]]))
+                    pos = cap - 1;
+                else
+                    continue;
+                uint ti;
+                float alpha = hit_alpha(recs + j, tf, tf_n, tf_min, tf_scale, density, m2, ts, a, op, dp, &ti);
+                kbuffer_insert(kt, kj, ka, kc, order, pos, t, id, j, alpha, ti);
+            } else {
+                global const clvis_bvh_node *cn = nodes + child;
+                clvis_ray_slab(o, inv, cn->lo[0], cn->lo[1], cn->lo[2], cn->hi[0], cn->hi[1], cn->hi[2], &t0, &t1);
+                if (!(t1 >= t0 && t1 >= lower) || (kn == cap && t0 > kt[cap - 1]))
+                    continue;
+                push[np] = child;
+                push_t[np++] = t0;
+            }
+        }
+        /* the nearer child on top */
+        if (np == 2 && push_t[0] < push_t[1]) {
+            stack[sp] = push[1];
+            stack_t[sp++] = push_t[1];
+            stack[sp] = push[0];
+            stack_t[sp++] = push_t[0];
+        } else {
+            for (int c = 0; c < np; ++c) {
+                stack[sp] = push[c];
+                stack_t[sp++] = push_t[c];
+            }
+        }
+    }
+    return kn;
 }
 
 kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_boxes,
@@ -96,7 +206,7 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
     float o[3], d[3], inv[3];
     clvis_camera_ray(cam, px, py, o, d);
     for (int k = 0; k < 3; ++k)
-        inv[k] = 1.0f / (d[k] != 0.0f ? d[k] : copysign(1e-20f, d[k]));
+        inv[k] = clvis_ray_inv_dir(d[k]);
 
     float T = 1.0f, cr = 0.0f, cg = 0.0f, cb = 0.0f, z = INFINITY;
     float last_t = -1.0f;   /* every hit has t >= 0 */
@@ -106,121 +216,20 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
     uint kj[K];            /* their leaf positions (id = order[j]) */
     float ka[K];           /* their alpha */
     uint kc[K];            /* their transfer-function entry */
-    uint stack[STACK];
-    float stack_t[STACK];
 
     /* the round's capacity: K0 in the first round, doubling up to K, so a ray
      * that turns opaque early does not traverse its whole length for K hits */
     int cap = K0 < K ? K0 : K;
     while (!done) {
         ++rounds;
-        int kn = 0;
-        int sp = 0;
-        float lower = fmax(last_t, 0.0f);
-        /* root */
-        {
-            float t0, t1;
-            global const clvis_bvh_node *r = nodes;
-            slab(r->lo[0], r->lo[1], r->lo[2], r->hi[0], r->hi[1], r->hi[2], o, inv, &t0, &t1);
-            if (t1 >= t0 && t1 >= lower) {
-                stack[sp] = 0;
-                stack_t[sp++] = t0;
-            }
-        }
-        while (sp > 0) {
-            --sp;
-            uint node = stack[sp];
-            if (kn == cap && stack_t[sp] > kt[cap - 1])
-                continue;
-            global const clvis_bvh_node *nd = nodes + node;
-            uint ch[2] = {nd->left, nd->right};
-            uint push[2];
-            float push_t[2];
-            int np = 0;
-            for (int c = 0; c < 2; ++c) {
-                uint child = ch[c];
-                if (child == CLVIS_BVH_NONE)
-                    continue;
-                float t0, t1;
-                if (child & CLVIS_BVH_LEAF) {
-                    uint j = child & ~CLVIS_BVH_LEAF;
-                    global const float *bx = leaf_boxes + 6 * (size_t)j;
-                    slab(bx[0], bx[1], bx[2], bx[3], bx[4], bx[5], o, inv, &t0, &t1);
-                    if (!(t1 >= t0 && t1 >= lower) || (kn == cap && t0 > kt[cap - 1]))
-                        continue;
-                    float t, m2, ts, a, op[3], dp[3];
-                    clvis_gauss_hit(recs + j, o, d, &t, &m2, &ts, &a, op, dp);
-                    if (!(m2 <= cutoff2))
-                        continue;
-                    uint id = order[j];
-                    if (!key_less(last_t, last_id, t, id))
-                        continue;
-                    int pos;
-                    if (kn < cap)
-                        pos = kn++;
-                    else if (key_less(t, id, kt[cap - 1], order[kj[cap - 1]]))
-                        pos = cap - 1;
-                    else
-                        continue;
-                    global const clvis_gaussian *g = recs + j;
-                    float x = floor(((g->value - tf_min) * tf_scale) * (float)tf_n);
-                    uint ti = x >= (float)(tf_n - 1) ? tf_n - 1 : x > 0.0f ? (uint)x : 0u;
-                    float opac = g->opacity * tf[ti].w;
-#if MODEL == 1
-                    float s0 = op[0] + ts * dp[0], s1 = op[1] + ts * dp[1], s2 = op[2] + ts * dp[2];
-                    float ms2 = clvis_dot3(s0, s1, s2, s0, s1, s2);
-                    float integral = (exp(-0.5f * ms2) * sqrt(M_PI_F / (2.0f * a))) * erfc(-ts * sqrt(0.5f * a));
-                    float alpha = 1.0f - exp(-((density * opac) * integral));
-#else
-                    float alpha = fmin(0.99f, opac * exp(-0.5f * m2));
-#endif
-                    while (pos > 0 && key_less(t, id, kt[pos - 1], order[kj[pos - 1]])) {
-                        kt[pos] = kt[pos - 1];
-                        kj[pos] = kj[pos - 1];
-                        ka[pos] = ka[pos - 1];
-                        kc[pos] = kc[pos - 1];
-                        --pos;
-                    }
-                    kt[pos] = t;
-                    kj[pos] = j;
-                    ka[pos] = alpha;
-                    kc[pos] = ti;
-                } else {
-                    global const clvis_bvh_node *cn = nodes + child;
-                    slab(cn->lo[0], cn->lo[1], cn->lo[2], cn->hi[0], cn->hi[1], cn->hi[2], o, inv, &t0, &t1);
-                    if (!(t1 >= t0 && t1 >= lower) || (kn == cap && t0 > kt[cap - 1]))
-                        continue;
-                    push[np] = child;
-                    push_t[np++] = t0;
-                }
-            }
-            /* the nearer child on top */
-            if (np == 2 && push_t[0] < push_t[1]) {
-                stack[sp] = push[1];
-                stack_t[sp++] = push_t[1];
-                stack[sp] = push[0];
-                stack_t[sp++] = push_t[0];
-            } else {
-                for (int c = 0; c < np; ++c) {
-                    stack[sp] = push[c];
-                    stack_t[sp++] = push_t[c];
-                }
-            }
-        }
-
+        int kn = collect_round(nodes, leaf_boxes, recs, order, o, d, inv, last_t, last_id, cap, tf, tf_n,
+                               tf_min, tf_scale, cutoff2, density, kt, kj, ka, kc);
+        /* composite the round front to back */
         for (int h = 0; h < kn; ++h) {
-            float alpha = ka[h];
-            float4 c = tf[kc[h]];
-            float wgt = T * alpha;
-            cr += wgt * c.x;
-            cg += wgt * c.y;
-            cb += wgt * c.z;
-            T = T * (1.0f - alpha);
+            clvis_gauss_composite(ka[h], tf[kc[h]], &T, &cr, &cg, &cb);
             ++hits;
-            if (T < 0.5f && z == INFINITY) {
-                float p0 = o[0] + kt[h] * d[0], p1 = o[1] + kt[h] * d[1], p2 = o[2] + kt[h] * d[2];
-                z = clvis_dot3(cam[18], cam[19], cam[20], p0, p1, p2) + cam[21];
-            }
+            if (T < 0.5f && z == INFINITY)
+                z = clvis_ray_depth(cam, o, d, kt[h]);
             if (T < T_STOP) {
                 done = true;
                 break;

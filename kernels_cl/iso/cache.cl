@@ -7,7 +7,8 @@
  * No compiler flags. Defines:
  *   NEEDED_T  the element type of the `needed` flags: uchar (default) or uint;
  *             a block is needed when its flag is nonzero.
- * Includes clvis/zfp.h (the per-block decoder; stream format documented there).
+ * Includes clvis/zfp.h (the per-block decoder, stream format documented there;
+ * the block-grid helpers).
  *
  * Blocks: the ZFP block grid of zfp.cl, nbx x nby x nbz blocks of 4^3 samples,
  * block id b = bx + nbx (by + nby bz), nblocks = nbx nby nbz < 2^32.
@@ -83,18 +84,15 @@ kernel void mark_blocks(global const uint *visible_ids, uint count, uint nbx, ui
     uint j = get_global_id(0);
     if (j >= count)
         return;
-    ulong nblocks = (ulong)nbx * nby * nbz;
-    uint v = visible_ids[j];
-    if ((ulong)v >= nblocks)
+    uint c[3];
+    if (!clvis_zfp_grid_cell(visible_ids[j], nbx, nby, nbz, c))
         return;
-    uint bx = v % nbx, rest = v / nbx;
-    uint by = rest % nby, bz = rest / nby;
     for (uint dz = 0; dz < 2u; ++dz)
         for (uint dy = 0; dy < 2u; ++dy)
             for (uint dx = 0; dx < 2u; ++dx) {
-                uint x = bx + dx, y = by + dy, z = bz + dz;
+                uint x = c[0] + dx, y = c[1] + dy, z = c[2] + dz;
                 if (x < nbx && y < nby && z < nbz)
-                    needed[x + nbx * (y + nby * z)] = (NEEDED_T)1;
+                    needed[clvis_zfp_block_id(x, y, z, nbx, nby)] = (NEEDED_T)1;
             }
 }
 
@@ -165,5 +163,5 @@ kernel void cache_decode(global const ulong *stream, uint rate, uint nblocks,
     uint j = get_global_id(0);
     if (j >= count)
         return;
-    zfp_decode_brick(stream, rate, nblocks, ids[j], bricks + (ulong)slots[j] * 64u);
+    clvis_zfp_decode_brick(stream, rate, nblocks, ids[j], bricks + (ulong)slots[j] * 64u);
 }

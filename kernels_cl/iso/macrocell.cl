@@ -3,7 +3,7 @@
  *
  * ABI
  * ---
- * No defines, no compiler flags. Includes clvis/zfp.h (stream layout and the
+ * No defines, no compiler flags. Includes clvis/zfp.h (stream layout, the
  * per-block decode). Volume [nz][ny][nx], blocks (bx, by, bz) of 4^3 samples,
  * block b = bx + nbx (by + nby bz), nb_ = ceil(n_ / 4), as in zfp.cl.
  *
@@ -46,23 +46,19 @@ inline float2 merge(float2 a, float2 b)
 kernel void block_faces(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,
                         global float2 *faces)
 {
-    uint nbx = (nx + 3u) >> 2, nby = (ny + 3u) >> 2, nbz = (nz + 3u) >> 2;
     ulong b = get_global_id(0);
-    uint c[3];
-    if (!zfp_grid_cell(b, nbx, nby, nbz, c))
+    uint c[3], ext[3];
+    int q[64], emax;
+    if (!clvis_zfp_decode_volume_block(stream, rate, nx, ny, nz, b, c, ext, q, &emax))
         return;
-    uint bx = c[0], by = c[1], bz = c[2];
-
-    int q[64];
-    int emax = zfp_decode_block3i(stream, b, rate, q);
-    uint ex = min(4u, nx - 4u * bx), ey = min(4u, ny - 4u * by), ez = min(4u, nz - 4u * bz);
+    uint ex = ext[0], ey = ext[1], ez = ext[2];
     float2 f[8];
     for (uint e = 0; e < 8u; ++e)
         f[e] = (float2)(INFINITY, -INFINITY);
     for (uint z = 0; z < ez; ++z)
         for (uint y = 0; y < ey; ++y)
             for (uint x = 0; x < ex; ++x) {
-                float v = emax == ZFP_ZERO_BLOCK ? 0.0f : zfp_dequantize(q[16u * z + 4u * y + x], emax);
+                float v = clvis_zfp_value(q, 16u * z + 4u * y + x, emax);
                 /* the faces this sample lies on: every e whose axes all have coordinate 0 */
                 uint on = (x == 0u ? 1u : 0u) | (y == 0u ? 2u : 0u) | (z == 0u ? 4u : 0u);
                 for (uint e = 0; e < 8u; ++e)
@@ -75,10 +71,10 @@ kernel void block_faces(global const ulong *stream, uint rate, uint nx, uint ny,
 
 kernel void block_ranges(global const float2 *faces, uint nx, uint ny, uint nz, global float2 *ranges)
 {
-    uint nbx = (nx + 3u) >> 2, nby = (ny + 3u) >> 2, nbz = (nz + 3u) >> 2;
+    uint nbx = clvis_zfp_blocks(nx), nby = clvis_zfp_blocks(ny), nbz = clvis_zfp_blocks(nz);
     ulong b = get_global_id(0);
     uint c[3];
-    if (!zfp_grid_cell(b, nbx, nby, nbz, c))
+    if (!clvis_zfp_grid_cell(b, nbx, nby, nbz, c))
         return;
     uint bx = c[0], by = c[1], bz = c[2];
     float2 r = (float2)(INFINITY, -INFINITY);
@@ -95,10 +91,10 @@ kernel void block_ranges(global const float2 *faces, uint nx, uint ny, uint nz, 
 
 kernel void coarse_ranges(global const float2 *ranges, uint nbx, uint nby, uint nbz, global float2 *coarse)
 {
-    uint ncx = (nbx + 3u) >> 2, ncy = (nby + 3u) >> 2, ncz = (nbz + 3u) >> 2;
+    uint ncx = clvis_zfp_blocks(nbx), ncy = clvis_zfp_blocks(nby), ncz = clvis_zfp_blocks(nbz);
     ulong c = get_global_id(0);
     uint cc[3];
-    if (!zfp_grid_cell(c, ncx, ncy, ncz, cc))
+    if (!clvis_zfp_grid_cell(c, ncx, ncy, ncz, cc))
         return;
     uint cx = cc[0], cy = cc[1], cz = cc[2];
     float2 r = (float2)(INFINITY, -INFINITY);

@@ -10,9 +10,9 @@
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (FP_CONTRACT is OFF
  * below: every float operation rounds on its own, so clvis/reference/
  * iso_traverse.py reproduces the results bit for bit). No defines.
- * Includes clvis/gauss.h (the 22-float camera-ray buffer, clvis_camera_ray)
- * and clvis/bvh.h (CLVIS_BVH_TINY_DIR, the 1/d convention), clvis/iso.h
- * (clvis_iso_ray_setup: the ray in index space and its box interval).
+ * Includes clvis/camera.h (the 22-float camera-ray buffer, clvis_camera_ray),
+ * clvis/iso.h (clvis_iso_ray_setup: the ray in index space and its box
+ * interval; the 1/d convention of clvis/ray.h).
  *
  * Volume [nz][ny][nx] samples, nx, ny, nz >= 2; ZFP blocks of 4^3 samples,
  * block id b = bx + nbx (by + nby bz), nb_ = ceil(n_ / 4); coarse cell id
@@ -51,7 +51,7 @@
  * Coarse skipping gives exactly the sequence of the fine grid alone.
  *
  * kernel init_rays(
- *     global const float *cam,           22 floats (clvis/gauss.h)
+ *     global const float *cam,           22 floats: the camera rays of clvis/camera.h
  *     uint W, uint H,                    image size: pixel p = py * W + px
  *     uint nx, uint ny, uint nz, float dx, float dy, float dz, float ox, float oy, float oz,
  *     global float *ray_t,               out, per pixel: t_enter, +INFINITY when the ray misses
@@ -85,8 +85,7 @@
 /* before the includes: clvis_camera_ray must not contract either */
 #pragma OPENCL FP_CONTRACT OFF
 
-#include "clvis/bvh.h"
-#include "clvis/gauss.h"
+#include "clvis/camera.h"
 #include "clvis/iso.h"
 
 #define NO_BLOCK 0xFFFFFFFFu

@@ -34,24 +34,16 @@
 kernel void decode_volume(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,
                           global float *out)
 {
-    uint nbx = (nx + 3u) >> 2, nby = (ny + 3u) >> 2, nbz = (nz + 3u) >> 2;
-    ulong b = get_global_id(0);
-    uint c[3];
-    if (!zfp_grid_cell(b, nbx, nby, nbz, c))
+    uint c[3], e[3];
+    int q[64], emax;
+    if (!clvis_zfp_decode_volume_block(stream, rate, nx, ny, nz, get_global_id(0), c, e, q, &emax))
         return;
-    uint bx = c[0], by = c[1], bz = c[2];
-
-    int q[64];
-    int emax = zfp_decode_block3i(stream, b, rate, q);
-
-    uint x0 = 4u * bx, y0 = 4u * by, z0 = 4u * bz;
-    uint ex = min(4u, nx - x0), ey = min(4u, ny - y0), ez = min(4u, nz - z0);
-    for (uint z = 0; z < ez; ++z)
-        for (uint y = 0; y < ey; ++y) {
+    uint x0 = 4u * c[0], y0 = 4u * c[1], z0 = 4u * c[2];
+    for (uint z = 0; z < e[2]; ++z)
+        for (uint y = 0; y < e[1]; ++y) {
             global float *row = out + ((ulong)(z0 + z) * ny + (y0 + y)) * nx + x0;
-            const int *src = q + 16u * z + 4u * y;
-            for (uint x = 0; x < ex; ++x)
-                row[x] = emax == ZFP_ZERO_BLOCK ? 0.0f : zfp_dequantize(src[x], emax);
+            for (uint x = 0; x < e[0]; ++x)
+                row[x] = clvis_zfp_value(q, 16u * z + 4u * y + x, emax);
         }
 }
 
@@ -61,5 +53,5 @@ kernel void decode_blocks(global const ulong *stream, uint rate, uint nblocks_to
     uint j = get_global_id(0);
     if (j >= count)
         return;
-    zfp_decode_brick(stream, rate, nblocks_total, ids[j], out_bricks + (ulong)j * 64u);
+    clvis_zfp_decode_brick(stream, rate, nblocks_total, ids[j], out_bricks + (ulong)j * 64u);
 }

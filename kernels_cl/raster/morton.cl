@@ -3,14 +3,15 @@
  *
  * ABI
  * ---
- * No defines. One work-item per point: global size >= n, any local size.
+ * No defines. Includes clvis/morton.h. One work-item per point: global size >= n, any local size.
  *
  * kernel morton_codes(global const float *positions, uint n,
  *                     float lox, float loy, float loz,
  *                     float sx, float sy, float sz, global uint *codes)
  *     positions: n points of 3 floats. q_a = (a - lo_a) * s_a (float32), clamped
- *     to [0, 1023] and truncated (s_a = 1023 / extent_a, or 0 for a flat axis);
- *     codes[i] = clvis_morton3(qx, qy, qz) (clvis/morton.h, 30 bits), or
+ *     to [0, 1023] and truncated (s_a = 1023 / extent_a, or 0 for a flat axis;
+ *     clvis_morton_quantize); codes[i] = clvis_morton3(qx, qy, qz) (clvis/morton.h,
+ *     30 bits), or
  *     0xFFFFFFFF for a point with a NaN or infinite coordinate (sorted last).
  *
  * kernel gather_points(global const float *src, global const uint *perm, uint n,
@@ -27,11 +28,6 @@
 
 #include "clvis/morton.h"
 
-inline uint morton_quantize(float v)
-{
-    return v <= 0.0f ? 0u : v >= 1023.0f ? 1023u : (uint)v;
-}
-
 kernel void morton_codes(global const float *positions, uint n, float lox, float loy, float loz,
                          float sx, float sy, float sz, global uint *codes)
 {
@@ -44,8 +40,8 @@ kernel void morton_codes(global const float *positions, uint n, float lox, float
         codes[i] = 0xFFFFFFFFu;
         return;
     }
-    codes[i] = clvis_morton3(morton_quantize((x - lox) * sx), morton_quantize((y - loy) * sy),
-                             morton_quantize((z - loz) * sz));
+    codes[i] = clvis_morton3(clvis_morton_quantize((x - lox) * sx), clvis_morton_quantize((y - loy) * sy),
+                             clvis_morton_quantize((z - loz) * sz));
 }
 
 kernel void gather_points(global const float *src, global const uint *perm, uint n,

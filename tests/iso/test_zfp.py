@@ -111,7 +111,7 @@ def test_stream_length_is_rate_words_per_block():
 
 def test_perm_table_of_the_header_is_the_reference_table():
     src = (runtime.INCLUDE_DIR / "clvis" / "zfp.h").read_text()
-    body = src.split("zfp_perm3[64] = {")[1].split("}")[0]
+    body = src.split("clvis_zfp_perm3[64] = {")[1].split("}")[0]
     table = [int(t) for t in re.findall(r"\d+", body)]
     assert table == list(ref.PERM_3)
     assert sorted(table) == list(range(64))
@@ -137,7 +137,7 @@ kernel void probe(global const int *i, global const int *emax, uint n, global fl
 {
     uint k = get_global_id(0);
     if (k < n)
-        out[k] = zfp_dequantize(i[k], emax[k]);
+        out[k] = clvis_zfp_dequantize(i[k], emax[k]);
 }
 """
 

@@ -14,7 +14,7 @@ from .macrocell import _volume, cell_ranges
 __all__ = ["BISECTION_STEPS", "TINY_DIR", "IsoImage", "Shading", "cell_cubic", "cubic_first_zero",
            "render_rays", "shade"]
 
-TINY_DIR = 1e-20            # clvis/bvh.h CLVIS_BVH_TINY_DIR
+TINY_DIR = 1e-20            # clvis/ray.h CLVIS_RAY_TINY_DIR
 BISECTION_STEPS = 60
 
 

@@ -32,7 +32,7 @@ Entry (slab test)
 Per axis a: ``inv_a = spacing_a / d_safe_a`` (t per index unit), where
 ``d_safe_a = d_a``, except that a component with ``|d_a| < TINY_DIR`` (1e-20,
 zero included) is replaced by ``copysign(TINY_DIR, d_a)`` (+0 -> +TINY,
--0 -> -TINY), exactly as clvis/bvh.h's ``clvis_bvh_inv_dir``. The index-space
+-0 -> -TINY), exactly as clvis/ray.h's ``clvis_ray_safe_dir``. The index-space
 ray is G(t) = O + t D, O = (o - origin) / spacing, D = d / spacing (D keeps
 its zeros; only the inverse uses TINY_DIR). With
 ``t0 = (0 - O) inv``, ``t1 = (n - 1 - O) inv``: ``t_enter = max(0, max_a

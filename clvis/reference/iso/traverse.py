@@ -28,7 +28,7 @@ from ..camera import camera_rays
 __all__ = ["NO_BLOCK", "init_rays", "macro_traverse", "ray_setup"]
 
 NO_BLOCK = np.uint32(0xFFFFFFFF)
-_TINY = np.float32(1e-20)          # clvis/bvh.h CLVIS_BVH_TINY_DIR
+_TINY = np.float32(1e-20)          # clvis/ray.h CLVIS_RAY_TINY_DIR
 _F = np.float32
 
 

@@ -1,6 +1,8 @@
-/* clvis/camera.h — the camera and pixel conventions of clvis, in OpenCL C.
+/* clvis/camera.h — the camera and pixel conventions of clvis, in OpenCL C:
+ * the projection of the rasterizers and the rays of the ray casters.
  *
- * Camera buffer: 20 floats, row-major.
+ * Camera buffer (the rasterizers: raster/render.cl, raster/resolve.cl):
+ * 20 floats, row-major.
  *   cam[0..15]   M = projection @ view (column vectors: clip = M [x y z 1]^T)
  *   cam[16..19]  D = -view[2, :], so depth = D . [x y z 1] is the view-space
  *                distance along the view axis (clip w for a perspective camera;
@@ -16,6 +18,23 @@
  *   sx = ((clip_0 * r) * 0.5 + 0.5) * W,  sy = (0.5 - (clip_1 * r) * 0.5) * H
  *   drawn when x, y, z are finite, near <= depth <= far, clip_3 > 0,
  *   0 <= sx < W and 0 <= sy < H; pixel (floor(sx), floor(sy)), row 0 on top.
+ *
+ * Camera rays (the ray casters: gauss/march.cl, iso/traverse.cl, iso/raytrace.cl)
+ * -----------
+ * A 22-float buffer (clvis.camera.ray_buffer (Python)):
+ *   [0..2] o0  [3..5] ou  [6..8] ov   origin  o = o0 + u ou + v ov
+ *   [9..11] d0 [12..14] du [15..17] dv  direction dd = d0 + u du + v dv, d = dd / |dd|
+ *   [18..21] depth row D: view depth of a point p = D . (p, 1)
+ * with u = px + 0.5, v = py + 0.5 (pixel centres, row 0 on top). The origin is
+ * on the near plane, so t >= 0 is what the camera sees. Every product and sum
+ * is rounded separately, left to right (FP_CONTRACT OFF before the include,
+ * and -cl-fp32-correctly-rounded-divide-sqrt); the NumPy references repeat the
+ * same float32 operations.
+ *
+ *   clvis_dot3(a0, a1, a2, b0, b1, b2) = (a0 b0 + a1 b1) + a2 b2
+ *   clvis_camera_ray(cam, px, py, o, d): pixel (px, py)'s origin o[3] and unit
+ *       direction d[3]
+ *   clvis_ray_depth(cam, o, d, t): the view depth D . (o + t d, 1) of the point at t
  */
 #ifndef CLVIS_CAMERA_H
 #define CLVIS_CAMERA_H
@@ -127,6 +146,34 @@ inline int clvis_box_culled(const clvis_camera *c, float3 lo, float3 hi, float n
         all_out &= out;
     }
     return all_out != 0u;
+}
+
+/* ---------------------------------------------------------------- camera rays */
+
+inline float clvis_dot3(float a0, float a1, float a2, float b0, float b1, float b2)
+{
+    return (a0 * b0 + a1 * b1) + a2 * b2;
+}
+
+/* The pixel (px, py)'s ray: origin o[3] and unit direction d[3]. */
+inline void clvis_camera_ray(global const float *cam, uint px, uint py, float *o, float *d)
+{
+    float u = (float)px + 0.5f, v = (float)py + 0.5f;
+    float dd[3];
+    for (int k = 0; k < 3; ++k) {
+        o[k] = (cam[k] + u * cam[3 + k]) + v * cam[6 + k];
+        dd[k] = (cam[9 + k] + u * cam[12 + k]) + v * cam[15 + k];
+    }
+    float len = sqrt(clvis_dot3(dd[0], dd[1], dd[2], dd[0], dd[1], dd[2]));
+    for (int k = 0; k < 3; ++k)
+        d[k] = dd[k] / len;
+}
+
+/* The view depth of the ray's point at t: D . (o + t d, 1), cam[18..21] = D. */
+inline float clvis_ray_depth(global const float *cam, const float *o, const float *d, float t)
+{
+    float p0 = o[0] + t * d[0], p1 = o[1] + t * d[1], p2 = o[2] + t * d[2];
+    return clvis_dot3(cam[18], cam[19], cam[20], p0, p1, p2) + cam[21];
 }
 
 #endif /* CLVIS_CAMERA_H */

@@ -1,4 +1,4 @@
-/* clvis/gauss.h — Gaussian records and camera rays of the gauss family.
+/* clvis/gauss.h — Gaussian records of the gauss family and the ray–Gaussian test.
  *
  * A Gaussian's density along a ray is opacity * exp(-m^2 / 2), m the
  * Mahalanobis distance. Kernels test rays against a *record*, which holds the
@@ -15,15 +15,7 @@
  * Degenerate Gaussians: s_k is clamped below to max(CLVIS_GAUSS_FLAT * max_j s_j,
  * CLVIS_GAUSS_TINY) before W is formed, so a flat Gaussian is a thin slab.
  *
- * Camera rays: a 22-float buffer (clvis.gauss.render.ray_buffer)
- *   [0..2] o0  [3..5] ou  [6..8] ov   origin  o = o0 + u ou + v ov
- *   [9..11] d0 [12..14] du [15..17] dv  direction dd = d0 + u du + v dv, d = dd / |dd|
- *   [18..21] depth row D: view depth of a point p = D . (p, 1)
- * with u = px + 0.5, v = py + 0.5 (pixel centres, row 0 on top). The origin is
- * on the near plane, so t >= 0 is what the camera sees. Every product and sum
- * is rounded separately, left to right (build with FP_CONTRACT OFF and
- * -cl-fp32-correctly-rounded-divide-sqrt): clvis/reference/gauss/render.py
- * repeats the same float32 operations.
+ * Camera rays (the 22-float buffer, clvis_camera_ray, clvis_dot3): clvis/camera.h.
  *
  * clvis_gauss_hit(g, o, d, &t, &m2, &ts, &a): the ray's closest approach to g
  * in the Mahalanobis sense over t >= 0:
@@ -31,9 +23,24 @@
  *   a = |d'|^2, b = o'.d', ts = -b / a            (ts: the unclamped maximum)
  *   t = fmax(ts, 0); m2 = |o' + t d'|^2
  * A ray hits g when m2 <= cutoff^2; t orders the hits (ties by Gaussian id).
+ *
+ * The stages of compositing a hit (gauss/march.cl; clvis.reference.gauss.render's
+ * tf_lookup and render_rays repeat them, render_rays in float64):
+ *   uint clvis_gauss_tf_index(value, tf_min, tf_scale, tf_n): the transfer-function
+ *       entry clamp(floor(((value - tf_min) * tf_scale) * tf_n), 0, tf_n - 1)
+ *   float clvis_gauss_alpha_max_response(opac, m2) = min(0.99, opac exp(-m2 / 2))
+ *   float clvis_gauss_alpha_absorption(opac, density, ts, a, op, dp)
+ *       = 1 - exp(-(density opac) I), I = (exp(-ms2 / 2) sqrt(pi / (2a)))
+ *       erfc(-ts sqrt(a / 2)), ms2 = |o' + ts d'|^2 (op = o', dp = d' of
+ *       clvis_gauss_hit)
+ *   clvis_gauss_composite(alpha, c, &T, &cr, &cg, &cb): one front-to-back step,
+ *       w = T alpha; cr += w c.x, cg += w c.y, cb += w c.z; T = T (1 - alpha)
+ * (opac: the record's opacity times the transfer function's alpha factor.)
  */
 #ifndef CLVIS_GAUSS_H
 #define CLVIS_GAUSS_H
+
+#include "clvis/camera.h"
 
 #define CLVIS_GAUSS_FLAT 1e-3f
 #define CLVIS_GAUSS_TINY 1e-30f
@@ -44,25 +51,6 @@ typedef struct {
     float w[9];
     float opacity;
 } clvis_gaussian;
-
-inline float clvis_dot3(float a0, float a1, float a2, float b0, float b1, float b2)
-{
-    return (a0 * b0 + a1 * b1) + a2 * b2;
-}
-
-/* The pixel (px, py)'s ray: origin o[3] and unit direction d[3]. */
-inline void clvis_camera_ray(global const float *cam, uint px, uint py, float *o, float *d)
-{
-    float u = (float)px + 0.5f, v = (float)py + 0.5f;
-    float dd[3];
-    for (int k = 0; k < 3; ++k) {
-        o[k] = (cam[k] + u * cam[3 + k]) + v * cam[6 + k];
-        dd[k] = (cam[9 + k] + u * cam[12 + k]) + v * cam[15 + k];
-    }
-    float len = sqrt(clvis_dot3(dd[0], dd[1], dd[2], dd[0], dd[1], dd[2]));
-    for (int k = 0; k < 3; ++k)
-        d[k] = dd[k] / len;
-}
 
 inline void clvis_gauss_hit(global const clvis_gaussian *g, const float *o, const float *d,
                             float *t, float *m2, float *ts, float *a, float *op, float *dp)
@@ -80,4 +68,33 @@ inline void clvis_gauss_hit(global const clvis_gaussian *g, const float *o, cons
     *m2 = clvis_dot3(p0, p1, p2, p0, p1, p2);
 }
 
-#endif
+inline uint clvis_gauss_tf_index(float value, float tf_min, float tf_scale, uint tf_n)
+{
+    float x = floor(((value - tf_min) * tf_scale) * (float)tf_n);
+    return x >= (float)(tf_n - 1) ? tf_n - 1 : x > 0.0f ? (uint)x : 0u;
+}
+
+inline float clvis_gauss_alpha_max_response(float opac, float m2)
+{
+    return fmin(0.99f, opac * exp(-0.5f * m2));
+}
+
+inline float clvis_gauss_alpha_absorption(float opac, float density, float ts, float a,
+                                          const float *op, const float *dp)
+{
+    float s0 = op[0] + ts * dp[0], s1 = op[1] + ts * dp[1], s2 = op[2] + ts * dp[2];
+    float ms2 = clvis_dot3(s0, s1, s2, s0, s1, s2);
+    float integral = (exp(-0.5f * ms2) * sqrt(M_PI_F / (2.0f * a))) * erfc(-ts * sqrt(0.5f * a));
+    return 1.0f - exp(-((density * opac) * integral));
+}
+
+inline void clvis_gauss_composite(float alpha, float4 c, float *T, float *cr, float *cg, float *cb)
+{
+    float wgt = *T * alpha;
+    *cr += wgt * c.x;
+    *cg += wgt * c.y;
+    *cb += wgt * c.z;
+    *T = *T * (1.0f - alpha);
+}
+
+#endif /* CLVIS_GAUSS_H */

@@ -1,7 +1,9 @@
-/* zfp.h — decoding one block of a ZFP fixed-rate stream of 3-D float32 data.
+/* clvis/zfp.h — decoding one block of a ZFP fixed-rate stream of 3-D float32 data.
  *
  * Inline functions only, for kernels that decode whole volumes
- * (iso/zfp.cl) or just the blocks they need (a block cache). The format, as
+ * (iso/zfp.cl, iso/macrocell.cl) or just the blocks they need (iso/cache.cl),
+ * and the block-grid helpers (iso/raytrace.cl too). No other header needed;
+ * include guard CLVIS_ZFP_H. The format, as
  * zfp 1.0 writes it in fixed-rate mode (zfp_stream_set_rate(rate, float, 3,
  * align 0); zfpy.compress_numpy(v, rate=r, write_header=False)):
  *
@@ -15,7 +17,7 @@
  * - Inside a block: 1 bit (0: all 64 values are +0.0f), 8 bits of exponent
  *   emax + 127, then embedded bit-plane coding of 64 negabinary uint
  *   coefficients (planes 31 down to 0, at most maxbits - 9 bits), in the
- *   sequency order zfp_perm3; then the inverse lifting transform along z, y
+ *   sequency order clvis_zfp_perm3; then the inverse lifting transform along z, y
  *   and x; value = (float)i * (float)2^(emax - 30), each rounded to nearest
  *   even as zfp does on an IEEE host (2^(emax - 30) is 0 below 2^-149).
  * - In-block order of decoded values: index x + 4 y + 16 z.
@@ -29,23 +31,32 @@
  * bits say. Any bit pattern decodes to some finite or infinite values (never
  * NaN): a corrupt stream of the right length gives garbage, not a crash.
  *
- * API (the rest are helpers):
- *   int zfp_decode_block3i(global const ulong *stream, ulong block, uint rate,
+ * API (every name starts with clvis_zfp_ / CLVIS_ZFP_; the rest are helpers):
+ *   int clvis_zfp_decode_block3i(global const ulong *stream, ulong block, uint rate,
  *                          int *q)
  *       the integer values of block `block` into private q[64]; returns
- *       emax, or ZFP_ZERO_BLOCK for an all-zero block. Reads only words
+ *       emax, or CLVIS_ZFP_ZERO_BLOCK for an all-zero block. Reads only words
  *       [block * rate, (block + 1) * rate) of `stream`.
- *   void zfp_decode_brick(global const ulong *stream, uint rate, uint nblocks, uint b,
+ *   void clvis_zfp_decode_brick(global const ulong *stream, uint rate, uint nblocks, uint b,
  *                         global float *brick)
  *       block b's 64 values into brick (x + 4 y + 16 z); NaN without reading
  *       when b >= nblocks.
- *   int zfp_grid_cell(ulong b, uint nx, uint ny, uint nz, uint *c)
+ *   int clvis_zfp_grid_cell(ulong b, uint nx, uint ny, uint nz, uint *c)
  *       cell b of an x-fastest grid as c = (x, y, z); 0 if b is beyond it
  *       (the block grid: nx = ceil(X / 4), ...).
- *   float zfp_dequantize(int i, int emax)
+ *   uint clvis_zfp_blocks(uint n), uint clvis_zfp_block_id(x, y, z, nbx, nby)
+ *       blocks along an axis of n samples (ceil(n / 4)); the id x + nbx (y + nby z).
+ *   int clvis_zfp_decode_volume_block(stream, rate, nx, ny, nz, ulong b, uint *c,
+ *                                     uint *e, int *q, int *emax)
+ *       the prologue of a kernel with a work-item per block of a volume: block
+ *       b's grid coordinates c[3], in-volume extent e[3] (<= 4 per axis) and
+ *       decoded integers q[64], *emax; 0 (nothing done) when b is beyond the grid.
+ *   float clvis_zfp_value(const int *q, uint k, int emax)
+ *       value k of a decoded block (+0.0f for an all-zero block).
+ *   float clvis_zfp_dequantize(int i, int emax)
  *       value of integer i of a block with exponent emax (not for
- *       ZFP_ZERO_BLOCK: those values are +0.0f). So value k of a block is
- *       emax == ZFP_ZERO_BLOCK ? 0.0f : zfp_dequantize(q[k], emax).
+ *       CLVIS_ZFP_ZERO_BLOCK: those values are +0.0f). So value k of a block is
+ *       emax == CLVIS_ZFP_ZERO_BLOCK ? 0.0f : clvis_zfp_dequantize(q[k], emax).
  *
  * GPU note: one work-item decodes a whole block with 64-entry private
  * arrays indexed at run time (coefficient deposit, permutation); that suits
@@ -55,15 +66,15 @@
 #ifndef CLVIS_ZFP_H
 #define CLVIS_ZFP_H
 
-#define ZFP_BLOCK_VALUES 64
-#define ZFP_EBIAS 127
-#define ZFP_NBMASK 0xaaaaaaaau
-#define ZFP_MAX_RATE 32u
+#define CLVIS_ZFP_BLOCK_VALUES 64
+#define CLVIS_ZFP_EBIAS 127
+#define CLVIS_ZFP_NBMASK 0xaaaaaaaau
+#define CLVIS_ZFP_MAX_RATE 32u
 
-/* coefficient k of the decoded sequence sits at block index zfp_perm3[k]
+/* coefficient k of the decoded sequence sits at block index clvis_zfp_perm3[k]
  * (x + 4 y + 16 z): (x, y, z) ordered by x + y + z, then x^2 + y^2 + z^2,
  * ties in zfp's order (part of the format) */
-constant uchar zfp_perm3[64] = {
+constant uchar clvis_zfp_perm3[64] = {
      0,
      1,  4, 16,
     20, 17,  5,
@@ -93,11 +104,11 @@ typedef struct {
     uint nwords;                /* the block's words (= rate) */
     uint avail;                 /* bits left in buf */
     ulong buf;                  /* unread bits, next one lowest; higher bits 0 */
-} zfp_reader;
+} clvis_zfp_reader;
 
-inline zfp_reader zfp_reader_at(global const ulong *stream, ulong block, uint rate)
+inline clvis_zfp_reader clvis_zfp_reader_at(global const ulong *stream, ulong block, uint rate)
 {
-    zfp_reader r;
+    clvis_zfp_reader r;
     r.words = stream + block * (ulong)rate;
     r.next = 0u;
     r.nwords = rate;
@@ -106,17 +117,17 @@ inline zfp_reader zfp_reader_at(global const ulong *stream, ulong block, uint ra
     return r;
 }
 
-inline ulong zfp_load_word(zfp_reader *r)
+inline ulong clvis_zfp_load_word(clvis_zfp_reader *r)
 {
     ulong w = r->next < r->nwords ? r->words[r->next] : 0ul;   /* never past the block */
     r->next += 1u;
     return w;
 }
 
-inline uint zfp_read_bit(zfp_reader *r)
+inline uint clvis_zfp_read_bit(clvis_zfp_reader *r)
 {
     if (r->avail == 0u) {
-        r->buf = zfp_load_word(r);
+        r->buf = clvis_zfp_load_word(r);
         r->avail = 64u;
     }
     uint bit = (uint)(r->buf & 1ul);
@@ -126,14 +137,14 @@ inline uint zfp_read_bit(zfp_reader *r)
 }
 
 /* the next n bits (0 <= n <= 64), the first one lowest */
-inline ulong zfp_read_bits(zfp_reader *r, uint n)
+inline ulong clvis_zfp_read_bits(clvis_zfp_reader *r, uint n)
 {
     ulong v = r->buf;
     if (r->avail >= n) {
         r->buf = n < 64u ? r->buf >> n : 0ul;
         r->avail -= n;
     } else {
-        ulong w = zfp_load_word(r);
+        ulong w = clvis_zfp_load_word(r);
         uint used = n - r->avail;          /* 1..64 bits of w; avail <= 63 here */
         v |= w << r->avail;
         r->buf = used < 64u ? w >> used : 0ul;
@@ -144,7 +155,7 @@ inline ulong zfp_read_bits(zfp_reader *r, uint n)
 
 /* Embedded decoding of 64 uint coefficients with at most `budget` bits
  * (zfp's rate-constrained decode_few_ints with maxprec 64: all 32 planes). */
-inline void zfp_decode_ints(zfp_reader *r, uint budget, uint *u)
+inline void clvis_zfp_decode_ints(clvis_zfp_reader *r, uint budget, uint *u)
 {
     for (uint i = 0; i < 64u; ++i)
         u[i] = 0u;
@@ -153,15 +164,15 @@ inline void zfp_decode_ints(zfp_reader *r, uint budget, uint *u)
         /* the first n bits of plane k, verbatim */
         uint m = min(n, budget);
         budget -= m;
-        ulong x = zfp_read_bits(r, m);
+        ulong x = clvis_zfp_read_bits(r, m);
         /* group tests, each followed by a unary run to the next one-bit */
         while (budget != 0u && n < 64u) {
             budget -= 1u;
-            if (!zfp_read_bit(r))
+            if (!clvis_zfp_read_bit(r))
                 break;
             while (budget != 0u && n < 63u) {
                 budget -= 1u;
-                if (zfp_read_bit(r))
+                if (clvis_zfp_read_bit(r))
                     break;
                 n += 1u;
             }
@@ -178,7 +189,7 @@ inline void zfp_decode_ints(zfp_reader *r, uint budget, uint *u)
 }
 
 /* inverse lifting of the 4 values p[0], p[s], p[2s], p[3s] (wrapping int32) */
-inline void zfp_inv_lift(int *p, uint s)
+inline void clvis_zfp_inv_lift(int *p, uint s)
 {
     uint x = as_uint(p[0]), y = as_uint(p[s]), z = as_uint(p[2u * s]), w = as_uint(p[3u * s]);
     y += as_uint(as_int(w) >> 1);
@@ -199,42 +210,42 @@ inline void zfp_inv_lift(int *p, uint s)
 
 /* the inverse decorrelating transform of a block (index x + 4 y + 16 z):
  * along z, then y, then x */
-inline void zfp_inv_xform3(int *q)
+inline void clvis_zfp_inv_xform3(int *q)
 {
     for (uint i = 0; i < 16u; ++i)
-        zfp_inv_lift(q + i, 16u);                          /* i = x + 4 y */
+        clvis_zfp_inv_lift(q + i, 16u);                          /* i = x + 4 y */
     for (uint z = 0; z < 4u; ++z)
         for (uint x = 0; x < 4u; ++x)
-            zfp_inv_lift(q + 16u * z + x, 4u);
+            clvis_zfp_inv_lift(q + 16u * z + x, 4u);
     for (uint i = 0; i < 16u; ++i)
-        zfp_inv_lift(q + 4u * i, 1u);                      /* i = y + 4 z */
+        clvis_zfp_inv_lift(q + 4u * i, 1u);                      /* i = y + 4 z */
 }
 
 /* The integer block of block `block` of `stream` into q[64] (index
- * x + 4 y + 16 z); returns emax, or ZFP_ZERO_BLOCK for an all-zero block
+ * x + 4 y + 16 z); returns emax, or CLVIS_ZFP_ZERO_BLOCK for an all-zero block
  * (q is then all 0). */
-#define ZFP_ZERO_BLOCK (-1000)
-inline int zfp_decode_block3i(global const ulong *stream, ulong block, uint rate, int *q)
+#define CLVIS_ZFP_ZERO_BLOCK (-1000)
+inline int clvis_zfp_decode_block3i(global const ulong *stream, ulong block, uint rate, int *q)
 {
-    zfp_reader r = zfp_reader_at(stream, block, rate);
-    if (!zfp_read_bit(&r)) {
+    clvis_zfp_reader r = clvis_zfp_reader_at(stream, block, rate);
+    if (!clvis_zfp_read_bit(&r)) {
         for (uint i = 0; i < 64u; ++i)
             q[i] = 0;
-        return ZFP_ZERO_BLOCK;
+        return CLVIS_ZFP_ZERO_BLOCK;
     }
-    int emax = (int)zfp_read_bits(&r, 8u) - ZFP_EBIAS;
+    int emax = (int)clvis_zfp_read_bits(&r, 8u) - CLVIS_ZFP_EBIAS;
     uint u[64];
-    zfp_decode_ints(&r, 64u * rate - 9u, u);
+    clvis_zfp_decode_ints(&r, 64u * rate - 9u, u);
     for (uint i = 0; i < 64u; ++i)
-        q[zfp_perm3[i]] = as_int((u[i] ^ ZFP_NBMASK) - ZFP_NBMASK);
-    zfp_inv_xform3(q);
+        q[clvis_zfp_perm3[i]] = as_int((u[i] ^ CLVIS_ZFP_NBMASK) - CLVIS_ZFP_NBMASK);
+    clvis_zfp_inv_xform3(q);
     return emax;
 }
 
 /* (float)i * (float)2^(emax - 30) rounded as on an IEEE host: the product
  * is exact while 2^(emax - 30) is normal; below, its rounding to a
- * subnormal (ties to even) is done on the bits. emax = ZFP_ZERO_BLOCK: +0. */
-inline float zfp_dequantize(int i, int emax)
+ * subnormal (ties to even) is done on the bits. emax = CLVIS_ZFP_ZERO_BLOCK: +0. */
+inline float clvis_zfp_dequantize(int i, int emax)
 {
     int e = emax - 30;
     if (e >= -126)                         /* both factors normal, so is the product (or inf) */
@@ -260,9 +271,16 @@ inline float zfp_dequantize(int i, int emax)
     return as_float(sign | q);
 }
 
+/* Value k of a decoded block: +0.0f for an all-zero block, else
+ * clvis_zfp_dequantize(q[k], emax). */
+inline float clvis_zfp_value(const int *q, uint k, int emax)
+{
+    return emax == CLVIS_ZFP_ZERO_BLOCK ? 0.0f : clvis_zfp_dequantize(q[k], emax);
+}
+
 /* Block b of the stream decoded into brick[0..63] (x + 4 y + 16 z); NaN
  * everywhere, reading nothing, when b >= nblocks (the stream's block count). */
-inline void zfp_decode_brick(global const ulong *stream, uint rate, uint nblocks, uint b,
+inline void clvis_zfp_decode_brick(global const ulong *stream, uint rate, uint nblocks, uint b,
                              global float *brick)
 {
     if (b >= nblocks) {
@@ -271,14 +289,14 @@ inline void zfp_decode_brick(global const ulong *stream, uint rate, uint nblocks
         return;
     }
     int q[64];
-    int emax = zfp_decode_block3i(stream, b, rate, q);
+    int emax = clvis_zfp_decode_block3i(stream, b, rate, q);
     for (uint i = 0; i < 64u; ++i)
-        brick[i] = emax == ZFP_ZERO_BLOCK ? 0.0f : zfp_dequantize(q[i], emax);
+        brick[i] = clvis_zfp_value(q, i, emax);
 }
 
 /* Cell b of a grid of nx x ny x nz cells, x fastest: its (x, y, z) into c[3];
  * 0 when b lies beyond the grid (the caller's work-item then has nothing to do). */
-inline int zfp_grid_cell(ulong b, uint nx, uint ny, uint nz, uint *c)
+inline int clvis_zfp_grid_cell(ulong b, uint nx, uint ny, uint nz, uint *c)
 {
     if (b >= (ulong)nx * ny * nz)
         return 0;
@@ -289,4 +307,34 @@ inline int zfp_grid_cell(ulong b, uint nx, uint ny, uint nz, uint *c)
     return 1;
 }
 
-#endif
+/* Blocks along an axis of n samples: ceil(n / 4). */
+inline uint clvis_zfp_blocks(uint n)
+{
+    return (n + 3u) >> 2;
+}
+
+/* The id of block (x, y, z) of a grid nbx x nby blocks wide, x fastest
+ * (the inverse of clvis_zfp_grid_cell; the grid has < 2^32 blocks). */
+inline uint clvis_zfp_block_id(uint x, uint y, uint z, uint nbx, uint nby)
+{
+    return x + nbx * (y + nby * z);
+}
+
+/* The prologue of a kernel with one work-item per block of an nx x ny x nz
+ * volume: block b's coordinates c[3] in the block grid, its in-volume extent
+ * e[3] (min(4, n - 4 c) samples per axis), and its integers q[64] with *emax
+ * (clvis_zfp_decode_block3i). Returns 0, decoding nothing, when b lies beyond
+ * the grid (the work-item then has nothing to do). */
+inline int clvis_zfp_decode_volume_block(global const ulong *stream, uint rate, uint nx, uint ny,
+                                         uint nz, ulong b, uint *c, uint *e, int *q, int *emax)
+{
+    if (!clvis_zfp_grid_cell(b, clvis_zfp_blocks(nx), clvis_zfp_blocks(ny), clvis_zfp_blocks(nz), c))
+        return 0;
+    *emax = clvis_zfp_decode_block3i(stream, b, rate, q);
+    e[0] = min(4u, nx - 4u * c[0]);
+    e[1] = min(4u, ny - 4u * c[1]);
+    e[2] = min(4u, nz - 4u * c[2]);
+    return 1;
+}
+
+#endif /* CLVIS_ZFP_H */

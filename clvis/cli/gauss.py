@@ -70,9 +70,9 @@ def _lods(text: str) -> list[str]:
 
 def _sources(args):
     """[(panel name, Gaussians or None, sparse volume or None)], description."""
-    from . import datasets
-    from .gauss import Gaussians, SparseVolume, read_vdb
-    from .io import read_points
+    from .. import datasets
+    from ..gauss import Gaussians, SparseVolume, read_vdb
+    from ..io import read_points
 
     lods = _lods(args.lod)
     if args.file is None:
@@ -102,7 +102,7 @@ def _sources(args):
         return lods, sv, None, str(path)
     if suffix == ".npz":
         return ["file"], None, Gaussians.load(path), str(path)
-    from .gauss import gaussians_from_points
+    from ..gauss import gaussians_from_points
     cloud = read_points(path)
     if len(cloud) == 0:
         raise _GaussError(f"{path}: the file holds no points")
@@ -111,7 +111,7 @@ def _sources(args):
 
 
 def cmd(args) -> int:
-    from .errors import ClvisError
+    from ..errors import ClvisError
 
     try:
         return _run(args)
@@ -126,9 +126,9 @@ def cmd(args) -> int:
 def render_panels(lods, sv, gaussians, width, height, *, model="absorption", density=None,
                   colormap="inferno", k=None, queue=None):
     """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given Gaussians)."""
-    from . import Camera
-    from .colormap import TransferFunction
-    from .gauss import GaussianRenderer, gaussians_from_volume
+    from .. import Camera
+    from ..colormap import TransferFunction
+    from ..gauss import GaussianRenderer, gaussians_from_volume
 
     items = []
     for name in lods:
@@ -157,7 +157,7 @@ def render_panels(lods, sv, gaussians, width, height, *, model="absorption", den
 
 
 def _run(args) -> int:
-    from . import images, runtime
+    from .. import images, runtime
 
     t0 = time.perf_counter()
     lods, sv, gaussians, source = _sources(args)
@@ -191,11 +191,11 @@ def _run(args) -> int:
 def demo(out_dir, q, size=(480, 480)) -> bool:
     """The demo's gauss part: the explosion at three LODs (figures, PNG) and a
     small frame checked against the brute-force reference."""
-    from . import Camera, datasets, images
-    from .camera import ray_buffer
-    from .colormap import TransferFunction
-    from .gauss import GaussianRenderer, SparseVolume, lod_table
-    from .reference.gauss import render as ref
+    from .. import Camera, datasets, images
+    from ..camera import ray_buffer
+    from ..colormap import TransferFunction
+    from ..gauss import GaussianRenderer, SparseVolume, lod_table
+    from ..reference.gauss import render as ref
 
     w, h = size
     e = datasets.explosion()

@@ -60,8 +60,8 @@ def _size(text: str) -> tuple[int, int]:
 
 def _load(args):
     """(volume, spacing, origin, default isovalue, description)."""
-    from . import datasets
-    from .volumes import read_volume
+    from .. import datasets
+    from ..volumes import read_volume
 
     if args.file is not None:
         if args.dataset is not None:
@@ -89,8 +89,8 @@ def picture(img) -> np.ndarray:
 def render(volume, spacing, origin, isovalue, width, height, *, rate=8, completion=1.0, speculation=True,
            queue=None):
     """(renderer, camera, [IsoImage per pass])."""
-    from . import Camera
-    from .iso import IsoRenderer
+    from .. import Camera
+    from ..iso import IsoRenderer
 
     r = IsoRenderer(volume, rate=rate, spacing=spacing, origin=origin, queue=queue)
     lo = np.asarray(origin, np.float64)
@@ -101,7 +101,7 @@ def render(volume, spacing, origin, isovalue, width, height, *, rate=8, completi
 
 
 def cmd(args) -> int:
-    from .errors import ClvisError
+    from ..errors import ClvisError
 
     try:
         return _run(args)
@@ -114,7 +114,7 @@ def cmd(args) -> int:
 
 
 def _run(args) -> int:
-    from . import images, runtime
+    from .. import images, runtime
 
     if not 1 <= args.rate <= 32:
         raise _IsoError(f"--rate: expected 1..32, got {args.rate}")
@@ -151,8 +151,8 @@ def _run(args) -> int:
 
 def demo(out_dir, q, size=(640, 480)) -> bool:
     """The demo's iso part: Marschner-Lobb, progressive, checked against the reference."""
-    from . import datasets, images, zfp
-    from .reference import iso as ref
+    from .. import datasets, images, zfp
+    from ..reference import iso as ref
 
     w, h = size
     d = datasets.marschner_lobb(64)

@@ -30,12 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import cli_gauss, cli_iso
+from . import gauss as cli_gauss, iso as cli_iso
 
 
 def _cmd_info(args) -> int:
-    from . import __version__, runtime
-    from .errors import ClvisError
+    from .. import __version__, runtime
+    from ..errors import ClvisError
 
     print(f"clvis {__version__}   kernels: {runtime.KERNEL_ROOT}")
     devs = runtime.devices()
@@ -103,8 +103,8 @@ def _timed(fn, queue=None, repeat=3) -> float:
 def _cmd_demo(args) -> int:
     import pyopencl.array as cla
 
-    from . import __version__, primitives, runtime
-    from .reference import primitives as ref
+    from .. import __version__, primitives, runtime
+    from ..reference import primitives as ref
 
     q = runtime.default_queue()
     caps = runtime.capabilities(q)
@@ -193,7 +193,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _size(text: str) -> tuple[int, int]:
     """'WxH' -> (W, H), each in 1..MAX_IMAGE_SIDE."""
-    from .raster import MAX_IMAGE_SIDE
+    from ..raster import MAX_IMAGE_SIDE
 
     m = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", text)
     if not m:
@@ -312,8 +312,8 @@ def _isatty(stream) -> bool:
 
 def _embedded(name: str, n: int):
     """An embedded dataset (clvis.datasets) as a clvis.PointCloud."""
-    from . import datasets
-    from .io import PointCloud
+    from .. import datasets
+    from ..io import PointCloud
 
     d = getattr(datasets, name)(n)
     return PointCloud(d["positions"], colors=d["colors"], attributes=d["attributes"],
@@ -350,7 +350,7 @@ def _fit_camera(positions, lo, hi, aspect: float, direction=_FIT_DIRECTION):
     """Camera.fit on the bounds, then moved along its view axis until the
     points (a sample of them) just fill the frame. Camera.fit frames the
     bounding sphere, which leaves a flat cloud (a storm, a terrain) small."""
-    from .camera import Camera
+    from ..camera import Camera
 
     cam = Camera.fit(lo, hi, direction=direction, aspect=aspect)
     p = _finite_sample(positions)
@@ -382,7 +382,7 @@ def _tiny(centre) -> float:
 def _axis_camera(kind: str, lo, hi, aspect: float):
     """An orthographic camera along an axis framing the box: top looks down
     (north, +y, up), front looks along +y, side along -x."""
-    from .camera import Camera
+    from ..camera import Camera
 
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     direction, up = (np.asarray(v, np.float64) for v in _AXIS_VIEWS[kind])
@@ -398,7 +398,7 @@ def _axis_camera(kind: str, lo, hi, aspect: float):
 
 
 def _camera(view: tuple[str, int], positions, lo, hi, width: int, height: int):
-    from .camera import grid_cameras, hemisphere_cameras
+    from ..camera import grid_cameras, hemisphere_cameras
 
     kind, k = view
     aspect = width / height
@@ -447,8 +447,8 @@ def _raster_fields(cloud, attribute) -> dict:
 def _render_panels(raster, cloud, camera, width, height, attribute, colormap, soft_z, levels,
                    progress) -> _Rendered:
     """Render one view; the G-buffers and the images a person looks at."""
-    from . import images
-    from .raster import EMPTY, depth_filter
+    from .. import images
+    from ..raster import EMPTY, depth_filter
 
     with progress.stage("rendering + resolving G-buffers"):
         t0 = time.perf_counter()
@@ -506,7 +506,7 @@ def _overview(panels) -> np.ndarray:
     (RGB), shrunk to at most _OVERVIEW_WIDTH pixels wide."""
     from PIL import Image, ImageDraw, ImageFont
 
-    from . import images
+    from .. import images
 
     cols = min(3, len(panels))
     f = max(1, -(-cols * panels[0].image.shape[1] // _OVERVIEW_WIDTH))
@@ -537,7 +537,7 @@ def _save_pngs(out: Path, named) -> list[Path]:
     (Pillow's PNG encoder releases the GIL)."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from . import images
+    from .. import images
 
     with ThreadPoolExecutor(max_workers=max(1, min(len(named), os.cpu_count() or 1))) as pool:
         return list(pool.map(lambda item: images.save_png(out / item[0], item[1]), named))
@@ -545,7 +545,7 @@ def _save_pngs(out: Path, named) -> list[Path]:
 
 def _load(args, progress):
     """(cloud, its description, default attribute, depth filter on by default)."""
-    from .io import read_points
+    from ..io import read_points
 
     if args.file is not None:
         if args.dataset is not None or args.points is not None:
@@ -569,7 +569,7 @@ def _load(args, progress):
 
 
 def _cmd_render(args) -> int:
-    from .errors import ClvisError
+    from ..errors import ClvisError
 
     progress = _Progress(not args.quiet and (args.progress or _isatty(sys.stderr)))
     try:
@@ -583,9 +583,9 @@ def _cmd_render(args) -> int:
 
 
 def _render(args, progress) -> int:
-    from . import colormap, runtime
-    from .raster.depth_filter import LEVELS
-    from .raster import Rasterizer
+    from .. import colormap, runtime
+    from ..raster.depth_filter import LEVELS
+    from ..raster import Rasterizer
 
     width, height = args.size
     try:
@@ -635,9 +635,9 @@ def _render(args, progress) -> int:
 
 def _demo_raster(args, q) -> bool:
     """The demo's raster part: throughput, the reference check, the overview PNG."""
-    from . import images
-    from .raster import Rasterizer
-    from .reference import raster as ref
+    from .. import images
+    from ..raster import Rasterizer
+    from ..reference import raster as ref
 
     W, H = args.size
     n, attribute = args.points, "temperature"
@@ -678,7 +678,7 @@ def _bench_dir() -> Path | None:
 
 
 def _cmd_bench(args) -> int:
-    from . import benchreport, runtime
+    from .. import benchreport, runtime
 
     if args.report:
         rows, meta = benchreport.load(args.report)
@@ -799,6 +799,3 @@ def _add_render_parser(sub):
                    help="show the progress of each stage on stderr even when it is not a terminal")
     r.add_argument("--quiet", action="store_true", help="no progress display")
 
-
-if __name__ == "__main__":
-    sys.exit(main())

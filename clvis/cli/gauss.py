@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from ._common import CliError, size
 
 LODS = ("low", "medium", "high")
 _HELP = """\
@@ -27,9 +28,6 @@ velocity when the file has one, else sized by the 4 nearest neighbours).
 """
 
 
-class _GaussError(Exception):
-    pass
-
 
 def add_parser(sub):
     g = sub.add_parser("gauss", help="Gaussians from a volume at three LODs, ray marched to PNGs",
@@ -44,27 +42,18 @@ def add_parser(sub):
     g.add_argument("--density", type=float, default=None,
                    help="extinction scale of the absorption model (default 6 / volume diagonal)")
     g.add_argument("--colormap", default="inferno", metavar="NAME", help="matplotlib colormap")
-    g.add_argument("--size", type=_size, default=(640, 640), metavar="WxH", help="each panel (default 640x640)")
+    g.add_argument("--size", type=size, default=(640, 640), metavar="WxH", help="each panel (default 640x640)")
     g.add_argument("--k", type=int, default=None, help="k-buffer size (default: the device profile's)")
     g.add_argument("--out", default="clvis-gauss", metavar="DIR", help="output folder (default ./clvis-gauss)")
     return g
 
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH such as 640x640, got {text!r}") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"sizes must lie in 1..16384, got {text!r}")
-    return w, h
 
 
 def _lods(text: str) -> list[str]:
     out = [t.strip() for t in text.split(",") if t.strip()]
     bad = [t for t in out if t not in LODS]
     if bad or not out:
-        raise _GaussError(f"--lod: expected some of {', '.join(LODS)}, got {text!r}")
+        raise CliError(f"--lod: expected some of {', '.join(LODS)}, got {text!r}")
     return out
 
 
@@ -82,7 +71,7 @@ def _sources(args):
         return lods, sv, None, "the embedded explosion (96^3)"
     path = Path(args.file)
     if not path.exists():
-        raise _GaussError(f"{path}: no such file")
+        raise CliError(f"{path}: no such file")
     suffix = path.suffix.lower()
     if suffix == ".vdb":
         sv = read_vdb(path)
@@ -94,9 +83,9 @@ def _sources(args):
         try:
             v = np.load(path, allow_pickle=False)
         except (OSError, ValueError) as e:
-            raise _GaussError(f"{path}: cannot read: {e}") from None
+            raise CliError(f"{path}: cannot read: {e}") from None
         if v.ndim != 3:
-            raise _GaussError(f"{path}: expected a 3-D volume, got shape {v.shape}")
+            raise CliError(f"{path}: expected a 3-D volume, got shape {v.shape}")
         sv = SparseVolume.from_dense(v.astype(np.float32), threshold=0.0 if args.threshold is None
                                      else args.threshold)
         return lods, sv, None, str(path)
@@ -105,22 +94,13 @@ def _sources(args):
     from ..gauss import gaussians_from_points
     cloud = read_points(path)
     if len(cloud) == 0:
-        raise _GaussError(f"{path}: the file holds no points")
+        raise CliError(f"{path}: the file holds no points")
     g = gaussians_from_points(cloud, velocity="cloud" if cloud.velocity is not None else None)
     return ["points"], None, g, str(path)
 
 
 def cmd(args) -> int:
-    from ..errors import ClvisError
-
-    try:
-        return _run(args)
-    except (_GaussError, ClvisError, ImportError) as e:
-        msg = str(e)
-    except OSError as e:
-        msg = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
-    print(f"clvis gauss: error: {msg}", file=sys.stderr)
-    return 2
+    return _run(args)
 
 
 def render_panels(lods, sv, gaussians, width, height, *, model="absorption", density=None,
@@ -136,7 +116,7 @@ def render_panels(lods, sv, gaussians, width, height, *, model="absorption", den
         items.append((name, g))
     allg = [g for _, g in items if g.n]
     if not allg:
-        raise _GaussError("no Gaussians: the volume has no active voxel")
+        raise CliError("no Gaussians: the volume has no active voxel")
     lo = np.min([g.bounds(1.0)[0] for g in allg], axis=0)
     hi = np.max([g.bounds(1.0)[1] for g in allg], axis=0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0

@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from ._common import CliError, size
 
 _HELP = """\
 Compress a volume with ZFP (fixed rate), then ray march its isosurface in
@@ -28,9 +29,6 @@ _ACTIVE_COLOUR = (1.0, 0.0, 1.0)
 _BACKGROUND = (0.08, 0.08, 0.1)
 
 
-class _IsoError(Exception):
-    pass
-
 
 def add_parser(sub):
     p = sub.add_parser("iso", help="progressive isosurface raycasting of a ZFP-compressed volume",
@@ -43,19 +41,10 @@ def add_parser(sub):
     p.add_argument("--completion", type=float, default=1.0, help="stop once this fraction of the rays "
                    "is finished (default 1.0)")
     p.add_argument("--no-speculation", action="store_true", help="one candidate block per ray and pass")
-    p.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH", help="default 1280x720")
+    p.add_argument("--size", type=size, default=(1280, 720), metavar="WxH", help="default 1280x720")
     p.add_argument("--out", default="clvis-iso", metavar="DIR", help="output folder (default ./clvis-iso)")
     return p
 
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH such as 1280x720, got {text!r}") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"sizes must lie in 1..16384, got {text!r}")
-    return w, h
 
 
 def _load(args):
@@ -65,10 +54,10 @@ def _load(args):
 
     if args.file is not None:
         if args.dataset is not None:
-            raise _IsoError("--dataset chooses an embedded volume; leave it out with a FILE")
+            raise CliError("--dataset chooses an embedded volume; leave it out with a FILE")
         path = Path(args.file)
         if not path.exists():
-            raise _IsoError(f"{path}: no such file")
+            raise CliError(f"{path}: no such file")
         v = read_volume(path)
         data = np.asarray(v.data, np.float32)
         lo, hi = float(np.nanmin(data)), float(np.nanmax(data))
@@ -101,25 +90,16 @@ def render(volume, spacing, origin, isovalue, width, height, *, rate=8, completi
 
 
 def cmd(args) -> int:
-    from ..errors import ClvisError
-
-    try:
-        return _run(args)
-    except (_IsoError, ClvisError, ImportError) as e:
-        msg = str(e)
-    except OSError as e:
-        msg = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
-    print(f"clvis iso: error: {msg}", file=sys.stderr)
-    return 2
+    return _run(args)
 
 
 def _run(args) -> int:
     from .. import images, runtime
 
     if not 1 <= args.rate <= 32:
-        raise _IsoError(f"--rate: expected 1..32, got {args.rate}")
+        raise CliError(f"--rate: expected 1..32, got {args.rate}")
     if not 0 < args.completion <= 1:
-        raise _IsoError(f"--completion: expected a fraction in (0, 1], got {args.completion}")
+        raise CliError(f"--completion: expected a fraction in (0, 1], got {args.completion}")
     volume, spacing, origin, default_iso, source = _load(args)
     iso = args.isovalue if args.isovalue is not None else default_iso
     w, h = args.size

@@ -8,13 +8,34 @@ import subprocess
 import sys
 from pathlib import Path
 
+from ._common import real
+
+
+def _report(path: str):
+    """--report: the (rows, meta) of a pytest-benchmark JSON file, read while
+    the arguments are parsed, so a wrong file is an argument error."""
+    import argparse
+
+    from .. import benchreport
+
+    try:
+        return benchreport.load(path)
+    except FileNotFoundError:
+        raise argparse.ArgumentTypeError(f"{path}: no such file") from None
+    except OSError as e:
+        raise argparse.ArgumentTypeError(f"{path}: {e.strerror or e}") from None
+    except (ValueError, KeyError, TypeError, AttributeError) as e:   # not JSON, or not a benchmark's
+        raise argparse.ArgumentTypeError(f"{path}: not a pytest-benchmark JSON file ({type(e).__name__}: "
+                                         f"{str(e).splitlines()[0] if str(e) else ''})") from None
+
 
 def add_parser(sub):
     b = sub.add_parser("bench", help="run a benchmark suite and print its table")
     b.add_argument("family", choices=["primitives", "raster", "gauss", "iso"])
-    b.add_argument("--scale", type=float, help="multiply every size (e.g. 0.01 for a smoke run)")
+    b.add_argument("--scale", type=real(0.0, open_lo=True), help="multiply every size (e.g. 0.01 for a smoke run)")
     b.add_argument("--json", help="where to write the JSON (default bench/results/<device>/<family>.json)")
-    b.add_argument("--report", help="print the table of an existing JSON instead of running")
+    b.add_argument("--report", type=_report, metavar="JSON",
+                   help="print the table of an existing JSON instead of running")
     b.add_argument("--check", action="store_true", help="exit 1 if a target is missed")
     return b
 
@@ -30,7 +51,7 @@ def cmd(args) -> int:
     from .. import benchreport, runtime
 
     if args.report:
-        rows, meta = benchreport.load(args.report)
+        rows, meta = args.report
     else:
         bench = _bench_dir()
         if bench is None:

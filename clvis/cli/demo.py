@@ -7,13 +7,17 @@ from __future__ import annotations
 import numpy as np
 
 from . import gauss, iso, raster
-from ._common import positive_int, size, timed
+from ._common import count, size, timed
+from .raster import MAX_POINTS
+
+MAX_N = 2**32 - 1       # the primitives count in uint
 
 
 def add_parser(sub):
     d = sub.add_parser("demo", help="run the kernels on generated data and print the figures")
-    d.add_argument("--n", type=int, default=1 << 24, help="elements of the primitives (default 2^24)")
-    d.add_argument("--points", type=positive_int, default=500_000,
+    d.add_argument("--n", type=count(1, MAX_N), default=1 << 24,
+                   help="elements of the primitives (default 2^24)")
+    d.add_argument("--points", type=count(1, MAX_POINTS), default=500_000,
                    help="particles of the rendered hurricane (default 500,000)")
     d.add_argument("--size", type=size, default=(1920, 1080), metavar="WxH",
                    help="image size of the render (default 1920x1080)")

@@ -11,9 +11,24 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import CliError, size
+from ..gauss.render import MAX_K
+from ._common import (
+    SIZE_RULE,
+    VIEWS_HELP,
+    CliError,
+    FitView,
+    add_camera_options,
+    camera_from_args,
+    check_camera_args,
+    colormap_name,
+    count,
+    real,
+    size,
+)
 
 LODS = ("low", "medium", "high")
+# --view fit: from the front left, a little above, a narrow lens
+_FIT = FitView(direction=(-0.55, 1.0, -0.35), fov_y=40.0)
 _HELP = """\
 Turn a volume into Gaussians at the levels of detail of Sharma & Schmalstieg
 (low: one per 8^3 leaf; medium: 4^3 / 2^3 blocks; high: 2^3 blocks / voxels),
@@ -25,7 +40,8 @@ FILE may be a .vdb (float grid, needs the `vdb` extra: tinyvdb), a .npy
 volume indexed [z, y, x], a .npz of Gaussians (clvis.Gaussians.save), or a
 point cloud (.ply, .las, .laz: one Gaussian per point, stretched along the
 velocity when the file has one, else sized by the 4 nearest neighbours).
-"""
+
+""" + VIEWS_HELP
 
 
 
@@ -35,16 +51,20 @@ def add_parser(sub):
     g.add_argument("file", nargs="?", help="a .vdb, .npy, Gaussians .npz or point cloud file")
     g.add_argument("--lod", default="low,medium,high", metavar="LIST",
                    help="comma-separated levels of detail (default low,medium,high)")
-    g.add_argument("--threshold", type=float, default=None,
+    g.add_argument("--threshold", type=real(), default=None,
                    help="voxels above this are active (default: > 0 for dense volumes)")
     g.add_argument("--model", choices=["max_response", "absorption"], default="absorption",
                    help="compositing model (default absorption)")
-    g.add_argument("--density", type=float, default=None,
+    g.add_argument("--density", type=real(0.0), default=None,
                    help="extinction scale of the absorption model (default 6 / volume diagonal)")
-    g.add_argument("--colormap", default="inferno", metavar="NAME", help="matplotlib colormap")
-    g.add_argument("--size", type=size, default=(640, 640), metavar="WxH", help="each panel (default 640x640)")
-    g.add_argument("--k", type=int, default=None, help="k-buffer size (default: the device profile's)")
+    g.add_argument("--colormap", type=colormap_name, default="inferno", metavar="NAME",
+                   help="a matplotlib colormap (default inferno)")
+    g.add_argument("--size", type=size, default=(640, 640), metavar="WxH",
+                   help=f"each panel, {SIZE_RULE} (default 640x640)")
+    g.add_argument("--k", type=count(1, MAX_K), default=None,
+                   help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)")
     g.add_argument("--out", default="clvis-gauss", metavar="DIR", help="output folder (default ./clvis-gauss)")
+    add_camera_options(g, _FIT)
     return g
 
 
@@ -100,12 +120,14 @@ def _sources(args):
 
 
 def cmd(args) -> int:
+    check_camera_args(args)
     return _run(args)
 
 
 def render_panels(lods, sv, gaussians, width, height, *, model="absorption", density=None,
-                  colormap="inferno", k=None, queue=None):
-    """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given Gaussians)."""
+                  colormap="inferno", k=None, camera=None, queue=None):
+    """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given
+    Gaussians), seen by camera(lo, hi) of their bounds (default: the fit view)."""
     from .. import Camera
     from ..colormap import TransferFunction
     from ..gauss import GaussianRenderer, gaussians_from_volume
@@ -120,7 +142,8 @@ def render_panels(lods, sv, gaussians, width, height, *, model="absorption", den
     lo = np.min([g.bounds(1.0)[0] for g in allg], axis=0)
     hi = np.max([g.bounds(1.0)[1] for g in allg], axis=0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
-    cam = Camera.fit(lo, hi, direction=(-0.55, 1.0, -0.35), aspect=width / height, fov_y=40)
+    cam = (camera(lo, hi) if camera is not None else
+           Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y))
     vals = np.concatenate([g.values for g in allg])
     vr = (float(vals.min()), float(vals.max()))
     tf = TransferFunction(colormap, opacity=[(0.0, 0.05), (0.35, 0.35), (1.0, 1.0)], value_range=vr)
@@ -144,7 +167,8 @@ def _run(args) -> int:
     width, height = args.size
     q = runtime.default_queue()
     panels = render_panels(lods, sv, gaussians, width, height, model=args.model, density=args.density,
-                           colormap=args.colormap, k=args.k, queue=q)
+                           colormap=args.colormap, k=args.k, queue=q,
+                           camera=lambda lo, hi: camera_from_args(args, lo, hi, width, height))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     files = []
@@ -197,7 +221,7 @@ def demo(out_dir, q, size=(480, 480)) -> bool:
     g = panels[1][1]
     lo, hi = g.bounds(1.0)
     cw, ch = 24, 24
-    cam = Camera.fit(lo, hi, direction=(-0.55, 1.0, -0.35), aspect=1.0, fov_y=40)
+    cam = Camera.fit(lo, hi, direction=_FIT.direction, aspect=1.0, fov_y=_FIT.fov_y)
     tf = TransferFunction("inferno")
     img = GaussianRenderer(g, tf, model="max_response", queue=q).render(cam, cw, ch)
     vmin, scale = tf.limits(g.values)

@@ -11,7 +11,19 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import CliError, size
+from ..iso.zfp import MAX_RATE, MIN_RATE
+from ._common import (
+    SIZE_RULE,
+    VIEWS_HELP,
+    CliError,
+    FitView,
+    add_camera_options,
+    camera_from_args,
+    check_camera_args,
+    count,
+    real,
+    size,
+)
 
 _HELP = """\
 Compress a volume with ZFP (fixed rate), then ray march its isosurface in
@@ -23,10 +35,13 @@ Without a FILE it renders an embedded volume: marschner-lobb (64^3, iso 0.5)
 or turbulence (128^3, iso 0.5). FILE: a raw volume named like the Open SciVis
 datasets (<name>_<X>x<Y>x<Z>_<type>.raw), a .npy volume [z, y, x], or a NIfTI
 file (.nii, .nii.gz; needs nibabel).
-"""
+
+""" + VIEWS_HELP
 _DATASETS = ("marschner-lobb", "turbulence")
 _ACTIVE_COLOUR = (1.0, 0.0, 1.0)
 _BACKGROUND = (0.08, 0.08, 0.1)
+# --view fit: from the front left, a little above, a narrow lens
+_FIT = FitView(direction=(-0.6, 1.0, -0.45), fov_y=35.0)
 
 
 
@@ -35,14 +50,16 @@ def add_parser(sub):
                        description=_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("file", nargs="?", help="a .raw (Open SciVis naming), .npy or NIfTI volume")
     p.add_argument("--dataset", choices=_DATASETS, help="an embedded volume (default marschner-lobb)")
-    p.add_argument("--isovalue", type=float, default=None, help="default: 0.5 for the embedded volumes, "
+    p.add_argument("--isovalue", type=real(), default=None, help="default: 0.5 for the embedded volumes, "
                    "else the middle of the value range")
-    p.add_argument("--rate", type=int, default=8, help="ZFP bits per value, 1..32 (default 8)")
-    p.add_argument("--completion", type=float, default=1.0, help="stop once this fraction of the rays "
+    p.add_argument("--rate", type=count(MIN_RATE, MAX_RATE), default=8, help="ZFP bits per value, 1..32 (default 8)")
+    p.add_argument("--completion", type=real(0.0, 1.0, open_lo=True, what="a fraction"), default=1.0, help="stop once this fraction of the rays "
                    "is finished (default 1.0)")
     p.add_argument("--no-speculation", action="store_true", help="one candidate block per ray and pass")
-    p.add_argument("--size", type=size, default=(1280, 720), metavar="WxH", help="default 1280x720")
+    p.add_argument("--size", type=size, default=(1280, 720), metavar="WxH",
+                   help=f"{SIZE_RULE} (default 1280x720)")
     p.add_argument("--out", default="clvis-iso", metavar="DIR", help="output folder (default ./clvis-iso)")
+    add_camera_options(p, _FIT)
     return p
 
 
@@ -76,37 +93,37 @@ def picture(img) -> np.ndarray:
 
 
 def render(volume, spacing, origin, isovalue, width, height, *, rate=8, completion=1.0, speculation=True,
-           queue=None):
-    """(renderer, camera, [IsoImage per pass])."""
+           camera=None, queue=None):
+    """(renderer, camera, [IsoImage per pass]), seen by camera(lo, hi) of the
+    volume's bounds (default: the fit view)."""
     from .. import Camera
     from ..iso import IsoRenderer
 
     r = IsoRenderer(volume, rate=rate, spacing=spacing, origin=origin, queue=queue)
     lo = np.asarray(origin, np.float64)
     hi = lo + (np.array(r.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
-    cam = Camera.fit(lo, hi, direction=(-0.6, 1.0, -0.45), aspect=width / height, fov_y=35)
+    cam = (camera(lo, hi) if camera is not None else
+           Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y))
     images = list(r.passes(cam, width, height, isovalue, completion=completion, speculation=speculation))
     return r, cam, images
 
 
 def cmd(args) -> int:
+    check_camera_args(args)
     return _run(args)
 
 
 def _run(args) -> int:
     from .. import images, runtime
 
-    if not 1 <= args.rate <= 32:
-        raise CliError(f"--rate: expected 1..32, got {args.rate}")
-    if not 0 < args.completion <= 1:
-        raise CliError(f"--completion: expected a fraction in (0, 1], got {args.completion}")
     volume, spacing, origin, default_iso, source = _load(args)
     iso = args.isovalue if args.isovalue is not None else default_iso
     w, h = args.size
     q = runtime.default_queue()
     t0 = time.perf_counter()
     r, _, passes = render(volume, spacing, origin, iso, w, h, rate=args.rate, completion=args.completion,
-                          speculation=not args.no_speculation, queue=q)
+                          speculation=not args.no_speculation, queue=q,
+                          camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h))
     total = time.perf_counter() - t0
     img = passes[-1]
     out = Path(args.out)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import itertools
 import math
 import os
 import re
@@ -15,7 +14,23 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import CliError, Progress, isatty, positive_int, size, timed
+from ._common import (
+    SIZE_RULE,
+    VIEWS_HELP,
+    CliError,
+    FitView,
+    Progress,
+    add_camera_options,
+    camera_from_args,
+    check_camera_args,
+    colormap_name,
+    count,
+    describe_camera,
+    fit_camera,
+    isatty,
+    size,
+    timed,
+)
 
 # The embedded clouds: generator, default attribute, whether the depth filter
 # panel is on by default (the filter is made for LiDAR scans seen through holes).
@@ -25,30 +40,15 @@ _DATASETS = {
 }
 _DEFAULT_POINTS = {"hurricane": 2_000_000, "terrain": 1_000_000}
 # --view fit looks along this direction (from the eye towards the centre):
-# from the south-south-west, about 40 degrees above the horizon, z up.
-_FIT_DIRECTION = (0.45, 1.0, -0.9)
-_FIT_MARGIN = 1.05          # the cloud fills 1/1.05 of the frame
+# from the south-south-west, about 40 degrees above the horizon, z up; the
+# field of view is Camera.fit's. Then fit moves the eye until the points
+# themselves fill the frame.
+_FIT = FitView(direction=(0.45, 1.0, -0.9), fov_y=60.0)
 _SOFT_Z_FACTOR = 1.01
 _OVERVIEW_WIDTH = 2880      # the overview is shrunk by an integer factor to fit this
 _BACKGROUND = (24, 24, 24)  # behind the overview's transparent (empty) pixels
-# orthographic views: (view direction, up)
-_AXIS_VIEWS = {"top": ((0, 0, -1), (0, 1, 0)), "front": ((0, 1, 0), (0, 0, 1)),
-               "side": ((-1, 0, 0), (0, 0, 1))}
-_SAMPLER_CAMERAS = {"hemisphere": 128, "grid": 384}     # grid_cameras with count=4
 _COORDINATES = ("x", "y", "z")      # --attribute takes these too
-
-
-def _view(text: str) -> tuple[str, int]:
-    """'fit' | 'top' | 'front' | 'side' | 'hemisphere:K' | 'grid:K' -> (kind, K)."""
-    kind, sep, k = text.strip().lower().partition(":")
-    if not sep and kind in ("fit", *_AXIS_VIEWS):
-        return kind, 0
-    if sep and kind in _SAMPLER_CAMERAS:
-        count = _SAMPLER_CAMERAS[kind]
-        if k.strip().isdigit() and int(k) < count:
-            return kind, int(k)
-        raise argparse.ArgumentTypeError(f"{kind}:K needs K in 0..{count - 1}, got {text!r}")
-    raise argparse.ArgumentTypeError(f"expected fit, top, front, side, hemisphere:K or grid:K, got {text!r}")
+MAX_POINTS = 2**32 - 2              # the Rasterizer's: index 0xFFFFFFFF marks an empty pixel
 
 
 def _soft_z(text: str) -> float | None:
@@ -103,80 +103,6 @@ def _pick_attribute(cloud, requested: str | None, default: str | None, source: s
     if names:
         return names[0]
     return None if cloud.colors is not None else "z"
-
-
-def _finite_sample(positions, limit: int = 200_000) -> np.ndarray:
-    """Up to `limit` of the points with finite x, y, z (an even stride), float64."""
-    step = max(1, len(positions) // limit)
-    p = positions[::step].astype(np.float64)
-    return p[np.isfinite(p).all(axis=1)]
-
-
-def _fit_camera(positions, lo, hi, aspect: float, direction=_FIT_DIRECTION):
-    """Camera.fit on the bounds, then moved along its view axis until the
-    points (a sample of them) just fill the frame. Camera.fit frames the
-    bounding sphere, which leaves a flat cloud (a storm, a terrain) small."""
-    from ..camera import Camera
-
-    cam = Camera.fit(lo, hi, direction=direction, aspect=aspect)
-    p = _finite_sample(positions)
-    centre = 0.5 * (np.asarray(lo, np.float64) + np.asarray(hi, np.float64))
-    if len(p) == 0 or np.ptp(p, axis=0).max() <= _tiny(centre):
-        return cam          # (about) one point: Camera.fit's own framing
-    right, up, forward = cam.view[0, :3], cam.view[1, :3], cam.forward
-    o = p - centre
-    a, b, c = np.abs(o @ right), np.abs(o @ up), o @ forward
-    tan_y = 1.0 / cam.projection[1, 1]
-    tan_x = aspect * tan_y
-    # with the eye at distance D from the centre, a point is in frame when
-    # a <= tan_x (D + c) and b <= tan_y (D + c), and in front when D + c > 0
-    radius = max(0.5 * float(np.linalg.norm(np.asarray(hi) - np.asarray(lo))), 1e-6)
-    dist = max(float(np.max(_FIT_MARGIN * np.maximum(a / tan_x, b / tan_y) - c)),
-               float(np.max(-c)) + 1e-3 * radius)
-    nearest, farthest = dist + float(c.min()), dist + float(c.max())
-    fov_y = math.degrees(2 * math.atan(tan_y))
-    return Camera.look_at(centre - dist * forward, centre, (0, 0, 1), fov_y, aspect,
-                          near=0.5 * nearest, far=1.5 * farthest)
-
-
-def _tiny(centre) -> float:
-    """An extent too small to frame on its own around `centre`: below it
-    float32 cameras no longer resolve the points (Camera.fit's floor)."""
-    return 1e-4 * max(1.0, float(np.abs(centre).max()))
-
-
-def _axis_camera(kind: str, lo, hi, aspect: float):
-    """An orthographic camera along an axis framing the box: top looks down
-    (north, +y, up), front looks along +y, side along -x."""
-    from ..camera import Camera
-
-    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    direction, up = (np.asarray(v, np.float64) for v in _AXIS_VIEWS[kind])
-    right = np.cross(direction, up)
-    ext = hi - lo
-    width, height, depth = (float(np.abs(v) @ ext) for v in (right, up, direction))
-    centre = 0.5 * (lo + hi)
-    scale = max(width, height, depth, _tiny(centre))
-    frame = _FIT_MARGIN * max(height, width / aspect, 1e-3 * scale)
-    back = 0.5 * depth + 0.1 * scale              # the eye sits outside the box
-    return Camera.ortho(centre - back * direction, centre, up, height=frame, aspect=aspect,
-                        near=0.05 * scale, far=back + 0.5 * depth + 0.1 * scale)
-
-
-def _camera(view: tuple[str, int], positions, lo, hi, width: int, height: int):
-    from ..camera import grid_cameras, hemisphere_cameras
-
-    kind, k = view
-    aspect = width / height
-    if kind == "fit":
-        return _fit_camera(positions, lo, hi, aspect)
-    if kind in _AXIS_VIEWS:
-        return _axis_camera(kind, lo, hi, aspect)
-    sampler = hemisphere_cameras if kind == "hemisphere" else grid_cameras
-    cam = next(itertools.islice(sampler(lo, hi, aspect=aspect), k, None), None)
-    if cam is None:
-        raise CliError(f"--view {kind}:{k}: the sampler has fewer than {k + 1} cameras")
-    return cam
 
 
 @dataclasses.dataclass
@@ -335,20 +261,17 @@ def _load(args, progress):
 
 
 def cmd(args) -> int:
+    check_camera_args(args)
     progress = Progress(not args.quiet and (args.progress or isatty(sys.stderr)))
     return _render(args, progress)
 
 
 def _render(args, progress) -> int:
-    from .. import colormap, runtime
+    from .. import runtime
     from ..raster import Rasterizer
     from ..raster.depth_filter import LEVELS
 
     width, height = args.size
-    try:
-        colormap.lut(args.colormap)
-    except (TypeError, ValueError) as e:
-        raise CliError(str(e)) from None
     t_start = time.perf_counter()
     cloud, source, default_attribute, filter_on = _load(args, progress)
     attribute = _pick_attribute(cloud, args.attribute, default_attribute, source)
@@ -357,7 +280,7 @@ def _render(args, progress) -> int:
         lo, hi = cloud.bounds()
     except ValueError:
         raise CliError(f"{source}: no point has finite coordinates") from None
-    camera = _camera(args.view, cloud.positions, lo, hi, width, height)
+    camera = camera_from_args(args, lo, hi, width, height, points=cloud.positions)
     q = runtime.default_queue()
     with progress.stage("uploading + Morton order"):
         raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
@@ -373,11 +296,10 @@ def _render(args, progress) -> int:
     g, n = r.gbuffers, len(cloud)
     covered = int(g.covered.sum())
     stats = g.stats
-    kind, k = args.view
     colored = f"colored by {attribute} ({args.colormap})" if attribute else "its colors"
     print(f"clvis render: {source}, {n:,} points, {colored}")
     print(f"  device    {runtime.describe(q.device)}")
-    print(f"  view      {kind}{':' + str(k) if kind in _SAMPLER_CAMERAS else ''}, {width}x{height}")
+    print(f"  view      {describe_camera(args)}, {width}x{height}")
     print(f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)")
     print(f"  batches   {stats['batches_drawn']:,} drawn, {stats['batches'] - stats['batches_drawn']:,} "
           f"culled of {stats['batches']:,} ({stats['points_read']:,} points read)")
@@ -402,7 +324,7 @@ def demo(args, q) -> bool:
           "(best of 3 after a warm-up):\n")
     cloud = _embedded("hurricane", n)
     lo, hi = cloud.bounds()
-    cam = _fit_camera(cloud.positions, lo, hi, W / H)
+    cam = fit_camera(cloud.positions, lo, hi, W / H, _FIT)
     raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
     t_vis = timed(lambda: raster.visibility(cam, W, H), q)
     t_all = timed(lambda: raster.render(cam, W, H, color_by=attribute), q)
@@ -412,7 +334,7 @@ def demo(args, q) -> bool:
 
     m, w, h = min(n, 100_000), 320, 180
     sub = cloud.positions[:m]               # the generator's order is random: a uniform subsample
-    sub_cam = _fit_camera(sub, lo, hi, w / h)
+    sub_cam = fit_camera(sub, lo, hi, w / h, _FIT)
     got = Rasterizer(sub, queue=q).render(sub_cam, w, h)
     want = ref.rasterize(sub, sub_cam, w, h)
     ok = np.array_equal(got.index, want.index) and np.array_equal(got.depth, want.depth)
@@ -435,15 +357,10 @@ has what it needs), and overview.png with all of them side by side.
 
 Without a FILE it renders an embedded synthetic cloud: a hurricane of 2M
 particles (velocity, pressure, temperature, speed) or a 1M-point LiDAR-like
-terrain (intensity, classification).
+terrain (intensity, classification). The fit view frames the points
+themselves, not only their bounding box.
 
-views:
-  fit           the whole cloud from an oblique direction, perspective (default)
-  top           orthographic, looking down, north (+y) up
-  front, side   orthographic, looking along +y / along -x, z up
-  hemisphere:K  the K-th of the 128 NARVis hemisphere cameras (K = 0..127)
-  grid:K        the K-th of the 384 NARVis grid cameras, a 4 x 4 grid (K = 0..383)
-"""
+""" + VIEWS_HELP
 
 
 def add_parser(sub):
@@ -452,18 +369,17 @@ def add_parser(sub):
     r.add_argument("file", nargs="?", help="a PLY, LAS, LAZ, NPY or NPZ point cloud")
     r.add_argument("--dataset", choices=sorted(_DATASETS),
                    help="the embedded cloud when no FILE is given (default hurricane)")
-    r.add_argument("--points", type=positive_int, metavar="N",
+    r.add_argument("--points", type=count(1, MAX_POINTS), metavar="N",
                    help="points of the embedded cloud (default 2,000,000 hurricane, 1,000,000 terrain)")
     r.add_argument("--attribute", metavar="NAME",
                    help="color by this attribute, or by a coordinate: x, y, z (default: temperature "
                         "for the hurricane, classification for the terrain; for a file intensity "
                         "if it has one, else its first attribute, else its colors, else z)")
-    r.add_argument("--colormap", default="viridis", metavar="NAME",
+    r.add_argument("--colormap", type=colormap_name, default="viridis", metavar="NAME",
                    help="a matplotlib colormap for the attribute (default viridis)")
-    r.add_argument("--view", type=_view, default=("fit", 0),
-                   help="fit, top, front, side, hemisphere:K or grid:K (default fit)")
     r.add_argument("--size", type=size, default=(1920, 1080), metavar="WxH",
-                   help="image size in pixels (default 1920x1080)")
+                   help=f"image size in pixels, {SIZE_RULE} (default 1920x1080)")
+    add_camera_options(r, _FIT)
     r.add_argument("--soft-z", type=_soft_z, nargs="?", const=_SOFT_Z_FACTOR,
                    default=_SOFT_Z_FACTOR, metavar="FACTOR",
                    help="the soft z-buffer's depth tolerance factor, or off (default 1.01)")

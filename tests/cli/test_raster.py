@@ -221,7 +221,7 @@ def test_fit_frames_every_point():
     cloud = _small_cloud(20000)
     lo, hi = cloud.bounds()
     for w, h in ((1920, 1080), (100, 400)):
-        cam = raster._fit_camera(cloud.positions, lo, hi, w / h)
+        cam = _common.fit_camera(cloud.positions, lo, hi, w / h, raster._FIT)
         visible = cam.project(cloud.positions, w, h).visible
         assert visible.all()
         # and tightly: the points reach within a few pixels of two sides

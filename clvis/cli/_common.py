@@ -26,7 +26,7 @@ from ..raster import MAX_IMAGE_SIDE
 # 2^31, so the kernels' 32-bit pixel indices never overflow.
 MAX_SIDE = MAX_IMAGE_SIDE
 MAX_PIXELS = 2**31 - 1
-SIZE_RULE = f"each side 1..{MAX_SIDE}"
+SIZE_RULE = f"each side 1..{MAX_SIDE}, so W*H < 2^31"
 
 
 class CliError(Exception):

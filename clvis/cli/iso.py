@@ -6,11 +6,24 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from ..iso.zfp import MAX_RATE, MIN_RATE
+from ._common import (
+    SIZE_RULE,
+    VIEWS_HELP,
+    CliError,
+    FitView,
+    add_camera_options,
+    camera_from_args,
+    check_camera_args,
+    count,
+    real,
+    size,
+)
 
 _HELP = """\
 Compress a volume with ZFP (fixed rate), then ray march its isosurface in
@@ -22,14 +35,14 @@ Without a FILE it renders an embedded volume: marschner-lobb (64^3, iso 0.5)
 or turbulence (128^3, iso 0.5). FILE: a raw volume named like the Open SciVis
 datasets (<name>_<X>x<Y>x<Z>_<type>.raw), a .npy volume [z, y, x], or a NIfTI
 file (.nii, .nii.gz; needs nibabel).
-"""
+
+""" + VIEWS_HELP
 _DATASETS = ("marschner-lobb", "turbulence")
 _ACTIVE_COLOUR = (1.0, 0.0, 1.0)
 _BACKGROUND = (0.08, 0.08, 0.1)
+# --view fit: from the front left, a little above, a narrow lens
+_FIT = FitView(direction=(-0.6, 1.0, -0.45), fov_y=35.0)
 
-
-class _IsoError(Exception):
-    pass
 
 
 def add_parser(sub):
@@ -37,38 +50,31 @@ def add_parser(sub):
                        description=_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("file", nargs="?", help="a .raw (Open SciVis naming), .npy or NIfTI volume")
     p.add_argument("--dataset", choices=_DATASETS, help="an embedded volume (default marschner-lobb)")
-    p.add_argument("--isovalue", type=float, default=None, help="default: 0.5 for the embedded volumes, "
+    p.add_argument("--isovalue", type=real(), default=None, help="default: 0.5 for the embedded volumes, "
                    "else the middle of the value range")
-    p.add_argument("--rate", type=int, default=8, help="ZFP bits per value, 1..32 (default 8)")
-    p.add_argument("--completion", type=float, default=1.0, help="stop once this fraction of the rays "
+    p.add_argument("--rate", type=count(MIN_RATE, MAX_RATE), default=8, help="ZFP bits per value, 1..32 (default 8)")
+    p.add_argument("--completion", type=real(0.0, 1.0, open_lo=True, what="a fraction"), default=1.0, help="stop once this fraction of the rays "
                    "is finished (default 1.0)")
     p.add_argument("--no-speculation", action="store_true", help="one candidate block per ray and pass")
-    p.add_argument("--size", type=_size, default=(1280, 720), metavar="WxH", help="default 1280x720")
+    p.add_argument("--size", type=size, default=(1280, 720), metavar="WxH",
+                   help=f"{SIZE_RULE} (default 1280x720)")
     p.add_argument("--out", default="clvis-iso", metavar="DIR", help="output folder (default ./clvis-iso)")
+    add_camera_options(p, _FIT)
     return p
 
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH such as 1280x720, got {text!r}") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"sizes must lie in 1..16384, got {text!r}")
-    return w, h
 
 
 def _load(args):
     """(volume, spacing, origin, default isovalue, description)."""
-    from . import datasets
-    from .volumes import read_volume
+    from .. import datasets
+    from ..volumes import read_volume
 
     if args.file is not None:
         if args.dataset is not None:
-            raise _IsoError("--dataset chooses an embedded volume; leave it out with a FILE")
+            raise CliError("--dataset chooses an embedded volume; leave it out with a FILE")
         path = Path(args.file)
         if not path.exists():
-            raise _IsoError(f"{path}: no such file")
+            raise CliError(f"{path}: no such file")
         v = read_volume(path)
         data = np.asarray(v.data, np.float32)
         lo, hi = float(np.nanmin(data)), float(np.nanmax(data))
@@ -87,46 +93,37 @@ def picture(img) -> np.ndarray:
 
 
 def render(volume, spacing, origin, isovalue, width, height, *, rate=8, completion=1.0, speculation=True,
-           queue=None):
-    """(renderer, camera, [IsoImage per pass])."""
-    from . import Camera
-    from .iso import IsoRenderer
+           camera=None, queue=None):
+    """(renderer, camera, [IsoImage per pass]), seen by camera(lo, hi) of the
+    volume's bounds (default: the fit view)."""
+    from .. import Camera
+    from ..iso import IsoRenderer
 
     r = IsoRenderer(volume, rate=rate, spacing=spacing, origin=origin, queue=queue)
     lo = np.asarray(origin, np.float64)
     hi = lo + (np.array(r.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
-    cam = Camera.fit(lo, hi, direction=(-0.6, 1.0, -0.45), aspect=width / height, fov_y=35)
+    cam = (camera(lo, hi) if camera is not None else
+           Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y))
     images = list(r.passes(cam, width, height, isovalue, completion=completion, speculation=speculation))
     return r, cam, images
 
 
 def cmd(args) -> int:
-    from .errors import ClvisError
-
-    try:
-        return _run(args)
-    except (_IsoError, ClvisError, ImportError) as e:
-        msg = str(e)
-    except OSError as e:
-        msg = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
-    print(f"clvis iso: error: {msg}", file=sys.stderr)
-    return 2
+    check_camera_args(args)
+    return _run(args)
 
 
 def _run(args) -> int:
-    from . import images, runtime
+    from .. import images, runtime
 
-    if not 1 <= args.rate <= 32:
-        raise _IsoError(f"--rate: expected 1..32, got {args.rate}")
-    if not 0 < args.completion <= 1:
-        raise _IsoError(f"--completion: expected a fraction in (0, 1], got {args.completion}")
     volume, spacing, origin, default_iso, source = _load(args)
     iso = args.isovalue if args.isovalue is not None else default_iso
     w, h = args.size
     q = runtime.default_queue()
     t0 = time.perf_counter()
     r, _, passes = render(volume, spacing, origin, iso, w, h, rate=args.rate, completion=args.completion,
-                          speculation=not args.no_speculation, queue=q)
+                          speculation=not args.no_speculation, queue=q,
+                          camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h))
     total = time.perf_counter() - t0
     img = passes[-1]
     out = Path(args.out)
@@ -151,8 +148,8 @@ def _run(args) -> int:
 
 def demo(out_dir, q, size=(640, 480)) -> bool:
     """The demo's iso part: Marschner-Lobb, progressive, checked against the reference."""
-    from . import datasets, images, zfp
-    from .reference import iso as ref
+    from .. import datasets, images, zfp
+    from ..reference import iso as ref
 
     w, h = size
     d = datasets.marschner_lobb(64)

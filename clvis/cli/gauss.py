@@ -6,13 +6,29 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from ..gauss.render import MAX_K
+from ._common import (
+    SIZE_RULE,
+    VIEWS_HELP,
+    CliError,
+    FitView,
+    add_camera_options,
+    camera_from_args,
+    check_camera_args,
+    colormap_name,
+    count,
+    real,
+    size,
+)
+
 LODS = ("low", "medium", "high")
+# --view fit: from the front left, a little above, a narrow lens
+_FIT = FitView(direction=(-0.55, 1.0, -0.35), fov_y=40.0)
 _HELP = """\
 Turn a volume into Gaussians at the levels of detail of Sharma & Schmalstieg
 (low: one per 8^3 leaf; medium: 4^3 / 2^3 blocks; high: 2^3 blocks / voxels),
@@ -24,11 +40,9 @@ FILE may be a .vdb (float grid, needs the `vdb` extra: tinyvdb), a .npy
 volume indexed [z, y, x], a .npz of Gaussians (clvis.Gaussians.save), or a
 point cloud (.ply, .las, .laz: one Gaussian per point, stretched along the
 velocity when the file has one, else sized by the 4 nearest neighbours).
-"""
 
+""" + VIEWS_HELP
 
-class _GaussError(Exception):
-    pass
 
 
 def add_parser(sub):
@@ -37,42 +51,37 @@ def add_parser(sub):
     g.add_argument("file", nargs="?", help="a .vdb, .npy, Gaussians .npz or point cloud file")
     g.add_argument("--lod", default="low,medium,high", metavar="LIST",
                    help="comma-separated levels of detail (default low,medium,high)")
-    g.add_argument("--threshold", type=float, default=None,
+    g.add_argument("--threshold", type=real(), default=None,
                    help="voxels above this are active (default: > 0 for dense volumes)")
     g.add_argument("--model", choices=["max_response", "absorption"], default="absorption",
                    help="compositing model (default absorption)")
-    g.add_argument("--density", type=float, default=None,
+    g.add_argument("--density", type=real(0.0), default=None,
                    help="extinction scale of the absorption model (default 6 / volume diagonal)")
-    g.add_argument("--colormap", default="inferno", metavar="NAME", help="matplotlib colormap")
-    g.add_argument("--size", type=_size, default=(640, 640), metavar="WxH", help="each panel (default 640x640)")
-    g.add_argument("--k", type=int, default=None, help="k-buffer size (default: the device profile's)")
+    g.add_argument("--colormap", type=colormap_name, default="inferno", metavar="NAME",
+                   help="a matplotlib colormap (default inferno)")
+    g.add_argument("--size", type=size, default=(640, 640), metavar="WxH",
+                   help=f"each panel, {SIZE_RULE} (default 640x640)")
+    g.add_argument("--k", type=count(1, MAX_K), default=None,
+                   help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)")
     g.add_argument("--out", default="clvis-gauss", metavar="DIR", help="output folder (default ./clvis-gauss)")
+    add_camera_options(g, _FIT)
     return g
 
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH such as 640x640, got {text!r}") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"sizes must lie in 1..16384, got {text!r}")
-    return w, h
 
 
 def _lods(text: str) -> list[str]:
     out = [t.strip() for t in text.split(",") if t.strip()]
     bad = [t for t in out if t not in LODS]
     if bad or not out:
-        raise _GaussError(f"--lod: expected some of {', '.join(LODS)}, got {text!r}")
+        raise CliError(f"--lod: expected some of {', '.join(LODS)}, got {text!r}")
     return out
 
 
 def _sources(args):
     """[(panel name, Gaussians or None, sparse volume or None)], description."""
-    from . import datasets
-    from .gauss import Gaussians, SparseVolume, read_vdb
-    from .io import read_points
+    from .. import datasets
+    from ..gauss import Gaussians, SparseVolume, read_vdb
+    from ..io import read_points
 
     lods = _lods(args.lod)
     if args.file is None:
@@ -82,7 +91,7 @@ def _sources(args):
         return lods, sv, None, "the embedded explosion (96^3)"
     path = Path(args.file)
     if not path.exists():
-        raise _GaussError(f"{path}: no such file")
+        raise CliError(f"{path}: no such file")
     suffix = path.suffix.lower()
     if suffix == ".vdb":
         sv = read_vdb(path)
@@ -94,41 +103,34 @@ def _sources(args):
         try:
             v = np.load(path, allow_pickle=False)
         except (OSError, ValueError) as e:
-            raise _GaussError(f"{path}: cannot read: {e}") from None
+            raise CliError(f"{path}: cannot read: {e}") from None
         if v.ndim != 3:
-            raise _GaussError(f"{path}: expected a 3-D volume, got shape {v.shape}")
+            raise CliError(f"{path}: expected a 3-D volume, got shape {v.shape}")
         sv = SparseVolume.from_dense(v.astype(np.float32), threshold=0.0 if args.threshold is None
                                      else args.threshold)
         return lods, sv, None, str(path)
     if suffix == ".npz":
         return ["file"], None, Gaussians.load(path), str(path)
-    from .gauss import gaussians_from_points
+    from ..gauss import gaussians_from_points
     cloud = read_points(path)
     if len(cloud) == 0:
-        raise _GaussError(f"{path}: the file holds no points")
+        raise CliError(f"{path}: the file holds no points")
     g = gaussians_from_points(cloud, velocity="cloud" if cloud.velocity is not None else None)
     return ["points"], None, g, str(path)
 
 
 def cmd(args) -> int:
-    from .errors import ClvisError
-
-    try:
-        return _run(args)
-    except (_GaussError, ClvisError, ImportError) as e:
-        msg = str(e)
-    except OSError as e:
-        msg = f"{e.filename}: {e.strerror}" if e.filename and e.strerror else str(e)
-    print(f"clvis gauss: error: {msg}", file=sys.stderr)
-    return 2
+    check_camera_args(args)
+    return _run(args)
 
 
 def render_panels(lods, sv, gaussians, width, height, *, model="absorption", density=None,
-                  colormap="inferno", k=None, queue=None):
-    """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given Gaussians)."""
-    from . import Camera
-    from .colormap import TransferFunction
-    from .gauss import GaussianRenderer, gaussians_from_volume
+                  colormap="inferno", k=None, camera=None, queue=None):
+    """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given
+    Gaussians), seen by camera(lo, hi) of their bounds (default: the fit view)."""
+    from .. import Camera
+    from ..colormap import TransferFunction
+    from ..gauss import GaussianRenderer, gaussians_from_volume
 
     items = []
     for name in lods:
@@ -136,11 +138,12 @@ def render_panels(lods, sv, gaussians, width, height, *, model="absorption", den
         items.append((name, g))
     allg = [g for _, g in items if g.n]
     if not allg:
-        raise _GaussError("no Gaussians: the volume has no active voxel")
+        raise CliError("no Gaussians: the volume has no active voxel")
     lo = np.min([g.bounds(1.0)[0] for g in allg], axis=0)
     hi = np.max([g.bounds(1.0)[1] for g in allg], axis=0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
-    cam = Camera.fit(lo, hi, direction=(-0.55, 1.0, -0.35), aspect=width / height, fov_y=40)
+    cam = (camera(lo, hi) if camera is not None else
+           Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y))
     vals = np.concatenate([g.values for g in allg])
     vr = (float(vals.min()), float(vals.max()))
     tf = TransferFunction(colormap, opacity=[(0.0, 0.05), (0.35, 0.35), (1.0, 1.0)], value_range=vr)
@@ -157,14 +160,15 @@ def render_panels(lods, sv, gaussians, width, height, *, model="absorption", den
 
 
 def _run(args) -> int:
-    from . import images, runtime
+    from .. import images, runtime
 
     t0 = time.perf_counter()
     lods, sv, gaussians, source = _sources(args)
     width, height = args.size
     q = runtime.default_queue()
     panels = render_panels(lods, sv, gaussians, width, height, model=args.model, density=args.density,
-                           colormap=args.colormap, k=args.k, queue=q)
+                           colormap=args.colormap, k=args.k, queue=q,
+                           camera=lambda lo, hi: camera_from_args(args, lo, hi, width, height))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     files = []
@@ -191,11 +195,11 @@ def _run(args) -> int:
 def demo(out_dir, q, size=(480, 480)) -> bool:
     """The demo's gauss part: the explosion at three LODs (figures, PNG) and a
     small frame checked against the brute-force reference."""
-    from . import Camera, datasets, images
-    from .camera import ray_buffer
-    from .colormap import TransferFunction
-    from .gauss import GaussianRenderer, SparseVolume, lod_table
-    from .reference.gauss import render as ref
+    from .. import Camera, datasets, images
+    from ..camera import ray_buffer
+    from ..colormap import TransferFunction
+    from ..gauss import GaussianRenderer, SparseVolume, lod_table
+    from ..reference.gauss import render as ref
 
     w, h = size
     e = datasets.explosion()
@@ -217,7 +221,7 @@ def demo(out_dir, q, size=(480, 480)) -> bool:
     g = panels[1][1]
     lo, hi = g.bounds(1.0)
     cw, ch = 24, 24
-    cam = Camera.fit(lo, hi, direction=(-0.55, 1.0, -0.35), aspect=1.0, fov_y=40)
+    cam = Camera.fit(lo, hi, direction=_FIT.direction, aspect=1.0, fov_y=_FIT.fov_y)
     tf = TransferFunction("inferno")
     img = GaussianRenderer(g, tf, model="max_response", queue=q).render(cam, cw, ch)
     vmin, scale = tf.limits(g.values)

@@ -1,0 +1,80 @@
+"""The clvis command line.
+
+    clvis info                   OpenCL platforms and devices, the one clvis uses, its capabilities
+    clvis demo                   runs the kernel families on generated data and prints the figures
+    clvis render [FILE]          renders a point cloud (default: an embedded synthetic hurricane)
+                                 and writes PNGs of its G-buffers
+    clvis iso [FILE]             progressive isosurface raycasting of a ZFP-compressed volume
+                                 (default: an embedded Marschner-Lobb volume)
+    clvis gauss [FILE]           Gaussians from a volume at three levels of detail, ray marched
+                                 (default: an embedded explosion), PNGs side by side
+    clvis bench primitives|raster|gauss|iso
+                                 a benchmark suite with its peers, as a table (and JSON)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from .._version import __version__
+from . import bench, demo, gauss, info, iso, raster
+from ._common import Parser, glue_values, run
+
+_COMMANDS = {"info": info, "demo": demo, "render": raster, "iso": iso, "gauss": gauss, "bench": bench}
+_EPILOG = """\
+A bad argument or a file clvis cannot use is one line on stderr and exit
+status 2 (CLVIS_DEBUG=1: the traceback instead). `clvis COMMAND --help`
+tells more about each command.
+"""
+
+
+def _parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
+    p = argparse.ArgumentParser(prog="clvis", description=__doc__, epilog=_EPILOG,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--version", action="version", version=f"clvis {__version__}")
+    sub = p.add_subparsers(dest="cmd", metavar="COMMAND", parser_class=Parser)
+    commands = {name: module.add_parser(sub) for name, module in _COMMANDS.items()}
+    return p, commands
+
+
+def main(argv=None) -> int:
+    """Run the clvis command line on `argv` (default sys.argv[1:]); the exit status.
+
+    A bare `clvis` prints the help and exits 0, as `clvis --help` does.
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    p, commands = _parser()
+    if not argv:
+        p.print_help()
+        return 0
+    for i, tok in enumerate(argv):        # the command: the first word that is no option
+        if not tok.startswith("-"):
+            if tok in commands:
+                argv[i + 1:] = glue_values(commands[tok], argv[i + 1:])
+            break
+    try:
+        args = p.parse_args(argv)
+        if args.cmd is None:                # only options, such as `clvis --verbose`
+            p.print_help()
+            return 0
+        return run(args.cmd, _COMMANDS[args.cmd].cmd, args)
+    except SystemExit as e:                 # argparse: --help, --version, a bad argument
+        return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
+    except BrokenPipeError:                 # `clvis info | head -1`: the reader has all it wanted
+        _quiet_stdout()
+        return 141                          # 128 + SIGPIPE, as a pipeline reports a process it stopped
+
+
+def _quiet_stdout():
+    """Point the process's stdout at /dev/null, so that Python's final flush of
+    what is still buffered does not fail a second time, with a message."""
+    if sys.stdout is not sys.__stdout__:
+        return
+    try:
+        fd = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(fd, sys.stdout.fileno())
+        os.close(fd)
+    except (OSError, ValueError, AttributeError):
+        pass

@@ -1,0 +1,481 @@
+"""What every clvis command shares: the argument types (image size, counts),
+the one error class a command reports, the wrapper that turns errors into
+one line on stderr and exit status 2, and the progress display."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import itertools
+import math
+import os
+import re
+import shutil
+import sys
+import threading
+import time
+
+import numpy as np
+
+from ..errors import ClvisError
+from ..raster import MAX_IMAGE_SIDE
+
+# The one image-size rule of every command: each side in 1..MAX_SIDE, the
+# rasterizer's limit (the smallest any renderer has). W * H then stays below
+# 2^31, so the kernels' 32-bit pixel indices never overflow.
+MAX_SIDE = MAX_IMAGE_SIDE
+MAX_PIXELS = 2**31 - 1
+SIZE_RULE = f"each side 1..{MAX_SIDE}, so W*H < 2^31"
+
+
+class CliError(Exception):
+    """A problem a command reports as one line on stderr, with exit status 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    """A sub-command's parser: a bad argument is one line, without the usage text."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def glue_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """argv with `--opt VALUE` written `--opt=VALUE` where VALUE starts with a
+    dash: argparse takes `-5x5` or `-1,2,3` for an option of its own, not for
+    the value of the option before it."""
+    takes_value = {s for a in parser._actions if a.option_strings and a.nargs is None
+                   for s in a.option_strings}
+    known = set(parser._option_string_actions)
+    out, i = [], 0
+    while i < len(argv):
+        tok = argv[i]
+        if tok == "--":
+            out += argv[i:]
+            break
+        nxt = argv[i + 1] if i + 1 < len(argv) else None
+        if (tok in takes_value and nxt is not None and nxt.startswith("-") and nxt != "--"
+                and nxt.split("=", 1)[0] not in known):
+            out.append(f"{tok}={nxt}")
+            i += 2
+            continue
+        out.append(tok)
+        i += 1
+    return out
+
+
+# ---------------------------------------------------------------- argument types
+
+def size(text: str) -> tuple[int, int]:
+    """'WxH' -> (W, H), each side in 1..MAX_SIDE (so W * H <= MAX_PIXELS)."""
+    m = re.fullmatch(r"\s*([+-]?\d+)\s*[xX×]\s*([+-]?\d+)\s*", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1920x1080, got {text!r}")
+    w, h = int(m.group(1)), int(m.group(2))
+    if not (1 <= w <= MAX_SIDE and 1 <= h <= MAX_SIDE) or w * h > MAX_PIXELS:
+        raise argparse.ArgumentTypeError(f"width and height must lie in 1..{MAX_SIDE}, got {text!r}")
+    return w, h
+
+
+def _integer(text: str) -> int | None:
+    """'2000000', '2_000_000', '2,000,000' or '2e6' -> 2000000; None if not a whole number."""
+    t = text.strip().replace("_", "").replace(",", "")
+    try:
+        return int(t)
+    except ValueError:
+        pass
+    try:
+        f = float(t)
+    except ValueError:
+        return None
+    return int(f) if math.isfinite(f) and f == int(f) else None
+
+
+def positive_int(text: str) -> int:
+    n = _integer(text)
+    if n is None or n < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return n
+
+
+def count(lo: int, hi: int):
+    """An argument type: a whole number in lo..hi."""
+    def parse(text: str) -> int:
+        n = _integer(text)
+        if n is None or not lo <= n <= hi:
+            what = "a positive integer" if lo == 1 else "an integer"
+            raise argparse.ArgumentTypeError(f"expected {what} in {lo:,}..{hi:,}, got {text!r}")
+        return n
+    parse.__name__ = "count"        # argparse names the type in some messages
+    return parse
+
+
+def real(lo: float = -math.inf, hi: float = math.inf, *, open_lo: bool = False, what: str = "a number"):
+    """An argument type: a finite float in [lo, hi] (or (lo, hi] with open_lo)."""
+    def parse(text: str) -> float:
+        try:
+            f = float(text)
+        except ValueError:
+            f = math.nan
+        if not (math.isfinite(f) and (f > lo if open_lo else f >= lo) and f <= hi):
+            rng = ("" if lo == -math.inf and hi == math.inf else
+                   f" > {lo:g}" if hi == math.inf and open_lo else
+                   f" >= {lo:g}" if hi == math.inf else
+                   f" in {'(' if open_lo else '['}{lo:g}, {hi:g}]")
+            raise argparse.ArgumentTypeError(f"expected {what}{rng} (finite), got {text!r}")
+        return f
+    parse.__name__ = "real"
+    return parse
+
+
+def colormap_name(text: str) -> str:
+    """A matplotlib colormap name; an unknown one gets the closest names."""
+    import difflib
+
+    from .. import colormap
+
+    known = colormap.names()
+    if text in known:
+        return text
+    close = difflib.get_close_matches(text, known, n=5) or difflib.get_close_matches(
+        text.lower(), [k.lower() for k in known], n=5, cutoff=0.5)
+    hint = (f"closest: {', '.join(close)}" if close else
+            f"some valid names: {', '.join(k for k in ('viridis', 'magma', 'inferno', 'plasma', 'cividis', 'gray') if k in known)}")
+    raise argparse.ArgumentTypeError(f"unknown colormap {text!r}; {hint} ({len(known)} names in all: "
+                                     "matplotlib's colormaps, _r reversed)")
+
+
+# ---------------------------------------------------------------- running a command
+
+def run(name: str, fn, args) -> int:
+    """fn(args), with the errors a user can cause as one line on stderr and
+    exit status 2: CliError, clvis's own errors (a file clvis cannot read, a
+    device too small), a bad value a library call rejects (ValueError,
+    TypeError), OSError (an unreadable file, an unwritable folder), a
+    missing optional package and running out of memory. CLVIS_DEBUG=1 lets
+    them through, traceback and all."""
+    try:
+        return fn(args)
+    except BrokenPipeError:
+        raise                       # main's: the reader went away, not an error of ours
+    except (CliError, ClvisError, ValueError, TypeError, ImportError, OSError, MemoryError) as e:
+        if os.environ.get("CLVIS_DEBUG", "") not in ("", "0"):
+            raise
+        msg = _one_line(e)
+    print(f"clvis {name}: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def _one_line(e: BaseException) -> str:
+    if isinstance(e, MemoryError):
+        return f"out of host memory{': ' + str(e) if str(e) else ''}"
+    if isinstance(e, OSError) and e.filename and e.strerror:
+        return f"{e.filename}: {e.strerror}"
+    lines = str(e).strip().splitlines() or [type(e).__name__]
+    more = " [more with CLVIS_DEBUG=1]" if len(lines) > 1 else ""
+    return lines[0] + more
+
+
+def timed(fn, queue=None, repeat=3) -> float:
+    """Best of `repeat` timed runs after one warm-up (which builds the
+    kernels); a single timed run when that one takes over half a second."""
+    def once():
+        t0 = time.perf_counter()
+        fn()
+        if queue is not None:
+            queue.finish()
+        return time.perf_counter() - t0
+
+    once()
+    best = once()
+    if best > 0.5:
+        return best
+    for _ in range(repeat - 1):
+        best = min(best, once())
+    return best
+
+
+# ---------------------------------------------------------------- progress
+
+class Progress:
+    """Stage names and their elapsed times on stderr.
+
+    On a terminal the running stage's line is rewritten in place a few times
+    a second; elsewhere (a log, --progress into a pipe) each stage prints one
+    line when it ends. Disabled, it prints nothing.
+    """
+
+    def __init__(self, enabled: bool, prefix: str = "clvis render"):
+        self.enabled = enabled
+        self.stream = sys.stderr
+        self.tty = enabled and isatty(self.stream)
+        self.prefix = prefix
+        self.start = time.perf_counter()
+
+    def _line(self, name: str, since: float, failed: bool = False) -> str:
+        now = time.perf_counter()
+        tail = "failed" if failed else f"(total {now - self.start:6.2f} s)"
+        line = f"{self.prefix}: {name:<36} {now - since:6.2f} s  {tail}"
+        if self.tty:            # one terminal row, or \r cannot rewrite it
+            line = line[:shutil.get_terminal_size().columns - 1]
+        return line
+
+    def _write(self, text: str):
+        self.stream.write(text)
+        self.stream.flush()
+
+    @contextlib.contextmanager
+    def stage(self, name: str):
+        if not self.enabled:
+            yield
+            return
+        t0 = time.perf_counter()
+        stop = threading.Event()
+        ticker = None
+        if self.tty:
+            def tick():
+                while not stop.wait(0.2):
+                    self._write("\r\x1b[K" + self._line(name, t0))
+            self._write("\r\x1b[K" + self._line(name, t0))
+            ticker = threading.Thread(target=tick, daemon=True)
+            ticker.start()
+        failed = True
+        try:
+            yield
+            failed = False
+        finally:
+            stop.set()
+            if ticker is not None:
+                ticker.join()
+            self._write(("\r\x1b[K" if self.tty else "") + self._line(name, t0, failed) + "\n")
+
+
+def isatty(stream) -> bool:
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+# ---------------------------------------------------------------- camera options
+
+@dataclasses.dataclass(frozen=True)
+class FitView:
+    """A command's default view: --view fit looks along `direction` (from the
+    eye towards the centre, z up) with a vertical field of view of `fov_y`."""
+
+    direction: tuple[float, float, float]
+    fov_y: float
+
+
+FIT_MARGIN = 1.05           # fit and the axis views: the scene fills 1/1.05 of the frame
+# orthographic views: (view direction, up)
+AXIS_VIEWS = {"top": ((0, 0, -1), (0, 1, 0)), "front": ((0, 1, 0), (0, 0, 1)),
+              "side": ((-1, 0, 0), (0, 0, 1))}
+SAMPLER_CAMERAS = {"hemisphere": 128, "grid": 384}     # grid_cameras with count=4
+
+VIEWS_HELP = """\
+views (--view):
+  fit           the whole scene from an oblique direction, perspective (default)
+  top           orthographic, looking down, north (+y) up
+  front, side   orthographic, looking along +y / along -x, z up
+  hemisphere:K  the K-th of the 128 NARVis hemisphere cameras (K = 0..127)
+  grid:K        the K-th of the 384 NARVis grid cameras, a 4 x 4 grid (K = 0..383)
+--eye, --target and --up replace that part of the view's camera (the target
+then defaults to the centre of the scene's bounds when --eye is given, and up
+to +z, +y for top); --fov sets the field of view of a perspective view.
+"""
+
+
+def view(text: str) -> tuple[str, int]:
+    """'fit' | 'top' | 'front' | 'side' | 'hemisphere:K' | 'grid:K' -> (kind, K)."""
+    kind, sep, k = text.strip().lower().partition(":")
+    if not sep and kind in ("fit", *AXIS_VIEWS):
+        return kind, 0
+    if sep and kind in SAMPLER_CAMERAS:
+        count = SAMPLER_CAMERAS[kind]
+        if k.strip().isdigit() and int(k) < count:
+            return kind, int(k)
+        raise argparse.ArgumentTypeError(f"{kind}:K needs K in 0..{count - 1}, got {text!r}")
+    raise argparse.ArgumentTypeError(f"expected fit, top, front, side, hemisphere:K or grid:K, got {text!r}")
+
+
+def vec3(text: str) -> tuple[float, float, float]:
+    """'X,Y,Z' -> three finite floats."""
+    parts = text.replace(" ", "").split(",")
+    try:
+        v = tuple(float(p) for p in parts)
+    except ValueError:
+        v = ()
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
+        raise argparse.ArgumentTypeError(f"expected three finite numbers X,Y,Z such as 1,-2.5,3, got {text!r}")
+    return v
+
+
+def direction(text: str) -> tuple[float, float, float]:
+    v = vec3(text)
+    if not any(v):
+        raise argparse.ArgumentTypeError(f"expected a non-zero direction, got {text!r}")
+    return v
+
+
+def fov(text: str) -> float:
+    try:
+        f = float(text)
+    except ValueError:
+        f = math.nan
+    if not (math.isfinite(f) and 0 < f < 180):
+        raise argparse.ArgumentTypeError(f"expected a field of view in degrees, between 0 and 180, got {text!r}")
+    return f
+
+
+def add_camera_options(parser: argparse.ArgumentParser, fit: FitView):
+    """--view, --eye, --target, --up and --fov; `fit` is the command's default view."""
+    g = parser.add_argument_group("camera", "the view (see above), and parts of it replaced")
+    g.add_argument("--view", type=view, default=("fit", 0),
+                   help="fit, top, front, side, hemisphere:K or grid:K (default fit)")
+    g.add_argument("--eye", type=vec3, metavar="X,Y,Z", help="the camera position, in world units")
+    g.add_argument("--target", type=vec3, metavar="X,Y,Z",
+                   help="the point looked at (default: the view's; the centre with --eye)")
+    g.add_argument("--up", type=direction, metavar="X,Y,Z", help="the up direction (default: the view's)")
+    g.add_argument("--fov", type=fov, metavar="DEG",
+                   help=f"vertical field of view of a perspective view (default {fit.fov_y:g})")
+    parser.set_defaults(fit_view=fit)
+
+
+def check_camera_args(args):
+    """The camera options that contradict each other, before any work."""
+    kind, _ = args.view
+    if args.fov is not None and kind in AXIS_VIEWS:
+        raise CliError(f"--fov: the {kind} view is orthographic; leave --fov out or use a perspective view")
+    if args.eye is not None and args.target is not None and args.eye == args.target:
+        raise CliError("--eye and --target are the same point")
+
+
+def describe_camera(args) -> str:
+    """The view as given on the command line: 'fit', 'grid:7', 'fit, eye 1,2,3'."""
+    kind, k = args.view
+    text = f"{kind}:{k}" if kind in SAMPLER_CAMERAS else kind
+    for name in ("eye", "target", "up"):
+        v = getattr(args, name)
+        if v is not None:
+            text += f", {name} {','.join(f'{x:g}' for x in v)}"
+    if args.fov is not None:
+        text += f", fov {args.fov:g}"
+    return text
+
+
+def camera_from_args(args, lo, hi, width: int, height: int, points=None):
+    """The camera the options ask for, framing the box [lo, hi] (and, for
+    --view fit, the `points` themselves when given)."""
+    from ..camera import Camera, grid_cameras, hemisphere_cameras
+
+    kind, k = args.view
+    aspect = width / height
+    fit = args.fit_view
+    fov_y = args.fov if args.fov is not None else fit.fov_y
+    try:
+        if kind == "fit":
+            cam = (fit_camera(points, lo, hi, aspect, fit, fov_y) if points is not None else
+                   Camera.fit(lo, hi, direction=fit.direction, aspect=aspect, fov_y=fov_y))
+        elif kind in AXIS_VIEWS:
+            cam = axis_camera(kind, lo, hi, aspect)
+        else:
+            sampler = hemisphere_cameras if kind == "hemisphere" else grid_cameras
+            cam = next(itertools.islice(sampler(lo, hi, fov_y=fov_y, aspect=aspect), k, None), None)
+            if cam is None:
+                raise CliError(f"--view {kind}:{k}: the sampler has fewer than {k + 1} cameras")
+        if args.eye is None and args.target is None and args.up is None:
+            return cam
+        return _replaced(cam, kind, args, lo, hi, aspect)
+    except ValueError as e:         # Camera's own checks: an up along the view, ...
+        raise CliError(f"camera: {e}") from None
+
+
+def _replaced(cam, kind, args, lo, hi, aspect: float):
+    """`cam` with the eye, target and up of the options, near and far
+    enclosing the box, the projection (and field of view) kept."""
+    from ..camera import Camera
+
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    centre = 0.5 * (lo + hi)
+    eye = np.asarray(args.eye if args.eye is not None else cam.eye, np.float64)
+    if args.target is not None:
+        target = np.asarray(args.target, np.float64)
+    elif args.eye is not None:
+        target = centre
+    else:                           # the view's own line of sight
+        target = cam.eye + cam.forward * max(float(np.linalg.norm(centre - cam.eye)), 1.0)
+    up = args.up if args.up is not None else (AXIS_VIEWS[kind][1] if kind in AXIS_VIEWS else (0, 0, 1))
+    if np.array_equal(eye, target):
+        raise CliError("--eye: the camera would sit on its target; give a --target too")
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    depths = (corners - eye) @ forward
+    scale = max(float(np.linalg.norm(hi - lo)), tiny(centre), float(np.linalg.norm(target - eye)) * 1e-3)
+    if cam.orthographic:
+        return Camera.ortho(eye, target, up, height=2.0 / cam.projection[1, 1], aspect=aspect,
+                            near=float(depths.min()) - 0.1 * scale, far=float(depths.max()) + 0.1 * scale)
+    fov_y = math.degrees(2 * math.atan(1.0 / cam.projection[1, 1]))
+    far = max(1.01 * float(depths.max()), 0.0) + 1e-3 * scale
+    near = max(0.5 * float(depths.min()), 1e-4 * scale, 1e-6 * far)
+    return Camera.look_at(eye, target, up, fov_y, aspect, near=near, far=max(far, 2 * near))
+
+
+def _finite_sample(positions, limit: int = 200_000) -> np.ndarray:
+    """Up to `limit` of the points with finite x, y, z (an even stride), float64."""
+    step = max(1, len(positions) // limit)
+    p = positions[::step].astype(np.float64)
+    return p[np.isfinite(p).all(axis=1)]
+
+
+def fit_camera(positions, lo, hi, aspect: float, fit: FitView, fov_y: float | None = None):
+    """Camera.fit on the bounds, then moved along its view axis until the
+    points (a sample of them) just fill the frame. Camera.fit frames the
+    bounding sphere, which leaves a flat cloud (a storm, a terrain) small."""
+    from ..camera import Camera
+
+    cam = Camera.fit(lo, hi, direction=fit.direction, aspect=aspect,
+                     fov_y=fit.fov_y if fov_y is None else fov_y)
+    p = _finite_sample(positions)
+    centre = 0.5 * (np.asarray(lo, np.float64) + np.asarray(hi, np.float64))
+    if len(p) == 0 or np.ptp(p, axis=0).max() <= tiny(centre):
+        return cam          # (about) one point: Camera.fit's own framing
+    right, up, forward = cam.view[0, :3], cam.view[1, :3], cam.forward
+    o = p - centre
+    a, b, c = np.abs(o @ right), np.abs(o @ up), o @ forward
+    tan_y = 1.0 / cam.projection[1, 1]
+    tan_x = aspect * tan_y
+    # with the eye at distance D from the centre, a point is in frame when
+    # a <= tan_x (D + c) and b <= tan_y (D + c), and in front when D + c > 0
+    radius = max(0.5 * float(np.linalg.norm(np.asarray(hi) - np.asarray(lo))), 1e-6)
+    dist = max(float(np.max(FIT_MARGIN * np.maximum(a / tan_x, b / tan_y) - c)),
+               float(np.max(-c)) + 1e-3 * radius)
+    nearest, farthest = dist + float(c.min()), dist + float(c.max())
+    fov_y = math.degrees(2 * math.atan(tan_y))
+    return Camera.look_at(centre - dist * forward, centre, (0, 0, 1), fov_y, aspect,
+                          near=0.5 * nearest, far=1.5 * farthest)
+
+
+def tiny(centre) -> float:
+    """An extent too small to frame on its own around `centre`: below it
+    float32 cameras no longer resolve the points (Camera.fit's floor)."""
+    return 1e-4 * max(1.0, float(np.abs(centre).max()))
+
+
+def axis_camera(kind: str, lo, hi, aspect: float):
+    """An orthographic camera along an axis framing the box: top looks down
+    (north, +y, up), front looks along +y, side along -x."""
+    from ..camera import Camera
+
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    direction, up = (np.asarray(v, np.float64) for v in AXIS_VIEWS[kind])
+    right = np.cross(direction, up)
+    ext = hi - lo
+    width, height, depth = (float(np.abs(v) @ ext) for v in (right, up, direction))
+    centre = 0.5 * (lo + hi)
+    scale = max(width, height, depth, tiny(centre))
+    frame = FIT_MARGIN * max(height, width / aspect, 1e-3 * scale)
+    back = 0.5 * depth + 0.1 * scale              # the eye sits outside the box
+    return Camera.ortho(centre - back * direction, centre, up, height=frame, aspect=aspect,
+                        near=0.05 * scale, far=back + 0.5 * depth + 0.1 * scale)

@@ -1,0 +1,89 @@
+"""`clvis bench`: a family's benchmark suite with its peers, as a table (and
+JSON), or the table of an earlier run's JSON."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from ._common import real
+
+
+def _report(path: str):
+    """--report: the (rows, meta) of a pytest-benchmark JSON file, read while
+    the arguments are parsed, so a wrong file is an argument error."""
+    import argparse
+
+    from .. import benchreport
+
+    try:
+        return benchreport.load(path)
+    except FileNotFoundError:
+        raise argparse.ArgumentTypeError(f"{path}: no such file") from None
+    except OSError as e:
+        raise argparse.ArgumentTypeError(f"{path}: {e.strerror or e}") from None
+    except (ValueError, KeyError, TypeError, AttributeError) as e:   # not JSON, or not a benchmark's
+        raise argparse.ArgumentTypeError(f"{path}: not a pytest-benchmark JSON file ({type(e).__name__}: "
+                                         f"{str(e).splitlines()[0] if str(e) else ''})") from None
+
+
+def add_parser(sub):
+    b = sub.add_parser("bench", help="run a benchmark suite and print its table")
+    b.add_argument("family", choices=["primitives", "raster", "gauss", "iso"])
+    b.add_argument("--scale", type=real(0.0, open_lo=True), help="multiply every size (e.g. 0.01 for a smoke run)")
+    b.add_argument("--json", help="where to write the JSON (default bench/results/<device>/<family>.json)")
+    b.add_argument("--report", type=_report, metavar="JSON",
+                   help="print the table of an existing JSON instead of running")
+    b.add_argument("--check", action="store_true", help="exit 1 if a target is missed")
+    return b
+
+
+def _bench_dir() -> Path | None:
+    for cand in (Path.cwd() / "bench", Path(__file__).resolve().parents[2] / "bench"):
+        if (cand / "bench_primitives.py").is_file():
+            return cand
+    return None
+
+
+def cmd(args) -> int:
+    from .. import benchreport, runtime
+
+    if args.report:
+        rows, meta = args.report
+    else:
+        bench = _bench_dir()
+        if bench is None:
+            print("clvis bench needs the bench/ folder of a source checkout "
+                  "(run it from the repository root)", file=sys.stderr)
+            return 2
+        suite = bench / f"bench_{args.family}.py"
+        if not suite.is_file():
+            print(f"clvis bench: error: {suite} is missing", file=sys.stderr)
+            return 2
+        q = runtime.default_queue()
+        out = Path(args.json) if args.json else (
+            bench / "results" / runtime.device_slug(q) / f"{args.family}.json")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        env = dict(os.environ)
+        if args.scale is not None:
+            env["CLVIS_BENCH_SCALE"] = str(args.scale)
+        cmd = [sys.executable, "-m", "pytest", str(suite), "-q",
+               "-p", "no:cacheprovider", f"--benchmark-json={out}", "--benchmark-disable-gc"]
+        print("running:", " ".join(cmd), flush=True)
+        r = subprocess.run(cmd, check=False, cwd=bench.parent, env=env, stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True)
+        if r.returncode != 0:
+            print(r.stdout[-4000:])
+            return r.returncode
+        rows, meta = benchreport.load(out)
+        print(f"results: {out}")
+    print(benchreport.format_table(rows, meta))
+    results = benchreport.check(rows, args.family, meta.get("tuning", "cpu"))
+    if results:
+        print(f"\ntargets ({meta.get('tuning', 'cpu')} device):")
+        print(benchreport.format_checks(results))
+    if args.check and not all(ok for _, _, ok in results):
+        return 1
+    return 0

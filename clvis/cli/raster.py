@@ -1,0 +1,394 @@
+"""`clvis render`: a point cloud (a file, or an embedded synthetic one)
+rasterized to G-buffers, written as PNGs; and the demo's raster part."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import os
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ._common import (
+    SIZE_RULE,
+    VIEWS_HELP,
+    CliError,
+    FitView,
+    Progress,
+    add_camera_options,
+    camera_from_args,
+    check_camera_args,
+    colormap_name,
+    count,
+    describe_camera,
+    fit_camera,
+    isatty,
+    size,
+    timed,
+)
+
+# The embedded clouds: generator, default attribute, whether the depth filter
+# panel is on by default (the filter is made for LiDAR scans seen through holes).
+_DATASETS = {
+    "hurricane": ("temperature", False),
+    "terrain": ("classification", True),
+}
+_DEFAULT_POINTS = {"hurricane": 2_000_000, "terrain": 1_000_000}
+# --view fit looks along this direction (from the eye towards the centre):
+# from the south-south-west, about 40 degrees above the horizon, z up; the
+# field of view is Camera.fit's. Then fit moves the eye until the points
+# themselves fill the frame.
+_FIT = FitView(direction=(0.45, 1.0, -0.9), fov_y=60.0)
+_SOFT_Z_FACTOR = 1.01
+_OVERVIEW_WIDTH = 2880      # the overview is shrunk by an integer factor to fit this
+_BACKGROUND = (24, 24, 24)  # behind the overview's transparent (empty) pixels
+_COORDINATES = ("x", "y", "z")      # --attribute takes these too
+MAX_POINTS = 2**32 - 2              # the Rasterizer's: index 0xFFFFFFFF marks an empty pixel
+
+
+def _soft_z(text: str) -> float | None:
+    """A tolerance factor >= 1, or off."""
+    if text.strip().lower() in ("off", "0", "none"):
+        return None
+    try:
+        f = float(text)
+    except ValueError:
+        f = math.nan
+    if not (math.isfinite(f) and f >= 1.0):
+        raise argparse.ArgumentTypeError(f"expected a factor >= 1 (such as 1.01) or off, got {text!r}")
+    return f
+
+
+
+def _levels(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if not 0 <= n <= 16:
+        raise argparse.ArgumentTypeError(f"expected pyramid levels in 0..16 (0: off), got {text!r}")
+    return n
+
+
+
+def _embedded(name: str, n: int):
+    """An embedded dataset (clvis.datasets) as a clvis.PointCloud."""
+    from .. import datasets
+    from ..io import PointCloud
+
+    d = getattr(datasets, name)(n)
+    return PointCloud(d["positions"], colors=d["colors"], attributes=d["attributes"],
+                      velocity=d["velocity"])
+
+
+def _pick_attribute(cloud, requested: str | None, default: str | None, source: str) -> str | None:
+    """The attribute to color by: the one asked for (it must exist; x, y and z
+    name the coordinates unless the cloud has attributes of those names), else
+    the default when the cloud has it, else intensity, else the first one;
+    for a cloud of bare positions, z (height); None: the cloud's colors."""
+    names = list(cloud.attributes)
+    if requested is not None:
+        if requested not in cloud.attributes and requested not in _COORDINATES:
+            raise CliError(f"no attribute {requested!r} in {source}; it has "
+                               f"{', '.join(names) + ' and ' if names else ''}the coordinates x, y, z")
+        return requested
+    for cand in (default, "intensity"):
+        if cand in cloud.attributes:
+            return cand
+    if names:
+        return names[0]
+    return None if cloud.colors is not None else "z"
+
+
+@dataclasses.dataclass
+class _Panel:
+    key: str            # the PNG's file name, without .png
+    title: str          # its label in the overview
+    image: np.ndarray   # (H, W, 4) uint8 RGBA
+
+
+@dataclasses.dataclass
+class _Rendered:
+    gbuffers: object    # clvis.GBuffers of the main render
+    panels: list
+    first_s: float      # the first render (it may build the kernels)
+    warm_s: float       # the same render again
+
+
+def _safe_name(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "attribute"
+
+
+def _raster_fields(cloud, attribute) -> dict:
+    """Rasterizer keywords for `cloud`: only the attribute colored by travels
+    to the device (a LAS file has more attributes than the G-buffers hold)."""
+    attrs = {}
+    if attribute in cloud.attributes:
+        attrs[attribute] = cloud.attributes[attribute]
+    elif attribute is not None:
+        attrs[attribute] = cloud.positions[:, _COORDINATES.index(attribute)]
+    return {"colors": cloud.colors, "attributes": attrs, "velocity": cloud.velocity,
+            "radius": cloud.radius}
+
+
+def _render_panels(raster, cloud, camera, width, height, attribute, colormap, soft_z, levels,
+                   progress) -> _Rendered:
+    """Render one view; the G-buffers and the images a person looks at."""
+    from .. import images
+    from ..raster import EMPTY, depth_filter
+
+    with progress.stage("rendering + resolving G-buffers"):
+        t0 = time.perf_counter()
+        g = raster.render(camera, width, height, color_by=attribute, colormap=colormap)
+        first = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        raster.render(camera, width, height, color_by=attribute, colormap=colormap)
+        warm = time.perf_counter() - t0
+    panels = []
+    if attribute is not None:
+        panels.append(_Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({colormap})", g.rgba))
+    if cloud.colors is not None:
+        if attribute is None:
+            colors = g.rgba
+        else:               # the winners' colors, gathered on the host: no second render
+            colors = np.zeros_like(g.rgba)
+            hit = g.index != EMPTY
+            colors[hit] = cloud.colors[g.index[hit]]
+        panels.append(_Panel("colors", "point colors", colors))
+    panels.append(_Panel("depth", "depth (near = bright)", images.depth_image(g.depth)))
+    if g.vel2d is not None:
+        angle, magnitude = images.velocity_images(g.vel2d)
+        panels.append(_Panel("velocity-angle", "screen velocity: angle", angle))
+        panels.append(_Panel("velocity-magnitude", "screen velocity: magnitude", magnitude))
+    if soft_z is not None:
+        with progress.stage(f"soft z (factor {soft_z:g})"):
+            soft = raster.render(camera, width, height, color_by=attribute, colormap=colormap,
+                                 soft_z=soft_z, host=False)      # read back its rgba alone
+            panels.append(_Panel("soft-z", f"soft z (factor {soft_z:g})", soft.rgba.get()))
+    if levels:
+        with progress.stage(f"depth filter ({levels} levels)"):
+            filtered = depth_filter(g, levels)
+        panels.append(_Panel("depth-filtered", f"depth filter ({levels} levels)", filtered.rgba))
+    return _Rendered(g, panels, first, warm)
+
+
+def _shrink(image: np.ndarray, f: int) -> np.ndarray:
+    """An RGBA image shrunk by f in each direction, keeping the most opaque
+    pixel of each f x f block (single-pixel points stay points, not a haze)."""
+    h, w = image.shape[0] // f, image.shape[1] // f
+    if f <= 1 or h == 0 or w == 0:
+        return image
+    words = np.ascontiguousarray(image).view(np.uint32)[..., 0]     # one word per pixel
+    alpha_of = (lambda a: a >> 24) if sys.byteorder == "little" else (lambda a: a & 0xFF)
+    out = words[0:h * f:f, 0:w * f:f]
+    for dy in range(f):
+        for dx in range(f):
+            cand = words[dy:h * f:f, dx:w * f:f]
+            out = np.where(alpha_of(cand) > alpha_of(out), cand, out)
+    return np.ascontiguousarray(out).view(np.uint8).reshape(h, w, 4)
+
+
+def _overview(panels) -> np.ndarray:
+    """The panels in a grid, up to three a row, labelled, on a dark background
+    (RGB), shrunk to at most _OVERVIEW_WIDTH pixels wide."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    from .. import images
+
+    cols = min(3, len(panels))
+    f = max(1, -(-cols * panels[0].image.shape[1] // _OVERVIEW_WIDTH))
+    tiles = [_shrink(p.image, f) for p in panels]
+    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % cols)
+    pad = 4
+    rows = [images.side_by_side(tiles[i:i + cols], pad=pad) for i in range(0, len(tiles), cols)]
+    gap = np.zeros((pad, rows[0].shape[1], 4), np.uint8)
+    grid = np.concatenate([x for row in rows for x in (row, gap)][:-1], axis=0)
+    alpha = grid[..., 3:4].astype(np.uint16)
+    rgb = (grid[..., :3] * alpha + np.asarray(_BACKGROUND, np.uint16) * (255 - alpha) + 127) // 255
+    im = Image.fromarray(rgb.astype(np.uint8))
+    th, tw = tiles[0].shape[:2]
+    size = max(10, min(28, th // 16))
+    try:
+        font = ImageFont.load_default(size=size)
+    except (TypeError, OSError, ImportError):       # Pillow < 10.1, or no FreeType
+        font = ImageFont.load_default()
+    draw = ImageDraw.Draw(im)
+    for i, p in enumerate(panels):
+        x, y = (i % cols) * (tw + pad), (i // cols) * (th + pad)
+        draw.text((x + size // 2, y + size // 3), p.title, fill=(235, 235, 235), font=font)
+    return np.asarray(im)
+
+
+def _save_pngs(out: Path, named) -> list[Path]:
+    """images.save_png of each (file name, image) into `out`, a few at a time
+    (Pillow's PNG encoder releases the GIL)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .. import images
+
+    with ThreadPoolExecutor(max_workers=max(1, min(len(named), os.cpu_count() or 1))) as pool:
+        return list(pool.map(lambda item: images.save_png(out / item[0], item[1]), named))
+
+
+def _load(args, progress):
+    """(cloud, its description, default attribute, depth filter on by default)."""
+    from ..io import read_points
+
+    if args.file is not None:
+        if args.dataset is not None or args.points is not None:
+            raise CliError("--dataset and --points choose an embedded cloud; leave them out with a FILE")
+        with progress.stage(f"reading {Path(args.file).name}"):
+            try:
+                cloud = read_points(args.file)
+            except FileNotFoundError:
+                raise CliError(f"{args.file}: no such file") from None
+            except IsADirectoryError:
+                raise CliError(f"{args.file}: is a folder, not a point cloud file") from None
+        if len(cloud) == 0:
+            raise CliError(f"{args.file}: the file holds no points")
+        return cloud, str(args.file), None, False
+    name = args.dataset or "hurricane"
+    n = args.points if args.points is not None else _DEFAULT_POINTS[name]
+    with progress.stage(f"generating {name} ({n:,} points)"):
+        cloud = _embedded(name, n)
+    attribute, depth_filter_on = _DATASETS[name]
+    return cloud, f"the embedded {name}", attribute, depth_filter_on
+
+
+def cmd(args) -> int:
+    check_camera_args(args)
+    progress = Progress(not args.quiet and (args.progress or isatty(sys.stderr)))
+    return _render(args, progress)
+
+
+def _render(args, progress) -> int:
+    from .. import runtime
+    from ..raster import Rasterizer
+    from ..raster.depth_filter import LEVELS
+
+    width, height = args.size
+    t_start = time.perf_counter()
+    cloud, source, default_attribute, filter_on = _load(args, progress)
+    attribute = _pick_attribute(cloud, args.attribute, default_attribute, source)
+    levels = args.depth_filter if args.depth_filter is not None else (LEVELS if filter_on else 0)
+    try:
+        lo, hi = cloud.bounds()
+    except ValueError:
+        raise CliError(f"{source}: no point has finite coordinates") from None
+    camera = camera_from_args(args, lo, hi, width, height, points=cloud.positions)
+    q = runtime.default_queue()
+    with progress.stage("uploading + Morton order"):
+        raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
+        q.finish()
+    r = _render_panels(raster, cloud, camera, width, height, attribute, args.colormap,
+                       args.soft_z, levels, progress)
+    out = Path(args.out)
+    with progress.stage("writing PNGs"):
+        named = [(f"{p.key}.png", p.image) for p in r.panels] + [("overview.png", _overview(r.panels))]
+        files = _save_pngs(out, named)
+    total = time.perf_counter() - t_start
+
+    g, n = r.gbuffers, len(cloud)
+    covered = int(g.covered.sum())
+    stats = g.stats
+    colored = f"colored by {attribute} ({args.colormap})" if attribute else "its colors"
+    print(f"clvis render: {source}, {n:,} points, {colored}")
+    print(f"  device    {runtime.describe(q.device)}")
+    print(f"  view      {describe_camera(args)}, {width}x{height}")
+    print(f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)")
+    print(f"  batches   {stats['batches_drawn']:,} drawn, {stats['batches'] - stats['batches_drawn']:,} "
+          f"culled of {stats['batches']:,} ({stats['points_read']:,} points read)")
+    print(f"  render    {r.warm_s * 1e3:.1f} ms ({n / r.warm_s / 1e6:.1f} M points/s): render, resolve, "
+          f"read back; the first call, which may build kernels: {r.first_s * 1e3:.0f} ms")
+    print(f"  total     {total:.2f} s")
+    print(f"wrote {len(files)} PNGs to {out}{os.sep}")
+    for p in files:
+        print(f"  {p.name}")
+    return 0
+
+
+def demo(args, q) -> bool:
+    """The demo's raster part: throughput, the reference check, the overview PNG."""
+    from .. import images
+    from ..raster import Rasterizer
+    from ..reference import raster as ref
+
+    W, H = args.size
+    n, attribute = args.points, "temperature"
+    print(f"\nraster: the embedded hurricane, {n:,} particles at {W}x{H}, colored by {attribute} "
+          "(best of 3 after a warm-up):\n")
+    cloud = _embedded("hurricane", n)
+    lo, hi = cloud.bounds()
+    cam = fit_camera(cloud.positions, lo, hi, W / H, _FIT)
+    raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
+    t_vis = timed(lambda: raster.visibility(cam, W, H), q)
+    t_all = timed(lambda: raster.render(cam, W, H, color_by=attribute), q)
+    for name, t in (("render pass (visibility buffer)", t_vis),
+                    ("render + resolve, G-buffers on the host", t_all)):
+        print(f"  {name:40} {t * 1e3:8.2f} ms {n / t / 1e6:8.1f} M points/s")
+
+    m, w, h = min(n, 100_000), 320, 180
+    sub = cloud.positions[:m]               # the generator's order is random: a uniform subsample
+    sub_cam = fit_camera(sub, lo, hi, w / h, _FIT)
+    got = Rasterizer(sub, queue=q).render(sub_cam, w, h)
+    want = ref.rasterize(sub, sub_cam, w, h)
+    ok = np.array_equal(got.index, want.index) and np.array_equal(got.depth, want.depth)
+    print(f"  G-buffers vs clvis.reference.raster ({m:,} points at {w}x{h}, index and depth): "
+          f"{'matches' if ok else 'MISMATCH'}")
+
+    r = _render_panels(raster, cloud, cam, W, H, attribute, "viridis", _SOFT_Z_FACTOR, 0,
+                       Progress(False))
+    path = images.save_png(Path(args.out) / "overview.png", _overview(r.panels))
+    print(f"  overview of the G-buffers: {path}")
+    print("\nmore: clvis render --help, clvis bench raster")
+    return ok
+
+
+_RENDER_HELP = """\
+Render a point cloud and write PNGs of its G-buffers: the color by an
+attribute, the point colors, depth, the screen-space velocity's angle and
+magnitude, the soft z-buffer, the depth-filtered image (each when the cloud
+has what it needs), and overview.png with all of them side by side.
+
+Without a FILE it renders an embedded synthetic cloud: a hurricane of 2M
+particles (velocity, pressure, temperature, speed) or a 1M-point LiDAR-like
+terrain (intensity, classification). The fit view frames the points
+themselves, not only their bounding box.
+
+""" + VIEWS_HELP
+
+
+def add_parser(sub):
+    r = sub.add_parser("render", help="render a point cloud (default: a synthetic hurricane) to PNGs",
+                       description=_RENDER_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    r.add_argument("file", nargs="?", help="a PLY, LAS, LAZ, NPY or NPZ point cloud")
+    r.add_argument("--dataset", choices=sorted(_DATASETS),
+                   help="the embedded cloud when no FILE is given (default hurricane)")
+    r.add_argument("--points", type=count(1, MAX_POINTS), metavar="N",
+                   help="points of the embedded cloud (default 2,000,000 hurricane, 1,000,000 terrain)")
+    r.add_argument("--attribute", metavar="NAME",
+                   help="color by this attribute, or by a coordinate: x, y, z (default: temperature "
+                        "for the hurricane, classification for the terrain; for a file intensity "
+                        "if it has one, else its first attribute, else its colors, else z)")
+    r.add_argument("--colormap", type=colormap_name, default="viridis", metavar="NAME",
+                   help="a matplotlib colormap for the attribute (default viridis)")
+    r.add_argument("--size", type=size, default=(1920, 1080), metavar="WxH",
+                   help=f"image size in pixels, {SIZE_RULE} (default 1920x1080)")
+    add_camera_options(r, _FIT)
+    r.add_argument("--soft-z", type=_soft_z, nargs="?", const=_SOFT_Z_FACTOR,
+                   default=_SOFT_Z_FACTOR, metavar="FACTOR",
+                   help="the soft z-buffer's depth tolerance factor, or off (default 1.01)")
+    r.add_argument("--depth-filter", type=_levels, metavar="LEVELS",
+                   help="apply the depth filter with this many pyramid levels, 0: off "
+                        "(default: off, 4 for the terrain)")
+    r.add_argument("--out", default="clvis-render", metavar="DIR",
+                   help="folder for the PNGs (default ./clvis-render)")
+    r.add_argument("--progress", action="store_true",
+                   help="show the progress of each stage on stderr even when it is not a terminal")
+    r.add_argument("--quiet", action="store_true", help="no progress display")
+    return r

@@ -1,0 +1,299 @@
+"""clvis render: embedded clouds, files, views, progress and its errors."""
+
+import io
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from clvis import cli, datasets
+from clvis.cli import _common, raster
+from clvis.io import PointCloud, save_npz, write_ply
+
+SMALL = ["--size", "160x90", "--quiet"]
+
+
+def _png(path):
+    with Image.open(path) as im:
+        return np.asarray(im)
+
+
+def _assert_picture(path, size=(160, 90)):
+    """A PNG of the given (W, H) with something drawn: opaque pixels of more than one color."""
+    a = _png(path)
+    assert (a.shape[1], a.shape[0]) == size, path.name
+    assert a.ndim == 3 and a.shape[2] == 4, path.name
+    drawn = a[a[..., 3] > 0]
+    assert len(drawn) > 50, f"{path.name} is blank"
+    assert len(np.unique(drawn.reshape(len(drawn), -1), axis=0)) > 1, f"{path.name} has one color"
+
+
+def _render(capsys, *args):
+    """(exit status, stdout, stderr) of clvis render; argparse's exits too."""
+    try:
+        rc = cli.main(["render", *map(str, args)])
+    except SystemExit as e:
+        rc = e.code
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_render_hurricane(tmp_path, capsys):
+    rc, out, err = _render(capsys, "--points", 20000, "--out", tmp_path, *SMALL)
+    assert rc == 0, err
+    assert err == ""                        # --quiet; and no terminal here anyway
+    names = ["attribute-temperature", "colors", "depth", "velocity-angle", "velocity-magnitude",
+             "soft-z"]
+    assert sorted(p.stem for p in tmp_path.iterdir()) == sorted(names + ["overview"])
+    for name in names:
+        _assert_picture(tmp_path / f"{name}.png")
+    overview = _png(tmp_path / "overview.png")
+    assert overview.shape[1] > 3 * 160 and overview.shape[0] > 2 * 90     # a 3 x 2 grid
+    assert len(np.unique(overview.reshape(-1, overview.shape[2]), axis=0)) > 10
+    assert "20,000 points" in out and "160x90" in out and "covered" in out
+    assert "drawn" in out and "culled" in out and "M points/s" in out
+    assert str(tmp_path) in out
+
+
+def test_render_terrain_attribute_colormap(tmp_path, capsys):
+    rc, out, err = _render(capsys, "--dataset", "terrain", "--points", 20000, "--attribute", "intensity",
+                           "--colormap", "magma", "--soft-z", "off", "--out", tmp_path, *SMALL)
+    assert rc == 0, err
+    names = {p.stem for p in tmp_path.iterdir()}
+    assert names == {"attribute-intensity", "colors", "depth", "depth-filtered", "overview"}
+    for name in names - {"overview"}:
+        _assert_picture(tmp_path / f"{name}.png")
+    assert "intensity (magma)" in out
+
+
+def test_render_depth_filter_option(tmp_path, capsys):
+    rc, _, err = _render(capsys, "--points", 5000, "--depth-filter", 3, "--soft-z", "1.05",
+                         "--out", tmp_path, *SMALL)
+    assert rc == 0, err
+    _assert_picture(tmp_path / "depth-filtered.png")
+    _assert_picture(tmp_path / "soft-z.png")
+    rc, _, err = _render(capsys, "--dataset", "terrain", "--points", 5000, "--depth-filter", 0,
+                         "--out", tmp_path / "off", *SMALL)
+    assert rc == 0, err
+    assert not (tmp_path / "off" / "depth-filtered.png").exists()
+
+
+def test_render_progress(tmp_path, capsys):
+    rc, _, err = _render(capsys, "--points", 5000, "--size", "64x36", "--progress", "--out", tmp_path)
+    assert rc == 0
+    lines = err.splitlines()
+    for stage in ("generating hurricane", "uploading + Morton order", "rendering + resolving",
+                  "soft z", "writing PNGs"):
+        assert any(stage in line and line.rstrip().endswith(")") and " s " in line
+                   for line in lines), (stage, err)
+    assert "\r" not in err                  # not a terminal: one line per stage
+    rc, _, err = _render(capsys, "--points", 5000, "--size", "64x36", "--progress", "--quiet",
+                         "--out", tmp_path)
+    assert rc == 0 and err == ""
+
+
+def test_progress_on_a_terminal(monkeypatch):
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    stream = Terminal()
+    monkeypatch.setattr(sys, "stderr", stream)
+    progress = _common.Progress(True)
+    with progress.stage("reading x.ply"):
+        pass
+    with pytest.raises(RuntimeError), progress.stage("rendering"):
+        raise RuntimeError
+    text = stream.getvalue()
+    assert text.startswith("\r\x1b[K") and "reading x.ply" in text
+    assert text.endswith("\n") and "failed" in text.splitlines()[-1]
+    assert _common.Progress(False).stage("x").__enter__() is None
+
+
+def _small_cloud(n=5000):
+    d = datasets.hurricane(n, seed=1)
+    return PointCloud(d["positions"], colors=d["colors"], velocity=d["velocity"],
+                      attributes={"pressure": d["attributes"]["pressure"]})
+
+
+def test_render_ply_file(tmp_path, capsys):
+    path = tmp_path / "storm.ply"
+    write_ply(path, _small_cloud())
+    rc, out, err = _render(capsys, path, "--attribute", "pressure", "--out", tmp_path / "png", *SMALL)
+    assert rc == 0, err
+    for name in ("attribute-pressure", "colors", "depth", "velocity-angle", "soft-z"):
+        _assert_picture(tmp_path / "png" / f"{name}.png")
+    assert f"{path}, 5,000 points" in out
+
+
+def test_render_las_file(tmp_path, capsys):
+    """A LAS file has more attributes than the G-buffers hold: only the colored one travels."""
+    laspy = pytest.importorskip("laspy")
+    d = datasets.terrain(5000, seed=2)
+    las = laspy.create(point_format=3, file_version="1.2")
+    las.header.offsets = [500_000.0, 5_000_000.0, 0.0]      # UTM-like: clvis keeps an origin
+    las.header.scales = [0.01, 0.01, 0.01]
+    las.x = d["positions"][:, 0] + 500_000.0
+    las.y = d["positions"][:, 1] + 5_000_000.0
+    las.z = d["positions"][:, 2]
+    las.intensity = (d["attributes"]["intensity"] * 65535).astype(np.uint16)
+    las.classification = d["attributes"]["classification"]
+    for i, c in enumerate(("red", "green", "blue")):
+        setattr(las, c, d["colors"][:, i].astype(np.uint16) << 8)
+    path = tmp_path / "scan.las"
+    las.write(path)
+    rc, out, err = _render(capsys, path, "--view", "top", "--out", tmp_path / "png", *SMALL)
+    assert rc == 0, err
+    assert "colored by intensity" in out
+    for name in ("attribute-intensity", "colors", "depth"):
+        _assert_picture(tmp_path / "png" / f"{name}.png")
+    rc, out, err = _render(capsys, path, "--attribute", "classification", "--out", tmp_path / "c",
+                           *SMALL)
+    assert rc == 0, err
+    _assert_picture(tmp_path / "c" / "attribute-classification.png")
+
+
+def test_render_npz_positions_only(tmp_path, capsys):
+    path = tmp_path / "cloud.npz"
+    save_npz(path, PointCloud(_small_cloud().positions))
+    rc, out, err = _render(capsys, path, "--soft-z", "off", "--out", tmp_path / "png", *SMALL)
+    assert rc == 0, err
+    assert {p.stem for p in (tmp_path / "png").iterdir()} == {"attribute-z", "depth", "overview"}
+    _assert_picture(tmp_path / "png" / "attribute-z.png")
+    assert "colored by z (viridis)" in out
+    rc, out, err = _render(capsys, path, "--attribute", "x", "--out", tmp_path / "x", *SMALL)
+    assert rc == 0, err
+    _assert_picture(tmp_path / "x" / "attribute-x.png")
+
+
+def test_render_colors_only(tmp_path, capsys):
+    cloud = _small_cloud()
+    path = tmp_path / "cloud.npz"
+    save_npz(path, PointCloud(cloud.positions, colors=cloud.colors))
+    rc, out, err = _render(capsys, path, "--out", tmp_path / "png", *SMALL)
+    assert rc == 0, err
+    assert {p.stem for p in (tmp_path / "png").iterdir()} == {"colors", "depth", "soft-z", "overview"}
+    _assert_picture(tmp_path / "png" / "colors.png")
+    assert "its colors" in out
+
+
+@pytest.mark.parametrize("view", ["fit", "top", "front", "side", "hemisphere:0", "hemisphere:127",
+                                  "grid:0", "grid:383"])
+def test_render_views(tmp_path, capsys, view):
+    path = tmp_path / "cloud.npz"
+    save_npz(path, _small_cloud(20000))
+    rc, out, err = _render(capsys, path, "--view", view, "--soft-z", "off", "--out", tmp_path / "png",
+                           *SMALL)
+    assert rc == 0, err
+    assert f"view      {view}, 160x90" in out
+    a = _png(tmp_path / "png" / "depth.png")
+    assert a.shape == (90, 160, 4)
+    if not view.startswith("grid"):     # a grid camera may look past the cloud
+        _assert_picture(tmp_path / "png" / "attribute-pressure.png")
+
+
+@pytest.mark.parametrize("view", ["fit", "top", "front", "side", "hemisphere:3", "grid:7"])
+def test_render_degenerate_clouds(tmp_path, capsys, view):
+    """One point far from the origin, and a cloud with NaN rows: still a picture."""
+    one = tmp_path / "one.npy"
+    np.save(one, np.array([[1000.0, -2000.0, 50.0]], np.float32))
+    rc, out, err = _render(capsys, one, "--view", view, "--out", tmp_path / "one", *SMALL)
+    assert rc == 0, err
+    if view in ("fit", "top", "front", "side"):
+        assert "covered   1 of" in out
+    nan = tmp_path / "nan.npy"
+    p = _small_cloud(1000).positions.copy()
+    p[::7] = np.nan
+    np.save(nan, p)
+    rc, out, err = _render(capsys, nan, "--view", view, "--out", tmp_path / "nan", *SMALL)
+    assert rc == 0, err
+    allnan = tmp_path / "allnan.npy"
+    np.save(allnan, np.full((3, 3), np.nan, np.float32))
+    rc, _, err = _render(capsys, allnan, "--view", view, "--out", tmp_path / "allnan", *SMALL)
+    assert rc == 2 and "no point has finite coordinates" in err
+
+
+def test_fit_frames_every_point():
+    cloud = _small_cloud(20000)
+    lo, hi = cloud.bounds()
+    for w, h in ((1920, 1080), (100, 400)):
+        cam = _common.fit_camera(cloud.positions, lo, hi, w / h, raster._FIT)
+        visible = cam.project(cloud.positions, w, h).visible
+        assert visible.all()
+        # and tightly: the points reach within a few pixels of two sides
+        p = cam.project(cloud.positions, w, h)
+        margin = min(p.sx.min(), w - p.sx.max(), p.sy.min(), h - p.sy.max())
+        assert margin < 0.05 * max(w, h)
+
+
+def test_shrink_keeps_points():
+    a = np.zeros((4, 6, 4), np.uint8)
+    a[3, 5] = (10, 20, 30, 255)
+    a[0, 0] = (1, 2, 3, 100)
+    a[1, 1] = (4, 5, 6, 200)
+    s = raster._shrink(a, 2)
+    assert s.shape == (2, 3, 4)
+    assert tuple(s[1, 2]) == (10, 20, 30, 255) and tuple(s[0, 0]) == (4, 5, 6, 200)
+    assert s[..., 3].astype(bool).sum() == 2
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--attribute", "nope", "--points", "1000"],
+     ("no attribute 'nope' in the embedded hurricane; it has pressure, temperature, speed and the "
+      "coordinates x, y, z")),
+    (["--size", "12by4"], "argument --size: expected WIDTHxHEIGHT"),
+    (["--size", "0x10"], "argument --size: width and height must lie in"),
+    (["--view", "grid:384"], "argument --view: grid:K needs K in 0..383"),
+    (["--view", "diagonal"], "argument --view: expected fit, top"),
+    (["--colormap", "viridiss"], "unknown colormap 'viridiss'"),
+    (["--points", "-5"], "argument --points: expected a positive integer"),
+    (["--soft-z", "0.5"], "argument --soft-z: expected a factor >= 1"),
+    (["--depth-filter", "x"], "argument --depth-filter: expected pyramid levels"),
+    (["--dataset", "moon"], "argument --dataset: invalid choice"),
+    (["missing.ply"], "missing.ply: no such file"),
+    (["cloud.ply", "--points", "10"], "--dataset and --points choose an embedded cloud"),
+])
+def test_render_errors(tmp_path, capsys, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)
+    write_ply(tmp_path / "cloud.ply", _small_cloud(100))
+    rc, _, err = _render(capsys, *args, "--size", "32x18")
+    assert rc == 2
+    assert err.startswith("clvis render: error: ") and message in err, err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "clvis-render").exists()       # nothing written
+
+
+@pytest.mark.parametrize("name, content, message", [
+    ("bad.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty float x\nend_header\n",
+     "PLY file"),
+    ("bad.npz", b"not a zip", "malformed NPZ file"),
+    ("cloud.txt", b"1 2 3\n", "unknown point cloud format '.txt'"),
+    ("empty.npy", None, "holds no points"),
+])
+def test_render_unreadable_files(tmp_path, capsys, name, content, message):
+    path = tmp_path / name
+    if content is None:
+        np.save(path, np.zeros((0, 3), np.float32))
+    else:
+        path.write_bytes(content)
+    rc, _, err = _render(capsys, path, "--out", tmp_path / "png")
+    assert rc == 2
+    assert err.startswith(f"clvis render: error: {path}") and message in err, err
+    assert err.count("\n") == 1
+    assert not (tmp_path / "png").exists()
+
+
+def test_render_error_exit_status(tmp_path):
+    """The real process: exit status 2, one line on stderr, no traceback."""
+    env = dict(os.environ)
+    root = str(Path(cli.__file__).resolve().parent.parent)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
+    r = subprocess.run([sys.executable, "-m", "clvis.cli", "render", "nowhere.las"], cwd=tmp_path,
+                       env=env, capture_output=True, text=True, check=False)
+    assert r.returncode == 2
+    assert r.stderr == "clvis render: error: nowhere.las: no such file\n"
+    assert r.stdout == ""

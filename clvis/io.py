@@ -679,6 +679,19 @@ def load_npy(path) -> np.ndarray:
         raise DataError(f"{path}: cannot read: {e.strerror or e}") from e
 
 
+def npy_shape(path) -> tuple[int, ...]:
+    """The shape a .npy file declares, read from its header alone (checked as
+    :func:`load_npy` checks it), to tell a volume from a point array."""
+    try:
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            return tuple(_npy_header(f, str(path), size)[1])
+    except OSError as e:
+        if isinstance(e, FileNotFoundError):
+            raise
+        raise DataError(f"{path}: cannot read: {e.strerror or e}") from e
+
+
 def load_npz(path) -> dict[str, np.ndarray]:
     """The arrays of an .npz archive by key (the member name without .npy);
     DataError naming the file when it is malformed, truncated, an NPY array, or

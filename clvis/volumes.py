@@ -13,8 +13,9 @@ Formats, chosen by the file name (case-insensitive):
 - ``.nii``, ``.nii.gz``: NIfTI-1/2 through nibabel (an optional dependency:
   ``pip install clvis[nifti]``). NIfTI's data array is indexed [i, j, k] with
   i the fastest on disk; it is transposed to [k, j, i] = [z, y, x]. Trailing
-  axes of size 1 (a 3-D image stored as 4-D) are dropped. The header's scale
-  (scl_slope, scl_inter) is applied when set, as nibabel does.
+  axes of size 1 (a 3-D image stored as 4-D) are dropped. A 4-D image (a time
+  series) needs ``volume_index`` to pick one volume; only that volume is read.
+  The header's scale (scl_slope, scl_inter) is applied when set, as nibabel does.
 
 The samples are returned as stored (uint8 stays uint8: volumes can be large;
 convert where needed, e.g. ``volume.data.astype(np.float32)``), in native
@@ -50,7 +51,7 @@ import numpy as np
 from .errors import DataError
 from .io import load_npy
 
-__all__ = ["RAW_TYPES", "Volume", "read_volume"]
+__all__ = ["FORMATS", "RAW_TYPES", "Volume", "read_volume"]
 
 RAW_TYPES = {name: np.dtype(name) for name in
              ("uint8", "int8", "uint16", "int16", "uint32", "int32", "float32", "float64")}
@@ -87,13 +88,16 @@ class Volume:
                 f"spacing={self.spacing})")
 
 
-def read_volume(path, *, shape=None, dtype=None) -> Volume:
+FORMATS = (".raw", ".npy", ".nii", ".nii.gz")
+
+
+def read_volume(path, *, shape=None, dtype=None, volume_index: int | None = None) -> Volume:
     """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``; see the
     module docstring).
 
     `shape` (Z, Y, X) and `dtype` apply to ``.raw`` files only: they give the
     shape and the sample type when the file name does not, and override the
-    name when it does."""
+    name when it does. `volume_index` picks one volume of a 4-D NIfTI file."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path: expected a str or path, got {type(path).__name__}")
     path = Path(path)
@@ -106,11 +110,13 @@ def read_volume(path, *, shape=None, dtype=None) -> Volume:
         return _read_raw(path, shape, dtype)
     if shape is not None or dtype is not None:
         raise ValueError(f"shape, dtype: only for .raw files, not {path.name}")
+    if name.endswith((".nii", ".nii.gz")):
+        return _read_nifti(path, volume_index)
+    if volume_index is not None:
+        raise ValueError(f"volume_index: only for 4-D NIfTI files, not {path.name}")
     if name.endswith(".npy"):
         return _read_npy(path)
-    if name.endswith((".nii", ".nii.gz")):
-        return _read_nifti(path)
-    raise DataError(f"{path}: unknown volume format (expected .raw, .npy, .nii or .nii.gz)")
+    raise DataError(f"{path}: unknown volume format (expected {', '.join(FORMATS)})")
 
 
 def _raw_layout(path: Path, shape, dtype):
@@ -197,7 +203,7 @@ def _read_npy(path: Path) -> Volume:
 _DEFLATE_MAX_RATIO = 1032
 
 
-def _read_nifti(path: Path) -> Volume:
+def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
     try:
         import nibabel
     except ImportError:
@@ -218,9 +224,22 @@ def _read_nifti(path: Path) -> Volume:
         affine = np.array(img.affine, dtype=np.float64)
     except errors as e:
         raise DataError(f"{path}: not a readable NIfTI file: {type(e).__name__}: {e}") from e
-    _check_nifti_layout(path, shape, dtype, offset)
+    series = len(shape) == 4 and shape[3] > 1
+    if volume_index is not None:
+        t = _index(volume_index) if not isinstance(volume_index, bool) else -1
+        count = shape[3] if len(shape) > 3 else 1
+        if not 0 <= t < count:
+            raise ValueError(f"volume_index: {volume_index!r} is outside 0..{count - 1} ({path.name} holds "
+                             f"{count} volume{'s' if count != 1 else ''})")
+    elif series:
+        raise DataError(f"{path}: a 4-D NIfTI image of {shape[3]} volumes {shape[:3]} (i, j, k); "
+                        "choose one with volume_index (clvis iso/gauss: --volume-index T)")
+    _check_nifti_layout(path, shape[:3] + shape[4:] if series else shape, dtype, offset, shape)
     try:
-        data = np.asanyarray(img.dataobj)
+        if series:
+            data = np.asanyarray(img.dataobj[:, :, :, t])
+        else:
+            data = np.asanyarray(img.dataobj)
     except errors as e:
         raise DataError(f"{path}: not a readable NIfTI file: {type(e).__name__}: {e}") from e
     if data.ndim > 3 and all(s == 1 for s in data.shape[3:]):
@@ -234,9 +253,11 @@ def _read_nifti(path: Path) -> Volume:
     return Volume(data, spacing[::-1], (0.0, 0.0, 0.0), str(path), affine)
 
 
-def _check_nifti_layout(path: Path, shape: tuple, dtype: np.dtype, offset: int) -> None:
+def _check_nifti_layout(path: Path, shape: tuple, dtype: np.dtype, offset: int,
+                        stored: tuple | None = None) -> None:
     """The header's shape, type and data offset against the file, before nibabel
-    allocates the data (it allocates what the header declares, then reads)."""
+    allocates the data (it allocates what the header declares, then reads).
+    `shape` is what will be read, `stored` (default `shape`) what the file holds."""
     if dtype == np.bool_ or dtype.kind not in "iuf":
         raise DataError(f"{path}: expected real numbers, got NIfTI data type {dtype}")
     if len(shape) > 3 and any(s != 1 for s in shape[3:]) or len(shape) < 3:
@@ -246,7 +267,7 @@ def _check_nifti_layout(path: Path, shape: tuple, dtype: np.dtype, offset: int) 
     if offset < 0:
         raise DataError(f"{path}: malformed NIfTI header: data offset (vox_offset) {offset}")
     size = path.stat().st_size
-    nbytes = math.prod(shape) * dtype.itemsize
+    nbytes = math.prod(stored or shape) * dtype.itemsize
     if path.name.lower().endswith(".gz"):
         if offset + nbytes > size * _DEFLATE_MAX_RATIO:
             raise DataError(f"{path}: the header declares {shape} {dtype} samples = {nbytes} bytes from "

@@ -180,7 +180,7 @@ def test_nifti_scaling_and_trailing_axes(tmp_path):
     np.testing.assert_allclose(v.data, ijk.transpose(2, 1, 0) * 2.0 + 0.5)
     v = read_volume(_nifti(tmp_path / "four.nii", ijk[..., None]))
     np.testing.assert_array_equal(v.data, ijk.transpose(2, 1, 0))
-    with pytest.raises(DataError, match="3-D") as e:
+    with pytest.raises(DataError, match="4-D NIfTI image of 2 volumes .*volume_index") as e:
         read_volume(_nifti(tmp_path / "series.nii", np.stack([ijk, ijk], axis=-1)))
     assert "series.nii" in str(e.value)
     with pytest.raises(DataError, match="3-D"):
@@ -293,3 +293,25 @@ def test_npy_volume_declaring_more_than_it_holds(tmp_path):
     with pytest.raises(DataError, match=r"declares shape \(700, 700, 700\)") as e:
         read_volume(path)
     assert str(path) in str(e.value)
+
+
+def test_nifti_time_series_volume_index(tmp_path):
+    """A 4-D NIfTI is a series: one volume is read by index (nibabel's own
+    example4d.nii.gz, and a generated one checked sample for sample)."""
+    data = np.arange(4 * 5 * 6 * 3, dtype=np.int16).reshape(4, 5, 6, 3)
+    path = tmp_path / "series.nii"
+    nibabel.save(nibabel.Nifti1Image(data, np.diag([1.0, 2.0, 3.0, 1.0])), path)
+    with pytest.raises(DataError, match="4-D NIfTI image of 3 volumes"):
+        read_volume(path)
+    for t in range(3):
+        v = read_volume(path, volume_index=t)
+        np.testing.assert_array_equal(v.data, data[..., t].transpose(2, 1, 0))
+        assert v.spacing == (3.0, 2.0, 1.0)
+    with pytest.raises(ValueError, match="outside 0..2"):
+        read_volume(path, volume_index=3)
+    with pytest.raises(ValueError, match="only for 4-D NIfTI"):
+        np.save(tmp_path / "v.npy", np.zeros((2, 2, 2), np.float32))
+        read_volume(tmp_path / "v.npy", volume_index=0)
+    import os
+    ex = os.path.join(os.path.dirname(nibabel.__file__), "tests", "data", "example4d.nii.gz")
+    assert read_volume(ex, volume_index=1).data.shape == (24, 96, 128)

@@ -479,3 +479,83 @@ def axis_camera(kind: str, lo, hi, aspect: float):
     back = 0.5 * depth + 0.1 * scale              # the eye sits outside the box
     return Camera.ortho(centre - back * direction, centre, up, height=frame, aspect=aspect,
                         near=0.05 * scale, far=back + 0.5 * depth + 0.1 * scale)
+
+
+# --------------------------------------------------------------------------
+# volumes: the same file options for iso and gauss
+
+def spacing_xyz(text: str) -> tuple[float, float, float]:
+    """'DX,DY,DZ' -> three finite positive floats (x, y, z order)."""
+    v = vec3(text)
+    if not all(x > 0 for x in v):
+        raise argparse.ArgumentTypeError(f"expected three positive sample spacings DX,DY,DZ, got {text!r}")
+    return v
+
+
+def raw_shape(text: str) -> tuple[int, int, int]:
+    """'XxYxZ' (the Open SciVis order) -> (Z, Y, X)."""
+    parts = text.lower().replace(",", "x").split("x")
+    try:
+        xyz = tuple(int(p) for p in parts)
+    except ValueError:
+        xyz = ()
+    if len(xyz) != 3 or not all(0 < n <= 2**31 for n in xyz):
+        raise argparse.ArgumentTypeError(f"expected XxYxZ with positive sides, such as 256x256x128, got {text!r}")
+    return xyz[2], xyz[1], xyz[0]
+
+
+def add_volume_options(parser: argparse.ArgumentParser) -> None:
+    """--spacing, --shape, --dtype and --volume-index: how to read a volume FILE."""
+    from ..volumes import RAW_TYPES
+
+    g = parser.add_argument_group("volume files")
+    g.add_argument("--spacing", type=spacing_xyz, default=None, metavar="DX,DY,DZ",
+                   help="sample spacing along x, y, z (default: the file's: NIfTI and VDB carry "
+                        "their own, raw and .npy files 1,1,1)")
+    g.add_argument("--shape", type=raw_shape, default=None, metavar="XxYxZ",
+                   help="samples along x, y, z of a .raw file whose name does not say")
+    g.add_argument("--dtype", choices=sorted(RAW_TYPES), default=None,
+                   help="sample type of a .raw file whose name does not say")
+    g.add_argument("--volume-index", type=count(0, 2**31 - 1), default=None, metavar="T",
+                   help="the volume of a 4-D NIfTI time series to read (0 first)")
+
+
+def read_volume_file(args, path):
+    """The Volume of `path` with the volume options applied (spacing replaced,
+    samples as float32). CliError for options that do not fit the file."""
+    from ..volumes import read_volume
+
+    name = str(path).lower()
+    raw = name.endswith(".raw")
+    if not raw and (args.shape is not None or args.dtype is not None):
+        raise CliError(f"--shape and --dtype are for .raw files, not {path}")
+    v = read_volume(path, shape=args.shape if raw else None, dtype=args.dtype if raw else None,
+                    volume_index=args.volume_index)
+    spacing = v.spacing if args.spacing is None else tuple(reversed(args.spacing))
+    return np.asarray(v.data, np.float32), tuple(float(s) for s in spacing), v.origin
+
+
+def finite_range(data: np.ndarray, source: str) -> tuple[float, float]:
+    """(min, max) of the finite samples; ClvisError naming `source` when there
+    is none (no numpy RuntimeWarning on an all-NaN volume)."""
+    finite = np.isfinite(data)
+    if not finite.any():
+        raise CliError(f"{source}: the volume has no finite sample")
+    vals = data if finite.all() else data[finite]
+    return float(vals.min()), float(vals.max())
+
+
+def otsu_level(data: np.ndarray) -> float:
+    """Otsu's threshold of the finite samples (scikit-image), on at most ~2M of
+    them: the isovalue that separates the two classes of a scan best, which
+    shows a surface where the middle of the range often shows a few blobs."""
+    from skimage.filters import threshold_otsu
+
+    flat = data.ravel()
+    step = max(1, flat.size // 2_000_000)
+    sample = flat[::step]
+    sample = sample[np.isfinite(sample)]
+    lo, hi = float(sample.min()), float(sample.max())
+    if lo == hi:
+        return lo
+    return float(threshold_otsu(sample.astype(np.float64)))

@@ -18,15 +18,18 @@ from ._common import (
     CliError,
     FitView,
     add_camera_options,
+    add_volume_options,
     camera_from_args,
     check_camera_args,
     colormap_name,
     count,
+    read_volume_file,
     real,
     size,
 )
 
 LODS = ("low", "medium", "high")
+_POINT_FORMATS = (".ply", ".las", ".laz", ".npy", ".npz")
 # --view fit: from the front left, a little above, a narrow lens
 _FIT = FitView(direction=(-0.55, 1.0, -0.35), fov_y=40.0)
 _HELP = """\
@@ -36,10 +39,12 @@ ray march each through the device BVH, compositing every Gaussian in depth
 order, and write one PNG per LOD plus gauss.png with the panels side by side.
 
 Without a FILE it uses an embedded explosion density (96^3, closed form).
-FILE may be a .vdb (float grid, needs the `vdb` extra: tinyvdb), a .npy
-volume indexed [z, y, x], a .npz of Gaussians (clvis.Gaussians.save), or a
-point cloud (.ply, .las, .laz: one Gaussian per point, stretched along the
-velocity when the file has one, else sized by the 4 nearest neighbours).
+FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
+.nii.gz; see --shape, --volume-index) or a .vdb (float grid, needs the `vdb`
+extra: tinyvdb); a .npz of Gaussians (clvis.Gaussians.save); or a point cloud
+(.ply, .las, .laz, or an (N, 3) .npy/.npz as `clvis render` reads them: one
+Gaussian per point, stretched along the velocity when the file has one, else
+sized by the 4 nearest neighbours).
 
 """ + VIEWS_HELP
 
@@ -65,6 +70,7 @@ def add_parser(sub):
                    help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)")
     g.add_argument("--out", default="clvis-gauss", metavar="DIR", help="output folder (default ./clvis-gauss)")
     add_camera_options(g, _FIT)
+    add_volume_options(g)
     return g
 
 
@@ -92,31 +98,42 @@ def _sources(args):
     path = Path(args.file)
     if not path.exists():
         raise CliError(f"{path}: no such file")
-    suffix = path.suffix.lower()
-    if suffix == ".vdb":
+    from ..io import load_npz, npy_shape
+    from ..volumes import FORMATS as VOLUME_FORMATS
+
+    name = path.name.lower()
+    if name.endswith(".vdb"):
+        if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index")):
+            raise CliError("--shape, --dtype and --volume-index are for .raw and NIfTI volumes, not .vdb")
         sv = read_vdb(path)
-        if args.threshold is not None:
-            sv = SparseVolume.from_dense(sv.to_dense(), threshold=args.threshold, spacing=sv.spacing,
-                                         origin=sv.origin)
+        spacing = sv.spacing if args.spacing is None else tuple(reversed(args.spacing))
+        if args.threshold is not None or args.spacing is not None:
+            sv = SparseVolume.from_dense(sv.to_dense(), threshold=0.0 if args.threshold is None
+                                         else args.threshold, spacing=spacing, origin=sv.origin)
         return lods, sv, None, str(path)
-    if suffix == ".npy":
-        try:
-            v = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as e:
-            raise CliError(f"{path}: cannot read: {e}") from None
-        if v.ndim != 3:
-            raise CliError(f"{path}: expected a 3-D volume, got shape {v.shape}")
-        sv = SparseVolume.from_dense(v.astype(np.float32), threshold=0.0 if args.threshold is None
-                                     else args.threshold)
+    volume = name.endswith(VOLUME_FORMATS)
+    if name.endswith(".npy"):
+        shape = npy_shape(path)
+        volume = len(shape) == 3
+        if not volume and not (len(shape) == 1 or (len(shape) == 2 and shape[1] == 3)):
+            raise CliError(f"{path}: expected a 3-D volume [z, y, x] or an (N, 3) point array, "
+                           f"got shape {shape}")
+    if volume:
+        data, spacing, origin = read_volume_file(args, path)
+        sv = SparseVolume.from_dense(data, threshold=0.0 if args.threshold is None else args.threshold,
+                                     spacing=spacing, origin=origin)
         return lods, sv, None, str(path)
-    if suffix == ".npz":
+    if name.endswith(".npz") and "means" in load_npz(path):
         return ["file"], None, Gaussians.load(path), str(path)
-    from ..gauss import gaussians_from_points
-    cloud = read_points(path)
-    if len(cloud) == 0:
-        raise CliError(f"{path}: the file holds no points")
-    g = gaussians_from_points(cloud, velocity="cloud" if cloud.velocity is not None else None)
-    return ["points"], None, g, str(path)
+    if name.endswith(_POINT_FORMATS):
+        from ..gauss import gaussians_from_points
+        cloud = read_points(path)
+        if len(cloud) == 0:
+            raise CliError(f"{path}: the file holds no points")
+        g = gaussians_from_points(cloud, velocity="cloud" if cloud.velocity is not None else None)
+        return ["points"], None, g, str(path)
+    raise CliError(f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
+                   f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})")
 
 
 def cmd(args) -> int:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -18,9 +19,13 @@ from ._common import (
     CliError,
     FitView,
     add_camera_options,
+    add_volume_options,
     camera_from_args,
     check_camera_args,
     count,
+    finite_range,
+    otsu_level,
+    read_volume_file,
     real,
     size,
 )
@@ -33,8 +38,10 @@ running at the stop shown in magenta) and prints the figures of each pass.
 
 Without a FILE it renders an embedded volume: marschner-lobb (64^3, iso 0.5)
 or turbulence (128^3, iso 0.5). FILE: a raw volume named like the Open SciVis
-datasets (<name>_<X>x<Y>x<Z>_<type>.raw), a .npy volume [z, y, x], or a NIfTI
-file (.nii, .nii.gz; needs nibabel).
+datasets (<name>_<X>x<Y>x<Z>_<type>.raw, or any .raw with --shape and --dtype),
+a .npy volume [z, y, x], or a NIfTI file (.nii, .nii.gz; a 4-D series with
+--volume-index). The default isovalue of a file is Otsu's threshold of its
+samples (scikit-image), which separates a scan's tissue from its background.
 
 """ + VIEWS_HELP
 _DATASETS = ("marschner-lobb", "turbulence")
@@ -51,7 +58,7 @@ def add_parser(sub):
     p.add_argument("file", nargs="?", help="a .raw (Open SciVis naming), .npy or NIfTI volume")
     p.add_argument("--dataset", choices=_DATASETS, help="an embedded volume (default marschner-lobb)")
     p.add_argument("--isovalue", type=real(), default=None, help="default: 0.5 for the embedded volumes, "
-                   "else the middle of the value range")
+                   "else Otsu's threshold of the samples")
     p.add_argument("--rate", type=count(MIN_RATE, MAX_RATE), default=8, help="ZFP bits per value, 1..32 (default 8)")
     p.add_argument("--completion", type=real(0.0, 1.0, open_lo=True, what="a fraction"), default=1.0, help="stop once this fraction of the rays "
                    "is finished (default 1.0)")
@@ -60,14 +67,14 @@ def add_parser(sub):
                    help=f"{SIZE_RULE} (default 1280x720)")
     p.add_argument("--out", default="clvis-iso", metavar="DIR", help="output folder (default ./clvis-iso)")
     add_camera_options(p, _FIT)
+    add_volume_options(p)
     return p
 
 
 
 def _load(args):
-    """(volume, spacing, origin, default isovalue, description)."""
+    """(volume, spacing, origin, default isovalue, (min, max), description)."""
     from .. import datasets
-    from ..volumes import read_volume
 
     if args.file is not None:
         if args.dataset is not None:
@@ -75,13 +82,16 @@ def _load(args):
         path = Path(args.file)
         if not path.exists():
             raise CliError(f"{path}: no such file")
-        v = read_volume(path)
-        data = np.asarray(v.data, np.float32)
-        lo, hi = float(np.nanmin(data)), float(np.nanmax(data))
-        return data, v.spacing, v.origin, (lo + hi) / 2, str(path)
+        data, spacing, origin = read_volume_file(args, path)
+        value_range = finite_range(data, str(path))
+        return data, spacing, origin, otsu_level(data), value_range, str(path)
+    if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index")):
+        raise CliError("--shape, --dtype and --volume-index are for a volume FILE")
     name = args.dataset or "marschner-lobb"
     d = datasets.marschner_lobb(64) if name == "marschner-lobb" else datasets.turbulence(128)
-    return d["volume"], d["spacing"], d["origin"], 0.5, f"the embedded {name} ({d['volume'].shape[0]}^3)"
+    spacing = d["spacing"] if args.spacing is None else tuple(reversed(args.spacing))
+    return (d["volume"], spacing, d["origin"], 0.5, finite_range(d["volume"], name),
+            f"the embedded {name} ({d['volume'].shape[0]}^3)")
 
 
 def picture(img) -> np.ndarray:
@@ -116,8 +126,11 @@ def cmd(args) -> int:
 def _run(args) -> int:
     from .. import images, runtime
 
-    volume, spacing, origin, default_iso, source = _load(args)
+    volume, spacing, origin, default_iso, (vmin, vmax), source = _load(args)
     iso = args.isovalue if args.isovalue is not None else default_iso
+    if not vmin <= iso <= vmax:
+        print(f"clvis iso: warning: isovalue {iso:g} is outside the data range [{vmin:g}, {vmax:g}]: "
+              "no surface can show", file=sys.stderr)
     w, h = args.size
     q = runtime.default_queue()
     t0 = time.perf_counter()

@@ -1,0 +1,109 @@
+"""The volume-file options iso and gauss share (--spacing, --shape, --dtype,
+--volume-index), the default isovalue of a scan, and the formats gauss reads,
+on nibabel's bundled NIfTI files and on generated ones."""
+
+import os
+import warnings
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from clvis import cli, datasets
+
+nibabel = pytest.importorskip("nibabel")
+NIB = os.path.join(os.path.dirname(nibabel.__file__), "tests", "data")
+DATA = os.path.join(os.path.dirname(__file__), "..", "data")
+
+
+def _png(path):
+    with Image.open(path) as im:
+        return np.asarray(im)
+
+
+def test_iso_default_isovalue_shows_a_scan(tmp_path, capsys):
+    """nibabel's anatomical.nii (a real MRI): Otsu's threshold shows a surface
+    over a large part of the frame, where the middle of the range gives blobs."""
+    assert cli.main(["iso", os.path.join(NIB, "anatomical.nii"), "--size", "96x72",
+                     "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    a = _png(tmp_path / "iso.png")
+    surface = (np.abs(a[..., :3].astype(int) - [20, 20, 26]).sum(axis=2) > 30).mean()
+    assert surface > 0.15, (surface, out)
+
+
+def test_iso_four_d_nifti_needs_an_index(tmp_path, capsys):
+    f = os.path.join(NIB, "example4d.nii.gz")
+    assert cli.main(["iso", f, "--size", "40x30", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "4-D" in err and "--volume-index" in err and len(err.strip().splitlines()) == 1
+    assert cli.main(["iso", f, "--volume-index", "1", "--size", "40x30", "--out", str(tmp_path)]) == 0
+    assert cli.main(["iso", f, "--volume-index", "2", "--size", "40x30", "--out", str(tmp_path)]) == 2
+    assert "outside 0..1" in capsys.readouterr().err
+
+
+def test_raw_shape_dtype_and_spacing(tmp_path, capsys):
+    v = datasets.marschner_lobb(20)["volume"].astype(np.float32)
+    raw = tmp_path / "blob.raw"                    # no shape or type in the name
+    v.tofile(raw)
+    assert cli.main(["iso", str(raw), "--size", "32x24", "--out", str(tmp_path)]) == 2
+    assert "blob.raw" in capsys.readouterr().err
+    args = ["iso", str(raw), "--shape", "20x20x20", "--dtype", "float32", "--isovalue", "0.5",
+            "--size", "32x24", "--out", str(tmp_path)]
+    assert cli.main(args) == 0
+    capsys.readouterr()
+    assert cli.main(args + ["--spacing", "1,1,4"]) == 0
+    assert cli.main(["iso", str(raw), "--shape", "20x20", "--size", "32x24"]) == 2
+    assert "XxYxZ" in capsys.readouterr().err
+    assert cli.main(["iso", "--spacing", "1,0,1", "--size", "32x24"]) == 2
+    assert "positive" in capsys.readouterr().err
+    np.save(tmp_path / "v.npy", v)
+    assert cli.main(["iso", str(tmp_path / "v.npy"), "--shape", "20x20x20", "--size", "32x24"]) == 2
+    assert "for .raw files" in capsys.readouterr().err
+
+
+def test_iso_isovalue_outside_range_warns(tmp_path, capsys):
+    assert cli.main(["iso", "--isovalue", "7", "--size", "32x24", "--out", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert "outside the data range" in err and "[" in err
+
+
+def test_all_nan_volume_is_one_clvis_error(tmp_path, capsys):
+    np.save(tmp_path / "nan.npy", np.full((8, 8, 8), np.nan, np.float32))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")             # no numpy RuntimeWarning before the error
+        assert cli.main(["iso", str(tmp_path / "nan.npy"), "--size", "32x24"]) == 2
+    err = capsys.readouterr().err
+    assert "no finite sample" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("kind", ["nifti", "raw", "npy-volume", "npy-points", "laz", "ply"])
+def test_gauss_reads_every_format(tmp_path, capsys, kind):
+    v = datasets.marschner_lobb(16)["volume"].astype(np.float32)
+    if kind == "nifti":
+        path, extra = os.path.join(NIB, "anatomical.nii"), ["--threshold", "3000"]
+    elif kind == "raw":
+        path, extra = str(tmp_path / "m_16x16x16_float32.raw"), ["--threshold", "0.5"]
+        v.tofile(path)
+    elif kind == "npy-volume":
+        path, extra = str(tmp_path / "v.npy"), ["--threshold", "0.5"]
+        np.save(path, v)
+    elif kind == "npy-points":
+        path, extra = str(tmp_path / "p.npy"), []
+        np.save(path, np.random.default_rng(0).normal(size=(300, 3)).astype(np.float32))
+    elif kind == "laz":
+        path, extra = os.path.join(DATA, "laspy_simple.laz"), []
+    else:
+        path, extra = os.path.join(DATA, "pyvista_ant.ply"), []
+    assert cli.main(["gauss", path, "--lod", "low", "--size", "48x48", "--out", str(tmp_path / "o"),
+                     *extra]) == 0, capsys.readouterr().err
+    assert _png(tmp_path / "o" / "gauss.png").std() > 1
+
+
+def test_gauss_unknown_format_lists_formats(tmp_path, capsys):
+    f = tmp_path / "x.txt"
+    f.write_text("hello")
+    assert cli.main(["gauss", str(f)]) == 2
+    err = capsys.readouterr().err
+    for ext in (".vdb", ".raw", ".npy", ".nii", ".nii.gz", ".npz", ".ply", ".las", ".laz"):
+        assert ext in err

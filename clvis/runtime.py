@@ -19,7 +19,13 @@ source, every included header and the options. (clvis once exported binaries
 itself: on PoCL that compiles every kernel of a program up front, ~6 s a
 program, more than any cache hit saves.)
 
-Options (:func:`configure`, or the environment at import):
+Options (:func:`configure`, or the environment at import). Strings are
+accepted as the environment gives them (``max_alloc_bytes="5"``); a value
+clvis cannot use raises ValueError from :func:`configure`/:func:`set_options`,
+while a bad environment variable is ignored with a
+:class:`~clvis.errors.ClvisWarning` naming it and the values it accepts, and
+the default applies: importing clvis (and ``clvis info``) never fails because
+of the environment.
 
 - ``tuning``: ``None`` (by device type), ``"cpu"`` or ``"gpu"``: which set of
   ``-D`` work shapes the families build with (``CLVIS_TUNING``). Both give the
@@ -39,6 +45,7 @@ import os
 import re
 import threading
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +53,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 import pyopencl.tools
 
-from .errors import ClvisError, DeviceError, KernelBuildError
+from .errors import ClvisError, ClvisWarning, DeviceError, KernelBuildError
 
 __all__ = [
     "INCLUDE_DIR",
@@ -97,36 +104,100 @@ INCLUDE_DIR = KERNEL_ROOT / "include"
 # --------------------------------------------------------------------------
 # options
 
+_TUNINGS = ("cpu", "gpu")
+_TRUE = ("1", "true", "yes", "on")
+_FALSE = ("0", "false", "no", "off")
+
+
+def _tuning_value(v: object) -> str | None:
+    if v is None:
+        return None
+    if isinstance(v, str) and v.strip().lower() in _TUNINGS:
+        return v.strip().lower()
+    raise ValueError(f"tuning: expected None, 'cpu' or 'gpu', got {v!r}")
+
+
+def _flag_value(name: str, v: object) -> bool:
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)) and v in (0, 1):
+        return bool(v)
+    if isinstance(v, str) and v.strip().lower() in _TRUE + _FALSE:
+        return v.strip().lower() in _TRUE
+    raise ValueError(f"{name}: expected True or False (1/0, 'true'/'false', 'yes'/'no', 'on'/'off'), "
+                     f"got {v!r}")
+
+
+def _size_value(name: str, v: object) -> int | None:
+    """A positive whole number of bytes; strings ("5", "2e9") as the environment gives them."""
+    if v is None:
+        return None
+    size: object = v
+    if isinstance(v, str):
+        try:
+            size = int(v.strip())
+        except ValueError:
+            with contextlib.suppress(ValueError):
+                size = float(v.strip())
+    if isinstance(size, (float, np.floating)) and np.isfinite(size) and float(size).is_integer():
+        size = int(size)
+    if isinstance(size, (bool, np.bool_)) or not isinstance(size, (int, np.integer)) or size <= 0:
+        raise ValueError(f"{name}: expected a positive whole number of bytes, got {v!r}")
+    return int(size)
+
+
 @dataclasses.dataclass
 class Options:
+    """The options in force (see the module docstring). Strings are accepted as
+    the environment would give them (``max_alloc_bytes="5"``,
+    ``int64_atomics="false"``); a value clvis cannot use raises ValueError
+    naming the option."""
+
     tuning: str | None = None
     int64_atomics: bool = True
     max_alloc_bytes: int | None = None
 
+    def __post_init__(self) -> None:
+        self.tuning = _tuning_value(self.tuning)
+        self.int64_atomics = _flag_value("int64_atomics", self.int64_atomics)
+        self.max_alloc_bytes = _size_value("max_alloc_bytes", self.max_alloc_bytes)
+
+
+# environment variable -> (option, how to read it, what it accepts)
+_ENV: dict[str, tuple[str, Callable[[str], object], str]] = {
+    "CLVIS_TUNING": ("tuning", _tuning_value, "'cpu' or 'gpu' (unset: by device type)"),
+    "CLVIS_NO_INT64_ATOMICS": ("int64_atomics", lambda s: not _flag_value("CLVIS_NO_INT64_ATOMICS", s),
+                               "1/true/yes/on or 0/false/no/off"),
+    "CLVIS_MAX_ALLOC": ("max_alloc_bytes", lambda s: _size_value("CLVIS_MAX_ALLOC", s),
+                        "a positive whole number of bytes"),
+}
+
 
 def _env_options() -> Options:
-    env = os.environ
-    tuning = env.get("CLVIS_TUNING") or None
-    max_alloc = env.get("CLVIS_MAX_ALLOC")
-    return Options(
-        tuning=tuning,
-        int64_atomics=env.get("CLVIS_NO_INT64_ATOMICS", "0") in ("", "0", "false", "no"),
-        max_alloc_bytes=int(max_alloc) if max_alloc else None,
-    )
+    """The options the environment asks for. A value clvis cannot use is
+    ignored with a ClvisWarning naming the variable and what it accepts (the
+    default applies): importing clvis never fails because of the environment."""
+    changes: dict[str, object] = {}
+    for var, (name, parse, accepted) in _ENV.items():
+        raw = os.environ.get(var, "")
+        if not raw.strip():
+            continue
+        try:
+            changes[name] = parse(raw)
+        except ValueError:
+            default = getattr(Options(), name)
+            warnings.warn(f"{var}={raw!r} is ignored: expected {accepted}; using the default "
+                          f"({name}={default!r})", ClvisWarning, stacklevel=2)
+    return Options(**changes)  # type: ignore[arg-type]  # each value parsed for its field above
 
 
 _options = _env_options()
-_TUNINGS = ("cpu", "gpu")
 
 
 def _check_options(o: Options) -> None:
-    if o.tuning not in (None,) + _TUNINGS:
-        raise ValueError(f"tuning: expected None, 'cpu' or 'gpu', got {o.tuning!r}")
-    if o.max_alloc_bytes is not None and o.max_alloc_bytes <= 0:
-        raise ValueError(f"max_alloc_bytes: expected a positive size, got {o.max_alloc_bytes!r}")
-
-
-_check_options(_options)
+    # Options checks its fields when made (dataclasses.replace makes a new one);
+    # this catches fields assigned on an existing instance
+    Options(o.tuning, o.int64_atomics, o.max_alloc_bytes)
 
 
 def options() -> Options:

@@ -124,6 +124,44 @@ def test_bad_define_name(device):
                            {"T=int -DX": 1})
 
 
+@pytest.mark.parametrize("var, value", [("CLVIS_TUNING", "tpu"), ("CLVIS_MAX_ALLOC", "abc"),
+                                        ("CLVIS_MAX_ALLOC", "-5"), ("CLVIS_NO_INT64_ATOMICS", "maybe")])
+def test_bad_environment_warns(var, value):
+    """A bad variable never stops clvis from importing: a ClvisWarning names it
+    and what it accepts, and the default applies."""
+    code = ("import clvis\n"
+            "o = clvis.runtime.options()\n"
+            "print(o.tuning, o.int64_atomics, o.max_alloc_bytes)\n")
+    env = dict(os.environ, **{var: value})
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "None True None"
+    assert "ClvisWarning" in out.stderr and f"{var}={value!r} is ignored: expected" in out.stderr
+
+
+def test_environment_sizes():
+    code = "import clvis; print(clvis.runtime.options().max_alloc_bytes)"
+    for value, expected in (("4096", "4096"), (" 2e9 ", "2000000000")):
+        env = dict(os.environ, CLVIS_MAX_ALLOC=value)
+        out = subprocess.run([sys.executable, "-W", "error", "-c", code], env=env, capture_output=True,
+                             text=True)
+        assert out.returncode == 0, out.stderr
+        assert out.stdout.strip() == expected
+
+
+def test_options_from_strings():
+    with runtime.configure(max_alloc_bytes="5", int64_atomics="false", tuning=" GPU") as o:
+        assert (o.max_alloc_bytes, o.int64_atomics, o.tuning) == (5, False, "gpu")
+    for bad in ("abc", "-5", 0, 1.5, True, [5]):
+        with pytest.raises(ValueError, match="max_alloc_bytes"):
+            runtime.set_options(max_alloc_bytes=bad)
+    with pytest.raises(ValueError, match="int64_atomics"):
+        runtime.set_options(int64_atomics="maybe")
+    with pytest.raises(ValueError, match="tuning"):
+        runtime.set_options(tuning="tpu")
+    assert runtime.options() == runtime.Options()
+
+
 def test_program_cache(device):
     ctx = runtime.queue_for(device).context
     a = runtime.get_program(ctx, "primitives/scan.cl", {"T": "int"})

@@ -45,7 +45,7 @@ import os
 import re
 import threading
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -468,29 +468,90 @@ def device_slug(obj=None) -> str:
 _FLAGS = {"-cl-fp32-correctly-rounded-divide-sqrt"}
 
 
-def build_options(device: cl.Device, defines: dict, flags: tuple = ()) -> list[str]:
+# -D values: numbers, C identifiers and expressions of them without whitespace,
+# quotes or backslashes (the options reach the compiler as one space-joined string)
+_DEFINE_VALUE = re.compile(r"[A-Za-z0-9_.+\-*/%()<>!&|^~]+")
+
+# the include option when the compiler runs with INCLUDE_DIR as its working directory
+_HERE = "."
+
+
+def _define_value(name: str, v: object) -> str:
+    if isinstance(v, (bool, np.bool_)):
+        return str(int(v))
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        if not np.isfinite(v):
+            raise ValueError(f"define {name}: expected a finite number, got {v!r}")
+        return repr(float(v))
+    if isinstance(v, str) and _DEFINE_VALUE.fullmatch(v):
+        return v
+    raise ValueError(f"define {name}: expected a number or a C identifier/expression without "
+                     f"whitespace or quotes, got {v!r}")
+
+
+def _include_option() -> str:
+    """The -I path: pyopencl joins options with spaces, and no quoting works
+    everywhere (PoCL 3 passes quotes on to clang literally), so a path with
+    whitespace is given relative to the working directory, or as "." with the
+    compiler run from INCLUDE_DIR (see _build; the working directory is the
+    process's, so other threads' relative paths see it during such a build)."""
+    inc = str(INCLUDE_DIR)
+    if not re.search(r"\s", inc):
+        return inc
+    try:
+        rel = os.path.relpath(inc)
+    except (ValueError, OSError):      # another drive; a working directory since deleted
+        rel = inc
+    return rel if not re.search(r"\s", rel) else _HERE
+
+
+@contextlib.contextmanager
+def _working_directory(path: Path | None) -> Iterator[None]:
+    if path is None:
+        yield
+        return
+    try:
+        old: str | None = os.getcwd()
+    except OSError:
+        old = None
+    os.chdir(path)
+    try:
+        yield
+    finally:
+        if old is not None:
+            os.chdir(old)
+
+
+def build_options(device: cl.Device, defines: Mapping[str, object], flags: Sequence[str] = ()) -> list[str]:
+    """The compiler options clvis builds kernels_cl files with: the include
+    path, `flags` (only those clvis kernels use) and `defines` as ``-D``.
+    ValueError names a define whose name is not a C identifier or whose value
+    is not a number or a whitespace-free C identifier/expression."""
     for f in flags:
         if f not in _FLAGS:
             raise ValueError(f"compiler flag {f!r} is not one clvis kernels use")
-    opts = ["-I", str(INCLUDE_DIR), *flags]
+    opts = ["-I", _include_option(), *flags]
     for k, v in sorted(defines.items()):
-        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", k):
+        if not isinstance(k, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", k):
             raise ValueError(f"define name {k!r} is not a C identifier")
-        opts.append(f"-D{k}={v}")
+        opts.append(f"-D{k}={_define_value(k, v)}")
     if capabilities(device).int64_atomics:
         opts.append("-DCLVIS_INT64_ATOMICS=1")
     return opts
 
 
-def _build(context: cl.Context, path: Path, defines: dict, flags: tuple) -> cl.Program:
+def _build(context: cl.Context, path: Path, defines: Mapping[str, object], flags: Sequence[str]) -> cl.Program:
     device = context.devices[0]
+    opts = build_options(device, defines, flags)
     prg = cl.Program(context, path.read_text())
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), _working_directory(INCLUDE_DIR if opts[1] == _HERE else None):
         # drivers log remarks on success (Intel: vectorisation reports);
         # pyopencl turns each into a CompilerWarning. Failures raise below.
         warnings.simplefilter("ignore", cl.CompilerWarning)
         try:
-            prg.build(build_options(device, defines, flags))
+            prg.build(opts)
         except cl.Error as e:
             log = ""
             with contextlib.suppress(Exception):
@@ -507,7 +568,8 @@ def _display(path: Path) -> str:
         return str(path)
 
 
-def get_program(context: cl.Context, relpath: str, defines: dict, flags: tuple = ()) -> cl.Program:
+def get_program(context: cl.Context, relpath: str, defines: Mapping[str, object],
+                flags: Sequence[str] = ()) -> cl.Program:
     """The built program kernels_cl/`relpath` (or an absolute path: a kernel
     of your own, built the same way) with `defines` and compiler `flags`, cached."""
     state = _state(context)

@@ -2,6 +2,7 @@
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -15,6 +16,7 @@ import clvis
 from clvis import runtime
 
 PROBE = str(Path(__file__).parent / "kernels" / "probe.cl")
+REPO = Path(__file__).resolve().parent.parent
 
 
 def test_some_device_found():
@@ -122,6 +124,48 @@ def test_bad_define_name(device):
     with pytest.raises(ValueError, match="not a C identifier"):
         runtime.get_kernel(runtime.queue_for(device), "primitives/scan.cl", "scan_reduce",
                            {"T=int -DX": 1})
+
+
+@pytest.mark.parametrize("value", ["1 -DX=2", "a b", '"x"', "x\\", "", "a=b", float("nan"), None, [1]])
+def test_bad_define_value(device, value):
+    with pytest.raises(ValueError, match="define FOO"):
+        runtime.build_options(device, {"FOO": value})
+
+
+def test_define_values(device):
+    opts = runtime.build_options(device, {"A": 3, "B": "uint", "C": "(1<<4)", "D": 1.5, "E": True,
+                                          "F": np.int64(-2)})
+    assert {"-DA=3", "-DB=uint", "-DC=(1<<4)", "-DD=1.5", "-DE=1", "-DF=-2"} <= set(opts)
+
+
+def _copy_package(root):
+    """clvis/ and kernels_cl/ copied under `root`, as a checkout there would have them."""
+    ignore = shutil.ignore_patterns("__pycache__")
+    shutil.copytree(REPO / "clvis", root / "clvis", ignore=ignore)
+    shutil.copytree(REPO / "kernels_cl", root / "kernels_cl", ignore=ignore)
+
+
+def test_package_in_path_with_space(device, tmp_path):
+    """Kernels build when the package's path has a space: once from a working
+    directory beside it (a relative -I path) and once from one whose relative
+    path has a space too (the compiler runs from the include folder)."""
+    root = tmp_path / "with space" / "src dir"
+    _copy_package(root)
+    elsewhere = tmp_path / "other dir"
+    elsewhere.mkdir()
+    index = [runtime.describe(d) for d in runtime.devices()].index(runtime.describe(device))
+    code = ("import os, numpy as np, clvis\n"
+            "assert clvis.__file__.startswith(os.environ['PYTHONPATH']), clvis.__file__\n"
+            "cwd = os.getcwd()\n"
+            "x = np.arange(1000, dtype=np.int32)\n"
+            "assert (clvis.scan(x) == np.cumsum(x) - x).all()\n"
+            "assert os.getcwd() == cwd\n"
+            "print(clvis.runtime.build_options(clvis.default_queue().device, {})[1])\n")
+    env = dict(os.environ, PYTHONPATH=str(root), CLVIS_DEVICE=str(index))
+    for cwd, include in ((root, "kernels_cl/include"), (elsewhere, ".")):
+        out = subprocess.run([sys.executable, "-c", code], env=env, cwd=cwd, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        assert out.stdout.strip() == include
 
 
 @pytest.mark.parametrize("var, value", [("CLVIS_TUNING", "tpu"), ("CLVIS_MAX_ALLOC", "abc"),

@@ -43,7 +43,9 @@ import contextlib
 import dataclasses
 import os
 import re
+import sys
 import threading
+import time
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -542,9 +544,53 @@ def build_options(device: cl.Device, defines: Mapping[str, object], flags: Seque
     return opts
 
 
+# pyopencl keeps program binaries for drivers without a cache of their own
+# (Intel's CPU runtime, ...) under one lock file, held only while an entry is
+# read or written. A waiter gives up after 60 s and then, unless
+# PYOPENCL_CACHE_FAILURE_FATAL is set, fails with a KeyError naming that
+# variable. A lock older than that was left by a process killed mid-build:
+# report it at once instead of stalling a minute first.
+_STALE_LOCK_S = 60.0
+
+
+def _pyopencl_cache_dir(context: cl.Context) -> Path | None:
+    """Where pyopencl caches binaries of builds in `context` (as pyopencl.cache
+    decides), or None when it does not (PoCL and NVIDIA cache builds themselves)."""
+    try:
+        from pyopencl.characterize import has_src_build_cache
+        if getattr(cl, "_PYOPENCL_NO_CACHE", False) or has_src_build_cache(context.devices[0]):
+            return None
+        base = getattr(context, "cache_dir", None)
+        if base is not None:
+            return Path(base)
+        import platformdirs
+        xdg = os.environ.get("XDG_CACHE_HOME")
+        if sys.platform == "darwin" and xdg:
+            root = os.path.join(xdg, "pyopencl")
+        else:
+            root = platformdirs.user_cache_dir("pyopencl", "pyopencl")
+        return Path(root) / "pyopencl-compiler-cache-v2-py{}".format(".".join(str(i) for i in sys.version_info))
+    except Exception:       # only used to explain a failure: never the cause of one
+        return None
+
+
+def _cache_failure(cache: Path, error: BaseException | None) -> str:
+    lock = cache / "lock"
+    if lock.exists():
+        return (f"pyopencl's compiler cache is locked by {lock}, left by a process that was killed while "
+                f"building; delete that file (or set PYOPENCL_NO_CACHE=1)")
+    return (f"pyopencl's compiler cache in {cache} failed ({error!r}); delete that directory "
+            f"(or set PYOPENCL_NO_CACHE=1)")
+
+
 def _build(context: cl.Context, path: Path, defines: Mapping[str, object], flags: Sequence[str]) -> cl.Program:
     device = context.devices[0]
     opts = build_options(device, defines, flags)
+    cache = _pyopencl_cache_dir(context)
+    if cache is not None:
+        with contextlib.suppress(OSError):
+            if time.time() - (cache / "lock").stat().st_mtime > _STALE_LOCK_S:
+                raise KernelBuildError(_display(path), defines, describe(device), _cache_failure(cache, None))
     prg = cl.Program(context, path.read_text())
     with warnings.catch_warnings(), _working_directory(INCLUDE_DIR if opts[1] == _HERE else None):
         # drivers log remarks on success (Intel: vectorisation reports);
@@ -558,6 +604,12 @@ def _build(context: cl.Context, path: Path, defines: Mapping[str, object], flags
                 warnings.simplefilter("ignore", UserWarning)
                 log = prg.get_build_info(device, cl.program_build_info.LOG)
             raise KernelBuildError(_display(path), defines, describe(device), log or str(e)) from None
+        except (KeyError, RuntimeError) as e:
+            # pyopencl's own cache failed (a KeyError naming PYOPENCL_CACHE_FAILURE_FATAL
+            # after a minute on a stale lock, or a RuntimeError when that variable is set)
+            if cache is None:
+                raise
+            raise KernelBuildError(_display(path), defines, describe(device), _cache_failure(cache, e)) from e
     return prg
 
 

@@ -5,6 +5,7 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -204,6 +205,43 @@ def test_options_from_strings():
     with pytest.raises(ValueError, match="tuning"):
         runtime.set_options(tuning="tpu")
     assert runtime.options() == runtime.Options()
+
+
+def _pyopencl_cache(device, tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    ctx = runtime.queue_for(device).context
+    cache = runtime._pyopencl_cache_dir(ctx)
+    if cache is None:
+        pytest.skip("the driver caches its builds itself: pyopencl's cache is not used")
+    cache.mkdir(parents=True)
+    return ctx, cache
+
+
+def test_stale_cache_lock(device, tmp_path, monkeypatch):
+    """A lock older than pyopencl's one-minute wait is reported at once, naming the file."""
+    ctx, cache = _pyopencl_cache(device, tmp_path, monkeypatch)
+    lock = cache / "lock"
+    lock.touch()
+    old = time.time() - 120
+    os.utime(lock, (old, old))
+    with pytest.raises(clvis.KernelBuildError, match="delete that file") as info:
+        runtime.get_program(ctx, "primitives/scan.cl", {"T": "int", "UNIQUE": time.time_ns()})
+    assert str(lock) in str(info.value)
+
+
+def test_cache_failure_reported(device, tmp_path, monkeypatch):
+    """What pyopencl raises after waiting a minute on a fresh lock (a bare
+    KeyError) becomes a KernelBuildError naming the lock."""
+    ctx, cache = _pyopencl_cache(device, tmp_path, monkeypatch)
+    (cache / "lock").touch()
+
+    def build(self, *args, **kwargs):
+        raise KeyError("PYOPENCL_CACHE_FAILURE_FATAL")
+
+    monkeypatch.setattr(cl.Program, "build", build)
+    with pytest.raises(clvis.KernelBuildError, match="locked by") as info:
+        runtime.get_program(ctx, "primitives/scan.cl", {"T": "int", "UNIQUE": time.time_ns()})
+    assert str(cache / "lock") in str(info.value)
 
 
 def test_program_cache(device):

@@ -7,6 +7,10 @@ Settings clvis could not use and ignored (a bad environment variable) are
 reported with a :class:`ClvisWarning`.
 """
 
+from __future__ import annotations
+
+from collections.abc import Mapping
+
 
 class ClvisError(Exception):
     """Base class of clvis's errors."""
@@ -19,7 +23,7 @@ class KernelBuildError(ClvisError):
     defines), ``device`` (name) and ``log`` (the driver's build log).
     """
 
-    def __init__(self, path, defines, device, log):
+    def __init__(self, path: object, defines: Mapping[str, object], device: str, log: str) -> None:
         self.path = str(path)
         self.defines = dict(defines)
         self.device = device

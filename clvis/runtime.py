@@ -49,8 +49,10 @@ import time
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pyopencl as cl
 import pyopencl.array as cla
 import pyopencl.tools
@@ -207,7 +209,7 @@ def options() -> Options:
     return dataclasses.replace(_options)
 
 
-def set_options(**changes) -> None:
+def set_options(**changes: Any) -> None:
     """Change options for the rest of the process (see the module docstring)."""
     global _options
     new = dataclasses.replace(_options, **changes)
@@ -216,7 +218,7 @@ def set_options(**changes) -> None:
 
 
 @contextlib.contextmanager
-def configure(**changes):
+def configure(**changes: Any) -> Iterator[Options]:
     """Change options inside a ``with`` block, e.g.
     ``with clvis.runtime.configure(int64_atomics=False): ...``."""
     global _options
@@ -296,7 +298,7 @@ def select_device(spec: str | int | None = None) -> cl.Device:
     return found[0]
 
 
-def _listing(found) -> str:
+def _listing(found: Sequence[cl.Device]) -> str:
     return "; ".join(f"{i}: {describe(d)}" for i, d in enumerate(found)) or "none"
 
 
@@ -380,7 +382,7 @@ class Capabilities:
     fp64: bool
 
 
-def _as_device(obj) -> cl.Device:
+def _as_device(obj: object) -> cl.Device:
     if isinstance(obj, cl.Device):
         return obj
     if isinstance(obj, cl.CommandQueue):
@@ -424,7 +426,7 @@ def _native_capabilities(device: cl.Device) -> Capabilities:
     return caps
 
 
-def capabilities(obj=None) -> Capabilities:
+def capabilities(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) -> Capabilities:
     """What `obj` (a device, queue or context; default: the default queue's
     device) offers, as clvis sees it under the current options."""
     device = _as_device(obj if obj is not None else default_queue())
@@ -439,7 +441,7 @@ def capabilities(obj=None) -> Capabilities:
                                int64_atomics=caps.int64_atomics_native and o.int64_atomics)
 
 
-def tuning_profile(obj=None) -> str:
+def tuning_profile(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) -> str:
     """'cpu' or 'gpu': the work shapes the kernel families use on this device."""
     if _options.tuning is not None:
         return _options.tuning
@@ -447,7 +449,7 @@ def tuning_profile(obj=None) -> str:
     return "gpu" if _device_type(device) in ("GPU", "ACCELERATOR") else "cpu"
 
 
-def device_slug(obj=None) -> str:
+def device_slug(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) -> str:
     """A short file-name-safe name of the device, for benchmark result folders."""
     caps = capabilities(obj)
     plat = caps.platform.lower()
@@ -569,7 +571,8 @@ def _pyopencl_cache_dir(context: cl.Context) -> Path | None:
             root = os.path.join(xdg, "pyopencl")
         else:
             root = platformdirs.user_cache_dir("pyopencl", "pyopencl")
-        return Path(root) / "pyopencl-compiler-cache-v2-py{}".format(".".join(str(i) for i in sys.version_info))
+        version = ".".join(str(i) for i in sys.version_info)
+        return Path(root) / f"pyopencl-compiler-cache-v2-py{version}"
     except Exception:       # only used to explain a failure: never the cause of one
         return None
 
@@ -583,7 +586,8 @@ def _cache_failure(cache: Path, error: BaseException | None) -> str:
             f"(or set PYOPENCL_NO_CACHE=1)")
 
 
-def _build(context: cl.Context, path: Path, defines: Mapping[str, object], flags: Sequence[str]) -> cl.Program:
+def _build(context: cl.Context, path: Path, defines: Mapping[str, object],
+           flags: Sequence[str]) -> cl.Program:
     device = context.devices[0]
     opts = build_options(device, defines, flags)
     cache = _pyopencl_cache_dir(context)
@@ -637,8 +641,8 @@ def get_program(context: cl.Context, relpath: str, defines: Mapping[str, object]
         return prg
 
 
-def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: dict,
-               flags: tuple = ()) -> cl.Kernel:
+def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: Mapping[str, object],
+               flags: Sequence[str] = ()) -> cl.Kernel:
     """Kernel `name` of kernels_cl/`relpath` built with `defines` (and compiler
     `flags`) for the queue's device."""
     prg = get_program(queue.context, relpath, defines, flags)
@@ -661,8 +665,8 @@ def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: dict,
         return k
 
 
-def launch(queue, kernel: cl.Kernel, global_size: int, local_size: int | None, *args,
-           wait_for=None) -> cl.Event:
+def launch(queue: cl.CommandQueue, kernel: cl.Kernel, global_size: int, local_size: int | None, *args: Any,
+           wait_for: Sequence[cl.Event] | None = None) -> cl.Event:
     """Set `args` and enqueue a 1-D launch (serialised: kernels hold their args)."""
     with _lock:
         kernel.set_args(*args)
@@ -674,7 +678,7 @@ def launch(queue, kernel: cl.Kernel, global_size: int, local_size: int | None, *
 # --------------------------------------------------------------------------
 # memory
 
-def allocator(queue: cl.CommandQueue):
+def allocator(queue: cl.CommandQueue) -> cl.tools.MemoryPool:
     """A memory pool for the queue: repeated calls reuse device buffers."""
     state = _state(queue.context)
     with _lock:
@@ -692,7 +696,7 @@ def free_pools() -> None:
                 pool.free_held()
 
 
-def check_alloc(queue, nbytes: int, what: str) -> None:
+def check_alloc(queue: cl.CommandQueue, nbytes: int, what: str) -> None:
     """DeviceError if one buffer of `nbytes` exceeds the device's max single allocation."""
     limit = capabilities(queue).max_alloc_bytes
     if nbytes > limit:
@@ -701,9 +705,9 @@ def check_alloc(queue, nbytes: int, what: str) -> None:
             f"of {limit} bytes on {describe(queue.device)}")
 
 
-def empty(queue, shape, dtype, what: str) -> cla.Array:
+def empty(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLike, what: str) -> cla.Array:
     """A device array from the pool, after check_alloc; DeviceError if the driver refuses."""
-    shape = (shape,) if np.isscalar(shape) else tuple(shape)
+    shape = (int(shape),) if isinstance(shape, (int, np.integer)) else tuple(shape)
     dtype = np.dtype(dtype)
     nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     check_alloc(queue, nbytes, what)
@@ -713,14 +717,15 @@ def empty(queue, shape, dtype, what: str) -> cla.Array:
         raise DeviceError(f"{what}: allocating {nbytes} bytes on {describe(queue.device)} failed: {e}") from e
 
 
-def fill_zero(queue, a: cla.Array) -> cla.Array:
+def fill_zero(queue: cl.CommandQueue, a: cla.Array) -> cla.Array:
     """Zero a device array's bytes with clEnqueueFillBuffer (pyopencl's
     Array.fill would build a kernel of its own)."""
     if a.nbytes:
-        cl.enqueue_fill_buffer(queue, a.base_data, np.zeros(1, np.uint8), a.offset, a.nbytes)
+        cl.enqueue_fill_buffer(queue, a.base_data,  # type: ignore[arg-type]  # a Buffer: a.nbytes > 0
+                               np.zeros(1, np.uint8), a.offset, a.nbytes)
     return a
 
 
-def zeros(queue, shape, dtype, what: str) -> cla.Array:
+def zeros(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLike, what: str) -> cla.Array:
     """empty(), zeroed."""
     return fill_zero(queue, empty(queue, shape, dtype, what))

@@ -40,10 +40,12 @@ import operator
 import os
 import re
 import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from .errors import DataError
 from .io import load_npy
@@ -86,7 +88,8 @@ class Volume:
                 f"spacing={self.spacing})")
 
 
-def read_volume(path, *, shape=None, dtype=None) -> Volume:
+def read_volume(path: str | os.PathLike[str], *, shape: Sequence[int] | None = None,
+                dtype: npt.DTypeLike | None = None) -> Volume:
     """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``; see the
     module docstring).
 

@@ -7,19 +7,22 @@ Every op takes numpy arrays (and returns numpy) or ``pyopencl.array.Array``
 from __future__ import annotations
 
 import operator
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pyopencl as cl
 import pyopencl.array as cla
 
 from . import runtime
 
 
-def is_device(x) -> bool:
+def is_device(x: object) -> bool:
     return isinstance(x, cla.Array)
 
 
-def resolve_queue(queue, **arrays) -> cl.CommandQueue:
+def resolve_queue(queue: cl.CommandQueue | None, **arrays: Any) -> cl.CommandQueue:
     """The queue to run on: `queue`, else the first device array's, else the default.
     Every device array must live in that queue's context."""
     dev = [(k, a) for k, a in arrays.items() if is_device(a)]
@@ -45,7 +48,8 @@ def _dtype_names(dtypes) -> str:
 MAX_LENGTH = 2**32 - 1
 
 
-def check_array(name: str, x, dtypes=None, ndim=None, min_ndim=None):
+def check_array(name: str, x: Any, dtypes: Iterable[Any] | None = None, ndim: int | None = None,
+                min_ndim: int | None = None) -> Any:
     """Check dtype and rank; returns x (a device array) or a C-contiguous numpy array.
 
     Object arrays raise a TypeError naming the argument; host arrays in the
@@ -77,7 +81,7 @@ def check_array(name: str, x, dtypes=None, ndim=None, min_ndim=None):
     return x
 
 
-def to_device(queue, name: str, x) -> cla.Array:
+def to_device(queue: cl.CommandQueue, name: str, x: Any) -> cla.Array:
     """x (checked) on the device: device arrays as they are, numpy copied in."""
     if is_device(x):
         if x.offset:
@@ -89,16 +93,16 @@ def to_device(queue, name: str, x) -> cla.Array:
     return d
 
 
-def buf(a: cla.Array):
+def buf(a: cla.Array) -> cl.MemoryObjectHolder | cl.SVMPointer | None:
     """The cl.Buffer behind a device array (None for an empty array)."""
     return a.base_data if a.size else None
 
 
-def result(a: cla.Array, host: bool):
+def result(a: cla.Array, host: bool) -> np.ndarray | cla.Array:
     return a.get() if host else a
 
 
-def nonnegative_int(name: str, v) -> int:
+def nonnegative_int(name: str, v: Any) -> int:
     """v as an int >= 0: TypeError for a non-integer (bool included), ValueError below 0."""
     if isinstance(v, bool):
         raise TypeError(f"{name}: expected an integer, got bool")
@@ -111,7 +115,7 @@ def nonnegative_int(name: str, v) -> int:
     return v
 
 
-def positive_int(name: str, v) -> int:
+def positive_int(name: str, v: Any) -> int:
     """v as an int >= 1: TypeError for a non-integer (bool included), ValueError below 1."""
     v = nonnegative_int(name, v)
     if v < 1:
@@ -119,7 +123,7 @@ def positive_int(name: str, v) -> int:
     return v
 
 
-def real_array(name: str, a) -> np.ndarray:
+def real_array(name: str, a: npt.ArrayLike) -> np.ndarray:
     """`a` as a numpy array of real numbers (integers or floats, not bool;
     object, complex and string arrays are refused): TypeError naming `name`
     otherwise. Nothing is copied: the byte order is kept (big-endian arrays are

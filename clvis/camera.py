@@ -19,10 +19,11 @@ NARVis training viewpoints (z is up).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from ._arrays import positive_int, real_array
 
@@ -214,8 +215,8 @@ class Camera:
                 f"near={self.near:g}, far={self.far:g})")
 
     @classmethod
-    def look_at(cls, eye, target, up=(0, 0, 1), fov_y: float = 60.0, aspect: float = 1.0,
-                near: float = 0.1, far: float = 1000.0) -> Camera:
+    def look_at(cls, eye: npt.ArrayLike, target: npt.ArrayLike, up: npt.ArrayLike = (0, 0, 1),
+                fov_y: float = 60.0, aspect: float = 1.0, near: float = 0.1, far: float = 1000.0) -> Camera:
         """A perspective camera at `eye` looking at `target`.
 
         `fov_y` is the vertical field of view in degrees, `aspect` = width / height.
@@ -227,8 +228,8 @@ class Camera:
                    near, far, False, eye)
 
     @classmethod
-    def ortho(cls, eye, target, up=(0, 0, 1), height: float = 2.0, aspect: float = 1.0,
-              near: float = 0.1, far: float = 1000.0) -> Camera:
+    def ortho(cls, eye: npt.ArrayLike, target: npt.ArrayLike, up: npt.ArrayLike = (0, 0, 1),
+              height: float = 2.0, aspect: float = 1.0, near: float = 0.1, far: float = 1000.0) -> Camera:
         """An orthographic camera at `eye` looking at `target`.
 
         `height` is the world-space height of the view volume (its width is
@@ -241,7 +242,8 @@ class Camera:
                    near, far, True, eye)
 
     @classmethod
-    def fit(cls, bounds_min, bounds_max, direction=(-1, -1, -0.6), up=(0, 0, 1),
+    def fit(cls, bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike,
+            direction: npt.ArrayLike = (-1, -1, -0.6), up: npt.ArrayLike = (0, 0, 1),
             fov_y: float = 60.0, aspect: float = 1.0) -> Camera:
         """A perspective camera that frames the whole box.
 
@@ -283,7 +285,7 @@ class Camera:
         for an image `height` pixels tall."""
         return 0.5 * height * float(self.projection[1, 1])
 
-    def project(self, points, width: int, height: int) -> Projected:
+    def project(self, points: npt.ArrayLike, width: int, height: int) -> Projected:
         """Project (N, 3) points to a `width` x `height` image, in float32 as the kernels do.
 
         With M = float32(matrix), D = float32(depth_row) and (x, y, z) the float32
@@ -332,7 +334,8 @@ def _sphere_depths(dist: float, radius: float) -> tuple[float, float]:
     return 0.5 * (dist - radius), 1.5 * (dist + radius)
 
 
-def grid_cameras(bounds_min, bounds_max, count=4, spacing: float | None = None,
+def grid_cameras(bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike, count: int | Sequence[int] = 4,
+                 spacing: float | None = None,
                  height: float | None = None, fov_y: float = 60.0, aspect: float = 1.0,
                  near: float | None = None, far: float | None = None) -> Iterator[Camera]:
     """NARVis grid viewpoints: 24 cameras at each position of a grid over the box.
@@ -367,7 +370,7 @@ def grid_cameras(bounds_min, bounds_max, count=4, spacing: float | None = None,
     return _grid(eyes, fov_y, aspect, near, far)
 
 
-def _grid_counts(lo, hi, count, spacing) -> tuple[int, int]:
+def _grid_counts(lo, hi, count, spacing) -> tuple[int, ...]:
     extent = hi[:2] - lo[:2]
     if spacing is not None:
         spacing = _positive("spacing", spacing)
@@ -392,8 +395,9 @@ def _grid(eyes, fov_y, aspect, near, far) -> Iterator[Camera]:
                 yield Camera.look_at(eye, eye + forward, (0, 0, 1), fov_y, aspect, near, far)
 
 
-def hemisphere_cameras(bounds_min, bounds_max, fov_y: float = 60.0, aspect: float = 1.0,
-                       near: float | None = None, far: float | None = None) -> Iterator[Camera]:
+def hemisphere_cameras(bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike, fov_y: float = 60.0,
+                       aspect: float = 1.0, near: float | None = None,
+                       far: float | None = None) -> Iterator[Camera]:
     """NARVis hemisphere viewpoints: 128 cameras looking at the box centre.
 
     The eyes lie on the upper hemisphere around the centre with radius 0.75 x the
@@ -429,7 +433,7 @@ def _hemisphere(centre, dist, fov_y, aspect, near, far) -> Iterator[Camera]:
 CAMERA_DTYPE = np.dtype([("m", "<f4", (4, 4)), ("d", "<f4", (4,))])
 
 
-def camera_buffer(camera) -> np.ndarray:
+def camera_buffer(camera: Camera) -> np.ndarray:
     """The 20 float32 of clvis/camera.h: M = projection @ view, then the depth row."""
     m = np.asarray(camera.matrix, np.float64)
     d = np.asarray(camera.depth_row, np.float64)

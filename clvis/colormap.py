@@ -30,8 +30,10 @@ import difflib
 import functools
 import numbers
 import operator
+from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ["apply", "lut", "names", "value_range"]
 
@@ -79,7 +81,7 @@ def _table(name: str, n: int) -> np.ndarray:
     return table
 
 
-def apply(values, lut, vmin, vmax) -> np.ndarray:
+def apply(values: npt.ArrayLike, lut: np.ndarray, vmin: float, vmax: float) -> np.ndarray:
     """Colours of `values` through `lut` by the module's index rule: an array of
     shape ``values.shape + (4,)``, uint8, NaN values ``(0, 0, 0, 0)``.
 
@@ -111,7 +113,7 @@ def apply(values, lut, vmin, vmax) -> np.ndarray:
     return out
 
 
-def value_range(values) -> tuple[float, float]:
+def value_range(values: npt.ArrayLike) -> tuple[float, float]:
     """``(min, max)`` of the finite `values` as Python floats; ``(0.0, 1.0)``
     when none is finite."""
     v = np.asarray(values)
@@ -158,7 +160,8 @@ class TransferFunction:
         colormap's colour i and the opacity map at (i + 0.5) / n.
     """
 
-    def __init__(self, colormap: str = "viridis", opacity=None, value_range=None, entries: int = 256):
+    def __init__(self, colormap: str = "viridis", opacity: npt.ArrayLike | None = None,
+                 value_range: Sequence[float] | None = None, entries: int = 256) -> None:
         self.colormap = colormap
         self.lut = lut(colormap, entries)
         self.entries = int(entries)
@@ -192,11 +195,11 @@ class TransferFunction:
         t[:, 3] = np.interp(x, pts[:, 0], pts[:, 1])
         return t
 
-    def limits(self, values) -> tuple[np.float32, np.float32]:
+    def limits(self, values: npt.ArrayLike) -> tuple[np.float32, np.float32]:
         """(vmin, scale) as float32 for `values`."""
         lo, hi = self.value_range if self.value_range is not None else value_range(values)
         scale = np.float32(1.0 / (np.float64(hi) - np.float64(lo))) if hi != lo else np.float32(0)
         return np.float32(lo), scale
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"TransferFunction({self.colormap!r}, value_range={self.value_range})"

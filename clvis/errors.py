@@ -3,7 +3,13 @@
 Every error clvis raises on purpose is a :class:`ClvisError` (or, for a wrong
 argument type or value, a :class:`TypeError` / :class:`ValueError` naming the
 argument). Catch ``ClvisError`` to handle all of clvis's own failures.
+Settings clvis could not use and ignored (a bad environment variable) are
+reported with a :class:`ClvisWarning`.
 """
+
+from __future__ import annotations
+
+from collections.abc import Mapping
 
 
 class ClvisError(Exception):
@@ -17,7 +23,7 @@ class KernelBuildError(ClvisError):
     defines), ``device`` (name) and ``log`` (the driver's build log).
     """
 
-    def __init__(self, path, defines, device, log):
+    def __init__(self, path: object, defines: Mapping[str, object], device: str, log: str) -> None:
         self.path = str(path)
         self.defines = dict(defines)
         self.device = device
@@ -36,3 +42,8 @@ class DeviceError(ClvisError):
 class DataError(ClvisError, ValueError):
     """Input data that clvis cannot use (malformed files, keys outside a promised
     range, ...). Also a ValueError, so code that catches bad values catches it."""
+
+
+class ClvisWarning(UserWarning):
+    """A setting clvis could not use and ignored; the message names it, the
+    values it accepts and what clvis used instead."""

@@ -26,9 +26,12 @@ import struct
 import tokenize
 import zipfile
 import zlib
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from ._arrays import real_array
 from .errors import DataError
@@ -119,7 +122,9 @@ class PointCloud:
         World position of the local coordinate origin (float64, default zeros).
     """
 
-    def __init__(self, positions, colors=None, attributes=None, velocity=None, radius=None, origin=None):
+    def __init__(self, positions: npt.ArrayLike, colors: npt.ArrayLike | None = None,
+                 attributes: Mapping[str, Any] | None = None, velocity: npt.ArrayLike | None = None,
+                 radius: npt.ArrayLike | None = None, origin: npt.ArrayLike | None = None) -> None:
         self.positions = _vectors("positions", positions, None)
         n = len(self.positions)
         self.colors = None if colors is None else _colors(colors, n)
@@ -168,7 +173,7 @@ class PointCloud:
         p = self.positions[finite]
         return p.min(axis=0).astype(np.float64), p.max(axis=0).astype(np.float64)
 
-    def subset(self, index) -> PointCloud:
+    def subset(self, index: npt.ArrayLike | slice) -> PointCloud:
         """A new cloud with the points selected by `index`: a boolean mask of length
         N, an array of indices, or a slice. An index out of range raises
         DataError."""
@@ -195,7 +200,7 @@ class PointCloud:
 
 # ---------------------------------------------------------------- reading
 
-def read_points(path) -> PointCloud:
+def read_points(path: str | os.PathLike[str]) -> PointCloud:
     """Read a point cloud; the format comes from the extension (case-insensitive).
 
     - ``.ply``: the ``vertex`` element. x, y, z are required; red, green, blue

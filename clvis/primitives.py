@@ -14,8 +14,11 @@ guarantees between work-groups (PoCL, Apple, ARM).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
 
 from . import runtime
 from ._arrays import buf, check_array, is_device, resolve_queue, result, to_device
@@ -27,7 +30,7 @@ __all__ = ["compact", "compact_indices", "copy", "histogram", "radix_sort", "sca
 # work-item per group walking a contiguous range (PoCL and other CPU drivers
 # run work-items as loops, so this is what vectorises and streams); "gpu":
 # wide groups staging tiles through local memory.
-PROFILES = {
+PROFILES: dict[str, dict[str, Any]] = {
     "cpu": {
         "groups_per_cu": 4,
         "scan": {"WG": 1, "ITEMS": 16},
@@ -129,7 +132,8 @@ def _scan_into(queue, src, dst, total, exclusive: bool) -> None:
                    buf(partials), exclusive, buf(total))
 
 
-def scan(x, exclusive: bool = True, *, return_total: bool = False, out=None, queue=None):
+def scan(x: Any, exclusive: bool = True, *, return_total: bool = False,
+         out: cla.Array | None = None, queue: cl.CommandQueue | None = None) -> Any:
     """Prefix sums of a 1-D array of int32, uint32, int64, uint64 or float32.
 
     exclusive=True: out[i] = x[0] + ... + x[i-1] (out[0] = 0); False: up to x[i].
@@ -238,7 +242,8 @@ def _finish_compact(out, count, host, sync):
     return out[:k] if k else out[:0]
 
 
-def compact(x, flags, *, out=None, count=None, queue=None):
+def compact(x: Any, flags: Any, *, out: cla.Array | None = None,
+            count: cla.Array | None = None, queue: cl.CommandQueue | None = None) -> Any:
     """x[flags != 0], in input order. x: any dtype, shape (n, ...) (rows are
     kept whole); flags: 1-D of length n, bool or an integer type.
 
@@ -266,7 +271,8 @@ def compact(x, flags, *, out=None, count=None, queue=None):
     return _finish_compact(out, count_d, host, sync=count is None)
 
 
-def compact_indices(flags, *, out=None, count=None, queue=None):
+def compact_indices(flags: Any, *, out: cla.Array | None = None,
+                    count: cla.Array | None = None, queue: cl.CommandQueue | None = None) -> Any:
     """The indices i (uint32, ascending) where flags[i] != 0: ``np.flatnonzero``.
     Returns and ``out``/``count`` as :func:`compact`."""
     queue = resolve_queue(queue, flags=flags, out=out, count=count)
@@ -286,7 +292,8 @@ def compact_indices(flags, *, out=None, count=None, queue=None):
 # --------------------------------------------------------------------------
 # radix sort
 
-def radix_sort(keys, values=None, *, key_bits: int | None = None, queue=None):
+def radix_sort(keys: Any, values: Any = None, *,
+               key_bits: int | None = None, queue: cl.CommandQueue | None = None) -> Any:
     """Stable LSD radix sort.
 
     keys: 1-D uint32, int32, float32, uint64, int64 or float64. Floats sort in
@@ -360,7 +367,7 @@ def radix_sort(keys, values=None, *, key_bits: int | None = None, queue=None):
     kbuf = [runtime.empty(queue, n, kd.dtype, "radix_sort keys")]
     if passes > 1:
         kbuf.append(runtime.empty(queue, n, kd.dtype, "radix_sort keys"))
-    vbuf = [None, None]
+    vbuf: list[cla.Array | None] = [None, None]
     if vd is not None:
         vbuf = [runtime.empty(queue, n, vd.dtype, "radix_sort values"),
                 runtime.empty(queue, n, vd.dtype, "radix_sort values") if passes > 1 else None]
@@ -398,7 +405,8 @@ def _sorted_result(kd, vd, host):
 # --------------------------------------------------------------------------
 # histogram
 
-def histogram(keys, nbins: int, *, check: bool = True, queue=None):
+def histogram(keys: Any, nbins: int, *, check: bool = True,
+              queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
     """Counts per bin (uint32, length nbins) of int32/uint32 bin indices:
     ``np.bincount(keys, minlength=nbins)``.
 
@@ -448,7 +456,8 @@ def histogram(keys, nbins: int, *, check: bool = True, queue=None):
 # --------------------------------------------------------------------------
 # copy
 
-def copy(x, *, out=None, queue=None):
+def copy(x: Any, *, out: cla.Array | None = None,
+         queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
     """A copy of x made by a device kernel: the benchmarks' bandwidth yardstick.
     out: a device array of x's dtype and shape to copy into (e.g. the very
     buffer an op under test writes, so both see the same memory placement)."""

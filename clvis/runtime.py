@@ -19,7 +19,13 @@ source, every included header and the options. (clvis once exported binaries
 itself: on PoCL that compiles every kernel of a program up front, ~6 s a
 program, more than any cache hit saves.)
 
-Options (:func:`configure`, or the environment at import):
+Options (:func:`configure`, or the environment at import). Strings are
+accepted as the environment gives them (``max_alloc_bytes="5"``); a value
+clvis cannot use raises ValueError from :func:`configure`/:func:`set_options`,
+while a bad environment variable is ignored with a
+:class:`~clvis.errors.ClvisWarning` naming it and the values it accepts, and
+the default applies: importing clvis (and ``clvis info``) never fails because
+of the environment.
 
 - ``tuning``: ``None`` (by device type), ``"cpu"`` or ``"gpu"``: which set of
   ``-D`` work shapes the families build with (``CLVIS_TUNING``). Both give the
@@ -37,16 +43,21 @@ import contextlib
 import dataclasses
 import os
 import re
+import sys
 import threading
+import time
 import warnings
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pyopencl as cl
 import pyopencl.array as cla
 import pyopencl.tools
 
-from .errors import ClvisError, DeviceError, KernelBuildError
+from .errors import ClvisError, ClvisWarning, DeviceError, KernelBuildError
 
 __all__ = [
     "INCLUDE_DIR",
@@ -97,36 +108,100 @@ INCLUDE_DIR = KERNEL_ROOT / "include"
 # --------------------------------------------------------------------------
 # options
 
+_TUNINGS = ("cpu", "gpu")
+_TRUE = ("1", "true", "yes", "on")
+_FALSE = ("0", "false", "no", "off")
+
+
+def _tuning_value(v: object) -> str | None:
+    if v is None:
+        return None
+    if isinstance(v, str) and v.strip().lower() in _TUNINGS:
+        return v.strip().lower()
+    raise ValueError(f"tuning: expected None, 'cpu' or 'gpu', got {v!r}")
+
+
+def _flag_value(name: str, v: object) -> bool:
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)) and v in (0, 1):
+        return bool(v)
+    if isinstance(v, str) and v.strip().lower() in _TRUE + _FALSE:
+        return v.strip().lower() in _TRUE
+    raise ValueError(f"{name}: expected True or False (1/0, 'true'/'false', 'yes'/'no', 'on'/'off'), "
+                     f"got {v!r}")
+
+
+def _size_value(name: str, v: object) -> int | None:
+    """A positive whole number of bytes; strings ("5", "2e9") as the environment gives them."""
+    if v is None:
+        return None
+    size: object = v
+    if isinstance(v, str):
+        try:
+            size = int(v.strip())
+        except ValueError:
+            with contextlib.suppress(ValueError):
+                size = float(v.strip())
+    if isinstance(size, (float, np.floating)) and np.isfinite(size) and float(size).is_integer():
+        size = int(size)
+    if isinstance(size, (bool, np.bool_)) or not isinstance(size, (int, np.integer)) or size <= 0:
+        raise ValueError(f"{name}: expected a positive whole number of bytes, got {v!r}")
+    return int(size)
+
+
 @dataclasses.dataclass
 class Options:
+    """The options in force (see the module docstring). Strings are accepted as
+    the environment would give them (``max_alloc_bytes="5"``,
+    ``int64_atomics="false"``); a value clvis cannot use raises ValueError
+    naming the option."""
+
     tuning: str | None = None
     int64_atomics: bool = True
     max_alloc_bytes: int | None = None
 
+    def __post_init__(self) -> None:
+        self.tuning = _tuning_value(self.tuning)
+        self.int64_atomics = _flag_value("int64_atomics", self.int64_atomics)
+        self.max_alloc_bytes = _size_value("max_alloc_bytes", self.max_alloc_bytes)
+
+
+# environment variable -> (option, how to read it, what it accepts)
+_ENV: dict[str, tuple[str, Callable[[str], object], str]] = {
+    "CLVIS_TUNING": ("tuning", _tuning_value, "'cpu' or 'gpu' (unset: by device type)"),
+    "CLVIS_NO_INT64_ATOMICS": ("int64_atomics", lambda s: not _flag_value("CLVIS_NO_INT64_ATOMICS", s),
+                               "1/true/yes/on or 0/false/no/off"),
+    "CLVIS_MAX_ALLOC": ("max_alloc_bytes", lambda s: _size_value("CLVIS_MAX_ALLOC", s),
+                        "a positive whole number of bytes"),
+}
+
 
 def _env_options() -> Options:
-    env = os.environ
-    tuning = env.get("CLVIS_TUNING") or None
-    max_alloc = env.get("CLVIS_MAX_ALLOC")
-    return Options(
-        tuning=tuning,
-        int64_atomics=env.get("CLVIS_NO_INT64_ATOMICS", "0") in ("", "0", "false", "no"),
-        max_alloc_bytes=int(max_alloc) if max_alloc else None,
-    )
+    """The options the environment asks for. A value clvis cannot use is
+    ignored with a ClvisWarning naming the variable and what it accepts (the
+    default applies): importing clvis never fails because of the environment."""
+    changes: dict[str, object] = {}
+    for var, (name, parse, accepted) in _ENV.items():
+        raw = os.environ.get(var, "")
+        if not raw.strip():
+            continue
+        try:
+            changes[name] = parse(raw)
+        except ValueError:
+            default = getattr(Options(), name)
+            warnings.warn(f"{var}={raw!r} is ignored: expected {accepted}; using the default "
+                          f"({name}={default!r})", ClvisWarning, stacklevel=2)
+    return Options(**changes)  # type: ignore[arg-type]  # each value parsed for its field above
 
 
 _options = _env_options()
-_TUNINGS = ("cpu", "gpu")
 
 
 def _check_options(o: Options) -> None:
-    if o.tuning not in (None,) + _TUNINGS:
-        raise ValueError(f"tuning: expected None, 'cpu' or 'gpu', got {o.tuning!r}")
-    if o.max_alloc_bytes is not None and o.max_alloc_bytes <= 0:
-        raise ValueError(f"max_alloc_bytes: expected a positive size, got {o.max_alloc_bytes!r}")
-
-
-_check_options(_options)
+    # Options checks its fields when made (dataclasses.replace makes a new one);
+    # this catches fields assigned on an existing instance
+    Options(o.tuning, o.int64_atomics, o.max_alloc_bytes)
 
 
 def options() -> Options:
@@ -134,7 +209,7 @@ def options() -> Options:
     return dataclasses.replace(_options)
 
 
-def set_options(**changes) -> None:
+def set_options(**changes: Any) -> None:
     """Change options for the rest of the process (see the module docstring)."""
     global _options
     new = dataclasses.replace(_options, **changes)
@@ -143,7 +218,7 @@ def set_options(**changes) -> None:
 
 
 @contextlib.contextmanager
-def configure(**changes):
+def configure(**changes: Any) -> Iterator[Options]:
     """Change options inside a ``with`` block, e.g.
     ``with clvis.runtime.configure(int64_atomics=False): ...``."""
     global _options
@@ -223,7 +298,7 @@ def select_device(spec: str | int | None = None) -> cl.Device:
     return found[0]
 
 
-def _listing(found) -> str:
+def _listing(found: Sequence[cl.Device]) -> str:
     return "; ".join(f"{i}: {describe(d)}" for i, d in enumerate(found)) or "none"
 
 
@@ -307,7 +382,7 @@ class Capabilities:
     fp64: bool
 
 
-def _as_device(obj) -> cl.Device:
+def _as_device(obj: object) -> cl.Device:
     if isinstance(obj, cl.Device):
         return obj
     if isinstance(obj, cl.CommandQueue):
@@ -351,7 +426,7 @@ def _native_capabilities(device: cl.Device) -> Capabilities:
     return caps
 
 
-def capabilities(obj=None) -> Capabilities:
+def capabilities(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) -> Capabilities:
     """What `obj` (a device, queue or context; default: the default queue's
     device) offers, as clvis sees it under the current options."""
     device = _as_device(obj if obj is not None else default_queue())
@@ -366,7 +441,7 @@ def capabilities(obj=None) -> Capabilities:
                                int64_atomics=caps.int64_atomics_native and o.int64_atomics)
 
 
-def tuning_profile(obj=None) -> str:
+def tuning_profile(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) -> str:
     """'cpu' or 'gpu': the work shapes the kernel families use on this device."""
     if _options.tuning is not None:
         return _options.tuning
@@ -374,7 +449,7 @@ def tuning_profile(obj=None) -> str:
     return "gpu" if _device_type(device) in ("GPU", "ACCELERATOR") else "cpu"
 
 
-def device_slug(obj=None) -> str:
+def device_slug(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) -> str:
     """A short file-name-safe name of the device, for benchmark result folders."""
     caps = capabilities(obj)
     plat = caps.platform.lower()
@@ -397,35 +472,148 @@ def device_slug(obj=None) -> str:
 _FLAGS = {"-cl-fp32-correctly-rounded-divide-sqrt"}
 
 
-def build_options(device: cl.Device, defines: dict, flags: tuple = ()) -> list[str]:
+# -D values: numbers, C identifiers and expressions of them without whitespace,
+# quotes or backslashes (the options reach the compiler as one space-joined string)
+_DEFINE_VALUE = re.compile(r"[A-Za-z0-9_.+\-*/%()<>!&|^~]+")
+
+# the include option when the compiler runs with INCLUDE_DIR as its working directory
+_HERE = "."
+
+
+def _define_value(name: str, v: object) -> str:
+    if isinstance(v, (bool, np.bool_)):
+        return str(int(v))
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        if not np.isfinite(v):
+            raise ValueError(f"define {name}: expected a finite number, got {v!r}")
+        return repr(float(v))
+    if isinstance(v, str) and _DEFINE_VALUE.fullmatch(v):
+        return v
+    raise ValueError(f"define {name}: expected a number or a C identifier/expression without "
+                     f"whitespace or quotes, got {v!r}")
+
+
+def _include_option() -> str:
+    """The -I path: pyopencl joins options with spaces, and no quoting works
+    everywhere (PoCL 3 passes quotes on to clang literally), so a path with
+    whitespace is given relative to the working directory, or as "." with the
+    compiler run from INCLUDE_DIR (see _build; the working directory is the
+    process's, so other threads' relative paths see it during such a build)."""
+    inc = str(INCLUDE_DIR)
+    if not re.search(r"\s", inc):
+        return inc
+    try:
+        rel = os.path.relpath(inc)
+    except (ValueError, OSError):      # another drive; a working directory since deleted
+        rel = inc
+    return rel if not re.search(r"\s", rel) else _HERE
+
+
+@contextlib.contextmanager
+def _working_directory(path: Path | None) -> Iterator[None]:
+    if path is None:
+        yield
+        return
+    try:
+        old: str | None = os.getcwd()
+    except OSError:
+        old = None
+    os.chdir(path)
+    try:
+        yield
+    finally:
+        if old is not None:
+            os.chdir(old)
+
+
+def build_options(device: cl.Device, defines: Mapping[str, object], flags: Sequence[str] = ()) -> list[str]:
+    """The compiler options clvis builds kernels_cl files with: the include
+    path, `flags` (only those clvis kernels use) and `defines` as ``-D``.
+    ValueError names a define whose name is not a C identifier or whose value
+    is not a number or a whitespace-free C identifier/expression."""
     for f in flags:
         if f not in _FLAGS:
             raise ValueError(f"compiler flag {f!r} is not one clvis kernels use")
-    opts = ["-I", str(INCLUDE_DIR), *flags]
+    opts = ["-I", _include_option(), *flags]
     for k, v in sorted(defines.items()):
-        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", k):
+        if not isinstance(k, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", k):
             raise ValueError(f"define name {k!r} is not a C identifier")
-        opts.append(f"-D{k}={v}")
+        opts.append(f"-D{k}={_define_value(k, v)}")
     if capabilities(device).int64_atomics:
         opts.append("-DCLVIS_INT64_ATOMICS=1")
     return opts
 
 
-def _build(context: cl.Context, path: Path, defines: dict, flags: tuple) -> cl.Program:
+# pyopencl keeps program binaries for drivers without a cache of their own
+# (Intel's CPU runtime, ...) under one lock file, held only while an entry is
+# read or written. A waiter gives up after 60 s and then, unless
+# PYOPENCL_CACHE_FAILURE_FATAL is set, fails with a KeyError naming that
+# variable. A lock older than that was left by a process killed mid-build:
+# report it at once instead of stalling a minute first.
+_STALE_LOCK_S = 60.0
+
+
+def _pyopencl_cache_dir(context: cl.Context) -> Path | None:
+    """Where pyopencl caches binaries of builds in `context` (as pyopencl.cache
+    decides), or None when it does not (PoCL and NVIDIA cache builds themselves)."""
+    try:
+        from pyopencl.characterize import has_src_build_cache
+        if getattr(cl, "_PYOPENCL_NO_CACHE", False) or has_src_build_cache(context.devices[0]):
+            return None
+        base = getattr(context, "cache_dir", None)
+        if base is not None:
+            return Path(base)
+        import platformdirs
+        xdg = os.environ.get("XDG_CACHE_HOME")
+        if sys.platform == "darwin" and xdg:
+            root = os.path.join(xdg, "pyopencl")
+        else:
+            root = platformdirs.user_cache_dir("pyopencl", "pyopencl")
+        version = ".".join(str(i) for i in sys.version_info)
+        return Path(root) / f"pyopencl-compiler-cache-v2-py{version}"
+    except Exception:       # only used to explain a failure: never the cause of one
+        return None
+
+
+def _cache_failure(cache: Path, error: BaseException | None) -> str:
+    lock = cache / "lock"
+    if lock.exists():
+        return (f"pyopencl's compiler cache is locked by {lock}, left by a process that was killed while "
+                f"building; delete that file (or set PYOPENCL_NO_CACHE=1)")
+    return (f"pyopencl's compiler cache in {cache} failed ({error!r}); delete that directory "
+            f"(or set PYOPENCL_NO_CACHE=1)")
+
+
+def _build(context: cl.Context, path: Path, defines: Mapping[str, object],
+           flags: Sequence[str]) -> cl.Program:
     device = context.devices[0]
+    opts = build_options(device, defines, flags)
+    cache = _pyopencl_cache_dir(context)
+    if cache is not None:
+        with contextlib.suppress(OSError):
+            if time.time() - (cache / "lock").stat().st_mtime > _STALE_LOCK_S:
+                raise KernelBuildError(_display(path), defines, describe(device), _cache_failure(cache, None))
     prg = cl.Program(context, path.read_text())
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), _working_directory(INCLUDE_DIR if opts[1] == _HERE else None):
         # drivers log remarks on success (Intel: vectorisation reports);
         # pyopencl turns each into a CompilerWarning. Failures raise below.
         warnings.simplefilter("ignore", cl.CompilerWarning)
         try:
-            prg.build(build_options(device, defines, flags))
+            prg.build(opts)
         except cl.Error as e:
             log = ""
             with contextlib.suppress(Exception):
                 warnings.simplefilter("ignore", UserWarning)
                 log = prg.get_build_info(device, cl.program_build_info.LOG)
             raise KernelBuildError(_display(path), defines, describe(device), log or str(e)) from None
+        except (KeyError, RuntimeError) as e:
+            # pyopencl's own cache failed (a KeyError naming PYOPENCL_CACHE_FAILURE_FATAL
+            # after a minute on a stale lock, or a RuntimeError when that variable is set)
+            if cache is None:
+                raise
+            raise KernelBuildError(_display(path), defines, describe(device), _cache_failure(cache, e)) from e
     return prg
 
 
@@ -436,7 +624,8 @@ def _display(path: Path) -> str:
         return str(path)
 
 
-def get_program(context: cl.Context, relpath: str, defines: dict, flags: tuple = ()) -> cl.Program:
+def get_program(context: cl.Context, relpath: str, defines: Mapping[str, object],
+                flags: Sequence[str] = ()) -> cl.Program:
     """The built program kernels_cl/`relpath` (or an absolute path: a kernel
     of your own, built the same way) with `defines` and compiler `flags`, cached."""
     state = _state(context)
@@ -452,8 +641,8 @@ def get_program(context: cl.Context, relpath: str, defines: dict, flags: tuple =
         return prg
 
 
-def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: dict,
-               flags: tuple = ()) -> cl.Kernel:
+def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: Mapping[str, object],
+               flags: Sequence[str] = ()) -> cl.Kernel:
     """Kernel `name` of kernels_cl/`relpath` built with `defines` (and compiler
     `flags`) for the queue's device."""
     prg = get_program(queue.context, relpath, defines, flags)
@@ -476,8 +665,8 @@ def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: dict,
         return k
 
 
-def launch(queue, kernel: cl.Kernel, global_size: int, local_size: int | None, *args,
-           wait_for=None) -> cl.Event:
+def launch(queue: cl.CommandQueue, kernel: cl.Kernel, global_size: int, local_size: int | None, *args: Any,
+           wait_for: Sequence[cl.Event] | None = None) -> cl.Event:
     """Set `args` and enqueue a 1-D launch (serialised: kernels hold their args)."""
     with _lock:
         kernel.set_args(*args)
@@ -489,7 +678,7 @@ def launch(queue, kernel: cl.Kernel, global_size: int, local_size: int | None, *
 # --------------------------------------------------------------------------
 # memory
 
-def allocator(queue: cl.CommandQueue):
+def allocator(queue: cl.CommandQueue) -> cl.tools.MemoryPool:
     """A memory pool for the queue: repeated calls reuse device buffers."""
     state = _state(queue.context)
     with _lock:
@@ -507,7 +696,7 @@ def free_pools() -> None:
                 pool.free_held()
 
 
-def check_alloc(queue, nbytes: int, what: str) -> None:
+def check_alloc(queue: cl.CommandQueue, nbytes: int, what: str) -> None:
     """DeviceError if one buffer of `nbytes` exceeds the device's max single allocation."""
     limit = capabilities(queue).max_alloc_bytes
     if nbytes > limit:
@@ -516,9 +705,9 @@ def check_alloc(queue, nbytes: int, what: str) -> None:
             f"of {limit} bytes on {describe(queue.device)}")
 
 
-def empty(queue, shape, dtype, what: str) -> cla.Array:
+def empty(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLike, what: str) -> cla.Array:
     """A device array from the pool, after check_alloc; DeviceError if the driver refuses."""
-    shape = (shape,) if np.isscalar(shape) else tuple(shape)
+    shape = (int(shape),) if isinstance(shape, (int, np.integer)) else tuple(shape)
     dtype = np.dtype(dtype)
     nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     check_alloc(queue, nbytes, what)
@@ -528,14 +717,15 @@ def empty(queue, shape, dtype, what: str) -> cla.Array:
         raise DeviceError(f"{what}: allocating {nbytes} bytes on {describe(queue.device)} failed: {e}") from e
 
 
-def fill_zero(queue, a: cla.Array) -> cla.Array:
+def fill_zero(queue: cl.CommandQueue, a: cla.Array) -> cla.Array:
     """Zero a device array's bytes with clEnqueueFillBuffer (pyopencl's
     Array.fill would build a kernel of its own)."""
     if a.nbytes:
-        cl.enqueue_fill_buffer(queue, a.base_data, np.zeros(1, np.uint8), a.offset, a.nbytes)
+        cl.enqueue_fill_buffer(queue, a.base_data,  # type: ignore[arg-type]  # a Buffer: a.nbytes > 0
+                               np.zeros(1, np.uint8), a.offset, a.nbytes)
     return a
 
 
-def zeros(queue, shape, dtype, what: str) -> cla.Array:
+def zeros(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLike, what: str) -> cla.Array:
     """empty(), zeroed."""
     return fill_zero(queue, empty(queue, shape, dtype, what))

@@ -43,10 +43,12 @@ import os
 import re
 import struct
 import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from .errors import DataError
 from .io import load_npy
@@ -91,7 +93,8 @@ class Volume:
 FORMATS = (".raw", ".npy", ".nii", ".nii.gz")
 
 
-def read_volume(path, *, shape=None, dtype=None, volume_index: int | None = None) -> Volume:
+def read_volume(path: str | os.PathLike[str], *, shape: Sequence[int] | None = None,
+                dtype: npt.DTypeLike | None = None, volume_index: int | None = None) -> Volume:
     """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``; see the
     module docstring).
 

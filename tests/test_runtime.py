@@ -2,8 +2,10 @@
 
 import os
 import re
+import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +17,7 @@ import clvis
 from clvis import runtime
 
 PROBE = str(Path(__file__).parent / "kernels" / "probe.cl")
+REPO = Path(__file__).resolve().parent.parent
 
 
 def test_some_device_found():
@@ -122,6 +125,123 @@ def test_bad_define_name(device):
     with pytest.raises(ValueError, match="not a C identifier"):
         runtime.get_kernel(runtime.queue_for(device), "primitives/scan.cl", "scan_reduce",
                            {"T=int -DX": 1})
+
+
+@pytest.mark.parametrize("value", ["1 -DX=2", "a b", '"x"', "x\\", "", "a=b", float("nan"), None, [1]])
+def test_bad_define_value(device, value):
+    with pytest.raises(ValueError, match="define FOO"):
+        runtime.build_options(device, {"FOO": value})
+
+
+def test_define_values(device):
+    opts = runtime.build_options(device, {"A": 3, "B": "uint", "C": "(1<<4)", "D": 1.5, "E": True,
+                                          "F": np.int64(-2)})
+    assert {"-DA=3", "-DB=uint", "-DC=(1<<4)", "-DD=1.5", "-DE=1", "-DF=-2"} <= set(opts)
+
+
+def _copy_package(root):
+    """clvis/ and kernels_cl/ copied under `root`, as a checkout there would have them."""
+    ignore = shutil.ignore_patterns("__pycache__")
+    shutil.copytree(REPO / "clvis", root / "clvis", ignore=ignore)
+    shutil.copytree(REPO / "kernels_cl", root / "kernels_cl", ignore=ignore)
+
+
+def test_package_in_path_with_space(device, tmp_path):
+    """Kernels build when the package's path has a space: once from a working
+    directory beside it (a relative -I path) and once from one whose relative
+    path has a space too (the compiler runs from the include folder)."""
+    root = tmp_path / "with space" / "src dir"
+    _copy_package(root)
+    elsewhere = tmp_path / "other dir"
+    elsewhere.mkdir()
+    index = [runtime.describe(d) for d in runtime.devices()].index(runtime.describe(device))
+    code = ("import os, numpy as np, clvis\n"
+            "assert clvis.__file__.startswith(os.environ['PYTHONPATH']), clvis.__file__\n"
+            "cwd = os.getcwd()\n"
+            "x = np.arange(1000, dtype=np.int32)\n"
+            "assert (clvis.scan(x) == np.cumsum(x) - x).all()\n"
+            "assert os.getcwd() == cwd\n"
+            "print(clvis.runtime.build_options(clvis.default_queue().device, {})[1])\n")
+    env = dict(os.environ, PYTHONPATH=str(root), CLVIS_DEVICE=str(index))
+    for cwd, include in ((root, "kernels_cl/include"), (elsewhere, ".")):
+        out = subprocess.run([sys.executable, "-c", code], env=env, cwd=cwd, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        assert out.stdout.strip() == include
+
+
+@pytest.mark.parametrize("var, value", [("CLVIS_TUNING", "tpu"), ("CLVIS_MAX_ALLOC", "abc"),
+                                        ("CLVIS_MAX_ALLOC", "-5"), ("CLVIS_NO_INT64_ATOMICS", "maybe")])
+def test_bad_environment_warns(var, value):
+    """A bad variable never stops clvis from importing: a ClvisWarning names it
+    and what it accepts, and the default applies."""
+    code = ("import clvis\n"
+            "o = clvis.runtime.options()\n"
+            "print(o.tuning, o.int64_atomics, o.max_alloc_bytes)\n")
+    env = dict(os.environ, **{var: value})
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "None True None"
+    assert "ClvisWarning" in out.stderr and f"{var}={value!r} is ignored: expected" in out.stderr
+
+
+def test_environment_sizes():
+    code = "import clvis; print(clvis.runtime.options().max_alloc_bytes)"
+    for value, expected in (("4096", "4096"), (" 2e9 ", "2000000000")):
+        env = dict(os.environ, CLVIS_MAX_ALLOC=value)
+        out = subprocess.run([sys.executable, "-W", "error", "-c", code], env=env, capture_output=True,
+                             text=True)
+        assert out.returncode == 0, out.stderr
+        assert out.stdout.strip() == expected
+
+
+def test_options_from_strings():
+    with runtime.configure(max_alloc_bytes="5", int64_atomics="false", tuning=" GPU") as o:
+        assert (o.max_alloc_bytes, o.int64_atomics, o.tuning) == (5, False, "gpu")
+    for bad in ("abc", "-5", 0, 1.5, True, [5]):
+        with pytest.raises(ValueError, match="max_alloc_bytes"):
+            runtime.set_options(max_alloc_bytes=bad)
+    with pytest.raises(ValueError, match="int64_atomics"):
+        runtime.set_options(int64_atomics="maybe")
+    with pytest.raises(ValueError, match="tuning"):
+        runtime.set_options(tuning="tpu")
+    assert runtime.options() == runtime.Options()
+
+
+def _pyopencl_cache(device, tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    ctx = runtime.queue_for(device).context
+    cache = runtime._pyopencl_cache_dir(ctx)
+    if cache is None:
+        pytest.skip("the driver caches its builds itself: pyopencl's cache is not used")
+    cache.mkdir(parents=True)
+    return ctx, cache
+
+
+def test_stale_cache_lock(device, tmp_path, monkeypatch):
+    """A lock older than pyopencl's one-minute wait is reported at once, naming the file."""
+    ctx, cache = _pyopencl_cache(device, tmp_path, monkeypatch)
+    lock = cache / "lock"
+    lock.touch()
+    old = time.time() - 120
+    os.utime(lock, (old, old))
+    with pytest.raises(clvis.KernelBuildError, match="delete that file") as info:
+        runtime.get_program(ctx, "primitives/scan.cl", {"T": "int", "UNIQUE": time.time_ns()})
+    assert str(lock) in str(info.value)
+
+
+def test_cache_failure_reported(device, tmp_path, monkeypatch):
+    """What pyopencl raises after waiting a minute on a fresh lock (a bare
+    KeyError) becomes a KernelBuildError naming the lock."""
+    ctx, cache = _pyopencl_cache(device, tmp_path, monkeypatch)
+    (cache / "lock").touch()
+
+    def build(self, *args, **kwargs):
+        raise KeyError("PYOPENCL_CACHE_FAILURE_FATAL")
+
+    monkeypatch.setattr(cl.Program, "build", build)
+    with pytest.raises(clvis.KernelBuildError, match="locked by") as info:
+        runtime.get_program(ctx, "primitives/scan.cl", {"T": "int", "UNIQUE": time.time_ns()})
+    assert str(cache / "lock") in str(info.value)
 
 
 def test_program_cache(device):

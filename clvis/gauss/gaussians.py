@@ -9,9 +9,12 @@ maps to a colour (and an opacity factor).
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import DataError
 
@@ -51,7 +54,8 @@ class Gaussians:
     opacities : (N,), optional, in [0, 1] (1 when omitted).
     """
 
-    def __init__(self, means, scales, rotations=None, values=None, opacities=None):
+    def __init__(self, means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike | None = None,
+                 values: npt.ArrayLike | None = None, opacities: npt.ArrayLike | None = None) -> None:
         self.means = _real("means", means, (3,), None)
         n = len(self.means)
         self.scales = _real("scales", scales, (3,), n)
@@ -101,12 +105,12 @@ class Gaussians:
         m = self.means.astype(np.float64)
         return (m - half).min(axis=0), (m + half).max(axis=0)
 
-    def subset(self, index) -> Gaussians:
+    def subset(self, index: npt.ArrayLike | slice) -> Gaussians:
         return Gaussians(self.means[index], self.scales[index], self.rotations[index],
                          self.values[index], self.opacities[index])
 
     @staticmethod
-    def concatenate(parts) -> Gaussians:
+    def concatenate(parts: Iterable[Gaussians]) -> Gaussians:
         parts = list(parts)
         if not parts:
             return Gaussians(np.zeros((0, 3)), np.zeros((0, 3)))
@@ -115,13 +119,13 @@ class Gaussians:
                          cat([p.rotations for p in parts]), cat([p.values for p in parts]),
                          cat([p.opacities for p in parts]))
 
-    def save(self, path) -> None:
+    def save(self, path: str | os.PathLike[str]) -> None:
         """Write a .npz (means, scales, rotations, values, opacities)."""
         np.savez(path, means=self.means, scales=self.scales, rotations=self.rotations,
                  values=self.values, opacities=self.opacities)
 
     @classmethod
-    def load(cls, path) -> Gaussians:
+    def load(cls, path: str | os.PathLike[str]) -> Gaussians:
         """Read a .npz written by :meth:`save`; DataError naming the file when malformed."""
         from ..io import load_npz
 

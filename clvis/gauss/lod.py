@@ -27,8 +27,11 @@ so the results equal ``clvis.reference.gauss.lod`` bit for bit.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+import pyopencl as cl
 
 from .. import runtime
 from .._arrays import resolve_queue
@@ -133,8 +136,10 @@ def _empty_gaussians() -> Gaussians:
                      values=np.zeros(0, np.float32))
 
 
-def gaussians_from_volume(volume_or_sparse, lod: str = "medium", threshold=None, mask=None,
-                          spacing=None, origin=None, queue=None) -> Gaussians:
+def gaussians_from_volume(volume_or_sparse: SparseVolume | Any, lod: str = "medium",
+                          threshold: float | None = None, mask: Any = None,
+                          spacing: Sequence[float] | None = None, origin: Sequence[float] | None = None,
+                          queue: cl.CommandQueue | None = None) -> Gaussians:
     """The Gaussians of a volume at level of detail `lod` ("low", "medium" or "high").
 
     volume_or_sparse: a [Z, Y, X] numpy volume (made sparse with

@@ -8,6 +8,8 @@ nearest neighbours (hole filling for terrain scans; scipy's cKDTree).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..errors import DataError
@@ -47,8 +49,9 @@ def frames_along(directions) -> np.ndarray:
     return np.stack([a, b, c], axis=2).astype(np.float32)
 
 
-def gaussians_from_points(cloud, *, velocity=None, stretch: float = 250.0, scale=None, k: int = 4,
-                          values=None, opacity=1.0) -> Gaussians:
+def gaussians_from_points(cloud: PointCloud | Any, *, velocity: Any = None, stretch: float = 250.0,
+                          scale: Any = None, k: int = 4, values: Any = None,
+                          opacity: Any = 1.0) -> Gaussians:
     """Gaussians for the points of `cloud` (a clvis.PointCloud or (N, 3) positions).
 
     velocity : (N, 3), ``"cloud"`` (the cloud's own velocity) or None.

@@ -23,9 +23,11 @@ below 0.5, +inf where T never got there.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import pyopencl as cl
 
 from .. import runtime
 from .._arrays import nonnegative_int, positive_int, resolve_queue
@@ -64,7 +66,7 @@ class GaussianImage:
     rounds: np.ndarray
     stats: dict = field(default_factory=dict)
 
-    def to_uint8(self, background=(0.0, 0.0, 0.0)) -> np.ndarray:
+    def to_uint8(self, background: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
         """(H, W, 3) uint8 over a background colour (components in [0, 1])."""
         bg = np.asarray(background, np.float32).reshape(1, 1, 3)
         rgb = self.rgba[..., :3] + (1 - self.rgba[..., 3:4]) * bg
@@ -103,7 +105,7 @@ class GaussianRenderer:
 
     def __init__(self, gaussians: Gaussians, transfer_function: TransferFunction | None = None,
                  model: str = "max_response", k: int | None = None, cutoff: float = 3.0,
-                 density: float = 1.0, queue=None):
+                 density: float = 1.0, queue: cl.CommandQueue | None = None) -> None:
         if not isinstance(gaussians, Gaussians):
             raise TypeError(f"gaussians: expected clvis.Gaussians, got {type(gaussians).__name__}")
         if model not in MODELS:
@@ -160,8 +162,8 @@ class GaussianRenderer:
     def _buf(self, a):
         return a.base_data if a is not None and a.size else self._dummy.base_data
 
-    def render(self, camera: Camera, width: int, height: int, *, transfer_function=None,
-               host: bool = True) -> GaussianImage:
+    def render(self, camera: Camera, width: int, height: int, *,
+               transfer_function: TransferFunction | None = None, host: bool = True) -> GaussianImage:
         """One frame; see the module doc for what the planes hold.
 
         host=False leaves ``rgba`` and ``depth`` on the device (pyopencl
@@ -217,7 +219,8 @@ class GaussianRenderer:
 
 def render_gaussians(gaussians: Gaussians, camera: Camera, width: int, height: int, *,
                      transfer_function: TransferFunction | None = None, model: str = "max_response",
-                     k: int | None = None, cutoff: float = 3.0, density: float = 1.0, queue=None) -> GaussianImage:
+                     k: int | None = None, cutoff: float = 3.0, density: float = 1.0,
+                     queue: cl.CommandQueue | None = None) -> GaussianImage:
     """One frame of `gaussians`: a :class:`GaussianRenderer` and its ``render``."""
     r = GaussianRenderer(gaussians, transfer_function, model=model, k=k, cutoff=cutoff, density=density,
                          queue=queue)

@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -87,7 +89,9 @@ class SparseVolume:
     takes the fields above and checks them.
     """
 
-    def __init__(self, shape, spacing, origin, coords, masks, tiles, tile_values, values):
+    def __init__(self, shape: Sequence[int], spacing: Sequence[float], origin: Sequence[float],
+                 coords: np.ndarray, masks: np.ndarray, tiles: np.ndarray, tile_values: np.ndarray,
+                 values: np.ndarray) -> None:
         shape = tuple(int(s) for s in shape)
         if len(shape) != 3 or min(shape) < 0 or max(shape) > _MAX_SIDE:
             raise ValueError(f"shape: expected 3 sizes in [0, {_MAX_SIDE}], got {shape}")
@@ -214,8 +218,9 @@ class SparseVolume:
 
     # ------------------------------------------------------------------
     @classmethod
-    def from_dense(cls, volume, threshold=None, mask=None, spacing=(1.0, 1.0, 1.0),
-                   origin=(0.0, 0.0, 0.0)) -> SparseVolume:
+    def from_dense(cls, volume: Any, threshold: float | None = None, mask: Any = None,
+                   spacing: Sequence[float] = (1.0, 1.0, 1.0),
+                   origin: Sequence[float] = (0.0, 0.0, 0.0)) -> SparseVolume:
         """The sparse layout of a [Z, Y, X] volume (any real dtype, stored as float32).
 
         Active voxels: ``volume > threshold`` (NaN is never above it), or
@@ -314,7 +319,7 @@ def _tinyvdb():
     return tinyvdb
 
 
-def read_vdb(path, grid=None) -> SparseVolume:
+def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> SparseVolume:
     """The active voxels of a float grid of an OpenVDB file, as a SparseVolume.
 
     grid: the grid's name, or its index in the file; default: the first float

@@ -25,9 +25,12 @@ The rules (rays, dual grid, root finding, shading) are clvis.reference.iso's.
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import pyopencl as cl
 
 from .. import runtime
 from .._arrays import positive_int, resolve_queue
@@ -83,8 +86,9 @@ class IsoRenderer:
         cache grows when a pass needs more.
     """
 
-    def __init__(self, volume_or_zfp, rate: int = 8, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0), *,
-                 cache_capacity=None, queue=None):
+    def __init__(self, volume_or_zfp: ZfpVolume | Any, rate: int = 8,
+                 spacing: Sequence[float] = (1.0, 1.0, 1.0), origin: Sequence[float] = (0.0, 0.0, 0.0), *,
+                 cache_capacity: int | None = None, queue: cl.CommandQueue | None = None) -> None:
         self.queue = q = resolve_queue(queue)
         zv = volume_or_zfp if isinstance(volume_or_zfp, ZfpVolume) else compress(volume_or_zfp, rate)
         if min(zv.shape) < 2:
@@ -96,10 +100,10 @@ class IsoRenderer:
         self.cache = BlockCache(zv, cache_capacity, queue=q)
 
     @property
-    def shape(self):
+    def shape(self) -> tuple[int, int, int]:
         return self.volume.shape
 
-    def reset_cache(self, capacity=None) -> None:
+    def reset_cache(self, capacity: int | None = None) -> None:
         """Start over with an empty block cache (a cold start, e.g. for timings)."""
         self.cache = BlockCache(self.volume, capacity, queue=self.queue)
 
@@ -113,7 +117,7 @@ class IsoRenderer:
         return last()
 
     def passes(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
-               speculation: bool = True, start_speculation: int = 1):
+               speculation: bool = True, start_speculation: int = 1) -> Iterator[IsoImage]:
         """Yield the partial image after each pass (see the module doc)."""
         for image in self._run(camera, width, height, isovalue, completion, speculation, start_speculation):
             yield image()

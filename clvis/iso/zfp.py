@@ -29,8 +29,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
 
 from .. import runtime
 from .._arrays import is_device, nonnegative_int, resolve_queue, result
@@ -97,7 +101,7 @@ def _grid(shape) -> tuple[int, int, int]:
     return tuple(-(-d // 4) for d in shape)
 
 
-def expected_nbytes(shape, rate) -> int:
+def expected_nbytes(shape: Sequence[int], rate: int) -> int:
     """The exact byte length of a headerless fixed-rate stream of a float32
     volume of `shape` ([Z, Y, X]) at `rate`: 8 rate bytes per 4^3 block."""
     shape, rate = _check_shape(shape), _check_rate(rate)
@@ -176,14 +180,14 @@ class ZfpVolume:
             raise ValueError(f"block_id: {block_id} is outside [0, {self.nblocks})")
         return (4 * (block_id // (nbx * nby)), 4 * (block_id // nbx % nby), 4 * (block_id % nbx))
 
-    def to_device(self, queue=None):
+    def to_device(self, queue: cl.CommandQueue | None = None) -> cla.Array:
         """The stream on the device: a uint64 ``pyopencl.array.Array`` of its
         words, which :func:`decode` and :func:`decode_blocks` take in place of
         the bytes."""
         q = resolve_queue(queue)
         return _upload(q, self.stream)
 
-    def decode(self, *, queue=None, host: bool = True):
+    def decode(self, *, queue: cl.CommandQueue | None = None, host: bool = True) -> np.ndarray | cla.Array:
         """:func:`decode` of this volume."""
         return decode(self, queue=queue, host=host)
 
@@ -191,7 +195,7 @@ class ZfpVolume:
         return f"ZfpVolume(shape={self.shape}, rate={self.rate}, nbytes={self.nbytes})"
 
 
-def compress(volume, rate) -> ZfpVolume:
+def compress(volume: Any, rate: int) -> ZfpVolume:
     """Compress a 3-D volume ([Z, Y, X]) with zfp at a fixed integer `rate`
     (bits per value, 1..32). float32 is compressed as it is; float64, float16
     and integer volumes are converted to float32 first. A non-finite value
@@ -276,7 +280,9 @@ def _stream_buffer(queue, stream):
     return _upload(queue, stream).base_data
 
 
-def decode(stream_or_zfpvolume, shape=None, rate=None, *, queue=None, host: bool = True):
+def decode(stream_or_zfpvolume: ZfpVolume | Any, shape: Sequence[int] | None = None,
+           rate: int | None = None, *, queue: cl.CommandQueue | None = None,
+           host: bool = True) -> np.ndarray | cla.Array:
     """The float32 volume of `shape` ([Z, Y, X]) in a headerless zfp
     fixed-rate stream, decoded on the device bit for bit as zfp does.
 
@@ -298,7 +304,9 @@ def decode(stream_or_zfpvolume, shape=None, rate=None, *, queue=None, host: bool
     return result(out, host)
 
 
-def decode_blocks(stream_or_zfpvolume, ids, shape=None, rate=None, *, queue=None, host: bool = False):
+def decode_blocks(stream_or_zfpvolume: ZfpVolume | Any, ids: Any, shape: Sequence[int] | None = None,
+                  rate: int | None = None, *, queue: cl.CommandQueue | None = None,
+                  host: bool = False) -> np.ndarray | cla.Array:
     """Blocks `ids` of a stream as bricks: a (len(ids), 64) float32 array,
     row j block ids[j] (x-fastest block order, :meth:`ZfpVolume.block_id`),
     value i of a row voxel (x, y, z) of the block with i = x + 4 y + 16 z

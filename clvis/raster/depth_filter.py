@@ -19,8 +19,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
 
 from .. import runtime
 from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device
@@ -58,7 +62,7 @@ PROFILES = {
 _MAX_SIDE = 2**32 - 1
 
 
-def level_shapes(shape, levels: int) -> list[tuple[int, int]]:
+def level_shapes(shape: Sequence[int], levels: int) -> list[tuple[int, int]]:
     """[(H0, W0), ... (HL, WL)]: each level ceil(H/2) x ceil(W/2) of the one before."""
     h, w = (int(s) for s in shape)
     out = [(h, w)]
@@ -94,8 +98,9 @@ def _real(name, value, low, what):
     return np.float32(f)
 
 
-def depth_filter_mask(depth, levels: int = LEVELS, filter_strength: float = FILTER_STRENGTH, *,
-                      edge_threshold: float = EDGE_THRESHOLD, queue=None):
+def depth_filter_mask(depth: Any, levels: int = LEVELS, filter_strength: float = FILTER_STRENGTH, *,
+                      edge_threshold: float = EDGE_THRESHOLD,
+                      queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
     """Which pixels of a one-pixel-per-point depth image to keep.
 
     depth: H x W float32, +inf where no point landed; every other value must
@@ -165,7 +170,8 @@ def depth_filter_mask(depth, levels: int = LEVELS, filter_strength: float = FILT
     return keep.get().view(np.bool_) if host else keep
 
 
-def rgbda(rgba, depth, keep, *, queue=None):
+def rgbda(rgba: Any, depth: Any, keep: Any, *,
+          queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
     """The filtered RGBDA image: H x W x 5 float32 [r, g, b, depth, alpha].
 
     rgba: H x W x C uint8 (C = 3 or 4; the first three channels are used);
@@ -216,9 +222,10 @@ class FilteredImage:
     rgbda: np.ndarray
 
 
-def depth_filter(gbuffers_or_depth, levels: int = LEVELS,
+def depth_filter(gbuffers_or_depth: GBuffers | Any, levels: int = LEVELS,
                  filter_strength: float = FILTER_STRENGTH, *,
-                 edge_threshold: float = EDGE_THRESHOLD, queue=None) -> FilteredImage:
+                 edge_threshold: float = EDGE_THRESHOLD,
+                 queue: cl.CommandQueue | None = None) -> FilteredImage:
     """Remove background points seen through holes in the foreground (the
     hierarchical min-pool filter of Vanherck, Zoomers et al. 2025; the rules
     are in ``clvis.reference.raster.depth_filter``). gbuffers_or_depth: a

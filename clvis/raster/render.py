@@ -32,6 +32,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import pyopencl as cl
@@ -40,7 +42,7 @@ import pyopencl.array as cla
 from .. import colormap as _colormap
 from .. import morton, runtime
 from .._arrays import check_array, is_device, resolve_queue
-from ..camera import CAMERA_DTYPE, camera_buffer  # noqa: F401  (re-exported)
+from ..camera import CAMERA_DTYPE, Camera, camera_buffer  # noqa: F401  (re-exported)
 from ..errors import DeviceError
 from ..primitives import radix_sort
 
@@ -217,8 +219,10 @@ class Rasterizer:
     them, so the result does not depend on the order.
     """
 
-    def __init__(self, cloud_or_positions, *, colors=None, attributes=None, velocity=None,
-                 radius=None, morton: bool = True, batch_size: int = BATCH_SIZE, queue=None):
+    def __init__(self, cloud_or_positions: Any, *, colors: Any = None,
+                 attributes: Mapping[str, Any] | None = None, velocity: Any = None, radius: Any = None,
+                 morton: bool = True, batch_size: int = BATCH_SIZE,
+                 queue: cl.CommandQueue | None = None) -> None:
         if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) \
                 or not 1 <= batch_size <= 1 << 24:
             raise ValueError(f"batch_size: expected an int in [1, 2^24], got {batch_size!r}")
@@ -277,7 +281,7 @@ class Rasterizer:
         width, height = _check_size(width, height)
         return cam, near, far, width, height
 
-    def visibility(self, camera, width: int, height: int) -> tuple[cla.Array, cla.Array]:
+    def visibility(self, camera: Camera, width: int, height: int) -> tuple[cla.Array, cla.Array]:
         """Run the render pass only: the (H, W) uint64 visibility buffer
         (``dkey << 32 | index``, all ones where empty) and the per-batch
         drawn flags (uint8), both on the device."""
@@ -354,9 +358,9 @@ class Rasterizer:
             stride, offset = 1, 0
         return 2, src, stride, offset, lut, lut.shape[0], np.float32(vmin), scale
 
-    def render(self, camera, width: int, height: int, *, color_by: str | None = None,
-               colormap: str = "viridis", value_range=None, soft_z=None,
-               host: bool = True) -> GBuffers:
+    def render(self, camera: Camera, width: int, height: int, *, color_by: str | None = None,
+               colormap: str = "viridis", value_range: tuple[float, float] | None = None,
+               soft_z: bool | float | None = None, host: bool = True) -> GBuffers:
         """Render and resolve one view; numpy G-buffers (host=False: the planes
         stay on the device as ``pyopencl.array.Array``, nothing is read back,
         and stats is empty).
@@ -475,7 +479,7 @@ def _gbuffers(out, f32_names, u8_names, get) -> GBuffers:
                     vel_speed=g(out["speed"]), radius_px=g(out["radius"]))
 
 
-def morton_order(positions, *, queue=None):
+def morton_order(positions: Any, *, queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
     """The permutation that sorts points along a 30-bit Morton curve over
     their finite bounding box (10 bits per axis; ties keep input order;
     points with a NaN or infinite coordinate last). positions: float32 (N, 3).
@@ -514,10 +518,11 @@ def morton_order(positions, *, queue=None):
     return perm.get() if host else perm
 
 
-def rasterize(cloud_or_positions, camera, width: int, height: int, *, colors=None,
-              attributes=None, velocity=None, radius=None, soft_z=None, color_by=None,
-              colormap: str = "viridis", value_range=None, morton: bool = False,
-              batch_size: int = BATCH_SIZE, queue=None) -> GBuffers:
+def rasterize(cloud_or_positions: Any, camera: Camera, width: int, height: int, *, colors: Any = None,
+              attributes: Mapping[str, Any] | None = None, velocity: Any = None, radius: Any = None,
+              soft_z: bool | float | None = None, color_by: str | None = None,
+              colormap: str = "viridis", value_range: tuple[float, float] | None = None, morton: bool = False,
+              batch_size: int = BATCH_SIZE, queue: cl.CommandQueue | None = None) -> GBuffers:
     """Render and resolve one view of a point cloud: :class:`Rasterizer`
     (``cloud_or_positions``, colors, attributes, velocity, radius, morton,
     batch_size) followed by its ``render`` (camera, size, color_by, colormap,

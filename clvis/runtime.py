@@ -288,7 +288,7 @@ def select_device(spec: str | int | None = None) -> cl.Device:
     if not found:
         raise DeviceError(
             "no OpenCL device found: install a driver, e.g. PoCL with "
-            "pip install 'pyopencl[pocl]' (or clvis[pocl])")
+            "pip install 'pyopencl[pocl]' (or pip install \".[pocl]\" in a clvis checkout)")
     for d in found:
         if _device_type(d) == "GPU":
             return d

@@ -11,7 +11,7 @@ Formats, chosen by the file name (case-insensitive):
   must be exactly Z * Y * X * itemsize bytes.
 - ``.npy``: a 3-D array of real numbers, taken as [z, y, x].
 - ``.nii``, ``.nii.gz``: NIfTI-1/2 through nibabel (an optional dependency:
-  ``pip install clvis[nifti]``). NIfTI's data array is indexed [i, j, k] with
+  ``pip install ".[nifti]"`` from a clvis checkout, or ``pip install nibabel``). NIfTI's data array is indexed [i, j, k] with
   i the fastest on disk; it is transposed to [k, j, i] = [z, y, x]. Trailing
   axes of size 1 (a 3-D image stored as 4-D) are dropped. A 4-D image (a time
   series) needs ``volume_index`` to pick one volume; only that volume is read.
@@ -210,7 +210,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
     try:
         import nibabel
     except ImportError:
-        raise ImportError(f"reading {path.name} (NIfTI) needs nibabel: pip install clvis[nifti]") from None
+        raise ImportError(f"reading {path.name} (NIfTI) needs nibabel: pip install \".[nifti]\" in a clvis checkout (or pip install nibabel)") from None
     from nibabel.filebasedimages import ImageFileError
     from nibabel.spatialimages import HeaderDataError
     # what nibabel raises on malformed headers and data (OverflowError: an infinite

@@ -12,7 +12,7 @@ sample [z, y, x] sits at world position (x*dx, y*dy, z*dz) + origin, origin
 being (ox, oy, oz) (DESIGN.md).
 
 :func:`read_vdb` reads a float grid of an OpenVDB file into this layout
-through the optional ``tinyvdb`` package (``pip install clvis[vdb]``).
+through the optional ``tinyvdb`` package (``pip install ".[vdb]"`` from a clvis checkout, or ``pip install tinyvdb``).
 """
 
 from __future__ import annotations
@@ -315,7 +315,7 @@ def _tinyvdb():
     try:
         import tinyvdb
     except ImportError as e:
-        raise ImportError("read_vdb needs the tinyvdb package: pip install clvis[vdb]") from e
+        raise ImportError("read_vdb needs the tinyvdb package: pip install \".[vdb]\" in a clvis checkout (or pip install tinyvdb)") from e
     return tinyvdb
 
 

@@ -460,7 +460,7 @@ def test_cubic_first_zero_on_many_random_cells():
     rows = np.nonzero(has_change)[0]
     assert (root[rows] <= s[rows, first[rows]] + 1e-12).all()
     assert (root[rows] >= s[rows, first[rows] - 1] - 1e-12).all()
-    assert np.abs(iso._horner(tuple(x[found] for x in c), root[found])).max() < 1e-12
+    assert np.abs(iso.raytrace._horner(tuple(x[found] for x in c), root[found])).max() < 1e-12
 
 
 # ---------------------------------------------------------------------------

@@ -29,6 +29,12 @@ Options (:func:`configure`, or the environment at import):
   paths can be tested on devices that have them (``CLVIS_NO_INT64_ATOMICS=1``).
 - ``max_alloc_bytes``: a cap on one allocation, below the device's own limit,
   to emulate a smaller device (``CLVIS_MAX_ALLOC``).
+
+A renderer captures the options once (:func:`capture`) and runs under them
+(:func:`pinned`, per thread), so changing them applies to the next renderer.
+The launch layer at the end of this module (:func:`local_size`, :func:`items`,
+:func:`fill`, :func:`arg`, :data:`EXACT_FP`, :func:`seconds`) is what every
+family sizes, fills and times its launches with.
 """
 
 from __future__ import annotations

@@ -322,7 +322,7 @@ class Rasterizer:
 
     def _camera_device(self, cam):
         d = runtime.empty(self.queue, cam.size, np.float32, "camera")
-        d.set(cam, queue=self.queue)
+        d.set(cam, queue=self.queue, async_=True)     # no wait for earlier renders (host=False)
         return d
 
     def _lut(self, name):

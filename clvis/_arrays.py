@@ -93,9 +93,8 @@ def to_device(queue: cl.CommandQueue, name: str, x: Any) -> cla.Array:
     return d
 
 
-def buf(a: cla.Array) -> cl.MemoryObjectHolder | cl.SVMPointer | None:
-    """The cl.Buffer behind a device array (None for an empty array)."""
-    return a.base_data if a.size else None
+# the cl.Buffer behind a device array (None for an empty array)
+buf = runtime.arg
 
 
 def result(a: cla.Array, host: bool) -> np.ndarray | cla.Array:
@@ -134,3 +133,24 @@ def real_array(name: str, a: npt.ArrayLike) -> np.ndarray:
     if a.dtype == np.bool_ or a.dtype.kind not in "iuf":
         raise TypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
     return a
+
+
+def triple(name: str, v, positive: bool) -> tuple[float, float, float]:
+    """v as 3 floats, each finite as float32 (and > 0 with `positive`):
+    TypeError naming `name` for a string or a non-sequence, ValueError for
+    another length or a bad value."""
+    if isinstance(v, (str, bytes)):
+        raise TypeError(f"{name}: expected 3 numbers, got {type(v).__name__}")
+    try:
+        t = tuple(float(x) for x in v)
+    except TypeError:
+        raise TypeError(f"{name}: expected 3 numbers, got {type(v).__name__}") from None
+    if len(t) != 3:
+        raise ValueError(f"{name}: expected 3 numbers, got {len(t)}")
+    with np.errstate(over="ignore"):        # overflow is what the check reports
+        f32 = np.asarray(t, np.float32)
+    if not np.isfinite(f32).all():
+        raise ValueError(f"{name}: {t} is not finite as float32")
+    if positive and not (f32 > 0).all():
+        raise ValueError(f"{name}: {t} must be > 0 on every axis")
+    return t

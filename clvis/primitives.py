@@ -68,10 +68,7 @@ def _shape(queue, family: str) -> tuple[dict, int]:
     prof = PROFILES[runtime.tuning_profile(queue)]
     caps = runtime.capabilities(queue)
     shape = dict(prof[family])
-    wg = shape["WG"]
-    while wg > 1 and wg > caps.max_work_group_size:
-        wg //= 2
-    shape["WG"] = wg
+    shape["WG"] = runtime.local_size(queue, shape["WG"])
     return shape, max(1, prof["groups_per_cu"] * caps.compute_units)
 
 

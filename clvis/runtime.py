@@ -35,6 +35,12 @@ of the environment.
   paths can be tested on devices that have them (``CLVIS_NO_INT64_ATOMICS=1``).
 - ``max_alloc_bytes``: a cap on one allocation, below the device's own limit,
   to emulate a smaller device (``CLVIS_MAX_ALLOC``).
+
+A renderer captures the options once (:func:`capture`) and runs under them
+(:func:`pinned`, per thread), so changing them applies to the next renderer.
+The launch layer at the end of this module (:func:`local_size`, :func:`items`,
+:func:`fill`, :func:`arg`, :data:`EXACT_FP`, :func:`seconds`) is what every
+family sizes, fills and times its launches with.
 """
 
 from __future__ import annotations
@@ -60,13 +66,17 @@ import pyopencl.tools
 from .errors import ClvisError, ClvisWarning, DeviceError, KernelBuildError
 
 __all__ = [
+    "EXACT_FP",
     "INCLUDE_DIR",
     "KERNEL_ROOT",
     "Capabilities",
+    "LaunchConfig",
     "Options",
     "allocator",
+    "arg",
     "build_options",
     "capabilities",
+    "capture",
     "check_alloc",
     "configure",
     "default_queue",
@@ -74,13 +84,20 @@ __all__ = [
     "device_slug",
     "devices",
     "empty",
+    "fill",
     "fill_zero",
     "free_pools",
     "get_kernel",
     "get_program",
+    "items",
     "launch",
+    "local_size",
+    "marker",
+    "nbytes",
     "options",
+    "pinned",
     "queue_for",
+    "seconds",
     "select_device",
     "set_default_device",
     "set_options",
@@ -321,13 +338,17 @@ _default: cl.CommandQueue | None = None
 
 
 def queue_for(device: cl.Device) -> cl.CommandQueue:
-    """clvis's in-order queue (and context) for `device`, made once."""
+    """clvis's in-order queue (and context) for `device`, made once, with
+    event profiling enabled (timings in stats come from it: :func:`seconds`)."""
     with _lock:
         q = _queues.get(device.int_ptr)
         if q is None:
             try:
                 ctx = cl.Context([device])
-                q = cl.CommandQueue(ctx, device)
+                try:
+                    q = cl.CommandQueue(ctx, device, properties=cl.command_queue_properties.PROFILING_ENABLE)
+                except cl.Error:        # a driver without profiling: stats' timings are then None
+                    q = cl.CommandQueue(ctx, device)
             except cl.Error as e:
                 raise DeviceError(f"cannot open {describe(device)}: {e}") from e
             _queues[device.int_ptr] = q
@@ -431,7 +452,7 @@ def capabilities(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) ->
     device) offers, as clvis sees it under the current options."""
     device = _as_device(obj if obj is not None else default_queue())
     caps = _native_capabilities(device)
-    o = _options
+    o = _in_force()
     if o.int64_atomics and o.max_alloc_bytes is None:
         return caps
     max_alloc = caps.max_alloc_bytes
@@ -443,8 +464,9 @@ def capabilities(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) ->
 
 def tuning_profile(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) -> str:
     """'cpu' or 'gpu': the work shapes the kernel families use on this device."""
-    if _options.tuning is not None:
-        return _options.tuning
+    tuning = _in_force().tuning
+    if tuning is not None:
+        return tuning
     device = _as_device(obj if obj is not None else default_queue())
     return "gpu" if _device_type(device) in ("GPU", "ACCELERATOR") else "cpu"
 
@@ -587,9 +609,9 @@ def _cache_failure(cache: Path, error: BaseException | None) -> str:
 
 
 def _build(context: cl.Context, path: Path, defines: Mapping[str, object],
-           flags: Sequence[str]) -> cl.Program:
+           opts: list[str]) -> cl.Program:
+    """Build `path` with `opts` (the options of the program cache's key, read once)."""
     device = context.devices[0]
-    opts = build_options(device, defines, flags)
     cache = _pyopencl_cache_dir(context)
     if cache is not None:
         with contextlib.suppress(OSError):
@@ -601,7 +623,7 @@ def _build(context: cl.Context, path: Path, defines: Mapping[str, object],
         # pyopencl turns each into a CompilerWarning. Failures raise below.
         warnings.simplefilter("ignore", cl.CompilerWarning)
         try:
-            prg.build(opts)
+            prg.build(opts)     # the options of the cache key, read once
         except cl.Error as e:
             log = ""
             with contextlib.suppress(Exception):
@@ -630,14 +652,15 @@ def get_program(context: cl.Context, relpath: str, defines: Mapping[str, object]
     of your own, built the same way) with `defines` and compiler `flags`, cached."""
     state = _state(context)
     device = context.devices[0]
-    key = (relpath, tuple(build_options(device, defines, flags)))
+    opts = build_options(device, defines, flags)
+    key = (relpath, tuple(opts))
     with _lock:
         prg = state.programs.get(key)
         if prg is None:
             path = KERNEL_ROOT / relpath
             if not path.is_file():
                 raise ClvisError(f"no kernel source {path}")
-            prg = state.programs[key] = _build(context, path, defines, flags)
+            prg = state.programs[key] = _build(context, path, defines, opts)
         return prg
 
 
@@ -718,14 +741,150 @@ def empty(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLi
 
 
 def fill_zero(queue: cl.CommandQueue, a: cla.Array) -> cla.Array:
-    """Zero a device array's bytes with clEnqueueFillBuffer (pyopencl's
-    Array.fill would build a kernel of its own)."""
-    if a.nbytes:
-        cl.enqueue_fill_buffer(queue, a.base_data,  # type: ignore[arg-type]  # a Buffer: a.nbytes > 0
-                               np.zeros(1, np.uint8), a.offset, a.nbytes)
-    return a
+    """Zero a device array's bytes: :func:`fill` with 0."""
+    return fill(queue, a, 0)
 
 
 def zeros(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLike, what: str) -> cla.Array:
     """empty(), zeroed."""
     return fill_zero(queue, empty(queue, shape, dtype, what))
+
+
+# --------------------------------------------------------------------------
+# the launch layer
+#
+# Every family sizes, fills and times its launches with these, and every
+# renderer runs under the options it captured (see LaunchConfig).
+
+# the compiler flags of the kernels whose float32 results the references
+# repeat exactly (each such kernel's ABI comment says so)
+EXACT_FP = ("-cl-fp32-correctly-rounded-divide-sqrt",)
+
+
+def local_size(queue, wanted: int) -> int:
+    """`wanted` work-items per group, halved until the queue's device allows
+    it (at least 1). Halving keeps a power of two a power of two: the work
+    shapes of the PROFILES tables are, and tiles (64 pixels of march.cl) are
+    multiples of them."""
+    wg = max(1, int(wanted))
+    limit = _native_capabilities(_as_device(queue)).max_work_group_size
+    while wg > 1 and wg > limit:
+        wg //= 2
+    return wg
+
+
+def items(queue, n: int, wg: int) -> tuple[int, int]:
+    """(global, local) sizes of a 1-D launch with one work-item per element
+    of `n`: local = local_size(queue, wg), global the next multiple of it.
+    n == 0 gives one group, not zero: an empty launch is invalid before
+    OpenCL 2.1, and every such kernel returns for items past its count."""
+    local = local_size(queue, wg)
+    return max(1, -(-int(n) // local)) * local, local
+
+
+def fill(queue: cl.CommandQueue, a: cla.Array, value: Any = 0, *, start: int = 0,
+         wait_for: Sequence[cl.Event] | None = None) -> cla.Array:
+    """Set the elements of device array `a` from element `start` on to
+    `value` (converted to a's dtype: np.float32(np.inf), -1, 0xFFFFFFFF, ...)
+    with clEnqueueFillBuffer (pyopencl's Array.fill would build a kernel of
+    its own). A pattern whose bytes are all equal (0, all ones) is sent as
+    one byte. Returns `a`."""
+    dtype = np.dtype(a.dtype)
+    off = int(start) * dtype.itemsize
+    nbytes = a.nbytes - off
+    if nbytes <= 0:
+        return a
+    if value == 0:
+        pattern = np.zeros(1, np.uint8)
+    else:
+        pattern = np.full(1, value, dtype).view(np.uint8)
+        if (pattern == pattern[0]).all():
+            pattern = pattern[:1].copy()
+    cl.enqueue_fill_buffer(queue, a.base_data,  # type: ignore[arg-type]  # a Buffer: nbytes > 0
+                           pattern, a.offset + off, nbytes, wait_for=wait_for)
+    return a
+
+
+def arg(a):
+    """A buffer argument that may be absent: None (a NULL pointer) for None
+    or an empty array, else the array's cl.Buffer. A cl.Buffer passes as is."""
+    if a is None or isinstance(a, cl.MemoryObjectHolder):
+        return a
+    return a.base_data if a.size else None
+
+
+def nbytes(*arrays) -> int:
+    """Device bytes of `arrays` (None counts 0): what a renderer's stats report
+    as allocated, from the arrays it holds rather than from a formula."""
+    return int(sum(a.nbytes for a in arrays if a is not None))
+
+
+# -- options captured per renderer ------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class LaunchConfig:
+    """What a renderer runs with, fixed when it is made (:func:`capture`):
+    the options then in force, and what they mean on its device (the tuning
+    profile, whether kernels are built with 64-bit atomics). Later
+    :func:`configure`/:func:`set_options` calls, in this thread or another,
+    apply to renderers made after them."""
+    options: Options
+    tuning: str
+    int64_atomics: bool
+
+
+def capture(queue) -> LaunchConfig:
+    """The options in force (in this thread, see :func:`pinned`) for `queue`'s device."""
+    o = _in_force()
+    device = _as_device(queue)
+    native = _native_capabilities(device)
+    tuning = o.tuning or ("gpu" if _device_type(device) in ("GPU", "ACCELERATOR") else "cpu")
+    return LaunchConfig(dataclasses.replace(o), tuning, bool(native.int64_atomics_native and o.int64_atomics))
+
+
+_pins = threading.local()
+
+
+def _in_force() -> Options:
+    """The options this thread runs under: its pinned ones, else the process's."""
+    pinned_cfg = getattr(_pins, "config", None)
+    return pinned_cfg.options if pinned_cfg is not None else _options
+
+
+@contextlib.contextmanager
+def pinned(config: LaunchConfig):
+    """Run the block (in this thread only) under `config`'s options, whatever
+    configure() does meanwhile: capabilities(), tuning_profile() and
+    get_kernel() (through build_options) follow it, so a renderer, and the
+    primitives it calls, never mixes kernels and buffers of two settings."""
+    saved = getattr(_pins, "config", None)
+    _pins.config = config
+    try:
+        yield config
+    finally:
+        _pins.config = saved
+
+
+# -- timings from event profiling --------------------------------------------
+
+def marker(queue) -> cl.Event:
+    """An event that completes when everything enqueued before it has: with
+    the event of a later command, :func:`seconds` of the commands between."""
+    return cl.enqueue_marker(queue)
+
+
+def seconds(first: cl.Event | None, last: cl.Event | None = None, *, wait: bool = True) -> float | None:
+    """Device seconds from the start of `first` to the end of `last` (default:
+    `first` alone), from OpenCL event profiling (clvis's queues enable it).
+    wait=False: None instead of waiting for `last` to complete. None too when
+    an event is missing or its queue was made without profiling."""
+    last = first if last is None else last
+    if first is None or last is None:
+        return None
+    if not wait and last.command_execution_status != cl.command_execution_status.COMPLETE:
+        return None
+    try:
+        last.wait()
+        return max(0, last.profile.end - first.profile.start) * 1e-9
+    except cl.Error:        # PROFILING_INFO_NOT_AVAILABLE: a queue of the caller's without profiling
+        return None

@@ -11,7 +11,10 @@ test_required_platforms fail when a named platform is missing, so a driver
 that silently stops loading cannot shrink the matrix unnoticed.
 """
 
+import contextlib
+import dataclasses
 import os
+import threading
 
 import hypothesis
 import pytest
@@ -45,6 +48,37 @@ def queue(device, profile):
     """The device's clvis queue, with the tuning profile in force for the test."""
     with runtime.configure(tuning=profile):
         yield runtime.queue_for(device)
+
+
+@pytest.fixture
+def options_flipping():
+    """A context manager: while it is open, another thread keeps changing the
+    process's options (int64_atomics and tuning, every half millisecond).
+    Yields a one-element list counting the changes; restores the options."""
+    saved = runtime.options()
+    stop = threading.Event()
+    flips = [0]
+
+    def flip():
+        while not stop.is_set():
+            i = flips[0]
+            runtime.set_options(int64_atomics=bool(i % 2), tuning=("gpu", "cpu")[i % 2])
+            flips[0] = i + 1
+            stop.wait(0.0005)
+
+    @contextlib.contextmanager
+    def flipping():
+        t = threading.Thread(target=flip, daemon=True)
+        t.start()
+        try:
+            yield flips
+        finally:
+            stop.set()
+            t.join()
+            runtime.set_options(**dataclasses.asdict(saved))
+
+    yield flipping
+    runtime.set_options(**dataclasses.asdict(saved))
 
 
 @pytest.fixture(autouse=True)

@@ -320,3 +320,96 @@ def test_every_kernel_file_documents_its_abi():
         assert names, f
         for name in names:
             assert f"kernel {name}(" in comment, (f, name)
+
+
+# -- the launch layer ----------------------------------------------------------
+
+def test_local_size_and_items(device):
+    q = runtime.queue_for(device)
+    top = runtime.capabilities(q).max_work_group_size
+    assert runtime.local_size(q, 64) == min(64, top)
+    assert runtime.local_size(q, 0) == 1
+    big = runtime.local_size(q, 4 * top)
+    assert big <= top and big & (big - 1) == 0 or big == top
+    assert runtime.items(q, 0, 64) == (64, 64)            # one group, never an empty launch
+    assert runtime.items(q, 1, 64) == (64, 64)
+    assert runtime.items(q, 65, 64) == (128, 64)
+    g, l = runtime.items(q, 10, 4 * top)
+    assert g % l == 0 and g >= 10 and l <= top
+
+
+@pytest.mark.parametrize("dtype, value", [(np.uint8, 0), (np.uint32, 0xFFFFFFFF), (np.int32, -1),
+                                          (np.float32, np.inf), (np.uint64, 2**64 - 1),
+                                          (np.float32, 1.5), (np.uint16, 0x1234)])
+def test_fill(device, dtype, value):
+    q = runtime.queue_for(device)
+    a = runtime.empty(q, 37, dtype, "fill test")
+    a.set(np.arange(37).astype(dtype))
+    runtime.fill(q, a, value, start=5)
+    want = np.arange(37).astype(dtype)
+    want[5:] = np.asarray(value).astype(dtype)
+    np.testing.assert_array_equal(a.get(), want)
+    runtime.fill_zero(q, a)
+    assert not a.get().any()
+    runtime.fill(q, a[:0], value)                         # nothing to fill
+
+
+def test_arg(device):
+    q = runtime.queue_for(device)
+    a = runtime.empty(q, 4, np.float32, "arg test")
+    assert runtime.arg(None) is None
+    assert runtime.arg(a[:0]) is None
+    assert runtime.arg(a) is a.base_data and runtime.arg(a.base_data) is a.base_data
+
+
+def test_exact_fp_is_a_known_flag(device):
+    assert runtime.build_options(device, {}, runtime.EXACT_FP)[2:3] == list(runtime.EXACT_FP)
+
+
+def test_triple():
+    from clvis._arrays import triple
+    assert triple("spacing", (1, 2, 3), positive=True) == (1.0, 2.0, 3.0)
+    assert triple("origin", np.array([-1, 0, 1]), positive=False) == (-1.0, 0.0, 1.0)
+    with pytest.raises(TypeError, match="spacing"):
+        triple("spacing", "123", positive=True)           # not (1, 2, 3)
+    with pytest.raises(TypeError, match="spacing"):
+        triple("spacing", 1.0, positive=True)
+    with pytest.raises(ValueError, match="spacing"):
+        triple("spacing", (1, 2), positive=True)
+    with pytest.raises(ValueError, match="spacing"):
+        triple("spacing", (1, 0, 2), positive=True)
+    with pytest.raises(ValueError, match="origin"):
+        triple("origin", (1, np.nan, 2), positive=False)
+    with pytest.raises(ValueError, match="origin"):
+        triple("origin", (1, 1e39, 2), positive=False)    # not finite as float32
+
+
+def test_capture_and_pinned(device):
+    q = runtime.queue_for(device)
+    native = runtime.capabilities(q).int64_atomics_native
+    with runtime.configure(tuning="gpu", int64_atomics=False):
+        cfg = runtime.capture(q)
+    assert cfg.tuning == "gpu" and cfg.int64_atomics is False
+    with runtime.configure(tuning="cpu", int64_atomics=True):
+        assert runtime.tuning_profile(q) == "cpu"
+        with runtime.pinned(cfg):
+            assert runtime.tuning_profile(q) == "gpu"
+            assert runtime.capabilities(q).int64_atomics is False
+            assert "-DCLVIS_INT64_ATOMICS=1" not in runtime.build_options(device, {})
+        assert runtime.tuning_profile(q) == "cpu"
+        assert runtime.capabilities(q).int64_atomics == native
+
+
+def test_event_seconds(device):
+    q = runtime.queue_for(device)
+    assert q.properties & cl.command_queue_properties.PROFILING_ENABLE
+    a = runtime.empty(q, 1 << 16, np.uint32, "timing test")
+    start = runtime.marker(q)
+    clvis.scan(a, queue=q)
+    end = runtime.marker(q)
+    s = runtime.seconds(start, end)
+    assert s is not None and 0 <= s < 60
+    assert runtime.seconds(None) is None
+    plain = cl.CommandQueue(q.context, device)            # a caller's queue without profiling
+    assert runtime.seconds(runtime.marker(plain)) is None
+    assert runtime.nbytes(a, None, a[:10]) == a.nbytes + 40

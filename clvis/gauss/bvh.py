@@ -26,10 +26,7 @@ ABI in ``kernels_cl/gauss/bvh.cl``; the NumPy definition of the result in
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
-import pyopencl as cl
 
 from .. import morton, runtime
 from .._arrays import check_array, resolve_queue, to_device
@@ -55,14 +52,12 @@ PROFILES = {"cpu": {"item_wg": 64, "bounds_groups": 4, "bounds_contiguous": True
 
 
 def _wg(queue) -> int:
-    return max(1, min(PROFILES[runtime.tuning_profile(queue)]["item_wg"],
-                      runtime.capabilities(queue).max_work_group_size))
+    return runtime.local_size(queue, PROFILES[runtime.tuning_profile(queue)]["item_wg"])
 
 
 def _items(queue, n: int) -> tuple[int, int]:
     """(global, local) sizes for one work-item per element of n."""
-    wg = _wg(queue)
-    return max(1, -(-n // wg)) * wg, wg
+    return runtime.items(queue, n, PROFILES[runtime.tuning_profile(queue)]["item_wg"])
 
 
 def _kernel(queue, name: str):
@@ -79,11 +74,11 @@ class BVH:
     boxes[order[j]]. codes: device uint32 (n,), the sorted Morton codes.
     bounds: host (lo, hi) float32 (3,) each, the union of the boxes (+inf, -inf
     for n == 0). centre_bounds: host (lo, hi), the union box of the centres
-    (the Morton grid). build_seconds: wall time of the build (queue finished).
+    (the Morton grid). events: (first, last) of the build's commands, for
+    :attr:`build_seconds`. The build does not wait for its last kernels.
     """
 
-    def __init__(self, queue, n, nodes, order, leaf_boxes, codes, bounds, centre_bounds,
-                 build_seconds):
+    def __init__(self, queue, n, nodes, order, leaf_boxes, codes, bounds, centre_bounds, events):
         self.queue = queue
         self.n = n
         self.nodes = nodes
@@ -92,7 +87,13 @@ class BVH:
         self.codes = codes
         self.bounds = bounds
         self.centre_bounds = centre_bounds
-        self.build_seconds = build_seconds
+        self.events = events
+
+    @property
+    def build_seconds(self) -> float | None:
+        """Device time of the build (event profiling; waits for the build to
+        finish). None on a queue made without profiling."""
+        return runtime.seconds(*self.events)
 
     @property
     def nbytes(self) -> int:
@@ -104,8 +105,7 @@ class BVH:
         return self.nodes.get(), self.order.get(), self.leaf_boxes.get()
 
     def __repr__(self) -> str:
-        return (f"BVH(n={self.n}, nodes={self.nodes.shape[0]}, nbytes={self.nbytes}, "
-                f"build_seconds={self.build_seconds:.4f})")
+        return f"BVH(n={self.n}, nodes={self.nodes.shape[0]}, nbytes={self.nbytes})"     # does not wait
 
 
 def _decode_key(k: np.ndarray) -> np.ndarray:
@@ -117,8 +117,7 @@ def _decode_key(k: np.ndarray) -> np.ndarray:
 
 def _read_bounds(queue, bd, n: int):
     """Run bvh_bounds; (centre lo, centre hi, box lo, box hi), or DataError on a bad row."""
-    res = runtime.empty(queue, 16, np.uint32, "BVH bounds")
-    cl.enqueue_fill_buffer(queue, res.base_data, np.full(1, 0xFF, np.uint8), 0, res.nbytes)
+    res = runtime.fill(queue, runtime.empty(queue, 16, np.uint32, "BVH bounds"), 0xFFFFFFFF)
     prof = PROFILES[runtime.tuning_profile(queue)]
     wg = _wg(queue)
     groups = max(1, min(prof["bounds_groups"] * runtime.capabilities(queue).compute_units, -(-n // wg)))
@@ -145,7 +144,6 @@ def build_bvh(boxes, *, queue=None) -> BVH:
     are on the device. DataError names the first bad row; N >= 2^31 raises
     DeviceError.
     """
-    t0 = time.perf_counter()
     queue = resolve_queue(queue, boxes=boxes)
     shape = getattr(boxes, "shape", None)
     if shape is not None and len(shape) == 2 and shape[0] > MAX_BOXES:     # before any copy
@@ -156,12 +154,12 @@ def build_bvh(boxes, *, queue=None) -> BVH:
         raise ValueError(f"boxes: expected shape (N, 6) = lo xyz, hi xyz; got {tuple(b.shape)}")
     n = int(b.shape[0])
     e = runtime.empty
+    first = runtime.marker(queue)
     if n == 0:
         empty3 = (np.full(3, np.inf, np.float32), np.full(3, -np.inf, np.float32))
-        queue.finish()
         return BVH(queue, 0, e(queue, 0, BVH_NODE_DTYPE, "BVH nodes"), e(queue, 0, np.uint32, "BVH order"),
                    e(queue, (0, 6), np.float32, "BVH leaf boxes"), e(queue, 0, np.uint32, "BVH codes"),
-                   empty3, empty3, time.perf_counter() - t0)
+                   empty3, empty3, (first, runtime.marker(queue)))
     bd = to_device(queue, "boxes", b)
     clo, chi, blo, bhi = _read_bounds(queue, bd, n)
     # -0.0 -> +0.0 (which zero an item keeps depends on the rows it saw): the
@@ -181,9 +179,7 @@ def build_bvh(boxes, *, queue=None) -> BVH:
     runtime.launch(queue, _kernel(queue, "bvh_gather"), *_items(queue, n), bd.base_data, order.base_data,
                    np.uint32(n), leaf_boxes.base_data)
     nodes = e(queue, max(n - 1, 1), BVH_NODE_DTYPE, "BVH nodes")
-    meet = e(queue, max(n - 1, 1), np.uint32, "BVH meeting words")
-    cl.enqueue_fill_buffer(queue, meet.base_data, np.full(1, 0xFF, np.uint8), 0, meet.nbytes)
-    runtime.launch(queue, _kernel(queue, "bvh_build"), *_items(queue, n), codes.base_data,
-                   leaf_boxes.base_data, np.uint32(n), nodes.base_data, meet.base_data)
-    queue.finish()
-    return BVH(queue, n, nodes, order, leaf_boxes, codes, (blo, bhi), (clo, chi), time.perf_counter() - t0)
+    meet = runtime.fill(queue, e(queue, max(n - 1, 1), np.uint32, "BVH meeting words"), 0xFFFFFFFF)
+    last = runtime.launch(queue, _kernel(queue, "bvh_build"), *_items(queue, n), codes.base_data,
+                          leaf_boxes.base_data, np.uint32(n), nodes.base_data, meet.base_data)
+    return BVH(queue, n, nodes, order, leaf_boxes, codes, (blo, bhi), (clo, chi), (first, last))

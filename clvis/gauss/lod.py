@@ -48,7 +48,6 @@ LODS = ("low", "medium", "high")
 BYTES_PER_GAUSSIAN = 68
 # an axis-aligned Gaussian needs no rotation: means 12 + scales 12 + value 4 + opacity 4
 BYTES_PER_AXIS_ALIGNED_GAUSSIAN = 32
-_FLAGS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 _SRC = "gauss/lod.cl"
 # work shapes per tuning profile: lod_emit's summation order is defined for a
 # 64-item group per leaf, so both profiles use it; "count_wg" is the local size
@@ -102,8 +101,8 @@ class _DeviceLeaves:
         q = self.queue
         counts = runtime.empty(q, self.n, np.uint32, "LOD counts")
         wg = PROFILES[runtime.tuning_profile(q)]["count_wg"]
-        k = runtime.get_kernel(q, _SRC, "lod_count", {}, _FLAGS)
-        runtime.launch(q, k, -(-self.n // wg) * wg, wg, self.masks.base_data, np.uint32(self.n),
+        k = runtime.get_kernel(q, _SRC, "lod_count", {}, runtime.EXACT_FP)
+        runtime.launch(q, k, *runtime.items(q, self.n, wg), self.masks.base_data, np.uint32(self.n),
                        np.uint32(lod), counts.base_data)
         offsets, total = scan(counts, exclusive=True, return_total=True, queue=q)
         return offsets, int(total.get()[0])
@@ -115,7 +114,7 @@ class _DeviceLeaves:
         scales = runtime.empty(q, (max(total, 1), 3), np.float32, "Gaussian scales")
         values = runtime.empty(q, max(total, 1), np.float32, "Gaussian values")
         wg = PROFILES[runtime.tuning_profile(q)]["WG"]
-        k = runtime.get_kernel(q, _SRC, "lod_emit", {}, _FLAGS)
+        k = runtime.get_kernel(q, _SRC, "lod_emit", {}, runtime.EXACT_FP)
         dz, dy, dx = self.spacing
         ox, oy, oz = self.origin
         runtime.launch(q, k, self.n * wg, wg, self.coords.base_data, self.masks.base_data,

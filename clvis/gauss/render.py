@@ -18,11 +18,15 @@ starts on the camera's near plane. Compositing stops once the transmittance
 T < 1e-3. ``rgba`` is premultiplied colour with alpha = 1 - T; ``depth`` is
 the view depth (the camera's depth row) of the hit that first brought T
 below 0.5, +inf where T never got there.
+
+A GaussianRenderer captures the runtime options (tuning profile, 64-bit
+atomics) and its kernels when it is made (runtime.capture). Timings in its
+stats come from OpenCL event profiling; nothing waits for the device unless
+the caller reads results back (host=True) or a timing.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -45,7 +49,6 @@ __all__ = [
     "render_gaussians",
 ]
 
-_FLAGS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 MODELS = {"max_response": 0, "absorption": 1}
 MAX_K = 64
 TILE = 8
@@ -78,16 +81,10 @@ class GaussianImage:
 # longer rounds pay (a round re-traverses the BVH), but a first round of 16
 # lets rays that turn opaque early stop early (PoCL, 256^2: the explosion's
 # high LOD 90 -> 45 ms; 10^5 overlapping translucent Gaussians 490 -> 530 ms).
-# GPUs: 3DGRT's k = 16 keeps the buffer in registers.
-PROFILES = {"cpu": {"march_wg": 8, "k": 64, "k0": 16}, "gpu": {"march_wg": 64, "k": 16, "k0": 16}}
-
-
-def _local(q) -> int:
-    return min(PROFILES[runtime.tuning_profile(q)]["march_wg"], runtime.capabilities(q).max_work_group_size)
-
-
-def _items(n: int, wg: int = 64) -> tuple[int, int]:
-    return max(-(-n // wg), 1) * wg, wg
+# GPUs: 3DGRT's k = 16 keeps the buffer in registers. "item_wg": the local
+# size of the one-item-per-Gaussian record kernels.
+PROFILES = {"cpu": {"march_wg": 8, "k": 64, "k0": 16, "item_wg": 64},
+            "gpu": {"march_wg": 64, "k": 16, "k0": 16, "item_wg": 64}}
 
 
 class GaussianRenderer:
@@ -111,7 +108,9 @@ class GaussianRenderer:
         if model not in MODELS:
             raise ValueError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
         self.queue = q = resolve_queue(queue)
-        k = PROFILES[runtime.tuning_profile(q)]["k"] if k is None else nonnegative_int("k", k)
+        self.config = runtime.capture(q)
+        prof = self._profile = PROFILES[self.config.tuning]
+        k = prof["k"] if k is None else nonnegative_int("k", k)
         if not 1 <= k <= MAX_K:
             raise ValueError(f"k: expected 1..{MAX_K}, got {k}")
         cutoff, density = float(cutoff), float(density)
@@ -130,7 +129,17 @@ class GaussianRenderer:
         if n >= 2 ** 31:
             raise DeviceError(f"gaussians: {n} Gaussians; at most 2^31 - 1")
         self.n = n
-        t0 = time.perf_counter()
+        with runtime.pinned(self.config):
+            self._setup(gaussians)
+
+    def _setup(self, gaussians: Gaussians) -> None:
+        q, n, prof = self.queue, self.n, self._profile
+        flags = runtime.EXACT_FP
+        self._march = runtime.get_kernel(q, "gauss/march.cl", "march",
+                                         {"K": self.k, "K0": min(self.k, prof["k0"]),
+                                          "MODEL": MODELS[self.model]}, flags)
+        self._march_wg = runtime.local_size(q, prof["march_wg"])
+        first = runtime.marker(q)
         m = max(n, 1)
         arrays = {}
         for name, a in (("means", gaussians.means), ("scales", gaussians.scales),
@@ -142,25 +151,40 @@ class GaussianRenderer:
             arrays[name] = d
         records = runtime.empty(q, m * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records")
         boxes = runtime.empty(q, (m, 6), np.float32, "Gaussian boxes")
+        last = None
         if n:
-            kr = runtime.get_kernel(q, "gauss/gaussians.cl", "gaussian_records", {}, _FLAGS)
-            runtime.launch(q, kr, *_items(n), *(arrays[k_].base_data for k_ in
-                                                ("means", "scales", "rotations", "values", "opacities")),
-                           np.uint32(n), np.float32(cutoff), records.base_data, boxes.base_data)
-        q.finish()
-        self.upload_seconds = time.perf_counter() - t0
+            kr = runtime.get_kernel(q, "gauss/gaussians.cl", "gaussian_records", {}, flags)
+            last = runtime.launch(q, kr, *runtime.items(q, n, prof["item_wg"]),
+                                  *(arrays[k_].base_data for k_ in
+                                    ("means", "scales", "rotations", "values", "opacities")),
+                                  np.uint32(n), np.float32(self.cutoff), records.base_data, boxes.base_data)
+        self._upload_events = (first, last or runtime.marker(q))
         self.bvh = build_bvh(boxes[:n] if n else np.zeros((0, 6), np.float32), queue=q)
-        self.build_seconds = self.bvh.build_seconds
         self.records = runtime.empty(q, m * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records (BVH order)")
         if n:
-            kg = runtime.get_kernel(q, "gauss/gaussians.cl", "gather_records", {}, _FLAGS)
-            runtime.launch(q, kg, *_items(n), records.base_data, self.bvh.order.base_data, np.uint32(n),
-                           self.records.base_data)
+            kg = runtime.get_kernel(q, "gauss/gaussians.cl", "gather_records", {}, flags)
+            runtime.launch(q, kg, *runtime.items(q, n, prof["item_wg"]), records.base_data,
+                           self.bvh.order.base_data, np.uint32(n), self.records.base_data)
         self._dummy = runtime.zeros(q, 64, np.float32, "empty BVH") if n == 0 else None
-        q.finish()
+
+    @property
+    def upload_seconds(self) -> float | None:
+        """Device time of the upload and the Gaussian records (event profiling; waits for them)."""
+        return runtime.seconds(*self._upload_events)
+
+    @property
+    def build_seconds(self) -> float | None:
+        """Device time of the BVH build (event profiling; waits for it)."""
+        return self.bvh.build_seconds
+
+    @property
+    def nbytes(self) -> int:
+        """Device bytes the renderer holds: the Gaussian records and the BVH."""
+        return runtime.nbytes(self.records, self._dummy) + self.bvh.nbytes
 
     def _buf(self, a):
-        return a.base_data if a is not None and a.size else self._dummy.base_data
+        b = runtime.arg(a)
+        return self._dummy.base_data if b is None else b
 
     def render(self, camera: Camera, width: int, height: int, *,
                transfer_function: TransferFunction | None = None, host: bool = True) -> GaussianImage:
@@ -181,37 +205,35 @@ class GaussianRenderer:
         tmin, tscale = tf.limits(self.gaussians.values)
         table = tf.table()
         runtime.check_alloc(q, w * h * 28, "Gaussian image")
-        t0 = time.perf_counter()
+        start = runtime.marker(q)
         camd = runtime.empty(q, cam.size, np.float32, "camera rays")
-        camd.set(cam, queue=q)
+        camd.set(cam, queue=q, async_=True)     # no wait for earlier renders (host=False)
         tfd = runtime.empty(q, table.shape, np.float32, "transfer function")
-        tfd.set(table, queue=q)
+        tfd.set(table, queue=q, async_=True)
         rgba = runtime.empty(q, (h, w, 4), np.float32, "rgba")
         depth = runtime.empty(q, (h, w), np.float32, "depth")
         stats = runtime.empty(q, (h, w, 2), np.uint32, "ray stats")
-        kern = runtime.get_kernel(q, "gauss/march.cl", "march",
-                                  {"K": self.k, "K0": min(self.k, PROFILES[runtime.tuning_profile(q)]["k0"]),
-                                   "MODEL": MODELS[self.model]}, _FLAGS)
         tiles = (-(-w // TILE)) * (-(-h // TILE))
         bvh = self.bvh
         nodes = bvh.nodes if self.n else None
-        runtime.launch(q, kern, tiles * TILE * TILE, _local(q),
+        end = runtime.launch(q, self._march, tiles * TILE * TILE, self._march_wg,
                        self._buf(nodes), self._buf(bvh.leaf_boxes if self.n else None),
                        self.records.base_data, self._buf(bvh.order if self.n else None),
                        np.uint32(self.n), camd.base_data, np.uint32(w), np.uint32(h),
                        tfd.base_data, np.uint32(table.shape[0]), tmin, tscale,
                        np.float32(self.cutoff * self.cutoff), np.float32(self.density),
                        rgba.base_data, depth.base_data, stats.base_data)
-        q.finish()
-        seconds = time.perf_counter() - t0
         if not host:
-            info = {"gaussians": self.n, "model": self.model, "k": self.k, "bvh_build_s": self.build_seconds,
-                    "render_s": seconds, "rays": w * h, "bvh_nodes": max(self.n - 1, 0), "ray_stats": stats}
+            # nothing waits: the timings are None until the device is done
+            # with them (then runtime.seconds(*info["events"]) gives render_s)
+            info = {"gaussians": self.n, "model": self.model, "k": self.k,
+                    "bvh_build_s": runtime.seconds(*self.bvh.events, wait=False), "render_s": None,
+                    "events": (start, end), "rays": w * h, "bvh_nodes": max(self.n - 1, 0), "ray_stats": stats}
             return GaussianImage(rgba, depth, None, None, info)
         st = stats.get()
         hits, rounds = st[..., 0], st[..., 1]
         info = {"gaussians": self.n, "model": self.model, "k": self.k, "bvh_build_s": self.build_seconds,
-                "render_s": seconds, "rays": w * h, "hits_per_ray_mean": float(hits.mean()),
+                "render_s": runtime.seconds(start, end), "rays": w * h, "hits_per_ray_mean": float(hits.mean()),
                 "hits_per_ray_max": int(hits.max()), "rounds_per_ray_mean": float(rounds.mean()),
                 "bvh_nodes": max(self.n - 1, 0)}
         return GaussianImage(rgba.get(), depth.get(), hits, rounds, info)

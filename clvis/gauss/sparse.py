@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arrays import triple
 from ..errors import DataError
 
 __all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb"]
@@ -45,23 +46,6 @@ def _pack_masks(active: np.ndarray) -> np.ndarray:
 def _unpack_masks(masks: np.ndarray) -> np.ndarray:
     """(L, 16) uint32 -> (L, 512) bool."""
     return ((masks[:, :, None] & _BITS) != 0).reshape(len(masks), LEAF_VOXELS)
-
-
-def _triple(name: str, v, positive: bool) -> tuple[float, float, float]:
-    if isinstance(v, (str, bytes)):
-        raise TypeError(f"{name}: expected 3 numbers, got {type(v).__name__}")
-    try:
-        t = tuple(float(x) for x in v)
-    except TypeError:
-        raise TypeError(f"{name}: expected 3 numbers, got {type(v).__name__}") from None
-    if len(t) != 3:
-        raise ValueError(f"{name}: expected 3 numbers, got {len(t)}")
-    f32 = np.asarray(t, np.float32)
-    if not np.isfinite(f32).all():
-        raise ValueError(f"{name}: {t} is not finite as float32")
-    if positive and not (f32 > 0).all():
-        raise ValueError(f"{name}: {t} must be > 0 on every axis")
-    return t
 
 
 class SparseVolume:
@@ -96,8 +80,8 @@ class SparseVolume:
         if len(shape) != 3 or min(shape) < 0 or max(shape) > _MAX_SIDE:
             raise ValueError(f"shape: expected 3 sizes in [0, {_MAX_SIDE}], got {shape}")
         self.shape = shape
-        self.spacing = _triple("spacing", spacing, positive=True)
-        self.origin = _triple("origin", origin, positive=False)
+        self.spacing = triple("spacing", spacing, positive=True)
+        self.origin = triple("origin", origin, positive=False)
         self.coords = np.ascontiguousarray(coords, np.int32).reshape(-1, 3)
         n = len(self.coords)
         self.masks = np.ascontiguousarray(masks, np.uint32)
@@ -230,8 +214,8 @@ class SparseVolume:
         """
         vol = _check_volume(volume)
         act = _active(vol, threshold, mask)
-        spacing = _triple("spacing", spacing, positive=True)
-        origin = _triple("origin", origin, positive=False)
+        spacing = triple("spacing", spacing, positive=True)
+        origin = triple("origin", origin, positive=False)
         if act.any() and not np.isfinite(vol[act]).all():
             zyx = np.argwhere(act & ~np.isfinite(vol))[0]
             raise DataError(f"volume: active voxel [z, y, x] = {zyx.tolist()} is "

@@ -43,7 +43,7 @@ from ..errors import DataError
 from ..primitives import compact_indices, radix_sort
 from .zfp import BRICK_VALUES, ZfpVolume
 
-__all__ = ["AGE_MAX", "FREE", "BlockCache", "default_capacity", "grown_capacity", "mark_blocks"]
+__all__ = ["AGE_MAX", "FREE", "PROFILES", "BlockCache", "default_capacity", "grown_capacity", "mark_blocks"]
 
 FREE = 0xFFFFFFFF                  # slot_of_block / block_of_slot: none
 AGE_MAX = 0xFFFFFFFE               # ages saturate here
@@ -61,7 +61,9 @@ def grown_capacity(capacity: int, n_needed: int, nblocks: int) -> int:
     return max(n_needed, min(nblocks, -(-3 * capacity // 2)))
 
 _SRC = "iso/cache.cl"
-_WG = 64                           # fixed local size of every cache kernel
+# the local size of every cache kernel, per tuning profile (a fixed one: PoCL
+# would compile a work-group function for every size the driver chose)
+PROFILES = {"cpu": {"wg": 64}, "gpu": {"wg": 64}}
 _NEEDED_T = {np.dtype(np.uint8): "uchar", np.dtype(np.uint32): "uint"}
 
 
@@ -69,8 +71,8 @@ def _u32(v) -> np.uint32:
     return np.uint32(int(v))
 
 
-def _groups(n: int) -> int:
-    return max(1, -(-int(n) // _WG)) * _WG
+def _items(queue, n: int) -> tuple[int, int]:
+    return runtime.items(queue, n, PROFILES[runtime.tuning_profile(queue)]["wg"])
 
 
 def _kernel(queue, name: str, needed_dtype=np.uint8):
@@ -107,7 +109,7 @@ def mark_blocks(visible_ids, blocks, needed=None, *, queue=None):
         _check_needed(needed, nblocks)
     if vd.size and nblocks:
         k = _kernel(queue, "mark_blocks", needed.dtype)
-        runtime.launch(queue, k, _groups(vd.size), _WG, vd.base_data, _u32(vd.size),
+        runtime.launch(queue, k, *_items(queue, vd.size), vd.base_data, _u32(vd.size),
                        _u32(nbx), _u32(nby), _u32(nbz), needed.base_data)
     return needed
 
@@ -144,28 +146,26 @@ class BlockCache:
         self._stream = zfp_volume.to_device(q)
         self.capacity = int(capacity)
         self.bricks = runtime.zeros(q, (self.capacity, BRICK_VALUES), np.float32, "cache bricks")
-        self.block_of_slot = self._fill_ff(runtime.empty(q, self.capacity, np.uint32, "cache block_of_slot"))
+        self.block_of_slot = runtime.fill(q, runtime.empty(q, self.capacity, np.uint32, "cache block_of_slot"),
+                                          FREE)
         self.ages = runtime.zeros(q, self.capacity, np.uint32, "cache ages")
-        self.slot_of_block = self._fill_ff(
-            runtime.empty(q, max(self.nblocks, 1), np.int32, "cache slot_of_block"))[:self.nblocks]
+        self.slot_of_block = runtime.fill(
+            q, runtime.empty(q, max(self.nblocks, 1), np.int32, "cache slot_of_block"), -1)[:self.nblocks]
         self.occupied = 0
         self.decoded_total = 0
         self.decoded_last = 0
         self.evicted_last = 0
 
-    def _fill_ff(self, a, offset_elems: int = 0):
-        nbytes = a.nbytes - offset_elems * a.dtype.itemsize
-        if nbytes:
-            cl.enqueue_fill_buffer(self.queue, a.base_data, np.full(1, 0xFF, np.uint8),
-                                   a.offset + offset_elems * a.dtype.itemsize, nbytes)
-        return a
-
     @property
     def nbytes(self) -> int:
         """Device bytes of the cache buffers (bricks, block_of_slot, ages,
         slot_of_block; the compressed stream not counted)."""
-        return int(self.bricks.nbytes + self.block_of_slot.nbytes + self.ages.nbytes
-                   + self.slot_of_block.nbytes)
+        return runtime.nbytes(self.bricks, self.block_of_slot, self.ages, self.slot_of_block)
+
+    @property
+    def stream_nbytes(self) -> int:
+        """Device bytes of the compressed stream the cache decodes from."""
+        return runtime.nbytes(self._stream)
 
     def get_state(self) -> dict:
         """Host copies: slot_of_block, block_of_slot, ages, bricks, capacity."""
@@ -183,11 +183,9 @@ class BlockCache:
         for src, dst in ((self.bricks, bricks), (self.block_of_slot, bos), (self.ages, ages)):
             cl.enqueue_copy(q, dst.base_data, src.base_data, byte_count=src.nbytes,
                             src_offset=src.offset, dst_offset=dst.offset)
-        cl.enqueue_fill_buffer(q, bricks.base_data, np.zeros(1, np.uint8),
-                               bricks.offset + self.bricks.nbytes, bricks.nbytes - self.bricks.nbytes)
-        cl.enqueue_fill_buffer(q, ages.base_data, np.zeros(1, np.uint8),
-                               ages.offset + self.ages.nbytes, ages.nbytes - self.ages.nbytes)
-        self._fill_ff(bos, old)
+        runtime.fill(q, bricks, 0, start=self.bricks.size)
+        runtime.fill(q, ages, 0, start=old)
+        runtime.fill(q, bos, FREE, start=old)
         self.bricks, self.block_of_slot, self.ages, self.capacity = bricks, bos, ages, new
 
     def _slot_lists(self, nd):
@@ -195,7 +193,7 @@ class BlockCache:
         q, cap = self.queue, self.capacity
         free_f = runtime.empty(q, cap, np.uint8, "cache free flags")
         cand_f = runtime.empty(q, cap, np.uint8, "cache candidate flags")
-        runtime.launch(q, _kernel(q, "cache_slot_flags", nd.dtype), _groups(cap), _WG,
+        runtime.launch(q, _kernel(q, "cache_slot_flags", nd.dtype), *_items(q, cap),
                        self.block_of_slot.base_data, nd.base_data, _u32(cap), free_f.base_data,
                        cand_f.base_data)
         return free_f, cand_f
@@ -232,7 +230,7 @@ class BlockCache:
 
         # 1. missing blocks, ascending
         miss_f = runtime.empty(q, nb, np.uint8, "cache missing flags")
-        runtime.launch(q, _kernel(q, "cache_missing", nd.dtype), _groups(nb), _WG, nd.base_data,
+        runtime.launch(q, _kernel(q, "cache_missing", nd.dtype), *_items(q, nb), nd.base_data,
                        self.slot_of_block.base_data, _u32(nb), miss_f.base_data)
         missing = compact_indices(miss_f, queue=q)
         m = int(missing.size)
@@ -250,7 +248,7 @@ class BlockCache:
 
         # 3. ages
         cap = self.capacity
-        runtime.launch(q, _kernel(q, "cache_age", nd.dtype), _groups(cap), _WG,
+        runtime.launch(q, _kernel(q, "cache_age", nd.dtype), *_items(q, cap),
                        self.block_of_slot.base_data, nd.base_data, _u32(cap), self.ages.base_data)
         if not m:
             return 0
@@ -259,18 +257,18 @@ class BlockCache:
         if slots is None:
             c = int(cand.size)
             keys = runtime.empty(q, c, np.uint32, "cache candidate keys")
-            runtime.launch(q, _kernel(q, "cache_candidate_keys"), _groups(c), _WG, cand.base_data,
+            runtime.launch(q, _kernel(q, "cache_candidate_keys"), *_items(q, c), cand.base_data,
                            _u32(c), self.block_of_slot.base_data, self.ages.base_data, keys.base_data)
             _, order = radix_sort(keys, cand, queue=q)
             slots = order[:m]
             self.evicted_last = m - nfree
-        runtime.launch(q, _kernel(q, "cache_assign"), _groups(m), _WG, missing.base_data,
+        runtime.launch(q, _kernel(q, "cache_assign"), *_items(q, m), missing.base_data,
                        slots.base_data, _u32(m), self.block_of_slot.base_data,
                        self.slot_of_block.base_data, self.ages.base_data)
 
         # 5. decode
         zv = self.volume
-        runtime.launch(q, _kernel(q, "cache_decode"), _groups(m), _WG, self._stream.base_data,
+        runtime.launch(q, _kernel(q, "cache_decode"), *_items(q, m), self._stream.base_data,
                        _u32(zv.rate), _u32(nb), missing.base_data, slots.base_data, _u32(m),
                        self.bricks.base_data)
         self.occupied += m - self.evicted_last

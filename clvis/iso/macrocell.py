@@ -10,12 +10,13 @@ import numpy as np
 
 from .. import runtime
 from .._arrays import resolve_queue
-from .zfp import PROFILES as _ZFP_PROFILES
 from .zfp import ZfpVolume, _stream_buffer
 
-__all__ = ["MacrocellGrids", "macrocell_grids"]
+__all__ = ["PROFILES", "MacrocellGrids", "macrocell_grids"]
 
 _SRC = "iso/macrocell.cl"
+# the local size of the one-item-per-block (and per coarse cell) kernels
+PROFILES = {"cpu": {"wg": 64}, "gpu": {"wg": 64}}
 
 
 @dataclass
@@ -48,18 +49,18 @@ def macrocell_grids(volume: ZfpVolume, *, queue=None, host: bool = True) -> Macr
     nbz, nby, nbx = (-(-n // 4) for n in volume.shape)
     ncz, ncy, ncx = (-(-n // 4) for n in (nbz, nby, nbx))
     nb, nc = nbx * nby * nbz, ncx * ncy * ncz
-    wg = _ZFP_PROFILES[runtime.tuning_profile(q)]["wg"]
+    wg = PROFILES[runtime.tuning_profile(q)]["wg"]
     faces = runtime.empty(q, (nb, 8, 2), np.float32, "block faces")
     fine = runtime.empty(q, (nbz, nby, nbx, 2), np.float32, "fine macrocells")
     coarse = runtime.empty(q, (ncz, ncy, ncx, 2), np.float32, "coarse macrocells")
     dims = (np.uint32(nx), np.uint32(ny), np.uint32(nz))
     k = runtime.get_kernel(q, _SRC, "block_faces", {})
-    runtime.launch(q, k, -(-nb // wg) * wg, wg, _stream_buffer(q, volume.stream), np.uint32(volume.rate),
+    runtime.launch(q, k, *runtime.items(q, nb, wg), _stream_buffer(q, volume.stream), np.uint32(volume.rate),
                    *dims, faces.base_data)
     k = runtime.get_kernel(q, _SRC, "block_ranges", {})
-    runtime.launch(q, k, -(-nb // wg) * wg, wg, faces.base_data, *dims, fine.base_data)
+    runtime.launch(q, k, *runtime.items(q, nb, wg), faces.base_data, *dims, fine.base_data)
     k = runtime.get_kernel(q, _SRC, "coarse_ranges", {})
-    runtime.launch(q, k, -(-nc // wg) * wg, wg, fine.base_data, np.uint32(nbx), np.uint32(nby),
+    runtime.launch(q, k, *runtime.items(q, nc, wg), fine.base_data, np.uint32(nbx), np.uint32(nby),
                    np.uint32(nbz), coarse.base_data)
     if host:
         return MacrocellGrids(fine.get(), coarse.get())

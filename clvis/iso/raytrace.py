@@ -12,16 +12,12 @@ import numpy as np
 
 from .. import runtime
 
-__all__ = ["LOCAL_SIZE", "raytrace_blocks"]
+__all__ = ["PROFILES", "raytrace_blocks"]
 
 _SRC = "iso/raytrace.cl"
-_FLAGS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 # work-items per block group, per tuning profile (any size works; see the ABI)
-LOCAL_SIZE = {"cpu": 16, "gpu": 64}
-
-
-def _buf(a):
-    return a.base_data if hasattr(a, "base_data") else a
+PROFILES = {"cpu": {"wg": 16}, "gpu": {"wg": 64}}
+_arg = runtime.arg
 
 
 def raytrace_blocks(queue, bricks, slot_of_block, shape, spacing, origin, isovalue, cam, width,
@@ -49,13 +45,13 @@ def raytrace_blocks(queue, bricks, slot_of_block, shape, spacing, origin, isoval
     dz, dy, dx = (np.float32(s) for s in spacing)
     ox, oy, oz = (np.float32(s) for s in origin)
     ray_hit, hit_t, rgba, depth = outputs
-    wg = LOCAL_SIZE[runtime.tuning_profile(queue)]
+    wg = runtime.local_size(queue, PROFILES[runtime.tuning_profile(queue)]["wg"])
     defines = {"REFINE_STEPS": int(refine_steps), "ITEMS": int(items is not None)}
-    k = runtime.get_kernel(queue, _SRC, "raytrace_blocks", defines, _FLAGS)
+    k = runtime.get_kernel(queue, _SRC, "raytrace_blocks", defines, runtime.EXACT_FP)
     item_pixel, n_spec, hitkey = items if items is not None else (None, 1, None)
     return runtime.launch(queue, k, ngroups * wg, wg,
-                          _buf(bricks), _buf(slot_of_block), np.uint32(nx), np.uint32(ny), np.uint32(nz),
-                          dx, dy, dz, ox, oy, oz, np.float32(isovalue), _buf(cam), np.uint32(width),
-                          _buf(group_blocks), _buf(group_offsets), _buf(group_counts), _buf(ray_ids),
-                          _buf(ray_t), _buf(ray_hit), _buf(hit_t), _buf(rgba), _buf(depth),
-                          _buf(item_pixel), np.uint32(n_spec), _buf(hitkey), wait_for=wait_for)
+                          _arg(bricks), _arg(slot_of_block), np.uint32(nx), np.uint32(ny), np.uint32(nz),
+                          dx, dy, dz, ox, oy, oz, np.float32(isovalue), _arg(cam), np.uint32(width),
+                          _arg(group_blocks), _arg(group_offsets), _arg(group_counts), _arg(ray_ids),
+                          _arg(ray_t), _arg(ray_hit), _arg(hit_t), _arg(rgba), _arg(depth),
+                          _arg(item_pixel), np.uint32(n_spec), _arg(hitkey), wait_for=wait_for)

@@ -19,12 +19,17 @@ A pass, for the rays still active (kernels_cl/iso/):
    64-bit atomics, else by scanning its candidates in order (same result);
    rays without a hit go on from where the traversal left them.
 
+An IsoRenderer captures the runtime options (tuning profile, 64-bit atomics)
+and its kernels when it is made; every pass runs under them (runtime.pinned),
+whatever runtime.configure does meanwhile, in this thread or another.
+``stats["seconds"]`` is device time from event profiling, from the start of
+the render to the end of the pass.
+
 The rules (rays, dual grid, root finding, shading) are clvis.reference.iso's.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -33,7 +38,7 @@ import numpy as np
 import pyopencl as cl
 
 from .. import runtime
-from .._arrays import positive_int, resolve_queue
+from .._arrays import positive_int, resolve_queue, triple
 from ..camera import Camera, ray_buffer
 from ..errors import DataError
 from ..primitives import compact, compact_indices, radix_sort
@@ -41,13 +46,16 @@ from .cache import BlockCache, mark_blocks
 from .macrocell import macrocell_grids
 from .raytrace import raytrace_blocks
 from .traverse import init_rays, macro_traverse
-from .zfp import PROFILES as _ZFP_PROFILES
 from .zfp import ZfpVolume, compress
 
-__all__ = ["IsoImage", "IsoRenderer"]
+__all__ = ["PROFILES", "IsoImage", "IsoRenderer"]
 
 MAX_SPEC = 64
 _PASS = "iso/pass.cl"
+_PASS_KERNELS = ("valid_items", "gather_u32", "group_heads", "group_info", "resolve_hits")
+# the local size of pass.cl's one-item-per-element kernels (a fixed one: PoCL
+# would compile a work-group function for every size the driver chose)
+PROFILES = {"cpu": {"wg": 64}, "gpu": {"wg": 64}}
 
 @dataclass
 class IsoImage:
@@ -67,11 +75,6 @@ class IsoImage:
     stats: dict
 
 
-def _items(queue, n: int) -> tuple[int, int]:
-    wg = _ZFP_PROFILES[runtime.tuning_profile(queue)]["wg"]
-    return max(-(-n // wg), 1) * wg, wg
-
-
 class IsoRenderer:
     """A ZFP-compressed volume on the device with its macrocell grids and a
     block cache, for progressive isosurface renders.
@@ -84,20 +87,27 @@ class IsoRenderer:
     spacing : (dz, dy, dx); origin : world (x, y, z) of sample [0, 0, 0].
     cache_capacity : initial block-cache slots (default: BlockCache's); the
         cache grows when a pass needs more.
+
+    ``config`` holds the runtime options captured at construction
+    (runtime.capture); a configure() change applies to renderers made after it.
     """
 
     def __init__(self, volume_or_zfp: ZfpVolume | Any, rate: int = 8,
                  spacing: Sequence[float] = (1.0, 1.0, 1.0), origin: Sequence[float] = (0.0, 0.0, 0.0), *,
                  cache_capacity: int | None = None, queue: cl.CommandQueue | None = None) -> None:
         self.queue = q = resolve_queue(queue)
+        self.config = runtime.capture(q)
         zv = volume_or_zfp if isinstance(volume_or_zfp, ZfpVolume) else compress(volume_or_zfp, rate)
         if min(zv.shape) < 2:
             raise DataError(f"volume: every axis needs at least 2 samples, got shape {zv.shape}")
         self.volume = zv
-        self.spacing = _triple("spacing", spacing, positive=True)
-        self.origin = _triple("origin", origin, positive=False)
-        self.grids = macrocell_grids(zv, queue=q, host=False)
-        self.cache = BlockCache(zv, cache_capacity, queue=q)
+        self.spacing = triple("spacing", spacing, positive=True)
+        self.origin = triple("origin", origin, positive=False)
+        with runtime.pinned(self.config):
+            self._kernels = {name: runtime.get_kernel(q, _PASS, name, {}) for name in _PASS_KERNELS}
+            self._wg = PROFILES[self.config.tuning]["wg"]
+            self.grids = macrocell_grids(zv, queue=q, host=False)
+            self.cache = BlockCache(zv, cache_capacity, queue=q)
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -105,22 +115,31 @@ class IsoRenderer:
 
     def reset_cache(self, capacity: int | None = None) -> None:
         """Start over with an empty block cache (a cold start, e.g. for timings)."""
-        self.cache = BlockCache(self.volume, capacity, queue=self.queue)
+        with runtime.pinned(self.config):
+            self.cache = BlockCache(self.volume, capacity, queue=self.queue)
 
     def render(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
                speculation: bool = True, start_speculation: int = 1) -> IsoImage:
         """Passes until `completion` of the rays are finished; the last image
         (read back once, at the end)."""
         last = None
-        for last in self._run(camera, width, height, isovalue, completion, speculation, start_speculation):
-            pass
-        return last()
+        with runtime.pinned(self.config):
+            for last in self._run(camera, width, height, isovalue, completion, speculation, start_speculation):
+                pass
+            return last()
 
     def passes(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
                speculation: bool = True, start_speculation: int = 1) -> Iterator[IsoImage]:
         """Yield the partial image after each pass (see the module doc)."""
-        for image in self._run(camera, width, height, isovalue, completion, speculation, start_speculation):
-            yield image()
+        run = self._run(camera, width, height, isovalue, completion, speculation, start_speculation)
+        while True:
+            # pinned while the pass runs, not while the caller holds the image
+            with runtime.pinned(self.config):
+                image = next(run, None)
+                if image is None:
+                    return
+                image = image()
+            yield image
 
     def _run(self, camera, width, height, isovalue, completion, speculation, start_speculation):
         """The pass loop: after each pass, a function that reads the image back."""
@@ -137,7 +156,7 @@ class IsoRenderer:
         q, zv = self.queue, self.volume
         npix = w * h
         shape, spacing, origin = zv.shape, self.spacing, self.origin
-        t_start = time.perf_counter()
+        start = runtime.marker(q)
         cam = runtime.empty(q, 22, np.float32, "camera rays")
         cam.set(ray_buffer(camera, w, h), queue=q)
         ray_t, active_all, count = init_rays(q, cam, w, h, shape, spacing, origin)
@@ -148,19 +167,20 @@ class IsoRenderer:
         hit_t = runtime.empty(q, npix, np.float32, "hit t")
         depth = runtime.empty(q, npix, np.float32, "depth")
         for a in (hit_t, depth):
-            _fill(q, a, np.float32(np.inf))
+            runtime.fill(q, a, np.float32(np.inf))
         rgba = runtime.zeros(q, (npix, 4), np.float32, "rgba")
-        int64 = runtime.capabilities(q).int64_atomics
+        int64 = self.config.int64_atomics
         hitkey = runtime.empty(q, npix, np.uint64, "hit keys") if int64 else None
+        frame_bytes = runtime.nbytes(cam, ray_t, active_all, count, hit, hit_t, depth, rgba, hitkey)
         stats = {"passes": 0, "active_per_pass": [], "n_spec_per_pass": [], "items_per_pass": [],
                  "blocks_per_pass": [], "decoded_per_pass": [], "rays_entering": n_active,
                  "speculation": bool(speculation), "int64_atomics": bool(int64)}
         decoded0 = self.cache.decoded_total
         done = n_active == 0
         if done:            # no ray meets the volume: the (empty) image at once
-            stats.update(blocks_decoded=0, cache_slots=self.cache.capacity,
-                         seconds=time.perf_counter() - t_start)
-            yield lambda: self._image(w, h, hit, hit_t, rgba, depth, active, 1.0, stats)
+            stats.update(blocks_decoded=0, cache_slots=self.cache.capacity)
+            end = runtime.marker(q)
+            yield lambda: self._image(w, h, hit, hit_t, rgba, depth, active, 1.0, stats, (start, end))
         while not done:
             n_spec = min(MAX_SPEC, max(1, (npix * s) // n_active)) if speculation else 1
             if speculation and stats["passes"] == 0:
@@ -181,8 +201,9 @@ class IsoRenderer:
             item_rgba = runtime.empty(q, (max(n_items, 1), 4), np.float32, "item rgba")
             item_depth = runtime.empty(q, max(n_items, 1), np.float32, "item depth")
             if hitkey is not None:
-                _fill(q, hitkey, np.uint64(0xFFFFFFFFFFFFFFFF))
+                runtime.fill(q, hitkey, np.uint64(0xFFFFFFFFFFFFFFFF))
             ngroups = 0
+            pass_arrays = [cnt, cand_block, cand_t, valid, item_ids, item_hit, item_t, item_rgba, item_depth]
             if m:
                 keys = runtime.empty(q, m, np.uint32, "item blocks")
                 self._launch("gather_u32", m, cand_block.base_data, item_ids.base_data, np.uint32(m),
@@ -194,6 +215,7 @@ class IsoRenderer:
                 ngroups = int(starts.size)
                 gblocks = runtime.empty(q, ngroups, np.uint32, "group blocks")
                 gcounts = runtime.empty(q, ngroups, np.uint32, "group counts")
+                pass_arrays += [keys, skeys, sitems, heads, starts, gblocks, gcounts]
                 self._launch("group_info", ngroups, skeys.base_data, starts.base_data, np.uint32(ngroups),
                              np.uint32(m), gblocks.base_data, gcounts.base_data)
                 needed = mark_blocks(gblocks, zv, queue=q)
@@ -204,11 +226,11 @@ class IsoRenderer:
             else:
                 decoded = 0
             still = runtime.empty(q, max(n_active, 1), np.uint8, "still active")
-            k = runtime.get_kernel(q, _PASS, "resolve_hits", {})
-            runtime.launch(q, k, *_items(q, n_active), active.base_data, np.uint32(n_active), np.uint32(n_spec),
-                           item_hit.base_data, item_t.base_data, item_rgba.base_data, item_depth.base_data,
-                           hitkey.base_data if hitkey is not None else None, ray_t.base_data, hit.base_data,
-                           hit_t.base_data, rgba.base_data, depth.base_data, still.base_data)
+            pass_arrays.append(still)
+            self._launch("resolve_hits", n_active, active.base_data, np.uint32(n_active), np.uint32(n_spec),
+                         item_hit.base_data, item_t.base_data, item_rgba.base_data, item_depth.base_data,
+                         runtime.arg(hitkey), ray_t.base_data, hit.base_data,
+                         hit_t.base_data, rgba.base_data, depth.base_data, still.base_data)
             stats["passes"] += 1
             stats["active_per_pass"].append(n_active)
             stats["n_spec_per_pass"].append(n_spec)
@@ -221,39 +243,25 @@ class IsoRenderer:
             done = n_active == 0 or frac >= completion
             stats["blocks_decoded"] = self.cache.decoded_total - decoded0
             stats["cache_slots"] = self.cache.capacity
-            stats["seconds"] = time.perf_counter() - t_start
+            # what is allocated: the arrays held (for the pass items, this pass's)
             stats["device_bytes"] = {
-                "compressed volume": zv.nbytes, "block cache": self.cache.nbytes,
-                "macrocell grids": self.grids.fine.nbytes + self.grids.coarse.nbytes,
-                "rays and image": npix * (4 + 1 + 4 + 4 + 16 + 4) + (npix * 8 if hitkey is not None else 0),
-                "pass items": n_items * (4 + 4 + 1 + 4 + 16 + 4)}
-            yield lambda a=active, f=frac, st=dict(stats): self._image(w, h, hit, hit_t, rgba, depth, a, f, st)
+                "compressed volume": self.cache.stream_nbytes, "block cache": self.cache.nbytes,
+                "macrocell grids": runtime.nbytes(self.grids.fine, self.grids.coarse),
+                "rays and image": frame_bytes,
+                "pass items": runtime.nbytes(*pass_arrays)}
+            end = runtime.marker(q)
+            yield lambda a=active, f=frac, st=dict(stats), ev=(start, end): self._image(
+                w, h, hit, hit_t, rgba, depth, a, f, st, ev)
 
     def _launch(self, name, n, *args):
-        k = runtime.get_kernel(self.queue, _PASS, name, {})
-        runtime.launch(self.queue, k, *_items(self.queue, n), *args)
+        runtime.launch(self.queue, self._kernels[name], *runtime.items(self.queue, n, self._wg), *args)
 
-    def _image(self, w, h, hit, hit_t, rgba, depth, active, frac, stats) -> IsoImage:
+    def _image(self, w, h, hit, hit_t, rgba, depth, active, frac, stats, events) -> IsoImage:
         act = np.zeros(w * h, bool)
         if active.size:
             act[active.get()] = True
-        return IsoImage(rgba.get().reshape(h, w, 4), depth.get().reshape(h, w),
-                        hit.get().reshape(h, w).astype(bool), hit_t.get().reshape(h, w), act.reshape(h, w),
-                        frac, stats)
-
-
-def _fill(q, a, value) -> None:
-    import pyopencl as cl
-    cl.enqueue_fill_buffer(q, a.base_data, np.array([value]), 0, a.nbytes)
-
-
-def _triple(name, v, positive: bool) -> tuple:
-    try:
-        t = tuple(float(x) for x in v)
-    except TypeError:
-        raise TypeError(f"{name}: expected 3 numbers, got {type(v).__name__}") from None
-    if len(t) != 3 or not all(np.isfinite(np.float32(x)) for x in t):
-        raise ValueError(f"{name}: expected 3 finite numbers, got {v!r}")
-    if positive and min(t) <= 0:
-        raise ValueError(f"{name}: expected positive numbers, got {v!r}")
-    return t
+        image = IsoImage(rgba.get().reshape(h, w, 4), depth.get().reshape(h, w),
+                         hit.get().reshape(h, w).astype(bool), hit_t.get().reshape(h, w), act.reshape(h, w),
+                         frac, stats)
+        stats["seconds"] = runtime.seconds(*events)     # read back: the events are done
+        return image

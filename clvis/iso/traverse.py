@@ -14,17 +14,13 @@ import numpy as np
 from .. import runtime
 from ..primitives import compact_indices
 
-__all__ = ["LOCAL_SIZE", "MAX_SPEC", "init_rays", "macro_traverse"]
+__all__ = ["MAX_SPEC", "PROFILES", "init_rays", "macro_traverse"]
 
 _SRC = "iso/traverse.cl"
-_FLAGS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 # work-items per group, per tuning profile (any size works; see the ABI)
-LOCAL_SIZE = {"cpu": 16, "gpu": 64}
+PROFILES = {"cpu": {"wg": 16}, "gpu": {"wg": 64}}
 MAX_SPEC = 64
-
-
-def _buf(a):
-    return a.base_data if hasattr(a, "base_data") else a
+_arg = runtime.arg
 
 
 def _volume_args(shape, spacing, origin):
@@ -48,9 +44,9 @@ def init_rays(queue, cam, width, height, shape, spacing, origin, *, wait_for=Non
         raise ValueError(f"width, height: need at least one pixel, got {w} x {h}")
     ray_t = runtime.empty(queue, npix, np.float32, "ray_t")
     enters = runtime.empty(queue, npix, np.uint8, "ray enters flags")
-    wg = LOCAL_SIZE[runtime.tuning_profile(queue)]
-    k = runtime.get_kernel(queue, _SRC, "init_rays", {}, _FLAGS)
-    runtime.launch(queue, k, -(-npix // wg) * wg, wg, _buf(cam), np.uint32(w), np.uint32(h),
+    wg = PROFILES[runtime.tuning_profile(queue)]["wg"]
+    k = runtime.get_kernel(queue, _SRC, "init_rays", {}, runtime.EXACT_FP)
+    runtime.launch(queue, k, *runtime.items(queue, npix, wg), _arg(cam), np.uint32(w), np.uint32(h),
                    *_volume_args(shape, spacing, origin), ray_t.base_data, enters.base_data,
                    wait_for=wait_for)
     count = runtime.empty(queue, 1, np.uint32, "active ray count")
@@ -79,10 +75,10 @@ def macro_traverse(queue, shape, spacing, origin, isovalue, cam, width, fine, co
     if cand_block.size < max_rays * n_spec or cand_t.size < max_rays * n_spec:
         raise ValueError(f"cand_block, cand_t: need room for {max_rays * n_spec} entries, "
                          f"got {cand_block.size} and {cand_t.size}")
-    wg = LOCAL_SIZE[runtime.tuning_profile(queue)]
-    k = runtime.get_kernel(queue, _SRC, "macro_traverse", {}, _FLAGS)
-    return runtime.launch(queue, k, -(-max_rays // wg) * wg, wg,
+    wg = PROFILES[runtime.tuning_profile(queue)]["wg"]
+    k = runtime.get_kernel(queue, _SRC, "macro_traverse", {}, runtime.EXACT_FP)
+    return runtime.launch(queue, k, *runtime.items(queue, max_rays, wg),
                           *_volume_args(shape, spacing, origin), np.float32(isovalue),
-                          _buf(cam), np.uint32(width), _buf(fine), _buf(coarse), _buf(active), _buf(count),
-                          _buf(ray_t), np.uint32(n_spec), _buf(cand_block), _buf(cand_t),
+                          _arg(cam), np.uint32(width), _arg(fine), _arg(coarse), _arg(active), _arg(count),
+                          _arg(ray_t), np.uint32(n_spec), _arg(cand_block), _arg(cand_t),
                           wait_for=wait_for)

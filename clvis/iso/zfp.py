@@ -299,7 +299,7 @@ def decode(stream_or_zfpvolume: ZfpVolume | Any, shape: Sequence[int] | None = N
     if nblocks:
         wg = PROFILES[runtime.tuning_profile(q)]["wg"]
         k = runtime.get_kernel(q, _SRC, "decode_volume", {})
-        runtime.launch(q, k, -(-nblocks // wg) * wg, wg, _stream_buffer(q, stream), np.uint32(rate),
+        runtime.launch(q, k, *runtime.items(q, nblocks, wg), _stream_buffer(q, stream), np.uint32(rate),
                        np.uint32(shape[2]), np.uint32(shape[1]), np.uint32(shape[0]), out.base_data)
     return result(out, host)
 
@@ -345,6 +345,6 @@ def decode_blocks(stream_or_zfpvolume: ZfpVolume | Any, ids: Any, shape: Sequenc
     if count:
         wg = PROFILES[runtime.tuning_profile(q)]["wg"]
         k = runtime.get_kernel(q, _SRC, "decode_blocks", {})
-        runtime.launch(q, k, -(-count // wg) * wg, wg, _stream_buffer(q, stream), np.uint32(rate),
+        runtime.launch(q, k, *runtime.items(q, count, wg), _stream_buffer(q, stream), np.uint32(rate),
                        np.uint32(nblocks), ids_d.base_data, np.uint32(count), out.base_data)
     return result(out, host)

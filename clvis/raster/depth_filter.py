@@ -75,16 +75,11 @@ def level_shapes(shape: Sequence[int], levels: int) -> list[tuple[int, int]]:
 def _launcher(queue):
     prof = PROFILES[runtime.tuning_profile(queue)]
     items, wg = prof["ITEMS"], prof["WG"]
-    if wg is not None:
-        wg = min(wg, runtime.capabilities(queue).max_work_group_size)
     defines = {"ITEMS": items}
 
     def launch(name, pixels, *args):
         k = runtime.get_kernel(queue, _SRC, name, defines)
-        g = -(-pixels // items)
-        if wg is not None:
-            g = -(-g // wg) * wg
-        runtime.launch(queue, k, g, wg, *args)
+        runtime.launch(queue, k, *runtime.items(queue, -(-pixels // items), wg), *args)
 
     return launch
 

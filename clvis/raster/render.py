@@ -22,7 +22,9 @@ Points are processed in batches of ``batch_size`` consecutive points with a
 bounding box each; batches the camera cannot see are skipped without reading
 a point. :class:`Rasterizer` keeps a cloud on the device (optionally in Morton
 order, so batches are compact and early-z rejects most points) for rendering
-many views; :func:`rasterize` is the one-call form. Kernels:
+many views (it captures the runtime options, 64-bit atomics and tuning
+profile, when made: later configure() calls apply to Rasterizers made after
+them); :func:`rasterize` is the one-call form. Kernels:
 ``kernels_cl/raster/render.cl`` and ``resolve.cl`` (this module drives both:
 MACR is render, then resolve), ``morton.cl``; NumPy definitions:
 ``clvis.reference.raster``.
@@ -36,7 +38,6 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import colormap as _colormap
@@ -64,8 +65,6 @@ BATCH_SIZE = 10240
 _F32_MAX = float(np.finfo(np.float32).max)
 # a visibility word as two uints (little-endian ulong: dkey << 32 | id)
 VIS_DTYPE = np.dtype([("id", "<u4"), ("dkey", "<u4")])
-# the camera buffer of clvis/camera.h
-_FLAGS = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 # local size of the per-batch kernels: one work-item walking a batch on CPUs,
 # a group striding through it on GPUs
 # (VEC: float8 projection in render.cl); "item_wg": the fixed local size of the
@@ -228,8 +227,21 @@ class Rasterizer:
             raise ValueError(f"batch_size: expected an int in [1, 2^24], got {batch_size!r}")
         inp = _Input(cloud_or_positions, colors, attributes, velocity, radius)
         self.queue = q = resolve_queue(queue, positions=inp.positions)
+        self.config = runtime.capture(q)
+        with runtime.pinned(self.config):
+            self._setup(inp, morton, int(batch_size))
+
+    def _setup(self, inp, morton, batch_size):
+        q = self.queue
+        # the kernels of a render, for the options captured
+        passes = ("render_visibility",) if self.config.int64_atomics else ("render_depth", "render_index")
+        defines = _render_defines(q)
+        self._kernels = {name: runtime.get_kernel(q, "raster/render.cl", name, defines, runtime.EXACT_FP)
+                         for name in passes + ("soft_accumulate",)}
+        self._kernels.update((name, runtime.get_kernel(q, "raster/resolve.cl", name, {}, runtime.EXACT_FP))
+                             for name in ("resolve", "resolve_attributes"))
         self.n = n = inp.n
-        self.batch_size = int(batch_size)
+        self.batch_size = batch_size
         self.nbatches = -(-n // self.batch_size)
         self.attribute_names = list(inp.f32) + list(inp.u8)
         self._f32_names, self._u8_names = list(inp.f32), list(inp.u8)
@@ -286,13 +298,13 @@ class Rasterizer:
         (``dkey << 32 | index``, all ones where empty) and the per-batch
         drawn flags (uint8), both on the device."""
         cam, near, far, W, H = self._program_args(camera, width, height)
-        vis, drawn, _ = self._render(cam, near, far, W, H)
+        with runtime.pinned(self.config):
+            vis, drawn, _ = self._render(cam, near, far, W, H)
         return vis, drawn
 
     def _render(self, cam, near, far, W, H):
         q = self.queue
-        vis = runtime.empty(q, (H, W), np.uint64, "visibility buffer")
-        cl.enqueue_fill_buffer(q, vis.base_data, np.full(1, 0xFF, np.uint8), 0, vis.nbytes)
+        vis = runtime.fill(q, runtime.empty(q, (H, W), np.uint64, "visibility buffer"), np.uint64(2**64 - 1))
         drawn = runtime.empty(q, max(self.nbatches, 1), np.uint8, "batch flags")
         cam_d = self._camera_device(cam)
         if self.n == 0:
@@ -303,22 +315,18 @@ class Rasterizer:
         # cell nearest first (render.cl's ABI comment): far fewer atomics
         f = cam[16:19].astype(np.float64)           # the depth row: the view direction
         reverse = np.uint32(f[0] + 2 * f[1] + 4 * f[2] < 0)
-        args = (self.positions.base_data, _opt(self.ids), np.uint32(self.n),
+        args = (self.positions.base_data, _arg(self.ids), np.uint32(self.n),
                 np.uint32(self.batch_size), self.bounds.base_data, cam_d.base_data, near, far,
                 np.uint32(W), np.uint32(H), vis.base_data, drawn.base_data, reverse)
         G = self.nbatches * L
-        if runtime.capabilities(q).int64_atomics:
-            k = runtime.get_kernel(q, "raster/render.cl", "render_visibility", _render_defines(q), _FLAGS)
-            runtime.launch(q, k, G, L, *args)
-        else:
-            for name in ("render_depth", "render_index"):
-                k = runtime.get_kernel(q, "raster/render.cl", name, _render_defines(q), _FLAGS)
-                runtime.launch(q, k, G, L, *args)
+        passes = ("render_visibility",) if self.config.int64_atomics else ("render_depth", "render_index")
+        for name in passes:
+            runtime.launch(q, self._kernels[name], G, L, *args)
         return vis, drawn, cam_d
 
     def _camera_device(self, cam):
         d = runtime.empty(self.queue, cam.size, np.float32, "camera")
-        d.set(cam, queue=self.queue)
+        d.set(cam, queue=self.queue, async_=True)     # no wait for earlier renders (host=False)
         return d
 
     def _lut(self, name):
@@ -375,8 +383,9 @@ class Rasterizer:
         tol = _soft_tolerance(soft_z, camera)
         tf = self._tf(color_by, colormap, value_range)
         focal = np.float32(0.5 * H * float(np.asarray(camera.projection)[1, 1]))
-        vis, drawn, cam_d = self._render(cam, near, far, W, H)
-        out = self._resolve(vis, cam_d, W, H, focal, tf, tol, near, far)
+        with runtime.pinned(self.config):
+            vis, drawn, cam_d = self._render(cam, near, far, W, H)
+            out = self._resolve(vis, cam_d, W, H, focal, tf, tol, near, far)
         if not host:
             return _gbuffers(out, self._f32_names, self._u8_names, lambda a: a)
         g = _gbuffers(out, self._f32_names, self._u8_names, lambda a: a.get())
@@ -394,13 +403,13 @@ class Rasterizer:
         if tol is not None and self.n:
             accum = runtime.zeros(q, npix * 5, np.uint32, "soft z accumulation")
             L = _local_size(q)
-            k = runtime.get_kernel(q, "raster/render.cl", "soft_accumulate", _render_defines(q), _FLAGS)
-            runtime.launch(q, k, self.nbatches * L, L, self.positions.base_data, _opt(self.ids),
+            runtime.launch(q, self._kernels["soft_accumulate"], self.nbatches * L, L,
+                           self.positions.base_data, _arg(self.ids),
                            np.uint32(self.n), np.uint32(self.batch_size), self.bounds.base_data,
                            cam_d.base_data, near, far, np.uint32(W), np.uint32(H),
                            vis.base_data, np.float32(tol), np.uint32(color_mode),
-                           _opt(self.colors), _opt(tf_buf), np.uint32(stride), np.uint32(offset),
-                           _opt(lut), np.uint32(lut_n), vmin, scale, accum.base_data)
+                           _arg(self.colors), _arg(tf_buf), np.uint32(stride), np.uint32(offset),
+                           _arg(lut), np.uint32(lut_n), vmin, scale, accum.base_data)
         flags = (1 if self.has_velocity else 0) | (2 if self.has_radius else 0)
         nf, nu = len(self._f32_names), len(self._u8_names)
         e = runtime.empty
@@ -415,38 +424,33 @@ class Rasterizer:
             "speed": e(q, (H, W), np.float32, "velocity magnitude") if flags & 1 else None,
             "radius": e(q, (H, W), np.float32, "radius plane") if flags & 2 else None,
         }
-        k = runtime.get_kernel(q, "raster/resolve.cl", "resolve", {}, _FLAGS)
-        runtime.launch(q, k, *_items(q, npix), vis.base_data, np.uint32(W), np.uint32(H),
-                       np.uint32(color_mode), _opt(self.colors), _opt(tf_buf), np.uint32(stride),
-                       np.uint32(offset), _opt(lut), np.uint32(lut_n), vmin, scale, _opt(accum),
+        runtime.launch(q, self._kernels["resolve"], *_items(q, npix), vis.base_data, np.uint32(W),
+                       np.uint32(H),
+                       np.uint32(color_mode), _arg(self.colors), _arg(tf_buf), np.uint32(stride),
+                       np.uint32(offset), _arg(lut), np.uint32(lut_n), vmin, scale, _arg(accum),
                        out["index"].base_data, out["depth"].base_data, out["rgba"].base_data)
         if flags or nf or nu:
-            k = runtime.get_kernel(q, "raster/resolve.cl", "resolve_attributes", {}, _FLAGS)
             runtime.launch(
-                q, k, *_items(q, npix), vis.base_data, np.uint32(W), np.uint32(H),
-                self.positions.base_data, _opt(self.inv), cam_d.base_data, focal,
-                np.uint32(flags), np.uint32(nf), _opt(self.attr_f32), np.uint32(nu),
-                _opt(self.attr_u8), _opt(self.velocity), _opt(self.radius), _opt(out["f32"]),
-                _opt(out["u8"]), _opt(out["vel"]), _opt(out["angle"]), _opt(out["speed"]),
-                _opt(out["radius"]))
+                q, self._kernels["resolve_attributes"], *_items(q, npix), vis.base_data, np.uint32(W),
+                np.uint32(H),
+                self.positions.base_data, _arg(self.inv), cam_d.base_data, focal,
+                np.uint32(flags), np.uint32(nf), _arg(self.attr_f32), np.uint32(nu),
+                _arg(self.attr_u8), _arg(self.velocity), _arg(self.radius), _arg(out["f32"]),
+                _arg(out["u8"]), _arg(out["vel"]), _arg(out["angle"]), _arg(out["speed"]),
+                _arg(out["radius"]))
         return out
 
 
-def _opt(a):
-    """The buffer of an optional device array; None (a NULL argument) when absent or empty."""
-    return a.base_data if a is not None and a.size else None
+_arg = runtime.arg
 
 
 def _local_size(queue) -> int:
-    L = PROFILES[runtime.tuning_profile(queue)]["L"]
-    return max(1, min(L, runtime.capabilities(queue).max_work_group_size))
+    return runtime.local_size(queue, PROFILES[runtime.tuning_profile(queue)]["L"])
 
 
 def _items(queue, n: int) -> tuple[int, int]:
     """(global, local) sizes for one work-item per element of n."""
-    wg = max(1, min(PROFILES[runtime.tuning_profile(queue)]["item_wg"],
-                    runtime.capabilities(queue).max_work_group_size))
-    return -(-n // wg) * wg, wg
+    return runtime.items(queue, n, PROFILES[runtime.tuning_profile(queue)]["item_wg"])
 
 
 def _render_defines(queue) -> dict:
@@ -459,7 +463,7 @@ def _batch_bounds(queue, positions, batch: int) -> cla.Array:
     bounds = runtime.empty(queue, (max(nb, 1), 6), np.float32, "batch bounds")
     if n:
         k = runtime.get_kernel(queue, "raster/render.cl", "batch_bounds", _render_defines(queue),
-                               _FLAGS)
+                               runtime.EXACT_FP)
         runtime.launch(queue, k, *_items(queue, nb), positions.base_data, np.uint32(n), np.uint32(batch),
                        bounds.base_data)
     return bounds

@@ -282,3 +282,51 @@ def test_device_output(queue):
     np.testing.assert_array_equal(b.rgba.get(), a.rgba)
     np.testing.assert_array_equal(b.depth.get(), a.depth)
     np.testing.assert_array_equal(b.stats["ray_stats"].get()[..., 0], a.hits)
+
+
+def _other(queue, int64):
+    """Options unlike those in force: the other atomics path and work shape."""
+    return {"int64_atomics": not int64, "tuning": "gpu" if runtime.tuning_profile(queue) == "cpu" else "cpu"}
+
+
+def _assert_same(got, want):
+    for name in ("rgba", "depth", "hits", "rounds"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+
+
+@pytest.mark.parametrize("int64", [True, False], ids=["int64", "no-int64"])
+def test_options_captured_at_construction(queue, int64):
+    """A GaussianRenderer keeps the options (and k) it was made with."""
+    g = _random(200, seed=21)
+    with runtime.configure(int64_atomics=int64):
+        r = gr.GaussianRenderer(g, queue=queue)
+    want = r.render(_cam(), W, H)
+    with runtime.configure(**_other(queue, int64)) as o:
+        _assert_same(r.render(_cam(), W, H), want)
+        assert r.config.tuning != o.tuning
+        assert r.k == gr.PROFILES[r.config.tuning]["k"]
+
+
+def test_configure_from_another_thread(queue, options_flipping):
+    """configure() from another thread during builds and renders: the same image, no crash."""
+    g = _random(200, seed=22)
+    r = gr.GaussianRenderer(g, k=16, queue=queue)
+    want = r.render(_cam(), W, H)
+    with options_flipping() as flips:
+        for _ in range(5):
+            _assert_same(r.render(_cam(), W, H), want)
+            _assert_same(gr.GaussianRenderer(g, k=16, queue=queue).render(_cam(), W, H), want)
+    assert flips[0] > 2
+
+
+def test_render_does_not_wait_and_times_from_events(queue):
+    """host=False enqueues and returns (render_s None until asked); host=True
+    reports device times from event profiling."""
+    g = _random(100, seed=23)
+    r = gr.GaussianRenderer(g, queue=queue)
+    b = r.render(_cam(), W, H, host=False)
+    assert b.stats["render_s"] is None
+    assert runtime.seconds(*b.stats["events"]) > 0          # waits, then reads the events
+    a = r.render(_cam(), W, H)
+    assert a.stats["render_s"] > 0 and a.stats["bvh_build_s"] > 0 and r.upload_seconds > 0
+    assert r.nbytes == r.records.nbytes + r.bvh.nbytes

@@ -192,3 +192,71 @@ def test_surface_on_block_and_coarse_boundaries(queue, axis):
     np.testing.assert_array_equal(img.hit, want.hit)
     assert want.hit.mean() > 0.2
     np.testing.assert_allclose(img.depth[img.hit], want.depth[want.hit], rtol=0, atol=1e-4 * want.diagonal)
+
+
+def _other(queue, int64):
+    """Options unlike those in force: the other atomics path and work shape."""
+    return {"int64_atomics": not int64, "tuning": "gpu" if runtime.tuning_profile(queue) == "cpu" else "cpu"}
+
+
+def _assert_same(got, want):
+    for name in ("rgba", "depth", "hit", "t", "active"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+
+
+@pytest.mark.parametrize("int64", [True, False], ids=["int64", "no-int64"])
+def test_configure_between_passes(queue, int64):
+    """A renderer keeps the options it was made with: configure() between the
+    passes of passes() (once a 64-bit-atomics kernel given a NULL hit-key
+    buffer, a crash) changes nothing in the image."""
+    d = _ML
+    zv = zfp.compress(d["volume"], 16)
+    with runtime.configure(int64_atomics=int64):
+        r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
+    want = r.render(_cam(), W, H, 0.5)
+    r.reset_cache()
+    images = []
+    saved = runtime.options()
+    try:
+        for img in r.passes(_cam(), W, H, 0.5):
+            images.append(img)
+            runtime.set_options(**_other(queue, runtime.options().int64_atomics))
+    finally:
+        runtime.set_options(tuning=saved.tuning, int64_atomics=saved.int64_atomics)
+    assert len(images) >= 2
+    _assert_same(images[-1], want)
+    assert images[-1].stats["int64_atomics"] == r.config.int64_atomics == want.stats["int64_atomics"]
+    # and a renderer made now takes the options now in force
+    with runtime.configure(**_other(queue, int64)) as o:
+        r2 = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
+        assert r2.config.tuning == o.tuning
+        assert r2.config.int64_atomics == (o.int64_atomics and runtime.capabilities(queue).int64_atomics_native)
+        _assert_same(r2.render(_cam(), W, H, 0.5), want)
+
+
+def test_configure_from_another_thread(queue, options_flipping):
+    """configure() from another thread during renders: the same image, no crash."""
+    d = _ML
+    zv = zfp.compress(d["volume"], 16)
+    r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
+    want = r.render(_cam(), W, H, 0.5)
+    with options_flipping() as flips:
+        for _ in range(3):
+            r.reset_cache()
+            _assert_same(r.render(_cam(), W, H, 0.5), want)
+            *_, last = r.passes(_cam(), W, H, 0.5)
+            _assert_same(last, want)
+    assert flips[0] > 2
+
+
+def test_stats_timings_and_bytes(queue):
+    """seconds from event profiling; device bytes from the arrays held."""
+    d = _ML
+    zv = zfp.compress(d["volume"], 16)
+    r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
+    st = r.render(_cam(), W, H, 0.5).stats
+    assert st["seconds"] > 0
+    dev = st["device_bytes"]
+    assert dev["block cache"] == r.cache.nbytes and dev["compressed volume"] >= zv.nbytes
+    assert dev["macrocell grids"] == r.grids.fine.nbytes + r.grids.coarse.nbytes
+    assert dev["rays and image"] >= W * H * (4 + 1 + 4 + 4 + 16 + 4) and dev["pass items"] > 0

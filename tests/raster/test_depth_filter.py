@@ -14,6 +14,8 @@ import clvis
 from clvis.raster.depth_filter import depth_filter_mask, level_shapes, rgbda
 from clvis.reference.raster import depth_filter as ref
 
+# the module: clvis.raster's depth_filter attribute is the function of that name
+
 INF = np.float32(np.inf)
 
 

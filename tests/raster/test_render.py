@@ -398,3 +398,43 @@ def test_bad_input(queue):
     with runtime.configure(max_alloc_bytes=1 << 20), \
             pytest.raises(clvis.DeviceError, match="visibility buffer"):
             clvis.rasterize(pos, cam, 1024, 1024, queue=queue)
+
+
+def _other(queue, int64):
+    """Options unlike those in force: the other atomics path and work shape."""
+    return {"int64_atomics": not int64, "tuning": "gpu" if runtime.tuning_profile(queue) == "cpu" else "cpu"}
+
+
+def _options_scene(queue):
+    pos = _scene(4000, seed=5)
+    rng = np.random.default_rng(5)
+    colors = rng.integers(0, 256, (len(pos), 4), dtype=np.uint8)
+    return pos, colors, {"v": rng.normal(size=len(pos)).astype(np.float32)}
+
+
+@pytest.mark.parametrize("int64", [True, False], ids=["int64", "no-int64"])
+def test_options_captured_at_construction(queue, int64):
+    """A Rasterizer keeps the options it was made with; configure() applies to
+    the next one, with the same result."""
+    pos, colors, attrs = _options_scene(queue)
+    with runtime.configure(int64_atomics=int64):
+        r = clvis.Rasterizer(pos, colors=colors, attributes=attrs, batch_size=256, queue=queue)
+    want = r.render(_cam(), W, H, soft_z=True)
+    want_vis = r.visibility(_cam(), W, H)[0].get()
+    with runtime.configure(**_other(queue, int64)) as o:
+        _assert_gbuffers(r.render(_cam(), W, H, soft_z=True), want)
+        np.testing.assert_array_equal(r.visibility(_cam(), W, H)[0].get(), want_vis)
+        r2 = clvis.Rasterizer(pos, colors=colors, attributes=attrs, batch_size=256, queue=queue)
+        assert r2.config.tuning == o.tuning != r.config.tuning
+        _assert_gbuffers(r2.render(_cam(), W, H, soft_z=True), want)
+
+
+def test_configure_from_another_thread(queue, options_flipping):
+    """configure() from another thread during renders: the same G-buffers, no crash."""
+    pos, colors, attrs = _options_scene(queue)
+    r = clvis.Rasterizer(pos, colors=colors, attributes=attrs, batch_size=256, queue=queue)
+    want = r.render(_cam(), W, H, soft_z=True)
+    with options_flipping() as flips:
+        for _ in range(20):
+            _assert_gbuffers(r.render(_cam(), W, H, soft_z=True), want)
+    assert flips[0] > 2

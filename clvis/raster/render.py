@@ -38,6 +38,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import colormap as _colormap

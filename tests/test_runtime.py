@@ -413,3 +413,14 @@ def test_event_seconds(device):
     plain = cl.CommandQueue(q.context, device)            # a caller's queue without profiling
     assert runtime.seconds(runtime.marker(plain)) is None
     assert runtime.nbytes(a, None, a[:10]) == a.nbytes + 40
+
+
+def test_check_memory(device):
+    q = runtime.queue_for(device)
+    runtime.check_memory(q, "a small image", device_bytes=1 << 20, host_bytes=1 << 20)
+    avail = runtime.host_available_bytes()
+    assert avail is None or avail > 0
+    with pytest.raises(clvis.DeviceError, match=r"a huge image: needs .* GB on the device and .* GB on the host"):
+        runtime.check_memory(q, "a huge image", device_bytes=1 << 62)
+    with pytest.raises(clvis.DeviceError, match="available"):
+        runtime.check_memory(q, "a huge image", host_bytes=1 << 60)

@@ -175,7 +175,7 @@ def test_trilinear_gradient(probes):
     w[:10] = np.round(w[:10])                          # corners
     g = cla.empty(q, 3 * len(v), np.float32)
     prg.gradient(q, (len(v),), None, _dev(q, v).data, _dev(q, w).data, g.data)
-    want = ref._trilinear_gradient(_corners(v), w.astype(np.float64))
+    want = ref.raytrace._trilinear_gradient(_corners(v), w.astype(np.float64))
     np.testing.assert_allclose(g.get().reshape(-1, 3), want, rtol=1e-5, atol=1e-5)
 
 

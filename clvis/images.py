@@ -202,7 +202,7 @@ def _font(size: int):
 
 def _text_size(width: int) -> int:
     """The font size for labels of a panel `width` pixels wide."""
-    return int(min(MAX_TEXT, max(MIN_TEXT + 3, round(width / 30))))
+    return int(min(MAX_TEXT, max(MIN_TEXT + 4, round(width / 26))))
 
 
 def label_height(width: int) -> int:

@@ -366,8 +366,8 @@ def describe_camera(args) -> str:
 
 
 def camera_from_args(args, lo, hi, width: int, height: int, points=None):
-    """The camera the options ask for, framing the box [lo, hi] (and, for
-    --view fit, the `points` themselves when given)."""
+    """The camera the options ask for, framing the box [lo, hi] (for --view
+    fit, the `points` themselves when given, else the box's corners)."""
     from ..camera import Camera, grid_cameras, hemisphere_cameras
 
     kind, k = args.view
@@ -376,8 +376,10 @@ def camera_from_args(args, lo, hi, width: int, height: int, points=None):
     fov_y = args.fov if args.fov is not None else fit.fov_y
     try:
         if kind == "fit":
-            cam = (fit_camera(points, lo, hi, aspect, fit, fov_y) if points is not None else
-                   Camera.fit(lo, hi, direction=fit.direction, aspect=aspect, fov_y=fov_y))
+            if points is None:      # the box's corners: framed tighter than its bounding sphere
+                points = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                   for z in (lo[2], hi[2])], np.float64)
+            cam = fit_camera(points, lo, hi, aspect, fit, fov_y)
         elif kind in AXIS_VIEWS:
             cam = axis_camera(kind, lo, hi, aspect)
         else:

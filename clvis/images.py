@@ -1,13 +1,23 @@
-"""G-buffer planes to images a person looks at, and PNG files (Pillow).
+"""G-buffer planes to images a person looks at, the labels, colour bars and
+grids that make them readable, and PNG files (Pillow).
 
-Images are ``[H, W, C]`` uint8 arrays, row 0 on top. Every colour image here is
-RGBA with empty pixels transparent black ``(0, 0, 0, 0)``; colours come from
-``clvis.colormap`` by its index rule. `colormap` arguments take a matplotlib
-name or an ``(n, 4)`` uint8 table.
+Images are ``[H, W, C]`` uint8 arrays, row 0 on top. Every colour image from
+a plane here is RGBA with empty pixels transparent black ``(0, 0, 0, 0)``;
+colours come from ``clvis.colormap`` by its index rule. `colormap` arguments
+take a matplotlib name or an ``(n, 4)`` uint8 table.
+
+For the pictures the commands write: `opaque` puts an image over a background
+colour (``BACKGROUND`` by default), `label` adds a band of text above it (on
+``BAND``, darker, so a band never reads as part of the picture),
+`colorbar` draws a colormap's ramp with its value range written under the
+ends, and `compose` lays labelled panels out in a grid. Text uses Pillow's
+built-in font (scalable with FreeType, Pillow >= 10.1; else its bitmap font):
+no font file is read.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import secrets
 from pathlib import Path
@@ -17,7 +27,14 @@ import numpy as np
 from . import colormap as cm
 from ._arrays import nonnegative_int
 
-__all__ = ["attribute_image", "depth_image", "save_png", "side_by_side", "velocity_images"]
+__all__ = ["BACKGROUND", "attribute_image", "colorbar", "compose", "depth_image", "font",
+           "from_premultiplied", "label", "label_height", "opaque", "save_png", "side_by_side",
+           "velocity_images"]
+
+BACKGROUND = (24, 24, 28)       # behind empty pixels: a dark grey
+BAND = (8, 8, 10)               # label bands, colour bars and the gaps between panels: darker
+TEXT = (235, 235, 235)          # the labels' text
+MIN_TEXT, MAX_TEXT = 8, 24      # font sizes in pixels a label may take
 
 
 def save_png(path, image) -> Path:
@@ -137,3 +154,192 @@ def _plane(name: str, x) -> np.ndarray:
 
 def _table(colormap) -> np.ndarray:
     return cm.lut(colormap) if isinstance(colormap, str) else np.asarray(colormap)
+
+
+# ---------------------------------------------------------------- pictures
+
+def opaque(rgba, background=BACKGROUND) -> np.ndarray:
+    """``(H, W, 4)`` uint8 RGBA `rgba` (straight alpha) over the RGB colour
+    `background` (three 0..255 integers): the same shape, every alpha 255."""
+    a = _rgba("rgba", rgba)
+    bg = _colour("background", background)
+    alpha = a[..., 3:4].astype(np.uint16)
+    out = np.empty_like(a)
+    out[..., :3] = (a[..., :3] * alpha + np.asarray(bg, np.uint16) * (255 - alpha) + 127) // 255
+    out[..., 3] = 255
+    return out
+
+
+def from_premultiplied(rgba) -> np.ndarray:
+    """``(H, W, 4)`` float RGBA with premultiplied colour in [0, 1] (what the
+    Gaussian renderer gives) as uint8 RGBA with straight alpha; alpha 0 gives
+    transparent black."""
+    a = np.asarray(rgba, np.float32)
+    if a.ndim != 3 or a.shape[2] != 4:
+        raise ValueError(f"rgba: expected shape (H, W, 4), got {a.shape}")
+    alpha = np.clip(a[..., 3:4], 0.0, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rgb = np.where(alpha > 0, a[..., :3] / alpha, 0.0)
+    out = np.concatenate([np.clip(rgb, 0.0, 1.0), alpha], axis=2)
+    return np.rint(out * 255).astype(np.uint8)
+
+
+def font(size: int):
+    """Pillow's built-in font at `size` pixels (its bitmap font, about 11
+    pixels, where Pillow is older than 10.1 or has no FreeType)."""
+    return _font(int(size))
+
+
+@functools.lru_cache(maxsize=32)
+def _font(size: int):
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=size)
+    except (TypeError, OSError, ImportError, AttributeError):   # Pillow < 10.1, or no FreeType
+        return ImageFont.load_default()
+
+
+def _text_size(width: int) -> int:
+    """The font size for labels of a panel `width` pixels wide."""
+    return int(min(MAX_TEXT, max(MIN_TEXT + 4, round(width / 26))))
+
+
+def label_height(width: int) -> int:
+    """Rows of the band `label` adds above a panel `width` pixels wide (and
+    of a `colorbar` of that width)."""
+    return int(round(_text_size(width) * 1.5)) + 2
+
+
+def _fit_text(text: str, size: int, width: int):
+    """(font, text) with the text fitting `width` pixels: the font shrunk down
+    to MIN_TEXT, then the text cut with an ellipsis."""
+    while True:
+        f = _font(size)
+        if f.getlength(text) <= width or size <= MIN_TEXT:
+            break
+        size -= 1
+    if f.getlength(text) <= width:
+        return f, text
+    while text and f.getlength(text + "\u2026") > width:
+        text = text[:-1]
+    return f, (text + "\u2026") if text else ""
+
+
+def _draw_text(band: np.ndarray, pieces, size: int, colour=TEXT) -> np.ndarray:
+    """`pieces`: [(text, "left" | "centre" | "right")] written on `band`
+    (RGBA), vertically centred, with a margin of a third of the font size."""
+    from PIL import Image, ImageDraw
+
+    im = Image.fromarray(band)
+    draw = ImageDraw.Draw(im)
+    h, w = band.shape[:2]
+    margin = max(2, size // 3)
+    for text, where in pieces:
+        f, text = _fit_text(text, size, max(1, w - 2 * margin))
+        if not text:
+            continue
+        left, _, right, _ = draw.textbbox((0, 0), text, font=f)
+        _, top, _, bottom = draw.textbbox((0, 0), "Hg", font=f)     # one baseline for every text
+        x = {"left": margin - left, "right": w - margin - right,
+             "centre": (w - (right - left)) // 2 - left}[where]
+        y = (h - (bottom - top)) // 2 - top
+        draw.text((x, y), text, fill=tuple(colour) + (255,), font=f)
+    return np.asarray(im)
+
+
+def label(image, text: str, background=BAND) -> np.ndarray:
+    """`image` (``(H, W, 4)`` uint8 RGBA) with an opaque band of
+    ``label_height(W)`` rows above it, `text` written in it (left-aligned,
+    the font shrunk and then the text cut to fit the width). The image's own
+    pixels are kept as they are (transparent ones too)."""
+    image = _rgba("image", image)
+    if not isinstance(text, str):
+        raise TypeError(f"text: expected a str, got {type(text).__name__}")
+    w = image.shape[1]
+    band = np.empty((label_height(w), w, 4), np.uint8)
+    band[:] = _colour("background", background) + (255,)
+    band = _draw_text(band, [(text, "left")], _text_size(w))
+    return np.concatenate([band, image], axis=0)
+
+
+def colorbar(lut, vmin, vmax, width, *, title: str = "", background=BAND) -> np.ndarray:
+    """A horizontal colour bar ``(label_height(width) + ramp rows, width, 4)``,
+    opaque: its top rows are the ramp, column ``x`` the colour of the value
+    ``vmin + (vmax - vmin) * x / (width - 1)`` through `lut` by the colormap
+    index rule (column 0 is ``lut[0]``, the last column ``lut[-1]``); under it
+    `vmin` at the left end, `vmax` at the right end and `title` between them.
+    `lut`: a colormap name or an ``(n, 4)`` uint8 table."""
+    table = _table(lut)
+    width = nonnegative_int("width", width)
+    if width < 2:
+        raise ValueError(f"width: a colour bar needs at least 2 columns, got {width}")
+    lo, hi = cm._limit("vmin", vmin), cm._limit("vmax", vmax)
+    if lo > hi:
+        raise ValueError(f"vmin ({lo!r}) must be <= vmax ({hi!r})")
+    values = lo + (hi - lo) * np.arange(width, dtype=np.float64) / (width - 1)
+    values[-1] = hi
+    ramp_rows = max(4, _text_size(width) // 2)
+    ramp = np.broadcast_to(cm.apply(values, table, lo, hi), (ramp_rows, width, 4)).copy()
+    ramp[..., 3] = 255
+    text = np.empty((label_height(width), width, 4), np.uint8)
+    text[:] = _colour("background", background) + (255,)
+    size = _text_size(width)
+    ends = [(_number(lo), "left"), (_number(hi), "right")]
+    f = _font(size)
+    room = width - 2 * max(2, size // 3) - f.getlength(ends[0][0] + ends[1][0]) - 2 * size
+    pieces = ends + ([(title, "centre")] if title and f.getlength(title) <= room else [])
+    return np.concatenate([ramp, _draw_text(text, pieces, size)], axis=0)
+
+
+def _number(v: float) -> str:
+    return f"{v:.4g}"
+
+
+def compose(panels, columns: int | None = None, pad: int = 4, background=BAND) -> np.ndarray:
+    """``(H_i, W_i, 4)`` uint8 RGBA panels in a grid of `columns` (default:
+    all in one row), left to right and top to bottom, `pad` pixels between
+    them, each top-aligned in its cell. Gaps and unfilled cells take the RGB
+    colour `background` (opaque), or stay transparent with ``background=None``;
+    the panels' own pixels are copied as they are."""
+    panels = [_rgba(f"panels[{k}]", p) for k, p in enumerate(panels)]
+    if not panels:
+        raise ValueError("panels: expected at least one panel")
+    pad = nonnegative_int("pad", pad)
+    cols = len(panels) if columns is None else nonnegative_int("columns", columns)
+    if cols < 1:
+        raise ValueError(f"columns: expected at least 1, got {cols}")
+    cols = min(cols, len(panels))
+    rows = [panels[i:i + cols] for i in range(0, len(panels), cols)]
+    widths = [max(row[c].shape[1] for row in rows if c < len(row)) for c in range(cols)]
+    heights = [max(p.shape[0] for p in row) for row in rows]
+    out = np.zeros((sum(heights) + pad * (len(rows) - 1), sum(widths) + pad * (cols - 1), 4), np.uint8)
+    if background is not None:
+        out[:] = _colour("background", background) + (255,)
+    y = 0
+    for row, h in zip(rows, heights):
+        x = 0
+        for p, w in zip(row, widths):
+            out[y:y + p.shape[0], x:x + p.shape[1]] = p
+            x += w + pad
+        y += h + pad
+    return out
+
+
+def _rgba(name: str, x) -> np.ndarray:
+    x = np.asarray(x)
+    if x.dtype != np.uint8 or x.ndim != 3 or x.shape[2] != 4 or x.shape[0] < 1 or x.shape[1] < 1:
+        raise ValueError(f"{name}: expected an (H, W, 4) uint8 RGBA image, got shape {x.shape} "
+                         f"{x.dtype.name}")
+    return x
+
+
+def _colour(name: str, c) -> tuple[int, int, int]:
+    try:
+        t = tuple(int(v) for v in c)
+        ok = len(t) == 3 and all(0 <= v <= 255 and v == c_ for v, c_ in zip(t, c))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"{name}: expected an RGB colour of three integers 0..255, got {c!r}")
+    return t

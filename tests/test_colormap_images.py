@@ -278,3 +278,95 @@ def test_save_png_rejects(tmp_path, bad):
     with pytest.raises(ValueError, match="image"):
         images.save_png(tmp_path / "x.png", bad)
     assert not any(tmp_path.iterdir())
+
+
+def _panel(h=30, w=50):
+    a = np.zeros((h, w, 4), np.uint8)
+    a[5:8, 10:15] = (200, 40, 40, 255)
+    a[9, 3] = (10, 200, 10, 128)
+    return a
+
+
+def test_opaque_has_no_transparent_pixel():
+    a = _panel()
+    out = images.opaque(a, (1, 2, 3))
+    assert out.shape == a.shape and out.dtype == np.uint8 and (out[..., 3] == 255).all()
+    assert tuple(out[0, 0]) == (1, 2, 3, 255)                   # empty: the background
+    assert tuple(out[6, 12]) == (200, 40, 40, 255)             # opaque: kept
+    np.testing.assert_array_equal(out[9, 3, :3], [(10 * 128 + 1 * 127 + 127) // 255,
+                                                   (200 * 128 + 2 * 127 + 127) // 255,
+                                                   (10 * 128 + 3 * 127 + 127) // 255])
+    assert (images.opaque(a)[0, 0, :3] == images.BACKGROUND).all()
+    with pytest.raises(ValueError, match="background"):
+        images.opaque(a, (0, 0, 300))
+    with pytest.raises(ValueError, match="rgba"):
+        images.opaque(a[..., :3])
+
+
+def test_from_premultiplied():
+    f = np.array([[[0.5, 0.25, 0.0, 0.5], [0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0]]], np.float32)
+    out = images.from_premultiplied(f)
+    np.testing.assert_array_equal(out[0], [[255, 128, 0, 128], [0, 0, 0, 0], [255, 255, 255, 255]])
+
+
+@pytest.mark.parametrize("width", [16, 64, 160, 480, 1920])
+def test_label_adds_a_band_above(width):
+    a = _panel(40, width)
+    out = images.label(a, "temperature (viridis)")
+    band = images.label_height(width)
+    assert 10 <= band <= 40
+    assert out.shape == (40 + band, width, 4) and out.dtype == np.uint8
+    np.testing.assert_array_equal(out[band:], a)                # the image is untouched
+    assert (out[:band, :, 3] == 255).all()                      # the band is opaque
+    text = out[:band, :, :3].astype(int)
+    assert (np.abs(text - images.BAND).sum(axis=2) > 200).sum() > 5     # and has bright text
+    if width >= 160:                                            # it fits: the font is not shrunk
+        assert band >= 18
+
+
+def test_label_cuts_text_that_does_not_fit():
+    out = images.label(_panel(10, 20), "a very long label " * 20)
+    assert out.shape[1] == 20
+    with pytest.raises(TypeError, match="text"):
+        images.label(_panel(), 3)
+
+
+@pytest.mark.parametrize("name", ["viridis", "inferno", "coolwarm_r"])
+@pytest.mark.parametrize("width", [2, 50, 333])
+def test_colorbar_ends_are_the_colormaps_ends(name, width):
+    lut = colormap.lut(name)
+    bar = images.colorbar(name, -2.5, 7.0, width, title="value")
+    assert bar.shape[1] == width and bar.dtype == np.uint8 and (bar[..., 3] == 255).all()
+    assert bar.shape[0] >= images.label_height(width)
+    np.testing.assert_array_equal(bar[0, 0], lut[0])
+    np.testing.assert_array_equal(bar[0, -1], lut[-1])
+    expected = colormap.apply(np.linspace(-2.5, 7.0, width), lut, -2.5, 7.0)
+    np.testing.assert_array_equal(bar[0], expected)
+    np.testing.assert_array_equal(images.colorbar(lut, 1.0, 1.0, width)[0, 0], lut[0])    # a flat range
+
+
+def test_colorbar_errors():
+    with pytest.raises(ValueError, match="vmin"):
+        images.colorbar("viridis", 2.0, 1.0, 50)
+    with pytest.raises(ValueError, match="width"):
+        images.colorbar("viridis", 0.0, 1.0, 1)
+    with pytest.raises(ValueError, match="colormap"):
+        images.colorbar("nope", 0.0, 1.0, 50)
+
+
+def test_compose_grid():
+    a, b, c = _panel(30, 50), _panel(20, 40), _panel(10, 60)
+    out = images.compose([a, b, c], columns=2, pad=3, background=(9, 8, 7))
+    assert out.shape == (30 + 3 + 10, 60 + 3 + 40, 4)       # columns as wide as their widest
+    np.testing.assert_array_equal(out[:30, :50], a)
+    np.testing.assert_array_equal(out[:20, 63:103], b)
+    np.testing.assert_array_equal(out[33:43, :60], c)
+    assert tuple(out[25, 55]) == (9, 8, 7, 255) and tuple(out[31, 10]) == (9, 8, 7, 255)
+    row = images.compose([a, b], pad=0, background=None)
+    assert row.shape == (30, 90, 4) and (row[25:, 50:] == 0).all()
+    with pytest.raises(ValueError, match="panels"):
+        images.compose([])
+    with pytest.raises(ValueError, match=r"panels\[1\]"):
+        images.compose([a, a[..., :3]])
+    with pytest.raises(ValueError, match="columns"):
+        images.compose([a], columns=0)

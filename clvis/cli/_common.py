@@ -366,8 +366,8 @@ def describe_camera(args) -> str:
 
 
 def camera_from_args(args, lo, hi, width: int, height: int, points=None):
-    """The camera the options ask for, framing the box [lo, hi] (and, for
-    --view fit, the `points` themselves when given)."""
+    """The camera the options ask for, framing the box [lo, hi] (for --view
+    fit, the `points` themselves when given, else the box's corners)."""
     from ..camera import Camera, grid_cameras, hemisphere_cameras
 
     kind, k = args.view
@@ -376,8 +376,10 @@ def camera_from_args(args, lo, hi, width: int, height: int, points=None):
     fov_y = args.fov if args.fov is not None else fit.fov_y
     try:
         if kind == "fit":
-            cam = (fit_camera(points, lo, hi, aspect, fit, fov_y) if points is not None else
-                   Camera.fit(lo, hi, direction=fit.direction, aspect=aspect, fov_y=fov_y))
+            if points is None:      # the box's corners: framed tighter than its bounding sphere
+                points = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                   for z in (lo[2], hi[2])], np.float64)
+            cam = fit_camera(points, lo, hi, aspect, fit, fov_y)
         elif kind in AXIS_VIEWS:
             cam = axis_camera(kind, lo, hi, aspect)
         else:
@@ -430,9 +432,10 @@ def _finite_sample(positions, limit: int = 200_000) -> np.ndarray:
 
 
 def fit_camera(positions, lo, hi, aspect: float, fit: FitView, fov_y: float | None = None):
-    """Camera.fit on the bounds, then moved along its view axis until the
-    points (a sample of them) just fill the frame. Camera.fit frames the
-    bounding sphere, which leaves a flat cloud (a storm, a terrain) small."""
+    """Camera.fit on the bounds, then moved sideways until the points (a sample
+    of them) are centred on screen and along its view axis until they just
+    fill the frame; the direction is kept. Camera.fit frames the bounding
+    sphere, which leaves a flat cloud (a storm, a terrain) small."""
     from ..camera import Camera
 
     cam = Camera.fit(lo, hi, direction=fit.direction, aspect=aspect,
@@ -443,17 +446,40 @@ def fit_camera(positions, lo, hi, aspect: float, fit: FitView, fov_y: float | No
         return cam          # (about) one point: Camera.fit's own framing
     right, up, forward = cam.view[0, :3], cam.view[1, :3], cam.forward
     o = p - centre
-    a, b, c = np.abs(o @ right), np.abs(o @ up), o @ forward
+    c = o @ forward
     tan_y = 1.0 / cam.projection[1, 1]
     tan_x = aspect * tan_y
-    # with the eye at distance D from the centre, a point is in frame when
-    # a <= tan_x (D + c) and b <= tan_y (D + c), and in front when D + c > 0
+    # with the eye at distance D from the centre, shifted sideways by (sx, sy),
+    # a point is in frame when |a - sx| <= tan_x (D + c) and |b - sy| <=
+    # tan_y (D + c), and in front when D + c > 0
+    a, b = o @ right, o @ up
     radius = max(0.5 * float(np.linalg.norm(np.asarray(hi) - np.asarray(lo))), 1e-6)
-    dist = max(float(np.max(FIT_MARGIN * np.maximum(a / tan_x, b / tan_y) - c)),
-               float(np.max(-c)) + 1e-3 * radius)
+    shift = np.zeros(2)
+
+    def distance():
+        return max(float(np.max(FIT_MARGIN * np.maximum(np.abs(a - shift[0]) / tan_x,
+                                                       np.abs(b - shift[1]) / tan_y) - c)),
+                   float(np.max(-c)) + 1e-3 * radius)
+
+    dist = distance()
+    # perspective puts the near side of an oblique cloud lower and wider on
+    # screen: shift the eye sideways until the points' extents are centred in
+    # the frame, then move it in again (a few rounds converge)
+    step = max(1, len(c) // 20_000)     # the centre from a sample; the distance from all
+    for _ in range(3):
+        depth = dist + c[::step]
+        for k, s in enumerate((a[::step], b[::step])):
+            lo_s, hi_s = float(s.min()), float(s.max())
+            for _ in range(40):         # bisect: the mid of the extents, decreasing in the shift
+                mid = 0.5 * (lo_s + hi_s)
+                x = (s - mid) / depth
+                lo_s, hi_s = (mid, hi_s) if x.max() + x.min() > 0 else (lo_s, mid)
+            shift[k] = 0.5 * (lo_s + hi_s)
+        dist = distance()
     nearest, farthest = dist + float(c.min()), dist + float(c.max())
     fov_y = math.degrees(2 * math.atan(tan_y))
-    return Camera.look_at(centre - dist * forward, centre, (0, 0, 1), fov_y, aspect,
+    target = centre + shift[0] * right + shift[1] * up
+    return Camera.look_at(target - dist * forward, target, (0, 0, 1), fov_y, aspect,
                           near=0.5 * nearest, far=1.5 * farthest)
 
 

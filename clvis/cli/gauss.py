@@ -36,7 +36,8 @@ _HELP = """\
 Turn a volume into Gaussians at the levels of detail of Sharma & Schmalstieg
 (low: one per 8^3 leaf; medium: 4^3 / 2^3 blocks; high: 2^3 blocks / voxels),
 ray march each through the device BVH, compositing every Gaussian in depth
-order, and write one PNG per LOD plus gauss.png with the panels side by side.
+order, and write one PNG per LOD plus gauss.png with the panels side by side,
+each labelled with its LOD and Gaussian count over the colormap's value range.
 
 Without a FILE it uses an embedded explosion density (96^3, closed form).
 FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
@@ -69,6 +70,9 @@ def add_parser(sub):
     g.add_argument("--k", type=count(1, MAX_K), default=None,
                    help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)")
     g.add_argument("--out", default="clvis-gauss", metavar="DIR", help="output folder (default ./clvis-gauss)")
+    g.add_argument("--transparent", action="store_true",
+                   help="leave empty pixels transparent (default: a dark grey; gauss.png's label "
+                        "bands stay opaque)")
     add_camera_options(g, _FIT)
     add_volume_options(g)
     return g
@@ -176,6 +180,32 @@ def render_panels(lods, sv, gaussians, width, height, *, model="absorption", den
     return out
 
 
+def _picture(img, transparent: bool = False) -> np.ndarray:
+    """(H, W, 4) uint8 of a GaussianImage, over images.BACKGROUND unless `transparent`."""
+    from .. import images
+
+    rgba = images.from_premultiplied(img.rgba)
+    return rgba if transparent else images.opaque(rgba)
+
+
+def strip(panels, colormap: str, transparent: bool = False) -> np.ndarray:
+    """render_panels' images side by side, each labelled with its LOD and
+    Gaussian count, over a colour bar of the values' range (the transfer
+    function's)."""
+    from .. import images
+    from ..colormap import value_range
+
+    values = np.concatenate([g.values for _, g, _ in panels])
+    vmin, vmax = value_range(values)
+    tiles = []
+    for name, g, img in panels:
+        title = f"{name} LOD" if name in LODS else name
+        tile = images.label(_picture(img, transparent), f"{title}: {g.n:,} Gaussians")
+        bar = images.colorbar(colormap, vmin, vmax, tile.shape[1], title="value")
+        tiles.append(np.concatenate([tile, bar], axis=0))
+    return images.compose(tiles)
+
+
 def _run(args) -> int:
     from .. import images, runtime
 
@@ -190,9 +220,8 @@ def _run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     files = []
     for name, _, img in panels:
-        files.append(images.save_png(out / f"{name}.png", img.to_uint8((0.06, 0.06, 0.08))))
-    strip = np.concatenate([img.to_uint8((0.06, 0.06, 0.08)) for _, _, img in panels], axis=1)
-    files.append(images.save_png(out / "gauss.png", strip))
+        files.append(images.save_png(out / f"{name}.png", _picture(img, args.transparent)))
+    files.append(images.save_png(out / "gauss.png", strip(panels, args.colormap, args.transparent)))
     print(f"clvis gauss: {source}, {args.model} model, {width}x{height}")
     print(f"  device    {runtime.describe(q.device)}")
     if sv is not None:
@@ -248,8 +277,7 @@ def demo(out_dir, q, size=(480, 480)) -> bool:
     ok = err <= 1e-3
     print(f"  frame vs clvis.reference.gauss ({g.n:,} Gaussians at {cw}x{ch}, max |difference| {err:.1e}): "
           f"{'matches' if ok else 'MISMATCH'}")
-    strip = np.concatenate([im.to_uint8((0.06, 0.06, 0.08)) for _, _, im in panels], axis=1)
-    path = images.save_png(Path(out_dir) / "gauss.png", strip)
+    path = images.save_png(Path(out_dir) / "gauss.png", strip(panels, "inferno"))
     print(f"  the three LODs side by side: {path}")
     print("\nmore: clvis gauss --help, clvis bench gauss")
     return ok

@@ -34,7 +34,8 @@ _HELP = """\
 Compress a volume with ZFP (fixed rate), then ray march its isosurface in
 passes: each pass traverses the macrocell grids, decodes only the blocks its
 rays need into an LRU cache, and intersects them. Writes iso.png (rays still
-running at the stop shown in magenta) and prints the figures of each pass.
+running at the stop shown in magenta; the isovalue and completion in a band
+above) and prints the figures of each pass.
 
 Without a FILE it renders an embedded volume: marschner-lobb (64^3, iso 0.5)
 or turbulence (128^3, iso 0.5). FILE: a raw volume named like the Open SciVis
@@ -46,7 +47,6 @@ samples (scikit-image), which separates a scan's tissue from its background.
 """ + VIEWS_HELP
 _DATASETS = ("marschner-lobb", "turbulence")
 _ACTIVE_COLOUR = (1.0, 0.0, 1.0)
-_BACKGROUND = (0.08, 0.08, 0.1)
 # --view fit: from the front left, a little above, a narrow lens
 _FIT = FitView(direction=(-0.6, 1.0, -0.45), fov_y=35.0)
 
@@ -66,6 +66,9 @@ def add_parser(sub):
     p.add_argument("--size", type=size, default=(1280, 720), metavar="WxH",
                    help=f"{SIZE_RULE} (default 1280x720)")
     p.add_argument("--out", default="clvis-iso", metavar="DIR", help="output folder (default ./clvis-iso)")
+    p.add_argument("--transparent", action="store_true",
+                   help="leave pixels without surface transparent (default: a dark grey; the label "
+                        "band stays opaque)")
     add_camera_options(p, _FIT)
     add_volume_options(p)
     return p
@@ -94,12 +97,26 @@ def _load(args):
             f"the embedded {name} ({d['volume'].shape[0]}^3)")
 
 
-def picture(img) -> np.ndarray:
-    """(H, W, 3) uint8: the shaded surface over a dark background, rays still
-    running in magenta."""
-    rgb = np.where(img.hit[..., None], img.rgba[..., :3], np.float32(_BACKGROUND))
+def picture(img, transparent: bool = False) -> np.ndarray:
+    """(H, W, 4) uint8: the shaded surface, rays still running in magenta,
+    over images.BACKGROUND (or transparent where neither)."""
+    from .. import images
+
+    rgb = np.where(img.hit[..., None], img.rgba[..., :3], np.float32(0.0))
     rgb = np.where(img.active[..., None], np.float32(_ACTIVE_COLOUR), rgb)
-    return np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8)
+    alpha = (img.hit | img.active)[..., None].astype(np.float32)
+    rgba = np.clip(np.rint(np.concatenate([rgb, alpha], axis=2) * 255), 0, 255).astype(np.uint8)
+    return rgba if transparent else images.opaque(rgba)
+
+
+def labelled(img, isovalue: float, transparent: bool = False) -> np.ndarray:
+    """picture() under a band naming the isovalue and the completion."""
+    from .. import images
+
+    text = f"isovalue {isovalue:g}, completion {img.completion:.3f}"
+    if img.completion < 1:
+        text += " (magenta: rays still running)"
+    return images.label(picture(img, transparent), text)
 
 
 def render(volume, spacing, origin, isovalue, width, height, *, rate=8, completion=1.0, speculation=True,
@@ -140,7 +157,7 @@ def _run(args) -> int:
     total = time.perf_counter() - t0
     img = passes[-1]
     out = Path(args.out)
-    path = images.save_png(out / "iso.png", picture(img))
+    path = images.save_png(out / "iso.png", labelled(img, iso, args.transparent))
     st = img.stats
     print(f"clvis iso: {source}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
     print(f"  device      {runtime.describe(q.device)}")
@@ -181,7 +198,7 @@ def demo(out_dir, q, size=(640, 480)) -> bool:
     a = ref.agreement(want, small.hit, small.depth)
     print(f"  image vs clvis.reference.iso ({cw}x{ch}, hit mask and depth on reliable pixels): "
           f"{'matches' if a['ok'] else 'MISMATCH'} (depth error {a['depth_error']:.1e} of the diagonal)")
-    path = images.save_png(Path(out_dir) / "iso.png", picture(img))
+    path = images.save_png(Path(out_dir) / "iso.png", labelled(img, 0.5))
     print(f"  the surface: {path}")
     print("\nmore: clvis iso --help")
     return bool(a["ok"])

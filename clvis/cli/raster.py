@@ -46,7 +46,6 @@ _DEFAULT_POINTS = {"hurricane": 2_000_000, "terrain": 1_000_000}
 _FIT = FitView(direction=(0.45, 1.0, -0.9), fov_y=60.0)
 _SOFT_Z_FACTOR = 1.01
 _OVERVIEW_WIDTH = 2880      # the overview is shrunk by an integer factor to fit this
-_BACKGROUND = (24, 24, 24)  # behind the overview's transparent (empty) pixels
 _COORDINATES = ("x", "y", "z")      # --attribute takes these too
 MAX_POINTS = 2**32 - 2              # the Rasterizer's: index 0xFFFFFFFF marks an empty pixel
 
@@ -110,6 +109,7 @@ class _Panel:
     key: str            # the PNG's file name, without .png
     title: str          # its label in the overview
     image: np.ndarray   # (H, W, 4) uint8 RGBA
+    bar: tuple | None = None    # (colormap, vmin, vmax) of its colour bar
 
 
 @dataclasses.dataclass
@@ -151,7 +151,10 @@ def _render_panels(raster, cloud, camera, width, height, attribute, colormap, so
         warm = time.perf_counter() - t0
     panels = []
     if attribute is not None:
-        panels.append(_Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({colormap})", g.rgba))
+        from ..colormap import value_range         # the range render() colours over
+        vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
+        panels.append(_Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({colormap})", g.rgba,
+                             (colormap, *vr)))
     if cloud.colors is not None:
         if attribute is None:
             colors = g.rgba
@@ -193,35 +196,22 @@ def _shrink(image: np.ndarray, f: int) -> np.ndarray:
     return np.ascontiguousarray(out).view(np.uint8).reshape(h, w, 4)
 
 
-def _overview(panels) -> np.ndarray:
-    """The panels in a grid, up to three a row, labelled, on a dark background
-    (RGB), shrunk to at most _OVERVIEW_WIDTH pixels wide."""
-    from PIL import Image, ImageDraw, ImageFont
-
+def _overview(panels, transparent: bool = False) -> np.ndarray:
+    """The panels in a grid, up to three a row, each labelled with its title
+    (and the attribute's colour bar), shrunk to at most _OVERVIEW_WIDTH pixels
+    wide; empty pixels over images.BACKGROUND unless `transparent`."""
     from .. import images
 
     cols = min(3, len(panels))
     f = max(1, -(-cols * panels[0].image.shape[1] // _OVERVIEW_WIDTH))
-    tiles = [_shrink(p.image, f) for p in panels]
-    tiles += [np.zeros_like(tiles[0])] * (-len(tiles) % cols)
-    pad = 4
-    rows = [images.side_by_side(tiles[i:i + cols], pad=pad) for i in range(0, len(tiles), cols)]
-    gap = np.zeros((pad, rows[0].shape[1], 4), np.uint8)
-    grid = np.concatenate([x for row in rows for x in (row, gap)][:-1], axis=0)
-    alpha = grid[..., 3:4].astype(np.uint16)
-    rgb = (grid[..., :3] * alpha + np.asarray(_BACKGROUND, np.uint16) * (255 - alpha) + 127) // 255
-    im = Image.fromarray(rgb.astype(np.uint8))
-    th, tw = tiles[0].shape[:2]
-    size = max(10, min(28, th // 16))
-    try:
-        font = ImageFont.load_default(size=size)
-    except (TypeError, OSError, ImportError):       # Pillow < 10.1, or no FreeType
-        font = ImageFont.load_default()
-    draw = ImageDraw.Draw(im)
-    for i, p in enumerate(panels):
-        x, y = (i % cols) * (tw + pad), (i // cols) * (th + pad)
-        draw.text((x + size // 2, y + size // 3), p.title, fill=(235, 235, 235), font=font)
-    return np.asarray(im)
+    tiles = []
+    for p in panels:
+        tile = _shrink(p.image, f)
+        tile = images.label(tile if transparent else images.opaque(tile), p.title)
+        if p.bar is not None:
+            tile = np.concatenate([tile, images.colorbar(*p.bar, tile.shape[1])], axis=0)
+        tiles.append(tile)
+    return images.compose(tiles, columns=cols)
 
 
 def _save_pngs(out: Path, named) -> list[Path]:
@@ -267,7 +257,7 @@ def cmd(args) -> int:
 
 
 def _render(args, progress) -> int:
-    from .. import runtime
+    from .. import images, runtime
     from ..raster import Rasterizer
     from ..raster.depth_filter import LEVELS
 
@@ -289,7 +279,8 @@ def _render(args, progress) -> int:
                        args.soft_z, levels, progress)
     out = Path(args.out)
     with progress.stage("writing PNGs"):
-        named = [(f"{p.key}.png", p.image) for p in r.panels] + [("overview.png", _overview(r.panels))]
+        named = [(f"{p.key}.png", p.image if args.transparent else images.opaque(p.image)) for p in r.panels]
+        named.append(("overview.png", _overview(r.panels, args.transparent)))
         files = _save_pngs(out, named)
     total = time.perf_counter() - t_start
 
@@ -388,6 +379,9 @@ def add_parser(sub):
                         "(default: off, 4 for the terrain)")
     r.add_argument("--out", default="clvis-render", metavar="DIR",
                    help="folder for the PNGs (default ./clvis-render)")
+    r.add_argument("--transparent", action="store_true",
+                   help="leave empty pixels transparent (default: over a dark grey; the overview's "
+                        "label bands stay opaque)")
     r.add_argument("--progress", action="store_true",
                    help="show the progress of each stage on stderr even when it is not a terminal")
     r.add_argument("--quiet", action="store_true", help="no progress display")

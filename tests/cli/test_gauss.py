@@ -19,7 +19,7 @@ def test_gauss_default(tmp_path, capsys):
             assert im.size == (64, 48)
             assert np.asarray(im).std() > 1          # not blank
     with Image.open(tmp_path / "gauss.png") as im:
-        assert im.size == (3 * 64, 48)
+        assert im.width >= 3 * 64 and im.height > 48      # labelled, over colour bars
 
 
 def test_gauss_files(tmp_path, capsys):

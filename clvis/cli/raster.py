@@ -48,6 +48,7 @@ _SOFT_Z_FACTOR = 1.01
 _OVERVIEW_WIDTH = 2880      # the overview is shrunk by an integer factor to fit this
 _COORDINATES = ("x", "y", "z")      # --attribute takes these too
 MAX_POINTS = 2**32 - 2              # the Rasterizer's: index 0xFFFFFFFF marks an empty pixel
+MAX_POINT_SIZE = 64                 # the Rasterizer's point_size: 1..64 pixels a side
 
 
 def _soft_z(text: str) -> float | None:
@@ -137,17 +138,18 @@ def _raster_fields(cloud, attribute) -> dict:
 
 
 def _render_panels(raster, cloud, camera, width, height, attribute, colormap, soft_z, levels,
-                   progress) -> _Rendered:
+                   progress, point_size=1) -> _Rendered:
     """Render one view; the G-buffers and the images a person looks at."""
     from .. import images
     from ..raster import EMPTY, depth_filter
 
     with progress.stage("rendering + resolving G-buffers"):
         t0 = time.perf_counter()
-        g = raster.render(camera, width, height, color_by=attribute, colormap=colormap)
+        g = raster.render(camera, width, height, color_by=attribute, colormap=colormap,
+                          point_size=point_size)
         first = time.perf_counter() - t0
         t0 = time.perf_counter()
-        raster.render(camera, width, height, color_by=attribute, colormap=colormap)
+        raster.render(camera, width, height, color_by=attribute, colormap=colormap, point_size=point_size)
         warm = time.perf_counter() - t0
     panels = []
     if attribute is not None:
@@ -171,7 +173,8 @@ def _render_panels(raster, cloud, camera, width, height, attribute, colormap, so
     if soft_z is not None:
         with progress.stage(f"soft z (factor {soft_z:g})"):
             soft = raster.render(camera, width, height, color_by=attribute, colormap=colormap,
-                                 soft_z=soft_z, host=False)      # read back its rgba alone
+                                 soft_z=soft_z, point_size=point_size,
+                                 host=False)      # read back its rgba alone
             panels.append(_Panel("soft-z", f"soft z (factor {soft_z:g})", soft.rgba.get()))
     if levels:
         with progress.stage(f"depth filter ({levels} levels)"):
@@ -276,7 +279,7 @@ def _render(args, progress) -> int:
         raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
         q.finish()
     r = _render_panels(raster, cloud, camera, width, height, attribute, args.colormap,
-                       args.soft_z, levels, progress)
+                       args.soft_z, levels, progress, args.point_size)
     out = Path(args.out)
     with progress.stage("writing PNGs"):
         named = [(f"{p.key}.png", p.image if args.transparent else images.opaque(p.image)) for p in r.panels]
@@ -290,7 +293,11 @@ def _render(args, progress) -> int:
     colored = f"colored by {attribute} ({args.colormap})" if attribute else "its colors"
     print(f"clvis render: {source}, {n:,} points, {colored}")
     print(f"  device    {runtime.describe(q.device)}")
-    print(f"  view      {describe_camera(args)}, {width}x{height}")
+    print(f"  view      {describe_camera(args)}, {width}x{height}"
+          + (f", points {args.point_size}x{args.point_size} pixels" if args.point_size > 1 else ""))
+    dropped = stats.get("points_nonfinite", 0)
+    if dropped:
+        print(f"  dropped   {dropped:,} points with a NaN or infinite coordinate (never drawn)")
     print(f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)")
     print(f"  batches   {stats['batches_drawn']:,} drawn, {stats['batches'] - stats['batches_drawn']:,} "
           f"culled of {stats['batches']:,} ({stats['points_read']:,} points read)")
@@ -371,6 +378,9 @@ def add_parser(sub):
     r.add_argument("--size", type=size, default=(1920, 1080), metavar="WxH",
                    help=f"image size in pixels, {SIZE_RULE} (default 1920x1080)")
     add_camera_options(r, _FIT)
+    r.add_argument("--point-size", type=count(1, MAX_POINT_SIZE), default=1, metavar="N",
+                   help=f"draw each point as N x N pixels around its own, depth-tested per pixel "
+                        f"(even N: one more pixel right and down), 1..{MAX_POINT_SIZE} (default 1)")
     r.add_argument("--soft-z", type=_soft_z, nargs="?", const=_SOFT_Z_FACTOR,
                    default=_SOFT_Z_FACTOR, metavar="FACTOR",
                    help="the soft z-buffer's depth tolerance factor, or off (default 1.01)")

@@ -45,13 +45,14 @@ from .. import colormap as _colormap
 from .. import morton, runtime
 from .._arrays import check_array, is_device, resolve_queue
 from ..camera import CAMERA_DTYPE, Camera, camera_buffer  # noqa: F401  (re-exported)
-from ..errors import DeviceError
+from ..errors import DataError, DeviceError
 from ..primitives import radix_sort
 
 __all__ = [
     "EMPTY",
     "MAX_ATTRIBUTES",
     "MAX_IMAGE_SIDE",
+    "MAX_POINT_SIZE",
     "VIS_DTYPE",
     "GBuffers",
     "Rasterizer",
@@ -62,6 +63,8 @@ __all__ = [
 EMPTY = np.uint32(0xFFFFFFFF)       # index of an empty pixel
 MAX_ATTRIBUTES = 8
 MAX_IMAGE_SIDE = 1 << 15            # W, H: exact as float32 and addressable as uint
+MAX_PIXELS = 2**31 - 1              # W * H: the kernels index pixels with 32-bit integers
+MAX_POINT_SIZE = 64                 # render.cl's POINT_SIZE: 1..64 pixels a side
 BATCH_SIZE = 10240
 _F32_MAX = float(np.finfo(np.float32).max)
 # a visibility word as two uints (little-endian ulong: dkey << 32 | id)
@@ -85,7 +88,9 @@ class GBuffers:
     screen velocity in pixels per unit time (x right, y down), vel_angle
     (atan2(vy, vx), radians) and vel_speed (its length), NaN where empty;
     radius_px: the splat radius in pixels. Planes the cloud has no data for are
-    None. stats: batches, batches_drawn, points_read.
+    None. stats: points, batches, batches_drawn, points_read, and
+    points_nonfinite (points never drawn because a coordinate is NaN or
+    infinite).
     """
 
     index: np.ndarray
@@ -109,13 +114,53 @@ class GBuffers:
 
 
 def _check_camera(camera):
+    """(camera buffer, near, far); a DataError naming the camera when the
+    kernels could not use it: a matrix that is not finite (in float32 too), a
+    singular projection @ view (a zero-size projection, a degenerate view),
+    or a zero depth row."""
     for attr in ("matrix", "depth_row", "near", "far", "projection"):
         if not hasattr(camera, attr):
             raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
     near, far = float(camera.near), float(camera.far)
     if not (math.isfinite(near) and math.isfinite(far) and near < far):
         raise ValueError(f"camera: needs finite near < far, got near={near}, far={far}")
+    try:
+        m = np.array(camera.matrix, np.float64)
+        d = np.array(camera.depth_row, np.float64)
+    except (TypeError, ValueError):
+        m = d = np.full(1, np.nan)
+    if m.shape != (4, 4) or d.shape != (4,) or not (np.isfinite(m).all() and np.isfinite(d).all()):
+        raise DataError("camera: its matrix (projection @ view) and depth row must be finite, "
+                        "a 4x4 array and 4 numbers")
+    with np.errstate(all="ignore"):
+        finite32 = np.isfinite(m.astype(np.float32)).all() and np.isfinite(d.astype(np.float32)).all()
+    if not finite32:
+        raise DataError("camera: its matrix overflows float32 (the kernels' precision)")
+    why = _singular(camera, d)
+    if why:
+        raise DataError(f"camera: {why}; such a camera draws nothing")
     return camera_buffer(camera), np.float32(near), np.float32(far)
+
+
+def _singular(camera, depth_row) -> str | None:
+    """Why projection @ view has no inverse, or None. Checked apart, and
+    scale-free: the projection by its condition number (world coordinates
+    do not enter it), the view's rotation by its normalised determinant (a
+    view far from the origin, as with UTM coordinates, is fine)."""
+    p = np.asarray(camera.projection, np.float64)
+    with np.errstate(all="ignore"):
+        cond = float(np.linalg.cond(p)) if p.shape == (4, 4) and p.any() else math.inf
+    if not (math.isfinite(cond) and cond < 1e12):
+        return f"the projection is singular (condition number {cond:.3g}): a zero-size view volume"
+    view = getattr(camera, "view", None)
+    if view is not None:
+        r = np.asarray(view, np.float64)[:3, :3]
+        norms = np.linalg.norm(r, axis=1)
+        if not norms.all() or abs(np.linalg.det(r)) / norms.prod() < 1e-9:
+            return "the view matrix is singular (eye, target and up do not span a frame)"
+    if not np.asarray(depth_row)[:3].any():
+        return "its depth row is zero"
+    return None
 
 
 def _check_size(width, height):
@@ -124,7 +169,19 @@ def _check_size(width, height):
             raise TypeError(f"{name}: expected an int, got {type(v).__name__}")
         if not 1 <= int(v) <= MAX_IMAGE_SIDE:
             raise ValueError(f"{name}: {int(v)} is outside [1, {MAX_IMAGE_SIDE}]")
-    return int(width), int(height)
+    width, height = int(width), int(height)
+    if width * height > MAX_PIXELS:
+        raise ValueError(f"width x height: {width}x{height} = {width * height} pixels; at most "
+                         "2^31 - 1 (the kernels index pixels with 32-bit integers)")
+    return width, height
+
+
+def _check_point_size(point_size) -> int:
+    if isinstance(point_size, bool) or not isinstance(point_size, (int, np.integer)):
+        raise TypeError(f"point_size: expected an int, got {type(point_size).__name__}")
+    if not 1 <= int(point_size) <= MAX_POINT_SIZE:
+        raise ValueError(f"point_size: {int(point_size)} pixels is outside [1, {MAX_POINT_SIZE}]")
+    return int(point_size)
 
 
 def _soft_tolerance(soft_z, camera) -> float | None:
@@ -145,6 +202,12 @@ class _Input:
     """The caller's cloud, checked; host arrays (or device arrays) per field."""
 
     def __init__(self, cloud, colors, attributes, velocity, radius):
+        # the limit on planes applies to attributes given here, not to a
+        # cloud's own (a LAS file has more; render(planes=) picks)
+        if attributes is not None and len(attributes) > MAX_ATTRIBUTES:
+            raise ValueError(f"attributes: {len(attributes)} given; at most {MAX_ATTRIBUTES} "
+                             "(a PointCloud's own attributes may be more: render(planes=) "
+                             "picks which to resolve)")
         if hasattr(cloud, "positions"):
             positions = cloud.positions
             colors = colors if colors is not None else getattr(cloud, "colors", None)
@@ -186,8 +249,7 @@ class _Input:
             self.radius = r.astype(np.float32) if r.dtype != np.float32 else r
         self.f32, self.u8 = {}, {}
         attributes = dict(attributes or {})
-        if len(attributes) > MAX_ATTRIBUTES:
-            raise ValueError(f"attributes: {len(attributes)} given; at most {MAX_ATTRIBUTES}")
+        self.names = list(attributes)
         for name, a in attributes.items():
             if not isinstance(name, str):
                 raise TypeError(f"attributes: names must be strings, got {name!r}")
@@ -209,8 +271,11 @@ class Rasterizer:
     velocity and radius are used unless given here) or positions, float32
     (N, 3) (float64 is converted; a ``pyopencl.array.Array`` stays on the
     device). colors: uint8 (N, 4) or (N, 3). attributes: up to 8 name → (N,)
-    arrays (uint8/bool kept as uint8, other numbers as float32). velocity:
-    (N, 3) per point; radius: (N,) world radius per point.
+    arrays (uint8/bool kept as uint8, other numbers as float32); a
+    PointCloud's own attributes may be more (a LAS file has 13 or more).
+    Attributes stay on the host until a render needs them: the one colored
+    by, and the planes resolved (``render(planes=)``), each uploaded once.
+    velocity: (N, 3) per point; radius: (N,) world radius per point.
 
     morton=True reorders the points along a Morton curve on the device (the
     radix sort of 30-bit codes): batches become compact boxes that frustum
@@ -234,21 +299,22 @@ class Rasterizer:
 
     def _setup(self, inp, morton, batch_size):
         q = self.queue
-        # the kernels of a render, for the options captured
-        passes = ("render_visibility",) if self.config.int64_atomics else ("render_depth", "render_index")
-        defines = _render_defines(q)
-        self._kernels = {name: runtime.get_kernel(q, "raster/render.cl", name, defines, runtime.EXACT_FP)
-                         for name in passes + ("soft_accumulate",)}
-        self._kernels.update((name, runtime.get_kernel(q, "raster/resolve.cl", name, {}, runtime.EXACT_FP))
-                             for name in ("resolve", "resolve_attributes"))
+        # the kernels of a render, for the options captured (render.cl's per
+        # point size: built when first asked for)
+        self._kernels = {name: runtime.get_kernel(q, "raster/resolve.cl", name, {}, runtime.EXACT_FP)
+                         for name in ("resolve", "resolve_attributes")}
+        self._splat_kernels: dict = {}
+        self._render_kernels(1)
         self.n = n = inp.n
         self.batch_size = batch_size
         self.nbatches = -(-n // self.batch_size)
-        self.attribute_names = list(inp.f32) + list(inp.u8)
+        self.attribute_names = list(inp.names)      # the caller's order
         self._f32_names, self._u8_names = list(inp.f32), list(inp.u8)
-        self._host_attr = {**inp.f32, **inp.u8}
+        self._host_attr = {**inp.f32, **inp.u8}     # uploaded when a render needs them
         self._ranges: dict = {}
-        self._tf_cache: dict = {}
+        self._tf_cache: dict = {}       # name -> float32 device copy (color_by)
+        self._planes_cache: tuple | None = None     # (names, f32 device, u8 device): the last planes
+        self._nonfinite: int | cla.Array = 0
         self._luts: dict = {}
         self.has_colors = inp.colors is not None
         self.has_velocity = inp.velocity is not None
@@ -269,12 +335,81 @@ class Rasterizer:
         else:
             self.positions = pos
         self.bounds = _batch_bounds(q, self.positions, self.batch_size)
+        if n:       # per batch, read back with the first stats
+            self._nonfinite = runtime.empty(q, self.nbatches, np.uint32, "non-finite counts")
+            k = runtime.get_kernel(q, "raster/render.cl", "batch_nonfinite", _render_defines(q),
+                                   runtime.EXACT_FP)
+            runtime.launch(q, k, *_items(q, self.nbatches), self.positions.base_data, np.uint32(n),
+                           np.uint32(self.batch_size), self._nonfinite.base_data)
         self.colors = self._upload("colors", inp.colors)
         self.velocity = self._upload("velocity", inp.velocity)
         self.radius = self._upload("radius", inp.radius)
-        nf, nu = len(inp.f32), len(inp.u8)
-        self.attr_f32 = self._upload("attributes", np.stack(list(inp.f32.values()), axis=1)) if nf else None
-        self.attr_u8 = self._upload("attributes", np.stack(list(inp.u8.values()), axis=1)) if nu else None
+
+    def _render_kernels(self, point_size: int) -> dict:
+        """render.cl's kernels for POINT_SIZE = point_size (one build each)."""
+        ks = self._splat_kernels.get(point_size)
+        if ks is None:
+            q = self.queue
+            with runtime.pinned(self.config):
+                passes = ("render_visibility",) if self.config.int64_atomics else \
+                    ("render_depth", "render_index")
+                defines = _render_defines(q)
+                if point_size != 1:
+                    defines["POINT_SIZE"] = point_size
+                ks = self._splat_kernels[point_size] = {
+                    name: runtime.get_kernel(q, "raster/render.cl", name, defines, runtime.EXACT_FP)
+                    for name in passes + ("soft_accumulate",)}
+        return ks
+
+    @property
+    def nonfinite(self) -> int:
+        """How many points have a NaN or infinite coordinate (never drawn);
+        counted on the device when the Rasterizer was made, read once."""
+        if not isinstance(self._nonfinite, int):
+            self._nonfinite = int(self._nonfinite.get().astype(np.int64).sum())
+        return self._nonfinite
+
+    def _planes(self, planes) -> list[str]:
+        """The attribute planes a render resolves, checked."""
+        if planes is None:
+            return list(self.attribute_names) if len(self.attribute_names) <= MAX_ATTRIBUTES else []
+        if isinstance(planes, str):
+            planes = [planes]
+        names = list(planes)
+        for name in names:
+            if name not in self._host_attr:
+                raise ValueError(f"planes: no attribute {name!r}; the cloud has "
+                                 f"{', '.join(self.attribute_names) or 'none'}")
+        if len(set(names)) != len(names):
+            raise ValueError(f"planes: {names} names an attribute twice")
+        if len(names) > MAX_ATTRIBUTES:
+            raise ValueError(f"planes: {len(names)} given; at most {MAX_ATTRIBUTES} attribute "
+                             "planes a render")
+        return names
+
+    def _plane_buffers(self, names):
+        """(f32 names, u8 names, f32 device, u8 device): the planes' values
+        interleaved per point as resolve.cl reads them, uploaded for the last
+        selection (a render with the same planes uploads nothing)."""
+        f32 = [m for m in names if m in self._f32_names]
+        u8 = [m for m in names if m in self._u8_names]
+        key = (tuple(f32), tuple(u8))
+        if self._planes_cache is None or self._planes_cache[0] != key:
+            self._planes_cache = None           # let the old buffers go first
+            df = self._upload_async("attributes", np.stack([self._host_attr[m] for m in f32], axis=1)) \
+                if f32 else None
+            du = self._upload_async("attributes", np.stack([self._host_attr[m] for m in u8], axis=1)) \
+                if u8 else None
+            self._planes_cache = (key, df, du)
+        return f32, u8, self._planes_cache[1], self._planes_cache[2]
+
+    def _upload_async(self, name, a):
+        """A host array to a new device array without waiting for earlier
+        renders (pyopencl keeps `a` alive until the copy is done)."""
+        d = runtime.empty(self.queue, a.shape, a.dtype, name)
+        if a.size:
+            d.set(np.ascontiguousarray(a), queue=self.queue, async_=True)
+        return d
 
     def _upload(self, name, a):
         if a is None:
@@ -294,16 +429,18 @@ class Rasterizer:
         width, height = _check_size(width, height)
         return cam, near, far, width, height
 
-    def visibility(self, camera: Camera, width: int, height: int) -> tuple[cla.Array, cla.Array]:
+    def visibility(self, camera: Camera, width: int, height: int, *,
+                   point_size: int = 1) -> tuple[cla.Array, cla.Array]:
         """Run the render pass only: the (H, W) uint64 visibility buffer
         (``dkey << 32 | index``, all ones where empty) and the per-batch
-        drawn flags (uint8), both on the device."""
+        drawn flags (uint8), both on the device. point_size: as in render."""
         cam, near, far, W, H = self._program_args(camera, width, height)
+        ps = _check_point_size(point_size)
         with runtime.pinned(self.config):
-            vis, drawn, _ = self._render(cam, near, far, W, H)
+            vis, drawn, _ = self._render(cam, near, far, W, H, ps)
         return vis, drawn
 
-    def _render(self, cam, near, far, W, H):
+    def _render(self, cam, near, far, W, H, point_size):
         q = self.queue
         vis = runtime.fill(q, runtime.empty(q, (H, W), np.uint64, "visibility buffer"), np.uint64(2**64 - 1))
         drawn = runtime.empty(q, max(self.nbatches, 1), np.uint8, "batch flags")
@@ -320,9 +457,10 @@ class Rasterizer:
                 np.uint32(self.batch_size), self.bounds.base_data, cam_d.base_data, near, far,
                 np.uint32(W), np.uint32(H), vis.base_data, drawn.base_data, reverse)
         G = self.nbatches * L
+        kernels = self._render_kernels(point_size)
         passes = ("render_visibility",) if self.config.int64_atomics else ("render_depth", "render_index")
         for name in passes:
-            runtime.launch(q, self._kernels[name], G, L, *args)
+            runtime.launch(q, kernels[name], G, L, *args)
         return vis, drawn, cam_d
 
     def _camera_device(self, cam):
@@ -357,19 +495,16 @@ class Rasterizer:
         vmin, vmax = vr
         scale = np.float32(0.0 if vmax == vmin else 1.0 / (vmax - vmin))
         lut = self._lut(colormap)
-        if color_by in self._f32_names:
-            src, stride, offset = self.attr_f32, len(self._f32_names), self._f32_names.index(color_by)
-        else:       # a uint8 attribute: the kernels read float32, so a float copy
-            src = self._tf_cache.get(color_by)
-            if src is None:
-                src = self._tf_cache[color_by] = self._upload(
-                    "attributes", self._host_attr[color_by].astype(np.float32))
-            stride, offset = 1, 0
-        return 2, src, stride, offset, lut, lut.shape[0], np.float32(vmin), scale
+        src = self._tf_cache.get(color_by)      # its own float32 copy (a uint8 attribute converted)
+        if src is None:
+            src = self._tf_cache[color_by] = self._upload_async(
+                "attributes", self._host_attr[color_by].astype(np.float32))
+        return 2, src, 1, 0, lut, lut.shape[0], np.float32(vmin), scale
 
     def render(self, camera: Camera, width: int, height: int, *, color_by: str | None = None,
                colormap: str = "viridis", value_range: tuple[float, float] | None = None,
-               soft_z: bool | float | None = None, host: bool = True) -> GBuffers:
+               soft_z: bool | float | None = None, planes: Any = None, point_size: int = 1,
+               host: bool = True) -> GBuffers:
         """Render and resolve one view; numpy G-buffers (host=False: the planes
         stay on the device as ``pyopencl.array.Array``, nothing is read back,
         and stats is empty).
@@ -379,24 +514,41 @@ class Rasterizer:
         else the cloud's colors, else white. soft_z: None (off), True (factor
         1.01) or a factor >= 1: rgba becomes the mean color of every point
         within factor × the nearest depth of its pixel (needs near > 0).
+
+        planes: the attributes resolved into ``GBuffers.attributes``, a list
+        of at most 8 names (``[]``: none). Default (None): every attribute of
+        the cloud when it has at most 8; a cloud with more (a LAS file) gets
+        none unless they are named here. Coloring by an attribute does not
+        need its plane.
+
+        point_size: 1..64; each point covers point_size × point_size pixels
+        around its own, clipped to the image (even sizes reach one pixel
+        further right and down: px - (N-1)//2 .. px + N//2), depth-tested per
+        pixel like a point of size 1. A point whose own pixel is outside the
+        image draws nothing.
         """
         cam, near, far, W, H = self._program_args(camera, width, height)
+        ps = _check_point_size(point_size)
         tol = _soft_tolerance(soft_z, camera)
+        names = self._planes(planes)
         tf = self._tf(color_by, colormap, value_range)
         focal = np.float32(0.5 * H * float(np.asarray(camera.projection)[1, 1]))
         with runtime.pinned(self.config):
-            vis, drawn, cam_d = self._render(cam, near, far, W, H)
-            out = self._resolve(vis, cam_d, W, H, focal, tf, tol, near, far)
+            f32, u8, df, du = self._plane_buffers(names)
+            vis, drawn, cam_d = self._render(cam, near, far, W, H, ps)
+            out = self._resolve(vis, cam_d, W, H, focal, tf, tol, near, far, ps, f32, u8, df, du)
         if not host:
-            return _gbuffers(out, self._f32_names, self._u8_names, lambda a: a)
-        g = _gbuffers(out, self._f32_names, self._u8_names, lambda a: a.get())
+            return _gbuffers(out, f32, u8, names, lambda a: a)
+        g = _gbuffers(out, f32, u8, names, lambda a: a.get())
         d = drawn.get()[: self.nbatches].astype(bool)
         sizes = np.minimum(self.batch_size, self.n - np.arange(self.nbatches) * self.batch_size)
         g.stats = {"points": self.n, "batches": self.nbatches, "batches_drawn": int(d.sum()),
-                   "points_read": int(sizes[d].sum()) if self.nbatches else 0}
+                   "points_read": int(sizes[d].sum()) if self.nbatches else 0,
+                   "points_nonfinite": self.nonfinite}
         return g
 
-    def _resolve(self, vis, cam_d, W, H, focal, tf, tol, near, far):
+    def _resolve(self, vis, cam_d, W, H, focal, tf, tol, near, far, point_size, f32_names,
+                 u8_names, attr_f32, attr_u8):
         q = self.queue
         npix = W * H
         color_mode, tf_buf, stride, offset, lut, lut_n, vmin, scale = tf
@@ -404,7 +556,7 @@ class Rasterizer:
         if tol is not None and self.n:
             accum = runtime.zeros(q, npix * 5, np.uint32, "soft z accumulation")
             L = _local_size(q)
-            runtime.launch(q, self._kernels["soft_accumulate"], self.nbatches * L, L,
+            runtime.launch(q, self._render_kernels(point_size)["soft_accumulate"], self.nbatches * L, L,
                            self.positions.base_data, _arg(self.ids),
                            np.uint32(self.n), np.uint32(self.batch_size), self.bounds.base_data,
                            cam_d.base_data, near, far, np.uint32(W), np.uint32(H),
@@ -412,7 +564,7 @@ class Rasterizer:
                            _arg(self.colors), _arg(tf_buf), np.uint32(stride), np.uint32(offset),
                            _arg(lut), np.uint32(lut_n), vmin, scale, accum.base_data)
         flags = (1 if self.has_velocity else 0) | (2 if self.has_radius else 0)
-        nf, nu = len(self._f32_names), len(self._u8_names)
+        nf, nu = len(f32_names), len(u8_names)
         e = runtime.empty
         out = {
             "index": e(q, (H, W), np.uint32, "index buffer"),
@@ -435,8 +587,8 @@ class Rasterizer:
                 q, self._kernels["resolve_attributes"], *_items(q, npix), vis.base_data, np.uint32(W),
                 np.uint32(H),
                 self.positions.base_data, _arg(self.inv), cam_d.base_data, focal,
-                np.uint32(flags), np.uint32(nf), _arg(self.attr_f32), np.uint32(nu),
-                _arg(self.attr_u8), _arg(self.velocity), _arg(self.radius), _arg(out["f32"]),
+                np.uint32(flags), np.uint32(nf), _arg(attr_f32), np.uint32(nu),
+                _arg(attr_u8), _arg(self.velocity), _arg(self.radius), _arg(out["f32"]),
                 _arg(out["u8"]), _arg(out["vel"]), _arg(out["angle"]), _arg(out["speed"]),
                 _arg(out["radius"]))
         return out
@@ -470,7 +622,7 @@ def _batch_bounds(queue, positions, batch: int) -> cla.Array:
     return bounds
 
 
-def _gbuffers(out, f32_names, u8_names, get) -> GBuffers:
+def _gbuffers(out, f32_names, u8_names, order, get) -> GBuffers:
     def g(a):
         return None if a is None else get(a)
     attrs = {}
@@ -479,6 +631,7 @@ def _gbuffers(out, f32_names, u8_names, get) -> GBuffers:
         attrs[name] = f32[i]
     for i, name in enumerate(u8_names):
         attrs[name] = u8[i]
+    attrs = {name: attrs[name] for name in order}       # the order asked for
     return GBuffers(index=g(out["index"]), depth=g(out["depth"]), rgba=g(out["rgba"]),
                     attributes=attrs, vel2d=g(out["vel"]), vel_angle=g(out["angle"]),
                     vel_speed=g(out["speed"]), radius_px=g(out["radius"]))
@@ -527,12 +680,14 @@ def rasterize(cloud_or_positions: Any, camera: Camera, width: int, height: int, 
               attributes: Mapping[str, Any] | None = None, velocity: Any = None, radius: Any = None,
               soft_z: bool | float | None = None, color_by: str | None = None,
               colormap: str = "viridis", value_range: tuple[float, float] | None = None, morton: bool = False,
-              batch_size: int = BATCH_SIZE, queue: cl.CommandQueue | None = None) -> GBuffers:
+              batch_size: int = BATCH_SIZE, planes: Any = None, point_size: int = 1,
+              queue: cl.CommandQueue | None = None) -> GBuffers:
     """Render and resolve one view of a point cloud: :class:`Rasterizer`
     (``cloud_or_positions``, colors, attributes, velocity, radius, morton,
     batch_size) followed by its ``render`` (camera, size, color_by, colormap,
-    value_range, soft_z). For many views of one cloud, keep a Rasterizer."""
+    value_range, soft_z, planes, point_size). For many views of one cloud,
+    keep a Rasterizer."""
     r = Rasterizer(cloud_or_positions, colors=colors, attributes=attributes, velocity=velocity,
                    radius=radius, morton=morton, batch_size=batch_size, queue=queue)
     return r.render(camera, width, height, color_by=color_by, colormap=colormap,
-                    value_range=value_range, soft_z=soft_z)
+                    value_range=value_range, soft_z=soft_z, planes=planes, point_size=point_size)

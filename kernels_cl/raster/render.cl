@@ -12,6 +12,14 @@
  * work-item projects 8 points at a time in float8 registers (CPU devices:
  * SIMD); results are identical. Any local size works (the CPU work shape
  * launches 1 work-item per group, the GPU shape 256).
+ * POINT_SIZE = N, 1 (default) to 64: a drawn point covers the N x N pixels
+ * px - (N-1)/2 .. px + N/2 by py - (N-1)/2 .. py + N/2 (integer division;
+ * (px, py) its pixel; for even N the extra column is on the right and the
+ * extra row below), clipped to the image. Each covered pixel takes the
+ * point's dkey << 32 | id exactly as its own pixel does (same early-z, same
+ * atomics, same ties). Only points whose own pixel is in the image are drawn
+ * (a point just outside the image draws nothing). All four per-batch kernels
+ * (visibility, depth, index, soft_accumulate) cover the same pixels.
  *
  * Points and batches. positions: n points, 3 floats each (x, y, z), in render
  * order. They are cut into nb = ceil(n / batch) batches of `batch` consecutive
@@ -35,6 +43,11 @@
  * kernel batch_bounds(global const float *positions, uint n, uint batch,
  *                     global float *bounds)
  *     Global size >= nb, any local size; item b computes bounds of batch b.
+ *
+ * kernel batch_nonfinite(global const float *positions, uint n, uint batch,
+ *                        global uint *counts)
+ *     Global size >= nb, any local size; item b writes counts[b] = the number
+ *     of points of batch b with a NaN or infinite coordinate (never drawn).
  *
  * kernel render_visibility(positions, ids, n, batch, bounds, cam, near, far,
  *                          W, H, global ulong *vis, global uchar *drawn,
@@ -62,7 +75,8 @@
  *                        global const float *tf_src, uint tf_stride, uint tf_offset,
  *                        global const uchar4 *lut, uint lut_n, float tf_min,
  *                        float tf_scale, global uint *accum)
- *     After the visibility pass. For every drawn point whose depth <=
+ *     After the visibility pass. For every drawn point and every pixel p of
+ *     its POINT_SIZE square where its depth <=
  *     tolerance * (the pixel's nearest depth) (float32 product), adds its color
  *     (clvis_point_color) to accum[5p .. 5p+3] (r, g, b, a sums) and 1 to
  *     accum[5p+4] (the count), with atomic_add. accum is zeroed by the host.
@@ -76,7 +90,8 @@
  *
  * Memory traffic per point: 12 bytes of position (+4 of id when it passes
  * early-z with ids); one 4-byte read of vis, and an atomic on it when the
- * point may win. Culled batches: 24 bytes of bounds.
+ * point may win (per covered pixel with POINT_SIZE > 1). Culled batches: 24
+ * bytes of bounds.
  */
 #pragma OPENCL FP_CONTRACT OFF
 
@@ -88,6 +103,15 @@
 #ifndef VEC
 #define VEC 1
 #endif
+#ifndef POINT_SIZE
+#define POINT_SIZE 1
+#endif
+#if POINT_SIZE < 1 || POINT_SIZE > 64
+#error "POINT_SIZE must be 1..64"
+#endif
+/* the square of a point at pixel (px, py): px - SPLAT_LO .. px + SPLAT_HI */
+#define SPLAT_LO ((POINT_SIZE - 1) / 2)
+#define SPLAT_HI (POINT_SIZE / 2)
 
 #define MODE_VIS64 0
 #define MODE_DEPTH 1
@@ -112,6 +136,21 @@ kernel void batch_bounds(global const float *positions, uint n, uint batch, glob
     vstore3(hi, 0, bounds + 6 * b + 3);
 }
 
+kernel void batch_nonfinite(global const float *positions, uint n, uint batch, global uint *counts)
+{
+    uint b = get_global_id(0);
+    uint nb = (n + batch - 1) / batch;
+    if (b >= nb)
+        return;
+    uint bad = 0;
+    uint end = min(n, (b + 1) * batch);
+    for (uint i = b * batch; i < end; ++i) {
+        float3 p = vload3(i, positions);
+        bad += (isfinite(p.x) && isfinite(p.y) && isfinite(p.z)) ? 0u : 1u;
+    }
+    counts[b] = bad;
+}
+
 /* One drawn point i at pixel p with depth key dkey, as `mode` says. */
 inline void raster_point(int mode, uint i, uint p, uint dkey, global const uint *ids,
                          volatile global uint *words)
@@ -131,6 +170,22 @@ inline void raster_point(int mode, uint i, uint p, uint dkey, global const uint 
         clvis_atomic_min_u64((volatile global ulong *)words + p, ((ulong)dkey << 32) | id);
 #endif
     }
+}
+
+/* A drawn point i at pixel (px, py): raster_point on each pixel of its
+ * POINT_SIZE square inside the image (just the pixel itself for size 1). */
+inline void raster_splat(int mode, uint i, uint px, uint py, uint W, uint H, uint dkey,
+                         global const uint *ids, volatile global uint *words)
+{
+#if POINT_SIZE == 1
+    raster_point(mode, i, py * W + px, dkey, ids, words);
+#else
+    uint x0 = px >= SPLAT_LO ? px - SPLAT_LO : 0u, x1 = min(px + SPLAT_HI, W - 1u);
+    uint y0 = py >= SPLAT_LO ? py - SPLAT_LO : 0u, y1 = min(py + SPLAT_HI, H - 1u);
+    for (uint y = y0; y <= y1; ++y)
+        for (uint x = x0; x <= x1; ++x)
+            raster_point(mode, i, y * W + x, dkey, ids, words);
+#endif
 }
 
 /* The body of the three visibility kernels; `mode` is a constant at each call
@@ -167,15 +222,16 @@ inline void raster_batch(int mode, global const float *positions, global const u
         int8 drawn8 = clvis_project8(&c, x, y, z, near, far, fw, fh, &sx, &sy, &depth);
         if (!any(drawn8))
             continue;
-        uint pix[8], key[8];
+        uint pxs[8], pys[8], key[8];
         int ok[8];
-        vstore8(convert_uint8(sy) * W + convert_uint8(sx), 0, pix);
+        vstore8(convert_uint8(sx), 0, pxs);
+        vstore8(convert_uint8(sy), 0, pys);
         vstore8(clvis_key_f32_8(as_uint8(depth)), 0, key);
         vstore8(drawn8, 0, ok);
         for (int kk = 0; kk < 8; ++kk) {
             int k = reverse ? 7 - kk : kk;
             if (ok[k])
-                raster_point(mode, i + k, pix[k], key[k], ids, words);
+                raster_splat(mode, i + k, pxs[k], pys[k], W, H, key[k], ids, words);
         }
     }
 #endif
@@ -184,7 +240,7 @@ inline void raster_batch(int mode, global const float *positions, global const u
         float x = positions[3 * i], y = positions[3 * i + 1], z = positions[3 * i + 2];
         float sx, sy, depth;
         if (clvis_project(&c, x, y, z, near, far, fw, fh, &sx, &sy, &depth))
-            raster_point(mode, i, (uint)sy * W + (uint)sx, clvis_key_f32(as_uint(depth)), ids,
+            raster_splat(mode, i, (uint)sx, (uint)sy, W, H, clvis_key_f32(as_uint(depth)), ids,
                          words);
     }
 }
@@ -218,6 +274,28 @@ kernel void render_index(global const float *positions, global const uint *ids, 
                  reverse);
 }
 
+/* soft_accumulate at one pixel p of point i (its depth: `depth`). */
+inline void soft_pixel(uint i, uint p, float depth, global const uint *ids, global const uint *vis,
+                       float tolerance, uint color_mode, global const uchar4 *colors,
+                       global const float *tf_src, uint tf_stride, uint tf_offset,
+                       global const uchar4 *lut, uint lut_n, float tf_min, float tf_scale,
+                       global uint *accum)
+{
+    uint k = vis[clvis_hi_word(p)];
+    float nearest = as_float((k & 0x80000000u) ? (k ^ 0x80000000u) : ~k);
+    if (!(depth <= tolerance * nearest))
+        return;
+    uint id = ids ? ids[i] : i;
+    uint4 col = clvis_point_color(id, color_mode, colors, tf_src, tf_stride, tf_offset, lut, lut_n,
+                                  tf_min, tf_scale);
+    volatile global uint *a = accum + 5 * (size_t)p;
+    atomic_add(a + 0, col.x);
+    atomic_add(a + 1, col.y);
+    atomic_add(a + 2, col.z);
+    atomic_add(a + 3, col.w);
+    atomic_add(a + 4, 1u);
+}
+
 kernel void soft_accumulate(global const float *positions, global const uint *ids, uint n,
                             uint batch, global const float *bounds, global const float *cam,
                             float near, float far, uint W, uint H, global const uint *vis,
@@ -238,19 +316,12 @@ kernel void soft_accumulate(global const float *positions, global const uint *id
         float sx, sy, depth;
         if (!clvis_project(&c, x, y, z, near, far, fw, fh, &sx, &sy, &depth))
             continue;
-        uint p = (uint)sy * W + (uint)sx;
-        uint k = vis[clvis_hi_word(p)];
-        float nearest = as_float((k & 0x80000000u) ? (k ^ 0x80000000u) : ~k);
-        if (!(depth <= tolerance * nearest))
-            continue;
-        uint id = ids ? ids[i] : i;
-        uint4 col = clvis_point_color(id, color_mode, colors, tf_src, tf_stride, tf_offset, lut, lut_n, tf_min,
-                                 tf_scale);
-        volatile global uint *a = accum + 5 * (size_t)p;
-        atomic_add(a + 0, col.x);
-        atomic_add(a + 1, col.y);
-        atomic_add(a + 2, col.z);
-        atomic_add(a + 3, col.w);
-        atomic_add(a + 4, 1u);
+        uint px = (uint)sx, py = (uint)sy;
+        uint x0 = px >= SPLAT_LO ? px - SPLAT_LO : 0u, x1 = min(px + SPLAT_HI, W - 1u);
+        uint y0 = py >= SPLAT_LO ? py - SPLAT_LO : 0u, y1 = min(py + SPLAT_HI, H - 1u);
+        for (uint yy = y0; yy <= y1; ++yy)
+            for (uint xx = x0; xx <= x1; ++xx)
+                soft_pixel(i, yy * W + xx, depth, ids, vis, tolerance, color_mode, colors, tf_src,
+                           tf_stride, tf_offset, lut, lut_n, tf_min, tf_scale, accum);
     }
 }

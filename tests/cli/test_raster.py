@@ -157,6 +157,24 @@ def test_render_las_file(tmp_path, capsys):
     _assert_picture(tmp_path / "c" / "attribute-classification.png")
 
 
+def test_render_third_party_laz(tmp_path, capsys):
+    """laspy's own sample (13 attributes): colored by intensity, and with
+    --point-size the sparse scan covers more of the image."""
+    pytest.importorskip("laspy")
+    path = Path(__file__).parents[1] / "data" / "laspy_simple.laz"
+    rc, out, err = _render(capsys, path, "--view", "top", "--out", tmp_path / "one", *SMALL)
+    assert rc == 0, err
+    assert "colored by intensity" in out and "dropped" not in out
+    one = _png(tmp_path / "one" / "attribute-intensity.png")[..., 3] > 0
+    rc, out, err = _render(capsys, path, "--view", "top", "--point-size", 3, "--out", tmp_path / "three",
+                           *SMALL)
+    assert rc == 0, err
+    assert "points 3x3 pixels" in out
+    three = _png(tmp_path / "three" / "attribute-intensity.png")[..., 3] > 0
+    assert three.sum() > 3 * one.sum() and (three | one).sum() == three.sum()
+    _assert_picture(tmp_path / "three" / "attribute-intensity.png")
+
+
 def test_render_npz_positions_only(tmp_path, capsys):
     path = tmp_path / "cloud.npz"
     save_npz(path, PointCloud(_small_cloud().positions))
@@ -211,6 +229,7 @@ def test_render_degenerate_clouds(tmp_path, capsys, view):
     np.save(nan, p)
     rc, out, err = _render(capsys, nan, "--view", view, "--out", tmp_path / "nan", *SMALL)
     assert rc == 0, err
+    assert "dropped   143 points with a NaN or infinite coordinate" in out
     allnan = tmp_path / "allnan.npy"
     np.save(allnan, np.full((3, 3), np.nan, np.float32))
     rc, _, err = _render(capsys, allnan, "--view", view, "--out", tmp_path / "allnan", *SMALL)
@@ -253,6 +272,8 @@ def test_shrink_keeps_points():
     (["--points", "-5"], "argument --points: expected a positive integer"),
     (["--soft-z", "0.5"], "argument --soft-z: expected a factor >= 1"),
     (["--depth-filter", "x"], "argument --depth-filter: expected pyramid levels"),
+    (["--point-size", "0"], "argument --point-size: expected a positive integer in 1..64"),
+    (["--point-size", "65"], "argument --point-size: expected a positive integer in 1..64"),
     (["--dataset", "moon"], "argument --dataset: invalid choice"),
     (["missing.ply"], "missing.ply: no such file"),
     (["cloud.ply", "--points", "10"], "--dataset and --points choose an embedded cloud"),

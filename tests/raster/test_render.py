@@ -438,3 +438,193 @@ def test_configure_from_another_thread(queue, options_flipping):
         for _ in range(20):
             _assert_gbuffers(r.render(_cam(), W, H, soft_z=True), want)
     assert flips[0] > 2
+
+
+# ---------------------------------------------------------------------------
+# clouds with more attributes than planes (a LAS file), and planes=
+
+LAZ = __import__("pathlib").Path(__file__).parents[1] / "data" / "laspy_simple.laz"
+
+
+def _laz():
+    cloud = clvis.read_points(LAZ)
+    assert len(cloud.attributes) > raster.MAX_ATTRIBUTES
+    cam = Camera.fit(*cloud.bounds(), aspect=W / H)
+    return cloud, cam
+
+
+def test_las_file_color_by(queue):
+    """A LAS file's 13+ attributes: coloring by one needs no planes, and by
+    default none is resolved (more than 8)."""
+    cloud, cam = _laz()
+    g = clvis.rasterize(cloud, cam, W, H, color_by="intensity", queue=queue)
+    want = ref.rasterize(cloud.positions, cam, W, H, colors=cloud.colors, attributes=cloud.attributes,
+                         color_by="intensity")
+    _assert_gbuffers(g, want)
+    assert g.attributes == {} and g.covered.sum() > 100
+    assert len(np.unique(g.rgba[g.covered], axis=0)) > 5
+
+
+def test_las_file_planes(queue):
+    cloud, cam = _laz()
+    r = clvis.Rasterizer(cloud, queue=queue)
+    assert r.attribute_names == list(cloud.attributes)
+    for planes in (["classification", "intensity", "gps_time"], ["intensity"], [], "user_data",
+                   list(cloud.attributes)[-8:]):
+        g = r.render(cam, W, H, planes=planes, color_by="gps_time")
+        names = [planes] if isinstance(planes, str) else planes
+        assert list(g.attributes) == names          # in the order asked for
+        _assert_gbuffers(g, ref.rasterize(cloud.positions, cam, W, H, colors=cloud.colors,
+                                          attributes=cloud.attributes, planes=names,
+                                          color_by="gps_time"))
+    assert g.attributes["user_data"].dtype == np.uint8 or "user_data" not in g.attributes
+    with pytest.raises(ValueError, match="at most 8"):
+        r.render(cam, W, H, planes=list(cloud.attributes)[:9])
+    with pytest.raises(ValueError, match="planes: no attribute 'nope'"):
+        r.render(cam, W, H, planes=["nope"])
+    with pytest.raises(ValueError, match="twice"):
+        r.render(cam, W, H, planes=["intensity", "intensity"])
+    with pytest.raises(ValueError, match="attributes: 13 given; at most 8"):
+        clvis.Rasterizer(cloud.positions, attributes=cloud.attributes, queue=queue)
+
+
+def test_planes_default_and_bit_identical(queue):
+    """At most 8 attributes: all of them by default, as before planes=."""
+    pos, colors, attrs, vel, radius = _full_cloud(20_000, seed=21)
+    cam = _cam()
+    r = clvis.Rasterizer(pos, colors=colors, attributes=attrs, velocity=vel, queue=queue)
+    full = r.render(cam, W, H, color_by="label")
+    _assert_gbuffers(full, ref.rasterize(pos, cam, W, H, colors=colors, attributes=attrs, velocity=vel,
+                                         color_by="label"))
+    part = r.render(cam, W, H, color_by="label", planes=["flag", "temperature"])
+    assert list(part.attributes) == ["flag", "temperature"]
+    for k in part.attributes:
+        np.testing.assert_array_equal(part.attributes[k], full.attributes[k])
+    np.testing.assert_array_equal(part.rgba, full.rgba)
+    dev = r.render(cam, W, H, planes=["pressure"], host=False)
+    np.testing.assert_array_equal(dev.attributes["pressure"].get(), full.attributes["pressure"])
+
+
+# ---------------------------------------------------------------------------
+# point size
+
+def _splat_scene(n=3000, seed=30):
+    """Points near the image's edges and corners as well as inside, and exact
+    ties (repeated positions)."""
+    rng = np.random.default_rng(seed)
+    cam = Camera.ortho((0, 0, 5), (0, 0, 0), (0, 1, 0), height=2.0, aspect=W / H, near=0.5, far=10)
+    half_w = W / H
+    xy = rng.uniform([-half_w, -1], [half_w, 1], (n, 2))
+    edge = rng.uniform(0, 1, (n // 4, 2)) * [2 * half_w, 2] - [half_w, 1]
+    edge[: n // 16, 0] = np.where(rng.random(n // 16) < 0.5, -half_w, half_w * (1 - 1e-6))
+    edge[n // 16: n // 8, 1] = np.where(rng.random(n // 8 - n // 16) < 0.5, -1 + 1e-6, 1 - 1e-6)
+    xy = np.concatenate([xy, edge])
+    z = rng.uniform(-3, 3, len(xy))
+    pos = np.column_stack([xy, z]).astype(np.float32)
+    pos = np.concatenate([pos, pos[rng.integers(0, len(pos), n // 3)]])      # ties
+    return pos, cam
+
+
+@pytest.mark.parametrize("int64", [True, False], ids=["int64", "no-int64"])
+@pytest.mark.parametrize("point_size", [1, 2, 3, 5])
+def test_point_size_parity(queue, int64, point_size):
+    pos, cam = _splat_scene()
+    rng = np.random.default_rng(point_size)
+    colors = rng.integers(0, 256, (len(pos), 4), dtype=np.uint8)
+    want_vis = ref.visibility(pos, cam, W, H, point_size)
+    with runtime.configure(int64_atomics=int64):
+        r = clvis.Rasterizer(pos, colors=colors, morton=point_size % 2 == 1, batch_size=1000,
+                             queue=queue)
+    np.testing.assert_array_equal(r.visibility(cam, W, H, point_size=point_size)[0].get(), want_vis)
+    for soft_z in (None, 1.2):
+        got = r.render(cam, W, H, point_size=point_size, soft_z=soft_z)
+        _assert_gbuffers(got, ref.rasterize(pos, cam, W, H, colors=colors, soft_z=soft_z,
+                                            point_size=point_size))
+    if point_size == 1:
+        np.testing.assert_array_equal(want_vis, ref.visibility(pos, cam, W, H))
+    else:
+        assert got.covered.sum() > r.render(cam, W, H).covered.sum()
+        assert got.covered[0].any() and got.covered[-1].any()       # edges reached, clipped
+        assert got.covered[:, 0].any() and got.covered[:, -1].any()
+
+
+def test_point_size_square(device):
+    """One point: its square, with the documented offset for even sizes, and
+    clipped at the image's corner."""
+    q = runtime.queue_for(device)
+    cam = Camera.ortho((0, 0, 5), (0, 0, 0), (0, 1, 0), height=2.0, aspect=1.0, near=0.5, far=10)
+    centre = np.array([[0.01, -0.01, 0]], np.float32)         # pixel (8, 8) of 16 x 16
+    corner = np.array([[-0.99, 0.99, 0]], np.float32)         # pixel (0, 0)
+    for n, (lo, hi) in {1: (8, 8), 2: (8, 9), 3: (7, 9), 4: (7, 10), 5: (6, 10)}.items():
+        g = clvis.rasterize(centre, cam, 16, 16, point_size=n, queue=q)
+        ys, xs = np.nonzero(g.covered)
+        assert (ys.min(), ys.max(), xs.min(), xs.max()) == (lo, hi, lo, hi), n
+        g = clvis.rasterize(corner, cam, 16, 16, point_size=n, queue=q)
+        assert g.covered.sum() == (n // 2 + 1) ** 2, n
+
+
+def test_point_size_bad(queue):
+    pos = _scene(10)
+    for bad in (0, 65, -1):
+        with pytest.raises(ValueError, match=r"point_size: .* outside \[1, 64\]"):
+            clvis.rasterize(pos, _cam(), W, H, point_size=bad, queue=queue)
+    for bad in (2.0, True, "3"):
+        with pytest.raises(TypeError, match="point_size"):
+            clvis.rasterize(pos, _cam(), W, H, point_size=bad, queue=queue)
+
+
+# ---------------------------------------------------------------------------
+# non-finite points, image bounds, singular cameras
+
+def test_nonfinite_counted(queue):
+    pos = _scene(30_000, seed=31)
+    pos[::7, 1] = np.nan
+    pos[5::11, 2] = np.inf
+    pos[:5000] = -np.inf                 # whole batches
+    want = ref.nonfinite(pos)
+    assert want > 5000
+    for morton in (False, True):
+        r = clvis.Rasterizer(pos, morton=morton, batch_size=1024, queue=queue)
+        assert r.render(_cam(), W, H).stats["points_nonfinite"] == want == r.nonfinite
+    assert clvis.rasterize(_scene(100), _cam(), W, H, queue=queue).stats["points_nonfinite"] == 0
+    empty = clvis.rasterize(np.zeros((0, 3), np.float32), _cam(), W, H, queue=queue)
+    assert empty.stats["points_nonfinite"] == 0
+
+
+def test_image_pixels_bounded(monkeypatch, queue):
+    """W x H must stay below 2^31 (32-bit pixel indices), whatever the side limit."""
+    from clvis.raster import render as rr
+    monkeypatch.setattr(rr, "MAX_IMAGE_SIDE", 1 << 20)
+    with pytest.raises(ValueError, match=r"width x height: 65536x32768 = 2147483648 pixels"):
+        clvis.rasterize(_scene(10), _cam(), 65536, 32768, queue=queue)
+
+
+def test_singular_camera(queue):
+    import dataclasses
+    pos = _scene(100)
+    cam = _cam()
+    zero_proj = dataclasses.replace(cam, projection=np.zeros((4, 4)))
+    flat = np.array(cam.projection)
+    flat[1, 1] = 0.0                                          # zero height
+    bad_view = np.array(cam.view)
+    bad_view[2, :3] = bad_view[0, :3]                         # two equal axes
+    huge = np.array(cam.projection)
+    huge[0, 0] = 1e39                                         # overflows float32
+    cases = [(zero_proj, "projection is singular"),
+             (dataclasses.replace(cam, projection=flat), "projection is singular"),
+             (dataclasses.replace(cam, view=bad_view), "view matrix is singular"),
+             (dataclasses.replace(cam, projection=huge), "overflows float32")]
+
+    class NaNCamera:
+        matrix = np.full((4, 4), np.nan)
+        depth_row = np.zeros(4)
+        projection = np.eye(4)
+        near, far = 0.1, 10.0
+    cases.append((NaNCamera(), "must be finite"))
+    for c, msg in cases:
+        with pytest.raises(clvis.DataError, match=f"camera: .*{msg}"):
+            clvis.rasterize(pos, c, W, H, queue=queue)
+    with pytest.raises(ValueError, match="target: must differ from eye"):
+        Camera.look_at((1, 2, 3), (1, 2, 3))
+    far_away = Camera.look_at((5e5, 5e6, 300), (5e5 + 100, 5e6 + 100, 0), near=1, far=1000)
+    clvis.rasterize(pos + np.float32([5e5, 5e6, 0]), far_away, W, H, queue=queue)   # UTM-like: fine

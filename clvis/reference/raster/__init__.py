@@ -1,6 +1,7 @@
 """NumPy references of the raster family (clvis/raster/), module for module."""
 
 from . import depth_filter, render
-from .render import depth_key, key_depth, morton_order, rasterize, visibility
+from .render import depth_key, key_depth, morton_order, nonfinite, rasterize, splat, visibility
 
-__all__ = ["depth_filter", "depth_key", "key_depth", "morton_order", "rasterize", "render", "visibility"]
+__all__ = ["depth_filter", "depth_key", "key_depth", "morton_order", "nonfinite", "rasterize", "render",
+           "splat", "visibility"]

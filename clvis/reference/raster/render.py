@@ -2,8 +2,9 @@
 
 Written for obviousness: the projection is ``Camera.project`` (float32, the
 kernels' order of operations), visibility is ``np.minimum.at`` on
-``depth key << 32 | index``, and every G-buffer plane is a gather by the
-winning index.
+``depth key << 32 | index`` over every pixel of each point's square (point
+size N: px - (N-1)//2 .. px + N//2 and the same rows, clipped to the image),
+and every G-buffer plane is a gather by the winning index.
 """
 
 from __future__ import annotations
@@ -15,7 +16,30 @@ from ..morton import morton_codes
 from ...camera import camera_buffer
 from ...raster.render import EMPTY, GBuffers
 
-__all__ = ["depth_key", "key_depth", "morton_order", "rasterize", "visibility"]
+__all__ = ["depth_key", "key_depth", "morton_order", "nonfinite", "rasterize", "splat", "visibility"]
+
+MAX_ATTRIBUTES = 8      # restated from clvis.raster
+
+
+def nonfinite(positions) -> int:
+    """How many points have a NaN or infinite coordinate."""
+    return int((~np.isfinite(np.asarray(positions, np.float32).reshape(-1, 3))).any(axis=1).sum())
+
+
+def splat(pr, width: int, height: int, point_size: int = 1):
+    """(point, pixel) pairs: every visible point (its index in the input)
+    with each pixel py * W + px of its point_size square inside the image."""
+    idx = np.flatnonzero(pr.visible)
+    px, py = pr.px[idx].astype(np.int64), pr.py[idx].astype(np.int64)
+    lo, hi = (point_size - 1) // 2, point_size // 2
+    points, pixels = [], []
+    for dy in range(-lo, hi + 1):
+        for dx in range(-lo, hi + 1):
+            x, y = px + dx, py + dy
+            inside = (x >= 0) & (x < width) & (y >= 0) & (y < height)
+            points.append(idx[inside])
+            pixels.append(y[inside] * width + x[inside])
+    return np.concatenate(points), np.concatenate(pixels)
 
 
 def depth_key(depth: np.ndarray) -> np.ndarray:
@@ -31,13 +55,12 @@ def key_depth(keys: np.ndarray) -> np.ndarray:
     return bits.astype(np.uint32).view(np.float32)
 
 
-def visibility(positions, camera, width: int, height: int) -> np.ndarray:
+def visibility(positions, camera, width: int, height: int, point_size: int = 1) -> np.ndarray:
     """(H, W) uint64: min over the points drawn in each pixel of
     depth_key(depth) << 32 | index; all ones where no point is drawn."""
     positions = np.asarray(positions, np.float32).reshape(-1, 3)
     pr = camera.project(positions, width, height)
-    idx = np.flatnonzero(pr.visible)
-    pix = pr.py[idx].astype(np.int64) * width + pr.px[idx]
+    idx, pix = splat(pr, width, height, point_size)
     keys = (depth_key(pr.depth[idx]).astype(np.uint64) << np.uint64(32)) | idx.astype(np.uint64)
     vis = np.full(width * height, np.iinfo(np.uint64).max, np.uint64)
     np.minimum.at(vis, pix, keys)
@@ -60,13 +83,17 @@ def _colors(n, colors, attributes, color_by, colormap, value_range):
 
 def rasterize(positions, camera, width: int, height: int, *, colors=None, attributes=None,
               velocity=None, radius=None, soft_z=None, color_by=None, colormap="viridis",
-              value_range=None) -> GBuffers:
-    """clvis.rasterize in NumPy (positions as an (N, 3) array)."""
+              value_range=None, planes=None, point_size=1) -> GBuffers:
+    """clvis.rasterize in NumPy (positions as an (N, 3) array). planes: the
+    attributes resolved (default: all of them when there are at most 8, else
+    none), in the order given."""
     positions = np.asarray(positions, np.float32).reshape(-1, 3)
     n = positions.shape[0]
     H, W = height, width
     attributes = dict(attributes or {})
-    vis = visibility(positions, camera, W, H).ravel()
+    if planes is None:
+        planes = list(attributes) if len(attributes) <= MAX_ATTRIBUTES else []
+    vis = visibility(positions, camera, W, H, point_size).ravel()
     covered = vis != np.iinfo(np.uint64).max
     win = (vis & np.uint64(0xFFFFFFFF)).astype(np.int64)[covered]
 
@@ -81,8 +108,7 @@ def rasterize(positions, camera, width: int, height: int, *, colors=None, attrib
     if soft_z is not None and soft_z is not False and n:
         tol = np.float32(1.01 if soft_z is True else soft_z)
         pr = camera.project(positions, W, H)
-        idx = np.flatnonzero(pr.visible)
-        pix = pr.py[idx].astype(np.int64) * W + pr.px[idx]
+        idx, pix = splat(pr, W, H, point_size)
         near = depth[pix]
         keep = pr.depth[idx] <= tol * near
         sums = np.zeros((H * W, 5), np.uint64)
@@ -91,19 +117,20 @@ def rasterize(positions, camera, width: int, height: int, *, colors=None, attrib
         cnt = sums[covered, 4:5]
         rgba[covered] = ((sums[covered, :4] + cnt // 2) // cnt).astype(np.uint8)
 
-    planes = {}
-    for name, a in attributes.items():
-        a = np.asarray(a)
+    resolved = {}
+    for name in planes:
+        a = np.asarray(attributes[name])
         if a.dtype == np.uint8 or a.dtype == np.bool_:
             plane = np.zeros(H * W, np.uint8)
             plane[covered] = a.astype(np.uint8)[win]
         else:
             plane = np.full(H * W, np.nan, np.float32)
             plane[covered] = a.astype(np.float32)[win]
-        planes[name] = plane.reshape(H, W)
+        resolved[name] = plane.reshape(H, W)
 
     out = GBuffers(index=index.reshape(H, W), depth=depth.reshape(H, W),
-                   rgba=rgba.reshape(H, W, 4), attributes=planes)
+                   rgba=rgba.reshape(H, W, 4), attributes=resolved)
+    out.stats = {"points": n, "points_nonfinite": nonfinite(positions)}
     cam = camera_buffer(camera)
     M = cam[:16].reshape(4, 4)
     if velocity is not None:

@@ -413,5 +413,5 @@ def test_vdb_malformed(tmp_path):
 
 def test_vdb_needs_tinyvdb(monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, "tinyvdb", None)
-    with pytest.raises(ImportError, match=r"pip install clvis\[vdb\]"):
+    with pytest.raises(ImportError, match=r"pip install \"\.\[vdb\]\""):
         read_vdb(tmp_path / "x.vdb")

@@ -81,7 +81,8 @@ def add_parser(sub):
                    help=f"each panel, {SIZE_RULE} (default 640x640)")
     g.add_argument("--k", type=count(1, MAX_K), default=None,
                    help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)")
-    g.add_argument("--out", default="clvis-gauss", metavar="DIR", help="output folder (default ./clvis-gauss)")
+    g.add_argument("--out", default="clvis-gauss", metavar="DIR",
+                   help="output folder (default ./clvis-gauss)")
     g.add_argument("--progress", action="store_true",
                    help="show the progress on stderr even when it is not a terminal")
     g.add_argument("--quiet", action="store_true", help="no progress display")

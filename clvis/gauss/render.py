@@ -112,7 +112,8 @@ RAY_BYTES = 28          # per ray: rgba float4, depth float, stats uint2
 
 def _real(name: str, v) -> float:
     """v as a float: TypeError for strings, bool and other non-numbers."""
-    if isinstance(v, (str, bytes, bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+    if isinstance(v, (str, bytes, bool, np.bool_)) or \
+            not isinstance(v, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name}: expected a number, got {type(v).__name__}")
     return float(v)
 
@@ -271,7 +272,8 @@ class GaussianRenderer:
         tmin, tscale = tf.limits(self.gaussians.values)
         table = tf.table()
         what = f"Gaussian image {w}x{h}"
-        runtime.check_memory(q, what, device_bytes=w * rows * RAY_BYTES, host_bytes=w * h * RAY_BYTES if host else 0)
+        runtime.check_memory(q, what, device_bytes=w * rows * RAY_BYTES,
+                             host_bytes=w * h * RAY_BYTES if host else 0)
         runtime.check_alloc(q, w * rows * 16, f"{what}: rgba of {rows} rows")
         start = runtime.marker(q)
         camd = runtime.empty(q, cam.size, np.float32, "camera rays")
@@ -303,8 +305,8 @@ class GaussianRenderer:
             # with them (then runtime.seconds(*info["events"]) gives render_s)
             info = {"gaussians": self.n, "model": self.model, "k": self.k,
                     "bvh_build_s": runtime.seconds(*self.bvh.events, wait=False), "render_s": None,
-                    "events": (start, end), "rays": w * h, "bvh_nodes": max(self.n - 1, 0), "ray_stats": stats,
-                    "bands": 1}
+                    "events": (start, end), "rays": w * h, "bvh_nodes": max(self.n - 1, 0),
+                    "ray_stats": stats, "bands": 1}
             return GaussianImage(rgba, depth, None, None, info)
         out_rgba = np.empty((h, w, 4), np.float32)
         out_depth = np.empty((h, w), np.float32)

@@ -76,8 +76,9 @@ def test_colours_and_attributes():
     assert g.colors is None
     np.testing.assert_array_equal(g.values, inten.astype(np.float32))
     np.testing.assert_array_equal(gaussians_from_points(cloud, color_by="rgb").colors, rgb)
-    np.testing.assert_array_equal(gaussians_from_points(cloud, color_by="z").values, pos[:, 2].astype(np.float32))
-    assert gaussians_from_points(cloud, values="intensity").colors is None     # values given: the tf colours them
+    z = pos[:, 2].astype(np.float32)
+    np.testing.assert_array_equal(gaussians_from_points(cloud, color_by="z").values, z)
+    assert gaussians_from_points(cloud, values="intensity").colors is None     # values given: tf colours
     plain = gaussians_from_points(PointCloud(pos))               # no colours: elevation
     assert plain.colors is None and plain.values.std() > 0
     np.testing.assert_array_equal(gaussians_from_points(pos).values, pos[:, 2].astype(np.float32))
@@ -91,7 +92,8 @@ def test_colours_and_attributes():
         gaussians_from_points(cloud, color_by=3)
 
 
-@pytest.mark.parametrize("k,error", [(0, ValueError), (-1, ValueError), (65, ValueError), (10 ** 9, ValueError),
+@pytest.mark.parametrize("k,error", [(0, ValueError), (-1, ValueError), (65, ValueError),
+                                     (10 ** 9, ValueError),
                                      (2.5, TypeError), ("4", TypeError), (True, TypeError)])
 def test_bad_k(k, error):
     with pytest.raises(error, match="k"):

@@ -368,7 +368,7 @@ def describe_camera(args) -> str:
 def camera_from_args(args, lo, hi, width: int, height: int, points=None):
     """The camera the options ask for, framing the box [lo, hi] (for --view
     fit, the `points` themselves when given, else the box's corners)."""
-    from ..camera import Camera, grid_cameras, hemisphere_cameras
+    from ..camera import grid_cameras, hemisphere_cameras
 
     kind, k = args.view
     aspect = width / height

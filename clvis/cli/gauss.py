@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -17,12 +18,14 @@ from ._common import (
     VIEWS_HELP,
     CliError,
     FitView,
+    Progress,
     add_camera_options,
     add_volume_options,
     camera_from_args,
     check_camera_args,
     colormap_name,
     count,
+    isatty,
     read_volume_file,
     real,
     size,
@@ -45,7 +48,14 @@ FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
 extra: tinyvdb); a .npz of Gaussians (clvis.Gaussians.save); or a point cloud
 (.ply, .las, .laz, or an (N, 3) .npy/.npz as `clvis render` reads them: one
 Gaussian per point, stretched along the velocity when the file has one, else
-sized by the 4 nearest neighbours).
+sized by the 4 nearest neighbours, clamped to their 95th percentile). A cloud's
+points keep their own colours when it has them; --attribute NAME colours them
+by an attribute (e.g. intensity) or z instead; without colours or --attribute,
+by the speed when there is a velocity, else by the elevation z.
+
+The kernel build (once per process) is timed apart from the renders; a large
+--size is rendered in bands of rows, so device memory stays bounded, with
+the rays done shown on stderr when it is a terminal (--progress: always).
 
 """ + VIEWS_HELP
 
@@ -55,8 +65,10 @@ def add_parser(sub):
     g = sub.add_parser("gauss", help="Gaussians from a volume at three LODs, ray marched to PNGs",
                        description=_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     g.add_argument("file", nargs="?", help="a .vdb, .npy, Gaussians .npz or point cloud file")
-    g.add_argument("--lod", default="low,medium,high", metavar="LIST",
+    g.add_argument("--lod", type=_lods, default=list(LODS), metavar="LIST",
                    help="comma-separated levels of detail (default low,medium,high)")
+    g.add_argument("--attribute", default=None, metavar="NAME",
+                   help="point clouds: colour by this attribute (or z) instead of the cloud's rgb")
     g.add_argument("--threshold", type=real(), default=None,
                    help="voxels above this are active (default: > 0 for dense volumes)")
     g.add_argument("--model", choices=["max_response", "absorption"], default="absorption",
@@ -69,7 +81,11 @@ def add_parser(sub):
                    help=f"each panel, {SIZE_RULE} (default 640x640)")
     g.add_argument("--k", type=count(1, MAX_K), default=None,
                    help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)")
-    g.add_argument("--out", default="clvis-gauss", metavar="DIR", help="output folder (default ./clvis-gauss)")
+    g.add_argument("--out", default="clvis-gauss", metavar="DIR",
+                   help="output folder (default ./clvis-gauss)")
+    g.add_argument("--progress", action="store_true",
+                   help="show the progress on stderr even when it is not a terminal")
+    g.add_argument("--quiet", action="store_true", help="no progress display")
     g.add_argument("--transparent", action="store_true",
                    help="leave empty pixels transparent (default: a dark grey; gauss.png's label "
                         "bands stay opaque)")
@@ -80,10 +96,11 @@ def add_parser(sub):
 
 
 def _lods(text: str) -> list[str]:
+    """The --lod argument type: 'low,high' -> ['low', 'high']."""
     out = [t.strip() for t in text.split(",") if t.strip()]
     bad = [t for t in out if t not in LODS]
     if bad or not out:
-        raise CliError(f"--lod: expected some of {', '.join(LODS)}, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected some of {', '.join(LODS)}, got {text!r}")
     return out
 
 
@@ -93,7 +110,9 @@ def _sources(args):
     from ..gauss import Gaussians, SparseVolume, read_vdb
     from ..io import read_points
 
-    lods = _lods(args.lod)
+    lods = args.lod
+    if args.attribute is not None and not (args.file and args.file.lower().endswith(_POINT_FORMATS)):
+        raise CliError("--attribute is for point clouds (.ply, .las, .laz, .npy, .npz of points)")
     if args.file is None:
         e = datasets.explosion()
         sv = SparseVolume.from_dense(e["volume"], threshold=0.0 if args.threshold is None else args.threshold,
@@ -134,7 +153,11 @@ def _sources(args):
         cloud = read_points(path)
         if len(cloud) == 0:
             raise CliError(f"{path}: the file holds no points")
-        g = gaussians_from_points(cloud, velocity="cloud" if cloud.velocity is not None else None)
+        try:
+            g = gaussians_from_points(cloud, velocity="cloud" if cloud.velocity is not None else None,
+                                      color_by=args.attribute)
+        except ValueError as e:
+            raise CliError(f"{path}: {e}" if args.attribute is None else f"--attribute: {e}") from None
         return ["points"], None, g, str(path)
     raise CliError(f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
                    f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})")
@@ -145,10 +168,30 @@ def cmd(args) -> int:
     return _run(args)
 
 
+class _Label:
+    """A progress stage's name that changes while it runs: Progress formats
+    the name each time it redraws the line, so the rays done show as they grow."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def __format__(self, spec: str) -> str:
+        return format(self.text, spec)
+
+    def __str__(self) -> str:
+        return self.text
+
+
 def render_panels(lods, sv, gaussians, width, height, *, model="absorption", density=None,
-                  colormap="inferno", k=None, camera=None, queue=None):
+                  colormap="inferno", k=None, camera=None, queue=None, opacity=None, progress=None,
+                  timings=None):
     """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given
-    Gaussians), seen by camera(lo, hi) of their bounds (default: the fit view)."""
+    Gaussians), seen by camera(lo, hi) of their bounds (default: the fit view).
+
+    opacity: the transfer function's opacity points (default a ramp that keeps
+    low densities faint); progress: a Progress showing each panel's rays done;
+    timings: a dict given "build_s", the wall time of the kernel build (the
+    first renderer and frame, on a tiny scene)."""
     from .. import Camera
     from ..colormap import TransferFunction
     from ..gauss import GaussianRenderer, gaussians_from_volume
@@ -167,31 +210,49 @@ def render_panels(lods, sv, gaussians, width, height, *, model="absorption", den
            Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y))
     vals = np.concatenate([g.values for g in allg])
     vr = (float(vals.min()), float(vals.max()))
-    tf = TransferFunction(colormap, opacity=[(0.0, 0.05), (0.35, 0.35), (1.0, 1.0)], value_range=vr)
+    if opacity is None:
+        opacity = [(0.0, 0.05), (0.35, 0.35), (1.0, 1.0)]
+    tf = TransferFunction(colormap, opacity=opacity, value_range=vr)
     dens = density if density is not None else 6.0 / diag * 40
-    # warm-up: build the kernels on a tiny scene, so the figures below are the work itself
-    GaussianRenderer(allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k,
-                     queue=queue).render(cam, 8, 8)
+    progress = progress or Progress(False)
+    # warm-up: build the kernels on a tiny scene (the build is timed apart
+    # from the renders), so the figures below are the work itself
+    t0 = time.perf_counter()
+    with progress.stage("building kernels"):
+        GaussianRenderer(allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k,
+                         queue=queue).render(cam, 8, 8)
+    if timings is not None:
+        timings["build_s"] = time.perf_counter() - t0
     out = []
     for name, g in items:
-        r = GaussianRenderer(g, tf, model=model, density=dens, k=k, queue=queue)
-        img = r.render(cam, width, height)
+        label = _Label(f"{name}: BVH of {g.n:,} Gaussians")
+        with progress.stage(label):
+            r = GaussianRenderer(g, tf, model=model, density=dens, k=k, queue=queue)
+            label.text = f"{name}: rendering"
+
+            def done(rays, total, label=label, name=name):
+                label.text = f"{name}: {rays:,} / {total:,} rays"
+            img = r.render(cam, width, height, progress=done)
         out.append((name, g, img))
     return out
 
 
 def _picture(img, transparent: bool = False) -> np.ndarray:
-    """(H, W, 4) uint8 of a GaussianImage, over images.BACKGROUND unless `transparent`."""
+    """(H, W, 4) uint8 of a GaussianImage, over images.BACKGROUND unless
+    `transparent` (composited a band of rows at a time: no full-size float
+    temporaries for large images)."""
     from .. import images
 
-    rgba = images.from_premultiplied(img.rgba)
-    return rgba if transparent else images.opaque(rgba)
+    if transparent:
+        return images.from_premultiplied(img.rgba)
+    rgb = img.to_uint8(np.asarray(images.BACKGROUND, np.float32) / 255)
+    return np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
 
 
-def strip(panels, colormap: str, transparent: bool = False) -> np.ndarray:
+def strip(panels, colormap: str, transparent: bool = False, value_name: str = "value") -> np.ndarray:
     """render_panels' images side by side, each labelled with its LOD and
     Gaussian count, over a colour bar of the values' range (the transfer
-    function's)."""
+    function's; none for Gaussians drawn in their own colours)."""
     from .. import images
     from ..colormap import value_range
 
@@ -201,8 +262,10 @@ def strip(panels, colormap: str, transparent: bool = False) -> np.ndarray:
     for name, g, img in panels:
         title = f"{name} LOD" if name in LODS else name
         tile = images.label(_picture(img, transparent), f"{title}: {g.n:,} Gaussians")
-        bar = images.colorbar(colormap, vmin, vmax, tile.shape[1], title="value")
-        tiles.append(np.concatenate([tile, bar], axis=0))
+        if getattr(g, "colors", None) is None:
+            bar = images.colorbar(colormap, vmin, vmax, tile.shape[1], title=value_name)
+            tile = np.concatenate([tile, bar], axis=0)
+        tiles.append(tile)
     return images.compose(tiles)
 
 
@@ -210,27 +273,40 @@ def _run(args) -> int:
     from .. import images, runtime
 
     t0 = time.perf_counter()
+    progress = Progress(not args.quiet and (args.progress or isatty(sys.stderr)), "clvis gauss")
     lods, sv, gaussians, source = _sources(args)
     width, height = args.size
     q = runtime.default_queue()
+    timings: dict = {}
+    # points are surfaces: every Gaussian fully opaque, whatever its value
+    opacity = [(0.0, 1.0), (1.0, 1.0)] if lods == ["points"] else None
     panels = render_panels(lods, sv, gaussians, width, height, model=args.model, density=args.density,
-                           colormap=args.colormap, k=args.k, queue=q,
+                           colormap=args.colormap, k=args.k, queue=q, opacity=opacity, progress=progress,
+                           timings=timings,
                            camera=lambda lo, hi: camera_from_args(args, lo, hi, width, height))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     files = []
-    for name, _, img in panels:
-        files.append(images.save_png(out / f"{name}.png", _picture(img, args.transparent)))
-    files.append(images.save_png(out / "gauss.png", strip(panels, args.colormap, args.transparent)))
+    with progress.stage("writing PNGs"):
+        for name, _, img in panels:
+            files.append(images.save_png(out / f"{name}.png", _picture(img, args.transparent)))
+        files.append(images.save_png(out / "gauss.png", strip(panels, args.colormap, args.transparent,
+                                                              args.attribute or "value")))
     print(f"clvis gauss: {source}, {args.model} model, {width}x{height}")
     print(f"  device    {runtime.describe(q.device)}")
     if sv is not None:
         print(f"  volume    {sv.shape}, {sv.n_leaves:,} leaves")
-    print(f"  {'LOD':8} {'Gaussians':>10} {'MB':>8} {'BVH ms':>8} {'render ms':>10} {'hits/ray':>9}")
+    if gaussians is not None and gaussians.colors is not None:
+        print("  colour    the points' own rgb")
+    elif lods == ["points"]:
+        print(f"  colour    {args.attribute or 'the default value'} through {args.colormap}")
+    print(f"  build     {timings['build_s']:.2f} s (kernels, once per process; not in the render times)")
+    print(f"  {'LOD':8} {'Gaussians':>10} {'MB':>8} {'BVH ms':>8} {'render ms':>10} {'bands':>6} "
+          f"{'hits/ray':>9}")
     for name, g, img in panels:
         s = img.stats
         print(f"  {name:8} {g.n:10,} {g.nbytes / 1e6:8.2f} {s['bvh_build_s'] * 1e3:8.1f} "
-              f"{s['render_s'] * 1e3:10.1f} {s['hits_per_ray_mean']:9.1f}")
+              f"{s['render_s'] * 1e3:10.1f} {s['bands']:6} {s['hits_per_ray_mean']:9.1f}")
     print(f"  total     {time.perf_counter() - t0:.2f} s")
     print(f"wrote {len(files)} PNGs to {out}{os.sep}")
     for p in files:

@@ -4,7 +4,9 @@ A Gaussian i is a density  opacity_i * exp(-1/2 (x - mu_i)^T Sigma_i^-1 (x - mu_
 (peak 1 at its mean, not normalised), with Sigma_i = R_i diag(scales_i)^2 R_i^T:
 ``scales`` are the standard deviations along the Gaussian's own axes, which are
 the columns of ``rotations[i]``. ``values`` is the scalar a transfer function
-maps to a colour (and an opacity factor).
+maps to a colour (and an opacity factor); optional ``colors`` (N, 3) uint8 rgb
+give each Gaussian its own colour instead (renderers then take only the
+opacity factor from the transfer function).
 """
 
 from __future__ import annotations
@@ -39,6 +41,29 @@ def _real(name: str, x, shape_tail: tuple, n: int | None) -> np.ndarray:
     return a
 
 
+def _colors(x, n: int) -> np.ndarray:
+    """(N, 3) uint8 from integer rgb(a) in 0..255 as is, or floats in [0, 1] scaled by 255 and rounded."""
+    if isinstance(x, (str, bytes)):
+        raise TypeError(f"colors: expected an array, got {type(x).__name__}")
+    a = np.asarray(x)
+    if a.ndim != 2 or a.shape[1] not in (3, 4):
+        raise ValueError(f"colors: expected shape (N, 3) or (N, 4), got {a.shape}")
+    if a.shape[0] != n:
+        raise ValueError(f"colors: {a.shape[0]} rows, but there are {n} Gaussians")
+    a = a[:, :3]
+    if a.dtype == np.uint8:
+        return np.ascontiguousarray(a)
+    if a.dtype == bool or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        raise TypeError(f"colors: expected integers in 0..255 or floats in [0, 1], got dtype {a.dtype}")
+    if np.issubdtype(a.dtype, np.integer):
+        if a.size and ((a < 0) | (a > 255)).any():
+            raise DataError("colors: integer colours must lie in 0..255")
+        return a.astype(np.uint8)
+    if a.size and not (np.isfinite(a).all() and (a >= 0).all() and (a <= 1).all()):
+        raise DataError("colors: float colours must lie in [0, 1]")
+    return np.rint(a.astype(np.float64) * 255).astype(np.uint8)
+
+
 class Gaussians:
     """N anisotropic 3-D Gaussians.
 
@@ -52,10 +77,14 @@ class Gaussians:
         within 1e-3). Identity when omitted.
     values : (N,), optional scalar per Gaussian (0 when omitted).
     opacities : (N,), optional, in [0, 1] (1 when omitted).
+    colors : (N, 3) or (N, 4), optional: each Gaussian's own rgb, integers in
+        0..255 or floats in [0, 1] (alpha dropped; stored as (N, 3) uint8). None: the
+        transfer function colours them by value.
     """
 
     def __init__(self, means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike | None = None,
-                 values: npt.ArrayLike | None = None, opacities: npt.ArrayLike | None = None) -> None:
+                 values: npt.ArrayLike | None = None, opacities: npt.ArrayLike | None = None,
+                 colors: npt.ArrayLike | None = None) -> None:
         self.means = _real("means", means, (3,), None)
         n = len(self.means)
         self.scales = _real("scales", scales, (3,), n)
@@ -77,6 +106,7 @@ class Gaussians:
                           else _real("opacities", opacities, (), n))
         if n and ((self.opacities < 0) | (self.opacities > 1)).any():
             raise DataError("opacities: values must lie in [0, 1]")
+        self.colors = None if colors is None else _colors(colors, n)
 
     def __len__(self) -> int:
         return len(self.means)
@@ -94,7 +124,8 @@ class Gaussians:
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.means, self.scales, self.rotations, self.values, self.opacities))
+        return sum(a.nbytes for a in (self.means, self.scales, self.rotations, self.values, self.opacities,
+                                      self.colors) if a is not None)
 
     def bounds(self, cutoff: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) float64 of the boxes holding every Gaussian's `cutoff`-sigma ellipsoid."""
@@ -107,22 +138,31 @@ class Gaussians:
 
     def subset(self, index: npt.ArrayLike | slice) -> Gaussians:
         return Gaussians(self.means[index], self.scales[index], self.rotations[index],
-                         self.values[index], self.opacities[index])
+                         self.values[index], self.opacities[index],
+                         None if self.colors is None else self.colors[index])
 
     @staticmethod
     def concatenate(parts: Iterable[Gaussians]) -> Gaussians:
+        """One Gaussians of all `parts`, in order. Colours are kept when every
+        part has them; parts without colours among parts with them: ValueError
+        (there is no colour to give them)."""
         parts = list(parts)
         if not parts:
             return Gaussians(np.zeros((0, 3)), np.zeros((0, 3)))
         cat = np.concatenate
+        have = [p.colors is not None for p in parts]
+        if any(have) and not all(have):
+            raise ValueError("parts: some have colours and some do not")
         return Gaussians(cat([p.means for p in parts]), cat([p.scales for p in parts]),
                          cat([p.rotations for p in parts]), cat([p.values for p in parts]),
-                         cat([p.opacities for p in parts]))
+                         cat([p.opacities for p in parts]),
+                         cat([p.colors for p in parts]) if all(have) else None)
 
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write a .npz (means, scales, rotations, values, opacities)."""
+        """Write a .npz (means, scales, rotations, values, opacities, and colors when present)."""
+        extra = {} if self.colors is None else {"colors": self.colors}
         np.savez(path, means=self.means, scales=self.scales, rotations=self.rotations,
-                 values=self.values, opacities=self.opacities)
+                 values=self.values, opacities=self.opacities, **extra)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Gaussians:
@@ -134,7 +174,7 @@ class Gaussians:
         missing = [k for k in ("means", "scales") if k not in z]
         if missing:
             raise DataError(f"{path}: not a Gaussians file (missing {', '.join(missing)})")
-        get = {k: z[k] for k in ("means", "scales", "rotations", "values", "opacities") if k in z}
+        get = {k: z[k] for k in ("means", "scales", "rotations", "values", "opacities", "colors") if k in z}
         try:
             return cls(**get)
         except (TypeError, ValueError) as e:

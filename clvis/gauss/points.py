@@ -3,7 +3,18 @@
 Per point, either an anisotropic Gaussian elongated along the point's velocity,
 Sigma = R diag(stretch, 1, 1)^2 R^T * scale^2 with R's first axis along the
 velocity, or an isotropic one whose sigma is the mean distance to the k
-nearest neighbours (hole filling for terrain scans; scipy's cKDTree).
+nearest neighbours (hole filling for terrain scans; scipy's cKDTree), clamped
+to the KNN_CLAMP_PERCENTILE-th percentile of those distances: the bulk of a
+scan's points lie on its sampled surfaces, where the kNN distance is the
+sampling spacing the Gaussians should fill; the sparsest few percent are
+outliers and stray returns whose kNN distance is their gap to the scene, and
+a Gaussian that wide would cover the picture in a blurred cloud.
+
+Colour: a cloud with rgb gives its Gaussians those colours (Gaussians.colors,
+composited as they are; the values then hold the elevation z for the
+transfer function's opacity); otherwise the values come from an attribute
+chosen by name, the speed with a velocity, or the elevation z, so that a
+transfer function always has something to show.
 """
 
 from __future__ import annotations
@@ -12,19 +23,31 @@ from typing import Any
 
 import numpy as np
 
+from .._arrays import positive_int
 from ..errors import DataError
 from ..io import PointCloud
 from .gaussians import Gaussians
 
-__all__ = ["frames_along", "gaussians_from_points", "knn_mean_distance"]
+__all__ = ["KNN_CLAMP_PERCENTILE", "MAX_KNN", "frames_along", "gaussians_from_points", "knn_mean_distance"]
+
+KNN_CLAMP_PERCENTILE = 95.0     # isotropic kNN sigmas are clamped to this percentile of them
+MAX_KNN = 64                    # neighbours per point at most (the query holds N x k distances)
+
+
+def _k(k) -> int:
+    k = positive_int("k", k)
+    if k > MAX_KNN:
+        raise ValueError(f"k: expected 1..{MAX_KNN} neighbours, got {k}")
+    return k
 
 
 def knn_mean_distance(positions, k: int = 4) -> np.ndarray:
     """(N,) float32: each point's mean distance to its k nearest other points
     (scipy.spatial.cKDTree). Fewer than k + 1 points: the mean over those there are;
-    a single point: 0."""
+    a single point: 0. k in 1..MAX_KNN."""
     from scipy.spatial import cKDTree
 
+    k = _k(k)
     p = np.asarray(positions, np.float64)
     n = len(p)
     if n < 2:
@@ -51,19 +74,25 @@ def frames_along(directions) -> np.ndarray:
 
 def gaussians_from_points(cloud: PointCloud | Any, *, velocity: Any = None, stretch: float = 250.0,
                           scale: Any = None, k: int = 4, values: Any = None,
-                          opacity: Any = 1.0) -> Gaussians:
+                          opacity: Any = 1.0, color_by: str | None = None) -> Gaussians:
     """Gaussians for the points of `cloud` (a clvis.PointCloud or (N, 3) positions).
 
     velocity : (N, 3), ``"cloud"`` (the cloud's own velocity) or None.
         Given: anisotropic Gaussians, scales = scale * (stretch, 1, 1) along
         (velocity, two normals); a point with zero velocity gets scale * (1, 1, 1).
         None: isotropic, sigma = scale, or (scale None) the mean distance to
-        the k nearest neighbours.
+        the k nearest neighbours (1..MAX_KNN), clamped to the
+        KNN_CLAMP_PERCENTILE-th percentile of those distances (see the module doc).
     scale : float or (N,) base sigma. For anisotropic Gaussians it defaults to
         the median k-nearest-neighbour distance / stretch.
-    values : (N,) or an attribute name of the cloud; default the speed |velocity|
-        with a velocity, else zeros.
+    values : (N,) or an attribute name of the cloud; default (see color_by) the
+        speed |velocity| with a velocity, else the elevation z.
     opacity : float or (N,) in [0, 1].
+    color_by : None, "rgb", "z" or an attribute name of the cloud.
+        "rgb": the Gaussians carry the cloud's colours (ValueError without);
+        "z": values = elevation; a name: values = that attribute. None: "rgb"
+        when the cloud has colours and `values` is not given, else `values`
+        or their default.
     """
     if isinstance(cloud, PointCloud):
         positions = cloud.positions
@@ -85,10 +114,35 @@ def gaussians_from_points(cloud: PointCloud | Any, *, velocity: Any = None, stre
     stretch = float(stretch)
     if not (np.isfinite(stretch) and stretch > 0):
         raise ValueError(f"stretch: expected a positive number, got {stretch!r}")
+    k = _k(k)
+    cloud_colors = cloud.colors if isinstance(cloud, PointCloud) else None
+    colors = None
+    if color_by is not None:
+        if not isinstance(color_by, str):
+            raise TypeError(f"color_by: expected None, 'rgb', 'z' or an attribute name, got "
+                            f"{type(color_by).__name__}")
+        if values is not None:
+            raise ValueError("color_by and values: give one of them")
+        if color_by == "rgb":
+            if cloud_colors is None:
+                raise ValueError("color_by='rgb': the cloud has no colours")
+            colors = cloud_colors
+        elif color_by == "z":
+            values = positions[:, 2]
+        else:
+            attrs = cloud.attributes if isinstance(cloud, PointCloud) else {}
+            if color_by not in attrs:
+                have = ", ".join(["rgb"] * (cloud_colors is not None) + ["z", *attrs])
+                raise ValueError(f"color_by: the cloud has no attribute {color_by!r} (it has {have})")
+            values = attrs[color_by]
+    elif values is None and cloud_colors is not None:
+        colors = cloud_colors
     if isinstance(values, str):
         if not isinstance(cloud, PointCloud) or values not in cloud.attributes:
             raise ValueError(f"values: the cloud has no attribute {values!r}")
         values = cloud.attributes[values]
+    if colors is not None and values is None:
+        values = positions[:, 2]          # the transfer function's opacity reads something real
 
     if velocity is not None:
         vel = np.asarray(velocity, np.float64)
@@ -107,16 +161,22 @@ def gaussians_from_points(cloud: PointCloud | Any, *, velocity: Any = None, stre
         if values is None:
             values = np.linalg.norm(vel, axis=1)
     else:
-        sigma = knn_mean_distance(positions, k) if scale is None else _per_point("scale", scale, n)
+        if scale is None:
+            sigma = knn_mean_distance(positions, k).astype(np.float64)
+            if n:
+                sigma = np.minimum(sigma, np.percentile(sigma, KNN_CLAMP_PERCENTILE))
+        else:
+            sigma = _per_point("scale", scale, n)
         scales = np.repeat(np.asarray(sigma, np.float64)[:, None], 3, axis=1)
         rotations = None
         if values is None:
-            values = np.zeros(n)
+            values = positions[:, 2]
     values = np.asarray(values)
     if values.shape != (n,):
         raise ValueError(f"values: expected shape ({n},), got {values.shape}")
     opacities = _per_point("opacity", opacity, n)
-    return Gaussians(positions, scales, rotations, values.astype(np.float32), opacities)
+    return Gaussians(positions, scales, rotations, values.astype(np.float32), opacities,
+                     None if colors is None else colors[:, :3])
 
 
 def _per_point(name, v, n) -> np.ndarray:

@@ -19,6 +19,19 @@ T < 1e-3. ``rgba`` is premultiplied colour with alpha = 1 - T; ``depth`` is
 the view depth (the camera's depth row) of the hit that first brought T
 below 0.5, +inf where T never got there.
 
+Colours: by default the transfer function maps each Gaussian's value to an
+rgb colour and an opacity factor. Gaussians with their own colours
+(``Gaussians.colors``, e.g. a point cloud's rgb) are composited with those
+instead (march.cl's COLOR 1); the transfer function still scales opacity.
+
+Memory: an image is rendered in bands of rows, each a march launch over the
+same BVH writing its own per-ray buffers (rgba, depth, ray stats: 28 bytes a
+ray), read back into the host image before the next band; the device holds
+one band's buffers whatever the image size (the tuning profile's
+``tile_rays``). ``runtime.check_memory`` is asked before the host image and
+the band buffers are allocated, so an impossible size is a DeviceError
+naming both figures. host=False keeps the whole image on the device: one band.
+
 A GaussianRenderer captures the runtime options (tuning profile, 64-bit
 atomics) and its kernels when it is made (runtime.capture). Timings in its
 stats come from OpenCL event profiling; nothing waits for the device unless
@@ -27,7 +40,7 @@ the caller reads results back (host=True) or a timing.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -72,8 +85,14 @@ class GaussianImage:
     def to_uint8(self, background: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
         """(H, W, 3) uint8 over a background colour (components in [0, 1])."""
         bg = np.asarray(background, np.float32).reshape(1, 1, 3)
-        rgb = self.rgba[..., :3] + (1 - self.rgba[..., 3:4]) * bg
-        return np.clip(np.rint(rgb * 255), 0, 255).astype(np.uint8)
+        rgba = np.asarray(self.rgba)
+        out = np.empty(rgba.shape[:2] + (3,), np.uint8)
+        step = max(1, (1 << 20) // max(rgba.shape[1], 1))     # rows at a time: float temporaries stay small
+        for y in range(0, rgba.shape[0], step):
+            band = rgba[y:y + step]
+            rgb = band[..., :3] + (1 - band[..., 3:4]) * bg
+            out[y:y + step] = np.clip(np.rint(rgb * 255), 0, 255)
+        return out
 
 
 # per tuning profile: work-items per group of the march kernel (a divisor of
@@ -83,8 +102,20 @@ class GaussianImage:
 # high LOD 90 -> 45 ms; 10^5 overlapping translucent Gaussians 490 -> 530 ms).
 # GPUs: 3DGRT's k = 16 keeps the buffer in registers. "item_wg": the local
 # size of the one-item-per-Gaussian record kernels.
-PROFILES = {"cpu": {"march_wg": 8, "k": 64, "k0": 16, "item_wg": 64},
-            "gpu": {"march_wg": 64, "k": 16, "k0": 16, "item_wg": 64}}
+# "tile_rays": rays per band of rows at most (28 bytes each on the device);
+# a CPU gains nothing from larger launches and a band is the progress step,
+# a GPU wants enough rays in flight to fill it.
+PROFILES = {"cpu": {"march_wg": 8, "k": 64, "k0": 16, "item_wg": 64, "tile_rays": 1 << 18},
+            "gpu": {"march_wg": 64, "k": 16, "k0": 16, "item_wg": 64, "tile_rays": 1 << 21}}
+RAY_BYTES = 28          # per ray: rgba float4, depth float, stats uint2
+
+
+def _real(name: str, v) -> float:
+    """v as a float: TypeError for strings, bool and other non-numbers."""
+    if isinstance(v, (str, bytes, bool, np.bool_)) or \
+            not isinstance(v, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}: expected a number, got {type(v).__name__}")
+    return float(v)
 
 
 class GaussianRenderer:
@@ -98,11 +129,15 @@ class GaussianRenderer:
     k : hits per k-buffer round (1..64); None: the tuning profile's (64 on CPUs, 16 on GPUs)
     cutoff : hit radius in standard deviations (Mahalanobis), also the BVH boxes'
     density : extinction scale of the absorption model (per world unit)
+    colors : None (default): the Gaussians' own colours when they have them,
+        else the transfer function's; True: their own (ValueError if they
+        have none); False: the transfer function's.
     """
 
     def __init__(self, gaussians: Gaussians, transfer_function: TransferFunction | None = None,
                  model: str = "max_response", k: int | None = None, cutoff: float = 3.0,
-                 density: float = 1.0, queue: cl.CommandQueue | None = None) -> None:
+                 density: float = 1.0, queue: cl.CommandQueue | None = None, *,
+                 colors: bool | None = None) -> None:
         if not isinstance(gaussians, Gaussians):
             raise TypeError(f"gaussians: expected clvis.Gaussians, got {type(gaussians).__name__}")
         if model not in MODELS:
@@ -113,7 +148,14 @@ class GaussianRenderer:
         k = prof["k"] if k is None else nonnegative_int("k", k)
         if not 1 <= k <= MAX_K:
             raise ValueError(f"k: expected 1..{MAX_K}, got {k}")
-        cutoff, density = float(cutoff), float(density)
+        cutoff, density = _real("cutoff", cutoff), _real("density", density)
+        if colors is None:
+            colors = gaussians.colors is not None
+        elif not isinstance(colors, bool):
+            raise TypeError(f"colors: expected True, False or None, got {type(colors).__name__}")
+        elif colors and gaussians.colors is None:
+            raise ValueError("colors=True: the Gaussians have no colours")
+        self.colors = colors
         if not (np.isfinite(cutoff) and cutoff > 0):
             raise ValueError(f"cutoff: expected a positive finite number, got {cutoff!r}")
         if not (np.isfinite(density) and density >= 0):
@@ -137,7 +179,8 @@ class GaussianRenderer:
         flags = runtime.EXACT_FP
         self._march = runtime.get_kernel(q, "gauss/march.cl", "march",
                                          {"K": self.k, "K0": min(self.k, prof["k0"]),
-                                          "MODEL": MODELS[self.model]}, flags)
+                                          "MODEL": MODELS[self.model], "COLOR": int(self.colors)},
+                                         flags)
         self._march_wg = runtime.local_size(q, prof["march_wg"])
         first = runtime.marker(q)
         m = max(n, 1)
@@ -158,6 +201,14 @@ class GaussianRenderer:
                                   *(arrays[k_].base_data for k_ in
                                     ("means", "scales", "rotations", "values", "opacities")),
                                   np.uint32(n), np.float32(self.cutoff), records.base_data, boxes.base_data)
+        # own colours: uchar4 by Gaussian id (the kernel indexes them through
+        # the leaf order it already reads), alpha 255 and unused
+        self._colors = None
+        if self.colors and n:
+            rgba8 = np.full((n, 4), 255, np.uint8)
+            rgba8[:, :3] = gaussians.colors
+            self._colors = runtime.empty(q, (n, 4), np.uint8, "Gaussian colours")
+            self._colors.set(rgba8, queue=q)
         self._upload_events = (first, last or runtime.marker(q))
         self.bvh = build_bvh(boxes[:n] if n else np.zeros((0, 6), np.float32), queue=q)
         self.records = runtime.empty(q, m * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records (BVH order)")
@@ -180,20 +231,32 @@ class GaussianRenderer:
     @property
     def nbytes(self) -> int:
         """Device bytes the renderer holds: the Gaussian records and the BVH."""
-        return runtime.nbytes(self.records, self._dummy) + self.bvh.nbytes
+        return runtime.nbytes(self.records, self._dummy, self._colors) + self.bvh.nbytes
 
     def _buf(self, a):
         b = runtime.arg(a)
         return self._dummy.base_data if b is None else b
 
+    def band_rows(self, width: int, height: int) -> int:
+        """Rows per band for a width x height image: the tuning profile's
+        tile_rays over the width, a multiple of 8 (the kernel's tiles), at
+        least 8, at most the image."""
+        rows = max(8, self._profile["tile_rays"] // max(width, 1) // TILE * TILE)
+        return min(rows, height)
+
     def render(self, camera: Camera, width: int, height: int, *,
-               transfer_function: TransferFunction | None = None, host: bool = True) -> GaussianImage:
+               transfer_function: TransferFunction | None = None, host: bool = True,
+               tile_rows: int | None = None,
+               progress: Callable[[int, int], None] | None = None) -> GaussianImage:
         """One frame; see the module doc for what the planes hold.
 
-        host=False leaves ``rgba`` and ``depth`` on the device (pyopencl
-        arrays on the renderer's queue, for a pipeline such as post-processing)
-        and reads nothing back: ``hits`` and ``rounds`` are then None and
-        ``stats["ray_stats"]`` is the (H, W, 2) uint32 device array of both."""
+        The image is rendered in bands of `tile_rows` rows (default
+        :meth:`band_rows`); `progress(rays_done, rays_total)` is called after
+        each band is read back. host=False leaves ``rgba`` and ``depth`` on
+        the device (pyopencl arrays on the renderer's queue, for a pipeline
+        such as post-processing), renders one band and reads nothing back:
+        ``hits`` and ``rounds`` are then None and ``stats["ray_stats"]`` is the
+        (H, W, 2) uint32 device array of both."""
         q = self.queue
         w, h = positive_int("width", width), positive_int("height", height)
         if w * h >= 2 ** 32:
@@ -202,48 +265,77 @@ class GaussianRenderer:
         tf = transfer_function or self.transfer_function
         if not isinstance(tf, TransferFunction):
             raise TypeError(f"transfer_function: expected a clvis.TransferFunction, got {type(tf).__name__}")
+        rows = h if not host else self.band_rows(w, h) if tile_rows is None else \
+            min(positive_int("tile_rows", tile_rows), h)
+        if progress is not None and not callable(progress):
+            raise TypeError(f"progress: expected a callable, got {type(progress).__name__}")
         tmin, tscale = tf.limits(self.gaussians.values)
         table = tf.table()
-        runtime.check_alloc(q, w * h * 28, "Gaussian image")
+        what = f"Gaussian image {w}x{h}"
+        runtime.check_memory(q, what, device_bytes=w * rows * RAY_BYTES,
+                             host_bytes=w * h * RAY_BYTES if host else 0)
+        runtime.check_alloc(q, w * rows * 16, f"{what}: rgba of {rows} rows")
         start = runtime.marker(q)
         camd = runtime.empty(q, cam.size, np.float32, "camera rays")
         camd.set(cam, queue=q, async_=True)     # no wait for earlier renders (host=False)
         tfd = runtime.empty(q, table.shape, np.float32, "transfer function")
         tfd.set(table, queue=q, async_=True)
-        rgba = runtime.empty(q, (h, w, 4), np.float32, "rgba")
-        depth = runtime.empty(q, (h, w), np.float32, "depth")
-        stats = runtime.empty(q, (h, w, 2), np.uint32, "ray stats")
-        tiles = (-(-w // TILE)) * (-(-h // TILE))
+        rgba = runtime.empty(q, (rows, w, 4), np.float32, "rgba")
+        depth = runtime.empty(q, (rows, w), np.float32, "depth")
+        stats = runtime.empty(q, (rows, w, 2), np.uint32, "ray stats")
         bvh = self.bvh
         nodes = bvh.nodes if self.n else None
-        end = runtime.launch(q, self._march, tiles * TILE * TILE, self._march_wg,
-                       self._buf(nodes), self._buf(bvh.leaf_boxes if self.n else None),
-                       self.records.base_data, self._buf(bvh.order if self.n else None),
-                       np.uint32(self.n), camd.base_data, np.uint32(w), np.uint32(h),
-                       tfd.base_data, np.uint32(table.shape[0]), tmin, tscale,
-                       np.float32(self.cutoff * self.cutoff), np.float32(self.density),
-                       rgba.base_data, depth.base_data, stats.base_data)
+        fixed = (self._buf(nodes), self._buf(bvh.leaf_boxes if self.n else None),
+                 self.records.base_data, self._buf(bvh.order if self.n else None),
+                 np.uint32(self.n), camd.base_data, np.uint32(w), np.uint32(h),
+                 tfd.base_data, np.uint32(table.shape[0]), tmin, tscale,
+                 np.float32(self.cutoff * self.cutoff), np.float32(self.density),
+                 # COLOR 0 never reads the colours: any buffer stands in
+                 self.records.base_data if self._colors is None else self._colors.base_data)
+
+        def band(y0: int, n_rows: int) -> cl.Event:
+            tiles = (-(-w // TILE)) * (-(-n_rows // TILE))
+            return runtime.launch(q, self._march, tiles * TILE * TILE, self._march_wg, *fixed,
+                                  np.uint32(y0), np.uint32(n_rows), rgba.base_data, depth.base_data,
+                                  stats.base_data)
+
         if not host:
+            end = band(0, h)
             # nothing waits: the timings are None until the device is done
             # with them (then runtime.seconds(*info["events"]) gives render_s)
             info = {"gaussians": self.n, "model": self.model, "k": self.k,
                     "bvh_build_s": runtime.seconds(*self.bvh.events, wait=False), "render_s": None,
-                    "events": (start, end), "rays": w * h, "bvh_nodes": max(self.n - 1, 0), "ray_stats": stats}
+                    "events": (start, end), "rays": w * h, "bvh_nodes": max(self.n - 1, 0),
+                    "ray_stats": stats, "bands": 1}
             return GaussianImage(rgba, depth, None, None, info)
-        st = stats.get()
-        hits, rounds = st[..., 0], st[..., 1]
+        out_rgba = np.empty((h, w, 4), np.float32)
+        out_depth = np.empty((h, w), np.float32)
+        out_stats = np.empty((h, w, 2), np.uint32)
+        render_s: float | None = 0.0
+        bands = 0
+        for y0 in range(0, h, rows):
+            n_rows = min(rows, h - y0)
+            ev = band(y0, n_rows)
+            for dst, src in ((out_rgba, rgba), (out_depth, depth), (out_stats, stats)):
+                cl.enqueue_copy(q, dst[y0:y0 + n_rows], src.base_data, wait_for=[ev])
+            t = runtime.seconds(start if bands == 0 else ev, ev)     # the uploads count with band 0
+            render_s = None if t is None or render_s is None else render_s + t
+            bands += 1
+            if progress is not None:
+                progress(min(w * (y0 + n_rows), w * h), w * h)
+        hits, rounds = out_stats[..., 0], out_stats[..., 1]
         info = {"gaussians": self.n, "model": self.model, "k": self.k, "bvh_build_s": self.build_seconds,
-                "render_s": runtime.seconds(start, end), "rays": w * h, "hits_per_ray_mean": float(hits.mean()),
+                "render_s": render_s, "rays": w * h, "hits_per_ray_mean": float(hits.mean()),
                 "hits_per_ray_max": int(hits.max()), "rounds_per_ray_mean": float(rounds.mean()),
-                "bvh_nodes": max(self.n - 1, 0)}
-        return GaussianImage(rgba.get(), depth.get(), hits, rounds, info)
+                "bvh_nodes": max(self.n - 1, 0), "bands": bands, "band_rows": rows}
+        return GaussianImage(out_rgba, out_depth, hits, rounds, info)
 
 
 def render_gaussians(gaussians: Gaussians, camera: Camera, width: int, height: int, *,
                      transfer_function: TransferFunction | None = None, model: str = "max_response",
                      k: int | None = None, cutoff: float = 3.0, density: float = 1.0,
-                     queue: cl.CommandQueue | None = None) -> GaussianImage:
+                     queue: cl.CommandQueue | None = None, colors: bool | None = None) -> GaussianImage:
     """One frame of `gaussians`: a :class:`GaussianRenderer` and its ``render``."""
     r = GaussianRenderer(gaussians, transfer_function, model=model, k=k, cutoff=cutoff, density=density,
-                         queue=queue)
+                         queue=queue, colors=colors)
     return r.render(camera, width, height)

@@ -18,6 +18,10 @@
  *             I = exp(-ms2 / 2) * sqrt(pi / (2a)) * erfc(-ts * sqrt(a / 2)),
  *             ms2 = |o' + ts d'|^2 at the unclamped ts
  *   (default 0). opacity' = record opacity * the transfer function's alpha.
+ *   COLOR  0: a hit's colour is its transfer-function entry's rgb
+ *          1: a hit's colour is colors[id].xyz / 255 (its own rgb; .w unused);
+ *             the transfer function still gives the alpha factor
+ *   (default 0).
  *
  * kernel march(global const clvis_bvh_node *nodes,  the LBVH of clvis/bvh.h (n - 1 nodes, root 0;
  *                                                   one node with right = NONE when n == 1)
@@ -29,12 +33,18 @@
  *              global const float4 *tf, uint tf_n,  transfer function: rgb colour, alpha factor
  *              float tf_min, float tf_scale,        entry i = clamp(floor((value - tf_min) * tf_scale * tf_n), 0, tf_n - 1)
  *              float cutoff2, float density,
- *              global float4 *rgba,                 W * H: premultiplied rgb, alpha = 1 - T
- *              global float *depth,                 W * H: view depth where T first drops below 0.5, else +inf
- *              global uint2 *stats)                 W * H: (Gaussians composited, rounds)
- *     Global size: 64 * ceil(W / 8) * ceil(H / 8), a work-item per pixel of 8 x 8 pixel
- *     tiles (work-item i: tile i / 64, pixel i % 64 in it, row-major); any local size
- *     dividing 64 (64 on GPUs: a tile a group).
+ *              global const uchar4 *colors,         COLOR 1: n rgb(a) colours indexed by Gaussian id
+ *                                                   (original order, not leaf order); COLOR 0: unread
+ *              uint y0, uint rows,                  the band of image rows y0 .. y0 + rows - 1 to render
+ *              global float4 *rgba,                 rows * W: premultiplied rgb, alpha = 1 - T
+ *              global float *depth,                 rows * W: view depth where T first drops below 0.5, else +inf
+ *              global uint2 *stats)                 rows * W: (Gaussians composited, rounds)
+ *     The outputs hold the band only: pixel (px, py) at (py - y0) * W + px. A
+ *     host renders a large image band by band over the same BVH (bounded
+ *     memory for the per-ray state), or in one band (y0 = 0, rows = H).
+ *     Global size: 64 * ceil(W / 8) * ceil(rows / 8), a work-item per pixel of 8 x 8 pixel
+ *     tiles of the band (work-item i: tile i / 64, pixel i % 64 in it, row-major); any local
+ *     size dividing 64 (64 on GPUs: a tile a group).
  *     Per ray: rounds of a full BVH traversal collecting the k nearest hits (k = K0, 2 K0, ... K)
  *     whose key (t, id) is beyond the last key composited, then compositing
  *     them front to back: C += T * alpha * rgb, T *= 1 - alpha, until T < 1e-3
@@ -43,7 +53,7 @@
  *     Boxes are culled by clvis_ray_slab of clvis/ray.h (1/d by its tiny-direction
  *     rule); the Gaussians by clvis_gauss_hit of clvis/gauss.h.
  *     Stages: collect_round (the traversal: clvis_ray_slab, clvis_gauss_hit,
- *     hit_alpha, kbuffer_insert), then clvis_gauss_composite per hit.
+ *     hit_alpha, kbuffer_insert), then hit_color and clvis_gauss_composite per hit.
  */
 #pragma OPENCL FP_CONTRACT OFF
 
@@ -59,6 +69,9 @@
 #endif
 #ifndef MODEL
 #define MODEL 0
+#endif
+#ifndef COLOR
+#define COLOR 0
 #endif
 #define STACK 64
 #define T_STOP 1e-3f
@@ -80,6 +93,17 @@ inline float hit_alpha(global const clvis_gaussian *g, global const float4 *tf, 
     return clvis_gauss_alpha_absorption(opac, density, ts, a, op, dp);
 #else
     return clvis_gauss_alpha_max_response(opac, m2);
+#endif
+}
+
+/* The colour hit (leaf j, transfer-function entry ti) composites with (COLOR). */
+inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *colors,
+                        global const uint *order, uint j)
+{
+#if COLOR == 1
+    return clvis_gauss_rgb8(colors[order[j]]);
+#else
+    return tf[ti];
 #endif
 }
 
@@ -194,14 +218,16 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
                   global const clvis_gaussian *recs, global const uint *order, uint n,
                   global const float *cam, uint W, uint H, global const float4 *tf, uint tf_n,
                   float tf_min, float tf_scale, float cutoff2, float density,
+                  global const uchar4 *colors, uint y0, uint rows,
                   global float4 *rgba, global float *depth, global uint2 *stats)
 {
     uint tiles_x = (W + 7) / 8;
     uint tile = get_global_id(0) / 64, l = get_global_id(0) % 64;
-    uint px = (tile % tiles_x) * 8 + (l & 7), py = (tile / tiles_x) * 8 + (l >> 3);
-    if (px >= W || py >= H)
+    uint px = (tile % tiles_x) * 8 + (l & 7), row = (tile / tiles_x) * 8 + (l >> 3);
+    uint py = y0 + row;
+    if (px >= W || row >= rows || py >= H)
         return;
-    size_t pix = (size_t)py * W + px;
+    size_t pix = (size_t)row * W + px;
 
     float o[3], d[3], inv[3];
     clvis_camera_ray(cam, px, py, o, d);
@@ -226,7 +252,7 @@ kernel void march(global const clvis_bvh_node *nodes, global const float *leaf_b
                                tf_min, tf_scale, cutoff2, density, kt, kj, ka, kc);
         /* composite the round front to back */
         for (int h = 0; h < kn; ++h) {
-            clvis_gauss_composite(ka[h], tf[kc[h]], &T, &cr, &cg, &cb);
+            clvis_gauss_composite(ka[h], hit_color(tf, kc[h], colors, order, kj[h]), &T, &cr, &cg, &cb);
             ++hits;
             if (T < 0.5f && z == INFINITY)
                 z = clvis_ray_depth(cam, o, d, kt[h]);

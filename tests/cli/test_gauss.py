@@ -1,6 +1,8 @@
 """clvis gauss and the demo's gauss part, the explosion dataset, and Gaussians
 from point clouds."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -57,3 +59,55 @@ def test_gauss_bad_npy(tmp_path, capsys):
     np.save(tmp_path / "empty.npy", np.zeros((8, 8, 8), np.float32))
     assert cli.main(["gauss", str(tmp_path / "empty.npy"), "--out", str(tmp_path)]) == 2
     assert "no active voxel" in capsys.readouterr().err
+
+
+BACKGROUND = np.array([0.06, 0.06, 0.08]) * 255       # clvis gauss's background, grey level ~16.7
+
+
+@pytest.mark.parametrize("name", ["laspy_simple.laz", "pyvista_ant.ply"])
+def test_gauss_point_cloud_is_seen(tmp_path, capsys, name):
+    """A point cloud gives a picture well above the background: mean grey level
+    at least 10 above the background's (~16.7) and a tenth of the pixels 40
+    above it. (Points without velocity once all had value 0, drawn black, the
+    cloud's rgb ignored: brightest pixel 20, mean at the background's.) Now
+    27-30 on average here, a fifth of the frame well lit."""
+    path = Path(__file__).parents[1] / "data" / name
+    assert cli.main(["gauss", str(path), "--size", "96x96", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "build" in out and "render ms" in out
+    with Image.open(tmp_path / "points.png") as im:
+        a = np.asarray(im).astype(np.float64)
+    bg = BACKGROUND.mean()
+    assert a.mean() >= bg + 10
+    assert (a.mean(axis=2) >= bg + 40).mean() >= 0.1
+
+
+def test_gauss_attribute(tmp_path, capsys):
+    path = Path(__file__).parents[1] / "data" / "laspy_simple.laz"
+    assert cli.main(["gauss", str(path), "--attribute", "intensity", "--size", "48x48",
+                     "--out", str(tmp_path)]) == 0
+    assert "intensity through inferno" in capsys.readouterr().out
+    with Image.open(tmp_path / "points.png") as im:
+        assert np.asarray(im).astype(np.float64).mean() >= BACKGROUND.mean() + 10
+    assert cli.main(["gauss", str(path), "--attribute", "nope", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "--attribute" in err and "'nope'" in err and "intensity" in err
+    assert cli.main(["gauss", "--attribute", "intensity", "--out", str(tmp_path)]) == 2
+    assert "point clouds" in capsys.readouterr().err
+
+
+def test_gauss_lod_is_checked_by_argparse(capsys):
+    from clvis.cli import gauss as cg
+
+    assert cg._lods(" high, low ") == ["high", "low"]
+    assert cli.main(["gauss", "--lod", "low,ultra"]) == 2
+    err = capsys.readouterr().err
+    assert "argument --lod" in err and "ultra" in err
+
+
+def test_gauss_progress_on_stderr(tmp_path, capsys):
+    assert cli.main(["gauss", "--lod", "low", "--size", "40x40", "--progress", "--out", str(tmp_path)]) == 0
+    err = capsys.readouterr().err
+    assert "building kernels" in err and "1,600 / 1,600 rays" in err
+    assert cli.main(["gauss", "--lod", "low", "--size", "40x40", "--out", str(tmp_path)]) == 0
+    assert capsys.readouterr().err == ""              # not a terminal: no progress

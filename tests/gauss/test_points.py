@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import clvis
-from clvis.gauss.points import frames_along, gaussians_from_points, knn_mean_distance
+from clvis.gauss.points import KNN_CLAMP_PERCENTILE, frames_along, gaussians_from_points, knn_mean_distance
 from clvis.io import PointCloud
 
 
@@ -33,12 +33,73 @@ def test_points_isotropic_knn():
     pos = rng.uniform(size=(300, 3))
     g = gaussians_from_points(pos)
     d, _ = cKDTree(pos).query(pos, k=5)
-    np.testing.assert_allclose(g.scales[:, 0], d[:, 1:].mean(axis=1), rtol=1e-5)
+    knn = d[:, 1:].mean(axis=1)
+    np.testing.assert_allclose(g.scales[:, 0], np.minimum(knn, np.percentile(knn, 95)), rtol=1e-5)
     assert (g.scales[:, 0] == g.scales[:, 2]).all()
     assert knn_mean_distance(pos[:1]).tolist() == [0.0]
     cloud = PointCloud(pos, attributes={"intensity": np.arange(300.0)}, velocity=rng.normal(size=(300, 3)))
     g2 = gaussians_from_points(cloud, velocity="cloud", values="intensity")
     np.testing.assert_array_equal(g2.values, np.arange(300, dtype=np.float32))
+
+
+def test_isolated_points_are_clamped():
+    """A dense cloud and a few far outliers: the outliers' kNN distance is their
+    gap to the scene (~100), not the sampling; clamped to the 95th percentile
+    of the kNN distances, they are no wider than the cloud's own Gaussians."""
+    rng = np.random.default_rng(4)
+    dense = rng.uniform(0, 1, (2000, 3))
+    outliers = np.array([[100.0, 0, 0], [0, -80.0, 0], [0, 0, 120.0], [60.0, 60.0, 60.0]])
+    pos = np.concatenate([dense, outliers])
+    g = gaussians_from_points(pos)
+    knn = knn_mean_distance(pos)
+    assert knn[-4:].min() > 50                                   # unclamped: huge
+    cap = np.percentile(knn, KNN_CLAMP_PERCENTILE)
+    assert cap < 0.2
+    np.testing.assert_allclose(g.scales[-4:], cap, rtol=1e-6)
+    assert g.scales.max() <= cap * (1 + 1e-6)
+    np.testing.assert_allclose(g.scales[:-4, 0], np.minimum(knn[:-4], cap), rtol=1e-5)   # float32 positions
+    lo, hi = g.bounds()
+    extent = pos.max(axis=0) - pos.min(axis=0)
+    assert ((hi - lo) <= extent + 6 * cap * 1.001).all()          # the points plus 3 sigma, not 3 x 100 more
+
+
+def test_colours_and_attributes():
+    rng = np.random.default_rng(5)
+    pos = rng.uniform(size=(100, 3))
+    rgb = rng.integers(0, 256, (100, 3)).astype(np.uint8)
+    inten = rng.uniform(0, 500, 100)
+    cloud = PointCloud(pos, colors=rgb, attributes={"intensity": inten})
+    g = gaussians_from_points(cloud)                             # colours by default
+    np.testing.assert_array_equal(g.colors, rgb)
+    np.testing.assert_array_equal(g.values, pos[:, 2].astype(np.float32))     # elevation: never all zero
+    g = gaussians_from_points(cloud, color_by="intensity")
+    assert g.colors is None
+    np.testing.assert_array_equal(g.values, inten.astype(np.float32))
+    np.testing.assert_array_equal(gaussians_from_points(cloud, color_by="rgb").colors, rgb)
+    z = pos[:, 2].astype(np.float32)
+    np.testing.assert_array_equal(gaussians_from_points(cloud, color_by="z").values, z)
+    assert gaussians_from_points(cloud, values="intensity").colors is None     # values given: tf colours
+    plain = gaussians_from_points(PointCloud(pos))               # no colours: elevation
+    assert plain.colors is None and plain.values.std() > 0
+    np.testing.assert_array_equal(gaussians_from_points(pos).values, pos[:, 2].astype(np.float32))
+    with pytest.raises(ValueError, match="no attribute 'nope'.*intensity"):
+        gaussians_from_points(cloud, color_by="nope")
+    with pytest.raises(ValueError, match="no colours"):
+        gaussians_from_points(PointCloud(pos), color_by="rgb")
+    with pytest.raises(ValueError, match="one of them"):
+        gaussians_from_points(cloud, color_by="z", values=np.zeros(100))
+    with pytest.raises(TypeError, match="color_by"):
+        gaussians_from_points(cloud, color_by=3)
+
+
+@pytest.mark.parametrize("k,error", [(0, ValueError), (-1, ValueError), (65, ValueError),
+                                     (10 ** 9, ValueError),
+                                     (2.5, TypeError), ("4", TypeError), (True, TypeError)])
+def test_bad_k(k, error):
+    with pytest.raises(error, match="k"):
+        gaussians_from_points(np.zeros((5, 3)), k=k)
+    with pytest.raises(error, match="k"):
+        knn_mean_distance(np.zeros((5, 3)), k=k)
 
 
 def test_points_bad_input():

@@ -3,7 +3,11 @@ reference clvis.reference.gauss.render: the same hits in the same order (the
 hit test is float32-identical), colours within 1e-3 per channel (exp/erfc and
 float32 compositing), on every device and both work shapes."""
 
+import os
+import subprocess
+import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pyopencl as cl
@@ -41,13 +45,14 @@ def _random(n, seed=0, spread=1.0, scale=(0.05, 0.3), opacity=(0.05, 0.9)):
 def _reference(g, cam, w, h, tf, model, cutoff=3.0, density=1.0):
     vmin, scale = tf.limits(g.values)
     return ref.render(g.means, g.scales, g.rotations, g.values, g.opacities, ray_buffer(cam, w, h), w, h,
-                      tf.table(), vmin, scale, model=model, cutoff=cutoff, density=density)
+                      tf.table(), vmin, scale, model=model, cutoff=cutoff, density=density, colors=g.colors)
 
 
-def _check(queue, g, cam, w=W, h=H, model="max_response", k=16, tf=None, cutoff=3.0, density=1.0):
+def _check(queue, g, cam, w=W, h=H, model="max_response", k=16, tf=None, cutoff=3.0, density=1.0,
+           tile_rows=None):
     tf = tf or TransferFunction("jet")
     img = gr.GaussianRenderer(g, tf, model=model, k=k, cutoff=cutoff, density=density,
-                              queue=queue).render(cam, w, h)
+                              queue=queue).render(cam, w, h, tile_rows=tile_rows)
     rgba, depth, hits = _reference(g, cam, w, h, tf, model, cutoff, density)
     assert img.rgba.shape == (h, w, 4) and img.depth.shape == (h, w)
     np.testing.assert_allclose(img.rgba, rgba, rtol=0, atol=1e-3)
@@ -69,6 +74,65 @@ def test_random_scene(queue, model):
     img, rgba = _check(queue, g, _cam(), model=model)
     assert (rgba[..., 3] > 0.05).mean() > 0.3          # the scene is actually seen
     assert img.stats["hits_per_ray_max"] > 16           # several k-buffer rounds
+
+
+def _coloured(g, seed=0):
+    rng = np.random.default_rng(seed)
+    return Gaussians(g.means, g.scales, g.rotations, g.values, g.opacities,
+                     rng.integers(0, 256, (g.n, 3)).astype(np.uint8))
+
+
+@pytest.mark.parametrize("model", ["max_response", "absorption"])
+def test_own_colours(queue, model):
+    """Gaussians with their own rgb: composited with it, the transfer function's
+    opacity still applying (a ramp that hides low values)."""
+    g = _coloured(_random(300, seed=31), seed=31)
+    tf = TransferFunction("jet", opacity=[(0.0, 0.0), (0.4, 0.0), (0.7, 1.0), (1.0, 1.0)],
+                          value_range=(-1, 2))
+    img, rgba = _check(queue, g, _cam(), model=model, tf=tf)
+    plain, _ = _check(queue, Gaussians(g.means, g.scales, g.rotations, g.values, g.opacities), _cam(),
+                      model=model, tf=tf)
+    np.testing.assert_array_equal(img.rgba[..., 3], plain.rgba[..., 3])     # same alpha: the tf's opacity
+    assert np.abs(img.rgba[..., :3] - plain.rgba[..., :3]).max() > 0.1     # other colours
+    r = gr.GaussianRenderer(g, tf, model=model, queue=queue, colors=False)
+    np.testing.assert_array_equal(r.render(_cam(), W, H).rgba, plain.rgba)
+
+
+def test_own_colours_one_gaussian(queue):
+    g = Gaussians([[0, 0, 0]], [[0.5, 0.5, 0.5]], values=[0.0], colors=[[255, 128, 0]])
+    img, rgba = _check(queue, g, _cam())
+    c = img.rgba[H // 2, W // 2]
+    np.testing.assert_allclose(c[:3] / c[3], [1.0, 128 / 255, 0.0], rtol=1e-5)
+
+
+@pytest.mark.parametrize("tile_rows", [1, 8, 13, H])
+def test_bands_give_the_same_image(queue, tile_rows):
+    """Bands of rows (separate launches over the same BVH) give the one-band image exactly."""
+    g = _random(200, seed=32)
+    r = gr.GaussianRenderer(g, queue=queue)
+    whole = r.render(_cam(w=W, h=H + 3), W, H + 3, tile_rows=H + 3)
+    done = []
+    banded = r.render(_cam(w=W, h=H + 3), W, H + 3, tile_rows=tile_rows,
+                      progress=lambda a, b: done.append((a, b)))
+    _assert_same(banded, whole)
+    assert banded.stats["bands"] == -(-(H + 3) // tile_rows) == len(done)
+    assert done[-1] == (W * (H + 3), W * (H + 3)) and [a for a, _ in done] == sorted(a for a, _ in done)
+    _check(queue, _coloured(g), _cam(), tile_rows=tile_rows)
+
+
+def test_band_rows(queue):
+    r = gr.GaussianRenderer(_random(10), queue=queue)
+    rays = gr.PROFILES[r.config.tuning]["tile_rays"]
+    assert r.band_rows(64, 5) == 5
+    rows = r.band_rows(8192, 8192)
+    assert rows % 8 == 0 and 8 <= rows and rows * 8192 <= max(rays, 8 * 8192)
+
+
+def test_impossible_size_is_a_device_error(queue, monkeypatch):
+    r = gr.GaussianRenderer(_random(10), queue=queue)
+    monkeypatch.setattr(runtime, "host_available_bytes", lambda: 10 ** 6)
+    with pytest.raises(clvis.DeviceError, match=r"GB on the device and .* GB on the host"):
+        r.render(_cam(), 4000, 4000)
 
 
 def test_heavy_overlap(queue):
@@ -233,6 +297,15 @@ def test_bad_input(queue):
         gr.GaussianRenderer(g, k=65, queue=queue)
     with pytest.raises(ValueError, match="cutoff"):
         gr.GaussianRenderer(g, cutoff=float("nan"), queue=queue)
+    for name in ("cutoff", "density", "k"):
+        with pytest.raises(TypeError, match=name):
+            gr.GaussianRenderer(g, queue=queue, **{name: "3"})
+    with pytest.raises(TypeError, match="cutoff"):
+        gr.GaussianRenderer(g, cutoff=True, queue=queue)
+    with pytest.raises(ValueError, match="colors"):
+        gr.GaussianRenderer(g, colors=True, queue=queue)
+    with pytest.raises(TypeError, match="tile_rows"):
+        gr.GaussianRenderer(g, queue=queue).render(_cam(), 4, 4, tile_rows=2.5)
     with pytest.raises(TypeError, match="gaussians"):
         gr.GaussianRenderer(np.zeros((3, 3)), queue=queue)
     r = gr.GaussianRenderer(g, queue=queue)
@@ -262,6 +335,10 @@ def test_save_load(tmp_path):
     h = Gaussians.load(tmp_path / "g.npz")
     for k in ("means", "scales", "rotations", "values", "opacities"):
         np.testing.assert_array_equal(getattr(g, k), getattr(h, k))
+    assert h.colors is None
+    c = _coloured(g)
+    c.save(tmp_path / "c.npz")
+    np.testing.assert_array_equal(Gaussians.load(tmp_path / "c.npz").colors, c.colors)
     (tmp_path / "bad.npz").write_bytes(b"PK\x03\x04garbage")
     with pytest.raises(clvis.DataError, match="bad.npz"):
         Gaussians.load(tmp_path / "bad.npz")
@@ -271,6 +348,28 @@ def test_save_load(tmp_path):
     np.savez(tmp_path / "nan.npz", means=np.full((1, 3), np.nan), scales=np.ones((1, 3)))
     with pytest.raises(clvis.DataError, match="nan.npz"):
         Gaussians.load(tmp_path / "nan.npz")
+
+
+def test_colours_container():
+    g = _coloured(_random(20, seed=14))
+    assert g.colors.dtype == np.uint8 and g.colors.shape == (20, 3)
+    np.testing.assert_array_equal(g.subset(slice(5, 9)).colors, g.colors[5:9])
+    np.testing.assert_array_equal(g.subset(np.array([3, 1])).colors, g.colors[[3, 1]])
+    np.testing.assert_array_equal(Gaussians.concatenate([g, g]).colors, np.concatenate([g.colors] * 2))
+    assert Gaussians.concatenate([_random(3), _random(4)]).colors is None
+    with pytest.raises(ValueError, match="colours"):
+        Gaussians.concatenate([g, _random(3)])
+    f = Gaussians([[0, 0, 0], [1, 1, 1]], [[1, 1, 1]] * 2, colors=[[0.0, 0.5, 1.0, 0.2], [1, 1, 1, 1]])
+    assert f.colors.tolist() == [[0, 128, 255], [255, 255, 255]]
+    assert g.nbytes == _random(20, seed=14).nbytes + 60
+    with pytest.raises(clvis.DataError, match="colors"):
+        Gaussians([[0, 0, 0]], [[1, 1, 1]], colors=[[0, 0, 2.0]])
+    with pytest.raises(clvis.DataError, match="colors"):
+        Gaussians([[0, 0, 0]], [[1, 1, 1]], colors=[[1, 2, 256]])
+    with pytest.raises(TypeError, match="colors"):
+        Gaussians([[0, 0, 0]], [[1, 1, 1]], colors=np.array([[True, False, True]]))
+    with pytest.raises(ValueError, match="colors"):
+        Gaussians([[0, 0, 0]], [[1, 1, 1]], colors=[[1, 2]])
 
 
 def test_device_output(queue):
@@ -330,3 +429,49 @@ def test_render_does_not_wait_and_times_from_events(queue):
     a = r.render(_cam(), W, H)
     assert a.stats["render_s"] > 0 and a.stats["bvh_build_s"] > 0 and r.upload_seconds > 0
     assert r.nbytes == r.records.nbytes + r.bvh.nbytes
+    c = gr.GaussianRenderer(_coloured(g), queue=queue)
+    assert c.nbytes == r.nbytes + 4 * g.n
+
+
+_MEMORY_CHILD = """
+import sys
+import numpy as np
+from clvis.camera import Camera
+from clvis.gauss import render as gr
+from clvis.gauss.gaussians import Gaussians
+size = int(sys.argv[1])
+rng = np.random.default_rng(0)
+g = Gaussians(rng.normal(size=(40, 3)), rng.uniform(0.05, 0.15, (40, 3)), values=rng.uniform(size=40))
+cam = Camera.look_at((0.3, -6, 1.2), (0, 0, 0), (0, 0, 1), fov_y=50, aspect=1, near=0.1, far=50)
+r = gr.GaussianRenderer(g)
+r.render(cam, 64, 64)                                   # kernels built, pools warm
+def status(key):         # kB; VmHWM is this image's peak (ru_maxrss keeps the parent's across exec)
+    return next(int(x.split()[1]) * 1024 for x in open("/proc/self/status") if x.startswith(key + ":"))
+before = status("VmRSS")
+img = r.render(cam, size, size)
+img.to_uint8()
+peak = status("VmHWM")
+print(peak - before, img.stats["bands"], float(img.rgba[..., 3].max()))
+"""
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="needs /proc (Linux)")
+def test_large_render_memory_is_bounded():
+    """A 2048 x 2048 render of a small scene in a child process: the resident
+    set grows by at most 1.5 x the host image (28 bytes a ray: rgba, depth,
+    hits, rounds; 117 MB) + 32 MB (one band's buffers, the uint8 picture).
+    Here (PoCL) it grows by 180 MB; rendered in one band it grew by 290 MB (the
+    device buffers are host memory too, and read back in one piece).
+    The growth is the peak after the render minus the resident set before it,
+    so a higher peak left by the kernel build can only overstate it."""
+    size = 2048
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(clvis.__file__).parents[1]),
+                                                       os.environ.get("PYTHONPATH", "")]))
+    out = subprocess.run([sys.executable, "-c", _MEMORY_CHILD, str(size)], capture_output=True, text=True,
+                         env=env, timeout=600)
+    assert out.returncode == 0, out.stderr
+    grew, bands, alpha = out.stdout.split()
+    image = size * size * gr.RAY_BYTES
+    assert int(bands) > 1 and float(alpha) > 0.5
+    assert int(grew) <= 1.5 * image + (32 << 20), \
+        f"grew {int(grew) / 1e6:.0f} MB for a {image / 1e6:.0f} MB image in {bands} bands"

@@ -2,7 +2,7 @@
 from an inline source that includes clvis/gauss.h, as march.cl does), against
 clvis.reference.gauss.render: the ray-Gaussian hit test (bit for bit: the
 reference repeats the float32 operations), the transfer-function entry, the
-hit alpha of both models and the front-to-back compositing (render_rays does
+hit alpha of both models, a Gaussian's own colour, and the front-to-back compositing (render_rays does
 those two in float64: compared to float32 rounding)."""
 
 import math
@@ -48,6 +48,12 @@ kernel void alpha_max_response(global const float *opac, global const float *m2,
 {
     uint i = get_global_id(0);
     out[i] = clvis_gauss_alpha_max_response(opac[i], m2[i]);
+}
+
+kernel void rgb8(global const uchar4 *c, global float4 *out)
+{
+    uint i = get_global_id(0);
+    out[i] = clvis_gauss_rgb8(c[i]);
 }
 
 /* ray i composites hits [i * m, (i + 1) * m) front to back */
@@ -170,3 +176,14 @@ def test_composite(probes):
     rgb = ((before * a64)[:, :, None] * colour[:, :, :3].astype(np.float64)).sum(axis=1)
     np.testing.assert_allclose(got[:, :3], rgb, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(got[:, 3], 1 - after[:, -1], rtol=1e-5, atol=1e-6)
+
+
+def test_rgb8_is_the_reference_bit_for_bit(probes):
+    q, prg = probes
+    c = np.stack(np.meshgrid(np.arange(256), np.arange(4), indexing="ij"), -1).reshape(-1, 2)
+    rgba8 = np.stack([c[:, 0], 255 - c[:, 0], (7 * c[:, 0]) % 256, c[:, 1]], axis=1).astype(np.uint8)
+    out = cla.empty(q, 4 * len(rgba8), np.float32)
+    prg.rgb8(q, (len(rgba8),), None, _dev(q, rgba8, np.uint8).data, out.data)
+    got = out.get().reshape(-1, 4)
+    np.testing.assert_array_equal(got[:, :3], ref.rgb8(rgba8))
+    assert got[:, :3].min() == 0 and got[:, :3].max() == 1

@@ -6,6 +6,10 @@ operations one by one (numpy float32 arithmetic is IEEE, as is OpenCL's with
 FP_CONTRACT OFF and correctly rounded division and sqrt), so the set of hits
 and their order are the kernel's exactly. exp and erfc are evaluated in
 float64 here; compositing is in float64. Tests compare with a tolerance.
+
+With per-Gaussian colours (`colors`, (N, 3) uint8) a hit composites its own
+rgb / 255 (clvis_gauss_rgb8) instead of its transfer-function entry's rgb;
+the entry's alpha factor still scales the opacity.
 """
 
 from __future__ import annotations
@@ -83,22 +87,28 @@ def tf_lookup(values, table, vmin, scale):
     return table[i]
 
 
+def rgb8(colors):
+    """(N, 3) float32 colours from uint8 ones, as clvis_gauss_rgb8: c / 255."""
+    return np.asarray(colors, np.uint8)[:, :3].astype(np.float32) / np.float32(255)
+
+
 def render(means, scales, rotations, values, opacities, cam, width, height, table, vmin, scale, *,
-           model="max_response", cutoff=3.0, density=1.0):
+           model="max_response", cutoff=3.0, density=1.0, colors=None):
     """rgba (H, W, 4), depth (H, W), hits (H, W): brute force.
 
     cam: the 22-float ray buffer (clvis.camera.ray_buffer); table, vmin,
-    scale: the transfer function (TransferFunction.table() and .limits())."""
+    scale: the transfer function (TransferFunction.table() and .limits());
+    colors: None or each Gaussian's own (N, 3) uint8 rgb."""
     o, d = camera_rays(cam, width, height)
     rgba, depth, count = render_rays(means, scales, rotations, values, opacities, o, d, cam, table, vmin,
-                                     scale, model=model, cutoff=cutoff, density=density)
+                                     scale, model=model, cutoff=cutoff, density=density, colors=colors)
     return rgba.reshape(height, width, 4), depth.reshape(height, width), count.reshape(height, width)
 
 
 def render_rays(means, scales, rotations, values, opacities, o, d, cam, table, vmin, scale, *,
-                model="max_response", cutoff=3.0, density=1.0, chunk=1 << 22):
+                model="max_response", cutoff=3.0, density=1.0, colors=None, chunk=1 << 22):
     """rgba (R, 4) float32, depth (R,), hits (R,) for rays o, d (R, 3) float32
-    (camera_rays); cam supplies the depth row."""
+    (camera_rays); cam supplies the depth row; colors as in :func:`render`."""
     mean, value, w, opac = gaussian_records(means, scales, rotations, values, opacities)
     nrays, n = len(o), len(mean)
     rgba = np.zeros((nrays, 4), np.float64)
@@ -109,6 +119,7 @@ def render_rays(means, scales, rotations, values, opacities, o, d, cam, table, v
     c2 = np.float32(np.float32(cutoff) * np.float32(cutoff))
     tfv = tf_lookup(value, table, vmin, scale).astype(np.float64)
     eff = opac.astype(np.float64) * tfv[:, 3]
+    rgb = tfv[:, :3] if colors is None else rgb8(colors).astype(np.float64)
     camf = np.asarray(cam, np.float32)
     step = max(1, chunk // max(n, 1))
     ids = np.arange(n)
@@ -135,7 +146,7 @@ def render_rays(means, scales, rotations, values, opacities, o, d, cam, table, v
             keep = before >= T_STOP            # composited: T had not yet dropped below 1e-3
             m = int(keep.sum())
             wgt = before[:m] * alpha[:m]
-            rgba[sl.start + rr, :3] = (wgt[:, None] * tfv[order[:m], :3]).sum(axis=0)
+            rgba[sl.start + rr, :3] = (wgt[:, None] * rgb[order[:m]]).sum(axis=0)
             rgba[sl.start + rr, 3] = 1 - after[m - 1]
             count[sl.start + rr] = m
             below = np.flatnonzero(after[:m] < 0.5)

@@ -33,6 +33,9 @@
  *       = 1 - exp(-(density opac) I), I = (exp(-ms2 / 2) sqrt(pi / (2a)))
  *       erfc(-ts sqrt(a / 2)), ms2 = |o' + ts d'|^2 (op = o', dp = d' of
  *       clvis_gauss_hit)
+ *   float4 clvis_gauss_rgb8(c): a per-Gaussian uchar4 colour as (r, g, b, a) / 255
+ *       (correctly rounded division), used in place of the transfer function's
+ *       colour when a Gaussian carries its own
  *   clvis_gauss_composite(alpha, c, &T, &cr, &cg, &cb): one front-to-back step,
  *       w = T alpha; cr += w c.x, cg += w c.y, cb += w c.z; T = T (1 - alpha)
  * (opac: the record's opacity times the transfer function's alpha factor.)
@@ -86,6 +89,11 @@ inline float clvis_gauss_alpha_absorption(float opac, float density, float ts, f
     float ms2 = clvis_dot3(s0, s1, s2, s0, s1, s2);
     float integral = (exp(-0.5f * ms2) * sqrt(M_PI_F / (2.0f * a))) * erfc(-ts * sqrt(0.5f * a));
     return 1.0f - exp(-((density * opac) * integral));
+}
+
+inline float4 clvis_gauss_rgb8(uchar4 c)
+{
+    return convert_float4(c) / 255.0f;
 }
 
 inline void clvis_gauss_composite(float alpha, float4 c, float *T, float *cr, float *cg, float *cb)

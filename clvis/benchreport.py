@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+from collections.abc import Iterable
 from pathlib import Path
 
 
@@ -106,7 +108,7 @@ TARGETS = {
 }
 
 
-def load(path) -> tuple[list[Row], dict]:
+def load(path: str | os.PathLike[str]) -> tuple[list[Row], dict]:
     """Rows (copy bandwidth filled in) and the run's clvis section."""
     data = json.loads(Path(path).read_text())
     rows = []
@@ -186,7 +188,7 @@ def format_table(rows: list[Row], meta: dict | None = None) -> str:
     return "\n".join(lines)
 
 
-def format_checks(results) -> str:
+def format_checks(results: Iterable[tuple[Target, float | None, bool]]) -> str:
     lines = []
     for t, value, ok in results:
         if value is None:   # not in this run; --check still counts it as unmet

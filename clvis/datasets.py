@@ -12,6 +12,8 @@ right-handed with z up.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from ._arrays import nonnegative_int
@@ -30,7 +32,7 @@ T_SURFACE, LAPSE = 301.0, 6.5          # K, K/km
 WARM_CORE, WARM_CORE_R, WARM_CORE_Z = 10.0, 40.0, 10.0
 
 
-def hurricane(n: int = 2_000_000, seed=0) -> dict:
+def hurricane(n: int = 2_000_000, seed: int | None = 0) -> dict:
     """A hurricane-like vortex of `n` cloud particles, centred on the z axis in
     a box about 200 x 200 x 15 km (positions in km, x, y in [-100, 100], z in
     [0, 15]).
@@ -169,7 +171,7 @@ TREE_RADIUS, TREE_HEIGHT = 6.0, 14.0
 GROUND, HIGH_VEGETATION, BUILDING = 2, 5, 6
 
 
-def terrain(n: int = 1_000_000, seed=0) -> dict:
+def terrain(n: int = 1_000_000, seed: int | None = 0) -> dict:
     """An airborne LiDAR-like scan of `n` points over 400 x 400 m (positions in
     m, x, y in [-200, 200], z up): rolling ground ``z = f(x, y)`` (about 0-26 m), six
     flat-roofed box buildings (roofs and, 6 % of the points, walls), and a row
@@ -288,7 +290,7 @@ def _turbulence(x, y, z):
     return out / 0.9
 
 
-def explosion(shape=(96, 96, 96)) -> dict:
+def explosion(shape: Sequence[int] = (96, 96, 96)) -> dict:
     """A fireball: a turbulent, rising density field in closed form, zero
     outside it (a sparse volume, about 11% of the voxels non-zero at the
     default size).

@@ -20,12 +20,18 @@ from __future__ import annotations
 import functools
 import os
 import secrets
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from . import colormap as cm
 from ._arrays import nonnegative_int
+
+if TYPE_CHECKING:       # Pillow is imported when a picture is made, not with clvis
+    from PIL import ImageFont
 
 __all__ = ["BACKGROUND", "attribute_image", "colorbar", "compose", "depth_image", "font",
            "from_premultiplied", "label", "label_height", "opaque", "save_png", "side_by_side",
@@ -37,7 +43,7 @@ TEXT = (235, 235, 235)          # the labels' text
 MIN_TEXT, MAX_TEXT = 8, 24      # font sizes in pixels a label may take
 
 
-def save_png(path, image) -> Path:
+def save_png(path: str | os.PathLike[str], image: npt.ArrayLike) -> Path:
     """Write `image` (``(H, W, 4)`` RGBA, ``(H, W, 3)`` RGB or ``(H, W)`` grey,
     uint8, H and W >= 1) to the PNG file `path`, creating its parent folders.
     The file appears complete or not at all. Returns the path."""
@@ -63,7 +69,8 @@ def save_png(path, image) -> Path:
     return path
 
 
-def depth_image(depth, colormap="magma", near=None, far=None) -> np.ndarray:
+def depth_image(depth: npt.ArrayLike, colormap: str | npt.ArrayLike = "magma", near: float | None = None,
+                far: float | None = None) -> np.ndarray:
     """RGBA image of a depth plane ``(H, W)`` float (inf or NaN = empty).
 
     Closer is brighter: depth `near` takes the colormap's last entry and `far`
@@ -82,7 +89,7 @@ def depth_image(depth, colormap="magma", near=None, far=None) -> np.ndarray:
     return rgba
 
 
-def velocity_images(vel2d) -> tuple[np.ndarray, np.ndarray]:
+def velocity_images(vel2d: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """``(angle_rgba, magnitude_rgba)`` of a screen-space velocity plane
     ``(H, W, 2)`` float: ``[vx, vy]`` in pixels, y pointing down, NaN where
     empty.
@@ -111,7 +118,8 @@ def velocity_images(vel2d) -> tuple[np.ndarray, np.ndarray]:
     return angle_rgba, mag_rgba
 
 
-def attribute_image(plane, colormap="viridis", vmin=None, vmax=None) -> np.ndarray:
+def attribute_image(plane: npt.ArrayLike, colormap: str | npt.ArrayLike = "viridis", vmin: float | None = None,
+                    vmax: float | None = None) -> np.ndarray:
     """RGBA image of an attribute plane ``(H, W)`` float (NaN = empty,
     transparent black) through ``colormap.apply``; `vmin` and `vmax` default
     to the finite range of the plane."""
@@ -121,7 +129,7 @@ def attribute_image(plane, colormap="viridis", vmin=None, vmax=None) -> np.ndarr
                     hi if vmax is None else vmax)
 
 
-def side_by_side(images, pad=4) -> np.ndarray:
+def side_by_side(images: Iterable[np.ndarray], pad: int = 4) -> np.ndarray:
     """RGBA images ``(H_i, W_i, 4)`` uint8 placed left to right, `pad`
     transparent columns between neighbours, each top-aligned and padded with
     transparent rows to the tallest."""
@@ -158,7 +166,7 @@ def _table(colormap) -> np.ndarray:
 
 # ---------------------------------------------------------------- pictures
 
-def opaque(rgba, background=BACKGROUND) -> np.ndarray:
+def opaque(rgba: npt.ArrayLike, background: Sequence[int] = BACKGROUND) -> np.ndarray:
     """``(H, W, 4)`` uint8 RGBA `rgba` (straight alpha) over the RGB colour
     `background` (three 0..255 integers): the same shape, every alpha 255."""
     a = _rgba("rgba", rgba)
@@ -170,7 +178,7 @@ def opaque(rgba, background=BACKGROUND) -> np.ndarray:
     return out
 
 
-def from_premultiplied(rgba) -> np.ndarray:
+def from_premultiplied(rgba: npt.ArrayLike) -> np.ndarray:
     """``(H, W, 4)`` float RGBA with premultiplied colour in [0, 1] (what the
     Gaussian renderer gives) as uint8 RGBA with straight alpha; alpha 0 gives
     transparent black."""
@@ -184,7 +192,7 @@ def from_premultiplied(rgba) -> np.ndarray:
     return np.rint(out * 255).astype(np.uint8)
 
 
-def font(size: int):
+def font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
     """Pillow's built-in font at `size` pixels (its bitmap font, about 11
     pixels, where Pillow is older than 10.1 or has no FreeType)."""
     return _font(int(size))
@@ -248,7 +256,7 @@ def _draw_text(band: np.ndarray, pieces, size: int, colour=TEXT) -> np.ndarray:
     return np.asarray(im)
 
 
-def label(image, text: str, background=BAND) -> np.ndarray:
+def label(image: npt.ArrayLike, text: str, background: Sequence[int] = BAND) -> np.ndarray:
     """`image` (``(H, W, 4)`` uint8 RGBA) with an opaque band of
     ``label_height(W)`` rows above it, `text` written in it (left-aligned,
     the font shrunk and then the text cut to fit the width). The image's own
@@ -263,7 +271,8 @@ def label(image, text: str, background=BAND) -> np.ndarray:
     return np.concatenate([band, image], axis=0)
 
 
-def colorbar(lut, vmin, vmax, width, *, title: str = "", background=BAND) -> np.ndarray:
+def colorbar(lut: str | npt.ArrayLike, vmin: float, vmax: float, width: int, *, title: str = "",
+             background: Sequence[int] = BAND) -> np.ndarray:
     """A horizontal colour bar ``(label_height(width) + ramp rows, width, 4)``,
     opaque: its top rows are the ramp, column ``x`` the colour of the value
     ``vmin + (vmax - vmin) * x / (width - 1)`` through `lut` by the colormap
@@ -296,7 +305,8 @@ def _number(v: float) -> str:
     return f"{v:.4g}"
 
 
-def compose(panels, columns: int | None = None, pad: int = 4, background=BAND) -> np.ndarray:
+def compose(panels: Iterable[np.ndarray], columns: int | None = None, pad: int = 4,
+            background: Sequence[int] | None = BAND) -> np.ndarray:
     """``(H_i, W_i, 4)`` uint8 RGBA panels in a grid of `columns` (default:
     all in one row), left to right and top to bottom, `pad` pixels between
     them, each top-aligned in its cell. Gaps and unfilled cells take the RGB

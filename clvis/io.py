@@ -670,7 +670,7 @@ def _size(n: int) -> str:
     return f"{n} bytes"
 
 
-def load_npy(path) -> np.ndarray:
+def load_npy(path: str | os.PathLike[str]) -> np.ndarray:
     """The array of a .npy file; DataError naming the file when it is malformed,
     truncated, declares more data than it holds, holds objects (no pickles) or
     is an .npz archive."""
@@ -684,7 +684,7 @@ def load_npy(path) -> np.ndarray:
         raise DataError(f"{path}: cannot read: {e.strerror or e}") from e
 
 
-def npy_shape(path) -> tuple[int, ...]:
+def npy_shape(path: str | os.PathLike[str]) -> tuple[int, ...]:
     """The shape a .npy file declares, read from its header alone (checked as
     :func:`load_npy` checks it), to tell a volume from a point array."""
     try:
@@ -697,7 +697,7 @@ def npy_shape(path) -> tuple[int, ...]:
         raise DataError(f"{path}: cannot read: {e.strerror or e}") from e
 
 
-def load_npz(path) -> dict[str, np.ndarray]:
+def load_npz(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """The arrays of an .npz archive by key (the member name without .npy);
     DataError naming the file when it is malformed, truncated, an NPY array, or
     declares more data than it holds."""
@@ -763,7 +763,7 @@ def _check_cloud(cloud) -> None:
         raise TypeError(f"cloud: expected a PointCloud, got {type(cloud).__name__}")
 
 
-def write_ply(path, cloud: PointCloud, text: bool = False) -> None:
+def write_ply(path: str | os.PathLike[str], cloud: PointCloud, text: bool = False) -> None:
     """Write `cloud` as a PLY file (binary little-endian, or ASCII with `text`).
 
     Vertex properties: x, y, z (float); red, green, blue, alpha (uchar); vx, vy, vz
@@ -796,7 +796,7 @@ def write_ply(path, cloud: PointCloud, text: bool = False) -> None:
     _write_or_remove(path, ply.write)
 
 
-def save_npz(path, cloud: PointCloud) -> None:
+def save_npz(path: str | os.PathLike[str], cloud: PointCloud) -> None:
     """Write `cloud` as an uncompressed NPZ file with the keys :func:`read_points`
     reads: positions, origin, colors / velocity / radius when present, and one
     key per attribute."""

@@ -813,7 +813,7 @@ def zeros(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLi
 EXACT_FP = ("-cl-fp32-correctly-rounded-divide-sqrt",)
 
 
-def local_size(queue, wanted: int) -> int:
+def local_size(queue: cl.CommandQueue, wanted: int) -> int:
     """`wanted` work-items per group, halved until the queue's device allows
     it (at least 1). Halving keeps a power of two a power of two: the work
     shapes of the PROFILES tables are, and tiles (64 pixels of march.cl) are
@@ -825,7 +825,7 @@ def local_size(queue, wanted: int) -> int:
     return wg
 
 
-def items(queue, n: int, wg: int) -> tuple[int, int]:
+def items(queue: cl.CommandQueue, n: int, wg: int) -> tuple[int, int]:
     """(global, local) sizes of a 1-D launch with one work-item per element
     of `n`: local = local_size(queue, wg), global the next multiple of it.
     n == 0 gives one group, not zero: an empty launch is invalid before
@@ -857,7 +857,7 @@ def fill(queue: cl.CommandQueue, a: cla.Array, value: Any = 0, *, start: int = 0
     return a
 
 
-def arg(a):
+def arg(a: cla.Array | cl.MemoryObjectHolder | None) -> cl.MemoryObjectHolder | cl.SVMPointer | None:
     """A buffer argument that may be absent: None (a NULL pointer) for None
     or an empty array, else the array's cl.Buffer. A cl.Buffer passes as is."""
     if a is None or isinstance(a, cl.MemoryObjectHolder):
@@ -865,7 +865,7 @@ def arg(a):
     return a.base_data if a.size else None
 
 
-def nbytes(*arrays) -> int:
+def nbytes(*arrays: Any) -> int:
     """Device bytes of `arrays` (None counts 0): what a renderer's stats report
     as allocated, from the arrays it holds rather than from a formula."""
     return int(sum(a.nbytes for a in arrays if a is not None))
@@ -885,7 +885,7 @@ class LaunchConfig:
     int64_atomics: bool
 
 
-def capture(queue) -> LaunchConfig:
+def capture(queue: cl.CommandQueue) -> LaunchConfig:
     """The options in force (in this thread, see :func:`pinned`) for `queue`'s device."""
     o = _in_force()
     device = _as_device(queue)
@@ -904,7 +904,7 @@ def _in_force() -> Options:
 
 
 @contextlib.contextmanager
-def pinned(config: LaunchConfig):
+def pinned(config: LaunchConfig) -> Iterator[LaunchConfig]:
     """Run the block (in this thread only) under `config`'s options, whatever
     configure() does meanwhile: capabilities(), tuning_profile() and
     get_kernel() (through build_options) follow it, so a renderer, and the
@@ -919,7 +919,7 @@ def pinned(config: LaunchConfig):
 
 # -- timings from event profiling --------------------------------------------
 
-def marker(queue) -> cl.Event:
+def marker(queue: cl.CommandQueue) -> cl.Event:
     """An event that completes when everything enqueued before it has: with
     the event of a later command, :func:`seconds` of the commands between."""
     return cl.enqueue_marker(queue)

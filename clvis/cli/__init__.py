@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from collections.abc import Sequence
 
 from .._version import __version__
 from . import bench, demo, gauss, info, iso, raster
@@ -39,7 +40,7 @@ def _parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParse
     return p, commands
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the clvis command line on `argv` (default sys.argv[1:]); the exit status.
 
     A bare `clvis` prints the help and exits 0, as `clvis --help` does.

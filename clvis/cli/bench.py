@@ -3,12 +3,13 @@ JSON), or the table of an earlier run's JSON."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
 from pathlib import Path
 
-from ._common import real
+from ._common import Parser, real
 
 
 def _report(path: str):
@@ -29,7 +30,7 @@ def _report(path: str):
                                          f"{str(e).splitlines()[0] if str(e) else ''})") from None
 
 
-def add_parser(sub):
+def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     b = sub.add_parser("bench", help="run a benchmark suite and print its table")
     b.add_argument("family", choices=["primitives", "raster", "gauss", "iso"])
     b.add_argument("--scale", type=real(0.0, open_lo=True), help="multiply every size (e.g. 0.01 for a smoke run)")
@@ -47,7 +48,7 @@ def _bench_dir() -> Path | None:
     return None
 
 
-def cmd(args) -> int:
+def cmd(args: argparse.Namespace) -> int:
     from .. import benchreport, runtime
 
     if args.report:

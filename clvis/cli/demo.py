@@ -4,16 +4,18 @@ family's part lives with its command (raster.demo, gauss.demo, iso.demo)."""
 
 from __future__ import annotations
 
+import argparse
+
 import numpy as np
 
 from . import gauss, iso, raster
-from ._common import count, size, timed
+from ._common import Parser, count, size, timed
 from .raster import MAX_POINTS
 
 MAX_N = 2**32 - 1       # the primitives count in uint
 
 
-def add_parser(sub):
+def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     d = sub.add_parser("demo", help="run the kernels on generated data and print the figures")
     d.add_argument("--n", type=count(1, MAX_N), default=1 << 24,
                    help="elements of the primitives (default 2^24)")
@@ -30,7 +32,7 @@ def add_parser(sub):
     return d
 
 
-def cmd(args) -> int:
+def cmd(args: argparse.Namespace) -> int:
     import pyopencl.array as cla
 
     from .. import __version__, primitives, runtime

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import argparse
 
-def add_parser(sub):
+from ._common import Parser
+
+
+def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     return sub.add_parser("info", help="platforms, devices and the chosen device's capabilities")
 
 
-def cmd(args) -> int:
+def cmd(args: argparse.Namespace) -> int:
     from .. import __version__, runtime
     from ..errors import ClvisError
 

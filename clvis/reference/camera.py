@@ -5,11 +5,12 @@ the same float32 operations in the same order."""
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ["camera_rays"]
 
 
-def camera_rays(cam, width, height):
+def camera_rays(cam: npt.ArrayLike, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
     """Origins and unit directions (H*W, 3) float32 from the 22-float ray buffer."""
     cam = np.asarray(cam, np.float32)
     py, px = np.mgrid[0:height, 0:width]

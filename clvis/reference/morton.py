@@ -4,6 +4,7 @@ family build (kernels_cl/include/clvis/morton.h, clvis/morton.py)."""
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ["morton_codes"]
 
@@ -16,7 +17,7 @@ def _spread3(v: np.ndarray) -> np.ndarray:
     return out
 
 
-def morton_codes(positions) -> np.ndarray:
+def morton_codes(positions: npt.ArrayLike) -> np.ndarray:
     """30-bit Morton codes over the finite bounding box (clvis/morton.h's rule):
     q = clamp(trunc((a - lo) * float32(1023 / extent)), 0, 1023) per axis,
     x in the lowest bit; 0xFFFFFFFF for non-finite points."""

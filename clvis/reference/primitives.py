@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 
-def scan(x, exclusive=True, *, return_total=False):
+def scan(x: npt.ArrayLike, exclusive: bool = True, *,
+         return_total: bool = False) -> np.ndarray | tuple[np.ndarray, np.generic]:
     """Prefix sums in x's dtype (integers wrap)."""
     x = np.asarray(x)
     inclusive = np.cumsum(x, dtype=x.dtype)
@@ -17,15 +19,15 @@ def scan(x, exclusive=True, *, return_total=False):
     return (out, total) if return_total else out
 
 
-def compact(x, flags):
+def compact(x: npt.ArrayLike, flags: npt.ArrayLike) -> np.ndarray:
     return np.asarray(x)[np.asarray(flags) != 0]
 
 
-def compact_indices(flags):
+def compact_indices(flags: npt.ArrayLike) -> np.ndarray:
     return np.flatnonzero(np.asarray(flags) != 0).astype(np.uint32)
 
 
-def sort_key(keys):
+def sort_key(keys: npt.ArrayLike) -> np.ndarray:
     """The unsigned integer whose order is clvis's total order of `keys`:
     unsigned as is; signed with the sign bit flipped; floats by IEEE 754 bits
     (-inf < ... < -0.0 < +0.0 < ... < +inf), every NaN after +inf."""
@@ -42,7 +44,8 @@ def sort_key(keys):
     return np.where(np.isnan(keys), np.iinfo(u).max, key).astype(u)
 
 
-def radix_sort(keys, values=None, *, key_bits=None):
+def radix_sort(keys: npt.ArrayLike, values: npt.ArrayLike | None = None, *,
+               key_bits: int | None = None) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Stable sort by sort_key (key_bits: by the low key_bits bits only)."""
     keys = np.asarray(keys)
     k = sort_key(keys)
@@ -54,12 +57,12 @@ def radix_sort(keys, values=None, *, key_bits=None):
     return keys[order], np.asarray(values)[order]
 
 
-def histogram(keys, nbins, *, check=True):
+def histogram(keys: npt.ArrayLike, nbins: int, *, check: bool = True) -> np.ndarray:
     """Counts per bin; keys outside [0, nbins) are in no bin."""
     keys = np.asarray(keys).astype(np.int64)
     inside = keys[(keys >= 0) & (keys < nbins)]
     return np.bincount(inside, minlength=nbins).astype(np.uint32)
 
 
-def copy(x):
+def copy(x: npt.ArrayLike) -> np.ndarray:
     return np.array(x, copy=True)

@@ -162,12 +162,13 @@ def test_render_third_party_laz(tmp_path, capsys):
     --point-size the sparse scan covers more of the image."""
     pytest.importorskip("laspy")
     path = Path(__file__).parents[1] / "data" / "laspy_simple.laz"
-    rc, out, err = _render(capsys, path, "--view", "top", "--out", tmp_path / "one", *SMALL)
+    # --transparent: empty pixels keep alpha 0, so coverage can be counted
+    rc, out, err = _render(capsys, path, "--view", "top", "--transparent", "--out", tmp_path / "one", *SMALL)
     assert rc == 0, err
     assert "colored by intensity" in out and "dropped" not in out
     one = _png(tmp_path / "one" / "attribute-intensity.png")[..., 3] > 0
-    rc, out, err = _render(capsys, path, "--view", "top", "--point-size", 3, "--out", tmp_path / "three",
-                           *SMALL)
+    rc, out, err = _render(capsys, path, "--view", "top", "--point-size", 3, "--transparent",
+                           "--out", tmp_path / "three", *SMALL)
     assert rc == 0, err
     assert "points 3x3 pixels" in out
     three = _png(tmp_path / "three" / "attribute-intensity.png")[..., 3] > 0

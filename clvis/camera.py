@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ._arrays import positive_int, real_array
+from .errors import DataError
 
 __all__ = ["CAMERA_DTYPE", "Camera", "Projected", "camera_buffer", "grid_cameras", "hemisphere_cameras",
            "ray_buffer"]
@@ -89,6 +90,22 @@ def _image_size(name: str, v) -> int:
     if not 0 < v <= 2**24:
         raise ValueError(f"{name}: must be in 1..2^24 (exact in float32), got {v}")
     return int(v)
+
+
+def _check_invertible(m: np.ndarray) -> None:
+    """DataError naming the camera when projection @ view cannot be inverted
+    (rays come from its inverse): singular, or so near it that the inverse
+    does not give the identity back."""
+    try:
+        inv = np.linalg.inv(m)
+        with np.errstate(all="ignore"):
+            residual = float(np.abs(inv @ m - np.eye(4)).max())
+    except np.linalg.LinAlgError:
+        residual = np.inf
+    if not residual <= 1e-6:
+        raise DataError(f"camera: its matrix projection @ view is singular (inverse residual {residual:.3g}); "
+                        "make cameras with Camera.look_at, Camera.ortho or Camera.fit, whose arguments are "
+                        "checked (fov_y, aspect, near < far, eye != target, up not along the view)")
 
 
 def _bounds(bounds_min, bounds_max) -> tuple[np.ndarray, np.ndarray]:
@@ -202,6 +219,7 @@ class Camera:
         if not isinstance(self.orthographic, (bool, np.bool_)):
             raise TypeError(f"orthographic: expected a bool, got {type(self.orthographic).__name__}")
         near, far = _near_far(self.near, self.far, not self.orthographic)
+        _check_invertible(self.projection @ self.view)
         eye = _vec3("eye", self.eye)
         eye.setflags(write=False)
         object.__setattr__(self, "near", near)
@@ -460,9 +478,14 @@ def ray_buffer(camera: Camera, width: int, height: int) -> np.ndarray:
         p = inv @ np.array([u / w * 2 - 1, 1 - v / h * 2, zn, 1.0])
         return p[:3] / p[3]
 
-    near = [point(0, 0, -1), point(1, 0, -1), point(0, 1, -1)]
-    far = [point(0, 0, 1), point(1, 0, 1), point(0, 1, 1)]
-    o0, ou, ov = near[0], near[1] - near[0], near[2] - near[0]
-    f0, fu, fv = far[0], far[1] - far[0], far[2] - far[0]
-    buf = np.concatenate([o0, ou, ov, f0 - o0, fu - ou, fv - ov, camera.depth_row])
-    return buf.astype(np.float32)
+    with np.errstate(all="ignore"):     # a point at infinity is caught below
+        near = [point(0, 0, -1), point(1, 0, -1), point(0, 1, -1)]
+        far = [point(0, 0, 1), point(1, 0, 1), point(0, 1, 1)]
+        o0, ou, ov = near[0], near[1] - near[0], near[2] - near[0]
+        f0, fu, fv = far[0], far[1] - far[0], far[2] - far[0]
+        buf = np.concatenate([o0, ou, ov, f0 - o0, fu - ou, fv - ov, camera.depth_row])
+        out = buf.astype(np.float32)
+    if not np.isfinite(out).all():
+        raise DataError(f"camera: its rays for a {w} x {h} image are not finite in float32 (a near or far "
+                        f"plane at infinity, or a degenerate matrix): {camera!r}")
+    return out

@@ -346,3 +346,37 @@ def test_sampler_bad_options():
         Camera.fit((0, 0, 0), (1, 1, 1), direction=(0, 0, 0))
     with pytest.raises(ValueError, match="up"):
         Camera.fit((0, 0, 0), (1, 1, 1), direction=(0, 0, -1))
+
+
+def test_singular_cameras_are_refused():
+    """A camera whose matrix cannot be inverted (its rays come from the
+    inverse) is a clvis error naming the camera where it is made; ray_buffer
+    refuses rays that are not finite in float32."""
+    from clvis.camera import ray_buffer
+    from clvis.errors import ClvisError
+
+    good = Camera.look_at((3, 0, 0), (0, 0, 0))
+    eye = np.zeros(3)
+    for view, proj in [(np.zeros((4, 4)), good.projection),                  # no view at all
+                       (good.view, np.diag([1.0, 1.0, 0.0, 0.0])),          # flattened projection
+                       (good.view, good.projection[[0, 0, 2, 3]])]:          # two rows alike
+        with pytest.raises(ClvisError, match="camera: .*singular"):
+            Camera(view, proj, 0.1, 10.0, False, eye)
+        with pytest.raises(ValueError, match="camera"):
+            Camera(view, proj, 0.1, 10.0, False, eye)
+    with pytest.raises(ValueError, match="view"):
+        Camera(np.full((4, 4), np.nan), good.projection, 0.1, 10.0, False, eye)
+    with pytest.raises(ValueError, match="far"):
+        Camera(good.view, good.projection, 10.0, 10.0, False, eye)
+    for kwargs, name in [({"fov_y": 0}, "fov_y"), ({"aspect": 0}, "aspect"), ({"near": 1, "far": 1}, "far")]:
+        with pytest.raises(ValueError, match=name):
+            Camera.look_at((3, 0, 0), (0, 0, 0), **kwargs)
+    with pytest.raises(ValueError, match="target"):
+        Camera.look_at((1, 2, 3), (1, 2, 3))
+    with pytest.raises(ValueError, match="parallel"):
+        Camera.look_at((0, 0, 3), (0, 0, 0), up=(0, 0, 1))
+    # a huge (float64-finite) near plane: the rays overflow float32
+    wide = Camera.ortho((1e39, 0, 0), (0, 0, 0), near=-1e39, far=1e39)
+    with pytest.raises(ClvisError, match="camera: its rays"):
+        ray_buffer(wide, 4, 4)
+    assert np.isfinite(ray_buffer(good, 4, 4)).all()

@@ -18,12 +18,14 @@ from ._common import (
     VIEWS_HELP,
     CliError,
     FitView,
+    Progress,
     add_camera_options,
     add_volume_options,
     camera_from_args,
     check_camera_args,
     count,
     finite_range,
+    isatty,
     otsu_level,
     read_volume_file,
     real,
@@ -119,20 +121,41 @@ def labelled(img, isovalue: float, transparent: bool = False) -> np.ndarray:
     return images.label(picture(img, transparent), text)
 
 
+class _Status:
+    """The passes stage's name, formatted when Progress redraws its line: the
+    tile, passes and rays done so far (IsoRenderer.render's progress)."""
+
+    def __init__(self) -> None:
+        self.text = "passes"
+
+    def __call__(self, p: dict) -> None:
+        self.text = (f"passes {p['passes']}, tile {p['tile']}/{p['tiles']}, "
+                     f"rays {p['rays_done']:,}/{p['rays_total']:,}")
+
+    def __format__(self, spec: str) -> str:
+        return format(self.text, spec)
+
+
 def render(volume, spacing, origin, isovalue, width, height, *, rate=8, completion=1.0, speculation=True,
-           camera=None, queue=None):
-    """(renderer, camera, [IsoImage per pass]), seen by camera(lo, hi) of the
-    volume's bounds (default: the fit view)."""
+           camera=None, queue=None, progress=None):
+    """(renderer, camera, IsoImage), seen by camera(lo, hi) of the volume's
+    bounds (default: the fit view); progress: a clvis.cli._common.Progress
+    (default: none)."""
     from .. import Camera
     from ..iso import IsoRenderer
 
-    r = IsoRenderer(volume, rate=rate, spacing=spacing, origin=origin, queue=queue)
+    progress = progress if progress is not None else Progress(False)
+    with progress.stage("compress, build kernels"):
+        r = IsoRenderer(volume, rate=rate, spacing=spacing, origin=origin, queue=queue)
     lo = np.asarray(origin, np.float64)
     hi = lo + (np.array(r.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
     cam = (camera(lo, hi) if camera is not None else
            Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y))
-    images = list(r.passes(cam, width, height, isovalue, completion=completion, speculation=speculation))
-    return r, cam, images
+    status = _Status()
+    with progress.stage(status):
+        img = r.render(cam, width, height, isovalue, completion=completion, speculation=speculation,
+                       progress=status)
+    return r, cam, img
 
 
 def cmd(args) -> int:
@@ -151,11 +174,11 @@ def _run(args) -> int:
     w, h = args.size
     q = runtime.default_queue()
     t0 = time.perf_counter()
-    r, _, passes = render(volume, spacing, origin, iso, w, h, rate=args.rate, completion=args.completion,
-                          speculation=not args.no_speculation, queue=q,
-                          camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h))
+    r, _, img = render(volume, spacing, origin, iso, w, h, rate=args.rate, completion=args.completion,
+                       speculation=not args.no_speculation, queue=q,
+                       camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h),
+                       progress=Progress(isatty(sys.stderr), "clvis iso"))
     total = time.perf_counter() - t0
-    img = passes[-1]
     out = Path(args.out)
     path = images.save_png(out / "iso.png", labelled(img, iso, args.transparent))
     st = img.stats
@@ -165,15 +188,26 @@ def _run(args) -> int:
           f"compressed, {r.volume.nblocks:,} blocks")
     print(f"  passes      {st['passes']} (speculation {'on' if st['speculation'] else 'off'}), "
           f"completion {img.completion:.3f}, {st['rays_entering']:,} rays enter the volume")
-    print(f"  per pass    active rays {st['active_per_pass']}")
-    print(f"              candidates per ray {st['n_spec_per_pass']}")
+    if st["tiles"] > 1:
+        print(f"  tiles       {st['tiles']} of {st['tile_pixels']:,} pixels, passes per tile "
+              f"{st['passes_per_tile']}")
+    print(f"  per pass    active rays {_short(st['active_per_pass'])}")
+    print(f"              candidates per ray {_short(st['n_spec_per_pass'])}")
     print(f"  blocks      {st['blocks_decoded']:,} decoded, cache of {st['cache_slots']:,} slots")
     dev = st.get("device_bytes", {})
     if dev:
         print("  device MB   " + ", ".join(f"{k} {v / 1e6:.1f}" for k, v in dev.items()))
-    print(f"  time        {st['seconds'] * 1e3:.1f} ms of passes; {total:.2f} s with compression and setup")
+    print(f"  time        build {r.build_seconds:.2f} s, passes {st['seconds'] * 1e3:.1f} ms; "
+          f"{total:.2f} s with compression and setup")
     print(f"wrote {path}{os.sep if path.is_dir() else ''}")
     return 0
+
+
+def _short(values, most=12) -> str:
+    """A list, its first `most` entries when longer (one per pass of every tile)."""
+    if len(values) <= most:
+        return str(values)
+    return "[" + ", ".join(str(v) for v in values[:most]) + f", ... {len(values) - most} more]"
 
 
 def demo(out_dir, q, size=(640, 480)) -> bool:

@@ -21,7 +21,8 @@ _arg = runtime.arg
 
 
 def raytrace_blocks(queue, bricks, slot_of_block, shape, spacing, origin, isovalue, cam, width,
-                    groups, ray_ids, ray_t, outputs, *, refine_steps: int = 8, items=None, wait_for=None):
+                    groups, ray_ids, ray_t, outputs, *, refine_steps: int = 8, items=None, first_pixel=0,
+                    wait_for=None):
     """Launch ``raytrace_blocks`` (internal; see kernels_cl/iso/raytrace.cl's ABI).
 
     bricks (slots, 64) float32 and slot_of_block (nblocks,) int32: the block
@@ -36,7 +37,10 @@ def raytrace_blocks(queue, bricks, slot_of_block, shape, spacing, origin, isoval
     items = (item_pixel uint32, n_spec, hitkey uint64 or None): the
     speculation mode (-D ITEMS=1): ray_ids are item ids, ray_t and the
     outputs are per item, and hitkey (per pixel) receives the 64-bit atomic
-    min of (t bits << 32 | item) where the device has 64-bit atomics."""
+    min of (t bits << 32 | item) where the device has 64-bit atomics.
+
+    first_pixel: the tile's first image pixel; pixel ids and per-pixel arrays
+    are then the tile's (kernels_cl/iso/traverse.cl, Tiles)."""
     group_blocks, group_offsets, group_counts = groups
     ngroups = int(group_blocks.size)
     if ngroups == 0:
@@ -52,6 +56,7 @@ def raytrace_blocks(queue, bricks, slot_of_block, shape, spacing, origin, isoval
     return runtime.launch(queue, k, ngroups * wg, wg,
                           _arg(bricks), _arg(slot_of_block), np.uint32(nx), np.uint32(ny), np.uint32(nz),
                           dx, dy, dz, ox, oy, oz, np.float32(isovalue), _arg(cam), np.uint32(width),
+                          np.uint32(first_pixel),
                           _arg(group_blocks), _arg(group_offsets), _arg(group_counts), _arg(ray_ids),
                           _arg(ray_t), _arg(ray_hit), _arg(hit_t), _arg(rgba), _arg(depth),
                           _arg(item_pixel), np.uint32(n_spec), _arg(hitkey), wait_for=wait_for)

@@ -19,6 +19,37 @@ A pass, for the rays still active (kernels_cl/iso/):
    64-bit atomics, else by scanning its candidates in order (same result);
    rays without a hit go on from where the traversal left them.
 
+Tiles. Each ray is independent of the others, so the image is traced in
+tiles: ranges of `tile_pixels` pixels in row-major order (bands of whole rows
+by default), one after the other, each running the pass loop to its end over
+the renderer's shared compressed volume, macrocell grids and block cache. A
+tile holds the state of its own rays only (ray t, hit outputs, 64-bit hit
+keys, the active list, and each pass's items: rays x n_spec candidates and
+their sort keys), so device memory is bounded by the tile, not the image:
+at most PIXEL_BYTES + ITEM_BYTES * max(start_speculation, 2) bytes per tile
+pixel (one item per pixel without speculation), TILE_BYTES (256 MiB) per tile
+by default. Kernels compute each ray from its image pixel (the tile's first
+pixel p0 is a kernel argument), so a tiled image is the untiled one: the same
+hits, t, depths and colours, bit for bit. n_spec is a tile's own (its pixels
+and its active rays); the candidates do not depend on how they are split into
+passes, so that changes the passes, not the image. The host image (rgba,
+depth, hit, t, active: HOST_PIXEL_BYTES per pixel) is allocated once and
+each tile is read back into it when it is done; runtime.check_memory checks
+both figures before anything is allocated. width x height must stay below
+2^31 (MAX_PIXELS): the kernels index pixels with 32-bit integers.
+
+Completion is per tile: a tile stops once `completion` of its rays entering
+the volume are finished, so the whole image reaches at least `completion`
+(IsoImage.completion is the global fraction: finished rays over all rays
+entering the volume) and no part of it is left behind. Where a render stops
+early, a finished ray's pixel is that of the complete render; a ray still
+running shows no hit. With one tile (an image within the budget) this is the
+untiled pass loop.
+
+``passes()`` yields after every pass of every tile (tiles not started yet
+show no hits, their entering rays active). ``progress``, when given, is called
+after each pass with {"tile", "tiles", "passes", "rays_done", "rays_total"}.
+
 An IsoRenderer captures the runtime options (tuning profile, 64-bit atomics)
 and its kernels when it is made; every pass runs under them (runtime.pinned),
 whatever runtime.configure does meanwhile, in this thread or another.
@@ -30,7 +61,9 @@ The rules (rays, dual grid, root finding, shading) are clvis.reference.iso's.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+import numbers
+import time
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,18 +77,42 @@ from ..errors import DataError
 from ..primitives import compact, compact_indices, radix_sort
 from .cache import BlockCache, mark_blocks
 from .macrocell import macrocell_grids
+from .cache import _kernel as _cache_kernel
 from .raytrace import raytrace_blocks
 from .traverse import init_rays, macro_traverse
 from .zfp import ZfpVolume, compress
 
-__all__ = ["PROFILES", "IsoImage", "IsoRenderer"]
+__all__ = ["HOST_PIXEL_BYTES", "ITEM_BYTES", "MAX_PIXELS", "PIXEL_BYTES", "PROFILES", "TILE_BYTES", "IsoImage",
+           "IsoRenderer"]
 
 MAX_SPEC = 64
+# the kernels index pixels (and pass items within a tile) with 32-bit integers
+MAX_PIXELS = 2**31
+# device bytes per tile pixel: ray t, enters flag, active id (and its
+# compacted copy), still flag, hit, hit t, depth, rgba, 64-bit hit key
+PIXEL_BYTES = 4 + 1 + 4 + 4 + 1 + 1 + 4 + 4 + 16 + 8
+# device bytes per pass item: candidate block and t, valid flag, item id, item
+# hit / t / rgba / depth, sort key, sorted key and item, group head, group
+# start, and the radix sort's and compaction's working copies
+ITEM_BYTES = 4 + 4 + 1 + 4 + 1 + 4 + 16 + 4 + 4 + 4 + 4 + 1 + 4 + 16
+# the default device budget of one tile's rays and pass items
+TILE_BYTES = 256 * 2**20
+# host bytes per image pixel: rgba, depth, hit, t, active
+HOST_PIXEL_BYTES = 16 + 4 + 1 + 4 + 1
 _PASS = "iso/pass.cl"
 _PASS_KERNELS = ("valid_items", "gather_u32", "group_heads", "group_info", "resolve_hits")
 # the local size of pass.cl's one-item-per-element kernels (a fixed one: PoCL
 # would compile a work-group function for every size the driver chose)
 PROFILES = {"cpu": {"wg": 64}, "gpu": {"wg": 64}}
+
+
+def _real(name: str, v: Any) -> float:
+    """v as a float: a real number (not a bool, not a string: float("0.5")
+    would take one)."""
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+        raise TypeError(f"{name}: expected a real number, got {type(v).__name__}")
+    return float(v)
+
 
 @dataclass
 class IsoImage:
@@ -73,6 +130,54 @@ class IsoImage:
     active: np.ndarray
     completion: float
     stats: dict
+
+
+class _HostImage:
+    """The image on the host, flat per pixel; tiles are read back into it."""
+
+    def __init__(self, npix: int) -> None:
+        self.rgba = np.zeros((npix, 4), np.float32)
+        self.depth = np.full(npix, np.inf, np.float32)
+        self.hit = np.zeros(npix, np.uint8)
+        self.t = np.full(npix, np.inf, np.float32)
+        self.active = np.zeros(npix, bool)
+
+    def image(self, w: int, h: int, copy: bool) -> IsoImage:
+        c = np.copy if copy else (lambda a: a)
+        return IsoImage(c(self.rgba).reshape(h, w, 4), c(self.depth).reshape(h, w),
+                        c(self.hit).view(bool).reshape(h, w), c(self.t).reshape(h, w),
+                        c(self.active).reshape(h, w), 1.0, {})
+
+
+class _Tile:
+    """The device state of one tile's rays: pixels p0 .. p0 + n - 1."""
+
+    def __init__(self, q, p0, n, cam, w, h, shape, spacing, origin, int64) -> None:
+        self.q, self.p0, self.n, self.cam, self.w = q, p0, n, cam, w
+        self.ray_t, active_all, count = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
+        self.active = active_all[:int(count.get()[0])]
+        self.hit = runtime.zeros(q, n, np.uint8, "hit mask")
+        self.hit_t = runtime.empty(q, n, np.float32, "hit t")
+        self.depth = runtime.empty(q, n, np.float32, "depth")
+        for a in (self.hit_t, self.depth):
+            runtime.fill(q, a, np.float32(np.inf))
+        self.rgba = runtime.zeros(q, (n, 4), np.float32, "rgba")
+        self.hitkey = runtime.empty(q, n, np.uint64, "hit keys") if int64 else None
+        self.nbytes = runtime.nbytes(self.ray_t, active_all, count, self.hit, self.hit_t, self.depth, self.rgba,
+                                     self.hitkey)
+
+    def read(self, out: _HostImage, active=None) -> None:
+        """Copy the tile's part of the image (rays still running: `active`,
+        default the tile's own list) into `out` (blocks until it is there)."""
+        q, sl = self.q, slice(self.p0, self.p0 + self.n)
+        self.rgba.get(queue=q, ary=out.rgba[sl])
+        self.depth.get(queue=q, ary=out.depth[sl])
+        self.hit.get(queue=q, ary=out.hit[sl])
+        self.hit_t.get(queue=q, ary=out.t[sl])
+        active = self.active if active is None else active
+        out.active[sl] = False
+        if active.size:
+            out.active[self.p0 + active.get(queue=q).astype(np.int64)] = True
 
 
 class IsoRenderer:
@@ -104,10 +209,35 @@ class IsoRenderer:
         self.spacing = triple("spacing", spacing, positive=True)
         self.origin = triple("origin", origin, positive=False)
         with runtime.pinned(self.config):
+            t0 = time.perf_counter()
             self._kernels = {name: runtime.get_kernel(q, _PASS, name, {}) for name in _PASS_KERNELS}
+            self._build_kernels()
+            self.build_seconds = time.perf_counter() - t0
             self._wg = PROFILES[self.config.tuning]["wg"]
             self.grids = macrocell_grids(zv, queue=q, host=False)
             self.cache = BlockCache(zv, cache_capacity, queue=q)
+
+    def _build_kernels(self) -> None:
+        """Build (or fetch from the program cache) every kernel a pass runs,
+        so that the first render's time is the passes' (build_seconds says
+        how long this took): the iso kernels by name, the primitives (the
+        compactions and the sort, whose builds depend only on the dtypes and
+        the work shape) by running them on two elements."""
+        q = self.queue
+        for name in ("init_rays", "macro_traverse"):
+            runtime.get_kernel(q, "iso/traverse.cl", name, {}, runtime.EXACT_FP)
+        runtime.get_kernel(q, "iso/raytrace.cl", "raytrace_blocks", {"REFINE_STEPS": 8, "ITEMS": 1},
+                           runtime.EXACT_FP)
+        for name in ("mark_blocks", "cache_slot_flags", "cache_missing", "cache_age"):
+            _cache_kernel(q, name)
+        for name in ("cache_candidate_keys", "cache_assign", "cache_decode"):
+            _cache_kernel(q, name)
+        flags = runtime.zeros(q, 2, np.uint8, "warm-up flags")
+        ids = runtime.zeros(q, 2, np.uint32, "warm-up ids")
+        compact_indices(flags, queue=q)
+        compact(ids, flags, queue=q)
+        radix_sort(ids, ids, queue=q)
+        q.finish()
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -119,19 +249,24 @@ class IsoRenderer:
             self.cache = BlockCache(self.volume, capacity, queue=self.queue)
 
     def render(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
-               speculation: bool = True, start_speculation: int = 1) -> IsoImage:
-        """Passes until `completion` of the rays are finished; the last image
-        (read back once, at the end)."""
+               speculation: bool = True, start_speculation: int = 1, tile_pixels: int | None = None,
+               progress: Callable[[dict], None] | None = None) -> IsoImage:
+        """Passes until `completion` of the rays are finished, tile by tile;
+        the image (each tile read back once, when it is done). See the module
+        doc for tiles, `tile_pixels` and `progress`."""
         last = None
         with runtime.pinned(self.config):
-            for last in self._run(camera, width, height, isovalue, completion, speculation, start_speculation):
+            for last in self._run(camera, width, height, isovalue, completion, speculation, start_speculation,
+                                  tile_pixels, progress):
                 pass
-            return last()
+            return last(copy=False)
 
     def passes(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
-               speculation: bool = True, start_speculation: int = 1) -> Iterator[IsoImage]:
-        """Yield the partial image after each pass (see the module doc)."""
-        run = self._run(camera, width, height, isovalue, completion, speculation, start_speculation)
+               speculation: bool = True, start_speculation: int = 1, tile_pixels: int | None = None,
+               progress: Callable[[dict], None] | None = None) -> Iterator[IsoImage]:
+        """Yield the partial image after each pass of each tile (see the module doc)."""
+        run = self._run(camera, width, height, isovalue, completion, speculation, start_speculation,
+                        tile_pixels, progress)
         while True:
             # pinned while the pass runs, not while the caller holds the image
             with runtime.pinned(self.config):
@@ -141,127 +276,182 @@ class IsoRenderer:
                 image = image()
             yield image
 
-    def _run(self, camera, width, height, isovalue, completion, speculation, start_speculation):
-        """The pass loop: after each pass, a function that reads the image back."""
+    def tile_plan(self, width: int, height: int, *, speculation: bool = True, start_speculation: int = 1,
+                  tile_pixels: int | None = None) -> tuple[int, int]:
+        """(pixels per tile, device bytes a tile's rays and pass items may take):
+        whole rows where a row fits TILE_BYTES (see the module doc)."""
+        w, h = positive_int("width", width), positive_int("height", height)
+        s = positive_int("start_speculation", start_speculation)
+        per_pixel = PIXEL_BYTES + ITEM_BYTES * (max(s, 2) if speculation else 1)
+        if tile_pixels is None:
+            t = max(1, TILE_BYTES // per_pixel)
+            if t >= w:
+                t -= t % w
+        else:
+            t = positive_int("tile_pixels", tile_pixels)
+        t = min(t, w * h)
+        return t, t * per_pixel
+
+    def _run(self, camera, width, height, isovalue, completion, speculation, start_speculation, tile_pixels,
+             progress):
+        """The pass loop, tile after tile: after each pass, a function that
+        reads the image back (copy=False: the renderer's host arrays themselves)."""
         if not isinstance(camera, Camera):
             raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
         w, h = positive_int("width", width), positive_int("height", height)
-        iso = float(isovalue)
+        npix = w * h
+        if npix >= MAX_PIXELS:
+            raise ValueError(f"width x height: {w} x {h} = {npix} pixels; the kernels index pixels with "
+                             f"32-bit integers, so at most {MAX_PIXELS - 1}")
+        iso = _real("isovalue", isovalue)
         if not np.isfinite(np.float32(iso)):
             raise ValueError(f"isovalue: expected a finite number, got {isovalue!r}")
-        completion = float(completion)
+        completion = _real("completion", completion)
         if not 0.0 < completion <= 1.0:
             raise ValueError(f"completion: expected a fraction in (0, 1], got {completion!r}")
         s = positive_int("start_speculation", start_speculation)
+        if progress is not None and not callable(progress):
+            raise TypeError(f"progress: expected a callable or None, got {type(progress).__name__}")
+        tile, tile_bytes = self.tile_plan(w, h, speculation=speculation, start_speculation=s,
+                                          tile_pixels=tile_pixels)
+        tiles = [(p0, min(tile, npix - p0)) for p0 in range(0, npix, tile)]
+        runtime.check_memory(self.queue, f"iso image {w}x{h} ({len(tiles)} tiles of {tile} pixels)",
+                             device_bytes=tile_bytes, host_bytes=npix * HOST_PIXEL_BYTES)
         q, zv = self.queue, self.volume
-        npix = w * h
         shape, spacing, origin = zv.shape, self.spacing, self.origin
         start = runtime.marker(q)
         cam = runtime.empty(q, 22, np.float32, "camera rays")
         cam.set(ray_buffer(camera, w, h), queue=q)
-        ray_t, active_all, count = init_rays(q, cam, w, h, shape, spacing, origin)
-        n_active = int(count.get()[0])
-        active = active_all[:n_active]
-        n_enter = max(n_active, 1)
-        hit = runtime.zeros(q, npix, np.uint8, "hit mask")
-        hit_t = runtime.empty(q, npix, np.float32, "hit t")
-        depth = runtime.empty(q, npix, np.float32, "depth")
-        for a in (hit_t, depth):
-            runtime.fill(q, a, np.float32(np.inf))
-        rgba = runtime.zeros(q, (npix, 4), np.float32, "rgba")
+        out = _HostImage(npix)
+        # the rays entering the volume, tile by tile: the totals of completion
+        # and progress, and the active mask of the tiles not traced yet
+        entering = []
+        for p0, n in tiles:
+            _, ids, count = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
+            k = int(count.get()[0])
+            entering.append(k)
+            if k:
+                out.active[p0 + ids[:k].get().astype(np.int64)] = True
+        n_total = sum(entering)
         int64 = self.config.int64_atomics
-        hitkey = runtime.empty(q, npix, np.uint64, "hit keys") if int64 else None
-        frame_bytes = runtime.nbytes(cam, ray_t, active_all, count, hit, hit_t, depth, rgba, hitkey)
         stats = {"passes": 0, "active_per_pass": [], "n_spec_per_pass": [], "items_per_pass": [],
-                 "blocks_per_pass": [], "decoded_per_pass": [], "rays_entering": n_active,
-                 "speculation": bool(speculation), "int64_atomics": bool(int64)}
+                 "blocks_per_pass": [], "decoded_per_pass": [], "rays_entering": n_total,
+                 "speculation": bool(speculation), "int64_atomics": bool(int64),
+                 "tiles": len(tiles), "tile_pixels": tile, "passes_per_tile": [0] * len(tiles),
+                 "completion_per_tile": [1.0] * len(tiles),
+                 "blocks_decoded": 0, "cache_slots": self.cache.capacity}
         decoded0 = self.cache.decoded_total
-        done = n_active == 0
-        if done:            # no ray meets the volume: the (empty) image at once
-            stats.update(blocks_decoded=0, cache_slots=self.cache.capacity)
+        if n_total == 0:            # no ray meets the volume: the (empty) image at once
             end = runtime.marker(q)
-            yield lambda: self._image(w, h, hit, hit_t, rgba, depth, active, 1.0, stats, (start, end))
-        while not done:
-            n_spec = min(MAX_SPEC, max(1, (npix * s) // n_active)) if speculation else 1
-            if speculation and stats["passes"] == 0:
-                n_spec = max(n_spec, 2)     # the paper's two macro-traversal steps in the first pass
-            n_items = n_active * n_spec
-            cnt = runtime.empty(q, 1, np.uint32, "active count")
-            cnt.set(np.array([n_active], np.uint32), queue=q)
-            cand_block = runtime.empty(q, n_items, np.uint32, "candidate blocks")
-            cand_t = runtime.empty(q, n_items, np.float32, "candidate t")
-            macro_traverse(q, shape, spacing, origin, iso, cam, w, self.grids.fine, self.grids.coarse,
-                           active, cnt, n_active, ray_t, n_spec, cand_block, cand_t)
-            valid = runtime.empty(q, n_items, np.uint8, "valid items")
-            self._launch("valid_items", n_items, cand_block.base_data, np.uint32(n_items), valid.base_data)
-            item_ids = compact_indices(valid, queue=q)
-            m = int(item_ids.size)
-            item_hit = runtime.zeros(q, max(n_items, 1), np.uint8, "item hits")
-            item_t = runtime.empty(q, max(n_items, 1), np.float32, "item t")
-            item_rgba = runtime.empty(q, (max(n_items, 1), 4), np.float32, "item rgba")
-            item_depth = runtime.empty(q, max(n_items, 1), np.float32, "item depth")
-            if hitkey is not None:
-                runtime.fill(q, hitkey, np.uint64(0xFFFFFFFFFFFFFFFF))
-            ngroups = 0
-            pass_arrays = [cnt, cand_block, cand_t, valid, item_ids, item_hit, item_t, item_rgba, item_depth]
-            if m:
-                keys = runtime.empty(q, m, np.uint32, "item blocks")
-                self._launch("gather_u32", m, cand_block.base_data, item_ids.base_data, np.uint32(m),
-                             keys.base_data)
-                skeys, sitems = radix_sort(keys, item_ids, queue=q)
-                heads = runtime.empty(q, m, np.uint8, "group heads")
-                self._launch("group_heads", m, skeys.base_data, np.uint32(m), heads.base_data)
-                starts = compact_indices(heads, queue=q)
-                ngroups = int(starts.size)
-                gblocks = runtime.empty(q, ngroups, np.uint32, "group blocks")
-                gcounts = runtime.empty(q, ngroups, np.uint32, "group counts")
-                pass_arrays += [keys, skeys, sitems, heads, starts, gblocks, gcounts]
-                self._launch("group_info", ngroups, skeys.base_data, starts.base_data, np.uint32(ngroups),
-                             np.uint32(m), gblocks.base_data, gcounts.base_data)
-                needed = mark_blocks(gblocks, zv, queue=q)
-                decoded = self.cache.update(needed)
-                raytrace_blocks(q, self.cache.bricks, self.cache.slot_of_block, shape, spacing, origin, iso,
-                                cam, w, (gblocks, starts, gcounts), sitems, cand_t,
-                                (item_hit, item_t, item_rgba, item_depth), items=(active, n_spec, hitkey))
-            else:
-                decoded = 0
-            still = runtime.empty(q, max(n_active, 1), np.uint8, "still active")
-            pass_arrays.append(still)
-            self._launch("resolve_hits", n_active, active.base_data, np.uint32(n_active), np.uint32(n_spec),
-                         item_hit.base_data, item_t.base_data, item_rgba.base_data, item_depth.base_data,
-                         runtime.arg(hitkey), ray_t.base_data, hit.base_data,
-                         hit_t.base_data, rgba.base_data, depth.base_data, still.base_data)
-            stats["passes"] += 1
-            stats["active_per_pass"].append(n_active)
-            stats["n_spec_per_pass"].append(n_spec)
-            stats["items_per_pass"].append(m)
-            stats["blocks_per_pass"].append(ngroups)
-            stats["decoded_per_pass"].append(decoded)
-            active = compact(active, still[:n_active], queue=q)
-            n_active = int(active.size)
-            frac = 1.0 - n_active / n_enter
-            done = n_active == 0 or frac >= completion
-            stats["blocks_decoded"] = self.cache.decoded_total - decoded0
-            stats["cache_slots"] = self.cache.capacity
-            # what is allocated: the arrays held (for the pass items, this pass's)
-            stats["device_bytes"] = {
-                "compressed volume": self.cache.stream_nbytes, "block cache": self.cache.nbytes,
-                "macrocell grids": runtime.nbytes(self.grids.fine, self.grids.coarse),
-                "rays and image": frame_bytes,
-                "pass items": runtime.nbytes(*pass_arrays)}
-            end = runtime.marker(q)
-            yield lambda a=active, f=frac, st=dict(stats), ev=(start, end): self._image(
-                w, h, hit, hit_t, rgba, depth, a, f, st, ev)
+            yield lambda copy=True: self._image(w, h, out, None, 1.0, stats, (start, end), copy)
+            return
+        finished = 0                # rays finished in the tiles before this one
+        for ti, (p0, n) in enumerate(tiles):
+            n_enter = entering[ti]
+            if n_enter == 0:
+                continue
+            state = _Tile(q, p0, n, cam, w, h, shape, spacing, origin, int64)
+            n_active = n_enter
+            tile_done = False
+            while not tile_done:
+                n_spec = min(MAX_SPEC, max(1, (n * s) // n_active)) if speculation else 1
+                if speculation and stats["passes_per_tile"][ti] == 0:
+                    n_spec = max(n_spec, 2)     # the paper's two macro-traversal steps in the first pass
+                stats["active_per_pass"].append(n_active)
+                m, ngroups, decoded, item_bytes = self._pass(state, iso, n_active, n_spec)
+                n_active = int(state.active.size)
+                stats["passes"] += 1
+                stats["passes_per_tile"][ti] += 1
+                stats["n_spec_per_pass"].append(n_spec)
+                stats["items_per_pass"].append(m)
+                stats["blocks_per_pass"].append(ngroups)
+                stats["decoded_per_pass"].append(decoded)
+                tile_frac = 1.0 - n_active / n_enter
+                stats["completion_per_tile"][ti] = tile_frac
+                tile_done = n_active == 0 or tile_frac >= completion
+                frac = (finished + n_enter - n_active) / n_total
+                stats["blocks_decoded"] = self.cache.decoded_total - decoded0
+                stats["cache_slots"] = self.cache.capacity
+                # what is allocated: the arrays held (for the tile, its rays; for the pass items, this pass's)
+                stats["device_bytes"] = {
+                    "compressed volume": self.cache.stream_nbytes, "block cache": self.cache.nbytes,
+                    "macrocell grids": runtime.nbytes(self.grids.fine, self.grids.coarse),
+                    "rays and image": state.nbytes + runtime.nbytes(cam),
+                    "pass items": item_bytes}
+                end = runtime.marker(q)
+                if tile_done:
+                    state.read(out)     # the tile's part of the image, before its arrays go
+                    finished += n_enter - n_active
+                if progress is not None:
+                    progress({"tile": ti + 1, "tiles": len(tiles), "passes": stats["passes"],
+                              "rays_done": finished if tile_done else finished + n_enter - n_active,
+                              "rays_total": n_total})
+                yield lambda copy=True, st=(None if tile_done else state), a=state.active, f=frac, \
+                    sd=dict(stats), ev=(start, end): self._image(w, h, out, (st, a), f, sd, ev, copy)
+
+    def _pass(self, t: _Tile, iso: float, n_active: int, n_spec: int) -> tuple[int, int, int, int]:
+        """One pass over the tile's active rays; t.active becomes the rays
+        still running. Returns (items, blocks, blocks decoded, pass bytes)."""
+        q, zv = self.queue, self.volume
+        shape, spacing, origin = zv.shape, self.spacing, self.origin
+        active = t.active
+        n_items = n_active * n_spec
+        cnt = runtime.empty(q, 1, np.uint32, "active count")
+        cnt.set(np.array([n_active], np.uint32), queue=q)
+        cand_block = runtime.empty(q, n_items, np.uint32, "candidate blocks")
+        cand_t = runtime.empty(q, n_items, np.float32, "candidate t")
+        macro_traverse(q, shape, spacing, origin, iso, t.cam, t.w, self.grids.fine, self.grids.coarse,
+                       active, cnt, n_active, t.ray_t, n_spec, cand_block, cand_t, first_pixel=t.p0)
+        valid = runtime.empty(q, n_items, np.uint8, "valid items")
+        self._launch("valid_items", n_items, cand_block.base_data, np.uint32(n_items), valid.base_data)
+        item_ids = compact_indices(valid, queue=q)
+        m = int(item_ids.size)
+        item_hit = runtime.zeros(q, max(n_items, 1), np.uint8, "item hits")
+        item_t = runtime.empty(q, max(n_items, 1), np.float32, "item t")
+        item_rgba = runtime.empty(q, (max(n_items, 1), 4), np.float32, "item rgba")
+        item_depth = runtime.empty(q, max(n_items, 1), np.float32, "item depth")
+        if t.hitkey is not None:
+            runtime.fill(q, t.hitkey, np.uint64(0xFFFFFFFFFFFFFFFF))
+        ngroups = 0
+        pass_arrays = [cnt, cand_block, cand_t, valid, item_ids, item_hit, item_t, item_rgba, item_depth]
+        if m:
+            keys = runtime.empty(q, m, np.uint32, "item blocks")
+            self._launch("gather_u32", m, cand_block.base_data, item_ids.base_data, np.uint32(m),
+                         keys.base_data)
+            skeys, sitems = radix_sort(keys, item_ids, queue=q)
+            heads = runtime.empty(q, m, np.uint8, "group heads")
+            self._launch("group_heads", m, skeys.base_data, np.uint32(m), heads.base_data)
+            starts = compact_indices(heads, queue=q)
+            ngroups = int(starts.size)
+            gblocks = runtime.empty(q, ngroups, np.uint32, "group blocks")
+            gcounts = runtime.empty(q, ngroups, np.uint32, "group counts")
+            pass_arrays += [keys, skeys, sitems, heads, starts, gblocks, gcounts]
+            self._launch("group_info", ngroups, skeys.base_data, starts.base_data, np.uint32(ngroups),
+                         np.uint32(m), gblocks.base_data, gcounts.base_data)
+            needed = mark_blocks(gblocks, zv, queue=q)
+            decoded = self.cache.update(needed)
+            raytrace_blocks(q, self.cache.bricks, self.cache.slot_of_block, shape, spacing, origin, iso,
+                            t.cam, t.w, (gblocks, starts, gcounts), sitems, cand_t,
+                            (item_hit, item_t, item_rgba, item_depth), items=(active, n_spec, t.hitkey),
+                            first_pixel=t.p0)
+        else:
+            decoded = 0
+        still = runtime.empty(q, max(n_active, 1), np.uint8, "still active")
+        pass_arrays.append(still)
+        self._launch("resolve_hits", n_active, active.base_data, np.uint32(n_active), np.uint32(n_spec),
+                     item_hit.base_data, item_t.base_data, item_rgba.base_data, item_depth.base_data,
+                     runtime.arg(t.hitkey), t.ray_t.base_data, t.hit.base_data,
+                     t.hit_t.base_data, t.rgba.base_data, t.depth.base_data, still.base_data)
+        t.active = compact(active, still[:n_active], queue=q)
+        return m, ngroups, decoded, runtime.nbytes(*pass_arrays)
 
     def _launch(self, name, n, *args):
         runtime.launch(self.queue, self._kernels[name], *runtime.items(self.queue, n, self._wg), *args)
 
-    def _image(self, w, h, hit, hit_t, rgba, depth, active, frac, stats, events) -> IsoImage:
-        act = np.zeros(w * h, bool)
-        if active.size:
-            act[active.get()] = True
-        image = IsoImage(rgba.get().reshape(h, w, 4), depth.get().reshape(h, w),
-                         hit.get().reshape(h, w).astype(bool), hit_t.get().reshape(h, w), act.reshape(h, w),
-                         frac, stats)
+    def _image(self, w, h, out, tile, frac, stats, events, copy) -> IsoImage:
+        if tile is not None and tile[0] is not None:       # a tile still running: its part as it stands
+            tile[0].read(out, tile[1])
+        image = out.image(w, h, copy)
+        image.completion, image.stats = frac, stats
         stats["seconds"] = runtime.seconds(*events)     # read back: the events are done
         return image

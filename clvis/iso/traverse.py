@@ -32,21 +32,26 @@ def _volume_args(shape, spacing, origin):
     return (np.uint32(nx), np.uint32(ny), np.uint32(nz), dx, dy, dz, ox, oy, oz)
 
 
-def init_rays(queue, cam, width, height, shape, spacing, origin, *, wait_for=None):
+def init_rays(queue, cam, width, height, shape, spacing, origin, *, pixels=None, wait_for=None):
     """Per pixel the box entry t (+inf on a miss) and the list of rays that
     meet the volume box. cam: the 22-float ray buffer (device array).
-    Returns (ray_t float32 (W * H,), active uint32 (W * H,), count uint32 (1,)),
-    device arrays; the first count[0] entries of active are the pixel ids in
-    ascending order (clvis.primitives.compact_indices)."""
+    pixels = (p0, n): only the tile of image pixels p0 .. p0 + n - 1 (default
+    the whole image); the arrays then hold the tile's pixels, indexed p - p0.
+    Returns (ray_t float32 (n,), active uint32 (n,), count uint32 (1,)),
+    device arrays; the first count[0] entries of active are the (tile) pixel
+    ids in ascending order (clvis.primitives.compact_indices)."""
     w, h = int(width), int(height)
-    npix = w * h
-    if npix == 0:
+    if w * h == 0:
         raise ValueError(f"width, height: need at least one pixel, got {w} x {h}")
+    p0, npix = (0, w * h) if pixels is None else (int(pixels[0]), int(pixels[1]))
+    if not (0 <= p0 and 0 < npix and p0 + npix <= w * h):
+        raise ValueError(f"pixels: the tile ({p0}, {npix}) must lie in the {w} x {h} image")
     ray_t = runtime.empty(queue, npix, np.float32, "ray_t")
     enters = runtime.empty(queue, npix, np.uint8, "ray enters flags")
     wg = PROFILES[runtime.tuning_profile(queue)]["wg"]
     k = runtime.get_kernel(queue, _SRC, "init_rays", {}, runtime.EXACT_FP)
-    runtime.launch(queue, k, *runtime.items(queue, npix, wg), _arg(cam), np.uint32(w), np.uint32(h),
+    runtime.launch(queue, k, *runtime.items(queue, npix, wg), _arg(cam), np.uint32(w), np.uint32(p0),
+                   np.uint32(npix),
                    *_volume_args(shape, spacing, origin), ray_t.base_data, enters.base_data,
                    wait_for=wait_for)
     count = runtime.empty(queue, 1, np.uint32, "active ray count")
@@ -55,14 +60,15 @@ def init_rays(queue, cam, width, height, shape, spacing, origin, *, wait_for=Non
 
 
 def macro_traverse(queue, shape, spacing, origin, isovalue, cam, width, fine, coarse, active, count,
-                   max_rays, ray_t, n_spec, cand_block, cand_t, *, wait_for=None):
+                   max_rays, ray_t, n_spec, cand_block, cand_t, *, first_pixel=0, wait_for=None):
     """Launch ``macro_traverse`` (see kernels_cl/iso/traverse.cl's ABI).
 
     fine, coarse: float32 device arrays (.., 2) (clvis.iso.macrocell_grids,
     host=False); active uint32 pixel ids; count uint32 (1,) how many;
     max_rays an upper bound of count[0] (sizes the launch; <= active.size);
     ray_t float32 per pixel (in/out); cand_block uint32 and cand_t float32
-    with room for max_rays * n_spec entries (out). Returns the event (None
+    with room for max_rays * n_spec entries (out); first_pixel: the tile's
+    first image pixel (active ids and ray_t are the tile's). Returns the event (None
     when max_rays is 0)."""
     n_spec = int(n_spec)
     if not 1 <= n_spec <= MAX_SPEC:
@@ -79,6 +85,6 @@ def macro_traverse(queue, shape, spacing, origin, isovalue, cam, width, fine, co
     k = runtime.get_kernel(queue, _SRC, "macro_traverse", {}, runtime.EXACT_FP)
     return runtime.launch(queue, k, *runtime.items(queue, max_rays, wg),
                           *_volume_args(shape, spacing, origin), np.float32(isovalue),
-                          _arg(cam), np.uint32(width), _arg(fine), _arg(coarse), _arg(active), _arg(count),
+                          _arg(cam), np.uint32(width), np.uint32(first_pixel), _arg(fine), _arg(coarse), _arg(active), _arg(count),
                           _arg(ray_t), np.uint32(n_spec), _arg(cand_block), _arg(cand_t),
                           wait_for=wait_for)

@@ -38,6 +38,10 @@
  *     float isovalue,
  *     global const float *cam,           22 floats: the camera rays of clvis/camera.h
  *     uint W,                            image width: ray p = py * W + px
+ *     uint p0,                           the tile's first pixel: pixel ids below (ray_ids,
+ *                                        item_pixel) are tile pixels j, the ray of image
+ *                                        pixel p0 + j, and per-pixel arrays are indexed by j
+ *                                        (0: the whole image; see traverse.cl's Tiles)
  *     global const uint *group_blocks,   per work-group: the block id it traces
  *     global const uint *group_offsets,  per work-group: first index of its rays in ray_ids
  *     global const uint *group_counts,   per work-group: how many rays
@@ -195,7 +199,7 @@ inline int march_cells(local const float *brick, const int *n, const int *b0, co
 kernel void raytrace_blocks(global const float *bricks, global const int *slot_of_block,
                             uint nx, uint ny, uint nz, float dx, float dy, float dz,
                             float ox, float oy, float oz, float isovalue,
-                            global const float *cam, uint W,
+                            global const float *cam, uint W, uint p0,
                             global const uint *group_blocks, global const uint *group_offsets,
                             global const uint *group_counts, global const uint *ray_ids,
                             global float *ray_t, global uchar *ray_hit, global float *hit_t,
@@ -230,7 +234,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         const uint p = ray_ids[offset + r], e = p;      /* outputs and state per pixel */
 #endif
         float o[3], d[3], O[3], D[3], inv[3], t_enter, t_exit;
-        clvis_iso_ray_setup(cam, p, W, n, sp, org, o, d, O, D, inv, &t_enter, &t_exit);
+        clvis_iso_ray_setup(cam, p0 + p, W, n, sp, org, o, d, O, D, inv, &t_enter, &t_exit);
         const float t_in = ray_t[e];
         int c[3];
         first_cell(O, D, t_in, clo, chi, c);

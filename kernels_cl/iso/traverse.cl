@@ -50,13 +50,20 @@
  * candidate (entered at t); t = t_out. The ray ends when t >= t_exit.
  * Coarse skipping gives exactly the sequence of the fine grid alone.
  *
+ * Tiles. A renderer may trace the image in tiles, ranges of pixels [p0, p0 + npix)
+ * (bands of rows): the per-pixel arrays of a launch (ray_t, enters, and the
+ * `active` ids) then hold the tile's pixels only, indexed by j = p - p0, and
+ * the ray is always that of image pixel p = p0 + j (so a tile's rays are
+ * bit for bit those of the whole image). p0 = 0, npix = W * H: the whole image.
+ *
  * kernel init_rays(
  *     global const float *cam,           22 floats: the camera rays of clvis/camera.h
- *     uint W, uint H,                    image size: pixel p = py * W + px
+ *     uint W, uint p0, uint npix,        image width (pixel p = py * W + px); the tile's
+ *                                        first pixel p0 and pixel count npix
  *     uint nx, uint ny, uint nz, float dx, float dy, float dz, float ox, float oy, float oz,
- *     global float *ray_t,               out, per pixel: t_enter, +INFINITY when the ray misses
- *     global uchar *enters)              out, per pixel: 1 when the ray meets the box, else 0
- *   Global size >= W * H, any local size. (The host compacts `enters` into the
+ *     global float *ray_t,               out, per tile pixel j: t_enter, +INFINITY when the ray misses
+ *     global uchar *enters)              out, per tile pixel j: 1 when the ray meets the box, else 0
+ *   Global size >= npix, any local size. (The host compacts `enters` into the
  *   active list with clvis.primitives.compact_indices: deterministic order.)
  *
  * kernel macro_traverse(
@@ -65,11 +72,12 @@
  *     float ox, float oy, float oz,      origin: world position of sample (0, 0, 0)
  *     float isovalue,
  *     global const float *cam, uint W,   ray buffer, image width
+ *     uint p0,                           the tile's first pixel (0: the whole image)
  *     global const float2 *fine,         nbx * nby * nbz block ranges
  *     global const float2 *coarse,       ncx * ncy * ncz coarse ranges
- *     global const uint *active,         pixel ids of the rays to traverse
+ *     global const uint *active,         tile pixel ids j of the rays to traverse (pixel p0 + j)
  *     global const uint *count,          count[0]: how many entries of `active`
- *     global float *ray_t,               per pixel, in: resume t (t_enter for a new ray);
+ *     global float *ray_t,               per tile pixel j, in: resume t (t_enter for a new ray);
  *                                        out: the exit t of the last candidate when n_spec
  *                                        were recorded and the ray goes on, else +INFINITY
  *     uint n_spec,                       1..64 candidates per ray
@@ -91,20 +99,20 @@
 #define NO_BLOCK 0xFFFFFFFFu
 
 
-kernel void init_rays(global const float *cam, uint W, uint H, uint nx, uint ny, uint nz,
+kernel void init_rays(global const float *cam, uint W, uint p0, uint npix, uint nx, uint ny, uint nz,
                       float dx, float dy, float dz, float ox, float oy, float oz,
                       global float *ray_t, global uchar *enters)
 {
-    const uint p = get_global_id(0);
-    if (p >= W * H)
+    const uint j = get_global_id(0);
+    if (j >= npix)
         return;
     const int n[3] = {(int)nx, (int)ny, (int)nz};
     const float sp[3] = {dx, dy, dz}, org[3] = {ox, oy, oz};
     float o[3], d[3], O[3], D[3], inv[3], te, tx;
-    clvis_iso_ray_setup(cam, p, W, n, sp, org, o, d, O, D, inv, &te, &tx);
+    clvis_iso_ray_setup(cam, p0 + j, W, n, sp, org, o, d, O, D, inv, &te, &tx);
     const int in = te <= tx;
-    ray_t[p] = in ? te : INFINITY;
-    enters[p] = (uchar)in;
+    ray_t[j] = in ? te : INFINITY;
+    enters[j] = (uchar)in;
 }
 
 /* T_a of the block b's exit bound along the ray (the entry bound when `entry`) */
@@ -118,7 +126,7 @@ inline float block_bound_t(int b, int size, int n, float O, float inv, int entry
 
 kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float dz,
                            float ox, float oy, float oz, float isovalue,
-                           global const float *cam, uint W,
+                           global const float *cam, uint W, uint p0,
                            global const float2 *fine, global const float2 *coarse,
                            global const uint *active, global const uint *count,
                            global float *ray_t, uint n_spec,
@@ -127,14 +135,14 @@ kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float 
     const uint i = get_global_id(0);
     if (i >= count[0])
         return;
-    const uint p = active[i];
+    const uint p = active[i];   /* the tile's pixel: image pixel p0 + p */
     const int n[3] = {(int)nx, (int)ny, (int)nz};
     const float sp[3] = {dx, dy, dz}, org[3] = {ox, oy, oz};
     const int nb[3] = {(n[0] + 3) >> 2, (n[1] + 3) >> 2, (n[2] + 3) >> 2};
     const int ncb[3] = {(n[0] + 2) >> 2, (n[1] + 2) >> 2, (n[2] + 2) >> 2};  /* blocks with cells */
     const int nc[3] = {(nb[0] + 3) >> 2, (nb[1] + 3) >> 2, (nb[2] + 3) >> 2};
     float o[3], d[3], O[3], D[3], inv[3], te, t_exit;
-    clvis_iso_ray_setup(cam, p, W, n, sp, org, o, d, O, D, inv, &te, &t_exit);
+    clvis_iso_ray_setup(cam, p0 + p, W, n, sp, org, o, d, O, D, inv, &te, &t_exit);
 
     float t = ray_t[p];
     uint found = 0;

@@ -8,7 +8,9 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +20,7 @@ from ._common import (
     VIEWS_HELP,
     CliError,
     FitView,
+    Parser,
     Progress,
     add_camera_options,
     add_volume_options,
@@ -30,6 +33,13 @@ from ._common import (
     real,
     size,
 )
+
+if TYPE_CHECKING:
+    import pyopencl as cl
+
+    from ..camera import Camera
+    from ..gauss import Gaussians, SparseVolume
+    from ..gauss.render import GaussianImage
 
 LODS = ("low", "medium", "high")
 _POINT_FORMATS = (".ply", ".las", ".laz", ".npy", ".npz")
@@ -61,7 +71,7 @@ the rays done shown on stderr when it is a terminal (--progress: always).
 
 
 
-def add_parser(sub):
+def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     g = sub.add_parser("gauss", help="Gaussians from a volume at three LODs, ray marched to PNGs",
                        description=_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     g.add_argument("file", nargs="?", help="a .vdb, .npy, Gaussians .npz or point cloud file")
@@ -163,7 +173,7 @@ def _sources(args):
                    f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})")
 
 
-def cmd(args) -> int:
+def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
     return _run(args)
 
@@ -182,9 +192,13 @@ class _Label:
         return self.text
 
 
-def render_panels(lods, sv, gaussians, width, height, *, model="absorption", density=None,
-                  colormap="inferno", k=None, camera=None, queue=None, opacity=None, progress=None,
-                  timings=None):
+def render_panels(lods: Sequence[str], sv: SparseVolume | None, gaussians: Gaussians | None,
+                  width: int, height: int, *, model: str = "absorption", density: float | None = None,
+                  colormap: str = "inferno", k: int | None = None,
+                  camera: Callable[[np.ndarray, np.ndarray], Camera] | None = None,
+                  queue: cl.CommandQueue | None = None,
+                  opacity: Sequence[tuple[float, float]] | None = None, progress: Progress | None = None,
+                  timings: dict[str, float] | None = None) -> list[tuple[str, Gaussians, GaussianImage]]:
     """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given
     Gaussians), seen by camera(lo, hi) of their bounds (default: the fit view).
 
@@ -249,7 +263,7 @@ def _picture(img, transparent: bool = False) -> np.ndarray:
     return np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
 
 
-def strip(panels, colormap: str, transparent: bool = False, value_name: str = "value") -> np.ndarray:
+def strip(panels: Sequence[tuple[str, Gaussians, GaussianImage]], colormap: str, transparent: bool = False, value_name: str = "value") -> np.ndarray:
     """render_panels' images side by side, each labelled with its LOD and
     Gaussian count, over a colour bar of the values' range (the transfer
     function's; none for Gaussians drawn in their own colours)."""
@@ -314,7 +328,7 @@ def _run(args) -> int:
     return 0
 
 
-def demo(out_dir, q, size=(480, 480)) -> bool:
+def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (480, 480)) -> bool:
     """The demo's gauss part: the explosion at three LODs (figures, PNG) and a
     small frame checked against the brute-force reference."""
     from .. import Camera, datasets, images

@@ -8,7 +8,9 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,6 +20,7 @@ from ._common import (
     VIEWS_HELP,
     CliError,
     FitView,
+    Parser,
     Progress,
     add_camera_options,
     add_volume_options,
@@ -31,6 +34,12 @@ from ._common import (
     real,
     size,
 )
+
+if TYPE_CHECKING:
+    import pyopencl as cl
+
+    from ..camera import Camera
+    from ..iso import IsoImage, IsoRenderer, ZfpVolume
 
 _HELP = """\
 Compress a volume with ZFP (fixed rate), then ray march its isosurface in
@@ -54,7 +63,7 @@ _FIT = FitView(direction=(-0.6, 1.0, -0.45), fov_y=35.0)
 
 
 
-def add_parser(sub):
+def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     p = sub.add_parser("iso", help="progressive isosurface raycasting of a ZFP-compressed volume",
                        description=_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("file", nargs="?", help="a .raw (Open SciVis naming), .npy or NIfTI volume")
@@ -99,7 +108,7 @@ def _load(args):
             f"the embedded {name} ({d['volume'].shape[0]}^3)")
 
 
-def picture(img, transparent: bool = False) -> np.ndarray:
+def picture(img: IsoImage, transparent: bool = False) -> np.ndarray:
     """(H, W, 4) uint8: the shaded surface, rays still running in magenta,
     over images.BACKGROUND (or transparent where neither)."""
     from .. import images
@@ -111,7 +120,7 @@ def picture(img, transparent: bool = False) -> np.ndarray:
     return rgba if transparent else images.opaque(rgba)
 
 
-def labelled(img, isovalue: float, transparent: bool = False) -> np.ndarray:
+def labelled(img: IsoImage, isovalue: float, transparent: bool = False) -> np.ndarray:
     """picture() under a band naming the isovalue and the completion."""
     from .. import images
 
@@ -136,8 +145,11 @@ class _Status:
         return format(self.text, spec)
 
 
-def render(volume, spacing, origin, isovalue, width, height, *, rate=8, completion=1.0, speculation=True,
-           camera=None, queue=None, progress=None):
+def render(volume: ZfpVolume | Any, spacing: Sequence[float], origin: Sequence[float], isovalue: float,
+           width: int, height: int, *, rate: int = 8, completion: float = 1.0, speculation: bool = True,
+           camera: Callable[[np.ndarray, np.ndarray], Camera] | None = None,
+           queue: cl.CommandQueue | None = None,
+           progress: Progress | None = None) -> tuple[IsoRenderer, Camera, IsoImage]:
     """(renderer, camera, IsoImage), seen by camera(lo, hi) of the volume's
     bounds (default: the fit view); progress: a clvis.cli._common.Progress
     (default: none)."""
@@ -158,7 +170,7 @@ def render(volume, spacing, origin, isovalue, width, height, *, rate=8, completi
     return r, cam, img
 
 
-def cmd(args) -> int:
+def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
     return _run(args)
 
@@ -210,7 +222,7 @@ def _short(values, most=12) -> str:
     return "[" + ", ".join(str(v) for v in values[:most]) + f", ... {len(values) - most} more]"
 
 
-def demo(out_dir, q, size=(640, 480)) -> bool:
+def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (640, 480)) -> bool:
     """The demo's iso part: Marschner-Lobb, progressive, checked against the reference."""
     from .. import datasets, images, zfp
     from ..reference import iso as ref

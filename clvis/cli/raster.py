@@ -11,6 +11,7 @@ import re
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +20,7 @@ from ._common import (
     VIEWS_HELP,
     CliError,
     FitView,
+    Parser,
     Progress,
     add_camera_options,
     camera_from_args,
@@ -31,6 +33,9 @@ from ._common import (
     size,
     timed,
 )
+
+if TYPE_CHECKING:
+    import pyopencl as cl
 
 # The embedded clouds: generator, default attribute, whether the depth filter
 # panel is on by default (the filter is made for LiDAR scans seen through holes).
@@ -253,7 +258,7 @@ def _load(args, progress):
     return cloud, f"the embedded {name}", attribute, depth_filter_on
 
 
-def cmd(args) -> int:
+def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
     progress = Progress(not args.quiet and (args.progress or isatty(sys.stderr)))
     return _render(args, progress)
@@ -310,7 +315,7 @@ def _render(args, progress) -> int:
     return 0
 
 
-def demo(args, q) -> bool:
+def demo(args: argparse.Namespace, q: cl.CommandQueue) -> bool:
     """The demo's raster part: throughput, the reference check, the overview PNG."""
     from .. import images
     from ..raster import Rasterizer
@@ -361,7 +366,7 @@ themselves, not only their bounding box.
 """ + VIEWS_HELP
 
 
-def add_parser(sub):
+def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r = sub.add_parser("render", help="render a point cloud (default: a synthetic hurricane) to PNGs",
                        description=_RENDER_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("file", nargs="?", help="a PLY, LAS, LAZ, NPY or NPZ point cloud")

@@ -158,7 +158,7 @@ def _render_panels(raster, cloud, camera, width, height, attribute, colormap, so
         warm = time.perf_counter() - t0
     panels = []
     if attribute is not None:
-        from ..colormap import value_range         # the range render() colours over
+        from ..colormap import value_range  # the range render() colours over
         vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
         panels.append(_Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({colormap})", g.rgba,
                              (colormap, *vr)))

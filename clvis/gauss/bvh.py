@@ -26,7 +26,11 @@ ABI in ``kernels_cl/gauss/bvh.cl``; the NumPy definition of the result in
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
 
 from .. import morton, runtime
 from .._arrays import check_array, resolve_queue, to_device
@@ -78,7 +82,9 @@ class BVH:
     :attr:`build_seconds`. The build does not wait for its last kernels.
     """
 
-    def __init__(self, queue, n, nodes, order, leaf_boxes, codes, bounds, centre_bounds, events):
+    def __init__(self, queue: cl.CommandQueue, n: int, nodes: cla.Array, order: cla.Array,
+                 leaf_boxes: cla.Array, codes: cla.Array, bounds: tuple[np.ndarray, np.ndarray],
+                 centre_bounds: tuple[np.ndarray, np.ndarray], events: tuple[cl.Event, cl.Event]):
         self.queue = queue
         self.n = n
         self.nodes = nodes
@@ -135,7 +141,7 @@ def _read_bounds(queue, bd, n: int):
     return clo, chi, blo, bhi
 
 
-def build_bvh(boxes, *, queue=None) -> BVH:
+def build_bvh(boxes: Any, *, queue: cl.CommandQueue | None = None) -> BVH:
     """Build an LBVH over axis-aligned boxes on the device.
 
     boxes: float32 (N, 6), row i = (lo x, y, z, hi x, y, z), numpy or a

@@ -194,7 +194,7 @@ class LodTable:
         return "\n".join(lines)
 
 
-def lod_table(sparse, queue=None) -> LodTable:
+def lod_table(sparse: SparseVolume | Any, queue: cl.CommandQueue | None = None) -> LodTable:
     """Gaussian counts and sizes of every LOD of `sparse` (a SparseVolume, or
     a dense volume with every voxel active), counted on the device without
     making the Gaussians."""

@@ -22,6 +22,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from .._arrays import positive_int
 from ..errors import DataError
@@ -41,7 +42,7 @@ def _k(k) -> int:
     return k
 
 
-def knn_mean_distance(positions, k: int = 4) -> np.ndarray:
+def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     """(N,) float32: each point's mean distance to its k nearest other points
     (scipy.spatial.cKDTree). Fewer than k + 1 points: the mean over those there are;
     a single point: 0. k in 1..MAX_KNN."""
@@ -57,7 +58,7 @@ def knn_mean_distance(positions, k: int = 4) -> np.ndarray:
     return dist[:, 1:].mean(axis=1).astype(np.float32)
 
 
-def frames_along(directions) -> np.ndarray:
+def frames_along(directions: npt.ArrayLike) -> np.ndarray:
     """(N, 3, 3) float32 rotations whose first column is the unit direction
     (the x axis where the direction is zero), completed to a right-handed
     orthonormal frame."""

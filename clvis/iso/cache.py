@@ -34,8 +34,12 @@ Device state: ``bricks`` (capacity, 64) float32, ``slot_of_block``
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 import pyopencl as cl
+import pyopencl.array as cla
 
 from .. import runtime
 from .._arrays import check_array, is_device, resolve_queue, to_device
@@ -79,7 +83,8 @@ def _kernel(queue, name: str, needed_dtype=np.uint8):
     return runtime.get_kernel(queue, _SRC, name, {"NEEDED_T": _NEEDED_T[np.dtype(needed_dtype)]})
 
 
-def mark_blocks(visible_ids, blocks, needed=None, *, queue=None):
+def mark_blocks(visible_ids: Any, blocks: ZfpVolume | Sequence[int], needed: cla.Array | None = None, *,
+                queue: cl.CommandQueue | None = None) -> cla.Array:
     """Flags of the blocks a pass needs: each block of `visible_ids` (uint32
     block ids; ids >= nblocks are ignored) and its +x, +y, +z, +xy, +xz, +yz,
     +xyz neighbours inside the grid `blocks` = (nbz, nby, nbx) (a
@@ -133,7 +138,8 @@ class BlockCache:
     least 64, at most the block count). The cache grows when a pass needs more.
     """
 
-    def __init__(self, zfp_volume: ZfpVolume, capacity: int | None = None, *, queue=None):
+    def __init__(self, zfp_volume: ZfpVolume, capacity: int | None = None, *,
+                 queue: cl.CommandQueue | None = None):
         if not isinstance(zfp_volume, ZfpVolume):
             raise TypeError(f"zfp_volume: expected a clvis.zfp.ZfpVolume, got {type(zfp_volume).__name__}")
         self.volume = zfp_volume
@@ -206,7 +212,7 @@ class BlockCache:
             return free[:m], None, int(free.size)
         return None, compact_indices(cand_f, queue=self.queue), int(free.size)
 
-    def update(self, needed) -> int:
+    def update(self, needed: Any) -> int:
         """One pass: cache every block flagged in `needed` (a device array of
         nblocks uint8/bool/uint32 flags, nonzero = needed; numpy is uploaded).
         Returns the number of blocks decoded."""

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pyopencl as cl
 
 from .. import runtime
 from .._arrays import resolve_queue
@@ -28,7 +29,7 @@ class MacrocellGrids:
     fine: object
     coarse: object
 
-    def active(self, isovalue: float):
+    def active(self, isovalue: float) -> tuple[np.ndarray, np.ndarray]:
         """Host boolean masks (fine, coarse): the cells whose range holds `isovalue`."""
         f = self.fine if isinstance(self.fine, np.ndarray) else self.fine.get()
         c = self.coarse if isinstance(self.coarse, np.ndarray) else self.coarse.get()
@@ -36,7 +37,7 @@ class MacrocellGrids:
         return (f[..., 0] <= v) & (v <= f[..., 1]), (c[..., 0] <= v) & (v <= c[..., 1])
 
 
-def macrocell_grids(volume: ZfpVolume, *, queue=None, host: bool = True) -> MacrocellGrids:
+def macrocell_grids(volume: ZfpVolume, *, queue: cl.CommandQueue | None = None, host: bool = True) -> MacrocellGrids:
     """The fine and coarse macrocell grids of a compressed volume, built on the
     device from its stream (each block decoded once, kernels_cl/iso/macrocell.cl).
     Equal to clvis.reference.iso.macrocell.block_ranges / coarse_ranges of the decoded volume."""

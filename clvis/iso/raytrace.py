@@ -8,7 +8,11 @@ raw ``cl.Buffer`` for the cache), nothing is read back.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
 
 from .. import runtime
 
@@ -20,9 +24,12 @@ PROFILES = {"cpu": {"wg": 16}, "gpu": {"wg": 64}}
 _arg = runtime.arg
 
 
-def raytrace_blocks(queue, bricks, slot_of_block, shape, spacing, origin, isovalue, cam, width,
-                    groups, ray_ids, ray_t, outputs, *, refine_steps: int = 8, items=None, first_pixel=0,
-                    wait_for=None):
+def raytrace_blocks(queue: cl.CommandQueue, bricks: cla.Array, slot_of_block: cla.Array, shape: Sequence[int],
+                    spacing: Sequence[float], origin: Sequence[float], isovalue: float, cam: cla.Array,
+                    width: int, groups: tuple[cla.Array, cla.Array, cla.Array], ray_ids: cla.Array,
+                    ray_t: cla.Array, outputs: tuple[cla.Array, cla.Array, cla.Array, cla.Array], *,
+                    refine_steps: int = 8, items: tuple[cla.Array, int, cla.Array | None] | None = None,
+                    first_pixel: int = 0, wait_for: Sequence[cl.Event] | None = None) -> cl.Event | None:
     """Launch ``raytrace_blocks`` (internal; see kernels_cl/iso/raytrace.cl's ABI).
 
     bricks (slots, 64) float32 and slot_of_block (nblocks,) int32: the block

@@ -9,7 +9,11 @@ device: ``count`` is a 1-element uint32 device array).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
 
 from .. import runtime
 from ..primitives import compact_indices
@@ -32,7 +36,9 @@ def _volume_args(shape, spacing, origin):
     return (np.uint32(nx), np.uint32(ny), np.uint32(nz), dx, dy, dz, ox, oy, oz)
 
 
-def init_rays(queue, cam, width, height, shape, spacing, origin, *, pixels=None, wait_for=None):
+def init_rays(queue: cl.CommandQueue, cam: cla.Array, width: int, height: int, shape: Sequence[int],
+              spacing: Sequence[float], origin: Sequence[float], *, pixels: tuple[int, int] | None = None,
+              wait_for: Sequence[cl.Event] | None = None) -> tuple[cla.Array, cla.Array, cla.Array]:
     """Per pixel the box entry t (+inf on a miss) and the list of rays that
     meet the volume box. cam: the 22-float ray buffer (device array).
     pixels = (p0, n): only the tile of image pixels p0 .. p0 + n - 1 (default
@@ -59,8 +65,11 @@ def init_rays(queue, cam, width, height, shape, spacing, origin, *, pixels=None,
     return ray_t, active, count
 
 
-def macro_traverse(queue, shape, spacing, origin, isovalue, cam, width, fine, coarse, active, count,
-                   max_rays, ray_t, n_spec, cand_block, cand_t, *, first_pixel=0, wait_for=None):
+def macro_traverse(queue: cl.CommandQueue, shape: Sequence[int], spacing: Sequence[float],
+                   origin: Sequence[float], isovalue: float, cam: cla.Array, width: int, fine: cla.Array,
+                   coarse: cla.Array, active: cla.Array, count: cla.Array, max_rays: int, ray_t: cla.Array,
+                   n_spec: int, cand_block: cla.Array, cand_t: cla.Array, *, first_pixel: int = 0,
+                   wait_for: Sequence[cl.Event] | None = None) -> cl.Event | None:
     """Launch ``macro_traverse`` (see kernels_cl/iso/traverse.cl's ABI).
 
     fine, coarse: float32 device arrays (.., 2) (clvis.iso.macrocell_grids,

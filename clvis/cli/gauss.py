@@ -263,7 +263,8 @@ def _picture(img, transparent: bool = False) -> np.ndarray:
     return np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
 
 
-def strip(panels: Sequence[tuple[str, Gaussians, GaussianImage]], colormap: str, transparent: bool = False, value_name: str = "value") -> np.ndarray:
+def strip(panels: Sequence[tuple[str, Gaussians, GaussianImage]], colormap: str, transparent: bool = False,
+          value_name: str = "value") -> np.ndarray:
     """render_panels' images side by side, each labelled with its LOD and
     Gaussian count, over a colour bar of the values' range (the transfer
     function's; none for Gaussians drawn in their own colours)."""

@@ -37,7 +37,8 @@ class MacrocellGrids:
         return (f[..., 0] <= v) & (v <= f[..., 1]), (c[..., 0] <= v) & (v <= c[..., 1])
 
 
-def macrocell_grids(volume: ZfpVolume, *, queue: cl.CommandQueue | None = None, host: bool = True) -> MacrocellGrids:
+def macrocell_grids(volume: ZfpVolume, *, queue: cl.CommandQueue | None = None,
+                    host: bool = True) -> MacrocellGrids:
     """The fine and coarse macrocell grids of a compressed volume, built on the
     device from its stream (each block decoded once, kernels_cl/iso/macrocell.cl).
     Equal to clvis.reference.iso.macrocell.block_ranges / coarse_ranges of the decoded volume."""

@@ -13,6 +13,7 @@ tree bottom-up (Apetrei 2014's order), so the two must agree field for field.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from ..morton import morton_codes as _point_codes
 
@@ -23,7 +24,7 @@ BVH_LEAF = np.uint32(0x80000000)
 BVH_NONE = np.uint32(0xFFFFFFFF)
 
 
-def morton_codes(boxes) -> np.ndarray:
+def morton_codes(boxes: npt.ArrayLike) -> np.ndarray:
     """30-bit Morton codes of the centres (lo + hi) * 0.5 (float32) over their
     bounding box (clvis.reference.morton.morton_codes's quantization)."""
     b = np.asarray(boxes, np.float32).reshape(-1, 6)
@@ -43,7 +44,7 @@ def _union(llo, lhi, rlo, rhi):
     return np.where(rlo < llo, rlo, llo), np.where(rhi > lhi, rhi, lhi)
 
 
-def build_bvh(boxes):
+def build_bvh(boxes: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(nodes, order, leaf_boxes) of the LBVH over boxes, float32 (N, 6):
     nodes a BVH_NODE_DTYPE array (N - 1 nodes; 1 for N == 1; 0 for N == 0),
     order uint32 (stable argsort of the codes), leaf_boxes = boxes[order]."""
@@ -88,7 +89,7 @@ def _child_boxes(nodes, leaf_boxes, child):
     return lo, hi
 
 
-def check_bvh(nodes, order, leaf_boxes, boxes) -> None:
+def check_bvh(nodes: np.ndarray, order: np.ndarray, leaf_boxes: np.ndarray, boxes: npt.ArrayLike) -> None:
     """Assert the LBVH invariants; AssertionError saying which one fails.
 
     order is a permutation and leaf_boxes[j] == boxes[order[j]]; from the root

@@ -7,10 +7,17 @@ Never called by the library.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+import numpy.typing as npt
 
 from ...gauss.gaussians import Gaussians
 from ...gauss.sparse import SparseVolume
+
+if TYPE_CHECKING:
+    import pyopencl as cl
 
 __all__ = ["gaussians_from_volume", "lod_table", "sparse_from_dense"]
 
@@ -18,7 +25,9 @@ LODS = ("low", "medium", "high")
 F32 = np.float32
 
 
-def sparse_from_dense(volume, threshold=None, mask=None, spacing=(1.0, 1.0, 1.0), origin=(0.0, 0.0, 0.0)):
+def sparse_from_dense(volume: npt.ArrayLike, threshold: float | None = None,
+                      mask: npt.ArrayLike | None = None, spacing: Sequence[float] = (1.0, 1.0, 1.0),
+                      origin: Sequence[float] = (0.0, 0.0, 0.0)) -> dict[str, Any]:
     """The fields of SparseVolume.from_dense as a dict, one leaf at a time:
     shape, spacing, origin, coords (L, 3), masks (L, 16) uint32, tiles (L,),
     tile_values (L,), values (V, 512)."""
@@ -97,8 +106,10 @@ def _block_first(b, n):
     return np.stack([b // (nb * nb) * n, b // nb % nb * n, b % nb * n], axis=-1)
 
 
-def gaussians_from_volume(volume_or_sparse, lod="medium", threshold=None, mask=None, spacing=None,
-                          origin=None, queue=None) -> Gaussians:
+def gaussians_from_volume(volume_or_sparse: SparseVolume | npt.ArrayLike, lod: str = "medium",
+                          threshold: float | None = None, mask: npt.ArrayLike | None = None,
+                          spacing: Sequence[float] | None = None, origin: Sequence[float] | None = None,
+                          queue: cl.CommandQueue | None = None) -> Gaussians:
     """What clvis.gauss.lod.gaussians_from_volume returns (queue is ignored)."""
     if lod not in LODS:
         raise ValueError(f"lod: {lod!r}")
@@ -177,6 +188,6 @@ def gaussians_from_volume(volume_or_sparse, lod="medium", threshold=None, mask=N
     return Gaussians(zyx_means[:, ::-1], zyx_scales[:, ::-1], values=value)
 
 
-def lod_table(sparse, queue=None) -> dict:
+def lod_table(sparse: SparseVolume | npt.ArrayLike, queue: cl.CommandQueue | None = None) -> dict[str, int]:
     """{lod: number of Gaussians} (queue is ignored)."""
     return {lod: len(gaussians_from_volume(sparse, lod)) for lod in LODS}

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from ..camera import camera_rays
 
@@ -25,7 +26,9 @@ TINY = np.float32(1e-30)
 T_STOP = 1e-3
 
 
-def gaussian_records(means, scales, rotations, values, opacities):
+def gaussian_records(means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike,
+                     values: npt.ArrayLike,
+                     opacities: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(mean (N,3), value (N,), w (N,9), opacity (N,)) float32 as gaussian_records writes them."""
     s = np.asarray(scales, np.float32)
     r = np.asarray(rotations, np.float32).reshape(-1, 3, 3)
@@ -39,7 +42,8 @@ def gaussian_records(means, scales, rotations, values, opacities):
             np.asarray(opacities, np.float32))
 
 
-def gaussian_boxes(means, scales, rotations, cutoff):
+def gaussian_boxes(means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike,
+                   cutoff: float) -> np.ndarray:
     """(N, 6) float32 boxes as gaussian_records writes them."""
     s = np.asarray(scales, np.float32)
     r = np.asarray(rotations, np.float32).reshape(-1, 3, 3)
@@ -61,7 +65,8 @@ def _dot(a0, a1, a2, b0, b1, b2):
     return (a0 * b0 + a1 * b1) + a2 * b2
 
 
-def hits(o, d, mean, w):
+def hits(o: np.ndarray, d: np.ndarray, mean: np.ndarray,
+         w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """For rays (R, 3) and Gaussians: t, m2, ts, a, ms2 (R, N) float32, as clvis_gauss_hit."""
     r = [o[:, None, j] - mean[None, :, j] for j in range(3)]
     op = [_dot(w[None, :, 3 * k], w[None, :, 3 * k + 1], w[None, :, 3 * k + 2], r[0], r[1], r[2])
@@ -79,7 +84,7 @@ def hits(o, d, mean, w):
     return t, m2, ts, a, ms2
 
 
-def tf_lookup(values, table, vmin, scale):
+def tf_lookup(values: npt.ArrayLike, table: np.ndarray, vmin: float, scale: float) -> np.ndarray:
     """Transfer-function entries (N, 4) float32 by march.cl's index rule."""
     n = table.shape[0]
     x = np.floor(((np.asarray(values, np.float32) - np.float32(vmin)) * np.float32(scale)) * np.float32(n))
@@ -87,13 +92,16 @@ def tf_lookup(values, table, vmin, scale):
     return table[i]
 
 
-def rgb8(colors):
+def rgb8(colors: npt.ArrayLike) -> np.ndarray:
     """(N, 3) float32 colours from uint8 ones, as clvis_gauss_rgb8: c / 255."""
     return np.asarray(colors, np.uint8)[:, :3].astype(np.float32) / np.float32(255)
 
 
-def render(means, scales, rotations, values, opacities, cam, width, height, table, vmin, scale, *,
-           model="max_response", cutoff=3.0, density=1.0, colors=None):
+def render(means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike, values: npt.ArrayLike,
+           opacities: npt.ArrayLike, cam: npt.ArrayLike, width: int, height: int, table: np.ndarray,
+           vmin: float, scale: float, *, model: str = "max_response", cutoff: float = 3.0,
+           density: float = 1.0,
+           colors: npt.ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """rgba (H, W, 4), depth (H, W), hits (H, W): brute force.
 
     cam: the 22-float ray buffer (clvis.camera.ray_buffer); table, vmin,
@@ -105,8 +113,11 @@ def render(means, scales, rotations, values, opacities, cam, width, height, tabl
     return rgba.reshape(height, width, 4), depth.reshape(height, width), count.reshape(height, width)
 
 
-def render_rays(means, scales, rotations, values, opacities, o, d, cam, table, vmin, scale, *,
-                model="max_response", cutoff=3.0, density=1.0, colors=None, chunk=1 << 22):
+def render_rays(means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike, values: npt.ArrayLike,
+                opacities: npt.ArrayLike, o: np.ndarray, d: np.ndarray, cam: npt.ArrayLike, table: np.ndarray,
+                vmin: float, scale: float, *, model: str = "max_response", cutoff: float = 3.0,
+                density: float = 1.0, colors: npt.ArrayLike | None = None,
+                chunk: int = 1 << 22) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """rgba (R, 4) float32, depth (R,), hits (R,) for rays o, d (R, 3) float32
     (camera_rays); cam supplies the depth row; colors as in :func:`render`."""
     mean, value, w, opac = gaussian_records(means, scales, rotations, values, opacities)

@@ -22,7 +22,10 @@ tie rules as the device):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+import numpy.typing as npt
 
 FREE = 0xFFFFFFFF          # restated from clvis.iso.cache (the library never imports this module)
 AGE_MAX = 0xFFFFFFFE
@@ -38,7 +41,7 @@ def grown_capacity(capacity: int, n_needed: int, nblocks: int) -> int:
     return max(n_needed, min(nblocks, -(-3 * capacity // 2)))
 
 
-def mark_blocks(visible_ids, blocks) -> np.ndarray:
+def mark_blocks(visible_ids: npt.ArrayLike, blocks: Sequence[int]) -> np.ndarray:
     """uint8 flags per block (blocks = (nbz, nby, nbx)): 1 for each visible
     block (ids >= nblocks ignored) and its +x/+y/+z/+xy/+xz/+yz/+xyz
     neighbours inside the grid."""
@@ -74,7 +77,7 @@ class BlockCache:
     def occupied(self) -> int:
         return int(np.count_nonzero(self.block_of_slot != FREE))
 
-    def update(self, needed) -> int:
+    def update(self, needed: npt.ArrayLike) -> int:
         """Apply one pass's `needed` flags (nonzero = needed); returns the
         number of blocks newly assigned (and decoded)."""
         needed = np.asarray(needed).ravel() != 0

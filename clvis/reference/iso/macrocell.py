@@ -4,7 +4,10 @@ coarse groups of blocks."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+import numpy.typing as npt
 
 from ..._arrays import real_array
 from ...errors import DataError
@@ -28,7 +31,7 @@ def _volume(volume) -> np.ndarray:
 # macrocell grids
 
 
-def cell_ranges(volume):
+def cell_ranges(volume: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi), each (nz - 1, ny - 1, nx - 1) float32: the min and max of each
     dual cell's 8 corner samples (cell [k, j, i] has corners [k..k+1, j..j+1,
     i..i+1])."""
@@ -58,7 +61,7 @@ def _factor(name, v) -> int:
     return int(v)
 
 
-def block_ranges(volume, block: int = 4):
+def block_ranges(volume: npt.ArrayLike, block: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi), each (ceil(nz / block), ceil(ny / block), ceil(nx / block))
     float32: per block of block^3 samples (the ZFP blocks for block = 4; block
     [bz, by, bx] holds samples [block*bz .. block*bz + block - 1] per axis), the
@@ -72,7 +75,7 @@ def block_ranges(volume, block: int = 4):
     return _reduce_blocks(lo, hi, block, tuple(-(-(s + 1) // block) for s in lo.shape))
 
 
-def coarse_ranges(ranges, factor: int = 4):
+def coarse_ranges(ranges: Sequence[npt.ArrayLike], factor: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) of the coarse macrocells: per factor^3 group of blocks (blocks
     [factor*c .. factor*c + factor - 1] per axis, the last group partial), the
     min of the blocks' lo and the max of their hi. `ranges` is (lo, hi) from

@@ -5,9 +5,11 @@ are written out in clvis.reference.iso.render's module docstring."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from .macrocell import _volume, cell_ranges
 
@@ -77,7 +79,8 @@ def _iso(isovalue) -> float:
 # the cubic along a ray segment in one cell
 
 
-def cell_cubic(corners, local, direction):
+def cell_cubic(corners: npt.ArrayLike, local: npt.ArrayLike,
+               direction: npt.ArrayLike) -> tuple[np.ndarray, ...]:
     """Coefficients (c0, c1, c2, c3), each (M,), of f(s) = sum c_k s^k, the
     trilinear interpolant of `corners` (M, 2, 2, 2) [z, y, x] (already minus
     the isovalue) along local(s) = local + s direction (M, 3) x, y, z."""
@@ -124,7 +127,9 @@ def _extrema(c, length):
     return np.minimum(r1, r2), np.maximum(r1, r2)
 
 
-def cubic_first_zero(c, length, refine=None, start=True, end=True):
+def cubic_first_zero(c: Sequence[npt.ArrayLike], length: npt.ArrayLike,
+                     refine: int | tuple[str, int] | None = None, start: bool | np.ndarray = True,
+                     end: bool | np.ndarray = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The first zero of the cubic ``c`` (c0, c1, c2, c3 arrays (M,)) on
     [0, length] by the rules of the module docstring.
 
@@ -209,7 +214,9 @@ def _refine(c, a, b, fa, fb, refine):
 # rendering
 
 
-def render_rays(volume, origins, directions, isovalue, spacing=(1, 1, 1), origin=(0, 0, 0), refine=None):
+def render_rays(volume: npt.ArrayLike, origins: npt.ArrayLike, directions: npt.ArrayLike, isovalue: float,
+                spacing: Sequence[float] = (1, 1, 1), origin: Sequence[float] = (0, 0, 0),
+                refine: int | tuple[str, int] | None = None) -> dict[str, np.ndarray]:
     """First hits of rays o + t d (t >= 0) with the isosurface, by the rules of
     the module docstring. `origins`, `directions` (R, 3) are rounded to float32
     (directions should be unit length for t to be a world distance).
@@ -329,7 +336,8 @@ def _rays(name, a) -> np.ndarray:
     return a.astype(np.float64)
 
 
-def shade(normal, directions, hit, shading: Shading | None = None) -> np.ndarray:
+def shade(normal: np.ndarray, directions: np.ndarray, hit: np.ndarray,
+          shading: Shading | None = None) -> np.ndarray:
     """rgba (R, 4) float32 for normals facing the viewer (R, 3), ray directions
     (R, 3) and the hit mask (R,), by the module docstring's Blinn–Phong rule."""
     shading = shading or Shading()

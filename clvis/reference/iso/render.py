@@ -154,9 +154,12 @@ to about 1e-3, except where the hit lies within float noise of a cell face
 
 from __future__ import annotations
 
-import numpy as np
+from collections.abc import Sequence
 
-from ...camera import ray_buffer
+import numpy as np
+import numpy.typing as npt
+
+from ...camera import Camera, ray_buffer
 from ..camera import camera_rays
 from .raytrace import (  # noqa: F401  (the rules' building blocks, re-exported)
     BISECTION_STEPS,
@@ -178,8 +181,9 @@ VALUE_TOLERANCE = 1e-5      # reliability threshold, as a fraction of the value 
 
 
 
-def render(volume, camera, width, height, isovalue, spacing=(1, 1, 1), origin=(0, 0, 0),
-           shading: Shading | None = None, refine=None) -> IsoImage:
+def render(volume: npt.ArrayLike, camera: Camera, width: int, height: int, isovalue: float,
+           spacing: Sequence[float] = (1, 1, 1), origin: Sequence[float] = (0, 0, 0),
+           shading: Shading | None = None, refine: int | tuple[str, int] | None = None) -> IsoImage:
     """Raycast the isosurface ``volume == isovalue`` for `camera` at `width` x
     `height` (see the module docstring for every rule). `refine`: None (the
     exact root), an int k (Marmitt's k linear-interpolation steps) or
@@ -228,8 +232,8 @@ def reliable(image: IsoImage, value_tolerance: float = VALUE_TOLERANCE,
     return ok & (~image.hit | (image.slope * depth_tolerance * image.diagonal > eps))
 
 
-def agreement(reference: IsoImage, hit, depth, value_tolerance: float = VALUE_TOLERANCE,
-              depth_tolerance: float = DEPTH_TOLERANCE) -> dict:
+def agreement(reference: IsoImage, hit: npt.ArrayLike, depth: npt.ArrayLike,
+              value_tolerance: float = VALUE_TOLERANCE, depth_tolerance: float = DEPTH_TOLERANCE) -> dict:
     """Compare another image's hit mask and depth (H, W) with `reference` on
     its reliable pixels. Returns {"ok", "reliable" (count), "unreliable"
     (count), "mask_mismatches" (reliable pixels whose hit differs),

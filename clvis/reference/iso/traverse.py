@@ -21,7 +21,10 @@ depend on how the passes split it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+import numpy.typing as npt
 
 from ..camera import camera_rays
 
@@ -32,7 +35,8 @@ _TINY = np.float32(1e-20)          # clvis/ray.h CLVIS_RAY_TINY_DIR
 _F = np.float32
 
 
-def ray_setup(cam, width, height, shape, spacing, origin):
+def ray_setup(cam: npt.ArrayLike, width: int, height: int, shape: Sequence[int], spacing: Sequence[float],
+              origin: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per pixel (W * H rays): O, D, inv (R, 3) and t_enter, t_exit (R,), float32."""
     o, d = camera_rays(np.asarray(cam, np.float32), int(width), int(height))
     n = np.array(shape[::-1], np.int64)                       # nx, ny, nz
@@ -50,7 +54,8 @@ def ray_setup(cam, width, height, shape, spacing, origin):
     return O, D, inv, t_enter, t_exit
 
 
-def init_rays(cam, width, height, shape, spacing, origin):
+def init_rays(cam: npt.ArrayLike, width: int, height: int, shape: Sequence[int], spacing: Sequence[float],
+              origin: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
     """(ray_t float32 (W * H,): t_enter, +inf where the ray misses the box;
     enters uint8: 1 where it meets it), as the kernel init_rays."""
     _, _, _, t_enter, t_exit = ray_setup(cam, width, height, shape, spacing, origin)
@@ -67,7 +72,10 @@ def _bound_t(b, size, n, O, inv, entry):
     return (x - O) * inv
 
 
-def macro_traverse(shape, spacing, origin, isovalue, cam, width, fine, coarse, active, ray_t, n_spec):
+def macro_traverse(shape: Sequence[int], spacing: Sequence[float], origin: Sequence[float], isovalue: float,
+                   cam: npt.ArrayLike, width: int, fine: npt.ArrayLike, coarse: npt.ArrayLike,
+                   active: npt.ArrayLike, ray_t: npt.ArrayLike,
+                   n_spec: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Candidate blocks of the rays `active` (pixel ids).
 
     fine (nbz, nby, nbx, 2) and coarse (ncz, ncy, ncx, 2) float32 ranges

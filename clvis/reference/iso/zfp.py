@@ -33,7 +33,10 @@ are kept (zfp padded it on encode).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ["EBIAS", "NBMASK", "PERM_3", "block_words", "decode", "decode_block", "decode_blocks",
            "decode_ints", "dequantize", "expected_nbytes", "grid", "inv_lift", "inv_xform"]
@@ -72,18 +75,18 @@ PERM_3 = (
 )
 
 
-def grid(shape) -> tuple[int, int, int]:
+def grid(shape: Sequence[int]) -> tuple[int, int, int]:
     """Blocks along (z, y, x) of a [Z, Y, X] volume."""
     return tuple(-(-int(s) // 4) for s in shape)
 
 
-def expected_nbytes(shape, rate: int) -> int:
+def expected_nbytes(shape: Sequence[int], rate: int) -> int:
     """Bytes of the fixed-rate stream: rate 64-bit words per block."""
     nbz, nby, nbx = grid(shape)
     return nbz * nby * nbx * rate * 8
 
 
-def block_words(stream, b: int, rate: int) -> np.ndarray:
+def block_words(stream: bytes | np.ndarray, b: int, rate: int) -> np.ndarray:
     """The `rate` little-endian 64-bit words of block b."""
     words = np.frombuffer(bytes(stream), dtype="<u8")
     return words[b * rate:(b + 1) * rate]
@@ -188,7 +191,7 @@ def _check(stream, shape, rate):
     return shape
 
 
-def decode(stream, shape, rate: int) -> np.ndarray:
+def decode(stream: bytes | np.ndarray, shape: Sequence[int], rate: int) -> np.ndarray:
     """The float32 volume of `shape` ([Z, Y, X]) in a headerless fixed-rate stream."""
     shape = _check(stream, shape, rate)
     nbz, nby, nbx = grid(shape)
@@ -205,7 +208,8 @@ def decode(stream, shape, rate: int) -> np.ndarray:
     return out
 
 
-def decode_blocks(stream, ids, shape, rate: int) -> np.ndarray:
+def decode_blocks(stream: bytes | np.ndarray, ids: npt.ArrayLike, shape: Sequence[int],
+                  rate: int) -> np.ndarray:
     """(len(ids), 64) float32: block ids[j] (x-fastest block order) in row j,
     in zfp's in-block order x + 4 y + 16 z."""
     shape = _check(stream, shape, rate)

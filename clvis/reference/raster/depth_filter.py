@@ -62,7 +62,10 @@ empty pixels and the validation of NaN and negative depths.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+import numpy.typing as npt
 
 from ...errors import DataError
 
@@ -75,7 +78,7 @@ INV255 = np.float32(1.0) / np.float32(255.0)     # the float32 nearest 1/255
 _INF = np.float32(np.inf)
 
 
-def level_shapes(shape, levels):
+def level_shapes(shape: Sequence[int], levels: int) -> list[tuple[int, int]]:
     """[(H0, W0), (H1, W1), ... (HL, WL)]: ceil halving per level."""
     h, w = shape
     out = [(h, w)]
@@ -127,8 +130,8 @@ def _check(depth, levels, filter_strength, edge_threshold):
     return depth, s, t
 
 
-def depth_filter_mask(depth, levels=LEVELS, filter_strength=FILTER_STRENGTH, *,
-                      edge_threshold=EDGE_THRESHOLD):
+def depth_filter_mask(depth: npt.ArrayLike, levels: int = LEVELS, filter_strength: float = FILTER_STRENGTH, *,
+                      edge_threshold: float = EDGE_THRESHOLD) -> np.ndarray:
     """The keep mask (H x W bool) of the definition above."""
     depth, s, t = _check(depth, levels, filter_strength, edge_threshold)
     if depth.size == 0 or levels == 0:
@@ -147,7 +150,7 @@ def depth_filter_mask(depth, levels=LEVELS, filter_strength=FILTER_STRENGTH, *,
         f = np.where(kept, d, _up(f, d.shape))
 
 
-def rgbda(rgba, depth, keep):
+def rgbda(rgba: npt.ArrayLike, depth: npt.ArrayLike, keep: npt.ArrayLike) -> np.ndarray:
     """H x W x 5 float32 [r, g, b, depth, alpha]: where keep, the colour bytes
     times the float32 nearest 1/255, the depth and 1; elsewhere 0, 0, 0, +inf, 0."""
     rgba, depth, keep = np.asarray(rgba), np.asarray(depth), np.asarray(keep) != 0

@@ -9,24 +9,27 @@ and every G-buffer plane is a gather by the winning index.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
+import numpy.typing as npt
 
 from ... import colormap as _colormap
-from ..morton import morton_codes
-from ...camera import camera_buffer
+from ...camera import Camera, Projected, camera_buffer
 from ...raster.render import EMPTY, GBuffers
+from ..morton import morton_codes
 
 __all__ = ["depth_key", "key_depth", "morton_order", "nonfinite", "rasterize", "splat", "visibility"]
 
 MAX_ATTRIBUTES = 8      # restated from clvis.raster
 
 
-def nonfinite(positions) -> int:
+def nonfinite(positions: npt.ArrayLike) -> int:
     """How many points have a NaN or infinite coordinate."""
     return int((~np.isfinite(np.asarray(positions, np.float32).reshape(-1, 3))).any(axis=1).sum())
 
 
-def splat(pr, width: int, height: int, point_size: int = 1):
+def splat(pr: Projected, width: int, height: int, point_size: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """(point, pixel) pairs: every visible point (its index in the input)
     with each pixel py * W + px of its point_size square inside the image."""
     idx = np.flatnonzero(pr.visible)
@@ -55,7 +58,8 @@ def key_depth(keys: np.ndarray) -> np.ndarray:
     return bits.astype(np.uint32).view(np.float32)
 
 
-def visibility(positions, camera, width: int, height: int, point_size: int = 1) -> np.ndarray:
+def visibility(positions: npt.ArrayLike, camera: Camera, width: int, height: int,
+               point_size: int = 1) -> np.ndarray:
     """(H, W) uint64: min over the points drawn in each pixel of
     depth_key(depth) << 32 | index; all ones where no point is drawn."""
     positions = np.asarray(positions, np.float32).reshape(-1, 3)
@@ -81,9 +85,12 @@ def _colors(n, colors, attributes, color_by, colormap, value_range):
     return np.full((n, 4), 255, np.uint8)
 
 
-def rasterize(positions, camera, width: int, height: int, *, colors=None, attributes=None,
-              velocity=None, radius=None, soft_z=None, color_by=None, colormap="viridis",
-              value_range=None, planes=None, point_size=1) -> GBuffers:
+def rasterize(positions: npt.ArrayLike, camera: Camera, width: int, height: int, *,
+              colors: npt.ArrayLike | None = None, attributes: Mapping[str, npt.ArrayLike] | None = None,
+              velocity: npt.ArrayLike | None = None, radius: npt.ArrayLike | None = None,
+              soft_z: bool | float | None = None, color_by: str | None = None, colormap: str = "viridis",
+              value_range: tuple[float, float] | None = None, planes: Sequence[str] | None = None,
+              point_size: int = 1) -> GBuffers:
     """clvis.rasterize in NumPy (positions as an (N, 3) array). planes: the
     attributes resolved (default: all of them when there are at most 8, else
     none), in the order given."""
@@ -161,6 +168,6 @@ def rasterize(positions, camera, width: int, height: int, *, colors=None, attrib
     return out
 
 
-def morton_order(positions) -> np.ndarray:
+def morton_order(positions: npt.ArrayLike) -> np.ndarray:
     """Stable argsort of the Morton codes, uint32."""
     return np.argsort(morton_codes(positions), kind="stable").astype(np.uint32)

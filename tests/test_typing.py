@@ -9,11 +9,6 @@ Fully annotated: every parameter but a method's self/cls (``*args`` and
 
 The modules are read with ``ast``, never imported (``__main__.py`` exits when
 imported).
-
-The raster, gauss and iso families (and clvis/camera.py) are being edited on
-other branches: their modules are checked one by one in
-test_pending_modules_annotated, so that they can be annotated after those
-branches merge, one module at a time, and then join PENDING's complement.
 """
 
 from __future__ import annotations
@@ -22,18 +17,10 @@ import ast
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
-import pytest
-
 import clvis
 
 PACKAGE = Path(clvis.__file__).resolve().parent
 ROOT = PACKAGE.parent
-
-# paths relative to ROOT (a folder ends with "/"): the modules other branches are editing
-PENDING = ("clvis/raster/", "clvis/gauss/", "clvis/iso/",
-           "clvis/reference/raster/", "clvis/reference/gauss/", "clvis/reference/iso/",
-           "clvis/cli/raster.py", "clvis/cli/gauss.py", "clvis/cli/iso.py",
-           "clvis/camera.py")
 
 FunctionNode = ast.FunctionDef | ast.AsyncFunctionDef
 
@@ -48,13 +35,7 @@ def _modules() -> list[str]:
     return out
 
 
-def _pending(rel: str) -> bool:
-    return any(rel.startswith(x) if x.endswith("/") else rel == x for x in PENDING)
-
-
 MODULES = _modules()
-PENDING_MODULES = [m for m in MODULES if _pending(m)]
-OWN_MODULES = [m for m in MODULES if not _pending(m)]
 
 
 def _definitions(body: Sequence[ast.stmt], prefix: str = "",
@@ -114,7 +95,8 @@ def test_modules_found():
     assert "clvis/__init__.py" in MODULES and "clvis/runtime.py" in MODULES
     assert "clvis/cli/__main__.py" in MODULES
     assert not any(Path(m).name in ("_arrays.py", "_common.py", "_version.py") for m in MODULES)
-    assert PENDING_MODULES and OWN_MODULES
+    for family in ("raster", "gauss", "iso"):
+        assert f"clvis/{family}/__init__.py" in MODULES and f"clvis/reference/{family}/__init__.py" in MODULES
 
 
 def test_checker_finds_what_is_missing(tmp_path):
@@ -142,13 +124,6 @@ class _Hidden:
 
 
 def test_public_functions_annotated():
-    """Every module but the PENDING ones."""
-    found = [line for m in OWN_MODULES for line in offenders(m)]
-    assert not found, _report(found)
-
-
-@pytest.mark.parametrize("module", PENDING_MODULES)
-def test_pending_modules_annotated(module):
-    """The modules of the families other branches are editing, one by one."""
-    found = offenders(module)
+    """Every public module of the package."""
+    found = [line for m in MODULES for line in offenders(m)]
     assert not found, _report(found)

@@ -29,7 +29,7 @@ from ._arrays import positive_int, real_array
 from .errors import DataError
 
 __all__ = ["CAMERA_DTYPE", "Camera", "Projected", "camera_buffer", "grid_cameras", "hemisphere_cameras",
-           "ray_buffer"]
+           "ray_buffer", "singular"]
 
 # Camera.fit frames the bounding sphere enlarged by this factor, so rounding never
 # pushes a box corner out of the image.
@@ -92,20 +92,26 @@ def _image_size(name: str, v) -> int:
     return int(v)
 
 
-def _check_invertible(m: np.ndarray) -> None:
-    """DataError naming the camera when projection @ view cannot be inverted
-    (rays come from its inverse): singular, or so near it that the inverse
-    does not give the identity back."""
-    try:
-        inv = np.linalg.inv(m)
-        with np.errstate(all="ignore"):
-            residual = float(np.abs(inv @ m - np.eye(4)).max())
-    except np.linalg.LinAlgError:
-        residual = np.inf
-    if not residual <= 1e-6:
-        raise DataError(f"camera: its matrix projection @ view is singular (inverse residual {residual:.3g}); "
-                        "make cameras with Camera.look_at, Camera.ortho or Camera.fit, whose arguments are "
-                        "checked (fov_y, aspect, near < far, eye != target, up not along the view)")
+def singular(projection: np.ndarray, view: np.ndarray | None = None,
+             depth_row: np.ndarray | None = None) -> str | None:
+    """Why projection @ view has no usable inverse (rays and the depth key come
+    from it), or None. Checked apart, and scale-free: the projection by its
+    condition number (world coordinates do not enter it), the view's rotation
+    by its normalised determinant (a view far from the origin, as with UTM
+    coordinates, is fine), and the depth row (not zero)."""
+    p = np.asarray(projection, np.float64)
+    with np.errstate(all="ignore"):
+        cond = float(np.linalg.cond(p)) if p.shape == (4, 4) and p.any() else math.inf
+    if not (math.isfinite(cond) and cond < 1e12):
+        return f"the projection is singular (condition number {cond:.3g}): a zero-size view volume"
+    if view is not None:
+        r = np.asarray(view, np.float64)[:3, :3]
+        norms = np.linalg.norm(r, axis=1)
+        if not norms.all() or abs(np.linalg.det(r)) / norms.prod() < 1e-9:
+            return "the view matrix is singular (eye, target and up do not span a frame)"
+    if depth_row is not None and not np.asarray(depth_row)[:3].any():
+        return "its depth row is zero"
+    return None
 
 
 def _bounds(bounds_min, bounds_max) -> tuple[np.ndarray, np.ndarray]:
@@ -219,7 +225,11 @@ class Camera:
         if not isinstance(self.orthographic, (bool, np.bool_)):
             raise TypeError(f"orthographic: expected a bool, got {type(self.orthographic).__name__}")
         near, far = _near_far(self.near, self.far, not self.orthographic)
-        _check_invertible(self.projection @ self.view)
+        why = singular(self.projection, self.view)
+        if why is not None:
+            raise DataError(f"camera: {why}; make cameras with Camera.look_at, Camera.ortho or Camera.fit, "
+                            "whose arguments are checked (fov_y, aspect, near < far, eye != target, up not "
+                            "along the view)")
         eye = _vec3("eye", self.eye)
         eye.setflags(write=False)
         object.__setattr__(self, "near", near)
@@ -472,7 +482,11 @@ def ray_buffer(camera: Camera, width: int, height: int) -> np.ndarray:
     if not isinstance(camera, Camera):
         raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
     w, h = positive_int("width", width), positive_int("height", height)
-    inv = np.linalg.inv(camera.matrix)
+    try:
+        inv = np.linalg.inv(camera.matrix)
+    except np.linalg.LinAlgError:
+        raise DataError("camera: its matrix projection @ view cannot be inverted in float64 (coordinates "
+                        "too large for the rays to be computed)") from None
 
     def point(u, v, zn):
         p = inv @ np.array([u / w * 2 - 1, 1 - v / h * 2, zn, 1.0])

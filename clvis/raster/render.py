@@ -44,7 +44,7 @@ import pyopencl.array as cla
 from .. import colormap as _colormap
 from .. import morton, runtime
 from .._arrays import check_array, is_device, resolve_queue
-from ..camera import CAMERA_DTYPE, Camera, camera_buffer  # noqa: F401  (re-exported)
+from ..camera import CAMERA_DTYPE, Camera, camera_buffer, singular  # noqa: F401  (re-exported)
 from ..errors import DataError, DeviceError
 from ..primitives import radix_sort
 
@@ -136,31 +136,10 @@ def _check_camera(camera):
         finite32 = np.isfinite(m.astype(np.float32)).all() and np.isfinite(d.astype(np.float32)).all()
     if not finite32:
         raise DataError("camera: its matrix overflows float32 (the kernels' precision)")
-    why = _singular(camera, d)
+    why = singular(camera.projection, getattr(camera, "view", None), d)
     if why:
         raise DataError(f"camera: {why}; such a camera draws nothing")
     return camera_buffer(camera), np.float32(near), np.float32(far)
-
-
-def _singular(camera, depth_row) -> str | None:
-    """Why projection @ view has no inverse, or None. Checked apart, and
-    scale-free: the projection by its condition number (world coordinates
-    do not enter it), the view's rotation by its normalised determinant (a
-    view far from the origin, as with UTM coordinates, is fine)."""
-    p = np.asarray(camera.projection, np.float64)
-    with np.errstate(all="ignore"):
-        cond = float(np.linalg.cond(p)) if p.shape == (4, 4) and p.any() else math.inf
-    if not (math.isfinite(cond) and cond < 1e12):
-        return f"the projection is singular (condition number {cond:.3g}): a zero-size view volume"
-    view = getattr(camera, "view", None)
-    if view is not None:
-        r = np.asarray(view, np.float64)[:3, :3]
-        norms = np.linalg.norm(r, axis=1)
-        if not norms.all() or abs(np.linalg.det(r)) / norms.prod() < 1e-9:
-            return "the view matrix is singular (eye, target and up do not span a frame)"
-    if not np.asarray(depth_row)[:3].any():
-        return "its depth row is zero"
-    return None
 
 
 def _check_size(width, height):

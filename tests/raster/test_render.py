@@ -611,12 +611,11 @@ def test_singular_camera(queue):
     huge[0, 0] = 1e39                                         # overflows float32
     # a clvis.Camera refuses a singular projection @ view where it is made; the
     # rasterizer checks what reaches it (duck-typed cameras too)
-    made = "its matrix projection @ view is singular"
-    cases = [(lambda: dataclasses.replace(cam, projection=np.zeros((4, 4))), made),
-             (lambda: dataclasses.replace(cam, projection=flat), made),
-             (lambda: dataclasses.replace(cam, view=bad_view), made),
-             # ill-conditioned in float64 and out of float32's range: refused either way
-             (lambda: dataclasses.replace(cam, projection=huge), f"(overflows float32|{made})")]
+    cases = [(lambda: dataclasses.replace(cam, projection=np.zeros((4, 4))), "projection is singular"),
+             (lambda: dataclasses.replace(cam, projection=flat), "projection is singular"),
+             (lambda: dataclasses.replace(cam, view=bad_view), "view matrix is singular"),
+             # 1e39: refused where it is made (ill-conditioned), else as beyond float32
+             (lambda: dataclasses.replace(cam, projection=huge), "(projection is singular|overflows float32)")]
 
     class NaNCamera:
         matrix = np.full((4, 4), np.nan)

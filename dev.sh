@@ -10,11 +10,17 @@
 #   ./dev.sh bench [FAMILY]
 #                    .venv-test; runs `clvis bench FAMILY` (full sizes) for
 #                    every family, or the family named
+#   ./dev.sh oclgrind [ARGS]
+#                    .venv-test; every kernel at small sizes under the Oclgrind
+#                    simulator (apt-get install oclgrind), both work shapes, 64-bit
+#                    atomics on and off; fails on invalid accesses and on data
+#                    races not marked benign in the kernel source
+#                    (tests/oclgrind/audit.py; ARGS go to it; ~2 min)
 #   ./dev.sh lint    .venv-lint: ruff (lint + format check) on the whole tree and
 #                    mypy on the runtime, primitives, camera and the public API
 #   ./dev.sh fmt     .venv-lint: ruff format + ruff check --fix
 #
-# Extra arguments go to the command (pytest, clvis demo, clvis bench).
+# Extra arguments go to the command (pytest, clvis demo, clvis bench, the audit).
 set -euo pipefail
 cd "$(dirname "$0")"
 PY=${PYTHON:-python3}
@@ -88,8 +94,17 @@ test | bench)
     CLVIS_LARGE=${CLVIS_LARGE:-1} CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001} \
         exec .venv-test/bin/python -m pytest tests bench --benchmark-disable -q "$@"
     ;;
+oclgrind)
+    if with_intel; then
+        venv .venv-test pocl,test,intel
+    else
+        venv .venv-test pocl,test
+    fi
+    # Oclgrind's preloaded runtime replaces every ICD: no intel_env here
+    exec .venv-test/bin/python tests/oclgrind/audit.py "$@"
+    ;;
 *)
-    echo "usage: ./dev.sh demo | test | bench | lint | fmt  [args]" >&2
+    echo "usage: ./dev.sh demo | test | bench | oclgrind | lint | fmt  [args]" >&2
     exit 2
     ;;
 esac

@@ -179,6 +179,9 @@ kernel void bvh_gather(global const float *boxes, global const uint *order, uint
 
 /* ---------------------------------------------------------------- 4. hierarchy and boxes */
 
+/* benign race (lbvh-sibling): the stores of a finished node race, in
+ * Oclgrind's report, with the loads of its box by the item that finishes its
+ * parent (bvh_build); the atomic_xchg hand-off there orders them (see there). */
 inline void bvh_store(global clvis_bvh_node *node, float3 lo, float3 hi, uint left, uint right)
 {
     node->lo[0] = lo.x; node->lo[1] = lo.y; node->lo[2] = lo.z; node->left = left;
@@ -247,6 +250,26 @@ void bvh_build(global const uint *codes, global const float *leaf_boxes, uint n,
                 return;
             mem_fence(CLK_GLOBAL_MEM_FENCE);
             sword = left ? split + 1 : split;   /* left child of split g: node g; right: g + 1 */
+            /* benign race (lbvh-sibling): the sibling's box, stored with
+             * plain stores (bvh_store) by the item that got here first, is
+             * loaded here without an atomic. Oclgrind reports every such
+             * load against that store: across work-groups its detector
+             * counts only atomics on the same address as ordering, and it
+             * does not model mem_fence. The order holds all the same. The
+             * first item stored the node, then fenced (its stores before its
+             * later accesses), then exchanged meet[split]. Exchanges on one
+             * word are atomic and totally ordered, and ours returned the
+             * first item's end rather than 0xFFFFFFFF, so it came after the
+             * first's exchange, which came after the first's stores; our own
+             * fence keeps these loads after our exchange. Store, fence,
+             * atomic | atomic, fence, load: the release/acquire fence pattern
+             * (OpenCL 2.0 spells it atomic_work_item_fence with release and
+             * acquire order), in the form OpenCL 1.2 can express, as in
+             * Karras's and Apetrei's GPU builders. The loads go through a
+             * volatile pointer so that the compiler issues them after the
+             * fence rather than reusing an earlier value. Each node is stored
+             * once and its box loaded at most once, by this hand-off; its
+             * child words are never read here. */
             slo = (float3)(vnodes[sword].lo[0], vnodes[sword].lo[1], vnodes[sword].lo[2]);
             shi = (float3)(vnodes[sword].hi[0], vnodes[sword].hi[1], vnodes[sword].hi[2]);
         }

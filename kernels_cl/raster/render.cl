@@ -160,6 +160,21 @@ inline void raster_point(int mode, uint i, uint p, uint dkey, global const uint 
             clvis_atomic_min_u32(words + clvis_lo_word(p), ids ? ids[i] : i);
         return;
     }
+    /* benign race (early-z): early-z reads the pixel's depth key with a plain
+     * (volatile) load while other work-items update the same word with the
+     * atomic min below (Oclgrind reports each such pair). The word only ever
+     * decreases, so the value read, current or stale, is >= the key the
+     * pixel ends with. A point is skipped only when its dkey is greater than
+     * that value, hence greater than the final winner's: it could not have
+     * won. A stale (larger) value can only let through a point that the
+     * atomic min then rejects; it never rejects a point that would win, so
+     * the buffer is exactly what the atomics alone would make. The load is
+     * of one aligned 32-bit word (the high half of the 64-bit entry on the
+     * 64-bit path), which devices read whole: it gives the high half of a
+     * value the entry did hold. It is not made atomic because the only
+     * atomic read OpenCL 1.2 offers is a read-modify-write (atomic_or(p, 0)),
+     * which would write to every pixel a point lands on and cost what
+     * early-z saves. (render_index's read above has no writer in its launch.) */
     if (dkey > words[clvis_hi_word(p)])     /* early-z: it cannot win */
         return;
     if (mode == MODE_DEPTH) {

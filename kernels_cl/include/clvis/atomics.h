@@ -21,6 +21,9 @@
 #define clvis_lo_word(i) (2u * (i))
 #define clvis_hi_word(i) (2u * (i) + 1u)
 
+/* benign race (early-z): raster/render.cl's early-z test reads the word
+ * this atomic min updates with a plain load; why that is safe is explained
+ * there. */
 inline void clvis_atomic_min_u32(volatile global uint *p, uint v)
 {
     atomic_min(p, v);
@@ -31,6 +34,7 @@ inline void clvis_atomic_min_u32(volatile global uint *p, uint v)
 #pragma OPENCL EXTENSION cl_khr_int64_extended_atomics : enable
 #define clvis_has_atomic_min_u64() 1
 
+/* benign race (early-z): as above, for the 64-bit depth|index entries */
 inline void clvis_atomic_min_u64(volatile global ulong *p, ulong v)
 {
     atom_min(p, v);

@@ -1,0 +1,324 @@
+"""The workload tests/oclgrind/audit.py runs under Oclgrind: small cases of
+every kernel of every family, through the public Python API, in one
+configuration (tuning profile, 64-bit atomics on or off).
+
+    oclgrind --data-races --check-api python tests/oclgrind/cases.py cpu int64 [CASE ...]
+
+It prints to stderr, where Oclgrind writes its diagnostics, a line
+``@@case <name>`` before each case (so the audit can say which case a
+diagnostic came from), ``@@error <json>`` (the case and its traceback) when
+a case raises, ``@@time <name> <seconds>`` after each case, and at the end
+``@@launched <json>``: how often each kernel was enqueued, by name. Sizes
+are tiny (Oclgrind interprets every work-item) but give several work-groups
+in both work shapes, so cross-group accesses are seen.
+Results are not checked here: tests/ does that.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+import traceback
+import warnings
+
+import numpy as np
+import pyopencl as cl
+
+MARK = "@@"
+
+
+def _note(kind: str, text: str) -> None:
+    sys.stderr.flush()
+    sys.stderr.write(f"{MARK}{kind} {text}\n")
+    sys.stderr.flush()
+
+
+# ---------------------------------------------------------------------------
+# launch record: every enqueue goes through pyopencl.enqueue_nd_range_kernel
+# (clvis.runtime.launch looks it up on the module at each call)
+
+LAUNCHED: dict[str, int] = {}
+_enqueue = cl.enqueue_nd_range_kernel
+
+
+def _recording_enqueue(queue, kernel, *args, **kw):
+    name = kernel.function_name
+    LAUNCHED[name] = LAUNCHED.get(name, 0) + 1
+    return _enqueue(queue, kernel, *args, **kw)
+
+
+cl.enqueue_nd_range_kernel = _recording_enqueue
+
+# imported after the patch, so that nothing binds the original first
+import clvis
+from clvis import Camera, runtime
+from clvis.gauss import GaussianRenderer, Gaussians, SparseVolume, build_bvh, lod_table
+from clvis.gauss.points import frames_along
+from clvis.iso import BlockCache, IsoRenderer
+
+# ---------------------------------------------------------------------------
+# cases: each takes the queue and runs a few public calls
+
+CASES = []
+
+
+def case(fn):
+    CASES.append(fn)
+    return fn
+
+
+def _rng(seed=0):
+    return np.random.default_rng(seed)
+
+
+@case
+def scan(q):
+    rng = _rng(1)
+    # several groups in both work shapes (the gpu shape's tile is 2048)
+    for n in (1, 100, 2500):
+        clvis.scan(rng.integers(-1000, 1000, n).astype(np.int32), queue=q)
+    clvis.scan(rng.integers(0, 1000, 300).astype(np.uint32), exclusive=False, queue=q)
+    clvis.scan(rng.random(300).astype(np.float32), queue=q)
+    clvis.scan(rng.integers(0, 2**40, 300).astype(np.uint64), return_total=True, queue=q)
+    clvis.scan(rng.integers(-2**40, 2**40, 300).astype(np.int64), queue=q)
+    # scan_chained's look-back fallback (a -D variant, testing only)
+    import clvis.primitives as prim
+    prim._SCAN_TEST_FALLBACK = True
+    try:
+        clvis.scan(rng.integers(0, 9, 700).astype(np.uint32), queue=q)
+    finally:
+        prim._SCAN_TEST_FALLBACK = False
+
+
+@case
+def compact(q):
+    rng = _rng(2)
+    for n in (1, 300, 2500):
+        x = rng.integers(-100, 100, n).astype(np.int32)
+        f = rng.random(n) < 0.4
+        clvis.compact(x, f, queue=q)
+        clvis.compact_indices(f, queue=q)
+    clvis.compact(rng.random((200, 3)).astype(np.float32), rng.integers(0, 3, 200).astype(np.uint16), queue=q)
+    clvis.compact(rng.integers(0, 255, 150).astype(np.uint8), np.ones(150, np.bool_), queue=q)
+
+
+@case
+def radix_sort(q):
+    rng = _rng(3)
+    # every pass runs the same kernels: key_bits keeps the pass count (and
+    # Oclgrind's time) down where the key type allows it
+    for n in (3, 2500):     # the gpu shape's tile is 1024 keys
+        k = rng.integers(0, 2**12, n).astype(np.uint32)
+        clvis.radix_sort(k, np.arange(n, dtype=np.uint32), key_bits=12, queue=q)
+    clvis.radix_sort(rng.standard_normal(300).astype(np.float32), queue=q)
+    clvis.radix_sort(rng.integers(-2**31, 2**31, 100).astype(np.int32), rng.random(100).astype(np.float32),
+                     queue=q)
+    clvis.radix_sort(rng.integers(0, 2**36, 200, dtype=np.uint64), key_bits=36, queue=q)
+    clvis.radix_sort(rng.standard_normal(50), queue=q)
+
+
+@case
+def histogram(q):
+    rng = _rng(4)
+    clvis.histogram(rng.integers(0, 16, 300).astype(np.int32), 16, queue=q)       # local bins
+    clvis.histogram(rng.integers(0, 300, 2500).astype(np.uint32), 300, queue=q)
+    clvis.histogram(rng.integers(0, 1000, 300).astype(np.uint32), 1000, queue=q)  # global: n < bins
+    clvis.histogram(rng.integers(0, 5000, 300).astype(np.int32), 4000, check=False, queue=q)
+
+
+@case
+def copy(q):
+    from clvis.primitives import copy as dcopy
+    rng = _rng(5)
+    dcopy(rng.random(257).astype(np.float32), queue=q)
+    dcopy(rng.integers(0, 255, 13).astype(np.uint8), queue=q)
+
+
+# --- raster ------------------------------------------------------------------
+
+def _raster_cam(w, h, eye=(0.3, -6.0, 1.2)):
+    return Camera.look_at(eye, (0.0, 0.0, 0.0), (0, 0, 1), fov_y=50.0, aspect=w / h, near=0.5, far=20.0)
+
+
+def _cloud(n, seed):
+    rng = _rng(seed)
+    pos = rng.normal(size=(n, 3)).astype(np.float32)
+    pos[::37] = np.nan                          # non-finite points are skipped
+    # duplicates: ties in depth go to the lowest index
+    pos[n // 2: n // 2 + 20] = pos[:20]
+    return pos
+
+
+@case
+def rasterize(q):
+    rng = _rng(6)
+    n, w, h = 300, 16, 12
+    pos = _cloud(n, 6)
+    colors = rng.integers(0, 256, (n, 4)).astype(np.uint8)
+    attrs = {"temp": rng.random(n).astype(np.float32), "cls": rng.integers(0, 5, n).astype(np.uint8)}
+    vel = rng.normal(size=(n, 3)).astype(np.float32)
+    radius = rng.uniform(0.01, 0.1, n).astype(np.float32)
+    # Morton order (morton_order: codes, iota, radix sort; then gather, invert)
+    r = clvis.Rasterizer(pos, colors=colors, attributes=attrs, velocity=vel, radius=radius, morton=True,
+                         batch_size=100, queue=q)
+    front, back = _raster_cam(w, h), _raster_cam(w, h, (-0.3, 6.0, -1.2))  # batch walk reverse = 0, 1
+    r.render(front, w, h, soft_z=True)                          # colors
+    r.render(back, w, h, color_by="temp", soft_z=1.05)          # a float attribute through the colormap
+    r.render(front, w, h, color_by="cls")                       # a uint8 attribute
+    # input order, white points, soft z; colors and radius only
+    clvis.rasterize(pos, _raster_cam(8, 8), 8, 8, soft_z=True, batch_size=50, queue=q)
+    clvis.rasterize(pos[:40], _raster_cam(32, 24), 32, 24, colors=colors[:40, :3], radius=radius[:40],
+                    morton=False, queue=q)
+
+
+@case
+def depth_filter(q):
+    rng = _rng(7)
+    h, w = 24, 20
+    depth = np.where(rng.random((h, w)) < 0.6, rng.uniform(2, 20, (h, w)), np.inf).astype(np.float32)
+    for levels in (0, 1, 3):
+        clvis.raster.depth_filter_mask(depth, levels, 1.05, edge_threshold=0.01, queue=q)
+    clvis.raster.depth_filter_mask(depth[:7, :5], 2, queue=q)
+    g = clvis.rasterize(_cloud(300, 8), _raster_cam(w, h), w, h, queue=q)
+    clvis.depth_filter(g, 2, queue=q)
+    rgba = rng.integers(0, 256, (h, w, 3)).astype(np.uint8)
+    clvis.raster.rgbda(rgba, depth, rng.random((h, w)) < 0.5, queue=q)
+
+
+# --- iso ---------------------------------------------------------------------
+
+def _volume(n=13, seed=9):
+    """A sphere-ish field with noise: [z, y, x] float32, edge blocks partial."""
+    zz, yy, xx = np.mgrid[:n, :n + 2, :n + 5].astype(np.float32)
+    c = (n - 1) / 2
+    r = np.sqrt((xx - c) ** 2 + (yy - c) ** 2 + (zz - c) ** 2) / c
+    return (1.0 - r + 0.05 * _rng(seed).standard_normal(r.shape)).astype(np.float32)
+
+
+def _iso_cam(w, h, eye=(30.0, -26.0, 18.0)):
+    return Camera.look_at(eye, (6.0, 6.0, 6.0), (0, 0, 1), fov_y=40, aspect=w / h, near=0.05, far=200)
+
+
+@case
+def zfp(q):
+    zv = clvis.zfp.compress(_volume(), 12)
+    clvis.zfp.decode(zv, queue=q)
+    clvis.zfp.decode_blocks(zv, [0, 3, zv.nblocks - 1, 1], queue=q, host=True)
+    ids = runtime.empty(q, 3, np.uint32, "ids")
+    ids.set(np.array([2, zv.nblocks + 5, 0], np.uint32))   # an out-of-range id: a NaN brick
+    clvis.zfp.decode_blocks(zv, ids, queue=q, host=True)
+
+
+@case
+def iso_render(q):
+    zv = clvis.zfp.compress(_volume(), 16)
+    w, h = 16, 12
+    # a 2-slot cache: it grows, and evicts in later passes
+    r = IsoRenderer(zv, cache_capacity=2, queue=q)
+    r.render(_iso_cam(w, h), w, h, 0.3, speculation=True)
+    r = IsoRenderer(zv, spacing=(1.0, 0.9, 1.1), origin=(-1.0, 0.0, 0.5), queue=q)
+    r.render(_iso_cam(8, 8, (-20.0, 30.0, -10.0)), 8, 8, 0.5, completion=0.9, speculation=False)
+
+
+@case
+def iso_cache(q):
+    """The LRU cache through evictions: fewer slots than needed blocks."""
+    zv = clvis.zfp.compress(_volume(), 8)
+    nb = zv.nblocks
+    cache = BlockCache(zv, 3, queue=q)
+    rng = _rng(10)
+    for _ in range(3):
+        needed = np.zeros(nb, np.uint8)
+        needed[rng.choice(nb, 2, replace=False)] = 1
+        cache.update(needed)
+    needed = np.zeros(nb, np.uint32)
+    needed[:5] = 1                  # more than the capacity: the cache grows
+    cache.update(needed)
+    clvis.iso.mark_blocks(np.array([0, 2, 3], np.uint32), zv, queue=q)
+
+
+# --- gauss -------------------------------------------------------------------
+
+def _gaussians(n, seed=11):
+    rng = _rng(seed)
+    means = rng.normal(size=(n, 3))
+    scales = rng.uniform(0.05, 0.3, size=(n, 3))
+    rot = frames_along(rng.normal(size=(n, 3)))
+    return Gaussians(means, scales, rot, rng.uniform(-1, 2, n), rng.uniform(0.05, 0.9, n))
+
+
+def _gauss_cam(w, h):
+    return Camera.look_at((0.3, -6.0, 1.2), (0, 0, 0), (0, 0, 1), fov_y=50.0, aspect=w / h, near=0.1, far=50.0)
+
+
+@case
+def gauss_lod(q):
+    rng = _rng(12)
+    vol = rng.random((12, 10, 19)).astype(np.float32)
+    sv = SparseVolume.from_dense(vol, threshold=0.6, spacing=(1.0, 0.5, 2.0), origin=(1.0, 2.0, 3.0))
+    for lod in ("low", "medium", "high"):
+        clvis.gaussians_from_volume(sv, lod, queue=q)
+    lod_table(sv, queue=q)
+    full = rng.random((9, 9, 9)).astype(np.float32)         # every voxel active: tiles of one value
+    full[:] = 0.5
+    clvis.gaussians_from_volume(full, "medium", queue=q)
+
+
+@case
+def gauss_bvh(q):
+    rng = _rng(13)
+    for n in (1, 3, 300):
+        lo = rng.normal(size=(n, 3)).astype(np.float32)
+        hi = lo + rng.uniform(0, 0.2, (n, 3)).astype(np.float32)
+        if n == 300:
+            lo[50:60] = lo[0]               # equal Morton codes
+            hi[50:60] = hi[0]
+        build_bvh(np.concatenate([lo, hi], axis=1), queue=q)
+
+
+@case
+def gauss_render(q):
+    g = _gaussians(120)
+    w, h = 16, 12
+    GaussianRenderer(g, model="max_response", queue=q).render(_gauss_cam(w, h), w, h)
+    # k=3: several k-buffer rounds per ray
+    GaussianRenderer(g, model="absorption", k=3, density=2.0, queue=q).render(_gauss_cam(9, 7), 9, 7)
+    GaussianRenderer(_gaussians(1, 14), queue=q).render(_gauss_cam(8, 8), 8, 8)
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) < 3 or argv[1] not in ("cpu", "gpu") or argv[2] not in ("int64", "no-int64"):
+        print("usage: cases.py cpu|gpu int64|no-int64 [CASE ...]", file=sys.stderr)
+        return 2
+    tuning, int64 = argv[1], argv[2] == "int64"
+    only = set(argv[3:])
+    warnings.simplefilter("ignore")     # compiler warnings are not what this run looks for
+    platforms = cl.get_platforms()
+    names = [p.name for p in platforms]
+    if names != ["Oclgrind"]:
+        print(f"cases.py: expected only the Oclgrind platform, got {names}", file=sys.stderr)
+        return 2
+    device = platforms[0].get_devices()[0]
+    failed = 0
+    with runtime.configure(tuning=tuning, int64_atomics=int64):
+        q = runtime.queue_for(device)
+        for fn in CASES:
+            if only and fn.__name__ not in only:
+                continue
+            _note("case", fn.__name__)
+            t0 = time.perf_counter()
+            try:
+                fn(q)
+                q.finish()
+            except Exception:  # noqa: BLE001  (reported, and the run goes on)
+                failed += 1
+                _note("error", json.dumps({"case": fn.__name__, "traceback": traceback.format_exc()}))
+            _note("time", f"{fn.__name__} {time.perf_counter() - t0:.2f}")
+        _note("case", "(end)")
+    _note("launched", json.dumps(LAUNCHED, sort_keys=True))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))

@@ -170,6 +170,12 @@ def rasterize(q):
     clvis.rasterize(pos, _raster_cam(8, 8), 8, 8, soft_z=True, batch_size=50, queue=q)
     clvis.rasterize(pos[:40], _raster_cam(32, 24), 32, 24, colors=colors[:40, :3], radius=radius[:40],
                     morton=False, queue=q)
+    # squares of 3 pixels (POINT_SIZE 3) at the image's edges, soft z too; non-finite points counted
+    bad = pos.copy()
+    bad[::7] = np.nan
+    r = clvis.Rasterizer(bad, colors=colors, batch_size=64, queue=q)
+    r.render(front, w, h, point_size=3, soft_z=True)
+    r.render(back, w, h, point_size=2)
 
 
 @case
@@ -219,6 +225,8 @@ def iso_render(q):
     r.render(_iso_cam(w, h), w, h, 0.3, speculation=True)
     r = IsoRenderer(zv, spacing=(1.0, 0.9, 1.1), origin=(-1.0, 0.0, 0.5), queue=q)
     r.render(_iso_cam(8, 8, (-20.0, 30.0, -10.0)), 8, 8, 0.5, completion=0.9, speculation=False)
+    # tiles of 37 pixels: every kernel starts mid-row at a tile's first pixel
+    r.render(_iso_cam(w, h), w, h, 0.3, tile_pixels=37)
 
 
 @case
@@ -285,6 +293,11 @@ def gauss_render(q):
     # k=3: several k-buffer rounds per ray
     GaussianRenderer(g, model="absorption", k=3, density=2.0, queue=q).render(_gauss_cam(9, 7), 9, 7)
     GaussianRenderer(_gaussians(1, 14), queue=q).render(_gauss_cam(8, 8), 8, 8)
+    # per-Gaussian colours (COLOR 1), in bands of 5 rows
+    coloured = _gaussians(60, 15)
+    coloured = Gaussians(coloured.means, coloured.scales, coloured.rotations, coloured.values,
+                         coloured.opacities, colors=_rng(15).integers(0, 256, (60, 3)).astype(np.uint8))
+    GaussianRenderer(coloured, queue=q).render(_gauss_cam(w, h), w, h, tile_rows=5)
 
 
 def main(argv: list[str]) -> int:

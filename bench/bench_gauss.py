@@ -28,9 +28,9 @@ import pytest
 from benchutil import run, scaled
 
 from clvis import Camera, datasets, runtime
+from clvis import primitives as P
 from clvis.camera import ray_buffer
 from clvis.colormap import TransferFunction
-from clvis import primitives as P
 from clvis.gauss import GaussianRenderer, Gaussians, build_bvh, gaussians_from_volume
 from clvis.gauss.points import frames_along
 from clvis.reference.gauss import bvh as ref_bvh
@@ -39,7 +39,7 @@ from clvis.reference.gauss import render as ref_render
 
 W = H = 512
 SIZES = {"1e4": 10_000, "1e5": 100_000, "1e6": 1_000_000}
-SUBSET = {"1e4": 1024, "1e5": 128, "1e6": 16}       # reference rays per round
+SUBSET = {"1e4": 1024, "1e5": 128, "1e6": 16}  # reference rays per round
 _cache = {}
 
 
@@ -48,8 +48,13 @@ def scene(label):
         n = scaled(SIZES[label])
         rng = np.random.default_rng(0)
         spacing = 2 / n ** (1 / 3)
-        g = Gaussians(rng.uniform(-1, 1, (n, 3)), rng.uniform(0.3, 1.0, (n, 3)) * spacing,
-                      frames_along(rng.normal(size=(n, 3))), rng.uniform(0, 1, n), rng.uniform(0.05, 0.5, n))
+        g = Gaussians(
+            rng.uniform(-1, 1, (n, 3)),
+            rng.uniform(0.3, 1.0, (n, 3)) * spacing,
+            frames_along(rng.normal(size=(n, 3))),
+            rng.uniform(0, 1, n),
+            rng.uniform(0.05, 0.5, n),
+        )
         lo, hi = g.bounds(1.0)
         cam = Camera.fit(lo, hi, aspect=W / H, fov_y=45)
         _cache[label] = (g, cam)
@@ -67,17 +72,42 @@ def test_bvh_build(benchmark, queue, label, impl):
     if impl == "clvis":
         bd = cla.to_device(queue, boxes)
         build_bvh(bd, queue=queue)
-        run(benchmark, lambda: build_bvh(bd, queue=queue), op=op, impl=impl, role="clvis", n=n,
-            nbytes=model, queue=queue, rounds=5)
+        run(
+            benchmark,
+            lambda: build_bvh(bd, queue=queue),
+            op=op,
+            impl=impl,
+            role="clvis",
+            n=n,
+            nbytes=model,
+            queue=queue,
+            rounds=5,
+        )
     elif impl == "np.argsort":
         codes = ref_bvh.morton_codes(boxes)
-        run(benchmark, lambda: np.argsort(codes, kind="stable"), op=op,
-            impl="np.argsort of the Morton codes alone", role="peer", n=n, nbytes=model, rounds=5)
+        run(
+            benchmark,
+            lambda: np.argsort(codes, kind="stable"),
+            op=op,
+            impl="np.argsort of the Morton codes alone",
+            role="peer",
+            n=n,
+            nbytes=model,
+            rounds=5,
+        )
     else:
         a = runtime.empty(queue, model // 8, np.float32, "copy src")
         b = runtime.empty(queue, model // 8, np.float32, "copy dst")
-        run(benchmark, lambda: P.copy(a, out=b), op=op, impl="copy kernel (56 B/Gaussian)", role="copy",
-            n=n, nbytes=model, queue=queue)
+        run(
+            benchmark,
+            lambda: P.copy(a, out=b),
+            op=op,
+            impl="copy kernel (56 B/Gaussian)",
+            role="copy",
+            n=n,
+            nbytes=model,
+            queue=queue,
+        )
 
 
 @pytest.mark.parametrize("label", list(SIZES))
@@ -89,9 +119,20 @@ def test_render(benchmark, queue, label, impl):
     if impl == "clvis":
         r = GaussianRenderer(g, queue=queue)
         info = r.render(cam, W, H).stats
-        run(benchmark, lambda: r.render(cam, W, H), op=op, impl=impl, role="clvis", n=rays,
-            nbytes=rays * 16, rounds=3, hits_per_ray=info["hits_per_ray_mean"],
-            rounds_per_ray=info["rounds_per_ray_mean"], k=info["k"], bvh_build_s=info["bvh_build_s"])
+        run(
+            benchmark,
+            lambda: r.render(cam, W, H),
+            op=op,
+            impl=impl,
+            role="clvis",
+            n=rays,
+            nbytes=rays * 16,
+            rounds=3,
+            hits_per_ray=info["hits_per_ray_mean"],
+            rounds_per_ray=info["rounds_per_ray_mean"],
+            k=info["k"],
+            bvh_build_s=info["bvh_build_s"],
+        )
     else:
         tf = TransferFunction()
         vmin, scale = tf.limits(g.values)
@@ -99,10 +140,30 @@ def test_render(benchmark, queue, label, impl):
         o, d = ref_render.camera_rays(cam_buf, W, H)
         m = min(SUBSET[label], rays)
         pick = np.linspace(0, rays - 1, m).astype(np.intp)
-        run(benchmark, lambda: ref_render.render_rays(g.means, g.scales, g.rotations, g.values, g.opacities,
-                                                      o[pick], d[pick], cam_buf, tf.table(), vmin, scale),
-            op=op, impl="numpy brute force (extrapolated from a ray subset)", role="peer", n=rays,
-            nbytes=rays * 16, rounds=3, time_scale=rays / m, subset_rays=m)
+        run(
+            benchmark,
+            lambda: ref_render.render_rays(
+                g.means,
+                g.scales,
+                g.rotations,
+                g.values,
+                g.opacities,
+                o[pick],
+                d[pick],
+                cam_buf,
+                tf.table(),
+                vmin,
+                scale,
+            ),
+            op=op,
+            impl="numpy brute force (extrapolated from a ray subset)",
+            role="peer",
+            n=rays,
+            nbytes=rays * 16,
+            rounds=3,
+            time_scale=rays / m,
+            subset_rays=m,
+        )
 
 
 @pytest.mark.parametrize("lod", ["low", "medium", "high"])
@@ -116,12 +177,30 @@ def test_lod(benchmark, queue, lod, impl):
     kw = {"lod": lod, "threshold": 0.0, "spacing": e["spacing"], "origin": e["origin"]}
     if impl == "clvis":
         g = gaussians_from_volume(vol, queue=queue, **kw)
-        run(benchmark, lambda: gaussians_from_volume(vol, queue=queue, **kw), op=op, impl=impl,
-            role="clvis", n=g.n, nbytes=vol.nbytes + g.nbytes, rounds=5, gaussians=g.n, bytes_out=g.nbytes)
+        run(
+            benchmark,
+            lambda: gaussians_from_volume(vol, queue=queue, **kw),
+            op=op,
+            impl=impl,
+            role="clvis",
+            n=g.n,
+            nbytes=vol.nbytes + g.nbytes,
+            rounds=5,
+            gaussians=g.n,
+            bytes_out=g.nbytes,
+        )
     else:
         g = gaussians_from_volume(vol, queue=queue, **kw)
-        run(benchmark, lambda: ref_lod.gaussians_from_volume(vol, **kw), op=op, impl="numpy reference",
-            role="peer", n=g.n, nbytes=vol.nbytes + g.nbytes, rounds=3)
+        run(
+            benchmark,
+            lambda: ref_lod.gaussians_from_volume(vol, **kw),
+            op=op,
+            impl="numpy reference",
+            role="peer",
+            n=g.n,
+            nbytes=vol.nbytes + g.nbytes,
+            rounds=3,
+        )
 
 
 def test_render_1080p(benchmark, queue):
@@ -132,6 +211,16 @@ def test_render_1080p(benchmark, queue):
     cam = Camera.fit(lo, hi, aspect=1920 / 1080, fov_y=45)
     r = GaussianRenderer(g, queue=queue)
     info = r.render(cam, 1920, 1080).stats
-    run(benchmark, lambda: r.render(cam, 1920, 1080), op="render[1e6 Gaussians, 1920x1080]", impl="clvis",
-        role="clvis", n=1920 * 1080, nbytes=1920 * 1080 * 16, rounds=2,
-        hits_per_ray=info["hits_per_ray_mean"], rounds_per_ray=info["rounds_per_ray_mean"], k=info["k"])
+    run(
+        benchmark,
+        lambda: r.render(cam, 1920, 1080),
+        op="render[1e6 Gaussians, 1920x1080]",
+        impl="clvis",
+        role="clvis",
+        n=1920 * 1080,
+        nbytes=1920 * 1080 * 16,
+        rounds=2,
+        hits_per_ray=info["hits_per_ray_mean"],
+        rounds_per_ray=info["rounds_per_ray_mean"],
+        k=info["k"],
+    )

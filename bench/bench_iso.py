@@ -56,12 +56,18 @@ def _cold(r, cam, w, h, completion, speculation=True):
 
 
 # the peers render whole frames / extract the whole surface: compared at 100% only
-CASES = [(s, c, i) for s in SIZES for c in (1.0, 0.85) for i in ("clvis", "marching_cubes", "numpy")
-         if c == 1.0 or i == "clvis"]
+CASES = [
+    (s, c, i)
+    for s in SIZES
+    for c in (1.0, 0.85)
+    for i in ("clvis", "marching_cubes", "numpy")
+    if c == 1.0 or i == "clvis"
+]
 
 
-@pytest.mark.parametrize("size,completion,impl", CASES,
-                         ids=[f"{s}-{round(c * 100)}%-{i}" for s, c, i in CASES])
+@pytest.mark.parametrize(
+    "size,completion,impl", CASES, ids=[f"{s}-{round(c * 100)}%-{i}" for s, c, i in CASES]
+)
 def test_iso(benchmark, queue, size, completion, impl):
     d, zv, r, lo, hi = scene(queue)
     w, h = SIZES[size]
@@ -74,25 +80,56 @@ def test_iso(benchmark, queue, size, completion, impl):
         fine, _ = r.grids.active(ISO)
         st = spec.stats
         dev = sum(st["device_bytes"].values())
-        run(benchmark, lambda: _cold(r, cam, w, h, completion), op=op, impl=impl, role="clvis", n=rays,
-            nbytes=zv.nbytes, rounds=3, passes=st["passes"], passes_without_speculation=plain.stats["passes"],
+        run(
+            benchmark,
+            lambda: _cold(r, cam, w, h, completion),
+            op=op,
+            impl=impl,
+            role="clvis",
+            n=rays,
+            nbytes=zv.nbytes,
+            rounds=3,
+            passes=st["passes"],
+            passes_without_speculation=plain.stats["passes"],
             pass_reduction=plain.stats["passes"] / max(st["passes"], 1),
-            blocks_decoded=st["blocks_decoded"], blocks_decoded_without_speculation=plain.stats["blocks_decoded"],
-            isovalue_blocks=int(fine.sum()), blocks=zv.nblocks,
+            blocks_decoded=st["blocks_decoded"],
+            blocks_decoded_without_speculation=plain.stats["blocks_decoded"],
+            isovalue_blocks=int(fine.sum()),
+            blocks=zv.nblocks,
             decoded_per_isovalue_block=st["blocks_decoded"] / max(int(fine.sum()), 1),
-            device_bytes=st["device_bytes"], device_memory_fraction=dev / d["volume"].nbytes,
-            completion=spec.completion, hits=int(spec.hit.sum()))
+            device_bytes=st["device_bytes"],
+            device_memory_fraction=dev / d["volume"].nbytes,
+            completion=spec.completion,
+            hits=int(spec.hit.sum()),
+        )
     elif impl == "marching_cubes":
         from skimage.measure import marching_cubes
+
         vol = zfp.decode(zv)
-        run(benchmark, lambda: marching_cubes(vol, ISO), op=op, impl="skimage.measure.marching_cubes",
-            role="peer", n=rays, nbytes=zv.nbytes, rounds=3)
+        run(
+            benchmark,
+            lambda: marching_cubes(vol, ISO),
+            op=op,
+            impl="skimage.measure.marching_cubes",
+            role="peer",
+            n=rays,
+            nbytes=zv.nbytes,
+            rounds=3,
+        )
     else:
         vol = zfp.decode(zv)
         o, dd = camera_rays(ray_buffer(cam, w, h), w, h)
         m = 2048
         pick = np.linspace(0, rays - 1, m).astype(np.intp)
-        run(benchmark, lambda: ref.render_rays(vol, o[pick], dd[pick], ISO, spacing=d["spacing"],
-                                               origin=d["origin"]),
-            op=op, impl="numpy dense reference (extrapolated from a ray subset)", role="peer", n=rays,
-            nbytes=zv.nbytes, rounds=3, time_scale=rays / m, subset_rays=m)
+        run(
+            benchmark,
+            lambda: ref.render_rays(vol, o[pick], dd[pick], ISO, spacing=d["spacing"], origin=d["origin"]),
+            op=op,
+            impl="numpy dense reference (extrapolated from a ray subset)",
+            role="peer",
+            n=rays,
+            nbytes=zv.nbytes,
+            rounds=3,
+            time_scale=rays / m,
+            subset_rays=m,
+        )

@@ -38,8 +38,12 @@ def scan_data(queue, dtype):
 
 SCAN_IMPLS = ["clvis", "clvis-host", "numpy", "numpy-same-dtype", "pyopencl", "copy"]
 # np.cumsum(x) already keeps float32: the same-dtype peer exists for int32 only
-SCAN_CASES = [(d, i) for d in ("int32", "float32") for i in SCAN_IMPLS
-              if not (d == "float32" and i == "numpy-same-dtype")]
+SCAN_CASES = [
+    (d, i)
+    for d in ("int32", "float32")
+    for i in SCAN_IMPLS
+    if not (d == "float32" and i == "numpy-same-dtype")
+]
 
 
 @pytest.mark.parametrize("dtype,impl", SCAN_CASES)
@@ -50,23 +54,46 @@ def test_scan(benchmark, queue, dtype, impl):
     op = f"scan[{dt.name}]"
     model = 2 * n * dt.itemsize
     if impl == "clvis":
-        run(benchmark, lambda: clvis.scan(xd, out=out), op=op, impl=impl, role="clvis",
-            n=n, nbytes=model, queue=queue)
+        run(
+            benchmark,
+            lambda: clvis.scan(xd, out=out),
+            op=op,
+            impl=impl,
+            role="clvis",
+            n=n,
+            nbytes=model,
+            queue=queue,
+        )
     elif impl == "clvis-host":
         run(benchmark, lambda: clvis.scan(x), op=op, impl=impl, role="clvis-host", n=n, nbytes=model)
     elif impl == "numpy":
         # as users call it: int32 sums in int64
-        run(benchmark, lambda: np.cumsum(x), op=op, impl="numpy.cumsum(x)", role="peer",
-            n=n, nbytes=model)
+        run(benchmark, lambda: np.cumsum(x), op=op, impl="numpy.cumsum(x)", role="peer", n=n, nbytes=model)
     elif impl == "numpy-same-dtype":
         # the same output as clvis's (sums wrapping in 32 bits)
-        run(benchmark, lambda: np.cumsum(x, dtype=dt), op=op, impl="numpy.cumsum(x, dtype=x.dtype)",
-            role="peer", n=n, nbytes=model)
+        run(
+            benchmark,
+            lambda: np.cumsum(x, dtype=dt),
+            op=op,
+            impl="numpy.cumsum(x, dtype=x.dtype)",
+            role="peer",
+            n=n,
+            nbytes=model,
+        )
     elif impl == "pyopencl":
         from pyopencl.scan import ExclusiveScanKernel
+
         knl = ExclusiveScanKernel(queue.context, dt, "a+b", "0")
-        run(benchmark, lambda: knl(xd, out), op=op, impl="pyopencl.ExclusiveScanKernel",
-            role="peer", n=n, nbytes=model, queue=queue)
+        run(
+            benchmark,
+            lambda: knl(xd, out),
+            op=op,
+            impl="pyopencl.ExclusiveScanKernel",
+            role="peer",
+            n=n,
+            nbytes=model,
+            queue=queue,
+        )
     else:
         run_copy(benchmark, queue, op, xd, n, out=out)
 
@@ -92,19 +119,34 @@ def test_compact(benchmark, queue, compact_data, impl):
     op = "compact[int32, half kept]"
     model = (n + k) * x.itemsize
     if impl == "clvis":
-        run(benchmark, lambda: clvis.compact(xd, fd), op=op, impl=impl, role="clvis", n=n,
-            nbytes=model, queue=queue)
+        run(
+            benchmark,
+            lambda: clvis.compact(xd, fd),
+            op=op,
+            impl=impl,
+            role="clvis",
+            n=n,
+            nbytes=model,
+            queue=queue,
+        )
     elif impl == "clvis-host":
-        run(benchmark, lambda: clvis.compact(x, mask), op=op, impl=impl, role="clvis-host",
-            n=n, nbytes=model)
+        run(benchmark, lambda: clvis.compact(x, mask), op=op, impl=impl, role="clvis-host", n=n, nbytes=model)
     elif impl == "numpy":
-        run(benchmark, lambda: x[mask], op=op, impl="numpy boolean mask", role="peer", n=n,
-            nbytes=model)
+        run(benchmark, lambda: x[mask], op=op, impl="numpy boolean mask", role="peer", n=n, nbytes=model)
     elif impl == "pyopencl":
         from pyopencl.algorithm import copy_if
-        run(benchmark, lambda: copy_if(xd, "flags[i] != 0", extra_args=[("flags", fd)]),
-            op=op, impl="pyopencl.algorithm.copy_if", role="peer", n=n, nbytes=model,
-            queue=queue, rounds=3)
+
+        run(
+            benchmark,
+            lambda: copy_if(xd, "flags[i] != 0", extra_args=[("flags", fd)]),
+            op=op,
+            impl="pyopencl.algorithm.copy_if",
+            role="peer",
+            n=n,
+            nbytes=model,
+            queue=queue,
+            rounds=3,
+        )
     else:
         run_copy(benchmark, queue, op, xd, n)
 
@@ -136,24 +178,65 @@ def test_radix_sort(benchmark, queue, sort_data, impl):
     passes = _passes(queue)
     model = passes * n * (3 * 4 + 2 * 4)
     if impl == "clvis":
-        run(benchmark, lambda: clvis.radix_sort(kd, vd), op=op, impl=impl, role="clvis", n=n,
-            nbytes=model, queue=queue, passes=passes)
+        run(
+            benchmark,
+            lambda: clvis.radix_sort(kd, vd),
+            op=op,
+            impl=impl,
+            role="clvis",
+            n=n,
+            nbytes=model,
+            queue=queue,
+            passes=passes,
+        )
     elif impl == "clvis-host":
-        run(benchmark, lambda: clvis.radix_sort(keys, vals), op=op, impl=impl,
-            role="clvis-host", n=n, nbytes=model, passes=passes)
+        run(
+            benchmark,
+            lambda: clvis.radix_sort(keys, vals),
+            op=op,
+            impl=impl,
+            role="clvis-host",
+            n=n,
+            nbytes=model,
+            passes=passes,
+        )
     elif impl == "numpy":
+
         def np_sort():
             order = np.argsort(keys, kind="stable")
             return keys[order], vals[order]
-        run(benchmark, np_sort, op=op, impl="numpy argsort(stable) + gather", role="peer", n=n,
-            nbytes=model, rounds=3)
+
+        run(
+            benchmark,
+            np_sort,
+            op=op,
+            impl="numpy argsort(stable) + gather",
+            role="peer",
+            n=n,
+            nbytes=model,
+            rounds=3,
+        )
     elif impl == "pyopencl":
         from pyopencl.algorithm import RadixSort
-        sorter = RadixSort(queue.context, "unsigned *keys, unsigned *vals", key_expr="keys[i]",
-                           sort_arg_names=["keys", "vals"], key_dtype=np.uint32)
-        run(benchmark, lambda: sorter(kd, vd, key_bits=32, queue=queue), op=op,
-            impl="pyopencl.algorithm.RadixSort", role="peer", n=n, nbytes=model,
-            queue=queue, rounds=2)
+
+        sorter = RadixSort(
+            queue.context,
+            "unsigned *keys, unsigned *vals",
+            key_expr="keys[i]",
+            sort_arg_names=["keys", "vals"],
+            key_dtype=np.uint32,
+        )
+        run(
+            benchmark,
+            lambda: sorter(kd, vd, key_bits=32, queue=queue),
+            op=op,
+            impl="pyopencl.algorithm.RadixSort",
+            role="peer",
+            n=n,
+            nbytes=model,
+            queue=queue,
+            rounds=2,
+        )
     else:
         run_copy(benchmark, queue, op, kd, n)
 
@@ -178,10 +261,25 @@ def test_histogram(benchmark, queue, hist_data, impl):
     op = "histogram[256 bins]"
     model = n * keys.itemsize
     if impl == "clvis":
-        run(benchmark, lambda: clvis.histogram(kd, 256), op=op, impl=impl, role="clvis", n=n,
-            nbytes=model, queue=queue)
+        run(
+            benchmark,
+            lambda: clvis.histogram(kd, 256),
+            op=op,
+            impl=impl,
+            role="clvis",
+            n=n,
+            nbytes=model,
+            queue=queue,
+        )
     elif impl == "numpy":
-        run(benchmark, lambda: np.bincount(keys, minlength=256), op=op, impl="numpy.bincount",
-            role="peer", n=n, nbytes=model)
+        run(
+            benchmark,
+            lambda: np.bincount(keys, minlength=256),
+            op=op,
+            impl="numpy.bincount",
+            role="peer",
+            n=n,
+            nbytes=model,
+        )
     else:
         run_copy(benchmark, queue, op, kd, n)

@@ -45,8 +45,9 @@ def scene(queue):
         lo, hi = pos.min(axis=0), pos.max(axis=0)
         cam = clvis.Camera.fit(lo, hi, aspect=W / H)
         centre = (lo + hi) / 2
-        close = clvis.Camera.look_at(centre + [0, -40, 60], centre + [0, 10, 0], (0, 0, 1),
-                                     fov_y=50, aspect=W / H, near=1, far=2000)
+        close = clvis.Camera.look_at(
+            centre + [0, -40, 60], centre + [0, 10, 0], (0, 0, 1), fov_y=50, aspect=W / H, near=1, far=2000
+        )
         _cache["scene"] = (pos, colors, pos[shuffle], colors[shuffle], cam, close)
     return _cache["scene"]
 
@@ -60,8 +61,11 @@ def rasterizer(queue, which):
     return _cache[key]
 
 
-OPS = {"morton order": "raster[morton order]", "random order": "raster[random order]",
-       "culled view": "raster[culled view]"}
+OPS = {
+    "morton order": "raster[morton order]",
+    "random order": "raster[random order]",
+    "culled view": "raster[culled view]",
+}
 IMPLS = ["clvis", "numpy-reference", "numpy-minimum.at", "copy"]
 CASES = [(o, i) for o in OPS for i in IMPLS if not (o == "culled view" and i == "numpy-minimum.at")]
 
@@ -75,13 +79,31 @@ def test_raster(benchmark, queue, order, impl):
     model = 16 * N
     if impl == "clvis":
         r = rasterizer(queue, order)
-        info = r.render(camera, W, H).stats       # warm-up, and the culling figures
-        run(benchmark, lambda: r.render(camera, W, H, host=False), op=op, impl=impl, role="clvis",
-            n=N, nbytes=model, queue=queue, batches=info["batches"],
-            batches_drawn=info["batches_drawn"], points_read=info["points_read"])
+        info = r.render(camera, W, H).stats  # warm-up, and the culling figures
+        run(
+            benchmark,
+            lambda: r.render(camera, W, H, host=False),
+            op=op,
+            impl=impl,
+            role="clvis",
+            n=N,
+            nbytes=model,
+            queue=queue,
+            batches=info["batches"],
+            batches_drawn=info["batches_drawn"],
+            points_read=info["points_read"],
+        )
     elif impl == "numpy-reference":
-        run(benchmark, lambda: ref.visibility(points, camera, W, H), op=op,
-            impl="numpy reference render (np.minimum.at)", role="peer", n=N, nbytes=model, rounds=3)
+        run(
+            benchmark,
+            lambda: ref.visibility(points, camera, W, H),
+            op=op,
+            impl="numpy reference render (np.minimum.at)",
+            role="peer",
+            n=N,
+            nbytes=model,
+            rounds=3,
+        )
     elif impl == "numpy-minimum.at":
         pr = camera.project(points, W, H)
         idx = np.flatnonzero(pr.visible)
@@ -92,11 +114,28 @@ def test_raster(benchmark, queue, order, impl):
         def scatter():
             vis.fill(np.iinfo(np.uint64).max)
             np.minimum.at(vis, pix, keys)
-        run(benchmark, scatter, op=op, impl="np.minimum.at alone (keys precomputed)", role="peer",
-            n=N, nbytes=model, rounds=3)
+
+        run(
+            benchmark,
+            scatter,
+            op=op,
+            impl="np.minimum.at alone (keys precomputed)",
+            role="peer",
+            n=N,
+            nbytes=model,
+            rounds=3,
+        )
     else:
         src = _cache.get("copy")
         if src is None:
             src = _cache["copy"] = (cla.empty(queue, 4 * N, np.float32), cla.empty(queue, 4 * N, np.float32))
-        run(benchmark, lambda: P.copy(src[0], out=src[1]), op=op, impl="copy kernel (16 B/point)",
-            role="copy", n=N, nbytes=2 * src[0].nbytes, queue=queue)
+        run(
+            benchmark,
+            lambda: P.copy(src[0], out=src[1]),
+            op=op,
+            impl="copy kernel (16 B/point)",
+            role="copy",
+            n=N,
+            nbytes=2 * src[0].nbytes,
+            queue=queue,
+        )

@@ -30,5 +30,14 @@ def run_copy(benchmark, queue, op, xd, n, out=None):
     """The op's bandwidth limit: the device copy kernel over its main array
     (into `out`, the buffer the op itself writes, where there is one)."""
     from clvis import primitives
-    run(benchmark, lambda: primitives.copy(xd, out=out), op=op, impl="copy kernel", role="copy",
-        n=n, nbytes=2 * xd.nbytes, queue=queue)
+
+    run(
+        benchmark,
+        lambda: primitives.copy(xd, out=out),
+        op=op,
+        impl="copy kernel",
+        role="copy",
+        n=n,
+        nbytes=2 * xd.nbytes,
+        queue=queue,
+    )

@@ -48,8 +48,13 @@ def _dtype_names(dtypes) -> str:
 MAX_LENGTH = 2**32 - 1
 
 
-def check_array(name: str, x: Any, dtypes: Iterable[Any] | None = None, ndim: int | None = None,
-                min_ndim: int | None = None) -> Any:
+def check_array(
+    name: str,
+    x: Any,
+    dtypes: Iterable[Any] | None = None,
+    ndim: int | None = None,
+    min_ndim: int | None = None,
+) -> Any:
     """Check dtype and rank; returns x (a device array) or a C-contiguous numpy array.
 
     Object arrays raise a TypeError naming the argument; host arrays in the
@@ -67,8 +72,9 @@ def check_array(name: str, x: Any, dtypes: Iterable[Any] | None = None, ndim: in
         if not x.dtype.isnative:
             x = x.astype(x.dtype.newbyteorder("="))
     if dtypes is not None and np.dtype(x.dtype) not in [np.dtype(d) for d in dtypes]:
-        raise TypeError(f"{name}: dtype {np.dtype(x.dtype).name} is not supported; "
-                        f"expected one of {_dtype_names(dtypes)}")
+        raise TypeError(
+            f"{name}: dtype {np.dtype(x.dtype).name} is not supported; expected one of {_dtype_names(dtypes)}"
+        )
     if ndim is not None and x.ndim != ndim:
         raise ValueError(f"{name}: expected a {ndim}-D array, got shape {tuple(x.shape)}")
     if min_ndim is not None and x.ndim < min_ndim:
@@ -85,7 +91,7 @@ def to_device(queue: cl.CommandQueue, name: str, x: Any) -> cla.Array:
     """x (checked) on the device: device arrays as they are, numpy copied in."""
     if is_device(x):
         if x.offset:
-            x = x.copy()        # kernels take whole buffers; a view with an offset is copied once
+            x = x.copy()  # kernels take whole buffers; a view with an offset is copied once
         return x
     d = runtime.empty(queue, x.shape, x.dtype, name)
     if x.size:
@@ -147,7 +153,7 @@ def triple(name: str, v, positive: bool) -> tuple[float, float, float]:
         raise TypeError(f"{name}: expected 3 numbers, got {type(v).__name__}") from None
     if len(t) != 3:
         raise ValueError(f"{name}: expected 3 numbers, got {len(t)}")
-    with np.errstate(over="ignore"):        # overflow is what the check reports
+    with np.errstate(over="ignore"):  # overflow is what the check reports
         f32 = np.asarray(t, np.float32)
     if not np.isfinite(f32).all():
         raise ValueError(f"{name}: {t} is not finite as float32")

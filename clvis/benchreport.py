@@ -51,17 +51,19 @@ class Row:
 @dataclasses.dataclass
 class Target:
     op: str
-    what: str          # "copy_pct", the impl name of a peer, or "info:<key>" (a figure the clvis row records)
+    what: str  # "copy_pct", the impl name of a peer, or "info:<key>" (a figure the clvis row records)
     at_least: float
-    devices: str       # "cpu" or "gpu": the tuning profile it applies to
-    at_most: bool = False   # for "info:" targets: the figure must be <= at_least instead
+    devices: str  # "cpu" or "gpu": the tuning profile it applies to
+    at_most: bool = False  # for "info:" targets: the figure must be <= at_least instead
     label: str = ""
 
     def describe(self) -> str:
         if self.what == "copy_pct":
             return f"{self.op}: >= {self.at_least:g}% of copy bandwidth"
         if self.what.startswith("info:"):
-            return f"{self.op}: {self.label or self.what[5:]} {'<=' if self.at_most else '>='} {self.at_least:g}"
+            return (
+                f"{self.op}: {self.label or self.what[5:]} {'<=' if self.at_most else '>='} {self.at_least:g}"
+            )
         return f"{self.op}: >= {self.at_least:g}x {self.what}"
 
 
@@ -93,16 +95,29 @@ TARGETS = {
     "iso": [
         # on PoCL's CPU device (2 cores): a 256^3 volume at 512x512
         Target(ISO_OP, "info:pass_reduction", 5, "cpu", label="passes without / with speculation"),
-        Target(ISO_OP, "info:decoded_per_isovalue_block", 1 / 3, "cpu", at_most=True,
-               label="blocks decoded / blocks holding the isovalue (BCMC's)"),
-        Target(ISO_OP, "info:device_memory_fraction", 0.25, "cpu", at_most=True,
-               label="device memory / decoded volume"),
+        Target(
+            ISO_OP,
+            "info:decoded_per_isovalue_block",
+            1 / 3,
+            "cpu",
+            at_most=True,
+            label="blocks decoded / blocks holding the isovalue (BCMC's)",
+        ),
+        Target(
+            ISO_OP,
+            "info:device_memory_fraction",
+            0.25,
+            "cpu",
+            at_most=True,
+            label="device memory / decoded volume",
+        ),
         Target(ISO_OP, "skimage.measure.marching_cubes", 1, "cpu"),
     ],
     "gauss": [
         # on PoCL's CPU device (2 cores)
-        Target("render[1e5 Gaussians, 512x512]", "numpy brute force (extrapolated from a ray subset)", 500,
-               "cpu"),
+        Target(
+            "render[1e5 Gaussians, 512x512]", "numpy brute force (extrapolated from a ray subset)", 500, "cpu"
+        ),
         Target("bvh_build[1e6 Gaussians]", "np.argsort of the Morton codes alone", 1, "cpu"),
     ],
 }
@@ -120,9 +135,19 @@ def load(path: str | os.PathLike[str]) -> tuple[list[Row], dict]:
         # a peer timed on a subset (e.g. 1/4096 of the rays of a frame) and
         # scaled to the whole op: extra_info "time_scale"
         f = float(info.get("time_scale", 1.0))
-        rows.append(Row(op=info["op"], impl=info["impl"], role=info["role"], n=info["n"],
-                        bytes=info["bytes"], median_s=st["median"] * f, min_s=st["min"] * f,
-                        rounds=st["rounds"], info=info))
+        rows.append(
+            Row(
+                op=info["op"],
+                impl=info["impl"],
+                role=info["role"],
+                n=info["n"],
+                bytes=info["bytes"],
+                median_s=st["median"] * f,
+                min_s=st["min"] * f,
+                rounds=st["rounds"],
+                info=info,
+            )
+        )
     copy = {r.op: r.gbs for r in rows if r.role == "copy"}
     for r in rows:
         r.copy_gbs = copy.get(r.op)
@@ -169,10 +194,14 @@ def format_table(rows: list[Row], meta: dict | None = None) -> str:
     rat = ratios(rows)
     lines = []
     if meta:
-        lines.append(f"device: {meta.get('device', '?')}   tuning: {meta.get('tuning', '?')}   "
-                     f"clvis {meta.get('version', '?')}   scale {meta.get('scale', 1)}")
-    head = (f"{'implementation':38} {'best':>9} {'median':>9} {'throughput':>14} {'GB/s':>7} "
-            f"{'% copy':>7} {'clvis speed-up':>15}")
+        lines.append(
+            f"device: {meta.get('device', '?')}   tuning: {meta.get('tuning', '?')}   "
+            f"clvis {meta.get('version', '?')}   scale {meta.get('scale', 1)}"
+        )
+    head = (
+        f"{'implementation':38} {'best':>9} {'median':>9} {'throughput':>14} {'GB/s':>7} "
+        f"{'% copy':>7} {'clvis speed-up':>15}"
+    )
     for op in dict.fromkeys(r.op for r in rows):
         ops = [r for r in rows if r.op == op]
         n = ops[0].n
@@ -183,18 +212,25 @@ def format_table(rows: list[Row], meta: dict | None = None) -> str:
                 name = "clvis (numpy in/out, transfers)"
             pct = f"{r.copy_pct:6.0f}%" if r.copy_pct is not None else "      -"
             speed = f"{rat[(op, r.impl)]:14.1f}x" if (op, r.impl) in rat else ""
-            lines.append(f"{name:38} {r.min_s * 1e3:7.2f}ms {r.median_s * 1e3:7.2f}ms "
-                         f"{_si(r.elems_per_s) + 'el/s':>14} {r.gbs:7.1f} {pct} {speed:>15}")
+            lines.append(
+                f"{name:38} {r.min_s * 1e3:7.2f}ms {r.median_s * 1e3:7.2f}ms "
+                f"{_si(r.elems_per_s) + 'el/s':>14} {r.gbs:7.1f} {pct} {speed:>15}"
+            )
     return "\n".join(lines)
 
 
 def format_checks(results: Iterable[tuple[Target, float | None, bool]]) -> str:
     lines = []
     for t, value, ok in results:
-        if value is None:   # not in this run; --check still counts it as unmet
+        if value is None:  # not in this run; --check still counts it as unmet
             lines.append(f"  [not measured] {t.describe()}")
             continue
-        v = (f"{value:.0f}%" if t.what == "copy_pct" else f"{value:.3g}" if t.what.startswith("info:")
-             else f"{value:.1f}x")
+        v = (
+            f"{value:.0f}%"
+            if t.what == "copy_pct"
+            else f"{value:.3g}"
+            if t.what.startswith("info:")
+            else f"{value:.1f}x"
+        )
         lines.append(f"  [{'met' if ok else 'MISSED'}] {t.describe()}: {v}")
     return "\n".join(lines)

@@ -28,8 +28,16 @@ import numpy.typing as npt
 from ._arrays import positive_int, real_array
 from .errors import DataError
 
-__all__ = ["CAMERA_DTYPE", "Camera", "Projected", "camera_buffer", "grid_cameras", "hemisphere_cameras",
-           "ray_buffer", "singular"]
+__all__ = [
+    "CAMERA_DTYPE",
+    "Camera",
+    "Projected",
+    "camera_buffer",
+    "grid_cameras",
+    "hemisphere_cameras",
+    "ray_buffer",
+    "singular",
+]
 
 # Camera.fit frames the bounding sphere enlarged by this factor, so rounding never
 # pushes a box corner out of the image.
@@ -92,8 +100,9 @@ def _image_size(name: str, v) -> int:
     return int(v)
 
 
-def singular(projection: np.ndarray, view: np.ndarray | None = None,
-             depth_row: np.ndarray | None = None) -> str | None:
+def singular(
+    projection: np.ndarray, view: np.ndarray | None = None, depth_row: np.ndarray | None = None
+) -> str | None:
     """Why projection @ view has no usable inverse (rays and the depth key come
     from it), or None. Checked apart, and scale-free: the projection by its
     condition number (world coordinates do not enter it), the view's rotation
@@ -117,8 +126,9 @@ def singular(projection: np.ndarray, view: np.ndarray | None = None,
 def _bounds(bounds_min, bounds_max) -> tuple[np.ndarray, np.ndarray]:
     lo, hi = _vec3("bounds_min", bounds_min), _vec3("bounds_max", bounds_max)
     if (hi < lo).any():
-        raise ValueError(f"bounds_max: must be >= bounds_min component-wise, got {hi.tolist()} "
-                         f"< {lo.tolist()}")
+        raise ValueError(
+            f"bounds_max: must be >= bounds_min component-wise, got {hi.tolist()} < {lo.tolist()}"
+        )
     return lo, hi
 
 
@@ -227,9 +237,11 @@ class Camera:
         near, far = _near_far(self.near, self.far, not self.orthographic)
         why = singular(self.projection, self.view)
         if why is not None:
-            raise DataError(f"camera: {why}; make cameras with Camera.look_at, Camera.ortho or Camera.fit, "
-                            "whose arguments are checked (fov_y, aspect, near < far, eye != target, up not "
-                            "along the view)")
+            raise DataError(
+                f"camera: {why}; make cameras with Camera.look_at, Camera.ortho or Camera.fit, "
+                "whose arguments are checked (fov_y, aspect, near < far, eye != target, up not "
+                "along the view)"
+            )
         eye = _vec3("eye", self.eye)
         eye.setflags(write=False)
         object.__setattr__(self, "near", near)
@@ -239,12 +251,22 @@ class Camera:
 
     def __repr__(self) -> str:
         kind = "orthographic" if self.orthographic else "perspective"
-        return (f"Camera({kind}, eye={self.eye.tolist()}, forward={self.forward.tolist()}, "
-                f"near={self.near:g}, far={self.far:g})")
+        return (
+            f"Camera({kind}, eye={self.eye.tolist()}, forward={self.forward.tolist()}, "
+            f"near={self.near:g}, far={self.far:g})"
+        )
 
     @classmethod
-    def look_at(cls, eye: npt.ArrayLike, target: npt.ArrayLike, up: npt.ArrayLike = (0, 0, 1),
-                fov_y: float = 60.0, aspect: float = 1.0, near: float = 0.1, far: float = 1000.0) -> Camera:
+    def look_at(
+        cls,
+        eye: npt.ArrayLike,
+        target: npt.ArrayLike,
+        up: npt.ArrayLike = (0, 0, 1),
+        fov_y: float = 60.0,
+        aspect: float = 1.0,
+        near: float = 0.1,
+        far: float = 1000.0,
+    ) -> Camera:
         """A perspective camera at `eye` looking at `target`.
 
         `fov_y` is the vertical field of view in degrees, `aspect` = width / height.
@@ -252,12 +274,21 @@ class Camera:
         eye, target, up = _vec3("eye", eye), _vec3("target", target), _vec3("up", up)
         fov_y, aspect = _fov(fov_y), _positive("aspect", aspect)
         near, far = _near_far(near, far, perspective=True)
-        return cls(_view_matrix(eye, target, up), _perspective(fov_y, aspect, near, far),
-                   near, far, False, eye)
+        return cls(
+            _view_matrix(eye, target, up), _perspective(fov_y, aspect, near, far), near, far, False, eye
+        )
 
     @classmethod
-    def ortho(cls, eye: npt.ArrayLike, target: npt.ArrayLike, up: npt.ArrayLike = (0, 0, 1),
-              height: float = 2.0, aspect: float = 1.0, near: float = 0.1, far: float = 1000.0) -> Camera:
+    def ortho(
+        cls,
+        eye: npt.ArrayLike,
+        target: npt.ArrayLike,
+        up: npt.ArrayLike = (0, 0, 1),
+        height: float = 2.0,
+        aspect: float = 1.0,
+        near: float = 0.1,
+        far: float = 1000.0,
+    ) -> Camera:
         """An orthographic camera at `eye` looking at `target`.
 
         `height` is the world-space height of the view volume (its width is
@@ -266,13 +297,18 @@ class Camera:
         eye, target, up = _vec3("eye", eye), _vec3("target", target), _vec3("up", up)
         height, aspect = _positive("height", height), _positive("aspect", aspect)
         near, far = _near_far(near, far, perspective=False)
-        return cls(_view_matrix(eye, target, up), _ortho(height, aspect, near, far),
-                   near, far, True, eye)
+        return cls(_view_matrix(eye, target, up), _ortho(height, aspect, near, far), near, far, True, eye)
 
     @classmethod
-    def fit(cls, bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike,
-            direction: npt.ArrayLike = (-1, -1, -0.6), up: npt.ArrayLike = (0, 0, 1),
-            fov_y: float = 60.0, aspect: float = 1.0) -> Camera:
+    def fit(
+        cls,
+        bounds_min: npt.ArrayLike,
+        bounds_max: npt.ArrayLike,
+        direction: npt.ArrayLike = (-1, -1, -0.6),
+        up: npt.ArrayLike = (0, 0, 1),
+        fov_y: float = 60.0,
+        aspect: float = 1.0,
+    ) -> Camera:
         """A perspective camera that frames the whole box.
 
         It looks at the box centre along `direction` (the view direction, from the
@@ -335,15 +371,23 @@ class Camera:
         x, y, z = p[:, 0], p[:, 1], p[:, 2]
         half = np.float32(0.5)
         with np.errstate(all="ignore"):
-            clip_x, clip_y, clip_w = (((m[i, 0] * x + m[i, 1] * y) + m[i, 2] * z) + m[i, 3]
-                                      for i in (0, 1, 3))
+            clip_x, clip_y, clip_w = (
+                ((m[i, 0] * x + m[i, 1] * y) + m[i, 2] * z) + m[i, 3] for i in (0, 1, 3)
+            )
             depth = ((d[0] * x + d[1] * y) + d[2] * z) + d[3]
             r = np.float32(1) / clip_w
             sx = ((clip_x * r) * half + half) * w
             sy = (half - (clip_y * r) * half) * h
-            visible = (np.isfinite(p).all(axis=1)
-                       & (depth >= np.float32(self.near)) & (depth <= np.float32(self.far))
-                       & (clip_w > 0) & (sx >= 0) & (sx < w) & (sy >= 0) & (sy < h))
+            visible = (
+                np.isfinite(p).all(axis=1)
+                & (depth >= np.float32(self.near))
+                & (depth <= np.float32(self.far))
+                & (clip_w > 0)
+                & (sx >= 0)
+                & (sx < w)
+                & (sy >= 0)
+                & (sy < h)
+            )
         px = np.where(visible, np.floor(sx), -1).astype(np.int32)
         py = np.where(visible, np.floor(sy), -1).astype(np.int32)
         return Projected(sx, sy, px, py, depth, visible)
@@ -362,10 +406,17 @@ def _sphere_depths(dist: float, radius: float) -> tuple[float, float]:
     return 0.5 * (dist - radius), 1.5 * (dist + radius)
 
 
-def grid_cameras(bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike, count: int | Sequence[int] = 4,
-                 spacing: float | None = None,
-                 height: float | None = None, fov_y: float = 60.0, aspect: float = 1.0,
-                 near: float | None = None, far: float | None = None) -> Iterator[Camera]:
+def grid_cameras(
+    bounds_min: npt.ArrayLike,
+    bounds_max: npt.ArrayLike,
+    count: int | Sequence[int] = 4,
+    spacing: float | None = None,
+    height: float | None = None,
+    fov_y: float = 60.0,
+    aspect: float = 1.0,
+    near: float | None = None,
+    far: float | None = None,
+) -> Iterator[Camera]:
     """NARVis grid viewpoints: 24 cameras at each position of a grid over the box.
 
     Positions are the centres of an nx x ny grid of cells covering the box's x–y
@@ -388,8 +439,9 @@ def grid_cameras(bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike, count: in
     xs, ys = (_grid_axis(lo[i], hi[i], n) for i, n in enumerate(_grid_counts(lo, hi, count, spacing)))
     z = hi[2] + height
     eyes = [np.array([x, y, z]) for y in ys for x in xs]
-    corners = np.array([[cx, cy, cz] for cx in (lo[0], hi[0]) for cy in (lo[1], hi[1])
-                        for cz in (lo[2], hi[2])])
+    corners = np.array(
+        [[cx, cy, cz] for cx in (lo[0], hi[0]) for cy in (lo[1], hi[1]) for cz in (lo[2], hi[2])]
+    )
     reach = max(np.linalg.norm(corners - e, axis=1).max() for e in eyes)
     scale = max(2 * radius, abs(height))
     near = 1e-3 * scale if near is None else near
@@ -404,10 +456,11 @@ def _grid_counts(lo, hi, count, spacing) -> tuple[int, ...]:
         spacing = _positive("spacing", spacing)
         return tuple(max(1, math.ceil(e / spacing)) for e in extent)
     counts = (count, count) if isinstance(count, (int, np.integer)) else tuple(count)
-    if len(counts) != 2 or not all(isinstance(c, (int, np.integer)) and not isinstance(c, bool)
-                                   and c > 0 for c in counts):
+    if len(counts) != 2 or not all(
+        isinstance(c, (int, np.integer)) and not isinstance(c, bool) and c > 0 for c in counts
+    ):
         raise ValueError(f"count: expected a positive int or two positive ints, got {count!r}")
-    return tuple(int(c) if e > 0 else 1 for c, e in zip(counts, extent))
+    return tuple(int(c) if e > 0 else 1 for c, e in zip(counts, extent, strict=True))
 
 
 def _grid_axis(lo: float, hi: float, n: int) -> np.ndarray:
@@ -423,9 +476,14 @@ def _grid(eyes, fov_y, aspect, near, far) -> Iterator[Camera]:
                 yield Camera.look_at(eye, eye + forward, (0, 0, 1), fov_y, aspect, near, far)
 
 
-def hemisphere_cameras(bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike, fov_y: float = 60.0,
-                       aspect: float = 1.0, near: float | None = None,
-                       far: float | None = None) -> Iterator[Camera]:
+def hemisphere_cameras(
+    bounds_min: npt.ArrayLike,
+    bounds_max: npt.ArrayLike,
+    fov_y: float = 60.0,
+    aspect: float = 1.0,
+    near: float | None = None,
+    far: float | None = None,
+) -> Iterator[Camera]:
     """NARVis hemisphere viewpoints: 128 cameras looking at the box centre.
 
     The eyes lie on the upper hemisphere around the centre with radius 0.75 x the
@@ -438,10 +496,11 @@ def hemisphere_cameras(bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike, fov
     lo, hi = _bounds(bounds_min, bounds_max)
     fov_y, aspect = _fov(fov_y), _positive("aspect", aspect)
     centre, radius = _sphere(lo, hi)
-    dist = 1.5 * radius          # 0.75 x diagonal
+    dist = 1.5 * radius  # 0.75 x diagonal
     default_near, default_far = _sphere_depths(dist, radius)
-    near, far = _near_far(default_near if near is None else near,
-                          default_far if far is None else far, perspective=True)
+    near, far = _near_far(
+        default_near if near is None else near, default_far if far is None else far, perspective=True
+    )
     return _hemisphere(centre, dist, fov_y, aspect, near, far)
 
 
@@ -450,8 +509,9 @@ def _hemisphere(centre, dist, fov_y, aspect, near, far) -> Iterator[Camera]:
         theta = i * math.pi / 8
         for k in range(32):
             phi = k * math.pi / 16
-            offset = dist * np.array([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi),
-                                      math.cos(theta)])
+            offset = dist * np.array(
+                [math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi), math.cos(theta)]
+            )
             yield Camera.look_at(centre + offset, centre, (0, 0, 1), fov_y, aspect, near, far)
 
 
@@ -485,14 +545,16 @@ def ray_buffer(camera: Camera, width: int, height: int) -> np.ndarray:
     try:
         inv = np.linalg.inv(camera.matrix)
     except np.linalg.LinAlgError:
-        raise DataError("camera: its matrix projection @ view cannot be inverted in float64 (coordinates "
-                        "too large for the rays to be computed)") from None
+        raise DataError(
+            "camera: its matrix projection @ view cannot be inverted in float64 (coordinates "
+            "too large for the rays to be computed)"
+        ) from None
 
     def point(u, v, zn):
         p = inv @ np.array([u / w * 2 - 1, 1 - v / h * 2, zn, 1.0])
         return p[:3] / p[3]
 
-    with np.errstate(all="ignore"):     # a point at infinity is caught below
+    with np.errstate(all="ignore"):  # a point at infinity is caught below
         near = [point(0, 0, -1), point(1, 0, -1), point(0, 1, -1)]
         far = [point(0, 0, 1), point(1, 0, 1), point(0, 1, 1)]
         o0, ou, ov = near[0], near[1] - near[0], near[2] - near[0]
@@ -500,6 +562,8 @@ def ray_buffer(camera: Camera, width: int, height: int) -> np.ndarray:
         buf = np.concatenate([o0, ou, ov, f0 - o0, fu - ou, fv - ov, camera.depth_row])
         out = buf.astype(np.float32)
     if not np.isfinite(out).all():
-        raise DataError(f"camera: its rays for a {w} x {h} image are not finite in float32 (a near or far "
-                        f"plane at infinity, or a degenerate matrix): {camera!r}")
+        raise DataError(
+            f"camera: its rays for a {w} x {h} image are not finite in float32 (a near or far "
+            f"plane at infinity, or a degenerate matrix): {camera!r}"
+        )
     return out

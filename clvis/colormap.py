@@ -37,7 +37,7 @@ import numpy.typing as npt
 
 __all__ = ["apply", "lut", "names", "value_range"]
 
-_MAX_ENTRIES = 2**24       # float32(n) and float32(n - 1) are exact up to here
+_MAX_ENTRIES = 2**24  # float32(n) and float32(n - 1) are exact up to here
 _F32_MAX = float(np.finfo(np.float32).max)
 
 
@@ -74,8 +74,10 @@ def _table(name: str, n: int) -> np.ndarray:
         known = sorted(matplotlib.colormaps)
         close = difflib.get_close_matches(name, known, n=5)
         some = close or [k for k in ("viridis", "magma", "inferno", "plasma", "twilight") if k in known]
-        raise ValueError(f"unknown colormap {name!r}; valid names include {', '.join(some)} "
-                         f"(clvis.colormap.names() lists all {len(known)})") from None
+        raise ValueError(
+            f"unknown colormap {name!r}; valid names include {', '.join(some)} "
+            f"(clvis.colormap.names() lists all {len(known)})"
+        ) from None
     table = np.ascontiguousarray(cmap.resampled(n)(np.arange(n), bytes=True), dtype=np.uint8)
     table.flags.writeable = False
     return table
@@ -92,8 +94,7 @@ def apply(values: npt.ArrayLike, lut: np.ndarray, vmin: float, vmax: float) -> n
     if table.dtype != np.uint8:
         raise TypeError(f"lut: expected uint8, got {table.dtype.name}")
     if table.ndim != 2 or table.shape[1] != 4 or not 1 <= table.shape[0] <= _MAX_ENTRIES:
-        raise ValueError(f"lut: expected shape (n, 4) with 1 <= n <= {_MAX_ENTRIES}, "
-                         f"got {table.shape}")
+        raise ValueError(f"lut: expected shape (n, 4) with 1 <= n <= {_MAX_ENTRIES}, got {table.shape}")
     v = np.asarray(values)
     if v.dtype.kind not in "biuf":
         raise TypeError(f"values: expected real numbers, got dtype {v.dtype.name}")
@@ -103,8 +104,9 @@ def apply(values: npt.ArrayLike, lut: np.ndarray, vmin: float, vmax: float) -> n
     n = table.shape[0]
     with np.errstate(over="ignore", invalid="ignore"):
         v = v.astype(np.float32)
-        scale = np.float32(np.float64(1.0) / (np.float64(hi) - np.float64(lo))) if hi != lo \
-            else np.float32(0.0)
+        scale = (
+            np.float32(np.float64(1.0) / (np.float64(hi) - np.float64(lo))) if hi != lo else np.float32(0.0)
+        )
         t = (v - np.float32(lo)) * scale
         x = np.floor(t * np.float32(n))
     i = np.where(x >= n - 1, n - 1, np.where(x > 0, x, 0)).astype(np.intp)
@@ -160,8 +162,13 @@ class TransferFunction:
         colormap's colour i and the opacity map at (i + 0.5) / n.
     """
 
-    def __init__(self, colormap: str = "viridis", opacity: npt.ArrayLike | None = None,
-                 value_range: Sequence[float] | None = None, entries: int = 256) -> None:
+    def __init__(
+        self,
+        colormap: str = "viridis",
+        opacity: npt.ArrayLike | None = None,
+        value_range: Sequence[float] | None = None,
+        entries: int = 256,
+    ) -> None:
         self.colormap = colormap
         self.lut = lut(colormap, entries)
         self.entries = int(entries)

@@ -21,14 +21,14 @@ from ._arrays import nonnegative_int
 __all__ = ["explosion", "hurricane", "marschner_lobb", "terrain", "turbulence"]
 
 # hurricane parameters (km, m/s, hPa, K)
-R_MAX_WIND = 30.0          # radius of maximum wind
-V_MAX = 65.0               # maximum tangential wind, at the surface
-DECAY = 0.6                # V ~ r^-DECAY outside R_MAX_WIND
-TOP = 15.0                 # height of the storm, km
-RADIUS = 100.0             # particles lie within this radius
+R_MAX_WIND = 30.0  # radius of maximum wind
+V_MAX = 65.0  # maximum tangential wind, at the surface
+DECAY = 0.6  # V ~ r^-DECAY outside R_MAX_WIND
+TOP = 15.0  # height of the storm, km
+RADIUS = 100.0  # particles lie within this radius
 P_ENV, P_DROP, HOLLAND_B = 1010.0, 70.0, 1.5
-SCALE_HEIGHT = 8.0         # of pressure, km
-T_SURFACE, LAPSE = 301.0, 6.5          # K, K/km
+SCALE_HEIGHT = 8.0  # of pressure, km
+T_SURFACE, LAPSE = 301.0, 6.5  # K, K/km
 WARM_CORE, WARM_CORE_R, WARM_CORE_Z = 10.0, 40.0, 10.0
 
 
@@ -75,8 +75,11 @@ def hurricane(n: int = 2_000_000, seed: int | None = 0) -> dict:
     pitch = np.tan(np.radians(15.0))
     r_b = _truncated_exponential(rng, counts[1], 40.0, RADIUS, 35.0)
     arm = rng.integers(0, 4, counts[1])
-    th_b = (2 * np.pi * arm / 4 - np.log(r_b / 40.0) / pitch
-            + rng.normal(0.0, 4.0, counts[1]) / (r_b * np.sin(np.arctan(pitch))))
+    th_b = (
+        2 * np.pi * arm / 4
+        - np.log(r_b / 40.0) / pitch
+        + rng.normal(0.0, 4.0, counts[1]) / (r_b * np.sin(np.arctan(pitch)))
+    )
     z_b = (9.0 - 5.0 * (r_b - 40.0) / (RADIUS - 40.0)) * rng.random(counts[1]) ** 0.8
 
     # inflow layer and outflow canopy
@@ -108,10 +111,11 @@ def hurricane(n: int = 2_000_000, seed: int | None = 0) -> dict:
     positions[:, 1] = r * sin
     positions[:, 2] = z
 
-    deficit = P_DROP * (1.0 - np.exp(-(R_MAX_WIND / np.maximum(r, 1e-3)) ** HOLLAND_B))
+    deficit = P_DROP * (1.0 - np.exp(-((R_MAX_WIND / np.maximum(r, 1e-3)) ** HOLLAND_B)))
     pressure = (P_ENV - deficit * (1.0 - 0.7 * z / TOP)) * np.exp(-z / SCALE_HEIGHT)
-    temperature = (T_SURFACE - LAPSE * z
-                   + WARM_CORE * np.exp(-(r / WARM_CORE_R) ** 2 - ((z - WARM_CORE_Z) / 4.0) ** 2))
+    temperature = (
+        T_SURFACE - LAPSE * z + WARM_CORE * np.exp(-((r / WARM_CORE_R) ** 2) - ((z - WARM_CORE_Z) / 4.0) ** 2)
+    )
 
     shade = 150.0 + 100.0 * (z / TOP) ** 0.7 + rng.normal(0.0, 12.0, n)
     colors = np.empty((n, 4), np.uint8)
@@ -133,8 +137,9 @@ def hurricane(n: int = 2_000_000, seed: int | None = 0) -> dict:
 
 def _tangential_wind(r):
     """Modified Rankine vortex at the surface, m/s."""
-    return np.where(r < R_MAX_WIND, V_MAX * r / R_MAX_WIND,
-                    V_MAX * (R_MAX_WIND / np.maximum(r, R_MAX_WIND)) ** DECAY)
+    return np.where(
+        r < R_MAX_WIND, V_MAX * r / R_MAX_WIND, V_MAX * (R_MAX_WIND / np.maximum(r, R_MAX_WIND)) ** DECAY
+    )
 
 
 def _secondary_circulation(r, z):
@@ -158,14 +163,16 @@ def _secondary_circulation(r, z):
 
 
 # terrain parameters (m): buildings as (centre x, centre y, half size x, half size y, height)
-BUILDINGS = np.array([
-    (-120.0, 80.0, 25.0, 15.0, 18.0),
-    (-60.0, 110.0, 12.0, 30.0, 32.0),
-    (30.0, 60.0, 35.0, 20.0, 12.0),
-    (110.0, 120.0, 18.0, 18.0, 45.0),
-    (-40.0, -70.0, 40.0, 12.0, 9.0),
-    (90.0, -90.0, 22.0, 35.0, 24.0),
-])
+BUILDINGS = np.array(
+    [
+        (-120.0, 80.0, 25.0, 15.0, 18.0),
+        (-60.0, 110.0, 12.0, 30.0, 32.0),
+        (30.0, 60.0, 35.0, 20.0, 12.0),
+        (110.0, 120.0, 18.0, 18.0, 45.0),
+        (-40.0, -70.0, 40.0, 12.0, 9.0),
+        (90.0, -90.0, 22.0, 35.0, 24.0),
+    ]
+)
 TREE_RADIUS, TREE_HEIGHT = 6.0, 14.0
 # ASPRS LAS classes
 GROUND, HIGH_VEGETATION, BUILDING = 2, 5, 6
@@ -208,7 +215,7 @@ def terrain(n: int = 1_000_000, seed: int | None = 0) -> dict:
 
     # walls, uniform over their area
     hx, hy, h = BUILDINGS[:, 2], BUILDINGS[:, 3], BUILDINGS[:, 4]
-    area = np.stack([hx, hx, hy, hy], axis=1) * h[:, None]   # faces -y, +y, -x, +x
+    area = np.stack([hx, hx, hy, hy], axis=1) * h[:, None]  # faces -y, +y, -x, +x
     face = rng.choice(area.size, n_wall, p=(area / area.sum()).ravel())
     b, side = face // 4, face % 4
     cx, cy = BUILDINGS[b, 0], BUILDINGS[b, 1]
@@ -247,10 +254,13 @@ def terrain(n: int = 1_000_000, seed: int | None = 0) -> dict:
 
 def _ground(x, y):
     """The ground height, m: two hills on a gentle slope with small undulations."""
-    return (12.0 + 0.03 * (x + y)
-            + 14.0 * np.exp(-((x + 90.0) ** 2 + (y + 120.0) ** 2) / (2 * 60.0**2))
-            + 9.0 * np.exp(-((x - 130.0) ** 2 + (y - 20.0) ** 2) / (2 * 45.0**2))
-            + 1.5 * np.sin(x / 23.0) * np.cos(y / 31.0))
+    return (
+        12.0
+        + 0.03 * (x + y)
+        + 14.0 * np.exp(-((x + 90.0) ** 2 + (y + 120.0) ** 2) / (2 * 60.0**2))
+        + 9.0 * np.exp(-((x - 130.0) ** 2 + (y - 20.0) ** 2) / (2 * 45.0**2))
+        + 1.5 * np.sin(x / 23.0) * np.cos(y / 31.0)
+    )
 
 
 def _count(n) -> int:
@@ -270,8 +280,8 @@ def _truncated_exponential(rng, size, lo, hi, scale):
 
 
 # explosion parameters (the volume spans [-1, 1]^3)
-EXPLOSION_RADIUS = 0.55     # mean radius of the fireball
-EXPLOSION_SHELL = 0.22      # density falls off over this distance outside the radius
+EXPLOSION_RADIUS = 0.55  # mean radius of the fireball
+EXPLOSION_SHELL = 0.22  # density falls off over this distance outside the radius
 # turbulence: (frequency, amplitude) octaves of a sum of products of sines
 _OCTAVES = ((3.0, 0.5), (6.1, 0.25), (12.3, 0.125), (24.7, 0.0625))
 
@@ -285,8 +295,10 @@ def _turbulence(x, y, z):
         u = c * x - s_ * y
         v = s_ * x + c * y
         w = z + 0.37 * i
-        out += a * (np.sin(f * u + 1.1 * i) * np.sin(f * v + 0.5) * np.sin(f * w + 2.3 * i)
-                    + 0.5 * np.sin(f * (u + v + w) + i))
+        out += a * (
+            np.sin(f * u + 1.1 * i) * np.sin(f * v + 0.5) * np.sin(f * w + 2.3 * i)
+            + 0.5 * np.sin(f * (u + v + w) + i)
+        )
     return out / 0.9
 
 
@@ -305,8 +317,9 @@ def explosion(shape: Sequence[int] = (96, 96, 96)) -> dict:
         raise TypeError(f"shape: expected three integers, got {shape!r}") from None
     if min(zs, ys, xs) < 2:
         raise ValueError(f"shape: each size must be at least 2, got {tuple(shape)}")
-    z, y, x = np.meshgrid(np.linspace(-1, 1, zs), np.linspace(-1, 1, ys), np.linspace(-1, 1, xs),
-                          indexing="ij")
+    z, y, x = np.meshgrid(
+        np.linspace(-1, 1, zs), np.linspace(-1, 1, ys), np.linspace(-1, 1, xs), indexing="ij"
+    )
     n = _turbulence(x, y, z)
     # a mushroom: the fireball rises and flattens, on a narrower stem
     cz = z - 0.15
@@ -318,15 +331,18 @@ def explosion(shape: Sequence[int] = (96, 96, 96)) -> dict:
     density = np.maximum(ball * (0.55 + 0.45 * np.clip(n + 0.3, 0, 1)), 0.6 * stem)
     density[density < 0.02] = 0.0
     step = 2.0 / (np.array([zs, ys, xs]) - 1)
-    return {"volume": density.astype(np.float32), "spacing": tuple(float(v) for v in step),
-            "origin": (-1.0, -1.0, -1.0)}
+    return {
+        "volume": density.astype(np.float32),
+        "spacing": tuple(float(v) for v in step),
+        "origin": (-1.0, -1.0, -1.0),
+    }
 
 
 # ---------------------------------------------------------------------------
 # volumes for isosurface raycasting (the iso family): dense, closed form
 
-MARSCHNER_LOBB_FM = 6.0          # f_M
-MARSCHNER_LOBB_ALPHA = 0.25      # alpha
+MARSCHNER_LOBB_FM = 6.0  # f_M
+MARSCHNER_LOBB_ALPHA = 0.25  # alpha
 MARSCHNER_LOBB_ISOVALUE = 0.5
 TURBULENCE_ISOVALUE = 0.5
 # turbulence octaves: (frequency in radians per unit, amplitude, rotation axis, angle in radians)
@@ -407,7 +423,8 @@ def turbulence(n: int = 128) -> dict:
     total = np.zeros(x.shape)
     for o, (f, a, axis, angle) in enumerate(_TURBULENCE_OCTAVES):
         q = p @ _rotation(axis, angle).T
-        total += a * (np.sin(f * q[..., 0] + 1.3 * o) * np.sin(f * q[..., 1] + 0.7)
-                      * np.sin(f * q[..., 2] + 2.1 * o)
-                      + 0.5 * np.sin(f * q.sum(axis=-1) / np.sqrt(3.0) + o))
+        total += a * (
+            np.sin(f * q[..., 0] + 1.3 * o) * np.sin(f * q[..., 1] + 0.7) * np.sin(f * q[..., 2] + 2.1 * o)
+            + 0.5 * np.sin(f * q.sum(axis=-1) / np.sqrt(3.0) + o)
+        )
     return _cube_volume(np.clip(0.5 + 0.5 * total / 1.6, 0.0, 1.0), n)

@@ -30,17 +30,29 @@ import numpy.typing as npt
 from . import colormap as cm
 from ._arrays import nonnegative_int
 
-if TYPE_CHECKING:       # Pillow is imported when a picture is made, not with clvis
+if TYPE_CHECKING:  # Pillow is imported when a picture is made, not with clvis
     from PIL import ImageFont
 
-__all__ = ["BACKGROUND", "attribute_image", "colorbar", "compose", "depth_image", "font",
-           "from_premultiplied", "label", "label_height", "opaque", "save_png", "side_by_side",
-           "velocity_images"]
+__all__ = [
+    "BACKGROUND",
+    "attribute_image",
+    "colorbar",
+    "compose",
+    "depth_image",
+    "font",
+    "from_premultiplied",
+    "label",
+    "label_height",
+    "opaque",
+    "save_png",
+    "side_by_side",
+    "velocity_images",
+]
 
-BACKGROUND = (24, 24, 28)       # behind empty pixels: a dark grey
-BAND = (8, 8, 10)               # label bands, colour bars and the gaps between panels: darker
-TEXT = (235, 235, 235)          # the labels' text
-MIN_TEXT, MAX_TEXT = 8, 24      # font sizes in pixels a label may take
+BACKGROUND = (24, 24, 28)  # behind empty pixels: a dark grey
+BAND = (8, 8, 10)  # label bands, colour bars and the gaps between panels: darker
+TEXT = (235, 235, 235)  # the labels' text
+MIN_TEXT, MAX_TEXT = 8, 24  # font sizes in pixels a label may take
 
 
 def save_png(path: str | os.PathLike[str], image: npt.ArrayLike) -> Path:
@@ -50,10 +62,14 @@ def save_png(path: str | os.PathLike[str], image: npt.ArrayLike) -> Path:
     image = np.asarray(image)
     if image.dtype != np.uint8:
         raise ValueError(f"image: expected uint8, got {image.dtype.name}")
-    if not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] in (3, 4))) \
-            or image.shape[0] < 1 or image.shape[1] < 1:
-        raise ValueError(f"image: expected shape (H, W), (H, W, 3) or (H, W, 4) with H, W >= 1, "
-                         f"got {image.shape}")
+    if (
+        not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] in (3, 4)))
+        or image.shape[0] < 1
+        or image.shape[1] < 1
+    ):
+        raise ValueError(
+            f"image: expected shape (H, W), (H, W, 3) or (H, W, 4) with H, W >= 1, got {image.shape}"
+        )
     from PIL import Image
 
     path = Path(path)
@@ -69,8 +85,12 @@ def save_png(path: str | os.PathLike[str], image: npt.ArrayLike) -> Path:
     return path
 
 
-def depth_image(depth: npt.ArrayLike, colormap: str | npt.ArrayLike = "magma", near: float | None = None,
-                far: float | None = None) -> np.ndarray:
+def depth_image(
+    depth: npt.ArrayLike,
+    colormap: str | npt.ArrayLike = "magma",
+    near: float | None = None,
+    far: float | None = None,
+) -> np.ndarray:
     """RGBA image of a depth plane ``(H, W)`` float (inf or NaN = empty).
 
     Closer is brighter: depth `near` takes the colormap's last entry and `far`
@@ -118,15 +138,18 @@ def velocity_images(vel2d: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     return angle_rgba, mag_rgba
 
 
-def attribute_image(plane: npt.ArrayLike, colormap: str | npt.ArrayLike = "viridis", vmin: float | None = None,
-                    vmax: float | None = None) -> np.ndarray:
+def attribute_image(
+    plane: npt.ArrayLike,
+    colormap: str | npt.ArrayLike = "viridis",
+    vmin: float | None = None,
+    vmax: float | None = None,
+) -> np.ndarray:
     """RGBA image of an attribute plane ``(H, W)`` float (NaN = empty,
     transparent black) through ``colormap.apply``; `vmin` and `vmax` default
     to the finite range of the plane."""
     plane = _plane("plane", plane)
     lo, hi = cm.value_range(plane)
-    return cm.apply(plane, _table(colormap), lo if vmin is None else vmin,
-                    hi if vmax is None else vmax)
+    return cm.apply(plane, _table(colormap), lo if vmin is None else vmin, hi if vmax is None else vmax)
 
 
 def side_by_side(images: Iterable[np.ndarray], pad: int = 4) -> np.ndarray:
@@ -139,14 +162,15 @@ def side_by_side(images: Iterable[np.ndarray], pad: int = 4) -> np.ndarray:
         raise ValueError("images: expected at least one image")
     for k, im in enumerate(images):
         if im.dtype != np.uint8 or im.ndim != 3 or im.shape[2] != 4:
-            raise ValueError(f"images[{k}]: expected an (H, W, 4) uint8 RGBA image, "
-                             f"got shape {im.shape} {im.dtype.name}")
+            raise ValueError(
+                f"images[{k}]: expected an (H, W, 4) uint8 RGBA image, got shape {im.shape} {im.dtype.name}"
+            )
     height = max(im.shape[0] for im in images)
     width = sum(im.shape[1] for im in images) + pad * (len(images) - 1)
     out = np.zeros((height, width, 4), np.uint8)
     x = 0
     for im in images:
-        out[:im.shape[0], x:x + im.shape[1]] = im
+        out[: im.shape[0], x : x + im.shape[1]] = im
         x += im.shape[1] + pad
     return out
 
@@ -165,6 +189,7 @@ def _table(colormap) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- pictures
+
 
 def opaque(rgba: npt.ArrayLike, background: Sequence[int] = BACKGROUND) -> np.ndarray:
     """``(H, W, 4)`` uint8 RGBA `rgba` (straight alpha) over the RGB colour
@@ -204,7 +229,7 @@ def _font(size: int):
 
     try:
         return ImageFont.load_default(size=size)
-    except (TypeError, OSError, ImportError, AttributeError):   # Pillow < 10.1, or no FreeType
+    except (TypeError, OSError, ImportError, AttributeError):  # Pillow < 10.1, or no FreeType
         return ImageFont.load_default()
 
 
@@ -248,9 +273,10 @@ def _draw_text(band: np.ndarray, pieces, size: int, colour=TEXT) -> np.ndarray:
         if not text:
             continue
         left, _, right, _ = draw.textbbox((0, 0), text, font=f)
-        _, top, _, bottom = draw.textbbox((0, 0), "Hg", font=f)     # one baseline for every text
-        x = {"left": margin - left, "right": w - margin - right,
-             "centre": (w - (right - left)) // 2 - left}[where]
+        _, top, _, bottom = draw.textbbox((0, 0), "Hg", font=f)  # one baseline for every text
+        x = {"left": margin - left, "right": w - margin - right, "centre": (w - (right - left)) // 2 - left}[
+            where
+        ]
         y = (h - (bottom - top)) // 2 - top
         draw.text((x, y), text, fill=tuple(colour) + (255,), font=f)
     return np.asarray(im)
@@ -271,8 +297,15 @@ def label(image: npt.ArrayLike, text: str, background: Sequence[int] = BAND) -> 
     return np.concatenate([band, image], axis=0)
 
 
-def colorbar(lut: str | npt.ArrayLike, vmin: float, vmax: float, width: int, *, title: str = "",
-             background: Sequence[int] = BAND) -> np.ndarray:
+def colorbar(
+    lut: str | npt.ArrayLike,
+    vmin: float,
+    vmax: float,
+    width: int,
+    *,
+    title: str = "",
+    background: Sequence[int] = BAND,
+) -> np.ndarray:
     """A horizontal colour bar ``(label_height(width) + ramp rows, width, 4)``,
     opaque: its top rows are the ramp, column ``x`` the colour of the value
     ``vmin + (vmax - vmin) * x / (width - 1)`` through `lut` by the colormap
@@ -305,8 +338,12 @@ def _number(v: float) -> str:
     return f"{v:.4g}"
 
 
-def compose(panels: Iterable[np.ndarray], columns: int | None = None, pad: int = 4,
-            background: Sequence[int] | None = BAND) -> np.ndarray:
+def compose(
+    panels: Iterable[np.ndarray],
+    columns: int | None = None,
+    pad: int = 4,
+    background: Sequence[int] | None = BAND,
+) -> np.ndarray:
     """``(H_i, W_i, 4)`` uint8 RGBA panels in a grid of `columns` (default:
     all in one row), left to right and top to bottom, `pad` pixels between
     them, each top-aligned in its cell. Gaps and unfilled cells take the RGB
@@ -320,17 +357,17 @@ def compose(panels: Iterable[np.ndarray], columns: int | None = None, pad: int =
     if cols < 1:
         raise ValueError(f"columns: expected at least 1, got {cols}")
     cols = min(cols, len(panels))
-    rows = [panels[i:i + cols] for i in range(0, len(panels), cols)]
+    rows = [panels[i : i + cols] for i in range(0, len(panels), cols)]
     widths = [max(row[c].shape[1] for row in rows if c < len(row)) for c in range(cols)]
     heights = [max(p.shape[0] for p in row) for row in rows]
     out = np.zeros((sum(heights) + pad * (len(rows) - 1), sum(widths) + pad * (cols - 1), 4), np.uint8)
     if background is not None:
         out[:] = _colour("background", background) + (255,)
     y = 0
-    for row, h in zip(rows, heights):
+    for row, h in zip(rows, heights, strict=True):
         x = 0
-        for p, w in zip(row, widths):
-            out[y:y + p.shape[0], x:x + p.shape[1]] = p
+        for p, w in zip(row, widths, strict=True):
+            out[y : y + p.shape[0], x : x + p.shape[1]] = p
             x += w + pad
         y += h + pad
     return out
@@ -339,15 +376,16 @@ def compose(panels: Iterable[np.ndarray], columns: int | None = None, pad: int =
 def _rgba(name: str, x) -> np.ndarray:
     x = np.asarray(x)
     if x.dtype != np.uint8 or x.ndim != 3 or x.shape[2] != 4 or x.shape[0] < 1 or x.shape[1] < 1:
-        raise ValueError(f"{name}: expected an (H, W, 4) uint8 RGBA image, got shape {x.shape} "
-                         f"{x.dtype.name}")
+        raise ValueError(
+            f"{name}: expected an (H, W, 4) uint8 RGBA image, got shape {x.shape} {x.dtype.name}"
+        )
     return x
 
 
 def _colour(name: str, c) -> tuple[int, int, int]:
     try:
         t = tuple(int(v) for v in c)
-        ok = len(t) == 3 and all(0 <= v <= 255 and v == c_ for v, c_ in zip(t, c))
+        ok = len(t) == 3 and all(0 <= v <= 255 and v == c_ for v, c_ in zip(t, c, strict=True))
     except (TypeError, ValueError):
         ok = False
     if not ok:

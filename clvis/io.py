@@ -68,13 +68,15 @@ def _colors(a, n: int) -> np.ndarray:
     if a.dtype == np.uint16:
         a = (a >> 8).astype(np.uint8)
     elif a.dtype.kind == "f":
-        if not ((a >= 0) & (a <= 1)).all():         # NaN fails too
+        if not ((a >= 0) & (a <= 1)).all():  # NaN fails too
             raise ValueError("colors: float colors must lie in [0, 1]")
         a = np.rint(a.astype(np.float64) * 255).astype(np.uint8)
     elif a.dtype != np.uint8:
         if a.size and (a.min() < 0 or a.max() > 255):
-            raise ValueError(f"colors: {a.dtype} colors must lie in 0..255 "
-                             "(uint16 colors are scaled down; pass them as uint16)")
+            raise ValueError(
+                f"colors: {a.dtype} colors must lie in 0..255 "
+                "(uint16 colors are scaled down; pass them as uint16)"
+            )
         a = a.astype(np.uint8)
     if a.shape[1] == 3:
         a = np.concatenate([a, np.full((len(a), 1), 255, np.uint8)], axis=1)
@@ -122,9 +124,15 @@ class PointCloud:
         World position of the local coordinate origin (float64, default zeros).
     """
 
-    def __init__(self, positions: npt.ArrayLike, colors: npt.ArrayLike | None = None,
-                 attributes: Mapping[str, Any] | None = None, velocity: npt.ArrayLike | None = None,
-                 radius: npt.ArrayLike | None = None, origin: npt.ArrayLike | None = None) -> None:
+    def __init__(
+        self,
+        positions: npt.ArrayLike,
+        colors: npt.ArrayLike | None = None,
+        attributes: Mapping[str, Any] | None = None,
+        velocity: npt.ArrayLike | None = None,
+        radius: npt.ArrayLike | None = None,
+        origin: npt.ArrayLike | None = None,
+    ) -> None:
         self.positions = _vectors("positions", positions, None)
         n = len(self.positions)
         self.colors = None if colors is None else _colors(colors, n)
@@ -183,22 +191,32 @@ class PointCloud:
                 if index.shape != (len(self),):
                     raise ValueError(f"index: a mask must have shape ({len(self)},), got {index.shape}")
             elif index.dtype.kind not in "iu" or index.ndim != 1:
-                raise TypeError(f"index: expected a boolean mask, 1-D integer indices or a slice, "
-                                f"got {index.dtype} with shape {index.shape}")
+                raise TypeError(
+                    f"index: expected a boolean mask, 1-D integer indices or a slice, "
+                    f"got {index.dtype} with shape {index.shape}"
+                )
 
             elif index.size and not (-len(self) <= index.min() and index.max() < len(self)):
-                raise DataError(f"index: indices must lie in [-{len(self)}, {len(self)}), got "
-                                f"{int(index.min())}..{int(index.max())}")
+                raise DataError(
+                    f"index: indices must lie in [-{len(self)}, {len(self)}), got "
+                    f"{int(index.min())}..{int(index.max())}"
+                )
 
         def pick(a):
             return None if a is None else a[index]
 
-        return PointCloud(self.positions[index], pick(self.colors),
-                          {k: v[index] for k, v in self.attributes.items()},
-                          pick(self.velocity), pick(self.radius), self.origin)
+        return PointCloud(
+            self.positions[index],
+            pick(self.colors),
+            {k: v[index] for k, v in self.attributes.items()},
+            pick(self.velocity),
+            pick(self.radius),
+            self.origin,
+        )
 
 
 # ---------------------------------------------------------------- reading
+
 
 def read_points(path: str | os.PathLike[str]) -> PointCloud:
     """Read a point cloud; the format comes from the extension (case-insensitive).
@@ -217,14 +235,14 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
       ``radius``, ``origin`` optional; every other key an (N,) attribute.
     """
     path = Path(path)
-    readers = {".ply": _read_ply, ".las": _read_las, ".laz": _read_las, ".npy": _read_npy,
-               ".npz": _read_npz}
+    readers = {".ply": _read_ply, ".las": _read_las, ".laz": _read_las, ".npy": _read_npy, ".npz": _read_npz}
     if not path.exists():
         raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), str(path))
     reader = readers.get(path.suffix.lower())
     if reader is None:
-        raise DataError(f"{path}: unknown point cloud format {path.suffix!r}; "
-                        f"expected one of {', '.join(readers)}")
+        raise DataError(
+            f"{path}: unknown point cloud format {path.suffix!r}; expected one of {', '.join(readers)}"
+        )
     return reader(path)
 
 
@@ -262,9 +280,24 @@ def _from_columns(path: Path, columns: dict[str, np.ndarray], origin=None) -> Po
 
 
 # PLY property types and their sizes in bytes
-_PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2,
-              "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4,
-              "double": 8, "float64": 8}
+_PLY_SIZES = {
+    "char": 1,
+    "uchar": 1,
+    "int8": 1,
+    "uint8": 1,
+    "short": 2,
+    "ushort": 2,
+    "int16": 2,
+    "uint16": 2,
+    "int": 4,
+    "uint": 4,
+    "int32": 4,
+    "uint32": 4,
+    "float": 4,
+    "float32": 4,
+    "double": 8,
+    "float64": 8,
+}
 
 
 def _check_ply_header(path: Path) -> None:
@@ -291,7 +324,7 @@ def _check_ply_header(path: Path) -> None:
             fmt = words[1]
         elif words[0] == "element" and len(words) == 3:
             try:
-                elements.append([words[1], int(words[2]), 0, 0])   # name, count, min bytes, properties
+                elements.append([words[1], int(words[2]), 0, 0])  # name, count, min bytes, properties
             except ValueError:
                 return
         elif words[0] == "property" and elements:
@@ -309,8 +342,10 @@ def _check_ply_header(path: Path) -> None:
     have = size - data_start
     if need > have:
         declared = ", ".join(f"{count} {name}" for name, count, _, _ in elements)
-        raise DataError(f"{path}: truncated or malformed PLY file: the header declares {declared} "
-                        f"rows, at least {_size(need)}, but the file holds {have} bytes after the header")
+        raise DataError(
+            f"{path}: truncated or malformed PLY file: the header declares {declared} "
+            f"rows, at least {_size(need)}, but the file holds {have} bytes after the header"
+        )
 
 
 def _read_ply(path: Path) -> PointCloud:
@@ -319,20 +354,30 @@ def _read_ply(path: Path) -> PointCloud:
     _check_ply_header(path)
     try:
         ply = plyfile.PlyData.read(str(path), mmap=False)
-    except (plyfile.PlyParseError, ValueError, OverflowError, EOFError, struct.error, TypeError,
-            IndexError, KeyError, UnicodeDecodeError) as e:
+    except (
+        plyfile.PlyParseError,
+        ValueError,
+        OverflowError,
+        EOFError,
+        struct.error,
+        TypeError,
+        IndexError,
+        KeyError,
+        UnicodeDecodeError,
+    ) as e:
         raise DataError(f"{path}: malformed PLY file: {type(e).__name__}: {e}") from e
     names = [el.name for el in ply.elements]
     if "vertex" not in names:
-        raise DataError(f"{path}: the PLY file has no vertex element "
-                        f"(elements: {', '.join(names) or 'none'})")
-    data = ply["vertex"].data           # plyfile raises on fewer rows than the header declares
-    columns = {k: data[k] for k in data.dtype.names if data.dtype[k].kind in "iufb"}   # lists skipped
+        raise DataError(
+            f"{path}: the PLY file has no vertex element (elements: {', '.join(names) or 'none'})"
+        )
+    data = ply["vertex"].data  # plyfile raises on fewer rows than the header declares
+    columns = {k: data[k] for k in data.dtype.names if data.dtype[k].kind in "iufb"}  # lists skipped
     origin = None
     for c in ply.comments:
         if c.startswith(_ORIGIN_COMMENT + " "):
             try:
-                origin = [float(v) for v in c[len(_ORIGIN_COMMENT):].split()]
+                origin = [float(v) for v in c[len(_ORIGIN_COMMENT) :].split()]
             except ValueError as e:
                 raise DataError(f"{path}: malformed origin comment {c!r}") from e
     return _from_columns(path, columns, origin)
@@ -365,28 +410,37 @@ def _check_las_header(path: Path) -> tuple[int, int]:
         # public header fields from byte 94: header size, offset to point data, number of VLRs,
         # point data format, record length, legacy point count
         header_size, data_offset, n_vlr, point_format, record_len, count = struct.unpack_from(
-            "<HIIBHI", head, 94)
+            "<HIIBHI", head, 94
+        )
         if header_size < 227 or header_size + 54 * n_vlr > data_offset:
-            raise DataError(f"{path}: malformed LAS/LAZ header: header size {header_size} and {n_vlr} VLRs "
-                            f"do not fit before the point data at byte {data_offset}")
+            raise DataError(
+                f"{path}: malformed LAS/LAZ header: header size {header_size} and {n_vlr} VLRs "
+                f"do not fit before the point data at byte {data_offset}"
+            )
         if data_offset > size:
-            raise DataError(f"{path}: truncated LAS/LAZ file: the point data should start at byte "
-                            f"{data_offset}, the file has {size} bytes")
+            raise DataError(
+                f"{path}: truncated LAS/LAZ file: the point data should start at byte "
+                f"{data_offset}, the file has {size} bytes"
+            )
         evlr_start = n_evlr = 0
         if (head[24], head[25]) >= (1, 4) and header_size >= 375:
             evlr_start, n_evlr, count64 = struct.unpack_from("<QIQ", head, 235)
             count = count64 or count
             if n_evlr and evlr_start + 60 * n_evlr > size:
-                raise DataError(f"{path}: malformed LAS/LAZ header: {n_evlr} extended VLRs from byte "
-                                f"{evlr_start} of {size}")
+                raise DataError(
+                    f"{path}: malformed LAS/LAZ header: {n_evlr} extended VLRs from byte "
+                    f"{evlr_start} of {size}"
+                )
         vlrs = _las_records(f, path, header_size, n_vlr, data_offset, 54, "<H", "VLR")
         if n_evlr:
             _las_records(f, path, evlr_start, n_evlr, size, 60, "<Q", "extended VLR")
         compressed = point_format & 0xC0
         if not compressed:
             if data_offset + count * record_len > size:
-                raise DataError(f"{path}: truncated LAS file: the header declares {count} points of "
-                                f"{record_len} bytes from byte {data_offset}, the file has {size} bytes")
+                raise DataError(
+                    f"{path}: truncated LAS file: the header declares {count} points of "
+                    f"{record_len} bytes from byte {data_offset}, the file has {size} bytes"
+                )
             return count, record_len
         laszip = vlrs.get(_LASZIP_VLR)
         if laszip is None:
@@ -406,8 +460,10 @@ def _las_records(f, path, start: int, n: int, end: int, head_len: int, len_fmt: 
             raise DataError(f"{path}: truncated LAS/LAZ file: {what} {i} of {n} at byte {pos}")
         (length,) = struct.unpack_from(len_fmt, h, 20)
         if pos + head_len + length > end:
-            raise DataError(f"{path}: malformed LAS/LAZ file: {what} {i} at byte {pos} declares "
-                            f"{length} bytes, past byte {end}")
+            raise DataError(
+                f"{path}: malformed LAS/LAZ file: {what} {i} at byte {pos} declares "
+                f"{length} bytes, past byte {end}"
+            )
         key = (h[2:18].rstrip(b"\0"), struct.unpack_from("<H", h, 18)[0])
         found.setdefault(key, (pos + head_len, length))
         pos += head_len + length
@@ -424,17 +480,22 @@ def _check_laz(f, path, size: int, data_offset: int, count: int, record_len: int
     chunk_size = struct.unpack_from("<I", vlr, 12)[0]
     (n_items,) = struct.unpack_from("<H", vlr, 32)
     if 34 + 6 * n_items > len(vlr):
-        raise DataError(f"{path}: malformed LAZ file: the laszip VLR lists {n_items} items "
-                        f"in {len(vlr)} bytes")
+        raise DataError(
+            f"{path}: malformed LAZ file: the laszip VLR lists {n_items} items in {len(vlr)} bytes"
+        )
     item_bytes = sum(struct.unpack_from("<H", vlr, 34 + 6 * i + 2)[0] for i in range(n_items))
     if item_bytes != record_len:
-        raise DataError(f"{path}: malformed LAZ file: the laszip items take {item_bytes} bytes per point, "
-                        f"the header says {record_len}")
+        raise DataError(
+            f"{path}: malformed LAZ file: the laszip items take {item_bytes} bytes per point, "
+            f"the header says {record_len}"
+        )
     data_bytes = size - data_offset
     if count > _LAZ_MAX_POINTS_PER_BYTE * data_bytes:
-        raise DataError(f"{path}: the header declares {count} points of {record_len} bytes = "
-                        f"{_size(count * record_len)} but the file holds {data_bytes} bytes of compressed "
-                        f"point data (at most {_LAZ_MAX_POINTS_PER_BYTE} points per byte)")
+        raise DataError(
+            f"{path}: the header declares {count} points of {record_len} bytes = "
+            f"{_size(count * record_len)} but the file holds {data_bytes} bytes of compressed "
+            f"point data (at most {_LAZ_MAX_POINTS_PER_BYTE} points per byte)"
+        )
     if count == 0:
         return
     # the chunk table: its offset (int64) starts the point data; -1 means "at the end,
@@ -448,26 +509,36 @@ def _check_laz(f, path, size: int, data_offset: int, count: int, record_len: int
         f.seek(size - 8)
         (table,) = struct.unpack("<q", f.read(8))
     if not data_offset + 8 <= table <= size - 8:
-        raise DataError(f"{path}: malformed LAZ file: the chunk table offset {table} lies outside the "
-                        f"point data (bytes {data_offset + 8}..{size - 8})")
+        raise DataError(
+            f"{path}: malformed LAZ file: the chunk table offset {table} lies outside the "
+            f"point data (bytes {data_offset + 8}..{size - 8})"
+        )
     f.seek(table)
     version, n_chunks = struct.unpack("<II", f.read(8))
     # every chunk stores its first point raw: a chunk takes at least record_len bytes
     room = (table - data_offset - 8) // max(record_len, 1)
     if n_chunks > room:
-        raise DataError(f"{path}: malformed LAZ file: the chunk table declares {n_chunks} chunks, "
-                        f"the {table - data_offset - 8} bytes of point data hold at most {room}")
+        raise DataError(
+            f"{path}: malformed LAZ file: the chunk table declares {n_chunks} chunks, "
+            f"the {table - data_offset - 8} bytes of point data hold at most {room}"
+        )
     if chunk_size != 0xFFFFFFFF and count > n_chunks * chunk_size:
-        raise DataError(f"{path}: malformed LAZ file: {count} points do not fit in {n_chunks} chunks "
-                        f"of {chunk_size}")
+        raise DataError(
+            f"{path}: malformed LAZ file: {count} points do not fit in {n_chunks} chunks of {chunk_size}"
+        )
     _check_laz_chunks(f, path, data_offset, table, count, record_len, vlr, chunk_size, n_chunks)
 
 
 # Layers per item of LASzip's layered compression (point formats 6-10): the
 # point (10) has 9, RGB (11) 1, RGB+NIR (12) 2, the wave packet (13) 1, the
 # extra bytes (14) one per byte.
-_LAZ_LAYERS = {10: lambda size: 9, 11: lambda size: 1, 12: lambda size: 2, 13: lambda size: 1,
-               14: lambda size: size}
+_LAZ_LAYERS = {
+    10: lambda size: 9,
+    11: lambda size: 1,
+    12: lambda size: 2,
+    13: lambda size: 1,
+    14: lambda size: size,
+}
 
 
 def _check_laz_chunks(f, path, data_offset, table, count, record_len, vlr, chunk_size, n_chunks):
@@ -483,17 +554,22 @@ def _check_laz_chunks(f, path, data_offset, table, count, record_len, vlr, chunk
         raise DataError(f"{path}: malformed LAZ file: unreadable chunk table: {e}") from None
     room = table - data_offset - 8
     if len(entries) != n_chunks or sum(b for _, b in entries) > room:
-        raise DataError(f"{path}: malformed LAZ file: the chunk table's {len(entries)} chunks take "
-                        f"{sum(b for _, b in entries)} bytes, the point data has {room}")
-    if chunk_size == 0xFFFFFFFF:                   # variable-size chunks: each says its count
-        if sum(p for p, _ in entries) < count or any(
-                p > _LAZ_MAX_POINTS_PER_BYTE * b for p, b in entries):
-            raise DataError(f"{path}: malformed LAZ file: the chunk table's point counts do not match "
-                            f"the header's {count} points or their bytes")
+        raise DataError(
+            f"{path}: malformed LAZ file: the chunk table's {len(entries)} chunks take "
+            f"{sum(b for _, b in entries)} bytes, the point data has {room}"
+        )
+    if chunk_size == 0xFFFFFFFF:  # variable-size chunks: each says its count
+        if sum(p for p, _ in entries) < count or any(p > _LAZ_MAX_POINTS_PER_BYTE * b for p, b in entries):
+            raise DataError(
+                f"{path}: malformed LAZ file: the chunk table's point counts do not match "
+                f"the header's {count} points or their bytes"
+            )
     elif not 0 < chunk_size <= _LAZ_MAX_POINTS_PER_BYTE * max((b for _, b in entries), default=0):
         # lazrs sizes its buffers by the chunk size
-        raise DataError(f"{path}: malformed LAZ file: a chunk size of {chunk_size} points, for chunks of "
-                        f"at most {max((b for _, b in entries), default=0)} bytes")
+        raise DataError(
+            f"{path}: malformed LAZ file: a chunk size of {chunk_size} points, for chunks of "
+            f"at most {max((b for _, b in entries), default=0)} bytes"
+        )
     compressor = struct.unpack_from("<H", vlr, 0)[0]
     items = [struct.unpack_from("<HH", vlr, 34 + 6 * i) for i in range(struct.unpack_from("<H", vlr, 32)[0])]
     if compressor != 3 or not all(t in _LAZ_LAYERS for t, _ in items):
@@ -511,9 +587,11 @@ def _check_laz_chunks(f, path, data_offset, table, count, record_len, vlr, chunk
             raise DataError(f"{path}: truncated LAZ file: chunk {i} at byte {pos}")
         in_chunk, *layers = struct.unpack(f"<{1 + n_layers}I", raw)
         if in_chunk > min(points, left) or sum(layers) > nbytes:
-            raise DataError(f"{path}: malformed LAZ file: chunk {i} at byte {pos} declares {in_chunk} "
-                            f"points in layers of {sum(layers)} bytes; the chunk table gives it "
-                            f"{min(points, left)} points in {nbytes} bytes")
+            raise DataError(
+                f"{path}: malformed LAZ file: chunk {i} at byte {pos} declares {in_chunk} "
+                f"points in layers of {sum(layers)} bytes; the chunk table gives it "
+                f"{min(points, left)} points in {nbytes} bytes"
+            )
         left -= in_chunk
         pos += nbytes
 
@@ -526,8 +604,10 @@ def _read_las(path: Path) -> PointCloud:
         with laspy.open(str(path)) as reader:
             header = reader.header
             if header.point_count != count:
-                raise DataError(f"{path}: malformed LAS/LAZ header: laspy reads {header.point_count} "
-                                f"points, the header fields say {count}")
+                raise DataError(
+                    f"{path}: malformed LAS/LAZ header: laspy reads {header.point_count} "
+                    f"points, the header fields say {count}"
+                )
             parts = [chunk.array for chunk in reader.chunk_iterator(_LAS_READ_CHUNK)]
         point_format = header.point_format
         array = np.concatenate(parts) if parts else np.zeros(0, point_format.dtype())
@@ -535,13 +615,24 @@ def _read_las(path: Path) -> PointCloud:
         n, declared = len(las), header.point_count
     except DataError:
         raise
-    except (laspy.errors.LaspyException, ValueError, RuntimeError, OverflowError, EOFError,
-            struct.error, OSError, KeyError, IndexError, TypeError) as e:
+    except (
+        laspy.errors.LaspyException,
+        ValueError,
+        RuntimeError,
+        OverflowError,
+        EOFError,
+        struct.error,
+        OSError,
+        KeyError,
+        IndexError,
+        TypeError,
+    ) as e:
         # RuntimeError / lazrs.LazrsError: lazrs's decompression errors
         raise DataError(f"{path}: malformed LAS/LAZ file: {type(e).__name__}: {e}") from e
     if n != declared:
-        raise DataError(f"{path}: truncated LAS/LAZ file: the header declares {declared} points, "
-                        f"{n} were read")
+        raise DataError(
+            f"{path}: truncated LAS/LAZ file: the header declares {declared} points, {n} were read"
+        )
     xyz = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
     origin = xyz.min(axis=0) if n else np.zeros(3)
     dims = list(las.point_format.dimension_names)
@@ -554,7 +645,7 @@ def _read_las(path: Path) -> PointCloud:
         if name in ("X", "Y", "Z", "red", "green", "blue"):
             continue
         a = np.asarray(las[name])
-        if a.ndim != 1:              # array-valued extra bytes
+        if a.ndim != 1:  # array-valued extra bytes
             continue
         if name == "gps_time" and n:
             a = a - a.min()
@@ -570,8 +661,9 @@ def _read_npy(path: Path) -> PointCloud:
             raise DataError(f"{path}: expected a 1-D structured array, got shape {a.shape}")
         return _from_columns(path, {k: a[k] for k in a.dtype.names if a.dtype[k].ndim == 0})
     if a.ndim != 2 or a.shape[1] != 3:
-        raise DataError(f"{path}: expected an (N, 3) array or a structured array with x, y, z fields, "
-                        f"got shape {a.shape}")
+        raise DataError(
+            f"{path}: expected an (N, 3) array or a structured array with x, y, z fields, got shape {a.shape}"
+        )
     return _cloud(path, positions=a)
 
 
@@ -593,7 +685,7 @@ def _read_npz(path: Path) -> PointCloud:
 # against the bytes present, and only then read.
 
 _NPY_MAGIC = b"\x93NUMPY"
-_NPY_MAX_HEADER = 10000          # numpy's own limit on the header's length
+_NPY_MAX_HEADER = 10000  # numpy's own limit on the header's length
 _ZIP_MAGIC = b"PK\x03\x04"
 # zlib's deflate expands at most 1032:1 (a run of one byte), so a deflated NPZ
 # member cannot hold more than this many bytes per compressed byte.
@@ -616,36 +708,53 @@ def _npy_header(f, name: str, available: int):
         raise DataError(f"{name}: malformed NPY file: truncated header")
     length = int.from_bytes(raw, "little")
     if length > _NPY_MAX_HEADER:
-        raise DataError(f"{name}: malformed NPY file: a header of {length} bytes "
-                        f"(at most {_NPY_MAX_HEADER})")
+        raise DataError(f"{name}: malformed NPY file: a header of {length} bytes (at most {_NPY_MAX_HEADER})")
     text = f.read(length)
     if len(text) < length:
         raise DataError(f"{name}: malformed NPY file: truncated header")
     try:
         header = ast.literal_eval(text.decode("utf8" if magic[6] == 3 else "latin1"))
-    except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError, UnicodeDecodeError,
-            tokenize.TokenError) as e:
+    except (
+        ValueError,
+        SyntaxError,
+        TypeError,
+        MemoryError,
+        RecursionError,
+        UnicodeDecodeError,
+        tokenize.TokenError,
+    ) as e:
         raise DataError(f"{name}: malformed NPY file: unreadable header ({type(e).__name__})") from None
-    if (not isinstance(header, dict) or set(header) != {"descr", "fortran_order", "shape"}
-            or not isinstance(header["fortran_order"], bool) or not isinstance(header["shape"], tuple)
-            or not all(type(s) is int and s >= 0 for s in header["shape"])):
-        raise DataError(f"{name}: malformed NPY file: the header is not a dict of descr, fortran_order "
-                        f"and a shape of non-negative ints: {text[:200]!r}")
+    if (
+        not isinstance(header, dict)
+        or set(header) != {"descr", "fortran_order", "shape"}
+        or not isinstance(header["fortran_order"], bool)
+        or not isinstance(header["shape"], tuple)
+        or not all(type(s) is int and s >= 0 for s in header["shape"])
+    ):
+        raise DataError(
+            f"{name}: malformed NPY file: the header is not a dict of descr, fortran_order "
+            f"and a shape of non-negative ints: {text[:200]!r}"
+        )
     try:
         dtype = np.lib.format.descr_to_dtype(header["descr"])
-    except Exception as e:          # numpy's dtype parser raises anything on hostile descr
-        raise DataError(f"{name}: malformed NPY file: bad dtype {header['descr']!r:.100}: "
-                        f"{type(e).__name__}") from None
+    except Exception as e:  # numpy's dtype parser raises anything on hostile descr
+        raise DataError(
+            f"{name}: malformed NPY file: bad dtype {header['descr']!r:.100}: {type(e).__name__}"
+        ) from None
     if dtype.hasobject:
-        raise DataError(f"{name}: the NPY array holds Python objects (dtype {dtype}), which would "
-                        "need pickle; clvis reads numeric arrays only")
+        raise DataError(
+            f"{name}: the NPY array holds Python objects (dtype {dtype}), which would "
+            "need pickle; clvis reads numeric arrays only"
+        )
     shape = header["shape"]
     count = math.prod(shape)
     nbytes = count * dtype.itemsize
     have = available - 8 - width - length
     if count * max(dtype.itemsize, 1) > have:
-        raise DataError(f"{name}: truncated or malformed NPY file: the header declares shape {shape} "
-                        f"of {dtype} = {_size(nbytes)} but the file holds {max(have, 0)} bytes of data")
+        raise DataError(
+            f"{name}: truncated or malformed NPY file: the header declares shape {shape} "
+            f"of {dtype} = {_size(nbytes)} but the file holds {max(have, 0)} bytes of data"
+        )
     return dtype, shape, header["fortran_order"], nbytes
 
 
@@ -656,7 +765,7 @@ def _read_npy_stream(f, name: str, available: int) -> np.ndarray:
     got = f.readinto(buf) if nbytes else 0
     if got != nbytes:
         raise DataError(f"{name}: truncated NPY file: {got} of {nbytes} bytes of data")
-    if dtype.itemsize == 0:              # e.g. void0 / empty structs: nothing to read
+    if dtype.itemsize == 0:  # e.g. void0 / empty structs: nothing to read
         return np.zeros(shape, dtype, order="F" if fortran else "C")
     a = np.frombuffer(buf, dtype=dtype, count=math.prod(shape))
     return a.reshape(shape, order="F" if fortran else "C")
@@ -717,8 +826,19 @@ def load_npz(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
         raise
     except FileNotFoundError:
         raise
-    except (zipfile.BadZipFile, zlib.error, NotImplementedError, RuntimeError, EOFError, OSError,
-            ValueError, struct.error, OverflowError, UnicodeDecodeError, KeyError) as e:
+    except (
+        zipfile.BadZipFile,
+        zlib.error,
+        NotImplementedError,
+        RuntimeError,
+        EOFError,
+        OSError,
+        ValueError,
+        struct.error,
+        OverflowError,
+        UnicodeDecodeError,
+        KeyError,
+    ) as e:
         # NotImplementedError: an unknown compression; RuntimeError: an encrypted member
         raise DataError(f"{name}: malformed NPZ file: {type(e).__name__}: {e}") from None
 
@@ -738,13 +858,16 @@ def _npz_member(z: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, size: int)
     else:
         raise DataError(f"{where}: unsupported zip compression {info.compress_type}")
     if info.file_size > limit:
-        raise DataError(f"{where}: declares {_size(info.file_size)} uncompressed from "
-                        f"{info.compress_size} compressed bytes")
+        raise DataError(
+            f"{where}: declares {_size(info.file_size)} uncompressed from "
+            f"{info.compress_size} compressed bytes"
+        )
     with z.open(info) as member:
         return _read_npy_stream(member, where, info.file_size)
 
 
 # ---------------------------------------------------------------- writing
+
 
 def _write_or_remove(path, write) -> None:
     """write(file) into `path`; on any failure the partial file is removed."""
@@ -775,8 +898,9 @@ def write_ply(path: str | os.PathLike[str], cloud: PointCloud, text: bool = Fals
     _check_cloud(cloud)
     for k in cloud.attributes:
         if k in _RESERVED_COLUMNS or not k.isidentifier():
-            raise ValueError(f"cloud: attribute {k!r} cannot be a PLY property "
-                             "(a reserved name or not an identifier)")
+            raise ValueError(
+                f"cloud: attribute {k!r} cannot be a PLY property (a reserved name or not an identifier)"
+            )
     columns = [(c, cloud.positions[:, i]) for i, c in enumerate("xyz")]
     if cloud.colors is not None:
         columns += [(c, cloud.colors[:, i]) for i, c in enumerate(_COLOR_NAMES[0])]
@@ -791,8 +915,9 @@ def write_ply(path: str | os.PathLike[str], cloud: PointCloud, text: bool = Fals
     comments = []
     if cloud.origin.any():
         comments.append(f"{_ORIGIN_COMMENT} {' '.join(repr(float(v)) for v in cloud.origin)}")
-    ply = plyfile.PlyData([plyfile.PlyElement.describe(vertex, "vertex")], text=text,
-                          byte_order="<", comments=comments)
+    ply = plyfile.PlyData(
+        [plyfile.PlyElement.describe(vertex, "vertex")], text=text, byte_order="<", comments=comments
+    )
     _write_or_remove(path, ply.write)
 
 
@@ -805,8 +930,9 @@ def save_npz(path: str | os.PathLike[str], cloud: PointCloud) -> None:
     if clash:
         raise ValueError(f"cloud: attribute names {clash} clash with the NPZ keys {list(_NPZ_KEYS)}")
     arrays = {"positions": cloud.positions, "origin": cloud.origin}
-    arrays.update({k: getattr(cloud, k) for k in ("colors", "velocity", "radius")
-                   if getattr(cloud, k) is not None})
+    arrays.update(
+        {k: getattr(cloud, k) for k in ("colors", "velocity", "radius") if getattr(cloud, k) is not None}
+    )
     arrays.update(cloud.attributes)
 
     def write(f):

@@ -12,7 +12,7 @@ import numpy as np
 
 __all__ = ["BITS", "scale"]
 
-BITS = 10                          # bits per axis: 30-bit codes
+BITS = 10  # bits per axis: 30-bit codes
 
 
 def scale(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

@@ -47,16 +47,24 @@ PROFILES: dict[str, dict[str, Any]] = {
     },
 }
 
-_SCAN_T = {np.dtype(np.int32): "int", np.dtype(np.uint32): "uint",
-           np.dtype(np.int64): "long", np.dtype(np.uint64): "ulong",
-           np.dtype(np.float32): "float"}
+_SCAN_T = {
+    np.dtype(np.int32): "int",
+    np.dtype(np.uint32): "uint",
+    np.dtype(np.int64): "long",
+    np.dtype(np.uint64): "ulong",
+    np.dtype(np.float32): "float",
+}
 # key dtype -> (KEY_T, KEY_ORDER, bits)
-_KEYS = {np.dtype(np.uint32): ("uint", 0, 32), np.dtype(np.int32): ("uint", 1, 32),
-         np.dtype(np.float32): ("uint", 2, 32), np.dtype(np.uint64): ("ulong", 0, 64),
-         np.dtype(np.int64): ("ulong", 1, 64), np.dtype(np.float64): ("ulong", 2, 64)}
+_KEYS = {
+    np.dtype(np.uint32): ("uint", 0, 32),
+    np.dtype(np.int32): ("uint", 1, 32),
+    np.dtype(np.float32): ("uint", 2, 32),
+    np.dtype(np.uint64): ("ulong", 0, 64),
+    np.dtype(np.int64): ("ulong", 1, 64),
+    np.dtype(np.float64): ("ulong", 2, 64),
+}
 _WORD = {1: "uchar", 2: "ushort", 4: "uint", 8: "ulong"}
-_FLAG_DTYPES = [np.bool_, np.uint8, np.int8, np.uint16, np.int16,
-                np.uint32, np.int32, np.uint64, np.int64]
+_FLAG_DTYPES = [np.bool_, np.uint8, np.int8, np.uint16, np.int16, np.uint32, np.int32, np.uint64, np.int64]
 _VALUE_DTYPES = [np.uint32, np.int32, np.float32]
 _HIST_DTYPES = [np.int32, np.uint32]
 _MAX_N = 2**32 - 1
@@ -107,9 +115,13 @@ def _scan_into(queue, src, dst, total, exclusive: bool) -> None:
     wg, tile = shape["WG"], shape["WG"] * shape["ITEMS"]
     defines = {"T": _SCAN_T[src.dtype], "WG": wg, "ITEMS": shape["ITEMS"]}
     exclusive = np.uint32(1 if exclusive else 0)
-    chained = (wg == 1 and src.dtype.itemsize == 4 and src.dtype.kind in "iu"
-               and runtime.capabilities(queue).int64_atomics
-               and src.base_data.int_ptr != dst.base_data.int_ptr)
+    chained = (
+        wg == 1
+        and src.dtype.itemsize == 4
+        and src.dtype.kind in "iu"
+        and runtime.capabilities(queue).int64_atomics
+        and src.base_data.int_ptr != dst.base_data.int_ptr
+    )
     if chained:
         # ~4 ranges per group slot: each stays in cache between its two reads
         per, G = _partition(n, tile, 4 * groups)
@@ -117,20 +129,38 @@ def _scan_into(queue, src, dst, total, exclusive: bool) -> None:
             defines["SCAN_TEST_FALLBACK"] = 1
         status = runtime.zeros(queue, G + 1, np.uint64, "scan status")
         k = runtime.get_kernel(queue, "primitives/scan.cl", "scan_chained", defines)
-        runtime.launch(queue, k, G, 1, buf(src), buf(dst), _u64(n), _u64(per), buf(status),
-                       exclusive, buf(total))
+        runtime.launch(
+            queue, k, G, 1, buf(src), buf(dst), _u64(n), _u64(per), buf(status), exclusive, buf(total)
+        )
         return
     per, G = _partition(n, tile, groups)
     partials = runtime.empty(queue, G, src.dtype, "scan partials")
     k_reduce = runtime.get_kernel(queue, "primitives/scan.cl", "scan_reduce", defines)
     k_down = runtime.get_kernel(queue, "primitives/scan.cl", "scan_downsweep", defines)
     runtime.launch(queue, k_reduce, G * wg, wg, buf(src), _u64(n), _u64(per), buf(partials))
-    runtime.launch(queue, k_down, G * wg, wg, buf(src), buf(dst), _u64(n), _u64(per),
-                   buf(partials), exclusive, buf(total))
+    runtime.launch(
+        queue,
+        k_down,
+        G * wg,
+        wg,
+        buf(src),
+        buf(dst),
+        _u64(n),
+        _u64(per),
+        buf(partials),
+        exclusive,
+        buf(total),
+    )
 
 
-def scan(x: Any, exclusive: bool = True, *, return_total: bool = False,
-         out: cla.Array | None = None, queue: cl.CommandQueue | None = None) -> Any:
+def scan(
+    x: Any,
+    exclusive: bool = True,
+    *,
+    return_total: bool = False,
+    out: cla.Array | None = None,
+    queue: cl.CommandQueue | None = None,
+) -> Any:
     """Prefix sums of a 1-D array of int32, uint32, int64, uint64 or float32.
 
     exclusive=True: out[i] = x[0] + ... + x[i-1] (out[0] = 0); False: up to x[i].
@@ -173,6 +203,7 @@ def scan(x: Any, exclusive: bool = True, *, return_total: bool = False,
 # --------------------------------------------------------------------------
 # compaction
 
+
 def _flags_input(queue, flags, n):
     f = check_array("flags", flags, dtypes=_FLAG_DTYPES, ndim=1)
     if f.shape[0] != n:
@@ -198,12 +229,12 @@ def _compact(queue, fd, xd, rowbytes: int, out, count):
     runtime.launch(queue, k_count, G * wg, wg, buf(fd), _u64(n), _u64(per), buf(counts))
     if xd is None:
         k = runtime.get_kernel(queue, "primitives/compact.cl", "compact_indices", defines)
-        runtime.launch(queue, k, G * wg, wg, buf(fd), buf(out), _u64(n), _u64(per),
-                       buf(counts), buf(count))
+        runtime.launch(queue, k, G * wg, wg, buf(fd), buf(out), _u64(n), _u64(per), buf(counts), buf(count))
     else:
         k = runtime.get_kernel(queue, "primitives/compact.cl", "compact_scatter", defines)
-        runtime.launch(queue, k, G * wg, wg, buf(xd), buf(fd), buf(out), _u64(n), _u64(per),
-                       buf(counts), buf(count))
+        runtime.launch(
+            queue, k, G * wg, wg, buf(xd), buf(fd), buf(out), _u64(n), _u64(per), buf(counts), buf(count)
+        )
 
 
 def _compact_outputs(queue, n, row_shape, dtype, out, count, what):
@@ -220,8 +251,9 @@ def _compact_outputs(queue, n, row_shape, dtype, out, count, what):
             raise TypeError("out: expected a pyopencl.array.Array")
         out = check_array("out", out, dtypes=[dtype])
         if tuple(out.shape[1:]) != tuple(row_shape) or out.shape[0] < n:
-            raise ValueError(f"out: expected shape ({n}, ...{tuple(row_shape)}) or longer, "
-                             f"got {tuple(out.shape)}")
+            raise ValueError(
+                f"out: expected shape ({n}, ...{tuple(row_shape)}) or longer, got {tuple(out.shape)}"
+            )
         if out.offset:
             raise ValueError("out: a device array with an offset cannot be written in place")
     else:
@@ -235,12 +267,18 @@ def _finish_compact(out, count, host, sync):
         return out[:k].get() if k else np.empty((0,) + out.shape[1:], out.dtype)
     if not sync:
         return out, count
-    k = int(count.get()[0])     # one 4-byte read to size the result
+    k = int(count.get()[0])  # one 4-byte read to size the result
     return out[:k] if k else out[:0]
 
 
-def compact(x: Any, flags: Any, *, out: cla.Array | None = None,
-            count: cla.Array | None = None, queue: cl.CommandQueue | None = None) -> Any:
+def compact(
+    x: Any,
+    flags: Any,
+    *,
+    out: cla.Array | None = None,
+    count: cla.Array | None = None,
+    queue: cl.CommandQueue | None = None,
+) -> Any:
     """x[flags != 0], in input order. x: any dtype, shape (n, ...) (rows are
     kept whole); flags: 1-D of length n, bool or an integer type.
 
@@ -268,8 +306,13 @@ def compact(x: Any, flags: Any, *, out: cla.Array | None = None,
     return _finish_compact(out, count_d, host, sync=count is None)
 
 
-def compact_indices(flags: Any, *, out: cla.Array | None = None,
-                    count: cla.Array | None = None, queue: cl.CommandQueue | None = None) -> Any:
+def compact_indices(
+    flags: Any,
+    *,
+    out: cla.Array | None = None,
+    count: cla.Array | None = None,
+    queue: cl.CommandQueue | None = None,
+) -> Any:
     """The indices i (uint32, ascending) where flags[i] != 0: ``np.flatnonzero``.
     Returns and ``out``/``count`` as :func:`compact`."""
     queue = resolve_queue(queue, flags=flags, out=out, count=count)
@@ -289,8 +332,10 @@ def compact_indices(flags: Any, *, out: cla.Array | None = None,
 # --------------------------------------------------------------------------
 # radix sort
 
-def radix_sort(keys: Any, values: Any = None, *,
-               key_bits: int | None = None, queue: cl.CommandQueue | None = None) -> Any:
+
+def radix_sort(
+    keys: Any, values: Any = None, *, key_bits: int | None = None, queue: cl.CommandQueue | None = None
+) -> Any:
     """Stable LSD radix sort.
 
     keys: 1-D uint32, int32, float32, uint64, int64 or float64. Floats sort in
@@ -319,7 +364,9 @@ def radix_sort(keys: Any, values: Any = None, *,
         if order == 2:
             raise ValueError("key_bits: only integer keys can be limited to their low bits")
         if not 0 <= key_bits <= bits:
-            raise ValueError(f"key_bits: expected 0..{bits} for {np.dtype(keys.dtype).name} keys, got {key_bits}")
+            raise ValueError(
+                f"key_bits: expected 0..{bits} for {np.dtype(keys.dtype).name} keys, got {key_bits}"
+            )
     sort_bits = bits if key_bits is None else int(key_bits)
     _check_size(n, "radix_sort")
 
@@ -345,15 +392,22 @@ def radix_sort(keys: Any, values: Any = None, *,
         def local_bytes(w):
             tile_bytes = w * shape["ITEMS"] * (kd.dtype.itemsize + (4 if vd is not None else 0))
             return 4 * radix * w + tile_bytes + 4 * (radix + w)
+
         while wg > 1 and local_bytes(wg) > runtime.capabilities(queue).local_mem_bytes:
             wg //= 2
     tile = wg * shape["ITEMS"]
     if wg == 1:
         per, G = _partition(n, tile, groups)
-    else:       # the tiled kernel ranks one tile per group (radix_sort.cl)
+    else:  # the tiled kernel ranks one tile per group (radix_sort.cl)
         per, G = tile, -(-n // tile)
-    defines = {"KEY_T": key_t, "KEY_ORDER": order, "HAS_VALUES": int(vd is not None),
-               "RADIX_BITS": radix_bits, "WG": wg, "ITEMS": shape["ITEMS"]}
+    defines = {
+        "KEY_T": key_t,
+        "KEY_ORDER": order,
+        "HAS_VALUES": int(vd is not None),
+        "RADIX_BITS": radix_bits,
+        "WG": wg,
+        "ITEMS": shape["ITEMS"],
+    }
     k_up = runtime.get_kernel(queue, "primitives/radix_sort.cl", "radix_upsweep", defines)
     k_sc = runtime.get_kernel(queue, "primitives/radix_sort.cl", "radix_scatter", defines)
 
@@ -366,20 +420,31 @@ def radix_sort(keys: Any, values: Any = None, *,
         kbuf.append(runtime.empty(queue, n, kd.dtype, "radix_sort keys"))
     vbuf: list[cla.Array | None] = [None, None]
     if vd is not None:
-        vbuf = [runtime.empty(queue, n, vd.dtype, "radix_sort values"),
-                runtime.empty(queue, n, vd.dtype, "radix_sort values") if passes > 1 else None]
+        vbuf = [
+            runtime.empty(queue, n, vd.dtype, "radix_sort values"),
+            runtime.empty(queue, n, vd.dtype, "radix_sort values") if passes > 1 else None,
+        ]
 
     src_k, src_v = kd, vd
     for p in range(passes):
         dst_k, dst_v = kbuf[p % 2], vbuf[p % 2]
         shift = np.uint32(p * radix_bits)
-        runtime.launch(queue, k_up, G * wg, wg, buf(src_k), _u64(n), _u64(per), shift,
-                       buf(hist), buf(orbits))
+        runtime.launch(queue, k_up, G * wg, wg, buf(src_k), _u64(n), _u64(per), shift, buf(hist), buf(orbits))
         _scan_into(queue, hist, offsets, hist_total, exclusive=True)
-        runtime.launch(queue, k_sc, G * wg, wg, buf(src_k), buf(dst_k),
-                       buf(src_v) if src_v is not None else None,
-                       buf(dst_v) if dst_v is not None else None,
-                       _u64(n), _u64(per), shift, buf(offsets))
+        runtime.launch(
+            queue,
+            k_sc,
+            G * wg,
+            wg,
+            buf(src_k),
+            buf(dst_k),
+            buf(src_v) if src_v is not None else None,
+            buf(dst_v) if dst_v is not None else None,
+            _u64(n),
+            _u64(per),
+            shift,
+            buf(offsets),
+        )
         src_k, src_v = dst_k, dst_v
     if key_bits is not None and key_bits < bits:
         _check_key_bits(int(np.bitwise_or.reduce(orbits.get())), key_bits, keys.dtype)
@@ -390,7 +455,8 @@ def _check_key_bits(ors: int, key_bits: int, dtype) -> None:
     if ors >> key_bits:
         raise DataError(
             f"keys: key_bits={key_bits} promises {np.dtype(dtype).name} keys in [0, 2**{key_bits}), "
-            f"but some have higher bits set (bitwise OR of all keys: {ors:#x})")
+            f"but some have higher bits set (bitwise OR of all keys: {ors:#x})"
+        )
 
 
 def _sorted_result(kd, vd, host):
@@ -402,8 +468,10 @@ def _sorted_result(kd, vd, host):
 # --------------------------------------------------------------------------
 # histogram
 
-def histogram(keys: Any, nbins: int, *, check: bool = True,
-              queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
+
+def histogram(
+    keys: Any, nbins: int, *, check: bool = True, queue: cl.CommandQueue | None = None
+) -> np.ndarray | cla.Array:
     """Counts per bin (uint32, length nbins) of int32/uint32 bin indices:
     ``np.bincount(keys, minlength=nbins)``.
 
@@ -429,20 +497,32 @@ def histogram(keys: Any, nbins: int, *, check: bool = True,
         # local counters for the bins needed (a power of two, so few variants),
         # if the profile and the device's local memory allow
         local_bins = max(256, 1 << (nbins - 1).bit_length())
-        fits = (local_bins <= shape["LOCAL_BINS"]
-                and 4 * (local_bins + 1) <= runtime.capabilities(queue).local_mem_bytes)
-        defines = {"KEY_T": "int" if kd.dtype == np.int32 else "uint", "WG": wg,
-                   "LOCAL_BINS": local_bins}
+        fits = (
+            local_bins <= shape["LOCAL_BINS"]
+            and 4 * (local_bins + 1) <= runtime.capabilities(queue).local_mem_bytes
+        )
+        defines = {"KEY_T": "int" if kd.dtype == np.int32 else "uint", "WG": wg, "LOCAL_BINS": local_bins}
         if fits and n >= nbins:
             per, G = _partition(n, wg, groups)
             k = runtime.get_kernel(queue, "primitives/histogram.cl", "histogram_local", defines)
-            runtime.launch(queue, k, G * wg, wg, buf(kd), _u64(n), _u64(per), np.uint32(nbins),
-                           buf(counts), buf(overflow))
+            runtime.launch(
+                queue,
+                k,
+                G * wg,
+                wg,
+                buf(kd),
+                _u64(n),
+                _u64(per),
+                np.uint32(nbins),
+                buf(counts),
+                buf(overflow),
+            )
         else:
             k = runtime.get_kernel(queue, "primitives/histogram.cl", "histogram_global", defines)
             G = min(groups * 64, -(-n // wg))
-            runtime.launch(queue, k, G * wg, wg, buf(kd), _u64(n), np.uint32(nbins),
-                           buf(counts), buf(overflow))
+            runtime.launch(
+                queue, k, G * wg, wg, buf(kd), _u64(n), np.uint32(nbins), buf(counts), buf(overflow)
+            )
         if check:
             bad = int(overflow.get()[0])
             if bad:
@@ -453,8 +533,10 @@ def histogram(keys: Any, nbins: int, *, check: bool = True,
 # --------------------------------------------------------------------------
 # copy
 
-def copy(x: Any, *, out: cla.Array | None = None,
-         queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
+
+def copy(
+    x: Any, *, out: cla.Array | None = None, queue: cl.CommandQueue | None = None
+) -> np.ndarray | cla.Array:
     """A copy of x made by a device kernel: the benchmarks' bandwidth yardstick.
     out: a device array of x's dtype and shape to copy into (e.g. the very
     buffer an op under test writes, so both see the same memory placement)."""

@@ -111,6 +111,7 @@ __all__ = [
 # --------------------------------------------------------------------------
 # kernel sources
 
+
 def _find_kernel_root() -> Path:
     here = Path(__file__).resolve().parent
     # installed wheel: clvis/kernels_cl; source checkout: <repo>/kernels_cl
@@ -147,8 +148,9 @@ def _flag_value(name: str, v: object) -> bool:
         return bool(v)
     if isinstance(v, str) and v.strip().lower() in _TRUE + _FALSE:
         return v.strip().lower() in _TRUE
-    raise ValueError(f"{name}: expected True or False (1/0, 'true'/'false', 'yes'/'no', 'on'/'off'), "
-                     f"got {v!r}")
+    raise ValueError(
+        f"{name}: expected True or False (1/0, 'true'/'false', 'yes'/'no', 'on'/'off'), got {v!r}"
+    )
 
 
 def _size_value(name: str, v: object) -> int | None:
@@ -189,10 +191,16 @@ class Options:
 # environment variable -> (option, how to read it, what it accepts)
 _ENV: dict[str, tuple[str, Callable[[str], object], str]] = {
     "CLVIS_TUNING": ("tuning", _tuning_value, "'cpu' or 'gpu' (unset: by device type)"),
-    "CLVIS_NO_INT64_ATOMICS": ("int64_atomics", lambda s: not _flag_value("CLVIS_NO_INT64_ATOMICS", s),
-                               "1/true/yes/on or 0/false/no/off"),
-    "CLVIS_MAX_ALLOC": ("max_alloc_bytes", lambda s: _size_value("CLVIS_MAX_ALLOC", s),
-                        "a positive whole number of bytes"),
+    "CLVIS_NO_INT64_ATOMICS": (
+        "int64_atomics",
+        lambda s: not _flag_value("CLVIS_NO_INT64_ATOMICS", s),
+        "1/true/yes/on or 0/false/no/off",
+    ),
+    "CLVIS_MAX_ALLOC": (
+        "max_alloc_bytes",
+        lambda s: _size_value("CLVIS_MAX_ALLOC", s),
+        "a positive whole number of bytes",
+    ),
 }
 
 
@@ -209,8 +217,11 @@ def _env_options() -> Options:
             changes[name] = parse(raw)
         except ValueError:
             default = getattr(Options(), name)
-            warnings.warn(f"{var}={raw!r} is ignored: expected {accepted}; using the default "
-                          f"({name}={default!r})", ClvisWarning, stacklevel=2)
+            warnings.warn(
+                f"{var}={raw!r} is ignored: expected {accepted}; using the default ({name}={default!r})",
+                ClvisWarning,
+                stacklevel=2,
+            )
     return Options(**changes)  # type: ignore[arg-type]  # each value parsed for its field above
 
 
@@ -252,11 +263,12 @@ def configure(**changes: Any) -> Iterator[Options]:
 # --------------------------------------------------------------------------
 # devices
 
+
 def devices() -> list[cl.Device]:
     """Every OpenCL device of every platform, in platform order."""
     try:
         platforms = cl.get_platforms()
-    except cl.Error:     # no ICD at all: PLATFORM_NOT_FOUND_KHR
+    except cl.Error:  # no ICD at all: PLATFORM_NOT_FOUND_KHR
         return []
     out = []
     for p in platforms:
@@ -293,8 +305,7 @@ def select_device(spec: str | int | None = None) -> cl.Device:
             i = int(spec_s)
             if i < len(found):
                 return found[i]
-            raise DeviceError(f"CLVIS_DEVICE={spec_s}: there are {len(found)} devices "
-                              f"({_listing(found)})")
+            raise DeviceError(f"CLVIS_DEVICE={spec_s}: there are {len(found)} devices ({_listing(found)})")
         for d in found:
             if spec_s.lower() in f"{d.platform.name} {d.name}".lower():
                 return d
@@ -307,7 +318,8 @@ def select_device(spec: str | int | None = None) -> cl.Device:
     if not found:
         raise DeviceError(
             "no OpenCL device found: install a driver, e.g. PoCL with "
-            "pip install 'pyopencl[pocl]' (or pip install \".[pocl]\" in a clvis checkout)")
+            "pip install 'pyopencl[pocl]' (or pip install \".[pocl]\" in a clvis checkout)"
+        )
     for d in found:
         if _device_type(d) == "GPU":
             return d
@@ -333,8 +345,8 @@ class _ContextState:
 
 _lock = threading.RLock()
 _queues: dict[int, cl.CommandQueue] = {}
-_queue_contexts: dict[int, cl.Context] = {}   # Intel's CPU runtime frees a context
-                                              # its queues still use unless we hold it
+_queue_contexts: dict[int, cl.Context] = {}  # Intel's CPU runtime frees a context
+# its queues still use unless we hold it
 _contexts: dict[int, _ContextState] = {}
 _default: cl.CommandQueue | None = None
 
@@ -349,7 +361,7 @@ def queue_for(device: cl.Device) -> cl.CommandQueue:
                 ctx = cl.Context([device])
                 try:
                     q = cl.CommandQueue(ctx, device, properties=cl.command_queue_properties.PROFILING_ENABLE)
-                except cl.Error:        # a driver without profiling: stats' timings are then None
+                except cl.Error:  # a driver without profiling: stats' timings are then None
                     q = cl.CommandQueue(ctx, device)
             except cl.Error as e:
                 raise DeviceError(f"cannot open {describe(device)}: {e}") from e
@@ -387,6 +399,7 @@ def _state(context: cl.Context) -> _ContextState:
 # --------------------------------------------------------------------------
 # capabilities
 
+
 @dataclasses.dataclass(frozen=True)
 class Capabilities:
     platform: str
@@ -397,10 +410,10 @@ class Capabilities:
     compute_units: int
     max_work_group_size: int
     local_mem_bytes: int
-    max_alloc_bytes: int            # after the max_alloc_bytes option
+    max_alloc_bytes: int  # after the max_alloc_bytes option
     global_mem_bytes: int
-    int64_atomics: bool             # what kernels are built for (option applied)
-    int64_atomics_native: bool      # what the device reports
+    int64_atomics: bool  # what kernels are built for (option applied)
+    int64_atomics_native: bool  # what the device reports
     subgroups: bool
     fp64: bool
 
@@ -424,7 +437,7 @@ def _native_capabilities(device: cl.Device) -> Capabilities:
     if caps is not None:
         return caps
     ext = device.extensions.split()
-    native64 = ("cl_khr_int64_base_atomics" in ext and "cl_khr_int64_extended_atomics" in ext)
+    native64 = "cl_khr_int64_base_atomics" in ext and "cl_khr_int64_extended_atomics" in ext
     subgroups = "cl_khr_subgroups" in ext or "cl_intel_subgroups" in ext
     if not subgroups:
         with contextlib.suppress(Exception):
@@ -460,8 +473,9 @@ def capabilities(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) ->
     max_alloc = caps.max_alloc_bytes
     if o.max_alloc_bytes is not None:
         max_alloc = min(max_alloc, int(o.max_alloc_bytes))
-    return dataclasses.replace(caps, max_alloc_bytes=max_alloc,
-                               int64_atomics=caps.int64_atomics_native and o.int64_atomics)
+    return dataclasses.replace(
+        caps, max_alloc_bytes=max_alloc, int64_atomics=caps.int64_atomics_native and o.int64_atomics
+    )
 
 
 def tuning_profile(obj: cl.Device | cl.CommandQueue | cl.Context | None = None) -> str:
@@ -515,8 +529,10 @@ def _define_value(name: str, v: object) -> str:
         return repr(float(v))
     if isinstance(v, str) and _DEFINE_VALUE.fullmatch(v):
         return v
-    raise ValueError(f"define {name}: expected a number or a C identifier/expression without "
-                     f"whitespace or quotes, got {v!r}")
+    raise ValueError(
+        f"define {name}: expected a number or a C identifier/expression without "
+        f"whitespace or quotes, got {v!r}"
+    )
 
 
 def _include_option() -> str:
@@ -530,7 +546,7 @@ def _include_option() -> str:
         return inc
     try:
         rel = os.path.relpath(inc)
-    except (ValueError, OSError):      # another drive; a working directory since deleted
+    except (ValueError, OSError):  # another drive; a working directory since deleted
         rel = inc
     return rel if not re.search(r"\s", rel) else _HERE
 
@@ -584,12 +600,14 @@ def _pyopencl_cache_dir(context: cl.Context) -> Path | None:
     decides), or None when it does not (PoCL and NVIDIA cache builds themselves)."""
     try:
         from pyopencl.characterize import has_src_build_cache
+
         if getattr(cl, "_PYOPENCL_NO_CACHE", False) or has_src_build_cache(context.devices[0]):
             return None
         base = getattr(context, "cache_dir", None)
         if base is not None:
             return Path(base)
         import platformdirs
+
         xdg = os.environ.get("XDG_CACHE_HOME")
         if sys.platform == "darwin" and xdg:
             root = os.path.join(xdg, "pyopencl")
@@ -597,21 +615,24 @@ def _pyopencl_cache_dir(context: cl.Context) -> Path | None:
             root = platformdirs.user_cache_dir("pyopencl", "pyopencl")
         version = ".".join(str(i) for i in sys.version_info)
         return Path(root) / f"pyopencl-compiler-cache-v2-py{version}"
-    except Exception:       # only used to explain a failure: never the cause of one
+    except Exception:  # only used to explain a failure: never the cause of one
         return None
 
 
 def _cache_failure(cache: Path, error: BaseException | None) -> str:
     lock = cache / "lock"
     if lock.exists():
-        return (f"pyopencl's compiler cache is locked by {lock}, left by a process that was killed while "
-                f"building; delete that file (or set PYOPENCL_NO_CACHE=1)")
-    return (f"pyopencl's compiler cache in {cache} failed ({error!r}); delete that directory "
-            f"(or set PYOPENCL_NO_CACHE=1)")
+        return (
+            f"pyopencl's compiler cache is locked by {lock}, left by a process that was killed while "
+            f"building; delete that file (or set PYOPENCL_NO_CACHE=1)"
+        )
+    return (
+        f"pyopencl's compiler cache in {cache} failed ({error!r}); delete that directory "
+        f"(or set PYOPENCL_NO_CACHE=1)"
+    )
 
 
-def _build(context: cl.Context, path: Path, defines: Mapping[str, object],
-           opts: list[str]) -> cl.Program:
+def _build(context: cl.Context, path: Path, defines: Mapping[str, object], opts: list[str]) -> cl.Program:
     """Build `path` with `opts` (the options of the program cache's key, read once)."""
     device = context.devices[0]
     cache = _pyopencl_cache_dir(context)
@@ -625,7 +646,7 @@ def _build(context: cl.Context, path: Path, defines: Mapping[str, object],
         # pyopencl turns each into a CompilerWarning. Failures raise below.
         warnings.simplefilter("ignore", cl.CompilerWarning)
         try:
-            prg.build(opts)     # the options of the cache key, read once
+            prg.build(opts)  # the options of the cache key, read once
         except cl.Error as e:
             log = ""
             with contextlib.suppress(Exception):
@@ -648,8 +669,9 @@ def _display(path: Path) -> str:
         return str(path)
 
 
-def get_program(context: cl.Context, relpath: str, defines: Mapping[str, object],
-                flags: Sequence[str] = ()) -> cl.Program:
+def get_program(
+    context: cl.Context, relpath: str, defines: Mapping[str, object], flags: Sequence[str] = ()
+) -> cl.Program:
     """The built program kernels_cl/`relpath` (or an absolute path: a kernel
     of your own, built the same way) with `defines` and compiler `flags`, cached."""
     state = _state(context)
@@ -666,8 +688,9 @@ def get_program(context: cl.Context, relpath: str, defines: Mapping[str, object]
         return prg
 
 
-def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: Mapping[str, object],
-               flags: Sequence[str] = ()) -> cl.Kernel:
+def get_kernel(
+    queue: cl.CommandQueue, relpath: str, name: str, defines: Mapping[str, object], flags: Sequence[str] = ()
+) -> cl.Kernel:
     """Kernel `name` of kernels_cl/`relpath` built with `defines` (and compiler
     `flags`) for the queue's device."""
     prg = get_program(queue.context, relpath, defines, flags)
@@ -684,24 +707,39 @@ def get_kernel(queue: cl.CommandQueue, relpath: str, name: str, defines: Mapping
                 log = ""
                 with contextlib.suppress(Exception):
                     log = prg.get_build_info(queue.device, cl.program_build_info.LOG)
-                raise KernelBuildError(_display(KERNEL_ROOT / relpath), defines, describe(queue.device),
-                                       f"kernel {name!r} unavailable after the build: {e}\n{log}") from None
+                raise KernelBuildError(
+                    _display(KERNEL_ROOT / relpath),
+                    defines,
+                    describe(queue.device),
+                    f"kernel {name!r} unavailable after the build: {e}\n{log}",
+                ) from None
             state.kernels[key] = k
         return k
 
 
-def launch(queue: cl.CommandQueue, kernel: cl.Kernel, global_size: int, local_size: int | None, *args: Any,
-           wait_for: Sequence[cl.Event] | None = None) -> cl.Event:
+def launch(
+    queue: cl.CommandQueue,
+    kernel: cl.Kernel,
+    global_size: int,
+    local_size: int | None,
+    *args: Any,
+    wait_for: Sequence[cl.Event] | None = None,
+) -> cl.Event:
     """Set `args` and enqueue a 1-D launch (serialised: kernels hold their args)."""
     with _lock:
         kernel.set_args(*args)
         return cl.enqueue_nd_range_kernel(
-            queue, kernel, (int(global_size),),
-            None if local_size is None else (int(local_size),), wait_for=wait_for)
+            queue,
+            kernel,
+            (int(global_size),),
+            None if local_size is None else (int(local_size),),
+            wait_for=wait_for,
+        )
 
 
 # --------------------------------------------------------------------------
 # memory
+
 
 def allocator(queue: cl.CommandQueue) -> cl.tools.MemoryPool:
     """A memory pool for the queue: repeated calls reuse device buffers."""
@@ -727,7 +765,8 @@ def check_alloc(queue: cl.CommandQueue, nbytes: int, what: str) -> None:
     if nbytes > limit:
         raise DeviceError(
             f"{what}: needs one buffer of {nbytes} bytes, more than the max single allocation "
-            f"of {limit} bytes on {describe(queue.device)}")
+            f"of {limit} bytes on {describe(queue.device)}"
+        )
 
 
 def host_available_bytes() -> int | None:
@@ -769,15 +808,19 @@ def check_memory(queue: cl.CommandQueue, what: str, *, device_bytes: int = 0, ho
     device, device memory is host memory: both count against the host."""
     caps = capabilities(queue)
     if device_bytes > caps.global_mem_bytes:
-        raise DeviceError(f"{what}: needs {device_bytes / 1e9:.2f} GB on the device and "
-                          f"{host_bytes / 1e9:.2f} GB on the host; {describe(queue.device)} has "
-                          f"{caps.global_mem_bytes / 1e9:.2f} GB")
+        raise DeviceError(
+            f"{what}: needs {device_bytes / 1e9:.2f} GB on the device and "
+            f"{host_bytes / 1e9:.2f} GB on the host; {describe(queue.device)} has "
+            f"{caps.global_mem_bytes / 1e9:.2f} GB"
+        )
     host_need = host_bytes + (device_bytes if caps.device_type == "CPU" else 0)
     avail = host_available_bytes()
     if avail is not None and host_need > avail:
-        raise DeviceError(f"{what}: needs {device_bytes / 1e9:.2f} GB on the device and "
-                          f"{host_bytes / 1e9:.2f} GB on the host ({host_need / 1e9:.2f} GB of host memory "
-                          f"with a CPU device), but only {avail / 1e9:.2f} GB is available")
+        raise DeviceError(
+            f"{what}: needs {device_bytes / 1e9:.2f} GB on the device and "
+            f"{host_bytes / 1e9:.2f} GB on the host ({host_need / 1e9:.2f} GB of host memory "
+            f"with a CPU device), but only {avail / 1e9:.2f} GB is available"
+        )
 
 
 def empty(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLike, what: str) -> cla.Array:
@@ -834,8 +877,14 @@ def items(queue: cl.CommandQueue, n: int, wg: int) -> tuple[int, int]:
     return max(1, -(-int(n) // local)) * local, local
 
 
-def fill(queue: cl.CommandQueue, a: cla.Array, value: Any = 0, *, start: int = 0,
-         wait_for: Sequence[cl.Event] | None = None) -> cla.Array:
+def fill(
+    queue: cl.CommandQueue,
+    a: cla.Array,
+    value: Any = 0,
+    *,
+    start: int = 0,
+    wait_for: Sequence[cl.Event] | None = None,
+) -> cla.Array:
     """Set the elements of device array `a` from element `start` on to
     `value` (converted to a's dtype: np.float32(np.inf), -1, 0xFFFFFFFF, ...)
     with clEnqueueFillBuffer (pyopencl's Array.fill would build a kernel of
@@ -852,8 +901,14 @@ def fill(queue: cl.CommandQueue, a: cla.Array, value: Any = 0, *, start: int = 0
         pattern = np.full(1, value, dtype).view(np.uint8)
         if (pattern == pattern[0]).all():
             pattern = pattern[:1].copy()
-    cl.enqueue_fill_buffer(queue, a.base_data,  # type: ignore[arg-type]  # a Buffer: nbytes > 0
-                           pattern, a.offset + off, nbytes, wait_for=wait_for)
+    cl.enqueue_fill_buffer(
+        queue,
+        a.base_data,  # type: ignore[arg-type]  # a Buffer: nbytes > 0
+        pattern,
+        a.offset + off,
+        nbytes,
+        wait_for=wait_for,
+    )
     return a
 
 
@@ -873,6 +928,7 @@ def nbytes(*arrays: Any) -> int:
 
 # -- options captured per renderer ------------------------------------------
 
+
 @dataclasses.dataclass(frozen=True)
 class LaunchConfig:
     """What a renderer runs with, fixed when it is made (:func:`capture`):
@@ -880,6 +936,7 @@ class LaunchConfig:
     profile, whether kernels are built with 64-bit atomics). Later
     :func:`configure`/:func:`set_options` calls, in this thread or another,
     apply to renderers made after them."""
+
     options: Options
     tuning: str
     int64_atomics: bool
@@ -919,6 +976,7 @@ def pinned(config: LaunchConfig) -> Iterator[LaunchConfig]:
 
 # -- timings from event profiling --------------------------------------------
 
+
 def marker(queue: cl.CommandQueue) -> cl.Event:
     """An event that completes when everything enqueued before it has: with
     the event of a later command, :func:`seconds` of the commands between."""
@@ -938,5 +996,5 @@ def seconds(first: cl.Event | None, last: cl.Event | None = None, *, wait: bool 
     try:
         last.wait()
         return max(0, last.profile.end - first.profile.start) * 1e-9
-    except cl.Error:        # PROFILING_INFO_NOT_AVAILABLE: a queue of the caller's without profiling
+    except cl.Error:  # PROFILING_INFO_NOT_AVAILABLE: a queue of the caller's without profiling
         return None

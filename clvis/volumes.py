@@ -11,9 +11,9 @@ Formats, chosen by the file name (case-insensitive):
   must be exactly Z * Y * X * itemsize bytes.
 - ``.npy``: a 3-D array of real numbers, taken as [z, y, x].
 - ``.nii``, ``.nii.gz``: NIfTI-1/2 through nibabel (an optional dependency:
-  ``pip install ".[nifti]"`` from a clvis checkout, or ``pip install nibabel``). NIfTI's data array is indexed [i, j, k] with
-  i the fastest on disk; it is transposed to [k, j, i] = [z, y, x]. Trailing
-  axes of size 1 (a 3-D image stored as 4-D) are dropped. A 4-D image (a time
+  ``pip install ".[nifti]"`` from a clvis checkout, or ``pip install nibabel``).
+  NIfTI's data array is indexed [i, j, k] with i the fastest on disk; it is
+  transposed to [k, j, i] = [z, y, x]. Trailing axes of size 1 (a 3-D image stored as 4-D) are dropped. A 4-D image (a time
   series) needs ``volume_index`` to pick one volume; only that volume is read.
   The header's scale (scl_slope, scl_inter) is applied when set, as nibabel does.
 
@@ -55,10 +55,13 @@ from .io import load_npy
 
 __all__ = ["FORMATS", "RAW_TYPES", "Volume", "read_volume"]
 
-RAW_TYPES = {name: np.dtype(name) for name in
-             ("uint8", "int8", "uint16", "int16", "uint32", "int32", "float32", "float64")}
-_RAW_NAME = re.compile(r"^(?P<name>.*)_(?P<x>\d+)x(?P<y>\d+)x(?P<z>\d+)_(?P<type>[A-Za-z0-9]+)\.raw$",
-                       re.IGNORECASE)
+RAW_TYPES = {
+    name: np.dtype(name)
+    for name in ("uint8", "int8", "uint16", "int16", "uint32", "int32", "float32", "float64")
+}
+_RAW_NAME = re.compile(
+    r"^(?P<name>.*)_(?P<x>\d+)x(?P<y>\d+)x(?P<z>\d+)_(?P<type>[A-Za-z0-9]+)\.raw$", re.IGNORECASE
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,15 +89,21 @@ class Volume:
         return self.data.shape
 
     def __repr__(self) -> str:
-        return (f"Volume({self.path!r}, shape={self.data.shape}, dtype={self.data.dtype}, "
-                f"spacing={self.spacing})")
+        return (
+            f"Volume({self.path!r}, shape={self.data.shape}, dtype={self.data.dtype}, spacing={self.spacing})"
+        )
 
 
 FORMATS = (".raw", ".npy", ".nii", ".nii.gz")
 
 
-def read_volume(path: str | os.PathLike[str], *, shape: Sequence[int] | None = None,
-                dtype: npt.DTypeLike | None = None, volume_index: int | None = None) -> Volume:
+def read_volume(
+    path: str | os.PathLike[str],
+    *,
+    shape: Sequence[int] | None = None,
+    dtype: npt.DTypeLike | None = None,
+    volume_index: int | None = None,
+) -> Volume:
     """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``; see the
     module docstring).
 
@@ -127,9 +136,11 @@ def _raw_layout(path: Path, shape, dtype):
     m = _RAW_NAME.match(path.name)
     if shape is None:
         if m is None:
-            raise DataError(f"{path}: the name does not give the shape; expected "
-                            f"<name>_<X>x<Y>x<Z>_<type>.raw (e.g. bonsai_256x256x256_uint8.raw), "
-                            f"or pass shape=(Z, Y, X)")
+            raise DataError(
+                f"{path}: the name does not give the shape; expected "
+                f"<name>_<X>x<Y>x<Z>_<type>.raw (e.g. bonsai_256x256x256_uint8.raw), "
+                f"or pass shape=(Z, Y, X)"
+            )
         shape = (int(m["z"]), int(m["y"]), int(m["x"]))
     else:
         try:
@@ -142,13 +153,17 @@ def _raw_layout(path: Path, shape, dtype):
         raise DataError(f"{path}: the shape (Z, Y, X) = {shape} has an empty axis")
     if dtype is None:
         if m is None:
-            raise DataError(f"{path}: the name does not give the sample type; expected "
-                            f"<name>_<X>x<Y>x<Z>_<type>.raw with type one of {', '.join(RAW_TYPES)}, "
-                            f"or pass dtype=")
+            raise DataError(
+                f"{path}: the name does not give the sample type; expected "
+                f"<name>_<X>x<Y>x<Z>_<type>.raw with type one of {', '.join(RAW_TYPES)}, "
+                f"or pass dtype="
+            )
         kind = m["type"].lower()
         if kind not in RAW_TYPES:
-            raise DataError(f"{path}: unknown sample type {m['type']!r} in the name; expected one of "
-                            f"{', '.join(RAW_TYPES)}")
+            raise DataError(
+                f"{path}: unknown sample type {m['type']!r} in the name; expected one of "
+                f"{', '.join(RAW_TYPES)}"
+            )
         dt = RAW_TYPES[kind]
     else:
         try:
@@ -175,12 +190,14 @@ def _read_raw(path: Path, shape, dtype) -> Volume:
         size = path.stat().st_size
         if size != need:
             what = "short" if size < need else "long"
-            raise DataError(f"{path}: {size} bytes, but {shape[2]}x{shape[1]}x{shape[0]} {dt.newbyteorder('=')} "
-                            f"samples need {need} (the file is {what} by {abs(size - need)} bytes)")
+            raise DataError(
+                f"{path}: {size} bytes, but {shape[2]}x{shape[1]}x{shape[0]} {dt.newbyteorder('=')} "
+                f"samples need {need} (the file is {what} by {abs(size - need)} bytes)"
+            )
         data = np.fromfile(path, dtype=dt, count=count)
     except OSError as e:
         raise DataError(f"{path}: cannot read: {e.strerror or e}") from e
-    if data.size != count:           # the file shrank while we read it
+    if data.size != count:  # the file shrank while we read it
         raise DataError(f"{path}: expected {count} samples, read {data.size}")
     data = data.reshape(shape).astype(dt.newbyteorder("="), copy=False)
     return Volume(data, (1.0, 1.0, 1.0), (0.0, 0.0, 0.0), str(path))
@@ -210,15 +227,30 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
     try:
         import nibabel
     except ImportError:
-        raise ImportError(f"reading {path.name} (NIfTI) needs nibabel: pip install \".[nifti]\" in a clvis checkout (or pip install nibabel)") from None
+        raise ImportError(
+            f'reading {path.name} (NIfTI) needs nibabel: pip install ".[nifti]" in a clvis checkout '
+            "(or pip install nibabel)"
+        ) from None
     from nibabel.filebasedimages import ImageFileError
     from nibabel.spatialimages import HeaderDataError
+
     # what nibabel raises on malformed headers and data (OverflowError: an infinite
     # vox_offset; HeaderDataError: an unknown datatype code)
-    errors = (ImageFileError, HeaderDataError, OSError, EOFError, ValueError, zlib.error, KeyError,
-              OverflowError, TypeError, IndexError, struct.error)
+    errors = (
+        ImageFileError,
+        HeaderDataError,
+        OSError,
+        EOFError,
+        ValueError,
+        zlib.error,
+        KeyError,
+        OverflowError,
+        TypeError,
+        IndexError,
+        struct.error,
+    )
     try:
-        img = nibabel.load(path)            # the header only; the data is read below
+        img = nibabel.load(path)  # the header only; the data is read below
         header = img.header
         shape = tuple(int(s) for s in header.get_data_shape())
         dtype = np.dtype(header.get_data_dtype())
@@ -232,11 +264,15 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         t = _index(volume_index) if not isinstance(volume_index, bool) else -1
         count = shape[3] if len(shape) > 3 else 1
         if not 0 <= t < count:
-            raise ValueError(f"volume_index: {volume_index!r} is outside 0..{count - 1} ({path.name} holds "
-                             f"{count} volume{'s' if count != 1 else ''})")
+            raise ValueError(
+                f"volume_index: {volume_index!r} is outside 0..{count - 1} ({path.name} holds "
+                f"{count} volume{'s' if count != 1 else ''})"
+            )
     elif series:
-        raise DataError(f"{path}: a 4-D NIfTI image of {shape[3]} volumes {shape[:3]} (i, j, k); "
-                        "choose one with volume_index (clvis iso/gauss: --volume-index T)")
+        raise DataError(
+            f"{path}: a 4-D NIfTI image of {shape[3]} volumes {shape[:3]} (i, j, k); "
+            "choose one with volume_index (clvis iso/gauss: --volume-index T)"
+        )
     _check_nifti_layout(path, shape[:3] + shape[4:] if series else shape, dtype, offset, shape)
     try:
         if series:
@@ -256,8 +292,9 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
     return Volume(data, spacing[::-1], (0.0, 0.0, 0.0), str(path), affine)
 
 
-def _check_nifti_layout(path: Path, shape: tuple, dtype: np.dtype, offset: int,
-                        stored: tuple | None = None) -> None:
+def _check_nifti_layout(
+    path: Path, shape: tuple, dtype: np.dtype, offset: int, stored: tuple | None = None
+) -> None:
     """The header's shape, type and data offset against the file, before nibabel
     allocates the data (it allocates what the header declares, then reads).
     `shape` is what will be read, `stored` (default `shape`) what the file holds."""
@@ -273,9 +310,13 @@ def _check_nifti_layout(path: Path, shape: tuple, dtype: np.dtype, offset: int,
     nbytes = math.prod(stored or shape) * dtype.itemsize
     if path.name.lower().endswith(".gz"):
         if offset + nbytes > size * _DEFLATE_MAX_RATIO:
-            raise DataError(f"{path}: the header declares {shape} {dtype} samples = {nbytes} bytes from "
-                            f"byte {offset}, more than a gzip file of {size} bytes can hold "
-                            f"(at most {_DEFLATE_MAX_RATIO}:1)")
+            raise DataError(
+                f"{path}: the header declares {shape} {dtype} samples = {nbytes} bytes from "
+                f"byte {offset}, more than a gzip file of {size} bytes can hold "
+                f"(at most {_DEFLATE_MAX_RATIO}:1)"
+            )
     elif offset + nbytes > size:
-        raise DataError(f"{path}: truncated NIfTI file: the header declares {shape} {dtype} samples = "
-                        f"{nbytes} bytes from byte {offset}, the file has {size} bytes")
+        raise DataError(
+            f"{path}: truncated NIfTI file: the header declares {shape} {dtype} samples = "
+            f"{nbytes} bytes from byte {offset}, the file has {size} bytes"
+        )

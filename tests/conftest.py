@@ -22,8 +22,11 @@ import pytest
 from clvis import runtime
 
 hypothesis.settings.register_profile(
-    "clvis", deadline=None, max_examples=int(os.environ.get("CLVIS_HYPOTHESIS_EXAMPLES", "40")),
-    suppress_health_check=[hypothesis.HealthCheck.too_slow])
+    "clvis",
+    deadline=None,
+    max_examples=int(os.environ.get("CLVIS_HYPOTHESIS_EXAMPLES", "40")),
+    suppress_health_check=[hypothesis.HealthCheck.too_slow],
+)
 hypothesis.settings.load_profile("clvis")
 
 DEVICES = runtime.devices()
@@ -88,6 +91,7 @@ def _release_large(request):
     yield
     if request.node.get_closest_marker("large"):
         import gc
+
         gc.collect()
         runtime.free_pools()
 

@@ -15,11 +15,12 @@ def _h(m, p):
 
 # ---------------------------------------------------------------- matrices
 
+
 def test_look_at_basis_and_translation():
     cam = Camera.look_at((1, 2, 3), (1, 7, 3), up=(0, 0, 1))
     # looking along +y with z up: right is +x
     np.testing.assert_allclose(cam.view[:3, :3], [[1, 0, 0], [0, 0, 1], [0, -1, 0]], atol=1e-15)
-    np.testing.assert_allclose(_h(cam.view, (1, 2, 3)), [0, 0, 0, 1], atol=1e-15)   # eye -> origin
+    np.testing.assert_allclose(_h(cam.view, (1, 2, 3)), [0, 0, 0, 1], atol=1e-15)  # eye -> origin
     np.testing.assert_allclose(_h(cam.view, (1, 6, 3))[:3], [0, 0, -4], atol=1e-15)  # ahead -> -z
     np.testing.assert_allclose(cam.forward, [0, 1, 0], atol=1e-15)
     np.testing.assert_array_equal(cam.eye, [1, 2, 3])
@@ -30,7 +31,7 @@ def test_view_is_rigid():
     cam = Camera.look_at((3, -2, 5), (-1, 4, 0.5), up=(0.1, 0.2, 1))
     r = cam.view[:3, :3]
     np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-14)
-    assert np.linalg.det(r) == pytest.approx(1.0)        # right-handed
+    assert np.linalg.det(r) == pytest.approx(1.0)  # right-handed
     np.testing.assert_array_equal(cam.view[3], [0, 0, 0, 1])
 
 
@@ -38,7 +39,7 @@ def test_view_is_rigid():
 def test_perspective_depth_is_clip_w(d):
     near, far = 0.1, 100.0
     cam = Camera.look_at((2, 1, 1), (2, 1, -5), up=(0, 1, 0), fov_y=45, aspect=1.5, near=near, far=far)
-    p = (2, 1, 1 - d)                                   # on the view axis, d in front
+    p = (2, 1, 1 - d)  # on the view axis, d in front
     clip = _h(cam.matrix, p)
     assert clip[3] == pytest.approx(d)
     assert cam.depth_row @ np.append(p, 1) == pytest.approx(d)
@@ -56,8 +57,8 @@ def test_perspective_field_of_view():
     fov, aspect = 50.0, 2.0
     cam = Camera.look_at((0, 0, 0), (0, 0, -1), up=(0, 1, 0), fov_y=fov, aspect=aspect)
     t = math.tan(math.radians(fov / 2))
-    top = _h(cam.matrix, (0, 3 * t, -3))                 # on the top edge at depth 3
-    right = _h(cam.matrix, (3 * t * aspect, 0, -3))      # on the right edge
+    top = _h(cam.matrix, (0, 3 * t, -3))  # on the top edge at depth 3
+    right = _h(cam.matrix, (3 * t * aspect, 0, -3))  # on the right edge
     assert top[1] / top[3] == pytest.approx(1)
     assert right[0] / right[3] == pytest.approx(1)
     assert cam.focal_px(480) == pytest.approx(240 / t)
@@ -70,10 +71,10 @@ def test_orthographic():
         clip = _h(cam.matrix, p)
         assert clip[3] == 1.0
         assert cam.depth_row @ np.append(p, 1) == pytest.approx(10 - p[2])
-    np.testing.assert_allclose(_h(cam.matrix, (4, 2, 0))[:2], [1, 1])       # width 8, height 4
-    np.testing.assert_allclose(_h(cam.matrix, (0, 0, 11))[2], -1)          # depth -1 = near
-    np.testing.assert_allclose(_h(cam.matrix, (0, 0, -10))[2], 1)          # depth 20 = far
-    assert cam.focal_px(100) == pytest.approx(25)                          # 100 px for 4 units
+    np.testing.assert_allclose(_h(cam.matrix, (4, 2, 0))[:2], [1, 1])  # width 8, height 4
+    np.testing.assert_allclose(_h(cam.matrix, (0, 0, 11))[2], -1)  # depth -1 = near
+    np.testing.assert_allclose(_h(cam.matrix, (0, 0, -10))[2], 1)  # depth 20 = far
+    assert cam.focal_px(100) == pytest.approx(25)  # 100 px for 4 units
 
 
 def test_camera_is_immutable():
@@ -87,14 +88,15 @@ def test_camera_is_immutable():
 
 # ---------------------------------------------------------------- pixel convention
 
+
 def test_pixel_convention():
     cam = Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0), fov_y=90)
     w, h = 64, 48
     r = cam.project(np.array([[0, 0, 0], [0, 1, 0], [0, -1, 0], [1, 0, 0], [-1, 0, 0]]), w, h)
     assert (r.sx[0], r.sy[0]) == (w / 2, h / 2)
     assert (r.px[0], r.py[0]) == (w // 2, h // 2)
-    assert r.py[1] < h / 2 < r.py[2]                     # above the axis: a row near the top
-    assert r.px[4] < w / 2 < r.px[3]                     # right of the axis: a column on the right
+    assert r.py[1] < h / 2 < r.py[2]  # above the axis: a row near the top
+    assert r.px[4] < w / 2 < r.px[3]  # right of the axis: a column on the right
     assert r.visible.all()
     np.testing.assert_array_equal(r.depth, 5)
     assert r.sx.dtype == r.sy.dtype == r.depth.dtype == np.float32
@@ -138,8 +140,13 @@ def _project_scalar(cam, p, w, h):
     r = _f32(_div(1.0, cw))
     sx = _f32(_f32(_f32(_f32(cx * r) * 0.5) + 0.5) * w)
     sy = _f32(_f32(0.5 - _f32(_f32(cy * r) * 0.5)) * h)
-    vis = (all(math.isfinite(v) for v in (x, y, z)) and _f32(cam.near) <= depth <= _f32(cam.far)
-           and cw > 0 and 0 <= sx < w and 0 <= sy < h)
+    vis = (
+        all(math.isfinite(v) for v in (x, y, z))
+        and _f32(cam.near) <= depth <= _f32(cam.far)
+        and cw > 0
+        and 0 <= sx < w
+        and 0 <= sy < h
+    )
     return sx, sy, (math.floor(sx) if vis else -1), (math.floor(sy) if vis else -1), depth, vis
 
 
@@ -151,12 +158,25 @@ def _same_f32(a, b):
 def _adversarial_points(cam, w, h, rng):
     fwd, eye = cam.forward, cam.eye
     right, up = cam.view[0, :3], cam.view[1, :3]
-    pts = [eye + fwd * rng.uniform(cam.near, cam.far, 1)[0]
-           + right * rng.normal(0, 20) + up * rng.normal(0, 20) for _ in range(200)]
-    pts += [eye + fwd * cam.near, eye + fwd * cam.far,                        # near/far planes
-            eye + fwd * np.nextafter(cam.near, 0), eye + fwd * np.nextafter(cam.far, np.inf),
-            eye, eye - fwd * 3, eye - fwd * 3 + right, eye + right,            # behind, at the eye plane
-            [np.nan, 0, 0], [0, np.inf, 0], [0, 0, -np.inf], [1e38, 1e38, 1e38], [-3e38, 0, 0]]
+    pts = [
+        eye + fwd * rng.uniform(cam.near, cam.far, 1)[0] + right * rng.normal(0, 20) + up * rng.normal(0, 20)
+        for _ in range(200)
+    ]
+    pts += [
+        eye + fwd * cam.near,
+        eye + fwd * cam.far,  # near/far planes
+        eye + fwd * np.nextafter(cam.near, 0),
+        eye + fwd * np.nextafter(cam.far, np.inf),
+        eye,
+        eye - fwd * 3,
+        eye - fwd * 3 + right,
+        eye + right,  # behind, at the eye plane
+        [np.nan, 0, 0],
+        [0, np.inf, 0],
+        [0, 0, -np.inf],
+        [1e38, 1e38, 1e38],
+        [-3e38, 0, 0],
+    ]
     # points aimed at pixel edges: ndc = 2 k / W - 1 exactly, at a few depths
     inv = np.linalg.inv(cam.matrix)
     for k in [0, 1, w // 2, w - 1, w]:
@@ -175,11 +195,13 @@ def test_project_bit_exact(kind):
     rng = np.random.default_rng(7)
     w, h = 640, 361
     if kind == "perspective":
-        cam = Camera.look_at((3.3, -7.1, 2.9), (0.2, 0.4, -0.3), up=(0, 0, 1), fov_y=55, aspect=w / h,
-                             near=0.7, far=90.0)
+        cam = Camera.look_at(
+            (3.3, -7.1, 2.9), (0.2, 0.4, -0.3), up=(0, 0, 1), fov_y=55, aspect=w / h, near=0.7, far=90.0
+        )
     else:
-        cam = Camera.ortho((3.3, -7.1, 2.9), (0.2, 0.4, -0.3), up=(0, 0, 1), height=31.0, aspect=w / h,
-                           near=0.7, far=90.0)
+        cam = Camera.ortho(
+            (3.3, -7.1, 2.9), (0.2, 0.4, -0.3), up=(0, 0, 1), height=31.0, aspect=w / h, near=0.7, far=90.0
+        )
     pts = _adversarial_points(cam, w, h, rng)
     r = cam.project(pts, w, h)
     assert 0 < r.visible.sum() < len(pts)
@@ -205,8 +227,10 @@ def test_project_empty_and_dtypes():
 
 # ---------------------------------------------------------------- fit and samplers
 
-@pytest.mark.parametrize("lo,hi", [((0, 0, 0), (10, 5, 2)), ((-1e3, 2e3, 7), (-1e3 + 1, 2e3 + 4, 7)),
-                                   ((1, 1, 1), (1, 1, 1))])
+
+@pytest.mark.parametrize(
+    "lo,hi", [((0, 0, 0), (10, 5, 2)), ((-1e3, 2e3, 7), (-1e3 + 1, 2e3 + 4, 7)), ((1, 1, 1), (1, 1, 1))]
+)
 @pytest.mark.parametrize("aspect", [0.5, 1.0, 2.5])
 @pytest.mark.parametrize("fov", [20.0, 60.0, 150.0])
 def test_fit_frames_the_box(lo, hi, aspect, fov):
@@ -216,7 +240,7 @@ def test_fit_frames_the_box(lo, hi, aspect, fov):
     r = cam.project(np.vstack([corners, centre]), 100, 100)
     assert r.visible.all()
     np.testing.assert_allclose(cam.forward, -np.array([1, 1, 0.6]) / np.linalg.norm([1, 1, 0.6]))
-    assert cam.forward @ (centre - cam.eye) > 0      # direction points from the eye to the centre
+    assert cam.forward @ (centre - cam.eye) > 0  # direction points from the eye to the centre
 
 
 def _corners(lo, hi):
@@ -253,13 +277,15 @@ def test_grid_cameras():
     np.testing.assert_allclose(eyes[:, 2], 3.5)
     np.testing.assert_allclose(sorted(set(eyes[:, 0])), [1, 3, 5, 7])
     np.testing.assert_allclose(sorted(set(eyes[:, 1])), [1, 3])
-    for i, cam in enumerate(cams[:24]):                    # one position: yaw outer, pitch inner
+    for i, cam in enumerate(cams[:24]):  # one position: yaw outer, pitch inner
         yaw, pitch = math.radians(45 * (i // 3)), math.radians((1, 30, 60)[i % 3])
-        np.testing.assert_allclose(cam.forward, [math.cos(pitch) * math.cos(yaw),
-                                                 math.cos(pitch) * math.sin(yaw), -math.sin(pitch)],
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            cam.forward,
+            [math.cos(pitch) * math.cos(yaw), math.cos(pitch) * math.sin(yaw), -math.sin(pitch)],
+            atol=1e-12,
+        )
     for cam in cams:
-        assert cam.view[1, 2] > 0                             # z up stays up in the image
+        assert cam.view[1, 2] > 0  # z up stays up in the image
         far_corner = np.linalg.norm(_corners(lo, hi) - cam.eye, axis=1).max()
         assert cam.far >= far_corner
         on_axis = cam.eye + cam.forward * 0.5 * (cam.near + cam.far)
@@ -274,7 +300,7 @@ def test_grid_cameras():
 
 
 def test_grid_spacing_and_flat_box():
-    cams = list(grid_cameras((0, 0, 0), (10, 0, 0), spacing=3.0))     # flat in y and z
+    cams = list(grid_cameras((0, 0, 0), (10, 0, 0), spacing=3.0))  # flat in y and z
     assert len(cams) == 4 * 1 * 24
     assert len(list(grid_cameras((0, 0, 0), (0, 0, 0)))) == 24
     assert len(list(grid_cameras((0, 0, 0), (1, 1, 1)))) == 16 * 24
@@ -282,29 +308,33 @@ def test_grid_spacing_and_flat_box():
 
 # ---------------------------------------------------------------- bad input
 
-@pytest.mark.parametrize("kwargs,name", [
-    ({"eye": (1, 2, 3), "target": (1, 2, 3)}, "target"),
-    ({"eye": (0, 0, 1), "target": (0, 0, 0)}, "up"),
-    ({"eye": (0, 0, 1), "target": (0, 0, 0), "up": (0, 0, 0)}, "up"),
-    ({"eye": (1, 0, 0), "target": (0, 0, 0), "fov_y": 0}, "fov_y"),
-    ({"eye": (1, 0, 0), "target": (0, 0, 0), "fov_y": 180}, "fov_y"),
-    ({"eye": (1, 0, 0), "target": (0, 0, 0), "aspect": 0}, "aspect"),
-    ({"eye": (1, 0, 0), "target": (0, 0, 0), "aspect": np.inf}, "aspect"),
-    ({"eye": (1, 0, 0), "target": (0, 0, 0), "near": 0}, "near"),
-    ({"eye": (1, 0, 0), "target": (0, 0, 0), "near": -1}, "near"),
-    ({"eye": (1, 0, 0), "target": (0, 0, 0), "near": 2, "far": 2}, "far"),
-    ({"eye": (1, 0, 0), "target": (0, 0, 0), "far": np.nan}, "far"),
-    ({"eye": (np.nan, 0, 0), "target": (0, 0, 0)}, "eye"),
-    ({"eye": (1, 0), "target": (0, 0, 0)}, "eye"),
-    ({"eye": (1, 0, 0), "target": (0, np.inf, 0)}, "target"),
-])
+
+@pytest.mark.parametrize(
+    "kwargs,name",
+    [
+        ({"eye": (1, 2, 3), "target": (1, 2, 3)}, "target"),
+        ({"eye": (0, 0, 1), "target": (0, 0, 0)}, "up"),
+        ({"eye": (0, 0, 1), "target": (0, 0, 0), "up": (0, 0, 0)}, "up"),
+        ({"eye": (1, 0, 0), "target": (0, 0, 0), "fov_y": 0}, "fov_y"),
+        ({"eye": (1, 0, 0), "target": (0, 0, 0), "fov_y": 180}, "fov_y"),
+        ({"eye": (1, 0, 0), "target": (0, 0, 0), "aspect": 0}, "aspect"),
+        ({"eye": (1, 0, 0), "target": (0, 0, 0), "aspect": np.inf}, "aspect"),
+        ({"eye": (1, 0, 0), "target": (0, 0, 0), "near": 0}, "near"),
+        ({"eye": (1, 0, 0), "target": (0, 0, 0), "near": -1}, "near"),
+        ({"eye": (1, 0, 0), "target": (0, 0, 0), "near": 2, "far": 2}, "far"),
+        ({"eye": (1, 0, 0), "target": (0, 0, 0), "far": np.nan}, "far"),
+        ({"eye": (np.nan, 0, 0), "target": (0, 0, 0)}, "eye"),
+        ({"eye": (1, 0), "target": (0, 0, 0)}, "eye"),
+        ({"eye": (1, 0, 0), "target": (0, np.inf, 0)}, "target"),
+    ],
+)
 def test_look_at_bad_input(kwargs, name):
     with pytest.raises(ValueError, match=name):
         Camera.look_at(**kwargs)
 
 
 def test_ortho_bad_input():
-    Camera.ortho((1, 0, 0), (0, 0, 0), near=-5, far=5)                 # near may be <= 0
+    Camera.ortho((1, 0, 0), (0, 0, 0), near=-5, far=5)  # near may be <= 0
     with pytest.raises(ValueError, match="far"):
         Camera.ortho((1, 0, 0), (0, 0, 0), near=1, far=-1)
     with pytest.raises(ValueError, match="height"):
@@ -328,7 +358,7 @@ def test_project_bad_input():
 @pytest.mark.parametrize("sampler", [grid_cameras, hemisphere_cameras, Camera.fit])
 def test_sampler_bad_bounds(sampler):
     with pytest.raises(ValueError, match="bounds_max"):
-        sampler((0, 0, 0), (1, -1, 1))                 # raised on the call, before iterating
+        sampler((0, 0, 0), (1, -1, 1))  # raised on the call, before iterating
     with pytest.raises(ValueError, match="bounds_min"):
         sampler((0, np.nan, 0), (1, 1, 1))
     with pytest.raises(ValueError, match="bounds_max"):
@@ -357,9 +387,11 @@ def test_singular_cameras_are_refused():
 
     good = Camera.look_at((3, 0, 0), (0, 0, 0))
     eye = np.zeros(3)
-    for view, proj in [(np.zeros((4, 4)), good.projection),                  # no view at all
-                       (good.view, np.diag([1.0, 1.0, 0.0, 0.0])),          # flattened projection
-                       (good.view, good.projection[[0, 0, 2, 3]])]:          # two rows alike
+    for view, proj in [
+        (np.zeros((4, 4)), good.projection),  # no view at all
+        (good.view, np.diag([1.0, 1.0, 0.0, 0.0])),  # flattened projection
+        (good.view, good.projection[[0, 0, 2, 3]]),
+    ]:  # two rows alike
         with pytest.raises(ClvisError, match="camera: .*singular"):
             Camera(view, proj, 0.1, 10.0, False, eye)
         with pytest.raises(ValueError, match="camera"):

@@ -12,8 +12,9 @@ from clvis import colormap, images
 F32 = np.float32
 
 
-@pytest.mark.parametrize("name", ["viridis", "magma", "inferno", "twilight", "gray", "jet", "tab10",
-                                  "coolwarm_r"])
+@pytest.mark.parametrize(
+    "name", ["viridis", "magma", "inferno", "twilight", "gray", "jet", "tab10", "coolwarm_r"]
+)
 @pytest.mark.parametrize("n", [1, 2, 5, 256, 1000])
 def test_lut_is_matplotlibs(name, n):
     expected = matplotlib.colormaps[name].resampled(n)(np.arange(n), bytes=True)
@@ -81,19 +82,44 @@ SPECIAL = [np.nan, np.inf, -np.inf, 0.0, -0.0, 1.0, -1.0, 1e-30, -1e-30, 3e38, -
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 256, 1000])
-@pytest.mark.parametrize("vmin, vmax", [(0.0, 1.0), (-1.0, 3.0), (0.1, 0.7), (2.5, 2.5), (0.0, 0.0),
-                                        (-3e38, 3e38), (1e-30, 2e-30), (0.0, 1e-39), (1.0, 1.0 + 1e-7),
-                                        (100.0, 100.0001)])
+@pytest.mark.parametrize(
+    "vmin, vmax",
+    [
+        (0.0, 1.0),
+        (-1.0, 3.0),
+        (0.1, 0.7),
+        (2.5, 2.5),
+        (0.0, 0.0),
+        (-3e38, 3e38),
+        (1e-30, 2e-30),
+        (0.0, 1e-39),
+        (1.0, 1.0 + 1e-7),
+        (100.0, 100.0001),
+    ],
+)
 def test_apply_matches_scalar_loop(n, vmin, vmax):
     rng = np.random.default_rng(n)
     lo, hi = F32(vmin), F32(vmax)
     with np.errstate(over="ignore"):
-        values = np.concatenate([
-            np.array(SPECIAL + [vmin, vmax, lo, hi, np.nextafter(lo, F32(-np.inf)),
-                                np.nextafter(hi, F32(np.inf)), (vmin + vmax) / 2], dtype=np.float32),
-            rng.uniform(vmin - 0.1 * (vmax - vmin), vmax + 0.1 * (vmax - vmin), 300).astype(np.float32),
-            (vmin + (vmax - vmin) * np.arange(n + 1) / n).astype(np.float32),     # bin edges
-        ])
+        values = np.concatenate(
+            [
+                np.array(
+                    SPECIAL
+                    + [
+                        vmin,
+                        vmax,
+                        lo,
+                        hi,
+                        np.nextafter(lo, F32(-np.inf)),
+                        np.nextafter(hi, F32(np.inf)),
+                        (vmin + vmax) / 2,
+                    ],
+                    dtype=np.float32,
+                ),
+                rng.uniform(vmin - 0.1 * (vmax - vmin), vmax + 0.1 * (vmax - vmin), 300).astype(np.float32),
+                (vmin + (vmax - vmin) * np.arange(n + 1) / n).astype(np.float32),  # bin edges
+            ]
+        )
     lut = _index_lut(n)
     with np.errstate(over="ignore", invalid="ignore"):
         expected = _apply_loop(values, lut, vmin, vmax)
@@ -108,7 +134,7 @@ def test_apply_documented_cases():
     got = colormap.apply(v, lut, 0.0, 1.0)
     assert (got[0] == 0).all()
     assert _indices(got[1:]).tolist() == [0, 0, 0, 0, 1, 5, 9, 9, 9, 9]
-    flat = colormap.apply(v, lut, 0.5, 0.5)       # vmin == vmax: entry 0, NaN transparent
+    flat = colormap.apply(v, lut, 0.5, 0.5)  # vmin == vmax: entry 0, NaN transparent
     assert (flat[0] == 0).all() and (_indices(flat[1:]) == 0).all() and (flat[1:, 3] == 255).all()
 
 
@@ -179,8 +205,8 @@ def test_depth_image_transparent_where_empty_and_closer_brighter():
     empty = ~np.isfinite(d)
     assert (img[empty] == 0).all() and (img[~empty, 3] == 255).all()
     magma = colormap.lut("magma")
-    np.testing.assert_array_equal(img[0, 0], magma[-1])     # nearest: last entry
-    np.testing.assert_array_equal(img[2, 2], magma[0])      # farthest: first entry
+    np.testing.assert_array_equal(img[0, 0], magma[-1])  # nearest: last entry
+    np.testing.assert_array_equal(img[2, 2], magma[0])  # farthest: first entry
     assert img[0, 0, :3].astype(int).sum() > img[1, 1, :3].astype(int).sum() > img[2, 2, :3].astype(int).sum()
     clamped = images.depth_image(d, "viridis", near=3.0, far=5.0)
     viridis = colormap.lut("viridis")
@@ -203,11 +229,11 @@ def test_depth_image_errors():
 
 def test_velocity_images():
     v = np.full((3, 4, 2), np.nan, np.float32)
-    v[0, 0] = (1.0, 0.0)        # right: angle 0
-    v[0, 1] = (0.0, 2.0)        # down in the image: angle +pi/2
-    v[0, 2] = (-3.0, 0.0)       # left: angle pi
+    v[0, 0] = (1.0, 0.0)  # right: angle 0
+    v[0, 1] = (0.0, 2.0)  # down in the image: angle +pi/2
+    v[0, 2] = (-3.0, 0.0)  # left: angle pi
     v[1, 1] = (0.0, 0.0)
-    v[2, 2] = (np.nan, 1.0)     # one NaN component: empty
+    v[2, 2] = (np.nan, 1.0)  # one NaN component: empty
     angle, mag = images.velocity_images(v)
     assert angle.shape == mag.shape == (3, 4, 4)
     empty = np.isnan(v).any(axis=2)
@@ -233,8 +259,9 @@ def test_attribute_image():
     np.testing.assert_array_equal(img, colormap.apply(plane, colormap.lut("viridis"), 0.0, 1.0))
     assert (img[0, 0] == 0).all()
     lut = colormap.lut("gray", 4)
-    np.testing.assert_array_equal(images.attribute_image(plane, lut, vmin=0.0, vmax=2.0),
-                                  colormap.apply(plane, lut, 0.0, 2.0))
+    np.testing.assert_array_equal(
+        images.attribute_image(plane, lut, vmin=0.0, vmax=2.0), colormap.apply(plane, lut, 0.0, 2.0)
+    )
     with pytest.raises(ValueError, match="plane"):
         images.attribute_image(np.zeros(3, np.float32))
 
@@ -271,9 +298,16 @@ def test_save_png_round_trip(tmp_path, channels):
     assert sorted(p.name for p in path.parent.iterdir()) == ["img.png"]
 
 
-@pytest.mark.parametrize("bad", [np.zeros((2, 2, 4), np.float32), np.zeros((2, 2, 2), np.uint8),
-                                 np.zeros((0, 3, 4), np.uint8), np.zeros(5, np.uint8),
-                                 np.zeros((2, 2, 4, 1), np.uint8)])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        np.zeros((2, 2, 4), np.float32),
+        np.zeros((2, 2, 2), np.uint8),
+        np.zeros((0, 3, 4), np.uint8),
+        np.zeros(5, np.uint8),
+        np.zeros((2, 2, 4, 1), np.uint8),
+    ],
+)
 def test_save_png_rejects(tmp_path, bad):
     with pytest.raises(ValueError, match="image"):
         images.save_png(tmp_path / "x.png", bad)
@@ -291,11 +325,16 @@ def test_opaque_has_no_transparent_pixel():
     a = _panel()
     out = images.opaque(a, (1, 2, 3))
     assert out.shape == a.shape and out.dtype == np.uint8 and (out[..., 3] == 255).all()
-    assert tuple(out[0, 0]) == (1, 2, 3, 255)                   # empty: the background
-    assert tuple(out[6, 12]) == (200, 40, 40, 255)             # opaque: kept
-    np.testing.assert_array_equal(out[9, 3, :3], [(10 * 128 + 1 * 127 + 127) // 255,
-                                                   (200 * 128 + 2 * 127 + 127) // 255,
-                                                   (10 * 128 + 3 * 127 + 127) // 255])
+    assert tuple(out[0, 0]) == (1, 2, 3, 255)  # empty: the background
+    assert tuple(out[6, 12]) == (200, 40, 40, 255)  # opaque: kept
+    np.testing.assert_array_equal(
+        out[9, 3, :3],
+        [
+            (10 * 128 + 1 * 127 + 127) // 255,
+            (200 * 128 + 2 * 127 + 127) // 255,
+            (10 * 128 + 3 * 127 + 127) // 255,
+        ],
+    )
     assert (images.opaque(a)[0, 0, :3] == images.BACKGROUND).all()
     with pytest.raises(ValueError, match="background"):
         images.opaque(a, (0, 0, 300))
@@ -316,11 +355,11 @@ def test_label_adds_a_band_above(width):
     band = images.label_height(width)
     assert 10 <= band <= 40
     assert out.shape == (40 + band, width, 4) and out.dtype == np.uint8
-    np.testing.assert_array_equal(out[band:], a)                # the image is untouched
-    assert (out[:band, :, 3] == 255).all()                      # the band is opaque
+    np.testing.assert_array_equal(out[band:], a)  # the image is untouched
+    assert (out[:band, :, 3] == 255).all()  # the band is opaque
     text = out[:band, :, :3].astype(int)
-    assert (np.abs(text - images.BAND).sum(axis=2) > 200).sum() > 5     # and has bright text
-    if width >= 160:                                            # it fits: the font is not shrunk
+    assert (np.abs(text - images.BAND).sum(axis=2) > 200).sum() > 5  # and has bright text
+    if width >= 160:  # it fits: the font is not shrunk
         assert band >= 18
 
 
@@ -342,7 +381,7 @@ def test_colorbar_ends_are_the_colormaps_ends(name, width):
     np.testing.assert_array_equal(bar[0, -1], lut[-1])
     expected = colormap.apply(np.linspace(-2.5, 7.0, width), lut, -2.5, 7.0)
     np.testing.assert_array_equal(bar[0], expected)
-    np.testing.assert_array_equal(images.colorbar(lut, 1.0, 1.0, width)[0, 0], lut[0])    # a flat range
+    np.testing.assert_array_equal(images.colorbar(lut, 1.0, 1.0, width)[0, 0], lut[0])  # a flat range
 
 
 def test_colorbar_errors():
@@ -357,7 +396,7 @@ def test_colorbar_errors():
 def test_compose_grid():
     a, b, c = _panel(30, 50), _panel(20, 40), _panel(10, 60)
     out = images.compose([a, b, c], columns=2, pad=3, background=(9, 8, 7))
-    assert out.shape == (30 + 3 + 10, 60 + 3 + 40, 4)       # columns as wide as their widest
+    assert out.shape == (30 + 3 + 10, 60 + 3 + 40, 4)  # columns as wide as their widest
     np.testing.assert_array_equal(out[:30, :50], a)
     np.testing.assert_array_equal(out[:20, 63:103], b)
     np.testing.assert_array_equal(out[33:43, :60], c)

@@ -68,7 +68,7 @@ def test_hurricane_finite_and_in_box(storm):
 def test_hurricane_has_a_clear_eye(storm):
     r = np.hypot(storm["positions"][:, 0], storm["positions"][:, 1])
     assert (r > 20).all()
-    assert np.mean(r < 50) > 0.4        # eyewall and inner bands hold most particles
+    assert np.mean(r < 50) > 0.4  # eyewall and inner bands hold most particles
 
 
 def test_tangential_wind_peaks_near_radius_of_maximum_wind(storm):
@@ -79,15 +79,15 @@ def test_tangential_wind_peaks_near_radius_of_maximum_wind(storm):
     mean = np.array([v_t[low][which == k].mean() for k in range(len(edges) - 1)])
     peak = edges[np.argmax(mean)] + 2.5
     assert abs(peak - datasets.R_MAX_WIND) <= 5.0
-    assert mean[-1] < 0.6 * mean.max()          # decays outward
-    assert 40 < mean.max() < 80                 # m/s, a strong hurricane
+    assert mean[-1] < 0.6 * mean.max()  # decays outward
+    assert 40 < mean.max() < 80  # m/s, a strong hurricane
 
 
 def test_rotation_is_counter_clockwise_seen_from_above(storm):
     _, _, v_t, _, _ = _cylindrical(storm)
     assert np.mean(v_t > 0) > 0.99
     p, v = storm["positions"], storm["velocity"]
-    assert np.mean(p[:, 0] * v[:, 1] - p[:, 1] * v[:, 0]) > 0     # z angular momentum
+    assert np.mean(p[:, 0] * v[:, 1] - p[:, 1] * v[:, 0]) > 0  # z angular momentum
 
 
 def test_inflow_below_outflow_aloft_updraft_in_eyewall(storm):
@@ -102,11 +102,12 @@ def test_pressure_lowest_at_centre(storm):
     p = storm["attributes"]["pressure"].astype(np.float64)
     low = z < 2.0
     # pressure ~ a + b z + c r near the surface: rises outward, falls upward
-    (_, b, c), *_ = np.linalg.lstsq(np.stack([np.ones(low.sum()), z[low], r[low]], axis=1),
-                                    p[low], rcond=None)
+    (_, b, c), *_ = np.linalg.lstsq(
+        np.stack([np.ones(low.sum()), z[low], r[low]], axis=1), p[low], rcond=None
+    )
     assert c > 0 and b < 0
-    assert r[np.argmin(np.where(low, p - b * z, np.inf))] < 40    # height-corrected minimum
-    assert p.max() < 1010.0 and p[z < 0.1].min() > 930.0     # hPa, a deep but real low
+    assert r[np.argmin(np.where(low, p - b * z, np.inf))] < 40  # height-corrected minimum
+    assert p.max() < 1010.0 and p[z < 0.1].min() > 930.0  # hPa, a deep but real low
 
 
 def test_temperature_falls_with_height_and_core_is_warm(storm):
@@ -147,7 +148,7 @@ def test_explosion():
     v = e["volume"]
     assert v.shape == (96, 96, 96) and v.dtype == np.float32
     assert 0.05 < (v > 0).mean() < 0.3 and v.max() <= 1 and v.min() >= 0
-    np.testing.assert_array_equal(v, datasets.explosion()["volume"])     # closed form: deterministic
+    np.testing.assert_array_equal(v, datasets.explosion()["volume"])  # closed form: deterministic
     assert np.allclose(np.array(e["origin"]) + (np.array(v.shape[::-1]) - 1) * e["spacing"][::-1], 1.0)
     with pytest.raises(ValueError, match="shape"):
         datasets.explosion((1, 4, 4))

@@ -42,11 +42,16 @@ def _host(tmp_path, source):
     if cc is None:
         _unavailable("no C compiler (cc/gcc) on PATH")
     exe = tmp_path / source.stem
-    build = subprocess.run([cc, "-std=c99", "-O2", "-Wall", str(source), "-lOpenCL", "-o", str(exe)],
-                           capture_output=True, text=True)
+    build = subprocess.run(
+        [cc, "-std=c99", "-O2", "-Wall", str(source), "-lOpenCL", "-o", str(exe)],
+        capture_output=True,
+        text=True,
+    )
     if build.returncode != 0:
-        _unavailable("the OpenCL headers or ICD loader are missing (Debian: opencl-headers "
-                     f"ocl-icd-opencl-dev): {build.stderr.strip()[-400:]}")
+        _unavailable(
+            "the OpenCL headers or ICD loader are missing (Debian: opencl-headers "
+            f"ocl-icd-opencl-dev): {build.stderr.strip()[-400:]}"
+        )
     pocl = _pocl_library()
     if pocl is None:
         _unavailable("no PoCL library found (pip install 'pyopencl[pocl]')")
@@ -58,8 +63,9 @@ def _host(tmp_path, source):
 
 def test_c_host_runs_scan(tmp_path):
     exe, env = _host(tmp_path, HOST)
-    run = subprocess.run([str(exe), str(runtime.KERNEL_ROOT)], capture_output=True, text=True,
-                         env=env, timeout=600)
+    run = subprocess.run(
+        [str(exe), str(runtime.KERNEL_ROOT)], capture_output=True, text=True, env=env, timeout=600
+    )
     assert run.returncode == 0, run.stdout + run.stderr
     lines = [ln for ln in run.stdout.splitlines() if ln.startswith("scan.cl")]
     assert len(lines) == 4 and all(ln.endswith(": OK") for ln in lines), run.stdout
@@ -83,9 +89,13 @@ def test_c_host_runs_raster(tmp_path):
     header = np.array([len(pos), W, H, 1000], "<u4").tobytes()
     header += np.array([cam.near, cam.far], "<f4").tobytes() + camera_buffer(cam).astype("<f4").tobytes()
     (tmp_path / "in.bin").write_bytes(header + pos.astype("<f4").tobytes())
-    run = subprocess.run([str(exe), str(runtime.KERNEL_ROOT), str(tmp_path / "in.bin"),
-                          str(tmp_path / "out.bin")], capture_output=True, text=True, env=env,
-                         timeout=600)
+    run = subprocess.run(
+        [str(exe), str(runtime.KERNEL_ROOT), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
     assert run.returncode == 0, run.stdout + run.stderr
     out = (tmp_path / "out.bin").read_bytes()
     npix = W * H

@@ -17,11 +17,17 @@ def _cloud(n=50, seed=0, **extra):
 
 def _full_cloud(n=50, seed=0):
     rng = np.random.default_rng(seed)
-    return PointCloud(rng.normal(0, 10, (n, 3)),
-                      colors=rng.integers(0, 256, (n, 4), dtype=np.uint8),
-                      attributes={"intensity": rng.random(n).astype(np.float32),
-                                  "label": rng.integers(0, 9, n).astype(np.uint8)},
-                      velocity=rng.normal(0, 1, (n, 3)), radius=rng.random(n), origin=(1e6, -2.5, 0.125))
+    return PointCloud(
+        rng.normal(0, 10, (n, 3)),
+        colors=rng.integers(0, 256, (n, 4), dtype=np.uint8),
+        attributes={
+            "intensity": rng.random(n).astype(np.float32),
+            "label": rng.integers(0, 9, n).astype(np.uint8),
+        },
+        velocity=rng.normal(0, 1, (n, 3)),
+        radius=rng.random(n),
+        origin=(1e6, -2.5, 0.125),
+    )
 
 
 def _assert_same(a: PointCloud, b: PointCloud):
@@ -42,13 +48,20 @@ def _assert_same(a: PointCloud, b: PointCloud):
 
 # ---------------------------------------------------------------- PointCloud
 
+
 def test_pointcloud_conversions():
     n = 4
-    pc = PointCloud(np.arange(12, dtype=np.int64).reshape(n, 3),
-                    colors=np.array([[0, 0.5, 1]] * n),
-                    attributes={"f64": np.arange(n, dtype=np.float64), "i32": np.arange(n, dtype=np.int32),
-                                "u8": np.arange(n, dtype=np.uint8), "flag": np.array([True, False] * 2)},
-                    radius=[1, 2, 3, 4])
+    pc = PointCloud(
+        np.arange(12, dtype=np.int64).reshape(n, 3),
+        colors=np.array([[0, 0.5, 1]] * n),
+        attributes={
+            "f64": np.arange(n, dtype=np.float64),
+            "i32": np.arange(n, dtype=np.int32),
+            "u8": np.arange(n, dtype=np.uint8),
+            "flag": np.array([True, False] * 2),
+        },
+        radius=[1, 2, 3, 4],
+    )
     assert pc.positions.dtype == np.float32 and pc.positions.flags.c_contiguous
     np.testing.assert_array_equal(pc.colors, [[0, 128, 255, 255]] * n)
     assert pc.attributes["f64"].dtype == np.float32
@@ -67,15 +80,21 @@ def test_pointcloud_colors():
     np.testing.assert_array_equal(u16.colors, [[255, 1, 0, 255], [0, 1, 128, 255]])
     rgba = PointCloud(p, colors=np.array([[1, 2, 3, 4], [5, 6, 7, 8]], dtype=np.uint8))
     np.testing.assert_array_equal(rgba.colors, [[1, 2, 3, 4], [5, 6, 7, 8]])
-    ints = PointCloud(p, colors=[[255, 0, 10], [1, 2, 3]])              # int64 within 0..255
+    ints = PointCloud(p, colors=[[255, 0, 10], [1, 2, 3]])  # int64 within 0..255
     np.testing.assert_array_equal(ints.colors, [[255, 0, 10, 255], [1, 2, 3, 255]])
     assert ints.colors.dtype == np.uint8
 
 
 def test_bounds_and_subset():
     p = np.array([[0, 1, 2], [np.nan, 100, 100], [-1, 5, 3], [4, -2, np.inf]])
-    pc = PointCloud(p, colors=np.zeros((4, 3), np.uint8), attributes={"a": np.arange(4.0)},
-                    velocity=np.ones((4, 3)), radius=np.arange(4.0), origin=(1, 2, 3))
+    pc = PointCloud(
+        p,
+        colors=np.zeros((4, 3), np.uint8),
+        attributes={"a": np.arange(4.0)},
+        velocity=np.ones((4, 3)),
+        radius=np.arange(4.0),
+        origin=(1, 2, 3),
+    )
     lo, hi = pc.bounds()
     assert lo.dtype == np.float64
     np.testing.assert_array_equal(lo, [-1, 1, 2])
@@ -95,28 +114,31 @@ def test_bounds_and_subset():
         pc.subset(np.array([0.5]))
 
 
-@pytest.mark.parametrize("kwargs,exc,name", [
-    ({"positions": np.zeros((3, 2))}, ValueError, "positions"),
-    ({"positions": np.zeros(3)}, ValueError, "positions"),
-    ({"positions": np.array([["a", "b", "c"]])}, TypeError, "positions"),
-    ({"positions": np.zeros((3, 3), bool)}, TypeError, "positions"),
-    ({"positions": None}, TypeError, "positions"),
-    ({"positions": np.zeros((3, 3)), "colors": np.zeros((2, 3), np.uint8)}, ValueError, "colors"),
-    ({"positions": np.zeros((3, 3)), "colors": np.zeros((3, 2), np.uint8)}, ValueError, "colors"),
-    ({"positions": np.zeros((3, 3)), "colors": np.full((3, 3), 1.5)}, ValueError, "colors"),
-    ({"positions": np.zeros((3, 3)), "colors": np.full((3, 3), np.nan)}, ValueError, "colors"),
-    ({"positions": np.zeros((3, 3)), "colors": np.full((3, 3), 300)}, ValueError, "colors"),
-    ({"positions": np.zeros((3, 3)), "velocity": np.zeros((4, 3))}, ValueError, "velocity"),
-    ({"positions": np.zeros((3, 3)), "radius": np.zeros(2)}, ValueError, "radius"),
-    ({"positions": np.zeros((3, 3)), "radius": np.zeros((3, 1))}, ValueError, "radius"),
-    ({"positions": np.zeros((3, 3)), "attributes": {"t": np.zeros(4)}}, ValueError, "'t'"),
-    ({"positions": np.zeros((3, 3)), "attributes": {"t": np.zeros((3, 2))}}, ValueError, "'t'"),
-    ({"positions": np.zeros((3, 3)), "attributes": {"t": np.array(["a"] * 3)}}, TypeError, "'t'"),
-    ({"positions": np.zeros((3, 3)), "attributes": {1: np.zeros(3)}}, TypeError, "attributes"),
-    ({"positions": np.zeros((3, 3)), "attributes": [np.zeros(3)]}, TypeError, "attributes"),
-    ({"positions": np.zeros((3, 3)), "origin": (0, 0)}, ValueError, "origin"),
-    ({"positions": np.zeros((3, 3)), "origin": (0, 0, np.nan)}, ValueError, "origin"),
-])
+@pytest.mark.parametrize(
+    "kwargs,exc,name",
+    [
+        ({"positions": np.zeros((3, 2))}, ValueError, "positions"),
+        ({"positions": np.zeros(3)}, ValueError, "positions"),
+        ({"positions": np.array([["a", "b", "c"]])}, TypeError, "positions"),
+        ({"positions": np.zeros((3, 3), bool)}, TypeError, "positions"),
+        ({"positions": None}, TypeError, "positions"),
+        ({"positions": np.zeros((3, 3)), "colors": np.zeros((2, 3), np.uint8)}, ValueError, "colors"),
+        ({"positions": np.zeros((3, 3)), "colors": np.zeros((3, 2), np.uint8)}, ValueError, "colors"),
+        ({"positions": np.zeros((3, 3)), "colors": np.full((3, 3), 1.5)}, ValueError, "colors"),
+        ({"positions": np.zeros((3, 3)), "colors": np.full((3, 3), np.nan)}, ValueError, "colors"),
+        ({"positions": np.zeros((3, 3)), "colors": np.full((3, 3), 300)}, ValueError, "colors"),
+        ({"positions": np.zeros((3, 3)), "velocity": np.zeros((4, 3))}, ValueError, "velocity"),
+        ({"positions": np.zeros((3, 3)), "radius": np.zeros(2)}, ValueError, "radius"),
+        ({"positions": np.zeros((3, 3)), "radius": np.zeros((3, 1))}, ValueError, "radius"),
+        ({"positions": np.zeros((3, 3)), "attributes": {"t": np.zeros(4)}}, ValueError, "'t'"),
+        ({"positions": np.zeros((3, 3)), "attributes": {"t": np.zeros((3, 2))}}, ValueError, "'t'"),
+        ({"positions": np.zeros((3, 3)), "attributes": {"t": np.array(["a"] * 3)}}, TypeError, "'t'"),
+        ({"positions": np.zeros((3, 3)), "attributes": {1: np.zeros(3)}}, TypeError, "attributes"),
+        ({"positions": np.zeros((3, 3)), "attributes": [np.zeros(3)]}, TypeError, "attributes"),
+        ({"positions": np.zeros((3, 3)), "origin": (0, 0)}, ValueError, "origin"),
+        ({"positions": np.zeros((3, 3)), "origin": (0, 0, np.nan)}, ValueError, "origin"),
+    ],
+)
 def test_pointcloud_bad_input(kwargs, exc, name):
     with pytest.raises(exc, match=name):
         PointCloud(**kwargs)
@@ -131,6 +153,7 @@ def test_empty_cloud_round_trips(tmp_path):
 
 # ---------------------------------------------------------------- PLY
 
+
 @pytest.mark.parametrize("text", [False, True])
 @pytest.mark.parametrize("full", [False, True])
 def test_ply_round_trip(tmp_path, text, full):
@@ -144,22 +167,37 @@ def test_ply_round_trip(tmp_path, text, full):
 def test_ply_foreign_properties(tmp_path):
     """A PLY written by someone else: r/g/b naming, velocity_*, doubles, extra elements."""
     n = 6
-    v = np.zeros(n, dtype=[("x", ">f8"), ("y", ">f8"), ("z", ">f8"), ("r", "u1"), ("g", "u1"), ("b", "u1"),
-                           ("velocity_x", "f4"), ("velocity_y", "f4"), ("velocity_z", "f4"),
-                           ("nx", "f4"), ("scalar_temp", "i2"), ("red", "u1")])
+    v = np.zeros(
+        n,
+        dtype=[
+            ("x", ">f8"),
+            ("y", ">f8"),
+            ("z", ">f8"),
+            ("r", "u1"),
+            ("g", "u1"),
+            ("b", "u1"),
+            ("velocity_x", "f4"),
+            ("velocity_y", "f4"),
+            ("velocity_z", "f4"),
+            ("nx", "f4"),
+            ("scalar_temp", "i2"),
+            ("red", "u1"),
+        ],
+    )
     v["x"] = np.arange(n) + 0.25
     v["r"], v["g"], v["b"], v["red"] = 10, 20, 30, 99
     v["velocity_y"] = 2
     v["scalar_temp"] = -7
     faces = np.array([([0, 1, 2],)], dtype=[("vertex_indices", "i4", (3,))])
     path = tmp_path / "FOREIGN.PLY"
-    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex"), plyfile.PlyElement.describe(faces, "face")],
-                    byte_order=">").write(str(path))
+    plyfile.PlyData(
+        [plyfile.PlyElement.describe(v, "vertex"), plyfile.PlyElement.describe(faces, "face")], byte_order=">"
+    ).write(str(path))
     pc = read_points(path)
     np.testing.assert_array_equal(pc.positions[:, 0], np.arange(n) + 0.25)
     np.testing.assert_array_equal(pc.colors, [[10, 20, 30, 255]] * n)
     np.testing.assert_array_equal(pc.velocity, [[0, 2, 0]] * n)
-    assert pc.attribute_names == ("nx", "scalar_temp", "red")     # a lone "red" stays an attribute
+    assert pc.attribute_names == ("nx", "scalar_temp", "red")  # a lone "red" stays an attribute
     assert pc.attributes["scalar_temp"].dtype == np.float32
     np.testing.assert_array_equal(pc.attributes["scalar_temp"], -7)
 
@@ -203,8 +241,18 @@ def test_ply_truncated(tmp_path):
     data = _binary_ply(tmp_path)
     header_end = data.index(b"end_header\n") + len(b"end_header\n")
     row = (len(data) - header_end) // 40
-    cuts = [0, 3, 20, header_end - 5, header_end, header_end + 1, header_end + row, header_end + row + 7,
-            len(data) - row, len(data) - 1]
+    cuts = [
+        0,
+        3,
+        20,
+        header_end - 5,
+        header_end,
+        header_end + 1,
+        header_end + row,
+        header_end + row + 7,
+        len(data) - row,
+        len(data) - 1,
+    ]
     for cut in cuts:
         path = tmp_path / f"cut{cut}.ply"
         path.write_bytes(data[:cut])
@@ -215,19 +263,24 @@ def test_ply_ascii_truncated(tmp_path):
     path = tmp_path / "t.ply"
     write_ply(path, _cloud(n=10), text=True)
     lines = path.read_bytes().splitlines(keepends=True)
-    path.write_bytes(b"".join(lines[:-3]) + lines[-3][:5])      # two rows missing, one cut short
+    path.write_bytes(b"".join(lines[:-3]) + lines[-3][:5])  # two rows missing, one cut short
     _expect_data_error(path)
 
 
-@pytest.mark.parametrize("content", [
-    b"hello, this is not a point cloud\n",
-    b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nend_header\n",
-    (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
-     b"end_header\n1 2 banana\n"),
-    b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n",
-    b"ply\nformat ascii 1.0\nelement face 1\nproperty float x\nend_header\n1\n",
-    bytes(range(256)) * 4,
-])
+@pytest.mark.parametrize(
+    "content",
+    [
+        b"hello, this is not a point cloud\n",
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nend_header\n",
+        (
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+            b"end_header\n1 2 banana\n"
+        ),
+        b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n",
+        b"ply\nformat ascii 1.0\nelement face 1\nproperty float x\nend_header\n1\n",
+        bytes(range(256)) * 4,
+    ],
+)
 def test_ply_malformed(tmp_path, content):
     path = tmp_path / "bad.ply"
     path.write_bytes(content)
@@ -235,15 +288,17 @@ def test_ply_malformed(tmp_path, content):
 
 
 def test_ply_bad_colors_become_data_error(tmp_path):
-    v = np.zeros(2, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("red", "f4"), ("green", "f4"),
-                           ("blue", "f4")])
-    v["red"] = 200.0                    # float colors must be in [0, 1]
+    v = np.zeros(
+        2, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("red", "f4"), ("green", "f4"), ("blue", "f4")]
+    )
+    v["red"] = 200.0  # float colors must be in [0, 1]
     path = tmp_path / "c.ply"
     plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")]).write(str(path))
     _expect_data_error(path, "colors")
 
 
 # ---------------------------------------------------------------- LAS / LAZ
+
 
 def _write_las(path, n=300, point_format=3, big_colors=True, seed=0):
     rng = np.random.default_rng(seed)
@@ -311,8 +366,23 @@ def test_las_truncated(tmp_path, ext):
     _write_las(path, point_format=7)
     data = path.read_bytes()
     start = laspy.read(str(path)).header.offset_to_point_data
-    for cut in sorted({0, 4, 100, 226, 300, start - 1, start, start + 1, start + 36, start + 36 * 5,
-                       (start + len(data)) // 2, len(data) - 36, len(data) - 1}):
+    for cut in sorted(
+        {
+            0,
+            4,
+            100,
+            226,
+            300,
+            start - 1,
+            start,
+            start + 1,
+            start + 36,
+            start + 36 * 5,
+            (start + len(data)) // 2,
+            len(data) - 36,
+            len(data) - 1,
+        }
+    ):
         bad = tmp_path / f"cut{cut}.{ext}"
         bad.write_bytes(data[:cut])
         _expect_data_error(bad)
@@ -330,14 +400,17 @@ def test_las_garbage(tmp_path):
 
 
 @pytest.mark.parametrize("ext", ["las", "laz"])
-@pytest.mark.parametrize("offset,fmt,value", [
-    (100, "<I", 0xFFFFFFF0),        # number of VLRs (laspy would loop over them for hours)
-    (96, "<I", 0xFFFFFFF0),         # offset to point data past the end
-    (94, "<H", 10),                 # header size
-    (243, "<I", 0xFFFFFFF0),        # number of extended VLRs (LAS 1.4)
-    (247, "<Q", 1 << 40),           # point count (LAS 1.4)
-    (247, "<Q", (1 << 64) - 1),
-])
+@pytest.mark.parametrize(
+    "offset,fmt,value",
+    [
+        (100, "<I", 0xFFFFFFF0),  # number of VLRs (laspy would loop over them for hours)
+        (96, "<I", 0xFFFFFFF0),  # offset to point data past the end
+        (94, "<H", 10),  # header size
+        (243, "<I", 0xFFFFFFF0),  # number of extended VLRs (LAS 1.4)
+        (247, "<Q", 1 << 40),  # point count (LAS 1.4)
+        (247, "<Q", (1 << 64) - 1),
+    ],
+)
 def test_las_corrupt_header_fields(tmp_path, ext, offset, fmt, value):
     import struct
 
@@ -351,6 +424,7 @@ def test_las_corrupt_header_fields(tmp_path, ext, offset, fmt, value):
 
 # ---------------------------------------------------------------- NPY / NPZ
 
+
 def test_npy_plain(tmp_path):
     p = np.random.default_rng(1).normal(size=(20, 3))
     np.save(tmp_path / "p.npy", p)
@@ -361,15 +435,27 @@ def test_npy_plain(tmp_path):
 
 def test_npy_structured(tmp_path):
     n = 5
-    a = np.zeros(n, dtype=[("x", "f8"), ("y", "f4"), ("z", "i4"), ("red", "u1"), ("green", "u1"),
-                           ("blue", "u1"), ("temperature", "f8"), ("valid", "?"), ("rgb3", "u1", (3,))])
+    a = np.zeros(
+        n,
+        dtype=[
+            ("x", "f8"),
+            ("y", "f4"),
+            ("z", "i4"),
+            ("red", "u1"),
+            ("green", "u1"),
+            ("blue", "u1"),
+            ("temperature", "f8"),
+            ("valid", "?"),
+            ("rgb3", "u1", (3,)),
+        ],
+    )
     a["x"], a["z"], a["red"], a["temperature"], a["valid"] = np.arange(n), 7, 200, 1.5, True
     np.save(tmp_path / "s.npy", a)
     pc = read_points(tmp_path / "s.npy")
     np.testing.assert_array_equal(pc.positions[:, 0], np.arange(n))
     np.testing.assert_array_equal(pc.positions[:, 2], 7)
     np.testing.assert_array_equal(pc.colors[:, 0], 200)
-    assert pc.attribute_names == ("temperature", "valid")        # the sub-array field is skipped
+    assert pc.attribute_names == ("temperature", "valid")  # the sub-array field is skipped
     assert pc.attributes["valid"].dtype == np.uint8
 
 
@@ -389,28 +475,34 @@ def test_npz_attribute_named_like_savez_keywords(tmp_path):
     assert not (tmp_path / "d.npz").exists()
 
 
-@pytest.mark.parametrize("arrays,match", [
-    ({"points": np.zeros((3, 3))}, "positions"),
-    ({"positions": np.zeros((3, 2))}, "positions"),
-    ({"positions": np.zeros((3, 3)), "colors": np.zeros((4, 3), np.uint8)}, "colors"),
-    ({"positions": np.zeros((3, 3)), "extra": np.zeros((3, 2))}, "extra"),
-    ({"positions": np.zeros((3, 3)), "origin": np.zeros(2)}, "origin"),
-])
+@pytest.mark.parametrize(
+    "arrays,match",
+    [
+        ({"points": np.zeros((3, 3))}, "positions"),
+        ({"positions": np.zeros((3, 2))}, "positions"),
+        ({"positions": np.zeros((3, 3)), "colors": np.zeros((4, 3), np.uint8)}, "colors"),
+        ({"positions": np.zeros((3, 3)), "extra": np.zeros((3, 2))}, "extra"),
+        ({"positions": np.zeros((3, 3)), "origin": np.zeros(2)}, "origin"),
+    ],
+)
 def test_npz_malformed(tmp_path, arrays, match):
     path = tmp_path / "bad.npz"
     np.savez(path, **arrays)
     _expect_data_error(path, match)
 
 
-@pytest.mark.parametrize("make", [
-    lambda p: np.save(p, np.zeros((4, 2))),
-    lambda p: np.save(p, np.zeros((4, 3, 1))),
-    lambda p: np.save(p, np.array(["a", "b", "c"] * 2).reshape(2, 3)),
-    lambda p: np.save(p, np.array([None, 1], dtype=object)),          # needs pickle
-    lambda p: np.save(p, np.zeros(3, dtype=[("x", "f4"), ("y", "f4")])),
-    lambda p: p.write_bytes(b"\x93NUMPY\x01\x00garbage"),
-    lambda p: p.write_bytes(b"not numpy at all"),
-])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda p: np.save(p, np.zeros((4, 2))),
+        lambda p: np.save(p, np.zeros((4, 3, 1))),
+        lambda p: np.save(p, np.array(["a", "b", "c"] * 2).reshape(2, 3)),
+        lambda p: np.save(p, np.array([None, 1], dtype=object)),  # needs pickle
+        lambda p: np.save(p, np.zeros(3, dtype=[("x", "f4"), ("y", "f4")])),
+        lambda p: p.write_bytes(b"\x93NUMPY\x01\x00garbage"),
+        lambda p: p.write_bytes(b"not numpy at all"),
+    ],
+)
 def test_npy_malformed(tmp_path, make):
     path = tmp_path / "bad.npy"
     make(path)
@@ -443,6 +535,7 @@ def test_npz_named_npy_and_back(tmp_path):
 
 # ---------------------------------------------------------------- dispatch
 
+
 def test_missing_file(tmp_path):
     with pytest.raises(FileNotFoundError):
         read_points(tmp_path / "nope.ply")
@@ -470,23 +563,31 @@ def test_str_paths(tmp_path):
 
 # ---------------------------------------------------------------- hostile files
 
+
 def _npy_with_header(path, header: bytes, data=b""):
     header += b" " * (-(len(header) + 11) % 64) + b"\n"
     path.write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header + data)
     return path
 
 
-@pytest.mark.parametrize("header,match", [
-    (b"{'descr': '<f4', 'fortran_order': False, 'shape': (1000000000, 3)}", "declares shape"),
-    (b"{'descr': '<f8', 'fortran_order': False, 'shape': (4611686018427387904, 4611686018427387904, 3)}", "declares shape"),
-    (b"{'descr': '<f8', 'fortran_order': False, 'shape': (9223372036854775807, 3)}", "declares shape"),
-    (b"{b'descr': '<f8', 'fortran_order': False, 'shape': (4, 3)}", "malformed NPY"),
-    (b"{'descr': '<f8', 'fortran_order': False, 'shape': (4, 3)", "malformed NPY"),       # unterminated
-    (b"{'descr': '''<f8", "malformed NPY"),                                              # TokenError
-    (b"{'descr': 'nonsense', 'fortran_order': False, 'shape': (4, 3)}", "bad dtype"),
-    (b"{'descr': '<f8', 'fortran_order': False, 'shape': (4, -3)}", "malformed NPY"),
-    (b"{'descr': '|O', 'fortran_order': False, 'shape': (4, 3)}", "pickle"),
-])
+@pytest.mark.parametrize(
+    "header,match",
+    [
+        (b"{'descr': '<f4', 'fortran_order': False, 'shape': (1000000000, 3)}", "declares shape"),
+        (
+            b"{'descr': '<f8', 'fortran_order': False, "
+            b"'shape': (4611686018427387904, 4611686018427387904, 3)}",
+            "declares shape",
+        ),
+        (b"{'descr': '<f8', 'fortran_order': False, 'shape': (9223372036854775807, 3)}", "declares shape"),
+        (b"{b'descr': '<f8', 'fortran_order': False, 'shape': (4, 3)}", "malformed NPY"),
+        (b"{'descr': '<f8', 'fortran_order': False, 'shape': (4, 3)", "malformed NPY"),  # unterminated
+        (b"{'descr': '''<f8", "malformed NPY"),  # TokenError
+        (b"{'descr': 'nonsense', 'fortran_order': False, 'shape': (4, 3)}", "bad dtype"),
+        (b"{'descr': '<f8', 'fortran_order': False, 'shape': (4, -3)}", "malformed NPY"),
+        (b"{'descr': '|O', 'fortran_order': False, 'shape': (4, 3)}", "pickle"),
+    ],
+)
 def test_npy_hostile_headers(tmp_path, header, match):
     _expect_data_error(_npy_with_header(tmp_path / "h.npy", header, bytes(96)), match)
 
@@ -508,10 +609,16 @@ def test_npz_truncated_and_lying(tmp_path):
         _expect_data_error(bad)
     # a stored member whose NPY header declares 10^9 rows
     import zipfile
+
     with zipfile.ZipFile(tmp_path / "lie.npz", "w") as z:
-        z.writestr("positions.npy", _npy_with_header(
-            tmp_path / "x.npy", b"{'descr': '<f4', 'fortran_order': False, 'shape': (1000000000, 3)}",
-            bytes(36)).read_bytes())
+        z.writestr(
+            "positions.npy",
+            _npy_with_header(
+                tmp_path / "x.npy",
+                b"{'descr': '<f4', 'fortran_order': False, 'shape': (1000000000, 3)}",
+                bytes(36),
+            ).read_bytes(),
+        )
     _expect_data_error(tmp_path / "lie.npz", "declares shape (1000000000, 3)")
 
 
@@ -529,7 +636,7 @@ def _laz_with_header_count(tmp_path, count):
     path = tmp_path / "lie.laz"
     _write_las(path, n=20, point_format=3)
     data = bytearray(path.read_bytes())
-    struct.pack_into("<I", data, 107, count)                  # legacy point count (LAS 1.2)
+    struct.pack_into("<I", data, 107, count)  # legacy point count (LAS 1.2)
     path.write_bytes(bytes(data))
     return path
 
@@ -548,12 +655,12 @@ def test_laz_corrupt_chunk_table(tmp_path):
     data = bytearray(path.read_bytes())
     start = laspy.read(str(path)).header.offset_to_point_data
     table = struct.unpack_from("<q", data, start)[0]
-    for value in (0xFFFF0001, 0x7FFFFFFF, 1000):             # the number of chunks (lazrs aborted on these)
+    for value in (0xFFFF0001, 0x7FFFFFFF, 1000):  # the number of chunks (lazrs aborted on these)
         bad = bytearray(data)
         struct.pack_into("<I", bad, table + 4, value)
         path.write_bytes(bytes(bad))
         _expect_data_error(path, "chunk")
-    for value in (-5, len(data) + 100, start):                # the chunk table's offset
+    for value in (-5, len(data) + 100, start):  # the chunk table's offset
         bad = bytearray(data)
         struct.pack_into("<q", bad, start, value)
         path.write_bytes(bytes(bad))
@@ -603,13 +710,20 @@ def test_laz_mutations_never_abort(tmp_path, point_format):
     _write_las(src, n=80, point_format=point_format)
     root = str(Path(__file__).resolve().parents[1])
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([root, os.environ.get("PYTHONPATH", "")]))
-    proc = subprocess.run([sys.executable, "-c", _LAZ_FUZZ_CHILD, str(src), str(tmp_path / "m.laz"), "300"],
-                          capture_output=True, text=True, env=env, timeout=240)
+    proc = subprocess.run(
+        [sys.executable, "-c", _LAZ_FUZZ_CHILD, str(src), str(tmp_path / "m.laz"), "300"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=240,
+    )
     lines = [json.loads(line) for line in proc.stdout.splitlines()]
     results = [r["r"] for r in lines if "r" in r]
-    assert proc.returncode == 0, (f"the child died (rc {proc.returncode}) at case {lines[-1]['i'] if lines else '?'}: "
-                                  f"{proc.stderr[-1500:]}")
+    assert proc.returncode == 0, (
+        f"the child died (rc {proc.returncode}) at case {lines[-1]['i'] if lines else '?'}: "
+        f"{proc.stderr[-1500:]}"
+    )
     assert len(results) == 300
     bad = [r for r in results if r not in ("ok", "clvis")]
     assert not bad, bad[:10]
-    assert results.count("clvis") > 10          # the mutations do break files
+    assert results.count("clvis") > 10  # the mutations do break files

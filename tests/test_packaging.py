@@ -10,13 +10,15 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_wheel_ships_kernels(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w",
-                        str(tmp_path), str(ROOT)], capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(ROOT)],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
     wheel = next(tmp_path.glob("clvis-*.whl"))
     names = set(zipfile.ZipFile(wheel).namelist())
-    sources = [p.relative_to(ROOT).as_posix() for p in (ROOT / "kernels_cl").rglob("*")
-               if p.is_file()]
+    sources = [p.relative_to(ROOT).as_posix() for p in (ROOT / "kernels_cl").rglob("*") if p.is_file()]
     assert sources
     for s in sources:
         assert f"clvis/{s}" in names, s
@@ -24,11 +26,12 @@ def test_wheel_ships_kernels(tmp_path):
     # unpacked on its own, away from the checkout, it builds and runs a kernel
     site = tmp_path / "site"
     zipfile.ZipFile(wheel).extractall(site)
-    code = ("import numpy as np, clvis, clvis.runtime as r; "
-            "print(r.KERNEL_ROOT); print(clvis.scan(np.arange(5, dtype=np.int32)).tolist())")
+    code = (
+        "import numpy as np, clvis, clvis.runtime as r; "
+        "print(r.KERNEL_ROOT); print(clvis.scan(np.arange(5, dtype=np.int32)).tolist())"
+    )
     env = dict(os.environ, PYTHONPATH=str(site))
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         cwd=tmp_path, env=env)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env)
     assert out.returncode == 0, out.stderr
     root, result = out.stdout.strip().splitlines()
     assert Path(root) == site / "clvis" / "kernels_cl"

@@ -28,7 +28,7 @@ laspy = pytest.importorskip("laspy")
 nibabel = pytest.importorskip("nibabel")
 tinyvdb = pytest.importorskip("tinyvdb")
 
-LIMIT_BYTES = 1536 << 20          # RLIMIT_AS of the child: 1.5 GiB
+LIMIT_BYTES = 1536 << 20  # RLIMIT_AS of the child: 1.5 GiB
 # CLVIS_FUZZ_SCALE=10 runs ten times the cases (a longer search, by hand)
 SCALE = int(os.environ.get("CLVIS_FUZZ_SCALE", "1"))
 ROOT = Path(__file__).resolve().parents[1]
@@ -76,11 +76,16 @@ print(json.dumps({"maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrs
 
 # ---------------------------------------------------------------- base files
 
+
 def _cloud(n, seed=0):
     rng = np.random.default_rng(seed)
-    return PointCloud(rng.normal(0, 10, (n, 3)), colors=rng.integers(0, 256, (n, 4), dtype=np.uint8),
-                      attributes={"intensity": rng.random(n).astype(np.float32)},
-                      radius=rng.random(n), origin=(1e5, 2.0, 0.5))
+    return PointCloud(
+        rng.normal(0, 10, (n, 3)),
+        colors=rng.integers(0, 256, (n, 4), dtype=np.uint8),
+        attributes={"intensity": rng.random(n).astype(np.float32)},
+        radius=rng.random(n),
+        origin=(1e5, 2.0, 0.5),
+    )
 
 
 def _las(path, n, point_format, seed=0):
@@ -109,7 +114,8 @@ def _vdb(tmp, path):
     """A float grid written by tinyvdb from a minimal hand-made OpenVDB file."""
     vs = np.array([1.0, 1.0, 1.0])
     transform = _s("ScaleTranslateMap") + b"".join(
-        struct.pack("<3d", *v) for v in (np.zeros(3), vs, vs, 1 / vs, 1 / vs**2, 0.5 / vs))
+        struct.pack("<3d", *v) for v in (np.zeros(3), vs, vs, 1 / vs, 1 / vs**2, 0.5 / vs)
+    )
     out = struct.pack("<qIIIB", 0x56444220, 224, 11, 0, 1) + b"0EA4B2C5-0F55-4B24-9C25-5CFD16E1E1CE"
     out += struct.pack("<II", 0, 1)
     body = struct.pack("<II", 0, 0) + transform + struct.pack("<I", 1) + struct.pack("<f", 0)
@@ -165,36 +171,50 @@ def _bases(tmp):
     return out
 
 
-_EXTREMES = [0, 1, 0x7F, 0x80, 0xFF, 0x7FFF, 0xFFFF, 0x7FFFFFFF, 0x80000000, 0xFFFFFFFF, 0xFFFF0001,
-             1 << 40, (1 << 63) - 1, (1 << 64) - 1]
+_EXTREMES = [
+    0,
+    1,
+    0x7F,
+    0x80,
+    0xFF,
+    0x7FFF,
+    0xFFFF,
+    0x7FFFFFFF,
+    0x80000000,
+    0xFFFFFFFF,
+    0xFFFF0001,
+    1 << 40,
+    (1 << 63) - 1,
+    (1 << 64) - 1,
+]
 
 
 def _mutate(rng, data, head, suffix):
     b = bytearray(data)
-    if suffix == ".nii.gz":                     # mutate the decompressed header, then compress
+    if suffix == ".nii.gz":  # mutate the decompressed header, then compress
         raw = bytearray(gzip.decompress(data))
         return gzip.compress(bytes(_mutate(rng, raw, 352, ".nii")))
     mode = rng.integers(0, 5)
-    if mode == 0:                               # random bytes anywhere
+    if mode == 0:  # random bytes anywhere
         for _ in range(rng.integers(1, 5)):
             b[rng.integers(0, len(b))] = rng.integers(0, 256)
-    elif mode in (1, 2):                        # an extreme integer in the header region
+    elif mode in (1, 2):  # an extreme integer in the header region
         width = (2, 4, 8)[rng.integers(0, 3)]
         at = int(rng.integers(0, max(1, head - width)))
         value = _EXTREMES[rng.integers(0, len(_EXTREMES))] & ((1 << 8 * width) - 1)
-        b[at:at + width] = value.to_bytes(width, "little")
-    elif mode == 3:                             # a huge, negative or zero number in a text header
+        b[at : at + width] = value.to_bytes(width, "little")
+    elif mode == 3:  # a huge, negative or zero number in a text header
         text = bytes(b[:head])
         numbers = list(re.finditer(rb"\d+", text))
         if not numbers:
             return _mutate(rng, data, head, suffix)
         m = numbers[rng.integers(0, len(numbers))]
         new = [b"9" * 12, b"9" * 40, b"-1", b"0", b"4294967296", b"1e300"][rng.integers(0, 6)]
-        b[m.start():m.end()] = new
-        if suffix == ".npy":                    # keep the header length field consistent
+        b[m.start() : m.end()] = new
+        if suffix == ".npy":  # keep the header length field consistent
             return bytes(b)
-    else:                                       # truncation, or the tail cut off
-        b = b[:rng.integers(0, len(b))]
+    else:  # truncation, or the tail cut off
+        b = b[: rng.integers(0, len(b))]
     return bytes(b)
 
 
@@ -204,8 +224,13 @@ def _run(cases_path, n, tmp):
     maxrss = []
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     while start < n:
-        proc = subprocess.run([sys.executable, "-c", CHILD, str(cases_path), str(LIMIT_BYTES), str(start)],
-                              capture_output=True, text=True, env=env, timeout=300)
+        proc = subprocess.run(
+            [sys.executable, "-c", CHILD, str(cases_path), str(LIMIT_BYTES), str(start)],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=300,
+        )
         last = None
         for line in proc.stdout.splitlines():
             rec = json.loads(line)
@@ -217,9 +242,13 @@ def _run(cases_path, n, tmp):
                 results[rec["i"]] = rec
         if proc.returncode == 0:
             break
-        if last is None or last in results:      # died before or between cases
+        if last is None or last in results:  # died before or between cases
             pytest.fail(f"the fuzz child failed outside a case (rc {proc.returncode}): {proc.stderr[-2000:]}")
-        crashes[last] = {"i": last, "outcome": "crash", "detail": f"rc {proc.returncode}: {proc.stderr[-300:]}"}
+        crashes[last] = {
+            "i": last,
+            "outcome": "crash",
+            "detail": f"rc {proc.returncode}: {proc.stderr[-300:]}",
+        }
         start = last + 1
     results.update(crashes)
     return results, maxrss
@@ -244,8 +273,11 @@ def test_mutated_files_raise_only_clvis_errors(tmp_path):
     cases_path.write_text(json.dumps(cases))
     results, maxrss = _run(cases_path, len(cases), tmp_path)
     assert len(results) == len(cases)
-    bad = [f"{labels[i]}: {r['outcome']}: {r.get('detail', '')}" for i, r in sorted(results.items())
-           if r["outcome"] not in ("ok", "clvis") or ("unmutated" in labels[i] and r["outcome"] != "ok")]
+    bad = [
+        f"{labels[i]}: {r['outcome']}: {r.get('detail', '')}"
+        for i, r in sorted(results.items())
+        if r["outcome"] not in ("ok", "clvis") or ("unmutated" in labels[i] and r["outcome"] != "ok")
+    ]
     counts = {}
     for i, r in results.items():
         key = (labels[i].split(" ")[0], r["outcome"])

@@ -11,8 +11,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-BLOCKS = re.findall(r"^```python\n(.*?)^```", (ROOT / "README.md").read_text(encoding="utf-8"),
-                    re.M | re.S)
+BLOCKS = re.findall(r"^```python\n(.*?)^```", (ROOT / "README.md").read_text(encoding="utf-8"), re.M | re.S)
 
 
 def test_readme_has_examples():
@@ -27,6 +26,6 @@ def test_readme_examples_run(tmp_path, monkeypatch):
     times = []
     for i, block in enumerate(BLOCKS):
         t0 = time.perf_counter()
-        exec(compile(block, f"README.md python block {i + 1}", "exec"), namespace)   # noqa: S102
+        exec(compile(block, f"README.md python block {i + 1}", "exec"), namespace)  # noqa: S102
         times.append(time.perf_counter() - t0)
     print("README blocks, seconds:", ", ".join(f"{t:.1f}" for t in times))

@@ -26,7 +26,9 @@ def test_some_device_found():
 
 def test_required_platforms():
     """The test command names the platforms it installed; each must load."""
-    wanted = [p.strip().lower() for p in os.environ.get("CLVIS_REQUIRE_PLATFORMS", "").split(",") if p.strip()]
+    wanted = [
+        p.strip().lower() for p in os.environ.get("CLVIS_REQUIRE_PLATFORMS", "").split(",") if p.strip()
+    ]
     if not wanted:
         pytest.skip("CLVIS_REQUIRE_PLATFORMS is not set (the README's test command sets it)")
     names = [d.platform.name.lower() for d in runtime.devices()]
@@ -71,8 +73,9 @@ def test_capabilities(device):
     ext = device.extensions.split()
     assert caps.compute_units >= 1 and caps.max_work_group_size >= 1
     assert caps.max_alloc_bytes == device.max_mem_alloc_size
-    assert caps.int64_atomics_native == ("cl_khr_int64_base_atomics" in ext
-                                         and "cl_khr_int64_extended_atomics" in ext)
+    assert caps.int64_atomics_native == (
+        "cl_khr_int64_base_atomics" in ext and "cl_khr_int64_extended_atomics" in ext
+    )
     assert caps.int64_atomics == caps.int64_atomics_native
     assert caps.device_type in ("CPU", "GPU", "ACCELERATOR", "OTHER")
 
@@ -123,8 +126,7 @@ def test_kernel_build_error(device, tmp_path):
 
 def test_bad_define_name(device):
     with pytest.raises(ValueError, match="not a C identifier"):
-        runtime.get_kernel(runtime.queue_for(device), "primitives/scan.cl", "scan_reduce",
-                           {"T=int -DX": 1})
+        runtime.get_kernel(runtime.queue_for(device), "primitives/scan.cl", "scan_reduce", {"T=int -DX": 1})
 
 
 @pytest.mark.parametrize("value", ["1 -DX=2", "a b", '"x"', "x\\", "", "a=b", float("nan"), None, [1]])
@@ -134,8 +136,9 @@ def test_bad_define_value(device, value):
 
 
 def test_define_values(device):
-    opts = runtime.build_options(device, {"A": 3, "B": "uint", "C": "(1<<4)", "D": 1.5, "E": True,
-                                          "F": np.int64(-2)})
+    opts = runtime.build_options(
+        device, {"A": 3, "B": "uint", "C": "(1<<4)", "D": 1.5, "E": True, "F": np.int64(-2)}
+    )
     assert {"-DA=3", "-DB=uint", "-DC=(1<<4)", "-DD=1.5", "-DE=1", "-DF=-2"} <= set(opts)
 
 
@@ -155,13 +158,15 @@ def test_package_in_path_with_space(device, tmp_path):
     elsewhere = tmp_path / "other dir"
     elsewhere.mkdir()
     index = [runtime.describe(d) for d in runtime.devices()].index(runtime.describe(device))
-    code = ("import os, numpy as np, clvis\n"
-            "assert clvis.__file__.startswith(os.environ['PYTHONPATH']), clvis.__file__\n"
-            "cwd = os.getcwd()\n"
-            "x = np.arange(1000, dtype=np.int32)\n"
-            "assert (clvis.scan(x) == np.cumsum(x) - x).all()\n"
-            "assert os.getcwd() == cwd\n"
-            "print(clvis.runtime.build_options(clvis.default_queue().device, {})[1])\n")
+    code = (
+        "import os, numpy as np, clvis\n"
+        "assert clvis.__file__.startswith(os.environ['PYTHONPATH']), clvis.__file__\n"
+        "cwd = os.getcwd()\n"
+        "x = np.arange(1000, dtype=np.int32)\n"
+        "assert (clvis.scan(x) == np.cumsum(x) - x).all()\n"
+        "assert os.getcwd() == cwd\n"
+        "print(clvis.runtime.build_options(clvis.default_queue().device, {})[1])\n"
+    )
     env = dict(os.environ, PYTHONPATH=str(root), CLVIS_DEVICE=str(index))
     for cwd, include in ((root, "kernels_cl/include"), (elsewhere, ".")):
         out = subprocess.run([sys.executable, "-c", code], env=env, cwd=cwd, capture_output=True, text=True)
@@ -169,14 +174,19 @@ def test_package_in_path_with_space(device, tmp_path):
         assert out.stdout.strip() == include
 
 
-@pytest.mark.parametrize("var, value", [("CLVIS_TUNING", "tpu"), ("CLVIS_MAX_ALLOC", "abc"),
-                                        ("CLVIS_MAX_ALLOC", "-5"), ("CLVIS_NO_INT64_ATOMICS", "maybe")])
+@pytest.mark.parametrize(
+    "var, value",
+    [
+        ("CLVIS_TUNING", "tpu"),
+        ("CLVIS_MAX_ALLOC", "abc"),
+        ("CLVIS_MAX_ALLOC", "-5"),
+        ("CLVIS_NO_INT64_ATOMICS", "maybe"),
+    ],
+)
 def test_bad_environment_warns(var, value):
     """A bad variable never stops clvis from importing: a ClvisWarning names it
     and what it accepts, and the default applies."""
-    code = ("import clvis\n"
-            "o = clvis.runtime.options()\n"
-            "print(o.tuning, o.int64_atomics, o.max_alloc_bytes)\n")
+    code = "import clvis\no = clvis.runtime.options()\nprint(o.tuning, o.int64_atomics, o.max_alloc_bytes)\n"
     env = dict(os.environ, **{var: value})
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
@@ -188,8 +198,9 @@ def test_environment_sizes():
     code = "import clvis; print(clvis.runtime.options().max_alloc_bytes)"
     for value, expected in (("4096", "4096"), (" 2e9 ", "2000000000")):
         env = dict(os.environ, CLVIS_MAX_ALLOC=value)
-        out = subprocess.run([sys.executable, "-W", "error", "-c", code], env=env, capture_output=True,
-                             text=True)
+        out = subprocess.run(
+            [sys.executable, "-W", "error", "-c", code], env=env, capture_output=True, text=True
+        )
         assert out.returncode == 0, out.stderr
         assert out.stdout.strip() == expected
 
@@ -254,11 +265,13 @@ def test_program_cache(device):
 def test_max_alloc_cap():
     with runtime.configure(max_alloc_bytes=1000):
         assert runtime.capabilities().max_alloc_bytes == 1000
-        with pytest.raises(clvis.DeviceError,
-                           match=r"x: needs one buffer of 4000 bytes, more than the max single "
-                                 r"allocation of 1000 bytes"):
+        with pytest.raises(
+            clvis.DeviceError,
+            match=r"x: needs one buffer of 4000 bytes, more than the max single "
+            r"allocation of 1000 bytes",
+        ):
             clvis.scan(np.zeros(1000, np.int32))
-        clvis.scan(np.zeros(250, np.int32))     # exactly at the cap
+        clvis.scan(np.zeros(250, np.int32))  # exactly at the cap
     with pytest.raises(ValueError, match="max_alloc_bytes"):
         runtime.set_options(max_alloc_bytes=0)
 
@@ -270,8 +283,11 @@ def test_beyond_device_alloc(device):
     q = runtime.queue_for(device)
     limit = runtime.capabilities(device).max_alloc_bytes
     x = np.zeros(limit // 4 + 1, np.int32)
-    with pytest.raises(clvis.DeviceError, match=rf"x: needs one buffer of {x.nbytes} bytes.*"
-                                                rf"allocation of {limit} bytes"):
+    with pytest.raises(
+        clvis.DeviceError,
+        match=rf"x: needs one buffer of {x.nbytes} bytes.*"
+        rf"allocation of {limit} bytes",
+    ):
         clvis.scan(x, queue=q)
 
 
@@ -290,7 +306,7 @@ def test_default_queue():
 
 
 def test_other_context_rejected(device):
-    ctx = cl.Context([device])          # not clvis's context for this device
+    ctx = cl.Context([device])  # not clvis's context for this device
     x = cla.to_device(cl.CommandQueue(ctx), np.arange(10, dtype=np.int32))
     with pytest.raises(ValueError, match="x: the device array belongs to another OpenCL context"):
         clvis.scan(x, queue=runtime.queue_for(device))
@@ -324,6 +340,7 @@ def test_every_kernel_file_documents_its_abi():
 
 # -- the launch layer ----------------------------------------------------------
 
+
 def test_local_size_and_items(device):
     q = runtime.queue_for(device)
     top = runtime.capabilities(q).max_work_group_size
@@ -331,16 +348,25 @@ def test_local_size_and_items(device):
     assert runtime.local_size(q, 0) == 1
     big = runtime.local_size(q, 4 * top)
     assert big <= top and big & (big - 1) == 0 or big == top
-    assert runtime.items(q, 0, 64) == (64, 64)            # one group, never an empty launch
+    assert runtime.items(q, 0, 64) == (64, 64)  # one group, never an empty launch
     assert runtime.items(q, 1, 64) == (64, 64)
     assert runtime.items(q, 65, 64) == (128, 64)
-    g, l = runtime.items(q, 10, 4 * top)
-    assert g % l == 0 and g >= 10 and l <= top
+    g, local = runtime.items(q, 10, 4 * top)
+    assert g % local == 0 and g >= 10 and local <= top
 
 
-@pytest.mark.parametrize("dtype, value", [(np.uint8, 0), (np.uint32, 0xFFFFFFFF), (np.int32, -1),
-                                          (np.float32, np.inf), (np.uint64, 2**64 - 1),
-                                          (np.float32, 1.5), (np.uint16, 0x1234)])
+@pytest.mark.parametrize(
+    "dtype, value",
+    [
+        (np.uint8, 0),
+        (np.uint32, 0xFFFFFFFF),
+        (np.int32, -1),
+        (np.float32, np.inf),
+        (np.uint64, 2**64 - 1),
+        (np.float32, 1.5),
+        (np.uint16, 0x1234),
+    ],
+)
 def test_fill(device, dtype, value):
     q = runtime.queue_for(device)
     a = runtime.empty(q, 37, dtype, "fill test")
@@ -351,7 +377,7 @@ def test_fill(device, dtype, value):
     np.testing.assert_array_equal(a.get(), want)
     runtime.fill_zero(q, a)
     assert not a.get().any()
-    runtime.fill(q, a[:0], value)                         # nothing to fill
+    runtime.fill(q, a[:0], value)  # nothing to fill
 
 
 def test_arg(device):
@@ -368,10 +394,11 @@ def test_exact_fp_is_a_known_flag(device):
 
 def test_triple():
     from clvis._arrays import triple
+
     assert triple("spacing", (1, 2, 3), positive=True) == (1.0, 2.0, 3.0)
     assert triple("origin", np.array([-1, 0, 1]), positive=False) == (-1.0, 0.0, 1.0)
     with pytest.raises(TypeError, match="spacing"):
-        triple("spacing", "123", positive=True)           # not (1, 2, 3)
+        triple("spacing", "123", positive=True)  # not (1, 2, 3)
     with pytest.raises(TypeError, match="spacing"):
         triple("spacing", 1.0, positive=True)
     with pytest.raises(ValueError, match="spacing"):
@@ -381,7 +408,7 @@ def test_triple():
     with pytest.raises(ValueError, match="origin"):
         triple("origin", (1, np.nan, 2), positive=False)
     with pytest.raises(ValueError, match="origin"):
-        triple("origin", (1, 1e39, 2), positive=False)    # not finite as float32
+        triple("origin", (1, 1e39, 2), positive=False)  # not finite as float32
 
 
 def test_capture_and_pinned(device):
@@ -410,7 +437,7 @@ def test_event_seconds(device):
     s = runtime.seconds(start, end)
     assert s is not None and 0 <= s < 60
     assert runtime.seconds(None) is None
-    plain = cl.CommandQueue(q.context, device)            # a caller's queue without profiling
+    plain = cl.CommandQueue(q.context, device)  # a caller's queue without profiling
     assert runtime.seconds(runtime.marker(plain)) is None
     assert runtime.nbytes(a, None, a[:10]) == a.nbytes + 40
 
@@ -420,7 +447,9 @@ def test_check_memory(device):
     runtime.check_memory(q, "a small image", device_bytes=1 << 20, host_bytes=1 << 20)
     avail = runtime.host_available_bytes()
     assert avail is None or avail > 0
-    with pytest.raises(clvis.DeviceError, match=r"a huge image: needs .* GB on the device and .* GB on the host"):
+    with pytest.raises(
+        clvis.DeviceError, match=r"a huge image: needs .* GB on the device and .* GB on the host"
+    ):
         runtime.check_memory(q, "a huge image", device_bytes=1 << 62)
     with pytest.raises(clvis.DeviceError, match="available"):
         runtime.check_memory(q, "a huge image", host_bytes=1 << 60)

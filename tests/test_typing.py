@@ -38,8 +38,9 @@ def _modules() -> list[str]:
 MODULES = _modules()
 
 
-def _definitions(body: Sequence[ast.stmt], prefix: str = "",
-                 in_class: bool = False) -> Iterator[tuple[str, FunctionNode, bool]]:
+def _definitions(
+    body: Sequence[ast.stmt], prefix: str = "", in_class: bool = False
+) -> Iterator[tuple[str, FunctionNode, bool]]:
     """(qualified name, node, is a method) of each public function of `body`,
     public classes' methods included, through if/try blocks, not into functions."""
     for n in body:
@@ -100,7 +101,7 @@ def test_modules_found():
 
 
 def test_checker_finds_what_is_missing(tmp_path):
-    src = '''
+    src = """
 def f(a, b: int, *args, c=1, **kw): pass
 def g(x: int) -> int: return x
 def _private(a): pass
@@ -116,11 +117,18 @@ class C:
     def _p(self, a): pass
 class _Hidden:
     def m(self, a): pass
-'''
+"""
     tree = ast.parse(src)
     found = {name: _missing(node, method) for name, node, method in _definitions(tree.body)}
-    assert found == {"f": ["a", "*args", "c", "**kw", "return"], "g": [], "h": ["return"],
-                     "C.__init__": ["a"], "C.m": [], "C.s": ["self"], "C.k": []}
+    assert found == {
+        "f": ["a", "*args", "c", "**kw", "return"],
+        "g": [],
+        "h": ["return"],
+        "C.__init__": ["a"],
+        "C.m": [],
+        "C.s": ["self"],
+        "C.k": [],
+    }
 
 
 def test_public_functions_annotated():

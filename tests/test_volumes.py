@@ -29,7 +29,7 @@ def _write_raw(path, a):
 
 @pytest.mark.parametrize("dtype", sorted(RAW_TYPES))
 def test_raw_round_trip(tmp_path, dtype):
-    a = _sample((3, 4, 5), dtype)                                  # Z, Y, X
+    a = _sample((3, 4, 5), dtype)  # Z, Y, X
     path = _write_raw(tmp_path / f"thing_5x4x3_{dtype}.raw", a)
     v = read_volume(path)
     assert isinstance(v, Volume)
@@ -59,21 +59,25 @@ def test_raw_keywords_give_or_override_the_name(tmp_path):
     a = _sample((2, 3, 4), np.float32)
     path = _write_raw(tmp_path / "plain.raw", a)
     np.testing.assert_array_equal(read_volume(path, shape=(2, 3, 4), dtype=np.float32).data, a)
-    np.testing.assert_array_equal(read_volume(path, shape=(np.int64(4), 3, 2), dtype="float32").data,
-                                  a.reshape(4, 3, 2))
+    np.testing.assert_array_equal(
+        read_volume(path, shape=(np.int64(4), 3, 2), dtype="float32").data, a.reshape(4, 3, 2)
+    )
     # a name that says something else is overridden
     named = _write_raw(tmp_path / "x_2x2x2_uint8.raw", a)
     np.testing.assert_array_equal(read_volume(named, shape=(2, 3, 4), dtype=np.float32).data, a)
     np.testing.assert_array_equal(read_volume(named, shape=(6, 4, 4)).data.ravel(), a.view(np.uint8).ravel())
 
 
-@pytest.mark.parametrize("name, message", [
-    ("plain.raw", "the name does not give the shape"),
-    ("thing_4x3_uint8.raw", "the name does not give the shape"),
-    ("thing_4x3x2.raw", "the name does not give the shape"),
-    ("thing_4x3x2_uint12.raw", "unknown sample type 'uint12'"),
-    ("thing_4x0x2_uint8.raw", "empty axis"),
-])
+@pytest.mark.parametrize(
+    "name, message",
+    [
+        ("plain.raw", "the name does not give the shape"),
+        ("thing_4x3_uint8.raw", "the name does not give the shape"),
+        ("thing_4x3x2.raw", "the name does not give the shape"),
+        ("thing_4x3x2_uint12.raw", "unknown sample type 'uint12'"),
+        ("thing_4x0x2_uint8.raw", "empty axis"),
+    ],
+)
 def test_raw_bad_names(tmp_path, name, message):
     path = tmp_path / name
     path.write_bytes(bytes(24))
@@ -82,8 +86,9 @@ def test_raw_bad_names(tmp_path, name, message):
     assert str(path) in str(e.value)
 
 
-@pytest.mark.parametrize("size, what", [(59, "short by 1"), (61, "long by 1"), (0, "short by 60"),
-                                        (120, "long by 60")])
+@pytest.mark.parametrize(
+    "size, what", [(59, "short by 1"), (61, "long by 1"), (0, "short by 60"), (120, "long by 60")]
+)
 def test_raw_wrong_sizes(tmp_path, size, what):
     path = tmp_path / "thing_5x3x2_uint16.raw"
     path.write_bytes(bytes(size))
@@ -124,13 +129,16 @@ def test_npy_round_trip(tmp_path, dtype):
     np.testing.assert_array_equal(f.data, a)
 
 
-@pytest.mark.parametrize("a, message", [
-    (np.zeros((3, 4)), "expected a 3-D volume"),
-    (np.zeros((2, 3, 4, 5)), "expected a 3-D volume"),
-    (np.zeros((2, 3, 4), bool), "real numbers"),
-    (np.zeros((2, 3, 4), np.complex64), "real numbers"),
-    (np.zeros((2, 0, 4)), "empty"),
-])
+@pytest.mark.parametrize(
+    "a, message",
+    [
+        (np.zeros((3, 4)), "expected a 3-D volume"),
+        (np.zeros((2, 3, 4, 5)), "expected a 3-D volume"),
+        (np.zeros((2, 3, 4), bool), "real numbers"),
+        (np.zeros((2, 3, 4), np.complex64), "real numbers"),
+        (np.zeros((2, 0, 4)), "empty"),
+    ],
+)
 def test_npy_bad_arrays(tmp_path, a, message):
     path = _npy(tmp_path, a)
     with pytest.raises(DataError, match=message) as e:
@@ -154,7 +162,7 @@ def test_npy_malformed_and_object_arrays(tmp_path):
 
 def _nifti(path, data, zooms=(1.0, 1.0, 1.0), slope=None):
     img = nibabel.Nifti1Image(data, np.diag([*zooms, 1.0]))
-    img.header.set_zooms(zooms[:data.ndim] if data.ndim < 3 else (*zooms, *([1.0] * (data.ndim - 3))))
+    img.header.set_zooms(zooms[: data.ndim] if data.ndim < 3 else (*zooms, *([1.0] * (data.ndim - 3))))
     if slope is not None:
         img.header.set_slope_inter(slope, 0.5)
     nibabel.save(img, path)
@@ -164,12 +172,12 @@ def _nifti(path, data, zooms=(1.0, 1.0, 1.0), slope=None):
 @pytest.mark.parametrize("suffix", [".nii", ".nii.gz", ".NII.GZ"])
 @pytest.mark.parametrize("dtype", [np.int16, np.float32])
 def test_nifti_round_trip(tmp_path, suffix, dtype):
-    ijk = _sample((5, 4, 3), dtype, seed=3)                        # NIfTI order: i (x), j (y), k (z)
+    ijk = _sample((5, 4, 3), dtype, seed=3)  # NIfTI order: i (x), j (y), k (z)
     path = _nifti(tmp_path / f"brain{suffix}", ijk, zooms=(0.5, 0.75, 2.0))
     v = read_volume(path)
     assert v.data.shape == (3, 4, 5) and v.data.dtype == dtype and v.data.flags.c_contiguous
     np.testing.assert_array_equal(v.data, ijk.transpose(2, 1, 0))  # [z, y, x]
-    assert v.spacing == (2.0, 0.75, 0.5)                           # (dz, dy, dx)
+    assert v.spacing == (2.0, 0.75, 0.5)  # (dz, dy, dx)
     assert v.origin == (0.0, 0.0, 0.0)
     np.testing.assert_allclose(v.affine, np.diag([0.5, 0.75, 2.0, 1.0]))
 
@@ -190,7 +198,7 @@ def test_nifti_scaling_and_trailing_axes(tmp_path):
 def test_nifti_broken_files(tmp_path):
     good = _nifti(tmp_path / "g.nii.gz", np.ones((8, 8, 8), np.float32))
     truncated = tmp_path / "t.nii.gz"
-    truncated.write_bytes(good.read_bytes()[:len(good.read_bytes()) // 2])
+    truncated.write_bytes(good.read_bytes()[: len(good.read_bytes()) // 2])
     short = tmp_path / "short.nii"
     short.write_bytes(gzip.decompress(good.read_bytes())[:600])
     garbage = tmp_path / "x.nii"
@@ -248,7 +256,7 @@ def _nifti_header(shape, datatype=16, bitpix=32, vox_offset=352.0):
 
 def test_nifti_declaring_more_than_it_holds(tmp_path):
     tiny = tmp_path / "tiny.nii"
-    tiny.write_bytes(_nifti_header((700, 700, 700)) + bytes(256))         # 608 bytes
+    tiny.write_bytes(_nifti_header((700, 700, 700)) + bytes(256))  # 608 bytes
     assert tiny.stat().st_size == 608
     with pytest.raises(DataError, match="the file has 608 bytes") as e:
         read_volume(tiny)
@@ -260,14 +268,17 @@ def test_nifti_declaring_more_than_it_holds(tmp_path):
     assert str(gz) in str(e.value)
 
 
-@pytest.mark.parametrize("header, message", [
-    (_nifti_header((2, 2, 2), datatype=999), "not a readable NIfTI"),        # unknown datatype
-    (_nifti_header((2, 2, 2), datatype=32, bitpix=64), "real numbers"),      # complex64
-    (_nifti_header((2, 2, 2), datatype=128, bitpix=24), "real numbers"),     # RGB24
-    (_nifti_header((2, 2, 2), vox_offset=float("inf")), "NIfTI"),
-    (_nifti_header((2, 2, 2), vox_offset=3e38), "NIfTI"),
-    (_nifti_header((2, 2, 2), vox_offset=-1e9), "NIfTI"),
-])
+@pytest.mark.parametrize(
+    "header, message",
+    [
+        (_nifti_header((2, 2, 2), datatype=999), "not a readable NIfTI"),  # unknown datatype
+        (_nifti_header((2, 2, 2), datatype=32, bitpix=64), "real numbers"),  # complex64
+        (_nifti_header((2, 2, 2), datatype=128, bitpix=24), "real numbers"),  # RGB24
+        (_nifti_header((2, 2, 2), vox_offset=float("inf")), "NIfTI"),
+        (_nifti_header((2, 2, 2), vox_offset=3e38), "NIfTI"),
+        (_nifti_header((2, 2, 2), vox_offset=-1e9), "NIfTI"),
+    ],
+)
 def test_nifti_hostile_headers(tmp_path, header, message):
     path = tmp_path / "h.nii"
     path.write_bytes(header + bytes(64))
@@ -276,8 +287,10 @@ def test_nifti_hostile_headers(tmp_path, header, message):
     assert str(path) in str(e.value)
 
 
-@pytest.mark.parametrize("a", [np.zeros((2, 2, 2), np.complex128), np.array(["ab"] * 8).reshape(2, 2, 2),
-                               np.zeros((2, 2, 2), ">c8")])
+@pytest.mark.parametrize(
+    "a",
+    [np.zeros((2, 2, 2), np.complex128), np.array(["ab"] * 8).reshape(2, 2, 2), np.zeros((2, 2, 2), ">c8")],
+)
 def test_npy_string_and_complex_volumes(tmp_path, a):
     path = _npy(tmp_path, a)
     with pytest.raises(DataError, match="real numbers") as e:
@@ -313,5 +326,6 @@ def test_nifti_time_series_volume_index(tmp_path):
         np.save(tmp_path / "v.npy", np.zeros((2, 2, 2), np.float32))
         read_volume(tmp_path / "v.npy", volume_index=0)
     import os
+
     ex = os.path.join(os.path.dirname(nibabel.__file__), "tests", "data", "example4d.nii.gz")
     assert read_volume(ex, volume_index=1).data.shape == (24, 96, 128)

@@ -1,15 +1,15 @@
 """The clvis command line.
 
-    clvis info                   OpenCL platforms and devices, the one clvis uses, its capabilities
-    clvis demo                   runs the kernel families on generated data and prints the figures
-    clvis render [FILE]          renders a point cloud (default: an embedded synthetic hurricane)
-                                 and writes PNGs of its G-buffers
-    clvis iso [FILE]             progressive isosurface raycasting of a ZFP-compressed volume
-                                 (default: an embedded Marschner-Lobb volume)
-    clvis gauss [FILE]           Gaussians from a volume at three levels of detail, ray marched
-                                 (default: an embedded explosion), PNGs side by side
-    clvis bench primitives|raster|gauss|iso
-                                 a benchmark suite with its peers, as a table (and JSON)
+clvis info                   OpenCL platforms and devices, the one clvis uses, its capabilities
+clvis demo                   runs the kernel families on generated data and prints the figures
+clvis render [FILE]          renders a point cloud (default: an embedded synthetic hurricane)
+                             and writes PNGs of its G-buffers
+clvis iso [FILE]             progressive isosurface raycasting of a ZFP-compressed volume
+                             (default: an embedded Marschner-Lobb volume)
+clvis gauss [FILE]           Gaussians from a volume at three levels of detail, ray marched
+                             (default: an embedded explosion), PNGs side by side
+clvis bench primitives|raster|gauss|iso
+                             a benchmark suite with its peers, as a table (and JSON)
 """
 
 from __future__ import annotations
@@ -32,8 +32,12 @@ tells more about each command.
 
 
 def _parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
-    p = argparse.ArgumentParser(prog="clvis", description=__doc__, epilog=_EPILOG,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="clvis",
+        description=__doc__,
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--version", action="version", version=f"clvis {__version__}")
     sub = p.add_subparsers(dest="cmd", metavar="COMMAND", parser_class=Parser)
     commands = {name: module.add_parser(sub) for name, module in _COMMANDS.items()}
@@ -50,22 +54,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not argv:
         p.print_help()
         return 0
-    for i, tok in enumerate(argv):        # the command: the first word that is no option
+    for i, tok in enumerate(argv):  # the command: the first word that is no option
         if not tok.startswith("-"):
             if tok in commands:
-                argv[i + 1:] = glue_values(commands[tok], argv[i + 1:])
+                argv[i + 1 :] = glue_values(commands[tok], argv[i + 1 :])
             break
     try:
         args = p.parse_args(argv)
-        if args.cmd is None:                # only options, such as `clvis --verbose`
+        if args.cmd is None:  # only options, such as `clvis --verbose`
             p.print_help()
             return 0
         return run(args.cmd, _COMMANDS[args.cmd].cmd, args)
-    except SystemExit as e:                 # argparse: --help, --version, a bad argument
+    except SystemExit as e:  # argparse: --help, --version, a bad argument
         return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
-    except BrokenPipeError:                 # `clvis info | head -1`: the reader has all it wanted
+    except BrokenPipeError:  # `clvis info | head -1`: the reader has all it wanted
         _quiet_stdout()
-        return 141                          # 128 + SIGPIPE, as a pipeline reports a process it stopped
+        return 141  # 128 + SIGPIPE, as a pipeline reports a process it stopped
 
 
 def _quiet_stdout():

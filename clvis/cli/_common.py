@@ -44,8 +44,9 @@ def glue_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
     """argv with `--opt VALUE` written `--opt=VALUE` where VALUE starts with a
     dash: argparse takes `-5x5` or `-1,2,3` for an option of its own, not for
     the value of the option before it."""
-    takes_value = {s for a in parser._actions if a.option_strings and a.nargs is None
-                   for s in a.option_strings}
+    takes_value = {
+        s for a in parser._actions if a.option_strings and a.nargs is None for s in a.option_strings
+    }
     known = set(parser._option_string_actions)
     out, i = [], 0
     while i < len(argv):
@@ -54,8 +55,13 @@ def glue_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
             out += argv[i:]
             break
         nxt = argv[i + 1] if i + 1 < len(argv) else None
-        if (tok in takes_value and nxt is not None and nxt.startswith("-") and nxt != "--"
-                and nxt.split("=", 1)[0] not in known):
+        if (
+            tok in takes_value
+            and nxt is not None
+            and nxt.startswith("-")
+            and nxt != "--"
+            and nxt.split("=", 1)[0] not in known
+        ):
             out.append(f"{tok}={nxt}")
             i += 2
             continue
@@ -65,6 +71,7 @@ def glue_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
 
 
 # ---------------------------------------------------------------- argument types
+
 
 def size(text: str) -> tuple[int, int]:
     """'WxH' -> (W, H), each side in 1..MAX_SIDE (so W * H <= MAX_PIXELS)."""
@@ -100,30 +107,39 @@ def positive_int(text: str) -> int:
 
 def count(lo: int, hi: int):
     """An argument type: a whole number in lo..hi."""
+
     def parse(text: str) -> int:
         n = _integer(text)
         if n is None or not lo <= n <= hi:
             what = "a positive integer" if lo == 1 else "an integer"
             raise argparse.ArgumentTypeError(f"expected {what} in {lo:,}..{hi:,}, got {text!r}")
         return n
-    parse.__name__ = "count"        # argparse names the type in some messages
+
+    parse.__name__ = "count"  # argparse names the type in some messages
     return parse
 
 
 def real(lo: float = -math.inf, hi: float = math.inf, *, open_lo: bool = False, what: str = "a number"):
     """An argument type: a finite float in [lo, hi] (or (lo, hi] with open_lo)."""
+
     def parse(text: str) -> float:
         try:
             f = float(text)
         except ValueError:
             f = math.nan
         if not (math.isfinite(f) and (f > lo if open_lo else f >= lo) and f <= hi):
-            rng = ("" if lo == -math.inf and hi == math.inf else
-                   f" > {lo:g}" if hi == math.inf and open_lo else
-                   f" >= {lo:g}" if hi == math.inf else
-                   f" in {'(' if open_lo else '['}{lo:g}, {hi:g}]")
+            rng = (
+                ""
+                if lo == -math.inf and hi == math.inf
+                else f" > {lo:g}"
+                if hi == math.inf and open_lo
+                else f" >= {lo:g}"
+                if hi == math.inf
+                else f" in {'(' if open_lo else '['}{lo:g}, {hi:g}]"
+            )
             raise argparse.ArgumentTypeError(f"expected {what}{rng} (finite), got {text!r}")
         return f
+
     parse.__name__ = "real"
     return parse
 
@@ -138,14 +154,18 @@ def colormap_name(text: str) -> str:
     if text in known:
         return text
     close = difflib.get_close_matches(text, known, n=5) or difflib.get_close_matches(
-        text.lower(), [k.lower() for k in known], n=5, cutoff=0.5)
-    hint = (f"closest: {', '.join(close)}" if close else
-            f"some valid names: {', '.join(k for k in ('viridis', 'magma', 'inferno', 'plasma', 'cividis', 'gray') if k in known)}")
-    raise argparse.ArgumentTypeError(f"unknown colormap {text!r}; {hint} ({len(known)} names in all: "
-                                     "matplotlib's colormaps, _r reversed)")
+        text.lower(), [k.lower() for k in known], n=5, cutoff=0.5
+    )
+    common = [k for k in ("viridis", "magma", "inferno", "plasma", "cividis", "gray") if k in known]
+    hint = f"closest: {', '.join(close)}" if close else f"some valid names: {', '.join(common)}"
+
+    raise argparse.ArgumentTypeError(
+        f"unknown colormap {text!r}; {hint} ({len(known)} names in all: matplotlib's colormaps, _r reversed)"
+    )
 
 
 # ---------------------------------------------------------------- running a command
+
 
 def run(name: str, fn, args) -> int:
     """fn(args), with the errors a user can cause as one line on stderr and
@@ -157,7 +177,7 @@ def run(name: str, fn, args) -> int:
     try:
         return fn(args)
     except BrokenPipeError:
-        raise                       # main's: the reader went away, not an error of ours
+        raise  # main's: the reader went away, not an error of ours
     except (CliError, ClvisError, ValueError, TypeError, ImportError, OSError, MemoryError) as e:
         if os.environ.get("CLVIS_DEBUG", "") not in ("", "0"):
             raise
@@ -179,6 +199,7 @@ def _one_line(e: BaseException) -> str:
 def timed(fn, queue=None, repeat=3) -> float:
     """Best of `repeat` timed runs after one warm-up (which builds the
     kernels); a single timed run when that one takes over half a second."""
+
     def once():
         t0 = time.perf_counter()
         fn()
@@ -196,6 +217,7 @@ def timed(fn, queue=None, repeat=3) -> float:
 
 
 # ---------------------------------------------------------------- progress
+
 
 class Progress:
     """Stage names and their elapsed times on stderr.
@@ -216,8 +238,8 @@ class Progress:
         now = time.perf_counter()
         tail = "failed" if failed else f"(total {now - self.start:6.2f} s)"
         line = f"{self.prefix}: {name:<36} {now - since:6.2f} s  {tail}"
-        if self.tty:            # one terminal row, or \r cannot rewrite it
-            line = line[:shutil.get_terminal_size().columns - 1]
+        if self.tty:  # one terminal row, or \r cannot rewrite it
+            line = line[: shutil.get_terminal_size().columns - 1]
         return line
 
     def _write(self, text: str):
@@ -233,9 +255,11 @@ class Progress:
         stop = threading.Event()
         ticker = None
         if self.tty:
+
             def tick():
                 while not stop.wait(0.2):
                     self._write("\r\x1b[K" + self._line(name, t0))
+
             self._write("\r\x1b[K" + self._line(name, t0))
             ticker = threading.Thread(target=tick, daemon=True)
             ticker.start()
@@ -259,6 +283,7 @@ def isatty(stream) -> bool:
 
 # ---------------------------------------------------------------- camera options
 
+
 @dataclasses.dataclass(frozen=True)
 class FitView:
     """A command's default view: --view fit looks along `direction` (from the
@@ -268,11 +293,14 @@ class FitView:
     fov_y: float
 
 
-FIT_MARGIN = 1.05           # fit and the axis views: the scene fills 1/1.05 of the frame
+FIT_MARGIN = 1.05  # fit and the axis views: the scene fills 1/1.05 of the frame
 # orthographic views: (view direction, up)
-AXIS_VIEWS = {"top": ((0, 0, -1), (0, 1, 0)), "front": ((0, 1, 0), (0, 0, 1)),
-              "side": ((-1, 0, 0), (0, 0, 1))}
-SAMPLER_CAMERAS = {"hemisphere": 128, "grid": 384}     # grid_cameras with count=4
+AXIS_VIEWS = {
+    "top": ((0, 0, -1), (0, 1, 0)),
+    "front": ((0, 1, 0), (0, 0, 1)),
+    "side": ((-1, 0, 0), (0, 0, 1)),
+}
+SAMPLER_CAMERAS = {"hemisphere": 128, "grid": 384}  # grid_cameras with count=4
 
 VIEWS_HELP = """\
 views (--view):
@@ -308,7 +336,9 @@ def vec3(text: str) -> tuple[float, float, float]:
     except ValueError:
         v = ()
     if len(v) != 3 or not all(math.isfinite(x) for x in v):
-        raise argparse.ArgumentTypeError(f"expected three finite numbers X,Y,Z such as 1,-2.5,3, got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"expected three finite numbers X,Y,Z such as 1,-2.5,3, got {text!r}"
+        )
     return v
 
 
@@ -325,21 +355,35 @@ def fov(text: str) -> float:
     except ValueError:
         f = math.nan
     if not (math.isfinite(f) and 0 < f < 180):
-        raise argparse.ArgumentTypeError(f"expected a field of view in degrees, between 0 and 180, got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"expected a field of view in degrees, between 0 and 180, got {text!r}"
+        )
     return f
 
 
 def add_camera_options(parser: argparse.ArgumentParser, fit: FitView):
     """--view, --eye, --target, --up and --fov; `fit` is the command's default view."""
     g = parser.add_argument_group("camera", "the view (see above), and parts of it replaced")
-    g.add_argument("--view", type=view, default=("fit", 0),
-                   help="fit, top, front, side, hemisphere:K or grid:K (default fit)")
+    g.add_argument(
+        "--view",
+        type=view,
+        default=("fit", 0),
+        help="fit, top, front, side, hemisphere:K or grid:K (default fit)",
+    )
     g.add_argument("--eye", type=vec3, metavar="X,Y,Z", help="the camera position, in world units")
-    g.add_argument("--target", type=vec3, metavar="X,Y,Z",
-                   help="the point looked at (default: the view's; the centre with --eye)")
+    g.add_argument(
+        "--target",
+        type=vec3,
+        metavar="X,Y,Z",
+        help="the point looked at (default: the view's; the centre with --eye)",
+    )
     g.add_argument("--up", type=direction, metavar="X,Y,Z", help="the up direction (default: the view's)")
-    g.add_argument("--fov", type=fov, metavar="DEG",
-                   help=f"vertical field of view of a perspective view (default {fit.fov_y:g})")
+    g.add_argument(
+        "--fov",
+        type=fov,
+        metavar="DEG",
+        help=f"vertical field of view of a perspective view (default {fit.fov_y:g})",
+    )
     parser.set_defaults(fit_view=fit)
 
 
@@ -376,9 +420,11 @@ def camera_from_args(args, lo, hi, width: int, height: int, points=None):
     fov_y = args.fov if args.fov is not None else fit.fov_y
     try:
         if kind == "fit":
-            if points is None:      # the box's corners: framed tighter than its bounding sphere
-                points = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                                   for z in (lo[2], hi[2])], np.float64)
+            if points is None:  # the box's corners: framed tighter than its bounding sphere
+                points = np.array(
+                    [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])],
+                    np.float64,
+                )
             cam = fit_camera(points, lo, hi, aspect, fit, fov_y)
         elif kind in AXIS_VIEWS:
             cam = axis_camera(kind, lo, hi, aspect)
@@ -390,7 +436,7 @@ def camera_from_args(args, lo, hi, width: int, height: int, points=None):
         if args.eye is None and args.target is None and args.up is None:
             return cam
         return _replaced(cam, kind, args, lo, hi, aspect)
-    except ValueError as e:         # Camera's own checks: an up along the view, ...
+    except ValueError as e:  # Camera's own checks: an up along the view, ...
         raise CliError(f"camera: {e}") from None
 
 
@@ -406,7 +452,7 @@ def _replaced(cam, kind, args, lo, hi, aspect: float):
         target = np.asarray(args.target, np.float64)
     elif args.eye is not None:
         target = centre
-    else:                           # the view's own line of sight
+    else:  # the view's own line of sight
         target = cam.eye + cam.forward * max(float(np.linalg.norm(centre - cam.eye)), 1.0)
     up = args.up if args.up is not None else (AXIS_VIEWS[kind][1] if kind in AXIS_VIEWS else (0, 0, 1))
     if np.array_equal(eye, target):
@@ -416,8 +462,15 @@ def _replaced(cam, kind, args, lo, hi, aspect: float):
     depths = (corners - eye) @ forward
     scale = max(float(np.linalg.norm(hi - lo)), tiny(centre), float(np.linalg.norm(target - eye)) * 1e-3)
     if cam.orthographic:
-        return Camera.ortho(eye, target, up, height=2.0 / cam.projection[1, 1], aspect=aspect,
-                            near=float(depths.min()) - 0.1 * scale, far=float(depths.max()) + 0.1 * scale)
+        return Camera.ortho(
+            eye,
+            target,
+            up,
+            height=2.0 / cam.projection[1, 1],
+            aspect=aspect,
+            near=float(depths.min()) - 0.1 * scale,
+            far=float(depths.max()) + 0.1 * scale,
+        )
     fov_y = math.degrees(2 * math.atan(1.0 / cam.projection[1, 1]))
     far = max(1.01 * float(depths.max()), 0.0) + 1e-3 * scale
     near = max(0.5 * float(depths.min()), 1e-4 * scale, 1e-6 * far)
@@ -438,12 +491,13 @@ def fit_camera(positions, lo, hi, aspect: float, fit: FitView, fov_y: float | No
     sphere, which leaves a flat cloud (a storm, a terrain) small."""
     from ..camera import Camera
 
-    cam = Camera.fit(lo, hi, direction=fit.direction, aspect=aspect,
-                     fov_y=fit.fov_y if fov_y is None else fov_y)
+    cam = Camera.fit(
+        lo, hi, direction=fit.direction, aspect=aspect, fov_y=fit.fov_y if fov_y is None else fov_y
+    )
     p = _finite_sample(positions)
     centre = 0.5 * (np.asarray(lo, np.float64) + np.asarray(hi, np.float64))
     if len(p) == 0 or np.ptp(p, axis=0).max() <= tiny(centre):
-        return cam          # (about) one point: Camera.fit's own framing
+        return cam  # (about) one point: Camera.fit's own framing
     right, up, forward = cam.view[0, :3], cam.view[1, :3], cam.forward
     o = p - centre
     c = o @ forward
@@ -457,20 +511,25 @@ def fit_camera(positions, lo, hi, aspect: float, fit: FitView, fov_y: float | No
     shift = np.zeros(2)
 
     def distance():
-        return max(float(np.max(FIT_MARGIN * np.maximum(np.abs(a - shift[0]) / tan_x,
-                                                       np.abs(b - shift[1]) / tan_y) - c)),
-                   float(np.max(-c)) + 1e-3 * radius)
+        return max(
+            float(
+                np.max(
+                    FIT_MARGIN * np.maximum(np.abs(a - shift[0]) / tan_x, np.abs(b - shift[1]) / tan_y) - c
+                )
+            ),
+            float(np.max(-c)) + 1e-3 * radius,
+        )
 
     dist = distance()
     # perspective puts the near side of an oblique cloud lower and wider on
     # screen: shift the eye sideways until the points' extents are centred in
     # the frame, then move it in again (a few rounds converge)
-    step = max(1, len(c) // 20_000)     # the centre from a sample; the distance from all
+    step = max(1, len(c) // 20_000)  # the centre from a sample; the distance from all
     for _ in range(3):
         depth = dist + c[::step]
         for k, s in enumerate((a[::step], b[::step])):
             lo_s, hi_s = float(s.min()), float(s.max())
-            for _ in range(40):         # bisect: the mid of the extents, decreasing in the shift
+            for _ in range(40):  # bisect: the mid of the extents, decreasing in the shift
                 mid = 0.5 * (lo_s + hi_s)
                 x = (s - mid) / depth
                 lo_s, hi_s = (mid, hi_s) if x.max() + x.min() > 0 else (lo_s, mid)
@@ -479,8 +538,9 @@ def fit_camera(positions, lo, hi, aspect: float, fit: FitView, fov_y: float | No
     nearest, farthest = dist + float(c.min()), dist + float(c.max())
     fov_y = math.degrees(2 * math.atan(tan_y))
     target = centre + shift[0] * right + shift[1] * up
-    return Camera.look_at(target - dist * forward, target, (0, 0, 1), fov_y, aspect,
-                          near=0.5 * nearest, far=1.5 * farthest)
+    return Camera.look_at(
+        target - dist * forward, target, (0, 0, 1), fov_y, aspect, near=0.5 * nearest, far=1.5 * farthest
+    )
 
 
 def tiny(centre) -> float:
@@ -502,13 +562,21 @@ def axis_camera(kind: str, lo, hi, aspect: float):
     centre = 0.5 * (lo + hi)
     scale = max(width, height, depth, tiny(centre))
     frame = FIT_MARGIN * max(height, width / aspect, 1e-3 * scale)
-    back = 0.5 * depth + 0.1 * scale              # the eye sits outside the box
-    return Camera.ortho(centre - back * direction, centre, up, height=frame, aspect=aspect,
-                        near=0.05 * scale, far=back + 0.5 * depth + 0.1 * scale)
+    back = 0.5 * depth + 0.1 * scale  # the eye sits outside the box
+    return Camera.ortho(
+        centre - back * direction,
+        centre,
+        up,
+        height=frame,
+        aspect=aspect,
+        near=0.05 * scale,
+        far=back + 0.5 * depth + 0.1 * scale,
+    )
 
 
 # --------------------------------------------------------------------------
 # volumes: the same file options for iso and gauss
+
 
 def spacing_xyz(text: str) -> tuple[float, float, float]:
     """'DX,DY,DZ' -> three finite positive floats (x, y, z order)."""
@@ -526,7 +594,9 @@ def raw_shape(text: str) -> tuple[int, int, int]:
     except ValueError:
         xyz = ()
     if len(xyz) != 3 or not all(0 < n <= 2**31 for n in xyz):
-        raise argparse.ArgumentTypeError(f"expected XxYxZ with positive sides, such as 256x256x128, got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"expected XxYxZ with positive sides, such as 256x256x128, got {text!r}"
+        )
     return xyz[2], xyz[1], xyz[0]
 
 
@@ -535,15 +605,34 @@ def add_volume_options(parser: argparse.ArgumentParser) -> None:
     from ..volumes import RAW_TYPES
 
     g = parser.add_argument_group("volume files")
-    g.add_argument("--spacing", type=spacing_xyz, default=None, metavar="DX,DY,DZ",
-                   help="sample spacing along x, y, z (default: the file's: NIfTI and VDB carry "
-                        "their own, raw and .npy files 1,1,1)")
-    g.add_argument("--shape", type=raw_shape, default=None, metavar="XxYxZ",
-                   help="samples along x, y, z of a .raw file whose name does not say")
-    g.add_argument("--dtype", choices=sorted(RAW_TYPES), default=None,
-                   help="sample type of a .raw file whose name does not say")
-    g.add_argument("--volume-index", type=count(0, 2**31 - 1), default=None, metavar="T",
-                   help="the volume of a 4-D NIfTI time series to read (0 first)")
+    g.add_argument(
+        "--spacing",
+        type=spacing_xyz,
+        default=None,
+        metavar="DX,DY,DZ",
+        help="sample spacing along x, y, z (default: the file's: NIfTI and VDB carry "
+        "their own, raw and .npy files 1,1,1)",
+    )
+    g.add_argument(
+        "--shape",
+        type=raw_shape,
+        default=None,
+        metavar="XxYxZ",
+        help="samples along x, y, z of a .raw file whose name does not say",
+    )
+    g.add_argument(
+        "--dtype",
+        choices=sorted(RAW_TYPES),
+        default=None,
+        help="sample type of a .raw file whose name does not say",
+    )
+    g.add_argument(
+        "--volume-index",
+        type=count(0, 2**31 - 1),
+        default=None,
+        metavar="T",
+        help="the volume of a 4-D NIfTI time series to read (0 first)",
+    )
 
 
 def read_volume_file(args, path):
@@ -555,8 +644,12 @@ def read_volume_file(args, path):
     raw = name.endswith(".raw")
     if not raw and (args.shape is not None or args.dtype is not None):
         raise CliError(f"--shape and --dtype are for .raw files, not {path}")
-    v = read_volume(path, shape=args.shape if raw else None, dtype=args.dtype if raw else None,
-                    volume_index=args.volume_index)
+    v = read_volume(
+        path,
+        shape=args.shape if raw else None,
+        dtype=args.dtype if raw else None,
+        volume_index=args.volume_index,
+    )
     spacing = v.spacing if args.spacing is None else tuple(reversed(args.spacing))
     return np.asarray(v.data, np.float32), tuple(float(s) for s in spacing), v.origin
 

@@ -25,18 +25,26 @@ def _report(path: str):
         raise argparse.ArgumentTypeError(f"{path}: no such file") from None
     except OSError as e:
         raise argparse.ArgumentTypeError(f"{path}: {e.strerror or e}") from None
-    except (ValueError, KeyError, TypeError, AttributeError) as e:   # not JSON, or not a benchmark's
-        raise argparse.ArgumentTypeError(f"{path}: not a pytest-benchmark JSON file ({type(e).__name__}: "
-                                         f"{str(e).splitlines()[0] if str(e) else ''})") from None
+    except (ValueError, KeyError, TypeError, AttributeError) as e:  # not JSON, or not a benchmark's
+        raise argparse.ArgumentTypeError(
+            f"{path}: not a pytest-benchmark JSON file ({type(e).__name__}: "
+            f"{str(e).splitlines()[0] if str(e) else ''})"
+        ) from None
 
 
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     b = sub.add_parser("bench", help="run a benchmark suite and print its table")
     b.add_argument("family", choices=["primitives", "raster", "gauss", "iso"])
-    b.add_argument("--scale", type=real(0.0, open_lo=True), help="multiply every size (e.g. 0.01 for a smoke run)")
+    b.add_argument(
+        "--scale", type=real(0.0, open_lo=True), help="multiply every size (e.g. 0.01 for a smoke run)"
+    )
     b.add_argument("--json", help="where to write the JSON (default bench/results/<device>/<family>.json)")
-    b.add_argument("--report", type=_report, metavar="JSON",
-                   help="print the table of an existing JSON instead of running")
+    b.add_argument(
+        "--report",
+        type=_report,
+        metavar="JSON",
+        help="print the table of an existing JSON instead of running",
+    )
     b.add_argument("--check", action="store_true", help="exit 1 if a target is missed")
     return b
 
@@ -56,25 +64,46 @@ def cmd(args: argparse.Namespace) -> int:
     else:
         bench = _bench_dir()
         if bench is None:
-            print("clvis bench needs the bench/ folder of a source checkout "
-                  "(run it from the repository root)", file=sys.stderr)
+            print(
+                "clvis bench needs the bench/ folder of a source checkout (run it from the repository root)",
+                file=sys.stderr,
+            )
             return 2
         suite = bench / f"bench_{args.family}.py"
         if not suite.is_file():
             print(f"clvis bench: error: {suite} is missing", file=sys.stderr)
             return 2
         q = runtime.default_queue()
-        out = Path(args.json) if args.json else (
-            bench / "results" / runtime.device_slug(q) / f"{args.family}.json")
+        out = (
+            Path(args.json)
+            if args.json
+            else (bench / "results" / runtime.device_slug(q) / f"{args.family}.json")
+        )
         out.parent.mkdir(parents=True, exist_ok=True)
         env = dict(os.environ)
         if args.scale is not None:
             env["CLVIS_BENCH_SCALE"] = str(args.scale)
-        cmd = [sys.executable, "-m", "pytest", str(suite), "-q",
-               "-p", "no:cacheprovider", f"--benchmark-json={out}", "--benchmark-disable-gc"]
+        cmd = [
+            sys.executable,
+            "-m",
+            "pytest",
+            str(suite),
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            f"--benchmark-json={out}",
+            "--benchmark-disable-gc",
+        ]
         print("running:", " ".join(cmd), flush=True)
-        r = subprocess.run(cmd, check=False, cwd=bench.parent, env=env, stdout=subprocess.PIPE,
-                           stderr=subprocess.STDOUT, text=True)
+        r = subprocess.run(
+            cmd,
+            check=False,
+            cwd=bench.parent,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         if r.returncode != 0:
             print(r.stdout[-4000:])
             return r.returncode

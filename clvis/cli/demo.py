@@ -12,23 +12,44 @@ from . import gauss, iso, raster
 from ._common import Parser, count, size, timed
 from .raster import MAX_POINTS
 
-MAX_N = 2**32 - 1       # the primitives count in uint
+MAX_N = 2**32 - 1  # the primitives count in uint
 
 
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     d = sub.add_parser("demo", help="run the kernels on generated data and print the figures")
-    d.add_argument("--n", type=count(1, MAX_N), default=1 << 24,
-                   help="elements of the primitives (default 2^24)")
-    d.add_argument("--points", type=count(1, MAX_POINTS), default=500_000,
-                   help="particles of the rendered hurricane (default 500,000)")
-    d.add_argument("--size", type=size, default=(1920, 1080), metavar="WxH",
-                   help="image size of the render (default 1920x1080)")
-    d.add_argument("--iso-size", type=size, default=(640, 480), metavar="WxH",
-                   help="the isosurface picture (default 640x480)")
-    d.add_argument("--gauss-size", type=size, default=(480, 480), metavar="WxH",
-                   help="each Gaussian LOD panel (default 480x480)")
-    d.add_argument("--out", default="clvis-demo", metavar="DIR",
-                   help="where the PNGs go (default ./clvis-demo)")
+    d.add_argument(
+        "--n", type=count(1, MAX_N), default=1 << 24, help="elements of the primitives (default 2^24)"
+    )
+    d.add_argument(
+        "--points",
+        type=count(1, MAX_POINTS),
+        default=500_000,
+        help="particles of the rendered hurricane (default 500,000)",
+    )
+    d.add_argument(
+        "--size",
+        type=size,
+        default=(1920, 1080),
+        metavar="WxH",
+        help="image size of the render (default 1920x1080)",
+    )
+    d.add_argument(
+        "--iso-size",
+        type=size,
+        default=(640, 480),
+        metavar="WxH",
+        help="the isosurface picture (default 640x480)",
+    )
+    d.add_argument(
+        "--gauss-size",
+        type=size,
+        default=(480, 480),
+        metavar="WxH",
+        help="each Gaussian LOD panel (default 480x480)",
+    )
+    d.add_argument(
+        "--out", default="clvis-demo", metavar="DIR", help="where the PNGs go (default ./clvis-demo)"
+    )
     return d
 
 
@@ -41,10 +62,14 @@ def cmd(args: argparse.Namespace) -> int:
     q = runtime.default_queue()
     caps = runtime.capabilities(q)
     n = args.n
-    print(f"clvis {__version__} on {runtime.describe(q.device)} "
-          f"({caps.device_type}, {caps.compute_units} compute units, tuning {runtime.tuning_profile(q)})")
-    print("\nprimitives on generated data, device-resident arrays; numpy on the host "
-          "(best of 3 after a warm-up that builds the kernels):\n")
+    print(
+        f"clvis {__version__} on {runtime.describe(q.device)} "
+        f"({caps.device_type}, {caps.compute_units} compute units, tuning {runtime.tuning_profile(q)})"
+    )
+    print(
+        "\nprimitives on generated data, device-resident arrays; numpy on the host "
+        "(best of 3 after a warm-up that builds the kernels):\n"
+    )
     rng = np.random.default_rng(0)
     x = rng.integers(0, 100, n).astype(np.int32)
     mask = rng.random(n) < 0.5
@@ -59,19 +84,37 @@ def cmd(args: argparse.Namespace) -> int:
         return keys[o], vals[o]
 
     cases = [
-        ("scan int32 (exclusive)", lambda: primitives.scan(xd),
-         lambda: np.cumsum(x, dtype=np.int32), "np.cumsum",   # the same int32 output
-         lambda: np.array_equal(primitives.scan(xd).get(), ref.scan(x))),
-        ("compact int32, half kept", lambda: primitives.compact(xd, md),
-         lambda: x[mask], "boolean mask",
-         lambda: np.array_equal(primitives.compact(xd, md).get(), ref.compact(x, mask))),
-        ("radix sort uint32 keys+values", lambda: primitives.radix_sort(kd, vd),
-         np_sort, "argsort+gather",
-         lambda: all(np.array_equal(a.get(), b) for a, b in
-                     zip(primitives.radix_sort(kd, vd), ref.radix_sort(keys, vals)))),
-        ("histogram, 256 bins", lambda: primitives.histogram(bd, 256),
-         lambda: np.bincount(bins, minlength=256), "np.bincount",
-         lambda: np.array_equal(primitives.histogram(bd, 256).get(), ref.histogram(bins, 256))),
+        (
+            "scan int32 (exclusive)",
+            lambda: primitives.scan(xd),
+            lambda: np.cumsum(x, dtype=np.int32),
+            "np.cumsum",  # the same int32 output
+            lambda: np.array_equal(primitives.scan(xd).get(), ref.scan(x)),
+        ),
+        (
+            "compact int32, half kept",
+            lambda: primitives.compact(xd, md),
+            lambda: x[mask],
+            "boolean mask",
+            lambda: np.array_equal(primitives.compact(xd, md).get(), ref.compact(x, mask)),
+        ),
+        (
+            "radix sort uint32 keys+values",
+            lambda: primitives.radix_sort(kd, vd),
+            np_sort,
+            "argsort+gather",
+            lambda: all(
+                np.array_equal(a.get(), b)
+                for a, b in zip(primitives.radix_sort(kd, vd), ref.radix_sort(keys, vals), strict=True)
+            ),
+        ),
+        (
+            "histogram, 256 bins",
+            lambda: primitives.histogram(bd, 256),
+            lambda: np.bincount(bins, minlength=256),
+            "np.bincount",
+            lambda: np.array_equal(primitives.histogram(bd, 256).get(), ref.histogram(bins, 256)),
+        ),
     ]
     print(f"  {'op (n = ' + format(n, ',') + ')':34} {'clvis':>16} {'numpy':>26} {'speed-up':>9}  reference")
     ok_all = True
@@ -80,12 +123,12 @@ def cmd(args: argparse.Namespace) -> int:
         t_np = timed(npfn)
         ok = bool(check())
         ok_all &= ok
-        print(f"  {name:34} {t_cl * 1e3:7.2f} ms {n / t_cl / 1e6:5.0f} M/s   "
-              f"{npname:>14} {t_np * 1e3:7.2f} ms {t_np / t_cl:8.1f}x  {'matches' if ok else 'MISMATCH'}")
+        print(
+            f"  {name:34} {t_cl * 1e3:7.2f} ms {n / t_cl / 1e6:5.0f} M/s   "
+            f"{npname:>14} {t_np * 1e3:7.2f} ms {t_np / t_cl:8.1f}x  {'matches' if ok else 'MISMATCH'}"
+        )
     print("\nfull benchmarks with every peer: clvis bench primitives")
     ok_all &= raster.demo(args, q)
     ok_all &= gauss.demo(args.out, q, size=args.gauss_size)
     ok_all &= iso.demo(args.out, q, size=args.iso_size)
     return 0 if ok_all else 1
-
-

@@ -45,7 +45,8 @@ LODS = ("low", "medium", "high")
 _POINT_FORMATS = (".ply", ".las", ".laz", ".npy", ".npz")
 # --view fit: from the front left, a little above, a narrow lens
 _FIT = FitView(direction=(-0.55, 1.0, -0.35), fov_y=40.0)
-_HELP = """\
+_HELP = (
+    """\
 Turn a volume into Gaussians at the levels of detail of Sharma & Schmalstieg
 (low: one per 8^3 leaf; medium: 4^3 / 2^3 blocks; high: 2^3 blocks / voxels),
 ray march each through the device BVH, compositing every Gaussian in depth
@@ -67,42 +68,85 @@ The kernel build (once per process) is timed apart from the renders; a large
 --size is rendered in bands of rows, so device memory stays bounded, with
 the rays done shown on stderr when it is a terminal (--progress: always).
 
-""" + VIEWS_HELP
-
+"""
+    + VIEWS_HELP
+)
 
 
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
-    g = sub.add_parser("gauss", help="Gaussians from a volume at three LODs, ray marched to PNGs",
-                       description=_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    g = sub.add_parser(
+        "gauss",
+        help="Gaussians from a volume at three LODs, ray marched to PNGs",
+        description=_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     g.add_argument("file", nargs="?", help="a .vdb, .npy, Gaussians .npz or point cloud file")
-    g.add_argument("--lod", type=_lods, default=list(LODS), metavar="LIST",
-                   help="comma-separated levels of detail (default low,medium,high)")
-    g.add_argument("--attribute", default=None, metavar="NAME",
-                   help="point clouds: colour by this attribute (or z) instead of the cloud's rgb")
-    g.add_argument("--threshold", type=real(), default=None,
-                   help="voxels above this are active (default: > 0 for dense volumes)")
-    g.add_argument("--model", choices=["max_response", "absorption"], default="absorption",
-                   help="compositing model (default absorption)")
-    g.add_argument("--density", type=real(0.0), default=None,
-                   help="extinction scale of the absorption model (default 6 / volume diagonal)")
-    g.add_argument("--colormap", type=colormap_name, default="inferno", metavar="NAME",
-                   help="a matplotlib colormap (default inferno)")
-    g.add_argument("--size", type=size, default=(640, 640), metavar="WxH",
-                   help=f"each panel, {SIZE_RULE} (default 640x640)")
-    g.add_argument("--k", type=count(1, MAX_K), default=None,
-                   help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)")
-    g.add_argument("--out", default="clvis-gauss", metavar="DIR",
-                   help="output folder (default ./clvis-gauss)")
-    g.add_argument("--progress", action="store_true",
-                   help="show the progress on stderr even when it is not a terminal")
+    g.add_argument(
+        "--lod",
+        type=_lods,
+        default=list(LODS),
+        metavar="LIST",
+        help="comma-separated levels of detail (default low,medium,high)",
+    )
+    g.add_argument(
+        "--attribute",
+        default=None,
+        metavar="NAME",
+        help="point clouds: colour by this attribute (or z) instead of the cloud's rgb",
+    )
+    g.add_argument(
+        "--threshold",
+        type=real(),
+        default=None,
+        help="voxels above this are active (default: > 0 for dense volumes)",
+    )
+    g.add_argument(
+        "--model",
+        choices=["max_response", "absorption"],
+        default="absorption",
+        help="compositing model (default absorption)",
+    )
+    g.add_argument(
+        "--density",
+        type=real(0.0),
+        default=None,
+        help="extinction scale of the absorption model (default 6 / volume diagonal)",
+    )
+    g.add_argument(
+        "--colormap",
+        type=colormap_name,
+        default="inferno",
+        metavar="NAME",
+        help="a matplotlib colormap (default inferno)",
+    )
+    g.add_argument(
+        "--size",
+        type=size,
+        default=(640, 640),
+        metavar="WxH",
+        help=f"each panel, {SIZE_RULE} (default 640x640)",
+    )
+    g.add_argument(
+        "--k",
+        type=count(1, MAX_K),
+        default=None,
+        help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)",
+    )
+    g.add_argument(
+        "--out", default="clvis-gauss", metavar="DIR", help="output folder (default ./clvis-gauss)"
+    )
+    g.add_argument(
+        "--progress", action="store_true", help="show the progress on stderr even when it is not a terminal"
+    )
     g.add_argument("--quiet", action="store_true", help="no progress display")
-    g.add_argument("--transparent", action="store_true",
-                   help="leave empty pixels transparent (default: a dark grey; gauss.png's label "
-                        "bands stay opaque)")
+    g.add_argument(
+        "--transparent",
+        action="store_true",
+        help="leave empty pixels transparent (default: a dark grey; gauss.png's label bands stay opaque)",
+    )
     add_camera_options(g, _FIT)
     add_volume_options(g)
     return g
-
 
 
 def _lods(text: str) -> list[str]:
@@ -125,8 +169,12 @@ def _sources(args):
         raise CliError("--attribute is for point clouds (.ply, .las, .laz, .npy, .npz of points)")
     if args.file is None:
         e = datasets.explosion()
-        sv = SparseVolume.from_dense(e["volume"], threshold=0.0 if args.threshold is None else args.threshold,
-                                     spacing=e["spacing"], origin=e["origin"])
+        sv = SparseVolume.from_dense(
+            e["volume"],
+            threshold=0.0 if args.threshold is None else args.threshold,
+            spacing=e["spacing"],
+            origin=e["origin"],
+        )
         return lods, sv, None, "the embedded explosion (96^3)"
     path = Path(args.file)
     if not path.exists():
@@ -141,36 +189,46 @@ def _sources(args):
         sv = read_vdb(path)
         spacing = sv.spacing if args.spacing is None else tuple(reversed(args.spacing))
         if args.threshold is not None or args.spacing is not None:
-            sv = SparseVolume.from_dense(sv.to_dense(), threshold=0.0 if args.threshold is None
-                                         else args.threshold, spacing=spacing, origin=sv.origin)
+            sv = SparseVolume.from_dense(
+                sv.to_dense(),
+                threshold=0.0 if args.threshold is None else args.threshold,
+                spacing=spacing,
+                origin=sv.origin,
+            )
         return lods, sv, None, str(path)
     volume = name.endswith(VOLUME_FORMATS)
     if name.endswith(".npy"):
         shape = npy_shape(path)
         volume = len(shape) == 3
         if not volume and not (len(shape) == 1 or (len(shape) == 2 and shape[1] == 3)):
-            raise CliError(f"{path}: expected a 3-D volume [z, y, x] or an (N, 3) point array, "
-                           f"got shape {shape}")
+            raise CliError(
+                f"{path}: expected a 3-D volume [z, y, x] or an (N, 3) point array, got shape {shape}"
+            )
     if volume:
         data, spacing, origin = read_volume_file(args, path)
-        sv = SparseVolume.from_dense(data, threshold=0.0 if args.threshold is None else args.threshold,
-                                     spacing=spacing, origin=origin)
+        sv = SparseVolume.from_dense(
+            data, threshold=0.0 if args.threshold is None else args.threshold, spacing=spacing, origin=origin
+        )
         return lods, sv, None, str(path)
     if name.endswith(".npz") and "means" in load_npz(path):
         return ["file"], None, Gaussians.load(path), str(path)
     if name.endswith(_POINT_FORMATS):
         from ..gauss import gaussians_from_points
+
         cloud = read_points(path)
         if len(cloud) == 0:
             raise CliError(f"{path}: the file holds no points")
         try:
-            g = gaussians_from_points(cloud, velocity="cloud" if cloud.velocity is not None else None,
-                                      color_by=args.attribute)
+            g = gaussians_from_points(
+                cloud, velocity="cloud" if cloud.velocity is not None else None, color_by=args.attribute
+            )
         except ValueError as e:
             raise CliError(f"{path}: {e}" if args.attribute is None else f"--attribute: {e}") from None
         return ["points"], None, g, str(path)
-    raise CliError(f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
-                   f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})")
+    raise CliError(
+        f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
+        f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})"
+    )
 
 
 def cmd(args: argparse.Namespace) -> int:
@@ -192,13 +250,23 @@ class _Label:
         return self.text
 
 
-def render_panels(lods: Sequence[str], sv: SparseVolume | None, gaussians: Gaussians | None,
-                  width: int, height: int, *, model: str = "absorption", density: float | None = None,
-                  colormap: str = "inferno", k: int | None = None,
-                  camera: Callable[[np.ndarray, np.ndarray], Camera] | None = None,
-                  queue: cl.CommandQueue | None = None,
-                  opacity: Sequence[tuple[float, float]] | None = None, progress: Progress | None = None,
-                  timings: dict[str, float] | None = None) -> list[tuple[str, Gaussians, GaussianImage]]:
+def render_panels(
+    lods: Sequence[str],
+    sv: SparseVolume | None,
+    gaussians: Gaussians | None,
+    width: int,
+    height: int,
+    *,
+    model: str = "absorption",
+    density: float | None = None,
+    colormap: str = "inferno",
+    k: int | None = None,
+    camera: Callable[[np.ndarray, np.ndarray], Camera] | None = None,
+    queue: cl.CommandQueue | None = None,
+    opacity: Sequence[tuple[float, float]] | None = None,
+    progress: Progress | None = None,
+    timings: dict[str, float] | None = None,
+) -> list[tuple[str, Gaussians, GaussianImage]]:
     """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given
     Gaussians), seen by camera(lo, hi) of their bounds (default: the fit view).
 
@@ -220,8 +288,11 @@ def render_panels(lods: Sequence[str], sv: SparseVolume | None, gaussians: Gauss
     lo = np.min([g.bounds(1.0)[0] for g in allg], axis=0)
     hi = np.max([g.bounds(1.0)[1] for g in allg], axis=0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
-    cam = (camera(lo, hi) if camera is not None else
-           Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y))
+    cam = (
+        camera(lo, hi)
+        if camera is not None
+        else Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y)
+    )
     vals = np.concatenate([g.values for g in allg])
     vr = (float(vals.min()), float(vals.max()))
     if opacity is None:
@@ -233,8 +304,9 @@ def render_panels(lods: Sequence[str], sv: SparseVolume | None, gaussians: Gauss
     # from the renders), so the figures below are the work itself
     t0 = time.perf_counter()
     with progress.stage("building kernels"):
-        GaussianRenderer(allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k,
-                         queue=queue).render(cam, 8, 8)
+        GaussianRenderer(allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k, queue=queue).render(
+            cam, 8, 8
+        )
     if timings is not None:
         timings["build_s"] = time.perf_counter() - t0
     out = []
@@ -246,6 +318,7 @@ def render_panels(lods: Sequence[str], sv: SparseVolume | None, gaussians: Gauss
 
             def done(rays, total, label=label, name=name):
                 label.text = f"{name}: {rays:,} / {total:,} rays"
+
             img = r.render(cam, width, height, progress=done)
         out.append((name, g, img))
     return out
@@ -263,8 +336,12 @@ def _picture(img, transparent: bool = False) -> np.ndarray:
     return np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
 
 
-def strip(panels: Sequence[tuple[str, Gaussians, GaussianImage]], colormap: str, transparent: bool = False,
-          value_name: str = "value") -> np.ndarray:
+def strip(
+    panels: Sequence[tuple[str, Gaussians, GaussianImage]],
+    colormap: str,
+    transparent: bool = False,
+    value_name: str = "value",
+) -> np.ndarray:
     """render_panels' images side by side, each labelled with its LOD and
     Gaussian count, over a colour bar of the values' range (the transfer
     function's; none for Gaussians drawn in their own colours)."""
@@ -295,18 +372,33 @@ def _run(args) -> int:
     timings: dict = {}
     # points are surfaces: every Gaussian fully opaque, whatever its value
     opacity = [(0.0, 1.0), (1.0, 1.0)] if lods == ["points"] else None
-    panels = render_panels(lods, sv, gaussians, width, height, model=args.model, density=args.density,
-                           colormap=args.colormap, k=args.k, queue=q, opacity=opacity, progress=progress,
-                           timings=timings,
-                           camera=lambda lo, hi: camera_from_args(args, lo, hi, width, height))
+    panels = render_panels(
+        lods,
+        sv,
+        gaussians,
+        width,
+        height,
+        model=args.model,
+        density=args.density,
+        colormap=args.colormap,
+        k=args.k,
+        queue=q,
+        opacity=opacity,
+        progress=progress,
+        timings=timings,
+        camera=lambda lo, hi: camera_from_args(args, lo, hi, width, height),
+    )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     files = []
     with progress.stage("writing PNGs"):
         for name, _, img in panels:
             files.append(images.save_png(out / f"{name}.png", _picture(img, args.transparent)))
-        files.append(images.save_png(out / "gauss.png", strip(panels, args.colormap, args.transparent,
-                                                              args.attribute or "value")))
+        files.append(
+            images.save_png(
+                out / "gauss.png", strip(panels, args.colormap, args.transparent, args.attribute or "value")
+            )
+        )
     print(f"clvis gauss: {source}, {args.model} model, {width}x{height}")
     print(f"  device    {runtime.describe(q.device)}")
     if sv is not None:
@@ -316,12 +408,16 @@ def _run(args) -> int:
     elif lods == ["points"]:
         print(f"  colour    {args.attribute or 'the default value'} through {args.colormap}")
     print(f"  build     {timings['build_s']:.2f} s (kernels, once per process; not in the render times)")
-    print(f"  {'LOD':8} {'Gaussians':>10} {'MB':>8} {'BVH ms':>8} {'render ms':>10} {'bands':>6} "
-          f"{'hits/ray':>9}")
+    print(
+        f"  {'LOD':8} {'Gaussians':>10} {'MB':>8} {'BVH ms':>8} {'render ms':>10} {'bands':>6} "
+        f"{'hits/ray':>9}"
+    )
     for name, g, img in panels:
         s = img.stats
-        print(f"  {name:8} {g.n:10,} {g.nbytes / 1e6:8.2f} {s['bvh_build_s'] * 1e3:8.1f} "
-              f"{s['render_s'] * 1e3:10.1f} {s['bands']:6} {s['hits_per_ray_mean']:9.1f}")
+        print(
+            f"  {name:8} {g.n:10,} {g.nbytes / 1e6:8.2f} {s['bvh_build_s'] * 1e3:8.1f} "
+            f"{s['render_s'] * 1e3:10.1f} {s['bands']:6} {s['hits_per_ray_mean']:9.1f}"
+        )
     print(f"  total     {time.perf_counter() - t0:.2f} s")
     print(f"wrote {len(files)} PNGs to {out}{os.sep}")
     for p in files:
@@ -341,19 +437,27 @@ def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (480, 
     w, h = size
     e = datasets.explosion()
     sv = SparseVolume.from_dense(e["volume"], threshold=0.0, spacing=e["spacing"], origin=e["origin"])
-    print(f"\ngauss: the embedded explosion (96^3, {sv.n_active:,} active voxels in {sv.n_leaves:,} leaves) "
-          f"as Gaussians, ray marched at {w}x{h} (absorption model, every Gaussian in depth order):\n")
+    print(
+        f"\ngauss: the embedded explosion (96^3, {sv.n_active:,} active voxels in {sv.n_leaves:,} leaves) "
+        f"as Gaussians, ray marched at {w}x{h} (absorption model, every Gaussian in depth order):\n"
+    )
     table = lod_table(sv, queue=q)
     panels = render_panels(LODS, sv, None, w, h, queue=q)
-    print(f"  sparse volume: {table.sparse_bytes / 1e6:.2f} MB ({table.tiles} tiles); "
-          f"dense: {e['volume'].nbytes / 1e6:.2f} MB")
-    print(f"  {'LOD':8} {'Gaussians':>10} {'MB':>7} {'MB axis-aligned':>16} {'BVH build':>10} {'frame':>10} "
-          f"{'hits/ray':>9}")
+    print(
+        f"  sparse volume: {table.sparse_bytes / 1e6:.2f} MB ({table.tiles} tiles); "
+        f"dense: {e['volume'].nbytes / 1e6:.2f} MB"
+    )
+    print(
+        f"  {'LOD':8} {'Gaussians':>10} {'MB':>7} {'MB axis-aligned':>16} {'BVH build':>10} {'frame':>10} "
+        f"{'hits/ray':>9}"
+    )
     for name, g, img in panels:
         s, row = img.stats, table[name]
         assert row.gaussians == g.n
-        print(f"  {name:8} {g.n:10,} {row.bytes / 1e6:7.2f} {row.axis_aligned_bytes / 1e6:16.2f} "
-              f"{s['bvh_build_s'] * 1e3:8.1f}ms {s['render_s'] * 1e3:8.1f}ms {s['hits_per_ray_mean']:9.1f}")
+        print(
+            f"  {name:8} {g.n:10,} {row.bytes / 1e6:7.2f} {row.axis_aligned_bytes / 1e6:16.2f} "
+            f"{s['bvh_build_s'] * 1e3:8.1f}ms {s['render_s'] * 1e3:8.1f}ms {s['hits_per_ray_mean']:9.1f}"
+        )
     # the check: a small frame of the medium LOD against every-ray-against-every-Gaussian
     g = panels[1][1]
     lo, hi = g.bounds(1.0)
@@ -362,12 +466,25 @@ def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (480, 
     tf = TransferFunction("inferno")
     img = GaussianRenderer(g, tf, model="max_response", queue=q).render(cam, cw, ch)
     vmin, scale = tf.limits(g.values)
-    want, _, _ = ref.render(g.means, g.scales, g.rotations, g.values, g.opacities, ray_buffer(cam, cw, ch),
-                            cw, ch, tf.table(), vmin, scale)
+    want, _, _ = ref.render(
+        g.means,
+        g.scales,
+        g.rotations,
+        g.values,
+        g.opacities,
+        ray_buffer(cam, cw, ch),
+        cw,
+        ch,
+        tf.table(),
+        vmin,
+        scale,
+    )
     err = float(np.abs(img.rgba - want).max())
     ok = err <= 1e-3
-    print(f"  frame vs clvis.reference.gauss ({g.n:,} Gaussians at {cw}x{ch}, max |difference| {err:.1e}): "
-          f"{'matches' if ok else 'MISMATCH'}")
+    print(
+        f"  frame vs clvis.reference.gauss ({g.n:,} Gaussians at {cw}x{ch}, max |difference| {err:.1e}): "
+        f"{'matches' if ok else 'MISMATCH'}"
+    )
     path = images.save_png(Path(out_dir) / "gauss.png", strip(panels, "inferno"))
     print(f"  the three LODs side by side: {path}")
     print("\nmore: clvis gauss --help, clvis bench gauss")

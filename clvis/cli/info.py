@@ -57,4 +57,3 @@ def _int64_text(caps) -> str:
     if caps.int64_atomics_native:
         return "no (forced off: CLVIS_NO_INT64_ATOMICS)"
     return "no (fallback paths)"
-

@@ -41,7 +41,8 @@ if TYPE_CHECKING:
     from ..camera import Camera
     from ..iso import IsoImage, IsoRenderer, ZfpVolume
 
-_HELP = """\
+_HELP = (
+    """\
 Compress a volume with ZFP (fixed rate), then ray march its isosurface in
 passes: each pass traverses the macrocell grids, decodes only the blocks its
 rays need into an LRU cache, and intersects them. Writes iso.png (rays still
@@ -55,35 +56,52 @@ a .npy volume [z, y, x], or a NIfTI file (.nii, .nii.gz; a 4-D series with
 --volume-index). The default isovalue of a file is Otsu's threshold of its
 samples (scikit-image), which separates a scan's tissue from its background.
 
-""" + VIEWS_HELP
+"""
+    + VIEWS_HELP
+)
 _DATASETS = ("marschner-lobb", "turbulence")
 _ACTIVE_COLOUR = (1.0, 0.0, 1.0)
 # --view fit: from the front left, a little above, a narrow lens
 _FIT = FitView(direction=(-0.6, 1.0, -0.45), fov_y=35.0)
 
 
-
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
-    p = sub.add_parser("iso", help="progressive isosurface raycasting of a ZFP-compressed volume",
-                       description=_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = sub.add_parser(
+        "iso",
+        help="progressive isosurface raycasting of a ZFP-compressed volume",
+        description=_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("file", nargs="?", help="a .raw (Open SciVis naming), .npy or NIfTI volume")
     p.add_argument("--dataset", choices=_DATASETS, help="an embedded volume (default marschner-lobb)")
-    p.add_argument("--isovalue", type=real(), default=None, help="default: 0.5 for the embedded volumes, "
-                   "else Otsu's threshold of the samples")
-    p.add_argument("--rate", type=count(MIN_RATE, MAX_RATE), default=8, help="ZFP bits per value, 1..32 (default 8)")
-    p.add_argument("--completion", type=real(0.0, 1.0, open_lo=True, what="a fraction"), default=1.0, help="stop once this fraction of the rays "
-                   "is finished (default 1.0)")
+    p.add_argument(
+        "--isovalue",
+        type=real(),
+        default=None,
+        help="default: 0.5 for the embedded volumes, else Otsu's threshold of the samples",
+    )
+    p.add_argument(
+        "--rate", type=count(MIN_RATE, MAX_RATE), default=8, help="ZFP bits per value, 1..32 (default 8)"
+    )
+    p.add_argument(
+        "--completion",
+        type=real(0.0, 1.0, open_lo=True, what="a fraction"),
+        default=1.0,
+        help="stop once this fraction of the rays is finished (default 1.0)",
+    )
     p.add_argument("--no-speculation", action="store_true", help="one candidate block per ray and pass")
-    p.add_argument("--size", type=size, default=(1280, 720), metavar="WxH",
-                   help=f"{SIZE_RULE} (default 1280x720)")
+    p.add_argument(
+        "--size", type=size, default=(1280, 720), metavar="WxH", help=f"{SIZE_RULE} (default 1280x720)"
+    )
     p.add_argument("--out", default="clvis-iso", metavar="DIR", help="output folder (default ./clvis-iso)")
-    p.add_argument("--transparent", action="store_true",
-                   help="leave pixels without surface transparent (default: a dark grey; the label "
-                        "band stays opaque)")
+    p.add_argument(
+        "--transparent",
+        action="store_true",
+        help="leave pixels without surface transparent (default: a dark grey; the label band stays opaque)",
+    )
     add_camera_options(p, _FIT)
     add_volume_options(p)
     return p
-
 
 
 def _load(args):
@@ -104,8 +122,14 @@ def _load(args):
     name = args.dataset or "marschner-lobb"
     d = datasets.marschner_lobb(64) if name == "marschner-lobb" else datasets.turbulence(128)
     spacing = d["spacing"] if args.spacing is None else tuple(reversed(args.spacing))
-    return (d["volume"], spacing, d["origin"], 0.5, finite_range(d["volume"], name),
-            f"the embedded {name} ({d['volume'].shape[0]}^3)")
+    return (
+        d["volume"],
+        spacing,
+        d["origin"],
+        0.5,
+        finite_range(d["volume"], name),
+        f"the embedded {name} ({d['volume'].shape[0]}^3)",
+    )
 
 
 def picture(img: IsoImage, transparent: bool = False) -> np.ndarray:
@@ -138,18 +162,30 @@ class _Status:
         self.text = "passes"
 
     def __call__(self, p: dict) -> None:
-        self.text = (f"passes {p['passes']}, tile {p['tile']}/{p['tiles']}, "
-                     f"rays {p['rays_done']:,}/{p['rays_total']:,}")
+        self.text = (
+            f"passes {p['passes']}, tile {p['tile']}/{p['tiles']}, "
+            f"rays {p['rays_done']:,}/{p['rays_total']:,}"
+        )
 
     def __format__(self, spec: str) -> str:
         return format(self.text, spec)
 
 
-def render(volume: ZfpVolume | Any, spacing: Sequence[float], origin: Sequence[float], isovalue: float,
-           width: int, height: int, *, rate: int = 8, completion: float = 1.0, speculation: bool = True,
-           camera: Callable[[np.ndarray, np.ndarray], Camera] | None = None,
-           queue: cl.CommandQueue | None = None,
-           progress: Progress | None = None) -> tuple[IsoRenderer, Camera, IsoImage]:
+def render(
+    volume: ZfpVolume | Any,
+    spacing: Sequence[float],
+    origin: Sequence[float],
+    isovalue: float,
+    width: int,
+    height: int,
+    *,
+    rate: int = 8,
+    completion: float = 1.0,
+    speculation: bool = True,
+    camera: Callable[[np.ndarray, np.ndarray], Camera] | None = None,
+    queue: cl.CommandQueue | None = None,
+    progress: Progress | None = None,
+) -> tuple[IsoRenderer, Camera, IsoImage]:
     """(renderer, camera, IsoImage), seen by camera(lo, hi) of the volume's
     bounds (default: the fit view); progress: a clvis.cli._common.Progress
     (default: none)."""
@@ -161,12 +197,16 @@ def render(volume: ZfpVolume | Any, spacing: Sequence[float], origin: Sequence[f
         r = IsoRenderer(volume, rate=rate, spacing=spacing, origin=origin, queue=queue)
     lo = np.asarray(origin, np.float64)
     hi = lo + (np.array(r.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
-    cam = (camera(lo, hi) if camera is not None else
-           Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y))
+    cam = (
+        camera(lo, hi)
+        if camera is not None
+        else Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y)
+    )
     status = _Status()
     with progress.stage(status):
-        img = r.render(cam, width, height, isovalue, completion=completion, speculation=speculation,
-                       progress=status)
+        img = r.render(
+            cam, width, height, isovalue, completion=completion, speculation=speculation, progress=status
+        )
     return r, cam, img
 
 
@@ -181,36 +221,57 @@ def _run(args) -> int:
     volume, spacing, origin, default_iso, (vmin, vmax), source = _load(args)
     iso = args.isovalue if args.isovalue is not None else default_iso
     if not vmin <= iso <= vmax:
-        print(f"clvis iso: warning: isovalue {iso:g} is outside the data range [{vmin:g}, {vmax:g}]: "
-              "no surface can show", file=sys.stderr)
+        print(
+            f"clvis iso: warning: isovalue {iso:g} is outside the data range [{vmin:g}, {vmax:g}]: "
+            "no surface can show",
+            file=sys.stderr,
+        )
     w, h = args.size
     q = runtime.default_queue()
     t0 = time.perf_counter()
-    r, _, img = render(volume, spacing, origin, iso, w, h, rate=args.rate, completion=args.completion,
-                       speculation=not args.no_speculation, queue=q,
-                       camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h),
-                       progress=Progress(isatty(sys.stderr), "clvis iso"))
+    r, _, img = render(
+        volume,
+        spacing,
+        origin,
+        iso,
+        w,
+        h,
+        rate=args.rate,
+        completion=args.completion,
+        speculation=not args.no_speculation,
+        queue=q,
+        camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h),
+        progress=Progress(isatty(sys.stderr), "clvis iso"),
+    )
     total = time.perf_counter() - t0
     out = Path(args.out)
     path = images.save_png(out / "iso.png", labelled(img, iso, args.transparent))
     st = img.stats
     print(f"clvis iso: {source}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
     print(f"  device      {runtime.describe(q.device)}")
-    print(f"  volume      {r.shape} = {volume.nbytes / 1e6:.1f} MB decoded, {r.volume.nbytes / 1e6:.1f} MB "
-          f"compressed, {r.volume.nblocks:,} blocks")
-    print(f"  passes      {st['passes']} (speculation {'on' if st['speculation'] else 'off'}), "
-          f"completion {img.completion:.3f}, {st['rays_entering']:,} rays enter the volume")
+    print(
+        f"  volume      {r.shape} = {volume.nbytes / 1e6:.1f} MB decoded, {r.volume.nbytes / 1e6:.1f} MB "
+        f"compressed, {r.volume.nblocks:,} blocks"
+    )
+    print(
+        f"  passes      {st['passes']} (speculation {'on' if st['speculation'] else 'off'}), "
+        f"completion {img.completion:.3f}, {st['rays_entering']:,} rays enter the volume"
+    )
     if st["tiles"] > 1:
-        print(f"  tiles       {st['tiles']} of {st['tile_pixels']:,} pixels, passes per tile "
-              f"{st['passes_per_tile']}")
+        print(
+            f"  tiles       {st['tiles']} of {st['tile_pixels']:,} pixels, passes per tile "
+            f"{st['passes_per_tile']}"
+        )
     print(f"  per pass    active rays {_short(st['active_per_pass'])}")
     print(f"              candidates per ray {_short(st['n_spec_per_pass'])}")
     print(f"  blocks      {st['blocks_decoded']:,} decoded, cache of {st['cache_slots']:,} slots")
     dev = st.get("device_bytes", {})
     if dev:
         print("  device MB   " + ", ".join(f"{k} {v / 1e6:.1f}" for k, v in dev.items()))
-    print(f"  time        build {r.build_seconds:.2f} s, passes {st['seconds'] * 1e3:.1f} ms; "
-          f"{total:.2f} s with compression and setup")
+    print(
+        f"  time        build {r.build_seconds:.2f} s, passes {st['seconds'] * 1e3:.1f} ms; "
+        f"{total:.2f} s with compression and setup"
+    )
     print(f"wrote {path}{os.sep if path.is_dir() else ''}")
     return 0
 
@@ -229,21 +290,27 @@ def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (640, 
 
     w, h = size
     d = datasets.marschner_lobb(64)
-    print(f"\niso: Marschner-Lobb 64^3 at iso 0.5, ZFP rate 8, {w}x{h}, progressive passes with speculation:\n")
+    print(
+        f"\niso: Marschner-Lobb 64^3 at iso 0.5, ZFP rate 8, {w}x{h}, progressive passes with speculation:\n"
+    )
     r, cam, _ = render(d["volume"], d["spacing"], d["origin"], 0.5, w, h, queue=q)
-    r.reset_cache()                                   # a cold cache for the timed run
+    r.reset_cache()  # a cold cache for the timed run
     t = time.perf_counter()
     img = r.render(cam, w, h, 0.5)
     dt = time.perf_counter() - t
     st = img.stats
-    print(f"  {st['passes']} passes in {dt * 1e3:.1f} ms; active rays per pass {st['active_per_pass']}; "
-          f"{st['blocks_decoded']:,} of {r.volume.nblocks:,} blocks decoded")
+    print(
+        f"  {st['passes']} passes in {dt * 1e3:.1f} ms; active rays per pass {st['active_per_pass']}; "
+        f"{st['blocks_decoded']:,} of {r.volume.nblocks:,} blocks decoded"
+    )
     cw, ch = 64, 48
     small = r.render(cam, cw, ch, 0.5)
     want = ref.render(zfp.decode(r.volume), cam, cw, ch, 0.5, spacing=d["spacing"], origin=d["origin"])
     a = ref.agreement(want, small.hit, small.depth)
-    print(f"  image vs clvis.reference.iso ({cw}x{ch}, hit mask and depth on reliable pixels): "
-          f"{'matches' if a['ok'] else 'MISMATCH'} (depth error {a['depth_error']:.1e} of the diagonal)")
+    print(
+        f"  image vs clvis.reference.iso ({cw}x{ch}, hit mask and depth on reliable pixels): "
+        f"{'matches' if a['ok'] else 'MISMATCH'} (depth error {a['depth_error']:.1e} of the diagonal)"
+    )
     path = images.save_png(Path(out_dir) / "iso.png", labelled(img, 0.5))
     print(f"  the surface: {path}")
     print("\nmore: clvis iso --help")

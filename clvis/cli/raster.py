@@ -50,10 +50,10 @@ _DEFAULT_POINTS = {"hurricane": 2_000_000, "terrain": 1_000_000}
 # themselves fill the frame.
 _FIT = FitView(direction=(0.45, 1.0, -0.9), fov_y=60.0)
 _SOFT_Z_FACTOR = 1.01
-_OVERVIEW_WIDTH = 2880      # the overview is shrunk by an integer factor to fit this
-_COORDINATES = ("x", "y", "z")      # --attribute takes these too
-MAX_POINTS = 2**32 - 2              # the Rasterizer's: index 0xFFFFFFFF marks an empty pixel
-MAX_POINT_SIZE = 64                 # the Rasterizer's point_size: 1..64 pixels a side
+_OVERVIEW_WIDTH = 2880  # the overview is shrunk by an integer factor to fit this
+_COORDINATES = ("x", "y", "z")  # --attribute takes these too
+MAX_POINTS = 2**32 - 2  # the Rasterizer's: index 0xFFFFFFFF marks an empty pixel
+MAX_POINT_SIZE = 64  # the Rasterizer's point_size: 1..64 pixels a side
 
 
 def _soft_z(text: str) -> float | None:
@@ -69,7 +69,6 @@ def _soft_z(text: str) -> float | None:
     return f
 
 
-
 def _levels(text: str) -> int:
     try:
         n = int(text)
@@ -80,15 +79,13 @@ def _levels(text: str) -> int:
     return n
 
 
-
 def _embedded(name: str, n: int):
     """An embedded dataset (clvis.datasets) as a clvis.PointCloud."""
     from .. import datasets
     from ..io import PointCloud
 
     d = getattr(datasets, name)(n)
-    return PointCloud(d["positions"], colors=d["colors"], attributes=d["attributes"],
-                      velocity=d["velocity"])
+    return PointCloud(d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"])
 
 
 def _pick_attribute(cloud, requested: str | None, default: str | None, source: str) -> str | None:
@@ -99,8 +96,10 @@ def _pick_attribute(cloud, requested: str | None, default: str | None, source: s
     names = list(cloud.attributes)
     if requested is not None:
         if requested not in cloud.attributes and requested not in _COORDINATES:
-            raise CliError(f"no attribute {requested!r} in {source}; it has "
-                               f"{', '.join(names) + ' and ' if names else ''}the coordinates x, y, z")
+            raise CliError(
+                f"no attribute {requested!r} in {source}; it has "
+                f"{', '.join(names) + ' and ' if names else ''}the coordinates x, y, z"
+            )
         return requested
     for cand in (default, "intensity"):
         if cand in cloud.attributes:
@@ -112,18 +111,18 @@ def _pick_attribute(cloud, requested: str | None, default: str | None, source: s
 
 @dataclasses.dataclass
 class _Panel:
-    key: str            # the PNG's file name, without .png
-    title: str          # its label in the overview
-    image: np.ndarray   # (H, W, 4) uint8 RGBA
-    bar: tuple | None = None    # (colormap, vmin, vmax) of its colour bar
+    key: str  # the PNG's file name, without .png
+    title: str  # its label in the overview
+    image: np.ndarray  # (H, W, 4) uint8 RGBA
+    bar: tuple | None = None  # (colormap, vmin, vmax) of its colour bar
 
 
 @dataclasses.dataclass
 class _Rendered:
-    gbuffers: object    # clvis.GBuffers of the main render
+    gbuffers: object  # clvis.GBuffers of the main render
     panels: list
-    first_s: float      # the first render (it may build the kernels)
-    warm_s: float       # the same render again
+    first_s: float  # the first render (it may build the kernels)
+    warm_s: float  # the same render again
 
 
 def _safe_name(name: str) -> str:
@@ -138,20 +137,19 @@ def _raster_fields(cloud, attribute) -> dict:
         attrs[attribute] = cloud.attributes[attribute]
     elif attribute is not None:
         attrs[attribute] = cloud.positions[:, _COORDINATES.index(attribute)]
-    return {"colors": cloud.colors, "attributes": attrs, "velocity": cloud.velocity,
-            "radius": cloud.radius}
+    return {"colors": cloud.colors, "attributes": attrs, "velocity": cloud.velocity, "radius": cloud.radius}
 
 
-def _render_panels(raster, cloud, camera, width, height, attribute, colormap, soft_z, levels,
-                   progress, point_size=1) -> _Rendered:
+def _render_panels(
+    raster, cloud, camera, width, height, attribute, colormap, soft_z, levels, progress, point_size=1
+) -> _Rendered:
     """Render one view; the G-buffers and the images a person looks at."""
     from .. import images
     from ..raster import EMPTY, depth_filter
 
     with progress.stage("rendering + resolving G-buffers"):
         t0 = time.perf_counter()
-        g = raster.render(camera, width, height, color_by=attribute, colormap=colormap,
-                          point_size=point_size)
+        g = raster.render(camera, width, height, color_by=attribute, colormap=colormap, point_size=point_size)
         first = time.perf_counter() - t0
         t0 = time.perf_counter()
         raster.render(camera, width, height, color_by=attribute, colormap=colormap, point_size=point_size)
@@ -159,13 +157,15 @@ def _render_panels(raster, cloud, camera, width, height, attribute, colormap, so
     panels = []
     if attribute is not None:
         from ..colormap import value_range  # the range render() colours over
+
         vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
-        panels.append(_Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({colormap})", g.rgba,
-                             (colormap, *vr)))
+        panels.append(
+            _Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({colormap})", g.rgba, (colormap, *vr))
+        )
     if cloud.colors is not None:
         if attribute is None:
             colors = g.rgba
-        else:               # the winners' colors, gathered on the host: no second render
+        else:  # the winners' colors, gathered on the host: no second render
             colors = np.zeros_like(g.rgba)
             hit = g.index != EMPTY
             colors[hit] = cloud.colors[g.index[hit]]
@@ -177,9 +177,16 @@ def _render_panels(raster, cloud, camera, width, height, attribute, colormap, so
         panels.append(_Panel("velocity-magnitude", "screen velocity: magnitude", magnitude))
     if soft_z is not None:
         with progress.stage(f"soft z (factor {soft_z:g})"):
-            soft = raster.render(camera, width, height, color_by=attribute, colormap=colormap,
-                                 soft_z=soft_z, point_size=point_size,
-                                 host=False)      # read back its rgba alone
+            soft = raster.render(
+                camera,
+                width,
+                height,
+                color_by=attribute,
+                colormap=colormap,
+                soft_z=soft_z,
+                point_size=point_size,
+                host=False,
+            )  # read back its rgba alone
             panels.append(_Panel("soft-z", f"soft z (factor {soft_z:g})", soft.rgba.get()))
     if levels:
         with progress.stage(f"depth filter ({levels} levels)"):
@@ -194,12 +201,12 @@ def _shrink(image: np.ndarray, f: int) -> np.ndarray:
     h, w = image.shape[0] // f, image.shape[1] // f
     if f <= 1 or h == 0 or w == 0:
         return image
-    words = np.ascontiguousarray(image).view(np.uint32)[..., 0]     # one word per pixel
+    words = np.ascontiguousarray(image).view(np.uint32)[..., 0]  # one word per pixel
     alpha_of = (lambda a: a >> 24) if sys.byteorder == "little" else (lambda a: a & 0xFF)
-    out = words[0:h * f:f, 0:w * f:f]
+    out = words[0 : h * f : f, 0 : w * f : f]
     for dy in range(f):
         for dx in range(f):
-            cand = words[dy:h * f:f, dx:w * f:f]
+            cand = words[dy : h * f : f, dx : w * f : f]
             out = np.where(alpha_of(cand) > alpha_of(out), cand, out)
     return np.ascontiguousarray(out).view(np.uint8).reshape(h, w, 4)
 
@@ -283,8 +290,19 @@ def _render(args, progress) -> int:
     with progress.stage("uploading + Morton order"):
         raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
         q.finish()
-    r = _render_panels(raster, cloud, camera, width, height, attribute, args.colormap,
-                       args.soft_z, levels, progress, args.point_size)
+    r = _render_panels(
+        raster,
+        cloud,
+        camera,
+        width,
+        height,
+        attribute,
+        args.colormap,
+        args.soft_z,
+        levels,
+        progress,
+        args.point_size,
+    )
     out = Path(args.out)
     with progress.stage("writing PNGs"):
         named = [(f"{p.key}.png", p.image if args.transparent else images.opaque(p.image)) for p in r.panels]
@@ -298,16 +316,22 @@ def _render(args, progress) -> int:
     colored = f"colored by {attribute} ({args.colormap})" if attribute else "its colors"
     print(f"clvis render: {source}, {n:,} points, {colored}")
     print(f"  device    {runtime.describe(q.device)}")
-    print(f"  view      {describe_camera(args)}, {width}x{height}"
-          + (f", points {args.point_size}x{args.point_size} pixels" if args.point_size > 1 else ""))
+    print(
+        f"  view      {describe_camera(args)}, {width}x{height}"
+        + (f", points {args.point_size}x{args.point_size} pixels" if args.point_size > 1 else "")
+    )
     dropped = stats.get("points_nonfinite", 0)
     if dropped:
         print(f"  dropped   {dropped:,} points with a NaN or infinite coordinate (never drawn)")
     print(f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)")
-    print(f"  batches   {stats['batches_drawn']:,} drawn, {stats['batches'] - stats['batches_drawn']:,} "
-          f"culled of {stats['batches']:,} ({stats['points_read']:,} points read)")
-    print(f"  render    {r.warm_s * 1e3:.1f} ms ({n / r.warm_s / 1e6:.1f} M points/s): render, resolve, "
-          f"read back; the first call, which may build kernels: {r.first_s * 1e3:.0f} ms")
+    print(
+        f"  batches   {stats['batches_drawn']:,} drawn, {stats['batches'] - stats['batches_drawn']:,} "
+        f"culled of {stats['batches']:,} ({stats['points_read']:,} points read)"
+    )
+    print(
+        f"  render    {r.warm_s * 1e3:.1f} ms ({n / r.warm_s / 1e6:.1f} M points/s): render, resolve, "
+        f"read back; the first call, which may build kernels: {r.first_s * 1e3:.0f} ms"
+    )
     print(f"  total     {total:.2f} s")
     print(f"wrote {len(files)} PNGs to {out}{os.sep}")
     for p in files:
@@ -323,36 +347,42 @@ def demo(args: argparse.Namespace, q: cl.CommandQueue) -> bool:
 
     W, H = args.size
     n, attribute = args.points, "temperature"
-    print(f"\nraster: the embedded hurricane, {n:,} particles at {W}x{H}, colored by {attribute} "
-          "(best of 3 after a warm-up):\n")
+    print(
+        f"\nraster: the embedded hurricane, {n:,} particles at {W}x{H}, colored by {attribute} "
+        "(best of 3 after a warm-up):\n"
+    )
     cloud = _embedded("hurricane", n)
     lo, hi = cloud.bounds()
     cam = fit_camera(cloud.positions, lo, hi, W / H, _FIT)
     raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
     t_vis = timed(lambda: raster.visibility(cam, W, H), q)
     t_all = timed(lambda: raster.render(cam, W, H, color_by=attribute), q)
-    for name, t in (("render pass (visibility buffer)", t_vis),
-                    ("render + resolve, G-buffers on the host", t_all)):
+    for name, t in (
+        ("render pass (visibility buffer)", t_vis),
+        ("render + resolve, G-buffers on the host", t_all),
+    ):
         print(f"  {name:40} {t * 1e3:8.2f} ms {n / t / 1e6:8.1f} M points/s")
 
     m, w, h = min(n, 100_000), 320, 180
-    sub = cloud.positions[:m]               # the generator's order is random: a uniform subsample
+    sub = cloud.positions[:m]  # the generator's order is random: a uniform subsample
     sub_cam = fit_camera(sub, lo, hi, w / h, _FIT)
     got = Rasterizer(sub, queue=q).render(sub_cam, w, h)
     want = ref.rasterize(sub, sub_cam, w, h)
     ok = np.array_equal(got.index, want.index) and np.array_equal(got.depth, want.depth)
-    print(f"  G-buffers vs clvis.reference.raster ({m:,} points at {w}x{h}, index and depth): "
-          f"{'matches' if ok else 'MISMATCH'}")
+    print(
+        f"  G-buffers vs clvis.reference.raster ({m:,} points at {w}x{h}, index and depth): "
+        f"{'matches' if ok else 'MISMATCH'}"
+    )
 
-    r = _render_panels(raster, cloud, cam, W, H, attribute, "viridis", _SOFT_Z_FACTOR, 0,
-                       Progress(False))
+    r = _render_panels(raster, cloud, cam, W, H, attribute, "viridis", _SOFT_Z_FACTOR, 0, Progress(False))
     path = images.save_png(Path(args.out) / "overview.png", _overview(r.panels))
     print(f"  overview of the G-buffers: {path}")
     print("\nmore: clvis render --help, clvis bench raster")
     return ok
 
 
-_RENDER_HELP = """\
+_RENDER_HELP = (
+    """\
 Render a point cloud and write PNGs of its G-buffers: the color by an
 attribute, the point colors, depth, the screen-space velocity's angle and
 magnitude, the soft z-buffer, the depth-filtered image (each when the cloud
@@ -363,41 +393,88 @@ particles (velocity, pressure, temperature, speed) or a 1M-point LiDAR-like
 terrain (intensity, classification). The fit view frames the points
 themselves, not only their bounding box.
 
-""" + VIEWS_HELP
+"""
+    + VIEWS_HELP
+)
 
 
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
-    r = sub.add_parser("render", help="render a point cloud (default: a synthetic hurricane) to PNGs",
-                       description=_RENDER_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    r = sub.add_parser(
+        "render",
+        help="render a point cloud (default: a synthetic hurricane) to PNGs",
+        description=_RENDER_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     r.add_argument("file", nargs="?", help="a PLY, LAS, LAZ, NPY or NPZ point cloud")
-    r.add_argument("--dataset", choices=sorted(_DATASETS),
-                   help="the embedded cloud when no FILE is given (default hurricane)")
-    r.add_argument("--points", type=count(1, MAX_POINTS), metavar="N",
-                   help="points of the embedded cloud (default 2,000,000 hurricane, 1,000,000 terrain)")
-    r.add_argument("--attribute", metavar="NAME",
-                   help="color by this attribute, or by a coordinate: x, y, z (default: temperature "
-                        "for the hurricane, classification for the terrain; for a file intensity "
-                        "if it has one, else its first attribute, else its colors, else z)")
-    r.add_argument("--colormap", type=colormap_name, default="viridis", metavar="NAME",
-                   help="a matplotlib colormap for the attribute (default viridis)")
-    r.add_argument("--size", type=size, default=(1920, 1080), metavar="WxH",
-                   help=f"image size in pixels, {SIZE_RULE} (default 1920x1080)")
+    r.add_argument(
+        "--dataset",
+        choices=sorted(_DATASETS),
+        help="the embedded cloud when no FILE is given (default hurricane)",
+    )
+    r.add_argument(
+        "--points",
+        type=count(1, MAX_POINTS),
+        metavar="N",
+        help="points of the embedded cloud (default 2,000,000 hurricane, 1,000,000 terrain)",
+    )
+    r.add_argument(
+        "--attribute",
+        metavar="NAME",
+        help="color by this attribute, or by a coordinate: x, y, z (default: temperature "
+        "for the hurricane, classification for the terrain; for a file intensity "
+        "if it has one, else its first attribute, else its colors, else z)",
+    )
+    r.add_argument(
+        "--colormap",
+        type=colormap_name,
+        default="viridis",
+        metavar="NAME",
+        help="a matplotlib colormap for the attribute (default viridis)",
+    )
+    r.add_argument(
+        "--size",
+        type=size,
+        default=(1920, 1080),
+        metavar="WxH",
+        help=f"image size in pixels, {SIZE_RULE} (default 1920x1080)",
+    )
     add_camera_options(r, _FIT)
-    r.add_argument("--point-size", type=count(1, MAX_POINT_SIZE), default=1, metavar="N",
-                   help=f"draw each point as N x N pixels around its own, depth-tested per pixel "
-                        f"(even N: one more pixel right and down), 1..{MAX_POINT_SIZE} (default 1)")
-    r.add_argument("--soft-z", type=_soft_z, nargs="?", const=_SOFT_Z_FACTOR,
-                   default=_SOFT_Z_FACTOR, metavar="FACTOR",
-                   help="the soft z-buffer's depth tolerance factor, or off (default 1.01)")
-    r.add_argument("--depth-filter", type=_levels, metavar="LEVELS",
-                   help="apply the depth filter with this many pyramid levels, 0: off "
-                        "(default: off, 4 for the terrain)")
-    r.add_argument("--out", default="clvis-render", metavar="DIR",
-                   help="folder for the PNGs (default ./clvis-render)")
-    r.add_argument("--transparent", action="store_true",
-                   help="leave empty pixels transparent (default: over a dark grey; the overview's "
-                        "label bands stay opaque)")
-    r.add_argument("--progress", action="store_true",
-                   help="show the progress of each stage on stderr even when it is not a terminal")
+    r.add_argument(
+        "--point-size",
+        type=count(1, MAX_POINT_SIZE),
+        default=1,
+        metavar="N",
+        help=f"draw each point as N x N pixels around its own, depth-tested per pixel "
+        f"(even N: one more pixel right and down), 1..{MAX_POINT_SIZE} (default 1)",
+    )
+    r.add_argument(
+        "--soft-z",
+        type=_soft_z,
+        nargs="?",
+        const=_SOFT_Z_FACTOR,
+        default=_SOFT_Z_FACTOR,
+        metavar="FACTOR",
+        help="the soft z-buffer's depth tolerance factor, or off (default 1.01)",
+    )
+    r.add_argument(
+        "--depth-filter",
+        type=_levels,
+        metavar="LEVELS",
+        help="apply the depth filter with this many pyramid levels, 0: off (default: off, 4 for the terrain)",
+    )
+    r.add_argument(
+        "--out", default="clvis-render", metavar="DIR", help="folder for the PNGs (default ./clvis-render)"
+    )
+    r.add_argument(
+        "--transparent",
+        action="store_true",
+        help="leave empty pixels transparent (default: over a dark grey; the overview's "
+        "label bands stay opaque)",
+    )
+    r.add_argument(
+        "--progress",
+        action="store_true",
+        help="show the progress of each stage on stderr even when it is not a terminal",
+    )
     r.add_argument("--quiet", action="store_true", help="no progress display")
     return r

@@ -41,9 +41,9 @@ __all__ = ["BVH", "BVH_LEAF", "BVH_NODE_DTYPE", "BVH_NONE", "build_bvh"]
 
 # clvis_bvh_node of clvis/bvh.h: 32 bytes
 BVH_NODE_DTYPE = np.dtype([("lo", "<f4", (3,)), ("left", "<u4"), ("hi", "<f4", (3,)), ("right", "<u4")])
-BVH_LEAF = np.uint32(0x80000000)     # child & LEAF: a leaf; child & ~LEAF = sorted position
-BVH_NONE = np.uint32(0xFFFFFFFF)     # no child (the right child of a 1-primitive tree)
-MAX_BOXES = 2**31 - 1               # child words keep the top bit for LEAF
+BVH_LEAF = np.uint32(0x80000000)  # child & LEAF: a leaf; child & ~LEAF = sorted position
+BVH_NONE = np.uint32(0xFFFFFFFF)  # no child (the right child of a 1-primitive tree)
+MAX_BOXES = 2**31 - 1  # child words keep the top bit for LEAF
 
 _KERNEL = "gauss/bvh.cl"
 # item_wg: the fixed local size (a driver-chosen one makes PoCL compile a
@@ -51,8 +51,10 @@ _KERNEL = "gauss/bvh.cl"
 # bounds reduction per compute unit; bounds_contiguous: each of its items walks
 # one contiguous range of rows (streams on CPUs), else the items interleave
 # (coalesced on GPUs).
-PROFILES = {"cpu": {"item_wg": 64, "bounds_groups": 4, "bounds_contiguous": True},
-            "gpu": {"item_wg": 256, "bounds_groups": 8, "bounds_contiguous": False}}
+PROFILES = {
+    "cpu": {"item_wg": 64, "bounds_groups": 4, "bounds_contiguous": True},
+    "gpu": {"item_wg": 256, "bounds_groups": 8, "bounds_contiguous": False},
+}
 
 
 def _wg(queue) -> int:
@@ -82,9 +84,18 @@ class BVH:
     :attr:`build_seconds`. The build does not wait for its last kernels.
     """
 
-    def __init__(self, queue: cl.CommandQueue, n: int, nodes: cla.Array, order: cla.Array,
-                 leaf_boxes: cla.Array, codes: cla.Array, bounds: tuple[np.ndarray, np.ndarray],
-                 centre_bounds: tuple[np.ndarray, np.ndarray], events: tuple[cl.Event, cl.Event]):
+    def __init__(
+        self,
+        queue: cl.CommandQueue,
+        n: int,
+        nodes: cla.Array,
+        order: cla.Array,
+        leaf_boxes: cla.Array,
+        codes: cla.Array,
+        bounds: tuple[np.ndarray, np.ndarray],
+        centre_bounds: tuple[np.ndarray, np.ndarray],
+        events: tuple[cl.Event, cl.Event],
+    ):
         self.queue = queue
         self.n = n
         self.nodes = nodes
@@ -111,7 +122,7 @@ class BVH:
         return self.nodes.get(), self.order.get(), self.leaf_boxes.get()
 
     def __repr__(self) -> str:
-        return f"BVH(n={self.n}, nodes={self.nodes.shape[0]}, nbytes={self.nbytes})"     # does not wait
+        return f"BVH(n={self.n}, nodes={self.nodes.shape[0]}, nbytes={self.nbytes})"  # does not wait
 
 
 def _decode_key(k: np.ndarray) -> np.ndarray:
@@ -129,13 +140,23 @@ def _read_bounds(queue, bd, n: int):
     groups = max(1, min(prof["bounds_groups"] * runtime.capabilities(queue).compute_units, -(-n // wg)))
     items = groups * wg
     chunk = -(-n // items) if prof["bounds_contiguous"] else 1
-    runtime.launch(queue, _kernel(queue, "bvh_bounds"), items, wg, bd.base_data, np.uint32(n),
-                   np.uint32(chunk), res.base_data)
+    runtime.launch(
+        queue,
+        _kernel(queue, "bvh_bounds"),
+        items,
+        wg,
+        bd.base_data,
+        np.uint32(n),
+        np.uint32(chunk),
+        res.base_data,
+    )
     r = res.get(queue=queue)
     if r[12] != 0xFFFFFFFF:
         row = int(r[12])
-        raise DataError(f"boxes: row {row} is not a valid box (NaN or infinite values, lo > hi on an "
-                        "axis, or lo + hi overflows float32)")
+        raise DataError(
+            f"boxes: row {row} is not a valid box (NaN or infinite values, lo > hi on an "
+            "axis, or lo + hi overflows float32)"
+        )
     clo, chi = _decode_key(r[0:3]), _decode_key(~r[3:6])
     blo, bhi = _decode_key(r[6:9]), _decode_key(~r[9:12])
     return clo, chi, blo, bhi
@@ -152,9 +173,10 @@ def build_bvh(boxes: Any, *, queue: cl.CommandQueue | None = None) -> BVH:
     """
     queue = resolve_queue(queue, boxes=boxes)
     shape = getattr(boxes, "shape", None)
-    if shape is not None and len(shape) == 2 and shape[0] > MAX_BOXES:     # before any copy
-        raise DeviceError(f"boxes: {shape[0]} boxes; at most 2^31 - 1 (child words keep the top bit "
-                          "for leaves)")
+    if shape is not None and len(shape) == 2 and shape[0] > MAX_BOXES:  # before any copy
+        raise DeviceError(
+            f"boxes: {shape[0]} boxes; at most 2^31 - 1 (child words keep the top bit for leaves)"
+        )
     b = check_array("boxes", boxes, dtypes=[np.float32], ndim=2)
     if b.shape[1] != 6:
         raise ValueError(f"boxes: expected shape (N, 6) = lo xyz, hi xyz; got {tuple(b.shape)}")
@@ -163,9 +185,17 @@ def build_bvh(boxes: Any, *, queue: cl.CommandQueue | None = None) -> BVH:
     first = runtime.marker(queue)
     if n == 0:
         empty3 = (np.full(3, np.inf, np.float32), np.full(3, -np.inf, np.float32))
-        return BVH(queue, 0, e(queue, 0, BVH_NODE_DTYPE, "BVH nodes"), e(queue, 0, np.uint32, "BVH order"),
-                   e(queue, (0, 6), np.float32, "BVH leaf boxes"), e(queue, 0, np.uint32, "BVH codes"),
-                   empty3, empty3, (first, runtime.marker(queue)))
+        return BVH(
+            queue,
+            0,
+            e(queue, 0, BVH_NODE_DTYPE, "BVH nodes"),
+            e(queue, 0, np.uint32, "BVH order"),
+            e(queue, (0, 6), np.float32, "BVH leaf boxes"),
+            e(queue, 0, np.uint32, "BVH codes"),
+            empty3,
+            empty3,
+            (first, runtime.marker(queue)),
+        )
     bd = to_device(queue, "boxes", b)
     clo, chi, blo, bhi = _read_bounds(queue, bd, n)
     # -0.0 -> +0.0 (which zero an item keeps depends on the rows it saw): the
@@ -175,17 +205,41 @@ def build_bvh(boxes: Any, *, queue: cl.CommandQueue | None = None) -> BVH:
 
     codes = e(queue, n, np.uint32, "BVH Morton codes")
     iota = e(queue, n, np.uint32, "BVH order")
-    runtime.launch(queue, _kernel(queue, "bvh_morton"), *_items(queue, n), bd.base_data, np.uint32(n),
-                   *clo, *scale, codes.base_data, iota.base_data)
+    runtime.launch(
+        queue,
+        _kernel(queue, "bvh_morton"),
+        *_items(queue, n),
+        bd.base_data,
+        np.uint32(n),
+        *clo,
+        *scale,
+        codes.base_data,
+        iota.base_data,
+    )
     # codes < 2^30 by construction; all 32 bits cost no extra pass at 4 or 8
     # bits a pass, and skip key_bits's check (a host read)
     codes, order = radix_sort(codes, iota, queue=queue)
 
     leaf_boxes = e(queue, (n, 6), np.float32, "BVH leaf boxes")
-    runtime.launch(queue, _kernel(queue, "bvh_gather"), *_items(queue, n), bd.base_data, order.base_data,
-                   np.uint32(n), leaf_boxes.base_data)
+    runtime.launch(
+        queue,
+        _kernel(queue, "bvh_gather"),
+        *_items(queue, n),
+        bd.base_data,
+        order.base_data,
+        np.uint32(n),
+        leaf_boxes.base_data,
+    )
     nodes = e(queue, max(n - 1, 1), BVH_NODE_DTYPE, "BVH nodes")
     meet = runtime.fill(queue, e(queue, max(n - 1, 1), np.uint32, "BVH meeting words"), 0xFFFFFFFF)
-    last = runtime.launch(queue, _kernel(queue, "bvh_build"), *_items(queue, n), codes.base_data,
-                          leaf_boxes.base_data, np.uint32(n), nodes.base_data, meet.base_data)
+    last = runtime.launch(
+        queue,
+        _kernel(queue, "bvh_build"),
+        *_items(queue, n),
+        codes.base_data,
+        leaf_boxes.base_data,
+        np.uint32(n),
+        nodes.base_data,
+        meet.base_data,
+    )
     return BVH(queue, n, nodes, order, leaf_boxes, codes, (blo, bhi), (clo, chi), (first, last))

@@ -82,15 +82,22 @@ class Gaussians:
         transfer function colours them by value.
     """
 
-    def __init__(self, means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike | None = None,
-                 values: npt.ArrayLike | None = None, opacities: npt.ArrayLike | None = None,
-                 colors: npt.ArrayLike | None = None) -> None:
+    def __init__(
+        self,
+        means: npt.ArrayLike,
+        scales: npt.ArrayLike,
+        rotations: npt.ArrayLike | None = None,
+        values: npt.ArrayLike | None = None,
+        opacities: npt.ArrayLike | None = None,
+        colors: npt.ArrayLike | None = None,
+    ) -> None:
         self.means = _real("means", means, (3,), None)
         n = len(self.means)
         self.scales = _real("scales", scales, (3,), n)
         if n and (self.scales < 0).any():
-            raise DataError(f"scales: row {int(np.flatnonzero((self.scales < 0).any(axis=1))[0])} "
-                            "is negative")
+            raise DataError(
+                f"scales: row {int(np.flatnonzero((self.scales < 0).any(axis=1))[0])} is negative"
+            )
         if rotations is None:
             self.rotations = np.ascontiguousarray(np.broadcast_to(np.eye(3, dtype=np.float32), (n, 3, 3)))
         else:
@@ -99,11 +106,12 @@ class Gaussians:
                 r = self.rotations.astype(np.float64)
                 err = np.abs(np.einsum("nji,njk->nik", r, r) - np.eye(3)).max(axis=(1, 2))
                 if (err > 1e-3).any():
-                    raise DataError(f"rotations: matrix {int(np.flatnonzero(err > 1e-3)[0])} is not "
-                                    "orthonormal (R^T R differs from I by more than 1e-3)")
-        self.values = (np.zeros(n, np.float32) if values is None else _real("values", values, (), n))
-        self.opacities = (np.ones(n, np.float32) if opacities is None
-                          else _real("opacities", opacities, (), n))
+                    raise DataError(
+                        f"rotations: matrix {int(np.flatnonzero(err > 1e-3)[0])} is not "
+                        "orthonormal (R^T R differs from I by more than 1e-3)"
+                    )
+        self.values = np.zeros(n, np.float32) if values is None else _real("values", values, (), n)
+        self.opacities = np.ones(n, np.float32) if opacities is None else _real("opacities", opacities, (), n)
         if n and ((self.opacities < 0) | (self.opacities > 1)).any():
             raise DataError("opacities: values must lie in [0, 1]")
         self.colors = None if colors is None else _colors(colors, n)
@@ -124,22 +132,33 @@ class Gaussians:
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.means, self.scales, self.rotations, self.values, self.opacities,
-                                      self.colors) if a is not None)
+        return sum(
+            a.nbytes
+            for a in (self.means, self.scales, self.rotations, self.values, self.opacities, self.colors)
+            if a is not None
+        )
 
     def bounds(self, cutoff: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) float64 of the boxes holding every Gaussian's `cutoff`-sigma ellipsoid."""
         if not self.n:
             return np.zeros(3), np.zeros(3)
-        half = cutoff * np.sqrt(np.einsum("nij,nj->ni", self.rotations.astype(np.float64) ** 2,
-                                          self.scales.astype(np.float64) ** 2))
+        half = cutoff * np.sqrt(
+            np.einsum(
+                "nij,nj->ni", self.rotations.astype(np.float64) ** 2, self.scales.astype(np.float64) ** 2
+            )
+        )
         m = self.means.astype(np.float64)
         return (m - half).min(axis=0), (m + half).max(axis=0)
 
     def subset(self, index: npt.ArrayLike | slice) -> Gaussians:
-        return Gaussians(self.means[index], self.scales[index], self.rotations[index],
-                         self.values[index], self.opacities[index],
-                         None if self.colors is None else self.colors[index])
+        return Gaussians(
+            self.means[index],
+            self.scales[index],
+            self.rotations[index],
+            self.values[index],
+            self.opacities[index],
+            None if self.colors is None else self.colors[index],
+        )
 
     @staticmethod
     def concatenate(parts: Iterable[Gaussians]) -> Gaussians:
@@ -153,16 +172,27 @@ class Gaussians:
         have = [p.colors is not None for p in parts]
         if any(have) and not all(have):
             raise ValueError("parts: some have colours and some do not")
-        return Gaussians(cat([p.means for p in parts]), cat([p.scales for p in parts]),
-                         cat([p.rotations for p in parts]), cat([p.values for p in parts]),
-                         cat([p.opacities for p in parts]),
-                         cat([p.colors for p in parts]) if all(have) else None)
+        return Gaussians(
+            cat([p.means for p in parts]),
+            cat([p.scales for p in parts]),
+            cat([p.rotations for p in parts]),
+            cat([p.values for p in parts]),
+            cat([p.opacities for p in parts]),
+            cat([p.colors for p in parts]) if all(have) else None,
+        )
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write a .npz (means, scales, rotations, values, opacities, and colors when present)."""
         extra = {} if self.colors is None else {"colors": self.colors}
-        np.savez(path, means=self.means, scales=self.scales, rotations=self.rotations,
-                 values=self.values, opacities=self.opacities, **extra)
+        np.savez(
+            path,
+            means=self.means,
+            scales=self.scales,
+            rotations=self.rotations,
+            values=self.values,
+            opacities=self.opacities,
+            **extra,
+        )
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Gaussians:

@@ -40,8 +40,15 @@ from ..primitives import scan
 from .gaussians import Gaussians
 from .sparse import SparseVolume
 
-__all__ = ["BYTES_PER_AXIS_ALIGNED_GAUSSIAN", "BYTES_PER_GAUSSIAN", "LODS", "LodRow", "LodTable",
-           "gaussians_from_volume", "lod_table"]
+__all__ = [
+    "BYTES_PER_AXIS_ALIGNED_GAUSSIAN",
+    "BYTES_PER_GAUSSIAN",
+    "LODS",
+    "LodRow",
+    "LodTable",
+    "gaussians_from_volume",
+    "lod_table",
+]
 
 LODS = ("low", "medium", "high")
 # as clvis.gauss.Gaussians stores one: means 12 + scales 12 + rotations 36 + value 4 + opacity 4
@@ -54,7 +61,7 @@ _SRC = "gauss/lod.cl"
 # of the one-item-per-leaf count kernel (a fixed one: PoCL would compile a
 # work-group function for every size the driver chose)
 PROFILES = {"cpu": {"WG": 64, "count_wg": 64}, "gpu": {"WG": 64, "count_wg": 256}}
-_MAX_LEAVES = (2**32 - 1) // 512      # Gaussian offsets are uint32
+_MAX_LEAVES = (2**32 - 1) // 512  # Gaussian offsets are uint32
 
 
 def _lod_index(lod) -> int:
@@ -65,15 +72,24 @@ def _lod_index(lod) -> int:
 
 def _as_sparse(volume_or_sparse, threshold, mask, spacing, origin) -> SparseVolume:
     if isinstance(volume_or_sparse, SparseVolume):
-        given = [n for n, v in (("threshold", threshold), ("mask", mask), ("spacing", spacing),
-                                ("origin", origin)) if v is not None]
+        given = [
+            n
+            for n, v in (("threshold", threshold), ("mask", mask), ("spacing", spacing), ("origin", origin))
+            if v is not None
+        ]
         if given:
-            raise ValueError(f"{', '.join(given)}: a SparseVolume already has its active voxels, "
-                             "spacing and origin; pass these with a dense volume only")
+            raise ValueError(
+                f"{', '.join(given)}: a SparseVolume already has its active voxels, "
+                "spacing and origin; pass these with a dense volume only"
+            )
         return volume_or_sparse
-    return SparseVolume.from_dense(volume_or_sparse, threshold=threshold, mask=mask,
-                                   spacing=(1.0, 1.0, 1.0) if spacing is None else spacing,
-                                   origin=(0.0, 0.0, 0.0) if origin is None else origin)
+    return SparseVolume.from_dense(
+        volume_or_sparse,
+        threshold=threshold,
+        mask=mask,
+        spacing=(1.0, 1.0, 1.0) if spacing is None else spacing,
+        origin=(0.0, 0.0, 0.0) if origin is None else origin,
+    )
 
 
 class _DeviceLeaves:
@@ -81,8 +97,9 @@ class _DeviceLeaves:
 
     def __init__(self, queue, sv: SparseVolume):
         if sv.n_leaves > _MAX_LEAVES:
-            raise DeviceError(f"volume: {sv.n_leaves} leaves; at most {_MAX_LEAVES} "
-                              "(Gaussian offsets are 32-bit)")
+            raise DeviceError(
+                f"volume: {sv.n_leaves} leaves; at most {_MAX_LEAVES} (Gaussian offsets are 32-bit)"
+            )
         caps = runtime.capabilities(queue)
         if caps.max_work_group_size < PROFILES["cpu"]["WG"]:
             raise DeviceError(f"{runtime.describe(queue.device)}: lod.cl needs work-groups of 64 items")
@@ -93,8 +110,8 @@ class _DeviceLeaves:
         self.rows = _put(queue, "rows", sv.value_rows)
         self.tile_values = _put(queue, "tile_values", sv.tile_values)
         self.values = _put(queue, "values", sv.values if len(sv.values) else np.zeros((1, 512), np.float32))
-        self.spacing = np.asarray(sv.spacing, np.float32)     # dz, dy, dx
-        self.origin = np.asarray(sv.origin, np.float32)       # ox, oy, oz
+        self.spacing = np.asarray(sv.spacing, np.float32)  # dz, dy, dx
+        self.origin = np.asarray(sv.origin, np.float32)  # ox, oy, oz
 
     def counts(self, lod: int):
         """(per-leaf counts, offsets, total) for one LOD; total read with one small transfer."""
@@ -102,8 +119,15 @@ class _DeviceLeaves:
         counts = runtime.empty(q, self.n, np.uint32, "LOD counts")
         wg = PROFILES[runtime.tuning_profile(q)]["count_wg"]
         k = runtime.get_kernel(q, _SRC, "lod_count", {}, runtime.EXACT_FP)
-        runtime.launch(q, k, *runtime.items(q, self.n, wg), self.masks.base_data, np.uint32(self.n),
-                       np.uint32(lod), counts.base_data)
+        runtime.launch(
+            q,
+            k,
+            *runtime.items(q, self.n, wg),
+            self.masks.base_data,
+            np.uint32(self.n),
+            np.uint32(lod),
+            counts.base_data,
+        )
         offsets, total = scan(counts, exclusive=True, return_total=True, queue=q)
         return offsets, int(total.get()[0])
 
@@ -117,10 +141,29 @@ class _DeviceLeaves:
         k = runtime.get_kernel(q, _SRC, "lod_emit", {}, runtime.EXACT_FP)
         dz, dy, dx = self.spacing
         ox, oy, oz = self.origin
-        runtime.launch(q, k, self.n * wg, wg, self.coords.base_data, self.masks.base_data,
-                       self.rows.base_data, self.tile_values.base_data, self.values.base_data,
-                       np.uint32(self.n), np.uint32(lod), dz, dy, dx, ox, oy, oz,
-                       offsets.base_data, means.base_data, scales.base_data, values.base_data)
+        runtime.launch(
+            q,
+            k,
+            self.n * wg,
+            wg,
+            self.coords.base_data,
+            self.masks.base_data,
+            self.rows.base_data,
+            self.tile_values.base_data,
+            self.values.base_data,
+            np.uint32(self.n),
+            np.uint32(lod),
+            dz,
+            dy,
+            dx,
+            ox,
+            oy,
+            oz,
+            offsets.base_data,
+            means.base_data,
+            scales.base_data,
+            values.base_data,
+        )
         return Gaussians(means.get()[:total], scales.get()[:total], values=values.get()[:total])
 
 
@@ -131,14 +174,20 @@ def _put(queue, what, a: np.ndarray):
 
 
 def _empty_gaussians() -> Gaussians:
-    return Gaussians(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32),
-                     values=np.zeros(0, np.float32))
+    return Gaussians(
+        np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32), values=np.zeros(0, np.float32)
+    )
 
 
-def gaussians_from_volume(volume_or_sparse: SparseVolume | Any, lod: str = "medium",
-                          threshold: float | None = None, mask: Any = None,
-                          spacing: Sequence[float] | None = None, origin: Sequence[float] | None = None,
-                          queue: cl.CommandQueue | None = None) -> Gaussians:
+def gaussians_from_volume(
+    volume_or_sparse: SparseVolume | Any,
+    lod: str = "medium",
+    threshold: float | None = None,
+    mask: Any = None,
+    spacing: Sequence[float] | None = None,
+    origin: Sequence[float] | None = None,
+    queue: cl.CommandQueue | None = None,
+) -> Gaussians:
     """The Gaussians of a volume at level of detail `lod` ("low", "medium" or "high").
 
     volume_or_sparse: a [Z, Y, X] numpy volume (made sparse with
@@ -186,10 +235,11 @@ class LodTable:
         raise KeyError(lod)
 
     def format(self) -> str:
-        head = (f"sparse volume: {self.leaves} leaves ({self.tiles} tiles), {self.active_voxels} active "
-                f"voxels, {self.sparse_bytes} B")
-        lines = [head,
-                 f"{'LOD':<8}{'Gaussians':>12}{'bytes':>14}{'axis-aligned B':>16}"]
+        head = (
+            f"sparse volume: {self.leaves} leaves ({self.tiles} tiles), {self.active_voxels} active "
+            f"voxels, {self.sparse_bytes} B"
+        )
+        lines = [head, f"{'LOD':<8}{'Gaussians':>12}{'bytes':>14}{'axis-aligned B':>16}"]
         lines += [f"{r.lod:<8}{r.gaussians:>12}{r.bytes:>14}{r.axis_aligned_bytes:>16}" for r in self.rows]
         return "\n".join(lines)
 

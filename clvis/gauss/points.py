@@ -31,8 +31,8 @@ from .gaussians import Gaussians
 
 __all__ = ["KNN_CLAMP_PERCENTILE", "MAX_KNN", "frames_along", "gaussians_from_points", "knn_mean_distance"]
 
-KNN_CLAMP_PERCENTILE = 95.0     # isotropic kNN sigmas are clamped to this percentile of them
-MAX_KNN = 64                    # neighbours per point at most (the query holds N x k distances)
+KNN_CLAMP_PERCENTILE = 95.0  # isotropic kNN sigmas are clamped to this percentile of them
+MAX_KNN = 64  # neighbours per point at most (the query holds N x k distances)
 
 
 def _k(k) -> int:
@@ -73,9 +73,17 @@ def frames_along(directions: npt.ArrayLike) -> np.ndarray:
     return np.stack([a, b, c], axis=2).astype(np.float32)
 
 
-def gaussians_from_points(cloud: PointCloud | Any, *, velocity: Any = None, stretch: float = 250.0,
-                          scale: Any = None, k: int = 4, values: Any = None,
-                          opacity: Any = 1.0, color_by: str | None = None) -> Gaussians:
+def gaussians_from_points(
+    cloud: PointCloud | Any,
+    *,
+    velocity: Any = None,
+    stretch: float = 250.0,
+    scale: Any = None,
+    k: int = 4,
+    values: Any = None,
+    opacity: Any = 1.0,
+    color_by: str | None = None,
+) -> Gaussians:
     """Gaussians for the points of `cloud` (a clvis.PointCloud or (N, 3) positions).
 
     velocity : (N, 3), ``"cloud"`` (the cloud's own velocity) or None.
@@ -120,8 +128,9 @@ def gaussians_from_points(cloud: PointCloud | Any, *, velocity: Any = None, stre
     colors = None
     if color_by is not None:
         if not isinstance(color_by, str):
-            raise TypeError(f"color_by: expected None, 'rgb', 'z' or an attribute name, got "
-                            f"{type(color_by).__name__}")
+            raise TypeError(
+                f"color_by: expected None, 'rgb', 'z' or an attribute name, got {type(color_by).__name__}"
+            )
         if values is not None:
             raise ValueError("color_by and values: give one of them")
         if color_by == "rgb":
@@ -143,7 +152,7 @@ def gaussians_from_points(cloud: PointCloud | Any, *, velocity: Any = None, stre
             raise ValueError(f"values: the cloud has no attribute {values!r}")
         values = cloud.attributes[values]
     if colors is not None and values is None:
-        values = positions[:, 2]          # the transfer function's opacity reads something real
+        values = positions[:, 2]  # the transfer function's opacity reads something real
 
     if velocity is not None:
         vel = np.asarray(velocity, np.float64)
@@ -176,8 +185,14 @@ def gaussians_from_points(cloud: PointCloud | Any, *, velocity: Any = None, stre
     if values.shape != (n,):
         raise ValueError(f"values: expected shape ({n},), got {values.shape}")
     opacities = _per_point("opacity", opacity, n)
-    return Gaussians(positions, scales, rotations, values.astype(np.float32), opacities,
-                     None if colors is None else colors[:, :3])
+    return Gaussians(
+        positions,
+        scales,
+        rotations,
+        values.astype(np.float32),
+        opacities,
+        None if colors is None else colors[:, :3],
+    )
 
 
 def _per_point(name, v, n) -> np.ndarray:

@@ -66,8 +66,9 @@ MODELS = {"max_response": 0, "absorption": 1}
 MAX_K = 64
 TILE = 8
 
-GAUSSIAN_DTYPE = np.dtype([("mean", np.float32, 3), ("value", np.float32), ("w", np.float32, 9),
-                           ("opacity", np.float32)])
+GAUSSIAN_DTYPE = np.dtype(
+    [("mean", np.float32, 3), ("value", np.float32), ("w", np.float32, 9), ("opacity", np.float32)]
+)
 
 
 @dataclass
@@ -76,6 +77,7 @@ class GaussianImage:
     ``depth`` (H, W) float32 view depth where T first fell below 0.5 (+inf
     elsewhere); ``hits`` and ``rounds`` (H, W) uint32 per ray (Gaussians
     composited, k-buffer rounds); ``stats`` a dict."""
+
     rgba: np.ndarray
     depth: np.ndarray
     hits: np.ndarray
@@ -87,11 +89,11 @@ class GaussianImage:
         bg = np.asarray(background, np.float32).reshape(1, 1, 3)
         rgba = np.asarray(self.rgba)
         out = np.empty(rgba.shape[:2] + (3,), np.uint8)
-        step = max(1, (1 << 20) // max(rgba.shape[1], 1))     # rows at a time: float temporaries stay small
+        step = max(1, (1 << 20) // max(rgba.shape[1], 1))  # rows at a time: float temporaries stay small
         for y in range(0, rgba.shape[0], step):
-            band = rgba[y:y + step]
+            band = rgba[y : y + step]
             rgb = band[..., :3] + (1 - band[..., 3:4]) * bg
-            out[y:y + step] = np.clip(np.rint(rgb * 255), 0, 255)
+            out[y : y + step] = np.clip(np.rint(rgb * 255), 0, 255)
         return out
 
 
@@ -105,15 +107,18 @@ class GaussianImage:
 # "tile_rays": rays per band of rows at most (28 bytes each on the device);
 # a CPU gains nothing from larger launches and a band is the progress step,
 # a GPU wants enough rays in flight to fill it.
-PROFILES = {"cpu": {"march_wg": 8, "k": 64, "k0": 16, "item_wg": 64, "tile_rays": 1 << 18},
-            "gpu": {"march_wg": 64, "k": 16, "k0": 16, "item_wg": 64, "tile_rays": 1 << 21}}
-RAY_BYTES = 28          # per ray: rgba float4, depth float, stats uint2
+PROFILES = {
+    "cpu": {"march_wg": 8, "k": 64, "k0": 16, "item_wg": 64, "tile_rays": 1 << 18},
+    "gpu": {"march_wg": 64, "k": 16, "k0": 16, "item_wg": 64, "tile_rays": 1 << 21},
+}
+RAY_BYTES = 28  # per ray: rgba float4, depth float, stats uint2
 
 
 def _real(name: str, v) -> float:
     """v as a float: TypeError for strings, bool and other non-numbers."""
-    if isinstance(v, (str, bytes, bool, np.bool_)) or \
-            not isinstance(v, (int, float, np.integer, np.floating)):
+    if isinstance(v, (str, bytes, bool, np.bool_)) or not isinstance(
+        v, (int, float, np.integer, np.floating)
+    ):
         raise TypeError(f"{name}: expected a number, got {type(v).__name__}")
     return float(v)
 
@@ -134,10 +139,18 @@ class GaussianRenderer:
         have none); False: the transfer function's.
     """
 
-    def __init__(self, gaussians: Gaussians, transfer_function: TransferFunction | None = None,
-                 model: str = "max_response", k: int | None = None, cutoff: float = 3.0,
-                 density: float = 1.0, queue: cl.CommandQueue | None = None, *,
-                 colors: bool | None = None) -> None:
+    def __init__(
+        self,
+        gaussians: Gaussians,
+        transfer_function: TransferFunction | None = None,
+        model: str = "max_response",
+        k: int | None = None,
+        cutoff: float = 3.0,
+        density: float = 1.0,
+        queue: cl.CommandQueue | None = None,
+        *,
+        colors: bool | None = None,
+    ) -> None:
         if not isinstance(gaussians, Gaussians):
             raise TypeError(f"gaussians: expected clvis.Gaussians, got {type(gaussians).__name__}")
         if model not in MODELS:
@@ -163,12 +176,14 @@ class GaussianRenderer:
         if transfer_function is None:
             transfer_function = TransferFunction()
         if not isinstance(transfer_function, TransferFunction):
-            raise TypeError("transfer_function: expected a clvis.TransferFunction, got "
-                            f"{type(transfer_function).__name__}")
+            raise TypeError(
+                "transfer_function: expected a clvis.TransferFunction, got "
+                f"{type(transfer_function).__name__}"
+            )
         self.gaussians, self.model, self.k = gaussians, model, k
         self.cutoff, self.density, self.transfer_function = cutoff, density, transfer_function
         n = gaussians.n
-        if n >= 2 ** 31:
+        if n >= 2**31:
             raise DeviceError(f"gaussians: {n} Gaussians; at most 2^31 - 1")
         self.n = n
         with runtime.pinned(self.config):
@@ -177,17 +192,29 @@ class GaussianRenderer:
     def _setup(self, gaussians: Gaussians) -> None:
         q, n, prof = self.queue, self.n, self._profile
         flags = runtime.EXACT_FP
-        self._march = runtime.get_kernel(q, "gauss/march.cl", "march",
-                                         {"K": self.k, "K0": min(self.k, prof["k0"]),
-                                          "MODEL": MODELS[self.model], "COLOR": int(self.colors)},
-                                         flags)
+        self._march = runtime.get_kernel(
+            q,
+            "gauss/march.cl",
+            "march",
+            {
+                "K": self.k,
+                "K0": min(self.k, prof["k0"]),
+                "MODEL": MODELS[self.model],
+                "COLOR": int(self.colors),
+            },
+            flags,
+        )
         self._march_wg = runtime.local_size(q, prof["march_wg"])
         first = runtime.marker(q)
         m = max(n, 1)
         arrays = {}
-        for name, a in (("means", gaussians.means), ("scales", gaussians.scales),
-                        ("rotations", gaussians.rotations), ("values", gaussians.values),
-                        ("opacities", gaussians.opacities)):
+        for name, a in (
+            ("means", gaussians.means),
+            ("scales", gaussians.scales),
+            ("rotations", gaussians.rotations),
+            ("values", gaussians.values),
+            ("opacities", gaussians.opacities),
+        ):
             d = runtime.empty(q, (m,) + a.shape[1:], np.float32, f"Gaussian {name}")
             if n:
                 d.set(a, queue=q)
@@ -197,10 +224,16 @@ class GaussianRenderer:
         last = None
         if n:
             kr = runtime.get_kernel(q, "gauss/gaussians.cl", "gaussian_records", {}, flags)
-            last = runtime.launch(q, kr, *runtime.items(q, n, prof["item_wg"]),
-                                  *(arrays[k_].base_data for k_ in
-                                    ("means", "scales", "rotations", "values", "opacities")),
-                                  np.uint32(n), np.float32(self.cutoff), records.base_data, boxes.base_data)
+            last = runtime.launch(
+                q,
+                kr,
+                *runtime.items(q, n, prof["item_wg"]),
+                *(arrays[k_].base_data for k_ in ("means", "scales", "rotations", "values", "opacities")),
+                np.uint32(n),
+                np.float32(self.cutoff),
+                records.base_data,
+                boxes.base_data,
+            )
         # own colours: uchar4 by Gaussian id (the kernel indexes them through
         # the leaf order it already reads), alpha 255 and unused
         self._colors = None
@@ -214,8 +247,15 @@ class GaussianRenderer:
         self.records = runtime.empty(q, m * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records (BVH order)")
         if n:
             kg = runtime.get_kernel(q, "gauss/gaussians.cl", "gather_records", {}, flags)
-            runtime.launch(q, kg, *runtime.items(q, n, prof["item_wg"]), records.base_data,
-                           self.bvh.order.base_data, np.uint32(n), self.records.base_data)
+            runtime.launch(
+                q,
+                kg,
+                *runtime.items(q, n, prof["item_wg"]),
+                records.base_data,
+                self.bvh.order.base_data,
+                np.uint32(n),
+                self.records.base_data,
+            )
         self._dummy = runtime.zeros(q, 64, np.float32, "empty BVH") if n == 0 else None
 
     @property
@@ -244,10 +284,17 @@ class GaussianRenderer:
         rows = max(8, self._profile["tile_rays"] // max(width, 1) // TILE * TILE)
         return min(rows, height)
 
-    def render(self, camera: Camera, width: int, height: int, *,
-               transfer_function: TransferFunction | None = None, host: bool = True,
-               tile_rows: int | None = None,
-               progress: Callable[[int, int], None] | None = None) -> GaussianImage:
+    def render(
+        self,
+        camera: Camera,
+        width: int,
+        height: int,
+        *,
+        transfer_function: TransferFunction | None = None,
+        host: bool = True,
+        tile_rows: int | None = None,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> GaussianImage:
         """One frame; see the module doc for what the planes hold.
 
         The image is rendered in bands of `tile_rows` rows (default
@@ -259,25 +306,31 @@ class GaussianRenderer:
         (H, W, 2) uint32 device array of both."""
         q = self.queue
         w, h = positive_int("width", width), positive_int("height", height)
-        if w * h >= 2 ** 32:
+        if w * h >= 2**32:
             raise DeviceError(f"width x height: {w * h} pixels; at most 2^32 - 1")
         cam = ray_buffer(camera, w, h)
         tf = transfer_function or self.transfer_function
         if not isinstance(tf, TransferFunction):
             raise TypeError(f"transfer_function: expected a clvis.TransferFunction, got {type(tf).__name__}")
-        rows = h if not host else self.band_rows(w, h) if tile_rows is None else \
-            min(positive_int("tile_rows", tile_rows), h)
+        rows = (
+            h
+            if not host
+            else self.band_rows(w, h)
+            if tile_rows is None
+            else min(positive_int("tile_rows", tile_rows), h)
+        )
         if progress is not None and not callable(progress):
             raise TypeError(f"progress: expected a callable, got {type(progress).__name__}")
         tmin, tscale = tf.limits(self.gaussians.values)
         table = tf.table()
         what = f"Gaussian image {w}x{h}"
-        runtime.check_memory(q, what, device_bytes=w * rows * RAY_BYTES,
-                             host_bytes=w * h * RAY_BYTES if host else 0)
+        runtime.check_memory(
+            q, what, device_bytes=w * rows * RAY_BYTES, host_bytes=w * h * RAY_BYTES if host else 0
+        )
         runtime.check_alloc(q, w * rows * 16, f"{what}: rgba of {rows} rows")
         start = runtime.marker(q)
         camd = runtime.empty(q, cam.size, np.float32, "camera rays")
-        camd.set(cam, queue=q, async_=True)     # no wait for earlier renders (host=False)
+        camd.set(cam, queue=q, async_=True)  # no wait for earlier renders (host=False)
         tfd = runtime.empty(q, table.shape, np.float32, "transfer function")
         tfd.set(table, queue=q, async_=True)
         rgba = runtime.empty(q, (rows, w, 4), np.float32, "rgba")
@@ -285,28 +338,56 @@ class GaussianRenderer:
         stats = runtime.empty(q, (rows, w, 2), np.uint32, "ray stats")
         bvh = self.bvh
         nodes = bvh.nodes if self.n else None
-        fixed = (self._buf(nodes), self._buf(bvh.leaf_boxes if self.n else None),
-                 self.records.base_data, self._buf(bvh.order if self.n else None),
-                 np.uint32(self.n), camd.base_data, np.uint32(w), np.uint32(h),
-                 tfd.base_data, np.uint32(table.shape[0]), tmin, tscale,
-                 np.float32(self.cutoff * self.cutoff), np.float32(self.density),
-                 # COLOR 0 never reads the colours: any buffer stands in
-                 self.records.base_data if self._colors is None else self._colors.base_data)
+        fixed = (
+            self._buf(nodes),
+            self._buf(bvh.leaf_boxes if self.n else None),
+            self.records.base_data,
+            self._buf(bvh.order if self.n else None),
+            np.uint32(self.n),
+            camd.base_data,
+            np.uint32(w),
+            np.uint32(h),
+            tfd.base_data,
+            np.uint32(table.shape[0]),
+            tmin,
+            tscale,
+            np.float32(self.cutoff * self.cutoff),
+            np.float32(self.density),
+            # COLOR 0 never reads the colours: any buffer stands in
+            self.records.base_data if self._colors is None else self._colors.base_data,
+        )
 
         def band(y0: int, n_rows: int) -> cl.Event:
             tiles = (-(-w // TILE)) * (-(-n_rows // TILE))
-            return runtime.launch(q, self._march, tiles * TILE * TILE, self._march_wg, *fixed,
-                                  np.uint32(y0), np.uint32(n_rows), rgba.base_data, depth.base_data,
-                                  stats.base_data)
+            return runtime.launch(
+                q,
+                self._march,
+                tiles * TILE * TILE,
+                self._march_wg,
+                *fixed,
+                np.uint32(y0),
+                np.uint32(n_rows),
+                rgba.base_data,
+                depth.base_data,
+                stats.base_data,
+            )
 
         if not host:
             end = band(0, h)
             # nothing waits: the timings are None until the device is done
             # with them (then runtime.seconds(*info["events"]) gives render_s)
-            info = {"gaussians": self.n, "model": self.model, "k": self.k,
-                    "bvh_build_s": runtime.seconds(*self.bvh.events, wait=False), "render_s": None,
-                    "events": (start, end), "rays": w * h, "bvh_nodes": max(self.n - 1, 0),
-                    "ray_stats": stats, "bands": 1}
+            info = {
+                "gaussians": self.n,
+                "model": self.model,
+                "k": self.k,
+                "bvh_build_s": runtime.seconds(*self.bvh.events, wait=False),
+                "render_s": None,
+                "events": (start, end),
+                "rays": w * h,
+                "bvh_nodes": max(self.n - 1, 0),
+                "ray_stats": stats,
+                "bands": 1,
+            }
             return GaussianImage(rgba, depth, None, None, info)
         out_rgba = np.empty((h, w, 4), np.float32)
         out_depth = np.empty((h, w), np.float32)
@@ -317,25 +398,53 @@ class GaussianRenderer:
             n_rows = min(rows, h - y0)
             ev = band(y0, n_rows)
             for dst, src in ((out_rgba, rgba), (out_depth, depth), (out_stats, stats)):
-                cl.enqueue_copy(q, dst[y0:y0 + n_rows], src.base_data, wait_for=[ev])
-            t = runtime.seconds(start if bands == 0 else ev, ev)     # the uploads count with band 0
+                cl.enqueue_copy(q, dst[y0 : y0 + n_rows], src.base_data, wait_for=[ev])
+            t = runtime.seconds(start if bands == 0 else ev, ev)  # the uploads count with band 0
             render_s = None if t is None or render_s is None else render_s + t
             bands += 1
             if progress is not None:
                 progress(min(w * (y0 + n_rows), w * h), w * h)
         hits, rounds = out_stats[..., 0], out_stats[..., 1]
-        info = {"gaussians": self.n, "model": self.model, "k": self.k, "bvh_build_s": self.build_seconds,
-                "render_s": render_s, "rays": w * h, "hits_per_ray_mean": float(hits.mean()),
-                "hits_per_ray_max": int(hits.max()), "rounds_per_ray_mean": float(rounds.mean()),
-                "bvh_nodes": max(self.n - 1, 0), "bands": bands, "band_rows": rows}
+        info = {
+            "gaussians": self.n,
+            "model": self.model,
+            "k": self.k,
+            "bvh_build_s": self.build_seconds,
+            "render_s": render_s,
+            "rays": w * h,
+            "hits_per_ray_mean": float(hits.mean()),
+            "hits_per_ray_max": int(hits.max()),
+            "rounds_per_ray_mean": float(rounds.mean()),
+            "bvh_nodes": max(self.n - 1, 0),
+            "bands": bands,
+            "band_rows": rows,
+        }
         return GaussianImage(out_rgba, out_depth, hits, rounds, info)
 
 
-def render_gaussians(gaussians: Gaussians, camera: Camera, width: int, height: int, *,
-                     transfer_function: TransferFunction | None = None, model: str = "max_response",
-                     k: int | None = None, cutoff: float = 3.0, density: float = 1.0,
-                     queue: cl.CommandQueue | None = None, colors: bool | None = None) -> GaussianImage:
+def render_gaussians(
+    gaussians: Gaussians,
+    camera: Camera,
+    width: int,
+    height: int,
+    *,
+    transfer_function: TransferFunction | None = None,
+    model: str = "max_response",
+    k: int | None = None,
+    cutoff: float = 3.0,
+    density: float = 1.0,
+    queue: cl.CommandQueue | None = None,
+    colors: bool | None = None,
+) -> GaussianImage:
     """One frame of `gaussians`: a :class:`GaussianRenderer` and its ``render``."""
-    r = GaussianRenderer(gaussians, transfer_function, model=model, k=k, cutoff=cutoff, density=density,
-                         queue=queue, colors=colors)
+    r = GaussianRenderer(
+        gaussians,
+        transfer_function,
+        model=model,
+        k=k,
+        cutoff=cutoff,
+        density=density,
+        queue=queue,
+        colors=colors,
+    )
     return r.render(camera, width, height)

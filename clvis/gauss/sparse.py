@@ -12,7 +12,8 @@ sample [z, y, x] sits at world position (x*dx, y*dy, z*dz) + origin, origin
 being (ox, oy, oz) (DESIGN.md).
 
 :func:`read_vdb` reads a float grid of an OpenVDB file into this layout
-through the optional ``tinyvdb`` package (``pip install ".[vdb]"`` from a clvis checkout, or ``pip install tinyvdb``).
+through the optional ``tinyvdb`` package (``pip install ".[vdb]"`` from a clvis
+checkout, or ``pip install tinyvdb``).
 """
 
 from __future__ import annotations
@@ -30,10 +31,10 @@ from ..errors import DataError
 
 __all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb"]
 
-LEAF = 8                      # voxels along each side of a leaf
-LEAF_VOXELS = LEAF ** 3       # 512
+LEAF = 8  # voxels along each side of a leaf
+LEAF_VOXELS = LEAF**3  # 512
 _MASK_WORDS = LEAF_VOXELS // 32
-_MAX_SIDE = 2**31 - LEAF      # voxel indices stay int32 in the kernels
+_MAX_SIDE = 2**31 - LEAF  # voxel indices stay int32 in the kernels
 _BITS = (np.uint32(1) << np.arange(32, dtype=np.uint32)).astype(np.uint32)
 
 
@@ -73,9 +74,17 @@ class SparseVolume:
     takes the fields above and checks them.
     """
 
-    def __init__(self, shape: Sequence[int], spacing: Sequence[float], origin: Sequence[float],
-                 coords: np.ndarray, masks: np.ndarray, tiles: np.ndarray, tile_values: np.ndarray,
-                 values: np.ndarray) -> None:
+    def __init__(
+        self,
+        shape: Sequence[int],
+        spacing: Sequence[float],
+        origin: Sequence[float],
+        coords: np.ndarray,
+        masks: np.ndarray,
+        tiles: np.ndarray,
+        tile_values: np.ndarray,
+        values: np.ndarray,
+    ) -> None:
         shape = tuple(int(s) for s in shape)
         if len(shape) != 3 or min(shape) < 0 or max(shape) > _MAX_SIDE:
             raise ValueError(f"shape: expected 3 sizes in [0, {_MAX_SIDE}], got {shape}")
@@ -91,12 +100,15 @@ class SparseVolume:
         if self.masks.shape != (n, _MASK_WORDS):
             raise ValueError(f"masks: expected shape ({n}, {_MASK_WORDS}), got {self.masks.shape}")
         if self.tiles.shape != (n,) or self.tile_values.shape != (n,):
-            raise ValueError(f"tiles, tile_values: expected shape ({n},), got {self.tiles.shape}, "
-                             f"{self.tile_values.shape}")
+            raise ValueError(
+                f"tiles, tile_values: expected shape ({n},), got {self.tiles.shape}, {self.tile_values.shape}"
+            )
         nv = n - int(self.tiles.sum())
         if self.values.shape != (nv, LEAF_VOXELS):
-            raise ValueError(f"values: expected shape ({nv}, {LEAF_VOXELS}) for {nv} non-tile leaves, "
-                             f"got {self.values.shape}")
+            raise ValueError(
+                f"values: expected shape ({nv}, {LEAF_VOXELS}) for {nv} non-tile leaves, "
+                f"got {self.values.shape}"
+            )
         self._check()
 
     # ------------------------------------------------------------------
@@ -106,7 +118,7 @@ class SparseVolume:
         if n:
             if (c % LEAF).any() or (c < 0).any() or (c >= np.asarray(self.shape)).any():
                 raise DataError("coords: leaf origins must be multiples of 8 inside the volume")
-            d = np.diff(c, axis=0)                  # consecutive leaves: lexicographically increasing
+            d = np.diff(c, axis=0)  # consecutive leaves: lexicographically increasing
             first = d[np.arange(len(d)), (d != 0).argmax(axis=1)] if len(d) else d[:, 0]
             if (first <= 0).any():
                 raise DataError("coords: leaves must be unique and in z-y-x order")
@@ -117,27 +129,32 @@ class SparseVolume:
             raise DataError("masks: a tile leaf must have all 512 voxels active")
         inside = self._inside()
         if (active & ~inside).any():
-            raise DataError(f"masks: leaf {int(np.flatnonzero((active & ~inside).any(axis=1))[0])} has "
-                            "active voxels outside the volume")
+            raise DataError(
+                f"masks: leaf {int(np.flatnonzero((active & ~inside).any(axis=1))[0])} has "
+                "active voxels outside the volume"
+            )
         if not np.isfinite(self.tile_values[self.tiles]).all():
             bad = int(np.flatnonzero(self.tiles & ~np.isfinite(self.tile_values))[0])
-            raise DataError(f"tile_values: tile leaf {bad} at voxel {self.coords[bad].tolist()} "
-                            "is not finite")
+            raise DataError(
+                f"tile_values: tile leaf {bad} at voxel {self.coords[bad].tolist()} is not finite"
+            )
         vals = self.values
         act = active[~self.tiles]
         if vals.size and not np.isfinite(vals[act]).all():
             r, i = np.argwhere(act & ~np.isfinite(vals))[0]
             leaf = int(np.flatnonzero(~self.tiles)[r])
             zyx = self.coords[leaf].astype(np.int64) + [i // 64, i // 8 % 8, i % 8]
-            raise DataError(f"volume: active voxel [z, y, x] = {zyx.tolist()} is {vals[r, i]} "
-                            "(not finite)")
+            raise DataError(f"volume: active voxel [z, y, x] = {zyx.tolist()} is {vals[r, i]} (not finite)")
 
     def _inside(self) -> np.ndarray:
         """(L, 512) bool: the voxel lies inside the volume."""
-        room = np.asarray(self.shape, np.int64) - self.coords.astype(np.int64)     # (L, 3) z, y, x
+        room = np.asarray(self.shape, np.int64) - self.coords.astype(np.int64)  # (L, 3) z, y, x
         r = np.arange(LEAF)
-        inside = ((r < room[:, 0:1])[:, :, None, None] & (r < room[:, 1:2])[:, None, :, None]
-                  & (r < room[:, 2:3])[:, None, None, :])
+        inside = (
+            (r < room[:, 0:1])[:, :, None, None]
+            & (r < room[:, 1:2])[:, None, :, None]
+            & (r < room[:, 2:3])[:, None, None, :]
+        )
         return inside.reshape(len(room), LEAF_VOXELS)
 
     # ------------------------------------------------------------------
@@ -202,9 +219,14 @@ class SparseVolume:
 
     # ------------------------------------------------------------------
     @classmethod
-    def from_dense(cls, volume: Any, threshold: float | None = None, mask: Any = None,
-                   spacing: Sequence[float] = (1.0, 1.0, 1.0),
-                   origin: Sequence[float] = (0.0, 0.0, 0.0)) -> SparseVolume:
+    def from_dense(
+        cls,
+        volume: Any,
+        threshold: float | None = None,
+        mask: Any = None,
+        spacing: Sequence[float] = (1.0, 1.0, 1.0),
+        origin: Sequence[float] = (0.0, 0.0, 0.0),
+    ) -> SparseVolume:
         """The sparse layout of a [Z, Y, X] volume (any real dtype, stored as float32).
 
         Active voxels: ``volume > threshold`` (NaN is never above it), or
@@ -218,8 +240,9 @@ class SparseVolume:
         origin = triple("origin", origin, positive=False)
         if act.any() and not np.isfinite(vol[act]).all():
             zyx = np.argwhere(act & ~np.isfinite(vol))[0]
-            raise DataError(f"volume: active voxel [z, y, x] = {zyx.tolist()} is "
-                            f"{vol[tuple(zyx)]} (not finite)")
+            raise DataError(
+                f"volume: active voxel [z, y, x] = {zyx.tolist()} is {vol[tuple(zyx)]} (not finite)"
+            )
         Z, Y, X = vol.shape
         pz, py, px = (-(-s // LEAF) * LEAF for s in vol.shape)
         pv = np.zeros((pz, py, px), np.float32)
@@ -241,14 +264,18 @@ class SparseVolume:
         lv = np.where(la, lv, np.float32(0)).astype(np.float32)
         bits = lv.view(np.uint32)
         tiles = la.all(axis=1) & (bits == bits[:, :1]).all(axis=1)
-        tile_values = np.where(tiles, lv[:, 0] if len(lv) else np.zeros(0, np.float32),
-                               np.float32(0)).astype(np.float32)
-        return cls(shape, spacing, origin, coords.astype(np.int32), _pack_masks(la), tiles, tile_values,
-                   lv[~tiles])
+        tile_values = np.where(tiles, lv[:, 0] if len(lv) else np.zeros(0, np.float32), np.float32(0)).astype(
+            np.float32
+        )
+        return cls(
+            shape, spacing, origin, coords.astype(np.int32), _pack_masks(la), tiles, tile_values, lv[~tiles]
+        )
 
     def __repr__(self) -> str:
-        return (f"SparseVolume(shape={self.shape}, leaves={self.n_leaves}, tiles={self.n_tiles}, "
-                f"active={self.n_active})")
+        return (
+            f"SparseVolume(shape={self.shape}, leaves={self.n_leaves}, tiles={self.n_tiles}, "
+            f"active={self.n_active})"
+        )
 
 
 def _leaf_view(a: np.ndarray) -> np.ndarray:
@@ -288,18 +315,22 @@ def _active(vol: np.ndarray, threshold, mask) -> np.ndarray:
         t = float(threshold)
         if math.isnan(t):
             raise ValueError("threshold: NaN")
-        return np.greater(vol, np.float64(t))     # compared exactly, in float64
+        return np.greater(vol, np.float64(t))  # compared exactly, in float64
     return np.ones(vol.shape, bool)
 
 
 # --------------------------------------------------------------------------
 # OpenVDB files through tinyvdb
 
+
 def _tinyvdb():
     try:
         import tinyvdb
     except ImportError as e:
-        raise ImportError("read_vdb needs the tinyvdb package: pip install \".[vdb]\" in a clvis checkout (or pip install tinyvdb)") from e
+        raise ImportError(
+            'read_vdb needs the tinyvdb package: pip install ".[vdb]" in a clvis checkout '
+            "(or pip install tinyvdb)"
+        ) from e
     return tinyvdb
 
 
@@ -373,20 +404,30 @@ def _read_grid(f, p: Path, grid) -> SparseVolume:
         raise DataError(f"{p}: grid {names[idx]!r}: inconsistent voxel data")
     spacing = (voxel_size[2], voxel_size[1], voxel_size[0])
     if count == 0:
-        return SparseVolume((0, 0, 0), spacing, translation, np.zeros((0, 3), np.int32),
-                            np.zeros((0, _MASK_WORDS), np.uint32), np.zeros(0, bool),
-                            np.zeros(0, np.float32), np.zeros((0, LEAF_VOXELS), np.float32))
+        return SparseVolume(
+            (0, 0, 0),
+            spacing,
+            translation,
+            np.zeros((0, 3), np.int32),
+            np.zeros((0, _MASK_WORDS), np.uint32),
+            np.zeros(0, bool),
+            np.zeros(0, np.float32),
+            np.zeros((0, LEAF_VOXELS), np.float32),
+        )
     zyx = ijk[:, ::-1]
     off = np.floor_divide(zyx.min(axis=0), LEAF) * LEAF
     zyx = zyx - off
     shape = tuple(int(s) for s in zyx.max(axis=0) + 1)
     if max(shape) > _MAX_SIDE:
-        raise DataError(f"{p}: grid {names[idx]!r} spans {shape[::-1]} voxels (x, y, z); "
-                        f"at most {_MAX_SIDE} per axis")
+        raise DataError(
+            f"{p}: grid {names[idx]!r} spans {shape[::-1]} voxels (x, y, z); at most {_MAX_SIDE} per axis"
+        )
     bad = ~np.isfinite(vals)
     if bad.any():
-        raise DataError(f"{p}: grid {names[idx]!r}: active voxel (x, y, z) = "
-                        f"{ijk[np.flatnonzero(bad)[0]].tolist()} is not finite")
+        raise DataError(
+            f"{p}: grid {names[idx]!r}: active voxel (x, y, z) = "
+            f"{ijk[np.flatnonzero(bad)[0]].tolist()} is not finite"
+        )
     leaf = zyx // LEAF
     coords, inv = np.unique(leaf, axis=0, return_inverse=True)
     inv = inv.reshape(-1)
@@ -416,13 +457,16 @@ def _transform(p: Path, t: dict):
         m = np.asarray(t["matrix"], np.float64)
         lin = m[:3, :3]
         if (lin != np.diag(np.diag(lin))).any():
-            raise DataError(f"{p}: the grid's transform rotates or shears; only axis-aligned "
-                            "scale/translate maps are supported")
+            raise DataError(
+                f"{p}: the grid's transform rotates or shears; only axis-aligned "
+                "scale/translate maps are supported"
+            )
         vs = tuple(float(v) for v in np.diag(lin))
         tr = tuple(float(v) for v in m[3, :3])
     else:
         raise DataError(f"{p}: unsupported grid transform {kind!r}")
     if not all(math.isfinite(v) and v > 0 for v in vs) or not all(math.isfinite(v) for v in tr):
-        raise DataError(f"{p}: the grid's voxel size {vs} / translation {tr} is not usable "
-                        "(needs finite sizes > 0)")
+        raise DataError(
+            f"{p}: the grid's voxel size {vs} / translation {tr} is not usable (needs finite sizes > 0)"
+        )
     return vs, tr

@@ -49,8 +49,8 @@ from .zfp import BRICK_VALUES, ZfpVolume
 
 __all__ = ["AGE_MAX", "FREE", "PROFILES", "BlockCache", "default_capacity", "grown_capacity", "mark_blocks"]
 
-FREE = 0xFFFFFFFF                  # slot_of_block / block_of_slot: none
-AGE_MAX = 0xFFFFFFFE               # ages saturate here
+FREE = 0xFFFFFFFF  # slot_of_block / block_of_slot: none
+AGE_MAX = 0xFFFFFFFE  # ages saturate here
 
 
 def default_capacity(nblocks: int) -> int:
@@ -63,6 +63,7 @@ def grown_capacity(capacity: int, n_needed: int, nblocks: int) -> int:
     """The capacity after a pass that needs more free slots than there are:
     max(n_needed, min(nblocks, ceil(1.5 capacity)))."""
     return max(n_needed, min(nblocks, -(-3 * capacity // 2)))
+
 
 _SRC = "iso/cache.cl"
 # the local size of every cache kernel, per tuning profile (a fixed one: PoCL
@@ -83,8 +84,13 @@ def _kernel(queue, name: str, needed_dtype=np.uint8):
     return runtime.get_kernel(queue, _SRC, name, {"NEEDED_T": _NEEDED_T[np.dtype(needed_dtype)]})
 
 
-def mark_blocks(visible_ids: Any, blocks: ZfpVolume | Sequence[int], needed: cla.Array | None = None, *,
-                queue: cl.CommandQueue | None = None) -> cla.Array:
+def mark_blocks(
+    visible_ids: Any,
+    blocks: ZfpVolume | Sequence[int],
+    needed: cla.Array | None = None,
+    *,
+    queue: cl.CommandQueue | None = None,
+) -> cla.Array:
     """Flags of the blocks a pass needs: each block of `visible_ids` (uint32
     block ids; ids >= nblocks are ignored) and its +x, +y, +z, +xy, +xz, +yz,
     +xyz neighbours inside the grid `blocks` = (nbz, nby, nbx) (a
@@ -114,8 +120,17 @@ def mark_blocks(visible_ids: Any, blocks: ZfpVolume | Sequence[int], needed: cla
         _check_needed(needed, nblocks)
     if vd.size and nblocks:
         k = _kernel(queue, "mark_blocks", needed.dtype)
-        runtime.launch(queue, k, *_items(queue, vd.size), vd.base_data, _u32(vd.size),
-                       _u32(nbx), _u32(nby), _u32(nbz), needed.base_data)
+        runtime.launch(
+            queue,
+            k,
+            *_items(queue, vd.size),
+            vd.base_data,
+            _u32(vd.size),
+            _u32(nbx),
+            _u32(nby),
+            _u32(nbz),
+            needed.base_data,
+        )
     return needed
 
 
@@ -138,8 +153,9 @@ class BlockCache:
     least 64, at most the block count). The cache grows when a pass needs more.
     """
 
-    def __init__(self, zfp_volume: ZfpVolume, capacity: int | None = None, *,
-                 queue: cl.CommandQueue | None = None):
+    def __init__(
+        self, zfp_volume: ZfpVolume, capacity: int | None = None, *, queue: cl.CommandQueue | None = None
+    ):
         if not isinstance(zfp_volume, ZfpVolume):
             raise TypeError(f"zfp_volume: expected a clvis.zfp.ZfpVolume, got {type(zfp_volume).__name__}")
         self.volume = zfp_volume
@@ -152,11 +168,13 @@ class BlockCache:
         self._stream = zfp_volume.to_device(q)
         self.capacity = int(capacity)
         self.bricks = runtime.zeros(q, (self.capacity, BRICK_VALUES), np.float32, "cache bricks")
-        self.block_of_slot = runtime.fill(q, runtime.empty(q, self.capacity, np.uint32, "cache block_of_slot"),
-                                          FREE)
+        self.block_of_slot = runtime.fill(
+            q, runtime.empty(q, self.capacity, np.uint32, "cache block_of_slot"), FREE
+        )
         self.ages = runtime.zeros(q, self.capacity, np.uint32, "cache ages")
         self.slot_of_block = runtime.fill(
-            q, runtime.empty(q, max(self.nblocks, 1), np.int32, "cache slot_of_block"), -1)[:self.nblocks]
+            q, runtime.empty(q, max(self.nblocks, 1), np.int32, "cache slot_of_block"), -1
+        )[: self.nblocks]
         self.occupied = 0
         self.decoded_total = 0
         self.decoded_last = 0
@@ -175,9 +193,13 @@ class BlockCache:
 
     def get_state(self) -> dict:
         """Host copies: slot_of_block, block_of_slot, ages, bricks, capacity."""
-        return {"slot_of_block": self.slot_of_block.get() if self.nblocks else np.zeros(0, np.int32),
-                "block_of_slot": self.block_of_slot.get(), "ages": self.ages.get(),
-                "bricks": self.bricks.get(), "capacity": self.capacity}
+        return {
+            "slot_of_block": self.slot_of_block.get() if self.nblocks else np.zeros(0, np.int32),
+            "block_of_slot": self.block_of_slot.get(),
+            "ages": self.ages.get(),
+            "bricks": self.bricks.get(),
+            "capacity": self.capacity,
+        }
 
     # -- steps ---------------------------------------------------------------
 
@@ -187,8 +209,14 @@ class BlockCache:
         bos = runtime.empty(q, new, np.uint32, "cache block_of_slot")
         ages = runtime.empty(q, new, np.uint32, "cache ages")
         for src, dst in ((self.bricks, bricks), (self.block_of_slot, bos), (self.ages, ages)):
-            cl.enqueue_copy(q, dst.base_data, src.base_data, byte_count=src.nbytes,
-                            src_offset=src.offset, dst_offset=dst.offset)
+            cl.enqueue_copy(
+                q,
+                dst.base_data,
+                src.base_data,
+                byte_count=src.nbytes,
+                src_offset=src.offset,
+                dst_offset=dst.offset,
+            )
         runtime.fill(q, bricks, 0, start=self.bricks.size)
         runtime.fill(q, ages, 0, start=old)
         runtime.fill(q, bos, FREE, start=old)
@@ -199,9 +227,16 @@ class BlockCache:
         q, cap = self.queue, self.capacity
         free_f = runtime.empty(q, cap, np.uint8, "cache free flags")
         cand_f = runtime.empty(q, cap, np.uint8, "cache candidate flags")
-        runtime.launch(q, _kernel(q, "cache_slot_flags", nd.dtype), *_items(q, cap),
-                       self.block_of_slot.base_data, nd.base_data, _u32(cap), free_f.base_data,
-                       cand_f.base_data)
+        runtime.launch(
+            q,
+            _kernel(q, "cache_slot_flags", nd.dtype),
+            *_items(q, cap),
+            self.block_of_slot.base_data,
+            nd.base_data,
+            _u32(cap),
+            free_f.base_data,
+            cand_f.base_data,
+        )
         return free_f, cand_f
 
     def _free_or_candidates(self, nd, m):
@@ -236,8 +271,15 @@ class BlockCache:
 
         # 1. missing blocks, ascending
         miss_f = runtime.empty(q, nb, np.uint8, "cache missing flags")
-        runtime.launch(q, _kernel(q, "cache_missing", nd.dtype), *_items(q, nb), nd.base_data,
-                       self.slot_of_block.base_data, _u32(nb), miss_f.base_data)
+        runtime.launch(
+            q,
+            _kernel(q, "cache_missing", nd.dtype),
+            *_items(q, nb),
+            nd.base_data,
+            self.slot_of_block.base_data,
+            _u32(nb),
+            miss_f.base_data,
+        )
         missing = compact_indices(miss_f, queue=q)
         m = int(missing.size)
 
@@ -249,13 +291,20 @@ class BlockCache:
                 n_needed = self.capacity - int(cand.size) + m
                 self._grow(grown_capacity(self.capacity, n_needed, nb))
                 slots, cand, nfree = self._free_or_candidates(nd, m)
-            if slots is None and cand.size < m:      # cannot happen: grown to n_needed
+            if slots is None and cand.size < m:  # cannot happen: grown to n_needed
                 raise DataError(f"block cache: {m} blocks to place but {cand.size} candidate slots")
 
         # 3. ages
         cap = self.capacity
-        runtime.launch(q, _kernel(q, "cache_age", nd.dtype), *_items(q, cap),
-                       self.block_of_slot.base_data, nd.base_data, _u32(cap), self.ages.base_data)
+        runtime.launch(
+            q,
+            _kernel(q, "cache_age", nd.dtype),
+            *_items(q, cap),
+            self.block_of_slot.base_data,
+            nd.base_data,
+            _u32(cap),
+            self.ages.base_data,
+        )
         if not m:
             return 0
 
@@ -263,26 +312,52 @@ class BlockCache:
         if slots is None:
             c = int(cand.size)
             keys = runtime.empty(q, c, np.uint32, "cache candidate keys")
-            runtime.launch(q, _kernel(q, "cache_candidate_keys"), *_items(q, c), cand.base_data,
-                           _u32(c), self.block_of_slot.base_data, self.ages.base_data, keys.base_data)
+            runtime.launch(
+                q,
+                _kernel(q, "cache_candidate_keys"),
+                *_items(q, c),
+                cand.base_data,
+                _u32(c),
+                self.block_of_slot.base_data,
+                self.ages.base_data,
+                keys.base_data,
+            )
             _, order = radix_sort(keys, cand, queue=q)
             slots = order[:m]
             self.evicted_last = m - nfree
-        runtime.launch(q, _kernel(q, "cache_assign"), *_items(q, m), missing.base_data,
-                       slots.base_data, _u32(m), self.block_of_slot.base_data,
-                       self.slot_of_block.base_data, self.ages.base_data)
+        runtime.launch(
+            q,
+            _kernel(q, "cache_assign"),
+            *_items(q, m),
+            missing.base_data,
+            slots.base_data,
+            _u32(m),
+            self.block_of_slot.base_data,
+            self.slot_of_block.base_data,
+            self.ages.base_data,
+        )
 
         # 5. decode
         zv = self.volume
-        runtime.launch(q, _kernel(q, "cache_decode"), *_items(q, m), self._stream.base_data,
-                       _u32(zv.rate), _u32(nb), missing.base_data, slots.base_data, _u32(m),
-                       self.bricks.base_data)
+        runtime.launch(
+            q,
+            _kernel(q, "cache_decode"),
+            *_items(q, m),
+            self._stream.base_data,
+            _u32(zv.rate),
+            _u32(nb),
+            missing.base_data,
+            slots.base_data,
+            _u32(m),
+            self.bricks.base_data,
+        )
         self.occupied += m - self.evicted_last
         self.decoded_last = m
         self.decoded_total += m
         return m
 
     def __repr__(self) -> str:
-        return (f"BlockCache(capacity={self.capacity}, occupied={self.occupied}, nblocks={self.nblocks}, "
-                f"decoded_total={self.decoded_total})")
-
+        return (
+            f"BlockCache(capacity={self.capacity}, occupied={self.occupied}, nblocks={self.nblocks}, "
+            f"decoded_total={self.decoded_total})"
+        )

@@ -26,6 +26,7 @@ class MacrocellGrids:
     +x/+y/+z neighbour samples: the dual grid) and the coarse grid (4^3
     blocks). Each is a (Z, Y, X, 2) float32 array of (lo, hi); (+inf, -inf)
     where a block holds no dual cell. Device arrays when built with host=False."""
+
     fine: object
     coarse: object
 
@@ -37,8 +38,9 @@ class MacrocellGrids:
         return (f[..., 0] <= v) & (v <= f[..., 1]), (c[..., 0] <= v) & (v <= c[..., 1])
 
 
-def macrocell_grids(volume: ZfpVolume, *, queue: cl.CommandQueue | None = None,
-                    host: bool = True) -> MacrocellGrids:
+def macrocell_grids(
+    volume: ZfpVolume, *, queue: cl.CommandQueue | None = None, host: bool = True
+) -> MacrocellGrids:
     """The fine and coarse macrocell grids of a compressed volume, built on the
     device from its stream (each block decoded once, kernels_cl/iso/macrocell.cl).
     Equal to clvis.reference.iso.macrocell.block_ranges / coarse_ranges of the decoded volume."""
@@ -57,13 +59,28 @@ def macrocell_grids(volume: ZfpVolume, *, queue: cl.CommandQueue | None = None,
     coarse = runtime.empty(q, (ncz, ncy, ncx, 2), np.float32, "coarse macrocells")
     dims = (np.uint32(nx), np.uint32(ny), np.uint32(nz))
     k = runtime.get_kernel(q, _SRC, "block_faces", {})
-    runtime.launch(q, k, *runtime.items(q, nb, wg), _stream_buffer(q, volume.stream), np.uint32(volume.rate),
-                   *dims, faces.base_data)
+    runtime.launch(
+        q,
+        k,
+        *runtime.items(q, nb, wg),
+        _stream_buffer(q, volume.stream),
+        np.uint32(volume.rate),
+        *dims,
+        faces.base_data,
+    )
     k = runtime.get_kernel(q, _SRC, "block_ranges", {})
     runtime.launch(q, k, *runtime.items(q, nb, wg), faces.base_data, *dims, fine.base_data)
     k = runtime.get_kernel(q, _SRC, "coarse_ranges", {})
-    runtime.launch(q, k, *runtime.items(q, nc, wg), fine.base_data, np.uint32(nbx), np.uint32(nby),
-                   np.uint32(nbz), coarse.base_data)
+    runtime.launch(
+        q,
+        k,
+        *runtime.items(q, nc, wg),
+        fine.base_data,
+        np.uint32(nbx),
+        np.uint32(nby),
+        np.uint32(nbz),
+        coarse.base_data,
+    )
     if host:
         return MacrocellGrids(fine.get(), coarse.get())
     return MacrocellGrids(fine, coarse)

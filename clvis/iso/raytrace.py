@@ -24,12 +24,26 @@ PROFILES = {"cpu": {"wg": 16}, "gpu": {"wg": 64}}
 _arg = runtime.arg
 
 
-def raytrace_blocks(queue: cl.CommandQueue, bricks: cla.Array, slot_of_block: cla.Array, shape: Sequence[int],
-                    spacing: Sequence[float], origin: Sequence[float], isovalue: float, cam: cla.Array,
-                    width: int, groups: tuple[cla.Array, cla.Array, cla.Array], ray_ids: cla.Array,
-                    ray_t: cla.Array, outputs: tuple[cla.Array, cla.Array, cla.Array, cla.Array], *,
-                    refine_steps: int = 8, items: tuple[cla.Array, int, cla.Array | None] | None = None,
-                    first_pixel: int = 0, wait_for: Sequence[cl.Event] | None = None) -> cl.Event | None:
+def raytrace_blocks(
+    queue: cl.CommandQueue,
+    bricks: cla.Array,
+    slot_of_block: cla.Array,
+    shape: Sequence[int],
+    spacing: Sequence[float],
+    origin: Sequence[float],
+    isovalue: float,
+    cam: cla.Array,
+    width: int,
+    groups: tuple[cla.Array, cla.Array, cla.Array],
+    ray_ids: cla.Array,
+    ray_t: cla.Array,
+    outputs: tuple[cla.Array, cla.Array, cla.Array, cla.Array],
+    *,
+    refine_steps: int = 8,
+    items: tuple[cla.Array, int, cla.Array | None] | None = None,
+    first_pixel: int = 0,
+    wait_for: Sequence[cl.Event] | None = None,
+) -> cl.Event | None:
     """Launch ``raytrace_blocks`` (internal; see kernels_cl/iso/raytrace.cl's ABI).
 
     bricks (slots, 64) float32 and slot_of_block (nblocks,) int32: the block
@@ -60,10 +74,37 @@ def raytrace_blocks(queue: cl.CommandQueue, bricks: cla.Array, slot_of_block: cl
     defines = {"REFINE_STEPS": int(refine_steps), "ITEMS": int(items is not None)}
     k = runtime.get_kernel(queue, _SRC, "raytrace_blocks", defines, runtime.EXACT_FP)
     item_pixel, n_spec, hitkey = items if items is not None else (None, 1, None)
-    return runtime.launch(queue, k, ngroups * wg, wg,
-                          _arg(bricks), _arg(slot_of_block), np.uint32(nx), np.uint32(ny), np.uint32(nz),
-                          dx, dy, dz, ox, oy, oz, np.float32(isovalue), _arg(cam), np.uint32(width),
-                          np.uint32(first_pixel),
-                          _arg(group_blocks), _arg(group_offsets), _arg(group_counts), _arg(ray_ids),
-                          _arg(ray_t), _arg(ray_hit), _arg(hit_t), _arg(rgba), _arg(depth),
-                          _arg(item_pixel), np.uint32(n_spec), _arg(hitkey), wait_for=wait_for)
+    return runtime.launch(
+        queue,
+        k,
+        ngroups * wg,
+        wg,
+        _arg(bricks),
+        _arg(slot_of_block),
+        np.uint32(nx),
+        np.uint32(ny),
+        np.uint32(nz),
+        dx,
+        dy,
+        dz,
+        ox,
+        oy,
+        oz,
+        np.float32(isovalue),
+        _arg(cam),
+        np.uint32(width),
+        np.uint32(first_pixel),
+        _arg(group_blocks),
+        _arg(group_offsets),
+        _arg(group_counts),
+        _arg(ray_ids),
+        _arg(ray_t),
+        _arg(ray_hit),
+        _arg(hit_t),
+        _arg(rgba),
+        _arg(depth),
+        _arg(item_pixel),
+        np.uint32(n_spec),
+        _arg(hitkey),
+        wait_for=wait_for,
+    )

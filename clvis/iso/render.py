@@ -76,14 +76,22 @@ from ..camera import Camera, ray_buffer
 from ..errors import DataError
 from ..primitives import compact, compact_indices, radix_sort
 from .cache import BlockCache, mark_blocks
-from .macrocell import macrocell_grids
 from .cache import _kernel as _cache_kernel
+from .macrocell import macrocell_grids
 from .raytrace import raytrace_blocks
 from .traverse import init_rays, macro_traverse
 from .zfp import ZfpVolume, compress
 
-__all__ = ["HOST_PIXEL_BYTES", "ITEM_BYTES", "MAX_PIXELS", "PIXEL_BYTES", "PROFILES", "TILE_BYTES", "IsoImage",
-           "IsoRenderer"]
+__all__ = [
+    "HOST_PIXEL_BYTES",
+    "ITEM_BYTES",
+    "MAX_PIXELS",
+    "PIXEL_BYTES",
+    "PROFILES",
+    "TILE_BYTES",
+    "IsoImage",
+    "IsoRenderer",
+]
 
 MAX_SPEC = 64
 # the kernels index pixels (and pass items within a tile) with 32-bit integers
@@ -123,6 +131,7 @@ class IsoImage:
     (H, W) bool (rays still running),
     ``completion`` (the fraction of the rays entering the volume that are
     finished) and ``stats``."""
+
     rgba: np.ndarray
     depth: np.ndarray
     hit: np.ndarray
@@ -144,9 +153,15 @@ class _HostImage:
 
     def image(self, w: int, h: int, copy: bool) -> IsoImage:
         c = np.copy if copy else (lambda a: a)
-        return IsoImage(c(self.rgba).reshape(h, w, 4), c(self.depth).reshape(h, w),
-                        c(self.hit).view(bool).reshape(h, w), c(self.t).reshape(h, w),
-                        c(self.active).reshape(h, w), 1.0, {})
+        return IsoImage(
+            c(self.rgba).reshape(h, w, 4),
+            c(self.depth).reshape(h, w),
+            c(self.hit).view(bool).reshape(h, w),
+            c(self.t).reshape(h, w),
+            c(self.active).reshape(h, w),
+            1.0,
+            {},
+        )
 
 
 class _Tile:
@@ -155,7 +170,7 @@ class _Tile:
     def __init__(self, q, p0, n, cam, w, h, shape, spacing, origin, int64) -> None:
         self.q, self.p0, self.n, self.cam, self.w = q, p0, n, cam, w
         self.ray_t, active_all, count = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
-        self.active = active_all[:int(count.get()[0])]
+        self.active = active_all[: int(count.get()[0])]
         self.hit = runtime.zeros(q, n, np.uint8, "hit mask")
         self.hit_t = runtime.empty(q, n, np.float32, "hit t")
         self.depth = runtime.empty(q, n, np.float32, "depth")
@@ -163,8 +178,9 @@ class _Tile:
             runtime.fill(q, a, np.float32(np.inf))
         self.rgba = runtime.zeros(q, (n, 4), np.float32, "rgba")
         self.hitkey = runtime.empty(q, n, np.uint64, "hit keys") if int64 else None
-        self.nbytes = runtime.nbytes(self.ray_t, active_all, count, self.hit, self.hit_t, self.depth, self.rgba,
-                                     self.hitkey)
+        self.nbytes = runtime.nbytes(
+            self.ray_t, active_all, count, self.hit, self.hit_t, self.depth, self.rgba, self.hitkey
+        )
 
     def read(self, out: _HostImage, active=None) -> None:
         """Copy the tile's part of the image (rays still running: `active`,
@@ -197,9 +213,16 @@ class IsoRenderer:
     (runtime.capture); a configure() change applies to renderers made after it.
     """
 
-    def __init__(self, volume_or_zfp: ZfpVolume | Any, rate: int = 8,
-                 spacing: Sequence[float] = (1.0, 1.0, 1.0), origin: Sequence[float] = (0.0, 0.0, 0.0), *,
-                 cache_capacity: int | None = None, queue: cl.CommandQueue | None = None) -> None:
+    def __init__(
+        self,
+        volume_or_zfp: ZfpVolume | Any,
+        rate: int = 8,
+        spacing: Sequence[float] = (1.0, 1.0, 1.0),
+        origin: Sequence[float] = (0.0, 0.0, 0.0),
+        *,
+        cache_capacity: int | None = None,
+        queue: cl.CommandQueue | None = None,
+    ) -> None:
         self.queue = q = resolve_queue(queue)
         self.config = runtime.capture(q)
         zv = volume_or_zfp if isinstance(volume_or_zfp, ZfpVolume) else compress(volume_or_zfp, rate)
@@ -226,8 +249,9 @@ class IsoRenderer:
         q = self.queue
         for name in ("init_rays", "macro_traverse"):
             runtime.get_kernel(q, "iso/traverse.cl", name, {}, runtime.EXACT_FP)
-        runtime.get_kernel(q, "iso/raytrace.cl", "raytrace_blocks", {"REFINE_STEPS": 8, "ITEMS": 1},
-                           runtime.EXACT_FP)
+        runtime.get_kernel(
+            q, "iso/raytrace.cl", "raytrace_blocks", {"REFINE_STEPS": 8, "ITEMS": 1}, runtime.EXACT_FP
+        )
         for name in ("mark_blocks", "cache_slot_flags", "cache_missing", "cache_age"):
             _cache_kernel(q, name)
         for name in ("cache_candidate_keys", "cache_assign", "cache_decode"):
@@ -248,25 +272,55 @@ class IsoRenderer:
         with runtime.pinned(self.config):
             self.cache = BlockCache(self.volume, capacity, queue=self.queue)
 
-    def render(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
-               speculation: bool = True, start_speculation: int = 1, tile_pixels: int | None = None,
-               progress: Callable[[dict], None] | None = None) -> IsoImage:
+    def render(
+        self,
+        camera: Camera,
+        width: int,
+        height: int,
+        isovalue: float,
+        *,
+        completion: float = 1.0,
+        speculation: bool = True,
+        start_speculation: int = 1,
+        tile_pixels: int | None = None,
+        progress: Callable[[dict], None] | None = None,
+    ) -> IsoImage:
         """Passes until `completion` of the rays are finished, tile by tile;
         the image (each tile read back once, when it is done). See the module
         doc for tiles, `tile_pixels` and `progress`."""
         last = None
         with runtime.pinned(self.config):
-            for last in self._run(camera, width, height, isovalue, completion, speculation, start_speculation,
-                                  tile_pixels, progress):
+            for last in self._run(  # noqa: B007  (the last image of the pass loop is the result)
+                camera,
+                width,
+                height,
+                isovalue,
+                completion,
+                speculation,
+                start_speculation,
+                tile_pixels,
+                progress,
+            ):
                 pass
             return last(copy=False)
 
-    def passes(self, camera: Camera, width: int, height: int, isovalue: float, *, completion: float = 1.0,
-               speculation: bool = True, start_speculation: int = 1, tile_pixels: int | None = None,
-               progress: Callable[[dict], None] | None = None) -> Iterator[IsoImage]:
+    def passes(
+        self,
+        camera: Camera,
+        width: int,
+        height: int,
+        isovalue: float,
+        *,
+        completion: float = 1.0,
+        speculation: bool = True,
+        start_speculation: int = 1,
+        tile_pixels: int | None = None,
+        progress: Callable[[dict], None] | None = None,
+    ) -> Iterator[IsoImage]:
         """Yield the partial image after each pass of each tile (see the module doc)."""
-        run = self._run(camera, width, height, isovalue, completion, speculation, start_speculation,
-                        tile_pixels, progress)
+        run = self._run(
+            camera, width, height, isovalue, completion, speculation, start_speculation, tile_pixels, progress
+        )
         while True:
             # pinned while the pass runs, not while the caller holds the image
             with runtime.pinned(self.config):
@@ -276,8 +330,15 @@ class IsoRenderer:
                 image = image()
             yield image
 
-    def tile_plan(self, width: int, height: int, *, speculation: bool = True, start_speculation: int = 1,
-                  tile_pixels: int | None = None) -> tuple[int, int]:
+    def tile_plan(
+        self,
+        width: int,
+        height: int,
+        *,
+        speculation: bool = True,
+        start_speculation: int = 1,
+        tile_pixels: int | None = None,
+    ) -> tuple[int, int]:
         """(pixels per tile, device bytes a tile's rays and pass items may take):
         whole rows where a row fits TILE_BYTES (see the module doc)."""
         w, h = positive_int("width", width), positive_int("height", height)
@@ -292,8 +353,18 @@ class IsoRenderer:
         t = min(t, w * h)
         return t, t * per_pixel
 
-    def _run(self, camera, width, height, isovalue, completion, speculation, start_speculation, tile_pixels,
-             progress):
+    def _run(
+        self,
+        camera,
+        width,
+        height,
+        isovalue,
+        completion,
+        speculation,
+        start_speculation,
+        tile_pixels,
+        progress,
+    ):
         """The pass loop, tile after tile: after each pass, a function that
         reads the image back (copy=False: the renderer's host arrays themselves)."""
         if not isinstance(camera, Camera):
@@ -301,8 +372,10 @@ class IsoRenderer:
         w, h = positive_int("width", width), positive_int("height", height)
         npix = w * h
         if npix >= MAX_PIXELS:
-            raise ValueError(f"width x height: {w} x {h} = {npix} pixels; the kernels index pixels with "
-                             f"32-bit integers, so at most {MAX_PIXELS - 1}")
+            raise ValueError(
+                f"width x height: {w} x {h} = {npix} pixels; the kernels index pixels with "
+                f"32-bit integers, so at most {MAX_PIXELS - 1}"
+            )
         iso = _real("isovalue", isovalue)
         if not np.isfinite(np.float32(iso)):
             raise ValueError(f"isovalue: expected a finite number, got {isovalue!r}")
@@ -312,11 +385,16 @@ class IsoRenderer:
         s = positive_int("start_speculation", start_speculation)
         if progress is not None and not callable(progress):
             raise TypeError(f"progress: expected a callable or None, got {type(progress).__name__}")
-        tile, tile_bytes = self.tile_plan(w, h, speculation=speculation, start_speculation=s,
-                                          tile_pixels=tile_pixels)
+        tile, tile_bytes = self.tile_plan(
+            w, h, speculation=speculation, start_speculation=s, tile_pixels=tile_pixels
+        )
         tiles = [(p0, min(tile, npix - p0)) for p0 in range(0, npix, tile)]
-        runtime.check_memory(self.queue, f"iso image {w}x{h} ({len(tiles)} tiles of {tile} pixels)",
-                             device_bytes=tile_bytes, host_bytes=npix * HOST_PIXEL_BYTES)
+        runtime.check_memory(
+            self.queue,
+            f"iso image {w}x{h} ({len(tiles)} tiles of {tile} pixels)",
+            device_bytes=tile_bytes,
+            host_bytes=npix * HOST_PIXEL_BYTES,
+        )
         q, zv = self.queue, self.volume
         shape, spacing, origin = zv.shape, self.spacing, self.origin
         start = runtime.marker(q)
@@ -334,18 +412,29 @@ class IsoRenderer:
                 out.active[p0 + ids[:k].get().astype(np.int64)] = True
         n_total = sum(entering)
         int64 = self.config.int64_atomics
-        stats = {"passes": 0, "active_per_pass": [], "n_spec_per_pass": [], "items_per_pass": [],
-                 "blocks_per_pass": [], "decoded_per_pass": [], "rays_entering": n_total,
-                 "speculation": bool(speculation), "int64_atomics": bool(int64),
-                 "tiles": len(tiles), "tile_pixels": tile, "passes_per_tile": [0] * len(tiles),
-                 "completion_per_tile": [1.0] * len(tiles),
-                 "blocks_decoded": 0, "cache_slots": self.cache.capacity}
+        stats = {
+            "passes": 0,
+            "active_per_pass": [],
+            "n_spec_per_pass": [],
+            "items_per_pass": [],
+            "blocks_per_pass": [],
+            "decoded_per_pass": [],
+            "rays_entering": n_total,
+            "speculation": bool(speculation),
+            "int64_atomics": bool(int64),
+            "tiles": len(tiles),
+            "tile_pixels": tile,
+            "passes_per_tile": [0] * len(tiles),
+            "completion_per_tile": [1.0] * len(tiles),
+            "blocks_decoded": 0,
+            "cache_slots": self.cache.capacity,
+        }
         decoded0 = self.cache.decoded_total
-        if n_total == 0:            # no ray meets the volume: the (empty) image at once
+        if n_total == 0:  # no ray meets the volume: the (empty) image at once
             end = runtime.marker(q)
             yield lambda copy=True: self._image(w, h, out, None, 1.0, stats, (start, end), copy)
             return
-        finished = 0                # rays finished in the tiles before this one
+        finished = 0  # rays finished in the tiles before this one
         for ti, (p0, n) in enumerate(tiles):
             n_enter = entering[ti]
             if n_enter == 0:
@@ -356,7 +445,7 @@ class IsoRenderer:
             while not tile_done:
                 n_spec = min(MAX_SPEC, max(1, (n * s) // n_active)) if speculation else 1
                 if speculation and stats["passes_per_tile"][ti] == 0:
-                    n_spec = max(n_spec, 2)     # the paper's two macro-traversal steps in the first pass
+                    n_spec = max(n_spec, 2)  # the paper's two macro-traversal steps in the first pass
                 stats["active_per_pass"].append(n_active)
                 m, ngroups, decoded, item_bytes = self._pass(state, iso, n_active, n_spec)
                 n_active = int(state.active.size)
@@ -374,20 +463,31 @@ class IsoRenderer:
                 stats["cache_slots"] = self.cache.capacity
                 # what is allocated: the arrays held (for the tile, its rays; for the pass items, this pass's)
                 stats["device_bytes"] = {
-                    "compressed volume": self.cache.stream_nbytes, "block cache": self.cache.nbytes,
+                    "compressed volume": self.cache.stream_nbytes,
+                    "block cache": self.cache.nbytes,
                     "macrocell grids": runtime.nbytes(self.grids.fine, self.grids.coarse),
                     "rays and image": state.nbytes + runtime.nbytes(cam),
-                    "pass items": item_bytes}
+                    "pass items": item_bytes,
+                }
                 end = runtime.marker(q)
                 if tile_done:
-                    state.read(out)     # the tile's part of the image, before its arrays go
+                    state.read(out)  # the tile's part of the image, before its arrays go
                     finished += n_enter - n_active
                 if progress is not None:
-                    progress({"tile": ti + 1, "tiles": len(tiles), "passes": stats["passes"],
-                              "rays_done": finished if tile_done else finished + n_enter - n_active,
-                              "rays_total": n_total})
-                yield lambda copy=True, st=(None if tile_done else state), a=state.active, f=frac, \
-                    sd=dict(stats), ev=(start, end): self._image(w, h, out, (st, a), f, sd, ev, copy)
+                    progress(
+                        {
+                            "tile": ti + 1,
+                            "tiles": len(tiles),
+                            "passes": stats["passes"],
+                            "rays_done": finished if tile_done else finished + n_enter - n_active,
+                            "rays_total": n_total,
+                        }
+                    )
+                # the image after this pass, made only when the caller asks for it
+                st, a, sd, ev = (None if tile_done else state), state.active, dict(stats), (start, end)
+                yield lambda copy=True, st=st, a=a, f=frac, sd=sd, ev=ev: self._image(
+                    w, h, out, (st, a), f, sd, ev, copy
+                )
 
     def _pass(self, t: _Tile, iso: float, n_active: int, n_spec: int) -> tuple[int, int, int, int]:
         """One pass over the tile's active rays; t.active becomes the rays
@@ -400,8 +500,25 @@ class IsoRenderer:
         cnt.set(np.array([n_active], np.uint32), queue=q)
         cand_block = runtime.empty(q, n_items, np.uint32, "candidate blocks")
         cand_t = runtime.empty(q, n_items, np.float32, "candidate t")
-        macro_traverse(q, shape, spacing, origin, iso, t.cam, t.w, self.grids.fine, self.grids.coarse,
-                       active, cnt, n_active, t.ray_t, n_spec, cand_block, cand_t, first_pixel=t.p0)
+        macro_traverse(
+            q,
+            shape,
+            spacing,
+            origin,
+            iso,
+            t.cam,
+            t.w,
+            self.grids.fine,
+            self.grids.coarse,
+            active,
+            cnt,
+            n_active,
+            t.ray_t,
+            n_spec,
+            cand_block,
+            cand_t,
+            first_pixel=t.p0,
+        )
         valid = runtime.empty(q, n_items, np.uint8, "valid items")
         self._launch("valid_items", n_items, cand_block.base_data, np.uint32(n_items), valid.base_data)
         item_ids = compact_indices(valid, queue=q)
@@ -416,8 +533,9 @@ class IsoRenderer:
         pass_arrays = [cnt, cand_block, cand_t, valid, item_ids, item_hit, item_t, item_rgba, item_depth]
         if m:
             keys = runtime.empty(q, m, np.uint32, "item blocks")
-            self._launch("gather_u32", m, cand_block.base_data, item_ids.base_data, np.uint32(m),
-                         keys.base_data)
+            self._launch(
+                "gather_u32", m, cand_block.base_data, item_ids.base_data, np.uint32(m), keys.base_data
+            )
             skeys, sitems = radix_sort(keys, item_ids, queue=q)
             heads = runtime.empty(q, m, np.uint8, "group heads")
             self._launch("group_heads", m, skeys.base_data, np.uint32(m), heads.base_data)
@@ -426,22 +544,57 @@ class IsoRenderer:
             gblocks = runtime.empty(q, ngroups, np.uint32, "group blocks")
             gcounts = runtime.empty(q, ngroups, np.uint32, "group counts")
             pass_arrays += [keys, skeys, sitems, heads, starts, gblocks, gcounts]
-            self._launch("group_info", ngroups, skeys.base_data, starts.base_data, np.uint32(ngroups),
-                         np.uint32(m), gblocks.base_data, gcounts.base_data)
+            self._launch(
+                "group_info",
+                ngroups,
+                skeys.base_data,
+                starts.base_data,
+                np.uint32(ngroups),
+                np.uint32(m),
+                gblocks.base_data,
+                gcounts.base_data,
+            )
             needed = mark_blocks(gblocks, zv, queue=q)
             decoded = self.cache.update(needed)
-            raytrace_blocks(q, self.cache.bricks, self.cache.slot_of_block, shape, spacing, origin, iso,
-                            t.cam, t.w, (gblocks, starts, gcounts), sitems, cand_t,
-                            (item_hit, item_t, item_rgba, item_depth), items=(active, n_spec, t.hitkey),
-                            first_pixel=t.p0)
+            raytrace_blocks(
+                q,
+                self.cache.bricks,
+                self.cache.slot_of_block,
+                shape,
+                spacing,
+                origin,
+                iso,
+                t.cam,
+                t.w,
+                (gblocks, starts, gcounts),
+                sitems,
+                cand_t,
+                (item_hit, item_t, item_rgba, item_depth),
+                items=(active, n_spec, t.hitkey),
+                first_pixel=t.p0,
+            )
         else:
             decoded = 0
         still = runtime.empty(q, max(n_active, 1), np.uint8, "still active")
         pass_arrays.append(still)
-        self._launch("resolve_hits", n_active, active.base_data, np.uint32(n_active), np.uint32(n_spec),
-                     item_hit.base_data, item_t.base_data, item_rgba.base_data, item_depth.base_data,
-                     runtime.arg(t.hitkey), t.ray_t.base_data, t.hit.base_data,
-                     t.hit_t.base_data, t.rgba.base_data, t.depth.base_data, still.base_data)
+        self._launch(
+            "resolve_hits",
+            n_active,
+            active.base_data,
+            np.uint32(n_active),
+            np.uint32(n_spec),
+            item_hit.base_data,
+            item_t.base_data,
+            item_rgba.base_data,
+            item_depth.base_data,
+            runtime.arg(t.hitkey),
+            t.ray_t.base_data,
+            t.hit.base_data,
+            t.hit_t.base_data,
+            t.rgba.base_data,
+            t.depth.base_data,
+            still.base_data,
+        )
         t.active = compact(active, still[:n_active], queue=q)
         return m, ngroups, decoded, runtime.nbytes(*pass_arrays)
 
@@ -449,9 +602,9 @@ class IsoRenderer:
         runtime.launch(self.queue, self._kernels[name], *runtime.items(self.queue, n, self._wg), *args)
 
     def _image(self, w, h, out, tile, frac, stats, events, copy) -> IsoImage:
-        if tile is not None and tile[0] is not None:       # a tile still running: its part as it stands
+        if tile is not None and tile[0] is not None:  # a tile still running: its part as it stands
             tile[0].read(out, tile[1])
         image = out.image(w, h, copy)
         image.completion, image.stats = frac, stats
-        stats["seconds"] = runtime.seconds(*events)     # read back: the events are done
+        stats["seconds"] = runtime.seconds(*events)  # read back: the events are done
         return image

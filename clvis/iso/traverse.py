@@ -36,9 +36,18 @@ def _volume_args(shape, spacing, origin):
     return (np.uint32(nx), np.uint32(ny), np.uint32(nz), dx, dy, dz, ox, oy, oz)
 
 
-def init_rays(queue: cl.CommandQueue, cam: cla.Array, width: int, height: int, shape: Sequence[int],
-              spacing: Sequence[float], origin: Sequence[float], *, pixels: tuple[int, int] | None = None,
-              wait_for: Sequence[cl.Event] | None = None) -> tuple[cla.Array, cla.Array, cla.Array]:
+def init_rays(
+    queue: cl.CommandQueue,
+    cam: cla.Array,
+    width: int,
+    height: int,
+    shape: Sequence[int],
+    spacing: Sequence[float],
+    origin: Sequence[float],
+    *,
+    pixels: tuple[int, int] | None = None,
+    wait_for: Sequence[cl.Event] | None = None,
+) -> tuple[cla.Array, cla.Array, cla.Array]:
     """Per pixel the box entry t (+inf on a miss) and the list of rays that
     meet the volume box. cam: the 22-float ray buffer (device array).
     pixels = (p0, n): only the tile of image pixels p0 .. p0 + n - 1 (default
@@ -56,20 +65,45 @@ def init_rays(queue: cl.CommandQueue, cam: cla.Array, width: int, height: int, s
     enters = runtime.empty(queue, npix, np.uint8, "ray enters flags")
     wg = PROFILES[runtime.tuning_profile(queue)]["wg"]
     k = runtime.get_kernel(queue, _SRC, "init_rays", {}, runtime.EXACT_FP)
-    runtime.launch(queue, k, *runtime.items(queue, npix, wg), _arg(cam), np.uint32(w), np.uint32(p0),
-                   np.uint32(npix),
-                   *_volume_args(shape, spacing, origin), ray_t.base_data, enters.base_data,
-                   wait_for=wait_for)
+    runtime.launch(
+        queue,
+        k,
+        *runtime.items(queue, npix, wg),
+        _arg(cam),
+        np.uint32(w),
+        np.uint32(p0),
+        np.uint32(npix),
+        *_volume_args(shape, spacing, origin),
+        ray_t.base_data,
+        enters.base_data,
+        wait_for=wait_for,
+    )
     count = runtime.empty(queue, 1, np.uint32, "active ray count")
     active, count = compact_indices(enters, count=count, queue=queue)
     return ray_t, active, count
 
 
-def macro_traverse(queue: cl.CommandQueue, shape: Sequence[int], spacing: Sequence[float],
-                   origin: Sequence[float], isovalue: float, cam: cla.Array, width: int, fine: cla.Array,
-                   coarse: cla.Array, active: cla.Array, count: cla.Array, max_rays: int, ray_t: cla.Array,
-                   n_spec: int, cand_block: cla.Array, cand_t: cla.Array, *, first_pixel: int = 0,
-                   wait_for: Sequence[cl.Event] | None = None) -> cl.Event | None:
+def macro_traverse(
+    queue: cl.CommandQueue,
+    shape: Sequence[int],
+    spacing: Sequence[float],
+    origin: Sequence[float],
+    isovalue: float,
+    cam: cla.Array,
+    width: int,
+    fine: cla.Array,
+    coarse: cla.Array,
+    active: cla.Array,
+    count: cla.Array,
+    max_rays: int,
+    ray_t: cla.Array,
+    n_spec: int,
+    cand_block: cla.Array,
+    cand_t: cla.Array,
+    *,
+    first_pixel: int = 0,
+    wait_for: Sequence[cl.Event] | None = None,
+) -> cl.Event | None:
     """Launch ``macro_traverse`` (see kernels_cl/iso/traverse.cl's ABI).
 
     fine, coarse: float32 device arrays (.., 2) (clvis.iso.macrocell_grids,
@@ -88,12 +122,28 @@ def macro_traverse(queue: cl.CommandQueue, shape: Sequence[int], spacing: Sequen
     if max_rays > active.size:
         raise ValueError(f"max_rays: {max_rays} exceeds the active list's {active.size} entries")
     if cand_block.size < max_rays * n_spec or cand_t.size < max_rays * n_spec:
-        raise ValueError(f"cand_block, cand_t: need room for {max_rays * n_spec} entries, "
-                         f"got {cand_block.size} and {cand_t.size}")
+        raise ValueError(
+            f"cand_block, cand_t: need room for {max_rays * n_spec} entries, "
+            f"got {cand_block.size} and {cand_t.size}"
+        )
     wg = PROFILES[runtime.tuning_profile(queue)]["wg"]
     k = runtime.get_kernel(queue, _SRC, "macro_traverse", {}, runtime.EXACT_FP)
-    return runtime.launch(queue, k, *runtime.items(queue, max_rays, wg),
-                          *_volume_args(shape, spacing, origin), np.float32(isovalue),
-                          _arg(cam), np.uint32(width), np.uint32(first_pixel), _arg(fine), _arg(coarse), _arg(active), _arg(count),
-                          _arg(ray_t), np.uint32(n_spec), _arg(cand_block), _arg(cand_t),
-                          wait_for=wait_for)
+    return runtime.launch(
+        queue,
+        k,
+        *runtime.items(queue, max_rays, wg),
+        *_volume_args(shape, spacing, origin),
+        np.float32(isovalue),
+        _arg(cam),
+        np.uint32(width),
+        np.uint32(first_pixel),
+        _arg(fine),
+        _arg(coarse),
+        _arg(active),
+        _arg(count),
+        _arg(ray_t),
+        np.uint32(n_spec),
+        _arg(cand_block),
+        _arg(cand_t),
+        wait_for=wait_for,
+    )

@@ -40,19 +40,27 @@ from .. import runtime
 from .._arrays import is_device, nonnegative_int, resolve_queue, result
 from ..errors import DataError
 
-__all__ = ["BRICK_VALUES", "MAX_RATE", "MIN_RATE", "PROFILES", "ZfpVolume", "compress", "decode",
-           "decode_blocks", "expected_nbytes"]
+__all__ = [
+    "BRICK_VALUES",
+    "MAX_RATE",
+    "MIN_RATE",
+    "PROFILES",
+    "ZfpVolume",
+    "compress",
+    "decode",
+    "decode_blocks",
+    "expected_nbytes",
+]
 
 MIN_RATE, MAX_RATE = 1, 32
-BRICK_VALUES = 64                   # floats per decoded block, index x + 4 y + 16 z
+BRICK_VALUES = 64  # floats per decoded block, index x + 4 y + 16 z
 _SRC = "iso/zfp.cl"
-_MAX_SIDE = 1 << 31                 # nx, ny, nz are uint in the kernels (plus 3 for rounding up)
-_MAX_BLOCKS = (1 << 32) - 1         # block ids are uint
-_ZFP_MAGIC = b"zfp"                 # a stream written with a header starts with it
+_MAX_SIDE = 1 << 31  # nx, ny, nz are uint in the kernels (plus 3 for rounding up)
+_MAX_BLOCKS = (1 << 32) - 1  # block ids are uint
+_ZFP_MAGIC = b"zfp"  # a stream written with a header starts with it
 # the fixed local size of the one-work-item-per-block kernels (a driver-chosen
 # one would make PoCL compile a work-group function per launch size)
 PROFILES = {"cpu": {"wg": 64}, "gpu": {"wg": 64}}
-
 
 
 def _as_bytes(stream) -> bytes:
@@ -65,6 +73,7 @@ def _as_bytes(stream) -> bytes:
         return bytes(memoryview(stream))
     except TypeError:
         raise TypeError(f"stream: expected bytes or an array, got {type(stream).__name__}") from None
+
 
 def _check_rate(rate) -> int:
     if isinstance(rate, bool) or not isinstance(rate, (int, float, np.integer, np.floating)):
@@ -111,8 +120,10 @@ def expected_nbytes(shape: Sequence[int], rate: int) -> int:
 def _length_error(nbytes: int, shape, rate, head: bytes | None = None) -> DataError:
     want = expected_nbytes(shape, rate)
     nblocks = math.prod(_grid(shape))
-    what = (f"stream: {nbytes} bytes, but a fixed-rate stream of shape {shape} at rate {rate} "
-            f"is exactly {want} bytes ({nblocks} blocks of {8 * rate})")
+    what = (
+        f"stream: {nbytes} bytes, but a fixed-rate stream of shape {shape} at rate {rate} "
+        f"is exactly {want} bytes ({nblocks} blocks of {8 * rate})"
+    )
     if nbytes < want:
         return DataError(f"{what}: it is {want - nbytes} bytes short (truncated?)")
     hint = ""
@@ -137,8 +148,10 @@ class ZfpVolume:
     def __post_init__(self):
         stream = self.stream
         if is_device(stream):
-            raise TypeError("stream: a ZfpVolume keeps its stream on the host; pass bytes "
-                            "(decode() takes device streams directly)")
+            raise TypeError(
+                "stream: a ZfpVolume keeps its stream on the host; pass bytes "
+                "(decode() takes device streams directly)"
+            )
         stream = _as_bytes(stream)
         shape, rate = _check_shape(self.shape), _check_rate(self.rate)
         if len(stream) != expected_nbytes(shape, rate):
@@ -220,8 +233,10 @@ def compress(volume: Any, rate: int) -> ZfpVolume:
     if bad.any():
         first = tuple(int(i) for i in np.argwhere(bad)[0])
         note = " after conversion to float32" if converted else ""
-        raise DataError(f"volume: {int(bad.sum())} non-finite values{note} (zfp's fixed-rate mode "
-                        f"cannot keep NaN or Inf); the first at [z, y, x] = {first}: {v[first]}")
+        raise DataError(
+            f"volume: {int(bad.sum())} non-finite values{note} (zfp's fixed-rate mode "
+            f"cannot keep NaN or Inf); the first at [z, y, x] = {first}: {v[first]}"
+        )
     if v.size == 0:
         return ZfpVolume(b"", shape, rate)
     try:
@@ -234,6 +249,7 @@ def compress(volume: Any, rate: int) -> ZfpVolume:
 
 # --------------------------------------------------------------------------
 # decoding
+
 
 def _stream_args(stream_or_zfpvolume, shape, rate):
     """(stream, shape, rate) checked; stream as bytes or a device array."""
@@ -275,14 +291,19 @@ def _stream_buffer(queue, stream):
         if stream.context.int_ptr != queue.context.int_ptr:
             raise ValueError("stream: the device array belongs to another OpenCL context than the queue")
         if stream.offset:
-            stream = stream.copy()          # the kernels take a whole buffer of aligned words
+            stream = stream.copy()  # the kernels take a whole buffer of aligned words
         return stream.base_data
     return _upload(queue, stream).base_data
 
 
-def decode(stream_or_zfpvolume: ZfpVolume | Any, shape: Sequence[int] | None = None,
-           rate: int | None = None, *, queue: cl.CommandQueue | None = None,
-           host: bool = True) -> np.ndarray | cla.Array:
+def decode(
+    stream_or_zfpvolume: ZfpVolume | Any,
+    shape: Sequence[int] | None = None,
+    rate: int | None = None,
+    *,
+    queue: cl.CommandQueue | None = None,
+    host: bool = True,
+) -> np.ndarray | cla.Array:
     """The float32 volume of `shape` ([Z, Y, X]) in a headerless zfp
     fixed-rate stream, decoded on the device bit for bit as zfp does.
 
@@ -299,14 +320,29 @@ def decode(stream_or_zfpvolume: ZfpVolume | Any, shape: Sequence[int] | None = N
     if nblocks:
         wg = PROFILES[runtime.tuning_profile(q)]["wg"]
         k = runtime.get_kernel(q, _SRC, "decode_volume", {})
-        runtime.launch(q, k, *runtime.items(q, nblocks, wg), _stream_buffer(q, stream), np.uint32(rate),
-                       np.uint32(shape[2]), np.uint32(shape[1]), np.uint32(shape[0]), out.base_data)
+        runtime.launch(
+            q,
+            k,
+            *runtime.items(q, nblocks, wg),
+            _stream_buffer(q, stream),
+            np.uint32(rate),
+            np.uint32(shape[2]),
+            np.uint32(shape[1]),
+            np.uint32(shape[0]),
+            out.base_data,
+        )
     return result(out, host)
 
 
-def decode_blocks(stream_or_zfpvolume: ZfpVolume | Any, ids: Any, shape: Sequence[int] | None = None,
-                  rate: int | None = None, *, queue: cl.CommandQueue | None = None,
-                  host: bool = False) -> np.ndarray | cla.Array:
+def decode_blocks(
+    stream_or_zfpvolume: ZfpVolume | Any,
+    ids: Any,
+    shape: Sequence[int] | None = None,
+    rate: int | None = None,
+    *,
+    queue: cl.CommandQueue | None = None,
+    host: bool = False,
+) -> np.ndarray | cla.Array:
     """Blocks `ids` of a stream as bricks: a (len(ids), 64) float32 array,
     row j block ids[j] (x-fastest block order, :meth:`ZfpVolume.block_id`),
     value i of a row voxel (x, y, z) of the block with i = x + 4 y + 16 z
@@ -334,8 +370,10 @@ def decode_blocks(stream_or_zfpvolume: ZfpVolume | Any, ids: Any, shape: Sequenc
         bad = (ids_h < 0) | (ids_h >= nblocks)
         if bad.any():
             j = int(np.argmax(bad))
-            raise DataError(f"ids: ids[{j}] = {int(ids_h[j])} is not a block of the volume "
-                            f"(shape {shape}: {nblocks} blocks)")
+            raise DataError(
+                f"ids: ids[{j}] = {int(ids_h[j])} is not a block of the volume "
+                f"(shape {shape}: {nblocks} blocks)"
+            )
         count = int(ids_h.size)
         ids_d = None
         if count:
@@ -345,6 +383,15 @@ def decode_blocks(stream_or_zfpvolume: ZfpVolume | Any, ids: Any, shape: Sequenc
     if count:
         wg = PROFILES[runtime.tuning_profile(q)]["wg"]
         k = runtime.get_kernel(q, _SRC, "decode_blocks", {})
-        runtime.launch(q, k, *runtime.items(q, count, wg), _stream_buffer(q, stream), np.uint32(rate),
-                       np.uint32(nblocks), ids_d.base_data, np.uint32(count), out.base_data)
+        runtime.launch(
+            q,
+            k,
+            *runtime.items(q, count, wg),
+            _stream_buffer(q, stream),
+            np.uint32(rate),
+            np.uint32(nblocks),
+            ids_d.base_data,
+            np.uint32(count),
+            out.base_data,
+        )
     return result(out, host)

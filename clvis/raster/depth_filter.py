@@ -43,9 +43,9 @@ __all__ = [
     "rgbda",
 ]
 
-LEVELS = 4                 # pyramid levels (the paper's implementation: 4)
-FILTER_STRENGTH = 1.025    # tolerance factor (the paper's implementation: 1.025)
-EDGE_THRESHOLD = 0.01      # relative Laplacian threshold (clvis's choice)
+LEVELS = 4  # pyramid levels (the paper's implementation: 4)
+FILTER_STRENGTH = 1.025  # tolerance factor (the paper's implementation: 1.025)
+EDGE_THRESHOLD = 0.01  # relative Laplacian threshold (clvis's choice)
 MAX_LEVELS = 16
 
 _SRC = "raster/depth_filter.cl"
@@ -93,9 +93,14 @@ def _real(name, value, low, what):
     return np.float32(f)
 
 
-def depth_filter_mask(depth: Any, levels: int = LEVELS, filter_strength: float = FILTER_STRENGTH, *,
-                      edge_threshold: float = EDGE_THRESHOLD,
-                      queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
+def depth_filter_mask(
+    depth: Any,
+    levels: int = LEVELS,
+    filter_strength: float = FILTER_STRENGTH,
+    *,
+    edge_threshold: float = EDGE_THRESHOLD,
+    queue: cl.CommandQueue | None = None,
+) -> np.ndarray | cla.Array:
     """Which pixels of a one-pixel-per-point depth image to keep.
 
     depth: H x W float32, +inf where no point landed; every other value must
@@ -128,13 +133,16 @@ def depth_filter_mask(depth: Any, levels: int = LEVELS, filter_strength: float =
         raise ValueError(f"depth: shape {depth.shape}; each side must be below 2^32")
 
     if h * w == 0:
-        return np.zeros((h, w), np.bool_) if host else runtime.empty(
-            queue, (h, w), np.uint8, "depth_filter keep mask")
+        return (
+            np.zeros((h, w), np.bool_)
+            if host
+            else runtime.empty(queue, (h, w), np.uint8, "depth_filter keep mask")
+        )
     keep = runtime.empty(queue, (h, w), np.uint8, "depth_filter keep mask")
     dd = to_device(queue, "depth", depth)
     launch = _launcher(queue)
     shapes = level_shapes((h, w), levels)
-    offsets = [0, 0]                      # offsets[k]: level k in pyr (k >= 1)
+    offsets = [0, 0]  # offsets[k]: level k in pyr (k >= 1)
     for hk, wk in shapes[1:]:
         offsets.append(offsets[-1] + hk * wk)
     bad = runtime.zeros(queue, 2, np.uint32, "depth_filter input check")
@@ -145,28 +153,80 @@ def depth_filter_mask(depth: Any, levels: int = LEVELS, filter_strength: float =
         for k in range(1, levels + 1):
             (sh, sw), (ch, cw) = shapes[k - 1], shapes[k]
             src, src_off = (dd, 0) if k == 1 else (pyr, offsets[k - 1])
-            launch("depth_minpool", ch * cw, buf(src), u64(src_off), u32(sw), u32(sh),
-                   buf(pyr), u64(offsets[k]), u32(cw), u32(ch))
+            launch(
+                "depth_minpool",
+                ch * cw,
+                buf(src),
+                u64(src_off),
+                u32(sw),
+                u32(sh),
+                buf(pyr),
+                u64(offsets[k]),
+                u32(cw),
+                u32(ch),
+            )
         for k in range(levels, 1, -1):
             (fh, fw), (ch, cw) = shapes[k - 1], shapes[k]
-            launch("depth_refine", fh * fw, buf(pyr), u64(offsets[k - 1]), u32(fw), u32(fh),
-                   u64(offsets[k]), u32(cw), u32(ch), strength, tau)
+            launch(
+                "depth_refine",
+                fh * fw,
+                buf(pyr),
+                u64(offsets[k - 1]),
+                u32(fw),
+                u32(fh),
+                u64(offsets[k]),
+                u32(cw),
+                u32(ch),
+                strength,
+                tau,
+            )
         ch, cw = shapes[1]
-        launch("depth_keep", h * w, buf(dd), u32(w), u32(h), buf(pyr), u64(0), u32(cw), u32(ch),
-               u32(1), strength, tau, buf(keep), buf(bad))
+        launch(
+            "depth_keep",
+            h * w,
+            buf(dd),
+            u32(w),
+            u32(h),
+            buf(pyr),
+            u64(0),
+            u32(cw),
+            u32(ch),
+            u32(1),
+            strength,
+            tau,
+            buf(keep),
+            buf(bad),
+        )
     else:
-        launch("depth_keep", h * w, buf(dd), u32(w), u32(h), buf(dd), u64(0), u32(0), u32(0),
-               u32(0), strength, tau, buf(keep), buf(bad))
+        launch(
+            "depth_keep",
+            h * w,
+            buf(dd),
+            u32(w),
+            u32(h),
+            buf(dd),
+            u64(0),
+            u32(0),
+            u32(0),
+            u32(0),
+            strength,
+            tau,
+            buf(keep),
+            buf(bad),
+        )
 
     nan, negative = (int(c) for c in bad.get())
     if nan or negative:
-        raise DataError(f"depth: {nan} NaN and {negative} negative values; a depth is a "
-                        "finite value >= 0, or +inf where there is no point")
+        raise DataError(
+            f"depth: {nan} NaN and {negative} negative values; a depth is a "
+            "finite value >= 0, or +inf where there is no point"
+        )
     return keep.get().view(np.bool_) if host else keep
 
 
-def rgbda(rgba: Any, depth: Any, keep: Any, *,
-          queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
+def rgbda(
+    rgba: Any, depth: Any, keep: Any, *, queue: cl.CommandQueue | None = None
+) -> np.ndarray | cla.Array:
     """The filtered RGBDA image: H x W x 5 float32 [r, g, b, depth, alpha].
 
     rgba: H x W x C uint8 (C = 3 or 4; the first three channels are used);
@@ -185,21 +245,17 @@ def rgbda(rgba: Any, depth: Any, keep: Any, *,
     if rgba.shape[2] not in (3, 4):
         raise ValueError(f"rgba: expected 3 or 4 channels, got shape {tuple(rgba.shape)}")
     if tuple(depth.shape) != tuple(rgba.shape[:2]):
-        raise ValueError(f"depth: shape {tuple(depth.shape)} differs from rgba's "
-                         f"{tuple(rgba.shape[:2])}")
+        raise ValueError(f"depth: shape {tuple(depth.shape)} differs from rgba's {tuple(rgba.shape[:2])}")
     if tuple(keep.shape) != tuple(rgba.shape[:2]):
-        raise ValueError(f"keep: shape {tuple(keep.shape)} differs from rgba's "
-                         f"{tuple(rgba.shape[:2])}")
+        raise ValueError(f"keep: shape {tuple(keep.shape)} differs from rgba's {tuple(rgba.shape[:2])}")
     h, w, c = (int(s) for s in rgba.shape)
     out = runtime.empty(queue, (h, w, 5), np.float32, "rgbda output")
     n = h * w
     if n:
-        rd, dd, kd = (to_device(queue, nm, x) for nm, x in
-                      (("rgba", rgba), ("depth", depth), ("keep", keep)))
+        rd, dd, kd = (to_device(queue, nm, x) for nm, x in (("rgba", rgba), ("depth", depth), ("keep", keep)))
         if kd.dtype == np.bool_:
             kd = kd.view(np.uint8)
-        _launcher(queue)("depth_rgbda", n, buf(rd), np.uint32(c), buf(dd), buf(kd),
-                         np.uint64(n), buf(out))
+        _launcher(queue)("depth_rgbda", n, buf(rd), np.uint32(c), buf(dd), buf(kd), np.uint64(n), buf(out))
     return result(out, host)
 
 
@@ -217,10 +273,14 @@ class FilteredImage:
     rgbda: np.ndarray
 
 
-def depth_filter(gbuffers_or_depth: GBuffers | Any, levels: int = LEVELS,
-                 filter_strength: float = FILTER_STRENGTH, *,
-                 edge_threshold: float = EDGE_THRESHOLD,
-                 queue: cl.CommandQueue | None = None) -> FilteredImage:
+def depth_filter(
+    gbuffers_or_depth: GBuffers | Any,
+    levels: int = LEVELS,
+    filter_strength: float = FILTER_STRENGTH,
+    *,
+    edge_threshold: float = EDGE_THRESHOLD,
+    queue: cl.CommandQueue | None = None,
+) -> FilteredImage:
     """Remove background points seen through holes in the foreground (the
     hierarchical min-pool filter of Vanherck, Zoomers et al. 2025; the rules
     are in ``clvis.reference.raster.depth_filter``). gbuffers_or_depth: a
@@ -229,13 +289,16 @@ def depth_filter(gbuffers_or_depth: GBuffers | Any, levels: int = LEVELS,
         depth, rgba = gbuffers_or_depth.depth, gbuffers_or_depth.rgba
     else:
         depth, rgba = gbuffers_or_depth, None
-    keep = depth_filter_mask(depth, levels, filter_strength,
-                                           edge_threshold=edge_threshold, queue=queue)
+    keep = depth_filter_mask(depth, levels, filter_strength, edge_threshold=edge_threshold, queue=queue)
     depth = np.asarray(depth)
     colors = rgba if rgba is not None else np.zeros(depth.shape + (4,), np.uint8)
     out_rgbda = rgbda(colors, depth, keep, queue=queue)
     kept_rgba = None
     if rgba is not None:
         kept_rgba = np.where(keep[..., None], rgba, 0).astype(np.uint8)
-    return FilteredImage(keep=keep, depth=np.where(keep, depth, np.float32(np.inf)).astype(np.float32),
-                         rgba=kept_rgba, rgbda=out_rgbda)
+    return FilteredImage(
+        keep=keep,
+        depth=np.where(keep, depth, np.float32(np.inf)).astype(np.float32),
+        rgba=kept_rgba,
+        rgbda=out_rgbda,
+    )

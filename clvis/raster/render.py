@@ -60,11 +60,11 @@ __all__ = [
     "rasterize",
 ]
 
-EMPTY = np.uint32(0xFFFFFFFF)       # index of an empty pixel
+EMPTY = np.uint32(0xFFFFFFFF)  # index of an empty pixel
 MAX_ATTRIBUTES = 8
-MAX_IMAGE_SIDE = 1 << 15            # W, H: exact as float32 and addressable as uint
-MAX_PIXELS = 2**31 - 1              # W * H: the kernels index pixels with 32-bit integers
-MAX_POINT_SIZE = 64                 # render.cl's POINT_SIZE: 1..64 pixels a side
+MAX_IMAGE_SIDE = 1 << 15  # W, H: exact as float32 and addressable as uint
+MAX_PIXELS = 2**31 - 1  # W * H: the kernels index pixels with 32-bit integers
+MAX_POINT_SIZE = 64  # render.cl's POINT_SIZE: 1..64 pixels a side
 BATCH_SIZE = 10240
 _F32_MAX = float(np.finfo(np.float32).max)
 # a visibility word as two uints (little-endian ulong: dkey << 32 | id)
@@ -130,8 +130,9 @@ def _check_camera(camera):
     except (TypeError, ValueError):
         m = d = np.full(1, np.nan)
     if m.shape != (4, 4) or d.shape != (4,) or not (np.isfinite(m).all() and np.isfinite(d).all()):
-        raise DataError("camera: its matrix (projection @ view) and depth row must be finite, "
-                        "a 4x4 array and 4 numbers")
+        raise DataError(
+            "camera: its matrix (projection @ view) and depth row must be finite, a 4x4 array and 4 numbers"
+        )
     with np.errstate(all="ignore"):
         finite32 = np.isfinite(m.astype(np.float32)).all() and np.isfinite(d.astype(np.float32)).all()
     if not finite32:
@@ -150,8 +151,10 @@ def _check_size(width, height):
             raise ValueError(f"{name}: {int(v)} is outside [1, {MAX_IMAGE_SIDE}]")
     width, height = int(width), int(height)
     if width * height > MAX_PIXELS:
-        raise ValueError(f"width x height: {width}x{height} = {width * height} pixels; at most "
-                         "2^31 - 1 (the kernels index pixels with 32-bit integers)")
+        raise ValueError(
+            f"width x height: {width}x{height} = {width * height} pixels; at most "
+            "2^31 - 1 (the kernels index pixels with 32-bit integers)"
+        )
     return width, height
 
 
@@ -184,9 +187,11 @@ class _Input:
         # the limit on planes applies to attributes given here, not to a
         # cloud's own (a LAS file has more; render(planes=) picks)
         if attributes is not None and len(attributes) > MAX_ATTRIBUTES:
-            raise ValueError(f"attributes: {len(attributes)} given; at most {MAX_ATTRIBUTES} "
-                             "(a PointCloud's own attributes may be more: render(planes=) "
-                             "picks which to resolve)")
+            raise ValueError(
+                f"attributes: {len(attributes)} given; at most {MAX_ATTRIBUTES} "
+                "(a PointCloud's own attributes may be more: render(planes=) "
+                "picks which to resolve)"
+            )
         if hasattr(cloud, "positions"):
             positions = cloud.positions
             colors = colors if colors is not None else getattr(cloud, "colors", None)
@@ -263,12 +268,23 @@ class Rasterizer:
     them, so the result does not depend on the order.
     """
 
-    def __init__(self, cloud_or_positions: Any, *, colors: Any = None,
-                 attributes: Mapping[str, Any] | None = None, velocity: Any = None, radius: Any = None,
-                 morton: bool = True, batch_size: int = BATCH_SIZE,
-                 queue: cl.CommandQueue | None = None) -> None:
-        if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) \
-                or not 1 <= batch_size <= 1 << 24:
+    def __init__(
+        self,
+        cloud_or_positions: Any,
+        *,
+        colors: Any = None,
+        attributes: Mapping[str, Any] | None = None,
+        velocity: Any = None,
+        radius: Any = None,
+        morton: bool = True,
+        batch_size: int = BATCH_SIZE,
+        queue: cl.CommandQueue | None = None,
+    ) -> None:
+        if (
+            isinstance(batch_size, bool)
+            or not isinstance(batch_size, (int, np.integer))
+            or not 1 <= batch_size <= 1 << 24
+        ):
             raise ValueError(f"batch_size: expected an int in [1, 2^24], got {batch_size!r}")
         inp = _Input(cloud_or_positions, colors, attributes, velocity, radius)
         self.queue = q = resolve_queue(queue, positions=inp.positions)
@@ -280,19 +296,21 @@ class Rasterizer:
         q = self.queue
         # the kernels of a render, for the options captured (render.cl's per
         # point size: built when first asked for)
-        self._kernels = {name: runtime.get_kernel(q, "raster/resolve.cl", name, {}, runtime.EXACT_FP)
-                         for name in ("resolve", "resolve_attributes")}
+        self._kernels = {
+            name: runtime.get_kernel(q, "raster/resolve.cl", name, {}, runtime.EXACT_FP)
+            for name in ("resolve", "resolve_attributes")
+        }
         self._splat_kernels: dict = {}
         self._render_kernels(1)
         self.n = n = inp.n
         self.batch_size = batch_size
         self.nbatches = -(-n // self.batch_size)
-        self.attribute_names = list(inp.names)      # the caller's order
+        self.attribute_names = list(inp.names)  # the caller's order
         self._f32_names, self._u8_names = list(inp.f32), list(inp.u8)
-        self._host_attr = {**inp.f32, **inp.u8}     # uploaded when a render needs them
+        self._host_attr = {**inp.f32, **inp.u8}  # uploaded when a render needs them
         self._ranges: dict = {}
-        self._tf_cache: dict = {}       # name -> float32 device copy (color_by)
-        self._planes_cache: tuple | None = None     # (names, f32 device, u8 device): the last planes
+        self._tf_cache: dict = {}  # name -> float32 device copy (color_by)
+        self._planes_cache: tuple | None = None  # (names, f32 device, u8 device): the last planes
         self._nonfinite: int | cla.Array = 0
         self._luts: dict = {}
         self.has_colors = inp.colors is not None
@@ -307,19 +325,28 @@ class Rasterizer:
             self.positions = runtime.empty(q, (n, 3), np.float32, "Morton-ordered positions")
             self.inv = runtime.empty(q, n, np.uint32, "inverse permutation")
             k = runtime.get_kernel(q, "raster/morton.cl", "gather_points", {})
-            runtime.launch(q, k, *_items(q, n), pos.base_data, perm.base_data, np.uint32(n),
-                           self.positions.base_data)
+            runtime.launch(
+                q, k, *_items(q, n), pos.base_data, perm.base_data, np.uint32(n), self.positions.base_data
+            )
             k = runtime.get_kernel(q, "raster/morton.cl", "invert_permutation", {})
             runtime.launch(q, k, *_items(q, n), perm.base_data, np.uint32(n), self.inv.base_data)
         else:
             self.positions = pos
         self.bounds = _batch_bounds(q, self.positions, self.batch_size)
-        if n:       # per batch, read back with the first stats
+        if n:  # per batch, read back with the first stats
             self._nonfinite = runtime.empty(q, self.nbatches, np.uint32, "non-finite counts")
-            k = runtime.get_kernel(q, "raster/render.cl", "batch_nonfinite", _render_defines(q),
-                                   runtime.EXACT_FP)
-            runtime.launch(q, k, *_items(q, self.nbatches), self.positions.base_data, np.uint32(n),
-                           np.uint32(self.batch_size), self._nonfinite.base_data)
+            k = runtime.get_kernel(
+                q, "raster/render.cl", "batch_nonfinite", _render_defines(q), runtime.EXACT_FP
+            )
+            runtime.launch(
+                q,
+                k,
+                *_items(q, self.nbatches),
+                self.positions.base_data,
+                np.uint32(n),
+                np.uint32(self.batch_size),
+                self._nonfinite.base_data,
+            )
         self.colors = self._upload("colors", inp.colors)
         self.velocity = self._upload("velocity", inp.velocity)
         self.radius = self._upload("radius", inp.radius)
@@ -330,14 +357,16 @@ class Rasterizer:
         if ks is None:
             q = self.queue
             with runtime.pinned(self.config):
-                passes = ("render_visibility",) if self.config.int64_atomics else \
-                    ("render_depth", "render_index")
+                passes = (
+                    ("render_visibility",) if self.config.int64_atomics else ("render_depth", "render_index")
+                )
                 defines = _render_defines(q)
                 if point_size != 1:
                     defines["POINT_SIZE"] = point_size
                 ks = self._splat_kernels[point_size] = {
                     name: runtime.get_kernel(q, "raster/render.cl", name, defines, runtime.EXACT_FP)
-                    for name in passes + ("soft_accumulate",)}
+                    for name in passes + ("soft_accumulate",)
+                }
         return ks
 
     @property
@@ -357,13 +386,16 @@ class Rasterizer:
         names = list(planes)
         for name in names:
             if name not in self._host_attr:
-                raise ValueError(f"planes: no attribute {name!r}; the cloud has "
-                                 f"{', '.join(self.attribute_names) or 'none'}")
+                raise ValueError(
+                    f"planes: no attribute {name!r}; the cloud has "
+                    f"{', '.join(self.attribute_names) or 'none'}"
+                )
         if len(set(names)) != len(names):
             raise ValueError(f"planes: {names} names an attribute twice")
         if len(names) > MAX_ATTRIBUTES:
-            raise ValueError(f"planes: {len(names)} given; at most {MAX_ATTRIBUTES} attribute "
-                             "planes a render")
+            raise ValueError(
+                f"planes: {len(names)} given; at most {MAX_ATTRIBUTES} attribute planes a render"
+            )
         return names
 
     def _plane_buffers(self, names):
@@ -374,11 +406,17 @@ class Rasterizer:
         u8 = [m for m in names if m in self._u8_names]
         key = (tuple(f32), tuple(u8))
         if self._planes_cache is None or self._planes_cache[0] != key:
-            self._planes_cache = None           # let the old buffers go first
-            df = self._upload_async("attributes", np.stack([self._host_attr[m] for m in f32], axis=1)) \
-                if f32 else None
-            du = self._upload_async("attributes", np.stack([self._host_attr[m] for m in u8], axis=1)) \
-                if u8 else None
+            self._planes_cache = None  # let the old buffers go first
+            df = (
+                self._upload_async("attributes", np.stack([self._host_attr[m] for m in f32], axis=1))
+                if f32
+                else None
+            )
+            du = (
+                self._upload_async("attributes", np.stack([self._host_attr[m] for m in u8], axis=1))
+                if u8
+                else None
+            )
             self._planes_cache = (key, df, du)
         return f32, u8, self._planes_cache[1], self._planes_cache[2]
 
@@ -408,8 +446,9 @@ class Rasterizer:
         width, height = _check_size(width, height)
         return cam, near, far, width, height
 
-    def visibility(self, camera: Camera, width: int, height: int, *,
-                   point_size: int = 1) -> tuple[cla.Array, cla.Array]:
+    def visibility(
+        self, camera: Camera, width: int, height: int, *, point_size: int = 1
+    ) -> tuple[cla.Array, cla.Array]:
         """Run the render pass only: the (H, W) uint64 visibility buffer
         (``dkey << 32 | index``, all ones where empty) and the per-batch
         drawn flags (uint8), both on the device. point_size: as in render."""
@@ -430,11 +469,23 @@ class Rasterizer:
         L = _local_size(q)
         # walk batches backwards when that visits the points of each Morton
         # cell nearest first (render.cl's ABI comment): far fewer atomics
-        f = cam[16:19].astype(np.float64)           # the depth row: the view direction
+        f = cam[16:19].astype(np.float64)  # the depth row: the view direction
         reverse = np.uint32(f[0] + 2 * f[1] + 4 * f[2] < 0)
-        args = (self.positions.base_data, _arg(self.ids), np.uint32(self.n),
-                np.uint32(self.batch_size), self.bounds.base_data, cam_d.base_data, near, far,
-                np.uint32(W), np.uint32(H), vis.base_data, drawn.base_data, reverse)
+        args = (
+            self.positions.base_data,
+            _arg(self.ids),
+            np.uint32(self.n),
+            np.uint32(self.batch_size),
+            self.bounds.base_data,
+            cam_d.base_data,
+            near,
+            far,
+            np.uint32(W),
+            np.uint32(H),
+            vis.base_data,
+            drawn.base_data,
+            reverse,
+        )
         G = self.nbatches * L
         kernels = self._render_kernels(point_size)
         passes = ("render_visibility",) if self.config.int64_atomics else ("render_depth", "render_index")
@@ -444,7 +495,7 @@ class Rasterizer:
 
     def _camera_device(self, cam):
         d = runtime.empty(self.queue, cam.size, np.float32, "camera")
-        d.set(cam, queue=self.queue, async_=True)     # no wait for earlier renders (host=False)
+        d.set(cam, queue=self.queue, async_=True)  # no wait for earlier renders (host=False)
         return d
 
     def _lut(self, name):
@@ -459,8 +510,10 @@ class Rasterizer:
         if color_by is None:
             return (1 if self.has_colors else 0), None, 0, 0, None, 0, np.float32(0), np.float32(0)
         if color_by not in self._host_attr:
-            raise ValueError(f"color_by: no attribute {color_by!r}; the cloud has "
-                             f"{', '.join(self.attribute_names) or 'none'}")
+            raise ValueError(
+                f"color_by: no attribute {color_by!r}; the cloud has "
+                f"{', '.join(self.attribute_names) or 'none'}"
+            )
         if value_range is None:
             vr = self._ranges.get(color_by)
             if vr is None:
@@ -468,22 +521,34 @@ class Rasterizer:
         else:
             vr = tuple(float(v) for v in value_range)
             # finite as float32 too: the kernels take vmin as a float
-            if len(vr) != 2 or not all(math.isfinite(v) and abs(v) <= _F32_MAX for v in vr) \
-                    or vr[0] > vr[1]:
-                raise ValueError(f"value_range: expected finite (vmin, vmax) with vmin <= vmax, got {value_range!r}")
+            if len(vr) != 2 or not all(math.isfinite(v) and abs(v) <= _F32_MAX for v in vr) or vr[0] > vr[1]:
+                raise ValueError(
+                    f"value_range: expected finite (vmin, vmax) with vmin <= vmax, got {value_range!r}"
+                )
         vmin, vmax = vr
         scale = np.float32(0.0 if vmax == vmin else 1.0 / (vmax - vmin))
         lut = self._lut(colormap)
-        src = self._tf_cache.get(color_by)      # its own float32 copy (a uint8 attribute converted)
+        src = self._tf_cache.get(color_by)  # its own float32 copy (a uint8 attribute converted)
         if src is None:
             src = self._tf_cache[color_by] = self._upload_async(
-                "attributes", self._host_attr[color_by].astype(np.float32))
+                "attributes", self._host_attr[color_by].astype(np.float32)
+            )
         return 2, src, 1, 0, lut, lut.shape[0], np.float32(vmin), scale
 
-    def render(self, camera: Camera, width: int, height: int, *, color_by: str | None = None,
-               colormap: str = "viridis", value_range: tuple[float, float] | None = None,
-               soft_z: bool | float | None = None, planes: Any = None, point_size: int = 1,
-               host: bool = True) -> GBuffers:
+    def render(
+        self,
+        camera: Camera,
+        width: int,
+        height: int,
+        *,
+        color_by: str | None = None,
+        colormap: str = "viridis",
+        value_range: tuple[float, float] | None = None,
+        soft_z: bool | float | None = None,
+        planes: Any = None,
+        point_size: int = 1,
+        host: bool = True,
+    ) -> GBuffers:
         """Render and resolve one view; numpy G-buffers (host=False: the planes
         stay on the device as ``pyopencl.array.Array``, nothing is read back,
         and stats is empty).
@@ -521,13 +586,18 @@ class Rasterizer:
         g = _gbuffers(out, f32, u8, names, lambda a: a.get())
         d = drawn.get()[: self.nbatches].astype(bool)
         sizes = np.minimum(self.batch_size, self.n - np.arange(self.nbatches) * self.batch_size)
-        g.stats = {"points": self.n, "batches": self.nbatches, "batches_drawn": int(d.sum()),
-                   "points_read": int(sizes[d].sum()) if self.nbatches else 0,
-                   "points_nonfinite": self.nonfinite}
+        g.stats = {
+            "points": self.n,
+            "batches": self.nbatches,
+            "batches_drawn": int(d.sum()),
+            "points_read": int(sizes[d].sum()) if self.nbatches else 0,
+            "points_nonfinite": self.nonfinite,
+        }
         return g
 
-    def _resolve(self, vis, cam_d, W, H, focal, tf, tol, near, far, point_size, f32_names,
-                 u8_names, attr_f32, attr_u8):
+    def _resolve(
+        self, vis, cam_d, W, H, focal, tf, tol, near, far, point_size, f32_names, u8_names, attr_f32, attr_u8
+    ):
         q = self.queue
         npix = W * H
         color_mode, tf_buf, stride, offset, lut, lut_n, vmin, scale = tf
@@ -535,13 +605,34 @@ class Rasterizer:
         if tol is not None and self.n:
             accum = runtime.zeros(q, npix * 5, np.uint32, "soft z accumulation")
             L = _local_size(q)
-            runtime.launch(q, self._render_kernels(point_size)["soft_accumulate"], self.nbatches * L, L,
-                           self.positions.base_data, _arg(self.ids),
-                           np.uint32(self.n), np.uint32(self.batch_size), self.bounds.base_data,
-                           cam_d.base_data, near, far, np.uint32(W), np.uint32(H),
-                           vis.base_data, np.float32(tol), np.uint32(color_mode),
-                           _arg(self.colors), _arg(tf_buf), np.uint32(stride), np.uint32(offset),
-                           _arg(lut), np.uint32(lut_n), vmin, scale, accum.base_data)
+            runtime.launch(
+                q,
+                self._render_kernels(point_size)["soft_accumulate"],
+                self.nbatches * L,
+                L,
+                self.positions.base_data,
+                _arg(self.ids),
+                np.uint32(self.n),
+                np.uint32(self.batch_size),
+                self.bounds.base_data,
+                cam_d.base_data,
+                near,
+                far,
+                np.uint32(W),
+                np.uint32(H),
+                vis.base_data,
+                np.float32(tol),
+                np.uint32(color_mode),
+                _arg(self.colors),
+                _arg(tf_buf),
+                np.uint32(stride),
+                np.uint32(offset),
+                _arg(lut),
+                np.uint32(lut_n),
+                vmin,
+                scale,
+                accum.base_data,
+            )
         flags = (1 if self.has_velocity else 0) | (2 if self.has_radius else 0)
         nf, nu = len(f32_names), len(u8_names)
         e = runtime.empty
@@ -556,20 +647,53 @@ class Rasterizer:
             "speed": e(q, (H, W), np.float32, "velocity magnitude") if flags & 1 else None,
             "radius": e(q, (H, W), np.float32, "radius plane") if flags & 2 else None,
         }
-        runtime.launch(q, self._kernels["resolve"], *_items(q, npix), vis.base_data, np.uint32(W),
-                       np.uint32(H),
-                       np.uint32(color_mode), _arg(self.colors), _arg(tf_buf), np.uint32(stride),
-                       np.uint32(offset), _arg(lut), np.uint32(lut_n), vmin, scale, _arg(accum),
-                       out["index"].base_data, out["depth"].base_data, out["rgba"].base_data)
+        runtime.launch(
+            q,
+            self._kernels["resolve"],
+            *_items(q, npix),
+            vis.base_data,
+            np.uint32(W),
+            np.uint32(H),
+            np.uint32(color_mode),
+            _arg(self.colors),
+            _arg(tf_buf),
+            np.uint32(stride),
+            np.uint32(offset),
+            _arg(lut),
+            np.uint32(lut_n),
+            vmin,
+            scale,
+            _arg(accum),
+            out["index"].base_data,
+            out["depth"].base_data,
+            out["rgba"].base_data,
+        )
         if flags or nf or nu:
             runtime.launch(
-                q, self._kernels["resolve_attributes"], *_items(q, npix), vis.base_data, np.uint32(W),
+                q,
+                self._kernels["resolve_attributes"],
+                *_items(q, npix),
+                vis.base_data,
+                np.uint32(W),
                 np.uint32(H),
-                self.positions.base_data, _arg(self.inv), cam_d.base_data, focal,
-                np.uint32(flags), np.uint32(nf), _arg(attr_f32), np.uint32(nu),
-                _arg(attr_u8), _arg(self.velocity), _arg(self.radius), _arg(out["f32"]),
-                _arg(out["u8"]), _arg(out["vel"]), _arg(out["angle"]), _arg(out["speed"]),
-                _arg(out["radius"]))
+                self.positions.base_data,
+                _arg(self.inv),
+                cam_d.base_data,
+                focal,
+                np.uint32(flags),
+                np.uint32(nf),
+                _arg(attr_f32),
+                np.uint32(nu),
+                _arg(attr_u8),
+                _arg(self.velocity),
+                _arg(self.radius),
+                _arg(out["f32"]),
+                _arg(out["u8"]),
+                _arg(out["vel"]),
+                _arg(out["angle"]),
+                _arg(out["speed"]),
+                _arg(out["radius"]),
+            )
         return out
 
 
@@ -594,26 +718,42 @@ def _batch_bounds(queue, positions, batch: int) -> cla.Array:
     nb = -(-n // batch)
     bounds = runtime.empty(queue, (max(nb, 1), 6), np.float32, "batch bounds")
     if n:
-        k = runtime.get_kernel(queue, "raster/render.cl", "batch_bounds", _render_defines(queue),
-                               runtime.EXACT_FP)
-        runtime.launch(queue, k, *_items(queue, nb), positions.base_data, np.uint32(n), np.uint32(batch),
-                       bounds.base_data)
+        k = runtime.get_kernel(
+            queue, "raster/render.cl", "batch_bounds", _render_defines(queue), runtime.EXACT_FP
+        )
+        runtime.launch(
+            queue,
+            k,
+            *_items(queue, nb),
+            positions.base_data,
+            np.uint32(n),
+            np.uint32(batch),
+            bounds.base_data,
+        )
     return bounds
 
 
 def _gbuffers(out, f32_names, u8_names, order, get) -> GBuffers:
     def g(a):
         return None if a is None else get(a)
+
     attrs = {}
     f32, u8 = g(out["f32"]), g(out["u8"])
     for i, name in enumerate(f32_names):
         attrs[name] = f32[i]
     for i, name in enumerate(u8_names):
         attrs[name] = u8[i]
-    attrs = {name: attrs[name] for name in order}       # the order asked for
-    return GBuffers(index=g(out["index"]), depth=g(out["depth"]), rgba=g(out["rgba"]),
-                    attributes=attrs, vel2d=g(out["vel"]), vel_angle=g(out["angle"]),
-                    vel_speed=g(out["speed"]), radius_px=g(out["radius"]))
+    attrs = {name: attrs[name] for name in order}  # the order asked for
+    return GBuffers(
+        index=g(out["index"]),
+        depth=g(out["depth"]),
+        rgba=g(out["rgba"]),
+        attributes=attrs,
+        vel2d=g(out["vel"]),
+        vel_angle=g(out["angle"]),
+        vel_speed=g(out["speed"]),
+        radius_px=g(out["radius"]),
+    )
 
 
 def morton_order(positions: Any, *, queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
@@ -641,13 +781,21 @@ def morton_order(positions: Any, *, queue: cl.CommandQueue | None = None) -> np.
         return out.get() if host else out
     bounds = _batch_bounds(queue, p, BATCH_SIZE).get()
     lo, hi = bounds[:, :3].min(axis=0), bounds[:, 3:].max(axis=0)
-    if not (lo <= hi).all():            # no finite point: every code is 0xFFFFFFFF
+    if not (lo <= hi).all():  # no finite point: every code is 0xFFFFFFFF
         lo = hi = np.zeros(3, np.float32)
     scale = morton.scale(lo, hi)
     codes = runtime.empty(queue, n, np.uint32, "Morton codes")
     k = runtime.get_kernel(queue, "raster/morton.cl", "morton_codes", {}, ())
-    runtime.launch(queue, k, *_items(queue, n), p.base_data, np.uint32(n), *lo.astype(np.float32),
-                   *scale, codes.base_data)
+    runtime.launch(
+        queue,
+        k,
+        *_items(queue, n),
+        p.base_data,
+        np.uint32(n),
+        *lo.astype(np.float32),
+        *scale,
+        codes.base_data,
+    )
     iota = runtime.empty(queue, n, np.uint32, "Morton permutation")
     k = runtime.get_kernel(queue, "raster/morton.cl", "iota", {}, ())
     runtime.launch(queue, k, *_items(queue, n), np.uint32(n), iota.base_data)
@@ -655,18 +803,49 @@ def morton_order(positions: Any, *, queue: cl.CommandQueue | None = None) -> np.
     return perm.get() if host else perm
 
 
-def rasterize(cloud_or_positions: Any, camera: Camera, width: int, height: int, *, colors: Any = None,
-              attributes: Mapping[str, Any] | None = None, velocity: Any = None, radius: Any = None,
-              soft_z: bool | float | None = None, color_by: str | None = None,
-              colormap: str = "viridis", value_range: tuple[float, float] | None = None, morton: bool = False,
-              batch_size: int = BATCH_SIZE, planes: Any = None, point_size: int = 1,
-              queue: cl.CommandQueue | None = None) -> GBuffers:
+def rasterize(
+    cloud_or_positions: Any,
+    camera: Camera,
+    width: int,
+    height: int,
+    *,
+    colors: Any = None,
+    attributes: Mapping[str, Any] | None = None,
+    velocity: Any = None,
+    radius: Any = None,
+    soft_z: bool | float | None = None,
+    color_by: str | None = None,
+    colormap: str = "viridis",
+    value_range: tuple[float, float] | None = None,
+    morton: bool = False,
+    batch_size: int = BATCH_SIZE,
+    planes: Any = None,
+    point_size: int = 1,
+    queue: cl.CommandQueue | None = None,
+) -> GBuffers:
     """Render and resolve one view of a point cloud: :class:`Rasterizer`
     (``cloud_or_positions``, colors, attributes, velocity, radius, morton,
     batch_size) followed by its ``render`` (camera, size, color_by, colormap,
     value_range, soft_z, planes, point_size). For many views of one cloud,
     keep a Rasterizer."""
-    r = Rasterizer(cloud_or_positions, colors=colors, attributes=attributes, velocity=velocity,
-                   radius=radius, morton=morton, batch_size=batch_size, queue=queue)
-    return r.render(camera, width, height, color_by=color_by, colormap=colormap,
-                    value_range=value_range, soft_z=soft_z, planes=planes, point_size=point_size)
+    r = Rasterizer(
+        cloud_or_positions,
+        colors=colors,
+        attributes=attributes,
+        velocity=velocity,
+        radius=radius,
+        morton=morton,
+        batch_size=batch_size,
+        queue=queue,
+    )
+    return r.render(
+        camera,
+        width,
+        height,
+        color_by=color_by,
+        colormap=colormap,
+        value_range=value_range,
+        soft_z=soft_z,
+        planes=planes,
+        point_size=point_size,
+    )

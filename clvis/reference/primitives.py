@@ -6,8 +6,9 @@ import numpy as np
 import numpy.typing as npt
 
 
-def scan(x: npt.ArrayLike, exclusive: bool = True, *,
-         return_total: bool = False) -> np.ndarray | tuple[np.ndarray, np.generic]:
+def scan(
+    x: npt.ArrayLike, exclusive: bool = True, *, return_total: bool = False
+) -> np.ndarray | tuple[np.ndarray, np.generic]:
     """Prefix sums in x's dtype (integers wrap)."""
     x = np.asarray(x)
     inclusive = np.cumsum(x, dtype=x.dtype)
@@ -44,8 +45,9 @@ def sort_key(keys: npt.ArrayLike) -> np.ndarray:
     return np.where(np.isnan(keys), np.iinfo(u).max, key).astype(u)
 
 
-def radix_sort(keys: npt.ArrayLike, values: npt.ArrayLike | None = None, *,
-               key_bits: int | None = None) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+def radix_sort(
+    keys: npt.ArrayLike, values: npt.ArrayLike | None = None, *, key_bits: int | None = None
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Stable sort by sort_key (key_bits: by the low key_bits bits only)."""
     keys = np.asarray(keys)
     k = sort_key(keys)

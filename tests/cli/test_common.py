@@ -13,7 +13,7 @@ from clvis.raster import MAX_IMAGE_SIDE
 
 def test_one_size_rule():
     assert _common.MAX_SIDE == MAX_IMAGE_SIDE == 32768
-    assert _common.MAX_SIDE ** 2 <= _common.MAX_PIXELS == 2**31 - 1     # 32-bit pixel indices
+    assert _common.MAX_SIDE**2 <= _common.MAX_PIXELS == 2**31 - 1  # 32-bit pixel indices
     assert _common.size("32768x32768") == (32768, 32768)
     assert _common.size(" 640 × 480 ") == (640, 480)
     for bad in ("32769x1", "0x5", "-5x5", "5x", "axb"):
@@ -57,7 +57,7 @@ def test_camera_default_is_the_commands_fit():
     want = Camera.fit(LO, HI, direction=(-0.6, 1.0, -0.45), aspect=64 / 48, fov_y=35.0)
     assert np.allclose(cam.forward, want.forward) and np.allclose(cam.projection[:2], want.projection[:2])
     corners = np.array([[x, y, z] for x in (LO[0], HI[0]) for y in (LO[1], HI[1]) for z in (LO[2], HI[2])])
-    p = cam.project(corners, 64, 48)        # the box's corners, not its sphere, fill the frame
+    p = cam.project(corners, 64, 48)  # the box's corners, not its sphere, fill the frame
     assert p.visible.all() and min(p.sx.min(), 64 - p.sx.max(), p.sy.min(), 48 - p.sy.max()) < 3
 
 
@@ -68,7 +68,7 @@ def test_camera_eye_target_up_fov():
     assert np.allclose(cam.forward, (centre - cam.eye) / np.linalg.norm(centre - cam.eye))
     assert np.isclose(np.degrees(2 * np.arctan(1 / cam.projection[1, 1])), 20.0)
     corners = np.array([[x, y, z] for x in (0, 2) for y in (0, 4) for z in (0, 1)], np.float32)
-    assert cam.project(corners, 64, 48).depth.min() > cam.near          # the box lies in [near, far]
+    assert cam.project(corners, 64, 48).depth.min() > cam.near  # the box lies in [near, far]
     assert cam.project(corners, 64, 48).depth.max() < cam.far
     cam = _common.camera_from_args(_args(target=(2.0, 4.0, 1.0), up=(0.0, 1.0, 1.0)), LO, HI, 64, 48)
     assert np.allclose(cam.forward, (np.array([2, 4, 1]) - cam.eye) / np.linalg.norm([2, 4, 1] - cam.eye))
@@ -76,8 +76,17 @@ def test_camera_eye_target_up_fov():
 
 @pytest.mark.parametrize("view", ["top", "front", "side"])
 def test_camera_axis_views_stay_orthographic(view):
-    cam = _common.camera_from_args(_args(view=(view, 0), eye=(1.0, 2.0, 50.0) if view == "top" else None,
-                                         up=(1.0, 0.0, 0.0) if view == "top" else None), LO, HI, 64, 48)
+    cam = _common.camera_from_args(
+        _args(
+            view=(view, 0),
+            eye=(1.0, 2.0, 50.0) if view == "top" else None,
+            up=(1.0, 0.0, 0.0) if view == "top" else None,
+        ),
+        LO,
+        HI,
+        64,
+        48,
+    )
     assert cam.orthographic
 
 
@@ -97,20 +106,27 @@ def _picture(path):
         return np.asarray(im)
 
 
-@pytest.mark.parametrize("command, extra, png", [
-    ("iso", [], "iso.png"),
-    ("gauss", ["--lod", "low"], "low.png"),
-    ("render", ["--points", "3000", "--quiet", "--soft-z", "off"], "depth.png"),
-])
+@pytest.mark.parametrize(
+    "command, extra, png",
+    [
+        ("iso", [], "iso.png"),
+        ("gauss", ["--lod", "low"], "low.png"),
+        ("render", ["--points", "3000", "--quiet", "--soft-z", "off"], "depth.png"),
+    ],
+)
 def test_every_command_takes_the_camera_options(tmp_path, capsys, command, extra, png):
     pictures = {}
-    for name, opts in {"fit": [], "top": ["--view", "top"], "eye": ["--eye", "-40,-60,25", "--fov", "30"],
-                       "hemi": ["--view", "hemisphere:40", "--up", "0,0,1"]}.items():
+    for name, opts in {
+        "fit": [],
+        "top": ["--view", "top"],
+        "eye": ["--eye", "-40,-60,25", "--fov", "30"],
+        "hemi": ["--view", "hemisphere:40", "--up", "0,0,1"],
+    }.items():
         rc = cli.main([command, *extra, *opts, "--size", "40x30", "--out", str(tmp_path / name)])
         err = capsys.readouterr().err
         assert rc == 0, err
         pictures[name] = _picture(tmp_path / name / png)
-        pictures[name] = pictures[name][-30:]       # iso.png: under its label band
+        pictures[name] = pictures[name][-30:]  # iso.png: under its label band
         assert pictures[name].shape[:2] == (30, 40)
     assert not np.array_equal(pictures["fit"], pictures["top"])
     assert not np.array_equal(pictures["fit"], pictures["eye"])

@@ -26,30 +26,36 @@ def _one_line_error(err, command):
     assert "Traceback" not in err
 
 
-@pytest.mark.parametrize("args, message", [
-    (["gauss", "--density", "-1"], "argument --density: expected a number >= 0 (finite), got '-1'"),
-    (["gauss", "--density", "nan"], "argument --density: expected a number >= 0 (finite), got 'nan'"),
-    (["gauss", "--k", "0"], "argument --k: expected a positive integer in 1..64, got '0'"),
-    (["gauss", "--threshold", "nan"], "argument --threshold: expected a number (finite), got 'nan'"),
-    (["gauss", "--colormap", "nope"], "argument --colormap: unknown colormap 'nope'"),
-    (["render", "--colormap", "viridiss"], "closest: viridis"),
-    (["iso", "--isovalue", "nan"], "argument --isovalue: expected a number (finite), got 'nan'"),
-    (["iso", "--rate", "0"], "argument --rate: expected a positive integer in 1..32"),
-    (["iso", "--size", "-5x5"], "argument --size: width and height must lie in 1..32768, got '-5x5'"),
-    (["gauss", "--size", "-5x5"], "argument --size: width and height must lie in 1..32768"),
-    (["render", "--size", "-5x5"], "argument --size: width and height must lie in 1..32768"),
-    (["gauss", "--size", "32769x2"], "argument --size: width and height must lie in 1..32768"),
-    (["demo", "--n", "-5"], "argument --n: expected a positive integer in 1..4,294,967,295, got '-5'"),
-    (["demo", "--iso-size", "0x4"], "argument --iso-size: width and height must lie in"),
-    (["render", "--points", "1e11"], "argument --points: expected a positive integer in 1..4,294,967,294"),
-    (["render", "--view", "top", "--fov", "30"], "--fov: the top view is orthographic"),
-    (["iso", "--eye", "1,2"], "argument --eye: expected three finite numbers X,Y,Z"),
-    (["iso", "--eye", "-1,nan,3"], "argument --eye: expected three finite numbers X,Y,Z"),
-    (["gauss", "--up", "0,0,0"], "argument --up: expected a non-zero direction"),
-    (["gauss", "--fov", "180"], "argument --fov: expected a field of view in degrees"),
-    (["iso", "--eye", "1,1,1", "--target", "1,1,1"], "--eye and --target are the same point"),
-    (["bench", "primitives", "--scale", "-1"], "argument --scale: expected a number > 0"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["gauss", "--density", "-1"], "argument --density: expected a number >= 0 (finite), got '-1'"),
+        (["gauss", "--density", "nan"], "argument --density: expected a number >= 0 (finite), got 'nan'"),
+        (["gauss", "--k", "0"], "argument --k: expected a positive integer in 1..64, got '0'"),
+        (["gauss", "--threshold", "nan"], "argument --threshold: expected a number (finite), got 'nan'"),
+        (["gauss", "--colormap", "nope"], "argument --colormap: unknown colormap 'nope'"),
+        (["render", "--colormap", "viridiss"], "closest: viridis"),
+        (["iso", "--isovalue", "nan"], "argument --isovalue: expected a number (finite), got 'nan'"),
+        (["iso", "--rate", "0"], "argument --rate: expected a positive integer in 1..32"),
+        (["iso", "--size", "-5x5"], "argument --size: width and height must lie in 1..32768, got '-5x5'"),
+        (["gauss", "--size", "-5x5"], "argument --size: width and height must lie in 1..32768"),
+        (["render", "--size", "-5x5"], "argument --size: width and height must lie in 1..32768"),
+        (["gauss", "--size", "32769x2"], "argument --size: width and height must lie in 1..32768"),
+        (["demo", "--n", "-5"], "argument --n: expected a positive integer in 1..4,294,967,295, got '-5'"),
+        (["demo", "--iso-size", "0x4"], "argument --iso-size: width and height must lie in"),
+        (
+            ["render", "--points", "1e11"],
+            "argument --points: expected a positive integer in 1..4,294,967,294",
+        ),
+        (["render", "--view", "top", "--fov", "30"], "--fov: the top view is orthographic"),
+        (["iso", "--eye", "1,2"], "argument --eye: expected three finite numbers X,Y,Z"),
+        (["iso", "--eye", "-1,nan,3"], "argument --eye: expected three finite numbers X,Y,Z"),
+        (["gauss", "--up", "0,0,0"], "argument --up: expected a non-zero direction"),
+        (["gauss", "--fov", "180"], "argument --fov: expected a field of view in degrees"),
+        (["iso", "--eye", "1,1,1", "--target", "1,1,1"], "--eye and --target are the same point"),
+        (["bench", "primitives", "--scale", "-1"], "argument --scale: expected a number > 0"),
+    ],
+)
 def test_bad_values(tmp_path, capsys, monkeypatch, args, message):
     monkeypatch.chdir(tmp_path)
     loads = []
@@ -60,7 +66,7 @@ def test_bad_values(tmp_path, capsys, monkeypatch, args, message):
     assert rc == 2 and out == ""
     _one_line_error(err, args[0])
     assert message in err, err
-    assert not loads and not (tmp_path / "out").exists()       # nothing loaded, nothing written
+    assert not loads and not (tmp_path / "out").exists()  # nothing loaded, nothing written
 
 
 def test_colormap_message_lists_names(capsys):
@@ -69,12 +75,15 @@ def test_colormap_message_lists_names(capsys):
     assert "some valid names: viridis" in err and "names in all" in err
 
 
-@pytest.mark.parametrize("content, message", [
-    (None, "missing.json: no such file"),
-    (b"not json at all", "not a pytest-benchmark JSON file"),
-    (b"[1, 2, 3]", "not a pytest-benchmark JSON file"),
-    (b'{"benchmarks": [{"extra_info": {"op": "x"}}]}', "not a pytest-benchmark JSON file"),
-])
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (None, "missing.json: no such file"),
+        (b"not json at all", "not a pytest-benchmark JSON file"),
+        (b"[1, 2, 3]", "not a pytest-benchmark JSON file"),
+        (b'{"benchmarks": [{"extra_info": {"op": "x"}}]}', "not a pytest-benchmark JSON file"),
+    ],
+)
 def test_bench_report_files(tmp_path, capsys, content, message):
     path = tmp_path / "missing.json"
     if content is not None:
@@ -88,13 +97,17 @@ def test_bench_report_files(tmp_path, capsys, content, message):
 
 def test_library_errors_are_one_line(tmp_path, capsys, monkeypatch):
     """A ClvisError from a library call (here the device choice) is one line, exit 2."""
+
     def no_device(*a, **k):
         raise DeviceError("no device can hold this\nsecond line of detail")
 
     monkeypatch.setattr(clvis.runtime, "default_queue", no_device)
-    for args in (["iso", "--size", "16x16"], ["gauss", "--size", "16x16", "--lod", "low"],
-                 ["render", "--points", "100", "--size", "16x16", "--quiet"],
-                 ["demo", "--n", "100"]):
+    for args in (
+        ["iso", "--size", "16x16"],
+        ["gauss", "--size", "16x16", "--lod", "low"],
+        ["render", "--points", "100", "--size", "16x16", "--quiet"],
+        ["demo", "--n", "100"],
+    ):
         rc, _, err = _main(capsys, *args, "--out", tmp_path / "out")
         assert rc == 2
         _one_line_error(err, args[0])
@@ -147,16 +160,35 @@ def _env():
 
 def test_info_into_head(tmp_path):
     """`clvis info | head -1`: the first line, and nothing on stderr."""
-    r = subprocess.run(f"'{sys.executable}' -m clvis info | head -1", shell=True, cwd=tmp_path, env=_env(),
-                       capture_output=True, text=True, check=False)
+    r = subprocess.run(
+        f"'{sys.executable}' -m clvis info | head -1",
+        shell=True,
+        cwd=tmp_path,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert r.stdout.startswith(f"clvis {clvis.__version__}") and r.stdout.count("\n") == 1
     assert r.stderr == ""
 
 
 def test_python_m_clvis(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "clvis", "--version"], cwd=tmp_path, env=_env(),
-                       capture_output=True, text=True, check=False)
+    r = subprocess.run(
+        [sys.executable, "-m", "clvis", "--version"],
+        cwd=tmp_path,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert r.returncode == 0 and r.stdout == f"clvis {clvis.__version__}\n"
-    r = subprocess.run([sys.executable, "-m", "clvis", "iso", "--isovalue", "nan"], cwd=tmp_path, env=_env(),
-                       capture_output=True, text=True, check=False)
+    r = subprocess.run(
+        [sys.executable, "-m", "clvis", "iso", "--isovalue", "nan"],
+        cwd=tmp_path,
+        env=_env(),
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--isovalue" in r.stderr

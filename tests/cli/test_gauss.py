@@ -19,16 +19,31 @@ def test_gauss_default(tmp_path, capsys):
         assert lod in out
         with Image.open(tmp_path / f"{lod}.png") as im:
             assert im.size == (64, 48)
-            assert np.asarray(im).std() > 1          # not blank
+            assert np.asarray(im).std() > 1  # not blank
     with Image.open(tmp_path / "gauss.png") as im:
-        assert im.width >= 3 * 64 and im.height > 48      # labelled, over colour bars
+        assert im.width >= 3 * 64 and im.height > 48  # labelled, over colour bars
 
 
 def test_gauss_files(tmp_path, capsys):
     e = datasets.explosion((20, 24, 28))
     np.save(tmp_path / "v.npy", e["volume"])
-    assert cli.main(["gauss", str(tmp_path / "v.npy"), "--lod", "high", "--model", "max_response",
-                     "--size", "32x32", "--out", str(tmp_path / "a")]) == 0
+    assert (
+        cli.main(
+            [
+                "gauss",
+                str(tmp_path / "v.npy"),
+                "--lod",
+                "high",
+                "--model",
+                "max_response",
+                "--size",
+                "32x32",
+                "--out",
+                str(tmp_path / "a"),
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "a" / "high.png").is_file()
     g = clvis.gaussians_from_volume(e["volume"], lod="low", threshold=0.0)
     g.save(tmp_path / "g.npz")
@@ -40,10 +55,13 @@ def test_gauss_files(tmp_path, capsys):
     assert (tmp_path / "c" / "points.png").is_file()
 
 
-@pytest.mark.parametrize("args,message", [
-    (["nope.vdb"], "no such file"),
-    (["--lod", "ultra"], "--lod"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["nope.vdb"], "no such file"),
+        (["--lod", "ultra"], "--lod"),
+    ],
+)
 def test_gauss_errors(tmp_path, capsys, args, message):
     assert cli.main(["gauss", *args, "--out", str(tmp_path)]) == 2
     assert message in capsys.readouterr().err
@@ -61,7 +79,7 @@ def test_gauss_bad_npy(tmp_path, capsys):
     assert "no active voxel" in capsys.readouterr().err
 
 
-BACKGROUND = np.array([0.06, 0.06, 0.08]) * 255       # clvis gauss's background, grey level ~16.7
+BACKGROUND = np.array([0.06, 0.06, 0.08]) * 255  # clvis gauss's background, grey level ~16.7
 
 
 @pytest.mark.parametrize("name", ["laspy_simple.laz", "pyvista_ant.ply"])
@@ -84,8 +102,10 @@ def test_gauss_point_cloud_is_seen(tmp_path, capsys, name):
 
 def test_gauss_attribute(tmp_path, capsys):
     path = Path(__file__).parents[1] / "data" / "laspy_simple.laz"
-    assert cli.main(["gauss", str(path), "--attribute", "intensity", "--size", "48x48",
-                     "--out", str(tmp_path)]) == 0
+    assert (
+        cli.main(["gauss", str(path), "--attribute", "intensity", "--size", "48x48", "--out", str(tmp_path)])
+        == 0
+    )
     assert "intensity through inferno" in capsys.readouterr().out
     with Image.open(tmp_path / "points.png") as im:
         assert np.asarray(im).astype(np.float64).mean() >= BACKGROUND.mean() + 10
@@ -110,4 +130,4 @@ def test_gauss_progress_on_stderr(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "building kernels" in err and "1,600 / 1,600 rays" in err
     assert cli.main(["gauss", "--lod", "low", "--size", "40x40", "--out", str(tmp_path)]) == 0
-    assert capsys.readouterr().err == ""              # not a terminal: no progress
+    assert capsys.readouterr().err == ""  # not a terminal: no progress

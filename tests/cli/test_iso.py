@@ -17,29 +17,66 @@ def test_iso_embedded(tmp_path, capsys, dataset):
 
 
 def test_iso_partial_marks_active_rays(tmp_path, capsys):
-    assert cli.main(["iso", "--dataset", "turbulence", "--no-speculation", "--completion", "0.5",
-                     "--size", "64x48", "--out", str(tmp_path)]) == 0
+    assert (
+        cli.main(
+            [
+                "iso",
+                "--dataset",
+                "turbulence",
+                "--no-speculation",
+                "--completion",
+                "0.5",
+                "--size",
+                "64x48",
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     with Image.open(tmp_path / "iso.png") as im:
         a = np.asarray(im)
-    assert ((a[..., 0] == 255) & (a[..., 1] == 0) & (a[..., 2] == 255)).any()     # magenta: still running
+    assert ((a[..., 0] == 255) & (a[..., 1] == 0) & (a[..., 2] == 255)).any()  # magenta: still running
 
 
 def test_iso_files(tmp_path, capsys):
     v = datasets.marschner_lobb(20)["volume"]
     np.save(tmp_path / "v.npy", v)
-    assert cli.main(["iso", str(tmp_path / "v.npy"), "--isovalue", "0.5", "--rate", "12", "--size", "40x30",
-                     "--out", str(tmp_path / "a")]) == 0
+    assert (
+        cli.main(
+            [
+                "iso",
+                str(tmp_path / "v.npy"),
+                "--isovalue",
+                "0.5",
+                "--rate",
+                "12",
+                "--size",
+                "40x30",
+                "--out",
+                str(tmp_path / "a"),
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "a" / "iso.png").is_file()
     (v * 255).astype(np.uint8).tofile(tmp_path / "ml_20x20x20_uint8.raw")
-    assert cli.main(["iso", str(tmp_path / "ml_20x20x20_uint8.raw"), "--size", "40x30",
-                     "--out", str(tmp_path / "b")]) == 0
+    assert (
+        cli.main(
+            ["iso", str(tmp_path / "ml_20x20x20_uint8.raw"), "--size", "40x30", "--out", str(tmp_path / "b")]
+        )
+        == 0
+    )
 
 
-@pytest.mark.parametrize("args,message", [
-    (["nope.raw"], "no such file"),
-    (["--rate", "40"], "--rate"),
-    (["--completion", "0"], "--completion"),
-])
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["nope.raw"], "no such file"),
+        (["--rate", "40"], "--rate"),
+        (["--completion", "0"], "--completion"),
+    ],
+)
 def test_iso_errors(tmp_path, capsys, args, message):
     assert cli.main(["iso", *args, "--size", "16x16", "--out", str(tmp_path)]) == 2
     assert message in capsys.readouterr().err

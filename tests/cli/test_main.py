@@ -15,14 +15,32 @@ def test_info(capsys):
 
 
 def test_demo(capsys, tmp_path):
-    assert cli.main(["demo", "--n", "30000", "--points", "20000", "--size", "160x90",
-                     "--gauss-size", "64x64", "--iso-size", "80x60", "--out", str(tmp_path)]) == 0
+    assert (
+        cli.main(
+            [
+                "demo",
+                "--n",
+                "30000",
+                "--points",
+                "20000",
+                "--size",
+                "160x90",
+                "--gauss-size",
+                "64x64",
+                "--iso-size",
+                "80x60",
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
-    assert out.count("matches") == 7 and "MISMATCH" not in out     # 4 primitives, raster, gauss, iso
+    assert out.count("matches") == 7 and "MISMATCH" not in out  # 4 primitives, raster, gauss, iso
     with Image.open(tmp_path / "iso.png") as im:
-        assert im.size == (80, 60 + images.label_height(80))       # under a label band
+        assert im.size == (80, 60 + images.label_height(80))  # under a label band
     with Image.open(tmp_path / "gauss.png") as im:
-        assert im.width >= 3 * 64 and im.height > 64               # labelled, over colour bars
+        assert im.width >= 3 * 64 and im.height > 64  # labelled, over colour bars
     assert "M points/s" in out
     with Image.open(tmp_path / "overview.png") as im:
         assert im.width > 160
@@ -30,17 +48,22 @@ def test_demo(capsys, tmp_path):
 
 def _bench_json(tmp_path, tuning="cpu"):
     def b(op, impl, role, n, nbytes, median):
-        return {"extra_info": {"op": op, "impl": impl, "role": role, "n": n, "bytes": nbytes},
-                "stats": {"median": median * 1.1, "min": median, "rounds": 5}}
+        return {
+            "extra_info": {"op": op, "impl": impl, "role": role, "n": n, "bytes": nbytes},
+            "stats": {"median": median * 1.1, "min": median, "rounds": 5},
+        }
+
     op = "scan[int32]"
-    data = {"clvis": {"device": "test device", "tuning": tuning, "version": "x", "scale": 1},
-            "benchmarks": [
-                b(op, "clvis", "clvis", 1000, 8000, 1e-3),
-                b(op, "numpy.cumsum(x)", "peer", 1000, 8000, 3e-3),
-                b(op, "pyopencl.ExclusiveScanKernel", "peer", 1000, 8000, 4e-3),
-                b(op, "copy kernel", "copy", 1000, 8000, 0.5e-3),
-                {"stats": {"median": 1, "min": 1, "rounds": 1}},     # not ours: ignored
-            ]}
+    data = {
+        "clvis": {"device": "test device", "tuning": tuning, "version": "x", "scale": 1},
+        "benchmarks": [
+            b(op, "clvis", "clvis", 1000, 8000, 1e-3),
+            b(op, "numpy.cumsum(x)", "peer", 1000, 8000, 3e-3),
+            b(op, "pyopencl.ExclusiveScanKernel", "peer", 1000, 8000, 4e-3),
+            b(op, "copy kernel", "copy", 1000, 8000, 0.5e-3),
+            {"stats": {"median": 1, "min": 1, "rounds": 1}},  # not ours: ignored
+        ],
+    }
     p = tmp_path / "r.json"
     p.write_text(json.dumps(data))
     return p
@@ -51,7 +74,7 @@ def test_report_math(tmp_path):
     clv = next(r for r in rows if r.role == "clvis")
     assert clv.elems_per_s == pytest.approx(1e6)
     assert clv.gbs == pytest.approx(8e-3)
-    assert clv.copy_pct == pytest.approx(50.0)       # copy moves the same bytes in half the time
+    assert clv.copy_pct == pytest.approx(50.0)  # copy moves the same bytes in half the time
     rat = benchreport.ratios(rows)
     assert rat[("scan[int32]", "numpy.cumsum(x)")] == pytest.approx(3.0)
     checks = {t.describe(): (v, ok) for t, v, ok in benchreport.check(rows, "primitives", "cpu")}
@@ -59,7 +82,7 @@ def test_report_math(tmp_path):
     assert checks["scan[int32]: >= 5x pyopencl.ExclusiveScanKernel"] == (pytest.approx(4.0), False)
     assert checks["scan[int32]: >= 40% of copy bandwidth"] == (pytest.approx(50.0), True)
     missing = [k for k, (v, ok) in checks.items() if v is None]
-    assert all(not checks[k][1] for k in missing)    # unmeasured targets are not met
+    assert all(not checks[k][1] for k in missing)  # unmeasured targets are not met
     table = benchreport.format_table(rows, meta)
     assert "3.0x" in table and "50%" in table
 

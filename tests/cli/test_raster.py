@@ -45,14 +45,13 @@ def _render(capsys, *args):
 def test_render_hurricane(tmp_path, capsys):
     rc, out, err = _render(capsys, "--points", 20000, "--out", tmp_path, *SMALL)
     assert rc == 0, err
-    assert err == ""                        # --quiet; and no terminal here anyway
-    names = ["attribute-temperature", "colors", "depth", "velocity-angle", "velocity-magnitude",
-             "soft-z"]
+    assert err == ""  # --quiet; and no terminal here anyway
+    names = ["attribute-temperature", "colors", "depth", "velocity-angle", "velocity-magnitude", "soft-z"]
     assert sorted(p.stem for p in tmp_path.iterdir()) == sorted(names + ["overview"])
     for name in names:
         _assert_picture(tmp_path / f"{name}.png")
     overview = _png(tmp_path / "overview.png")
-    assert overview.shape[1] > 3 * 160 and overview.shape[0] > 2 * 90     # a 3 x 2 grid
+    assert overview.shape[1] > 3 * 160 and overview.shape[0] > 2 * 90  # a 3 x 2 grid
     assert len(np.unique(overview.reshape(-1, overview.shape[2]), axis=0)) > 10
     assert "20,000 points" in out and "160x90" in out and "covered" in out
     assert "drawn" in out and "culled" in out and "M points/s" in out
@@ -60,8 +59,22 @@ def test_render_hurricane(tmp_path, capsys):
 
 
 def test_render_terrain_attribute_colormap(tmp_path, capsys):
-    rc, out, err = _render(capsys, "--dataset", "terrain", "--points", 20000, "--attribute", "intensity",
-                           "--colormap", "magma", "--soft-z", "off", "--out", tmp_path, *SMALL)
+    rc, out, err = _render(
+        capsys,
+        "--dataset",
+        "terrain",
+        "--points",
+        20000,
+        "--attribute",
+        "intensity",
+        "--colormap",
+        "magma",
+        "--soft-z",
+        "off",
+        "--out",
+        tmp_path,
+        *SMALL,
+    )
     assert rc == 0, err
     names = {p.stem for p in tmp_path.iterdir()}
     assert names == {"attribute-intensity", "colors", "depth", "depth-filtered", "overview"}
@@ -71,13 +84,24 @@ def test_render_terrain_attribute_colormap(tmp_path, capsys):
 
 
 def test_render_depth_filter_option(tmp_path, capsys):
-    rc, _, err = _render(capsys, "--points", 5000, "--depth-filter", 3, "--soft-z", "1.05",
-                         "--out", tmp_path, *SMALL)
+    rc, _, err = _render(
+        capsys, "--points", 5000, "--depth-filter", 3, "--soft-z", "1.05", "--out", tmp_path, *SMALL
+    )
     assert rc == 0, err
     _assert_picture(tmp_path / "depth-filtered.png")
     _assert_picture(tmp_path / "soft-z.png")
-    rc, _, err = _render(capsys, "--dataset", "terrain", "--points", 5000, "--depth-filter", 0,
-                         "--out", tmp_path / "off", *SMALL)
+    rc, _, err = _render(
+        capsys,
+        "--dataset",
+        "terrain",
+        "--points",
+        5000,
+        "--depth-filter",
+        0,
+        "--out",
+        tmp_path / "off",
+        *SMALL,
+    )
     assert rc == 0, err
     assert not (tmp_path / "off" / "depth-filtered.png").exists()
 
@@ -86,13 +110,21 @@ def test_render_progress(tmp_path, capsys):
     rc, _, err = _render(capsys, "--points", 5000, "--size", "64x36", "--progress", "--out", tmp_path)
     assert rc == 0
     lines = err.splitlines()
-    for stage in ("generating hurricane", "uploading + Morton order", "rendering + resolving",
-                  "soft z", "writing PNGs"):
-        assert any(stage in line and line.rstrip().endswith(")") and " s " in line
-                   for line in lines), (stage, err)
-    assert "\r" not in err                  # not a terminal: one line per stage
-    rc, _, err = _render(capsys, "--points", 5000, "--size", "64x36", "--progress", "--quiet",
-                         "--out", tmp_path)
+    for stage in (
+        "generating hurricane",
+        "uploading + Morton order",
+        "rendering + resolving",
+        "soft z",
+        "writing PNGs",
+    ):
+        assert any(stage in line and line.rstrip().endswith(")") and " s " in line for line in lines), (
+            stage,
+            err,
+        )
+    assert "\r" not in err  # not a terminal: one line per stage
+    rc, _, err = _render(
+        capsys, "--points", 5000, "--size", "64x36", "--progress", "--quiet", "--out", tmp_path
+    )
     assert rc == 0 and err == ""
 
 
@@ -116,8 +148,12 @@ def test_progress_on_a_terminal(monkeypatch):
 
 def _small_cloud(n=5000):
     d = datasets.hurricane(n, seed=1)
-    return PointCloud(d["positions"], colors=d["colors"], velocity=d["velocity"],
-                      attributes={"pressure": d["attributes"]["pressure"]})
+    return PointCloud(
+        d["positions"],
+        colors=d["colors"],
+        velocity=d["velocity"],
+        attributes={"pressure": d["attributes"]["pressure"]},
+    )
 
 
 def test_render_ply_file(tmp_path, capsys):
@@ -135,7 +171,7 @@ def test_render_las_file(tmp_path, capsys):
     laspy = pytest.importorskip("laspy")
     d = datasets.terrain(5000, seed=2)
     las = laspy.create(point_format=3, file_version="1.2")
-    las.header.offsets = [500_000.0, 5_000_000.0, 0.0]      # UTM-like: clvis keeps an origin
+    las.header.offsets = [500_000.0, 5_000_000.0, 0.0]  # UTM-like: clvis keeps an origin
     las.header.scales = [0.01, 0.01, 0.01]
     las.x = d["positions"][:, 0] + 500_000.0
     las.y = d["positions"][:, 1] + 5_000_000.0
@@ -151,8 +187,7 @@ def test_render_las_file(tmp_path, capsys):
     assert "colored by intensity" in out
     for name in ("attribute-intensity", "colors", "depth"):
         _assert_picture(tmp_path / "png" / f"{name}.png")
-    rc, out, err = _render(capsys, path, "--attribute", "classification", "--out", tmp_path / "c",
-                           *SMALL)
+    rc, out, err = _render(capsys, path, "--attribute", "classification", "--out", tmp_path / "c", *SMALL)
     assert rc == 0, err
     _assert_picture(tmp_path / "c" / "attribute-classification.png")
 
@@ -167,8 +202,9 @@ def test_render_third_party_laz(tmp_path, capsys):
     assert rc == 0, err
     assert "colored by intensity" in out and "dropped" not in out
     one = _png(tmp_path / "one" / "attribute-intensity.png")[..., 3] > 0
-    rc, out, err = _render(capsys, path, "--view", "top", "--point-size", 3, "--transparent",
-                           "--out", tmp_path / "three", *SMALL)
+    rc, out, err = _render(
+        capsys, path, "--view", "top", "--point-size", 3, "--transparent", "--out", tmp_path / "three", *SMALL
+    )
     assert rc == 0, err
     assert "points 3x3 pixels" in out
     three = _png(tmp_path / "three" / "attribute-intensity.png")[..., 3] > 0
@@ -200,18 +236,18 @@ def test_render_colors_only(tmp_path, capsys):
     assert "its colors" in out
 
 
-@pytest.mark.parametrize("view", ["fit", "top", "front", "side", "hemisphere:0", "hemisphere:127",
-                                  "grid:0", "grid:383"])
+@pytest.mark.parametrize(
+    "view", ["fit", "top", "front", "side", "hemisphere:0", "hemisphere:127", "grid:0", "grid:383"]
+)
 def test_render_views(tmp_path, capsys, view):
     path = tmp_path / "cloud.npz"
     save_npz(path, _small_cloud(20000))
-    rc, out, err = _render(capsys, path, "--view", view, "--soft-z", "off", "--out", tmp_path / "png",
-                           *SMALL)
+    rc, out, err = _render(capsys, path, "--view", view, "--soft-z", "off", "--out", tmp_path / "png", *SMALL)
     assert rc == 0, err
     assert f"view      {view}, 160x90" in out
     a = _png(tmp_path / "png" / "depth.png")
     assert a.shape == (90, 160, 4)
-    if not view.startswith("grid"):     # a grid camera may look past the cloud
+    if not view.startswith("grid"):  # a grid camera may look past the cloud
         _assert_picture(tmp_path / "png" / "attribute-pressure.png")
 
 
@@ -261,24 +297,31 @@ def test_shrink_keeps_points():
     assert s[..., 3].astype(bool).sum() == 2
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--attribute", "nope", "--points", "1000"],
-     ("no attribute 'nope' in the embedded hurricane; it has pressure, temperature, speed and the "
-      "coordinates x, y, z")),
-    (["--size", "12by4"], "argument --size: expected WIDTHxHEIGHT"),
-    (["--size", "0x10"], "argument --size: width and height must lie in"),
-    (["--view", "grid:384"], "argument --view: grid:K needs K in 0..383"),
-    (["--view", "diagonal"], "argument --view: expected fit, top"),
-    (["--colormap", "viridiss"], "unknown colormap 'viridiss'"),
-    (["--points", "-5"], "argument --points: expected a positive integer"),
-    (["--soft-z", "0.5"], "argument --soft-z: expected a factor >= 1"),
-    (["--depth-filter", "x"], "argument --depth-filter: expected pyramid levels"),
-    (["--point-size", "0"], "argument --point-size: expected a positive integer in 1..64"),
-    (["--point-size", "65"], "argument --point-size: expected a positive integer in 1..64"),
-    (["--dataset", "moon"], "argument --dataset: invalid choice"),
-    (["missing.ply"], "missing.ply: no such file"),
-    (["cloud.ply", "--points", "10"], "--dataset and --points choose an embedded cloud"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["--attribute", "nope", "--points", "1000"],
+            (
+                "no attribute 'nope' in the embedded hurricane; it has pressure, temperature, speed and the "
+                "coordinates x, y, z"
+            ),
+        ),
+        (["--size", "12by4"], "argument --size: expected WIDTHxHEIGHT"),
+        (["--size", "0x10"], "argument --size: width and height must lie in"),
+        (["--view", "grid:384"], "argument --view: grid:K needs K in 0..383"),
+        (["--view", "diagonal"], "argument --view: expected fit, top"),
+        (["--colormap", "viridiss"], "unknown colormap 'viridiss'"),
+        (["--points", "-5"], "argument --points: expected a positive integer"),
+        (["--soft-z", "0.5"], "argument --soft-z: expected a factor >= 1"),
+        (["--depth-filter", "x"], "argument --depth-filter: expected pyramid levels"),
+        (["--point-size", "0"], "argument --point-size: expected a positive integer in 1..64"),
+        (["--point-size", "65"], "argument --point-size: expected a positive integer in 1..64"),
+        (["--dataset", "moon"], "argument --dataset: invalid choice"),
+        (["missing.ply"], "missing.ply: no such file"),
+        (["cloud.ply", "--points", "10"], "--dataset and --points choose an embedded cloud"),
+    ],
+)
 def test_render_errors(tmp_path, capsys, monkeypatch, args, message):
     monkeypatch.chdir(tmp_path)
     write_ply(tmp_path / "cloud.ply", _small_cloud(100))
@@ -286,16 +329,22 @@ def test_render_errors(tmp_path, capsys, monkeypatch, args, message):
     assert rc == 2
     assert err.startswith("clvis render: error: ") and message in err, err
     assert err.count("\n") == 1 and "Traceback" not in err
-    assert not (tmp_path / "clvis-render").exists()       # nothing written
+    assert not (tmp_path / "clvis-render").exists()  # nothing written
 
 
-@pytest.mark.parametrize("name, content, message", [
-    ("bad.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty float x\nend_header\n",
-     "PLY file"),
-    ("bad.npz", b"not a zip", "malformed NPZ file"),
-    ("cloud.txt", b"1 2 3\n", "unknown point cloud format '.txt'"),
-    ("empty.npy", None, "holds no points"),
-])
+@pytest.mark.parametrize(
+    "name, content, message",
+    [
+        (
+            "bad.ply",
+            b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty float x\nend_header\n",
+            "PLY file",
+        ),
+        ("bad.npz", b"not a zip", "malformed NPZ file"),
+        ("cloud.txt", b"1 2 3\n", "unknown point cloud format '.txt'"),
+        ("empty.npy", None, "holds no points"),
+    ],
+)
 def test_render_unreadable_files(tmp_path, capsys, name, content, message):
     path = tmp_path / name
     if content is None:
@@ -314,8 +363,14 @@ def test_render_error_exit_status(tmp_path):
     env = dict(os.environ)
     root = str(Path(cli.__file__).resolve().parent.parent)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [root, env.get("PYTHONPATH")]))
-    r = subprocess.run([sys.executable, "-m", "clvis.cli", "render", "nowhere.las"], cwd=tmp_path,
-                       env=env, capture_output=True, text=True, check=False)
+    r = subprocess.run(
+        [sys.executable, "-m", "clvis.cli", "render", "nowhere.las"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert r.returncode == 2
     assert r.stderr == "clvis render: error: nowhere.las: no such file\n"
     assert r.stdout == ""

@@ -24,10 +24,11 @@ def _png(path):
 def test_iso_default_isovalue_shows_a_scan(tmp_path, capsys):
     """nibabel's anatomical.nii (a real MRI): Otsu's threshold shows a surface
     over a large part of the frame, where the middle of the range gives blobs."""
-    assert cli.main(["iso", os.path.join(NIB, "anatomical.nii"), "--size", "96x72",
-                     "--out", str(tmp_path)]) == 0
+    assert (
+        cli.main(["iso", os.path.join(NIB, "anatomical.nii"), "--size", "96x72", "--out", str(tmp_path)]) == 0
+    )
     out = capsys.readouterr().out
-    a = _png(tmp_path / "iso.png")[-72:]        # under the label band
+    a = _png(tmp_path / "iso.png")[-72:]  # under the label band
     surface = (np.abs(a[..., :3].astype(int) - [20, 20, 26]).sum(axis=2) > 30).mean()
     assert surface > 0.15, (surface, out)
 
@@ -44,12 +45,24 @@ def test_iso_four_d_nifti_needs_an_index(tmp_path, capsys):
 
 def test_raw_shape_dtype_and_spacing(tmp_path, capsys):
     v = datasets.marschner_lobb(20)["volume"].astype(np.float32)
-    raw = tmp_path / "blob.raw"                    # no shape or type in the name
+    raw = tmp_path / "blob.raw"  # no shape or type in the name
     v.tofile(raw)
     assert cli.main(["iso", str(raw), "--size", "32x24", "--out", str(tmp_path)]) == 2
     assert "blob.raw" in capsys.readouterr().err
-    args = ["iso", str(raw), "--shape", "20x20x20", "--dtype", "float32", "--isovalue", "0.5",
-            "--size", "32x24", "--out", str(tmp_path)]
+    args = [
+        "iso",
+        str(raw),
+        "--shape",
+        "20x20x20",
+        "--dtype",
+        "float32",
+        "--isovalue",
+        "0.5",
+        "--size",
+        "32x24",
+        "--out",
+        str(tmp_path),
+    ]
     assert cli.main(args) == 0
     capsys.readouterr()
     assert cli.main(args + ["--spacing", "1,1,4"]) == 0
@@ -71,7 +84,7 @@ def test_iso_isovalue_outside_range_warns(tmp_path, capsys):
 def test_all_nan_volume_is_one_clvis_error(tmp_path, capsys):
     np.save(tmp_path / "nan.npy", np.full((8, 8, 8), np.nan, np.float32))
     with warnings.catch_warnings():
-        warnings.simplefilter("error")             # no numpy RuntimeWarning before the error
+        warnings.simplefilter("error")  # no numpy RuntimeWarning before the error
         assert cli.main(["iso", str(tmp_path / "nan.npy"), "--size", "32x24"]) == 2
     err = capsys.readouterr().err
     assert "no finite sample" in err and len(err.strip().splitlines()) == 1
@@ -95,8 +108,10 @@ def test_gauss_reads_every_format(tmp_path, capsys, kind):
         path, extra = os.path.join(DATA, "laspy_simple.laz"), []
     else:
         path, extra = os.path.join(DATA, "pyvista_ant.ply"), []
-    assert cli.main(["gauss", path, "--lod", "low", "--size", "48x48", "--out", str(tmp_path / "o"),
-                     *extra]) == 0, capsys.readouterr().err
+    assert (
+        cli.main(["gauss", path, "--lod", "low", "--size", "48x48", "--out", str(tmp_path / "o"), *extra])
+        == 0
+    ), capsys.readouterr().err
     assert _png(tmp_path / "o" / "gauss.png").std() > 1
 
 

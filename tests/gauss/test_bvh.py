@@ -40,9 +40,10 @@ def check(boxes, queue):
     np.testing.assert_array_equal(leaf_boxes.view(np.uint32), want_leaves.view(np.uint32))
     for field in ("left", "right"):
         np.testing.assert_array_equal(nodes[field], want_nodes[field], err_msg=field)
-    for field in ("lo", "hi"):    # bits: -0.0 and +0.0 count
-        np.testing.assert_array_equal(nodes[field].view(np.uint32), want_nodes[field].view(np.uint32),
-                                      err_msg=field)
+    for field in ("lo", "hi"):  # bits: -0.0 and +0.0 count
+        np.testing.assert_array_equal(
+            nodes[field].view(np.uint32), want_nodes[field].view(np.uint32), err_msg=field
+        )
     assert nodes.tobytes() == want_nodes.tobytes()
     ref.check_bvh(nodes, order, leaf_boxes, host)
     np.testing.assert_array_equal(t.codes.get(), ref.morton_codes(host)[want_order])
@@ -112,9 +113,14 @@ def test_device_input(queue):
     check(view, queue)
 
 
-@given(n=st.integers(0, 600), seed=st.integers(0, 2**32 - 1), profile=st.sampled_from(["cpu", "gpu"]),
-       spread=st.sampled_from([1e-3, 1.0, 1e5]), size=st.sampled_from([0.0, 0.01, 1.0, 100.0]),
-       grid=st.booleans())
+@given(
+    n=st.integers(0, 600),
+    seed=st.integers(0, 2**32 - 1),
+    profile=st.sampled_from(["cpu", "gpu"]),
+    spread=st.sampled_from([1e-3, 1.0, 1e5]),
+    size=st.sampled_from([0.0, 0.01, 1.0, 100.0]),
+    grid=st.booleans(),
+)
 def test_property(device, n, seed, profile, spread, size, grid):
     """Random sizes and boxes (on a coarse grid: many equal codes and ties)."""
     boxes = random_boxes(n, seed, spread, size)
@@ -139,7 +145,7 @@ def test_large(device, large):
     to the (checked) reference, so the invariants hold too."""
     boxes, want = large
     got = bvh.build_bvh(boxes, queue=runtime.queue_for(device)).get()
-    for g, w in zip(got, want):
+    for g, w in zip(got, want, strict=True):
         assert g.tobytes() == w.tobytes()
 
 
@@ -155,20 +161,20 @@ def test_check_bvh_rejects_corruption():
 
     leafy = int(np.flatnonzero(nodes["left"] & bvh.BVH_LEAF)[0])
     bad = nodes.copy()
-    bad["right"][leafy] = nodes["left"][leafy]         # a leaf twice (boxes still contain it)
+    bad["right"][leafy] = nodes["left"][leafy]  # a leaf twice (boxes still contain it)
     rejects(f"leaf {nodes['left'][leafy] & ~bvh.BVH_LEAF} is reached more than once", nodes=bad)
     bad = nodes.copy()
     inner = int(np.flatnonzero((nodes["right"] & bvh.BVH_LEAF) == 0)[-1])
-    bad["right"][inner] = 0                            # a cycle back to the root
+    bad["right"][inner] = 0  # a cycle back to the root
     rejects("internal node 0 is reached more than once", nodes=bad)
     bad = nodes.copy()
-    bad["left"][3] = 5000                              # out of range
+    bad["left"][3] = 5000  # out of range
     rejects("out of range", nodes=bad)
     bad = nodes.copy()
     bad["right"][7] = bvh.BVH_NONE
     rejects("NONE", nodes=bad)
     bad = nodes.copy()
-    bad["lo"][0, 1] += np.float32(1.0)                 # the root no longer contains a child
+    bad["lo"][0, 1] += np.float32(1.0)  # the root no longer contains a child
     rejects("does not contain", nodes=bad)
     bad = nodes.copy()
     bad["hi"][leafy, 0] = bad["lo"][leafy, 0]
@@ -207,16 +213,18 @@ def test_bad_input(queue):
         with pytest.raises(clvis.DataError, match=f"row {row}"):
             bvh.build_bvh(b, queue=queue)
     b = good.copy()
-    b[4, 2] = b[4, 5] + 1                              # lo > hi
+    b[4, 2] = b[4, 5] + 1  # lo > hi
     b[8, 0] = np.nan
     with pytest.raises(clvis.DataError, match="row 4"):
         bvh.build_bvh(b, queue=queue)
     with pytest.raises(clvis.DataError, match="row 6"):
-        bvh.build_bvh(cla.to_device(queue, np.where(np.arange(10)[:, None] == 6, np.nan, good)
-                                    .astype(np.float32)), queue=queue)
+        bvh.build_bvh(
+            cla.to_device(queue, np.where(np.arange(10)[:, None] == 6, np.nan, good).astype(np.float32)),
+            queue=queue,
+        )
     big = np.finfo(np.float32).max
     b = good.copy()
-    b[2] = [big, 0, 0, big, 1, 1]                      # lo + hi overflows: no finite centre
+    b[2] = [big, 0, 0, big, 1, 1]  # lo + hi overflows: no finite centre
     with pytest.raises(clvis.DataError, match="row 2"):
         bvh.build_bvh(b, queue=queue)
     huge = np.lib.stride_tricks.as_strided(good, shape=(2**31, 6), strides=(0, 4))
@@ -225,7 +233,7 @@ def test_bad_input(queue):
 
 
 def _build(queue, src):
-    with warnings.catch_warnings():       # drivers may log remarks on success
+    with warnings.catch_warnings():  # drivers may log remarks on success
         warnings.simplefilter("ignore", cl.CompilerWarning)
         return cl.Program(queue.context, src).build(["-I", str(runtime.INCLUDE_DIR)])
 
@@ -234,7 +242,9 @@ def test_node_layout(device):
     """BVH_NODE_DTYPE is clvis_bvh_node: size, offsets, and the fields as a
     kernel reads them from records the host wrote."""
     q = runtime.queue_for(device)
-    prg = _build(q, """
+    prg = _build(
+        q,
+        """
     #include "clvis/bvh.h"
     kernel void probe(global const clvis_bvh_node *nodes, global const float *leaf_boxes, global uint *out) {
         out[0] = sizeof(clvis_bvh_node);
@@ -253,7 +263,8 @@ def test_node_layout(device):
         clvis_bvh_leaf_box(leaf_boxes, 1, &lo, &hi);
         vstore3(as_uint3(lo), 0, out + 16);
         vstore3(as_uint3(hi), 0, out + 19);
-    }""")
+    }""",
+    )
     dt = bvh.BVH_NODE_DTYPE
     rec = np.zeros(2, dt)
     rec[1] = ((1.5, -2.0, 3.25), 0x80000007, (4.0, 5.5, -0.0), 42)
@@ -262,8 +273,11 @@ def test_node_layout(device):
     prg.probe(q, (1,), (1,), cla.to_device(q, rec).data, cla.to_device(q, leaves).data, out.data)
     got = out.get()
     np.testing.assert_array_equal(got[16:22].view(np.float32), leaves[1])
-    assert list(got[:5]) == [dt.itemsize, dt.fields["lo"][1], dt.fields["left"][1], dt.fields["hi"][1],
-                             dt.fields["right"][1]] == [32, 0, 12, 16, 28]
+    assert (
+        list(got[:5])
+        == [dt.itemsize, dt.fields["lo"][1], dt.fields["left"][1], dt.fields["hi"][1], dt.fields["right"][1]]
+        == [32, 0, 12, 16, 28]
+    )
     assert got[5] == bvh.BVH_LEAF and got[6] == bvh.BVH_NONE
     assert got[8:16].tobytes() == rec[1].tobytes()
     assert ref.BVH_NODE_DTYPE == dt and ref.BVH_LEAF == bvh.BVH_LEAF and ref.BVH_NONE == bvh.BVH_NONE
@@ -274,7 +288,9 @@ def test_slab(device):
     zero and -0.0 direction components, faces, origins inside; random rays
     agree with a float64 slab test (outside a thin margin around grazing)."""
     q = runtime.queue_for(device)
-    prg = _build(q, """
+    prg = _build(
+        q,
+        """
     #pragma OPENCL FP_CONTRACT OFF
     #include "clvis/ray.h"
     kernel void slab(global const float *o, global const float *d, global const float *box,
@@ -292,39 +308,49 @@ def test_slab(device):
         tx = clvis_ray_min(tx, tmax);
         out[3 * i] = te <= tx; out[3 * i + 1] = te; out[3 * i + 2] = tx;
         vstore3(vload3(0, inv), i, out + 3 * get_global_size(0));
-    }""")
+    }""",
+    )
     kernel = cl.Kernel(prg, "slab")
 
     def run(o, d, box, tmin=0.0, tmax=np.inf):
         o, d, box = (np.ascontiguousarray(a, np.float32) for a in (o, d, box))
         m = o.shape[0]
         out = cla.empty(q, 6 * m, np.float32)
-        kernel(q, (m,), None, cla.to_device(q, o).data, cla.to_device(q, d).data,
-               cla.to_device(q, box).data, np.float32(tmin), np.float32(tmax), out.data)
+        kernel(
+            q,
+            (m,),
+            None,
+            cla.to_device(q, o).data,
+            cla.to_device(q, d).data,
+            cla.to_device(q, box).data,
+            np.float32(tmin),
+            np.float32(tmax),
+            out.data,
+        )
         r = out.get()
-        return r[:3 * m].reshape(m, 3), r[3 * m:].reshape(m, 3)
+        return r[: 3 * m].reshape(m, 3), r[3 * m :].reshape(m, 3)
 
     unit = [0, 0, 0, 1, 1, 1]
     cases = [  # origin, direction, hit, t_enter, t_exit
         ((-1, 0.5, 0.5), (1, 0, 0), 1, 1.0, 2.0),
-        ((-1, 1.5, 0.5), (1, 0, 0), 0, None, None),       # parallel, outside the y slab
+        ((-1, 1.5, 0.5), (1, 0, 0), 0, None, None),  # parallel, outside the y slab
         # in a face plane, parallel to it: the zero's sign says which side
-        ((-1, 1.0, 0.5), (1, -0.0, 0), 1, 1.0, 2.0),      # face y = 1, moving in (-0.0)
-        ((-1, 1.0, 0.5), (1, 0.0, 0), 0, None, None),     # face y = 1, moving out (+0.0)
-        ((-1, 0.0, 0.5), (1, 0.0, 0), 1, 1.0, 2.0),       # face y = 0, moving in
-        ((-1, 0.0, 0.5), (1, -0.0, 0), 0, None, None),    # face y = 0, moving out
-        ((0.5, 0.5, 0.5), (0, 0, -1), 1, 0.0, 0.5),       # from inside
-        ((2, 0.5, 0.5), (1, 0, 0), 0, None, None),        # behind
+        ((-1, 1.0, 0.5), (1, -0.0, 0), 1, 1.0, 2.0),  # face y = 1, moving in (-0.0)
+        ((-1, 1.0, 0.5), (1, 0.0, 0), 0, None, None),  # face y = 1, moving out (+0.0)
+        ((-1, 0.0, 0.5), (1, 0.0, 0), 1, 1.0, 2.0),  # face y = 0, moving in
+        ((-1, 0.0, 0.5), (1, -0.0, 0), 0, None, None),  # face y = 0, moving out
+        ((0.5, 0.5, 0.5), (0, 0, -1), 1, 0.0, 0.5),  # from inside
+        ((2, 0.5, 0.5), (1, 0, 0), 0, None, None),  # behind
         ((0.5, 0.5, -3), (0, -0.0, 2), 1, 1.5, 2.0),
         ((0.5, 0.5, -3), (1e-30, -1e-38, 2), 1, 1.5, 2.0),  # tiny and subnormal components
-        ((-1, -1, -1), (1, 1, 1), 1, 1.0, 2.0),           # through the corners
+        ((-1, -1, -1), (1, 1, 1), 1, 1.0, 2.0),  # through the corners
     ]
     o = np.array([c[0] for c in cases])
     d = np.array([c[1] for c in cases])
     res, inv = run(o, d, np.tile(unit, (len(cases), 1)))
     assert np.isfinite(inv).all() and (inv != 0).all()
     assert not np.isnan(res).any()
-    for (_, _, hit, te, tx), r in zip(cases, res):
+    for (_, _, hit, te, tx), r in zip(cases, res, strict=True):
         assert r[0] == hit, (cases, res)
         if hit:
             assert r[1] == pytest.approx(te, abs=1e-6) and r[2] == pytest.approx(tx, rel=1e-6)
@@ -348,8 +374,12 @@ def test_slab(device):
     o[zero] = target[zero]
     res, _ = run(o, d, box)
     # float64 reference: per axis the parameter interval, exact for zero components
-    o64, d64, lo64, hi64 = o.astype(np.float64), d.astype(np.float64), box[:, :3].astype(np.float64), \
-        box[:, 3:].astype(np.float64)
+    o64, d64, lo64, hi64 = (
+        o.astype(np.float64),
+        d.astype(np.float64),
+        box[:, :3].astype(np.float64),
+        box[:, 3:].astype(np.float64),
+    )
     with np.errstate(divide="ignore", invalid="ignore"):
         t0, t1 = (lo64 - o64) / d64, (hi64 - o64) / d64
     inside = (o64 >= lo64) & (o64 <= hi64)

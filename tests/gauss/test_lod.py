@@ -54,7 +54,7 @@ def _cases():
     neg = (rng.standard_normal((20, 12, 18)) * 100 - 30).astype(F32)
     equal = np.full((11, 19, 8), 3.25, F32)
     dense = rng.random((16, 16, 24)).astype(F32)
-    dense[8:, 8:, :8] = -0.75          # one tile beside voxel leaves
+    dense[8:, 8:, :8] = -0.75  # one tile beside voxel leaves
     return [
         ("empty", np.zeros((5, 6, 7), F32), {"threshold": 0.0}),
         ("zero-size", np.zeros((0, 4, 4), F32), {}),
@@ -62,8 +62,11 @@ def _cases():
         ("full, tiles", np.full((16, 16, 16), 2.0, F32), {}),
         ("full, one tile", dense, {"spacing": (0.5, 0.25, 2.0)}),
         ("13x17x9 threshold", odd, {"threshold": 0.3}),
-        ("random mask, negative", neg, {"mask": rng.random(neg.shape) < 0.35,
-                                        "spacing": (0.1, 0.2, 0.3), "origin": (-5.0, 7.5, 1e3)}),
+        (
+            "random mask, negative",
+            neg,
+            {"mask": rng.random(neg.shape) < 0.35, "spacing": (0.1, 0.2, 0.3), "origin": (-5.0, 7.5, 1e3)},
+        ),
         ("dense blocks", neg, {"mask": np.kron(rng.random((10, 6, 9)) < 0.7, np.ones((2, 2, 2), bool))}),
         ("all equal", equal, {"threshold": 3.0, "origin": (1.0, 2.0, 3.0)}),
     ]
@@ -81,12 +84,12 @@ def test_matches_reference(queue, lod):
 def test_known_values(queue):
     # a full 16^3 volume of 2.0: 8 tiles
     vol = np.full((16, 16, 16), 2.0, F32)
-    sp = (1.0, 2.0, 4.0)     # dz, dy, dx
+    sp = (1.0, 2.0, 4.0)  # dz, dy, dx
     low = gaussians_from_volume(vol, "low", spacing=sp, queue=queue)
     assert len(low) == 8
     np.testing.assert_array_equal(low.scales, np.tile([[16.0, 8.0, 4.0]], (8, 1)))
     np.testing.assert_array_equal(low.means[0], [3.5 * 4, 3.5 * 2, 3.5])
-    np.testing.assert_array_equal(low.means[1], [11.5 * 4, 3.5 * 2, 3.5])   # x fastest
+    np.testing.assert_array_equal(low.means[1], [11.5 * 4, 3.5 * 2, 3.5])  # x fastest
     np.testing.assert_array_equal(low.values, np.full(8, 2.0, F32))
     med = gaussians_from_volume(vol, "medium", spacing=sp, queue=queue)
     assert len(med) == 64
@@ -99,8 +102,9 @@ def test_known_values(queue):
     one = np.zeros((9, 10, 11), F32)
     one[4, 7, 9] = -2.5
     for lod in LODS:
-        g = gaussians_from_volume(one, lod, mask=one != 0, spacing=(0.5, 2.0, 3.0), origin=(1, 2, 3),
-                                  queue=queue)
+        g = gaussians_from_volume(
+            one, lod, mask=one != 0, spacing=(0.5, 2.0, 3.0), origin=(1, 2, 3), queue=queue
+        )
         np.testing.assert_array_equal(g.means, [[9 * 3.0 + 1, 7 * 2.0 + 2, 4 * 0.5 + 3]])
         np.testing.assert_array_equal(g.scales, [[1.5, 1.0, 0.25]])
         np.testing.assert_array_equal(g.values, [-2.5])
@@ -110,15 +114,15 @@ def test_medium_sparse_order(queue):
     """A full 2^3 block, a partial block and a lone voxel of one sparse leaf."""
     vol = np.arange(512, dtype=F32).reshape(8, 8, 8)
     m = np.zeros((8, 8, 8), bool)
-    m[0:2, 0:2, 0:2] = True            # block 0: full
-    m[1, 0, 2] = m[0, 1, 3] = True     # block 1 (x 2..3): voxels [0,1,3] then [1,0,2]
-    m[7, 7, 7] = True                  # block 63
+    m[0:2, 0:2, 0:2] = True  # block 0: full
+    m[1, 0, 2] = m[0, 1, 3] = True  # block 1 (x 2..3): voxels [0,1,3] then [1,0,2]
+    m[7, 7, 7] = True  # block 63
     g = gaussians_from_volume(vol, "medium", mask=m, queue=queue)
     np.testing.assert_array_equal(g.means, [[0.5, 0.5, 0.5], [3, 1, 0], [2, 0, 1], [7, 7, 7]])
     np.testing.assert_array_equal(g.scales, [[1, 1, 1], [0.5] * 3, [0.5] * 3, [0.5] * 3])
     np.testing.assert_array_equal(g.values, [np.mean(vol[0:2, 0:2, 0:2]), vol[0, 1, 3], vol[1, 0, 2], 511])
     high = gaussians_from_volume(vol, "high", mask=m, queue=queue)
-    np.testing.assert_array_equal(high.values, vol[m])      # z-y-x order
+    np.testing.assert_array_equal(high.values, vol[m])  # z-y-x order
     low = gaussians_from_volume(vol, "low", mask=m, queue=queue)
     np.testing.assert_array_equal(low.means, [[3.5, 3.5, 3.5]])
     np.testing.assert_array_equal(low.scales, [[4, 4, 4]])
@@ -134,19 +138,23 @@ def test_low_mean(queue):
     g = _check(queue, vol, "low", mask=mask)
     sv = SparseVolume.from_dense(vol, mask=mask)
     for i, (z, y, x) in enumerate(sv.coords):
-        leaf, lm = vol[z:z + 8, y:y + 8, x:x + 8], mask[z:z + 8, y:y + 8, x:x + 8]
+        leaf, lm = vol[z : z + 8, y : y + 8, x : x + 8], mask[z : z + 8, y : y + 8, x : x + 8]
         np.testing.assert_allclose(g.values[i], leaf[lm].astype(np.float64).mean(), rtol=1e-5, atol=1e-3)
 
 
-@given(shape=st.tuples(st.integers(1, 20), st.integers(1, 20), st.integers(1, 20)),
-       density=st.sampled_from([0.0, 0.05, 0.5, 0.95, 1.0]), seed=st.integers(0, 2**31),
-       lod=st.sampled_from(LODS), blocky=st.booleans())
+@given(
+    shape=st.tuples(st.integers(1, 20), st.integers(1, 20), st.integers(1, 20)),
+    density=st.sampled_from([0.0, 0.05, 0.5, 0.95, 1.0]),
+    seed=st.integers(0, 2**31),
+    lod=st.sampled_from(LODS),
+    blocky=st.booleans(),
+)
 def test_property(device, profile, shape, density, seed, lod, blocky):
     rng = np.random.default_rng(seed)
     vol = (rng.standard_normal(shape) * 10).astype(F32)
-    if blocky:     # 2^3 blocks all active or not: full blocks in sparse leaves
+    if blocky:  # 2^3 blocks all active or not: full blocks in sparse leaves
         m = np.kron(rng.random([-(-s // 2) for s in shape]) < density, np.ones((2, 2, 2), bool))
-        m = m[:shape[0], :shape[1], :shape[2]]
+        m = m[: shape[0], : shape[1], : shape[2]]
     else:
         m = rng.random(shape) < density
     with runtime.configure(tuning=profile):
@@ -156,12 +164,15 @@ def test_property(device, profile, shape, density, seed, lod, blocky):
 # --------------------------------------------------------------------------
 # the sparse layout
 
+
 def test_sparse_from_dense_matches_reference():
     rng = np.random.default_rng(5)
-    vols = [(rng.standard_normal((13, 17, 9)).astype(F32), {"threshold": 0.2}),
-            (np.full((16, 8, 24), 1.5, F32), {}),
-            (rng.standard_normal((8, 8, 8)).astype(np.float64), {"mask": rng.random((8, 8, 8)) < 0.1}),
-            (np.zeros((3, 0, 2), F32), {})]
+    vols = [
+        (rng.standard_normal((13, 17, 9)).astype(F32), {"threshold": 0.2}),
+        (np.full((16, 8, 24), 1.5, F32), {}),
+        (rng.standard_normal((8, 8, 8)).astype(np.float64), {"mask": rng.random((8, 8, 8)) < 0.1}),
+        (np.zeros((3, 0, 2), F32), {}),
+    ]
     for vol, kw in vols:
         sv = SparseVolume.from_dense(vol, **kw)
         want = ref.sparse_from_dense(vol, **kw)
@@ -178,11 +189,11 @@ def test_sparse_from_dense_matches_reference():
 
 def test_sparse_layout_details():
     vol = np.zeros((16, 16, 16), F32)
-    vol[:8, :8, :8] = 4.0                  # a tile
+    vol[:8, :8, :8] = 4.0  # a tile
     vol[:8, :8, 8:] = 4.0
-    vol[0, 0, 8] = 0.0                     # one voxel differs: not a tile
-    vol[8:, :8, :8] = 0.0                  # all-active zeros: a tile of 0.0
-    vol[8, 0, 0] = -0.0                    # -0.0 differs in bits: not a tile
+    vol[0, 0, 8] = 0.0  # one voxel differs: not a tile
+    vol[8:, :8, :8] = 0.0  # all-active zeros: a tile of 0.0
+    vol[8, 0, 0] = -0.0  # -0.0 differs in bits: not a tile
     sv = SparseVolume.from_dense(vol)
     np.testing.assert_array_equal(sv.coords[:3], [[0, 0, 0], [0, 0, 8], [0, 8, 0]])
     assert sv.tiles.tolist() == [True, False, True, True, False, True, True, True]
@@ -231,11 +242,27 @@ def test_bad_input():
     bad[2, 3, 4] = np.nan
     assert SparseVolume.from_dense(bad, threshold=0.5).n_active == vol.size - 1
     with pytest.raises(clvis.DataError, match="leaves must be unique"):
-        SparseVolume((16, 8, 8), (1, 1, 1), (0, 0, 0), [[8, 0, 0], [0, 0, 0]],
-                     np.ones((2, 16), np.uint32), [False, False], [0, 0], np.zeros((2, 512)))
+        SparseVolume(
+            (16, 8, 8),
+            (1, 1, 1),
+            (0, 0, 0),
+            [[8, 0, 0], [0, 0, 0]],
+            np.ones((2, 16), np.uint32),
+            [False, False],
+            [0, 0],
+            np.zeros((2, 512)),
+        )
     with pytest.raises(clvis.DataError, match="outside the volume"):
-        SparseVolume((4, 8, 8), (1, 1, 1), (0, 0, 0), [[0, 0, 0]], np.full((1, 16), 0xFFFFFFFF, np.uint32),
-                     [False], [0], np.zeros((1, 512)))
+        SparseVolume(
+            (4, 8, 8),
+            (1, 1, 1),
+            (0, 0, 0),
+            [[0, 0, 0]],
+            np.full((1, 16), 0xFFFFFFFF, np.uint32),
+            [False],
+            [0],
+            np.zeros((1, 512)),
+        )
 
 
 def test_lod_table(queue):
@@ -264,6 +291,7 @@ def test_lod_table(queue):
 # tests make a minimal OpenVDB file (header, grid descriptors, transform, an
 # empty tree), let tinyvdb fill a grid and save it, and read that back.
 
+
 def _s(text: str) -> bytes:
     b = text.encode()
     return struct.pack("<I", len(b)) + b
@@ -271,8 +299,9 @@ def _s(text: str) -> bytes:
 
 def _scale_translate(voxel_size, translation) -> bytes:
     vs, t = np.asarray(voxel_size, float), np.asarray(translation, float)
-    return _s("ScaleTranslateMap") + b"".join(struct.pack("<3d", *v)
-                                              for v in (t, vs, vs, 1 / vs, 1 / vs**2, 0.5 / vs))
+    return _s("ScaleTranslateMap") + b"".join(
+        struct.pack("<3d", *v) for v in (t, vs, vs, 1 / vs, 1 / vs**2, 0.5 / vs)
+    )
 
 
 def _affine(m) -> bytes:
@@ -282,11 +311,11 @@ def _affine(m) -> bytes:
 def _vdb_template(grids) -> bytes:
     """An OpenVDB (format 224) file of empty grids: (name, type, transform bytes)."""
     out = struct.pack("<qIIIB", 0x56444220, 224, 11, 0, 1) + b"0EA4B2C5-0F55-4B24-9C25-5CFD16E1E1CE"
-    out += struct.pack("<II", 0, len(grids))        # no file metadata; grid count
+    out += struct.pack("<II", 0, len(grids))  # no file metadata; grid count
     for name, type_name, transform in grids:
-        body = struct.pack("<II", 0, 0) + transform + struct.pack("<I", 1)    # no compression, no metadata
-        body += struct.pack("<i" if "int" in type_name else "<f", 0)          # background
-        body += struct.pack("<ii", 0, 0)                                      # no root tiles, no children
+        body = struct.pack("<II", 0, 0) + transform + struct.pack("<I", 1)  # no compression, no metadata
+        body += struct.pack("<i" if "int" in type_name else "<f", 0)  # background
+        body += struct.pack("<ii", 0, 0)  # no root tiles, no children
         out += _s(name) + _s(type_name) + _s("")
         pos = len(out) + 24
         out += struct.pack("<qqq", pos, pos + len(body), pos + len(body)) + body
@@ -296,14 +325,19 @@ def _vdb_template(grids) -> bytes:
 def _write_vdb(tmp_path, name, grids, fill):
     """Write the template, fill grids with tinyvdb ({index: (ijk (N, 3), values)}) and save."""
     import tinyvdb  # a test dependency: fails (not skips) when missing
+
     template = tmp_path / f"{name}-template.vdb"
     template.write_bytes(_vdb_template(grids))
     path = tmp_path / f"{name}.vdb"
     with tinyvdb.open(str(template)) as f:
         f.read_grids()
         for i, (ijk, vals) in fill.items():
-            f.extend_grid_from_sparse(i, np.ascontiguousarray(ijk, np.int32).tobytes(),
-                                      np.ascontiguousarray(vals, np.float32).tobytes(), grids[i][0])
+            f.extend_grid_from_sparse(
+                i,
+                np.ascontiguousarray(ijk, np.int32).tobytes(),
+                np.ascontiguousarray(vals, np.float32).tobytes(),
+                grids[i][0],
+            )
         f.save(str(path))
     return path
 
@@ -313,31 +347,33 @@ def _random_voxels(seed=4):
     vol = (rng.standard_normal((19, 14, 23)) * 5).astype(F32)
     act = rng.random(vol.shape) < 0.2
     act[:8, :8, :8] = True
-    vol[:8, :8, :8] = 0.5                           # a tile once aligned
-    shift = np.array([-37, 5, 250])                 # VDB index (i, j, k) = (x, y, z) + shift
+    vol[:8, :8, :8] = 0.5  # a tile once aligned
+    shift = np.array([-37, 5, 250])  # VDB index (i, j, k) = (x, y, z) + shift
     zyx = np.argwhere(act)
     return vol, act, zyx[:, ::-1] + shift, vol[act], shift
 
 
 def test_vdb_round_trip(tmp_path):
     vol, act, ijk, vals, shift = _random_voxels()
-    grids = [("labels", "Tree_int32_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0))),
-             ("temperature", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0))),
-             ("density", "Tree_float_5_4_3", _scale_translate((0.5, 0.25, 2.0), (1.0, -2.0, 3.5)))]
+    grids = [
+        ("labels", "Tree_int32_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0))),
+        ("temperature", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0))),
+        ("density", "Tree_float_5_4_3", _scale_translate((0.5, 0.25, 2.0), (1.0, -2.0, 3.5))),
+    ]
     path = _write_vdb(tmp_path, "rt", grids, {1: (ijk[:5], vals[:5]), 2: (ijk, vals)})
     sv = read_vdb(path, grid="density")
     # the offset is leaf-aligned: x = -37 -> leaf origin -40; y = 5 -> 0; z = 250 -> 248
     off_xyz = np.array([-40, 0, 248])
-    rel = shift - off_xyz                            # where the volume's [0, 0, 0] lands
+    rel = shift - off_xyz  # where the volume's [0, 0, 0] lands
     assert sv.shape == tuple(int(s) for s in (np.argwhere(act).max(axis=0) + 1 + rel[::-1]))
     assert sv.spacing == (2.0, 0.25, 0.5)
     np.testing.assert_allclose(sv.origin, np.array([1.0, -2.0, 3.5]) + np.array([0.5, 0.25, 2.0]) * off_xyz)
     dense, active = sv.to_dense(), sv.active()
     z0, y0, x0 = rel[::-1]
     Z, Y, X = vol.shape
-    np.testing.assert_array_equal(active[z0:z0 + Z, y0:y0 + Y, x0:x0 + X], act)
+    np.testing.assert_array_equal(active[z0 : z0 + Z, y0 : y0 + Y, x0 : x0 + X], act)
     assert active.sum() == act.sum()
-    np.testing.assert_array_equal(dense[z0:z0 + Z, y0:y0 + Y, x0:x0 + X], np.where(act, vol, 0))
+    np.testing.assert_array_equal(dense[z0 : z0 + Z, y0 : y0 + Y, x0 : x0 + X], np.where(act, vol, 0))
     # world positions agree: VDB's voxel_size * ijk + translation
     w_vdb = np.array([0.5, 0.25, 2.0]) * ijk + [1.0, -2.0, 3.5]
     idx = np.argwhere(active)[:, ::-1]
@@ -354,17 +390,19 @@ def test_vdb_round_trip(tmp_path):
 def test_vdb_grids_and_transforms(tmp_path):
     ijk = np.array([[0, 0, 0], [-8, 3, 17]])
     c, s = np.cos(0.3), np.sin(0.3)
-    grids = [("labels", "Tree_int32_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0))),
-             ("rot", "Tree_float_5_4_3", _affine([[c, s, 0, 0], [-s, c, 0, 0], [0, 0, 1, 0], [1, 2, 3, 1]])),
-             ("diag", "Tree_float_5_4_3", _affine([[2, 0, 0, 0], [0, 3, 0, 0], [0, 0, 4, 0], [5, 6, 7, 1]])),
-             ("empty", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
+    grids = [
+        ("labels", "Tree_int32_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0))),
+        ("rot", "Tree_float_5_4_3", _affine([[c, s, 0, 0], [-s, c, 0, 0], [0, 0, 1, 0], [1, 2, 3, 1]])),
+        ("diag", "Tree_float_5_4_3", _affine([[2, 0, 0, 0], [0, 3, 0, 0], [0, 0, 4, 0], [5, 6, 7, 1]])),
+        ("empty", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0))),
+    ]
     path = _write_vdb(tmp_path, "grids", grids, {1: (ijk, [1, 2]), 2: (ijk, [1, 2])})
     sv = read_vdb(path, grid="diag")
     assert sv.spacing == (4.0, 3.0, 2.0) and sv.shape == (18, 4, 9)
     np.testing.assert_allclose(sv.origin, [5 - 16, 6, 7])
     np.testing.assert_array_equal(sv.to_dense()[17, 3, 0], 2.0)
     with pytest.raises(clvis.DataError, match="rotates or shears") as e:
-        read_vdb(path)                                  # the first float grid is "rot"
+        read_vdb(path)  # the first float grid is "rot"
     assert str(path) in str(e.value)
     with pytest.raises(clvis.DataError, match="'labels' is a Tree_int32_5_4_3, not a float grid"):
         read_vdb(path, grid="labels")

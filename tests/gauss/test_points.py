@@ -19,11 +19,11 @@ def test_points_anisotropic():
     unit = vel / np.maximum(np.linalg.norm(vel, axis=1, keepdims=True), 1e-30)
     np.testing.assert_allclose(np.abs((axis[1:] * unit[1:]).sum(axis=1)), 1, atol=1e-6)
     np.testing.assert_allclose(g.scales[1:], np.tile([2.5, 0.01, 0.01], (199, 1)), rtol=1e-6)
-    np.testing.assert_allclose(g.scales[0], [0.01] * 3, rtol=1e-6)       # zero velocity: isotropic
+    np.testing.assert_allclose(g.scales[0], [0.01] * 3, rtol=1e-6)  # zero velocity: isotropic
     np.testing.assert_allclose(g.values, np.linalg.norm(vel, axis=1), rtol=1e-6)
     cov = g.covariances[5].astype(np.float64)
     u = unit[5]
-    assert np.isclose(u @ cov @ u, 2.5 ** 2, rtol=1e-4)
+    assert np.isclose(u @ cov @ u, 2.5**2, rtol=1e-4)
 
 
 def test_points_isotropic_knn():
@@ -52,15 +52,15 @@ def test_isolated_points_are_clamped():
     pos = np.concatenate([dense, outliers])
     g = gaussians_from_points(pos)
     knn = knn_mean_distance(pos)
-    assert knn[-4:].min() > 50                                   # unclamped: huge
+    assert knn[-4:].min() > 50  # unclamped: huge
     cap = np.percentile(knn, KNN_CLAMP_PERCENTILE)
     assert cap < 0.2
     np.testing.assert_allclose(g.scales[-4:], cap, rtol=1e-6)
     assert g.scales.max() <= cap * (1 + 1e-6)
-    np.testing.assert_allclose(g.scales[:-4, 0], np.minimum(knn[:-4], cap), rtol=1e-5)   # float32 positions
+    np.testing.assert_allclose(g.scales[:-4, 0], np.minimum(knn[:-4], cap), rtol=1e-5)  # float32 positions
     lo, hi = g.bounds()
     extent = pos.max(axis=0) - pos.min(axis=0)
-    assert ((hi - lo) <= extent + 6 * cap * 1.001).all()          # the points plus 3 sigma, not 3 x 100 more
+    assert ((hi - lo) <= extent + 6 * cap * 1.001).all()  # the points plus 3 sigma, not 3 x 100 more
 
 
 def test_colours_and_attributes():
@@ -69,17 +69,17 @@ def test_colours_and_attributes():
     rgb = rng.integers(0, 256, (100, 3)).astype(np.uint8)
     inten = rng.uniform(0, 500, 100)
     cloud = PointCloud(pos, colors=rgb, attributes={"intensity": inten})
-    g = gaussians_from_points(cloud)                             # colours by default
+    g = gaussians_from_points(cloud)  # colours by default
     np.testing.assert_array_equal(g.colors, rgb)
-    np.testing.assert_array_equal(g.values, pos[:, 2].astype(np.float32))     # elevation: never all zero
+    np.testing.assert_array_equal(g.values, pos[:, 2].astype(np.float32))  # elevation: never all zero
     g = gaussians_from_points(cloud, color_by="intensity")
     assert g.colors is None
     np.testing.assert_array_equal(g.values, inten.astype(np.float32))
     np.testing.assert_array_equal(gaussians_from_points(cloud, color_by="rgb").colors, rgb)
     z = pos[:, 2].astype(np.float32)
     np.testing.assert_array_equal(gaussians_from_points(cloud, color_by="z").values, z)
-    assert gaussians_from_points(cloud, values="intensity").colors is None     # values given: tf colours
-    plain = gaussians_from_points(PointCloud(pos))               # no colours: elevation
+    assert gaussians_from_points(cloud, values="intensity").colors is None  # values given: tf colours
+    plain = gaussians_from_points(PointCloud(pos))  # no colours: elevation
     assert plain.colors is None and plain.values.std() > 0
     np.testing.assert_array_equal(gaussians_from_points(pos).values, pos[:, 2].astype(np.float32))
     with pytest.raises(ValueError, match="no attribute 'nope'.*intensity"):
@@ -92,9 +92,18 @@ def test_colours_and_attributes():
         gaussians_from_points(cloud, color_by=3)
 
 
-@pytest.mark.parametrize("k,error", [(0, ValueError), (-1, ValueError), (65, ValueError),
-                                     (10 ** 9, ValueError),
-                                     (2.5, TypeError), ("4", TypeError), (True, TypeError)])
+@pytest.mark.parametrize(
+    "k,error",
+    [
+        (0, ValueError),
+        (-1, ValueError),
+        (65, ValueError),
+        (10**9, ValueError),
+        (2.5, TypeError),
+        ("4", TypeError),
+        (True, TypeError),
+    ],
+)
 def test_bad_k(k, error):
     with pytest.raises(error, match="k"):
         gaussians_from_points(np.zeros((5, 3)), k=k)
@@ -120,6 +129,7 @@ def test_frames_are_rotations():
     v = rng.normal(size=(100, 3))
     v[:3] = [[0, 0, 0], [1, 0, 0], [0, 0, -2]]
     r = frames_along(v).astype(np.float64)
-    np.testing.assert_allclose(np.einsum("nji,njk->nik", r, r), np.broadcast_to(np.eye(3), (100, 3, 3)),
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        np.einsum("nji,njk->nik", r, r), np.broadcast_to(np.eye(3), (100, 3, 3)), atol=1e-6
+    )
     np.testing.assert_allclose(np.linalg.det(r), 1, atol=1e-6)

@@ -44,15 +44,32 @@ def _random(n, seed=0, spread=1.0, scale=(0.05, 0.3), opacity=(0.05, 0.9)):
 
 def _reference(g, cam, w, h, tf, model, cutoff=3.0, density=1.0):
     vmin, scale = tf.limits(g.values)
-    return ref.render(g.means, g.scales, g.rotations, g.values, g.opacities, ray_buffer(cam, w, h), w, h,
-                      tf.table(), vmin, scale, model=model, cutoff=cutoff, density=density, colors=g.colors)
+    return ref.render(
+        g.means,
+        g.scales,
+        g.rotations,
+        g.values,
+        g.opacities,
+        ray_buffer(cam, w, h),
+        w,
+        h,
+        tf.table(),
+        vmin,
+        scale,
+        model=model,
+        cutoff=cutoff,
+        density=density,
+        colors=g.colors,
+    )
 
 
-def _check(queue, g, cam, w=W, h=H, model="max_response", k=16, tf=None, cutoff=3.0, density=1.0,
-           tile_rows=None):
+def _check(
+    queue, g, cam, w=W, h=H, model="max_response", k=16, tf=None, cutoff=3.0, density=1.0, tile_rows=None
+):
     tf = tf or TransferFunction("jet")
-    img = gr.GaussianRenderer(g, tf, model=model, k=k, cutoff=cutoff, density=density,
-                              queue=queue).render(cam, w, h, tile_rows=tile_rows)
+    img = gr.GaussianRenderer(g, tf, model=model, k=k, cutoff=cutoff, density=density, queue=queue).render(
+        cam, w, h, tile_rows=tile_rows
+    )
     rgba, depth, hits = _reference(g, cam, w, h, tf, model, cutoff, density)
     assert img.rgba.shape == (h, w, 4) and img.depth.shape == (h, w)
     np.testing.assert_allclose(img.rgba, rgba, rtol=0, atol=1e-3)
@@ -72,14 +89,15 @@ def _check(queue, g, cam, w=W, h=H, model="max_response", k=16, tf=None, cutoff=
 def test_random_scene(queue, model):
     g = _random(300, seed=1)
     img, rgba = _check(queue, g, _cam(), model=model)
-    assert (rgba[..., 3] > 0.05).mean() > 0.3          # the scene is actually seen
-    assert img.stats["hits_per_ray_max"] > 16           # several k-buffer rounds
+    assert (rgba[..., 3] > 0.05).mean() > 0.3  # the scene is actually seen
+    assert img.stats["hits_per_ray_max"] > 16  # several k-buffer rounds
 
 
 def _coloured(g, seed=0):
     rng = np.random.default_rng(seed)
-    return Gaussians(g.means, g.scales, g.rotations, g.values, g.opacities,
-                     rng.integers(0, 256, (g.n, 3)).astype(np.uint8))
+    return Gaussians(
+        g.means, g.scales, g.rotations, g.values, g.opacities, rng.integers(0, 256, (g.n, 3)).astype(np.uint8)
+    )
 
 
 @pytest.mark.parametrize("model", ["max_response", "absorption"])
@@ -87,13 +105,15 @@ def test_own_colours(queue, model):
     """Gaussians with their own rgb: composited with it, the transfer function's
     opacity still applying (a ramp that hides low values)."""
     g = _coloured(_random(300, seed=31), seed=31)
-    tf = TransferFunction("jet", opacity=[(0.0, 0.0), (0.4, 0.0), (0.7, 1.0), (1.0, 1.0)],
-                          value_range=(-1, 2))
+    tf = TransferFunction(
+        "jet", opacity=[(0.0, 0.0), (0.4, 0.0), (0.7, 1.0), (1.0, 1.0)], value_range=(-1, 2)
+    )
     img, rgba = _check(queue, g, _cam(), model=model, tf=tf)
-    plain, _ = _check(queue, Gaussians(g.means, g.scales, g.rotations, g.values, g.opacities), _cam(),
-                      model=model, tf=tf)
-    np.testing.assert_array_equal(img.rgba[..., 3], plain.rgba[..., 3])     # same alpha: the tf's opacity
-    assert np.abs(img.rgba[..., :3] - plain.rgba[..., :3]).max() > 0.1     # other colours
+    plain, _ = _check(
+        queue, Gaussians(g.means, g.scales, g.rotations, g.values, g.opacities), _cam(), model=model, tf=tf
+    )
+    np.testing.assert_array_equal(img.rgba[..., 3], plain.rgba[..., 3])  # same alpha: the tf's opacity
+    assert np.abs(img.rgba[..., :3] - plain.rgba[..., :3]).max() > 0.1  # other colours
     r = gr.GaussianRenderer(g, tf, model=model, queue=queue, colors=False)
     np.testing.assert_array_equal(r.render(_cam(), W, H).rgba, plain.rgba)
 
@@ -112,8 +132,9 @@ def test_bands_give_the_same_image(queue, tile_rows):
     r = gr.GaussianRenderer(g, queue=queue)
     whole = r.render(_cam(w=W, h=H + 3), W, H + 3, tile_rows=H + 3)
     done = []
-    banded = r.render(_cam(w=W, h=H + 3), W, H + 3, tile_rows=tile_rows,
-                      progress=lambda a, b: done.append((a, b)))
+    banded = r.render(
+        _cam(w=W, h=H + 3), W, H + 3, tile_rows=tile_rows, progress=lambda a, b: done.append((a, b))
+    )
     _assert_same(banded, whole)
     assert banded.stats["bands"] == -(-(H + 3) // tile_rows) == len(done)
     assert done[-1] == (W * (H + 3), W * (H + 3)) and [a for a, _ in done] == sorted(a for a, _ in done)
@@ -130,7 +151,7 @@ def test_band_rows(queue):
 
 def test_impossible_size_is_a_device_error(queue, monkeypatch):
     r = gr.GaussianRenderer(_random(10), queue=queue)
-    monkeypatch.setattr(runtime, "host_available_bytes", lambda: 10 ** 6)
+    monkeypatch.setattr(runtime, "host_available_bytes", lambda: 10**6)
     with pytest.raises(clvis.DeviceError, match=r"GB on the device and .* GB on the host"):
         r.render(_cam(), 4000, 4000)
 
@@ -176,25 +197,31 @@ def test_behind_and_around_the_camera(queue):
     g = Gaussians.concatenate([around, big])
     for model in gr.MODELS:
         img, rgba = _check(queue, g, _cam(eye=(0.0, 0.0, 0.0), target=(0, 1, 0)), model=model)
-        assert rgba[..., 3].min() > 0.1                  # every ray starts inside the big one
+        assert rgba[..., 3].min() > 0.1  # every ray starts inside the big one
 
 
 def test_flat_and_needle_gaussians(queue):
     rng = np.random.default_rng(5)
     n = 120
     scales = rng.uniform(0.1, 0.6, (n, 3))
-    scales[: n // 3, 2] = 0.0                   # flat disks
-    scales[n // 3: 2 * n // 3, 1:] = 0.0        # needles
-    scales[-3:] = 0.0                           # points: never hit
-    g = Gaussians(rng.normal(size=(n, 3)), scales, frames_along(rng.normal(size=(n, 3))),
-                  rng.uniform(0, 1, n), rng.uniform(0.2, 1, n))
+    scales[: n // 3, 2] = 0.0  # flat disks
+    scales[n // 3 : 2 * n // 3, 1:] = 0.0  # needles
+    scales[-3:] = 0.0  # points: never hit
+    g = Gaussians(
+        rng.normal(size=(n, 3)),
+        scales,
+        frames_along(rng.normal(size=(n, 3))),
+        rng.uniform(0, 1, n),
+        rng.uniform(0.2, 1, n),
+    )
     for model in gr.MODELS:
         _check(queue, g, _cam(), model=model)
 
 
 def test_identical_gaussians_tie_by_id(queue):
-    g = Gaussians(np.zeros((40, 3)), np.full((40, 3), 0.5), values=np.linspace(0, 1, 40),
-                  opacities=np.full(40, 0.05))
+    g = Gaussians(
+        np.zeros((40, 3)), np.full((40, 3), 0.5), values=np.linspace(0, 1, 40), opacities=np.full(40, 0.05)
+    )
     img, _ = _check(queue, g, _cam(), k=4)
     assert img.hits.max() == 40
 
@@ -212,8 +239,9 @@ def test_axis_aligned_rays(queue):
 
 
 def test_transfer_function_and_density(queue):
-    tf = TransferFunction("viridis", opacity=[(0.0, 0.0), (0.3, 0.0), (0.6, 1.0), (1.0, 0.5)],
-                             value_range=(-0.5, 1.5))
+    tf = TransferFunction(
+        "viridis", opacity=[(0.0, 0.0), (0.3, 0.0), (0.6, 1.0), (1.0, 0.5)], value_range=(-0.5, 1.5)
+    )
     g = _random(250, seed=8)
     _check(queue, g, _cam(), tf=tf)
     _check(queue, g, _cam(), tf=tf, model="absorption", density=3.0)
@@ -231,15 +259,26 @@ def test_points_gaussians(queue):
     _check(queue, iso, _cam())
 
 
-@given(n=st.integers(0, 120), seed=st.integers(0, 2 ** 31), k=st.sampled_from([1, 2, 5, 16]),
-       model=st.sampled_from(list(gr.MODELS)))
+@given(
+    n=st.integers(0, 120),
+    seed=st.integers(0, 2**31),
+    k=st.sampled_from([1, 2, 5, 16]),
+    model=st.sampled_from(list(gr.MODELS)),
+)
 def test_property(n, seed, k, model):
     queue = clvis.default_queue()
     rng = np.random.default_rng(seed)
     g = _random(n, seed=seed, spread=float(rng.uniform(0.3, 3)))
     eye = rng.normal(size=3) * float(rng.uniform(0.5, 8))
-    _check(queue, g, _cam(eye=tuple(eye), target=tuple(rng.normal(size=3)), w=12, h=10), w=12, h=10,
-           k=k, model=model)
+    _check(
+        queue,
+        g,
+        _cam(eye=tuple(eye), target=tuple(rng.normal(size=3)), w=12, h=10),
+        w=12,
+        h=10,
+        k=k,
+        model=model,
+    )
 
 
 def test_records_and_boxes_match_reference(queue):
@@ -262,7 +301,7 @@ def test_boxes_hold_the_ellipsoids():
     boxes = ref.gaussian_boxes(g.means, g.scales, g.rotations, 3.0)
     rng = np.random.default_rng(0)
     u = rng.normal(size=(300, 64, 3))
-    u *= 3.0 / np.linalg.norm(u, axis=2, keepdims=True)          # on the 3-sigma sphere
+    u *= 3.0 / np.linalg.norm(u, axis=2, keepdims=True)  # on the 3-sigma sphere
     pts = g.means[:, None, :] + np.einsum("nij,nj,nkj->nki", g.rotations, g.scales, u)
     assert (pts >= boxes[:, None, :3]).all() and (pts <= boxes[:, None, 3:]).all()
 
@@ -278,7 +317,7 @@ def test_record_layout(device):
         out[2] = (uint)((char *)&g.w[0] - (char *)&g);
         out[3] = (uint)((char *)&g.opacity - (char *)&g);
     }"""
-    with warnings.catch_warnings():       # drivers may log remarks on success
+    with warnings.catch_warnings():  # drivers may log remarks on success
         warnings.simplefilter("ignore", cl.CompilerWarning)
         prg = cl.Program(q.context, src).build(["-I", str(runtime.INCLUDE_DIR)])
     out = cla.zeros(q, 4, np.uint32)
@@ -425,7 +464,7 @@ def test_render_does_not_wait_and_times_from_events(queue):
     r = gr.GaussianRenderer(g, queue=queue)
     b = r.render(_cam(), W, H, host=False)
     assert b.stats["render_s"] is None
-    assert runtime.seconds(*b.stats["events"]) > 0          # waits, then reads the events
+    assert runtime.seconds(*b.stats["events"]) > 0  # waits, then reads the events
     a = r.render(_cam(), W, H)
     assert a.stats["render_s"] > 0 and a.stats["bvh_build_s"] > 0 and r.upload_seconds > 0
     assert r.nbytes == r.records.nbytes + r.bvh.nbytes
@@ -465,13 +504,17 @@ def test_large_render_memory_is_bounded():
     The growth is the peak after the render minus the resident set before it,
     so a higher peak left by the kernel build can only overstate it."""
     size = 2048
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(clvis.__file__).parents[1]),
-                                                       os.environ.get("PYTHONPATH", "")]))
-    out = subprocess.run([sys.executable, "-c", _MEMORY_CHILD, str(size)], capture_output=True, text=True,
-                         env=env, timeout=600)
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join([str(Path(clvis.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]),
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", _MEMORY_CHILD, str(size)], capture_output=True, text=True, env=env, timeout=600
+    )
     assert out.returncode == 0, out.stderr
     grew, bands, alpha = out.stdout.split()
     image = size * size * gr.RAY_BYTES
     assert int(bands) > 1 and float(alpha) > 0.5
-    assert int(grew) <= 1.5 * image + (32 << 20), \
+    assert int(grew) <= 1.5 * image + (32 << 20), (
         f"grew {int(grew) / 1e6:.0f} MB for a {image / 1e6:.0f} MB image in {bands} bands"
+    )

@@ -72,10 +72,11 @@ kernel void composite(global const float *alpha, global const float4 *colour, ui
 @pytest.fixture
 def probes(device):
     q = runtime.queue_for(device)
-    with warnings.catch_warnings():       # drivers may log remarks on success
+    with warnings.catch_warnings():  # drivers may log remarks on success
         warnings.simplefilter("ignore", cl.CompilerWarning)
         prg = cl.Program(q.context, PROBES).build(
-            ["-I", str(runtime.INCLUDE_DIR), "-cl-fp32-correctly-rounded-divide-sqrt"])
+            ["-I", str(runtime.INCLUDE_DIR), "-cl-fp32-correctly-rounded-divide-sqrt"]
+        )
     return q, prg
 
 
@@ -88,7 +89,7 @@ def _scene(n, seed):
     rng = np.random.default_rng(seed)
     means = rng.uniform(-1, 1, (n, 3))
     scales = rng.uniform(0.05, 0.5, (n, 3))
-    scales[:20, 0] = 1e-9                                  # flat ones
+    scales[:20, 0] = 1e-9  # flat ones
     a = rng.normal(size=(n, 3, 3))
     rotations = np.linalg.qr(a)[0]
     values, opacities = rng.random(n), rng.uniform(0.05, 1.0, n)
@@ -98,7 +99,7 @@ def _scene(n, seed):
     o = rng.uniform(-4, 4, (n, 3)).astype(np.float32)
     target = mean + rng.normal(size=(n, 3)).astype(np.float32) * 0.3
     d = target - o
-    d[:10] = -d[:10]                                       # Gaussian behind the origin: t = 0
+    d[:10] = -d[:10]  # Gaussian behind the origin: t = 0
     d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
     return recs, mean, w, opac, o, d
 
@@ -108,11 +109,10 @@ def test_hit_is_the_reference_bit_for_bit(probes):
     n = 3000
     recs, mean, w, opac, o, d = _scene(n, seed=1)
     out = cla.empty(q, 5 * n, np.float32)
-    prg.hit(q, (n,), None, _dev(q, recs, gr.GAUSSIAN_DTYPE).data, _dev(q, o).data, _dev(q, d).data,
-            out.data)
+    prg.hit(q, (n,), None, _dev(q, recs, gr.GAUSSIAN_DTYPE).data, _dev(q, o).data, _dev(q, d).data, out.data)
     got = out.get().reshape(n, 5)
     idx = np.arange(n)
-    t, m2, ts, a, ms2 = (x[idx, idx] for x in ref.hits(o, d, mean, w))   # ray i against Gaussian i
+    t, m2, ts, a, ms2 = (x[idx, idx] for x in ref.hits(o, d, mean, w))  # ray i against Gaussian i
     for k, want in enumerate((t, m2, ts, a)):
         np.testing.assert_array_equal(got[:, k].view(np.uint32), want.astype(np.float32).view(np.uint32))
     assert (got[:, 0] >= 0).all() and (got[:10, 0] == 0).all()
@@ -122,8 +122,11 @@ def test_hit_is_the_reference_bit_for_bit(probes):
     # absorption alpha, density 1.5: render_rays's float64 formula on the same t, ts, a, ms2
     aa = a.astype(np.float64)
     arg = -ts.astype(np.float64) * np.sqrt(0.5 * aa)
-    integral = (np.exp(-0.5 * ms2.astype(np.float64)) * np.sqrt(np.pi / (2 * aa))
-                * np.array([math.erfc(x) for x in arg]))
+    integral = (
+        np.exp(-0.5 * ms2.astype(np.float64))
+        * np.sqrt(np.pi / (2 * aa))
+        * np.array([math.erfc(x) for x in arg])
+    )
     want = 1 - np.exp(-1.5 * opac.astype(np.float64) * integral)
     np.testing.assert_allclose(got[hit, 4], want[hit], rtol=2e-5, atol=1e-6)
 
@@ -135,8 +138,16 @@ def test_tf_index(probes):
     kernel = cl.Kernel(prg, "tf_index")
     for tf_n, vmin, scale in ((256, 0.0, 1.0), (7, -0.25, 2.0), (1, 0.0, 1.0)):
         out = cla.empty(q, len(values), np.uint32)
-        kernel(q, (len(values),), None, _dev(q, values).data, np.float32(vmin), np.float32(scale),
-                     np.uint32(tf_n), out.data)
+        kernel(
+            q,
+            (len(values),),
+            None,
+            _dev(q, values).data,
+            np.float32(vmin),
+            np.float32(scale),
+            np.uint32(tf_n),
+            out.data,
+        )
         table = np.arange(tf_n, dtype=np.float32)[:, None].repeat(4, axis=1)
         want = ref.tf_lookup(values, table, vmin, scale)[:, 0].astype(np.uint32)
         np.testing.assert_array_equal(out.get(), want)
@@ -149,7 +160,7 @@ def test_alpha_max_response(probes):
     opac = rng.uniform(0, 1, m).astype(np.float32)
     opac[:5] = 1.0
     m2 = rng.uniform(0, 9, m).astype(np.float32)
-    m2[:5] = 0.0                                           # capped at 0.99
+    m2[:5] = 0.0  # capped at 0.99
     out = cla.empty(q, m, np.float32)
     prg.alpha_max_response(q, (m,), None, _dev(q, opac).data, _dev(q, m2).data, out.data)
     want = np.minimum(0.99, opac.astype(np.float64) * np.exp(-0.5 * m2.astype(np.float64)))
@@ -163,11 +174,18 @@ def test_composite(probes):
     rng = np.random.default_rng(4)
     rays, m = 1000, 40
     alpha = rng.uniform(0, 0.99, (rays, m)).astype(np.float32)
-    alpha[:, m // 2:] *= rng.random((rays, 1)).astype(np.float32)
+    alpha[:, m // 2 :] *= rng.random((rays, 1)).astype(np.float32)
     colour = rng.random((rays, m, 4)).astype(np.float32)
     out = cla.empty(q, 4 * rays, np.float32)
-    prg.composite(q, (rays,), None, _dev(q, alpha.ravel()).data, _dev(q, colour.reshape(-1, 4)).data,
-                  np.uint32(m), out.data)
+    prg.composite(
+        q,
+        (rays,),
+        None,
+        _dev(q, alpha.ravel()).data,
+        _dev(q, colour.reshape(-1, 4)).data,
+        np.uint32(m),
+        out.data,
+    )
     got = out.get().reshape(rays, 4)
     # render_rays's compositing (float64): weights T_before * alpha, alpha = 1 - T_after
     a64 = alpha.astype(np.float64)

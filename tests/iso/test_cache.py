@@ -23,7 +23,7 @@ SHAPES = [(4, 4, 4), (9, 10, 11), (13, 8, 21), (1, 30, 5)]
 def _zv(shape, rate=7) -> zfp.ZfpVolume:
     rng = np.random.default_rng(sum(shape))
     v = rng.standard_normal(shape).astype(np.float32)
-    v[: shape[0] // 2] = 0.0                      # some all-zero blocks
+    v[: shape[0] // 2] = 0.0  # some all-zero blocks
     return zfp.compress(v, rate)
 
 
@@ -34,7 +34,11 @@ def _check(cache: BlockCache, model: ref.BlockCache, needed=None, before=None):
     np.testing.assert_array_equal(s["block_of_slot"], model.block_of_slot)
     np.testing.assert_array_equal(s["ages"], model.ages)
     assert (cache.occupied, cache.decoded_last, cache.decoded_total, cache.evicted_last) == (
-        model.occupied, model.decoded_last, model.decoded_total, model.evicted_last)
+        model.occupied,
+        model.decoded_last,
+        model.decoded_total,
+        model.evicted_last,
+    )
     sob, bos = s["slot_of_block"], s["block_of_slot"]
     occ = np.flatnonzero(bos != ref.FREE)
     # a bijection: every occupied slot's block points back to it, nothing else does
@@ -43,8 +47,8 @@ def _check(cache: BlockCache, model: ref.BlockCache, needed=None, before=None):
     assert np.count_nonzero(sob >= 0) == len(occ)
     if needed is not None:
         nz = np.flatnonzero(needed)
-        assert (sob[nz] >= 0).all()                                     # every needed block cached
-        if before is not None:                                          # and none of them moved
+        assert (sob[nz] >= 0).all()  # every needed block cached
+        if before is not None:  # and none of them moved
             kept = nz[before[nz] >= 0]
             np.testing.assert_array_equal(sob[kept], before[kept])
     return s
@@ -95,7 +99,7 @@ def test_sequences_match_model(device, profile, case):
         _check(cache, model)
         before = None
         for f in seq:
-            nd = runtime.empty(q, f.size, dtype, "needed")      # device flags of each dtype
+            nd = runtime.empty(q, f.size, dtype, "needed")  # device flags of each dtype
             nd.set((f * (3 if dtype == np.uint32 else 1)).astype(dtype), queue=q)
             assert cache.update(nd) == model.update(f)
             s = _check(cache, model, f, before)
@@ -104,7 +108,7 @@ def test_sequences_match_model(device, profile, case):
 
 
 def test_lru_order_by_hand(queue):
-    zv = _zv((9, 10, 11))                         # 3 x 3 x 3 = 27 blocks
+    zv = _zv((9, 10, 11))  # 3 x 3 x 3 = 27 blocks
     cache = BlockCache(zv, 3, queue=queue)
     assert (cache.capacity, cache.occupied) == (3, 0)
 
@@ -118,12 +122,12 @@ def test_lru_order_by_hand(queue):
     assert run([0, 1, 2]) == (3, [0, 1, 2], [0, 0, 0])
     assert run([1]) == (0, [0, 1, 2], [1, 0, 1])
     assert run([2], np.uint32) == (0, [0, 1, 2], [2, 1, 0])
-    assert run([5], bool) == (1, [5, 1, 2], [0, 2, 1])       # slot 0 (age 3) is the oldest
+    assert run([5], bool) == (1, [5, 1, 2], [0, 2, 1])  # slot 0 (age 3) is the oldest
     assert cache.evicted_last == 1 and cache.get_state()["slot_of_block"][0] == -1
-    assert run([6, 7]) == (2, [5, 6, 7], [1, 0, 0])          # slot 1 (age 3), then slot 2 (age 2)
+    assert run([6, 7]) == (2, [5, 6, 7], [1, 0, 0])  # slot 1 (age 3), then slot 2 (age 2)
     assert run([]) == (0, [5, 6, 7], [2, 1, 1])
-    assert run([9]) == (1, [9, 6, 7], [0, 2, 2])             # oldest
-    assert run([8]) == (1, [9, 8, 7], [1, 0, 3])             # tie of ages 3: the lower slot
+    assert run([9]) == (1, [9, 6, 7], [0, 2, 2])  # oldest
+    assert run([8]) == (1, [9, 8, 7], [1, 0, 3])  # tie of ages 3: the lower slot
     # growth: 5 needed > 3 slots -> max(5, ceil(1.5 * 3)) = 5; the old blocks stay put
     # (free slots 3, 4 first, then slot 2's block 7, the only one not needed)
     assert run([9, 8, 20, 21, 22]) == (3, [9, 8, 22, 20, 21], [0, 0, 0, 0, 0])
@@ -179,7 +183,7 @@ def test_mark_blocks(queue, dtype):
 def test_marked_pass_feeds_cache(queue):
     zv = _zv((13, 8, 21))
     cache, model = BlockCache(zv, queue=queue), ref.BlockCache(zv.nblocks)
-    assert cache.capacity == model.capacity == ref.default_capacity(zv.nblocks) == 48   # < 64: all
+    assert cache.capacity == model.capacity == ref.default_capacity(zv.nblocks) == 48  # < 64: all
     for vis in ([0, 5], [23], list(range(0, 24, 3))):
         nd = mark_blocks(np.array(vis, np.uint32), zv, queue=queue)
         f = ref.mark_blocks(vis, zv.blocks)
@@ -209,7 +213,7 @@ def test_empty_volume_and_bad_input(queue):
 
 def test_larger_volume_growth_and_eviction(queue):
     rng = np.random.default_rng(11)
-    zv = zfp.compress(rng.standard_normal((40, 36, 44)).astype(np.float32), 5)     # 990 blocks
+    zv = zfp.compress(rng.standard_normal((40, 36, 44)).astype(np.float32), 5)  # 990 blocks
     cache, model = BlockCache(zv, queue=queue), ref.BlockCache(zv.nblocks)
     assert cache.capacity == 64
     evicted, grown = 0, 0

@@ -62,8 +62,11 @@ def test_active_and_device_output(queue):
     np.testing.assert_array_equal(ca, ((coarse[..., 0] <= 0.5) & (0.5 <= coarse[..., 1])))
 
 
-@given(shape=st.tuples(st.integers(2, 14), st.integers(2, 14), st.integers(2, 14)),
-       rate=st.integers(1, 32), seed=st.integers(0, 2 ** 31))
+@given(
+    shape=st.tuples(st.integers(2, 14), st.integers(2, 14), st.integers(2, 14)),
+    rate=st.integers(1, 32),
+    seed=st.integers(0, 2**31),
+)
 def test_property(shape, rate, seed):
     v = np.random.default_rng(seed).normal(size=shape).astype(np.float32)
     zv = zfp.compress(v, rate)

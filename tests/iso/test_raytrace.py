@@ -13,8 +13,7 @@ import pytest
 
 from clvis import datasets, runtime, zfp
 from clvis._arrays import to_device
-from clvis.camera import Camera
-from clvis.camera import ray_buffer
+from clvis.camera import Camera, ray_buffer
 from clvis.iso.raytrace import raytrace_blocks
 from clvis.reference import iso
 from clvis.reference.camera import camera_rays
@@ -26,8 +25,19 @@ def _upload(q, a, dtype):
     return to_device(q, "test array", np.ascontiguousarray(a, dtype))
 
 
-def _raycast(q, vol, cam, w, h, isovalue, spacing=(1, 1, 1), origin=(0, 0, 0), rate=24,
-             permute_slots=False, absent=False):
+def _raycast(
+    q,
+    vol,
+    cam,
+    w,
+    h,
+    isovalue,
+    spacing=(1, 1, 1),
+    origin=(0, 0, 0),
+    rate=24,
+    permute_slots=False,
+    absent=False,
+):
     """The kernel's image (hit, t, depth, rgba as (H, W[, 4])), the reference
     image of the decoded volume and stats (rounds, the most rays in a group).
     absent: slot_of_block all -1 (nothing cached)."""
@@ -36,9 +46,9 @@ def _raycast(q, vol, cam, w, h, isovalue, spacing=(1, 1, 1), origin=(0, 0, 0), r
     nblocks = z.nblocks
     _, nby, nbx = z.blocks
     slot_of_block = np.arange(nblocks, dtype=np.int32)
-    if permute_slots:                      # the cache holds the blocks in another order
+    if permute_slots:  # the cache holds the blocks in another order
         slot_of_block = np.random.default_rng(1).permutation(nblocks).astype(np.int32)
-    order = np.argsort(slot_of_block)      # slot s holds block order[s]
+    order = np.argsort(slot_of_block)  # slot s holds block order[s]
     bricks = zfp.decode_blocks(z, order, queue=q)
     if absent:
         slot_of_block[:] = -1
@@ -82,8 +92,21 @@ def _raycast(q, vol, cam, w, h, isovalue, spacing=(1, 1, 1), origin=(0, 0, 0), r
         blocks, offsets, counts = np.unique(ids[srt], return_index=True, return_counts=True)
         most = max(most, int(counts.max()))
         groups = tuple(_upload(q, a, np.uint32) for a in (blocks, offsets, counts))
-        raytrace_blocks(q, bricks, slots_d, vol.shape, spacing, origin, isovalue, cam_d, w,
-                        groups, _upload(q, rays, np.uint32), ray_t, (ray_hit, hit_t, rgba, depth))
+        raytrace_blocks(
+            q,
+            bricks,
+            slots_d,
+            vol.shape,
+            spacing,
+            origin,
+            isovalue,
+            cam_d,
+            w,
+            groups,
+            _upload(q, rays, np.uint32),
+            ray_t,
+            (ray_hit, hit_t, rgba, depth),
+        )
         t_now, hit_now = ray_t.get(queue=q), ray_hit.get(queue=q)
         active = rays[(hit_now[rays] == 0) & np.isfinite(t_now[rays])]
         # the block DDA: step the axis whose block boundary comes first (ties x < y < z)
@@ -99,8 +122,12 @@ def _raycast(q, vol, cam, w, h, isovalue, spacing=(1, 1, 1), origin=(0, 0, 0), r
         active = active[inside]
 
     ref = iso.render(decoded, cam, w, h, isovalue, spacing, origin)
-    out = {"hit": ray_hit.get(queue=q).reshape(h, w).astype(bool), "t": hit_t.get(queue=q).reshape(h, w),
-           "depth": depth.get(queue=q).reshape(h, w), "rgba": rgba.get(queue=q).reshape(h, w, 4)}
+    out = {
+        "hit": ray_hit.get(queue=q).reshape(h, w).astype(bool),
+        "t": hit_t.get(queue=q).reshape(h, w),
+        "depth": depth.get(queue=q).reshape(h, w),
+        "rgba": rgba.get(queue=q).reshape(h, w, 4),
+    }
     return out, ref, {"rounds": rounds, "most": most}
 
 
@@ -109,10 +136,12 @@ def _check(out, ref, name, min_hits=0.0, colour_tol=2e-3, colour_frac=0.002):
     rel = iso.reliable(ref)
     both = rel & out["hit"] & ref.hit
     cerr = np.abs(out["rgba"][both] - ref.rgba[both]).max(axis=-1) if both.any() else np.zeros(0)
-    print(f"{name}: hits {ref.hit.mean():.3f}, unreliable {agree['unreliable'] / ref.hit.size:.4f}, "
-          f"mask mismatches {agree['mask_mismatches']}, depth error / diagonal {agree['depth_error']:.2e}, "
-          f"colour max {cerr.max() if cerr.size else 0:.2e}, "
-          f"> {colour_tol}: {(cerr > colour_tol).mean() if cerr.size else 0:.4f}")
+    print(
+        f"{name}: hits {ref.hit.mean():.3f}, unreliable {agree['unreliable'] / ref.hit.size:.4f}, "
+        f"mask mismatches {agree['mask_mismatches']}, depth error / diagonal {agree['depth_error']:.2e}, "
+        f"colour max {cerr.max() if cerr.size else 0:.2e}, "
+        f"> {colour_tol}: {(cerr > colour_tol).mean() if cerr.size else 0:.4f}"
+    )
     assert agree["ok"], agree
     assert ref.hit.mean() >= min_hits
     # hit t agrees as well as depth does; misses keep +inf, zero colour
@@ -133,21 +162,26 @@ def test_marschner_lobb(queue):
     ds = datasets.marschner_lobb(41)
     out, ref, stats = _raycast(queue, ds["volume"], CAM, 48, 40, 0.5, ds["spacing"], ds["origin"])
     _check(out, ref, "marschner_lobb 41", min_hits=0.3)
-    assert stats["rounds"] > 3 and stats["most"] > 64    # work-items loop over their group's rays
+    assert stats["rounds"] > 3 and stats["most"] > 64  # work-items loop over their group's rays
 
 
 def test_turbulence_with_permuted_cache_slots(queue):
     ds = datasets.turbulence(30)
-    out, ref, _ = _raycast(queue, ds["volume"], CAM, 48, 40, 0.5, ds["spacing"], ds["origin"],
-                           permute_slots=True)
+    out, ref, _ = _raycast(
+        queue, ds["volume"], CAM, 48, 40, 0.5, ds["spacing"], ds["origin"], permute_slots=True
+    )
     _check(out, ref, "turbulence 30", min_hits=0.3)
 
 
 def _sphere(shape, spacing, origin, centre):
     nz, ny, nx = shape
     dz, dy, dx = spacing
-    zz, yy, xx = np.meshgrid(np.arange(nz) * dz + origin[2], np.arange(ny) * dy + origin[1],
-                             np.arange(nx) * dx + origin[0], indexing="ij")
+    zz, yy, xx = np.meshgrid(
+        np.arange(nz) * dz + origin[2],
+        np.arange(ny) * dy + origin[1],
+        np.arange(nx) * dx + origin[0],
+        indexing="ij",
+    )
     return np.sqrt((xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 + (zz - centre[2]) ** 2).astype(np.float32)
 
 
@@ -156,14 +190,14 @@ def test_sphere_on_block_boundaries(queue, where):
     """Distance to a sample at a block corner; radius 8 samples along x, so the
     surface passes through block faces, edges and corners."""
     shape, spacing, origin = (29, 27, 33), (0.5, 0.5, 0.5), (-8.0, -6.0, -9.0)
-    centre = np.array(origin) + np.array((16, 12, 16)) * 0.5           # sample (16, 12, 16): a block corner
+    centre = np.array(origin) + np.array((16, 12, 16)) * 0.5  # sample (16, 12, 16): a block corner
     vol = _sphere(shape, spacing, origin, centre)
     if where == "outside":
         cam = Camera.look_at(centre + (13.0, -11.0, 8.0), centre, (0, 0, 1), fov_y=35, near=0.5, far=100)
-    elif where == "inside_volume":          # camera in the volume, outside the sphere
+    elif where == "inside_volume":  # camera in the volume, outside the sphere
         eye = centre + (6.5, -0.3, 0.2)
         cam = Camera.look_at(eye, centre, (0, 0, 1), fov_y=70, near=0.05, far=100)
-    else:                                   # camera inside the sphere: sees its first crossing
+    else:  # camera inside the sphere: sees its first crossing
         eye = centre + (0.4, -0.3, 0.2)
         cam = Camera.look_at(eye, eye + (1.0, 0.3, -0.2), (0, 0, 1), fov_y=90, near=0.05, far=100)
     out, ref, _ = _raycast(queue, vol, cam, 40, 32, 4.0, spacing, origin, rate=32)
@@ -194,7 +228,9 @@ def test_plane_on_a_block_boundary(queue, axis):
     assert np.abs(out["t"][ref.hit] - ref.t[ref.hit]).max() <= iso.DEPTH_TOLERANCE * ref.diagonal
 
 
-@pytest.mark.parametrize("name, view", [("marschner_lobb", (0.0, 0.0, -1.0)), ("turbulence", (1.0, 0.0, 0.0))])
+@pytest.mark.parametrize(
+    "name, view", [("marschner_lobb", (0.0, 0.0, -1.0)), ("turbulence", (1.0, 0.0, 0.0))]
+)
 def test_axis_parallel_orthographic_rays(queue, name, view):
     ds = datasets.marschner_lobb(33) if name == "marschner_lobb" else datasets.turbulence(25)
     view = np.array(view)
@@ -214,7 +250,7 @@ def test_rays_along_grid_lines_and_block_faces(queue, view):
     view = np.array(view)
     up = (0, 1, 0) if view[2] else (0, 0, 1)
     w, h = 24, 22
-    target = np.array((7.5, 7.5, 8.5))           # pixel centres on integer coordinates across the view
+    target = np.array((7.5, 7.5, 8.5))  # pixel centres on integer coordinates across the view
     cam = Camera.ortho(target - 30.0 * view, target, up, height=float(h), aspect=w / h, near=0.5, far=100)
     o, _ = camera_rays(ray_buffer(cam, w, h), w, h)
     across = [a for a in range(3) if view[a] == 0]
@@ -229,17 +265,23 @@ def test_isovalue_outside_the_range_hits_nothing(queue):
     out, ref, stats = _raycast(queue, ds["volume"], CAM, 32, 24, level, ds["spacing"], ds["origin"])
     assert not ref.hit.any() and not out["hit"].any()
     assert np.isinf(out["depth"]).all() and (out["rgba"] == 0).all()
-    assert stats["rounds"] > 3              # the rays walked every block on their way
+    assert stats["rounds"] > 3  # the rays walked every block on their way
 
 
 def test_absent_blocks_read_as_nan_and_give_no_hits(queue):
     ds = datasets.marschner_lobb(17)
-    out, ref, stats = _raycast(queue, ds["volume"], CAM, 16, 12, 0.5, ds["spacing"], ds["origin"], absent=True)
+    out, ref, stats = _raycast(
+        queue, ds["volume"], CAM, 16, 12, 0.5, ds["spacing"], ds["origin"], absent=True
+    )
     assert ref.hit.any() and not out["hit"].any()
-    assert stats["rounds"] > 1              # and the rays still walk on through the volume
+    assert stats["rounds"] > 1  # and the rays still walk on through the volume
 
 
 def test_no_groups_launches_nothing(queue):
     empty = tuple(runtime.empty(queue, 1, np.uint32, "x")[:0] for _ in range(3))
-    assert raytrace_blocks(queue, None, None, (4, 4, 4), (1, 1, 1), (0, 0, 0), 0.5, None, 4,
-                           empty, None, None, (None,) * 4) is None
+    assert (
+        raytrace_blocks(
+            queue, None, None, (4, 4, 4), (1, 1, 1), (0, 0, 0), 0.5, None, 4, empty, None, None, (None,) * 4
+        )
+        is None
+    )

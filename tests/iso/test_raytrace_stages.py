@@ -69,10 +69,11 @@ kernel void shade(global const float *g, global const float *d, global float4 *r
 @pytest.fixture
 def probes(device):
     q = runtime.queue_for(device)
-    with warnings.catch_warnings():       # drivers may log remarks on success
+    with warnings.catch_warnings():  # drivers may log remarks on success
         warnings.simplefilter("ignore", cl.CompilerWarning)
         prg = cl.Program(q.context, PROBES).build(
-            ["-I", str(runtime.INCLUDE_DIR), "-cl-fp32-correctly-rounded-divide-sqrt"])
+            ["-I", str(runtime.INCLUDE_DIR), "-cl-fp32-correctly-rounded-divide-sqrt"]
+        )
     return q, prg
 
 
@@ -113,7 +114,7 @@ def test_cell_cubic_is_the_interpolant(probes):
     q, prg = probes
     v, u, D = _cells(500, seed=2)
     u = (u * 0.5).astype(np.float32)
-    D = (D / np.abs(D).max(axis=1, keepdims=True) * 0.4).astype(np.float32)   # u + s D stays in the cell
+    D = (D / np.abs(D).max(axis=1, keepdims=True) * 0.4).astype(np.float32)  # u + s D stays in the cell
     cf = _cell_cubic(q, prg, v, u, D).astype(np.float64)
     c = _corners(v)
     for s in (0.0, 0.5, 1.0):
@@ -133,37 +134,40 @@ def test_first_zero(probes, steps):
     length = rng.uniform(0.1, 2.0, len(cf)).astype(np.float32)
     found = cla.empty(q, len(cf), np.int32)
     s = cla.empty(q, len(cf), np.float32)
-    prg.first_zero(q, (len(cf),), None, _dev(q, cf).data, _dev(q, length).data, np.int32(steps),
-                   found.data, s.data)
+    prg.first_zero(
+        q, (len(cf),), None, _dev(q, cf).data, _dev(q, length).data, np.int32(steps), found.data, s.data
+    )
     found, s = found.get().astype(bool), s.get()
     c64 = tuple(cf[:, k].astype(np.float64) for k in range(4))
-    want_found, want_s, margin, _ = ref.cubic_first_zero(c64, length.astype(np.float64),
-                                                         refine=("illinois", steps))
+    want_found, want_s, margin, _ = ref.cubic_first_zero(
+        c64, length.astype(np.float64), refine=("illinois", steps)
+    )
     clear = margin > 1e-3
     assert clear.sum() > 3000 and want_found[clear].sum() > 500 and (~want_found[clear]).sum() > 500
     np.testing.assert_array_equal(found[clear], want_found[clear])
     both = clear & want_found
     assert (s[both] >= 0).all() and (s[both] <= length[both]).all()
     np.testing.assert_allclose(s[both], want_s[both], atol=2e-4 * 2.0 ** (8 - steps))
-    assert np.isnan(s[~found]).all()                   # not written where nothing is found
+    assert np.isnan(s[~found]).all()  # not written where nothing is found
 
 
 def test_first_zero_edge_cases(probes):
     q, prg = probes
     cases = [  # c0..c3, length, found, s
-        ((0.0, 1.0, 0.0, 0.0), 1.0, True, 0.0),         # zero at the start
-        ((-1.0, 2.0, 0.0, 0.0), 1.0, True, 0.5),        # linear
-        ((1.0, 0.0, 0.0, 0.0), 1.0, False, None),       # constant, no zero
-        ((0.25, -1.0, 1.0, 0.0), 1.0, True, 0.5),       # double root at the minimum
-        ((1.0, -1.0, 0.0, 0.0), 0.5, False, None),      # root beyond the length
+        ((0.0, 1.0, 0.0, 0.0), 1.0, True, 0.0),  # zero at the start
+        ((-1.0, 2.0, 0.0, 0.0), 1.0, True, 0.5),  # linear
+        ((1.0, 0.0, 0.0, 0.0), 1.0, False, None),  # constant, no zero
+        ((0.25, -1.0, 1.0, 0.0), 1.0, True, 0.5),  # double root at the minimum
+        ((1.0, -1.0, 0.0, 0.0), 0.5, False, None),  # root beyond the length
     ]
     cf = np.array([c[0] for c in cases], np.float32)
     length = np.array([c[1] for c in cases], np.float32)
     found = cla.empty(q, len(cases), np.int32)
     s = cla.empty(q, len(cases), np.float32)
-    prg.first_zero(q, (len(cases),), None, _dev(q, cf).data, _dev(q, length).data, np.int32(8),
-                   found.data, s.data)
-    for (_, _, f, want), gf, gs in zip(cases, found.get(), s.get()):
+    prg.first_zero(
+        q, (len(cases),), None, _dev(q, cf).data, _dev(q, length).data, np.int32(8), found.data, s.data
+    )
+    for (_, _, f, want), gf, gs in zip(cases, found.get(), s.get(), strict=True):
         assert bool(gf) == f
         if f:
             assert gs == pytest.approx(want, abs=1e-5)
@@ -172,7 +176,7 @@ def test_first_zero_edge_cases(probes):
 def test_trilinear_gradient(probes):
     q, prg = probes
     v, w, _ = _cells(4000, seed=5)
-    w[:10] = np.round(w[:10])                          # corners
+    w[:10] = np.round(w[:10])  # corners
     g = cla.empty(q, 3 * len(v), np.float32)
     prg.gradient(q, (len(v),), None, _dev(q, v).data, _dev(q, w).data, g.data)
     want = ref.raytrace._trilinear_gradient(_corners(v), w.astype(np.float64))
@@ -184,10 +188,10 @@ def test_shade(probes):
     rng = np.random.default_rng(6)
     m = 4000
     g = (rng.normal(size=(m, 3)) * rng.uniform(1e-3, 1e3, (m, 1))).astype(np.float32)
-    g[:5] = 0.0                                        # no gradient: lit as if facing the viewer
+    g[:5] = 0.0  # no gradient: lit as if facing the viewer
     d = rng.normal(size=(m, 3))
     d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
-    d[5:10] = g[5:10] / np.linalg.norm(g[5:10], axis=1, keepdims=True)   # head on
+    d[5:10] = g[5:10] / np.linalg.norm(g[5:10], axis=1, keepdims=True)  # head on
     rgba = cla.empty(q, 4 * m, np.float32)
     prg.shade(q, (m,), None, _dev(q, g).data, _dev(q, d).data, rgba.data)
     got = rgba.get().reshape(m, 4)

@@ -53,7 +53,8 @@ def test_speculation_cuts_passes(queue):
     plain = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
     a = plain.render(_cam(), W, H, 0.5, speculation=False)
     b = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue).render(
-        _cam(), W, H, 0.5, speculation=True)
+        _cam(), W, H, 0.5, speculation=True
+    )
     assert b.stats["passes"] < a.stats["passes"]
     np.testing.assert_array_equal(a.hit, b.hit)
     np.testing.assert_array_equal(a.depth, b.depth)
@@ -125,10 +126,10 @@ def test_nothing_to_hit(queue):
     d = _ML
     zv = zfp.compress(d["volume"], 8)
     r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
-    img = r.render(_cam(), W, H, 7.0)            # outside the value range
+    img = r.render(_cam(), W, H, 7.0)  # outside the value range
     assert not img.hit.any() and img.stats["blocks_decoded"] == 0
     away = _cam(eye=(0, -6, 0), target=(0, -9, 0))
-    img = r.render(away, W, H, 0.5)             # no ray meets the volume
+    img = r.render(away, W, H, 0.5)  # no ray meets the volume
     assert not img.hit.any() and img.stats["passes"] == 0 and img.stats["rays_entering"] == 0
 
 
@@ -152,8 +153,8 @@ def test_dense_input_and_bad_arguments(queue):
 
 def test_hits_lie_on_the_marching_cubes_mesh(queue):
     """The renderer's hit points (o + t d) against scikit-image's mesh of the decoded volume."""
-    from skimage.measure import marching_cubes
     from meshes import mesh_distance as _mesh_distance
+    from skimage.measure import marching_cubes
 
     from clvis.camera import ray_buffer
     from clvis.reference.camera import camera_rays
@@ -185,7 +186,7 @@ def test_surface_on_block_and_coarse_boundaries(queue, axis):
     n = 33
     idx = np.arange(n, dtype=np.float32) - 16
     vol = np.broadcast_to(idx.reshape([-1 if a == axis else 1 for a in range(3)]), (n, n, n))
-    zv = zfp.compress(np.ascontiguousarray(vol), 32)          # lossless enough for integers
+    zv = zfp.compress(np.ascontiguousarray(vol), 32)  # lossless enough for integers
     cam = Camera.look_at((45, -20, 38), (16, 16, 16), (0, 0, 1), fov_y=40, aspect=W / H, near=0.1, far=200)
     img = iso.IsoRenderer(zv, queue=queue).render(cam, W, H, 0.0)
     want = ref.render(zfp.decode(zv), cam, W, H, 0.0)
@@ -230,7 +231,9 @@ def test_configure_between_passes(queue, int64):
     with runtime.configure(**_other(queue, int64)) as o:
         r2 = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
         assert r2.config.tuning == o.tuning
-        assert r2.config.int64_atomics == (o.int64_atomics and runtime.capabilities(queue).int64_atomics_native)
+        assert r2.config.int64_atomics == (
+            o.int64_atomics and runtime.capabilities(queue).int64_atomics_native
+        )
         _assert_same(r2.render(_cam(), W, H, 0.5), want)
 
 
@@ -324,12 +327,15 @@ def test_tile_plan_and_memory_check(queue, monkeypatch):
     t, nbytes = r.tile_plan(8192, 8192)
     assert t % 8192 == 0 and nbytes <= iso.render.TILE_BYTES
     assert r.tile_plan(8192, 8192, speculation=False)[0] > t
-    assert r.tile_plan(100, 10, tile_pixels=7) == (7, 7 * (iso.render.PIXEL_BYTES + 2 * iso.render.ITEM_BYTES))
+    assert r.tile_plan(100, 10, tile_pixels=7) == (
+        7,
+        7 * (iso.render.PIXEL_BYTES + 2 * iso.render.ITEM_BYTES),
+    )
     with pytest.raises(ValueError, match="32-bit"):
         r.render(_cam(), 65536, 32768, 0.5)
     monkeypatch.setattr(runtime, "host_available_bytes", lambda: 2 * 10**9)
     with pytest.raises(clvis.DeviceError, match="on the host") as e:
-        r.render(_cam(), 46340, 46340, 0.5)          # just under 2^31 pixels: 56 GB of host image
+        r.render(_cam(), 46340, 46340, 0.5)  # just under 2^31 pixels: 56 GB of host image
     assert "on the device" in str(e.value)
     with pytest.raises(TypeError, match="tile_pixels"):
         r.render(_cam(), W, H, 0.5, tile_pixels=2.5)
@@ -367,10 +373,14 @@ def test_large_render_stays_in_bounded_memory(tmp_path):
     import subprocess
     import sys
 
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([os.path.dirname(os.path.dirname(clvis.__file__)),
-                                                        os.environ.get("PYTHONPATH", "")]))
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join(
+            [os.path.dirname(os.path.dirname(clvis.__file__)), os.environ.get("PYTHONPATH", "")]
+        ),
+    )
     before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     subprocess.run([sys.executable, "-c", _MEMORY_CHILD], check=True, env=env, timeout=600)
     peak_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-    if peak_kb > before:        # ru_maxrss is the largest child's; an earlier child may have been larger
+    if peak_kb > before:  # ru_maxrss is the largest child's; an earlier child may have been larger
         assert peak_kb < 1_000_000, f"peak RSS {peak_kb / 1e6:.2f} GB"

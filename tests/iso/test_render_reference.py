@@ -9,13 +9,12 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+from meshes import closest_on_triangles as _closest_on_triangles
+from meshes import mesh_distance as _mesh_distance
 from skimage.measure import marching_cubes
 
 from clvis import DataError, datasets
-from meshes import closest_on_triangles as _closest_on_triangles
-from meshes import mesh_distance as _mesh_distance
-from clvis.camera import Camera
-from clvis.camera import ray_buffer
+from clvis.camera import Camera, ray_buffer
 from clvis.reference import iso
 from clvis.reference.camera import camera_rays
 
@@ -32,19 +31,31 @@ def _trilinear(vol, g):
     for dz in (0, 1):
         for dy in (0, 1):
             for dx in (0, 1):
-                w = ((u[:, 0] if dx else 1 - u[:, 0]) * (u[:, 1] if dy else 1 - u[:, 1])
-                     * (u[:, 2] if dz else 1 - u[:, 2]))
+                w = (
+                    (u[:, 0] if dx else 1 - u[:, 0])
+                    * (u[:, 1] if dy else 1 - u[:, 1])
+                    * (u[:, 2] if dz else 1 - u[:, 2])
+                )
                 out += w * vol[c[:, 2] + dz, c[:, 1] + dy, c[:, 0] + dx]
     return out
 
 
-def _sphere_volume(shape=(40, 44, 48), spacing=(0.5, 0.45, 0.4), origin=(-9.0, -10.0, -4.0),
-                   centre=(0.3, -0.2, 4.1), sign=1.0):
+def _sphere_volume(
+    shape=(40, 44, 48),
+    spacing=(0.5, 0.45, 0.4),
+    origin=(-9.0, -10.0, -4.0),
+    centre=(0.3, -0.2, 4.1),
+    sign=1.0,
+):
     """The distance to `centre` (world), sampled on the grid; (vol, spacing, origin)."""
     nz, ny, nx = shape
     dz, dy, dx = spacing
-    z, y, x = np.meshgrid(np.arange(nz) * dz + origin[2], np.arange(ny) * dy + origin[1],
-                          np.arange(nx) * dx + origin[0], indexing="ij")
+    z, y, x = np.meshgrid(
+        np.arange(nz) * dz + origin[2],
+        np.arange(ny) * dy + origin[1],
+        np.arange(nx) * dx + origin[0],
+        indexing="ij",
+    )
     r = np.sqrt((x - centre[0]) ** 2 + (y - centre[1]) ** 2 + (z - centre[2]) ** 2)
     return (sign * r).astype(np.float32), spacing, origin
 
@@ -71,20 +82,25 @@ CAM = Camera.look_at((2.2, -2.9, 2.0), (0, 0, 0), (0, 0, 1), fov_y=40, near=0.1,
 # against marching cubes
 
 
-@pytest.mark.parametrize("name, mean_limit, max_limit", [
-    ("marschner_lobb", 0.05, 0.5),
-    ("turbulence", 0.02, 0.35),
-])
+@pytest.mark.parametrize(
+    "name, mean_limit, max_limit",
+    [
+        ("marschner_lobb", 0.05, 0.5),
+        ("turbulence", 0.02, 0.35),
+    ],
+)
 def test_hits_lie_on_the_marching_cubes_mesh(name, mean_limit, max_limit):
     ds = datasets.marschner_lobb(64) if name == "marschner_lobb" else datasets.turbulence(128)
     vol, spacing, origin = ds["volume"], ds["spacing"], ds["origin"]
     verts, faces, _, _ = marching_cubes(vol, 0.5, spacing=spacing)
-    verts = verts[:, ::-1] + np.asarray(origin)          # [z, y, x] index * spacing -> world x, y, z
+    verts = verts[:, ::-1] + np.asarray(origin)  # [z, y, x] index * spacing -> world x, y, z
     img = iso.render(vol, CAM, 128, 128, 0.5, spacing, origin)
     assert img.hit.sum() > 4000
     dist = _mesh_distance(img.position[img.hit], verts, faces) / spacing[0]
-    print(f"{name}: {img.hit.sum()} hits, distance to the mesh mean {dist.mean():.4f}, "
-          f"max {dist.max():.4f} voxel")
+    print(
+        f"{name}: {img.hit.sum()} hits, distance to the mesh mean {dist.mean():.4f}, "
+        f"max {dist.max():.4f} voxel"
+    )
     assert dist.mean() < 0.1 and dist.mean() < mean_limit
     assert dist.max() < max_limit
     # every hit lies on the trilinear surface
@@ -183,7 +199,7 @@ def test_camera_inside_the_volume_sees_the_sphere_from_inside(sign):
 
 
 @pytest.mark.parametrize("axis", [0, 1, 2])
-@pytest.mark.parametrize("plane", [8, 16])         # a block boundary; a coarse-cell boundary
+@pytest.mark.parametrize("plane", [8, 16])  # a block boundary; a coarse-cell boundary
 @pytest.mark.parametrize("side", [-1, 1])
 def test_plane_on_a_block_boundary(axis, plane, side):
     """value = index along `axis` - plane: the surface is the sample plane, which
@@ -193,7 +209,7 @@ def test_plane_on_a_block_boundary(axis, plane, side):
     origin = np.array((-2.0, 1.5, 0.25))
     grid = np.meshgrid(*(np.arange(s) for s in shape), indexing="ij")[2 - axis]
     vol = (grid - plane).astype(np.float32)
-    sp_xyz = np.asarray(spacing, np.float32).astype(np.float64)[::-1]     # as the renderer rounds it
+    sp_xyz = np.asarray(spacing, np.float32).astype(np.float64)[::-1]  # as the renderer rounds it
     box = (np.array(shape[::-1]) - 1) * sp_xyz
     target = origin + 0.5 * box
     target[axis] = origin[axis] + plane * sp_xyz[axis]
@@ -234,7 +250,7 @@ def test_axis_parallel_rays_against_dense_sampling():
             for _ in range(40):
                 o = rng.uniform(0, np.array(shape[::-1]) - 1)
                 if rng.random() < 0.5:
-                    o = np.round(o)                         # on grid lines / faces
+                    o = np.round(o)  # on grid lines / faces
                 o[axis] = -2.0 if sign > 0 else shape[2 - axis] + 1.0
                 d = np.zeros(3)
                 d[axis] = sign
@@ -266,7 +282,7 @@ def test_axis_parallel_rays_against_dense_sampling():
 
 def test_rays_in_a_face_plane_follow_the_sign_of_zero():
     vol = np.zeros((5, 6, 7), np.float32)
-    vol[3:] = 1.0                           # surface at z = 2.5 at iso 0.5
+    vol[3:] = 1.0  # surface at z = 2.5 at iso 0.5
     o = np.array([[0.0, 2.0, -3.0], [0.0, 2.0, -3.0], [6.0, 2.0, -3.0], [6.0, 2.0, -3.0]])
     d = np.array([[0.0, 0.0, 1.0], [-0.0, 0.0, 1.0], [-0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
     r = iso.render_rays(vol, o, d, 0.5)
@@ -278,12 +294,12 @@ def test_rays_in_a_face_plane_follow_the_sign_of_zero():
 
 def test_exact_isovalue_at_a_sample_is_a_hit():
     vol = np.zeros((4, 4, 4), np.float32)
-    vol[2, 1, 1] = 1.0                       # touches 1.0 exactly at one sample
+    vol[2, 1, 1] = 1.0  # touches 1.0 exactly at one sample
     o = np.array([[1.0, 1.0, -1.0], [1.0, 1.25, -1.0]])
     d = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
     r = iso.render_rays(vol, o, d, 1.0)
     np.testing.assert_array_equal(r["hit"], [True, False])
-    assert r["t"][0] == 3.0 and r["margin"][0] == 0.0     # a tangential touch: unreliable
+    assert r["t"][0] == 3.0 and r["margin"][0] == 0.0  # a tangential touch: unreliable
     # and a zero at the entry point is a hit at t_enter
     r = iso.render_rays(np.full((3, 3, 3), 2.0, np.float32), o, d, 2.0)
     assert r["hit"].all() and (r["t"] == 1.0).all()
@@ -293,7 +309,11 @@ def test_empty_volume_and_isovalues_outside_the_range():
     ds = datasets.marschner_lobb(24)
     vol = ds["volume"]
     args = (ds["spacing"], ds["origin"])
-    for v, level in ((np.zeros_like(vol), 0.5), (vol, float(vol.max()) + 0.01), (vol, float(vol.min()) - 0.01)):
+    for v, level in (
+        (np.zeros_like(vol), 0.5),
+        (vol, float(vol.max()) + 0.01),
+        (vol, float(vol.min()) - 0.01),
+    ):
         img = iso.render(v, CAM, 24, 20, level, *args)
         assert not img.hit.any() and (img.rgba == 0).all() and np.isinf(img.depth).all()
         assert np.isnan(img.position).all() and np.isnan(img.normal).all()
@@ -315,7 +335,7 @@ def test_refinement_methods_meet_their_documented_accuracy():
     marmitt = iso.render(*args, refine=3)
     m = iso.agreement(exact, marmitt.hit, marmitt.depth)
     print(f"Marmitt 3: {m}; Illinois 6: {a}")
-    assert m["mask_mismatches"] == 0 and not m["ok"]          # the depth is not within 1e-4
+    assert m["mask_mismatches"] == 0 and not m["ok"]  # the depth is not within 1e-4
     # agreement notices a flipped hit and a shifted depth
     flipped = exact.hit.copy()
     py, px = np.argwhere(iso.reliable(exact) & exact.hit)[0]
@@ -327,8 +347,9 @@ def test_refinement_methods_meet_their_documented_accuracy():
 def test_spacing_and_origin_are_honoured():
     vol, spacing, origin = _sphere_volume()
     # the same world surface from a differently sampled grid
-    vol2, spacing2, origin2 = _sphere_volume(shape=(52, 50, 64), spacing=(0.4, 0.4, 0.3),
-                                             origin=(-10.0, -10.0, -2.0))
+    vol2, spacing2, origin2 = _sphere_volume(
+        shape=(52, 50, 64), spacing=(0.4, 0.4, 0.3), origin=(-10.0, -10.0, -2.0)
+    )
     cam = Camera.look_at((14.0, -11.0, 9.0), (0.3, -0.2, 4.1), (0, 0, 1), fov_y=35, near=0.5, far=100)
     a = iso.render(vol, cam, 32, 32, 4.0, spacing, origin)
     b = iso.render(vol2, cam, 32, 32, 4.0, spacing2, origin2)
@@ -379,10 +400,10 @@ def test_block_and_coarse_ranges_against_brute_force(shape):
     assert blo.shape == tuple(-(-s // 4) for s in shape)
     for bz, by, bx in np.ndindex(blo.shape):
         b = np.array([bz, by, bx])
-        if (4 * b > np.array(shape) - 2).any():            # no cell has its minimum corner here
+        if (4 * b > np.array(shape) - 2).any():  # no cell has its minimum corner here
             assert blo[bz, by, bx] == np.inf and bhi[bz, by, bx] == -np.inf
             continue
-        sl = tuple(slice(4 * x, min(4 * x + 5, s)) for x, s in zip(b, shape))
+        sl = tuple(slice(4 * x, min(4 * x + 5, s)) for x, s in zip(b, shape, strict=True))
         assert blo[bz, by, bx] == vol[sl].min() and bhi[bz, by, bx] == vol[sl].max()
 
     clo, chi = iso.coarse_ranges((blo, bhi), 4)
@@ -401,14 +422,18 @@ def test_block_and_coarse_ranges_against_brute_force(shape):
 def _segment(local, direction):
     """Length of local + s direction inside the unit cube, s >= 0."""
     with np.errstate(all="ignore"):
-        t = np.where(direction > 0, (1 - local) / direction, np.where(direction < 0, -local / direction, np.inf))
+        t = np.where(
+            direction > 0, (1 - local) / direction, np.where(direction < 0, -local / direction, np.inf)
+        )
     return t.min()
 
 
-@given(corners=arrays(np.float64, (2, 2, 2), elements=st.floats(-1, 1)),
-       local=arrays(np.float64, 3, elements=st.floats(0, 1)),
-       direction=arrays(np.float64, 3, elements=st.floats(-1, 1)),
-       refine=st.sampled_from([None, 3, ("illinois", 6)]))
+@given(
+    corners=arrays(np.float64, (2, 2, 2), elements=st.floats(-1, 1)),
+    local=arrays(np.float64, 3, elements=st.floats(0, 1)),
+    direction=arrays(np.float64, 3, elements=st.floats(-1, 1)),
+    refine=st.sampled_from([None, 3, ("illinois", 6)]),
+)
 def test_cubic_first_zero_against_dense_sampling(corners, local, direction, refine):
     if np.linalg.norm(direction) < 1e-3:
         direction = np.array([0.3, -0.5, 0.8])
@@ -420,10 +445,10 @@ def test_cubic_first_zero_against_dense_sampling(corners, local, direction, refi
     np.testing.assert_allclose(c[0] + s * (c[1] + s * (c[2] + s * c[3])), f, atol=1e-12)
     found, root, margin, bracket = iso.cubic_first_zero(c, np.array([length]), refine)
     found, root = bool(found[0]), root[0]
-    tol = 1e-12                                        # |f| below this: a float tie, either way
+    tol = 1e-12  # |f| below this: a float tie, either way
     changed = np.nonzero(f * np.sign(f[0]) < -tol)[0]  # strict sign changes from f(0)
     if not found:
-        assert abs(f[0]) > 0 and changed.size == 0     # no sign change anywhere
+        assert abs(f[0]) > 0 and changed.size == 0  # no sign change anywhere
         assert margin[0] > 0
         return
     assert 0 <= root <= length
@@ -433,7 +458,7 @@ def test_cubic_first_zero_against_dense_sampling(corners, local, direction, refi
         assert bracket[0, 0] <= root <= bracket[0, 1]
     if f[0] == 0:
         assert root == 0
-    if changed.size:                                   # no earlier sign change was missed
+    if changed.size:  # no earlier sign change was missed
         assert bracket[0, 0] <= s[changed[0]]
         if refine is None:
             assert root <= s[changed[0]] + 1e-12
@@ -447,7 +472,7 @@ def test_cubic_first_zero_on_many_random_cells():
     local = rng.random((m, 3))
     direction = rng.normal(size=(m, 3))
     direction /= np.linalg.norm(direction, axis=1)[:, None]
-    length = np.array([_segment(a, b) for a, b in zip(local, direction)])
+    length = np.array([_segment(a, b) for a, b in zip(local, direction, strict=True)])
     c = iso.cell_cubic(corners, local, direction)
     found, root, _, _ = iso.cubic_first_zero(c, length)
     s = np.linspace(0, 1, 1001)[None, :] * length[:, None]

@@ -13,14 +13,13 @@ from hypothesis import strategies as st
 
 from clvis import datasets, runtime, zfp
 from clvis._arrays import to_device
-from clvis.camera import Camera
-from clvis.camera import ray_buffer
+from clvis.camera import Camera, ray_buffer
 from clvis.iso.macrocell import macrocell_grids
 from clvis.iso.raytrace import raytrace_blocks
 from clvis.iso.traverse import init_rays, macro_traverse
 from clvis.reference import iso
-from clvis.reference.iso import traverse as ref
 from clvis.reference.camera import camera_rays
+from clvis.reference.iso import traverse as ref
 
 NO = 0xFFFFFFFF
 CAM = Camera.look_at((1.7, -2.2, 1.5), (0, 0, 0), (0, 0, 1), fov_y=40, near=0.1, far=20)
@@ -40,7 +39,7 @@ def _volume(name, n):
 def _grids(q, z, no_coarse=False):
     g = macrocell_grids(z, queue=q)
     coarse = g.coarse.copy()
-    if no_coarse:                             # every coarse cell (-inf, +inf): fine skipping only
+    if no_coarse:  # every coarse cell (-inf, +inf): fine skipping only
         coarse[..., 0], coarse[..., 1] = -np.inf, np.inf
     return g.fine, coarse
 
@@ -56,8 +55,9 @@ class Scene:
         self.fine_d, self.coarse_d = _upload(q, fine, np.float32), _upload(q, coarse, np.float32)
 
     def init(self):
-        ray_t, active, count = init_rays(self.q, self.cam_d, self.w, self.h, self.shape, self.spacing,
-                                         self.origin)
+        ray_t, active, count = init_rays(
+            self.q, self.cam_d, self.w, self.h, self.shape, self.spacing, self.origin
+        )
         rt_ref, enters = ref.init_rays(self.buf, self.w, self.h, self.shape, self.spacing, self.origin)
         cnt = int(count.get(queue=self.q)[0])
         assert np.array_equal(ray_t.get(queue=self.q), rt_ref)
@@ -72,13 +72,40 @@ class Scene:
         count_d = _upload(q, [cnt], np.uint32)
         cb = runtime.empty(q, max(cnt * n_spec, 1), np.uint32, "cand_block")
         ct = runtime.empty(q, max(cnt * n_spec, 1), np.float32, "cand_t")
-        macro_traverse(q, self.shape, self.spacing, self.origin, self.iso, self.cam_d, self.w, self.fine_d,
-                       self.coarse_d, act_d, count_d, cnt, rt_d, n_spec, cb, ct)
-        rb, rt, rrt = ref.macro_traverse(self.shape, self.spacing, self.origin, self.iso, self.buf, self.w,
-                                         self.fine, self.coarse, act, ray_t, n_spec)
+        macro_traverse(
+            q,
+            self.shape,
+            self.spacing,
+            self.origin,
+            self.iso,
+            self.cam_d,
+            self.w,
+            self.fine_d,
+            self.coarse_d,
+            act_d,
+            count_d,
+            cnt,
+            rt_d,
+            n_spec,
+            cb,
+            ct,
+        )
+        rb, rt, rrt = ref.macro_traverse(
+            self.shape,
+            self.spacing,
+            self.origin,
+            self.iso,
+            self.buf,
+            self.w,
+            self.fine,
+            self.coarse,
+            act,
+            ray_t,
+            n_spec,
+        )
         if cnt:
-            assert np.array_equal(cb.get(queue=q)[:cnt * n_spec].reshape(cnt, n_spec), rb)
-            assert np.array_equal(ct.get(queue=q)[:cnt * n_spec].reshape(cnt, n_spec), rt)
+            assert np.array_equal(cb.get(queue=q)[: cnt * n_spec].reshape(cnt, n_spec), rb)
+            assert np.array_equal(ct.get(queue=q)[: cnt * n_spec].reshape(cnt, n_spec), rt)
         assert np.array_equal(rt_d.get(queue=q), rrt)
         # candidates first, then padding; padding only when the ray is done
         have = rb != NO
@@ -97,7 +124,7 @@ class Scene:
             assert rounds <= 200
             rb, rt, ray_t = self.step(ray_t, act, n_spec)
             for i, p in enumerate(act):
-                seqs[int(p)] += [(int(b), float(t)) for b, t in zip(rb[i], rt[i]) if b != NO]
+                seqs[int(p)] += [(int(b), float(t)) for b, t in zip(rb[i], rt[i], strict=True) if b != NO]
             act = act[np.isfinite(ray_t[act])]
         return seqs, rounds
 
@@ -147,10 +174,15 @@ def _check_plain(seqs, plain):
 
 
 @settings(max_examples=15, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(name=st.sampled_from(["marschner_lobb", "turbulence"]),
-       eye=st.tuples(*[st.floats(-1.0, 1.0)] * 3), dist=st.floats(1.8, 4.0),
-       target=st.tuples(*[st.floats(-0.4, 0.4)] * 3), fov=st.floats(20, 70),
-       level=st.floats(0.2, 0.8), n_spec=st.sampled_from([1, 2, 5, 64]))
+@given(
+    name=st.sampled_from(["marschner_lobb", "turbulence"]),
+    eye=st.tuples(*[st.floats(-1.0, 1.0)] * 3),
+    dist=st.floats(1.8, 4.0),
+    target=st.tuples(*[st.floats(-0.4, 0.4)] * 3),
+    fov=st.floats(20, 70),
+    level=st.floats(0.2, 0.8),
+    n_spec=st.sampled_from([1, 2, 5, 64]),
+)
 def test_random_cameras_device_equals_reference(queue, name, eye, dist, target, fov, level, n_spec):
     eye = np.array(eye)
     if np.linalg.norm(eye) < 1e-3:
@@ -185,7 +217,7 @@ def test_camera_inside_the_volume(queue):
     assert len(act) == 16 * 12 and (ray_t == 0).all()
     seqs, _ = s.passes(3)
     _check_plain(seqs, _plain_dda(s))
-    assert all(seqs[p] for p in seqs)          # every ray has a candidate at some point
+    assert all(seqs[p] for p in seqs)  # every ray has a candidate at some point
 
 
 @pytest.mark.parametrize("view", [(0.0, 0.0, -1.0), (0.0, 1.0, 0.0), (-1.0, 0.0, 0.0)])
@@ -219,7 +251,7 @@ def test_rays_that_miss_the_box(queue):
     assert 0 < len(act) < 16 * 12
     miss = np.setdiff1d(np.arange(16 * 12), act).astype(np.uint32)
     assert np.isinf(ray_t[miss]).all()
-    rb, rt, rrt = s.step(ray_t, miss, 4)        # listed anyway: no candidates, ray_t stays +inf
+    rb, rt, rrt = s.step(ray_t, miss, 4)  # listed anyway: no candidates, ray_t stays +inf
     assert (rb == NO).all() and np.isinf(rt).all() and np.isinf(rrt[miss]).all()
     assert np.array_equal(rrt[act], ray_t[act])  # rays not listed are not touched
     # a NaN or a t beyond the exit is a finished ray too
@@ -243,12 +275,32 @@ def test_no_rays_and_bad_n_spec(queue):
     ray_t, act = s.init()
     s.step(ray_t, act[:0], 3)
     z = _upload(queue, np.zeros(4), np.uint32)
-    assert macro_traverse(queue, s.shape, s.spacing, s.origin, 0.5, s.cam_d, 4, s.fine_d, s.coarse_d,
-                          z, z, 0, z, 1, z, z) is None
+    assert (
+        macro_traverse(
+            queue, s.shape, s.spacing, s.origin, 0.5, s.cam_d, 4, s.fine_d, s.coarse_d, z, z, 0, z, 1, z, z
+        )
+        is None
+    )
     for bad in (0, 65):
         with pytest.raises(ValueError, match="n_spec"):
-            macro_traverse(queue, s.shape, s.spacing, s.origin, 0.5, s.cam_d, 4, s.fine_d, s.coarse_d,
-                           z, z, 1, z, bad, z, z)
+            macro_traverse(
+                queue,
+                s.shape,
+                s.spacing,
+                s.origin,
+                0.5,
+                s.cam_d,
+                4,
+                s.fine_d,
+                s.coarse_d,
+                z,
+                z,
+                1,
+                z,
+                bad,
+                z,
+                z,
+            )
 
 
 def _render_with_candidates(q, name, n, cam, w, h, isovalue, n_spec):
@@ -281,8 +333,21 @@ def _render_with_candidates(q, name, n, cam, w, h, isovalue, n_spec):
             srt = np.argsort(blocks, kind="stable")
             ub, off, cnt = np.unique(blocks[srt], return_index=True, return_counts=True)
             groups = tuple(_upload(q, a, np.uint32) for a in (ub, off, cnt))
-            raytrace_blocks(q, bricks, slots, s.shape, s.spacing, s.origin, isovalue, s.cam_d, w, groups,
-                            _upload(q, rays[srt], np.uint32), rt_d, (ray_hit, hit_t, rgba, depth))
+            raytrace_blocks(
+                q,
+                bricks,
+                slots,
+                s.shape,
+                s.spacing,
+                s.origin,
+                isovalue,
+                s.cam_d,
+                w,
+                groups,
+                _upload(q, rays[srt], np.uint32),
+                rt_d,
+                (ray_hit, hit_t, rgba, depth),
+            )
         hit = ray_hit.get(queue=q)
         act = act[(hit[act] == 0) & np.isfinite(trav_t[act])]
     decoded = zfp.decode(z, queue=q)
@@ -292,8 +357,9 @@ def _render_with_candidates(q, name, n, cam, w, h, isovalue, n_spec):
 
 @pytest.mark.parametrize("name, n_spec", [("marschner_lobb", 1), ("marschner_lobb", 8), ("turbulence", 8)])
 def test_candidates_through_raytrace_blocks_match_the_reference(queue, name, n_spec):
-    hit, depth, image, rounds = _render_with_candidates(queue, name, 41 if name == "marschner_lobb" else 30,
-                                                        CAM, 40, 32, 0.5, n_spec)
+    hit, depth, image, rounds = _render_with_candidates(
+        queue, name, 41 if name == "marschner_lobb" else 30, CAM, 40, 32, 0.5, n_spec
+    )
     agree = iso.agreement(image, hit, depth)
     assert agree["ok"], agree
     assert image.hit.mean() > 0.3

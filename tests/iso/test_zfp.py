@@ -33,35 +33,46 @@ def _volume(kind: str, shape) -> np.ndarray:
         v = rng.standard_normal(shape)
     elif kind == "smooth":
         v = np.sin(0.31 * x) + np.cos(0.17 * y + 0.4) * np.sin(0.23 * z) + 0.5 * np.sin(0.05 * (x + y + z))
-    elif kind == "real":            # the explosion, cropped: exact zeros and a sparse support
+    elif kind == "real":  # the explosion, cropped: exact zeros and a sparse support
         full = clvis.datasets.explosion((40, 44, 36))["volume"]
-        reps = [-(-s // f) for s, f in zip(shape, full.shape)]
-        v = np.tile(full, reps)[:shape[0], :shape[1], :shape[2]]
+        reps = [-(-s // f) for s, f in zip(shape, full.shape, strict=True)]
+        v = np.tile(full, reps)[: shape[0], : shape[1], : shape[2]]
     elif kind == "constant":
         v = np.full(shape, 3.25)
     elif kind == "zeros":
         v = np.zeros(shape)
-    elif kind == "huge":            # up to float32's largest: decoded values may overflow to inf
+    elif kind == "huge":  # up to float32's largest: decoded values may overflow to inf
         v = rng.uniform(-1, 1, shape) * np.where(rng.random(shape) < 0.5, 1e30, 3.4e38)
     elif kind == "tiny":
         v = rng.standard_normal(shape) * 1e-30
-    elif kind == "denormal":        # subnormal floats: the product's rounding to subnormals
+    elif kind == "denormal":  # subnormal floats: the product's rounding to subnormals
         v = rng.standard_normal(shape) * 1e-40
-    elif kind == "underflow":       # block maxima 2^-119..2^-96: products that round to subnormals
+    elif kind == "underflow":  # block maxima 2^-119..2^-96: products that round to subnormals
         blocks = rng.uniform(-119, -96, [-(-n // 4) for n in shape])
-        scale = np.kron(blocks, np.ones((4, 4, 4)))[:shape[0], :shape[1], :shape[2]]
+        scale = np.kron(blocks, np.ones((4, 4, 4)))[: shape[0], : shape[1], : shape[2]]
         v = np.sign(rng.standard_normal(shape)) * 2.0 ** (scale - rng.uniform(0, 30, shape))
     elif kind == "negative":
         v = -np.abs(rng.standard_normal(shape)) * 100 - 5
-    elif kind == "magnitudes":      # every exponent, both signs
+    elif kind == "magnitudes":  # every exponent, both signs
         v = np.sign(rng.standard_normal(shape)) * 10.0 ** rng.uniform(-45, 38, shape)
     else:
         raise AssertionError(kind)
     return np.asarray(v, F32)
 
 
-KINDS = ["random", "smooth", "real", "constant", "zeros", "huge", "tiny", "denormal", "underflow", "negative",
-         "magnitudes"]
+KINDS = [
+    "random",
+    "smooth",
+    "real",
+    "constant",
+    "zeros",
+    "huge",
+    "tiny",
+    "denormal",
+    "underflow",
+    "negative",
+    "magnitudes",
+]
 
 
 def zfpy_decompress(stream: bytes, shape, rate: int) -> np.ndarray:
@@ -81,11 +92,14 @@ def assert_bits_equal(got, want, msg=""):
     bad = got.view(np.uint32) != want.view(np.uint32)
     if bad.any():
         i = tuple(int(k) for k in np.argwhere(bad)[0])
-        raise AssertionError(f"{msg}: {int(bad.sum())} values differ; first at {i}: {got[i]!r} != {want[i]!r}")
+        raise AssertionError(
+            f"{msg}: {int(bad.sum())} values differ; first at {i}: {got[i]!r} != {want[i]!r}"
+        )
 
 
 # --------------------------------------------------------------------------
 # the format, zfpy and the reference
+
 
 def test_headerless_stream_is_the_payload_of_the_header_stream():
     """write_header=False drops zfp's 96-bit header and nothing else, and
@@ -149,9 +163,14 @@ def test_dequantize_every_exponent(queue, tmp_path):
     edge = [0, 1, -1, 2, 3, 5, 7, 0x7FFFFFFF, -0x7FFFFFFF - 1, 0x1000001, 0x1000003, -0x1000001, 0x2000006]
     edge += [s * (1 << k) + d for k in range(31) for d in (-1, 0, 1) for s in (1, -1)]
     rng = np.random.default_rng(4)
-    vals = np.concatenate([np.array(edge, np.int64), rng.integers(-2**31, 2**31, 600),
-                           (rng.standard_normal(300) * 2.0 ** rng.uniform(0, 31, 300)).astype(np.int64)])
-    vals = np.clip(vals, -2**31, 2**31 - 1).astype(np.int32)
+    vals = np.concatenate(
+        [
+            np.array(edge, np.int64),
+            rng.integers(-(2**31), 2**31, 600),
+            (rng.standard_normal(300) * 2.0 ** rng.uniform(0, 31, 300)).astype(np.int64),
+        ]
+    )
+    vals = np.clip(vals, -(2**31), 2**31 - 1).astype(np.int32)
     emaxes = np.arange(-127, 129, dtype=np.int32)
     i, e = (a.ravel() for a in np.meshgrid(vals, emaxes))
     path = tmp_path / "probe.cl"
@@ -168,7 +187,7 @@ def test_dequantize_every_exponent(queue, tmp_path):
     assert sub.sum() > 1000
     # numpy's float32 ldexp rounds 2^-150 (a tie) to 0 and keeps 2^-149, as ldexpf does
     assert ref.dequantize(np.array([1], np.int32), -120)[0] == 0
-    assert ref.dequantize(np.array([1], np.int32), -119)[0] == np.float32(2.0 ** -149)
+    assert ref.dequantize(np.array([1], np.int32), -119)[0] == np.float32(2.0**-149)
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -184,8 +203,11 @@ def test_decode_real_volume_every_rate(queue):
     assert (v == 0).mean() > 0.5
     for rate in RATES:
         zv = zfp.compress(v, rate)
-        assert_bits_equal(zfp.decode(zv.stream, v.shape, rate, queue=queue),
-                          zfpy_decompress(zv.stream, v.shape, rate), f"rate {rate}")
+        assert_bits_equal(
+            zfp.decode(zv.stream, v.shape, rate, queue=queue),
+            zfpy_decompress(zv.stream, v.shape, rate),
+            f"rate {rate}",
+        )
 
 
 def test_decode_blocks_are_the_blocks_of_the_volume(queue):
@@ -194,7 +216,7 @@ def test_decode_blocks_are_the_blocks_of_the_volume(queue):
         zv, full = _case("magnitudes", shape, rate)
         rng = np.random.default_rng(rate)
         ids = rng.integers(0, zv.nblocks, 40)
-        ids[:3] = [0, zv.nblocks - 1, 0]                # repeats and the last (partial) block
+        ids[:3] = [0, zv.nblocks - 1, 0]  # repeats and the last (partial) block
         bricks = zfp.decode_blocks(zv, ids, queue=queue)
         assert isinstance(bricks, cla.Array) and bricks.shape == (40, 64) and bricks.dtype == F32
         bricks = bricks.get()
@@ -203,8 +225,8 @@ def test_decode_blocks_are_the_blocks_of_the_volume(queue):
         # the in-range part as the full decode
         for j, b in enumerate(ids):
             z, y, x = zv.block_origin(int(b))
-            part = full[z:z + 4, y:y + 4, x:x + 4]
-            brick = bricks[j].reshape(4, 4, 4)[:part.shape[0], :part.shape[1], :part.shape[2]]
+            part = full[z : z + 4, y : y + 4, x : x + 4]
+            brick = bricks[j].reshape(4, 4, 4)[: part.shape[0], : part.shape[1], : part.shape[2]]
             assert_bits_equal(np.ascontiguousarray(brick), part, f"block {b}")
 
 
@@ -214,7 +236,7 @@ def test_decode_blocks_device_ids_and_out_of_range(queue):
     got = zfp.decode_blocks(zv, ids, queue=queue, host=True)
     want = ref.decode_blocks(zv.stream, [7, 0, 3], zv.shape, 8)
     assert_bits_equal(got[[0, 2, 4]], want)
-    assert np.isnan(got[[1, 3]]).all()                 # ids >= nblocks: NaN bricks, nothing read
+    assert np.isnan(got[[1, 3]]).all()  # ids >= nblocks: NaN bricks, nothing read
     empty = zfp.decode_blocks(zv, np.zeros(0, np.int64), queue=queue, host=True)
     assert empty.shape == (0, 64)
 
@@ -244,7 +266,9 @@ def test_device_inputs_and_outputs(queue):
     as_bytes = cla.to_device(queue, np.frombuffer(zv.stream, np.uint8))
     assert_bits_equal(zfp.decode(as_bytes, zv.shape, zv.rate), want, "uint8 bytes")
     # a view with an offset (copied to a whole buffer)
-    padded = cla.to_device(queue, np.concatenate([np.zeros(3, np.uint64), np.frombuffer(zv.stream, np.uint64)]))
+    padded = cla.to_device(
+        queue, np.concatenate([np.zeros(3, np.uint64), np.frombuffer(zv.stream, np.uint64)])
+    )
     assert_bits_equal(zfp.decode(padded[3:], zv.shape, zv.rate), want, "offset view")
     assert_bits_equal(zfp.decode(np.frombuffer(zv.stream, np.uint8), zv.shape, zv.rate, queue=queue), want)
     assert_bits_equal(zv.decode(queue=queue), want, "ZfpVolume.decode")
@@ -266,9 +290,13 @@ def test_corrupt_stream_decodes_like_zfp_without_error(queue):
             assert_bits_equal(got, ref.decode(bad, zv.shape, rate), f"rate {rate} (reference)")
 
 
-@given(shape=st.tuples(st.integers(1, 20), st.integers(1, 20), st.integers(1, 20)),
-       rate=st.integers(1, 32), kind=st.sampled_from(KINDS), seed=st.integers(0, 2**31),
-       profile=st.sampled_from(["cpu", "gpu"]))
+@given(
+    shape=st.tuples(st.integers(1, 20), st.integers(1, 20), st.integers(1, 20)),
+    rate=st.integers(1, 32),
+    kind=st.sampled_from(KINDS),
+    seed=st.integers(0, 2**31),
+    profile=st.sampled_from(["cpu", "gpu"]),
+)
 def test_property(device, shape, rate, kind, seed, profile):
     v = _volume(kind, shape)
     if kind in ("random", "magnitudes"):
@@ -285,6 +313,7 @@ def test_property(device, shape, rate, kind, seed, profile):
 # --------------------------------------------------------------------------
 # compress and ZfpVolume
 
+
 def test_compress_converts_to_float32():
     rng = np.random.default_rng(2)
     for dtype in (np.uint8, np.uint16, np.int16, np.int32, np.int64, np.float64, np.float16):
@@ -292,8 +321,9 @@ def test_compress_converts_to_float32():
         zv = zfp.compress(v, 9)
         assert zv.stream == zfpy.compress_numpy(v.astype(F32), rate=9, write_header=False), dtype
     v = _volume("smooth", (8, 12, 10))
-    assert zfp.compress(v.transpose(2, 1, 0), 4).stream == \
-        zfpy.compress_numpy(np.ascontiguousarray(v.transpose(2, 1, 0)), rate=4, write_header=False)
+    assert zfp.compress(v.transpose(2, 1, 0), 4).stream == zfpy.compress_numpy(
+        np.ascontiguousarray(v.transpose(2, 1, 0)), rate=4, write_header=False
+    )
     assert zfp.compress(v, 5.0).rate == 5
 
 
@@ -323,10 +353,15 @@ def test_empty_volume(queue):
 # --------------------------------------------------------------------------
 # bad input
 
+
 def test_short_and_long_streams_raise_data_error():
     zv, _ = _case("random", (5, 6, 7), 8)
-    for bad, what in [(zv.stream[:-8], "8 bytes short"), (zv.stream[:-1], "1 bytes short"),
-                      (b"", "512 bytes short"), (zv.stream + bytes(8), "8 bytes too many")]:
+    for bad, what in [
+        (zv.stream[:-8], "8 bytes short"),
+        (zv.stream[:-1], "1 bytes short"),
+        (b"", "512 bytes short"),
+        (zv.stream + bytes(8), "8 bytes too many"),
+    ]:
         with pytest.raises(clvis.DataError, match=f"{len(bad)} bytes.*exactly 512 bytes.*{what}"):
             zfp.decode(bad, (5, 6, 7), 8)
         with pytest.raises(clvis.DataError, match="exactly 512"):
@@ -354,8 +389,18 @@ def test_wrong_shape_or_rate_raise_data_error(queue):
         zfp.decode(zv.stream)
 
 
-@pytest.mark.parametrize("rate, err", [(8.5, ValueError), (0, ValueError), (33, ValueError), (-1, ValueError),
-                                       (float("nan"), ValueError), (True, TypeError), ("8", TypeError)])
+@pytest.mark.parametrize(
+    "rate, err",
+    [
+        (8.5, ValueError),
+        (0, ValueError),
+        (33, ValueError),
+        (-1, ValueError),
+        (float("nan"), ValueError),
+        (True, TypeError),
+        ("8", TypeError),
+    ],
+)
 def test_bad_rates(rate, err):
     v = _volume("random", (4, 4, 4))
     with pytest.raises(err, match="rate"):
@@ -364,8 +409,17 @@ def test_bad_rates(rate, err):
         zfp.decode(bytes(64), (4, 4, 4), rate)
 
 
-@pytest.mark.parametrize("shape, err", [((4, 4), ValueError), ((4, 4, 4, 4), ValueError), ((4, -1, 4), ValueError),
-                                        ((4, 4.0, 4), TypeError), (None, TypeError), ((1 << 31, 1, 1), ValueError)])
+@pytest.mark.parametrize(
+    "shape, err",
+    [
+        ((4, 4), ValueError),
+        ((4, 4, 4, 4), ValueError),
+        ((4, -1, 4), ValueError),
+        ((4, 4.0, 4), TypeError),
+        (None, TypeError),
+        ((1 << 31, 1, 1), ValueError),
+    ],
+)
 def test_bad_shapes(shape, err):
     with pytest.raises(err, match="shape"):
         zfp.decode(bytes(64), shape, 8)

@@ -78,6 +78,7 @@ _AT = re.compile(r"^At line (\d+) \(column (\d+)\) of (.+):$")
 # ---------------------------------------------------------------------------
 # the sources: kernels and benign-race markers
 
+
 def _strip_comments(text: str) -> str:
     """C comments replaced by spaces (newlines kept, so offsets and lines stay)."""
     return re.sub(r"/\*.*?\*/|//[^\n]*", lambda m: re.sub(r"[^\n]", " ", m.group(0)), text, flags=re.DOTALL)
@@ -167,13 +168,14 @@ class Sources:
 # ---------------------------------------------------------------------------
 # Oclgrind's output
 
+
 @dataclasses.dataclass
 class Access:
-    entity: str                     # "Global(3,0,0) Local(3,0,0) Group(0,0,0)"
+    entity: str  # "Global(3,0,0) Local(3,0,0) Group(0,0,0)"
     instruction: str
-    file: str | None = None         # as Oclgrind names it
+    file: str | None = None  # as Oclgrind names it
     line: int = 0
-    source: str = ""                # the text Oclgrind shows (headers: unreliable)
+    source: str = ""  # the text Oclgrind shows (headers: unreliable)
 
 
 @dataclasses.dataclass
@@ -197,14 +199,15 @@ class Diagnostic:
     @property
     def title(self) -> str:
         """The header without the address (which differs between reports)."""
-        return re.sub(r" at (global|local|private|constant) memory address 0x[0-9a-f]+", r" (\1)",
-                      self.header)
+        return re.sub(
+            r" at (global|local|private|constant) memory address 0x[0-9a-f]+", r" (\1)", self.header
+        )
 
     def field(self, name: str) -> str:
         """The value of a body line "Name: value" (or "Name value")."""
         for line in self.body:
             if line.startswith((name + ":", name + " ")):
-                return line[len(name):].lstrip(":").strip()
+                return line[len(name) :].lstrip(":").strip()
         return ""
 
     def text(self) -> str:
@@ -214,10 +217,10 @@ class Diagnostic:
 @dataclasses.dataclass
 class RunOutput:
     diagnostics: list[Diagnostic]
-    errors: list[tuple[str, str]]       # (case, traceback)
+    errors: list[tuple[str, str]]  # (case, traceback)
     launched: dict[str, int] | None
-    stray: list[str]                    # lines that are neither markers nor Oclgrind's
-    seconds: dict[str, float] = dataclasses.field(default_factory=dict)     # per case
+    stray: list[str]  # lines that are neither markers nor Oclgrind's
+    seconds: dict[str, float] = dataclasses.field(default_factory=dict)  # per case
 
 
 def _accesses(body: list[str]) -> list[Access]:
@@ -291,9 +294,13 @@ def parse(text: str) -> RunOutput:
 # ---------------------------------------------------------------------------
 # judging
 
+
 def _api_ignored(d: Diagnostic) -> bool:
-    return (d.field("Function") == "clGetDeviceInfo" and d.field("Error") == "CL_INVALID_VALUE"
-            and d.field("For argument") == "'param_name'")
+    return (
+        d.field("Function") == "clGetDeviceInfo"
+        and d.field("Error") == "CL_INVALID_VALUE"
+        and d.field("For argument") == "'param_name'"
+    )
 
 
 def _where(src: Sources, d: Diagnostic, a: Access) -> tuple[Path | None, str]:
@@ -303,8 +310,12 @@ def _where(src: Sources, d: Diagnostic, a: Access) -> tuple[Path | None, str]:
     if path is None:
         return None, f"{a.file}:{a.line} (not found)"
     rel = path.relative_to(REPO) if path.is_relative_to(REPO) else path
-    if a.file == "input.cl" and a.source and a.source != "(source not available)" \
-            and src.line(path, a.line).strip() != a.source.strip():
+    if (
+        a.file == "input.cl"
+        and a.source
+        and a.source != "(source not available)"
+        and src.line(path, a.line).strip() != a.source.strip()
+    ):
         # the program source is not the file we think: never match a marker
         return None, f"{rel}:{a.line} (Oclgrind shows another line: {a.source!r})"
     return path, f"{rel}:{a.line}"
@@ -334,6 +345,7 @@ def judge(src: Sources, d: Diagnostic) -> tuple[str, str, str]:
 # ---------------------------------------------------------------------------
 # running
 
+
 @dataclasses.dataclass
 class ConfigResult:
     tuning: str
@@ -355,7 +367,7 @@ def _command(oclgrind: str, tuning: str, atomics: str, cases: list[str]) -> list
 def _env() -> dict[str, str]:
     env = dict(os.environ)
     env["PYOPENCL_NO_CACHE"] = "1"
-    env["OCLGRIND_MAX_ERRORS"] = str(2**31 - 1)     # the default stops reporting after 1000
+    env["OCLGRIND_MAX_ERRORS"] = str(2**31 - 1)  # the default stops reporting after 1000
     env["PYTHONPATH"] = os.pathsep.join([str(REPO)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     for k in ("CLVIS_DEVICE", "PYOPENCL_CTX", "CLVIS_TUNING", "CLVIS_NO_INT64_ATOMICS", "CLVIS_MAX_ALLOC"):
         env.pop(k, None)
@@ -364,8 +376,16 @@ def _env() -> dict[str, str]:
 
 def run_config(oclgrind: str, tuning: str, atomics: str, cases: list[str]) -> ConfigResult:
     t0 = time.perf_counter()
-    p = subprocess.run(_command(oclgrind, tuning, atomics, cases), cwd=REPO, env=_env(), check=False,
-                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, errors="replace")
+    p = subprocess.run(
+        _command(oclgrind, tuning, atomics, cases),
+        cwd=REPO,
+        env=_env(),
+        check=False,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        errors="replace",
+    )
     return ConfigResult(tuning, atomics, time.perf_counter() - t0, p.returncode, parse(p.stdout), p.stdout)
 
 
@@ -389,16 +409,21 @@ def report(src: Sources, results: list[ConfigResult], full: bool, out=None) -> b
         for d in r.output.diagnostics:
             verdict, key, note = judge(src, d)
             counts[verdict] += 1
-            g = groups.setdefault((verdict, key, note), {"n": 0, "configs": set(), "cases": set(), "first": None})
+            g = groups.setdefault(
+                (verdict, key, note), {"n": 0, "configs": set(), "cases": set(), "first": None}
+            )
             g["n"] += 1
             g["configs"].add(r.name)
             g["cases"].add(d.case)
             if g["first"] is None:
                 g["first"] = (r, d)
         launched = r.output.launched or {}
-        print(f"{r.name:13s} {r.seconds:6.1f} s  {len(launched):3d} kernels launched  "
-              f"{counts['benign']:5d} benign races  {counts['fail']:4d} failures  "
-              f"{counts['ignored']:3d} API queries ignored", file=out)
+        print(
+            f"{r.name:13s} {r.seconds:6.1f} s  {len(launched):3d} kernels launched  "
+            f"{counts['benign']:5d} benign races  {counts['fail']:4d} failures  "
+            f"{counts['ignored']:3d} API queries ignored",
+            file=out,
+        )
         slow = sorted(r.output.seconds.items(), key=lambda kv: -kv[1])[:3]
         if slow:
             print("  slowest cases: " + ", ".join(f"{k} {v:.1f} s" for k, v in slow), file=out)
@@ -418,8 +443,11 @@ def report(src: Sources, results: list[ConfigResult], full: bool, out=None) -> b
     if benign:
         print("\ndocumented benign races (reports, configurations, cases):", file=out)
         for (_, key, tag), g in sorted(benign, key=lambda kg: kg[0][1]):
-            print(f"  [{tag}] {key}\n      {g['n']} reports; {', '.join(sorted(g['configs']))}; "
-                  f"{', '.join(sorted(g['cases']))}", file=out)
+            print(
+                f"  [{tag}] {key}\n      {g['n']} reports; {', '.join(sorted(g['configs']))}; "
+                f"{', '.join(sorted(g['cases']))}",
+                file=out,
+            )
     used = {t for k in groups if k[0] == "benign" for t in k[2].split(",")}
     for tag, places in sorted(src.all_tags().items()):
         if full and tag not in used:
@@ -429,24 +457,37 @@ def report(src: Sources, results: list[ConfigResult], full: bool, out=None) -> b
     for (_, key, note), g in sorted(fails, key=lambda kg: kg[0][1]):
         ok = False
         r, d = g["first"]
-        print(f"\nFAIL ({note}): {key}\n  {g['n']} reports; {', '.join(sorted(g['configs']))}; cases "
-              f"{', '.join(sorted(g['cases']))}\n  first report ({r.name}, case {d.case}):", file=out)
+        print(
+            f"\nFAIL ({note}): {key}\n  {g['n']} reports; {', '.join(sorted(g['configs']))}; cases "
+            f"{', '.join(sorted(g['cases']))}\n  first report ({r.name}, case {d.case}):",
+            file=out,
+        )
         print("    " + d.text().replace("\n", "\n    "), file=out)
-        print("  reproduce: " + " ".join(_command("oclgrind", r.tuning, r.atomics, [d.case]))
-              + "  (with PYOPENCL_NO_CACHE=1)", file=out)
+        print(
+            "  reproduce: "
+            + " ".join(_command("oclgrind", r.tuning, r.atomics, [d.case]))
+            + "  (with PYOPENCL_NO_CACHE=1)",
+            file=out,
+        )
 
     kernels = src.kernels
     launched_any: dict[str, list[str]] = defaultdict(list)
     for r in results:
-        for k in (r.output.launched or {}):
+        for k in r.output.launched or {}:
             launched_any[k].append(r.name)
     missing = sorted(set(kernels) - set(launched_any))
-    print(f"\nkernels launched: {len(set(kernels) & set(launched_any))} of {len(kernels)} "
-          f"in kernels_cl/<family>/*.cl", file=out)
+    print(
+        f"\nkernels launched: {len(set(kernels) & set(launched_any))} of {len(kernels)} "
+        f"in kernels_cl/<family>/*.cl",
+        file=out,
+    )
     if missing and full:
         ok = False
-        print("FAIL: never launched (add them to tests/oclgrind/cases.py): "
-              + ", ".join(f"{k} ({kernels[k].relative_to(REPO)})" for k in missing), file=out)
+        print(
+            "FAIL: never launched (add them to tests/oclgrind/cases.py): "
+            + ", ".join(f"{k} ({kernels[k].relative_to(REPO)})" for k in missing),
+            file=out,
+        )
     elif missing:
         print(f"(a partial run: {len(missing)} not launched)", file=out)
     print("\noclgrind audit: " + ("passed" if ok else "FAILED"), file=out)
@@ -455,11 +496,20 @@ def report(src: Sources, results: list[ConfigResult], full: bool, out=None) -> b
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--config", action="append", metavar="TUNING:ATOMICS",
-                    help="cpu|gpu:int64|no-int64 (default: all four)")
+    ap.add_argument(
+        "--config",
+        action="append",
+        metavar="TUNING:ATOMICS",
+        help="cpu|gpu:int64|no-int64 (default: all four)",
+    )
     ap.add_argument("--case", action="append", default=[], help="run only these cases of cases.py")
-    ap.add_argument("--jobs", "-j", type=int, default=0,
-                    help="configurations run at once (default: 2 when the machine has 4 or more cores, else 1)")
+    ap.add_argument(
+        "--jobs",
+        "-j",
+        type=int,
+        default=0,
+        help="configurations run at once (default: 2 when the machine has 4 or more cores, else 1)",
+    )
     ap.add_argument("--log-dir", type=Path, help="keep each configuration's raw Oclgrind output here")
     ap.add_argument("--oclgrind", default=os.environ.get("OCLGRIND", "oclgrind"))
     args = ap.parse_args(argv)
@@ -478,8 +528,11 @@ def main(argv=None) -> int:
             configs.append((t, a))
     src = Sources()
     jobs = args.jobs or (2 if (os.cpu_count() or 1) >= 4 else 1)
-    print(f"oclgrind audit: {_oclgrind_version(oclgrind)}, {len(configs)} configurations, "
-          f"{len(src.kernels)} kernels; {' '.join(OCLGRIND_ARGS)}", flush=True)
+    print(
+        f"oclgrind audit: {_oclgrind_version(oclgrind)}, {len(configs)} configurations, "
+        f"{len(src.kernels)} kernels; {' '.join(OCLGRIND_ARGS)}",
+        flush=True,
+    )
     t0 = time.perf_counter()
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as ex:
         results = list(ex.map(lambda c: run_config(oclgrind, c[0], c[1], args.case), configs))

@@ -81,9 +81,10 @@ def scan(q):
     clvis.scan(rng.integers(0, 1000, 300).astype(np.uint32), exclusive=False, queue=q)
     clvis.scan(rng.random(300).astype(np.float32), queue=q)
     clvis.scan(rng.integers(0, 2**40, 300).astype(np.uint64), return_total=True, queue=q)
-    clvis.scan(rng.integers(-2**40, 2**40, 300).astype(np.int64), queue=q)
+    clvis.scan(rng.integers(-(2**40), 2**40, 300).astype(np.int64), queue=q)
     # scan_chained's look-back fallback (a -D variant, testing only)
     import clvis.primitives as prim
+
     prim._SCAN_TEST_FALLBACK = True
     try:
         clvis.scan(rng.integers(0, 9, 700).astype(np.uint32), queue=q)
@@ -108,12 +109,13 @@ def radix_sort(q):
     rng = _rng(3)
     # every pass runs the same kernels: key_bits keeps the pass count (and
     # Oclgrind's time) down where the key type allows it
-    for n in (3, 2500):     # the gpu shape's tile is 1024 keys
+    for n in (3, 2500):  # the gpu shape's tile is 1024 keys
         k = rng.integers(0, 2**12, n).astype(np.uint32)
         clvis.radix_sort(k, np.arange(n, dtype=np.uint32), key_bits=12, queue=q)
     clvis.radix_sort(rng.standard_normal(300).astype(np.float32), queue=q)
-    clvis.radix_sort(rng.integers(-2**31, 2**31, 100).astype(np.int32), rng.random(100).astype(np.float32),
-                     queue=q)
+    clvis.radix_sort(
+        rng.integers(-(2**31), 2**31, 100).astype(np.int32), rng.random(100).astype(np.float32), queue=q
+    )
     clvis.radix_sort(rng.integers(0, 2**36, 200, dtype=np.uint64), key_bits=36, queue=q)
     clvis.radix_sort(rng.standard_normal(50), queue=q)
 
@@ -121,7 +123,7 @@ def radix_sort(q):
 @case
 def histogram(q):
     rng = _rng(4)
-    clvis.histogram(rng.integers(0, 16, 300).astype(np.int32), 16, queue=q)       # local bins
+    clvis.histogram(rng.integers(0, 16, 300).astype(np.int32), 16, queue=q)  # local bins
     clvis.histogram(rng.integers(0, 300, 2500).astype(np.uint32), 300, queue=q)
     clvis.histogram(rng.integers(0, 1000, 300).astype(np.uint32), 1000, queue=q)  # global: n < bins
     clvis.histogram(rng.integers(0, 5000, 300).astype(np.int32), 4000, check=False, queue=q)
@@ -130,12 +132,14 @@ def histogram(q):
 @case
 def copy(q):
     from clvis.primitives import copy as dcopy
+
     rng = _rng(5)
     dcopy(rng.random(257).astype(np.float32), queue=q)
     dcopy(rng.integers(0, 255, 13).astype(np.uint8), queue=q)
 
 
 # --- raster ------------------------------------------------------------------
+
 
 def _raster_cam(w, h, eye=(0.3, -6.0, 1.2)):
     return Camera.look_at(eye, (0.0, 0.0, 0.0), (0, 0, 1), fov_y=50.0, aspect=w / h, near=0.5, far=20.0)
@@ -144,9 +148,9 @@ def _raster_cam(w, h, eye=(0.3, -6.0, 1.2)):
 def _cloud(n, seed):
     rng = _rng(seed)
     pos = rng.normal(size=(n, 3)).astype(np.float32)
-    pos[::37] = np.nan                          # non-finite points are skipped
+    pos[::37] = np.nan  # non-finite points are skipped
     # duplicates: ties in depth go to the lowest index
-    pos[n // 2: n // 2 + 20] = pos[:20]
+    pos[n // 2 : n // 2 + 20] = pos[:20]
     return pos
 
 
@@ -160,16 +164,32 @@ def rasterize(q):
     vel = rng.normal(size=(n, 3)).astype(np.float32)
     radius = rng.uniform(0.01, 0.1, n).astype(np.float32)
     # Morton order (morton_order: codes, iota, radix sort; then gather, invert)
-    r = clvis.Rasterizer(pos, colors=colors, attributes=attrs, velocity=vel, radius=radius, morton=True,
-                         batch_size=100, queue=q)
+    r = clvis.Rasterizer(
+        pos,
+        colors=colors,
+        attributes=attrs,
+        velocity=vel,
+        radius=radius,
+        morton=True,
+        batch_size=100,
+        queue=q,
+    )
     front, back = _raster_cam(w, h), _raster_cam(w, h, (-0.3, 6.0, -1.2))  # batch walk reverse = 0, 1
-    r.render(front, w, h, soft_z=True)                          # colors
-    r.render(back, w, h, color_by="temp", soft_z=1.05)          # a float attribute through the colormap
-    r.render(front, w, h, color_by="cls")                       # a uint8 attribute
+    r.render(front, w, h, soft_z=True)  # colors
+    r.render(back, w, h, color_by="temp", soft_z=1.05)  # a float attribute through the colormap
+    r.render(front, w, h, color_by="cls")  # a uint8 attribute
     # input order, white points, soft z; colors and radius only
     clvis.rasterize(pos, _raster_cam(8, 8), 8, 8, soft_z=True, batch_size=50, queue=q)
-    clvis.rasterize(pos[:40], _raster_cam(32, 24), 32, 24, colors=colors[:40, :3], radius=radius[:40],
-                    morton=False, queue=q)
+    clvis.rasterize(
+        pos[:40],
+        _raster_cam(32, 24),
+        32,
+        24,
+        colors=colors[:40, :3],
+        radius=radius[:40],
+        morton=False,
+        queue=q,
+    )
     # squares of 3 pixels (POINT_SIZE 3) at the image's edges, soft z too; non-finite points counted
     bad = pos.copy()
     bad[::7] = np.nan
@@ -194,9 +214,10 @@ def depth_filter(q):
 
 # --- iso ---------------------------------------------------------------------
 
+
 def _volume(n=13, seed=9):
     """A sphere-ish field with noise: [z, y, x] float32, edge blocks partial."""
-    zz, yy, xx = np.mgrid[:n, :n + 2, :n + 5].astype(np.float32)
+    zz, yy, xx = np.mgrid[:n, : n + 2, : n + 5].astype(np.float32)
     c = (n - 1) / 2
     r = np.sqrt((xx - c) ** 2 + (yy - c) ** 2 + (zz - c) ** 2) / c
     return (1.0 - r + 0.05 * _rng(seed).standard_normal(r.shape)).astype(np.float32)
@@ -212,7 +233,7 @@ def zfp(q):
     clvis.zfp.decode(zv, queue=q)
     clvis.zfp.decode_blocks(zv, [0, 3, zv.nblocks - 1, 1], queue=q, host=True)
     ids = runtime.empty(q, 3, np.uint32, "ids")
-    ids.set(np.array([2, zv.nblocks + 5, 0], np.uint32))   # an out-of-range id: a NaN brick
+    ids.set(np.array([2, zv.nblocks + 5, 0], np.uint32))  # an out-of-range id: a NaN brick
     clvis.zfp.decode_blocks(zv, ids, queue=q, host=True)
 
 
@@ -241,12 +262,13 @@ def iso_cache(q):
         needed[rng.choice(nb, 2, replace=False)] = 1
         cache.update(needed)
     needed = np.zeros(nb, np.uint32)
-    needed[:5] = 1                  # more than the capacity: the cache grows
+    needed[:5] = 1  # more than the capacity: the cache grows
     cache.update(needed)
     clvis.iso.mark_blocks(np.array([0, 2, 3], np.uint32), zv, queue=q)
 
 
 # --- gauss -------------------------------------------------------------------
+
 
 def _gaussians(n, seed=11):
     rng = _rng(seed)
@@ -257,7 +279,9 @@ def _gaussians(n, seed=11):
 
 
 def _gauss_cam(w, h):
-    return Camera.look_at((0.3, -6.0, 1.2), (0, 0, 0), (0, 0, 1), fov_y=50.0, aspect=w / h, near=0.1, far=50.0)
+    return Camera.look_at(
+        (0.3, -6.0, 1.2), (0, 0, 0), (0, 0, 1), fov_y=50.0, aspect=w / h, near=0.1, far=50.0
+    )
 
 
 @case
@@ -268,7 +292,7 @@ def gauss_lod(q):
     for lod in ("low", "medium", "high"):
         clvis.gaussians_from_volume(sv, lod, queue=q)
     lod_table(sv, queue=q)
-    full = rng.random((9, 9, 9)).astype(np.float32)         # every voxel active: tiles of one value
+    full = rng.random((9, 9, 9)).astype(np.float32)  # every voxel active: tiles of one value
     full[:] = 0.5
     clvis.gaussians_from_volume(full, "medium", queue=q)
 
@@ -280,7 +304,7 @@ def gauss_bvh(q):
         lo = rng.normal(size=(n, 3)).astype(np.float32)
         hi = lo + rng.uniform(0, 0.2, (n, 3)).astype(np.float32)
         if n == 300:
-            lo[50:60] = lo[0]               # equal Morton codes
+            lo[50:60] = lo[0]  # equal Morton codes
             hi[50:60] = hi[0]
         build_bvh(np.concatenate([lo, hi], axis=1), queue=q)
 
@@ -295,8 +319,14 @@ def gauss_render(q):
     GaussianRenderer(_gaussians(1, 14), queue=q).render(_gauss_cam(8, 8), 8, 8)
     # per-Gaussian colours (COLOR 1), in bands of 5 rows
     coloured = _gaussians(60, 15)
-    coloured = Gaussians(coloured.means, coloured.scales, coloured.rotations, coloured.values,
-                         coloured.opacities, colors=_rng(15).integers(0, 256, (60, 3)).astype(np.uint8))
+    coloured = Gaussians(
+        coloured.means,
+        coloured.scales,
+        coloured.rotations,
+        coloured.values,
+        coloured.opacities,
+        colors=_rng(15).integers(0, 256, (60, 3)).astype(np.uint8),
+    )
     GaussianRenderer(coloured, queue=q).render(_gauss_cam(w, h), w, h, tile_rows=5)
 
 
@@ -306,7 +336,7 @@ def main(argv: list[str]) -> int:
         return 2
     tuning, int64 = argv[1], argv[2] == "int64"
     only = set(argv[3:])
-    warnings.simplefilter("ignore")     # compiler warnings are not what this run looks for
+    warnings.simplefilter("ignore")  # compiler warnings are not what this run looks for
     platforms = cl.get_platforms()
     names = [p.name for p in platforms]
     if names != ["Oclgrind"]:

@@ -13,7 +13,7 @@ import pytest
 HERE = Path(__file__).resolve().parent
 _spec = importlib.util.spec_from_file_location("clvis_oclgrind_audit", HERE / "audit.py")
 audit = importlib.util.module_from_spec(_spec)
-sys.modules[_spec.name] = audit         # dataclasses look their module up there
+sys.modules[_spec.name] = audit  # dataclasses look their module up there
 _spec.loader.exec_module(audit)
 
 KERNELS_CL = audit.KERNELS_CL
@@ -28,8 +28,16 @@ def test_kernel_list_is_every_kernel():
         n = len(re.findall(r"\bkernel\b", text))
         names = [k for k, p in found.items() if p == path]
         assert len(names) == n > 0, (path, names)
-    assert {"bvh_build", "render_visibility", "render_depth", "render_index", "scan_chained",
-            "copy_bytes", "march", "cache_candidate_keys"} <= set(found)
+    assert {
+        "bvh_build",
+        "render_visibility",
+        "render_depth",
+        "render_index",
+        "scan_chained",
+        "copy_bytes",
+        "march",
+        "cache_candidate_keys",
+    } <= set(found)
 
 
 def test_marked_lines_cover_the_block_a_marker_opens():
@@ -74,8 +82,12 @@ def test_known_benign_races_are_marked():
     assert "early-z" in src.tags(render, _line_of(render, "if (dkey > words[clvis_hi_word(p)])"))
     assert "early-z" in src.tags(atomics, _line_of(atomics, "atomic_min(p, v);"))
     assert "early-z" in src.tags(atomics, _line_of(atomics, "atom_min(p, v);"))
-    for needle in ("slo = (float3)(vnodes[sword]", "shi = (float3)(vnodes[sword]",
-                   "node->lo[0] = lo.x;", "node->hi[0] = hi.x;"):
+    for needle in (
+        "slo = (float3)(vnodes[sword]",
+        "shi = (float3)(vnodes[sword]",
+        "node->lo[0] = lo.x;",
+        "node->hi[0] = hi.x;",
+    ):
         assert "lbvh-sibling" in src.tags(bvh, _line_of(bvh, needle)), needle
     # the early-z read only: the MODE_INDEX read has no concurrent writer
     assert not src.tags(render, _line_of(render, "if (dkey == words[clvis_hi_word(p)])"))
@@ -112,15 +124,19 @@ def test_judge_races():
     render, read, amin = _render_lines()
     text = render.read_text().splitlines()[read - 1].strip()
     unmarked = _line_of(render, "vstore3(lo, 0, bounds + 6 * b);")
-    log = "\n".join([
-        "@@case rasterize",
-        _race("kernels_cl/include/clvis/atomics.h", amin, "input.cl", read, src_text=text),
-        _race("/somewhere/kernels_cl/include/clvis/atomics.h", amin, "input.cl", unmarked),
-        _race("kernels_cl/include/clvis/atomics.h", amin, "input.cl", 0, src_text="(source not available)"),
-        # the right line number, but Oclgrind shows other source: not this file
-        _race("kernels_cl/include/clvis/atomics.h", amin, "input.cl", read, src_text="x = 1;"),
-        "@@case (end)",
-    ])
+    log = "\n".join(
+        [
+            "@@case rasterize",
+            _race("kernels_cl/include/clvis/atomics.h", amin, "input.cl", read, src_text=text),
+            _race("/somewhere/kernels_cl/include/clvis/atomics.h", amin, "input.cl", unmarked),
+            _race(
+                "kernels_cl/include/clvis/atomics.h", amin, "input.cl", 0, src_text="(source not available)"
+            ),
+            # the right line number, but Oclgrind shows other source: not this file
+            _race("kernels_cl/include/clvis/atomics.h", amin, "input.cl", read, src_text="x = 1;"),
+            "@@case (end)",
+        ]
+    )
     out = audit.parse(log)
     assert not out.stray and not out.errors
     assert [d.case for d in out.diagnostics] == ["rasterize"] * 4
@@ -133,8 +149,11 @@ def test_judge_races():
     # tags must agree: an early-z access racing with an lbvh-sibling one is not benign
     bvh = KERNELS_CL / "gauss/bvh.cl"
     store = _line_of(bvh, "node->lo[0] = lo.x;")
-    d = audit.parse(_race("kernels_cl/gauss/bvh.cl", store, "kernels_cl/include/clvis/atomics.h", amin,
-                          kernel="bvh_build")).diagnostics[0]
+    d = audit.parse(
+        _race(
+            "kernels_cl/gauss/bvh.cl", store, "kernels_cl/include/clvis/atomics.h", amin, kernel="bvh_build"
+        )
+    ).diagnostics[0]
     assert audit.judge(src, d)[0] == "fail"
 
 

@@ -26,7 +26,7 @@ def flags_for(n, density, rng, dtype=np.bool_):
 def test_parity_sizes(queue, density):
     rng = np.random.default_rng(11)
     for n in SIZES:
-        x = rng.integers(-2**31, 2**31, n).astype(np.int32)
+        x = rng.integers(-(2**31), 2**31, n).astype(np.int32)
         f = flags_for(n, density, rng)
         got = clvis.compact(x, f, queue=queue)
         np.testing.assert_array_equal(got, ref.compact(x, f))
@@ -34,25 +34,37 @@ def test_parity_sizes(queue, density):
         np.testing.assert_array_equal(clvis.compact_indices(f, queue=queue), ref.compact_indices(f))
 
 
-@pytest.mark.parametrize("fdtype", [np.bool_, np.uint8, np.int8, np.uint16, np.int16,
-                                    np.uint32, np.int32, np.uint64, np.int64],
-                         ids=lambda d: np.dtype(d).name)
+@pytest.mark.parametrize(
+    "fdtype",
+    [np.bool_, np.uint8, np.int8, np.uint16, np.int16, np.uint32, np.int32, np.uint64, np.int64],
+    ids=lambda d: np.dtype(d).name,
+)
 def test_flag_dtypes(queue, fdtype):
     rng = np.random.default_rng(5)
     n = 30011
     x = np.arange(n, dtype=np.float32)
     f = flags_for(n, 0.3, rng, fdtype)
     if np.dtype(fdtype).kind == "i":
-        f = -f      # negative flags are non-zero too
+        f = -f  # negative flags are non-zero too
     np.testing.assert_array_equal(clvis.compact(x, f, queue=queue), ref.compact(x, f))
     np.testing.assert_array_equal(clvis.compact_indices(f, queue=queue), ref.compact_indices(f))
 
 
-@pytest.mark.parametrize("dtype,row", [
-    (np.uint8, ()), (np.int16, ()), (np.float64, ()), (np.complex128, ()),
-    (np.float32, (3,)), (np.uint8, (4,)), (np.uint8, (3,)), (np.int16, (2, 3)),
-    (np.dtype([("a", np.float32), ("b", np.uint8)]), ()),
-], ids=str)
+@pytest.mark.parametrize(
+    "dtype,row",
+    [
+        (np.uint8, ()),
+        (np.int16, ()),
+        (np.float64, ()),
+        (np.complex128, ()),
+        (np.float32, (3,)),
+        (np.uint8, (4,)),
+        (np.uint8, (3,)),
+        (np.int16, (2, 3)),
+        (np.dtype([("a", np.float32), ("b", np.uint8)]), ()),
+    ],
+    ids=str,
+)
 def test_row_types(queue, dtype, row):
     """Rows of any width are kept whole (copied as 8/4/2/1-byte words)."""
     rng = np.random.default_rng(9)
@@ -79,8 +91,9 @@ def test_device_pipeline_count_on_device(queue, monkeypatch):
     count = cla.zeros(queue, 1, np.uint32)
     monkeypatch.setattr(cla.Array, "get", lambda *a, **k: pytest.fail("host read in a device pipeline"))
     r_out, r_count = clvis.compact(xd, fd, out=out, count=count)
-    r2_out, r2_count = clvis.compact_indices(fd, out=cla.empty(queue, n, np.uint32),
-                                             count=cla.zeros(queue, 1, np.uint32))
+    r2_out, r2_count = clvis.compact_indices(
+        fd, out=cla.empty(queue, n, np.uint32), count=cla.zeros(queue, 1, np.uint32)
+    )
     monkeypatch.undo()
     assert r_out is out and r_count is count
     k = int(count.get()[0])

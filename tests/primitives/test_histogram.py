@@ -27,16 +27,14 @@ def test_contention(queue, dtype):
     keys = np.full(300_000, 5, dtype)
     np.testing.assert_array_equal(clvis.histogram(keys, 6, queue=queue), ref.histogram(keys, 6))
     keys = (np.arange(1 << 20) % 2).astype(dtype)
-    np.testing.assert_array_equal(clvis.histogram(keys, 1 << 16, queue=queue),
-                                  ref.histogram(keys, 1 << 16))
+    np.testing.assert_array_equal(clvis.histogram(keys, 1 << 16, queue=queue), ref.histogram(keys, 1 << 16))
 
 
 def test_out_of_range(queue):
     keys = np.array([0, 3, -1, 4, 2, 2**31 - 1, 3], np.int32)
     with pytest.raises(clvis.DataError, match=r"3 keys lie outside \[0, 4\)"):
         clvis.histogram(keys, 4, queue=queue)
-    np.testing.assert_array_equal(clvis.histogram(keys, 4, check=False, queue=queue),
-                                  ref.histogram(keys, 4))
+    np.testing.assert_array_equal(clvis.histogram(keys, 4, check=False, queue=queue), ref.histogram(keys, 4))
     ukeys = np.array([1, 0xFFFFFFFF], np.uint32)
     with pytest.raises(clvis.DataError, match="1 keys"):
         clvis.histogram(ukeys, 10, queue=queue)
@@ -49,8 +47,9 @@ def test_device_arrays(queue):
     np.testing.assert_array_equal(got.get(), ref.histogram(keys, 77))
 
 
-@given(keys=hnp.arrays(np.int32, st.integers(0, 4000), elements=st.integers(-3, 300)),
-       nbins=st.integers(1, 400))
+@given(
+    keys=hnp.arrays(np.int32, st.integers(0, 4000), elements=st.integers(-3, 300)), nbins=st.integers(1, 400)
+)
 def test_property(device, keys, nbins):
     q = clvis.runtime.queue_for(device)
     got = clvis.histogram(keys, nbins, check=False, queue=q)

@@ -84,26 +84,35 @@ def test_float_total_order(queue, dtype):
     if dt.itemsize == 4:
         nans = np.array([0x7FC00000, 0xFFC00000, 0x7F800001, 0xFFFFFFFF], u).view(dt)
     else:
-        nans = np.array([0x7FF8000000000000, 0xFFF8000000000000, 0x7FF0000000000001,
-                         0xFFFFFFFFFFFFFFFF], u).view(dt)
+        nans = np.array(
+            [0x7FF8000000000000, 0xFFF8000000000000, 0x7FF0000000000001, 0xFFFFFFFFFFFFFFFF], u
+        ).view(dt)
     tiny = np.finfo(dt).smallest_subnormal
-    special = np.concatenate([nans, np.array([np.inf, -np.inf, 0.0, -0.0, tiny, -tiny,
-                                              np.finfo(dt).max, np.finfo(dt).min, 1, -1], dt)])
+    special = np.concatenate(
+        [
+            nans,
+            np.array(
+                [np.inf, -np.inf, 0.0, -0.0, tiny, -tiny, np.finfo(dt).max, np.finfo(dt).min, 1, -1], dt
+            ),
+        ]
+    )
     rng = np.random.default_rng(3)
     keys = rng.choice(special, 10007)
     check(keys, queue)
     got = clvis.radix_sort(keys, queue=queue)
     finite = got[~np.isnan(got)]
     assert np.all(finite[1:] >= finite[:-1])
-    assert np.isnan(got[-int(np.isnan(keys).sum()):]).all()
+    assert np.isnan(got[-int(np.isnan(keys).sum()) :]).all()
     zeros = bits(got[got == 0])
     neg_zero = bits(np.array([-0.0], dt))[0]
-    assert np.all(np.diff((zeros != neg_zero).astype(int)) >= 0)   # all -0.0 before +0.0
+    assert np.all(np.diff((zeros != neg_zero).astype(int)) >= 0)  # all -0.0 before +0.0
     np.testing.assert_array_equal(bits(got[np.isnan(got)]), bits(keys[np.isnan(keys)]))
 
 
-@pytest.mark.parametrize("dtype,key_bits", [(np.uint32, 12), (np.uint32, 1), (np.int32, 20),
-                                            (np.uint64, 40), (np.int64, 33), (np.uint32, 32)])
+@pytest.mark.parametrize(
+    "dtype,key_bits",
+    [(np.uint32, 12), (np.uint32, 1), (np.int32, 20), (np.uint64, 40), (np.int64, 33), (np.uint32, 32)],
+)
 def test_key_bits(queue, dtype, key_bits):
     rng = np.random.default_rng(5)
     keys = rng.integers(0, 1 << min(key_bits, 62), 50001, dtype=np.uint64).astype(dtype)
@@ -116,13 +125,14 @@ def test_key_bits_violation(queue):
     saved = keys.copy()
     with pytest.raises(clvis.DataError, match=r"key_bits=16 .*0x10"):
         clvis.radix_sort(keys, key_bits=16, queue=queue)
-    np.testing.assert_array_equal(keys, saved)      # input untouched
+    np.testing.assert_array_equal(keys, saved)  # input untouched
     with pytest.raises(clvis.DataError, match="key_bits=31"):
         clvis.radix_sort(np.array([5, -1, 3], np.int32), key_bits=31, queue=queue)
     with pytest.raises(clvis.DataError, match="key_bits=0"):
         clvis.radix_sort(np.array([0, 1], np.uint32), key_bits=0, queue=queue)
     np.testing.assert_array_equal(
-        clvis.radix_sort(np.zeros(7, np.uint32), key_bits=0, queue=queue), np.zeros(7))
+        clvis.radix_sort(np.zeros(7, np.uint32), key_bits=0, queue=queue), np.zeros(7)
+    )
 
 
 def test_values_dtypes(queue):
@@ -141,7 +151,7 @@ def _check_sorted_permutation(keys, gk, gv):
     k = ref.sort_key(gk)
     assert np.all(k[1:] >= k[:-1])
     np.testing.assert_array_equal(bits(keys[gv]), bits(gk))
-    assert np.bincount(gv, minlength=gv.size).max() == 1     # each input position once
+    assert np.bincount(gv, minlength=gv.size).max() == 1  # each input position once
     same = k[1:] == k[:-1]
     assert np.all(gv[1:][same] > gv[:-1][same])
 
@@ -175,14 +185,13 @@ def test_device_arrays(queue):
     gk, gv = clvis.radix_sort(kd, vd)
     assert isinstance(gk, cla.Array) and isinstance(gv, cla.Array)
     assert gk.data is not kd.data
-    np.testing.assert_array_equal(kd.get(), keys)       # input untouched
+    np.testing.assert_array_equal(kd.get(), keys)  # input untouched
     wk, wv = ref.radix_sort(keys, np.arange(30000, dtype=np.uint32))
     np.testing.assert_array_equal(gk.get(), wk)
     np.testing.assert_array_equal(gv.get(), wv)
 
 
-@given(keys=hnp.arrays(st.sampled_from([np.uint32, np.int32, np.int64, np.float32]),
-                       st.integers(0, 3000)))
+@given(keys=hnp.arrays(st.sampled_from([np.uint32, np.int32, np.int64, np.float32]), st.integers(0, 3000)))
 def test_property(device, keys):
     check(keys, clvis.runtime.queue_for(device))
 

@@ -20,21 +20,20 @@ import clvis
 from clvis.reference import primitives as ref
 
 DTYPES = [np.int32, np.uint32, np.int64, np.uint64, np.float32]
-SIZES = [0, 1, 2, 3, 15, 16, 17, 255, 256, 257, 2047, 2048, 2049, 4095, 4096, 4097,
-         65535, 65536, 65537]
+SIZES = [0, 1, 2, 3, 15, 16, 17, 255, 256, 257, 2047, 2048, 2049, 4095, 4096, 4097, 65535, 65536, 65537]
 
 
 def data(n, dtype, rng, kind="random"):
     dtype = np.dtype(dtype)
     if kind == "random":
-        if dtype.kind == "f":   # integers: exact in float32 while sums < 2^24
+        if dtype.kind == "f":  # integers: exact in float32 while sums < 2^24
             hi = max(2, min(100, (1 << 24) // max(n, 1)))
             return rng.integers(0, hi, n).astype(dtype)
         info = np.iinfo(dtype)
         return rng.integers(info.min, info.max, n, dtype=dtype, endpoint=True)
     if kind == "zeros":
         return np.zeros(n, dtype)
-    if kind == "extremes":      # min/max of the type: sums wrap around
+    if kind == "extremes":  # min/max of the type: sums wrap around
         info = np.iinfo(dtype) if dtype.kind in "iu" else np.finfo(dtype)
         return np.where(np.arange(n) % 3 == 0, info.max, info.min).astype(dtype)
     raise ValueError(kind)
@@ -57,8 +56,7 @@ def test_parity_sizes(queue, dtype, exclusive):
 
 
 @pytest.mark.parametrize("kind", ["zeros", "extremes"])
-@pytest.mark.parametrize("dtype", [np.int32, np.uint32, np.int64, np.uint64],
-                         ids=lambda d: np.dtype(d).name)
+@pytest.mark.parametrize("dtype", [np.int32, np.uint32, np.int64, np.uint64], ids=lambda d: np.dtype(d).name)
 def test_adversarial_integers(queue, dtype, kind):
     for n in (1, 1000, 100003):
         check(data(n, dtype, np.random.default_rng(1), kind), True, queue)
@@ -112,9 +110,9 @@ def test_float_rounding_bound(queue):
 def test_float_nan_inf(queue):
     x = np.ones(5000, np.float32)
     x[1000] = np.inf
-    x[2000] = -np.inf       # inf - inf: NaN from here on
+    x[2000] = -np.inf  # inf - inf: NaN from here on
     out = clvis.scan(x, False, queue=queue)
-    with np.errstate(invalid="ignore"):     # inf + -inf, as the kernel computes too
+    with np.errstate(invalid="ignore"):  # inf + -inf, as the kernel computes too
         want = ref.scan(x, False)
     np.testing.assert_array_equal(np.isnan(out), np.isnan(want))
     np.testing.assert_array_equal(np.isinf(out), np.isinf(want))
@@ -149,8 +147,11 @@ def test_chained_scan_used_and_matches_fallback_build(device, dtype, monkeypatch
     q = clvis.runtime.queue_for(device)
     used = []
     real = clvis.runtime.get_kernel
-    monkeypatch.setattr(clvis.runtime, "get_kernel",
-                        lambda queue, path, name, defines: used.append(name) or real(queue, path, name, defines))
+    monkeypatch.setattr(
+        clvis.runtime,
+        "get_kernel",
+        lambda queue, path, name, defines: used.append(name) or real(queue, path, name, defines),
+    )
     rng = np.random.default_rng(5)
     with clvis.runtime.configure(tuning="cpu"):
         for n in CHAIN_SIZES:
@@ -201,14 +202,15 @@ def test_empty_total(queue):
     assert out.shape == (0,) and total == 0
 
 
-@given(x=hnp.arrays(st.sampled_from([np.int32, np.uint32, np.int64, np.uint64]),
-                    st.integers(0, 5000)),
-       exclusive=st.booleans())
+@given(
+    x=hnp.arrays(st.sampled_from([np.int32, np.uint32, np.int64, np.uint64]), st.integers(0, 5000)),
+    exclusive=st.booleans(),
+)
 def test_property_integers(device, x, exclusive):
     check(x, exclusive, clvis.runtime.queue_for(device))
 
 
-@given(x=hnp.arrays(np.int64, st.integers(1, 3000), elements=st.integers(-2**40, 2**40)))
+@given(x=hnp.arrays(np.int64, st.integers(1, 3000), elements=st.integers(-(2**40), 2**40)))
 def test_property_exclusive_is_inclusive_minus_x(device, x):
     q = clvis.runtime.queue_for(device)
     inc, total = clvis.scan(x, False, return_total=True, queue=q)

@@ -47,12 +47,11 @@ def check(depth, queue, *args, **kw):
     want = ref.depth_filter_mask(depth, *args, **kw)
     assert got.dtype == np.bool_ and got.shape == depth.shape
     np.testing.assert_array_equal(got, want)
-    assert not (got & ~np.isfinite(depth)).any()      # only present points are kept
+    assert not (got & ~np.isfinite(depth)).any()  # only present points are kept
     return got
 
 
-@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (7, 1), (2, 2), (3, 5), (33, 17), (64, 65),
-                                   (255, 257)])
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (7, 1), (2, 2), (3, 5), (33, 17), (64, 65), (255, 257)])
 def test_parity_random(queue, shape):
     for i, density in enumerate((0.2, 0.6, 1.0)):
         d = layered(shape, density, seed=hash((shape, i)) % 2**32)
@@ -86,11 +85,11 @@ def test_scene(queue, hole_fraction):
     levels = 4
     d, (y0, y1, x0, x1), holes = scene(128, 192, hole_fraction, seed=11)
     keep = check(d, queue, levels)
-    yy, xx = np.mgrid[:d.shape[0], :d.shape[1]]
+    yy, xx = np.mgrid[: d.shape[0], : d.shape[1]]
     inside = (yy >= y0) & (yy < y1) & (xx >= x0) & (xx < x1)
     into = np.minimum(np.minimum(yy - y0, y1 - 1 - yy), np.minimum(xx - x0, x1 - 1 - xx))
-    assert keep[inside & ~holes].all()                         # near plane kept
-    assert keep[~inside].all()                                 # far plane around it kept
+    assert keep[inside & ~holes].all()  # near plane kept
+    assert keep[~inside].all()  # far plane around it kept
     through = inside & holes
     # see-through points removed, but for a band along the silhouette (the
     # near side of an edge compares with the far plane beside it)
@@ -120,7 +119,7 @@ def test_single_point_and_steps(queue):
     step = np.full((40, 50), 4.0, np.float32)
     step[:, 25:] = 9.0
     assert check(step, queue, 4).all()
-    step[:17, :] = 1.0                     # three planes, T-junction
+    step[:17, :] = 1.0  # three planes, T-junction
     assert check(step, queue, 4).all()
 
 
@@ -153,14 +152,21 @@ def test_rgbda(queue):
     dev = rgbda(cla.to_device(queue, rgba), d, depth_filter_mask(cla.to_device(queue, d)))
     assert isinstance(dev, cla.Array)
     np.testing.assert_array_equal(dev.get(), want)
-    assert rgbda(np.zeros((0, 4, 4), np.uint8), np.zeros((0, 4), np.float32),
-                    np.zeros((0, 4), bool), queue=queue).shape == (0, 4, 5)
+    assert rgbda(
+        np.zeros((0, 4, 4), np.uint8), np.zeros((0, 4), np.float32), np.zeros((0, 4), bool), queue=queue
+    ).shape == (0, 4, 5)
 
 
-@given(d=hnp.arrays(np.float32, st.tuples(st.integers(1, 24), st.integers(1, 24)),
-                    elements=st.sampled_from([0.0, 1.0, 1.02, 1.03, 2.0, 2.05, 10.0, np.inf])),
-       levels=st.integers(0, 6), strength=st.sampled_from([1.0, 1.025, 1.5]),
-       edge=st.sampled_from([0.0, 0.01, 1.0]))
+@given(
+    d=hnp.arrays(
+        np.float32,
+        st.tuples(st.integers(1, 24), st.integers(1, 24)),
+        elements=st.sampled_from([0.0, 1.0, 1.02, 1.03, 2.0, 2.05, 10.0, np.inf]),
+    ),
+    levels=st.integers(0, 6),
+    strength=st.sampled_from([1.0, 1.025, 1.5]),
+    edge=st.sampled_from([0.0, 0.01, 1.0]),
+)
 def test_property(device, d, levels, strength, edge):
     q = clvis.runtime.queue_for(device)
     got = check(d, q, levels, strength, edge_threshold=edge)
@@ -196,8 +202,11 @@ def test_bad_input(device):
     for t in (-0.01, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="edge_threshold"):
             depth_filter_mask(d, edge_threshold=t, queue=q)
-    for bad, what in ((np.nan, "1 NaN and 0 negative"), (-1.0, "0 NaN and 1 negative"),
-                      (-np.inf, "0 NaN and 1 negative")):
+    for bad, what in (
+        (np.nan, "1 NaN and 0 negative"),
+        (-1.0, "0 NaN and 1 negative"),
+        (-np.inf, "0 NaN and 1 negative"),
+    ):
         x = d.copy()
         x[2, 3] = bad
         for levels in (0, 4):

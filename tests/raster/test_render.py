@@ -90,7 +90,7 @@ def test_near_far_behind_and_edges(queue):
     near and far planes and on pixel edges, just outside them, and behind."""
     cam = Camera.ortho((0, 0, 0), (0, 0, -1), (0, 1, 0), height=2.0, aspect=1.0, near=1.0, far=8.0)
     depth = cam.depth_row
-    assert np.array_equal(depth, [0, 0, -1, 0])          # depth = -z, exactly
+    assert np.array_equal(depth, [0, 0, -1, 0])  # depth = -z, exactly
     e = np.float32(np.spacing(np.float32(1.0)))
     xs = np.array([-1.0, -0.75, -0.5, 0.0, 0.25, 0.5, 1.0 - e, 1.0, -1.0 - e], np.float32)
     zs = np.array([-1.0, -8.0, -1.0 + e, -8.0 - 8 * e, -4.0, 3.0, 0.0], np.float32)
@@ -102,8 +102,9 @@ def test_near_far_behind_and_edges(queue):
     assert pr.visible[(pts[:, 0] == -1) & (pts[:, 1] == 0) & (pts[:, 2] == -1)].all()
     assert not pr.visible[pts[:, 0] == 1].any()
     for morton in (False, True):
-        np.testing.assert_array_equal(_vis(queue, pts, cam, 8, 8, morton=morton),
-                                      ref.visibility(pts, cam, 8, 8))
+        np.testing.assert_array_equal(
+            _vis(queue, pts, cam, 8, 8, morton=morton), ref.visibility(pts, cam, 8, 8)
+        )
 
 
 def test_nan_inf_never_drawn(queue):
@@ -111,7 +112,7 @@ def test_nan_inf_never_drawn(queue):
     rng = np.random.default_rng(3)
     bad = rng.random(pos.shape) < 0.05
     pos[bad] = rng.choice(np.array([np.nan, np.inf, -np.inf], np.float32), int(bad.sum()))
-    pos[:20_000] = np.nan                       # whole batches with no finite point
+    pos[:20_000] = np.nan  # whole batches with no finite point
     cam = _cam()
     want = ref.visibility(pos, cam, W, H)
     ids = want[want != np.iinfo(np.uint64).max] & np.uint64(0xFFFFFFFF)
@@ -125,7 +126,7 @@ def test_fallback_without_int64_atomics(device):
     device that has the extension."""
     pos = _scene(300_000, seed=9)
     rng = np.random.default_rng(9)
-    pos = np.concatenate([pos, pos[rng.integers(0, len(pos), 100_000)]])    # exact ties
+    pos = np.concatenate([pos, pos[rng.integers(0, len(pos), 100_000)]])  # exact ties
     cam = _cam()
     q = runtime.queue_for(device)
     fast = _vis(q, pos, cam)
@@ -144,10 +145,12 @@ def _full_cloud(n, seed=0):
     rng = np.random.default_rng(seed)
     pos = _scene(n, seed)
     colors = rng.integers(0, 256, (n, 4), dtype=np.uint8)
-    attrs = {"temperature": rng.normal(300, 20, n).astype(np.float32),
-             "pressure": rng.random(n).astype(np.float64),        # converted to float32
-             "label": rng.integers(0, 7, n).astype(np.uint8),
-             "flag": rng.random(n) < 0.5}
+    attrs = {
+        "temperature": rng.normal(300, 20, n).astype(np.float32),
+        "pressure": rng.random(n).astype(np.float64),  # converted to float32
+        "label": rng.integers(0, 7, n).astype(np.uint8),
+        "flag": rng.random(n) < 0.5,
+    }
     attrs["temperature"][::97] = np.nan
     vel = rng.normal(size=(n, 3)).astype(np.float32)
     radius = rng.random(n).astype(np.float32) * 0.05
@@ -170,8 +173,7 @@ def test_gbuffers_parity(queue, morton):
     assert np.isnan(got.vel2d[empty]).all() and np.isnan(got.radius_px[empty]).all()
     # velocity planes are consistent with each other
     c = got.covered
-    np.testing.assert_allclose(got.vel_speed[c], np.hypot(got.vel2d[c, 0], got.vel2d[c, 1]),
-                               rtol=1e-6)
+    np.testing.assert_allclose(got.vel_speed[c], np.hypot(got.vel2d[c, 0], got.vel2d[c, 1]), rtol=1e-6)
 
 
 def test_screen_velocity_is_the_pixel_motion(device):
@@ -195,14 +197,16 @@ def test_transfer_function(queue, color_by):
     pos, _, attrs, _, _ = _full_cloud(40_000, seed=4)
     cam = _cam()
     for cmap, vr in (("viridis", None), ("magma", (290.0, 310.0)), ("jet", (3.0, 3.0))):
-        got = clvis.rasterize(pos, cam, W, H, attributes=attrs, color_by=color_by, colormap=cmap,
-                              value_range=vr, queue=queue)
-        want = ref.rasterize(pos, cam, W, H, attributes=attrs, color_by=color_by, colormap=cmap,
-                             value_range=vr)
+        got = clvis.rasterize(
+            pos, cam, W, H, attributes=attrs, color_by=color_by, colormap=cmap, value_range=vr, queue=queue
+        )
+        want = ref.rasterize(
+            pos, cam, W, H, attributes=attrs, color_by=color_by, colormap=cmap, value_range=vr
+        )
         _assert_gbuffers(got, want)
         colors = len(np.unique(got.rgba[got.covered & ~np.isnan(got.attributes[color_by])], axis=0))
         if vr is None:
-            assert colors >= 5          # the data's own range spreads over the colormap
+            assert colors >= 5  # the data's own range spreads over the colormap
         elif vr[0] == vr[1]:
             assert colors == 1
 
@@ -215,12 +219,14 @@ def test_soft_z(queue, soft_z):
     want = ref.rasterize(pos, cam, W, H, colors=colors, soft_z=soft_z)
     _assert_gbuffers(got, want)
     hard = ref.rasterize(pos, cam, W, H, colors=colors)
-    if soft_z == 1.2:       # averaging many colours differs from the nearest point's
+    if soft_z == 1.2:  # averaging many colours differs from the nearest point's
         assert (got.rgba != hard.rgba).any()
-    got = clvis.rasterize(pos, cam, W, H, attributes=attrs, color_by="temperature", soft_z=soft_z,
-                          queue=queue)
-    _assert_gbuffers(got, ref.rasterize(pos, cam, W, H, attributes=attrs, color_by="temperature",
-                                        soft_z=soft_z))
+    got = clvis.rasterize(
+        pos, cam, W, H, attributes=attrs, color_by="temperature", soft_z=soft_z, queue=queue
+    )
+    _assert_gbuffers(
+        got, ref.rasterize(pos, cam, W, H, attributes=attrs, color_by="temperature", soft_z=soft_z)
+    )
 
 
 def test_batch_culling(queue):
@@ -247,10 +253,16 @@ def test_property_random_cameras(device, seed, ortho, batch):
     pos = (rng.normal(size=(3000, 3)) * rng.uniform(0.1, 10)).astype(np.float32)
     eye = rng.normal(size=3) * rng.uniform(0.1, 20)
     target = eye + rng.normal(size=3)
-    kw = {"aspect": float(rng.uniform(0.5, 2)), "near": float(rng.uniform(0.01, 1)),
-          "far": float(rng.uniform(2, 40))}
-    cam = (Camera.ortho(eye, target, (0, 0, 1), height=float(rng.uniform(0.5, 20)), **kw) if ortho
-           else Camera.look_at(eye, target, (0, 0, 1), fov_y=float(rng.uniform(10, 120)), **kw))
+    kw = {
+        "aspect": float(rng.uniform(0.5, 2)),
+        "near": float(rng.uniform(0.01, 1)),
+        "far": float(rng.uniform(2, 40)),
+    }
+    cam = (
+        Camera.ortho(eye, target, (0, 0, 1), height=float(rng.uniform(0.5, 20)), **kw)
+        if ortho
+        else Camera.look_at(eye, target, (0, 0, 1), fov_y=float(rng.uniform(10, 120)), **kw)
+    )
     w, h = int(rng.integers(1, 40)), int(rng.integers(1, 40))
     q = runtime.queue_for(device)
     got = _vis(q, pos, cam, w, h, morton=bool(seed % 2), batch_size=batch)
@@ -270,8 +282,9 @@ def test_morton_order(queue):
 def test_device_arrays(queue):
     pos, colors, *_ = _full_cloud(20_000, seed=12)
     cam = _cam()
-    g = clvis.rasterize(cla.to_device(queue, pos), cam, W, H, colors=cla.to_device(queue, colors),
-                        morton=True)
+    g = clvis.rasterize(
+        cla.to_device(queue, pos), cam, W, H, colors=cla.to_device(queue, colors), morton=True
+    )
     _assert_gbuffers(g, ref.rasterize(pos, cam, W, H, colors=colors))
 
 
@@ -280,8 +293,20 @@ def test_point_cloud_input(queue):
     cloud = clvis.PointCloud(pos, colors=colors, attributes=attrs, velocity=vel, radius=radius)
     cam = _cam()
     g = clvis.rasterize(cloud, cam, W, H, color_by="label", queue=queue)
-    _assert_gbuffers(g, ref.rasterize(pos, cam, W, H, colors=colors, attributes=cloud.attributes,
-                                      velocity=vel, radius=radius, color_by="label"))
+    _assert_gbuffers(
+        g,
+        ref.rasterize(
+            pos,
+            cam,
+            W,
+            H,
+            colors=colors,
+            attributes=cloud.attributes,
+            velocity=vel,
+            radius=radius,
+            color_by="label",
+        ),
+    )
 
 
 def test_layouts(device):
@@ -301,7 +326,7 @@ def test_layouts(device):
         vstore4(c.r0, 0, out); vstore4(c.r1, 1, out); vstore4(c.r2, 2, out);
         vstore4(c.r3, 3, out); vstore4(c.d, 4, out);
     }"""
-    with warnings.catch_warnings():       # drivers may log remarks on success
+    with warnings.catch_warnings():  # drivers may log remarks on success
         warnings.simplefilter("ignore", cl.CompilerWarning)
         prg = cl.Program(q.context, src).build(["-I", str(runtime.INCLUDE_DIR)])
     d_cam = cla.to_device(q, buf)
@@ -321,7 +346,7 @@ def test_depth_filter(queue):
     """clvis.depth_filter on G-buffers: a near wall with holes over a far wall;
     the far points seen through the holes are removed."""
     rng = np.random.default_rng(14)
-    n = 4000        # about one point per pixel of the near wall: it has holes
+    n = 4000  # about one point per pixel of the near wall: it has holes
     near = np.column_stack([rng.uniform(-1, 1, n), np.full(n, -2.0), rng.uniform(-1, 1, n)])
     m = 300_000
     far = np.column_stack([rng.uniform(-6, 6, m), np.full(m, 6.0), rng.uniform(-6, 6, m)])
@@ -330,14 +355,15 @@ def test_depth_filter(queue):
     g = clvis.rasterize(pos, cam, 96, 96, queue=queue)
     f = clvis.depth_filter(g, levels=4, queue=queue)
     from clvis.reference.raster import depth_filter as ref_df
+
     np.testing.assert_array_equal(f.keep, ref_df.depth_filter_mask(g.depth, 4))
     from_near = g.covered & (g.index < n)
     from_far = g.covered & (g.index >= n)
     pr = cam.project(np.array([[-0.8, -2, -0.8], [0.8, -2, 0.8]], np.float32), 96, 96)
     inner = np.zeros_like(from_far)
-    inner[pr.py[1] + 3:pr.py[0] - 3, pr.px[0] + 3:pr.px[1] - 3] = True
-    assert from_far[inner].sum() > 50                    # see-through points exist
-    assert f.keep[from_far & inner].mean() < 0.1        # and are removed
+    inner[pr.py[1] + 3 : pr.py[0] - 3, pr.px[0] + 3 : pr.px[1] - 3] = True
+    assert from_far[inner].sum() > 50  # see-through points exist
+    assert f.keep[from_far & inner].mean() < 0.1  # and are removed
     assert f.keep[from_near].mean() > 0.95
     assert f.rgbda.shape == (96, 96, 5)
     np.testing.assert_array_equal(f.rgbda[..., 4], f.keep.astype(np.float32))
@@ -363,8 +389,7 @@ def test_bad_input(queue):
     with pytest.raises(ValueError, match="radius"):
         clvis.rasterize(pos, cam, W, H, radius=np.zeros(11, np.float32), queue=queue)
     with pytest.raises(ValueError, match="at most 8"):
-        clvis.rasterize(pos, cam, W, H, attributes={str(i): np.zeros(10) for i in range(9)},
-                        queue=queue)
+        clvis.rasterize(pos, cam, W, H, attributes={str(i): np.zeros(10) for i in range(9)}, queue=queue)
     with pytest.raises(ValueError, match=r"attributes\['a'\]"):
         clvis.rasterize(pos, cam, W, H, attributes={"a": np.zeros(3)}, queue=queue)
     with pytest.raises(TypeError, match=r"attributes\['a'\]"):
@@ -382,22 +407,27 @@ def test_bad_input(queue):
     with pytest.raises(ValueError, match="color_by"):
         clvis.rasterize(pos, cam, W, H, color_by="nope", queue=queue)
     with pytest.raises(ValueError, match="value_range"):
-        clvis.rasterize(pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a",
-                        value_range=(1.0, 0.0), queue=queue)
+        clvis.rasterize(
+            pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a", value_range=(1.0, 0.0), queue=queue
+        )
     with pytest.raises(ValueError, match="value_range"):
-        clvis.rasterize(pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a",
-                        value_range=(0.0, 1e39), queue=queue)
+        clvis.rasterize(
+            pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a", value_range=(0.0, 1e39), queue=queue
+        )
     with pytest.raises(ValueError, match="viridi"):
-        clvis.rasterize(pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a",
-                        colormap="viridi", queue=queue)
+        clvis.rasterize(
+            pos, cam, W, H, attributes={"a": np.zeros(10)}, color_by="a", colormap="viridi", queue=queue
+        )
     with pytest.raises(ValueError, match="batch_size"):
         clvis.Rasterizer(pos, batch_size=0, queue=queue)
     ortho = Camera.ortho((0, 0, 5), (0, 0, 0), (0, 1, 0), near=-1.0, far=10.0)
     with pytest.raises(ValueError, match="near > 0"):
         clvis.rasterize(pos, ortho, W, H, soft_z=True, queue=queue)
-    with runtime.configure(max_alloc_bytes=1 << 20), \
-            pytest.raises(clvis.DeviceError, match="visibility buffer"):
-            clvis.rasterize(pos, cam, 1024, 1024, queue=queue)
+    with (
+        runtime.configure(max_alloc_bytes=1 << 20),
+        pytest.raises(clvis.DeviceError, match="visibility buffer"),
+    ):
+        clvis.rasterize(pos, cam, 1024, 1024, queue=queue)
 
 
 def _other(queue, int64):
@@ -458,8 +488,9 @@ def test_las_file_color_by(queue):
     default none is resolved (more than 8)."""
     cloud, cam = _laz()
     g = clvis.rasterize(cloud, cam, W, H, color_by="intensity", queue=queue)
-    want = ref.rasterize(cloud.positions, cam, W, H, colors=cloud.colors, attributes=cloud.attributes,
-                         color_by="intensity")
+    want = ref.rasterize(
+        cloud.positions, cam, W, H, colors=cloud.colors, attributes=cloud.attributes, color_by="intensity"
+    )
     _assert_gbuffers(g, want)
     assert g.attributes == {} and g.covered.sum() > 100
     assert len(np.unique(g.rgba[g.covered], axis=0)) > 5
@@ -469,14 +500,29 @@ def test_las_file_planes(queue):
     cloud, cam = _laz()
     r = clvis.Rasterizer(cloud, queue=queue)
     assert r.attribute_names == list(cloud.attributes)
-    for planes in (["classification", "intensity", "gps_time"], ["intensity"], [], "user_data",
-                   list(cloud.attributes)[-8:]):
+    for planes in (
+        ["classification", "intensity", "gps_time"],
+        ["intensity"],
+        [],
+        "user_data",
+        list(cloud.attributes)[-8:],
+    ):
         g = r.render(cam, W, H, planes=planes, color_by="gps_time")
         names = [planes] if isinstance(planes, str) else planes
-        assert list(g.attributes) == names          # in the order asked for
-        _assert_gbuffers(g, ref.rasterize(cloud.positions, cam, W, H, colors=cloud.colors,
-                                          attributes=cloud.attributes, planes=names,
-                                          color_by="gps_time"))
+        assert list(g.attributes) == names  # in the order asked for
+        _assert_gbuffers(
+            g,
+            ref.rasterize(
+                cloud.positions,
+                cam,
+                W,
+                H,
+                colors=cloud.colors,
+                attributes=cloud.attributes,
+                planes=names,
+                color_by="gps_time",
+            ),
+        )
     assert g.attributes["user_data"].dtype == np.uint8 or "user_data" not in g.attributes
     with pytest.raises(ValueError, match="at most 8"):
         r.render(cam, W, H, planes=list(cloud.attributes)[:9])
@@ -494,8 +540,9 @@ def test_planes_default_and_bit_identical(queue):
     cam = _cam()
     r = clvis.Rasterizer(pos, colors=colors, attributes=attrs, velocity=vel, queue=queue)
     full = r.render(cam, W, H, color_by="label")
-    _assert_gbuffers(full, ref.rasterize(pos, cam, W, H, colors=colors, attributes=attrs, velocity=vel,
-                                         color_by="label"))
+    _assert_gbuffers(
+        full, ref.rasterize(pos, cam, W, H, colors=colors, attributes=attrs, velocity=vel, color_by="label")
+    )
     part = r.render(cam, W, H, color_by="label", planes=["flag", "temperature"])
     assert list(part.attributes) == ["flag", "temperature"]
     for k in part.attributes:
@@ -508,6 +555,7 @@ def test_planes_default_and_bit_identical(queue):
 # ---------------------------------------------------------------------------
 # point size
 
+
 def _splat_scene(n=3000, seed=30):
     """Points near the image's edges and corners as well as inside, and exact
     ties (repeated positions)."""
@@ -517,11 +565,11 @@ def _splat_scene(n=3000, seed=30):
     xy = rng.uniform([-half_w, -1], [half_w, 1], (n, 2))
     edge = rng.uniform(0, 1, (n // 4, 2)) * [2 * half_w, 2] - [half_w, 1]
     edge[: n // 16, 0] = np.where(rng.random(n // 16) < 0.5, -half_w, half_w * (1 - 1e-6))
-    edge[n // 16: n // 8, 1] = np.where(rng.random(n // 8 - n // 16) < 0.5, -1 + 1e-6, 1 - 1e-6)
+    edge[n // 16 : n // 8, 1] = np.where(rng.random(n // 8 - n // 16) < 0.5, -1 + 1e-6, 1 - 1e-6)
     xy = np.concatenate([xy, edge])
     z = rng.uniform(-3, 3, len(xy))
     pos = np.column_stack([xy, z]).astype(np.float32)
-    pos = np.concatenate([pos, pos[rng.integers(0, len(pos), n // 3)]])      # ties
+    pos = np.concatenate([pos, pos[rng.integers(0, len(pos), n // 3)]])  # ties
     return pos, cam
 
 
@@ -533,18 +581,18 @@ def test_point_size_parity(queue, int64, point_size):
     colors = rng.integers(0, 256, (len(pos), 4), dtype=np.uint8)
     want_vis = ref.visibility(pos, cam, W, H, point_size)
     with runtime.configure(int64_atomics=int64):
-        r = clvis.Rasterizer(pos, colors=colors, morton=point_size % 2 == 1, batch_size=1000,
-                             queue=queue)
+        r = clvis.Rasterizer(pos, colors=colors, morton=point_size % 2 == 1, batch_size=1000, queue=queue)
     np.testing.assert_array_equal(r.visibility(cam, W, H, point_size=point_size)[0].get(), want_vis)
     for soft_z in (None, 1.2):
         got = r.render(cam, W, H, point_size=point_size, soft_z=soft_z)
-        _assert_gbuffers(got, ref.rasterize(pos, cam, W, H, colors=colors, soft_z=soft_z,
-                                            point_size=point_size))
+        _assert_gbuffers(
+            got, ref.rasterize(pos, cam, W, H, colors=colors, soft_z=soft_z, point_size=point_size)
+        )
     if point_size == 1:
         np.testing.assert_array_equal(want_vis, ref.visibility(pos, cam, W, H))
     else:
         assert got.covered.sum() > r.render(cam, W, H).covered.sum()
-        assert got.covered[0].any() and got.covered[-1].any()       # edges reached, clipped
+        assert got.covered[0].any() and got.covered[-1].any()  # edges reached, clipped
         assert got.covered[:, 0].any() and got.covered[:, -1].any()
 
 
@@ -553,8 +601,8 @@ def test_point_size_square(device):
     clipped at the image's corner."""
     q = runtime.queue_for(device)
     cam = Camera.ortho((0, 0, 5), (0, 0, 0), (0, 1, 0), height=2.0, aspect=1.0, near=0.5, far=10)
-    centre = np.array([[0.01, -0.01, 0]], np.float32)         # pixel (8, 8) of 16 x 16
-    corner = np.array([[-0.99, 0.99, 0]], np.float32)         # pixel (0, 0)
+    centre = np.array([[0.01, -0.01, 0]], np.float32)  # pixel (8, 8) of 16 x 16
+    corner = np.array([[-0.99, 0.99, 0]], np.float32)  # pixel (0, 0)
     for n, (lo, hi) in {1: (8, 8), 2: (8, 9), 3: (7, 9), 4: (7, 10), 5: (6, 10)}.items():
         g = clvis.rasterize(centre, cam, 16, 16, point_size=n, queue=q)
         ys, xs = np.nonzero(g.covered)
@@ -576,11 +624,12 @@ def test_point_size_bad(queue):
 # ---------------------------------------------------------------------------
 # non-finite points, image bounds, singular cameras
 
+
 def test_nonfinite_counted(queue):
     pos = _scene(30_000, seed=31)
     pos[::7, 1] = np.nan
     pos[5::11, 2] = np.inf
-    pos[:5000] = -np.inf                 # whole batches
+    pos[:5000] = -np.inf  # whole batches
     want = ref.nonfinite(pos)
     assert want > 5000
     for morton in (False, True):
@@ -594,6 +643,7 @@ def test_nonfinite_counted(queue):
 def test_image_pixels_bounded(monkeypatch, queue):
     """W x H must stay below 2^31 (32-bit pixel indices), whatever the side limit."""
     from clvis.raster import render as rr
+
     monkeypatch.setattr(rr, "MAX_IMAGE_SIDE", 1 << 20)
     with pytest.raises(ValueError, match=r"width x height: 65536x32768 = 2147483648 pixels"):
         clvis.rasterize(_scene(10), _cam(), 65536, 32768, queue=queue)
@@ -601,21 +651,24 @@ def test_image_pixels_bounded(monkeypatch, queue):
 
 def test_singular_camera(queue):
     import dataclasses
+
     pos = _scene(100)
     cam = _cam()
     flat = np.array(cam.projection)
-    flat[1, 1] = 0.0                                          # zero height
+    flat[1, 1] = 0.0  # zero height
     bad_view = np.array(cam.view)
-    bad_view[2, :3] = bad_view[0, :3]                         # two equal axes
+    bad_view[2, :3] = bad_view[0, :3]  # two equal axes
     huge = np.array(cam.projection)
-    huge[0, 0] = 1e39                                         # overflows float32
+    huge[0, 0] = 1e39  # overflows float32
     # a clvis.Camera refuses a singular projection @ view where it is made; the
     # rasterizer checks what reaches it (duck-typed cameras too)
-    cases = [(lambda: dataclasses.replace(cam, projection=np.zeros((4, 4))), "projection is singular"),
-             (lambda: dataclasses.replace(cam, projection=flat), "projection is singular"),
-             (lambda: dataclasses.replace(cam, view=bad_view), "view matrix is singular"),
-             # 1e39: refused where it is made (ill-conditioned), else as beyond float32
-             (lambda: dataclasses.replace(cam, projection=huge), "(projection is singular|overflows float32)")]
+    cases = [
+        (lambda: dataclasses.replace(cam, projection=np.zeros((4, 4))), "projection is singular"),
+        (lambda: dataclasses.replace(cam, projection=flat), "projection is singular"),
+        (lambda: dataclasses.replace(cam, view=bad_view), "view matrix is singular"),
+        # 1e39: refused where it is made (ill-conditioned), else as beyond float32
+        (lambda: dataclasses.replace(cam, projection=huge), "(projection is singular|overflows float32)"),
+    ]
 
     class NaNCamera:
         matrix = np.full((4, 4), np.nan)
@@ -623,11 +676,12 @@ def test_singular_camera(queue):
         projection = np.eye(4)
         near, far = 0.1, 10.0
 
-    class SingularCamera:                                     # not a clvis.Camera: checked by raster
+    class SingularCamera:  # not a clvis.Camera: checked by raster
         matrix = np.zeros((4, 4))
         depth_row = np.array([0.0, 0.0, -1.0, 0.0])
         projection = np.zeros((4, 4))
         near, far = 0.1, 10.0
+
     cases.append((NaNCamera, "must be finite"))
     cases.append((SingularCamera, "projection is singular"))
     for make, msg in cases:
@@ -636,4 +690,4 @@ def test_singular_camera(queue):
     with pytest.raises(ValueError, match="target: must differ from eye"):
         Camera.look_at((1, 2, 3), (1, 2, 3))
     far_away = Camera.look_at((5e5, 5e6, 300), (5e5 + 100, 5e6 + 100, 0), near=1, far=1000)
-    clvis.rasterize(pos + np.float32([5e5, 5e6, 0]), far_away, W, H, queue=queue)   # UTM-like: fine
+    clvis.rasterize(pos + np.float32([5e5, 5e6, 0]), far_away, W, H, queue=queue)  # UTM-like: fine

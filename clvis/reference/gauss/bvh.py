@@ -66,15 +66,18 @@ def build_bvh(boxes: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     levels = []
     while idx.size:
         top = _bit_length(keys[first] ^ keys[last]) - np.uint64(1)
-        boundary = (keys[last] >> top) << top        # the prefix, then the first bit of last
+        boundary = (keys[last] >> top) << top  # the prefix, then the first bit of last
         g = np.searchsorted(keys, boundary, side="left") - 1
         left = np.where(g == first, BVH_LEAF | g.astype(np.uint32), g.astype(np.uint32))
         right = np.where(g + 1 == last, BVH_LEAF | (g + 1).astype(np.uint32), (g + 1).astype(np.uint32))
         nodes["left"][idx], nodes["right"][idx] = left, right
         levels.append((idx, left, right))
         li, ri = g > first, g + 1 < last
-        first, last, idx = (np.concatenate([first[li], g[ri] + 1]), np.concatenate([g[li], last[ri]]),
-                            np.concatenate([g[li], g[ri] + 1]))
+        first, last, idx = (
+            np.concatenate([first[li], g[ri] + 1]),
+            np.concatenate([g[li], last[ri]]),
+            np.concatenate([g[li], g[ri] + 1]),
+        )
     for idx, left, right in reversed(levels):
         (llo, lhi), (rlo, rhi) = _child_boxes(nodes, leaf_boxes, left), _child_boxes(nodes, leaf_boxes, right)
         nodes["lo"][idx], nodes["hi"][idx] = _union(llo, lhi, rlo, rhi)
@@ -102,7 +105,9 @@ def check_bvh(nodes: np.ndarray, order: np.ndarray, leaf_boxes: np.ndarray, boxe
     n = boxes.shape[0]
     assert nodes.dtype == BVH_NODE_DTYPE, f"nodes: dtype {nodes.dtype}, expected {BVH_NODE_DTYPE}"
     assert order.shape == (n,), f"order: shape {order.shape}, expected ({n},)"
-    assert np.array_equal(np.sort(order.astype(np.int64)), np.arange(n)), "order is not a permutation of 0..n-1"
+    assert np.array_equal(np.sort(order.astype(np.int64)), np.arange(n)), (
+        "order is not a permutation of 0..n-1"
+    )
     assert leaf_boxes.shape == (n, 6), f"leaf_boxes: shape {leaf_boxes.shape}, expected ({n}, 6)"
     bad = np.flatnonzero((leaf_boxes.view(np.uint32) != boxes[order].view(np.uint32)).any(axis=1))
     assert bad.size == 0, f"leaf_boxes[{bad[0]}] != boxes[order[{bad[0]}]]"
@@ -111,10 +116,12 @@ def check_bvh(nodes: np.ndarray, order: np.ndarray, leaf_boxes: np.ndarray, boxe
         return
     if n == 1:
         assert nodes.shape == (1,), f"1 box but {nodes.shape[0]} nodes"
-        assert nodes["left"][0] == BVH_LEAF and nodes["right"][0] == BVH_NONE, \
+        assert nodes["left"][0] == BVH_LEAF and nodes["right"][0] == BVH_NONE, (
             f"1-box tree: children {nodes['left'][0]:#x}, {nodes['right'][0]:#x}; expected LEAF|0, NONE"
-        assert (nodes["lo"][0] <= boxes[0, :3]).all() and (nodes["hi"][0] >= boxes[0, 3:]).all(), \
+        )
+        assert (nodes["lo"][0] <= boxes[0, :3]).all() and (nodes["hi"][0] >= boxes[0, 3:]).all(), (
             "1-box tree: the node's box does not contain the box"
+        )
         return
     m = n - 1
     assert nodes.shape == (m,), f"{n} boxes need {m} internal nodes, got {nodes.shape[0]}"
@@ -126,8 +133,9 @@ def check_bvh(nodes: np.ndarray, order: np.ndarray, leaf_boxes: np.ndarray, boxe
         nxt, contain = [], []
         for side in ("left", "right"):
             c = nodes[side][frontier]
-            assert (c != BVH_NONE).all(), \
+            assert (c != BVH_NONE).all(), (
                 f"node {frontier[np.argmax(c == BVH_NONE)]}: {side} child is NONE in a tree of {n} boxes"
+            )
             leaf = (c & BVH_LEAF) != 0
             k = (c & ~BVH_LEAF).astype(np.int64)
             for is_leaf, size, kind in ((True, n, "leaf"), (False, m, "internal node")):
@@ -138,15 +146,25 @@ def check_bvh(nodes: np.ndarray, order: np.ndarray, leaf_boxes: np.ndarray, boxe
                 np.add.at(seen_leaf if is_leaf else seen_node, ks, 1)
                 if not is_leaf:
                     nxt.append(ks)
-                contain.append((side, kind, ps, ks, leaf_boxes[ks, :3] if is_leaf else nodes["lo"][ks],
-                                leaf_boxes[ks, 3:] if is_leaf else nodes["hi"][ks]))
+                contain.append(
+                    (
+                        side,
+                        kind,
+                        ps,
+                        ks,
+                        leaf_boxes[ks, :3] if is_leaf else nodes["lo"][ks],
+                        leaf_boxes[ks, 3:] if is_leaf else nodes["hi"][ks],
+                    )
+                )
         twice = np.flatnonzero(seen_node > 1)
         assert twice.size == 0, f"internal node {twice[0]} is reached more than once"
         twice = np.flatnonzero(seen_leaf > 1)
         assert twice.size == 0, f"leaf {twice[0]} is reached more than once"
         for side, kind, ps, ks, clo, chi in contain:
             ok = (nodes["lo"][ps] <= clo).all(axis=1) & (nodes["hi"][ps] >= chi).all(axis=1)
-            assert ok.all(), f"node {ps[~ok][0]}'s box does not contain its {side} child ({kind} {ks[~ok][0]})"
+            assert ok.all(), (
+                f"node {ps[~ok][0]}'s box does not contain its {side} child ({kind} {ks[~ok][0]})"
+            )
         frontier = np.concatenate(nxt)
     missing = np.flatnonzero(seen_node == 0)
     assert missing.size == 0, f"internal node {missing[0]} is not reached from the root"

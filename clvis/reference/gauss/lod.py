@@ -25,9 +25,13 @@ LODS = ("low", "medium", "high")
 F32 = np.float32
 
 
-def sparse_from_dense(volume: npt.ArrayLike, threshold: float | None = None,
-                      mask: npt.ArrayLike | None = None, spacing: Sequence[float] = (1.0, 1.0, 1.0),
-                      origin: Sequence[float] = (0.0, 0.0, 0.0)) -> dict[str, Any]:
+def sparse_from_dense(
+    volume: npt.ArrayLike,
+    threshold: float | None = None,
+    mask: npt.ArrayLike | None = None,
+    spacing: Sequence[float] = (1.0, 1.0, 1.0),
+    origin: Sequence[float] = (0.0, 0.0, 0.0),
+) -> dict[str, Any]:
     """The fields of SparseVolume.from_dense as a dict, one leaf at a time:
     shape, spacing, origin, coords (L, 3), masks (L, 16) uint32, tiles (L,),
     tile_values (L,), values (V, 512)."""
@@ -48,8 +52,8 @@ def sparse_from_dense(volume: npt.ArrayLike, threshold: float | None = None,
                 v = np.zeros((8, 8, 8), F32)
                 sub = (slice(lz, lz + 8), slice(ly, ly + 8), slice(lx, lx + 8))
                 part = act[sub]
-                a[:part.shape[0], :part.shape[1], :part.shape[2]] = part
-                v[:part.shape[0], :part.shape[1], :part.shape[2]] = np.where(part, vol[sub], F32(0))
+                a[: part.shape[0], : part.shape[1], : part.shape[2]] = part
+                v[: part.shape[0], : part.shape[1], : part.shape[2]] = np.where(part, vol[sub], F32(0))
                 if not a.any():
                     continue
                 flat_a, flat_v = a.ravel(), v.ravel()
@@ -61,7 +65,8 @@ def sparse_from_dense(volume: npt.ArrayLike, threshold: float | None = None,
                 if not is_tile:
                     values.append(flat_v)
     return {
-        "shape": vol.shape, "spacing": tuple(float(s) for s in spacing),
+        "shape": vol.shape,
+        "spacing": tuple(float(s) for s in spacing),
         "origin": tuple(float(o) for o in origin),
         "coords": np.array(coords, np.int32).reshape(-1, 3),
         "masks": np.array(masks, np.uint32).reshape(-1, 16),
@@ -74,14 +79,18 @@ def sparse_from_dense(volume: npt.ArrayLike, threshold: float | None = None,
 def _sparse(volume_or_sparse, threshold, mask, spacing, origin) -> SparseVolume:
     if isinstance(volume_or_sparse, SparseVolume):
         return volume_or_sparse
-    d = sparse_from_dense(volume_or_sparse, threshold, mask,
-                          (1.0, 1.0, 1.0) if spacing is None else spacing,
-                          (0.0, 0.0, 0.0) if origin is None else origin)
+    d = sparse_from_dense(
+        volume_or_sparse,
+        threshold,
+        mask,
+        (1.0, 1.0, 1.0) if spacing is None else spacing,
+        (0.0, 0.0, 0.0) if origin is None else origin,
+    )
     return SparseVolume(**d)
 
 
 def _centre(first, ext, d, o):
-    a = first.astype(np.int32).astype(F32) * d + o       # (float)int, as the kernel
+    a = first.astype(np.int32).astype(F32) * d + o  # (float)int, as the kernel
     b = (first + ext - 1).astype(np.int32).astype(F32) * d + o
     return (a + b) * F32(0.5)
 
@@ -106,10 +115,15 @@ def _block_first(b, n):
     return np.stack([b // (nb * nb) * n, b // nb % nb * n, b % nb * n], axis=-1)
 
 
-def gaussians_from_volume(volume_or_sparse: SparseVolume | npt.ArrayLike, lod: str = "medium",
-                          threshold: float | None = None, mask: npt.ArrayLike | None = None,
-                          spacing: Sequence[float] | None = None, origin: Sequence[float] | None = None,
-                          queue: cl.CommandQueue | None = None) -> Gaussians:
+def gaussians_from_volume(
+    volume_or_sparse: SparseVolume | npt.ArrayLike,
+    lod: str = "medium",
+    threshold: float | None = None,
+    mask: npt.ArrayLike | None = None,
+    spacing: Sequence[float] | None = None,
+    origin: Sequence[float] | None = None,
+    queue: cl.CommandQueue | None = None,
+) -> Gaussians:
     """What clvis.gauss.lod.gaussians_from_volume returns (queue is ignored)."""
     if lod not in LODS:
         raise ValueError(f"lod: {lod!r}")
@@ -120,8 +134,8 @@ def gaussians_from_volume(volume_or_sparse: SparseVolume | npt.ArrayLike, lod: s
     C = sv.coords.astype(np.int64)
     dense = A.reshape(L, 512).all(axis=1)
     tiles, tv = sv.tiles, sv.tile_values
-    d = np.asarray(sv.spacing, F32)                   # dz, dy, dx
-    o = np.asarray(sv.origin, F32)[::-1]              # oz, oy, ox
+    d = np.asarray(sv.spacing, F32)  # dz, dy, dx
+    o = np.asarray(sv.origin, F32)[::-1]  # oz, oy, ox
     # candidate Gaussians: leaf, unit, sub (the sort keys), first voxel (z, y, x), extent, value
     rec = {k: [] for k in ("leaf", "unit", "sub", "first", "ext", "value")}
 
@@ -135,15 +149,15 @@ def gaussians_from_volume(volume_or_sparse: SparseVolume | npt.ArrayLike, lod: s
 
     leaves = np.arange(L)
     if lod == "low":
-        rows = _sequential_sum(V)                       # (L, 8, 8): over x
+        rows = _sequential_sum(V)  # (L, 8, 8): over x
         p = rows.reshape(L, 64)
         for h in (32, 16, 8, 4, 2, 1):
-            p = p[:, :h] + p[:, h:2 * h]
+            p = p[:, :h] + p[:, h : 2 * h]
         count = A.reshape(L, 512).sum(axis=1)
         mean = np.where(tiles, tv, p[:, 0] / count.astype(F32))
         lo, hi = [], []
         for axes in ((2, 3), (1, 3), (1, 2)):
-            has = A.any(axis=axes)                      # (L, 8)
+            has = A.any(axis=axes)  # (L, 8)
             lo.append(has.argmax(axis=1))
             hi.append(7 - has[:, ::-1].argmax(axis=1))
         lo, hi = np.stack(lo, axis=1), np.stack(hi, axis=1)
@@ -153,29 +167,47 @@ def gaussians_from_volume(volume_or_sparse: SparseVolume | npt.ArrayLike, lod: s
         # dense leaves: their blocks
         dl = np.flatnonzero(dense)
         if len(dl):
-            s = _sequential_sum(_blocks(V[dl], n_dense))            # (D, nb^3)
+            s = _sequential_sum(_blocks(V[dl], n_dense))  # (D, nb^3)
             val = np.where(tiles[dl, None], tv[dl, None], s / F32(n_dense**3))
             nb3 = (8 // n_dense) ** 3
             b = np.arange(nb3)
             first = C[dl, None, :] + _block_first(b, n_dense)[None]
-            add(np.repeat(dl, nb3), np.tile(b, len(dl)), np.zeros(len(dl) * nb3, int), first,
-                (n_dense,) * 3, val.ravel())
+            add(
+                np.repeat(dl, nb3),
+                np.tile(b, len(dl)),
+                np.zeros(len(dl) * nb3, int),
+                first,
+                (n_dense,) * 3,
+                val.ravel(),
+            )
         sl = np.flatnonzero(~dense)
         if len(sl):
             if lod == "medium":
-                ab = _blocks(A[sl], 2)                              # (S, 64 blocks, 8)
+                ab = _blocks(A[sl], 2)  # (S, 64 blocks, 8)
                 vb = _blocks(V[sl], 2)
                 full = ab.all(axis=2)
                 fs, fb = np.nonzero(full)
-                add(sl[fs], fb, np.zeros(len(fs), int), C[sl[fs]] + _block_first(fb, 2), (2, 2, 2),
-                    _sequential_sum(vb[fs, fb]) / F32(8))
-                ps, pb, pk = np.nonzero(ab & ~full[:, :, None])     # single voxels of partial blocks
+                add(
+                    sl[fs],
+                    fb,
+                    np.zeros(len(fs), int),
+                    C[sl[fs]] + _block_first(fb, 2),
+                    (2, 2, 2),
+                    _sequential_sum(vb[fs, fb]) / F32(8),
+                )
+                ps, pb, pk = np.nonzero(ab & ~full[:, :, None])  # single voxels of partial blocks
                 local = _block_first(pb, 2) + np.stack([pk >> 2, (pk >> 1) & 1, pk & 1], axis=-1)
                 add(sl[ps], pb, pk, C[sl[ps]] + local, (1, 1, 1), vb[ps, pb, pk])
             else:
                 vs, z, y, x = np.nonzero(A[sl])
-                add(sl[vs], 64 * z + 8 * y + x, np.zeros(len(vs), int), C[sl[vs]] + np.stack([z, y, x], -1),
-                    (1, 1, 1), V[sl[vs], z, y, x])
+                add(
+                    sl[vs],
+                    64 * z + 8 * y + x,
+                    np.zeros(len(vs), int),
+                    C[sl[vs]] + np.stack([z, y, x], -1),
+                    (1, 1, 1),
+                    V[sl[vs], z, y, x],
+                )
     if not rec["leaf"]:
         return Gaussians(np.zeros((0, 3), F32), np.zeros((0, 3), F32), values=np.zeros(0, F32))
     leaf, unit, sub = (np.concatenate(rec[k]) for k in ("leaf", "unit", "sub"))

@@ -26,9 +26,13 @@ TINY = np.float32(1e-30)
 T_STOP = 1e-3
 
 
-def gaussian_records(means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike,
-                     values: npt.ArrayLike,
-                     opacities: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def gaussian_records(
+    means: npt.ArrayLike,
+    scales: npt.ArrayLike,
+    rotations: npt.ArrayLike,
+    values: npt.ArrayLike,
+    opacities: npt.ArrayLike,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(mean (N,3), value (N,), w (N,9), opacity (N,)) float32 as gaussian_records writes them."""
     s = np.asarray(scales, np.float32)
     r = np.asarray(rotations, np.float32).reshape(-1, 3, 3)
@@ -38,12 +42,17 @@ def gaussian_records(means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt
     for k in range(3):
         for j in range(3):
             w[:, 3 * k + j] = r[:, j, k] / se[:, k]
-    return (np.asarray(means, np.float32), np.asarray(values, np.float32), w,
-            np.asarray(opacities, np.float32))
+    return (
+        np.asarray(means, np.float32),
+        np.asarray(values, np.float32),
+        w,
+        np.asarray(opacities, np.float32),
+    )
 
 
-def gaussian_boxes(means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike,
-                   cutoff: float) -> np.ndarray:
+def gaussian_boxes(
+    means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike, cutoff: float
+) -> np.ndarray:
     """(N, 6) float32 boxes as gaussian_records writes them."""
     s = np.asarray(scales, np.float32)
     r = np.asarray(rotations, np.float32).reshape(-1, 3, 3)
@@ -65,14 +74,26 @@ def _dot(a0, a1, a2, b0, b1, b2):
     return (a0 * b0 + a1 * b1) + a2 * b2
 
 
-def hits(o: np.ndarray, d: np.ndarray, mean: np.ndarray,
-         w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def hits(
+    o: np.ndarray, d: np.ndarray, mean: np.ndarray, w: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """For rays (R, 3) and Gaussians: t, m2, ts, a, ms2 (R, N) float32, as clvis_gauss_hit."""
     r = [o[:, None, j] - mean[None, :, j] for j in range(3)]
-    op = [_dot(w[None, :, 3 * k], w[None, :, 3 * k + 1], w[None, :, 3 * k + 2], r[0], r[1], r[2])
-          for k in range(3)]
-    dp = [_dot(w[None, :, 3 * k], w[None, :, 3 * k + 1], w[None, :, 3 * k + 2],
-               d[:, None, 0], d[:, None, 1], d[:, None, 2]) for k in range(3)]
+    op = [
+        _dot(w[None, :, 3 * k], w[None, :, 3 * k + 1], w[None, :, 3 * k + 2], r[0], r[1], r[2])
+        for k in range(3)
+    ]
+    dp = [
+        _dot(
+            w[None, :, 3 * k],
+            w[None, :, 3 * k + 1],
+            w[None, :, 3 * k + 2],
+            d[:, None, 0],
+            d[:, None, 1],
+            d[:, None, 2],
+        )
+        for k in range(3)
+    ]
     a = _dot(*dp, *dp)
     b = _dot(*op, *dp)
     ts = -b / a
@@ -97,27 +118,69 @@ def rgb8(colors: npt.ArrayLike) -> np.ndarray:
     return np.asarray(colors, np.uint8)[:, :3].astype(np.float32) / np.float32(255)
 
 
-def render(means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike, values: npt.ArrayLike,
-           opacities: npt.ArrayLike, cam: npt.ArrayLike, width: int, height: int, table: np.ndarray,
-           vmin: float, scale: float, *, model: str = "max_response", cutoff: float = 3.0,
-           density: float = 1.0,
-           colors: npt.ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def render(
+    means: npt.ArrayLike,
+    scales: npt.ArrayLike,
+    rotations: npt.ArrayLike,
+    values: npt.ArrayLike,
+    opacities: npt.ArrayLike,
+    cam: npt.ArrayLike,
+    width: int,
+    height: int,
+    table: np.ndarray,
+    vmin: float,
+    scale: float,
+    *,
+    model: str = "max_response",
+    cutoff: float = 3.0,
+    density: float = 1.0,
+    colors: npt.ArrayLike | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """rgba (H, W, 4), depth (H, W), hits (H, W): brute force.
 
     cam: the 22-float ray buffer (clvis.camera.ray_buffer); table, vmin,
     scale: the transfer function (TransferFunction.table() and .limits());
     colors: None or each Gaussian's own (N, 3) uint8 rgb."""
     o, d = camera_rays(cam, width, height)
-    rgba, depth, count = render_rays(means, scales, rotations, values, opacities, o, d, cam, table, vmin,
-                                     scale, model=model, cutoff=cutoff, density=density, colors=colors)
+    rgba, depth, count = render_rays(
+        means,
+        scales,
+        rotations,
+        values,
+        opacities,
+        o,
+        d,
+        cam,
+        table,
+        vmin,
+        scale,
+        model=model,
+        cutoff=cutoff,
+        density=density,
+        colors=colors,
+    )
     return rgba.reshape(height, width, 4), depth.reshape(height, width), count.reshape(height, width)
 
 
-def render_rays(means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.ArrayLike, values: npt.ArrayLike,
-                opacities: npt.ArrayLike, o: np.ndarray, d: np.ndarray, cam: npt.ArrayLike, table: np.ndarray,
-                vmin: float, scale: float, *, model: str = "max_response", cutoff: float = 3.0,
-                density: float = 1.0, colors: npt.ArrayLike | None = None,
-                chunk: int = 1 << 22) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def render_rays(
+    means: npt.ArrayLike,
+    scales: npt.ArrayLike,
+    rotations: npt.ArrayLike,
+    values: npt.ArrayLike,
+    opacities: npt.ArrayLike,
+    o: np.ndarray,
+    d: np.ndarray,
+    cam: npt.ArrayLike,
+    table: np.ndarray,
+    vmin: float,
+    scale: float,
+    *,
+    model: str = "max_response",
+    cutoff: float = 3.0,
+    density: float = 1.0,
+    colors: npt.ArrayLike | None = None,
+    chunk: int = 1 << 22,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """rgba (R, 4) float32, depth (R,), hits (R,) for rays o, d (R, 3) float32
     (camera_rays); cam supplies the depth row; colors as in :func:`render`."""
     mean, value, w, opac = gaussian_records(means, scales, rotations, values, opacities)
@@ -149,12 +212,15 @@ def render_rays(means: npt.ArrayLike, scales: npt.ArrayLike, rotations: npt.Arra
             else:
                 aa = a[rr, order].astype(np.float64)
                 arg = -ts[rr, order].astype(np.float64) * np.sqrt(0.5 * aa)
-                integral = (np.exp(-0.5 * ms2[rr, order].astype(np.float64)) * np.sqrt(np.pi / (2 * aa))
-                            * np.array([math.erfc(x) for x in arg]))
+                integral = (
+                    np.exp(-0.5 * ms2[rr, order].astype(np.float64))
+                    * np.sqrt(np.pi / (2 * aa))
+                    * np.array([math.erfc(x) for x in arg])
+                )
                 alpha = 1 - np.exp(-density * eff[order] * integral)
             after = np.cumprod(1 - alpha)
             before = np.concatenate([[1.0], after[:-1]])
-            keep = before >= T_STOP            # composited: T had not yet dropped below 1e-3
+            keep = before >= T_STOP  # composited: T had not yet dropped below 1e-3
             m = int(keep.sum())
             wgt = before[:m] * alpha[:m]
             rgba[sl.start + rr, :3] = (wgt[:, None] * rgb[order[:m]]).sum(axis=0)

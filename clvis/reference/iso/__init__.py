@@ -4,7 +4,16 @@ raycaster are written out in render's module docstring)."""
 
 from . import cache, macrocell, raytrace, traverse, zfp
 from .macrocell import block_ranges, cell_ranges, coarse_ranges
-from .raytrace import BISECTION_STEPS, TINY_DIR, IsoImage, Shading, cell_cubic, cubic_first_zero, render_rays, shade
+from .raytrace import (
+    BISECTION_STEPS,
+    TINY_DIR,
+    IsoImage,
+    Shading,
+    cell_cubic,
+    cubic_first_zero,
+    render_rays,
+    shade,
+)
 from .render import DEPTH_TOLERANCE, VALUE_TOLERANCE, agreement, reliable, render
 
 __all__ = [

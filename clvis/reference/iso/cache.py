@@ -27,7 +27,7 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-FREE = 0xFFFFFFFF          # restated from clvis.iso.cache (the library never imports this module)
+FREE = 0xFFFFFFFF  # restated from clvis.iso.cache (the library never imports this module)
 AGE_MAX = 0xFFFFFFFE
 
 

@@ -27,6 +27,7 @@ def _volume(volume) -> np.ndarray:
         raise DataError("volume: values must be finite (as float32)")
     return a
 
+
 # ---------------------------------------------------------------------------
 # macrocell grids
 
@@ -36,8 +37,12 @@ def cell_ranges(volume: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     dual cell's 8 corner samples (cell [k, j, i] has corners [k..k+1, j..j+1,
     i..i+1])."""
     v = _volume(volume)
-    views = [v[dz:v.shape[0] - 1 + dz, dy:v.shape[1] - 1 + dy, dx:v.shape[2] - 1 + dx]
-             for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)]
+    views = [
+        v[dz : v.shape[0] - 1 + dz, dy : v.shape[1] - 1 + dy, dx : v.shape[2] - 1 + dx]
+        for dz in (0, 1)
+        for dy in (0, 1)
+        for dx in (0, 1)
+    ]
     return np.minimum.reduce(views), np.maximum.reduce(views)
 
 
@@ -46,7 +51,7 @@ def _reduce_blocks(lo, hi, factor, shape=None):
     (default: just enough groups) may ask for more groups, which are empty."""
     if shape is None:
         shape = tuple(-(-s // factor) for s in lo.shape)
-    pad = [(0, b * factor - s) for b, s in zip(shape, lo.shape)]
+    pad = [(0, b * factor - s) for b, s in zip(shape, lo.shape, strict=True)]
     lo = np.pad(lo, pad, constant_values=np.inf)
     hi = np.pad(hi, pad, constant_values=-np.inf)
     split = (shape[0], factor, shape[1], factor, shape[2], factor)
@@ -87,5 +92,3 @@ def coarse_ranges(ranges: Sequence[npt.ArrayLike], factor: int = 4) -> tuple[np.
     if lo.ndim != 3 or lo.shape != hi.shape:
         raise ValueError(f"ranges: expected two 3-D arrays of one shape, got {lo.shape} and {hi.shape}")
     return _reduce_blocks(lo, hi, _factor("factor", factor))
-
-

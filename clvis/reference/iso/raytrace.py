@@ -13,10 +13,18 @@ import numpy.typing as npt
 
 from .macrocell import _volume, cell_ranges
 
-__all__ = ["BISECTION_STEPS", "TINY_DIR", "IsoImage", "Shading", "cell_cubic", "cubic_first_zero",
-           "render_rays", "shade"]
+__all__ = [
+    "BISECTION_STEPS",
+    "TINY_DIR",
+    "IsoImage",
+    "Shading",
+    "cell_cubic",
+    "cubic_first_zero",
+    "render_rays",
+    "shade",
+]
 
-TINY_DIR = 1e-20            # clvis/ray.h CLVIS_RAY_TINY_DIR
+TINY_DIR = 1e-20  # clvis/ray.h CLVIS_RAY_TINY_DIR
 BISECTION_STEPS = 60
 
 
@@ -74,13 +82,13 @@ def _iso(isovalue) -> float:
     return v
 
 
-
 # ---------------------------------------------------------------------------
 # the cubic along a ray segment in one cell
 
 
-def cell_cubic(corners: npt.ArrayLike, local: npt.ArrayLike,
-               direction: npt.ArrayLike) -> tuple[np.ndarray, ...]:
+def cell_cubic(
+    corners: npt.ArrayLike, local: npt.ArrayLike, direction: npt.ArrayLike
+) -> tuple[np.ndarray, ...]:
     """Coefficients (c0, c1, c2, c3), each (M,), of f(s) = sum c_k s^k, the
     trilinear interpolant of `corners` (M, 2, 2, 2) [z, y, x] (already minus
     the isovalue) along local(s) = local + s direction (M, 3) x, y, z."""
@@ -127,9 +135,13 @@ def _extrema(c, length):
     return np.minimum(r1, r2), np.maximum(r1, r2)
 
 
-def cubic_first_zero(c: Sequence[npt.ArrayLike], length: npt.ArrayLike,
-                     refine: int | tuple[str, int] | None = None, start: bool | np.ndarray = True,
-                     end: bool | np.ndarray = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def cubic_first_zero(
+    c: Sequence[npt.ArrayLike],
+    length: npt.ArrayLike,
+    refine: int | tuple[str, int] | None = None,
+    start: bool | np.ndarray = True,
+    end: bool | np.ndarray = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The first zero of the cubic ``c`` (c0, c1, c2, c3 arrays (M,)) on
     [0, length] by the rules of the module docstring.
 
@@ -151,10 +163,12 @@ def cubic_first_zero(c: Sequence[npt.ArrayLike], length: npt.ArrayLike,
     k = np.argmax(zero, axis=1)
     rows = np.arange(len(length))
     upto = np.where(found, k + 1, 3)
-    turning = np.stack([np.broadcast_to(start, length.shape), e1 < length, e2 < length,
-                        np.broadcast_to(end, length.shape)], axis=1)
+    turning = np.stack(
+        [np.broadcast_to(start, length.shape), e1 < length, e2 < length, np.broadcast_to(end, length.shape)],
+        axis=1,
+    )
     turning &= np.arange(4)[None, :] <= upto[:, None]
-    turning[rows, upto] |= found                 # the far end of the hit interval, whatever it is
+    turning[rows, upto] |= found  # the far end of the hit interval, whatever it is
     margin = np.where(turning, np.abs(f), np.inf).min(axis=1)
     a, b = pts[rows, k], pts[rows, k + 1]
     fa, fb = f[rows, k], f[rows, k + 1]
@@ -169,10 +183,16 @@ def _refine_mode(refine):
     if refine is None:
         return "bisection", BISECTION_STEPS
     method, k = ("marmitt", refine) if not isinstance(refine, tuple) else refine
-    if method not in ("marmitt", "illinois", "bisection") or isinstance(k, bool) \
-            or not isinstance(k, (int, np.integer)) or k < 0:
-        raise ValueError(f"refine: expected None, an int >= 0 or ('marmitt' | 'illinois' | 'bisection', "
-                         f"int >= 0), got {refine!r}")
+    if (
+        method not in ("marmitt", "illinois", "bisection")
+        or isinstance(k, bool)
+        or not isinstance(k, (int, np.integer))
+        or k < 0
+    ):
+        raise ValueError(
+            f"refine: expected None, an int >= 0 or ('marmitt' | 'illinois' | 'bisection', "
+            f"int >= 0), got {refine!r}"
+        )
     return method, int(k)
 
 
@@ -186,16 +206,17 @@ def _refine(c, a, b, fa, fb, refine):
             for _ in range(steps):
                 m = 0.5 * (a + b)
                 fm = _horner(c, m)
-                left = _has_zero(fa, fm)         # a zero in [a, m]: keep it
+                left = _has_zero(fa, fm)  # a zero in [a, m]: keep it
                 b, fb = np.where(left, m, b), np.where(left, fm, fb)
                 a, fa = np.where(left, a, m), np.where(left, fa, fm)
             s = 0.5 * (a + b)
         else:
+
             def interpolate():
                 x = np.where(fb != fa, a - fa * (b - a) / (fb - fa), a)
                 return np.clip(x, np.minimum(a, b), np.maximum(a, b))
 
-            last = np.zeros(len(a), np.int8)     # 1: a was replaced last step, -1: b
+            last = np.zeros(len(a), np.int8)  # 1: a was replaced last step, -1: b
             for _ in range(steps):
                 x = interpolate()
                 fx = _horner(c, x)
@@ -214,9 +235,15 @@ def _refine(c, a, b, fa, fb, refine):
 # rendering
 
 
-def render_rays(volume: npt.ArrayLike, origins: npt.ArrayLike, directions: npt.ArrayLike, isovalue: float,
-                spacing: Sequence[float] = (1, 1, 1), origin: Sequence[float] = (0, 0, 0),
-                refine: int | tuple[str, int] | None = None) -> dict[str, np.ndarray]:
+def render_rays(
+    volume: npt.ArrayLike,
+    origins: npt.ArrayLike,
+    directions: npt.ArrayLike,
+    isovalue: float,
+    spacing: Sequence[float] = (1, 1, 1),
+    origin: Sequence[float] = (0, 0, 0),
+    refine: int | tuple[str, int] | None = None,
+) -> dict[str, np.ndarray]:
     """First hits of rays o + t d (t >= 0) with the isosurface, by the rules of
     the module docstring. `origins`, `directions` (R, 3) are rounded to float32
     (directions should be unit length for t to be a world distance).
@@ -228,7 +255,7 @@ def render_rays(volume: npt.ArrayLike, origins: npt.ArrayLike, directions: npt.A
     vol = vol32.astype(np.float64)
     iso = _iso(isovalue)
     _refine_mode(refine)
-    sp = _vec3("spacing", spacing, positive=True)[::-1].copy()     # dx, dy, dz
+    sp = _vec3("spacing", spacing, positive=True)[::-1].copy()  # dx, dy, dz
     org = _vec3("origin", origin)
     o = _rays("origins", origins)
     d = _rays("directions", directions)
@@ -263,7 +290,7 @@ def render_rays(volume: npt.ArrayLike, origins: npt.ArrayLike, directions: npt.A
     with np.errstate(invalid="ignore", over="ignore"):
         c = np.clip(np.floor(O[act] + t_enter[act, None] * D[act]), 0, n - 2).astype(np.int64)
     t_in = t_enter[act]
-    prev_slope = np.full(len(act), np.nan)      # f' at the previous cell's exit, NaN: unknown
+    prev_slope = np.full(len(act), np.nan)  # f' at the previous cell's exit, NaN: unknown
     step_offsets = np.array([[dz, dy, dx] for dz in (0, 1) for dy in (0, 1) for dx in (0, 1)])
     sample_strides = np.array([ny * nx, nx, 1])
     while act.size:
@@ -318,9 +345,9 @@ def _trilinear_gradient(corners, u):
     wx = np.stack([1.0 - u[:, 0], u[:, 0]], axis=1)
     wy = np.stack([1.0 - u[:, 1], u[:, 1]], axis=1)
     wz = np.stack([1.0 - u[:, 2], u[:, 2]], axis=1)
-    dxv = corners[:, :, :, 1] - corners[:, :, :, 0]           # [z, y]
-    dyv = corners[:, :, 1, :] - corners[:, :, 0, :]           # [z, x]
-    dzv = corners[:, 1, :, :] - corners[:, 0, :, :]           # [y, x]
+    dxv = corners[:, :, :, 1] - corners[:, :, :, 0]  # [z, y]
+    dyv = corners[:, :, 1, :] - corners[:, :, 0, :]  # [z, x]
+    dzv = corners[:, 1, :, :] - corners[:, 0, :, :]  # [y, x]
     gx = np.einsum("mzy,mz,my->m", dxv, wz, wy)
     gy = np.einsum("mzx,mz,mx->m", dyv, wz, wx)
     gz = np.einsum("myx,my,mx->m", dzv, wy, wx)
@@ -336,15 +363,18 @@ def _rays(name, a) -> np.ndarray:
     return a.astype(np.float64)
 
 
-def shade(normal: np.ndarray, directions: np.ndarray, hit: np.ndarray,
-          shading: Shading | None = None) -> np.ndarray:
+def shade(
+    normal: np.ndarray, directions: np.ndarray, hit: np.ndarray, shading: Shading | None = None
+) -> np.ndarray:
     """rgba (R, 4) float32 for normals facing the viewer (R, 3), ray directions
     (R, 3) and the hit mask (R,), by the module docstring's Blinn–Phong rule."""
     shading = shading or Shading()
     x = np.abs(np.einsum("ij,ij->i", np.nan_to_num(normal), directions))
     base = np.asarray(shading.base, np.float64)
-    rgb = base[None, :] * (shading.ambient + shading.diffuse * x)[:, None] \
-        + (shading.specular * x ** shading.shininess)[:, None]
+    rgb = (
+        base[None, :] * (shading.ambient + shading.diffuse * x)[:, None]
+        + (shading.specular * x**shading.shininess)[:, None]
+    )
     rgba = np.zeros((len(x), 4))
     rgba[:, :3] = np.clip(rgb, 0.0, 1.0)
     rgba[:, 3] = 1.0

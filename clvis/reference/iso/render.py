@@ -176,14 +176,21 @@ from .raytrace import (  # noqa: F401  (the rules' building blocks, re-exported)
 
 __all__ = ["DEPTH_TOLERANCE", "VALUE_TOLERANCE", "agreement", "reliable", "render"]
 
-DEPTH_TOLERANCE = 1e-4      # depth agreement, as a fraction of the volume diagonal
-VALUE_TOLERANCE = 1e-5      # reliability threshold, as a fraction of the value range
+DEPTH_TOLERANCE = 1e-4  # depth agreement, as a fraction of the volume diagonal
+VALUE_TOLERANCE = 1e-5  # reliability threshold, as a fraction of the value range
 
 
-
-def render(volume: npt.ArrayLike, camera: Camera, width: int, height: int, isovalue: float,
-           spacing: Sequence[float] = (1, 1, 1), origin: Sequence[float] = (0, 0, 0),
-           shading: Shading | None = None, refine: int | tuple[str, int] | None = None) -> IsoImage:
+def render(
+    volume: npt.ArrayLike,
+    camera: Camera,
+    width: int,
+    height: int,
+    isovalue: float,
+    spacing: Sequence[float] = (1, 1, 1),
+    origin: Sequence[float] = (0, 0, 0),
+    shading: Shading | None = None,
+    refine: int | tuple[str, int] | None = None,
+) -> IsoImage:
     """Raycast the isosurface ``volume == isovalue`` for `camera` at `width` x
     `height` (see the module docstring for every rule). `refine`: None (the
     exact root), an int k (Marmitt's k linear-interpolation steps) or
@@ -210,19 +217,28 @@ def render(volume: npt.ArrayLike, camera: Camera, width: int, height: int, isova
     sp = _vec3("spacing", spacing, positive=True)
     diagonal = float(np.linalg.norm((np.array(vol.shape) - 1) * sp))
     return IsoImage(
-        hit=hit.reshape(h, w), t=t.reshape(h, w), depth=depth.reshape(h, w),
-        position=position.reshape(h, w, 3), gradient=g.reshape(h, w, 3), normal=normal.reshape(h, w, 3),
-        rgba=rgba.reshape(h, w, 4), margin=r["margin"].reshape(h, w), slope=r["slope"].reshape(h, w),
-        cells=r["cells"].reshape(h, w), diagonal=diagonal,
-        value_range=float(vol.max()) - float(vol.min()))
+        hit=hit.reshape(h, w),
+        t=t.reshape(h, w),
+        depth=depth.reshape(h, w),
+        position=position.reshape(h, w, 3),
+        gradient=g.reshape(h, w, 3),
+        normal=normal.reshape(h, w, 3),
+        rgba=rgba.reshape(h, w, 4),
+        margin=r["margin"].reshape(h, w),
+        slope=r["slope"].reshape(h, w),
+        cells=r["cells"].reshape(h, w),
+        diagonal=diagonal,
+        value_range=float(vol.max()) - float(vol.min()),
+    )
 
 
 # ---------------------------------------------------------------------------
 # the tolerance an OpenCL image must meet
 
 
-def reliable(image: IsoImage, value_tolerance: float = VALUE_TOLERANCE,
-             depth_tolerance: float = DEPTH_TOLERANCE) -> np.ndarray:
+def reliable(
+    image: IsoImage, value_tolerance: float = VALUE_TOLERANCE, depth_tolerance: float = DEPTH_TOLERANCE
+) -> np.ndarray:
     """(H, W) bool: the pixels whose hit mask and depth are stable under value
     perturbations of ``eps = value_tolerance * image.value_range``: margin >
     eps and, at hits, slope * depth_tolerance * diagonal > eps. (A constant
@@ -232,8 +248,13 @@ def reliable(image: IsoImage, value_tolerance: float = VALUE_TOLERANCE,
     return ok & (~image.hit | (image.slope * depth_tolerance * image.diagonal > eps))
 
 
-def agreement(reference: IsoImage, hit: npt.ArrayLike, depth: npt.ArrayLike,
-              value_tolerance: float = VALUE_TOLERANCE, depth_tolerance: float = DEPTH_TOLERANCE) -> dict:
+def agreement(
+    reference: IsoImage,
+    hit: npt.ArrayLike,
+    depth: npt.ArrayLike,
+    value_tolerance: float = VALUE_TOLERANCE,
+    depth_tolerance: float = DEPTH_TOLERANCE,
+) -> dict:
     """Compare another image's hit mask and depth (H, W) with `reference` on
     its reliable pixels. Returns {"ok", "reliable" (count), "unreliable"
     (count), "mask_mismatches" (reliable pixels whose hit differs),
@@ -243,10 +264,17 @@ def agreement(reference: IsoImage, hit: npt.ArrayLike, depth: npt.ArrayLike,
     hit = np.asarray(hit, bool)
     depth = np.asarray(depth, np.float64)
     if hit.shape != reference.hit.shape or depth.shape != reference.hit.shape:
-        raise ValueError(f"hit, depth: expected shape {reference.hit.shape}, got {hit.shape} and {depth.shape}")
+        raise ValueError(
+            f"hit, depth: expected shape {reference.hit.shape}, got {hit.shape} and {depth.shape}"
+        )
     rel = reliable(reference, value_tolerance, depth_tolerance)
     mism = int((rel & (hit != reference.hit)).sum())
     both = rel & hit & reference.hit
     err = float(np.abs(depth[both] - reference.depth[both]).max() / reference.diagonal) if both.any() else 0.0
-    return {"ok": mism == 0 and err <= depth_tolerance, "reliable": int(rel.sum()),
-            "unreliable": int((~rel).sum()), "mask_mismatches": mism, "depth_error": err}
+    return {
+        "ok": mism == 0 and err <= depth_tolerance,
+        "reliable": int(rel.sum()),
+        "unreliable": int((~rel).sum()),
+        "mask_mismatches": mism,
+        "depth_error": err,
+    }

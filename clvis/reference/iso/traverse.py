@@ -31,16 +31,22 @@ from ..camera import camera_rays
 __all__ = ["NO_BLOCK", "init_rays", "macro_traverse", "ray_setup"]
 
 NO_BLOCK = np.uint32(0xFFFFFFFF)
-_TINY = np.float32(1e-20)          # clvis/ray.h CLVIS_RAY_TINY_DIR
+_TINY = np.float32(1e-20)  # clvis/ray.h CLVIS_RAY_TINY_DIR
 _F = np.float32
 
 
-def ray_setup(cam: npt.ArrayLike, width: int, height: int, shape: Sequence[int], spacing: Sequence[float],
-              origin: Sequence[float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def ray_setup(
+    cam: npt.ArrayLike,
+    width: int,
+    height: int,
+    shape: Sequence[int],
+    spacing: Sequence[float],
+    origin: Sequence[float],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per pixel (W * H rays): O, D, inv (R, 3) and t_enter, t_exit (R,), float32."""
     o, d = camera_rays(np.asarray(cam, np.float32), int(width), int(height))
-    n = np.array(shape[::-1], np.int64)                       # nx, ny, nz
-    sp = np.asarray(spacing, np.float32)[::-1].copy()          # dx, dy, dz
+    n = np.array(shape[::-1], np.int64)  # nx, ny, nz
+    sp = np.asarray(spacing, np.float32)[::-1].copy()  # dx, dy, dz
     org = np.asarray(origin, np.float32)
     d_safe = np.where(np.abs(d) < _TINY, np.copysign(_TINY, d), d).astype(np.float32)
     inv = sp / d_safe
@@ -54,8 +60,14 @@ def ray_setup(cam: npt.ArrayLike, width: int, height: int, shape: Sequence[int],
     return O, D, inv, t_enter, t_exit
 
 
-def init_rays(cam: npt.ArrayLike, width: int, height: int, shape: Sequence[int], spacing: Sequence[float],
-              origin: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+def init_rays(
+    cam: npt.ArrayLike,
+    width: int,
+    height: int,
+    shape: Sequence[int],
+    spacing: Sequence[float],
+    origin: Sequence[float],
+) -> tuple[np.ndarray, np.ndarray]:
     """(ray_t float32 (W * H,): t_enter, +inf where the ray misses the box;
     enters uint8: 1 where it meets it), as the kernel init_rays."""
     _, _, _, t_enter, t_exit = ray_setup(cam, width, height, shape, spacing, origin)
@@ -72,10 +84,19 @@ def _bound_t(b, size, n, O, inv, entry):
     return (x - O) * inv
 
 
-def macro_traverse(shape: Sequence[int], spacing: Sequence[float], origin: Sequence[float], isovalue: float,
-                   cam: npt.ArrayLike, width: int, fine: npt.ArrayLike, coarse: npt.ArrayLike,
-                   active: npt.ArrayLike, ray_t: npt.ArrayLike,
-                   n_spec: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def macro_traverse(
+    shape: Sequence[int],
+    spacing: Sequence[float],
+    origin: Sequence[float],
+    isovalue: float,
+    cam: npt.ArrayLike,
+    width: int,
+    fine: npt.ArrayLike,
+    coarse: npt.ArrayLike,
+    active: npt.ArrayLike,
+    ray_t: npt.ArrayLike,
+    n_spec: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Candidate blocks of the rays `active` (pixel ids).
 
     fine (nbz, nby, nbx, 2) and coarse (ncz, ncy, ncx, 2) float32 ranges
@@ -111,7 +132,7 @@ def macro_traverse(shape: Sequence[int], spacing: Sequence[float], origin: Seque
         g = np.floor(O + t[:, None] * D)
         c = np.where(g >= 0, np.where(g <= (n - 2).astype(np.float32), np.nan_to_num(g), n - 2), 0)
         b = c.astype(np.int64) >> 2
-        while True:              # back while t is before the block's entry
+        while True:  # back while t is before the block's entry
             nxt = b - step
             back = live[:, None] & (nxt >= 0) & (nxt < ncb) & (t[:, None] < _bound_t(b, 4, n, O, inv, True))
             if not back.any():
@@ -121,9 +142,14 @@ def macro_traverse(shape: Sequence[int], spacing: Sequence[float], origin: Seque
             live &= t < t_exit
             if not live.any():
                 break
-            while True:          # forward while t is at or past the block's exit
+            while True:  # forward while t is at or past the block's exit
                 nxt = b + step
-                fwd = live[:, None] & (nxt >= 0) & (nxt < ncb) & (t[:, None] >= _bound_t(b, 4, n, O, inv, False))
+                fwd = (
+                    live[:, None]
+                    & (nxt >= 0)
+                    & (nxt < ncb)
+                    & (t[:, None] >= _bound_t(b, 4, n, O, inv, False))
+                )
                 if not fwd.any():
                     break
                 b = np.where(fwd, nxt, b)

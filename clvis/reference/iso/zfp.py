@@ -38,8 +38,21 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["EBIAS", "NBMASK", "PERM_3", "block_words", "decode", "decode_block", "decode_blocks",
-           "decode_ints", "dequantize", "expected_nbytes", "grid", "inv_lift", "inv_xform"]
+__all__ = [
+    "EBIAS",
+    "NBMASK",
+    "PERM_3",
+    "block_words",
+    "decode",
+    "decode_block",
+    "decode_blocks",
+    "decode_ints",
+    "dequantize",
+    "expected_nbytes",
+    "grid",
+    "inv_lift",
+    "inv_xform",
+]
 
 EBIAS = 127
 NBMASK = 0xAAAAAAAA
@@ -53,24 +66,68 @@ def _ix(x, y, z):
 # x^2 + y^2 + z^2 (ties in zfp's own order: this table is part of the format)
 PERM_3 = (
     _ix(0, 0, 0),
-    _ix(1, 0, 0), _ix(0, 1, 0), _ix(0, 0, 1),
-    _ix(0, 1, 1), _ix(1, 0, 1), _ix(1, 1, 0),
-    _ix(2, 0, 0), _ix(0, 2, 0), _ix(0, 0, 2),
+    _ix(1, 0, 0),
+    _ix(0, 1, 0),
+    _ix(0, 0, 1),
+    _ix(0, 1, 1),
+    _ix(1, 0, 1),
+    _ix(1, 1, 0),
+    _ix(2, 0, 0),
+    _ix(0, 2, 0),
+    _ix(0, 0, 2),
     _ix(1, 1, 1),
-    _ix(2, 1, 0), _ix(2, 0, 1), _ix(0, 2, 1), _ix(1, 2, 0), _ix(1, 0, 2), _ix(0, 1, 2),
-    _ix(3, 0, 0), _ix(0, 3, 0), _ix(0, 0, 3),
-    _ix(2, 1, 1), _ix(1, 2, 1), _ix(1, 1, 2),
-    _ix(0, 2, 2), _ix(2, 0, 2), _ix(2, 2, 0),
-    _ix(3, 1, 0), _ix(3, 0, 1), _ix(0, 3, 1), _ix(1, 3, 0), _ix(1, 0, 3), _ix(0, 1, 3),
-    _ix(1, 2, 2), _ix(2, 1, 2), _ix(2, 2, 1),
-    _ix(3, 1, 1), _ix(1, 3, 1), _ix(1, 1, 3),
-    _ix(3, 2, 0), _ix(3, 0, 2), _ix(0, 3, 2), _ix(2, 3, 0), _ix(2, 0, 3), _ix(0, 2, 3),
+    _ix(2, 1, 0),
+    _ix(2, 0, 1),
+    _ix(0, 2, 1),
+    _ix(1, 2, 0),
+    _ix(1, 0, 2),
+    _ix(0, 1, 2),
+    _ix(3, 0, 0),
+    _ix(0, 3, 0),
+    _ix(0, 0, 3),
+    _ix(2, 1, 1),
+    _ix(1, 2, 1),
+    _ix(1, 1, 2),
+    _ix(0, 2, 2),
+    _ix(2, 0, 2),
+    _ix(2, 2, 0),
+    _ix(3, 1, 0),
+    _ix(3, 0, 1),
+    _ix(0, 3, 1),
+    _ix(1, 3, 0),
+    _ix(1, 0, 3),
+    _ix(0, 1, 3),
+    _ix(1, 2, 2),
+    _ix(2, 1, 2),
+    _ix(2, 2, 1),
+    _ix(3, 1, 1),
+    _ix(1, 3, 1),
+    _ix(1, 1, 3),
+    _ix(3, 2, 0),
+    _ix(3, 0, 2),
+    _ix(0, 3, 2),
+    _ix(2, 3, 0),
+    _ix(2, 0, 3),
+    _ix(0, 2, 3),
     _ix(2, 2, 2),
-    _ix(3, 2, 1), _ix(3, 1, 2), _ix(1, 3, 2), _ix(2, 3, 1), _ix(2, 1, 3), _ix(1, 2, 3),
-    _ix(0, 3, 3), _ix(3, 0, 3), _ix(3, 3, 0),
-    _ix(3, 2, 2), _ix(2, 3, 2), _ix(2, 2, 3),
-    _ix(1, 3, 3), _ix(3, 1, 3), _ix(3, 3, 1),
-    _ix(2, 3, 3), _ix(3, 2, 3), _ix(3, 3, 2),
+    _ix(3, 2, 1),
+    _ix(3, 1, 2),
+    _ix(1, 3, 2),
+    _ix(2, 3, 1),
+    _ix(2, 1, 3),
+    _ix(1, 2, 3),
+    _ix(0, 3, 3),
+    _ix(3, 0, 3),
+    _ix(3, 3, 0),
+    _ix(3, 2, 2),
+    _ix(2, 3, 2),
+    _ix(2, 2, 3),
+    _ix(1, 3, 3),
+    _ix(3, 1, 3),
+    _ix(3, 3, 1),
+    _ix(2, 3, 3),
+    _ix(3, 2, 3),
+    _ix(3, 3, 2),
     _ix(3, 3, 3),
 )
 
@@ -89,7 +146,7 @@ def expected_nbytes(shape: Sequence[int], rate: int) -> int:
 def block_words(stream: bytes | np.ndarray, b: int, rate: int) -> np.ndarray:
     """The `rate` little-endian 64-bit words of block b."""
     words = np.frombuffer(bytes(stream), dtype="<u8")
-    return words[b * rate:(b + 1) * rate]
+    return words[b * rate : (b + 1) * rate]
 
 
 class _Bits:
@@ -112,8 +169,8 @@ def decode_ints(bits: _Bits, budget: int) -> list[int]:
     """zfp's embedded decoding of 64 unsigned 32-bit coefficients with at
     most `budget` bits (the rate-constrained path of decode_few_ints)."""
     data = [0] * 64
-    n = 0                                   # coefficients significant so far
-    for k in range(31, -1, -1):             # bit plane k, most significant first
+    n = 0  # coefficients significant so far
+    for k in range(31, -1, -1):  # bit plane k, most significant first
         if budget == 0:
             break
         # the first n bits of the plane, verbatim
@@ -124,13 +181,13 @@ def decode_ints(bits: _Bits, budget: int) -> list[int]:
         while budget and n < 64:
             budget -= 1
             if not bits.read(1):
-                break                       # no more one-bits in this plane
+                break  # no more one-bits in this plane
             while budget and n < 63:
                 budget -= 1
                 if bits.read(1):
                     break
                 n += 1
-            x |= 1 << n                     # set even when the budget ran out (as zfp does)
+            x |= 1 << n  # set even when the budget ran out (as zfp does)
             n += 1
         for i in range(64):
             if (x >> i) & 1:
@@ -140,7 +197,7 @@ def decode_ints(bits: _Bits, budget: int) -> list[int]:
 
 def inv_lift(v: np.ndarray, axis: int) -> None:
     """zfp's inverse lifting of the 4-vectors along `axis` of the int32 block v, in place."""
-    a = np.moveaxis(v, axis, 0)             # a view: assignments write into v
+    a = np.moveaxis(v, axis, 0)  # a view: assignments write into v
     x, y, z, w = (a[i].copy() for i in range(4))
     y += w >> 1
     w -= y >> 1
@@ -179,7 +236,7 @@ def decode_block(words: np.ndarray, rate: int) -> np.ndarray:
     signed = ((u ^ np.uint32(NBMASK)) - np.uint32(NBMASK)).view(np.int32)
     block = np.zeros(64, np.int32)
     block[list(PERM_3)] = signed
-    block = block.reshape(4, 4, 4)          # [z, y, x]
+    block = block.reshape(4, 4, 4)  # [z, y, x]
     inv_xform(block)
     return dequantize(block.reshape(64), emax)
 
@@ -202,14 +259,15 @@ def decode(stream: bytes | np.ndarray, shape: Sequence[int], rate: int) -> np.nd
             for bx in range(nbx):
                 block = decode_block(block_words(stream, b, rate), rate).reshape(4, 4, 4)
                 z, y, x = 4 * bz, 4 * by, 4 * bx
-                part = out[z:z + 4, y:y + 4, x:x + 4]
-                part[...] = block[:part.shape[0], :part.shape[1], :part.shape[2]]
+                part = out[z : z + 4, y : y + 4, x : x + 4]
+                part[...] = block[: part.shape[0], : part.shape[1], : part.shape[2]]
                 b += 1
     return out
 
 
-def decode_blocks(stream: bytes | np.ndarray, ids: npt.ArrayLike, shape: Sequence[int],
-                  rate: int) -> np.ndarray:
+def decode_blocks(
+    stream: bytes | np.ndarray, ids: npt.ArrayLike, shape: Sequence[int], rate: int
+) -> np.ndarray:
     """(len(ids), 64) float32: block ids[j] (x-fastest block order) in row j,
     in zfp's in-block order x + 4 y + 16 z."""
     shape = _check(stream, shape, rate)

@@ -3,5 +3,14 @@
 from . import depth_filter, render
 from .render import depth_key, key_depth, morton_order, nonfinite, rasterize, splat, visibility
 
-__all__ = ["depth_filter", "depth_key", "key_depth", "morton_order", "nonfinite", "rasterize", "render",
-           "splat", "visibility"]
+__all__ = [
+    "depth_filter",
+    "depth_key",
+    "key_depth",
+    "morton_order",
+    "nonfinite",
+    "rasterize",
+    "render",
+    "splat",
+    "visibility",
+]

@@ -73,7 +73,7 @@ LEVELS = 4
 FILTER_STRENGTH = 1.025
 EDGE_THRESHOLD = 0.01
 MAX_LEVELS = 16
-INV255 = np.float32(1.0) / np.float32(255.0)     # the float32 nearest 1/255
+INV255 = np.float32(1.0) / np.float32(255.0)  # the float32 nearest 1/255
 
 _INF = np.float32(np.inf)
 
@@ -97,19 +97,19 @@ def _min_pool(d):
 
 def _reference_depth(f, t):
     """For each pixel of level f: the depth its children are compared with."""
-    g = np.pad(f, 1, mode="edge")           # outside neighbour = the centre itself
+    g = np.pad(f, 1, mode="edge")  # outside neighbour = the centre itself
     with np.errstate(over="ignore", invalid="ignore"):
         lap = (((g[:-2, 1:-1] + g[2:, 1:-1]) + g[1:-1, :-2]) + g[1:-1, 2:]) - f * np.float32(4)
         edge = lap > t * f
     h, w = f.shape
     m = np.pad(f, 1, constant_values=-_INF)  # outside pixels take no part in the max
-    around = np.max([m[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)], axis=0)
+    around = np.max([m[dy : dy + h, dx : dx + w] for dy in range(3) for dx in range(3)], axis=0)
     return np.where(edge, around, f)
 
 
 def _up(a, shape):
     """Each pixel of the finer level `shape` gets its parent's value."""
-    return a.repeat(2, axis=0).repeat(2, axis=1)[:shape[0], :shape[1]]
+    return a.repeat(2, axis=0).repeat(2, axis=1)[: shape[0], : shape[1]]
 
 
 def _check(depth, levels, filter_strength, edge_threshold):
@@ -130,8 +130,13 @@ def _check(depth, levels, filter_strength, edge_threshold):
     return depth, s, t
 
 
-def depth_filter_mask(depth: npt.ArrayLike, levels: int = LEVELS, filter_strength: float = FILTER_STRENGTH, *,
-                      edge_threshold: float = EDGE_THRESHOLD) -> np.ndarray:
+def depth_filter_mask(
+    depth: npt.ArrayLike,
+    levels: int = LEVELS,
+    filter_strength: float = FILTER_STRENGTH,
+    *,
+    edge_threshold: float = EDGE_THRESHOLD,
+) -> np.ndarray:
     """The keep mask (H x W bool) of the definition above."""
     depth, s, t = _check(depth, levels, filter_strength, edge_threshold)
     if depth.size == 0 or levels == 0:

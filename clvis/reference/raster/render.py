@@ -21,7 +21,7 @@ from ..morton import morton_codes
 
 __all__ = ["depth_key", "key_depth", "morton_order", "nonfinite", "rasterize", "splat", "visibility"]
 
-MAX_ATTRIBUTES = 8      # restated from clvis.raster
+MAX_ATTRIBUTES = 8  # restated from clvis.raster
 
 
 def nonfinite(positions: npt.ArrayLike) -> int:
@@ -58,8 +58,9 @@ def key_depth(keys: np.ndarray) -> np.ndarray:
     return bits.astype(np.uint32).view(np.float32)
 
 
-def visibility(positions: npt.ArrayLike, camera: Camera, width: int, height: int,
-               point_size: int = 1) -> np.ndarray:
+def visibility(
+    positions: npt.ArrayLike, camera: Camera, width: int, height: int, point_size: int = 1
+) -> np.ndarray:
     """(H, W) uint64: min over the points drawn in each pixel of
     depth_key(depth) << 32 | index; all ones where no point is drawn."""
     positions = np.asarray(positions, np.float32).reshape(-1, 3)
@@ -85,12 +86,23 @@ def _colors(n, colors, attributes, color_by, colormap, value_range):
     return np.full((n, 4), 255, np.uint8)
 
 
-def rasterize(positions: npt.ArrayLike, camera: Camera, width: int, height: int, *,
-              colors: npt.ArrayLike | None = None, attributes: Mapping[str, npt.ArrayLike] | None = None,
-              velocity: npt.ArrayLike | None = None, radius: npt.ArrayLike | None = None,
-              soft_z: bool | float | None = None, color_by: str | None = None, colormap: str = "viridis",
-              value_range: tuple[float, float] | None = None, planes: Sequence[str] | None = None,
-              point_size: int = 1) -> GBuffers:
+def rasterize(
+    positions: npt.ArrayLike,
+    camera: Camera,
+    width: int,
+    height: int,
+    *,
+    colors: npt.ArrayLike | None = None,
+    attributes: Mapping[str, npt.ArrayLike] | None = None,
+    velocity: npt.ArrayLike | None = None,
+    radius: npt.ArrayLike | None = None,
+    soft_z: bool | float | None = None,
+    color_by: str | None = None,
+    colormap: str = "viridis",
+    value_range: tuple[float, float] | None = None,
+    planes: Sequence[str] | None = None,
+    point_size: int = 1,
+) -> GBuffers:
     """clvis.rasterize in NumPy (positions as an (N, 3) array). planes: the
     attributes resolved (default: all of them when there are at most 8, else
     none), in the order given."""
@@ -119,8 +131,13 @@ def rasterize(positions: npt.ArrayLike, camera: Camera, width: int, height: int,
         near = depth[pix]
         keep = pr.depth[idx] <= tol * near
         sums = np.zeros((H * W, 5), np.uint64)
-        np.add.at(sums, pix[keep], np.concatenate(
-            [pc[idx[keep]].astype(np.uint64), np.ones((int(keep.sum()), 1), np.uint64)], axis=1))
+        np.add.at(
+            sums,
+            pix[keep],
+            np.concatenate(
+                [pc[idx[keep]].astype(np.uint64), np.ones((int(keep.sum()), 1), np.uint64)], axis=1
+            ),
+        )
         cnt = sums[covered, 4:5]
         rgba[covered] = ((sums[covered, :4] + cnt // 2) // cnt).astype(np.uint8)
 
@@ -135,8 +152,9 @@ def rasterize(positions: npt.ArrayLike, camera: Camera, width: int, height: int,
             plane[covered] = a.astype(np.float32)[win]
         resolved[name] = plane.reshape(H, W)
 
-    out = GBuffers(index=index.reshape(H, W), depth=depth.reshape(H, W),
-                   rgba=rgba.reshape(H, W, 4), attributes=resolved)
+    out = GBuffers(
+        index=index.reshape(H, W), depth=depth.reshape(H, W), rgba=rgba.reshape(H, W, 4), attributes=resolved
+    )
     out.stats = {"points": n, "points_nonfinite": nonfinite(positions)}
     cam = camera_buffer(camera)
     M = cam[:16].reshape(4, 4)
@@ -157,8 +175,7 @@ def rasterize(positions: npt.ArrayLike, camera: Camera, width: int, height: int,
         vel[covered, 0], vel[covered, 1] = vx, vy
         out.vel2d = vel.reshape(H, W, 2)
         out.vel_angle = np.arctan2(out.vel2d[..., 1], out.vel2d[..., 0])
-        out.vel_speed = np.sqrt(out.vel2d[..., 0] * out.vel2d[..., 0]
-                                + out.vel2d[..., 1] * out.vel2d[..., 1])
+        out.vel_speed = np.sqrt(out.vel2d[..., 0] * out.vel2d[..., 0] + out.vel2d[..., 1] * out.vel2d[..., 1])
     if radius is not None:
         focal = np.float32(0.5 * H * float(np.asarray(camera.projection)[1, 1]))
         r = np.asarray(radius, np.float32)[win]

@@ -13,9 +13,10 @@ Formats, chosen by the file name (case-insensitive):
 - ``.nii``, ``.nii.gz``: NIfTI-1/2 through nibabel (an optional dependency:
   ``pip install ".[nifti]"`` from a clvis checkout, or ``pip install nibabel``).
   NIfTI's data array is indexed [i, j, k] with i the fastest on disk; it is
-  transposed to [k, j, i] = [z, y, x]. Trailing axes of size 1 (a 3-D image stored as 4-D) are dropped. A 4-D image (a time
-  series) needs ``volume_index`` to pick one volume; only that volume is read.
-  The header's scale (scl_slope, scl_inter) is applied when set, as nibabel does.
+  transposed to [k, j, i] = [z, y, x]. Trailing axes of size 1 (a 3-D image
+  stored as 4-D) are dropped. A 4-D image (a time series) needs ``volume_index``
+  to pick one volume; only that volume is read. The header's scale (scl_slope,
+  scl_inter) is applied when set, as nibabel does.
 
 The samples are returned as stored (uint8 stays uint8: volumes can be large;
 convert where needed, e.g. ``volume.data.astype(np.float32)``), in native

@@ -1,0 +1,121 @@
+"""The family rule of DESIGN.md, checked on the source (no imports run):
+
+- every kernels_cl/<family>/<x>.cl is launched from its own family's Python
+  (clvis/<family>/, or clvis/primitives.py for the primitives), and from no
+  other family;
+- a family never imports another family's modules: shared code lives in
+  top-level clvis/*.py modules;
+- the library never imports clvis.reference (only the command line does, for
+  the demo's checks against the references), and a family's references never
+  import another family's references.
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+import clvis
+from clvis import runtime
+
+PACKAGE = Path(clvis.__file__).parent
+FAMILIES = ("raster", "iso", "gauss")
+
+
+def _modules(root: Path) -> list[Path]:
+    return sorted(p for p in root.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def _dotted(path: Path) -> str:
+    rel = path.relative_to(PACKAGE.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _imports(path: Path) -> set[str]:
+    """The absolute names of the modules `path` imports (relative imports resolved)."""
+    package = _dotted(path).split(".")
+    if path.name != "__init__.py":
+        package = package[:-1]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - (node.level - 1)]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            out.add(mod)
+            out.update(f"{mod}.{a.name}" for a in node.names)
+    return out
+
+
+def _family(module: str, root: str = "clvis") -> str | None:
+    parts = module.split(".")
+    if len(parts) >= 2 and parts[0] == "clvis":
+        if root == "clvis.reference" and len(parts) >= 3 and parts[1] == "reference":
+            return parts[2] if parts[2] in FAMILIES else None
+        if root == "clvis" and parts[1] in FAMILIES:
+            return parts[1]
+    return None
+
+
+def _kernel_files() -> list[str]:
+    return sorted(
+        str(p.relative_to(runtime.KERNEL_ROOT))
+        for p in runtime.KERNEL_ROOT.glob("*/*.cl")
+        if p.parent.name != "include"
+    )
+
+
+def test_layout_found_the_tree():
+    kernels = _kernel_files()
+    assert len(kernels) >= 19 and {k.split("/")[0] for k in kernels} == {"primitives", *FAMILIES}
+    assert all((PACKAGE / f).is_dir() for f in FAMILIES)
+    assert all((PACKAGE / "reference" / f).is_dir() for f in FAMILIES)
+
+
+@pytest.mark.parametrize("kernel", _kernel_files())
+def test_kernel_launched_from_its_family(kernel):
+    family = kernel.split("/")[0]
+    own = [PACKAGE / "primitives.py"] if family == "primitives" else _modules(PACKAGE / family)
+    users = [p for p in _modules(PACKAGE) if f'"{kernel}"' in p.read_text()]
+    assert any(p in own for p in users), f"{kernel} is not launched from clvis/{family}"
+    strangers = [str(p.relative_to(PACKAGE)) for p in users if p not in own]
+    assert not strangers, f"{kernel} is launched from outside its family: {strangers}"
+
+
+def test_no_family_imports_another():
+    for family in FAMILIES:
+        for path in _modules(PACKAGE / family):
+            others = {m for m in _imports(path) if _family(m) not in (None, family)}
+            assert not others, f"{path.relative_to(PACKAGE)} imports {sorted(others)}"
+
+
+def test_library_never_imports_the_references():
+    cli, reference = PACKAGE / "cli", PACKAGE / "reference"
+    for path in _modules(PACKAGE):
+        if cli in path.parents or reference in path.parents:
+            continue
+        bad = {m for m in _imports(path) if m == "clvis.reference" or m.startswith("clvis.reference.")}
+        assert not bad, f"{path.relative_to(PACKAGE)} imports {sorted(bad)}"
+
+
+def test_references_keep_to_their_family():
+    for family in FAMILIES:
+        for path in _modules(PACKAGE / "reference" / family):
+            imports = _imports(path)
+            others = {m for m in imports if _family(m, "clvis.reference") not in (None, family)}
+            assert not others, f"{path.relative_to(PACKAGE)} imports {sorted(others)}"
+
+
+def test_import_resolution():
+    """The checker itself: relative imports are resolved against the module's package."""
+    got = _imports(PACKAGE / "iso" / "render.py")
+    assert "clvis.iso.cache" in got and "clvis.runtime" in got and "clvis.camera.ray_buffer" in got
+    assert _family("clvis.gauss.render") == "gauss" and _family("clvis.camera") is None
+    assert _family("clvis.reference.iso.zfp", "clvis.reference") == "iso"

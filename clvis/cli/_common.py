@@ -409,6 +409,19 @@ def describe_camera(args) -> str:
     return text
 
 
+def box_corners(lo, hi) -> np.ndarray:
+    """The 8 corners of the box [lo, hi], (8, 3) float64."""
+    return np.array(
+        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64
+    )
+
+
+def fit_box(lo, hi, width: int, height: int, fit: FitView):
+    """The default view (--view fit, no overrides) of the box [lo, hi]: what the
+    commands use when no options are given, and the demo too."""
+    return fit_camera(box_corners(lo, hi), lo, hi, width / height, fit, fit.fov_y)
+
+
 def camera_from_args(args, lo, hi, width: int, height: int, points=None):
     """The camera the options ask for, framing the box [lo, hi] (for --view
     fit, the `points` themselves when given, else the box's corners)."""
@@ -421,10 +434,7 @@ def camera_from_args(args, lo, hi, width: int, height: int, points=None):
     try:
         if kind == "fit":
             if points is None:  # the box's corners: framed tighter than its bounding sphere
-                points = np.array(
-                    [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])],
-                    np.float64,
-                )
+                points = box_corners(lo, hi)
             cam = fit_camera(points, lo, hi, aspect, fit, fov_y)
         elif kind in AXIS_VIEWS:
             cam = axis_camera(kind, lo, hi, aspect)

@@ -28,6 +28,7 @@ from ._common import (
     check_camera_args,
     colormap_name,
     count,
+    fit_box,
     isatty,
     read_volume_file,
     real,
@@ -274,7 +275,6 @@ def render_panels(
     low densities faint); progress: a Progress showing each panel's rays done;
     timings: a dict given "build_s", the wall time of the kernel build (the
     first renderer and frame, on a tiny scene)."""
-    from .. import Camera
     from ..colormap import TransferFunction
     from ..gauss import GaussianRenderer, gaussians_from_volume
 
@@ -288,11 +288,7 @@ def render_panels(
     lo = np.min([g.bounds(1.0)[0] for g in allg], axis=0)
     hi = np.max([g.bounds(1.0)[1] for g in allg], axis=0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
-    cam = (
-        camera(lo, hi)
-        if camera is not None
-        else Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y)
-    )
+    cam = camera(lo, hi) if camera is not None else fit_box(lo, hi, width, height, _FIT)
     vals = np.concatenate([g.values for g in allg])
     vr = (float(vals.min()), float(vals.max()))
     if opacity is None:

@@ -28,6 +28,7 @@ from ._common import (
     check_camera_args,
     count,
     finite_range,
+    fit_box,
     isatty,
     otsu_level,
     read_volume_file,
@@ -189,7 +190,6 @@ def render(
     """(renderer, camera, IsoImage), seen by camera(lo, hi) of the volume's
     bounds (default: the fit view); progress: a clvis.cli._common.Progress
     (default: none)."""
-    from .. import Camera
     from ..iso import IsoRenderer
 
     progress = progress if progress is not None else Progress(False)
@@ -197,11 +197,7 @@ def render(
         r = IsoRenderer(volume, rate=rate, spacing=spacing, origin=origin, queue=queue)
     lo = np.asarray(origin, np.float64)
     hi = lo + (np.array(r.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
-    cam = (
-        camera(lo, hi)
-        if camera is not None
-        else Camera.fit(lo, hi, direction=_FIT.direction, aspect=width / height, fov_y=_FIT.fov_y)
-    )
+    cam = camera(lo, hi) if camera is not None else fit_box(lo, hi, width, height, _FIT)
     status = _Status()
     with progress.stage(status):
         img = r.render(

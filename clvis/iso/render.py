@@ -167,9 +167,12 @@ class _HostImage:
 class _Tile:
     """The device state of one tile's rays: pixels p0 .. p0 + n - 1."""
 
-    def __init__(self, q, p0, n, cam, w, h, shape, spacing, origin, int64) -> None:
+    def __init__(self, q, p0, n, cam, w, h, shape, spacing, origin, int64, rays=None) -> None:
+        """`rays`: init_rays' (ray_t, ids, count) of this tile when the caller has them."""
         self.q, self.p0, self.n, self.cam, self.w = q, p0, n, cam, w
-        self.ray_t, active_all, count = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
+        if rays is None:
+            rays = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
+        self.ray_t, active_all, count = rays
         self.active = active_all[: int(count.get()[0])]
         self.hit = runtime.zeros(q, n, np.uint8, "hit mask")
         self.hit_t = runtime.empty(q, n, np.float32, "hit t")
@@ -403,13 +406,17 @@ class IsoRenderer:
         out = _HostImage(npix)
         # the rays entering the volume, tile by tile: the totals of completion
         # and progress, and the active mask of the tiles not traced yet
-        entering = []
-        for p0, n in tiles:
-            _, ids, count = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
-            k = int(count.get()[0])
+        # (the first tile keeps its rays: it is traced next, and its own state
+        # says which of them are running)
+        entering, first_rays = [], None
+        for ti, (p0, n) in enumerate(tiles):
+            rays = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
+            k = int(rays[2].get()[0])
             entering.append(k)
-            if k:
-                out.active[p0 + ids[:k].get().astype(np.int64)] = True
+            if ti == 0:
+                first_rays = rays
+            elif k:
+                out.active[p0 + rays[1][:k].get().astype(np.int64)] = True
         n_total = sum(entering)
         int64 = self.config.int64_atomics
         stats = {
@@ -439,7 +446,8 @@ class IsoRenderer:
             n_enter = entering[ti]
             if n_enter == 0:
                 continue
-            state = _Tile(q, p0, n, cam, w, h, shape, spacing, origin, int64)
+            state = _Tile(q, p0, n, cam, w, h, shape, spacing, origin, int64, first_rays if ti == 0 else None)
+            first_rays = None
             n_active = n_enter
             tile_done = False
             while not tile_done:

@@ -33,6 +33,8 @@ def splat(pr: Projected, width: int, height: int, point_size: int = 1) -> tuple[
     """(point, pixel) pairs: every visible point (its index in the input)
     with each pixel py * W + px of its point_size square inside the image."""
     idx = np.flatnonzero(pr.visible)
+    if point_size == 1:  # a visible point's own pixel is inside the image
+        return idx, pr.py[idx].astype(np.int64) * width + pr.px[idx]
     px, py = pr.px[idx].astype(np.int64), pr.py[idx].astype(np.int64)
     lo, hi = (point_size - 1) // 2, point_size // 2
     points, pixels = [], []

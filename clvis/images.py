@@ -366,7 +366,7 @@ def compose(
     y = 0
     for row, h in zip(rows, heights, strict=True):
         x = 0
-        for p, w in zip(row, widths, strict=True):
+        for p, w in zip(row, widths):  # noqa: B905  (the last row may hold fewer panels)
             out[y : y + p.shape[0], x : x + p.shape[1]] = p
             x += w + pad
         y += h + pad

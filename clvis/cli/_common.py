@@ -219,6 +219,29 @@ def timed(fn, queue=None, repeat=3) -> float:
 # ---------------------------------------------------------------- progress
 
 
+def add_output_options(parser: argparse.ArgumentParser, out: str, empty: str) -> None:
+    """--out, --transparent, --progress and --quiet: where the PNGs go and what is
+    shown on the way, alike for every command that renders. `empty` names
+    what --transparent leaves clear."""
+    parser.add_argument("--out", default=out, metavar="DIR", help=f"folder for the PNGs (default ./{out})")
+    parser.add_argument(
+        "--transparent",
+        action="store_true",
+        help=f"leave {empty} transparent (default: over a dark grey; label bands stay opaque)",
+    )
+    parser.add_argument(
+        "--progress",
+        action="store_true",
+        help="show the progress on stderr even when it is not a terminal",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def progress_from_args(args: argparse.Namespace, prefix: str) -> Progress:
+    """The progress display --progress / --quiet ask for (by default: on a terminal only)."""
+    return Progress(not args.quiet and (args.progress or isatty(sys.stderr)), prefix)
+
+
 class Progress:
     """Stage names and their elapsed times on stderr.
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -23,13 +22,14 @@ from ._common import (
     Parser,
     Progress,
     add_camera_options,
+    add_output_options,
     add_volume_options,
     camera_from_args,
     check_camera_args,
     colormap_name,
     count,
     fit_box,
-    isatty,
+    progress_from_args,
     read_volume_file,
     real,
     size,
@@ -133,18 +133,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         default=None,
         help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)",
     )
-    g.add_argument(
-        "--out", default="clvis-gauss", metavar="DIR", help="output folder (default ./clvis-gauss)"
-    )
-    g.add_argument(
-        "--progress", action="store_true", help="show the progress on stderr even when it is not a terminal"
-    )
-    g.add_argument("--quiet", action="store_true", help="no progress display")
-    g.add_argument(
-        "--transparent",
-        action="store_true",
-        help="leave empty pixels transparent (default: a dark grey; gauss.png's label bands stay opaque)",
-    )
+    add_output_options(g, "clvis-gauss", "empty pixels")
     add_camera_options(g, _FIT)
     add_volume_options(g)
     return g
@@ -361,7 +350,7 @@ def _run(args) -> int:
     from .. import images, runtime
 
     t0 = time.perf_counter()
-    progress = Progress(not args.quiet and (args.progress or isatty(sys.stderr)), "clvis gauss")
+    progress = progress_from_args(args, "clvis gauss")
     lods, sv, gaussians, source = _sources(args)
     width, height = args.size
     q = runtime.default_queue()

@@ -23,14 +23,15 @@ from ._common import (
     Parser,
     Progress,
     add_camera_options,
+    add_output_options,
     add_volume_options,
     camera_from_args,
     check_camera_args,
     count,
     finite_range,
     fit_box,
-    isatty,
     otsu_level,
+    progress_from_args,
     read_volume_file,
     real,
     size,
@@ -94,12 +95,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     p.add_argument(
         "--size", type=size, default=(1280, 720), metavar="WxH", help=f"{SIZE_RULE} (default 1280x720)"
     )
-    p.add_argument("--out", default="clvis-iso", metavar="DIR", help="output folder (default ./clvis-iso)")
-    p.add_argument(
-        "--transparent",
-        action="store_true",
-        help="leave pixels without surface transparent (default: a dark grey; the label band stays opaque)",
-    )
+    add_output_options(p, "clvis-iso", "pixels without surface")
     add_camera_options(p, _FIT)
     add_volume_options(p)
     return p
@@ -237,7 +233,7 @@ def _run(args) -> int:
         speculation=not args.no_speculation,
         queue=q,
         camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h),
-        progress=Progress(isatty(sys.stderr), "clvis iso"),
+        progress=progress_from_args(args, "clvis iso"),
     )
     total = time.perf_counter() - t0
     out = Path(args.out)

@@ -23,13 +23,14 @@ from ._common import (
     Parser,
     Progress,
     add_camera_options,
+    add_output_options,
     camera_from_args,
     check_camera_args,
     colormap_name,
     count,
     describe_camera,
     fit_camera,
-    isatty,
+    progress_from_args,
     size,
     timed,
 )
@@ -267,7 +268,7 @@ def _load(args, progress):
 
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
-    progress = Progress(not args.quiet and (args.progress or isatty(sys.stderr)))
+    progress = progress_from_args(args, "clvis render")
     return _render(args, progress)
 
 
@@ -462,19 +463,5 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         metavar="LEVELS",
         help="apply the depth filter with this many pyramid levels, 0: off (default: off, 4 for the terrain)",
     )
-    r.add_argument(
-        "--out", default="clvis-render", metavar="DIR", help="folder for the PNGs (default ./clvis-render)"
-    )
-    r.add_argument(
-        "--transparent",
-        action="store_true",
-        help="leave empty pixels transparent (default: over a dark grey; the overview's "
-        "label bands stay opaque)",
-    )
-    r.add_argument(
-        "--progress",
-        action="store_true",
-        help="show the progress of each stage on stderr even when it is not a terminal",
-    )
-    r.add_argument("--quiet", action="store_true", help="no progress display")
+    add_output_options(r, "clvis-render", "empty pixels")
     return r

@@ -72,11 +72,11 @@ demo)
     ;;
 test | bench)
     if with_intel; then
-        venv .venv-test pocl,test,intel
+        venv .venv-test pocl,test,intel,train
         intel_env .venv-test
         export CLVIS_REQUIRE_PLATFORMS=${CLVIS_REQUIRE_PLATFORMS:-portable,intel}
     else
-        venv .venv-test pocl,test
+        venv .venv-test pocl,test,train
         export CLVIS_REQUIRE_PLATFORMS=${CLVIS_REQUIRE_PLATFORMS:-portable}
     fi
     if [ "$cmd" = bench ]; then
@@ -96,9 +96,9 @@ test | bench)
     ;;
 oclgrind)
     if with_intel; then
-        venv .venv-test pocl,test,intel
+        venv .venv-test pocl,test,intel,train
     else
-        venv .venv-test pocl,test
+        venv .venv-test pocl,test,train
     fi
     # Oclgrind's preloaded runtime replaces every ICD: no intel_env here
     exec .venv-test/bin/python tests/oclgrind/audit.py "$@"

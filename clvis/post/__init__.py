@@ -1,0 +1,8 @@
+"""post family: small U-Nets that turn fast renders into the images a slow
+renderer gives, run with onnxruntime (trained here with PyTorch: ``clvis
+train``), and the classical baseline every network must beat, a push-pull
+hole fill (:mod:`clvis.post.pushpull`).
+
+Inference needs onnxruntime only; torch is imported by ``clvis train`` and
+the tests that compare the exported graphs with their PyTorch modules.
+"""

@@ -1,0 +1,315 @@
+"""Training and validation pairs for the post networks, made with clvis's own
+renderers from closed-form scenes with deterministic seeds (no downloads).
+
+In-fill (``iso_frames``): procedural volumes of random parameters and
+isovalues, each seen from orbit cameras, rendered by IsoRenderer without
+speculation (one candidate block per ray and pass, so the completion grows in
+small steps) and snapshotted after the first pass that reaches each asked
+completion; the target is the same render run to the end. A finished ray's
+pixel is the complete render's (IsoRenderer's rule, asserted here), so a
+frame keeps the complete image and, per completion, the mask of the rays
+still running.
+
+Volume kinds: "waves" (sums of rotated sine products of random
+frequencies, the embedded turbulence's form with random parameters),
+"ripples" (Marschner–Lobb with random frequency, depth and axis), "blobs"
+(sums of random Gaussians) for training; "gyroid" (a triply periodic minimal
+surface of random scale and offset) and the embedded ``turbulence`` are never
+trained on: the held-out set.
+
+LiDAR (``lidar_frames``): a closed-form scene sampled densely (a random town:
+hills, box buildings and tree crowns; or the embedded terrain, which is held
+out), one random subset of it as the sparse scan. Input: the scan rendered
+with one pixel per point and depth-filtered (FilteredImage.rgbda); target:
+the dense cloud rendered with 3x3-pixel points from the same camera, so the
+pair is registered exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import datasets
+from ..camera import Camera
+
+TRAIN_VOLUMES = ("waves", "ripples", "blobs")
+HELD_OUT_VOLUMES = ("gyroid", "turbulence")
+COMPLETIONS = (0.85, 0.9, 0.95)
+
+
+def _axes(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    c = np.linspace(-1.0, 1.0, n)
+    z, y, x = np.meshgrid(c, c, c, indexing="ij")
+    return x, y, z
+
+
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.diag(r))
+
+
+def procedural_volume(kind: str, rng: np.random.Generator, n: int = 64) -> tuple[np.ndarray, float]:
+    """(volume [z, y, x] float32 over [-1, 1]^3, isovalue) of the given kind
+    with parameters drawn from `rng`; the isovalue is a random quantile of
+    the samples (so the surface exists)."""
+    x, y, z = _axes(n)
+    p = np.stack([x, y, z], axis=-1)
+    if kind == "waves":
+        v = np.zeros(x.shape)
+        for o in range(int(rng.integers(2, 5))):
+            f = rng.uniform(2.0, 5.0) * 1.9**o
+            q = p @ _random_rotation(rng).T
+            ph = rng.uniform(0, 2 * np.pi, 4)
+            v += 0.6**o * (
+                np.sin(f * q[..., 0] + ph[0]) * np.sin(f * q[..., 1] + ph[1]) * np.sin(f * q[..., 2] + ph[2])
+                + 0.5 * np.sin(f * q.sum(-1) / math.sqrt(3) + ph[3])
+            )
+        lo, hi = 0.3, 0.7
+    elif kind == "ripples":
+        q = p @ _random_rotation(rng).T
+        fm, alpha = rng.uniform(2.0, 7.0), rng.uniform(0.1, 0.5)
+        r = np.sqrt(q[..., 0] ** 2 + q[..., 1] ** 2)
+        rho_r = np.cos(2 * np.pi * fm * np.cos(np.pi * r / 2))
+        v = (1 - np.sin(np.pi * q[..., 2] / 2) + alpha * (1 + rho_r)) / (2 * (1 + alpha))
+        lo, hi = 0.4, 0.6
+    elif kind == "blobs":
+        v = np.zeros(x.shape)
+        for _ in range(int(rng.integers(4, 24))):
+            c = rng.uniform(-0.9, 0.9, 3)
+            s = rng.uniform(0.08, 0.4)
+            v += rng.uniform(0.5, 1.0) * np.exp(-((p - c) ** 2).sum(-1) / (2 * s * s))
+        lo, hi = 0.6, 0.9
+    elif kind == "gyroid":
+        k = rng.uniform(4.0, 10.0)
+        q = p @ _random_rotation(rng).T * k + rng.uniform(0, 2 * np.pi, 3)
+        v = (
+            np.sin(q[..., 0]) * np.cos(q[..., 1])
+            + np.sin(q[..., 1]) * np.cos(q[..., 2])
+            + np.sin(q[..., 2]) * np.cos(q[..., 0])
+        )
+        lo, hi = 0.3, 0.7
+    elif kind == "turbulence":
+        v = datasets.turbulence(n)["volume"]
+        lo, hi = 0.35, 0.65
+    else:
+        raise ValueError(f"volume kind: expected one of {TRAIN_VOLUMES + HELD_OUT_VOLUMES}, got {kind!r}")
+    v = v.astype(np.float32)
+    iso = float(np.quantile(v, rng.uniform(lo, hi)))
+    return v, iso
+
+
+def orbit_camera(
+    rng: np.random.Generator, lo: Sequence[float], hi: Sequence[float], aspect: float, zoom: tuple[float, float]
+) -> Camera:
+    """A camera on a random orbit position around the box [lo, hi], looking at
+    a point near its centre, at zoom x the distance that frames its bounding
+    sphere (zoom < 1: closer, the surface fills the frame)."""
+    lo_, hi_ = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    centre, radius = (lo_ + hi_) / 2, float(np.linalg.norm(hi_ - lo_)) / 2
+    fov = rng.uniform(30.0, 50.0)
+    d = rng.normal(size=3)
+    d[2] *= 0.6
+    d /= np.linalg.norm(d)
+    half = min(math.radians(fov) / 2, math.atan(aspect * math.tan(math.radians(fov) / 2)))
+    dist = rng.uniform(*zoom) * radius / math.sin(half)
+    target = centre + rng.uniform(-0.15, 0.15, 3) * radius
+    eye = target + dist * d
+    near = max(dist - 1.1 * radius, 0.02 * radius)
+    return Camera.look_at(eye, target, (0, 0, 1), fov, aspect, near, dist + 1.1 * radius)
+
+
+@dataclass
+class IsoFrame:
+    """One in-fill frame: the complete render (``rgb`` premultiplied over
+    black, float32 (H, W, 3); ``hit`` bool), per completion the rays still
+    running (``active[c]``) and the render's device seconds to reach it
+    (``seconds[c]``, 1.0 for the complete one); what it shows (``source``)."""
+
+    rgb: np.ndarray
+    hit: np.ndarray
+    active: dict[float, np.ndarray]
+    seconds: dict[float, float]
+    source: str
+
+    def planes(self, completion: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rgba, hit, active) of the partial image: what pack_iso takes."""
+        a = self.active[completion]
+        rgba = np.concatenate([self.rgb, self.hit[..., None].astype(np.float32)], axis=2)
+        rgba[a] = 0.0
+        return rgba, self.hit & ~a, a
+
+
+def iso_frames(
+    kinds: Sequence[str],
+    count: int,
+    seed: int,
+    width: int,
+    height: int,
+    *,
+    views: int = 2,
+    n: int = 64,
+    completions: Sequence[float] = COMPLETIONS,
+    progress: Callable[[str], None] | None = None,
+) -> list[IsoFrame]:
+    """`count` volumes (kinds in turn) x `views` orbit views each."""
+    from ..iso import IsoRenderer
+
+    rng = np.random.default_rng(seed)
+    frames = []
+    for i in range(count):
+        kind = kinds[i % len(kinds)]
+        vol, iso = procedural_volume(kind, rng, n)
+        step = 2.0 / (n - 1)
+        r = IsoRenderer(vol, rate=8, spacing=(step, step, step), origin=(-1.0, -1.0, -1.0))
+        for v in range(views):
+            cam = orbit_camera(rng, (-1, -1, -1), (1, 1, 1), width / height, (0.45, 0.95))
+            snaps: dict[float, object] = {}
+            seconds: dict[float, float] = {}
+            img = None
+            for img in r.passes(cam, width, height, iso, speculation=False):
+                for c in completions:
+                    if c not in snaps and img.completion >= c:
+                        snaps[c] = img
+                        seconds[c] = float(img.stats["seconds"])
+            assert img is not None
+            seconds[1.0] = float(img.stats["seconds"])
+            rgb = np.where(img.hit[..., None], img.rgba[..., :3], np.float32(0)).astype(np.float32)
+            active = {}
+            for c in completions:
+                s = snaps.get(c, img)
+                done = ~s.active  # type: ignore[attr-defined]
+                # a finished ray's pixel is the complete render's
+                assert np.array_equal(s.hit[done], img.hit[done])  # type: ignore[attr-defined]
+                active[c] = s.active.copy()  # type: ignore[attr-defined]
+            frames.append(IsoFrame(rgb, img.hit.copy(), active, seconds, f"{kind} #{i} view {v} iso {iso:.4g}"))
+            if progress is not None:
+                progress(f"iso frame {len(frames)}/{count * views}")
+    return frames
+
+
+# ---------------------------------------------------------------------------
+# LiDAR scenes
+
+_RAMP = np.array([[40, 90, 40], [120, 160, 70], [190, 170, 120], [235, 235, 230]], np.float64)
+
+
+def _ramp(level: np.ndarray) -> np.ndarray:
+    at = np.linspace(0.0, 1.0, len(_RAMP))
+    return np.stack([np.interp(level, at, _RAMP[:, c]) for c in range(3)], axis=1)
+
+
+def town(n: int, seed: int) -> dict:
+    """A random town of `n` points over 200 x 200 m: rolling hills, 5-14 box
+    buildings of random size and roof colour (roofs and walls), 10-40 tree
+    crowns; ground coloured by height like the terrain. positions (n, 3)
+    float32, colors (n, 4) uint8."""
+    rng = np.random.default_rng(seed)
+    hills = [(rng.uniform(-100, 100, 2), rng.uniform(20, 70), rng.uniform(-8, 15)) for _ in range(4)]
+
+    def ground(x, y):
+        z = np.zeros_like(x)
+        for (cx, cy), s, h in hills:
+            z += h * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * s * s))
+        return z
+
+    nb = int(rng.integers(5, 15))
+    b = np.stack(
+        [rng.uniform(-80, 80, nb), rng.uniform(-80, 80, nb), rng.uniform(5, 20, nb), rng.uniform(5, 20, nb)],
+        axis=1,
+    )
+    bh = rng.uniform(6, 35, nb)
+    roof = rng.uniform(60, 230, (nb, 3))
+    nt = int(rng.integers(10, 40))
+    trees = np.stack([rng.uniform(-95, 95, nt), rng.uniform(-95, 95, nt), rng.uniform(3, 8, nt)], axis=1)
+    n_wall = n // 10
+    n_top = n - n_wall
+    x, y = rng.uniform(-100, 100, n_top), rng.uniform(-100, 100, n_top)
+    z = ground(x, y)
+    col = _ramp(np.clip((z + 8) / 50, 0, 1))
+    for (tx, ty, tr), th in zip(trees, rng.uniform(6, 14, nt)):
+        d2 = (x - tx) ** 2 + (y - ty) ** 2
+        m = d2 < tr * tr
+        z[m] = ground(np.array(tx), np.array(ty)) + th + 2 * np.sqrt(1 - d2[m] / (tr * tr))
+        col[m] = (50, 110 + 30 * rng.random(), 45)
+    for k in range(nb):
+        m = (np.abs(x - b[k, 0]) <= b[k, 2]) & (np.abs(y - b[k, 1]) <= b[k, 3])
+        z[m] = ground(b[k, 0], b[k, 1]) + bh[k]
+        col[m] = roof[k]
+    k = rng.integers(0, nb, n_wall)
+    side = rng.integers(0, 4, n_wall)
+    along = rng.uniform(-1, 1, n_wall)
+    sign = np.where(side % 2 == 0, -1.0, 1.0)
+    wx = np.where(side < 2, b[k, 0] + along * b[k, 2], b[k, 0] + sign * b[k, 2])
+    wy = np.where(side < 2, b[k, 1] + sign * b[k, 3], b[k, 1] + along * b[k, 3])
+    wz = ground(b[k, 0], b[k, 1]) + rng.random(n_wall) * bh[k]
+    wcol = roof[k] * 0.6
+    pos = np.stack([np.concatenate([x, wx]), np.concatenate([y, wy]), np.concatenate([z, wz])], 1)
+    colors = np.concatenate([col, wcol])
+    rgba = np.concatenate([np.clip(np.rint(colors), 0, 255), np.full((n, 1), 255.0)], 1).astype(np.uint8)
+    return {"positions": pos.astype(np.float32), "colors": rgba}
+
+
+@dataclass
+class LidarFrame:
+    """One LiDAR frame: ``rgbda`` (H, W, 5) float32, the depth-filtered sparse
+    scan (FilteredImage.rgbda); ``rgb`` (H, W, 3) float32 in [0, 1], the dense
+    render; ``source``."""
+
+    rgbda: np.ndarray
+    rgb: np.ndarray
+    source: str
+
+
+def lidar_frames(
+    scenes: Sequence[str],
+    count: int,
+    seed: int,
+    width: int,
+    height: int,
+    *,
+    views: int = 3,
+    dense_points: int = 3_000_000,
+    sparse: tuple[float, float] = (0.03, 0.12),
+    progress: Callable[[str], None] | None = None,
+) -> list[LidarFrame]:
+    """`count` scenes ("town": a random town per scene; "terrain": the
+    embedded terrain) x `views` oblique views each."""
+    from ..raster import Rasterizer, depth_filter
+
+    rng = np.random.default_rng(seed)
+    frames = []
+    for i in range(count):
+        kind = scenes[i % len(scenes)]
+        s = int(rng.integers(0, 2**31))
+        if kind == "town":
+            cloud = town(dense_points, s)
+        elif kind == "terrain":
+            cloud = datasets.terrain(dense_points, s)
+        else:
+            raise ValueError(f"scene: expected 'town' or 'terrain', got {kind!r}")
+        pos, col = cloud["positions"], cloud["colors"]
+        keep = rng.random(len(pos)) < rng.uniform(*sparse)
+        dense = Rasterizer(pos, colors=col)
+        scan = Rasterizer(pos[keep], colors=col[keep])
+        lo, hi = pos.min(0), pos.max(0)
+        centre = (lo + hi) / 2
+        extent = float(np.linalg.norm(hi[:2] - lo[:2])) / 2
+        for v in range(views):
+            az = rng.uniform(0, 2 * np.pi)
+            el = np.radians(rng.uniform(20, 60))
+            dist = extent * rng.uniform(0.5, 1.2)
+            target = centre + np.r_[rng.uniform(-0.3, 0.3, 2) * extent, 0.0]
+            target[2] = lo[2]
+            eye = target + dist * np.array([np.cos(az) * np.cos(el), np.sin(az) * np.cos(el), np.sin(el)])
+            cam = Camera.look_at(eye, target, (0, 0, 1), rng.uniform(40, 60), width / height, 1.0, 4 * extent)
+            g = dense.render(cam, width, height, point_size=3, planes=[])
+            rgb = np.where((g.index != 0xFFFFFFFF)[..., None], g.rgba[..., :3] / np.float32(255), 0)
+            f = depth_filter(scan.render(cam, width, height, planes=[]))
+            frames.append(LidarFrame(np.asarray(f.rgbda), rgb.astype(np.float32), f"{kind} seed {s} view {v}"))
+            if progress is not None:
+                progress(f"lidar frame {len(frames)}/{count * views}")
+    return frames

@@ -1,0 +1,3 @@
+"""The shipped networks' names (no import of torch or onnxruntime)."""
+
+NAMES = ("infill", "lidar")

@@ -1,0 +1,463 @@
+"""``clvis train``: make the training pairs with clvis's renderers
+(clvis.post.data, deterministic seeds), train a network of clvis.post.nets
+with PyTorch on random crops, export it to ONNX (opset 17, dynamic height and
+width), make its fp16 and int8 variants, and write its model card.
+
+The card (``NAME.json`` beside ``NAME.onnx``) says how the model was made:
+the command, seed, data, architecture, steps, wall time, the loss curve, the
+held-out metrics (PSNR and SSIM through scikit-image, against push-pull and
+the raw input on the same frames), each variant's file, size and sha256, and
+the versions used. ``clvis.post.load`` checks the sha256 before it runs a
+file.
+
+Needs the ``train`` extra (torch==2.13.0, onnx, pytorch-msssim).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import platform
+import sys
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import data as _data
+from .names import NAMES
+
+# what each network trains on by default (the release runs); the CLI's
+# --frames and --frame-size shrink the data for smoke runs
+SPECS: dict[str, dict[str, Any]] = {
+    "infill": {
+        "arch": {},
+        "frames": 24,  # volumes (x views)
+        "views": 2,
+        "held_out": 4,
+        "frame_size": (1280, 720),
+        "batch": 4,
+        "loss": {"l1": 0.5, "ms_ssim": 0.5},
+        "lr": 1e-3,
+    },
+    "lidar": {
+        "arch": {"width": 8, "depth": 4},
+        "frames": 12,  # scenes (x views)
+        "views": 3,
+        "held_out": 4,
+        "frame_size": (960, 720),
+        "batch": 4,
+        "loss": {"l1": 0.9, "ms_ssim": 0.1},
+        "lr": 1e-3,
+    },
+}
+OPSET = 17
+INT8_MAX_LOSS_DB = 0.3
+
+
+def sha256(path: str | os.PathLike) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+# ---------------------------------------------------------------------------
+# data
+
+
+def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
+    w, h = size
+    if name == "infill":
+        kinds = _data.HELD_OUT_VOLUMES if held_out else _data.TRAIN_VOLUMES
+        return _data.iso_frames(kinds, count, seed, w, h, views=views, progress=log)
+    scenes = ("terrain", "town") if held_out else ("town",)
+    return _data.lidar_frames(scenes, count, seed, w, h, views=views, progress=log)
+
+
+def _pack(
+    name: str, frame: Any, completion: float | None = None, stride: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """(input (5, Hp, Wp), target (C, H, W)) float32 of one frame, through
+    the pack kernels the inference uses (padded to a multiple of `stride`)."""
+    from .pack import pack_iso, pack_rgbda
+
+    if name == "infill":
+        x = pack_iso(*frame.planes(completion), stride=stride)[0]
+        y = np.concatenate([frame.rgb, frame.hit[..., None].astype(np.float32)], axis=2)
+    else:
+        x = pack_rgbda(frame.rgbda, stride=stride)[0]
+        y = frame.rgb
+    return np.asarray(x, np.float32), np.ascontiguousarray(y.transpose(2, 0, 1), np.float32)
+
+
+# ---------------------------------------------------------------------------
+# losses and metrics
+
+
+def _ms_ssim_window(size: int) -> int:
+    """The largest odd Gaussian window <= 11 that MS-SSIM's 5 scales allow
+    on a crop of `size` pixels (pytorch-msssim needs size > (win - 1) * 16)."""
+    win = 11
+    while win > 3 and (win - 1) * 16 >= size:
+        win -= 2
+    return win
+
+
+def _loss_fn(weights: dict[str, float], crop: int):
+    import torch
+    from pytorch_msssim import ms_ssim
+
+    win = _ms_ssim_window(crop)
+
+    def loss(pred, target):
+        total = weights["l1"] * torch.nn.functional.l1_loss(pred, target)
+        rgb_p, rgb_t = pred[:, :3], target[:, :3]
+        total = total + weights["ms_ssim"] * (1.0 - ms_ssim(rgb_p, rgb_t, data_range=1.0, win_size=win))
+        return total
+
+    return loss
+
+
+def metrics(output: np.ndarray, target: np.ndarray) -> dict[str, float]:
+    """PSNR (dB) and SSIM of two (H, W, 3) float images in [0, 1], through
+    scikit-image."""
+    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+    o = np.clip(output, 0, 1).astype(np.float64)
+    t = np.clip(target, 0, 1).astype(np.float64)
+    psnr = float(peak_signal_noise_ratio(t, o, data_range=1.0)) if not np.array_equal(o, t) else math.inf
+    ssim = float(structural_similarity(t, o, data_range=1.0, channel_axis=2))
+    return {"psnr": psnr, "ssim": ssim}
+
+
+def _rgb(nchw: np.ndarray) -> np.ndarray:
+    """(H, W, 3) of a (C, H, W) output or target: RGB (premultiplied over black)."""
+    return np.ascontiguousarray(nchw[:3].transpose(1, 2, 0))
+
+
+def _baselines(name: str, x: np.ndarray, y: np.ndarray) -> dict[str, dict[str, float]]:
+    """Metrics of the raw input and of push-pull on it, against the target
+    (x cropped to y's size)."""
+    from .pushpull import pushpull
+
+    x = np.ascontiguousarray(x[:, : y.shape[1], : y.shape[2]])
+    if name == "infill":
+        rgb = _rgb(x)
+        valid = x[4] == 0  # finished rays
+        filled = pushpull(np.ascontiguousarray(np.concatenate([rgb, x[3:4].transpose(1, 2, 0)], 2)), valid)
+        pp = filled[..., :3]
+    else:
+        rgb = _rgb(x)
+        valid = x[3] > 0  # kept points
+        pp = pushpull(rgb, valid)
+    t = _rgb(y)
+    return {"input": metrics(rgb, t), "pushpull": metrics(pp, t)}
+
+
+# ---------------------------------------------------------------------------
+# training
+
+
+def _augment(x, y, rng: np.random.Generator, name: str):
+    """Flips and 90-degree rotations; for the LiDAR net, brightness and
+    contrast on the colours of input and target alike."""
+    import torch
+
+    k = int(rng.integers(0, 4))
+    if k:
+        x, y = torch.rot90(x, k, (2, 3)), torch.rot90(y, k, (2, 3))
+    if rng.random() < 0.5:
+        x, y = torch.flip(x, (3,)), torch.flip(y, (3,))
+    if name == "lidar":
+        c = float(rng.uniform(0.75, 1.25))
+        b = float(rng.uniform(-0.1, 0.1))
+        kept = x[:, 3:4] > 0
+        x = x.clone()
+        x[:, :3] = torch.where(kept, ((x[:, :3] - 0.5) * c + 0.5 + b).clamp(0, 1), x[:, :3])
+        covered = y.sum(1, keepdim=True) > 0
+        y = torch.where(covered, ((y - 0.5) * c + 0.5 + b).clamp(0, 1), y)
+    return x.contiguous(), y.contiguous()
+
+
+def _batch(pairs, n: int, crop: int, rng: np.random.Generator):
+    import torch
+
+    xs, ys = [], []
+    for _ in range(n):
+        x, y = pairs[int(rng.integers(0, len(pairs)))]
+        _, h, w = x.shape
+        cy, cx = int(rng.integers(0, h - crop + 1)), int(rng.integers(0, w - crop + 1))
+        xs.append(x[:, cy : cy + crop, cx : cx + crop])
+        ys.append(y[:, cy : cy + crop, cx : cx + crop])
+    return torch.from_numpy(np.stack(xs).astype(np.float32)), torch.from_numpy(np.stack(ys).astype(np.float32))
+
+
+def train(
+    name: str,
+    *,
+    steps: int,
+    size: int,
+    out: str | os.PathLike,
+    seed: int = 0,
+    frames: int | None = None,
+    frame_size: tuple[int, int] | None = None,
+    command: Sequence[str] | None = None,
+    log: Callable[[str], None] = print,
+) -> dict:
+    """Train network `name` for `steps` steps on `size` x `size` crops, export
+    it into `out` (NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx where int8
+    loses at most INT8_MAX_LOSS_DB on the held-out frames) and write NAME.json;
+    returns the card."""
+    import torch
+
+    from . import nets
+
+    if name not in SPECS:
+        raise ValueError(f"model: expected one of {NAMES}, got {name!r}")
+    spec = SPECS[name]
+    t_start = time.perf_counter()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    fsize = tuple(frame_size or spec["frame_size"])
+    count = int(frames or spec["frames"])
+    if size > min(fsize):
+        raise ValueError(f"--size {size}: larger than the frames ({fsize[0]}x{fsize[1]})")
+    torch.manual_seed(seed)
+    torch.set_num_threads(int(os.environ.get("CLVIS_TRAIN_THREADS", os.cpu_count() or 1)))
+    rng = np.random.default_rng(seed)
+
+    t0 = time.perf_counter()
+    train_frames = _frames(name, count, spec["views"], seed, fsize, False, log)
+    held = max(1, min(spec["held_out"], count))
+    val_frames = _frames(name, held, 1, seed + 1_000_003, fsize, True, log)
+    completions = _data.COMPLETIONS if name == "infill" else (None,)
+    pairs = [_pack(name, f, c) for f in train_frames for c in completions]
+    pairs = [(x.astype(np.float16), y.astype(np.float16)) for x, y in pairs]
+    data_seconds = time.perf_counter() - t0
+    log(f"{len(pairs)} training pairs, {len(val_frames)} held-out frames in {data_seconds:.0f} s")
+
+    net = nets.build(name, **spec["arch"])
+    opt = torch.optim.Adam(net.parameters(), lr=spec["lr"])
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=spec["lr"] / 100)
+    loss_fn = _loss_fn(spec["loss"], size)
+    curve: list[list[float]] = []
+    every = max(1, steps // 50)
+    running = 0.0
+    t0 = time.perf_counter()
+    net.train()
+    for step in range(1, steps + 1):
+        x, y = _augment(*_batch(pairs, spec["batch"], size, rng), rng, name)
+        loss = loss_fn(net(x), y)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        running += loss.item()
+        if step % every == 0 or step == steps:
+            n = every if step % every == 0 else step % every
+            curve.append([step, round(running / n, 5)])
+            running = 0.0
+            log(f"step {step}/{steps} loss {curve[-1][1]:.4f} ({time.perf_counter() - t0:.0f} s)")
+    train_seconds = time.perf_counter() - t0
+    net.eval()
+
+    # held-out: the network against push-pull and the raw input, per completion
+    stride = net.stride
+    held_out: dict[str, Any] = {}
+    val_pairs = {c: [_pack(name, f, c, stride) for f in val_frames] for c in completions}
+    for c, vp in val_pairs.items():
+        rows = []
+        for x, y in vp:
+            with torch.no_grad():
+                o = net(torch.from_numpy(x)[None])[0].numpy()
+            o = o[:, : y.shape[1], : y.shape[2]]
+            row = _baselines(name, x, y)
+            row["network"] = metrics(_rgb(o), _rgb(y))
+            rows.append(row)
+        key = f"completion {c}" if c is not None else "all"
+        held_out[key] = {
+            k: {m: float(np.mean([r[k][m] for r in rows])) for m in ("psnr", "ssim")}
+            for k in ("input", "pushpull", "network")
+        }
+        log(f"held-out {key}: {held_out[key]}")
+
+    files = export(net, name, out, [x for vp in val_pairs.values() for x, _ in vp], val_pairs, log)
+    card = {
+        "name": name,
+        "network": type(net).__name__,
+        "architecture": spec["arch"],
+        "parameters": nets.count_parameters(net),
+        "stride": stride,
+        "channels_in": net.channels_in,
+        "channels_out": net.channels_out,
+        "command": " ".join(command) if command else f"clvis train {name} --steps {steps} --size {size}",
+        "seed": seed,
+        "data": {
+            "train": _data.TRAIN_VOLUMES if name == "infill" else ["town"],
+            "held_out": _data.HELD_OUT_VOLUMES if name == "infill" else ["terrain", "town (unseen seeds)"],
+            "frames": len(train_frames),
+            "held_out_frames": len(val_frames),
+            "frame_size": list(fsize),
+            "completions": list(_data.COMPLETIONS) if name == "infill" else None,
+            "generation_seconds": round(data_seconds, 1),
+        },
+        "training": {
+            "steps": steps,
+            "batch": spec["batch"],
+            "crop": size,
+            "optimizer": f"Adam lr {spec['lr']}, cosine to {spec['lr'] / 100}",
+            "loss": spec["loss"],
+            "loss_curve": curve,
+            "seconds": round(train_seconds, 1),
+            "threads": torch.get_num_threads(),
+        },
+        "held_out": held_out,
+        "files": files,
+        "wall_seconds": round(time.perf_counter() - t_start, 1),
+        "versions": _versions(),
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+    }
+    (out / f"{name}.json").write_text(json.dumps(card, indent=1) + "\n")
+    log(f"wrote {out / (name + '.json')}")
+    return card
+
+
+def _versions() -> dict[str, str]:
+    import onnx
+    import onnxruntime
+    import torch
+
+    from .._version import __version__
+
+    return {
+        "clvis": __version__,
+        "torch": torch.__version__,
+        "onnx": onnx.__version__,
+        "onnxruntime": onnxruntime.__version__,
+        "python": sys.version.split()[0],
+    }
+
+
+# ---------------------------------------------------------------------------
+# export
+
+
+def export(net, name: str, out: Path, calibration: list[np.ndarray], val_pairs: dict, log) -> dict:
+    """NAME.onnx (fp32), NAME.fp16.onnx and, where it loses at most
+    INT8_MAX_LOSS_DB of held-out PSNR, NAME.int8.onnx; their files, sizes,
+    sha256 and (fp16, int8) held-out PSNR change against fp32."""
+    import torch
+
+    stride = net.stride
+    fp32 = out / f"{name}.onnx"
+    x0 = torch.zeros(1, net.channels_in, 2 * stride, 2 * stride)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(
+            net,
+            (x0,),
+            str(fp32),
+            dynamo=False,
+            opset_version=OPSET,
+            input_names=["planes"],
+            output_names=["image"],
+            dynamic_axes={"planes": {2: "height", 3: "width"}, "image": {2: "height", 3: "width"}},
+        )
+    # fp32: onnxruntime = torch eager on a held-out input
+    x = calibration[0][None]
+    with torch.no_grad():
+        ref = net(torch.from_numpy(x)).numpy()
+    files: dict[str, Any] = {"fp32": {"file": fp32.name, "max_abs_vs_torch": float(np.abs(_run(fp32, x) - ref).max())}}
+
+    fp16 = out / f"{name}.fp16.onnx"
+    _to_fp16(fp32, fp16)
+    files["fp16"] = {"file": fp16.name}
+
+    int8 = out / f"{name}.int8.onnx"
+    _to_int8(fp32, int8, [c[None] for c in calibration[:8]])
+    files["int8"] = {"file": int8.name}
+
+    base = _psnr_of(fp32, val_pairs)
+    for k in ("fp16", "int8"):
+        p = _psnr_of(out / files[k]["file"], val_pairs)
+        files[k]["psnr_change_db"] = round(p - base, 3)
+    if files["int8"]["psnr_change_db"] < -INT8_MAX_LOSS_DB:
+        log(f"int8 loses {-files['int8']['psnr_change_db']:.2f} dB > {INT8_MAX_LOSS_DB}: not shipped")
+        int8.unlink()
+        files["int8"]["file"] = None
+    for v in files.values():
+        if v["file"] is not None:
+            p = out / v["file"]
+            v["bytes"] = p.stat().st_size
+            v["sha256"] = sha256(p)
+    log(f"exported {', '.join(f'{k}: {v}' for k, v in files.items())}")
+    return files
+
+
+def _session(path: Path):
+    import onnxruntime as ort
+
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = os.cpu_count() or 1
+    return ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+
+
+def _run(path: Path, x: np.ndarray) -> np.ndarray:
+    s = _session(path)
+    return s.run(None, {s.get_inputs()[0].name: x})[0]
+
+
+def _psnr_of(path: Path, val_pairs: dict) -> float:
+    s = _session(path)
+    vals = []
+    for vp in val_pairs.values():
+        for x, y in vp:
+            o = s.run(None, {s.get_inputs()[0].name: x[None]})[0][0]
+            vals.append(metrics(_rgb(o[:, : y.shape[1], : y.shape[2]]), _rgb(y))["psnr"])
+    return float(np.mean(vals))
+
+
+def _to_fp16(src: Path, dst: Path) -> None:
+    import onnx
+    from onnxruntime.transformers.float16 import convert_float_to_float16
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = convert_float_to_float16(onnx.load(str(src)), keep_io_types=True)
+    onnx.save(m, str(dst))
+
+
+def _to_int8(src: Path, dst: Path, calibration: list[np.ndarray]) -> None:
+    """onnxruntime static quantization: QDQ, per-channel weights, int8
+    activations calibrated on held-out inputs."""
+    from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+    from onnxruntime.quantization.shape_inference import quant_pre_process
+
+    class Reader(CalibrationDataReader):
+        def __init__(self) -> None:
+            self.items = iter([{"planes": c} for c in calibration])
+
+        def get_next(self):
+            return next(self.items, None)
+
+    pre = dst.with_suffix(".pre.onnx")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        quant_pre_process(str(src), str(pre), skip_symbolic_shape=True)
+        quantize_static(
+            str(pre),
+            str(dst),
+            Reader(),
+            quant_format=QuantFormat.QDQ,
+            per_channel=True,
+            activation_type=QuantType.QInt8,
+            weight_type=QuantType.QInt8,
+        )
+    pre.unlink()

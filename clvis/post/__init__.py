@@ -6,3 +6,7 @@ hole fill (:mod:`clvis.post.pushpull`).
 Inference needs onnxruntime only; torch is imported by ``clvis train`` and
 the tests that compare the exported graphs with their PyTorch modules.
 """
+
+from .pushpull import pushpull
+
+__all__ = ["pushpull"]

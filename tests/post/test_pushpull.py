@@ -5,6 +5,8 @@ Tolerance: exact. The kernels repeat the reference's float32 operations in the
 same order (FP_CONTRACT OFF, correctly rounded division), so every device that
 keeps float32 denormals gives the reference's bits."""
 
+import importlib
+
 import numpy as np
 import pyopencl.array as cla
 import pytest
@@ -14,9 +16,11 @@ from skimage.metrics import peak_signal_noise_ratio
 
 import clvis
 from clvis.errors import ClvisError, DataError
-from clvis.post import pushpull as pp_module
 from clvis.post.pushpull import default_levels, pushpull
 from clvis.reference.post import pushpull as ref
+
+# the module: clvis.post's pushpull attribute is the function of that name
+pp_module = importlib.import_module("clvis.post.pushpull")
 
 
 def holed(shape, channels, fraction, seed, nan_holes=True):

@@ -19,7 +19,7 @@ import clvis
 from clvis import runtime
 
 PACKAGE = Path(clvis.__file__).parent
-FAMILIES = ("raster", "iso", "gauss")
+FAMILIES = ("raster", "iso", "gauss", "post")
 
 
 def _modules(root: Path) -> list[Path]:

@@ -6,3 +6,8 @@ hole fill (:mod:`clvis.post.pushpull`).
 Inference needs onnxruntime only; torch is imported by ``clvis train`` and
 the tests that compare the exported graphs with their PyTorch modules.
 """
+
+from .pack import pack_iso, pack_rgbda, padded_shape, unpack_rgba8
+from .pushpull import pushpull
+
+__all__ = ["pack_iso", "pack_rgbda", "padded_shape", "pushpull", "unpack_rgba8"]

@@ -52,6 +52,7 @@ cl.enqueue_nd_range_kernel = _recording_enqueue
 
 # imported after the patch, so that nothing binds the original first
 import clvis
+import clvis.post
 from clvis import Camera, runtime
 from clvis.gauss import GaussianRenderer, Gaussians, SparseVolume, build_bvh, lod_table
 from clvis.gauss.points import frames_along
@@ -328,6 +329,40 @@ def gauss_render(q):
         colors=_rng(15).integers(0, 256, (60, 3)).astype(np.uint8),
     )
     GaussianRenderer(coloured, queue=q).render(_gauss_cam(w, h), w, h, tile_rows=5)
+
+
+# --- post --------------------------------------------------------------------
+
+
+@case
+def post_pushpull(q):
+    rng = _rng(21)
+    for (h, w), channels in (((19, 23), 3), ((1, 9), 1), ((7, 1), 5)):
+        img = rng.random((h, w, channels)).astype(np.float32)
+        valid = rng.random((h, w)) < 0.4
+        img[~valid] = np.nan
+        clvis.post.pushpull(img, valid, queue=q)
+    clvis.post.pushpull(img, valid.astype(np.uint8), levels=0, queue=q)
+    clvis.post.pushpull(np.ones((1, 1, 2), np.float32), np.ones((1, 1), bool), queue=q)
+
+
+@case
+def post_pack(q):
+    rng = _rng(22)
+    h, w = 13, 19
+    rgba = rng.random((h, w, 4)).astype(np.float32)
+    hit, active = rng.random((h, w)) < 0.6, rng.random((h, w)) < 0.2
+    for stride in (1, 8):
+        clvis.post.pack_iso(rgba, hit, active, stride=stride, queue=q)
+    x = np.zeros((h, w, 5), np.float32)
+    keep = rng.random((h, w)) < 0.5
+    x[..., :3] = rng.random((h, w, 3))
+    x[..., 3] = np.where(keep, rng.uniform(1, 50, (h, w)), np.inf)
+    x[..., 4] = keep
+    packed = clvis.post.pack_rgbda(x, stride=8, queue=q)
+    clvis.post.pack_rgbda(x[:1, :3], queue=q)
+    for channels in (3, 4):
+        clvis.post.unpack_rgba8(packed[:, :channels].copy(), h, w, queue=q)
 
 
 def main(argv: list[str]) -> int:

@@ -1,0 +1,238 @@
+"""Images to and from the networks' tensors (post family), for ONNX Runtime.
+
+The networks take one NCHW float32 tensor (batch 1) whose height and width
+are multiples of their stride; the padding pixels read as "empty".
+:func:`pack_iso` builds the in-fill network's input from an iso image,
+:func:`pack_rgbda` the LiDAR U-Net's from a depth-filtered point image, and
+:func:`unpack_rgba8` turns a network's output into an 8-bit RGBA picture. The
+exact definitions are the docstrings of :mod:`clvis.reference.post.pack`; the
+kernels are ``kernels_cl/post/pack.cl`` and give its results bit for bit.
+
+Arrays: numpy in, numpy out; device arrays in (any of them), a device array
+out on the same queue. ``out=`` takes a caller's C-contiguous
+``pyopencl.array.Array`` (no offset) of the result's shape and dtype, e.g. one
+over a host-visible ``ALLOC_HOST_PTR`` buffer that the caller maps after
+``queue.finish()`` and hands to onnxruntime's IO binding; the function then
+returns ``out`` itself. The input checks read back at most 16 bytes.
+
+Sizes: at most ``MAX_SIDE`` (32768) per padded side and ``MAX_PIXELS``
+(2^28) padded pixels, so a 5-channel tensor stays below 2^31 elements.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+
+from .. import runtime
+from .._arrays import buf, check_array, is_device, positive_int, resolve_queue, result, to_device
+from ..errors import DataError
+
+__all__ = ["MAX_PIXELS", "MAX_SIDE", "pack_iso", "pack_rgbda", "padded_shape", "unpack_rgba8"]
+
+MAX_SIDE = 32768
+MAX_PIXELS = 2**28
+
+_SRC = "post/pack.cl"
+
+# -D work shapes per tuning profile: pixels per work-item (ITEMS) and the
+# local size (WG, rgbda_range's reduction width). Both give the same results;
+# the tests run both on every device.
+PROFILES = {
+    "cpu": {"ITEMS": 16, "WG": 16},
+    "gpu": {"ITEMS": 1, "WG": 256},
+}
+
+
+def padded_shape(height: int, width: int, stride: int = 1) -> tuple[int, int]:
+    """(Hp, Wp): height and width rounded up to multiples of stride."""
+    stride = positive_int("stride", stride)
+    return -(-int(height) // stride) * stride, -(-int(width) // stride) * stride
+
+
+def _check_size(name: str, h: int, w: int, hp: int, wp: int) -> None:
+    if h == 0 or w == 0:
+        raise DataError(f"{name}: empty ({h} x {w} pixels); a network input needs at least one pixel")
+    if max(hp, wp) > MAX_SIDE or hp * wp > MAX_PIXELS:
+        raise DataError(
+            f"{name}: {h} x {w} pixels ({hp} x {wp} padded); at most {MAX_SIDE} per side and 2^28 pixels"
+        )
+
+
+def _check_out(out: Any, queue: cl.CommandQueue, shape: tuple[int, ...], dtype: type) -> cla.Array:
+    if not is_device(out):
+        raise TypeError(f"out: expected a pyopencl.array.Array, got {type(out).__name__}")
+    if out.dtype != np.dtype(dtype) or tuple(out.shape) != shape:
+        raise ValueError(
+            f"out: expected shape {shape} {np.dtype(dtype).name}, got {tuple(out.shape)} {out.dtype.name}"
+        )
+    if not out.flags.c_contiguous or out.offset:
+        raise ValueError("out: expected a C-contiguous array without an offset (a whole buffer)")
+    if out.context.int_ptr != queue.context.int_ptr:
+        raise ValueError("out: the device array belongs to another OpenCL context than the queue")
+    return out
+
+
+def _target(out: Any, queue: cl.CommandQueue, shape: tuple[int, ...], dtype: type, what: str) -> cla.Array:
+    if out is None:
+        return runtime.empty(queue, shape, dtype, what)
+    return _check_out(out, queue, shape, dtype)
+
+
+def _launcher(queue: cl.CommandQueue) -> tuple[Any, int, int]:
+    prof = PROFILES[runtime.tuning_profile(queue)]
+    items, wg = prof["ITEMS"], runtime.local_size(queue, prof["WG"])
+    defines = {"ITEMS": items, "WG": wg}
+
+    def launch(name: str, pixels: int, *args: Any) -> None:
+        k = runtime.get_kernel(queue, _SRC, name, defines, runtime.EXACT_FP)
+        runtime.launch(queue, k, *runtime.items(queue, -(-pixels // items), wg), *args)
+
+    return launch, items, wg
+
+
+def _mask(queue: cl.CommandQueue, name: str, m: Any) -> cla.Array:
+    d = to_device(queue, name, m)
+    return d.view(np.uint8) if d.dtype == np.bool_ else d
+
+
+def pack_iso(
+    rgba: Any,
+    hit: Any,
+    active: Any,
+    *,
+    stride: int = 1,
+    out: cla.Array | None = None,
+    queue: cl.CommandQueue | None = None,
+) -> np.ndarray | cla.Array:
+    """The in-fill network's input: (1, 5, Hp, Wp) float32 = R, G, B, HIT, ACTIVE.
+
+    rgba: H x W x 4 float32 (an IsoImage's shaded colour; alpha unused); hit,
+    active: H x W bool or uint8 (nonzero = true). Hp, Wp: H, W rounded up to
+    multiples of `stride`. At pixels that are hit and not active: the colour's
+    r, g, b and HIT 1; elsewhere 0, 0, 0, 0. ACTIVE: 1 where active, else 0.
+    Padding pixels: all 0. A non-finite r, g or b at a hit pixel (active or
+    not) raises DataError after the kernel ran.
+    """
+    queue = resolve_queue(queue, rgba=rgba, hit=hit, active=active, out=out)
+    host = not (is_device(rgba) or is_device(hit) or is_device(active))
+    rgba = check_array("rgba", rgba, dtypes=[np.float32], ndim=3)
+    hit = check_array("hit", hit, dtypes=[np.bool_, np.uint8], ndim=2)
+    active = check_array("active", active, dtypes=[np.bool_, np.uint8], ndim=2)
+    h, w, c = (int(s) for s in rgba.shape)
+    if c != 4:
+        raise ValueError(f"rgba: expected 4 channels, got shape {tuple(rgba.shape)}")
+    for name, m in (("hit", hit), ("active", active)):
+        if tuple(m.shape) != (h, w):
+            raise ValueError(f"{name}: shape {tuple(m.shape)} differs from rgba's {(h, w)}")
+    hp, wp = padded_shape(h, w, stride)
+    _check_size("rgba", h, w, hp, wp)
+    dst = _target(out, queue, (1, 5, hp, wp), np.float32, "pack_iso output")
+    bad = runtime.zeros(queue, 1, np.uint32, "pack_iso input check")
+    launch, _, _ = _launcher(queue)
+    u32 = np.uint32
+    launch(
+        "pack_iso",
+        hp * wp,
+        buf(to_device(queue, "rgba", rgba)),
+        buf(_mask(queue, "hit", hit)),
+        buf(_mask(queue, "active", active)),
+        u32(w),
+        u32(h),
+        u32(wp),
+        u32(hp),
+        buf(dst),
+        buf(bad),
+    )
+    nonfinite = int(bad.get()[0])
+    if nonfinite:
+        raise DataError(f"rgba: {nonfinite} hit pixels with a NaN or infinite r, g or b")
+    return dst if out is not None else result(dst, host)
+
+
+def pack_rgbda(
+    rgbda: Any, *, stride: int = 1, out: cla.Array | None = None, queue: cl.CommandQueue | None = None
+) -> np.ndarray | cla.Array:
+    """The LiDAR U-Net's input: (1, 5, Hp, Wp) float32 = R, G, B, A, D.
+
+    rgbda: H x W x 5 float32 [r, g, b, depth, alpha] (a FilteredImage's rgbda:
+    depth +inf where removed or empty, alpha 0 or 1). A pixel is kept where
+    alpha > 0 and its depth is finite: R, G, B, A as given and
+    D = (depth - dmin) / (dmax - dmin) in float32, dmin and dmax the kept
+    depths' extremes in this frame, computed on the device by a reduction
+    kernel (rgbda_range; no host round trip), D = 0 where dmax == dmin.
+    Elsewhere, and at padding pixels: R = G = B = A = 0, D = -1. No kept pixel
+    at all gives an all-empty tensor, not an error. A NaN anywhere, or a
+    depth of -inf where alpha > 0, raises DataError after the kernels ran.
+    """
+    queue = resolve_queue(queue, rgbda=rgbda, out=out)
+    host = not is_device(rgbda)
+    rgbda = check_array("rgbda", rgbda, dtypes=[np.float32], ndim=3)
+    h, w, c = (int(s) for s in rgbda.shape)
+    if c != 5:
+        raise ValueError(
+            f"rgbda: expected 5 channels [r, g, b, depth, alpha], got shape {tuple(rgbda.shape)}"
+        )
+    hp, wp = padded_shape(h, w, stride)
+    _check_size("rgbda", h, w, hp, wp)
+    dst = _target(out, queue, (1, 5, hp, wp), np.float32, "pack_rgbda output")
+    stats = runtime.zeros(queue, 4, np.uint32, "pack_rgbda depth range")
+    src = to_device(queue, "rgbda", rgbda)
+    launch, _, _ = _launcher(queue)
+    u32 = np.uint32
+    launch("rgbda_range", h * w, buf(src), np.uint64(h * w), buf(stats))
+    launch("pack_rgbda", hp * wp, buf(src), u32(w), u32(h), u32(wp), u32(hp), buf(stats), buf(dst))
+    nan, neg = (int(v) for v in stats.get()[:2])
+    if nan or neg:
+        raise DataError(
+            f"rgbda: {nan} NaN values and {neg} pixels with alpha > 0 and depth -inf; "
+            "values must be numbers, a depth finite or +inf (empty)"
+        )
+    return dst if out is not None else result(dst, host)
+
+
+def unpack_rgba8(
+    nchw: Any,
+    height: int,
+    width: int,
+    *,
+    out: cla.Array | None = None,
+    queue: cl.CommandQueue | None = None,
+) -> np.ndarray | cla.Array:
+    """A network's output as an 8-bit picture: height x width x 4 uint8.
+
+    nchw: (1, C, Hp, Wp) float32, C = 3 (RGB) or 4 (RGBA); the top-left
+    height x width pixels are kept (height <= Hp, width <= Wp). Each value v
+    becomes rint(clamp(v, 0, 1) * 255) (half to even) and NaN 0; alpha is 255
+    when C = 3.
+    """
+    queue = resolve_queue(queue, nchw=nchw, out=out)
+    host = not is_device(nchw)
+    nchw = check_array("nchw", nchw, dtypes=[np.float32], ndim=4)
+    n, c, hp, wp = (int(s) for s in nchw.shape)
+    if n != 1 or c not in (3, 4):
+        raise ValueError(f"nchw: expected shape (1, 3 or 4, H, W), got {tuple(nchw.shape)}")
+    height, width = positive_int("height", height), positive_int("width", width)
+    if height > hp:
+        raise ValueError(f"height: {height} is more than the tensor's {hp} rows")
+    if width > wp:
+        raise ValueError(f"width: {width} is more than the tensor's {wp} columns")
+    _check_size("nchw", hp, wp, hp, wp)
+    dst = _target(out, queue, (height, width, 4), np.uint8, "unpack_rgba8 output")
+    launch, _, _ = _launcher(queue)
+    u32 = np.uint32
+    launch(
+        "unpack_rgba8",
+        height * width,
+        buf(to_device(queue, "nchw", nchw)),
+        u32(c),
+        u32(wp),
+        u32(hp),
+        u32(width),
+        u32(height),
+        buf(dst),
+    )
+    return dst if out is not None else result(dst, host)

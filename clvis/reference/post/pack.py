@@ -1,0 +1,89 @@
+"""NumPy reference of clvis.post.pack: images to and from the networks' tensors.
+
+A tensor is NCHW float32 with batch 1: (1, C, Hp, Wp), Hp and Wp the image's
+height and width rounded up to a multiple of the network's stride. Pixels
+past the image (the bottom rows and right columns) are padding and read as
+"empty". ``kernels_cl/post/pack.cl`` gives these results bit for bit (on
+devices that keep float32 denormals: the depth normalisation's division is
+IEEE float32 on both sides).
+
+pack_iso (the in-fill network): from an iso image's ``rgba`` (H x W x 4,
+shaded colour at hits), ``hit`` and ``active`` (H x W, nonzero = true),
+channels R, G, B, HIT, ACTIVE. A pixel is shown where hit and not active:
+R, G, B = its r, g, b and HIT = 1; elsewhere R = G = B = HIT = 0. ACTIVE = 1
+where active, else 0. Padding: all 0. A hit pixel's r, g, b must be finite.
+
+pack_rgbda (the LiDAR U-Net, following the LiDAR paper's authors'
+conventions): from ``rgbda`` (H x W x 5 [r, g, b, depth, alpha], a
+FilteredImage's), channels R, G, B, A, D. A pixel is kept where alpha > 0 and
+depth is finite: R, G, B, A as given, ``D = (depth - dmin) / (dmax - dmin)``
+in float32 with dmin, dmax the minimum and maximum depth over the kept pixels
+of this image (D = 0 when dmax == dmin). Elsewhere, and at padding:
+R = G = B = A = 0, D = -1. No kept pixel: every pixel empty. Errors: a NaN
+anywhere, a depth of -inf where alpha > 0.
+
+unpack_rgba8: from (1, C, Hp, Wp), C = 3 or 4, the top-left height x width
+pixels as H x W x 4 uint8: ``rint(clip(v, 0, 1) * 255)`` in float32 (rint:
+half to even), NaN -> 0, alpha 255 when C = 3.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from ...errors import DataError
+
+MAX_SIDE = 32768
+MAX_PIXELS = 2**28
+
+_F = np.float32
+
+
+def padded_shape(height: int, width: int, stride: int = 1) -> tuple[int, int]:
+    return -(-height // stride) * stride, -(-width // stride) * stride
+
+
+def _nchw(planes: list[np.ndarray], hp: int, wp: int, fill: list[float]) -> np.ndarray:
+    out = np.empty((1, len(planes), hp, wp), _F)
+    for c, (p, f) in enumerate(zip(planes, fill, strict=True)):
+        out[0, c] = f
+        out[0, c, : p.shape[0], : p.shape[1]] = p
+    return out
+
+
+def pack_iso(
+    rgba: npt.ArrayLike, hit: npt.ArrayLike, active: npt.ArrayLike, *, stride: int = 1
+) -> np.ndarray:
+    rgba = np.asarray(rgba, _F)
+    hit, active = np.asarray(hit) != 0, np.asarray(active) != 0
+    if not np.isfinite(rgba[hit][:, :3]).all():
+        raise DataError("rgba: a hit pixel with a NaN or infinite r, g or b")
+    shown = hit & ~active
+    rgb = [np.where(shown, rgba[..., c], _F(0)) for c in range(3)]
+    hp, wp = padded_shape(*shown.shape, stride)
+    return _nchw([*rgb, shown.astype(_F), active.astype(_F)], hp, wp, [0, 0, 0, 0, 0])
+
+
+def pack_rgbda(rgbda: npt.ArrayLike, *, stride: int = 1) -> np.ndarray:
+    rgbda = np.asarray(rgbda, _F)
+    depth, alpha = rgbda[..., 3], rgbda[..., 4]
+    if np.isnan(rgbda).any() or ((alpha > 0) & (depth == -np.inf)).any():
+        raise DataError("rgbda: NaN values, or depth -inf where alpha > 0")
+    kept = (alpha > 0) & np.isfinite(depth)
+    d = np.full(depth.shape, _F(-1))
+    if kept.any():
+        dmin, dmax = depth[kept].min(), depth[kept].max()
+        span = _F(dmax - dmin)
+        d[kept] = (depth[kept] - dmin) / span if span > 0 else _F(0)
+    planes = [np.where(kept, rgbda[..., c], _F(0)) for c in (0, 1, 2, 4)]
+    hp, wp = padded_shape(*depth.shape, stride)
+    return _nchw([*planes, d], hp, wp, [0, 0, 0, 0, -1])
+
+
+def unpack_rgba8(nchw: npt.ArrayLike, height: int, width: int) -> np.ndarray:
+    x = np.asarray(nchw, _F)[0, :, :height, :width]
+    v = np.rint(np.clip(np.nan_to_num(x, nan=0.0), _F(0), _F(1)) * _F(255)).astype(np.uint8)
+    out = np.full((height, width, 4), 255, np.uint8)
+    out[..., : v.shape[0]] = np.moveaxis(v, 0, -1)
+    return out

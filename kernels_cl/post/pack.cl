@@ -1,0 +1,202 @@
+/* pack.cl — images to and from the NCHW float32 tensors of the post family's
+ * networks (batch 1), for ONNX Runtime. The definitions are the docstrings of
+ * clvis/reference/post/pack.py; the kernels give its results bit for bit.
+ *
+ * ABI
+ * ---
+ * Defines (optional):
+ *   ITEMS   pixels per work-item (default 1): work-item g handles the pixels
+ *           g*ITEMS .. g*ITEMS + ITEMS - 1 in row-major order. Launch any
+ *           one-dimensional global size >= ceil(pixels / ITEMS) (work-items
+ *           past the end do nothing).
+ *   WG      the local size (a power of two, default 1): rgbda_range must be
+ *           launched with exactly this local size; the other kernels take any.
+ * Build with -cl-fp32-correctly-rounded-divide-sqrt (pack_rgbda divides; the
+ * reference divides in IEEE float32); the file sets FP_CONTRACT OFF itself.
+ *
+ * Images are row-major, row 0 on top, w x h pixels, channels interleaved.
+ * A tensor is (1, C, hp, wp) float32 with hp >= h, wp >= w: channel c of
+ * pixel (x, y) at [c*hp*wp + y*wp + x]. Pixels with x >= w or y >= h are
+ * padding. Kernels over a tensor run one item per tensor pixel (hp*wp).
+ *
+ * kernel pack_iso(global const float *rgba, global const uchar *hit,
+ *                 global const uchar *active, uint w, uint h, uint wp, uint hp,
+ *                 global float *out, global uint *bad)
+ *     rgba: w*h*4 floats; hit, active: w*h uchars (nonzero = true). out:
+ *     (1, 5, hp, wp) = R, G, B, HIT, ACTIVE. With shown = hit && !active:
+ *     R, G, B = rgba's r, g, b where shown, else 0; HIT = shown ? 1 : 0;
+ *     ACTIVE = active ? 1 : 0. Padding: all 0. bad[0] += the number of hit
+ *     pixels whose r, g or b is not finite (the host zeroes it first).
+ *
+ * kernel rgbda_range(global const float *rgbda, ulong n, global uint *stats)
+ *     rgbda: n pixels of 5 floats {r, g, b, depth, alpha}. Adds to stats
+ *     (4 uints, zeroed by the host):
+ *       stats[0] += NaN values (any of the 5 channels),
+ *       stats[1] += pixels with alpha > 0 and depth == -INFINITY,
+ *       stats[2] = max(stats[2], key(depth)) over kept pixels,
+ *       stats[3] = max(stats[3], ~key(depth)) over kept pixels,
+ *     where kept = alpha > 0 && isfinite(depth) and key() is clvis_key_f32
+ *     (clvis/keys.h; never 0 or ~0 for a finite value, so 0 means "none").
+ *     Global size: a multiple of WG >= ceil(n / ITEMS); local size WG.
+ *
+ * kernel pack_rgbda(global const float *rgbda, uint w, uint h, uint wp,
+ *                   uint hp, global const uint *stats, global float *out)
+ *     out: (1, 5, hp, wp) = R, G, B, A, D. At kept pixels: r, g, b, alpha as
+ *     given and D = range > 0 ? (depth - dmin) / range : 0, range = dmax -
+ *     dmin, dmin and dmax the kept depths' extremes decoded from stats[3]
+ *     and stats[2] (rgbda_range's, on the same rgbda). Elsewhere (not kept,
+ *     padding): R = G = B = A = 0, D = -1.
+ *
+ * kernel unpack_rgba8(global const float *nchw, uint channels, uint wp,
+ *                     uint hp, uint w, uint h, global uchar *out)
+ *     nchw: (1, channels, hp, wp), channels 3 or 4, w <= wp, h <= hp. out:
+ *     w*h*4 uchars, the top-left w x h pixels: each value v becomes
+ *     rint(clamp(v, 0, 1) * 255) (rint: half to even), NaN becomes 0; alpha
+ *     255 when channels = 3. Pixels: w * h.
+ *
+ * Memory traffic: one read of each input value and one write of each output
+ * value; rgbda_range reads the input once more and does 2 atomics per group.
+ */
+#pragma OPENCL FP_CONTRACT OFF
+
+#include "clvis/keys.h"
+
+#ifndef ITEMS
+#define ITEMS 1
+#endif
+#ifndef WG
+#define WG 1
+#endif
+
+static inline float key_to_float(const uint key)
+{
+    return as_float((key & 0x80000000u) ? (key & 0x7FFFFFFFu) : ~key);
+}
+
+static inline int rgbda_kept(const float depth, const float alpha)
+{
+    return alpha > 0.0f && isfinite(depth);
+}
+
+kernel void pack_iso(global const float *rgba, global const uchar *hit,
+                     global const uchar *active, const uint w, const uint h,
+                     const uint wp, const uint hp, global float *out, global uint *bad)
+{
+    const ulong plane = (ulong)wp * hp;
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i) {
+        const uint y = (uint)(i / wp), x = (uint)(i - (ulong)y * wp);
+        float r = 0.0f, g = 0.0f, b = 0.0f, shown = 0.0f, act = 0.0f;
+        if (x < w && y < h) {
+            const ulong s = (ulong)y * w + x;
+            const int is_hit = hit[s] != 0, is_active = active[s] != 0;
+            if (is_hit) {
+                const float4 c = vload4(s, rgba);
+                if (!(isfinite(c.x) && isfinite(c.y) && isfinite(c.z)))
+                    atomic_inc(&bad[0]);
+                if (!is_active) {
+                    r = c.x;
+                    g = c.y;
+                    b = c.z;
+                    shown = 1.0f;
+                }
+            }
+            act = is_active ? 1.0f : 0.0f;
+        }
+        out[i] = r;
+        out[plane + i] = g;
+        out[2 * plane + i] = b;
+        out[3 * plane + i] = shown;
+        out[4 * plane + i] = act;
+    }
+}
+
+kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
+void rgbda_range(global const float *rgbda, const ulong n, global uint *stats)
+{
+    local uint hi[WG], lo[WG];      /* max key, max ~key: 0 = no kept pixel */
+    const uint lid = get_local_id(0);
+    uint kmax = 0, kminv = 0, nan = 0, neg = 0;
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    for (ulong i = first; i < n && i < first + ITEMS; ++i) {
+        global const float *p = rgbda + 5 * i;
+        for (uint c = 0; c < 5; ++c)
+            nan += isnan(p[c]) ? 1 : 0;
+        const float d = p[3], a = p[4];
+        if (a > 0.0f && d == -INFINITY)
+            ++neg;
+        if (rgbda_kept(d, a)) {
+            const uint k = clvis_key_f32(as_uint(d));
+            kmax = max(kmax, k);
+            kminv = max(kminv, ~k);
+        }
+    }
+    if (nan)
+        atomic_add(&stats[0], nan);
+    if (neg)
+        atomic_add(&stats[1], neg);
+    hi[lid] = kmax;
+    lo[lid] = kminv;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (uint s = WG / 2; s > 0; s >>= 1) {
+        if (lid < s) {
+            hi[lid] = max(hi[lid], hi[lid + s]);
+            lo[lid] = max(lo[lid], lo[lid + s]);
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid == 0) {
+        if (hi[0])
+            atomic_max(&stats[2], hi[0]);
+        if (lo[0])
+            atomic_max(&stats[3], lo[0]);
+    }
+}
+
+kernel void pack_rgbda(global const float *rgbda, const uint w, const uint h,
+                       const uint wp, const uint hp, global const uint *stats,
+                       global float *out)
+{
+    const ulong plane = (ulong)wp * hp;
+    const float dmax = key_to_float(stats[2]), dmin = key_to_float(~stats[3]);
+    const float range = dmax - dmin;
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i) {
+        const uint y = (uint)(i / wp), x = (uint)(i - (ulong)y * wp);
+        float r = 0.0f, g = 0.0f, b = 0.0f, a = 0.0f, dn = -1.0f;
+        if (x < w && y < h) {
+            global const float *p = rgbda + 5 * ((ulong)y * w + x);
+            const float d = p[3];
+            if (rgbda_kept(d, p[4])) {
+                r = p[0];
+                g = p[1];
+                b = p[2];
+                a = p[4];
+                dn = range > 0.0f ? (d - dmin) / range : 0.0f;
+            }
+        }
+        out[i] = r;
+        out[plane + i] = g;
+        out[2 * plane + i] = b;
+        out[3 * plane + i] = a;
+        out[4 * plane + i] = dn;
+    }
+}
+
+kernel void unpack_rgba8(global const float *nchw, const uint channels, const uint wp,
+                         const uint hp, const uint w, const uint h, global uchar *out)
+{
+    const ulong plane = (ulong)wp * hp, n = (ulong)w * h;
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    for (ulong i = first; i < n && i < first + ITEMS; ++i) {
+        const uint y = (uint)(i / w), x = (uint)(i - (ulong)y * w);
+        const ulong s = (ulong)y * wp + x;
+        uchar v[4];
+        for (uint c = 0; c < 4; ++c) {
+            float f = c < channels ? nchw[c * plane + s] : 1.0f;
+            f = isnan(f) ? 0.0f : min(max(f, 0.0f), 1.0f);
+            v[c] = (uchar)rint(f * 255.0f);
+        }
+        vstore4((uchar4)(v[0], v[1], v[2], v[3]), i, out);
+    }
+}

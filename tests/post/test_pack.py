@@ -1,0 +1,326 @@
+"""clvis.post.pack against clvis.reference.post.pack, out= arrays (a host-backed
+ALLOC_HOST_PTR buffer mapped to numpy included) and bad input.
+
+Tolerance: exact everywhere. Packing copies values; the depth normalisation
+is one float32 subtraction and one correctly rounded division on both sides
+(FP_CONTRACT OFF), so the kernels give the reference's bits."""
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import clvis
+from clvis.errors import ClvisError, DataError
+from clvis.post import pack as pack_module
+from clvis.post.pack import pack_iso, pack_rgbda, padded_shape, unpack_rgba8
+from clvis.reference.post import pack as ref
+
+SHAPES = [(1, 1), (1, 9), (9, 1), (3, 5), (17, 33), (37, 53)]
+STRIDES = [1, 8, 16]
+
+
+def iso_inputs(shape, seed):
+    rng = np.random.default_rng(seed)
+    rgba = rng.uniform(-0.5, 1.5, shape + (4,)).astype(np.float32)
+    hit = rng.random(shape) < 0.6
+    active = rng.random(shape) < 0.2
+    rgba[~hit] = np.nan  # colours of pixels not hit are never read
+    return rgba, hit, active
+
+
+def rgbda_inputs(shape, seed, kept=0.6):
+    rng = np.random.default_rng(seed)
+    x = np.zeros(shape + (5,), np.float32)
+    keep = rng.random(shape) < kept
+    x[..., :3] = np.where(keep[..., None], rng.random(shape + (3,)), 0)
+    x[..., 3] = np.where(keep, rng.uniform(0.5, 80.0, shape), np.inf)
+    x[..., 4] = keep
+    return x
+
+
+def same(got, want):
+    assert isinstance(got, np.ndarray) and got.dtype == want.dtype and got.shape == want.shape
+    np.testing.assert_array_equal(got, want)
+    assert got.tobytes() == want.tobytes()  # signs of zeros too
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("stride", STRIDES)
+def test_pack_iso(queue, shape, stride):
+    rgba, hit, active = iso_inputs(shape, seed=hash((shape, stride)) % 2**32)
+    got = pack_iso(rgba, hit, active, stride=stride, queue=queue)
+    want = ref.pack_iso(rgba, hit, active, stride=stride)
+    same(got, want)
+    hp, wp = padded_shape(*shape, stride)
+    assert got.shape == (1, 5, hp, wp) and hp % stride == 0 and wp % stride == 0
+    assert not got[:, :, shape[0] :].any() and not got[:, :, :, shape[1] :].any()
+    same(pack_iso(rgba, hit.astype(np.uint8) * 3, active.astype(np.uint8), stride=stride, queue=queue), want)
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("stride", STRIDES)
+def test_pack_rgbda(queue, shape, stride):
+    x = rgbda_inputs(shape, seed=hash((shape, stride)) % 2**32)
+    got = pack_rgbda(x, stride=stride, queue=queue)
+    want = ref.pack_rgbda(x, stride=stride)
+    same(got, want)
+    kept = x[..., 4] > 0
+    d = got[0, 4, : shape[0], : shape[1]]
+    if kept.sum() > 1:
+        assert d[kept].min() == 0 and d[kept].max() == 1
+    assert (d[~kept] == -1).all() and (got[0, 4, shape[0] :] == -1).all()
+    assert not got[0, :4, shape[0] :].any() and not got[0, :4, :, shape[1] :].any()
+
+
+def test_pack_rgbda_adversarial(queue):
+    x = rgbda_inputs((23, 31), seed=3)
+    # negative depths, zeros of both signs, extremes, alpha > 0 with +inf depth (empty)
+    x[0, 0, 3:] = (-5.0, 1.0)
+    x[0, 1, 3:] = (-0.0, 1.0)
+    x[0, 2, 3:] = (0.0, 1.0)
+    x[0, 3, 3:] = (np.inf, 1.0)
+    x[0, 4, 3:] = (3e38, 0.5)
+    x[0, 5, 3:] = (7.0, 0.0)  # alpha 0: empty whatever the depth
+    x[1, 0, 3:] = (-np.inf, 0.0)
+    same(pack_rgbda(x, queue=queue), ref.pack_rgbda(x))
+    # one kept pixel; every kept depth equal: D = 0
+    for depth in (4.0, -0.0):
+        y = np.zeros((9, 11, 5), np.float32)
+        y[..., 3] = np.inf
+        y[2:5, 3, 3:] = (depth, 1.0)
+        got = pack_rgbda(y, stride=8, queue=queue)
+        same(got, ref.pack_rgbda(y, stride=8))
+        assert (got[0, 4, 2:5, 3] == 0).all() and (got[0, 3, 2:5, 3] == 1).all()
+    # no kept pixel at all: every pixel empty, not an error
+    y[..., 4] = 0
+    got = pack_rgbda(y, stride=16, queue=queue)
+    same(got, ref.pack_rgbda(y, stride=16))
+    assert not got[0, :4].any() and (got[0, 4] == -1).all()
+
+
+def test_pack_large(queue):
+    x = rgbda_inputs((720, 1280), seed=5)
+    same(pack_rgbda(x, stride=16, queue=queue), ref.pack_rgbda(x, stride=16))
+    rgba, hit, active = iso_inputs((721, 1279), seed=6)
+    same(pack_iso(rgba, hit, active, stride=16, queue=queue), ref.pack_iso(rgba, hit, active, stride=16))
+
+
+@pytest.mark.parametrize("channels", [3, 4])
+@pytest.mark.parametrize("shape", [(1, 1), (5, 3), (37, 53)])
+def test_unpack(queue, channels, shape):
+    rng = np.random.default_rng(hash((channels, shape)) % 2**32)
+    hp, wp = padded_shape(*shape, 16)
+    t = rng.uniform(-0.25, 1.25, (1, channels, hp, wp)).astype(np.float32)
+    flat = t.reshape(-1)
+    specials = [np.nan, -np.nan, np.inf, -np.inf, 0.5, 0.5 / 255, 1.5 / 255, 2.5 / 255, -0.0, 1.0]
+    flat[: len(specials)] = specials
+    t[0, :, 0, : min(4, shape[1])] = np.float32(127.5 / 255)
+    got = unpack_rgba8(t, *shape, queue=queue)
+    want = ref.unpack_rgba8(t, *shape)
+    same(got, want)
+    assert got.shape == shape + (4,)
+    if channels == 3:
+        assert (got[..., 3] == 255).all()
+    same(unpack_rgba8(t, 1, 1, queue=queue), ref.unpack_rgba8(t, 1, 1))
+
+
+def test_unpack_rounds_half_to_even(queue):
+    # (k + 0.5) / 255 in float32 times 255 gives k + 0.5 exactly for these k
+    t = np.zeros((1, 3, 1, 4), np.float32)
+    t[0, 0, 0] = np.array([0.5, 1.5, 2.5, 127.5], np.float32) / np.float32(255)
+    got = unpack_rgba8(t, 1, 4, queue=queue)
+    want = ref.unpack_rgba8(t, 1, 4)
+    same(got, want)
+
+
+def test_round_trip(queue):
+    """unpack_rgba8 of a packed image's colour planes gives the colours back."""
+    rgba8 = np.random.default_rng(2).integers(0, 256, (19, 23, 4)).astype(np.uint8)
+    rgba = (rgba8.astype(np.float32) / np.float32(255)).astype(np.float32)
+    hit = np.ones((19, 23), bool)
+    packed = pack_iso(rgba, hit, np.zeros_like(hit), stride=8, queue=queue)
+    back = unpack_rgba8(packed[:, :3].copy(), 19, 23, queue=queue)
+    np.testing.assert_array_equal(back[..., :3], rgba8[..., :3])
+
+
+def test_device_arrays(queue):
+    rgba, hit, active = iso_inputs((21, 13), seed=7)
+    got = pack_iso(cla.to_device(queue, rgba), hit, active, stride=8)
+    assert isinstance(got, cla.Array) and got.queue is queue
+    same(got.get(), ref.pack_iso(rgba, hit, active, stride=8))
+    x = rgbda_inputs((21, 13), seed=8)
+    got = pack_rgbda(cla.to_device(queue, x), stride=8)
+    assert isinstance(got, cla.Array)
+    same(got.get(), ref.pack_rgbda(x, stride=8))
+    t = got.get()[:, :4].copy()  # R, G, B, A
+    back = unpack_rgba8(cla.to_device(queue, t), 21, 13)
+    assert isinstance(back, cla.Array) and back.dtype == np.uint8
+    same(back.get(), ref.unpack_rgba8(t, 21, 13))
+
+
+def test_out(queue):
+    x = rgbda_inputs((21, 13), seed=9)
+    want = ref.pack_rgbda(x, stride=16)
+    out = cla.empty(queue, want.shape, np.float32)
+    assert pack_rgbda(x, stride=16, out=out, queue=queue) is out
+    same(out.get(), want)
+    rgba, hit, active = iso_inputs((21, 13), seed=9)
+    assert pack_iso(rgba, hit, active, stride=16, out=out, queue=queue) is out
+    same(out.get(), ref.pack_iso(rgba, hit, active, stride=16))
+    img = cla.empty(queue, (21, 13, 4), np.uint8)
+    assert unpack_rgba8(out.get()[:, :3].copy(), 21, 13, out=img) is img
+    same(img.get(), ref.unpack_rgba8(out.get()[:, :3], 21, 13))
+
+
+def test_out_host_mapped(queue):
+    """A host-backed buffer (ALLOC_HOST_PTR), as handed to onnxruntime's IO
+    binding: after queue.finish() its mapped view holds the result."""
+    x = rgbda_inputs((37, 53), seed=10)
+    want = ref.pack_rgbda(x, stride=8)
+    mf = cl.mem_flags
+    b = cl.Buffer(queue.context, mf.READ_WRITE | mf.ALLOC_HOST_PTR, want.nbytes)
+    out = cla.Array(queue, want.shape, np.float32, data=b)
+    assert pack_rgbda(x, stride=8, out=out, queue=queue) is out
+    queue.finish()
+    view, _ = cl.enqueue_map_buffer(queue, b, cl.map_flags.READ, 0, want.shape, np.float32)
+    try:
+        np.testing.assert_array_equal(view, want)
+    finally:
+        view.base.release(queue)
+    queue.finish()
+    img = cl.Buffer(queue.context, mf.READ_WRITE | mf.ALLOC_HOST_PTR, 37 * 53 * 4)
+    packed = ref.pack_iso(*iso_inputs((37, 53), seed=11), stride=8)
+    unpack_rgba8(
+        packed[:, :3].copy(), 37, 53, out=cla.Array(queue, (37, 53, 4), np.uint8, data=img), queue=queue
+    )
+    queue.finish()
+    view, _ = cl.enqueue_map_buffer(queue, img, cl.map_flags.READ, 0, (37, 53, 4), np.uint8)
+    try:
+        np.testing.assert_array_equal(view, ref.unpack_rgba8(packed[:, :3], 37, 53))
+    finally:
+        view.base.release(queue)
+
+
+@given(
+    h=st.integers(1, 40),
+    w=st.integers(1, 40),
+    stride=st.sampled_from([1, 2, 8, 16, 32]),
+    seed=st.integers(0, 2**16),
+    kept=st.sampled_from([0.0, 0.01, 0.5, 1.0]),
+)
+def test_property(device, h, w, stride, seed, kept):
+    q = clvis.runtime.queue_for(device)
+    x = rgbda_inputs((h, w), seed, kept)
+    got = pack_rgbda(x, stride=stride, queue=q)
+    same(got, ref.pack_rgbda(x, stride=stride))
+    d = got[0, 4]
+    assert ((d == -1) | ((d >= 0) & (d <= 1))).all()
+    rgba, hit, active = iso_inputs((h, w), seed)
+    same(pack_iso(rgba, hit, active, stride=stride, queue=q), ref.pack_iso(rgba, hit, active, stride=stride))
+
+
+def test_limits():
+    assert pack_module.MAX_SIDE == ref.MAX_SIDE and pack_module.MAX_PIXELS == ref.MAX_PIXELS
+    assert padded_shape(1, 1, 16) == (16, 16) and padded_shape(720, 1280, 16) == (720, 1280)
+    assert padded_shape(721, 1281, 8) == (728, 1288)
+
+
+def test_bad_input(device, monkeypatch):
+    q = clvis.runtime.queue_for(device)
+    rgba, hit, active = iso_inputs((6, 7), seed=1)
+    x = rgbda_inputs((6, 7), seed=1)
+    with pytest.raises(TypeError, match="rgba: dtype float64"):
+        pack_iso(rgba.astype(np.float64), hit, active, queue=q)
+    with pytest.raises(ValueError, match="rgba: expected 4 channels"):
+        pack_iso(rgba[..., :3], hit, active, queue=q)
+    with pytest.raises(ValueError, match="hit: shape"):
+        pack_iso(rgba, hit[:5], active, queue=q)
+    with pytest.raises(TypeError, match="active: dtype int32"):
+        pack_iso(rgba, hit, active.astype(np.int32), queue=q)
+    bad = rgba.copy()
+    bad[hit.nonzero()[0][0], hit.nonzero()[1][0], 2] = np.inf
+    with pytest.raises(DataError, match="rgba: 1 hit pixels with a NaN or infinite"):
+        pack_iso(bad, hit, active, queue=q)
+    with pytest.raises(DataError):
+        ref.pack_iso(bad, hit, active)
+    for stride, exc in ((0, ValueError), (-8, ValueError), (1.5, TypeError), (True, TypeError)):
+        with pytest.raises(exc, match="stride"):
+            pack_rgbda(x, stride=stride, queue=q)
+    with pytest.raises(ValueError, match="rgbda: expected 5 channels"):
+        pack_rgbda(x[..., :4], queue=q)
+    for name, (pix, ch, value) in {
+        "nan colour": ((1, 1), 0, np.nan),
+        "nan alpha": ((2, 2), 4, np.nan),
+        "nan depth": ((0, 0), 3, np.nan),
+    }.items():
+        y = x.copy()
+        y[pix][ch] = value
+        with pytest.raises(DataError, match="rgbda: 1 NaN values and 0 pixels") as e:
+            pack_rgbda(y, queue=q)
+        assert isinstance(e.value, ClvisError), name
+        with pytest.raises(DataError):
+            ref.pack_rgbda(y)
+    y = x.copy()
+    y[3, 3, 3:] = (-np.inf, 1.0)
+    with pytest.raises(DataError, match="0 NaN values and 1 pixels with alpha > 0 and depth -inf"):
+        pack_rgbda(cla.to_device(q, y))
+    for shape in [(0, 4), (4, 0)]:
+        with pytest.raises(DataError, match="rgbda: empty"):
+            pack_rgbda(np.zeros(shape + (5,), np.float32), queue=q)
+        with pytest.raises(DataError, match="rgba: empty"):
+            pack_iso(
+                np.zeros(shape + (4,), np.float32), np.zeros(shape, bool), np.zeros(shape, bool), queue=q
+            )
+    # the size limits (checked before anything is allocated on the device)
+    wide = np.broadcast_to(np.zeros(5, np.float32), (1, 32769, 5))
+    with pytest.raises(DataError, match="at most 32768 per side"):
+        pack_rgbda(wide, queue=q)
+    with monkeypatch.context() as m:
+        m.setattr(pack_module, "MAX_PIXELS", 6 * 8 - 1)
+        with pytest.raises(DataError, match="\\(6 x 8 padded\\)"):
+            pack_rgbda(x, stride=2, queue=q)
+        pack_rgbda(x, queue=q)
+    with pytest.raises(DataError, match="at most 32768 per side"):
+        pack_iso(
+            np.broadcast_to(np.zeros(4, np.float32), (1, 32767, 4)),
+            np.zeros((1, 32767), bool),
+            np.zeros((1, 32767), bool),
+            stride=3,  # 32767 padded to 32769
+            queue=q,
+        )
+    # out
+    want_shape = (1, 5, 6, 7)
+    for out, exc, msg in (
+        (np.zeros(want_shape, np.float32), TypeError, "out: expected a pyopencl.array.Array"),
+        (cla.empty(q, (1, 5, 6, 8), np.float32), ValueError, "out: expected shape"),
+        (cla.empty(q, want_shape, np.float64), ValueError, "out: expected shape"),
+        (
+            cla.empty(q, (2, 5, 6, 7), np.float32)[1:],
+            ValueError,
+            "out: expected a C-contiguous array without",
+        ),
+    ):
+        with pytest.raises(exc, match=msg):
+            pack_rgbda(x, out=out, queue=q)
+    # unpack
+    t = np.zeros((1, 4, 8, 8), np.float32)
+    with pytest.raises(ValueError, match="nchw: expected shape"):
+        unpack_rgba8(np.zeros((2, 4, 8, 8), np.float32), 8, 8, queue=q)
+    with pytest.raises(ValueError, match="nchw: expected shape"):
+        unpack_rgba8(np.zeros((1, 5, 8, 8), np.float32), 8, 8, queue=q)
+    with pytest.raises(ValueError, match="nchw: expected a 4-D array"):
+        unpack_rgba8(t[0], 8, 8, queue=q)
+    with pytest.raises(TypeError, match="nchw: dtype float16"):
+        unpack_rgba8(t.astype(np.float16), 8, 8, queue=q)
+    with pytest.raises(ValueError, match="height: 9 is more"):
+        unpack_rgba8(t, 9, 8, queue=q)
+    with pytest.raises(ValueError, match="width: 9 is more"):
+        unpack_rgba8(t, 8, 9, queue=q)
+    for v, exc in ((0, ValueError), (2.0, TypeError)):
+        with pytest.raises(exc, match="height"):
+            unpack_rgba8(t, v, 8, queue=q)
+    with pytest.raises(ValueError, match="out: expected shape"):
+        unpack_rgba8(t, 8, 8, out=cla.empty(q, (8, 8, 3), np.uint8), queue=q)

@@ -10,6 +10,7 @@ clvis gauss [FILE]           Gaussians from a volume at three levels of detail, 
                              (default: an embedded explosion), PNGs side by side
 clvis bench primitives|raster|gauss|iso
                              a benchmark suite with its peers, as a table (and JSON)
+clvis train infill|lidar     trains a post network on renders made here, exports it to ONNX
 """
 
 from __future__ import annotations
@@ -20,10 +21,10 @@ import sys
 from collections.abc import Sequence
 
 from .._version import __version__
-from . import bench, demo, gauss, info, iso, raster
+from . import bench, demo, gauss, info, iso, raster, train
 from ._common import Parser, glue_values, run
 
-_COMMANDS = {"info": info, "demo": demo, "render": raster, "iso": iso, "gauss": gauss, "bench": bench}
+_COMMANDS = {"info": info, "demo": demo, "render": raster, "iso": iso, "gauss": gauss, "bench": bench, "train": train}
 _EPILOG = """\
 A bad argument or a file clvis cannot use is one line on stderr and exit
 status 2 (CLVIS_DEBUG=1: the traceback instead). `clvis COMMAND --help`

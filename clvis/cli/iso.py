@@ -91,6 +91,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         default=1.0,
         help="stop once this fraction of the rays is finished (default 1.0)",
     )
+    p.add_argument(
+        "--infill",
+        action="store_true",
+        help="also write iso-infill.png: the rays still running filled in by the in-fill network "
+        "(clvis.post; use with --completion below 1)",
+    )
     p.add_argument("--no-speculation", action="store_true", help="one candidate block per ray and pass")
     p.add_argument(
         "--size", type=size, default=(1280, 720), metavar="WxH", help=f"{SIZE_RULE} (default 1280x720)"
@@ -238,6 +244,19 @@ def _run(args) -> int:
     total = time.perf_counter() - t0
     out = Path(args.out)
     path = images.save_png(out / "iso.png", labelled(img, iso, args.transparent))
+    infilled = None
+    if args.infill:
+        from .. import post
+
+        net = post.load("infill", queue=q)
+        filled = net(img)
+        infilled = images.save_png(
+            out / "iso-infill.png",
+            images.label(
+                filled if args.transparent else images.opaque(filled),
+                f"isovalue {iso:g}, completion {img.completion:.3f}, in-filled by the network",
+            ),
+        )
     st = img.stats
     print(f"clvis iso: {source}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
     print(f"  device      {runtime.describe(q.device)}")
@@ -264,6 +283,14 @@ def _run(args) -> int:
         f"  time        build {r.build_seconds:.2f} s, passes {st['seconds'] * 1e3:.1f} ms; "
         f"{total:.2f} s with compression and setup"
     )
+    if infilled is not None:
+        ns = net.stats
+        print(
+            f"  in-fill     {net!r}: pack {ns['pack'] * 1e3:.1f} ms, inference {ns['inference'] * 1e3:.1f} ms, "
+            f"unpack {ns['unpack'] * 1e3:.1f} ms"
+        )
+        print(f"wrote {path} and {infilled}")
+        return 0
     print(f"wrote {path}{os.sep if path.is_dir() else ''}")
     return 0
 

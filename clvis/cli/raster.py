@@ -142,7 +142,7 @@ def _raster_fields(cloud, attribute) -> dict:
 
 
 def _render_panels(
-    raster, cloud, camera, width, height, attribute, colormap, soft_z, levels, progress, point_size=1
+    raster, cloud, camera, width, height, attribute, colormap, soft_z, levels, progress, point_size=1, post=None
 ) -> _Rendered:
     """Render one view; the G-buffers and the images a person looks at."""
     from .. import images
@@ -193,6 +193,9 @@ def _render_panels(
         with progress.stage(f"depth filter ({levels} levels)"):
             filtered = depth_filter(g, levels)
         panels.append(_Panel("depth-filtered", f"depth filter ({levels} levels)", filtered.rgba))
+        if post is not None:
+            with progress.stage(f"{post.name} network"):
+                panels.append(_Panel(f"post-{post.name}", "LiDAR RGBDA U-Net", post(filtered)))
     return _Rendered(g, panels, first, warm)
 
 
@@ -288,6 +291,13 @@ def _render(args, progress) -> int:
         raise CliError(f"{source}: no point has finite coordinates") from None
     camera = camera_from_args(args, lo, hi, width, height, points=cloud.positions)
     q = runtime.default_queue()
+    net = None
+    if args.post is not None:
+        from .. import post
+
+        if not levels:
+            raise CliError(f"--post {args.post}: the network takes the depth-filtered image; add --depth-filter")
+        net = post.load(args.post, queue=q)
     with progress.stage("uploading + Morton order"):
         raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
         q.finish()
@@ -303,6 +313,7 @@ def _render(args, progress) -> int:
         levels,
         progress,
         args.point_size,
+        net,
     )
     out = Path(args.out)
     with progress.stage("writing PNGs"):
@@ -333,6 +344,12 @@ def _render(args, progress) -> int:
         f"  render    {r.warm_s * 1e3:.1f} ms ({n / r.warm_s / 1e6:.1f} M points/s): render, resolve, "
         f"read back; the first call, which may build kernels: {r.first_s * 1e3:.0f} ms"
     )
+    if net is not None:
+        ns = net.stats
+        print(
+            f"  post      {net!r}: pack {ns['pack'] * 1e3:.1f} ms, inference {ns['inference'] * 1e3:.1f} ms, "
+            f"unpack {ns['unpack'] * 1e3:.1f} ms"
+        )
     print(f"  total     {total:.2f} s")
     print(f"wrote {len(files)} PNGs to {out}{os.sep}")
     for p in files:
@@ -462,6 +479,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         type=_levels,
         metavar="LEVELS",
         help="apply the depth filter with this many pyramid levels, 0: off (default: off, 4 for the terrain)",
+    )
+    r.add_argument(
+        "--post",
+        choices=("lidar",),
+        help="also write post-lidar.png: the depth-filtered image reconstructed by the LiDAR "
+        "RGBDA U-Net (clvis.post; needs the depth filter)",
     )
     add_output_options(r, "clvis-render", "empty pixels")
     return r

@@ -7,7 +7,15 @@ Inference needs onnxruntime only; torch is imported by ``clvis train`` and
 the tests that compare the exported graphs with their PyTorch modules.
 """
 
+from .infer import MODELS, PRECISIONS, PostNetwork, load
+from .names import NAMES
 from .pack import pack_iso, pack_rgbda, padded_shape, unpack_rgba8
 from .pushpull import pushpull
 
-__all__ = ["pack_iso", "pack_rgbda", "padded_shape", "pushpull", "unpack_rgba8"]
+__all__ = [
+    "MODELS",
+    "NAMES",
+    "PRECISIONS",
+    "PostNetwork",
+    "load",
+    "pack_iso", "pack_rgbda", "padded_shape", "pushpull", "unpack_rgba8"]

@@ -1,0 +1,78 @@
+"""clvis train: train a post network on pairs made by clvis's renderers,
+export it to ONNX (fp32, fp16, int8) and write its model card."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ._common import CliError, Parser, count, size
+
+_HELP = """\
+Train one of the post family's networks (clvis.post) with PyTorch:
+
+  infill   in-fill of isosurface images stopped at 85/90/95 % completion
+           (a W-Net: two U-Nets of 4-8-16-32 channels; ~31 k parameters)
+  lidar    the LiDAR RGBDA U-Net: depth-filtered sparse scans to dense renders
+
+The training pairs are rendered here from closed-form volumes and scenes
+with deterministic seeds (clvis.post.data); held-out frames come from kinds
+never trained on. Writes NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx (when
+int8 loses at most 0.3 dB) and the model card NAME.json into --out; the
+shipped models in clvis/post/models were made by this command, as their
+cards say. Needs the train extra: pip install 'clvis[train]'.
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
+    from ..post.names import NAMES
+
+    p = sub.add_parser(
+        "train",
+        help="train a post network (infill, lidar) and export it to ONNX",
+        description=_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", choices=NAMES, help="the network to train")
+    p.add_argument("--steps", type=count(1, 10**7), default=2000, help="optimizer steps (default 2000)")
+    p.add_argument(
+        "--size", type=count(32, 4096), default=256, metavar="N", help="training crops N x N (default 256)"
+    )
+    p.add_argument("--out", default=".", metavar="DIR", help="where the model and its card go (default .)")
+    p.add_argument("--seed", type=count(0, 2**31 - 1), default=0, help="the data's and the weights' seed")
+    p.add_argument(
+        "--frames",
+        type=count(1, 10_000),
+        default=None,
+        metavar="N",
+        help="volumes or scenes to render for training (default: the release run's)",
+    )
+    p.add_argument(
+        "--frame-size", type=size, default=None, metavar="WxH", help="frame size (default: the release run's)"
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    return p
+
+
+def cmd(args: argparse.Namespace) -> int:
+    try:
+        from ..post import train
+    except ImportError as e:  # torch, onnx or pytorch-msssim missing
+        raise CliError(f"clvis train needs the train extra (pip install 'clvis[train]'): {e}") from None
+    log = (lambda s: None) if args.quiet else (lambda s: print(f"clvis train: {s}", file=sys.stderr, flush=True))
+    fw, fh = args.frame_size or train.SPECS[args.model]["frame_size"]
+    if args.size > min(fw, fh):
+        raise CliError(f"--size {args.size}: larger than the frames ({fw}x{fh})")
+    card = train.train(
+        args.model,
+        steps=args.steps,
+        size=args.size,
+        out=args.out,
+        seed=args.seed,
+        frames=args.frames,
+        frame_size=args.frame_size,
+        command=["clvis", "train", *sys.argv[sys.argv.index("train") + 1 :]] if "train" in sys.argv else None,
+        log=log,
+    )
+    print(f"{args.out}/{card['name']}.onnx: held-out {card['held_out']}")
+    return 0

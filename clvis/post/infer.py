@@ -1,0 +1,245 @@
+"""The shipped networks, run with onnxruntime (never torch).
+
+``load(name, precision="fp32", providers=None)`` gives a :class:`PostNetwork`
+whose call takes a renderer's own output and returns an RGBA8 picture:
+
+- "infill": an IsoImage (or anything with ``rgba``, ``hit`` and ``active``),
+  e.g. ``IsoRenderer.render(..., completion=0.85)``; the rays still running
+  are filled in, the finished pixels come back as they were. Alpha is the
+  surface's coverage (premultiplied colour over black).
+- "lidar": a FilteredImage (``depth_filter(...)``, or its ``rgbda`` array
+  (H, W, 5)); alpha 255.
+
+One frame: the pack kernel (clvis.post.pack) writes the network's NCHW
+float32 input into a buffer allocated host-visible (ALLOC_HOST_PTR) and
+mapped, which onnxruntime reads through IO binding with no copy on CPU
+devices (on a GPU the map is the frame's one read-back: onnxruntime has no
+OpenCL provider); onnxruntime writes its output into a host array, which
+the unpack kernel turns into RGBA8, cropping the padding off. ``stats``
+holds the last call's seconds per stage (pack, inference, unpack).
+
+onnxruntime runs on its CPU provider by default (CUDA's first when the
+installed onnxruntime has it), with one intra-op thread per core and its
+worker threads' spinning off, since it alternates with OpenCL work.
+"fp16" is meant for GPU providers (on CPUs it is slower than fp32); "int8"
+(static QDQ quantization, per-channel weights) ships only where it lost at
+most 0.3 dB on the held-out frames (the card says how much).
+
+Each model's card (``NAME.json``) is checked against its file (sha256)
+before the file is used; a missing, changed or unreadable file raises
+DataError naming it. Inputs: at most ``MAX_SIDE`` pixels a side and
+``MAX_PIXELS`` pixels (the networks' activations at that size take about
+2.5 GB for the LiDAR U-Net).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+
+from .._arrays import resolve_queue
+from ..errors import DataError
+from .names import NAMES
+from .pack import pack_iso, pack_rgbda, padded_shape, unpack_rgba8
+
+__all__ = ["MAX_PIXELS", "MAX_SIDE", "MODELS", "PRECISIONS", "PostNetwork", "load"]
+
+MODELS = Path(__file__).resolve().parent / "models"
+PRECISIONS = ("fp32", "fp16", "int8")
+MAX_SIDE = 8192
+MAX_PIXELS = 2**25
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _card(directory: Path, name: str) -> dict:
+    path = directory / f"{name}.json"
+    try:
+        card = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DataError(f"{path}: no model card for {name!r} (train one with `clvis train {name}`)") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise DataError(f"{path}: unreadable model card ({e})") from None
+    if not isinstance(card, dict) or not isinstance(card.get("files"), dict) or "stride" not in card:
+        raise DataError(f"{path}: not a clvis model card (no files or stride)")
+    return card
+
+
+def _providers(providers: list[str] | None) -> list[str]:
+    import onnxruntime as ort
+
+    available = ort.get_available_providers()
+    if providers is None:
+        return [p for p in ("CUDAExecutionProvider", "CPUExecutionProvider") if p in available]
+    if isinstance(providers, str) or not all(isinstance(p, str) for p in providers):
+        raise TypeError("providers: expected a list of onnxruntime provider names")
+    missing = [p for p in providers if p not in available]
+    if missing:
+        raise ValueError(f"providers: {missing} not in this onnxruntime (it has {available})")
+    return list(providers)
+
+
+class PostNetwork:
+    """A shipped network on onnxruntime: call it on a renderer's output
+    (see the module doc). ``card``: its model card; ``stats``: the last
+    call's seconds per stage."""
+
+    def __init__(
+        self,
+        name: str,
+        precision: str,
+        directory: Path,
+        providers: list[str] | None,
+        threads: int | None,
+        queue: cl.CommandQueue | None,
+    ) -> None:
+        import onnxruntime as ort
+
+        self.name, self.precision = name, precision
+        self.card = card = _card(directory, name)
+        entry = card["files"].get(precision) or {}
+        if not entry.get("file"):
+            raise DataError(
+                f"{name}: no {precision} variant (int8 ships only where it loses at most 0.3 dB; "
+                f"the card says: {entry.get('psnr_change_db', 'none made')} dB)"
+            )
+        self.path = path = directory / entry["file"]
+        if not path.is_file():
+            raise DataError(f"{path}: model file missing")
+        if _sha256(path) != entry.get("sha256"):
+            raise DataError(f"{path}: does not match its model card's sha256 (changed or corrupt)")
+        so = ort.SessionOptions()
+        so.intra_op_num_threads = threads if threads is not None else (os.cpu_count() or 1)
+        so.inter_op_num_threads = 1
+        so.add_session_config_entry("session.intra_op.allow_spinning", "0")
+        so.add_session_config_entry("session.inter_op.allow_spinning", "0")
+        try:
+            self.session = ort.InferenceSession(str(path), so, providers=_providers(providers))
+        except (ValueError, TypeError):
+            raise
+        except Exception as e:  # onnxruntime's own errors: a corrupt or foreign graph
+            raise DataError(f"{path}: onnxruntime cannot load it ({str(e).splitlines()[0]})") from None
+        inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        if len(inputs) != 1 or len(outputs) != 1 or inputs[0].shape[1] != card.get("channels_in"):
+            raise DataError(f"{path}: its graph is not the one its card describes")
+        self._in, self._out = inputs[0].name, outputs[0].name
+        self.stride = int(card["stride"])
+        self.channels_out = int(card["channels_out"])
+        self.queue = resolve_queue(queue)
+        self.stats: dict[str, float] = {}
+        self._buffers: dict[tuple[int, int], tuple[cla.Array, np.ndarray]] = {}
+
+    def __repr__(self) -> str:
+        return f"PostNetwork({self.name!r}, {self.precision}, {self.session.get_providers()[0]})"
+
+    def _buffers_for(self, hp: int, wp: int) -> tuple[cla.Array, np.ndarray]:
+        """The host-visible input buffer and the host output array of a size
+        (kept for the next frame of the same size)."""
+        key = (hp, wp)
+        if key not in self._buffers:
+            self._buffers.clear()
+            shape = (1, 5, hp, wp)
+            flags = cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR
+            data = cl.Buffer(self.queue.context, flags, int(np.prod(shape)) * 4)
+            planes = cla.Array(self.queue, shape, np.float32, data=data)
+            self._buffers[key] = planes, np.empty((1, self.channels_out, hp, wp), np.float32)
+        return self._buffers[key]
+
+    def _size(self, image: Any) -> tuple[int, int]:
+        """(H, W) of an input the network takes; TypeError/ValueError/DataError else."""
+        if self.name == "infill":
+            if not all(hasattr(image, k) for k in ("rgba", "hit", "active")):
+                raise TypeError(f"image: the infill network takes an IsoImage, got {type(image).__name__}")
+            shape = tuple(np.shape(image.rgba))
+            if len(shape) != 3 or shape[2] != 4:
+                raise ValueError(f"rgba: expected (H, W, 4), got shape {shape}")
+        else:
+            rgbda = getattr(image, "rgbda", image)
+            if not isinstance(rgbda, (np.ndarray, cla.Array)):
+                raise TypeError(
+                    f"image: the lidar network takes a FilteredImage or its rgbda, got {type(image).__name__}"
+                )
+            shape = tuple(rgbda.shape)
+            if len(shape) != 3 or shape[2] != 5:
+                raise ValueError(f"rgbda: expected (H, W, 5) [r, g, b, depth, alpha], got shape {shape}")
+        h, w = int(shape[0]), int(shape[1])
+        if h == 0 or w == 0:
+            raise DataError(f"image: empty ({h} x {w} pixels)")
+        if max(h, w) > MAX_SIDE or h * w > MAX_PIXELS:
+            raise DataError(
+                f"image: {w} x {h} pixels is beyond the networks' maximum "
+                f"({MAX_SIDE} a side, {MAX_PIXELS} pixels)"
+            )
+        return h, w
+
+    def infer(self, image: Any) -> np.ndarray:
+        """The network's raw output for `image`: (1, C, Hp, Wp) float32 (C: 4
+        for infill, 3 for lidar), padded to the stride."""
+        t0 = time.perf_counter()
+        h, w = self._hw = self._size(image)
+        planes, output = self._buffers_for(*padded_shape(h, w, self.stride))
+        q, s = self.queue, self.stride
+        if self.name == "infill":
+            pack_iso(image.rgba, image.hit, image.active, stride=s, out=planes, queue=q)
+        else:
+            pack_rgbda(getattr(image, "rgbda", image), stride=s, out=planes, queue=q)
+        q.finish()
+        t1 = time.perf_counter()
+        mapped, _ = cl.enqueue_map_buffer(
+            q, planes.base_data, cl.map_flags.READ, 0, planes.shape, np.float32, is_blocking=True
+        )
+        try:
+            io = self.session.io_binding()
+            io.bind_input(self._in, "cpu", 0, np.float32, list(planes.shape), mapped.ctypes.data)
+            io.bind_output(self._out, "cpu", 0, np.float32, list(output.shape), output.ctypes.data)
+            self.session.run_with_iobinding(io)
+        finally:
+            mapped.base.release()
+        self.stats = {"pack": t1 - t0, "inference": time.perf_counter() - t1}
+        return output
+
+    def __call__(self, image: Any) -> np.ndarray:
+        """(H, W, 4) uint8 RGBA: the network's picture of `image`."""
+        output = self.infer(image)
+        t0 = time.perf_counter()
+        h, w = self._hw
+        rgba = unpack_rgba8(output, h, w, queue=self.queue)
+        self.stats["unpack"] = time.perf_counter() - t0
+        return np.asarray(rgba)
+
+
+def load(
+    name: str,
+    precision: str = "fp32",
+    providers: list[str] | None = None,
+    *,
+    directory: str | os.PathLike | None = None,
+    threads: int | None = None,
+    queue: cl.CommandQueue | None = None,
+) -> PostNetwork:
+    """The shipped network `name` ("infill", "lidar") at `precision`
+    ("fp32", "fp16", "int8"), on onnxruntime with `providers` (default: CUDA's
+    when present, then the CPU's). directory: where NAME.json and its files
+    are (default: the models shipped in clvis/post/models; a `clvis train
+    --out` folder works too); threads: onnxruntime's intra-op threads
+    (default: one per core)."""
+    if name not in NAMES:
+        raise ValueError(f"name: expected one of {NAMES}, got {name!r}")
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision: expected one of {PRECISIONS}, got {precision!r}")
+    d = MODELS if directory is None else Path(directory)
+    return PostNetwork(name, precision, d, providers, threads, queue)

@@ -81,14 +81,15 @@ test | bench)
     fi
     if [ "$cmd" = bench ]; then
         case "${1:-}" in
-        primitives | raster | gauss | iso)
+        primitives | raster | gauss | iso | post)
             exec .venv-test/bin/clvis bench "$@"
             ;;
         esac
         .venv-test/bin/clvis bench primitives "$@"
         .venv-test/bin/clvis bench raster "$@"
         .venv-test/bin/clvis bench gauss "$@"
-        exec .venv-test/bin/clvis bench iso "$@"
+        .venv-test/bin/clvis bench iso "$@"
+        exec .venv-test/bin/clvis bench post "$@"
     fi
     # CLVIS_LARGE=1: the 2^27-element tests too (~1.5 min, ~8 GB)
     CLVIS_LARGE=${CLVIS_LARGE:-1} CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001} \

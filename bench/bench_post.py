@@ -1,0 +1,155 @@
+"""Benchmarks of the post family: the shipped networks on onnxruntime's CPU
+provider (one intra-op thread per core, spinning off: clvis.post.load's
+settings) at fp32, fp16 and int8, per frame through clvis.post's pack ->
+IO binding -> unpack path, against torch eager on the same input, push-pull
+(the classical baseline) and the slow path each network replaces, in one
+session.
+
+- infill[...]: an IsoImage of a held-out gyroid volume (64^3) stopped at 85 %
+  (no speculation); the slow path is IsoRenderer.render to 100 % (with
+  speculation, cold cache), and "render to 85 % + network" is the fast path
+  whole.
+- lidar[...]: the depth-filtered render of a sparse scan of the terrain
+  (the held-out scene); the slow path is the dense render (3 M points, 3 x 3
+  pixel points).
+
+Sizes 512x512, 960x720 and 1280x720 (CLVIS_BENCH_SCALE shrinks them).
+
+    clvis bench post
+"""
+
+import os
+
+import numpy as np
+import pytest
+from benchutil import run, scaled
+
+from clvis import datasets, post
+from clvis.errors import DataError
+from clvis.post import data
+
+SIDE = min(1.0, scaled(1 << 20) / (1 << 20)) ** 0.5
+SIZES = {
+    k: (max(64, round(w * SIDE)), max(64, round(h * SIDE)))
+    for k, (w, h) in {"512x512": (512, 512), "960x720": (960, 720), "1280x720": (1280, 720)}.items()
+}
+IMPLS = ("fp32", "fp16", "int8", "torch", "pushpull", "slow")
+_cache: dict = {}
+
+
+def _iso(queue, w, h):
+    key = ("iso", w, h)
+    if key not in _cache:
+        from clvis.iso import IsoRenderer
+
+        rng = np.random.default_rng(20)
+        n = max(16, round(64 * SIDE))
+        vol, iso = data.procedural_volume("gyroid", rng, n)
+        r = IsoRenderer(vol, spacing=(2 / (n - 1),) * 3, origin=(-1, -1, -1), queue=queue)
+        cam = data.orbit_camera(rng, (-1, -1, -1), (1, 1, 1), w / h, (0.5, 0.7))
+        img = r.render(cam, w, h, iso, completion=0.85, speculation=False)
+        _cache[key] = (r, cam, iso, img)
+    return _cache[key]
+
+
+def _lidar(queue, w, h):
+    key = ("lidar", w, h)
+    if key not in _cache:
+        from clvis.raster import Rasterizer, depth_filter
+
+        n = max(20_000, round(3_000_000 * SIDE**2))
+        cloud = datasets.terrain(n, 31)
+        pos, col = cloud["positions"], cloud["colors"]
+        keep = np.random.default_rng(1).random(n) < 0.08
+        dense = Rasterizer(pos, colors=col, queue=queue)
+        scan = Rasterizer(pos[keep], colors=col[keep], queue=queue)
+        from clvis import Camera
+
+        cam = Camera.look_at((-150, -200, 160), (0, 0, 0), (0, 0, 1), 50, w / h, 1.0, 2000)
+        f = depth_filter(scan.render(cam, w, h, planes=[]))
+        _cache[key] = (dense, scan, cam, f)
+    return _cache[key]
+
+
+def _torch_net(name):
+    """The shipped architecture in torch eager (its weights do not change
+    the time: random ones)."""
+    torch = pytest.importorskip("torch")
+    from clvis.post import nets
+
+    if ("torch", name) not in _cache:
+        torch.set_num_threads(os.cpu_count() or 1)
+        _cache[("torch", name)] = nets.build(name, **post.load(name).card["architecture"]).eval()
+    return _cache[("torch", name)]
+
+
+CASES = [(n, s, i) for n in post.NAMES for s in SIZES for i in IMPLS]
+
+
+@pytest.mark.parametrize("name,size,impl", CASES, ids=[f"{n}-{s}-{i}" for n, s, i in CASES])
+def test_post(benchmark, queue, name, size, impl):
+    w, h = SIZES[size]
+    op = f"{name}[{size}]"
+    if name == "infill":
+        r, cam, iso, image = _iso(queue, w, h)
+    else:
+        dense, scan, cam, image = _lidar(queue, w, h)
+    if impl in ("fp32", "fp16", "int8"):
+        try:
+            net = post.load(name, impl, queue=queue)
+        except DataError:  # int8 not shipped (it lost more than 0.3 dB)
+            pytest.skip(f"{name}: no {impl} variant shipped (see its card)")
+        net(image)
+        run(
+            benchmark,
+            lambda: net(image),
+            op=op,
+            impl=f"onnxruntime {impl}",
+            role="clvis" if impl == "fp32" else "clvis-host",
+            n=w * h,
+            nbytes=w * h * (5 * 4 + 4),
+            rounds=5,
+            stages=dict(net.stats),
+        )
+    elif impl == "torch":
+        torch = pytest.importorskip("torch")
+        net = _torch_net(name)
+        x = torch.rand(1, 5, -(-h // net.stride) * net.stride, -(-w // net.stride) * net.stride)
+
+        def eager():
+            with torch.no_grad():
+                return net(x)
+
+        run(benchmark, eager, op=op, impl="torch eager (fp32)", role="peer", n=w * h, nbytes=w * h * 24, rounds=3)
+    elif impl == "pushpull":
+        if name == "infill":
+            known = np.where((image.hit & ~image.active)[..., None], image.rgba, 0).astype(np.float32)
+            valid = ~image.active
+        else:
+            known = np.ascontiguousarray(image.rgbda[..., :3])
+            valid = image.rgbda[..., 4] > 0
+        run(
+            benchmark,
+            lambda: post.pushpull(known, valid, queue=queue),
+            op=op,
+            impl="push-pull (OpenCL)",
+            role="peer",
+            n=w * h,
+            nbytes=known.nbytes * 2,
+            rounds=5,
+        )
+    else:
+        if name == "infill":
+
+            def slow():
+                r.reset_cache()
+                return r.render(cam, w, h, iso)
+
+            impl_name = "IsoRenderer to 100 % (the slow path)"
+        else:
+
+            def slow():
+                return dense.render(cam, w, h, point_size=3, planes=[])
+
+            impl_name = "dense render (the slow path)"
+        run(benchmark, slow, op=op, impl=impl_name, role="peer", n=w * h, nbytes=w * h * 24, rounds=3)

@@ -1,0 +1,59 @@
+"""clvis train's smoke run (a few steps on tiny frames, through the CLI) and
+the training pairs' rules."""
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch", reason="the train extra (torch==2.13.0) is part of the test venv")
+
+from clvis import post  # noqa: E402
+from clvis.cli import main  # noqa: E402
+from clvis.post import data, train  # noqa: E402
+
+
+@pytest.mark.parametrize("name", post.NAMES)
+def test_train_smoke_through_the_cli(tmp_path, name):
+    rc = main(
+        ["train", name, "--steps", "3", "--size", "64", "--frames", "1", "--frame-size", "96x64",
+         "--out", str(tmp_path), "--quiet"]
+    )
+    assert rc == 0
+    card = json.loads((tmp_path / f"{name}.json").read_text())
+    assert card["training"]["steps"] == 3 and card["files"]["fp32"]["max_abs_vs_torch"] < 1e-4
+    assert train.sha256(tmp_path / f"{name}.onnx") == card["files"]["fp32"]["sha256"]
+    net = post.load(name, directory=tmp_path)  # the folder clvis train wrote loads as shipped ones do
+    assert net.card["seed"] == 0
+
+
+def test_train_rejects_crops_larger_than_frames(tmp_path, capsys):
+    assert main(["train", "infill", "--size", "512", "--frame-size", "96x64", "--out", str(tmp_path)]) == 2
+    assert "larger than the frames" in capsys.readouterr().err
+
+
+def test_iso_frames_are_deterministic_and_consistent():
+    a = data.iso_frames(("waves",), 1, 3, 64, 48, views=1, n=24)[0]
+    b = data.iso_frames(("waves",), 1, 3, 64, 48, views=1, n=24)[0]
+    np.testing.assert_array_equal(a.rgb, b.rgb)
+    for c in data.COMPLETIONS:
+        np.testing.assert_array_equal(a.active[c], b.active[c])
+        rgba, hit, active = a.planes(c)
+        assert not (hit & active).any() and (rgba[active] == 0).all()
+    # fewer rays run at higher completion
+    assert a.active[0.85].sum() >= a.active[0.9].sum() >= a.active[0.95].sum()
+
+
+def test_lidar_pairs_are_registered():
+    f = data.lidar_frames(("town",), 1, 4, 80, 60, views=1, dense_points=60_000)[0]
+    kept = f.rgbda[..., 4] > 0
+    assert kept.any()
+    # a kept scan point is a point of the dense cloud: the dense render
+    # covers its pixel
+    assert (f.rgb[kept].sum(-1) > 0).mean() > 0.95
+
+
+@pytest.mark.parametrize("kind", data.TRAIN_VOLUMES + data.HELD_OUT_VOLUMES)
+def test_procedural_volumes_have_a_surface(kind):
+    v, iso = data.procedural_volume(kind, np.random.default_rng(0), 16)
+    assert v.shape == (16, 16, 16) and v.dtype == np.float32 and v.min() < iso < v.max()

@@ -26,7 +26,7 @@ from benchutil import run, scaled
 
 from clvis import datasets, post
 from clvis.errors import DataError
-from clvis.post import data
+from clvis.training import data
 
 SIDE = min(1.0, scaled(1 << 20) / (1 << 20)) ** 0.5
 SIZES = {
@@ -120,7 +120,16 @@ def test_post(benchmark, queue, name, size, impl):
             with torch.no_grad():
                 return net(x)
 
-        run(benchmark, eager, op=op, impl="torch eager (fp32)", role="peer", n=w * h, nbytes=w * h * 24, rounds=3)
+        run(
+            benchmark,
+            eager,
+            op=op,
+            impl="torch eager (fp32)",
+            role="peer",
+            n=w * h,
+            nbytes=w * h * 24,
+            rounds=3,
+        )
     elif impl == "pushpull":
         if name == "infill":
             known = np.where((image.hit & ~image.active)[..., None], image.rgba, 0).astype(np.float32)

@@ -24,7 +24,15 @@ from .._version import __version__
 from . import bench, demo, gauss, info, iso, raster, train
 from ._common import Parser, glue_values, run
 
-_COMMANDS = {"info": info, "demo": demo, "render": raster, "iso": iso, "gauss": gauss, "bench": bench, "train": train}
+_COMMANDS = {
+    "info": info,
+    "demo": demo,
+    "render": raster,
+    "iso": iso,
+    "gauss": gauss,
+    "bench": bench,
+    "train": train,
+}
 _EPILOG = """\
 A bad argument or a file clvis cannot use is one line on stderr and exit
 status 2 (CLVIS_DEBUG=1: the traceback instead). `clvis COMMAND --help`

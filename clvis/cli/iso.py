@@ -286,8 +286,8 @@ def _run(args) -> int:
     if infilled is not None:
         ns = net.stats
         print(
-            f"  in-fill     {net!r}: pack {ns['pack'] * 1e3:.1f} ms, inference {ns['inference'] * 1e3:.1f} ms, "
-            f"unpack {ns['unpack'] * 1e3:.1f} ms"
+            f"  in-fill     {net!r}: pack {ns['pack'] * 1e3:.1f} ms, "
+            f"inference {ns['inference'] * 1e3:.1f} ms, unpack {ns['unpack'] * 1e3:.1f} ms"
         )
         print(f"wrote {path} and {infilled}")
         return 0

@@ -142,7 +142,18 @@ def _raster_fields(cloud, attribute) -> dict:
 
 
 def _render_panels(
-    raster, cloud, camera, width, height, attribute, colormap, soft_z, levels, progress, point_size=1, post=None
+    raster,
+    cloud,
+    camera,
+    width,
+    height,
+    attribute,
+    colormap,
+    soft_z,
+    levels,
+    progress,
+    point_size=1,
+    post=None,
 ) -> _Rendered:
     """Render one view; the G-buffers and the images a person looks at."""
     from .. import images
@@ -296,7 +307,9 @@ def _render(args, progress) -> int:
         from .. import post
 
         if not levels:
-            raise CliError(f"--post {args.post}: the network takes the depth-filtered image; add --depth-filter")
+            raise CliError(
+                f"--post {args.post}: the network takes the depth-filtered image; add --depth-filter"
+            )
         net = post.load(args.post, queue=q)
     with progress.stage("uploading + Morton order"):
         raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)

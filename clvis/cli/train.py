@@ -56,10 +56,14 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
 
 def cmd(args: argparse.Namespace) -> int:
     try:
-        from ..post import train
+        from ..training import train
     except ImportError as e:  # torch, onnx or pytorch-msssim missing
         raise CliError(f"clvis train needs the train extra (pip install 'clvis[train]'): {e}") from None
-    log = (lambda s: None) if args.quiet else (lambda s: print(f"clvis train: {s}", file=sys.stderr, flush=True))
+    log = (
+        (lambda s: None)
+        if args.quiet
+        else (lambda s: print(f"clvis train: {s}", file=sys.stderr, flush=True))
+    )
     fw, fh = args.frame_size or train.SPECS[args.model]["frame_size"]
     if args.size > min(fw, fh):
         raise CliError(f"--size {args.size}: larger than the frames ({fw}x{fh})")

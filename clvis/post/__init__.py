@@ -18,4 +18,9 @@ __all__ = [
     "PRECISIONS",
     "PostNetwork",
     "load",
-    "pack_iso", "pack_rgbda", "padded_shape", "pushpull", "unpack_rgba8"]
+    "pack_iso",
+    "pack_rgbda",
+    "padded_shape",
+    "pushpull",
+    "unpack_rgba8",
+]

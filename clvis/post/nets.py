@@ -88,7 +88,7 @@ class _UNet(nn.Module):
         self.mid = _Block(c, mid, bn, convs)
         self.dec = nn.ModuleList()
         c = mid
-        for w, skip in zip(dec, reversed(enc)):
+        for w, skip in zip(dec, reversed(enc), strict=True):
             self.dec.append(_Block(c + skip, w, bn, convs))
             c = w
         self.out = nn.Conv2d(c, cout, 1)
@@ -101,7 +101,7 @@ class _UNet(nn.Module):
             skips.append(x)
             x = self.pool(x)
         x = self.mid(x)
-        for block, skip in zip(self.dec, reversed(skips)):
+        for block, skip in zip(self.dec, reversed(skips), strict=True):
             if self.up_mode == "bilinear":
                 x = F.interpolate(x, scale_factor=2.0, mode="bilinear", align_corners=False)
             else:

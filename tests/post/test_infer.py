@@ -11,7 +11,8 @@ import pytest
 
 from clvis import post
 from clvis.errors import DataError
-from clvis.post import data, infer, train
+from clvis.post import infer
+from clvis.training import data, train
 
 SHIPPED = sorted(p.stem for p in infer.MODELS.glob("*.json"))
 
@@ -87,8 +88,9 @@ def test_infill_beats_pushpull_on_held_out_volume(iso_pair):
     target = np.where(full.hit[..., None], full.rgba[..., :3], 0).astype(np.float32)
     out = post.load("infill")(part)[..., :3] / np.float32(255)
     known = np.where((part.hit & ~part.active)[..., None], part.rgba[..., :3], 0).astype(np.float32)
-    pp = post.pushpull(np.concatenate([known, (part.hit & ~part.active)[..., None].astype(np.float32)], 2),
-                       ~part.active)[..., :3]
+    pp = post.pushpull(
+        np.concatenate([known, (part.hit & ~part.active)[..., None].astype(np.float32)], 2), ~part.active
+    )[..., :3]
     net_m, pp_m = train.metrics(out, target), train.metrics(pp, target)
     assert net_m["psnr"] > pp_m["psnr"] and net_m["ssim"] > 0.9
 

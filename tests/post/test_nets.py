@@ -11,8 +11,9 @@ import pytest
 torch = pytest.importorskip("torch", reason="the train extra (torch==2.13.0) is part of the test venv")
 ort = pytest.importorskip("onnxruntime")
 
-from clvis.post import data, nets, train  # noqa: E402
+from clvis.post import nets  # noqa: E402
 from clvis.post.pack import pack_iso, pack_rgbda  # noqa: E402
+from clvis.training import data, train  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -38,9 +39,11 @@ def exported(request, tmp_path_factory, real_inputs):
                     m.running_mean.uniform_(-0.2, 0.2)
                     m.running_var.uniform_(0.5, 2.0)
     x, frame = real_inputs[name]
-    y = frame.rgb.transpose(2, 0, 1) if name == "lidar" else np.concatenate(
-        [frame.rgb, frame.hit[..., None]], 2
-    ).transpose(2, 0, 1)
+    y = (
+        frame.rgb.transpose(2, 0, 1)
+        if name == "lidar"
+        else np.concatenate([frame.rgb, frame.hit[..., None]], 2).transpose(2, 0, 1)
+    )
     out = tmp_path_factory.mktemp(name)
     files = train.export(net, name, out, [x[0]], {None: [(x[0], np.ascontiguousarray(y, np.float32))]}, print)
     return name, net, out, files

@@ -10,14 +10,27 @@ pytest.importorskip("torch", reason="the train extra (torch==2.13.0) is part of 
 
 from clvis import post  # noqa: E402
 from clvis.cli import main  # noqa: E402
-from clvis.post import data, train  # noqa: E402
+from clvis.training import data, train  # noqa: E402
 
 
 @pytest.mark.parametrize("name", post.NAMES)
 def test_train_smoke_through_the_cli(tmp_path, name):
     rc = main(
-        ["train", name, "--steps", "3", "--size", "64", "--frames", "1", "--frame-size", "96x64",
-         "--out", str(tmp_path), "--quiet"]
+        [
+            "train",
+            name,
+            "--steps",
+            "3",
+            "--size",
+            "64",
+            "--frames",
+            "1",
+            "--frame-size",
+            "96x64",
+            "--out",
+            str(tmp_path),
+            "--quiet",
+        ]
     )
     assert rc == 0
     card = json.loads((tmp_path / f"{name}.json").read_text())

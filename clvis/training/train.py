@@ -1,5 +1,5 @@
 """``clvis train``: make the training pairs with clvis's renderers
-(clvis.post.data, deterministic seeds), train a network of clvis.post.nets
+(clvis.training.data, deterministic seeds), train a network of clvis.post.nets
 with PyTorch on random crops, export it to ONNX (opset 17, dynamic height and
 width), make its fp16 and int8 variants, and write its model card.
 
@@ -29,8 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from ..post.names import NAMES
 from . import data as _data
-from .names import NAMES
 
 # what each network trains on by default (the release runs); the CLI's
 # --frames and --frame-size shrink the data for smoke runs
@@ -86,7 +86,7 @@ def _pack(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(input (5, Hp, Wp), target (C, H, W)) float32 of one frame, through
     the pack kernels the inference uses (padded to a multiple of `stride`)."""
-    from .pack import pack_iso, pack_rgbda
+    from ..post.pack import pack_iso, pack_rgbda
 
     if name == "infill":
         x = pack_iso(*frame.planes(completion), stride=stride)[0]
@@ -145,7 +145,7 @@ def _rgb(nchw: np.ndarray) -> np.ndarray:
 def _baselines(name: str, x: np.ndarray, y: np.ndarray) -> dict[str, dict[str, float]]:
     """Metrics of the raw input and of push-pull on it, against the target
     (x cropped to y's size)."""
-    from .pushpull import pushpull
+    from ..post.pushpull import pushpull
 
     x = np.ascontiguousarray(x[:, : y.shape[1], : y.shape[2]])
     if name == "infill":
@@ -196,7 +196,9 @@ def _batch(pairs, n: int, crop: int, rng: np.random.Generator):
         cy, cx = int(rng.integers(0, h - crop + 1)), int(rng.integers(0, w - crop + 1))
         xs.append(x[:, cy : cy + crop, cx : cx + crop])
         ys.append(y[:, cy : cy + crop, cx : cx + crop])
-    return torch.from_numpy(np.stack(xs).astype(np.float32)), torch.from_numpy(np.stack(ys).astype(np.float32))
+    return torch.from_numpy(np.stack(xs).astype(np.float32)), torch.from_numpy(
+        np.stack(ys).astype(np.float32)
+    )
 
 
 def train(
@@ -217,7 +219,7 @@ def train(
     returns the card."""
     import torch
 
-    from . import nets
+    from ..post import nets
 
     if name not in SPECS:
         raise ValueError(f"model: expected one of {NAMES}, got {name!r}")
@@ -349,7 +351,14 @@ def _versions() -> dict[str, str]:
 # export
 
 
-def export(net, name: str, out: Path, calibration: list[np.ndarray], val_pairs: dict, log) -> dict:
+def export(
+    net: Any,
+    name: str,
+    out: Path,
+    calibration: list[np.ndarray],
+    val_pairs: dict,
+    log: Callable[[str], None],
+) -> dict:
     """NAME.onnx (fp32), NAME.fp16.onnx and, where it loses at most
     INT8_MAX_LOSS_DB of held-out PSNR, NAME.int8.onnx; their files, sizes,
     sha256 and (fp16, int8) held-out PSNR change against fp32."""
@@ -374,7 +383,9 @@ def export(net, name: str, out: Path, calibration: list[np.ndarray], val_pairs: 
     x = calibration[0][None]
     with torch.no_grad():
         ref = net(torch.from_numpy(x)).numpy()
-    files: dict[str, Any] = {"fp32": {"file": fp32.name, "max_abs_vs_torch": float(np.abs(_run(fp32, x) - ref).max())}}
+    files: dict[str, Any] = {
+        "fp32": {"file": fp32.name, "max_abs_vs_torch": float(np.abs(_run(fp32, x) - ref).max())}
+    }
 
     fp16 = out / f"{name}.fp16.onnx"
     _to_fp16(fp32, fp16)

@@ -103,7 +103,11 @@ def procedural_volume(kind: str, rng: np.random.Generator, n: int = 64) -> tuple
 
 
 def orbit_camera(
-    rng: np.random.Generator, lo: Sequence[float], hi: Sequence[float], aspect: float, zoom: tuple[float, float]
+    rng: np.random.Generator,
+    lo: Sequence[float],
+    hi: Sequence[float],
+    aspect: float,
+    zoom: tuple[float, float],
 ) -> Camera:
     """A camera on a random orbit position around the box [lo, hi], looking at
     a point near its centre, at zoom x the distance that frames its bounding
@@ -185,7 +189,9 @@ def iso_frames(
                 # a finished ray's pixel is the complete render's
                 assert np.array_equal(s.hit[done], img.hit[done])  # type: ignore[attr-defined]
                 active[c] = s.active.copy()  # type: ignore[attr-defined]
-            frames.append(IsoFrame(rgb, img.hit.copy(), active, seconds, f"{kind} #{i} view {v} iso {iso:.4g}"))
+            frames.append(
+                IsoFrame(rgb, img.hit.copy(), active, seconds, f"{kind} #{i} view {v} iso {iso:.4g}")
+            )
             if progress is not None:
                 progress(f"iso frame {len(frames)}/{count * views}")
     return frames
@@ -230,7 +236,7 @@ def town(n: int, seed: int) -> dict:
     x, y = rng.uniform(-100, 100, n_top), rng.uniform(-100, 100, n_top)
     z = ground(x, y)
     col = _ramp(np.clip((z + 8) / 50, 0, 1))
-    for (tx, ty, tr), th in zip(trees, rng.uniform(6, 14, nt)):
+    for (tx, ty, tr), th in zip(trees, rng.uniform(6, 14, nt), strict=True):
         d2 = (x - tx) ** 2 + (y - ty) ** 2
         m = d2 < tr * tr
         z[m] = ground(np.array(tx), np.array(ty)) + th + 2 * np.sqrt(1 - d2[m] / (tr * tr))
@@ -309,7 +315,9 @@ def lidar_frames(
             g = dense.render(cam, width, height, point_size=3, planes=[])
             rgb = np.where((g.index != 0xFFFFFFFF)[..., None], g.rgba[..., :3] / np.float32(255), 0)
             f = depth_filter(scan.render(cam, width, height, planes=[]))
-            frames.append(LidarFrame(np.asarray(f.rgbda), rgb.astype(np.float32), f"{kind} seed {s} view {v}"))
+            frames.append(
+                LidarFrame(np.asarray(f.rgbda), rgb.astype(np.float32), f"{kind} seed {s} view {v}")
+            )
             if progress is not None:
                 progress(f"lidar frame {len(frames)}/{count * views}")
     return frames

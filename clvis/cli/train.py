@@ -54,6 +54,17 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     return p
 
 
+def _command(args: argparse.Namespace) -> list[str]:
+    """The command line that repeats this run (for the model card)."""
+    c = ["clvis", "train", args.model, "--steps", str(args.steps), "--size", str(args.size)]
+    c += ["--out", str(args.out), "--seed", str(args.seed)]
+    if args.frames is not None:
+        c += ["--frames", str(args.frames)]
+    if args.frame_size is not None:
+        c += ["--frame-size", f"{args.frame_size[0]}x{args.frame_size[1]}"]
+    return c
+
+
 def cmd(args: argparse.Namespace) -> int:
     try:
         from ..training import train
@@ -75,7 +86,7 @@ def cmd(args: argparse.Namespace) -> int:
         seed=args.seed,
         frames=args.frames,
         frame_size=args.frame_size,
-        command=["clvis", "train", *sys.argv[sys.argv.index("train") + 1 :]] if "train" in sys.argv else None,
+        command=_command(args),
         log=log,
     )
     print(f"{args.out}/{card['name']}.onnx: held-out {card['held_out']}")

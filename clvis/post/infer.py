@@ -50,7 +50,7 @@ from ..errors import DataError
 from .names import NAMES
 from .pack import pack_iso, pack_rgbda, padded_shape, unpack_rgba8
 
-__all__ = ["MAX_PIXELS", "MAX_SIDE", "MODELS", "PRECISIONS", "PostNetwork", "load"]
+__all__ = ["MAX_PIXELS", "MAX_SIDE", "MODELS", "PRECISIONS", "PostNetwork", "load", "sha256"]
 
 MODELS = Path(__file__).resolve().parent / "models"
 PRECISIONS = ("fp32", "fp16", "int8")
@@ -58,7 +58,8 @@ MAX_SIDE = 8192
 MAX_PIXELS = 2**25
 
 
-def _sha256(path: Path) -> str:
+def sha256(path: str | os.PathLike) -> str:
+    """The file's sha256, hex: what a model card records and load checks."""
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):
@@ -120,17 +121,16 @@ class PostNetwork:
         self.path = path = directory / entry["file"]
         if not path.is_file():
             raise DataError(f"{path}: model file missing")
-        if _sha256(path) != entry.get("sha256"):
+        if sha256(path) != entry.get("sha256"):
             raise DataError(f"{path}: does not match its model card's sha256 (changed or corrupt)")
         so = ort.SessionOptions()
         so.intra_op_num_threads = threads if threads is not None else (os.cpu_count() or 1)
         so.inter_op_num_threads = 1
         so.add_session_config_entry("session.intra_op.allow_spinning", "0")
         so.add_session_config_entry("session.inter_op.allow_spinning", "0")
+        chosen = _providers(providers)
         try:
-            self.session = ort.InferenceSession(str(path), so, providers=_providers(providers))
-        except (ValueError, TypeError):
-            raise
+            self.session = ort.InferenceSession(str(path), so, providers=chosen)
         except Exception as e:  # onnxruntime's own errors: a corrupt or foreign graph
             raise DataError(f"{path}: onnxruntime cannot load it ({str(e).splitlines()[0]})") from None
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
@@ -186,18 +186,18 @@ class PostNetwork:
             )
         return h, w
 
-    def infer(self, image: Any) -> np.ndarray:
-        """The network's raw output for `image`: (1, C, Hp, Wp) float32 (C: 4
-        for infill, 3 for lidar), padded to the stride."""
+    def _run(self, image: Any) -> tuple[np.ndarray, int, int]:
+        """(output, H, W): the network's output in this object's host array
+        (reused by the next frame of the same size) and the image's size."""
         t0 = time.perf_counter()
-        h, w = self._hw = self._size(image)
+        h, w = self._size(image)
         planes, output = self._buffers_for(*padded_shape(h, w, self.stride))
         q, s = self.queue, self.stride
+        # each pack reads its input check back, so the kernel is done on return
         if self.name == "infill":
             pack_iso(image.rgba, image.hit, image.active, stride=s, out=planes, queue=q)
         else:
             pack_rgbda(getattr(image, "rgbda", image), stride=s, out=planes, queue=q)
-        q.finish()
         t1 = time.perf_counter()
         mapped, _ = cl.enqueue_map_buffer(
             q, planes.base_data, cl.map_flags.READ, 0, planes.shape, np.float32, is_blocking=True
@@ -210,13 +210,17 @@ class PostNetwork:
         finally:
             mapped.base.release()
         self.stats = {"pack": t1 - t0, "inference": time.perf_counter() - t1}
-        return output
+        return output, h, w
+
+    def infer(self, image: Any) -> np.ndarray:
+        """The network's raw output for `image`: (1, C, Hp, Wp) float32 (C: 4
+        for infill, 3 for lidar), padded to the stride."""
+        return self._run(image)[0].copy()
 
     def __call__(self, image: Any) -> np.ndarray:
         """(H, W, 4) uint8 RGBA: the network's picture of `image`."""
-        output = self.infer(image)
+        output, h, w = self._run(image)
         t0 = time.perf_counter()
-        h, w = self._hw
         rgba = unpack_rgba8(output, h, w, queue=self.queue)
         self.stats["unpack"] = time.perf_counter() - t0
         return np.asarray(rgba)

@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -171,7 +172,7 @@ def iso_frames(
         r = IsoRenderer(vol, rate=8, spacing=(step, step, step), origin=(-1.0, -1.0, -1.0))
         for v in range(views):
             cam = orbit_camera(rng, (-1, -1, -1), (1, 1, 1), width / height, (0.45, 0.95))
-            snaps: dict[float, object] = {}
+            snaps: dict[float, Any] = {}
             seconds: dict[float, float] = {}
             img = None
             for img in r.passes(cam, width, height, iso, speculation=False):
@@ -185,10 +186,10 @@ def iso_frames(
             active = {}
             for c in completions:
                 s = snaps.get(c, img)
-                done = ~s.active  # type: ignore[attr-defined]
+                done = ~s.active
                 # a finished ray's pixel is the complete render's
-                assert np.array_equal(s.hit[done], img.hit[done])  # type: ignore[attr-defined]
-                active[c] = s.active.copy()  # type: ignore[attr-defined]
+                assert np.array_equal(s.hit[done], img.hit[done])
+                active[c] = s.active.copy()
             frames.append(
                 IsoFrame(rgb, img.hit.copy(), active, seconds, f"{kind} #{i} view {v} iso {iso:.4g}")
             )

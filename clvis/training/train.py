@@ -15,7 +15,6 @@ Needs the ``train`` extra (torch==2.13.0, onnx, pytorch-msssim).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -29,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from ..post.infer import sha256
 from ..post.names import NAMES
 from . import data as _data
 
@@ -58,14 +58,6 @@ SPECS: dict[str, dict[str, Any]] = {
 }
 OPSET = 17
 INT8_MAX_LOSS_DB = 0.3
-
-
-def sha256(path: str | os.PathLike) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 # ---------------------------------------------------------------------------

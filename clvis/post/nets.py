@@ -33,7 +33,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-__all__ = ["InfillWNet", "RgbdaUNet", "build", "count_parameters"]
+__all__ = ["InfillWNet", "PushPull", "RgbdaUNet", "build", "count_parameters"]
 
 
 def _conv(cin: int, cout: int, bn: bool) -> list[nn.Module]:
@@ -110,45 +110,100 @@ class _UNet(nn.Module):
         return self.out(x)
 
 
+class PushPull(nn.Module):
+    """Push-pull hole fill as graph operations (the classical baseline of
+    clvis.post.pushpull, inside the networks): ``levels`` halvings by 2x2
+    weighted averages, the coarsest level's holes filled with the weighted
+    mean of the whole image, then bilinear 2x up-sampling blended back with
+    each level's weight. Height and width must be multiples of
+    2 ** ``levels``. Exact 2x operations only, so the exported graph keeps
+    dynamic height and width without shape arithmetic. It differs from the
+    OpenCL kernel (which halves down to 1 x 1) only in holes wider than
+    2 ** ``levels`` pixels."""
+
+    def __init__(self, levels: int) -> None:
+        super().__init__()
+        self.levels = levels
+
+    def forward(self, colour: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+        eps = 1e-12
+        c, w = colour * weight, weight
+        pyramid = []
+        for _ in range(self.levels):
+            pyramid.append((c, w))
+            wsum = F.avg_pool2d(w, 2)
+            c = F.avg_pool2d(c * w, 2) / torch.clamp(wsum, min=eps)
+            w = torch.clamp(wsum * 4.0, max=1.0)
+        total = torch.sum(w, dim=(2, 3), keepdim=True)
+        mean = torch.sum(c * w, dim=(2, 3), keepdim=True) / torch.clamp(total, min=eps)
+        c = w * c + (1.0 - w) * mean
+        for ck, wk in reversed(pyramid):
+            e = F.interpolate(c, scale_factor=2.0, mode="bilinear", align_corners=False)
+            c = wk * ck + (1.0 - wk) * e
+        return c
+
+
+def _zero_last(unet: _UNet) -> _UNet:
+    """Start a residual U-Net at zero correction."""
+    nn.init.zeros_(unet.out.weight)
+    nn.init.zeros_(unet.out.bias)
+    return unet
+
+
 class InfillWNet(nn.Module):
     """In-fill of a partial isosurface image: 5 planes in (R, G, B, hit,
-    active), 4 out (R, G, B, coverage), finished pixels passed through."""
+    active), 4 out (R, G, B, coverage), finished pixels passed through.
+
+    The finished pixels are first push-pulled into the holes (:class:`PushPull`,
+    5 levels); each U-Net sees the input beside the current estimate and adds
+    a correction to it (its last convolution starts at zero, so an untrained
+    network is the push-pull baseline)."""
 
     channels_in = 5
     channels_out = 4
 
-    def __init__(self, enc: tuple[int, ...] = (4, 8, 16), mid: int = 32) -> None:
+    def __init__(self, enc: tuple[int, ...] = (4, 8, 16), mid: int = 32, levels: int = 5) -> None:
         super().__init__()
         dec = tuple(reversed(enc))
         kw = {"bn": False, "convs": 1, "up": "nearest", "pool": "avg"}
-        self.first = _UNet(5, 4, enc, mid, dec, **kw)  # type: ignore[arg-type]
-        self.second = _UNet(5 + 4, 4, enc, mid, dec, **kw)  # type: ignore[arg-type]
-        self.stride = self.first.stride
+        self.fill = PushPull(levels)
+        self.first = _zero_last(_UNet(5 + 4, 4, enc, mid, dec, **kw))  # type: ignore[arg-type]
+        self.second = _zero_last(_UNet(5 + 4, 4, enc, mid, dec, **kw))  # type: ignore[arg-type]
+        self.stride = max(self.first.stride, 2**levels)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         known = x[:, 0:4]  # R, G, B, hit: the finished rays' values
         active = x[:, 4:5]
-        y = torch.sigmoid(self.first(x))
-        y = torch.sigmoid(self.second(torch.cat([x, y], dim=1)))
+        y = self.fill(known, 1.0 - active)
+        y = torch.clamp(y + self.first(torch.cat([x, y], dim=1)), 0.0, 1.0)
+        y = torch.clamp(y + self.second(torch.cat([x, y], dim=1)), 0.0, 1.0)
         return known * (1.0 - active) + y * active
 
 
 class RgbdaUNet(nn.Module):
-    """The LiDAR RGBDA U-Net: R, G, B, A, D in, RGB out (sigmoid)."""
+    """The LiDAR RGBDA U-Net: R, G, B, A, D in, RGB out.
+
+    The kept pixels' colours are first push-pulled into the empty ones
+    (:class:`PushPull`, 5 levels); the U-Net sees the five planes beside that
+    estimate and adds a correction (its last convolution starts at zero), the
+    result clipped to [0, 1]."""
 
     channels_in = 5
     channels_out = 3
 
-    def __init__(self, width: int = 16, depth: int = 4) -> None:
+    def __init__(self, width: int = 16, depth: int = 4, levels: int = 5) -> None:
         super().__init__()
         enc = tuple(width * 2**i for i in range(depth))
-        self.net = _UNet(
-            5, 3, enc, width * 2**depth, tuple(reversed(enc)), bn=True, convs=2, up="bilinear", pool="max"
+        self.fill = PushPull(levels)
+        self.net = _zero_last(
+            _UNet(5 + 3, 3, enc, width * 2**depth, tuple(reversed(enc)), bn=True, convs=2, up="bilinear", pool="max")
         )
-        self.stride = self.net.stride
+        self.stride = max(self.net.stride, 2**levels)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return torch.sigmoid(self.net(x))
+        kept = (x[:, 3:4] > 0).to(x.dtype)
+        y = self.fill(x[:, 0:3], kept)
+        return torch.clamp(y + self.net(torch.cat([x, y], dim=1)), 0.0, 1.0)
 
 
 def build(name: str, **kwargs: int) -> nn.Module:

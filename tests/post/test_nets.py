@@ -20,9 +20,9 @@ from clvis.training import data, train  # noqa: E402
 def real_inputs():
     """A real partial iso image and a real depth-filtered scan, packed."""
     f = data.iso_frames(("blobs",), 1, 5, 96, 64, views=1, n=32)[0]
-    iso = pack_iso(*f.planes(0.85), stride=8)
+    iso = pack_iso(*f.planes(0.85), stride=32)
     lf = data.lidar_frames(("town",), 1, 5, 96, 64, views=1, dense_points=100_000)[0]
-    lidar = pack_rgbda(lf.rgbda, stride=16)
+    lidar = pack_rgbda(lf.rgbda, stride=32)
     return {"infill": (iso, f), "lidar": (lidar, lf)}
 
 
@@ -32,6 +32,11 @@ def exported(request, tmp_path_factory, real_inputs):
     name = request.param
     torch.manual_seed(3)
     net = nets.build(name, **train.SPECS[name]["arch"]).eval()
+    with torch.no_grad():  # the residual U-Nets start at zero: give them a say
+        for m in net.modules():
+            if isinstance(m, nets._UNet):
+                torch.nn.init.normal_(m.out.weight, std=0.2)
+                torch.nn.init.normal_(m.out.bias, std=0.05)
     if name == "lidar":  # BN statistics other than the identity, so folding them is checked
         with torch.no_grad():
             for m in net.modules():
@@ -63,7 +68,7 @@ def _torch(net, x):
         return net(torch.from_numpy(x)).numpy()
 
 
-@pytest.mark.parametrize("size", [(16, 16), (48, 80), (112, 64)])
+@pytest.mark.parametrize("size", [(32, 32), (64, 96), (128, 64)])
 def test_onnx_equals_torch_on_random_inputs(exported, size):
     name, net, out, _ = exported
     rng = np.random.default_rng(sum(size))
@@ -110,13 +115,42 @@ def test_finished_pixels_pass_through():
     """The in-fill graph keeps the finished rays' R, G, B and hit exactly."""
     torch.manual_seed(0)
     net = nets.InfillWNet().eval()
+    with torch.no_grad():
+        torch.nn.init.normal_(net.second.out.weight, std=0.2)
     rng = np.random.default_rng(1)
-    x = rng.random((1, 5, 32, 40), dtype=np.float32)
-    x[:, 4] = rng.random((32, 40)) < 0.2
+    x = rng.random((1, 5, 32, 64), dtype=np.float32)
+    x[:, 4] = rng.random((32, 64)) < 0.2
     y = _torch(net, x)
     done = x[0, 4] == 0
     np.testing.assert_array_equal(y[0, :4][:, done], x[0, :4][:, done])
     assert not np.array_equal(y[0, :4][:, ~done], x[0, :4][:, ~done])
+
+
+def test_graph_pushpull_is_the_baseline():
+    """The networks' push-pull front (nets.PushPull) is clvis.post.pushpull's
+    definition wherever no hole is wider than its pyramid: every 32 x 32
+    block holds a known pixel. An untrained network (its corrections start
+    at zero) outputs exactly that fill."""
+    from clvis.reference.post.pushpull import pushpull
+
+    rng = np.random.default_rng(4)
+    h, w = 96, 160
+    image = rng.random((h, w, 4), dtype=np.float32)
+    valid = rng.random((h, w)) < 0.3
+    valid[::32, ::32] = True
+    want = pushpull(image, valid)
+    c = torch.from_numpy(np.ascontiguousarray(image.transpose(2, 0, 1)[None]))
+    wt = torch.from_numpy(valid.astype(np.float32)[None, None])
+    got = nets.PushPull(5)(c, wt)[0].numpy().transpose(1, 2, 0)
+    np.testing.assert_allclose(got, want, atol=2e-6, rtol=0)
+    x = np.concatenate([image.transpose(2, 0, 1), (~valid)[None].astype(np.float32)])[None]
+    y = _torch(nets.InfillWNet().eval(), np.ascontiguousarray(x))
+    np.testing.assert_allclose(y[0].transpose(1, 2, 0), want, atol=2e-6, rtol=0)
+    # holes wider than the pyramid take the weighted mean of the image
+    valid2 = np.zeros((h, w), bool)
+    valid2[:8, :8] = True
+    got2 = nets.PushPull(5)(c, torch.from_numpy(valid2.astype(np.float32)[None, None]))[0].numpy()
+    np.testing.assert_allclose(got2[:, 80:, 100:].mean((1, 2)), image[:8, :8].mean((0, 1)), atol=1e-5)
 
 
 def test_architectures():
@@ -125,10 +159,10 @@ def test_architectures():
     w = nets.InfillWNet()
     assert [b[0].out_channels for b in w.first.enc] == [4, 8, 16] and w.first.mid[0].out_channels == 32
     assert [b[0].out_channels for b in w.first.dec] == [16, 8, 4]
-    assert 0.10e6 < 4 * nets.count_parameters(w) < 0.14e6 and w.stride == 8
+    assert 0.10e6 < 4 * nets.count_parameters(w) < 0.14e6 and w.stride == 32
     u = nets.RgbdaUNet(width=8)
     kinds = [type(m).__name__ for m in u.net.enc[0]]
-    assert kinds == ["Conv2d", "BatchNorm2d", "ReLU"] * 2 and u.stride == 16
+    assert kinds == ["Conv2d", "BatchNorm2d", "ReLU"] * 2 and u.stride == 32
     assert nets.count_parameters(nets.RgbdaUNet(width=64)) > 30e6  # the authors' widths: 31 M
 
 

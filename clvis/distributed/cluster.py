@@ -112,9 +112,50 @@ class ClusterOwner:
     def _near(self, where: dict, future: Any) -> dict:
         return self._pin(where.get(future.key))
 
-    @property
-    def nworkers(self) -> int:
-        return len(self.client.scheduler_info(n_workers=-1)["workers"])
+    def submit_frame(self, task: Any, view: dict) -> list:
+        """The futures of one frame's bands, nothing waited for: `task`
+        (parts, view) → a full-frame Partial runs once per worker over the
+        partitions that worker holds (self._handles, with self._arrays);
+        then direct-send (self.compositing "direct": each worker's frame cut
+        into one band of rows per worker, band j composited on worker j) or
+        a binary tree of pairwise composites ("tree")."""
+        client = self.client
+        where = self._who_has(self._handles)
+        groups: dict[str | None, list] = {}
+        for i, h in enumerate(self._handles):
+            groups.setdefault(where.get(h.key), []).append((h, self._arrays[i]))
+        workers = list(groups)
+        partials = [client.submit(task, parts, view, pure=False, **self._pin(w)) for w, parts in groups.items()]
+        if self.compositing == "tree" or len(partials) == 1:
+            level = partials
+            while len(level) > 1:
+                nxt = [
+                    client.submit(composite_task, level[k], level[k + 1], pure=False)
+                    for k in range(0, len(level) - 1, 2)
+                ]
+                level = nxt + ([level[-1]] if len(level) % 2 else [])
+            return level
+        out = []
+        for j, band in enumerate(_c.bands(view["height"], len(partials))):
+            pieces = [
+                client.submit(_c.split, p, band, j == 0, pure=False, **self._pin(workers[i]))
+                for i, p in enumerate(partials)
+            ]
+            out.append(client.submit(composite_task, *pieces, pure=False, **self._pin(workers[j])))
+        return out
+
+    def _frame(self, task: Any, view: dict) -> tuple[_c.Partial, float, dict, int]:
+        """(the frame as one Partial, client seconds, worker → bytes sent, workers used)."""
+        t0 = time.perf_counter()
+        final = self._gather(self.submit_frame(task, view))
+        frame = time.perf_counter() - t0
+        whole = _c.assemble(final)
+        sent = dict(whole.sent)
+        for p in final:  # each band's last hop: to the client
+            if p.worker is not None:
+                sent[p.worker] = sent.get(p.worker, 0) + p.nbytes
+        used = len({k.split(" ", 1)[1] for k in whole.seconds if k.startswith("render ")})
+        return whole, frame, sent, used
 
     def close(self) -> None:
         """Drop the partitions; close the client and cluster started here."""

@@ -459,15 +459,8 @@ class DistributedRasterizer(ClusterOwner):
         summed over the workers' tasks), ``bytes_sent`` (worker → bytes its
         partials sent to other workers and to the client)."""
         view = self._view(camera, width, height, color_by, colormap, value_range, planes, point_size)
-        t0 = time.perf_counter()
-        final = self._gather(self.submit_frame(view))
-        frame = time.perf_counter() - t0
-        whole = _c.assemble(final)
-        sent = dict(whole.sent)
-        for p in final:  # each band's last hop: to the client
-            if p.worker is not None:
-                sent[p.worker] = sent.get(p.worker, 0) + p.nbytes
-        return self._gbuffers(whole, frame, sent, len(final))
+        whole, frame, sent, nworkers = self._frame(_render_partials, view)
+        return self._gbuffers(whole, frame, sent, nworkers)
 
     def _view(self, camera, width, height, color_by, colormap, value_range, planes, point_size) -> dict:
         from ..raster.render import _check_camera, _check_point_size, _check_size
@@ -493,40 +486,6 @@ class DistributedRasterizer(ClusterOwner):
             "planes": [planes] if isinstance(planes, str) else list(planes),
             "point_size": point_size,
         }
-
-    def submit_frame(self, view: dict) -> list:
-        """The futures of one frame's bands (rendered and composited on the
-        workers; nothing waits). `view`: as ``_view`` makes it."""
-        client = self.client
-        where = self._who_has(self._handles)
-        groups: dict[str | None, list] = {}
-        for i, h in enumerate(self._handles):
-            w = where.get(h.key)
-            groups.setdefault(w, []).append((h, self._arrays[i]))
-        partials = [
-            client.submit(_render_partials, parts, view, pure=False, **self._pin(w)) for w, parts in groups.items()
-        ]
-        workers = list(groups)
-        if self.compositing == "tree" or len(partials) == 1:
-            level = partials
-            while len(level) > 1:
-                nxt = [
-                    client.submit(composite_task, level[k], level[k + 1], pure=False)
-                    for k in range(0, len(level) - 1, 2)
-                ]
-                if len(level) % 2:
-                    nxt.append(level[-1])
-                level = nxt
-            return level
-        rows = _c.bands(view["height"], len(partials))
-        out = []
-        for j, band in enumerate(rows):
-            pieces = [
-                client.submit(_c.split, p, band, j == 0, pure=False, **self._pin(workers[i]))
-                for i, p in enumerate(partials)
-            ]
-            out.append(client.submit(composite_task, *pieces, pure=False, **self._pin(workers[j])))
-        return out
 
     def _gbuffers(self, whole: _c.Partial, frame: float, sent: dict, nparts: int) -> GBuffers:
         p = whole.planes

@@ -10,7 +10,9 @@ volumes: the brick's number). An empty pixel's key is all ones. Taking the
 partial with the smaller key, pixel by pixel, is associative and commutative
 and the keys of covered pixels never tie, so any grouping of the partials
 (direct-send bands, a binary tree, all at once) gives the same frame as one
-device that saw every partition: that device keeps the same minimum.
+device that saw every partition: that device keeps the same minimum. Only
+empty pixels tie, so their planes must be the same in every partial (the
+renderers' empty values: index all ones, depth +inf, rgba 0, NaN).
 
 A :class:`Partial` may cover a band of rows (``rows``): direct-send splits
 each worker's partial into one band per worker, sends band j to worker j,

@@ -69,7 +69,7 @@ def start_cluster(workers: int, **kw: Any) -> Any:
     """A LocalCluster of `workers` processes, one thread each, no dashboard."""
     d = _distributed()
     kw.setdefault("processes", True)
-    return d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=None, **kw)
+    return d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw)
 
 
 class ClusterOwner:

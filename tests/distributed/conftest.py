@@ -1,20 +1,8 @@
-"""A real dask.distributed LocalCluster for the distributed tests: two worker
-processes of one thread each, shared by a module's tests (tests that kill a
+"""The LocalCluster a module's distributed tests share (tests that kill a
 worker or change the workers' environment start their own)."""
 
 import pytest
-
-distributed = pytest.importorskip("distributed")  # the `distributed` extra; ./dev.sh test installs it
-
-TIMEOUT = 60  # seconds any wait of these tests may take
-
-
-def local_cluster(**kw):
-    """A LocalCluster of two one-thread worker processes (no dashboard)."""
-    kw.setdefault("n_workers", 2)
-    return distributed.LocalCluster(
-        threads_per_worker=1, processes=True, dashboard_address=None, worker_dashboard_address=None, **kw
-    )
+from dask_cluster import TIMEOUT, distributed, local_cluster
 
 
 @pytest.fixture(scope="module")

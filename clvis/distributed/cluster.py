@@ -66,7 +66,7 @@ def frame_seconds(frame: float, seconds: dict) -> dict:
 
 
 def start_cluster(workers: int, **kw: Any) -> Any:
-    """A LocalCluster of `workers` processes, one thread each, no dashboard."""
+    """A LocalCluster of `workers` processes, one thread each, the dashboard on a free port."""
     d = _distributed()
     kw.setdefault("processes", True)
     return d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw)

@@ -96,8 +96,10 @@ class ClusterOwner:
     def _gather(self, futures: Sequence[Any]) -> list:
         d = _distributed()
         futures = list(futures)
-        done, pending = d.wait(futures, timeout=self.timeout, return_when="ALL_COMPLETED")
-        del done, pending
+        d.wait(futures, timeout=self.timeout, return_when="ALL_COMPLETED")
+        for f in futures:  # the first failure in the partitions' order, whichever failed first
+            if f.status == "error":
+                f.result(timeout=self.timeout)
         return self.client.gather(futures)
 
     def _who_has(self, futures: Sequence[Any]) -> dict:

@@ -239,7 +239,9 @@ def _run_distributed(args) -> int:
         if not Path(args.file).exists():
             raise CliError(f"{args.file}: no such file")
         if args.isovalue is None:
-            raise CliError("--isovalue: needed with a FILE on workers (Otsu's default reads every sample here)")
+            raise CliError(
+                "--isovalue: needed with a FILE on workers (Otsu's default reads every sample here)"
+            )
         source, iso, spacing, origin, what = args.file, args.isovalue, None, (0.0, 0.0, 0.0), str(args.file)
         if args.spacing is not None:
             spacing = tuple(reversed(args.spacing))
@@ -256,7 +258,14 @@ def _run_distributed(args) -> int:
         what, kw = f"the embedded {name} ({d['volume'].shape[0]}^3)", {}
     try:
         dr = DistributedIsoRenderer(
-            source, client, rate=args.rate, spacing=spacing, origin=origin, brick=args.brick, workers=workers, **kw
+            source,
+            client,
+            rate=args.rate,
+            spacing=spacing,
+            origin=origin,
+            brick=args.brick,
+            workers=workers,
+            **kw,
         )
     except (OSError, TimeoutError) as e:
         raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None

@@ -319,15 +319,24 @@ def _render_distributed(args, progress) -> int:
         lo, hi = dr.bounds
         camera = camera_from_args(args, lo, hi, width, height)
         with progress.stage("rendering + compositing"):
-            g = dr.render(camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size)
+            g = dr.render(
+                camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size
+            )
             t0 = time.perf_counter()
-            g = dr.render(camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size)
+            g = dr.render(
+                camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size
+            )
             warm = time.perf_counter() - t0
         panels = []
         if attribute is not None:
             vr = dr._ranges[attribute]
             panels.append(
-                _Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({args.colormap})", g.rgba, (args.colormap, *vr))
+                _Panel(
+                    f"attribute-{_safe_name(attribute)}",
+                    f"{attribute} ({args.colormap})",
+                    g.rgba,
+                    (args.colormap, *vr),
+                )
             )
         else:
             panels.append(_Panel("colors", "point colors", g.rgba))
@@ -335,23 +344,31 @@ def _render_distributed(args, progress) -> int:
         if args.depth_filter:
             with progress.stage(f"depth filter ({args.depth_filter} levels)"):
                 filtered = depth_filter(g, args.depth_filter)
-            panels.append(_Panel("depth-filtered", f"depth filter ({args.depth_filter} levels)", filtered.rgba))
+            panels.append(
+                _Panel("depth-filtered", f"depth filter ({args.depth_filter} levels)", filtered.rgba)
+            )
         out = Path(args.out)
         with progress.stage("writing PNGs"):
-            named = [(f"{p.key}.png", p.image if args.transparent else images.opaque(p.image)) for p in panels]
+            named = [
+                (f"{p.key}.png", p.image if args.transparent else images.opaque(p.image)) for p in panels
+            ]
             named.append(("overview.png", _overview(panels, args.transparent)))
             files = _save_pngs(out, named)
         st = g.stats
         covered = int(g.covered.sum())
         print(f"clvis render: {len(args.file)} tiles, {dr.n:,} points, on {st['workers']} Dask workers")
         print(f"  view      {describe_camera(args)}, {width}x{height}")
-        print(f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)")
+        print(
+            f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)"
+        )
         sec = st["seconds"]
         print(
             f"  frame     {warm * 1e3:.1f} ms ({st['compositing']} compositing; busiest worker: render "
             f"{sec['render'] * 1e3:.1f} ms, composite {sec['composite'] * 1e3:.1f} ms)"
         )
-        print("  sent      " + ", ".join(f"{w} {b / 1e6:.2f} MB" for w, b in sorted(st["bytes_sent"].items())))
+        print(
+            "  sent      " + ", ".join(f"{w} {b / 1e6:.2f} MB" for w, b in sorted(st["bytes_sent"].items()))
+        )
         print("  soft z    off (on workers it would need every tile's colours near each pixel's winner)")
         print(f"  total     {time.perf_counter() - t_start:.2f} s")
     print(f"wrote {len(files)} PNGs to {out}{os.sep}")

@@ -17,16 +17,21 @@ from typing import Any
 from ..errors import DeviceError
 from . import composite as _c
 
-__all__ = ["ClusterOwner", "composite_task", "current_worker", "device_error", "frame_seconds", "start_cluster"]
+__all__ = [
+    "ClusterOwner",
+    "composite_task",
+    "current_worker",
+    "device_error",
+    "frame_seconds",
+    "start_cluster",
+]
 
 
 def _distributed():
     try:
         import distributed
     except ImportError as e:  # pragma: no cover - the extra is missing
-        raise ImportError(
-            "clvis.distributed needs dask.distributed: pip install 'clvis[distributed]'"
-        ) from e
+        raise ImportError("clvis.distributed needs dask.distributed: pip install 'clvis[distributed]'") from e
     return distributed
 
 
@@ -127,7 +132,9 @@ class ClusterOwner:
         for i, h in enumerate(self._handles):
             groups.setdefault(where.get(h.key), []).append((h, self._arrays[i]))
         workers = list(groups)
-        partials = [client.submit(task, parts, view, pure=False, **self._pin(w)) for w, parts in groups.items()]
+        partials = [
+            client.submit(task, parts, view, pure=False, **self._pin(w)) for w, parts in groups.items()
+        ]
         if self.compositing == "tree" or len(partials) == 1:
             level = partials
             while len(level) > 1:

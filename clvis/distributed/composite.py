@@ -111,7 +111,7 @@ def bands(height: int, n: int) -> list[tuple[int, int]]:
     edges = [0]
     for i in range(n):
         edges.append(edges[-1] + q + (1 if i < r else 0))
-    return list(zip(edges[:-1], edges[1:]))
+    return list(zip(edges[:-1], edges[1:], strict=True))
 
 
 def split(part: Partial, rows: tuple[int, int], carry: bool = True) -> Partial:
@@ -137,7 +137,7 @@ def split(part: Partial, rows: tuple[int, int], carry: bool = True) -> Partial:
 def assemble(parts: Sequence[Partial]) -> Partial:
     """Bands that tile a frame, in any order, stacked into one partial."""
     parts = sorted(parts, key=lambda p: p.rows)
-    for a, b in zip(parts[:-1], parts[1:]):
+    for a, b in zip(parts[:-1], parts[1:], strict=True):
         if a.rows[1] != b.rows[0]:
             raise ValueError(f"parts: bands {a.rows} and {b.rows} do not meet")
     first = parts[0]

@@ -69,7 +69,8 @@ def brick_plan(shape: Sequence[int], brick: int | Sequence[int]) -> list[tuple[t
     ):
         raise ValueError(f"brick: expected a multiple of {ZFP_BLOCK} (or three), got {brick!r}")
     axes = [
-        [(a, min(a + int(b) + ZFP_BLOCK, n)) for a in range(0, n - 1, int(b))] for n, b in zip(shape, edges)
+        [(a, min(a + int(b) + ZFP_BLOCK, n)) for a in range(0, n - 1, int(b))]
+        for n, b in zip(shape, edges, strict=True)
     ]
     return [(z, y, x) for z in axes[0] for y in axes[1] for x in axes[2]]
 
@@ -272,7 +273,9 @@ class DistributedIsoRenderer(ClusterOwner):
         try:
             if is_path:
                 path = str(volume_or_bricks)
-                lay = self._gather([self.client.submit(_layout, path, shape, dtype, volume_index, pure=False)])[0]
+                lay = self._gather(
+                    [self.client.submit(_layout, path, shape, dtype, volume_index, pure=False)]
+                )[0]
                 self.volume_shape = tuple(lay["shape"])
                 default_spacing = lay["spacing"]
             else:
@@ -305,7 +308,7 @@ class DistributedIsoRenderer(ClusterOwner):
                 self.client.submit(_build_from, s, a, pure=False, **self._near(self._who_has([a]), a))
                 if a is not None
                 else self.client.submit(_build_from, s, None, pure=False)
-                for s, a in zip(specs, self._arrays)
+                for s, a in zip(specs, self._arrays, strict=True)
             ]
             handles = self._gather(self._handles)
             self.compressed_bytes = int(sum(h.compressed_bytes for h in handles))

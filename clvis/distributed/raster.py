@@ -55,7 +55,7 @@ from ..errors import ClvisError, DataError, DeviceError
 from ..io import PointCloud, read_points
 from ..raster import EMPTY, GBuffers, Rasterizer
 from . import composite as _c
-from .cluster import ClusterOwner, composite_task, current_worker, device_error, frame_seconds
+from .cluster import ClusterOwner, current_worker, device_error, frame_seconds
 
 __all__ = ["COMPOSITING", "DistributedRasterizer", "concatenate"]
 
@@ -132,7 +132,11 @@ def _read(spec: dict) -> PointCloud:
     a = spec["arrays"]
     try:
         return PointCloud(
-            a["positions"], a.get("colors"), dict(a.get("attributes") or {}), a.get("velocity"), a.get("radius")
+            a["positions"],
+            a.get("colors"),
+            dict(a.get("attributes") or {}),
+            a.get("velocity"),
+            a.get("radius"),
         )
     except (TypeError, ValueError) as e:
         raise DataError(f"partition {spec['number']}: {e}") from e
@@ -206,7 +210,7 @@ def _build_here(handle: _Handle, arrays: Any = None) -> Rasterizer:
         cloud = _read(spec)
     if len(cloud) != handle.n:
         raise DataError(
-            f"{handle.spec['path'] or 'partition %d' % handle.spec['number']}: "
+            f"{handle.spec['path'] or 'partition {}'.format(handle.spec['number'])}: "
             f"{len(cloud)} points now, {handle.n} when it was opened"
         )
     q = _queue()
@@ -282,7 +286,9 @@ def _render_partials(parts: list, view: dict) -> _c.Partial:
                 planes[f] = a
         for k, a in g.attributes.items():
             planes["attr:" + k] = a
-        partials.append(_c.Partial((0, view["height"]), _c.depth_keys(g.depth, index, covered), planes, worker))
+        partials.append(
+            _c.Partial((0, view["height"]), _c.depth_keys(g.depth, index, covered), planes, worker)
+        )
     t1 = time.perf_counter()
     out = _c.composite(partials, worker)
     out.sent = {}  # partials on the same worker move nothing
@@ -375,14 +381,16 @@ class DistributedRasterizer(ClusterOwner):
         if not paths:
             raise ValueError("sources: no partition given")
         keep = None if fields is None else [str(f) for f in fields]
-        specs = [{"token": f"{token}-{i}", "path": p, "number": i, "fields": keep} for i, p in enumerate(paths)]
+        specs = [
+            {"token": f"{token}-{i}", "path": p, "number": i, "fields": keep} for i, p in enumerate(paths)
+        ]
         return specs, [None] * len(specs)
 
     def _setup(self, specs, arrays, options):
         client = self.client
         if any(a is not None for a in arrays):
             arrays = [_computed(client, a) for a in arrays]  # the blocks, kept on the workers
-        opened = [client.submit(_open, s, a, pure=False) for s, a in zip(specs, arrays)]
+        opened = [client.submit(_open, s, a, pure=False) for s, a in zip(specs, arrays, strict=True)]
         metas = self._gather(opened)
         self._check_partitions(specs, metas)
         origin = np.min([m["origin"] for m in metas], axis=0)
@@ -408,7 +416,7 @@ class DistributedRasterizer(ClusterOwner):
             client.submit(
                 _build, s, origin, int(o), int(m["n"]), options, a, pure=False, **self._near(where, f)
             )
-            for s, o, m, a, f in zip(specs, offsets, metas, arrays, opened)
+            for s, o, m, a, f in zip(specs, offsets, metas, arrays, opened, strict=True)
         ]
         self._arrays = arrays
         handles = self._gather(self._handles)
@@ -470,7 +478,8 @@ class DistributedRasterizer(ClusterOwner):
         _check_point_size(point_size)
         if color_by is not None and color_by not in self.attribute_names:
             raise ValueError(
-                f"color_by: no attribute {color_by!r}; the cloud has {', '.join(self.attribute_names) or 'none'}"
+                f"color_by: no attribute {color_by!r}; the cloud has "
+                f"{', '.join(self.attribute_names) or 'none'}"
             )
         if color_by is not None and value_range is None:
             value_range = self._ranges[color_by]

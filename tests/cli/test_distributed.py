@@ -45,15 +45,22 @@ def tiles(tmp_path_factory):
         paths.append(tmp / f"t{i}.npz")
         save_npz(paths[-1], cloud)
     whole = tmp / "whole.npz"
-    save_npz(whole, PointCloud(np.concatenate([np.load(p)["positions"] for p in paths]),
-                               attributes={"intensity": np.concatenate([np.load(p)["intensity"] for p in paths])}))
+    save_npz(
+        whole,
+        PointCloud(
+            np.concatenate([np.load(p)["positions"] for p in paths]),
+            attributes={"intensity": np.concatenate([np.load(p)["intensity"] for p in paths])},
+        ),
+    )
     return paths, whole
 
 
 def test_render_tiles_on_a_scheduler_equals_one_process(tiles, scheduler, tmp_path, capsys):
     paths, whole = tiles
     view = ["--view", "top"]
-    rc, out, err = _run(capsys, "render", *paths, "--scheduler", scheduler, "--out", tmp_path / "d", *view, *SMALL)
+    rc, out, err = _run(
+        capsys, "render", *paths, "--scheduler", scheduler, "--out", tmp_path / "d", *view, *SMALL
+    )
     assert rc == 0, err
     assert "3 tiles, 7,000 points, on 2 Dask workers" in out and "sent" in out
     rc, out, err = _run(capsys, "render", whole, "--out", tmp_path / "s", *view, *SMALL)
@@ -101,5 +108,7 @@ def test_errors(tiles, scheduler, tmp_path, capsys):
     np.save(tmp_path / "v.npy", np.zeros((8, 8, 8), np.float32))
     rc, out, err = _run(capsys, "iso", tmp_path / "v.npy", "--scheduler", scheduler)
     assert rc == 2 and "--isovalue: needed with a FILE on workers" in err
-    rc, out, err = _run(capsys, "iso", tmp_path / "v.npy", "--scheduler", scheduler, "--isovalue", 0, "--brick", 6)
+    rc, out, err = _run(
+        capsys, "iso", tmp_path / "v.npy", "--scheduler", scheduler, "--isovalue", 0, "--brick", 6
+    )
     assert rc == 2 and "--brick: 6 is not a multiple of 4" in err

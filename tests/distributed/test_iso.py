@@ -29,7 +29,9 @@ def _cam(eye=(2.2, -2.6, 1.8)):
 def single():
     v, sp, org = _ML["volume"], _ML["spacing"], _ML["origin"]
     r = IsoRenderer(v, RATE, sp, org)
-    want = {eye: ref.render(zfp.decode(r.volume), _cam(eye), W, H, 0.5, spacing=sp, origin=org) for eye in _EYES}
+    want = {
+        eye: ref.render(zfp.decode(r.volume), _cam(eye), W, H, 0.5, spacing=sp, origin=org) for eye in _EYES
+    }
     return r, want
 
 
@@ -60,10 +62,10 @@ def test_brick_plan_covers_every_cell_once(shape, edge):
     for ranges in brick_plan(shape, edge):
         assert all(a % 4 == 0 and b - a >= 2 for a, b in ranges)
         e = (edge,) * 3 if isinstance(edge, int) else edge
-        own = tuple(slice(a, min(a + k, n - 1)) for (a, _), k, n in zip(ranges, e, shape))
+        own = tuple(slice(a, min(a + k, n - 1)) for (a, _), k, n in zip(ranges, e, shape, strict=True))
         cover[own] += 1
         # the samples held: the owned cells' corners and the rest of the neighbour ZFP block
-        assert all(b == min(a + k + 4, n) for (a, b), k, n in zip(ranges, e, shape))
+        assert all(b == min(a + k + 4, n) for (a, b), k, n in zip(ranges, e, shape, strict=True))
     assert (cover == 1).all()
 
 
@@ -95,7 +97,9 @@ def test_files_read_brick_by_brick_on_the_workers(client, single, tmp_path, fmt)
         nib = pytest.importorskip("nibabel")
         path = tmp_path / "ml.nii"
         nib.save(nib.Nifti1Image(v.transpose(2, 1, 0), np.eye(4)), str(path))
-    with DistributedIsoRenderer(path, client, rate=RATE, spacing=sp, origin=org, brick=16, timeout=TIMEOUT, **kw) as dr:
+    with DistributedIsoRenderer(
+        path, client, rate=RATE, spacing=sp, origin=org, brick=16, timeout=TIMEOUT, **kw
+    ) as dr:
         assert dr.volume_shape == (41, 41, 41) and len(dr.bricks) == 27
         _check(dr.render(_cam(), W, H, 0.5), single, _EYES[0])
 

@@ -128,7 +128,9 @@ def test_las_tiles_with_their_own_origins(client, tmp_path):
     )
     with DistributedRasterizer(paths, client, fields=["intensity"], timeout=TIMEOUT) as dr:
         got = dr.render(cam, W, H, color_by="intensity")
-    want = Rasterizer(whole.positions, colors=whole.colors, attributes={"intensity": whole.attributes["intensity"]})
+    want = Rasterizer(
+        whole.positions, colors=whole.colors, attributes={"intensity": whole.attributes["intensity"]}
+    )
     want = want.render(cam, W, H, color_by="intensity")
     _same(got, want)
     assert got.covered.sum() > 200
@@ -262,7 +264,9 @@ def test_workers_without_a_device(tmp_path, monkeypatch, tiles):
     with local_cluster(n_workers=1) as cluster, distributed.Client(cluster, timeout=TIMEOUT) as c:
         c.wait_for_workers(1, timeout=TIMEOUT)
         (addr,) = c.scheduler_info()["workers"]
-        with pytest.raises(DeviceError, match=f"worker {addr}: no usable OpenCL device.*no-such-opencl-device"):
+        with pytest.raises(
+            DeviceError, match=f"worker {addr}: no usable OpenCL device.*no-such-opencl-device"
+        ):
             DistributedRasterizer(paths[:2], c, timeout=TIMEOUT)
 
 

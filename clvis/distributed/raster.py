@@ -177,18 +177,31 @@ def _open(spec: dict, arrays: Any = None) -> dict:
 
 
 class _Handle:
-    """What the client holds for a built partition: its name in a worker's
-    registry and how to build it again. Small, so Dask never moves points."""
+    """What the client holds for the partitions one worker opened, built into
+    one Rasterizer there: its name in the worker's registry and how to build
+    it again. Small, so Dask never moves points."""
 
-    def __init__(self, spec: dict, origin: np.ndarray, offset: int, n: int, options: dict) -> None:
-        self.spec = {k: v for k, v in spec.items() if k != "arrays"}
-        self.origin, self.offset, self.n, self.options = origin, offset, n, options
+    def __init__(self, specs: list, origin: np.ndarray, offsets: list, ns: list, options: dict) -> None:
+        self.specs = [{k: v for k, v in spec.items() if k != "arrays"} for spec in specs]
+        self.origin, self.offsets, self.ns, self.options = origin, list(offsets), list(ns), options
         self.worker = current_worker()
         self.device_bytes = 0
 
     @property
     def token(self) -> str:
-        return self.spec["token"]
+        return "|".join(s["token"] for s in self.specs)
+
+    def global_ids(self, index: np.ndarray) -> np.ndarray:
+        """The Rasterizer's indices (its partitions one after the other, in
+        the global order) as global ids; EMPTY stays EMPTY."""
+        covered = index != EMPTY
+        ends = np.cumsum(self.ns)
+        local = index[covered].astype(np.int64)
+        k = np.searchsorted(ends, local, side="right")
+        starts = ends - np.asarray(self.ns)
+        out = np.full(index.shape, EMPTY, np.uint32)
+        out[covered] = (local - starts[k] + np.asarray(self.offsets, np.int64)[k]).astype(np.uint32)
+        return out
 
 
 def _queue():
@@ -203,16 +216,22 @@ def _queue():
 
 
 def _build_here(handle: _Handle, arrays: Any = None) -> Rasterizer:
-    with _LOCK:
-        cloud = _LOADED.pop(handle.token, None)
-    if cloud is None:  # opened on another worker, or this process is new
-        spec = {**handle.spec, "arrays": arrays} if arrays is not None else handle.spec
-        cloud = _read(spec)
-    if len(cloud) != handle.n:
-        raise DataError(
-            f"{handle.spec['path'] or 'partition {}'.format(handle.spec['number'])}: "
-            f"{len(cloud)} points now, {handle.n} when it was opened"
-        )
+    clouds = []
+    for i, (spec, n) in enumerate(zip(handle.specs, handle.ns, strict=True)):
+        with _LOCK:
+            cloud = _LOADED.pop(spec["token"], None)
+        if cloud is None:  # opened on another worker, or this process is new
+            cloud = _read({**spec, "arrays": arrays[i]} if arrays is not None else spec)
+        if len(cloud) != n:
+            raise DataError(
+                f"{spec['path'] or 'partition {}'.format(spec['number'])}: "
+                f"{len(cloud)} points now, {n} when it was opened"
+            )
+        clouds.append(cloud)
+    # one cloud of this worker's partitions in their global order, so that
+    # ties between them still go to the lowest global id
+    cloud = clouds[0] if len(clouds) == 1 else concatenate(clouds, handle.origin)
+    del clouds
     q = _queue()
     o = handle.options
     try:
@@ -233,9 +252,11 @@ def _build_here(handle: _Handle, arrays: Any = None) -> Rasterizer:
     return r
 
 
-def _build(spec: dict, origin: np.ndarray, offset: int, n: int, options: dict, arrays: Any = None) -> _Handle:
-    """Task: the partition's Rasterizer, kept in this process."""
-    h = _Handle(spec, origin, offset, n, options)
+def _build(
+    specs: list, origin: np.ndarray, offsets: list, ns: list, options: dict, arrays: Any = None
+) -> _Handle:
+    """Task: one Rasterizer of these partitions, kept in this process."""
+    h = _Handle(specs, origin, offsets, ns, options)
     r = _build_here(h, arrays)
     h.device_bytes = int(r.positions.nbytes)
     return h
@@ -278,7 +299,7 @@ def _render_partials(parts: list, view: dict) -> _c.Partial:
         for k in stats:
             stats[k] += g.stats.get(k, 0)
         covered = g.index != EMPTY
-        index = np.where(covered, g.index + np.uint32(handle.offset), EMPTY).astype(np.uint32)
+        index = handle.global_ids(g.index)
         planes = {"index": index}
         for f in _FIELDS[1:]:
             a = getattr(g, f)
@@ -411,17 +432,33 @@ class DistributedRasterizer(ClusterOwner):
             if b
             else None
         )
+        # the partitions each worker opened become one Rasterizer there: one
+        # render, one resolve and one partial per worker and frame
         where = self._who_has(opened)
-        self._handles = [
-            client.submit(
-                _build, s, origin, int(o), int(m["n"]), options, a, pure=False, **self._near(where, f)
+        groups: dict = {}
+        for i, f in enumerate(opened):
+            groups.setdefault(where.get(f.key), []).append(i)
+        self._handles, self._arrays = [], []
+        for w, idx in groups.items():
+            a = [arrays[i] for i in idx] if arrays[idx[0]] is not None else None
+            self._handles.append(
+                client.submit(
+                    _build,
+                    [specs[i] for i in idx],
+                    origin,
+                    [int(offsets[i]) for i in idx],
+                    [int(counts[i]) for i in idx],
+                    options,
+                    a,
+                    pure=False,
+                    **self._pin(w),
+                )
             )
-            for s, o, m, a, f in zip(specs, offsets, metas, arrays, opened, strict=True)
-        ]
-        self._arrays = arrays
+            self._arrays.append(a)
+        self.npartitions = len(specs)
         handles = self._gather(self._handles)
         self.device_bytes = int(sum(h.device_bytes for h in handles))
-        self._tokens = [s["token"] for s in specs]
+        self._tokens = [s["token"] for s in specs] + [h.token for h in handles]
         client.run(_forget, self._tokens, True)  # clouds opened where they were not built
 
     def _check_partitions(self, specs, metas):
@@ -511,7 +548,7 @@ class DistributedRasterizer(ClusterOwner):
         )
         g.stats = {
             **whole.counts,
-            "partitions": len(self._handles),
+            "partitions": self.npartitions,
             "workers": nparts,
             "compositing": self.compositing,
             "seconds": frame_seconds(frame, whole.seconds),

@@ -27,7 +27,17 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["EMPTY_KEY", "Partial", "assemble", "bands", "composite", "depth_keys", "split"]
+__all__ = [
+    "EMPTY_KEY",
+    "Partial",
+    "assemble",
+    "bands",
+    "composite",
+    "depth_keys",
+    "depths_of",
+    "ids_of",
+    "split",
+]
 
 EMPTY_KEY = np.uint64(0xFFFFFFFFFFFFFFFF)
 
@@ -41,6 +51,21 @@ def depth_keys(depth: np.ndarray, ids: np.ndarray, covered: np.ndarray) -> np.nd
     k32 = np.where(bits >> np.uint32(31), ~bits, bits | np.uint32(0x80000000)).astype(np.uint64)
     key = (k32 << np.uint64(32)) | np.asarray(ids).astype(np.uint64)
     return np.where(covered, key, EMPTY_KEY)
+
+
+def ids_of(key: np.ndarray) -> np.ndarray:
+    """The ids of `key` (its low 32 bits): 0xFFFFFFFF where empty. The key
+    carries the winner's id and depth, so partials need not send them too."""
+    return (key & np.uint64(0xFFFFFFFF)).astype(np.uint32)
+
+
+def depths_of(key: np.ndarray) -> np.ndarray:
+    """The float32 depths of `key` (the inverse of depth_keys' f32key on its
+    high 32 bits): +inf where empty."""
+    k32 = (key >> np.uint64(32)).astype(np.uint32)
+    bits = np.where(k32 >> np.uint32(31), k32 ^ np.uint32(0x80000000), ~k32)
+    depth = bits.astype(np.uint32).view(np.float32)
+    return np.where(key == EMPTY_KEY, np.float32(np.inf), depth).astype(np.float32)
 
 
 @dataclasses.dataclass

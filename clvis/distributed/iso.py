@@ -219,7 +219,7 @@ def _render_bricks(parts: list, view: dict) -> _c.Partial:
         )
         passes += int(img.stats.get("passes", 0))
         number = np.uint32(handle.spec["number"])
-        planes = {"rgba": img.rgba, "depth": img.depth, "hit": img.hit, "t": img.t}
+        planes = {"rgba": img.rgba, "t": img.t}  # depth and hit travel in the key
         key = _c.depth_keys(img.depth, np.full(img.hit.shape, number), img.hit)
         partials.append(_c.Partial((0, view["height"]), key, planes, worker))
     t1 = time.perf_counter()
@@ -302,7 +302,9 @@ class DistributedIsoRenderer(ClusterOwner):
                     self._arrays.append(None)
                 else:  # the brick's samples, scattered to a worker once
                     sl = tuple(slice(a, b) for a, b in ranges)
-                    self._arrays.append(self.client.scatter(np.ascontiguousarray(v[sl], np.float32)))
+                    self._arrays.append(
+                        self.client.scatter(np.ascontiguousarray(v[sl], np.float32), hash=False)
+                    )
             self._tokens = [s["token"] for s in specs]
             self._handles = [
                 self.client.submit(_build_from, s, a, pure=False, **self._near(self._who_has([a]), a))
@@ -354,12 +356,13 @@ class DistributedIsoRenderer(ClusterOwner):
         }
         whole, frame, sent, nworkers = self._frame(_render_bricks, view)
         p = whole.planes
+        hit = whole.key != _c.EMPTY_KEY
         return IsoImage(
             p["rgba"],
-            p["depth"],
-            p["hit"],
+            _c.depths_of(whole.key),
+            hit,
             p["t"],
-            np.zeros(p["hit"].shape, bool),
+            np.zeros(hit.shape, bool),
             1.0,
             {
                 **whole.counts,

@@ -300,8 +300,8 @@ def _render_partials(parts: list, view: dict) -> _c.Partial:
             stats[k] += g.stats.get(k, 0)
         covered = g.index != EMPTY
         index = handle.global_ids(g.index)
-        planes = {"index": index}
-        for f in _FIELDS[1:]:
+        planes = {}  # index and depth travel in the key
+        for f in _FIELDS[2:]:
             a = getattr(g, f)
             if a is not None:
                 planes[f] = a
@@ -537,8 +537,8 @@ class DistributedRasterizer(ClusterOwner):
         p = whole.planes
         attrs = {k[5:]: v for k, v in p.items() if k.startswith("attr:")}
         g = GBuffers(
-            index=p["index"],
-            depth=p["depth"],
+            index=_c.ids_of(whole.key),
+            depth=_c.depths_of(whole.key),
             rgba=p["rgba"],
             attributes=attrs,
             vel2d=p.get("vel2d"),

@@ -45,7 +45,14 @@ def test_depth_keys_match_the_reference_and_keep_the_order():
     np.testing.assert_array_equal(got, ref.keys(d, ids, covered))
     assert (np.diff(got.astype(object)) > 0).all()  # float order is key order
     covered[3] = False
-    assert C.depth_keys(d, ids, covered)[3] == C.EMPTY_KEY == 2**64 - 1
+    keys = C.depth_keys(d, ids, covered)
+    assert keys[3] == C.EMPTY_KEY == 2**64 - 1
+    # the key carries id and depth: both come back exactly (-0.0 too), empty as EMPTY / +inf
+    ids_back, depth_back = C.ids_of(keys), C.depths_of(keys)
+    want_ids = np.where(covered, ids, 0xFFFFFFFF)
+    np.testing.assert_array_equal(ids_back, want_ids)
+    want_depth = np.where(covered, d, np.inf).astype(np.float32)
+    np.testing.assert_array_equal(depth_back.view(np.uint32), want_depth.view(np.uint32))
 
 
 @pytest.mark.parametrize("n_parts", [1, 2, 3, 7])

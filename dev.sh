@@ -72,16 +72,16 @@ demo)
     ;;
 test | bench)
     if with_intel; then
-        venv .venv-test pocl,test,intel,train
+        venv .venv-test pocl,test,intel,train,distributed
         intel_env .venv-test
         export CLVIS_REQUIRE_PLATFORMS=${CLVIS_REQUIRE_PLATFORMS:-portable,intel}
     else
-        venv .venv-test pocl,test,train
+        venv .venv-test pocl,test,train,distributed
         export CLVIS_REQUIRE_PLATFORMS=${CLVIS_REQUIRE_PLATFORMS:-portable}
     fi
     if [ "$cmd" = bench ]; then
         case "${1:-}" in
-        primitives | raster | gauss | iso | post)
+        primitives | raster | gauss | iso | post | distributed)
             exec .venv-test/bin/clvis bench "$@"
             ;;
         esac
@@ -89,7 +89,8 @@ test | bench)
         .venv-test/bin/clvis bench raster "$@"
         .venv-test/bin/clvis bench gauss "$@"
         .venv-test/bin/clvis bench iso "$@"
-        exec .venv-test/bin/clvis bench post "$@"
+        .venv-test/bin/clvis bench post "$@"
+        exec .venv-test/bin/clvis bench distributed "$@"
     fi
     # CLVIS_LARGE=1: the 2^27-element tests too (~1.5 min, ~8 GB)
     CLVIS_LARGE=${CLVIS_LARGE:-1} CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001} \
@@ -97,9 +98,9 @@ test | bench)
     ;;
 oclgrind)
     if with_intel; then
-        venv .venv-test pocl,test,intel,train
+        venv .venv-test pocl,test,intel,train,distributed
     else
-        venv .venv-test pocl,test,train
+        venv .venv-test pocl,test,train,distributed
     fi
     # Oclgrind's preloaded runtime replaces every ICD: no intel_env here
     exec .venv-test/bin/python tests/oclgrind/audit.py "$@"

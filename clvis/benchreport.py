@@ -69,6 +69,7 @@ class Target:
 
 SORT_OP = "radix_sort[uint32 keys + uint32 values]"
 ISO_OP = "iso[turbulence 256^3, 512x512, to 100%]"
+DISTRIBUTED_OP = "distributed[2^26 points, 16 LAS tiles, 1920x1080]"
 TARGETS = {
     "primitives": [
         # on PoCL's CPU device (2 cores). "np.cumsum" as users call it
@@ -112,6 +113,25 @@ TARGETS = {
             label="device memory / decoded volume",
         ),
         Target(ISO_OP, "skimage.measure.marching_cubes", 1, "cpu"),
+    ],
+    "distributed": [
+        # on PoCL's CPU device (2 cores): Dask workers of one thread each
+        Target(DISTRIBUTED_OP, "1 worker (one thread)", 1.6, "cpu"),
+        Target(
+            DISTRIBUTED_OP,
+            "info:composite_fraction",
+            0.2,
+            "cpu",
+            at_most=True,
+            label="compositing / frame (busiest worker)",
+        ),
+        Target(
+            DISTRIBUTED_OP,
+            "info:cloud_over_memory_limit",
+            1,
+            "cpu",
+            label="cloud bytes / each worker's memory_limit (it rendered)",
+        ),
     ],
     "gauss": [
         # on PoCL's CPU device (2 cores)

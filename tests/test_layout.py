@@ -5,6 +5,11 @@
   other family;
 - a family never imports another family's modules: shared code lives in
   top-level clvis/*.py modules;
+- the layers above the families (LAYERS: training, which renders the post
+  networks' pairs with the iso and raster renderers; distributed, which runs
+  the raster and iso renderers on Dask workers; the command line on top) may use
+  every family; no family, reference or top-level module imports them, and
+  distributed does not import the command line;
 - the library never imports clvis.reference (only the command line does, for
   the demo's checks against the references), and a family's references never
   import another family's references.
@@ -20,6 +25,10 @@ from clvis import runtime
 
 PACKAGE = Path(clvis.__file__).parent
 FAMILIES = ("raster", "iso", "gauss", "post")
+# packages that sit on top of the families and may import them, lowest first:
+# each may import the ones before it (training drives the iso and raster
+# renderers to make its pairs; the command line drives training and distributed)
+LAYERS = ("training", "distributed", "cli")
 
 
 def _modules(root: Path) -> list[Path]:
@@ -96,6 +105,31 @@ def test_no_family_imports_another():
             assert not others, f"{path.relative_to(PACKAGE)} imports {sorted(others)}"
 
 
+def _layer(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if len(parts) >= 2 and parts[0] == "clvis" and parts[1] in LAYERS else None
+
+
+def test_layers_are_packages_beside_the_families():
+    assert not set(LAYERS) & set(FAMILIES)
+    assert all((PACKAGE / layer / "__init__.py").is_file() for layer in LAYERS)
+    # distributed has NumPy references (its compositing) like a family
+    assert (PACKAGE / "reference" / "distributed").is_dir()
+
+
+def test_nothing_below_a_layer_imports_it():
+    """Families, their references and the top-level modules never import
+    training, distributed or cli; distributed never imports cli. (clvis/__main__.py,
+    `python -m clvis`, is the command line's entry point.)"""
+    for path in _modules(PACKAGE):
+        if path == PACKAGE / "__main__.py":
+            continue
+        own = _layer(_dotted(path))
+        allowed = LAYERS[: LAYERS.index(own) + 1] if own else ()
+        bad = {m for m in _imports(path) if _layer(m) is not None and _layer(m) not in allowed}
+        assert not bad, f"{path.relative_to(PACKAGE)} imports {sorted(bad)}"
+
+
 def test_library_never_imports_the_references():
     cli, reference = PACKAGE / "cli", PACKAGE / "reference"
     for path in _modules(PACKAGE):
@@ -119,3 +153,7 @@ def test_import_resolution():
     assert "clvis.iso.cache" in got and "clvis.runtime" in got and "clvis.camera.ray_buffer" in got
     assert _family("clvis.gauss.render") == "gauss" and _family("clvis.camera") is None
     assert _family("clvis.reference.iso.zfp", "clvis.reference") == "iso"
+    assert _layer("clvis.distributed.raster") == "distributed" and _layer("clvis.raster.render") is None
+    assert _layer("clvis.cli._common") == "cli"
+    got = _imports(PACKAGE / "distributed" / "raster.py")
+    assert "clvis.raster" in got and "clvis.distributed.composite" in got

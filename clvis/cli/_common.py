@@ -711,3 +711,38 @@ def otsu_level(data: np.ndarray) -> float:
     if lo == hi:
         return lo
     return float(threshold_otsu(sample.astype(np.float64)))
+
+
+def add_cluster_options(parser: argparse.ArgumentParser) -> None:
+    """--workers N / --scheduler ADDRESS: render on Dask workers (clvis.distributed)."""
+    g = parser.add_mutually_exclusive_group()
+    g.add_argument(
+        "--workers",
+        type=count(1, 4096),
+        metavar="N",
+        help="render on N local Dask worker processes of one thread each (a LocalCluster started "
+        "here; needs the distributed extra)",
+    )
+    g.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="render on the workers of a running Dask scheduler (tcp://host:port)",
+    )
+
+
+def cluster_client(args) -> tuple[object, int]:
+    """(client argument, workers) for clvis.distributed from --workers/--scheduler."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise CliError(
+            "--workers and --scheduler need dask.distributed: pip install 'clvis[distributed]'"
+        ) from None
+    if args.scheduler is not None:
+        return args.scheduler, 1
+    return None, args.workers
+
+
+def distributed_run(args) -> bool:
+    """True when --workers or --scheduler asks for Dask workers."""
+    return getattr(args, "workers", None) is not None or getattr(args, "scheduler", None) is not None

@@ -23,11 +23,14 @@ from ._common import (
     Parser,
     Progress,
     add_camera_options,
+    add_cluster_options,
     add_output_options,
     add_volume_options,
     camera_from_args,
     check_camera_args,
+    cluster_client,
     count,
+    distributed_run,
     finite_range,
     fit_box,
     otsu_level,
@@ -104,6 +107,14 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     add_output_options(p, "clvis-iso", "pixels without surface")
     add_camera_options(p, _FIT)
     add_volume_options(p)
+    add_cluster_options(p)
+    p.add_argument(
+        "--brick",
+        type=count(4, 4096),
+        default=64,
+        metavar="N",
+        help="with --workers/--scheduler: cells per brick edge, a multiple of 4 (default 64)",
+    )
     return p
 
 
@@ -210,7 +221,79 @@ def render(
 
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
+    if distributed_run(args):
+        return _run_distributed(args)
     return _run(args)
+
+
+def _run_distributed(args) -> int:
+    """`clvis iso FILE --workers N | --scheduler ADDRESS`: the volume cut into
+    bricks, read (a FILE: memory-mapped slices) and rendered on Dask workers."""
+    from .. import datasets, images
+    from ..distributed.iso import DistributedIsoRenderer
+
+    if args.brick % 4:
+        raise CliError(f"--brick: {args.brick} is not a multiple of 4 (ZFP's block edge)")
+    if args.completion != 1.0:
+        raise CliError("--completion: on workers every ray finishes (leave it out)")
+    client, workers = cluster_client(args)
+    w, h = args.size
+    t0 = time.perf_counter()
+    if args.file is not None:
+        if args.dataset is not None:
+            raise CliError("--dataset chooses an embedded volume; leave it out with a FILE")
+        if not Path(args.file).exists():
+            raise CliError(f"{args.file}: no such file")
+        if args.isovalue is None:
+            raise CliError(
+                "--isovalue: needed with a FILE on workers (Otsu's default reads every sample here)"
+            )
+        source, iso, spacing, origin, what = args.file, args.isovalue, None, (0.0, 0.0, 0.0), str(args.file)
+        if args.spacing is not None:
+            spacing = tuple(reversed(args.spacing))
+        kw = {"shape": args.shape, "dtype": args.dtype, "volume_index": args.volume_index}
+        if not str(args.file).lower().endswith(".raw"):
+            kw = {"volume_index": args.volume_index} if args.volume_index is not None else {}
+    else:
+        name = args.dataset or "marschner-lobb"
+        d = datasets.marschner_lobb(64) if name == "marschner-lobb" else datasets.turbulence(128)
+        source, spacing, origin = d["volume"], d["spacing"], d["origin"]
+        if args.spacing is not None:
+            spacing = tuple(reversed(args.spacing))
+        iso = 0.5 if args.isovalue is None else args.isovalue
+        what, kw = f"the embedded {name} ({d['volume'].shape[0]}^3)", {}
+    try:
+        dr = DistributedIsoRenderer(
+            source,
+            client,
+            rate=args.rate,
+            spacing=spacing,
+            origin=origin,
+            brick=args.brick,
+            workers=workers,
+            **kw,
+        )
+    except (OSError, TimeoutError) as e:
+        raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
+    with dr:
+        lo = np.asarray(dr.origin, np.float64)
+        hi = lo + (np.array(dr.volume_shape[::-1]) - 1) * np.asarray(dr.spacing, np.float64)[::-1]
+        cam = camera_from_args(args, lo, hi, w, h)
+        img = dr.render(cam, w, h, iso, speculation=not args.no_speculation)
+    total = time.perf_counter() - t0
+    path = images.save_png(Path(args.out) / "iso.png", labelled(img, iso, args.transparent))
+    st = img.stats
+    sec = st["seconds"]
+    print(f"clvis iso: {what}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
+    print(f"  bricks      {len(dr.bricks)} of {args.brick}^3 cells on {st['workers']} Dask workers")
+    print(
+        f"  frame       {sec['frame'] * 1e3:.1f} ms ({st['compositing']} compositing; busiest worker: "
+        f"render {sec['render'] * 1e3:.1f} ms, composite {sec['composite'] * 1e3:.1f} ms)"
+    )
+    print("  sent        " + ", ".join(f"{a} {b / 1e6:.2f} MB" for a, b in sorted(st["bytes_sent"].items())))
+    print(f"  time        {total:.2f} s with reading, compression and setup")
+    print(f"wrote {path}{os.sep if path.is_dir() else ''}")
+    return 0
 
 
 def _run(args) -> int:

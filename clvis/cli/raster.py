@@ -23,12 +23,15 @@ from ._common import (
     Parser,
     Progress,
     add_camera_options,
+    add_cluster_options,
     add_output_options,
     camera_from_args,
     check_camera_args,
+    cluster_client,
     colormap_name,
     count,
     describe_camera,
+    distributed_run,
     fit_camera,
     progress_from_args,
     size,
@@ -260,6 +263,12 @@ def _load(args, progress):
     from ..io import read_points
 
     if args.file is not None:
+        if len(args.file) > 1:
+            raise CliError(
+                f"{len(args.file)} files: several tiles render together on Dask workers "
+                "(--workers N or --scheduler ADDRESS)"
+            )
+        args.file = args.file[0]
         if args.dataset is not None or args.points is not None:
             raise CliError("--dataset and --points choose an embedded cloud; leave them out with a FILE")
         with progress.stage(f"reading {Path(args.file).name}"):
@@ -283,7 +292,103 @@ def _load(args, progress):
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
     progress = progress_from_args(args, "clvis render")
+    if distributed_run(args):
+        return _render_distributed(args, progress)
+    args.file = args.file or None
     return _render(args, progress)
+
+
+def _render_distributed(args, progress) -> int:
+    """`clvis render TILES... --workers N | --scheduler ADDRESS`: the tiles
+    read and rendered on Dask workers, composited into one view."""
+    from .. import images
+    from ..distributed import DistributedRasterizer
+    from ..raster import depth_filter
+
+    if not args.file:
+        raise CliError("--workers and --scheduler render point FILEs (tiles); give at least one")
+    if args.dataset is not None or args.points is not None:
+        raise CliError("--dataset and --points choose an embedded cloud; leave them out with FILEs")
+    for f in args.file:
+        if not Path(f).is_file():
+            raise CliError(f"{f}: no such file")
+    client, workers = cluster_client(args)
+    width, height = args.size
+    t_start = time.perf_counter()
+    fields = [args.attribute] if args.attribute is not None else None
+    with progress.stage(f"reading {len(args.file)} tiles on the workers"):
+        try:
+            dr = DistributedRasterizer(args.file, client, workers=workers, fields=fields)
+        except (OSError, TimeoutError) as e:
+            raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
+    with dr:
+        attribute = args.attribute
+        names = dr.attribute_names
+        if attribute is not None and attribute not in names:
+            raise CliError(f"--attribute {attribute}: the tiles have {', '.join(names) or 'no attributes'}")
+        if attribute is None:  # as for one file: intensity, else the first attribute, else the colours
+            attribute = "intensity" if "intensity" in names else (names[0] if names else None)
+        if dr.bounds is None:
+            raise CliError("the tiles hold no point with finite coordinates")
+        lo, hi = dr.bounds
+        camera = camera_from_args(args, lo, hi, width, height)
+        with progress.stage("rendering + compositing"):
+            g = dr.render(
+                camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size
+            )
+            t0 = time.perf_counter()
+            g = dr.render(
+                camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size
+            )
+            warm = time.perf_counter() - t0
+        panels = []
+        if attribute is not None:
+            vr = dr._ranges[attribute]
+            panels.append(
+                _Panel(
+                    f"attribute-{_safe_name(attribute)}",
+                    f"{attribute} ({args.colormap})",
+                    g.rgba,
+                    (args.colormap, *vr),
+                )
+            )
+        else:
+            panels.append(_Panel("colors", "point colors", g.rgba))
+        panels.append(_Panel("depth", "depth (near = bright)", images.depth_image(g.depth)))
+        if args.depth_filter:
+            with progress.stage(f"depth filter ({args.depth_filter} levels)"):
+                filtered = depth_filter(g, args.depth_filter)
+            panels.append(
+                _Panel("depth-filtered", f"depth filter ({args.depth_filter} levels)", filtered.rgba)
+            )
+        out = Path(args.out)
+        with progress.stage("writing PNGs"):
+            named = [
+                (f"{p.key}.png", p.image if args.transparent else images.opaque(p.image)) for p in panels
+            ]
+            named.append(("overview.png", _overview(panels, args.transparent)))
+            files = _save_pngs(out, named)
+        st = g.stats
+        covered = int(g.covered.sum())
+        print(f"clvis render: {len(args.file)} tiles, {dr.n:,} points, on {st['workers']} Dask workers")
+        print(f"  view      {describe_camera(args)}, {width}x{height}")
+        print(
+            f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)"
+        )
+        sec = st["seconds"]
+        print(
+            f"  frame     {warm * 1e3:.1f} ms ({st['compositing']} compositing; busiest worker: render "
+            f"{sec['render'] * 1e3:.1f} ms, composite {sec['composite'] * 1e3:.1f} ms)"
+        )
+        print(
+            "  sent      " + ", ".join(f"{w} {b / 1e6:.2f} MB" for w, b in sorted(st["bytes_sent"].items()))
+        )
+        print("  soft z    off (on workers it would need every tile's colours near each pixel's winner)")
+        print(f"  total     {time.perf_counter() - t_start:.2f} s")
+    print(f"wrote {len(files)} PNGs to {out}{os.sep}")
+    for p in files:
+        print(f"  {p.name}")
+    return 0
 
 
 def _render(args, progress) -> int:
@@ -436,7 +541,11 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         description=_RENDER_HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    r.add_argument("file", nargs="?", help="a PLY, LAS, LAZ, NPY or NPZ point cloud")
+    r.add_argument(
+        "file",
+        nargs="*",
+        help="a PLY, LAS, LAZ, NPY or NPZ point cloud (several: tiles rendered on Dask workers)",
+    )
     r.add_argument(
         "--dataset",
         choices=sorted(_DATASETS),
@@ -500,4 +609,5 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "RGBDA U-Net (clvis.post; needs the depth filter)",
     )
     add_output_options(r, "clvis-render", "empty pixels")
+    add_cluster_options(r)
     return r

@@ -1,0 +1,246 @@
+"""Benchmarks of clvis.distributed: sort-last rendering on Dask workers,
+against the single-process renderers in the same session.
+
+Points: a 2^26-point terrain written as 16 LAS tiles (4 x 4, point format 2:
+xyz + RGB) at bench time, read and rendered on the workers at 1920x1080 and
+composited by direct-send. Rows of the op (one frame each):
+
+- "2 workers": a LocalCluster of 2 worker processes, one thread each (Dask's
+  threads_per_worker=1 and PoCL limited to one core: POCL_CPU_MAX_CU_COUNT=1);
+- "1 worker (one thread)": the same with one worker, holding every tile;
+- "single process Rasterizer": clvis.Rasterizer of the concatenated cloud in
+  this process (PoCL on every core), the non-distributed path.
+
+The 2-worker row records, from the frame's stats: compositing seconds of the
+busiest worker (min-key merging of its own tiles and of its direct-send
+band) and their fraction of the frame, the bytes each worker sends per frame,
+and the workers' per-tile render time, from which the projected frame time at
+8, 64 and 512 workers for 10^10 points at 1920x1080 is computed (the model
+is in bench/results/distributed-cpu.md). The workers of the 2-worker cluster
+have a memory_limit of 3/4 of the cloud's bytes (16 B/point: xyz float32 +
+RGBA), so the cloud exceeds every worker's limit; Dask's pause and terminate
+thresholds are off for them (the partitions live in OpenCL device memory, not
+in Dask's managed memory, which stays at the handles' few bytes).
+
+Volumes: a 512^3 volume (turbulence) as .npy, bricks read on the workers by
+memory-mapped slicing, against one IsoRenderer of the whole volume.
+
+    clvis bench distributed          (CLVIS_BENCH_SCALE shrinks both)
+"""
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from benchutil import run, scaled
+
+distributed = pytest.importorskip("distributed")
+laspy = pytest.importorskip("laspy")
+
+import clvis  # noqa: E402
+from clvis.distributed import DistributedRasterizer, concatenate  # noqa: E402
+from clvis.distributed.iso import DistributedIsoRenderer  # noqa: E402
+from clvis.io import read_points  # noqa: E402
+
+SCALE = float(os.environ.get("CLVIS_BENCH_SCALE", "1"))
+N = scaled(1 << 26)
+TILES = 16
+W, H = (1920, 1080) if SCALE >= 0.05 else (480, 270)
+SIDE = max(16, int(round(512 * SCALE ** (1 / 3))) // 4 * 4)  # the volume's edge
+POINTS_OP = f"distributed[2^{np.log2(N):.0f} points, {TILES} LAS tiles, {W}x{H}]"
+ISO_OP = f"distributed_iso[{SIDE}^3 .npy, 512x512]"
+TIMEOUT = 1800
+_cache: dict = {}
+
+
+def _tmp() -> Path:
+    if "tmp" not in _cache:
+        _cache["tmpdir"] = tempfile.TemporaryDirectory(prefix="clvis-bench-distributed-")
+        _cache["tmp"] = Path(_cache["tmpdir"].name)
+    return _cache["tmp"]
+
+
+def tiles() -> list[Path]:
+    """16 LAS tiles of a terrain, 4 x 4 tiles of 100 m, 1 mm resolution."""
+    if "tiles" not in _cache:
+        rng = np.random.default_rng(0)
+        paths = []
+        per = N // TILES
+        for i in range(TILES):
+            n = per + (N - per * TILES if i == TILES - 1 else 0)
+            x = (i % 4) * 100 + rng.random(n) * 100
+            y = (i // 4) * 100 + rng.random(n) * 100
+            z = 20 * np.sin(x / 37.0) * np.cos(y / 53.0) + rng.random(n) * 0.5
+            header = laspy.LasHeader(point_format=2, version="1.2")
+            header.scales, header.offsets = [0.001] * 3, [500000.0, 4000000.0, 0.0]
+            las = laspy.LasData(header)
+            las.x, las.y, las.z = x + 500000, y + 4000000, z
+            c = ((z - z.min()) / (np.ptp(z) + 1e-9) * 65535).astype(np.uint16)
+            las.red, las.green, las.blue = c, 65535 - c, np.full(n, 30000, np.uint16)
+            p = _tmp() / f"tile{i:02d}.las"
+            las.write(str(p))
+            paths.append(p)
+        _cache["tiles"] = paths
+    return _cache["tiles"]
+
+
+def camera(bounds):
+    lo, hi = bounds
+    return clvis.Camera.fit(lo, hi, aspect=W / H)
+
+
+def cloud_bytes() -> int:
+    return 16 * N  # xyz float32 + RGBA: DESIGN.md's bytes model of rasterization
+
+
+def _cluster(n_workers, memory_limit="auto"):
+    os.environ["POCL_CPU_MAX_CU_COUNT"] = "1"  # one core per worker (inherited by the processes)
+    os.environ["POCL_MAX_PTHREAD_COUNT"] = "1"
+    try:
+        return distributed.LocalCluster(
+            n_workers=n_workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=":0",
+            memory_limit=memory_limit,
+        )
+    finally:
+        del os.environ["POCL_CPU_MAX_CU_COUNT"], os.environ["POCL_MAX_PTHREAD_COUNT"]
+
+
+def _frames(benchmark, n_workers, impl, role, rounds):
+    limit = int(0.75 * cloud_bytes()) if n_workers == 2 else "auto"
+    config = {"distributed.worker.memory.pause": False, "distributed.worker.memory.terminate": False}
+    import dask
+
+    with (
+        dask.config.set(config),
+        _cluster(n_workers, limit) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        client.wait_for_workers(n_workers, timeout=120)
+        t0 = time.perf_counter()
+        with DistributedRasterizer(tiles(), client, fields=[], morton=True, timeout=TIMEOUT) as dr:
+            load = time.perf_counter() - t0
+            cam = camera(dr.bounds)
+            g = dr.render(cam, W, H)  # warm-up: kernels built on the workers
+            stats = [g.stats]
+
+            def frame():
+                stats.append(dr.render(cam, W, H).stats)
+
+            run(
+                benchmark, frame, op=POINTS_OP, impl=impl, role=role, n=N, nbytes=cloud_bytes(), rounds=rounds
+            )
+            best = min(stats[1:], key=lambda s: s["seconds"]["frame"])
+            sec = best["seconds"]
+            managed = sum(
+                w["metrics"].get("managed_bytes", 0) for w in client.scheduler_info()["workers"].values()
+            )
+            rss = max(w["metrics"]["memory"] for w in client.scheduler_info()["workers"].values())
+            per_worker_sent = sorted(best["bytes_sent"].values())
+            benchmark.extra_info.update(
+                workers=n_workers,
+                load_seconds=load,
+                frame_seconds=sec["frame"],
+                render_seconds=sec["render"],
+                composite_seconds=sec["composite"],
+                composite_fraction=sec["composite"] / sec["frame"],
+                bytes_sent_per_worker=per_worker_sent,
+                frame_bytes=int(sum(a.nbytes for a in (g.index, g.depth, g.rgba))) + 8 * W * H,
+                covered=int(g.covered.sum()),
+                memory_limit=limit if isinstance(limit, int) else None,
+                cloud_over_memory_limit=cloud_bytes() / limit if isinstance(limit, int) else None,
+                max_worker_rss=int(rss),
+                dask_managed_bytes=int(managed),
+                device_bytes=dr.device_bytes,
+            )
+            _cache[("stats", n_workers)] = benchmark.extra_info.copy()
+            _cache["view"] = (cam, g)
+
+
+@pytest.mark.parametrize("impl", ["2 workers", "1 worker (one thread)", "single process Rasterizer"])
+def test_points(benchmark, queue, impl):
+    rounds = 5 if SCALE < 0.5 else 3
+    if impl == "2 workers":
+        _frames(benchmark, 2, impl, "clvis", rounds)
+    elif impl == "1 worker (one thread)":
+        _frames(benchmark, 1, impl, "peer", rounds)
+    else:
+        whole = concatenate([read_points(p) for p in tiles()])
+        whole.attributes = {}
+        r = clvis.Rasterizer(whole, queue=queue)
+        lo, hi = whole.bounds()
+        cam = camera((lo, hi))
+        g = r.render(cam, W, H)
+        if "view" in _cache:  # the distributed frame is this one, bit for bit
+            assert np.array_equal(_cache["view"][1].index, g.index)
+            assert np.array_equal(_cache["view"][1].rgba, g.rgba)
+        run(
+            benchmark,
+            lambda: r.render(cam, W, H),
+            op=POINTS_OP,
+            impl=impl,
+            role="peer",
+            n=N,
+            nbytes=cloud_bytes(),
+            rounds=rounds,
+        )
+        del r, whole
+
+
+def volume_path() -> Path:
+    if "volume" not in _cache:
+        from clvis import datasets
+
+        v = datasets.turbulence(SIDE)["volume"].astype(np.float32)
+        p = _tmp() / f"turbulence_{SIDE}.npy"
+        np.save(p, v)
+        _cache["volume"] = p
+    return _cache["volume"]
+
+
+@pytest.mark.parametrize("impl", ["2 workers", "single process IsoRenderer"])
+def test_volume(benchmark, queue, impl):
+    p = volume_path()
+    w = h = 512 if SCALE >= 0.05 else 128
+    n = SIDE**3
+    cam = clvis.Camera.fit((0, 0, 0), (SIDE - 1,) * 3, aspect=1.0)
+    if impl == "2 workers":
+        with _cluster(2) as cluster, distributed.Client(cluster) as client:
+            client.wait_for_workers(2, timeout=120)
+            with DistributedIsoRenderer(p, client, rate=8, brick=max(16, SIDE // 4), timeout=TIMEOUT) as dr:
+                img = dr.render(cam, w, h, 0.5)
+                stats = [img.stats]
+                run(
+                    benchmark,
+                    lambda: stats.append(dr.render(cam, w, h, 0.5).stats),
+                    op=ISO_OP,
+                    impl=impl,
+                    role="clvis",
+                    n=n,
+                    nbytes=4 * n,
+                    rounds=3,
+                )
+                sec = min(stats[1:], key=lambda s: s["seconds"]["frame"])["seconds"]
+                benchmark.extra_info.update(
+                    bricks=len(dr.bricks),
+                    composite_fraction=sec["composite"] / sec["frame"],
+                    hits=int(img.hit.sum()),
+                )
+    else:
+        r = clvis.IsoRenderer(np.load(p), 8, queue=queue)
+        r.render(cam, w, h, 0.5)
+        run(
+            benchmark,
+            lambda: r.render(cam, w, h, 0.5),
+            op=ISO_OP,
+            impl=impl,
+            role="peer",
+            n=n,
+            nbytes=4 * n,
+            rounds=3,
+        )

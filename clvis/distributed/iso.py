@@ -1,0 +1,379 @@
+"""Sort-last isosurface rendering of a bricked volume on Dask workers.
+
+:class:`DistributedIsoRenderer` cuts a [z, y, x] volume into bricks whose
+cells do not overlap: brick (a_z, a_y, a_x) owns the cells a .. a + B - 1 of
+each axis (B, the brick edge in cells, a multiple of 4, so bricks start on
+ZFP's 4^3 block grid). It holds the samples a .. a + B + 3: the +1 neighbour
+sample the dual grid's last cell needs, and the rest of that neighbour block,
+so every ZFP block of the brick is a block of the whole volume: compressed
+alone at the same rate it decodes to the same values (fixed-rate zfp codes
+blocks independently; the volume's partial blocks at its far faces are
+padded the same way). A brick therefore sees exactly the single device's
+field in its cells; the cells of the neighbour block it also holds are the
+next brick's too and give the same hits.
+
+Each brick is read where it is rendered: from the array given (sliced on the
+client), or from a file by slicing a memory map on the worker (.npy, .raw;
+NIfTI through nibabel's array proxy), so a volume larger than one worker's
+memory renders. Each worker keeps an :class:`clvis.iso.IsoRenderer` per
+brick (origin moved to the brick's first sample) and renders every frame
+with it; a pixel's nearest hit over the bricks wins by the smallest
+``depth key << 32 | brick number`` (:mod:`clvis.distributed.composite`),
+then direct-send or a tree as for points (:mod:`clvis.distributed.raster`).
+
+The image is the single device's up to float32 rounding: a brick's rays
+enter its own box, so its t and depths are rounded differently; hit masks
+and depths agree under the iso tests' rule (``clvis.reference.iso.render.
+agreement``: the same hits on reliable pixels, depths within 1e-4 of the
+volume's diagonal).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import uuid
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._arrays import triple
+from ..camera import Camera
+from ..errors import ClvisError, DataError, DeviceError
+from ..iso import IsoImage, IsoRenderer
+from . import composite as _c
+from .cluster import ClusterOwner, current_worker, device_error, frame_seconds
+
+__all__ = ["DistributedIsoRenderer", "brick_plan"]
+
+ZFP_BLOCK = 4
+_RESIDENT: dict[str, IsoRenderer] = {}
+_LOCK = threading.Lock()
+
+
+def brick_plan(shape: Sequence[int], brick: int | Sequence[int]) -> list[tuple[tuple[int, int], ...]]:
+    """The bricks of a [z, y, x] volume of `shape` with `brick` cells a side
+    (a multiple of 4, per axis or one for all): per brick, the sample range
+    (start, stop) of each axis, z first, stop exclusive: start .. start +
+    brick + 4 clipped to the volume (its own cells and the next ZFP block)."""
+    shape = tuple(int(s) for s in shape)
+    if len(shape) != 3 or min(shape) < 2:
+        raise DataError(f"volume: every axis needs at least 2 samples, got shape {shape}")
+    edges = (brick,) * 3 if isinstance(brick, (int, np.integer)) else tuple(brick)
+    if len(edges) != 3 or any(
+        isinstance(b, bool) or not isinstance(b, (int, np.integer)) or b < ZFP_BLOCK or b % ZFP_BLOCK
+        for b in edges
+    ):
+        raise ValueError(f"brick: expected a multiple of {ZFP_BLOCK} (or three), got {brick!r}")
+    axes = [
+        [(a, min(a + int(b) + ZFP_BLOCK, n)) for a in range(0, n - 1, int(b))]
+        for n, b in zip(shape, edges, strict=True)
+    ]
+    return [(z, y, x) for z in axes[0] for y in axes[1] for x in axes[2]]
+
+
+# ---------------------------------------------------------------- files, on the workers
+
+
+def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
+    """Task: a volume file's shape (Z, Y, X), spacing (dz, dy, dx) and how to
+    slice it, from its header alone."""
+    from .. import volumes
+    from ..io import npy_shape
+
+    p = Path(path)
+    if not p.is_file():
+        raise DataError(f"{path}: no such file (on worker {current_worker()})")
+    name = p.name.lower()
+    try:
+        if name.endswith(".raw"):
+            shp, dt = volumes._raw_layout(p, shape, dtype)
+            need = math.prod(shp) * dt.itemsize
+            if p.stat().st_size != need:
+                raise DataError(f"{path}: {p.stat().st_size} bytes, but shape {shp} of {dt} needs {need}")
+            return {"kind": "raw", "shape": shp, "dtype": dt.str, "spacing": (1.0, 1.0, 1.0)}
+        if shape is not None or dtype is not None:
+            raise ValueError(f"shape, dtype: only for .raw files, not {p.name}")
+        if name.endswith(".npy"):
+            shp = npy_shape(p)
+            if len(shp) != 3:
+                raise DataError(f"{path}: expected a 3-D volume, got shape {shp}")
+            return {"kind": "npy", "shape": tuple(shp), "spacing": (1.0, 1.0, 1.0)}
+        if name.endswith((".nii", ".nii.gz")):
+            import nibabel
+
+            img = nibabel.load(p)
+            s = tuple(int(v) for v in img.header.get_data_shape())
+            zooms = tuple(float(z) for z in img.header.get_zooms())[:3]
+            if len(s) < 3 or any(v != 1 for v in s[3:]) and volume_index is None:
+                raise DataError(f"{path}: expected a 3-D volume (or volume_index), got shape {s}")
+            return {"kind": "nifti", "shape": s[:3][::-1], "spacing": zooms[::-1], "index": volume_index}
+    except ClvisError:
+        raise
+    except (OSError, ValueError, TypeError, ImportError) as e:
+        raise DataError(f"{path}: cannot read its header: {type(e).__name__}: {e}") from e
+    raise DataError(f"{path}: unknown volume format (expected .npy, .raw, .nii, .nii.gz)")
+
+
+def _read_brick(spec: dict) -> np.ndarray:
+    """A brick's samples as float32 [z, y, x]: sliced from the client's array
+    or from a memory map of the file (only the brick's pages are read)."""
+    (z0, z1), (y0, y1), (x0, x1) = spec["ranges"]
+    src = spec["source"]
+    if isinstance(src, np.ndarray):
+        return np.ascontiguousarray(src, np.float32)
+    path, lay = src
+    try:
+        if lay["kind"] == "npy":
+            a = np.load(path, mmap_mode="r", allow_pickle=False)[z0:z1, y0:y1, x0:x1]
+        elif lay["kind"] == "raw":
+            m = np.memmap(path, dtype=np.dtype(lay["dtype"]), mode="r", shape=tuple(lay["shape"]))
+            a = m[z0:z1, y0:y1, x0:x1]
+        else:
+            import nibabel
+
+            proxy = nibabel.load(path).dataobj
+            sl = (slice(x0, x1), slice(y0, y1), slice(z0, z1))
+            a = np.asarray(proxy[sl + ((lay["index"],) if lay.get("index") is not None else ())])
+            a = a.reshape(a.shape[:3]).transpose(2, 1, 0)
+        if a.dtype.kind not in "iuf":
+            raise DataError(f"{path}: expected real numbers, got dtype {a.dtype}")
+        out = np.ascontiguousarray(a, np.float32)
+    except ClvisError:
+        raise
+    except (OSError, ValueError, TypeError, EOFError) as e:
+        raise DataError(f"{path}: cannot read brick {spec['ranges']}: {type(e).__name__}: {e}") from e
+    if not np.isfinite(out).all():
+        raise DataError(f"{path}: non-finite samples in brick {spec['ranges']} (zfp cannot keep them)")
+    return out
+
+
+class _Handle:
+    def __init__(self, spec: dict) -> None:
+        self.spec = {k: v for k, v in spec.items() if k != "source" or not isinstance(v, np.ndarray)}
+        self.worker = current_worker()
+        self.compressed_bytes = 0
+
+    @property
+    def token(self) -> str:
+        return self.spec["token"]
+
+
+def _build_here(spec: dict) -> IsoRenderer:
+    from .. import runtime
+
+    data = _read_brick(spec)
+    try:
+        q = runtime.default_queue()
+    except Exception as e:  # no platform, an ICD loader error, CLVIS_DEVICE matching nothing
+        raise device_error(e) from e
+    try:
+        r = IsoRenderer(data, spec["rate"], spec["spacing"], spec["origin"], queue=q)
+    except DeviceError as e:
+        raise device_error(e) from e
+    with _LOCK:
+        _RESIDENT[spec["token"]] = r
+    return r
+
+
+def _build(spec: dict) -> _Handle:
+    """Task: the brick's IsoRenderer, kept in this process."""
+    h = _Handle(spec)
+    h.compressed_bytes = len(_build_here(spec).volume.stream)
+    return h
+
+
+def _renderer(handle: _Handle, data: Any) -> IsoRenderer:
+    with _LOCK:
+        r = _RESIDENT.get(handle.token)
+    if r is None:  # this process never built it (a worker lost, a task moved)
+        spec = handle.spec if data is None else {**handle.spec, "source": data}
+        r = _build_here(spec)
+    return r
+
+
+def _forget(tokens: list) -> None:
+    with _LOCK:
+        for t in tokens:
+            _RESIDENT.pop(t, None)
+
+
+def _render_bricks(parts: list, view: dict) -> _c.Partial:
+    """Task: render the bricks given, composited here by the min key."""
+    import time
+
+    worker = current_worker()
+    t0 = time.perf_counter()
+    partials = []
+    passes = 0
+    for handle, data in parts:
+        img = _renderer(handle, data).render(
+            view["camera"],
+            view["width"],
+            view["height"],
+            view["isovalue"],
+            speculation=view["speculation"],
+        )
+        passes += int(img.stats.get("passes", 0))
+        number = np.uint32(handle.spec["number"])
+        planes = {"rgba": img.rgba, "t": img.t}  # depth and hit travel in the key
+        key = _c.depth_keys(img.depth, np.full(img.hit.shape, number), img.hit)
+        partials.append(_c.Partial((0, view["height"]), key, planes, worker))
+    t1 = time.perf_counter()
+    out = _c.composite(partials, worker)
+    out.sent = {}
+    out.seconds = {f"render {worker}": t1 - t0, f"composite {worker}": time.perf_counter() - t1}
+    out.counts = {"bricks": len(parts), "passes": passes}
+    return out
+
+
+class DistributedIsoRenderer(ClusterOwner):
+    """A volume cut into bricks on Dask workers, rendered as one
+    :class:`clvis.iso.IsoRenderer` renders it (the module doc says how).
+
+    volume_or_bricks: a 3-D [z, y, x] array (bricks sliced on the client and
+    sent to the workers), or a volume file (.npy, .raw with `shape`/`dtype`
+    as :func:`clvis.volumes.read_volume` takes them, .nii/.nii.gz) read
+    brick by brick on the workers. rate: ZFP bits per value. spacing
+    (dz, dy, dx): default the file's (NIfTI) or ones; origin: world (x, y, z)
+    of sample [0, 0, 0]. brick: cells per brick edge, a multiple of 4 (one
+    int or three). client, workers, compositing, timeout: as for
+    :class:`clvis.distributed.DistributedRasterizer`.
+    """
+
+    def __init__(
+        self,
+        volume_or_bricks: Any,
+        client: Any = None,
+        *,
+        rate: int = 8,
+        spacing: Sequence[float] | None = None,
+        origin: Sequence[float] = (0.0, 0.0, 0.0),
+        brick: int | Sequence[int] = 64,
+        shape: Sequence[int] | None = None,
+        dtype: Any = None,
+        volume_index: int | None = None,
+        compositing: str = "direct",
+        workers: int = 2,
+        timeout: float = 300.0,
+    ) -> None:
+        if compositing not in ("direct", "tree"):
+            raise ValueError(f"compositing: expected 'direct' or 'tree', got {compositing!r}")
+        self.compositing = compositing
+        is_path = isinstance(volume_or_bricks, (str, os.PathLike))
+        if not is_path:
+            v = np.asarray(volume_or_bricks)
+            if v.ndim != 3 or v.dtype.kind not in "iuf":
+                raise ValueError(f"volume: expected a 3-D real array [Z, Y, X], got {v.dtype} {v.shape}")
+        o = triple("origin", origin, positive=False)
+        super().__init__(client, workers, timeout)
+        try:
+            if is_path:
+                path = str(volume_or_bricks)
+                lay = self._gather(
+                    [self.client.submit(_layout, path, shape, dtype, volume_index, pure=False)]
+                )[0]
+                self.volume_shape = tuple(lay["shape"])
+                default_spacing = lay["spacing"]
+            else:
+                self.volume_shape = tuple(v.shape)
+                default_spacing = (1.0, 1.0, 1.0)
+            sp = triple("spacing", default_spacing if spacing is None else spacing, positive=True)
+            self.spacing, self.origin = sp, o
+            self.bricks = brick_plan(self.volume_shape, brick)
+            token = uuid.uuid4().hex
+            specs, self._arrays = [], []
+            for i, ranges in enumerate(self.bricks):
+                (z0, _), (y0, _), (x0, _) = ranges
+                spec = {
+                    "token": f"{token}-{i}",
+                    "number": i,
+                    "ranges": ranges,
+                    "rate": rate,
+                    "spacing": sp,
+                    "origin": (o[0] + x0 * sp[2], o[1] + y0 * sp[1], o[2] + z0 * sp[0]),
+                    "source": (path, lay) if is_path else None,
+                }
+                specs.append(spec)
+                if is_path:
+                    self._arrays.append(None)
+                else:  # the brick's samples, scattered to a worker once
+                    sl = tuple(slice(a, b) for a, b in ranges)
+                    self._arrays.append(
+                        self.client.scatter(np.ascontiguousarray(v[sl], np.float32), hash=False)
+                    )
+            self._tokens = [s["token"] for s in specs]
+            self._handles = [
+                self.client.submit(_build_from, s, a, pure=False, **self._near(self._who_has([a]), a))
+                if a is not None
+                else self.client.submit(_build_from, s, None, pure=False)
+                for s, a in zip(specs, self._arrays, strict=True)
+            ]
+            handles = self._gather(self._handles)
+            self.compressed_bytes = int(sum(h.compressed_bytes for h in handles))
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Let go of the bricks on the workers; close a cluster started here."""
+        tokens = getattr(self, "_tokens", None)
+        if tokens and self.client is not None and self.client.status == "running":
+            try:
+                self.client.run(_forget, tokens)
+            except Exception:  # a worker gone: its bricks went with it
+                pass
+        super().close()
+
+    def render(
+        self,
+        camera: Camera,
+        width: int,
+        height: int,
+        isovalue: float,
+        *,
+        speculation: bool = True,
+    ) -> IsoImage:
+        """The complete image (every ray finished) of the whole volume.
+        ``stats``: bricks, passes (summed over bricks), workers, compositing,
+        seconds, bytes_sent (as ``DistributedRasterizer.render``'s)."""
+        from ..raster.render import _check_size
+
+        if not isinstance(camera, Camera):
+            raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
+        width, height = _check_size(width, height)
+        if isinstance(isovalue, bool) or not isinstance(isovalue, (int, float, np.integer, np.floating)):
+            raise TypeError(f"isovalue: expected a real number, got {type(isovalue).__name__}")
+        view = {
+            "camera": camera,
+            "width": width,
+            "height": height,
+            "isovalue": float(isovalue),
+            "speculation": bool(speculation),
+        }
+        whole, frame, sent, nworkers = self._frame(_render_bricks, view)
+        p = whole.planes
+        hit = whole.key != _c.EMPTY_KEY
+        return IsoImage(
+            p["rgba"],
+            _c.depths_of(whole.key),
+            hit,
+            p["t"],
+            np.zeros(hit.shape, bool),
+            1.0,
+            {
+                **whole.counts,
+                "workers": nworkers,
+                "compositing": self.compositing,
+                "seconds": frame_seconds(frame, whole.seconds),
+                "bytes_sent": sent,
+            },
+        )
+
+
+def _build_from(spec: dict, data: Any) -> _Handle:
+    """Task: build a brick from its scattered samples (data) or its file."""
+    return _build(spec if data is None else {**spec, "source": data})

@@ -1,0 +1,138 @@
+"""DistributedIsoRenderer on a real LocalCluster against the single-device
+IsoRenderer: the bricks (aligned to ZFP's 4^3 blocks, each with its
+neighbour block) cover every cell once; the image has the same hit mask and
+depths within the iso tests' tolerance (clvis.reference.iso.agreement on
+the reference's reliable pixels, and against the single device's image),
+whether the volume comes as an array or as a .npy, .raw or NIfTI file read
+brick by brick on the workers."""
+
+import numpy as np
+import pytest
+from dask_cluster import TIMEOUT
+
+from clvis import Camera, datasets, zfp
+from clvis.distributed.iso import DistributedIsoRenderer, brick_plan
+from clvis.errors import DataError
+from clvis.iso import IsoRenderer
+from clvis.reference import iso as ref
+
+W, H = 48, 40
+RATE = 16
+_ML = datasets.marschner_lobb(41)
+
+
+def _cam(eye=(2.2, -2.6, 1.8)):
+    return Camera.look_at(eye, (0, 0, 0), (0, 0, 1), fov_y=40, aspect=W / H, near=0.05, far=20)
+
+
+@pytest.fixture(scope="module")
+def single():
+    v, sp, org = _ML["volume"], _ML["spacing"], _ML["origin"]
+    r = IsoRenderer(v, RATE, sp, org)
+    want = {
+        eye: ref.render(zfp.decode(r.volume), _cam(eye), W, H, 0.5, spacing=sp, origin=org) for eye in _EYES
+    }
+    return r, want
+
+
+_EYES = ((2.2, -2.6, 1.8), (-1.5, 2.0, -2.5))
+
+
+def _check(img, single, eye):
+    r, want = single
+    one = r.render(_cam(eye), W, H, 0.5)
+    a = ref.agreement(want[eye], img.hit, img.depth)
+    assert a["ok"] and a["reliable"] > 0.9 * W * H, a
+    assert ref.agreement(want[eye], one.hit, one.depth)["ok"]
+    # against the single device: the same hits; depths within the rule's tolerance
+    rel = ref.reliable(want[eye])
+    assert (img.hit[rel] == one.hit[rel]).all()
+    both = img.hit & one.hit
+    assert both.sum() > 200
+    assert np.abs(img.depth[both] - one.depth[both]).max() <= ref.DEPTH_TOLERANCE * want[eye].diagonal
+    np.testing.assert_allclose(img.rgba[both], one.rgba[both], atol=2e-3)
+    assert (img.rgba[~img.hit] == 0).all() and np.isinf(img.depth[~img.hit]).all()
+    assert not img.active.any() and img.completion == 1.0
+
+
+@pytest.mark.parametrize("shape", [(41, 41, 41), (9, 17, 5), (2, 2, 2), (13, 8, 30)])
+@pytest.mark.parametrize("edge", [4, 8, (12, 4, 16)])
+def test_brick_plan_covers_every_cell_once(shape, edge):
+    cover = np.zeros([n - 1 for n in shape], np.int32)
+    for ranges in brick_plan(shape, edge):
+        assert all(a % 4 == 0 and b - a >= 2 for a, b in ranges)
+        e = (edge,) * 3 if isinstance(edge, int) else edge
+        own = tuple(slice(a, min(a + k, n - 1)) for (a, _), k, n in zip(ranges, e, shape, strict=True))
+        cover[own] += 1
+        # the samples held: the owned cells' corners and the rest of the neighbour ZFP block
+        assert all(b == min(a + k + 4, n) for (a, b), k, n in zip(ranges, e, shape, strict=True))
+    assert (cover == 1).all()
+
+
+@pytest.mark.parametrize("compositing", ["direct", "tree"])
+def test_array_bricks_equal_the_single_device(client, single, compositing):
+    v, sp, org = _ML["volume"], _ML["spacing"], _ML["origin"]
+    with DistributedIsoRenderer(
+        v, client, rate=RATE, spacing=sp, origin=org, brick=12, compositing=compositing, timeout=TIMEOUT
+    ) as dr:
+        assert len(dr.bricks) == 64
+        for eye in _EYES:
+            img = dr.render(_cam(eye), W, H, 0.5)
+            _check(img, single, eye)
+            assert img.stats["bricks"] == 64 and img.stats["compositing"] == compositing
+            assert sum(img.stats["bytes_sent"].values()) >= img.depth.nbytes
+
+
+@pytest.mark.parametrize("fmt", ["npy", "raw", "nii"])
+def test_files_read_brick_by_brick_on_the_workers(client, single, tmp_path, fmt):
+    v, sp, org = _ML["volume"].astype(np.float32), _ML["spacing"], _ML["origin"]
+    kw = {}
+    if fmt == "npy":
+        path = tmp_path / "ml.npy"
+        np.save(path, v)
+    elif fmt == "raw":
+        path = tmp_path / "ml_41x41x41_float32.raw"
+        v.astype("<f4").tofile(path)
+    else:
+        nib = pytest.importorskip("nibabel")
+        path = tmp_path / "ml.nii"
+        nib.save(nib.Nifti1Image(v.transpose(2, 1, 0), np.eye(4)), str(path))
+    with DistributedIsoRenderer(
+        path, client, rate=RATE, spacing=sp, origin=org, brick=16, timeout=TIMEOUT, **kw
+    ) as dr:
+        assert dr.volume_shape == (41, 41, 41) and len(dr.bricks) == 27
+        _check(dr.render(_cam(), W, H, 0.5), single, _EYES[0])
+
+
+def test_bad_files_and_arguments(client, tmp_path):
+    bad = tmp_path / "broken.npy"
+    bad.write_bytes(b"\x93NUMPY garbage")
+    with pytest.raises(DataError, match="broken.npy"):
+        DistributedIsoRenderer(bad, client, timeout=TIMEOUT)
+    flat = tmp_path / "flat.npy"
+    np.save(flat, np.zeros((4, 4)))
+    with pytest.raises(DataError, match="flat.npy: expected a 3-D volume"):
+        DistributedIsoRenderer(flat, client, timeout=TIMEOUT)
+    short = tmp_path / "v_8x8x8_float32.raw"
+    short.write_bytes(b"\0" * 100)
+    with pytest.raises(DataError, match="v_8x8x8_float32.raw: 100 bytes"):
+        DistributedIsoRenderer(short, client, timeout=TIMEOUT)
+    nan = tmp_path / "nan.npy"
+    a = np.zeros((9, 9, 9), np.float32)
+    a[8, 8, 8] = np.nan
+    np.save(nan, a)
+    with pytest.raises(DataError, match="nan.npy: non-finite samples in brick"):
+        DistributedIsoRenderer(nan, client, brick=4, timeout=TIMEOUT)
+    with pytest.raises(DataError, match="nowhere.npy: no such file"):
+        DistributedIsoRenderer(tmp_path / "nowhere.npy", client, timeout=TIMEOUT)
+    with pytest.raises(ValueError, match="brick: expected a multiple of 4"):
+        DistributedIsoRenderer(np.zeros((8, 8, 8)), client, brick=6)
+    with pytest.raises(DataError, match="at least 2 samples"):
+        DistributedIsoRenderer(np.zeros((1, 8, 8)), client)
+    with pytest.raises(ValueError, match="volume: expected a 3-D real array"):
+        DistributedIsoRenderer(np.zeros((8, 8)), client)
+    with DistributedIsoRenderer(np.zeros((8, 8, 8)), client, brick=4, timeout=TIMEOUT) as dr:
+        with pytest.raises(TypeError, match="isovalue"):
+            dr.render(_cam(), W, H, "0.5")
+        img = dr.render(_cam(), W, H, 0.5)  # nothing to hit
+        assert not img.hit.any() and np.isinf(img.depth).all()

@@ -1,6 +1,7 @@
 """`clvis demo`: each kernel family on generated data, its figures and a
 check against its reference. The primitives part is here; each rendering
-family's part lives with its command (raster.demo, gauss.demo, iso.demo)."""
+family's part lives with its command (raster.demo, gauss.demo, iso.demo;
+post.demo: the networks' contact sheets)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import argparse
 
 import numpy as np
 
-from . import gauss, iso, raster
+from . import gauss, iso, post, raster
 from ._common import Parser, count, size, timed
 from .raster import MAX_POINTS
 
@@ -46,6 +47,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         default=(480, 480),
         metavar="WxH",
         help="each Gaussian LOD panel (default 480x480)",
+    )
+    d.add_argument(
+        "--post-size",
+        type=size,
+        default=(640, 360),
+        metavar="WxH",
+        help="each panel of the networks' contact sheets (default 640x360)",
     )
     d.add_argument(
         "--out", default="clvis-demo", metavar="DIR", help="where the PNGs go (default ./clvis-demo)"
@@ -131,4 +139,5 @@ def cmd(args: argparse.Namespace) -> int:
     ok_all &= raster.demo(args, q)
     ok_all &= gauss.demo(args.out, q, size=args.gauss_size)
     ok_all &= iso.demo(args.out, q, size=args.iso_size)
+    ok_all &= post.demo(args.out, q, size=args.post_size)
     return 0 if ok_all else 1

@@ -29,6 +29,8 @@ def test_demo(capsys, tmp_path):
                 "64x64",
                 "--iso-size",
                 "80x60",
+                "--post-size",
+                "96x64",
                 "--out",
                 str(tmp_path),
             ]
@@ -42,6 +44,10 @@ def test_demo(capsys, tmp_path):
     with Image.open(tmp_path / "gauss.png") as im:
         assert im.width >= 3 * 64 and im.height > 64  # labelled, over colour bars
     assert "M points/s" in out
+    for name in ("infill", "lidar"):  # input, push-pull, network, target, error; labelled
+        with Image.open(tmp_path / f"post-{name}.png") as im:
+            assert im.size == (5 * 96 + 4 * 4, 64 + images.label_height(96))
+        assert f"{name:7} input" in out
     with Image.open(tmp_path / "overview.png") as im:
         assert im.width > 160
 

@@ -6,25 +6,33 @@ Inference never imports this module: clvis.post.infer runs the exported
 graphs with onnxruntime alone.
 
 Both networks take NCHW float32 whose height and width are multiples of
-their ``stride`` (clvis.post.pack pads, unpack crops back) and use only
-convolutions, pooling, nearest or bilinear up-sampling and concatenation, so
-the exported graphs have dynamic height and width and no Gather-lowered ops
-(no ``F.unfold``).
+their ``stride`` (32; clvis.post.pack pads, unpack crops back) and use only
+convolutions, pooling, bilinear or nearest up-sampling, concatenation and
+element-wise arithmetic, so the exported graphs have dynamic height and width
+and no Gather-lowered ops (no ``F.unfold``).
+
+Both start from the classical baseline: :class:`PushPull`, the push-pull
+hole fill of clvis.post.pushpull written as graph operations, fills the holes
+from the known pixels, and the U-Nets see that estimate beside their input
+and add a correction to it (their last convolution starts at zero, so an
+untrained network is push-pull, and training can only be judged by what it
+adds).
 
 - :class:`InfillWNet` (Dyken, Usher & Kumar 2024, after FoVolNet's W-Net): two
   small U-Nets in sequence with encoder blocks of 4, 8 and 16 channels, a
   32-channel bottleneck and decoder blocks of 16, 8 and 4 (one 3x3
   convolution + ReLU each, average-pool down, nearest up). Input: the partial
   isosurface image as 5 planes (R, G, B, hit, active; clvis.post.pack.pack_iso);
-  the second U-Net sees the first one's output beside the input. Output: 4
-  planes (R, G, B premultiplied over black, coverage) in which the finished
-  pixels keep their input values exactly and the active ones take the
-  network's prediction (the blend is part of the graph).
+  each U-Net sees the input beside the current estimate. Output: 4 planes
+  (R, G, B premultiplied over black, coverage) in which the finished pixels
+  keep their input values exactly and the active ones take the network's
+  prediction (the blend is part of the graph).
 - :class:`RgbdaUNet` (Vanherck, Zoomers et al. 2025): a U-Net of
   conv-BN-ReLU x 2 stages, max-pool down, bilinear up, on the R, G, B, A, D
   planes of the depth-filtered image (their code's conventions:
-  clvis.post.pack.pack_rgbda); output RGB in [0, 1] (sigmoid). The authors'
-  widths are 64..1024 (31 M parameters); ``width`` sets the first stage's.
+  clvis.post.pack.pack_rgbda) beside the push-pulled colours; output RGB
+  clipped to [0, 1]. The authors' widths are 64..1024 (31 M parameters);
+  ``width`` sets the first stage's.
 """
 
 from __future__ import annotations

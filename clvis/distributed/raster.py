@@ -235,12 +235,18 @@ def _build_here(handle: _Handle, arrays: Any = None) -> Rasterizer:
     q = _queue()
     o = handle.options
     try:
-        r = Rasterizer(
+        # a PointCloud, not its fields as arguments: a LAS file has more
+        # attributes than one render resolves (render(planes=) picks)
+        shifted = PointCloud(
             _shift(cloud, handle.origin),
             colors=cloud.colors,
             attributes=cloud.attributes,
             velocity=cloud.velocity,
             radius=cloud.radius,
+            origin=handle.origin,
+        )
+        r = Rasterizer(
+            shifted,
             morton=o["morton"],
             batch_size=o["batch_size"],
             queue=q,

@@ -79,7 +79,7 @@ def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (640, 
     print(f"  contact sheet: {path} (input: magenta = rays still running)")
     ok &= got.shape == (h, w, 4) and s["network"]["psnr"] > s["input"]["psnr"]
 
-    lf = data.lidar_frames(("terrain",), 1, 2027, w, h, views=1, dense_points=1_000_000)[0]
+    lf = data.lidar_frames(("terrain",), 1, 2027, w, h, views=1)[0]
     kept = lf.rgbda[..., 4] > 0
     inp = np.where(kept[..., None], lf.rgbda[..., :3], 0).astype(np.float32)
     pp = np.asarray(post.pushpull(np.ascontiguousarray(lf.rgbda[..., :3]), kept, queue=q))

@@ -83,33 +83,59 @@ def test_infill_equals_plain_onnxruntime(iso_pair, precision):
         assert np.abs(rgba[done].astype(int) - expect).max() <= 1
 
 
-def test_infill_quality_on_held_out_volume(iso_pair):
-    """A gyroid (never trained on), 120 x 72 at 85 %: the shipped network
-    gains at least 3 dB over the raw input, with SSIM above the input's and
-    0.85, and stays
-    within 3 dB of push-pull. (The issue's bar, 1 dB *above* push-pull, is
-    not met by the shipped short training run: the card's held-out figures
-    at 1280 x 720 say by how much.)"""
-    part, full = iso_pair
-    target = np.where(full.hit[..., None], full.rgba[..., :3], 0).astype(np.float32)
-    out = post.load("infill")(part)[..., :3] / np.float32(255)
-    known = np.where((part.hit & ~part.active)[..., None], part.rgba[..., :3], 0).astype(np.float32)
-    pp = post.pushpull(
-        np.concatenate([known, (part.hit & ~part.active)[..., None].astype(np.float32)], 2), ~part.active
-    )[..., :3]
-    net_m, pp_m = train.metrics(out, target), train.metrics(pp, target)
-    raw = train.metrics(known[..., :3], target)
-    assert net_m["psnr"] > raw["psnr"] + 3 and net_m["ssim"] > max(raw["ssim"], 0.85)
-    assert net_m["psnr"] > pp_m["psnr"] - 3
+def test_infill_quality_on_held_out_volume():
+    """A gyroid (a kind never trained on; 64^3, as the held-out set), 640 x 360
+    at 85 %: the shipped network beats push-pull on the same input by 1 dB
+    and in SSIM. (It was trained on 1280 x 720 frames: at 320 x 180 it is
+    within 2 dB of push-pull either way, which README states.)"""
+    f = data.iso_frames(("gyroid",), 1, 8, 640, 360, views=1, completions=(0.85,))[0]
+    rgba, hit, active = f.planes(0.85)
+    out = post.load("infill")(_Iso(rgba, hit, active))[..., :3] / np.float32(255)
+    pp = post.pushpull(rgba, ~active)[..., :3]
+    net_m, pp_m, raw = (train.metrics(x, f.rgb) for x in (out, pp, rgba[..., :3]))
+    assert net_m["psnr"] > pp_m["psnr"] + 1 and net_m["psnr"] > raw["psnr"] + 6
+    assert net_m["ssim"] > max(pp_m["ssim"] + 0.005, 0.92)
 
 
-def test_lidar_reconstruction_beats_its_input():
-    lf = data.lidar_frames(("terrain",), 1, 11, 160, 120, views=1, dense_points=300_000)[0]
+def test_lidar_reconstruction_beats_push_pull():
+    """A terrain view (a scene never trained on) at the training's densities:
+    6 dB over the depth-filtered input, 1 dB and 0.02 SSIM over push-pull."""
+    lf = data.lidar_frames(("terrain",), 1, 12, 160, 120, views=1)[0]
     net = post.load("lidar")
     out = net(lf.rgbda)[..., :3] / np.float32(255)
     assert net(_Filtered(lf.rgbda)).shape == (120, 160, 4)
-    got, raw = train.metrics(out, lf.rgb), train.metrics(lf.rgbda[..., :3], lf.rgb)
-    assert got["psnr"] > raw["psnr"] + 3
+    pp = post.pushpull(np.ascontiguousarray(lf.rgbda[..., :3]), lf.rgbda[..., 4] > 0)
+    got, pp_m, raw = (train.metrics(x, lf.rgb) for x in (out, pp, lf.rgbda[..., :3]))
+    assert got["psnr"] > raw["psnr"] + 6 and got["psnr"] > pp_m["psnr"] + 1
+    assert got["ssim"] > pp_m["ssim"] + 0.02
+
+
+# the issue's targets on the held-out sets (1280 x 720 in-fill, 960 x 720 LiDAR)
+TARGETS = {
+    ("infill", "completion 0.85"): {"psnr": 25.0, "ssim": 0.92, "over_pushpull_db": 1.0},
+    ("infill", "completion 0.9"): {"ssim": 0.95},
+    ("infill", "completion 0.95"): {"ssim": 0.98},
+    ("lidar", "all"): {"ssim": 0.85, "over_pushpull_db": 1.0, "over_pushpull_ssim": 0.02, "over_input_db": 6.0},
+}
+
+
+@pytest.mark.parametrize("name,key", list(TARGETS))
+def test_shipped_cards_meet_the_targets(name, key):
+    """What ships must meet the issue's quality targets on its held-out
+    frames, as its card (checked against its files above) records them."""
+    card = json.loads((infer.MODELS / f"{name}.json").read_text())
+    m = card["held_out"][key]
+    t = TARGETS[(name, key)]
+    net, pp, raw = m["network"], m["pushpull"], m["input"]
+    assert net["psnr"] >= t.get("psnr", 0) and net["ssim"] >= t["ssim"]
+    assert net["psnr"] >= pp["psnr"] + t.get("over_pushpull_db", 0)
+    assert net["ssim"] >= pp["ssim"] + t.get("over_pushpull_ssim", 0)
+    assert net["psnr"] >= raw["psnr"] + t.get("over_input_db", 0)
+
+
+class _Iso:
+    def __init__(self, rgba, hit, active):
+        self.rgba, self.hit, self.active = rgba, hit, active
 
 
 class _Filtered:

@@ -228,8 +228,8 @@ def format_table(rows: list[Row], meta: dict | None = None) -> str:
         lines += ["", f"{op}   n = {n:,}", head, "-" * len(head)]
         for r in sorted(ops, key=lambda r: ["clvis", "clvis-host", "peer", "copy"].index(r.role)):
             name = r.impl if r.role != "clvis" else "clvis (device arrays)"
-            if r.role == "clvis-host":
-                name = "clvis (numpy in/out, transfers)"
+            if r.role == "clvis-host":  # a variant with its own name (e.g. a precision) keeps it
+                name = "clvis (numpy in/out, transfers)" if r.impl == "clvis-host" else f"clvis, {r.impl}"
             pct = f"{r.copy_pct:6.0f}%" if r.copy_pct is not None else "      -"
             speed = f"{rat[(op, r.impl)]:14.1f}x" if (op, r.impl) in rat else ""
             lines.append(

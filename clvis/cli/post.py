@@ -33,7 +33,9 @@ def _sheet(path: Path, inp: np.ndarray, pp: np.ndarray, out: np.ndarray, target:
         _panel(pp, f"push-pull {scores['pushpull']['psnr']:.1f} dB, SSIM {scores['pushpull']['ssim']:.3f}"),
         _panel(out, f"network {scores['network']['psnr']:.1f} dB, SSIM {scores['network']['ssim']:.3f}"),
         _panel(target, "target (the slow render)"),
-        images.label(images.attribute_image(err, "magma", 0.0, ERROR_SCALE), f"|network - target|, 0..{ERROR_SCALE}"),
+        images.label(
+            images.attribute_image(err, "magma", 0.0, ERROR_SCALE), f"|network - target|, 0..{ERROR_SCALE}"
+        ),
     ]
     return images.save_png(path, images.side_by_side(panels))
 
@@ -62,7 +64,9 @@ def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (640, 
 
     w, h = size
     out_dir = Path(out_dir)
-    print(f"\npost: the shipped networks on held-out frames ({w}x{h}), PSNR / SSIM against the slow render:\n")
+    print(
+        f"\npost: the shipped networks on held-out frames ({w}x{h}), PSNR / SSIM against the slow render:\n"
+    )
     ok = True
 
     f = data.iso_frames(("gyroid",), 1, 2027, w, h, views=1, completions=(0.85,))[0]

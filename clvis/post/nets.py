@@ -204,7 +204,17 @@ class RgbdaUNet(nn.Module):
         enc = tuple(width * 2**i for i in range(depth))
         self.fill = PushPull(levels)
         self.net = _zero_last(
-            _UNet(5 + 3, 3, enc, width * 2**depth, tuple(reversed(enc)), bn=True, convs=2, up="bilinear", pool="max")
+            _UNet(
+                5 + 3,
+                3,
+                enc,
+                width * 2**depth,
+                tuple(reversed(enc)),
+                bn=True,
+                convs=2,
+                up="bilinear",
+                pool="max",
+            )
         )
         self.stride = max(self.net.stride, 2**levels)
 

@@ -115,7 +115,12 @@ TARGETS = {
     ("infill", "completion 0.85"): {"psnr": 25.0, "ssim": 0.92, "over_pushpull_db": 1.0},
     ("infill", "completion 0.9"): {"ssim": 0.95},
     ("infill", "completion 0.95"): {"ssim": 0.98},
-    ("lidar", "all"): {"ssim": 0.85, "over_pushpull_db": 1.0, "over_pushpull_ssim": 0.02, "over_input_db": 6.0},
+    ("lidar", "all"): {
+        "ssim": 0.85,
+        "over_pushpull_db": 1.0,
+        "over_pushpull_ssim": 0.02,
+        "over_input_db": 6.0,
+    },
 }
 
 

@@ -166,6 +166,15 @@ class ClusterOwner:
         used = len({k.split(" ", 1)[1] for k in whole.seconds if k.startswith("render ")})
         return whole, frame, sent, used
 
+    def _run_on_workers(self, fn: Any, *args: Any) -> None:
+        """fn(*args) on every worker while the client runs (closing: letting
+        go of this object's state there); a worker gone took its state with it."""
+        if self.client is not None and self.client.status == "running":
+            try:
+                self.client.run(fn, *args)
+            except Exception:
+                pass
+
     def close(self) -> None:
         """Drop the partitions; close the client and cluster started here."""
         for name in ("_handles", "_arrays"):

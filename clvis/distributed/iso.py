@@ -321,11 +321,8 @@ class DistributedIsoRenderer(ClusterOwner):
     def close(self) -> None:
         """Let go of the bricks on the workers; close a cluster started here."""
         tokens = getattr(self, "_tokens", None)
-        if tokens and self.client is not None and self.client.status == "running":
-            try:
-                self.client.run(_forget, tokens)
-            except Exception:  # a worker gone: its bricks went with it
-                pass
+        if tokens:
+            self._run_on_workers(_forget, tokens)
         super().close()
 
     def render(

@@ -482,11 +482,8 @@ class DistributedRasterizer(ClusterOwner):
     def close(self) -> None:
         """Let go of the partitions on the workers; close a cluster started here."""
         tokens = getattr(self, "_tokens", None)
-        if tokens and self.client is not None and self.client.status == "running":
-            try:
-                self.client.run(_forget, tokens, False)
-            except Exception:  # a worker gone: its partitions went with it
-                pass
+        if tokens:
+            self._run_on_workers(_forget, tokens, False)
         super().close()
 
     # -- frames

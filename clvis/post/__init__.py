@@ -9,7 +9,7 @@ the tests that compare the exported graphs with their PyTorch modules.
 
 from .infer import MODELS, PRECISIONS, PostNetwork, load
 from .names import NAMES
-from .pack import pack_iso, pack_rgbda, padded_shape, unpack_rgba8
+from .pack import pack_gbuffers, pack_iso, pack_rgbda, padded_shape, unpack_rgba8
 from .pushpull import pushpull
 
 __all__ = [
@@ -18,6 +18,7 @@ __all__ = [
     "PRECISIONS",
     "PostNetwork",
     "load",
+    "pack_gbuffers",
     "pack_iso",
     "pack_rgbda",
     "padded_shape",

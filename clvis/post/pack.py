@@ -3,7 +3,8 @@
 The networks take one NCHW float32 tensor (batch 1) whose height and width
 are multiples of their stride; the padding pixels read as "empty".
 :func:`pack_iso` builds the in-fill network's input from an iso image,
-:func:`pack_rgbda` the LiDAR U-Net's from a depth-filtered point image, and
+:func:`pack_rgbda` the LiDAR U-Net's from a depth-filtered point image,
+:func:`pack_gbuffers` the NARVis U-Net's from rasterizer G-buffers, and
 :func:`unpack_rgba8` turns a network's output into an 8-bit RGBA picture. The
 exact definitions are the docstrings of :mod:`clvis.reference.post.pack`; the
 kernels are ``kernels_cl/post/pack.cl`` and give its results bit for bit.
@@ -30,8 +31,17 @@ import pyopencl.array as cla
 from .. import runtime
 from .._arrays import buf, check_array, is_device, positive_int, resolve_queue, result, to_device
 from ..errors import DataError
+from .names import GBUFFER_PLANES, gbuffer_channels
 
-__all__ = ["MAX_PIXELS", "MAX_SIDE", "pack_iso", "pack_rgbda", "padded_shape", "unpack_rgba8"]
+__all__ = [
+    "MAX_PIXELS",
+    "MAX_SIDE",
+    "pack_gbuffers",
+    "pack_iso",
+    "pack_rgbda",
+    "padded_shape",
+    "unpack_rgba8",
+]
 
 MAX_SIDE = 32768
 MAX_PIXELS = 2**28
@@ -191,6 +201,107 @@ def pack_rgbda(
             f"rgbda: {nan} NaN values and {neg} pixels with alpha > 0 and depth -inf; "
             "values must be numbers, a depth finite or +inf (empty)"
         )
+    return dst if out is not None else result(dst, host)
+
+
+def _gbuffer_sources(gbuffers: Any, planes: tuple[str, ...]) -> list[tuple[str, Any, int, int]]:
+    """(channel name, float32 array, element offset, step) of each channel
+    after R, G, B and the coverage, in the tensor's order; DataError for a
+    plane the G-buffers lack."""
+    out: list[tuple[str, Any, int, int]] = []
+
+    def need(name: str, what: str, a: Any) -> Any:
+        if a is None:
+            raise DataError(f"planes: the G-buffers have no {name!r} plane ({what})")
+        return a
+
+    if "depth" in planes:
+        out.append(("depth", need("depth", "depth", gbuffers.depth), 0, 1))
+    if "vel2d" in planes:
+        why = "the cloud has no velocity"
+        v = need("vel2d", why, gbuffers.vel2d)
+        out += [("vel_x", v, 0, 2), ("vel_y", v, 1, 2)]
+        out.append(("vel_angle", need("vel2d", why, gbuffers.vel_angle), 0, 1))
+        out.append(("vel_speed", need("vel2d", why, gbuffers.vel_speed), 0, 1))
+    attrs = gbuffers.attributes or {}
+    for p in planes:
+        if p in GBUFFER_PLANES:
+            continue
+        if p not in attrs:
+            have = ", ".join(attrs) or "none"
+            raise DataError(
+                f"planes: the G-buffers have no attribute plane {p!r} (they have: {have}; "
+                "render(planes=[...]) resolves a cloud's attributes)"
+            )
+        a = attrs[p]
+        out.append((p, a if a.dtype == np.float32 else a.astype(np.float32), 0, 1))
+    return out
+
+
+def pack_gbuffers(
+    gbuffers: Any,
+    planes: Any = ("rgb", "depth", "vel2d"),
+    *,
+    stride: int = 1,
+    out: cla.Array | None = None,
+    queue: cl.CommandQueue | None = None,
+) -> np.ndarray | cla.Array:
+    """The NARVis U-Net's input: (1, C, Hp, Wp) float32 from rasterizer
+    G-buffers (a clvis.raster.GBuffers, numpy or ``host=False`` device
+    planes), the channels of ``clvis.post.names.gbuffer_channels(planes)``.
+
+    R, G, B = the colour / 255 and COVERAGE = 1 where a point was drawn;
+    then, where named, the view depth, the screen velocity (v'x, v'y, its
+    angle, |v'|) and any attribute planes, raw (the network normalises them
+    in its graph). Every channel is 0 at empty pixels and padding. A plane
+    the G-buffers lack, or a NaN or infinite value at a covered pixel, raises
+    DataError naming it (after the kernels ran).
+    """
+    layout = gbuffer_channels(planes)
+    planes = tuple([planes] if isinstance(planes, str) else planes)
+    for name in ("index", "rgba", "attributes"):
+        if not hasattr(gbuffers, name):
+            raise TypeError(f"gbuffers: expected clvis.raster.GBuffers, got {type(gbuffers).__name__}")
+    index, rgba = gbuffers.index, gbuffers.rgba
+    queue = resolve_queue(queue, index=index, rgba=rgba, out=out)
+    host = not is_device(index)
+    index = check_array("index", index, dtypes=[np.uint32], ndim=2)
+    rgba = check_array("rgba", rgba, dtypes=[np.uint8], ndim=3)
+    h, w = (int(s) for s in index.shape)
+    if tuple(rgba.shape) != (h, w, 4):
+        raise ValueError(f"rgba: expected shape {(h, w, 4)} (the index plane's), got {tuple(rgba.shape)}")
+    sources = _gbuffer_sources(gbuffers, planes)
+    for name, a, _, step in sources:
+        want = (h, w, 2) if step == 2 else (h, w)
+        if tuple(a.shape) != want:
+            raise ValueError(f"{name}: expected shape {want} (the index plane's), got {tuple(a.shape)}")
+    hp, wp = padded_shape(h, w, stride)
+    _check_size("gbuffers", h, w, hp, wp)
+    dst = _target(out, queue, (1, len(layout), hp, wp), np.float32, "pack_gbuffers output")
+    bad = runtime.zeros(queue, len(sources) or 1, np.uint32, "pack_gbuffers input check")
+    launch, _, _ = _launcher(queue)
+    u32 = np.uint32
+    idx = to_device(queue, "index", index)
+    dims = (u32(w), u32(h), u32(wp), u32(hp))
+    launch("pack_rgb_coverage", hp * wp, buf(to_device(queue, "rgba", rgba)), buf(idx), *dims, buf(dst))
+    for c, (name, a, offset, step) in enumerate(sources):
+        src = to_device(queue, name, check_array(name, a, dtypes=[np.float32]))
+        launch(
+            "pack_plane",
+            hp * wp,
+            buf(src),
+            np.uint64(offset),
+            u32(step),
+            buf(idx),
+            *dims,
+            u32(4 + c),
+            buf(dst),
+            buf(bad),
+        )
+    counts = bad.get()
+    for (name, *_), n in zip(sources, counts, strict=False):
+        if n:
+            raise DataError(f"{name}: {int(n)} covered pixels with a NaN or infinite value")
     return dst if out is not None else result(dst, host)
 
 

@@ -47,6 +47,23 @@
  *     and stats[2] (rgbda_range's, on the same rgbda). Elsewhere (not kept,
  *     padding): R = G = B = A = 0, D = -1.
  *
+ * kernel pack_rgb_coverage(global const uchar *rgba, global const uint *index,
+ *                           uint w, uint h, uint wp, uint hp, global float *out)
+ *     The NARVis U-Net's first 4 channels from rasterizer G-buffers: rgba
+ *     w*h*4 uchars, index w*h uints (0xFFFFFFFF = empty). out: (1, C, hp, wp)
+ *     with C >= 4; channels 0..3 = R, G, B, COVERAGE: at covered pixels
+ *     (index != 0xFFFFFFFF) r / 255.0f, g / 255.0f, b / 255.0f and 1; else,
+ *     and at padding, 0. Other channels are not touched.
+ *
+ * kernel pack_plane(global const float *src, ulong offset, uint step,
+ *                   global const uint *index, uint w, uint h, uint wp, uint hp,
+ *                   uint channel, global float *out, global uint *bad)
+ *     One more channel of the same tensor: out[channel] at pixel (x, y) =
+ *     src[offset + step * (y*w + x)] where covered, 0 elsewhere and at
+ *     padding; channel >= 4. A covered pixel whose value is NaN or infinite
+ *     gets 0 and bad[channel - 4] += 1 (the host zeroes bad first and raises
+ *     an error naming the plane).
+ *
  * kernel unpack_rgba8(global const float *nchw, uint channels, uint wp,
  *                     uint hp, uint w, uint h, global uchar *out)
  *     nchw: (1, channels, hp, wp), channels 3 or 4, w <= wp, h <= hp. out:
@@ -181,6 +198,59 @@ kernel void pack_rgbda(global const float *rgbda, const uint w, const uint h,
         out[3 * plane + i] = a;
         out[4 * plane + i] = dn;
     }
+}
+
+kernel void pack_rgb_coverage(global const uchar *rgba, global const uint *index,
+                              const uint w, const uint h, const uint wp, const uint hp,
+                              global float *out)
+{
+    const ulong plane = (ulong)wp * hp;
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i) {
+        const uint y = (uint)(i / wp), x = (uint)(i - (ulong)y * wp);
+        float r = 0.0f, g = 0.0f, b = 0.0f, cov = 0.0f;
+        if (x < w && y < h) {
+            const ulong s = (ulong)y * w + x;
+            if (index[s] != 0xFFFFFFFFu) {
+                const uchar4 c = vload4(s, rgba);
+                r = (float)c.x / 255.0f;
+                g = (float)c.y / 255.0f;
+                b = (float)c.z / 255.0f;
+                cov = 1.0f;
+            }
+        }
+        out[i] = r;
+        out[plane + i] = g;
+        out[2 * plane + i] = b;
+        out[3 * plane + i] = cov;
+    }
+}
+
+kernel void pack_plane(global const float *src, const ulong offset, const uint step,
+                       global const uint *index, const uint w, const uint h,
+                       const uint wp, const uint hp, const uint channel,
+                       global float *out, global uint *bad)
+{
+    const ulong plane = (ulong)wp * hp;
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    uint nonfinite = 0;
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i) {
+        const uint y = (uint)(i / wp), x = (uint)(i - (ulong)y * wp);
+        float v = 0.0f;
+        if (x < w && y < h) {
+            const ulong s = (ulong)y * w + x;
+            if (index[s] != 0xFFFFFFFFu) {
+                v = src[offset + (ulong)step * s];
+                if (!isfinite(v)) {
+                    ++nonfinite;
+                    v = 0.0f;
+                }
+            }
+        }
+        out[channel * plane + i] = v;
+    }
+    if (nonfinite)
+        atomic_add(&bad[channel - 4], nonfinite);
 }
 
 kernel void unpack_rgba8(global const float *nchw, const uint channels, const uint wp,

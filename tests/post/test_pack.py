@@ -324,3 +324,104 @@ def test_bad_input(device, monkeypatch):
             unpack_rgba8(t, v, 8, queue=q)
     with pytest.raises(ValueError, match="out: expected shape"):
         unpack_rgba8(t, 8, 8, out=cla.empty(q, (8, 8, 3), np.uint8), queue=q)
+
+
+# ---------------------------------------------------------------------------
+# pack_gbuffers: rasterizer G-buffers for the NARVis U-Net
+
+
+def gbuffers(shape, seed, covered=0.5, attributes=("temperature",)):
+    """Synthetic G-buffers as Rasterizer.render gives them: NaN / +inf /
+    EMPTY at empty pixels, finite values at covered ones."""
+    from clvis.raster import EMPTY, GBuffers
+
+    rng = np.random.default_rng(seed)
+    cov = rng.random(shape) < covered
+    index = np.where(cov, rng.integers(0, 1000, shape), EMPTY).astype(np.uint32)
+    rgba = np.where(cov[..., None], rng.integers(0, 256, shape + (4,)), 0).astype(np.uint8)
+    nan = np.float32(np.nan)
+    depth = np.where(cov, rng.uniform(1, 500, shape), np.inf).astype(np.float32)
+    vel = np.where(cov[..., None], rng.normal(0, 30, shape + (2,)), nan).astype(np.float32)
+    angle = np.where(cov, np.arctan2(vel[..., 1], vel[..., 0]), nan).astype(np.float32)
+    speed = np.where(cov, np.hypot(vel[..., 0], vel[..., 1]), nan).astype(np.float32)
+    attrs = {a: np.where(cov, rng.uniform(200, 300, shape), nan).astype(np.float32) for a in attributes}
+    attrs["class"] = np.where(cov, rng.integers(1, 9, shape), 0).astype(np.uint8)
+    return GBuffers(index, depth, rgba, attrs, vel, angle, speed)
+
+
+GBUFFER_SELECTIONS = [
+    ("rgb",),
+    ("rgb", "depth", "vel2d"),
+    ("rgb", "vel2d", "temperature", "class", "depth"),
+]
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("stride", STRIDES)
+@pytest.mark.parametrize("planes", GBUFFER_SELECTIONS, ids=["-".join(p) for p in GBUFFER_SELECTIONS])
+def test_pack_gbuffers(queue, shape, stride, planes):
+    from clvis.post import pack_gbuffers
+    from clvis.post.names import gbuffer_channels
+
+    g = gbuffers(shape, seed=hash((shape, stride, planes)) % 2**32)
+    got = pack_gbuffers(g, planes, stride=stride, queue=queue)
+    want = ref.pack_gbuffers(g, planes, stride=stride)
+    same(got, want)
+    hp, wp = padded_shape(*shape, stride)
+    assert got.shape == (1, len(gbuffer_channels(planes)), hp, wp)
+    cov = g.index != 0xFFFFFFFF
+    np.testing.assert_array_equal(got[0, 3, : shape[0], : shape[1]], cov)
+    assert not got[0, :, : shape[0], : shape[1]][:, ~cov].any()  # empty pixels are 0 in every channel
+    if "vel2d" in planes:
+        c = gbuffer_channels(planes).index("vel_speed")
+        np.testing.assert_array_equal(got[0, c, : shape[0], : shape[1]][cov], g.vel_speed[cov])
+
+
+def test_pack_gbuffers_from_the_rasterizer_on_the_device(queue):
+    """host=False G-buffers (device arrays) in, a device array out, the same
+    values as the numpy ones; into a mapped ALLOC_HOST_PTR out= too."""
+    from clvis.post import pack_gbuffers
+    from clvis.training import data
+
+    sc = data.narvis_scene("hurricane", 20_000, 1)
+    ras = sc.rasterizer(queue=queue)
+    cam = data.narvis_cameras(sc, "hemisphere")[20]
+    planes = ("rgb", "depth", "vel2d", "pressure")
+    host = sc.gbuffers(ras, cam, 75, 41, planes)
+    dev = sc.gbuffers(ras, cam, 75, 41, planes, host=False)
+    want = ref.pack_gbuffers(host, planes, stride=16)
+    assert host.covered.mean() > 0.05
+    got = pack_gbuffers(dev, planes, stride=16, queue=queue)
+    assert isinstance(got, cla.Array)
+    same(got.get(), want)
+    flags = cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR
+    out = cla.Array(queue, want.shape, np.float32, data=cl.Buffer(queue.context, flags, want.nbytes))
+    assert pack_gbuffers(host, planes, stride=16, out=out, queue=queue) is out
+    same(out.get(), want)
+
+
+def test_pack_gbuffers_bad_input(queue):
+    from clvis.post import pack_gbuffers
+
+    g = gbuffers((9, 13), 1)
+    no_vel = gbuffers((9, 13), 1)
+    no_vel.vel2d = no_vel.vel_angle = no_vel.vel_speed = None
+    with pytest.raises(DataError, match="vel2d.*no velocity"):
+        pack_gbuffers(no_vel, ("rgb", "vel2d"), queue=queue)
+    with pytest.raises(DataError, match="no attribute plane 'pressure'.*temperature"):
+        pack_gbuffers(g, ("rgb", "pressure"), queue=queue)
+    with pytest.raises(ValueError, match="lacks 'rgb'"):
+        pack_gbuffers(g, ("depth",), queue=queue)
+    with pytest.raises(TypeError, match="GBuffers"):
+        pack_gbuffers(np.zeros((9, 13, 5), np.float32), queue=queue)
+    bad = gbuffers((9, 13), 1)
+    cov = bad.index != 0xFFFFFFFF
+    bad.depth[np.argwhere(cov)[0][0], np.argwhere(cov)[0][1]] = np.nan
+    with pytest.raises(DataError, match="depth: 1 covered pixels with a NaN"):
+        pack_gbuffers(bad, ("rgb", "depth"), queue=queue)
+    short = gbuffers((9, 13), 1)
+    short.depth = short.depth[:8]
+    with pytest.raises(ValueError, match=r"depth: expected shape \(9, 13\)"):
+        pack_gbuffers(short, ("rgb", "depth"), queue=queue)
+    with pytest.raises(ClvisError):
+        pack_gbuffers(gbuffers((0, 4), 1), queue=queue)

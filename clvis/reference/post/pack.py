@@ -22,6 +22,15 @@ of this image (D = 0 when dmax == dmin). Elsewhere, and at padding:
 R = G = B = A = 0, D = -1. No kept pixel: every pixel empty. Errors: a NaN
 anywhere, a depth of -inf where alpha > 0.
 
+pack_gbuffers (the NARVis U-Net): from rasterizer G-buffers (``index``,
+``rgba`` and the planes named), the channels of
+clvis.post.nets.gbuffer_channels(planes): R, G, B = rgba / 255 in float32
+and COVERAGE = 1 at covered pixels (index != 0xFFFFFFFF); then depth, then
+the screen velocity (vel2d's x and y, vel_angle, vel_speed), then each other
+named plane (an attribute, as float32) in the order given. Every channel is
+0 at empty pixels and padding. A covered pixel whose value is NaN or
+infinite is an error.
+
 unpack_rgba8: from (1, C, Hp, Wp), C = 3 or 4, the top-left height x width
 pixels as H x W x 4 uint8: ``rint(clip(v, 0, 1) * 255)`` in float32 (rint:
 half to even), NaN -> 0, alpha 255 when C = 3.
@@ -79,6 +88,39 @@ def pack_rgbda(rgbda: npt.ArrayLike, *, stride: int = 1) -> np.ndarray:
     planes = [np.where(kept, rgbda[..., c], _F(0)) for c in (0, 1, 2, 4)]
     hp, wp = padded_shape(*depth.shape, stride)
     return _nchw([*planes, d], hp, wp, [0, 0, 0, 0, -1])
+
+
+def gbuffer_sources(gbuffers, planes) -> list[tuple[str, np.ndarray]]:
+    """(channel name, (H, W) float32 values) of the planes after R, G, B and
+    the coverage, in the tensor's order."""
+    planes = list(planes)
+    out = []
+    if "depth" in planes:
+        out.append(("depth", np.asarray(gbuffers.depth, _F)))
+    if "vel2d" in planes:
+        v = np.asarray(gbuffers.vel2d, _F)
+        out += [("vel_x", v[..., 0]), ("vel_y", v[..., 1])]
+        out += [
+            ("vel_angle", np.asarray(gbuffers.vel_angle, _F)),
+            ("vel_speed", np.asarray(gbuffers.vel_speed, _F)),
+        ]
+    for p in planes:
+        if p not in ("rgb", "coverage", "depth", "vel2d"):
+            out.append((p, np.asarray(gbuffers.attributes[p]).astype(_F)))
+    return out
+
+
+def pack_gbuffers(gbuffers, planes, *, stride: int = 1) -> np.ndarray:
+    covered = np.asarray(gbuffers.index) != np.uint32(0xFFFFFFFF)
+    rgba = np.asarray(gbuffers.rgba)
+    chans = [np.where(covered, rgba[..., c].astype(_F) / _F(255), _F(0)) for c in range(3)]
+    chans.append(covered.astype(_F))
+    for name, v in gbuffer_sources(gbuffers, planes):
+        if not np.isfinite(v[covered]).all():
+            raise DataError(f"{name}: a covered pixel with a NaN or infinite value")
+        chans.append(np.where(covered, v, _F(0)))
+    hp, wp = padded_shape(*covered.shape, stride)
+    return _nchw(chans, hp, wp, [0] * len(chans))
 
 
 def unpack_rgba8(nchw: npt.ArrayLike, height: int, width: int) -> np.ndarray:

@@ -37,11 +37,26 @@ adds).
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-__all__ = ["InfillWNet", "PushPull", "RgbdaUNet", "build", "count_parameters"]
+from .names import GBUFFER_PLANES, gbuffer_channels
+
+__all__ = [
+    "GBUFFER_PLANES",
+    "GatedConv2d",
+    "InfillWNet",
+    "NarvisUNet",
+    "PushPull",
+    "RgbdaUNet",
+    "build",
+    "count_parameters",
+    "gbuffer_channels",
+]
 
 
 def _conv(cin: int, cout: int, bn: bool) -> list[nn.Module]:
@@ -224,14 +239,138 @@ class RgbdaUNet(nn.Module):
         return torch.clamp(y + self.net(torch.cat([x, y], dim=1)), 0.0, 1.0)
 
 
-def build(name: str, **kwargs: int) -> nn.Module:
-    """A network by its shipped name ("infill", "lidar") with its
-    architecture arguments (InfillWNet: none; RgbdaUNet: width, depth)."""
+class GatedConv2d(nn.Module):
+    """Gated convolution (Yu et al. 2019): two k x k convolutions of the same
+    input, a feature map and a gate, ``ELU(features) * sigmoid(gate)``. The
+    gate lets the network learn per pixel and channel how much of a feature to
+    pass, which is what sparse inputs (empty pixels between points) need."""
+
+    def __init__(self, cin: int, cout: int, k: int = 3) -> None:
+        super().__init__()
+        self.features = nn.Conv2d(cin, cout, k, padding=k // 2)
+        self.gate = nn.Conv2d(cin, cout, k, padding=k // 2)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return F.elu(self.features(x)) * torch.sigmoid(self.gate(x))
+
+
+class NarvisUNet(nn.Module):
+    """NARVis's gated U-Net (Han et al., after NPBG's): G-buffer planes in,
+    RGB out (premultiplied over black, clipped to [0, 1]).
+
+    - ``planes`` picks the G-buffers by name (:func:`gbuffer_channels` gives
+      the layout; R, G, B and the coverage always come first). They are
+      normalised in the graph: the depth to [0, 1] over the covered pixels'
+      range (nearest 1, empty 0); the screen velocity and its length divided
+      by the covered pixels' mean length, its angle by pi; any other plane
+      (an attribute) to [0, 1] over its covered range.
+    - A 1x1 convolution (channels kept) and four 2x2 average poolings give
+      the planes at 5 resolutions; each is concatenated to the input of the
+      encoder's first block at its resolution.
+    - Encoder: a gated 3x3 convolution (ELU) at each of the 5 resolutions
+      (NPBG's gated block), 2x2 average pooling between them (4
+      down-sampling stages); widths ``widths`` (NPBG's 16..256 by default;
+      the paper's text says 64..1024).
+    - Decoder: up-sampling by 2 (``up``: "bilinear", NPBG's, or
+      "transposed": a 2x2 transposed convolution, the paper's text), the
+      encoder's output of the same size concatenated (skip), a gated 3x3
+      convolution; then a 1x1 convolution to RGB.
+
+    Height and width must be multiples of 16 (``stride``)."""
+
+    channels_out = 3
+
+    def __init__(
+        self,
+        planes: tuple[str, ...] = ("rgb", "depth", "vel2d"),
+        widths: tuple[int, ...] = (16, 32, 64, 128, 256),
+        up: str = "bilinear",
+    ) -> None:
+        super().__init__()
+        if len(widths) != 5:
+            raise ValueError(f"widths: expected 5 (one per resolution), got {len(widths)}")
+        if up not in ("bilinear", "transposed"):
+            raise ValueError(f"up: expected 'bilinear' or 'transposed', got {up!r}")
+        self.planes = tuple(planes)
+        self.layout = gbuffer_channels(self.planes)
+        self.channels_in = c = len(self.layout)
+        self.widths, self.up_mode = tuple(int(w) for w in widths), up
+        self.inject = nn.Conv2d(c, c, 1)
+        self.enc = nn.ModuleList()
+        prev = 0
+        for w in self.widths:
+            self.enc.append(GatedConv2d(prev + c, w))
+            prev = w
+        self.ups = nn.ModuleList()
+        self.dec = nn.ModuleList()
+        for w_low, w in zip(reversed(self.widths[1:]), reversed(self.widths[:-1]), strict=True):
+            self.ups.append(
+                nn.ConvTranspose2d(w_low, w_low, 2, stride=2) if up == "transposed" else nn.Identity()
+            )
+            self.dec.append(GatedConv2d(w_low + w, w))
+        self.out = nn.Conv2d(self.widths[0], 3, 1)
+        self.stride = 16
+
+    def normalise(self, x: torch.Tensor) -> torch.Tensor:
+        """The planes as the network sees them (see the class doc)."""
+        cov = x[:, 3:4]
+        n = torch.clamp(torch.sum(cov, dim=(2, 3), keepdim=True), min=1.0)
+        big = 3.0e38
+
+        def unit(p: torch.Tensor) -> torch.Tensor:  # [0, 1] over the covered range
+            lo = torch.amin(p * cov + (1.0 - cov) * big, dim=(2, 3), keepdim=True)
+            hi = torch.amax(p * cov - (1.0 - cov) * big, dim=(2, 3), keepdim=True)
+            return cov * (p - lo) / torch.clamp(hi - lo, min=1e-20)
+
+        parts = [x[:, :4]]
+        i = 4
+        while i < self.channels_in:
+            name = self.layout[i]
+            if name == "depth":
+                parts.append(cov * (1.0 - unit(x[:, i : i + 1])))
+                i += 1
+            elif name == "vel_x":
+                v = x[:, i : i + 4]
+                s = n / torch.clamp(torch.sum(v[:, 3:4] * cov, dim=(2, 3), keepdim=True), min=1e-20)
+                parts += [v[:, 0:2] * s, v[:, 2:3] * (1.0 / math.pi), v[:, 3:4] * s]
+                i += 4
+            else:
+                parts.append(unit(x[:, i : i + 1]))
+                i += 1
+        return torch.cat(parts, dim=1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        g = self.inject(self.normalise(x))
+        skips: list[torch.Tensor] = []
+        h = torch.zeros(0)
+        for i, block in enumerate(self.enc):
+            if i:
+                g = F.avg_pool2d(g, 2)
+                h = block(torch.cat([F.avg_pool2d(h, 2), g], dim=1))
+            else:
+                h = block(g)
+            skips.append(h)
+        for up, block, skip in zip(self.ups, self.dec, reversed(skips[:-1]), strict=True):
+            if self.up_mode == "bilinear":
+                h = F.interpolate(h, scale_factor=2.0, mode="bilinear", align_corners=False)
+            else:
+                h = up(h)
+            h = block(torch.cat([h, skip], dim=1))
+        return torch.clamp(self.out(h), 0.0, 1.0)
+
+
+def build(name: str, **kwargs: Any) -> nn.Module:
+    """A network by its shipped name ("infill", "lidar", "narvis") with its
+    architecture arguments (InfillWNet: none; RgbdaUNet: width, depth;
+    NarvisUNet: planes, widths, up)."""
     if name == "infill":
-        return InfillWNet(**kwargs)  # type: ignore[arg-type]
+        return InfillWNet(**kwargs)
     if name == "lidar":
         return RgbdaUNet(**kwargs)
-    raise ValueError(f"network: expected 'infill' or 'lidar', got {name!r}")
+    if name == "narvis":
+        kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs.items()}
+        return NarvisUNet(**kwargs)
+    raise ValueError(f"network: expected 'infill', 'lidar' or 'narvis', got {name!r}")
 
 
 def count_parameters(net: nn.Module) -> int:

@@ -23,7 +23,11 @@ def real_inputs():
     iso = pack_iso(*f.planes(0.85), stride=32)
     lf = data.lidar_frames(("town",), 1, 5, 96, 64, views=1, dense_points=100_000)[0]
     lidar = pack_rgbda(lf.rgbda, stride=32)
-    return {"infill": (iso, f), "lidar": (lidar, lf)}
+    sc = data.narvis_scene("hurricane", 30_000, 5)
+    nf = data.narvis_frames(
+        sc, data.narvis_cameras(sc, "hemisphere", 1.5)[7:8], 96, 64, ("rgb", "depth", "vel2d")
+    )[0]
+    return {"infill": (iso, f), "lidar": (lidar, lf), "narvis": (nf.x[None], nf)}
 
 
 @pytest.fixture(scope="module", params=list(train.SPECS))
@@ -46,7 +50,7 @@ def exported(request, tmp_path_factory, real_inputs):
     x, frame = real_inputs[name]
     y = (
         frame.rgb.transpose(2, 0, 1)
-        if name == "lidar"
+        if name in ("lidar", "narvis")
         else np.concatenate([frame.rgb, frame.hit[..., None]], 2).transpose(2, 0, 1)
     )
     out = tmp_path_factory.mktemp(name)
@@ -72,9 +76,11 @@ def _torch(net, x):
 def test_onnx_equals_torch_on_random_inputs(exported, size):
     name, net, out, _ = exported
     rng = np.random.default_rng(sum(size))
-    x = rng.random((1, 5, *size), dtype=np.float32)
+    x = rng.random((1, net.channels_in, *size), dtype=np.float32)
     if name == "infill":
         x[:, 3:5] = rng.random((1, 2, *size)) < 0.3  # hit and active are masks
+    if name == "narvis":
+        x = _narvis_input(rng, *size)
     got, want = _run(out / f"{name}.onnx", x), _torch(net, x)
     assert got.shape == want.shape == (1, net.channels_out, *size)
     np.testing.assert_allclose(got, want, atol=1e-4, rtol=0)
@@ -168,3 +174,117 @@ def test_architectures():
 
 def test_export_card_json_serialisable(exported):
     json.dumps(exported[3])
+
+
+# ---------------------------------------------------------------------------
+# NARVis: the gated convolution and the multi-scale injection, restated
+
+
+def _conv_numpy(x, w, b):
+    """'same' 2-D convolution (cross-correlation, zero padding) of (C, H, W)
+    with (O, C, k, k) weights, in float64 loops over the kernel taps."""
+    o, c, k, _ = w.shape
+    p = k // 2
+    xp = np.pad(x.astype(np.float64), ((0, 0), (p, p), (p, p)))
+    h, wd = x.shape[1:]
+    out = np.zeros((o, h, wd)) + b[:, None, None]
+    for dy in range(k):
+        for dx in range(k):
+            out += np.einsum("oc,chw->ohw", w[:, :, dy, dx], xp[:, dy : dy + h, dx : dx + wd])
+    return out
+
+
+def _elu(v):
+    return np.where(v > 0, v, np.expm1(np.minimum(v, 0)))
+
+
+def test_gated_convolution_restated():
+    """Yu et al.'s gated convolution: ELU(W_f * x + b_f) * sigmoid(W_g * x + b_g)."""
+    torch.manual_seed(1)
+    g = nets.GatedConv2d(5, 7).eval()
+    x = np.random.default_rng(2).normal(size=(5, 11, 13)).astype(np.float32)
+    p = {k: v.detach().numpy().astype(np.float64) for k, v in g.state_dict().items()}
+    f = _conv_numpy(x, p["features.weight"], p["features.bias"])
+    gate = _conv_numpy(x, p["gate.weight"], p["gate.bias"])
+    want = _elu(f) / (1 + np.exp(-gate))
+    got = _torch(g, x[None])[0]
+    np.testing.assert_allclose(got, want, atol=1e-5, rtol=0)
+
+
+def _narvis_input(rng, h=64, w=96, planes=("rgb", "depth", "vel2d")):
+    from clvis.post.names import gbuffer_channels
+
+    c = len(gbuffer_channels(planes))
+    x = rng.random((1, c, h, w)).astype(np.float32)
+    cov = rng.random((h, w)) < 0.4
+    x[0, 3] = cov
+    x[0, 4:] *= 50.0
+    x[0, :, ~cov] = 0
+    return x
+
+
+def test_narvis_normalisation():
+    """Depth to [0, 1] over the covered range, nearest 1, empty 0; the
+    screen velocity over the covered pixels' mean length; the angle / pi;
+    attributes to [0, 1] over their covered range."""
+    rng = np.random.default_rng(3)
+    net = nets.NarvisUNet(("rgb", "depth", "vel2d", "temperature"), widths=(4, 4, 4, 4, 4))
+    x = _narvis_input(rng, planes=net.planes)
+    got = net.normalise(torch.from_numpy(x))[0].numpy()
+    cov = x[0, 3] > 0
+    d = x[0, 4]
+    want_d = np.where(cov, 1 - (d - d[cov].min()) / (d[cov].max() - d[cov].min()), 0)
+    np.testing.assert_allclose(got[4], want_d, atol=1e-6)
+    mean = x[0, 8][cov].mean()
+    np.testing.assert_allclose(got[5:7], x[0, 5:7] / mean, rtol=1e-5)
+    np.testing.assert_allclose(got[7], x[0, 7] / np.pi, rtol=1e-6)
+    np.testing.assert_allclose(got[8], x[0, 8] / mean, rtol=1e-5)
+    t = x[0, 9]
+    np.testing.assert_allclose(got[9], np.where(cov, (t - t[cov].min()) / np.ptp(t[cov]), 0), atol=1e-6)
+    np.testing.assert_array_equal(got[:4], x[0, :4])
+
+
+def test_narvis_multiscale_injection():
+    """The G-buffers pass a 1x1 convolution (channels kept), are halved by
+    2x2 means four times, and each resolution is concatenated to the input
+    of the encoder's block at that resolution (after the pooled features)."""
+    torch.manual_seed(4)
+    net = nets.NarvisUNet(widths=(6, 7, 8, 9, 10)).eval()
+    x = _narvis_input(np.random.default_rng(5))
+    seen = []
+    hooks = [b.register_forward_hook(lambda m, i, o: seen.append(i[0].numpy())) for b in net.enc]
+    _torch(net, x)
+    for h in hooks:
+        h.remove()
+    xn = net.normalise(torch.from_numpy(x))[0].numpy().astype(np.float64)
+    w = net.inject.weight.detach().numpy()[:, :, 0, 0].astype(np.float64)
+    g = np.einsum("oc,chw->ohw", w, xn) + net.inject.bias.detach().numpy()[:, None, None]
+    c = net.channels_in
+    assert [s.shape[1] for s in seen] == [c, 6 + c, 7 + c, 8 + c, 9 + c]
+    for level, s in enumerate(seen):
+        if level:
+            g = g.reshape(c, g.shape[1] // 2, 2, g.shape[2] // 2, 2).mean(axis=(2, 4))
+        assert s.shape[2:] == (64 >> level, 96 >> level)
+        np.testing.assert_allclose(s[0, -c:], g, atol=1e-5)
+
+
+def test_narvis_architecture():
+    """Gated convolutions at 5 resolutions, ELU and average pooling; the
+    shipped widths and NPBG's 16..256 (about 2 M parameters, the paper's
+    7.73 MB of U-Net); transposed up-sampling where asked."""
+    net = nets.NarvisUNet()
+    assert [b.features.out_channels for b in net.enc] == [16, 32, 64, 128, 256]
+    assert [b.features.out_channels for b in net.dec] == [128, 64, 32, 16]
+    assert all(isinstance(b, nets.GatedConv2d) for b in [*net.enc, *net.dec]) and net.stride == 16
+    assert net.inject.in_channels == net.inject.out_channels == 9 and net.inject.kernel_size == (1, 1)
+    assert 1.9e6 < nets.count_parameters(net) < 2.2e6
+    shipped = nets.build("narvis", **train.SPECS["narvis"]["arch"])
+    assert nets.count_parameters(shipped) < nets.count_parameters(net)
+    t = nets.NarvisUNet(up="transposed")
+    assert sum(isinstance(m, torch.nn.ConvTranspose2d) for m in t.modules()) == 4
+    y = _torch(t.eval(), _narvis_input(np.random.default_rng(6), 32, 48))
+    assert y.shape == (1, 3, 32, 48) and y.min() >= 0 and y.max() <= 1
+    with pytest.raises(ValueError, match="rgb"):
+        nets.NarvisUNet(("depth",))
+    with pytest.raises(ValueError, match="twice"):
+        nets.NarvisUNet(("rgb", "depth", "depth"))

@@ -32,7 +32,7 @@ T_SURFACE, LAPSE = 301.0, 6.5  # K, K/km
 WARM_CORE, WARM_CORE_R, WARM_CORE_Z = 10.0, 40.0, 10.0
 
 
-def hurricane(n: int = 2_000_000, seed: int | None = 0) -> dict:
+def hurricane(n: int = 2_000_000, seed: int | None = 0, time: float = 0.0) -> dict:
     """A hurricane-like vortex of `n` cloud particles, centred on the z axis in
     a box about 200 x 200 x 15 km (positions in km, x, y in [-100, 100], z in
     [0, 15]).
@@ -53,6 +53,12 @@ def hurricane(n: int = 2_000_000, seed: int | None = 0) -> dict:
       ~2 km, outflow above ~12 km, updraft in the eyewall, weak subsidence
       outside it;
     - plus turbulence, normal with 1 m/s per component.
+
+    `time` (seconds, default 0) advects every particle along its tangential
+    wind for that long: each turns about the axis by ``v_t(r, z) / r * time``
+    (radius and height kept, so the flow field is the same), which winds the
+    rain bands up the way the differential rotation of a real storm does; the
+    storm a few minutes on is a time slice never seen at time 0.
 
     Attributes (N,) float32: ``pressure`` (hPa, a Holland profile
     ``p_c + dp * exp(-(R / r) ** 1.5)`` at the surface, 940 hPa in the eye,
@@ -96,9 +102,14 @@ def hurricane(n: int = 2_000_000, seed: int | None = 0) -> dict:
     order = rng.permutation(n)
     r, theta, z = r[order], theta[order], z[order]
     r = np.minimum(r, RADIUS)
+    v_t = _tangential_wind(r) * (1.0 - 0.55 * z / TOP)
+    time = float(time)
+    if not np.isfinite(time):
+        raise ValueError(f"time: expected a finite number of seconds, got {time!r}")
+    if time:
+        theta = theta + v_t / (1000.0 * np.maximum(r, 1e-3)) * time  # m/s over km
     cos, sin = np.cos(theta), np.sin(theta)
 
-    v_t = _tangential_wind(r) * (1.0 - 0.55 * z / TOP)
     u_r, w = _secondary_circulation(r, z)
     velocity = np.empty((n, 3), np.float32)
     velocity[:, 0] = u_r * cos - v_t * sin

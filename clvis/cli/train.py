@@ -14,6 +14,8 @@ Train one of the post family's networks (clvis.post) with PyTorch:
   infill   in-fill of isosurface images stopped at 85/90/95 % completion
            (a W-Net: two U-Nets of 4-8-16-32 channels; ~31 k parameters)
   lidar    the LiDAR RGBDA U-Net: depth-filtered sparse scans to dense renders
+  narvis   NARVis's gated U-Net: rasterizer G-buffers of the hurricane's
+           particles to the Gaussian renderer's image of them
 
 The training pairs are rendered here from closed-form volumes and scenes
 with deterministic seeds (clvis.post.data); held-out frames come from kinds
@@ -29,7 +31,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
 
     p = sub.add_parser(
         "train",
-        help="train a post network (infill, lidar) and export it to ONNX",
+        help="train a post network (infill, lidar, narvis) and export it to ONNX",
         description=_HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -45,10 +47,17 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         type=count(1, 10_000),
         default=None,
         metavar="N",
-        help="volumes or scenes to render for training (default: the release run's)",
+        help="volumes, scenes or (narvis) views to render for training (default: the release run's)",
     )
     p.add_argument(
         "--frame-size", type=size, default=None, metavar="WxH", help="frame size (default: the release run's)"
+    )
+    p.add_argument(
+        "--points",
+        type=count(1000, 10**8),
+        default=None,
+        metavar="N",
+        help="narvis: the scenes' particles (default 2,000,000)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
@@ -62,6 +71,8 @@ def _command(args: argparse.Namespace) -> list[str]:
         c += ["--frames", str(args.frames)]
     if args.frame_size is not None:
         c += ["--frame-size", f"{args.frame_size[0]}x{args.frame_size[1]}"]
+    if args.points is not None:
+        c += ["--points", str(args.points)]
     return c
 
 
@@ -86,6 +97,7 @@ def cmd(args: argparse.Namespace) -> int:
         seed=args.seed,
         frames=args.frames,
         frame_size=args.frame_size,
+        points=args.points,
         command=_command(args),
         log=log,
     )

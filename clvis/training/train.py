@@ -55,6 +55,19 @@ SPECS: dict[str, dict[str, Any]] = {
         "loss": {"l1": 0.9, "ms_ssim": 0.1},
         "lr": 1e-3,
     },
+    # NARVis: hemisphere views of the hurricane, 9:1 train/validation by view;
+    # held out: the grid sampler's views, and the storm 20 minutes on
+    "narvis": {
+        "arch": {"planes": ["rgb", "depth", "vel2d"], "widths": [12, 24, 48, 96, 192], "up": "bilinear"},
+        "frames": 64,  # hemisphere views (every other azimuth of the 128)
+        "views": 1,
+        "held_out": 8,  # grid-sampler views and storm views, each
+        "points": 2_000_000,
+        "frame_size": (512, 512),
+        "batch": 4,
+        "loss": {"l2": 1.0, "tv": 0.002, "ms_ssim": 0.05},
+        "lr": 1e-3,
+    },
 }
 OPSET = 17
 INT8_MAX_LOSS_DB = 0.3
@@ -62,6 +75,33 @@ INT8_MAX_LOSS_DB = 0.3
 
 # ---------------------------------------------------------------------------
 # data
+
+
+def _narvis_sets(count: int, held: int, points: int, seed: int, size, planes, log) -> dict[str, list]:
+    """The NARVis frames: "train" and "validation" (`count` hemisphere views
+    of the hurricane at every other azimuth, every tenth to validation),
+    "grid sampler" (`held` views of the grid sampler, never trained on) and
+    "storm" (`held` hemisphere views at the other azimuths of the storm
+    NARVIS_STORM_TIME later, other particles)."""
+    w, h = size
+    hur = _data.narvis_scene("hurricane", points, seed)
+    cams = _data.narvis_cameras(hur, "hemisphere", w / h)
+    rng = np.random.default_rng(seed)
+    even = cams[0::2]
+    picked = [even[int(i)] for i in np.sort(rng.permutation(len(even))[: min(count, len(even))])]
+    val_idx = set(range(9, len(picked), 10)) or ({len(picked) - 1} if len(picked) > 1 else set())
+    grid = _data.narvis_cameras(hur, "grid", w / h)
+    grid = [grid[int(i)] for i in np.sort(rng.permutation(len(grid))[:held])]
+    frames = _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log)
+    storm = _data.narvis_scene("storm", points, seed + 7)
+    odd = _data.narvis_cameras(storm, "hemisphere", w / h)[1::2]
+    odd = [odd[int(i)] for i in np.sort(rng.permutation(len(odd))[:held])]
+    return {
+        "train": [f for i, f in enumerate(frames[: len(picked)]) if i not in val_idx],
+        "validation": [f for i, f in enumerate(frames[: len(picked)]) if i in val_idx],
+        "grid sampler": frames[len(picked) :],
+        "storm": _data.narvis_frames(storm, odd, w, h, planes, progress=log),
+    }
 
 
 def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
@@ -83,6 +123,12 @@ def _pack(
     if name == "infill":
         x = pack_iso(*frame.planes(completion), stride=stride)[0]
         y = np.concatenate([frame.rgb, frame.hit[..., None].astype(np.float32)], axis=2)
+    elif name == "narvis":
+        c, h, w = frame.x.shape
+        hp, wp = -(-h // stride) * stride, -(-w // stride) * stride
+        x = np.zeros((c, hp, wp), np.float32)
+        x[:, :h, :w] = frame.x
+        y = frame.rgb
     else:
         x = pack_rgbda(frame.rgbda, stride=stride)[0]
         y = frame.rgb
@@ -109,7 +155,16 @@ def _loss_fn(weights: dict[str, float], crop: int):
     win = _ms_ssim_window(crop)
 
     def loss(pred, target):
-        total = weights["l1"] * torch.nn.functional.l1_loss(pred, target)
+        total = pred.new_zeros(())
+        if weights.get("l1"):
+            total = total + weights["l1"] * torch.nn.functional.l1_loss(pred, target)
+        if weights.get("l2"):
+            total = total + weights["l2"] * torch.nn.functional.mse_loss(pred, target)
+        if weights.get("tv"):  # total variation of the prediction
+            tv = (pred[..., 1:, :] - pred[..., :-1, :]).abs().mean() + (
+                pred[..., :, 1:] - pred[..., :, :-1]
+            ).abs().mean()
+            total = total + weights["tv"] * tv
         rgb_p, rgb_t = pred[:, :3], target[:, :3]
         total = total + weights["ms_ssim"] * (1.0 - ms_ssim(rgb_p, rgb_t, data_range=1.0, win_size=win))
         return total
@@ -147,7 +202,7 @@ def _baselines(name: str, x: np.ndarray, y: np.ndarray) -> dict[str, dict[str, f
         pp = filled[..., :3]
     else:
         rgb = _rgb(x)
-        valid = x[3] > 0  # kept points
+        valid = x[3] > 0  # kept (lidar) or covered (narvis) pixels
         pp = pushpull(rgb, valid)
     t = _rgb(y)
     return {"input": metrics(rgb, t), "pushpull": metrics(pp, t)}
@@ -159,9 +214,26 @@ def _baselines(name: str, x: np.ndarray, y: np.ndarray) -> dict[str, dict[str, f
 
 def _augment(x, y, rng: np.random.Generator, name: str):
     """Flips and 90-degree rotations; for the LiDAR net, brightness and
-    contrast on the colours of input and target alike."""
+    contrast on the colours of input and target alike. The NARVis net: flips
+    only, its screen velocity planes (4 + depth: v'x, v'y, angle) mirrored
+    with the image."""
     import torch
 
+    if name == "narvis":
+        x = x.clone()
+        v = 5 if x.shape[1] > 8 else None  # the layout with depth and vel2d
+        if rng.random() < 0.5:  # left-right: v'x -> -v'x, angle -> pi - angle
+            x, y = torch.flip(x, (3,)), torch.flip(y, (3,))
+            if v is not None:
+                x[:, v] = -x[:, v]
+                a = x[:, v + 2]
+                x[:, v + 2] = torch.where(a > 0, math.pi - a, -math.pi - a) * x[:, 3]
+        if rng.random() < 0.5:  # up-down: v'y -> -v'y, angle -> -angle
+            x, y = torch.flip(x, (2,)), torch.flip(y, (2,))
+            if v is not None:
+                x[:, v + 1] = -x[:, v + 1]
+                x[:, v + 2] = -x[:, v + 2]
+        return x.contiguous(), y.contiguous()
     k = int(rng.integers(0, 4))
     if k:
         x, y = torch.rot90(x, k, (2, 3)), torch.rot90(y, k, (2, 3))
@@ -202,13 +274,15 @@ def train(
     seed: int = 0,
     frames: int | None = None,
     frame_size: tuple[int, int] | None = None,
+    points: int | None = None,
     command: Sequence[str] | None = None,
     log: Callable[[str], None] = print,
 ) -> dict:
     """Train network `name` for `steps` steps on `size` x `size` crops, export
     it into `out` (NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx where int8
     loses at most INT8_MAX_LOSS_DB on the held-out frames) and write NAME.json;
-    returns the card."""
+    returns the card. points: the NARVis scenes' particles (default
+    the release run's 2M)."""
     import torch
 
     from ..post import nets
@@ -228,9 +302,16 @@ def train(
     rng = np.random.default_rng(seed)
 
     t0 = time.perf_counter()
-    train_frames = _frames(name, count, spec["views"], seed, fsize, False, log)
-    held = max(1, min(spec["held_out"], count))
-    val_frames = _frames(name, held, 1, seed + 1_000_003, fsize, True, log)
+    sets: dict[str, list] = {}
+    if name == "narvis":
+        npoints = int(points or spec["points"])
+        sets = _narvis_sets(count, spec["held_out"], npoints, seed, fsize, spec["arch"]["planes"], log)
+        train_frames = sets.pop("train")
+        val_frames = [f for v in sets.values() for f in v]
+    else:
+        train_frames = _frames(name, count, spec["views"], seed, fsize, False, log)
+        held = max(1, min(spec["held_out"], count))
+        val_frames = _frames(name, held, 1, seed + 1_000_003, fsize, True, log)
     completions = _data.COMPLETIONS if name == "infill" else (None,)
     pairs = [_pack(name, f, c) for f in train_frames for c in completions]
     pairs = [(x.astype(np.float16), y.astype(np.float16)) for x, y in pairs]
@@ -265,7 +346,11 @@ def train(
     # held-out: the network against push-pull and the raw input, per completion
     stride = net.stride
     held_out: dict[str, Any] = {}
-    val_pairs = {c: [_pack(name, f, c, stride) for f in val_frames] for c in completions}
+    if sets:
+        val_pairs: dict[Any, list] = {k: [_pack(name, f, None, stride) for f in v] for k, v in sets.items()}
+    else:
+        val_pairs = {c: [_pack(name, f, c, stride) for f in val_frames] for c in completions}
+    val_pairs = {k: v for k, v in val_pairs.items() if v}  # a smoke run's sets may be empty
     for c, vp in val_pairs.items():
         rows = []
         for x, y in vp:
@@ -275,7 +360,7 @@ def train(
             row = _baselines(name, x, y)
             row["network"] = metrics(_rgb(o), _rgb(y))
             rows.append(row)
-        key = f"completion {c}" if c is not None else "all"
+        key = c if isinstance(c, str) else f"completion {c}" if c is not None else "all"
         held_out[key] = {
             k: {m: float(np.mean([r[k][m] for r in rows])) for m in ("psnr", "ssim")}
             for k in ("input", "pushpull", "network")
@@ -293,7 +378,9 @@ def train(
         "channels_out": net.channels_out,
         "command": " ".join(command) if command else f"clvis train {name} --steps {steps} --size {size}",
         "seed": seed,
-        "data": {
+        "data": _narvis_data(sets, train_frames, fsize, data_seconds)
+        if sets
+        else {
             "train": _data.TRAIN_VOLUMES if name == "infill" else ["town"],
             "held_out": _data.HELD_OUT_VOLUMES if name == "infill" else ["terrain", "town (unseen seeds)"],
             "frames": len(train_frames),
@@ -321,6 +408,35 @@ def train(
     (out / f"{name}.json").write_text(json.dumps(card, indent=1) + "\n")
     log(f"wrote {out / (name + '.json')}")
     return card
+
+
+def _narvis_data(sets: dict, train_frames: list, fsize, seconds: float) -> dict:
+    """The NARVis card's data section: what each set shows and how long
+    each renderer took on it (mean seconds per frame, this machine)."""
+
+    def mean(frames, k):
+        return round(float(np.mean([f.seconds[k] for f in frames])), 4) if frames else None
+
+    all_frames = {"train": train_frames, **sets}
+    return {
+        "target": (
+            f"GaussianRenderer (max response) of one Gaussian per particle: sigma {_data.NARVIS_SIGMA} x the "
+            f"median 4-NN spacing, x {_data.NARVIS_STRETCH} along the velocity, opacity "
+            f"{_data.NARVIS_OPACITY}; colour by {_data.NARVIS_ATTRIBUTE} through {_data.NARVIS_COLORMAP}"
+        ),
+        "input": "Rasterizer.render G-buffers (one pixel per point), the same transfer function",
+        "sets": {
+            k: {
+                "frames": len(v),
+                "source": sorted({f.source.rsplit(" view ", 1)[0] for f in v}),
+                "raster_seconds": mean(v, "raster"),
+                "gaussian_seconds": mean(v, "gaussians"),
+            }
+            for k, v in all_frames.items()
+        },
+        "frame_size": list(fsize),
+        "generation_seconds": round(seconds, 1),
+    }
 
 
 def _versions() -> dict[str, str]:

@@ -30,6 +30,7 @@ def test_train_smoke_through_the_cli(tmp_path, name):
             "--out",
             str(tmp_path),
             "--quiet",
+            *(["--points", "20000"] if name == "narvis" else []),
         ]
     )
     assert rc == 0
@@ -70,3 +71,28 @@ def test_lidar_pairs_are_registered():
 def test_procedural_volumes_have_a_surface(kind):
     v, iso = data.procedural_volume(kind, np.random.default_rng(0), 16)
     assert v.shape == (16, 16, 16) and v.dtype == np.float32 and v.min() < iso < v.max()
+
+
+def test_narvis_pairs_are_registered():
+    """The G-buffers and the Gaussian renderer's image of one view: the same
+    camera, so the image is bright where points were drawn and black far
+    from any; the storm is the hurricane's flow at another time."""
+    sc = data.narvis_scene("hurricane", 30_000, 2)
+    cams = data.narvis_cameras(sc, "hemisphere")
+    assert len(cams) == 128
+    f = data.narvis_frames(sc, cams[10:11], 80, 60, ("rgb", "depth", "vel2d"))[0]
+    assert f.x.shape == (9, 60, 80) and f.rgb.shape == (60, 80, 3)
+    cov = f.x[3] > 0
+    lum = f.rgb.sum(2)
+    assert lum[cov].mean() > 5 * max(lum[~cov].mean(), 1e-3)
+    assert 0.02 < cov.mean() < 0.9 and f.seconds["gaussians"] > 0
+    grid = data.narvis_cameras(sc, "grid")
+    assert 0 < len(grid) < 96
+    storm = data.narvis_scene("storm", 30_000, 2)
+    hur = sc.cloud
+    # the same particles' radii and heights, turned about the axis by the flow
+    np.testing.assert_allclose(
+        np.hypot(*storm.cloud.positions[:, :2].T), np.hypot(*hur.positions[:, :2].T), rtol=1e-5
+    )
+    np.testing.assert_array_equal(storm.cloud.positions[:, 2], hur.positions[:, 2])
+    assert not np.allclose(storm.cloud.positions[:, :2], hur.positions[:, :2], atol=1.0)

@@ -13,7 +13,15 @@ session.
   (the held-out scene); the slow path is the dense render (3 M points, 3 x 3
   pixel points).
 
-Sizes 512x512, 960x720 and 1280x720 (CLVIS_BENCH_SCALE shrinks them).
+- narvis[...]: the G-buffers of the hurricane (2 M particles) from a
+  hemisphere view never trained on; the slow path is the Gaussian renderer
+  of the velocity-elongated Gaussians (the paper's "GR"), and "MACR + U-Net"
+  (render, resolve, pack, inference, unpack) is the fast path whole. The
+  wider configurations (NPBG's 16..256, the paper's text's 64..1024) are
+  timed with random weights (their speed does not depend on them).
+
+Sizes 512x512, 960x720 and 1280x720 (narvis: 512x512, the paper's;
+CLVIS_BENCH_SCALE shrinks them).
 
     clvis bench post
 """
@@ -71,6 +79,51 @@ def _lidar(queue, w, h):
     return _cache[key]
 
 
+def _narvis(queue, w, h):
+    key = ("narvis", w, h)
+    if key not in _cache:
+        n = max(20_000, round(2_000_000 * SIDE**2))
+        scene = data.narvis_scene("hurricane", n, 0)
+        cam = data.narvis_cameras(scene, "hemisphere", w / h)[41]  # an odd azimuth: never trained on
+        ras = scene.rasterizer(queue=queue)
+        gr = scene.gaussian_renderer(queue=queue)
+        planes = post.load("narvis").planes
+        g = scene.gbuffers(ras, cam, w, h, planes)
+        _cache[key] = (scene, ras, gr, cam, g)
+    return _cache[key]
+
+
+def _wide(widths):
+    """An ONNX file of the NARVis U-Net at other widths (random weights)."""
+    pytest.importorskip("torch")
+    pytest.importorskip("onnx")
+    import tempfile
+    from pathlib import Path
+
+    from clvis.post import nets
+    from clvis.training.train import OPSET
+
+    key = ("wide", widths)
+    if key not in _cache:
+        import torch
+
+        card = post.load("narvis").card["architecture"]
+        net = nets.build("narvis", planes=card["planes"], widths=widths, up=card.get("up", "bilinear")).eval()
+        path = Path(tempfile.mkdtemp()) / "wide.onnx"
+        torch.onnx.export(
+            net,
+            (torch.zeros(1, net.channels_in, 32, 32),),
+            str(path),
+            dynamo=False,
+            opset_version=OPSET,
+            input_names=["planes"],
+            output_names=["image"],
+            dynamic_axes={"planes": {2: "height", 3: "width"}, "image": {2: "height", 3: "width"}},
+        )
+        _cache[key] = (path, nets.count_parameters(net))
+    return _cache[key]
+
+
 def _torch_net(name):
     """The shipped architecture in torch eager (its weights do not change
     the time: random ones)."""
@@ -83,7 +136,9 @@ def _torch_net(name):
     return _cache[("torch", name)]
 
 
-CASES = [(n, s, i) for n in post.NAMES for s in SIZES for i in IMPLS]
+NARVIS_IMPLS = (*IMPLS, "fast", "16-256", "64-1024")
+CASES = [(n, s, i) for n in ("infill", "lidar") for s in SIZES for i in IMPLS]
+CASES += [("narvis", "512x512", i) for i in NARVIS_IMPLS]
 
 
 @pytest.mark.parametrize("name,size,impl", CASES, ids=[f"{n}-{s}-{i}" for n, s, i in CASES])
@@ -92,8 +147,12 @@ def test_post(benchmark, queue, name, size, impl):
     op = f"{name}[{size}]"
     if name == "infill":
         r, cam, iso, image = _iso(queue, w, h)
-    else:
+    elif name == "lidar":
         dense, scan, cam, image = _lidar(queue, w, h)
+    else:
+        scene, ras, gr, cam, image = _narvis(queue, w, h)
+    if name == "narvis" and impl in ("fast", "16-256", "64-1024"):
+        return _narvis_extra(benchmark, queue, impl, op, w, h, scene, ras, cam, image)
     if impl in ("fp32", "fp16", "int8"):
         try:
             net = post.load(name, impl, queue=queue)
@@ -114,7 +173,7 @@ def test_post(benchmark, queue, name, size, impl):
     elif impl == "torch":
         torch = pytest.importorskip("torch")
         net = _torch_net(name)
-        x = torch.rand(1, 5, -(-h // net.stride) * net.stride, -(-w // net.stride) * net.stride)
+        x = torch.rand(1, net.channels_in, -(-h // net.stride) * net.stride, -(-w // net.stride) * net.stride)
 
         def eager():
             with torch.no_grad():
@@ -134,6 +193,9 @@ def test_post(benchmark, queue, name, size, impl):
         if name == "infill":
             known = np.where((image.hit & ~image.active)[..., None], image.rgba, 0).astype(np.float32)
             valid = ~image.active
+        elif name == "narvis":
+            known = np.ascontiguousarray(image.rgba[..., :3] / np.float32(255))
+            valid = image.covered
         else:
             known = np.ascontiguousarray(image.rgbda[..., :3])
             valid = image.rgbda[..., 4] > 0
@@ -155,6 +217,13 @@ def test_post(benchmark, queue, name, size, impl):
                 return r.render(cam, w, h, iso)
 
             impl_name = "IsoRenderer to 100 % (the slow path)"
+        elif name == "narvis":
+            gr.render(cam, w, h)
+
+            def slow():
+                return gr.render(cam, w, h)
+
+            impl_name = f"Gaussian renderer, {gr.n:,} Gaussians (the slow path)"
         else:
 
             def slow():
@@ -162,3 +231,55 @@ def test_post(benchmark, queue, name, size, impl):
 
             impl_name = "dense render (the slow path)"
         run(benchmark, slow, op=op, impl=impl_name, role="peer", n=w * h, nbytes=w * h * 24, rounds=3)
+
+
+def _narvis_extra(benchmark, queue, impl, op, w, h, scene, ras, cam, image):
+    """The fast path whole, and the wider configurations' inference."""
+    if impl == "fast":
+        net = post.load("narvis", queue=queue)
+        stages = {}
+
+        def fast():
+            import time
+
+            t0 = time.perf_counter()
+            g = scene.gbuffers(ras, cam, w, h, net.planes, host=False)
+            queue.finish()
+            t1 = time.perf_counter()
+            out = net(g)
+            stages.update(render=t1 - t0, **net.stats)
+            return out
+
+        fast()
+        run(
+            benchmark,
+            fast,
+            op=op,
+            impl="MACR render + U-Net fp32 (the fast path)",
+            role="clvis-host",
+            n=w * h,
+            nbytes=w * h * 24,
+            rounds=5,
+            stages=stages,
+        )
+        return
+    import onnxruntime as ort
+
+    widths = tuple(int(v) * 2**i for i, v in enumerate([impl.split("-")[0]] * 5))
+    path, params = _wide(widths)
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = os.cpu_count() or 1
+    so.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    s = ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
+    x = np.asarray(post.pack_gbuffers(image, post.load("narvis").planes, stride=16))
+    s.run(None, {"planes": x})
+    run(
+        benchmark,
+        lambda: s.run(None, {"planes": x}),
+        op=op,
+        impl=f"onnxruntime fp32, widths {widths[0]}..{widths[-1]} ({params / 1e6:.2f} M parameters)",
+        role="peer",
+        n=w * h,
+        nbytes=x.nbytes,
+        rounds=3,
+    )

@@ -207,10 +207,55 @@ def _render_panels(
         with progress.stage(f"depth filter ({levels} levels)"):
             filtered = depth_filter(g, levels)
         panels.append(_Panel("depth-filtered", f"depth filter ({levels} levels)", filtered.rgba))
-        if post is not None:
+        if post is not None and post.name == "lidar":
             with progress.stage(f"{post.name} network"):
                 panels.append(_Panel(f"post-{post.name}", "LiDAR RGBDA U-Net", post(filtered)))
+    if post is not None and post.name == "narvis":
+        with progress.stage("narvis network"):
+            post(g)  # the first call sizes its buffers
+            panels.append(_Panel("post-narvis", "NARVis U-Net (G-buffers -> Gaussians)", post(g)))
     return _Rendered(g, panels, first, warm)
+
+
+def _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net, progress) -> list[str]:
+    """--compare: the Gaussian renderer NARVis replaces, on the same view and
+    transfer function; a panel, and lines scoring the network's image and
+    the plain rasterization against it, with the time of each path."""
+    from ..colormap import value_range
+    from ..training.data import NarvisScene
+    from ..training.train import metrics
+
+    vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
+    scene = NarvisScene(cloud, attribute, vr, colormap, "the cloud")
+    with progress.stage("Gaussian renderer (velocity-elongated Gaussians)"):
+        t0 = time.perf_counter()
+        gr = scene.gaussian_renderer(queue=net.queue)
+        setup = time.perf_counter() - t0
+        gr.render(camera, width, height)  # builds the kernels
+        t0 = time.perf_counter()
+        img = gr.render(camera, width, height)
+        gr_s = time.perf_counter() - t0
+    target = np.clip(np.asarray(img.rgba)[..., :3], 0, 1).astype(np.float32)
+    rgba = np.empty((height, width, 4), np.uint8)
+    rgba[..., :3] = np.rint(target * 255)
+    rgba[..., 3] = 255
+    r.panels.append(_Panel("gaussians", "Gaussian renderer (the target)", rgba))
+    g = r.gbuffers
+    plain = np.where(g.covered[..., None], g.rgba[..., :3] / np.float32(255), 0).astype(np.float32)
+    post_img = next(p.image for p in r.panels if p.key == "post-narvis")
+    m_net = metrics(post_img[..., :3] / np.float32(255), target)
+    m_plain = metrics(plain, target)
+    ns = net.stats
+    fast = r.warm_s + ns["pack"] + ns["inference"] + ns["unpack"]
+    return [
+        f"  compare   against the Gaussian renderer ({gr.n:,} Gaussians; set up in {setup:.1f} s):",
+        f"            plain rasterization {m_plain['psnr']:.2f} dB, SSIM {m_plain['ssim']:.3f}",
+        f"            NARVis U-Net        {m_net['psnr']:.2f} dB, SSIM {m_net['ssim']:.3f}",
+        f"            MACR + U-Net {fast * 1e3:.0f} ms (render {r.warm_s * 1e3:.0f}, "
+        f"pack {ns['pack'] * 1e3:.0f}, inference {ns['inference'] * 1e3:.0f}, "
+        f"unpack {ns['unpack'] * 1e3:.0f}) against Gaussians "
+        f"{gr_s * 1e3:.0f} ms: {gr_s / fast:.1f}x faster",
+    ]
 
 
 def _shrink(image: np.ndarray, f: int) -> np.ndarray:
@@ -408,13 +453,26 @@ def _render(args, progress) -> int:
     camera = camera_from_args(args, lo, hi, width, height, points=cloud.positions)
     q = runtime.default_queue()
     net = None
+    if args.compare and args.post != "narvis":
+        raise CliError(
+            "--compare: it scores the narvis network against the Gaussian renderer; add --post narvis"
+        )
     if args.post is not None:
         from .. import post
 
-        if not levels:
+        if args.post == "lidar" and not levels:
             raise CliError(
                 f"--post {args.post}: the network takes the depth-filtered image; add --depth-filter"
             )
+        if args.post == "narvis":
+            if cloud.velocity is None:
+                raise CliError(
+                    f"--post narvis: {source} has no velocity (the network takes the screen velocity plane)"
+                )
+            if attribute is None:
+                raise CliError(
+                    "--post narvis: the network takes points coloured by an attribute; add --attribute"
+                )
         net = post.load(args.post, queue=q)
     with progress.stage("uploading + Morton order"):
         raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
@@ -433,6 +491,11 @@ def _render(args, progress) -> int:
         args.point_size,
         net,
     )
+    compared = []
+    if args.compare:
+        compared = _compare_gaussians(
+            cloud, camera, width, height, attribute, args.colormap, r, net, progress
+        )
     out = Path(args.out)
     with progress.stage("writing PNGs"):
         named = [(f"{p.key}.png", p.image if args.transparent else images.opaque(p.image)) for p in r.panels]
@@ -468,6 +531,8 @@ def _render(args, progress) -> int:
             f"  post      {net!r}: pack {ns['pack'] * 1e3:.1f} ms, inference {ns['inference'] * 1e3:.1f} ms, "
             f"unpack {ns['unpack'] * 1e3:.1f} ms"
         )
+    for line in compared:
+        print(line)
     print(f"  total     {total:.2f} s")
     print(f"wrote {len(files)} PNGs to {out}{os.sep}")
     for p in files:
@@ -604,9 +669,16 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     )
     r.add_argument(
         "--post",
-        choices=("lidar",),
-        help="also write post-lidar.png: the depth-filtered image reconstructed by the LiDAR "
-        "RGBDA U-Net (clvis.post; needs the depth filter)",
+        choices=("lidar", "narvis"),
+        help="also write post-NAME.png: lidar, the depth-filtered image reconstructed by the LiDAR "
+        "RGBDA U-Net (needs the depth filter); narvis, the G-buffers turned into the Gaussian "
+        "renderer's image by NARVis's U-Net (needs a velocity and an attribute to colour by)",
+    )
+    r.add_argument(
+        "--compare",
+        action="store_true",
+        help="with --post narvis: also render the Gaussian renderer's image of the view (gaussians.png) "
+        "and score the network and the plain rasterization against it (PSNR, SSIM, time)",
     )
     add_output_options(r, "clvis-render", "empty pixels")
     add_cluster_options(r)

@@ -9,6 +9,11 @@ whose call takes a renderer's own output and returns an RGBA8 picture:
   surface's coverage (premultiplied colour over black).
 - "lidar": a FilteredImage (``depth_filter(...)``, or its ``rgbda`` array
   (H, W, 5)); alpha 255.
+- "narvis": rasterizer G-buffers (``Rasterizer.render``'s GBuffers, numpy
+  or ``host=False``) with the planes the card names (``planes``: by default
+  the colour, depth and screen velocity, so the cloud needs a velocity);
+  returns the Gaussian renderer's image of the same view as the network
+  predicts it (RGB premultiplied over black, alpha 255).
 
 One frame: the pack kernel (clvis.post.pack) writes the network's NCHW
 float32 input into a buffer allocated host-visible (ALLOC_HOST_PTR) and
@@ -48,7 +53,7 @@ import pyopencl.array as cla
 from .._arrays import resolve_queue
 from ..errors import DataError
 from .names import NAMES
-from .pack import pack_iso, pack_rgbda, padded_shape, unpack_rgba8
+from .pack import pack_gbuffers, pack_iso, pack_rgbda, padded_shape, unpack_rgba8
 
 __all__ = ["MAX_PIXELS", "MAX_SIDE", "MODELS", "PRECISIONS", "PostNetwork", "load", "sha256"]
 
@@ -138,6 +143,8 @@ class PostNetwork:
             raise DataError(f"{path}: its graph is not the one its card describes")
         self._in, self._out = inputs[0].name, outputs[0].name
         self.stride = int(card["stride"])
+        self.channels_in = int(card["channels_in"])
+        self.planes = tuple(card.get("architecture", {}).get("planes") or ())
         self.channels_out = int(card["channels_out"])
         self.queue = resolve_queue(queue)
         self.stats: dict[str, float] = {}
@@ -152,7 +159,7 @@ class PostNetwork:
         key = (hp, wp)
         if key not in self._buffers:
             self._buffers.clear()
-            shape = (1, 5, hp, wp)
+            shape = (1, self.channels_in, hp, wp)
             flags = cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR
             data = cl.Buffer(self.queue.context, flags, int(np.prod(shape)) * 4)
             planes = cla.Array(self.queue, shape, np.float32, data=data)
@@ -161,7 +168,16 @@ class PostNetwork:
 
     def _size(self, image: Any) -> tuple[int, int]:
         """(H, W) of an input the network takes; TypeError/ValueError/DataError else."""
-        if self.name == "infill":
+        if self.name == "narvis":
+            if not all(hasattr(image, k) for k in ("index", "rgba", "depth", "attributes")):
+                raise TypeError(
+                    "image: the narvis network takes rasterizer G-buffers (GBuffers), "
+                    f"got {type(image).__name__}"
+                )
+            shape = tuple(image.index.shape)
+            if len(shape) != 2:
+                raise ValueError(f"index: expected (H, W), got shape {shape}")
+        elif self.name == "infill":
             if not all(hasattr(image, k) for k in ("rgba", "hit", "active")):
                 raise TypeError(f"image: the infill network takes an IsoImage, got {type(image).__name__}")
             shape = tuple(np.shape(image.rgba))
@@ -194,7 +210,9 @@ class PostNetwork:
         planes, output = self._buffers_for(*padded_shape(h, w, self.stride))
         q, s = self.queue, self.stride
         # each pack reads its input check back, so the kernel is done on return
-        if self.name == "infill":
+        if self.name == "narvis":
+            pack_gbuffers(image, self.planes, stride=s, out=planes, queue=q)
+        elif self.name == "infill":
             pack_iso(image.rgba, image.hit, image.active, stride=s, out=planes, queue=q)
         else:
             pack_rgbda(getattr(image, "rgbda", image), stride=s, out=planes, queue=q)
@@ -214,7 +232,7 @@ class PostNetwork:
 
     def infer(self, image: Any) -> np.ndarray:
         """The network's raw output for `image`: (1, C, Hp, Wp) float32 (C: 4
-        for infill, 3 for lidar), padded to the stride."""
+        for infill, 3 for lidar and narvis), padded to the stride."""
         return self._run(image)[0].copy()
 
     def __call__(self, image: Any) -> np.ndarray:
@@ -235,7 +253,7 @@ def load(
     threads: int | None = None,
     queue: cl.CommandQueue | None = None,
 ) -> PostNetwork:
-    """The shipped network `name` ("infill", "lidar") at `precision`
+    """The shipped network `name` ("infill", "lidar", "narvis") at `precision`
     ("fp32", "fp16", "int8"), on onnxruntime with `providers` (default: CUDA's
     when present, then the CPU's). directory: where NAME.json and its files
     are (default: the models shipped in clvis/post/models; a `clvis train

@@ -9,7 +9,7 @@ GBUFFER_PLANES = {"rgb": 3, "coverage": 1, "depth": 1, "vel2d": 4}
 DEFAULT_GBUFFER_PLANES = ("rgb", "depth", "vel2d")
 
 
-def gbuffer_channels(planes) -> list[str]:
+def gbuffer_channels(planes: str | tuple[str, ...] | list[str]) -> list[str]:
     """The channel layout of a plane selection: R, G, B and the coverage
     (1 where a point was drawn) always first, then the depth, then the screen
     velocity (v'x, v'y, its angle, |v'|), then any other planes (attributes)

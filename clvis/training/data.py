@@ -358,7 +358,9 @@ class NarvisScene:
 
         return Rasterizer(self.cloud, queue=queue)
 
-    def gbuffers(self, ras: Any, camera: Camera, width: int, height: int, planes: Sequence[str], **kw):
+    def gbuffers(
+        self, ras: Any, camera: Camera, width: int, height: int, planes: Sequence[str], **kw: Any
+    ) -> Any:
         """The MACR G-buffers of a view, one pixel per point, coloured by the
         transfer function, with the attribute planes `planes` names."""
         from ..post.names import GBUFFER_PLANES

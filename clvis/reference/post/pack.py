@@ -38,6 +38,9 @@ half to even), NaN -> 0, alpha 255 when C = 3.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 
@@ -90,7 +93,7 @@ def pack_rgbda(rgbda: npt.ArrayLike, *, stride: int = 1) -> np.ndarray:
     return _nchw([*planes, d], hp, wp, [0, 0, 0, 0, -1])
 
 
-def gbuffer_sources(gbuffers, planes) -> list[tuple[str, np.ndarray]]:
+def gbuffer_sources(gbuffers: Any, planes: Sequence[str]) -> list[tuple[str, np.ndarray]]:
     """(channel name, (H, W) float32 values) of the planes after R, G, B and
     the coverage, in the tensor's order."""
     planes = list(planes)
@@ -110,7 +113,7 @@ def gbuffer_sources(gbuffers, planes) -> list[tuple[str, np.ndarray]]:
     return out
 
 
-def pack_gbuffers(gbuffers, planes, *, stride: int = 1) -> np.ndarray:
+def pack_gbuffers(gbuffers: Any, planes: Sequence[str], *, stride: int = 1) -> np.ndarray:
     covered = np.asarray(gbuffers.index) != np.uint32(0xFFFFFFFF)
     rgba = np.asarray(gbuffers.rgba)
     chans = [np.where(covered, rgba[..., c].astype(_F) / _F(255), _F(0)) for c in range(3)]

@@ -363,6 +363,15 @@ def post_pack(q):
     clvis.post.pack_rgbda(x[:1, :3], queue=q)
     for channels in (3, 4):
         clvis.post.unpack_rgba8(packed[:, :channels].copy(), h, w, queue=q)
+    # G-buffers of a small cloud with a velocity: pack_rgb_coverage, pack_plane
+    from clvis.raster import Rasterizer
+
+    pos = rng.uniform(-1, 1, (300, 3)).astype(np.float32)
+    vel = rng.normal(0, 1, (300, 3)).astype(np.float32)
+    ras = Rasterizer(pos, attributes={"t": pos[:, 2]}, velocity=vel, queue=q)
+    g = ras.render(_raster_cam(w, h), w, h, color_by="t")
+    for stride in (1, 16):
+        clvis.post.pack_gbuffers(g, ("rgb", "depth", "vel2d", "t"), stride=stride, queue=q)
 
 
 def main(argv: list[str]) -> int:

@@ -101,25 +101,14 @@ def _wide(widths):
     from pathlib import Path
 
     from clvis.post import nets
-    from clvis.training.train import OPSET
+    from clvis.training.train import export_onnx
 
     key = ("wide", widths)
     if key not in _cache:
-        import torch
-
         card = post.load("narvis").card["architecture"]
         net = nets.build("narvis", planes=card["planes"], widths=widths, up=card.get("up", "bilinear")).eval()
         path = Path(tempfile.mkdtemp()) / "wide.onnx"
-        torch.onnx.export(
-            net,
-            (torch.zeros(1, net.channels_in, 32, 32),),
-            str(path),
-            dynamo=False,
-            opset_version=OPSET,
-            input_names=["planes"],
-            output_names=["image"],
-            dynamic_axes={"planes": {2: "height", 3: "width"}, "image": {2: "height", 3: "width"}},
-        )
+        export_onnx(net, path)
         _cache[key] = (path, nets.count_parameters(net))
     return _cache[key]
 
@@ -265,7 +254,8 @@ def _narvis_extra(benchmark, queue, impl, op, w, h, scene, ras, cam, image):
         return
     import onnxruntime as ort
 
-    widths = tuple(int(v) * 2**i for i, v in enumerate([impl.split("-")[0]] * 5))
+    first = int(impl.split("-")[0])  # "16-256": 16, 32, 64, 128, 256
+    widths = tuple(first << i for i in range(5))
     path, params = _wide(widths)
     so = ort.SessionOptions()
     so.intra_op_num_threads = os.cpu_count() or 1

@@ -212,16 +212,16 @@ def _baselines(name: str, x: np.ndarray, y: np.ndarray) -> dict[str, dict[str, f
 # training
 
 
-def _augment(x, y, rng: np.random.Generator, name: str):
+def _augment(x, y, rng: np.random.Generator, name: str, layout: Sequence[str] = ()):
     """Flips and 90-degree rotations; for the LiDAR net, brightness and
     contrast on the colours of input and target alike. The NARVis net: flips
-    only, its screen velocity planes (4 + depth: v'x, v'y, angle) mirrored
-    with the image."""
+    only, its screen velocity planes (v'x, v'y, angle: where `layout`, the
+    input's channel names, has them) mirrored with the image."""
     import torch
 
     if name == "narvis":
         x = x.clone()
-        v = 5 if x.shape[1] > 8 else None  # the layout with depth and vel2d
+        v = list(layout).index("vel_x") if "vel_x" in layout else None
         if rng.random() < 0.5:  # left-right: v'x -> -v'x, angle -> pi - angle
             x, y = torch.flip(x, (3,)), torch.flip(y, (3,))
             if v is not None:
@@ -328,7 +328,7 @@ def train(
     t0 = time.perf_counter()
     net.train()
     for step in range(1, steps + 1):
-        x, y = _augment(*_batch(pairs, spec["batch"], size, rng), rng, name)
+        x, y = _augment(*_batch(pairs, spec["batch"], size, rng), rng, name, getattr(net, "layout", ()))
         loss = loss_fn(net(x), y)
         opt.zero_grad()
         loss.backward()
@@ -459,6 +459,26 @@ def _versions() -> dict[str, str]:
 # export
 
 
+def export_onnx(net: Any, path: Path) -> None:
+    """The network's fp32 graph: opset OPSET, input "planes" and output
+    "image" with dynamic height and width."""
+    import torch
+
+    x0 = torch.zeros(1, net.channels_in, 2 * net.stride, 2 * net.stride)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(
+            net,
+            (x0,),
+            str(path),
+            dynamo=False,
+            opset_version=OPSET,
+            input_names=["planes"],
+            output_names=["image"],
+            dynamic_axes={"planes": {2: "height", 3: "width"}, "image": {2: "height", 3: "width"}},
+        )
+
+
 def export(
     net: Any,
     name: str,
@@ -472,21 +492,8 @@ def export(
     sha256 and (fp16, int8) held-out PSNR change against fp32."""
     import torch
 
-    stride = net.stride
     fp32 = out / f"{name}.onnx"
-    x0 = torch.zeros(1, net.channels_in, 2 * stride, 2 * stride)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        torch.onnx.export(
-            net,
-            (x0,),
-            str(fp32),
-            dynamo=False,
-            opset_version=OPSET,
-            input_names=["planes"],
-            output_names=["image"],
-            dynamic_axes={"planes": {2: "height", 3: "width"}, "image": {2: "height", 3: "width"}},
-        )
+    export_onnx(net, fp32)
     # fp32: onnxruntime = torch eager on a held-out input
     x = calibration[0][None]
     with torch.no_grad():

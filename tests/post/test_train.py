@@ -96,3 +96,34 @@ def test_narvis_pairs_are_registered():
     )
     np.testing.assert_array_equal(storm.cloud.positions[:, 2], hur.positions[:, 2])
     assert not np.allclose(storm.cloud.positions[:, :2], hur.positions[:, :2], atol=1.0)
+
+
+def test_narvis_augmentation_mirrors_the_velocity_where_the_layout_has_it():
+    """Flips mirror v'x (left-right) and v'y (up-down) at their channels in
+    the input's layout, whatever planes precede them (here no depth)."""
+    import torch
+
+    from clvis.post.names import gbuffer_channels
+
+    layout = gbuffer_channels(("rgb", "vel2d"))
+    vx = layout.index("vel_x")
+    g = torch.Generator().manual_seed(0)
+    x = torch.rand(1, len(layout), 8, 12, generator=g)
+    x[:, 3] = 1.0  # every pixel covered
+    y = torch.rand(1, 3, 8, 12, generator=g)
+    seen = set()
+    for seed in range(16):
+        xo, yo = train._augment(x, y, np.random.default_rng(seed), "narvis", layout)
+        for dims in ((), (3,), (2,), (2, 3)):
+            if torch.equal(yo, torch.flip(y, dims) if dims else y):
+                break
+        else:
+            raise AssertionError("the target was not flipped as a whole")
+        seen.add(dims)
+        xf = torch.flip(x, dims) if dims else x
+        sx = -1.0 if 3 in dims else 1.0
+        sy = -1.0 if 2 in dims else 1.0
+        torch.testing.assert_close(xo[:, vx], sx * xf[:, vx])
+        torch.testing.assert_close(xo[:, vx + 1], sy * xf[:, vx + 1])
+        torch.testing.assert_close(xo[:, :3], xf[:, :3])
+    assert len(seen) == 4

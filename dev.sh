@@ -48,7 +48,7 @@ intel_env() { # VENV: point the ICD loader at Intel's runtime inside the venv
 }
 
 # mypy's scope: the runtime, the primitives, the camera and the public API
-TYPED="clvis/__init__.py clvis/runtime.py clvis/primitives.py clvis/camera.py clvis/errors.py
+TYPED="clvis/__init__.py clvis/runtime clvis/primitives.py clvis/camera.py clvis/errors.py
        clvis/_arrays.py clvis/colormap.py clvis/morton.py"
 
 cmd=${1:-}

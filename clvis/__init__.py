@@ -7,7 +7,7 @@ See ``clvis.runtime`` for device choice and options.
 
 import sys as _sys
 
-from . import datasets, volumes
+from . import datasets
 from ._version import __version__
 from .camera import Camera, grid_cameras, hemisphere_cameras
 from .colormap import TransferFunction
@@ -22,7 +22,7 @@ from .gauss import (
     read_vdb,
     render_gaussians,
 )
-from .io import PointCloud, read_points
+from .io import PointCloud, Volume, read_points, read_volume, volumes
 from .iso import IsoImage, IsoRenderer, zfp
 from .primitives import compact, compact_indices, histogram, radix_sort, scan
 from .raster import (
@@ -52,6 +52,7 @@ __all__ = [
     "Rasterizer",
     "SparseVolume",
     "TransferFunction",
+    "Volume",
     "__version__",
     "capabilities",
     "compact",
@@ -69,6 +70,7 @@ __all__ = [
     "rasterize",
     "read_points",
     "read_vdb",
+    "read_volume",
     "render_gaussians",
     "scan",
     "set_default_device",

@@ -36,12 +36,12 @@ ROOT = Path(__file__).resolve().parents[1]
 # The child: imports first (they map shared libraries), then the limit, then the cases.
 CHILD = r"""
 import json, resource, sys
-import clvis.io, clvis.volumes, clvis.gauss.sparse, clvis.gauss.gaussians
+import clvis.io, clvis.io.volumes, clvis.gauss.sparse, clvis.gauss.gaussians
 import laspy, lazrs, nibabel, plyfile, tinyvdb
 from clvis.errors import ClvisError
 limit = int(sys.argv[2])
 resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
-readers = {"points": clvis.io.read_points, "volume": clvis.volumes.read_volume,
+readers = {"points": clvis.io.read_points, "volume": clvis.io.volumes.read_volume,
            "vdb": clvis.gauss.sparse.read_vdb, "gaussians": clvis.gauss.gaussians.Gaussians.load}
 cases = json.load(open(sys.argv[1]))
 start = int(sys.argv[3])

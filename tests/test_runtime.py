@@ -221,7 +221,7 @@ def test_options_from_strings():
 def _pyopencl_cache(device, tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     ctx = runtime.queue_for(device).context
-    cache = runtime._pyopencl_cache_dir(ctx)
+    cache = runtime.program._pyopencl_cache_dir(ctx)
     if cache is None:
         pytest.skip("the driver caches its builds itself: pyopencl's cache is not used")
     cache.mkdir(parents=True)

@@ -93,7 +93,11 @@ def _report(found: list[str]) -> str:
 
 
 def test_modules_found():
-    assert "clvis/__init__.py" in MODULES and "clvis/runtime.py" in MODULES
+    assert (
+        "clvis/__init__.py" in MODULES
+        and "clvis/runtime/__init__.py" in MODULES
+        and "clvis/runtime/device.py" in MODULES
+    )
     assert "clvis/cli/__main__.py" in MODULES
     assert not any(Path(m).name in ("_arrays.py", "_common.py", "_version.py") for m in MODULES)
     for family in ("raster", "gauss", "iso"):

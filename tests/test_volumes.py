@@ -1,4 +1,4 @@
-"""clvis.volumes.read_volume: raw files named like the Open SciVis datasets,
+"""clvis.read_volume (clvis/io/volumes.py): raw files named like the Open SciVis datasets,
 .npy and NIfTI, and a DataError naming the file for everything it cannot read."""
 
 import gzip
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from clvis import DataError
-from clvis.volumes import RAW_TYPES, Volume, read_volume
+from clvis.io.volumes import RAW_TYPES, Volume, read_volume
 
 
 def _sample(shape, dtype, seed=0):

@@ -635,7 +635,7 @@ def raw_shape(text: str) -> tuple[int, int, int]:
 
 def add_volume_options(parser: argparse.ArgumentParser) -> None:
     """--spacing, --shape, --dtype and --volume-index: how to read a volume FILE."""
-    from ..volumes import RAW_TYPES
+    from ..io.volumes import RAW_TYPES
 
     g = parser.add_argument_group("volume files")
     g.add_argument(
@@ -671,7 +671,7 @@ def add_volume_options(parser: argparse.ArgumentParser) -> None:
 def read_volume_file(args, path):
     """The Volume of `path` with the volume options applied (spacing replaced,
     samples as float32). CliError for options that do not fit the file."""
-    from ..volumes import read_volume
+    from ..io.volumes import read_volume
 
     name = str(path).lower()
     raw = name.endswith(".raw")

@@ -170,7 +170,7 @@ def _sources(args):
     if not path.exists():
         raise CliError(f"{path}: no such file")
     from ..io import load_npz, npy_shape
-    from ..volumes import FORMATS as VOLUME_FORMATS
+    from ..io.volumes import FORMATS as VOLUME_FORMATS
 
     name = path.name.lower()
     if name.endswith(".vdb"):

@@ -81,8 +81,7 @@ def brick_plan(shape: Sequence[int], brick: int | Sequence[int]) -> list[tuple[t
 def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
     """Task: a volume file's shape (Z, Y, X), spacing (dz, dy, dx) and how to
     slice it, from its header alone."""
-    from .. import volumes
-    from ..io import npy_shape
+    from ..io import npy_shape, volumes
 
     p = Path(path)
     if not p.is_file():
@@ -236,7 +235,7 @@ class DistributedIsoRenderer(ClusterOwner):
 
     volume_or_bricks: a 3-D [z, y, x] array (bricks sliced on the client and
     sent to the workers), or a volume file (.npy, .raw with `shape`/`dtype`
-    as :func:`clvis.volumes.read_volume` takes them, .nii/.nii.gz) read
+    as :func:`clvis.read_volume` takes them, .nii/.nii.gz) read
     brick by brick on the workers. rate: ZFP bits per value. spacing
     (dz, dy, dx): default the file's (NIfTI) or ones; origin: world (x, y, z)
     of sample [0, 0, 0]. brick: cells per brick edge, a multiple of 4 (one

@@ -333,7 +333,7 @@ def test_tile_plan_and_memory_check(queue, monkeypatch):
     )
     with pytest.raises(ValueError, match="32-bit"):
         r.render(_cam(), 65536, 32768, 0.5)
-    monkeypatch.setattr(runtime, "host_available_bytes", lambda: 2 * 10**9)
+    monkeypatch.setattr(runtime.memory, "host_available_bytes", lambda: 2 * 10**9)
     with pytest.raises(clvis.DeviceError, match="on the host") as e:
         r.render(_cam(), 46340, 46340, 0.5)  # just under 2^31 pixels: 56 GB of host image
     assert "on the device" in str(e.value)

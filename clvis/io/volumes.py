@@ -51,8 +51,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from .errors import DataError
-from .io import load_npy
+from ..errors import DataError
+from .npy import load_npy
 
 __all__ = ["FORMATS", "RAW_TYPES", "Volume", "read_volume"]
 

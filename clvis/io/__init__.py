@@ -1,0 +1,33 @@
+"""Reading and writing data files.
+
+- :mod:`~clvis.io.points`: point clouds (:class:`PointCloud`,
+  :func:`read_points`, :func:`write_ply`, :func:`save_npz`), one module per
+  format whose checks are long (:mod:`~clvis.io.ply`, :mod:`~clvis.io.las`);
+- :mod:`~clvis.io.volumes`: volumes (:func:`read_volume`, :class:`Volume`):
+  raw, NPY and NIfTI;
+- :mod:`~clvis.io.npy`: NPY and NPZ read safely (:func:`load_npy`,
+  :func:`load_npz`, :func:`npy_shape`), for both.
+
+:func:`~clvis.gauss.read_vdb` (OpenVDB, into the Gaussian family's sparse
+layout) lives with :class:`~clvis.gauss.SparseVolume`.
+"""
+
+from .cloud import PointCloud
+from .npy import load_npy, load_npz, npy_shape
+from .ply import write_ply
+from .points import read_points, save_npz
+from .volumes import FORMATS, RAW_TYPES, Volume, read_volume
+
+__all__ = [
+    "FORMATS",
+    "RAW_TYPES",
+    "PointCloud",
+    "Volume",
+    "load_npy",
+    "load_npz",
+    "npy_shape",
+    "read_points",
+    "read_volume",
+    "save_npz",
+    "write_ply",
+]

@@ -1,0 +1,240 @@
+"""A point cloud (:class:`PointCloud`), what it checks and converts, and the
+helpers every point reader and writer shares."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .._arrays import real_array
+from ..errors import DataError
+
+# Named columns (PLY vertex properties, structured NPY fields) with a meaning.
+_COLOR_NAMES = (("red", "green", "blue", "alpha"), ("r", "g", "b", "a"))
+_VELOCITY_NAMES = (("vx", "vy", "vz"), ("velocity_x", "velocity_y", "velocity_z"))
+_RESERVED_COLUMNS = frozenset({"x", "y", "z", "radius"}.union(*_COLOR_NAMES, *_VELOCITY_NAMES))
+_NPZ_KEYS = ("positions", "colors", "velocity", "radius", "origin")
+# The PLY header comment that carries a cloud's origin.
+_ORIGIN_COMMENT = "clvis origin"
+
+
+def _vectors(name: str, a, n: int | None) -> np.ndarray:
+    a = real_array(name, a)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name}: expected shape (N, 3), got {a.shape}")
+    _check_length(name, len(a), n)
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
+def _check_length(name: str, length: int, n: int | None) -> None:
+    if n is not None and length != n:
+        raise ValueError(f"{name}: {length} rows, but positions has {n}")
+
+
+def _colors(a, n: int) -> np.ndarray:
+    a = real_array("colors", a)
+    if a.ndim != 2 or a.shape[1] not in (3, 4):
+        raise ValueError(f"colors: expected shape (N, 3) or (N, 4), got {a.shape}")
+    _check_length("colors", len(a), n)
+    if a.dtype == np.uint16:
+        a = (a >> 8).astype(np.uint8)
+    elif a.dtype.kind == "f":
+        if not ((a >= 0) & (a <= 1)).all():  # NaN fails too
+            raise ValueError("colors: float colors must lie in [0, 1]")
+        a = np.rint(a.astype(np.float64) * 255).astype(np.uint8)
+    elif a.dtype != np.uint8:
+        if a.size and (a.min() < 0 or a.max() > 255):
+            raise ValueError(
+                f"colors: {a.dtype} colors must lie in 0..255 "
+                "(uint16 colors are scaled down; pass them as uint16)"
+            )
+        a = a.astype(np.uint8)
+    if a.shape[1] == 3:
+        a = np.concatenate([a, np.full((len(a), 1), 255, np.uint8)], axis=1)
+    return np.ascontiguousarray(a)
+
+
+def _attribute(key, a, n: int) -> np.ndarray:
+    if not isinstance(key, str) or not key:
+        raise TypeError(f"attributes: names must be non-empty strings, got {key!r}")
+    name = f"attributes[{key!r}]"
+    if isinstance(a, (str, bytes)) or a is None:
+        raise TypeError(f"{name}: expected an array, got {type(a).__name__}")
+    a = np.asarray(a)
+    if a.ndim != 1:
+        raise ValueError(f"{name}: expected shape (N,), got {a.shape}")
+    _check_length(name, len(a), n)
+    if a.dtype == np.bool_:
+        return a.astype(np.uint8)
+    if a.dtype.kind not in "iuf":
+        raise TypeError(f"{name}: expected real numbers or bools, got dtype {a.dtype}")
+    return np.ascontiguousarray(a, dtype=np.uint8 if a.dtype == np.uint8 else np.float32)
+
+
+class PointCloud:
+    """Points with optional colors, velocities, radii and per-point attributes.
+
+    The constructor checks and converts its arguments (TypeError / ValueError
+    naming the argument).
+
+    Parameters
+    ----------
+    positions : (N, 3) real array
+        Stored as float32, C-contiguous.
+    colors : (N, 3) or (N, 4) array, optional
+        uint8 as is; uint16 scaled down (>> 8); float in [0, 1] scaled by 255 and
+        rounded; other integers in 0..255 as is. Stored as (N, 4) uint8 RGBA
+        (alpha 255 when not given).
+    attributes : dict of str -> (N,) array, optional
+        float32 and uint8 kept, bool stored as uint8, other reals as float32.
+    velocity : (N, 3) real array, optional
+        Stored as float32.
+    radius : (N,) real array, optional
+        Stored as float32.
+    origin : (3,) real, optional
+        World position of the local coordinate origin (float64, default zeros).
+    """
+
+    def __init__(
+        self,
+        positions: npt.ArrayLike,
+        colors: npt.ArrayLike | None = None,
+        attributes: Mapping[str, Any] | None = None,
+        velocity: npt.ArrayLike | None = None,
+        radius: npt.ArrayLike | None = None,
+        origin: npt.ArrayLike | None = None,
+    ) -> None:
+        self.positions = _vectors("positions", positions, None)
+        n = len(self.positions)
+        self.colors = None if colors is None else _colors(colors, n)
+        self.velocity = None if velocity is None else _vectors("velocity", velocity, n)
+        if radius is None:
+            self.radius = None
+        else:
+            r = real_array("radius", radius)
+            if r.ndim != 1:
+                raise ValueError(f"radius: expected shape (N,), got {r.shape}")
+            _check_length("radius", len(r), n)
+            self.radius = np.ascontiguousarray(r, dtype=np.float32)
+        if attributes is None:
+            attributes = {}
+        if not isinstance(attributes, dict):
+            raise TypeError(f"attributes: expected a dict, got {type(attributes).__name__}")
+        self.attributes = {k: _attribute(k, v, n) for k, v in attributes.items()}
+        o = np.zeros(3) if origin is None else np.asarray(real_array("origin", origin), dtype=np.float64)
+        if o.shape != (3,) or not np.isfinite(o).all():
+            raise ValueError(f"origin: expected 3 finite numbers, got {o.tolist()}")
+        self.origin = o
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+    def __repr__(self) -> str:
+        parts = [f"{len(self)} points"]
+        parts += [name for name in ("colors", "velocity", "radius") if getattr(self, name) is not None]
+        if self.attributes:
+            parts.append(f"attributes={list(self.attributes)}")
+        if self.origin.any():
+            parts.append(f"origin={self.origin.tolist()}")
+        return f"PointCloud({', '.join(parts)})"
+
+    @property
+    def attribute_names(self) -> tuple[str, ...]:
+        """The attribute names, in insertion order."""
+        return tuple(self.attributes)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(min, max), two (3,) float64 arrays over the points whose x, y, z are all
+        finite, in local coordinates (add ``origin`` for world coordinates)."""
+        finite = np.isfinite(self.positions).all(axis=1)
+        if not finite.any():
+            raise ValueError("bounds: the cloud has no finite points")
+        p = self.positions[finite]
+        return p.min(axis=0).astype(np.float64), p.max(axis=0).astype(np.float64)
+
+    def subset(self, index: npt.ArrayLike | slice) -> PointCloud:
+        """A new cloud with the points selected by `index`: a boolean mask of length
+        N, an array of indices, or a slice. An index out of range raises
+        DataError."""
+        if not isinstance(index, slice):
+            index = np.asarray(index)
+            if index.dtype == np.bool_:
+                if index.shape != (len(self),):
+                    raise ValueError(f"index: a mask must have shape ({len(self)},), got {index.shape}")
+            elif index.dtype.kind not in "iu" or index.ndim != 1:
+                raise TypeError(
+                    f"index: expected a boolean mask, 1-D integer indices or a slice, "
+                    f"got {index.dtype} with shape {index.shape}"
+                )
+
+            elif index.size and not (-len(self) <= index.min() and index.max() < len(self)):
+                raise DataError(
+                    f"index: indices must lie in [-{len(self)}, {len(self)}), got "
+                    f"{int(index.min())}..{int(index.max())}"
+                )
+
+        def pick(a):
+            return None if a is None else a[index]
+
+        return PointCloud(
+            self.positions[index],
+            pick(self.colors),
+            {k: v[index] for k, v in self.attributes.items()},
+            pick(self.velocity),
+            pick(self.radius),
+            self.origin,
+        )
+
+
+def _cloud(path: Path, **fields) -> PointCloud:
+    """PointCloud(**fields), its complaints turned into DataErrors naming the file."""
+    try:
+        return PointCloud(**fields)
+    except (TypeError, ValueError) as e:
+        raise DataError(f"{path}: {e}") from e
+
+
+def _from_columns(path: Path, columns: dict[str, np.ndarray], origin=None) -> PointCloud:
+    """A cloud from named 1-D columns (PLY properties, structured NPY fields)."""
+    missing = [c for c in "xyz" if c not in columns]
+    if missing:
+        raise DataError(f"{path}: no {', '.join(missing)} column (found {', '.join(columns) or 'none'})")
+    columns = dict(columns)
+
+    def take(names):
+        return np.stack([columns.pop(c) for c in names], axis=1)
+
+    fields = {"positions": take("xyz"), "origin": origin}
+    for names in _COLOR_NAMES:
+        if all(c in columns for c in names[:3]):
+            fields["colors"] = take([c for c in names if c in columns])
+            break
+    for names in _VELOCITY_NAMES:
+        if all(c in columns for c in names):
+            fields["velocity"] = take(names)
+            break
+    if "radius" in columns:
+        fields["radius"] = columns.pop("radius")
+    fields["attributes"] = columns
+    return _cloud(path, **fields)
+
+
+def _write_or_remove(path, write) -> None:
+    """write(file) into `path`; on any failure the partial file is removed."""
+    path = Path(path)
+    with open(path, "wb") as f:
+        try:
+            write(f)
+        except BaseException:
+            f.close()
+            path.unlink()
+            raise
+
+
+def _check_cloud(cloud) -> None:
+    if not isinstance(cloud, PointCloud):
+        raise TypeError(f"cloud: expected a PointCloud, got {type(cloud).__name__}")

@@ -1,0 +1,111 @@
+"""Point cloud files: :class:`PointCloud` and the readers and writers.
+
+:func:`read_points` reads PLY (ASCII or binary, via plyfile), LAS and LAZ (via
+laspy; LAZ needs its lazrs backend), NPY and NPZ, chosen by the file extension.
+:func:`write_ply` and :func:`save_npz` write a cloud back so that it round-trips.
+
+Positions are float32, what the kernels read. float32 keeps about 7 significant
+digits, too few for georeferenced coordinates (UTM eastings of 10^5..10^6 m), so
+the LAS/LAZ reader subtracts the minimum of the points' coordinates and keeps it,
+in float64, as ``cloud.origin``: world position = origin + position. Other
+formats take positions as stored (origin zero), except that files written by
+clvis carry their origin along (an NPZ key, a PLY header comment).
+
+A missing file raises FileNotFoundError; a file clvis cannot read (unknown
+extension, malformed or truncated content, wrong shapes) raises
+:class:`clvis.errors.DataError` naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+from .cloud import _NPZ_KEYS, PointCloud, _check_cloud, _cloud, _from_columns, _write_or_remove
+from .las import _read_las
+from .npy import load_npy, load_npz
+from .ply import _read_ply, write_ply
+
+__all__ = ["PointCloud", "read_points", "save_npz", "write_ply"]
+
+
+# ---------------------------------------------------------------- reading
+
+
+def read_points(path: str | os.PathLike[str]) -> PointCloud:
+    """Read a point cloud; the format comes from the extension (case-insensitive).
+
+    - ``.ply``: the ``vertex`` element. x, y, z are required; red, green, blue
+      [, alpha] (or r, g, b [, a]) become colors; vx, vy, vz (or velocity_x, ...)
+      the velocity; radius the radius; every other scalar property an attribute.
+    - ``.las``, ``.laz``: positions relative to ``origin`` = the minimum of the
+      points' coordinates; red/green/blue become 8-bit (>> 8 when any value
+      exceeds 255, else as is); every other dimension (intensity, classification,
+      return_number, ...) an attribute. gps_time is stored as seconds since the
+      earliest point, which float32 resolves where absolute GPS time would not.
+    - ``.npy``: an (N, 3) array, or a structured array with fields x, y, z and
+      others named as for PLY.
+    - ``.npz``: key ``positions`` (N, 3) required; ``colors``, ``velocity``,
+      ``radius``, ``origin`` optional; every other key an (N,) attribute.
+    """
+    path = Path(path)
+    readers = {".ply": _read_ply, ".las": _read_las, ".laz": _read_las, ".npy": _read_npy, ".npz": _read_npz}
+    if not path.exists():
+        raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), str(path))
+    reader = readers.get(path.suffix.lower())
+    if reader is None:
+        raise DataError(
+            f"{path}: unknown point cloud format {path.suffix!r}; expected one of {', '.join(readers)}"
+        )
+    return reader(path)
+
+
+def _read_npy(path: Path) -> PointCloud:
+    a = load_npy(path)
+    if a.dtype.names:
+        if a.ndim != 1:
+            raise DataError(f"{path}: expected a 1-D structured array, got shape {a.shape}")
+        return _from_columns(path, {k: a[k] for k in a.dtype.names if a.dtype[k].ndim == 0})
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise DataError(
+            f"{path}: expected an (N, 3) array or a structured array with x, y, z fields, got shape {a.shape}"
+        )
+    return _cloud(path, positions=a)
+
+
+def _read_npz(path: Path) -> PointCloud:
+    arrays = load_npz(path)
+    if "positions" not in arrays:
+        raise DataError(f"{path}: no 'positions' array (keys: {', '.join(arrays) or 'none'})")
+    fields = {k: arrays.pop(k) for k in _NPZ_KEYS if k in arrays}
+    fields["attributes"] = arrays
+    return _cloud(path, **fields)
+
+
+def save_npz(path: str | os.PathLike[str], cloud: PointCloud) -> None:
+    """Write `cloud` as an uncompressed NPZ file with the keys :func:`read_points`
+    reads: positions, origin, colors / velocity / radius when present, and one
+    key per attribute."""
+    _check_cloud(cloud)
+    clash = [k for k in cloud.attributes if k in _NPZ_KEYS]
+    if clash:
+        raise ValueError(f"cloud: attribute names {clash} clash with the NPZ keys {list(_NPZ_KEYS)}")
+    arrays = {"positions": cloud.positions, "origin": cloud.origin}
+    arrays.update(
+        {k: getattr(cloud, k) for k in ("colors", "velocity", "radius") if getattr(cloud, k) is not None}
+    )
+    arrays.update(cloud.attributes)
+
+    def write(f):
+        # np.savez's own keywords (file, allow_pickle) would clash with attribute names
+        with zipfile.ZipFile(f, "w") as archive:
+            for k, v in arrays.items():
+                with archive.open(f"{k}.npy", "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, np.asarray(v), allow_pickle=False)
+
+    _write_or_remove(path, write)

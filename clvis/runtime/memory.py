@@ -1,0 +1,123 @@
+"""Memory: a pool per queue, checks before large allocations (one buffer
+against the device's max allocation, a total against device and host memory),
+and pooled, checked device arrays."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+import pyopencl as cl
+import pyopencl.array as cla
+import pyopencl.tools
+
+from ..errors import DeviceError
+from .device import _contexts, _lock, _state, capabilities, describe
+from .dispatch import fill
+
+
+def allocator(queue: cl.CommandQueue) -> cl.tools.MemoryPool:
+    """A memory pool for the queue: repeated calls reuse device buffers."""
+    state = _state(queue.context)
+    with _lock:
+        pool = state.pools.get(queue.int_ptr)
+        if pool is None:
+            pool = state.pools[queue.int_ptr] = cl.tools.MemoryPool(cl.tools.ImmediateAllocator(queue))
+        return pool
+
+
+def free_pools() -> None:
+    """Give every pooled buffer back to the drivers."""
+    with _lock:
+        for s in _contexts.values():
+            for pool in s.pools.values():
+                pool.free_held()
+
+
+def check_alloc(queue: cl.CommandQueue, nbytes: int, what: str) -> None:
+    """DeviceError if one buffer of `nbytes` exceeds the device's max single allocation."""
+    limit = capabilities(queue).max_alloc_bytes
+    if nbytes > limit:
+        raise DeviceError(
+            f"{what}: needs one buffer of {nbytes} bytes, more than the max single allocation "
+            f"of {limit} bytes on {describe(queue.device)}"
+        )
+
+
+def host_available_bytes() -> int | None:
+    """Memory this process can still take on the host: the kernel's estimate of
+    available memory (MemAvailable), lowered to the address-space limit
+    (RLIMIT_AS) minus what the process already maps; None where neither is
+    known."""
+    avail = None
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    avail = int(line.split()[1]) * 1024
+                    break
+    except (OSError, ValueError, IndexError):
+        pass
+    if avail is None:
+        with contextlib.suppress(ValueError, OSError, AttributeError):
+            avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            with open("/proc/self/statm") as f:
+                mapped = int(f.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+            left = max(0, soft - mapped)
+            avail = left if avail is None else min(avail, left)
+    except (ImportError, OSError, ValueError, IndexError):
+        pass
+    return avail
+
+
+def check_memory(queue: cl.CommandQueue, what: str, *, device_bytes: int = 0, host_bytes: int = 0) -> None:
+    """DeviceError naming both figures when `device_bytes` more on the device or
+    `host_bytes` more on the host would not fit: call it before a large
+    allocation (a big image, a tile plan), so the caller gets a clear error
+    instead of a driver failure, a swap storm or the OOM killer. On a CPU
+    device, device memory is host memory: both count against the host."""
+    caps = capabilities(queue)
+    if device_bytes > caps.global_mem_bytes:
+        raise DeviceError(
+            f"{what}: needs {device_bytes / 1e9:.2f} GB on the device and "
+            f"{host_bytes / 1e9:.2f} GB on the host; {describe(queue.device)} has "
+            f"{caps.global_mem_bytes / 1e9:.2f} GB"
+        )
+    host_need = host_bytes + (device_bytes if caps.device_type == "CPU" else 0)
+    avail = host_available_bytes()
+    if avail is not None and host_need > avail:
+        raise DeviceError(
+            f"{what}: needs {device_bytes / 1e9:.2f} GB on the device and "
+            f"{host_bytes / 1e9:.2f} GB on the host ({host_need / 1e9:.2f} GB of host memory "
+            f"with a CPU device), but only {avail / 1e9:.2f} GB is available"
+        )
+
+
+def empty(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLike, what: str) -> cla.Array:
+    """A device array from the pool, after check_alloc; DeviceError if the driver refuses."""
+    shape = (int(shape),) if isinstance(shape, (int, np.integer)) else tuple(shape)
+    dtype = np.dtype(dtype)
+    nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    check_alloc(queue, nbytes, what)
+    try:
+        return cla.empty(queue, shape, dtype, allocator=allocator(queue))
+    except (cl.MemoryError, cl.Error) as e:
+        raise DeviceError(f"{what}: allocating {nbytes} bytes on {describe(queue.device)} failed: {e}") from e
+
+
+def fill_zero(queue: cl.CommandQueue, a: cla.Array) -> cla.Array:
+    """Zero a device array's bytes: :func:`fill` with 0."""
+    return fill(queue, a, 0)
+
+
+def zeros(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLike, what: str) -> cla.Array:
+    """empty(), zeroed."""
+    return fill_zero(queue, empty(queue, shape, dtype, what))

@@ -5,8 +5,6 @@ Arrays in, arrays out: numpy arrays come back as numpy arrays, and
 See ``clvis.runtime`` for device choice and options.
 """
 
-import sys as _sys
-
 from . import datasets
 from ._version import __version__
 from .camera import Camera, grid_cameras, hemisphere_cameras
@@ -77,6 +75,3 @@ __all__ = [
     "volumes",
     "zfp",
 ]
-
-# ``import clvis.zfp`` keeps working: the module lives in the iso family now
-_sys.modules[__name__ + ".zfp"] = zfp

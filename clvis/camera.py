@@ -13,7 +13,8 @@ for a perspective camera; for an orthographic one clip w is 1).
 OpenCL kernels compute it; kernel tests compare against it bit for bit.
 
 The samplers :func:`grid_cameras` and :func:`hemisphere_cameras` produce the
-NARVis training viewpoints (z is up).
+NARVis training viewpoints (z is up); :func:`fit_camera` and
+:func:`axis_camera` frame a scene as the commands' default views do.
 """
 
 from __future__ import annotations
@@ -29,12 +30,17 @@ from ._arrays import positive_int, real_array
 from .errors import DataError
 
 __all__ = [
+    "AXIS_VIEWS",
     "CAMERA_DTYPE",
     "Camera",
     "Projected",
+    "axis_camera",
+    "box_corners",
     "camera_buffer",
+    "fit_camera",
     "grid_cameras",
     "hemisphere_cameras",
+    "min_extent",
     "ray_buffer",
     "singular",
 ]
@@ -513,6 +519,132 @@ def _hemisphere(centre, dist, fov_y, aspect, near, far) -> Iterator[Camera]:
                 [math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi), math.cos(theta)]
             )
             yield Camera.look_at(centre + offset, centre, (0, 0, 1), fov_y, aspect, near, far)
+
+
+# --------------------------------------------------------------------------
+# framing a scene: the commands' default views (--view fit, top/front/side)
+
+# the axis views: (view direction, up)
+AXIS_VIEWS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
+    "top": ((0, 0, -1), (0, 1, 0)),
+    "front": ((0, 1, 0), (0, 0, 1)),
+    "side": ((-1, 0, 0), (0, 0, 1)),
+}
+
+
+def box_corners(bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike) -> np.ndarray:
+    """The 8 corners of the box [bounds_min, bounds_max], (8, 3) float64."""
+    lo, hi = np.asarray(bounds_min, np.float64), np.asarray(bounds_max, np.float64)
+    return np.array(
+        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64
+    )
+
+
+def min_extent(centre: npt.ArrayLike) -> float:
+    """An extent too small to frame on its own around `centre`: below it
+    float32 cameras no longer resolve the points (Camera.fit's floor)."""
+    return _MIN_RADIUS * max(1.0, float(np.abs(np.asarray(centre, np.float64)).max()))
+
+
+def _finite_sample(positions: npt.ArrayLike, limit: int = 200_000) -> np.ndarray:
+    """Up to `limit` of the points with finite x, y, z (an even stride), float64."""
+    positions = np.asarray(positions)
+    step = max(1, len(positions) // limit)
+    p = positions[::step].astype(np.float64)
+    return p[np.isfinite(p).all(axis=1)]
+
+
+def fit_camera(
+    positions: npt.ArrayLike,
+    bounds_min: npt.ArrayLike,
+    bounds_max: npt.ArrayLike,
+    *,
+    direction: npt.ArrayLike = (-1, -1, -0.6),
+    fov_y: float = 60.0,
+    aspect: float = 1.0,
+) -> Camera:
+    """A perspective camera framing the points `positions` ((N, 3)) tightly:
+    :meth:`Camera.fit` on the bounds, then moved sideways until the points (a
+    sample of them) are centred on screen and along its view axis until they
+    just fill the frame; the direction is kept (z up). Camera.fit frames the
+    bounding sphere, which leaves a flat cloud (a storm, a terrain) small."""
+    cam = Camera.fit(bounds_min, bounds_max, direction=direction, aspect=aspect, fov_y=fov_y)
+    p = _finite_sample(positions)
+    lo, hi = np.asarray(bounds_min, np.float64), np.asarray(bounds_max, np.float64)
+    centre = 0.5 * (lo + hi)
+    if len(p) == 0 or np.ptp(p, axis=0).max() <= min_extent(centre):
+        return cam  # (about) one point: Camera.fit's own framing
+    right, up, forward = cam.view[0, :3], cam.view[1, :3], cam.forward
+    o = p - centre
+    c = o @ forward
+    tan_y = 1.0 / cam.projection[1, 1]
+    tan_x = aspect * tan_y
+    # with the eye at distance D from the centre, shifted sideways by (sx, sy),
+    # a point is in frame when |a - sx| <= tan_x (D + c) and |b - sy| <=
+    # tan_y (D + c), and in front when D + c > 0
+    a, b = o @ right, o @ up
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6)
+    shift = np.zeros(2)
+
+    def distance() -> float:
+        return max(
+            float(
+                np.max(
+                    _FIT_MARGIN * np.maximum(np.abs(a - shift[0]) / tan_x, np.abs(b - shift[1]) / tan_y) - c
+                )
+            ),
+            float(np.max(-c)) + 1e-3 * radius,
+        )
+
+    dist = distance()
+    # perspective puts the near side of an oblique cloud lower and wider on
+    # screen: shift the eye sideways until the points' extents are centred in
+    # the frame, then move it in again (a few rounds converge)
+    step = max(1, len(c) // 20_000)  # the centre from a sample; the distance from all
+    for _ in range(3):
+        depth = dist + c[::step]
+        for k, s in enumerate((a[::step], b[::step])):
+            lo_s, hi_s = float(s.min()), float(s.max())
+            for _ in range(40):  # bisect: the mid of the extents, decreasing in the shift
+                mid = 0.5 * (lo_s + hi_s)
+                x = (s - mid) / depth
+                lo_s, hi_s = (mid, hi_s) if x.max() + x.min() > 0 else (lo_s, mid)
+            shift[k] = 0.5 * (lo_s + hi_s)
+        dist = distance()
+    nearest, farthest = dist + float(c.min()), dist + float(c.max())
+    fov = math.degrees(2 * math.atan(tan_y))
+    target = centre + shift[0] * right + shift[1] * up
+    return Camera.look_at(
+        target - dist * forward, target, (0, 0, 1), fov, aspect, near=0.5 * nearest, far=1.5 * farthest
+    )
+
+
+def axis_camera(
+    kind: str, bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike, aspect: float = 1.0
+) -> Camera:
+    """An orthographic camera along an axis (`kind`, a key of AXIS_VIEWS)
+    framing the box: top looks down (north, +y, up), front looks along +y,
+    side along -x."""
+    if kind not in AXIS_VIEWS:
+        raise ValueError(f"kind: expected one of {', '.join(AXIS_VIEWS)}, got {kind!r}")
+    lo, hi = np.asarray(bounds_min, np.float64), np.asarray(bounds_max, np.float64)
+    direction, up = (np.asarray(v, np.float64) for v in AXIS_VIEWS[kind])
+    right = np.cross(direction, up)
+    ext = hi - lo
+    width, height, depth = (float(np.abs(v) @ ext) for v in (right, up, direction))
+    centre = 0.5 * (lo + hi)
+    scale = max(width, height, depth, min_extent(centre))
+    frame = _FIT_MARGIN * max(height, width / aspect, 1e-3 * scale)
+    back = 0.5 * depth + 0.1 * scale  # the eye sits outside the box
+    return Camera.ortho(
+        centre - back * direction,
+        centre,
+        up,
+        height=frame,
+        aspect=aspect,
+        near=0.05 * scale,
+        far=back + 0.5 * depth + 0.1 * scale,
+    )
 
 
 # --------------------------------------------------------------------------

@@ -415,3 +415,39 @@ def test_singular_cameras_are_refused():
     with pytest.raises(ClvisError, match="camera: its (rays|matrix projection @ view cannot be inverted)"):
         ray_buffer(Camera.look_at((1e39, 0, 0), (0, 0, 0), near=1, far=10), 4, 4)
     assert np.isfinite(ray_buffer(good, 4, 4)).all()
+
+
+# --------------------------------------------------------------------------
+# framing a scene (the commands' default views)
+
+
+def test_axis_camera_frames_the_box():
+    from clvis.camera import AXIS_VIEWS, axis_camera, box_corners
+
+    lo, hi = np.array([-3.0, 1.0, 0.5]), np.array([5.0, 2.0, 4.0])
+    corners = box_corners(lo, hi)
+    assert corners.shape == (8, 3) and (corners.min(axis=0) == lo).all() and (corners.max(axis=0) == hi).all()
+    for kind in AXIS_VIEWS:
+        for aspect in (0.5, 1.0, 16 / 9):
+            cam = axis_camera(kind, lo, hi, aspect)
+            assert cam.orthographic
+            assert cam.project(corners, 160, int(160 / aspect)).visible.all(), (kind, aspect)
+    with pytest.raises(ValueError, match="kind: expected one of top, front, side"):
+        axis_camera("bottom", lo, hi)
+
+
+def test_fit_camera_frames_the_points():
+    from clvis.camera import fit_camera
+
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(5000, 3)) * [10.0, 10.0, 0.5]  # a flat cloud: Camera.fit leaves it small
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    tight = fit_camera(p, lo, hi, direction=(1, 1, -0.5), fov_y=40, aspect=1.5)
+    loose = Camera.fit(lo, hi, direction=(1, 1, -0.5), fov_y=40, aspect=1.5)
+    pt, pl = tight.project(p, 300, 200), loose.project(p, 300, 200)
+    assert pt.visible.all() and pl.visible.all()
+    assert np.ptp(pt.sx) > 1.2 * np.ptp(pl.sx)  # fills more of the frame
+    # one point (or none finite): Camera.fit's own framing
+    one = np.array([[1.0, 2.0, 3.0]])
+    got, want = fit_camera(one, one[0], one[0]), Camera.fit(one[0], one[0])
+    np.testing.assert_array_equal(got.matrix, want.matrix)

@@ -76,8 +76,7 @@ def test_c_host_runs_raster(tmp_path):
     index and depth buffers bit for bit."""
     import numpy as np
 
-    from clvis.camera import Camera
-    from clvis.raster import camera_buffer
+    from clvis.camera import Camera, camera_buffer
     from clvis.reference import raster as ref
 
     exe, env = _host(tmp_path, HOST.parent / "raster_host.c")

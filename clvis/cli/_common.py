@@ -18,6 +18,16 @@ import time
 
 import numpy as np
 
+from ..camera import (
+    AXIS_VIEWS,
+    Camera,
+    axis_camera,
+    box_corners,
+    fit_camera,
+    grid_cameras,
+    hemisphere_cameras,
+    min_extent,
+)
 from ..errors import ClvisError
 from ..raster import MAX_IMAGE_SIDE
 
@@ -316,13 +326,6 @@ class FitView:
     fov_y: float
 
 
-FIT_MARGIN = 1.05  # fit and the axis views: the scene fills 1/1.05 of the frame
-# orthographic views: (view direction, up)
-AXIS_VIEWS = {
-    "top": ((0, 0, -1), (0, 1, 0)),
-    "front": ((0, 1, 0), (0, 0, 1)),
-    "side": ((-1, 0, 0), (0, 0, 1)),
-}
 SAMPLER_CAMERAS = {"hemisphere": 128, "grid": 384}  # grid_cameras with count=4
 
 VIEWS_HELP = """\
@@ -432,24 +435,17 @@ def describe_camera(args) -> str:
     return text
 
 
-def box_corners(lo, hi) -> np.ndarray:
-    """The 8 corners of the box [lo, hi], (8, 3) float64."""
-    return np.array(
-        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], np.float64
-    )
-
-
 def fit_box(lo, hi, width: int, height: int, fit: FitView):
     """The default view (--view fit, no overrides) of the box [lo, hi]: what the
     commands use when no options are given, and the demo too."""
-    return fit_camera(box_corners(lo, hi), lo, hi, width / height, fit, fit.fov_y)
+    return fit_camera(
+        box_corners(lo, hi), lo, hi, direction=fit.direction, fov_y=fit.fov_y, aspect=width / height
+    )
 
 
 def camera_from_args(args, lo, hi, width: int, height: int, points=None):
     """The camera the options ask for, framing the box [lo, hi] (for --view
     fit, the `points` themselves when given, else the box's corners)."""
-    from ..camera import grid_cameras, hemisphere_cameras
-
     kind, k = args.view
     aspect = width / height
     fit = args.fit_view
@@ -458,7 +454,7 @@ def camera_from_args(args, lo, hi, width: int, height: int, points=None):
         if kind == "fit":
             if points is None:  # the box's corners: framed tighter than its bounding sphere
                 points = box_corners(lo, hi)
-            cam = fit_camera(points, lo, hi, aspect, fit, fov_y)
+            cam = fit_camera(points, lo, hi, direction=fit.direction, fov_y=fov_y, aspect=aspect)
         elif kind in AXIS_VIEWS:
             cam = axis_camera(kind, lo, hi, aspect)
         else:
@@ -476,8 +472,6 @@ def camera_from_args(args, lo, hi, width: int, height: int, points=None):
 def _replaced(cam, kind, args, lo, hi, aspect: float):
     """`cam` with the eye, target and up of the options, near and far
     enclosing the box, the projection (and field of view) kept."""
-    from ..camera import Camera
-
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     centre = 0.5 * (lo + hi)
     eye = np.asarray(args.eye if args.eye is not None else cam.eye, np.float64)
@@ -491,9 +485,11 @@ def _replaced(cam, kind, args, lo, hi, aspect: float):
     if np.array_equal(eye, target):
         raise CliError("--eye: the camera would sit on its target; give a --target too")
     forward = (target - eye) / np.linalg.norm(target - eye)
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    corners = box_corners(lo, hi)
     depths = (corners - eye) @ forward
-    scale = max(float(np.linalg.norm(hi - lo)), tiny(centre), float(np.linalg.norm(target - eye)) * 1e-3)
+    scale = max(
+        float(np.linalg.norm(hi - lo)), min_extent(centre), float(np.linalg.norm(target - eye)) * 1e-3
+    )
     if cam.orthographic:
         return Camera.ortho(
             eye,
@@ -508,103 +504,6 @@ def _replaced(cam, kind, args, lo, hi, aspect: float):
     far = max(1.01 * float(depths.max()), 0.0) + 1e-3 * scale
     near = max(0.5 * float(depths.min()), 1e-4 * scale, 1e-6 * far)
     return Camera.look_at(eye, target, up, fov_y, aspect, near=near, far=max(far, 2 * near))
-
-
-def _finite_sample(positions, limit: int = 200_000) -> np.ndarray:
-    """Up to `limit` of the points with finite x, y, z (an even stride), float64."""
-    step = max(1, len(positions) // limit)
-    p = positions[::step].astype(np.float64)
-    return p[np.isfinite(p).all(axis=1)]
-
-
-def fit_camera(positions, lo, hi, aspect: float, fit: FitView, fov_y: float | None = None):
-    """Camera.fit on the bounds, then moved sideways until the points (a sample
-    of them) are centred on screen and along its view axis until they just
-    fill the frame; the direction is kept. Camera.fit frames the bounding
-    sphere, which leaves a flat cloud (a storm, a terrain) small."""
-    from ..camera import Camera
-
-    cam = Camera.fit(
-        lo, hi, direction=fit.direction, aspect=aspect, fov_y=fit.fov_y if fov_y is None else fov_y
-    )
-    p = _finite_sample(positions)
-    centre = 0.5 * (np.asarray(lo, np.float64) + np.asarray(hi, np.float64))
-    if len(p) == 0 or np.ptp(p, axis=0).max() <= tiny(centre):
-        return cam  # (about) one point: Camera.fit's own framing
-    right, up, forward = cam.view[0, :3], cam.view[1, :3], cam.forward
-    o = p - centre
-    c = o @ forward
-    tan_y = 1.0 / cam.projection[1, 1]
-    tan_x = aspect * tan_y
-    # with the eye at distance D from the centre, shifted sideways by (sx, sy),
-    # a point is in frame when |a - sx| <= tan_x (D + c) and |b - sy| <=
-    # tan_y (D + c), and in front when D + c > 0
-    a, b = o @ right, o @ up
-    radius = max(0.5 * float(np.linalg.norm(np.asarray(hi) - np.asarray(lo))), 1e-6)
-    shift = np.zeros(2)
-
-    def distance():
-        return max(
-            float(
-                np.max(
-                    FIT_MARGIN * np.maximum(np.abs(a - shift[0]) / tan_x, np.abs(b - shift[1]) / tan_y) - c
-                )
-            ),
-            float(np.max(-c)) + 1e-3 * radius,
-        )
-
-    dist = distance()
-    # perspective puts the near side of an oblique cloud lower and wider on
-    # screen: shift the eye sideways until the points' extents are centred in
-    # the frame, then move it in again (a few rounds converge)
-    step = max(1, len(c) // 20_000)  # the centre from a sample; the distance from all
-    for _ in range(3):
-        depth = dist + c[::step]
-        for k, s in enumerate((a[::step], b[::step])):
-            lo_s, hi_s = float(s.min()), float(s.max())
-            for _ in range(40):  # bisect: the mid of the extents, decreasing in the shift
-                mid = 0.5 * (lo_s + hi_s)
-                x = (s - mid) / depth
-                lo_s, hi_s = (mid, hi_s) if x.max() + x.min() > 0 else (lo_s, mid)
-            shift[k] = 0.5 * (lo_s + hi_s)
-        dist = distance()
-    nearest, farthest = dist + float(c.min()), dist + float(c.max())
-    fov_y = math.degrees(2 * math.atan(tan_y))
-    target = centre + shift[0] * right + shift[1] * up
-    return Camera.look_at(
-        target - dist * forward, target, (0, 0, 1), fov_y, aspect, near=0.5 * nearest, far=1.5 * farthest
-    )
-
-
-def tiny(centre) -> float:
-    """An extent too small to frame on its own around `centre`: below it
-    float32 cameras no longer resolve the points (Camera.fit's floor)."""
-    return 1e-4 * max(1.0, float(np.abs(centre).max()))
-
-
-def axis_camera(kind: str, lo, hi, aspect: float):
-    """An orthographic camera along an axis framing the box: top looks down
-    (north, +y, up), front looks along +y, side along -x."""
-    from ..camera import Camera
-
-    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    direction, up = (np.asarray(v, np.float64) for v in AXIS_VIEWS[kind])
-    right = np.cross(direction, up)
-    ext = hi - lo
-    width, height, depth = (float(np.abs(v) @ ext) for v in (right, up, direction))
-    centre = 0.5 * (lo + hi)
-    scale = max(width, height, depth, tiny(centre))
-    frame = FIT_MARGIN * max(height, width / aspect, 1e-3 * scale)
-    back = 0.5 * depth + 0.1 * scale  # the eye sits outside the box
-    return Camera.ortho(
-        centre - back * direction,
-        centre,
-        up,
-        height=frame,
-        aspect=aspect,
-        near=0.05 * scale,
-        far=back + 0.5 * depth + 0.1 * scale,
-    )
 
 
 # --------------------------------------------------------------------------
@@ -695,22 +594,6 @@ def finite_range(data: np.ndarray, source: str) -> tuple[float, float]:
         raise CliError(f"{source}: the volume has no finite sample")
     vals = data if finite.all() else data[finite]
     return float(vals.min()), float(vals.max())
-
-
-def otsu_level(data: np.ndarray) -> float:
-    """Otsu's threshold of the finite samples (scikit-image), on at most ~2M of
-    them: the isovalue that separates the two classes of a scan best, which
-    shows a surface where the middle of the range often shows a few blobs."""
-    from skimage.filters import threshold_otsu
-
-    flat = data.ravel()
-    step = max(1, flat.size // 2_000_000)
-    sample = flat[::step]
-    sample = sample[np.isfinite(sample)]
-    lo, hi = float(sample.min()), float(sample.max())
-    if lo == hi:
-        return lo
-    return float(threshold_otsu(sample.astype(np.float64)))
 
 
 def add_cluster_options(parser: argparse.ArgumentParser) -> None:

@@ -1,7 +1,7 @@
 """`clvis demo`: each kernel family on generated data, its figures and a
 check against its reference. The primitives part is here; each rendering
 family's part lives with its command (raster.demo, gauss.demo, iso.demo;
-post.demo: the networks' contact sheets)."""
+demo_post.demo: the networks' contact sheets)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import argparse
 
 import numpy as np
 
-from . import gauss, iso, post, raster
+from . import demo_post, gauss, iso, raster
 from ._common import Parser, count, size, timed
 from .raster import MAX_POINTS
 
@@ -139,5 +139,5 @@ def cmd(args: argparse.Namespace) -> int:
     ok_all &= raster.demo(args, q)
     ok_all &= gauss.demo(args.out, q, size=args.gauss_size)
     ok_all &= iso.demo(args.out, q, size=args.iso_size)
-    ok_all &= post.demo(args.out, q, size=args.post_size)
+    ok_all &= demo_post.demo(args.out, q, size=args.post_size)
     return 0 if ok_all else 1

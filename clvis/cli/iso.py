@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..io.volumes import otsu_level
 from ..iso.zfp import MAX_RATE, MIN_RATE
 from ._common import (
     SIZE_RULE,
@@ -33,7 +34,6 @@ from ._common import (
     distributed_run,
     finite_range,
     fit_box,
-    otsu_level,
     progress_from_args,
     read_volume_file,
     real,

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..camera import fit_camera
 from ._common import (
     SIZE_RULE,
     VIEWS_HELP,
@@ -32,7 +33,6 @@ from ._common import (
     count,
     describe_camera,
     distributed_run,
-    fit_camera,
     progress_from_args,
     size,
     timed,
@@ -554,7 +554,7 @@ def demo(args: argparse.Namespace, q: cl.CommandQueue) -> bool:
     )
     cloud = _embedded("hurricane", n)
     lo, hi = cloud.bounds()
-    cam = fit_camera(cloud.positions, lo, hi, W / H, _FIT)
+    cam = fit_camera(cloud.positions, lo, hi, direction=_FIT.direction, fov_y=_FIT.fov_y, aspect=W / H)
     raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
     t_vis = timed(lambda: raster.visibility(cam, W, H), q)
     t_all = timed(lambda: raster.render(cam, W, H, color_by=attribute), q)
@@ -566,7 +566,7 @@ def demo(args: argparse.Namespace, q: cl.CommandQueue) -> bool:
 
     m, w, h = min(n, 100_000), 320, 180
     sub = cloud.positions[:m]  # the generator's order is random: a uniform subsample
-    sub_cam = fit_camera(sub, lo, hi, w / h, _FIT)
+    sub_cam = fit_camera(sub, lo, hi, direction=_FIT.direction, fov_y=_FIT.fov_y, aspect=w / h)
     got = Rasterizer(sub, queue=q).render(sub_cam, w, h)
     want = ref.rasterize(sub, sub_cam, w, h)
     ok = np.array_equal(got.index, want.index) and np.array_equal(got.depth, want.depth)

@@ -2,13 +2,11 @@
 device LBVH, and ray marching that composites every Gaussian a ray meets in
 depth order (Sharma & Schmalstieg; 3D Gaussian Ray Tracing)."""
 
-from ..colormap import TransferFunction  # noqa: F401  (clvis.gauss.TransferFunction, as before)
 from .bvh import BVH, BVH_NODE_DTYPE, build_bvh
-from .gaussians import Gaussians
+from .gaussians import GAUSSIAN_DTYPE, Gaussians
 from .lod import LODS, LodRow, LodTable, gaussians_from_volume, lod_table
 from .points import gaussians_from_points, knn_mean_distance
 from .render import (
-    GAUSSIAN_DTYPE,
     GaussianImage,
     GaussianRenderer,
     render_gaussians,

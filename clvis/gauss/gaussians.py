@@ -1,4 +1,7 @@
-"""The Gaussians container shared by the gauss family.
+"""The Gaussians container shared by the gauss family, and their records on
+the device (``kernels_cl/gauss/gaussians.cl``: :func:`gaussian_records`
+uploads them and builds the records the march kernel reads with their boxes;
+:func:`gather_records` puts the records in the BVH's leaf order).
 
 A Gaussian i is a density  opacity_i * exp(-1/2 (x - mu_i)^T Sigma_i^-1 (x - mu_i))
 (peak 1 at its mean, not normalised), with Sigma_i = R_i diag(scales_i)^2 R_i^T:
@@ -17,10 +20,20 @@ from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
+import pyopencl as cl
+import pyopencl.array as cla
 
+from .. import runtime
 from ..errors import DataError
 
-__all__ = ["Gaussians"]
+__all__ = ["GAUSSIAN_DTYPE", "PROFILES", "Gaussians", "gather_records", "gaussian_records"]
+
+# One record of gaussians.cl (kernels_cl/include/clvis/gauss.h): what march.cl reads.
+GAUSSIAN_DTYPE = np.dtype(
+    [("mean", np.float32, 3), ("value", np.float32), ("w", np.float32, 9), ("opacity", np.float32)]
+)
+# work-items per group of gaussians.cl's one-item-per-Gaussian kernels
+PROFILES = {"cpu": {"item_wg": 64}, "gpu": {"item_wg": 64}}
 
 
 def _real(name: str, x, shape_tail: tuple, n: int | None) -> np.ndarray:
@@ -212,3 +225,65 @@ class Gaussians:
 
     def __repr__(self) -> str:
         return f"Gaussians(n={self.n})"
+
+
+def _items(queue: cl.CommandQueue, n: int) -> tuple[int, int]:
+    return runtime.items(queue, n, PROFILES[runtime.tuning_profile(queue)]["item_wg"])
+
+
+def gaussian_records(
+    queue: cl.CommandQueue, gaussians: Gaussians, cutoff: float
+) -> tuple[cla.Array, cla.Array, cl.Event | None]:
+    """`gaussians` uploaded and turned into records (GAUSSIAN_DTYPE, as bytes)
+    and world boxes at `cutoff` standard deviations (float32 (N, 6)), in the
+    Gaussians' order, by gaussians.cl's gaussian_records: (records, boxes, the
+    event of the launch, None for no Gaussians). Both arrays hold at least one
+    element."""
+    n = gaussians.n
+    m = max(n, 1)
+    arrays = {}
+    for name, a in (
+        ("means", gaussians.means),
+        ("scales", gaussians.scales),
+        ("rotations", gaussians.rotations),
+        ("values", gaussians.values),
+        ("opacities", gaussians.opacities),
+    ):
+        d = runtime.empty(queue, (m,) + a.shape[1:], np.float32, f"Gaussian {name}")
+        if n:
+            d.set(a, queue=queue)
+        arrays[name] = d
+    records = runtime.empty(queue, m * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records")
+    boxes = runtime.empty(queue, (m, 6), np.float32, "Gaussian boxes")
+    last = None
+    if n:
+        kr = runtime.get_kernel(queue, "gauss/gaussians.cl", "gaussian_records", {}, runtime.EXACT_FP)
+        last = runtime.launch(
+            queue,
+            kr,
+            *_items(queue, n),
+            *(arrays[k].base_data for k in ("means", "scales", "rotations", "values", "opacities")),
+            np.uint32(n),
+            np.float32(cutoff),
+            records.base_data,
+            boxes.base_data,
+        )
+    return records, boxes, last
+
+
+def gather_records(queue: cl.CommandQueue, records: cla.Array, order: cla.Array, n: int) -> cla.Array:
+    """The first `n` records in the order `order` (uint32 (n,), the BVH's leaf
+    order), by gaussians.cl's gather_records; at least one record long."""
+    out = runtime.empty(queue, max(n, 1) * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records (BVH order)")
+    if n:
+        kg = runtime.get_kernel(queue, "gauss/gaussians.cl", "gather_records", {}, runtime.EXACT_FP)
+        runtime.launch(
+            queue,
+            kg,
+            *_items(queue, n),
+            records.base_data,
+            order.base_data,
+            np.uint32(n),
+            out.base_data,
+        )
+    return out

@@ -52,10 +52,9 @@ from ..camera import Camera, ray_buffer
 from ..colormap import TransferFunction
 from ..errors import DeviceError
 from .bvh import build_bvh
-from .gaussians import Gaussians
+from .gaussians import Gaussians, gather_records, gaussian_records
 
 __all__ = [
-    "GAUSSIAN_DTYPE",
     "MODELS",
     "GaussianImage",
     "GaussianRenderer",
@@ -65,10 +64,6 @@ __all__ = [
 MODELS = {"max_response": 0, "absorption": 1}
 MAX_K = 64
 TILE = 8
-
-GAUSSIAN_DTYPE = np.dtype(
-    [("mean", np.float32, 3), ("value", np.float32), ("w", np.float32, 9), ("opacity", np.float32)]
-)
 
 
 @dataclass
@@ -102,14 +97,13 @@ class GaussianImage:
 # longer rounds pay (a round re-traverses the BVH), but a first round of 16
 # lets rays that turn opaque early stop early (PoCL, 256^2: the explosion's
 # high LOD 90 -> 45 ms; 10^5 overlapping translucent Gaussians 490 -> 530 ms).
-# GPUs: 3DGRT's k = 16 keeps the buffer in registers. "item_wg": the local
-# size of the one-item-per-Gaussian record kernels.
+# GPUs: 3DGRT's k = 16 keeps the buffer in registers.
 # "tile_rays": rays per band of rows at most (28 bytes each on the device);
 # a CPU gains nothing from larger launches and a band is the progress step,
 # a GPU wants enough rays in flight to fill it.
 PROFILES = {
-    "cpu": {"march_wg": 8, "k": 64, "k0": 16, "item_wg": 64, "tile_rays": 1 << 18},
-    "gpu": {"march_wg": 64, "k": 16, "k0": 16, "item_wg": 64, "tile_rays": 1 << 21},
+    "cpu": {"march_wg": 8, "k": 64, "k0": 16, "tile_rays": 1 << 18},
+    "gpu": {"march_wg": 64, "k": 16, "k0": 16, "tile_rays": 1 << 21},
 }
 RAY_BYTES = 28  # per ray: rgba float4, depth float, stats uint2
 
@@ -191,7 +185,6 @@ class GaussianRenderer:
 
     def _setup(self, gaussians: Gaussians) -> None:
         q, n, prof = self.queue, self.n, self._profile
-        flags = runtime.EXACT_FP
         self._march = runtime.get_kernel(
             q,
             "gauss/march.cl",
@@ -202,38 +195,11 @@ class GaussianRenderer:
                 "MODEL": MODELS[self.model],
                 "COLOR": int(self.colors),
             },
-            flags,
+            runtime.EXACT_FP,
         )
         self._march_wg = runtime.local_size(q, prof["march_wg"])
         first = runtime.marker(q)
-        m = max(n, 1)
-        arrays = {}
-        for name, a in (
-            ("means", gaussians.means),
-            ("scales", gaussians.scales),
-            ("rotations", gaussians.rotations),
-            ("values", gaussians.values),
-            ("opacities", gaussians.opacities),
-        ):
-            d = runtime.empty(q, (m,) + a.shape[1:], np.float32, f"Gaussian {name}")
-            if n:
-                d.set(a, queue=q)
-            arrays[name] = d
-        records = runtime.empty(q, m * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records")
-        boxes = runtime.empty(q, (m, 6), np.float32, "Gaussian boxes")
-        last = None
-        if n:
-            kr = runtime.get_kernel(q, "gauss/gaussians.cl", "gaussian_records", {}, flags)
-            last = runtime.launch(
-                q,
-                kr,
-                *runtime.items(q, n, prof["item_wg"]),
-                *(arrays[k_].base_data for k_ in ("means", "scales", "rotations", "values", "opacities")),
-                np.uint32(n),
-                np.float32(self.cutoff),
-                records.base_data,
-                boxes.base_data,
-            )
+        records, boxes, last = gaussian_records(q, gaussians, self.cutoff)
         # own colours: uchar4 by Gaussian id (the kernel indexes them through
         # the leaf order it already reads), alpha 255 and unused
         self._colors = None
@@ -244,18 +210,7 @@ class GaussianRenderer:
             self._colors.set(rgba8, queue=q)
         self._upload_events = (first, last or runtime.marker(q))
         self.bvh = build_bvh(boxes[:n] if n else np.zeros((0, 6), np.float32), queue=q)
-        self.records = runtime.empty(q, m * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records (BVH order)")
-        if n:
-            kg = runtime.get_kernel(q, "gauss/gaussians.cl", "gather_records", {}, flags)
-            runtime.launch(
-                q,
-                kg,
-                *runtime.items(q, n, prof["item_wg"]),
-                records.base_data,
-                self.bvh.order.base_data,
-                np.uint32(n),
-                self.records.base_data,
-            )
+        self.records = gather_records(q, records, self.bvh.order, n)
         self._dummy = runtime.zeros(q, 64, np.float32, "empty BVH") if n == 0 else None
 
     @property

@@ -4,7 +4,7 @@
   :func:`read_points`, :func:`write_ply`, :func:`save_npz`), one module per
   format whose checks are long (:mod:`~clvis.io.ply`, :mod:`~clvis.io.las`);
 - :mod:`~clvis.io.volumes`: volumes (:func:`read_volume`, :class:`Volume`):
-  raw, NPY and NIfTI;
+  raw, NPY and NIfTI, and :func:`otsu_level` (a scan's default isovalue);
 - :mod:`~clvis.io.npy`: NPY and NPZ read safely (:func:`load_npy`,
   :func:`load_npz`, :func:`npy_shape`), for both.
 
@@ -16,7 +16,7 @@ from .cloud import PointCloud
 from .npy import load_npy, load_npz, npy_shape
 from .ply import write_ply
 from .points import read_points, save_npz
-from .volumes import FORMATS, RAW_TYPES, Volume, read_volume
+from .volumes import FORMATS, RAW_TYPES, Volume, otsu_level, read_volume
 
 __all__ = [
     "FORMATS",
@@ -26,6 +26,7 @@ __all__ = [
     "load_npy",
     "load_npz",
     "npy_shape",
+    "otsu_level",
     "read_points",
     "read_volume",
     "save_npz",

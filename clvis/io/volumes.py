@@ -54,7 +54,7 @@ import numpy.typing as npt
 from ..errors import DataError
 from .npy import load_npy
 
-__all__ = ["FORMATS", "RAW_TYPES", "Volume", "read_volume"]
+__all__ = ["FORMATS", "RAW_TYPES", "Volume", "otsu_level", "read_volume"]
 
 RAW_TYPES = {
     name: np.dtype(name)
@@ -321,3 +321,21 @@ def _check_nifti_layout(
             f"{path}: truncated NIfTI file: the header declares {shape} {dtype} samples = "
             f"{nbytes} bytes from byte {offset}, the file has {size} bytes"
         )
+
+
+def otsu_level(data: npt.ArrayLike) -> float:
+    """Otsu's threshold of the finite samples (scikit-image), on at most ~2M of
+    them: the isovalue that separates the two classes of a scan best, which
+    shows a surface where the middle of the range often shows a few blobs."""
+    from skimage.filters import threshold_otsu
+
+    flat = np.asarray(data).ravel()
+    step = max(1, flat.size // 2_000_000)
+    sample = flat[::step]
+    sample = sample[np.isfinite(sample)]
+    if not sample.size:
+        raise ValueError("data: no finite sample")
+    lo, hi = float(sample.min()), float(sample.max())
+    if lo == hi:
+        return lo
+    return float(threshold_otsu(sample.astype(np.float64)))

@@ -1,9 +1,9 @@
 """raster family: point rasterization into multi-attribute G-buffers
-(render.py: render.cl + resolve.cl; Morton order: morton.cl), and the
+(render.py: render.cl + resolve.cl; morton.py: morton.cl), and the
 hierarchical depth filter (depth_filter.py: depth_filter.cl)."""
 
-from ..camera import CAMERA_DTYPE, camera_buffer
 from .depth_filter import FilteredImage, depth_filter, depth_filter_mask, rgbda
+from .morton import morton_order
 from .render import (
     BATCH_SIZE,
     EMPTY,
@@ -13,13 +13,11 @@ from .render import (
     VIS_DTYPE,
     GBuffers,
     Rasterizer,
-    morton_order,
     rasterize,
 )
 
 __all__ = [
     "BATCH_SIZE",
-    "CAMERA_DTYPE",
     "EMPTY",
     "MAX_ATTRIBUTES",
     "MAX_IMAGE_SIDE",
@@ -28,7 +26,6 @@ __all__ = [
     "FilteredImage",
     "GBuffers",
     "Rasterizer",
-    "camera_buffer",
     "depth_filter",
     "depth_filter_mask",
     "morton_order",

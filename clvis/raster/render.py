@@ -26,8 +26,8 @@ many views (it captures the runtime options, 64-bit atomics and tuning
 profile, when made: later configure() calls apply to Rasterizers made after
 them); :func:`rasterize` is the one-call form. Kernels:
 ``kernels_cl/raster/render.cl`` and ``resolve.cl`` (this module drives both:
-MACR is render, then resolve), ``morton.cl``; NumPy definitions:
-``clvis.reference.raster``.
+MACR is render, then resolve); the Morton order (``morton.cl``) is
+:mod:`clvis.raster.morton`'s. NumPy definitions: ``clvis.reference.raster``.
 """
 
 from __future__ import annotations
@@ -42,11 +42,11 @@ import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import colormap as _colormap
-from .. import morton, runtime
+from .. import runtime
 from .._arrays import check_array, is_device, resolve_queue
-from ..camera import CAMERA_DTYPE, Camera, camera_buffer, singular  # noqa: F401  (re-exported)
+from ..camera import Camera, camera_buffer, singular
 from ..errors import DataError, DeviceError
-from ..primitives import radix_sort
+from .morton import morton_gather, morton_order
 
 __all__ = [
     "EMPTY",
@@ -56,7 +56,6 @@ __all__ = [
     "VIS_DTYPE",
     "GBuffers",
     "Rasterizer",
-    "morton_order",
     "rasterize",
 ]
 
@@ -320,16 +319,8 @@ class Rasterizer:
         pos = self._upload("positions", inp.positions)
         self.ids = self.inv = None
         if morton and n > 1:
-            perm = morton_order(pos, queue=q)
-            self.ids = perm
-            self.positions = runtime.empty(q, (n, 3), np.float32, "Morton-ordered positions")
-            self.inv = runtime.empty(q, n, np.uint32, "inverse permutation")
-            k = runtime.get_kernel(q, "raster/morton.cl", "gather_points", {})
-            runtime.launch(
-                q, k, *_items(q, n), pos.base_data, perm.base_data, np.uint32(n), self.positions.base_data
-            )
-            k = runtime.get_kernel(q, "raster/morton.cl", "invert_permutation", {})
-            runtime.launch(q, k, *_items(q, n), perm.base_data, np.uint32(n), self.inv.base_data)
+            self.ids = perm = morton_order(pos, queue=q)
+            self.positions, self.inv = morton_gather(q, pos, perm)
         else:
             self.positions = pos
         self.bounds = _batch_bounds(q, self.positions, self.batch_size)
@@ -754,53 +745,6 @@ def _gbuffers(out, f32_names, u8_names, order, get) -> GBuffers:
         vel_speed=g(out["speed"]),
         radius_px=g(out["radius"]),
     )
-
-
-def morton_order(positions: Any, *, queue: cl.CommandQueue | None = None) -> np.ndarray | cla.Array:
-    """The permutation that sorts points along a 30-bit Morton curve over
-    their finite bounding box (10 bits per axis; ties keep input order;
-    points with a NaN or infinite coordinate last). positions: float32 (N, 3).
-    Returns uint32 (N,): numpy for numpy input, a device array for device input."""
-    queue = resolve_queue(queue, positions=positions)
-    host = not is_device(positions)
-    p = check_array("positions", positions, dtypes=[np.float32], ndim=2)
-    if p.shape[1] != 3:
-        raise ValueError(f"positions: expected shape (N, 3), got {tuple(p.shape)}")
-    n = p.shape[0]
-    if n >= 0xFFFFFFFF:
-        raise DeviceError(f"positions: {n} points; at most 2^32 - 2")
-    if host:
-        d = runtime.empty(queue, p.shape, np.float32, "positions")
-        if n:
-            d.set(p, queue=queue)
-        p = d
-    elif p.offset:
-        p = p.copy()
-    if n == 0:
-        out = runtime.empty(queue, 0, np.uint32, "Morton permutation")
-        return out.get() if host else out
-    bounds = _batch_bounds(queue, p, BATCH_SIZE).get()
-    lo, hi = bounds[:, :3].min(axis=0), bounds[:, 3:].max(axis=0)
-    if not (lo <= hi).all():  # no finite point: every code is 0xFFFFFFFF
-        lo = hi = np.zeros(3, np.float32)
-    scale = morton.scale(lo, hi)
-    codes = runtime.empty(queue, n, np.uint32, "Morton codes")
-    k = runtime.get_kernel(queue, "raster/morton.cl", "morton_codes", {}, ())
-    runtime.launch(
-        queue,
-        k,
-        *_items(queue, n),
-        p.base_data,
-        np.uint32(n),
-        *lo.astype(np.float32),
-        *scale,
-        codes.base_data,
-    )
-    iota = runtime.empty(queue, n, np.uint32, "Morton permutation")
-    k = runtime.get_kernel(queue, "raster/morton.cl", "iota", {}, ())
-    runtime.launch(queue, k, *_items(queue, n), np.uint32(n), iota.base_data)
-    _, perm = radix_sort(codes, iota)
-    return perm.get() if host else perm
 
 
 def rasterize(

@@ -11,6 +11,7 @@ import pytest
 from PIL import Image
 
 from clvis import cli, datasets
+from clvis.camera import fit_camera
 from clvis.cli import _common, raster
 from clvis.io import PointCloud, save_npz, write_ply
 
@@ -277,7 +278,8 @@ def test_fit_frames_every_point():
     cloud = _small_cloud(20000)
     lo, hi = cloud.bounds()
     for w, h in ((1920, 1080), (100, 400)):
-        cam = _common.fit_camera(cloud.positions, lo, hi, w / h, raster._FIT)
+        fit = raster._FIT
+        cam = fit_camera(cloud.positions, lo, hi, direction=fit.direction, fov_y=fit.fov_y, aspect=w / h)
         visible = cam.project(cloud.positions, w, h).visible
         assert visible.all()
         # and tightly: the points reach within a few pixels of two sides

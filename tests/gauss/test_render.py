@@ -21,8 +21,9 @@ from clvis import runtime
 from clvis.camera import Camera, ray_buffer
 from clvis.colormap import TransferFunction
 from clvis.gauss import render as gr
-from clvis.gauss.gaussians import Gaussians
+from clvis.gauss.gaussians import GAUSSIAN_DTYPE, Gaussians
 from clvis.gauss.points import frames_along, gaussians_from_points
+from clvis.reference.gauss import gaussians as ref_g
 from clvis.reference.gauss import render as ref
 
 W, H = 24, 20
@@ -285,20 +286,20 @@ def test_records_and_boxes_match_reference(queue):
     g = _random(500, seed=10)
     g2 = Gaussians.concatenate([g, Gaussians([[1, 2, 3]], [[0, 0, 0]]), Gaussians([[0, 0, 0]], [[1, 0, 0]])])
     r = gr.GaussianRenderer(g2, queue=queue)
-    recs = r.records.get().view(gr.GAUSSIAN_DTYPE)
+    recs = r.records.get().view(GAUSSIAN_DTYPE)
     order = r.bvh.order.get()
-    mean, value, w, opac = ref.gaussian_records(g2.means, g2.scales, g2.rotations, g2.values, g2.opacities)
+    mean, value, w, opac = ref_g.gaussian_records(g2.means, g2.scales, g2.rotations, g2.values, g2.opacities)
     np.testing.assert_array_equal(recs["mean"], mean[order])
     np.testing.assert_array_equal(recs["w"], w[order])
     np.testing.assert_array_equal(recs["value"], value[order])
     np.testing.assert_array_equal(recs["opacity"], opac[order])
-    boxes = ref.gaussian_boxes(g2.means, g2.scales, g2.rotations, 3.0)
+    boxes = ref_g.gaussian_boxes(g2.means, g2.scales, g2.rotations, 3.0)
     np.testing.assert_array_equal(r.bvh.leaf_boxes.get(), boxes[order])
 
 
 def test_boxes_hold_the_ellipsoids():
     g = _random(300, seed=11)
-    boxes = ref.gaussian_boxes(g.means, g.scales, g.rotations, 3.0)
+    boxes = ref_g.gaussian_boxes(g.means, g.scales, g.rotations, 3.0)
     rng = np.random.default_rng(0)
     u = rng.normal(size=(300, 64, 3))
     u *= 3.0 / np.linalg.norm(u, axis=2, keepdims=True)  # on the 3-sigma sphere
@@ -322,7 +323,7 @@ def test_record_layout(device):
         prg = cl.Program(q.context, src).build(["-I", str(runtime.INCLUDE_DIR)])
     out = cla.zeros(q, 4, np.uint32)
     prg.probe(q, (1,), (1,), out.data)
-    d = gr.GAUSSIAN_DTYPE
+    d = GAUSSIAN_DTYPE
     assert out.get().tolist() == [d.itemsize, d.fields["value"][1], d.fields["w"][1], d.fields["opacity"][1]]
 
 

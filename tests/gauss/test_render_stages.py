@@ -14,7 +14,8 @@ import pyopencl.array as cla
 import pytest
 
 from clvis import runtime
-from clvis.gauss import render as gr
+from clvis.gauss.gaussians import GAUSSIAN_DTYPE
+from clvis.reference.gauss import gaussians as ref_g
 from clvis.reference.gauss import render as ref
 
 PROBES = """
@@ -93,8 +94,8 @@ def _scene(n, seed):
     a = rng.normal(size=(n, 3, 3))
     rotations = np.linalg.qr(a)[0]
     values, opacities = rng.random(n), rng.uniform(0.05, 1.0, n)
-    mean, value, w, opac = ref.gaussian_records(means, scales, rotations, values, opacities)
-    recs = np.zeros(n, gr.GAUSSIAN_DTYPE)
+    mean, value, w, opac = ref_g.gaussian_records(means, scales, rotations, values, opacities)
+    recs = np.zeros(n, GAUSSIAN_DTYPE)
     recs["mean"], recs["value"], recs["w"], recs["opacity"] = mean, value, w, opac
     o = rng.uniform(-4, 4, (n, 3)).astype(np.float32)
     target = mean + rng.normal(size=(n, 3)).astype(np.float32) * 0.3
@@ -109,7 +110,7 @@ def test_hit_is_the_reference_bit_for_bit(probes):
     n = 3000
     recs, mean, w, opac, o, d = _scene(n, seed=1)
     out = cla.empty(q, 5 * n, np.float32)
-    prg.hit(q, (n,), None, _dev(q, recs, gr.GAUSSIAN_DTYPE).data, _dev(q, o).data, _dev(q, d).data, out.data)
+    prg.hit(q, (n,), None, _dev(q, recs, GAUSSIAN_DTYPE).data, _dev(q, o).data, _dev(q, d).data, out.data)
     got = out.get().reshape(n, 5)
     idx = np.arange(n)
     t, m2, ts, a, ms2 = (x[idx, idx] for x in ref.hits(o, d, mean, w))  # ray i against Gaussian i

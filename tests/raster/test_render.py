@@ -269,16 +269,6 @@ def test_property_random_cameras(device, seed, ortho, batch):
     np.testing.assert_array_equal(got, ref.visibility(pos, cam, w, h))
 
 
-def test_morton_order(queue):
-    pos = _scene(100_000, seed=11)
-    pos[::1000] = np.nan
-    perm = clvis.morton_order(pos, queue=queue)
-    np.testing.assert_array_equal(perm, ref.morton_order(pos))
-    assert np.array_equal(np.sort(perm), np.arange(len(pos)))
-    assert np.isnan(pos[perm[-100:]]).any(axis=1).all()
-    assert clvis.morton_order(np.zeros((0, 3), np.float32), queue=queue).shape == (0,)
-
-
 def test_device_arrays(queue):
     pos, colors, *_ = _full_cloud(20_000, seed=12)
     cam = _cam()

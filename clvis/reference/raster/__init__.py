@@ -1,12 +1,14 @@
 """NumPy references of the raster family (clvis/raster/), module for module."""
 
-from . import depth_filter, render
-from .render import depth_key, key_depth, morton_order, nonfinite, rasterize, splat, visibility
+from . import depth_filter, morton, render
+from .morton import morton_order
+from .render import depth_key, key_depth, nonfinite, rasterize, splat, visibility
 
 __all__ = [
     "depth_filter",
     "depth_key",
     "key_depth",
+    "morton",
     "morton_order",
     "nonfinite",
     "rasterize",

@@ -17,9 +17,8 @@ import numpy.typing as npt
 from ... import colormap as _colormap
 from ...camera import Camera, Projected, camera_buffer
 from ...raster.render import EMPTY, GBuffers
-from ..morton import morton_codes
 
-__all__ = ["depth_key", "key_depth", "morton_order", "nonfinite", "rasterize", "splat", "visibility"]
+__all__ = ["depth_key", "key_depth", "nonfinite", "rasterize", "splat", "visibility"]
 
 MAX_ATTRIBUTES = 8  # restated from clvis.raster
 
@@ -185,8 +184,3 @@ def rasterize(
         rp[covered] = (r * focal) / depth[covered]
         out.radius_px = rp.reshape(H, W)
     return out
-
-
-def morton_order(positions: npt.ArrayLike) -> np.ndarray:
-    """Stable argsort of the Morton codes, uint32."""
-    return np.argsort(morton_codes(positions), kind="stable").astype(np.uint32)

@@ -12,7 +12,9 @@
   distributed does not import the command line;
 - the library never imports clvis.reference (only the command line does, for
   the demo's checks against the references), and a family's references never
-  import another family's references.
+  import another family's references;
+- no module takes a private ``_name`` from a module of another package (a
+  check another package needs is public where it belongs).
 """
 
 import ast
@@ -157,3 +159,101 @@ def test_import_resolution():
     assert _layer("clvis.cli._common") == "cli"
     got = _imports(PACKAGE / "distributed" / "raster.py")
     assert "clvis.raster" in got and "clvis.distributed.composite" in got
+
+
+# --------------------------------------------------------------------------
+# no private reach across packages
+
+
+def _package_of(module: str) -> str:
+    """The package a module belongs to: itself for a package, else its parent."""
+    parts = module.split(".")
+    path = PACKAGE.parent.joinpath(*parts)
+    return module if path.is_dir() else ".".join(parts[:-1])
+
+
+def _is_module(module: str) -> bool:
+    path = PACKAGE.parent.joinpath(*module.split("."))
+    return path.is_dir() or path.with_suffix(".py").is_file()
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+# the library's own private helper modules, shared by every package by design
+# (DESIGN.md: "_arrays.py: argument checks shared by every family")
+SHARED_PRIVATE_MODULES = {"clvis._arrays", "clvis._version"}
+
+
+def private_reach(source: str, module: str, is_package: bool = False) -> list[str]:
+    """Each `_name` the module `module` (dotted; `source` its text) takes from
+    a module of another package: ``from x import _name`` and ``x._name``
+    after ``import x`` / ``from p import x``. A private module shared on
+    purpose (SHARED_PRIVATE_MODULES) may be imported, not its `_names`."""
+    base_parts = module.split(".") if is_package else module.split(".")[:-1]
+    own = ".".join(base_parts)
+    bad = []
+    aliases: dict[str, str] = {}  # local name -> module it is bound to
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.asname:
+                    aliases[a.asname] = a.name
+                else:
+                    aliases[a.name.split(".")[0]] = a.name.split(".")[0]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = base_parts[: len(base_parts) - (node.level - 1)]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            if not mod.startswith("clvis"):
+                continue
+            for a in node.names:
+                full = f"{mod}.{a.name}"
+                if _is_module(full):  # a module: its package is where it lives
+                    aliases[a.asname or a.name] = full
+                    if _private(a.name) and full not in SHARED_PRIVATE_MODULES and _package_of(full) != own:
+                        bad.append(f"{module}:{node.lineno} imports the private module {full}")
+                elif _private(a.name) and _package_of(mod) != own:
+                    bad.append(f"{module}:{node.lineno} imports {a.name} from {mod}")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and _private(node.attr):
+            target = aliases.get(node.value.id)
+            if target and target.startswith("clvis") and _package_of(target) != own:
+                bad.append(f"{module}:{node.lineno} reaches {target}.{node.attr}")
+    return bad
+
+
+def test_no_private_reach_across_packages():
+    found = []
+    for path in _modules(PACKAGE):
+        found += private_reach(path.read_text(), _dotted(path), path.name == "__init__.py")
+    assert not found, "private names taken from another package:\n" + "\n".join(found)
+
+
+def test_private_reach_checker_catches_violations():
+    """The checker itself, on sources that break the rule (and some that do not)."""
+    bad = """
+from ..raster.render import _batch_bounds, EMPTY
+from .. import volumes_missing
+from ..io import volumes
+from clvis.camera import _vec3
+import clvis.runtime.settings as st
+volumes._index(3)
+st._in_force()
+"""
+    found = private_reach(bad, "clvis.distributed.fake")
+    assert len(found) == 4, found
+    assert "imports _batch_bounds from clvis.raster.render" in found[0]
+    assert any("imports _vec3 from clvis.camera" in f for f in found)
+    assert any("reaches clvis.io.volumes._index" in f for f in found)
+    assert any("reaches clvis.runtime.settings._in_force" in f for f in found)
+    # the same names inside their own package are fine, and so is the shared _arrays
+    assert private_reach("from .render import _batch_bounds\n", "clvis.raster.morton") == []
+    assert private_reach("from .settings import _in_force\n", "clvis.runtime.device") == []
+    assert private_reach("from .._arrays import check_array\n", "clvis.raster.render") == []
+    assert private_reach("from .. import _arrays\n", "clvis.gauss.fake") == []
+    assert private_reach("from ..cli import _common\n", "clvis.training.fake") != []

@@ -29,13 +29,13 @@ from ..camera import (
     min_extent,
 )
 from ..errors import ClvisError
-from ..raster import MAX_IMAGE_SIDE
+from ..limits import RASTER
 
 # The one image-size rule of every command: each side in 1..MAX_SIDE, the
 # rasterizer's limit (the smallest any renderer has). W * H then stays below
 # 2^31, so the kernels' 32-bit pixel indices never overflow.
-MAX_SIDE = MAX_IMAGE_SIDE
-MAX_PIXELS = 2**31 - 1
+MAX_SIDE = RASTER.max_side
+MAX_PIXELS = RASTER.max_pixels
 SIZE_RULE = f"each side 1..{MAX_SIDE}, so W*H < 2^31"
 
 

@@ -89,7 +89,7 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
     name = p.name.lower()
     try:
         if name.endswith(".raw"):
-            shp, dt = volumes._raw_layout(p, shape, dtype)
+            shp, dt = volumes.raw_layout(p, shape, dtype)
             need = math.prod(shp) * dt.itemsize
             if p.stat().st_size != need:
                 raise DataError(f"{path}: {p.stat().st_size} bytes, but shape {shp} of {dt} needs {need}")
@@ -336,11 +336,11 @@ class DistributedIsoRenderer(ClusterOwner):
         """The complete image (every ray finished) of the whole volume.
         ``stats``: bricks, passes (summed over bricks), workers, compositing,
         seconds, bytes_sent (as ``DistributedRasterizer.render``'s)."""
-        from ..raster.render import _check_size
+        from ..limits import ISO, check_image_size
 
         if not isinstance(camera, Camera):
             raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
-        width, height = _check_size(width, height)
+        width, height = check_image_size(width, height, ISO)
         if isinstance(isovalue, bool) or not isinstance(isovalue, (int, float, np.integer, np.floating)):
             raise TypeError(f"isovalue: expected a real number, got {type(isovalue).__name__}")
         view = {

@@ -511,11 +511,11 @@ class DistributedRasterizer(ClusterOwner):
         return self._gbuffers(whole, frame, sent, nworkers)
 
     def _view(self, camera, width, height, color_by, colormap, value_range, planes, point_size) -> dict:
-        from ..raster.render import _check_camera, _check_point_size, _check_size
+        from ..raster.inputs import check_camera, check_point_size, check_size
 
-        _check_camera(camera)
-        width, height = _check_size(width, height)
-        _check_point_size(point_size)
+        check_camera(camera)
+        width, height = check_size(width, height)
+        check_point_size(point_size)
         if color_by is not None and color_by not in self.attribute_names:
             raise ValueError(
                 f"color_by: no attribute {color_by!r}; the cloud has "

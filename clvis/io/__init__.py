@@ -16,7 +16,7 @@ from .cloud import PointCloud
 from .npy import load_npy, load_npz, npy_shape
 from .ply import write_ply
 from .points import read_points, save_npz
-from .volumes import FORMATS, RAW_TYPES, Volume, otsu_level, read_volume
+from .volumes import FORMATS, RAW_TYPES, Volume, otsu_level, raw_layout, read_volume
 
 __all__ = [
     "FORMATS",
@@ -27,6 +27,7 @@ __all__ = [
     "load_npz",
     "npy_shape",
     "otsu_level",
+    "raw_layout",
     "read_points",
     "read_volume",
     "save_npz",

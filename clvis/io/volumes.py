@@ -54,7 +54,7 @@ import numpy.typing as npt
 from ..errors import DataError
 from .npy import load_npy
 
-__all__ = ["FORMATS", "RAW_TYPES", "Volume", "otsu_level", "read_volume"]
+__all__ = ["FORMATS", "RAW_TYPES", "Volume", "otsu_level", "raw_layout", "read_volume"]
 
 RAW_TYPES = {
     name: np.dtype(name)
@@ -132,8 +132,14 @@ def read_volume(
     raise DataError(f"{path}: unknown volume format (expected {', '.join(FORMATS)})")
 
 
-def _raw_layout(path: Path, shape, dtype):
-    """(shape (Z, Y, X), little-endian dtype) from the name and the keywords."""
+def raw_layout(
+    path: str | os.PathLike[str], shape: Sequence[int] | None = None, dtype: npt.DTypeLike | None = None
+) -> tuple[tuple[int, ...], np.dtype]:
+    """(shape (Z, Y, X), little-endian dtype) of the .raw file `path`, from
+    its name (``<name>_<X>x<Y>x<Z>_<type>.raw``) and the keywords, as
+    :func:`read_volume` takes them, without reading the file; DataError
+    naming the file when neither gives them."""
+    path = Path(path)
     m = _RAW_NAME.match(path.name)
     if shape is None:
         if m is None:
@@ -184,7 +190,7 @@ def _index(v) -> int:
 
 
 def _read_raw(path: Path, shape, dtype) -> Volume:
-    shape, dt = _raw_layout(path, shape, dtype)
+    shape, dt = raw_layout(path, shape, dtype)
     count = shape[0] * shape[1] * shape[2]
     need = count * dt.itemsize
     try:

@@ -70,7 +70,7 @@ from typing import Any
 import numpy as np
 import pyopencl as cl
 
-from .. import runtime
+from .. import limits, runtime
 from .._arrays import positive_int, resolve_queue, triple
 from ..camera import Camera, ray_buffer
 from ..errors import DataError
@@ -94,8 +94,9 @@ __all__ = [
 ]
 
 MAX_SPEC = 64
-# the kernels index pixels (and pass items within a tile) with 32-bit integers
-MAX_PIXELS = 2**31
+# width x height stays below this: the kernels index pixels (and pass items
+# within a tile) with 32-bit integers (clvis.limits.ISO)
+MAX_PIXELS = limits.ISO.max_pixels + 1
 # device bytes per tile pixel: ray t, enters flag, active id (and its
 # compacted copy), still flag, hit, hit t, depth, rgba, 64-bit hit key
 PIXEL_BYTES = 4 + 1 + 4 + 4 + 1 + 1 + 4 + 4 + 16 + 8

@@ -50,6 +50,7 @@ import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 
+from .. import limits
 from .._arrays import resolve_queue
 from ..errors import DataError
 from .names import NAMES
@@ -59,8 +60,8 @@ __all__ = ["MAX_PIXELS", "MAX_SIDE", "MODELS", "PRECISIONS", "PostNetwork", "loa
 
 MODELS = Path(__file__).resolve().parent / "models"
 PRECISIONS = ("fp32", "fp16", "int8")
-MAX_SIDE = 8192
-MAX_PIXELS = 2**25
+MAX_SIDE = limits.POST_INFER.max_side  # 8192 (why: clvis.limits)
+MAX_PIXELS = limits.POST_INFER.max_pixels  # 2^25
 
 
 def sha256(path: str | os.PathLike) -> str:

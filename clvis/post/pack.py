@@ -28,7 +28,7 @@ import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 
-from .. import runtime
+from .. import limits, runtime
 from .._arrays import buf, check_array, is_device, positive_int, resolve_queue, result, to_device
 from ..errors import DataError
 from .names import GBUFFER_PLANES, gbuffer_channels
@@ -43,8 +43,8 @@ __all__ = [
     "unpack_rgba8",
 ]
 
-MAX_SIDE = 32768
-MAX_PIXELS = 2**28
+MAX_SIDE = limits.POST_PACK.max_side  # 32768 a padded side (why: clvis.limits)
+MAX_PIXELS = limits.POST_PACK.max_pixels  # 2^28 padded pixels
 
 _SRC = "post/pack.cl"
 

@@ -43,16 +43,20 @@ import pyopencl.array as cla
 
 from .. import colormap as _colormap
 from .. import runtime
-from .._arrays import check_array, is_device, resolve_queue
-from ..camera import Camera, camera_buffer, singular
-from ..errors import DataError, DeviceError
+from .._arrays import is_device, resolve_queue
+from ..camera import Camera
+from .inputs import (
+    MAX_ATTRIBUTES,
+    RasterInput,
+    check_camera,
+    check_point_size,
+    check_size,
+    soft_tolerance,
+)
 from .morton import morton_gather, morton_order
 
 __all__ = [
     "EMPTY",
-    "MAX_ATTRIBUTES",
-    "MAX_IMAGE_SIDE",
-    "MAX_POINT_SIZE",
     "VIS_DTYPE",
     "GBuffers",
     "Rasterizer",
@@ -60,10 +64,6 @@ __all__ = [
 ]
 
 EMPTY = np.uint32(0xFFFFFFFF)  # index of an empty pixel
-MAX_ATTRIBUTES = 8
-MAX_IMAGE_SIDE = 1 << 15  # W, H: exact as float32 and addressable as uint
-MAX_PIXELS = 2**31 - 1  # W * H: the kernels index pixels with 32-bit integers
-MAX_POINT_SIZE = 64  # render.cl's POINT_SIZE: 1..64 pixels a side
 BATCH_SIZE = 10240
 _F32_MAX = float(np.finfo(np.float32).max)
 # a visibility word as two uints (little-endian ulong: dkey << 32 | id)
@@ -112,141 +112,6 @@ class GBuffers:
         return self.index.shape
 
 
-def _check_camera(camera):
-    """(camera buffer, near, far); a DataError naming the camera when the
-    kernels could not use it: a matrix that is not finite (in float32 too), a
-    singular projection @ view (a zero-size projection, a degenerate view),
-    or a zero depth row."""
-    for attr in ("matrix", "depth_row", "near", "far", "projection"):
-        if not hasattr(camera, attr):
-            raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
-    near, far = float(camera.near), float(camera.far)
-    if not (math.isfinite(near) and math.isfinite(far) and near < far):
-        raise ValueError(f"camera: needs finite near < far, got near={near}, far={far}")
-    try:
-        m = np.array(camera.matrix, np.float64)
-        d = np.array(camera.depth_row, np.float64)
-    except (TypeError, ValueError):
-        m = d = np.full(1, np.nan)
-    if m.shape != (4, 4) or d.shape != (4,) or not (np.isfinite(m).all() and np.isfinite(d).all()):
-        raise DataError(
-            "camera: its matrix (projection @ view) and depth row must be finite, a 4x4 array and 4 numbers"
-        )
-    with np.errstate(all="ignore"):
-        finite32 = np.isfinite(m.astype(np.float32)).all() and np.isfinite(d.astype(np.float32)).all()
-    if not finite32:
-        raise DataError("camera: its matrix overflows float32 (the kernels' precision)")
-    why = singular(camera.projection, getattr(camera, "view", None), d)
-    if why:
-        raise DataError(f"camera: {why}; such a camera draws nothing")
-    return camera_buffer(camera), np.float32(near), np.float32(far)
-
-
-def _check_size(width, height):
-    for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-            raise TypeError(f"{name}: expected an int, got {type(v).__name__}")
-        if not 1 <= int(v) <= MAX_IMAGE_SIDE:
-            raise ValueError(f"{name}: {int(v)} is outside [1, {MAX_IMAGE_SIDE}]")
-    width, height = int(width), int(height)
-    if width * height > MAX_PIXELS:
-        raise ValueError(
-            f"width x height: {width}x{height} = {width * height} pixels; at most "
-            "2^31 - 1 (the kernels index pixels with 32-bit integers)"
-        )
-    return width, height
-
-
-def _check_point_size(point_size) -> int:
-    if isinstance(point_size, bool) or not isinstance(point_size, (int, np.integer)):
-        raise TypeError(f"point_size: expected an int, got {type(point_size).__name__}")
-    if not 1 <= int(point_size) <= MAX_POINT_SIZE:
-        raise ValueError(f"point_size: {int(point_size)} pixels is outside [1, {MAX_POINT_SIZE}]")
-    return int(point_size)
-
-
-def _soft_tolerance(soft_z, camera) -> float | None:
-    if soft_z is None or soft_z is False:
-        return None
-    tol = 1.01 if soft_z is True else soft_z
-    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating, np.integer)):
-        raise TypeError(f"soft_z: expected None, True or a tolerance factor, got {type(soft_z).__name__}")
-    tol = float(tol)
-    if not (math.isfinite(tol) and tol >= 1.0):
-        raise ValueError(f"soft_z: the tolerance factor must be finite and >= 1, got {tol}")
-    if not float(camera.near) > 0.0:
-        raise ValueError("soft_z: needs a camera with near > 0 (a relative depth tolerance)")
-    return tol
-
-
-class _Input:
-    """The caller's cloud, checked; host arrays (or device arrays) per field."""
-
-    def __init__(self, cloud, colors, attributes, velocity, radius):
-        # the limit on planes applies to attributes given here, not to a
-        # cloud's own (a LAS file has more; render(planes=) picks)
-        if attributes is not None and len(attributes) > MAX_ATTRIBUTES:
-            raise ValueError(
-                f"attributes: {len(attributes)} given; at most {MAX_ATTRIBUTES} "
-                "(a PointCloud's own attributes may be more: render(planes=) "
-                "picks which to resolve)"
-            )
-        if hasattr(cloud, "positions"):
-            positions = cloud.positions
-            colors = colors if colors is not None else getattr(cloud, "colors", None)
-            attributes = attributes if attributes is not None else getattr(cloud, "attributes", None)
-            velocity = velocity if velocity is not None else getattr(cloud, "velocity", None)
-            radius = radius if radius is not None else getattr(cloud, "radius", None)
-        else:
-            positions = cloud
-        if not is_device(positions) and not isinstance(positions, np.ndarray):
-            positions = np.asarray(positions)
-        if not is_device(positions) and positions.dtype == np.float64:
-            positions = positions.astype(np.float32)
-        self.positions = check_array("positions", positions, dtypes=[np.float32], ndim=2)
-        if self.positions.shape[1] != 3:
-            raise ValueError(f"positions: expected shape (N, 3), got {tuple(self.positions.shape)}")
-        n = self.n = int(self.positions.shape[0])
-        if n >= 0xFFFFFFFF:
-            raise DeviceError(f"positions: {n} points; at most 2^32 - 2 (0xFFFFFFFF marks empty pixels)")
-        self.colors = None
-        if colors is not None:
-            c = check_array("colors", colors, dtypes=[np.uint8], ndim=2)
-            if c.shape[0] != n or c.shape[1] not in (3, 4):
-                raise ValueError(f"colors: expected shape ({n}, 4) or ({n}, 3), got {tuple(c.shape)}")
-            if c.shape[1] == 3:
-                c = c.get() if is_device(c) else c
-                c = np.concatenate([c, np.full((n, 1), 255, np.uint8)], axis=1)
-            self.colors = c
-        self.velocity = None
-        if velocity is not None:
-            v = check_array("velocity", velocity, dtypes=[np.float32, np.float64], ndim=2)
-            if v.shape != (n, 3):
-                raise ValueError(f"velocity: expected shape ({n}, 3), got {tuple(v.shape)}")
-            self.velocity = v.astype(np.float32) if v.dtype != np.float32 else v
-        self.radius = None
-        if radius is not None:
-            r = check_array("radius", radius, dtypes=[np.float32, np.float64], ndim=1)
-            if r.shape != (n,):
-                raise ValueError(f"radius: expected shape ({n},), got {tuple(r.shape)}")
-            self.radius = r.astype(np.float32) if r.dtype != np.float32 else r
-        self.f32, self.u8 = {}, {}
-        attributes = dict(attributes or {})
-        self.names = list(attributes)
-        for name, a in attributes.items():
-            if not isinstance(name, str):
-                raise TypeError(f"attributes: names must be strings, got {name!r}")
-            a = a.get() if is_device(a) else np.asarray(a)
-            if a.shape != (n,):
-                raise ValueError(f"attributes[{name!r}]: expected shape ({n},), got {a.shape}")
-            if a.dtype == np.uint8 or a.dtype == np.bool_:
-                self.u8[name] = np.ascontiguousarray(a, np.uint8)
-            elif a.dtype.kind in "iuf":
-                self.f32[name] = np.ascontiguousarray(a, np.float32)
-            else:
-                raise TypeError(f"attributes[{name!r}]: dtype {a.dtype} is not numeric")
-
-
 class Rasterizer:
     """A point cloud on the device, ready to render from many cameras.
 
@@ -285,7 +150,7 @@ class Rasterizer:
             or not 1 <= batch_size <= 1 << 24
         ):
             raise ValueError(f"batch_size: expected an int in [1, 2^24], got {batch_size!r}")
-        inp = _Input(cloud_or_positions, colors, attributes, velocity, radius)
+        inp = RasterInput(cloud_or_positions, colors, attributes, velocity, radius)
         self.queue = q = resolve_queue(queue, positions=inp.positions)
         self.config = runtime.capture(q)
         with runtime.pinned(self.config):
@@ -433,8 +298,8 @@ class Rasterizer:
 
     # ------------------------------------------------------------------
     def _program_args(self, camera, width, height):
-        cam, near, far = _check_camera(camera)
-        width, height = _check_size(width, height)
+        cam, near, far = check_camera(camera)
+        width, height = check_size(width, height)
         return cam, near, far, width, height
 
     def visibility(
@@ -444,7 +309,7 @@ class Rasterizer:
         (``dkey << 32 | index``, all ones where empty) and the per-batch
         drawn flags (uint8), both on the device. point_size: as in render."""
         cam, near, far, W, H = self._program_args(camera, width, height)
-        ps = _check_point_size(point_size)
+        ps = check_point_size(point_size)
         with runtime.pinned(self.config):
             vis, drawn, _ = self._render(cam, near, far, W, H, ps)
         return vis, drawn
@@ -563,8 +428,8 @@ class Rasterizer:
         image draws nothing.
         """
         cam, near, far, W, H = self._program_args(camera, width, height)
-        ps = _check_point_size(point_size)
-        tol = _soft_tolerance(soft_z, camera)
+        ps = check_point_size(point_size)
+        tol = soft_tolerance(soft_z, camera)
         names = self._planes(planes)
         tf = self._tf(color_by, colormap, value_range)
         focal = np.float32(0.5 * H * float(np.asarray(camera.projection)[1, 1]))

@@ -632,9 +632,10 @@ def test_nonfinite_counted(queue):
 
 def test_image_pixels_bounded(monkeypatch, queue):
     """W x H must stay below 2^31 (32-bit pixel indices), whatever the side limit."""
-    from clvis.raster import render as rr
+    from clvis.limits import RASTER, ImageLimits
+    from clvis.raster import inputs
 
-    monkeypatch.setattr(rr, "MAX_IMAGE_SIDE", 1 << 20)
+    monkeypatch.setattr(inputs, "LIMITS", ImageLimits(1 << 20, RASTER.max_pixels, RASTER.why))
     with pytest.raises(ValueError, match=r"width x height: 65536x32768 = 2147483648 pixels"):
         clvis.rasterize(_scene(10), _cam(), 65536, 32768, queue=queue)
 

@@ -8,9 +8,10 @@ clvis iso [FILE]             progressive isosurface raycasting of a ZFP-compress
                              (default: an embedded Marschner-Lobb volume)
 clvis gauss [FILE]           Gaussians from a volume at three levels of detail, ray marched
                              (default: an embedded explosion), PNGs side by side
-clvis bench primitives|raster|gauss|iso
+clvis bench {families}
                              a benchmark suite with its peers, as a table (and JSON)
-clvis train infill|lidar     trains a post network on renders made here, exports it to ONNX
+clvis train {models}
+                             trains a post network on renders made here, exports it to ONNX
 """
 
 from __future__ import annotations
@@ -41,9 +42,11 @@ tells more about each command.
 
 
 def _parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
+    from ..post.names import NAMES
+
     p = argparse.ArgumentParser(
         prog="clvis",
-        description=__doc__,
+        description=(__doc__ or "").format(families="|".join(bench.FAMILIES), models="|".join(NAMES)),
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -32,9 +32,13 @@ def _report(path: str):
         ) from None
 
 
+# the suites: bench/bench_<family>.py
+FAMILIES = ("primitives", "raster", "gauss", "iso", "post", "distributed")
+
+
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     b = sub.add_parser("bench", help="run a benchmark suite and print its table")
-    b.add_argument("family", choices=["primitives", "raster", "gauss", "iso", "post", "distributed"])
+    b.add_argument("family", choices=FAMILIES)
     b.add_argument(
         "--scale", type=real(0.0, open_lo=True), help="multiply every size (e.g. 0.01 for a smoke run)"
     )

@@ -18,7 +18,7 @@ Train one of the post family's networks (clvis.post) with PyTorch:
            particles to the Gaussian renderer's image of them
 
 The training pairs are rendered here from closed-form volumes and scenes
-with deterministic seeds (clvis.post.data); held-out frames come from kinds
+with deterministic seeds (clvis.training.data); held-out frames come from kinds
 never trained on. Writes NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx (when
 int8 loses at most 0.3 dB) and the model card NAME.json into --out; the
 shipped models in clvis/post/models were made by this command, as their

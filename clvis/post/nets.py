@@ -5,13 +5,14 @@ compared with (onnxruntime output = torch eager within 1e-4 in fp32).
 Inference never imports this module: clvis.post.infer runs the exported
 graphs with onnxruntime alone.
 
-Both networks take NCHW float32 whose height and width are multiples of
-their ``stride`` (32; clvis.post.pack pads, unpack crops back) and use only
+The three networks take NCHW float32 whose height and width are multiples
+of their ``stride`` (32 for in-fill and LiDAR, 16 for NARVis; clvis.post.pack
+pads, unpack crops back) and use only
 convolutions, pooling, bilinear or nearest up-sampling, concatenation and
 element-wise arithmetic, so the exported graphs have dynamic height and width
 and no Gather-lowered ops (no ``F.unfold``).
 
-Both start from the classical baseline: :class:`PushPull`, the push-pull
+In-fill and LiDAR start from the classical baseline: :class:`PushPull`, the push-pull
 hole fill of clvis.post.pushpull written as graph operations, fills the holes
 from the known pixels, and the U-Nets see that estimate beside their input
 and add a correction to it (their last convolution starts at zero, so an
@@ -33,6 +34,10 @@ adds).
   clvis.post.pack.pack_rgbda) beside the push-pulled colours; output RGB
   clipped to [0, 1]. The authors' widths are 64..1024 (31 M parameters);
   ``width`` sets the first stage's.
+- :class:`NarvisUNet` (NARVis, after NPBG's gated U-Net): the rasterizer's
+  G-buffer planes (clvis.post.pack.pack_gbuffers) to RGB, with gated
+  convolutions (:class:`GatedConv2d`) at five resolutions; no push-pull
+  estimate (its input is dense where points were drawn).
 """
 
 from __future__ import annotations

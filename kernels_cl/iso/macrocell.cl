@@ -13,7 +13,7 @@
  * +y, +z neighbour samples. A block that holds no cell's minimum corner
  * (4 B_a >= n_a - 1 on some axis) gets the empty range (+inf, -inf). The
  * coarse grid: per 4^3 group of blocks, the min of their lo and the max of
- * their hi (the last group partial). clvis/reference/iso.py block_ranges and
+ * their hi (the last group partial). clvis/reference/iso/macrocell.py block_ranges and
  * coarse_ranges give the same floats.
  *
  * kernel block_faces(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,

@@ -9,7 +9,7 @@
  * selects how resolve_hits finds the nearest hit (see there). One work-item
  * per element; global size >= the element count, any local size.
  * An item e = i * n_spec + k is the k-th candidate block of active ray i
- * (clvis/iso/traverse.cl writes cand_block[e], cand_t[e]).
+ * (kernels_cl/iso/traverse.cl writes cand_block[e], cand_t[e]).
  *
  * kernel valid_items(global const uint *cand_block, uint n, global uchar *valid)
  *     valid[e] = cand_block[e] != 0xFFFFFFFF.

@@ -63,7 +63,7 @@
  *   volume must be cached (their samples on the block's far faces are corners
  *   of the block's cells); an absent one reads as NaN (no hit in those cells).
  *
- * Per ray (the rules of clvis/reference/iso.py, in float32): o, d from the ray
+ * Per ray (the rules of clvis/reference/iso/traverse.py and raytrace.py, in float32): o, d from the ray
  * buffer; index space O = (o - origin) / spacing, D = d / spacing, inv = spacing /
  * d_safe (|d| < TINY -> copysign(TINY, d)); t_exit = min_a max(t0_a, t1_a) of the
  * box [0, n - 1]. The first cell is clamp(floor(O + t D), block's cells), the

@@ -20,7 +20,7 @@
  * kernels_cl/iso/macrocell.cl). A float2 range is (lo, hi); a block or coarse
  * cell is active iff lo <= isovalue <= hi ((+inf, -inf) and NaN: never).
  *
- * Per ray (float32, the rules of clvis/reference/iso.py): o, d from the ray
+ * Per ray (float32, the rules of clvis/reference/iso/traverse.py): o, d from the ray
  * buffer; O = (o - origin) / spacing, D = d / spacing, inv = spacing / d_safe
  * (|d| < TINY -> copysign(TINY, d)); t0 = (0 - O) inv, t1 = ((n - 1) - O) inv;
  * t_enter = max(0, max_a min(t0, t1)), t_exit = min_a max(t0, t1); the ray
@@ -33,7 +33,7 @@
  * the half-open [T_a(entry bound), T_a(exit bound)) (entry bound 4 b_a, exit
  * min(4 b_a + 4, n_a - 1) when inv_a > 0; swapped when inv_a < 0), and in
  * block b for t in the intersection over the axes. This is the block DDA of
- * tests/test_iso_raytrace.py (t_next recomputed from the block index, the
+ * tests/iso/test_raytrace.py (t_next recomputed from the block index, the
  * same T) except that blocks whose segment has zero length (a ray through a
  * block edge or corner, where the DDA steps two axes at one t; ties x < y < z
  * only order those) are never candidates. So the candidate sequence does not

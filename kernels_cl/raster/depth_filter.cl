@@ -3,7 +3,7 @@
  * (Vanherck, Zoomers et al., "Real-time Neural Rendering of LiDAR Point
  * Clouds", Eurographics 2025 short papers). The exact definition, with the
  * parts that follow the paper and the parts clvis chose, is the docstring of
- * clvis/reference/depth_filter.py; the kernels below compute it bit for bit.
+ * clvis/reference/raster/depth_filter.py; the kernels below compute it bit for bit.
  *
  * ABI
  * ---

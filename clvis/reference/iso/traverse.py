@@ -5,7 +5,7 @@ Everything is float32 with the kernel's operation order (FP_CONTRACT off,
 correctly rounded division), so device and reference give the same block
 ids and the same t values bit for bit; there are no documented tie cases.
 
-Rules (see traverse.cl's ABI comment): the ray setup of clvis/reference/iso.py
+Rules (see traverse.cl's ABI comment): the ray setup of :func:`ray_setup`
 (O, D, inv with the tiny-direction rule, t_enter, t_exit) in float32; block
 b_a spans [4 b_a, min(4 b_a + 4, n_a - 1)] in index space, for b_a <
 ceil((n_a - 1) / 4); with T_a(x) = (x - O_a) inv_a the ray is in block b_a

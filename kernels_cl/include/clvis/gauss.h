@@ -10,7 +10,7 @@
  *       float value;          12  scalar the transfer function maps to colour
  *       float w[9];           16  W row-major: w[3k + j] = R[j][k] / s_k
  *       float opacity;        52  in [0, 1]
- *   } clvis_gaussian;         56 bytes, 4-byte aligned (numpy: clvis.gauss.render.GAUSSIAN_DTYPE)
+ *   } clvis_gaussian;         56 bytes, 4-byte aligned (numpy: clvis.gauss.gaussians.GAUSSIAN_DTYPE)
  *
  * Degenerate Gaussians: s_k is clamped below to max(CLVIS_GAUSS_FLAT * max_j s_j,
  * CLVIS_GAUSS_TINY) before W is formed, so a flat Gaussian is a thin slab.

@@ -12,7 +12,7 @@
  * min_a max(t0, t1) (the ray meets the box [0, n - 1] iff t_enter <=
  * t_exit). n, sp, org are per axis x, y, z. Includes clvis/camera.h and
  * clvis/ray.h; the including file sets FP_CONTRACT OFF before its includes
- * (clvis/reference/iso_traverse.py repeats these float32 operations).
+ * (clvis/reference/iso/traverse.py repeats these float32 operations).
  *
  * Cell stages. A dual cell's corners v[8] (minus the isovalue), v[x + 2 y + 4 z]
  * for the corner at offset (x, y, z); u[3] the ray's local position in the

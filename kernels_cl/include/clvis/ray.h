@@ -10,7 +10,7 @@
  * lying exactly in a face plane (o on the face, that component of d zero)
  * moves the way the zero's sign says, as if tilted by TINY: inwards it hits,
  * outwards its interval on that axis ends at t = 0. The NumPy references
- * (clvis.reference.iso, clvis.reference.iso_traverse) use the same rule.
+ * (clvis.reference.iso.traverse, clvis.reference.iso.raytrace) use the same rule.
  *
  *   float clvis_ray_safe_dir(float d)        d, or copysign(TINY, d) when |d| < TINY
  *   float clvis_ray_inv_dir(float d)         1 / clvis_ray_safe_dir(d)

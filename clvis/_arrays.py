@@ -7,6 +7,7 @@ Every op takes numpy arrays (and returns numpy) or ``pyopencl.array.Array``
 from __future__ import annotations
 
 import operator
+import typing
 from collections.abc import Iterable
 from typing import Any
 
@@ -101,6 +102,16 @@ def to_device(queue: cl.CommandQueue, name: str, x: Any) -> cla.Array:
 
 # the cl.Buffer behind a device array (None for an empty array)
 buf = runtime.arg
+
+
+def buffer_of(a: cla.Array) -> cl.Buffer:
+    """The buffer behind the non-empty device array `a` (a cl.Buffer, or a
+    pool's PooledBuffer, which enqueue_copy takes alike), for the calls whose
+    types take no None."""
+    b = a.base_data
+    if not isinstance(b, cl.MemoryObjectHolder):
+        raise TypeError(f"expected a device array with a buffer, got one of {a.nbytes} bytes")
+    return typing.cast(cl.Buffer, b)
 
 
 def result(a: cla.Array, host: bool) -> np.ndarray | cla.Array:

@@ -390,4 +390,4 @@ def _colour(name: str, c) -> tuple[int, int, int]:
         ok = False
     if not ok:
         raise ValueError(f"{name}: expected an RGB colour of three integers 0..255, got {c!r}")
-    return t
+    return t[0], t[1], t[2]

@@ -87,11 +87,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _quiet_stdout():
     """Point the process's stdout at /dev/null, so that Python's final flush of
     what is still buffered does not fail a second time, with a message."""
-    if sys.stdout is not sys.__stdout__:
+    stdout = sys.stdout
+    if stdout is not sys.__stdout__ or stdout is None:
         return
     try:
         fd = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(fd, sys.stdout.fileno())
+        os.dup2(fd, stdout.fileno())
         os.close(fd)
     except (OSError, ValueError, AttributeError):
         pass

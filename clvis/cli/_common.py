@@ -15,6 +15,7 @@ import shutil
 import sys
 import threading
 import time
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -267,7 +268,7 @@ class Progress:
         self.prefix = prefix
         self.start = time.perf_counter()
 
-    def _line(self, name: str, since: float, failed: bool = False) -> str:
+    def _line(self, name: object, since: float, failed: bool = False) -> str:
         now = time.perf_counter()
         tail = "failed" if failed else f"(total {now - self.start:6.2f} s)"
         line = f"{self.prefix}: {name:<36} {now - since:6.2f} s  {tail}"
@@ -280,7 +281,9 @@ class Progress:
         self.stream.flush()
 
     @contextlib.contextmanager
-    def stage(self, name: str):
+    def stage(self, name: object) -> Iterator[None]:
+        """Time the block as a stage called `name` (formatted at each redraw:
+        an object whose __format__ changes shows progress within the stage)."""
         if not self.enabled:
             yield
             return
@@ -459,9 +462,10 @@ def camera_from_args(args, lo, hi, width: int, height: int, points=None):
             cam = axis_camera(kind, lo, hi, aspect)
         else:
             sampler = hemisphere_cameras if kind == "hemisphere" else grid_cameras
-            cam = next(itertools.islice(sampler(lo, hi, fov_y=fov_y, aspect=aspect), k, None), None)
-            if cam is None:
+            sampled = next(itertools.islice(sampler(lo, hi, fov_y=fov_y, aspect=aspect), k, None), None)
+            if sampled is None:
                 raise CliError(f"--view {kind}:{k}: the sampler has fewer than {k + 1} cameras")
+            cam = sampled
         if args.eye is None and args.target is None and args.up is None:
             return cam
         return _replaced(cam, kind, args, lo, hi, aspect)

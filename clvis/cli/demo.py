@@ -6,8 +6,10 @@ demo_post.demo: the networks' contact sheets)."""
 from __future__ import annotations
 
 import argparse
+import typing
 
 import numpy as np
+import pyopencl.array as cla
 
 from . import demo_post, gauss, iso, raster
 from ._common import Parser, count, size, timed
@@ -62,7 +64,6 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
 
 
 def cmd(args: argparse.Namespace) -> int:
-    import pyopencl.array as cla
 
     from .. import __version__, primitives, runtime
     from ..reference import primitives as ref
@@ -121,7 +122,9 @@ def cmd(args: argparse.Namespace) -> int:
             lambda: primitives.histogram(bd, 256),
             lambda: np.bincount(bins, minlength=256),
             "np.bincount",
-            lambda: np.array_equal(primitives.histogram(bd, 256).get(), ref.histogram(bins, 256)),
+            lambda: np.array_equal(
+                typing.cast(cla.Array, primitives.histogram(bd, 256)).get(), ref.histogram(bins, 256)
+            ),
         ),
     ]
     print(f"  {'op (n = ' + format(n, ',') + ')':34} {'clvis':>16} {'numpy':>26} {'speed-up':>9}  reference")

@@ -8,6 +8,7 @@ import argparse
 import os
 import sys
 import time
+import typing
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -152,7 +153,7 @@ def picture(img: IsoImage, transparent: bool = False) -> np.ndarray:
     from .. import images
 
     rgb = np.where(img.hit[..., None], img.rgba[..., :3], np.float32(0.0))
-    rgb = np.where(img.active[..., None], np.float32(_ACTIVE_COLOUR), rgb)
+    rgb = np.where(img.active[..., None], np.asarray(_ACTIVE_COLOUR, np.float32), rgb)
     alpha = (img.hit | img.active)[..., None].astype(np.float32)
     rgba = np.clip(np.rint(np.concatenate([rgb, alpha], axis=2) * 255), 0, 255).astype(np.uint8)
     return rgba if transparent else images.opaque(rgba)
@@ -407,7 +408,15 @@ def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (640, 
     )
     cw, ch = 64, 48
     small = r.render(cam, cw, ch, 0.5)
-    want = ref.render(zfp.decode(r.volume), cam, cw, ch, 0.5, spacing=d["spacing"], origin=d["origin"])
+    want = ref.render(
+        typing.cast(np.ndarray, zfp.decode(r.volume)),
+        cam,
+        cw,
+        ch,
+        0.5,
+        spacing=d["spacing"],
+        origin=d["origin"],
+    )
     a = ref.agreement(want, small.hit, small.depth)
     print(
         f"  image vs clvis.reference.iso ({cw}x{ch}, hit mask and depth on reliable pixels): "

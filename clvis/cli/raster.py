@@ -10,6 +10,7 @@ import os
 import re
 import sys
 import time
+import typing
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -40,6 +41,8 @@ from ._common import (
 
 if TYPE_CHECKING:
     import pyopencl as cl
+
+    from ..raster import GBuffers
 
 # The embedded clouds: generator, default attribute, whether the depth filter
 # panel is on by default (the filter is made for LiDAR scans seen through holes).
@@ -123,7 +126,7 @@ class _Panel:
 
 @dataclasses.dataclass
 class _Rendered:
-    gbuffers: object  # clvis.GBuffers of the main render
+    gbuffers: GBuffers  # of the main render
     panels: list
     first_s: float  # the first render (it may build the kernels)
     warm_s: float  # the same render again
@@ -206,7 +209,8 @@ def _render_panels(
     if levels:
         with progress.stage(f"depth filter ({levels} levels)"):
             filtered = depth_filter(g, levels)
-        panels.append(_Panel("depth-filtered", f"depth filter ({levels} levels)", filtered.rgba))
+        kept = typing.cast(np.ndarray, filtered.rgba)  # G-buffers in: the rgba is there
+        panels.append(_Panel("depth-filtered", f"depth filter ({levels} levels)", kept))
         if post is not None and post.name == "lidar":
             with progress.stage(f"{post.name} network"):
                 panels.append(_Panel(f"post-{post.name}", "LiDAR RGBDA U-Net", post(filtered)))
@@ -287,7 +291,8 @@ def _overview(panels, transparent: bool = False) -> np.ndarray:
         tile = _shrink(p.image, f)
         tile = images.label(tile if transparent else images.opaque(tile), p.title)
         if p.bar is not None:
-            tile = np.concatenate([tile, images.colorbar(*p.bar, tile.shape[1])], axis=0)
+            lut, vmin, vmax = p.bar
+            tile = np.concatenate([tile, images.colorbar(lut, vmin, vmax, tile.shape[1])], axis=0)
         tiles.append(tile)
     return images.compose(tiles, columns=cols)
 
@@ -403,9 +408,8 @@ def _render_distributed(args, progress) -> int:
         if args.depth_filter:
             with progress.stage(f"depth filter ({args.depth_filter} levels)"):
                 filtered = depth_filter(g, args.depth_filter)
-            panels.append(
-                _Panel("depth-filtered", f"depth filter ({args.depth_filter} levels)", filtered.rgba)
-            )
+            kept = typing.cast(np.ndarray, filtered.rgba)  # G-buffers in: the rgba is there
+            panels.append(_Panel("depth-filtered", f"depth filter ({args.depth_filter} levels)", kept))
         out = Path(args.out)
         with progress.stage("writing PNGs"):
             named = [

@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -164,13 +165,14 @@ class Gaussians:
         return (m - half).min(axis=0), (m + half).max(axis=0)
 
     def subset(self, index: npt.ArrayLike | slice) -> Gaussians:
+        pick = index if isinstance(index, slice) else np.asarray(index)
         return Gaussians(
-            self.means[index],
-            self.scales[index],
-            self.rotations[index],
-            self.values[index],
-            self.opacities[index],
-            None if self.colors is None else self.colors[index],
+            self.means[pick],
+            self.scales[pick],
+            self.rotations[pick],
+            self.values[pick],
+            self.opacities[pick],
+            None if self.colors is None else self.colors[pick],
         )
 
     @staticmethod
@@ -196,7 +198,7 @@ class Gaussians:
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write a .npz (means, scales, rotations, values, opacities, and colors when present)."""
-        extra = {} if self.colors is None else {"colors": self.colors}
+        extra: dict[str, Any] = {} if self.colors is None else {"colors": self.colors}
         np.savez(
             path,
             means=self.means,

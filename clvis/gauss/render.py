@@ -45,9 +45,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyopencl as cl
+import pyopencl.array as cla
 
 from .. import runtime
-from .._arrays import nonnegative_int, positive_int, resolve_queue
+from .._arrays import buffer_of, nonnegative_int, positive_int, resolve_queue
 from ..camera import Camera, ray_buffer
 from ..colormap import TransferFunction
 from ..errors import DeviceError
@@ -71,18 +72,19 @@ class GaussianImage:
     """A rendered frame: ``rgba`` (H, W, 4) float32 premultiplied, alpha = 1 - T;
     ``depth`` (H, W) float32 view depth where T first fell below 0.5 (+inf
     elsewhere); ``hits`` and ``rounds`` (H, W) uint32 per ray (Gaussians
-    composited, k-buffer rounds); ``stats`` a dict."""
+    composited, k-buffer rounds); ``stats`` a dict. With ``host=False``
+    rgba and depth are device arrays and hits and rounds None."""
 
-    rgba: np.ndarray
-    depth: np.ndarray
-    hits: np.ndarray
-    rounds: np.ndarray
+    rgba: np.ndarray | cla.Array
+    depth: np.ndarray | cla.Array
+    hits: np.ndarray | None
+    rounds: np.ndarray | None
     stats: dict = field(default_factory=dict)
 
     def to_uint8(self, background: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
         """(H, W, 3) uint8 over a background colour (components in [0, 1])."""
         bg = np.asarray(background, np.float32).reshape(1, 1, 3)
-        rgba = np.asarray(self.rgba)
+        rgba = self.rgba.get() if isinstance(self.rgba, cla.Array) else np.asarray(self.rgba)
         out = np.empty(rgba.shape[:2] + (3,), np.uint8)
         step = max(1, (1 << 20) // max(rgba.shape[1], 1))  # rows at a time: float temporaries stay small
         for y in range(0, rgba.shape[0], step):
@@ -202,8 +204,8 @@ class GaussianRenderer:
         records, boxes, last = gaussian_records(q, gaussians, self.cutoff)
         # own colours: uchar4 by Gaussian id (the kernel indexes them through
         # the leaf order it already reads), alpha 255 and unused
-        self._colors = None
-        if self.colors and n:
+        self._colors: cla.Array | None = None
+        if self.colors and n and gaussians.colors is not None:  # (colors=True: they have some)
             rgba8 = np.full((n, 4), 255, np.uint8)
             rgba8[:, :3] = gaussians.colors
             self._colors = runtime.empty(q, (n, 4), np.uint8, "Gaussian colours")
@@ -228,9 +230,12 @@ class GaussianRenderer:
         """Device bytes the renderer holds: the Gaussian records and the BVH."""
         return runtime.nbytes(self.records, self._dummy, self._colors) + self.bvh.nbytes
 
-    def _buf(self, a):
+    def _buf(self, a: cla.Array | None) -> cl.MemoryObjectHolder | cl.SVMPointer:
         b = runtime.arg(a)
-        return self._dummy.base_data if b is None else b
+        if b is None:  # no Gaussians: the kernels still take a buffer
+            assert self._dummy is not None
+            return buffer_of(self._dummy)
+        return b
 
     def band_rows(self, width: int, height: int) -> int:
         """Rows per band for a width x height image: the tuning profile's
@@ -353,7 +358,7 @@ class GaussianRenderer:
             n_rows = min(rows, h - y0)
             ev = band(y0, n_rows)
             for dst, src in ((out_rgba, rgba), (out_depth, depth), (out_stats, stats)):
-                cl.enqueue_copy(q, dst[y0 : y0 + n_rows], src.base_data, wait_for=[ev])
+                cl.enqueue_copy(q, dst[y0 : y0 + n_rows], buffer_of(src), wait_for=[ev])
             t = runtime.seconds(start if bands == 0 else ev, ev)  # the uploads count with band 0
             render_s = None if t is None or render_s is None else render_s + t
             bands += 1

@@ -42,7 +42,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import runtime
-from .._arrays import check_array, is_device, resolve_queue, to_device
+from .._arrays import buffer_of, check_array, is_device, resolve_queue, to_device
 from ..errors import DataError
 from ..primitives import compact_indices, radix_sort
 from .zfp import BRICK_VALUES, ZfpVolume
@@ -211,8 +211,8 @@ class BlockCache:
         for src, dst in ((self.bricks, bricks), (self.block_of_slot, bos), (self.ages, ages)):
             cl.enqueue_copy(
                 q,
-                dst.base_data,
-                src.base_data,
+                buffer_of(dst),
+                buffer_of(src),
                 byte_count=src.nbytes,
                 src_offset=src.offset,
                 dst_offset=dst.offset,

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pyopencl as cl
+import pyopencl.array as cla
 
 from .. import runtime
 from .._arrays import resolve_queue
@@ -27,8 +28,8 @@ class MacrocellGrids:
     blocks). Each is a (Z, Y, X, 2) float32 array of (lo, hi); (+inf, -inf)
     where a block holds no dual cell. Device arrays when built with host=False."""
 
-    fine: object
-    coarse: object
+    fine: np.ndarray | cla.Array
+    coarse: np.ndarray | cla.Array
 
     def active(self, isovalue: float) -> tuple[np.ndarray, np.ndarray]:
         """Host boolean masks (fine, coarse): the cells whose range holds `isovalue`."""

@@ -103,7 +103,7 @@ def _check_shape(shape) -> tuple[int, int, int]:
     nblocks = math.prod(-(-d // 4) for d in out)
     if nblocks > _MAX_BLOCKS:
         raise ValueError(f"shape: {tuple(out)} has {nblocks} blocks of 4^3; at most 2^32 - 1")
-    return tuple(out)
+    return out[0], out[1], out[2]
 
 
 def _grid(shape) -> tuple[int, int, int]:

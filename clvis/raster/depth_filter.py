@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import typing
 from collections.abc import Sequence
 from typing import Any
 
@@ -289,10 +290,14 @@ def depth_filter(
         depth, rgba = gbuffers_or_depth.depth, gbuffers_or_depth.rgba
     else:
         depth, rgba = gbuffers_or_depth, None
-    keep = depth_filter_mask(depth, levels, filter_strength, edge_threshold=edge_threshold, queue=queue)
+    # numpy in, numpy out: the mask and the rgbda of host planes are host arrays
+    keep = typing.cast(
+        np.ndarray,
+        depth_filter_mask(depth, levels, filter_strength, edge_threshold=edge_threshold, queue=queue),
+    )
     depth = np.asarray(depth)
     colors = rgba if rgba is not None else np.zeros(depth.shape + (4,), np.uint8)
-    out_rgbda = rgbda(colors, depth, keep, queue=queue)
+    out_rgbda = typing.cast(np.ndarray, rgbda(colors, depth, keep, queue=queue))
     kept_rgba = None
     if rgba is not None:
         kept_rgba = np.where(keep[..., None], rgba, 0).astype(np.uint8)

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from collections.abc import Mapping
 from typing import Any
 
@@ -182,9 +183,11 @@ class Rasterizer:
         self.has_radius = inp.radius is not None
 
         pos = self._upload("positions", inp.positions)
-        self.ids = self.inv = None
+        self.ids: cla.Array | None = None
+        self.inv: cla.Array | None = None
         if morton and n > 1:
-            self.ids = perm = morton_order(pos, queue=q)
+            perm = typing.cast(cla.Array, morton_order(pos, queue=q))  # device in, device out
+            self.ids = perm
             self.positions, self.inv = morton_gather(q, pos, perm)
         else:
             self.positions = pos
@@ -492,7 +495,7 @@ class Rasterizer:
         flags = (1 if self.has_velocity else 0) | (2 if self.has_radius else 0)
         nf, nu = len(f32_names), len(u8_names)
         e = runtime.empty
-        out = {
+        out: dict[str, cla.Array | None] = {
             "index": e(q, (H, W), np.uint32, "index buffer"),
             "depth": e(q, (H, W), np.float32, "depth buffer"),
             "rgba": e(q, (H, W, 4), np.uint8, "rgba buffer"),
@@ -520,9 +523,9 @@ class Rasterizer:
             vmin,
             scale,
             _arg(accum),
-            out["index"].base_data,
-            out["depth"].base_data,
-            out["rgba"].base_data,
+            _arg(out["index"]),
+            _arg(out["depth"]),
+            _arg(out["rgba"]),
         )
         if flags or nf or nu:
             runtime.launch(

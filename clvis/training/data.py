@@ -246,14 +246,14 @@ def town(n: int, seed: int) -> dict:
         m = (np.abs(x - b[k, 0]) <= b[k, 2]) & (np.abs(y - b[k, 1]) <= b[k, 3])
         z[m] = ground(b[k, 0], b[k, 1]) + bh[k]
         col[m] = roof[k]
-    k = rng.integers(0, nb, n_wall)
+    wall = rng.integers(0, nb, n_wall)  # the building of each wall point
     side = rng.integers(0, 4, n_wall)
     along = rng.uniform(-1, 1, n_wall)
     sign = np.where(side % 2 == 0, -1.0, 1.0)
-    wx = np.where(side < 2, b[k, 0] + along * b[k, 2], b[k, 0] + sign * b[k, 2])
-    wy = np.where(side < 2, b[k, 1] + sign * b[k, 3], b[k, 1] + along * b[k, 3])
-    wz = ground(b[k, 0], b[k, 1]) + rng.random(n_wall) * bh[k]
-    wcol = roof[k] * 0.6
+    wx = np.where(side < 2, b[wall, 0] + along * b[wall, 2], b[wall, 0] + sign * b[wall, 2])
+    wy = np.where(side < 2, b[wall, 1] + sign * b[wall, 3], b[wall, 1] + along * b[wall, 3])
+    wz = ground(b[wall, 0], b[wall, 1]) + rng.random(n_wall) * bh[wall]
+    wcol = roof[wall] * 0.6
     pos = np.stack([np.concatenate([x, wx]), np.concatenate([y, wy]), np.concatenate([z, wz])], 1)
     colors = np.concatenate([col, wcol])
     rgba = np.concatenate([np.clip(np.rint(colors), 0, 255), np.full((n, 1), 255.0)], 1).astype(np.uint8)

@@ -328,7 +328,8 @@ def train(
     t0 = time.perf_counter()
     net.train()
     for step in range(1, steps + 1):
-        x, y = _augment(*_batch(pairs, spec["batch"], size, rng), rng, name, getattr(net, "layout", ()))
+        xb, yb = _batch(pairs, spec["batch"], size, rng)
+        x, y = _augment(xb, yb, rng, name, getattr(net, "layout", ()))
         loss = loss_fn(net(x), y)
         opt.zero_grad()
         loss.backward()

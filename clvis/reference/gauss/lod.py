@@ -137,7 +137,7 @@ def gaussians_from_volume(
     d = np.asarray(sv.spacing, F32)  # dz, dy, dx
     o = np.asarray(sv.origin, F32)[::-1]  # oz, oy, ox
     # candidate Gaussians: leaf, unit, sub (the sort keys), first voxel (z, y, x), extent, value
-    rec = {k: [] for k in ("leaf", "unit", "sub", "first", "ext", "value")}
+    rec: dict[str, list[np.ndarray]] = {k: [] for k in ("leaf", "unit", "sub", "first", "ext", "value")}
 
     def add(leaf, unit, sub, first, ext, value):
         rec["leaf"].append(leaf)
@@ -155,12 +155,12 @@ def gaussians_from_volume(
             p = p[:, :h] + p[:, h : 2 * h]
         count = A.reshape(L, 512).sum(axis=1)
         mean = np.where(tiles, tv, p[:, 0] / count.astype(F32))
-        lo, hi = [], []
+        los, his = [], []
         for axes in ((2, 3), (1, 3), (1, 2)):
-            has = A.any(axis=axes)  # (L, 8)
-            lo.append(has.argmax(axis=1))
-            hi.append(7 - has[:, ::-1].argmax(axis=1))
-        lo, hi = np.stack(lo, axis=1), np.stack(hi, axis=1)
+            has = np.asarray(A.any(axis=axes))  # (L, 8)
+            los.append(has.argmax(axis=1))
+            his.append(7 - has[:, ::-1].argmax(axis=1))
+        lo, hi = np.stack(los, axis=1), np.stack(his, axis=1)
         add(leaves, np.zeros(L, int), np.zeros(L, int), C + lo, hi - lo + 1, mean)
     else:
         n_dense = 4 if lod == "medium" else 2

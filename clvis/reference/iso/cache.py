@@ -80,7 +80,7 @@ class BlockCache:
     def update(self, needed: npt.ArrayLike) -> int:
         """Apply one pass's `needed` flags (nonzero = needed); returns the
         number of blocks newly assigned (and decoded)."""
-        needed = np.asarray(needed).ravel() != 0
+        needed = np.asarray(needed).ravel().astype(bool)  # nonzero
         assert needed.shape == (self.nblocks,)
         missing = np.flatnonzero(needed & (self.slot_of_block < 0))
         m = len(missing)

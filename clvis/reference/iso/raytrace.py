@@ -152,12 +152,12 @@ def cubic_first_zero(
     them when nothing is found), s = 0 where `start`, s = length where `end`
     (and no hit lies in an earlier interval), and the hit interval's far end;
     `start`, `end` are bools or (M,) bool arrays."""
-    c = tuple(np.asarray(x, np.float64) for x in c)
+    cs = tuple(np.asarray(x, np.float64) for x in c)
     length = np.asarray(length, np.float64)
-    e1, e2 = _extrema(c, length)
+    e1, e2 = _extrema(cs, length)
     pts = np.stack([np.zeros_like(length), e1, e2, length], axis=1)
-    f = _horner([x[:, None] for x in c], pts)
-    f[:, 0] = c[0]
+    f = _horner([x[:, None] for x in cs], pts)
+    f[:, 0] = cs[0]
     zero = _has_zero(f[:, :-1], f[:, 1:])
     found = zero.any(axis=1)
     k = np.argmax(zero, axis=1)
@@ -172,7 +172,7 @@ def cubic_first_zero(
     margin = np.where(turning, np.abs(f), np.inf).min(axis=1)
     a, b = pts[rows, k], pts[rows, k + 1]
     fa, fb = f[rows, k], f[rows, k + 1]
-    s = _refine(c, a, b, fa, fb, refine)
+    s = _refine(cs, a, b, fa, fb, refine)
     s = np.where(found, s, np.nan)
     interval = np.where(found[:, None], np.stack([a, b], axis=1), np.nan)
     return found, s, margin, interval

@@ -134,7 +134,8 @@ PERM_3 = (
 
 def grid(shape: Sequence[int]) -> tuple[int, int, int]:
     """Blocks along (z, y, x) of a [Z, Y, X] volume."""
-    return tuple(-(-int(s) // 4) for s in shape)
+    z, y, x = (-(-int(s) // 4) for s in shape)
+    return z, y, x
 
 
 def expected_nbytes(shape: Sequence[int], rate: int) -> int:
@@ -234,9 +235,9 @@ def decode_block(words: np.ndarray, rate: int) -> np.ndarray:
     emax = bits.read(8) - EBIAS
     u = np.array(decode_ints(bits, 64 * rate - 9), np.uint32)
     signed = ((u ^ np.uint32(NBMASK)) - np.uint32(NBMASK)).view(np.int32)
-    block = np.zeros(64, np.int32)
-    block[list(PERM_3)] = signed
-    block = block.reshape(4, 4, 4)  # [z, y, x]
+    flat = np.zeros(64, np.int32)
+    flat[list(PERM_3)] = signed
+    block = flat.reshape(4, 4, 4)  # [z, y, x]
     inv_xform(block)
     return dequantize(block.reshape(64), emax)
 

@@ -68,12 +68,12 @@ def pack_iso(
     rgba: npt.ArrayLike, hit: npt.ArrayLike, active: npt.ArrayLike, *, stride: int = 1
 ) -> np.ndarray:
     rgba = np.asarray(rgba, _F)
-    hit, active = np.asarray(hit) != 0, np.asarray(active) != 0
+    hit, active = np.asarray(hit).astype(bool), np.asarray(active).astype(bool)
     if not np.isfinite(rgba[hit][:, :3]).all():
         raise DataError("rgba: a hit pixel with a NaN or infinite r, g or b")
     shown = hit & ~active
     rgb = [np.where(shown, rgba[..., c], _F(0)) for c in range(3)]
-    hp, wp = padded_shape(*shown.shape, stride)
+    hp, wp = padded_shape(shown.shape[0], shown.shape[1], stride)
     return _nchw([*rgb, shown.astype(_F), active.astype(_F)], hp, wp, [0, 0, 0, 0, 0])
 
 
@@ -89,7 +89,7 @@ def pack_rgbda(rgbda: npt.ArrayLike, *, stride: int = 1) -> np.ndarray:
         span = _F(dmax - dmin)
         d[kept] = (depth[kept] - dmin) / span if span > 0 else _F(0)
     planes = [np.where(kept, rgbda[..., c], _F(0)) for c in (0, 1, 2, 4)]
-    hp, wp = padded_shape(*depth.shape, stride)
+    hp, wp = padded_shape(depth.shape[0], depth.shape[1], stride)
     return _nchw([*planes, d], hp, wp, [0, 0, 0, 0, -1])
 
 
@@ -122,7 +122,7 @@ def pack_gbuffers(gbuffers: Any, planes: Sequence[str], *, stride: int = 1) -> n
         if not np.isfinite(v[covered]).all():
             raise DataError(f"{name}: a covered pixel with a NaN or infinite value")
         chans.append(np.where(covered, v, _F(0)))
-    hp, wp = padded_shape(*covered.shape, stride)
+    hp, wp = padded_shape(covered.shape[0], covered.shape[1], stride)
     return _nchw(chans, hp, wp, [0] * len(chans))
 
 

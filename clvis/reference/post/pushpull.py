@@ -98,7 +98,7 @@ def bilerp(coarse: np.ndarray, height: int, width: int) -> np.ndarray:
 def pushpull(image: npt.ArrayLike, valid: npt.ArrayLike, *, levels: int | None = None) -> np.ndarray:
     """The filled image (H x W x C float32) of the definition above."""
     image = np.asarray(image)
-    valid = np.asarray(valid) != 0
+    valid = np.asarray(valid).astype(bool)  # nonzero
     if image.dtype != np.float32 or image.ndim != 3 or not 1 <= image.shape[2] <= MAX_CHANNELS:
         raise ValueError(f"image: expected H x W x C float32 with C in 1..{MAX_CHANNELS}")
     if valid.shape != image.shape[:2]:

@@ -112,8 +112,10 @@ def _up(a, shape):
     return a.repeat(2, axis=0).repeat(2, axis=1)[: shape[0], : shape[1]]
 
 
-def _check(depth, levels, filter_strength, edge_threshold):
-    depth = np.asarray(depth)
+def _check(
+    depth_in: npt.ArrayLike, levels: int, filter_strength: float, edge_threshold: float
+) -> tuple[np.ndarray, np.float32, np.float32]:
+    depth = np.asarray(depth_in)
     if depth.dtype != np.float32:
         raise TypeError(f"depth: dtype {depth.dtype.name} is not supported; expected float32")
     if depth.ndim != 2:
@@ -153,12 +155,13 @@ def depth_filter_mask(
         if k == 1:
             return kept
         f = np.where(kept, d, _up(f, d.shape))
+    raise AssertionError("unreachable: the loop returns at k == 1")
 
 
 def rgbda(rgba: npt.ArrayLike, depth: npt.ArrayLike, keep: npt.ArrayLike) -> np.ndarray:
     """H x W x 5 float32 [r, g, b, depth, alpha]: where keep, the colour bytes
     times the float32 nearest 1/255, the depth and 1; elsewhere 0, 0, 0, +inf, 0."""
-    rgba, depth, keep = np.asarray(rgba), np.asarray(depth), np.asarray(keep) != 0
+    rgba, depth, keep = np.asarray(rgba), np.asarray(depth), np.asarray(keep).astype(bool)
     out = np.zeros(depth.shape + (5,), np.float32)
     out[..., :3] = np.where(keep[..., None], rgba[..., :3].astype(np.float32) * INV255, 0)
     out[..., 3] = np.where(keep, depth, _INF)

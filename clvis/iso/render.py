@@ -34,8 +34,10 @@ hits, t, depths and colours, bit for bit. n_spec is a tile's own (its pixels
 and its active rays); the candidates do not depend on how they are split into
 passes, so that changes the passes, not the image. The host image (rgba,
 depth, hit, t, active: HOST_PIXEL_BYTES per pixel) is allocated once and
-each tile is read back into it when it is done; runtime.check_memory checks
-both figures before anything is allocated. width x height must stay below
+each tile is read back into it when it is done (host=False: the same planes
+on the device, each tile written into them by pass.cl's tile_image and
+mark_active, nothing read back but the pass loop's counts);
+runtime.check_memory checks both figures before anything is allocated. width x height must stay below
 2^31 (MAX_PIXELS): the kernels index pixels with 32-bit integers.
 
 Completion is per tile: a tile stops once `completion` of its rays entering
@@ -138,7 +140,8 @@ class IsoImage:
     from the ray's origin on the near plane; +inf elsewhere), ``active``
     (H, W) bool (rays still running),
     ``completion`` (the fraction of the rays entering the volume that are
-    finished) and ``stats``."""
+    finished) and ``stats``. From ``render(..., host=False)`` the five planes
+    are ``pyopencl.array.Array`` of the same shapes and dtypes."""
 
     rgba: np.ndarray
     depth: np.ndarray

@@ -131,6 +131,7 @@ def test_nothing_to_hit(queue):
     away = _cam(eye=(0, -6, 0), target=(0, -9, 0))
     img = r.render(away, W, H, 0.5)  # no ray meets the volume
     assert not img.hit.any() and img.stats["passes"] == 0 and img.stats["rays_entering"] == 0
+    _same(_got(r.render(away, W, H, 0.5, host=False)), img)  # the empty image on the device
 
 
 def test_dense_input_and_bad_arguments(queue):

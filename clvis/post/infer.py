@@ -194,7 +194,8 @@ class PostNetwork:
         elif self.name == "infill":
             if not all(hasattr(image, k) for k in ("rgba", "hit", "active")):
                 raise TypeError(f"image: the infill network takes an IsoImage, got {type(image).__name__}")
-            shape = tuple(getattr(image.rgba, "shape", np.shape(image.rgba)))
+            rgba = image.rgba
+            shape = tuple(rgba.shape if hasattr(rgba, "shape") else np.shape(rgba))
             if len(shape) != 3 or shape[2] != 4:
                 raise ValueError(f"rgba: expected (H, W, 4), got shape {shape}")
         else:

@@ -5,6 +5,7 @@ figures of each pass."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -200,10 +201,11 @@ def render(
     camera: Callable[[np.ndarray, np.ndarray], Camera] | None = None,
     queue: cl.CommandQueue | None = None,
     progress: Progress | None = None,
+    host: bool = True,
 ) -> tuple[IsoRenderer, Camera, IsoImage]:
     """(renderer, camera, IsoImage), seen by camera(lo, hi) of the volume's
     bounds (default: the fit view); progress: a clvis.cli._common.Progress
-    (default: none)."""
+    (default: none); host=False: the image stays on the device."""
     from ..iso import IsoRenderer
 
     progress = progress if progress is not None else Progress(False)
@@ -215,7 +217,14 @@ def render(
     status = _Status()
     with progress.stage(status):
         img = r.render(
-            cam, width, height, isovalue, completion=completion, speculation=speculation, progress=status
+            cam,
+            width,
+            height,
+            isovalue,
+            completion=completion,
+            speculation=speculation,
+            progress=status,
+            host=host,
         )
     return r, cam, img
 
@@ -324,16 +333,18 @@ def _run(args) -> int:
         queue=q,
         camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h),
         progress=progress_from_args(args, "clvis iso"),
+        host=not args.infill,  # the in-fill network takes the image where it is
     )
     total = time.perf_counter() - t0
     out = Path(args.out)
-    path = images.save_png(out / "iso.png", labelled(img, iso, args.transparent))
     infilled = None
     if args.infill:
         from .. import post
 
         net = post.load("infill", queue=q)
         filled = net(img)
+        # iso.png shows the colour, hit and active planes: only these come back
+        img = dataclasses.replace(img, rgba=img.rgba.get(), hit=img.hit.get(), active=img.active.get())
         infilled = images.save_png(
             out / "iso-infill.png",
             images.label(
@@ -341,6 +352,7 @@ def _run(args) -> int:
                 f"isovalue {iso:g}, completion {img.completion:.3f}, in-filled by the network",
             ),
         )
+    path = images.save_png(out / "iso.png", labelled(img, iso, args.transparent))
     st = img.stats
     print(f"clvis iso: {source}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
     print(f"  device      {runtime.describe(q.device)}")

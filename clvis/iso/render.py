@@ -34,8 +34,10 @@ hits, t, depths and colours, bit for bit. n_spec is a tile's own (its pixels
 and its active rays); the candidates do not depend on how they are split into
 passes, so that changes the passes, not the image. The host image (rgba,
 depth, hit, t, active: HOST_PIXEL_BYTES per pixel) is allocated once and
-each tile is read back into it when it is done; runtime.check_memory checks
-both figures before anything is allocated. width x height must stay below
+each tile is read back into it when it is done (host=False: the same planes
+on the device, each tile written into them by pass.cl's tile_image and
+mark_active, nothing read back but the pass loop's counts);
+runtime.check_memory checks both figures before anything is allocated. width x height must stay below
 2^31 (MAX_PIXELS): the kernels index pixels with 32-bit integers.
 
 Completion is per tile: a tile stops once `completion` of its rays entering
@@ -109,7 +111,15 @@ TILE_BYTES = 256 * 2**20
 # host bytes per image pixel: rgba, depth, hit, t, active
 HOST_PIXEL_BYTES = 16 + 4 + 1 + 4 + 1
 _PASS = "iso/pass.cl"
-_PASS_KERNELS = ("valid_items", "gather_u32", "group_heads", "group_info", "resolve_hits")
+_PASS_KERNELS = (
+    "valid_items",
+    "gather_u32",
+    "group_heads",
+    "group_info",
+    "resolve_hits",
+    "tile_image",
+    "mark_active",
+)
 # the local size of pass.cl's one-item-per-element kernels (a fixed one: PoCL
 # would compile a work-group function for every size the driver chose)
 PROFILES = {"cpu": {"wg": 64}, "gpu": {"wg": 64}}
@@ -131,7 +141,8 @@ class IsoImage:
     from the ray's origin on the near plane; +inf elsewhere), ``active``
     (H, W) bool (rays still running),
     ``completion`` (the fraction of the rays entering the volume that are
-    finished) and ``stats``."""
+    finished) and ``stats``. From ``render(..., host=False)`` the five planes
+    are ``pyopencl.array.Array`` of the same shapes and dtypes."""
 
     rgba: np.ndarray
     depth: np.ndarray
@@ -164,6 +175,77 @@ class _HostImage:
             {},
         )
 
+    def mark_active(self, p0: int, ids: Any, count: int) -> None:
+        """Mark pixels p0 + ids[:count] (a device list) as running."""
+        if count:
+            self.active[p0 + ids[:count].get().astype(np.int64)] = True
+
+    def write_tile(self, tile: _Tile, active: Any) -> None:
+        """The tile's part of the image, `active` its rays still running (blocks)."""
+        q, sl = tile.q, slice(tile.p0, tile.p0 + tile.n)
+        tile.rgba.get(queue=q, ary=self.rgba[sl])
+        tile.depth.get(queue=q, ary=self.depth[sl])
+        tile.hit.get(queue=q, ary=self.hit[sl])
+        tile.hit_t.get(queue=q, ary=self.t[sl])
+        self.active[sl] = False
+        self.mark_active(tile.p0, active, int(active.size))
+
+
+class _DeviceImage:
+    """The image on the device (render(host=False)): whole-image planes the
+    tiles are written into by pass.cl's tile_image and mark_active; nothing
+    is read back."""
+
+    def __init__(self, renderer: IsoRenderer, npix: int) -> None:
+        q = self.q = renderer.queue
+        self.launch = renderer._launch
+        self.rgba = runtime.zeros(q, (npix, 4), np.float32, "iso image rgba")
+        self.depth = runtime.empty(q, npix, np.float32, "iso image depth")
+        self.hit = runtime.zeros(q, npix, np.uint8, "iso image hit mask")
+        self.t = runtime.empty(q, npix, np.float32, "iso image t")
+        self.active = runtime.zeros(q, npix, np.uint8, "iso image active mask")
+        for a in (self.depth, self.t):
+            runtime.fill(q, a, np.float32(np.inf))
+
+    def image(self, w: int, h: int, copy: bool) -> IsoImage:
+        def c(a: Any) -> Any:
+            return a.copy(queue=self.q) if copy else a
+
+        return IsoImage(
+            c(self.rgba).reshape(h, w, 4),
+            c(self.depth).reshape(h, w),
+            c(self.hit).view(np.bool_).reshape(h, w),
+            c(self.t).reshape(h, w),
+            c(self.active).view(np.bool_).reshape(h, w),
+            1.0,
+            {},
+        )
+
+    def mark_active(self, p0: int, ids: Any, count: int) -> None:
+        if count:
+            self.launch(
+                "mark_active", count, np.uint32(p0), ids.base_data, np.uint32(count), self.active.base_data
+            )
+
+    def write_tile(self, tile: _Tile, active: Any) -> None:
+        u32 = np.uint32
+        self.launch(
+            "tile_image",
+            tile.n,
+            u32(tile.p0),
+            u32(tile.n),
+            tile.hit.base_data,
+            tile.hit_t.base_data,
+            tile.rgba.base_data,
+            tile.depth.base_data,
+            self.hit.base_data,
+            self.t.base_data,
+            self.rgba.base_data,
+            self.depth.base_data,
+            self.active.base_data,
+        )
+        self.mark_active(tile.p0, active, int(active.size))
+
 
 class _Tile:
     """The device state of one tile's rays: pixels p0 .. p0 + n - 1."""
@@ -186,18 +268,11 @@ class _Tile:
             self.ray_t, active_all, count, self.hit, self.hit_t, self.depth, self.rgba, self.hitkey
         )
 
-    def read(self, out: _HostImage, active=None) -> None:
-        """Copy the tile's part of the image (rays still running: `active`,
-        default the tile's own list) into `out` (blocks until it is there)."""
-        q, sl = self.q, slice(self.p0, self.p0 + self.n)
-        self.rgba.get(queue=q, ary=out.rgba[sl])
-        self.depth.get(queue=q, ary=out.depth[sl])
-        self.hit.get(queue=q, ary=out.hit[sl])
-        self.hit_t.get(queue=q, ary=out.t[sl])
-        active = self.active if active is None else active
-        out.active[sl] = False
-        if active.size:
-            out.active[self.p0 + active.get(queue=q).astype(np.int64)] = True
+    def read(self, out: _HostImage | _DeviceImage, active=None) -> None:
+        """Write the tile's part of the image (rays still running: `active`,
+        default the tile's own list) into `out` (a host image: blocks until
+        it is there; a device image: two launches)."""
+        out.write_tile(self, self.active if active is None else active)
 
 
 class IsoRenderer:
@@ -288,9 +363,13 @@ class IsoRenderer:
         start_speculation: int = 1,
         tile_pixels: int | None = None,
         progress: Callable[[dict], None] | None = None,
+        host: bool = True,
     ) -> IsoImage:
         """Passes until `completion` of the rays are finished, tile by tile;
-        the image (each tile read back once, when it is done). See the module
+        the image (each tile read back once, when it is done). host=False:
+        the image's planes stay on the device (``pyopencl.array.Array``;
+        ``hit`` and ``active`` bool), each tile written into them by a kernel,
+        and nothing but the pass loop's counts is read back. See the module
         doc for tiles, `tile_pixels` and `progress`."""
         last = None
         with runtime.pinned(self.config):
@@ -304,6 +383,7 @@ class IsoRenderer:
                 start_speculation,
                 tile_pixels,
                 progress,
+                host,
             ):
                 pass
             return last(copy=False)
@@ -320,10 +400,21 @@ class IsoRenderer:
         start_speculation: int = 1,
         tile_pixels: int | None = None,
         progress: Callable[[dict], None] | None = None,
+        host: bool = True,
     ) -> Iterator[IsoImage]:
-        """Yield the partial image after each pass of each tile (see the module doc)."""
+        """Yield the partial image after each pass of each tile (see the module
+        doc); host=False: device images, each its own copy (see render)."""
         run = self._run(
-            camera, width, height, isovalue, completion, speculation, start_speculation, tile_pixels, progress
+            camera,
+            width,
+            height,
+            isovalue,
+            completion,
+            speculation,
+            start_speculation,
+            tile_pixels,
+            progress,
+            host,
         )
         while True:
             # pinned while the pass runs, not while the caller holds the image
@@ -368,9 +459,11 @@ class IsoRenderer:
         start_speculation,
         tile_pixels,
         progress,
+        host=True,
     ):
         """The pass loop, tile after tile: after each pass, a function that
-        reads the image back (copy=False: the renderer's host arrays themselves)."""
+        gives the image (copy=False: the renderer's image arrays themselves;
+        host=False: the device image, else read back)."""
         if not isinstance(camera, Camera):
             raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
         w, h = positive_int("width", width), positive_int("height", height)
@@ -393,18 +486,19 @@ class IsoRenderer:
             w, h, speculation=speculation, start_speculation=s, tile_pixels=tile_pixels
         )
         tiles = [(p0, min(tile, npix - p0)) for p0 in range(0, npix, tile)]
+        image_bytes = npix * HOST_PIXEL_BYTES
         runtime.check_memory(
             self.queue,
             f"iso image {w}x{h} ({len(tiles)} tiles of {tile} pixels)",
-            device_bytes=tile_bytes,
-            host_bytes=npix * HOST_PIXEL_BYTES,
+            device_bytes=tile_bytes + (0 if host else image_bytes),
+            host_bytes=image_bytes if host else 0,
         )
         q, zv = self.queue, self.volume
         shape, spacing, origin = zv.shape, self.spacing, self.origin
         start = runtime.marker(q)
         cam = runtime.empty(q, 22, np.float32, "camera rays")
         cam.set(ray_buffer(camera, w, h), queue=q)
-        out = _HostImage(npix)
+        out = _HostImage(npix) if host else _DeviceImage(self, npix)
         # the rays entering the volume, tile by tile: the totals of completion
         # and progress, and the active mask of the tiles not traced yet
         # (the first tile keeps its rays: it is traced next, and its own state
@@ -416,8 +510,8 @@ class IsoRenderer:
             entering.append(k)
             if ti == 0:
                 first_rays = rays
-            elif k:
-                out.active[p0 + rays[1][:k].get().astype(np.int64)] = True
+            else:
+                out.mark_active(p0, rays[1], k)
         n_total = sum(entering)
         int64 = self.config.int64_atomics
         stats = {

@@ -4,24 +4,32 @@
 whose call takes a renderer's own output and returns an RGBA8 picture:
 
 - "infill": an IsoImage (or anything with ``rgba``, ``hit`` and ``active``),
-  e.g. ``IsoRenderer.render(..., completion=0.85)``; the rays still running
-  are filled in, the finished pixels come back as they were. Alpha is the
-  surface's coverage (premultiplied colour over black).
+  e.g. ``IsoRenderer.render(..., completion=0.85, host=False)``; the rays
+  still running are filled in, the finished pixels come back as they were.
+  Alpha is the surface's coverage (premultiplied colour over black).
 - "lidar": a FilteredImage (``depth_filter(...)``, or its ``rgbda`` array
-  (H, W, 5)); alpha 255.
+  (H, W, 5), numpy or device: ``raster.rgbda(g.rgba, g.depth,
+  depth_filter_mask(g.depth))`` of ``host=False`` G-buffers); alpha 255.
 - "narvis": rasterizer G-buffers (``Rasterizer.render``'s GBuffers, numpy
   or ``host=False``) with the planes the card names (``planes``: by default
-  the colour, depth and screen velocity, so the cloud needs a velocity);
-  returns the Gaussian renderer's image of the same view as the network
-  predicts it (RGB premultiplied over black, alpha 255).
+  the colour, depth and screen velocity, so the cloud needs a velocity;
+  ``attribute_planes``: the attributes among them, what ``render(planes=)``
+  needs to resolve); returns the Gaussian renderer's image of the same view
+  as the network predicts it (RGB premultiplied over black, alpha 255).
 
-One frame: the pack kernel (clvis.post.pack) writes the network's NCHW
-float32 input into a buffer allocated host-visible (ALLOC_HOST_PTR) and
-mapped, which onnxruntime reads through IO binding with no copy on CPU
-devices (on a GPU the map is the frame's one read-back: onnxruntime has no
-OpenCL provider); onnxruntime writes its output into a host array, which
-the unpack kernel turns into RGBA8, cropping the padding off. ``stats``
-holds the last call's seconds per stage (pack, inference, unpack).
+One frame, the data on the device until onnxruntime needs it: the pack
+kernel (clvis.post.pack) reads device planes where they are (a numpy plane
+is uploaded once) and writes the network's NCHW float32 input into a buffer
+allocated host-visible (ALLOC_HOST_PTR); onnxruntime reads it and writes its
+output into a second such buffer, both mapped and bound by pointer (IO
+binding), and the unpack kernel turns the output into RGBA8 where it lies,
+cropping the padding off; the picture is read back. On a CPU device the
+maps copy nothing; on a GPU (onnxruntime has no OpenCL provider) the input's
+map is the frame's one read-back of the tensor and the output's unmap its
+one upload. Per pixel that is C_in x 4 bytes down, C_out x 4 up and the
+picture's 4 down (tests/post/test_transfers.py holds the documented
+pipelines to it). ``stats`` holds the last call's seconds per stage (pack,
+inference, unpack).
 
 onnxruntime runs on its CPU provider by default (CUDA's first when the
 installed onnxruntime has it), with one intra-op thread per core and its
@@ -53,7 +61,7 @@ import pyopencl.array as cla
 from .. import limits
 from .._arrays import resolve_queue
 from ..errors import DataError
-from .names import NAMES
+from .names import GBUFFER_PLANES, NAMES
 from .pack import pack_gbuffers, pack_iso, pack_rgbda, padded_shape, unpack_rgba8
 
 __all__ = ["MAX_PIXELS", "MAX_SIDE", "MODELS", "PRECISIONS", "PostNetwork", "load", "sha256"]
@@ -146,25 +154,31 @@ class PostNetwork:
         self.stride = int(card["stride"])
         self.channels_in = int(card["channels_in"])
         self.planes = tuple(card.get("architecture", {}).get("planes") or ())
+        #: the attribute planes the network reads: a render for it resolves
+        #: these alone (``Rasterizer.render(..., planes=net.attribute_planes,
+        #: host=False)``); empty for in-fill and LiDAR
+        self.attribute_planes = tuple(p for p in self.planes if p not in GBUFFER_PLANES)
         self.channels_out = int(card["channels_out"])
         self.queue = resolve_queue(queue)
         self.stats: dict[str, float] = {}
-        self._buffers: dict[tuple[int, int], tuple[cla.Array, np.ndarray]] = {}
+        self._buffers: dict[tuple[int, int], tuple[cla.Array, cla.Array]] = {}
 
     def __repr__(self) -> str:
         return f"PostNetwork({self.name!r}, {self.precision}, {self.session.get_providers()[0]})"
 
-    def _buffers_for(self, hp: int, wp: int) -> tuple[cla.Array, np.ndarray]:
-        """The host-visible input buffer and the host output array of a size
-        (kept for the next frame of the same size)."""
+    def _buffers_for(self, hp: int, wp: int) -> tuple[cla.Array, cla.Array]:
+        """The host-visible (ALLOC_HOST_PTR) input and output tensors of a
+        size, as device arrays (kept for the next frame of the same size)."""
         key = (hp, wp)
         if key not in self._buffers:
             self._buffers.clear()
-            shape = (1, self.channels_in, hp, wp)
             flags = cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR
-            data = cl.Buffer(self.queue.context, flags, int(np.prod(shape)) * 4)
-            planes = cla.Array(self.queue, shape, np.float32, data=data)
-            self._buffers[key] = planes, np.empty((1, self.channels_out, hp, wp), np.float32)
+            tensors = []
+            for c in (self.channels_in, self.channels_out):
+                shape = (1, c, hp, wp)
+                data = cl.Buffer(self.queue.context, flags, int(np.prod(shape)) * 4)
+                tensors.append(cla.Array(self.queue, shape, np.float32, data=data))
+            self._buffers[key] = tensors[0], tensors[1]
         return self._buffers[key]
 
     def _size(self, image: Any) -> tuple[int, int]:
@@ -181,7 +195,8 @@ class PostNetwork:
         elif self.name == "infill":
             if not all(hasattr(image, k) for k in ("rgba", "hit", "active")):
                 raise TypeError(f"image: the infill network takes an IsoImage, got {type(image).__name__}")
-            shape = tuple(np.shape(image.rgba))
+            rgba = image.rgba
+            shape = tuple(rgba.shape if hasattr(rgba, "shape") else np.shape(rgba))
             if len(shape) != 3 or shape[2] != 4:
                 raise ValueError(f"rgba: expected (H, W, 4), got shape {shape}")
         else:
@@ -203,13 +218,15 @@ class PostNetwork:
             )
         return h, w
 
-    def _run(self, image: Any) -> tuple[np.ndarray, int, int]:
-        """(output, H, W): the network's output in this object's host array
-        (reused by the next frame of the same size) and the image's size."""
+    def _run(self, image: Any) -> tuple[cla.Array, int, int]:
+        """(output, H, W): the network's output, in this object's host-visible
+        device array (reused by the next frame of the same size), and the
+        image's size."""
         t0 = time.perf_counter()
         h, w = self._size(image)
         planes, output = self._buffers_for(*padded_shape(h, w, self.stride))
         q, s = self.queue, self.stride
+        # device planes are packed as they are; a host plane is uploaded once.
         # each pack reads its input check back, so the kernel is done on return
         if self.name == "narvis":
             pack_gbuffers(image, self.planes, stride=s, out=planes, queue=q)
@@ -218,31 +235,50 @@ class PostNetwork:
         else:
             pack_rgbda(getattr(image, "rgbda", image), stride=s, out=planes, queue=q)
         t1 = time.perf_counter()
-        mapped, _ = cl.enqueue_map_buffer(
+        # onnxruntime reads the input and writes the output through host
+        # pointers to the two host-visible buffers (IO binding): on a CPU
+        # device no copy; on a GPU the input's map is a read-back and the
+        # output's unmap the upload the unpack kernel needs
+        mapped_in, _ = cl.enqueue_map_buffer(
             q, planes.base_data, cl.map_flags.READ, 0, planes.shape, np.float32, is_blocking=True
         )
         try:
-            io = self.session.io_binding()
-            io.bind_input(self._in, "cpu", 0, np.float32, list(planes.shape), mapped.ctypes.data)
-            io.bind_output(self._out, "cpu", 0, np.float32, list(output.shape), output.ctypes.data)
-            self.session.run_with_iobinding(io)
+            mapped_out, _ = cl.enqueue_map_buffer(
+                q,
+                output.base_data,
+                cl.map_flags.WRITE_INVALIDATE_REGION,
+                0,
+                output.shape,
+                np.float32,
+                is_blocking=True,
+            )
+            try:
+                io = self.session.io_binding()
+                io.bind_input(self._in, "cpu", 0, np.float32, list(planes.shape), mapped_in.ctypes.data)
+                io.bind_output(self._out, "cpu", 0, np.float32, list(output.shape), mapped_out.ctypes.data)
+                self.session.run_with_iobinding(io)
+            finally:
+                mapped_out.base.release()
         finally:
-            mapped.base.release()
+            mapped_in.base.release()
         self.stats = {"pack": t1 - t0, "inference": time.perf_counter() - t1}
         return output, h, w
 
     def infer(self, image: Any) -> np.ndarray:
         """The network's raw output for `image`: (1, C, Hp, Wp) float32 (C: 4
         for infill, 3 for lidar and narvis), padded to the stride."""
-        return self._run(image)[0].copy()
+        return self._run(image)[0].get()
 
     def __call__(self, image: Any) -> np.ndarray:
-        """(H, W, 4) uint8 RGBA: the network's picture of `image`."""
+        """(H, W, 4) uint8 RGBA: the network's picture of `image` (the unpack
+        kernel reads the network's output where onnxruntime wrote it; the
+        picture is the one read-back)."""
         output, h, w = self._run(image)
         t0 = time.perf_counter()
         rgba = unpack_rgba8(output, h, w, queue=self.queue)
+        picture = rgba.get() if isinstance(rgba, cla.Array) else rgba
         self.stats["unpack"] = time.perf_counter() - t0
-        return np.asarray(rgba)
+        return picture
 
 
 def load(

@@ -284,8 +284,13 @@ def pack_gbuffers(
     idx = to_device(queue, "index", index)
     dims = (u32(w), u32(h), u32(wp), u32(hp))
     launch("pack_rgb_coverage", hp * wp, buf(to_device(queue, "rgba", rgba)), buf(idx), *dims, buf(dst))
+    # each plane crosses to the device once: vel2d's x and y channels are
+    # two sources over one array
+    uploaded: dict[int, cla.Array] = {}
     for c, (name, a, offset, step) in enumerate(sources):
-        src = to_device(queue, name, check_array(name, a, dtypes=[np.float32]))
+        src = uploaded.get(id(a))
+        if src is None:
+            src = uploaded[id(a)] = to_device(queue, name, check_array(name, a, dtypes=[np.float32]))
         launch(
             "pack_plane",
             hp * wp,

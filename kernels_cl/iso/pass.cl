@@ -42,6 +42,22 @@
  *     both). A winner's t, rgba and depth go to pixel p, hit[p] = 1,
  *     ray_t[p] = +INFINITY and still[i] = 0; otherwise still[i] = 1 when
  *     ray_t[p] (where traverse.cl left the ray) is finite, else 0.
+ *
+ * The image on the device (IsoRenderer.render(host=False)): whole-image
+ * planes indexed by pixel p = py * W + px, a tile's pixels p0 .. p0 + n - 1.
+ *
+ * kernel tile_image(uint p0, uint n,
+ *                   global const uchar *hit, global const float *hit_t,
+ *                   global const float4 *rgba, global const float *depth,
+ *                   global uchar *img_hit, global float *img_t, global float4 *img_rgba,
+ *                   global float *img_depth, global uchar *img_active)
+ *     Per tile pixel j < n (the tile's arrays, as resolve_hits leaves them),
+ *     p = p0 + j: img_hit[p] = hit[j], img_t[p] = hit_t[j], img_rgba[p] =
+ *     rgba[j], img_depth[p] = depth[j], img_active[p] = 0.
+ *
+ * kernel mark_active(uint p0, global const uint *active, uint count, global uchar *img_active)
+ *     img_active[p0 + active[i]] = 1 for i < count (the tile's rays still
+ *     running; run after tile_image).
  */
 #include "clvis/atomics.h"
 
@@ -110,4 +126,27 @@ kernel void resolve_hits(global const uint *active, uint count, uint n_spec,
     } else {
         still[i] = isfinite(ray_t[p]) ? 1 : 0;
     }
+}
+
+kernel void tile_image(uint p0, uint n, global const uchar *hit, global const float *hit_t,
+                       global const float4 *rgba, global const float *depth, global uchar *img_hit,
+                       global float *img_t, global float4 *img_rgba, global float *img_depth,
+                       global uchar *img_active)
+{
+    uint j = get_global_id(0);
+    if (j >= n)
+        return;
+    uint p = p0 + j;
+    img_hit[p] = hit[j];
+    img_t[p] = hit_t[j];
+    img_rgba[p] = rgba[j];
+    img_depth[p] = depth[j];
+    img_active[p] = 0;
+}
+
+kernel void mark_active(uint p0, global const uint *active, uint count, global uchar *img_active)
+{
+    uint i = get_global_id(0);
+    if (i < count)
+        img_active[p0 + active[i]] = 1;
 }

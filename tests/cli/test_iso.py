@@ -86,3 +86,19 @@ def test_iso_bad_raw(tmp_path, capsys):
     (tmp_path / "x_4x4x4_uint8.raw").write_bytes(b"\0" * 10)
     assert cli.main(["iso", str(tmp_path / "x_4x4x4_uint8.raw"), "--out", str(tmp_path)]) == 2
     assert "x_4x4x4_uint8.raw" in capsys.readouterr().err
+
+
+def test_iso_infill(tmp_path, capsys):
+    """--infill: the image stays on the device for the network; iso.png (its
+    colour, hit and active planes read back) is the plain render's."""
+    args = ["iso", "--dataset", "turbulence", "--no-speculation", "--completion", "0.8", "--size", "64x48"]
+    assert cli.main([*args, "--out", str(tmp_path / "plain")]) == 0
+    assert cli.main([*args, "--infill", "--out", str(tmp_path / "net")]) == 0
+    out = capsys.readouterr().out
+    assert "in-fill" in out and "iso-infill.png" in out
+    with Image.open(tmp_path / "plain" / "iso.png") as a, Image.open(tmp_path / "net" / "iso.png") as b:
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    with Image.open(tmp_path / "net" / "iso-infill.png") as im:
+        a = np.asarray(im)
+    assert a.shape[1] == 64 and a.std() > 1
+    assert not ((a[..., 0] == 255) & (a[..., 1] == 0) & (a[..., 2] == 255)).any()  # no magenta left

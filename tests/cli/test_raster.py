@@ -376,3 +376,20 @@ def test_render_error_exit_status(tmp_path):
     assert r.returncode == 2
     assert r.stderr == "clvis render: error: nowhere.las: no such file\n"
     assert r.stdout == ""
+
+
+@pytest.mark.parametrize(
+    "args,panel",
+    [
+        (["--post", "narvis"], "post-narvis"),
+        (["--dataset", "terrain", "--depth-filter", 3, "--post", "lidar"], "post-lidar"),
+    ],
+    ids=["narvis", "lidar"],
+)
+def test_render_post(tmp_path, capsys, args, panel):
+    """--post runs the network on the device path (a render of the planes it
+    reads) and writes its picture beside the host render's panels."""
+    rc, out, err = _render(capsys, "--points", 20000, *args, "--out", tmp_path, *SMALL)
+    assert rc == 0, err
+    _assert_picture(tmp_path / f"{panel}.png")
+    assert "a frame from render to picture, G-buffers on the device" in out

@@ -131,6 +131,7 @@ def test_nothing_to_hit(queue):
     away = _cam(eye=(0, -6, 0), target=(0, -9, 0))
     img = r.render(away, W, H, 0.5)  # no ray meets the volume
     assert not img.hit.any() and img.stats["passes"] == 0 and img.stats["rays_entering"] == 0
+    _same(_got(r.render(away, W, H, 0.5, host=False)), img)  # the empty image on the device
 
 
 def test_dense_input_and_bad_arguments(queue):
@@ -320,6 +321,40 @@ def test_passes_and_progress_over_tiles(queue):
     first = images[0]
     assert not first.hit[10:].any() and first.active[10:].any()
     _same(images[-1], r.render(_cam(), W, H, 0.5))
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [{}, {"completion": 0.6, "speculation": False}, {"completion": 0.6, "tile_pixels": 97}],
+    ids=["whole", "partial", "partial-tiles"],
+)
+def test_device_image_is_the_host_image(queue, kw):
+    """host=False: the planes stay on the device (pass.cl's tile_image and
+    mark_active write each tile into them) and equal the host image bit for
+    bit, after every pass too; hit and active are bool, as on the host."""
+    import pyopencl.array as cla
+
+    d = _TURB
+    r = iso.IsoRenderer(d["volume"], 8, d["spacing"], d["origin"], queue=queue)
+    host = r.render(_cam(), W, H, 0.5, **kw)
+    dev = r.render(_cam(), W, H, 0.5, host=False, **kw)
+    assert dev.completion == host.completion and dev.stats["passes"] == host.stats["passes"]
+    for name in ("rgba", "depth", "hit", "t", "active"):
+        a = getattr(dev, name)
+        assert isinstance(a, cla.Array) and a.dtype == getattr(host, name).dtype
+    _same(_got(dev), host)
+    if kw.get("completion", 1) < 1:
+        assert host.active.any()
+    passes = list(r.passes(_cam(), W, H, 0.5, host=False, **kw))
+    want = list(r.passes(_cam(), W, H, 0.5, **kw))
+    assert len(passes) == len(want) > 1
+    for got, ref_image in zip(passes, want, strict=True):  # each a snapshot of its pass
+        _same(_got(got), ref_image)
+
+
+def _got(image):
+    """A device IsoImage's planes read back."""
+    return type(image)(*(getattr(image, k).get() for k in ("rgba", "depth", "hit", "t", "active")), 1.0, {})
 
 
 def test_tile_plan_and_memory_check(queue, monkeypatch):

@@ -249,6 +249,11 @@ def iso_render(q):
     r.render(_iso_cam(8, 8, (-20.0, 30.0, -10.0)), 8, 8, 0.5, completion=0.9, speculation=False)
     # tiles of 37 pixels: every kernel starts mid-row at a tile's first pixel
     r.render(_iso_cam(w, h), w, h, 0.3, tile_pixels=37)
+    # the image on the device (tile_image, mark_active): tiles stopped early,
+    # and the passes' snapshots with tiles not started yet
+    r.render(_iso_cam(w, h), w, h, 0.3, completion=0.5, speculation=False, tile_pixels=37, host=False)
+    for _ in r.passes(_iso_cam(w, h), w, h, 0.3, tile_pixels=97, host=False):
+        pass
 
 
 @case

@@ -344,7 +344,8 @@ def _run(args) -> int:
         net = post.load("infill", queue=q)
         filled = net(img)
         # iso.png shows the colour, hit and active planes: only these come back
-        img = dataclasses.replace(img, rgba=img.rgba.get(), hit=img.hit.get(), active=img.active.get())
+        dev = typing.cast(typing.Any, img)  # rendered with host=False: device planes
+        img = dataclasses.replace(img, rgba=dev.rgba.get(), hit=dev.hit.get(), active=dev.active.get())
         infilled = images.save_png(
             out / "iso-infill.png",
             images.label(

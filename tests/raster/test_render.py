@@ -50,7 +50,13 @@ def _assert_gbuffers(got, want):
         if a is not None:
             np.testing.assert_array_equal(a, b)
     if want.vel_angle is not None:
-        np.testing.assert_allclose(got.vel_angle, want.vel_angle, rtol=0, atol=4e-7)
+        # OpenCL's atan2 is specified to 6 ulp (OpenCL C 1.2, 7.4), not correctly rounded:
+        # Intel's runtime differs from numpy's by up to 2 ulp near +-pi
+        ulp = np.spacing(np.abs(np.nan_to_num(want.vel_angle)).astype(np.float32))
+        err = np.abs(np.nan_to_num(got.vel_angle) - np.nan_to_num(want.vel_angle))
+        assert (err <= 6 * ulp).all(), (
+            f"vel_angle off by {float((err / ulp).max()):.1f} ulp (OpenCL allows 6)"
+        )
         np.testing.assert_array_equal(np.isnan(got.vel_angle), np.isnan(want.vel_angle))
 
 

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 import os
-import threading
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
@@ -42,16 +41,14 @@ import numpy as np
 
 from .._arrays import triple
 from ..camera import Camera
-from ..errors import ClvisError, DataError, DeviceError
+from ..errors import ClusterError, ClvisError, DataError, DeviceError
 from ..iso import IsoImage, IsoRenderer
 from . import composite as _c
-from .cluster import ClusterOwner, current_worker, device_error, frame_seconds
+from .cluster import CONNECT_TIMEOUT, REGISTRY, ClusterOwner, current_worker, device_error, frame_seconds
 
 __all__ = ["DistributedIsoRenderer", "brick_plan"]
 
 ZFP_BLOCK = 4
-_RESIDENT: dict[str, IsoRenderer] = {}
-_LOCK = threading.Lock()
 
 
 def brick_plan(shape: Sequence[int], brick: int | Sequence[int]) -> list[tuple[tuple[int, int], ...]]:
@@ -174,9 +171,7 @@ def _build_here(spec: dict) -> IsoRenderer:
         r = IsoRenderer(data, spec["rate"], spec["spacing"], spec["origin"], queue=q)
     except DeviceError as e:
         raise device_error(e) from e
-    with _LOCK:
-        _RESIDENT[spec["token"]] = r
-    return r
+    return REGISTRY.put(spec["token"], r)
 
 
 def _build(spec: dict) -> _Handle:
@@ -187,47 +182,28 @@ def _build(spec: dict) -> _Handle:
 
 
 def _renderer(handle: _Handle, data: Any) -> IsoRenderer:
-    with _LOCK:
-        r = _RESIDENT.get(handle.token)
+    r = REGISTRY.get(handle.token)
     if r is None:  # this process never built it (a worker lost, a task moved)
         spec = handle.spec if data is None else {**handle.spec, "source": data}
         r = _build_here(spec)
     return r
 
 
-def _forget(tokens: list) -> None:
-    with _LOCK:
-        for t in tokens:
-            _RESIDENT.pop(t, None)
-
-
-def _render_bricks(parts: list, view: dict) -> _c.Partial:
-    """Task: render the bricks given, composited here by the min key."""
-    import time
-
-    worker = current_worker()
-    t0 = time.perf_counter()
-    partials = []
-    passes = 0
-    for handle, data in parts:
-        img = _renderer(handle, data).render(
-            view["camera"],
-            view["width"],
-            view["height"],
-            view["isovalue"],
-            speculation=view["speculation"],
-        )
-        passes += int(img.stats.get("passes", 0))
-        number = np.uint32(handle.spec["number"])
-        planes = {"rgba": img.rgba, "t": img.t}  # depth and hit travel in the key
-        key = _c.depth_keys(img.depth, np.full(img.hit.shape, number), img.hit)
-        partials.append(_c.Partial((0, view["height"]), key, planes, worker))
-    t1 = time.perf_counter()
-    out = _c.composite(partials, worker)
-    out.sent = {}
-    out.seconds = {f"render {worker}": t1 - t0, f"composite {worker}": time.perf_counter() - t1}
-    out.counts = {"bricks": len(parts), "passes": passes}
-    return out
+def render_one(handle: _Handle, data: Any, view: dict) -> _c.Partial:
+    """The full-frame partial of one brick (cluster.render_partial composites
+    a worker's): depth and hit travel in the key, the brick's number as id."""
+    img = _renderer(handle, data).render(
+        view["camera"],
+        view["width"],
+        view["height"],
+        view["isovalue"],
+        speculation=view["speculation"],
+    )
+    number = np.uint32(handle.spec["number"])
+    planes = {"rgba": img.rgba, "t": img.t}
+    key = _c.depth_keys(img.depth, np.full(img.hit.shape, number), img.hit)
+    counts = {"bricks": 1, "passes": int(img.stats.get("passes", 0))}
+    return _c.Partial((0, view["height"]), key, planes, current_worker(), counts=counts)
 
 
 class DistributedIsoRenderer(ClusterOwner):
@@ -235,12 +211,14 @@ class DistributedIsoRenderer(ClusterOwner):
     :class:`clvis.iso.IsoRenderer` renders it (the module doc says how).
 
     volume_or_bricks: a 3-D [z, y, x] array (bricks sliced on the client and
-    sent to the workers), or a volume file (.npy, .raw with `shape`/`dtype`
-    as :func:`clvis.volumes.read_volume` takes them, .nii/.nii.gz) read
-    brick by brick on the workers. rate: ZFP bits per value. spacing
-    (dz, dy, dx): default the file's (NIfTI) or ones; origin: world (x, y, z)
-    of sample [0, 0, 0]. brick: cells per brick edge, a multiple of 4 (one
-    int or three). client, workers, compositing, timeout: as for
+    sent to the workers; the client keeps the array, unchanged, to send a
+    brick again when a worker is lost with it), or a volume file (.npy, .raw
+    with `shape`/`dtype` as :func:`clvis.volumes.read_volume` takes them,
+    .nii/.nii.gz) read brick by brick on the workers. rate: ZFP bits per
+    value. spacing (dz, dy, dx): default the file's (NIfTI) or ones; origin:
+    world (x, y, z) of sample [0, 0, 0]. brick: cells per brick edge, a
+    multiple of 4 (one int or three). client, workers, compositing,
+    timeout, connect_timeout: as for
     :class:`clvis.distributed.DistributedRasterizer`.
     """
 
@@ -259,6 +237,7 @@ class DistributedIsoRenderer(ClusterOwner):
         compositing: str = "direct",
         workers: int = 2,
         timeout: float = 300.0,
+        connect_timeout: float = CONNECT_TIMEOUT,
     ) -> None:
         if compositing not in ("direct", "tree"):
             raise ValueError(f"compositing: expected 'direct' or 'tree', got {compositing!r}")
@@ -269,12 +248,14 @@ class DistributedIsoRenderer(ClusterOwner):
             if v.ndim != 3 or v.dtype.kind not in "iuf":
                 raise ValueError(f"volume: expected a 3-D real array [Z, Y, X], got {v.dtype} {v.shape}")
         o = triple("origin", origin, positive=False)
-        super().__init__(client, workers, timeout)
+        super().__init__(client, workers, timeout, connect_timeout)
+        self._source = None if is_path else v
         try:
             if is_path:
                 path = str(volume_or_bricks)
                 lay = self._gather(
-                    [self.client.submit(_layout, path, shape, dtype, volume_index, pure=False)]
+                    [self.client.submit(_layout, path, shape, dtype, volume_index, pure=False)],
+                    f"reading the header of {path}",
                 )[0]
                 self.volume_shape = tuple(lay["shape"])
                 default_spacing = lay["spacing"]
@@ -285,45 +266,66 @@ class DistributedIsoRenderer(ClusterOwner):
             self.spacing, self.origin = sp, o
             self.bricks = brick_plan(self.volume_shape, brick)
             token = uuid.uuid4().hex
-            specs, self._arrays = [], []
+            self._specs = []
             for i, ranges in enumerate(self.bricks):
                 (z0, _), (y0, _), (x0, _) = ranges
-                spec = {
-                    "token": f"{token}-{i}",
-                    "number": i,
-                    "ranges": ranges,
-                    "rate": rate,
-                    "spacing": sp,
-                    "origin": (o[0] + x0 * sp[2], o[1] + y0 * sp[1], o[2] + z0 * sp[0]),
-                    "source": (path, lay) if is_path else None,
-                }
-                specs.append(spec)
-                if is_path:
-                    self._arrays.append(None)
-                else:  # the brick's samples, scattered to a worker once
-                    sl = tuple(slice(a, b) for a, b in ranges)
-                    self._arrays.append(
-                        self.client.scatter(np.ascontiguousarray(v[sl], np.float32), hash=False)
-                    )
-            self._tokens = [s["token"] for s in specs]
-            self._handles = [
-                self.client.submit(_build_from, s, a, pure=False, **self._near(self._who_has([a]), a))
-                if a is not None
-                else self.client.submit(_build_from, s, None, pure=False)
-                for s, a in zip(specs, self._arrays, strict=True)
-            ]
-            handles = self._gather(self._handles)
-            self.compressed_bytes = int(sum(h.compressed_bytes for h in handles))
+                self._specs.append(
+                    {
+                        "token": f"{token}-{i}",
+                        "number": i,
+                        "ranges": ranges,
+                        "rate": rate,
+                        "spacing": sp,
+                        "origin": (o[0] + x0 * sp[2], o[1] + y0 * sp[1], o[2] + z0 * sp[0]),
+                        "source": (path, lay) if is_path else None,
+                    }
+                )
+            tokens = [s["token"] for s in self._specs]
+            self.hold([], [], tokens)  # what close() lets go of if this fails
+            arrays = [self._scatter(i) for i in range(len(self.bricks))]
+            handles = [self._submit_build(i, a) for i, a in enumerate(arrays)]
+            self.hold(handles, arrays, tokens)
+            self._built = self._gather(handles, f"building {len(handles)} bricks")
+            self.compressed_bytes = int(sum(h.compressed_bytes for h in self._built))
         except BaseException:
             self.close()
             raise
 
-    def close(self) -> None:
-        """Let go of the bricks on the workers; close a cluster started here."""
-        tokens = getattr(self, "_tokens", None)
-        if tokens:
-            self._run_on_workers(_forget, tokens)
-        super().close()
+    def _scatter(self, i: int) -> Any:
+        """Brick i's samples sent to a worker (None for a file: read there)."""
+        if self._source is None:
+            return None
+        sl = tuple(slice(a, b) for a, b in self.bricks[i])
+        return self.client.scatter(
+            np.ascontiguousarray(self._source[sl], np.float32), hash=False, timeout=self.timeout
+        )
+
+    def _submit_build(self, i: int, data: Any) -> Any:
+        near = self._near(self._who_has([data]), data) if data is not None else {}
+        return self.client.submit(_build_from, self._specs[i], data, pure=False, **near)
+
+    def _recover(self) -> None:
+        """Bricks of an array lost with a worker: sent again from the
+        client's array and built again (file bricks: Dask builds them again)."""
+        if self._source is None:
+            return
+        lost = [
+            i
+            for i, (h, a) in enumerate(zip(self._handles, self._arrays, strict=True))
+            if a.status != "finished" or h.status != "finished"
+        ]
+        for i in lost:
+            self._arrays[i] = self._scatter(i)
+            self._handles[i] = self._submit_build(i, self._arrays[i])
+        try:
+            rebuilt = self._gather([self._handles[i] for i in lost], f"rebuilding {len(lost)} lost bricks")
+        except ClusterError as e:
+            gone = ", ".join(f"brick {i} {self.bricks[i]} (was on {self._built[i].worker})" for i in lost[:4])
+            raise ClusterError(
+                f"{gone}{' ...' if len(lost) > 4 else ''}: lost and not rebuilt: {e}"
+            ) from None
+        for i, h in zip(lost, rebuilt, strict=True):
+            self._built[i] = h
 
     def render(
         self,
@@ -339,6 +341,7 @@ class DistributedIsoRenderer(ClusterOwner):
         seconds, bytes_sent (as ``DistributedRasterizer.render``'s)."""
         from ..raster.render import _check_size
 
+        self._check_open()
         if not isinstance(camera, Camera):
             raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
         width, height = _check_size(width, height)
@@ -351,7 +354,7 @@ class DistributedIsoRenderer(ClusterOwner):
             "isovalue": float(isovalue),
             "speculation": bool(speculation),
         }
-        whole, frame, sent, nworkers = self._frame(_render_bricks, view)
+        whole, frame, sent, nworkers = self._frame(render_one, view)
         p = whole.planes
         hit = whole.key != _c.EMPTY_KEY
         return IsoImage(

@@ -155,36 +155,37 @@ def frame_seconds(frame: float, seconds: dict) -> dict:
 
 
 def _ignore_sigint() -> None:
-    """Worker plugin: a terminal's Ctrl-C reaches the whole process group;
-    the process that started the cluster stops its workers, so they ignore it."""
     with contextlib.suppress(ValueError):  # not the main thread: nothing to do
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _quiet_workers() -> Any:
-    """A WorkerPlugin that runs _ignore_sigint in every worker process, those
-    the nanny starts again included."""
+    """A WorkerPlugin that makes every worker process ignore SIGINT, those the
+    nanny starts again after a loss included."""
     d = _distributed()
 
-    class QuietWorkers(d.WorkerPlugin):
-        name = "clvis-ignore-sigint"
+    class IgnoreSigint(d.WorkerPlugin):
         idempotent = True
+        name = "clvis-ignore-sigint"
 
         def setup(self, worker: Any) -> None:
             _ignore_sigint()
 
-    return QuietWorkers()
+    return IgnoreSigint()
 
 
 def start_cluster(workers: int, **kw: Any) -> Any:
     """A LocalCluster of `workers` processes, one thread each, the dashboard
-    on a free port; the worker processes ignore SIGINT (the client stops them)."""
+    on a free port. Its worker processes ignore SIGINT: a terminal's Ctrl-C
+    reaches the whole process group, and the process that started them
+    stops them (their tracebacks would say nothing). They inherit the
+    ignoring through exec, so SIGINT is ignored here while they start: a
+    Ctrl-C in those seconds is lost (press it again)."""
     d = _distributed()
     kw.setdefault("processes", True)
-    old = signal.getsignal(signal.SIGINT)
+    kw.setdefault("silence_logs", logging.ERROR)  # the workers' warnings of a cluster stopped on purpose
     main = threading.current_thread() is threading.main_thread()
-    if main:  # inherited through exec by the first worker processes
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     try:
         return d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw)
     finally:

@@ -158,16 +158,15 @@ def _meta(cloud: PointCloud) -> dict:
         "dtypes": [str(v.dtype) for v in cloud.attributes.values()],
         "fields": tuple(f for f in ("colors", "velocity", "radius") if getattr(cloud, f) is not None),
         "ranges": ranges,
-        "bounds": _bounds(cloud),
     }
 
 
 def _bounds(cloud: PointCloud):
+    """(min, max) of the finite positions as stored (local coordinates), or None."""
     try:
-        lo, hi = cloud.bounds()
+        return cloud.bounds()
     except ValueError:  # no finite point
         return None
-    return lo + cloud.origin, hi + cloud.origin
 
 
 def _open(spec: dict, arrays: Any = None) -> dict:
@@ -189,6 +188,7 @@ class _Handle:
         self.origin, self.offsets, self.ns, self.options = origin, list(offsets), list(ns), options
         self.worker = current_worker()
         self.device_bytes = 0
+        self.bounds = None  # (min, max) of its points relative to origin, float64
 
     @property
     def token(self) -> str:
@@ -247,6 +247,7 @@ def _build_here(handle: _Handle, arrays: Any = None) -> Rasterizer:
             radius=cloud.radius,
             origin=handle.origin,
         )
+        handle.bounds = _bounds(shifted)
         r = Rasterizer(
             shifted,
             morton=o["morton"],
@@ -440,12 +441,6 @@ class DistributedRasterizer(ClusterOwner):
         self.attribute_names = metas[0]["names"]
         self.fields = metas[0]["fields"]
         self._ranges = {k: _merge_ranges([m["ranges"][k] for m in metas]) for k in self.attribute_names}
-        b = [m["bounds"] for m in metas if m["bounds"] is not None]
-        self.bounds = (
-            (np.min([x[0] for x in b], axis=0) - origin, np.max([x[1] for x in b], axis=0) - origin)
-            if b
-            else None
-        )
         # the partitions each worker opened become one Rasterizer there: one
         # render, one resolve and one partial per worker and frame
         where = self._who_has(opened)
@@ -472,6 +467,10 @@ class DistributedRasterizer(ClusterOwner):
         self.npartitions = len(specs)
         built = self._gather(handles, f"building {len(handles)} Rasterizers")
         self.device_bytes = int(sum(h.device_bytes for h in built))
+        b = [h.bounds for h in built if h.bounds is not None]
+        self.bounds = (  # of the float32 positions the workers hold: the concatenated cloud's, exactly
+            (np.min([x[0] for x in b], axis=0), np.max([x[1] for x in b], axis=0)) if b else None
+        )
         self.hold(handles, held, [s["token"] for s in specs] + [h.token for h in built])
         self._run_on_workers(forget, [s["token"] for s in specs])  # clouds opened where not built
 

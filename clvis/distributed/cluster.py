@@ -423,7 +423,7 @@ class ClusterOwner:
                     raise ClusterError(f"{e}; still lost after {FRAME_RETRIES} recoveries") from None
                 self._recover()
         frame = time.perf_counter() - t0
-        whole = _c.assemble(final)
+        whole = _c.assemble(final, (view["height"], view["width"]))
         sent = dict(whole.sent)
         for p in final:  # each band's last hop: to the client
             if p.worker is not None:

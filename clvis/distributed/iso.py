@@ -189,21 +189,76 @@ def _renderer(handle: _Handle, data: Any) -> IsoRenderer:
     return r
 
 
-def render_one(handle: _Handle, data: Any, view: dict) -> _c.Partial:
-    """The full-frame partial of one brick (cluster.render_partial composites
-    a worker's): depth and hit travel in the key, the brick's number as id."""
-    img = _renderer(handle, data).render(
-        view["camera"],
-        view["width"],
-        view["height"],
-        view["isovalue"],
-        speculation=view["speculation"],
+EMPTY_PLANES = {"rgba": 0.0, "t": np.inf}  # an IsoImage's planes where no ray hit
+
+
+def footprint(spec: dict, camera: Camera, width: int, height: int) -> tuple[int, int, int, int] | None:
+    """(first row, end row, first column, end column) of the pixels whose
+    rays can meet the brick's box (the box of its samples projected, a pixel
+    of margin for rounding), clipped to the frame; None when a corner is not
+    in front of the eye (then the whole frame)."""
+    (z0, z1), (y0, y1), (x0, x1) = spec["ranges"]
+    dz, dy, dx = spec["spacing"]
+    ox, oy, oz = spec["origin"]
+    xs = (ox, ox + (x1 - x0 - 1) * dx)
+    ys = (oy, oy + (y1 - y0 - 1) * dy)
+    zs = (oz, oz + (z1 - z0 - 1) * dz)
+    corners = np.array([[x, y, z, 1.0] for x in xs for y in ys for z in zs])
+    clip = corners @ np.asarray(camera.matrix, np.float64).T
+    w = clip[:, 3]
+    if not camera.orthographic and (w <= 1e-9 * max(1.0, float(np.abs(w).max()))).any():
+        return None
+    u = (clip[:, 0] / w * 0.5 + 0.5) * width
+    v = (0.5 - clip[:, 1] / w * 0.5) * height
+    c0 = int(np.clip(np.floor(u.min()) - 1, 0, width))
+    c1 = int(np.clip(np.ceil(u.max()) + 1, 0, width))
+    r0 = int(np.clip(np.floor(v.min()) - 1, 0, height))
+    r1 = int(np.clip(np.ceil(v.max()) + 1, 0, height))
+    return r0, max(r0, r1), c0, max(c0, c1)
+
+
+def window(camera: Camera, width: int, height: int, rect: tuple[int, int, int, int]) -> Camera:
+    """The camera whose (c1 - c0) x (r1 - r0) image is the rectangle `rect`
+    of `camera`'s width x height one: the same view and depth row, the
+    projection followed by the clip-space scale and shift that maps the
+    rectangle's NDC onto [-1, 1] (its rays are the frame's, rounded apart)."""
+    r0, r1, c0, c1 = rect
+    w, h = c1 - c0, r1 - r0
+    m = np.eye(4)
+    m[0, 0], m[0, 3] = width / w, width / w - 1 - 2 * c0 / w
+    m[1, 1], m[1, 3] = height / h, 1 - height / h + 2 * r0 / h
+    return Camera(
+        camera.view, m @ camera.projection, camera.near, camera.far, camera.orthographic, camera.eye
     )
+
+
+def render_one(handle: _Handle, data: Any, view: dict) -> _c.Partial:
+    """The partial of one brick (cluster.render_partial composites a
+    worker's): only the rectangle of the frame its box covers is rendered
+    (view["footprints"], default on) and sent; depth and hit travel in the
+    key, the brick's number as id."""
+    W, H = view["width"], view["height"]
+    rect = footprint(handle.spec, view["camera"], W, H) if view.get("footprints", True) else None
+    rect = (0, H, 0, W) if rect is None else rect
+    r0, r1, c0, c1 = rect
     number = np.uint32(handle.spec["number"])
+    counts = {"bricks": 1, "passes": 0, "pixels": (r1 - r0) * (c1 - c0)}
+    worker = current_worker()
+    if r1 == r0 or c1 == c0:  # off screen
+        key = np.full((r1 - r0, c1 - c0), _c.EMPTY_KEY, np.uint64)
+        planes = {
+            "rgba": np.zeros((r1 - r0, c1 - c0, 4), np.float32),
+            "t": np.full((r1 - r0, c1 - c0), np.inf, np.float32),
+        }
+        return _c.Partial((r0, r1), key, planes, worker, counts=counts, cols=(c0, c1), empty=EMPTY_PLANES)
+    cam = view["camera"] if rect == (0, H, 0, W) else window(view["camera"], W, H, rect)
+    img = _renderer(handle, data).render(
+        cam, c1 - c0, r1 - r0, view["isovalue"], speculation=view["speculation"]
+    )
+    counts["passes"] = int(img.stats.get("passes", 0))
     planes = {"rgba": img.rgba, "t": img.t}
     key = _c.depth_keys(img.depth, np.full(img.hit.shape, number), img.hit)
-    counts = {"bricks": 1, "passes": int(img.stats.get("passes", 0))}
-    return _c.Partial((0, view["height"]), key, planes, current_worker(), counts=counts)
+    return _c.Partial((r0, r1), key, planes, worker, counts=counts, cols=(c0, c1), empty=EMPTY_PLANES)
 
 
 class DistributedIsoRenderer(ClusterOwner):
@@ -282,8 +337,12 @@ class DistributedIsoRenderer(ClusterOwner):
                 )
             tokens = [s["token"] for s in self._specs]
             self.hold([], [], tokens)  # what close() lets go of if this fails
-            arrays = [self._scatter(i) for i in range(len(self.bricks))]
-            handles = [self._submit_build(i, a) for i, a in enumerate(arrays)]
+            # consecutive bricks (z-major: slabs) on the same worker: its
+            # bricks' footprints make one compact region of the frame
+            ws = sorted(self.client.scheduler_info()["workers"]) or [None]
+            place = [ws[i * len(ws) // len(self.bricks)] for i in range(len(self.bricks))]
+            arrays = [self._scatter(i, place[i]) for i in range(len(self.bricks))]
+            handles = [self._submit_build(i, a, place[i]) for i, a in enumerate(arrays)]
             self.hold(handles, arrays, tokens)
             self._built = self._gather(handles, f"building {len(handles)} bricks")
             self.compressed_bytes = int(sum(h.compressed_bytes for h in self._built))
@@ -291,17 +350,22 @@ class DistributedIsoRenderer(ClusterOwner):
             self.close()
             raise
 
-    def _scatter(self, i: int) -> Any:
-        """Brick i's samples sent to a worker (None for a file: read there)."""
+    def _scatter(self, i: int, worker: str | None = None) -> Any:
+        """Brick i's samples sent to `worker` (None: any; a file's: None, read there)."""
         if self._source is None:
             return None
         sl = tuple(slice(a, b) for a, b in self.bricks[i])
         return self.client.scatter(
-            np.ascontiguousarray(self._source[sl], np.float32), hash=False, timeout=self.timeout
+            np.ascontiguousarray(self._source[sl], np.float32),
+            workers=None if worker is None else [worker],
+            hash=False,
+            timeout=self.timeout,
         )
 
-    def _submit_build(self, i: int, data: Any) -> Any:
-        near = self._near(self._who_has([data]), data) if data is not None else {}
+    def _submit_build(self, i: int, data: Any, worker: str | None = None) -> Any:
+        if worker is None and data is not None:  # where the scatter put it
+            worker = self._who_has([data]).get(data.key)
+        near = self._pin(worker)
         return self.client.submit(_build_from, self._specs[i], data, pure=False, **near)
 
     def _recover(self) -> None:
@@ -335,10 +399,14 @@ class DistributedIsoRenderer(ClusterOwner):
         isovalue: float,
         *,
         speculation: bool = True,
+        footprints: bool = True,
     ) -> IsoImage:
         """The complete image (every ray finished) of the whole volume.
-        ``stats``: bricks, passes (summed over bricks), workers, compositing,
-        seconds, bytes_sent (as ``DistributedRasterizer.render``'s)."""
+        footprints: each brick renders, and sends, only the rectangle of the
+        frame its box projects to (False: full frames, for comparison).
+        ``stats``: bricks, passes (summed over bricks), pixels (rendered,
+        summed over bricks), workers, compositing, seconds, bytes_sent (as
+        ``DistributedRasterizer.render``'s)."""
         from ..raster.render import _check_size
 
         self._check_open()
@@ -353,6 +421,7 @@ class DistributedIsoRenderer(ClusterOwner):
             "height": height,
             "isovalue": float(isovalue),
             "speculation": bool(speculation),
+            "footprints": bool(footprints),
         }
         whole, frame, sent, nworkers = self._frame(render_one, view)
         p = whole.planes

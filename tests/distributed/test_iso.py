@@ -136,3 +136,42 @@ def test_bad_files_and_arguments(client, tmp_path):
             dr.render(_cam(), W, H, "0.5")
         img = dr.render(_cam(), W, H, 0.5)  # nothing to hit
         assert not img.hit.any() and np.isinf(img.depth).all()
+
+
+def test_footprints_render_and_send_only_the_bricks_rectangles(client, single):
+    """Each brick renders the rectangle of the frame its box projects to (a
+    window camera: the frame's rays, rounded apart): the image agrees with
+    the full-frame bricks' under the iso rule, every hit of a brick's full
+    frame lies inside its rectangle, and fewer pixels are rendered and
+    fewer bytes sent than with full frames."""
+    from clvis.distributed import iso as diso
+
+    v, sp, org = _ML["volume"], _ML["spacing"], _ML["origin"]
+    with DistributedIsoRenderer(
+        v, client, rate=RATE, spacing=sp, origin=org, brick=12, timeout=TIMEOUT
+    ) as dr:
+        for eye in _EYES:
+            rect_img = dr.render(_cam(eye), W, H, 0.5)
+            full_img = dr.render(_cam(eye), W, H, 0.5, footprints=False)
+            _check(rect_img, single, eye)
+            _check(full_img, single, eye)
+            assert rect_img.stats["pixels"] < 0.6 * full_img.stats["pixels"] == 0.6 * 64 * W * H
+            assert sum(rect_img.stats["bytes_sent"].values()) < sum(full_img.stats["bytes_sent"].values())
+        # one brick alone: its full frame's hits lie inside its footprint, where the window agrees
+        r = IsoRenderer(v, RATE, sp, org)
+        for spec in dr._specs[::7]:
+            (z0, z1), (y0, y1), (x0, x1) = spec["ranges"]
+            b = IsoRenderer(v[z0:z1, y0:y1, x0:x1], RATE, sp, spec["origin"], queue=r.queue)
+            full = b.render(_cam(), W, H, 0.5)
+            rect = diso.footprint(spec, _cam(), W, H)
+            r0, r1, c0, c1 = rect
+            inside = np.zeros((H, W), bool)
+            inside[r0:r1, c0:c1] = True
+            assert not (full.hit & ~inside).any()
+            if r1 > r0 and c1 > c0:
+                win = b.render(diso.window(_cam(), W, H, rect), c1 - c0, r1 - r0, 0.5)
+                sub = full.hit[r0:r1, c0:c1]
+                assert (win.hit != sub).sum() <= 2
+                both = win.hit & sub
+                d = np.abs(win.depth[both] - full.depth[r0:r1, c0:c1][both])
+                assert d.size == 0 or d.max() <= ref.DEPTH_TOLERANCE * 3 * max(sp) * 40

@@ -302,7 +302,8 @@ def compare_volume(side: int = 512, rounds: int = 5, brick: int = 128, size: int
         med, best, c = np.median(r["wall"]), min(r["wall"]), np.median(r["cpu"])
         if k == "single":
             print(
-                f"| single IsoRenderer | {med * 1e3:.0f} ms | {best * 1e3:.0f} ms | {c:.2f} | {size * size:,} | - | - |"
+                f"| single IsoRenderer | {med * 1e3:.0f} ms | {best * 1e3:.0f} ms | {c:.2f} | "
+                f"{size * size:,} | - | - |"
             )
             continue
         st = imgs[k].stats

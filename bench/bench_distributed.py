@@ -32,6 +32,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -250,14 +251,15 @@ def test_volume(benchmark, queue, impl):
         )
 
 
-def compare_volume(side: int = 512, rounds: int = 5, brick: int = 128, size: int = 512) -> None:
+def compare_volume(side: int = 512, rounds: int = 5, brick: Any = 128, size: int = 512) -> None:
     """One process, the three renderers in turn (A B C A B C ...): turbulence
     side^3 as .npy, the single IsoRenderer (PoCL on every core) against 2
     one-thread workers with and without footprints; per row the median and
     min wall time of a frame and the CPU seconds per frame (client + workers),
     pixels rendered and bytes sent per worker, and the agreement of the
     images with the single one's (hit pixels that differ, largest depth gap).
-        python bench/bench_distributed.py [SIDE [ROUNDS [BRICK]]]"""
+        python bench/bench_distributed.py [SIDE [ROUNDS [BRICK [SIZE]]]]
+    (BRICK: an edge, or Z,Y,X: 128,256,256 cuts 256^3 into one slab per worker)"""
     import resource
 
     global SIDE
@@ -321,4 +323,5 @@ def compare_volume(side: int = 512, rounds: int = 5, brick: int = 128, size: int
 if __name__ == "__main__":
     import sys
 
-    compare_volume(*[int(a) for a in sys.argv[1:]])
+    args = [tuple(int(x) for x in a.split(",")) if "," in a else int(a) for a in sys.argv[1:]]
+    compare_volume(*args)  # type: ignore[arg-type]

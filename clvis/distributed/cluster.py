@@ -183,7 +183,9 @@ def start_cluster(workers: int, **kw: Any) -> Any:
     Ctrl-C in those seconds is lost (press it again)."""
     d = _distributed()
     kw.setdefault("processes", True)
-    kw.setdefault("silence_logs", logging.ERROR)  # the workers' warnings of a cluster stopped on purpose
+    # the workers report their failures through the futures; their own logs
+    # (a cluster stopped on purpose: heartbeats to a closed scheduler) say nothing more
+    kw.setdefault("silence_logs", logging.CRITICAL)
     main = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     try:

@@ -46,7 +46,7 @@ from ..iso import IsoImage, IsoRenderer
 from . import composite as _c
 from .cluster import CONNECT_TIMEOUT, REGISTRY, ClusterOwner, current_worker, device_error, frame_seconds
 
-__all__ = ["DistributedIsoRenderer", "brick_plan"]
+__all__ = ["DistributedIsoRenderer", "brick_plan", "footprint", "window", "worker_plan"]
 
 ZFP_BLOCK = 4
 
@@ -70,6 +70,30 @@ def brick_plan(shape: Sequence[int], brick: int | Sequence[int]) -> list[tuple[t
         for n, b in zip(shape, edges, strict=True)
     ]
     return [(z, y, x) for z in axes[0] for y in axes[1] for x in axes[2]]
+
+
+def worker_plan(bricks: Sequence[tuple], workers: int) -> list[tuple[tuple, int]]:
+    """The bricks (brick_plan's, z-major) grouped into one slab per worker:
+    the z layers of bricks split into `workers` runs of consecutive layers
+    (as even as they come), each run's samples the union of its bricks'
+    ranges. (ranges, bricks in it) per slab; the bricks themselves when
+    there are fewer z layers than workers."""
+    layers: dict = {}
+    for r in bricks:
+        layers.setdefault(r[0], []).append(r)
+    zs = sorted(layers)
+    if workers < 1 or len(zs) < workers:
+        return [(r, 1) for r in bricks]
+    out = []
+    for run in np.array_split(np.arange(len(zs)), workers):
+        first, last = layers[zs[run[0]]], layers[zs[run[-1]]]
+        ranges = (
+            (first[0][0][0], last[0][0][1]),
+            (min(r[1][0] for r in first), max(r[1][1] for r in first)),
+            (min(r[2][0] for r in first), max(r[2][1] for r in first)),
+        )
+        out.append((ranges, sum(len(layers[zs[k]]) for k in run)))
+    return out
 
 
 # ---------------------------------------------------------------- files, on the workers
@@ -242,7 +266,12 @@ def render_one(handle: _Handle, data: Any, view: dict) -> _c.Partial:
     rect = (0, H, 0, W) if rect is None else rect
     r0, r1, c0, c1 = rect
     number = np.uint32(handle.spec["number"])
-    counts = {"bricks": 1, "passes": 0, "pixels": (r1 - r0) * (c1 - c0)}
+    counts = {
+        "bricks": handle.spec.get("bricks", 1),
+        "renderers": 1,
+        "passes": 0,
+        "pixels": (r1 - r0) * (c1 - c0),
+    }
     worker = current_worker()
     if r1 == r0 or c1 == c0:  # off screen
         key = np.full((r1 - r0, c1 - c0), _c.EMPTY_KEY, np.uint64)
@@ -272,8 +301,12 @@ class DistributedIsoRenderer(ClusterOwner):
     .nii/.nii.gz) read brick by brick on the workers. rate: ZFP bits per
     value. spacing (dz, dy, dx): default the file's (NIfTI) or ones; origin:
     world (x, y, z) of sample [0, 0, 0]. brick: cells per brick edge, a
-    multiple of 4 (one int or three). client, workers, compositing,
-    timeout, connect_timeout: as for
+    multiple of 4 (one int or three). per_worker: one IsoRenderer per
+    worker over the union of its bricks (:func:`worker_plan`: whole z
+    layers of bricks, one slab per worker: one cache, one pass loop, one
+    footprint), when the bricks have at least as many z layers as there
+    are workers; False: one IsoRenderer per brick. client, workers,
+    compositing, timeout, connect_timeout: as for
     :class:`clvis.distributed.DistributedRasterizer`.
     """
 
@@ -293,6 +326,7 @@ class DistributedIsoRenderer(ClusterOwner):
         workers: int = 2,
         timeout: float = 300.0,
         connect_timeout: float = CONNECT_TIMEOUT,
+        per_worker: bool = True,
     ) -> None:
         if compositing not in ("direct", "tree"):
             raise ValueError(f"compositing: expected 'direct' or 'tree', got {compositing!r}")
@@ -320,14 +354,17 @@ class DistributedIsoRenderer(ClusterOwner):
             sp = triple("spacing", default_spacing if spacing is None else spacing, positive=True)
             self.spacing, self.origin = sp, o
             self.bricks = brick_plan(self.volume_shape, brick)
+            ws = sorted(self.client.scheduler_info()["workers"]) or [None]
+            units = worker_plan(self.bricks, len(ws)) if per_worker else [(r, 1) for r in self.bricks]
             token = uuid.uuid4().hex
             self._specs = []
-            for i, ranges in enumerate(self.bricks):
+            for i, (ranges, count) in enumerate(units):
                 (z0, _), (y0, _), (x0, _) = ranges
                 self._specs.append(
                     {
                         "token": f"{token}-{i}",
                         "number": i,
+                        "bricks": count,
                         "ranges": ranges,
                         "rate": rate,
                         "spacing": sp,
@@ -339,12 +376,12 @@ class DistributedIsoRenderer(ClusterOwner):
             self.hold([], [], tokens)  # what close() lets go of if this fails
             # consecutive bricks (z-major: slabs) on the same worker: its
             # bricks' footprints make one compact region of the frame
-            ws = sorted(self.client.scheduler_info()["workers"]) or [None]
-            place = [ws[i * len(ws) // len(self.bricks)] for i in range(len(self.bricks))]
-            arrays = [self._scatter(i, place[i]) for i in range(len(self.bricks))]
+            n = len(self._specs)
+            place = [ws[i * len(ws) // n] for i in range(n)]
+            arrays = [self._scatter(i, place[i]) for i in range(n)]
             handles = [self._submit_build(i, a, place[i]) for i, a in enumerate(arrays)]
             self.hold(handles, arrays, tokens)
-            self._built = self._gather(handles, f"building {len(handles)} bricks")
+            self._built = self._gather(handles, f"building {n} renderers of {len(self.bricks)} bricks")
             self.compressed_bytes = int(sum(h.compressed_bytes for h in self._built))
         except BaseException:
             self.close()
@@ -354,7 +391,7 @@ class DistributedIsoRenderer(ClusterOwner):
         """Brick i's samples sent to `worker` (None: any; a file's: None, read there)."""
         if self._source is None:
             return None
-        sl = tuple(slice(a, b) for a, b in self.bricks[i])
+        sl = tuple(slice(a, b) for a, b in self._specs[i]["ranges"])
         return self.client.scatter(
             np.ascontiguousarray(self._source[sl], np.float32),
             workers=None if worker is None else [worker],
@@ -384,7 +421,9 @@ class DistributedIsoRenderer(ClusterOwner):
         try:
             rebuilt = self._gather([self._handles[i] for i in lost], f"rebuilding {len(lost)} lost bricks")
         except ClusterError as e:
-            gone = ", ".join(f"brick {i} {self.bricks[i]} (was on {self._built[i].worker})" for i in lost[:4])
+            gone = ", ".join(
+                f"bricks {self._specs[i]['ranges']} (were on {self._built[i].worker})" for i in lost[:4]
+            )
             raise ClusterError(
                 f"{gone}{' ...' if len(lost) > 4 else ''}: lost and not rebuilt: {e}"
             ) from None

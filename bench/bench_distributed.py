@@ -273,30 +273,35 @@ def compare_volume(side: int = 512, rounds: int = 5, brick: Any = 128, size: int
         r = resource.getrusage(resource.RUSAGE_SELF)
         return r.ru_utime + r.ru_stime
 
-    rows: dict = {k: {"wall": [], "cpu": []} for k in ("single", "footprints", "full frames")}
+    kinds = ("single", "per worker, footprints", "per brick, footprints", "per brick, full frames")
+    rows: dict = {k: {"wall": [], "cpu": []} for k in kinds}
     with _cluster(2) as cluster, distributed.Client(cluster) as client:
         client.wait_for_workers(2, timeout=120)
 
         def worker_cpu():
             return sum(client.run(lambda: sum(os.times()[:2])).values())
 
-        with DistributedIsoRenderer(p, client, rate=8, brick=brick, timeout=TIMEOUT) as dr:
-            imgs = {
-                k: dr.render(cam, size, size, 0.5, footprints=k == "footprints")
-                for k in rows
-                if k != "single"
-            }
+        with (
+            DistributedIsoRenderer(p, client, rate=8, brick=brick, timeout=TIMEOUT) as slabs,
+            DistributedIsoRenderer(p, client, rate=8, brick=brick, timeout=TIMEOUT, per_worker=False) as dr,
+        ):
+
+            def frame(k):
+                r = slabs if k.startswith("per worker") else dr
+                return r.render(cam, size, size, 0.5, footprints=k.endswith("footprints"))
+
+            imgs = {k: frame(k) for k in rows if k != "single"}
             for _ in range(rounds):
                 for k in rows:
                     c0, w0, t0 = cpu(), worker_cpu() if k != "single" else 0.0, time.perf_counter()
                     if k == "single":
                         single.render(cam, size, size, 0.5)
                     else:
-                        imgs[k] = dr.render(cam, size, size, 0.5, footprints=k == "footprints")
+                        imgs[k] = frame(k)
                     rows[k]["wall"].append(time.perf_counter() - t0)
                     rows[k]["cpu"].append(cpu() - c0 + (worker_cpu() - w0 if k != "single" else 0.0))
             print(
-                f"turbulence {side}^3 .npy, {len(dr.bricks)} bricks of {brick}^3, ZFP rate 8, {size}x{size}"
+                f"turbulence {side}^3 .npy, {len(dr.bricks)} bricks of {brick} cells, ZFP rate 8, {size}x{size}"
             )
     print("| row | median frame | best | CPU s/frame | pixels rendered | bytes sent per worker | vs single |")
     print("|---|---|---|---|---|---|---|")

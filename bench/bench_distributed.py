@@ -301,7 +301,8 @@ def compare_volume(side: int = 512, rounds: int = 5, brick: Any = 128, size: int
                     rows[k]["wall"].append(time.perf_counter() - t0)
                     rows[k]["cpu"].append(cpu() - c0 + (worker_cpu() - w0 if k != "single" else 0.0))
             print(
-                f"turbulence {side}^3 .npy, {len(dr.bricks)} bricks of {brick} cells, ZFP rate 8, {size}x{size}"
+                f"turbulence {side}^3 .npy, {len(dr.bricks)} bricks of {brick} cells, "
+                f"ZFP rate 8, {size}x{size}"
             )
     print("| row | median frame | best | CPU s/frame | pixels rendered | bytes sent per worker | vs single |")
     print("|---|---|---|---|---|---|---|")

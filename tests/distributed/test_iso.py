@@ -195,9 +195,9 @@ def test_footprints_render_and_send_only_the_bricks_rectangles(client, single):
 
 
 def test_worker_plan_makes_one_slab_per_worker_of_whole_brick_layers():
-    bricks = brick_plan((41, 30, 17), 8)  # 5 z layers of 4 x 3 bricks
+    bricks = brick_plan((41, 30, 17), 8)  # 5 z layers of 4 x 2 bricks
     plan = worker_plan(bricks, 2)
-    assert [c for _, c in plan] == [36, 24]  # 3 layers, 2 layers
+    assert [c for _, c in plan] == [24, 16]  # 3 layers, 2 layers
     assert plan[0][0] == ((0, 28), (0, 30), (0, 17)) and plan[1][0] == ((24, 41), (0, 30), (0, 17))
     assert worker_plan(bricks, 6) == [(r, 1) for r in bricks]  # fewer layers than workers: the bricks
-    assert [c for _, c in worker_plan(bricks, 5)] == [12] * 5
+    assert [c for _, c in worker_plan(bricks, 5)] == [8] * 5

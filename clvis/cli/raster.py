@@ -666,7 +666,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "file",
         nargs="*",
-        help="a PLY, LAS, LAZ, NPY or NPZ point cloud (several: tiles rendered on Dask workers)",
+        help="a PLY, LAS, LAZ, NPY or NPZ point cloud (several: tiles joined into one cloud here, "
+        "or rendered on Dask workers with --workers/--scheduler)",
     )
     r.add_argument(
         "--dataset",

@@ -32,6 +32,7 @@ import os
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -203,21 +204,22 @@ def volume_path() -> Path:
     return _cache["volume"]
 
 
-@pytest.mark.parametrize("impl", ["2 workers", "single process IsoRenderer"])
+@pytest.mark.parametrize("impl", ["2 workers", "2 workers, full frames", "single process IsoRenderer"])
 def test_volume(benchmark, queue, impl):
     p = volume_path()
     w = h = 512 if SCALE >= 0.05 else 128
     n = SIDE**3
     cam = clvis.Camera.fit((0, 0, 0), (SIDE - 1,) * 3, aspect=1.0)
-    if impl == "2 workers":
+    if impl != "single process IsoRenderer":
+        fp = impl == "2 workers"  # each brick renders and sends its screen footprint only
         with _cluster(2) as cluster, distributed.Client(cluster) as client:
             client.wait_for_workers(2, timeout=120)
             with DistributedIsoRenderer(p, client, rate=8, brick=max(16, SIDE // 4), timeout=TIMEOUT) as dr:
-                img = dr.render(cam, w, h, 0.5)
+                img = dr.render(cam, w, h, 0.5, footprints=fp)
                 stats = [img.stats]
                 run(
                     benchmark,
-                    lambda: stats.append(dr.render(cam, w, h, 0.5).stats),
+                    lambda: stats.append(dr.render(cam, w, h, 0.5, footprints=fp).stats),
                     op=ISO_OP,
                     impl=impl,
                     role="clvis",
@@ -225,11 +227,14 @@ def test_volume(benchmark, queue, impl):
                     nbytes=4 * n,
                     rounds=3,
                 )
-                sec = min(stats[1:], key=lambda s: s["seconds"]["frame"])["seconds"]
+                best = min(stats[1:], key=lambda s: s["seconds"]["frame"])
+                sec = best["seconds"]
                 benchmark.extra_info.update(
                     bricks=len(dr.bricks),
                     composite_fraction=sec["composite"] / sec["frame"],
                     hits=int(img.hit.sum()),
+                    pixels_rendered=int(best["pixels"]),
+                    bytes_sent_per_worker=sorted(best["bytes_sent"].values()),
                 )
     else:
         r = clvis.IsoRenderer(np.load(p), 8, queue=queue)
@@ -244,3 +249,85 @@ def test_volume(benchmark, queue, impl):
             nbytes=4 * n,
             rounds=3,
         )
+
+
+def compare_volume(side: int = 512, rounds: int = 5, brick: Any = 128, size: int = 512) -> None:
+    """One process, the three renderers in turn (A B C A B C ...): turbulence
+    side^3 as .npy, the single IsoRenderer (PoCL on every core) against 2
+    one-thread workers with and without footprints; per row the median and
+    min wall time of a frame and the CPU seconds per frame (client + workers),
+    pixels rendered and bytes sent per worker, and the agreement of the
+    images with the single one's (hit pixels that differ, largest depth gap).
+        python bench/bench_distributed.py [SIDE [ROUNDS [BRICK [SIZE]]]]
+    (BRICK: an edge, or Z,Y,X: 128,256,256 cuts 256^3 into one slab per worker)"""
+    import resource
+
+    global SIDE
+    SIDE = side
+    p = volume_path()
+    cam = clvis.Camera.fit((0, 0, 0), (side - 1,) * 3, aspect=1.0)
+    single = clvis.IsoRenderer(np.load(p), 8)
+    one = single.render(cam, size, size, 0.5)
+
+    def cpu():
+        r = resource.getrusage(resource.RUSAGE_SELF)
+        return r.ru_utime + r.ru_stime
+
+    kinds = ("single", "per worker, footprints", "per brick, footprints", "per brick, full frames")
+    rows: dict = {k: {"wall": [], "cpu": []} for k in kinds}
+    with _cluster(2) as cluster, distributed.Client(cluster) as client:
+        client.wait_for_workers(2, timeout=120)
+
+        def worker_cpu():
+            return sum(client.run(lambda: sum(os.times()[:2])).values())
+
+        with (
+            DistributedIsoRenderer(p, client, rate=8, brick=brick, timeout=TIMEOUT) as slabs,
+            DistributedIsoRenderer(p, client, rate=8, brick=brick, timeout=TIMEOUT, per_worker=False) as dr,
+        ):
+
+            def frame(k):
+                r = slabs if k.startswith("per worker") else dr
+                return r.render(cam, size, size, 0.5, footprints=k.endswith("footprints"))
+
+            imgs = {k: frame(k) for k in rows if k != "single"}
+            for _ in range(rounds):
+                for k in rows:
+                    c0, w0, t0 = cpu(), worker_cpu() if k != "single" else 0.0, time.perf_counter()
+                    if k == "single":
+                        single.render(cam, size, size, 0.5)
+                    else:
+                        imgs[k] = frame(k)
+                    rows[k]["wall"].append(time.perf_counter() - t0)
+                    rows[k]["cpu"].append(cpu() - c0 + (worker_cpu() - w0 if k != "single" else 0.0))
+            print(
+                f"turbulence {side}^3 .npy, {len(dr.bricks)} bricks of {brick} cells, "
+                f"ZFP rate 8, {size}x{size}"
+            )
+    print("| row | median frame | best | CPU s/frame | pixels rendered | bytes sent per worker | vs single |")
+    print("|---|---|---|---|---|---|---|")
+    for k, r in rows.items():
+        med, best, c = np.median(r["wall"]), min(r["wall"]), np.median(r["cpu"])
+        if k == "single":
+            print(
+                f"| single IsoRenderer | {med * 1e3:.0f} ms | {best * 1e3:.0f} ms | {c:.2f} | "
+                f"{size * size:,} | - | - |"
+            )
+            continue
+        st = imgs[k].stats
+        sent = ", ".join(f"{b / 1e6:.2f} MB" for b in sorted(st["bytes_sent"].values()))
+        diff = int((imgs[k].hit != one.hit).sum())
+        both = imgs[k].hit & one.hit
+        gap = float(np.abs(imgs[k].depth[both] - one.depth[both]).max()) if both.any() else 0.0
+        ratio = med / np.median(rows["single"]["wall"])
+        print(
+            f"| 2 workers, {k} | {med * 1e3:.0f} ms | {best * 1e3:.0f} ms | {c:.2f} | {st['pixels']:,} | "
+            f"{sent} | {ratio:.2f}x; hits differ at {diff} px, depth gap {gap:.2e} |"
+        )
+
+
+if __name__ == "__main__":
+    import sys
+
+    args = [tuple(int(x) for x in a.split(",")) if "," in a else int(a) for a in sys.argv[1:]]
+    compare_volume(*args)  # type: ignore[arg-type]

@@ -47,3 +47,15 @@ class DataError(ClvisError, ValueError):
 class ClvisWarning(UserWarning):
     """A setting clvis could not use and ignored; the message names it, the
     values it accepts and what clvis used instead."""
+
+
+class ClusterError(ClvisError):
+    """The Dask cluster under ``clvis.distributed`` failed us: a scheduler not
+    reached, data lost with a worker that cannot be made again, a distributed
+    renderer used after ``close()``. The message says which."""
+
+
+class ClusterTimeout(ClusterError, TimeoutError):
+    """A wait on the Dask cluster ran past its bound (``timeout``,
+    ``connect_timeout``); the message says what was waited for and on which
+    workers. Also a TimeoutError."""

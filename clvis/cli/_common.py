@@ -615,6 +615,13 @@ def add_cluster_options(parser: argparse.ArgumentParser) -> None:
         metavar="ADDRESS",
         help="render on the workers of a running Dask scheduler (tcp://host:port)",
     )
+    parser.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=10.0,
+        metavar="SECONDS",
+        help="with --scheduler: seconds to reach it (a refused connection fails at once; default 10)",
+    )
 
 
 def cluster_client(args) -> tuple[object, int]:
@@ -628,6 +635,28 @@ def cluster_client(args) -> tuple[object, int]:
     if args.scheduler is not None:
         return args.scheduler, 1
     return None, args.workers
+
+
+def on_workers(name: str, fn, *args) -> int:
+    """fn(*args), a Ctrl-C as one line on stderr and exit status 130: the
+    renderer's close (unwinding) stops the Dask workers started here, which
+    never see the signal themselves (clvis.distributed.cluster.start_cluster)."""
+    import signal
+
+    def interrupt(signum, frame):  # the first Ctrl-C stops; more would cut the stopping short
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        raise KeyboardInterrupt
+
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.signal(signal.SIGINT, interrupt) if main else None
+    try:
+        status = fn(*args)
+    except KeyboardInterrupt:  # SIGINT stays ignored: this process is on its way out
+        print(f"clvis {name}: interrupted; the Dask workers started here were stopped", file=sys.stderr)
+        return 130
+    if main:
+        signal.signal(signal.SIGINT, old)
+    return status
 
 
 def distributed_run(args) -> bool:

@@ -36,6 +36,7 @@ from ._common import (
     distributed_run,
     finite_range,
     fit_box,
+    on_workers,
     progress_from_args,
     read_volume_file,
     real,
@@ -232,7 +233,7 @@ def render(
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
     if distributed_run(args):
-        return _run_distributed(args)
+        return on_workers("iso", _run_distributed, args)
     return _run(args)
 
 
@@ -281,9 +282,10 @@ def _run_distributed(args) -> int:
             origin=origin,
             brick=args.brick,
             workers=workers,
+            connect_timeout=args.connect_timeout,
             **kw,
         )
-    except (OSError, TimeoutError) as e:
+    except OSError as e:
         raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
     with dr:
         lo = np.asarray(dr.origin, np.float64)

@@ -34,6 +34,7 @@ from ._common import (
     count,
     describe_camera,
     distributed_run,
+    on_workers,
     progress_from_args,
     size,
     timed,
@@ -335,14 +336,11 @@ def _load(args, progress):
     from ..io import read_points
 
     if args.file is not None:
-        if len(args.file) > 1:
-            raise CliError(
-                f"{len(args.file)} files: several tiles render together on Dask workers "
-                "(--workers N or --scheduler ADDRESS)"
-            )
-        args.file = args.file[0]
         if args.dataset is not None or args.points is not None:
             raise CliError("--dataset and --points choose an embedded cloud; leave them out with a FILE")
+        if len(args.file) > 1:
+            return _load_tiles(args, progress)
+        args.file = args.file[0]
         with progress.stage(f"reading {Path(args.file).name}"):
             try:
                 cloud = read_points(args.file)
@@ -361,11 +359,60 @@ def _load(args, progress):
     return cloud, f"the embedded {name}", attribute, depth_filter_on
 
 
+def _load_tiles(args, progress):
+    """Several point files as one cloud on this device (the files in order:
+    one coordinate origin, the smallest of theirs; the attribute planes every
+    file has, matched by name; colours, velocity and radius when every file
+    has them), as clvis.distributed.concatenate makes it for the workers."""
+    from .. import runtime
+    from ..distributed.raster import concatenate
+    from ..io import read_points
+
+    clouds = []
+    for f in args.file:
+        with progress.stage(f"reading {Path(f).name}"):
+            try:
+                clouds.append(read_points(f))
+            except FileNotFoundError:
+                raise CliError(f"{f}: no such file") from None
+            except IsADirectoryError:
+                raise CliError(f"{f}: is a folder, not a point cloud file") from None
+    names = [k for k in clouds[0].attributes if all(k in c.attributes for c in clouds[1:])]
+    if args.attribute is not None:
+        for f, c in zip(args.file, clouds, strict=True):
+            if args.attribute not in c.attributes and args.attribute not in _COORDINATES:
+                raise CliError(
+                    f"{f}: no attribute {args.attribute!r}; it has {', '.join(c.attributes) or 'none'}"
+                )
+    for k in names:
+        kinds = {str(c.attributes[k].dtype) for c in clouds}
+        if len(kinds) > 1:
+            raise CliError(f"attribute {k!r}: of types {sorted(kinds)} in the files; one type needed")
+    partial = [f for f in ("colors", "velocity", "radius") if any(getattr(c, f) is None for c in clouds)]
+    for c in clouds:
+        c.attributes = {k: c.attributes[k] for k in names}
+        for f in partial:  # not in every file: left out
+            setattr(c, f, None)
+    n = sum(len(c) for c in clouds)
+    if n == 0:
+        raise CliError(f"{len(clouds)} files: they hold no points")
+    need = n * (12 + 4 * len(names) + 16)  # positions, attributes, colours and room to render
+    q = runtime.default_queue()
+    if n >= 0xFFFFFFFF or need > int(q.device.global_mem_size):
+        raise CliError(
+            f"{len(clouds)} files, {n:,} points: more than one device holds ({q.device.name.strip()}); "
+            "render them on Dask workers (--workers N or --scheduler ADDRESS)"
+        )
+    with progress.stage(f"joining {len(clouds)} tiles ({n:,} points)"):
+        cloud = concatenate(clouds)
+    return cloud, f"{len(clouds)} tiles", None, False
+
+
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
     progress = progress_from_args(args, "clvis render")
     if distributed_run(args):
-        return _render_distributed(args, progress)
+        return on_workers("render", _render_distributed, args, progress)
     args.file = args.file or None
     return _render(args, progress)
 
@@ -390,8 +437,10 @@ def _render_distributed(args, progress) -> int:
     fields = [args.attribute] if args.attribute is not None else None
     with progress.stage(f"reading {len(args.file)} tiles on the workers"):
         try:
-            dr = DistributedRasterizer(args.file, client, workers=workers, fields=fields)
-        except (OSError, TimeoutError) as e:
+            dr = DistributedRasterizer(
+                args.file, client, workers=workers, fields=fields, connect_timeout=args.connect_timeout
+            )
+        except OSError as e:
             raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
     with dr:
         attribute = args.attribute
@@ -403,7 +452,10 @@ def _render_distributed(args, progress) -> int:
         if dr.bounds is None:
             raise CliError("the tiles hold no point with finite coordinates")
         lo, hi = dr.bounds
-        camera = camera_from_args(args, lo, hi, width, height)
+        # one framing rule with and without workers: a fit view frames the
+        # same sample of the points (every k-th of the concatenated cloud)
+        sample = dr.sample() if args.view[0] == "fit" else None
+        camera = camera_from_args(args, lo, hi, width, height, points=sample)
         with progress.stage("rendering + compositing"):
             g = dr.render(
                 camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size
@@ -442,6 +494,11 @@ def _render_distributed(args, progress) -> int:
         st = g.stats
         covered = int(g.covered.sum())
         print(f"clvis render: {len(args.file)} tiles, {dr.n:,} points, on {st['workers']} Dask workers")
+        if workers is not None and workers > dr.npartitions:
+            print(
+                f"  note      {dr.npartitions} file{'s' if dr.npartitions > 1 else ''} on {workers} workers: "
+                "a file is one partition, rendered by one worker (give more tiles to use them all)"
+            )
         print(f"  view      {describe_camera(args)}, {width}x{height}")
         print(
             f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)"
@@ -636,7 +693,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "file",
         nargs="*",
-        help="a PLY, LAS, LAZ, NPY or NPZ point cloud (several: tiles rendered on Dask workers)",
+        help="a PLY, LAS, LAZ, NPY or NPZ point cloud (several: tiles joined into one cloud here, "
+        "or rendered on Dask workers with --workers/--scheduler)",
     )
     r.add_argument(
         "--dataset",

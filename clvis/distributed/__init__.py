@@ -8,10 +8,12 @@ its function, is ``clvis.distributed.composite``)."""
 
 from . import composite
 from .composite import EMPTY_KEY, Partial, depth_keys
+from .iso import DistributedIsoRenderer
 from .raster import DistributedRasterizer, concatenate
 
 __all__ = [
     "EMPTY_KEY",
+    "DistributedIsoRenderer",
     "DistributedRasterizer",
     "Partial",
     "composite",

@@ -1,30 +1,50 @@
-"""The Dask side shared by the distributed renderers: the client (given, or a
-``LocalCluster`` of one-thread worker processes started and owned here),
-waits that always have a timeout, where futures live, and the tasks and
-errors common to points and volumes.
+"""The Dask side shared by the distributed renderers: the client (given, an
+address, or a ``LocalCluster`` of one-thread worker processes started and
+owned here), waits that always have a bound, the one per-process registry
+of what the workers hold, the one frame task, and the errors.
 
 No scheduling of our own: tasks go to Dask with a loose wish for the worker
 that holds their inputs (``allow_other_workers``), so a lost worker's tasks
 run elsewhere.
+
+Every wait on the cluster is bounded: ``timeout`` for a frame or a build,
+``connect_timeout`` for reaching a scheduler (a refused connection fails at
+once), and the smaller of the two for letting go at :meth:`ClusterOwner.close`.
+A wait past its bound raises :class:`clvis.errors.ClusterTimeout` saying what
+was waited for and on which workers; a renderer used after ``close()``, a
+scheduler not reached and data lost for good raise
+:class:`clvis.errors.ClusterError`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import signal
+import socket
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
+from urllib.parse import urlsplit
 
-from ..errors import DeviceError
+from ..errors import ClusterError, ClusterTimeout, DeviceError
 from . import composite as _c
 
 __all__ = [
+    "REGISTRY",
     "ClusterOwner",
+    "WorkerRegistry",
     "composite_task",
     "current_worker",
     "device_error",
     "frame_seconds",
+    "render_partial",
     "start_cluster",
 ]
+
+CONNECT_TIMEOUT = 10.0  # seconds to reach a scheduler given by address
+FRAME_RETRIES = 2  # frames submitted again after data was lost with a worker
 
 
 def _distributed():
@@ -49,6 +69,67 @@ def device_error(e: BaseException) -> DeviceError:
     return DeviceError(f"worker {w}: no usable OpenCL device ({type(e).__name__}: {e})")
 
 
+# ---------------------------------------------------------------- the workers' side
+
+
+class WorkerRegistry:
+    """What one worker process holds for the renderers, by token: the
+    renderers built there (a Rasterizer of its partitions, an IsoRenderer per
+    brick) and partitions read but not built yet. A frame task that finds its
+    token missing (a new process, a task moved) builds it again from its
+    handle. One per process: :data:`REGISTRY`."""
+
+    def __init__(self) -> None:
+        self._items: dict[str, Any] = {}
+        self._lock = threading.Lock()
+
+    def put(self, token: str, item: Any) -> Any:
+        with self._lock:
+            self._items[token] = item
+        return item
+
+    def get(self, token: str) -> Any:
+        with self._lock:
+            return self._items.get(token)
+
+    def pop(self, token: str) -> Any:
+        with self._lock:
+            return self._items.pop(token, None)
+
+    def forget(self, tokens: Sequence[str]) -> None:
+        with self._lock:
+            for t in tokens:
+                self._items.pop(t, None)
+
+    def tokens(self) -> list[str]:
+        with self._lock:
+            return sorted(self._items)
+
+
+REGISTRY = WorkerRegistry()
+
+
+def forget(tokens: Sequence[str]) -> None:
+    """Run on every worker: let go of these tokens."""
+    REGISTRY.forget(tokens)
+
+
+def render_partial(render_one: Callable[[Any, Any, dict], _c.Partial], parts: list, view: dict) -> _c.Partial:
+    """Task, the same for points and volumes: ``render_one(handle, data,
+    view)`` → the Partial of one part (its ``counts`` included) for each
+    (handle, data) in `parts`, composited here by the min key, timed
+    ("render <worker>", "composite <worker>"); nothing sent yet (partials of
+    one worker move nothing)."""
+    worker = current_worker()
+    t0 = time.perf_counter()
+    partials = [render_one(handle, data, view) for handle, data in parts]
+    t1 = time.perf_counter()
+    out = _c.composite(partials, worker)
+    out.sent = {}
+    out.seconds = {f"render {worker}": t1 - t0, f"composite {worker}": time.perf_counter() - t1}
+    return out
+
+
 def composite_task(*parts: _c.Partial) -> _c.Partial:
     """Task: min-key composite of `parts` on this worker, timed."""
     t0 = time.perf_counter()
@@ -70,46 +151,221 @@ def frame_seconds(frame: float, seconds: dict) -> dict:
     return out
 
 
+# ---------------------------------------------------------------- the client's side
+
+
+def _ignore_sigint() -> None:
+    with contextlib.suppress(ValueError):  # not the main thread: nothing to do
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _quiet_workers() -> Any:
+    """A WorkerPlugin that makes every worker process ignore SIGINT, those the
+    nanny starts again after a loss included."""
+    d = _distributed()
+
+    class IgnoreSigint(d.WorkerPlugin):
+        idempotent = True
+        name = "clvis-ignore-sigint"
+
+        def setup(self, worker: Any) -> None:
+            _ignore_sigint()
+
+    return IgnoreSigint()
+
+
 def start_cluster(workers: int, **kw: Any) -> Any:
-    """A LocalCluster of `workers` processes, one thread each, the dashboard on a free port."""
+    """A LocalCluster of `workers` processes, one thread each, the dashboard
+    on a free port. Its worker processes ignore SIGINT: a terminal's Ctrl-C
+    reaches the whole process group, and the process that started them
+    stops them (their tracebacks would say nothing). They inherit the
+    ignoring through exec, so SIGINT is ignored here while they start: a
+    Ctrl-C in those seconds is lost (press it again)."""
     d = _distributed()
     kw.setdefault("processes", True)
-    return d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw)
+    # the workers report their failures through the futures; their own logs
+    # (a cluster stopped on purpose: heartbeats to a closed scheduler) say nothing more
+    kw.setdefault("silence_logs", logging.CRITICAL)
+    main = threading.current_thread() is threading.main_thread()
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        return d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw)
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, old)
+
+
+def _probe(address: str, timeout: float) -> None:
+    """Fail fast on a tcp:// scheduler that refuses or does not answer."""
+    parts = urlsplit(address if "://" in address else "tcp://" + address)
+    if parts.scheme != "tcp" or parts.hostname is None:
+        return  # tls://, inproc://, ucx://: Dask's own connect, bounded by the timeout
+    try:
+        port = parts.port
+    except ValueError:
+        raise ClusterError(f"scheduler {address}: not a host:port address") from None
+    if port is None:
+        return
+    try:
+        with socket.create_connection((parts.hostname, port), timeout=timeout):
+            pass
+    except TimeoutError:
+        raise ClusterTimeout(f"scheduler {address}: no answer within connect_timeout={timeout:g} s") from None
+    except OSError as e:
+        raise ClusterError(f"scheduler {address}: cannot connect ({e.strerror or e})") from None
+
+
+def _connect(address: str, timeout: float) -> Any:
+    """A Client of the scheduler at `address`, made within `timeout` seconds
+    (Dask's own connect can wait longer on a peer that accepts and stays
+    silent: it is left to finish, and closed, in the background)."""
+    d = _distributed()
+    box: dict = {}
+
+    def connect() -> None:
+        try:
+            box["client"] = d.Client(address, timeout=timeout)
+        except BaseException as e:  # noqa: BLE001 - handed to the caller's thread
+            box["error"] = e
+
+    def close_late() -> None:
+        t.join()
+        if "client" in box:
+            with contextlib.suppress(Exception):
+                box["client"].close(timeout=timeout)
+
+    t = threading.Thread(target=connect, name="clvis-connect", daemon=True)
+    t.start()
+    t.join(timeout + 1.0)
+    if t.is_alive():
+        threading.Thread(target=close_late, name="clvis-connect-close", daemon=True).start()
+        raise ClusterTimeout(f"scheduler {address}: not reached within connect_timeout={timeout:g} s")
+    e = box.get("error")
+    if isinstance(e, (OSError, TimeoutError)):
+        raise (ClusterTimeout if isinstance(e, TimeoutError) else ClusterError)(
+            f"scheduler {address}: not reached within connect_timeout={timeout:g} s ({type(e).__name__}: {e})"
+        ) from None
+    if e is not None:
+        raise e
+    return box["client"]
 
 
 class ClusterOwner:
-    """Holds a Dask client; starts (and closes) a LocalCluster when given none."""
+    """Holds a Dask client (starts, and closes, a LocalCluster when given
+    none) and the handles of what the workers hold; submits and waits for
+    frames.
 
-    def __init__(self, client: Any, workers: int, timeout: float) -> None:
+    A subclass makes its handles on the workers, then gives them to
+    :meth:`hold`: ``handles`` (futures of small objects naming what one
+    worker built, each with a ``worker`` address), ``arrays`` (per handle,
+    the futures of its data on the workers, or None), ``tokens`` (every
+    registry token to let go of at close). It may override :meth:`_recover`
+    to make data lost with a worker again (iso: bricks of an array)."""
+
+    def __init__(
+        self, client: Any, workers: int, timeout: float, connect_timeout: float = CONNECT_TIMEOUT
+    ) -> None:
+        for name, v in (("timeout", timeout), ("connect_timeout", connect_timeout)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+                raise ValueError(f"{name}: expected a positive number of seconds, got {v!r}")
         d = _distributed()
         self.timeout = float(timeout)
+        self.connect_timeout = float(connect_timeout)
         self._cluster = None
         self._own_client = False
+        self._closed = False
+        self._handles: list = []
+        self._arrays: list = []
+        self._tokens: list = []
+        self.client: Any = None
         if client is None:
             if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
                 raise ValueError(f"workers: expected a positive int, got {workers!r}")
             self._cluster = start_cluster(workers)
-            client = d.Client(self._cluster, timeout=self.timeout)
+            try:
+                client = d.Client(self._cluster, timeout=self.connect_timeout)
+                client.register_plugin(_quiet_workers())
+            except BaseException:
+                self._close_cluster()
+                raise
             self._own_client = True
         elif isinstance(client, str):
-            client = d.Client(client, timeout=self.timeout)
+            _probe(client, self.connect_timeout)
+            client = _connect(client, self.connect_timeout)
             self._own_client = True
         elif not isinstance(client, d.Client):
             raise TypeError(f"client: expected a dask.distributed.Client, an address or None, got {client!r}")
         self.client = client
 
-    def _gather(self, futures: Sequence[Any]) -> list:
+    # -- what the workers hold
+    def hold(self, handles: Sequence[Any], arrays: Sequence[Any], tokens: Sequence[str]) -> None:
+        """The handles (futures) frames render, their data futures, and the
+        tokens close() lets go of on every worker."""
+        self._handles, self._arrays, self._tokens = list(handles), list(arrays), list(tokens)
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ClusterError(f"{type(self).__name__}: closed; make a new one to render again")
+
+    def _recover(self) -> None:
+        """Make again what a lost worker took along and Dask cannot recompute
+        (here: nothing; files and dask arrays have their lineage)."""
+
+    # -- bounded waits
+    def _gather(self, futures: Sequence[Any], what: str, where: dict | None = None) -> list:
+        """The results of `futures`, waited for at most self.timeout: a
+        ClusterTimeout naming `what` and the workers of the unfinished
+        (`where`: future key → worker); a task's own error as it is (the first
+        in order); futures cancelled because their data was lost: ClusterError."""
         d = _distributed()
         futures = list(futures)
-        d.wait(futures, timeout=self.timeout, return_when="ALL_COMPLETED")
+        deadline = time.monotonic() + self.timeout
+        try:
+            d.wait(futures, timeout=self.timeout, return_when="ALL_COMPLETED")
+        except TimeoutError:
+            self._timed_out(futures, what, where)
+        except d.CancelledError:
+            pass  # the statuses below say which
         for f in futures:  # the first failure in the partitions' order, whichever failed first
             if f.status == "error":
-                f.result(timeout=self.timeout)
-        return self.client.gather(futures)
+                f.result(timeout=max(deadline - time.monotonic(), 1.0))
+        lost = [f for f in futures if f.status != "finished"]
+        if lost:
+            raise _Lost(f"{what}: {len(lost)} of {len(futures)} tasks cancelled (data lost with a worker)")
+        out = []
+        for f in futures:
+            try:
+                out.append(f.result(timeout=max(deadline - time.monotonic(), 0.001)))
+            except TimeoutError:
+                self._timed_out(futures, what, where)
+            except d.CancelledError as e:
+                raise _Lost(f"{what}: cancelled ({e})") from None
+        return out
+
+    def _timed_out(self, futures: Sequence[Any], what: str, where: dict | None) -> None:
+        left = [f for f in futures if f.status not in ("finished", "error", "cancelled")]
+        workers = sorted({w for f in left if (w := (where or {}).get(f.key)) is not None})
+        on = f" (waiting on {', '.join(workers)})" if workers else ""
+        raise ClusterTimeout(
+            f"{what}: {len(left)} of {len(futures)} tasks not done within timeout={self.timeout:g} s{on}"
+        ) from None
+
+    def _sync(self, what: str, fn: Callable, *args: Any, timeout: float | None = None, **kw: Any) -> Any:
+        """fn(*args, **kw) on the client's loop, bounded (ClusterTimeout naming `what`)."""
+        t = self.timeout if timeout is None else timeout
+        try:
+            return self.client.sync(fn, *args, callback_timeout=t, **kw)
+        except TimeoutError:
+            raise ClusterTimeout(f"{what}: no answer within {t:g} s") from None
 
     def _who_has(self, futures: Sequence[Any]) -> dict:
         """future key → the address of one worker holding it (None: nowhere yet)."""
-        has = self.client.who_has(list(futures))
+        keys = list({f.key for f in futures})
+        has = self._sync("the scheduler's who_has", self.client.scheduler.who_has, keys=keys)
         return {k: (sorted(v)[0] if v else None) for k, v in has.items()}
 
     @staticmethod
@@ -119,46 +375,57 @@ class ClusterOwner:
     def _near(self, where: dict, future: Any) -> dict:
         return self._pin(where.get(future.key))
 
-    def submit_frame(self, task: Any, view: dict) -> list:
-        """The futures of one frame's bands, nothing waited for: `task`
-        (parts, view) → a full-frame Partial runs once per worker over the
-        partitions that worker holds (self._handles, with self._arrays);
-        then direct-send (self.compositing "direct": each worker's frame cut
-        into one band of rows per worker, band j composited on worker j) or
-        a binary tree of pairwise composites ("tree")."""
+    # -- frames
+    def submit_frame(self, render_one: Callable, view: dict) -> tuple[list, dict]:
+        """The futures of one frame's bands, nothing waited for, and future
+        key → the worker it was meant for: render_partial(render_one, parts,
+        view) once per worker over the handles that worker holds (with their
+        data); then direct-send (self.compositing "direct": each worker's
+        frame cut into one band of rows per worker, band j composited on
+        worker j) or a binary tree of pairwise composites ("tree")."""
         client = self.client
         where = self._who_has(self._handles)
         groups: dict[str | None, list] = {}
         for i, h in enumerate(self._handles):
             groups.setdefault(where.get(h.key), []).append((h, self._arrays[i]))
         workers = list(groups)
-        partials = [
-            client.submit(task, parts, view, pure=False, **self._pin(w)) for w, parts in groups.items()
-        ]
+        meant: dict = {}
+
+        def submit(fn, *args, worker=None):
+            f = client.submit(fn, *args, pure=False, **self._pin(worker))
+            meant[f.key] = worker
+            return f
+
+        partials = [submit(render_partial, render_one, parts, view, worker=w) for w, parts in groups.items()]
         if self.compositing == "tree" or len(partials) == 1:
             level = partials
             while len(level) > 1:
-                nxt = [
-                    client.submit(composite_task, level[k], level[k + 1], pure=False)
-                    for k in range(0, len(level) - 1, 2)
-                ]
+                nxt = [submit(composite_task, level[k], level[k + 1]) for k in range(0, len(level) - 1, 2)]
                 level = nxt + ([level[-1]] if len(level) % 2 else [])
-            return level
+            return level, meant
         out = []
         for j, band in enumerate(_c.bands(view["height"], len(partials))):
-            pieces = [
-                client.submit(_c.split, p, band, j == 0, pure=False, **self._pin(workers[i]))
-                for i, p in enumerate(partials)
-            ]
-            out.append(client.submit(composite_task, *pieces, pure=False, **self._pin(workers[j])))
-        return out
+            pieces = [submit(_c.split, p, band, j == 0, worker=workers[i]) for i, p in enumerate(partials)]
+            out.append(submit(composite_task, *pieces, worker=workers[j]))
+        return out, meant
 
-    def _frame(self, task: Any, view: dict) -> tuple[_c.Partial, float, dict, int]:
-        """(the frame as one Partial, client seconds, worker → bytes sent, workers used)."""
+    def _frame(self, render_one: Callable, view: dict) -> tuple[_c.Partial, float, dict, int]:
+        """(the frame as one Partial, client seconds, worker → bytes sent,
+        workers used). A frame whose tasks were cancelled because a worker
+        took their data along is submitted again after :meth:`_recover`."""
+        self._check_open()
         t0 = time.perf_counter()
-        final = self._gather(self.submit_frame(task, view))
+        for attempt in range(FRAME_RETRIES + 1):
+            futures, meant = self.submit_frame(render_one, view)
+            try:
+                final = self._gather(futures, f"frame ({len(futures)} composited bands)", meant)
+                break
+            except _Lost as e:
+                if attempt == FRAME_RETRIES:
+                    raise ClusterError(f"{e}; still lost after {FRAME_RETRIES} recoveries") from None
+                self._recover()
         frame = time.perf_counter() - t0
-        whole = _c.assemble(final)
+        whole = _c.assemble(final, (view["height"], view["width"]))
         sent = dict(whole.sent)
         for p in final:  # each band's last hop: to the client
             if p.worker is not None:
@@ -166,28 +433,63 @@ class ClusterOwner:
         used = len({k.split(" ", 1)[1] for k in whole.seconds if k.startswith("render ")})
         return whole, frame, sent, used
 
+    # -- letting go
     def _run_on_workers(self, fn: Any, *args: Any) -> None:
-        """fn(*args) on every worker while the client runs (closing: letting
-        go of this object's state there); a worker gone took its state with it."""
+        """fn(*args) on every worker while the client runs, bounded by the
+        smaller of timeout and connect_timeout (closing: letting go of this
+        object's state there); a worker gone took its state with it, one
+        that does not answer keeps it until its process ends."""
         if self.client is not None and self.client.status == "running":
-            try:
-                self.client.run(fn, *args)
-            except Exception:
-                pass
+            with contextlib.suppress(Exception):
+                self.client.run(fn, *args, on_error="ignore", callback_timeout=self._close_timeout)
+
+    @property
+    def _close_timeout(self) -> float:
+        return min(self.timeout, self.connect_timeout)
+
+    def _close_cluster(self) -> None:
+        if self._cluster is not None:
+            cluster, self._cluster = self._cluster, None
+            with _quiet_logs(), contextlib.suppress(Exception):
+                cluster.close(timeout=self._close_timeout)
 
     def close(self) -> None:
-        """Drop the partitions; close the client and cluster started here."""
-        for name in ("_handles", "_arrays"):
-            if hasattr(self, name):
-                setattr(self, name, [])
-        if self._own_client and self.client is not None:
-            self.client.close()
-        if self._cluster is not None:
-            self._cluster.close()
-            self._cluster = None
+        """Let go of the handles and of what the workers hold for them; close
+        the client and cluster started here. Every step is bounded; closing
+        twice is harmless."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self._tokens:
+                self._run_on_workers(forget, self._tokens)
+        finally:
+            self._handles, self._arrays, self._tokens = [], [], []
+            if self._own_client and self.client is not None:
+                with _quiet_logs(), contextlib.suppress(Exception):
+                    self.client.close(timeout=self._close_timeout)
+            self._close_cluster()
 
     def __enter__(self) -> Any:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class _Lost(ClusterError):
+    """Futures cancelled: their inputs were lost with a worker (a frame
+    tries again after _recover)."""
+
+
+@contextlib.contextmanager
+def _quiet_logs():
+    """distributed's own warnings while a cluster is stopped on purpose
+    (workers that went away, comms closed) say nothing the caller needs."""
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)

@@ -17,7 +17,13 @@ renderers' empty values: index all ones, depth +inf, rgba 0, NaN).
 A :class:`Partial` may cover a band of rows (``rows``): direct-send splits
 each worker's partial into one band per worker, sends band j to worker j,
 which composites its band over every worker's, and the client gathers the
-bands (IceT's direct-send). NumPy definition: ``clvis.reference.distributed.composite``.
+bands (IceT's direct-send). A partial may also be a *rectangle* of the frame
+(``cols`` and ``empty`` given: a volume brick's screen footprint): pixels
+outside it are empty, so rectangles composite onto their union (or a given
+rectangle) filled with the planes' ``empty`` values, a band of a rectangle
+is its intersection with the band (IceT composites image regions the same
+way), and only the footprints' pixels are sent. NumPy definition:
+``clvis.reference.distributed.composite``.
 """
 
 from __future__ import annotations
@@ -75,7 +81,11 @@ class Partial:
     address of the worker that holds it (None on the client); ``sent``:
     worker → bytes the partials composited into this one crossed from that
     worker to another; ``seconds``: named timings of the work behind it;
-    ``counts``: named counts of it (summed when partials are composited)."""
+    ``counts``: named counts of it (summed when partials are composited).
+    ``cols``: the first column and the end (default: from 0, the key's
+    width); ``empty``: plane name → its value at an empty pixel (0 when not
+    named). With ``empty`` given the partial is a rectangle: it composites
+    with partials of other rectangles and is cut to bands by intersection."""
 
     rows: tuple[int, int]
     key: np.ndarray
@@ -84,6 +94,14 @@ class Partial:
     sent: dict = dataclasses.field(default_factory=dict)
     seconds: dict = dataclasses.field(default_factory=dict)
     counts: dict = dataclasses.field(default_factory=dict)
+    cols: tuple[int, int] | None = None
+    empty: dict | None = None
+
+    @property
+    def rect(self) -> tuple[int, int, int, int]:
+        """(first row, end row, first column, end column) of the frame."""
+        c0 = self.cols[0] if self.cols is not None else 0
+        return self.rows[0], self.rows[1], c0, c0 + self.key.shape[1]
 
     @property
     def nbytes(self) -> int:
@@ -99,32 +117,83 @@ def _merge_counts(dicts: Sequence[Mapping]) -> dict:
     return out
 
 
-def composite(parts: Sequence[Partial], worker: str | None = None) -> Partial:
+def _union(parts: Sequence[Partial]) -> tuple[int, int, int, int]:
+    """The smallest rectangle holding every part with pixels (the first's
+    when none has)."""
+    rects = [p.rect for p in parts if p.key.size]
+    if not rects:
+        return parts[0].rect
+    return (
+        min(r[0] for r in rects),
+        max(r[1] for r in rects),
+        min(r[2] for r in rects),
+        max(r[3] for r in rects),
+    )
+
+
+def _paste(parts: Sequence[Partial], rect: tuple[int, int, int, int]) -> tuple[np.ndarray, dict]:
+    """(key, planes) of `rect`: empty, then each part's pixels inside it where
+    its key is smaller."""
+    r0, r1, c0, c1 = rect
+    first = parts[0]
+    empty = first.empty or {}
+    key = np.full((r1 - r0, c1 - c0), EMPTY_KEY, np.uint64)
+    planes = {
+        name: np.full((r1 - r0, c1 - c0) + a.shape[2:], empty.get(name, 0), a.dtype)
+        for name, a in first.planes.items()
+    }
+    for p in parts:
+        pr0, pr1, pc0, pc1 = p.rect
+        a0, a1, b0, b1 = max(pr0, r0), min(pr1, r1), max(pc0, c0), min(pc1, c1)
+        if a0 >= a1 or b0 >= b1:
+            continue
+        src = (slice(a0 - pr0, a1 - pr0), slice(b0 - pc0, b1 - pc0))
+        dst = (slice(a0 - r0, a1 - r0), slice(b0 - c0, b1 - c0))
+        k, pk = key[dst], p.key[src]
+        take = pk < k
+        k[take] = pk[take]
+        for name, a in planes.items():
+            a[dst][take] = p.planes[name][src][take]
+    return key, planes
+
+
+def composite(
+    parts: Sequence[Partial], worker: str | None = None, rect: tuple[int, int, int, int] | None = None
+) -> Partial:
     """The per-pixel smallest key over `parts` (all of the same rows and the
-    same planes), with the winner's planes. `worker`: where this runs; the
-    bytes of every part held elsewhere are counted as sent by its worker."""
+    same planes, or rectangles: onto `rect`, default their union), with the
+    winner's planes. `worker`: where this runs; the bytes of every part held
+    elsewhere are counted as sent by its worker."""
     if not parts:
         raise ValueError("parts: nothing to composite")
     first = parts[0]
+    same = rect is None and all(p.rect == first.rect and p.key.shape == first.key.shape for p in parts)
     for p in parts[1:]:
-        if p.rows != first.rows or p.key.shape != first.key.shape or p.planes.keys() != first.planes.keys():
+        if p.planes.keys() != first.planes.keys() or not same and (p.empty is None or first.empty is None):
             raise ValueError(
                 f"parts: partials of rows {p.rows} / shape {p.key.shape} / planes {sorted(p.planes)} "
                 f"cannot be composited with rows {first.rows} / {first.key.shape} / {sorted(first.planes)}"
             )
-    key = first.key.copy()
-    planes = {name: a.copy() for name, a in first.planes.items()}
-    for p in parts[1:]:
-        take = p.key < key
-        key[take] = p.key[take]
-        for name, a in planes.items():
-            a[take] = p.planes[name][take]
+    if same:
+        key = first.key.copy()
+        planes = {name: a.copy() for name, a in first.planes.items()}
+        for p in parts[1:]:
+            take = p.key < key
+            key[take] = p.key[take]
+            for name, a in planes.items():
+                a[take] = p.planes[name][take]
+        r0, r1, c0, c1 = first.rect
+    else:
+        r0, r1, c0, c1 = rect if rect is not None else _union(parts)
+        key, planes = _paste(parts, (r0, r1, c0, c1))
     sent = _merge_counts([p.sent for p in parts])
     for p in parts:
         if p.worker is not None and p.worker != worker:
             sent[p.worker] = sent.get(p.worker, 0) + p.nbytes
     seconds = _merge_counts([p.seconds for p in parts])
-    return Partial(first.rows, key, planes, worker, sent, seconds, _merge_counts([p.counts for p in parts]))
+    counts = _merge_counts([p.counts for p in parts])
+    cols = first.cols if same else (c0, c1)
+    return Partial((r0, r1), key, planes, worker, sent, seconds, counts, cols, first.empty)
 
 
 def bands(height: int, n: int) -> list[tuple[int, int]]:
@@ -145,7 +214,10 @@ def split(part: Partial, rows: tuple[int, int], carry: bool = True) -> Partial:
     counts (give them to one band only, or they add up once per band)."""
     r0, r1 = rows
     a0, a1 = part.rows
-    if not a0 <= r0 <= r1 <= a1:
+    if part.empty is not None:  # a rectangle: its intersection with the band (maybe no rows)
+        r0, r1 = min(max(r0, a0), r1), max(min(r1, a1), r0)
+        r1 = max(r0, r1)
+    elif not a0 <= r0 <= r1 <= a1:
         raise ValueError(f"rows: {rows} is not inside the partial's rows {part.rows}")
     s = slice(r0 - a0, r1 - a0)
     return Partial(
@@ -156,11 +228,28 @@ def split(part: Partial, rows: tuple[int, int], carry: bool = True) -> Partial:
         {},
         dict(part.seconds) if carry else {},
         dict(part.counts) if carry else {},
+        part.cols,
+        part.empty,
     )
 
 
-def assemble(parts: Sequence[Partial]) -> Partial:
-    """Bands that tile a frame, in any order, stacked into one partial."""
+def assemble(parts: Sequence[Partial], frame: tuple[int, int] | None = None) -> Partial:
+    """Bands that tile a frame, in any order, stacked into one partial; or
+    rectangles (partials with ``empty``) placed in a frame of `frame`
+    (height, width) rows and columns."""
+    if frame is not None and any(p.empty is not None for p in parts):
+        key, planes = _paste(parts, (0, frame[0], 0, frame[1]))
+        return Partial(
+            (0, frame[0]),
+            key,
+            planes,
+            None,
+            _merge_counts([p.sent for p in parts]),
+            _merge_counts([p.seconds for p in parts]),
+            _merge_counts([p.counts for p in parts]),
+            None,
+            parts[0].empty,
+        )
     parts = sorted(parts, key=lambda p: p.rows)
     for a, b in zip(parts[:-1], parts[1:], strict=True):
         if a.rows[1] != b.rows[0]:

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 import os
-import threading
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
@@ -42,16 +41,14 @@ import numpy as np
 
 from .._arrays import triple
 from ..camera import Camera
-from ..errors import ClvisError, DataError, DeviceError
+from ..errors import ClusterError, ClvisError, DataError, DeviceError
 from ..iso import IsoImage, IsoRenderer
 from . import composite as _c
-from .cluster import ClusterOwner, current_worker, device_error, frame_seconds
+from .cluster import CONNECT_TIMEOUT, REGISTRY, ClusterOwner, current_worker, device_error, frame_seconds
 
-__all__ = ["DistributedIsoRenderer", "brick_plan"]
+__all__ = ["DistributedIsoRenderer", "brick_plan", "footprint", "window", "worker_plan"]
 
 ZFP_BLOCK = 4
-_RESIDENT: dict[str, IsoRenderer] = {}
-_LOCK = threading.Lock()
 
 
 def brick_plan(shape: Sequence[int], brick: int | Sequence[int]) -> list[tuple[tuple[int, int], ...]]:
@@ -73,6 +70,30 @@ def brick_plan(shape: Sequence[int], brick: int | Sequence[int]) -> list[tuple[t
         for n, b in zip(shape, edges, strict=True)
     ]
     return [(z, y, x) for z in axes[0] for y in axes[1] for x in axes[2]]
+
+
+def worker_plan(bricks: Sequence[tuple], workers: int) -> list[tuple[tuple, int]]:
+    """The bricks (brick_plan's, z-major) grouped into one slab per worker:
+    the z layers of bricks split into `workers` runs of consecutive layers
+    (as even as they come), each run's samples the union of its bricks'
+    ranges. (ranges, bricks in it) per slab; the bricks themselves when
+    there are fewer z layers than workers."""
+    layers: dict = {}
+    for r in bricks:
+        layers.setdefault(r[0], []).append(r)
+    zs = sorted(layers)
+    if workers < 1 or len(zs) < workers:
+        return [(r, 1) for r in bricks]
+    out = []
+    for run in np.array_split(np.arange(len(zs)), workers):
+        first, last = layers[zs[run[0]]], layers[zs[run[-1]]]
+        ranges = (
+            (first[0][0][0], last[0][0][1]),
+            (min(r[1][0] for r in first), max(r[1][1] for r in first)),
+            (min(r[2][0] for r in first), max(r[2][1] for r in first)),
+        )
+        out.append((ranges, sum(len(layers[zs[k]]) for k in run)))
+    return out
 
 
 # ---------------------------------------------------------------- files, on the workers
@@ -173,9 +194,7 @@ def _build_here(spec: dict) -> IsoRenderer:
         r = IsoRenderer(data, spec["rate"], spec["spacing"], spec["origin"], queue=q)
     except DeviceError as e:
         raise device_error(e) from e
-    with _LOCK:
-        _RESIDENT[spec["token"]] = r
-    return r
+    return REGISTRY.put(spec["token"], r)
 
 
 def _build(spec: dict) -> _Handle:
@@ -186,47 +205,88 @@ def _build(spec: dict) -> _Handle:
 
 
 def _renderer(handle: _Handle, data: Any) -> IsoRenderer:
-    with _LOCK:
-        r = _RESIDENT.get(handle.token)
+    r = REGISTRY.get(handle.token)
     if r is None:  # this process never built it (a worker lost, a task moved)
         spec = handle.spec if data is None else {**handle.spec, "source": data}
         r = _build_here(spec)
     return r
 
 
-def _forget(tokens: list) -> None:
-    with _LOCK:
-        for t in tokens:
-            _RESIDENT.pop(t, None)
+EMPTY_PLANES = {"rgba": 0.0, "t": np.inf}  # an IsoImage's planes where no ray hit
 
 
-def _render_bricks(parts: list, view: dict) -> _c.Partial:
-    """Task: render the bricks given, composited here by the min key."""
-    import time
+def footprint(spec: dict, camera: Camera, width: int, height: int) -> tuple[int, int, int, int] | None:
+    """(first row, end row, first column, end column) of the pixels whose
+    rays can meet the brick's box (the box of its samples projected, a pixel
+    of margin for rounding), clipped to the frame; None when a corner is not
+    in front of the eye (then the whole frame)."""
+    (z0, z1), (y0, y1), (x0, x1) = spec["ranges"]
+    dz, dy, dx = spec["spacing"]
+    ox, oy, oz = spec["origin"]
+    xs = (ox, ox + (x1 - x0 - 1) * dx)
+    ys = (oy, oy + (y1 - y0 - 1) * dy)
+    zs = (oz, oz + (z1 - z0 - 1) * dz)
+    corners = np.array([[x, y, z, 1.0] for x in xs for y in ys for z in zs])
+    clip = corners @ np.asarray(camera.matrix, np.float64).T
+    w = clip[:, 3]
+    if not camera.orthographic and (w <= 1e-9 * max(1.0, float(np.abs(w).max()))).any():
+        return None
+    u = (clip[:, 0] / w * 0.5 + 0.5) * width
+    v = (0.5 - clip[:, 1] / w * 0.5) * height
+    c0 = int(np.clip(np.floor(u.min()) - 1, 0, width))
+    c1 = int(np.clip(np.ceil(u.max()) + 1, 0, width))
+    r0 = int(np.clip(np.floor(v.min()) - 1, 0, height))
+    r1 = int(np.clip(np.ceil(v.max()) + 1, 0, height))
+    return r0, max(r0, r1), c0, max(c0, c1)
 
+
+def window(camera: Camera, width: int, height: int, rect: tuple[int, int, int, int]) -> Camera:
+    """The camera whose (c1 - c0) x (r1 - r0) image is the rectangle `rect`
+    of `camera`'s width x height one: the same view and depth row, the
+    projection followed by the clip-space scale and shift that maps the
+    rectangle's NDC onto [-1, 1] (its rays are the frame's, rounded apart)."""
+    r0, r1, c0, c1 = rect
+    w, h = c1 - c0, r1 - r0
+    m = np.eye(4)
+    m[0, 0], m[0, 3] = width / w, width / w - 1 - 2 * c0 / w
+    m[1, 1], m[1, 3] = height / h, 1 - height / h + 2 * r0 / h
+    return Camera(
+        camera.view, m @ camera.projection, camera.near, camera.far, camera.orthographic, camera.eye
+    )
+
+
+def render_one(handle: _Handle, data: Any, view: dict) -> _c.Partial:
+    """The partial of one brick (cluster.render_partial composites a
+    worker's): only the rectangle of the frame its box covers is rendered
+    (view["footprints"], default on) and sent; depth and hit travel in the
+    key, the brick's number as id."""
+    W, H = view["width"], view["height"]
+    rect = footprint(handle.spec, view["camera"], W, H) if view.get("footprints", True) else None
+    rect = (0, H, 0, W) if rect is None else rect
+    r0, r1, c0, c1 = rect
+    number = np.uint32(handle.spec["number"])
+    counts = {
+        "bricks": handle.spec.get("bricks", 1),
+        "renderers": 1,
+        "passes": 0,
+        "pixels": (r1 - r0) * (c1 - c0),
+    }
     worker = current_worker()
-    t0 = time.perf_counter()
-    partials = []
-    passes = 0
-    for handle, data in parts:
-        img = _renderer(handle, data).render(
-            view["camera"],
-            view["width"],
-            view["height"],
-            view["isovalue"],
-            speculation=view["speculation"],
-        )
-        passes += int(img.stats.get("passes", 0))
-        number = np.uint32(handle.spec["number"])
-        planes = {"rgba": img.rgba, "t": img.t}  # depth and hit travel in the key
-        key = _c.depth_keys(img.depth, np.full(img.hit.shape, number), img.hit)
-        partials.append(_c.Partial((0, view["height"]), key, planes, worker))
-    t1 = time.perf_counter()
-    out = _c.composite(partials, worker)
-    out.sent = {}
-    out.seconds = {f"render {worker}": t1 - t0, f"composite {worker}": time.perf_counter() - t1}
-    out.counts = {"bricks": len(parts), "passes": passes}
-    return out
+    if r1 == r0 or c1 == c0:  # off screen
+        key = np.full((r1 - r0, c1 - c0), _c.EMPTY_KEY, np.uint64)
+        planes = {
+            "rgba": np.zeros((r1 - r0, c1 - c0, 4), np.float32),
+            "t": np.full((r1 - r0, c1 - c0), np.inf, np.float32),
+        }
+        return _c.Partial((r0, r1), key, planes, worker, counts=counts, cols=(c0, c1), empty=EMPTY_PLANES)
+    cam = view["camera"] if rect == (0, H, 0, W) else window(view["camera"], W, H, rect)
+    img = _renderer(handle, data).render(
+        cam, c1 - c0, r1 - r0, view["isovalue"], speculation=view["speculation"]
+    )
+    counts["passes"] = int(img.stats.get("passes", 0))
+    planes = {"rgba": img.rgba, "t": img.t}
+    key = _c.depth_keys(img.depth, np.full(img.hit.shape, number), img.hit)
+    return _c.Partial((r0, r1), key, planes, worker, counts=counts, cols=(c0, c1), empty=EMPTY_PLANES)
 
 
 class DistributedIsoRenderer(ClusterOwner):
@@ -234,12 +294,18 @@ class DistributedIsoRenderer(ClusterOwner):
     :class:`clvis.iso.IsoRenderer` renders it (the module doc says how).
 
     volume_or_bricks: a 3-D [z, y, x] array (bricks sliced on the client and
-    sent to the workers), or a volume file (.npy, .raw with `shape`/`dtype`
-    as :func:`clvis.read_volume` takes them, .nii/.nii.gz) read
-    brick by brick on the workers. rate: ZFP bits per value. spacing
-    (dz, dy, dx): default the file's (NIfTI) or ones; origin: world (x, y, z)
-    of sample [0, 0, 0]. brick: cells per brick edge, a multiple of 4 (one
-    int or three). client, workers, compositing, timeout: as for
+    sent to the workers; the client keeps the array, unchanged, to send a
+    brick again when a worker is lost with it), or a volume file (.npy, .raw
+    with `shape`/`dtype` as :func:`clvis.read_volume` takes them,
+    .nii/.nii.gz) read brick by brick on the workers. rate: ZFP bits per
+    value. spacing (dz, dy, dx): default the file's (NIfTI) or ones; origin:
+    world (x, y, z) of sample [0, 0, 0]. brick: cells per brick edge, a
+    multiple of 4 (one int or three). per_worker: one IsoRenderer per
+    worker over the union of its bricks (:func:`worker_plan`: whole z
+    layers of bricks, one slab per worker: one cache, one pass loop, one
+    footprint), when the bricks have at least as many z layers as there
+    are workers; False: one IsoRenderer per brick. client, workers,
+    compositing, timeout, connect_timeout: as for
     :class:`clvis.distributed.DistributedRasterizer`.
     """
 
@@ -258,6 +324,8 @@ class DistributedIsoRenderer(ClusterOwner):
         compositing: str = "direct",
         workers: int = 2,
         timeout: float = 300.0,
+        connect_timeout: float = CONNECT_TIMEOUT,
+        per_worker: bool = True,
     ) -> None:
         if compositing not in ("direct", "tree"):
             raise ValueError(f"compositing: expected 'direct' or 'tree', got {compositing!r}")
@@ -268,12 +336,14 @@ class DistributedIsoRenderer(ClusterOwner):
             if v.ndim != 3 or v.dtype.kind not in "iuf":
                 raise ValueError(f"volume: expected a 3-D real array [Z, Y, X], got {v.dtype} {v.shape}")
         o = triple("origin", origin, positive=False)
-        super().__init__(client, workers, timeout)
+        super().__init__(client, workers, timeout, connect_timeout)
+        self._source = None if is_path else v
         try:
             if is_path:
                 path = str(volume_or_bricks)
                 lay = self._gather(
-                    [self.client.submit(_layout, path, shape, dtype, volume_index, pure=False)]
+                    [self.client.submit(_layout, path, shape, dtype, volume_index, pure=False)],
+                    f"reading the header of {path}",
                 )[0]
                 self.volume_shape = tuple(lay["shape"])
                 default_spacing = lay["spacing"]
@@ -283,46 +353,81 @@ class DistributedIsoRenderer(ClusterOwner):
             sp = triple("spacing", default_spacing if spacing is None else spacing, positive=True)
             self.spacing, self.origin = sp, o
             self.bricks = brick_plan(self.volume_shape, brick)
+            ws = sorted(self.client.scheduler_info()["workers"]) or [None]
+            units = worker_plan(self.bricks, len(ws)) if per_worker else [(r, 1) for r in self.bricks]
             token = uuid.uuid4().hex
-            specs, self._arrays = [], []
-            for i, ranges in enumerate(self.bricks):
+            self._specs = []
+            for i, (ranges, count) in enumerate(units):
                 (z0, _), (y0, _), (x0, _) = ranges
-                spec = {
-                    "token": f"{token}-{i}",
-                    "number": i,
-                    "ranges": ranges,
-                    "rate": rate,
-                    "spacing": sp,
-                    "origin": (o[0] + x0 * sp[2], o[1] + y0 * sp[1], o[2] + z0 * sp[0]),
-                    "source": (path, lay) if is_path else None,
-                }
-                specs.append(spec)
-                if is_path:
-                    self._arrays.append(None)
-                else:  # the brick's samples, scattered to a worker once
-                    sl = tuple(slice(a, b) for a, b in ranges)
-                    self._arrays.append(
-                        self.client.scatter(np.ascontiguousarray(v[sl], np.float32), hash=False)
-                    )
-            self._tokens = [s["token"] for s in specs]
-            self._handles = [
-                self.client.submit(_build_from, s, a, pure=False, **self._near(self._who_has([a]), a))
-                if a is not None
-                else self.client.submit(_build_from, s, None, pure=False)
-                for s, a in zip(specs, self._arrays, strict=True)
-            ]
-            handles = self._gather(self._handles)
-            self.compressed_bytes = int(sum(h.compressed_bytes for h in handles))
+                self._specs.append(
+                    {
+                        "token": f"{token}-{i}",
+                        "number": i,
+                        "bricks": count,
+                        "ranges": ranges,
+                        "rate": rate,
+                        "spacing": sp,
+                        "origin": (o[0] + x0 * sp[2], o[1] + y0 * sp[1], o[2] + z0 * sp[0]),
+                        "source": (path, lay) if is_path else None,
+                    }
+                )
+            tokens = [s["token"] for s in self._specs]
+            self.hold([], [], tokens)  # what close() lets go of if this fails
+            # consecutive bricks (z-major: slabs) on the same worker: its
+            # bricks' footprints make one compact region of the frame
+            n = len(self._specs)
+            place = [ws[i * len(ws) // n] for i in range(n)]
+            arrays = [self._scatter(i, place[i]) for i in range(n)]
+            handles = [self._submit_build(i, a, place[i]) for i, a in enumerate(arrays)]
+            self.hold(handles, arrays, tokens)
+            self._built = self._gather(handles, f"building {n} renderers of {len(self.bricks)} bricks")
+            self.compressed_bytes = int(sum(h.compressed_bytes for h in self._built))
         except BaseException:
             self.close()
             raise
 
-    def close(self) -> None:
-        """Let go of the bricks on the workers; close a cluster started here."""
-        tokens = getattr(self, "_tokens", None)
-        if tokens:
-            self._run_on_workers(_forget, tokens)
-        super().close()
+    def _scatter(self, i: int, worker: str | None = None) -> Any:
+        """Brick i's samples sent to `worker` (None: any; a file's: None, read there)."""
+        if self._source is None:
+            return None
+        sl = tuple(slice(a, b) for a, b in self._specs[i]["ranges"])
+        return self.client.scatter(
+            np.ascontiguousarray(self._source[sl], np.float32),
+            workers=None if worker is None else [worker],
+            hash=False,
+            timeout=self.timeout,
+        )
+
+    def _submit_build(self, i: int, data: Any, worker: str | None = None) -> Any:
+        if worker is None and data is not None:  # where the scatter put it
+            worker = self._who_has([data]).get(data.key)
+        near = self._pin(worker)
+        return self.client.submit(_build_from, self._specs[i], data, pure=False, **near)
+
+    def _recover(self) -> None:
+        """Bricks of an array lost with a worker: sent again from the
+        client's array and built again (file bricks: Dask builds them again)."""
+        if self._source is None:
+            return
+        lost = [
+            i
+            for i, (h, a) in enumerate(zip(self._handles, self._arrays, strict=True))
+            if a.status != "finished" or h.status != "finished"
+        ]
+        for i in lost:
+            self._arrays[i] = self._scatter(i)
+            self._handles[i] = self._submit_build(i, self._arrays[i])
+        try:
+            rebuilt = self._gather([self._handles[i] for i in lost], f"rebuilding {len(lost)} lost bricks")
+        except ClusterError as e:
+            gone = ", ".join(
+                f"bricks {self._specs[i]['ranges']} (were on {self._built[i].worker})" for i in lost[:4]
+            )
+            raise ClusterError(
+                f"{gone}{' ...' if len(lost) > 4 else ''}: lost and not rebuilt: {e}"
+            ) from None
+        for i, h in zip(lost, rebuilt, strict=True):
+            self._built[i] = h
 
     def render(
         self,
@@ -332,12 +437,17 @@ class DistributedIsoRenderer(ClusterOwner):
         isovalue: float,
         *,
         speculation: bool = True,
+        footprints: bool = True,
     ) -> IsoImage:
         """The complete image (every ray finished) of the whole volume.
-        ``stats``: bricks, passes (summed over bricks), workers, compositing,
-        seconds, bytes_sent (as ``DistributedRasterizer.render``'s)."""
+        footprints: each brick renders, and sends, only the rectangle of the
+        frame its box projects to (False: full frames, for comparison).
+        ``stats``: bricks, passes (summed over bricks), pixels (rendered,
+        summed over bricks), workers, compositing, seconds, bytes_sent (as
+        ``DistributedRasterizer.render``'s)."""
         from ..limits import ISO, check_image_size
 
+        self._check_open()
         if not isinstance(camera, Camera):
             raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
         width, height = check_image_size(width, height, ISO)
@@ -349,8 +459,9 @@ class DistributedIsoRenderer(ClusterOwner):
             "height": height,
             "isovalue": float(isovalue),
             "speculation": bool(speculation),
+            "footprints": bool(footprints),
         }
-        whole, frame, sent, nworkers = self._frame(_render_bricks, view)
+        whole, frame, sent, nworkers = self._frame(render_one, view)
         p = whole.planes
         hit = whole.key != _c.EMPTY_KEY
         return IsoImage(

@@ -41,8 +41,6 @@ the process that starts the cluster.
 from __future__ import annotations
 
 import os
-import threading
-import time
 import uuid
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -55,17 +53,23 @@ from ..errors import ClvisError, DataError, DeviceError
 from ..io import PointCloud, read_points
 from ..raster import EMPTY, GBuffers, Rasterizer
 from . import composite as _c
-from .cluster import ClusterOwner, current_worker, device_error, frame_seconds
+from .cluster import (
+    CONNECT_TIMEOUT,
+    REGISTRY,
+    ClusterOwner,
+    current_worker,
+    device_error,
+    forget,
+    frame_seconds,
+)
 
 __all__ = ["COMPOSITING", "DistributedRasterizer", "concatenate"]
 
 COMPOSITING = ("direct", "tree")
 _FIELDS = ("index", "depth", "rgba", "vel2d", "vel_angle", "vel_speed", "radius_px")
-
-# this process's partitions: token -> (PointCloud read but not built yet) / Rasterizer
-_LOADED: dict[str, PointCloud] = {}
-_RESIDENT: dict[str, Rasterizer] = {}
-_LOCK = threading.Lock()
+# in this process's registry (cluster.REGISTRY): a partition's token → its
+# PointCloud read but not built yet; a handle's token ("raster:" + its
+# partitions' tokens) → the Rasterizer of its partitions
 
 
 def concatenate(clouds: Sequence[PointCloud], origin: Any = None) -> PointCloud:
@@ -154,16 +158,15 @@ def _meta(cloud: PointCloud) -> dict:
         "dtypes": [str(v.dtype) for v in cloud.attributes.values()],
         "fields": tuple(f for f in ("colors", "velocity", "radius") if getattr(cloud, f) is not None),
         "ranges": ranges,
-        "bounds": _bounds(cloud),
     }
 
 
 def _bounds(cloud: PointCloud):
+    """(min, max) of the finite positions as stored (local coordinates), or None."""
     try:
-        lo, hi = cloud.bounds()
+        return cloud.bounds()
     except ValueError:  # no finite point
         return None
-    return lo + cloud.origin, hi + cloud.origin
 
 
 def _open(spec: dict, arrays: Any = None) -> dict:
@@ -171,8 +174,7 @@ def _open(spec: dict, arrays: Any = None) -> dict:
     if arrays is not None:
         spec = {**spec, "arrays": arrays}
     cloud = _read(spec)
-    with _LOCK:
-        _LOADED[spec["token"]] = cloud
+    REGISTRY.put(spec["token"], cloud)
     return _meta(cloud)
 
 
@@ -186,10 +188,11 @@ class _Handle:
         self.origin, self.offsets, self.ns, self.options = origin, list(offsets), list(ns), options
         self.worker = current_worker()
         self.device_bytes = 0
+        self.bounds = None  # (min, max) of its points relative to origin, float64
 
     @property
     def token(self) -> str:
-        return "|".join(s["token"] for s in self.specs)
+        return "raster:" + "|".join(s["token"] for s in self.specs)
 
     def global_ids(self, index: np.ndarray) -> np.ndarray:
         """The Rasterizer's indices (its partitions one after the other, in
@@ -218,8 +221,7 @@ def _queue():
 def _build_here(handle: _Handle, arrays: Any = None) -> Rasterizer:
     clouds = []
     for i, (spec, n) in enumerate(zip(handle.specs, handle.ns, strict=True)):
-        with _LOCK:
-            cloud = _LOADED.pop(spec["token"], None)
+        cloud = REGISTRY.pop(spec["token"])
         if cloud is None:  # opened on another worker, or this process is new
             cloud = _read({**spec, "arrays": arrays[i]} if arrays is not None else spec)
         if len(cloud) != n:
@@ -245,6 +247,7 @@ def _build_here(handle: _Handle, arrays: Any = None) -> Rasterizer:
             radius=cloud.radius,
             origin=handle.origin,
         )
+        handle.bounds = _bounds(shifted)
         r = Rasterizer(
             shifted,
             morton=o["morton"],
@@ -253,9 +256,7 @@ def _build_here(handle: _Handle, arrays: Any = None) -> Rasterizer:
         )
     except DeviceError as e:
         raise device_error(e) from e
-    with _LOCK:
-        _RESIDENT[handle.token] = r
-    return r
+    return REGISTRY.put(handle.token, r)
 
 
 def _build(
@@ -268,60 +269,62 @@ def _build(
     return h
 
 
-def _forget(tokens: list, loaded_only: bool) -> None:
-    """Run on every worker: let go of these partitions."""
-    with _LOCK:
-        for t in tokens:
-            _LOADED.pop(t, None)
-            if not loaded_only:
-                _RESIDENT.pop(t, None)
-
-
 def _rasterizer(handle: _Handle, arrays: Any = None) -> Rasterizer:
-    with _LOCK:
-        r = _RESIDENT.get(handle.token)
+    r = REGISTRY.get(handle.token)
     return r if r is not None else _build_here(handle, arrays)
 
 
-def _render_partials(parts: list, view: dict) -> _c.Partial:
-    """Task: render every partition given (handles with their arrays), global
-    ids, composited here into one full-frame partial."""
-    worker = current_worker()
-    t0 = time.perf_counter()
-    partials = []
-    stats = {"points": 0, "batches": 0, "batches_drawn": 0, "points_read": 0, "points_nonfinite": 0}
-    for handle, arrays in parts:
-        r = _rasterizer(handle, arrays)
-        g = r.render(
-            view["camera"],
-            view["width"],
-            view["height"],
-            color_by=view["color_by"],
-            colormap=view["colormap"],
-            value_range=view["value_range"],
-            planes=view["planes"],
-            point_size=view["point_size"],
-        )
-        for k in stats:
-            stats[k] += g.stats.get(k, 0)
-        covered = g.index != EMPTY
-        index = handle.global_ids(g.index)
-        planes = {}  # index and depth travel in the key
-        for f in _FIELDS[2:]:
-            a = getattr(g, f)
-            if a is not None:
-                planes[f] = a
-        for k, a in g.attributes.items():
-            planes["attr:" + k] = a
-        partials.append(
-            _c.Partial((0, view["height"]), _c.depth_keys(g.depth, index, covered), planes, worker)
-        )
-    t1 = time.perf_counter()
-    out = _c.composite(partials, worker)
-    out.sent = {}  # partials on the same worker move nothing
-    out.seconds = {f"render {worker}": t1 - t0, f"composite {worker}": time.perf_counter() - t1}
-    out.counts = stats
-    return out
+_STATS = ("points", "batches", "batches_drawn", "points_read", "points_nonfinite")
+
+
+def render_one(handle: _Handle, arrays: Any, view: dict) -> _c.Partial:
+    """The full-frame partial of one handle's Rasterizer (cluster.render_partial
+    composites a worker's): index and depth travel in the key, global ids."""
+    r = _rasterizer(handle, arrays)
+    g = r.render(
+        view["camera"],
+        view["width"],
+        view["height"],
+        color_by=view["color_by"],
+        colormap=view["colormap"],
+        value_range=view["value_range"],
+        planes=view["planes"],
+        point_size=view["point_size"],
+    )
+    covered = g.index != EMPTY
+    index = handle.global_ids(g.index)
+    planes = {}  # index and depth travel in the key
+    for f in _FIELDS[2:]:
+        a = getattr(g, f)
+        if a is not None:
+            planes[f] = a
+    for k, a in g.attributes.items():
+        planes["attr:" + k] = a
+    key = _c.depth_keys(g.depth, index, covered)
+    counts = {k: g.stats.get(k, 0) for k in _STATS}
+    return _c.Partial((0, view["height"]), key, planes, current_worker(), counts=counts)
+
+
+def _sample(handle: _Handle, arrays: Any, step: int) -> tuple[np.ndarray, np.ndarray]:
+    """Task: (global ids, positions) of the handle's points whose global id
+    is a multiple of `step`: float32 positions relative to the common origin,
+    as the Rasterizer holds them."""
+    r = _rasterizer(handle, arrays)
+    ids, local = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    start = 0
+    for off, n in zip(handle.offsets, handle.ns, strict=True):
+        first = -off % step  # the first multiple of step at or after off, from off
+        k = np.arange(first, n, step, dtype=np.int64)
+        ids.append(off + k)
+        local.append(start + k)
+        start += n
+    idx = np.concatenate(local)
+    if not len(idx):
+        return np.zeros(0, np.int64), np.zeros((0, 3), np.float32)
+    pos = r.positions.get()
+    if r.inv is not None:  # Morton order on the device: the caller's index i sits at inv[i]
+        idx = r.inv.get()[idx]
+    return np.concatenate(ids), pos[idx]
 
 
 # ---------------------------------------------------------------- the client's side
@@ -343,7 +346,11 @@ class DistributedRasterizer(ClusterOwner):
     ``with`` block). fields: for files, the attributes to keep (default all;
     every file must have them). morton, batch_size: the Rasterizers'.
     compositing: "direct" (direct-send, default) or "tree". timeout: seconds
-    any wait may take before a ``TimeoutError``.
+    any wait on the cluster may take (a build, a frame) before a
+    :class:`clvis.errors.ClusterTimeout` (a ``TimeoutError``) saying what
+    timed out; connect_timeout: seconds to reach a scheduler given by
+    address (a refused connection fails at once). A render after
+    :meth:`close` raises :class:`clvis.errors.ClusterError`.
     """
 
     def __init__(
@@ -361,12 +368,13 @@ class DistributedRasterizer(ClusterOwner):
         compositing: str = "direct",
         workers: int = 2,
         timeout: float = 300.0,
+        connect_timeout: float = CONNECT_TIMEOUT,
     ) -> None:
         if compositing not in COMPOSITING:
             raise ValueError(f"compositing: expected one of {COMPOSITING}, got {compositing!r}")
         self.compositing = compositing
         specs, arrays = self._partitions(sources, colors, attributes, velocity, radius, fields)
-        super().__init__(client, workers, timeout)
+        super().__init__(client, workers, timeout, connect_timeout)
         try:
             self._setup(specs, arrays, {"morton": bool(morton), "batch_size": int(batch_size)})
         except BaseException:
@@ -418,7 +426,8 @@ class DistributedRasterizer(ClusterOwner):
         if any(a is not None for a in arrays):
             arrays = [_computed(client, a) for a in arrays]  # the blocks, kept on the workers
         opened = [client.submit(_open, s, a, pure=False) for s, a in zip(specs, arrays, strict=True)]
-        metas = self._gather(opened)
+        self.hold([], [], [s["token"] for s in specs])  # what close() lets go of if this fails
+        metas = self._gather(opened, f"opening {len(specs)} partitions")
         self._check_partitions(specs, metas)
         origin = np.min([m["origin"] for m in metas], axis=0)
         counts = [m["n"] for m in metas]
@@ -432,22 +441,16 @@ class DistributedRasterizer(ClusterOwner):
         self.attribute_names = metas[0]["names"]
         self.fields = metas[0]["fields"]
         self._ranges = {k: _merge_ranges([m["ranges"][k] for m in metas]) for k in self.attribute_names}
-        b = [m["bounds"] for m in metas if m["bounds"] is not None]
-        self.bounds = (
-            (np.min([x[0] for x in b], axis=0) - origin, np.max([x[1] for x in b], axis=0) - origin)
-            if b
-            else None
-        )
         # the partitions each worker opened become one Rasterizer there: one
         # render, one resolve and one partial per worker and frame
         where = self._who_has(opened)
         groups: dict = {}
         for i, f in enumerate(opened):
             groups.setdefault(where.get(f.key), []).append(i)
-        self._handles, self._arrays = [], []
+        handles, held = [], []
         for w, idx in groups.items():
             a = [arrays[i] for i in idx] if arrays[idx[0]] is not None else None
-            self._handles.append(
+            handles.append(
                 client.submit(
                     _build,
                     [specs[i] for i in idx],
@@ -460,12 +463,16 @@ class DistributedRasterizer(ClusterOwner):
                     **self._pin(w),
                 )
             )
-            self._arrays.append(a)
+            held.append(a)
         self.npartitions = len(specs)
-        handles = self._gather(self._handles)
-        self.device_bytes = int(sum(h.device_bytes for h in handles))
-        self._tokens = [s["token"] for s in specs] + [h.token for h in handles]
-        client.run(_forget, self._tokens, True)  # clouds opened where they were not built
+        built = self._gather(handles, f"building {len(handles)} Rasterizers")
+        self.device_bytes = int(sum(h.device_bytes for h in built))
+        b = [h.bounds for h in built if h.bounds is not None]
+        self.bounds = (  # of the float32 positions the workers hold: the concatenated cloud's, exactly
+            (np.min([x[0] for x in b], axis=0), np.max([x[1] for x in b], axis=0)) if b else None
+        )
+        self.hold(handles, held, [s["token"] for s in specs] + [h.token for h in built])
+        self._run_on_workers(forget, [s["token"] for s in specs])  # clouds opened where not built
 
     def _check_partitions(self, specs, metas):
         def name(i):
@@ -479,12 +486,25 @@ class DistributedRasterizer(ClusterOwner):
                         f"{m[what]} differ from {name(0)}'s {metas[0][what]}"
                     )
 
-    def close(self) -> None:
-        """Let go of the partitions on the workers; close a cluster started here."""
-        tokens = getattr(self, "_tokens", None)
-        if tokens:
-            self._run_on_workers(_forget, tokens, False)
-        super().close()
+    def sample(self, limit: int = 200_000) -> np.ndarray:
+        """Every k-th point of the concatenated cloud (k = max(1, n // limit),
+        the points whose global id is a multiple of k), float32 (m, 3)
+        relative to :attr:`origin`: the same rows, bit for bit, as
+        ``concatenate(clouds).positions[::k]`` on one device, so a view
+        fitted to a sample frames the cloud the same way on both."""
+        self._check_open()
+        if isinstance(limit, bool) or not isinstance(limit, (int, np.integer)) or limit < 1:
+            raise ValueError(f"limit: expected a positive int, got {limit!r}")
+        step = max(1, self.n // int(limit))
+        where = self._who_has(self._handles)
+        futures = [
+            self.client.submit(_sample, h, a, step, pure=False, **self._near(where, h))
+            for h, a in zip(self._handles, self._arrays, strict=True)
+        ]
+        got = self._gather(futures, f"a sample of every {step}th point")
+        ids = np.concatenate([g[0] for g in got] + [np.zeros(0, np.int64)])
+        pos = np.concatenate([g[1] for g in got] + [np.zeros((0, 3), np.float32)])
+        return pos[np.argsort(ids, kind="stable")]
 
     # -- frames
     def render(
@@ -506,8 +526,9 @@ class DistributedRasterizer(ClusterOwner):
         ``seconds`` (frame: wall time on the client; render, composite:
         summed over the workers' tasks), ``bytes_sent`` (worker → bytes its
         partials sent to other workers and to the client)."""
+        self._check_open()
         view = self._view(camera, width, height, color_by, colormap, value_range, planes, point_size)
-        whole, frame, sent, nworkers = self._frame(_render_partials, view)
+        whole, frame, sent, nworkers = self._frame(render_one, view)
         return self._gbuffers(whole, frame, sent, nworkers)
 
     def _view(self, camera, width, height, color_by, colormap, value_range, planes, point_size) -> dict:

@@ -2,6 +2,13 @@
 rendered on Dask workers give the pictures of the single-process commands;
 without the flags nothing changes; the errors."""
 
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
 import numpy as np
 import pytest
 from dask_cluster import TIMEOUT, distributed, local_cluster
@@ -95,8 +102,6 @@ def test_iso_on_a_scheduler(scheduler, tmp_path, capsys):
 
 def test_errors(tiles, scheduler, tmp_path, capsys):
     paths, _ = tiles
-    rc, out, err = _run(capsys, "render", *paths, "--out", tmp_path, *SMALL)
-    assert rc == 2 and "3 files: several tiles render together on Dask workers" in err
     rc, out, err = _run(capsys, "render", *paths, "--workers", 1, "--scheduler", scheduler)
     assert rc == 2 and "not allowed with argument" in err
     rc, out, err = _run(capsys, "render", paths[0], tmp_path / "missing.las", "--scheduler", scheduler)
@@ -112,3 +117,104 @@ def test_errors(tiles, scheduler, tmp_path, capsys):
         capsys, "iso", tmp_path / "v.npy", "--scheduler", scheduler, "--isovalue", 0, "--brick", 6
     )
     assert rc == 2 and "--brick: 6 is not a multiple of 4" in err
+
+
+def test_several_files_on_one_device_frame_as_on_workers(tiles, scheduler, tmp_path, capsys):
+    """Several tiles without --workers load into one device renderer; the
+    default (fit) view frames the same sample of the points either way, so
+    the pictures are the same."""
+    paths, _ = tiles
+    rc, out, err = _run(capsys, "render", *paths, "--out", tmp_path / "s", *SMALL)
+    assert rc == 0, err
+    assert "clvis render: 3 tiles, 7,000 points" in out
+    rc, out, err = _run(capsys, "render", *paths, "--scheduler", scheduler, "--out", tmp_path / "d", *SMALL)
+    assert rc == 0, err
+    for name in ("attribute-intensity.png", "depth.png"):
+        a, b = _png(tmp_path / "d" / name), _png(tmp_path / "s" / name)
+        assert (a[..., 3] > 0).sum() > 500
+        np.testing.assert_array_equal(a, b)
+
+
+def test_several_files_match_attributes_by_name(tmp_path, capsys):
+    rng = np.random.default_rng(1)
+    a = PointCloud(rng.uniform(0, 1, (300, 3)), attributes={"i": rng.random(300), "k": rng.random(300)})
+    b = PointCloud(rng.uniform(0, 1, (200, 3)) + 5, attributes={"k": rng.random(200), "i": rng.random(200)})
+    c = PointCloud(rng.uniform(0, 1, (100, 3)), attributes={"k": rng.random(100)})
+    for name, cloud in (("a", a), ("b", b), ("c", c)):
+        save_npz(tmp_path / f"{name}.npz", cloud)
+    rc, out, err = _run(
+        capsys, "render", tmp_path / "a.npz", tmp_path / "b.npz", "--out", tmp_path / "o", *SMALL
+    )
+    assert rc == 0 and "2 tiles, 500 points, colored by i" in out, err
+    rc, out, err = _run(
+        capsys,
+        "render",
+        tmp_path / "a.npz",
+        tmp_path / "c.npz",
+        "--attribute",
+        "i",
+        "--out",
+        tmp_path,
+        *SMALL,
+    )
+    assert rc == 2 and "c.npz: no attribute 'i'; it has k" in err
+
+
+def test_one_file_on_several_workers_says_so(tiles, tmp_path, capsys):
+    paths, _ = tiles
+    rc, out, err = _run(capsys, "render", paths[0], "--workers", 2, "--out", tmp_path, *SMALL)
+    assert rc == 0, err
+    assert "on 1 Dask workers" in out and "1 file on 2 workers: a file is one partition" in out
+
+
+def test_a_refused_scheduler_fails_in_seconds(tiles, tmp_path, capsys):
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    t0 = time.monotonic()
+    rc, out, err = _run(capsys, "render", tiles[0][0], "--scheduler", f"tcp://127.0.0.1:{port}", *SMALL)
+    assert rc == 2 and f"scheduler tcp://127.0.0.1:{port}: cannot connect" in err
+    assert time.monotonic() - t0 < 5
+
+
+def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):
+    """SIGINT to the whole process group (a terminal's Ctrl-C) once the
+    LocalCluster's workers run: one line on stderr, exit status 130, and no
+    process of the group left."""
+    rng = np.random.default_rng(2)
+    paths = []
+    for i in range(2):
+        paths.append(tmp_path / f"big{i}.npz")
+        save_npz(paths[-1], PointCloud(rng.uniform(0, 1, (300_000, 3)) + [i, 0, 0]))
+    cmd = [sys.executable, "-m", "clvis", "render", *map(str, paths), "--workers", "2"]
+    cmd += ["--size", "1600x1200", "--out", str(tmp_path / "o"), "--quiet"]
+    p = subprocess.Popen(
+        cmd, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while len(_group(p.pid)) < 3 and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)  # the worker processes have started
+        while p.poll() is None and time.monotonic() < deadline:  # a Ctrl-C while the cluster starts is lost
+            os.killpg(p.pid, signal.SIGINT)
+            try:
+                p.wait(1.0)
+            except subprocess.TimeoutExpired:
+                pass
+        out, err = p.communicate(timeout=TIMEOUT)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 130, err
+    assert err.splitlines() == ["clvis render: interrupted; the Dask workers started here were stopped"]
+    deadline = time.monotonic() + 10
+    while _group(p.pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _group(p.pid)
+
+
+def _group(pgid):
+    """The processes of process group pgid."""
+    out = subprocess.run(["pgrep", "-g", str(pgid)], capture_output=True, text=True).stdout
+    return out.split()

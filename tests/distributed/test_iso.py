@@ -11,7 +11,7 @@ import pytest
 from dask_cluster import TIMEOUT
 
 from clvis import Camera, datasets, zfp
-from clvis.distributed.iso import DistributedIsoRenderer, brick_plan
+from clvis.distributed.iso import DistributedIsoRenderer, brick_plan, worker_plan
 from clvis.errors import DataError
 from clvis.iso import IsoRenderer
 from clvis.reference import iso as ref
@@ -69,17 +69,27 @@ def test_brick_plan_covers_every_cell_once(shape, edge):
     assert (cover == 1).all()
 
 
+@pytest.mark.parametrize("per_worker", [True, False])
 @pytest.mark.parametrize("compositing", ["direct", "tree"])
-def test_array_bricks_equal_the_single_device(client, single, compositing):
+def test_array_bricks_equal_the_single_device(client, single, compositing, per_worker):
     v, sp, org = _ML["volume"], _ML["spacing"], _ML["origin"]
     with DistributedIsoRenderer(
-        v, client, rate=RATE, spacing=sp, origin=org, brick=12, compositing=compositing, timeout=TIMEOUT
+        v,
+        client,
+        rate=RATE,
+        spacing=sp,
+        origin=org,
+        brick=12,
+        compositing=compositing,
+        timeout=TIMEOUT,
+        per_worker=per_worker,
     ) as dr:
         assert len(dr.bricks) == 64
         for eye in _EYES:
             img = dr.render(_cam(eye), W, H, 0.5)
             _check(img, single, eye)
             assert img.stats["bricks"] == 64 and img.stats["compositing"] == compositing
+            assert img.stats["renderers"] == (2 if per_worker else 64)
             assert sum(img.stats["bytes_sent"].values()) >= img.depth.nbytes
 
 
@@ -136,3 +146,58 @@ def test_bad_files_and_arguments(client, tmp_path):
             dr.render(_cam(), W, H, "0.5")
         img = dr.render(_cam(), W, H, 0.5)  # nothing to hit
         assert not img.hit.any() and np.isinf(img.depth).all()
+
+
+def test_footprints_render_and_send_only_the_bricks_rectangles(client, single):
+    """Each brick renders the rectangle of the frame its box projects to (a
+    window camera: the frame's rays, rounded apart): the image agrees with
+    the full-frame bricks' under the iso rule, every hit of a brick's full
+    frame lies inside its rectangle, and fewer pixels are rendered and
+    fewer bytes sent than with full frames."""
+    from clvis.distributed import iso as diso
+
+    v, sp, org = _ML["volume"], _ML["spacing"], _ML["origin"]
+    with DistributedIsoRenderer(
+        v, client, rate=RATE, spacing=sp, origin=org, brick=12, timeout=TIMEOUT, per_worker=False
+    ) as dr:
+        for eye in _EYES:
+            rect_img = dr.render(_cam(eye), W, H, 0.5)
+            full_img = dr.render(_cam(eye), W, H, 0.5, footprints=False)
+            _check(rect_img, single, eye)
+            _check(full_img, single, eye)
+            assert rect_img.stats["pixels"] < 0.6 * full_img.stats["pixels"] == 0.6 * 64 * W * H
+            assert sum(rect_img.stats["bytes_sent"].values()) <= sum(full_img.stats["bytes_sent"].values())
+        # the volume small in the frame: each worker sends the union of its footprints, not the frame
+        far = tuple(3 * c for c in _EYES[0])
+        small = dr.render(_cam(far), W, H, 0.5)
+        whole = dr.render(_cam(far), W, H, 0.5, footprints=False)
+        assert (small.hit != whole.hit).sum() <= 2 and small.hit.sum() > 20
+        sent = [sum(i.stats["bytes_sent"].values()) for i in (small, whole)]
+        assert sent[0] < 0.8 * sent[1], sent
+        # one brick alone: its full frame's hits lie inside its footprint, where the window agrees
+        r = IsoRenderer(v, RATE, sp, org)
+        for spec in dr._specs[::7]:
+            (z0, z1), (y0, y1), (x0, x1) = spec["ranges"]
+            b = IsoRenderer(v[z0:z1, y0:y1, x0:x1], RATE, sp, spec["origin"], queue=r.queue)
+            full = b.render(_cam(), W, H, 0.5)
+            rect = diso.footprint(spec, _cam(), W, H)
+            r0, r1, c0, c1 = rect
+            inside = np.zeros((H, W), bool)
+            inside[r0:r1, c0:c1] = True
+            assert not (full.hit & ~inside).any()
+            if r1 > r0 and c1 > c0:
+                win = b.render(diso.window(_cam(), W, H, rect), c1 - c0, r1 - r0, 0.5)
+                sub = full.hit[r0:r1, c0:c1]
+                assert (win.hit != sub).sum() <= 2
+                both = win.hit & sub
+                d = np.abs(win.depth[both] - full.depth[r0:r1, c0:c1][both])
+                assert d.size == 0 or d.max() <= ref.DEPTH_TOLERANCE * 3 * max(sp) * 40
+
+
+def test_worker_plan_makes_one_slab_per_worker_of_whole_brick_layers():
+    bricks = brick_plan((41, 30, 17), 8)  # 5 z layers of 4 x 2 bricks
+    plan = worker_plan(bricks, 2)
+    assert [c for _, c in plan] == [24, 16]  # 3 layers, 2 layers
+    assert plan[0][0] == ((0, 28), (0, 30), (0, 17)) and plan[1][0] == ((24, 41), (0, 30), (0, 17))
+    assert worker_plan(bricks, 6) == [(r, 1) for r in bricks]  # fewer layers than workers: the bricks
+    assert [c for _, c in worker_plan(bricks, 5)] == [8] * 5

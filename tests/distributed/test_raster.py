@@ -184,9 +184,9 @@ def test_the_client_holds_no_points(client, tiles):
 
 
 def _resident_tokens():
-    from clvis.distributed import raster
+    from clvis.distributed.cluster import REGISTRY
 
-    return list(raster._RESIDENT)
+    return REGISTRY.tokens()
 
 
 def test_a_malformed_file_names_itself(client, tmp_path, tiles):
@@ -244,7 +244,7 @@ def test_a_worker_killed_in_the_middle_of_a_frame(tmp_path):
             victim = sorted(where)[0]
             pid = c.run(os.getpid, workers=[victim])[victim]
             view = dr._view(_cam(), W, H, "a", "viridis", None, None, 1)
-            frame = dr.submit_frame(distributed_render_task(), view)
+            frame, _ = dr.submit_frame(distributed_render_task(), view)
             os.kill(pid, signal.SIGKILL)
             from clvis.distributed import composite
 
@@ -261,7 +261,7 @@ def test_a_worker_killed_in_the_middle_of_a_frame(tmp_path):
 def distributed_render_task():
     from clvis.distributed import raster
 
-    return raster._render_partials
+    return raster.render_one
 
 
 def test_workers_without_a_device(tmp_path, monkeypatch, tiles):

@@ -1,0 +1,159 @@
+"""Faults and waits of the distributed renderers on real, bounded
+LocalClusters: a worker killed during a frame of a volume built from an
+array (its bricks are sent again from the client), a worker stopped
+(SIGSTOP) during a frame and at close (bounded waits, errors that say what
+timed out), a scheduler address that refuses connections (fails in
+seconds), and a renderer used after close()."""
+
+import os
+import signal
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+from dask_cluster import TIMEOUT, distributed, local_cluster
+
+from clvis import Camera, datasets
+from clvis.distributed import DistributedIsoRenderer, DistributedRasterizer
+from clvis.distributed import composite as C
+from clvis.distributed import iso as diso
+from clvis.errors import ClusterError, ClusterTimeout, ClvisError
+from clvis.io import PointCloud, save_npz
+
+W, H = 40, 32
+_ML = datasets.marschner_lobb(25)
+
+
+def _cam():
+    return Camera.look_at((2.2, -2.6, 1.8), (0, 0, 0), (0, 0, 1), fov_y=40, aspect=W / H, near=0.05, far=20)
+
+
+def _iso(client, **kw):
+    return DistributedIsoRenderer(
+        _ML["volume"], client, rate=16, spacing=_ML["spacing"], origin=_ML["origin"], brick=8, **kw
+    )
+
+
+def _same_image(a, b):
+    assert np.array_equal(a.hit, b.hit)
+    assert np.array_equal(a.depth, b.depth) and np.array_equal(a.rgba, b.rgba)
+
+
+def _pid(client, worker):
+    return client.run(os.getpid, workers=[worker])[worker]
+
+
+def test_a_worker_killed_during_a_frame_of_an_array_volume():
+    """The bricks of an in-memory array were scattered from the client: a
+    worker killed with the frame's tasks in flight takes some of them along
+    ("lost scattered data"). The renderer sends them again and the frame,
+    and every later one, equals the undisturbed image."""
+    with local_cluster() as cluster, distributed.Client(cluster, timeout=TIMEOUT) as c:
+        c.wait_for_workers(2, timeout=TIMEOUT)
+        with _iso(c, timeout=TIMEOUT) as dr:
+            want = dr.render(_cam(), W, H, 0.5)
+            assert want.hit.sum() > 100 and len(dr.bricks) == 27
+            held = {h.worker for h in dr._built}
+            assert len(held) == 2  # both workers hold bricks
+            victim = sorted(held)[0]
+            pid = _pid(c, victim)
+            view = {"camera": _cam(), "width": W, "height": H, "isovalue": 0.5, "speculation": True}
+            frame, _ = dr.submit_frame(diso.render_one, view)  # in flight ...
+            os.kill(pid, signal.SIGKILL)  # ... when the worker dies
+            with pytest.raises(distributed.CancelledError, match="already forgotten|lost"):
+                distributed.wait(frame, timeout=TIMEOUT)  # what broke every later frame
+            # the next frames: lost bricks sent again from the client's array, rebuilt
+            for _ in range(2):
+                got = dr.render(_cam(), W, H, 0.5)
+                _same_image(got, want)
+            assert victim not in c.scheduler_info()["workers"]
+            # killed during render() itself: it recovers inside the call
+            held = sorted({h.worker for h in dr._built})
+            pid = _pid(c, held[-1])
+            threading.Timer(0.05, os.kill, (pid, signal.SIGKILL)).start()
+            _same_image(dr.render(_cam(), W, H, 0.5), want)
+            _same_image(dr.render(_cam(), W, H, 0.5), want)
+
+
+def test_a_stopped_worker_times_out_with_a_clvis_error_and_close_is_bounded(tmp_path):
+    """SIGSTOP one worker: a frame raises ClusterTimeout within about its
+    timeout, naming the frame and the stopped worker; close() returns within
+    a bounded time too (it does not wait for the stopped worker)."""
+    timeout = 4.0
+    with local_cluster() as cluster, distributed.Client(cluster, timeout=TIMEOUT) as c:
+        c.wait_for_workers(2, timeout=TIMEOUT)
+        dr = _iso(c, timeout=TIMEOUT, connect_timeout=2.0)
+        pid = None
+        try:
+            dr.render(_cam(), W, H, 0.5)
+            dr.timeout = timeout  # the frames' bound (the build may take longer on a busy machine)
+            victim = sorted({h.worker for h in dr._built})[0]
+            pid = _pid(c, victim)
+            os.kill(pid, signal.SIGSTOP)
+            t0 = time.monotonic()
+            with pytest.raises(ClusterTimeout, match=r"frame .*not done within timeout=4 s") as e:
+                dr.render(_cam(), W, H, 0.5)
+            assert time.monotonic() - t0 < 3 * timeout + 5
+            assert isinstance(e.value, TimeoutError) and isinstance(e.value, ClvisError)
+            assert victim in str(e.value)
+            t0 = time.monotonic()
+            dr.close()
+            assert time.monotonic() - t0 < 2 * timeout + 5
+            with pytest.raises(ClusterError, match="DistributedIsoRenderer: closed"):
+                dr.render(_cam(), W, H, 0.5)
+        finally:
+            if pid is not None:
+                os.kill(pid, signal.SIGKILL)  # the nanny starts another
+            dr.close()
+
+
+def test_render_after_close_says_closed(tmp_path):
+    rng = np.random.default_rng(0)
+    path = tmp_path / "t.npz"
+    save_npz(path, PointCloud(rng.uniform(0, 1, (500, 3))))
+    with DistributedRasterizer([path], workers=1, timeout=TIMEOUT) as dr:
+        cam = Camera.look_at((3, -2, 2), (0.5, 0.5, 0.5), (0, 0, 1), aspect=W / H)
+        assert (dr.render(cam, W, H).index != C.ids_of(C.EMPTY_KEY)).any()
+    with pytest.raises(ClusterError, match="DistributedRasterizer: closed; make a new one"):
+        dr.render(cam, W, H)
+    with pytest.raises(ClusterError, match="closed"):
+        dr.sample()
+    dr.close()  # twice: harmless
+
+
+def _closed_port():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()  # nothing listens there now
+    return port
+
+
+def test_a_refused_scheduler_fails_in_seconds():
+    port = _closed_port()
+    for cls in (DistributedRasterizer, DistributedIsoRenderer):
+        t0 = time.monotonic()
+        src = ["x.npz"] if cls is DistributedRasterizer else np.zeros((8, 8, 8), np.float32)
+        with pytest.raises(ClusterError, match=f"scheduler tcp://127.0.0.1:{port}: cannot connect"):
+            cls(src, f"tcp://127.0.0.1:{port}", timeout=TIMEOUT)
+        assert time.monotonic() - t0 < 5
+
+
+def test_a_silent_scheduler_fails_after_connect_timeout():
+    """A port that accepts and never speaks Dask: the Client's own connect
+    waits connect_timeout, not the render timeout."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)
+    port = srv.getsockname()[1]
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(ClusterError, match=f"scheduler tcp://127.0.0.1:{port}: not reached within"):
+            DistributedRasterizer(["x.npz"], f"tcp://127.0.0.1:{port}", timeout=600, connect_timeout=2)
+        assert time.monotonic() - t0 < 20
+    finally:
+        srv.close()
+    with pytest.raises(ValueError, match="connect_timeout: expected a positive number"):
+        DistributedRasterizer(["x.npz"], "tcp://127.0.0.1:1", connect_timeout=0)

@@ -53,6 +53,8 @@ from ..colormap import TransferFunction
 from ..errors import DeviceError
 from .bvh import build_bvh
 from .gaussians import Gaussians
+from .tiles import PROFILES as TILE_PROFILES
+from .tiles import render_tiles
 
 __all__ = [
     "GAUSSIAN_DTYPE",
@@ -63,6 +65,7 @@ __all__ = [
 ]
 
 MODELS = {"max_response": 0, "absorption": 1}
+METHODS = ("tiles", "bvh")
 MAX_K = 64
 TILE = 8
 
@@ -108,8 +111,8 @@ class GaussianImage:
 # a CPU gains nothing from larger launches and a band is the progress step,
 # a GPU wants enough rays in flight to fill it.
 PROFILES = {
-    "cpu": {"march_wg": 8, "k": 64, "k0": 16, "item_wg": 64, "tile_rays": 1 << 18},
-    "gpu": {"march_wg": 64, "k": 16, "k0": 16, "item_wg": 64, "tile_rays": 1 << 21},
+    "cpu": {"march_wg": 8, "k": 64, "k0": 16, "item_wg": 64, "tile_rays": 1 << 18, "method": "tiles"},
+    "gpu": {"march_wg": 64, "k": 16, "k0": 16, "item_wg": 64, "tile_rays": 1 << 21, "method": "tiles"},
 }
 RAY_BYTES = 28  # per ray: rgba float4, depth float, stats uint2
 
@@ -137,6 +140,10 @@ class GaussianRenderer:
     colors : None (default): the Gaussians' own colours when they have them,
         else the transfer function's; True: their own (ValueError if they
         have none); False: the transfer function's.
+    method : "tiles" (the Gaussians binned to screen tiles and sorted per
+        tile, clvis.gauss.tiles), "bvh" (march.cl over an LBVH) or None: the
+        tuning profile's (the faster one measured). Both give the same image.
+    kp : the tile renderer's pending-hit buffer (1..64); None: its profile's.
     """
 
     def __init__(
@@ -150,6 +157,8 @@ class GaussianRenderer:
         queue: cl.CommandQueue | None = None,
         *,
         colors: bool | None = None,
+        method: str | None = None,
+        kp: int | None = None,
     ) -> None:
         if not isinstance(gaussians, Gaussians):
             raise TypeError(f"gaussians: expected clvis.Gaussians, got {type(gaussians).__name__}")
@@ -158,6 +167,14 @@ class GaussianRenderer:
         self.queue = q = resolve_queue(queue)
         self.config = runtime.capture(q)
         prof = self._profile = PROFILES[self.config.tuning]
+        method = prof["method"] if method is None else method
+        if method not in METHODS:
+            raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+        self.method = method
+        kp = TILE_PROFILES[self.config.tuning]["kp"] if kp is None else nonnegative_int("kp", kp)
+        if not 1 <= kp <= MAX_K:
+            raise ValueError(f"kp: expected 1..{MAX_K}, got {kp}")
+        self.kp = kp
         k = prof["k"] if k is None else nonnegative_int("k", k)
         if not 1 <= k <= MAX_K:
             raise ValueError(f"k: expected 1..{MAX_K}, got {k}")
@@ -243,6 +260,12 @@ class GaussianRenderer:
             self._colors = runtime.empty(q, (n, 4), np.uint8, "Gaussian colours")
             self._colors.set(rgba8, queue=q)
         self._upload_events = (first, last or runtime.marker(q))
+        self._dummy = runtime.zeros(q, 64, np.float32, "empty BVH") if n == 0 else None
+        if self.method == "tiles":
+            # records stay in id order; no BVH
+            self.bvh = None
+            self.records = records
+            return
         self.bvh = build_bvh(boxes[:n] if n else np.zeros((0, 6), np.float32), queue=q)
         self.records = runtime.empty(q, m * GAUSSIAN_DTYPE.itemsize, np.uint8, "Gaussian records (BVH order)")
         if n:
@@ -256,7 +279,6 @@ class GaussianRenderer:
                 np.uint32(n),
                 self.records.base_data,
             )
-        self._dummy = runtime.zeros(q, 64, np.float32, "empty BVH") if n == 0 else None
 
     @property
     def upload_seconds(self) -> float | None:
@@ -265,13 +287,14 @@ class GaussianRenderer:
 
     @property
     def build_seconds(self) -> float | None:
-        """Device time of the BVH build (event profiling; waits for it)."""
-        return self.bvh.build_seconds
+        """Device time of the BVH build (event profiling; waits for it); None for method="tiles"."""
+        return None if self.bvh is None else self.bvh.build_seconds
 
     @property
     def nbytes(self) -> int:
         """Device bytes the renderer holds: the Gaussian records and the BVH."""
-        return runtime.nbytes(self.records, self._dummy, self._colors) + self.bvh.nbytes
+        bvh = 0 if self.bvh is None else self.bvh.nbytes
+        return runtime.nbytes(self.records, self._dummy, self._colors) + bvh
 
     def _buf(self, a):
         b = runtime.arg(a)
@@ -294,6 +317,7 @@ class GaussianRenderer:
         host: bool = True,
         tile_rows: int | None = None,
         progress: Callable[[int, int], None] | None = None,
+        max_keys: int | None = None,
     ) -> GaussianImage:
         """One frame; see the module doc for what the planes hold.
 
@@ -303,7 +327,14 @@ class GaussianRenderer:
         the device (pyopencl arrays on the renderer's queue, for a pipeline
         such as post-processing), renders one band and reads nothing back:
         ``hits`` and ``rounds`` are then None and ``stats["ray_stats"]`` is the
-        (H, W, 2) uint32 device array of both."""
+        (H, W, 2) uint32 device array of both.
+
+        method="tiles": tile_rows is unused; the image is rendered in bands of
+        tile rows holding at most `max_keys` keys (default: the tuning
+        profile's ``tile_keys``), and of at most ``tile_rays`` rays when read
+        back. stats add keys, keys_per_gaussian, candidates_per_pixel (the
+        mean length of a pixel's tile list) and the device time split
+        bin_s (count, scan, keys), sort_s, tile_render_s (ranges, render)."""
         q = self.queue
         w, h = positive_int("width", width), positive_int("height", height)
         if w * h >= 2**32:
@@ -321,6 +352,11 @@ class GaussianRenderer:
         )
         if progress is not None and not callable(progress):
             raise TypeError(f"progress: expected a callable, got {type(progress).__name__}")
+        if max_keys is not None:
+            max_keys = positive_int("max_keys", max_keys)
+        if self.method == "tiles":
+            with runtime.pinned(self.config):
+                return _tiles_image(self, camera, w, h, tf, host, max_keys, progress)
         tmin, tscale = tf.limits(self.gaussians.values)
         table = tf.table()
         what = f"Gaussian image {w}x{h}"
@@ -422,6 +458,31 @@ class GaussianRenderer:
         return GaussianImage(out_rgba, out_depth, hits, rounds, info)
 
 
+def _tiles_image(r: GaussianRenderer, camera, w, h, tf, host, max_keys, progress) -> GaussianImage:
+    rgba, depth, stats, tinfo = render_tiles(
+        r, camera, w, h, tf, host=host, max_keys=max_keys, progress=progress
+    )
+    info = {
+        "gaussians": r.n,
+        "model": r.model,
+        "k": r.k,
+        "bvh_build_s": None,
+        "rays": w * h,
+        "bvh_nodes": 0,
+        "band_rows": None,
+        **tinfo,
+    }
+    if not host:
+        info["render_s"] = None
+        info["ray_stats"] = stats
+        return GaussianImage(rgba, depth, None, None, info)
+    hits, rounds = stats[..., 0], stats[..., 1]
+    info["hits_per_ray_mean"] = float(hits.mean())
+    info["hits_per_ray_max"] = int(hits.max())
+    info["rounds_per_ray_mean"] = float(rounds.mean())
+    return GaussianImage(rgba, depth, hits, rounds, info)
+
+
 def render_gaussians(
     gaussians: Gaussians,
     camera: Camera,
@@ -435,6 +496,7 @@ def render_gaussians(
     density: float = 1.0,
     queue: cl.CommandQueue | None = None,
     colors: bool | None = None,
+    method: str | None = None,
 ) -> GaussianImage:
     """One frame of `gaussians`: a :class:`GaussianRenderer` and its ``render``."""
     r = GaussianRenderer(
@@ -446,5 +508,6 @@ def render_gaussians(
         density=density,
         queue=queue,
         colors=colors,
+        method=method,
     )
     return r.render(camera, width, height)

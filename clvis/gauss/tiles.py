@@ -1,0 +1,247 @@
+"""The tile renderer of GaussianRenderer (method="tiles", kernels_cl/gauss/tiles.cl).
+
+The same image as the BVH march (march.cl): the same hit test, alpha and
+compositing, in the same (t, id) order per pixel. Data flow per band of tile
+rows:
+
+1. ``tile_count``: each Gaussian's exact projected footprint (the outline
+   ellipse of its cutoff ellipsoid, inflated by 1 %) against the tiles' pixel
+   centres; the number of tiles it may touch.
+2. ``clvis.primitives.scan`` of the counts: each Gaussian's first key, and the
+   band's key count (one small read: the band is split when it exceeds the
+   budget, ``tile_keys`` of the tuning profile or ``max_keys``).
+3. ``tile_keys``: one key ``tile << 32 | key_f32(dmin)`` per (Gaussian, tile),
+   dmin a lower bound of the Gaussian's view depth.
+4. ``clvis.primitives.radix_sort`` of the keys with the Gaussian ids.
+5. ``tile_ranges``: each tile's run of keys.
+6. ``tile_render``: per pixel, the tile's list in dmin order; a hit is
+   composited once no later candidate can come before it (its depth is below
+   the next candidate's dmin), through a small pending buffer, with rounds over
+   the same list when more than KP hits are pending.
+
+Memory: keys and ids take 12 bytes a key plus the sort's temporaries (12
+more); the key count is known before anything is allocated for it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pyopencl as cl
+
+from .. import primitives, runtime
+from ..camera import Camera, ray_buffer
+from ..colormap import TransferFunction
+from ..errors import DeviceError
+
+__all__ = ["PROFILES", "KEY_BYTES", "projection_rows", "render_tiles"]
+
+# per tuning profile: tile side in pixels (TS), pending-hit buffer (KP),
+# work-items per group of tile_render (a divisor of TS * TS), of the
+# one-item-per-Gaussian kernels, keys per band at most ("tile_keys"), rays per
+# band at most when the image is read back ("tile_rays", as the BVH path).
+PROFILES = {
+    "cpu": {"ts": 16, "kp": 16, "render_wg": 16, "item_wg": 64, "tile_keys": 1 << 24, "tile_rays": 1 << 20},
+    "gpu": {"ts": 16, "kp": 16, "render_wg": 256, "item_wg": 256, "tile_keys": 1 << 25, "tile_rays": 1 << 22},
+}
+KEY_BYTES = 24  # key 8 + id 4, and the radix sort's copies of both
+RAY_BYTES = 28
+
+
+def projection_rows(camera: Camera, width: int, height: int) -> np.ndarray:
+    """16 float32: the pixel-homogeneous projection rows Pu, Pv, Pw
+    ((u w, v w, w) = P (x, y, z, 1), u, v continuous pixel coordinates, row 0
+    on top) and the depth row D, as tiles.cl reads them."""
+    m = np.asarray(camera.matrix, np.float64)
+    pu = 0.5 * width * (m[0] + m[3])
+    pv = 0.5 * height * (m[3] - m[1])
+    return np.concatenate([pu, pv, m[3], np.asarray(camera.depth_row, np.float64)]).astype(np.float32)
+
+
+def _kernels(q, r) -> dict:
+    prof = PROFILES[r.config.tuning]
+    defines = {
+        "TS": prof["ts"],
+        "KP": r.kp,
+        "MODEL": {"max_response": 0, "absorption": 1}[r.model],
+        "COLOR": int(r.colors),
+    }
+    return {
+        name: runtime.get_kernel(q, "gauss/tiles.cl", name, defines, runtime.EXACT_FP)
+        for name in ("tile_count", "tile_keys", "tile_ranges", "tile_render")
+    }
+
+
+def render_tiles(
+    r: Any,
+    camera: Camera,
+    w: int,
+    h: int,
+    tf: TransferFunction,
+    *,
+    host: bool,
+    max_keys: int | None,
+    progress: Callable[[int, int], None] | None,
+) -> tuple[Any, Any, Any, dict]:
+    """rgba, depth, ray stats (host arrays, or device arrays of the whole
+    image when host=False) and the stats dict, for GaussianRenderer `r`."""
+    q = r.queue
+    prof = PROFILES[r.config.tuning]
+    ts = prof["ts"]
+    ks = _kernels(q, r)
+    n = r.n
+    tiles_x, tiles_y = -(-w // ts), -(-h // ts)
+    budget = prof["tile_keys"] if max_keys is None else max_keys
+    rows_cap = tiles_y if not host else max(1, min(tiles_y, prof["tile_rays"] // (w * ts)))
+    cam = ray_buffer(camera, w, h)
+    proj = projection_rows(camera, w, h)
+    near = np.float32(camera.near - 1e-4 * (abs(camera.near) + 1e-3))
+    tmin, tscale = tf.limits(r.gaussians.values)
+    table = tf.table()
+    what = f"Gaussian image {w}x{h}"
+    out_rows = h if not host else min(h, rows_cap * ts)
+    runtime.check_memory(
+        q,
+        what,
+        device_bytes=w * out_rows * RAY_BYTES + min(budget, 1 << 26) * KEY_BYTES,
+        host_bytes=w * h * RAY_BYTES if host else 0,
+    )
+    start = runtime.marker(q)
+    camd = runtime.empty(q, cam.size, np.float32, "camera rays")
+    camd.set(cam, queue=q, async_=True)
+    projd = runtime.empty(q, proj.size, np.float32, "camera projection")
+    projd.set(proj, queue=q, async_=True)
+    tfd = runtime.empty(q, table.shape, np.float32, "transfer function")
+    tfd.set(table, queue=q, async_=True)
+    rgba = runtime.empty(q, (out_rows, w, 4), np.float32, "rgba")
+    depth = runtime.empty(q, (out_rows, w), np.float32, "depth")
+    stats = runtime.empty(q, (out_rows, w, 2), np.uint32, "ray stats")
+    recs = r.records.base_data
+    colors = recs if r._colors is None else r._colors.base_data
+    counts = runtime.empty(q, max(n, 1), np.uint64, "tile counts per Gaussian")
+    g_items = runtime.items(q, n, prof["item_wg"])
+    wg = runtime.local_size(q, prof["render_wg"])
+    head = (recs, np.uint32(n), projd.base_data, near, np.float32(r.cutoff), np.uint32(w), np.uint32(h))
+    if host:
+        out_rgba = np.empty((h, w, 4), np.float32)
+        out_depth = np.empty((h, w), np.float32)
+        out_stats = np.empty((h, w, 2), np.uint32)
+    bands = [(a, min(a + rows_cap, tiles_y)) for a in range(0, tiles_y, rows_cap)]
+    times = {"bin_s": 0.0, "sort_s": 0.0, "render_s_tiles": 0.0}
+    events: list[tuple[str, cl.Event, cl.Event]] = []
+    total_keys = 0
+    cand = 0  # sum over pixels of their tile's list length
+    done_bands = 0
+    while bands:
+        a, b = bands.pop(0)
+        e0 = runtime.marker(q)
+        if n:
+            runtime.launch(q, ks["tile_count"], *g_items, *head, np.uint32(a), np.uint32(b), counts.base_data)
+            offsets, total_d = primitives.scan(counts[:n], return_total=True, queue=q)
+            m = int(total_d.get()[0])
+        else:
+            offsets, m = None, 0
+        if m > budget and b - a > 1:
+            mid = (a + b) // 2
+            bands[0:0] = [(a, mid), (mid, b)]
+            continue
+        if m >= 2**32:
+            raise DeviceError(
+                f"{what}: one row of {ts}-pixel tiles needs {m} keys; at most 2^32 - 1 (fewer "
+                "or smaller Gaussians, or a smaller image)"
+            )
+        band_tiles = (b - a) * tiles_x
+        ranges = runtime.zeros(q, (band_tiles, 2), np.uint32, "tile ranges")
+        keys = ids = None
+        e1 = e2 = e0
+        if m:
+            runtime.check_memory(q, f"{what}: {m} tile keys", device_bytes=m * KEY_BYTES)
+            keys = runtime.empty(q, m, np.uint64, "tile keys")
+            ids = runtime.empty(q, m, np.uint32, "tile key ids")
+            runtime.launch(
+                q,
+                ks["tile_keys"],
+                *g_items,
+                *head,
+                np.uint32(a),
+                np.uint32(b),
+                offsets.base_data,
+                keys.base_data,
+                ids.base_data,
+            )
+            e1 = runtime.marker(q)
+            tile_bits = max(1, int(band_tiles - 1).bit_length())
+            keys, ids = primitives.radix_sort(keys, ids, key_bits=32 + tile_bits, queue=q)
+            e2 = runtime.marker(q)
+            runtime.launch(q, ks["tile_ranges"], *runtime.items(q, m, 256), keys.base_data, np.uint32(m),
+                           ranges.base_data)
+        y0 = a * ts
+        n_rows = min(b * ts, h) - y0
+        out_y0 = y0 if host else 0
+        e3 = runtime.launch(
+            q,
+            ks["tile_render"],
+            band_tiles * ts * ts,
+            wg,
+            recs,
+            (keys if keys is not None else counts).base_data,
+            (ids if ids is not None else counts).base_data,
+            ranges.base_data,
+            camd.base_data,
+            np.uint32(w),
+            np.uint32(h),
+            np.uint32(a),
+            np.uint32(n_rows),
+            np.uint32(out_y0),
+            tfd.base_data,
+            np.uint32(table.shape[0]),
+            tmin,
+            tscale,
+            np.float32(r.cutoff * r.cutoff),
+            np.float32(r.density),
+            colors,
+            rgba.base_data,
+            depth.base_data,
+            stats.base_data,
+        )
+        events.append(("band", e0 if done_bands else start, e1, e2, e3))  # type: ignore[arg-type]
+        total_keys += m
+        if host:
+            rng = ranges.get().astype(np.int64)
+            lens = (rng[:, 1] - rng[:, 0]).reshape(b - a, tiles_x)
+            px_w = np.minimum(ts, w - np.arange(tiles_x) * ts)
+            px_h = np.minimum(ts, h - (a + np.arange(b - a)) * ts)
+            cand += int((lens * px_h[:, None] * px_w[None, :]).sum())
+            for dst, src in ((out_rgba, rgba), (out_depth, depth), (out_stats, stats)):
+                cl.enqueue_copy(q, dst[y0 : y0 + n_rows], src.base_data, wait_for=[e3])
+            if progress is not None:
+                progress(w * (y0 + n_rows), w * h)
+        done_bands += 1
+    info: dict = {
+        "method": "tiles",
+        "tile": ts,
+        "kp": r.kp,
+        "keys": total_keys,
+        "keys_per_gaussian": total_keys / max(n, 1),
+        "bands": done_bands,
+    }
+    if not host:
+        info["events"] = (start, events[-1][4])
+        return rgba, depth, stats, info
+    bin_s = sort_s = render_s = 0.0
+    for _, e0, e1, e2, e3 in events:  # type: ignore[misc]
+        bin_s += runtime.seconds(e0, e1) or 0.0
+        sort_s += runtime.seconds(e1, e2) or 0.0 if e1 is not e2 else 0.0
+        render_s += runtime.seconds(e2, e3) or 0.0
+    info.update(
+        {
+            "bin_s": bin_s,
+            "sort_s": sort_s,
+            "tile_render_s": render_s,
+            "render_s": runtime.seconds(start, events[-1][4]),
+            "candidates_per_pixel": cand / (w * h),
+        }
+    )
+    return out_rgba, out_depth, out_stats, info

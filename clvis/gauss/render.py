@@ -175,6 +175,7 @@ class GaussianRenderer:
         if not 1 <= kp <= MAX_K:
             raise ValueError(f"kp: expected 1..{MAX_K}, got {kp}")
         self.kp = kp
+        self.lanes: int | None = None  # tile_render (1) or tile_render8 (8); None: the profile's
         k = prof["k"] if k is None else nonnegative_int("k", k)
         if not 1 <= k <= MAX_K:
             raise ValueError(f"k: expected 1..{MAX_K}, got {k}")

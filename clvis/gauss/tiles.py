@@ -43,8 +43,10 @@ __all__ = ["PROFILES", "KEY_BYTES", "projection_rows", "render_tiles"]
 # one-item-per-Gaussian kernels, keys per band at most ("tile_keys"), rays per
 # band at most when the image is read back ("tile_rays", as the BVH path).
 PROFILES = {
-    "cpu": {"ts": 16, "kp": 16, "render_wg": 16, "item_wg": 64, "tile_keys": 1 << 24, "tile_rays": 1 << 20},
-    "gpu": {"ts": 16, "kp": 16, "render_wg": 256, "item_wg": 256, "tile_keys": 1 << 25, "tile_rays": 1 << 22},
+    "cpu": {"ts": 16, "kp": 64, "lanes": 8, "render_wg": 4, "item_wg": 64, "tile_keys": 1 << 24,
+            "tile_rays": 1 << 20},
+    "gpu": {"ts": 16, "kp": 32, "lanes": 1, "render_wg": 256, "item_wg": 256, "tile_keys": 1 << 25,
+            "tile_rays": 1 << 22},
 }
 KEY_BYTES = 24  # key 8 + id 4, and the radix sort's copies of both
 RAY_BYTES = 28
@@ -70,7 +72,7 @@ def _kernels(q, r) -> dict:
     }
     return {
         name: runtime.get_kernel(q, "gauss/tiles.cl", name, defines, runtime.EXACT_FP)
-        for name in ("tile_count", "tile_keys", "tile_ranges", "tile_render")
+        for name in ("tile_count", "tile_keys", "tile_ranges", "tile_render", "tile_render8")
     }
 
 
@@ -122,6 +124,8 @@ def render_tiles(
     colors = recs if r._colors is None else r._colors.base_data
     counts = runtime.empty(q, max(n, 1), np.uint64, "tile counts per Gaussian")
     g_items = runtime.items(q, n, prof["item_wg"])
+    lanes = prof["lanes"] if r.lanes is None else r.lanes
+    render = ks["tile_render8" if lanes == 8 else "tile_render"]
     wg = runtime.local_size(q, prof["render_wg"])
     head = (recs, np.uint32(n), projd.base_data, near, np.float32(r.cutoff), np.uint32(w), np.uint32(h))
     if host:
@@ -182,8 +186,8 @@ def render_tiles(
         out_y0 = y0 if host else 0
         e3 = runtime.launch(
             q,
-            ks["tile_render"],
-            band_tiles * ts * ts,
+            render,
+            band_tiles * ts * ts // lanes,
             wg,
             recs,
             (keys if keys is not None else counts).base_data,
@@ -223,6 +227,7 @@ def render_tiles(
         "method": "tiles",
         "tile": ts,
         "kp": r.kp,
+        "lanes": lanes,
         "keys": total_keys,
         "keys_per_gaussian": total_keys / max(n, 1),
         "bands": done_bands,

@@ -437,3 +437,196 @@ kernel void tile_render(global const clvis_gaussian *recs, global const ulong *k
     depth[pix] = z;
     stats[pix] = (uint2)(hits, rounds);
 }
+
+/* ---------------------------------------------------------------- 8 lanes
+ * tile_render8: tile_render's result, a work-item per row of 8 pixels of a
+ * tile (TS a multiple of 8): the hit test of a candidate runs on the 8 rays
+ * at once in float8 lanes (the same operations as clvis_gauss_hit, lane by
+ * lane), the pending buffers and compositing per lane. Global size:
+ * tiles_x * (rows / TS rounded up) * TS * TS / 8; work-item i: tile
+ * i / (TS * TS / 8), row (i % (TS * TS / 8)) / (TS / 8) of it, pixels
+ * 8 * (i % (TS / 8)) .. + 7 of that row; any local size dividing TS * TS / 8.
+ * Same arguments as tile_render. */
+
+/* lane l: composite its smallest pending hit */
+#define POP_LANE(l)                                                                                   \
+    do {                                                                                              \
+        int q_ = --kn[l];                                                                             \
+        clvis_gauss_composite(ka[l][q_], hit_color(tf, kc[l][q_], colors, ki[l][q_]), &T[l], &cr[l],  \
+                              &cg[l], &cb[l]);                                                        \
+        ++hits[l];                                                                                    \
+        last_t[l] = kt[l][q_];                                                                        \
+        last_id[l] = ki[l][q_];                                                                       \
+        if (T[l] < 0.5f && z[l] == INFINITY)                                                          \
+            z[l] = clvis_ray_depth(cam, o[l], d[l], kt[l][q_]);                                       \
+        if (T[l] < T_STOP)                                                                            \
+            done[l] = true;                                                                           \
+    } while (0)
+
+kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *keys, global const uint *ids,
+                         global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
+                         uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
+                         float tf_scale, float cutoff2, float density, global const uchar4 *colors,
+                         global float4 *rgba, global float *depth, global uint2 *stats)
+{
+    uint tiles_x = (W + TS - 1) / TS;
+    uint per_tile = TS * TS / 8;
+    uint tile = get_global_id(0) / per_tile, l8 = get_global_id(0) % per_tile;
+    uint px0 = (tile % tiles_x) * TS + (l8 % (TS / 8)) * 8, row = (tile / tiles_x) * TS + l8 / (TS / 8);
+    uint py = ty0 * TS + row;
+    if (px0 >= W || row >= rows || py >= H)
+        return;
+
+    float o[8][3], d[8][3], cd[8], d0[8];
+    float T[8], cr[8], cg[8], cb[8], z[8], last_t[8], ct[8], front[8];
+    uint hits[8], nround[8], last_id[8], cid[8];
+    bool done[8], over[8], gone[8];   /* gone: done and taken off live */
+    int kn[8];
+    float kt[8][KP], ka[8][KP];
+    uint ki[8][KP], kc[8][KP];
+    float lox[8], loy[8], loz[8], ldx[8], ldy[8], ldz[8];
+    uint2 range = ranges[tile];
+    int live = 0;
+    for (int l = 0; l < 8; ++l) {
+        uint px = min(px0 + l, W - 1);
+        clvis_camera_ray(cam, px, py, o[l], d[l]);
+        cd[l] = clvis_dot3(cam[18], cam[19], cam[20], d[l][0], d[l][1], d[l][2]);
+        d0[l] = clvis_dot3(cam[18], cam[19], cam[20], o[l][0], o[l][1], o[l][2]) + cam[21];
+        lox[l] = o[l][0]; loy[l] = o[l][1]; loz[l] = o[l][2];
+        ldx[l] = d[l][0]; ldy[l] = d[l][1]; ldz[l] = d[l][2];
+        T[l] = 1.0f; cr[l] = cg[l] = cb[l] = 0.0f; z[l] = INFINITY;
+        last_t[l] = -1.0f; last_id[l] = 0; hits[l] = 0; nround[l] = 0;
+        done[l] = gone[l] = px0 + l >= W || range.x >= range.y;
+        live += !done[l];
+    }
+    float8 ox = vload8(0, lox), oy = vload8(0, loy), oz = vload8(0, loz);
+    float8 dx = vload8(0, ldx), dy = vload8(0, ldy), dz = vload8(0, ldz);
+    while (live > 0) {
+        for (int l = 0; l < 8; ++l) {
+            kn[l] = 0;
+            over[l] = false;
+            ct[l] = INFINITY;
+            cid[l] = 0xFFFFFFFFu;
+            front[l] = INFINITY;
+            nround[l] += !done[l];
+        }
+        for (uint i = range.x; i < range.y && live > 0; ++i) {
+            float dm = key_to_f32((uint)keys[i]);
+            if (any(vload8(0, front) < dm)) {
+                for (int l = 0; l < 8; ++l) {
+                    while (front[l] < dm && !done[l]) {
+                        POP_LANE(l);
+                        if (kn[l] > 0 && cd[l] > 0.0f) {
+                            float h = kt[l][kn[l] - 1] * cd[l];
+                            front[l] = (h + d0[l]) + 1e-5f * (fabs(h) + fabs(d0[l]));
+                        } else
+                            front[l] = INFINITY;
+                    }
+                    if (done[l] && !gone[l]) {
+                        gone[l] = true;
+                        front[l] = INFINITY;
+                        --live;
+                    }
+                }
+                if (live == 0)
+                    break;
+            }
+            uint id = ids[i];
+            global const clvis_gaussian *g = recs + id;
+            /* clvis_gauss_hit on 8 rays */
+            float8 r0 = ox - g->mean[0], r1 = oy - g->mean[1], r2 = oz - g->mean[2];
+            float8 op0 = (g->w[0] * r0 + g->w[1] * r1) + g->w[2] * r2;
+            float8 op1 = (g->w[3] * r0 + g->w[4] * r1) + g->w[5] * r2;
+            float8 op2 = (g->w[6] * r0 + g->w[7] * r1) + g->w[8] * r2;
+            float8 dp0 = (g->w[0] * dx + g->w[1] * dy) + g->w[2] * dz;
+            float8 dp1 = (g->w[3] * dx + g->w[4] * dy) + g->w[5] * dz;
+            float8 dp2 = (g->w[6] * dx + g->w[7] * dy) + g->w[8] * dz;
+            float8 a8 = (dp0 * dp0 + dp1 * dp1) + dp2 * dp2;
+            float8 b8 = (op0 * dp0 + op1 * dp1) + op2 * dp2;
+            float8 ts8 = -b8 / a8;
+            float8 t8 = fmax(ts8, 0.0f);
+            float8 p0 = op0 + t8 * dp0, p1 = op1 + t8 * dp1, p2 = op2 + t8 * dp2;
+            float8 m28 = (p0 * p0 + p1 * p1) + p2 * p2;
+            int8 hit = m28 <= cutoff2;
+            if (!any(hit))
+                continue;
+            float lt[8], lm2[8], lts[8], la[8], lop[3][8], ldp[3][8];
+            int lh[8];
+            vstore8(t8, 0, lt);
+            vstore8(m28, 0, lm2);
+            vstore8(ts8, 0, lts);
+            vstore8(a8, 0, la);
+            vstore8(op0, 0, lop[0]);
+            vstore8(op1, 0, lop[1]);
+            vstore8(op2, 0, lop[2]);
+            vstore8(dp0, 0, ldp[0]);
+            vstore8(dp1, 0, ldp[1]);
+            vstore8(dp2, 0, ldp[2]);
+            vstore8(hit, 0, lh);
+            for (int l = 0; l < 8; ++l) {
+                if (!lh[l] || done[l])
+                    continue;
+                float t = lt[l];
+                if (!key_less(last_t[l], last_id[l], t, id))
+                    continue;
+                if (over[l] && !key_less(t, id, ct[l], cid[l]))
+                    continue;
+                if (kn[l] == KP) {
+                    over[l] = true;
+                    if (key_less(kt[l][0], ki[l][0], t, id)) {
+                        ct[l] = t;
+                        cid[l] = id;
+                        continue;
+                    }
+                    ct[l] = kt[l][0];
+                    cid[l] = ki[l][0];
+                    for (int q = 0; q < KP - 1; ++q) {
+                        kt[l][q] = kt[l][q + 1];
+                        ki[l][q] = ki[l][q + 1];
+                        ka[l][q] = ka[l][q + 1];
+                        kc[l][q] = kc[l][q + 1];
+                    }
+                    kn[l] = KP - 1;
+                }
+                float op[3] = {lop[0][l], lop[1][l], lop[2][l]}, dp[3] = {ldp[0][l], ldp[1][l], ldp[2][l]};
+                uint ti;
+                float alpha = hit_alpha(g, tf, tf_n, tf_min, tf_scale, density, lm2[l], lts[l], la[l], op, dp, &ti);
+                int pos = kn[l]++;
+                while (pos > 0 && key_less(kt[l][pos - 1], ki[l][pos - 1], t, id)) {
+                    kt[l][pos] = kt[l][pos - 1];
+                    ki[l][pos] = ki[l][pos - 1];
+                    ka[l][pos] = ka[l][pos - 1];
+                    kc[l][pos] = kc[l][pos - 1];
+                    --pos;
+                }
+                kt[l][pos] = t;
+                ki[l][pos] = id;
+                ka[l][pos] = alpha;
+                kc[l][pos] = ti;
+                if (pos == kn[l] - 1 && cd[l] > 0.0f) {
+                    float h = t * cd[l];
+                    front[l] = (h + d0[l]) + 1e-5f * (fabs(h) + fabs(d0[l]));
+                }
+            }
+        }
+        /* the rest of the round, front to back; lanes without overflow are done */
+        for (int l = 0; l < 8; ++l) {
+            if (gone[l])
+                continue;
+            while (!done[l] && kn[l] > 0)
+                POP_LANE(l);
+            if (!over[l])
+                done[l] = true;
+            if (done[l] && !gone[l]) {
+                gone[l] = true;
+                --live;
+            }
+        }
+    }
+    for (int l = 0; l < 8 && px0 + l < W; ++l) {
+        size_t pix = (size_t)(py - out_y0) * W + px0 + l;
+        rgba[pix] = (float4)(cr[l], cg[l], cb[l], 1.0f - T[l]);
+        depth[pix] = z[l];
+        stats[pix] = (uint2)(hits[l], nround[l]);
+    }
+}

@@ -172,6 +172,7 @@ def render_tiles(
                 np.uint32(a),
                 np.uint32(b),
                 offsets.base_data,
+                camd.base_data,
                 keys.base_data,
                 ids.base_data,
             )

@@ -33,10 +33,11 @@
  *     counts[i] = the tiles of the band Gaussian i may touch (footprint below).
  * kernel tile_keys(recs, uint n, proj, float near, float cutoff, uint W, uint H,
  *                  uint ty0, uint ty1, global const ulong *offsets,  n: exclusive scan of counts
+ *                  global const float *cam,                           22 floats (clvis/camera.h)
  *                  global ulong *keys, global uint *ids)              sum(counts) each
- *     keys[offsets[i] + k] = tile << 32 | clvis_key_f32(dmin_i), ids[...] = i,
- *     tiles in row-major order. dmin_i: a lower bound of the view depth of
- *     every point of Gaussian i's cutoff ellipsoid (inflated, below).
+ *     keys[offsets[i] + k] = tile << 32 | clvis_key_f32(dk), ids[...] = i,
+ *     tiles in row-major order. dk (tile_depth): a lower bound of the view
+ *     depth of every hit of Gaussian i by a ray of the tile.
  * kernel tile_ranges(global const ulong *keys, uint m,   m keys sorted ascending
  *                    global uint2 *ranges)               per tile of the band, zeroed before:
  *     ranges[tile] = (first, last + 1) of the tile's keys; (0, 0) for none.
@@ -61,11 +62,11 @@
  * hit lies inside; otherwise (the ellipsoid straddles the eye's plane) every
  * tile of the image. Gaussians wholly nearer than the near plane have none.
  *
- * Order (tile_render): a tile's keys are sorted by dmin. A pixel's ray has
- * origin o at view depth d0 and direction d with c = D . d > 0, so a hit at t
- * lies at depth d0 + t c >= dmin: every later candidate's hits have
- * t >= (dmin_next - d0) / c. A pending hit whose depth d0 + t c (plus 1e-5 of
- * its magnitude) is below dmin_next can therefore be composited: hits are
+ * Order (tile_render): a tile's keys are sorted by their depth bound dk. A
+ * pixel's ray has origin o at view depth d0 and direction d with c = D . d > 0,
+ * so a hit at t lies at depth d0 + t c >= dk: every later candidate's hits
+ * have t >= (dk_next - d0) / c. A pending hit whose depth d0 + t c (plus 1e-5 of
+ * its magnitude) is below dk_next can therefore be composited: hits are
  * composited in exact (t, id) order through a KP-entry buffer. When more than
  * KP hits are pending, the buffer keeps the KP smallest keys, the round
  * composites only keys below the smallest one it dropped, and another round
@@ -247,25 +248,82 @@ kernel void tile_count(global const clvis_gaussian *recs, uint n, global const f
     counts[i] = cnt;
 }
 
+/* A lower bound of the view depth of Gaussian g's hits by the rays of tile
+ * (tx, ty). A hit at t = ts > 0 is the ray's point of least Mahalanobis
+ * distance, y = x - mean with y' S^-1 d = 0 and y' S^-1 y <= c^2 (S the
+ * covariance), whose depth offset f . y is at least
+ * -c sqrt(f' S f - (f . d)^2 / (d' S^-1 d)). Over the tile's directions
+ * dd(u, v) (linear in u, v), f . dd is linear and |W dd|^2 convex, so their
+ * extremes over the rectangle of pixel centres are at its corners. Hits at
+ * t = 0 lie on the near plane: a Gaussian reaching it keeps dmin. */
+inline float tile_depth(const tile_footprint *f, float m3, float fsf, float c, float sd, const float *a0,
+                        const float *au, const float *av, float fd0, float fdu, float fdv, float near, int tx,
+                        int ty, uint W, uint H)
+{
+    if (!(f->dmin > near))
+        return f->dmin;
+    float us[2] = {(float)(tx * TS) + 0.5f, (float)min((tx + 1) * TS, (int)W) - 0.5f};
+    float vs[2] = {(float)(ty * TS) + 0.5f, (float)min((ty + 1) * TS, (int)H) - 0.5f};
+    float qmax = 0.0f, fmin2 = INFINITY, fdlo = INFINITY, fdhi = -INFINITY;
+    for (int k = 0; k < 4; ++k) {
+        float u = us[k & 1], v = vs[k >> 1];
+        float x0 = (a0[0] + u * au[0]) + v * av[0];
+        float x1 = (a0[1] + u * au[1]) + v * av[1];
+        float x2 = (a0[2] + u * au[2]) + v * av[2];
+        qmax = fmax(qmax, clvis_dot3(x0, x1, x2, x0, x1, x2));
+        float fd = (fd0 + u * fdu) + v * fdv;
+        fdlo = fmin(fdlo, fd);
+        fdhi = fmax(fdhi, fd);
+        fmin2 = fmin(fmin2, fd * fd);
+    }
+    float h = (fdlo > 0.0f || fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : 0.0f;
+    float g = fmax(fsf - h, 0.0f) + 1e-5f * fsf;
+    float lo = (m3 - c * sqrt(g)) - sd;
+    return isfinite(lo) ? fmax(lo, f->dmin) : f->dmin;
+}
+
 kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
                       float cutoff, uint W, uint H, uint ty0, uint ty1, global const ulong *offsets,
-                      global ulong *keys, global uint *ids)
+                      global const float *cam, global ulong *keys, global uint *ids)
 {
     uint i = get_global_id(0);
     if (i >= n)
         return;
     tile_footprint f;
-    if (!footprint(recs + i, proj, near, cutoff, W, H, &f))
+    global const clvis_gaussian *g = recs + i;
+    if (!footprint(g, proj, near, cutoff, W, H, &f))
         return;
+    /* W dd = a0 + u au + v av; f . dd = fd0 + u fdu + v fdv (f = D's xyz) */
+    float a0[3], au[3], av[3];
+    for (int k = 0; k < 3; ++k) {
+        a0[k] = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], cam[9], cam[10], cam[11]);
+        au[k] = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], cam[12], cam[13], cam[14]);
+        av[k] = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], cam[15], cam[16], cam[17]);
+    }
+    global const float *D = proj + 12;
+    float fd0 = clvis_dot3(D[0], D[1], D[2], cam[9], cam[10], cam[11]);
+    float fdu = clvis_dot3(D[0], D[1], D[2], cam[12], cam[13], cam[14]);
+    float fdv = clvis_dot3(D[0], D[1], D[2], cam[15], cam[16], cam[17]);
+    float c = cutoff * INFLATE;
+    float m3 = row4(D, g->mean[0], g->mean[1], g->mean[2]);
+    float sd = 1e-5f * absrow4(D, g->mean[0], g->mean[1], g->mean[2]) + 1e-30f;
+    /* f' S f = |f' L|^2, L = W^-1 as in footprint */
+    float e[3];
+    for (int k = 0; k < 3; ++k) {
+        float r2 = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], g->w[3 * k], g->w[3 * k + 1],
+                              g->w[3 * k + 2]);
+        e[k] = clvis_dot3(D[0], D[1], D[2], g->w[3 * k] / r2, g->w[3 * k + 1] / r2, g->w[3 * k + 2] / r2);
+    }
+    float fsf = clvis_dot3(e[0], e[1], e[2], e[0], e[1], e[2]);
     uint tiles_x = (W + TS - 1) / TS;
-    ulong dkey = (ulong)clvis_key_f32(as_uint(f.dmin));
     ulong at = offsets[i];
     int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
     for (int ty = y0; ty <= y1; ++ty)
         for (int tx = f.tx0; tx <= f.tx1; ++tx)
             if (tile_kept(&f, tx, ty, W, H)) {
+                float dk = tile_depth(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, near, tx, ty, W, H);
                 ulong tile = (ulong)(ty - (int)ty0) * tiles_x + (ulong)tx;
-                keys[at] = tile << 32 | dkey;
+                keys[at] = tile << 32 | (ulong)clvis_key_f32(as_uint(dk));
                 ids[at] = i;
                 ++at;
             }

@@ -36,7 +36,7 @@ from ..camera import Camera, ray_buffer
 from ..colormap import TransferFunction
 from ..errors import DeviceError
 
-__all__ = ["PROFILES", "KEY_BYTES", "projection_rows", "render_tiles"]
+__all__ = ["KEY_BYTES", "PROFILES", "projection_rows", "render_tiles", "tile_lists"]
 
 # per tuning profile: tile side in pixels (TS), pending-hit buffer (KP),
 # pixels per work-item of the render ("lanes": 8, tile_render8's float8 rows,
@@ -47,10 +47,24 @@ __all__ = ["PROFILES", "KEY_BYTES", "projection_rows", "render_tiles"]
 # groups of one work-item spread over the cores (groups of 4 ran on one);
 # 8- and 16-pixel tiles cost the same (fewer candidates against 2.3x the keys).
 PROFILES = {
-    "cpu": {"ts": 16, "kp": 64, "lanes": 8, "render_wg": 1, "item_wg": 64, "tile_keys": 1 << 24,
-            "tile_rays": 1 << 20},
-    "gpu": {"ts": 16, "kp": 32, "lanes": 1, "render_wg": 256, "item_wg": 256, "tile_keys": 1 << 25,
-            "tile_rays": 1 << 22},
+    "cpu": {
+        "ts": 16,
+        "kp": 64,
+        "lanes": 8,
+        "render_wg": 1,
+        "item_wg": 64,
+        "tile_keys": 1 << 24,
+        "tile_rays": 1 << 19,
+    },
+    "gpu": {
+        "ts": 16,
+        "kp": 32,
+        "lanes": 1,
+        "render_wg": 256,
+        "item_wg": 256,
+        "tile_keys": 1 << 25,
+        "tile_rays": 1 << 22,
+    },
 }
 KEY_BYTES = 24  # key 8 + id 4, and the radix sort's copies of both
 RAY_BYTES = 28
@@ -90,9 +104,12 @@ def render_tiles(
     host: bool,
     max_keys: int | None,
     progress: Callable[[int, int], None] | None,
+    keep: list | None = None,
 ) -> tuple[Any, Any, Any, dict]:
     """rgba, depth, ray stats (host arrays, or device arrays of the whole
-    image when host=False) and the stats dict, for GaussianRenderer `r`."""
+    image when host=False) and the stats dict, for GaussianRenderer `r`.
+    keep: a list to append each band's (first tile row, end tile row, sorted
+    keys, ids, ranges) to, as host arrays (tests, :func:`tile_lists`)."""
     q = r.queue
     prof = PROFILES[r.config.tuning]
     ts = prof["ts"]
@@ -137,8 +154,7 @@ def render_tiles(
         out_depth = np.empty((h, w), np.float32)
         out_stats = np.empty((h, w, 2), np.uint32)
     bands = [(a, min(a + rows_cap, tiles_y)) for a in range(0, tiles_y, rows_cap)]
-    times = {"bin_s": 0.0, "sort_s": 0.0, "render_s_tiles": 0.0}
-    events: list[tuple[str, cl.Event, cl.Event]] = []
+    events: list[tuple[cl.Event, cl.Event, cl.Event, cl.Event]] = []
     total_keys = 0
     cand = 0  # sum over pixels of their tile's list length
     done_bands = 0
@@ -184,8 +200,14 @@ def render_tiles(
             tile_bits = max(1, int(band_tiles - 1).bit_length())
             keys, ids = primitives.radix_sort(keys, ids, key_bits=32 + tile_bits, queue=q)
             e2 = runtime.marker(q)
-            runtime.launch(q, ks["tile_ranges"], *runtime.items(q, m, 256), keys.base_data, np.uint32(m),
-                           ranges.base_data)
+            runtime.launch(
+                q,
+                ks["tile_ranges"],
+                *runtime.items(q, m, 256),
+                keys.base_data,
+                np.uint32(m),
+                ranges.base_data,
+            )
         y0 = a * ts
         n_rows = min(b * ts, h) - y0
         out_y0 = y0 if host else 0
@@ -215,8 +237,18 @@ def render_tiles(
             depth.base_data,
             stats.base_data,
         )
-        events.append(("band", e0 if done_bands else start, e1, e2, e3))  # type: ignore[arg-type]
+        events.append((e0 if done_bands else start, e1, e2, e3))
         total_keys += m
+        if keep is not None:
+            keep.append(
+                (
+                    a,
+                    b,
+                    keys.get() if keys is not None else np.zeros(0, np.uint64),
+                    ids.get() if ids is not None else np.zeros(0, np.uint32),
+                    ranges.get(),
+                )
+            )
         if host:
             rng = ranges.get().astype(np.int64)
             lens = (rng[:, 1] - rng[:, 0]).reshape(b - a, tiles_x)
@@ -238,20 +270,44 @@ def render_tiles(
         "bands": done_bands,
     }
     if not host:
-        info["events"] = (start, events[-1][4])
+        info["events"] = (start, events[-1][3])
         return rgba, depth, stats, info
     bin_s = sort_s = render_s = 0.0
-    for _, e0, e1, e2, e3 in events:  # type: ignore[misc]
+    for e0, e1, e2, e3 in events:
         bin_s += runtime.seconds(e0, e1) or 0.0
-        sort_s += runtime.seconds(e1, e2) or 0.0 if e1 is not e2 else 0.0
+        if e1 is not e2:
+            sort_s += runtime.seconds(e1, e2) or 0.0
         render_s += runtime.seconds(e2, e3) or 0.0
     info.update(
         {
             "bin_s": bin_s,
             "sort_s": sort_s,
             "tile_render_s": render_s,
-            "render_s": runtime.seconds(start, events[-1][4]),
+            "render_s": runtime.seconds(start, events[-1][3]),
             "candidates_per_pixel": cand / (w * h),
         }
     )
     return out_rgba, out_depth, out_stats, info
+
+
+def tile_lists(r: Any, camera: Camera, width: int, height: int, *, max_keys: int | None = None) -> list:
+    """The bins of one frame of GaussianRenderer `r` (method="tiles"): per
+    band, (first tile row, end tile row, keys, ids, ranges) as host arrays,
+    keys sorted (tile within the band << 32 | clvis_key_f32(depth bound)),
+    ids the Gaussians, ranges (tiles, 2) each tile's [first, end) keys."""
+    if r.method != "tiles":
+        raise ValueError(f"tile_lists: the renderer's method is {r.method!r}, not 'tiles'")
+    keep: list = []
+    with runtime.pinned(r.config):
+        render_tiles(
+            r,
+            camera,
+            width,
+            height,
+            r.transfer_function,
+            host=True,
+            max_keys=max_keys,
+            progress=None,
+            keep=keep,
+        )
+    return keep

@@ -608,22 +608,26 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *
             int8 hit = m28 <= cutoff2;
             if (!any(hit))
                 continue;
-            /* the alpha of the 8 lanes at once (hit_alpha's operations, lane by lane) */
+            /* one transfer-function entry a candidate; alphas lane by lane with
+             * the scalar functions (the same bits as tile_render and march.cl) */
             uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
             float opac = g->opacity * tf[ti].w;
-#if MODEL == 1
-            float8 s0 = op0 + ts8 * dp0, s1 = op1 + ts8 * dp1, s2 = op2 + ts8 * dp2;
-            float8 ms2 = (s0 * s0 + s1 * s1) + s2 * s2;
-            float8 integral = (exp(-0.5f * ms2) * sqrt(M_PI_F / (2.0f * a8))) * erfc(-ts8 * sqrt(0.5f * a8));
-            float8 alpha8 = 1.0f - exp(-((density * opac) * integral));
-#else
-            float8 alpha8 = fmin(0.99f, opac * exp(-0.5f * m28));
-#endif
-            float lt[8], lal[8];
+            float lt[8], lm2[8];
             int lh[8];
             vstore8(t8, 0, lt);
-            vstore8(alpha8, 0, lal);
+            vstore8(m28, 0, lm2);
             vstore8(hit, 0, lh);
+#if MODEL == 1
+            float lts[8], la[8], lop[3][8], ldp[3][8];
+            vstore8(ts8, 0, lts);
+            vstore8(a8, 0, la);
+            vstore8(op0, 0, lop[0]);
+            vstore8(op1, 0, lop[1]);
+            vstore8(op2, 0, lop[2]);
+            vstore8(dp0, 0, ldp[0]);
+            vstore8(dp1, 0, ldp[1]);
+            vstore8(dp2, 0, ldp[2]);
+#endif
             for (int l = 0; l < 8; ++l) {
                 if (!lh[l] || done[l])
                     continue;
@@ -649,7 +653,12 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *
                     }
                     kn[l] = KP - 1;
                 }
-                float alpha = lal[l];
+#if MODEL == 1
+                float op[3] = {lop[0][l], lop[1][l], lop[2][l]}, dp[3] = {ldp[0][l], ldp[1][l], ldp[2][l]};
+                float alpha = clvis_gauss_alpha_absorption(opac, density, lts[l], la[l], op, dp);
+#else
+                float alpha = clvis_gauss_alpha_max_response(opac, lm2[l]);
+#endif
                 int pos = kn[l]++;
                 while (pos > 0 && key_less(kt[l][pos - 1], ki[l][pos - 1], t, id)) {
                     kt[l][pos] = kt[l][pos - 1];

@@ -117,6 +117,8 @@ def render_tiles(
     n = r.n
     tiles_x, tiles_y = -(-w // ts), -(-h // ts)
     budget = prof["tile_keys"] if max_keys is None else max_keys
+    # a quarter of the device's memory at most for a band's keys
+    budget = max(1, min(budget, runtime.capabilities(q).global_mem_bytes // (4 * KEY_BYTES)))
     rows_cap = tiles_y if not host else max(1, min(tiles_y, prof["tile_rays"] // (w * ts)))
     cam = ray_buffer(camera, w, h)
     proj = projection_rows(camera, w, h)
@@ -128,7 +130,7 @@ def render_tiles(
     runtime.check_memory(
         q,
         what,
-        device_bytes=w * out_rows * RAY_BYTES + min(budget, 1 << 26) * KEY_BYTES,
+        device_bytes=w * out_rows * RAY_BYTES,
         host_bytes=w * h * RAY_BYTES if host else 0,
     )
     start = runtime.marker(q)

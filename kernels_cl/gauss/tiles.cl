@@ -506,19 +506,44 @@ kernel void tile_render(global const clvis_gaussian *recs, global const ulong *k
  * 8 * (i % (TS / 8)) .. + 7 of that row; any local size dividing TS * TS / 8.
  * Same arguments as tile_render. */
 
+/* Pending hits of tile_render8 in two 64-bit words each: the key
+ * as_uint(t) << 32 | id (t >= 0, -0 made +0, so the unsigned order of the
+ * word is the (t, id) order) and the payload as_uint(alpha) << 32 | the
+ * transfer-function entry. */
+inline ulong pend_key(float t, uint id)
+{
+    return (ulong)as_uint(t + 0.0f) << 32 | id;
+}
+
+inline float pend_t(ulong k)
+{
+    return as_float((uint)(k >> 32));
+}
+
 /* lane l: composite its smallest pending hit */
 #define POP_LANE(l)                                                                                   \
     do {                                                                                              \
         int q_ = --kn[l];                                                                             \
-        clvis_gauss_composite(ka[l][q_], hit_color(tf, kc[l][q_], colors, ki[l][q_]), &T[l], &cr[l],  \
-                              &cg[l], &cb[l]);                                                        \
+        ulong k_ = pk[l][q_], v_ = pv[l][q_];                                                         \
+        float t_ = pend_t(k_);                                                                        \
+        clvis_gauss_composite(as_float((uint)(v_ >> 32)), hit_color(tf, (uint)v_, colors, (uint)k_),  \
+                              &T[l], &cr[l], &cg[l], &cb[l]);                                         \
         ++hits[l];                                                                                    \
-        last_t[l] = kt[l][q_];                                                                        \
-        last_id[l] = ki[l][q_];                                                                       \
+        last[l] = k_;                                                                                 \
         if (T[l] < 0.5f && z[l] == INFINITY)                                                          \
-            z[l] = clvis_ray_depth(cam, o[l], d[l], kt[l][q_]);                                       \
+            z[l] = clvis_ray_depth(cam, o[l], d[l], t_);                                              \
         if (T[l] < T_STOP)                                                                            \
             done[l] = true;                                                                           \
+    } while (0)
+
+/* lane l's flush threshold: the depth of its smallest pending hit, plus slack */
+#define FRONT_LANE(l)                                                                                 \
+    do {                                                                                              \
+        if (kn[l] > 0 && cd[l] > 0.0f) {                                                              \
+            float h_ = pend_t(pk[l][kn[l] - 1]) * cd[l];                                              \
+            front[l] = (h_ + d0[l]) + 1e-5f * (fabs(h_) + fabs(d0[l]));                               \
+        } else                                                                                        \
+            front[l] = INFINITY;                                                                      \
     } while (0)
 
 kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *keys, global const uint *ids,
@@ -536,12 +561,12 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *
         return;
 
     float o[8][3], d[8][3], cd[8], d0[8];
-    float T[8], cr[8], cg[8], cb[8], z[8], last_t[8], ct[8], front[8];
-    uint hits[8], nround[8], last_id[8], cid[8];
+    float T[8], cr[8], cg[8], cb[8], z[8], front[8];
+    ulong last[8], ceil_k[8];   /* the last key composited; the round's ceiling */
+    uint hits[8], nround[8];
     bool done[8], over[8], gone[8];   /* gone: done and taken off live */
     int kn[8];
-    float kt[8][KP], ka[8][KP];
-    uint ki[8][KP], kc[8][KP];
+    ulong pk[8][KP], pv[8][KP];   /* pending: key descending, [kn - 1] the smallest */
     float lox[8], loy[8], loz[8], ldx[8], ldy[8], ldz[8];
     uint2 range = ranges[tile];
     int live = 0;
@@ -553,18 +578,18 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *
         lox[l] = o[l][0]; loy[l] = o[l][1]; loz[l] = o[l][2];
         ldx[l] = d[l][0]; ldy[l] = d[l][1]; ldz[l] = d[l][2];
         T[l] = 1.0f; cr[l] = cg[l] = cb[l] = 0.0f; z[l] = INFINITY;
-        last_t[l] = -1.0f; last_id[l] = 0; hits[l] = 0; nround[l] = 0;
+        hits[l] = 0; nround[l] = 0;
         done[l] = gone[l] = px0 + l >= W || range.x >= range.y;
         live += !done[l];
     }
     float8 ox = vload8(0, lox), oy = vload8(0, loy), oz = vload8(0, loz);
     float8 dx = vload8(0, ldx), dy = vload8(0, ldy), dz = vload8(0, ldz);
+    bool first = true;   /* round 1: every hit is beyond "last" */
     while (live > 0) {
         for (int l = 0; l < 8; ++l) {
             kn[l] = 0;
             over[l] = false;
-            ct[l] = INFINITY;
-            cid[l] = 0xFFFFFFFFu;
+            ceil_k[l] = 0xFFFFFFFFFFFFFFFFul;
             front[l] = INFINITY;
             nround[l] += !done[l];
         }
@@ -572,13 +597,11 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *
             float dm = key_to_f32((uint)keys[i]);
             if (any(vload8(0, front) < dm)) {
                 for (int l = 0; l < 8; ++l) {
+                    if (!(front[l] < dm))
+                        continue;
                     while (front[l] < dm && !done[l]) {
                         POP_LANE(l);
-                        if (kn[l] > 0 && cd[l] > 0.0f) {
-                            float h = kt[l][kn[l] - 1] * cd[l];
-                            front[l] = (h + d0[l]) + 1e-5f * (fabs(h) + fabs(d0[l]));
-                        } else
-                            front[l] = INFINITY;
+                        FRONT_LANE(l);
                     }
                     if (done[l] && !gone[l]) {
                         gone[l] = true;
@@ -631,25 +654,21 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *
             for (int l = 0; l < 8; ++l) {
                 if (!lh[l] || done[l])
                     continue;
-                float t = lt[l];
-                if (!key_less(last_t[l], last_id[l], t, id))
-                    continue;
-                if (over[l] && !key_less(t, id, ct[l], cid[l]))
-                    continue;
+                ulong k = pend_key(lt[l], id);
+                if (!first && k <= last[l])
+                    continue;   /* composited in an earlier round */
+                if (k >= ceil_k[l])
+                    continue;   /* beyond the round's ceiling */
                 if (kn[l] == KP) {
                     over[l] = true;
-                    if (key_less(kt[l][0], ki[l][0], t, id)) {
-                        ct[l] = t;
-                        cid[l] = id;
+                    if (pk[l][0] < k) {
+                        ceil_k[l] = k;   /* the new hit is the largest: drop it */
                         continue;
                     }
-                    ct[l] = kt[l][0];
-                    cid[l] = ki[l][0];
+                    ceil_k[l] = pk[l][0];   /* drop the largest pending hit */
                     for (int q = 0; q < KP - 1; ++q) {
-                        kt[l][q] = kt[l][q + 1];
-                        ki[l][q] = ki[l][q + 1];
-                        ka[l][q] = ka[l][q + 1];
-                        kc[l][q] = kc[l][q + 1];
+                        pk[l][q] = pk[l][q + 1];
+                        pv[l][q] = pv[l][q + 1];
                     }
                     kn[l] = KP - 1;
                 }
@@ -659,22 +678,17 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *
 #else
                 float alpha = clvis_gauss_alpha_max_response(opac, lm2[l]);
 #endif
+                ulong v = (ulong)as_uint(alpha) << 32 | ti;
                 int pos = kn[l]++;
-                while (pos > 0 && key_less(kt[l][pos - 1], ki[l][pos - 1], t, id)) {
-                    kt[l][pos] = kt[l][pos - 1];
-                    ki[l][pos] = ki[l][pos - 1];
-                    ka[l][pos] = ka[l][pos - 1];
-                    kc[l][pos] = kc[l][pos - 1];
+                while (pos > 0 && pk[l][pos - 1] < k) {
+                    pk[l][pos] = pk[l][pos - 1];
+                    pv[l][pos] = pv[l][pos - 1];
                     --pos;
                 }
-                kt[l][pos] = t;
-                ki[l][pos] = id;
-                ka[l][pos] = alpha;
-                kc[l][pos] = ti;
-                if (pos == kn[l] - 1 && cd[l] > 0.0f) {
-                    float h = t * cd[l];
-                    front[l] = (h + d0[l]) + 1e-5f * (fabs(h) + fabs(d0[l]));
-                }
+                pk[l][pos] = k;
+                pv[l][pos] = v;
+                if (pos == kn[l] - 1)
+                    FRONT_LANE(l);
             }
         }
         /* the rest of the round, front to back; lanes without overflow are done */
@@ -690,6 +704,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *
                 --live;
             }
         }
+        first = false;
     }
     for (int l = 0; l < 8 && px0 + l < W; ++l) {
         size_t pix = (size_t)(py - out_y0) * W + px0 + l;

@@ -59,12 +59,14 @@ from .tiles import render_tiles
 __all__ = [
     "GAUSSIAN_DTYPE",
     "MODELS",
+    "SPLAT",
     "GaussianImage",
     "GaussianRenderer",
     "render_gaussians",
 ]
 
-MODELS = {"max_response": 0, "absorption": 1}
+MODELS = {"max_response": 0, "absorption": 1}  # the ray models (march.cl, tiles.cl)
+SPLAT = "splat"  # 3DGS's rasterizer (splat.cl), tiles only
 METHODS = ("tiles", "bvh")
 MAX_K = 64
 TILE = 8
@@ -133,7 +135,9 @@ class GaussianRenderer:
     ----------
     gaussians : clvis.Gaussians
     transfer_function : TransferFunction (default viridis, opacity 1)
-    model : "max_response" or "absorption" (see the module doc)
+    model : "max_response" or "absorption" (see the module doc), or "splat":
+        the forward pass of 3D Gaussian Splatting (EWA-projected 2D Gaussians
+        sorted by their mean's depth per tile; clvis.gauss.tiles, splat.cl)
     k : hits per k-buffer round (1..64); None: the tuning profile's (64 on CPUs, 16 on GPUs)
     cutoff : hit radius in standard deviations (Mahalanobis), also the BVH boxes'
     density : extinction scale of the absorption model (per world unit)
@@ -162,14 +166,18 @@ class GaussianRenderer:
     ) -> None:
         if not isinstance(gaussians, Gaussians):
             raise TypeError(f"gaussians: expected clvis.Gaussians, got {type(gaussians).__name__}")
-        if model not in MODELS:
-            raise ValueError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
+        if model not in MODELS and model != SPLAT:
+            raise ValueError(f"model: expected one of {', '.join([*MODELS, SPLAT])}, got {model!r}")
         self.queue = q = resolve_queue(queue)
         self.config = runtime.capture(q)
         prof = self._profile = PROFILES[self.config.tuning]
+        if model == "splat" and method is None:
+            method = "tiles"
         method = prof["method"] if method is None else method
         if method not in METHODS:
             raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+        if model == "splat" and method != "tiles":
+            raise ValueError("model='splat' (3DGS's rasterizer) needs method='tiles'")
         self.method = method
         kp = TILE_PROFILES[self.config.tuning]["kp"] if kp is None else nonnegative_int("kp", kp)
         if not 1 <= kp <= MAX_K:
@@ -210,17 +218,21 @@ class GaussianRenderer:
     def _setup(self, gaussians: Gaussians) -> None:
         q, n, prof = self.queue, self.n, self._profile
         flags = runtime.EXACT_FP
-        self._march = runtime.get_kernel(
-            q,
-            "gauss/march.cl",
-            "march",
-            {
-                "K": self.k,
-                "K0": min(self.k, prof["k0"]),
-                "MODEL": MODELS[self.model],
-                "COLOR": int(self.colors),
-            },
-            flags,
+        self._march = (
+            None
+            if self.method == "tiles"
+            else runtime.get_kernel(
+                q,
+                "gauss/march.cl",
+                "march",
+                {
+                    "K": self.k,
+                    "K0": min(self.k, prof["k0"]),
+                    "MODEL": MODELS[self.model],
+                    "COLOR": int(self.colors),
+                },
+                flags,
+            )
         )
         self._march_wg = runtime.local_size(q, prof["march_wg"])
         first = runtime.marker(q)

@@ -46,12 +46,14 @@ __all__ = ["KEY_BYTES", "PROFILES", "projection_rows", "render_tiles", "tile_lis
 # ("tile_rays", as the BVH path). CPUs (PoCL, 10^5 Gaussians at 512^2):
 # groups of one work-item spread over the cores (groups of 4 ran on one);
 # 8- and 16-pixel tiles cost the same (fewer candidates against 2.3x the keys).
+# "splat_wg": work-items (pixels) per group of splat.cl's render.
 PROFILES = {
     "cpu": {
         "ts": 16,
         "kp": 64,
         "lanes": 8,
         "render_wg": 1,
+        "splat_wg": 16,
         "item_wg": 64,
         "tile_keys": 1 << 24,
         "tile_rays": 1 << 19,
@@ -61,6 +63,7 @@ PROFILES = {
         "kp": 32,
         "lanes": 1,
         "render_wg": 256,
+        "splat_wg": 256,
         "item_wg": 256,
         "tile_keys": 1 << 25,
         "tile_rays": 1 << 22,
@@ -82,6 +85,16 @@ def projection_rows(camera: Camera, width: int, height: int) -> np.ndarray:
 
 def _kernels(q, r) -> dict:
     prof = PROFILES[r.config.tuning]
+    if r.model == "splat":
+        sd = {"TS": prof["ts"], "COLOR": int(r.colors)}
+        ks = {
+            name: runtime.get_kernel(q, "gauss/splat.cl", name, sd, runtime.EXACT_FP)
+            for name in ("splat_count", "splat_keys", "splat_render")
+        }
+        ks["tile_ranges"] = runtime.get_kernel(
+            q, "gauss/tiles.cl", "tile_ranges", {"TS": prof["ts"]}, runtime.EXACT_FP
+        )
+        return ks
     defines = {
         "TS": prof["ts"],
         "KP": r.kp,
@@ -147,10 +160,17 @@ def render_tiles(
     colors = recs if r._colors is None else r._colors.base_data
     counts = runtime.empty(q, max(n, 1), np.uint64, "tile counts per Gaussian")
     g_items = runtime.items(q, n, prof["item_wg"])
-    lanes = prof["lanes"] if r.lanes is None else r.lanes
-    render = ks["tile_render8" if lanes == 8 else "tile_render"]
-    wg = runtime.local_size(q, prof["render_wg"])
-    head = (recs, np.uint32(n), projd.base_data, near, np.float32(r.cutoff), np.uint32(w), np.uint32(h))
+    splat = r.model == "splat"
+    lanes = 1 if splat else prof["lanes"] if r.lanes is None else r.lanes
+    render = ks["splat_render" if splat else "tile_render8" if lanes == 8 else "tile_render"]
+    wg = runtime.local_size(q, prof["splat_wg" if splat else "render_wg"])
+    if splat:
+        head = (recs, np.uint32(n), projd.base_data, near, np.uint32(w), np.uint32(h))
+        splats = runtime.empty(q, (max(n, 1), 8), np.float32, "2D splats")
+        count_k, keys_k = ks["splat_count"], ks["splat_keys"]
+    else:
+        head = (recs, np.uint32(n), projd.base_data, near, np.float32(r.cutoff), np.uint32(w), np.uint32(h))
+        count_k, keys_k = ks["tile_count"], ks["tile_keys"]
     if host:
         out_rgba = np.empty((h, w, 4), np.float32)
         out_depth = np.empty((h, w), np.float32)
@@ -164,7 +184,16 @@ def render_tiles(
         a, b = bands.pop(0)
         e0 = runtime.marker(q)
         if n:
-            runtime.launch(q, ks["tile_count"], *g_items, *head, np.uint32(a), np.uint32(b), counts.base_data)
+            runtime.launch(
+                q,
+                count_k,
+                *g_items,
+                *head,
+                np.uint32(a),
+                np.uint32(b),
+                *((splats.base_data,) if splat else ()),
+                counts.base_data,
+            )
             offsets, total_d = primitives.scan(counts[:n], return_total=True, queue=q)
             m = int(total_d.get()[0])
         else:
@@ -186,15 +215,15 @@ def render_tiles(
             runtime.check_memory(q, f"{what}: {m} tile keys", device_bytes=m * KEY_BYTES)
             keys = runtime.empty(q, m, np.uint64, "tile keys")
             ids = runtime.empty(q, m, np.uint32, "tile key ids")
+            extra = (splats.base_data, offsets.base_data) if splat else (offsets.base_data, camd.base_data)
             runtime.launch(
                 q,
-                ks["tile_keys"],
+                keys_k,
                 *g_items,
                 *head,
                 np.uint32(a),
                 np.uint32(b),
-                offsets.base_data,
-                camd.base_data,
+                *extra,
                 keys.base_data,
                 ids.base_data,
             )
@@ -213,28 +242,24 @@ def render_tiles(
         y0 = a * ts
         n_rows = min(b * ts, h) - y0
         out_y0 = y0 if host else 0
+        lists = (
+            (keys if keys is not None else counts).base_data,
+            (ids if ids is not None else counts).base_data,
+            ranges.base_data,
+        )
+        band_args = (np.uint32(w), np.uint32(h), np.uint32(a), np.uint32(n_rows), np.uint32(out_y0))
+        tf_args = (tfd.base_data, np.uint32(table.shape[0]), tmin, tscale)
+        if splat:
+            args = (recs, splats.base_data, *lists, *band_args, *tf_args, colors)
+        else:
+            model_args = (np.float32(r.cutoff * r.cutoff), np.float32(r.density))
+            args = (recs, *lists, camd.base_data, *band_args, *tf_args, *model_args, colors)
         e3 = runtime.launch(
             q,
             render,
             band_tiles * ts * ts // lanes,
             wg,
-            recs,
-            (keys if keys is not None else counts).base_data,
-            (ids if ids is not None else counts).base_data,
-            ranges.base_data,
-            camd.base_data,
-            np.uint32(w),
-            np.uint32(h),
-            np.uint32(a),
-            np.uint32(n_rows),
-            np.uint32(out_y0),
-            tfd.base_data,
-            np.uint32(table.shape[0]),
-            tmin,
-            tscale,
-            np.float32(r.cutoff * r.cutoff),
-            np.float32(r.density),
-            colors,
+            *args,
             rgba.base_data,
             depth.base_data,
             stats.base_data,

@@ -245,3 +245,41 @@ def test_render_1080p(benchmark, queue, impl):
         k=info["k"],
         **_tile_info(info),
     )
+
+
+def hurricane_scene():
+    """NARVis's target: the embedded hurricane's 2 M particles as
+    velocity-elongated Gaussians (training.data.NarvisScene's), the fit view."""
+    if "hurricane" not in _cache:
+        from clvis.training.data import narvis_scene
+
+        n = scaled(2_000_000)
+        r = narvis_scene("hurricane", n, 0).gaussian_renderer()
+        g, tf = r.gaussians, r.transfer_function
+        lo, hi = g.bounds(1.0)
+        _cache["hurricane"] = (g, tf, Camera.fit(lo, hi, aspect=W / H, fov_y=45))
+    return _cache["hurricane"]
+
+
+@pytest.mark.parametrize("impl", ["splat", "tiles", "bvh"])
+def test_render_narvis(benchmark, queue, impl):
+    """The NARVis target frame at 512x512: 3DGS's splatting (model="splat",
+    NARVis's GR) and the max-response ray model by tiles and by the BVH."""
+    g, tf, cam = hurricane_scene()
+    model, method = ("splat", "tiles") if impl == "splat" else ("max_response", impl)
+    r = GaussianRenderer(g, tf, queue=queue, model=model, method=method, colors=False)
+    info = r.render(cam, W, H).stats
+    run(
+        benchmark,
+        lambda: r.render(cam, W, H),
+        op=f"render[hurricane {g.n:,} Gaussians, {W}x{H}]",
+        impl={"splat": "clvis", "tiles": "max_response, tiles", "bvh": BVH_IMPL}[impl],
+        role="clvis" if impl == "splat" else "peer",
+        n=W * H,
+        nbytes=W * H * 16,
+        rounds=2,
+        model=model,
+        method=method,
+        hits_per_ray=info["hits_per_ray_mean"],
+        **_tile_info(info),
+    )

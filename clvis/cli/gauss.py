@@ -103,9 +103,10 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     )
     g.add_argument(
         "--model",
-        choices=["max_response", "absorption"],
+        choices=["max_response", "absorption", "splat"],
         default="absorption",
-        help="compositing model (default absorption)",
+        help="compositing model (default absorption); splat: 3D Gaussian Splatting's "
+        "rasterizer (NARVis's GR; the tile renderer)",
     )
     g.add_argument(
         "--method",

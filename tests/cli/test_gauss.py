@@ -37,6 +37,18 @@ def test_gauss_method(tmp_path, capsys, method):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
+def test_gauss_splat(tmp_path, capsys):
+    assert (
+        cli.main(["gauss", "--lod", "low", "--size", "40x32", "--model", "splat", "--out", str(tmp_path)])
+        == 0
+    )
+    assert "splat model" in capsys.readouterr().out
+    with Image.open(tmp_path / "low.png") as im:
+        assert np.asarray(im).std() > 1
+    assert cli.main(["gauss", "--model", "splat", "--method", "bvh", "--out", str(tmp_path)]) == 2
+    assert "needs method='tiles'" in capsys.readouterr().err
+
+
 def test_gauss_files(tmp_path, capsys):
     e = datasets.explosion((20, 24, 28))
     np.save(tmp_path / "v.npy", e["volume"])

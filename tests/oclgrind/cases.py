@@ -353,6 +353,9 @@ def gauss_tiles(q):
         colors=[[255, 0, 0], [0, 255, 0], [0, 0, 255]],
     )
     GaussianRenderer(around, queue=q, method="tiles").render(_gauss_cam(9, 7), 9, 7)
+    # the splatting model (splat.cl), own colours, in two bands
+    GaussianRenderer(around, queue=q, model="splat").render(_gauss_cam(9, 7), 9, 7)
+    GaussianRenderer(g, queue=q, model="splat").render(_gauss_cam(w, 40), w, 40, max_keys=20)
     GaussianRenderer(Gaussians(np.zeros((0, 3)), np.zeros((0, 3))), queue=q, method="tiles").render(
         _gauss_cam(8, 8), 8, 8
     )

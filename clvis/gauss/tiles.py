@@ -56,7 +56,7 @@ PROFILES = {
         "splat_wg": 16,
         "item_wg": 64,
         "tile_keys": 1 << 24,
-        "tile_rays": 1 << 19,
+        "tile_rays": 1 << 18,
     },
     "gpu": {
         "ts": 16,
@@ -175,11 +175,12 @@ def render_tiles(
         out_rgba = np.empty((h, w, 4), np.float32)
         out_depth = np.empty((h, w), np.float32)
         out_stats = np.empty((h, w, 2), np.uint32)
-    bands = [(a, min(a + rows_cap, tiles_y)) for a in range(0, tiles_y, rows_cap)]
+    bands = [(0, tiles_y)]  # split while a band's keys exceed the budget
     events: list[tuple[cl.Event, cl.Event, cl.Event, cl.Event]] = []
     total_keys = 0
     cand = 0  # sum over pixels of their tile's list length
     done_bands = 0
+    render_bands = 0
     while bands:
         a, b = bands.pop(0)
         e0 = runtime.marker(q)
@@ -241,29 +242,47 @@ def render_tiles(
             )
         y0 = a * ts
         n_rows = min(b * ts, h) - y0
-        out_y0 = y0 if host else 0
         lists = (
             (keys if keys is not None else counts).base_data,
             (ids if ids is not None else counts).base_data,
             ranges.base_data,
         )
-        band_args = (np.uint32(w), np.uint32(h), np.uint32(a), np.uint32(n_rows), np.uint32(out_y0))
         tf_args = (tfd.base_data, np.uint32(table.shape[0]), tmin, tscale)
-        if splat:
-            args = (recs, splats.base_data, *lists, *band_args, *tf_args, colors)
-        else:
-            model_args = (np.float32(r.cutoff * r.cutoff), np.float32(r.density))
-            args = (recs, *lists, camd.base_data, *band_args, *tf_args, *model_args, colors)
-        e3 = runtime.launch(
-            q,
-            render,
-            band_tiles * ts * ts // lanes,
-            wg,
-            *args,
-            rgba.base_data,
-            depth.base_data,
-            stats.base_data,
-        )
+        order = r.order.base_data
+        # the band's tiles, rendered (and read back) rows_cap tile rows at a time
+        for c in range(a, b, rows_cap):
+            d = min(c + rows_cap, b)
+            out_y0 = c * ts if host else 0
+            band_args = (
+                np.uint32(w),
+                np.uint32(h),
+                np.uint32(a),
+                np.uint32((c - a) * tiles_x),
+                np.uint32(n_rows),
+                np.uint32(out_y0),
+            )
+            if splat:
+                args = (recs, order, splats.base_data, *lists, *band_args, *tf_args, colors)
+            else:
+                model_args = (np.float32(r.cutoff * r.cutoff), np.float32(r.density))
+                args = (recs, order, *lists, camd.base_data, *band_args, *tf_args, *model_args, colors)
+            render_bands += 1
+            e3 = runtime.launch(
+                q,
+                render,
+                (d - c) * tiles_x * ts * ts // lanes,
+                wg,
+                *args,
+                rgba.base_data,
+                depth.base_data,
+                stats.base_data,
+            )
+            if host:
+                r0, r1 = c * ts, min(d * ts, h)
+                for dst, src in ((out_rgba, rgba), (out_depth, depth), (out_stats, stats)):
+                    cl.enqueue_copy(q, dst[r0:r1], src.base_data, wait_for=[e3])
+                if progress is not None:
+                    progress(w * r1, w * h)
         events.append((e0 if done_bands else start, e1, e2, e3))
         total_keys += m
         if keep is not None:
@@ -282,10 +301,6 @@ def render_tiles(
             px_w = np.minimum(ts, w - np.arange(tiles_x) * ts)
             px_h = np.minimum(ts, h - (a + np.arange(b - a)) * ts)
             cand += int((lens * px_h[:, None] * px_w[None, :]).sum())
-            for dst, src in ((out_rgba, rgba), (out_depth, depth), (out_stats, stats)):
-                cl.enqueue_copy(q, dst[y0 : y0 + n_rows], src.base_data, wait_for=[e3])
-            if progress is not None:
-                progress(w * (y0 + n_rows), w * h)
         done_bands += 1
     info: dict = {
         "method": "tiles",
@@ -294,7 +309,8 @@ def render_tiles(
         "lanes": lanes,
         "keys": total_keys,
         "keys_per_gaussian": total_keys / max(n, 1),
-        "bands": done_bands,
+        "bands": render_bands,  # render launches (read back one by one when host=True)
+        "key_bands": done_bands,  # bands of tile rows binned and sorted apart
     }
     if not host:
         info["events"] = (start, events[-1][3])

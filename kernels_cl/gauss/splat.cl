@@ -27,9 +27,9 @@
  * kernel splat_keys(same, global const float *splats, global const ulong *offsets,
  *                   global ulong *keys, global uint *ids)
  *     keys: (tile - band's first) << 32 | clvis_key_f32(depth), ids: i.
- * kernel splat_render(recs, splats, keys, ids, ranges, uint W, uint H, uint ty0, uint rows,
+ * kernel splat_render(recs, order (record j is Gaussian order[j]), splats, keys, ids, ranges, uint W, uint H, uint ty0, uint rows,
  *                     uint out_y0, tf, tf_n, tf_min, tf_scale, colors, rgba, depth, stats)
- *     Per pixel (px, py), its tile's list in (depth, id) order: d = (u, v) -
+ *     Per pixel (px, py), its tile's list in (depth, record) order: d = (u, v) -
  *     (px + 0.5, py + 0.5), q = (A dx^2 + C dy^2) + 2 B dx dy; skipped when
  *     q > 9; alpha = min(0.99, opacity' exp(-q / 2)); skipped when alpha < 1/255;
  *     T' = T (1 - alpha); T' < 1e-4 ends the pixel without this Gaussian;
@@ -215,14 +215,15 @@ kernel void splat_keys(global const clvis_gaussian *recs, uint n, global const f
             }
 }
 
-kernel void splat_render(global const clvis_gaussian *recs, global const float *splats, global const ulong *keys,
+kernel void splat_render(global const clvis_gaussian *recs, global const uint *order, global const float *splats,
+                         global const ulong *keys,
                          global const uint *ids, global const uint2 *ranges, uint W, uint H, uint ty0,
-                         uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
+                         uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
                          float tf_scale, global const uchar4 *colors, global float4 *rgba, global float *depth,
                          global uint2 *stats)
 {
     uint tiles_x = (W + TS - 1) / TS;
-    uint tile = get_global_id(0) / (TS * TS), l = get_global_id(0) % (TS * TS);
+    uint tile = tile0 + get_global_id(0) / (TS * TS), l = get_global_id(0) % (TS * TS);
     uint px = (tile % tiles_x) * TS + l % TS, row = (tile / tiles_x) * TS + l / TS;
     uint py = ty0 * TS + row;
     if (px >= W || row >= rows || py >= H)
@@ -248,7 +249,7 @@ kernel void splat_render(global const clvis_gaussian *recs, global const float *
         if (Tn < SPLAT_T_STOP)
             break;
 #if COLOR == 1
-        float4 c = clvis_gauss_rgb8(colors[id]);
+        float4 c = clvis_gauss_rgb8(colors[order[id]]);
 #else
         float4 c = tf[ti];
 #endif

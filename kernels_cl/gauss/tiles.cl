@@ -17,7 +17,9 @@
  *   COLOR  0 transfer-function rgb, 1 colors[id] (march.cl's, default 0)
  *
  * Common arguments:
- *   recs      n clvis_gaussian records (clvis/gauss.h) in Gaussian id order
+ *   recs      n clvis_gaussian records (clvis/gauss.h), in any order (the host
+ *             keeps them in the LBVH's Morton leaf order: a tile's records lie
+ *             close in memory); ids in keys are record positions
  *   proj      16 floats, 4 rows of 4: Pu, Pv, Pw (the pixel-homogeneous
  *             projection: (u w, v w, w) = P (x, y, z, 1), u, v continuous pixel
  *             coordinates, pixel centres at integer + 0.5, row 0 on top) and D
@@ -35,22 +37,24 @@
  *                  uint ty0, uint ty1, global const ulong *offsets,  n: exclusive scan of counts
  *                  global const float *cam,                           22 floats (clvis/camera.h)
  *                  global ulong *keys, global uint *ids)              sum(counts) each
- *     keys[offsets[i] + k] = tile << 32 | clvis_key_f32(dk), ids[...] = i,
+ *     keys[offsets[i] + k] = tile << 32 | clvis_key_f32(dk), ids[...] = i (record),
  *     tiles in row-major order. dk (tile_depth): a lower bound of the view
  *     depth of every hit of Gaussian i by a ray of the tile.
  * kernel tile_ranges(global const ulong *keys, uint m,   m keys sorted ascending
  *                    global uint2 *ranges)               per tile of the band, zeroed before:
  *     ranges[tile] = (first, last + 1) of the tile's keys; (0, 0) for none.
- * kernel tile_render(recs, global const ulong *keys, global const uint *ids,
+ * kernel tile_render(recs, global const uint *order (record j is Gaussian order[j]: its id
+ *                    for ties and colours), global const ulong *keys, global const uint *ids,
  *                    global const uint2 *ranges, global const float *cam (22 floats,
- *                    clvis/camera.h), uint W, uint H, uint ty0, uint rows (image rows
- *                    of the band: ty0 * TS .. ty0 * TS + rows - 1), uint out_y0 (the
- *                    image row that row 0 of the outputs holds),
+ *                    clvis/camera.h), uint W, uint H, uint ty0, uint tile0 (the band's
+ *                    first tile this launch renders), uint rows (image rows of the
+ *                    band: ty0 * TS .. ty0 * TS + rows - 1), uint out_y0 (the image
+ *                    row that row 0 of the outputs holds),
  *                    tf, tf_n, tf_min, tf_scale, cutoff2, density, colors (as march.cl),
  *                    global float4 *rgba, global float *depth, global uint2 *stats)
  *     Outputs as march.cl's at (py - out_y0) * W + px; stats = (Gaussians
- *     composited, rounds). Global size: tiles_x * (rows / TS rounded up) * TS * TS,
- *     work-item i: tile i / (TS * TS) of the band (row-major), pixel i % (TS * TS)
+ *     composited, rounds). Global size: (tiles to render) * TS * TS, work-item i:
+ *     tile tile0 + i / (TS * TS) of the band (row-major), pixel i % (TS * TS)
  *     in it (row-major); any local size dividing TS * TS.
  *
  * Footprint (tile_footprint): the Gaussian's cutoff ellipsoid, inflated by
@@ -375,14 +379,15 @@ inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *c
 #endif
 }
 
-kernel void tile_render(global const clvis_gaussian *recs, global const ulong *keys, global const uint *ids,
+kernel void tile_render(global const clvis_gaussian *recs, global const uint *order, global const ulong *keys,
+                        global const uint *ids,
                         global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
-                        uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
+                        uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
                         float tf_scale, float cutoff2, float density, global const uchar4 *colors,
                         global float4 *rgba, global float *depth, global uint2 *stats)
 {
     uint tiles_x = (W + TS - 1) / TS;
-    uint tile = get_global_id(0) / (TS * TS), l = get_global_id(0) % (TS * TS);
+    uint tile = tile0 + get_global_id(0) / (TS * TS), l = get_global_id(0) % (TS * TS);
     uint px = (tile % tiles_x) * TS + l % TS, row = (tile / tiles_x) * TS + l / TS;
     uint py = ty0 * TS + row;
     if (px >= W || row >= rows || py >= H)
@@ -434,12 +439,13 @@ kernel void tile_render(global const clvis_gaussian *recs, global const ulong *k
                 if (done)
                     break;
             }
-            uint id = ids[i];
-            global const clvis_gaussian *g = recs + id;
+            uint j = ids[i];
+            global const clvis_gaussian *g = recs + j;
             float t, m2, ts, a, op[3], dp[3];
             clvis_gauss_hit(g, o, d, &t, &m2, &ts, &a, op, dp);
             if (!(m2 <= cutoff2))
                 continue;
+            uint id = order[j];
             if (!key_less(last_t, last_id, t, id))
                 continue;   /* composited in an earlier round */
             if (over && !key_less(t, id, ct, cid))
@@ -501,8 +507,8 @@ kernel void tile_render(global const clvis_gaussian *recs, global const ulong *k
  * tile (TS a multiple of 8): the hit test of a candidate runs on the 8 rays
  * at once in float8 lanes (the same operations as clvis_gauss_hit, lane by
  * lane), the pending buffers and compositing per lane. Global size:
- * tiles_x * (rows / TS rounded up) * TS * TS / 8; work-item i: tile
- * i / (TS * TS / 8), row (i % (TS * TS / 8)) / (TS / 8) of it, pixels
+ * (tiles to render) * TS * TS / 8; work-item i: tile
+ * tile0 + i / (TS * TS / 8), row (i % (TS * TS / 8)) / (TS / 8) of it, pixels
  * 8 * (i % (TS / 8)) .. + 7 of that row; any local size dividing TS * TS / 8.
  * Same arguments as tile_render. */
 
@@ -546,15 +552,16 @@ inline float pend_t(ulong k)
             front[l] = INFINITY;                                                                      \
     } while (0)
 
-kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *keys, global const uint *ids,
+kernel void tile_render8(global const clvis_gaussian *recs, global const uint *order, global const ulong *keys,
+                        global const uint *ids,
                          global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
-                         uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
+                         uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
                          float tf_scale, float cutoff2, float density, global const uchar4 *colors,
                          global float4 *rgba, global float *depth, global uint2 *stats)
 {
     uint tiles_x = (W + TS - 1) / TS;
     uint per_tile = TS * TS / 8;
-    uint tile = get_global_id(0) / per_tile, l8 = get_global_id(0) % per_tile;
+    uint tile = tile0 + get_global_id(0) / per_tile, l8 = get_global_id(0) % per_tile;
     uint px0 = (tile % tiles_x) * TS + (l8 % (TS / 8)) * 8, row = (tile / tiles_x) * TS + l8 / (TS / 8);
     uint py = ty0 * TS + row;
     if (px0 >= W || row >= rows || py >= H)
@@ -612,8 +619,8 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *
                 if (live == 0)
                     break;
             }
-            uint id = ids[i];
-            global const clvis_gaussian *g = recs + id;
+            uint j = ids[i];
+            global const clvis_gaussian *g = recs + j;
             /* clvis_gauss_hit on 8 rays */
             float8 r0 = ox - g->mean[0], r1 = oy - g->mean[1], r2 = oz - g->mean[2];
             float8 op0 = (g->w[0] * r0 + g->w[1] * r1) + g->w[2] * r2;
@@ -633,6 +640,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const ulong *
                 continue;
             /* one transfer-function entry a candidate; alphas lane by lane with
              * the scalar functions (the same bits as tile_render and march.cl) */
+            uint id = order[j];
             uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
             float opac = g->opacity * tf[ti].w;
             float lt[8], lm2[8];

@@ -127,9 +127,9 @@ def test_bands_bound_the_keys(queue, max_keys):
     banded = r.render(cam, 64, 70, max_keys=max_keys, progress=lambda a, b: done.append(a))
     np.testing.assert_array_equal(banded.rgba, whole.rgba)
     np.testing.assert_array_equal(banded.depth, whole.depth)
-    assert banded.stats["bands"] > 1 and len(done) == banded.stats["bands"] and done[-1] == 64 * 70
+    assert banded.stats["key_bands"] > 1 and len(done) == banded.stats["bands"] and done[-1] == 64 * 70
     bands = gt.tile_lists(r, cam, 64, 70, max_keys=max_keys)
-    assert len(bands) == banded.stats["bands"]
+    assert len(bands) == banded.stats["key_bands"]
     for a, b, keys, _, _ in bands:
         assert len(keys) <= max_keys or b - a == 1
 

@@ -45,11 +45,13 @@ __all__ = ["KEY_BYTES", "PROFILES", "projection_rows", "render_tiles", "tile_lis
 # most ("tile_keys"), rays per band at most when the image is read back
 # ("tile_rays", as the BVH path). CPUs (PoCL, 10^5 Gaussians at 512^2):
 # groups of one work-item spread over the cores (groups of 4 ran on one);
-# 8- and 16-pixel tiles cost the same (fewer candidates against 2.3x the keys).
+# 8-pixel tiles: the same CPU time as 16 on the bench scene (fewer candidates
+# against 2.3x the keys), half of it on NARVis's 2 M needle-like Gaussians
+# (1270 candidates a pixel against 3410).
 # "splat_wg": work-items (pixels) per group of splat.cl's render.
 PROFILES = {
     "cpu": {
-        "ts": 16,
+        "ts": 8,
         "kp": 64,
         "lanes": 8,
         "render_wg": 1,
@@ -337,7 +339,9 @@ def tile_lists(r: Any, camera: Camera, width: int, height: int, *, max_keys: int
     """The bins of one frame of GaussianRenderer `r` (method="tiles"): per
     band, (first tile row, end tile row, keys, ids, ranges) as host arrays,
     keys sorted (tile within the band << 32 | clvis_key_f32(depth bound)),
-    ids the Gaussians, ranges (tiles, 2) each tile's [first, end) keys."""
+    ids the Gaussians' ids (the kernels hold record positions, mapped here
+    through the renderer's order), ranges (tiles, 2) each tile's [first, end)
+    keys."""
     if r.method != "tiles":
         raise ValueError(f"tile_lists: the renderer's method is {r.method!r}, not 'tiles'")
     keep: list = []
@@ -353,4 +357,5 @@ def tile_lists(r: Any, camera: Camera, width: int, height: int, *, max_keys: int
             progress=None,
             keep=keep,
         )
-    return keep
+    order = r.order.get()  # record positions -> Gaussian ids
+    return [(a, b, keys, order[ids], ranges) for a, b, keys, ids, ranges in keep]

@@ -27,9 +27,12 @@
  * kernel splat_keys(same, global const float *splats, global const ulong *offsets,
  *                   global ulong *keys, global uint *ids)
  *     keys: (tile - band's first) << 32 | clvis_key_f32(depth), ids: i.
- * kernel splat_render(recs, order (record j is Gaussian order[j]), splats, keys, ids, ranges, uint W, uint H, uint ty0, uint rows,
- *                     uint out_y0, tf, tf_n, tf_min, tf_scale, colors, rgba, depth, stats)
- *     Per pixel (px, py), its tile's list in (depth, record) order: d = (u, v) -
+ * kernel splat_render(recs, global const uint *order (record j is Gaussian order[j], for
+ *                     its colour), splats, keys, ids, ranges, uint W, uint H, uint ty0,
+ *                     uint tile0, uint rows, uint out_y0 (as tiles.cl's tile_render),
+ *                     tf, tf_n, tf_min, tf_scale, colors, rgba, depth, stats)
+ *     Per pixel (px, py), its tile's list in (depth, record) order (equal
+ *     depths by record position, the host's Morton order, not by id): d = (u, v) -
  *     (px + 0.5, py + 0.5), q = (A dx^2 + C dy^2) + 2 B dx dy; skipped when
  *     q > 9; alpha = min(0.99, opacity' exp(-q / 2)); skipped when alpha < 1/255;
  *     T' = T (1 - alpha); T' < 1e-4 ends the pixel without this Gaussian;

@@ -11,11 +11,13 @@ the tuning profile.
   np.argsort of the same Morton codes
   alone (computed beforehand), and the device copy kernel over the bytes
   model (boxes read 24 B + nodes written 32 B per Gaussian).
-- render[N, 512x512]: GaussianRenderer.render (images read back) against the
-  brute-force NumPy reference (clvis.reference.gauss.render: every ray
+- render[N, 512x512]: GaussianRenderer.render (images read back): the tile
+  renderer (method="tiles", with keys per Gaussian, candidates per pixel and
+  the device time split bin / sort / render) against the BVH march
+  (method="bvh", the same image) and the brute-force NumPy reference (clvis.reference.gauss.render: every ray
   against every Gaussian, sorted, composited) timed on a subset of the rays
   spread over the frame and scaled to the frame ("time_scale").
-- render[1e6, 1920x1080]: the frame 3DGRT reports (no peer).
+- render[1e6, 1920x1080]: the frame 3DGRT reports, tiles against the BVH march.
 - lod[LEVEL]: gaussians_from_volume of the embedded explosion (96^3) on the
   device against the NumPy reference; n = the Gaussians produced.
 
@@ -40,6 +42,7 @@ from clvis.reference.gauss import render as ref_render
 W = H = 512
 SIZES = {"1e4": 10_000, "1e5": 100_000, "1e6": 1_000_000}
 SUBSET = {"1e4": 1024, "1e5": 128, "1e6": 16}  # reference rays per round
+BVH_IMPL = "GaussianRenderer(method='bvh'), the LBVH march"
 _cache = {}
 
 
@@ -110,28 +113,41 @@ def test_bvh_build(benchmark, queue, label, impl):
         )
 
 
+def _tile_info(info):
+    """The tile renderer's figures for the report (None for the BVH march)."""
+    return {
+        k: info.get(k)
+        for k in ("keys", "keys_per_gaussian", "candidates_per_pixel", "bin_s", "sort_s", "tile_render_s")
+    }
+
+
 @pytest.mark.parametrize("label", list(SIZES))
-@pytest.mark.parametrize("impl", ["clvis", "numpy"])
+@pytest.mark.parametrize("impl", ["clvis", "bvh", "numpy"])
 def test_render(benchmark, queue, label, impl):
     g, cam = scene(label)
     op = f"render[{label} Gaussians, {W}x{H}]"
     rays = W * H
-    if impl == "clvis":
-        r = GaussianRenderer(g, queue=queue)
+    if impl in ("clvis", "bvh"):
+        # "clvis": the tile renderer (method="tiles"); "bvh": the LBVH march,
+        # its peer (the same image)
+        method = "tiles" if impl == "clvis" else "bvh"
+        r = GaussianRenderer(g, queue=queue, method=method)
         info = r.render(cam, W, H).stats
         run(
             benchmark,
             lambda: r.render(cam, W, H),
             op=op,
-            impl=impl,
-            role="clvis",
+            impl=impl if impl == "clvis" else BVH_IMPL,
+            role="clvis" if impl == "clvis" else "peer",
             n=rays,
             nbytes=rays * 16,
             rounds=3,
+            method=method,
             hits_per_ray=info["hits_per_ray_mean"],
             rounds_per_ray=info["rounds_per_ray_mean"],
             k=info["k"],
             bvh_build_s=info["bvh_build_s"],
+            **_tile_info(info),
         )
     else:
         tf = TransferFunction()
@@ -203,24 +219,67 @@ def test_lod(benchmark, queue, lod, impl):
         )
 
 
-def test_render_1080p(benchmark, queue):
-    """3DGRT's setting: 10^6 Gaussians at 1920x1080 (no peer: the figure to set
-    beside 3DGRT's 55-190 fps with hardware ray tracing on an RTX 6000 Ada)."""
+@pytest.mark.parametrize("impl", ["clvis", "bvh"])
+def test_render_1080p(benchmark, queue, impl):
+    """3DGRT's setting: 10^6 Gaussians at 1920x1080, the tile renderer against
+    the BVH march (the figure to set beside 3DGRT's 55-190 fps with hardware
+    ray tracing on an RTX 6000 Ada)."""
     g, _ = scene("1e6")
     lo, hi = g.bounds(1.0)
     cam = Camera.fit(lo, hi, aspect=1920 / 1080, fov_y=45)
-    r = GaussianRenderer(g, queue=queue)
+    method = "tiles" if impl == "clvis" else "bvh"
+    r = GaussianRenderer(g, queue=queue, method=method)
     info = r.render(cam, 1920, 1080).stats
     run(
         benchmark,
         lambda: r.render(cam, 1920, 1080),
         op="render[1e6 Gaussians, 1920x1080]",
-        impl="clvis",
-        role="clvis",
+        impl=impl if impl == "clvis" else BVH_IMPL,
+        role="clvis" if impl == "clvis" else "peer",
         n=1920 * 1080,
         nbytes=1920 * 1080 * 16,
         rounds=2,
+        method=method,
         hits_per_ray=info["hits_per_ray_mean"],
         rounds_per_ray=info["rounds_per_ray_mean"],
         k=info["k"],
+        **_tile_info(info),
+    )
+
+
+def hurricane_scene():
+    """NARVis's target: the embedded hurricane's 2 M particles as
+    velocity-elongated Gaussians (training.data.NarvisScene's), the fit view."""
+    if "hurricane" not in _cache:
+        from clvis.training.data import narvis_scene
+
+        n = scaled(2_000_000)
+        r = narvis_scene("hurricane", n, 0).gaussian_renderer()
+        g, tf = r.gaussians, r.transfer_function
+        lo, hi = g.bounds(1.0)
+        _cache["hurricane"] = (g, tf, Camera.fit(lo, hi, aspect=W / H, fov_y=45))
+    return _cache["hurricane"]
+
+
+@pytest.mark.parametrize("impl", ["splat", "tiles", "bvh"])
+def test_render_narvis(benchmark, queue, impl):
+    """The NARVis target frame at 512x512: 3DGS's splatting (model="splat",
+    NARVis's GR) and the max-response ray model by tiles and by the BVH."""
+    g, tf, cam = hurricane_scene()
+    model, method = ("splat", "tiles") if impl == "splat" else ("max_response", impl)
+    r = GaussianRenderer(g, tf, queue=queue, model=model, method=method, colors=False)
+    info = r.render(cam, W, H).stats
+    run(
+        benchmark,
+        lambda: r.render(cam, W, H),
+        op=f"render[hurricane {g.n:,} Gaussians, {W}x{H}]",
+        impl={"splat": "clvis", "tiles": "max_response, tiles", "bvh": BVH_IMPL}[impl],
+        role="clvis" if impl == "splat" else "peer",
+        n=W * H,
+        nbytes=W * H * 16,
+        rounds=2,
+        model=model,
+        method=method,
+        hits_per_ray=info["hits_per_ray_mean"],
+        **_tile_info(info),
     )

@@ -139,6 +139,11 @@ TARGETS = {
             "render[1e5 Gaussians, 512x512]", "numpy brute force (extrapolated from a ray subset)", 500, "cpu"
         ),
         Target("bvh_build[1e6 Gaussians]", "np.argsort of the Morton codes alone", 1, "cpu"),
+        # the tile renderer against the LBVH march (the same image)
+        Target("render[1e5 Gaussians, 512x512]", "GaussianRenderer(method='bvh'), the LBVH march", 10, "cpu"),
+        Target(
+            "render[1e6 Gaussians, 1920x1080]", "GaussianRenderer(method='bvh'), the LBVH march", 5, "cpu"
+        ),
     ],
 }
 

@@ -104,9 +104,17 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     )
     g.add_argument(
         "--model",
-        choices=["max_response", "absorption"],
+        choices=["max_response", "absorption", "splat"],
         default="absorption",
-        help="compositing model (default absorption)",
+        help="compositing model (default absorption); splat: 3D Gaussian Splatting's "
+        "rasterizer (NARVis's GR; the tile renderer)",
+    )
+    g.add_argument(
+        "--method",
+        choices=["tiles", "bvh"],
+        default=None,
+        help="tiles: Gaussians binned to screen tiles and sorted per tile; bvh: rays "
+        "marched through an LBVH; the same image (default: the device profile's, tiles)",
     )
     g.add_argument(
         "--density",
@@ -252,6 +260,7 @@ def render_panels(
     density: float | None = None,
     colormap: str = "inferno",
     k: int | None = None,
+    method: str | None = None,
     camera: Callable[[np.ndarray, np.ndarray], Camera] | None = None,
     queue: cl.CommandQueue | None = None,
     opacity: Sequence[tuple[float, float]] | None = None,
@@ -290,16 +299,16 @@ def render_panels(
     # from the renders), so the figures below are the work itself
     t0 = time.perf_counter()
     with progress.stage("building kernels"):
-        GaussianRenderer(allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k, queue=queue).render(
-            cam, 8, 8
-        )
+        GaussianRenderer(
+            allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k, queue=queue, method=method
+        ).render(cam, 8, 8)
     if timings is not None:
         timings["build_s"] = time.perf_counter() - t0
     out = []
     for name, g in items:
-        label = _Label(f"{name}: BVH of {g.n:,} Gaussians")
+        label = _Label(f"{name}: {g.n:,} Gaussians")
         with progress.stage(label):
-            r = GaussianRenderer(g, tf, model=model, density=dens, k=k, queue=queue)
+            r = GaussianRenderer(g, tf, model=model, density=dens, k=k, queue=queue, method=method)
             label.text = f"{name}: rendering"
 
             def done(rays, total, label=label, name=name):
@@ -368,6 +377,7 @@ def _run(args) -> int:
         density=args.density,
         colormap=args.colormap,
         k=args.k,
+        method=args.method,
         queue=q,
         opacity=opacity,
         progress=progress,
@@ -394,15 +404,26 @@ def _run(args) -> int:
     elif lods == ["points"]:
         print(f"  colour    {args.attribute or 'the default value'} through {args.colormap}")
     print(f"  build     {timings['build_s']:.2f} s (kernels, once per process; not in the render times)")
+    method = panels[0][2].stats.get("method", "bvh")
     print(
-        f"  {'LOD':8} {'Gaussians':>10} {'MB':>8} {'BVH ms':>8} {'render ms':>10} {'bands':>6} "
-        f"{'hits/ray':>9}"
+        f"  method    {method}"
+        + (
+            " (setup: count, scan, keys, sort; keys per Gaussian)"
+            if method == "tiles"
+            else " (setup: BVH build)"
+        )
+    )
+    print(
+        f"  {'LOD':8} {'Gaussians':>10} {'MB':>8} {'setup ms':>8} {'render ms':>10} {'bands':>6} "
+        f"{'hits/ray':>9}" + (f" {'keys/G':>7}" if method == "tiles" else "")
     )
     for name, g, img in panels:
         s = img.stats
+        setup = s["bvh_build_s"] if method == "bvh" else s["bin_s"] + s["sort_s"]
         print(
-            f"  {name:8} {g.n:10,} {g.nbytes / 1e6:8.2f} {s['bvh_build_s'] * 1e3:8.1f} "
+            f"  {name:8} {g.n:10,} {g.nbytes / 1e6:8.2f} {setup * 1e3:8.1f} "
             f"{s['render_s'] * 1e3:10.1f} {s['bands']:6} {s['hits_per_ray_mean']:9.1f}"
+            + (f" {s['keys_per_gaussian']:7.2f}" if method == "tiles" else "")
         )
     print(f"  total     {time.perf_counter() - t0:.2f} s")
     print(f"wrote {len(files)} PNGs to {out}{os.sep}")
@@ -434,15 +455,16 @@ def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (480, 
         f"dense: {e['volume'].nbytes / 1e6:.2f} MB"
     )
     print(
-        f"  {'LOD':8} {'Gaussians':>10} {'MB':>7} {'MB axis-aligned':>16} {'BVH build':>10} {'frame':>10} "
-        f"{'hits/ray':>9}"
+        f"  {'LOD':8} {'Gaussians':>10} {'MB':>7} {'MB axis-aligned':>16} {'setup':>10} {'frame':>10} "
+        f"{'hits/ray':>9}   (setup: the BVH build, or the tiles' bin and sort)"
     )
     for name, g, img in panels:
         s, row = img.stats, table[name]
         assert row.gaussians == g.n
+        setup = s["bvh_build_s"] if s.get("method", "bvh") == "bvh" else s["bin_s"] + s["sort_s"]
         print(
             f"  {name:8} {g.n:10,} {row.bytes / 1e6:7.2f} {row.axis_aligned_bytes / 1e6:16.2f} "
-            f"{s['bvh_build_s'] * 1e3:8.1f}ms {s['render_s'] * 1e3:8.1f}ms {s['hits_per_ray_mean']:9.1f}"
+            f"{setup * 1e3:8.1f}ms {s['render_s'] * 1e3:8.1f}ms {s['hits_per_ray_mean']:9.1f}"
         )
     # the check: a small frame of the medium LOD against every-ray-against-every-Gaussian
     g = panels[1][1]

@@ -54,15 +54,20 @@ from ..colormap import TransferFunction
 from ..errors import DeviceError
 from .bvh import build_bvh
 from .gaussians import Gaussians, gather_records, gaussian_records
+from .tiles import PROFILES as TILE_PROFILES
+from .tiles import render_tiles
 
 __all__ = [
     "MODELS",
+    "SPLAT",
     "GaussianImage",
     "GaussianRenderer",
     "render_gaussians",
 ]
 
-MODELS = {"max_response": 0, "absorption": 1}
+MODELS = {"max_response": 0, "absorption": 1}  # the ray models (march.cl, tiles.cl)
+SPLAT = "splat"  # 3DGS's rasterizer (splat.cl), tiles only
+METHODS = ("tiles", "bvh")
 MAX_K = 64
 TILE = 8
 
@@ -104,8 +109,8 @@ class GaussianImage:
 # a CPU gains nothing from larger launches and a band is the progress step,
 # a GPU wants enough rays in flight to fill it.
 PROFILES = {
-    "cpu": {"march_wg": 8, "k": 64, "k0": 16, "tile_rays": 1 << 18},
-    "gpu": {"march_wg": 64, "k": 16, "k0": 16, "tile_rays": 1 << 21},
+    "cpu": {"march_wg": 8, "k": 64, "k0": 16, "tile_rays": 1 << 18, "method": "tiles"},
+    "gpu": {"march_wg": 64, "k": 16, "k0": 16, "tile_rays": 1 << 21, "method": "tiles"},
 }
 RAY_BYTES = 28  # per ray: rgba float4, depth float, stats uint2
 
@@ -126,13 +131,19 @@ class GaussianRenderer:
     ----------
     gaussians : clvis.Gaussians
     transfer_function : TransferFunction (default viridis, opacity 1)
-    model : "max_response" or "absorption" (see the module doc)
+    model : "max_response" or "absorption" (see the module doc), or "splat":
+        the forward pass of 3D Gaussian Splatting (EWA-projected 2D Gaussians
+        sorted by their mean's depth per tile; clvis.gauss.tiles, splat.cl)
     k : hits per k-buffer round (1..64); None: the tuning profile's (64 on CPUs, 16 on GPUs)
     cutoff : hit radius in standard deviations (Mahalanobis), also the BVH boxes'
     density : extinction scale of the absorption model (per world unit)
     colors : None (default): the Gaussians' own colours when they have them,
         else the transfer function's; True: their own (ValueError if they
         have none); False: the transfer function's.
+    method : "tiles" (the Gaussians binned to screen tiles and sorted per
+        tile, clvis.gauss.tiles), "bvh" (march.cl over an LBVH) or None: the
+        tuning profile's (the faster one measured). Both give the same image.
+    kp : the tile renderer's pending-hit buffer (1..64); None: its profile's.
     """
 
     def __init__(
@@ -146,14 +157,29 @@ class GaussianRenderer:
         queue: cl.CommandQueue | None = None,
         *,
         colors: bool | None = None,
+        method: str | None = None,
+        kp: int | None = None,
     ) -> None:
         if not isinstance(gaussians, Gaussians):
             raise TypeError(f"gaussians: expected clvis.Gaussians, got {type(gaussians).__name__}")
-        if model not in MODELS:
-            raise ValueError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
+        if model not in MODELS and model != SPLAT:
+            raise ValueError(f"model: expected one of {', '.join([*MODELS, SPLAT])}, got {model!r}")
         self.queue = q = resolve_queue(queue)
         self.config = runtime.capture(q)
         prof = self._profile = PROFILES[self.config.tuning]
+        if model == "splat" and method is None:
+            method = "tiles"
+        method = prof["method"] if method is None else method
+        if method not in METHODS:
+            raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+        if model == "splat" and method != "tiles":
+            raise ValueError("model='splat' (3DGS's rasterizer) needs method='tiles'")
+        self.method = method
+        kp = TILE_PROFILES[self.config.tuning]["kp"] if kp is None else nonnegative_int("kp", kp)
+        if not 1 <= kp <= MAX_K:
+            raise ValueError(f"kp: expected 1..{MAX_K}, got {kp}")
+        self.kp = kp
+        self.lanes: int | None = None  # tile_render (1) or tile_render8 (8); None: the profile's
         k = prof["k"] if k is None else nonnegative_int("k", k)
         if not 1 <= k <= MAX_K:
             raise ValueError(f"k: expected 1..{MAX_K}, got {k}")
@@ -187,17 +213,22 @@ class GaussianRenderer:
 
     def _setup(self, gaussians: Gaussians) -> None:
         q, n, prof = self.queue, self.n, self._profile
-        self._march = runtime.get_kernel(
-            q,
-            "gauss/march.cl",
-            "march",
-            {
-                "K": self.k,
-                "K0": min(self.k, prof["k0"]),
-                "MODEL": MODELS[self.model],
-                "COLOR": int(self.colors),
-            },
-            runtime.EXACT_FP,
+        flags = runtime.EXACT_FP
+        self._march = (
+            None
+            if self.method == "tiles"
+            else runtime.get_kernel(
+                q,
+                "gauss/march.cl",
+                "march",
+                {
+                    "K": self.k,
+                    "K0": min(self.k, prof["k0"]),
+                    "MODEL": MODELS[self.model],
+                    "COLOR": int(self.colors),
+                },
+                flags,
+            )
         )
         self._march_wg = runtime.local_size(q, prof["march_wg"])
         first = runtime.marker(q)
@@ -211,9 +242,13 @@ class GaussianRenderer:
             self._colors = runtime.empty(q, (n, 4), np.uint8, "Gaussian colours")
             self._colors.set(rgba8, queue=q)
         self._upload_events = (first, last or runtime.marker(q))
-        self.bvh = build_bvh(boxes[:n] if n else np.zeros((0, 6), np.float32), queue=q)
-        self.records = gather_records(q, records, self.bvh.order, n)
         self._dummy = runtime.zeros(q, 64, np.float32, "empty BVH") if n == 0 else None
+        bvh = build_bvh(boxes[:n] if n else np.zeros((0, 6), np.float32), queue=q)
+        # the tile renderer keeps only the BVH's Morton leaf order: a tile's
+        # records then lie close in memory (2 M Gaussians are 112 MB of records)
+        self.bvh = None if self.method == "tiles" else bvh
+        self.order = bvh.order if n else runtime.zeros(q, 1, np.uint32, "empty order")
+        self.records = gather_records(q, records, bvh.order, n)
 
     @property
     def upload_seconds(self) -> float | None:
@@ -222,12 +257,15 @@ class GaussianRenderer:
 
     @property
     def build_seconds(self) -> float | None:
-        """Device time of the BVH build (event profiling; waits for it)."""
-        return self.bvh.build_seconds
+        """Device time of the BVH build (event profiling; waits for it); None for method="tiles"."""
+        return None if self.bvh is None else self.bvh.build_seconds
 
     @property
     def nbytes(self) -> int:
-        """Device bytes the renderer holds: the Gaussian records and the BVH."""
+        """Device bytes the renderer holds: the Gaussian records and the BVH
+        (method="tiles": the records and their order)."""
+        if self.bvh is None:
+            return runtime.nbytes(self.records, self._dummy, self._colors, self.order)
         return runtime.nbytes(self.records, self._dummy, self._colors) + self.bvh.nbytes
 
     def _buf(self, a: cla.Array | None) -> cl.MemoryObjectHolder | cl.SVMPointer:
@@ -254,6 +292,7 @@ class GaussianRenderer:
         host: bool = True,
         tile_rows: int | None = None,
         progress: Callable[[int, int], None] | None = None,
+        max_keys: int | None = None,
     ) -> GaussianImage:
         """One frame; see the module doc for what the planes hold.
 
@@ -263,7 +302,14 @@ class GaussianRenderer:
         the device (pyopencl arrays on the renderer's queue, for a pipeline
         such as post-processing), renders one band and reads nothing back:
         ``hits`` and ``rounds`` are then None and ``stats["ray_stats"]`` is the
-        (H, W, 2) uint32 device array of both."""
+        (H, W, 2) uint32 device array of both.
+
+        method="tiles": tile_rows is unused; the image is rendered in bands of
+        tile rows holding at most `max_keys` keys (default: the tuning
+        profile's ``tile_keys``), and of at most ``tile_rays`` rays when read
+        back. stats add keys, keys_per_gaussian, candidates_per_pixel (the
+        mean length of a pixel's tile list) and the device time split
+        bin_s (count, scan, keys), sort_s, tile_render_s (ranges, render)."""
         q = self.queue
         w, h = positive_int("width", width), positive_int("height", height)
         if w * h >= 2**32:
@@ -281,6 +327,11 @@ class GaussianRenderer:
         )
         if progress is not None and not callable(progress):
             raise TypeError(f"progress: expected a callable, got {type(progress).__name__}")
+        if max_keys is not None:
+            max_keys = positive_int("max_keys", max_keys)
+        if self.method == "tiles":
+            with runtime.pinned(self.config):
+                return _tiles_image(self, camera, w, h, tf, host, max_keys, progress)
         tmin, tscale = tf.limits(self.gaussians.values)
         table = tf.table()
         what = f"Gaussian image {w}x{h}"
@@ -382,6 +433,31 @@ class GaussianRenderer:
         return GaussianImage(out_rgba, out_depth, hits, rounds, info)
 
 
+def _tiles_image(r: GaussianRenderer, camera, w, h, tf, host, max_keys, progress) -> GaussianImage:
+    rgba, depth, stats, tinfo = render_tiles(
+        r, camera, w, h, tf, host=host, max_keys=max_keys, progress=progress
+    )
+    info = {
+        "gaussians": r.n,
+        "model": r.model,
+        "k": r.k,
+        "bvh_build_s": None,
+        "rays": w * h,
+        "bvh_nodes": 0,
+        "band_rows": None,
+        **tinfo,
+    }
+    if not host:
+        info["render_s"] = None
+        info["ray_stats"] = stats
+        return GaussianImage(rgba, depth, None, None, info)
+    hits, rounds = stats[..., 0], stats[..., 1]
+    info["hits_per_ray_mean"] = float(hits.mean())
+    info["hits_per_ray_max"] = int(hits.max())
+    info["rounds_per_ray_mean"] = float(rounds.mean())
+    return GaussianImage(rgba, depth, hits, rounds, info)
+
+
 def render_gaussians(
     gaussians: Gaussians,
     camera: Camera,
@@ -395,6 +471,7 @@ def render_gaussians(
     density: float = 1.0,
     queue: cl.CommandQueue | None = None,
     colors: bool | None = None,
+    method: str | None = None,
 ) -> GaussianImage:
     """One frame of `gaussians`: a :class:`GaussianRenderer` and its ``render``."""
     r = GaussianRenderer(
@@ -406,5 +483,6 @@ def render_gaussians(
         density=density,
         queue=queue,
         colors=colors,
+        method=method,
     )
     return r.render(camera, width, height)

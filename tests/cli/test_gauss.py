@@ -24,6 +24,31 @@ def test_gauss_default(tmp_path, capsys):
         assert im.width >= 3 * 64 and im.height > 48  # labelled, over colour bars
 
 
+@pytest.mark.parametrize("method", ["tiles", "bvh"])
+def test_gauss_method(tmp_path, capsys, method):
+    """--method picks the renderer; both give the same picture."""
+    args = ["gauss", "--lod", "low", "--size", "40x32", "--model", "max_response", "--method", method]
+    assert cli.main([*args, "--out", str(tmp_path / method)]) == 0
+    out = capsys.readouterr().out
+    assert f"method    {method}" in out and ("keys/G" in out) == (method == "tiles")
+    other = "bvh" if method == "tiles" else "tiles"
+    assert cli.main([*args[:-1], other, "--out", str(tmp_path / other)]) == 0
+    with Image.open(tmp_path / method / "low.png") as a, Image.open(tmp_path / other / "low.png") as b:
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_gauss_splat(tmp_path, capsys):
+    assert (
+        cli.main(["gauss", "--lod", "low", "--size", "40x32", "--model", "splat", "--out", str(tmp_path)])
+        == 0
+    )
+    assert "splat model" in capsys.readouterr().out
+    with Image.open(tmp_path / "low.png") as im:
+        assert np.asarray(im).std() > 1
+    assert cli.main(["gauss", "--model", "splat", "--method", "bvh", "--out", str(tmp_path)]) == 2
+    assert "needs method='tiles'" in capsys.readouterr().err
+
+
 def test_gauss_files(tmp_path, capsys):
     e = datasets.explosion((20, 24, 28))
     np.save(tmp_path / "v.npy", e["volume"])
@@ -60,6 +85,7 @@ def test_gauss_files(tmp_path, capsys):
     [
         (["nope.vdb"], "no such file"),
         (["--lod", "ultra"], "--lod"),
+        (["--method", "raster"], "--method"),
     ],
 )
 def test_gauss_errors(tmp_path, capsys, args, message):

@@ -65,12 +65,23 @@ def _reference(g, cam, w, h, tf, model, cutoff=3.0, density=1.0):
 
 
 def _check(
-    queue, g, cam, w=W, h=H, model="max_response", k=16, tf=None, cutoff=3.0, density=1.0, tile_rows=None
+    queue,
+    g,
+    cam,
+    w=W,
+    h=H,
+    model="max_response",
+    k=16,
+    tf=None,
+    cutoff=3.0,
+    density=1.0,
+    tile_rows=None,
+    method=None,
 ):
     tf = tf or TransferFunction("jet")
-    img = gr.GaussianRenderer(g, tf, model=model, k=k, cutoff=cutoff, density=density, queue=queue).render(
-        cam, w, h, tile_rows=tile_rows
-    )
+    img = gr.GaussianRenderer(
+        g, tf, model=model, k=k, cutoff=cutoff, density=density, queue=queue, method=method
+    ).render(cam, w, h, tile_rows=tile_rows)
     rgba, depth, hits = _reference(g, cam, w, h, tf, model, cutoff, density)
     assert img.rgba.shape == (h, w, 4) and img.depth.shape == (h, w)
     np.testing.assert_allclose(img.rgba, rgba, rtol=0, atol=1e-3)
@@ -130,7 +141,7 @@ def test_own_colours_one_gaussian(queue):
 def test_bands_give_the_same_image(queue, tile_rows):
     """Bands of rows (separate launches over the same BVH) give the one-band image exactly."""
     g = _random(200, seed=32)
-    r = gr.GaussianRenderer(g, queue=queue)
+    r = gr.GaussianRenderer(g, queue=queue, method="bvh")
     whole = r.render(_cam(w=W, h=H + 3), W, H + 3, tile_rows=H + 3)
     done = []
     banded = r.render(
@@ -139,7 +150,7 @@ def test_bands_give_the_same_image(queue, tile_rows):
     _assert_same(banded, whole)
     assert banded.stats["bands"] == -(-(H + 3) // tile_rows) == len(done)
     assert done[-1] == (W * (H + 3), W * (H + 3)) and [a for a, _ in done] == sorted(a for a, _ in done)
-    _check(queue, _coloured(g), _cam(), tile_rows=tile_rows)
+    _check(queue, _coloured(g), _cam(), tile_rows=tile_rows, method="bvh")
 
 
 def test_band_rows(queue):
@@ -285,7 +296,7 @@ def test_property(n, seed, k, model):
 def test_records_and_boxes_match_reference(queue):
     g = _random(500, seed=10)
     g2 = Gaussians.concatenate([g, Gaussians([[1, 2, 3]], [[0, 0, 0]]), Gaussians([[0, 0, 0]], [[1, 0, 0]])])
-    r = gr.GaussianRenderer(g2, queue=queue)
+    r = gr.GaussianRenderer(g2, queue=queue, method="bvh")
     recs = r.records.get().view(GAUSSIAN_DTYPE)
     order = r.bvh.order.get()
     mean, value, w, opac = ref_g.gaussian_records(g2.means, g2.scales, g2.rotations, g2.values, g2.opacities)
@@ -462,15 +473,21 @@ def test_render_does_not_wait_and_times_from_events(queue):
     """host=False enqueues and returns (render_s None until asked); host=True
     reports device times from event profiling."""
     g = _random(100, seed=23)
-    r = gr.GaussianRenderer(g, queue=queue)
+    r = gr.GaussianRenderer(g, queue=queue, method="bvh")
     b = r.render(_cam(), W, H, host=False)
     assert b.stats["render_s"] is None
     assert runtime.seconds(*b.stats["events"]) > 0  # waits, then reads the events
     a = r.render(_cam(), W, H)
     assert a.stats["render_s"] > 0 and a.stats["bvh_build_s"] > 0 and r.upload_seconds > 0
     assert r.nbytes == r.records.nbytes + r.bvh.nbytes
-    c = gr.GaussianRenderer(_coloured(g), queue=queue)
+    c = gr.GaussianRenderer(_coloured(g), queue=queue, method="bvh")
     assert c.nbytes == r.nbytes + 4 * g.n
+    t = gr.GaussianRenderer(g, queue=queue, method="tiles")
+    assert t.nbytes == t.records.nbytes + t.order.nbytes and t.bvh is None and t.build_seconds is None
+    b = t.render(_cam(), W, H, host=False)
+    assert runtime.seconds(*b.stats["events"]) > 0
+    a = t.render(_cam(), W, H)
+    assert a.stats["render_s"] > 0 and a.stats["bin_s"] > 0 and a.stats["tile_render_s"] > 0
 
 
 _MEMORY_CHILD = """
@@ -480,10 +497,11 @@ from clvis.camera import Camera
 from clvis.gauss import render as gr
 from clvis.gauss.gaussians import Gaussians
 size = int(sys.argv[1])
+method = sys.argv[2]
 rng = np.random.default_rng(0)
 g = Gaussians(rng.normal(size=(40, 3)), rng.uniform(0.05, 0.15, (40, 3)), values=rng.uniform(size=40))
 cam = Camera.look_at((0.3, -6, 1.2), (0, 0, 0), (0, 0, 1), fov_y=50, aspect=1, near=0.1, far=50)
-r = gr.GaussianRenderer(g)
+r = gr.GaussianRenderer(g, method=method)
 r.render(cam, 64, 64)                                   # kernels built, pools warm
 def status(key):         # kB; VmHWM is this image's peak (ru_maxrss keeps the parent's across exec)
     return next(int(x.split()[1]) * 1024 for x in open("/proc/self/status") if x.startswith(key + ":"))
@@ -496,7 +514,8 @@ print(peak - before, img.stats["bands"], float(img.rgba[..., 3].max()))
 
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="needs /proc (Linux)")
-def test_large_render_memory_is_bounded():
+@pytest.mark.parametrize("method", gr.METHODS)
+def test_large_render_memory_is_bounded(method):
     """A 2048 x 2048 render of a small scene in a child process: the resident
     set grows by at most 1.5 x the host image (28 bytes a ray: rgba, depth,
     hits, rounds; 117 MB) + 32 MB (one band's buffers, the uint8 picture).
@@ -510,7 +529,11 @@ def test_large_render_memory_is_bounded():
         PYTHONPATH=os.pathsep.join([str(Path(clvis.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]),
     )
     out = subprocess.run(
-        [sys.executable, "-c", _MEMORY_CHILD, str(size)], capture_output=True, text=True, env=env, timeout=600
+        [sys.executable, "-c", _MEMORY_CHILD, str(size), method],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
     )
     assert out.returncode == 0, out.stderr
     grew, bands, alpha = out.stdout.split()

@@ -319,10 +319,12 @@ def gauss_bvh(q):
 def gauss_render(q):
     g = _gaussians(120)
     w, h = 16, 12
-    GaussianRenderer(g, model="max_response", queue=q).render(_gauss_cam(w, h), w, h)
+    GaussianRenderer(g, model="max_response", queue=q, method="bvh").render(_gauss_cam(w, h), w, h)
     # k=3: several k-buffer rounds per ray
-    GaussianRenderer(g, model="absorption", k=3, density=2.0, queue=q).render(_gauss_cam(9, 7), 9, 7)
-    GaussianRenderer(_gaussians(1, 14), queue=q).render(_gauss_cam(8, 8), 8, 8)
+    GaussianRenderer(g, model="absorption", k=3, density=2.0, queue=q, method="bvh").render(
+        _gauss_cam(9, 7), 9, 7
+    )
+    GaussianRenderer(_gaussians(1, 14), queue=q, method="bvh").render(_gauss_cam(8, 8), 8, 8)
     # per-Gaussian colours (COLOR 1), in bands of 5 rows
     coloured = _gaussians(60, 15)
     coloured = Gaussians(
@@ -333,7 +335,35 @@ def gauss_render(q):
         coloured.opacities,
         colors=_rng(15).integers(0, 256, (60, 3)).astype(np.uint8),
     )
-    GaussianRenderer(coloured, queue=q).render(_gauss_cam(w, h), w, h, tile_rows=5)
+    GaussianRenderer(coloured, queue=q, method="bvh").render(_gauss_cam(w, h), w, h, tile_rows=5)
+
+
+@case
+def gauss_tiles(q):
+    """The tile renderer: count, scan, keys, sort, ranges, render (tile_render8
+    under the cpu shape, tile_render under the gpu one)."""
+    g = _gaussians(80, 16)
+    w, h = 19, 13  # partial tiles on both edges
+    GaussianRenderer(g, queue=q, method="tiles").render(_gauss_cam(w, h), w, h)
+    # kp=2: pending overflow, rounds over the lists; key budget: bands of tile rows
+    GaussianRenderer(g, model="absorption", density=2.0, kp=2, queue=q, method="tiles").render(
+        _gauss_cam(w, 40), w, 40, max_keys=20
+    )
+    # the eye inside a Gaussian (every tile), one behind it, own colours
+    around = Gaussians(
+        [[0.3, -6.0, 1.2], [0.3, -9.0, 1.2], [0.0, 0.0, 0.0]],
+        [[1.0, 1.0, 1.0], [0.2, 0.2, 0.2], [0.5, 0.3, 0.4]],
+        values=[0.1, 0.5, 0.9],
+        opacities=[0.2, 0.9, 0.9],
+        colors=[[255, 0, 0], [0, 255, 0], [0, 0, 255]],
+    )
+    GaussianRenderer(around, queue=q, method="tiles").render(_gauss_cam(9, 7), 9, 7)
+    # the splatting model (splat.cl), own colours, in two bands
+    GaussianRenderer(around, queue=q, model="splat").render(_gauss_cam(9, 7), 9, 7)
+    GaussianRenderer(g, queue=q, model="splat").render(_gauss_cam(w, 40), w, 40, max_keys=20)
+    GaussianRenderer(Gaussians(np.zeros((0, 3)), np.zeros((0, 3))), queue=q, method="tiles").render(
+        _gauss_cam(8, 8), 8, 8
+    )
 
 
 # --- post --------------------------------------------------------------------

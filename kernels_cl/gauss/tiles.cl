@@ -1,0 +1,723 @@
+/* tiles.cl — Gaussians binned to screen tiles, sorted per tile by a depth
+ * bound, and composited per pixel in exact (t, id) order: the same image as
+ * march.cl (same hit test, same alpha, same compositing), without a BVH.
+ *
+ * Data flow (clvis/gauss/tiles.py): tile_count (keys per Gaussian) -> exclusive
+ * scan of the counts (clvis.primitives) -> tile_keys (one key per Gaussian and
+ * tile it may touch) -> radix sort of the keys with the Gaussian ids ->
+ * tile_ranges (each tile's run of keys) -> tile_render (per pixel).
+ *
+ * ABI
+ * ---
+ * Build options: -cl-fp32-correctly-rounded-divide-sqrt.
+ * Defines:
+ *   TS     tile side in pixels (default 16)
+ *   KP     the streaming k-buffer's size, 1..64 (default 16)
+ *   MODEL  0 max response, 1 absorption (march.cl's, default 0)
+ *   COLOR  0 transfer-function rgb, 1 colors[id] (march.cl's, default 0)
+ *
+ * Common arguments:
+ *   recs      n clvis_gaussian records (clvis/gauss.h), in any order (the host
+ *             keeps them in the LBVH's Morton leaf order: a tile's records lie
+ *             close in memory); ids in keys are record positions
+ *   proj      16 floats, 4 rows of 4: Pu, Pv, Pw (the pixel-homogeneous
+ *             projection: (u w, v w, w) = P (x, y, z, 1), u, v continuous pixel
+ *             coordinates, pixel centres at integer + 0.5, row 0 on top) and D
+ *             (the view depth row, clvis/camera.h)
+ *   near      the view depth of the rays' origins (the camera's near plane)
+ *   cutoff    hit radius in standard deviations (the hit is m2 <= cutoff^2)
+ *   W, H      image size; tiles_x = ceil(W / TS)
+ *   ty0, ty1  the band: tile rows ty0 .. ty1 - 1 are binned; a key's tile is
+ *             (ty - ty0) * tiles_x + tx
+ *
+ * kernel tile_count(recs, uint n, proj, float near, float cutoff, uint W, uint H,
+ *                   uint ty0, uint ty1, global ulong *counts)      n
+ *     counts[i] = the tiles of the band Gaussian i may touch (footprint below).
+ * kernel tile_keys(recs, uint n, proj, float near, float cutoff, uint W, uint H,
+ *                  uint ty0, uint ty1, global const ulong *offsets,  n: exclusive scan of counts
+ *                  global const float *cam,                           22 floats (clvis/camera.h)
+ *                  global ulong *keys, global uint *ids)              sum(counts) each
+ *     keys[offsets[i] + k] = tile << 32 | clvis_key_f32(dk), ids[...] = i (record),
+ *     tiles in row-major order. dk (tile_depth): a lower bound of the view
+ *     depth of every hit of Gaussian i by a ray of the tile.
+ * kernel tile_ranges(global const ulong *keys, uint m,   m keys sorted ascending
+ *                    global uint2 *ranges)               per tile of the band, zeroed before:
+ *     ranges[tile] = (first, last + 1) of the tile's keys; (0, 0) for none.
+ * kernel tile_render(recs, global const uint *order (record j is Gaussian order[j]: its id
+ *                    for ties and colours), global const ulong *keys, global const uint *ids,
+ *                    global const uint2 *ranges, global const float *cam (22 floats,
+ *                    clvis/camera.h), uint W, uint H, uint ty0, uint tile0 (the band's
+ *                    first tile this launch renders), uint rows (image rows of the
+ *                    band: ty0 * TS .. ty0 * TS + rows - 1), uint out_y0 (the image
+ *                    row that row 0 of the outputs holds),
+ *                    tf, tf_n, tf_min, tf_scale, cutoff2, density, colors (as march.cl),
+ *                    global float4 *rgba, global float *depth, global uint2 *stats)
+ *     Outputs as march.cl's at (py - out_y0) * W + px; stats = (Gaussians
+ *     composited, rounds). Global size: (tiles to render) * TS * TS, work-item i:
+ *     tile tile0 + i / (TS * TS) of the band (row-major), pixel i % (TS * TS)
+ *     in it (row-major); any local size dividing TS * TS.
+ *
+ * Footprint (tile_footprint): the Gaussian's cutoff ellipsoid, inflated by
+ * 1.01 (as the BVH boxes of gaussians.cl), projected exactly: when it lies in
+ * front of the eye's plane its outline is the ellipse with centre c and
+ * matrix E (dual conic P Q* P^T of the ellipsoid's dual quadric Q*, expanded so
+ * that no term cancels), a tile is kept when E's ellipse (plus 0.01 px) meets
+ * the rectangle of its pixel centres (plus 0.05 px) — every pixel whose ray can
+ * hit lies inside; otherwise (the ellipsoid straddles the eye's plane) every
+ * tile of the image. Gaussians wholly nearer than the near plane have none.
+ *
+ * Order (tile_render): a tile's keys are sorted by their depth bound dk. A
+ * pixel's ray has origin o at view depth d0 and direction d with c = D . d > 0,
+ * so a hit at t lies at depth d0 + t c >= dk: every later candidate's hits
+ * have t >= (dk_next - d0) / c. A pending hit whose depth d0 + t c (plus 1e-5 of
+ * its magnitude) is below dk_next can therefore be composited: hits are
+ * composited in exact (t, id) order through a KP-entry buffer. When more than
+ * KP hits are pending, the buffer keeps the KP smallest keys, the round
+ * composites only keys below the smallest one it dropped, and another round
+ * walks the same list for the keys beyond the last one composited (march.cl's
+ * rounds). Compositing stops once T < 1e-3, as march.cl.
+ */
+#pragma OPENCL FP_CONTRACT OFF
+
+#include "clvis/gauss.h"
+#include "clvis/keys.h"
+
+#ifndef TS
+#define TS 16
+#endif
+#ifndef KP
+#define KP 16
+#endif
+#ifndef MODEL
+#define MODEL 0
+#endif
+#ifndef COLOR
+#define COLOR 0
+#endif
+#define T_STOP 1e-3f
+#define INFLATE 1.01f
+#define EPS2 1e-4f     /* (0.01 px)^2 added to E's diagonal */
+#define PAD 0.05f      /* px added around a tile's pixel centres */
+
+typedef struct {
+    float cu, cv;          /* ellipse centre */
+    float a00, a01, a11;   /* adj(E) */
+    float det;             /* det(E) */
+    float pad;             /* px added around a tile's pixel centres */
+    int exact;             /* 1: test tiles against the ellipse; 0: every tile of the rectangle */
+    int tx0, tx1, ty0, ty1;/* tile rectangle (inclusive); empty when tx0 > tx1 */
+    float dmin;
+} tile_footprint;
+
+inline float row4(global const float *r, float x, float y, float z)
+{
+    return clvis_dot3(r[0], r[1], r[2], x, y, z) + r[3];
+}
+
+inline float absrow4(global const float *r, float x, float y, float z)
+{
+    return ((fabs(r[0] * x) + fabs(r[1] * y)) + fabs(r[2] * z)) + fabs(r[3]);
+}
+
+/* The footprint of record g; returns 0 when it touches no pixel. */
+inline int footprint(global const clvis_gaussian *g, global const float *proj, float near, float cutoff,
+                     uint W, uint H, tile_footprint *f)
+{
+    float c = cutoff * INFLATE;
+    /* L = W^-1 = R diag(se): L[j][k] = w[3k + j] / |row k of W|^2 (rows orthogonal) */
+    float L[3][3];
+    for (int k = 0; k < 3; ++k) {
+        float r2 = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], g->w[3 * k], g->w[3 * k + 1],
+                              g->w[3 * k + 2]);
+        for (int j = 0; j < 3; ++j)
+            L[j][k] = g->w[3 * k + j] / r2;
+    }
+    float mx = g->mean[0], my = g->mean[1], mz = g->mean[2];
+    /* b_r = c P_r[:3] L (the ellipsoid's extent along row r), m_r = P_r (mean, 1) */
+    float b[4][3], m[4];
+    for (int r = 0; r < 4; ++r) {
+        global const float *P = proj + 4 * r;
+        for (int k = 0; k < 3; ++k)
+            b[r][k] = c * clvis_dot3(P[0], P[1], P[2], L[0][k], L[1][k], L[2][k]);
+        m[r] = row4(P, mx, my, mz);
+    }
+    float sd = 1e-5f * absrow4(proj + 12, mx, my, mz) + 1e-30f;
+    float ext_d = sqrt(clvis_dot3(b[3][0], b[3][1], b[3][2], b[3][0], b[3][1], b[3][2]));
+    f->dmin = (m[3] - ext_d) - sd;
+    if ((m[3] + ext_d) + sd < near)
+        return 0;   /* wholly nearer than the rays' origins */
+    float S[3][3];
+    for (int r = 0; r < 3; ++r)
+        for (int s = 0; s < 3; ++s)
+            S[r][s] = clvis_dot3(b[r][0], b[r][1], b[r][2], b[s][0], b[s][1], b[s][2]);
+    float mu = m[0], mv = m[1], mw = m[2];
+    float fw = mw * mw - S[2][2];
+    float ulo = 0.0f, uhi = (float)W, vlo = 0.0f, vhi = (float)H;
+    f->exact = 0;
+    if (mw > 0.0f && fw > 1e-6f * (mw * mw)) {
+        /* the outline ellipse: E = N / fw^2 */
+        float nuu = ((mw * mw) * S[0][0] - 2.0f * (mu * mw) * S[0][2]) + (mu * mu) * S[2][2]
+                    - (S[0][0] * S[2][2] - S[0][2] * S[0][2]);
+        float nvv = ((mw * mw) * S[1][1] - 2.0f * (mv * mw) * S[1][2]) + (mv * mv) * S[2][2]
+                    - (S[1][1] * S[2][2] - S[1][2] * S[1][2]);
+        float nuv = (((mw * mw) * S[0][1] - (mu * mw) * S[1][2]) - (mv * mw) * S[0][2]) + (mu * mv) * S[2][2]
+                    + (S[0][2] * S[1][2] - S[0][1] * S[2][2]);
+        float f2 = fw * fw;
+        float euu = nuu / f2 + EPS2, evv = nvv / f2 + EPS2, euv = nuv / f2;
+        float cu = (mu * mw - S[0][2]) / fw, cv = (mv * mw - S[1][2]) / fw;
+        float det = euu * evv - euv * euv;
+        if (euu > 0.0f && evv > 0.0f && det > 0.0f && isfinite(det) && isfinite(cu) && isfinite(cv)) {
+            float pad = PAD + 1e-5f * (fabs(cu) + fabs(cv));
+            f->cu = cu;
+            f->cv = cv;
+            f->a00 = evv;
+            f->a01 = -euv;
+            f->a11 = euu;
+            f->det = det;
+            f->pad = pad;
+            f->exact = 1;
+            float hu = sqrt(euu) + pad, hv = sqrt(evv) + pad;
+            ulo = cu - hu;
+            uhi = cu + hu;
+            vlo = cv - hv;
+            vhi = cv + hv;
+        } else if (!(isfinite(cu) && isfinite(cv))) {
+            /* keep the whole image */
+        }
+    } else if (mw <= 0.0f && fw > 1e-6f * (mw * mw)) {
+        return 0;   /* wholly behind the eye's plane */
+    }
+    /* pixels whose centre px + 0.5 lies in [ulo, uhi] */
+    ulo = fmax(ulo, -1.0f);
+    vlo = fmax(vlo, -1.0f);
+    uhi = fmin(uhi, (float)W + 1.0f);
+    vhi = fmin(vhi, (float)H + 1.0f);
+    if (!(ulo <= uhi && vlo <= vhi))
+        return 0;
+    int px0 = max((int)ceil(ulo - 0.5f), 0), px1 = min((int)floor(uhi - 0.5f), (int)W - 1);
+    int py0 = max((int)ceil(vlo - 0.5f), 0), py1 = min((int)floor(vhi - 0.5f), (int)H - 1);
+    if (px0 > px1 || py0 > py1)
+        return 0;
+    f->tx0 = px0 / TS;
+    f->tx1 = px1 / TS;
+    f->ty0 = py0 / TS;
+    f->ty1 = py1 / TS;
+    return 1;
+}
+
+/* g(x) = dx' adj(E) dx <= det(E) somewhere on the rectangle [u0, u1] x [v0, v1] */
+inline int ellipse_meets(const tile_footprint *f, float u0, float u1, float v0, float v1)
+{
+    if (f->cu >= u0 && f->cu <= u1 && f->cv >= v0 && f->cv <= v1)
+        return 1;
+    float us[2] = {u0, u1}, vs[2] = {v0, v1};
+    for (int e = 0; e < 2; ++e) {
+        /* vertical edge u = us[e] */
+        float dx = us[e] - f->cu;
+        float dy = clamp(-(f->a01 * dx) / f->a11, v0 - f->cv, v1 - f->cv);
+        if ((f->a00 * dx * dx + 2.0f * f->a01 * dx * dy) + f->a11 * dy * dy <= f->det)
+            return 1;
+        /* horizontal edge v = vs[e] */
+        dy = vs[e] - f->cv;
+        dx = clamp(-(f->a01 * dy) / f->a00, u0 - f->cu, u1 - f->cu);
+        if ((f->a00 * dx * dx + 2.0f * f->a01 * dx * dy) + f->a11 * dy * dy <= f->det)
+            return 1;
+    }
+    return 0;
+}
+
+inline int tile_kept(const tile_footprint *f, int tx, int ty, uint W, uint H)
+{
+    if (!f->exact)
+        return 1;
+    float u0 = (float)(tx * TS) + 0.5f, u1 = (float)min((tx + 1) * TS, (int)W) - 0.5f;
+    float v0 = (float)(ty * TS) + 0.5f, v1 = (float)min((ty + 1) * TS, (int)H) - 0.5f;
+    return ellipse_meets(f, u0 - f->pad, u1 + f->pad, v0 - f->pad, v1 + f->pad);
+}
+
+kernel void tile_count(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
+                       float cutoff, uint W, uint H, uint ty0, uint ty1, global ulong *counts)
+{
+    uint i = get_global_id(0);
+    if (i >= n)
+        return;
+    tile_footprint f;
+    ulong cnt = 0;
+    if (footprint(recs + i, proj, near, cutoff, W, H, &f)) {
+        int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
+        for (int ty = y0; ty <= y1; ++ty)
+            for (int tx = f.tx0; tx <= f.tx1; ++tx)
+                cnt += tile_kept(&f, tx, ty, W, H);
+    }
+    counts[i] = cnt;
+}
+
+/* A lower bound of the view depth of Gaussian g's hits by the rays of tile
+ * (tx, ty). A hit at t = ts > 0 is the ray's point of least Mahalanobis
+ * distance, y = x - mean with y' S^-1 d = 0 and y' S^-1 y <= c^2 (S the
+ * covariance), whose depth offset f . y is at least
+ * -c sqrt(f' S f - (f . d)^2 / (d' S^-1 d)). Over the tile's directions
+ * dd(u, v) (linear in u, v), f . dd is linear and |W dd|^2 convex, so their
+ * extremes over the rectangle of pixel centres are at its corners. Hits at
+ * t = 0 lie on the near plane: a Gaussian reaching it keeps dmin. */
+inline float tile_depth(const tile_footprint *f, float m3, float fsf, float c, float sd, const float *a0,
+                        const float *au, const float *av, float fd0, float fdu, float fdv, float near, int tx,
+                        int ty, uint W, uint H)
+{
+    if (!(f->dmin > near))
+        return f->dmin;
+    float us[2] = {(float)(tx * TS) + 0.5f, (float)min((tx + 1) * TS, (int)W) - 0.5f};
+    float vs[2] = {(float)(ty * TS) + 0.5f, (float)min((ty + 1) * TS, (int)H) - 0.5f};
+    float qmax = 0.0f, fmin2 = INFINITY, fdlo = INFINITY, fdhi = -INFINITY;
+    for (int k = 0; k < 4; ++k) {
+        float u = us[k & 1], v = vs[k >> 1];
+        float x0 = (a0[0] + u * au[0]) + v * av[0];
+        float x1 = (a0[1] + u * au[1]) + v * av[1];
+        float x2 = (a0[2] + u * au[2]) + v * av[2];
+        qmax = fmax(qmax, clvis_dot3(x0, x1, x2, x0, x1, x2));
+        float fd = (fd0 + u * fdu) + v * fdv;
+        fdlo = fmin(fdlo, fd);
+        fdhi = fmax(fdhi, fd);
+        fmin2 = fmin(fmin2, fd * fd);
+    }
+    float h = (fdlo > 0.0f || fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : 0.0f;
+    float g = fmax(fsf - h, 0.0f) + 1e-5f * fsf;
+    float lo = (m3 - c * sqrt(g)) - sd;
+    return isfinite(lo) ? fmax(lo, f->dmin) : f->dmin;
+}
+
+kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
+                      float cutoff, uint W, uint H, uint ty0, uint ty1, global const ulong *offsets,
+                      global const float *cam, global ulong *keys, global uint *ids)
+{
+    uint i = get_global_id(0);
+    if (i >= n)
+        return;
+    tile_footprint f;
+    global const clvis_gaussian *g = recs + i;
+    if (!footprint(g, proj, near, cutoff, W, H, &f))
+        return;
+    /* W dd = a0 + u au + v av; f . dd = fd0 + u fdu + v fdv (f = D's xyz) */
+    float a0[3], au[3], av[3];
+    for (int k = 0; k < 3; ++k) {
+        a0[k] = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], cam[9], cam[10], cam[11]);
+        au[k] = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], cam[12], cam[13], cam[14]);
+        av[k] = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], cam[15], cam[16], cam[17]);
+    }
+    global const float *D = proj + 12;
+    float fd0 = clvis_dot3(D[0], D[1], D[2], cam[9], cam[10], cam[11]);
+    float fdu = clvis_dot3(D[0], D[1], D[2], cam[12], cam[13], cam[14]);
+    float fdv = clvis_dot3(D[0], D[1], D[2], cam[15], cam[16], cam[17]);
+    float c = cutoff * INFLATE;
+    float m3 = row4(D, g->mean[0], g->mean[1], g->mean[2]);
+    float sd = 1e-5f * absrow4(D, g->mean[0], g->mean[1], g->mean[2]) + 1e-30f;
+    /* f' S f = |f' L|^2, L = W^-1 as in footprint */
+    float e[3];
+    for (int k = 0; k < 3; ++k) {
+        float r2 = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], g->w[3 * k], g->w[3 * k + 1],
+                              g->w[3 * k + 2]);
+        e[k] = clvis_dot3(D[0], D[1], D[2], g->w[3 * k] / r2, g->w[3 * k + 1] / r2, g->w[3 * k + 2] / r2);
+    }
+    float fsf = clvis_dot3(e[0], e[1], e[2], e[0], e[1], e[2]);
+    uint tiles_x = (W + TS - 1) / TS;
+    ulong at = offsets[i];
+    int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
+    for (int ty = y0; ty <= y1; ++ty)
+        for (int tx = f.tx0; tx <= f.tx1; ++tx)
+            if (tile_kept(&f, tx, ty, W, H)) {
+                float dk = tile_depth(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, near, tx, ty, W, H);
+                ulong tile = (ulong)(ty - (int)ty0) * tiles_x + (ulong)tx;
+                keys[at] = tile << 32 | (ulong)clvis_key_f32(as_uint(dk));
+                ids[at] = i;
+                ++at;
+            }
+}
+
+kernel void tile_ranges(global const ulong *keys, uint m, global uint2 *ranges)
+{
+    uint i = get_global_id(0);
+    if (i >= m)
+        return;
+    uint tile = (uint)(keys[i] >> 32);
+    if (i == 0 || (uint)(keys[i - 1] >> 32) != tile)
+        ranges[tile].x = i;
+    if (i == m - 1 || (uint)(keys[i + 1] >> 32) != tile)
+        ranges[tile].y = i + 1;
+}
+
+/* (ta, ia) < (tb, ib) */
+inline bool key_less(float ta, uint ia, float tb, uint ib)
+{
+    return ta < tb || (ta == tb && ia < ib);
+}
+
+/* the float whose clvis_key_f32 is k */
+inline float key_to_f32(uint k)
+{
+    return as_float((k & 0x80000000u) ? (k & 0x7FFFFFFFu) : ~k);
+}
+
+inline float hit_alpha(global const clvis_gaussian *g, global const float4 *tf, uint tf_n, float tf_min,
+                       float tf_scale, float density, float m2, float ts, float a, const float *op,
+                       const float *dp, uint *ti)
+{
+    *ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
+    float opac = g->opacity * tf[*ti].w;
+#if MODEL == 1
+    return clvis_gauss_alpha_absorption(opac, density, ts, a, op, dp);
+#else
+    return clvis_gauss_alpha_max_response(opac, m2);
+#endif
+}
+
+inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *colors, uint id)
+{
+#if COLOR == 1
+    return clvis_gauss_rgb8(colors[id]);
+#else
+    return tf[ti];
+#endif
+}
+
+kernel void tile_render(global const clvis_gaussian *recs, global const uint *order, global const ulong *keys,
+                        global const uint *ids,
+                        global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
+                        uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
+                        float tf_scale, float cutoff2, float density, global const uchar4 *colors,
+                        global float4 *rgba, global float *depth, global uint2 *stats)
+{
+    uint tiles_x = (W + TS - 1) / TS;
+    uint tile = tile0 + get_global_id(0) / (TS * TS), l = get_global_id(0) % (TS * TS);
+    uint px = (tile % tiles_x) * TS + l % TS, row = (tile / tiles_x) * TS + l / TS;
+    uint py = ty0 * TS + row;
+    if (px >= W || row >= rows || py >= H)
+        return;
+    size_t pix = (size_t)(py - out_y0) * W + px;
+
+    float o[3], d[3];
+    clvis_camera_ray(cam, px, py, o, d);
+    /* view depth of the ray's point at t: d0 + t cd */
+    float cd = clvis_dot3(cam[18], cam[19], cam[20], d[0], d[1], d[2]);
+    float d0 = clvis_dot3(cam[18], cam[19], cam[20], o[0], o[1], o[2]) + cam[21];
+    bool stream = cd > 0.0f;
+
+    uint2 range = ranges[tile];
+    float T = 1.0f, cr = 0.0f, cg = 0.0f, cb = 0.0f, z = INFINITY;
+    float last_t = -1.0f;   /* every hit has t >= 0 */
+    uint last_id = 0, hits = 0, rounds = 0;
+    bool done = range.x >= range.y;
+    /* pending hits, key descending: [kn - 1] is the smallest */
+    float kt[KP];
+    uint ki[KP];
+    float ka[KP];
+    uint kc[KP];
+    while (!done) {
+        ++rounds;
+        int kn = 0;
+        bool over = false;
+        float ct = INFINITY;   /* the round's ceiling: the smallest key it dropped */
+        uint cid = 0xFFFFFFFFu;
+        for (uint i = range.x; i < range.y; ++i) {
+            if (stream && kn > 0) {
+                float dm = key_to_f32((uint)keys[i]);
+                while (kn > 0) {
+                    float h = kt[kn - 1] * cd;
+                    if (!((h + d0) + 1e-5f * (fabs(h) + fabs(d0)) < dm))
+                        break;
+                    --kn;
+                    clvis_gauss_composite(ka[kn], hit_color(tf, kc[kn], colors, ki[kn]), &T, &cr, &cg, &cb);
+                    ++hits;
+                    last_t = kt[kn];
+                    last_id = ki[kn];
+                    if (T < 0.5f && z == INFINITY)
+                        z = clvis_ray_depth(cam, o, d, kt[kn]);
+                    if (T < T_STOP) {
+                        done = true;
+                        break;
+                    }
+                }
+                if (done)
+                    break;
+            }
+            uint j = ids[i];
+            global const clvis_gaussian *g = recs + j;
+            float t, m2, ts, a, op[3], dp[3];
+            clvis_gauss_hit(g, o, d, &t, &m2, &ts, &a, op, dp);
+            if (!(m2 <= cutoff2))
+                continue;
+            uint id = order[j];
+            if (!key_less(last_t, last_id, t, id))
+                continue;   /* composited in an earlier round */
+            if (over && !key_less(t, id, ct, cid))
+                continue;   /* beyond the round's ceiling */
+            if (kn == KP) {
+                over = true;
+                if (key_less(kt[0], ki[0], t, id)) {
+                    ct = t;   /* the new hit is the largest: drop it */
+                    cid = id;
+                    continue;
+                }
+                ct = kt[0];   /* drop the largest pending hit */
+                cid = ki[0];
+                for (int q = 0; q < KP - 1; ++q) {
+                    kt[q] = kt[q + 1];
+                    ki[q] = ki[q + 1];
+                    ka[q] = ka[q + 1];
+                    kc[q] = kc[q + 1];
+                }
+                kn = KP - 1;
+            }
+            uint ti;
+            float alpha = hit_alpha(g, tf, tf_n, tf_min, tf_scale, density, m2, ts, a, op, dp, &ti);
+            int pos = kn++;
+            while (pos > 0 && key_less(kt[pos - 1], ki[pos - 1], t, id)) {
+                kt[pos] = kt[pos - 1];
+                ki[pos] = ki[pos - 1];
+                ka[pos] = ka[pos - 1];
+                kc[pos] = kc[pos - 1];
+                --pos;
+            }
+            kt[pos] = t;
+            ki[pos] = id;
+            ka[pos] = alpha;
+            kc[pos] = ti;
+        }
+        /* the rest of the round, front to back */
+        while (!done && kn > 0) {
+            --kn;
+            clvis_gauss_composite(ka[kn], hit_color(tf, kc[kn], colors, ki[kn]), &T, &cr, &cg, &cb);
+            ++hits;
+            last_t = kt[kn];
+            last_id = ki[kn];
+            if (T < 0.5f && z == INFINITY)
+                z = clvis_ray_depth(cam, o, d, kt[kn]);
+            if (T < T_STOP)
+                done = true;
+        }
+        if (!over)
+            done = true;
+    }
+    rgba[pix] = (float4)(cr, cg, cb, 1.0f - T);
+    depth[pix] = z;
+    stats[pix] = (uint2)(hits, rounds);
+}
+
+/* ---------------------------------------------------------------- 8 lanes
+ * tile_render8: tile_render's result, a work-item per row of 8 pixels of a
+ * tile (TS a multiple of 8): the hit test of a candidate runs on the 8 rays
+ * at once in float8 lanes (the same operations as clvis_gauss_hit, lane by
+ * lane), the pending buffers and compositing per lane. Global size:
+ * (tiles to render) * TS * TS / 8; work-item i: tile
+ * tile0 + i / (TS * TS / 8), row (i % (TS * TS / 8)) / (TS / 8) of it, pixels
+ * 8 * (i % (TS / 8)) .. + 7 of that row; any local size dividing TS * TS / 8.
+ * Same arguments as tile_render. */
+
+/* Pending hits of tile_render8 in two 64-bit words each: the key
+ * as_uint(t) << 32 | id (t >= 0, -0 made +0, so the unsigned order of the
+ * word is the (t, id) order) and the payload as_uint(alpha) << 32 | the
+ * transfer-function entry. */
+inline ulong pend_key(float t, uint id)
+{
+    return (ulong)as_uint(t + 0.0f) << 32 | id;
+}
+
+inline float pend_t(ulong k)
+{
+    return as_float((uint)(k >> 32));
+}
+
+/* lane l: composite its smallest pending hit */
+#define POP_LANE(l)                                                                                   \
+    do {                                                                                              \
+        int q_ = --kn[l];                                                                             \
+        ulong k_ = pk[l][q_], v_ = pv[l][q_];                                                         \
+        float t_ = pend_t(k_);                                                                        \
+        clvis_gauss_composite(as_float((uint)(v_ >> 32)), hit_color(tf, (uint)v_, colors, (uint)k_),  \
+                              &T[l], &cr[l], &cg[l], &cb[l]);                                         \
+        ++hits[l];                                                                                    \
+        last[l] = k_;                                                                                 \
+        if (T[l] < 0.5f && z[l] == INFINITY)                                                          \
+            z[l] = clvis_ray_depth(cam, o[l], d[l], t_);                                              \
+        if (T[l] < T_STOP)                                                                            \
+            done[l] = true;                                                                           \
+    } while (0)
+
+/* lane l's flush threshold: the depth of its smallest pending hit, plus slack */
+#define FRONT_LANE(l)                                                                                 \
+    do {                                                                                              \
+        if (kn[l] > 0 && cd[l] > 0.0f) {                                                              \
+            float h_ = pend_t(pk[l][kn[l] - 1]) * cd[l];                                              \
+            front[l] = (h_ + d0[l]) + 1e-5f * (fabs(h_) + fabs(d0[l]));                               \
+        } else                                                                                        \
+            front[l] = INFINITY;                                                                      \
+    } while (0)
+
+kernel void tile_render8(global const clvis_gaussian *recs, global const uint *order, global const ulong *keys,
+                        global const uint *ids,
+                         global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
+                         uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
+                         float tf_scale, float cutoff2, float density, global const uchar4 *colors,
+                         global float4 *rgba, global float *depth, global uint2 *stats)
+{
+    uint tiles_x = (W + TS - 1) / TS;
+    uint per_tile = TS * TS / 8;
+    uint tile = tile0 + get_global_id(0) / per_tile, l8 = get_global_id(0) % per_tile;
+    uint px0 = (tile % tiles_x) * TS + (l8 % (TS / 8)) * 8, row = (tile / tiles_x) * TS + l8 / (TS / 8);
+    uint py = ty0 * TS + row;
+    if (px0 >= W || row >= rows || py >= H)
+        return;
+
+    float o[8][3], d[8][3], cd[8], d0[8];
+    float T[8], cr[8], cg[8], cb[8], z[8], front[8];
+    ulong last[8], ceil_k[8];   /* the last key composited; the round's ceiling */
+    uint hits[8], nround[8];
+    bool done[8], over[8], gone[8];   /* gone: done and taken off live */
+    int kn[8];
+    ulong pk[8][KP], pv[8][KP];   /* pending: key descending, [kn - 1] the smallest */
+    float lox[8], loy[8], loz[8], ldx[8], ldy[8], ldz[8];
+    uint2 range = ranges[tile];
+    int live = 0;
+    for (int l = 0; l < 8; ++l) {
+        uint px = min(px0 + l, W - 1);
+        clvis_camera_ray(cam, px, py, o[l], d[l]);
+        cd[l] = clvis_dot3(cam[18], cam[19], cam[20], d[l][0], d[l][1], d[l][2]);
+        d0[l] = clvis_dot3(cam[18], cam[19], cam[20], o[l][0], o[l][1], o[l][2]) + cam[21];
+        lox[l] = o[l][0]; loy[l] = o[l][1]; loz[l] = o[l][2];
+        ldx[l] = d[l][0]; ldy[l] = d[l][1]; ldz[l] = d[l][2];
+        T[l] = 1.0f; cr[l] = cg[l] = cb[l] = 0.0f; z[l] = INFINITY;
+        hits[l] = 0; nround[l] = 0;
+        done[l] = gone[l] = px0 + l >= W || range.x >= range.y;
+        live += !done[l];
+    }
+    float8 ox = vload8(0, lox), oy = vload8(0, loy), oz = vload8(0, loz);
+    float8 dx = vload8(0, ldx), dy = vload8(0, ldy), dz = vload8(0, ldz);
+    bool first = true;   /* round 1: every hit is beyond "last" */
+    while (live > 0) {
+        for (int l = 0; l < 8; ++l) {
+            kn[l] = 0;
+            over[l] = false;
+            ceil_k[l] = 0xFFFFFFFFFFFFFFFFul;
+            front[l] = INFINITY;
+            nround[l] += !done[l];
+        }
+        for (uint i = range.x; i < range.y && live > 0; ++i) {
+            float dm = key_to_f32((uint)keys[i]);
+            if (any(vload8(0, front) < dm)) {
+                for (int l = 0; l < 8; ++l) {
+                    if (!(front[l] < dm))
+                        continue;
+                    while (front[l] < dm && !done[l]) {
+                        POP_LANE(l);
+                        FRONT_LANE(l);
+                    }
+                    if (done[l] && !gone[l]) {
+                        gone[l] = true;
+                        front[l] = INFINITY;
+                        --live;
+                    }
+                }
+                if (live == 0)
+                    break;
+            }
+            uint j = ids[i];
+            global const clvis_gaussian *g = recs + j;
+            /* clvis_gauss_hit on 8 rays */
+            float8 r0 = ox - g->mean[0], r1 = oy - g->mean[1], r2 = oz - g->mean[2];
+            float8 op0 = (g->w[0] * r0 + g->w[1] * r1) + g->w[2] * r2;
+            float8 op1 = (g->w[3] * r0 + g->w[4] * r1) + g->w[5] * r2;
+            float8 op2 = (g->w[6] * r0 + g->w[7] * r1) + g->w[8] * r2;
+            float8 dp0 = (g->w[0] * dx + g->w[1] * dy) + g->w[2] * dz;
+            float8 dp1 = (g->w[3] * dx + g->w[4] * dy) + g->w[5] * dz;
+            float8 dp2 = (g->w[6] * dx + g->w[7] * dy) + g->w[8] * dz;
+            float8 a8 = (dp0 * dp0 + dp1 * dp1) + dp2 * dp2;
+            float8 b8 = (op0 * dp0 + op1 * dp1) + op2 * dp2;
+            float8 ts8 = -b8 / a8;
+            float8 t8 = fmax(ts8, 0.0f);
+            float8 p0 = op0 + t8 * dp0, p1 = op1 + t8 * dp1, p2 = op2 + t8 * dp2;
+            float8 m28 = (p0 * p0 + p1 * p1) + p2 * p2;
+            int8 hit = m28 <= cutoff2;
+            if (!any(hit))
+                continue;
+            /* one transfer-function entry a candidate; alphas lane by lane with
+             * the scalar functions (the same bits as tile_render and march.cl) */
+            uint id = order[j];
+            uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
+            float opac = g->opacity * tf[ti].w;
+            float lt[8], lm2[8];
+            int lh[8];
+            vstore8(t8, 0, lt);
+            vstore8(m28, 0, lm2);
+            vstore8(hit, 0, lh);
+#if MODEL == 1
+            float lts[8], la[8], lop[3][8], ldp[3][8];
+            vstore8(ts8, 0, lts);
+            vstore8(a8, 0, la);
+            vstore8(op0, 0, lop[0]);
+            vstore8(op1, 0, lop[1]);
+            vstore8(op2, 0, lop[2]);
+            vstore8(dp0, 0, ldp[0]);
+            vstore8(dp1, 0, ldp[1]);
+            vstore8(dp2, 0, ldp[2]);
+#endif
+            for (int l = 0; l < 8; ++l) {
+                if (!lh[l] || done[l])
+                    continue;
+                ulong k = pend_key(lt[l], id);
+                if (!first && k <= last[l])
+                    continue;   /* composited in an earlier round */
+                if (k >= ceil_k[l])
+                    continue;   /* beyond the round's ceiling */
+                if (kn[l] == KP) {
+                    over[l] = true;
+                    if (pk[l][0] < k) {
+                        ceil_k[l] = k;   /* the new hit is the largest: drop it */
+                        continue;
+                    }
+                    ceil_k[l] = pk[l][0];   /* drop the largest pending hit */
+                    for (int q = 0; q < KP - 1; ++q) {
+                        pk[l][q] = pk[l][q + 1];
+                        pv[l][q] = pv[l][q + 1];
+                    }
+                    kn[l] = KP - 1;
+                }
+#if MODEL == 1
+                float op[3] = {lop[0][l], lop[1][l], lop[2][l]}, dp[3] = {ldp[0][l], ldp[1][l], ldp[2][l]};
+                float alpha = clvis_gauss_alpha_absorption(opac, density, lts[l], la[l], op, dp);
+#else
+                float alpha = clvis_gauss_alpha_max_response(opac, lm2[l]);
+#endif
+                ulong v = (ulong)as_uint(alpha) << 32 | ti;
+                int pos = kn[l]++;
+                while (pos > 0 && pk[l][pos - 1] < k) {
+                    pk[l][pos] = pk[l][pos - 1];
+                    pv[l][pos] = pv[l][pos - 1];
+                    --pos;
+                }
+                pk[l][pos] = k;
+                pv[l][pos] = v;
+                if (pos == kn[l] - 1)
+                    FRONT_LANE(l);
+            }
+        }
+        /* the rest of the round, front to back; lanes without overflow are done */
+        for (int l = 0; l < 8; ++l) {
+            if (gone[l])
+                continue;
+            while (!done[l] && kn[l] > 0)
+                POP_LANE(l);
+            if (!over[l])
+                done[l] = true;
+            if (done[l] && !gone[l]) {
+                gone[l] = true;
+                --live;
+            }
+        }
+        first = false;
+    }
+    for (int l = 0; l < 8 && px0 + l < W; ++l) {
+        size_t pix = (size_t)(py - out_y0) * W + px0 + l;
+        rgba[pix] = (float4)(cr[l], cg[l], cb[l], 1.0f - T[l]);
+        depth[pix] = z[l];
+        stats[pix] = (uint2)(hits[l], nround[l]);
+    }
+}

@@ -76,5 +76,16 @@ __all__ = [
     "zfp",
 ]
 
+
+def __getattr__(name: str) -> object:
+    # clvis.view(obj), the browser viewer: a layer above the families, imported
+    # when first used (its server, tornado, is the optional `view` extra)
+    if name == "view":
+        import clvis.view  # not `from . import view`: that would ask this __getattr__ again
+
+        return _sys.modules["clvis.view"]
+    raise AttributeError(f"module 'clvis' has no attribute {name!r}")
+
+
 # ``import clvis.zfp`` keeps working: the module lives in the iso family now
 _sys.modules[__name__ + ".zfp"] = zfp

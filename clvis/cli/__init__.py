@@ -11,6 +11,7 @@ clvis gauss [FILE]           Gaussians from a volume at three levels of detail, 
 clvis bench primitives|raster|gauss|iso
                              a benchmark suite with its peers, as a table (and JSON)
 clvis train infill|lidar     trains a post network on renders made here, exports it to ONNX
+clvis view [FILE]            an interactive viewer in the browser (points, progressive iso, Gaussians)
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import sys
 from collections.abc import Sequence
 
 from .._version import __version__
-from . import bench, demo, gauss, info, iso, raster, train
+from . import bench, demo, gauss, info, iso, raster, train, view
 from ._common import Parser, glue_values, run
 
 _COMMANDS = {
@@ -32,6 +33,7 @@ _COMMANDS = {
     "gauss": gauss,
     "bench": bench,
     "train": train,
+    "view": view,
 }
 _EPILOG = """\
 A bad argument or a file clvis cannot use is one line on stderr and exit

@@ -81,7 +81,7 @@ def __getattr__(name: str) -> object:
     # clvis.view(obj), the browser viewer: a layer above the families, imported
     # when first used (its server, tornado, is the optional `view` extra)
     if name == "view":
-        import clvis.view  # not `from . import view`: that would ask this __getattr__ again
+        import clvis.view  # noqa: F401  (not `from . import view`: that would call this again)
 
         return _sys.modules["clvis.view"]
     raise AttributeError(f"module 'clvis' has no attribute {name!r}")

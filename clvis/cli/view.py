@@ -16,6 +16,7 @@ from ._common import (
     otsu_level,
     read_volume_file,
     real,
+    size,
 )
 
 _HELP = """\
@@ -68,6 +69,23 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     p.add_argument("--host", default="127.0.0.1", help="the address to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=count(0, 65535), default=0, help="default 0: a free port")
     p.add_argument("--no-browser", action="store_true", help="print the URL only")
+    p.add_argument(
+        "--measure",
+        nargs="?",
+        const="all",
+        default=None,
+        metavar="MODES",
+        help="serve nothing: print the frame budget of the modes named (comma-separated; default "
+        "all): render, post, JPEG encode; interaction frames at half --size, then still frames; "
+        "iso: the first pass after a camera stop and the last",
+    )
+    p.add_argument(
+        "--size",
+        type=size,
+        default=(1280, 720),
+        metavar="WxH",
+        help="--measure's page size (default 1280x720)",
+    )
     add_volume_options(p)
     return p
 
@@ -104,7 +122,9 @@ def load_scene(args):
         from .. import PointCloud
 
         d = getattr(datasets, name)(args.points)
-        cloud = PointCloud(d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"])
+        cloud = PointCloud(
+            d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"]
+        )
         return PointScene(cloud, description=f"the embedded {name}")
     if name == "explosion":
         d = datasets.explosion()
@@ -113,13 +133,40 @@ def load_scene(args):
         d = datasets.marschner_lobb(64) if name == "marschner-lobb" else datasets.turbulence(128)
         iso = 0.5
     iso = args.isovalue if args.isovalue is not None else iso
-    return VolumeScene(d["volume"], d["spacing"], d["origin"], iso, args.rate, description=f"the embedded {name}")
+    return VolumeScene(
+        d["volume"], d["spacing"], d["origin"], iso, args.rate, description=f"the embedded {name}"
+    )
+
+
+def _measure(scene, args) -> int:
+    from ..view.measure import measure
+
+    w, h = args.size
+    print(f"clvis view --measure: {scene.description} on {scene.device}, page {w}x{h}")
+    print("mode          frame      first ms  last ms  frames  fps    CPU ms  stages of the first frame (ms)")
+    modes = scene.modes if args.measure == "all" else args.measure.split(",")
+    unknown = [m for m in modes if m not in scene.modes]
+    if unknown:
+        raise CliError(f"--measure: no mode {unknown[0]!r} for this data; it has {', '.join(scene.modes)}")
+    for mode in modes:
+        for interactive in (True, False):
+            r = measure(scene, w, h, mode, interactive=interactive)
+            stages = " / ".join(f"{k} {v:.1f}" for k, v in r["stages_ms"].items())
+            kind = "interaction" if interactive else "still"
+            print(
+                f"{mode:13} {kind:10} {r['first_ms']:8.1f} {r['last_ms']:8.1f} {r['frames']:6g} "
+                f"{r['fps']:6.1f} {r['cpu_ms']:7.1f}  {r['size']}: {stages}",
+                flush=True,
+            )
+    return 0
 
 
 def cmd(args: argparse.Namespace) -> int:
     from ..view import Viewer, ViewServer
 
     scene = load_scene(args)
+    if args.measure is not None:
+        return _measure(scene, args)
     server = ViewServer(scene, args.host, args.port)
     viewer = Viewer(server)
     print(f"clvis view: {scene.description} on {scene.device}")

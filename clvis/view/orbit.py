@@ -43,12 +43,29 @@ class Orbit:
         self._home = (float(azimuth), float(elevation))
         self.fit()
 
-    def fit(self) -> None:
-        """Back to the start: the box centre, seen whole."""
+    def fit(self, aspect: float = 16 / 9) -> None:
+        """Back to the start: the box centre, its 8 corners inside a view of
+        `aspect` (width / height) with a 5 % margin."""
         self.target = (self.lo + self.hi) / 2
         self.azimuth, self.elevation = self._home
-        half = math.radians(self.fov_y) / 2
-        self.distance = 1.05 * self.radius / math.sin(half)
+        tan_y = math.tan(math.radians(self.fov_y) / 2) / 1.05
+        tan_x = tan_y * float(aspect)
+        self.distance = 1.0
+        eye = self.eye
+        fwd = self.target - eye
+        fwd /= np.linalg.norm(fwd)
+        right = np.cross(fwd, _UP)
+        right /= np.linalg.norm(right)
+        up = np.cross(right, fwd)
+        lo, hi = self.lo, self.hi
+        corners = np.array(
+            [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+        )
+        rel = corners - self.target  # the eye sits at -distance along fwd from the target
+        f, r, u = rel @ fwd, np.abs(rel @ right), np.abs(rel @ up)
+        # a corner is inside when |r| <= (distance + f) tan_x and |u| <= (distance + f) tan_y
+        need = np.maximum(r / tan_x, u / tan_y) - f
+        self.distance = max(float(need.max()), self.radius * 1e-3)
 
     @property
     def eye(self) -> np.ndarray:

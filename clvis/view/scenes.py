@@ -25,7 +25,6 @@ from typing import Any
 
 import numpy as np
 
-from .. import colormap as _colormap
 from ..camera import Camera
 from ..errors import DataError
 from ..images import BACKGROUND
@@ -107,8 +106,7 @@ class PointScene(Scene):
     kind = "points"
 
     def __init__(self, cloud: Any, description: str = "points") -> None:
-        from .. import Rasterizer
-        from .. import PointCloud
+        from .. import PointCloud, Rasterizer
 
         if not isinstance(cloud, PointCloud):
             cloud = PointCloud(np.asarray(cloud))
@@ -119,7 +117,10 @@ class PointScene(Scene):
         finite = np.isfinite(pos).all(axis=1)
         if not finite.any():
             raise DataError(f"{description}: no point has finite coordinates")
-        self.lo, self.hi = pos[finite].min(axis=0).astype(np.float64), pos[finite].max(axis=0).astype(np.float64)
+        self.lo, self.hi = (
+            pos[finite].min(axis=0).astype(np.float64),
+            pos[finite].max(axis=0).astype(np.float64),
+        )
         attrs = dict(cloud.attributes) if cloud.attributes else {"z": pos[:, 2]}
         self.attributes = list(attrs)
         self.raster = Rasterizer(cloud, attributes=attrs) if not cloud.attributes else Rasterizer(cloud)
@@ -147,7 +148,9 @@ class PointScene(Scene):
     def _render(self, camera, w, h, s, point_size=None):
         attr = None if s["color_by"] == "rgb" else s["color_by"]
         ps = s["point_size"] if point_size is None else point_size
-        return self.raster.render(camera, w, h, color_by=attr, colormap=s["colormap"], point_size=ps, planes=[])
+        return self.raster.render(
+            camera, w, h, color_by=attr, colormap=s["colormap"], point_size=ps, planes=[]
+        )
 
     def frames(self, camera, width, height, settings, superseded):
         mode = settings["mode"]
@@ -168,7 +171,9 @@ class PointScene(Scene):
         t1 = time.perf_counter()
         rgba = self._net(mode)(src)
         t2 = time.perf_counter()
-        yield Frame(_premultiplied_over_background(rgba), info=info, times={"render": t1 - t0, "post": t2 - t1})
+        yield Frame(
+            _premultiplied_over_background(rgba), info=info, times={"render": t1 - t0, "post": t2 - t1}
+        )
 
     def _gaussians(self, camera, w, h, s):
         from .. import GaussianRenderer, gaussians_from_points

@@ -30,7 +30,9 @@ class LatestWins:
     worker goes on), and ``on_error`` is called with each.
     """
 
-    def __init__(self, name: str = "clvis-view-render", on_error: Callable[[BaseException], None] | None = None):
+    def __init__(
+        self, name: str = "clvis-view-render", on_error: Callable[[BaseException], None] | None = None
+    ):
         self._cond = threading.Condition()
         self._pending: tuple[int, Job] | None = None
         self._generation = 0

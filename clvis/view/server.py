@@ -108,7 +108,9 @@ class ViewServer:
         self.interactive_scale = float(interactive_scale)
         self.orbit = Orbit(scene.lo, scene.hi)
         self.size = self._clamp_size(*size)
+        self.orbit.fit(self.size[0] / self.size[1])
         self.interacting = False
+        self.moved = False  # by the person: until then a resize frames the data again
         self.seq = 0  # the last event applied
         self.frames = 0
         self.last_send = 0.0
@@ -198,24 +200,26 @@ class ViewServer:
             h = self.size[1]
             if kind == "size":
                 self.size = self._clamp_size(msg.get("width"), msg.get("height"))
+                if not self.moved:  # the page's own shape: frame the data for it
+                    self.orbit.fit(self.size[0] / self.size[1])
             elif kind == "drag":
                 dx, dy = _number(msg.get("dx")), _number(msg.get("dy"))
                 if msg.get("pan"):
                     self.orbit.pan(dx, dy, h)
                 else:
                     self.orbit.orbit(dx, dy, h)
-                self.interacting = interactive = True
+                self.interacting = interactive = self.moved = True
             elif kind == "zoom":
                 self.orbit.zoom(min(max(_number(msg.get("factor"), 1.0), 0.2), 5.0))
-                self.interacting = interactive = True
+                self.interacting = interactive = self.moved = True
             elif kind == "end":
                 self.interacting = False
             elif kind == "fit":
-                self.orbit.fit()
+                self.orbit.fit(self.size[0] / self.size[1])
                 self.interacting = False
             elif kind == "camera":
                 self.orbit.set(msg.get("eye"), msg.get("target"), msg.get("fov"))
-                self.interacting = False
+                self.interacting, self.moved = False, True
             elif kind == "set":
                 self.scene.update(msg.get("settings") or {})
                 reply = {"type": "settings", "settings": self.scene.settings}

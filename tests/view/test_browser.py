@@ -79,10 +79,20 @@ class Browser:
             pages = [t for t in json.load(r) if t["type"] == "page"]
         self.ws_url = pages[0]["webSocketDebuggerUrl"]
         self.loop = asyncio.new_event_loop()
-        self.ws = self.loop.run_until_complete(
-            tornado.websocket.websocket_connect(self.ws_url, max_message_size=1 << 28)
-        )
+
+        async def connect():
+            return await tornado.websocket.websocket_connect(self.ws_url, max_message_size=1 << 28)
+
+        self.ws = self.loop.run_until_complete(connect())
         self.id = 0
+        # the page's size, whatever the headless window's decorations take
+        self.call(
+            "Emulation.setDeviceMetricsOverride",
+            width=WIDTH,
+            height=HEIGHT,
+            deviceScaleFactor=1,
+            mobile=False,
+        )
 
     def call(self, method: str, **params):
         return self.loop.run_until_complete(self._call(method, params))
@@ -134,6 +144,13 @@ class Browser:
             self.mouse("mouseMoved", x0 + (x1 - x0) * i / steps, y0 + (y1 - y0) * i / steps)
         self.mouse("mouseReleased", x1, y1, buttons=0)
 
+    def choose(self, select: str, value: str):
+        """Pick `value` in the page's <select id=select>, as a person does."""
+        self.js(
+            f"(() => {{ const m = document.getElementById({json.dumps(select)});"
+            f" m.value = {json.dumps(value)}; m.dispatchEvent(new Event('change')); }})()"
+        )
+
     def canvas_hash(self) -> str:
         url = self.js("document.getElementById('view').toDataURL('image/png')")
         return hashlib.sha256(url.encode()).hexdigest()
@@ -165,9 +182,8 @@ def _settled(b: Browser, mode: str) -> dict:
     expr = (
         "(() => { const s = window.clvisView, h = s && s.header;"
         f" return h && !h.interactive && h.final && h.mode === {json.dumps(mode)}"
-        " && h.seq >= s.lastSent ? h : null; })()"
+        " && s.seq && h.seq >= s.seq ? h : null; })()"
     )
-    b.js("window.clvisView && (window.clvisView.lastSent = window.clvisView.seq || 0)")
     return b.wait_for(expr, f"a still frame of {mode}")
 
 
@@ -191,9 +207,11 @@ def test_points_orbit_and_modes(browser, tmp_path):
         cam0, img0 = first["camera"], b.canvas_hash()
 
         # drag to orbit: interaction frames at half size, then a full one
-        b.js("window.clvisView.sawInteractive = false; window.clvisView._w = setInterval(() => {"
-             " const h = window.clvisView.header; if (h && h.interactive) window.clvisView.sawInteractive ="
-             " [h.width, h.height]; }, 5)")
+        b.js(
+            "window.clvisView.sawInteractive = false; window.clvisView._w = setInterval(() => {"
+            " const h = window.clvisView.header; if (h && h.interactive) window.clvisView.sawInteractive ="
+            " [h.width, h.height]; }, 5)"
+        )
         b.drag(640, 400, 900, 330)
         after = _settled(b, "points")
         cam1, img1 = after["camera"], b.canvas_hash()
@@ -205,8 +223,7 @@ def test_points_orbit_and_modes(browser, tmp_path):
         assert b.js("window.clvisView.sawInteractive") == [WIDTH // 2, HEIGHT // 2]
 
         # colour by another attribute, then the LiDAR network
-        b.js("const c = document.getElementById('set-color_by'); c.value = 'pressure';"
-             " c.dispatchEvent(new Event('change'))")
+        b.choose("set-color_by", "pressure")
         b.wait_for("window.clvisView.settings.color_by === 'pressure'", "the colour setting")
         _settled(b, "points")
         assert b.canvas_hash() != img1
@@ -219,8 +236,7 @@ def test_points_orbit_and_modes(browser, tmp_path):
         (tmp_path / "points.png").write_bytes(png)
 
         for mode in ("narvis", "lidar"):
-            b.js(f"const m = document.getElementById('mode'); m.value = '{mode}';"
-                 " m.dispatchEvent(new Event('change'))")
+            b.choose("mode", mode)
             h = _settled(b, mode)
             assert h["ms"]["post"] > 0, h
         assert b.js("window.clvisView.error") is None
@@ -230,16 +246,20 @@ def test_points_orbit_and_modes(browser, tmp_path):
 
 def test_volume_progressive_iso_and_infill(browser):
     d = datasets.marschner_lobb(48)
-    server = ViewServer(VolumeScene(d["volume"], d["spacing"], d["origin"], 0.5, description="marschner-lobb"))
+    server = ViewServer(
+        VolumeScene(d["volume"], d["spacing"], d["origin"], 0.5, description="marschner-lobb")
+    )
     try:
         b = browser
         b.js("window.clvisView = undefined")
         b.call("Page.navigate", url=server.url)
         # record every header: the passes of one view arrive one by one
         b.wait_for("window.clvisView && window.clvisView.config", "the page to connect")
-        b.js("window.clvisView.log = []; window.clvisView._w = setInterval(() => {"
-             " const h = window.clvisView.header; const l = window.clvisView.log;"
-             " if (h && (!l.length || l[l.length - 1].id !== h.id)) l.push(h); }, 2)")
+        b.js(
+            "window.clvisView.log = []; window.clvisView._w = setInterval(() => {"
+            " const h = window.clvisView.header; const l = window.clvisView.log;"
+            " if (h && (!l.length || l[l.length - 1].id !== h.id)) l.push(h); }, 2)"
+        )
         first = _settled(b, "iso")
         assert first["info"]["completion"] == 1.0
         img0 = b.canvas_hash()
@@ -250,8 +270,7 @@ def test_volume_progressive_iso_and_infill(browser):
         passes = [h["info"]["pass"] for h in b.js("window.clvisView.log") if h["id"] > first["id"]]
         assert max(passes) > 1, f"only one pass was shown: {passes}"
 
-        b.js("const m = document.getElementById('mode'); m.value = 'iso+infill';"
-             " m.dispatchEvent(new Event('change'))")
+        b.choose("mode", "iso+infill")
         h = _settled(b, "iso+infill")
         assert h["info"]["completion"] == 1.0
         assert b.js("window.clvisView.error") is None

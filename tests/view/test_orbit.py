@@ -37,7 +37,9 @@ def test_pan_moves_target_and_eye_together_and_zoom_keeps_the_target():
     assert np.allclose(o.eye - o.target, off)
     t = o.target.copy()
     o.zoom(0.5)
-    assert np.allclose(o.target, t) and math.isclose(np.linalg.norm(o.eye - o.target), np.linalg.norm(off) / 2)
+    assert np.allclose(o.target, t) and math.isclose(
+        np.linalg.norm(o.eye - o.target), np.linalg.norm(off) / 2
+    )
     with pytest.raises(ValueError, match="zoom factor"):
         o.zoom(0)
 

@@ -42,7 +42,7 @@ def measure(
     settings = dict(scene.settings, mode=mode)
     if interactive:
         width, height = max(16, width // 2), max(16, height // 2)
-    orbit = Orbit(scene.lo, scene.hi)
+    orbit = Orbit(scene.lo, scene.hi, points=scene.fit_points)
     orbit.fit(width / height)
     quality = _QUALITY[interactive]
     _frame(scene, orbit.camera(width / height), width, height, settings, quality)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -33,6 +34,7 @@ class Orbit:
         azimuth: float = -115.0,
         elevation: float = 35.0,
         fov_y: float = 45.0,
+        points: Any = None,
     ) -> None:
         self.lo = np.asarray(lo, np.float64)
         self.hi = np.asarray(hi, np.float64)
@@ -41,11 +43,18 @@ class Orbit:
         self.radius = max(float(np.linalg.norm(self.hi - self.lo)) / 2, 1e-6)
         self.fov_y = float(fov_y)
         self._home = (float(azimuth), float(elevation))
+        # what fit() frames: a sample of the points where given (a round cloud
+        # fills more of the view than its box's corners would let it), else the corners
+        lo, hi = self.lo, self.hi
+        corners = np.array(
+            [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+        )
+        self._frame = corners if points is None else np.asarray(points, np.float64).reshape(-1, 3)
         self.fit()
 
     def fit(self, aspect: float = 16 / 9) -> None:
-        """Back to the start: the box centre, its 8 corners inside a view of
-        `aspect` (width / height) with a 5 % margin."""
+        """Back to the start: the box centre, its 8 corners (or the points
+        given) inside a view of `aspect` (width / height) with a 5 % margin."""
         self.target = (self.lo + self.hi) / 2
         self.azimuth, self.elevation = self._home
         tan_y = math.tan(math.radians(self.fov_y) / 2) / 1.05
@@ -57,13 +66,9 @@ class Orbit:
         right = np.cross(fwd, _UP)
         right /= np.linalg.norm(right)
         up = np.cross(right, fwd)
-        lo, hi = self.lo, self.hi
-        corners = np.array(
-            [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-        )
-        rel = corners - self.target  # the eye sits at -distance along fwd from the target
+        rel = self._frame - self.target  # the eye sits at -distance along fwd from the target
         f, r, u = rel @ fwd, np.abs(rel @ right), np.abs(rel @ up)
-        # a corner is inside when |r| <= (distance + f) tan_x and |u| <= (distance + f) tan_y
+        # a point is inside when |r| <= (distance + f) tan_x and |u| <= (distance + f) tan_y
         need = np.maximum(r / tan_x, u / tan_y) - f
         self.distance = max(float(need.max()), self.radius * 1e-3)
 

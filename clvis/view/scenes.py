@@ -35,6 +35,7 @@ COLORMAPS = ("viridis", "magma", "inferno", "plasma", "cividis", "turbo", "coolw
 _BG = np.array(BACKGROUND, np.uint8)
 _ACTIVE = np.array((70, 40, 75), np.uint8)  # iso: rays still running at this pass
 _MAX_POINT_SIZE = 16
+_FIT_SAMPLE = 20_000  # points the first view frames (every k-th)
 
 
 @dataclass
@@ -58,6 +59,7 @@ class Scene:
     choices: dict
     lo: np.ndarray
     hi: np.ndarray
+    fit_points: np.ndarray | None = None  # what the first view frames (None: the box)
     description = ""
     device = ""
 
@@ -121,6 +123,9 @@ class PointScene(Scene):
             pos[finite].min(axis=0).astype(np.float64),
             pos[finite].max(axis=0).astype(np.float64),
         )
+        step = max(1, len(pos) // _FIT_SAMPLE)
+        sample = pos[::step]
+        self.fit_points = sample[np.isfinite(sample).all(axis=1)].astype(np.float64)
         attrs = dict(cloud.attributes) if cloud.attributes else {"z": pos[:, 2]}
         self.attributes = list(attrs)
         self.raster = Rasterizer(cloud, attributes=attrs) if not cloud.attributes else Rasterizer(cloud)

@@ -106,7 +106,7 @@ class ViewServer:
             raise ValueError(f"interactive_scale: expected a fraction in (0, 1], got {interactive_scale!r}")
         self.scene, self.host, self.token = scene, host, access_token(host, token)
         self.interactive_scale = float(interactive_scale)
-        self.orbit = Orbit(scene.lo, scene.hi)
+        self.orbit = Orbit(scene.lo, scene.hi, points=scene.fit_points)
         self.size = self._clamp_size(*size)
         self.orbit.fit(self.size[0] / self.size[1])
         self.interacting = False

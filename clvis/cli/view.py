@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +19,9 @@ from ._common import (
     real,
     size,
 )
+
+if TYPE_CHECKING:
+    from ..view import Scene
 
 _HELP = """\
 Serve an interactive view of a point cloud or a volume and print its URL
@@ -99,7 +103,7 @@ def _is_volume(path: Path) -> bool:
     return True
 
 
-def load_scene(args):
+def load_scene(args: argparse.Namespace) -> Scene:
     """The scene of the FILE or --dataset (the only data the server reads)."""
     from .. import datasets
     from ..view import PointScene, VolumeScene

@@ -157,7 +157,9 @@ class PointScene(Scene):
             camera, w, h, color_by=attr, colormap=s["colormap"], point_size=ps, planes=[]
         )
 
-    def frames(self, camera, width, height, settings, superseded):
+    def frames(
+        self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
+    ) -> Iterator[Frame]:
         mode = settings["mode"]
         t0 = time.perf_counter()
         if mode == "gaussians":
@@ -241,7 +243,9 @@ class VolumeScene(Scene):
         self._infill = None
         self._gauss: dict[tuple, Any] = {}
 
-    def frames(self, camera, width, height, settings, superseded):
+    def frames(
+        self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
+    ) -> Iterator[Frame]:
         mode = settings["mode"]
         if mode == "gaussians":
             yield self._gaussians(camera, width, height, settings)

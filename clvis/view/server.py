@@ -66,7 +66,7 @@ def token_ok(expected: str | None, given: str | None) -> bool:
     return hmac.compare_digest(expected.encode(), given.encode())
 
 
-def encode_jpeg(image, quality: int) -> bytes:
+def encode_jpeg(image: Any, quality: int) -> bytes:
     from PIL import Image
 
     buf = io.BytesIO()
@@ -181,12 +181,12 @@ class ViewServer:
             "camera": self.orbit.state(),
         }
 
-    def opened(self, sock) -> None:
+    def opened(self, sock: Any) -> None:
         self._sockets.add(sock)
         sock.write_message(json.dumps(self._config()))
         self.request()
 
-    def closed(self, sock) -> None:
+    def closed(self, sock: Any) -> None:
         self._sockets.discard(sock)
 
     def handle(self, msg: dict) -> None:

@@ -221,6 +221,9 @@ def test_points_orbit_and_modes(browser, tmp_path):
         assert not np.allclose(cam1["eye"], cam0["eye"])
         assert np.allclose(cam1["target"], cam0["target"])  # an orbit, not a pan
         assert b.js("window.clvisView.sawInteractive") == [WIDTH // 2, HEIGHT // 2]
+        latency = b.js("window.clvisView.latencyMs")
+        assert latency is not None and latency > 0
+        print(f"\nview: mouse release -> full frame shown {latency:.0f} ms; that frame's ms {after['ms']}")
 
         # colour by another attribute, then the LiDAR network
         b.choose("set-color_by", "pressure")

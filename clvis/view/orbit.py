@@ -132,7 +132,8 @@ class Orbit:
         """JSON-ready: eye, target, up, fov, and the same view as command-line options."""
 
         def v(a) -> str:
-            return ",".join(f"{x:.6g}" for x in a)
+            # rounding noise (1e-14 where a coordinate is 0) is written as 0
+            return ",".join(f"{0.0 if abs(x) < 1e-9 * self.radius else x:.6g}" for x in a)
 
         eye = self.eye
         return {

@@ -225,6 +225,19 @@ def test_points_orbit_and_modes(browser, tmp_path):
         assert latency is not None and latency > 0
         print(f"\nview: mouse release -> full frame shown {latency:.0f} ms; that frame's ms {after['ms']}")
 
+        # a typed camera, as the other commands' options
+        b.js("document.getElementById('copy').click()")
+        b.js(
+            "(() => { const t = document.getElementById('camera-text');"
+            " t.value = '--eye 0,-250,120 --target 0,0,5 --up 0,0,1 --fov 40';"
+            " document.getElementById('camera-apply').click(); })()"
+        )
+        typed = _settled(b, "points")["camera"]
+        assert np.allclose(typed["eye"], (0, -250, 120)) and np.allclose(typed["target"], (0, 0, 5))
+        assert typed["fov"] == 40 and typed["cli"].startswith("--eye 0,-250,120 --target 0,0,5")
+        img1 = b.canvas_hash()
+        b.js("document.getElementById('copy').click()")  # hide it again
+
         # colour by another attribute, then the LiDAR network
         b.choose("set-color_by", "pressure")
         b.wait_for("window.clvisView.settings.color_by === 'pressure'", "the colour setting")

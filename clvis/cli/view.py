@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -165,6 +166,15 @@ def _measure(scene, args) -> int:
     return 0
 
 
+def _has_display() -> bool:
+    """Whether a graphical browser can open here: on Linux and the BSDs only
+    with an X or Wayland display (webbrowser would start a text browser in
+    this terminal on a server)."""
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
 def cmd(args: argparse.Namespace) -> int:
     from ..view import Viewer, ViewServer
 
@@ -175,7 +185,7 @@ def cmd(args: argparse.Namespace) -> int:
     viewer = Viewer(server)
     print(f"clvis view: {scene.description} on {scene.device}")
     print(f"clvis view: open {viewer.url}   (Ctrl-C stops)", flush=True)
-    if not args.no_browser:
+    if not args.no_browser and _has_display():
         viewer.show()
     viewer.wait()
     print("clvis view: stopped", file=sys.stderr)

@@ -74,3 +74,18 @@ def test_clvis_view_in_python(points):
         assert clvis.view.Viewer is type(v)
     finally:
         v.close()
+
+
+def test_gaussian_modes_draw_something(points):
+    from clvis.images import BACKGROUND
+
+    bg = np.array(BACKGROUND)
+    s = PointScene(points)
+    s.update({"mode": "gaussians"})
+    cam = Orbit(s.lo, s.hi, points=s.fit_points).camera(1.0)
+    f = next(s.frames(cam, 48, 48, s.settings, lambda: False))
+    assert f.info["gaussians"] == 5000 and (f.image != bg).any(axis=2).mean() > 0.05
+    v = VolumeScene(clvis.datasets.marschner_lobb(24)["volume"], isovalue=0.5)
+    v.update({"mode": "gaussians", "lod": "low"})
+    f = next(v.frames(Orbit(v.lo, v.hi).camera(1.0), 48, 48, v.settings, lambda: False))
+    assert f.info["gaussians"] > 0 and (f.image != bg).any(axis=2).mean() > 0.05

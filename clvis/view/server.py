@@ -44,8 +44,15 @@ _QUALITY = {True: 75, False: 92}  # JPEG quality while dragging, when still
 
 
 def needs_token(host: str) -> bool:
-    """Every host but the loopback interface needs a token."""
-    return host not in LOOPBACK
+    """Every host but the loopback interface (localhost, 127.0.0.0/8, ::1) needs a token."""
+    import ipaddress
+
+    if host in LOOPBACK:
+        return False
+    try:
+        return not ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:  # a host name: it may resolve to any interface
+        return True
 
 
 def access_token(host: str, token: str | None = None) -> str | None:

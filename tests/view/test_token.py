@@ -20,7 +20,8 @@ def test_token_check():
     for bad in (None, "", "s3cre", "s3cret ", "S3CRET", 123):
         assert not token_ok("s3cret", bad)
     assert not needs_token("127.0.0.1") and not needs_token("localhost") and not needs_token("::1")
-    assert needs_token("0.0.0.0") and needs_token("192.168.1.10")
+    assert not needs_token("127.0.0.2") and not needs_token("[::1]")
+    assert needs_token("0.0.0.0") and needs_token("192.168.1.10") and needs_token("myhost.example")
 
 
 @pytest.fixture(scope="module")

@@ -30,7 +30,8 @@ Serve an interactive view of a point cloud or a volume and print its URL
 OpenCL device, and streamed to the page as JPEG over a WebSocket; the page
 sends the mouse, touch and key events back. Drag to orbit, right- or
 shift-drag to pan, wheel or pinch to zoom; keys: arrows, + and -, f (fit),
-c (the camera as --eye/--target/--up/--fov options for the other commands).
+c (the camera as --eye/--target/--up/--fov options for the other commands;
+edit them and press Enter to go to a typed camera).
 While the pointer drags, frames are half the page's size; when it stops,
 full size. The status line shows each frame's milliseconds per stage
 (render / post / encode / send), the frames per second and the latency from

@@ -23,6 +23,7 @@ import asyncio
 import functools
 import hmac
 import io
+import itertools
 import json
 import secrets
 import struct
@@ -31,6 +32,7 @@ import time
 from importlib import resources
 from typing import Any
 
+from ..camera import hemisphere_cameras
 from .orbit import Orbit
 from .scenes import Frame, Scene
 from .schedule import LatestWins, Outbox
@@ -40,6 +42,7 @@ __all__ = ["LOOPBACK", "ViewServer", "access_token", "needs_token", "token_ok"]
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 MAX_SIZE = (3840, 2160)
 MIN_SIDE = 16
+HEMISPHERE_VIEWS = 128  # clvis.hemisphere_cameras: 4 polar angles x 32 azimuths
 _QUALITY = {True: 75, False: 92}  # JPEG quality while dragging, when still
 
 
@@ -226,6 +229,13 @@ class ViewServer:
                 self.interacting = False
             elif kind == "camera":
                 self.orbit.set(msg.get("eye"), msg.get("target"), msg.get("fov"))
+                self.interacting, self.moved = False, True
+            elif kind == "preset":  # one of the NARVis samplers' 128 hemisphere views
+                k = msg.get("hemisphere")
+                if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < HEMISPHERE_VIEWS:
+                    raise ValueError(f"hemisphere: expected a view 0..{HEMISPHERE_VIEWS - 1}, got {k!r}")
+                cam = next(itertools.islice(hemisphere_cameras(self.orbit.lo, self.orbit.hi), k, None))
+                self.orbit.set(cam.eye, (self.orbit.lo + self.orbit.hi) / 2)
                 self.interacting, self.moved = False, True
             elif kind == "set":
                 self.scene.update(msg.get("settings") or {})

@@ -31,6 +31,7 @@ pytest.importorskip("tornado", reason="the view extra (tornado) is not installed
 
 import tornado.websocket  # noqa: E402
 
+import clvis  # noqa: E402
 from clvis import PointCloud, datasets  # noqa: E402
 from clvis.view import PointScene, ViewServer, VolumeScene  # noqa: E402
 
@@ -235,8 +236,16 @@ def test_points_orbit_and_modes(browser, tmp_path):
         typed = _settled(b, "points")["camera"]
         assert np.allclose(typed["eye"], (0, -250, 120)) and np.allclose(typed["target"], (0, 0, 5))
         assert typed["fov"] == 40 and typed["cli"].startswith("--eye 0,-250,120 --target 0,0,5")
-        img1 = b.canvas_hash()
         b.js("document.getElementById('copy').click()")  # hide it again
+        # one of the NARVis samplers' views
+        b.js(
+            "(() => { const h = document.getElementById('hemisphere'); h.value = '40';"
+            " h.dispatchEvent(new Event('change')); })()"
+        )
+        preset = _settled(b, "points")["camera"]
+        want = list(clvis.hemisphere_cameras(cloud.positions.min(0), cloud.positions.max(0)))[40].eye
+        assert np.allclose(preset["eye"], want, rtol=1e-4, atol=1e-3)
+        img1 = b.canvas_hash()
 
         # colour by another attribute, then the LiDAR network
         b.choose("set-color_by", "pressure")

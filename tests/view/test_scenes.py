@@ -89,3 +89,21 @@ def test_gaussian_modes_draw_something(points):
     v.update({"mode": "gaussians", "lod": "low"})
     f = next(v.frames(Orbit(v.lo, v.hi).camera(1.0), 48, 48, v.settings, lambda: False))
     assert f.info["gaussians"] > 0 and (f.image != bg).any(axis=2).mean() > 0.05
+
+
+def test_hemisphere_presets_are_the_narvis_views(points):
+    from clvis.view import ViewServer
+
+    s = ViewServer(PointScene(points))
+    try:
+        cams = list(clvis.hemisphere_cameras(s.orbit.lo, s.orbit.hi))
+        for k in (0, 37, 127):
+            s.handle({"type": "preset", "hemisphere": k})
+            assert np.allclose(s.orbit.eye, cams[k].eye) and np.allclose(
+                s.orbit.target, (s.orbit.lo + s.orbit.hi) / 2
+            )
+        for bad in (128, -1, "3", True):
+            with pytest.raises(ValueError, match="hemisphere: expected a view 0..127"):
+                s.handle({"type": "preset", "hemisphere": bad})
+    finally:
+        s.close()

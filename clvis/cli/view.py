@@ -39,11 +39,13 @@ an event to the frame that shows it.
 
 Points (.ply, .las, .laz, .npz, an (N, 3) .npy, or --dataset hurricane|terrain):
 modes points (colour by an attribute or RGB, colormap, point size), lidar
-(depth filter + LiDAR U-Net), narvis (clouds with a velocity), gaussians.
+(depth filter + LiDAR U-Net), narvis (clouds with a velocity), gaussians,
+narvis|gaussians (split: MACR + NARVis beside the Gaussian renderer, the PSNR).
 Volumes (.raw, a 3-D .npy, NIfTI, or --dataset marschner-lobb|turbulence|
 explosion): modes iso (progressive: each pass is shown as it completes, and
 a camera move restarts the passes), iso+infill (the in-fill network on the
-partial passes), gaussians.
+partial passes), gaussians, infill|iso (split: 85 % of the rays + in-fill
+beside the complete render, the PSNR).
 
 The server listens on 127.0.0.1; --host 0.0.0.0 (or another address) makes
 it reachable from other machines, with a token in the printed URL that the

@@ -13,7 +13,9 @@ attribute through a colormap or by the points' RGB, point size), ``lidar``
 G-buffers; clouds with a velocity), ``gaussians`` (Gaussians from the points,
 ray marched). Volume modes: ``iso`` (progressive isosurface: each pass as it
 completes), ``iso+infill`` (the in-fill network on each partial pass),
-``gaussians`` (the volume's Gaussians at a level of detail).
+``gaussians`` (the volume's Gaussians at a level of detail). Split views
+(``narvis|gaussians``, ``infill|iso``): the fast path's left half beside its
+slow target's right half, with the PSNR of the whole frames.
 """
 
 from __future__ import annotations
@@ -29,12 +31,13 @@ from ..camera import Camera
 from ..errors import DataError
 from ..images import BACKGROUND
 
-__all__ = ["COLORMAPS", "Frame", "PointScene", "Scene", "VolumeScene", "scene_for"]
+__all__ = ["COLORMAPS", "Frame", "PointScene", "Scene", "VolumeScene", "psnr", "scene_for", "split"]
 
 COLORMAPS = ("viridis", "magma", "inferno", "plasma", "cividis", "turbo", "coolwarm", "gray")
 _BG = np.array(BACKGROUND, np.uint8)
 _ACTIVE = np.array((70, 40, 75), np.uint8)  # iso: rays still running at this pass
 _MAX_POINT_SIZE = 16
+SPLIT_COMPLETION = 0.85  # infill|iso: the fast side stops at this fraction of the rays
 _FIT_SAMPLE = 20_000  # points the first view frames (every k-th)
 
 
@@ -102,6 +105,21 @@ def _premultiplied_over_background(rgba8: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
 
 
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR in dB of two uint8 pictures (inf where they are equal)."""
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
+    return float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
+
+
+def split(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """The left half of `left` beside the right half of `right`, a light line between."""
+    out = right.copy()
+    w = out.shape[1]
+    out[:, : w // 2] = left[:, : w // 2]
+    out[:, max(w // 2 - 1, 0) : w // 2 + 1] = (200, 200, 200)
+    return out
+
+
 class PointScene(Scene):
     """A point cloud (a clvis.PointCloud)."""
 
@@ -132,7 +150,13 @@ class PointScene(Scene):
         self.device = self.raster.queue.device.name.strip()
         self.description = f"{description}: {len(cloud.positions):,} points"
         colours = (["rgb"] if cloud.colors is not None else []) + self.attributes
-        self.modes = ["points", "lidar"] + (["narvis"] if cloud.velocity is not None else []) + ["gaussians"]
+        velocity = cloud.velocity is not None
+        self.modes = (
+            ["points", "lidar"]
+            + (["narvis"] if velocity else [])
+            + ["gaussians"]
+            + (["narvis|gaussians"] if velocity else [])
+        )
         self.settings = {"mode": "points", "color_by": colours[0], "colormap": "viridis", "point_size": 1}
         self.choices = {
             "mode": self.modes,
@@ -165,6 +189,9 @@ class PointScene(Scene):
         if mode == "gaussians":
             yield self._gaussians(camera, width, height, settings)
             return
+        if mode == "narvis|gaussians":
+            yield self._split(camera, width, height, settings)
+            return
         g = self._render(camera, width, height, settings, 1 if mode != "points" else None)
         info = {"points": len(self.cloud.positions), "points read": g.stats.get("points_read", 0)}
         if mode == "points":
@@ -181,6 +208,39 @@ class PointScene(Scene):
         yield Frame(
             _premultiplied_over_background(rgba), info=info, times={"render": t1 - t0, "post": t2 - t1}
         )
+
+    def _split(self, camera, w, h, s):
+        """MACR + NARVis (left) beside its slow target, the Gaussian renderer
+        over the velocity-elongated Gaussians it was trained on (right), with
+        the PSNR of the whole frames (both over black, as the network predicts)."""
+        from ..colormap import value_range
+        from ..training.data import NARVIS_ATTRIBUTE, NarvisScene
+
+        attr = s["color_by"] if s["color_by"] != "rgb" else NARVIS_ATTRIBUTE
+        if attr not in self.cloud.attributes:
+            attr = self.attributes[0]
+        key = ("split", attr, s["colormap"])
+        t0 = time.perf_counter()
+        if key not in self._gauss:
+            vr = value_range(self.cloud.attributes[attr])
+            ns = NarvisScene(self.cloud, attr, vr, s["colormap"], "view")
+            self._gauss = {key: (ns, ns.gaussian_renderer(queue=self.raster.queue))}
+        build = time.perf_counter() - t0
+        ns, gr = self._gauss[key]
+        net = self._net("narvis")
+        t1 = time.perf_counter()
+        g = ns.gbuffers(self.raster, camera, w, h, net.planes)
+        ta = time.perf_counter()
+        fast = net(g)[..., :3]
+        t2 = time.perf_counter()
+        slow = gr.render(camera, w, h).to_uint8()
+        t3 = time.perf_counter()
+        times = {"render": (ta - t1) + (t3 - t2), "post": t2 - ta}
+        if build > 1e-3:
+            times["build"] = build
+        info = {"psnr dB": round(psnr(fast, slow), 2), "fast ms": round(1e3 * (t2 - t1), 1)}
+        info["slow ms"] = round(1e3 * (t3 - t2), 1)
+        return Frame(split(fast, slow), info=info, times=times)
 
     def _gaussians(self, camera, w, h, s):
         from .. import GaussianRenderer, gaussians_from_points
@@ -233,7 +293,7 @@ class VolumeScene(Scene):
         self.lo = np.asarray(origin, np.float64)
         self.hi = self.lo + (np.array(data.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
         self.description = f"{description}: {'x'.join(map(str, data.shape[::-1]))} samples"
-        self.modes = ["iso", "iso+infill", "gaussians"]
+        self.modes = ["iso", "iso+infill", "gaussians", "infill|iso"]
         self.settings = {"mode": "iso", "isovalue": float(isovalue), "lod": "medium"}
         self.choices = {
             "mode": self.modes,
@@ -249,6 +309,9 @@ class VolumeScene(Scene):
         mode = settings["mode"]
         if mode == "gaussians":
             yield self._gaussians(camera, width, height, settings)
+            return
+        if mode == "infill|iso":
+            yield self._split(camera, width, height, settings)
             return
         if mode == "iso+infill" and self._infill is None:
             from .. import post
@@ -274,6 +337,29 @@ class VolumeScene(Scene):
             if superseded():
                 return
             t0 = time.perf_counter()
+
+    def _split(self, camera, w, h, s):
+        """The render stopped at SPLIT_COMPLETION of the rays with the in-fill
+        network (left) beside the complete render (right), and their PSNR."""
+        if self._infill is None:
+            from .. import post
+
+            self._infill = post.load("infill", queue=self.iso.queue)
+        t0 = time.perf_counter()
+        part = self.iso.render(camera, w, h, s["isovalue"], completion=SPLIT_COMPLETION)
+        t1 = time.perf_counter()
+        fast = _premultiplied_over_background(self._infill(part))
+        t2 = time.perf_counter()
+        full = self.iso.render(camera, w, h, s["isovalue"])
+        slow = _over_background(np.clip(np.rint(full.rgba[..., :3] * 255), 0, 255).astype(np.uint8), full.hit)
+        t3 = time.perf_counter()
+        info = {
+            "psnr dB": round(psnr(fast, slow), 2),
+            "fast ms": round(1e3 * (t2 - t0), 1),
+            "slow ms": round(1e3 * (t3 - t2), 1),
+            "completion": round(float(part.completion), 3),
+        }
+        return Frame(split(fast, slow), info=info, times={"render": (t1 - t0) + (t3 - t2), "post": t2 - t1})
 
     def _gaussians(self, camera, w, h, s):
         from .. import GaussianRenderer, gaussians_from_volume

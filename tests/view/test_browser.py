@@ -260,10 +260,11 @@ def test_points_orbit_and_modes(browser, tmp_path):
             Path(keep).write_bytes(png)
         (tmp_path / "points.png").write_bytes(png)
 
-        for mode in ("narvis", "lidar"):
+        for mode in ("narvis", "lidar", "narvis|gaussians"):
             b.choose("mode", mode)
             h = _settled(b, mode)
             assert h["ms"]["post"] > 0, h
+        assert h["info"]["psnr dB"] > 5  # the split view: MACR + NARVis beside the Gaussian renderer
         assert b.js("window.clvisView.error") is None
     finally:
         server.close()
@@ -298,6 +299,9 @@ def test_volume_progressive_iso_and_infill(browser):
         b.choose("mode", "iso+infill")
         h = _settled(b, "iso+infill")
         assert h["info"]["completion"] == 1.0
+        b.choose("mode", "infill|iso")
+        h = _settled(b, "infill|iso")
+        assert h["info"]["psnr dB"] > 15 and h["info"]["completion"] >= 0.85
         assert b.js("window.clvisView.error") is None
     finally:
         server.close()

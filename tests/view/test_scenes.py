@@ -107,3 +107,24 @@ def test_hemisphere_presets_are_the_narvis_views(points):
                 s.handle({"type": "preset", "hemisphere": bad})
     finally:
         s.close()
+
+
+def test_split_views_show_both_sides_and_the_psnr():
+    from clvis.view.scenes import psnr, split
+
+    a, b = np.zeros((4, 6, 3), np.uint8), np.full((4, 6, 3), 255, np.uint8)
+    assert psnr(a, a) == float("inf") and psnr(a, b) == 0.0
+    both = split(a, b)
+    assert (both[:, :2] == 0).all() and (both[:, 4:] == 255).all() and (both[:, 2:4] == 200).all()
+
+    d = clvis.datasets.hurricane(20_000)
+    cloud = clvis.PointCloud(d["positions"], attributes=d["attributes"], velocity=d["velocity"])
+    s = PointScene(cloud)
+    s.update({"mode": "narvis|gaussians", "color_by": "temperature"})
+    f = next(s.frames(Orbit(s.lo, s.hi, points=s.fit_points).camera(1.0), 64, 64, s.settings, lambda: False))
+    assert 5 < f.info["psnr dB"] < 60 and f.times["post"] > 0
+
+    v = VolumeScene(clvis.datasets.marschner_lobb(32)["volume"], isovalue=0.5)
+    v.update({"mode": "infill|iso"})
+    f = next(v.frames(Orbit(v.lo, v.hi).camera(1.0), 64, 64, v.settings, lambda: False))
+    assert f.info["completion"] >= 0.85 and f.info["psnr dB"] > 15 and f.final

@@ -83,11 +83,11 @@ demo)
     ;;
 test | bench)
     if with_intel; then
-        venv .venv-test pocl,test,intel,train,distributed
+        venv .venv-test pocl,test,intel,train,distributed,view
         intel_env .venv-test
         export CLVIS_REQUIRE_PLATFORMS=${CLVIS_REQUIRE_PLATFORMS:-portable,intel}
     else
-        venv .venv-test pocl,test,train,distributed
+        venv .venv-test pocl,test,train,distributed,view
         export CLVIS_REQUIRE_PLATFORMS=${CLVIS_REQUIRE_PLATFORMS:-portable}
     fi
     if [ "$cmd" = bench ]; then

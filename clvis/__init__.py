@@ -5,6 +5,8 @@ Arrays in, arrays out: numpy arrays come back as numpy arrays, and
 See ``clvis.runtime`` for device choice and options.
 """
 
+import sys as _sys
+
 from . import datasets
 from ._version import __version__
 from .camera import Camera, grid_cameras, hemisphere_cameras
@@ -75,3 +77,13 @@ __all__ = [
     "volumes",
     "zfp",
 ]
+
+
+def __getattr__(name: str) -> object:
+    # clvis.view(obj), the browser viewer: a layer above the families, imported
+    # when first used (its server, tornado, is the optional `view` extra)
+    if name == "view":
+        import clvis.view  # noqa: F401  (not `from . import view`: that would call this again)
+
+        return _sys.modules["clvis.view"]
+    raise AttributeError(f"module 'clvis' has no attribute {name!r}")

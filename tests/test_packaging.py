@@ -22,6 +22,7 @@ def test_wheel_ships_kernels(tmp_path):
     assert sources
     for s in sources:
         assert f"clvis/{s}" in names, s
+    assert "clvis/view/static/index.html" in names  # the viewer's page
 
     # unpacked on its own, away from the checkout, it builds and runs a kernel
     site = tmp_path / "site"

@@ -1,0 +1,195 @@
+"""`clvis view`: an interactive, progressive viewer in the browser."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..io.volumes import otsu_level
+from ._common import (
+    CliError,
+    Parser,
+    add_volume_options,
+    count,
+    read_volume_file,
+    real,
+    size,
+)
+
+if TYPE_CHECKING:
+    from ..view import Scene
+
+_HELP = """\
+Serve an interactive view of a point cloud or a volume and print its URL
+(and open a browser where there is one). The frames are rendered here, on the
+OpenCL device, and streamed to the page as JPEG over a WebSocket; the page
+sends the mouse, touch and key events back. Drag to orbit, right- or
+shift-drag to pan, wheel or pinch to zoom; keys: arrows, + and -, f (fit),
+c (the camera as --eye/--target/--up/--fov options for the other commands;
+edit them and press Enter to go to a typed camera).
+While the pointer drags, frames are half the page's size; when it stops,
+full size. The status line shows each frame's milliseconds per stage
+(render / post / encode / send), the frames per second and the latency from
+an event to the frame that shows it.
+
+Points (.ply, .las, .laz, .npz, an (N, 3) .npy, or --dataset hurricane|terrain):
+modes points (colour by an attribute or RGB, colormap, point size), lidar
+(depth filter + LiDAR U-Net), narvis (clouds with a velocity), gaussians,
+narvis|gaussians (split: MACR + NARVis beside the Gaussian renderer, the PSNR).
+Volumes (.raw, a 3-D .npy, NIfTI, or --dataset marschner-lobb|turbulence|
+explosion): modes iso (progressive: each pass is shown as it completes, and
+a camera move restarts the passes), iso+infill (the in-fill network on the
+partial passes), gaussians, infill|iso (split: 85 % of the rays + in-fill
+beside the complete render, the PSNR).
+
+The server listens on 127.0.0.1; --host 0.0.0.0 (or another address) makes
+it reachable from other machines, with a token in the printed URL that the
+page must present. Only the FILE given here is ever read.
+"""
+_POINT_SETS = ("hurricane", "terrain")
+_VOLUME_SETS = ("marschner-lobb", "turbulence", "explosion")
+_POINT_SUFFIXES = (".ply", ".las", ".laz", ".npz", ".xyz", ".csv", ".txt")
+
+
+def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
+    p = sub.add_parser(
+        "view",
+        help="an interactive viewer in the browser (points, progressive isosurfaces, Gaussians)",
+        description=_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("file", nargs="?", help="a point cloud or a volume file")
+    p.add_argument("--dataset", choices=_POINT_SETS + _VOLUME_SETS, help="an embedded dataset")
+    p.add_argument(
+        "--points",
+        type=count(1, 2**31),
+        default=2_000_000,
+        metavar="N",
+        help="points of an embedded cloud (default 2000000)",
+    )
+    p.add_argument("--isovalue", type=real(), default=None, help="default: 0.5 embedded, else Otsu's")
+    p.add_argument("--rate", type=count(1, 32), default=8, help="ZFP bits per value (default 8)")
+    p.add_argument("--host", default="127.0.0.1", help="the address to listen on (default 127.0.0.1)")
+    p.add_argument("--port", type=count(0, 65535), default=0, help="default 0: a free port")
+    p.add_argument("--no-browser", action="store_true", help="print the URL only")
+    p.add_argument(
+        "--measure",
+        nargs="?",
+        const="all",
+        default=None,
+        metavar="MODES",
+        help="serve nothing: print the frame budget of the modes named (comma-separated; default "
+        "all): render, post, JPEG encode; interaction frames at half --size, then still frames; "
+        "iso: the first pass after a camera stop and the last",
+    )
+    p.add_argument(
+        "--size",
+        type=size,
+        default=(1280, 720),
+        metavar="WxH",
+        help="--measure's page size (default 1280x720)",
+    )
+    add_volume_options(p)
+    return p
+
+
+def _is_volume(path: Path) -> bool:
+    name = path.name.lower()
+    if name.endswith(_POINT_SUFFIXES):
+        return False
+    if name.endswith(".npy"):
+        return np.load(path, mmap_mode="r").ndim == 3
+    return True
+
+
+def load_scene(args: argparse.Namespace) -> Scene:
+    """The scene of the FILE or --dataset (the only data the server reads)."""
+    from .. import datasets
+    from ..view import PointScene, VolumeScene
+
+    if args.file is not None:
+        if args.dataset is not None:
+            raise CliError("--dataset chooses an embedded dataset; leave it out with a FILE")
+        path = Path(args.file)
+        if not path.exists():
+            raise CliError(f"{path}: no such file")
+        if _is_volume(path):
+            data, spacing, origin = read_volume_file(args, path)
+            iso = args.isovalue if args.isovalue is not None else otsu_level(data)
+            return VolumeScene(data, spacing, origin, iso, args.rate, description=str(path))
+        from .. import read_points
+
+        return PointScene(read_points(path), description=str(path))
+    name = args.dataset or "hurricane"
+    if name in _POINT_SETS:
+        from .. import PointCloud
+
+        d = getattr(datasets, name)(args.points)
+        cloud = PointCloud(
+            d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"]
+        )
+        return PointScene(cloud, description=f"the embedded {name}")
+    if name == "explosion":
+        d = datasets.explosion()
+        iso = 0.2
+    else:
+        d = datasets.marschner_lobb(64) if name == "marschner-lobb" else datasets.turbulence(128)
+        iso = 0.5
+    iso = args.isovalue if args.isovalue is not None else iso
+    return VolumeScene(
+        d["volume"], d["spacing"], d["origin"], iso, args.rate, description=f"the embedded {name}"
+    )
+
+
+def _measure(scene, args) -> int:
+    from ..view.measure import measure
+
+    w, h = args.size
+    print(f"clvis view --measure: {scene.description} on {scene.device}, page {w}x{h}")
+    print("mode          frame      first ms  last ms  frames  fps    CPU ms  stages of the first frame (ms)")
+    modes = scene.modes if args.measure == "all" else args.measure.split(",")
+    unknown = [m for m in modes if m not in scene.modes]
+    if unknown:
+        raise CliError(f"--measure: no mode {unknown[0]!r} for this data; it has {', '.join(scene.modes)}")
+    for mode in modes:
+        for interactive in (True, False):
+            r = measure(scene, w, h, mode, interactive=interactive)
+            stages = " / ".join(f"{k} {v:.1f}" for k, v in r["stages_ms"].items())
+            kind = "interaction" if interactive else "still"
+            print(
+                f"{mode:13} {kind:10} {r['first_ms']:8.1f} {r['last_ms']:8.1f} {r['frames']:6g} "
+                f"{r['fps']:6.1f} {r['cpu_ms']:7.1f}  {r['size']}: {stages}",
+                flush=True,
+            )
+    return 0
+
+
+def _has_display() -> bool:
+    """Whether a graphical browser can open here: on Linux and the BSDs only
+    with an X or Wayland display (webbrowser would start a text browser in
+    this terminal on a server)."""
+    if sys.platform in ("darwin", "win32"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def cmd(args: argparse.Namespace) -> int:
+    from ..view import Viewer, ViewServer
+
+    scene = load_scene(args)
+    if args.measure is not None:
+        return _measure(scene, args)
+    server = ViewServer(scene, args.host, args.port)
+    viewer = Viewer(server)
+    print(f"clvis view: {scene.description} on {scene.device}")
+    print(f"clvis view: open {viewer.url}   (Ctrl-C stops)", flush=True)
+    if not args.no_browser and _has_display():
+        viewer.show()
+    viewer.wait()
+    print("clvis view: stopped", file=sys.stderr)
+    return 0

@@ -1,0 +1,404 @@
+"""What the viewer shows: a point cloud or a volume, in the modes its data allows.
+
+A scene renders one view as a sequence of :class:`Frame` (one frame for a
+point render, one per pass for a progressive isosurface); the server encodes
+and sends each as it comes, and stops taking them once a newer view
+supersedes the render. Renderers are made once (the point cloud and the
+compressed volume stay on the device); the Gaussians and the post networks
+are made when their mode is first chosen.
+
+Point modes: ``points`` (the MACR Rasterizer's G-buffers, coloured by an
+attribute through a colormap or by the points' RGB, point size), ``lidar``
+(depth filter + the LiDAR U-Net), ``narvis`` (the NARVis U-Net on the
+G-buffers; clouds with a velocity), ``gaussians`` (Gaussians from the points,
+ray marched). Volume modes: ``iso`` (progressive isosurface: each pass as it
+completes), ``iso+infill`` (the in-fill network on each partial pass),
+``gaussians`` (the volume's Gaussians at a level of detail). Split views
+(``narvis|gaussians``, ``infill|iso``): the fast path's left half beside its
+slow target's right half, with the PSNR of the whole frames.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..camera import Camera
+from ..errors import DataError
+from ..images import BACKGROUND
+
+__all__ = ["COLORMAPS", "Frame", "PointScene", "Scene", "VolumeScene", "psnr", "scene_for", "split"]
+
+COLORMAPS = ("viridis", "magma", "inferno", "plasma", "cividis", "turbo", "coolwarm", "gray")
+_BG = np.array(BACKGROUND, np.uint8)
+_ACTIVE = np.array((70, 40, 75), np.uint8)  # iso: rays still running at this pass
+_MAX_POINT_SIZE = 16
+SPLIT_COMPLETION = 0.85  # infill|iso: the fast side stops at this fraction of the rays
+_FIT_SAMPLE = 20_000  # points the first view frames (every k-th)
+
+
+@dataclass
+class Frame:
+    """One picture of a view: (H, W, 3) uint8, whether more follow for the
+    same view, figures for the status line, and seconds per stage."""
+
+    image: np.ndarray
+    final: bool = True
+    info: dict = field(default_factory=dict)
+    times: dict = field(default_factory=dict)
+
+
+class Scene:
+    """Base: ``kind``, ``modes``, ``settings`` (what the page may change),
+    ``choices`` (the values each setting takes), bounds ``lo``/``hi``."""
+
+    kind = ""
+    modes: list[str]
+    settings: dict
+    choices: dict
+    lo: np.ndarray
+    hi: np.ndarray
+    fit_points: np.ndarray | None = None  # what the first view frames (None: the box)
+    description = ""
+    device = ""
+
+    def update(self, changes: dict) -> None:
+        """Apply settings from the page; ValueError for an unknown key or value."""
+        new = dict(self.settings)
+        for key, value in changes.items():
+            if key not in self.settings:
+                raise ValueError(f"unknown setting {key!r}")
+            allowed = self.choices.get(key)
+            if isinstance(allowed, list) and value not in allowed:
+                raise ValueError(f"{key}: expected one of {allowed}, got {value!r}")
+            if isinstance(allowed, dict):  # a number range
+                try:
+                    value = type(self.settings[key])(value)
+                except (TypeError, ValueError):
+                    raise ValueError(f"{key}: expected a number, got {value!r}") from None
+                if not allowed["min"] <= value <= allowed["max"]:
+                    raise ValueError(f"{key}: expected {allowed['min']}..{allowed['max']}, got {value!r}")
+            new[key] = value
+        self.settings = new
+
+    def frames(
+        self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
+    ) -> Iterator[Frame]:
+        raise NotImplementedError
+
+
+def _over_background(rgb: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    out = np.empty(covered.shape + (3,), np.uint8)
+    out[...] = _BG
+    out[covered] = rgb[covered]
+    return out
+
+
+def _premultiplied_over_background(rgba8: np.ndarray) -> np.ndarray:
+    """A network's RGBA8 picture (colour premultiplied over black) over the background."""
+    a = rgba8[..., 3:4].astype(np.float32) / 255
+    rgb = rgba8[..., :3].astype(np.float32) + (1 - a) * _BG.astype(np.float32)
+    return np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
+
+
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR in dB of two uint8 pictures (inf where they are equal)."""
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
+    return float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
+
+
+def split(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """The left half of `left` beside the right half of `right`, a light line between."""
+    out = right.copy()
+    w = out.shape[1]
+    out[:, : w // 2] = left[:, : w // 2]
+    out[:, max(w // 2 - 1, 0) : w // 2 + 1] = (200, 200, 200)
+    return out
+
+
+class PointScene(Scene):
+    """A point cloud (a clvis.PointCloud)."""
+
+    kind = "points"
+
+    def __init__(self, cloud: Any, description: str = "points") -> None:
+        from .. import PointCloud, Rasterizer
+
+        if not isinstance(cloud, PointCloud):
+            cloud = PointCloud(np.asarray(cloud))
+        if len(cloud.positions) == 0:
+            raise DataError(f"{description}: no points to show")
+        self.cloud = cloud
+        pos = cloud.positions
+        finite = np.isfinite(pos).all(axis=1)
+        if not finite.any():
+            raise DataError(f"{description}: no point has finite coordinates")
+        self.lo, self.hi = (
+            pos[finite].min(axis=0).astype(np.float64),
+            pos[finite].max(axis=0).astype(np.float64),
+        )
+        step = max(1, len(pos) // _FIT_SAMPLE)
+        sample = pos[::step]
+        self.fit_points = sample[np.isfinite(sample).all(axis=1)].astype(np.float64)
+        attrs = dict(cloud.attributes) if cloud.attributes else {"z": pos[:, 2]}
+        self.attributes = list(attrs)
+        self.raster = Rasterizer(cloud, attributes=attrs) if not cloud.attributes else Rasterizer(cloud)
+        self.device = self.raster.queue.device.name.strip()
+        self.description = f"{description}: {len(cloud.positions):,} points"
+        colours = (["rgb"] if cloud.colors is not None else []) + self.attributes
+        velocity = cloud.velocity is not None
+        self.modes = (
+            ["points", "lidar"]
+            + (["narvis"] if velocity else [])
+            + ["gaussians"]
+            + (["narvis|gaussians"] if velocity else [])
+        )
+        self.settings = {"mode": "points", "color_by": colours[0], "colormap": "viridis", "point_size": 1}
+        self.choices = {
+            "mode": self.modes,
+            "color_by": colours,
+            "colormap": list(COLORMAPS),
+            "point_size": {"min": 1, "max": _MAX_POINT_SIZE},
+        }
+        self._nets: dict[str, Any] = {}
+        self._gauss: dict[str, Any] = {}
+
+    def _net(self, name: str):
+        if name not in self._nets:
+            from .. import post  # onnxruntime: only when a network is asked for
+
+            self._nets[name] = post.load(name, queue=self.raster.queue)
+        return self._nets[name]
+
+    def _render(self, camera, w, h, s, point_size=None):
+        attr = None if s["color_by"] == "rgb" else s["color_by"]
+        ps = s["point_size"] if point_size is None else point_size
+        return self.raster.render(
+            camera, w, h, color_by=attr, colormap=s["colormap"], point_size=ps, planes=[]
+        )
+
+    def frames(
+        self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
+    ) -> Iterator[Frame]:
+        mode = settings["mode"]
+        t0 = time.perf_counter()
+        if mode == "gaussians":
+            yield self._gaussians(camera, width, height, settings)
+            return
+        if mode == "narvis|gaussians":
+            yield self._split(camera, width, height, settings)
+            return
+        g = self._render(camera, width, height, settings, 1 if mode != "points" else None)
+        info = {"points": len(self.cloud.positions), "points read": g.stats.get("points_read", 0)}
+        if mode == "points":
+            t1 = time.perf_counter()
+            image = _over_background(g.rgba[..., :3], g.index != 0xFFFFFFFF)
+            yield Frame(image, info=info, times={"render": t1 - t0})
+            return
+        from .. import depth_filter
+
+        src = depth_filter(g) if mode == "lidar" else g
+        t1 = time.perf_counter()
+        rgba = self._net(mode)(src)
+        t2 = time.perf_counter()
+        yield Frame(
+            _premultiplied_over_background(rgba), info=info, times={"render": t1 - t0, "post": t2 - t1}
+        )
+
+    def _split(self, camera, w, h, s):
+        """MACR + NARVis (left) beside its slow target, the Gaussian renderer
+        over the velocity-elongated Gaussians it was trained on (right), with
+        the PSNR of the whole frames (both over black, as the network predicts)."""
+        from ..colormap import value_range
+        from ..training.data import NARVIS_ATTRIBUTE, NarvisScene
+
+        attr = s["color_by"] if s["color_by"] != "rgb" else NARVIS_ATTRIBUTE
+        if attr not in self.cloud.attributes:
+            attr = self.attributes[0]
+        key = ("split", attr, s["colormap"])
+        t0 = time.perf_counter()
+        if key not in self._gauss:
+            vr = value_range(self.cloud.attributes[attr])
+            ns = NarvisScene(self.cloud, attr, vr, s["colormap"], "view")
+            self._gauss = {key: (ns, ns.gaussian_renderer(queue=self.raster.queue))}
+        build = time.perf_counter() - t0
+        ns, gr = self._gauss[key]
+        net = self._net("narvis")
+        t1 = time.perf_counter()
+        g = ns.gbuffers(self.raster, camera, w, h, net.planes)
+        ta = time.perf_counter()
+        fast = net(g)[..., :3]
+        t2 = time.perf_counter()
+        slow = gr.render(camera, w, h).to_uint8()
+        t3 = time.perf_counter()
+        times = {"render": (ta - t1) + (t3 - t2), "post": t2 - ta}
+        if build > 1e-3:
+            times["build"] = build
+        info = {"psnr dB": round(psnr(fast, slow), 2), "fast ms": round(1e3 * (t2 - t1), 1)}
+        info["slow ms"] = round(1e3 * (t3 - t2), 1)
+        return Frame(split(fast, slow), info=info, times=times)
+
+    def _gaussians(self, camera, w, h, s):
+        from .. import GaussianRenderer, gaussians_from_points
+
+        key = s["color_by"]
+        t0 = time.perf_counter()
+        if key not in self._gauss:
+            gs = gaussians_from_points(self.cloud, color_by=key if key != "rgb" else "rgb")
+            self._gauss = {key: (GaussianRenderer(gs, queue=self.raster.queue), gs.n)}
+        build = time.perf_counter() - t0
+        renderer, count = self._gauss[key]
+        img = renderer.render(camera, w, h)
+        t1 = time.perf_counter()
+        out = img.to_uint8(np.asarray(BACKGROUND) / 255)
+        times = {"render": t1 - t0 - build}
+        if build > 1e-3:
+            times["build"] = build
+        return Frame(out, info={"gaussians": count}, times=times)
+
+
+class VolumeScene(Scene):
+    """A volume [z, y, x], compressed with ZFP and raycast progressively."""
+
+    kind = "volume"
+
+    def __init__(
+        self,
+        volume: Any,
+        spacing: Any = (1.0, 1.0, 1.0),
+        origin: Any = (0.0, 0.0, 0.0),
+        isovalue: float | None = None,
+        rate: int = 8,
+        description: str = "volume",
+    ) -> None:
+        from .. import IsoRenderer
+
+        data = np.asarray(volume)
+        if data.ndim != 3:
+            raise DataError(f"{description}: expected a 3-D volume [z, y, x], got shape {data.shape}")
+        data = np.ascontiguousarray(data, np.float32)
+        finite = data[np.isfinite(data)]
+        if finite.size == 0:
+            raise DataError(f"{description}: no finite sample")
+        vmin, vmax = float(finite.min()), float(finite.max())
+        if isovalue is None:
+            isovalue = (vmin + vmax) / 2
+        self.volume, self.spacing, self.origin = data, tuple(spacing), tuple(origin)
+        self.iso = IsoRenderer(data, rate, spacing, origin)
+        self.device = self.iso.queue.device.name.strip()
+        self.lo = np.asarray(origin, np.float64)
+        self.hi = self.lo + (np.array(data.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
+        self.description = f"{description}: {'x'.join(map(str, data.shape[::-1]))} samples"
+        self.modes = ["iso", "iso+infill", "gaussians", "infill|iso"]
+        self.settings = {"mode": "iso", "isovalue": float(isovalue), "lod": "medium"}
+        self.choices = {
+            "mode": self.modes,
+            "isovalue": {"min": vmin, "max": vmax},
+            "lod": ["low", "medium", "high"],
+        }
+        self._infill = None
+        self._gauss: dict[tuple, Any] = {}
+
+    def frames(
+        self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
+    ) -> Iterator[Frame]:
+        mode = settings["mode"]
+        if mode == "gaussians":
+            yield self._gaussians(camera, width, height, settings)
+            return
+        if mode == "infill|iso":
+            yield self._split(camera, width, height, settings)
+            return
+        if mode == "iso+infill" and self._infill is None:
+            from .. import post
+
+            self._infill = post.load("infill", queue=self.iso.queue)
+        t0 = time.perf_counter()
+        n = 0
+        for img in self.iso.passes(camera, width, height, settings["isovalue"]):
+            n += 1
+            t1 = time.perf_counter()
+            times = {"render": t1 - t0}
+            done = not img.active.any()
+            info = {"pass": n, "completion": round(float(img.completion), 4)}
+            if mode == "iso+infill" and not done:
+                rgba = self._infill(img)
+                image = _premultiplied_over_background(rgba)
+                times["post"] = time.perf_counter() - t1
+            else:
+                rgb = np.clip(np.rint(img.rgba[..., :3] * 255), 0, 255).astype(np.uint8)
+                image = _over_background(rgb, img.hit)
+                image[img.active & ~img.hit] = _ACTIVE
+            yield Frame(image, final=done, info=info, times=times)
+            if superseded():
+                return
+            t0 = time.perf_counter()
+
+    def _split(self, camera, w, h, s):
+        """The render stopped at SPLIT_COMPLETION of the rays with the in-fill
+        network (left) beside the complete render (right), and their PSNR."""
+        if self._infill is None:
+            from .. import post
+
+            self._infill = post.load("infill", queue=self.iso.queue)
+        t0 = time.perf_counter()
+        part = self.iso.render(camera, w, h, s["isovalue"], completion=SPLIT_COMPLETION)
+        t1 = time.perf_counter()
+        fast = _premultiplied_over_background(self._infill(part))
+        t2 = time.perf_counter()
+        full = self.iso.render(camera, w, h, s["isovalue"])
+        slow = _over_background(np.clip(np.rint(full.rgba[..., :3] * 255), 0, 255).astype(np.uint8), full.hit)
+        t3 = time.perf_counter()
+        info = {
+            "psnr dB": round(psnr(fast, slow), 2),
+            "fast ms": round(1e3 * (t2 - t0), 1),
+            "slow ms": round(1e3 * (t3 - t2), 1),
+            "completion": round(float(part.completion), 3),
+        }
+        return Frame(split(fast, slow), info=info, times={"render": (t1 - t0) + (t3 - t2), "post": t2 - t1})
+
+    def _gaussians(self, camera, w, h, s):
+        from .. import GaussianRenderer, gaussians_from_volume
+
+        key = (s["lod"], s["isovalue"])
+        t0 = time.perf_counter()
+        if key not in self._gauss:
+            gs = gaussians_from_volume(
+                self.volume, s["lod"], threshold=s["isovalue"], spacing=self.spacing, origin=self.origin
+            )
+            if gs.n == 0:
+                raise DataError(f"no voxel above the isovalue {s['isovalue']:g}: no Gaussians")
+            self._gauss = {key: (GaussianRenderer(gs, queue=self.iso.queue), gs.n)}
+        build = time.perf_counter() - t0
+        renderer, count = self._gauss[key]
+        img = renderer.render(camera, w, h)
+        t1 = time.perf_counter()
+        times = {"render": t1 - t0 - build}
+        if build > 1e-3:
+            times["build"] = build
+        return Frame(img.to_uint8(np.asarray(BACKGROUND) / 255), info={"gaussians": count}, times=times)
+
+
+def scene_for(obj: Any, **kwargs: Any) -> Scene:
+    """A scene for `obj`: a Scene as is, a clvis.PointCloud or (N, 3) positions
+    (points), a 3-D array [z, y, x] (a volume; kwargs: spacing, origin,
+    isovalue, rate)."""
+    from .. import PointCloud
+
+    if isinstance(obj, Scene):
+        return obj
+    if isinstance(obj, PointCloud):
+        return PointScene(obj, **kwargs)
+    a = np.asarray(obj)
+    if a.ndim == 2 and a.shape[1] == 3:
+        return PointScene(PointCloud(a), **kwargs)
+    if a.ndim == 3:
+        return VolumeScene(a, **kwargs)
+    raise TypeError(
+        f"clvis.view: expected a clvis.PointCloud, (N, 3) positions or a 3-D volume, "
+        f"got {type(obj).__name__} of shape {getattr(a, 'shape', None)}"
+    )

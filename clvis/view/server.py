@@ -1,0 +1,399 @@
+"""The viewer's server: the page over HTTP, frames and events over a WebSocket.
+
+Tornado runs on its own thread with its own event loop (so a Jupyter kernel's
+loop is never touched); renders run on the LatestWins worker thread. Every
+event updates the shared view state at once and asks for a frame; the worker
+renders the newest state when it gets to it, so a burst of mouse events
+costs one frame, not one each. While the pointer drags, frames are rendered
+at ``interactive_scale`` of the page's size and sent as lower-quality JPEG;
+when it stops, at full size. Each frame is one binary message: a 4-byte
+big-endian header length, the header (JSON: camera, figures, seconds per
+stage), then the JPEG.
+
+Security: the server binds 127.0.0.1 by default. Any other host gets a token
+(printed with the URL) that the page and the socket must present; tornado's
+same-origin check refuses sockets opened by other sites' pages. The data are
+the ones the server was started with: the page can change the view and the
+settings, never name a file.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import hmac
+import io
+import itertools
+import json
+import secrets
+import struct
+import threading
+import time
+from importlib import resources
+from typing import Any
+
+from ..camera import hemisphere_cameras
+from .orbit import Orbit
+from .scenes import Frame, Scene
+from .schedule import LatestWins, Outbox
+
+__all__ = ["LOOPBACK", "ViewServer", "access_token", "needs_token", "token_ok"]
+
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+MAX_SIZE = (3840, 2160)
+MIN_SIDE = 16
+HEMISPHERE_VIEWS = 128  # clvis.hemisphere_cameras: 4 polar angles x 32 azimuths
+_QUALITY = {True: 75, False: 92}  # JPEG quality while dragging, when still
+
+
+def needs_token(host: str) -> bool:
+    """Every host but the loopback interface (localhost, 127.0.0.0/8, ::1) needs a token."""
+    import ipaddress
+
+    if host in LOOPBACK:
+        return False
+    try:
+        return not ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:  # a host name: it may resolve to any interface
+        return True
+
+
+def access_token(host: str, token: str | None = None) -> str | None:
+    """The token a server on `host` asks for: `token` when given, else a new
+    random one for any host but loopback (None: no token)."""
+    if token is None and needs_token(host):
+        return secrets.token_urlsafe(18)
+    return token
+
+
+def token_ok(expected: str | None, given: str | None) -> bool:
+    """Whether `given` is the server's token (any value when it has none);
+    compared in constant time."""
+    if expected is None:
+        return True
+    if not isinstance(given, str) or not given:
+        return False
+    return hmac.compare_digest(expected.encode(), given.encode())
+
+
+def encode_jpeg(image: Any, quality: int) -> bytes:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(image).save(buf, format="JPEG", quality=quality, subsampling=0 if quality >= 90 else 2)
+    return buf.getvalue()
+
+
+def pack_message(header: dict, payload: bytes) -> bytes:
+    h = json.dumps(header, separators=(",", ":")).encode()
+    return struct.pack(">I", len(h)) + h + payload
+
+
+class ViewServer:
+    """Serve `scene` at http://host:port/ (port 0: a free one).
+
+    ``url`` is the address to open (with the token when there is one).
+    ``close()`` stops the server and the render worker.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        *,
+        token: str | None = None,
+        interactive_scale: float = 0.5,
+        size: tuple[int, int] = (1280, 720),
+    ) -> None:
+        try:
+            import tornado  # noqa: F401
+        except ImportError:
+            from ..errors import ClvisError
+
+            raise ClvisError("clvis view needs tornado: pip install 'clvis[view]'") from None
+        if not 0 < interactive_scale <= 1:
+            raise ValueError(f"interactive_scale: expected a fraction in (0, 1], got {interactive_scale!r}")
+        self.scene, self.host, self.token = scene, host, access_token(host, token)
+        self.interactive_scale = float(interactive_scale)
+        self.orbit = Orbit(scene.lo, scene.hi, points=scene.fit_points)
+        self.size = self._clamp_size(*size)
+        self.orbit.fit(self.size[0] / self.size[1])
+        self.interacting = False
+        self.moved = False  # by the person: until then a resize frames the data again
+        self.seq = 0  # the last event applied
+        self.frames = 0
+        self.last_send = 0.0
+        self._lock = threading.Lock()
+        self._sockets: set[Any] = set()
+        self._error: str | None = None
+        self.scheduler = LatestWins(on_error=self._report)
+        self._ready = threading.Event()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._server: Any = None
+        self._startup_error: BaseException | None = None
+        self.thread = threading.Thread(target=self._serve, args=(port,), name="clvis-view-http", daemon=True)
+        self.thread.start()
+        self._ready.wait()
+        if self._startup_error is not None:
+            self.scheduler.close()
+            raise self._startup_error
+
+    # -- the event loop's thread ---------------------------------------------------
+
+    def _serve(self, port: int) -> None:
+        import tornado.httpserver
+        import tornado.web
+
+        loop = asyncio.new_event_loop()
+        asyncio.set_event_loop(loop)
+        self._loop = loop
+        try:
+            page, socket = _handlers()
+            app = tornado.web.Application(
+                [(r"/", page, {"server": self}), (r"/ws", socket, {"server": self})],
+                websocket_ping_interval=20,
+            )
+            self._server = tornado.httpserver.HTTPServer(app, max_body_size=1 << 16)
+            self._server.listen(port, address=self.host)
+            sock = next(iter(self._server._sockets.values()))
+            self.port = sock.getsockname()[1]
+        except BaseException as e:  # noqa: BLE001  (re-raised on the caller's thread)
+            self._startup_error = e
+            self._ready.set()
+            loop.close()
+            return
+        self._ready.set()
+        try:
+            loop.run_forever()
+        finally:
+            loop.close()
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        if host in ("0.0.0.0", "[::]"):
+            import socket
+
+            host = socket.gethostname()
+        return f"http://{host}:{self.port}/" + (f"?token={self.token}" if self.token else "")
+
+    def _config(self) -> dict:
+        s = self.scene
+        return {
+            "type": "config",
+            "kind": s.kind,
+            "modes": s.modes,
+            "settings": s.settings,
+            "choices": s.choices,
+            "description": s.description,
+            "device": s.device,
+            "camera": self.orbit.state(),
+        }
+
+    def opened(self, sock: Any) -> None:
+        self._sockets.add(sock)
+        sock.write_message(json.dumps(self._config()))
+        self.request()
+
+    def closed(self, sock: Any) -> None:
+        self._sockets.discard(sock)
+
+    def handle(self, msg: dict) -> None:
+        """An event from the page (on the loop's thread)."""
+        kind = msg.get("type")
+        interactive = False
+        reply = None
+        with self._lock:
+            if isinstance(msg.get("seq"), int):
+                self.seq = msg["seq"]
+            h = self.size[1]
+            if kind == "size":
+                self.size = self._clamp_size(msg.get("width"), msg.get("height"))
+                if not self.moved:  # the page's own shape: frame the data for it
+                    self.orbit.fit(self.size[0] / self.size[1])
+            elif kind == "drag":
+                dx, dy = _number(msg.get("dx")), _number(msg.get("dy"))
+                if msg.get("pan"):
+                    self.orbit.pan(dx, dy, h)
+                else:
+                    self.orbit.orbit(dx, dy, h)
+                self.interacting = interactive = self.moved = True
+            elif kind == "zoom":
+                self.orbit.zoom(min(max(_number(msg.get("factor"), 1.0), 0.2), 5.0))
+                self.interacting = interactive = self.moved = True
+            elif kind == "end":
+                self.interacting = False
+            elif kind == "fit":
+                self.orbit.fit(self.size[0] / self.size[1])
+                self.interacting = False
+            elif kind == "camera":
+                self.orbit.set(msg.get("eye"), msg.get("target"), msg.get("fov"))
+                self.interacting, self.moved = False, True
+            elif kind == "preset":  # one of the NARVis samplers' 128 hemisphere views
+                k = msg.get("hemisphere")
+                if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < HEMISPHERE_VIEWS:
+                    raise ValueError(f"hemisphere: expected a view 0..{HEMISPHERE_VIEWS - 1}, got {k!r}")
+                cam = next(itertools.islice(hemisphere_cameras(self.orbit.lo, self.orbit.hi), k, None))
+                self.orbit.set(cam.eye, (self.orbit.lo + self.orbit.hi) / 2)
+                self.interacting, self.moved = False, True
+            elif kind == "set":
+                self.scene.update(msg.get("settings") or {})
+                reply = {"type": "settings", "settings": self.scene.settings}
+            else:
+                raise ValueError(f"unknown event {kind!r}")
+        if reply is not None:
+            self._send_text(json.dumps(reply))
+        self.request(interactive)
+
+    def _send_text(self, text: str) -> None:
+        for sock in list(self._sockets):
+            sock.write_message(text)
+
+    def _broadcast(self, data: bytes) -> None:
+        for sock in list(self._sockets):
+            sock.outbox.put(data)
+
+    def _report(self, e: BaseException) -> None:
+        text = json.dumps({"type": "error", "message": f"{type(e).__name__}: {e}"})
+        if self._loop is not None and not self._loop.is_closed():
+            self._loop.call_soon_threadsafe(self._send_text, text)
+
+    # -- the render worker's thread ------------------------------------------------
+
+    def request(self, interactive: bool = False) -> int:
+        """Ask for a frame of the current state (the newest request wins)."""
+        return self.scheduler.submit(self._render)
+
+    def _render(self, superseded) -> None:
+        with self._lock:
+            interactive = self.interacting
+            w, h = self.size
+            if interactive:
+                w = max(MIN_SIDE, round(w * self.interactive_scale))
+                h = max(MIN_SIDE, round(h * self.interactive_scale))
+            camera = self.orbit.camera(w / h)
+            state = self.orbit.state()
+            settings = dict(self.scene.settings)
+            seq = self.seq
+        for frame in self.scene.frames(camera, w, h, settings, superseded):
+            self._emit(frame, interactive, settings, state, seq)
+            if superseded():
+                return
+
+    def _emit(self, frame: Frame, interactive: bool, settings: dict, state: dict, seq: int) -> None:
+        t0 = time.perf_counter()
+        jpeg = encode_jpeg(frame.image, _QUALITY[interactive])
+        times = {k: round(v * 1000, 2) for k, v in frame.times.items()}
+        times["encode"] = round((time.perf_counter() - t0) * 1000, 2)
+        times["send"] = round(self.last_send * 1000, 2)  # the previous frame's
+        self.frames += 1
+        header = {
+            "type": "frame",
+            "id": self.frames,
+            "seq": seq,
+            "width": int(frame.image.shape[1]),
+            "height": int(frame.image.shape[0]),
+            "interactive": interactive,
+            "final": frame.final,
+            "mode": settings.get("mode"),
+            "info": frame.info,
+            "ms": times,
+            "bytes": len(jpeg),
+            "camera": state,
+            "device": self.scene.device,
+        }
+        data = pack_message(header, jpeg)
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(self._broadcast, data)
+
+    # -----------------------------------------------------------------------------
+
+    def _clamp_size(self, w: Any, h: Any) -> tuple[int, int]:
+        w, h = int(_number(w, 960)), int(_number(h, 540))
+        return min(max(w, MIN_SIDE), MAX_SIZE[0]), min(max(h, MIN_SIDE), MAX_SIZE[1])
+
+    def close(self) -> None:
+        self.scheduler.close()
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+
+            def stop():
+                if self._server is not None:
+                    self._server.stop()
+                for sock in list(self._sockets):
+                    sock.close()
+                loop.stop()
+
+            loop.call_soon_threadsafe(stop)
+            self.thread.join(5)
+
+
+def _number(v: Any, default: float = 0.0) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return default
+    f = float(v)
+    return f if f == f and abs(f) != float("inf") else default
+
+
+def _page() -> bytes:
+    return resources.files(__package__).joinpath("static/index.html").read_bytes()
+
+
+@functools.cache
+def _handlers():
+    import tornado.web
+    import tornado.websocket
+
+    class PageHandler(tornado.web.RequestHandler):
+        def initialize(self, server: ViewServer) -> None:
+            self.server = server
+
+        def get(self) -> None:
+            if not token_ok(self.server.token, self.get_query_argument("token", None)):
+                self.set_status(403)
+                self.finish("clvis view: open the URL the server printed (with its token)\n")
+                return
+            self.set_header("Content-Type", "text/html; charset=utf-8")
+            self.set_header("Cache-Control", "no-store")
+            self.finish(_page())
+
+    class SocketHandler(tornado.websocket.WebSocketHandler):
+        def initialize(self, server: ViewServer) -> None:
+            self.server = server
+            self.outbox = Outbox(self._send)
+
+        def prepare(self) -> None:
+            if not token_ok(self.server.token, self.get_query_argument("token", None)):
+                raise tornado.web.HTTPError(403)
+
+        def open(self) -> None:
+            self.server.opened(self)
+
+        def on_message(self, message) -> None:
+            try:
+                msg = json.loads(message)
+                if not isinstance(msg, dict):
+                    raise ValueError("expected a JSON object")
+                self.server.handle(msg)
+            except (ValueError, TypeError) as e:
+                self.write_message(json.dumps({"type": "error", "message": str(e)}))
+
+        def on_close(self) -> None:
+            self.server.closed(self)
+
+        def _send(self, data: bytes) -> None:
+            t0 = time.perf_counter()
+            try:
+                fut = self.write_message(data, binary=True)
+            except tornado.websocket.WebSocketClosedError:
+                return
+
+            def done(_f) -> None:
+                self.server.last_send = time.perf_counter() - t0
+                self.outbox.done()
+
+            fut.add_done_callback(done)
+
+    return PageHandler, SocketHandler

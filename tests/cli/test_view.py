@@ -1,0 +1,70 @@
+"""`clvis view`: what it reads, its errors, and --measure (no browser: the
+browser test is tests/view/test_browser.py)."""
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clvis import cli
+from clvis.cli import view as view_cmd
+
+pytest.importorskip("tornado", reason="the view extra (tornado) is not installed")
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+
+
+def _args(*argv):
+    p, commands = cli._parser()
+    return p.parse_args(["view", *argv])
+
+
+def test_measure_prints_each_mode(capsys):
+    assert cli.main(["view", "--dataset", "marschner-lobb", "--measure", "iso", "--size", "128x96"]) == 0
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith("iso ")]
+    assert len(rows) == 2 and "interaction" in rows[0] and "64x48" in rows[0] and "128x96" in rows[1]
+
+
+def test_errors_are_one_line(capsys, tmp_path):
+    assert cli.main(["view", str(tmp_path / "missing.ply")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    assert cli.main(["view", "--dataset", "marschner-lobb", "--measure", "points"]) == 2
+    assert "no mode 'points'" in capsys.readouterr().err
+    assert cli.main(["view", str(DATA / "pyvista_ant.ply"), "--dataset", "terrain"]) == 2
+    assert "leave it out" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", ["pyvista_ant.ply", "laspy_simple.laz"])
+def test_third_party_point_files(name, tmp_path):
+    pytest.importorskip("laspy")
+    path = tmp_path / name
+    shutil.copy(DATA / name, path)
+    scene = view_cmd.load_scene(_args(str(path)))
+    assert scene.kind == "points" and "points" in scene.modes
+    frame = next(scene.frames(_camera(scene), 64, 48, scene.settings, lambda: False))
+    assert frame.image.shape == (48, 64, 3) and frame.image.std() > 0
+
+
+def test_volume_files_npy_and_nifti(tmp_path):
+    from clvis import datasets
+
+    vol = datasets.marschner_lobb(24)["volume"]
+    np.save(tmp_path / "v.npy", vol)
+    np.save(tmp_path / "p.npy", np.random.default_rng(0).random((100, 3)).astype(np.float32))
+    assert view_cmd.load_scene(_args(str(tmp_path / "v.npy"))).kind == "volume"
+    assert view_cmd.load_scene(_args(str(tmp_path / "p.npy"))).kind == "points"
+    nib = pytest.importorskip("nibabel")
+    nib.save(nib.Nifti1Image(vol.transpose(2, 1, 0), np.diag([2.0, 2.0, 2.0, 1.0])), tmp_path / "v.nii.gz")
+    scene = view_cmd.load_scene(_args(str(tmp_path / "v.nii.gz")))
+    assert scene.kind == "volume" and np.allclose(scene.hi - scene.lo, 2.0 * 23)
+    frames = list(scene.frames(_camera(scene), 48, 32, scene.settings, lambda: False))
+    assert frames[-1].final and frames[-1].info["completion"] == 1.0
+
+
+def _camera(scene):
+    from clvis.view import Orbit
+
+    o = Orbit(scene.lo, scene.hi, points=scene.fit_points)
+    return o.camera(4 / 3)

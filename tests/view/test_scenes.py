@@ -1,0 +1,130 @@
+"""Scenes and the Python entry point (no browser)."""
+
+import json
+import urllib.request
+
+import numpy as np
+import pytest
+
+import clvis
+from clvis.view import Orbit, PointScene, VolumeScene, scene_for
+
+pytest.importorskip("tornado", reason="the view extra (tornado) is not installed")
+
+
+@pytest.fixture(scope="module")
+def points():
+    rng = np.random.default_rng(2)
+    pos = rng.random((5000, 3)).astype(np.float32)
+    return clvis.PointCloud(pos, attributes={"height": pos[:, 2] * 10})
+
+
+def test_settings_are_checked(points):
+    s = PointScene(points)
+    assert s.choices["color_by"] == ["height"] and s.modes == ["points", "lidar", "gaussians"]
+    s.update({"colormap": "magma", "point_size": 3})
+    assert s.settings["colormap"] == "magma" and s.settings["point_size"] == 3
+    for bad, msg in (
+        ({"mode": "narvis"}, "mode: expected one of"),  # no velocity: no NARVis
+        ({"point_size": 99}, "point_size: expected 1..16"),
+        ({"point_size": "big"}, "expected a number"),
+        ({"path": "/etc/passwd"}, "unknown setting 'path'"),
+    ):
+        with pytest.raises(ValueError, match=msg):
+            s.update(bad)
+    assert s.settings["point_size"] == 3  # a refused change changes nothing
+
+
+def test_point_size_and_colormap_change_the_picture(points):
+    s = PointScene(points)
+    cam = Orbit(s.lo, s.hi, points=s.fit_points).camera(1.0)
+    one = next(s.frames(cam, 96, 96, s.settings, lambda: False)).image
+    s.update({"point_size": 3})
+    three = next(s.frames(cam, 96, 96, s.settings, lambda: False)).image
+    from clvis.images import BACKGROUND
+
+    bg = np.array(BACKGROUND)
+    assert (three != bg).any(axis=2).sum() > (one != bg).any(axis=2).sum()
+
+
+def test_progressive_iso_stops_when_superseded():
+    vol = clvis.datasets.marschner_lobb(32)["volume"]
+    s = VolumeScene(vol, isovalue=0.5)
+    cam = Orbit(s.lo, s.hi).camera(1.0)
+    full = list(s.frames(cam, 64, 64, s.settings, lambda: False))
+    assert len(full) >= 2 and full[-1].final and not full[0].final
+    assert [f.info["pass"] for f in full] == list(range(1, len(full) + 1))
+    cut = list(s.frames(cam, 64, 64, s.settings, lambda: True))  # a newer view came at once
+    assert len(cut) == 1 and not cut[0].final
+
+
+def test_scene_for_rejects_what_it_cannot_show():
+    with pytest.raises(TypeError, match="clvis.view: expected"):
+        scene_for(np.zeros((4, 4)))
+
+
+def test_clvis_view_in_python(points):
+    v = clvis.view(points, width=640, height=360)
+    try:
+        html = v._repr_html_()
+        assert "<iframe" in html and v.url in html and 'width="640"' in html
+        with urllib.request.urlopen(v.url, timeout=10) as r:
+            assert r.status == 200
+        assert isinstance(clvis.view, type(json)) and callable(clvis.view)  # the module, callable
+        assert clvis.view.Viewer is type(v)
+    finally:
+        v.close()
+
+
+def test_gaussian_modes_draw_something(points):
+    from clvis.images import BACKGROUND
+
+    bg = np.array(BACKGROUND)
+    s = PointScene(points)
+    s.update({"mode": "gaussians"})
+    cam = Orbit(s.lo, s.hi, points=s.fit_points).camera(1.0)
+    f = next(s.frames(cam, 48, 48, s.settings, lambda: False))
+    assert f.info["gaussians"] == 5000 and (f.image != bg).any(axis=2).mean() > 0.05
+    v = VolumeScene(clvis.datasets.marschner_lobb(24)["volume"], isovalue=0.5)
+    v.update({"mode": "gaussians", "lod": "low"})
+    f = next(v.frames(Orbit(v.lo, v.hi).camera(1.0), 48, 48, v.settings, lambda: False))
+    assert f.info["gaussians"] > 0 and (f.image != bg).any(axis=2).mean() > 0.05
+
+
+def test_hemisphere_presets_are_the_narvis_views(points):
+    from clvis.view import ViewServer
+
+    s = ViewServer(PointScene(points))
+    try:
+        cams = list(clvis.hemisphere_cameras(s.orbit.lo, s.orbit.hi))
+        for k in (0, 37, 127):
+            s.handle({"type": "preset", "hemisphere": k})
+            assert np.allclose(s.orbit.eye, cams[k].eye) and np.allclose(
+                s.orbit.target, (s.orbit.lo + s.orbit.hi) / 2
+            )
+        for bad in (128, -1, "3", True):
+            with pytest.raises(ValueError, match="hemisphere: expected a view 0..127"):
+                s.handle({"type": "preset", "hemisphere": bad})
+    finally:
+        s.close()
+
+
+def test_split_views_show_both_sides_and_the_psnr():
+    from clvis.view.scenes import psnr, split
+
+    a, b = np.zeros((4, 6, 3), np.uint8), np.full((4, 6, 3), 255, np.uint8)
+    assert psnr(a, a) == float("inf") and psnr(a, b) == 0.0
+    both = split(a, b)
+    assert (both[:, :2] == 0).all() and (both[:, 4:] == 255).all() and (both[:, 2:4] == 200).all()
+
+    d = clvis.datasets.hurricane(20_000)
+    cloud = clvis.PointCloud(d["positions"], attributes=d["attributes"], velocity=d["velocity"])
+    s = PointScene(cloud)
+    s.update({"mode": "narvis|gaussians", "color_by": "temperature"})
+    f = next(s.frames(Orbit(s.lo, s.hi, points=s.fit_points).camera(1.0), 64, 64, s.settings, lambda: False))
+    assert 5 < f.info["psnr dB"] < 60 and f.times["post"] > 0
+
+    v = VolumeScene(clvis.datasets.marschner_lobb(32)["volume"], isovalue=0.5)
+    v.update({"mode": "infill|iso"})
+    f = next(v.frames(Orbit(v.lo, v.hi).camera(1.0), 64, 64, v.settings, lambda: False))
+    assert f.info["completion"] >= 0.85 and f.info["psnr dB"] > 15 and f.final

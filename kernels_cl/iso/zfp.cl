@@ -38,12 +38,17 @@ kernel void decode_volume(global const ulong *stream, uint rate, uint nx, uint n
     int q[64], emax;
     if (!clvis_zfp_decode_volume_block(stream, rate, nx, ny, nz, get_global_id(0), c, e, q, &emax))
         return;
+    float v[64];
+    clvis_zfp_values(q, emax, v);
     uint x0 = 4u * c[0], y0 = 4u * c[1], z0 = 4u * c[2];
     for (uint z = 0; z < e[2]; ++z)
         for (uint y = 0; y < e[1]; ++y) {
             global float *row = out + ((ulong)(z0 + z) * ny + (y0 + y)) * nx + x0;
-            for (uint x = 0; x < e[0]; ++x)
-                row[x] = clvis_zfp_value(q, 16u * z + 4u * y + x, emax);
+            if (e[0] == 4u)
+                vstore4(vload4(0, v + 16u * z + 4u * y), 0, row);
+            else
+                for (uint x = 0; x < e[0]; ++x)
+                    row[x] = v[16u * z + 4u * y + x];
         }
 }
 

@@ -113,6 +113,10 @@ TARGETS = {
             label="device memory / decoded volume",
         ),
         Target(ISO_OP, "skimage.measure.marching_cubes", 1, "cpu"),
+        # ZFP decoding on 2 cores against one zfpy thread ("2 x zfpy", the
+        # ideal two-thread zfp, is in the table beside it)
+        Target("zfp_decode[turbulence 256^3, rate 8]", "zfpy (serial)", 2.5, "cpu"),
+        Target("zfp_decode[turbulence 256^3, rate 16]", "zfpy (serial)", 3, "cpu"),
     ],
     "distributed": [
         # on PoCL's CPU device (2 cores): Dask workers of one thread each

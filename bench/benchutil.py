@@ -20,9 +20,16 @@ def run(benchmark, fn, *, op, impl, role, n, nbytes, queue=None, rounds=11, **in
     benchmark.group = op
     benchmark.extra_info.update(op=op, impl=impl, role=role, n=int(n), bytes=int(nbytes), **info)
     cpu: list[float] = []
+    # CLVIS_BENCH_SLOWDOWN=k runs each clvis case k times a round: a real,
+    # known slow-down for testing `clvis bench --compare --fail-on`
+    repeat = int(os.environ.get("CLVIS_BENCH_SLOWDOWN", "1")) if role == "clvis" else 1
 
     def call():
         r0 = resource.getrusage(resource.RUSAGE_SELF)
+        for _ in range(repeat - 1):
+            fn()
+            if queue is not None:
+                queue.finish()
         r = fn()
         if queue is not None:
             queue.finish()

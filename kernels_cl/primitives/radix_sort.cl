@@ -102,8 +102,8 @@ void radix_upsweep(global const KEY_T *restrict keys, const ulong n,
     const ulong g = get_group_id(0);
     const ulong G = get_num_groups(0);
     const uint lid = get_local_id(0);
-    const ulong start = g * per_group;
-    const ulong end = min(n, start + per_group);
+    ulong start, end;
+    clvis_group_range(n, per_group, &start, &end);
     KEY_T ors = 0;
 
 #if WG == 1
@@ -121,9 +121,7 @@ void radix_upsweep(global const KEY_T *restrict keys, const ulong n,
 #else
     local uint count[RADIX];
     local KEY_T or_scratch[WG];
-    for (uint d = lid; d < RADIX; d += WG)
-        count[d] = 0;
-    barrier(CLK_LOCAL_MEM_FENCE);
+    clvis_wg_zero(count, RADIX);
     for (ulong i = start + lid; i < end; i += WG) {
         const KEY_T k = keys[i];
         ors |= k;
@@ -154,8 +152,8 @@ void radix_scatter(global const KEY_T *restrict keys_in,
     const ulong g = get_group_id(0);
     const ulong G = get_num_groups(0);
     const uint lid = get_local_id(0);
-    const ulong start = g * per_group;
-    const ulong end = min(n, start + per_group);
+    ulong start, end;
+    clvis_group_range(n, per_group, &start, &end);
 
 #if WG == 1
     uint next[RADIX];

@@ -2,7 +2,11 @@
  *
  * ABI
  * ---
- * No defines, no compiler flags. Includes clvis/zfp.h (the stream format and
+ * No defines, no compiler flags. The block-decoding kernels carry
+ * vec_type_hint(ulong16): they do their own vector work (zfp.h's transpose
+ * and dequantization), and the hint keeps Intel's CPU compiler from also
+ * vectorizing across work-items, whose data-dependent bit parsing then
+ * diverges lane by lane (3x slower there; PoCL and GPUs ignore it). Includes clvis/zfp.h (the stream format and
  * the per-block decode, documented there); bit-exact with zfp 1.0's own
  * decompression (zfpy.compress_numpy(v, rate=r, write_header=False)).
  *
@@ -31,7 +35,7 @@
  */
 #include "clvis/zfp.h"
 
-kernel void decode_volume(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,
+kernel __attribute__((vec_type_hint(ulong16))) void decode_volume(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,
                           global float *out)
 {
     uint c[3], e[3];
@@ -52,7 +56,7 @@ kernel void decode_volume(global const ulong *stream, uint rate, uint nx, uint n
         }
 }
 
-kernel void decode_blocks(global const ulong *stream, uint rate, uint nblocks_total,
+kernel __attribute__((vec_type_hint(ulong16))) void decode_blocks(global const ulong *stream, uint rate, uint nblocks_total,
                           global const uint *ids, uint count, global float *out_bricks)
 {
     uint j = get_global_id(0);

@@ -97,6 +97,8 @@ TARGETS = {
         Target("raster[morton order]", "numpy reference render (np.minimum.at)", 12, "cpu"),
         Target("raster[morton order]", "copy_pct", 25, "cpu"),
         Target("raster[morton order]", "np.minimum.at alone (keys precomputed)", 1, "cpu"),
+        # the same float32 projection and scatter compiled by numba on 2 threads
+        Target("raster[morton order]", "numba parallel (2 threads, visibility only)", 1.5, "cpu"),
         # goal on a GPU with NVIDIA's OpenCL
         Target("raster[morton order]", "copy_pct", 60, "gpu"),
     ],

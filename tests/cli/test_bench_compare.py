@@ -88,7 +88,13 @@ def test_real_runs(tmp_path, capsys, monkeypatch):
     base, again, slow = (str(tmp_path / f"{n}.json") for n in ("base", "again", "slow"))
     args = ["bench", "primitives", "--scale", "0.25", "--select", "histogram"]
     assert cli.main([*args, "--json", base]) == 0
-    assert cli.main([*args, "--json", again, "--compare", base, "--fail-on", "15%"]) == 0
+    # the same code: on a machine shared with other jobs a run can still be
+    # slower beyond 15 % in both figures now and then, so one more try (the
+    # injected slow-down below gets none)
+    rc = cli.main([*args, "--json", again, "--compare", base, "--fail-on", "15%"])
+    if rc != 0:
+        rc = cli.main([*args, "--json", again, "--compare", base, "--fail-on", "15%"])
+    assert rc == 0
     assert "histogram[256 bins]" in capsys.readouterr().out
     monkeypatch.setenv("CLVIS_BENCH_SLOWDOWN", "2")
     assert cli.main([*args, "--json", slow, "--compare", base, "--fail-on", "15%"]) == 1

@@ -133,3 +133,49 @@ def test_iso(benchmark, queue, size, completion, impl):
             time_scale=rays / m,
             subset_rays=m,
         )
+
+
+# ZFP fixed-rate decoding of the whole volume (clvis.zfp.decode into a device
+# array) against zfpy's serial decompression of the same headerless stream;
+# "2 x zfpy" (zfpy's time halved) is the ideal two-thread zfp beside it.
+ZFP_RATES = (8, 16)
+ZFP_CASES = [(r, i) for r in ZFP_RATES for i in ("clvis", "zfpy", "zfpy2")]
+
+
+def zfp_stream(rate):
+    key = ("zfp", rate)
+    if key not in _cache:
+        v = datasets.turbulence(N)["volume"]
+        _cache[key] = (v, zfp.compress(v, rate))
+    return _cache[key]
+
+
+@pytest.mark.parametrize("rate,impl", ZFP_CASES, ids=[f"rate{r}-{i}" for r, i in ZFP_CASES])
+def test_zfp_decode(benchmark, queue, rate, impl):
+    import zfpy
+
+    v, zv = zfp_stream(rate)
+    op = f"zfp_decode[turbulence {N}^3, rate {rate}]"
+    common = dict(op=op, n=v.size, nbytes=zv.nbytes + v.nbytes, rounds=5)
+    if impl == "clvis":
+        dev = zv.to_device(queue)
+        out = zfp.decode(dev, v.shape, rate, queue=queue, host=False)
+        want = zfpy._decompress(zv.stream, zfpy.type_float, list(v.shape), rate=float(rate))
+        assert np.array_equal(out.get().view(np.uint32), want.view(np.uint32))  # bit-exact
+        run(
+            benchmark,
+            lambda: zfp.decode(dev, v.shape, rate, queue=queue, host=False),
+            impl=impl,
+            role="clvis",
+            queue=queue,
+            **common,
+        )
+    else:
+        run(
+            benchmark,
+            lambda: zfpy._decompress(zv.stream, zfpy.type_float, list(v.shape), rate=float(rate)),
+            impl="zfpy (serial)" if impl == "zfpy" else "2 x zfpy (ideal two-thread zfp: zfpy's time / 2)",
+            role="peer",
+            time_scale=1.0 if impl == "zfpy" else 0.5,
+            **common,
+        )

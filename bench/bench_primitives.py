@@ -170,7 +170,54 @@ def _passes(queue):
     return -(-32 // bits)
 
 
-@pytest.mark.parametrize("impl", ["clvis", "clvis-host", "numpy", "pyopencl", "copy"])
+NUMBA_THREADS = 2
+_numba_sort = {}
+
+
+def numba_lsd_sort():
+    """A 2-thread LSD radix sort of uint32 pairs compiled by numba (8-bit
+    digits, 4 passes; per pass: each thread counts its half, a prefix over
+    (digit, thread), each thread scatters its half), the compiled peer."""
+    if not _numba_sort:
+        import numba
+
+        @numba.njit(parallel=True, cache=False)
+        def sort(keys, vals, nt):
+            n = keys.shape[0]
+            k0, v0 = keys.copy(), vals.copy()
+            k1, v1 = np.empty_like(keys), np.empty_like(vals)
+            per = (n + nt - 1) // nt
+            hist = np.zeros((nt, 256), np.int64)
+            for p in range(4):
+                shift = np.uint32(8 * p)
+                src_k, src_v = (k0, v0) if p % 2 == 0 else (k1, v1)
+                dst_k, dst_v = (k1, v1) if p % 2 == 0 else (k0, v0)
+                for t in numba.prange(nt):
+                    h = hist[t]
+                    h[:] = 0
+                    for i in range(t * per, min(n, (t + 1) * per)):
+                        h[(src_k[i] >> shift) & np.uint32(255)] += 1
+                at = 0
+                for d in range(256):
+                    for t in range(nt):
+                        c = hist[t, d]
+                        hist[t, d] = at
+                        at += c
+                for t in numba.prange(nt):
+                    nxt = hist[t]
+                    for i in range(t * per, min(n, (t + 1) * per)):
+                        d = (src_k[i] >> shift) & np.uint32(255)
+                        q = nxt[d]
+                        nxt[d] = q + 1
+                        dst_k[q] = src_k[i]
+                        dst_v[q] = src_v[i]
+            return k0, v0
+
+        _numba_sort["sort"] = sort
+    return _numba_sort["sort"]
+
+
+@pytest.mark.parametrize("impl", ["clvis", "clvis-host", "numpy", "numba", "pyopencl", "copy"])
 def test_radix_sort(benchmark, queue, sort_data, impl):
     keys, vals, kd, vd = sort_data
     n = keys.size
@@ -215,6 +262,24 @@ def test_radix_sort(benchmark, queue, sort_data, impl):
             n=n,
             nbytes=model,
             rounds=3,
+        )
+    elif impl == "numba":
+        import numba
+
+        numba.set_num_threads(NUMBA_THREADS)
+        sort = numba_lsd_sort()
+        gk, gv = sort(keys, vals, NUMBA_THREADS)  # compile, and check against numpy's stable sort
+        order = np.argsort(keys, kind="stable")
+        assert np.array_equal(gk, keys[order]) and np.array_equal(gv, vals[order])
+        run(
+            benchmark,
+            lambda: sort(keys, vals, NUMBA_THREADS),
+            op=op,
+            impl=f"numba LSD ({NUMBA_THREADS} threads)",
+            role="peer",
+            n=n,
+            nbytes=model,
+            rounds=5,
         )
     elif impl == "pyopencl":
         from pyopencl.algorithm import RadixSort

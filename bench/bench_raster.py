@@ -13,7 +13,11 @@ Per op: clvis render + resolve on device arrays (index, depth, rgba planes;
 nothing read back), the NumPy reference render a user would write
 (clvis.reference.raster.visibility: float32 projection, culling, key packing,
 np.minimum.at), np.minimum.at alone on keys and pixel indices computed
-beforehand (the scatter step only), and the device copy kernel over 16 bytes
+beforehand (the scatter step only), the same float32 projection and scatter
+compiled by numba on 2 threads (each thread a z-buffer of its half of the
+points, then a parallel min of the two: what compiled code on the same cores
+does; the visibility buffer only, checked equal to clvis's winners), and the
+device copy kernel over 16 bytes
 per point (DESIGN.md's bytes model: xyz float + rgba), the bandwidth limit:
 
     clvis bench raster
@@ -66,7 +70,73 @@ OPS = {
     "random order": "raster[random order]",
     "culled view": "raster[culled view]",
 }
-IMPLS = ["clvis", "numpy-reference", "numpy-minimum.at", "copy"]
+IMPLS = ["clvis", "numpy-reference", "numpy-minimum.at", "numba", "copy"]
+NUMBA_THREADS = 2
+_numba = {}
+
+
+def numba_render():
+    """The numba peer, compiled once: (render(pos, m, d, consts, vis, bufs), merge)."""
+    if not _numba:
+        import numba
+
+        @numba.njit(parallel=True, cache=False)
+        def render(pos, m, d, c, bufs, vis):
+            # c: near, far, W, H, 0.5, 1 as float32; every step in float32, no fma
+            near, far, fw, fh, half, one = c[0], c[1], c[2], c[3], c[4], c[5]
+            W = np.int64(fw)
+            n = pos.shape[0]
+            nt = bufs.shape[0]
+            per = (n + nt - 1) // nt
+            for t in numba.prange(nt):
+                buf = bufs[t]
+                buf[:] = np.uint64(0xFFFFFFFFFFFFFFFF)
+                depth = np.empty(1024, np.float32)
+                bits = depth.view(np.uint32)
+                pix = np.empty(1024, np.int64)
+                for s0 in range(t * per, min(n, (t + 1) * per), 1024):
+                    s1 = min(s0 + 1024, n, (t + 1) * per)
+                    for i in range(s0, s1):
+                        x, y, z = pos[i, 0], pos[i, 1], pos[i, 2]
+                        cx = ((m[0] * x + m[1] * y) + m[2] * z) + m[3]
+                        cy = ((m[4] * x + m[5] * y) + m[6] * z) + m[7]
+                        cw = ((m[12] * x + m[13] * y) + m[14] * z) + m[15]
+                        dd = ((d[0] * x + d[1] * y) + d[2] * z) + d[3]
+                        r = one / cw
+                        sx = ((cx * r) * half + half) * fw
+                        sy = (half - (cy * r) * half) * fh
+                        ok = (
+                            np.isfinite(x)
+                            and np.isfinite(y)
+                            and np.isfinite(z)
+                            and dd >= near
+                            and dd <= far
+                            and cw > 0
+                            and sx >= 0
+                            and sx < fw
+                            and sy >= 0
+                            and sy < fh
+                        )
+                        depth[i - s0] = dd
+                        pix[i - s0] = np.int64(sy) * W + np.int64(sx) if ok else -1
+                    for i in range(s0, s1):
+                        p = pix[i - s0]
+                        if p >= 0:
+                            b = bits[i - s0]
+                            k = (~b) if b & np.uint32(0x80000000) else (b | np.uint32(0x80000000))
+                            key = (np.uint64(k) << np.uint64(32)) | np.uint64(i)
+                            if key < buf[p]:
+                                buf[p] = key
+            for p in numba.prange(vis.shape[0]):
+                v = bufs[0, p]
+                for t in range(1, nt):
+                    v = min(v, bufs[t, p])
+                vis[p] = v
+
+        _numba["render"] = render
+    return _numba["render"]
+
+
 CASES = [(o, i) for o in OPS for i in IMPLS if not (o == "culled view" and i == "numpy-minimum.at")]
 
 
@@ -124,6 +194,30 @@ def test_raster(benchmark, queue, order, impl):
             n=N,
             nbytes=model,
             rounds=3,
+        )
+    elif impl == "numba":
+        import numba
+
+        numba.set_num_threads(NUMBA_THREADS)
+        render = numba_render()
+        f32 = np.float32
+        m = camera.matrix.astype(f32).ravel()
+        d = camera.depth_row.astype(f32)
+        c = np.array([camera.near, camera.far, W, H, 0.5, 1.0], f32)
+        bufs = np.empty((NUMBA_THREADS, W * H), np.uint64)
+        vis = np.empty(W * H, np.uint64)
+        render(points, m, d, c, bufs, vis)  # compile, and check the winners against clvis's
+        want = rasterizer(queue, order).render(camera, W, H).index.ravel()
+        assert np.array_equal((vis & np.uint64(0xFFFFFFFF)).astype(np.uint32), want)
+        run(
+            benchmark,
+            lambda: render(points, m, d, c, bufs, vis),
+            op=op,
+            impl=f"numba parallel ({NUMBA_THREADS} threads, visibility only)",
+            role="peer",
+            n=N,
+            nbytes=model,
+            rounds=5,
         )
     else:
         src = _cache.get("copy")

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 from collections.abc import Iterable
 from pathlib import Path
@@ -34,6 +35,12 @@ class Row:
     rounds: int
     copy_gbs: float | None = None
     info: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def cpu_s(self) -> float | None:
+        """The best round's process CPU time (user + system), where recorded."""
+        cpu = self.info.get("cpu_s")
+        return min(cpu) * float(self.info.get("time_scale", 1.0)) if cpu else None
 
     @property
     def elems_per_s(self) -> float:
@@ -90,6 +97,8 @@ TARGETS = {
         Target("raster[morton order]", "numpy reference render (np.minimum.at)", 12, "cpu"),
         Target("raster[morton order]", "copy_pct", 25, "cpu"),
         Target("raster[morton order]", "np.minimum.at alone (keys precomputed)", 1, "cpu"),
+        # the same float32 projection and scatter compiled by numba on 2 threads
+        Target("raster[morton order]", "numba parallel (2 threads, visibility only)", 1.5, "cpu"),
         # goal on a GPU with NVIDIA's OpenCL
         Target("raster[morton order]", "copy_pct", 60, "gpu"),
     ],
@@ -113,6 +122,10 @@ TARGETS = {
             label="device memory / decoded volume",
         ),
         Target(ISO_OP, "skimage.measure.marching_cubes", 1, "cpu"),
+        # ZFP decoding on 2 cores against one zfpy thread ("2 x zfpy", the
+        # ideal two-thread zfp, is in the table beside it)
+        Target("zfp_decode[turbulence 256^3, rate 8]", "zfpy (serial)", 2.5, "cpu"),
+        Target("zfp_decode[turbulence 256^3, rate 16]", "zfpy (serial)", 3, "cpu"),
     ],
     "distributed": [
         # on PoCL's CPU device (2 cores): Dask workers of one thread each
@@ -225,7 +238,7 @@ def format_table(rows: list[Row], meta: dict | None = None) -> str:
         )
     head = (
         f"{'implementation':38} {'best':>9} {'median':>9} {'throughput':>14} {'GB/s':>7} "
-        f"{'% copy':>7} {'clvis speed-up':>15}"
+        f"{'% copy':>7} {'clvis speed-up':>15} {'cpu':>9}"
     )
     for op in dict.fromkeys(r.op for r in rows):
         ops = [r for r in rows if r.op == op]
@@ -237,9 +250,10 @@ def format_table(rows: list[Row], meta: dict | None = None) -> str:
                 name = "clvis (numpy in/out, transfers)" if r.impl == "clvis-host" else f"clvis, {r.impl}"
             pct = f"{r.copy_pct:6.0f}%" if r.copy_pct is not None else "      -"
             speed = f"{rat[(op, r.impl)]:14.1f}x" if (op, r.impl) in rat else ""
+            cpu = f"{r.cpu_s * 1e3:7.2f}ms" if r.cpu_s is not None else ""
             lines.append(
                 f"{name:38} {r.min_s * 1e3:7.2f}ms {r.median_s * 1e3:7.2f}ms "
-                f"{_si(r.elems_per_s) + 'el/s':>14} {r.gbs:7.1f} {pct} {speed:>15}"
+                f"{_si(r.elems_per_s) + 'el/s':>14} {r.gbs:7.1f} {pct} {speed:>15} {cpu:>9}"
             )
     return "\n".join(lines)
 
@@ -258,4 +272,82 @@ def format_checks(results: Iterable[tuple[Target, float | None, bool]]) -> str:
             else f"{value:.1f}x"
         )
         lines.append(f"  [{'met' if ok else 'MISSED'}] {t.describe()}: {v}")
+    return "\n".join(lines)
+
+
+@dataclasses.dataclass
+class Change:
+    """One op of a comparison with a baseline run of the same device."""
+
+    op: str
+    anchor: str  # what clvis's time is divided by: the op's other rows ("copy kernel + 2 peers") or "none"
+    base: float  # baseline's clvis best / its anchor
+    now: float
+    base_s: float  # clvis's best time in seconds, baseline and now
+    now_s: float
+    fail_on: float | None
+
+    @property
+    def change(self) -> float:
+        """Relative slow-down of the normalised figure (+0.5 = 50 % slower)."""
+        return self.now / self.base - 1.0
+
+    @property
+    def change_s(self) -> float:
+        """Relative slow-down of clvis's best time itself."""
+        return self.now_s / self.base_s - 1.0
+
+    @property
+    def regressed(self) -> bool:
+        """Slower beyond fail_on both in time and normalised to the anchors: a
+        machine slower for the whole run moves only the time, a noisy anchor
+        only the normalised figure; a slower clvis moves both."""
+        return self.fail_on is not None and self.change > self.fail_on and self.change_s > self.fail_on
+
+
+def normalised(rows: list[Row]) -> dict[str, tuple[float, str, float]]:
+    """op -> (clvis best / anchor, anchor's name, clvis best in seconds).
+
+    The anchor is the geometric mean of the best times of the op's copy
+    kernel and peers, which ran in the same process minutes apart: a machine
+    that is slower for the whole run moves them and clvis alike, and the mean
+    damps the noise of any one of them. An op with neither keeps its best
+    time in seconds (anchor "none")."""
+    out = {}
+    for r in rows:
+        if r.role != "clvis":
+            continue
+        anchors = [a for a in rows if a.op == r.op and a.role in ("copy", "peer") and a.min_s > 0]
+        if anchors:
+            gm = math.exp(sum(math.log(a.min_s) for a in anchors) / len(anchors))
+            copies = sum(a.role == "copy" for a in anchors)
+            peers = len(anchors) - copies
+            name = " + ".join(
+                (["copy kernel"] if copies else [])
+                + ([f"{peers} peer{'s' if peers > 1 else ''}"] if peers else [])
+            )
+            out[r.op] = (r.min_s / gm, name, r.min_s)
+        else:
+            out[r.op] = (r.min_s, "none", r.min_s)
+    return out
+
+
+def compare(base: list[Row], now: list[Row], fail_on: float | None = None) -> list[Change]:
+    """Each op of `now` also in `base` (with the same anchors): its figures in both."""
+    b, n = normalised(base), normalised(now)
+    out = []
+    for op, (value, anchor, secs) in n.items():
+        if op in b and b[op][1] == anchor and b[op][0] > 0 and b[op][2] > 0:
+            out.append(Change(op, anchor, b[op][0], value, b[op][2], secs, fail_on))
+    return out
+
+
+def format_compare(changes: list[Change]) -> str:
+    lines = [f"{'op':56} {'anchor':24} {'baseline':>9} {'now':>9} {'change':>8} {'time':>8}"]
+    for c in changes:
+        flag = "  REGRESSED" if c.regressed else ""
+        lines.append(
+            f"{c.op[:56]:56} {c.anchor[:24]:24} {c.base:9.3g} {c.now:9.3g} {100 * c.change:+7.1f}% "
+            f"{100 * c.change_s:+7.1f}%{flag}"
+        )
     return "\n".join(lines)

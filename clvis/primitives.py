@@ -333,6 +333,11 @@ def compact_indices(
 # radix sort
 
 
+# The CPU form (WG 1) sorts MSD first from this many keys: one pass on the
+# top digit, then each bucket's remaining passes in cache (radix_sort.cl).
+MSD_MIN_N = 1 << 20
+
+
 def radix_sort(
     keys: Any, values: Any = None, *, key_bits: int | None = None, queue: cl.CommandQueue | None = None
 ) -> Any:
@@ -426,6 +431,43 @@ def radix_sort(
         ]
 
     src_k, src_v = kd, vd
+    if wg == 1 and passes >= 2 and n >= MSD_MIN_N:
+        # MSD first: one pass on the top digit into kbuf[0], then every
+        # bucket's remaining passes by one work-item, inside the cache
+        shift = np.uint32((passes - 1) * radix_bits)
+        runtime.launch(queue, k_up, G, 1, buf(src_k), _u64(n), _u64(per), shift, buf(hist), buf(orbits))
+        _scan_into(queue, hist, offsets, hist_total, exclusive=True)
+        runtime.launch(
+            queue,
+            k_sc,
+            G,
+            1,
+            buf(src_k),
+            buf(kbuf[0]),
+            buf(src_v) if src_v is not None else None,
+            buf(vbuf[0]) if vbuf[0] is not None else None,
+            _u64(n),
+            _u64(per),
+            shift,
+            buf(offsets),
+        )
+        k_lsd = runtime.get_kernel(queue, "primitives/radix_sort.cl", "radix_bucket_lsd", defines)
+        runtime.launch(
+            queue,
+            k_lsd,
+            radix,
+            1,
+            buf(kbuf[0]),
+            buf(kbuf[1]),
+            buf(vbuf[0]) if vbuf[0] is not None else None,
+            buf(vbuf[1]) if vbuf[1] is not None else None,
+            _u64(n),
+            np.uint32(G),
+            buf(offsets),
+            np.uint32(passes - 1),
+        )
+        src_k, src_v = kbuf[(passes - 1) % 2], vbuf[(passes - 1) % 2]
+        passes = 0
     for p in range(passes):
         dst_k, dst_v = kbuf[p % 2], vbuf[p % 2]
         shift = np.uint32(p * radix_bits)

@@ -50,7 +50,37 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="print the table of an existing JSON instead of running",
     )
     b.add_argument("--check", action="store_true", help="exit 1 if a target is missed")
+    b.add_argument(
+        "--compare",
+        nargs="?",
+        const=SAVED,
+        type=_report,
+        metavar="BASELINE",
+        help="compare with a saved run of the same device (default: the JSON this run replaces) on "
+        "the normalised figures (clvis's best time / the copy kernel's or fastest peer's in the same run)",
+    )
+    b.add_argument(
+        "--fail-on",
+        type=_percent,
+        metavar="PCT",
+        help="with --compare: exit 1 when an op's normalised figure is more than PCT slower (e.g. 15%%)",
+    )
+    b.add_argument("--select", metavar="EXPR", help="run only the cases pytest -k EXPR selects")
     return b
+
+
+SAVED = ([], {"saved": True})  # --compare without a path: the run's own saved JSON, read before it runs
+
+
+def _percent(text: str) -> float:
+    """--fail-on: "15%" or "15" -> 0.15."""
+    try:
+        v = float(text.strip().removesuffix("%"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: not a percentage such as 15%") from None
+    if not 0 < v < 10000:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a percentage above 0, such as 15%")
+    return v / 100
 
 
 def _bench_dir() -> Path | None:
@@ -63,6 +93,13 @@ def _bench_dir() -> Path | None:
 def cmd(args: argparse.Namespace) -> int:
     from .. import benchreport, runtime
 
+    if args.fail_on is not None and args.compare is None:
+        print("clvis bench: error: --fail-on needs --compare", file=sys.stderr)
+        return 2
+    baseline = args.compare
+    if baseline is SAVED and args.report:
+        print("clvis bench: error: --compare with --report needs the baseline's path", file=sys.stderr)
+        return 2
     if args.report:
         rows, meta = args.report
     else:
@@ -83,6 +120,11 @@ def cmd(args: argparse.Namespace) -> int:
             if args.json
             else (bench / "results" / runtime.device_slug(q) / f"{args.family}.json")
         )
+        if baseline is SAVED:
+            if not out.is_file():
+                print(f"clvis bench: error: --compare: no saved run at {out}", file=sys.stderr)
+                return 2
+            baseline = benchreport.load(out)
         out.parent.mkdir(parents=True, exist_ok=True)
         env = dict(os.environ)
         if args.scale is not None:
@@ -97,6 +139,7 @@ def cmd(args: argparse.Namespace) -> int:
             "no:cacheprovider",
             f"--benchmark-json={out}",
             "--benchmark-disable-gc",
+            *(["-k", args.select] if args.select else []),
         ]
         print("running:", " ".join(cmd), flush=True)
         r = subprocess.run(
@@ -118,6 +161,22 @@ def cmd(args: argparse.Namespace) -> int:
     if results:
         print(f"\ntargets ({meta.get('tuning', 'cpu')} device):")
         print(benchreport.format_checks(results))
+    regressed = False
+    if baseline is not None:
+        base_rows, base_meta = baseline
+        if base_meta.get("device_slug") != meta.get("device_slug"):
+            print(
+                f"clvis bench: error: --compare: the baseline ran on {base_meta.get('device', '?')}, "
+                f"this run on {meta.get('device', '?')}",
+                file=sys.stderr,
+            )
+            return 2
+        changes = benchreport.compare(base_rows, rows, args.fail_on)
+        print("\ncompared with the baseline (normalised: clvis best / anchor best, same run):")
+        print(benchreport.format_compare(changes))
+        regressed = any(c.regressed for c in changes)
+        if regressed:
+            print(f"\nregression beyond {100 * args.fail_on:g}%", file=sys.stderr)
     if args.check and not all(ok for _, _, ok in results):
         return 1
-    return 0
+    return 1 if regressed else 0

@@ -33,6 +33,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from .._keys import key_f32, key_f32_inverse
+
 __all__ = [
     "EMPTY_KEY",
     "Partial",
@@ -53,8 +55,7 @@ def depth_keys(depth: np.ndarray, ids: np.ndarray, covered: np.ndarray) -> np.nd
     elsewhere. f32key maps float32 bits to a uint32 of the same order
     (non-negative floats: sign bit set; negative ones: every bit flipped),
     the inverse of resolve.cl's ``resolve_depth``."""
-    bits = np.ascontiguousarray(depth, np.float32).view(np.uint32)
-    k32 = np.where(bits >> np.uint32(31), ~bits, bits | np.uint32(0x80000000)).astype(np.uint64)
+    k32 = key_f32(depth).astype(np.uint64)
     key = (k32 << np.uint64(32)) | np.asarray(ids).astype(np.uint64)
     return np.where(covered, key, EMPTY_KEY)
 
@@ -68,9 +69,7 @@ def ids_of(key: np.ndarray) -> np.ndarray:
 def depths_of(key: np.ndarray) -> np.ndarray:
     """The float32 depths of `key` (the inverse of depth_keys' f32key on its
     high 32 bits): +inf where empty."""
-    k32 = (key >> np.uint64(32)).astype(np.uint32)
-    bits = np.where(k32 >> np.uint32(31), k32 ^ np.uint32(0x80000000), ~k32)
-    depth = bits.astype(np.uint32).view(np.float32)
+    depth = key_f32_inverse((key >> np.uint64(32)).astype(np.uint32))
     return np.where(key == EMPTY_KEY, np.float32(np.inf), depth).astype(np.float32)
 
 

@@ -156,7 +156,7 @@ kernel void cache_assign(global const uint *ids, global const uint *slots, uint 
     ages[s] = 0u;
 }
 
-kernel void cache_decode(global const ulong *stream, uint rate, uint nblocks,
+kernel __attribute__((vec_type_hint(ulong16))) void cache_decode(global const ulong *stream, uint rate, uint nblocks,
                          global const uint *ids, global const uint *slots, uint count,
                          global float *bricks)
 {

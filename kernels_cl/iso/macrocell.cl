@@ -43,7 +43,7 @@ inline float2 merge(float2 a, float2 b)
     return (float2)(fmin(a.x, b.x), fmax(a.y, b.y));
 }
 
-kernel void block_faces(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,
+kernel __attribute__((vec_type_hint(ulong16))) void block_faces(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,
                         global float2 *faces)
 {
     ulong b = get_global_id(0);

@@ -2,7 +2,11 @@
  *
  * ABI
  * ---
- * No defines, no compiler flags. Includes clvis/zfp.h (the stream format and
+ * No defines, no compiler flags. The block-decoding kernels carry
+ * vec_type_hint(ulong16): they do their own vector work (zfp.h's transpose
+ * and dequantization), and the hint keeps Intel's CPU compiler from also
+ * vectorizing across work-items, whose data-dependent bit parsing then
+ * diverges lane by lane (3x slower there; PoCL and GPUs ignore it). Includes clvis/zfp.h (the stream format and
  * the per-block decode, documented there); bit-exact with zfp 1.0's own
  * decompression (zfpy.compress_numpy(v, rate=r, write_header=False)).
  *
@@ -31,23 +35,28 @@
  */
 #include "clvis/zfp.h"
 
-kernel void decode_volume(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,
+kernel __attribute__((vec_type_hint(ulong16))) void decode_volume(global const ulong *stream, uint rate, uint nx, uint ny, uint nz,
                           global float *out)
 {
     uint c[3], e[3];
     int q[64], emax;
     if (!clvis_zfp_decode_volume_block(stream, rate, nx, ny, nz, get_global_id(0), c, e, q, &emax))
         return;
+    float v[64];
+    clvis_zfp_values(q, emax, v);
     uint x0 = 4u * c[0], y0 = 4u * c[1], z0 = 4u * c[2];
     for (uint z = 0; z < e[2]; ++z)
         for (uint y = 0; y < e[1]; ++y) {
             global float *row = out + ((ulong)(z0 + z) * ny + (y0 + y)) * nx + x0;
-            for (uint x = 0; x < e[0]; ++x)
-                row[x] = clvis_zfp_value(q, 16u * z + 4u * y + x, emax);
+            if (e[0] == 4u)
+                vstore4(vload4(0, v + 16u * z + 4u * y), 0, row);
+            else
+                for (uint x = 0; x < e[0]; ++x)
+                    row[x] = v[16u * z + 4u * y + x];
         }
 }
 
-kernel void decode_blocks(global const ulong *stream, uint rate, uint nblocks_total,
+kernel __attribute__((vec_type_hint(ulong16))) void decode_blocks(global const ulong *stream, uint rate, uint nblocks_total,
                           global const uint *ids, uint count, global float *out_bricks)
 {
     uint j = get_global_id(0);

@@ -87,7 +87,7 @@
 
 static inline float key_to_float(const uint key)
 {
-    return as_float((key & 0x80000000u) ? (key & 0x7FFFFFFFu) : ~key);
+    return as_float(clvis_key_f32_inverse(key));
 }
 
 static inline int rgbda_kept(const float depth, const float alpha)

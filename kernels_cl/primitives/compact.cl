@@ -64,23 +64,20 @@
 
 CLVIS_DEFINE_WG_SCAN(wg_scan, uint)
 CLVIS_DEFINE_WG_SUM(sum_before, uint, wg_scan)
+CLVIS_DEFINE_WG_TOTAL(wg_total, uint, wg_scan)
 
 kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
 void compact_count(global const FLAG_T *restrict flags, const ulong n,
                    const ulong per_group, global uint *restrict counts)
 {
-    const ulong g = get_group_id(0);
     const uint lid = get_local_id(0);
-    const ulong start = g * per_group;
-    const ulong end = min(n, start + per_group);
+    ulong start, end;
+    clvis_group_range(n, per_group, &start, &end);
     uint c = 0;
     for (ulong i = start + lid; i < end; i += WG)
         c += (flags[i] != 0);
     local uint scratch[WG];
-    uint total;
-    wg_scan(c, scratch, &total);
-    if (lid == 0)
-        counts[g] = total;
+    wg_total(c, scratch, counts);
 }
 
 /* Copy row `i` of x, or write the index i, to output slot `pos`. */
@@ -106,8 +103,8 @@ inline void compact_range(global const ELEM_T *x, global const FLAG_T *flags,
 {
     const ulong g = get_group_id(0);
     const uint lid = get_local_id(0);
-    const ulong start = g * per_group;
-    const ulong end = min(n, start + per_group);
+    ulong start, end;
+    clvis_group_range(n, per_group, &start, &end);
     const uint first = sum_before(counts, g, scratch);
     const uint stop = first + counts[g];   /* this range's output is [first, stop) */
 

@@ -31,6 +31,8 @@
 #ifndef KEY_T
 #define KEY_T uint
 #endif
+#include "clvis/workgroup.h"
+
 #ifndef WG
 #define WG 1
 #endif
@@ -43,15 +45,11 @@ void histogram_local(global const KEY_T *restrict keys, const ulong n,
                      const ulong per_group, const uint nbins,
                      global uint *restrict counts, global uint *restrict overflow)
 {
-    const ulong g = get_group_id(0);
     const uint lid = get_local_id(0);
-    const ulong start = g * per_group;
-    const ulong end = min(n, start + per_group);
+    ulong start, end;
+    clvis_group_range(n, per_group, &start, &end);
     local uint bins[LOCAL_BINS + 1];         /* bins[nbins]: out of range */
-
-    for (uint b = lid; b <= nbins; b += WG)
-        bins[b] = 0;
-    barrier(CLK_LOCAL_MEM_FENCE);
+    clvis_wg_zero(bins, nbins + 1u);
     for (ulong i = start + lid; i < end; i += WG) {
         const uint k = (uint)keys[i];
         const uint b = (k < nbins) ? k : nbins;

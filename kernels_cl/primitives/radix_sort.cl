@@ -38,6 +38,24 @@
  *     in and out buffers must not overlap. With HAS_VALUES == 0 the value
  *     arguments are not read and may be NULL.
  *
+ * kernel radix_bucket_lsd(global KEY_T *keys_a, global KEY_T *keys_b,
+ *                         global VAL_T *vals_a, global VAL_T *vals_b,
+ *                         ulong n, uint G, global const uint *offsets,
+ *                         uint lsd_passes)                    (WG == 1 only)
+ *     The rest of an MSD-first sort: after one upsweep -> scan -> scatter
+ *     pass on the most significant digit into keys_a (vals_a), `offsets`
+ *     that pass's scanned hist, bucket d (the keys of top digit d) is
+ *     [offsets[d G], offsets[(d + 1) G]) (the last ends at n). Work-item d
+ *     (global size RADIX, local size 1) sorts bucket d stably on digits
+ *     shift = 0, RADIX_BITS, ..., (lsd_passes - 1) RADIX_BITS, ping-ponging
+ *     between a and b inside the bucket's range: the sorted bucket ends in
+ *     keys_b (vals_b) when lsd_passes is odd, in keys_a when even. Nothing
+ *     outside the bucket is read or written. One read counts every pass's
+ *     digits; a pass whose digit all the bucket's keys share is skipped
+ *     (clustered keys such as Morton codes), with one copy at the end when
+ *     the skips leave the bucket in the other buffer. lsd_passes <= bits of
+ *     KEY_T / RADIX_BITS - 1.
+ *
  * A sort of B-bit keys is ceil(B / RADIX_BITS) passes with shift = 0,
  * RADIX_BITS, ..., each upsweep -> exclusive scan of hist (scan.cl with
  * T = uint) -> scatter, ping-ponging between two buffers. Keys are moved as raw
@@ -45,6 +63,13 @@
  *
  * Memory traffic per pass: n K (upsweep) + n (2K + 2V) (scatter), K and V the
  * key and value sizes.
+ *
+ * MSD first (the CPU form for arrays past the last-level cache): LSD passes
+ * over arrays larger than the cache scatter into RADIX open write streams
+ * per thread, and each store misses (write-allocate, TLB); at 2^24 pairs the
+ * sort moved only 4-6 GB/s. One pass on the top digit cuts the keys into
+ * RADIX buckets of ~n / RADIX; each bucket (2^16 pairs = 512 KiB at 2^24,
+ * both buffers) then takes its remaining LSD passes in the core's L2.
  *
  * With WG == 1 a work-item walks its range in order and writes each key to its
  * digit's next slot (the fast form for CPU devices; RADIX_BITS 8). With
@@ -81,6 +106,8 @@
 #define ITEMS 8
 #endif
 #define RADIX (1u << RADIX_BITS)
+/* the most LSD passes radix_bucket_lsd makes: all digits but the top one */
+#define LSD_MAX (8 * sizeof(KEY_T) / RADIX_BITS - 1)
 #define TILE (WG * ITEMS)
 
 #if KEY_ORDER == 0
@@ -102,8 +129,8 @@ void radix_upsweep(global const KEY_T *restrict keys, const ulong n,
     const ulong g = get_group_id(0);
     const ulong G = get_num_groups(0);
     const uint lid = get_local_id(0);
-    const ulong start = g * per_group;
-    const ulong end = min(n, start + per_group);
+    ulong start, end;
+    clvis_group_range(n, per_group, &start, &end);
     KEY_T ors = 0;
 
 #if WG == 1
@@ -121,9 +148,7 @@ void radix_upsweep(global const KEY_T *restrict keys, const ulong n,
 #else
     local uint count[RADIX];
     local KEY_T or_scratch[WG];
-    for (uint d = lid; d < RADIX; d += WG)
-        count[d] = 0;
-    barrier(CLK_LOCAL_MEM_FENCE);
+    clvis_wg_zero(count, RADIX);
     for (ulong i = start + lid; i < end; i += WG) {
         const KEY_T k = keys[i];
         ors |= k;
@@ -154,8 +179,8 @@ void radix_scatter(global const KEY_T *restrict keys_in,
     const ulong g = get_group_id(0);
     const ulong G = get_num_groups(0);
     const uint lid = get_local_id(0);
-    const ulong start = g * per_group;
-    const ulong end = min(n, start + per_group);
+    ulong start, end;
+    clvis_group_range(n, per_group, &start, &end);
 
 #if WG == 1
     uint next[RADIX];
@@ -256,3 +281,71 @@ void radix_scatter(global const KEY_T *restrict keys_in,
     }
 #endif
 }
+
+#if WG == 1
+kernel __attribute__((reqd_work_group_size(1, 1, 1)))
+void radix_bucket_lsd(global KEY_T *restrict keys_a, global KEY_T *restrict keys_b,
+                      global VAL_T *restrict vals_a, global VAL_T *restrict vals_b,
+                      const ulong n, const uint G, global const uint *restrict offsets,
+                      const uint lsd_passes)
+{
+    const uint d = get_global_id(0);
+    if (d >= RADIX)
+        return;
+    const ulong lo = offsets[d * G];
+    const ulong hi = d + 1u < RADIX ? offsets[(d + 1u) * G] : n;
+    global KEY_T *sk = keys_a, *dk = keys_b;
+#if HAS_VALUES
+    global VAL_T *sv = vals_a, *dv = vals_b;
+#endif
+    /* every pass's digit counts in one read of the bucket */
+    uint count[LSD_MAX][RADIX];
+    for (uint p = 0; p < lsd_passes; ++p)
+        for (uint e = 0; e < RADIX; ++e)
+            count[p][e] = 0;
+    for (ulong i = lo; i < hi; ++i) {
+        const KEY_T k = sk[i];
+        for (uint p = 0; p < lsd_passes; ++p)
+            count[p][DIGIT(k, p * RADIX_BITS)]++;
+    }
+    for (uint p = 0; p < lsd_passes; ++p) {
+        const uint shift = p * RADIX_BITS;
+        uint *next = count[p];
+        /* a digit every key of the bucket shares moves nothing: skip it */
+        if (next[DIGIT(sk[lo], shift)] == (uint)(hi - lo))
+            continue;
+        uint at = (uint)lo;
+        for (uint e = 0; e < RADIX; ++e) {
+            const uint c = next[e];
+            next[e] = at;
+            at += c;
+        }
+        for (ulong i = lo; i < hi; ++i) {
+            const KEY_T k = sk[i];
+            const uint q = next[DIGIT(k, shift)]++;
+            dk[q] = k;
+#if HAS_VALUES
+            dv[q] = sv[i];
+#endif
+        }
+        global KEY_T *tk = sk;
+        sk = dk;
+        dk = tk;
+#if HAS_VALUES
+        global VAL_T *tv = sv;
+        sv = dv;
+        dv = tv;
+#endif
+    }
+    /* the bucket must end where the host looks: b for odd lsd_passes */
+    global KEY_T *want = (lsd_passes & 1u) ? keys_b : keys_a;
+    if (sk != want) {
+        for (ulong i = lo; i < hi; ++i) {
+            dk[i] = sk[i];
+#if HAS_VALUES
+            dv[i] = sv[i];
+#endif
+        }
+    }
+}
+#endif

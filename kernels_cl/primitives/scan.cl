@@ -138,6 +138,7 @@ inline TV vshift(TV a, T first) { return (TV)(first, a.s012); }
 
 CLVIS_DEFINE_WG_SCAN(wg_scan, T)
 CLVIS_DEFINE_WG_SUM(sum_before, T, wg_scan)
+CLVIS_DEFINE_WG_TOTAL(wg_total, T, wg_scan)
 
 #if WG > 1
 /* local-memory index with one pad word every 32, against bank conflicts */
@@ -172,13 +173,10 @@ kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
 void scan_reduce(global const T *restrict in, const ulong n,
                  const ulong per_group, global T *restrict partials)
 {
-    const ulong g = get_group_id(0);
-    const ulong start = g * per_group;
+    ulong start, end;
+    clvis_group_range(n, per_group, &start, &end);
     local T scratch[WG];
-    T total;
-    wg_scan(reduce_items(in, start, min(n, start + per_group)), scratch, &total);
-    if (get_local_id(0) == 0)
-        partials[g] = total;
+    wg_total(reduce_items(in, start, end), scratch, partials);
 }
 
 #if WG > 1

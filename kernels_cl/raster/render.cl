@@ -297,7 +297,7 @@ inline void soft_pixel(uint i, uint p, float depth, global const uint *ids, glob
                        global uint *accum)
 {
     uint k = vis[clvis_hi_word(p)];
-    float nearest = as_float((k & 0x80000000u) ? (k ^ 0x80000000u) : ~k);
+    float nearest = as_float(clvis_key_f32_inverse(k));
     if (!(depth <= tolerance * nearest))
         return;
     uint id = ids ? ids[i] : i;

@@ -60,13 +60,14 @@
 
 #include "clvis/camera.h"
 #include "clvis/colormap.h"
+#include "clvis/keys.h"
 
 #define RESOLVE_VELOCITY 1u
 #define RESOLVE_RADIUS 2u
 
 inline float resolve_depth(uint dkey)
 {
-    return as_float((dkey & 0x80000000u) ? (dkey ^ 0x80000000u) : ~dkey);
+    return as_float(clvis_key_f32_inverse(dkey));
 }
 
 kernel void resolve(global const uint *vis, uint W, uint H,

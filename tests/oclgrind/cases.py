@@ -119,6 +119,15 @@ def radix_sort(q):
     )
     clvis.radix_sort(rng.integers(0, 2**36, 200, dtype=np.uint64), key_bits=36, queue=q)
     clvis.radix_sort(rng.standard_normal(50), queue=q)
+    # the CPU shape's MSD-first path (radix_bucket_lsd), at a size it would
+    # otherwise leave to the LSD passes
+    msd, clvis.primitives.MSD_MIN_N = clvis.primitives.MSD_MIN_N, 0
+    try:
+        k = rng.integers(0, 2**20, 700).astype(np.uint32)
+        clvis.radix_sort(k, np.arange(700, dtype=np.uint32), key_bits=20, queue=q)
+        clvis.radix_sort(rng.integers(0, 2**40, 300, dtype=np.uint64) | np.uint64(5 << 16), queue=q)
+    finally:
+        clvis.primitives.MSD_MIN_N = msd
 
 
 @case

@@ -75,6 +75,48 @@ def test_adversarial(queue, dtype, kind):
     check(keys, queue)
 
 
+@pytest.fixture
+def msd_always(monkeypatch):
+    """The CPU form's MSD-first path (top digit, then each bucket by LSD in
+    cache) for every size, not only from MSD_MIN_N keys."""
+    monkeypatch.setattr(clvis.primitives, "MSD_MIN_N", 0)
+
+
+@pytest.mark.parametrize("dtype", KEY_DTYPES, ids=lambda d: np.dtype(d).name)
+def test_msd_first(queue, msd_always, dtype):
+    rng = np.random.default_rng(31)
+    dt = np.dtype(dtype)
+    for n in [2, 3, 257, 20011, 300_001]:
+        check(random_keys(n, dt, rng), queue)
+    check(random_keys(20011, dt, rng), queue, with_values=False)
+    # clustered keys: digits every key shares skip their pass, an odd number
+    # of skips ends a bucket in the other buffer (then copied back)
+    n = 50_000
+    info = np.iinfo(dt) if dt.kind != "f" else None
+    if info is not None:
+        hi = np.array(dt.itemsize * 8 - 8, dt)
+        low = rng.integers(0, 1 << 16, n).astype(dt)
+        top = (
+            (rng.integers(0, 256, n).astype(dt) << hi)
+            if dt.kind == "u"
+            else rng.integers(-3, 3, n).astype(dt)
+        )
+        for keys in (low | top if dt.kind == "u" else low + top * (1 << 20), top, np.full(n, 7, dt)):
+            check(keys, queue)
+    check(
+        rng.choice(np.array([-0.0, 0.0, np.inf, -np.inf, np.nan, 1.5], dt), 20011)
+        if dt.kind == "f"
+        else np.full(5, 1, dt),
+        queue,
+    )
+
+
+@pytest.mark.parametrize("key_bits", [1, 9, 17, 30])
+def test_msd_first_key_bits(queue, msd_always, key_bits):
+    rng = np.random.default_rng(key_bits)
+    check(rng.integers(0, 1 << key_bits, 70_001, dtype=np.uint32), queue, key_bits=key_bits)
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64], ids=lambda d: np.dtype(d).name)
 def test_float_total_order(queue, dtype):
     """-inf < ... < -0.0 < +0.0 < ... < +inf < NaN; NaNs of either sign and any

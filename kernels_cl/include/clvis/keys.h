@@ -10,6 +10,10 @@
  *             (every NaN, whatever its sign or payload, maps to the largest key,
  *             so NaNs sort last and keep their input order in a stable sort)
  *
+ * clvis_key_f32_inverse(key) gives back the float bits of a clvis_key_f32
+ * key (a NaN's key, all ones, gives 0x7FFFFFFF, a NaN); as_float of it is the
+ * depth of a depth key (raster/render.cl, raster/resolve.cl, post/pack.cl).
+ *
  * Only integer operations are used: no fp64 support is needed for the 64-bit
  * float keys. Radix sort moves the raw bits and calls these on the fly, so the
  * sorted output keeps every bit of the input (NaN payloads included).
@@ -24,6 +28,12 @@ inline uint clvis_key_f32(uint bits)
     if ((bits & 0x7FFFFFFFu) > 0x7F800000u)     /* NaN */
         return 0xFFFFFFFFu;
     return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
+}
+
+/* the float bits whose clvis_key_f32 is key */
+inline uint clvis_key_f32_inverse(uint key)
+{
+    return (key & 0x80000000u) ? (key ^ 0x80000000u) : ~key;
 }
 
 /* clvis_key_f32 on 8 lanes */

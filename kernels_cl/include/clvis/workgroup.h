@@ -23,6 +23,25 @@
  * The primitives use it to turn per-group partial results into the offset of
  * group g (count = g).
  *
+ * CLVIS_DEFINE_WG_TOTAL(NAME, TYPE, SCAN) defines
+ *
+ *     void NAME(TYPE x, local TYPE *scratch, global TYPE *partials)
+ *
+ * the group-reduction epilogue of the primitives' first passes (scan_reduce,
+ * compact_count): partials[get_group_id(0)] = the sum of x over the group
+ * (SCAN, made by CLVIS_DEFINE_WG_SCAN, joins them; work-item 0 writes).
+ *
+ * Plain functions (no WG needed):
+ *
+ *     void clvis_group_range(ulong n, ulong per_group, ulong *start, ulong *end)
+ *         the prologue of every primitive that cuts n elements into
+ *         contiguous ranges of per_group, one per group: group
+ *         get_group_id(0)'s elements [*start, *end) (the last range may be
+ *         shorter, and empty when the group lies past n).
+ *     void clvis_wg_zero(local uint *a, uint count)
+ *         a[0..count) = 0 by the whole group, then a barrier (the local
+ *         counters of histogram and radix sort); every work-item calls it.
+ *
  * Only local memory and barriers are used: no subgroup operations and no
  * assumption about a warp or SIMD width, so it runs on every OpenCL 1.2 device.
  */
@@ -56,6 +75,28 @@ inline TYPE NAME(global const TYPE *a, const ulong count, local TYPE *scratch)  
     TYPE total;                                                                 \
     SCAN(s, scratch, &total);                                                   \
     return total;                                                               \
+}
+
+#define CLVIS_DEFINE_WG_TOTAL(NAME, TYPE, SCAN)                                 \
+inline void NAME(TYPE x, local TYPE *scratch, global TYPE *partials)            \
+{                                                                               \
+    TYPE total;                                                                 \
+    SCAN(x, scratch, &total);                                                   \
+    if (get_local_id(0) == 0)                                                   \
+        partials[get_group_id(0)] = total;                                      \
+}
+
+inline void clvis_group_range(const ulong n, const ulong per_group, ulong *start, ulong *end)
+{
+    *start = get_group_id(0) * per_group;
+    *end = min(n, *start + per_group);
+}
+
+inline void clvis_wg_zero(local uint *a, const uint count)
+{
+    for (uint i = get_local_id(0); i < count; i += get_local_size(0))
+        a[i] = 0;
+    barrier(CLK_LOCAL_MEM_FENCE);
 }
 
 #endif /* CLVIS_WORKGROUP_H */

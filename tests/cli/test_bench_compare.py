@@ -1,0 +1,101 @@
+"""clvis bench --compare BASELINE --fail-on PCT: a regression of clvis beyond
+PCT (in its own time and normalised to the run's anchors, the copy kernel and
+the peers) exits 1; a machine slower for the whole run, a noisy anchor or two
+runs of the same code do not."""
+
+import json
+
+import pytest
+
+from clvis import benchreport, cli
+
+OP = "scan[int32]"
+
+
+def _json(path, *, clvis=1e-3, copy=0.5e-3, peers=(3e-3, 4e-3), device="cpu-a"):
+    def b(impl, role, t):
+        return {
+            "extra_info": {"op": OP, "impl": impl, "role": role, "n": 1000, "bytes": 8000, "cpu_s": [t]},
+            "stats": {"median": t * 1.1, "min": t, "rounds": 5},
+        }
+
+    rows = [b("clvis", "clvis", clvis), b("copy kernel", "copy", copy)]
+    rows += [b(f"peer {i}", "peer", t) for i, t in enumerate(peers)]
+    meta = {"device": device, "device_slug": device, "tuning": "cpu", "version": "x", "scale": 1}
+    path.write_text(json.dumps({"clvis": meta, "benchmarks": rows}))
+    return str(path)
+
+
+def _compare(tmp_path, capsys, **now):
+    base = _json(tmp_path / "base.json")
+    cur = _json(tmp_path / "now.json", **now)
+    rc = cli.main(["bench", "primitives", "--report", cur, "--compare", base, "--fail-on", "15%"])
+    return rc, capsys.readouterr()
+
+
+def test_same_figures_pass(tmp_path, capsys):
+    rc, out = _compare(tmp_path, capsys)
+    assert rc == 0 and "+0.0%" in out.out and "REGRESSED" not in out.out
+
+
+def test_clvis_twice_as_slow_fails(tmp_path, capsys):
+    rc, out = _compare(tmp_path, capsys, clvis=2e-3)
+    assert rc == 1 and "REGRESSED" in out.out and "+100.0%" in out.out
+    assert "regression beyond 15%" in out.err
+
+
+def test_whole_machine_slower_passes(tmp_path, capsys):
+    # every row twice as slow: the time moved, the normalised figure did not
+    rc, out = _compare(tmp_path, capsys, clvis=2e-3, copy=1e-3, peers=(6e-3, 8e-3))
+    assert rc == 0 and "REGRESSED" not in out.out
+
+
+def test_one_noisy_anchor_passes(tmp_path, capsys):
+    # the copy kernel alone ran twice as fast: clvis's own time did not move
+    rc, out = _compare(tmp_path, capsys, copy=0.25e-3)
+    assert rc == 0 and "REGRESSED" not in out.out
+
+
+def test_threshold(tmp_path, capsys):
+    assert _compare(tmp_path, capsys, clvis=1.1e-3)[0] == 0  # 10 % < 15 %
+    assert _compare(tmp_path, capsys, clvis=1.2e-3)[0] == 1  # 20 % > 15 %
+
+
+def test_compare_errors(tmp_path, capsys):
+    base = _json(tmp_path / "base.json")
+    other = _json(tmp_path / "other.json", device="gpu-b")
+    assert cli.main(["bench", "primitives", "--report", other, "--compare", base]) == 2
+    assert "baseline ran on cpu-a" in capsys.readouterr().err
+    assert cli.main(["bench", "primitives", "--report", base, "--fail-on", "15%"]) == 2
+    assert "--fail-on needs --compare" in capsys.readouterr().err
+    assert cli.main(["bench", "primitives", "--report", base, "--compare"]) == 2
+    assert "needs the baseline's path" in capsys.readouterr().err
+    assert cli.main(["bench", "primitives", "--report", base, "--compare", base, "--fail-on", "x%"]) == 2
+    assert "not a percentage" in capsys.readouterr().err
+
+
+def test_normalised_anchor_is_the_geometric_mean(tmp_path):
+    rows, _ = benchreport.load(_json(tmp_path / "a.json", clvis=2e-3, copy=1e-3, peers=(4e-3, 2e-3)))
+    value, anchor, secs = benchreport.normalised(rows)[OP]
+    assert value == pytest.approx(1.0) and secs == pytest.approx(2e-3)
+    assert anchor == "copy kernel + 2 peers"
+    assert rows[0].cpu_s == pytest.approx(2e-3)
+
+
+def test_real_runs(tmp_path, capsys, monkeypatch):
+    """Two runs of the same code pass; the same suite with each clvis case
+    run twice a round (CLVIS_BENCH_SLOWDOWN=2, a real 2x slow-down) fails."""
+    base, again, slow = (str(tmp_path / f"{n}.json") for n in ("base", "again", "slow"))
+    args = ["bench", "primitives", "--scale", "0.25", "--select", "histogram"]
+    assert cli.main([*args, "--json", base]) == 0
+    # the same code: on a machine shared with other jobs a run can still be
+    # slower beyond 15 % in both figures now and then, so one more try (the
+    # injected slow-down below gets none)
+    rc = cli.main([*args, "--json", again, "--compare", base, "--fail-on", "15%"])
+    if rc != 0:
+        rc = cli.main([*args, "--json", again, "--compare", base, "--fail-on", "15%"])
+    assert rc == 0
+    assert "histogram[256 bins]" in capsys.readouterr().out
+    monkeypatch.setenv("CLVIS_BENCH_SLOWDOWN", "2")
+    assert cli.main([*args, "--json", slow, "--compare", base, "--fail-on", "15%"]) == 1
+    assert "REGRESSED" in capsys.readouterr().out

@@ -60,7 +60,8 @@ TYPED="clvis/__init__.py clvis/__main__.py clvis/_arrays.py clvis/_version.py cl
        clvis/post/__init__.py clvis/post/names.py clvis/post/nets.py clvis/post/pack.py
        clvis/post/pushpull.py
        clvis/io/__init__.py clvis/io/npy.py clvis/io/volumes.py
-       clvis/distributed/__init__.py clvis/distributed/composite.py"
+       clvis/distributed/__init__.py clvis/distributed/composite.py
+       clvis/view"
 
 cmd=${1:-}
 shift || true

@@ -876,7 +876,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "file",
         nargs="*",
-        help="a PLY, LAS, LAZ, NPY or NPZ point cloud (several: tiles rendered on Dask workers)",
+        help="a PLY, LAS, LAZ, PCD, XYZ/TXT/CSV, NPY or NPZ point cloud (several: tiles rendered on "
+        "Dask workers)",
     )
     r.add_argument(
         "--dataset",

@@ -203,3 +203,30 @@ def test_errors(tmp_path, capsys, args, message):
     rc, out, err = _render(capsys, SIMPLE, *args, "--out", tmp_path, *SMALL)
     assert rc == 2
     assert message in err and err.count("\n") == 1
+
+
+def test_text_and_pcd_files(tmp_path, capsys):
+    """A text export of laspy's sample (x y z r g b, UTM coordinates) renders
+    in its RGB, framed in the file's coordinates; a PCD file too."""
+    cloud = read_points(SIMPLE)
+    xyz = cloud.positions.astype(np.float64) + cloud.origin
+    rows = np.concatenate([xyz, cloud.colors[:, :3]], axis=1)
+    np.savetxt(tmp_path / "scan.xyz", rows, fmt=["%.2f", "%.2f", "%.2f", "%d", "%d", "%d"])
+    rc, out, err = _render(capsys, tmp_path / "scan.xyz", "--out", tmp_path / "x", *SMALL)
+    assert rc == 0, err
+    assert "1,065 points, its colors" in out and "bounds    635619.85.." in out
+    rec = np.zeros(len(xyz), [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("rgb", "<u4")])
+    for k, c in enumerate("xyz"):
+        rec[c] = cloud.positions[:, k]
+    col = cloud.colors.astype(np.uint32)
+    rec["rgb"] = (col[:, 0] << 16) | (col[:, 1] << 8) | col[:, 2]
+    head = (
+        "VERSION 0.7\nFIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\n"
+        f"WIDTH {len(rec)}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(rec)}\nDATA binary\n"
+    )
+    (tmp_path / "scan.pcd").write_bytes(head.encode() + rec.tobytes())
+    rc, out, err = _render(capsys, tmp_path / "scan.pcd", "--out", tmp_path / "p", *SMALL)
+    assert rc == 0, err
+    assert "its colors" in out
+    rc, out, err = _render(capsys, tmp_path / "nothing.pcd", "--out", tmp_path / "n", *SMALL)
+    assert rc == 2 and "no such file" in err

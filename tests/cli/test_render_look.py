@@ -230,3 +230,17 @@ def test_text_and_pcd_files(tmp_path, capsys):
     assert "its colors" in out
     rc, out, err = _render(capsys, tmp_path / "nothing.pcd", "--out", tmp_path / "n", *SMALL)
     assert rc == 2 and "no such file" in err
+
+
+@pytest.mark.parametrize("command", [["render", "--points", "100"], ["iso"], ["gauss"]])
+def test_out_naming_a_file(tmp_path, capsys, command):
+    """--out naming a file (or a path below one) stops before any work."""
+    f = tmp_path / "afile"
+    f.write_text("")
+    for out in (f, f / "sub"):
+        try:
+            rc = cli.main([*command, "--out", str(out), "--quiet"])
+        except SystemExit as e:
+            rc = e.code
+        _, err = capsys.readouterr()
+        assert rc == 2 and "not a folder" in err and err.count("\n") == 1

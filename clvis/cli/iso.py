@@ -299,6 +299,11 @@ def _run_distributed(args) -> int:
 def _run(args) -> int:
     from .. import images, runtime
 
+    if args.infill and args.completion >= 1.0:
+        raise CliError(
+            "--infill fills the rays still running when the render stops; with --completion 1 every "
+            "ray finishes and there is nothing to fill (add --completion 0.85)"
+        )
     volume, spacing, origin, default_iso, (vmin, vmax), source = _load(args)
     iso = args.isovalue if args.isovalue is not None else default_iso
     if not vmin <= iso <= vmax:

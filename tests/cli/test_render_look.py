@@ -244,3 +244,14 @@ def test_out_naming_a_file(tmp_path, capsys, command):
             rc = e.code
         _, err = capsys.readouterr()
         assert rc == 2 and "not a folder" in err and err.count("\n") == 1
+
+
+def test_infill_without_completion(tmp_path, capsys):
+    """--infill with every ray finishing would do nothing: an error first."""
+    try:
+        rc = cli.main(["iso", "--infill", "--size", "32x32", "--quiet", "--out", str(tmp_path)])
+    except SystemExit as e:
+        rc = e.code
+    _, err = capsys.readouterr()
+    assert rc == 2 and "--infill fills the rays still running" in err
+    assert not any(tmp_path.iterdir())  # before any work

@@ -47,7 +47,7 @@ def _numbers(path, what, text, n, kind=float):
     return v
 
 
-def read_vti(path: Path):
+def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z))."""
     raw = path.read_bytes()
     if b"<!DOCTYPE" in raw[:4096] or b"<!ENTITY" in raw[:4096]:
@@ -147,7 +147,7 @@ def _inline_binary(path, body, fa, dtype, n):
         raise DataError(f"{path}: malformed binary array: {e}") from None
 
 
-def read_legacy(path: Path):
+def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     """A legacy .vtk STRUCTURED_POINTS file: (data, spacing zyx, origin xyz);
     the point data's first SCALARS (CELL_DATA and FIELD sections before it are
     passed over)."""

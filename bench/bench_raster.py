@@ -18,7 +18,11 @@ compiled by numba on 2 threads (each thread a z-buffer of its half of the
 points, then a parallel min of the two: what compiled code on the same cores
 does; the visibility buffer only, checked equal to clvis's winners), and the
 device copy kernel over 16 bytes
-per point (DESIGN.md's bytes model: xyz float + rgba), the bandwidth limit:
+per point (DESIGN.md's bytes model: xyz float + rgba), the bandwidth limit.
+
+Eye-dome lighting (clvis.raster.edl) on a 1920x1080 frame of the same scene
+(depth and rgba G-buffers on the device): clvis, its NumPy reference, and the
+copy kernel over its 12 bytes per pixel (depth and rgba in, rgba out):
 
     clvis bench raster
 """
@@ -230,6 +234,60 @@ def test_raster(benchmark, queue, order, impl):
             impl="copy kernel (16 B/point)",
             role="copy",
             n=N,
+            nbytes=2 * src[0].nbytes,
+            queue=queue,
+        )
+
+
+EDL_CASES = ["clvis", "numpy-reference", "copy"]
+
+
+def edl_frame(queue):
+    """The depth and rgba G-buffers of the scene's whole view, on the host."""
+    if "edl" not in _cache:
+        pos, colors, _, _, cam, _ = scene(queue)
+        g = clvis.rasterize(pos, cam, W, H, colors=colors, queue=queue)
+        _cache["edl"] = (g.depth, g.rgba)
+    return _cache["edl"]
+
+
+@pytest.mark.parametrize("impl", EDL_CASES)
+def test_edl(benchmark, queue, impl):
+    depth, rgba = edl_frame(queue)
+    model = 12 * W * H
+    if impl == "clvis":
+        dd, rd = cla.to_device(queue, depth), cla.to_device(queue, rgba)
+        clvis.raster.edl(dd, rd, queue=queue)  # builds the kernel
+        run(
+            benchmark,
+            lambda: clvis.raster.edl(dd, rd, queue=queue),
+            op="edl[1920x1080]",
+            impl=impl,
+            role="clvis",
+            n=W * H,
+            nbytes=model,
+            queue=queue,
+        )
+    elif impl == "numpy-reference":
+        run(
+            benchmark,
+            lambda: ref.edl.edl(depth, rgba),
+            op="edl[1920x1080]",
+            impl="numpy reference",
+            role="peer",
+            n=W * H,
+            nbytes=model,
+            rounds=3,
+        )
+    else:
+        src = (cla.empty(queue, 3 * W * H, np.float32), cla.empty(queue, 3 * W * H, np.float32))
+        run(
+            benchmark,
+            lambda: P.copy(src[0], out=src[1]),
+            op="edl[1920x1080]",
+            impl="copy kernel (12 B/pixel)",
+            role="copy",
+            n=W * H,
             nbytes=2 * src[0].nbytes,
             queue=queue,
         )

@@ -41,7 +41,9 @@ __all__ = [
     "grid_cameras",
     "hemisphere_cameras",
     "min_extent",
+    "point_spacing",
     "ray_buffer",
+    "robust_bounds",
     "singular",
 ]
 
@@ -552,6 +554,81 @@ def _finite_sample(positions: npt.ArrayLike, limit: int = 200_000) -> np.ndarray
     step = max(1, len(positions) // limit)
     p = positions[::step].astype(np.float64)
     return p[np.isfinite(p).all(axis=1)]
+
+
+# Robust framing: the box of the points that lie within ROBUST_FENCE box
+# widths of the ROBUST_PERCENTILE..(100 - ROBUST_PERCENTILE) percentile box,
+# per axis. A Gaussian cloud keeps every point out to 7 sigma, a uniform one
+# all of them; a few stray points (a (0, 0, 0) record in a georeferenced
+# scan) far outside the bulk are left out of the frame.
+ROBUST_PERCENTILE = 1.0
+ROBUST_FENCE = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class RobustBounds:
+    """What :func:`robust_bounds` finds. lo, hi: (3,) float64, the box of the
+    points kept; inside: (N,) bool, the points within the fences (finite
+    ones only); kept, total: how many of the finite points are inside, of
+    how many."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    inside: np.ndarray
+    kept: int
+    total: int
+
+
+def robust_bounds(
+    positions: npt.ArrayLike, percentile: float = ROBUST_PERCENTILE, fence: float = ROBUST_FENCE
+) -> RobustBounds:
+    """The bounds of the bulk of a cloud: per axis, the `percentile` and
+    100 - `percentile` percentiles (of a sample of up to 10^6 points) widened
+    by `fence` times their distance on each side; the points inside all three
+    fences are kept and their min and max are the bounds. ValueError when no
+    point is finite."""
+    p = np.asarray(positions)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"positions: expected shape (N, 3), got {p.shape}")
+    if not (0 <= percentile < 50 and fence >= 0):
+        raise ValueError(f"percentile {percentile!r} must lie in [0, 50) and fence {fence!r} be >= 0")
+    finite = np.isfinite(p).all(axis=1)
+    total = int(finite.sum())
+    if total == 0:
+        raise ValueError("bounds: the cloud has no finite points")
+    sample = _finite_sample(p, 1_000_000)
+    a, b = np.percentile(sample, [percentile, 100 - percentile], axis=0)
+    lo_f, hi_f = a - fence * (b - a), b + fence * (b - a)
+    with np.errstate(invalid="ignore"):
+        inside = finite & ((p >= lo_f) & (p <= hi_f)).all(axis=1)
+    kept = int(inside.sum())
+    q = p[inside] if kept < total else p[finite]
+    return RobustBounds(
+        q.min(axis=0).astype(np.float64), q.max(axis=0).astype(np.float64), inside, kept, total
+    )
+
+
+def point_spacing(camera: Camera, positions: npt.ArrayLike, width: int, height: int) -> float:
+    """The typical distance in pixels between neighbouring points on screen:
+    sqrt(footprint / visible points), the footprint measured as the cells
+    of that spacing's size that hold a point (computed twice: first from the
+    points' screen bounding box). 0 when no point is visible."""
+    p = _finite_sample(positions, 1_000_000)
+    scale = len(np.asarray(positions)) / max(len(p), 1)
+    pr = camera.project(p, width, height)
+    sx, sy = pr.sx[pr.visible].astype(np.float64), pr.sy[pr.visible].astype(np.float64)
+    n = len(sx) * scale
+    if len(sx) == 0:
+        return 0.0
+    area = max((np.ptp(sx) + 1) * (np.ptp(sy) + 1), 1.0)
+    spacing = math.sqrt(area / n)
+    for _ in range(2):
+        cell = max(spacing, 1.0)
+        cells = np.unique(
+            np.floor(sx / cell).astype(np.int64) * (2**31) + np.floor(sy / cell).astype(np.int64)
+        )
+        spacing = math.sqrt(len(cells) * cell * cell / n)
+    return spacing
 
 
 def fit_camera(

@@ -35,7 +35,16 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["apply", "lut", "names", "value_range"]
+__all__ = [
+    "ASPRS_CLASSES",
+    "apply",
+    "categorical",
+    "class_name",
+    "class_palette",
+    "lut",
+    "names",
+    "value_range",
+]
 
 _MAX_ENTRIES = 2**24  # float32(n) and float32(n - 1) are exact up to here
 _F32_MAX = float(np.finfo(np.float32).max)
@@ -210,3 +219,73 @@ class TransferFunction:
 
     def __repr__(self) -> str:
         return f"TransferFunction({self.colormap!r}, value_range={self.value_range})"
+
+
+# ---------------------------------------------------------------- categories
+
+# The ASPRS standard point classes (LAS 1.4, point formats 6-10; 0..12 hold for
+# formats 0-5 too): code -> (name, RGB). Colours chosen here so that the
+# families read at a glance: ground brown, vegetation greens from low to
+# high, buildings red, water blue, noise magenta, wires yellow.
+ASPRS_CLASSES: dict[int, tuple[str, tuple[int, int, int]]] = {
+    0: ("never classified", (150, 150, 150)),
+    1: ("unclassified", (205, 205, 205)),
+    2: ("ground", (166, 118, 66)),
+    3: ("low vegetation", (178, 223, 138)),
+    4: ("medium vegetation", (92, 184, 72)),
+    5: ("high vegetation", (26, 120, 40)),
+    6: ("building", (220, 70, 50)),
+    7: ("low point (noise)", (255, 0, 255)),
+    8: ("model key point", (255, 255, 0)),
+    9: ("water", (50, 110, 230)),
+    10: ("rail", (140, 80, 160)),
+    11: ("road surface", (90, 90, 90)),
+    12: ("overlap", (255, 160, 0)),
+    13: ("wire guard", (250, 230, 120)),
+    14: ("wire conductor", (255, 210, 60)),
+    15: ("transmission tower", (230, 130, 200)),
+    16: ("wire connector", (200, 160, 220)),
+    17: ("bridge deck", (120, 200, 220)),
+    18: ("high noise", (255, 0, 128)),
+}
+
+
+def class_palette() -> np.ndarray:
+    """``(256, 4)`` uint8 RGBA: the ASPRS class colours for codes 0..18, and for
+    the user-definable codes 19..255 hues a golden angle apart (distinct
+    neighbours, stable from file to file)."""
+    table = np.empty((256, 4), np.uint8)
+    table[:, 3] = 255
+    for code in range(256):
+        if code in ASPRS_CLASSES:
+            table[code, :3] = ASPRS_CLASSES[code][1]
+        else:
+            import colorsys
+
+            h = (code * 0.618033988749895) % 1.0
+            table[code, :3] = [round(255 * c) for c in colorsys.hsv_to_rgb(h, 0.65, 0.95)]
+    return table
+
+
+def class_name(code: int) -> str:
+    """The ASPRS name of class `code`, or "class N" for a user-definable one."""
+    return ASPRS_CLASSES[code][0] if code in ASPRS_CLASSES else f"class {code}"
+
+
+def categorical(values: npt.ArrayLike) -> bool:
+    """Whether `values` are class codes: whole numbers in 0..255 (a uint8
+    attribute, or floats that hold only such values), at least one."""
+    v = np.asarray(values)
+    if v.size == 0:
+        return False
+    if v.dtype == np.uint8:
+        return True
+    if v.dtype.kind not in "iuf":
+        return False
+    lo, hi = (
+        np.nanmin(v) if v.dtype.kind == "f" else v.min(),
+        np.nanmax(v) if v.dtype.kind == "f" else v.max(),
+    )
+    if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo and hi <= 255):
+        return False
+    return bool(np.all(np.mod(v[np.isfinite(v)], 1) == 0)) if v.dtype.kind == "f" else True

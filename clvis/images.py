@@ -43,6 +43,7 @@ __all__ = [
     "from_premultiplied",
     "label",
     "label_height",
+    "legend",
     "opaque",
     "save_png",
     "side_by_side",
@@ -391,3 +392,42 @@ def _colour(name: str, c) -> tuple[int, int, int]:
     if not ok:
         raise ValueError(f"{name}: expected an RGB colour of three integers 0..255, got {c!r}")
     return t[0], t[1], t[2]
+
+
+def legend(
+    entries: Sequence[tuple[Sequence[int], str]],
+    width: int,
+    *,
+    background: Sequence[int] = BAND,
+) -> np.ndarray:
+    """A legend band ``(rows, width, 4)``, opaque: each entry (RGB colour,
+    text) as a square swatch and its text, as many to a row as fit (the
+    widest entry sets the column width), in the order given."""
+    width = nonnegative_int("width", width)
+    if width < 2:
+        raise ValueError(f"width: a legend needs at least 2 columns, got {width}")
+    entries = [(_colour(f"entries[{k}]", c), str(t)) for k, (c, t) in enumerate(entries)]
+    size = _text_size(width)
+    row_h = label_height(width)
+    sw = max(4, size * 3 // 4)
+    margin = max(2, size // 3)
+    f = _font(size)
+    col_w = int(max([f.getlength(t) for _, t in entries] + [1])) + sw + 3 * margin
+    cols = max(1, min(len(entries), (width - margin) // max(col_w, 1)))
+    rows = max(1, -(-len(entries) // cols))
+    out = np.empty((rows * row_h, width, 4), np.uint8)
+    out[:] = _colour("background", background) + (255,)
+    cell_w = max(1, (width - margin) // cols)
+    for k, (c, t) in enumerate(entries):
+        r, col = divmod(k, cols)
+        x0, y0 = margin + col * cell_w, r * row_h
+        ys = y0 + (row_h - sw) // 2
+        out[ys : ys + sw, x0 : min(x0 + sw, width)] = c + (255,)
+        tx = x0 + sw + margin
+        if tx < width:
+            band = out[y0 : y0 + row_h, tx : min(x0 + cell_w, width)]
+            if band.shape[1] > 2 * margin:
+                out[y0 : y0 + row_h, tx : min(x0 + cell_w, width)] = _draw_text(
+                    np.ascontiguousarray(band), [(t, "left")], size
+                )
+    return out

@@ -451,3 +451,42 @@ def test_fit_camera_frames_the_points():
     one = np.array([[1.0, 2.0, 3.0]])
     got, want = fit_camera(one, one[0], one[0]), Camera.fit(one[0], one[0])
     np.testing.assert_array_equal(got.matrix, want.matrix)
+
+
+def test_robust_bounds_leaves_out_stray_points():
+    from clvis.camera import robust_bounds
+
+    rng = np.random.default_rng(0)
+    bulk = rng.uniform((698000, 6259000, 10), (699000, 6260000, 260), (20000, 3))
+    p = np.concatenate([bulk, np.zeros((2, 3)), [[np.nan, 0, 0]]])
+    rb = robust_bounds(p)
+    assert rb.total == 20002 and rb.kept == 20000 and not rb.inside[-3:].any()
+    np.testing.assert_array_equal(rb.lo, bulk.min(axis=0))
+    np.testing.assert_array_equal(rb.hi, bulk.max(axis=0))
+    # a uniform or Gaussian cloud keeps every point: its bounds are its min and max
+    for cloud in (bulk, rng.standard_normal((50000, 3))):
+        rb = robust_bounds(cloud)
+        assert rb.kept == rb.total == len(cloud)
+        np.testing.assert_array_equal(rb.hi, cloud.max(axis=0))
+    # a flat cloud (z all one value) keeps its points
+    flat = bulk.copy()
+    flat[:, 2] = 5.0
+    assert robust_bounds(flat).kept == len(flat)
+    with pytest.raises(ValueError, match="no finite points"):
+        robust_bounds(np.full((3, 3), np.nan))
+    with pytest.raises(ValueError, match="shape"):
+        robust_bounds(np.zeros((3, 2)))
+
+
+def test_point_spacing():
+    from clvis.camera import point_spacing
+
+    # a 100 x 100 grid seen from straight above, filling 1000 x 1000 pixels: 10 pixels apart
+    g = np.stack(np.meshgrid(np.arange(100) + 0.5, np.arange(100) + 0.5), -1).reshape(-1, 2)
+    p = np.concatenate([g, np.zeros((len(g), 1))], axis=1).astype(np.float32)
+    cam = Camera.ortho((50, 50, 10), (50, 50, 0), (0, 1, 0), height=100, aspect=1.0, near=1, far=20)
+    assert point_spacing(cam, p, 1000, 1000) == pytest.approx(10, rel=0.05)
+    assert point_spacing(cam, p, 100, 100) == pytest.approx(1, rel=0.05)
+    # nothing in view: 0
+    away = Camera.ortho((500, 500, 10), (500, 500, 0), (0, 1, 0), height=10, aspect=1.0, near=1, far=20)
+    assert point_spacing(away, p, 100, 100) == 0.0

@@ -409,3 +409,31 @@ def test_compose_grid():
         images.compose([a, a[..., :3]])
     with pytest.raises(ValueError, match="columns"):
         images.compose([a], columns=0)
+
+
+def test_class_palette():
+    from clvis.colormap import ASPRS_CLASSES, categorical, class_name, class_palette
+
+    t = class_palette()
+    assert t.shape == (256, 4) and t.dtype == np.uint8 and (t[:, 3] == 255).all()
+    assert tuple(t[2, :3]) == ASPRS_CLASSES[2][1] and class_name(2) == "ground"
+    assert class_name(9) == "water" and class_name(64) == "class 64"
+    # every ASPRS class has its own colour, and 1 and 2 are not two blues
+    assert len({tuple(t[k, :3]) for k in ASPRS_CLASSES}) == len(ASPRS_CLASSES)
+    assert categorical(np.array([1, 2, 2], np.uint8)) and categorical(np.array([0.0, 6.0, 255.0]))
+    assert not categorical(np.array([0.5, 2.0])) and not categorical(np.array([-1, 3]))
+    assert not categorical(np.array([256.0])) and not categorical(np.array([], np.uint8))
+
+
+def test_legend():
+    entries = [((166, 118, 66), "2 ground"), ((50, 110, 230), "9 water")]
+    a = images.legend(entries, 400)
+    assert a.dtype == np.uint8 and a.shape[1] == 400 and (a[..., 3] == 255).all()
+    colours = {tuple(c) for c in a[..., :3].reshape(-1, 3)}
+    assert (166, 118, 66) in colours and (50, 110, 230) in colours
+    # narrow: one entry a row
+    assert images.legend(entries, 60).shape[0] == 2 * images.legend(entries[:1], 60).shape[0]
+    with pytest.raises(ValueError, match="entries\\[0\\]"):
+        images.legend([((300, 0, 0), "x")], 100)
+    with pytest.raises(ValueError, match="width"):
+        images.legend(entries, 1)

@@ -541,7 +541,7 @@ def test_missing_file(tmp_path):
         read_points(tmp_path / "nope.ply")
 
 
-@pytest.mark.parametrize("name", ["points.xyz", "points", "points.ply.gz"])
+@pytest.mark.parametrize("name", ["points.e57", "points", "points.ply.gz"])
 def test_unknown_extension(tmp_path, name):
     path = tmp_path / name
     path.write_bytes(b"1 2 3\n")
@@ -727,3 +727,23 @@ def test_laz_mutations_never_abort(tmp_path, point_format):
     bad = [r for r in results if r not in ("ok", "clvis")]
     assert not bad, bad[:10]
     assert results.count("clvis") > 10  # the mutations do break files
+
+
+@pytest.mark.parametrize("order", ["<", ">"])
+def test_binary_ply_memory_mapped_columns_copied(tmp_path, order):
+    """Binary PLY is memory-mapped (a 2 M-vertex file: a minute row by row,
+    milliseconds mapped); what the cloud holds are copies in native order,
+    so the file is not held."""
+    import plyfile
+
+    v = np.zeros(5, [("x", order + "f4"), ("y", order + "f4"), ("z", order + "f4"), ("value", order + "f8")])
+    v["x"], v["value"] = np.arange(5), np.linspace(0, 1, 5)
+    path = tmp_path / "m.ply"
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")], byte_order=order).write(str(path))
+    c = read_points(path)
+    np.testing.assert_array_equal(c.positions[:, 0], np.arange(5))
+    np.testing.assert_allclose(c.attributes["value"], np.linspace(0, 1, 5))
+    for a in (c.positions, c.attributes["value"]):
+        assert a.dtype.isnative and not isinstance(a, np.memmap) and not isinstance(a.base, np.memmap)
+    path.unlink()  # nothing maps it any more
+    assert c.attributes["value"].sum() == pytest.approx(2.5)

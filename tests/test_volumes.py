@@ -233,7 +233,7 @@ def test_missing_unknown_and_unreadable(tmp_path):
         read_volume(tmp_path / "nope_2x2x2_uint8.raw")
     with pytest.raises(DataError, match="not a file"):
         read_volume(tmp_path)
-    other = tmp_path / "v.vtk"
+    other = tmp_path / "v.mha"
     other.write_bytes(b"x")
     with pytest.raises(DataError, match="unknown volume format") as e:
         read_volume(other)

@@ -234,7 +234,9 @@ def add_output_options(parser: argparse.ArgumentParser, out: str, empty: str) ->
     """--out, --transparent, --progress and --quiet: where the PNGs go and what is
     shown on the way, alike for every command that renders. `empty` names
     what --transparent leaves clear."""
-    parser.add_argument("--out", default=out, metavar="DIR", help=f"folder for the PNGs (default ./{out})")
+    parser.add_argument(
+        "--out", type=out_dir, default=out, metavar="DIR", help=f"folder for the PNGs (default ./{out})"
+    )
     parser.add_argument(
         "--transparent",
         action="store_true",
@@ -246,6 +248,23 @@ def add_output_options(parser: argparse.ArgumentParser, out: str, empty: str) ->
         help="show the progress on stderr even when it is not a terminal",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def out_dir(text: str) -> str:
+    """--out: a folder (made when missing); a file of that name, or below one,
+    is an error before any work starts."""
+    from pathlib import Path
+
+    p = Path(text)
+    for q in (p, *p.parents):
+        if q.exists():
+            if not q.is_dir():
+                what = "is a file" if q == p else f"lies below the file {q}"
+                raise argparse.ArgumentTypeError(
+                    f"{text} {what}, not a folder (--out names the folder for the PNGs)"
+                )
+            break
+    return text
 
 
 def progress_from_args(args: argparse.Namespace, prefix: str) -> Progress:

@@ -60,9 +60,10 @@ above) and prints the figures of each pass.
 Without a FILE it renders an embedded volume: marschner-lobb (64^3, iso 0.5)
 or turbulence (128^3, iso 0.5). FILE: a raw volume named like the Open SciVis
 datasets (<name>_<X>x<Y>x<Z>_<type>.raw, or any .raw with --shape and --dtype),
-a .npy volume [z, y, x], or a NIfTI file (.nii, .nii.gz; a 4-D series with
---volume-index). The default isovalue of a file is Otsu's threshold of its
-samples (scikit-image), which separates a scan's tissue from its background.
+a .npy volume [z, y, x], a NIfTI file (.nii, .nii.gz; a 4-D series with
+--volume-index), or VTK image data (.vti, legacy .vtk structured points).
+The default isovalue of a file is Otsu's threshold of its samples
+(scikit-image), which separates a scan's tissue from its background.
 
 """
     + VIEWS_HELP
@@ -311,6 +312,11 @@ def _run_distributed(args) -> int:
 def _run(args) -> int:
     from .. import images, runtime
 
+    if args.infill and args.completion >= 1.0:
+        raise CliError(
+            "--infill fills the rays still running when the render stops; with --completion 1 every "
+            "ray finishes and there is nothing to fill (add --completion 0.85)"
+        )
     volume, spacing, origin, default_iso, (vmin, vmax), source = _load(args)
     iso = args.isovalue if args.isovalue is not None else default_iso
     if not vmin <= iso <= vmax:

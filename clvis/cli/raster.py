@@ -62,6 +62,8 @@ _OVERVIEW_WIDTH = 2880  # the overview is shrunk by an integer factor to fit thi
 _COORDINATES = ("x", "y", "z")  # --attribute takes these too
 MAX_POINTS = 2**32 - 2  # the Rasterizer's: index 0xFFFFFFFF marks an empty pixel
 MAX_POINT_SIZE = 64  # the Rasterizer's point_size: 1..64 pixels a side
+MAX_AUTO_POINT_SIZE = 16  # --point-size auto: larger points blot out the shape
+_SPARSE_FRACTION = 1000  # a note when the points cover under 1/1000 of the image
 
 
 def _soft_z(text: str) -> float | None:
@@ -87,6 +89,78 @@ def _levels(text: str) -> int:
     return n
 
 
+def _point_size(text: str) -> int | str:
+    """'auto' or a whole number of pixels in 1..MAX_POINT_SIZE."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        return count(1, MAX_POINT_SIZE)(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"expected auto or a positive integer in 1..{MAX_POINT_SIZE}, got {text!r}"
+        ) from None
+
+
+def _value_range(text: str) -> tuple[str, float, float]:
+    """'MIN,MAX' -> ('values', MIN, MAX); 'pLO,pHI' -> ('percentile', LO, HI)."""
+    parts = [t.strip().lower() for t in text.split(",")]
+    pct = len(parts) == 2 and all(p.startswith("p") for p in parts)
+    try:
+        a, b = (float(p[1:] if pct else p) for p in parts)
+    except ValueError:
+        a = b = math.nan
+    ok = math.isfinite(a) and math.isfinite(b) and a < b and (not pct or (0 <= a and b <= 100))
+    if len(parts) != 2 or not ok:
+        raise argparse.ArgumentTypeError(
+            f"expected MIN,MAX (MIN < MAX) or percentiles pLO,pHI such as p2,p98, got {text!r}"
+        )
+    return ("percentile" if pct else "values", a, b)
+
+
+_COLOUR_NAMES = {
+    "black": (0, 0, 0),
+    "white": (255, 255, 255),
+    "grey": (128, 128, 128),
+    "gray": (128, 128, 128),
+    "darkgrey": (24, 24, 28),
+    "darkgray": (24, 24, 28),
+    "lightgrey": (211, 211, 211),
+    "lightgray": (211, 211, 211),
+    "navy": (0, 0, 128),
+    "blue": (0, 0, 255),
+    "skyblue": (135, 206, 235),
+}
+
+
+def _colour(text: str) -> tuple[int, int, int]:
+    """A colour name, #RRGGBB or R,G,B (0..255 each)."""
+    t = text.strip().lower()
+    if t in _COLOUR_NAMES:
+        return _COLOUR_NAMES[t]
+    if re.fullmatch(r"#[0-9a-f]{6}", t):
+        return tuple(int(t[k : k + 2], 16) for k in (1, 3, 5))  # type: ignore[return-value]
+    m = re.fullmatch(r"(\d{1,3}),(\d{1,3}),(\d{1,3})", t.replace(" ", ""))
+    if m and all(int(v) <= 255 for v in m.groups()):
+        return tuple(int(v) for v in m.groups())  # type: ignore[return-value]
+    raise argparse.ArgumentTypeError(
+        f"expected a colour: {', '.join(sorted(_COLOUR_NAMES))}, #RRGGBB or R,G,B (0..255), got {text!r}"
+    )
+
+
+def _edl_strength(text: str) -> float:
+    from ..raster.edl import MAX_EDL_STRENGTH
+
+    try:
+        f = float(text)
+    except ValueError:
+        f = math.nan
+    if not (math.isfinite(f) and 0 < f <= MAX_EDL_STRENGTH):
+        raise argparse.ArgumentTypeError(
+            f"expected an eye-dome lighting strength in (0, {MAX_EDL_STRENGTH:g}] such as 1, got {text!r}"
+        )
+    return f
+
+
 def _embedded(name: str, n: int):
     """An embedded dataset (clvis.datasets) as a clvis.PointCloud."""
     from .. import datasets
@@ -96,11 +170,25 @@ def _embedded(name: str, n: int):
     return PointCloud(d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"])
 
 
+def _informative(a) -> bool:
+    """Whether an array varies: a colour or attribute all one value shows nothing."""
+    a = np.asarray(a)
+    if a.size == 0:
+        return False
+    if a.ndim == 2:
+        return bool((a != a[:1]).any())
+    finite = a[np.isfinite(a)] if a.dtype.kind == "f" else a
+    return finite.size > 0 and bool(finite.min() != finite.max())
+
+
 def _pick_attribute(cloud, requested: str | None, default: str | None, source: str) -> str | None:
     """The attribute to color by: the one asked for (it must exist; x, y and z
-    name the coordinates unless the cloud has attributes of those names), else
-    the default when the cloud has it, else intensity, else the first one;
-    for a cloud of bare positions, z (height); None: the cloud's colors."""
+    name the coordinates unless the cloud has attributes of those names);
+    else an embedded cloud's default; else None, the cloud's own colors, when
+    they are not all one colour (what Open3D, PyVista, Potree and CloudCompare
+    show first); else intensity, else the first attribute that varies; else z
+    (height). An attribute or colour that is one value everywhere is passed
+    over: it shows nothing."""
     names = list(cloud.attributes)
     if requested is not None:
         if requested not in cloud.attributes and requested not in _COORDINATES:
@@ -109,12 +197,14 @@ def _pick_attribute(cloud, requested: str | None, default: str | None, source: s
                 f"{', '.join(names) + ' and ' if names else ''}the coordinates x, y, z"
             )
         return requested
-    for cand in (default, "intensity"):
-        if cand in cloud.attributes:
+    if default in cloud.attributes:
+        return default
+    if cloud.colors is not None and _informative(cloud.colors[:, :3]):
+        return None
+    for cand in ["intensity", *names]:
+        if cand in cloud.attributes and _informative(cloud.attributes[cand]):
             return cand
-    if names:
-        return names[0]
-    return None if cloud.colors is not None else "z"
+    return "z"
 
 
 @dataclasses.dataclass
@@ -123,6 +213,7 @@ class _Panel:
     title: str  # its label in the overview
     image: np.ndarray  # (H, W, 4) uint8 RGBA
     bar: tuple | None = None  # (colormap, vmin, vmax) of its colour bar
+    legend: list | None = None  # [(RGB, text)]: the categories' legend
 
 
 @dataclasses.dataclass
@@ -149,6 +240,22 @@ def _raster_fields(cloud, attribute) -> dict:
     return {"colors": cloud.colors, "attributes": attrs, "velocity": cloud.velocity, "radius": cloud.radius}
 
 
+@dataclasses.dataclass
+class _Look:
+    """How the colour panels look: the attribute's value range (None: its
+    min..max; in the renderer's coordinates), the offset its colour bar adds
+    (the origin along a coordinate, so bars read in the file's coordinates),
+    the class legend of a categorical attribute (then the points carry the
+    class colours and no attribute), eye-dome lighting's strength and radius."""
+
+    value_range: tuple[float, float] | None = None
+    bar_offset: float = 0.0
+    classes: list | None = None  # [(RGB, text)]
+    edl: float | None = None
+    edl_radius: int = 1
+    class_colors: np.ndarray | None = None  # (N, 4) uint8, with classes
+
+
 def _render_panels(
     raster,
     cloud,
@@ -162,34 +269,59 @@ def _render_panels(
     progress,
     point_size=1,
     post=None,
+    look: _Look | None = None,
 ) -> _Rendered:
     """Render one view; the G-buffers and the images a person looks at."""
     from .. import images
-    from ..raster import EMPTY, depth_filter, depth_filter_mask, rgbda
+    from ..raster import EMPTY, depth_filter, depth_filter_mask, edl, rgbda
 
+    look = look or _Look()
+    color_by = None if look.classes is not None else attribute
+    kw = {
+        "color_by": color_by,
+        "colormap": colormap,
+        "point_size": point_size,
+        "value_range": look.value_range,
+    }
     with progress.stage("rendering + resolving G-buffers"):
         t0 = time.perf_counter()
-        g = raster.render(camera, width, height, color_by=attribute, colormap=colormap, point_size=point_size)
+        g = raster.render(camera, width, height, **kw)
         first = time.perf_counter() - t0
         t0 = time.perf_counter()
-        raster.render(camera, width, height, color_by=attribute, colormap=colormap, point_size=point_size)
+        raster.render(camera, width, height, **kw)
         warm = time.perf_counter() - t0
+
+    def shaded(rgba):
+        if look.edl is None:
+            return rgba
+        return edl(g.depth, rgba, look.edl, look.edl_radius, queue=raster.queue)
+
     panels = []
-    if attribute is not None:
+    if look.classes is not None:
+        panels.append(
+            _Panel(
+                f"attribute-{_safe_name(attribute)}",
+                f"{attribute} (ASPRS classes)",
+                shaded(g.rgba),
+                legend=look.classes,
+            )
+        )
+    elif attribute is not None:
         from ..colormap import value_range  # the range render() colours over
 
-        vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
+        vr = look.value_range or value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
+        bar = (colormap, vr[0] + look.bar_offset, vr[1] + look.bar_offset)
         panels.append(
-            _Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({colormap})", g.rgba, (colormap, *vr))
+            _Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({colormap})", shaded(g.rgba), bar)
         )
     if cloud.colors is not None:
-        if attribute is None:
+        if color_by is None and look.classes is None:
             colors = g.rgba
         else:  # the winners' colors, gathered on the host: no second render
             colors = np.zeros_like(g.rgba)
             hit = g.index != EMPTY
             colors[hit] = cloud.colors[g.index[hit]]
-        panels.append(_Panel("colors", "point colors", colors))
+        panels.append(_Panel("colors", "point colors", shaded(colors)))
     panels.append(_Panel("depth", "depth (near = bright)", images.depth_image(g.depth)))
     if g.vel2d is not None:
         angle, magnitude = images.velocity_images(g.vel2d)
@@ -198,14 +330,7 @@ def _render_panels(
     if soft_z is not None:
         with progress.stage(f"soft z (factor {soft_z:g})"):
             soft = raster.render(
-                camera,
-                width,
-                height,
-                color_by=attribute,
-                colormap=colormap,
-                soft_z=soft_z,
-                point_size=point_size,
-                host=False,
+                camera, width, height, **kw, soft_z=soft_z, host=False
             )  # read back its rgba alone
             panels.append(_Panel("soft-z", f"soft z (factor {soft_z:g})", soft.rgba.get()))
     if levels:
@@ -220,16 +345,7 @@ def _render_panels(
             """The documented pipeline, on the device from render to network:
             G-buffers with only the planes the network reads, never read back
             (the panels above are the host render's)."""
-            gd = raster.render(
-                camera,
-                width,
-                height,
-                color_by=attribute,
-                colormap=colormap,
-                point_size=point_size,
-                planes=post.attribute_planes,
-                host=False,
-            )
+            gd = raster.render(camera, width, height, **kw, planes=post.attribute_planes, host=False)
             if post.name == "lidar":  # depth_filter(g) on device planes
                 return post(rgbda(gd.rgba, gd.depth, depth_filter_mask(gd.depth, levels)))
             return post(gd)
@@ -301,7 +417,7 @@ def _shrink(image: np.ndarray, f: int) -> np.ndarray:
     return np.ascontiguousarray(out).view(np.uint8).reshape(h, w, 4)
 
 
-def _overview(panels, transparent: bool = False) -> np.ndarray:
+def _overview(panels, transparent: bool = False, background=None) -> np.ndarray:
     """The panels in a grid, up to three a row, each labelled with its title
     (and the attribute's colour bar), shrunk to at most _OVERVIEW_WIDTH pixels
     wide; empty pixels over images.BACKGROUND unless `transparent`."""
@@ -312,12 +428,20 @@ def _overview(panels, transparent: bool = False) -> np.ndarray:
     tiles = []
     for p in panels:
         tile = _shrink(p.image, f)
-        tile = images.label(tile if transparent else images.opaque(tile), p.title)
+        tile = images.label(tile if transparent else _opaque(tile, background), p.title)
         if p.bar is not None:
             lut, vmin, vmax = p.bar
             tile = np.concatenate([tile, images.colorbar(lut, vmin, vmax, tile.shape[1])], axis=0)
+        if p.legend:
+            tile = np.concatenate([tile, images.legend(p.legend, tile.shape[1])], axis=0)
         tiles.append(tile)
     return images.compose(tiles, columns=cols)
+
+
+def _opaque(image, background=None):
+    from .. import images
+
+    return images.opaque(image) if background is None else images.opaque(image, background)
 
 
 def _save_pngs(out: Path, named) -> list[Path]:
@@ -410,8 +534,16 @@ def _load_tiles(args, progress):
 
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
+    if args.transparent and args.background is not None:
+        raise CliError("--transparent and --background: empty pixels are either clear or a colour; give one")
     progress = progress_from_args(args, "clvis render")
     if distributed_run(args):
+        for name in ("range", "background", "edl"):
+            if getattr(args, name) is not None:
+                raise CliError(f"--{name}: not with --workers/--scheduler (yet); leave it out")
+        if args.point_size == "auto":
+            raise CliError("--point-size auto: not with --workers/--scheduler (yet); give N")
+        args.colormap = args.colormap or "viridis"
         return on_workers("render", _render_distributed, args, progress)
     args.file = args.file or None
     return _render(args, progress)
@@ -519,8 +651,102 @@ def _render_distributed(args, progress) -> int:
     return 0
 
 
+def _framing(cloud, source: str):
+    """(lo, hi, the points to frame): the bounds of the bulk of the cloud
+    (clvis.camera.robust_bounds), with a note on stderr when stray points far
+    outside it are left out of the frame."""
+    from ..camera import robust_bounds
+
+    try:
+        rb = robust_bounds(cloud.positions)
+    except ValueError:
+        raise CliError(f"{source}: no point has finite coordinates") from None
+    if rb.kept == rb.total:
+        return rb.lo, rb.hi, cloud.positions
+    full_lo, full_hi = cloud.bounds()
+    o = cloud.origin
+    print(
+        f"clvis render: note: {rb.total - rb.kept:,} of {rb.total:,} points lie far outside the rest "
+        f"(the cloud spans {_box(full_lo + o, full_hi + o)}, its bulk {_box(rb.lo + o, rb.hi + o)}); "
+        "the view frames the bulk (--eye/--target to look elsewhere)",
+        file=sys.stderr,
+    )
+    return rb.lo, rb.hi, cloud.positions[rb.inside]
+
+
+def _box(lo, hi) -> str:
+    return " x ".join(f"{a:.10g}..{b:.10g}" for a, b in zip(lo, hi, strict=True))
+
+
+def _world_camera_args(args, origin):
+    """args with --eye and --target (given in the file's coordinates) moved
+    into the cloud's local ones: the origin is an internal detail that keeps
+    float32 positions precise, never something a user types."""
+    if not np.asarray(origin).any() or (args.eye is None and args.target is None):
+        return args
+    local = argparse.Namespace(**vars(args))
+    for name in ("eye", "target"):
+        v = getattr(args, name)
+        if v is not None:
+            setattr(local, name, tuple(float(a - b) for a, b in zip(v, origin, strict=True)))
+    return local
+
+
+def _look(args, cloud, attribute, point_size, queue) -> _Look:
+    """The colour panels' look from --range, --colormap, --edl (see _Look)."""
+    from ..colormap import ASPRS_CLASSES, categorical, class_name, class_palette
+
+    look = _Look()
+    if args.edl is not None:
+        look.edl, look.edl_radius = args.edl, max(1, (point_size + 1) // 2)
+    if attribute is None:
+        if args.range is not None:
+            raise CliError(
+                "--range scales an attribute's colours; the cloud is shown in its own colours "
+                "(add --attribute NAME)"
+            )
+        return look
+    coordinate = attribute not in cloud.attributes
+    values = cloud.positions[:, _COORDINATES.index(attribute)] if coordinate else cloud.attributes[attribute]
+    offset = float(cloud.origin[_COORDINATES.index(attribute)]) if coordinate else 0.0
+    if (
+        args.colormap is None
+        and not coordinate
+        and attribute.lower() in ("classification", "class", "classes", "label")
+        and categorical(values)
+    ):
+        if args.range is not None:
+            raise CliError(
+                f"--range: {attribute} is shown by class (ASPRS colours); --colormap NAME scales it"
+            )
+        codes, counts = np.unique(np.asarray(values).astype(np.int64), return_counts=True)
+        table = class_palette()
+        look.classes = [
+            (
+                tuple(int(c) for c in table[k, :3]),
+                f"{k} {class_name(int(k))}" + ("" if k in ASPRS_CLASSES else ""),
+            )
+            for k in codes
+        ]
+        look.class_colors = table[np.asarray(values).astype(np.int64)]
+        return look
+    look.bar_offset = offset
+    if args.range is not None:
+        kind, a, b = args.range
+        if kind == "percentile":
+            v = np.asarray(values, np.float64)
+            v = v[np.isfinite(v)]
+            if v.size == 0:
+                raise CliError(f"--range: {attribute} has no finite value")
+            lo, hi = (float(x) for x in np.percentile(v, [a, b]))
+        else:
+            lo, hi = a - offset, b - offset
+        look.value_range = (lo, hi)
+    return look
+
+
 def _render(args, progress) -> int:
-    from .. import images, runtime
+    from .. import runtime
     from ..raster import Rasterizer
     from ..raster.depth_filter import LEVELS
 
@@ -529,11 +755,15 @@ def _render(args, progress) -> int:
     cloud, source, default_attribute, filter_on = _load(args, progress)
     attribute = _pick_attribute(cloud, args.attribute, default_attribute, source)
     levels = args.depth_filter if args.depth_filter is not None else (LEVELS if filter_on else 0)
-    try:
-        lo, hi = cloud.bounds()
-    except ValueError:
-        raise CliError(f"{source}: no point has finite coordinates") from None
-    camera = camera_from_args(args, lo, hi, width, height, points=cloud.positions)
+    lo, hi, framed = _framing(cloud, source)
+    camera = camera_from_args(_world_camera_args(args, cloud.origin), lo, hi, width, height, points=framed)
+    point_size, spacing = args.point_size, None
+    if point_size == "auto":
+        from ..camera import point_spacing
+
+        spacing = point_spacing(camera, framed, width, height)
+        point_size = int(min(max(round(spacing), 1), MAX_AUTO_POINT_SIZE))
+    colormap = args.colormap or "viridis"
     q = runtime.default_queue()
     net = None
     if args.compare and args.post != "narvis":
@@ -557,8 +787,12 @@ def _render(args, progress) -> int:
                     "--post narvis: the network takes points coloured by an attribute; add --attribute"
                 )
         net = post.load(args.post, queue=q)
+    look = _look(args, cloud, attribute, point_size, q)
+    fields = _raster_fields(cloud, attribute)
+    if look.classes is not None:  # the class colours travel as the points' colours
+        fields = {**fields, "colors": look.class_colors, "attributes": {}}
     with progress.stage("uploading + Morton order"):
-        raster = Rasterizer(cloud.positions, **_raster_fields(cloud, attribute), queue=q)
+        raster = Rasterizer(cloud.positions, **fields, queue=q)
         q.finish()
     r = _render_panels(
         raster,
@@ -567,35 +801,52 @@ def _render(args, progress) -> int:
         width,
         height,
         attribute,
-        args.colormap,
+        colormap,
         args.soft_z,
         levels,
         progress,
-        args.point_size,
+        point_size,
         net,
+        look,
     )
     compared = []
     if args.compare:
-        compared = _compare_gaussians(
-            cloud, camera, width, height, attribute, args.colormap, r, net, progress
-        )
+        compared = _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net, progress)
     out = Path(args.out)
     with progress.stage("writing PNGs"):
-        named = [(f"{p.key}.png", p.image if args.transparent else images.opaque(p.image)) for p in r.panels]
-        named.append(("overview.png", _overview(r.panels, args.transparent)))
+        named = [
+            (f"{p.key}.png", p.image if args.transparent else _opaque(p.image, args.background))
+            for p in r.panels
+        ]
+        named.append(("overview.png", _overview(r.panels, args.transparent, args.background)))
         files = _save_pngs(out, named)
     total = time.perf_counter() - t_start
 
     g, n = r.gbuffers, len(cloud)
     covered = int(g.covered.sum())
     stats = g.stats
-    colored = f"colored by {attribute} ({args.colormap})" if attribute else "its colors"
+    if look.classes is not None:
+        colored = f"colored by {attribute} (ASPRS classes: {len(look.classes)})"
+    elif attribute:
+        colored = f"colored by {attribute} ({colormap})"
+    else:
+        colored = "its colors"
     print(f"clvis render: {source}, {n:,} points, {colored}")
     print(f"  device    {runtime.describe(q.device)}")
-    print(
-        f"  view      {describe_camera(args)}, {width}x{height}"
-        + (f", points {args.point_size}x{args.point_size} pixels" if args.point_size > 1 else "")
-    )
+    sized = ""
+    if spacing is not None:
+        sized = f", points {point_size}x{point_size} pixels (auto: {spacing:.1f} pixels apart)"
+    elif point_size > 1:
+        sized = f", points {point_size}x{point_size} pixels"
+    print(f"  view      {describe_camera(args)}, {width}x{height}{sized}")
+    o = cloud.origin
+    lo_w, hi_w = lo + o, hi + o
+    print(f"  bounds    {_box(lo_w, hi_w)}" + (" (the file's coordinates)" if o.any() else ""))
+    if look.value_range is not None:
+        a, b = (v + look.bar_offset for v in look.value_range)
+        print(f"  range     {attribute} {a:.6g}..{b:.6g}")
+    if look.edl is not None:
+        print(f"  edl       eye-dome lighting, strength {look.edl:g}, radius {look.edl_radius}")
     dropped = stats.get("points_nonfinite", 0)
     if dropped:
         print(f"  dropped   {dropped:,} points with a NaN or infinite coordinate (never drawn)")
@@ -617,6 +868,13 @@ def _render(args, progress) -> int:
         )
     for line in compared:
         print(line)
+    if covered * _SPARSE_FRACTION < width * height and covered < n:
+        print(
+            f"clvis render: note: the points cover {covered:,} of {width * height:,} pixels "
+            f"({100 * covered / (width * height):.2g} %)"
+            + ("; --point-size auto draws them large enough to see" if args.point_size == 1 else ""),
+            file=sys.stderr,
+        )
     print(f"  total     {total:.2f} s")
     print(f"wrote {len(files)} PNGs to {out}{os.sep}")
     for p in files:
@@ -693,8 +951,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "file",
         nargs="*",
-        help="a PLY, LAS, LAZ, NPY or NPZ point cloud (several: tiles joined into one cloud here, "
-        "or rendered on Dask workers with --workers/--scheduler)",
+        help="a PLY, LAS, LAZ, PCD, XYZ/TXT/CSV, NPY or NPZ point cloud (several: tiles joined into one "
+        "cloud here, or rendered on Dask workers with --workers/--scheduler)",
     )
     r.add_argument(
         "--dataset",
@@ -717,9 +975,25 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "--colormap",
         type=colormap_name,
-        default="viridis",
+        default=None,
         metavar="NAME",
-        help="a matplotlib colormap for the attribute (default viridis)",
+        help="a matplotlib colormap for the attribute (default viridis; a classification "
+        "attribute of class codes is shown in the ASPRS class colours with a legend unless "
+        "a colormap is given)",
+    )
+    r.add_argument(
+        "--range",
+        type=_value_range,
+        metavar="MIN,MAX|pLO,pHI",
+        help="the attribute values the colormap spans: two values (in the file's coordinates "
+        "for x, y, z), or two percentiles such as p2,p98 (default: the attribute's min..max)",
+    )
+    r.add_argument(
+        "--background",
+        type=_colour,
+        metavar="COLOR",
+        help="the colour behind the points: a name (black, white, grey, ...), #RRGGBB or R,G,B "
+        "(default a dark grey)",
     )
     r.add_argument(
         "--size",
@@ -731,11 +1005,22 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     add_camera_options(r, _FIT)
     r.add_argument(
         "--point-size",
-        type=count(1, MAX_POINT_SIZE),
+        type=_point_size,
         default=1,
-        metavar="N",
+        metavar="N|auto",
         help=f"draw each point as N x N pixels around its own, depth-tested per pixel "
-        f"(even N: one more pixel right and down), 1..{MAX_POINT_SIZE} (default 1)",
+        f"(even N: one more pixel right and down), 1..{MAX_POINT_SIZE}; auto: the points' "
+        f"spacing on screen, up to {MAX_AUTO_POINT_SIZE} (default 1)",
+    )
+    r.add_argument(
+        "--edl",
+        type=_edl_strength,
+        nargs="?",
+        const=1.0,
+        default=None,
+        metavar="STRENGTH",
+        help="eye-dome lighting: shade the colour panels by depth so the shape reads "
+        "without normals (strength default 1; Potree's and CloudCompare's shading)",
     )
     r.add_argument(
         "--soft-z",

@@ -96,7 +96,10 @@ def _read_ply(path: Path) -> PointCloud:
 
     _check_ply_header(path)
     try:
-        ply = plyfile.PlyData.read(str(path), mmap=False)
+        # binary data memory-mapped (plyfile reads ASCII, and elements with
+        # lists, row by row either way): a 2 M-vertex file loads in
+        # milliseconds instead of a minute; the columns are copied out below
+        ply = plyfile.PlyData.read(str(path), mmap="r")
     except (
         plyfile.PlyParseError,
         ValueError,
@@ -115,7 +118,13 @@ def _read_ply(path: Path) -> PointCloud:
             f"{path}: the PLY file has no vertex element (elements: {', '.join(names) or 'none'})"
         )
     data = ply["vertex"].data  # plyfile raises on fewer rows than the header declares
-    columns = {k: data[k] for k in data.dtype.names if data.dtype[k].kind in "iufb"}  # lists skipped
+    # lists skipped; each column copied out of the mapping (native byte order),
+    # so the file is not held open
+    columns = {
+        k: np.array(data[k], dtype=data.dtype[k].newbyteorder("="))
+        for k in data.dtype.names
+        if data.dtype[k].kind in "iufb"
+    }
     origin = None
     for c in ply.comments:
         if c.startswith(_ORIGIN_COMMENT + " "):

@@ -26,9 +26,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
+from .ascii import SUFFIXES as _ASCII_SUFFIXES
+from .ascii import _read_ascii
 from .cloud import _NPZ_KEYS, PointCloud, _check_cloud, _cloud, _from_columns, _write_or_remove
 from .las import _read_las
 from .npy import load_npy, load_npz
+from .pcd import _read_pcd
 from .ply import _read_ply, write_ply
 
 __all__ = ["PointCloud", "read_points", "save_npz", "write_ply"]
@@ -52,9 +55,15 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
       others named as for PLY.
     - ``.npz``: key ``positions`` (N, 3) required; ``colors``, ``velocity``,
       ``radius``, ``origin`` optional; every other key an (N,) attribute.
+    - ``.pcd``: the Point Cloud Library's format, ASCII or binary
+      (:mod:`clvis.io.pcd`).
+    - ``.xyz``, ``.txt``, ``.csv``: one point a line, columns named by a header
+      or by their count, positions relative to their minimum as for LAS
+      (:mod:`clvis.io.ascii`).
     """
     path = Path(path)
     readers = {".ply": _read_ply, ".las": _read_las, ".laz": _read_las, ".npy": _read_npy, ".npz": _read_npz}
+    readers.update({".pcd": _read_pcd, **dict.fromkeys(_ASCII_SUFFIXES, _read_ascii)})
     if not path.exists():
         raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), str(path))
     reader = readers.get(path.suffix.lower())

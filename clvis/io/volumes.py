@@ -95,7 +95,7 @@ class Volume:
         )
 
 
-FORMATS = (".raw", ".npy", ".nii", ".nii.gz")
+FORMATS = (".raw", ".npy", ".nii", ".nii.gz", ".vti", ".vtk")
 
 
 def read_volume(
@@ -129,6 +129,11 @@ def read_volume(
         raise ValueError(f"volume_index: only for 4-D NIfTI files, not {path.name}")
     if name.endswith(".npy"):
         return _read_npy(path)
+    if name.endswith((".vti", ".vtk")):
+        from .vtk import read_legacy, read_vti
+
+        data, spacing, origin = (read_vti if name.endswith(".vti") else read_legacy)(path)
+        return Volume(data, tuple(float(s) for s in spacing), tuple(float(o) for o in origin), str(path))
     raise DataError(f"{path}: unknown volume format (expected {', '.join(FORMATS)})")
 
 

@@ -185,11 +185,22 @@ def test_render_las_file(tmp_path, capsys):
     las.write(path)
     rc, out, err = _render(capsys, path, "--view", "top", "--out", tmp_path / "png", *SMALL)
     assert rc == 0, err
+    assert "its colors" in out  # RGB first, as Open3D, PyVista, Potree and CloudCompare show it
+    assert {p.stem for p in (tmp_path / "png").iterdir()} == {"colors", "depth", "soft-z", "overview"}
+    rc, out, err = _render(
+        capsys, path, "--view", "top", "--attribute", "intensity", "--out", tmp_path / "i", *SMALL
+    )
+    assert rc == 0, err
     assert "colored by intensity" in out
     for name in ("attribute-intensity", "colors", "depth"):
-        _assert_picture(tmp_path / "png" / f"{name}.png")
+        _assert_picture(tmp_path / "i" / f"{name}.png")
+    # the bounds in the file's own coordinates, the origin an internal detail
+    (line,) = [t for t in out.splitlines() if t.startswith("  bounds")]
+    x, y, _ = (float(part.split("..")[0]) for part in line.split()[1:6:2])
+    assert 499_000 < x < 501_000 and 4_999_000 < y < 5_001_000 and "(the file's coordinates)" in line
     rc, out, err = _render(capsys, path, "--attribute", "classification", "--out", tmp_path / "c", *SMALL)
     assert rc == 0, err
+    assert "colored by classification (ASPRS classes:" in out
     _assert_picture(tmp_path / "c" / "attribute-classification.png")
 
 
@@ -201,16 +212,16 @@ def test_render_third_party_laz(tmp_path, capsys):
     # --transparent: empty pixels keep alpha 0, so coverage can be counted
     rc, out, err = _render(capsys, path, "--view", "top", "--transparent", "--out", tmp_path / "one", *SMALL)
     assert rc == 0, err
-    assert "colored by intensity" in out and "dropped" not in out
-    one = _png(tmp_path / "one" / "attribute-intensity.png")[..., 3] > 0
+    assert "its colors" in out and "dropped" not in out  # the file has RGB
+    one = _png(tmp_path / "one" / "colors.png")[..., 3] > 0
     rc, out, err = _render(
         capsys, path, "--view", "top", "--point-size", 3, "--transparent", "--out", tmp_path / "three", *SMALL
     )
     assert rc == 0, err
     assert "points 3x3 pixels" in out
-    three = _png(tmp_path / "three" / "attribute-intensity.png")[..., 3] > 0
+    three = _png(tmp_path / "three" / "colors.png")[..., 3] > 0
     assert three.sum() > 3 * one.sum() and (three | one).sum() == three.sum()
-    _assert_picture(tmp_path / "three" / "attribute-intensity.png")
+    _assert_picture(tmp_path / "three" / "colors.png")
 
 
 def test_render_npz_positions_only(tmp_path, capsys):
@@ -249,7 +260,7 @@ def test_render_views(tmp_path, capsys, view):
     a = _png(tmp_path / "png" / "depth.png")
     assert a.shape == (90, 160, 4)
     if not view.startswith("grid"):  # a grid camera may look past the cloud
-        _assert_picture(tmp_path / "png" / "attribute-pressure.png")
+        _assert_picture(tmp_path / "png" / "colors.png")  # the cloud's RGB, shown first
 
 
 @pytest.mark.parametrize("view", ["fit", "top", "front", "side", "hemisphere:3", "grid:7"])
@@ -317,8 +328,8 @@ def test_shrink_keeps_points():
         (["--points", "-5"], "argument --points: expected a positive integer"),
         (["--soft-z", "0.5"], "argument --soft-z: expected a factor >= 1"),
         (["--depth-filter", "x"], "argument --depth-filter: expected pyramid levels"),
-        (["--point-size", "0"], "argument --point-size: expected a positive integer in 1..64"),
-        (["--point-size", "65"], "argument --point-size: expected a positive integer in 1..64"),
+        (["--point-size", "0"], "argument --point-size: expected auto or a positive integer in 1..64"),
+        (["--point-size", "65"], "argument --point-size: expected auto or a positive integer in 1..64"),
         (["--dataset", "moon"], "argument --dataset: invalid choice"),
         (["missing.ply"], "missing.ply: no such file"),
         (["cloud.ply", "--points", "10"], "--dataset and --points choose an embedded cloud"),
@@ -343,7 +354,7 @@ def test_render_errors(tmp_path, capsys, monkeypatch, args, message):
             "PLY file",
         ),
         ("bad.npz", b"not a zip", "malformed NPZ file"),
-        ("cloud.txt", b"1 2 3\n", "unknown point cloud format '.txt'"),
+        ("cloud.e57", b"1 2 3\n", "unknown point cloud format '.e57'"),
         ("empty.npy", None, "holds no points"),
     ],
 )

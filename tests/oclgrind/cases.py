@@ -222,6 +222,16 @@ def depth_filter(q):
     clvis.raster.rgbda(rgba, depth, rng.random((h, w)) < 0.5, queue=q)
 
 
+@case
+def edl(q):
+    rng = _rng(8)
+    h, w = 19, 23  # not a multiple of any work-group size: items past the end
+    depth = np.where(rng.random((h, w)) < 0.7, rng.uniform(2, 20, (h, w)), np.inf).astype(np.float32)
+    rgba = rng.integers(0, 256, (h, w, 4)).astype(np.uint8)
+    for radius in (1, 3, 30):  # 30: every neighbour outside the image
+        clvis.raster.edl(depth, rgba, 1.0, radius, queue=q)
+
+
 # --- iso ---------------------------------------------------------------------
 
 

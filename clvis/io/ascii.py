@@ -1,0 +1,154 @@
+"""ASCII point clouds: ``.xyz``, ``.txt``, ``.csv`` (and CloudCompare's,
+PDAL's and most scanners' text exports), one point a line.
+
+The columns: a header line of names (``x,y,z,red,green,blue``, ``//X Y Z R G
+B`` as CloudCompare writes it, ``X Y Z Intensity``) names them, mapped as
+for PLY (x, y, z; red/green/blue or r/g/b the colours; vx, vy, vz the
+velocity; the rest attributes). Without one, the count decides: 3 x y z;
+4 x y z intensity; 6 x y z r g b when the last three are whole numbers in
+0..255; 7 x y z intensity r g b likewise (Leica PTS); other counts x y z and
+attributes named ``column_4`` on. Separators: commas, semicolons, tabs or
+spaces. Lines starting with ``#``, ``//`` or ``%`` are comments. Positions
+are parsed in float64 and kept relative to their minimum (``cloud.origin``),
+as for LAS: text files usually hold georeferenced coordinates.
+
+Bounded: numpy's own text parser, no Python loop per line; a row with a
+different count or a value that is not a number raises DataError naming
+the line.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+from .cloud import PointCloud, _from_columns
+
+SUFFIXES = (".xyz", ".txt", ".csv")
+_COMMENT = ("#", "//", "%")
+_HEAD_BYTES = 1 << 16  # the header and the first data line lie in this
+
+
+def _split(line: str, sep: str | None) -> list[str]:
+    return [t for t in (line.split(sep) if sep else line.split()) if t.strip() != ""]
+
+
+def _number(t: str) -> bool:
+    try:
+        float(t)
+        return True
+    except ValueError:
+        return False
+
+
+def _read_ascii(path: Path) -> PointCloud:
+    with open(path, "rb") as f:
+        head = f.read(_HEAD_BYTES)
+    try:
+        text = head.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = head.decode("latin-1")
+    if "\0" in text:
+        raise DataError(f"{path}: not a text point cloud (it holds binary data)")
+    lines = text.splitlines()
+    if len(head) == _HEAD_BYTES and lines:
+        lines = lines[:-1]  # the last one may be cut
+    names: list[str] | None = None
+    skip = 0
+    first = None
+    for i, raw in enumerate(lines):
+        s = raw.strip()
+        if not s:
+            continue
+        comment = s.startswith(_COMMENT)
+        body = re.sub(r"^(#|//|%)\s*", "", s) if comment else s
+        sep = "," if "," in body else ";" if ";" in body else None
+        tokens = [t.strip() for t in _split(body, sep)]
+        if (
+            tokens
+            and not all(_number(t) for t in tokens)
+            and all(re.fullmatch(r"[A-Za-z_][\w.]*", t) for t in tokens)
+        ):
+            names, skip = [t.lower() for t in tokens], i + 1  # a header (commented or not)
+            continue
+        if comment:
+            skip = i + 1
+            continue
+        first, skip = (i, sep, tokens), skip
+        break
+    if first is None:
+        raise DataError(f"{path}: no point in the file (no line of numbers)")
+    line_no, sep, tokens = first
+    if not all(_number(t) for t in tokens):
+        raise DataError(f"{path}: line {line_no + 1}: expected numbers, got {lines[line_no].strip()[:80]!r}")
+    ncol = len(tokens)
+    if names is not None and len(names) != ncol:
+        raise DataError(f"{path}: the header names {len(names)} columns, line {line_no + 1} holds {ncol}")
+    try:
+        data = np.loadtxt(
+            path,
+            delimiter=sep,
+            comments=list(_COMMENT),
+            skiprows=line_no,
+            ndmin=2,
+            dtype=np.float64,
+            encoding="utf-8-sig",
+        )
+    except ValueError as e:
+        raise DataError(f"{path}: malformed text point cloud: {e}") from None
+    if data.shape[1] != ncol:
+        raise DataError(f"{path}: {data.shape[1]} columns, the first line holds {ncol}")
+    if names is None:
+        names = _default_names(data)
+    if ncol < 3:
+        raise DataError(f"{path}: {ncol} columns; a point needs x, y, z")
+    if len(set(names)) != len(names):
+        raise DataError(f"{path}: the header names a column twice: {', '.join(names)}")
+    return _with_origin(path, {n: data[:, k] for k, n in enumerate(names)})
+
+
+def _default_names(data: np.ndarray) -> list[str]:
+    n = data.shape[1]
+
+    def rgb(cols) -> bool:
+        c = data[:, cols]
+        return bool(np.isfinite(c).all() and (c >= 0).all() and (c <= 255).all() and (c == np.round(c)).all())
+
+    if n == 3:
+        return ["x", "y", "z"]
+    if n == 4:
+        return ["x", "y", "z", "intensity"]
+    if n == 6 and rgb([3, 4, 5]):
+        return ["x", "y", "z", "red", "green", "blue"]
+    if n == 7 and rgb([4, 5, 6]):
+        return ["x", "y", "z", "intensity", "red", "green", "blue"]
+    return ["x", "y", "z", *(f"column_{k + 1}" for k in range(3, n))]
+
+
+def _with_origin(path: Path, columns: dict) -> PointCloud:
+    """A cloud from float64 columns: x, y, z relative to their finite minimum
+    (the origin), colours as 8-bit, the rest float32 attributes."""
+    for c in "xyz":
+        if c not in columns:
+            raise DataError(f"{path}: no {c} column (found {', '.join(columns)})")
+    xyz = np.stack([columns[c] for c in "xyz"], axis=1)
+    finite = np.isfinite(xyz).all(axis=1)
+    origin = xyz[finite].min(axis=0) if finite.any() else np.zeros(3)
+    columns = dict(columns)
+    for k, c in enumerate("xyz"):
+        columns[c] = (xyz[:, k] - origin[k]).astype(np.float32)
+    for names in (("red", "green", "blue"), ("r", "g", "b")):
+        if all(c in columns for c in names):
+            rgb = np.stack([columns[c] for c in names], axis=1)
+            if not (np.isfinite(rgb).all() and (rgb >= 0).all() and (rgb <= 65535).all()):
+                raise DataError(f"{path}: colours must be finite numbers in 0..255 (or 0..1, or 0..65535)")
+            if rgb.size and rgb.max() <= 1 and not (rgb == np.round(rgb)).all():
+                rgb = rgb * 255  # colours as fractions
+            elif rgb.size and rgb.max() > 255:
+                rgb = rgb / 257  # 16-bit colours
+            for k, c in enumerate(names):
+                columns[c] = np.rint(rgb[:, k]).astype(np.uint8)
+    return _from_columns(path, columns, origin)

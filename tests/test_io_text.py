@@ -1,0 +1,151 @@
+"""The ASCII (.xyz/.txt/.csv) and PCD point cloud readers: what they read,
+and a clear DataError naming the file for what they cannot."""
+
+import numpy as np
+import pytest
+
+from clvis.errors import DataError
+from clvis.io import read_points
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
+
+
+def test_xyz_no_header(tmp_path):
+    c = read_points(_write(tmp_path / "a.xyz", "1 2 3\n4 5 6\n\n7 8 9.5\n"))
+    np.testing.assert_allclose(c.positions + c.origin, [[1, 2, 3], [4, 5, 6], [7, 8, 9.5]])
+    assert c.colors is None and not c.attributes
+    c = read_points(_write(tmp_path / "b.txt", "1 2 3 0.5\n4 5 6 0.7\n"))
+    np.testing.assert_allclose(c.attributes["intensity"], [0.5, 0.7])
+    c = read_points(_write(tmp_path / "c.xyz", "1\t2\t3\t255\t0\t10\n4\t5\t6\t0\t128\t0\n"))
+    np.testing.assert_array_equal(c.colors[:, :3], [[255, 0, 10], [0, 128, 0]])
+    c = read_points(_write(tmp_path / "d.txt", "1 2 3 -1200 255 0 10\n4 5 6 -900 0 128 0\n"))  # PTS
+    np.testing.assert_array_equal(c.attributes["intensity"], [-1200, -900])
+    assert c.colors is not None
+    c = read_points(_write(tmp_path / "e.txt", "1 2 3 0.1 0.2 0.3 0.4 0.5\n"))
+    assert list(c.attributes) == [f"column_{k}" for k in range(4, 9)]
+
+
+def test_csv_with_header_and_utm_coordinates(tmp_path):
+    text = (
+        "X,Y,Z,Red,Green,Blue,Classification\n"
+        "636001.76,848935.20,406.26,10,20,30,2\n"
+        "636002.01,848936.00,407.00,40,50,60,5\n"
+    )
+    c = read_points(_write(tmp_path / "a.csv", text))
+    np.testing.assert_allclose(c.origin, [636001.76, 848935.20, 406.26])
+    np.testing.assert_allclose(c.positions[1], [0.25, 0.8, 0.74], atol=1e-5)  # float32 keeps the centimetres
+    np.testing.assert_array_equal(c.colors[:, :3], [[10, 20, 30], [40, 50, 60]])
+    np.testing.assert_array_equal(c.attributes["classification"], [2, 5])
+    # CloudCompare's commented header, semicolons
+    c = read_points(_write(tmp_path / "b.txt", "//X;Y;Z;R;G;B\n1;2;3;1;2;3\n"))
+    np.testing.assert_array_equal(c.colors[0, :3], [1, 2, 3])
+    # comments, and colours as fractions
+    c = read_points(_write(tmp_path / "c.xyz", "# a scan\nx y z r g b\n0 0 0 0.5 1 0.25\n"))
+    np.testing.assert_array_equal(c.colors[0, :3], [128, 255, 64])
+
+
+@pytest.mark.parametrize(
+    "name, text, message",
+    [
+        ("a.xyz", "", "no point in the file"),
+        ("b.xyz", "# only a comment\n", "no point in the file"),
+        ("c.xyz", "1 2\n3 4\n", "2 columns; a point needs x, y, z"),
+        ("d.xyz", "1 2 3\n4 5 six\n", "malformed text point cloud"),
+        ("e.xyz", "1 2 3\n4 5 6 7\n", "malformed text point cloud"),
+        ("f.csv", "x,y,z,i\n1,2,3\n", "the header names 4 columns"),
+        ("g.csv", "a,b,c\n1,2,3\n", "no x column"),
+        ("h.csv", "x,y,z,x\n1,2,3,4\n", "names a column twice"),
+        ("i.xyz", "x y z r g b\n1 2 3 300000 0 0\n", "colours must be finite numbers"),
+        ("j.xyz", "\0\1\2 binary", "binary data"),
+    ],
+)
+def test_text_errors(tmp_path, name, text, message):
+    path = _write(tmp_path / name, text)
+    with pytest.raises(DataError, match=message) as e:
+        read_points(path)
+    assert str(path) in str(e.value)
+
+
+def _pcd_header(fields, sizes, types, n, data, counts=None):
+    counts = counts or ["1"] * len(fields)
+    return (
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\n"
+        f"FIELDS {' '.join(fields)}\nSIZE {' '.join(sizes)}\nTYPE {' '.join(types)}\n"
+        f"COUNT {' '.join(counts)}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n"
+    ).encode()
+
+
+def test_pcd_binary_rgb(tmp_path):
+    rec = np.zeros(3, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("rgb", "<f4"), ("intensity", "<f4")])
+    rec["x"], rec["y"], rec["z"] = [1, 2, 3], [4, 5, 6], [7, 8, np.nan]
+    packed = np.array([0xFF0000, 0x00FF00, 0x0000FF], np.uint32)
+    rec["rgb"] = packed.view(np.float32)
+    rec["intensity"] = [0.1, 0.2, 0.3]
+    path = tmp_path / "a.pcd"
+    path.write_bytes(
+        _pcd_header(["x", "y", "z", "rgb", "intensity"], ["4"] * 5, ["F"] * 5, 3, "binary") + rec.tobytes()
+    )
+    c = read_points(path)
+    np.testing.assert_array_equal(c.positions[:2], [[1, 4, 7], [2, 5, 8]])
+    assert np.isnan(c.positions[2, 2])  # an organized cloud's hole, kept
+    np.testing.assert_array_equal(c.colors[:, :3], [[255, 0, 0], [0, 255, 0], [0, 0, 255]])
+    np.testing.assert_allclose(c.attributes["intensity"], [0.1, 0.2, 0.3])
+    # truncated
+    path.write_bytes(path.read_bytes()[:-4])
+    with pytest.raises(DataError, match="truncated PCD file"):
+        read_points(path)
+
+
+def test_pcd_ascii(tmp_path):
+    rgb = np.array([0x102030], np.uint32).view(np.float32)[0]
+    body = f"1 2 3 {float(rgb):.9g} 0.5 0.25 1\n4 5 6 {0x405060} 0 0 0\n"  # packed float, packed integer
+    path = tmp_path / "b.pcd"
+    path.write_bytes(
+        _pcd_header(
+            ["x", "y", "z", "rgb", "h"],
+            ["4", "4", "4", "4", "4"],
+            ["F"] * 5,
+            2,
+            "ascii",
+            ["1", "1", "1", "1", "3"],
+        )
+        + body.encode()
+    )
+    c = read_points(path)
+    np.testing.assert_array_equal(c.positions, [[1, 2, 3], [4, 5, 6]])
+    np.testing.assert_array_equal(c.colors[:, :3], [[0x10, 0x20, 0x30], [0x40, 0x50, 0x60]])
+    assert "h" not in c.attributes  # a 3-count field: skipped
+
+
+@pytest.mark.parametrize(
+    "head, body, message",
+    [
+        (b"VERSION 0.7\nFIELDS x y z\n", b"", "no DATA line"),
+        (b"HELLO\n", b"", "not a PCD file"),
+        (
+            _pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 2, "binary_compressed"),
+            b"\0" * 40,
+            "binary_compressed",
+        ),
+        (_pcd_header(["x", "y", "z"], ["4"] * 3, ["Q"] * 3, 1, "binary"), b"\0" * 12, "unsupported TYPE"),
+        (_pcd_header(["x", "y", "z"], ["4", "4"], ["F"] * 3, 1, "binary"), b"\0" * 12, "differ in length"),
+        (_pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 10**12, "binary"), b"\0" * 12, "truncated PCD"),
+        (
+            _pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 10**12, "ascii"),
+            b"1 2 3\n",
+            "more than the file",
+        ),
+        (_pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 2, "ascii"), b"1 2 3\n", "1 rows of 3 values"),
+        (_pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 1, "ascii"), b"1 2 x\n", "malformed PCD data"),
+        (_pcd_header(["a", "b", "c"], ["4"] * 3, ["F"] * 3, 1, "binary"), b"\0" * 12, "no x, y, z column"),
+    ],
+)
+def test_pcd_errors(tmp_path, head, body, message):
+    path = tmp_path / "bad.pcd"
+    path.write_bytes(head + body)
+    with pytest.raises(DataError, match=message) as e:
+        read_points(path)
+    assert str(path) in str(e.value)

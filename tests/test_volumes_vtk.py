@@ -1,0 +1,117 @@
+"""VTK image data volumes (.vti, legacy .vtk STRUCTURED_POINTS) through
+read_volume: pyvista's own file, the encodings VTK writes, and a DataError
+naming the file for what is not read."""
+
+import base64
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clvis.errors import DataError
+from clvis.io import read_volume
+
+DATA = Path(__file__).parent / "data"
+
+
+def test_pyvista_uniform_vtk():
+    """Legacy binary, big-endian doubles, with cell data and a field before the
+    point scalars (x*y*z on a 10^3 grid)."""
+    v = read_volume(DATA / "pyvista_uniform.vtk")
+    assert v.shape == (10, 10, 10) and v.data.dtype == np.float64 and v.data.dtype.isnative
+    z, y, x = np.mgrid[:10, :10, :10]
+    np.testing.assert_array_equal(v.data, x * y * z)
+    assert v.spacing == (1.0, 1.0, 1.0) and v.origin == (0.0, 0.0, 0.0)
+
+
+def _vti(data, encoding, spacing="1 2 3", header="UInt32", big=False):
+    """A .vti of (Z, Y, X) `data` as VTK writes it."""
+    nz, ny, nx = data.shape
+    order = ">" if big else "<"
+    raw = data.astype(data.dtype.newbyteorder(order)).tobytes()
+    hdt = order + ("u8" if header == "UInt64" else "u4")
+    comp = ""
+    if encoding == "ascii":
+        body = " ".join(str(v) for v in data.ravel())
+    elif encoding == "binary":
+        body = base64.b64encode(np.array([len(raw)], hdt).tobytes() + raw).decode()
+    else:  # zlib blocks of 64 bytes, header and data encoded separately (VTK's layout)
+        comp = ' compressor="vtkZLibDataCompressor"'
+        blocks = [raw[i : i + 64] for i in range(0, len(raw), 64)]
+        zs = [zlib.compress(b) for b in blocks]
+        head = np.array([len(blocks), 64, len(blocks[-1]) % 64, *map(len, zs)], hdt).tobytes()
+        body = base64.b64encode(head).decode() + base64.b64encode(b"".join(zs)).decode()
+        encoding = "binary"
+    t = {"uint8": "UInt8", "int16": "Int16", "float32": "Float32", "float64": "Float64"}[data.dtype.name]
+    return (
+        f'<?xml version="1.0"?>\n<VTKFile type="ImageData" version="0.1" '
+        f'byte_order="{"BigEndian" if big else "LittleEndian"}" header_type="{header}"{comp}>\n'
+        f'<ImageData WholeExtent="0 {nx - 1} 0 {ny - 1} 0 {nz - 1}" Origin="5 6 7" Spacing="{spacing}">\n'
+        f'<Piece Extent="0 {nx - 1} 0 {ny - 1} 0 {nz - 1}"><PointData Scalars="v">\n'
+        f'<DataArray type="Float32" Name="other" format="ascii">{" ".join(["0"] * data.size)}</DataArray>\n'
+        f'<DataArray type="{t}" Name="v" format="{encoding}">\n{body}\n</DataArray>\n'
+        "</PointData><CellData></CellData></Piece></ImageData></VTKFile>\n"
+    ).encode()
+
+
+@pytest.mark.parametrize("encoding", ["ascii", "binary", "zlib"])
+@pytest.mark.parametrize("dtype", ["uint8", "int16", "float32", "float64"])
+def test_vti_encodings(tmp_path, encoding, dtype):
+    data = (np.arange(5 * 6 * 7).reshape(5, 6, 7) % 100).astype(dtype)
+    for header, big in (("UInt32", False), ("UInt64", True)):
+        path = tmp_path / f"v{header}.vti"
+        path.write_bytes(_vti(data, encoding, header=header, big=big))
+        v = read_volume(path)
+        np.testing.assert_array_equal(v.data, data)  # the Scalars array, not the first
+        assert v.data.dtype == np.dtype(dtype) and v.data.dtype.isnative
+        assert v.spacing == (3.0, 2.0, 1.0) and v.origin == (5.0, 6.0, 7.0)
+
+
+def test_vti_errors(tmp_path):
+    data = np.zeros((2, 3, 4), np.float32)
+    good = _vti(data, "zlib")
+
+    def bad(content, message):
+        p = tmp_path / "bad.vti"
+        p.write_bytes(content)
+        with pytest.raises(DataError, match=message) as e:
+            read_volume(p)
+        assert str(p) in str(e.value)
+
+    bad(b"hello", "not a VTK ImageData file")
+    bad(b'<!DOCTYPE x [<!ENTITY a "b">]>' + good, "DTD or entities")
+    bad(good.replace(b"</Piece>", b'</Piece><AppendedData encoding="raw">_</AppendedData>'), "appended data")
+    bad(good.replace(b'WholeExtent="0 3', b'WholeExtent="0 30'), "the extent needs")
+    bad(good.replace(b'Float32" Name="v"', b'Float16" Name="v"'), "unsupported DataArray type")
+    bad(good.replace(b'Name="v"', b'Name="v" NumberOfComponents="3"'), "several components")
+    bad(good.replace(b"vtkZLibDataCompressor", b"vtkLZ4DataCompressor"), "zlib only")
+    z = _vti(data, "zlib").split(b"\n")
+    z[6] = z[6][:-8]  # the array cut short
+    bad(b"\n".join(z), "truncated or malformed|malformed binary")
+    bad(
+        _vti(data, "binary").replace(b'format="binary">\n', b'format="binary">\n!!'), "malformed binary array"
+    )
+    bad(good.replace(b"<PointData", b"<CellData").replace(b"</PointData>", b"</CellData>"), "no point data")
+
+
+def test_legacy_ascii_and_errors(tmp_path):
+    head = "# vtk DataFile Version 3.0\nx\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 2 3 2\n"
+    head += "SPACING 1 2 3\nORIGIN 0 0 0\nPOINT_DATA 12\nSCALARS s float 1\nLOOKUP_TABLE default\n"
+    p = tmp_path / "a.vtk"
+    p.write_text(head + " ".join(str(k) for k in range(12)) + "\n")
+    v = read_volume(p)
+    np.testing.assert_array_equal(v.data, np.arange(12, dtype=np.float32).reshape(2, 3, 2))
+    assert v.spacing == (3.0, 2.0, 1.0)
+    for text, message in (
+        (head + "1 2 3\n", "3 samples, DIMENSIONS needs 12"),
+        (head.replace("POINT_DATA 12", "POINT_DATA 11") + "0 " * 12, "does not match DIMENSIONS"),
+        (head.replace("float 1", "float 3") + "0 " * 36, "one component"),
+        (head.replace("STRUCTURED_POINTS", "POLYDATA"), "only DATASET STRUCTURED_POINTS"),
+        (head.replace("ASCII", "BINARY") + "\0" * 8, "truncated"),
+        ("hello\n", "not a legacy VTK file"),
+        (head.replace("SCALARS s float 1\nLOOKUP_TABLE default\n", ""), "no POINT_DATA SCALARS"),
+    ):
+        p.write_text(text)
+        with pytest.raises(DataError, match=message):
+            read_volume(p)

@@ -18,7 +18,6 @@ extension, malformed or truncated content, wrong shapes) raises
 
 from __future__ import annotations
 
-import errno
 import os
 import zipfile
 from pathlib import Path
@@ -27,6 +26,7 @@ import numpy as np
 
 from ..errors import DataError
 from .cloud import _NPZ_KEYS, PointCloud, _check_cloud, _cloud, _from_columns, _write_or_remove
+from .files import regular_file
 from .las import _read_las
 from .npy import load_npy, load_npz
 from .ply import _read_ply, write_ply
@@ -53,10 +53,9 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
     - ``.npz``: key ``positions`` (N, 3) required; ``colors``, ``velocity``,
       ``radius``, ``origin`` optional; every other key an (N,) attribute.
     """
-    path = Path(path)
     readers = {".ply": _read_ply, ".las": _read_las, ".laz": _read_las, ".npy": _read_npy, ".npz": _read_npz}
-    if not path.exists():
-        raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), str(path))
+    # a FIFO would block the read, /dev/zero never end, a directory fail in the parser
+    path = regular_file(path)
     reader = readers.get(path.suffix.lower())
     if reader is None:
         raise DataError(

@@ -62,7 +62,7 @@ def _named(e: OSError, path: Path, tmp: Path) -> OSError:
     not) or the temporary one."""
     if e.filename is not None and e.filename != str(tmp):
         return e
-    new = type(e)(e.errno, f"{e.strerror or e} (writing {path})", str(path))
+    new = type(e)(e.errno, e.strerror or str(e), str(path))
     new.__cause__ = e.__cause__
     return new
 

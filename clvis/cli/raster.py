@@ -57,6 +57,9 @@ _SOFT_Z_FACTOR = 1.01
 _OVERVIEW_WIDTH = 2880  # the overview is shrunk by an integer factor to fit this
 _COORDINATES = ("x", "y", "z")  # --attribute takes these too
 MAX_POINTS = 2**32 - 2  # the Rasterizer's: index 0xFFFFFFFF marks an empty pixel
+# host bytes a pixel `clvis render` takes at its peak (measured: ~97 B a pixel
+# for a cloud with colors and attributes)
+HOST_BYTES_PER_PIXEL = 100
 MAX_POINT_SIZE = 64  # the Rasterizer's point_size: 1..64 pixels a side
 
 
@@ -452,6 +455,12 @@ def _render(args, progress) -> int:
         raise CliError(f"{source}: no point has finite coordinates") from None
     camera = camera_from_args(args, lo, hi, width, height, points=cloud.positions)
     q = runtime.default_queue()
+    # the whole command's host memory a pixel (G-buffers read back, the depth
+    # filter, the panels, the overview and their PNGs), refused up front
+    # rather than met by the OOM killer
+    runtime.check_memory(
+        q, f"clvis render --size {width}x{height}", host_bytes=width * height * HOST_BYTES_PER_PIXEL
+    )
     net = None
     if args.compare and args.post != "narvis":
         raise CliError(

@@ -82,3 +82,12 @@ def test_clvis_render_larger_than_host_memory_is_refused_up_front(tmp_path):
     assert out.stderr.startswith("clvis render: error: clvis render --size 16000x16000: needs"), out.stderr
     assert len(out.stderr.splitlines()) == 1 and "available" in out.stderr
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    "call", ["clvis.scan(x, queue=q)", "clvis.histogram(x, 4, queue=q)", "clvis.radix_sort(x, queue=q)"]
+)
+def test_zero_stride_view_claiming_2_31_elements_is_refused_before_the_copy(device, call):
+    # made contiguous before any size check: numpy's MemoryError
+    out = _child(device, f"x = np.broadcast_to(np.int32(1), (2**31,))\n{call}")
+    assert "needs a contiguous copy of 8.59 GB" in out

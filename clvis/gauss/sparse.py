@@ -29,6 +29,7 @@ import numpy as np
 from .._arrays import triple
 from ..errors import DataError
 from ..io.files import regular_file
+from ..io.vdb import check_vdb
 
 __all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb"]
 
@@ -356,6 +357,7 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
         raise TypeError(f"grid: expected a name, an index or None, got {type(grid).__name__}")
     tinyvdb = _tinyvdb()
     p = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO, device
+    check_vdb(p)  # counts the file cannot hold, before tinyvdb allocates them
     try:
         f = tinyvdb.open(str(p))
     except (RuntimeError, ValueError, OSError, MemoryError, IndexError) as e:

@@ -234,3 +234,27 @@ def test_other_readers_refuse_special_files(tmp_path, kind):
         path = _special(tmp_path / fn.__name__, kind, suffix)
         r = run_limited(fn, path, name=path, timeout=10)
         assert r.kind == "clvis", (fn.__name__, r)
+
+
+@pytest.mark.parametrize("field,value", [("tiles", 50_000_000), ("tiles", 10_000_000), ("children", 10**6)])
+def test_vdb_root_counts_beyond_the_file_are_refused_before_tinyvdb(tmp_path, field, value):
+    # the root node's tile count of a 1.5 MB file set to 5e7: tinyvdb reserved 1.7 GB first
+    pytest.importorskip("tinyvdb")
+    from fuzz.seeds import _vdb
+
+    from clvis.gauss import read_vdb
+
+    src = tmp_path / "big.vdb"
+    _vdb(tmp_path, src, n=300_000, seed=3)
+    ok = run_limited(read_vdb, str(src))
+    assert ok.kind == "ok" and ok.peak_rss < 256 * MiB, ok
+    data = bytearray(src.read_bytes())
+    # after the transform's name and 18 doubles: buffer count, background, tiles, children
+    at = (
+        data.index(b"ScaleTranslateMap") + len("ScaleTranslateMap") + 144 + 8 + (0 if field == "tiles" else 4)
+    )
+    struct.pack_into("<I", data, at, value)
+    path = tmp_path / "root.vdb"
+    path.write_bytes(bytes(data))
+    r = _refused(str(path), read_vdb)
+    assert "root node" in r.detail and r.peak_rss < 256 * MiB

@@ -91,3 +91,23 @@ def test_zero_stride_view_claiming_2_31_elements_is_refused_before_the_copy(devi
     # made contiguous before any size check: numpy's MemoryError
     out = _child(device, f"x = np.broadcast_to(np.int32(1), (2**31,))\n{call}")
     assert "needs a contiguous copy of 8.59 GB" in out
+
+
+def test_clvis_iso_larger_than_host_memory_is_refused_up_front(tmp_path):
+    # clvis iso --size 16000x16000 peaked at 19.7 GB
+    import resource
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (8 << 30, 8 << 30))
+
+    out = subprocess.run(
+        [sys.executable, "-m", "clvis", "iso", "--size", "16000x16000", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        preexec_fn=limit,
+    )
+    assert out.returncode == 2, out.stderr[-2000:]
+    assert out.stderr.startswith("clvis iso: error: clvis iso --size 16000x16000: needs"), out.stderr
+    assert len(out.stderr.splitlines()) == 1
+    assert not list(tmp_path.iterdir())

@@ -16,6 +16,12 @@
 #                    atomics on and off; fails on invalid accesses and on data
 #                    races not marked benign in the kernel source
 #                    (tests/oclgrind/audit.py; ARGS go to it; ~2 min)
+#   ./dev.sh fuzz [--minutes N | --cases N] [--seed S]
+#                    .venv-test; mutation fuzzing of every reader
+#                    (tests/fuzz/run.py), each case in a forked child under a
+#                    4 GiB address-space limit and a timeout; fails on a crash,
+#                    hang, foreign exception or a peak RSS over 256 MB for a
+#                    file under 1 MB (default: 5 minutes)
 #   ./dev.sh lint    .venv-lint: ruff (lint + format check) on the whole tree and
 #                    mypy on every module but the few tests/test_typing.py lists
 #   ./dev.sh fmt     .venv-lint: ruff format + ruff check --fix
@@ -108,6 +114,10 @@ test | bench)
     CLVIS_LARGE=${CLVIS_LARGE:-1} CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001} \
         exec .venv-test/bin/python -m pytest tests bench --benchmark-disable -q "$@"
     ;;
+fuzz)
+    venv .venv-test pocl,test,train,distributed
+    exec .venv-test/bin/python -W ignore tests/fuzz/run.py "$@"
+    ;;
 oclgrind)
     if with_intel; then
         venv .venv-test pocl,test,intel,train,distributed
@@ -118,7 +128,7 @@ oclgrind)
     exec .venv-test/bin/python tests/oclgrind/audit.py "$@"
     ;;
 *)
-    echo "usage: ./dev.sh demo | test | bench | oclgrind | lint | fmt  [args]" >&2
+    echo "usage: ./dev.sh demo | test | bench | oclgrind | fuzz | lint | fmt  [args]" >&2
     exit 2
     ;;
 esac

@@ -70,6 +70,8 @@ def check_array(
             raise TypeError(f"{name}: expected numbers, got an object array (dtype {x.dtype})")
         if x.ndim and x.shape[0] > MAX_LENGTH:
             raise ValueError(f"{name}: {x.shape[0]} items; at most 2^32 - 1 per array")
+        if not (x.flags.c_contiguous and x.dtype.isnative):
+            _check_copy(name, x)
         if not x.dtype.isnative:
             x = x.astype(x.dtype.newbyteorder("="))
     if dtypes is not None and np.dtype(x.dtype) not in [np.dtype(d) for d in dtypes]:
@@ -86,6 +88,23 @@ def check_array(
     else:
         x = np.ascontiguousarray(x)
     return x
+
+
+def _check_copy(name: str, x: np.ndarray) -> None:
+    """The contiguous copy of a view (a broadcast or zero-stride view may claim
+    billions of elements over a few bytes) must fit in host memory: DeviceError
+    naming the bytes instead of numpy's MemoryError."""
+    need = int(x.size) * x.dtype.itemsize
+    if need < 1 << 26:
+        return
+    avail = runtime.host_available_bytes()
+    if avail is not None and need > avail:
+        from .errors import DeviceError
+
+        raise DeviceError(
+            f"{name}: a view of shape {x.shape} ({x.dtype}) needs a contiguous copy of "
+            f"{need / 1e9:.2f} GB, and only {avail / 1e9:.2f} GB of host memory is available"
+        )
 
 
 def to_device(queue: cl.CommandQueue, name: str, x: Any) -> cla.Array:

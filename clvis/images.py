@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import functools
 import os
-import secrets
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -75,14 +74,11 @@ def save_png(path: str | os.PathLike[str], image: npt.ArrayLike) -> Path:
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(6)}.tmp")
-    try:
-        with open(tmp, "xb") as f:
-            Image.fromarray(np.ascontiguousarray(image)).save(f, format="PNG")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    from .io.files import replacing
+
+    # atomic: a hidden temporary file renamed over `path` (removed on any failure)
+    with replacing(path) as tmp, open(tmp, "xb") as f:
+        Image.fromarray(np.ascontiguousarray(image)).save(f, format="PNG")
     return path
 
 

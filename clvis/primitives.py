@@ -529,6 +529,12 @@ def histogram(
         raise ValueError(f"nbins: expected 1..2^32-1, got {nbins}")
     nbins = int(nbins)
     _check_size(keys.shape[0], "histogram")
+    # the counts (4 bytes a bin), and their copy when they are read back, before
+    # anything is allocated: a failed host allocation of a CPU device's buffer
+    # can bring the process down even when the MemoryError is caught
+    runtime.check_memory(
+        queue, f"histogram of {nbins} bins", device_bytes=4 * nbins, host_bytes=4 * nbins if host else 0
+    )
     kd = to_device(queue, "keys", keys)
     n = kd.size
     counts = runtime.zeros(queue, nbins, np.uint32, "histogram counts")

@@ -12,6 +12,7 @@ that silently stops loading cannot shrink the matrix unnoticed.
 """
 
 import contextlib
+import contextvars
 import dataclasses
 import os
 import threading
@@ -58,7 +59,9 @@ def options_flipping():
     """A context manager: while it is open, another thread keeps changing the
     process's options (int64_atomics and tuning, every half millisecond).
     Yields a one-element list counting the changes; restores the options."""
-    saved = runtime.options()
+    # the process's options, outside any configure() block of this test (a
+    # fresh context has none): what the flipping thread changes
+    saved = contextvars.Context().run(runtime.options)
     stop = threading.Event()
     flips = [0]
 
@@ -78,10 +81,10 @@ def options_flipping():
         finally:
             stop.set()
             t.join()
-            runtime.set_options(**dataclasses.asdict(saved))
+            contextvars.Context().run(runtime.set_options, **dataclasses.asdict(saved))
 
     yield flipping
-    runtime.set_options(**dataclasses.asdict(saved))
+    contextvars.Context().run(runtime.set_options, **dataclasses.asdict(saved))
 
 
 @pytest.fixture(autouse=True)

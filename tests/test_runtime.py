@@ -150,28 +150,40 @@ def _copy_package(root):
 
 
 def test_package_in_path_with_space(device, tmp_path):
-    """Kernels build when the package's path has a space: once from a working
-    directory beside it (a relative -I path) and once from one whose relative
-    path has a space too (the compiler runs from the include folder)."""
+    """Kernels build when the package's path has a space, from a working
+    directory beside it and from one whose path has a space too: the headers
+    are copied to a private folder without whitespace, and the process's
+    working directory never changes meanwhile (another thread reading relative
+    paths during the builds sees it unchanged every time)."""
     root = tmp_path / "with space" / "src dir"
     _copy_package(root)
     elsewhere = tmp_path / "other dir"
     elsewhere.mkdir()
     index = [runtime.describe(d) for d in runtime.devices()].index(runtime.describe(device))
     code = (
-        "import os, numpy as np, clvis\n"
+        "import os, threading, numpy as np, clvis\n"
         "assert clvis.__file__.startswith(os.environ['PYTHONPATH']), clvis.__file__\n"
         "cwd = os.getcwd()\n"
+        "open('marker', 'w').close()\n"
+        "seen, done = [], threading.Event()\n"
+        "def watch():\n"
+        "    while not done.is_set():\n"
+        "        seen.append(os.getcwd() == cwd and os.path.exists('marker'))\n"
+        "t = threading.Thread(target=watch)\n"
+        "t.start()\n"
         "x = np.arange(1000, dtype=np.int32)\n"
         "assert (clvis.scan(x) == np.cumsum(x) - x).all()\n"
-        "assert os.getcwd() == cwd\n"
+        "done.set(); t.join()\n"
+        "assert seen and all(seen), (len(seen), seen.count(False))\n"
         "print(clvis.runtime.build_options(clvis.default_queue().device, {})[1])\n"
     )
     env = dict(os.environ, PYTHONPATH=str(root), CLVIS_DEVICE=str(index))
-    for cwd, include in ((root, "kernels_cl/include"), (elsewhere, ".")):
+    for cwd in (root, elsewhere):
         out = subprocess.run([sys.executable, "-c", code], env=env, cwd=cwd, capture_output=True, text=True)
         assert out.returncode == 0, out.stderr
-        assert out.stdout.strip() == include
+        include = Path(out.stdout.strip())
+        assert include.name.startswith("clvis-include-") and " " not in str(include)
+        assert (include / "clvis").is_dir()
 
 
 @pytest.mark.parametrize(
@@ -453,3 +465,39 @@ def test_check_memory(device):
         runtime.check_memory(q, "a huge image", device_bytes=1 << 62)
     with pytest.raises(clvis.DeviceError, match="available"):
         runtime.check_memory(q, "a huge image", host_bytes=1 << 60)
+
+
+def test_configure_is_per_thread_and_never_leaks():
+    """Two threads' overlapping configure() blocks: each sees its own options
+    for its whole block, the other thread (and the main one) never sees them,
+    and after both the process's options are as before."""
+    import threading
+
+    before = runtime.options()
+    barrier = threading.Barrier(2)
+    seen: dict[str, list] = {"a": [], "b": []}
+
+    def work(name, **changes):
+        with runtime.configure(**changes):
+            for _ in range(50):
+                barrier.wait()
+                seen[name].append(runtime.options())
+                with runtime.configure(max_alloc_bytes=1 << 20):  # nested blocks
+                    assert runtime.options().max_alloc_bytes == 1 << 20
+                seen[name].append(runtime.options())
+        seen[name].append(runtime.options())
+
+    a = threading.Thread(target=work, args=("a",), kwargs={"int64_atomics": False})
+    b = threading.Thread(target=work, args=("b",), kwargs={"tuning": "gpu"})
+    a.start()
+    b.start()
+    a.join()
+    b.join()
+    assert all(not o.int64_atomics and o.tuning == before.tuning for o in seen["a"][:-1])
+    assert all(o.int64_atomics == before.int64_atomics and o.tuning == "gpu" for o in seen["b"][:-1])
+    assert seen["a"][-1] == before and seen["b"][-1] == before
+    assert runtime.options() == before
+    with runtime.configure(int64_atomics=False):
+        runtime.set_options(tuning="cpu")  # inside a block: for the rest of the block
+        assert runtime.options().tuning == "cpu"
+    assert runtime.options() == before

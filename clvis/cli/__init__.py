@@ -18,8 +18,11 @@ clvis view [FILE]            an interactive viewer in the browser (points, progr
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 
 from .._version import __version__
@@ -64,6 +67,56 @@ def main(argv: Sequence[str] | None = None) -> int:
     A bare `clvis` prints the help and exits 0, as `clvis --help` does.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
+    # Ctrl-C (SIGINT) and SIGTERM: one line and 128 + the signal, no traceback.
+    # SIGTERM is raised as an exception too, so what is being written is removed
+    # on the way out (clvis.io.files, save_png) instead of left as a temporary file.
+    previous = _on_sigterm()
+    sigint = signal.getsignal(signal.SIGINT)
+    try:
+        return _main(argv)
+    except _Terminated:
+        return _interrupted(argv, signal.SIGTERM)
+    except KeyboardInterrupt:
+        return _interrupted(argv, signal.SIGINT)
+    finally:
+        if previous is not None:
+            with contextlib.suppress(ValueError, OSError, TypeError):
+                signal.signal(signal.SIGTERM, previous)
+                signal.signal(signal.SIGINT, sigint)
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised where the main thread is, as KeyboardInterrupt is for SIGINT."""
+
+
+def _raise_terminated(signum, frame):
+    raise _Terminated
+
+
+def _on_sigterm():
+    """Raise _Terminated on SIGTERM (main thread only; elsewhere Python cannot set
+    a handler); the handler it replaced, or None."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    try:
+        return signal.signal(signal.SIGTERM, _raise_terminated)
+    except (ValueError, OSError):
+        return None
+
+
+def _interrupted(argv: list[str], sig: signal.Signals) -> int:
+    # a second Ctrl-C while exiting would print a traceback
+    with contextlib.suppress(ValueError, OSError):
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    cmd = next((a for a in argv if not a.startswith("-")), "")
+    what = "interrupted" if sig == signal.SIGINT else "terminated"
+    with contextlib.suppress(Exception):
+        sys.stderr.write(f"clvis{' ' + cmd if cmd else ''}: {what}\n")
+        sys.stderr.flush()
+    return 128 + int(sig)
+
+
+def _main(argv: list[str]) -> int:
     p, commands = _parser()
     if not argv:
         p.print_help()

@@ -61,6 +61,9 @@ _SOFT_Z_FACTOR = 1.01
 _OVERVIEW_WIDTH = 2880  # the overview is shrunk by an integer factor to fit this
 _COORDINATES = ("x", "y", "z")  # --attribute takes these too
 MAX_POINTS = 2**32 - 2  # the Rasterizer's: index 0xFFFFFFFF marks an empty pixel
+# host bytes a pixel `clvis render` takes at its peak (measured: ~97 B a pixel
+# for a cloud with colors and attributes)
+HOST_BYTES_PER_PIXEL = 100
 MAX_POINT_SIZE = 64  # the Rasterizer's point_size: 1..64 pixels a side
 MAX_AUTO_POINT_SIZE = 16  # --point-size auto: larger points blot out the shape
 _SPARSE_FRACTION = 1000  # a note when the points cover under 1/1000 of the image
@@ -765,6 +768,12 @@ def _render(args, progress) -> int:
         point_size = int(min(max(round(spacing), 1), MAX_AUTO_POINT_SIZE))
     colormap = args.colormap or "viridis"
     q = runtime.default_queue()
+    # the whole command's host memory a pixel (G-buffers read back, the depth
+    # filter, the panels, the overview and their PNGs), refused up front
+    # rather than met by the OOM killer
+    runtime.check_memory(
+        q, f"clvis render --size {width}x{height}", host_bytes=width * height * HOST_BYTES_PER_PIXEL
+    )
     net = None
     if args.compare and args.post != "narvis":
         raise CliError(

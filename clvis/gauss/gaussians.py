@@ -198,9 +198,10 @@ class Gaussians:
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write a .npz (means, scales, rotations, values, opacities, and colors when present)."""
+        from ..io.files import write_replacing
+
         extra: dict[str, Any] = {} if self.colors is None else {"colors": self.colors}
-        np.savez(
-            path,
+        arrays = dict(
             means=self.means,
             scales=self.scales,
             rotations=self.rotations,
@@ -208,6 +209,11 @@ class Gaussians:
             opacities=self.opacities,
             **extra,
         )
+        target = os.fspath(path)
+        if not target.endswith(".npz"):  # as np.savez names it
+            target += ".npz"
+        # atomic: a failed overwrite keeps the previous file
+        write_replacing(target, lambda f: np.savez(f, **arrays))
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Gaussians:

@@ -28,6 +28,8 @@ import numpy as np
 
 from .._arrays import triple
 from ..errors import DataError
+from ..io.files import regular_file
+from ..io.vdb import check_vdb
 
 __all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb"]
 
@@ -354,9 +356,8 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     if grid is not None and (isinstance(grid, bool) or not isinstance(grid, (str, int, np.integer))):
         raise TypeError(f"grid: expected a name, an index or None, got {type(grid).__name__}")
     tinyvdb = _tinyvdb()
-    p = Path(os.fspath(path))
-    if not p.is_file():
-        raise FileNotFoundError(f"{p}: no such file")
+    p = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO, device
+    check_vdb(p)  # counts the file cannot hold, before tinyvdb allocates them
     try:
         f = tinyvdb.open(str(p))
     except (RuntimeError, ValueError, OSError, MemoryError, IndexError) as e:

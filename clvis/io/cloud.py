@@ -12,6 +12,7 @@ import numpy.typing as npt
 
 from .._arrays import real_array
 from ..errors import DataError
+from .files import write_replacing
 
 # Named columns (PLY vertex properties, structured NPY fields) with a meaning.
 _COLOR_NAMES = (("red", "green", "blue", "alpha"), ("r", "g", "b", "a"))
@@ -224,15 +225,9 @@ def _from_columns(path: Path, columns: dict[str, np.ndarray], origin=None) -> Po
 
 
 def _write_or_remove(path, write) -> None:
-    """write(file) into `path`; on any failure the partial file is removed."""
-    path = Path(path)
-    with open(path, "wb") as f:
-        try:
-            write(f)
-        except BaseException:
-            f.close()
-            path.unlink()
-            raise
+    """write(file) into a file that then replaces `path` atomically: on any
+    failure `path` keeps what it held (see :mod:`clvis.io.files`)."""
+    write_replacing(path, write)
 
 
 def _check_cloud(cloud) -> None:

@@ -19,6 +19,33 @@ _LAZ_MAX_POINTS_PER_BYTE = 1000
 # most 67 bytes (point format 10), ~17 MB per chunk.
 _LAS_READ_CHUNK = 1 << 18
 _LASZIP_VLR = (b"laszip encoded", 22204)
+# LASzip's items (type, bytes) for each point data format, in order, and the
+# extra bytes item that follows them: lazrs decodes whatever the VLR lists and
+# sizes its buffers from it, so an item that does not belong to the point format
+# decodes into re-interpreted points or makes lazrs abort on an allocation.
+_POINT10, _GPSTIME11, _RGB12, _WAVE13 = (6, 20), (7, 8), (8, 6), (9, 29)
+_POINT14, _RGB14, _RGBNIR14, _WAVE14 = (10, 30), (11, 6), (12, 8), (13, 29)
+_LAZ_ITEMS = {
+    0: (_POINT10,),
+    1: (_POINT10, _GPSTIME11),
+    2: (_POINT10, _RGB12),
+    3: (_POINT10, _GPSTIME11, _RGB12),
+    4: (_POINT10, _GPSTIME11, _WAVE13),
+    5: (_POINT10, _GPSTIME11, _RGB12, _WAVE13),
+    6: (_POINT14,),
+    7: (_POINT14, _RGB14),
+    8: (_POINT14, _RGBNIR14),
+    9: (_POINT14, _WAVE14),
+    10: (_POINT14, _RGBNIR14, _WAVE14),
+}
+# (extra bytes item type, item versions, compressors) for formats 0-5 and 6-10:
+# pointwise (1) or pointwise chunked (2) items of version 1 or 2; layered
+# chunked (3) items of version 3
+_LAZ_LEGACY = (0, (1, 2), (1, 2))
+_LAZ_LAYERED = (14, (3,), (3,))
+# LASzip's default chunk: a chunk size up to this, or up to the point count,
+# is accepted (lazrs allocates chunk size x record length up front)
+_LAZ_DEFAULT_CHUNK = 50_000
 
 
 def _check_las_header(path: Path) -> tuple[int, int]:
@@ -59,6 +86,7 @@ def _check_las_header(path: Path) -> tuple[int, int]:
         vlrs = _las_records(f, path, header_size, n_vlr, data_offset, 54, "<H", "VLR")
         if n_evlr:
             _las_records(f, path, evlr_start, n_evlr, size, 60, "<Q", "extended VLR")
+        _check_extra_bytes(f, path, vlrs.get(_EXTRA_BYTES_VLR), point_format & 0x3F, record_len)
         compressed = point_format & 0xC0
         if not compressed:
             if data_offset + count * record_len > size:
@@ -70,8 +98,51 @@ def _check_las_header(path: Path) -> tuple[int, int]:
         laszip = vlrs.get(_LASZIP_VLR)
         if laszip is None:
             raise DataError(f"{path}: malformed LAZ file: no laszip VLR (the compression parameters)")
-        _check_laz(f, path, size, data_offset, count, record_len, laszip)
+        _check_laz(f, path, size, data_offset, count, record_len, laszip, point_format & 0x3F)
     return count, record_len
+
+
+# The extra bytes VLR: 192-byte descriptors; data_type (byte 2) 0 is "undocumented
+# bytes", as many as options (byte 3) says; 1-10 scalars, 11-30 (LAS 1.3) arrays of them
+_EXTRA_BYTES_VLR = (b"LASF_Spec", 4)
+_EXTRA_SIZES = (1, 1, 2, 2, 4, 4, 8, 8, 4, 8)
+_BASE_RECORD = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
+
+
+def _check_extra_bytes(f, path, record, point_format: int, record_len: int) -> None:
+    """The extra bytes descriptors against the record: laspy divides by a
+    descriptor's element size (0 for a data type 0 of no bytes) and lays the
+    dimensions out in the record without checking that they fit."""
+    if record is None:
+        return
+    start, length = record
+    f.seek(start)
+    raw = f.read(length)
+    if length % 192 or len(raw) != length:
+        raise DataError(
+            f"{path}: malformed LAS/LAZ file: an extra bytes VLR of {length} bytes (192 per field)"
+        )
+    total = 0
+    for i in range(length // 192):
+        kind, options = raw[192 * i + 2], raw[192 * i + 3]
+        if kind == 0:
+            size = options
+        elif kind <= 30:
+            size = _EXTRA_SIZES[(kind - 1) % 10] * (1 + (kind - 1) // 10)
+        else:
+            size = 0
+        if size == 0:
+            raise DataError(
+                f"{path}: malformed LAS/LAZ file: extra bytes field {i} has data type {kind} "
+                f"of {size} bytes (types 0 with a byte count, 1-30)"
+            )
+        total += size
+    room = record_len - _BASE_RECORD.get(point_format, 0)
+    if total > room:
+        raise DataError(
+            f"{path}: malformed LAS/LAZ file: the extra bytes fields take {total} bytes, "
+            f"the {record_len}-byte records of point format {point_format} have {room}"
+        )
 
 
 def _las_records(f, path, start: int, n: int, end: int, head_len: int, len_fmt: str, what: str) -> dict:
@@ -95,7 +166,34 @@ def _las_records(f, path, start: int, n: int, end: int, head_len: int, len_fmt: 
     return found
 
 
-def _check_laz(f, path, size: int, data_offset: int, count: int, record_len: int, laszip) -> None:
+def _check_laz_items(path, vlr: bytes, n_items: int, record_len: int, point_format: int) -> None:
+    """The laszip VLR's compressor and items must be the canonical ones of the
+    header's point format: (type, size, version) of each, then at most one
+    extra bytes item of the bytes the record has beyond the format's own."""
+    base = _LAZ_ITEMS.get(point_format)
+    if base is None:
+        raise DataError(f"{path}: malformed LAZ file: unknown point data format {point_format}")
+    extra_type, versions, compressors = _LAZ_LAYERED if point_format >= 6 else _LAZ_LEGACY
+    (compressor,) = struct.unpack_from("<H", vlr, 0)
+    if compressor not in compressors:
+        raise DataError(
+            f"{path}: malformed LAZ file: compressor {compressor} for point format {point_format} "
+            f"(expected {' or '.join(map(str, compressors))})"
+        )
+    items = [struct.unpack_from("<HHH", vlr, 34 + 6 * i) for i in range(n_items)]
+    extra = record_len - sum(n for _, n in base)
+    want = list(base) + ([(extra_type, extra)] if extra > 0 else [])
+    if extra < 0 or [(t, n) for t, n, _ in items] != want or any(v not in versions for _, _, v in items):
+        raise DataError(
+            f"{path}: malformed LAZ file: the laszip VLR lists items (type, size, version) "
+            f"{[tuple(i) for i in items]}; point format {point_format} with {record_len}-byte "
+            f"records needs {[(t, n) for t, n in want]}, version {' or '.join(map(str, versions))}"
+        )
+
+
+def _check_laz(
+    f, path, size: int, data_offset: int, count: int, record_len: int, laszip, point_format: int
+) -> None:
     """The laszip VLR, the chunk table and the declared point count against the file."""
     vlr_start, vlr_len = laszip
     f.seek(vlr_start)
@@ -113,6 +211,12 @@ def _check_laz(f, path, size: int, data_offset: int, count: int, record_len: int
         raise DataError(
             f"{path}: malformed LAZ file: the laszip items take {item_bytes} bytes per point, "
             f"the header says {record_len}"
+        )
+    _check_laz_items(path, vlr, n_items, record_len, point_format)
+    if chunk_size != 0xFFFFFFFF and chunk_size > max(count, _LAZ_DEFAULT_CHUNK):
+        raise DataError(
+            f"{path}: malformed LAZ file: a chunk size of {chunk_size} points for {count} points "
+            f"(at most the point count, or {_LAZ_DEFAULT_CHUNK})"
         )
     data_bytes = size - data_offset
     if count > _LAZ_MAX_POINTS_PER_BYTE * data_bytes:
@@ -251,6 +355,7 @@ def _read_las(path: Path) -> PointCloud:
         KeyError,
         IndexError,
         TypeError,
+        ZeroDivisionError,
     ) as e:
         # RuntimeError / lazrs.LazrsError: lazrs's decompression errors
         raise DataError(f"{path}: malformed LAS/LAZ file: {type(e).__name__}: {e}") from e

@@ -20,6 +20,7 @@ import zlib
 import numpy as np
 
 from ..errors import DataError
+from .files import regular_file
 
 _NPY_MAGIC = b"\x93NUMPY"
 _NPY_MAX_HEADER = 10000  # numpy's own limit on the header's length
@@ -120,6 +121,7 @@ def load_npy(path: str | os.PathLike[str]) -> np.ndarray:
     """The array of a .npy file; DataError naming the file when it is malformed,
     truncated, declares more data than it holds, holds objects (no pickles) or
     is an .npz archive."""
+    path = regular_file(path)
     try:
         with open(path, "rb") as f:
             size = os.fstat(f.fileno()).st_size
@@ -133,6 +135,7 @@ def load_npy(path: str | os.PathLike[str]) -> np.ndarray:
 def npy_shape(path: str | os.PathLike[str]) -> tuple[int, ...]:
     """The shape a .npy file declares, read from its header alone (checked as
     :func:`load_npy` checks it), to tell a volume from a point array."""
+    path = regular_file(path)
     try:
         with open(path, "rb") as f:
             size = os.fstat(f.fileno()).st_size
@@ -147,6 +150,7 @@ def load_npz(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """The arrays of an .npz archive by key (the member name without .npy);
     DataError naming the file when it is malformed, truncated, an NPY array, or
     declares more data than it holds."""
+    path = regular_file(path)
     name = str(path)
     try:
         with open(path, "rb") as f:

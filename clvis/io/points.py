@@ -18,7 +18,6 @@ extension, malformed or truncated content, wrong shapes) raises
 
 from __future__ import annotations
 
-import errno
 import os
 import zipfile
 from pathlib import Path
@@ -29,6 +28,7 @@ from ..errors import DataError
 from .ascii import SUFFIXES as _ASCII_SUFFIXES
 from .ascii import _read_ascii
 from .cloud import _NPZ_KEYS, PointCloud, _check_cloud, _cloud, _from_columns, _write_or_remove
+from .files import regular_file
 from .las import _read_las
 from .npy import load_npy, load_npz
 from .pcd import _read_pcd
@@ -61,11 +61,10 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
       or by their count, positions relative to their minimum as for LAS
       (:mod:`clvis.io.ascii`).
     """
-    path = Path(path)
     readers = {".ply": _read_ply, ".las": _read_las, ".laz": _read_las, ".npy": _read_npy, ".npz": _read_npz}
     readers.update({".pcd": _read_pcd, **dict.fromkeys(_ASCII_SUFFIXES, _read_ascii)})
-    if not path.exists():
-        raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), str(path))
+    # a FIFO would block the read, /dev/zero never end, a directory fail in the parser
+    path = regular_file(path)
     reader = readers.get(path.suffix.lower())
     if reader is None:
         raise DataError(

@@ -261,8 +261,11 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         IndexError,
         struct.error,
     )
+    _check_nifti_head(path)
     try:
         img = nibabel.load(path)  # the header only; the data is read below
+        if isinstance(img, nibabel.cifti2.Cifti2Image):
+            raise DataError(f"{path}: a CIFTI-2 file (a matrix over brain grayordinates), not a volume")
         header = img.header
         shape = tuple(int(s) for s in header.get_data_shape())
         dtype = np.dtype(header.get_data_dtype())
@@ -302,6 +305,68 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         raise DataError(f"{path}: the voxel size (pixdim) must be three positive numbers, got {zooms[:3]}")
     data = _real_volume(path, data.transpose(2, 1, 0))
     return Volume(data, spacing[::-1], (0.0, 0.0, 0.0), str(path), affine)
+
+
+# NIFTI_INTENT_CONNECTIVITY_*: the intent codes of CIFTI-2 files (matrices over
+# brain surfaces and voxels, not volumes)
+_CIFTI_INTENTS = range(3000, 3100)
+# sizeof_hdr -> (extension flag at, vox_offset format and offset, intent code format and offset)
+_NIFTI_HEADERS = {348: (348, "f", 108, "h", 68), 540: (540, "q", 168, "i", 504)}
+
+
+def _check_nifti_head(path: Path) -> None:
+    """What nibabel trusts when it reads a header, checked against the file first:
+    the extension chain after the header (nibabel reads each extension's declared
+    size at once: 2 GB reserved for one field of a 400-byte file), and CIFTI-2's
+    intent codes (nibabel gives a CIFTI image, without a volume's header)."""
+    import gzip
+
+    gz = path.name.lower().endswith(".gz")
+    size = path.stat().st_size
+    # what the data after the header can be: the file, or what gzip expands it to
+    available = size * _DEFLATE_MAX_RATIO if gz else size
+    try:
+        with gzip.open(path, "rb") if gz else open(path, "rb") as f:
+            head = f.read(544)
+            for order in "<>":
+                if len(head) >= 4 and struct.unpack_from(order + "i", head)[0] in _NIFTI_HEADERS:
+                    break
+            else:
+                return  # not NIfTI-1/2: nibabel says what it is
+            ext_at, off_fmt, off_at, intent_fmt, intent_at = _NIFTI_HEADERS[
+                struct.unpack_from(order + "i", head)[0]
+            ]
+            if len(head) < ext_at + 4 or head[ext_at] == 0:
+                return  # no extensions (nibabel reports a short header itself)
+            (intent,) = struct.unpack_from(order + intent_fmt, head, intent_at)
+            if intent in _CIFTI_INTENTS:
+                raise DataError(
+                    f"{path}: a CIFTI-2 file (intent code {intent}: a matrix over brain "
+                    "grayordinates), not a volume"
+                )
+            (vox_offset,) = struct.unpack_from(order + off_fmt, head, off_at)
+            pos = ext_at + 4
+            # nibabel reads extensions while vox_offset - position >= 16, or to
+            # the end of the file when vox_offset lies before them
+            if math.isnan(vox_offset) or 0 <= vox_offset - pos < 16:
+                return
+            end = available if vox_offset < pos or math.isinf(vox_offset) else min(available, int(vox_offset))
+            while pos + (16 if end < available else 8) <= end:
+                f.seek(pos)
+                raw = f.read(8)
+                if len(raw) < 8:
+                    break
+                esize, _ = struct.unpack(order + "ii", raw)
+                if esize < 8 or pos + esize > end:
+                    raise DataError(
+                        f"{path}: malformed NIfTI header: an extension at byte {pos} declares "
+                        f"{esize} bytes; the extensions end by byte {end}"
+                    )
+                pos += esize
+    except DataError:
+        raise
+    except (OSError, EOFError, zlib.error, struct.error) as e:
+        raise DataError(f"{path}: not a readable NIfTI file: {type(e).__name__}: {e}") from e
 
 
 def _check_nifti_layout(

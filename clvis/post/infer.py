@@ -91,7 +91,40 @@ def _card(directory: Path, name: str) -> dict:
         raise DataError(f"{path}: unreadable model card ({e})") from None
     if not isinstance(card, dict) or not isinstance(card.get("files"), dict) or "stride" not in card:
         raise DataError(f"{path}: not a clvis model card (no files or stride)")
+    _check_card(path, card)
     return card
+
+
+def _check_card(path: Path, card: dict) -> None:
+    """The fields load() and the packers trust, each of the type and range they
+    need: DataError naming the field (an edited card, not a Python traceback)."""
+
+    def whole(key, lo, hi):
+        v = card.get(key)
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+            raise DataError(
+                f"{path}: model card field {key!r} must be a whole number in {lo}..{hi}, got {v!r}"
+            )
+
+    whole("stride", 1, 1024)
+    if card["stride"] & (card["stride"] - 1):
+        raise DataError(f"{path}: model card field 'stride' must be a power of two, got {card['stride']}")
+    whole("channels_in", 1, 64)
+    whole("channels_out", 1, 64)
+    for precision, entry in card["files"].items():
+        if not isinstance(entry, dict) or not all(
+            isinstance(entry.get(k), str) for k in ("file", "sha256") if entry.get("file") is not None
+        ):
+            raise DataError(
+                f"{path}: model card entry files[{precision!r}] must give a file name and its sha256"
+            )
+        name = entry.get("file")
+        if name is not None and (not name or Path(name).name != name):
+            raise DataError(f"{path}: model card file {name!r} must be a plain file name beside the card")
+    arch = card.get("architecture", {})
+    planes = arch.get("planes", ()) if isinstance(arch, dict) else None
+    if planes is None or not isinstance(planes, (list, tuple)) or not all(isinstance(p, str) for p in planes):
+        raise DataError(f"{path}: model card field 'architecture' must be a dict whose 'planes' are names")
 
 
 def _providers(providers: list[str] | None) -> list[str]:
@@ -148,7 +181,15 @@ class PostNetwork:
         except Exception as e:  # onnxruntime's own errors: a corrupt or foreign graph
             raise DataError(f"{path}: onnxruntime cannot load it ({str(e).splitlines()[0]})") from None
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
-        if len(inputs) != 1 or len(outputs) != 1 or inputs[0].shape[1] != card.get("channels_in"):
+        if (
+            len(inputs) != 1
+            or len(outputs) != 1
+            or len(inputs[0].shape) != 4
+            or len(outputs[0].shape) != 4
+            or inputs[0].shape[1] != card.get("channels_in")
+            or outputs[0].shape[1] not in (card.get("channels_out"), None)
+            and not isinstance(outputs[0].shape[1], str)
+        ):
             raise DataError(f"{path}: its graph is not the one its card describes")
         self._in, self._out = inputs[0].name, outputs[0].name
         self.stride = int(card["stride"])
@@ -259,6 +300,10 @@ class PostNetwork:
                 self.session.run_with_iobinding(io)
             finally:
                 mapped_out.base.release()
+        except Exception as e:  # a graph that loads but fails when run (onnxruntime's errors)
+            raise DataError(
+                f"{self.path}: onnxruntime failed running it ({str(e).splitlines()[0]})"
+            ) from None
         finally:
             mapped_in.base.release()
         self.stats = {"pack": t1 - t0, "inference": time.perf_counter() - t1}

@@ -438,6 +438,7 @@ class Rasterizer:
         focal = np.float32(0.5 * H * float(np.asarray(camera.projection)[1, 1]))
         with runtime.pinned(self.config):
             f32, u8, df, du = self._plane_buffers(names)
+            self._check_memory(W, H, len(f32), len(u8), tol is not None and self.n > 0, host)
             vis, drawn, cam_d = self._render(cam, near, far, W, H, ps)
             out = self._resolve(vis, cam_d, W, H, focal, tf, tol, near, far, ps, f32, u8, df, du)
         if not host:
@@ -453,6 +454,19 @@ class Rasterizer:
             "points_nonfinite": self.nonfinite,
         }
         return g
+
+    def _check_memory(self, W: int, H: int, nf: int, nu: int, soft: bool, host: bool) -> None:
+        """Device and host bytes of one render, checked before anything is
+        allocated: the visibility buffer (8 B a pixel), the soft z accumulation
+        (20), index, depth, rgba (4 each), the attribute planes (4 or 1 each),
+        velocity (8 + 4 + 4) and radius (4); with host=True every plane but the
+        visibility buffer and the accumulation is read back."""
+        npix = W * H
+        planes = 12 + 4 * nf + nu + (16 if self.has_velocity else 0) + (4 if self.has_radius else 0)
+        device = npix * (8 + (20 if soft else 0) + planes)
+        runtime.check_memory(
+            self.queue, f"raster image {W}x{H}", device_bytes=device, host_bytes=npix * planes if host else 0
+        )
 
     def _resolve(
         self, vis, cam_d, W, H, focal, tf, tol, near, far, point_size, f32_names, u8_names, attr_f32, attr_u8

@@ -11,7 +11,7 @@ import re
 import sys
 import time
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -43,9 +43,6 @@ _FLAGS = {"-cl-fp32-correctly-rounded-divide-sqrt"}
 # quotes or backslashes (the options reach the compiler as one space-joined string)
 _DEFINE_VALUE = re.compile(r"[A-Za-z0-9_.+\-*/%()<>!&|^~]+")
 
-# the include option when the compiler runs with INCLUDE_DIR as its working directory
-_HERE = "."
-
 
 def _define_value(name: str, v: object) -> str:
     if isinstance(v, (bool, np.bool_)):
@@ -65,36 +62,59 @@ def _define_value(name: str, v: object) -> str:
 
 
 def _include_option() -> str:
-    """The -I path: pyopencl joins options with spaces, and no quoting works
-    everywhere (PoCL 3 passes quotes on to clang literally), so a path with
-    whitespace is given relative to the working directory, or as "." with the
-    compiler run from INCLUDE_DIR (see _build; the working directory is the
-    process's, so other threads' relative paths see it during such a build)."""
+    """The -I path. pyopencl joins options with spaces, and no quoting works
+    everywhere (PoCL 3 passes quotes on to clang literally), so when
+    INCLUDE_DIR's path has whitespace the headers are copied once to a private
+    folder whose path has none (:func:`_private_include`). The build never
+    changes the process's working directory, which other threads read."""
     inc = str(INCLUDE_DIR)
     if not re.search(r"\s", inc):
         return inc
-    try:
-        rel = os.path.relpath(inc)
-    except (ValueError, OSError):  # another drive; a working directory since deleted
-        rel = inc
-    return rel if not re.search(r"\s", rel) else _HERE
+    return str(_private_include())
 
 
-@contextlib.contextmanager
-def _working_directory(path: Path | None) -> Iterator[None]:
-    if path is None:
-        yield
-        return
-    try:
-        old: str | None = os.getcwd()
-    except OSError:
-        old = None
-    os.chdir(path)
-    try:
-        yield
-    finally:
-        if old is not None:
-            os.chdir(old)
+_private: Path | None = None
+
+
+def _private_include() -> Path:
+    """A copy of INCLUDE_DIR under the temporary folder (or /tmp, /var/tmp),
+    named by a hash of the headers' paths and contents: made once (renamed into
+    place, so concurrent processes never see half a copy) and shared by every
+    process of this clvis version."""
+    global _private
+    if _private is not None and _private.is_dir():
+        return _private
+    import hashlib
+    import shutil
+    import tempfile
+
+    digest = hashlib.sha256()
+    for f in sorted(INCLUDE_DIR.rglob("*")):
+        if f.is_file():
+            digest.update(f.relative_to(INCLUDE_DIR).as_posix().encode() + b"\0" + f.read_bytes())
+    name = f"clvis-include-{digest.hexdigest()[:16]}"
+    for base in (tempfile.gettempdir(), "/tmp", "/var/tmp"):
+        if re.search(r"\s", base) or not os.path.isdir(base):
+            continue
+        target = Path(base) / name
+        if not target.is_dir():
+            staging = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=base))
+            try:
+                shutil.copytree(INCLUDE_DIR, staging / "include")
+                try:
+                    os.replace(staging / "include", target)
+                except OSError:  # another process made it first
+                    if not target.is_dir():
+                        raise
+            finally:
+                shutil.rmtree(staging, ignore_errors=True)
+        _private = target
+        return target
+    raise ClvisError(
+        f"clvis's OpenCL headers are at {INCLUDE_DIR}, a path with whitespace, which the OpenCL "
+        "compiler's -I option cannot take, and no temporary folder without whitespace was found "
+        "to copy them to; set TMPDIR to one"
+    )
 
 
 def build_options(device: cl.Device, defines: Mapping[str, object], flags: Sequence[str] = ()) -> list[str]:
@@ -170,7 +190,7 @@ def _build(context: cl.Context, path: Path, defines: Mapping[str, object], opts:
             if time.time() - (cache / "lock").stat().st_mtime > _STALE_LOCK_S:
                 raise KernelBuildError(_display(path), defines, describe(device), _cache_failure(cache, None))
     prg = cl.Program(context, path.read_text())
-    with warnings.catch_warnings(), _working_directory(INCLUDE_DIR if opts[1] == _HERE else None):
+    with warnings.catch_warnings():
         # drivers log remarks on success (Intel: vectorisation reports);
         # pyopencl turns each into a CompilerWarning. Failures raise below.
         warnings.simplefilter("ignore", cl.CompilerWarning)

@@ -6,6 +6,7 @@ thread (:func:`_in_force`: a renderer's pinned ones, else the process's)."""
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import dataclasses
 import os
 import threading
@@ -115,6 +116,11 @@ def _env_options() -> Options:
 
 
 _options = _env_options()
+# configure()'s override: context-local (each thread, and each asyncio task, has
+# its own), so blocks nest per thread and one thread's block never changes
+# another's options or outlives its own block
+_override: contextvars.ContextVar[Options | None] = contextvars.ContextVar("clvis_options", default=None)
+_set_lock = threading.Lock()
 
 
 def _check_options(o: Options) -> None:
@@ -123,36 +129,49 @@ def _check_options(o: Options) -> None:
     Options(o.tuning, o.int64_atomics, o.max_alloc_bytes)
 
 
+def _current() -> Options:
+    """This context's options: its configure() block's, else the process's."""
+    o = _override.get()
+    return _options if o is None else o
+
+
 def options() -> Options:
     """A copy of the options in force."""
-    return dataclasses.replace(_options)
+    return dataclasses.replace(_current())
 
 
 def set_options(**changes: Any) -> None:
-    """Change options for the rest of the process (see the module docstring)."""
+    """Change options for the rest of the process (see the module docstring);
+    inside a :func:`configure` block, for the rest of that block."""
     global _options
-    new = dataclasses.replace(_options, **changes)
-    _check_options(new)
-    _options = new
+    with _set_lock:
+        new = dataclasses.replace(_current(), **changes)
+        _check_options(new)
+        if _override.get() is not None:
+            _override.set(new)
+        else:
+            _options = new
 
 
 @contextlib.contextmanager
 def configure(**changes: Any) -> Iterator[Options]:
     """Change options inside a ``with`` block, e.g.
-    ``with clvis.runtime.configure(int64_atomics=False): ...``."""
-    global _options
-    saved = _options
-    set_options(**changes)
+    ``with clvis.runtime.configure(int64_atomics=False): ...``. The change holds
+    in this thread (this context) only, until the block ends; blocks nest."""
+    new = dataclasses.replace(_current(), **changes)
+    _check_options(new)
+    token = _override.set(new)
     try:
         yield options()
     finally:
-        _options = saved
+        _override.reset(token)
 
 
 _pins = threading.local()
 
 
 def _in_force() -> Options:
-    """The options this thread runs under: its pinned ones, else the process's."""
+    """The options this thread runs under: its pinned ones, else its configure()
+    block's, else the process's."""
     pinned_cfg = getattr(_pins, "config", None)
-    return pinned_cfg.options if pinned_cfg is not None else _options
+    return pinned_cfg.options if pinned_cfg is not None else _current()

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from ..io.files import replacing, write_replacing
 from ..post.infer import sha256
 from ..post.names import NAMES
 from . import data as _data
@@ -406,7 +407,8 @@ def train(
         "versions": _versions(),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores",
     }
-    (out / f"{name}.json").write_text(json.dumps(card, indent=1) + "\n")
+    text = (json.dumps(card, indent=1) + "\n").encode()
+    write_replacing(out / f"{name}.json", lambda f: f.write(text))  # atomic
     log(f"wrote {out / (name + '.json')}")
     return card
 
@@ -466,12 +468,12 @@ def export_onnx(net: Any, path: Path) -> None:
     import torch
 
     x0 = torch.zeros(1, net.channels_in, 2 * net.stride, 2 * net.stride)
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), replacing(path) as tmp:  # atomic
         warnings.simplefilter("ignore")
         torch.onnx.export(
             net,
             (x0,),
-            str(path),
+            str(tmp),
             dynamo=False,
             opset_version=OPSET,
             input_names=["planes"],
@@ -558,7 +560,8 @@ def _to_fp16(src: Path, dst: Path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         m = convert_float_to_float16(onnx.load(str(src)), keep_io_types=True)
-    onnx.save(m, str(dst))
+    with replacing(dst) as tmp:
+        onnx.save(m, str(tmp))
 
 
 def _to_int8(src: Path, dst: Path, calibration: list[np.ndarray]) -> None:
@@ -575,12 +578,12 @@ def _to_int8(src: Path, dst: Path, calibration: list[np.ndarray]) -> None:
             return next(self.items, None)
 
     pre = dst.with_suffix(".pre.onnx")
-    with warnings.catch_warnings():
+    with warnings.catch_warnings(), replacing(dst) as tmp:
         warnings.simplefilter("ignore")
         quant_pre_process(str(src), str(pre), skip_symbolic_shape=True)
         quantize_static(
             str(pre),
-            str(dst),
+            str(tmp),
             Reader(),
             quant_format=QuantFormat.QDQ,
             per_channel=True,

@@ -1,0 +1,168 @@
+"""Seed files for the fuzzer, made here (and the third-party files of
+tests/data): every format clvis reads, with the reader each goes to.
+
+A seed is (format, reader, path). Formats: ply, las, laz, npy, npz, nii,
+nii.gz, raw, vdb. Readers: points (read_points), volume (read_volume), vdb
+(read_vdb), gaussians (Gaussians.load).
+"""
+
+from __future__ import annotations
+
+import gzip
+import struct
+from pathlib import Path
+
+import numpy as np
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+
+
+def _cloud(n, seed=0):
+    from clvis.io import PointCloud
+
+    rng = np.random.default_rng(seed)
+    return PointCloud(
+        rng.normal(0, 10, (n, 3)),
+        colors=rng.integers(0, 256, (n, 4), dtype=np.uint8),
+        attributes={"intensity": rng.random(n).astype(np.float32)},
+        radius=rng.random(n),
+        origin=(1e5, 2.0, 0.5),
+    )
+
+
+def _las(path, n, point_format, seed=0, extra=False):
+    import laspy
+
+    rng = np.random.default_rng(seed)
+    header = laspy.LasHeader(point_format=point_format, version="1.2" if point_format < 6 else "1.4")
+    header.scales = [0.001] * 3
+    header.offsets = [500000.0, 0.0, 0.0]
+    las = laspy.LasData(header)
+    if extra:
+        las.add_extra_dims([laspy.ExtraBytesParams("a", "f4"), laspy.ExtraBytesParams("b", "u1")])
+    las.x = 500000 + rng.random(n) * 100
+    las.y = rng.random(n) * 100
+    las.z = rng.random(n) * 10
+    las.intensity = rng.integers(0, 65536, n)
+    if "gps_time" in las.point_format.dimension_names:
+        las.gps_time = np.arange(n) * 0.5
+    if "red" in las.point_format.dimension_names:
+        las.red, las.green, las.blue = rng.integers(0, 65536, (3, n)).astype(np.uint16)
+    las.write(str(path))
+
+
+def _s(text):
+    b = text.encode()
+    return struct.pack("<I", len(b)) + b
+
+
+def _vdb(tmp: Path, path: Path, n=60, seed=1):
+    """A float grid written by tinyvdb from a minimal hand-made OpenVDB file."""
+    import tinyvdb
+
+    vs = np.array([1.0, 1.0, 1.0])
+    transform = _s("ScaleTranslateMap") + b"".join(
+        struct.pack("<3d", *v) for v in (np.zeros(3), vs, vs, 1 / vs, 1 / vs**2, 0.5 / vs)
+    )
+    out = struct.pack("<qIIIB", 0x56444220, 224, 11, 0, 1) + b"0EA4B2C5-0F55-4B24-9C25-5CFD16E1E1CE"
+    out += struct.pack("<II", 0, 1)
+    body = struct.pack("<II", 0, 0) + transform + struct.pack("<I", 1) + struct.pack("<f", 0)
+    body += struct.pack("<ii", 0, 0)
+    out += _s("density") + _s("Tree_float_5_4_3") + _s("")
+    pos = len(out) + 24
+    out += struct.pack("<qqq", pos, pos + len(body), pos + len(body)) + body
+    template = tmp / f"template-{path.stem}.vdb"
+    template.write_bytes(out)
+    rng = np.random.default_rng(seed)
+    ijk = np.unique(rng.integers(-10, 20, (n, 3)), axis=0).astype(np.int32)
+    vals = rng.random(len(ijk)).astype(np.float32)
+    with tinyvdb.open(str(template)) as f:
+        f.read_grids()
+        f.extend_grid_from_sparse(0, ijk.tobytes(), vals.tobytes(), "density")
+        f.save(str(path))
+    template.unlink()
+
+
+def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
+    """Write the seeds into `out`; [(format, reader, path)]. Formats whose
+    optional package is missing are left out."""
+    from clvis.gauss import Gaussians
+    from clvis.io import save_npz, write_ply
+
+    out.mkdir(parents=True, exist_ok=True)
+    seeds: list[tuple[str, str, Path]] = []
+
+    def add(fmt, reader, path):
+        seeds.append((fmt, reader, Path(path)))
+
+    write_ply(out / "bin.ply", _cloud(12))
+    add("ply", "points", out / "bin.ply")
+    write_ply(out / "txt.ply", _cloud(6, seed=1), text=True)
+    add("ply", "points", out / "txt.ply")
+    for name in ("pyvista_ant.ply",):
+        if (DATA / name).is_file():
+            add("ply", "points", DATA / name)
+    np.save(out / "arr.npy", np.random.default_rng(2).normal(size=(20, 3)).astype(np.float32))
+    add("npy", "points", out / "arr.npy")
+    rec = np.zeros(8, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("i", "<f8")])
+    np.save(out / "rec.npy", rec)
+    add("npy", "points", out / "rec.npy")
+    save_npz(out / "cloud.npz", _cloud(10, seed=3))
+    add("npz", "points", out / "cloud.npz")
+    rng = np.random.default_rng(4)
+    Gaussians(rng.normal(size=(5, 3)), rng.random((5, 3))).save(out / "gauss.npz")
+    add("npz", "gaussians", out / "gauss.npz")
+    np.savez_compressed(out / "deflated.npz", positions=rng.normal(size=(30, 3)))
+    add("npz", "points", out / "deflated.npz")
+    np.save(out / "vol.npy", rng.random((4, 5, 6)))
+    add("npy", "volume", out / "vol.npy")
+    (out / "vol_6x5x4_uint16.raw").write_bytes(rng.integers(0, 65535, 120, dtype=np.uint16).tobytes())
+    add("raw", "volume", out / "vol_6x5x4_uint16.raw")
+    try:
+        import laspy  # noqa: F401
+        import lazrs  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        _las(out / "las0.las", 30, 0)
+        add("las", "points", out / "las0.las")
+        _las(out / "las3.las", 30, 3)
+        add("las", "points", out / "las3.las")
+        _las(out / "eb.las", 20, 6, extra=True)
+        add("las", "points", out / "eb.las")
+        for pf, n in ((1, 60), (3, 60), (6, 80), (7, 60), (8, 60), (3, 3000)):
+            _las(out / f"laz{pf}-{n}.laz", n, pf, seed=pf)
+            add("laz", "points", out / f"laz{pf}-{n}.laz")
+        for name in ("laspy_simple.laz", "laspy_simple.copc.laz"):
+            if (DATA / name).is_file():
+                add("laz", "points", DATA / name)
+    try:
+        import nibabel
+    except ImportError:
+        pass
+    else:
+        data = rng.random((6, 5, 4)).astype(np.float32)
+        nibabel.save(nibabel.Nifti1Image(data, np.eye(4)), out / "vol.nii")
+        add("nii", "volume", out / "vol.nii")
+        img = nibabel.Nifti1Image(rng.integers(0, 200, (5, 4, 3, 1)).astype(np.int16), np.eye(4))
+        img.header.extensions.append(nibabel.nifti1.Nifti1Extension(6, b"a comment for the fuzzer"))
+        nibabel.save(img, out / "ext4d.nii")
+        add("nii", "volume", out / "ext4d.nii")
+        nibabel.save(nibabel.Nifti2Image(data, np.eye(4)), out / "vol2.nii")
+        add("nii", "volume", out / "vol2.nii")
+        (out / "volz.nii.gz").write_bytes(gzip.compress((out / "vol.nii").read_bytes()))
+        add("nii.gz", "volume", out / "volz.nii.gz")
+    try:
+        import tinyvdb  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        _vdb(out, out / "grid.vdb")
+        add("vdb", "vdb", out / "grid.vdb")
+        _vdb(out, out / "grid2.vdb", n=400, seed=2)
+        add("vdb", "vdb", out / "grid2.vdb")
+    return seeds
+
+
+def suffix(fmt: str) -> str:
+    return "." + fmt

@@ -1,0 +1,49 @@
+"""Edits of a model card loaded with post.load(directory=...): each loads and
+runs, or raises a clvis error naming the card or its file (never a
+ValueError/TypeError/KeyError/AttributeError or onnxruntime's own error)."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from clvis import post
+from clvis.errors import ClvisError
+from clvis.post.infer import MODELS
+
+pytest.importorskip("onnxruntime")
+
+BAD = [None, "x", -1, 0, 3, 7, 2**40, 1.5, True, [], {}]
+EDITS = (
+    [("stride", v) for v in BAD + [64, 2048]]
+    + [("channels_in", v) for v in BAD + [4, 6]]
+    + [("channels_out", v) for v in BAD + [4]]
+    + [("files", v) for v in (None, [], {"fp32": None}, {"fp32": "lidar.onnx"}, {"fp32": {}})]
+    + [("files.fp32.file", v) for v in (None, 5, "", "../lidar.onnx", "lidar.int8.onnx", [])]
+    + [("files.fp32.sha256", v) for v in (None, 5, "0" * 64)]
+    + [("architecture", v) for v in (None, [], "x", {"planes": 5}, {"planes": [1, 2]})]
+)
+
+
+def _edit(card, key, value):
+    parts = key.split(".")
+    d = card
+    for p in parts[:-1]:
+        d = d[p]
+    d[parts[-1]] = value
+
+
+@pytest.mark.parametrize("key,value", EDITS, ids=[f"{k}={v!r}"[:40] for k, v in EDITS])
+def test_edited_card_loads_and_runs_or_raises_a_clvis_error(tmp_path, key, value):
+    for f in MODELS.glob("lidar*"):
+        shutil.copy(f, tmp_path / f.name)
+    card = json.loads((tmp_path / "lidar.json").read_text())
+    _edit(card, key, value)
+    (tmp_path / "lidar.json").write_text(json.dumps(card))
+    try:
+        net = post.load("lidar", directory=tmp_path)
+        out = net(np.zeros((40, 24, 5), np.float32))
+        assert out.shape == (40, 24, 4)
+    except ClvisError as e:
+        assert str(tmp_path) in str(e) or str(e).startswith("lidar: no fp32 variant"), e

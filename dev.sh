@@ -57,7 +57,7 @@ intel_env() { # VENV: point the ICD loader at Intel's runtime inside the venv
 # tests/test_typing.py's UNTYPED (being reworked elsewhere: iso/render.py,
 # post/infer.py, io's point readers, distributed); that test keeps the two
 # lists together, so a new module is typed from the start
-TYPED="clvis/__init__.py clvis/__main__.py clvis/_arrays.py clvis/_version.py clvis/benchreport.py
+TYPED="clvis/__init__.py clvis/__main__.py clvis/_arrays.py clvis/_keys.py clvis/_version.py clvis/benchreport.py
        clvis/camera.py clvis/colormap.py clvis/datasets.py clvis/errors.py clvis/images.py
        clvis/limits.py clvis/morton.py clvis/primitives.py
        clvis/runtime clvis/raster clvis/gauss clvis/reference clvis/cli clvis/training

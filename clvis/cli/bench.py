@@ -8,11 +8,15 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ._common import Parser, real
 
+if TYPE_CHECKING:  # benchreport is imported when a report is read, not at start-up
+    from ..benchreport import Row
 
-def _report(path: str):
+
+def _report(path: str) -> tuple[list[Row], dict]:
     """--report: the (rows, meta) of a pytest-benchmark JSON file, read while
     the arguments are parsed, so a wrong file is an argument error."""
     import argparse
@@ -69,7 +73,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     return b
 
 
-SAVED = ([], {"saved": True})  # --compare without a path: the run's own saved JSON, read before it runs
+# --compare without a path: the run's own saved JSON, read before it runs
+SAVED: tuple[list[Row], dict] = ([], {"saved": True})
 
 
 def _percent(text: str) -> float:

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TypedDict
 
 import numpy as np
 import pyopencl as cl
@@ -99,6 +100,14 @@ class GaussianImage:
         return out
 
 
+class _Profile(TypedDict):
+    march_wg: int
+    k: int
+    k0: int
+    tile_rays: int
+    method: str
+
+
 # per tuning profile: work-items per group of the march kernel (a divisor of
 # 64), the default k-buffer size and the first round's k (K0). CPUs: fewer,
 # longer rounds pay (a round re-traverses the BVH), but a first round of 16
@@ -108,7 +117,7 @@ class GaussianImage:
 # "tile_rays": rays per band of rows at most (28 bytes each on the device);
 # a CPU gains nothing from larger launches and a band is the progress step,
 # a GPU wants enough rays in flight to fill it.
-PROFILES = {
+PROFILES: dict[str, _Profile] = {
     "cpu": {"march_wg": 8, "k": 64, "k0": 16, "tile_rays": 1 << 18, "method": "tiles"},
     "gpu": {"march_wg": 64, "k": 16, "k0": 16, "tile_rays": 1 << 21, "method": "tiles"},
 }
@@ -348,6 +357,8 @@ class GaussianRenderer:
         depth = runtime.empty(q, (rows, w), np.float32, "depth")
         stats = runtime.empty(q, (rows, w, 2), np.uint32, "ray stats")
         bvh = self.bvh
+        assert bvh is not None and self._march is not None  # method == "bvh" (tiles returned above)
+        march = self._march
         nodes = bvh.nodes if self.n else None
         fixed = (
             self._buf(nodes),
@@ -372,7 +383,7 @@ class GaussianRenderer:
             tiles = (-(-w // TILE)) * (-(-n_rows // TILE))
             return runtime.launch(
                 q,
-                self._march,
+                march,
                 tiles * TILE * TILE,
                 self._march_wg,
                 *fixed,
@@ -391,7 +402,7 @@ class GaussianRenderer:
                 "gaussians": self.n,
                 "model": self.model,
                 "k": self.k,
-                "bvh_build_s": runtime.seconds(*self.bvh.events, wait=False),
+                "bvh_build_s": runtime.seconds(*bvh.events, wait=False),
                 "render_s": None,
                 "events": (start, end),
                 "rays": w * h,

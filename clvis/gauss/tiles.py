@@ -32,6 +32,7 @@ import numpy as np
 import pyopencl as cl
 
 from .. import primitives, runtime
+from .._arrays import buffer_of
 from ..camera import Camera, ray_buffer
 from ..colormap import TransferFunction
 from ..errors import DeviceError
@@ -166,6 +167,7 @@ def render_tiles(
     lanes = 1 if splat else prof["lanes"] if r.lanes is None else r.lanes
     render = ks["splat_render" if splat else "tile_render8" if lanes == 8 else "tile_render"]
     wg = runtime.local_size(q, prof["splat_wg" if splat else "render_wg"])
+    head: tuple[Any, ...]  # the count and keys kernels' leading arguments
     if splat:
         head = (recs, np.uint32(n), projd.base_data, near, np.uint32(w), np.uint32(h))
         splats = runtime.empty(q, (max(n, 1), 8), np.float32, "2D splats")
@@ -263,6 +265,7 @@ def render_tiles(
                 np.uint32(n_rows),
                 np.uint32(out_y0),
             )
+            args: tuple[Any, ...]
             if splat:
                 args = (recs, order, splats.base_data, *lists, *band_args, *tf_args, colors)
             else:
@@ -282,7 +285,7 @@ def render_tiles(
             if host:
                 r0, r1 = c * ts, min(d * ts, h)
                 for dst, src in ((out_rgba, rgba), (out_depth, depth), (out_stats, stats)):
-                    cl.enqueue_copy(q, dst[r0:r1], src.base_data, wait_for=[e3])
+                    cl.enqueue_copy(q, dst[r0:r1], buffer_of(src), wait_for=[e3])
                 if progress is not None:
                     progress(w * r1, w * h)
         events.append((e0 if done_bands else start, e1, e2, e3))

@@ -10,10 +10,10 @@ view with the other commands.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from ..camera import Camera
 
@@ -29,8 +29,8 @@ class Orbit:
 
     def __init__(
         self,
-        lo: Sequence[float],
-        hi: Sequence[float],
+        lo: npt.ArrayLike,
+        hi: npt.ArrayLike,
         azimuth: float = -115.0,
         elevation: float = 35.0,
         fov_y: float = 45.0,
@@ -45,9 +45,9 @@ class Orbit:
         self._home = (float(azimuth), float(elevation))
         # what fit() frames: a sample of the points where given (a round cloud
         # fills more of the view than its box's corners would let it), else the corners
-        lo, hi = self.lo, self.hi
+        b0, b1 = self.lo, self.hi
         corners = np.array(
-            [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+            [[x, y, z] for x in (b0[0], b1[0]) for y in (b0[1], b1[1]) for z in (b0[2], b1[2])]
         )
         self._frame = corners if points is None else np.asarray(points, np.float64).reshape(-1, 3)
         self.fit()
@@ -109,7 +109,7 @@ class Orbit:
             raise ValueError(f"zoom factor: expected a positive number, got {factor!r}")
         self.distance = min(max(self.distance * f, self.radius * 1e-3), self.radius * 1e3)
 
-    def set(self, eye: Sequence[float], target: Sequence[float], fov_y: float | None = None) -> None:
+    def set(self, eye: npt.ArrayLike, target: npt.ArrayLike, fov_y: float | None = None) -> None:
         """A typed camera: the orbit that looks from `eye` at `target` (z up)."""
         eye_a, target_a = np.asarray(eye, np.float64), np.asarray(target, np.float64)
         if eye_a.shape != (3,) or target_a.shape != (3,) or not np.isfinite([eye_a, target_a]).all():

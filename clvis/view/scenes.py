@@ -23,13 +23,16 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..camera import Camera
 from ..errors import DataError
 from ..images import BACKGROUND
+
+if TYPE_CHECKING:  # clvis.post (onnxruntime) is imported only when a network is asked for
+    from ..post import PostNetwork
 
 __all__ = ["COLORMAPS", "Frame", "PointScene", "Scene", "VolumeScene", "psnr", "scene_for", "split"]
 
@@ -165,7 +168,9 @@ class PointScene(Scene):
             "point_size": {"min": 1, "max": _MAX_POINT_SIZE},
         }
         self._nets: dict[str, Any] = {}
-        self._gauss: dict[str, Any] = {}
+        # one entry: "gaussians" mode's (renderer, count) by colour, or the split
+        # mode's (NarvisScene, renderer) by ("split", attribute, colormap)
+        self._gauss: dict[str | tuple[str, ...], Any] = {}
 
     def _net(self, name: str):
         if name not in self._nets:
@@ -300,7 +305,7 @@ class VolumeScene(Scene):
             "isovalue": {"min": vmin, "max": vmax},
             "lod": ["low", "medium", "high"],
         }
-        self._infill = None
+        self._infill: PostNetwork | None = None
         self._gauss: dict[tuple, Any] = {}
 
     def frames(
@@ -326,6 +331,7 @@ class VolumeScene(Scene):
             done = not img.active.any()
             info = {"pass": n, "completion": round(float(img.completion), 4)}
             if mode == "iso+infill" and not done:
+                assert self._infill is not None  # loaded above for this mode
                 rgba = self._infill(img)
                 image = _premultiplied_over_background(rgba)
                 times["post"] = time.perf_counter() - t1

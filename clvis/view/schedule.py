@@ -71,7 +71,11 @@ class LatestWins:
                 self._pending = None
                 self._running = True
             try:
-                job(lambda gen=gen: self._generation != gen or self._closed)
+
+                def stale(gen: int = gen) -> bool:
+                    return self._generation != gen or self._closed
+
+                job(stale)
             except BaseException as e:  # noqa: BLE001  (reported; the worker must survive a bad frame)
                 self.errors.append(e)
                 if self.on_error is not None:

@@ -30,7 +30,9 @@ import struct
 import threading
 import time
 from importlib import resources
-from typing import Any
+from typing import Any, cast
+
+import numpy.typing as npt
 
 from ..camera import hemisphere_cameras
 from .orbit import Orbit
@@ -228,7 +230,10 @@ class ViewServer:
                 self.orbit.fit(self.size[0] / self.size[1])
                 self.interacting = False
             elif kind == "camera":
-                self.orbit.set(msg.get("eye"), msg.get("target"), msg.get("fov"))
+                # the page's JSON as it came: Orbit.set rejects anything but two
+                # finite 3-vectors (None included) with a ValueError
+                eye, target = cast(npt.ArrayLike, msg.get("eye")), cast(npt.ArrayLike, msg.get("target"))
+                self.orbit.set(eye, target, msg.get("fov"))
                 self.interacting, self.moved = False, True
             elif kind == "preset":  # one of the NARVis samplers' 128 hemisphere views
                 k = msg.get("hemisphere")

@@ -200,7 +200,7 @@ def test_impossible_size_is_a_device_error(queue, monkeypatch):
     from clvis import runtime
 
     r = gr.GaussianRenderer(_random(10), method="tiles", queue=queue)
-    monkeypatch.setattr(runtime, "host_available_bytes", lambda: 10**6)
+    monkeypatch.setattr(runtime.memory, "host_available_bytes", lambda: 10**6)
     with pytest.raises(clvis.DeviceError, match=r"GB on the device and .* GB on the host"):
         r.render(_cam(), 4000, 4000)
 

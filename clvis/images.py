@@ -402,19 +402,19 @@ def legend(
     width = nonnegative_int("width", width)
     if width < 2:
         raise ValueError(f"width: a legend needs at least 2 columns, got {width}")
-    entries = [(_colour(f"entries[{k}]", c), str(t)) for k, (c, t) in enumerate(entries)]
+    rgb_entries = [(_colour(f"entries[{k}]", c), str(t)) for k, (c, t) in enumerate(entries)]
     size = _text_size(width)
     row_h = label_height(width)
     sw = max(4, size * 3 // 4)
     margin = max(2, size // 3)
     f = _font(size)
-    col_w = int(max([f.getlength(t) for _, t in entries] + [1])) + sw + 3 * margin
-    cols = max(1, min(len(entries), (width - margin) // max(col_w, 1)))
-    rows = max(1, -(-len(entries) // cols))
+    col_w = int(max([f.getlength(t) for _, t in rgb_entries] + [1])) + sw + 3 * margin
+    cols = max(1, min(len(rgb_entries), (width - margin) // max(col_w, 1)))
+    rows = max(1, -(-len(rgb_entries) // cols))
     out = np.empty((rows * row_h, width, 4), np.uint8)
     out[:] = _colour("background", background) + (255,)
     cell_w = max(1, (width - margin) // cols)
-    for k, (c, t) in enumerate(entries):
+    for k, (c, t) in enumerate(rgb_entries):
         r, col = divmod(k, cols)
         x0, y0 = margin + col * cell_w, r * row_h
         ys = y0 + (row_h - sw) // 2

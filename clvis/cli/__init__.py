@@ -12,6 +12,8 @@ clvis bench {families}
                              a benchmark suite with its peers, as a table (and JSON)
 clvis train {models}
                              trains a post network on renders made here, exports it to ONNX
+clvis eval {models}
+                             scores a post network on its held-out suite against the baselines
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import sys
 from collections.abc import Sequence
 
 from .._version import __version__
-from . import bench, demo, gauss, info, iso, raster, train
+from . import bench, demo, gauss, heldout, info, iso, raster, train
 from ._common import Parser, glue_values, run
 
 _COMMANDS = {
@@ -33,6 +35,7 @@ _COMMANDS = {
     "gauss": gauss,
     "bench": bench,
     "train": train,
+    "eval": heldout,
 }
 _EPILOG = """\
 A bad argument or a file clvis cannot use is one line on stderr and exit

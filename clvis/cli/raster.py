@@ -247,8 +247,8 @@ def _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net
     transfer function; a panel, and lines scoring the network's image and
     the plain rasterization against it, with the time of each path."""
     from ..colormap import value_range
+    from ..metrics import metrics
     from ..training.data import NarvisScene
-    from ..training.train import metrics
 
     vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
     scene = NarvisScene(cloud, attribute, vr, colormap, "the cloud")

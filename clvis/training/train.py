@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from ..metrics import metrics
 from ..post.infer import sha256
 from ..post.names import NAMES
 from . import data as _data
@@ -170,18 +171,6 @@ def _loss_fn(weights: dict[str, float], crop: int):
         return total
 
     return loss
-
-
-def metrics(output: np.ndarray, target: np.ndarray) -> dict[str, float]:
-    """PSNR (dB) and SSIM of two (H, W, 3) float images in [0, 1], through
-    scikit-image."""
-    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
-
-    o = np.clip(output, 0, 1).astype(np.float64)
-    t = np.clip(target, 0, 1).astype(np.float64)
-    psnr = float(peak_signal_noise_ratio(t, o, data_range=1.0)) if not np.array_equal(o, t) else math.inf
-    ssim = float(structural_similarity(t, o, data_range=1.0, channel_axis=2))
-    return {"psnr": psnr, "ssim": ssim}
 
 
 def _rgb(nchw: np.ndarray) -> np.ndarray:

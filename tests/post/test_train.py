@@ -30,6 +30,8 @@ def test_train_smoke_through_the_cli(tmp_path, name):
             "--out",
             str(tmp_path),
             "--quiet",
+            "--eval",  # the held-out suite: tests/post/test_eval.py
+            "none",
             *(["--points", "20000"] if name == "narvis" else []),
         ]
     )
@@ -67,7 +69,7 @@ def test_lidar_pairs_are_registered():
     assert (f.rgb[kept].sum(-1) > 0).mean() > 0.95
 
 
-@pytest.mark.parametrize("kind", data.TRAIN_VOLUMES + data.HELD_OUT_VOLUMES)
+@pytest.mark.parametrize("kind", data.VOLUME_KINDS)
 def test_procedural_volumes_have_a_surface(kind):
     v, iso = data.procedural_volume(kind, np.random.default_rng(0), 16)
     assert v.shape == (16, 16, 16) and v.dtype == np.float32 and v.min() < iso < v.max()

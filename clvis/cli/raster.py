@@ -233,7 +233,7 @@ def _render_panels(
                 return post(rgbda(gd.rgba, gd.depth, depth_filter_mask(gd.depth, levels)))
             return post(gd)
 
-        title = {"lidar": "LiDAR RGBDA U-Net", "narvis": "NARVis U-Net (G-buffers -> Gaussians)"}[post.name]
+        title = post.spec.title
         with progress.stage(f"{post.name} network"):
             frame()  # the first call sizes its buffers
             t0 = time.perf_counter()

@@ -44,24 +44,13 @@ from typing import Any
 import numpy as np
 
 from ..metrics import metrics
+from ..post.specs import SPECS
 from . import data as _data
 from . import flows as _flows
 
-TRAINED = {
-    "infill": _data.TRAIN_VOLUMES,
-    "lidar": ("town",),
-    "narvis": ("hurricane",),
-}
-FAMILIES = {
-    "infill": _data.HELD_OUT_VOLUMES + _data.EVAL_VOLUMES,
-    "lidar": ("terrain", "photo"),
-    "narvis": (*_flows.FLOWS, "hurricane/magma"),
-}
-BASELINES = {
-    "infill": ("input", "pushpull"),
-    "lidar": ("input", "pushpull"),
-    "narvis": ("raster", "pushpull", "splat"),
-}
+TRAINED = {n: s.trained_families for n, s in SPECS.items()}
+FAMILIES = {n: s.eval_families for n, s in SPECS.items()}
+BASELINES = {n: s.baselines for n, s in SPECS.items()}
 #: the NARVis training's particles a pixel (2 M at 512 x 512)
 NARVIS_POINTS_PER_PIXEL = 2_000_000 / 512**2
 
@@ -82,6 +71,8 @@ class Case:
 def suite(name: str, quick: bool = False) -> list[Case]:
     """The held-out suite of network `name` (the quick one: what ``clvis
     train`` runs at its end, and CI's subset draws from)."""
+    if name not in FAMILIES:
+        raise ValueError(f"model: expected one of {tuple(FAMILIES)}, got {name!r}")
     fam = FAMILIES[name]
     if name == "infill":
         if quick:

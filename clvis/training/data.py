@@ -423,13 +423,13 @@ class NarvisScene:
         transfer function, with the attribute planes `planes` names."""
         from ..post.names import GBUFFER_PLANES
 
+        kw.setdefault("colormap", self.colormap)
+        kw.setdefault("value_range", self.value_range)
         return ras.render(
             camera,
             width,
             height,
             color_by=self.attribute,
-            colormap=self.colormap,
-            value_range=self.value_range,
             planes=[p for p in planes if p not in GBUFFER_PLANES],
             **kw,
         )
@@ -513,6 +513,29 @@ class NarvisFrame:
     source: str
 
 
+#: the colormaps NARVis's training may colour a view with (``looks``);
+#: "magma" stays out: clvis eval's unseen-colormap family uses it
+NARVIS_TRAIN_COLORMAPS = ("viridis", "plasma", "inferno", "cividis", "turbo", "coolwarm", "gray", "YlGnBu")
+
+
+def narvis_looks(
+    scene: NarvisScene, count: int, rng: np.random.Generator
+) -> list[tuple[str, tuple[float, float]]]:
+    """`count` random transfer functions for the scene's views: a colormap of
+    NARVIS_TRAIN_COLORMAPS (reversed half the time) and a value range
+    from 40 % inside to 20 % beyond the attribute's (the colour arrives in
+    the input planes: the network must carry it, not memorise it)."""
+    lo, hi = scene.value_range
+    span = hi - lo
+    out = []
+    for _ in range(count):
+        cmap = NARVIS_TRAIN_COLORMAPS[int(rng.integers(0, len(NARVIS_TRAIN_COLORMAPS)))]
+        cmap += "_r" if rng.random() < 0.5 else ""
+        a, b = lo + span * rng.uniform(-0.2, 0.4), hi - span * rng.uniform(-0.2, 0.4)
+        out.append((cmap, (float(a), float(max(b, a + 0.05 * span)))))
+    return out
+
+
 def narvis_frames(
     scene: NarvisScene,
     cameras: Sequence[Camera],
@@ -520,21 +543,32 @@ def narvis_frames(
     height: int,
     planes: Sequence[str],
     *,
+    looks: Sequence[tuple[str, tuple[float, float]]] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> list[NarvisFrame]:
-    """Both renders of each camera's view."""
+    """Both renders of each camera's view; `looks`: per camera a (colormap,
+    value range) both renderers colour it with (default the scene's)."""
     import time
 
+    from ..colormap import TransferFunction
     from ..post.pack import pack_gbuffers
 
+    if looks is not None and len(looks) != len(cameras):
+        raise ValueError(f"looks: {len(looks)} for {len(cameras)} cameras")
     ras = scene.rasterizer()
     gr = scene.gaussian_renderer()
     frames = []
     for i, cam in enumerate(cameras):
         t0 = time.perf_counter()
-        g = scene.gbuffers(ras, cam, width, height, planes)
-        t1 = time.perf_counter()
-        img = gr.render(cam, width, height)
+        if looks is None:
+            g = scene.gbuffers(ras, cam, width, height, planes)
+            t1 = time.perf_counter()
+            img = gr.render(cam, width, height)
+        else:
+            cmap, vr = looks[i]
+            g = scene.gbuffers(ras, cam, width, height, planes, colormap=cmap, value_range=vr)
+            t1 = time.perf_counter()
+            img = gr.render(cam, width, height, transfer_function=TransferFunction(cmap, value_range=vr))
         t2 = time.perf_counter()
         rgb = np.clip(np.asarray(img.rgba)[..., :3], 0, 1).astype(np.float32)
         x = np.asarray(pack_gbuffers(g, planes))[0]

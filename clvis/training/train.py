@@ -65,6 +65,7 @@ SPECS: dict[str, dict[str, Any]] = {
         "views": 1,
         "held_out": 8,  # grid-sampler views and storm views, each
         "points": 2_000_000,
+        "looks": True,  # random colormaps and value ranges per training view
         "frame_size": (512, 512),
         "batch": 4,
         "loss": {"l2": 1.0, "tv": 0.002, "ms_ssim": 0.05},
@@ -79,9 +80,13 @@ INT8_MAX_LOSS_DB = 0.3
 # data
 
 
-def _narvis_sets(count: int, held: int, points: int, seed: int, size, planes, log) -> dict[str, list]:
+def _narvis_sets(
+    count: int, held: int, points: int, seed: int, size, planes, log, looks: bool = False
+) -> dict[str, list]:
     """The NARVis frames: "train" and "validation" (`count` hemisphere views
-    of the hurricane at every other azimuth, every tenth to validation),
+    of the hurricane at every other azimuth, every tenth to validation; with
+    `looks`, each coloured by a random colormap and value range,
+    data.narvis_looks),
     "grid sampler" (`held` views of the grid sampler, never trained on) and
     "storm" (`held` hemisphere views at the other azimuths of the storm
     NARVIS_STORM_TIME later, other particles)."""
@@ -94,7 +99,12 @@ def _narvis_sets(count: int, held: int, points: int, seed: int, size, planes, lo
     val_idx = set(range(9, len(picked), 10)) or ({len(picked) - 1} if len(picked) > 1 else set())
     grid = _data.narvis_cameras(hur, "grid", w / h)
     grid = [grid[int(i)] for i in np.sort(rng.permutation(len(grid))[:held])]
-    frames = _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log)
+    if looks:
+        frames = _data.narvis_frames(
+            hur, picked, w, h, planes, looks=_data.narvis_looks(hur, len(picked), rng), progress=log
+        ) + _data.narvis_frames(hur, grid, w, h, planes, progress=log)
+    else:
+        frames = _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log)
     storm = _data.narvis_scene("storm", points, seed + 7)
     odd = _data.narvis_cameras(storm, "hemisphere", w / h)[1::2]
     odd = [odd[int(i)] for i in np.sort(rng.permutation(len(odd))[:held])]
@@ -326,7 +336,16 @@ def train(
     sets: dict[str, list] = {}
     if trainer.frames is None:  # NARVis: its sets of views
         npoints = int(points or spec["points"])
-        sets = _narvis_sets(count, spec["held_out"], npoints, seed, fsize, spec["arch"]["planes"], log)
+        sets = _narvis_sets(
+            count,
+            spec["held_out"],
+            npoints,
+            seed,
+            fsize,
+            spec["arch"]["planes"],
+            log,
+            spec.get("looks", False),
+        )
         train_frames = sets.pop("train")
         val_frames = [f for v in sets.values() for f in v]
     else:
@@ -400,7 +419,10 @@ def train(
         "channels_out": net.channels_out,
         "command": " ".join(command) if command else f"clvis train {name} --steps {steps} --size {size}",
         "seed": seed,
-        "data": _narvis_data(sets, train_frames, fsize, data_seconds)
+        "data": {
+            **_narvis_data(sets, train_frames, fsize, data_seconds),
+            "looks": list(_data.NARVIS_TRAIN_COLORMAPS) if spec.get("looks") else None,
+        }
         if sets
         else {
             "train": list(trainer.trained),

@@ -117,6 +117,54 @@ def test_shipped_cards_carry_their_suite_table(name):
     assert "| family |" in ev.table({"model": name, "rows": rows})
 
 
+# the rows of each shipped card's quick suite where the network is below the
+# best classical baseline (issue 21 §2's "never below the baseline": MISSED
+# on these), with (PSNR, SSIM) margins as measured; a card may not add a row
+# here nor fall more than 0.25 dB / 0.01 further on one
+KNOWN_BELOW = {
+    "infill": {
+        "turbulence 320x180 64^3 at 95% orbit": (-0.01, 0.003),
+        "noise 320x180 64^3 at 95% orbit": (-0.33, -0.0),
+        "shapes 320x180 64^3 at 85% orbit": (-2.46, 0.018),
+        "shapes 320x180 64^3 at 90% orbit": (-2.69, 0.009),
+        "shapes 320x180 64^3 at 95% orbit": (-0.63, 0.01),
+    },
+    "lidar": {"terrain 320x240 3% scan orbit": (-4.94, -0.011)},
+    "narvis": {
+        "lorenz 256x256 1x points hemisphere": (-4.39, -0.067),
+        "lorenz 256x256 1x points grid": (-5.79, -0.103),
+        "jet 256x256 1x points hemisphere": (-2.48, -0.034),
+        "jet 256x256 1x points grid": (-4.33, -0.167),
+        "ring 256x256 1x points grid": (-0.59, -0.04),
+        "hurricane/magma 256x256 1x points hemisphere": (-0.67, -0.037),
+        "hurricane/magma 256x256 1x points grid": (2.11, -0.045),
+    },
+}
+
+
+@pytest.mark.parametrize("name", post.NAMES)
+def test_shipped_cards_hold_their_suite_margins(name):
+    card = json.loads((post.MODELS / f"{name}.json").read_text())
+    margins = ev.margins({"model": name, "rows": card["held_out_suite"]["rows"]})
+    for label, dp, ds in margins:
+        if label in KNOWN_BELOW[name]:
+            kp, ks = KNOWN_BELOW[name][label]
+            assert dp >= kp - 0.25 and ds >= ks - 0.01, label
+        else:
+            assert dp >= 0 and ds >= 0, f"{label}: {dp:+.2f} dB, SSIM {ds:+.3f} below the best baseline"
+    assert set(KNOWN_BELOW[name]) <= {m[0] for m in margins}
+
+
+@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (13 rows of the three quick suites)")
+@pytest.mark.parametrize("name", post.NAMES)
+def test_shipped_cards_never_below_their_baseline(name):
+    """Issue 21 §2: PSNR and SSIM >= the best classical baseline on every
+    row of the suite. Every shipped card misses it."""
+    card = json.loads((post.MODELS / f"{name}.json").read_text())
+    margins = ev.margins({"model": name, "rows": card["held_out_suite"]["rows"]})
+    assert all(dp >= 0 and ds >= 0 for _, dp, ds in margins)
+
+
 # ---------------------------------------------------------------------------
 # the CI subset: one case of each suite, recomputed (~1 min on 2 cores)
 

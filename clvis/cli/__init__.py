@@ -12,6 +12,8 @@ clvis bench {families}
                              a benchmark suite with its peers, as a table (and JSON)
 clvis train {models}
                              trains a post network on renders made here, exports it to ONNX
+clvis eval {models}
+                             scores a post network on its held-out suite against the baselines
 clvis view [FILE]            an interactive viewer in the browser (points, progressive iso, Gaussians)
 """
 
@@ -26,7 +28,7 @@ import threading
 from collections.abc import Sequence
 
 from .._version import __version__
-from . import bench, demo, gauss, info, iso, raster, train, view
+from . import bench, demo, gauss, heldout, info, iso, raster, train, view
 from ._common import Parser, glue_values, run
 
 _COMMANDS = {
@@ -37,6 +39,7 @@ _COMMANDS = {
     "gauss": gauss,
     "bench": bench,
     "train": train,
+    "eval": heldout,
     "view": view,
 }
 _EPILOG = """\

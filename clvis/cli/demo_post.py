@@ -43,7 +43,7 @@ def _sheet(path: Path, inp: np.ndarray, pp: np.ndarray, out: np.ndarray, target:
 
 
 def _scores(inp, pp, out, target) -> dict:
-    from ..training.train import metrics
+    from ..metrics import metrics
 
     return {k: metrics(v, target) for k, v in (("input", inp), ("pushpull", pp), ("network", out))}
 

@@ -353,7 +353,7 @@ def _render_panels(
                 return post(rgbda(gd.rgba, gd.depth, depth_filter_mask(gd.depth, levels)))
             return post(gd)
 
-        title = {"lidar": "LiDAR RGBDA U-Net", "narvis": "NARVis U-Net (G-buffers -> Gaussians)"}[post.name]
+        title = post.spec.title
         with progress.stage(f"{post.name} network"):
             frame()  # the first call sizes its buffers
             t0 = time.perf_counter()
@@ -367,8 +367,8 @@ def _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net
     transfer function; a panel, and lines scoring the network's image and
     the plain rasterization against it, with the time of each path."""
     from ..colormap import value_range
+    from ..metrics import metrics
     from ..training.data import NarvisScene
-    from ..training.train import metrics
 
     vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
     scene = NarvisScene(cloud, attribute, vr, colormap, "the cloud")

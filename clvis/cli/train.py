@@ -59,6 +59,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         metavar="N",
         help="narvis: the scenes' particles (default 2,000,000)",
     )
+    p.add_argument(
+        "--eval",
+        choices=("quick", "full", "none"),
+        default="quick",
+        help="then score the model on its held-out suite (clvis eval) into its card (default quick)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -73,7 +79,7 @@ def _command(args: argparse.Namespace) -> list[str]:
         c += ["--frame-size", f"{args.frame_size[0]}x{args.frame_size[1]}"]
     if args.points is not None:
         c += ["--points", str(args.points)]
-    return c
+    return c + ["--eval", args.eval]
 
 
 def cmd(args: argparse.Namespace) -> int:
@@ -102,4 +108,15 @@ def cmd(args: argparse.Namespace) -> int:
         log=log,
     )
     print(f"{args.out}/{card['name']}.onnx: held-out {card['held_out']}")
+    if args.eval != "none":
+        from ..training import evaluate as ev
+
+        quick = args.eval == "quick"
+        result = ev.evaluate(args.model, model_dir=args.out, quick=quick, log=log)
+        print(ev.table(result))
+        ev.write_card(
+            result,
+            args.out,
+            ["clvis", "eval", args.model, "--model-dir", str(args.out)] + (["--quick"] if quick else []),
+        )
     return 0

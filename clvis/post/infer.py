@@ -61,8 +61,9 @@ import pyopencl.array as cla
 from .. import limits
 from .._arrays import resolve_queue
 from ..errors import DataError
-from .names import GBUFFER_PLANES, NAMES
-from .pack import pack_gbuffers, pack_iso, pack_rgbda, padded_shape, unpack_rgba8
+from .names import GBUFFER_PLANES
+from .pack import padded_shape, unpack_rgba8
+from .specs import spec
 
 __all__ = ["MAX_PIXELS", "MAX_SIDE", "MODELS", "PRECISIONS", "PostNetwork", "load", "sha256"]
 
@@ -158,6 +159,8 @@ class PostNetwork:
         import onnxruntime as ort
 
         self.name, self.precision = name, precision
+        #: the network's spec (clvis.post.specs): input check, pack, baselines
+        self.spec = spec(name)
         self.card = card = _card(directory, name)
         entry = card["files"].get(precision) or {}
         if not entry.get("file"):
@@ -224,32 +227,7 @@ class PostNetwork:
 
     def _size(self, image: Any) -> tuple[int, int]:
         """(H, W) of an input the network takes; TypeError/ValueError/DataError else."""
-        if self.name == "narvis":
-            if not all(hasattr(image, k) for k in ("index", "rgba", "depth", "attributes")):
-                raise TypeError(
-                    "image: the narvis network takes rasterizer G-buffers (GBuffers), "
-                    f"got {type(image).__name__}"
-                )
-            shape = tuple(image.index.shape)
-            if len(shape) != 2:
-                raise ValueError(f"index: expected (H, W), got shape {shape}")
-        elif self.name == "infill":
-            if not all(hasattr(image, k) for k in ("rgba", "hit", "active")):
-                raise TypeError(f"image: the infill network takes an IsoImage, got {type(image).__name__}")
-            rgba = image.rgba
-            shape = tuple(rgba.shape if hasattr(rgba, "shape") else np.shape(rgba))
-            if len(shape) != 3 or shape[2] != 4:
-                raise ValueError(f"rgba: expected (H, W, 4), got shape {shape}")
-        else:
-            rgbda = getattr(image, "rgbda", image)
-            if not isinstance(rgbda, (np.ndarray, cla.Array)):
-                raise TypeError(
-                    f"image: the lidar network takes a FilteredImage or its rgbda, got {type(image).__name__}"
-                )
-            shape = tuple(rgbda.shape)
-            if len(shape) != 3 or shape[2] != 5:
-                raise ValueError(f"rgbda: expected (H, W, 5) [r, g, b, depth, alpha], got shape {shape}")
-        h, w = int(shape[0]), int(shape[1])
+        h, w = self.spec.shape(image)
         if h == 0 or w == 0:
             raise DataError(f"image: empty ({h} x {w} pixels)")
         if max(h, w) > MAX_SIDE or h * w > MAX_PIXELS:
@@ -269,12 +247,7 @@ class PostNetwork:
         q, s = self.queue, self.stride
         # device planes are packed as they are; a host plane is uploaded once.
         # each pack reads its input check back, so the kernel is done on return
-        if self.name == "narvis":
-            pack_gbuffers(image, self.planes, stride=s, out=planes, queue=q)
-        elif self.name == "infill":
-            pack_iso(image.rgba, image.hit, image.active, stride=s, out=planes, queue=q)
-        else:
-            pack_rgbda(getattr(image, "rgbda", image), stride=s, out=planes, queue=q)
+        self.spec.pack(image, self.planes, s, planes, q)
         t1 = time.perf_counter()
         # onnxruntime reads the input and writes the output through host
         # pointers to the two host-visible buffers (IO binding): on a CPU
@@ -341,8 +314,7 @@ def load(
     are (default: the models shipped in clvis/post/models; a `clvis train
     --out` folder works too); threads: onnxruntime's intra-op threads
     (default: one per core)."""
-    if name not in NAMES:
-        raise ValueError(f"name: expected one of {NAMES}, got {name!r}")
+    spec(name)  # ValueError for a name no network has
     if precision not in PRECISIONS:
         raise ValueError(f"precision: expected one of {PRECISIONS}, got {precision!r}")
     d = MODELS if directory is None else Path(directory)

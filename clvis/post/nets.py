@@ -364,18 +364,19 @@ class NarvisUNet(nn.Module):
         return torch.clamp(self.out(h), 0.0, 1.0)
 
 
+#: the torch module of each shipped network, by name
+NETWORKS: dict[str, type[nn.Module]] = {"infill": InfillWNet, "lidar": RgbdaUNet, "narvis": NarvisUNet}
+
+
 def build(name: str, **kwargs: Any) -> nn.Module:
     """A network by its shipped name ("infill", "lidar", "narvis") with its
     architecture arguments (InfillWNet: none; RgbdaUNet: width, depth;
     NarvisUNet: planes, widths, up)."""
-    if name == "infill":
-        return InfillWNet(**kwargs)
-    if name == "lidar":
-        return RgbdaUNet(**kwargs)
-    if name == "narvis":
-        kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs.items()}
-        return NarvisUNet(**kwargs)
-    raise ValueError(f"network: expected 'infill', 'lidar' or 'narvis', got {name!r}")
+    cls = NETWORKS.get(name) if isinstance(name, str) else None
+    if cls is None:
+        raise ValueError(f"network: expected one of {tuple(NETWORKS)}, got {name!r}")
+    kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs.items()}
+    return cls(**kwargs)
 
 
 def count_parameters(net: nn.Module) -> int:

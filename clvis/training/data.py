@@ -39,6 +39,9 @@ from ..camera import Camera
 
 TRAIN_VOLUMES = ("waves", "ripples", "blobs")
 HELD_OUT_VOLUMES = ("gyroid", "turbulence")
+#: volume families made for ``clvis eval``'s held-out suite alone (never trained on)
+EVAL_VOLUMES = ("noise", "shapes", "layers")
+VOLUME_KINDS = TRAIN_VOLUMES + HELD_OUT_VOLUMES + EVAL_VOLUMES
 COMPLETIONS = (0.85, 0.9, 0.95)
 
 
@@ -96,8 +99,36 @@ def procedural_volume(kind: str, rng: np.random.Generator, n: int = 64) -> tuple
     elif kind == "turbulence":
         v = datasets.turbulence(n)["volume"]
         lo, hi = 0.35, 0.65
+    elif kind == "noise":  # a smoothed white-noise field (band-limited at a random scale)
+        from scipy.ndimage import gaussian_filter
+
+        v = gaussian_filter(rng.normal(size=x.shape), rng.uniform(1.5, 4.0) * n / 64, mode="wrap")
+        lo, hi = 0.35, 0.65
+    elif kind == "shapes":  # the distance field of a union of random spheres and boxes
+        v = np.full(x.shape, np.inf)
+        for _ in range(int(rng.integers(3, 9))):
+            c, s = rng.uniform(-0.6, 0.6, 3), rng.uniform(0.12, 0.4)
+            q = (p - c) @ _random_rotation(rng).T
+            if rng.random() < 0.5:
+                d = np.sqrt((q**2).sum(-1)) - s
+            else:
+                e = np.abs(q) - s * rng.uniform(0.5, 1.0, 3)
+                d = np.sqrt((np.maximum(e, 0) ** 2).sum(-1)) + np.minimum(e.max(-1), 0)
+            v = np.minimum(v, d)
+        v = -v
+        lo, hi = 0.55, 0.75
+    elif kind == "layers":  # CT-like: nested tissue shells of random density, noise, a bone core
+        from scipy.ndimage import gaussian_filter
+
+        q = (p @ _random_rotation(rng).T) / rng.uniform(0.5, 0.9, 3)
+        r = np.sqrt((q**2).sum(-1))
+        v = np.zeros(x.shape)
+        for k, level in enumerate(np.sort(rng.uniform(0.2, 1.0, int(rng.integers(2, 5))))[::-1]):
+            v = np.where(r < level, 0.3 + 0.25 * k + 0.05 * rng.random(), v)
+        v = gaussian_filter(v + 0.04 * rng.normal(size=x.shape), 1.0)
+        lo, hi = 0.55, 0.85
     else:
-        raise ValueError(f"volume kind: expected one of {TRAIN_VOLUMES + HELD_OUT_VOLUMES}, got {kind!r}")
+        raise ValueError(f"volume kind: expected one of {VOLUME_KINDS}, got {kind!r}")
     v = v.astype(np.float32)
     iso = float(np.quantile(v, rng.uniform(lo, hi)))
     return v, iso
@@ -260,6 +291,31 @@ def town(n: int, seed: int) -> dict:
     return {"positions": pos.astype(np.float32), "colors": rgba}
 
 
+#: scikit-image's bundled sample photographs (no download) for ``photo_town``
+PHOTOS = ("astronaut", "coffee", "chelsea", "rocket")
+
+
+def photo_town(n: int, seed: int) -> dict:
+    """A random town's geometry (``town``) coloured by a photograph of
+    scikit-image's samples draped over it from above (walls a darker shade of
+    the photo at their foot): natural-image textures the LiDAR network never
+    trained on, for the held-out suite."""
+    from skimage import data as skdata
+
+    cloud = town(n, seed)
+    rng = np.random.default_rng(seed)
+    photo = np.asarray(getattr(skdata, PHOTOS[int(rng.integers(0, len(PHOTOS)))])(), np.float64)[..., :3]
+    pos = cloud["positions"]
+    h, w = photo.shape[:2]
+    u = np.clip(((pos[:, 0] + 100) / 200 * (w - 1)).astype(int), 0, w - 1)
+    v = np.clip(((100 - pos[:, 1]) / 200 * (h - 1)).astype(int), 0, h - 1)
+    col = photo[v, u]
+    wall = np.arange(n) >= n - n // 10
+    col[wall] *= 0.6
+    rgba = np.concatenate([np.clip(np.rint(col), 0, 255), np.full((n, 1), 255.0)], 1).astype(np.uint8)
+    return {"positions": pos, "colors": rgba}
+
+
 @dataclass
 class LidarFrame:
     """One LiDAR frame: ``rgbda`` (H, W, 5) float32, the depth-filtered sparse
@@ -296,8 +352,10 @@ def lidar_frames(
             cloud = town(dense_points, s)
         elif kind == "terrain":
             cloud = datasets.terrain(dense_points, s)
+        elif kind == "photo":
+            cloud = photo_town(dense_points, s)
         else:
-            raise ValueError(f"scene: expected 'town' or 'terrain', got {kind!r}")
+            raise ValueError(f"scene: expected 'town', 'terrain' or 'photo', got {kind!r}")
         pos, col = cloud["positions"], cloud["colors"]
         keep = rng.random(len(pos)) < rng.uniform(*sparse)
         dense = Rasterizer(pos, colors=col)
@@ -365,13 +423,13 @@ class NarvisScene:
         transfer function, with the attribute planes `planes` names."""
         from ..post.names import GBUFFER_PLANES
 
+        kw.setdefault("colormap", self.colormap)
+        kw.setdefault("value_range", self.value_range)
         return ras.render(
             camera,
             width,
             height,
             color_by=self.attribute,
-            colormap=self.colormap,
-            value_range=self.value_range,
             planes=[p for p in planes if p not in GBUFFER_PLANES],
             **kw,
         )
@@ -455,6 +513,29 @@ class NarvisFrame:
     source: str
 
 
+#: the colormaps NARVis's training may colour a view with (``looks``);
+#: "magma" stays out: clvis eval's unseen-colormap family uses it
+NARVIS_TRAIN_COLORMAPS = ("viridis", "plasma", "inferno", "cividis", "turbo", "coolwarm", "gray", "YlGnBu")
+
+
+def narvis_looks(
+    scene: NarvisScene, count: int, rng: np.random.Generator
+) -> list[tuple[str, tuple[float, float]]]:
+    """`count` random transfer functions for the scene's views: a colormap of
+    NARVIS_TRAIN_COLORMAPS (reversed half the time) and a value range
+    from 40 % inside to 20 % beyond the attribute's (the colour arrives in
+    the input planes: the network must carry it, not memorise it)."""
+    lo, hi = scene.value_range
+    span = hi - lo
+    out = []
+    for _ in range(count):
+        cmap = NARVIS_TRAIN_COLORMAPS[int(rng.integers(0, len(NARVIS_TRAIN_COLORMAPS)))]
+        cmap += "_r" if rng.random() < 0.5 else ""
+        a, b = lo + span * rng.uniform(-0.2, 0.4), hi - span * rng.uniform(-0.2, 0.4)
+        out.append((cmap, (float(a), float(max(b, a + 0.05 * span)))))
+    return out
+
+
 def narvis_frames(
     scene: NarvisScene,
     cameras: Sequence[Camera],
@@ -462,21 +543,32 @@ def narvis_frames(
     height: int,
     planes: Sequence[str],
     *,
+    looks: Sequence[tuple[str, tuple[float, float]]] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> list[NarvisFrame]:
-    """Both renders of each camera's view."""
+    """Both renders of each camera's view; `looks`: per camera a (colormap,
+    value range) both renderers colour it with (default the scene's)."""
     import time
 
+    from ..colormap import TransferFunction
     from ..post.pack import pack_gbuffers
 
+    if looks is not None and len(looks) != len(cameras):
+        raise ValueError(f"looks: {len(looks)} for {len(cameras)} cameras")
     ras = scene.rasterizer()
     gr = scene.gaussian_renderer()
     frames = []
     for i, cam in enumerate(cameras):
         t0 = time.perf_counter()
-        g = scene.gbuffers(ras, cam, width, height, planes)
-        t1 = time.perf_counter()
-        img = gr.render(cam, width, height)
+        if looks is None:
+            g = scene.gbuffers(ras, cam, width, height, planes)
+            t1 = time.perf_counter()
+            img = gr.render(cam, width, height)
+        else:
+            cmap, vr = looks[i]
+            g = scene.gbuffers(ras, cam, width, height, planes, colormap=cmap, value_range=vr)
+            t1 = time.perf_counter()
+            img = gr.render(cam, width, height, transfer_function=TransferFunction(cmap, value_range=vr))
         t2 = time.perf_counter()
         rgb = np.clip(np.asarray(img.rgba)[..., :3], 0, 1).astype(np.float32)
         x = np.asarray(pack_gbuffers(g, planes))[0]

@@ -23,12 +23,14 @@ import sys
 import time
 import warnings
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..io.files import replacing, write_replacing
+from ..metrics import metrics
 from ..post.infer import sha256
 from ..post.names import NAMES
 from . import data as _data
@@ -64,6 +66,7 @@ SPECS: dict[str, dict[str, Any]] = {
         "views": 1,
         "held_out": 8,  # grid-sampler views and storm views, each
         "points": 2_000_000,
+        "looks": True,  # random colormaps and value ranges per training view
         "frame_size": (512, 512),
         "batch": 4,
         "loss": {"l2": 1.0, "tv": 0.002, "ms_ssim": 0.05},
@@ -78,9 +81,13 @@ INT8_MAX_LOSS_DB = 0.3
 # data
 
 
-def _narvis_sets(count: int, held: int, points: int, seed: int, size, planes, log) -> dict[str, list]:
+def _narvis_sets(
+    count: int, held: int, points: int, seed: int, size, planes, log, looks: bool = False
+) -> dict[str, list]:
     """The NARVis frames: "train" and "validation" (`count` hemisphere views
-    of the hurricane at every other azimuth, every tenth to validation),
+    of the hurricane at every other azimuth, every tenth to validation; with
+    `looks`, each coloured by a random colormap and value range,
+    data.narvis_looks),
     "grid sampler" (`held` views of the grid sampler, never trained on) and
     "storm" (`held` hemisphere views at the other azimuths of the storm
     NARVIS_STORM_TIME later, other particles)."""
@@ -93,7 +100,12 @@ def _narvis_sets(count: int, held: int, points: int, seed: int, size, planes, lo
     val_idx = set(range(9, len(picked), 10)) or ({len(picked) - 1} if len(picked) > 1 else set())
     grid = _data.narvis_cameras(hur, "grid", w / h)
     grid = [grid[int(i)] for i in np.sort(rng.permutation(len(grid))[:held])]
-    frames = _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log)
+    if looks:
+        frames = _data.narvis_frames(
+            hur, picked, w, h, planes, looks=_data.narvis_looks(hur, len(picked), rng), progress=log
+        ) + _data.narvis_frames(hur, grid, w, h, planes, progress=log)
+    else:
+        frames = _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log)
     storm = _data.narvis_scene("storm", points, seed + 7)
     odd = _data.narvis_cameras(storm, "hemisphere", w / h)[1::2]
     odd = [odd[int(i)] for i in np.sort(rng.permutation(len(odd))[:held])]
@@ -105,34 +117,50 @@ def _narvis_sets(count: int, held: int, points: int, seed: int, size, planes, lo
     }
 
 
-def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
-    w, h = size
-    if name == "infill":
-        kinds = _data.HELD_OUT_VOLUMES if held_out else _data.TRAIN_VOLUMES
-        return _data.iso_frames(kinds, count, seed, w, h, views=views, progress=log)
+def _iso_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
+    kinds = _data.HELD_OUT_VOLUMES if held_out else _data.TRAIN_VOLUMES
+    return _data.iso_frames(kinds, count, seed, *size, views=views, progress=log)
+
+
+def _lidar_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
     scenes = ("terrain", "town") if held_out else ("town",)
-    return _data.lidar_frames(scenes, count, seed, w, h, views=views, progress=log)
+    return _data.lidar_frames(scenes, count, seed, *size, views=views, progress=log)
+
+
+def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
+    frames = TRAINERS[name].frames
+    if frames is None:
+        raise ValueError(f"{name}: its frames come in sets (_narvis_sets)")
+    return frames(count, views, seed, size, held_out, log)
+
+
+def _pack_infill(frame: Any, completion: float | None, stride: int) -> tuple[Any, Any]:
+    from ..post.pack import pack_iso
+
+    x = pack_iso(*frame.planes(completion), stride=stride)[0]
+    return x, np.concatenate([frame.rgb, frame.hit[..., None].astype(np.float32)], axis=2)
+
+
+def _pack_narvis(frame: Any, completion: float | None, stride: int) -> tuple[Any, Any]:
+    c, h, w = frame.x.shape
+    hp, wp = -(-h // stride) * stride, -(-w // stride) * stride
+    x = np.zeros((c, hp, wp), np.float32)
+    x[:, :h, :w] = frame.x
+    return x, frame.rgb
+
+
+def _pack_lidar(frame: Any, completion: float | None, stride: int) -> tuple[Any, Any]:
+    from ..post.pack import pack_rgbda
+
+    return pack_rgbda(frame.rgbda, stride=stride)[0], frame.rgb
 
 
 def _pack(
     name: str, frame: Any, completion: float | None = None, stride: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(input (5, Hp, Wp), target (C, H, W)) float32 of one frame, through
+    """(input (C, Hp, Wp), target (C, H, W)) float32 of one frame, through
     the pack kernels the inference uses (padded to a multiple of `stride`)."""
-    from ..post.pack import pack_iso, pack_rgbda
-
-    if name == "infill":
-        x = pack_iso(*frame.planes(completion), stride=stride)[0]
-        y = np.concatenate([frame.rgb, frame.hit[..., None].astype(np.float32)], axis=2)
-    elif name == "narvis":
-        c, h, w = frame.x.shape
-        hp, wp = -(-h // stride) * stride, -(-w // stride) * stride
-        x = np.zeros((c, hp, wp), np.float32)
-        x[:, :h, :w] = frame.x
-        y = frame.rgb
-    else:
-        x = pack_rgbda(frame.rgbda, stride=stride)[0]
-        y = frame.rgb
+    x, y = TRAINERS[name].pack(frame, completion, stride)
     return np.asarray(x, np.float32), np.ascontiguousarray(y.transpose(2, 0, 1), np.float32)
 
 
@@ -173,18 +201,6 @@ def _loss_fn(weights: dict[str, float], crop: int):
     return loss
 
 
-def metrics(output: np.ndarray, target: np.ndarray) -> dict[str, float]:
-    """PSNR (dB) and SSIM of two (H, W, 3) float images in [0, 1], through
-    scikit-image."""
-    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
-
-    o = np.clip(output, 0, 1).astype(np.float64)
-    t = np.clip(target, 0, 1).astype(np.float64)
-    psnr = float(peak_signal_noise_ratio(t, o, data_range=1.0)) if not np.array_equal(o, t) else math.inf
-    ssim = float(structural_similarity(t, o, data_range=1.0, channel_axis=2))
-    return {"psnr": psnr, "ssim": ssim}
-
-
 def _rgb(nchw: np.ndarray) -> np.ndarray:
     """(H, W, 3) of a (C, H, W) output or target: RGB (premultiplied over black)."""
     return np.ascontiguousarray(nchw[:3].transpose(1, 2, 0))
@@ -196,13 +212,12 @@ def _baselines(name: str, x: np.ndarray, y: np.ndarray) -> dict[str, dict[str, f
     from ..post.pushpull import pushpull
 
     x = np.ascontiguousarray(x[:, : y.shape[1], : y.shape[2]])
-    if name == "infill":
-        rgb = _rgb(x)
+    rgb = _rgb(x)
+    if TRAINERS[name].pushpull_rgba:  # in-fill: its coverage filled beside the colour
         valid = x[4] == 0  # finished rays
         filled = pushpull(np.ascontiguousarray(np.concatenate([rgb, x[3:4].transpose(1, 2, 0)], 2)), valid)
         pp = filled[..., :3]
     else:
-        rgb = _rgb(x)
         valid = x[3] > 0  # kept (lidar) or covered (narvis) pixels
         pp = pushpull(rgb, valid)
     t = _rgb(y)
@@ -213,42 +228,58 @@ def _baselines(name: str, x: np.ndarray, y: np.ndarray) -> dict[str, dict[str, f
 # training
 
 
-def _augment(x, y, rng: np.random.Generator, name: str, layout: Sequence[str] = ()):
-    """Flips and 90-degree rotations; for the LiDAR net, brightness and
-    contrast on the colours of input and target alike. The NARVis net: flips
-    only, its screen velocity planes (v'x, v'y, angle: where `layout`, the
-    input's channel names, has them) mirrored with the image."""
+def _augment_narvis(x, y, rng: np.random.Generator, layout: Sequence[str]):
+    """Flips only, the screen velocity planes (v'x, v'y, angle: where
+    `layout`, the input's channel names, has them) mirrored with the image."""
     import torch
 
-    if name == "narvis":
-        x = x.clone()
-        v = list(layout).index("vel_x") if "vel_x" in layout else None
-        if rng.random() < 0.5:  # left-right: v'x -> -v'x, angle -> pi - angle
-            x, y = torch.flip(x, (3,)), torch.flip(y, (3,))
-            if v is not None:
-                x[:, v] = -x[:, v]
-                a = x[:, v + 2]
-                x[:, v + 2] = torch.where(a > 0, math.pi - a, -math.pi - a) * x[:, 3]
-        if rng.random() < 0.5:  # up-down: v'y -> -v'y, angle -> -angle
-            x, y = torch.flip(x, (2,)), torch.flip(y, (2,))
-            if v is not None:
-                x[:, v + 1] = -x[:, v + 1]
-                x[:, v + 2] = -x[:, v + 2]
-        return x.contiguous(), y.contiguous()
+    x = x.clone()
+    v = list(layout).index("vel_x") if "vel_x" in layout else None
+    if rng.random() < 0.5:  # left-right: v'x -> -v'x, angle -> pi - angle
+        x, y = torch.flip(x, (3,)), torch.flip(y, (3,))
+        if v is not None:
+            x[:, v] = -x[:, v]
+            a = x[:, v + 2]
+            x[:, v + 2] = torch.where(a > 0, math.pi - a, -math.pi - a) * x[:, 3]
+    if rng.random() < 0.5:  # up-down: v'y -> -v'y, angle -> -angle
+        x, y = torch.flip(x, (2,)), torch.flip(y, (2,))
+        if v is not None:
+            x[:, v + 1] = -x[:, v + 1]
+            x[:, v + 2] = -x[:, v + 2]
+    return x.contiguous(), y.contiguous()
+
+
+def _augment_dihedral(x, y, rng: np.random.Generator, layout: Sequence[str] = ()):
+    """Flips and 90-degree rotations (in-fill)."""
+    import torch
+
     k = int(rng.integers(0, 4))
     if k:
         x, y = torch.rot90(x, k, (2, 3)), torch.rot90(y, k, (2, 3))
     if rng.random() < 0.5:
         x, y = torch.flip(x, (3,)), torch.flip(y, (3,))
-    if name == "lidar":
-        c = float(rng.uniform(0.75, 1.25))
-        b = float(rng.uniform(-0.1, 0.1))
-        kept = x[:, 3:4] > 0
-        x = x.clone()
-        x[:, :3] = torch.where(kept, ((x[:, :3] - 0.5) * c + 0.5 + b).clamp(0, 1), x[:, :3])
-        covered = y.sum(1, keepdim=True) > 0
-        y = torch.where(covered, ((y - 0.5) * c + 0.5 + b).clamp(0, 1), y)
     return x.contiguous(), y.contiguous()
+
+
+def _augment_lidar(x, y, rng: np.random.Generator, layout: Sequence[str] = ()):
+    """Flips and rotations, then brightness and contrast on the colours of
+    input and target alike."""
+    import torch
+
+    x, y = _augment_dihedral(x, y, rng)
+    c = float(rng.uniform(0.75, 1.25))
+    b = float(rng.uniform(-0.1, 0.1))
+    kept = x[:, 3:4] > 0
+    x = x.clone()
+    x[:, :3] = torch.where(kept, ((x[:, :3] - 0.5) * c + 0.5 + b).clamp(0, 1), x[:, :3])
+    covered = y.sum(1, keepdim=True) > 0
+    y = torch.where(covered, ((y - 0.5) * c + 0.5 + b).clamp(0, 1), y)
+    return x.contiguous(), y.contiguous()
+
+
+def _augment(x, y, rng: np.random.Generator, name: str, layout: Sequence[str] = ()):
+    """The network's augmentation (its Trainer's)."""
+    return TRAINERS[name].augment(x, y, rng, layout)
 
 
 def _batch(pairs, n: int, crop: int, rng: np.random.Generator):
@@ -290,7 +321,7 @@ def train(
 
     if name not in SPECS:
         raise ValueError(f"model: expected one of {NAMES}, got {name!r}")
-    spec = SPECS[name]
+    spec, trainer = SPECS[name], TRAINERS[name]
     t_start = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -304,22 +335,31 @@ def train(
 
     t0 = time.perf_counter()
     sets: dict[str, list] = {}
-    if name == "narvis":
+    if trainer.frames is None:  # NARVis: its sets of views
         npoints = int(points or spec["points"])
-        sets = _narvis_sets(count, spec["held_out"], npoints, seed, fsize, spec["arch"]["planes"], log)
+        sets = _narvis_sets(
+            count,
+            spec["held_out"],
+            npoints,
+            seed,
+            fsize,
+            spec["arch"]["planes"],
+            log,
+            spec.get("looks", False),
+        )
         train_frames = sets.pop("train")
         val_frames = [f for v in sets.values() for f in v]
     else:
         train_frames = _frames(name, count, spec["views"], seed, fsize, False, log)
         held = max(1, min(spec["held_out"], count))
         val_frames = _frames(name, held, 1, seed + 1_000_003, fsize, True, log)
-    completions = _data.COMPLETIONS if name == "infill" else (None,)
+    completions = trainer.completions
     pairs = [_pack(name, f, c) for f in train_frames for c in completions]
     pairs = [(x.astype(np.float16), y.astype(np.float16)) for x, y in pairs]
     data_seconds = time.perf_counter() - t0
     log(f"{len(pairs)} training pairs, {len(val_frames)} held-out frames in {data_seconds:.0f} s")
 
-    net = nets.build(name, **spec["arch"])
+    net = trainer.build(**spec["arch"])
     opt = torch.optim.Adam(net.parameters(), lr=spec["lr"])
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=spec["lr"] / 100)
     loss_fn = _loss_fn(spec["loss"], size)
@@ -380,15 +420,18 @@ def train(
         "channels_out": net.channels_out,
         "command": " ".join(command) if command else f"clvis train {name} --steps {steps} --size {size}",
         "seed": seed,
-        "data": _narvis_data(sets, train_frames, fsize, data_seconds)
+        "data": {
+            **_narvis_data(sets, train_frames, fsize, data_seconds),
+            "looks": list(_data.NARVIS_TRAIN_COLORMAPS) if spec.get("looks") else None,
+        }
         if sets
         else {
-            "train": _data.TRAIN_VOLUMES if name == "infill" else ["town"],
-            "held_out": _data.HELD_OUT_VOLUMES if name == "infill" else ["terrain", "town (unseen seeds)"],
+            "train": list(trainer.trained),
+            "held_out": list(trainer.held_out),
             "frames": len(train_frames),
             "held_out_frames": len(val_frames),
             "frame_size": list(fsize),
-            "completions": list(_data.COMPLETIONS) if name == "infill" else None,
+            "completions": list(completions) if completions != (None,) else None,
             "generation_seconds": round(data_seconds, 1),
         },
         "training": {
@@ -591,3 +634,67 @@ def _to_int8(src: Path, dst: Path, calibration: list[np.ndarray]) -> None:
             weight_type=QuantType.QInt8,
         )
     pre.unlink()
+
+
+# ---------------------------------------------------------------------------
+# one Trainer per network: the training side of clvis.post.specs' NetworkSpec
+
+
+@dataclass(frozen=True)
+class Trainer:
+    """How network `name` is trained: its architecture's builder (torch,
+    clvis.post.nets), its frames (None: NARVis's sets, _narvis_sets), the
+    pack of a frame into (input, target), its augmentation, the completions
+    each frame gives pairs at, whether push-pull fills its coverage beside
+    the colour (in-fill), and what its data is for the card. A new network:
+    one Trainer here, one NetworkSpec in clvis.post.specs, one SPECS entry."""
+
+    build: Callable[..., Any]
+    frames: Callable[..., list] | None
+    pack: Callable[[Any, float | None, int], tuple[Any, Any]]
+    augment: Callable[..., tuple[Any, Any]]
+    completions: tuple = (None,)
+    pushpull_rgba: bool = False
+    trained: tuple[str, ...] = ()
+    held_out: tuple[str, ...] = ()
+
+
+def _builder(cls: str) -> Callable[..., Any]:
+    def build(**kwargs: Any) -> Any:
+        from ..post import nets
+
+        kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in kwargs.items()}
+        return getattr(nets, cls)(**kwargs)
+
+    return build
+
+
+TRAINERS: dict[str, Trainer] = {
+    "infill": Trainer(
+        _builder("InfillWNet"),
+        _iso_frames,
+        _pack_infill,
+        _augment_dihedral,
+        completions=_data.COMPLETIONS,
+        pushpull_rgba=True,
+        trained=_data.TRAIN_VOLUMES,
+        held_out=_data.HELD_OUT_VOLUMES,
+    ),
+    "lidar": Trainer(
+        _builder("RgbdaUNet"),
+        _lidar_frames,
+        _pack_lidar,
+        _augment_lidar,
+        trained=("town",),
+        held_out=("terrain", "town (unseen seeds)"),
+    ),
+    "narvis": Trainer(
+        _builder("NarvisUNet"),
+        None,
+        _pack_narvis,
+        lambda x, y, rng, layout=(): _augment_narvis(x, y, rng, layout),
+        trained=("hurricane",),
+        held_out=("grid sampler", "storm"),
+    ),
+}
+assert tuple(TRAINERS) == tuple(SPECS) == NAMES

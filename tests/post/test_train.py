@@ -30,6 +30,8 @@ def test_train_smoke_through_the_cli(tmp_path, name):
             "--out",
             str(tmp_path),
             "--quiet",
+            "--eval",  # the held-out suite: tests/post/test_eval.py
+            "none",
             *(["--points", "20000"] if name == "narvis" else []),
         ]
     )
@@ -67,7 +69,7 @@ def test_lidar_pairs_are_registered():
     assert (f.rgb[kept].sum(-1) > 0).mean() > 0.95
 
 
-@pytest.mark.parametrize("kind", data.TRAIN_VOLUMES + data.HELD_OUT_VOLUMES)
+@pytest.mark.parametrize("kind", data.VOLUME_KINDS)
 def test_procedural_volumes_have_a_surface(kind):
     v, iso = data.procedural_volume(kind, np.random.default_rng(0), 16)
     assert v.shape == (16, 16, 16) and v.dtype == np.float32 and v.min() < iso < v.max()
@@ -127,3 +129,27 @@ def test_narvis_augmentation_mirrors_the_velocity_where_the_layout_has_it():
         torch.testing.assert_close(xo[:, vx + 1], sy * xf[:, vx + 1])
         torch.testing.assert_close(xo[:, :3], xf[:, :3])
     assert len(seen) == 4
+
+
+def test_narvis_looks_colour_both_renders_alike():
+    """A random look (colormap, value range) colours the G-buffers and the
+    Gaussian renderer's target the same way: both differ from the scene's
+    default look, and magma (clvis eval's unseen colormap) is never drawn."""
+    sc = data.narvis_scene("hurricane", 20_000, 3)
+    looks = data.narvis_looks(sc, 40, np.random.default_rng(1))
+    assert not any(c.startswith("magma") for c, _ in looks)
+    assert len({c for c, _ in looks}) > 5
+    lo, hi = sc.value_range
+    for _, (a, b) in looks:
+        assert lo - 0.21 * (hi - lo) <= a < b <= hi + 0.21 * (hi - lo)
+    cam = data.narvis_cameras(sc, "hemisphere")[3]
+    look = [("coolwarm", (lo, hi))]
+    base = data.narvis_frames(sc, [cam], 48, 48, ("rgb", "depth", "vel2d"))[0]
+    new = data.narvis_frames(sc, [cam], 48, 48, ("rgb", "depth", "vel2d"), looks=look)[0]
+    covered = base.x[3] > 0
+    assert covered.any()
+    np.testing.assert_array_equal(base.x[3], new.x[3])  # the same points drawn
+    assert np.abs(base.x[:3] - new.x[:3])[:, covered].mean() > 0.05  # other colours in...
+    assert np.abs(base.rgb - new.rgb).mean() > 0.01  # ... and in the target
+    with pytest.raises(ValueError, match="looks"):
+        data.narvis_frames(sc, [cam], 48, 48, ("rgb",), looks=look * 2)

@@ -1,0 +1,57 @@
+"""clvis eval: a post network on its held-out suite (clvis.training.evaluate)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ._common import CliError, Parser
+
+_HELP = """\
+Score a post network on its held-out suite: scenes from generator families
+its training never used (in-fill: gyroid, turbulence, noise fields,
+distance fields of shapes, CT-like layers; LiDAR: the terrain, towns under
+photographs; NARVis: convection cells, the Lorenz attractor, a jet, a
+vortex ring, the hurricane through a colormap never seen), at several
+sizes, completions / densities and (NARVis) both camera samplers. Prints
+per family, size and setting the network against every classical baseline
+on the same input (PSNR / SSIM, mean and the worst frame's PSNR), then the
+table in markdown. The last column is the network minus the best baseline:
+negative where the network makes the image worse than no network.
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
+    from ..post.names import NAMES
+
+    p = sub.add_parser(
+        "eval",
+        help="score a post network (infill, lidar, narvis) on its held-out suite",
+        description=_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", choices=NAMES, help="the network to score")
+    p.add_argument(
+        "--model-dir", default=None, metavar="DIR", help="where NAME.json is (default: the shipped models)"
+    )
+    p.add_argument("--quick", action="store_true", help="one size and one frame per family (what train runs)")
+    p.add_argument("--write-card", action="store_true", help="write the table into the model's card")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    return p
+
+
+def cmd(args: argparse.Namespace) -> int:
+    from ..training import evaluate as ev
+
+    log = None if args.quiet else (lambda s: print(f"clvis eval: {s}", file=sys.stderr, flush=True))
+    try:
+        result = ev.evaluate(args.model, model_dir=args.model_dir, quick=args.quick, log=log)
+    except ImportError as e:
+        raise CliError(f"clvis eval needs onnxruntime: {e}") from None
+    print(ev.table(result))
+    below = [m for m in ev.margins(result) if m[1] < 0 or m[2] < 0]
+    print(f"\n{len(below)} of {len(result['rows'])} rows below the best baseline ({result['seconds']:.0f} s)")
+    if args.write_card:
+        command = ["clvis", "eval", args.model] + (["--quick"] if args.quick else [])
+        print(f"card: {ev.write_card(result, args.model_dir, command)}")
+    return 0

@@ -1,0 +1,138 @@
+"""One object per shipped network (the inference side): what it takes and
+how that is checked, how it is packed into the network's input tensor, its
+output channels, the classical baselines it is scored against and the
+held-out families ``clvis eval`` scores it on. A new network is one more
+NetworkSpec subclass and a line in SPECS (and, for training, its entry in
+clvis.training.train; no torch here).
+
+PostNetwork (clvis.post.infer) asks its spec for the input check and the
+pack; ``clvis eval`` (clvis.training.evaluate) reads the baselines and
+families from here.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+
+from .names import NAMES
+from .pack import pack_gbuffers, pack_iso, pack_rgbda
+
+__all__ = ["SPECS", "NetworkSpec", "spec"]
+
+
+class NetworkSpec:
+    """The inference-side description of one network (subclass per network)."""
+
+    name: str = ""
+    #: what the network's call takes, for error messages and docs
+    takes: str = ""
+    #: its name in pictures and tables
+    title: str = ""
+    #: output channels (RGB, or RGB and coverage)
+    channels_out: int = 3
+    #: the classical methods it must beat, by the names clvis eval uses
+    baselines: tuple[str, ...] = ()
+    #: generator families of its held-out suite (never in its training)
+    eval_families: tuple[str, ...] = ()
+    #: the families its shipped training used
+    trained_families: tuple[str, ...] = ()
+
+    def shape(self, image: Any) -> tuple[int, int]:
+        """(H, W) of an input; TypeError / ValueError where it is not one."""
+        raise NotImplementedError
+
+    def pack(
+        self, image: Any, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
+    ) -> None:
+        """Write the network's NCHW input for `image` into `out` (the pack
+        kernels of clvis.post.pack; device planes are read where they are)."""
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"<post network spec {self.name!r}: takes {self.takes}>"
+
+
+def _shape_of(a: Any) -> tuple[int, ...]:
+    return tuple(a.shape if hasattr(a, "shape") else np.shape(a))
+
+
+class InfillSpec(NetworkSpec):
+    name = "infill"
+    title = "in-fill W-Net"
+    takes = "an IsoImage (rgba, hit, active)"
+    channels_out = 4
+    baselines = ("input", "pushpull")
+    eval_families = ("gyroid", "turbulence", "noise", "shapes", "layers")
+    trained_families = ("waves", "ripples", "blobs")
+
+    def shape(self, image: Any) -> tuple[int, int]:
+        if not all(hasattr(image, k) for k in ("rgba", "hit", "active")):
+            raise TypeError(f"image: the infill network takes an IsoImage, got {type(image).__name__}")
+        shape = _shape_of(image.rgba)
+        if len(shape) != 3 or shape[2] != 4:
+            raise ValueError(f"rgba: expected (H, W, 4), got shape {shape}")
+        return int(shape[0]), int(shape[1])
+
+    def pack(self, image, planes, stride, out, queue):
+        pack_iso(image.rgba, image.hit, image.active, stride=stride, out=out, queue=queue)
+
+
+class LidarSpec(NetworkSpec):
+    name = "lidar"
+    title = "LiDAR RGBDA U-Net"
+    takes = "a FilteredImage or its rgbda (H, W, 5)"
+    baselines = ("input", "pushpull")
+    eval_families = ("terrain", "photo")
+    trained_families = ("town",)
+
+    def shape(self, image: Any) -> tuple[int, int]:
+        rgbda = getattr(image, "rgbda", image)
+        if not isinstance(rgbda, (np.ndarray, cla.Array)):
+            raise TypeError(
+                f"image: the lidar network takes a FilteredImage or its rgbda, got {type(image).__name__}"
+            )
+        shape = tuple(rgbda.shape)
+        if len(shape) != 3 or shape[2] != 5:
+            raise ValueError(f"rgbda: expected (H, W, 5) [r, g, b, depth, alpha], got shape {shape}")
+        return int(shape[0]), int(shape[1])
+
+    def pack(self, image, planes, stride, out, queue):
+        pack_rgbda(getattr(image, "rgbda", image), stride=stride, out=out, queue=queue)
+
+
+class NarvisSpec(NetworkSpec):
+    name = "narvis"
+    title = "NARVis U-Net (G-buffers -> Gaussians)"
+    takes = "rasterizer G-buffers (GBuffers)"
+    baselines = ("raster", "pushpull", "splat")
+    eval_families = ("convection", "lorenz", "jet", "ring", "hurricane/magma")
+    trained_families = ("hurricane",)
+
+    def shape(self, image: Any) -> tuple[int, int]:
+        if not all(hasattr(image, k) for k in ("index", "rgba", "depth", "attributes")):
+            raise TypeError(
+                f"image: the narvis network takes rasterizer G-buffers (GBuffers), got {type(image).__name__}"
+            )
+        shape = tuple(image.index.shape)
+        if len(shape) != 2:
+            raise ValueError(f"index: expected (H, W), got shape {shape}")
+        return int(shape[0]), int(shape[1])
+
+    def pack(self, image, planes, stride, out, queue):
+        pack_gbuffers(image, planes, stride=stride, out=out, queue=queue)
+
+
+SPECS: dict[str, NetworkSpec] = {s.name: s for s in (InfillSpec(), LidarSpec(), NarvisSpec())}
+assert tuple(SPECS) == NAMES, "clvis.post.names.NAMES and SPECS name the same networks"
+
+
+def spec(name: str) -> NetworkSpec:
+    """The spec of network `name`; ValueError for an unknown name."""
+    try:
+        return SPECS[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"name: expected one of {NAMES}, got {name!r}") from None

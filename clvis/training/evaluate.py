@@ -1,0 +1,396 @@
+"""``clvis eval``: a shipped (or trained) post network on its held-out suite.
+
+The suite of a network holds scenes from generator *families* its training
+never used (leave-family-out, not other views or seeds of its own
+generators), at several image sizes, densities / completions and, for
+NARVis, both camera samplers. Every frame is scored (PSNR, SSIM:
+clvis.metrics) for the network and for every classical baseline on the
+same input; a row of the table is one (family, size, setting, sampler)
+with the mean PSNR and SSIM and the worst frame's PSNR of each.
+
+Families (TRAINED: what the shipped networks' training used):
+
+- in-fill (trained on "waves", "ripples" (Marschner–Lobb), "blobs"):
+  "gyroid", "turbulence", "noise" (smoothed noise fields), "shapes"
+  (distance fields of random spheres and boxes), "layers" (CT-like nested
+  shells); completions 0.85, 0.9, 0.95; baseline push-pull (and the raw
+  partial image).
+- LiDAR (trained on "town"): "terrain" (the embedded one), "photo" (a
+  town's geometry under scikit-image's sample photographs); scan densities
+  1-30 %; baselines push-pull and the depth-filtered input.
+- NARVis (trained on the hurricane, hemisphere views, viridis over
+  temperature): flows of other geometries (clvis.training.flows:
+  "convection", "lorenz", "jet", "ring") and "hurricane/magma" (the
+  trained geometry through a colormap never seen); 0.25x, 1x, 4x the
+  training's particles a pixel; the hemisphere and grid samplers;
+  baselines the plain rasterization, push-pull of its RGB, and a classical
+  splat of the same G-buffers (``splat``).
+
+``--quick`` is the suite ``clvis train`` runs at its end: one size, one
+density, one frame per family. Needs no torch (onnxruntime runs the
+network, through clvis.post.load's checked files).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..metrics import metrics
+from ..post.specs import SPECS
+from . import data as _data
+from . import flows as _flows
+
+TRAINED = {n: s.trained_families for n, s in SPECS.items()}
+FAMILIES = {n: s.eval_families for n, s in SPECS.items()}
+BASELINES = {n: s.baselines for n, s in SPECS.items()}
+#: the NARVis training's particles a pixel (2 M at 512 x 512)
+NARVIS_POINTS_PER_PIXEL = 2_000_000 / 512**2
+
+
+@dataclass(frozen=True)
+class Case:
+    """One row of a suite: a family at a size (w, h), a setting (in-fill:
+    the volume's side, its completions are rows of their own; LiDAR: the
+    scan density; NARVis: the density factor), a sampler and frame count."""
+
+    family: str
+    size: tuple[int, int]
+    setting: float
+    sampler: str = "orbit"
+    frames: int = 1
+
+
+def suite(name: str, quick: bool = False) -> list[Case]:
+    """The held-out suite of network `name` (the quick one: what ``clvis
+    train`` runs at its end, and CI's subset draws from)."""
+    if name not in FAMILIES:
+        raise ValueError(f"model: expected one of {tuple(FAMILIES)}, got {name!r}")
+    fam = FAMILIES[name]
+    if name == "infill":
+        if quick:
+            return [Case(f, (320, 180), 64) for f in fam]
+        return [Case(f, s, 64, frames=2) for f in fam for s in ((320, 180), (640, 360), (1280, 720))] + [
+            Case(f, (640, 360), n) for f in fam for n in (32, 128)
+        ]
+    if name == "lidar":
+        if quick:
+            return [Case(f, (320, 240), d) for f in fam for d in (0.03, 0.1)]
+        return [
+            Case(f, s, d, frames=2)
+            for f in fam
+            for s in ((320, 240), (640, 480))
+            for d in (0.01, 0.03, 0.1, 0.3)
+        ]
+    if name == "narvis":
+        samplers = ("hemisphere", "grid")
+        if quick:
+            return [Case(f, (256, 256), 1.0, s) for f in fam for s in samplers]
+        return [
+            Case(f, sz, d, s, frames=2)
+            for f in fam
+            for s in samplers
+            for sz, ds in (((256, 256), (0.25, 1.0, 4.0)), ((512, 512), (1.0,)))
+            for d in ds
+        ]
+    raise ValueError(f"model: expected one of {tuple(FAMILIES)}, got {name!r}")
+
+
+# ---------------------------------------------------------------------------
+# the classical splat NARVis is measured against
+
+
+def splat(
+    rgb: np.ndarray,
+    covered: np.ndarray,
+    vel: np.ndarray | None = None,
+    *,
+    stretch: float = 4.0,
+    opacity: float = 0.5,
+    radius: int = 6,
+) -> np.ndarray:
+    """What a user would do without a network: each covered pixel drawn as a
+    screen-space Gaussian ellipse, its standard deviation half the local
+    pixel spacing of the points (from the coverage around it) across the
+    flow and up to `stretch` times that along its screen velocity `vel`
+    (H, W, 2; None: round), composited order-independently (colour: the
+    weighted mean; alpha: 1 - prod(1 - opacity x weight)). rgb (H, W, 3)
+    in [0, 1]; returns (H, W, 3) premultiplied over black."""
+    from scipy.ndimage import uniform_filter
+
+    h, w = covered.shape
+    cov = covered.astype(np.float64)
+    frac = uniform_filter(cov, 9, mode="constant")
+    sigma = np.clip(0.5 / np.sqrt(np.maximum(frac, 1 / 81)), 0.5, radius / 2.5)
+    if vel is not None:
+        speed = np.hypot(vel[..., 0], vel[..., 1])
+        ref = float(np.quantile(speed[covered], 0.95)) if covered.any() else 0.0
+        rel = np.clip(speed / ref, 0, 1) if ref > 0 else np.zeros_like(speed)
+        ang = np.arctan2(vel[..., 1], vel[..., 0])
+    else:
+        rel, ang = np.zeros((h, w)), np.zeros((h, w))
+    along = sigma * (1 + (stretch - 1) * rel)
+    ca, sa = np.cos(ang), np.sin(ang)
+    ys, xs = np.nonzero(covered)
+    src_sig, src_along = sigma[ys, xs], along[ys, xs]
+    src_c, src_s, col = ca[ys, xs], sa[ys, xs], rgb[ys, xs].astype(np.float64)
+    acc = np.zeros((h, w, 3))
+    wsum = np.zeros((h, w))
+    logt = np.zeros((h, w))
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            ty, tx = ys + dy, xs + dx
+            ok = (ty >= 0) & (ty < h) & (tx >= 0) & (tx < w)
+            d_al = dx * src_c[ok] + dy * src_s[ok]
+            d_ac = -dx * src_s[ok] + dy * src_c[ok]
+            wt = np.exp(-0.5 * ((d_al / src_along[ok]) ** 2 + (d_ac / src_sig[ok]) ** 2))
+            # one offset sends distinct sources to distinct pixels: plain += adds
+            at = (ty[ok], tx[ok])
+            wsum[at] += wt
+            logt[at] += np.log1p(-opacity * wt)
+            acc[at] += wt[:, None] * col[ok]
+    alpha = 1 - np.exp(logt)
+    mean = acc / np.maximum(wsum, 1e-12)[..., None]
+    return (mean * alpha[..., None]).astype(np.float32)
+
+
+# ---------------------------------------------------------------------------
+# frames of each network's suite: (input for the network, target, baselines)
+
+
+class _Iso:
+    def __init__(self, rgba: np.ndarray, hit: np.ndarray, active: np.ndarray) -> None:
+        self.rgba, self.hit, self.active = rgba, hit, active
+
+
+def _narvis_scene(family: str, n: int, seed: int) -> Any:
+    from ..io import PointCloud
+
+    if family == "hurricane/magma":
+        sc = _data.narvis_scene("hurricane", n, seed)
+        sc.colormap = "magma"
+        sc.source += ", magma"
+        return sc
+    d = _flows.flow(family, n, seed)
+    cloud = PointCloud(d["positions"], attributes=d["attributes"], velocity=d["velocity"])
+    a = d["attributes"]["temperature"]
+    return _data.NarvisScene(
+        cloud,
+        "temperature",
+        (float(a.min()), float(a.max())),
+        _data.NARVIS_COLORMAP,
+        f"{family} ({n:,} particles)",
+    )
+
+
+def _frames(name: str, case: Case, seed: int, planes: Sequence[str]):
+    """Yield (setting label, network input, target rgb, {baseline: rgb}) for
+    the case's frames."""
+    from ..post.pack import pack_gbuffers
+    from ..post.pushpull import pushpull
+
+    w, h = case.size
+    if name == "infill":
+        frames = _data.iso_frames((case.family,), case.frames, seed, w, h, views=1, n=int(case.setting))
+        for f in frames:
+            for c in _data.COMPLETIONS:
+                rgba, hit, active = f.planes(c)
+                pp = pushpull(rgba, ~active)[..., :3]
+                yield (
+                    f"{int(case.setting)}^3 at {c:.0%}",
+                    _Iso(rgba, hit, active),
+                    f.rgb,
+                    {
+                        "input": rgba[..., :3],
+                        "pushpull": pp,
+                    },
+                )
+    elif name == "lidar":
+        d = float(case.setting)
+        dense = int(4 * w * h * 2)  # ~8 points a pixel, as the training's 3 M at 960 x 720 is 4.3
+        for lf in _data.lidar_frames(
+            (case.family,), case.frames, seed, w, h, views=1, dense_points=dense, sparse=(d, d)
+        ):
+            rgb = np.ascontiguousarray(lf.rgbda[..., :3])
+            pp = pushpull(rgb, lf.rgbda[..., 4] > 0)
+            yield f"{d:.0%} scan", lf.rgbda, lf.rgb, {"input": rgb, "pushpull": pp}
+    else:
+        n = max(int(case.setting * NARVIS_POINTS_PER_PIXEL * w * h), 1000)
+        sc = _narvis_scene(case.family, n, seed)
+        cams = _data.narvis_cameras(sc, case.sampler, w / h)
+        rng = np.random.default_rng(seed)
+        cams = [cams[int(i)] for i in rng.permutation(len(cams))[: case.frames]]
+        ras, gr = sc.rasterizer(), sc.gaussian_renderer()
+        for cam in cams:
+            g = sc.gbuffers(ras, cam, w, h, planes)
+            target = np.clip(np.asarray(gr.render(cam, w, h).rgba)[..., :3], 0, 1).astype(np.float32)
+            covered = np.asarray(g.covered)
+            plain = np.where(covered[..., None], np.asarray(g.rgba)[..., :3] / np.float32(255), 0).astype(
+                np.float32
+            )
+            x = np.asarray(pack_gbuffers(g, ("rgb", "vel2d")))[0]  # r g b coverage vel_x vel_y angle speed
+            yield (
+                f"{case.setting:g}x points",
+                g,
+                target,
+                {
+                    "raster": plain,
+                    "pushpull": pushpull(np.ascontiguousarray(plain), covered),
+                    "splat": splat(plain, covered, np.stack([x[4], x[5]], -1)),
+                },
+            )
+
+
+#: a frame's PSNR is capped here in the means (an input equal to its target,
+#: every ray finished, scores inf)
+PSNR_CAP = 100.0
+
+
+def _summary(rows: list[dict[str, float]]) -> dict[str, float]:
+    p = [min(r["psnr"], PSNR_CAP) for r in rows]
+    return {
+        "psnr": float(np.mean(p)),
+        "ssim": float(np.mean([r["ssim"] for r in rows])),
+        "worst_psnr": float(np.min(p)),
+    }
+
+
+def evaluate(
+    name: str,
+    *,
+    model_dir: str | os.PathLike | None = None,
+    quick: bool = False,
+    cases: Sequence[Case] | None = None,
+    seed: int = 2026,
+    log: Callable[[str], None] | None = print,
+) -> dict:
+    """Score network `name` (from `model_dir`, default the shipped models)
+    on its held-out suite (`cases`: a subset of your own). Returns
+    {"model", "quick", "seconds", "rows": [{family, size, setting, sampler,
+    frames, network: {psnr, ssim, worst_psnr}, <baseline>: {...}, ...}]}."""
+    from .. import post
+
+    if name not in FAMILIES:
+        raise ValueError(f"model: expected one of {tuple(FAMILIES)}, got {name!r}")
+    net = post.load(name, directory=model_dir, threads=int(os.environ.get("CLVIS_EVAL_THREADS", "0")) or None)
+    t0 = time.perf_counter()
+    out_rows = []
+    for i, case in enumerate(cases if cases is not None else suite(name, quick)):
+        per: dict[str, dict[str, list]] = {}
+        for label, x, target, base in _frames(name, case, seed + 7919 * i, net.planes or ()):
+            got = net(x)[..., :3] / np.float32(255)
+            scores = {"network": metrics(got, target), **{k: metrics(v, target) for k, v in base.items()}}
+            for k, v in scores.items():
+                per.setdefault(label, {}).setdefault(k, []).append(v)
+        for label, methods in per.items():
+            row = {
+                "family": case.family,
+                "size": f"{case.size[0]}x{case.size[1]}",
+                "setting": label,
+                "sampler": case.sampler,
+                "frames": len(methods["network"]),
+                **{k: _summary(v) for k, v in methods.items()},
+            }
+            out_rows.append(row)
+            if log is not None:
+                log(_line(name, row))
+    return {"model": name, "quick": quick, "seconds": round(time.perf_counter() - t0, 1), "rows": out_rows}
+
+
+def _best_baseline(name: str, row: dict) -> tuple[str, dict]:
+    """The baseline of the highest mean PSNR on the row (the raw input
+    counts: a network that scores below no network at all is below it)."""
+    k = max((b for b in BASELINES[name] if b in row), key=lambda b: row[b]["psnr"])
+    return k, row[k]
+
+
+def _line(name: str, row: dict) -> str:
+    cells = [f"{row['family']:<16} {row['size']:>9} {row['setting']:<13} {row['sampler']:<10}"]
+    for k in ("network", *BASELINES[name]):
+        m = row[k]
+        cells.append(f"{k} {m['psnr']:5.2f}/{m['ssim']:.3f} (worst {m['worst_psnr']:5.2f})")
+    b, bm = _best_baseline(name, row)
+    d = row["network"]["psnr"] - bm["psnr"]
+    best_ssim = max(row[k]["ssim"] for k in BASELINES[name])
+    flag = "  BELOW" if d < 0 or row["network"]["ssim"] < best_ssim else ""
+    return " | ".join(cells) + f" | vs {b} {d:+.2f} dB{flag}"
+
+
+def table(result: dict) -> str:
+    """The result as a markdown table: per row, each method's mean PSNR /
+    SSIM and worst-frame PSNR, and the network's margin over the best
+    baseline (negative: the network loses to it)."""
+    name = result["model"]
+    methods = ("network", *BASELINES[name])
+    head = (
+        "| family | size | setting | sampler | "
+        + " | ".join(methods)
+        + " | network - best baseline (PSNR; SSIM) |"
+    )
+    lines = [head, "|" + "---|" * (5 + len(methods))]
+    for row in result["rows"]:
+        b, bm = _best_baseline(name, row)
+        cells = [row["family"], row["size"], row["setting"], row["sampler"]]
+        cells += [
+            f"{row[k]['psnr']:.2f} / {row[k]['ssim']:.3f} ({row[k]['worst_psnr']:.2f})" for k in methods
+        ]
+        best_ssim = max(row[k]["ssim"] for k in BASELINES[name])
+        net = row["network"]
+        cells.append(f"{net['psnr'] - bm['psnr']:+.2f} dB ({b}), SSIM {net['ssim'] - best_ssim:+.3f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_card(
+    result: dict, model_dir: str | os.PathLike | None = None, command: Sequence[str] | None = None
+) -> Path:
+    """Put the result into the model's card (``held_out_suite``); the card's
+    file entries and their sha256 are left as they are."""
+    from ..post.infer import MODELS
+
+    path = Path(model_dir or MODELS) / f"{result['model']}.json"
+    card = json.loads(path.read_text())
+    card["held_out_suite"] = {
+        "command": list(command) if command else None,
+        "quick": result["quick"],
+        "seconds": result["seconds"],
+        "trained_on": list(TRAINED[result["model"]]),
+        "rows": result["rows"],
+    }
+    path.write_text(json.dumps(card, indent=1, allow_nan=False) + "\n")
+    return path
+
+
+def margins(result: dict) -> list[tuple[str, float, float]]:
+    """Per row, (row label, network PSNR - the best baseline PSNR, network
+    SSIM - the best baseline SSIM, each best taken on its own): what the
+    "never below the baseline" target reads."""
+    name = result["model"]
+    out = []
+    for row in result["rows"]:
+        _, bm = _best_baseline(name, row)
+        best_ssim = max(row[b]["ssim"] for b in BASELINES[name] if b in row)
+        label = f"{row['family']} {row['size']} {row['setting']} {row['sampler']}"
+        out.append((label, row["network"]["psnr"] - bm["psnr"], row["network"]["ssim"] - best_ssim))
+    return out
+
+
+__all__ = [
+    "BASELINES",
+    "FAMILIES",
+    "TRAINED",
+    "Case",
+    "evaluate",
+    "margins",
+    "splat",
+    "suite",
+    "table",
+    "write_card",
+]

@@ -1,0 +1,235 @@
+"""clvis eval: the held-out suites (families never trained on), the classical
+splat NARVis is measured against, the cards' suite tables, and a CI-size
+subset of each suite recomputed and held to what the shipped models reach.
+
+The issue's targets (issue 21 §2) the shipped models MISS are stated here
+with their measurements, each as a strict xfail: when a retrained model
+meets one, its xfail passes and fails the run, so the mark must go."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from clvis import metrics as _metrics
+from clvis import post
+from clvis.cli import main
+from clvis.training import data, flows
+from clvis.training import evaluate as ev
+
+
+def test_suites_hold_only_families_never_trained_on():
+    for name in post.NAMES:
+        assert not set(ev.FAMILIES[name]) & set(ev.TRAINED[name])
+        for quick in (True, False):
+            cases = ev.suite(name, quick)
+            assert {c.family for c in cases} == set(ev.FAMILIES[name])
+    assert not set(data.EVAL_VOLUMES) & set(data.TRAIN_VOLUMES)
+    # the NARVis suite has both samplers and densities around the training's
+    full = ev.suite("narvis")
+    assert {c.sampler for c in full} == {"hemisphere", "grid"}
+    assert {c.setting for c in full} == {0.25, 1.0, 4.0}
+    with pytest.raises(ValueError, match="expected one of"):
+        ev.suite("nope")
+    # the specs name the generators clvis.training has
+    assert ev.FAMILIES["infill"] == data.HELD_OUT_VOLUMES + data.EVAL_VOLUMES
+    assert ev.TRAINED["infill"] == data.TRAIN_VOLUMES
+    assert ev.FAMILIES["narvis"][:-1] == flows.FLOWS
+
+
+def test_one_spec_per_network():
+    from clvis.post import specs
+
+    assert tuple(specs.SPECS) == post.NAMES
+    for name in post.NAMES:
+        s = specs.spec(name)
+        assert s.name == name and s.title and s.baselines and s.eval_families
+    with pytest.raises(ValueError, match="expected one of"):
+        specs.spec("nope")
+    with pytest.raises(TypeError, match="infill network takes an IsoImage"):
+        specs.spec("infill").shape(np.zeros((4, 4, 4)))
+    with pytest.raises(ValueError, match=r"\(H, W, 5\)"):
+        specs.spec("lidar").shape(np.zeros((4, 4, 4), np.float32))
+
+
+@pytest.mark.parametrize("kind", flows.FLOWS)
+def test_flows_are_finite_particles_with_a_velocity(kind):
+    d = flows.flow(kind, 2000, 3)
+    assert d["positions"].shape == d["velocity"].shape == (2000, 3)
+    t = d["attributes"]["temperature"]
+    assert t.shape == (2000,) and np.isfinite(d["positions"]).all() and np.isfinite(d["velocity"]).all()
+    assert t.max() > t.min() and np.abs(d["velocity"]).max() > 0
+    np.testing.assert_array_equal(d["positions"], flows.flow(kind, 2000, 3)["positions"])
+    with pytest.raises(ValueError, match="flow"):
+        flows.flow("nope", 2000, 3)
+
+
+def test_photo_town_takes_its_colours_from_a_photograph():
+    a, b = data.town(5000, 4), data.photo_town(5000, 4)
+    np.testing.assert_array_equal(a["positions"], b["positions"])
+    assert not np.array_equal(a["colors"], b["colors"])
+    # a photograph has many more distinct colours than the town's ramp and roofs
+    assert len(np.unique(b["colors"][:, :3], axis=0)) > 3 * len(np.unique(a["colors"][:, :3], axis=0))
+
+
+def test_splat_draws_an_ellipse_along_the_velocity():
+    rgb = np.zeros((31, 31, 3), np.float32)
+    cov = np.zeros((31, 31), bool)
+    rgb[15, 15], cov[15, 15] = (1.0, 0.5, 0.25), True
+    vel = np.zeros((31, 31, 2))
+    vel[15, 15] = (1.0, 0.0)  # along x
+    out = ev.splat(rgb, cov, vel, radius=6)
+    row, col = out[15, :, 0], out[:, 15, 0]
+    assert (row > 0.25 * row[15]).sum() > (col > 0.25 * col[15]).sum() + 2  # longer along x than y
+    np.testing.assert_allclose(out[15, 15] / out[15, 15, 0], (1.0, 0.5, 0.25), rtol=1e-6)  # its colour
+    assert out[15, 15, 0] == pytest.approx(0.5)  # opacity 0.5 at its centre
+    round_ = ev.splat(rgb, cov, None, radius=6)
+    np.testing.assert_allclose(round_[15, :, 0], round_[:, 15, 0], atol=1e-7)
+    assert not ev.splat(rgb, np.zeros_like(cov), vel).any()
+
+
+def test_metrics_module():
+    a = np.random.default_rng(0).random((32, 32, 3)).astype(np.float32)
+    assert _metrics.metrics(a, a) == {"psnr": math.inf, "ssim": pytest.approx(1.0)}
+    assert _metrics.metrics(a * 0.9, a)["psnr"] < 40
+    with pytest.raises(ValueError, match="H, W, 3"):
+        _metrics.metrics(a[..., :2], a[..., :2])
+
+
+def test_eval_cli_parses(capsys):
+    assert main(["eval", "--help"]) == 0
+    assert "held-out suite" in capsys.readouterr().out
+    assert main(["eval", "nope"]) == 2
+
+
+@pytest.mark.parametrize("name", post.NAMES)
+def test_shipped_cards_carry_their_suite_table(name):
+    """Each shipped card holds its quick suite (``clvis eval NAME --quick
+    --write-card``): every held-out family, every baseline."""
+    card = json.loads((post.MODELS / f"{name}.json").read_text())
+    suite = card["held_out_suite"]
+    assert suite["trained_on"] == list(ev.TRAINED[name])
+    rows = suite["rows"]
+    assert {r["family"] for r in rows} == set(ev.FAMILIES[name])
+    for r in rows:
+        assert set(ev.BASELINES[name]) | {"network"} <= set(r)
+    assert "| family |" in ev.table({"model": name, "rows": rows})
+
+
+# the rows of each shipped card's quick suite where the network is below the
+# best classical baseline (issue 21 §2's "never below the baseline": MISSED
+# on these), with (PSNR, SSIM) margins as measured; a card may not add a row
+# here nor fall more than 0.25 dB / 0.01 further on one
+KNOWN_BELOW = {
+    "infill": {
+        "turbulence 320x180 64^3 at 95% orbit": (-0.01, 0.003),
+        "noise 320x180 64^3 at 95% orbit": (-0.33, -0.0),
+        "shapes 320x180 64^3 at 85% orbit": (-2.46, 0.018),
+        "shapes 320x180 64^3 at 90% orbit": (-2.69, 0.009),
+        "shapes 320x180 64^3 at 95% orbit": (-0.63, 0.01),
+    },
+    "lidar": {"terrain 320x240 3% scan orbit": (-4.94, -0.011)},
+    "narvis": {
+        "lorenz 256x256 1x points hemisphere": (-4.39, -0.067),
+        "lorenz 256x256 1x points grid": (-5.79, -0.103),
+        "jet 256x256 1x points hemisphere": (-2.48, -0.034),
+        "jet 256x256 1x points grid": (-4.33, -0.167),
+        "ring 256x256 1x points grid": (-0.59, -0.04),
+        "hurricane/magma 256x256 1x points hemisphere": (-0.67, -0.037),
+        "hurricane/magma 256x256 1x points grid": (2.11, -0.045),
+    },
+}
+
+
+@pytest.mark.parametrize("name", post.NAMES)
+def test_shipped_cards_hold_their_suite_margins(name):
+    card = json.loads((post.MODELS / f"{name}.json").read_text())
+    margins = ev.margins({"model": name, "rows": card["held_out_suite"]["rows"]})
+    for label, dp, ds in margins:
+        if label in KNOWN_BELOW[name]:
+            kp, ks = KNOWN_BELOW[name][label]
+            assert dp >= kp - 0.25 and ds >= ks - 0.01, label
+        else:
+            assert dp >= 0 and ds >= 0, f"{label}: {dp:+.2f} dB, SSIM {ds:+.3f} below the best baseline"
+    assert set(KNOWN_BELOW[name]) <= {m[0] for m in margins}
+
+
+@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (13 rows of the three quick suites)")
+@pytest.mark.parametrize("name", post.NAMES)
+def test_shipped_cards_never_below_their_baseline(name):
+    """Issue 21 §2: PSNR and SSIM >= the best classical baseline on every
+    row of the suite. Every shipped card misses it."""
+    card = json.loads((post.MODELS / f"{name}.json").read_text())
+    margins = ev.margins({"model": name, "rows": card["held_out_suite"]["rows"]})
+    assert all(dp >= 0 and ds >= 0 for _, dp, ds in margins)
+
+
+# ---------------------------------------------------------------------------
+# the CI subset: one case of each suite, recomputed (~1 min on 2 cores)
+
+CI_CASES = {
+    "infill": ev.Case("shapes", (320, 180), 64),
+    "lidar": ev.Case("photo", (320, 240), 0.05),
+    "narvis": ev.Case("jet", (128, 128), 1.0, "hemisphere"),
+}
+
+
+@pytest.fixture(scope="module")
+def ci_rows():
+    out = {}
+    for name, case in CI_CASES.items():
+        rows = ev.evaluate(name, cases=[case], log=None)["rows"]
+        out[name] = {r["setting"]: r for r in rows}
+    return out
+
+
+def _margin(row, baseline, key="psnr"):
+    return row["network"][key] - row[baseline][key]
+
+
+def test_ci_infill_on_shapes(ci_rows):
+    """Distance fields of random shapes (never trained on), 320 x 180.
+    Measured (Intel CPU): 85 %: 33.7 dB / 0.973 (push-pull 29.9, input
+    25.0); 90 %: 41.4 (push-pull 32.7); 95 %: 50.4 (push-pull 34.5)."""
+    r = ci_rows["infill"]
+    a, b, c = r["64^3 at 85%"], r["64^3 at 90%"], r["64^3 at 95%"]
+    assert a["network"]["psnr"] > 25 and a["network"]["ssim"] > 0.95 and _margin(a, "pushpull") > 3
+    assert _margin(b, "pushpull") > 6 and b["network"]["ssim"] > 0.98
+    assert _margin(c, "pushpull") > 10 and c["network"]["ssim"] > 0.99
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="target missed (issue 21 §2, never below the baseline): at 95 % the network (50.4 dB) "
+    "is 16 dB below the raw partial image (66.7 dB): it paints the background rays still running",
+)
+def test_ci_infill_95_is_not_below_its_input(ci_rows):
+    assert _margin(ci_rows["infill"]["64^3 at 95%"], "input") >= 0
+
+
+def test_ci_lidar_on_photographs(ci_rows):
+    """A town under a photograph (never trained on), 5 % scan, 320 x 240.
+    Measured: 15.7 dB / 0.431 (push-pull 14.1 / 0.412, input 6.0). The
+    target's + 0.02 SSIM over push-pull is met by 0.019 only: not held."""
+    r = ci_rows["lidar"]["5% scan"]
+    assert _margin(r, "input") > 6 and _margin(r, "pushpull") > 1 and _margin(r, "pushpull", "ssim") > 0
+
+
+def test_ci_narvis_on_a_jet(ci_rows):
+    """A round jet (never trained on), hemisphere view, 128 x 128 at the
+    training's particles a pixel. Measured: 25.1 dB / 0.784 against GR
+    (plain rasterization 23.7 / 0.733, push-pull 13.8, classical splat
+    28.1 / 0.849)."""
+    r = ci_rows["narvis"]["1x points"]
+    assert r["network"]["psnr"] > 24 and _margin(r, "raster") > 0.5 and _margin(r, "pushpull") > 6
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="targets missed (issue 21 §2): on the jet the network (25.1 dB / 0.784) is 3.0 dB below "
+    "the classical splat (28.1 / 0.849) and 1.4 dB (not 6) over the plain rasterization",
+)
+def test_ci_narvis_meets_its_targets_on_a_jet(ci_rows):
+    r = ci_rows["narvis"]["1x points"]
+    assert _margin(r, "splat") >= 0 and _margin(r, "raster") >= 6 and r["network"]["ssim"] >= 0.82

@@ -65,7 +65,8 @@ TYPED="clvis/__init__.py clvis/__main__.py clvis/_arrays.py clvis/_keys.py clvis
        clvis/iso/cache.py clvis/iso/raytrace.py
        clvis/post/__init__.py clvis/post/names.py clvis/post/nets.py clvis/post/pack.py
        clvis/post/pushpull.py
-       clvis/io/__init__.py clvis/io/npy.py clvis/io/volumes.py
+       clvis/io/__init__.py clvis/io/npy.py clvis/io/volumes.py clvis/io/ascii.py clvis/io/files.py
+       clvis/io/pcd.py clvis/io/vdb.py clvis/io/vtk.py clvis/metrics.py clvis/post/specs.py
        clvis/distributed/__init__.py clvis/distributed/composite.py
        clvis/view"
 

@@ -126,7 +126,7 @@ def _read_pcd(path: Path) -> PointCloud:
     else:
         raise DataError(f"{path}: malformed PCD header: DATA {' '.join(h['DATA'])!r}")
     columns = {}
-    for name in data.dtype.names:
+    for name in data.dtype.names or ():
         if data.dtype[name].shape:
             continue  # multi-count fields (histograms, ...)
         low = name.lower()

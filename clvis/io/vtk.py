@@ -71,7 +71,7 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     origin = _numbers(path, "Origin", ia.get("Origin", "0 0 0"), 3)
     pd = re.search(rb"<PointData\b([^>]*)>(.*?)</PointData>", raw, re.S)
     arrays = re.findall(rb"(<DataArray\b[^>]*>)(.*?)</DataArray>", pd.group(2), re.S) if pd else []
-    if not arrays:
+    if pd is None or not arrays:
         raise DataError(f"{path}: no point data array (cell data is not read)")
     want = _attrs(b"<x " + pd.group(1) + b">").get("Scalars")
     tag, body = next(((t, b) for t, b in arrays if want and _attrs(t).get("Name") == want), arrays[0])
@@ -162,10 +162,10 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
         raise DataError(f"{path}: legacy VTK {kind.title()!r}: only DATASET STRUCTURED_POINTS is a volume")
     binary = up[2] == "BINARY"
     f = {}
-    for t in text[4:]:
-        if not t or t.split()[0].upper() in ("POINT_DATA", "CELL_DATA"):
+    for line in text[4:]:
+        if not line or line.split()[0].upper() in ("POINT_DATA", "CELL_DATA"):
             break
-        f[t.split()[0].upper()] = t.split()[1:]
+        f[line.split()[0].upper()] = line.split()[1:]
     if "DIMENSIONS" not in f:
         raise DataError(f"{path}: malformed STRUCTURED_POINTS header: no DIMENSIONS")
     nx, ny, nz = _numbers(path, "DIMENSIONS", " ".join(f["DIMENSIONS"]), 3, int)

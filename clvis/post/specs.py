@@ -77,7 +77,9 @@ class InfillSpec(NetworkSpec):
             raise ValueError(f"rgba: expected (H, W, 4), got shape {shape}")
         return int(shape[0]), int(shape[1])
 
-    def pack(self, image, planes, stride, out, queue):
+    def pack(
+        self, image: Any, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
+    ) -> None:
         pack_iso(image.rgba, image.hit, image.active, stride=stride, out=out, queue=queue)
 
 
@@ -100,7 +102,9 @@ class LidarSpec(NetworkSpec):
             raise ValueError(f"rgbda: expected (H, W, 5) [r, g, b, depth, alpha], got shape {shape}")
         return int(shape[0]), int(shape[1])
 
-    def pack(self, image, planes, stride, out, queue):
+    def pack(
+        self, image: Any, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
+    ) -> None:
         pack_rgbda(getattr(image, "rgbda", image), stride=stride, out=out, queue=queue)
 
 
@@ -122,7 +126,9 @@ class NarvisSpec(NetworkSpec):
             raise ValueError(f"index: expected (H, W), got shape {shape}")
         return int(shape[0]), int(shape[1])
 
-    def pack(self, image, planes, stride, out, queue):
+    def pack(
+        self, image: Any, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
+    ) -> None:
         pack_gbuffers(image, planes, stride=stride, out=out, queue=queue)
 
 

@@ -36,6 +36,7 @@ from clvis.colormap import TransferFunction
 from clvis.gauss import GaussianRenderer, Gaussians, build_bvh, gaussians_from_volume
 from clvis.gauss.points import frames_along
 from clvis.reference.gauss import bvh as ref_bvh
+from clvis.reference.gauss import gaussians as ref_gaussians
 from clvis.reference.gauss import lod as ref_lod
 from clvis.reference.gauss import render as ref_render
 
@@ -70,7 +71,7 @@ def test_bvh_build(benchmark, queue, label, impl):
     g, _ = scene(label)
     n = g.n
     op = f"bvh_build[{label} Gaussians]"
-    boxes = ref_render.gaussian_boxes(g.means, g.scales, g.rotations, 3.0)
+    boxes = ref_gaussians.gaussian_boxes(g.means, g.scales, g.rotations, 3.0)
     model = n * (24 + 32)
     if impl == "clvis":
         bd = cla.to_device(queue, boxes)

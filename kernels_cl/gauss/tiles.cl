@@ -56,6 +56,12 @@
  *     composited, rounds). Global size: (tiles to render) * TS * TS, work-item i:
  *     tile tile0 + i / (TS * TS) of the band (row-major), pixel i % (TS * TS)
  *     in it (row-major); any local size dividing TS * TS.
+ * kernel tile_render8(the arguments of tile_render)
+ *     The CPU profile's form of tile_render, the same outputs: a work-item
+ *     renders a row of 8 pixels of a tile in float8 lanes (TS a multiple of
+ *     8). Global size: (tiles to render) * TS * TS / 8, work-item i: tile
+ *     tile0 + i / (TS * TS / 8), row (i % (TS * TS / 8)) / (TS / 8), pixels
+ *     8 * (i % (TS / 8)) .. + 7 of that row; any local size.
  *
  * Footprint (tile_footprint): the Gaussian's cutoff ellipsoid, inflated by
  * 1.01 (as the BVH boxes of gaussians.cl), projected exactly: when it lies in

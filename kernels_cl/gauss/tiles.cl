@@ -299,29 +299,10 @@ kernel void tile_ranges(global const ulong *keys, uint m, global uint2 *ranges)
         ranges[tile].y = i + 1;
 }
 
-/* (ta, ia) < (tb, ib) */
-inline bool key_less(float ta, uint ia, float tb, uint ib)
-{
-    return ta < tb || (ta == tb && ia < ib);
-}
-
 /* the float whose clvis_key_f32 is k */
 inline float key_to_f32(uint k)
 {
     return as_float((k & 0x80000000u) ? (k & 0x7FFFFFFFu) : ~k);
-}
-
-inline float hit_alpha(global const clvis_gaussian *g, global const float4 *tf, uint tf_n, float tf_min,
-                       float tf_scale, float density, float m2, float ts, float a, const float *op,
-                       const float *dp, uint *ti)
-{
-    *ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
-    float opac = g->opacity * tf[*ti].w;
-#if MODEL == 1
-    return clvis_gauss_alpha_absorption(opac, density, ts, a, op, dp);
-#else
-    return clvis_gauss_alpha_max_response(opac, m2);
-#endif
 }
 
 inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *colors, uint id)
@@ -400,13 +381,13 @@ kernel void tile_render(global const clvis_gaussian *recs, global const uint *or
             if (!(m2 <= cutoff2))
                 continue;
             uint id = order[j];
-            if (!key_less(last_t, last_id, t, id))
+            if (!clvis_gauss_key_less(last_t, last_id, t, id))
                 continue;   /* composited in an earlier round */
-            if (over && !key_less(t, id, ct, cid))
+            if (over && !clvis_gauss_key_less(t, id, ct, cid))
                 continue;   /* beyond the round's ceiling */
             if (kn == KP) {
                 over = true;
-                if (key_less(kt[0], ki[0], t, id)) {
+                if (clvis_gauss_key_less(kt[0], ki[0], t, id)) {
                     ct = t;   /* the new hit is the largest: drop it */
                     cid = id;
                     continue;
@@ -422,9 +403,10 @@ kernel void tile_render(global const clvis_gaussian *recs, global const uint *or
                 kn = KP - 1;
             }
             uint ti;
-            float alpha = hit_alpha(g, tf, tf_n, tf_min, tf_scale, density, m2, ts, a, op, dp, &ti);
+            float alpha = clvis_gauss_hit_alpha(g, tf, tf_n, tf_min, tf_scale, MODEL, density, m2, ts, a,
+                                                op, dp, &ti);
             int pos = kn++;
-            while (pos > 0 && key_less(kt[pos - 1], ki[pos - 1], t, id)) {
+            while (pos > 0 && clvis_gauss_key_less(kt[pos - 1], ki[pos - 1], t, id)) {
                 kt[pos] = kt[pos - 1];
                 ki[pos] = ki[pos - 1];
                 ka[pos] = ka[pos - 1];

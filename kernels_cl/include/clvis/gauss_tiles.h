@@ -52,7 +52,8 @@ typedef struct {
     float pad;             /* px added around a tile's pixel centres */
 } clvis_ellipse;
 
-inline void clvis_ellipse_set(clvis_ellipse *e, float cu, float cv, float euu, float evv, float euv, float det)
+inline void clvis_ellipse_set(clvis_ellipse *e, float cu, float cv, float euu, float evv, float euv,
+                              float det)
 {
     e->cu = cu;
     e->cv = cv;

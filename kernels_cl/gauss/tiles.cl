@@ -321,10 +321,8 @@ kernel void tile_render(global const clvis_gaussian *recs, global const uint *or
                         float tf_scale, float cutoff2, float density, global const uchar4 *colors,
                         global float4 *rgba, global float *depth, global uint2 *stats)
 {
-    uint tiles_x = (W + TS - 1) / TS;
-    uint tile = tile0 + get_global_id(0) / (TS * TS), l = get_global_id(0) % (TS * TS);
-    uint px = (tile % tiles_x) * TS + l % TS, row = (tile / tiles_x) * TS + l / TS;
-    uint py = ty0 * TS + row;
+    uint px, py, row;
+    uint tile = clvis_tile_pixel(get_global_id(0), W, ty0, tile0, TS, &px, &py, &row);
     if (px >= W || row >= rows || py >= H)
         return;
     size_t pix = (size_t)(py - out_y0) * W + px;

@@ -20,6 +20,11 @@
  *       [ulo, uhi] x [vlo, vhi] (clamped to [-1, W + 1] x [-1, H + 1]); 0 when
  *       there are none
  *
+ *   uint clvis_tile_pixel(gid, W, ty0, tile0, ts, &px, &py, &row): a renderer's
+ *       work-item gid, a work-item per pixel of ts x ts tiles (tile tile0 + gid /
+ *       ts^2, pixel gid % ts^2 of it, row-major; tile index (ty - ty0) * tiles_x
+ *       + tx): its tile, pixel (px, py) and row within the band of tiles
+ *
  * clvis.reference.gauss.tiles and clvis.reference.gauss.splat repeat them.
  */
 #ifndef CLVIS_GAUSS_TILES_H
@@ -108,6 +113,16 @@ inline int clvis_tile_rect(float ulo, float uhi, float vlo, float vhi, uint W, u
     r[2] = py0 / ts;
     r[3] = py1 / ts;
     return 1;
+}
+
+inline uint clvis_tile_pixel(uint gid, uint W, uint ty0, uint tile0, uint ts, uint *px, uint *py, uint *row)
+{
+    uint tiles_x = (W + ts - 1) / ts;
+    uint tile = tile0 + gid / (ts * ts), l = gid % (ts * ts);
+    *px = (tile % tiles_x) * ts + l % ts;
+    *row = (tile / tiles_x) * ts + l / ts;
+    *py = ty0 * ts + *row;
+    return tile;
 }
 
 #endif /* CLVIS_GAUSS_TILES_H */

@@ -14,15 +14,15 @@ import gzip
 import json
 import os
 import re
-import struct
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from fuzz.seeds import _cloud, _las, _vdb
 
-from clvis.io import PointCloud, save_npz, write_ply
+from clvis.io import save_npz, write_ply
 
 laspy = pytest.importorskip("laspy")
 nibabel = pytest.importorskip("nibabel")
@@ -39,21 +39,13 @@ import json, resource, sys
 import clvis.io, clvis.io.volumes, clvis.gauss.sparse, clvis.gauss.gaussians
 import laspy, lazrs, nibabel, plyfile, tinyvdb
 from clvis.errors import ClvisError
+from fuzz.harness import _memory_error as memory_error
 limit = int(sys.argv[2])
 resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
 readers = {"points": clvis.io.read_points, "volume": clvis.io.volumes.read_volume,
            "vdb": clvis.gauss.sparse.read_vdb, "gaussians": clvis.gauss.gaussians.Gaussians.load}
 cases = json.load(open(sys.argv[1]))
 start = int(sys.argv[3])
-
-def memory_error(e):
-    seen = set()
-    while e is not None and id(e) not in seen:
-        if isinstance(e, MemoryError):
-            return True
-        seen.add(id(e))
-        e = e.__cause__ or e.__context__
-    return False
 
 for i in range(start, len(cases)):
     kind, path = cases[i]
@@ -75,63 +67,7 @@ print(json.dumps({"maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrs
 
 
 # ---------------------------------------------------------------- base files
-
-
-def _cloud(n, seed=0):
-    rng = np.random.default_rng(seed)
-    return PointCloud(
-        rng.normal(0, 10, (n, 3)),
-        colors=rng.integers(0, 256, (n, 4), dtype=np.uint8),
-        attributes={"intensity": rng.random(n).astype(np.float32)},
-        radius=rng.random(n),
-        origin=(1e5, 2.0, 0.5),
-    )
-
-
-def _las(path, n, point_format, seed=0):
-    rng = np.random.default_rng(seed)
-    header = laspy.LasHeader(point_format=point_format, version="1.2" if point_format < 6 else "1.4")
-    header.scales = [0.001] * 3
-    header.offsets = [500000.0, 0.0, 0.0]
-    las = laspy.LasData(header)
-    las.x = 500000 + rng.random(n) * 100
-    las.y = rng.random(n) * 100
-    las.z = rng.random(n) * 10
-    las.intensity = rng.integers(0, 65536, n)
-    las.gps_time = np.arange(n) * 0.5
-    if point_format in (3, 7):
-        las.red, las.green, las.blue = rng.integers(0, 65536, (3, n)).astype(np.uint16)
-    las.write(str(path))
-    return las.header.offset_to_point_data
-
-
-def _s(text):
-    b = text.encode()
-    return struct.pack("<I", len(b)) + b
-
-
-def _vdb(tmp, path):
-    """A float grid written by tinyvdb from a minimal hand-made OpenVDB file."""
-    vs = np.array([1.0, 1.0, 1.0])
-    transform = _s("ScaleTranslateMap") + b"".join(
-        struct.pack("<3d", *v) for v in (np.zeros(3), vs, vs, 1 / vs, 1 / vs**2, 0.5 / vs)
-    )
-    out = struct.pack("<qIIIB", 0x56444220, 224, 11, 0, 1) + b"0EA4B2C5-0F55-4B24-9C25-5CFD16E1E1CE"
-    out += struct.pack("<II", 0, 1)
-    body = struct.pack("<II", 0, 0) + transform + struct.pack("<I", 1) + struct.pack("<f", 0)
-    body += struct.pack("<ii", 0, 0)
-    out += _s("density") + _s("Tree_float_5_4_3") + _s("")
-    pos = len(out) + 24
-    out += struct.pack("<qqq", pos, pos + len(body), pos + len(body)) + body
-    template = tmp / "template.vdb"
-    template.write_bytes(out)
-    rng = np.random.default_rng(1)
-    ijk = np.unique(rng.integers(-10, 20, (60, 3)), axis=0).astype(np.int32)
-    vals = rng.random(len(ijk)).astype(np.float32)
-    with tinyvdb.open(str(template)) as f:
-        f.read_grids()
-        f.extend_grid_from_sparse(0, ijk.tobytes(), vals.tobytes(), "density")
-        f.save(str(path))
+# (made by tests/fuzz/seeds.py's _cloud, _las and _vdb, as the fuzzer's seeds)
 
 
 def _bases(tmp):
@@ -222,7 +158,10 @@ def _run(cases_path, n, tmp):
     """Run the child from case 0, restarting after a crash; {i: outcome}."""
     results, crashes, start = {}, {}, 0
     maxrss = []
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join([str(ROOT), str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")]),
+    )
     while start < n:
         proc = subprocess.run(
             [sys.executable, "-c", CHILD, str(cases_path), str(LIMIT_BYTES), str(start)],

@@ -53,7 +53,7 @@
  *     Boxes are culled by clvis_ray_slab of clvis/ray.h (1/d by its tiny-direction
  *     rule); the Gaussians by clvis_gauss_hit of clvis/gauss.h.
  *     Stages: collect_round (the traversal: clvis_ray_slab, clvis_gauss_hit,
- *     hit_alpha, kbuffer_insert), then hit_color and clvis_gauss_composite per hit.
+ *     clvis_gauss_hit_alpha, kbuffer_insert), then hit_color and clvis_gauss_composite per hit.
  */
 #pragma OPENCL FP_CONTRACT OFF
 
@@ -76,26 +76,6 @@
 #define STACK 64
 #define T_STOP 1e-3f
 
-/* (ta, ia) < (tb, ib) */
-inline bool key_less(float ta, uint ia, float tb, uint ib)
-{
-    return ta < tb || (ta == tb && ia < ib);
-}
-
-/* The hit alpha of record g (MODEL), and its transfer-function entry *ti. */
-inline float hit_alpha(global const clvis_gaussian *g, global const float4 *tf, uint tf_n, float tf_min,
-                       float tf_scale, float density, float m2, float ts, float a, const float *op,
-                       const float *dp, uint *ti)
-{
-    *ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
-    float opac = g->opacity * tf[*ti].w;
-#if MODEL == 1
-    return clvis_gauss_alpha_absorption(opac, density, ts, a, op, dp);
-#else
-    return clvis_gauss_alpha_max_response(opac, m2);
-#endif
-}
-
 /* The colour hit (leaf j, transfer-function entry ti) composites with (COLOR). */
 inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *colors,
                         global const uint *order, uint j)
@@ -112,7 +92,7 @@ inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *c
 inline void kbuffer_insert(float *kt, uint *kj, float *ka, uint *kc, global const uint *order, int pos,
                            float t, uint id, uint j, float alpha, uint ti)
 {
-    while (pos > 0 && key_less(t, id, kt[pos - 1], order[kj[pos - 1]])) {
+    while (pos > 0 && clvis_gauss_key_less(t, id, kt[pos - 1], order[kj[pos - 1]])) {
         kt[pos] = kt[pos - 1];
         kj[pos] = kj[pos - 1];
         ka[pos] = ka[pos - 1];
@@ -177,17 +157,18 @@ inline int collect_round(global const clvis_bvh_node *nodes, global const float 
                 if (!(m2 <= cutoff2))
                     continue;
                 uint id = order[j];
-                if (!key_less(last_t, last_id, t, id))
+                if (!clvis_gauss_key_less(last_t, last_id, t, id))
                     continue;
                 int pos;
                 if (kn < cap)
                     pos = kn++;
-                else if (key_less(t, id, kt[cap - 1], order[kj[cap - 1]]))
+                else if (clvis_gauss_key_less(t, id, kt[cap - 1], order[kj[cap - 1]]))
                     pos = cap - 1;
                 else
                     continue;
                 uint ti;
-                float alpha = hit_alpha(recs + j, tf, tf_n, tf_min, tf_scale, density, m2, ts, a, op, dp, &ti);
+                float alpha = clvis_gauss_hit_alpha(recs + j, tf, tf_n, tf_min, tf_scale, MODEL, density, m2,
+                                                    ts, a, op, dp, &ti);
                 kbuffer_insert(kt, kj, ka, kc, order, pos, t, id, j, alpha, ti);
             } else {
                 global const clvis_bvh_node *cn = nodes + child;

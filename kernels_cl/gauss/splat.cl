@@ -44,6 +44,7 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #include "clvis/gauss.h"
+#include "clvis/gauss_tiles.h"
 #include "clvis/keys.h"
 
 #ifndef TS
@@ -55,12 +56,6 @@
 #define SPLAT_T_STOP 1e-4f
 #define SPLAT_Q_MAX 9.0f
 #define SPLAT_LOWPASS 0.3f
-#define PAD 0.05f
-
-inline float row4(global const float *r, float x, float y, float z)
-{
-    return clvis_dot3(r[0], r[1], r[2], x, y, z) + r[3];
-}
 
 /* the 2D splat of g into s[0..7]; returns 0 when culled */
 inline int splat_project(global const clvis_gaussian *g, global const float *proj, float near, uint W, uint H,
@@ -69,18 +64,13 @@ inline int splat_project(global const clvis_gaussian *g, global const float *pro
     for (int k = 0; k < 8; ++k)
         s[k] = 0.0f;
     float L[3][3];
-    for (int k = 0; k < 3; ++k) {
-        float r2 = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], g->w[3 * k], g->w[3 * k + 1],
-                              g->w[3 * k + 2]);
-        for (int j = 0; j < 3; ++j)
-            L[j][k] = g->w[3 * k + j] / r2;
-    }
+    clvis_gauss_inverse(g, L);
     float mx = g->mean[0], my = g->mean[1], mz = g->mean[2];
     global const float *Pu = proj, *Pv = proj + 4, *Pw = proj + 8, *D = proj + 12;
-    float w = row4(Pw, mx, my, mz), dep = row4(D, mx, my, mz);
+    float w = clvis_row4(Pw, mx, my, mz), dep = clvis_row4(D, mx, my, mz);
     if (!(dep > near) || !(w > 0.0f))
         return 0;
-    float u = row4(Pu, mx, my, mz) / w, v = row4(Pv, mx, my, mz) / w;
+    float u = clvis_row4(Pu, mx, my, mz) / w, v = clvis_row4(Pv, mx, my, mz) / w;
     float hw = 0.5f * (float)W, hh = 0.5f * (float)H;
     float uc = clamp(u, hw - 1.3f * hw, hw + 1.3f * hw), vc = clamp(v, hh - 1.3f * hh, hh + 1.3f * hh);
     float J[2][3];
@@ -112,7 +102,7 @@ inline int splat_project(global const clvis_gaussian *g, global const float *pro
 
 /* the tiles (inclusive range) and the test of the ellipse q <= 9 (inflated) */
 typedef struct {
-    float cu, cv, a00, a01, a11, det, pad;
+    clvis_ellipse e;
     int tx0, tx1, ty0, ty1;
 } splat_fp;
 
@@ -128,47 +118,16 @@ inline int splat_footprint(const float *s, uint W, uint H, splat_fp *f)
     float det = euu * evv - euv * euv;
     if (!(euu > 0.0f && evv > 0.0f && det > 0.0f && isfinite(det)))
         return 0;
-    f->cu = s[0];
-    f->cv = s[1];
-    f->a00 = evv;
-    f->a01 = -euv;
-    f->a11 = euu;
-    f->det = det;
-    f->pad = PAD + 1e-5f * (fabs(s[0]) + fabs(s[1]));
-    float hu = sqrt(euu) + f->pad, hv = sqrt(evv) + f->pad;
-    float ulo = fmax(s[0] - hu, -1.0f), uhi = fmin(s[0] + hu, (float)W + 1.0f);
-    float vlo = fmax(s[1] - hv, -1.0f), vhi = fmin(s[1] + hv, (float)H + 1.0f);
-    if (!(ulo <= uhi && vlo <= vhi))
+    clvis_ellipse_set(&f->e, s[0], s[1], euu, evv, euv, det);
+    float hu = sqrt(euu) + f->e.pad, hv = sqrt(evv) + f->e.pad;
+    int r[4];
+    if (!clvis_tile_rect(s[0] - hu, s[0] + hu, s[1] - hv, s[1] + hv, W, H, TS, r))
         return 0;
-    int px0 = max((int)ceil(ulo - 0.5f), 0), px1 = min((int)floor(uhi - 0.5f), (int)W - 1);
-    int py0 = max((int)ceil(vlo - 0.5f), 0), py1 = min((int)floor(vhi - 0.5f), (int)H - 1);
-    if (px0 > px1 || py0 > py1)
-        return 0;
-    f->tx0 = px0 / TS;
-    f->tx1 = px1 / TS;
-    f->ty0 = py0 / TS;
-    f->ty1 = py1 / TS;
+    f->tx0 = r[0];
+    f->tx1 = r[1];
+    f->ty0 = r[2];
+    f->ty1 = r[3];
     return 1;
-}
-
-inline int splat_tile_kept(const splat_fp *f, int tx, int ty, uint W, uint H)
-{
-    float u0 = (float)(tx * TS) + 0.5f - f->pad, u1 = (float)min((tx + 1) * TS, (int)W) - 0.5f + f->pad;
-    float v0 = (float)(ty * TS) + 0.5f - f->pad, v1 = (float)min((ty + 1) * TS, (int)H) - 0.5f + f->pad;
-    if (f->cu >= u0 && f->cu <= u1 && f->cv >= v0 && f->cv <= v1)
-        return 1;
-    float us[2] = {u0, u1}, vs[2] = {v0, v1};
-    for (int e = 0; e < 2; ++e) {
-        float dx = us[e] - f->cu;
-        float dy = clamp(-(f->a01 * dx) / f->a11, v0 - f->cv, v1 - f->cv);
-        if ((f->a00 * dx * dx + 2.0f * f->a01 * dx * dy) + f->a11 * dy * dy <= f->det)
-            return 1;
-        dy = vs[e] - f->cv;
-        dx = clamp(-(f->a01 * dy) / f->a00, u0 - f->cu, u1 - f->cu);
-        if ((f->a00 * dx * dx + 2.0f * f->a01 * dx * dy) + f->a11 * dy * dy <= f->det)
-            return 1;
-    }
-    return 0;
 }
 
 kernel void splat_count(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
@@ -187,7 +146,7 @@ kernel void splat_count(global const clvis_gaussian *recs, uint n, global const 
         int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
         for (int ty = y0; ty <= y1; ++ty)
             for (int tx = f.tx0; tx <= f.tx1; ++tx)
-                cnt += splat_tile_kept(&f, tx, ty, W, H);
+                cnt += clvis_ellipse_tile(&f.e, tx, ty, W, H, TS);
     }
     counts[i] = cnt;
 }
@@ -211,7 +170,7 @@ kernel void splat_keys(global const clvis_gaussian *recs, uint n, global const f
     int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
     for (int ty = y0; ty <= y1; ++ty)
         for (int tx = f.tx0; tx <= f.tx1; ++tx)
-            if (splat_tile_kept(&f, tx, ty, W, H)) {
+            if (clvis_ellipse_tile(&f.e, tx, ty, W, H, TS)) {
                 keys[at] = ((ulong)(ty - (int)ty0) * tiles_x + (ulong)tx) << 32 | dkey;
                 ids[at] = i;
                 ++at;
@@ -225,10 +184,8 @@ kernel void splat_render(global const clvis_gaussian *recs, global const uint *o
                          float tf_scale, global const uchar4 *colors, global float4 *rgba, global float *depth,
                          global uint2 *stats)
 {
-    uint tiles_x = (W + TS - 1) / TS;
-    uint tile = tile0 + get_global_id(0) / (TS * TS), l = get_global_id(0) % (TS * TS);
-    uint px = (tile % tiles_x) * TS + l % TS, row = (tile / tiles_x) * TS + l / TS;
-    uint py = ty0 * TS + row;
+    uint px, py, row;
+    uint tile = clvis_tile_pixel(get_global_id(0), W, ty0, tile0, TS, &px, &py, &row);
     if (px >= W || row >= rows || py >= H)
         return;
     size_t pix = (size_t)(py - out_y0) * W + px;

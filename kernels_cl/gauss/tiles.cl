@@ -86,6 +86,7 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #include "clvis/gauss.h"
+#include "clvis/gauss_tiles.h"
 #include "clvis/keys.h"
 
 #ifndef TS
@@ -103,22 +104,13 @@
 #define T_STOP 1e-3f
 #define INFLATE 1.01f
 #define EPS2 1e-4f     /* (0.01 px)^2 added to E's diagonal */
-#define PAD 0.05f      /* px added around a tile's pixel centres */
 
 typedef struct {
-    float cu, cv;          /* ellipse centre */
-    float a00, a01, a11;   /* adj(E) */
-    float det;             /* det(E) */
-    float pad;             /* px added around a tile's pixel centres */
+    clvis_ellipse e;       /* the outline ellipse */
     int exact;             /* 1: test tiles against the ellipse; 0: every tile of the rectangle */
     int tx0, tx1, ty0, ty1;/* tile rectangle (inclusive); empty when tx0 > tx1 */
     float dmin;
 } tile_footprint;
-
-inline float row4(global const float *r, float x, float y, float z)
-{
-    return clvis_dot3(r[0], r[1], r[2], x, y, z) + r[3];
-}
 
 inline float absrow4(global const float *r, float x, float y, float z)
 {
@@ -132,12 +124,7 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
     float c = cutoff * INFLATE;
     /* L = W^-1 = R diag(se): L[j][k] = w[3k + j] / |row k of W|^2 (rows orthogonal) */
     float L[3][3];
-    for (int k = 0; k < 3; ++k) {
-        float r2 = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], g->w[3 * k], g->w[3 * k + 1],
-                              g->w[3 * k + 2]);
-        for (int j = 0; j < 3; ++j)
-            L[j][k] = g->w[3 * k + j] / r2;
-    }
+    clvis_gauss_inverse(g, L);
     float mx = g->mean[0], my = g->mean[1], mz = g->mean[2];
     /* b_r = c P_r[:3] L (the ellipsoid's extent along row r), m_r = P_r (mean, 1) */
     float b[4][3], m[4];
@@ -145,7 +132,7 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
         global const float *P = proj + 4 * r;
         for (int k = 0; k < 3; ++k)
             b[r][k] = c * clvis_dot3(P[0], P[1], P[2], L[0][k], L[1][k], L[2][k]);
-        m[r] = row4(P, mx, my, mz);
+        m[r] = clvis_row4(P, mx, my, mz);
     }
     float sd = 1e-5f * absrow4(proj + 12, mx, my, mz) + 1e-30f;
     float ext_d = sqrt(clvis_dot3(b[3][0], b[3][1], b[3][2], b[3][0], b[3][1], b[3][2]));
@@ -173,16 +160,9 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
         float cu = (mu * mw - S[0][2]) / fw, cv = (mv * mw - S[1][2]) / fw;
         float det = euu * evv - euv * euv;
         if (euu > 0.0f && evv > 0.0f && det > 0.0f && isfinite(det) && isfinite(cu) && isfinite(cv)) {
-            float pad = PAD + 1e-5f * (fabs(cu) + fabs(cv));
-            f->cu = cu;
-            f->cv = cv;
-            f->a00 = evv;
-            f->a01 = -euv;
-            f->a11 = euu;
-            f->det = det;
-            f->pad = pad;
+            clvis_ellipse_set(&f->e, cu, cv, euu, evv, euv, det);
             f->exact = 1;
-            float hu = sqrt(euu) + pad, hv = sqrt(evv) + pad;
+            float hu = sqrt(euu) + f->e.pad, hv = sqrt(evv) + f->e.pad;
             ulo = cu - hu;
             uhi = cu + hu;
             vlo = cv - hv;
@@ -194,51 +174,21 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
         return 0;   /* wholly behind the eye's plane */
     }
     /* pixels whose centre px + 0.5 lies in [ulo, uhi] */
-    ulo = fmax(ulo, -1.0f);
-    vlo = fmax(vlo, -1.0f);
-    uhi = fmin(uhi, (float)W + 1.0f);
-    vhi = fmin(vhi, (float)H + 1.0f);
-    if (!(ulo <= uhi && vlo <= vhi))
+    int r[4];
+    if (!clvis_tile_rect(ulo, uhi, vlo, vhi, W, H, TS, r))
         return 0;
-    int px0 = max((int)ceil(ulo - 0.5f), 0), px1 = min((int)floor(uhi - 0.5f), (int)W - 1);
-    int py0 = max((int)ceil(vlo - 0.5f), 0), py1 = min((int)floor(vhi - 0.5f), (int)H - 1);
-    if (px0 > px1 || py0 > py1)
-        return 0;
-    f->tx0 = px0 / TS;
-    f->tx1 = px1 / TS;
-    f->ty0 = py0 / TS;
-    f->ty1 = py1 / TS;
+    f->tx0 = r[0];
+    f->tx1 = r[1];
+    f->ty0 = r[2];
+    f->ty1 = r[3];
     return 1;
-}
-
-/* g(x) = dx' adj(E) dx <= det(E) somewhere on the rectangle [u0, u1] x [v0, v1] */
-inline int ellipse_meets(const tile_footprint *f, float u0, float u1, float v0, float v1)
-{
-    if (f->cu >= u0 && f->cu <= u1 && f->cv >= v0 && f->cv <= v1)
-        return 1;
-    float us[2] = {u0, u1}, vs[2] = {v0, v1};
-    for (int e = 0; e < 2; ++e) {
-        /* vertical edge u = us[e] */
-        float dx = us[e] - f->cu;
-        float dy = clamp(-(f->a01 * dx) / f->a11, v0 - f->cv, v1 - f->cv);
-        if ((f->a00 * dx * dx + 2.0f * f->a01 * dx * dy) + f->a11 * dy * dy <= f->det)
-            return 1;
-        /* horizontal edge v = vs[e] */
-        dy = vs[e] - f->cv;
-        dx = clamp(-(f->a01 * dy) / f->a00, u0 - f->cu, u1 - f->cu);
-        if ((f->a00 * dx * dx + 2.0f * f->a01 * dx * dy) + f->a11 * dy * dy <= f->det)
-            return 1;
-    }
-    return 0;
 }
 
 inline int tile_kept(const tile_footprint *f, int tx, int ty, uint W, uint H)
 {
     if (!f->exact)
         return 1;
-    float u0 = (float)(tx * TS) + 0.5f, u1 = (float)min((tx + 1) * TS, (int)W) - 0.5f;
-    float v0 = (float)(ty * TS) + 0.5f, v1 = (float)min((ty + 1) * TS, (int)H) - 0.5f;
-    return ellipse_meets(f, u0 - f->pad, u1 + f->pad, v0 - f->pad, v1 + f->pad);
+    return clvis_ellipse_tile(&f->e, tx, ty, W, H, TS);
 }
 
 kernel void tile_count(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
@@ -315,15 +265,13 @@ kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const fl
     float fdu = clvis_dot3(D[0], D[1], D[2], cam[12], cam[13], cam[14]);
     float fdv = clvis_dot3(D[0], D[1], D[2], cam[15], cam[16], cam[17]);
     float c = cutoff * INFLATE;
-    float m3 = row4(D, g->mean[0], g->mean[1], g->mean[2]);
+    float m3 = clvis_row4(D, g->mean[0], g->mean[1], g->mean[2]);
     float sd = 1e-5f * absrow4(D, g->mean[0], g->mean[1], g->mean[2]) + 1e-30f;
     /* f' S f = |f' L|^2, L = W^-1 as in footprint */
-    float e[3];
-    for (int k = 0; k < 3; ++k) {
-        float r2 = clvis_dot3(g->w[3 * k], g->w[3 * k + 1], g->w[3 * k + 2], g->w[3 * k], g->w[3 * k + 1],
-                              g->w[3 * k + 2]);
-        e[k] = clvis_dot3(D[0], D[1], D[2], g->w[3 * k] / r2, g->w[3 * k + 1] / r2, g->w[3 * k + 2] / r2);
-    }
+    float L[3][3], e[3];
+    clvis_gauss_inverse(g, L);
+    for (int k = 0; k < 3; ++k)
+        e[k] = clvis_dot3(D[0], D[1], D[2], L[0][k], L[1][k], L[2][k]);
     float fsf = clvis_dot3(e[0], e[1], e[2], e[0], e[1], e[2]);
     uint tiles_x = (W + TS - 1) / TS;
     ulong at = offsets[i];
@@ -351,29 +299,10 @@ kernel void tile_ranges(global const ulong *keys, uint m, global uint2 *ranges)
         ranges[tile].y = i + 1;
 }
 
-/* (ta, ia) < (tb, ib) */
-inline bool key_less(float ta, uint ia, float tb, uint ib)
-{
-    return ta < tb || (ta == tb && ia < ib);
-}
-
 /* the float whose clvis_key_f32 is k */
 inline float key_to_f32(uint k)
 {
     return as_float((k & 0x80000000u) ? (k & 0x7FFFFFFFu) : ~k);
-}
-
-inline float hit_alpha(global const clvis_gaussian *g, global const float4 *tf, uint tf_n, float tf_min,
-                       float tf_scale, float density, float m2, float ts, float a, const float *op,
-                       const float *dp, uint *ti)
-{
-    *ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
-    float opac = g->opacity * tf[*ti].w;
-#if MODEL == 1
-    return clvis_gauss_alpha_absorption(opac, density, ts, a, op, dp);
-#else
-    return clvis_gauss_alpha_max_response(opac, m2);
-#endif
 }
 
 inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *colors, uint id)
@@ -392,10 +321,8 @@ kernel void tile_render(global const clvis_gaussian *recs, global const uint *or
                         float tf_scale, float cutoff2, float density, global const uchar4 *colors,
                         global float4 *rgba, global float *depth, global uint2 *stats)
 {
-    uint tiles_x = (W + TS - 1) / TS;
-    uint tile = tile0 + get_global_id(0) / (TS * TS), l = get_global_id(0) % (TS * TS);
-    uint px = (tile % tiles_x) * TS + l % TS, row = (tile / tiles_x) * TS + l / TS;
-    uint py = ty0 * TS + row;
+    uint px, py, row;
+    uint tile = clvis_tile_pixel(get_global_id(0), W, ty0, tile0, TS, &px, &py, &row);
     if (px >= W || row >= rows || py >= H)
         return;
     size_t pix = (size_t)(py - out_y0) * W + px;
@@ -452,13 +379,13 @@ kernel void tile_render(global const clvis_gaussian *recs, global const uint *or
             if (!(m2 <= cutoff2))
                 continue;
             uint id = order[j];
-            if (!key_less(last_t, last_id, t, id))
+            if (!clvis_gauss_key_less(last_t, last_id, t, id))
                 continue;   /* composited in an earlier round */
-            if (over && !key_less(t, id, ct, cid))
+            if (over && !clvis_gauss_key_less(t, id, ct, cid))
                 continue;   /* beyond the round's ceiling */
             if (kn == KP) {
                 over = true;
-                if (key_less(kt[0], ki[0], t, id)) {
+                if (clvis_gauss_key_less(kt[0], ki[0], t, id)) {
                     ct = t;   /* the new hit is the largest: drop it */
                     cid = id;
                     continue;
@@ -474,9 +401,10 @@ kernel void tile_render(global const clvis_gaussian *recs, global const uint *or
                 kn = KP - 1;
             }
             uint ti;
-            float alpha = hit_alpha(g, tf, tf_n, tf_min, tf_scale, density, m2, ts, a, op, dp, &ti);
+            float alpha = clvis_gauss_hit_alpha(g, tf, tf_n, tf_min, tf_scale, MODEL, density, m2, ts, a,
+                                                op, dp, &ti);
             int pos = kn++;
-            while (pos > 0 && key_less(kt[pos - 1], ki[pos - 1], t, id)) {
+            while (pos > 0 && clvis_gauss_key_less(kt[pos - 1], ki[pos - 1], t, id)) {
                 kt[pos] = kt[pos - 1];
                 ki[pos] = ki[pos - 1];
                 ka[pos] = ka[pos - 1];

@@ -49,6 +49,7 @@ def _las(path, n, point_format, seed=0, extra=False):
     if "red" in las.point_format.dimension_names:
         las.red, las.green, las.blue = rng.integers(0, 65536, (3, n)).astype(np.uint16)
     las.write(str(path))
+    return las.header.offset_to_point_data
 
 
 def _s(text):

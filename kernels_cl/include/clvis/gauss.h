@@ -38,6 +38,10 @@
  *       colour when a Gaussian carries its own
  *   clvis_gauss_composite(alpha, c, &T, &cr, &cg, &cb): one front-to-back step,
  *       w = T alpha; cr += w c.x, cg += w c.y, cb += w c.z; T = T (1 - alpha)
+ *   float clvis_gauss_hit_alpha(g, tf, tf_n, tf_min, tf_scale, model, density, m2, ts, a,
+ *       op, dp, &ti): a hit's alpha, model 0 max response, 1 absorption, opac =
+ *       g's opacity times the alpha factor of its transfer-function entry *ti
+ *   bool clvis_gauss_key_less(ta, ia, tb, ib): (ta, ia) < (tb, ib), the hit order
  * (opac: the record's opacity times the transfer function's alpha factor.)
  */
 #ifndef CLVIS_GAUSS_H
@@ -103,6 +107,22 @@ inline void clvis_gauss_composite(float alpha, float4 c, float *T, float *cr, fl
     *cg += wgt * c.y;
     *cb += wgt * c.z;
     *T = *T * (1.0f - alpha);
+}
+
+inline float clvis_gauss_hit_alpha(global const clvis_gaussian *g, global const float4 *tf, uint tf_n,
+                                   float tf_min, float tf_scale, int model, float density, float m2,
+                                   float ts, float a, const float *op, const float *dp, uint *ti)
+{
+    *ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
+    float opac = g->opacity * tf[*ti].w;
+    if (model == 1)
+        return clvis_gauss_alpha_absorption(opac, density, ts, a, op, dp);
+    return clvis_gauss_alpha_max_response(opac, m2);
+}
+
+inline bool clvis_gauss_key_less(float ta, uint ia, float tb, uint ib)
+{
+    return ta < tb || (ta == tb && ia < ib);
 }
 
 #endif /* CLVIS_GAUSS_H */

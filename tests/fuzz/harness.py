@@ -13,7 +13,11 @@ limit is that size plus the budget, and the peak is the growth over the
 resident set at the start, so a case measures the same under pytest as in a
 fresh ``./dev.sh fuzz`` process.
 
-The regression tests and ``./dev.sh fuzz`` (tests/fuzz/run.py) share it.
+The regression tests and ``./dev.sh fuzz`` (tests/fuzz/run.py) share it. A
+fork copies only the calling thread: call it from a process that has not
+started thread pools the case would use (lazrs's parallel decoder after a LAZ
+read hangs in the child), hence ``./dev.sh test`` runs tests/fuzz in a pytest
+session of its own.
 """
 
 from __future__ import annotations

@@ -3,6 +3,7 @@ rendered on Dask workers give the pictures of the single-process commands;
 without the flags nothing changes; the errors."""
 
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -207,7 +208,11 @@ def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
     assert p.returncode == 130, err
-    assert err.splitlines() == ["clvis render: interrupted; the Dask workers started here were stopped"]
+    # a worker whose kernel build the signal reached may leave its OpenCL
+    # compiler's summary ("1 error generated.", native code on the inherited
+    # stderr, not Python's); clvis itself says one line, and no traceback
+    lines = [ln for ln in err.splitlines() if not re.fullmatch(r"\d+ errors? generated\.", ln)]
+    assert lines == ["clvis render: interrupted; the Dask workers started here were stopped"], err
     deadline = time.monotonic() + 10
     while _group(p.pid) and time.monotonic() < deadline:
         time.sleep(0.2)

@@ -393,6 +393,8 @@ def mutate(rng, data: bytes, fmt: str, others=()) -> tuple[bytes, str]:
     ops = operators(fmt)
     names = []
     for _ in range(1 if rng.random() < 0.8 else 2):
+        if not data:  # a truncation left nothing: the empty file is the case
+            break
         op = ops[int(rng.integers(0, len(ops)))]
         if fmt == "nii.gz" and op is not nifti_fields and rng.integers(0, 2):
             # mostly mutate the decompressed header, then compress again

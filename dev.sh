@@ -3,10 +3,12 @@
 # so a fresh machine needs only python3.
 #
 #   ./dev.sh demo    .venv: clvis + PoCL; runs `clvis demo`
-#   ./dev.sh test    .venv-test: clvis + PoCL + Intel's CPU OpenCL runtime (x86-64
+#   ./dev.sh test [PATHS] [PYTEST ARGS]
+#                    .venv-test: clvis + PoCL + Intel's CPU OpenCL runtime (x86-64
 #                    Linux) + test tools; runs the tests on every OpenCL device
 #                    found (2^27-element cases included), then the benchmark
-#                    suites once each at a tiny scale
+#                    suites once each at a tiny scale; with test paths
+#                    (tests/iso, tests/x.py::case) only those
 #   ./dev.sh bench [FAMILY]
 #                    .venv-test; runs `clvis bench FAMILY` (full sizes) for
 #                    every family, or the family named
@@ -116,6 +118,15 @@ test | bench)
     # tests/fuzz reads each file in a forked child (tests/fuzz/harness.py): it runs in a
     # session of its own, since the fork of a process whose thread pools exist (lazrs's
     # rayon pool after any LAZ read, the OpenCL runtimes') can hang in the child
+    # arguments that name test paths (tests/iso, tests/x.py::name) select what runs;
+    # other arguments (-k, -x, -m ...) apply to the whole suite
+    selected=
+    for a in "$@"; do
+        case "$a" in -*) ;; *) [ -e "${a%%::*}" ] && selected=1 ;; esac
+    done
+    if [ -n "$selected" ]; then
+        exec .venv-test/bin/python -m pytest --benchmark-disable -q "$@"
+    fi
     .venv-test/bin/python -m pytest tests bench --ignore=tests/fuzz --benchmark-disable -q "$@"
     exec .venv-test/bin/python -m pytest tests/fuzz -q "$@"
     ;;

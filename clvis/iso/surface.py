@@ -42,19 +42,27 @@ _SRC = "iso/surface.cl"
 PROFILES = {"cpu": {"WG": 64}, "gpu": {"WG": 256}}
 # the renderer's base colour (clvis/iso.h CLVIS_ISO_SHADE_BASE_*)
 SURFACE_COLOR = (0.9, 0.75, 0.4)
-AMBIENT, DIFFUSE, SPECULAR, SHININESS = 0.15, 0.75, 0.3, 32
+AMBIENT, DIFFUSE, SPECULAR, SHININESS = 0.15, 0.75, 0.3, 32  # _facing's powers are for 32
 
 
 def _facing(green: np.ndarray) -> np.ndarray:
     """x in [0, 1] from the shaded green g = G (AMBIENT + DIFFUSE x) +
-    SPECULAR x^SHININESS (G the base green): Newton from the linear part's
-    root, which lies above (the polynomial is convex and increasing)."""
+    SPECULAR x^32 (G the base green): Newton from the linear part's root,
+    which lies above (the polynomial is convex and increasing), until it
+    moves less than 1e-9."""
     g0 = SURFACE_COLOR[1]
     g = green.astype(np.float64)
     x = np.clip((g / g0 - AMBIENT) / DIFFUSE, 0.0, 1.0)
-    for _ in range(30):
-        f = g0 * (AMBIENT + DIFFUSE * x) + SPECULAR * x**SHININESS - g
-        x = np.clip(x - f / (g0 * DIFFUSE + SHININESS * SPECULAR * x ** (SHININESS - 1)), 0.0, 1.0)
+    for _ in range(50):
+        x2 = x * x
+        x4 = x2 * x2
+        x8 = x4 * x4
+        x16 = x8 * x8
+        f = g0 * (AMBIENT + DIFFUSE * x) + SPECULAR * (x16 * x16) - g
+        step = f / (g0 * DIFFUSE + SHININESS * SPECULAR * (x16 * x8 * x4 * x2 * x))
+        x = np.clip(x - step, 0.0, 1.0)
+        if not x.size or np.abs(step).max() < 1e-9:
+            break
     return x
 
 
@@ -94,6 +102,11 @@ def sample_hits(
         raise ValueError(f"field: every axis needs at least 2 samples, got shape {tuple(field.shape)}")
     dz, dy, dx = triple("spacing", spacing, positive=True)
     ox, oy, oz = triple("origin", origin, positive=False)
+    if len(image.hit.shape) != 2 or tuple(image.t.shape) != tuple(image.hit.shape):
+        raise ValueError(
+            f"image: expected (H, W) hit and t planes, got {tuple(image.hit.shape)} and "
+            f"{tuple(image.t.shape)}"
+        )
     h, w = (int(s) for s in image.hit.shape)
     n = h * w
     runtime.check_memory(
@@ -103,7 +116,7 @@ def sample_hits(
     if n:
         cam = runtime.empty(queue, 22, np.float32, "camera rays")
         cam.set(ray_buffer(camera, w, h), queue=queue)
-        hit = to_device(queue, "hit", image.hit.view(np.uint8) if host else image.hit)
+        hit = to_device(queue, "hit", np.ascontiguousarray(image.hit, np.uint8) if host else image.hit)
         t = to_device(queue, "t", np.ascontiguousarray(image.t, np.float32) if host else image.t)
         fd = to_device(queue, "field", field)
         nz, ny, nx = (int(s) for s in field.shape)
@@ -170,7 +183,8 @@ def color_surface(
         raise TypeError(f"image: expected a clvis.iso.IsoImage, got {type(image).__name__}")
     rgba, hit = _plane(image, "rgba").astype(np.float32), _plane(image, "hit").astype(bool)
     base = _rgb("color", SURFACE_COLOR if color is None else color)
-    x = _facing(rgba[..., 1])
+    x = np.zeros(hit.shape)
+    x[hit] = _facing(rgba[..., 1][hit])
     light, highlight = AMBIENT + DIFFUSE * x, SPECULAR * x**SHININESS
     col = np.broadcast_to(base.astype(np.float32), rgba.shape[:2] + (3,))
     if values is not None:

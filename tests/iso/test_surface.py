@@ -90,6 +90,12 @@ def test_parity_partly_outside(queue):
     got = _check(img, _cam(), field, (0.1, 0.12, 0.09), (-0.8, -0.5, -0.6), queue)
     assert np.isnan(got).any() and (~np.isnan(got)).any()
     assert np.isnan(got[~hit]).all()
+    # planes that are views (Fortran order, a float64 t): the same values
+    views = dict(planes, hit=np.asfortranarray(hit), t=t.astype(np.float64))
+    again = iso.sample_hits(
+        iso.IsoImage(**views), _cam(), field, (0.1, 0.12, 0.09), (-0.8, -0.5, -0.6), queue=queue
+    )
+    np.testing.assert_array_equal(again, got)
 
 
 def test_the_volume_at_its_hits_is_the_isovalue(queue, rendered):
@@ -194,6 +200,8 @@ def test_bad_arguments(rendered):
         iso.sample_hits(img, _cam(), vol[:1])
     with pytest.raises(TypeError, match="field"):
         iso.sample_hits(img, _cam(), np.zeros((2, 2, 2), complex))
+    with pytest.raises(ValueError, match="hit and t planes"):
+        iso.sample_hits(dataclasses.replace(img, t=img.t[:3]), _cam(), vol)
     with pytest.raises(ValueError, match="spacing"):
         iso.sample_hits(img, _cam(), vol, (0, 1, 1))
     with pytest.raises(ValueError, match="images"):

@@ -64,7 +64,7 @@ TYPED="clvis/__init__.py clvis/__main__.py clvis/_arrays.py clvis/_keys.py clvis
        clvis/limits.py clvis/morton.py clvis/primitives.py
        clvis/runtime clvis/raster clvis/gauss clvis/reference clvis/cli clvis/training
        clvis/iso/__init__.py clvis/iso/zfp.py clvis/iso/macrocell.py clvis/iso/traverse.py
-       clvis/iso/cache.py clvis/iso/raytrace.py
+       clvis/iso/cache.py clvis/iso/raytrace.py clvis/iso/surface.py
        clvis/post/__init__.py clvis/post/names.py clvis/post/nets.py clvis/post/pack.py
        clvis/post/pushpull.py
        clvis/io/__init__.py clvis/io/npy.py clvis/io/volumes.py clvis/io/ascii.py clvis/io/files.py

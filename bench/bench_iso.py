@@ -11,6 +11,8 @@ include decoding; compression and the macrocell grids are set-up.
   speculation, blocks decoded against the blocks whose range holds the
   isovalue (what an extract-everything method such as BCMC decodes), and the
   device memory against the decoded volume.
+- iso_surface[...]: clvis.iso.sample_hits, a second field (the same grid)
+  sampled at the hits of the 100% frame, against its NumPy reference.
 - peers: scikit-image marching_cubes of the decoded volume (the whole
   surface, once), and the dense NumPy reference raycaster
   (clvis.reference.iso.render_rays) on a subset of the rays, scaled to the
@@ -132,6 +134,49 @@ def test_iso(benchmark, queue, size, completion, impl):
             rounds=3,
             time_scale=rays / m,
             subset_rays=m,
+        )
+
+
+SURFACE_CASES = [(s, i) for s in SIZES for i in ("clvis", "numpy-reference")]
+
+
+@pytest.mark.parametrize("size,impl", SURFACE_CASES, ids=[f"{s}-{i}" for s, i in SURFACE_CASES])
+def test_iso_surface(benchmark, queue, size, impl):
+    """A second field at the surface hits (sample_hits) of the 100% frame."""
+    d, zv, r, lo, hi = scene(queue)
+    w, h = SIZES[size]
+    cam = _camera(lo, hi, w, h)
+    key = ("frame", size)
+    if key not in _cache:
+        _cache[key] = r.render(cam, w, h, ISO)
+    img = _cache[key]
+    field = np.ascontiguousarray(d["volume"][::-1])  # another field on the same grid
+    op = f"iso_surface[turbulence {N}^3, {size}]"
+    if impl == "clvis":
+        iso.sample_hits(img, cam, field, d["spacing"], d["origin"], queue=queue)  # builds the kernel
+        run(
+            benchmark,
+            lambda: iso.sample_hits(img, cam, field, d["spacing"], d["origin"], queue=queue),
+            op=op,
+            impl=impl,
+            role="clvis",
+            n=w * h,
+            nbytes=field.nbytes,
+            rounds=3,
+            hits=int(img.hit.sum()),
+        )
+    else:
+        from clvis.reference.iso import surface
+
+        run(
+            benchmark,
+            lambda: surface.sample_hits(field, cam, w, h, img.hit, img.t, d["spacing"], d["origin"]),
+            op=op,
+            impl="numpy reference",
+            role="peer",
+            n=w * h,
+            nbytes=field.nbytes,
+            rounds=3,
         )
 
 

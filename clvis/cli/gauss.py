@@ -35,6 +35,7 @@ from ._common import (
     real,
     size,
 )
+from .raster import _value_range as value_range_arg
 
 if TYPE_CHECKING:
     import pyopencl as cl
@@ -44,6 +45,16 @@ if TYPE_CHECKING:
     from ..gauss.render import GaussianImage
 
 LODS = ("low", "medium", "high")
+# the transfer function's opacity points (x along the value range, alpha): the
+# default keeps low values faint; for a volume FILE (a scan: a dense, noisy
+# background) the range starts at Otsu's background level and opacity is 0 up
+# to 5 % above it (the table's first entries too: values below the range take
+# entry 0, and a haze of them along a ray adds up)
+OPACITY_DEFAULT = ((0.0, 0.05), (0.35, 0.35), (1.0, 1.0))
+OPACITY_VOLUME_FILE = ((0.0, 0.0), (0.05, 0.0), (0.4, 0.25), (1.0, 1.0))
+# a volume FILE's default range ends at this percentile of its samples (a
+# scan's few hot voxels do not squeeze every colour to the bottom of the bar)
+TOP_PERCENTILE = 99.5
 _POINT_FORMATS = (".ply", ".las", ".laz", ".npy", ".npz")
 # --view fit: from the front left, a little above, a narrow lens
 _FIT = FitView(direction=(-0.55, 1.0, -0.35), fov_y=40.0)
@@ -130,6 +141,26 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="a matplotlib colormap (default inferno)",
     )
     g.add_argument(
+        "--range",
+        type=value_range_arg,
+        default=None,
+        metavar="MIN,MAX|pLO,pHI",
+        help="the values the transfer function spans (colours and opacity): two values, or two "
+        "percentiles of the samples such as p2,p98 (default: a volume FILE's Otsu background "
+        "level to its 99.5th percentile, so that a scan's background stays clear; else the "
+        "Gaussians' min..max)",
+    )
+    g.add_argument(
+        "--opacity",
+        type=_opacity,
+        default=None,
+        metavar="X:A,...",
+        help="the transfer function's opacity: points X:A along the range (X 0 at its start, 1 at "
+        "its end; A the opacity 0..1), linear between and constant beyond, e.g. 0:0,1:0.5 "
+        f"(default {_points_text(OPACITY_VOLUME_FILE)} for a volume FILE, "
+        f"{_points_text(OPACITY_DEFAULT)} otherwise)",
+    )
+    g.add_argument(
         "--size",
         type=size,
         default=(640, 640),
@@ -148,6 +179,29 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     return g
 
 
+def _points_text(points: Sequence[tuple[float, float]]) -> str:
+    return ",".join(f"{x:g}:{a:g}" for x, a in points)
+
+
+def _opacity(text: str) -> list[tuple[float, float]]:
+    """The --opacity argument type: '0:0,0.5:0.2,1:1' -> [(0, 0), (0.5, 0.2), (1, 1)]."""
+    pts = []
+    for part in text.split(","):
+        x, sep, a = part.partition(":")
+        try:
+            xa = (float(x), float(a)) if sep else None
+        except ValueError:
+            xa = None
+        if xa is None or not (0 <= xa[0] <= 1 and 0 <= xa[1] <= 1):
+            raise argparse.ArgumentTypeError(
+                f"expected points X:A (X and A in 0..1, X ascending) such as 0:0,1:0.5, got {text!r}"
+            )
+        pts.append(xa)
+    if any(b[0] < a[0] for a, b in zip(pts, pts[1:], strict=False)):
+        raise argparse.ArgumentTypeError(f"the points' X must ascend, got {text!r}")
+    return pts
+
+
 def _lods(text: str) -> list[str]:
     """The --lod argument type: 'low,high' -> ['low', 'high']."""
     out = [t.strip() for t in text.split(",") if t.strip()]
@@ -158,7 +212,8 @@ def _lods(text: str) -> list[str]:
 
 
 def _sources(args):
-    """[(panel name, Gaussians or None, sparse volume or None)], description."""
+    """(panel names, sparse volume or None, Gaussians or None, description,
+    the dense samples of a volume FILE or None)."""
     from .. import datasets
     from ..gauss import Gaussians, SparseVolume, read_vdb
     from ..io import read_points
@@ -174,7 +229,7 @@ def _sources(args):
             spacing=e["spacing"],
             origin=e["origin"],
         )
-        return lods, sv, None, "the embedded explosion (96^3)"
+        return lods, sv, None, "the embedded explosion (96^3)", e["volume"]
     path = Path(args.file)
     if not path.exists():
         raise CliError(f"{path}: no such file")
@@ -194,7 +249,7 @@ def _sources(args):
                 spacing=spacing,
                 origin=sv.origin,
             )
-        return lods, sv, None, str(path)
+        return lods, sv, None, str(path), None
     volume = name.endswith(VOLUME_FORMATS)
     if name.endswith(".npy"):
         shape = npy_shape(path)
@@ -208,9 +263,9 @@ def _sources(args):
         sv = SparseVolume.from_dense(
             data, threshold=0.0 if args.threshold is None else args.threshold, spacing=spacing, origin=origin
         )
-        return lods, sv, None, str(path)
+        return lods, sv, None, str(path), data
     if name.endswith(".npz") and "means" in load_npz(path):
-        return ["file"], None, Gaussians.load(path), str(path)
+        return ["file"], None, Gaussians.load(path), str(path), None
     if name.endswith(_POINT_FORMATS):
         from ..gauss import gaussians_from_points
 
@@ -223,7 +278,7 @@ def _sources(args):
             )
         except ValueError as e:
             raise CliError(f"{path}: {e}" if args.attribute is None else f"--attribute: {e}") from None
-        return ["points"], None, g, str(path)
+        return ["points"], None, g, str(path), None
     raise CliError(
         f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
         f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})"
@@ -264,14 +319,16 @@ def render_panels(
     camera: Callable[[np.ndarray, np.ndarray], Camera] | None = None,
     queue: cl.CommandQueue | None = None,
     opacity: Sequence[tuple[float, float]] | None = None,
+    value_range: tuple[float, float] | None = None,
     progress: Progress | None = None,
     timings: dict[str, float] | None = None,
 ) -> list[tuple[str, Gaussians, GaussianImage]]:
     """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given
     Gaussians), seen by camera(lo, hi) of their bounds (default: the fit view).
 
-    opacity: the transfer function's opacity points (default a ramp that keeps
-    low densities faint); progress: a Progress showing each panel's rays done;
+    opacity: the transfer function's opacity points (default OPACITY_DEFAULT, a
+    ramp that keeps low densities faint); value_range: the values it spans
+    (default the Gaussians' min..max); progress: a Progress showing each panel's rays done;
     timings: a dict given "build_s", the wall time of the kernel build (the
     first renderer and frame, on a tiny scene)."""
     from ..colormap import TransferFunction
@@ -288,10 +345,12 @@ def render_panels(
     hi = np.max([g.bounds(1.0)[1] for g in allg], axis=0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
     cam = camera(lo, hi) if camera is not None else fit_box(lo, hi, width, height, _FIT)
-    vals = np.concatenate([g.values for g in allg])
-    vr = (float(vals.min()), float(vals.max()))
+    if value_range is None:
+        vals = np.concatenate([g.values for g in allg])
+        value_range = (float(vals.min()), float(vals.max()))
+    vr = value_range
     if opacity is None:
-        opacity = [(0.0, 0.05), (0.35, 0.35), (1.0, 1.0)]
+        opacity = OPACITY_DEFAULT
     tf = TransferFunction(colormap, opacity=opacity, value_range=vr)
     dens = density if density is not None else 6.0 / diag * 40
     progress = progress or Progress(False)
@@ -319,6 +378,52 @@ def render_panels(
     return out
 
 
+def _transfer(args, lods, sv, gaussians, samples):
+    """(value range or None, opacity points or None, a line saying what was
+    chosen or None) of the transfer function, from --range and --opacity and
+    the defaults (see their help)."""
+    from ..io.volumes import otsu_level
+
+    points = lods == ["points"]
+    if points and (args.range is not None or args.opacity is not None):
+        if gaussians is not None and gaussians.colors is not None:
+            raise CliError(
+                "--range and --opacity shape a transfer function; the points are drawn in their own "
+                "colours (add --attribute NAME to colour them by a value)"
+            )
+    opacity = args.opacity
+    if opacity is None and points:
+        opacity = [(0.0, 1.0), (1.0, 1.0)]  # points are surfaces: fully opaque, whatever the value
+    if args.range is not None:
+        kind, a, b = args.range
+        if kind == "values":
+            return (a, b), opacity, f"range {a:g}..{b:g}"
+        # percentiles of the volume's samples, else of the Gaussians' values
+        if samples is not None:
+            values = np.asarray(samples)
+        elif sv is not None:
+            values = sv.to_dense()
+        else:
+            values = np.asarray(gaussians.values)
+        values = values[np.isfinite(values)]
+        if not values.size:
+            raise CliError("--range: the data has no finite value")
+        lo, hi = (float(v) for v in np.percentile(values, [a, b]))
+        return (lo, hi), opacity, f"range p{a:g}..p{b:g} of the samples: {lo:.6g}..{hi:.6g}"
+    if args.file is not None and samples is not None:
+        # a scan: its background (the lower of Otsu's two classes) stays clear
+        level = otsu_level(samples)
+        top = float(np.nanpercentile(samples, TOP_PERCENTILE))
+        if top > level:
+            return (
+                (level, top),
+                opacity if opacity is not None else list(OPACITY_VOLUME_FILE),
+                f"range {level:.6g} (Otsu's background level)..{top:.6g} (p{TOP_PERCENTILE:g}); "
+                "--range and --opacity change it",
+            )
+    return None, opacity, None
+
+
 def _picture(img, transparent: bool = False) -> np.ndarray:
     """(H, W, 4) uint8 of a GaussianImage, over images.BACKGROUND unless
     `transparent` (composited a band of rows at a time: no full-size float
@@ -336,15 +441,19 @@ def strip(
     colormap: str,
     transparent: bool = False,
     value_name: str = "value",
+    value_range: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """render_panels' images side by side, each labelled with its LOD and
-    Gaussian count, over a colour bar of the values' range (the transfer
-    function's; none for Gaussians drawn in their own colours)."""
+    Gaussian count, over a colour bar of the transfer function's range
+    (`value_range`, default the values' min..max; none for Gaussians drawn in
+    their own colours)."""
     from .. import images
-    from ..colormap import value_range
+    from ..colormap import value_range as finite_range
 
-    values = np.concatenate([g.values for _, g, _ in panels])
-    vmin, vmax = value_range(values)
+    if value_range is None:
+        vmin, vmax = finite_range(np.concatenate([g.values for _, g, _ in panels]))
+    else:
+        vmin, vmax = value_range
     tiles = []
     for name, g, img in panels:
         title = f"{name} LOD" if name in LODS else name
@@ -361,12 +470,11 @@ def _run(args) -> int:
 
     t0 = time.perf_counter()
     progress = progress_from_args(args, "clvis gauss")
-    lods, sv, gaussians, source = _sources(args)
+    lods, sv, gaussians, source, samples = _sources(args)
     width, height = args.size
     q = runtime.default_queue()
     timings: dict = {}
-    # points are surfaces: every Gaussian fully opaque, whatever its value
-    opacity = [(0.0, 1.0), (1.0, 1.0)] if lods == ["points"] else None
+    vr, opacity, why = _transfer(args, lods, sv, gaussians, samples)
     panels = render_panels(
         lods,
         sv,
@@ -380,6 +488,7 @@ def _run(args) -> int:
         method=args.method,
         queue=q,
         opacity=opacity,
+        value_range=vr,
         progress=progress,
         timings=timings,
         camera=lambda lo, hi: camera_from_args(args, lo, hi, width, height),
@@ -392,7 +501,8 @@ def _run(args) -> int:
             files.append(images.save_png(out / f"{name}.png", _picture(img, args.transparent)))
         files.append(
             images.save_png(
-                out / "gauss.png", strip(panels, args.colormap, args.transparent, args.attribute or "value")
+                out / "gauss.png",
+                strip(panels, args.colormap, args.transparent, args.attribute or "value", vr),
             )
         )
     print(f"clvis gauss: {source}, {args.model} model, {width}x{height}")
@@ -403,6 +513,8 @@ def _run(args) -> int:
         print("  colour    the points' own rgb")
     elif lods == ["points"]:
         print(f"  colour    {args.attribute or 'the default value'} through {args.colormap}")
+    if why:
+        print(f"  transfer  {why}")
     print(f"  build     {timings['build_s']:.2f} s (kernels, once per process; not in the render times)")
     method = panels[0][2].stats.get("method", "bvh")
     print(

@@ -32,6 +32,7 @@ from ._common import (
     camera_from_args,
     check_camera_args,
     cluster_client,
+    colormap_name,
     count,
     distributed_run,
     finite_range,
@@ -42,6 +43,8 @@ from ._common import (
     real,
     size,
 )
+from .raster import _colour
+from .raster import _value_range as value_range_arg
 
 if TYPE_CHECKING:
     import pyopencl as cl
@@ -64,6 +67,15 @@ a .npy volume [z, y, x], a NIfTI file (.nii, .nii.gz; a 4-D series with
 --volume-index), or VTK image data (.vti, legacy .vtk structured points).
 The default isovalue of a file is Otsu's threshold of its samples
 (scikit-image), which separates a scan's tissue from its background.
+
+Several isovalues (--isovalue 0.3,0.6) are rendered one after the other and
+composited, the nearest surface in each pixel, each in its own colour
+(--surface-color, once per isovalue; default the renderer's sand, then
+matplotlib's tab10). --color-by FIELD colours the surfaces by a second volume
+(a file as above: on the same grid, or any grid stretched over the same box),
+sampled on the device where each ray hit, through --colormap over --range,
+with a colour bar under the image. A constant volume has no isosurface: it
+is reported and no surface is drawn.
 
 """
     + VIEWS_HELP
@@ -89,9 +101,42 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     p.add_argument("--dataset", choices=_DATASETS, help="an embedded volume (default marschner-lobb)")
     p.add_argument(
         "--isovalue",
-        type=real(),
+        type=_isovalues,
         default=None,
-        help="default: 0.5 for the embedded volumes, else Otsu's threshold of the samples",
+        metavar="VALUE[,VALUE...]",
+        help="one or more isovalues, comma-separated (several: composited, nearest surface "
+        "first); default: 0.5 for the embedded volumes, else Otsu's threshold of the samples",
+    )
+    p.add_argument(
+        "--surface-color",
+        type=_colour,
+        action="append",
+        default=None,
+        metavar="COLOR",
+        help="the surface's colour: a name, #RRGGBB or R,G,B (0..255); give it once per "
+        "isovalue (default the renderer's sand, then matplotlib's tab10)",
+    )
+    p.add_argument(
+        "--color-by",
+        default=None,
+        metavar="FIELD",
+        help="colour the surface by a second volume file (read as FILE is; the same grid, or "
+        "stretched over the same box), sampled where each ray hit, with a colour bar",
+    )
+    p.add_argument(
+        "--colormap",
+        type=colormap_name,
+        default=None,
+        metavar="NAME",
+        help="with --color-by: a matplotlib colormap (default viridis)",
+    )
+    p.add_argument(
+        "--range",
+        type=value_range_arg,
+        default=None,
+        metavar="MIN,MAX|pLO,pHI",
+        help="with --color-by: the values the colormap spans, or percentiles of the values on "
+        "the surface such as p2,p98 (default their min..max)",
     )
     p.add_argument(
         "--rate", type=count(MIN_RATE, MAX_RATE), default=8, help="ZFP bits per value, 1..32 (default 8)"
@@ -100,7 +145,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--completion",
         type=real(0.0, 1.0, open_lo=True, what="a fraction"),
         default=1.0,
-        help="stop once this fraction of the rays is finished (default 1.0)",
+        help="stop once this fraction of the rays is finished (default 1.0); passes finish rays "
+        "in large steps, speculation most of them in the first, so the stop may come well past "
+        "it: --no-speculation stops closer",
     )
     p.add_argument(
         "--infill",
@@ -124,6 +171,15 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="with --workers/--scheduler: cells per brick edge, a multiple of 4 (default 64)",
     )
     return p
+
+
+def _isovalues(text: str) -> list[float]:
+    """The --isovalue argument type: '0.3,0.6' -> [0.3, 0.6] (finite, distinct)."""
+    parse = real()
+    out = [parse(t.strip()) for t in text.split(",")]
+    if len(set(out)) != len(out):
+        raise argparse.ArgumentTypeError(f"expected distinct values, got {text!r}")
+    return out
 
 
 def _load(args):
@@ -166,11 +222,13 @@ def picture(img: IsoImage, transparent: bool = False) -> np.ndarray:
     return rgba if transparent else images.opaque(rgba)
 
 
-def labelled(img: IsoImage, isovalue: float, transparent: bool = False) -> np.ndarray:
-    """picture() under a band naming the isovalue and the completion."""
+def labelled(img: IsoImage, isovalue: float | Sequence[float], transparent: bool = False) -> np.ndarray:
+    """picture() under a band naming the isovalue(s) and the completion."""
     from .. import images
 
-    text = f"isovalue {isovalue:g}, completion {img.completion:.3f}"
+    isos = [isovalue] if isinstance(isovalue, (int, float, np.floating)) else list(isovalue)
+    values = ", ".join(f"{v:g}" for v in isos)
+    text = f"isovalue{'s' if len(isos) > 1 else ''} {values}, completion {img.completion:.3f}"
     if img.completion < 1:
         text += " (magenta: rays still running)"
     return images.label(picture(img, transparent), text)
@@ -252,6 +310,11 @@ def _run_distributed(args) -> int:
         raise CliError(f"--brick: {args.brick} is not a multiple of 4 (ZFP's block edge)")
     if args.completion != 1.0:
         raise CliError("--completion: on workers every ray finishes (leave it out)")
+    if args.isovalue is not None and len(args.isovalue) > 1:
+        raise CliError("--isovalue: one value on workers (several are composited on one device)")
+    for name in ("surface_color", "color_by", "colormap", "range"):
+        if getattr(args, name) is not None:
+            raise CliError(f"--{name.replace('_', '-')}: not on workers (leave out --workers/--scheduler)")
     client, workers = cluster_client(args)
     w, h = args.size
     t0 = time.perf_counter()
@@ -264,7 +327,13 @@ def _run_distributed(args) -> int:
             raise CliError(
                 "--isovalue: needed with a FILE on workers (Otsu's default reads every sample here)"
             )
-        source, iso, spacing, origin, what = args.file, args.isovalue, None, (0.0, 0.0, 0.0), str(args.file)
+        source, iso, spacing, origin, what = (
+            args.file,
+            args.isovalue[0],
+            None,
+            (0.0, 0.0, 0.0),
+            str(args.file),
+        )
         if args.spacing is not None:
             spacing = tuple(reversed(args.spacing))
         kw = {"shape": args.shape, "dtype": args.dtype, "volume_index": args.volume_index}
@@ -276,7 +345,7 @@ def _run_distributed(args) -> int:
         source, spacing, origin = d["volume"], d["spacing"], d["origin"]
         if args.spacing is not None:
             spacing = tuple(reversed(args.spacing))
-        iso = 0.5 if args.isovalue is None else args.isovalue
+        iso = 0.5 if args.isovalue is None else args.isovalue[0]
         what, kw = f"the embedded {name} ({d['volume'].shape[0]}^3)", {}
     try:
         dr = DistributedIsoRenderer(
@@ -321,37 +390,83 @@ def _run(args) -> int:
             "--infill fills the rays still running when the render stops; with --completion 1 every "
             "ray finishes and there is nothing to fill (add --completion 0.85)"
         )
+    if args.color_by is None:
+        for name in ("colormap", "range"):
+            if getattr(args, name) is not None:
+                raise CliError(f"--{name} colours the surface by a field: add --color-by FIELD")
     volume, spacing, origin, default_iso, (vmin, vmax), source = _load(args)
-    iso = args.isovalue if args.isovalue is not None else default_iso
-    if not vmin <= iso <= vmax:
-        print(
-            f"clvis iso: warning: isovalue {iso:g} is outside the data range [{vmin:g}, {vmax:g}]: "
-            "no surface can show",
-            file=sys.stderr,
+    isos = args.isovalue if args.isovalue is not None else [default_iso]
+    if args.infill and (len(isos) > 1 or args.color_by is not None or args.surface_color is not None):
+        raise CliError(
+            "--infill: with one isovalue in the renderer's colours (no --color-by or --surface-color)"
         )
+    if args.surface_color is not None and len(args.surface_color) != len(isos):
+        raise CliError(
+            f"--surface-color: given {len(args.surface_color)} times for {len(isos)} isovalue(s); "
+            "give it once per isovalue"
+        )
+    constant = vmin == vmax
+    for iso in isos:
+        _warn_isovalue(iso, vmin, vmax)
     w, h = args.size
     q = runtime.default_queue()
     # the command's host memory a pixel at its peak (the renderer's host image,
     # the labelled copy, the infill and the PNGs), refused up front
-    runtime.check_memory(q, f"clvis iso --size {w}x{h}", host_bytes=w * h * HOST_BYTES_PER_PIXEL)
-    t0 = time.perf_counter()
-    r, _, img = render(
-        volume,
-        spacing,
-        origin,
-        iso,
-        w,
-        h,
-        rate=args.rate,
-        completion=args.completion,
-        speculation=not args.no_speculation,
-        queue=q,
-        camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h),
-        progress=progress_from_args(args, "clvis iso"),
-        host=not args.infill,  # the in-fill network takes the image where it is
+    runtime.check_memory(
+        q, f"clvis iso --size {w}x{h}", host_bytes=w * h * HOST_BYTES_PER_PIXEL * (1 + (len(isos) > 1))
     )
+    field = _field(args) if args.color_by is not None else None
+    t0 = time.perf_counter()
+    progress = progress_from_args(args, "clvis iso")
+    r = cam = None
+    shots = []
+    for iso in isos:
+        if constant:  # no isosurface: no render, no arbitrary hits
+            shots.append(_empty(w, h))
+            continue
+        if r is None or cam is None:
+            r, cam, img = render(
+                volume,
+                spacing,
+                origin,
+                iso,
+                w,
+                h,
+                rate=args.rate,
+                completion=args.completion,
+                speculation=not args.no_speculation,
+                queue=q,
+                camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h),
+                progress=progress,
+                host=not args.infill,  # the in-fill network takes the image where it is
+            )
+        else:  # the next isovalue: the same compressed volume, grids and cache
+            status = _Status()
+            with progress.stage(status):
+                img = r.render(
+                    cam,
+                    w,
+                    h,
+                    iso,
+                    completion=args.completion,
+                    speculation=not args.no_speculation,
+                    progress=status,
+                )
+        shots.append(img)
     total = time.perf_counter() - t0
     out = Path(args.out)
+    if args.completion < 1.0 and not args.no_speculation:
+        past = max(float(i.completion) for i in shots)
+        if past > args.completion + 0.05:
+            print(
+                f"clvis iso: note: the render stopped at completion {past:.3f}, well past "
+                f"--completion {args.completion:g}: speculation finishes most rays in the first pass "
+                "(--no-speculation stops closer)",
+                file=sys.stderr,
+            )
+    img, bar, crange = shots[0], None, None
+    if field is not None or args.surface_color is not None or len(shots) > 1:
+        img, bar, crange = _coloured(args, shots, cam, field, (volume.shape, spacing, origin))
     infilled = None
     if args.infill:
         from .. import post
@@ -365,34 +480,54 @@ def _run(args) -> int:
             out / "iso-infill.png",
             images.label(
                 filled if args.transparent else images.opaque(filled),
-                f"isovalue {iso:g}, completion {img.completion:.3f}, in-filled by the network",
+                f"isovalue {isos[0]:g}, completion {img.completion:.3f}, in-filled by the network",
             ),
         )
-    path = images.save_png(out / "iso.png", labelled(img, iso, args.transparent))
-    st = img.stats
-    print(f"clvis iso: {source}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
+    picture_ = labelled(img, isos, args.transparent)
+    if bar is not None:
+        picture_ = np.concatenate([picture_, bar], axis=0)
+    path = images.save_png(out / "iso.png", picture_)
+    values = ", ".join(f"{v:g}" for v in isos)
+    print(
+        f"clvis iso: {source}, isovalue{'s' if len(isos) > 1 else ''} {values}, ZFP rate {args.rate}, {w}x{h}"
+    )
     print(f"  device      {runtime.describe(q.device)}")
+    if r is None:
+        print(f"  volume      {volume.shape}, constant ({vmin:g}): no isosurface, nothing rendered")
+        print(f"wrote {path}{os.sep if path.is_dir() else ''}")
+        return 0
     print(
         f"  volume      {r.shape} = {volume.nbytes / 1e6:.1f} MB decoded, {r.volume.nbytes / 1e6:.1f} MB "
         f"compressed, {r.volume.nblocks:,} blocks"
     )
-    print(
-        f"  passes      {st['passes']} (speculation {'on' if st['speculation'] else 'off'}), "
-        f"completion {img.completion:.3f}, {st['rays_entering']:,} rays enter the volume"
-    )
-    if st["tiles"] > 1:
+    seconds = 0.0
+    for iso, shot in zip(isos, shots, strict=True):
+        st = shot.stats
+        seconds += st["seconds"]
+        if len(isos) > 1:
+            print(f"  isovalue    {iso:g}")
         print(
-            f"  tiles       {st['tiles']} of {st['tile_pixels']:,} pixels, passes per tile "
-            f"{st['passes_per_tile']}"
+            f"  passes      {st['passes']} (speculation {'on' if st['speculation'] else 'off'}), "
+            f"completion {shot.completion:.3f}, {st['rays_entering']:,} rays enter the volume"
         )
-    print(f"  per pass    active rays {_short(st['active_per_pass'])}")
-    print(f"              candidates per ray {_short(st['n_spec_per_pass'])}")
-    print(f"  blocks      {st['blocks_decoded']:,} decoded, cache of {st['cache_slots']:,} slots")
-    dev = st.get("device_bytes", {})
-    if dev:
-        print("  device MB   " + ", ".join(f"{k} {v / 1e6:.1f}" for k, v in dev.items()))
+        if st["tiles"] > 1:
+            print(
+                f"  tiles       {st['tiles']} of {st['tile_pixels']:,} pixels, passes per tile "
+                f"{st['passes_per_tile']}"
+            )
+        print(f"  per pass    active rays {_short(st['active_per_pass'])}")
+        print(f"              candidates per ray {_short(st['n_spec_per_pass'])}")
+        print(f"  blocks      {st['blocks_decoded']:,} decoded, cache of {st['cache_slots']:,} slots")
+        dev = st.get("device_bytes", {})
+        if dev:
+            print("  device MB   " + ", ".join(f"{k} {v / 1e6:.1f}" for k, v in dev.items()))
+    if crange is not None:
+        print(
+            f"  colour      {args.color_by} at the hits through {args.colormap or 'viridis'}, "
+            f"range {crange[0]:.6g}..{crange[1]:.6g}"
+        )
     print(
-        f"  time        build {r.build_seconds:.2f} s, passes {st['seconds'] * 1e3:.1f} ms; "
+        f"  time        build {r.build_seconds:.2f} s, passes {seconds * 1e3:.1f} ms; "
         f"{total:.2f} s with compression and setup"
     )
     if infilled is not None:
@@ -405,6 +540,106 @@ def _run(args) -> int:
         return 0
     print(f"wrote {path}{os.sep if path.is_dir() else ''}")
     return 0
+
+
+def _warn_isovalue(iso: float, vmin: float, vmax: float) -> None:
+    """A warning on stderr for an isovalue that shows no surface, or flat
+    regions instead of one."""
+    if vmin == vmax:
+        why = f"the volume is constant ({vmin:g}): it has no isosurface, and none is drawn"
+    elif not vmin <= iso <= vmax:
+        why = f"isovalue {iso:g} is outside the data range [{vmin:g}, {vmax:g}]: no surface can show"
+    elif iso in (vmin, vmax):
+        end = "minimum" if iso == vmin else "maximum"
+        why = (
+            f"isovalue {iso:g} is the data's {end}: regions at exactly that value show as surface "
+            f"(choose a value inside ({vmin:g}, {vmax:g}))"
+        )
+    else:
+        return
+    print(f"clvis iso: warning: {why}", file=sys.stderr)
+
+
+def _empty(w: int, h: int) -> IsoImage:
+    """An image with no surface (a constant volume: nothing rendered)."""
+    from ..iso import IsoImage
+
+    return IsoImage(
+        np.zeros((h, w, 4), np.float32),
+        np.full((h, w), np.inf, np.float32),
+        np.zeros((h, w), bool),
+        np.full((h, w), np.inf, np.float32),
+        np.zeros((h, w), bool),
+        1.0,
+        {},
+    )
+
+
+def _field(args) -> np.ndarray:
+    """--color-by's volume, [z, y, x] float32."""
+    path = Path(args.color_by)
+    if not path.exists():
+        raise CliError(f"--color-by: {path}: no such file")
+    data, _, _ = read_volume_file(args, path)
+    if data.ndim != 3 or min(data.shape) < 2:
+        raise CliError(
+            f"--color-by: {path}: expected a 3-D volume with 2 samples per axis or more, got {data.shape}"
+        )
+    return np.ascontiguousarray(data, np.float32)
+
+
+def _coloured(
+    args: argparse.Namespace,
+    shots: list[IsoImage],
+    cam: Camera | None,
+    field: np.ndarray | None,
+    grid: tuple[tuple[int, ...], Sequence[float], Sequence[float]],
+) -> tuple[IsoImage, np.ndarray | None, tuple[float, float] | None]:
+    """(the shots composited, each surface in its colour or --color-by's,
+    the colour bar or None, the colormap's range or None). grid: the
+    rendered volume's (shape [z, y, x], spacing (dz, dy, dx), origin)."""
+    from .. import images, iso
+    from ..colormap import value_range
+
+    colours = (
+        [tuple(c / 255 for c in rgb) for rgb in args.surface_color]
+        if args.surface_color is not None
+        else iso.surface_colors(len(shots))
+    )
+    w = int(shots[0].hit.shape[1])
+    if field is None or cam is None:
+        key = None
+        if len(shots) > 1 and w >= 2:  # which colour is which isovalue
+            entries = [
+                (tuple(round(c * 255) for c in rgb), f"isovalue {v:g}")
+                for rgb, v in zip(colours, args.isovalue, strict=True)
+            ]
+            key = images.legend(entries, w)
+        return iso.composite(shots, colours), key, None
+    shape, spacing, origin = grid
+    if field.shape == tuple(shape):
+        fspacing = tuple(spacing)
+    else:  # stretched over the rendered volume's box
+        extent = (np.asarray(shape, np.float64) - 1) * np.asarray(spacing, np.float64)
+        fspacing = tuple(float(v) for v in extent / (np.asarray(field.shape, np.float64) - 1))
+    vals = [iso.sample_hits(s, cam, field, fspacing, origin) for s in shots]
+    on = np.concatenate([np.asarray(v)[np.asarray(s.hit)] for v, s in zip(vals, shots, strict=True)])
+    on = on[np.isfinite(on)]
+    if not on.size:
+        print(f"clvis iso: warning: --color-by {args.color_by}: no value on the surface", file=sys.stderr)
+    if args.range is None:
+        lo, hi = value_range(on)
+    elif args.range[0] == "percentile":
+        lo, hi = (float(v) for v in np.percentile(on, args.range[1:])) if on.size else (0.0, 1.0)
+    else:
+        lo, hi = float(args.range[1]), float(args.range[2])
+    cmap = args.colormap or "viridis"
+    planes = [
+        iso.color_surface(s, values=v, colormap_name=cmap, value_range=(lo, hi), nan_color=c)
+        for s, v, c in zip(shots, vals, colours, strict=True)
+    ]
+    bar = images.colorbar(cmap, lo, hi, w, title=Path(args.color_by).name) if w >= 2 else None
+    return iso.composite(shots, planes=planes), bar, (lo, hi)
 
 
 def _short(values, most=12) -> str:

@@ -1,7 +1,8 @@
 """iso family: progressive isosurface raycasting over ZFP-compressed volumes
 (Dyken, Usher, Kumar, TVCG 2024). Module ↔ kernel: zfp.py ↔ zfp.cl,
 macrocell.py ↔ macrocell.cl, traverse.py ↔ traverse.cl, cache.py ↔ cache.cl,
-raytrace.py ↔ raytrace.cl, render.py ↔ pass.cl (the pass loop; ``pass`` is a
+raytrace.py ↔ raytrace.cl, surface.py ↔ surface.cl (colouring
+the surface: a second field at the hits, several isovalues), render.py ↔ pass.cl (the pass loop; ``pass`` is a
 Python keyword)."""
 
 from . import zfp
@@ -9,6 +10,7 @@ from .cache import BlockCache, mark_blocks
 from .macrocell import MacrocellGrids, macrocell_grids
 from .raytrace import raytrace_blocks
 from .render import IsoImage, IsoRenderer
+from .surface import SURFACE_COLOR, color_surface, composite, sample_hits, surface_colors
 from .traverse import init_rays, macro_traverse
 from .zfp import ZfpVolume
 
@@ -17,11 +19,16 @@ __all__ = [
     "IsoImage",
     "IsoRenderer",
     "MacrocellGrids",
+    "SURFACE_COLOR",
     "ZfpVolume",
+    "color_surface",
+    "composite",
     "init_rays",
     "macro_traverse",
     "macrocell_grids",
     "mark_blocks",
     "raytrace_blocks",
+    "sample_hits",
+    "surface_colors",
     "zfp",
 ]

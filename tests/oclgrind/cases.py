@@ -276,6 +276,21 @@ def iso_render(q):
 
 
 @case
+def iso_surface(q):
+    """sample_hits (surface.cl): hits from a render, a field on another grid
+    reaching past the box on one side and short of it on the other (NaN
+    hits), a host and a device image, and a size off the work-group size."""
+    zv = clvis.zfp.compress(_volume(), 16)
+    w, h = 17, 13
+    cam = _iso_cam(w, h)
+    img = IsoRenderer(zv, queue=q).render(cam, w, h, 0.3)
+    field = _volume(5, seed=12)[:, :6, :7]
+    clvis.iso.sample_hits(img, cam, field, (3.0, 2.5, 2.0), (0.5, -0.5, 0.0), queue=q)
+    dev = IsoRenderer(zv, queue=q).render(cam, w, h, 0.3, host=False)
+    clvis.iso.sample_hits(dev, cam, np.ones((2, 2, 2), np.float32), (12.0, 14.0, 17.0), queue=q)
+
+
+@case
 def iso_cache(q):
     """The LRU cache through evictions: fewer slots than needed blocks."""
     zv = clvis.zfp.compress(_volume(), 8)

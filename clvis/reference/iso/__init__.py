@@ -1,8 +1,8 @@
 """NumPy references of the iso family (clvis/iso/), module for module: zfp,
-macrocell, traverse, cache, raytrace, render (the rules of the whole
+macrocell, traverse, cache, raytrace, surface, render (the rules of the whole
 raycaster are written out in render's module docstring)."""
 
-from . import cache, macrocell, raytrace, traverse, zfp
+from . import cache, macrocell, raytrace, surface, traverse, zfp
 from .macrocell import block_ranges, cell_ranges, coarse_ranges
 from .raytrace import (
     BISECTION_STEPS,
@@ -36,6 +36,7 @@ __all__ = [
     "render",
     "render_rays",
     "shade",
+    "surface",
     "traverse",
     "zfp",
 ]

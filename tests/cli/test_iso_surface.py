@@ -1,0 +1,228 @@
+"""clvis iso's surface options through cli.main: --color-by (a second field
+at the hits, with a colour bar), several isovalues composited (with a
+legend), --surface-color, the warnings for a constant volume and an isovalue
+at the end of the range, the note when speculation stops far past
+--completion, and the errors. On third-party files: pyvista's uniform.vtk
+(tests/data, point scalars x*y*z) and nibabel's anatomical.nii (an MRI; the
+tests that need it skip when nibabel is absent)."""
+
+import os
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from clvis import cli, images
+
+DATA = os.path.join(os.path.dirname(__file__), "..", "data")
+UNIFORM = os.path.join(DATA, "pyvista_uniform.vtk")
+W, H = 96, 72
+BACKGROUND = np.array(images.BACKGROUND)
+
+
+def _png(path):
+    with Image.open(path) as im:
+        return np.asarray(im)[..., :3].astype(int)
+
+
+def _surface(a):
+    """The pixels that are not background (under the label band, above any bar)."""
+    return np.abs(a - BACKGROUND).sum(axis=2) > 30
+
+
+def _run(capsys, *args):
+    rc = cli.main(["iso", *args])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_color_by_itself_gives_the_isovalue(tmp_path, capsys):
+    """pyvista's x*y*z coloured by itself: every hit lies on the surface, so
+    the colours span the isovalue alone (at ZFP rate 32, near lossless)."""
+    rc, out, err = _run(
+        capsys,
+        UNIFORM,
+        "--isovalue",
+        "100",
+        "--rate",
+        "32",
+        "--color-by",
+        UNIFORM,
+        "--size",
+        f"{W}x{H}",
+        "--out",
+        str(tmp_path),
+    )
+    assert rc == 0, err
+    line = next(ln for ln in out.splitlines() if ln.strip().startswith("colour"))
+    lo, hi = (float(v) for v in line.rsplit("range ", 1)[1].split(".."))
+    assert 99.99 <= lo <= hi <= 100.01, line
+    a = _png(tmp_path / "iso.png")
+    assert a.shape[0] > H + images.label_height(W)  # the colour bar under the image
+
+
+def test_color_by_another_grid(tmp_path, capsys):
+    """A field on another grid (the x index of a 4 x 5 x 7 grid) stretched over
+    the box: the colours run along x; --range and --colormap apply, a bar
+    is drawn; a plain render of the same surface is sand-coloured."""
+    x = np.broadcast_to(np.linspace(0.0, 9.0, 7, dtype=np.float32), (4, 5, 7)).copy()
+    np.save(tmp_path / "x.npy", x)
+    args = [UNIFORM, "--isovalue", "100", "--size", f"{W}x{H}"]
+    rc, out, err = _run(
+        capsys,
+        *args,
+        "--color-by",
+        str(tmp_path / "x.npy"),
+        "--colormap",
+        "gray",
+        "--range",
+        "0,9",
+        "--out",
+        str(tmp_path / "c"),
+    )
+    assert rc == 0, err
+    assert "range 0..9" in out
+    rc, _, err = _run(capsys, *args, "--out", str(tmp_path / "p"))
+    assert rc == 0, err
+    lab = images.label_height(W)
+    coloured, plain = _png(tmp_path / "c" / "iso.png"), _png(tmp_path / "p" / "iso.png")
+    assert coloured.shape[0] > plain.shape[0] == H + lab
+    c, p = coloured[lab : lab + H], plain[lab:]
+    on = _surface(p)
+    assert on.sum() > 100
+    # the same surface (save its darkest greys, near the background)
+    assert not (_surface(c) & ~on).any() and (_surface(c) & on).sum() > 0.9 * on.sum()
+    grey = c[on]
+    assert (np.abs(grey[:, 0] - grey[:, 2]) <= 1).all()  # gray colormap: r == b (the highlight white)
+    assert (np.abs(p[on][:, 0] - p[on][:, 2]) > 20).mean() > 0.9  # sand: r well above b
+    # along x (to the right in this view, at least on average) the grey grows
+    cols = np.nonzero(on.any(axis=0))[0]
+    left = c[:, cols[: len(cols) // 3]][on[:, cols[: len(cols) // 3]]][:, 0].mean()
+    right = c[:, cols[-len(cols) // 3 :]][on[:, cols[-len(cols) // 3 :]]][:, 0].mean()
+    assert abs(left - right) > 20, (left, right)
+
+
+def test_color_by_nifti(tmp_path, capsys):
+    """nibabel's anatomical MRI coloured by another of its scans (a different
+    grid, stretched over the box): rc 0, the colour line and a bar."""
+    nibabel = pytest.importorskip("nibabel")
+    nib = os.path.join(os.path.dirname(nibabel.__file__), "tests", "data")
+    rc, out, err = _run(
+        capsys,
+        os.path.join(nib, "anatomical.nii"),
+        "--color-by",
+        os.path.join(nib, "reoriented_anat_moved.nii"),
+        "--range",
+        "p2,p98",
+        "--size",
+        f"{W}x{H}",
+        "--out",
+        str(tmp_path),
+    )
+    assert rc == 0, err
+    assert "reoriented_anat_moved.nii at the hits through viridis" in out
+    a = _png(tmp_path / "iso.png")
+    assert a.shape[0] > H + images.label_height(W)
+
+
+def test_several_isovalues(tmp_path, capsys):
+    """Two isovalues of x*y*z: two surfaces in their colours, the nearer in
+    front, a legend under the image, each one's passes printed."""
+    red, blue = (255, 0, 0), (0, 0, 255)
+    rc, out, err = _run(
+        capsys,
+        UNIFORM,
+        "--isovalue",
+        "30,300",
+        "--surface-color",
+        "255,0,0",
+        "--surface-color",
+        "blue",
+        "--size",
+        f"{W}x{H}",
+        "--out",
+        str(tmp_path),
+    )
+    assert rc == 0, err
+    assert "isovalues 30, 300" in out and out.count("  passes  ") == 2 and out.count("  isovalue    ") == 2
+    a = _png(tmp_path / "iso.png")
+    lab = images.label_height(W)
+    assert a.shape[0] > H + lab  # the legend
+    img = a[lab : lab + H]
+    reddish = (img[..., 0] > 2 * img[..., 2] + 20) & (img[..., 0] > 40)
+    bluish = (img[..., 2] > 2 * img[..., 0] + 20) & (img[..., 2] > 40)
+    assert reddish.sum() > 20 and bluish.sum() > 20, (reddish.sum(), bluish.sum())
+    legend = a[lab + H :]
+    for c in (red, blue):
+        assert (np.abs(legend - c).sum(axis=2) == 0).any()  # each swatch
+
+
+def test_constant_volume_warns_and_draws_nothing(tmp_path, capsys):
+    np.save(tmp_path / "c.npy", np.full((8, 9, 10), 3.0, np.float32))
+    for iso in ("3", "1"):
+        rc, out, err = _run(
+            capsys,
+            str(tmp_path / "c.npy"),
+            "--isovalue",
+            iso,
+            "--size",
+            f"{W}x{H}",
+            "--out",
+            str(tmp_path / iso),
+        )
+        assert rc == 0, err
+        assert "warning: the volume is constant (3)" in err and "nothing rendered" in out
+        a = _png(tmp_path / iso / "iso.png")[images.label_height(W) :]
+        assert not _surface(a).any()
+
+
+def test_isovalue_at_the_end_of_the_range_warns(tmp_path, capsys):
+    v = np.zeros((12, 12, 12), np.float32)
+    v[4:8, 4:8, 4:8] = 1.0
+    np.save(tmp_path / "v.npy", v)
+    rc, _, err = _run(
+        capsys, str(tmp_path / "v.npy"), "--isovalue", "0", "--size", "32x24", "--out", str(tmp_path)
+    )
+    assert rc == 0 and "is the data's minimum" in err
+    rc, _, err = _run(
+        capsys, str(tmp_path / "v.npy"), "--isovalue", "1", "--size", "32x24", "--out", str(tmp_path)
+    )
+    assert rc == 0 and "is the data's maximum" in err
+    rc, _, err = _run(
+        capsys, str(tmp_path / "v.npy"), "--isovalue", "0.5", "--size", "32x24", "--out", str(tmp_path)
+    )
+    assert rc == 0 and "warning" not in err
+
+
+def test_completion_stop_far_past_the_target_is_noted(tmp_path, capsys):
+    """The README's turbulence example: with speculation the first passes
+    finish far more than 85 % (a note says so); --no-speculation stops near it."""
+    base = ["--dataset", "turbulence", "--completion", "0.85", "--size", "128x72", "--out", str(tmp_path)]
+    rc, out, err = _run(capsys, *base)
+    assert rc == 0
+    done = float(out.split("completion ")[1].split(",")[0])
+    assert done > 0.9 and "well past --completion 0.85" in err and "--no-speculation" in err
+    rc, out, err = _run(capsys, *base, "--no-speculation")
+    assert rc == 0 and "well past" not in err
+    done = float(out.split("completion ")[1].split(",")[0])
+    assert 0.85 <= done < 0.9, out
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--colormap", "gray"], "--colormap colours the surface by a field: add --color-by"),
+        (["--range", "0,1"], "--range colours the surface by a field"),
+        (["--color-by", "nope.npy"], "--color-by: nope.npy: no such file"),
+        (["--isovalue", "0.3,0.3"], "distinct"),
+        (["--isovalue", "0.3,x"], "--isovalue"),
+        (["--isovalue", "0.3,0.6", "--surface-color", "blue"], "once per isovalue"),
+        (["--surface-color", "nocolour"], "--surface-color"),
+        (["--isovalue", "0.3,0.6", "--completion", "0.8", "--infill"], "--infill: with one isovalue"),
+        (["--isovalue", "0.3,0.6", "--workers", "1"], "--isovalue: one value on workers"),
+    ],
+)
+def test_errors(tmp_path, capsys, args, message):
+    rc, _, err = _run(capsys, *args, "--size", "16x16", "--out", str(tmp_path))
+    assert rc == 2 and message in err, err
+    assert len(err.strip().splitlines()) == 1

@@ -374,7 +374,11 @@ def _grid_axis_coords(n: int, name: str = "n"):
 
 def _cube_volume(values, n: int) -> dict:
     step = 2.0 / (n - 1)
-    return {"volume": values.astype(np.float32, copy=False), "spacing": (step, step, step), "origin": (-1.0, -1.0, -1.0)}
+    return {
+        "volume": values.astype(np.float32, copy=False),
+        "spacing": (step, step, step),
+        "origin": (-1.0, -1.0, -1.0),
+    }
 
 
 def marschner_lobb(n: int = 64) -> dict:
@@ -442,9 +446,8 @@ def turbulence(n: int = 128) -> dict:
         total = np.zeros(x.shape)
         for o, ((f, a, _, _), rot) in enumerate(zip(_TURBULENCE_OCTAVES, rotations, strict=True)):
             q = p @ rot
-            total += a * (
-                np.sin(f * q[..., 0] + 1.3 * o) * np.sin(f * q[..., 1] + 0.7) * np.sin(f * q[..., 2] + 2.1 * o)
-                + 0.5 * np.sin(f * q.sum(axis=-1) / np.sqrt(3.0) + o)
-            )
+            sines = np.sin(f * q[..., 0] + 1.3 * o) * np.sin(f * q[..., 1] + 0.7)
+            sines = sines * np.sin(f * q[..., 2] + 2.1 * o)
+            total += a * (sines + 0.5 * np.sin(f * q.sum(axis=-1) / np.sqrt(3.0) + o))
         out[z0 : z0 + step] = np.clip(0.5 + 0.5 * total / 1.6, 0.0, 1.0)
     return _cube_volume(out, n)

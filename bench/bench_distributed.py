@@ -28,6 +28,7 @@ memory-mapped slicing, against one IsoRenderer of the whole volume.
     clvis bench distributed          (CLVIS_BENCH_SCALE shrinks both)
 """
 
+import contextlib
 import os
 import tempfile
 import time
@@ -197,9 +198,8 @@ def volume_path() -> Path:
     if "volume" not in _cache:
         from clvis import datasets
 
-        v = datasets.turbulence(SIDE)["volume"].astype(np.float32)
         p = _tmp() / f"turbulence_{SIDE}.npy"
-        np.save(p, v)
+        np.save(p, datasets.turbulence(SIDE)["volume"])  # float32 already: no copy
         _cache["volume"] = p
     return _cache["volume"]
 
@@ -251,20 +251,103 @@ def test_volume(benchmark, queue, impl):
         )
 
 
-def compare_volume(side: int = 512, rounds: int = 5, brick: Any = 128, size: int = 512) -> None:
-    """One process, the three renderers in turn (A B C A B C ...): turbulence
-    side^3 as .npy, the single IsoRenderer (PoCL on every core) against 2
-    one-thread workers with and without footprints; per row the median and
-    min wall time of a frame and the CPU seconds per frame (client + workers),
-    pixels rendered and bytes sent per worker, and the agreement of the
-    images with the single one's (hit pixels that differ, largest depth gap).
-        python bench/bench_distributed.py [SIDE [ROUNDS [BRICK [SIZE]]]]
+class MemoryWatch:
+    """Peak resident memory of this process and its descendants (the
+    LocalCluster's nannies and workers), sampled every `interval` seconds in
+    a thread (psutil, which distributed needs): the peak of the sum of their
+    RSS and of their PSS (shared pages, e.g. a memory-mapped file read by
+    two workers, split between the processes that map them), in phases
+    named by mark()."""
+
+    def __init__(self, interval: float = 0.2) -> None:
+        import threading
+
+        import psutil
+
+        self._psutil, self._me = psutil, psutil.Process()
+        self.phase, self.peaks, self.interval = "start", {}, interval
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+        self._thread.start()
+
+    def _sample(self) -> None:
+        ps = [self._me, *self._me.children(recursive=True)]
+        rss = pss = top = 0
+        for p in ps:
+            try:
+                m = p.memory_full_info()
+            except (self._psutil.NoSuchProcess, self._psutil.AccessDenied):
+                continue
+            rss, pss = rss + m.rss, pss + getattr(m, "pss", m.rss)
+            if p is not self._me:
+                top = max(top, m.rss)
+        old = self.peaks.get(self.phase, {"rss": 0, "pss": 0, "client": 0, "worker": 0, "processes": 0})
+        client = self._me.memory_info().rss
+        self.peaks[self.phase] = {
+            "rss": max(old["rss"], rss),
+            "pss": max(old["pss"], pss),
+            "client": max(old["client"], client),
+            "worker": max(old["worker"], top),
+            "processes": max(old["processes"], len(ps)),
+        }
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            self._sample()
+            self._stop.wait(self.interval)
+
+    def mark(self, phase: str) -> None:
+        self._sample()
+        self.phase = phase
+        self._sample()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        self._sample()
+
+    def report(self) -> None:
+        print("| phase | peak RSS, sum | peak PSS, sum | client RSS | largest child RSS | processes |")
+        print("|---|---|---|---|---|---|")
+        for k, m in self.peaks.items():
+            print(
+                f"| {k} | {m['rss'] / 2**30:.2f} GiB | {m['pss'] / 2**30:.2f} GiB | "
+                f"{m['client'] / 2**30:.2f} GiB | {m['worker'] / 2**30:.2f} GiB | {m['processes']} |"
+            )
+        top = max(m["pss"] for m in self.peaks.values())
+        print(f"peak PSS of the bench process and its workers: {top / 2**30:.2f} GiB")
+
+
+ROWS = {
+    "default": ("single", "per worker, footprints"),
+    "all": ("single", "per worker, footprints", "per brick, footprints", "per brick, full frames"),
+}
+
+
+def compare_volume(
+    side: int = 512, rounds: int = 3, brick: Any = 128, size: int = 512, rows: str = "default"
+) -> None:
+    """One process, the renderers in turn (A B A B ...): turbulence side^3
+    as .npy, the single IsoRenderer (PoCL on every core) against 2
+    one-thread workers (rows "default": one IsoRenderer per worker with
+    footprints, the library's default; "all": also one per brick, with and
+    without footprints); per row each frame's wall time, the median, and
+    the CPU seconds per frame (client + workers), pixels rendered and bytes
+    sent per worker, the agreement of the images with the single one's
+    (hit pixels that differ, largest depth gap), the load average of the
+    machine around each round, and the peak memory of this process and its
+    workers per phase (MemoryWatch).
+        python bench/bench_distributed.py [SIDE [ROUNDS [BRICK [SIZE [ROWS]]]]]
     (BRICK: an edge, or Z,Y,X: 128,256,256 cuts 256^3 into one slab per worker)"""
     import resource
 
     global SIDE
     SIDE = side
+    watch = MemoryWatch()
+    print(f"load average at the start: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    watch.mark("generating the volume, writing the .npy")
     p = volume_path()
+    watch.mark("building the single IsoRenderer, its first frame")
     cam = clvis.Camera.fit((0, 0, 0), (side - 1,) * 3, aspect=1.0)
     single = clvis.IsoRenderer(np.load(p), 8)
     one = single.render(cam, size, size, 0.5)
@@ -273,8 +356,10 @@ def compare_volume(side: int = 512, rounds: int = 5, brick: Any = 128, size: int
         r = resource.getrusage(resource.RUSAGE_SELF)
         return r.ru_utime + r.ru_stime
 
-    kinds = ("single", "per worker, footprints", "per brick, footprints", "per brick, full frames")
-    rows: dict = {k: {"wall": [], "cpu": []} for k in kinds}
+    kinds = ROWS[rows]
+    table: dict = {k: {"wall": [], "cpu": []} for k in kinds}
+    loads = []
+    watch.mark("starting the cluster, building the distributed renderers, first frames")
     with _cluster(2) as cluster, distributed.Client(cluster) as client:
         client.wait_for_workers(2, timeout=120)
 
@@ -283,35 +368,47 @@ def compare_volume(side: int = 512, rounds: int = 5, brick: Any = 128, size: int
 
         with (
             DistributedIsoRenderer(p, client, rate=8, brick=brick, timeout=TIMEOUT) as slabs,
-            DistributedIsoRenderer(p, client, rate=8, brick=brick, timeout=TIMEOUT, per_worker=False) as dr,
+            DistributedIsoRenderer(p, client, rate=8, brick=brick, timeout=TIMEOUT, per_worker=False)
+            if len(kinds) > 2
+            else contextlib.nullcontext() as dr,
         ):
 
             def frame(k):
                 r = slabs if k.startswith("per worker") else dr
                 return r.render(cam, size, size, 0.5, footprints=k.endswith("footprints"))
 
-            imgs = {k: frame(k) for k in rows if k != "single"}
+            imgs = {k: frame(k) for k in table if k != "single"}
+            watch.mark("frames")
             for _ in range(rounds):
-                for k in rows:
+                loads.append(os.getloadavg()[0])
+                for k in table:
                     c0, w0, t0 = cpu(), worker_cpu() if k != "single" else 0.0, time.perf_counter()
                     if k == "single":
                         single.render(cam, size, size, 0.5)
                     else:
                         imgs[k] = frame(k)
-                    rows[k]["wall"].append(time.perf_counter() - t0)
-                    rows[k]["cpu"].append(cpu() - c0 + (worker_cpu() - w0 if k != "single" else 0.0))
+                    table[k]["wall"].append(time.perf_counter() - t0)
+                    table[k]["cpu"].append(cpu() - c0 + (worker_cpu() - w0 if k != "single" else 0.0))
+            loads.append(os.getloadavg()[0])
+            bricks = len(dr.bricks) if dr is not None else len(slabs.bricks)
             print(
-                f"turbulence {side}^3 .npy, {len(dr.bricks)} bricks of {brick} cells, "
-                f"ZFP rate 8, {size}x{size}"
+                f"turbulence {side}^3 .npy, {bricks} bricks of {brick} cells, "
+                f"{len(slabs._specs)} per-worker renderers, ZFP rate 8, {size}x{size}"
             )
-    print("| row | median frame | best | CPU s/frame | pixels rendered | bytes sent per worker | vs single |")
+    watch.stop()
+    print(
+        f"load average (1 min) before each round and after the last: {', '.join(f'{x:.1f}' for x in loads)}"
+    )
+    print(
+        "| row | frames | median | CPU s/frame | pixels rendered | bytes sent per worker | median / single |"
+    )
     print("|---|---|---|---|---|---|---|")
-    for k, r in rows.items():
-        med, best, c = np.median(r["wall"]), min(r["wall"]), np.median(r["cpu"])
+    for k, r in table.items():
+        med, c = np.median(r["wall"]), np.median(r["cpu"])
+        frames = ", ".join(f"{x * 1e3:.0f}" for x in r["wall"]) + " ms"
         if k == "single":
             print(
-                f"| single IsoRenderer | {med * 1e3:.0f} ms | {best * 1e3:.0f} ms | {c:.2f} | "
-                f"{size * size:,} | - | - |"
+                f"| single IsoRenderer | {frames} | {med * 1e3:.0f} ms | {c:.2f} | {size * size:,} | - | - |"
             )
             continue
         st = imgs[k].stats
@@ -319,15 +416,18 @@ def compare_volume(side: int = 512, rounds: int = 5, brick: Any = 128, size: int
         diff = int((imgs[k].hit != one.hit).sum())
         both = imgs[k].hit & one.hit
         gap = float(np.abs(imgs[k].depth[both] - one.depth[both]).max()) if both.any() else 0.0
-        ratio = med / np.median(rows["single"]["wall"])
+        ratio = med / np.median(table["single"]["wall"])
         print(
-            f"| 2 workers, {k} | {med * 1e3:.0f} ms | {best * 1e3:.0f} ms | {c:.2f} | {st['pixels']:,} | "
+            f"| 2 workers, {k} | {frames} | {med * 1e3:.0f} ms | {c:.2f} | {st['pixels']:,} | "
             f"{sent} | {ratio:.2f}x; hits differ at {diff} px, depth gap {gap:.2e} |"
         )
+    watch.report()
 
 
 if __name__ == "__main__":
     import sys
 
-    args = [tuple(int(x) for x in a.split(",")) if "," in a else int(a) for a in sys.argv[1:]]
+    args = [
+        a if a in ROWS else tuple(int(x) for x in a.split(",")) if "," in a else int(a) for a in sys.argv[1:]
+    ]
     compare_volume(*args)  # type: ignore[arg-type]

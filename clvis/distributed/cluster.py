@@ -262,6 +262,13 @@ class ClusterOwner:
     registry token to let go of at close). It may override :meth:`_recover`
     to make data lost with a worker again (iso: bricks of an array)."""
 
+    # compositing "auto": direct-send up to this many workers, the tree
+    # beyond (composite.schedule; a subclass sets its family's constant)
+    direct_send_max: int = _c.DIRECT_SEND_MAX_WORKERS_POINTS
+    compositing: str = "auto"
+    # the schedule the last frame used ("direct" or "tree"; None before one)
+    frame_compositing: str | None = None
+
     def __init__(
         self, client: Any, workers: int, timeout: float, connect_timeout: float = CONNECT_TIMEOUT
     ) -> None:
@@ -382,7 +389,8 @@ class ClusterOwner:
         view) once per worker over the handles that worker holds (with their
         data); then direct-send (self.compositing "direct": each worker's
         frame cut into one band of rows per worker, band j composited on
-        worker j) or a binary tree of pairwise composites ("tree")."""
+        worker j) or a binary tree of pairwise composites ("tree"); "auto"
+        picks one by the number of workers (composite.schedule)."""
         client = self.client
         where = self._who_has(self._handles)
         groups: dict[str | None, list] = {}
@@ -397,7 +405,8 @@ class ClusterOwner:
             return f
 
         partials = [submit(render_partial, render_one, parts, view, worker=w) for w, parts in groups.items()]
-        if self.compositing == "tree" or len(partials) == 1:
+        self.frame_compositing = _c.schedule(self.compositing, len(partials), self.direct_send_max)
+        if self.frame_compositing == "tree" or len(partials) == 1:
             level = partials
             while len(level) > 1:
                 nxt = [submit(composite_task, level[k], level[k + 1]) for k in range(0, len(level) - 1, 2)]

@@ -36,6 +36,9 @@ import numpy as np
 from .._keys import key_f32, key_f32_inverse
 
 __all__ = [
+    "COMPOSITING",
+    "DIRECT_SEND_MAX_WORKERS_POINTS",
+    "DIRECT_SEND_MAX_WORKERS_VOLUMES",
     "EMPTY_KEY",
     "Partial",
     "assemble",
@@ -44,10 +47,39 @@ __all__ = [
     "depth_keys",
     "depths_of",
     "ids_of",
+    "schedule",
     "split",
 ]
 
 EMPTY_KEY = np.uint64(0xFFFFFFFFFFFFFFFF)
+
+# The compositing schedules a distributed renderer takes: "auto" picks one
+# by the number of workers (schedule()).
+COMPOSITING = ("auto", "direct", "tree")
+
+# "auto" composites by direct-send up to these worker counts and by the
+# binary tree beyond: where the projections in bench/results/
+# distributed-cpu.md cross (Dask's ~1 ms of scheduler time per task makes
+# direct-send's P^2 band tasks cost more than the tree's ceil(log2 P)
+# levels of merges and transfers, each level a full frame for points, a
+# footprint's union for volumes). Points at 1920x1080 (93 ms to merge a
+# frame, 20 ms to send it): direct-send is cheaper up to 20 workers (at 20:
+# 4.58 s against 4.61 s for 10^10 points), the tree from 21. Volume
+# footprints, 512^3 at 512x512: the two are within 8 ms of each other up to
+# 5 workers and the tree is cheaper from 6 on (at 8: 143 ms against 186 ms).
+DIRECT_SEND_MAX_WORKERS_POINTS = 20
+DIRECT_SEND_MAX_WORKERS_VOLUMES = 5
+
+
+def schedule(compositing: str, workers: int, direct_max: int) -> str:
+    """The schedule a frame over `workers` partials uses: "direct" or
+    "tree" as given; "auto": "direct" up to `direct_max` workers (one of
+    the DIRECT_SEND_MAX_WORKERS_* constants), "tree" beyond."""
+    if compositing not in COMPOSITING:
+        raise ValueError(f"compositing: expected one of {COMPOSITING}, got {compositing!r}")
+    if compositing != "auto":
+        return compositing
+    return "direct" if workers <= direct_max else "tree"
 
 
 def depth_keys(depth: np.ndarray, ids: np.ndarray, covered: np.ndarray) -> np.ndarray:

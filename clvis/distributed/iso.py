@@ -306,8 +306,12 @@ class DistributedIsoRenderer(ClusterOwner):
     footprint), when the bricks have at least as many z layers as there
     are workers; False: one IsoRenderer per brick. client, workers,
     compositing, timeout, connect_timeout: as for
-    :class:`clvis.distributed.DistributedRasterizer`.
+    :class:`clvis.distributed.DistributedRasterizer`, but "auto" (the
+    default) takes the tree past ``composite.DIRECT_SEND_MAX_WORKERS_VOLUMES``
+    workers (footprints' unions are cheaper to merge up a tree than frames).
     """
+
+    direct_send_max = _c.DIRECT_SEND_MAX_WORKERS_VOLUMES
 
     def __init__(
         self,
@@ -321,14 +325,13 @@ class DistributedIsoRenderer(ClusterOwner):
         shape: Sequence[int] | None = None,
         dtype: Any = None,
         volume_index: int | None = None,
-        compositing: str = "direct",
+        compositing: str = "auto",
         workers: int = 2,
         timeout: float = 300.0,
         connect_timeout: float = CONNECT_TIMEOUT,
         per_worker: bool = True,
     ) -> None:
-        if compositing not in ("direct", "tree"):
-            raise ValueError(f"compositing: expected 'direct' or 'tree', got {compositing!r}")
+        _c.schedule(compositing, 1, self.direct_send_max)  # a clear error for an unknown one
         self.compositing = compositing
         is_path = isinstance(volume_or_bricks, (str, os.PathLike))
         if not is_path:
@@ -474,7 +477,7 @@ class DistributedIsoRenderer(ClusterOwner):
             {
                 **whole.counts,
                 "workers": nworkers,
-                "compositing": self.compositing,
+                "compositing": self.frame_compositing,
                 "seconds": frame_seconds(frame, whole.seconds),
                 "bytes_sent": sent,
             },

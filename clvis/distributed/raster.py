@@ -65,7 +65,7 @@ from .cluster import (
 
 __all__ = ["COMPOSITING", "DistributedRasterizer", "concatenate"]
 
-COMPOSITING = ("direct", "tree")
+COMPOSITING = _c.COMPOSITING
 _FIELDS = ("index", "depth", "rgba", "vel2d", "vel_angle", "vel_speed", "radius_px")
 # in this process's registry (cluster.REGISTRY): a partition's token → its
 # PointCloud read but not built yet; a handle's token ("raster:" + its
@@ -345,7 +345,9 @@ class DistributedRasterizer(ClusterOwner):
     `workers` processes of one thread each (closed with :meth:`close` or the
     ``with`` block). fields: for files, the attributes to keep (default all;
     every file must have them). morton, batch_size: the Rasterizers'.
-    compositing: "direct" (direct-send, default) or "tree". timeout: seconds
+    compositing: "auto" (default: direct-send up to
+    ``composite.DIRECT_SEND_MAX_WORKERS_POINTS`` workers, the binary tree
+    beyond), "direct" (direct-send) or "tree". timeout: seconds
     any wait on the cluster may take (a build, a frame) before a
     :class:`clvis.errors.ClusterTimeout` (a ``TimeoutError``) saying what
     timed out; connect_timeout: seconds to reach a scheduler given by
@@ -365,7 +367,7 @@ class DistributedRasterizer(ClusterOwner):
         fields: Sequence[str] | None = None,
         morton: bool = True,
         batch_size: int = 10240,
-        compositing: str = "direct",
+        compositing: str = "auto",
         workers: int = 2,
         timeout: float = 300.0,
         connect_timeout: float = CONNECT_TIMEOUT,
@@ -574,7 +576,7 @@ class DistributedRasterizer(ClusterOwner):
             **whole.counts,
             "partitions": self.npartitions,
             "workers": nparts,
-            "compositing": self.compositing,
+            "compositing": self.frame_compositing,
             "seconds": frame_seconds(frame, whole.seconds),
             "bytes_sent": sent,
         }

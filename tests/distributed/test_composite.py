@@ -132,3 +132,65 @@ def test_bad_input():
         C.assemble([C.split(a, (0, 1)), C.split(a, (2, 4))])
     with pytest.raises(ValueError, match="n: expected at least one band"):
         C.bands(4, 0)
+
+
+def _crossover(direct, tree):
+    """The largest worker count at which direct-send's projected frame is
+    not slower than the tree's (the tree cheaper at every count after it, to 64)."""
+    return max(p for p in range(1, 65) if direct(p) <= tree(p) or p == 1)
+
+
+def _levels(p):
+    return (p - 1).bit_length()  # ceil(log2 p): the tree's levels
+
+
+def test_auto_thresholds_are_the_projections_crossovers():
+    """The constants behind compositing="auto" are where the models of
+    bench/results/distributed-cpu.md cross (seconds; 1 ms of scheduler time
+    per task). Points, 10^10 at 1920x1080: render a + b n, a frame merged in
+    93 ms and sent in 20 ms (twice for direct-send: to the peers, to the
+    client); volumes, 512^3 at 512x512: footprints of 0.76 F P^(-2/3)
+    pixels, 28 B each, merged at 20 ns per pixel and piece."""
+    render = lambda p: 0.056 + 7.9e-9 * 1e10 / p  # noqa: E731
+    pd = lambda p: render(p) + 0.093 + 0.040 + (p * p + 2 * p) * 1e-3  # noqa: E731
+    pt = lambda p: render(p) + _levels(p) * 0.113 + (2 * p - 1) * 1e-3  # noqa: E731
+    assert C.DIRECT_SEND_MAX_WORKERS_POINTS == _crossover(pd, pt) == 20
+    f = 512 * 512
+    vr = lambda p: 0.58 / p + 0.03  # noqa: E731
+    union = lambda p, k: min(f, 0.76 * f * (2**k / p) ** (2 / 3))  # noqa: E731
+    vd = lambda p: (  # noqa: E731
+        vr(p) + f / p * p ** (1 / 3) * 20e-9 + (union(p, 0) + f / p) * 28 / 1.25e9 + (p * p + 2 * p) * 1e-3
+    )
+    vt = lambda p: (  # noqa: E731
+        vr(p)
+        + sum(union(p, k) for k in range(1, _levels(p) + 1)) * (40e-9 + 28 / 1.25e9)
+        + (2 * p - 1) * 1e-3
+    )
+    # up to 5 workers the two are within 8 ms (2 and 4: the tree by 2 ms); from 6 the tree wins
+    assert all(abs(vd(p) - vt(p)) < 0.008 for p in range(2, 6))
+    assert all(vt(p) < vd(p) for p in range(6, 65))
+    assert C.DIRECT_SEND_MAX_WORKERS_VOLUMES == 5
+
+
+@pytest.mark.parametrize("limit", [C.DIRECT_SEND_MAX_WORKERS_POINTS, C.DIRECT_SEND_MAX_WORKERS_VOLUMES])
+def test_auto_picks_direct_send_up_to_the_threshold_and_the_tree_beyond(limit):
+    assert [C.schedule("auto", p, limit) for p in range(1, limit + 1)] == ["direct"] * limit
+    assert [C.schedule("auto", p, limit) for p in (limit + 1, limit + 2, 64, 512)] == ["tree"] * 4
+    for p in (1, 2, limit + 1, 512):  # an explicit schedule is kept whatever the count
+        assert C.schedule("direct", p, limit) == "direct" and C.schedule("tree", p, limit) == "tree"
+    with pytest.raises(ValueError, match="compositing: expected one of"):
+        C.schedule("binary-swap", 2, limit)
+
+
+def test_auto_is_the_renderers_default_with_their_family_threshold():
+    import inspect
+
+    from clvis.distributed import DistributedRasterizer
+    from clvis.distributed.iso import DistributedIsoRenderer
+
+    for cls, limit in (
+        (DistributedRasterizer, C.DIRECT_SEND_MAX_WORKERS_POINTS),
+        (DistributedIsoRenderer, C.DIRECT_SEND_MAX_WORKERS_VOLUMES),
+    ):
+        assert inspect.signature(cls.__init__).parameters["compositing"].default == "auto"
+        assert cls.direct_send_max == limit

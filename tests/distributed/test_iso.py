@@ -93,6 +93,29 @@ def test_array_bricks_equal_the_single_device(client, single, compositing, per_w
             assert sum(img.stats["bytes_sent"].values()) >= img.depth.nbytes
 
 
+def test_auto_compositing_is_direct_send_bit_for_bit_on_two_workers(client):
+    """compositing="auto" (the default) on 2 workers takes direct-send: its
+    image equals the one direct-send gives bit for bit (the tree's too:
+    min-key compositing does not depend on the grouping)."""
+    v, sp, org = _ML["volume"], _ML["spacing"], _ML["origin"]
+    with DistributedIsoRenderer(
+        v, client, rate=RATE, spacing=sp, origin=org, brick=12, timeout=TIMEOUT
+    ) as dr:
+        assert dr.compositing == "auto"
+        imgs = {}
+        for how in ("auto", "direct", "tree"):
+            dr.compositing = how
+            imgs[how] = dr.render(_cam(), W, H, 0.5)
+        assert imgs["auto"].stats["workers"] == 2
+        assert imgs["auto"].stats["compositing"] == imgs["direct"].stats["compositing"] == "direct"
+        assert imgs["tree"].stats["compositing"] == "tree"
+        for how in ("direct", "tree"):
+            for f in ("rgba", "depth", "hit", "t"):
+                a, b = getattr(imgs["auto"], f), getattr(imgs[how], f)
+                assert a.dtype == b.dtype and np.array_equal(a, b), (how, f)
+        assert imgs["auto"].hit.sum() > 200
+
+
 @pytest.mark.parametrize("fmt", ["npy", "raw", "nii"])
 def test_files_read_brick_by_brick_on_the_workers(client, single, tmp_path, fmt):
     v, sp, org = _ML["volume"].astype(np.float32), _ML["spacing"], _ML["origin"]

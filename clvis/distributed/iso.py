@@ -356,7 +356,7 @@ class DistributedIsoRenderer(ClusterOwner):
             ws = sorted(self.client.scheduler_info()["workers"]) or [None]
             units = worker_plan(self.bricks, len(ws)) if per_worker else [(r, 1) for r in self.bricks]
             token = uuid.uuid4().hex
-            self._specs = []
+            self._specs: list[dict[str, Any]] = []
             for i, (ranges, count) in enumerate(units):
                 (z0, _), (y0, _), (x0, _) = ranges
                 self._specs.append(

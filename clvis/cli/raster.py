@@ -276,7 +276,7 @@ def _render_panels(
 ) -> _Rendered:
     """Render one view; the G-buffers and the images a person looks at."""
     from .. import images
-    from ..raster import EMPTY, depth_filter, depth_filter_mask, edl, rgbda
+    from ..raster import EMPTY, depth_filter, edl
 
     look = look or _Look()
     color_by = None if look.classes is not None else attribute
@@ -349,8 +349,8 @@ def _render_panels(
             G-buffers with only the planes the network reads, never read back
             (the panels above are the host render's)."""
             gd = raster.render(camera, width, height, **kw, planes=post.attribute_planes, host=False)
-            if post.name == "lidar":  # depth_filter(g) on device planes
-                return post(rgbda(gd.rgba, gd.depth, depth_filter_mask(gd.depth, levels)))
+            if post.name == "lidar":  # device planes in, device planes out
+                return post(depth_filter(gd, levels))
             return post(gd)
 
         title = post.spec.title

@@ -7,9 +7,9 @@ whose call takes a renderer's own output and returns an RGBA8 picture:
   e.g. ``IsoRenderer.render(..., completion=0.85, host=False)``; the rays
   still running are filled in, the finished pixels come back as they were.
   Alpha is the surface's coverage (premultiplied colour over black).
-- "lidar": a FilteredImage (``depth_filter(...)``, or its ``rgbda`` array
-  (H, W, 5), numpy or device: ``raster.rgbda(g.rgba, g.depth,
-  depth_filter_mask(g.depth))`` of ``host=False`` G-buffers); alpha 255.
+- "lidar": a FilteredImage (``depth_filter(g)``: numpy, or device planes
+  for ``host=False`` G-buffers) or its ``rgbda`` array (H, W, 5), numpy or
+  device; alpha 255.
 - "narvis": rasterizer G-buffers (``Rasterizer.render``'s GBuffers, numpy
   or ``host=False``) with the planes the card names (``planes``: by default
   the colour, depth and screen velocity, so the cloud needs a velocity;

@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arrays import on_host
 from ..camera import Camera
 from ..errors import ClvisError, DataError, DeviceError
 from ..io import PointCloud, read_points
@@ -295,8 +296,8 @@ def render_one(handle: _Handle, arrays: Any, view: dict) -> _c.Partial:
         planes=view["planes"],
         point_size=view["point_size"],
     )
-    covered = g.index != EMPTY
-    index = handle.global_ids(g.index)
+    covered = on_host(g.index) != EMPTY
+    index = handle.global_ids(on_host(g.index))
     planes = {}  # index and depth travel in the key
     for f in _FIELDS[2:]:
         a = getattr(g, f)
@@ -304,7 +305,7 @@ def render_one(handle: _Handle, arrays: Any, view: dict) -> _c.Partial:
             planes[f] = a
     for k, a in g.attributes.items():
         planes["attr:" + k] = a
-    key = _c.depth_keys(g.depth, index, covered)
+    key = _c.depth_keys(on_host(g.depth), index, covered)
     counts = {k: g.stats.get(k, 0) for k in _STATS}
     return _c.Partial((0, view["height"]), key, planes, current_worker(), counts=counts)
 

@@ -187,3 +187,29 @@ def test_mypy_scope_covers_every_other_module():
     both = [m for m in UNTYPED if _covered(m, typed)]
     assert not both, f"typed now: take them out of UNTYPED: {both}"
     assert all((ROOT / m).is_file() for m in UNTYPED), "UNTYPED names a module that is gone"
+
+
+# --------------------------------------------------------------------------
+# what post reads, as Protocols the renderers' results satisfy
+
+
+def test_post_input_protocols_match_the_results():
+    """Each Protocol of clvis.post.inputs names planes its result dataclass
+    has, and those planes are typed for host and device arrays (mypy checks
+    the rest: tests can't, the lint does)."""
+    import dataclasses
+
+    from clvis.iso import IsoImage
+    from clvis.post import inputs
+    from clvis.raster import FilteredImage, GBuffers
+
+    for proto, result in (
+        (inputs.IsoImageLike, IsoImage),
+        (inputs.FilteredImageLike, FilteredImage),
+        (inputs.GBuffersLike, GBuffers),
+    ):
+        planes = {n for n, v in vars(proto).items() if isinstance(v, property)}
+        fields = {f.name: str(f.type) for f in dataclasses.fields(result)}
+        assert planes and planes <= set(fields), (proto.__name__, planes - set(fields))
+        for name in planes:
+            assert "np.ndarray | cla.Array" in fields[name], f"{result.__name__}.{name}: {fields[name]}"

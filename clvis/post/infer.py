@@ -53,7 +53,6 @@ import os
 import time
 import typing
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pyopencl as cl
@@ -62,6 +61,7 @@ import pyopencl.array as cla
 from .. import limits
 from .._arrays import buffer_of, resolve_queue
 from ..errors import DataError
+from .inputs import PostInput
 from .names import GBUFFER_PLANES
 from .pack import padded_shape, unpack_rgba8
 from .specs import spec
@@ -238,7 +238,7 @@ class PostNetwork:
             self._buffers[key] = tensors[0], tensors[1]
         return self._buffers[key]
 
-    def _size(self, image: Any) -> tuple[int, int]:
+    def _size(self, image: PostInput) -> tuple[int, int]:
         """(H, W) of an input the network takes; TypeError/ValueError/DataError else."""
         h, w = self.spec.shape(image)
         if h == 0 or w == 0:
@@ -250,7 +250,7 @@ class PostNetwork:
             )
         return h, w
 
-    def _run(self, image: Any) -> tuple[cla.Array, int, int]:
+    def _run(self, image: PostInput) -> tuple[cla.Array, int, int]:
         """(output, H, W): the network's output, in this object's host-visible
         device array (reused by the next frame of the same size), and the
         image's size."""
@@ -285,12 +285,12 @@ class PostNetwork:
         self.stats = {"pack": t1 - t0, "inference": time.perf_counter() - t1}
         return output, h, w
 
-    def infer(self, image: Any) -> np.ndarray:
+    def infer(self, image: PostInput) -> np.ndarray:
         """The network's raw output for `image`: (1, C, Hp, Wp) float32 (C: 4
         for infill, 3 for lidar and narvis), padded to the stride."""
         return self._run(image)[0].get()
 
-    def __call__(self, image: Any) -> np.ndarray:
+    def __call__(self, image: PostInput) -> np.ndarray:
         """(H, W, 4) uint8 RGBA: the network's picture of `image` (the unpack
         kernel reads the network's output where onnxruntime wrote it; the
         picture is the one read-back)."""

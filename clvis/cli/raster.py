@@ -141,10 +141,10 @@ def _colour(text: str) -> tuple[int, int, int]:
     if t in _COLOUR_NAMES:
         return _COLOUR_NAMES[t]
     if re.fullmatch(r"#[0-9a-f]{6}", t):
-        return tuple(int(t[k : k + 2], 16) for k in (1, 3, 5))  # type: ignore[return-value]
+        return int(t[1:3], 16), int(t[3:5], 16), int(t[5:7], 16)
     m = re.fullmatch(r"(\d{1,3}),(\d{1,3}),(\d{1,3})", t.replace(" ", ""))
     if m and all(int(v) <= 255 for v in m.groups()):
-        return tuple(int(v) for v in m.groups())  # type: ignore[return-value]
+        return int(m[1]), int(m[2]), int(m[3])
     raise argparse.ArgumentTypeError(
         f"expected a colour: {', '.join(sorted(_COLOUR_NAMES))}, #RRGGBB or R,G,B (0..255), got {text!r}"
     )

@@ -137,6 +137,17 @@ def result(a: cla.Array, host: bool) -> np.ndarray | cla.Array:
     return a.get() if host else a
 
 
+def on_host(a: np.ndarray | cla.Array) -> np.ndarray:
+    """`a`, a plane of a result made on the host (numpy in, or ``host=True``),
+    typed as the numpy array it is; TypeError for a device array (the result
+    was made with ``host=False``, or from device input): nothing is read back."""
+    if not isinstance(a, np.ndarray):
+        raise TypeError(
+            f"expected a host (numpy) array, got {type(a).__name__}: read device planes back with .get()"
+        )
+    return a
+
+
 def nonnegative_int(name: str, v: Any) -> int:
     """v as an int >= 0: TypeError for a non-integer (bool included), ValueError below 0."""
     if isinstance(v, bool):

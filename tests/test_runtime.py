@@ -501,3 +501,15 @@ def test_configure_is_per_thread_and_never_leaks():
         runtime.set_options(tuning="cpu")  # inside a block: for the rest of the block
         assert runtime.options().tuning == "cpu"
     assert runtime.options() == before
+
+
+def test_on_host(device):
+    """clvis._arrays.on_host: a host result's plane as the numpy array it is;
+    a device array is refused (never read back behind the caller's back)."""
+    from clvis._arrays import on_host
+
+    a = np.arange(6, dtype=np.float32)
+    assert on_host(a) is a
+    d = cla.to_device(runtime.queue_for(device), a)
+    with pytest.raises(TypeError, match="expected a host \\(numpy\\) array, got Array"):
+        on_host(d)

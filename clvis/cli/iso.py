@@ -652,6 +652,7 @@ def _short(values, most=12) -> str:
 def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (640, 480)) -> bool:
     """The demo's iso part: Marschner-Lobb, progressive, checked against the reference."""
     from .. import datasets, images, zfp
+    from .._arrays import on_host
     from ..reference import iso as ref
 
     w, h = size
@@ -680,7 +681,7 @@ def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (640, 
         spacing=d["spacing"],
         origin=d["origin"],
     )
-    a = ref.agreement(want, small.hit, small.depth)
+    a = ref.agreement(want, on_host(small.hit), on_host(small.depth))
     print(
         f"  image vs clvis.reference.iso ({cw}x{ch}, hit mask and depth on reliable pixels): "
         f"{'matches' if a['ok'] else 'MISMATCH'} (depth error {a['depth_error']:.1e} of the diagonal)"

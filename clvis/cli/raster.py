@@ -141,10 +141,10 @@ def _colour(text: str) -> tuple[int, int, int]:
     if t in _COLOUR_NAMES:
         return _COLOUR_NAMES[t]
     if re.fullmatch(r"#[0-9a-f]{6}", t):
-        return tuple(int(t[k : k + 2], 16) for k in (1, 3, 5))  # type: ignore[return-value]
+        return int(t[1:3], 16), int(t[3:5], 16), int(t[5:7], 16)
     m = re.fullmatch(r"(\d{1,3}),(\d{1,3}),(\d{1,3})", t.replace(" ", ""))
     if m and all(int(v) <= 255 for v in m.groups()):
-        return tuple(int(v) for v in m.groups())  # type: ignore[return-value]
+        return int(m[1]), int(m[2]), int(m[3])
     raise argparse.ArgumentTypeError(
         f"expected a colour: {', '.join(sorted(_COLOUR_NAMES))}, #RRGGBB or R,G,B (0..255), got {text!r}"
     )
@@ -276,7 +276,7 @@ def _render_panels(
 ) -> _Rendered:
     """Render one view; the G-buffers and the images a person looks at."""
     from .. import images
-    from ..raster import EMPTY, depth_filter, depth_filter_mask, edl, rgbda
+    from ..raster import EMPTY, depth_filter, edl
 
     look = look or _Look()
     color_by = None if look.classes is not None else attribute
@@ -349,8 +349,8 @@ def _render_panels(
             G-buffers with only the planes the network reads, never read back
             (the panels above are the host render's)."""
             gd = raster.render(camera, width, height, **kw, planes=post.attribute_planes, host=False)
-            if post.name == "lidar":  # depth_filter(g) on device planes
-                return post(rgbda(gd.rgba, gd.depth, depth_filter_mask(gd.depth, levels)))
+            if post.name == "lidar":  # device planes in, device planes out
+                return post(depth_filter(gd, levels))
             return post(gd)
 
         title = post.spec.title
@@ -556,6 +556,7 @@ def _render_distributed(args, progress) -> int:
     """`clvis render TILES... --workers N | --scheduler ADDRESS`: the tiles
     read and rendered on Dask workers, composited into one view."""
     from .. import images
+    from .._arrays import on_host
     from ..distributed import DistributedRasterizer
     from ..raster import depth_filter
 
@@ -607,13 +608,13 @@ def _render_distributed(args, progress) -> int:
                 _Panel(
                     f"attribute-{_safe_name(attribute)}",
                     f"{attribute} ({args.colormap})",
-                    g.rgba,
+                    on_host(g.rgba),
                     (args.colormap, *vr),
                 )
             )
         else:
-            panels.append(_Panel("colors", "point colors", g.rgba))
-        panels.append(_Panel("depth", "depth (near = bright)", images.depth_image(g.depth)))
+            panels.append(_Panel("colors", "point colors", on_host(g.rgba)))
+        panels.append(_Panel("depth", "depth (near = bright)", images.depth_image(on_host(g.depth))))
         if args.depth_filter:
             with progress.stage(f"depth filter ({args.depth_filter} levels)"):
                 filtered = depth_filter(g, args.depth_filter)
@@ -627,7 +628,7 @@ def _render_distributed(args, progress) -> int:
             named.append(("overview.png", _overview(panels, args.transparent)))
             files = _save_pngs(out, named)
         st = g.stats
-        covered = int(g.covered.sum())
+        covered = int(on_host(g.covered).sum())
         print(f"clvis render: {len(args.file)} tiles, {dr.n:,} points, on {st['workers']} Dask workers")
         if workers is not None and workers > dr.npartitions:
             print(
@@ -750,6 +751,7 @@ def _look(args, cloud, attribute, point_size, queue) -> _Look:
 
 def _render(args, progress) -> int:
     from .. import runtime
+    from .._arrays import on_host
     from ..raster import Rasterizer
     from ..raster.depth_filter import LEVELS
 
@@ -832,7 +834,7 @@ def _render(args, progress) -> int:
     total = time.perf_counter() - t_start
 
     g, n = r.gbuffers, len(cloud)
-    covered = int(g.covered.sum())
+    covered = int(on_host(g.covered).sum())
     stats = g.stats
     if look.classes is not None:
         colored = f"colored by {attribute} (ASPRS classes: {len(look.classes)})"
@@ -894,6 +896,7 @@ def _render(args, progress) -> int:
 def demo(args: argparse.Namespace, q: cl.CommandQueue) -> bool:
     """The demo's raster part: throughput, the reference check, the overview PNG."""
     from .. import images
+    from .._arrays import on_host
     from ..raster import Rasterizer
     from ..reference import raster as ref
 
@@ -920,7 +923,9 @@ def demo(args: argparse.Namespace, q: cl.CommandQueue) -> bool:
     sub_cam = fit_camera(sub, lo, hi, direction=_FIT.direction, fov_y=_FIT.fov_y, aspect=w / h)
     got = Rasterizer(sub, queue=q).render(sub_cam, w, h)
     want = ref.rasterize(sub, sub_cam, w, h)
-    ok = np.array_equal(got.index, want.index) and np.array_equal(got.depth, want.depth)
+    ok = np.array_equal(on_host(got.index), on_host(want.index)) and np.array_equal(
+        on_host(got.depth), on_host(want.depth)
+    )
     print(
         f"  G-buffers vs clvis.reference.raster ({m:,} points at {w}x{h}, index and depth): "
         f"{'matches' if ok else 'MISMATCH'}"

@@ -24,7 +24,7 @@ import signal
 import socket
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -47,7 +47,8 @@ CONNECT_TIMEOUT = 10.0  # seconds to reach a scheduler given by address
 FRAME_RETRIES = 2  # frames submitted again after data was lost with a worker
 
 
-def _distributed():
+def _distributed() -> Any:
+    """The dask.distributed module (an optional extra: ImportError naming it)."""
     try:
         import distributed
     except ImportError as e:  # pragma: no cover - the extra is missing
@@ -162,9 +163,9 @@ def _ignore_sigint() -> None:
 def _quiet_workers() -> Any:
     """A WorkerPlugin that makes every worker process ignore SIGINT, those the
     nanny starts again after a loss included."""
-    d = _distributed()
+    plugin: Any = _distributed().WorkerPlugin  # the extra is imported when called: mypy takes the base as Any
 
-    class IgnoreSigint(d.WorkerPlugin):
+    class IgnoreSigint(plugin):
         idempotent = True
         name = "clvis-ignore-sigint"
 
@@ -399,7 +400,7 @@ class ClusterOwner:
         workers = list(groups)
         meant: dict = {}
 
-        def submit(fn, *args, worker=None):
+        def submit(fn: Callable, *args: Any, worker: str | None = None) -> Any:
             f = client.submit(fn, *args, pure=False, **self._pin(worker))
             meant[f.key] = worker
             return f
@@ -492,7 +493,7 @@ class _Lost(ClusterError):
 
 
 @contextlib.contextmanager
-def _quiet_logs():
+def _quiet_logs() -> Iterator[None]:
     """distributed's own warnings while a cluster is stopped on purpose
     (workers that went away, comms closed) say nothing the caller needs."""
     logger = logging.getLogger("distributed")

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from .._arrays import triple
+from .._arrays import on_host, triple
 from ..camera import Camera
 from ..errors import ClusterError, ClvisError, DataError, DeviceError
 from ..iso import IsoImage, IsoRenderer
@@ -284,8 +284,9 @@ def render_one(handle: _Handle, data: Any, view: dict) -> _c.Partial:
         cam, c1 - c0, r1 - r0, view["isovalue"], speculation=view["speculation"]
     )
     counts["passes"] = int(img.stats.get("passes", 0))
-    planes = {"rgba": img.rgba, "t": img.t}
-    key = _c.depth_keys(img.depth, np.full(img.hit.shape, number), img.hit)
+    hit = on_host(img.hit)
+    planes = {"rgba": on_host(img.rgba), "t": on_host(img.t)}
+    key = _c.depth_keys(on_host(img.depth), np.full(hit.shape, number), hit)
     return _c.Partial((r0, r1), key, planes, worker, counts=counts, cols=(c0, c1), empty=EMPTY_PLANES)
 
 
@@ -359,7 +360,7 @@ class DistributedIsoRenderer(ClusterOwner):
             ws = sorted(self.client.scheduler_info()["workers"]) or [None]
             units = worker_plan(self.bricks, len(ws)) if per_worker else [(r, 1) for r in self.bricks]
             token = uuid.uuid4().hex
-            self._specs = []
+            self._specs: list[dict[str, Any]] = []
             for i, (ranges, count) in enumerate(units):
                 (z0, _), (y0, _), (x0, _) = ranges
                 self._specs.append(

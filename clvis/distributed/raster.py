@@ -44,10 +44,11 @@ import os
 import uuid
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arrays import on_host
 from ..camera import Camera
 from ..errors import ClvisError, DataError, DeviceError
 from ..io import PointCloud, read_points
@@ -62,6 +63,9 @@ from .cluster import (
     forget,
     frame_seconds,
 )
+
+if TYPE_CHECKING:
+    import pyopencl as cl
 
 __all__ = ["COMPOSITING", "DistributedRasterizer", "concatenate"]
 
@@ -85,7 +89,7 @@ def concatenate(clouds: Sequence[PointCloud], origin: Any = None) -> PointCloud:
         if list(c.attributes) != names:
             raise DataError(f"clouds: attributes {list(c.attributes)} differ from the first cloud's {names}")
 
-    def cat(field):
+    def cat(field: str) -> np.ndarray | None:
         vals = [getattr(c, field) for c in clouds]
         if all(v is None for v in vals):
             return None
@@ -161,7 +165,7 @@ def _meta(cloud: PointCloud) -> dict:
     }
 
 
-def _bounds(cloud: PointCloud):
+def _bounds(cloud: PointCloud) -> tuple[np.ndarray, np.ndarray] | None:
     """(min, max) of the finite positions as stored (local coordinates), or None."""
     try:
         return cloud.bounds()
@@ -188,7 +192,8 @@ class _Handle:
         self.origin, self.offsets, self.ns, self.options = origin, list(offsets), list(ns), options
         self.worker = current_worker()
         self.device_bytes = 0
-        self.bounds = None  # (min, max) of its points relative to origin, float64
+        #: (min, max) of its points relative to origin, float64 (None: no finite point)
+        self.bounds: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def token(self) -> str:
@@ -207,7 +212,7 @@ class _Handle:
         return out
 
 
-def _queue():
+def _queue() -> cl.CommandQueue:
     from .. import runtime
 
     try:
@@ -291,8 +296,8 @@ def render_one(handle: _Handle, arrays: Any, view: dict) -> _c.Partial:
         planes=view["planes"],
         point_size=view["point_size"],
     )
-    covered = g.index != EMPTY
-    index = handle.global_ids(g.index)
+    covered = on_host(g.index) != EMPTY
+    index = handle.global_ids(on_host(g.index))
     planes = {}  # index and depth travel in the key
     for f in _FIELDS[2:]:
         a = getattr(g, f)
@@ -300,7 +305,7 @@ def render_one(handle: _Handle, arrays: Any, view: dict) -> _c.Partial:
             planes[f] = a
     for k, a in g.attributes.items():
         planes["attr:" + k] = a
-    key = _c.depth_keys(g.depth, index, covered)
+    key = _c.depth_keys(on_host(g.depth), index, covered)
     counts = {k: g.stats.get(k, 0) for k in _STATS}
     return _c.Partial((0, view["height"]), key, planes, current_worker(), counts=counts)
 
@@ -385,7 +390,14 @@ class DistributedRasterizer(ClusterOwner):
 
     # -- partitions
     @staticmethod
-    def _partitions(sources, colors, attributes, velocity, radius, fields):
+    def _partitions(
+        sources: Any,
+        colors: Any,
+        attributes: Mapping[str, Any] | None,
+        velocity: Any,
+        radius: Any,
+        fields: Sequence[str] | None,
+    ) -> tuple[list[dict[str, Any]], list[Any]]:
         token = uuid.uuid4().hex
         if hasattr(sources, "to_delayed") and hasattr(sources, "chunks"):
             pos = sources
@@ -399,7 +411,8 @@ class DistributedRasterizer(ClusterOwner):
                 if a is not None:
                     blocks[name] = _blocks(name, a, chunks)
             attrs = {k: _blocks(f"attributes[{k!r}]", a, chunks) for k, a in (attributes or {}).items()}
-            specs, arrays = [], []
+            specs: list[dict[str, Any]] = []
+            arrays: list[Any] = []
             for i in range(len(chunks)):
                 specs.append({"token": f"{token}-{i}", "path": None, "number": i, "fields": None})
                 d = {name: b[i] for name, b in blocks.items()}
@@ -423,7 +436,7 @@ class DistributedRasterizer(ClusterOwner):
         ]
         return specs, [None] * len(specs)
 
-    def _setup(self, specs, arrays, options):
+    def _setup(self, specs: list[dict[str, Any]], arrays: list[Any], options: dict[str, Any]) -> None:
         client = self.client
         if any(a is not None for a in arrays):
             arrays = [_computed(client, a) for a in arrays]  # the blocks, kept on the workers
@@ -476,8 +489,8 @@ class DistributedRasterizer(ClusterOwner):
         self.hold(handles, held, [s["token"] for s in specs] + [h.token for h in built])
         self._run_on_workers(forget, [s["token"] for s in specs])  # clouds opened where not built
 
-    def _check_partitions(self, specs, metas):
-        def name(i):
+    def _check_partitions(self, specs: list[dict[str, Any]], metas: list[dict[str, Any]]) -> None:
+        def name(i: int) -> str:
             return specs[i]["path"] or f"partition {i}"
 
         for i, m in enumerate(metas[1:], 1):
@@ -533,7 +546,17 @@ class DistributedRasterizer(ClusterOwner):
         whole, frame, sent, nworkers = self._frame(render_one, view)
         return self._gbuffers(whole, frame, sent, nworkers)
 
-    def _view(self, camera, width, height, color_by, colormap, value_range, planes, point_size) -> dict:
+    def _view(
+        self,
+        camera: Camera,
+        width: int,
+        height: int,
+        color_by: str | None,
+        colormap: str,
+        value_range: tuple[float, float] | None,
+        planes: Any,
+        point_size: int,
+    ) -> dict:
         from ..raster.inputs import check_camera, check_point_size, check_size
 
         check_camera(camera)

@@ -3,9 +3,10 @@ helpers every point reader and writer shares."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import os
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -15,15 +16,18 @@ from ..errors import DataError
 from .files import write_replacing
 
 # Named columns (PLY vertex properties, structured NPY fields) with a meaning.
-_COLOR_NAMES = (("red", "green", "blue", "alpha"), ("r", "g", "b", "a"))
-_VELOCITY_NAMES = (("vx", "vy", "vz"), ("velocity_x", "velocity_y", "velocity_z"))
+_COLOR_NAMES: tuple[tuple[str, ...], ...] = (("red", "green", "blue", "alpha"), ("r", "g", "b", "a"))
+_VELOCITY_NAMES: tuple[tuple[str, ...], ...] = (
+    ("vx", "vy", "vz"),
+    ("velocity_x", "velocity_y", "velocity_z"),
+)
 _RESERVED_COLUMNS = frozenset({"x", "y", "z", "radius"}.union(*_COLOR_NAMES, *_VELOCITY_NAMES))
 _NPZ_KEYS = ("positions", "colors", "velocity", "radius", "origin")
 # The PLY header comment that carries a cloud's origin.
 _ORIGIN_COMMENT = "clvis origin"
 
 
-def _vectors(name: str, a, n: int | None) -> np.ndarray:
+def _vectors(name: str, a: npt.ArrayLike, n: int | None) -> np.ndarray:
     a = real_array(name, a)
     if a.ndim != 2 or a.shape[1] != 3:
         raise ValueError(f"{name}: expected shape (N, 3), got {a.shape}")
@@ -36,7 +40,7 @@ def _check_length(name: str, length: int, n: int | None) -> None:
         raise ValueError(f"{name}: {length} rows, but positions has {n}")
 
 
-def _colors(a, n: int) -> np.ndarray:
+def _colors(a: npt.ArrayLike, n: int) -> np.ndarray:
     a = real_array("colors", a)
     if a.ndim != 2 or a.shape[1] not in (3, 4):
         raise ValueError(f"colors: expected shape (N, 3) or (N, 4), got {a.shape}")
@@ -59,7 +63,7 @@ def _colors(a, n: int) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def _attribute(key, a, n: int) -> np.ndarray:
+def _attribute(key: object, a: npt.ArrayLike, n: int) -> np.ndarray:
     if not isinstance(key, str) or not key:
         raise TypeError(f"attributes: names must be non-empty strings, got {key!r}")
     name = f"attributes[{key!r}]"
@@ -178,7 +182,7 @@ class PointCloud:
                     f"{int(index.min())}..{int(index.max())}"
                 )
 
-        def pick(a):
+        def pick(a: np.ndarray | None) -> np.ndarray | None:
             return None if a is None else a[index]
 
         return PointCloud(
@@ -191,7 +195,7 @@ class PointCloud:
         )
 
 
-def _cloud(path: Path, **fields) -> PointCloud:
+def _cloud(path: Path, **fields: Any) -> PointCloud:
     """PointCloud(**fields), its complaints turned into DataErrors naming the file."""
     try:
         return PointCloud(**fields)
@@ -199,17 +203,17 @@ def _cloud(path: Path, **fields) -> PointCloud:
         raise DataError(f"{path}: {e}") from e
 
 
-def _from_columns(path: Path, columns: dict[str, np.ndarray], origin=None) -> PointCloud:
+def _from_columns(path: Path, columns: dict[str, np.ndarray], origin: Any = None) -> PointCloud:
     """A cloud from named 1-D columns (PLY properties, structured NPY fields)."""
     missing = [c for c in "xyz" if c not in columns]
     if missing:
         raise DataError(f"{path}: no {', '.join(missing)} column (found {', '.join(columns) or 'none'})")
     columns = dict(columns)
 
-    def take(names):
+    def take(names: Iterable[str]) -> np.ndarray:
         return np.stack([columns.pop(c) for c in names], axis=1)
 
-    fields = {"positions": take("xyz"), "origin": origin}
+    fields: dict[str, Any] = {"positions": take("xyz"), "origin": origin}
     for names in _COLOR_NAMES:
         if all(c in columns for c in names[:3]):
             fields["colors"] = take([c for c in names if c in columns])
@@ -224,12 +228,12 @@ def _from_columns(path: Path, columns: dict[str, np.ndarray], origin=None) -> Po
     return _cloud(path, **fields)
 
 
-def _write_or_remove(path, write) -> None:
+def _write_or_remove(path: str | os.PathLike[str], write: Callable[[IO[Any]], object]) -> None:
     """write(file) into a file that then replaces `path` atomically: on any
     failure `path` keeps what it held (see :mod:`clvis.io.files`)."""
     write_replacing(path, write)
 
 
-def _check_cloud(cloud) -> None:
+def _check_cloud(cloud: object) -> None:
     if not isinstance(cloud, PointCloud):
         raise TypeError(f"cloud: expected a PointCloud, got {type(cloud).__name__}")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import struct
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -105,11 +106,17 @@ def _check_las_header(path: Path) -> tuple[int, int]:
 # The extra bytes VLR: 192-byte descriptors; data_type (byte 2) 0 is "undocumented
 # bytes", as many as options (byte 3) says; 1-10 scalars, 11-30 (LAS 1.3) arrays of them
 _EXTRA_BYTES_VLR = (b"LASF_Spec", 4)
+# a (E)VLR's key (user id, record id) and its data's place (start byte, length)
+_RecordKey = tuple[bytes, int]
+_Record = tuple[int, int]
+
 _EXTRA_SIZES = (1, 1, 2, 2, 4, 4, 8, 8, 4, 8)
 _BASE_RECORD = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
 
 
-def _check_extra_bytes(f, path, record, point_format: int, record_len: int) -> None:
+def _check_extra_bytes(
+    f: BinaryIO, path: Path, record: _Record | None, point_format: int, record_len: int
+) -> None:
     """The extra bytes descriptors against the record: laspy divides by a
     descriptor's element size (0 for a data type 0 of no bytes) and lays the
     dimensions out in the record without checking that they fit."""
@@ -145,9 +152,11 @@ def _check_extra_bytes(f, path, record, point_format: int, record_len: int) -> N
         )
 
 
-def _las_records(f, path, start: int, n: int, end: int, head_len: int, len_fmt: str, what: str) -> dict:
+def _las_records(
+    f: BinaryIO, path: Path, start: int, n: int, end: int, head_len: int, len_fmt: str, what: str
+) -> dict[_RecordKey, _Record]:
     """Walk n (E)VLRs from `start`: each must end by `end`. {(user id, record id): (data start, length)}."""
-    found = {}
+    found: dict[_RecordKey, _Record] = {}
     pos = start
     for i in range(n):
         f.seek(pos)
@@ -166,7 +175,7 @@ def _las_records(f, path, start: int, n: int, end: int, head_len: int, len_fmt: 
     return found
 
 
-def _check_laz_items(path, vlr: bytes, n_items: int, record_len: int, point_format: int) -> None:
+def _check_laz_items(path: Path, vlr: bytes, n_items: int, record_len: int, point_format: int) -> None:
     """The laszip VLR's compressor and items must be the canonical ones of the
     header's point format: (type, size, version) of each, then at most one
     extra bytes item of the bytes the record has beyond the format's own."""
@@ -192,7 +201,14 @@ def _check_laz_items(path, vlr: bytes, n_items: int, record_len: int, point_form
 
 
 def _check_laz(
-    f, path, size: int, data_offset: int, count: int, record_len: int, laszip, point_format: int
+    f: BinaryIO,
+    path: Path,
+    size: int,
+    data_offset: int,
+    count: int,
+    record_len: int,
+    laszip: _Record,
+    point_format: int,
 ) -> None:
     """The laszip VLR, the chunk table and the declared point count against the file."""
     vlr_start, vlr_len = laszip
@@ -270,7 +286,17 @@ _LAZ_LAYERS = {
 }
 
 
-def _check_laz_chunks(f, path, data_offset, table, count, record_len, vlr, chunk_size, n_chunks):
+def _check_laz_chunks(
+    f: BinaryIO,
+    path: Path,
+    data_offset: int,
+    table: int,
+    count: int,
+    record_len: int,
+    vlr: bytes,
+    chunk_size: int,
+    n_chunks: int,
+) -> None:
     """The chunk table's entries (decoded by lazrs, whose table of n_chunks entries
     is now small) and, for layered compression, each chunk's layer sizes: lazrs
     allocates what these declare, and a failed allocation aborts the process."""
@@ -366,11 +392,11 @@ def _read_las(path: Path) -> PointCloud:
     xyz = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
     origin = xyz.min(axis=0) if n else np.zeros(3)
     dims = list(las.point_format.dimension_names)
-    fields = {"positions": (xyz - origin).astype(np.float32), "origin": origin}
+    fields: dict[str, object] = {"positions": (xyz - origin).astype(np.float32), "origin": origin}
     if all(c in dims for c in ("red", "green", "blue")):
         rgb = np.stack([np.asarray(las[c]) for c in ("red", "green", "blue")], axis=1)
         fields["colors"] = (rgb >> 8 if n and rgb.max() > 255 else rgb).astype(np.uint8)
-    attributes = {}
+    attributes: dict[str, np.ndarray] = {}
     for name in dims:
         if name in ("X", "Y", "Z", "red", "green", "blue"):
             continue

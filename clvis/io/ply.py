@@ -58,7 +58,8 @@ def _check_ply_header(path: Path) -> None:
         return
     nl = head.find(b"\n", end)
     data_start = size if nl < 0 else nl + 1
-    fmt, elements = None, []
+    fmt = None
+    elements: list[tuple[str, list[int]]] = []  # (name, [count, min bytes a row, properties])
     for line in head[:end].decode("ascii", "replace").splitlines():
         words = line.split()
         if not words:
@@ -67,24 +68,24 @@ def _check_ply_header(path: Path) -> None:
             fmt = words[1]
         elif words[0] == "element" and len(words) == 3:
             try:
-                elements.append([words[1], int(words[2]), 0, 0])  # name, count, min bytes, properties
+                elements.append((words[1], [int(words[2]), 0, 0]))
             except ValueError:
                 return
         elif words[0] == "property" and elements:
-            el = elements[-1]
-            el[3] += 1
+            el = elements[-1][1]
+            el[2] += 1
             if len(words) >= 5 and words[1] == "list":
-                el[2] += _PLY_SIZES.get(words[2], 1)
+                el[1] += _PLY_SIZES.get(words[2], 1)
             elif len(words) >= 3:
-                el[2] += _PLY_SIZES.get(words[1], 1)
+                el[1] += _PLY_SIZES.get(words[1], 1)
     need = 0
-    for _, count, row, props in elements:
+    for _, (count, row, props) in elements:
         if count < 0:
             raise DataError(f"{path}: malformed PLY header: a negative element count {count}")
         need += count * max(1, row if fmt != "ascii" else 2 * props - 1)
     have = size - data_start
     if need > have:
-        declared = ", ".join(f"{count} {name}" for name, count, _, _ in elements)
+        declared = ", ".join(f"{count} {name}" for name, (count, _, _) in elements)
         raise DataError(
             f"{path}: truncated or malformed PLY file: the header declares {declared} "
             f"rows, at least {_size(need)}, but the file holds {have} bytes after the header"

@@ -21,6 +21,7 @@ from __future__ import annotations
 import os
 import zipfile
 from pathlib import Path
+from typing import IO, Any
 
 import numpy as np
 
@@ -90,7 +91,7 @@ def _read_npz(path: Path) -> PointCloud:
     arrays = load_npz(path)
     if "positions" not in arrays:
         raise DataError(f"{path}: no 'positions' array (keys: {', '.join(arrays) or 'none'})")
-    fields = {k: arrays.pop(k) for k in _NPZ_KEYS if k in arrays}
+    fields: dict[str, object] = {k: arrays.pop(k) for k in _NPZ_KEYS if k in arrays}
     fields["attributes"] = arrays
     return _cloud(path, **fields)
 
@@ -109,7 +110,7 @@ def save_npz(path: str | os.PathLike[str], cloud: PointCloud) -> None:
     )
     arrays.update(cloud.attributes)
 
-    def write(f):
+    def write(f: IO[Any]) -> None:
         # np.savez's own keywords (file, allow_pickle) would clash with attribute names
         with zipfile.ZipFile(f, "w") as archive:
             for k, v in arrays.items():

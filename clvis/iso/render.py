@@ -71,6 +71,7 @@ from typing import Any
 
 import numpy as np
 import pyopencl as cl
+import pyopencl.array as cla
 
 from .. import limits, runtime
 from .._arrays import positive_int, resolve_queue, triple
@@ -144,13 +145,13 @@ class IsoImage:
     finished) and ``stats``. From ``render(..., host=False)`` the five planes
     are ``pyopencl.array.Array`` of the same shapes and dtypes."""
 
-    rgba: np.ndarray
-    depth: np.ndarray
-    hit: np.ndarray
-    t: np.ndarray
-    active: np.ndarray
+    rgba: np.ndarray | cla.Array
+    depth: np.ndarray | cla.Array
+    hit: np.ndarray | cla.Array
+    t: np.ndarray | cla.Array
+    active: np.ndarray | cla.Array
     completion: float
-    stats: dict
+    stats: dict[str, Any]
 
 
 class _HostImage:
@@ -371,7 +372,7 @@ class IsoRenderer:
         ``hit`` and ``active`` bool), each tile written into them by a kernel,
         and nothing but the pass loop's counts is read back. See the module
         doc for tiles, `tile_pixels` and `progress`."""
-        last = None
+        last: Callable[..., IsoImage] | None = None
         with runtime.pinned(self.config):
             for last in self._run(  # noqa: B007  (the last image of the pass loop is the result)
                 camera,
@@ -386,6 +387,7 @@ class IsoRenderer:
                 host,
             ):
                 pass
+            assert last is not None  # _run yields at least once (no ray in the volume: the empty image)
             return last(copy=False)
 
     def passes(
@@ -514,7 +516,7 @@ class IsoRenderer:
                 out.mark_active(p0, rays[1], k)
         n_total = sum(entering)
         int64 = self.config.int64_atomics
-        stats = {
+        stats: dict[str, Any] = {
             "passes": 0,
             "active_per_pass": [],
             "n_spec_per_pass": [],
@@ -598,6 +600,8 @@ class IsoRenderer:
         q, zv = self.queue, self.volume
         shape, spacing, origin = zv.shape, self.spacing, self.origin
         active = t.active
+        fine, coarse = self.grids.fine, self.grids.coarse
+        assert isinstance(fine, cla.Array) and isinstance(coarse, cla.Array)  # built with host=False
         n_items = n_active * n_spec
         cnt = runtime.empty(q, 1, np.uint32, "active count")
         cnt.set(np.array([n_active], np.uint32), queue=q)
@@ -611,8 +615,8 @@ class IsoRenderer:
             iso,
             t.cam,
             t.w,
-            self.grids.fine,
-            self.grids.coarse,
+            fine,
+            coarse,
             active,
             cnt,
             n_active,

@@ -7,9 +7,9 @@ whose call takes a renderer's own output and returns an RGBA8 picture:
   e.g. ``IsoRenderer.render(..., completion=0.85, host=False)``; the rays
   still running are filled in, the finished pixels come back as they were.
   Alpha is the surface's coverage (premultiplied colour over black).
-- "lidar": a FilteredImage (``depth_filter(...)``, or its ``rgbda`` array
-  (H, W, 5), numpy or device: ``raster.rgbda(g.rgba, g.depth,
-  depth_filter_mask(g.depth))`` of ``host=False`` G-buffers); alpha 255.
+- "lidar": a FilteredImage (``depth_filter(g)``: numpy, or device planes
+  for ``host=False`` G-buffers) or its ``rgbda`` array (H, W, 5), numpy or
+  device; alpha 255.
 - "narvis": rasterizer G-buffers (``Rasterizer.render``'s GBuffers, numpy
   or ``host=False``) with the planes the card names (``planes``: by default
   the colour, depth and screen velocity, so the cloud needs a velocity;
@@ -51,16 +51,17 @@ import hashlib
 import json
 import os
 import time
+import typing
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import limits
-from .._arrays import resolve_queue
+from .._arrays import buffer_of, resolve_queue
 from ..errors import DataError
+from .inputs import PostInput
 from .names import GBUFFER_PLANES
 from .pack import padded_shape, unpack_rgba8
 from .specs import spec
@@ -100,7 +101,7 @@ def _check_card(path: Path, card: dict) -> None:
     """The fields load() and the packers trust, each of the type and range they
     need: DataError naming the field (an edited card, not a Python traceback)."""
 
-    def whole(key, lo, hi):
+    def whole(key: str, lo: int, hi: int) -> None:
         v = card.get(key)
         if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
             raise DataError(
@@ -140,6 +141,18 @@ def _providers(providers: list[str] | None) -> list[str]:
     if missing:
         raise ValueError(f"providers: {missing} not in this onnxruntime (it has {available})")
     return list(providers)
+
+
+def _map(queue: cl.CommandQueue, a: cla.Array, flags: cl.map_flags) -> tuple[np.ndarray, cl.MemoryMap]:
+    """The float32 device array `a`'s buffer mapped (blocking) as a host
+    array, and its map (``release()`` unmaps it)."""
+    # pyopencl's stub says the call returns the array; it returns (array, event),
+    # the array's base the map
+    mapped, _ = typing.cast(
+        "tuple[np.ndarray, cl.Event]",
+        cl.enqueue_map_buffer(queue, buffer_of(a), flags, 0, a.shape, np.dtype(np.float32), is_blocking=True),
+    )
+    return mapped, typing.cast(cl.MemoryMap, mapped.base)
 
 
 class PostNetwork:
@@ -225,7 +238,7 @@ class PostNetwork:
             self._buffers[key] = tensors[0], tensors[1]
         return self._buffers[key]
 
-    def _size(self, image: Any) -> tuple[int, int]:
+    def _size(self, image: PostInput) -> tuple[int, int]:
         """(H, W) of an input the network takes; TypeError/ValueError/DataError else."""
         h, w = self.spec.shape(image)
         if h == 0 or w == 0:
@@ -237,7 +250,7 @@ class PostNetwork:
             )
         return h, w
 
-    def _run(self, image: Any) -> tuple[cla.Array, int, int]:
+    def _run(self, image: PostInput) -> tuple[cla.Array, int, int]:
         """(output, H, W): the network's output, in this object's host-visible
         device array (reused by the next frame of the same size), and the
         image's size."""
@@ -253,41 +266,31 @@ class PostNetwork:
         # pointers to the two host-visible buffers (IO binding): on a CPU
         # device no copy; on a GPU the input's map is a read-back and the
         # output's unmap the upload the unpack kernel needs
-        mapped_in, _ = cl.enqueue_map_buffer(
-            q, planes.base_data, cl.map_flags.READ, 0, planes.shape, np.float32, is_blocking=True
-        )
+        mapped_in, map_in = _map(q, planes, cl.map_flags.READ)
         try:
-            mapped_out, _ = cl.enqueue_map_buffer(
-                q,
-                output.base_data,
-                cl.map_flags.WRITE_INVALIDATE_REGION,
-                0,
-                output.shape,
-                np.float32,
-                is_blocking=True,
-            )
+            mapped_out, map_out = _map(q, output, cl.map_flags.WRITE_INVALIDATE_REGION)
             try:
                 io = self.session.io_binding()
                 io.bind_input(self._in, "cpu", 0, np.float32, list(planes.shape), mapped_in.ctypes.data)
                 io.bind_output(self._out, "cpu", 0, np.float32, list(output.shape), mapped_out.ctypes.data)
                 self.session.run_with_iobinding(io)
             finally:
-                mapped_out.base.release()
+                map_out.release()
         except Exception as e:  # a graph that loads but fails when run (onnxruntime's errors)
             raise DataError(
                 f"{self.path}: onnxruntime failed running it ({str(e).splitlines()[0]})"
             ) from None
         finally:
-            mapped_in.base.release()
+            map_in.release()
         self.stats = {"pack": t1 - t0, "inference": time.perf_counter() - t1}
         return output, h, w
 
-    def infer(self, image: Any) -> np.ndarray:
+    def infer(self, image: PostInput) -> np.ndarray:
         """The network's raw output for `image`: (1, C, Hp, Wp) float32 (C: 4
         for infill, 3 for lidar and narvis), padded to the stride."""
         return self._run(image)[0].get()
 
-    def __call__(self, image: Any) -> np.ndarray:
+    def __call__(self, image: PostInput) -> np.ndarray:
         """(H, W, 4) uint8 RGBA: the network's picture of `image` (the unpack
         kernel reads the network's output where onnxruntime wrote it; the
         picture is the one read-back)."""

@@ -31,6 +31,7 @@ import pyopencl.array as cla
 from .. import limits, runtime
 from .._arrays import buf, check_array, is_device, positive_int, resolve_queue, result, to_device
 from ..errors import DataError
+from .inputs import GBuffersLike
 from .names import GBUFFER_PLANES, gbuffer_channels
 
 __all__ = [
@@ -204,7 +205,7 @@ def pack_rgbda(
     return dst if out is not None else result(dst, host)
 
 
-def _gbuffer_sources(gbuffers: Any, planes: tuple[str, ...]) -> list[tuple[str, Any, int, int]]:
+def _gbuffer_sources(gbuffers: GBuffersLike, planes: tuple[str, ...]) -> list[tuple[str, Any, int, int]]:
     """(channel name, float32 array, element offset, step) of each channel
     after R, G, B and the coverage, in the tensor's order; DataError for a
     plane the G-buffers lack."""
@@ -239,7 +240,7 @@ def _gbuffer_sources(gbuffers: Any, planes: tuple[str, ...]) -> list[tuple[str, 
 
 
 def pack_gbuffers(
-    gbuffers: Any,
+    gbuffers: GBuffersLike,
     planes: Any = ("rgb", "depth", "vel2d"),
     *,
     stride: int = 1,

@@ -7,24 +7,30 @@ clvis.training.train; no torch here).
 
 PostNetwork (clvis.post.infer) asks its spec for the input check and the
 pack; ``clvis eval`` (clvis.training.evaluate) reads the baselines and
-families from here.
+families from here. A spec is generic in what its network reads (the
+Protocols of clvis.post.inputs): ``shape`` checks any object at run time,
+``pack`` takes one that passed.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 
+from .inputs import GBuffersLike, IsoImageLike, LidarInput
 from .names import NAMES
 from .pack import pack_gbuffers, pack_iso, pack_rgbda
 
 __all__ = ["SPECS", "NetworkSpec", "spec"]
 
+#: what a network reads (a Protocol of clvis.post.inputs)
+InputT = TypeVar("InputT")
 
-class NetworkSpec:
+
+class NetworkSpec(Generic[InputT]):
     """The inference-side description of one network (subclass per network)."""
 
     name: str = ""
@@ -41,15 +47,16 @@ class NetworkSpec:
     #: the families its shipped training used
     trained_families: tuple[str, ...] = ()
 
-    def shape(self, image: Any) -> tuple[int, int]:
+    def shape(self, image: object) -> tuple[int, int]:
         """(H, W) of an input; TypeError / ValueError where it is not one."""
         raise NotImplementedError
 
     def pack(
-        self, image: Any, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
+        self, image: InputT, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
     ) -> None:
-        """Write the network's NCHW input for `image` into `out` (the pack
-        kernels of clvis.post.pack; device planes are read where they are)."""
+        """Write the network's NCHW input for `image` (one :meth:`shape`
+        accepted) into `out` (the pack kernels of clvis.post.pack; device
+        planes are read where they are)."""
         raise NotImplementedError
 
     def __repr__(self) -> str:
@@ -60,7 +67,7 @@ def _shape_of(a: Any) -> tuple[int, ...]:
     return tuple(a.shape if hasattr(a, "shape") else np.shape(a))
 
 
-class InfillSpec(NetworkSpec):
+class InfillSpec(NetworkSpec[IsoImageLike]):
     name = "infill"
     title = "in-fill W-Net"
     takes = "an IsoImage (rgba, hit, active)"
@@ -78,12 +85,17 @@ class InfillSpec(NetworkSpec):
         return int(shape[0]), int(shape[1])
 
     def pack(
-        self, image: Any, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
+        self,
+        image: IsoImageLike,
+        planes: tuple[str, ...],
+        stride: int,
+        out: cla.Array,
+        queue: cl.CommandQueue,
     ) -> None:
         pack_iso(image.rgba, image.hit, image.active, stride=stride, out=out, queue=queue)
 
 
-class LidarSpec(NetworkSpec):
+class LidarSpec(NetworkSpec[LidarInput]):
     name = "lidar"
     title = "LiDAR RGBDA U-Net"
     takes = "a FilteredImage or its rgbda (H, W, 5)"
@@ -103,12 +115,12 @@ class LidarSpec(NetworkSpec):
         return int(shape[0]), int(shape[1])
 
     def pack(
-        self, image: Any, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
+        self, image: LidarInput, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
     ) -> None:
         pack_rgbda(getattr(image, "rgbda", image), stride=stride, out=out, queue=queue)
 
 
-class NarvisSpec(NetworkSpec):
+class NarvisSpec(NetworkSpec[GBuffersLike]):
     name = "narvis"
     title = "NARVis U-Net (G-buffers -> Gaussians)"
     takes = "rasterizer G-buffers (GBuffers)"
@@ -127,16 +139,21 @@ class NarvisSpec(NetworkSpec):
         return int(shape[0]), int(shape[1])
 
     def pack(
-        self, image: Any, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
+        self,
+        image: GBuffersLike,
+        planes: tuple[str, ...],
+        stride: int,
+        out: cla.Array,
+        queue: cl.CommandQueue,
     ) -> None:
         pack_gbuffers(image, planes, stride=stride, out=out, queue=queue)
 
 
-SPECS: dict[str, NetworkSpec] = {s.name: s for s in (InfillSpec(), LidarSpec(), NarvisSpec())}
+SPECS: dict[str, NetworkSpec[Any]] = {s.name: s for s in (InfillSpec(), LidarSpec(), NarvisSpec())}
 assert tuple(SPECS) == NAMES, "clvis.post.names.NAMES and SPECS name the same networks"
 
 
-def spec(name: str) -> NetworkSpec:
+def spec(name: str) -> NetworkSpec[Any]:
     """The spec of network `name`; ValueError for an unknown name."""
     try:
         return SPECS[name]

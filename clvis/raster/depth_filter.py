@@ -266,12 +266,14 @@ class FilteredImage:
     kept); depth: float32, +inf where removed or empty; rgba: uint8 [H, W, 4]
     with alpha 0 where removed (None for a depth-only input); rgbda: float32
     [H, W, 5] = (r, g, b in [0, 1], depth, alpha in {0, 1}), the input of the
-    LiDAR paper's network."""
+    LiDAR paper's network. numpy arrays for numpy input; for device input
+    (``host=False`` G-buffers, a device depth image) ``pyopencl.array.Array``
+    of the same shapes and dtypes, on the input's queue."""
 
-    keep: np.ndarray
-    depth: np.ndarray
-    rgba: np.ndarray | None
-    rgbda: np.ndarray
+    keep: np.ndarray | cla.Array
+    depth: np.ndarray | cla.Array
+    rgba: np.ndarray | cla.Array | None
+    rgbda: np.ndarray | cla.Array
 
 
 def depth_filter(
@@ -285,25 +287,55 @@ def depth_filter(
     """Remove background points seen through holes in the foreground (the
     hierarchical min-pool filter of Vanherck, Zoomers et al. 2025; the rules
     are in ``clvis.reference.raster.depth_filter``). gbuffers_or_depth: a
-    :class:`GBuffers` or an [H, W] float32 depth image (+inf = empty)."""
+    :class:`GBuffers` or an [H, W] float32 depth image (+inf = empty).
+
+    numpy in, numpy out: the planes cross to the device once, the mask and
+    the RGBDA image come back and the kept planes are a select on the host.
+    Device planes in (``render(..., host=False)``), device planes out: all
+    four are made where the planes are (the depth_kept kernel for the kept
+    depth and colour), nothing read back but the 8-byte input check."""
     if isinstance(gbuffers_or_depth, GBuffers):
         depth, rgba = gbuffers_or_depth.depth, gbuffers_or_depth.rgba
     else:
         depth, rgba = gbuffers_or_depth, None
-    # numpy in, numpy out: the mask and the rgbda of host planes are host arrays
-    keep = typing.cast(
-        np.ndarray,
-        depth_filter_mask(depth, levels, filter_strength, edge_threshold=edge_threshold, queue=queue),
-    )
-    depth = np.asarray(depth)
-    colors = rgba if rgba is not None else np.zeros(depth.shape + (4,), np.uint8)
-    out_rgbda = typing.cast(np.ndarray, rgbda(colors, depth, keep, queue=queue))
-    kept_rgba = None
+    queue = resolve_queue(queue, depth=depth, rgba=rgba)
+    host = not (is_device(depth) or is_device(rgba))
+    depth = check_array("depth", depth, dtypes=[np.float32], ndim=2)
+    h, w = (int(s) for s in depth.shape)
     if rgba is not None:
-        kept_rgba = np.where(keep[..., None], rgba, 0).astype(np.uint8)
-    return FilteredImage(
-        keep=keep,
-        depth=np.where(keep, depth, np.float32(np.inf)).astype(np.float32),
-        rgba=kept_rgba,
-        rgbda=out_rgbda,
+        rgba = check_array("rgba", rgba, dtypes=[np.uint8], ndim=3)
+        if tuple(rgba.shape[:2]) != (h, w) or rgba.shape[2] not in (3, 4):
+            raise ValueError(f"rgba: expected shape {(h, w)} x 3 or 4 channels, got {tuple(rgba.shape)}")
+    dd = to_device(queue, "depth", depth)
+    # device in, device out: the uint8 mask and the rgbda stay where they are
+    keep = typing.cast(
+        cla.Array,
+        depth_filter_mask(dd, levels, filter_strength, edge_threshold=edge_threshold, queue=queue),
     )
+    rd = None if rgba is None else to_device(queue, "rgba", rgba)
+    colors = rd if rd is not None else runtime.zeros(queue, (h, w, 4), np.uint8, "depth_filter colours")
+    out_rgbda = typing.cast(cla.Array, rgbda(colors, dd, keep, queue=queue))
+    if host:
+        kept = keep.get().view(np.bool_)
+        return FilteredImage(
+            keep=kept,
+            depth=np.where(kept, depth, np.float32(np.inf)).astype(np.float32),
+            rgba=None if rgba is None else np.where(kept[..., None], rgba, 0).astype(np.uint8),
+            rgbda=out_rgbda.get(),
+        )
+    kept_depth = runtime.empty(queue, (h, w), np.float32, "depth_filter kept depth")
+    kept_rgba = None if rd is None else runtime.empty(queue, rd.shape, np.uint8, "depth_filter kept rgba")
+    n = h * w
+    if n:
+        _launcher(queue)(
+            "depth_kept",
+            n,
+            buf(dd),
+            buf(keep),
+            np.uint64(n),
+            buf(kept_depth),
+            buf(rd if rd is not None else dd),  # no colour: any valid buffer, unread
+            np.uint32(0 if rd is None else rd.shape[2]),
+            buf(kept_rgba if kept_rgba is not None else kept_depth),
+        )
+    return FilteredImage(keep=keep.view(np.bool_), depth=kept_depth, rgba=kept_rgba, rgbda=out_rgbda)

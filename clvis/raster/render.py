@@ -93,24 +93,25 @@ class GBuffers:
     infinite).
     """
 
-    index: np.ndarray
-    depth: np.ndarray
-    rgba: np.ndarray
-    attributes: dict
-    vel2d: np.ndarray | None = None
-    vel_angle: np.ndarray | None = None
-    vel_speed: np.ndarray | None = None
-    radius_px: np.ndarray | None = None
-    stats: dict = dataclasses.field(default_factory=dict)
+    index: np.ndarray | cla.Array
+    depth: np.ndarray | cla.Array
+    rgba: np.ndarray | cla.Array
+    attributes: Mapping[str, np.ndarray | cla.Array]
+    vel2d: np.ndarray | cla.Array | None = None
+    vel_angle: np.ndarray | cla.Array | None = None
+    vel_speed: np.ndarray | cla.Array | None = None
+    radius_px: np.ndarray | cla.Array | None = None
+    stats: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
-    def covered(self) -> np.ndarray:
+    def covered(self) -> np.ndarray | cla.Array:
         """bool [H, W]: a point was drawn there."""
         return self.index != EMPTY
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.index.shape
+        h, w = self.index.shape
+        return h, w
 
 
 class Rasterizer:

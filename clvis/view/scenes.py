@@ -322,6 +322,8 @@ class VolumeScene(Scene):
             from .. import post
 
             self._infill = post.load("infill", queue=self.iso.queue)
+        from .._arrays import on_host
+
         t0 = time.perf_counter()
         n = 0
         for img in self.iso.passes(camera, width, height, settings["isovalue"]):
@@ -336,9 +338,10 @@ class VolumeScene(Scene):
                 image = _premultiplied_over_background(rgba)
                 times["post"] = time.perf_counter() - t1
             else:
-                rgb = np.clip(np.rint(img.rgba[..., :3] * 255), 0, 255).astype(np.uint8)
-                image = _over_background(rgb, img.hit)
-                image[img.active & ~img.hit] = _ACTIVE
+                hit = on_host(img.hit)
+                rgb = np.clip(np.rint(on_host(img.rgba)[..., :3] * 255), 0, 255).astype(np.uint8)
+                image = _over_background(rgb, hit)
+                image[on_host(img.active) & ~hit] = _ACTIVE
             yield Frame(image, final=done, info=info, times=times)
             if superseded():
                 return
@@ -347,6 +350,8 @@ class VolumeScene(Scene):
     def _split(self, camera, w, h, s):
         """The render stopped at SPLIT_COMPLETION of the rays with the in-fill
         network (left) beside the complete render (right), and their PSNR."""
+        from .._arrays import on_host
+
         if self._infill is None:
             from .. import post
 
@@ -357,7 +362,9 @@ class VolumeScene(Scene):
         fast = _premultiplied_over_background(self._infill(part))
         t2 = time.perf_counter()
         full = self.iso.render(camera, w, h, s["isovalue"])
-        slow = _over_background(np.clip(np.rint(full.rgba[..., :3] * 255), 0, 255).astype(np.uint8), full.hit)
+        slow = _over_background(
+            np.clip(np.rint(on_host(full.rgba)[..., :3] * 255), 0, 255).astype(np.uint8), on_host(full.hit)
+        )
         t3 = time.perf_counter()
         info = {
             "psnr dB": round(psnr(fast, slow), 2),

@@ -61,6 +61,15 @@
  *     float nearest 1/255) for each colour byte c, depth[i], 1.0f; elsewhere
  *     0, 0, 0, +INFINITY, 0. Pixels: n.
  *
+ * kernel depth_kept(global const float *depth, global const uchar *keep,
+ *                   ulong n, global float *depth_out,
+ *                   global const uchar *rgba, uint channels,
+ *                   global uchar *rgba_out)
+ *     The planes depth_filter keeps, n pixels: depth_out[i] = depth[i] where
+ *     keep[i] != 0, else +INFINITY; for channels > 0 also the colour bytes,
+ *     rgba_out[channels*i + c] = rgba[channels*i + c] where keep[i] != 0,
+ *     else 0 (channels = 0: no colour; pass any valid buffers). Pixels: n.
+ *
  * Decision (depth_refine and depth_keep). Fine pixel q with value d, parent
  * p = (qx/2, qy/2) on the coarse level F, whose value is v:
  *   lap  = (((F[up] + F[down]) + F[left]) + F[right]) - v * 4.0f
@@ -198,5 +207,18 @@ kernel void depth_rgbda(global const uchar *rgba, const uint channels,
             o[3] = INFINITY;
             o[4] = 0.0f;
         }
+    }
+}
+
+kernel void depth_kept(global const float *depth, global const uchar *keep, const ulong n,
+                       global float *depth_out, global const uchar *rgba, const uint channels,
+                       global uchar *rgba_out)
+{
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    for (ulong i = first; i < n && i < first + ITEMS; ++i) {
+        const int kept = keep[i] != 0;
+        depth_out[i] = kept ? depth[i] : INFINITY;
+        for (uint c = 0; c < channels; ++c)
+            rgba_out[(ulong)channels * i + c] = kept ? rgba[(ulong)channels * i + c] : (uchar)0;
     }
 }

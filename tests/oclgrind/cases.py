@@ -218,6 +218,10 @@ def depth_filter(q):
     clvis.raster.depth_filter_mask(depth[:7, :5], 2, queue=q)
     g = clvis.rasterize(_cloud(300, 8), _raster_cam(w, h), w, h, queue=q)
     clvis.depth_filter(g, 2, queue=q)
+    # device planes in: the kept depth and colour are made by depth_kept
+    gd = clvis.Rasterizer(_cloud(300, 8), queue=q).render(_raster_cam(w, h), w, h, host=False)
+    clvis.depth_filter(gd, 2)
+    clvis.depth_filter(gd.depth, 1)
     rgba = rng.integers(0, 256, (h, w, 3)).astype(np.uint8)
     clvis.raster.rgbda(rgba, depth, rng.random((h, w)) < 0.5, queue=q)
 

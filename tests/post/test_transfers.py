@@ -184,19 +184,22 @@ def test_infill_pipeline_is_at_the_floor(device, transfers):
 
 
 def test_lidar_pipeline_is_at_the_floor(device, transfers):
-    """The depth filter's mask and RGBDA image made from device G-buffers
-    (what depth_filter does on numpy ones) into the LiDAR network: down 24
-    B/pixel (5 input channels, the picture), up 12 (3 output channels),
-    padding aside. The picture is depth_filter's host path's."""
+    """Device G-buffers through the depth filter into the LiDAR network, both
+    ways: depth_filter(g) (its planes stay on the device) and the mask and
+    RGBDA image made by hand: down 24 B/pixel (5 input channels, the
+    picture), up 12 (3 output channels), padding aside. The picture is
+    depth_filter's host path's."""
     from clvis.raster import depth_filter
 
     q = runtime.queue_for(device)
     ras, cam = _hurricane(q, W, H)
     net = post.load("lidar", queue=q)
     assert net.attribute_planes == ()
-    transfers.clear()
-    g = ras.render(cam, W, H, planes=[], host=False)
-    got = net(rgbda(g.rgba, g.depth, depth_filter_mask(g.depth, 4)))
-    assert transfers.planes(W * H) == _floor(net, H, W)
-    assert transfers.small(W * H) <= SMALL
-    np.testing.assert_array_equal(got, net(depth_filter(ras.render(cam, W, H, planes=[]), 4)))
+    want = net(depth_filter(ras.render(cam, W, H, planes=[]), 4))
+    for by_hand in (False, True):
+        transfers.clear()
+        g = ras.render(cam, W, H, planes=[], host=False)
+        got = net(rgbda(g.rgba, g.depth, depth_filter_mask(g.depth, 4)) if by_hand else depth_filter(g, 4))
+        assert transfers.planes(W * H) == _floor(net, H, W)
+        assert transfers.small(W * H) <= SMALL
+        np.testing.assert_array_equal(got, want)

@@ -157,6 +157,73 @@ def test_rgbda(queue):
     ).shape == (0, 4, 5)
 
 
+def _gbuffers(depth, rgba):
+    """G-buffers of the planes depth_filter reads (index: any point)."""
+    index = np.where(np.isfinite(depth), 0, 0xFFFFFFFF).astype(np.uint32)
+    return clvis.GBuffers(index=index, depth=depth, rgba=rgba, attributes={})
+
+
+def _device_gbuffers(q, g):
+    return clvis.GBuffers(
+        index=cla.to_device(q, g.index),
+        depth=cla.to_device(q, g.depth),
+        rgba=cla.to_device(q, g.rgba),
+        attributes={},
+    )
+
+
+def _check_filtered(f, depth, rgba, levels, device):
+    """Every plane of a FilteredImage against the reference, on the side it should be."""
+    keep = ref.depth_filter_mask(depth, levels)
+    want_depth, want_rgba = ref.kept(depth, keep, rgba)
+    want_rgbda = ref.rgbda(rgba if rgba is not None else np.zeros(depth.shape + (4,), np.uint8), depth, keep)
+    kind = cla.Array if device else np.ndarray
+    planes = {"keep": (f.keep, keep), "depth": (f.depth, want_depth), "rgbda": (f.rgbda, want_rgbda)}
+    if rgba is None:
+        assert f.rgba is None
+    else:
+        planes["rgba"] = (f.rgba, want_rgba)
+    for name, (got, want) in planes.items():
+        assert isinstance(got, kind), f"{name}: {type(got).__name__}"
+        assert got.dtype == want.dtype and tuple(got.shape) == want.shape, name
+        np.testing.assert_array_equal(got.get() if device else got, want, err_msg=name)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (3, 5), (64, 65)])
+def test_depth_filter_host_and_device(queue, shape):
+    """depth_filter: numpy G-buffers (or depth) in, numpy planes out; device
+    planes in, device planes out, every plane equal to the reference."""
+    rng = np.random.default_rng(hash(shape) % 2**32)
+    d = layered(shape, 0.6, seed=11)
+    rgba = rng.integers(0, 256, shape + (4,), dtype=np.uint8)
+    g = _gbuffers(d, rgba)
+    for levels in (0, 1, 4):
+        _check_filtered(clvis.depth_filter(g, levels, queue=queue), d, rgba, levels, device=False)
+        _check_filtered(clvis.depth_filter(_device_gbuffers(queue, g), levels), d, rgba, levels, device=True)
+        _check_filtered(clvis.depth_filter(d, levels, queue=queue), d, None, levels, device=False)
+        _check_filtered(clvis.depth_filter(cla.to_device(queue, d), levels), d, None, levels, device=True)
+    # one plane on the device is enough for device planes out
+    mixed = clvis.GBuffers(index=g.index, depth=cla.to_device(queue, d), rgba=rgba, attributes={})
+    _check_filtered(clvis.depth_filter(mixed, 2), d, rgba, 2, device=True)
+
+
+def test_depth_filter_empty_and_bad(queue):
+    for host in (True, False):
+        d = np.zeros((0, 3), np.float32)
+        f = clvis.depth_filter(d if host else cla.to_device(queue, d), queue=queue)
+        assert isinstance(f.rgbda, np.ndarray if host else cla.Array)
+        assert f.keep.shape == f.depth.shape == (0, 3) and f.rgbda.shape == (0, 3, 5) and f.rgba is None
+    d = layered((4, 5), 0.5, seed=1)
+    with pytest.raises(ValueError, match="rgba: expected shape"):
+        clvis.depth_filter(_gbuffers(d, np.zeros((4, 6, 4), np.uint8)), queue=queue)
+    with pytest.raises(TypeError, match="rgba: dtype float32"):
+        clvis.depth_filter(_gbuffers(d, np.zeros((4, 5, 4), np.float32)), queue=queue)
+    x = d.copy()
+    x[1, 1] = np.nan
+    with pytest.raises(clvis.DataError, match="1 NaN"):
+        clvis.depth_filter(_device_gbuffers(queue, _gbuffers(x, np.zeros((4, 5, 4), np.uint8))))
+
+
 @given(
     d=hnp.arrays(
         np.float32,

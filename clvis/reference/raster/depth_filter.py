@@ -167,3 +167,15 @@ def rgbda(rgba: npt.ArrayLike, depth: npt.ArrayLike, keep: npt.ArrayLike) -> np.
     out[..., 3] = np.where(keep, depth, _INF)
     out[..., 4] = keep
     return out
+
+
+def kept(
+    depth: npt.ArrayLike, keep: npt.ArrayLike, rgba: npt.ArrayLike | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The planes depth_filter keeps: (depth, +inf where not keep; the colour
+    bytes, every channel 0 where not keep, or None without rgba)."""
+    depth, keep = np.asarray(depth, np.float32), np.asarray(keep).astype(bool)
+    out_rgba = None
+    if rgba is not None:
+        out_rgba = np.where(keep[..., None], np.asarray(rgba), 0).astype(np.uint8)
+    return np.where(keep, depth, _INF).astype(np.float32), out_rgba

@@ -5,35 +5,69 @@ Arrays in, arrays out: numpy arrays come back as numpy arrays, and
 See ``clvis.runtime`` for device choice and options.
 """
 
+from __future__ import annotations
+
 import sys as _sys
 
-from . import datasets
 from ._version import __version__
-from .camera import Camera, grid_cameras, hemisphere_cameras
-from .colormap import TransferFunction
-from .errors import ClvisError, DataError, DeviceError, KernelBuildError
-from .gauss import (
-    GaussianImage,
-    GaussianRenderer,
-    Gaussians,
-    SparseVolume,
-    gaussians_from_points,
-    gaussians_from_volume,
-    read_vdb,
-    render_gaussians,
-)
-from .io import PointCloud, Volume, read_points, read_volume, volumes
-from .iso import IsoImage, IsoRenderer, zfp
-from .primitives import compact, compact_indices, histogram, radix_sort, scan
-from .raster import (
-    FilteredImage,
-    GBuffers,
-    Rasterizer,
-    depth_filter,
-    morton_order,
-    rasterize,
-)
-from .runtime import capabilities, default_queue, set_default_device
+
+# typing.TYPE_CHECKING without importing typing (type checkers take any
+# TYPE_CHECKING as true): `import clvis` imports nothing else
+TYPE_CHECKING = False
+if TYPE_CHECKING:  # the names for type checkers; at run time __getattr__ imports them
+    from . import datasets
+    from .camera import Camera, grid_cameras, hemisphere_cameras
+    from .colormap import TransferFunction
+    from .errors import ClvisError, DataError, DeviceError, KernelBuildError
+    from .gauss import (
+        GaussianImage,
+        GaussianRenderer,
+        Gaussians,
+        SparseVolume,
+        gaussians_from_points,
+        gaussians_from_volume,
+        read_vdb,
+        render_gaussians,
+    )
+    from .io import PointCloud, Volume, read_points, read_volume, volumes
+    from .iso import IsoImage, IsoRenderer, zfp
+    from .primitives import compact, compact_indices, histogram, radix_sort, scan
+    from .raster import (
+        FilteredImage,
+        GBuffers,
+        Rasterizer,
+        morton_order,
+        rasterize,
+    )
+    from .raster.depth_filter import depth_filter  # (clvis.raster.depth_filter is a module too)
+    from .runtime import capabilities, default_queue, set_default_device
+
+# each public name -> the module that defines it
+_WHERE = {
+    **dict.fromkeys(["Camera", "grid_cameras", "hemisphere_cameras"], ".camera"),
+    "TransferFunction": ".colormap",
+    **dict.fromkeys(["ClvisError", "DataError", "DeviceError", "KernelBuildError"], ".errors"),
+    **dict.fromkeys(
+        [
+            "GaussianImage",
+            "GaussianRenderer",
+            "Gaussians",
+            "SparseVolume",
+            "gaussians_from_points",
+            "gaussians_from_volume",
+            "read_vdb",
+            "render_gaussians",
+        ],
+        ".gauss",
+    ),
+    **dict.fromkeys(["PointCloud", "Volume", "read_points", "read_volume", "volumes"], ".io"),
+    **dict.fromkeys(["IsoImage", "IsoRenderer", "zfp"], ".iso"),
+    **dict.fromkeys(["compact", "compact_indices", "histogram", "radix_sort", "scan"], ".primitives"),
+    **dict.fromkeys(
+        ["FilteredImage", "GBuffers", "Rasterizer", "depth_filter", "morton_order", "rasterize"], ".raster"
+    ),
+    **dict.fromkeys(["capabilities", "default_queue", "set_default_device"], ".runtime"),
+}
 
 __all__ = [
     "Camera",
@@ -80,10 +114,27 @@ __all__ = [
 
 
 def __getattr__(name: str) -> object:
-    # clvis.view(obj), the browser viewer: a layer above the families, imported
-    # when first used (its server, tornado, is the optional `view` extra)
+    # The public names and the subpackages load when first used: `import clvis`
+    # (and so the command line's start, before it handles Ctrl-C) does not wait
+    # for NumPy, PyOpenCL and the families.
     if name == "view":
+        # clvis.view(obj), the browser viewer: a layer above the families (its
+        # server, tornado, is the optional `view` extra)
         import clvis.view  # noqa: F401  (not `from . import view`: that would call this again)
 
         return _sys.modules["clvis.view"]
-    raise AttributeError(f"module 'clvis' has no attribute {name!r}")
+    import importlib.util
+
+    where = _WHERE.get(name)
+    if where is not None:
+        value = getattr(importlib.import_module(where, __name__), name)
+    elif not name.startswith("__") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
+        value = importlib.import_module(f"{__name__}.{name}")  # clvis.io, clvis.runtime, ...
+    else:
+        raise AttributeError(f"module 'clvis' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -19,28 +19,33 @@ clvis view [FILE]            an interactive viewer in the browser (points, progr
 
 from __future__ import annotations
 
-import argparse
-import contextlib
+# Only what main() needs before it handles signals is imported here (each
+# import is time in which Ctrl-C would be a traceback); the rest in the functions.
 import os
 import signal
 import sys
-import threading
-from collections.abc import Sequence
 
 from .._version import __version__
-from . import bench, demo, gauss, heldout, info, iso, raster, train, view
-from ._common import Parser, glue_values, run
 
+TYPE_CHECKING = False  # typing.TYPE_CHECKING, without importing typing
+if TYPE_CHECKING:
+    import argparse
+    from collections.abc import Sequence
+    from types import ModuleType
+
+# each command -> its module in clvis.cli. They (and NumPy, PyOpenCL, the
+# families) are imported by main(), after it handles Ctrl-C and SIGTERM: a
+# signal in the second the imports take is one line too, not a traceback.
 _COMMANDS = {
-    "info": info,
-    "demo": demo,
-    "render": raster,
-    "iso": iso,
-    "gauss": gauss,
-    "bench": bench,
-    "train": train,
-    "eval": heldout,
-    "view": view,
+    "info": "info",
+    "demo": "demo",
+    "render": "raster",
+    "iso": "iso",
+    "gauss": "gauss",
+    "bench": "bench",
+    "train": "train",
+    "eval": "heldout",
+    "view": "view",
 }
 _EPILOG = """\
 A bad argument or a file clvis cannot use is one line on stderr and exit
@@ -49,8 +54,18 @@ tells more about each command.
 """
 
 
+def _module(cmd: str) -> ModuleType:
+    import importlib
+
+    return importlib.import_module(f"{__name__}.{_COMMANDS[cmd]}")
+
+
 def _parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParser]]:
+    import argparse
+
     from ..post.names import NAMES
+    from . import bench
+    from ._common import Parser
 
     p = argparse.ArgumentParser(
         prog="clvis",
@@ -60,7 +75,7 @@ def _parser() -> tuple[argparse.ArgumentParser, dict[str, argparse.ArgumentParse
     )
     p.add_argument("--version", action="version", version=f"clvis {__version__}")
     sub = p.add_subparsers(dest="cmd", metavar="COMMAND", parser_class=Parser)
-    commands = {name: module.add_parser(sub) for name, module in _COMMANDS.items()}
+    commands = {name: _module(name).add_parser(sub) for name in _COMMANDS}
     return p, commands
 
 
@@ -70,57 +85,91 @@ def main(argv: Sequence[str] | None = None) -> int:
     A bare `clvis` prints the help and exits 0, as `clvis --help` does.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
-    # Ctrl-C (SIGINT) and SIGTERM: one line and 128 + the signal, no traceback.
-    # SIGTERM is raised as an exception too, so what is being written is removed
-    # on the way out (clvis.io.files, save_png) instead of left as a temporary file.
-    previous = _on_sigterm()
-    sigint = signal.getsignal(signal.SIGINT)
+    # Ctrl-C (SIGINT) and SIGTERM: one line and 128 + the signal, no traceback,
+    # from here on: the commands and the libraries they use are imported in
+    # _main. SIGTERM is raised as an exception too, so what is being written is
+    # removed on the way out (clvis.io.files, save_png) instead of left as a
+    # temporary file.
+    previous: dict[int, object] = {}
     try:
-        return _main(argv)
+        _received.clear()
+        _on_signals(previous)
+        status = _main(argv)
+        _check_signals()
+        return status
     except _Terminated:
         return _interrupted(argv, signal.SIGTERM)
     except KeyboardInterrupt:
         return _interrupted(argv, signal.SIGINT)
+    except Exception:
+        if not _received:
+            raise
+        # what a library made of the signal (numpy's import, interrupted, raises
+        # an ImportError): the signal is what happened
+        return _interrupted(argv, signal.Signals(_received[0]))
     finally:
-        if previous is not None:
-            with contextlib.suppress(ValueError, OSError, TypeError):
-                signal.signal(signal.SIGTERM, previous)
-                signal.signal(signal.SIGINT, sigint)
+        for sig, handler in previous.items():
+            try:
+                signal.signal(sig, handler)  # type: ignore[arg-type]
+            except (ValueError, OSError, TypeError):
+                pass
 
 
 class _Terminated(BaseException):
     """SIGTERM, raised where the main thread is, as KeyboardInterrupt is for SIGINT."""
 
 
-def _raise_terminated(signum, frame):
-    raise _Terminated
+# the signals main()'s handlers saw: CPython (3.11) loses an exception that a
+# handler raises while compile() runs, as when a module is imported from its
+# source (no .pyc yet, PYTHONDONTWRITEBYTECODE): _check_signals raises it again
+_received: list[int] = []
 
 
-def _on_sigterm():
-    """Raise _Terminated on SIGTERM (main thread only; elsewhere Python cannot set
-    a handler); the handler it replaced, or None."""
-    if threading.current_thread() is not threading.main_thread():
-        return None
-    try:
-        return signal.signal(signal.SIGTERM, _raise_terminated)
-    except (ValueError, OSError):
-        return None
+def _raise_signal(signum, frame):
+    _received.append(signum)
+    raise _Terminated if signum == signal.SIGTERM else KeyboardInterrupt
+
+
+def _on_signals(previous: dict[int, object]) -> None:
+    """Raise _Terminated on SIGTERM and KeyboardInterrupt on SIGINT (where Python
+    does, not where SIGINT is ignored), noting each; the handlers replaced go
+    into `previous`. Main thread only: elsewhere Python cannot set a handler."""
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        if sig == signal.SIGINT and signal.getsignal(sig) is not signal.default_int_handler:
+            continue
+        try:
+            previous[sig] = signal.signal(sig, _raise_signal)
+        except (ValueError, OSError):  # ValueError: not the main thread
+            return
+
+
+def _check_signals() -> None:
+    """Raise for a signal whose exception was lost (see _received)."""
+    if _received:
+        raise _Terminated if _received[0] == signal.SIGTERM else KeyboardInterrupt
 
 
 def _interrupted(argv: list[str], sig: signal.Signals) -> int:
     # a second Ctrl-C while exiting would print a traceback
-    with contextlib.suppress(ValueError, OSError):
+    try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except (ValueError, OSError):
+        pass
     cmd = next((a for a in argv if not a.startswith("-")), "")
     what = "interrupted" if sig == signal.SIGINT else "terminated"
-    with contextlib.suppress(Exception):
+    try:
         sys.stderr.write(f"clvis{' ' + cmd if cmd else ''}: {what}\n")
         sys.stderr.flush()
+    except Exception:  # noqa: BLE001  (no stderr to tell)
+        pass
     return 128 + int(sig)
 
 
 def _main(argv: list[str]) -> int:
+    from ._common import glue_values, run
+
     p, commands = _parser()
+    _check_signals()  # the imports are done
     if not argv:
         p.print_help()
         return 0
@@ -134,7 +183,7 @@ def _main(argv: list[str]) -> int:
         if args.cmd is None:  # only options, such as `clvis --verbose`
             p.print_help()
             return 0
-        return run(args.cmd, _COMMANDS[args.cmd].cmd, args)
+        return run(args.cmd, _module(args.cmd).cmd, args)
     except SystemExit as e:  # argparse: --help, --version, a bad argument
         return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
     except BrokenPipeError:  # `clvis info | head -1`: the reader has all it wanted

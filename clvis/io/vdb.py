@@ -1,10 +1,11 @@
 """The checks an OpenVDB file passes before tinyvdb reads it: tinyvdb sizes
 its allocations by the counts the file declares (string lengths, metadata
-entries, grid descriptors, the root node's tile and child counts) before it
-finds the file too short for them: 4 changed bytes of a 1.5 MB file made it
-reserve 1.7 GB. :func:`check_vdb` walks the header, the grid descriptors and
-each grid's metadata, transform and root node header, and refuses counts the
-bytes after them cannot hold (DataError naming the file).
+entries, grid descriptors, the root node's tile and child counts, a
+compressed block's byte count) before it finds the file too short for them:
+4 changed bytes of a 1.5 MB file made it reserve 1.7 GB, one changed mask
+word of a 1 MB file 8.6 GB. :func:`check_vdb` walks the header, the grid
+descriptors and each grid's metadata, transform and tree, node by node, and
+refuses counts the bytes after them cannot hold (DataError naming the file).
 
 The layout (OpenVDB file format, version 222 and later):
 
@@ -13,12 +14,29 @@ The layout (OpenVDB file format, version 222 and later):
   file metadata (below); the grid count (uint32);
 - per grid: name, type and instance-parent strings (uint32 length + bytes),
   then the grid, block and end offsets (int64 each);
-- at a grid's offset: its compression flags (uint32), its metadata (a count,
-  then per entry a name and a type string and a uint32-sized value), its
-  transform (a type name string, then the map's doubles), the buffer count
-  (uint32), the root's background value, tile count and child count (uint32);
-  a tile takes 3 int32 + a value + an active byte, a child 3 int32 and at
-  least its two 4096-byte masks (a 32^3 internal node).
+- at a grid's offset: its compression flags (uint32: 1 zip, 2 active mask,
+  4 blosc), its metadata (a count, then per entry a name and a type string
+  and a uint32-sized value), its transform (a type name string, then the
+  map's doubles), the buffer count (uint32), the root's background value,
+  tile count and child count (uint32); a tile takes 3 int32 + a value + an
+  active byte, a child 3 int32 and then its node;
+- the topology of a Tree_<type>_5_4_3, depth first: an internal node of
+  32^3 (then 16^3) entries stores its child mask and value mask (4096, then
+  512 bytes each) and its values (below), then the nodes its child mask
+  names; a leaf (8^3) its value mask (64 bytes);
+- the buffers: per leaf, in the same order, its value mask again (tinyvdb
+  keeps the topology's, OpenVDB reads this one: they must agree) and its 512
+  values (a bool leaf: 3 int32 and a 64-byte bit mask);
+- values: a metadata byte (0-6), up to two inactive values, a selection mask
+  (metadata 3-5), then all the node's values, or only the active ones (the
+  value mask's count) under the active-mask flag unless the metadata is 6;
+  compressed (zip, blosc) as an int64 byte count and the bytes (a count <= 0:
+  exactly the values' raw bytes follow), else raw. A grid type ending in
+  _HalfFloat stores a float as 2 bytes, and nothing for a node without values.
+
+The walk follows tinyvdb's reader where OpenVDB's is more lenient (tinyvdb
+is what reads the file next); a tree of another value type or configuration
+is checked to the root node only.
 """
 
 from __future__ import annotations
@@ -45,6 +63,8 @@ _MAP_DOUBLES = {
 # bytes of one value of the tree's type (Tree_<type>_5_4_3)
 _VALUE_BYTES = {"float": 4, "double": 8, "int32": 4, "int64": 8, "bool": 1, "vec3s": 12, "vec3d": 24}
 _CHILD_MIN = 12 + 2 * 4096  # origin, then the 32^3 node's child and value masks
+_ZIP, _ACTIVE_MASK, _BLOSC = 1, 2, 4
+_LOG2DIMS = ["5", "4", "3"]  # the tree configuration walked (OpenVDB's standard one)
 
 
 class _Reader:
@@ -82,6 +102,13 @@ class _Reader:
             n = self.take("<I", f"{what} value")
             self.need(n, f"{what} value")
             self.pos += n
+
+    def mask(self, nbytes: int, what: str) -> int:
+        """Skip a node mask of `nbytes`; the bits it sets."""
+        self.need(nbytes, what)
+        on = int.from_bytes(self.data[self.pos : self.pos + nbytes], "little").bit_count()
+        self.pos += nbytes
+        return on
 
 
 def check_vdb(path: str | Path) -> None:
@@ -128,13 +155,14 @@ def _check(p: Path, data, size: int) -> None:
 
 
 def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> None:
-    parts = kind.split("_")
+    half = kind.endswith("_HalfFloat")  # floats saved as half floats
+    parts = kind.removesuffix("_HalfFloat").split("_")
     value_bytes = _VALUE_BYTES.get(parts[1]) if len(parts) > 1 and parts[0] == "Tree" else None
     if value_bytes is None:
         return  # a tree type clvis does not read: tinyvdb's checks
     r = _Reader(p, data, end)
     r.pos = grid_pos
-    r.take("<I", "grid compression flags")
+    compression = r.take("<I", "grid compression flags")
     r.metadata("grid metadata")
     map_type = r.string("transform type")
     doubles = _MAP_DOUBLES.get(map_type)
@@ -153,3 +181,78 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> None:
             f"{tiles} tiles and {children} children (at least {need} bytes); the grid has "
             f"{end - r.pos} bytes after them"
         )
+    if parts[2:] != _LOG2DIMS:
+        return  # another tree configuration: tinyvdb's checks
+    r.pos += tiles * (12 + value_bytes + 1)
+    tree = _Tree(r, compression, value_bytes, half and parts[1] == "float")
+    for _ in range(children):
+        r.take("<3i", "root child origin")
+        tree.internal(0)
+    for leaf in tree.leaves:
+        at = r.pos
+        r.need(64, "leaf buffer value mask")
+        if data[at : at + 64] != data[leaf : leaf + 64]:
+            raise DataError(
+                f"{p}: malformed VDB file: the leaf value mask at byte {at} differs from its "
+                f"topology's at byte {leaf}"
+            )
+        r.pos += 64
+        if parts[1] == "bool":  # origin, then the values as a bit mask
+            r.need(12 + 64, "bool leaf buffer")
+            r.pos += 12 + 64
+        else:
+            tree.values(3, int.from_bytes(data[leaf : leaf + 64], "little").bit_count())
+
+
+class _Tree:
+    """Walks a 5-4-3 tree's nodes as tinyvdb reads them, checking each against
+    the bytes left before tinyvdb would allocate what it declares."""
+
+    def __init__(self, r: _Reader, compression: int, value_bytes: int, half: bool) -> None:
+        self.r, self.compression, self.value_bytes, self.half = r, compression, value_bytes, half
+        self.leaves: list[int] = []  # where each leaf's topology value mask is
+
+    def internal(self, level: int) -> None:
+        r, log2 = self.r, int(_LOG2DIMS[level])
+        nbytes = (1 << 3 * log2) // 8
+        children = r.mask(nbytes, f"{1 << log2}^3 node child mask")
+        self.values(log2, r.mask(nbytes, f"{1 << log2}^3 node value mask"))
+        if level == 0:
+            for _ in range(children):
+                self.internal(1)
+        else:  # each child a leaf, its topology its value mask
+            r.need(64 * children, f"{children} leaf value masks")
+            self.leaves.extend(range(r.pos, r.pos + 64 * children, 64))
+            r.pos += 64 * children
+
+    def values(self, log2: int, active: int) -> None:
+        """A node's values: metadata, inactive values, selection mask, the values."""
+        r, n = self.r, 1 << 3 * log2
+        what = f"{1 << log2}^3 node values"
+        at = r.pos
+        meta = r.take("<B", f"{what}' metadata")
+        if meta > 6:
+            raise DataError(f"{r.path}: malformed VDB file: {what}' metadata {meta} at byte {at} (0 to 6)")
+        value_bytes = 2 if self.half else self.value_bytes
+        inactive = {2: 1, 4: 1, 5: 2}.get(meta, 0)
+        r.need(inactive * value_bytes, f"{what}' inactive values")
+        r.pos += inactive * value_bytes
+        if meta in (3, 4, 5):
+            r.mask(n // 8, f"{what}' selection mask")
+        count = active if self.compression & _ACTIVE_MASK and meta != 6 else n
+        raw = count * value_bytes
+        if self.half and count == 0:
+            return  # nothing stored, not even a compressed size
+        if self.compression & (_ZIP | _BLOSC):
+            at = r.pos
+            stored = r.take("<q", f"{what}' compressed size")
+            if stored <= 0 and -stored != raw:
+                raise DataError(
+                    f"{r.path}: malformed VDB file: {what} at byte {at} store {-stored} raw bytes "
+                    f"for {count} values of {value_bytes} bytes"
+                )
+            r.need(abs(stored), f"{what}' compressed block")
+            r.pos += abs(stored)
+        else:
+            r.need(raw, what)
+            r.pos += raw

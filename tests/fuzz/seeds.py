@@ -84,6 +84,29 @@ def _vdb(tmp: Path, path: Path, n=60, seed=1):
     template.unlink()
 
 
+def _vdb_tree(tmp: Path, path: Path, compression=None, clusters=4, seed=7):
+    """A float grid whose tree has several nodes at each level: `clusters`
+    32^3 nodes (more where a cluster straddles a boundary), 4 16^3 nodes in
+    each, 6 leaves in each of those; tinyvdb writes it raw, or with
+    `compression` (tinyvdb.COMPRESS_*): 4 clusters raw are 2-4 MB, 20 zipped
+    with the active mask 1 MB."""
+    import tinyvdb
+
+    _vdb(tmp, path, n=20, seed=seed)
+    rng = np.random.default_rng(seed)
+    pts = []
+    for c5 in rng.integers(-12000, 12000, (clusters, 3)):
+        for c4 in rng.integers(-1500, 1500, (4, 3)):
+            for leaf in rng.integers(-60, 60, (6, 3)):
+                pts.append(c5 + c4 + leaf + rng.integers(0, 8, (20, 3)))
+    ijk = np.unique(np.concatenate(pts), axis=0).astype(np.int32)
+    vals = rng.random(len(ijk)).astype(np.float32)
+    with tinyvdb.open(str(path)) as f:
+        f.read_grids()
+        f.extend_grid_from_sparse(0, ijk.tobytes(), vals.tobytes(), "density")
+        f.save(str(path), **({} if compression is None else {"compression": compression}))
+
+
 def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
     """Write the seeds into `out`; [(format, reader, path)]. Formats whose
     optional package is missing are left out."""
@@ -162,6 +185,9 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
         add("vdb", "vdb", out / "grid.vdb")
         _vdb(out, out / "grid2.vdb", n=400, seed=2)
         add("vdb", "vdb", out / "grid2.vdb")
+        # internal nodes and leaves of several kinds, zipped with the active mask
+        _vdb_tree(out, out / "tree.vdb", compression=tinyvdb.COMPRESS_ZIP | tinyvdb.COMPRESS_ACTIVE_MASK)
+        add("vdb", "vdb", out / "tree.vdb")
     return seeds
 
 

@@ -258,3 +258,81 @@ def test_vdb_root_counts_beyond_the_file_are_refused_before_tinyvdb(tmp_path, fi
     path.write_bytes(bytes(data))
     r = _refused(str(path), read_vdb)
     assert "root node" in r.detail and r.peak_rss < 256 * MiB
+
+
+def _tree_fields(data: bytes) -> dict[str, int]:
+    """Where fields of the first nodes of a _vdb_tree grid (zip, active mask)
+    are: the grid's compression flags; the first 32^3 node's child mask, value
+    mask, values' metadata byte and compressed size; the same of its first
+    16^3 node; that node's first leaf value mask (topology)."""
+    at = data.index(b"Tree_float_5_4_3") + 16 + 4  # then the instance parent, empty
+    (grid,) = struct.unpack_from("<q", data, at)
+    # after the transform's name and 18 doubles: buffer count, background, tiles, children
+    root = data.index(b"ScaleTranslateMap") + len("ScaleTranslateMap") + 144
+    assert struct.unpack_from("<I", data, root + 8)[0] == 0  # no root tiles
+    out = {"compression": grid}
+    pos = root + 16 + 12  # the first child's origin
+    for level, nbytes in ((5, 4096), (4, 512)):
+        out[f"child mask {level}"], out[f"value mask {level}"] = pos, pos + nbytes
+        out[f"metadata {level}"] = meta = pos + 2 * nbytes
+        assert data[meta] in (0, 1, 6)  # no inactive values, no selection mask
+        out[f"size {level}"] = meta + 1
+        pos = meta + 9 + abs(struct.unpack_from("<q", data, meta + 1)[0])
+    out["leaf mask"] = pos
+    return out
+
+
+@pytest.fixture(scope="module")
+def vdb_tree(tmp_path_factory):
+    """A 1 MB grid of ~40 32^3 nodes, ~160 16^3 nodes and ~1000 leaves (zip,
+    active mask) that reads as it is within 256 MB."""
+    tinyvdb = pytest.importorskip("tinyvdb")
+    from fuzz.seeds import _vdb_tree
+
+    from clvis.gauss import read_vdb
+    from clvis.io.vdb import check_vdb
+
+    tmp = tmp_path_factory.mktemp("vdb_tree")
+    path = tmp / "tree.vdb"
+    _vdb_tree(tmp, path, compression=tinyvdb.COMPRESS_ZIP | tinyvdb.COMPRESS_ACTIVE_MASK, clusters=20)
+    assert 500_000 < path.stat().st_size < 3_000_000
+    check_vdb(path)
+    ok = run_limited(read_vdb, str(path))
+    assert ok.kind == "ok" and ok.peak_rss < 256 * MiB, ok
+    return path
+
+
+# One field of a node changed. Before the tree walk, under a 16 GiB address
+# space, 8 of these made tinyvdb try to allocate more than that ("OOM"; across
+# 1,188 such mutants of a 1 MB and a 4 MB tree, 274 did, 5 more reserved 4.3
+# to 17.2 GB); "size 4" read as intact (tinyvdb reads the 4096 values whatever
+# raw size the block declares; OpenVDB refuses it); "compression" desynced it.
+@pytest.mark.parametrize(
+    "field,width,value",
+    [
+        ("compression", 4, 1),  # zip without the active mask: the value counts change
+        ("child mask 5", 8, 2**64 - 1),  # 64 more 16^3 children
+        ("value mask 5", 8, 2**63 - 1),
+        ("metadata 5", 1, 4),  # an inactive value and a selection mask that are not there
+        ("size 5", 8, 1 << 40),  # a compressed block of 1 TB
+        ("child mask 4", 8, 0xFFFFFF0000000000),
+        ("value mask 4", 8, 2**63 - 1),
+        ("metadata 4", 1, 5),
+        ("size 4", 8, 2**64 - (1 << 31)),  # 2 GB of raw values for 4096
+        ("leaf mask", 8, 1 << 31),  # tinyvdb counts the buffer's values with it
+    ],
+)
+def test_vdb_node_fields_beyond_the_file_are_refused_before_tinyvdb(tmp_path, vdb_tree, field, width, value):
+    from clvis.errors import DataError
+    from clvis.gauss import read_vdb
+    from clvis.io.vdb import check_vdb
+
+    data = bytearray(vdb_tree.read_bytes())
+    at = _tree_fields(bytes(data))[field]
+    data[at : at + width] = value.to_bytes(width, "little")
+    path = tmp_path / "node.vdb"
+    path.write_bytes(bytes(data))
+    with pytest.raises(DataError, match="malformed VDB file"):
+        check_vdb(path)  # the walk, before tinyvdb opens the file
+    r = _refused(str(path), read_vdb)
+    assert "malformed VDB file" in r.detail and r.peak_rss < 256 * MiB, r

@@ -86,9 +86,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     g.add_argument(
         "--lod",
         type=_lods,
-        default=list(LODS),
+        default=None,
         metavar="LIST",
-        help="comma-separated levels of detail (default low,medium,high)",
+        help="comma-separated levels of detail of a volume (default low,medium,high)",
     )
     g.add_argument(
         "--attribute",
@@ -163,7 +163,7 @@ def _sources(args):
     from ..gauss import Gaussians, SparseVolume, read_vdb
     from ..io import read_points
 
-    lods = args.lod
+    lods = args.lod or list(LODS)
     if args.attribute is not None and not (args.file and args.file.lower().endswith(_POINT_FORMATS)):
         raise CliError("--attribute is for point clouds (.ply, .las, .laz, .npy, .npz of points)")
     if args.file is None:
@@ -210,11 +210,13 @@ def _sources(args):
         )
         return lods, sv, None, str(path)
     if name.endswith(".npz") and "means" in load_npz(path):
+        _no_lod(args, path, "a file of Gaussians, drawn as they are")
         return ["file"], None, Gaussians.load(path), str(path)
     if name.endswith(_POINT_FORMATS):
         from ..gauss import gaussians_from_points
 
-        cloud = read_points(path)
+        _no_lod(args, path, "a point cloud, one Gaussian a point")
+        cloud = _finite_points(read_points(path), args)
         if len(cloud) == 0:
             raise CliError(f"{path}: the file holds no points")
         try:
@@ -228,6 +230,21 @@ def _sources(args):
         f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
         f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})"
     )
+
+
+def _no_lod(args, path, what: str) -> None:
+    """--lod makes levels of detail from a volume: an error for other files."""
+    if args.lod is not None:
+        raise CliError(f"--lod: levels of detail are made from a volume; {path} is {what} (leave --lod out)")
+
+
+def _finite_points(cloud, args):
+    """The cloud without its points that have a NaN or infinite coordinate
+    (counted in args.dropped for the summary): `clvis render`'s rule, they
+    are never drawn and the summary says how many."""
+    keep = np.isfinite(cloud.positions).all(axis=1)
+    args.dropped = int(len(keep) - keep.sum())
+    return cloud.subset(np.flatnonzero(keep)) if args.dropped else cloud
 
 
 def cmd(args: argparse.Namespace) -> int:
@@ -403,6 +420,8 @@ def _run(args) -> int:
         print("  colour    the points' own rgb")
     elif lods == ["points"]:
         print(f"  colour    {args.attribute or 'the default value'} through {args.colormap}")
+    if getattr(args, "dropped", 0):
+        print(f"  dropped   {args.dropped:,} points with a NaN or infinite coordinate (never drawn)")
     print(f"  build     {timings['build_s']:.2f} s (kernels, once per process; not in the render times)")
     method = panels[0][2].stats.get("method", "bvh")
     print(

@@ -119,7 +119,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     p.add_argument(
         "--brick",
         type=count(4, 4096),
-        default=64,
+        default=None,
         metavar="N",
         help="with --workers/--scheduler: cells per brick edge, a multiple of 4 (default 64)",
     )
@@ -238,7 +238,12 @@ def render(
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
     if distributed_run(args):
+        args.brick = 64 if args.brick is None else args.brick
         return on_workers("iso", _run_distributed, args)
+    if args.brick is not None:
+        raise CliError(
+            "--brick cuts the volume for Dask workers; add --workers N (or --scheduler) or leave it out"
+        )
     return _run(args)
 
 

@@ -541,12 +541,18 @@ def cmd(args: argparse.Namespace) -> int:
         raise CliError("--transparent and --background: empty pixels are either clear or a colour; give one")
     progress = progress_from_args(args, "clvis render")
     if distributed_run(args):
-        for name in ("range", "background", "edl"):
-            if getattr(args, name) is not None:
-                raise CliError(f"--{name}: not with --workers/--scheduler (yet); leave it out")
+        for name in ("post", "compare"):
+            if getattr(args, name) not in (None, False):
+                raise CliError(f"--{name}: not with --workers/--scheduler (the networks run on one device)")
+        if args.range is not None and args.range[0] == "percentile":
+            raise CliError(
+                "--range pLO,pHI: percentiles would read every value here; on workers give MIN,MAX"
+            )
         if args.point_size == "auto":
-            raise CliError("--point-size auto: not with --workers/--scheduler (yet); give N")
-        args.colormap = args.colormap or "viridis"
+            raise CliError(
+                "--point-size auto: measured on the whole cloud, not with --workers/--scheduler; give N"
+            )
+        args.colormap_given, args.colormap = args.colormap, args.colormap or "viridis"
         return on_workers("render", _render_distributed, args, progress)
     args.file = args.file or None
     return _render(args, progress)
@@ -591,28 +597,48 @@ def _render_distributed(args, progress) -> int:
         # same sample of the points (every k-th of the concatenated cloud)
         sample = dr.sample() if args.view[0] == "fit" else None
         camera = camera_from_args(args, lo, hi, width, height, points=sample)
+        if attribute is None and args.range is not None:
+            raise CliError(
+                "--range scales an attribute's colours; the tiles have none (add --attribute NAME)"
+            )
+        if attribute is not None and args.colormap_given is None and _class_like(attribute):
+            print(
+                f"clvis render: note: on workers {attribute} is coloured through {args.colormap}, "
+                "not the ASPRS class colours with their legend (those need one device; "
+                "--colormap NAME chooses the map and silences this)",
+                file=sys.stderr,
+            )
+        vr = None if args.range is None else (args.range[1], args.range[2])
+        kw = {"color_by": attribute, "colormap": args.colormap, "point_size": args.point_size}
+        kw["value_range"] = vr
         with progress.stage("rendering + compositing"):
-            g = dr.render(
-                camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size
-            )
+            g = dr.render(camera, width, height, **kw)
             t0 = time.perf_counter()
-            g = dr.render(
-                camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size
-            )
+            g = dr.render(camera, width, height, **kw)
             warm = time.perf_counter() - t0
+
+        def shaded(rgba):
+            if args.edl is None:
+                return rgba
+            from .. import runtime
+            from ..raster import edl
+
+            radius = max(1, (args.point_size + 1) // 2)
+            return edl(g.depth, rgba, args.edl, radius, queue=runtime.default_queue())
+
         panels = []
         if attribute is not None:
-            vr = dr._ranges[attribute]
+            vr = vr or dr._ranges[attribute]
             panels.append(
                 _Panel(
                     f"attribute-{_safe_name(attribute)}",
                     f"{attribute} ({args.colormap})",
-                    g.rgba,
+                    shaded(g.rgba),
                     (args.colormap, *vr),
                 )
             )
         else:
-            panels.append(_Panel("colors", "point colors", g.rgba))
+            panels.append(_Panel("colors", "point colors", shaded(g.rgba)))
         panels.append(_Panel("depth", "depth (near = bright)", images.depth_image(g.depth)))
         if args.depth_filter:
             with progress.stage(f"depth filter ({args.depth_filter} levels)"):
@@ -622,9 +648,10 @@ def _render_distributed(args, progress) -> int:
         out = Path(args.out)
         with progress.stage("writing PNGs"):
             named = [
-                (f"{p.key}.png", p.image if args.transparent else images.opaque(p.image)) for p in panels
+                (f"{p.key}.png", p.image if args.transparent else _opaque(p.image, args.background))
+                for p in panels
             ]
-            named.append(("overview.png", _overview(panels, args.transparent)))
+            named.append(("overview.png", _overview(panels, args.transparent, args.background)))
             files = _save_pngs(out, named)
         st = g.stats
         covered = int(g.covered.sum())
@@ -635,6 +662,10 @@ def _render_distributed(args, progress) -> int:
                 "a file is one partition, rendered by one worker (give more tiles to use them all)"
             )
         print(f"  view      {describe_camera(args)}, {width}x{height}")
+        if args.range is not None:
+            print(f"  range     {attribute} {args.range[1]:.6g}..{args.range[2]:.6g}")
+        if args.edl is not None:
+            print(f"  edl       eye-dome lighting, strength {args.edl:g}")
         print(
             f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)"
         )
@@ -695,6 +726,11 @@ def _world_camera_args(args, origin):
     return local
 
 
+def _class_like(attribute: str) -> bool:
+    """Whether an attribute's name says it holds class codes."""
+    return attribute.lower() in ("classification", "class", "classes", "label")
+
+
 def _look(args, cloud, attribute, point_size, queue) -> _Look:
     """The colour panels' look from --range, --colormap, --edl (see _Look)."""
     from ..colormap import ASPRS_CLASSES, categorical, class_name, class_palette
@@ -712,12 +748,7 @@ def _look(args, cloud, attribute, point_size, queue) -> _Look:
     coordinate = attribute not in cloud.attributes
     values = cloud.positions[:, _COORDINATES.index(attribute)] if coordinate else cloud.attributes[attribute]
     offset = float(cloud.origin[_COORDINATES.index(attribute)]) if coordinate else 0.0
-    if (
-        args.colormap is None
-        and not coordinate
-        and attribute.lower() in ("classification", "class", "classes", "label")
-        and categorical(values)
-    ):
+    if args.colormap is None and not coordinate and _class_like(attribute) and categorical(values):
         if args.range is not None:
             raise CliError(
                 f"--range: {attribute} is shown by class (ASPRS colours); --colormap NAME scales it"

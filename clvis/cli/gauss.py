@@ -342,10 +342,7 @@ def _picture(img, transparent: bool = False) -> np.ndarray:
     temporaries for large images)."""
     from .. import images
 
-    if transparent:
-        return images.from_premultiplied(img.rgba)
-    rgb = img.to_uint8(np.asarray(images.BACKGROUND, np.float32) / 255)
-    return np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
+    return img.to_uint8(None if transparent else images.BACKGROUND)
 
 
 def strip(

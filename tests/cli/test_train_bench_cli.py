@@ -5,7 +5,6 @@ missing modules simulated)."""
 
 import importlib.util
 import re
-import sys
 
 import numpy as np
 import pytest

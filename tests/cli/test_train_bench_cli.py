@@ -82,3 +82,18 @@ def test_a_frame_two_completions_share_is_scored_once():
     assert len(notes) == 1 and "1 of 2 frames" in notes[0]
     got = train._distinct_frames([same], (0.85, 0.9), notes.append)
     assert got[0.9] == [] and "no row" in notes[-1]
+
+
+def _scores(inp, pp, net):
+    return {k: {"psnr": v, "ssim": 0.5} for k, v in (("input", inp), ("pushpull", pp), ("network", net))}
+
+
+def test_demo_gains_are_over_the_input_and_the_best_baseline():
+    """The demo's narvis and lidar lines: push-pull floods the background and
+    scores below the raw input there, so a gain over push-pull alone flatters."""
+    from clvis.cli.demo_post import _line, gains
+
+    assert gains(_scores(20.0, 17.0, 22.5)) == (2.5, 2.5, "input")
+    assert gains(_scores(20.0, 26.0, 26.5)) == (6.5, 0.5, "push-pull")
+    line = _line("narvis", _scores(20.0, 17.0, 19.0), 0.01)
+    assert "(-1.0 dB over the input, -1.0 dB over the best baseline, input)" in line

@@ -248,6 +248,12 @@ def add_output_options(parser: argparse.ArgumentParser, out: str, empty: str) ->
         help="show the progress on stderr even when it is not a terminal",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress display")
+    parser.add_argument(
+        "--no-labels",
+        action="store_true",
+        help="write each image alone, exactly --size, without its title, colour bar or legend "
+        "(the side-by-side PNG keeps them)",
+    )
 
 
 def out_dir(text: str) -> str:

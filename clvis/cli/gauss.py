@@ -402,8 +402,12 @@ def _run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     files = []
     with progress.stage("writing PNGs"):
-        for name, _, img in panels:
-            files.append(images.save_png(out / f"{name}.png", _picture(img, args.transparent)))
+        value_name = args.attribute or "value"
+        for panel in panels:  # each labelled over its colour bar, as in gauss.png (--no-labels: bare)
+            one = _picture(panel[2], args.transparent) if args.no_labels else None
+            if one is None:
+                one = strip([panel], args.colormap, args.transparent, value_name)
+            files.append(images.save_png(out / f"{panel[0]}.png", one))
         files.append(
             images.save_png(
                 out / "gauss.png", strip(panels, args.colormap, args.transparent, args.attribute or "value")

@@ -166,9 +166,13 @@ def picture(img: IsoImage, transparent: bool = False) -> np.ndarray:
     return rgba if transparent else images.opaque(rgba)
 
 
-def labelled(img: IsoImage, isovalue: float, transparent: bool = False) -> np.ndarray:
-    """picture() under a band naming the isovalue and the completion."""
+def labelled(img: IsoImage, isovalue: float, transparent: bool = False, bare: bool = False) -> np.ndarray:
+    """picture() under a band naming the isovalue and the completion (bare:
+    the picture alone, --no-labels)."""
     from .. import images
+
+    if bare:
+        return picture(img, transparent)
 
     text = f"isovalue {isovalue:g}, completion {img.completion:.3f}"
     if img.completion < 1:
@@ -303,7 +307,9 @@ def _run_distributed(args) -> int:
         cam = camera_from_args(args, lo, hi, w, h)
         img = dr.render(cam, w, h, iso, speculation=not args.no_speculation)
     total = time.perf_counter() - t0
-    path = images.save_png(Path(args.out) / "iso.png", labelled(img, iso, args.transparent))
+    path = images.save_png(
+        Path(args.out) / "iso.png", labelled(img, iso, args.transparent, bare=args.no_labels)
+    )
     st = img.stats
     sec = st["seconds"]
     print(f"clvis iso: {what}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
@@ -366,14 +372,12 @@ def _run(args) -> int:
         # iso.png shows the colour, hit and active planes: only these come back
         dev = typing.cast(typing.Any, img)  # rendered with host=False: device planes
         img = dataclasses.replace(img, rgba=dev.rgba.get(), hit=dev.hit.get(), active=dev.active.get())
+        filled = filled if args.transparent else images.opaque(filled)
+        text = f"isovalue {iso:g}, completion {img.completion:.3f}, in-filled by the network"
         infilled = images.save_png(
-            out / "iso-infill.png",
-            images.label(
-                filled if args.transparent else images.opaque(filled),
-                f"isovalue {iso:g}, completion {img.completion:.3f}, in-filled by the network",
-            ),
+            out / "iso-infill.png", filled if args.no_labels else images.label(filled, text)
         )
-    path = images.save_png(out / "iso.png", labelled(img, iso, args.transparent))
+    path = images.save_png(out / "iso.png", labelled(img, iso, args.transparent, bare=args.no_labels))
     st = img.stats
     print(f"clvis iso: {source}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
     print(f"  device      {runtime.describe(q.device)}")

@@ -313,7 +313,7 @@ def _render_panels(
         from ..colormap import value_range  # the range render() colours over
 
         vr = look.value_range or value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
-        bar = (colormap, vr[0] + look.bar_offset, vr[1] + look.bar_offset)
+        bar = (colormap, vr[0] + look.bar_offset, vr[1] + look.bar_offset, attribute)
         panels.append(
             _Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({colormap})", shaded(g.rgba), bar)
         )
@@ -325,11 +325,23 @@ def _render_panels(
             hit = g.index != EMPTY
             colors[hit] = cloud.colors[g.index[hit]]
         panels.append(_Panel("colors", "point colors", shaded(colors)))
-    panels.append(_Panel("depth", "depth (near = bright)", images.depth_image(g.depth)))
+    panels.append(_depth_panel(g.depth))
     if g.vel2d is not None:
         angle, magnitude = images.velocity_images(g.vel2d)
-        panels.append(_Panel("velocity-angle", "screen velocity: angle", angle))
-        panels.append(_Panel("velocity-magnitude", "screen velocity: magnitude", magnitude))
+        speed = np.hypot(g.vel2d[..., 0], g.vel2d[..., 1])
+        speed = speed[np.isfinite(speed)]
+        top = float(np.percentile(speed, 99)) if speed.size else 1.0
+        panels.append(
+            _Panel("velocity-angle", "screen velocity: angle", angle, ("twilight", -180.0, 180.0, "degrees"))
+        )
+        panels.append(
+            _Panel(
+                "velocity-magnitude",
+                "screen velocity: magnitude",
+                magnitude,
+                ("inferno", 0.0, top, "pixels per unit time"),
+            )
+        )
     if soft_z is not None:
         with progress.stage(f"soft z (factor {soft_z:g})"):
             soft = raster.render(
@@ -404,6 +416,53 @@ def _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net
     ]
 
 
+def _depth_panel(depth) -> _Panel:
+    """The depth panel, its bar from the nearest depth (bright, left) to the farthest."""
+    from .. import images
+    from ..colormap import lut, value_range
+
+    near, far = value_range(depth)
+    bar = (lut("magma")[::-1], near, max(far, near), "view depth")
+    return _Panel("depth", "depth (near = bright)", images.depth_image(depth), bar)
+
+
+def _framed(p: _Panel, transparent: bool = False, background=None) -> np.ndarray:
+    """A panel's own PNG: its image under its title, over its colour bar or
+    legend when it maps values to colours (the overview's tile at full size);
+    the image alone otherwise."""
+    from .. import images
+
+    image = p.image if transparent else _opaque(p.image, background)
+    if p.bar is None and not p.legend:
+        return image
+    return _tile(p, image)
+
+
+def _tile(p: _Panel, image: np.ndarray) -> np.ndarray:
+    """`image` (the panel's, shrunk or not) labelled, over its bar or legend."""
+    from .. import images
+
+    tile = images.label(image, p.title)
+    if p.bar is not None:
+        lut, vmin, vmax, *title = p.bar
+        bar = images.colorbar(lut, vmin, vmax, tile.shape[1], title=title[0] if title else "")
+        tile = np.concatenate([tile, bar], axis=0)
+    if p.legend:
+        tile = np.concatenate([tile, images.legend(p.legend, tile.shape[1])], axis=0)
+    return tile
+
+
+def _panel_pngs(panels, args) -> list:
+    """[(file name, image)] of the panels: framed (title, colour bar, legend)
+    unless --no-labels asks for the images alone."""
+    if args.no_labels:
+        return [
+            (f"{p.key}.png", p.image if args.transparent else _opaque(p.image, args.background))
+            for p in panels
+        ]
+    return [(f"{p.key}.png", _framed(p, args.transparent, args.background)) for p in panels]
+
+
 def _shrink(image: np.ndarray, f: int) -> np.ndarray:
     """An RGBA image shrunk by f in each direction, keeping the most opaque
     pixel of each f x f block (single-pixel points stay points, not a haze)."""
@@ -431,13 +490,7 @@ def _overview(panels, transparent: bool = False, background=None) -> np.ndarray:
     tiles = []
     for p in panels:
         tile = _shrink(p.image, f)
-        tile = images.label(tile if transparent else _opaque(tile, background), p.title)
-        if p.bar is not None:
-            lut, vmin, vmax = p.bar
-            tile = np.concatenate([tile, images.colorbar(lut, vmin, vmax, tile.shape[1])], axis=0)
-        if p.legend:
-            tile = np.concatenate([tile, images.legend(p.legend, tile.shape[1])], axis=0)
-        tiles.append(tile)
+        tiles.append(_tile(p, tile if transparent else _opaque(tile, background)))
     return images.compose(tiles, columns=cols)
 
 
@@ -634,12 +687,12 @@ def _render_distributed(args, progress) -> int:
                     f"attribute-{_safe_name(attribute)}",
                     f"{attribute} ({args.colormap})",
                     shaded(g.rgba),
-                    (args.colormap, *vr),
+                    (args.colormap, *vr, attribute),
                 )
             )
         else:
             panels.append(_Panel("colors", "point colors", shaded(g.rgba)))
-        panels.append(_Panel("depth", "depth (near = bright)", images.depth_image(g.depth)))
+        panels.append(_depth_panel(g.depth))
         if args.depth_filter:
             with progress.stage(f"depth filter ({args.depth_filter} levels)"):
                 filtered = depth_filter(g, args.depth_filter)
@@ -647,10 +700,7 @@ def _render_distributed(args, progress) -> int:
             panels.append(_Panel("depth-filtered", f"depth filter ({args.depth_filter} levels)", kept))
         out = Path(args.out)
         with progress.stage("writing PNGs"):
-            named = [
-                (f"{p.key}.png", p.image if args.transparent else _opaque(p.image, args.background))
-                for p in panels
-            ]
+            named = _panel_pngs(panels, args)
             named.append(("overview.png", _overview(panels, args.transparent, args.background)))
             files = _save_pngs(out, named)
         st = g.stats
@@ -854,10 +904,7 @@ def _render(args, progress) -> int:
         compared = _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net, progress)
     out = Path(args.out)
     with progress.stage("writing PNGs"):
-        named = [
-            (f"{p.key}.png", p.image if args.transparent else _opaque(p.image, args.background))
-            for p in r.panels
-        ]
+        named = _panel_pngs(r.panels, args)
         named.append(("overview.png", _overview(r.panels, args.transparent, args.background)))
         files = _save_pngs(out, named)
     total = time.perf_counter() - t_start

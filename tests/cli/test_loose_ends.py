@@ -80,3 +80,54 @@ def test_camera_errors_have_one_prefix_and_no_api_advice(tmp_path, capsys):
     assert line.startswith("clvis render: error: camera: ") and line.count("camera:") == 1, line
     assert "Camera." not in line and "--eye" in line
     assert err.count("\n") == 1
+
+
+def _png(path):
+    from PIL import Image
+
+    with Image.open(path) as im:
+        return np.asarray(im)
+
+
+def test_every_png_that_maps_values_has_its_bar_or_legend(tmp_path, capsys):
+    """Each panel PNG that maps values to colours (an attribute, the classes,
+    depth; Gaussians through a transfer function) is labelled over its colour
+    bar or legend, as its tile in the overview; --no-labels: the image alone."""
+    from clvis import colormap, images
+
+    w, h = 240, 135
+    size = ["--size", f"{w}x{h}", "--quiet"]
+    rc, out, err = _main(capsys, "render", SIMPLE, "--attribute", "z", *size, "--out", tmp_path / "z")
+    assert rc == 0, err
+    band = images.label_height(w)
+    for name in ("attribute-z", "depth"):
+        a = _png(tmp_path / "z" / f"{name}.png")
+        assert a.shape[1] == w and a.shape[0] > h + band, name
+    a = _png(tmp_path / "z" / "attribute-z.png")
+    ramp = a[band + h + 1, :, :3]  # the bar's first row under the image
+    lut = colormap.lut("viridis")[:, :3]
+    assert (np.abs(ramp[0].astype(int) - lut[0]).max() <= 2) and (
+        np.abs(ramp[-1].astype(int) - lut[-1]).max() <= 2
+    )
+    assert _png(tmp_path / "z" / "colors.png").shape[:2] == (h, w)  # the file's own colours: no bar
+    rc, out, err = _main(
+        capsys, "render", SIMPLE, "--attribute", "classification", *size, "--out", tmp_path / "c"
+    )
+    assert rc == 0, err
+    c = _png(tmp_path / "c" / "attribute-classification.png")
+    legend = c[band + h :]
+    # the legend's swatches: ASPRS class 2 (ground) in its palette colour
+    ground = tuple(int(v) for v in colormap.class_palette()[2, :3])
+    assert (legend[..., :3] == ground).all(axis=-1).any()
+    rc, out, err = _main(
+        capsys, "render", SIMPLE, "--attribute", "z", *size, "--no-labels", "--out", tmp_path / "b"
+    )
+    assert rc == 0, err
+    for name in ("attribute-z", "depth", "colors"):
+        assert _png(tmp_path / "b" / f"{name}.png").shape[:2] == (h, w), name
+    rc, out, err = _main(capsys, "iso", "--size", "64x48", "--quiet", "--no-labels", "--out", tmp_path / "i")
+    assert rc == 0 and _png(tmp_path / "i" / "iso.png").shape[:2] == (48, 64)
+    rc, out, err = _main(capsys, "gauss", ANT, "--attribute", "z", *SMALL, "--out", tmp_path / "g")
+    assert rc == 0, err
+    g = _png(tmp_path / "g" / "points.png")
+    assert g.shape[1] == 64 and g.shape[0] > 48 + images.label_height(64)

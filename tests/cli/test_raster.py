@@ -15,7 +15,7 @@ from clvis.camera import fit_camera
 from clvis.cli import _common, raster
 from clvis.io import PointCloud, save_npz, write_ply
 
-SMALL = ["--size", "160x90", "--quiet"]
+SMALL = ["--size", "160x90", "--quiet", "--no-labels"]  # the images alone: exactly --size
 
 
 def _png(path):

@@ -430,7 +430,6 @@ def _framed(p: _Panel, transparent: bool = False, background=None) -> np.ndarray
     """A panel's own PNG: its image under its title, over its colour bar or
     legend when it maps values to colours (the overview's tile at full size);
     the image alone otherwise."""
-    from .. import images
 
     image = p.image if transparent else _opaque(p.image, background)
     if p.bar is None and not p.legend:
@@ -614,7 +613,6 @@ def cmd(args: argparse.Namespace) -> int:
 def _render_distributed(args, progress) -> int:
     """`clvis render TILES... --workers N | --scheduler ADDRESS`: the tiles
     read and rendered on Dask workers, composited into one view."""
-    from .. import images
     from ..distributed import DistributedRasterizer
     from ..raster import depth_filter
 

@@ -35,6 +35,7 @@ from ._common import (
     real,
     size,
 )
+from .orbit import add_orbit_options, check_orbit_args
 
 if TYPE_CHECKING:
     import pyopencl as cl
@@ -143,6 +144,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)",
     )
     add_output_options(g, "clvis-gauss", "empty pixels")
+    add_orbit_options(g)
     add_camera_options(g, _FIT)
     add_volume_options(g)
     return g
@@ -249,6 +251,7 @@ def _finite_points(cloud, args):
 
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
+    check_orbit_args(args)
     return _run(args)
 
 
@@ -413,6 +416,10 @@ def _run(args) -> int:
                 out / "gauss.png", strip(panels, args.colormap, args.transparent, args.attribute or "value")
             )
         )
+    if args.orbit is not None:  # the turntable (clvis.cli.orbit)
+        from .orbit import gauss_orbit, report
+
+        orbit = gauss_orbit(args, lods, sv, gaussians, q, opacity, out, progress)
     print(f"clvis gauss: {source}, {args.model} model, {width}x{height}")
     print(f"  device    {runtime.describe(q.device)}")
     if sv is not None:
@@ -445,6 +452,8 @@ def _run(args) -> int:
             f"{s['render_s'] * 1e3:10.1f} {s['bands']:6} {s['hits_per_ray_mean']:9.1f}"
             + (f" {s['keys_per_gaussian']:7.2f}" if method == "tiles" else "")
         )
+    if args.orbit is not None:
+        report(*orbit)
     print(f"  total     {time.perf_counter() - t0:.2f} s")
     print(f"wrote {len(files)} PNGs to {out}{os.sep}")
     for p in files:

@@ -42,6 +42,7 @@ from ._common import (
     real,
     size,
 )
+from .orbit import add_orbit_options, check_orbit_args
 
 if TYPE_CHECKING:
     import pyopencl as cl
@@ -113,6 +114,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--size", type=size, default=(1280, 720), metavar="WxH", help=f"{SIZE_RULE} (default 1280x720)"
     )
     add_output_options(p, "clvis-iso", "pixels without surface")
+    add_orbit_options(p)
     add_camera_options(p, _FIT)
     add_volume_options(p)
     add_cluster_options(p)
@@ -241,7 +243,10 @@ def render(
 
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
+    check_orbit_args(args)
     if distributed_run(args):
+        if args.orbit is not None:
+            raise CliError("--orbit: not with --workers/--scheduler (one device renders the turntable)")
         args.brick = 64 if args.brick is None else args.brick
         return on_workers("iso", _run_distributed, args)
     if args.brick is not None:
@@ -378,6 +383,10 @@ def _run(args) -> int:
             out / "iso-infill.png", filled if args.no_labels else images.label(filled, text)
         )
     path = images.save_png(out / "iso.png", labelled(img, iso, args.transparent, bare=args.no_labels))
+    if args.orbit is not None:  # the turntable (clvis.cli.orbit)
+        from .orbit import iso_orbit, report
+
+        orbit = iso_orbit(args, r, iso, out, progress_from_args(args, "clvis iso"))
     st = img.stats
     print(f"clvis iso: {source}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
     print(f"  device      {runtime.describe(q.device)}")
@@ -404,6 +413,8 @@ def _run(args) -> int:
         f"  time        build {r.build_seconds:.2f} s, passes {st['seconds'] * 1e3:.1f} ms; "
         f"{total:.2f} s with compression and setup"
     )
+    if args.orbit is not None:
+        report(*orbit)
     if infilled is not None:
         ns = net.stats
         print(

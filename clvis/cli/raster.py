@@ -39,6 +39,7 @@ from ._common import (
     size,
     timed,
 )
+from .orbit import add_orbit_options, check_orbit_args
 
 if TYPE_CHECKING:
     import pyopencl as cl
@@ -259,6 +260,17 @@ class _Look:
     class_colors: np.ndarray | None = None  # (N, 4) uint8, with classes
 
 
+def _render_kw(look: _Look, attribute, colormap, point_size) -> dict:
+    """Rasterizer.render's colour keywords for the look: the attribute through
+    the colormap over its range, or (classes, the cloud's colours) none."""
+    return {
+        "color_by": None if look.classes is not None else attribute,
+        "colormap": colormap,
+        "point_size": point_size,
+        "value_range": look.value_range,
+    }
+
+
 def _render_panels(
     raster,
     cloud,
@@ -280,12 +292,7 @@ def _render_panels(
 
     look = look or _Look()
     color_by = None if look.classes is not None else attribute
-    kw = {
-        "color_by": color_by,
-        "colormap": colormap,
-        "point_size": point_size,
-        "value_range": look.value_range,
-    }
+    kw = _render_kw(look, attribute, colormap, point_size)
     with progress.stage("rendering + resolving G-buffers"):
         t0 = time.perf_counter()
         g = raster.render(camera, width, height, **kw)
@@ -592,7 +599,10 @@ def cmd(args: argparse.Namespace) -> int:
     if args.transparent and args.background is not None:
         raise CliError("--transparent and --background: empty pixels are either clear or a colour; give one")
     progress = progress_from_args(args, "clvis render")
+    check_orbit_args(args)
     if distributed_run(args):
+        if args.orbit is not None:
+            raise CliError("--orbit: not with --workers/--scheduler (one device renders the turntable)")
         for name in ("post", "compare"):
             if getattr(args, name) not in (None, False):
                 raise CliError(f"--{name}: not with --workers/--scheduler (the networks run on one device)")
@@ -905,6 +915,22 @@ def _render(args, progress) -> int:
         named = _panel_pngs(r.panels, args)
         named.append(("overview.png", _overview(r.panels, args.transparent, args.background)))
         files = _save_pngs(out, named)
+    orbit: tuple = ([], None)
+    if args.orbit is not None:
+        from ..raster import edl
+        from .orbit import render_orbit
+
+        first = r.panels[0]  # the colour panel: the attribute's, the classes' or the cloud's colours
+
+        def draw(cam) -> np.ndarray:
+            g = raster.render(cam, width, height, **_render_kw(look, attribute, colormap, point_size))
+            rgba = g.rgba if look.edl is None else edl(g.depth, g.rgba, look.edl, look.edl_radius, queue=q)
+            p = dataclasses.replace(first, image=rgba)
+            if args.no_labels:
+                return p.image if args.transparent else _opaque(p.image, args.background)
+            return _framed(p, args.transparent, args.background)
+
+        orbit = render_orbit(args, camera, lo, hi, draw, out, progress)
     total = time.perf_counter() - t_start
 
     g, n = r.gbuffers, len(cloud)
@@ -960,8 +986,15 @@ def _render(args, progress) -> int:
             + ("; --point-size auto draws them large enough to see" if args.point_size == 1 else ""),
             file=sys.stderr,
         )
+    if args.orbit is not None:
+        from .orbit import report
+
+        report(*orbit)
     print(f"  total     {total:.2f} s")
-    print(f"wrote {len(files)} PNGs to {out}{os.sep}")
+    print(
+        f"wrote {len(files)} PNGs to {out}{os.sep}"
+        + (f" and {len(orbit[0])} orbit frames" if orbit[0] else "")
+    )
     for p in files:
         print(f"  {p.name}")
     return 0
@@ -1136,5 +1169,6 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "and score the network and the plain rasterization against it (PSNR, SSIM, time)",
     )
     add_output_options(r, "clvis-render", "empty pixels")
+    add_orbit_options(r)
     add_cluster_options(r)
     return r

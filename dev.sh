@@ -66,7 +66,7 @@ TYPED="clvis/__init__.py clvis/__main__.py clvis/_arrays.py clvis/_keys.py clvis
        clvis/post/__init__.py clvis/post/names.py clvis/post/nets.py clvis/post/pack.py
        clvis/post/pushpull.py
        clvis/io/__init__.py clvis/io/npy.py clvis/io/volumes.py clvis/io/ascii.py clvis/io/files.py
-       clvis/io/pcd.py clvis/io/vdb.py clvis/io/vtk.py clvis/metrics.py clvis/post/specs.py
+       clvis/io/pcd.py clvis/io/e57.py clvis/io/vdb.py clvis/io/vtk.py clvis/metrics.py clvis/post/specs.py
        clvis/distributed/__init__.py clvis/distributed/composite.py
        clvis/view"
 

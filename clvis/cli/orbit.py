@@ -198,7 +198,9 @@ def report(files: Sequence[Path], movie: Path | None) -> None:
         print(f"  movie     {movie}")
 
 
-def iso_orbit(args: argparse.Namespace, renderer: Any, isovalue: float, out: Path, progress: Progress):
+def iso_orbit(
+    args: argparse.Namespace, renderer: Any, isovalue: float, out: Path, progress: Progress
+) -> tuple[list[Path], Path | None]:
     """`clvis iso --orbit N`: the isosurface from N cameras around the volume,
     each frame as iso.png shows it (its band unless --no-labels)."""
     from .iso import labelled
@@ -223,7 +225,16 @@ def iso_orbit(args: argparse.Namespace, renderer: Any, isovalue: float, out: Pat
     return write_orbit(out, args.orbit, frame, progress, args.movie, args.fps)
 
 
-def gauss_orbit(args: argparse.Namespace, lods, sv, gaussians, queue, opacity, out: Path, progress: Progress):
+def gauss_orbit(
+    args: argparse.Namespace,
+    lods: Sequence[str],
+    sv: Any,
+    gaussians: Any,
+    queue: Any,
+    opacity: Any,
+    out: Path,
+    progress: Progress,
+) -> tuple[list[Path], Path | None]:
     """`clvis gauss --orbit N`: the LOD panels side by side (gauss.png's
     layout) from N cameras around the Gaussians."""
     from .. import images
@@ -257,12 +268,12 @@ def gauss_orbit(args: argparse.Namespace, lods, sv, gaussians, queue, opacity, o
 def render_orbit(
     args: argparse.Namespace,
     camera: Any,
-    lo,
-    hi,
+    lo: npt.ArrayLike,
+    hi: npt.ArrayLike,
     draw: Callable[[Any], np.ndarray],
     out: Path,
     progress: Progress,
-):
+) -> tuple[list[Path], Path | None]:
     """`clvis render --orbit N`: draw(camera) (the first panel as its PNG
     shows it) from N cameras around the cloud's bounds [lo, hi]."""
 

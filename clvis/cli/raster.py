@@ -1069,7 +1069,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "file",
         nargs="*",
-        help="a PLY, LAS, LAZ, PCD, XYZ/TXT/CSV, NPY or NPZ point cloud (several: tiles joined into one "
+        help="a PLY, LAS, LAZ, E57, PCD, XYZ/TXT/CSV, NPY or NPZ point cloud (several: tiles joined into one "
         "cloud here, or rendered on Dask workers with --workers/--scheduler)",
     )
     r.add_argument(

@@ -252,6 +252,10 @@ def _finite_points(cloud, args):
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
     check_orbit_args(args)
+    if args.model == "splat" and args.method == "bvh":  # the library's own words are its API's
+        raise CliError(
+            "--model splat (3D Gaussian Splatting's rasterizer) draws on tiles; leave --method bvh out"
+        )
     return _run(args)
 
 

@@ -354,12 +354,13 @@ def _render_panels(
             soft = raster.render(
                 camera, width, height, **kw, soft_z=soft_z, host=False
             )  # read back its rgba alone
-            panels.append(_Panel("soft-z", f"soft z (factor {soft_z:g})", soft.rgba.get()))
+            key = _Panel("soft-z", f"soft z (factor {soft_z:g})", soft.rgba.get())
+            panels.append(_keyed(key, panels))
     if levels:
         with progress.stage(f"depth filter ({levels} levels)"):
             filtered = depth_filter(g, levels)
         kept = typing.cast(np.ndarray, filtered.rgba)  # G-buffers in: the rgba is there
-        panels.append(_Panel("depth-filtered", f"depth filter ({levels} levels)", kept))
+        panels.append(_keyed(_Panel("depth-filtered", f"depth filter ({levels} levels)", kept), panels))
     post_s = 0.0
     if post is not None:
 
@@ -421,6 +422,14 @@ def _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net
         f"unpack {ns['unpack'] * 1e3:.0f}) against Gaussians "
         f"{gr_s * 1e3:.0f} ms: {gr_s / fast:.1f}x faster",
     ]
+
+
+def _keyed(p: _Panel, panels: list) -> _Panel:
+    """A panel in the first panel's colours (soft z, the depth filter) with its
+    colour bar or legend: the colours read the same there."""
+    if panels and panels[0].key.startswith("attribute-"):
+        p.bar, p.legend = panels[0].bar, panels[0].legend
+    return p
 
 
 def _depth_panel(depth) -> _Panel:
@@ -705,7 +714,9 @@ def _render_distributed(args, progress) -> int:
             with progress.stage(f"depth filter ({args.depth_filter} levels)"):
                 filtered = depth_filter(g, args.depth_filter)
             kept = typing.cast(np.ndarray, filtered.rgba)  # G-buffers in: the rgba is there
-            panels.append(_Panel("depth-filtered", f"depth filter ({args.depth_filter} levels)", kept))
+            panels.append(
+                _keyed(_Panel("depth-filtered", f"depth filter ({args.depth_filter} levels)", kept), panels)
+            )
         out = Path(args.out)
         with progress.stage("writing PNGs"):
             named = _panel_pngs(panels, args)

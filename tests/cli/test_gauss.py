@@ -53,7 +53,8 @@ def test_gauss_splat(tmp_path, capsys):
     with Image.open(tmp_path / "low.png") as im:
         assert np.asarray(im).std() > 1
     assert cli.main(["gauss", "--model", "splat", "--method", "bvh", "--out", str(tmp_path)]) == 2
-    assert "needs method='tiles'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--model splat (3D Gaussian Splatting's rasterizer) draws on tiles" in err and "method=" not in err
 
 
 def test_gauss_files(tmp_path, capsys):

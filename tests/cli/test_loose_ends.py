@@ -100,7 +100,7 @@ def test_every_png_that_maps_values_has_its_bar_or_legend(tmp_path, capsys):
     rc, out, err = _main(capsys, "render", SIMPLE, "--attribute", "z", *size, "--out", tmp_path / "z")
     assert rc == 0, err
     band = images.label_height(w)
-    for name in ("attribute-z", "depth"):
+    for name in ("attribute-z", "depth", "soft-z"):  # soft z: the attribute's colours, its bar
         a = _png(tmp_path / "z" / f"{name}.png")
         assert a.shape[1] == w and a.shape[0] > h + band, name
     a = _png(tmp_path / "z" / "attribute-z.png")

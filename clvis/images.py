@@ -34,6 +34,7 @@ if TYPE_CHECKING:  # Pillow is imported when a picture is made, not with clvis
 
 __all__ = [
     "BACKGROUND",
+    "Picture",
     "attribute_image",
     "colorbar",
     "compose",
@@ -53,6 +54,61 @@ BACKGROUND = (24, 24, 28)  # behind empty pixels: a dark grey
 BAND = (8, 8, 10)  # label bands, colour bars and the gaps between panels: darker
 TEXT = (235, 235, 235)  # the labels' text
 MIN_TEXT, MAX_TEXT = 8, 24  # font sizes in pixels a label may take
+
+
+class Picture:
+    """What every rendered image type shares (GBuffers, FilteredImage,
+    IsoImage, GaussianImage): ``to_uint8(background=None)`` is the picture
+    as ``(H, W, 4)`` uint8 RGBA, row 0 on top, straight alpha with empty
+    pixels transparent black; given a ``background`` (an RGB colour, three
+    0..255 integers such as ``BACKGROUND``) it lies over that colour, every
+    alpha 255. ``save_png(path, background=None)`` writes that picture
+    (:func:`save_png`: folders made, the file complete or absent) and returns
+    the path. The post networks' outputs are that array already."""
+
+    def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
+        raise NotImplementedError
+
+    def save_png(self, path: str | os.PathLike[str], background: Sequence[int] | None = None) -> Path:
+        """Write :meth:`to_uint8` of `background` to the PNG file `path`; the path."""
+        return save_png(path, self.to_uint8(background))
+
+
+def rgba8(rgba: npt.ArrayLike, background: Sequence[int] | None = None) -> np.ndarray:
+    """Picture.to_uint8 of a ``(H, W, 4)`` uint8 straight-alpha image: a copy,
+    or `opaque` over `background`."""
+    a = _rgba("rgba", rgba)
+    return a.copy() if background is None else opaque(a, background)
+
+
+def float_rgba8(
+    rgba: npt.ArrayLike, background: Sequence[int] | None = None, *, premultiplied: bool
+) -> np.ndarray:
+    """Picture.to_uint8 of a ``(H, W, 4)`` float image with colour in [0, 1]
+    (premultiplied by alpha or not), a band of rows at a time so float
+    temporaries stay small for large images."""
+    a = np.asarray(rgba)
+    if a.ndim != 3 or a.shape[2] != 4:
+        raise ValueError(f"rgba: expected shape (H, W, 4), got {a.shape}")
+    bg = None if background is None else np.asarray(_colour("background", background), np.float32) / 255
+    out = np.empty(a.shape, np.uint8)
+    step = max(1, (1 << 20) // max(a.shape[1], 1))
+    for y in range(0, a.shape[0], step):
+        band = a[y : y + step].astype(np.float32, copy=False)
+        alpha = np.clip(band[..., 3:4], 0.0, 1.0)
+        rgb: np.ndarray = band[..., :3]
+        if bg is None:
+            if premultiplied:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    rgb = np.where(alpha > 0, rgb / alpha, 0.0)
+            else:
+                rgb = np.where(alpha > 0, rgb, 0.0)
+            out[y : y + step, :, 3:] = np.rint(alpha * 255)
+        else:
+            rgb = (rgb if premultiplied else rgb * alpha) + (1 - alpha) * bg
+            out[y : y + step, :, 3] = 255
+        out[y : y + step, :, :3] = np.rint(np.clip(rgb, 0.0, 1.0) * 255)
+    return out
 
 
 def save_png(path: str | os.PathLike[str], image: npt.ArrayLike) -> Path:

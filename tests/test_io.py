@@ -541,7 +541,7 @@ def test_missing_file(tmp_path):
         read_points(tmp_path / "nope.ply")
 
 
-@pytest.mark.parametrize("name", ["points.e57", "points", "points.ply.gz"])
+@pytest.mark.parametrize("name", ["points.e58", "points", "points.ply.gz"])
 def test_unknown_extension(tmp_path, name):
     path = tmp_path / name
     path.write_bytes(b"1 2 3\n")

@@ -248,6 +248,12 @@ def add_output_options(parser: argparse.ArgumentParser, out: str, empty: str) ->
         help="show the progress on stderr even when it is not a terminal",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress display")
+    parser.add_argument(
+        "--no-labels",
+        action="store_true",
+        help="write each image alone, exactly --size, without its title, colour bar or legend "
+        "(the side-by-side PNG keeps them)",
+    )
 
 
 def out_dir(text: str) -> str:
@@ -489,7 +495,18 @@ def camera_from_args(args, lo, hi, width: int, height: int, points=None):
             return cam
         return _replaced(cam, kind, args, lo, hi, aspect)
     except ValueError as e:  # Camera's own checks: an up along the view, ...
-        raise CliError(f"camera: {e}") from None
+        raise CliError(camera_error(e)) from None
+
+
+def camera_error(e: BaseException) -> str:
+    """A camera check's message for a command line user: one 'camera:' prefix
+    (the library's own message may carry one already) and the options to change,
+    not the library calls that make a camera (those are the API's advice)."""
+    text = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+    while text.lower().startswith("camera:"):
+        text = text[len("camera:") :].strip()
+    text = text.split("; make cameras with", 1)[0]
+    return f"camera: {text} (check --eye, --target, --up and --fov)"
 
 
 def _replaced(cam, kind, args, lo, hi, aspect: float):

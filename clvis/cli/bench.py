@@ -88,6 +88,16 @@ def _percent(text: str) -> float:
     return v / 100
 
 
+def _missing(module: str) -> bool:
+    """Whether `module` cannot be imported (looked up, not imported)."""
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec(module) is None
+    except (ImportError, ValueError):
+        return True
+
+
 def _bench_dir() -> Path | None:
     for cand in (Path.cwd() / "bench", Path(__file__).resolve().parents[2] / "bench"):
         if (cand / "bench_primitives.py").is_file():
@@ -112,6 +122,15 @@ def cmd(args: argparse.Namespace) -> int:
         if bench is None:
             print(
                 "clvis bench needs the bench/ folder of a source checkout (run it from the repository root)",
+                file=sys.stderr,
+            )
+            return 2
+        missing = [m for m in ("pytest", "pytest_benchmark") if _missing(m)]
+        if missing:
+            print(
+                f"clvis bench: error: the suites run under pytest with pytest-benchmark "
+                f"({', '.join(missing)} not installed): pip install '.[test]' in the clone "
+                "(the test extra)",
                 file=sys.stderr,
             )
             return 2

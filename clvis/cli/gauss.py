@@ -35,6 +35,7 @@ from ._common import (
     real,
     size,
 )
+from .orbit import add_orbit_options, check_orbit_args
 from .raster import _value_range as value_range_arg
 
 if TYPE_CHECKING:
@@ -97,9 +98,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     g.add_argument(
         "--lod",
         type=_lods,
-        default=list(LODS),
+        default=None,
         metavar="LIST",
-        help="comma-separated levels of detail (default low,medium,high)",
+        help="comma-separated levels of detail of a volume (default low,medium,high)",
     )
     g.add_argument(
         "--attribute",
@@ -174,6 +175,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)",
     )
     add_output_options(g, "clvis-gauss", "empty pixels")
+    add_orbit_options(g)
     add_camera_options(g, _FIT)
     add_volume_options(g)
     return g
@@ -218,7 +220,7 @@ def _sources(args):
     from ..gauss import Gaussians, SparseVolume, read_vdb
     from ..io import read_points
 
-    lods = args.lod
+    lods = args.lod or list(LODS)
     if args.attribute is not None and not (args.file and args.file.lower().endswith(_POINT_FORMATS)):
         raise CliError("--attribute is for point clouds (.ply, .las, .laz, .npy, .npz of points)")
     if args.file is None:
@@ -265,11 +267,13 @@ def _sources(args):
         )
         return lods, sv, None, str(path), data
     if name.endswith(".npz") and "means" in load_npz(path):
+        _no_lod(args, path, "a file of Gaussians, drawn as they are")
         return ["file"], None, Gaussians.load(path), str(path), None
     if name.endswith(_POINT_FORMATS):
         from ..gauss import gaussians_from_points
 
-        cloud = read_points(path)
+        _no_lod(args, path, "a point cloud, one Gaussian a point")
+        cloud = _finite_points(read_points(path), args)
         if len(cloud) == 0:
             raise CliError(f"{path}: the file holds no points")
         try:
@@ -285,8 +289,28 @@ def _sources(args):
     )
 
 
+def _no_lod(args, path, what: str) -> None:
+    """--lod makes levels of detail from a volume: an error for other files."""
+    if args.lod is not None:
+        raise CliError(f"--lod: levels of detail are made from a volume; {path} is {what} (leave --lod out)")
+
+
+def _finite_points(cloud, args):
+    """The cloud without its points that have a NaN or infinite coordinate
+    (counted in args.dropped for the summary): `clvis render`'s rule, they
+    are never drawn and the summary says how many."""
+    keep = np.isfinite(cloud.positions).all(axis=1)
+    args.dropped = int(len(keep) - keep.sum())
+    return cloud.subset(np.flatnonzero(keep)) if args.dropped else cloud
+
+
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
+    check_orbit_args(args)
+    if args.model == "splat" and args.method == "bvh":  # the library's own words are its API's
+        raise CliError(
+            "--model splat (3D Gaussian Splatting's rasterizer) draws on tiles; leave --method bvh out"
+        )
     return _run(args)
 
 
@@ -430,10 +454,7 @@ def _picture(img, transparent: bool = False) -> np.ndarray:
     temporaries for large images)."""
     from .. import images
 
-    if transparent:
-        return images.from_premultiplied(img.rgba)
-    rgb = img.to_uint8(np.asarray(images.BACKGROUND, np.float32) / 255)
-    return np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
+    return img.to_uint8(None if transparent else images.BACKGROUND)
 
 
 def strip(
@@ -497,14 +518,22 @@ def _run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     files = []
     with progress.stage("writing PNGs"):
-        for name, _, img in panels:
-            files.append(images.save_png(out / f"{name}.png", _picture(img, args.transparent)))
+        value_name = args.attribute or "value"
+        for panel in panels:  # each labelled over its colour bar, as in gauss.png (--no-labels: bare)
+            one = _picture(panel[2], args.transparent) if args.no_labels else None
+            if one is None:
+                one = strip([panel], args.colormap, args.transparent, value_name, vr)
+            files.append(images.save_png(out / f"{panel[0]}.png", one))
         files.append(
             images.save_png(
                 out / "gauss.png",
                 strip(panels, args.colormap, args.transparent, args.attribute or "value", vr),
             )
         )
+    if args.orbit is not None:  # the turntable (clvis.cli.orbit)
+        from .orbit import gauss_orbit, report
+
+        orbit = gauss_orbit(args, lods, sv, gaussians, q, opacity, out, progress, vr)
     print(f"clvis gauss: {source}, {args.model} model, {width}x{height}")
     print(f"  device    {runtime.describe(q.device)}")
     if sv is not None:
@@ -515,6 +544,8 @@ def _run(args) -> int:
         print(f"  colour    {args.attribute or 'the default value'} through {args.colormap}")
     if why:
         print(f"  transfer  {why}")
+    if getattr(args, "dropped", 0):
+        print(f"  dropped   {args.dropped:,} points with a NaN or infinite coordinate (never drawn)")
     print(f"  build     {timings['build_s']:.2f} s (kernels, once per process; not in the render times)")
     method = panels[0][2].stats.get("method", "bvh")
     print(
@@ -537,6 +568,8 @@ def _run(args) -> int:
             f"{s['render_s'] * 1e3:10.1f} {s['bands']:6} {s['hits_per_ray_mean']:9.1f}"
             + (f" {s['keys_per_gaussian']:7.2f}" if method == "tiles" else "")
         )
+    if args.orbit is not None:
+        report(*orbit)
     print(f"  total     {time.perf_counter() - t0:.2f} s")
     print(f"wrote {len(files)} PNGs to {out}{os.sep}")
     for p in files:

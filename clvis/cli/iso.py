@@ -43,6 +43,7 @@ from ._common import (
     real,
     size,
 )
+from .orbit import add_orbit_options, check_orbit_args
 from .raster import _colour
 from .raster import _value_range as value_range_arg
 
@@ -160,13 +161,14 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--size", type=size, default=(1280, 720), metavar="WxH", help=f"{SIZE_RULE} (default 1280x720)"
     )
     add_output_options(p, "clvis-iso", "pixels without surface")
+    add_orbit_options(p)
     add_camera_options(p, _FIT)
     add_volume_options(p)
     add_cluster_options(p)
     p.add_argument(
         "--brick",
         type=count(4, 4096),
-        default=64,
+        default=None,
         metavar="N",
         help="with --workers/--scheduler: cells per brick edge, a multiple of 4 (default 64)",
     )
@@ -222,10 +224,15 @@ def picture(img: IsoImage, transparent: bool = False) -> np.ndarray:
     return rgba if transparent else images.opaque(rgba)
 
 
-def labelled(img: IsoImage, isovalue: float | Sequence[float], transparent: bool = False) -> np.ndarray:
-    """picture() under a band naming the isovalue(s) and the completion."""
+def labelled(
+    img: IsoImage, isovalue: float | Sequence[float], transparent: bool = False, bare: bool = False
+) -> np.ndarray:
+    """picture() under a band naming the isovalue(s) and the completion (bare:
+    the picture alone, --no-labels)."""
     from .. import images
 
+    if bare:
+        return picture(img, transparent)
     isos = [isovalue] if isinstance(isovalue, (int, float, np.floating)) else list(isovalue)
     values = ", ".join(f"{v:g}" for v in isos)
     text = f"isovalue{'s' if len(isos) > 1 else ''} {values}, completion {img.completion:.3f}"
@@ -295,8 +302,16 @@ def render(
 
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
+    check_orbit_args(args)
     if distributed_run(args):
+        if args.orbit is not None:
+            raise CliError("--orbit: not with --workers/--scheduler (one device renders the turntable)")
+        args.brick = 64 if args.brick is None else args.brick
         return on_workers("iso", _run_distributed, args)
+    if args.brick is not None:
+        raise CliError(
+            "--brick cuts the volume for Dask workers; add --workers N (or --scheduler) or leave it out"
+        )
     return _run(args)
 
 
@@ -367,7 +382,9 @@ def _run_distributed(args) -> int:
         cam = camera_from_args(args, lo, hi, w, h)
         img = dr.render(cam, w, h, iso, speculation=not args.no_speculation)
     total = time.perf_counter() - t0
-    path = images.save_png(Path(args.out) / "iso.png", labelled(img, iso, args.transparent))
+    path = images.save_png(
+        Path(args.out) / "iso.png", labelled(img, iso, args.transparent, bare=args.no_labels)
+    )
     st = img.stats
     sec = st["seconds"]
     print(f"clvis iso: {what}, isovalue {iso:g}, ZFP rate {args.rate}, {w}x{h}")
@@ -399,6 +416,13 @@ def _run(args) -> int:
     if args.infill and (len(isos) > 1 or args.color_by is not None or args.surface_color is not None):
         raise CliError(
             "--infill: with one isovalue in the renderer's colours (no --color-by or --surface-color)"
+        )
+    if args.orbit is not None and (
+        len(isos) > 1 or args.color_by is not None or args.surface_color is not None
+    ):
+        raise CliError(
+            "--orbit: turns one isovalue in the renderer's colours (no several isovalues, --color-by or "
+            "--surface-color)"
         )
     if args.surface_color is not None and len(args.surface_color) != len(isos):
         raise CliError(
@@ -476,17 +500,20 @@ def _run(args) -> int:
         # iso.png shows the colour, hit and active planes: only these come back
         dev = typing.cast(typing.Any, img)  # rendered with host=False: device planes
         img = dataclasses.replace(img, rgba=dev.rgba.get(), hit=dev.hit.get(), active=dev.active.get())
+        filled = filled if args.transparent else images.opaque(filled)
+        text = f"isovalue {isos[0]:g}, completion {img.completion:.3f}, in-filled by the network"
         infilled = images.save_png(
-            out / "iso-infill.png",
-            images.label(
-                filled if args.transparent else images.opaque(filled),
-                f"isovalue {isos[0]:g}, completion {img.completion:.3f}, in-filled by the network",
-            ),
+            out / "iso-infill.png", filled if args.no_labels else images.label(filled, text)
         )
-    picture_ = labelled(img, isos, args.transparent)
-    if bar is not None:
+    picture_ = labelled(img, isos, args.transparent, bare=args.no_labels)
+    if bar is not None and not args.no_labels:
         picture_ = np.concatenate([picture_, bar], axis=0)
     path = images.save_png(out / "iso.png", picture_)
+    orbit = None
+    if args.orbit is not None and r is not None:  # the turntable (clvis.cli.orbit)
+        from .orbit import iso_orbit
+
+        orbit = iso_orbit(args, r, isos[0], out, progress_from_args(args, "clvis iso"))
     values = ", ".join(f"{v:g}" for v in isos)
     print(
         f"clvis iso: {source}, isovalue{'s' if len(isos) > 1 else ''} {values}, ZFP rate {args.rate}, {w}x{h}"
@@ -530,6 +557,10 @@ def _run(args) -> int:
         f"  time        build {r.build_seconds:.2f} s, passes {seconds * 1e3:.1f} ms; "
         f"{total:.2f} s with compression and setup"
     )
+    if orbit is not None:
+        from .orbit import report
+
+        report(*orbit)
     if infilled is not None:
         ns = net.stats
         print(

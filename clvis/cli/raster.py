@@ -39,6 +39,7 @@ from ._common import (
     size,
     timed,
 )
+from .orbit import add_orbit_options, check_orbit_args
 
 if TYPE_CHECKING:
     import pyopencl as cl
@@ -259,6 +260,17 @@ class _Look:
     class_colors: np.ndarray | None = None  # (N, 4) uint8, with classes
 
 
+def _render_kw(look: _Look, attribute, colormap, point_size) -> dict:
+    """Rasterizer.render's colour keywords for the look: the attribute through
+    the colormap over its range, or (classes, the cloud's colours) none."""
+    return {
+        "color_by": None if look.classes is not None else attribute,
+        "colormap": colormap,
+        "point_size": point_size,
+        "value_range": look.value_range,
+    }
+
+
 def _render_panels(
     raster,
     cloud,
@@ -280,12 +292,7 @@ def _render_panels(
 
     look = look or _Look()
     color_by = None if look.classes is not None else attribute
-    kw = {
-        "color_by": color_by,
-        "colormap": colormap,
-        "point_size": point_size,
-        "value_range": look.value_range,
-    }
+    kw = _render_kw(look, attribute, colormap, point_size)
     with progress.stage("rendering + resolving G-buffers"):
         t0 = time.perf_counter()
         g = raster.render(camera, width, height, **kw)
@@ -313,7 +320,7 @@ def _render_panels(
         from ..colormap import value_range  # the range render() colours over
 
         vr = look.value_range or value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
-        bar = (colormap, vr[0] + look.bar_offset, vr[1] + look.bar_offset)
+        bar = (colormap, vr[0] + look.bar_offset, vr[1] + look.bar_offset, attribute)
         panels.append(
             _Panel(f"attribute-{_safe_name(attribute)}", f"{attribute} ({colormap})", shaded(g.rgba), bar)
         )
@@ -325,22 +332,35 @@ def _render_panels(
             hit = g.index != EMPTY
             colors[hit] = cloud.colors[g.index[hit]]
         panels.append(_Panel("colors", "point colors", shaded(colors)))
-    panels.append(_Panel("depth", "depth (near = bright)", images.depth_image(g.depth)))
+    panels.append(_depth_panel(g.depth))
     if g.vel2d is not None:
         angle, magnitude = images.velocity_images(g.vel2d)
-        panels.append(_Panel("velocity-angle", "screen velocity: angle", angle))
-        panels.append(_Panel("velocity-magnitude", "screen velocity: magnitude", magnitude))
+        speed = np.hypot(g.vel2d[..., 0], g.vel2d[..., 1])
+        speed = speed[np.isfinite(speed)]
+        top = float(np.percentile(speed, 99)) if speed.size else 1.0
+        panels.append(
+            _Panel("velocity-angle", "screen velocity: angle", angle, ("twilight", -180.0, 180.0, "degrees"))
+        )
+        panels.append(
+            _Panel(
+                "velocity-magnitude",
+                "screen velocity: magnitude",
+                magnitude,
+                ("inferno", 0.0, top, "pixels per unit time"),
+            )
+        )
     if soft_z is not None:
         with progress.stage(f"soft z (factor {soft_z:g})"):
             soft = raster.render(
                 camera, width, height, **kw, soft_z=soft_z, host=False
             )  # read back its rgba alone
-            panels.append(_Panel("soft-z", f"soft z (factor {soft_z:g})", soft.rgba.get()))
+            key = _Panel("soft-z", f"soft z (factor {soft_z:g})", soft.rgba.get())
+            panels.append(_keyed(key, panels))
     if levels:
         with progress.stage(f"depth filter ({levels} levels)"):
             filtered = depth_filter(g, levels)
         kept = typing.cast(np.ndarray, filtered.rgba)  # G-buffers in: the rgba is there
-        panels.append(_Panel("depth-filtered", f"depth filter ({levels} levels)", kept))
+        panels.append(_keyed(_Panel("depth-filtered", f"depth filter ({levels} levels)", kept), panels))
     post_s = 0.0
     if post is not None:
 
@@ -404,6 +424,60 @@ def _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net
     ]
 
 
+def _keyed(p: _Panel, panels: list) -> _Panel:
+    """A panel in the first panel's colours (soft z, the depth filter) with its
+    colour bar or legend: the colours read the same there."""
+    if panels and panels[0].key.startswith("attribute-"):
+        p.bar, p.legend = panels[0].bar, panels[0].legend
+    return p
+
+
+def _depth_panel(depth) -> _Panel:
+    """The depth panel, its bar from the nearest depth (bright, left) to the farthest."""
+    from .. import images
+    from ..colormap import lut, value_range
+
+    near, far = value_range(depth)
+    bar = (lut("magma")[::-1], near, max(far, near), "view depth")
+    return _Panel("depth", "depth (near = bright)", images.depth_image(depth), bar)
+
+
+def _framed(p: _Panel, transparent: bool = False, background=None) -> np.ndarray:
+    """A panel's own PNG: its image under its title, over its colour bar or
+    legend when it maps values to colours (the overview's tile at full size);
+    the image alone otherwise."""
+
+    image = p.image if transparent else _opaque(p.image, background)
+    if p.bar is None and not p.legend:
+        return image
+    return _tile(p, image)
+
+
+def _tile(p: _Panel, image: np.ndarray) -> np.ndarray:
+    """`image` (the panel's, shrunk or not) labelled, over its bar or legend."""
+    from .. import images
+
+    tile = images.label(image, p.title)
+    if p.bar is not None:
+        lut, vmin, vmax, *title = p.bar
+        bar = images.colorbar(lut, vmin, vmax, tile.shape[1], title=title[0] if title else "")
+        tile = np.concatenate([tile, bar], axis=0)
+    if p.legend:
+        tile = np.concatenate([tile, images.legend(p.legend, tile.shape[1])], axis=0)
+    return tile
+
+
+def _panel_pngs(panels, args) -> list:
+    """[(file name, image)] of the panels: framed (title, colour bar, legend)
+    unless --no-labels asks for the images alone."""
+    if args.no_labels:
+        return [
+            (f"{p.key}.png", p.image if args.transparent else _opaque(p.image, args.background))
+            for p in panels
+        ]
+    return [(f"{p.key}.png", _framed(p, args.transparent, args.background)) for p in panels]
+
+
 def _shrink(image: np.ndarray, f: int) -> np.ndarray:
     """An RGBA image shrunk by f in each direction, keeping the most opaque
     pixel of each f x f block (single-pixel points stay points, not a haze)."""
@@ -431,13 +505,7 @@ def _overview(panels, transparent: bool = False, background=None) -> np.ndarray:
     tiles = []
     for p in panels:
         tile = _shrink(p.image, f)
-        tile = images.label(tile if transparent else _opaque(tile, background), p.title)
-        if p.bar is not None:
-            lut, vmin, vmax = p.bar
-            tile = np.concatenate([tile, images.colorbar(lut, vmin, vmax, tile.shape[1])], axis=0)
-        if p.legend:
-            tile = np.concatenate([tile, images.legend(p.legend, tile.shape[1])], axis=0)
-        tiles.append(tile)
+        tiles.append(_tile(p, tile if transparent else _opaque(tile, background)))
     return images.compose(tiles, columns=cols)
 
 
@@ -540,13 +608,22 @@ def cmd(args: argparse.Namespace) -> int:
     if args.transparent and args.background is not None:
         raise CliError("--transparent and --background: empty pixels are either clear or a colour; give one")
     progress = progress_from_args(args, "clvis render")
+    check_orbit_args(args)
     if distributed_run(args):
-        for name in ("range", "background", "edl"):
-            if getattr(args, name) is not None:
-                raise CliError(f"--{name}: not with --workers/--scheduler (yet); leave it out")
+        if args.orbit is not None:
+            raise CliError("--orbit: not with --workers/--scheduler (one device renders the turntable)")
+        for name in ("post", "compare"):
+            if getattr(args, name) not in (None, False):
+                raise CliError(f"--{name}: not with --workers/--scheduler (the networks run on one device)")
+        if args.range is not None and args.range[0] == "percentile":
+            raise CliError(
+                "--range pLO,pHI: percentiles would read every value here; on workers give MIN,MAX"
+            )
         if args.point_size == "auto":
-            raise CliError("--point-size auto: not with --workers/--scheduler (yet); give N")
-        args.colormap = args.colormap or "viridis"
+            raise CliError(
+                "--point-size auto: measured on the whole cloud, not with --workers/--scheduler; give N"
+            )
+        args.colormap_given, args.colormap = args.colormap, args.colormap or "viridis"
         return on_workers("render", _render_distributed, args, progress)
     args.file = args.file or None
     return _render(args, progress)
@@ -555,7 +632,6 @@ def cmd(args: argparse.Namespace) -> int:
 def _render_distributed(args, progress) -> int:
     """`clvis render TILES... --workers N | --scheduler ADDRESS`: the tiles
     read and rendered on Dask workers, composited into one view."""
-    from .. import images
     from .._arrays import on_host
     from ..distributed import DistributedRasterizer
     from ..raster import depth_filter
@@ -592,40 +668,60 @@ def _render_distributed(args, progress) -> int:
         # same sample of the points (every k-th of the concatenated cloud)
         sample = dr.sample() if args.view[0] == "fit" else None
         camera = camera_from_args(args, lo, hi, width, height, points=sample)
+        if attribute is None and args.range is not None:
+            raise CliError(
+                "--range scales an attribute's colours; the tiles have none (add --attribute NAME)"
+            )
+        if attribute is not None and args.colormap_given is None and _class_like(attribute):
+            print(
+                f"clvis render: note: on workers {attribute} is coloured through {args.colormap}, "
+                "not the ASPRS class colours with their legend (those need one device; "
+                "--colormap NAME chooses the map and silences this)",
+                file=sys.stderr,
+            )
+        vr = None if args.range is None else (args.range[1], args.range[2])
+        kw = {"color_by": attribute, "colormap": args.colormap, "point_size": args.point_size}
+        kw["value_range"] = vr
         with progress.stage("rendering + compositing"):
-            g = dr.render(
-                camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size
-            )
+            g = dr.render(camera, width, height, **kw)
             t0 = time.perf_counter()
-            g = dr.render(
-                camera, width, height, color_by=attribute, colormap=args.colormap, point_size=args.point_size
-            )
+            g = dr.render(camera, width, height, **kw)
             warm = time.perf_counter() - t0
+
+        def shaded(rgba):
+            if args.edl is None:
+                return rgba
+            from .. import runtime
+            from ..raster import edl
+
+            radius = max(1, (args.point_size + 1) // 2)
+            return edl(g.depth, rgba, args.edl, radius, queue=runtime.default_queue())
+
         panels = []
         if attribute is not None:
-            vr = dr._ranges[attribute]
+            vr = vr or dr._ranges[attribute]
             panels.append(
                 _Panel(
                     f"attribute-{_safe_name(attribute)}",
                     f"{attribute} ({args.colormap})",
-                    on_host(g.rgba),
-                    (args.colormap, *vr),
+                    shaded(on_host(g.rgba)),
+                    (args.colormap, *vr, attribute),
                 )
             )
         else:
-            panels.append(_Panel("colors", "point colors", on_host(g.rgba)))
-        panels.append(_Panel("depth", "depth (near = bright)", images.depth_image(on_host(g.depth))))
+            panels.append(_Panel("colors", "point colors", shaded(on_host(g.rgba))))
+        panels.append(_depth_panel(on_host(g.depth)))
         if args.depth_filter:
             with progress.stage(f"depth filter ({args.depth_filter} levels)"):
                 filtered = depth_filter(g, args.depth_filter)
             kept = typing.cast(np.ndarray, filtered.rgba)  # G-buffers in: the rgba is there
-            panels.append(_Panel("depth-filtered", f"depth filter ({args.depth_filter} levels)", kept))
+            panels.append(
+                _keyed(_Panel("depth-filtered", f"depth filter ({args.depth_filter} levels)", kept), panels)
+            )
         out = Path(args.out)
         with progress.stage("writing PNGs"):
-            named = [
-                (f"{p.key}.png", p.image if args.transparent else images.opaque(p.image)) for p in panels
-            ]
-            named.append(("overview.png", _overview(panels, args.transparent)))
+            named = _panel_pngs(panels, args)
+            named.append(("overview.png", _overview(panels, args.transparent, args.background)))
             files = _save_pngs(out, named)
         st = g.stats
         covered = int(on_host(g.covered).sum())
@@ -636,6 +732,10 @@ def _render_distributed(args, progress) -> int:
                 "a file is one partition, rendered by one worker (give more tiles to use them all)"
             )
         print(f"  view      {describe_camera(args)}, {width}x{height}")
+        if args.range is not None:
+            print(f"  range     {attribute} {args.range[1]:.6g}..{args.range[2]:.6g}")
+        if args.edl is not None:
+            print(f"  edl       eye-dome lighting, strength {args.edl:g}")
         print(
             f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)"
         )
@@ -696,6 +796,11 @@ def _world_camera_args(args, origin):
     return local
 
 
+def _class_like(attribute: str) -> bool:
+    """Whether an attribute's name says it holds class codes."""
+    return attribute.lower() in ("classification", "class", "classes", "label")
+
+
 def _look(args, cloud, attribute, point_size, queue) -> _Look:
     """The colour panels' look from --range, --colormap, --edl (see _Look)."""
     from ..colormap import ASPRS_CLASSES, categorical, class_name, class_palette
@@ -713,12 +818,7 @@ def _look(args, cloud, attribute, point_size, queue) -> _Look:
     coordinate = attribute not in cloud.attributes
     values = cloud.positions[:, _COORDINATES.index(attribute)] if coordinate else cloud.attributes[attribute]
     offset = float(cloud.origin[_COORDINATES.index(attribute)]) if coordinate else 0.0
-    if (
-        args.colormap is None
-        and not coordinate
-        and attribute.lower() in ("classification", "class", "classes", "label")
-        and categorical(values)
-    ):
+    if args.colormap is None and not coordinate and _class_like(attribute) and categorical(values):
         if args.range is not None:
             raise CliError(
                 f"--range: {attribute} is shown by class (ASPRS colours); --colormap NAME scales it"
@@ -825,12 +925,25 @@ def _render(args, progress) -> int:
         compared = _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net, progress)
     out = Path(args.out)
     with progress.stage("writing PNGs"):
-        named = [
-            (f"{p.key}.png", p.image if args.transparent else _opaque(p.image, args.background))
-            for p in r.panels
-        ]
+        named = _panel_pngs(r.panels, args)
         named.append(("overview.png", _overview(r.panels, args.transparent, args.background)))
         files = _save_pngs(out, named)
+    orbit: tuple = ([], None)
+    if args.orbit is not None:
+        from ..raster import edl
+        from .orbit import render_orbit
+
+        first = r.panels[0]  # the colour panel: the attribute's, the classes' or the cloud's colours
+
+        def draw(cam) -> np.ndarray:
+            g = raster.render(cam, width, height, **_render_kw(look, attribute, colormap, point_size))
+            rgba = g.rgba if look.edl is None else edl(g.depth, g.rgba, look.edl, look.edl_radius, queue=q)
+            p = dataclasses.replace(first, image=rgba)
+            if args.no_labels:
+                return p.image if args.transparent else _opaque(p.image, args.background)
+            return _framed(p, args.transparent, args.background)
+
+        orbit = render_orbit(args, camera, lo, hi, draw, out, progress)
     total = time.perf_counter() - t_start
 
     g, n = r.gbuffers, len(cloud)
@@ -886,8 +999,15 @@ def _render(args, progress) -> int:
             + ("; --point-size auto draws them large enough to see" if args.point_size == 1 else ""),
             file=sys.stderr,
         )
+    if args.orbit is not None:
+        from .orbit import report
+
+        report(*orbit)
     print(f"  total     {total:.2f} s")
-    print(f"wrote {len(files)} PNGs to {out}{os.sep}")
+    print(
+        f"wrote {len(files)} PNGs to {out}{os.sep}"
+        + (f" and {len(orbit[0])} orbit frames" if orbit[0] else "")
+    )
     for p in files:
         print(f"  {p.name}")
     return 0
@@ -965,7 +1085,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "file",
         nargs="*",
-        help="a PLY, LAS, LAZ, PCD, XYZ/TXT/CSV, NPY or NPZ point cloud (several: tiles joined into one "
+        help="a PLY, LAS, LAZ, E57, PCD, XYZ/TXT/CSV, NPY or NPZ point cloud (several: tiles joined into one "
         "cloud here, or rendered on Dask workers with --workers/--scheduler)",
     )
     r.add_argument(
@@ -1065,5 +1185,6 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "and score the network and the plain rasterization against it (PSNR, SSIM, time)",
     )
     add_output_options(r, "clvis-render", "empty pixels")
+    add_orbit_options(r)
     add_cluster_options(r)
     return r

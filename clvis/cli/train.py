@@ -82,11 +82,48 @@ def _command(args: argparse.Namespace) -> list[str]:
     return c + ["--eval", args.eval]
 
 
-def cmd(args: argparse.Namespace) -> int:
+def _missing(module: str) -> bool:
+    """Whether `module` cannot be imported (looked up, not imported: torch takes seconds)."""
+    import importlib.util
+
     try:
+        return importlib.util.find_spec(module) is None
+    except (ImportError, ValueError):
+        return True
+
+
+def held_out_table(held_out: dict) -> str:
+    """The card's held-out rows as a table: PSNR (dB) and SSIM of the raw
+    input, push-pull and the network, and the network's gain over each."""
+    cols = (("input", "input"), ("pushpull", "push-pull"), ("network", "network"))
+    width = max([len("held-out")] + [len(str(k)) for k in held_out])
+    head = f"  {'held-out':<{width}}" + "".join(f" {label + ' dB':>13} {'SSIM':>6}" for _, label in cols)
+    head += f" {'vs input':>9} {'vs push-pull':>12}"
+    lines = [head]
+    for key, row in held_out.items():
+        line = f"  {key:<{width}}"
+        for k, _ in cols:
+            line += f" {row[k]['psnr']:13.2f} {row[k]['ssim']:6.3f}" if k in row else f" {'-':>13} {'-':>6}"
+        if all(k in row for k, _ in cols):
+            net = row["network"]["psnr"]
+            line += f" {net - row['input']['psnr']:+9.2f} {net - row['pushpull']['psnr']:+12.2f}"
+        lines.append(line)
+    if not held_out:
+        lines.append("  (no held-out frame)")
+    return "\n".join(lines)
+
+
+def cmd(args: argparse.Namespace) -> int:
+    missing = [m for m in ("torch", "onnx", "pytorch_msssim") if _missing(m)]
+    try:
+        if missing:
+            raise ModuleNotFoundError(name=missing[0])
         from ..training import train
     except ImportError as e:  # torch, onnx or pytorch-msssim missing
-        raise CliError(f"clvis train needs the train extra (pip install 'clvis[train]'): {e}") from None
+        raise CliError(
+            "clvis train needs the train extra, which installs PyTorch, onnx and pytorch-msssim "
+            f"({', '.join(missing) or e.name or e} missing): pip install '.[train]' in the clone"
+        ) from None
     log = (
         (lambda s: None)
         if args.quiet
@@ -107,7 +144,8 @@ def cmd(args: argparse.Namespace) -> int:
         command=_command(args),
         log=log,
     )
-    print(f"{args.out}/{card['name']}.onnx: held-out {card['held_out']}")
+    print(f"{args.out}/{card['name']}.onnx: held-out frames, mean per row")
+    print(held_out_table(card["held_out"]))
     if args.eval != "none":
         from ..training import evaluate as ev
 

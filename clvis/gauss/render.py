@@ -53,6 +53,7 @@ from .._arrays import buffer_of, nonnegative_int, positive_int, resolve_queue
 from ..camera import Camera, ray_buffer
 from ..colormap import TransferFunction
 from ..errors import DeviceError
+from ..images import Picture, float_rgba8
 from .bvh import build_bvh
 from .gaussians import Gaussians, gather_records, gaussian_records
 from .tiles import PROFILES as TILE_PROFILES
@@ -74,12 +75,14 @@ TILE = 8
 
 
 @dataclass
-class GaussianImage:
+class GaussianImage(Picture):
     """A rendered frame: ``rgba`` (H, W, 4) float32 premultiplied, alpha = 1 - T;
     ``depth`` (H, W) float32 view depth where T first fell below 0.5 (+inf
     elsewhere); ``hits`` and ``rounds`` (H, W) uint32 per ray (Gaussians
     composited, k-buffer rounds); ``stats`` a dict. With ``host=False``
-    rgba and depth are device arrays and hits and rounds None."""
+    rgba and depth are device arrays and hits and rounds None.
+    ``to_uint8(background=None)`` and ``save_png(path)``: the picture, as for
+    every image type (:class:`clvis.images.Picture`)."""
 
     rgba: np.ndarray | cla.Array
     depth: np.ndarray | cla.Array
@@ -87,17 +90,11 @@ class GaussianImage:
     rounds: np.ndarray | None
     stats: dict = field(default_factory=dict)
 
-    def to_uint8(self, background: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-        """(H, W, 3) uint8 over a background colour (components in [0, 1])."""
-        bg = np.asarray(background, np.float32).reshape(1, 1, 3)
-        rgba = self.rgba.get() if isinstance(self.rgba, cla.Array) else np.asarray(self.rgba)
-        out = np.empty(rgba.shape[:2] + (3,), np.uint8)
-        step = max(1, (1 << 20) // max(rgba.shape[1], 1))  # rows at a time: float temporaries stay small
-        for y in range(0, rgba.shape[0], step):
-            band = rgba[y : y + step]
-            rgb = band[..., :3] + (1 - band[..., 3:4]) * bg
-            out[y : y + step] = np.clip(np.rint(rgb * 255), 0, 255)
-        return out
+    def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
+        """(H, W, 4) uint8 RGBA, straight alpha (transparent where no Gaussian
+        covers a pixel), or over the RGB `background` (0..255 each)."""
+        rgba = self.rgba.get() if isinstance(self.rgba, cla.Array) else self.rgba
+        return float_rgba8(rgba, background, premultiplied=True)
 
 
 class _Profile(TypedDict):

@@ -29,6 +29,7 @@ from ..errors import DataError
 from .ascii import SUFFIXES as _ASCII_SUFFIXES
 from .ascii import _read_ascii
 from .cloud import _NPZ_KEYS, PointCloud, _check_cloud, _cloud, _from_columns, _write_or_remove
+from .e57 import _read_e57
 from .files import regular_file
 from .las import _read_las
 from .npy import load_npy, load_npz
@@ -61,9 +62,11 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
     - ``.xyz``, ``.txt``, ``.csv``: one point a line, columns named by a header
       or by their count, positions relative to their minimum as for LAS
       (:mod:`clvis.io.ascii`).
+    - ``.e57``: ASTM E57 scans through pye57 (the ``e57`` extra), joined,
+      positions relative to their minimum as for LAS (:mod:`clvis.io.e57`).
     """
     readers = {".ply": _read_ply, ".las": _read_las, ".laz": _read_las, ".npy": _read_npy, ".npz": _read_npz}
-    readers.update({".pcd": _read_pcd, **dict.fromkeys(_ASCII_SUFFIXES, _read_ascii)})
+    readers.update({".pcd": _read_pcd, ".e57": _read_e57, **dict.fromkeys(_ASCII_SUFFIXES, _read_ascii)})
     # a FIFO would block the read, /dev/zero never end, a directory fail in the parser
     path = regular_file(path)
     reader = readers.get(path.suffix.lower())

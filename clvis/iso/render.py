@@ -77,6 +77,7 @@ from .. import limits, runtime
 from .._arrays import positive_int, resolve_queue, triple
 from ..camera import Camera, ray_buffer
 from ..errors import DataError
+from ..images import Picture, float_rgba8
 from ..primitives import compact, compact_indices, radix_sort
 from .cache import BlockCache, mark_blocks
 from .cache import _kernel as _cache_kernel
@@ -135,7 +136,7 @@ def _real(name: str, v: Any) -> float:
 
 
 @dataclass
-class IsoImage:
+class IsoImage(Picture):
     """The image after a pass: ``rgba`` (H, W, 4) float32 (shaded surface,
     alpha 1 at hits), ``depth`` (H, W) view depth (+inf where no hit yet),
     ``hit`` (H, W) bool, ``t`` (H, W) the hit's ray parameter (world distance
@@ -143,7 +144,9 @@ class IsoImage:
     (H, W) bool (rays still running),
     ``completion`` (the fraction of the rays entering the volume that are
     finished) and ``stats``. From ``render(..., host=False)`` the five planes
-    are ``pyopencl.array.Array`` of the same shapes and dtypes."""
+    are ``pyopencl.array.Array`` of the same shapes and dtypes.
+    ``to_uint8(background=None)`` and ``save_png(path)``: the shaded surface
+    as a picture, as for every image type (:class:`clvis.images.Picture`)."""
 
     rgba: np.ndarray | cla.Array
     depth: np.ndarray | cla.Array
@@ -152,6 +155,14 @@ class IsoImage:
     active: np.ndarray | cla.Array
     completion: float
     stats: dict[str, Any]
+
+    def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
+        """(H, W, 4) uint8 RGBA: the shaded surface where a ray hit it, transparent
+        elsewhere, or over the RGB `background` (0..255 each)."""
+        rgba = np.array(self.rgba.get() if hasattr(self.rgba, "get") else self.rgba, np.float32)
+        hit = np.asarray(self.hit.get() if hasattr(self.hit, "get") else self.hit, bool)
+        rgba[..., 3] = hit
+        return float_rgba8(rgba, background, premultiplied=False)
 
 
 class _HostImage:

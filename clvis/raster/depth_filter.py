@@ -30,6 +30,7 @@ import pyopencl.array as cla
 from .. import runtime
 from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device
 from ..errors import DataError
+from ..images import Picture, rgba8
 from .render import GBuffers
 
 __all__ = [
@@ -261,19 +262,33 @@ def rgbda(
 
 
 @dataclasses.dataclass
-class FilteredImage:
+class FilteredImage(Picture):
     """What :func:`depth_filter` keeps. keep: bool [H, W] (a point is there and
     kept); depth: float32, +inf where removed or empty; rgba: uint8 [H, W, 4]
     with alpha 0 where removed (None for a depth-only input); rgbda: float32
     [H, W, 5] = (r, g, b in [0, 1], depth, alpha in {0, 1}), the input of the
     LiDAR paper's network. numpy arrays for numpy input; for device input
     (``host=False`` G-buffers, a device depth image) ``pyopencl.array.Array``
-    of the same shapes and dtypes, on the input's queue."""
+    of the same shapes and dtypes, on the input's queue.
+    ``to_uint8(background=None)`` and ``save_png(path)``: the kept points as a
+    picture (their colours; the kept depth in grey for a depth-only input), as
+    for every image type (:class:`clvis.images.Picture`)."""
 
     keep: np.ndarray | cla.Array
     depth: np.ndarray | cla.Array
     rgba: np.ndarray | cla.Array | None
     rgbda: np.ndarray | cla.Array
+
+    def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
+        """(H, W, 4) uint8 RGBA of what is kept, transparent elsewhere, or over
+        the RGB `background` (0..255 each)."""
+        from ..images import depth_image
+
+        def host(a: np.ndarray | cla.Array) -> np.ndarray:
+            return a.get() if isinstance(a, cla.Array) else a
+
+        rgba = host(self.rgba) if self.rgba is not None else depth_image(host(self.depth))
+        return rgba8(rgba, background)
 
 
 def depth_filter(

@@ -35,7 +35,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import typing
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -46,6 +46,7 @@ from .. import colormap as _colormap
 from .. import runtime
 from .._arrays import is_device, resolve_queue
 from ..camera import Camera
+from ..images import Picture, rgba8
 from .inputs import (
     MAX_ATTRIBUTES,
     RasterInput,
@@ -78,7 +79,7 @@ PROFILES = {"cpu": {"L": 1, "VEC": 8, "item_wg": 64}, "gpu": {"L": 256, "VEC": 1
 
 
 @dataclasses.dataclass
-class GBuffers:
+class GBuffers(Picture):
     """The G-buffers of one view, [H, W] planes, row 0 on top.
 
     index: uint32, the winning point (its index in the caller's order), or
@@ -90,7 +91,9 @@ class GBuffers:
     radius_px: the splat radius in pixels. Planes the cloud has no data for are
     None. stats: points, batches, batches_drawn, points_read, and
     points_nonfinite (points never drawn because a coordinate is NaN or
-    infinite).
+    infinite). ``to_uint8(background=None)`` and ``save_png(path)``: the
+    rgba plane as a picture, as for every image type
+    (:class:`clvis.images.Picture`).
     """
 
     index: np.ndarray | cla.Array
@@ -102,6 +105,14 @@ class GBuffers:
     vel_speed: np.ndarray | cla.Array | None = None
     radius_px: np.ndarray | cla.Array | None = None
     stats: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
+        """(H, W, 4) uint8 RGBA: the rgba plane (transparent where empty), or over
+        the RGB `background` (0..255 each)."""
+        if self.rgba is None:
+            raise ValueError("to_uint8: these G-buffers have no rgba plane (render(planes=...) left it out)")
+        rgba = self.rgba.get() if isinstance(self.rgba, cla.Array) else self.rgba
+        return rgba8(rgba, background)
 
     @property
     def covered(self) -> np.ndarray | cla.Array:

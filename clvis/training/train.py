@@ -155,6 +155,38 @@ def _pack_lidar(frame: Any, completion: float | None, stride: int) -> tuple[Any,
     return pack_rgbda(frame.rgbda, stride=stride)[0], frame.rgb
 
 
+def _distinct_frames(frames: list, completions: Sequence[Any], log: Callable[[str], None]) -> dict:
+    """{completion: the held-out frames whose partial image at it is their own}.
+    A pass may finish the rays past two completions at once (a small frame, a
+    volume most rays cross in one pass): the frame then holds one image for
+    both, and scoring it under each would print the same row twice (a short
+    run's 0.85 and 0.90 lines were identical so). Such a frame counts for the
+    lowest of those completions only; a completion left with no frame has no row."""
+    out: dict[Any, list] = {}
+    for i, c in enumerate(completions):
+        if c is None:
+            out[c] = list(frames)
+            continue
+        lower = [p for p in completions[:i] if p is not None]
+        own = [f for f in frames if not any(np.array_equal(f.active[c], f.active[p]) for p in lower)]
+        if len(own) < len(frames):
+            log(
+                f"held-out completion {c}: {len(frames) - len(own)} of {len(frames)} frames reach it in "
+                "the pass that reached a lower one (the same image); "
+                + (f"scored on the other {len(own)}" if own else "no row")
+            )
+        out[c] = own
+    return out
+
+
+def held_out_line(row: dict) -> str:
+    """One held-out row as text: PSNR (dB) and SSIM of the network, push-pull and the input."""
+    names = (("network", "network"), ("pushpull", "push-pull"), ("input", "input"))
+    return ", ".join(
+        f"{label} {row[k]['psnr']:.2f} dB SSIM {row[k]['ssim']:.3f}" for k, label in names if k in row
+    )
+
+
 def _pack(
     name: str, frame: Any, completion: float | None = None, stride: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -391,7 +423,8 @@ def train(
     if sets:
         val_pairs: dict[Any, list] = {k: [_pack(name, f, None, stride) for f in v] for k, v in sets.items()}
     else:
-        val_pairs = {c: [_pack(name, f, c, stride) for f in val_frames] for c in completions}
+        own = _distinct_frames(val_frames, completions, log)
+        val_pairs = {c: [_pack(name, f, c, stride) for f in own[c]] for c in completions}
     val_pairs = {k: v for k, v in val_pairs.items() if v}  # a smoke run's sets may be empty
     for c, vp in val_pairs.items():
         rows = []
@@ -407,7 +440,7 @@ def train(
             k: {m: float(np.mean([r[k][m] for r in rows])) for m in ("psnr", "ssim")}
             for k in ("input", "pushpull", "network")
         }
-        log(f"held-out {key}: {held_out[key]}")
+        log(f"held-out {key}: " + held_out_line(held_out[key]))
 
     files = export(net, name, out, [x for vp in val_pairs.values() for x, _ in vp], val_pairs, log)
     card = {

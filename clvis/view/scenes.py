@@ -238,7 +238,7 @@ class PointScene(Scene):
         ta = time.perf_counter()
         fast = net(g)[..., :3]
         t2 = time.perf_counter()
-        slow = gr.render(camera, w, h).to_uint8()
+        slow = gr.render(camera, w, h).to_uint8((0, 0, 0))[..., :3]
         t3 = time.perf_counter()
         times = {"render": (ta - t1) + (t3 - t2), "post": t2 - ta}
         if build > 1e-3:
@@ -259,7 +259,7 @@ class PointScene(Scene):
         renderer, count = self._gauss[key]
         img = renderer.render(camera, w, h)
         t1 = time.perf_counter()
-        out = img.to_uint8(np.asarray(BACKGROUND) / 255)
+        out = img.to_uint8(BACKGROUND)[..., :3]
         times = {"render": t1 - t0 - build}
         if build > 1e-3:
             times["build"] = build
@@ -393,7 +393,7 @@ class VolumeScene(Scene):
         times = {"render": t1 - t0 - build}
         if build > 1e-3:
             times["build"] = build
-        return Frame(img.to_uint8(np.asarray(BACKGROUND) / 255), info={"gaussians": count}, times=times)
+        return Frame(img.to_uint8(BACKGROUND)[..., :3], info={"gaussians": count}, times=times)
 
 
 def scene_for(obj: Any, **kwargs: Any) -> Scene:

@@ -110,8 +110,8 @@ def _picture(path):
     "command, extra, png",
     [
         ("iso", [], "iso.png"),
-        ("gauss", ["--lod", "low"], "low.png"),
-        ("render", ["--points", "3000", "--quiet", "--soft-z", "off"], "depth.png"),
+        ("gauss", ["--lod", "low", "--no-labels"], "low.png"),
+        ("render", ["--points", "3000", "--quiet", "--soft-z", "off", "--no-labels"], "depth.png"),
     ],
 )
 def test_every_command_takes_the_camera_options(tmp_path, capsys, command, extra, png):

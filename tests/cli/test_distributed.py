@@ -18,7 +18,7 @@ from PIL import Image
 from clvis import cli, datasets
 from clvis.io import PointCloud, save_npz
 
-SMALL = ["--size", "160x90", "--quiet"]
+SMALL = ["--size", "160x90", "--quiet", "--no-labels"]  # the images alone: exactly --size
 
 
 def _png(path):
@@ -134,6 +134,44 @@ def test_several_files_on_one_device_frame_as_on_workers(tiles, scheduler, tmp_p
         a, b = _png(tmp_path / "d" / name), _png(tmp_path / "s" / name)
         assert (a[..., 3] > 0).sum() > 500
         np.testing.assert_array_equal(a, b)
+
+
+def test_look_options_on_workers_equal_one_device(tiles, scheduler, tmp_path, capsys):
+    """--background, --range MIN,MAX and --edl work on workers as on one
+    device; what cannot (percentiles, auto point size, the networks) is an
+    error naming the option, never silently ignored."""
+    paths, _ = tiles
+    look = ["--background", "white", "--range", "0.2,0.8", "--edl", "1.5"]
+    rc, out, err = _run(capsys, "render", *paths, *look, "--out", tmp_path / "s", *SMALL)
+    assert rc == 0, err
+    rc, out, err = _run(
+        capsys, "render", *paths, *look, "--scheduler", scheduler, "--out", tmp_path / "d", *SMALL
+    )
+    assert rc == 0, err
+    assert "range     intensity 0.2..0.8" in out and "edl       eye-dome lighting, strength 1.5" in out
+    a, b = _png(tmp_path / "d" / "attribute-intensity.png"), _png(tmp_path / "s" / "attribute-intensity.png")
+    np.testing.assert_array_equal(a, b)
+    assert (a[0, 0, :3] == 255).all()  # the white background
+    for extra, message in (
+        (["--range", "p2,p98"], "--range pLO,pHI"),
+        (["--point-size", "auto"], "--point-size auto"),
+        (["--post", "lidar", "--depth-filter", "4"], "--post:"),
+    ):
+        rc, out, err = _run(capsys, "render", *paths, *extra, "--scheduler", scheduler, *SMALL)
+        assert rc == 2 and err.startswith(f"clvis render: error: {message}"), (extra, err)
+
+
+def test_classes_on_workers_say_they_use_a_colormap(scheduler, tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    path = tmp_path / "c.npz"
+    cls = rng.choice(np.array([2, 5, 6], np.uint8), 2000)
+    save_npz(path, PointCloud(rng.random((2000, 3)), attributes={"classification": cls}))
+    args = ["render", path, "--scheduler", scheduler, *SMALL]
+    rc, out, err = _run(capsys, *args, "--out", tmp_path / "a")
+    assert rc == 0, err
+    assert "clvis render: note: on workers classification is coloured through viridis" in err
+    rc, out, err = _run(capsys, *args, "--colormap", "tab10", "--out", tmp_path / "b")
+    assert rc == 0 and "note" not in err
 
 
 def test_several_files_match_attributes_by_name(tmp_path, capsys):

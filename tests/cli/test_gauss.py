@@ -18,8 +18,15 @@ def test_gauss_default(tmp_path, capsys):
     for lod in ("low", "medium", "high"):
         assert lod in out
         with Image.open(tmp_path / f"{lod}.png") as im:
-            assert im.size == (64, 48)
+            # labelled over its colour bar, as its tile in gauss.png
+            assert im.width == 64 and im.height > 48
             assert np.asarray(im).std() > 1  # not blank
+    assert (
+        cli.main(["gauss", "--size", "64x48", "--lod", "low", "--no-labels", "--out", str(tmp_path / "b")])
+        == 0
+    )
+    with Image.open(tmp_path / "b" / "low.png") as im:
+        assert im.size == (64, 48)  # the image alone
     with Image.open(tmp_path / "gauss.png") as im:
         assert im.width >= 3 * 64 and im.height > 48  # labelled, over colour bars
 
@@ -46,7 +53,8 @@ def test_gauss_splat(tmp_path, capsys):
     with Image.open(tmp_path / "low.png") as im:
         assert np.asarray(im).std() > 1
     assert cli.main(["gauss", "--model", "splat", "--method", "bvh", "--out", str(tmp_path)]) == 2
-    assert "needs method='tiles'" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--model splat (3D Gaussian Splatting's rasterizer) draws on tiles" in err and "method=" not in err
 
 
 def test_gauss_files(tmp_path, capsys):

@@ -15,7 +15,7 @@ from clvis.camera import fit_camera
 from clvis.cli import _common, raster
 from clvis.io import PointCloud, save_npz, write_ply
 
-SMALL = ["--size", "160x90", "--quiet"]
+SMALL = ["--size", "160x90", "--quiet", "--no-labels"]  # the images alone: exactly --size
 
 
 def _png(path):
@@ -354,7 +354,7 @@ def test_render_errors(tmp_path, capsys, monkeypatch, args, message):
             "PLY file",
         ),
         ("bad.npz", b"not a zip", "malformed NPZ file"),
-        ("cloud.e57", b"1 2 3\n", "unknown point cloud format '.e57'"),
+        ("cloud.e58", b"1 2 3\n", "unknown point cloud format '.e58'"),
         ("empty.npy", None, "holds no points"),
     ],
 )

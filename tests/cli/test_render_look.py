@@ -17,8 +17,8 @@ from clvis.io import PointCloud, read_points, save_npz
 DATA = Path(__file__).parents[1] / "data"
 SIMPLE = DATA / "laspy_simple.laz"  # 1,065 points, RGB, classes 1 and 2, UTM coordinates
 APPEND_BUG = DATA / "laspy_append_bug.laz"  # 37,807 points; 2 records at (0, 0, 0)
-SMALL = ["--size", "160x90", "--quiet"]
-MID = ["--size", "480x270", "--quiet"]
+SMALL = ["--size", "160x90", "--quiet", "--no-labels"]  # the images alone: exactly --size
+MID = ["--size", "480x270", "--quiet", "--no-labels"]
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 

@@ -1,7 +1,8 @@
 """Mutation operators: generic ones (bit flips, random bytes, extreme integers,
 length fields, truncation, appends, splices) and field-aware edits of the
 LAS/LAZ header, VLRs and laszip items, NIfTI-1/2 headers and extensions, ZIP
-(NPZ) records, NPY headers and VDB descriptors. Each takes (rng, data, seed)
+(NPZ) records, NPY headers, VDB descriptors and E57 files (numbers of the XML,
+the binary header, with the page checksums made right again). Each takes (rng, data, seed)
 and returns the mutant's bytes; :func:`mutate` picks one (or two) at random.
 """
 
@@ -369,7 +370,64 @@ def vdb_fields(rng, data: bytes, seed) -> bytes:
     return length_field(rng, data, seed)
 
 
+def _crc32c_table() -> list[int]:
+    table = []
+    for n in range(256):
+        c = n
+        for _ in range(8):
+            c = (c >> 1) ^ (0x82F63B78 if c & 1 else 0)
+        table.append(c)
+    return table
+
+
+_CRC32C = _crc32c_table()
+E57_PAGE = 1024  # E57 physical pages: 1020 bytes of data and their CRC-32C, big-endian
+
+
+def _crc32c(data: bytes) -> int:
+    crc = 0xFFFFFFFF
+    for byte in data:
+        crc = (crc >> 8) ^ _CRC32C[(crc ^ byte) & 0xFF]
+    return crc ^ 0xFFFFFFFF
+
+
+def _e57_checksums(b: bytearray) -> None:
+    """Every whole page's checksum made right again, so that libE57Format's
+    parser (not its page check) meets the edit."""
+    for at in range(0, len(b) - E57_PAGE + 1, E57_PAGE):
+        b[at + 1020 : at + 1024] = _crc32c(bytes(b[at : at + 1020])).to_bytes(4, "big")
+
+
+def e57_fields(rng, data: bytes, seed) -> bytes:
+    """An E57 file past its page checksums: a number of the XML section (a
+    recordCount, fileOffset, length, or bound) overwritten by digits of the same
+    length, a field of the binary header (file length, XML offset and length,
+    page size) set to an extreme, or random bytes in a page; then every page's
+    CRC-32C recomputed."""
+    b = bytearray(data)
+    numbers = [m.span(1) for m in re.finditer(rb'(?:="|>)(-?\d+)(?:"|<)', bytes(b))]
+    pick = int(rng.integers(0, 3))
+    if pick == 0 and numbers:
+        lo, hi = numbers[int(rng.integers(0, len(numbers)))]
+        digits = (
+            "9" * (hi - lo)
+            if rng.integers(0, 2)
+            else "".join(str(int(d)) for d in rng.integers(0, 10, hi - lo))
+        )
+        b[lo:hi] = digits.encode()
+    elif pick == 1 and len(b) >= 48:
+        at = [16, 24, 32, 40][int(rng.integers(0, 4))]
+        _put(b, at, 8, _extreme(rng, 8, _get(b, at, 8)))
+    else:
+        for _ in range(int(rng.integers(1, 9))):
+            if b:
+                b[int(rng.integers(0, len(b)))] = int(rng.integers(0, 256))
+    _e57_checksums(b)
+    return bytes(b)
+
+
 FIELD_AWARE = {
+    "e57": e57_fields,
     "las": las_fields,
     "laz": las_fields,
     "nii": nifti_fields,

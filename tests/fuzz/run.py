@@ -56,7 +56,16 @@ def _preload():
     import logging
 
     logging.getLogger("nibabel").setLevel(logging.CRITICAL)
-    for name in ("laspy", "lazrs", "nibabel", "nibabel.cifti2", "plyfile", "tinyvdb", "clvis.gauss.sparse"):
+    for name in (
+        "laspy",
+        "lazrs",
+        "nibabel",
+        "nibabel.cifti2",
+        "plyfile",
+        "tinyvdb",
+        "pye57",
+        "clvis.gauss.sparse",
+    ):
         try:
             __import__(name)
         except ImportError:

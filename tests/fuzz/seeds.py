@@ -2,7 +2,7 @@
 tests/data): every format clvis reads, with the reader each goes to.
 
 A seed is (format, reader, path). Formats: ply, las, laz, npy, npz, nii,
-nii.gz, raw, vdb. Readers: points (read_points), volume (read_volume), vdb
+nii.gz, raw, vdb, e57 (with pye57). Readers: points (read_points), volume (read_volume), vdb
 (read_vdb), gaussians (Gaussians.load).
 """
 
@@ -188,7 +188,35 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
         # internal nodes and leaves of several kinds, zipped with the active mask
         _vdb_tree(out, out / "tree.vdb", compression=tinyvdb.COMPRESS_ZIP | tinyvdb.COMPRESS_ACTIVE_MASK)
         add("vdb", "vdb", out / "tree.vdb")
+    try:
+        import pye57
+    except ImportError:
+        pass
+    else:
+        _e57(pye57, out / "scan.e57", 200)
+        add("e57", "points", out / "scan.e57")
+        _e57(pye57, out / "two.e57", 40, scans=2, invalid=True)
+        add("e57", "points", out / "two.e57")
     return seeds
+
+
+def _e57(pye57, path: Path, n: int, scans: int = 1, invalid: bool = False, seed: int = 5) -> None:
+    """An E57 file of `scans` scans of n points: georeferenced x, y, z,
+    intensity and colours (and an invalid-state field)."""
+    rng = np.random.default_rng(seed)
+    f = pye57.E57(str(path), mode="w")
+    for _ in range(scans):
+        s = {
+            "cartesianX": 5e5 + rng.random(n) * 10,
+            "cartesianY": rng.random(n) * 10,
+            "cartesianZ": rng.random(n),
+            "intensity": rng.random(n).astype(np.float32),
+            **{k: rng.integers(0, 256, n).astype(np.uint8) for k in ("colorRed", "colorGreen", "colorBlue")},
+        }
+        if invalid:
+            s["cartesianInvalidState"] = (np.arange(n) % 7 == 0).astype(np.int8)
+        f.write_scan_raw(s)
+    f.close()
 
 
 def suffix(fmt: str) -> str:

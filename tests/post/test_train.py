@@ -14,7 +14,7 @@ from clvis.training import data, train  # noqa: E402
 
 
 @pytest.mark.parametrize("name", post.NAMES)
-def test_train_smoke_through_the_cli(tmp_path, name):
+def test_train_smoke_through_the_cli(tmp_path, name, capsys):
     rc = main(
         [
             "train",
@@ -36,6 +36,9 @@ def test_train_smoke_through_the_cli(tmp_path, name):
         ]
     )
     assert rc == 0
+    out = capsys.readouterr().out
+    # a table of the held-out rows, not the card's dicts of 16-digit floats
+    assert "push-pull dB" in out and "vs push-pull" in out and "{'" not in out, out
     card = json.loads((tmp_path / f"{name}.json").read_text())
     assert card["training"]["steps"] == 3 and card["files"]["fp32"]["max_abs_vs_torch"] < 1e-4
     assert train.sha256(tmp_path / f"{name}.onnx") == card["files"]["fp32"]["sha256"]

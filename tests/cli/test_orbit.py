@@ -1,0 +1,170 @@
+"""--orbit N [--movie FILE] on clvis render, iso and gauss (clvis.cli.orbit):
+N frames around the data, written as they are made, a Ctrl-C leaving only
+complete files; a movie where the encoder is installed, a clear error naming
+the extra where not. Through main(), with exit status and stderr."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from clvis import cli
+from clvis.cli import orbit
+
+DATA = Path(__file__).parents[1] / "data"
+SIMPLE = DATA / "laspy_simple.laz"  # laspy's simple.laz: 1,065 points, RGB, classes
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+
+def _main(capsys, *args):
+    try:
+        rc = cli.main([*map(str, args)])
+    except SystemExit as e:
+        rc = e.code
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def _png(path):
+    with Image.open(path) as im:
+        return np.asarray(im)
+
+
+def _frames(folder):
+    return sorted(p.name for p in Path(folder).glob("orbit-*.png"))
+
+
+def test_render_orbit_turns_around_the_cloud(tmp_path, capsys):
+    pytest.importorskip("laspy")
+    rc, out, err = _main(
+        capsys,
+        "render",
+        SIMPLE,
+        "--size",
+        "96x64",
+        "--point-size",
+        "2",
+        "--orbit",
+        4,
+        "--quiet",
+        "--no-labels",
+        "--out",
+        tmp_path,
+    )
+    assert rc == 0, err
+    assert _frames(tmp_path) == [f"orbit-{k:04d}.png" for k in range(4)]
+    assert "orbit     4 frames, orbit-0000.png .. orbit-0003.png" in out
+    frames = [_png(tmp_path / f"orbit-{k:04d}.png") for k in range(4)]
+    # the first frame is the view given, as colors.png shows it; the others turn
+    np.testing.assert_array_equal(frames[0], _png(tmp_path / "colors.png"))
+    for f in frames[1:]:
+        assert f.shape == (64, 96, 4) and not np.array_equal(f, frames[0])
+        assert (f[..., :3] != (24, 24, 28)).any(axis=2).sum() > 100  # the cloud stays in view
+    assert not list(tmp_path.glob(".*"))  # no temporary file left
+
+
+def test_turning_a_full_circle_gives_the_camera_back():
+    import argparse
+
+    from clvis import Camera
+
+    args = argparse.Namespace(view=("fit", 0), up=None)
+    cam = Camera.look_at((3, -4, 2), (0.5, 0.5, 0.5), (0, 0, 1), 40, 1.5, 0.1, 20)
+    lo, hi = (0, 0, 0), (1, 1, 1)
+    back = orbit.turn(cam, lo, hi, 360.0, args)
+    np.testing.assert_allclose(back.eye, cam.eye, atol=1e-9)
+    half = orbit.turn(cam, lo, hi, 180.0, args)
+    np.testing.assert_allclose(half.eye, (-2, 5, 2), atol=1e-9)  # about the vertical through (0.5, 0.5)
+    np.testing.assert_allclose(half.forward[2], cam.forward[2], atol=1e-9)
+
+
+def test_iso_and_gauss_orbit(tmp_path, capsys):
+    rc, out, err = _main(capsys, "iso", "--size", "64x48", "--orbit", 3, "--quiet", "--out", tmp_path / "i")
+    assert rc == 0, err
+    assert _frames(tmp_path / "i") == ["orbit-0000.png", "orbit-0001.png", "orbit-0002.png"]
+    a, b = _png(tmp_path / "i" / "orbit-0000.png"), _png(tmp_path / "i" / "iso.png")
+    np.testing.assert_array_equal(a, b)  # the first frame is iso.png's view, band and all
+    rc, out, err = _main(
+        capsys, "gauss", "--lod", "low", "--size", "48x48", "--orbit", 2, "--quiet", "--out", tmp_path / "g"
+    )
+    assert rc == 0, err
+    assert _frames(tmp_path / "g") == ["orbit-0000.png", "orbit-0001.png"]
+    np.testing.assert_array_equal(_png(tmp_path / "g" / "orbit-0000.png"), _png(tmp_path / "g" / "gauss.png"))
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--movie", "x.mp4"], "--movie encodes the --orbit frames; add --orbit N"),
+        (["--orbit", "3", "--movie", "x.avi"], "--movie x.avi: expected a video file name ending .mp4"),
+        (["--orbit", "1"], "argument --orbit: expected an integer in 2..3,600"),
+        (["--fps", "10"], "--fps is the --movie's frame rate"),
+    ],
+)
+def test_orbit_errors(tmp_path, capsys, args, message):
+    for command in ("render", "iso", "gauss"):
+        rc, out, err = _main(capsys, command, *args, "--size", "32x32", "--out", tmp_path / command)
+        assert rc == 2 and message in err, (command, err)
+        assert not (tmp_path / command).exists()  # refused before any work
+
+
+def test_movie_without_the_encoder_names_the_extra(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # import fails: not installed
+    rc, out, err = _main(
+        capsys, "iso", "--orbit", 2, "--movie", tmp_path / "a.mp4", "--size", "32x32", "--out", tmp_path / "o"
+    )
+    assert rc == 2 and out == ""
+    assert "--movie needs the movie extra" in err and "pip install '.[movie]'" in err
+    assert err.count("\n") == 1 and not (tmp_path / "o").exists()
+
+
+def test_ctrl_c_during_the_orbit_leaves_complete_frames(tmp_path, capsys, monkeypatch):
+    real = orbit.turn
+    calls = []
+
+    def turn(*a, **k):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(orbit, "turn", turn)
+    rc, out, err = _main(capsys, "iso", "--size", "48x32", "--orbit", 5, "--quiet", "--out", tmp_path)
+    assert rc == 130 and err.strip().endswith("clvis iso: interrupted")
+    assert _frames(tmp_path) == ["orbit-0000.png", "orbit-0001.png"]
+    for name in _frames(tmp_path):
+        assert _png(tmp_path / name).shape[1] == 48  # complete PNGs
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_movie(tmp_path, capsys):
+    iio = pytest.importorskip("imageio.v2", reason="the movie extra (imageio) is in the test extra")
+    pytest.importorskip("imageio_ffmpeg", reason="the movie extra (imageio-ffmpeg) is in the test extra")
+    movie = tmp_path / "turn" / "iso.mp4"
+    rc, out, err = _main(
+        capsys,
+        "iso",
+        "--size",
+        "63x47",
+        "--orbit",
+        6,
+        "--movie",
+        movie,
+        "--fps",
+        12,
+        "--quiet",
+        "--out",
+        tmp_path / "o",
+    )
+    assert rc == 0, err
+    assert f"movie     {movie}" in out
+    with iio.get_reader(str(movie)) as r:
+        frames = [f for f in r]
+        assert r.get_meta_data()["fps"] == 12
+    h, w = _png(tmp_path / "o" / "orbit-0000.png").shape[:2]  # 63 wide, 47 + the label band high
+    assert w == 63 and len(frames) == 6
+    assert frames[0].shape == (h + h % 2, 64, 3)  # odd sides padded to even
+    assert not [p for p in movie.parent.iterdir() if p.name.startswith(".")]

@@ -1,0 +1,72 @@
+"""One image convention (clvis.images.Picture): every rendered image type has
+to_uint8(background=None) -> (H, W, 4) uint8 RGBA, straight alpha, transparent
+where empty (or over an RGB background, alpha 255) and save_png(path)."""
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from clvis import Camera, datasets, images
+from clvis.gauss import GaussianImage, GaussianRenderer, Gaussians
+from clvis.iso import IsoImage, IsoRenderer
+from clvis.raster import FilteredImage, GBuffers, Rasterizer, depth_filter
+
+W, H = 48, 32
+CAM = Camera.look_at((0.5, -2.5, 1.2), (0.5, 0.5, 0.5), (0, 0, 1), 40, W / H, near=0.1, far=10)
+
+
+def _pictures(queue):
+    rng = np.random.default_rng(0)
+    p = rng.random((4000, 3)).astype(np.float32)
+    colors = (rng.random((4000, 4)) * 255).astype(np.uint8)
+    colors[:, 3] = 255
+    g = Rasterizer(p, colors=colors, queue=queue).render(CAM, W, H)
+    d = datasets.marschner_lobb(16)
+    iso = IsoRenderer(d["volume"], spacing=(1 / 15,) * 3, queue=queue).render(CAM, W, H, 0.5)
+    gs = Gaussians(p[:300], np.full((300, 3), 0.03), values=rng.random(300))
+    gi = GaussianRenderer(gs, queue=queue).render(CAM, W, H)
+    return {"gbuffers": g, "filtered": depth_filter(g, 2, queue=queue), "iso": iso, "gauss": gi}
+
+
+def test_every_image_type_is_a_picture():
+    for t in (GBuffers, FilteredImage, IsoImage, GaussianImage):
+        assert issubclass(t, images.Picture)
+        assert t.to_uint8 is not images.Picture.to_uint8, t
+
+
+def test_to_uint8_and_save_png(queue, tmp_path):
+    for name, img in _pictures(queue).items():
+        a = img.to_uint8()
+        assert a.dtype == np.uint8 and a.shape == (H, W, 4), name
+        empty = a[..., 3] == 0
+        assert empty.any() and (~empty).any(), name  # something drawn, something not
+        assert (a[empty] == 0).all(), name  # empty pixels transparent black
+        b = img.to_uint8(images.BACKGROUND)
+        assert (b[..., 3] == 255).all(), name
+        assert (b[empty][:, :3] == images.BACKGROUND).all(), name
+        full = a[..., 3] == 255
+        # alpha 255 after rounding (a Gaussian image's 0.999): colours within one level
+        assert np.abs(b[full][:, :3].astype(int) - a[full][:, :3]).max() <= 1, name
+        path = img.save_png(tmp_path / name / "x.png")
+        with Image.open(path) as im:
+            np.testing.assert_array_equal(np.asarray(im), a)
+        with Image.open(img.save_png(tmp_path / f"{name}-bg.png", (255, 255, 255))) as im:
+            assert np.asarray(im)[empty][:, :3].min() == 255
+
+
+def test_the_conventions_agree():
+    """The iso image's shading straight from rgba; the Gaussian image's
+    premultiplied colour divided by alpha; the G-buffers' rgba copied."""
+    rgba = np.zeros((2, 2, 4), np.float32)
+    rgba[0, 0] = (0.25, 0.5, 1.0, 1.0)
+    iso = IsoImage(
+        rgba, np.zeros((2, 2)), np.eye(2, dtype=bool), np.zeros((2, 2)), np.zeros((2, 2), bool), 1, {}
+    )
+    a = iso.to_uint8()
+    assert tuple(a[0, 0]) == (64, 128, 255, 255) and tuple(a[0, 1]) == (0, 0, 0, 0)
+    assert tuple(a[1, 1]) == (0, 0, 0, 255)  # a hit shaded black stays a (black) hit
+    g = GaussianImage(np.array([[[0.25, 0.0, 0.5, 0.5]]], np.float32), np.zeros((1, 1)), None, None)
+    assert tuple(g.to_uint8()[0, 0]) == (128, 0, 255, 128)
+    assert tuple(g.to_uint8((0, 0, 0))[0, 0]) == (64, 0, 128, 255)
+    with pytest.raises(ValueError, match="background"):
+        g.to_uint8((0, 0, 300))

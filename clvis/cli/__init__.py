@@ -93,6 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous: dict[int, object] = {}
     try:
         _received.clear()
+        _deferred.clear()
         _on_signals(previous)
         status = _main(argv)
         _check_signals()
@@ -115,6 +116,23 @@ def main(argv: Sequence[str] | None = None) -> int:
                 pass
 
 
+def entry() -> int:
+    """The process's entry (the `clvis` script, `python -m clvis`): main(),
+    then, after a Ctrl-C or SIGTERM, the process ignores both while the
+    interpreter shuts down. A second Ctrl-C in that time (Dask's threads and
+    workers are still being joined) would otherwise end the process by the
+    signal, not with main()'s 130/143. main() itself leaves the handlers as
+    it found them (a library call changes no process-wide state)."""
+    status = main()
+    if _received:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                signal.signal(sig, signal.SIG_IGN)
+            except (ValueError, OSError):  # not the main thread
+                pass
+    return status
+
+
 class _Terminated(BaseException):
     """SIGTERM, raised where the main thread is, as KeyboardInterrupt is for SIGINT."""
 
@@ -127,7 +145,41 @@ _received: list[int] = []
 
 def _raise_signal(signum, frame):
     _received.append(signum)
+    if _unsafe(frame):
+        # raised here, the exception would be fatal (inside an extension
+        # module's initialisation: "Critical nanobind error", an abort) or
+        # printed and dropped ("Exception ignored in ... __del__"): the signal
+        # is sent again in 50 ms, until it lands where it can be raised
+        import threading
+
+        _deferred.add(signum)
+        t = threading.Timer(0.05, _send_again, (signum,))
+        t.daemon = True
+        t.start()
+        return
+    _deferred.clear()  # raised: no signal is sent again
     raise _Terminated if signum == signal.SIGTERM else KeyboardInterrupt
+
+
+# signals deferred by _raise_signal and not raised since
+_deferred: set[int] = set()
+
+
+def _send_again(signum: int) -> None:
+    if signum in _deferred:
+        os.kill(os.getpid(), signum)
+
+
+def _unsafe(frame) -> bool:
+    """Whether the main thread is importing a module, running a finaliser or
+    inside the import system's callbacks (where a raised exception is lost or
+    fatal)."""
+    while frame is not None:
+        code = frame.f_code
+        if code.co_filename.startswith("<frozen importlib") or code.co_name == "__del__":
+            return True
+        frame = frame.f_back
+    return False
 
 
 def _on_signals(previous: dict[int, object]) -> None:
@@ -146,10 +198,12 @@ def _on_signals(previous: dict[int, object]) -> None:
 def _check_signals() -> None:
     """Raise for a signal whose exception was lost (see _received)."""
     if _received:
+        _deferred.clear()
         raise _Terminated if _received[0] == signal.SIGTERM else KeyboardInterrupt
 
 
 def _interrupted(argv: list[str], sig: signal.Signals) -> int:
+    _deferred.clear()
     # a second Ctrl-C while exiting would print a traceback
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)

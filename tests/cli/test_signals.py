@@ -4,6 +4,7 @@ moment the command line starts, while it imports NumPy, PyOpenCL and the
 families, too."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -109,5 +110,11 @@ def test_a_signal_while_the_command_line_starts_is_one_line(tmp_path, sig, statu
         # interrupted, even though clvis caught the KeyboardInterrupt
         ok = (status, -sig) if entry[0] == "-m" and sig == signal.SIGINT else (status,)
         assert p.returncode in ok, (delay, p.returncode, err)
-        assert err == f"clvis render: {word}\n", (delay, err)
+        # a signal that lands while PoCL compiles a kernel makes its clang print
+        # its summary ("1 error generated.", native code writing to fd 2, not
+        # Python; LLVM's own signal handlers see it in whichever thread it is
+        # delivered, so blocking it around the build does not help): clvis
+        # itself says one line
+        lines = [ln for ln in err.splitlines() if not re.fullmatch(r"\d+ errors? generated\.", ln)]
+        assert lines == [f"clvis render: {word}"], (delay, err)
     assert len(landed) >= 5, landed

@@ -14,7 +14,13 @@ include decoding; compression and the macrocell grids are set-up.
 - iso_surface[...]: clvis.iso.sample_hits, a second field (the same grid)
   sampled at the hits of the 100% frame, against its NumPy reference.
 - peers: scikit-image marching_cubes of the decoded volume (the whole
-  surface, once), and the dense NumPy reference raycaster
+  surface, once); VTK's vtkFlyingEdges3D of the same volume on 2 threads
+  (vtkSMPTools, STDThread backend: the PyPI wheel has no TBB/OpenMP), alone
+  (the lower bound: no image) and followed by rendering its mesh to the same
+  image size from the same viewpoint (offscreen through EGL, Mesa's llvmpipe
+  software rasterizer on a machine without a GPU, pixels read back; skipped
+  with VTK's reason where the wheel cannot draw offscreen); and the
+  dense NumPy reference raycaster
   (clvis.reference.iso.render_rays) on a subset of the rays, scaled to the
   frame ("time_scale").
 
@@ -62,7 +68,7 @@ CASES = [
     (s, c, i)
     for s in SIZES
     for c in (1.0, 0.85)
-    for i in ("clvis", "marching_cubes", "numpy")
+    for i in ("clvis", "marching_cubes", "flying_edges", "flying_edges+render", "numpy")
     if c == 1.0 or i == "clvis"
 ]
 
@@ -118,6 +124,11 @@ def test_iso(benchmark, queue, size, completion, impl):
             nbytes=zv.nbytes,
             rounds=3,
         )
+    elif impl.startswith("flying_edges"):
+        if impl.endswith("+render") and (why := _vtk_offscreen()) is not None:
+            pytest.skip(f"VTK cannot render offscreen here: {why}")
+        fe, render, info = flying_edges(zfp.decode(zv), d, cam, w, h, impl.endswith("+render"))
+        run(benchmark, render, op=op, role="peer", n=rays, nbytes=zv.nbytes, rounds=3, **info)
     else:
         vol = zfp.decode(zv)
         o, dd = camera_rays(ray_buffer(cam, w, h), w, h)
@@ -135,6 +146,95 @@ def test_iso(benchmark, queue, size, completion, impl):
             time_scale=rays / m,
             subset_rays=m,
         )
+
+
+VTK_THREADS = 2
+_PROBE = """
+import vtk
+w = vtk.vtkRenderWindow(); w.SetOffScreenRendering(1); w.SetSize(8, 8)
+r = vtk.vtkRenderer(); w.AddRenderer(r); w.Render()
+print(w.GetClassName())
+"""
+
+
+def _vtk_offscreen():
+    """None when VTK's wheel can draw offscreen in this machine (EGL or OSMesa),
+    else why not: probed once in a child process, since a failed OpenGL
+    context can abort the process."""
+    if "vtk_offscreen" not in _cache:
+        import subprocess
+        import sys
+
+        p = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=120)
+        ok = p.returncode == 0 and "RenderWindow" in p.stdout
+        _cache["vtk_offscreen"] = (
+            None if ok else (p.stderr.strip().splitlines() or [f"exit {p.returncode}"])[-1]
+        )
+    return _cache["vtk_offscreen"]
+
+
+def flying_edges(vol, d, cam, w, h, draw):
+    """VTK's peer: (filter, fn, extra_info). fn re-runs vtkFlyingEdges3D on
+    `vol` (Modified forces it) and, with `draw`, renders the mesh offscreen to
+    w x h and reads the pixels back."""
+    import vtk
+    from vtkmodules.util.numpy_support import numpy_to_vtk
+    from vtkmodules.vtkCommonCore import vtkSMPTools
+
+    vtkSMPTools.SetBackend("STDThread")
+    vtkSMPTools.Initialize(VTK_THREADS)
+    img = vtk.vtkImageData()
+    img.SetDimensions(*vol.shape[::-1])
+    img.SetSpacing(*d["spacing"][::-1])
+    img.SetOrigin(*d["origin"])
+    img.GetPointData().SetScalars(numpy_to_vtk(np.ascontiguousarray(vol).ravel(), deep=True))
+    fe = vtk.vtkFlyingEdges3D()
+    fe.SetInputData(img)
+    fe.SetValue(0, ISO)
+    fe.ComputeNormalsOn()
+    threads = f"vtkSMPTools {vtkSMPTools.GetBackend()}, {vtkSMPTools.GetEstimatedNumberOfThreads()} threads"
+    info = {"impl": f"vtkFlyingEdges3D (VTK {vtk.vtkVersion.GetVTKVersion()}, {threads})"}
+    if not draw:
+
+        def fn():
+            fe.Modified()
+            fe.Update()
+            return fe.GetOutput().GetNumberOfCells()
+
+        fn()
+        info["triangles"] = int(fe.GetOutput().GetNumberOfCells())
+        return fe, fn, info
+    win = vtk.vtkRenderWindow()
+    win.SetOffScreenRendering(1)
+    win.SetSize(w, h)
+    ren = vtk.vtkRenderer()
+    win.AddRenderer(ren)
+    mapper = vtk.vtkPolyDataMapper()
+    mapper.SetInputConnection(fe.GetOutputPort())
+    mapper.ScalarVisibilityOff()
+    actor = vtk.vtkActor()
+    actor.SetMapper(mapper)
+    ren.AddActor(actor)
+    vc = ren.GetActiveCamera()
+    vc.SetPosition(*cam.eye)
+    vc.SetFocalPoint(*(cam.eye + cam.forward))
+    vc.SetViewUp(*cam.view[1, :3])
+    vc.SetViewAngle(35)
+    vc.SetClippingRange(cam.near, cam.far)
+    grab = vtk.vtkUnsignedCharArray()
+
+    def fn():
+        fe.Modified()
+        win.Render()
+        win.GetRGBACharPixelData(0, 0, w - 1, h - 1, 0, grab)  # the image back on the host
+        return grab
+
+    fn()
+    gl = win.ReportCapabilities()
+    renderer = next((ln.split(":", 1)[1].strip() for ln in gl.splitlines() if "renderer" in ln), "?")
+    info["impl"] += f" + render {w}x{h} ({win.GetClassName()}, {renderer}, pixels read back)"
+    info["triangles"] = int(fe.GetOutput().GetNumberOfCells())
+    return fe, fn, info
 
 
 SURFACE_CASES = [(s, i) for s in SIZES for i in ("clvis", "numpy-reference")]

@@ -121,7 +121,9 @@ TARGETS = {
             at_most=True,
             label="device memory / decoded volume",
         ),
-        Target(ISO_OP, "skimage.measure.marching_cubes", 1, "cpu"),
+        # issue 23: 3x marching_cubes (today ~1.4x); the frame time target,
+        # <= 120 ms (half of 245), is in bench/results/iso-cpu.md
+        Target(ISO_OP, "skimage.measure.marching_cubes", 3, "cpu"),
         # ZFP decoding on 2 cores against one zfpy thread ("2 x zfpy", the
         # ideal two-thread zfp, is in the table beside it)
         Target("zfp_decode[turbulence 256^3, rate 8]", "zfpy (serial)", 2.5, "cpu"),

@@ -36,6 +36,11 @@ def test_suites_hold_only_families_never_trained_on():
     assert ev.FAMILIES["infill"] == data.HELD_OUT_VOLUMES + data.EVAL_VOLUMES
     assert ev.TRAINED["infill"] == data.TRAIN_VOLUMES
     assert ev.FAMILIES["narvis"][:-1] == flows.FLOWS
+    # NARVis trains on the hurricane and the training flows, none of them a
+    # family of its suite (the hurricane through magma: a colormap never drawn)
+    assert ev.TRAINED["narvis"] == ("hurricane", *flows.TRAIN_FLOWS)
+    assert not set(flows.TRAIN_FLOWS) & set(flows.FLOWS)
+    assert not {"magma", "magma_r"} & set(data.NARVIS_TRAIN_COLORMAPS)
 
 
 def test_one_spec_per_network():
@@ -53,7 +58,7 @@ def test_one_spec_per_network():
         specs.spec("lidar").shape(np.zeros((4, 4, 4), np.float32))
 
 
-@pytest.mark.parametrize("kind", flows.FLOWS)
+@pytest.mark.parametrize("kind", flows.FLOWS + flows.TRAIN_FLOWS)
 def test_flows_are_finite_particles_with_a_velocity(kind):
     d = flows.flow(kind, 2000, 3)
     assert d["positions"].shape == d["velocity"].shape == (2000, 3)

@@ -635,14 +635,18 @@ def export(
     files["fp16"] = {"file": fp16.name}
 
     int8 = out / f"{name}.int8.onnx"
-    _to_int8(fp32, int8, [c[None] for c in calibration[:8]])
-    files["int8"] = {"file": int8.name}
+    quantizable = getattr(net, "int8", True)  # NarvisKPN: its softmax mask does not survive int8
+    if quantizable:
+        _to_int8(fp32, int8, [c[None] for c in calibration[:8]])
+        files["int8"] = {"file": int8.name}
+    else:
+        files["int8"] = {"file": None, "psnr_change_db": None}
 
     base = _psnr_of(fp32, val_pairs)
-    for k in ("fp16", "int8"):
+    for k in ("fp16", "int8") if quantizable else ("fp16",):
         p = _psnr_of(out / files[k]["file"], val_pairs)
         files[k]["psnr_change_db"] = round(p - base, 3)
-    if files["int8"]["psnr_change_db"] < -INT8_MAX_LOSS_DB:
+    if quantizable and files["int8"]["psnr_change_db"] < -INT8_MAX_LOSS_DB:
         log(f"int8 loses {-files['int8']['psnr_change_db']:.2f} dB > {INT8_MAX_LOSS_DB}: not shipped")
         int8.unlink()
         files["int8"]["file"] = None

@@ -114,7 +114,10 @@ def test_shipped_cards_carry_their_suite_table(name):
     --write-card``): every held-out family, every baseline."""
     card = json.loads((post.MODELS / f"{name}.json").read_text())
     suite = card["held_out_suite"]
-    assert suite["trained_on"] == list(ev.TRAINED[name])
+    # what the card's model saw: the training's families (the shipped NARVis
+    # U-Net predates the training flows: the hurricane alone), none in the suite
+    assert suite["trained_on"] and set(suite["trained_on"]) <= set(ev.TRAINED[name])
+    assert not set(suite["trained_on"]) & set(ev.FAMILIES[name])
     rows = suite["rows"]
     assert {r["family"] for r in rows} == set(ev.FAMILIES[name])
     for r in rows:

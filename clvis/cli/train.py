@@ -14,8 +14,9 @@ Train one of the post family's networks (clvis.post) with PyTorch:
   infill   in-fill of isosurface images stopped at 85/90/95 % completion
            (a W-Net: two U-Nets of 4-8-16-32 channels; ~31 k parameters)
   lidar    the LiDAR RGBDA U-Net: depth-filtered sparse scans to dense renders
-  narvis   NARVis's gated U-Net: rasterizer G-buffers of the hurricane's
-           particles to the Gaussian renderer's image of them
+  narvis   NARVis's gated U-Net predicting per-pixel kernels over the input
+           colours: rasterizer G-buffers of the hurricane and seven training
+           flows to the Gaussian renderer's image of them
 
 The training pairs are rendered here from closed-form volumes and scenes
 with deterministic seeds (clvis.training.data); held-out frames come from kinds

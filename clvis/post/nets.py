@@ -55,12 +55,14 @@ __all__ = [
     "GBUFFER_PLANES",
     "GatedConv2d",
     "InfillWNet",
+    "NarvisKPN",
     "NarvisUNet",
     "PushPull",
     "RgbdaUNet",
     "build",
     "count_parameters",
     "gbuffer_channels",
+    "onehot_unfold",
 ]
 
 
@@ -364,8 +366,125 @@ class NarvisUNet(nn.Module):
         return torch.clamp(self.out(h), 0.0, 1.0)
 
 
+def onehot_unfold(k: int) -> torch.Tensor:
+    """The fixed weights (k*k, 1, k, k) of a convolution that unfolds a
+    plane's k x k neighbourhood into k*k channels: channel dy * k + dx is the
+    pixel at offset (dy - k // 2, dx - k // 2) (zero beyond the border).
+    ``F.unfold`` written as a convolution, so it exports to plain ONNX Conv."""
+    w = torch.zeros(k * k, 1, k, k)
+    for j in range(k * k):
+        w[j, 0, j // k, j % k] = 1.0
+    return w
+
+
+class NarvisKPN(NarvisUNet):
+    """NARVis by per-pixel kernel prediction: the gated U-Net of
+    :class:`NarvisUNet` predicts, per output pixel, softmax weights over the
+    INPUT colours of a neighbourhood at a few pyramid scales and one
+    background (black) weight, so the output is a convex combination of input
+    colours and black: a colour that is not in the input cannot appear, and
+    a transfer function never seen in training comes through as it is drawn.
+
+    - ``kernels``: (k, s) pairs: a k x k neighbourhood of the colours
+      averaged over s x s blocks (s a power of two, 1: the pixels
+      themselves), the candidates of each output pixel those around its
+      block. A block's colour is the mean of its covered pixels; a
+      candidate with no covered pixel is masked out of the softmax.
+    - Candidates are gathered by fixed one-hot convolutions
+      (:func:`onehot_unfold`, grouped over R, G, B and the mask) and nearest
+      2**j up-sampling, so the graph is Conv, AveragePool, Resize and
+      element-wise arithmetic (no Gather).
+    - The head's last 1x1 convolution starts at zero weights with a bias of
+      ``prior`` on the finest scale's candidates: an untrained network is a
+      box filter of the covered pixels around each one (a splat).
+
+    No int8 variant (``int8 = False``): static int8 activations cannot hold
+    both the logits and the -1e4 that masks an empty candidate out of the
+    softmax, so empty candidates leak in (the release run's int8 lost 1.7 dB)."""
+
+    int8 = False
+
+    def __init__(
+        self,
+        planes: tuple[str, ...] = ("rgb", "depth", "vel2d"),
+        widths: tuple[int, ...] = (16, 32, 64, 128, 256),
+        up: str = "bilinear",
+        kernels: tuple[tuple[int, int], ...] = ((5, 1), (3, 2), (3, 4)),
+        prior: float = 2.0,
+    ) -> None:
+        super().__init__(planes, widths, up)
+        ks = tuple((int(k), int(s)) for k, s in kernels)
+        if not ks or any(k < 1 or k % 2 == 0 or s < 1 or s & (s - 1) or s > self.stride for k, s in ks):
+            raise ValueError(
+                f"kernels: expected (odd k, power-of-two s <= {self.stride}) pairs, got {kernels!r}"
+            )
+        self.kernels = ks
+        self.candidates = sum(k * k for k, _ in ks)
+        self.out = nn.Conv2d(self.widths[0], self.candidates + 1, 1)
+        nn.init.zeros_(self.out.weight)
+        with torch.no_grad():
+            self.out.bias.zero_()
+            self.out.bias[: ks[0][0] ** 2] = prior
+        for i, (k, _) in enumerate(ks):
+            self.register_buffer(f"unfold{i}", onehot_unfold(k).repeat(4, 1, 1, 1), persistent=False)
+
+    def gather(self, x: torch.Tensor) -> tuple[list[torch.Tensor], torch.Tensor]:
+        """The candidates of every output pixel: ([R, G, B] each (N, K, H, W),
+        mask (N, K, H, W)), K = ``candidates``, in ``kernels``' order."""
+        cov = x[:, 3:4]
+        rgb = x[:, 0:3] * cov
+        cols: list[list[torch.Tensor]] = [[], [], []]
+        masks = []
+        for i, (k, s) in enumerate(self.kernels):
+            if s > 1:
+                c = F.avg_pool2d(cov, s)
+                colour = F.avg_pool2d(rgb, s) / torch.clamp(c, min=1e-12)
+                m = torch.clamp(c * float(4 * s * s), max=1.0)
+            else:
+                colour, m = rgb, cov
+            u = F.conv2d(torch.cat([colour, m], dim=1), getattr(self, f"unfold{i}"), padding=k // 2, groups=4)
+            if s > 1:
+                u = F.interpolate(u, scale_factor=float(s), mode="nearest")
+            n = k * k
+            for j in range(3):
+                cols[j].append(u[:, j * n : (j + 1) * n])
+            masks.append(u[:, 3 * n : 4 * n])
+        return [torch.cat(c, dim=1) for c in cols], torch.cat(masks, dim=1)
+
+    def _weights(self, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        g = self.inject(self.normalise(x))
+        skips: list[torch.Tensor] = []
+        h = torch.zeros(0)
+        for i, block in enumerate(self.enc):
+            if i:
+                g = F.avg_pool2d(g, 2)
+                h = block(torch.cat([F.avg_pool2d(h, 2), g], dim=1))
+            else:
+                h = block(g)
+            skips.append(h)
+        for up, block, skip in zip(self.ups, self.dec, reversed(skips[:-1]), strict=True):
+            if self.up_mode == "bilinear":
+                h = F.interpolate(h, scale_factor=2.0, mode="bilinear", align_corners=False)
+            else:
+                h = up(h)
+            h = block(torch.cat([h, skip], dim=1))
+        valid = torch.cat([mask, torch.ones_like(mask[:, :1])], dim=1)
+        return torch.softmax(self.out(h) - (1.0 - valid) * 1.0e4, dim=1)
+
+    def weights(self, x: torch.Tensor) -> torch.Tensor:
+        """The per-pixel softmax weights (N, K + 1, H, W): the candidates'
+        (zero where masked), then the background's."""
+        return self._weights(x, self.gather(x)[1])
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        cols, mask = self.gather(x)
+        w = self._weights(x, mask)[:, : self.candidates]
+        out = torch.cat([torch.sum(w * c, dim=1, keepdim=True) for c in cols], dim=1)
+        return torch.clamp(out, 0.0, 1.0)
+
+
 #: the torch module of each shipped network, by name
-NETWORKS: dict[str, type[nn.Module]] = {"infill": InfillWNet, "lidar": RgbdaUNet, "narvis": NarvisUNet}
+NETWORKS: dict[str, type[nn.Module]] = {"infill": InfillWNet, "lidar": RgbdaUNet, "narvis": NarvisKPN}
 
 
 def build(name: str, **kwargs: Any) -> nn.Module:

@@ -122,11 +122,21 @@ class LidarSpec(NetworkSpec[LidarInput]):
 
 class NarvisSpec(NetworkSpec[GBuffersLike]):
     name = "narvis"
-    title = "NARVis U-Net (G-buffers -> Gaussians)"
+    title = "NARVis kernel-predicting U-Net (G-buffers -> Gaussians)"
     takes = "rasterizer G-buffers (GBuffers)"
     baselines = ("raster", "pushpull", "splat")
     eval_families = ("convection", "lorenz", "jet", "ring", "hurricane/magma")
-    trained_families = ("hurricane",)
+    #: the hurricane and clvis.training.flows.TRAIN_FLOWS
+    trained_families = (
+        "hurricane",
+        "abc",
+        "abc-lines",
+        "taylor-green",
+        "double-gyre",
+        "burgers",
+        "vortices",
+        "turbulence",
+    )
 
     def shape(self, image: Any) -> tuple[int, int]:
         if not all(hasattr(image, k) for k in ("index", "rgba", "depth", "attributes")):

@@ -515,7 +515,51 @@ class NarvisFrame:
 
 #: the colormaps NARVis's training may colour a view with (``looks``);
 #: "magma" stays out: clvis eval's unseen-colormap family uses it
-NARVIS_TRAIN_COLORMAPS = ("viridis", "plasma", "inferno", "cividis", "turbo", "coolwarm", "gray", "YlGnBu")
+NARVIS_TRAIN_COLORMAPS = (
+    "viridis",
+    "plasma",
+    "inferno",
+    "cividis",
+    "turbo",
+    "coolwarm",
+    "gray",
+    "YlGnBu",
+    "Spectral",
+    "RdBu",
+    "PiYG",
+    "jet",
+    "hot",
+    "cool",
+    "spring",
+    "summer",
+    "autumn",
+    "winter",
+    "twilight",
+    "ocean",
+    "terrain",
+    "rainbow",
+    "Blues",
+    "Oranges",
+    "copper",
+    "bone",
+    "cubehelix",
+    "gnuplot",
+)
+
+
+def narvis_flow_scene(kind: str, n: int, seed: int, colormap: str = NARVIS_COLORMAP) -> NarvisScene:
+    """A scene of clvis.training.flows' flow `kind` (`n` particles from
+    `seed`), coloured by its scalar ("temperature") through `colormap` over
+    the scalar's range."""
+    from ..io import PointCloud
+    from . import flows
+
+    d = flows.flow(kind, n, seed)
+    cloud = PointCloud(d["positions"], attributes=d["attributes"], velocity=d["velocity"])
+    a = d["attributes"]["temperature"]
+    return NarvisScene(
+        cloud, "temperature", (float(a.min()), float(a.max())), colormap, f"{kind} ({n:,} particles)"
+    )
 
 
 def narvis_looks(

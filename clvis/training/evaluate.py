@@ -171,23 +171,14 @@ class _Iso:
 
 
 def _narvis_scene(family: str, n: int, seed: int) -> Any:
-    from ..io import PointCloud
-
     if family == "hurricane/magma":
         sc = _data.narvis_scene("hurricane", n, seed)
         sc.colormap = "magma"
         sc.source += ", magma"
         return sc
-    d = _flows.flow(family, n, seed)
-    cloud = PointCloud(d["positions"], attributes=d["attributes"], velocity=d["velocity"])
-    a = d["attributes"]["temperature"]
-    return _data.NarvisScene(
-        cloud,
-        "temperature",
-        (float(a.min()), float(a.max())),
-        _data.NARVIS_COLORMAP,
-        f"{family} ({n:,} particles)",
-    )
+    if family not in _flows.FLOWS:
+        raise ValueError(f"family: expected one of {_flows.FLOWS + ('hurricane/magma',)}, got {family!r}")
+    return _data.narvis_flow_scene(family, n, seed)
 
 
 def _frames(name: str, case: Case, seed: int, planes: Sequence[str]):

@@ -12,6 +12,25 @@ velocity (n, 3) float32, attributes with a "temperature").
   height, a slight swirl, temperature its centreline excess;
 - "ring": a vortex ring (torus of radius 3, a Gaussian core), velocity its
   rotation about the core plus its self-induced drift along z.
+
+NARVis's *training* flows (TRAIN_FLOWS; none of them is a family of the
+held-out suite, which keeps the four above and the hurricane through an
+unseen colormap):
+
+- "abc": the Arnold–Beltrami–Childress flow in a 2 pi box (random A, B, C),
+  points uniform, the scalar a random mix of its components;
+- "abc-lines": particles along trajectories of the ABC flow (thin curves,
+  as attractor trajectories are), the scalar the time along each;
+- "taylor-green": Taylor–Green vortex cells in a 2 pi x 2 pi x pi box, the
+  scalar its pressure;
+- "double-gyre": the periodically driven double gyre in a slab (time as the
+  third axis), the scalar its stream function;
+- "burgers": a Burgers vortex (swirl, radial inflow, axial stretching),
+  points denser in its core, the scalar its vorticity;
+- "vortices": 2-5 tilted Rankine vortex tubes of random strengths, the scalar
+  the distance to the nearest core;
+- "turbulence": a random-Fourier divergence-free field (energy ~ k^-5/3),
+  points clustered by a random scalar field which also colours them.
 """
 
 from __future__ import annotations
@@ -19,6 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 FLOWS = ("convection", "lorenz", "jet", "ring")
+TRAIN_FLOWS = ("abc", "abc-lines", "taylor-green", "double-gyre", "burgers", "vortices", "turbulence")
 
 
 def _result(pos: np.ndarray, vel: np.ndarray, temp: np.ndarray) -> dict:
@@ -30,7 +50,7 @@ def _result(pos: np.ndarray, vel: np.ndarray, temp: np.ndarray) -> dict:
 
 
 def flow(kind: str, n: int, seed: int) -> dict:
-    """`n` particles of flow `kind` (one of FLOWS) from `seed`."""
+    """`n` particles of flow `kind` (one of FLOWS or TRAIN_FLOWS) from `seed`."""
     if not isinstance(n, int) or n < 16:
         raise ValueError(f"n: expected an int >= 16, got {n!r}")
     rng = np.random.default_rng(seed)
@@ -91,4 +111,115 @@ def flow(kind: str, n: int, seed: int) -> dict:
         ur, uz = -swirl * np.sin(psi), swirl * np.cos(psi) + 1.0
         vel = np.stack([ur * np.cos(phi), ur * np.sin(phi), uz], 1)
         return _result(pos, vel, np.exp(-((rho / core) ** 2)))
-    raise ValueError(f"flow: expected one of {FLOWS}, got {kind!r}")
+    if kind in TRAIN_FLOWS:
+        return _train_flow(kind, n, rng)
+    raise ValueError(f"flow: expected one of {FLOWS + TRAIN_FLOWS}, got {kind!r}")
+
+
+def _abc(q: np.ndarray, a: float, b: float, c: float) -> np.ndarray:
+    x, y, z = q[:, 0], q[:, 1], q[:, 2]
+    return np.stack(
+        [a * np.sin(z) + c * np.cos(y), b * np.sin(x) + a * np.cos(z), c * np.sin(y) + b * np.cos(x)], 1
+    )
+
+
+def _fourier(rng: np.random.Generator, modes: int, kmax: float, solenoidal: bool):
+    """A random smooth field: `modes` waves of wave numbers up to `kmax`
+    (amplitude ~ k^-11/6, energy ~ k^-5/3); solenoidal: a vector field
+    (each wave's amplitude across its wave vector), else a scalar one."""
+    k = rng.normal(size=(modes, 3))
+    k /= np.linalg.norm(k, axis=1, keepdims=True)
+    mag = np.exp(rng.uniform(0, np.log(kmax), modes))
+    k *= mag[:, None]
+    amp = mag ** (-11 / 6)
+    ph = rng.uniform(0, 2 * np.pi, modes)
+    if solenoidal:
+        a = np.cross(k, rng.normal(size=(modes, 3)))
+        a *= (amp / np.maximum(np.linalg.norm(a, axis=1), 1e-9))[:, None]
+    else:
+        a = amp[:, None]
+
+    def field(q: np.ndarray) -> np.ndarray:
+        out = np.zeros((len(q), a.shape[1]))
+        for j in range(modes):
+            out += np.sin(q @ k[j] + ph[j])[:, None] * a[j]
+        return out if solenoidal else out[:, 0]
+
+    return field
+
+
+def _train_flow(kind: str, n: int, rng: np.random.Generator) -> dict:
+    if kind == "abc":
+        a, b, c = rng.uniform(0.3, 1.5, 3)
+        pos = rng.uniform(0, 2 * np.pi, (n, 3))
+        vel = _abc(pos, a, b, c)
+        return _result(pos, vel, vel @ rng.normal(size=3))
+    if kind == "abc-lines":
+        a, b, c = rng.uniform(0.5, 1.5, 3)
+        m = max(n // int(rng.integers(150, 600)), 1)
+        steps = -(-n // m)
+        s = rng.uniform(0, 2 * np.pi, (m, 3))
+        dt = float(rng.uniform(0.01, 0.03))
+        out = np.empty((steps, m, 3))
+        for i in range(steps):
+            s = s + dt * _abc(s + dt / 2 * _abc(s, a, b, c), a, b, c)
+            out[i] = s
+        pos = np.mod(out.reshape(-1, 3)[:n] + rng.normal(scale=0.01, size=(n, 3)), 2 * np.pi)
+        t = np.repeat(np.arange(steps, dtype=np.float64), m)[:n]
+        return _result(pos, _abc(pos, a, b, c), t)
+    if kind == "taylor-green":
+        pos = rng.uniform(0, 1, (n, 3)) * (2 * np.pi, 2 * np.pi, np.pi)
+        x, y, z = pos.T
+        vel = np.stack([np.sin(x) * np.cos(y) * np.cos(z), -np.cos(x) * np.sin(y) * np.cos(z), 0 * x], 1)
+        p = (np.cos(2 * x) + np.cos(2 * y)) * (np.cos(2 * z) + 2) / 16
+        return _result(pos, vel, p)
+    if kind == "double-gyre":
+        amp, eps, om = rng.uniform(0.1, 0.3), rng.uniform(0.1, 0.3), rng.uniform(0.4, 0.8)
+        x, y = rng.uniform(0, 2, n), rng.uniform(0, 1, n)
+        tt = rng.uniform(0, 10, n)
+        f = eps * np.sin(om * tt) * x**2 + (1 - 2 * eps * np.sin(om * tt)) * x
+        df = 2 * eps * np.sin(om * tt) * x + 1 - 2 * eps * np.sin(om * tt)
+        psi = amp * np.sin(np.pi * f) * np.sin(np.pi * y)
+        u = -np.pi * amp * np.sin(np.pi * f) * np.cos(np.pi * y)
+        v = np.pi * amp * np.cos(np.pi * f) * np.sin(np.pi * y) * df
+        pos = np.stack([x, y, tt * 0.1], 1)
+        return _result(pos, np.stack([u, v, 0.1 * np.ones(n)], 1), psi)
+    if kind == "burgers":
+        a, delta, gam = rng.uniform(0.2, 0.6), rng.uniform(0.3, 0.7), rng.uniform(5, 15)
+        r = np.abs(rng.normal(size=n)) * delta * rng.uniform(1.5, 3)
+        th = rng.uniform(0, 2 * np.pi, n)
+        z = rng.uniform(-2, 2, n)
+        ut = gam / (2 * np.pi * np.maximum(r, 1e-3)) * (1 - np.exp(-((r / delta) ** 2)))
+        ur = -a * r
+        c, s_ = np.cos(th), np.sin(th)
+        pos = np.stack([r * c, r * s_, z], 1)
+        vel = np.stack([ur * c - ut * s_, ur * s_ + ut * c, 2 * a * z], 1)
+        return _result(pos, vel, np.exp(-((r / delta) ** 2)))
+    if kind == "vortices":
+        k = int(rng.integers(2, 6))
+        centres = rng.uniform(-3, 3, (k, 3)) * (1, 1, 0)
+        axes = rng.normal(size=(k, 3)) * (0.3, 0.3, 1)
+        axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+        cores, gams = rng.uniform(0.3, 0.8, k), rng.uniform(-10, 10, k)
+        pos = rng.uniform(-4, 4, (n, 3))
+        vel = np.zeros((n, 3))
+        near = np.full(n, np.inf)
+        for c0, ax, rc, g in zip(centres, axes, cores, gams, strict=True):
+            d = pos - c0
+            radial = d - (d @ ax)[:, None] * ax
+            r = np.linalg.norm(radial, axis=1)
+            ut = np.where(r < rc, g * r / (2 * np.pi * rc**2), g / (2 * np.pi * np.maximum(r, 1e-9)))
+            tang = np.cross(ax, radial) / np.maximum(r, 1e-9)[:, None]
+            vel += ut[:, None] * tang
+            near = np.minimum(near, r)
+        return _result(pos, vel, near)
+    # turbulence
+    vfield = _fourier(rng, 48, 6.0, True)
+    sfield = _fourier(rng, 24, 3.0, False)
+    cand = rng.uniform(-np.pi, np.pi, (3 * n, 3))
+    sv = sfield(cand)
+    keep = rng.uniform(size=3 * n) < 0.2 + 0.8 * (sv - sv.min()) / max(np.ptp(sv), 1e-9)
+    pos = cand[keep][:n]
+    if len(pos) < n:  # top up uniformly
+        pos = np.concatenate([pos, rng.uniform(-np.pi, np.pi, (n - len(pos), 3))])
+    return _result(pos, vfield(pos), sfield(pos))

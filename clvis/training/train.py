@@ -34,6 +34,7 @@ from ..metrics import metrics
 from ..post.infer import sha256
 from ..post.names import NAMES
 from . import data as _data
+from . import flows as _flows
 
 # what each network trains on by default (the release runs); the CLI's
 # --frames and --frame-size shrink the data for smoke runs
@@ -58,15 +59,28 @@ SPECS: dict[str, dict[str, Any]] = {
         "loss": {"l1": 0.9, "ms_ssim": 0.1},
         "lr": 1e-3,
     },
-    # NARVis: hemisphere views of the hurricane, 9:1 train/validation by view;
-    # held out: the grid sampler's views, and the storm 20 minutes on
+    # NARVis: hemisphere views of the hurricane (random looks), 9:1
+    # train/validation by view, beside the training flows
+    # (clvis.training.flows.TRAIN_FLOWS: flow_scenes scenes of each, flow_views
+    # views each, at random densities, looks and samplers, every 8th view to
+    # the "flows" validation set); held out: the hurricane's grid-sampler views
+    # and the storm 20 minutes on
     "narvis": {
-        "arch": {"planes": ["rgb", "depth", "vel2d"], "widths": [12, 24, 48, 96, 192], "up": "bilinear"},
-        "frames": 64,  # hemisphere views (every other azimuth of the 128)
+        "arch": {
+            "planes": ["rgb", "depth", "vel2d"],
+            "widths": [12, 24, 48, 96, 192],
+            "up": "bilinear",
+            "kernels": [[5, 1], [3, 2], [3, 4]],
+        },
+        "frames": 12,  # hurricane hemisphere views (of the 64 at every other azimuth)
         "views": 1,
-        "held_out": 8,  # grid-sampler views and storm views, each
+        "held_out": 4,  # grid-sampler views and storm views, each
         "points": 2_000_000,
         "looks": True,  # random colormaps and value ranges per training view
+        "flow_scenes": 2,  # of each training flow
+        "flow_views": 4,  # of each flow scene
+        "flow_sizes": [256, 384],  # a flow scene's frames are N x N, N one of these
+        "densities": [0.25, 4.0],  # x the hurricane's particles a pixel, log-uniform
         "frame_size": (512, 512),
         "batch": 4,
         "loss": {"l2": 1.0, "tv": 0.002, "ms_ssim": 0.05},
@@ -82,15 +96,30 @@ INT8_MAX_LOSS_DB = 0.3
 
 
 def _narvis_sets(
-    count: int, held: int, points: int, seed: int, size, planes, log, looks: bool = False
+    count: int,
+    held: int,
+    points: int,
+    seed: int,
+    size,
+    planes,
+    log,
+    looks: bool = False,
+    flows: tuple[int, int, Sequence[int], Sequence[float]] | None = None,
 ) -> dict[str, list]:
     """The NARVis frames: "train" and "validation" (`count` hemisphere views
     of the hurricane at every other azimuth, every tenth to validation; with
     `looks`, each coloured by a random colormap and value range,
-    data.narvis_looks),
-    "grid sampler" (`held` views of the grid sampler, never trained on) and
-    "storm" (`held` hemisphere views at the other azimuths of the storm
-    NARVIS_STORM_TIME later, other particles)."""
+    data.narvis_looks), "grid sampler" (`held` views of the grid sampler,
+    never trained on) and "storm" (`held` hemisphere views at the other
+    azimuths of the storm NARVIS_STORM_TIME later, other particles).
+
+    `flows` = (scenes, views, sizes, densities): that many scenes of each of
+    clvis.training.flows.TRAIN_FLOWS, each at N x N (N drawn from `sizes`,
+    at most the frame size) with density x the hurricane release run's
+    particles a pixel (log-uniform in `densities`, at most 4 x `points`
+    particles), `views` views
+    of each from either sampler under random looks; every 8th such view goes
+    to "flows" (validation), the rest to "train"."""
     w, h = size
     hur = _data.narvis_scene("hurricane", points, seed)
     cams = _data.narvis_cameras(hur, "hemisphere", w / h)
@@ -109,12 +138,55 @@ def _narvis_sets(
     storm = _data.narvis_scene("storm", points, seed + 7)
     odd = _data.narvis_cameras(storm, "hemisphere", w / h)[1::2]
     odd = [odd[int(i)] for i in np.sort(rng.permutation(len(odd))[:held])]
-    return {
+    out = {
         "train": [f for i, f in enumerate(frames[: len(picked)]) if i not in val_idx],
         "validation": [f for i, f in enumerate(frames[: len(picked)]) if i in val_idx],
         "grid sampler": frames[len(picked) :],
         "storm": _data.narvis_frames(storm, odd, w, h, planes, progress=log),
     }
+    if flows is not None:
+        flow_frames = narvis_flow_frames(*flows, points, seed, min(w, h), planes, log)
+        out["train"] += [f for i, f in enumerate(flow_frames) if i % 8 != 7]
+        out["flows"] = [f for i, f in enumerate(flow_frames) if i % 8 == 7]
+    return out
+
+
+def narvis_flow_frames(
+    scenes: int,
+    views: int,
+    sizes: Sequence[int],
+    densities: Sequence[float],
+    points: int,
+    seed: int,
+    largest: int,
+    planes: Sequence[str],
+    log: Callable[[str], None] | None = None,
+) -> list:
+    """NARVis frames of the training flows (see _narvis_sets' `flows`)."""
+    from . import flows as _flows
+
+    rng = np.random.default_rng(seed + 104_729)
+    lo, hi = (math.log(float(d)) for d in densities)
+    out = []
+    for kind in _flows.TRAIN_FLOWS:
+        for _ in range(scenes):
+            n_side = min(int(sizes[int(rng.integers(0, len(sizes)))]), largest)
+            d = math.exp(rng.uniform(lo, hi))
+            n = max(min(int(d * _NARVIS_POINTS_PER_PIXEL * n_side * n_side), 4 * points), 1000)
+            sc = _data.narvis_flow_scene(kind, n, int(rng.integers(0, 2**31)))
+            sc.source += f", {d:.2f}x points a pixel"
+            cams = []
+            for _ in range(views):
+                pool = _data.narvis_cameras(sc, "grid" if rng.random() < 0.4 else "hemisphere")
+                cams.append(pool[int(rng.integers(0, len(pool)))])
+            out += _data.narvis_frames(
+                sc, cams, n_side, n_side, planes, looks=_data.narvis_looks(sc, views, rng), progress=log
+            )
+    return out
+
+
+#: the hurricane release run's particles a pixel (2 M at 512 x 512)
+_NARVIS_POINTS_PER_PIXEL = 2_000_000 / 512**2
 
 
 def _iso_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
@@ -361,6 +433,8 @@ def train(
     count = int(frames or spec["frames"])
     if size > min(fsize):
         raise ValueError(f"--size {size}: larger than the frames ({fsize[0]}x{fsize[1]})")
+    if "flow_sizes" in spec and size > min(min(spec["flow_sizes"]), *fsize):
+        raise ValueError(f"--size {size}: larger than the flows' frames ({min(spec['flow_sizes'])})")
     torch.manual_seed(seed)
     torch.set_num_threads(int(os.environ.get("CLVIS_TRAIN_THREADS", os.cpu_count() or 1)))
     rng = np.random.default_rng(seed)
@@ -378,6 +452,14 @@ def train(
             spec["arch"]["planes"],
             log,
             spec.get("looks", False),
+            (
+                spec["flow_scenes"],
+                max(1, spec["flow_views"] * count // spec["frames"]),
+                spec["flow_sizes"],
+                spec["densities"],
+            )
+            if "flow_scenes" in spec
+            else None,
         )
         train_frames = sets.pop("train")
         val_frames = [f for v in sets.values() for f in v]
@@ -586,14 +668,18 @@ def export(
     files["fp16"] = {"file": fp16.name}
 
     int8 = out / f"{name}.int8.onnx"
-    _to_int8(fp32, int8, [c[None] for c in calibration[:8]])
-    files["int8"] = {"file": int8.name}
+    quantizable = getattr(net, "int8", True)  # NarvisKPN: its softmax mask does not survive int8
+    if quantizable:
+        _to_int8(fp32, int8, [c[None] for c in calibration[:8]])
+        files["int8"] = {"file": int8.name}
+    else:
+        files["int8"] = {"file": None, "psnr_change_db": None}
 
     base = _psnr_of(fp32, val_pairs)
-    for k in ("fp16", "int8"):
+    for k in ("fp16", "int8") if quantizable else ("fp16",):
         p = _psnr_of(out / files[k]["file"], val_pairs)
         files[k]["psnr_change_db"] = round(p - base, 3)
-    if files["int8"]["psnr_change_db"] < -INT8_MAX_LOSS_DB:
+    if quantizable and files["int8"]["psnr_change_db"] < -INT8_MAX_LOSS_DB:
         log(f"int8 loses {-files['int8']['psnr_change_db']:.2f} dB > {INT8_MAX_LOSS_DB}: not shipped")
         int8.unlink()
         files["int8"]["file"] = None
@@ -722,12 +808,12 @@ TRAINERS: dict[str, Trainer] = {
         held_out=("terrain", "town (unseen seeds)"),
     ),
     "narvis": Trainer(
-        _builder("NarvisUNet"),
+        _builder("NarvisKPN"),
         None,
         _pack_narvis,
         lambda x, y, rng, layout=(): _augment_narvis(x, y, rng, layout),
-        trained=("hurricane",),
-        held_out=("grid sampler", "storm"),
+        trained=("hurricane", *_flows.TRAIN_FLOWS),
+        held_out=("grid sampler", "storm", "flows"),
     ),
 }
 assert tuple(TRAINERS) == tuple(SPECS) == NAMES

@@ -41,6 +41,9 @@ def exported(request, tmp_path_factory, real_inputs):
             if isinstance(m, nets._UNet):
                 torch.nn.init.normal_(m.out.weight, std=0.2)
                 torch.nn.init.normal_(m.out.bias, std=0.05)
+    if name == "narvis":  # the kernel head starts at a fixed prior: give it a say
+        with torch.no_grad():
+            torch.nn.init.normal_(net.out.weight, std=0.5)
     if name == "lidar":  # BN statistics other than the identity, so folding them is checked
         with torch.no_grad():
             for m in net.modules():
@@ -102,6 +105,8 @@ def test_fp16_and_int8_within_tolerance(exported, real_inputs):
     np.testing.assert_allclose(_run(out / files["fp16"]["file"], x), want, atol=2e-2, rtol=0)
     if files["int8"]["file"] is not None:
         np.testing.assert_allclose(_run(out / files["int8"]["file"], x), want, atol=0.1, rtol=0)
+    # NarvisKPN makes none: int8 activations lose its softmax mask
+    assert (files["int8"]["file"] is None) == (name == "narvis")
 
 
 def test_graph_is_plain_convolutions(exported):
@@ -279,6 +284,7 @@ def test_narvis_architecture():
     assert net.inject.in_channels == net.inject.out_channels == 9 and net.inject.kernel_size == (1, 1)
     assert 1.9e6 < nets.count_parameters(net) < 2.2e6
     shipped = nets.build("narvis", **train.SPECS["narvis"]["arch"])
+    assert isinstance(shipped, nets.NarvisKPN)
     assert nets.count_parameters(shipped) < nets.count_parameters(net)
     t = nets.NarvisUNet(up="transposed")
     assert sum(isinstance(m, torch.nn.ConvTranspose2d) for m in t.modules()) == 4
@@ -288,3 +294,97 @@ def test_narvis_architecture():
         nets.NarvisUNet(("depth",))
     with pytest.raises(ValueError, match="twice"):
         nets.NarvisUNet(("rgb", "depth", "depth"))
+
+
+# ---------------------------------------------------------------------------
+# NARVis's kernel prediction (nets.NarvisKPN), restated
+
+
+def _kpn_candidates(x, kernels):
+    """Per pixel, the candidates of NarvisKPN in NumPy: for each (k, s), the
+    k x k blocks of s x s pixels around the pixel's block, each block's
+    colour the mean of its covered pixels and valid where it has one.
+    Returns colours (K, 3, H, W) and validity (K, H, W)."""
+    rgb, cov = x[0, :3].astype(np.float64), x[0, 3].astype(np.float64)
+    _, h, w = rgb.shape
+    cols, valid = [], []
+    for k, s in kernels:
+        hb, wb = h // s, w // s
+        n = cov.reshape(hb, s, wb, s).sum(axis=(1, 3))
+        tot = (rgb * cov).reshape(3, hb, s, wb, s).sum(axis=(2, 4))
+        colour = np.where(n > 0, tot / np.maximum(n, 1), 0)
+        r = k // 2
+        cp = np.pad(colour, ((0, 0), (r, r), (r, r)))
+        npad = np.pad(n > 0, r)
+        by, bx = np.arange(h) // s, np.arange(w) // s
+        for dy in range(k):
+            for dx in range(k):
+                yy, xx = by[:, None] + dy, bx[None, :] + dx
+                cols.append(cp[:, yy, xx])
+                valid.append(npad[yy, xx])
+    return np.stack(cols), np.stack(valid)
+
+
+def test_narvis_kernel_prediction_restated():
+    """The output is sum_k softmax(logits)_k x candidate_k over the valid
+    candidates and a background (black) weight: unfolding by one-hot
+    convolutions and nearest up-sampling = the NumPy gather above."""
+    torch.manual_seed(7)
+    kernels = ((5, 1), (3, 2), (3, 4))
+    net = nets.NarvisKPN(widths=(4, 4, 4, 4, 4), kernels=kernels).eval()
+    with torch.no_grad():
+        torch.nn.init.normal_(net.out.weight, std=0.7)
+    x = _narvis_input(np.random.default_rng(8), 32, 48)
+    x[0, :, :8, :] = 0  # a band wider than a 4 x 4 block with no point
+    logits = []
+    hook = net.out.register_forward_hook(lambda m, i, o: logits.append(o.numpy()[0].astype(np.float64)))
+    got = _torch(net, x)[0]
+    hook.remove()
+    cols, valid = _kpn_candidates(x, kernels)
+    assert cols.shape[0] == net.candidates == 25 + 9 + 9
+    lg = np.where(np.concatenate([valid, np.ones((1, *valid.shape[1:]), bool)]), logits[0], -np.inf)
+    wts = np.exp(lg - lg.max(0))
+    wts /= wts.sum(0)
+    want = np.einsum("khw,kchw->chw", wts[:-1], cols)
+    np.testing.assert_allclose(got, want, atol=2e-5, rtol=0)
+    np.testing.assert_allclose(_torch_weights(net, x), wts, atol=2e-5)
+    # rows 0-1 have no covered block within reach of even the coarsest scale: black
+    assert np.abs(got[:, :2]).max() == 0
+
+
+def _torch_weights(net, x):
+    with torch.no_grad():
+        return net.weights(torch.from_numpy(x))[0].numpy()
+
+
+def test_narvis_output_is_a_convex_combination_of_input_colours():
+    """A colour the input does not hold cannot appear: with every point one
+    colour (here one no colormap of the training holds), every output pixel
+    is that colour times a coverage in [0, 1], whatever the weights."""
+    torch.manual_seed(9)
+    net = nets.NarvisKPN(widths=(4, 4, 4, 4, 4)).eval()
+    with torch.no_grad():
+        torch.nn.init.normal_(net.out.weight, std=2.0)
+        torch.nn.init.normal_(net.out.bias, std=2.0)
+    x = _narvis_input(np.random.default_rng(10), 32, 32)
+    colour = np.array([0.9, 0.1, 0.6], np.float32)
+    x[0, :3] = colour[:, None, None] * x[0, 3]
+    y = _torch(net, x)[0]
+    alpha = y[0] / colour[0]
+    np.testing.assert_allclose(y, colour[:, None, None] * alpha, atol=1e-6)
+    assert alpha.min() >= 0 and alpha.max() <= 1 + 1e-6 and alpha.max() > 0.5
+    # an untrained network: the finest scale's covered neighbours, mostly
+    y0 = _torch(nets.NarvisKPN(widths=(4, 4, 4, 4, 4)).eval(), x)[0]
+    assert (y0[0] > 0).mean() > 0.95
+
+
+def test_onehot_unfold_is_the_neighbourhood():
+    x = np.random.default_rng(11).random((1, 1, 6, 7)).astype(np.float32)
+    u = torch.nn.functional.conv2d(torch.from_numpy(x), nets.onehot_unfold(3), padding=1)[0].numpy()
+    xp = np.pad(x[0, 0], 1)
+    for j in range(9):
+        np.testing.assert_array_equal(u[j], xp[j // 3 : j // 3 + 6, j % 3 : j % 3 + 7])
+    with pytest.raises(ValueError, match="kernels"):
+        nets.NarvisKPN(kernels=((4, 1),))
+    with pytest.raises(ValueError, match="kernels"):
+        nets.NarvisKPN(kernels=((3, 3),))

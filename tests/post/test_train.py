@@ -156,3 +156,26 @@ def test_narvis_looks_colour_both_renders_alike():
     assert np.abs(base.rgb - new.rgb).mean() > 0.01  # ... and in the target
     with pytest.raises(ValueError, match="looks"):
         data.narvis_frames(sc, [cam], 48, 48, ("rgb",), looks=look * 2)
+
+
+def test_narvis_flow_frames_vary_what_the_network_must_not_learn():
+    """The training flows' frames: every flow of TRAIN_FLOWS, colormaps
+    drawn from the training's (never magma), densities spread over the
+    asked range, deterministic from the seed."""
+    from clvis.training import flows
+
+    a = train.narvis_flow_frames(1, 2, [48], [0.25, 4.0], 20_000, 3, 64, ("rgb", "depth", "vel2d"))
+    b = train.narvis_flow_frames(1, 2, [48], [0.25, 4.0], 20_000, 3, 64, ("rgb", "depth", "vel2d"))
+    assert len(a) == 2 * len(flows.TRAIN_FLOWS)
+    kinds = {f.source.split(" ", 1)[0] for f in a}
+    assert kinds == set(flows.TRAIN_FLOWS)
+    for f, g in zip(a, b, strict=True):
+        assert f.x.shape == (9, 48, 48) and f.rgb.shape == (48, 48, 3)
+        np.testing.assert_array_equal(f.x, g.x)
+    assert sum((f.x[3] > 0).any() for f in a) >= len(a) - 2
+    # the particles a pixel of each scene: log-uniform over 16x
+    dens = sorted({float(f.source.rsplit(", ", 1)[1].split("x")[0]) for f in a})
+    assert len(dens) == len(flows.TRAIN_FLOWS) and 0.25 <= dens[0] and dens[-1] <= 4.0
+    assert dens[-1] / dens[0] > 2
+    # the colours differ between views of one scene (random looks)
+    assert any(not np.array_equal(a[i].x[:3], a[i + 1].x[:3]) for i in range(0, len(a), 2))

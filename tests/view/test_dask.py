@@ -122,6 +122,16 @@ def test_iso_frame_is_the_single_devices_within_the_tolerance(client):
         diff = np.abs(got.image.astype(int) - want.image.astype(int)).max(axis=2)
         assert (diff[rel] <= 1).all()
         assert psnr(got.image, want.image) > 35
+        # a frame the cluster cannot render is a message in the page, and the viewer goes on
+        sent = []
+        viewer.server._send_text = sent.append
+        scene.dr.close()  # as if the workers were gone for good
+        viewer.server.request()
+        deadline = time.monotonic() + TIMEOUT
+        while not sent and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert sent and '"type": "error"' in sent[0] and "ClusterError" in sent[0], sent
+        assert viewer.server.scheduler.thread.is_alive() and viewer.server.thread.is_alive()
     finally:
         viewer.close()
     assert scene.dr.closed and client.status == "running"  # a cluster given is the caller's

@@ -14,8 +14,12 @@ from ..io.volumes import otsu_level
 from ._common import (
     CliError,
     Parser,
+    add_cluster_options,
     add_volume_options,
+    cluster_client,
     count,
+    distributed_run,
+    on_workers,
     read_volume_file,
     real,
     size,
@@ -46,6 +50,17 @@ explosion): modes iso (progressive: each pass is shown as it completes, and
 a camera move restarts the passes), iso+infill (the in-fill network on the
 partial passes), gaussians, infill|iso (split: 85 % of the rays + in-fill
 beside the complete render, the PSNR).
+
+Dask (--workers N: a LocalCluster of N one-thread processes started here and
+stopped with the viewer; --scheduler ADDRESS: a running cluster): the frames
+are rendered on the workers and composited (clvis.distributed), the newest
+view still wins. Points: mode points only (a FILE is one partition, read on
+a worker; an embedded cloud is cut into one block per worker), the single
+device's frame bit for bit. Volumes: mode iso only, one complete frame per
+view (bricks of --brick cells; a FILE needs --isovalue), the single device's
+up to float32 rounding. The other modes run on one device (leave out
+--workers/--scheduler). A lost worker's data is rebuilt elsewhere; a frame
+that fails shows its error in the page and the next view tries again.
 
 The server listens on 127.0.0.1; --host 0.0.0.0 (or another address) makes
 it reachable from other machines, with a token in the printed URL that the
@@ -94,7 +109,14 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         metavar="WxH",
         help="--measure's page size (default 1280x720)",
     )
+    p.add_argument(
+        "--brick",
+        type=count(4, 4096),
+        default=64,
+        help="with --workers/--scheduler, a volume: cells per brick edge, a multiple of 4 (default 64)",
+    )
     add_volume_options(p)
+    add_cluster_options(p)
     return p
 
 
@@ -146,6 +168,88 @@ def load_scene(args: argparse.Namespace) -> Scene:
     )
 
 
+def load_dask_scene(args: argparse.Namespace) -> Scene:
+    """The FILE or --dataset on Dask workers (--workers/--scheduler):
+    points mode or iso mode, the data read on the workers where it is a FILE."""
+    from .. import datasets
+    from ..view import DaskPointScene, DaskVolumeScene
+
+    client, workers = cluster_client(args)
+    if args.brick % 4:
+        raise CliError(f"--brick: {args.brick} is not a multiple of 4 (ZFP's block edge)")
+    common = {"workers": workers, "connect_timeout": args.connect_timeout}
+    if args.file is not None:
+        if args.dataset is not None:
+            raise CliError("--dataset chooses an embedded dataset; leave it out with a FILE")
+        path = Path(args.file)
+        if not path.exists():
+            raise CliError(f"{path}: no such file")
+        if not _is_volume(path):
+            try:
+                return DaskPointScene([str(path)], client, description=str(path), **common)
+            except OSError as e:
+                raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
+        if args.isovalue is None:
+            raise CliError(
+                "--isovalue: needed with a volume FILE on workers (Otsu's reads every sample here)"
+            )
+        kw: dict = {"volume_index": args.volume_index} if args.volume_index is not None else {}
+        if path.name.lower().endswith(".raw"):
+            kw = {"shape": args.shape, "dtype": args.dtype, "volume_index": args.volume_index}
+        spacing = tuple(reversed(args.spacing)) if args.spacing is not None else None
+        source: object = str(path)
+        what, iso, vrange, origin = str(path), args.isovalue, None, (0.0, 0.0, 0.0)
+    else:
+        name = args.dataset or "hurricane"
+        if name in _POINT_SETS:
+            import dask.array as da
+
+            d = getattr(datasets, name)(args.points)
+            parts = max(1, workers)
+            chunk = -(-len(d["positions"]) // parts)
+
+            def arr(a):
+                return None if a is None else da.from_array(a, chunks=(chunk,) + a.shape[1:])
+
+            try:
+                return DaskPointScene(
+                    arr(d["positions"]),
+                    client,
+                    colors=arr(d["colors"]),
+                    attributes={k: arr(v) for k, v in d["attributes"].items()},
+                    velocity=arr(d["velocity"]),
+                    description=f"the embedded {name}",
+                    **common,
+                )
+            except OSError as e:
+                raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
+        if name == "explosion":
+            d, iso = datasets.explosion(), 0.2
+        else:
+            d = datasets.marschner_lobb(64) if name == "marschner-lobb" else datasets.turbulence(128)
+            iso = 0.5
+        iso = args.isovalue if args.isovalue is not None else iso
+        source, spacing, origin = d["volume"], d["spacing"], d["origin"]
+        what, kw = f"the embedded {name}", {}
+        vrange = (float(np.nanmin(d["volume"])), float(np.nanmax(d["volume"])))
+    try:
+        return DaskVolumeScene(
+            source,
+            client,
+            isovalue=iso,
+            vrange=vrange,
+            description=what,
+            rate=args.rate,
+            spacing=spacing,
+            origin=origin,
+            brick=args.brick,
+            **common,
+            **kw,
+        )
+    except OSError as e:
+        raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
+
+
 def _measure(scene, args) -> int:
     from ..view.measure import measure
 
@@ -154,6 +258,11 @@ def _measure(scene, args) -> int:
     print("mode          frame      first ms  last ms  frames  fps    CPU ms  stages of the first frame (ms)")
     modes = scene.modes if args.measure == "all" else args.measure.split(",")
     unknown = [m for m in modes if m not in scene.modes]
+    if unknown and scene.device.startswith("Dask workers"):
+        raise CliError(
+            f"--measure: mode {unknown[0]!r} is not rendered on Dask workers (they render "
+            f"{', '.join(scene.modes)}); leave out --workers/--scheduler for it"
+        )
     if unknown:
         raise CliError(f"--measure: no mode {unknown[0]!r} for this data; it has {', '.join(scene.modes)}")
     for mode in modes:
@@ -179,12 +288,25 @@ def _has_display() -> bool:
 
 
 def cmd(args: argparse.Namespace) -> int:
+    if distributed_run(args):
+        return on_workers("view", _serve, args)
+    return _serve(args)
+
+
+def _serve(args: argparse.Namespace) -> int:
     from ..view import Viewer, ViewServer
 
-    scene = load_scene(args)
+    scene = load_dask_scene(args) if distributed_run(args) else load_scene(args)
     if args.measure is not None:
-        return _measure(scene, args)
-    server = ViewServer(scene, args.host, args.port)
+        try:
+            return _measure(scene, args)
+        finally:
+            scene.close()
+    try:
+        server = ViewServer(scene, args.host, args.port)
+    except BaseException:
+        scene.close()
+        raise
     viewer = Viewer(server)
     print(f"clvis view: {scene.description} on {scene.device}")
     print(f"clvis view: open {viewer.url}   (Ctrl-C stops)", flush=True)

@@ -23,11 +23,13 @@ import webbrowser
 from typing import Any
 
 from .orbit import Orbit
-from .scenes import Frame, PointScene, Scene, VolumeScene, scene_for
+from .scenes import DaskPointScene, DaskVolumeScene, Frame, PointScene, Scene, VolumeScene, scene_for
 from .schedule import LatestWins, Outbox
 from .server import ViewServer, needs_token, token_ok
 
 __all__ = [
+    "DaskPointScene",
+    "DaskVolumeScene",
     "Frame",
     "LatestWins",
     "Orbit",

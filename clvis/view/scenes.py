@@ -34,7 +34,19 @@ from ..images import BACKGROUND
 if TYPE_CHECKING:  # clvis.post (onnxruntime) is imported only when a network is asked for
     from ..post import PostNetwork
 
-__all__ = ["COLORMAPS", "Frame", "PointScene", "Scene", "VolumeScene", "psnr", "scene_for", "split"]
+__all__ = [
+    "COLORMAPS",
+    "DASK_MODES",
+    "DaskPointScene",
+    "DaskVolumeScene",
+    "Frame",
+    "PointScene",
+    "Scene",
+    "VolumeScene",
+    "psnr",
+    "scene_for",
+    "split",
+]
 
 COLORMAPS = ("viridis", "magma", "inferno", "plasma", "cividis", "turbo", "coolwarm", "gray")
 _BG = np.array(BACKGROUND, np.uint8)
@@ -92,6 +104,9 @@ class Scene:
         self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
     ) -> Iterator[Frame]:
         raise NotImplementedError
+
+    def close(self) -> None:
+        """Let go of what the scene holds outside this process (a Dask scene: its cluster)."""
 
 
 def _over_background(rgb: np.ndarray, covered: np.ndarray) -> np.ndarray:
@@ -394,6 +409,137 @@ class VolumeScene(Scene):
         if build > 1e-3:
             times["build"] = build
         return Frame(img.to_uint8(BACKGROUND)[..., :3], info={"gaussians": count}, times=times)
+
+
+# the modes a Dask scene renders on the workers (clvis.distributed); the others
+# (the networks, the Gaussians, the split views) run on one device only
+DASK_MODES = {"points": ["points"], "volume": ["iso"]}
+
+
+def _dask_info(stats: dict) -> dict:
+    sec = stats["seconds"]
+    return {
+        "workers": stats["workers"],
+        "compositing": stats["compositing"],
+        "busiest worker ms": round(1e3 * (sec["render"] + sec["composite"]), 1),
+    }
+
+
+class DaskPointScene(Scene):
+    """A point cloud rendered on Dask workers (a
+    :class:`clvis.distributed.DistributedRasterizer`): mode ``points`` only,
+    the same G-buffers as :class:`PointScene`'s bit for bit. sources,
+    client, workers, connect_timeout, fields: the DistributedRasterizer's
+    (files read on the workers, or dask arrays with ``colors``/``attributes``/
+    ``velocity`` in ``options``). :meth:`close` stops the cluster started here."""
+
+    kind = "points"
+
+    def __init__(
+        self, sources: Any, client: Any = None, *, description: str = "points", **options: Any
+    ) -> None:
+        from ..distributed import DistributedRasterizer
+
+        self.dr = DistributedRasterizer(sources, client, **options)
+        try:
+            if self.dr.bounds is None:
+                raise DataError(f"{description}: no point has finite coordinates")
+            lo, hi = self.dr.bounds
+            self.lo, self.hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+            self.fit_points = self.dr.sample(_FIT_SAMPLE).astype(np.float64)
+        except BaseException:
+            self.dr.close()
+            raise
+        names = list(self.dr.attribute_names)
+        colours = names or ["rgb"]
+        self.description = f"{description}: {self.dr.n:,} points"
+        self.device = f"Dask workers ({self.dr.client.scheduler.address})"
+        self.modes = list(DASK_MODES["points"])
+        self.settings = {"mode": "points", "color_by": colours[0], "colormap": "viridis", "point_size": 1}
+        self.choices = {
+            "mode": self.modes,
+            "color_by": colours,
+            "colormap": list(COLORMAPS),
+            "point_size": {"min": 1, "max": _MAX_POINT_SIZE},
+        }
+
+    def frames(
+        self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
+    ) -> Iterator[Frame]:
+        from .._arrays import on_host
+
+        t0 = time.perf_counter()
+        attr = None if settings["color_by"] == "rgb" else settings["color_by"]
+        g = self.dr.render(
+            camera,
+            width,
+            height,
+            color_by=attr,
+            colormap=settings["colormap"],
+            point_size=settings["point_size"],
+            planes=[],
+        )
+        t1 = time.perf_counter()
+        image = _over_background(on_host(g.rgba)[..., :3], on_host(g.index) != 0xFFFFFFFF)
+        info = {"points": self.dr.n, "points read": g.stats.get("points_read", 0), **_dask_info(g.stats)}
+        yield Frame(image, info=info, times={"render": t1 - t0})
+
+    def close(self) -> None:
+        self.dr.close()
+
+
+class DaskVolumeScene(Scene):
+    """A volume cut into bricks on Dask workers (a
+    :class:`clvis.distributed.iso.DistributedIsoRenderer`): mode ``iso``, one
+    complete frame per view (the workers' passes are not streamed one by
+    one), the single device's image up to the distributed iso's tolerance
+    (the same hits, depths within 1e-4 of the diagonal). source: a 3-D array
+    or a volume file (read brick by brick on the workers); ``vrange``: the
+    isovalue slider's (min, max) (default the isovalue ± 1 for a file, whose
+    samples are never read here). :meth:`close` stops the cluster started here."""
+
+    kind = "volume"
+
+    def __init__(
+        self,
+        source: Any,
+        client: Any = None,
+        *,
+        isovalue: float,
+        vrange: tuple[float, float] | None = None,
+        description: str = "volume",
+        **options: Any,
+    ) -> None:
+        from ..distributed.iso import DistributedIsoRenderer
+
+        self.dr = DistributedIsoRenderer(source, client, **options)
+        self.lo = np.asarray(self.dr.origin, np.float64)
+        spacing = np.asarray(self.dr.spacing, np.float64)[::-1]
+        self.hi = self.lo + (np.array(self.dr.volume_shape[::-1]) - 1) * spacing
+        shape = "x".join(map(str, self.dr.volume_shape[::-1]))
+        self.description = f"{description}: {shape} samples in {len(self.dr.bricks)} bricks"
+        self.device = f"Dask workers ({self.dr.client.scheduler.address})"
+        if vrange is None:
+            vrange = (float(isovalue) - 1.0, float(isovalue) + 1.0)
+        self.modes = list(DASK_MODES["volume"])
+        self.settings = {"mode": "iso", "isovalue": float(isovalue)}
+        self.choices = {"mode": self.modes, "isovalue": {"min": vrange[0], "max": vrange[1]}}
+        self.last: Any = None  # the last IsoImage (tests compare it with one device's)
+
+    def frames(
+        self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
+    ) -> Iterator[Frame]:
+        from .._arrays import on_host
+
+        t0 = time.perf_counter()
+        img = self.last = self.dr.render(camera, width, height, settings["isovalue"])
+        t1 = time.perf_counter()
+        rgb = np.clip(np.rint(on_host(img.rgba)[..., :3] * 255), 0, 255).astype(np.uint8)
+        info = {"bricks": len(self.dr.bricks), "completion": 1.0, **_dask_info(img.stats)}
+        yield Frame(_over_background(rgb, on_host(img.hit)), info=info, times={"render": t1 - t0})
+
+    def close(self) -> None:
+        self.dr.close()
 
 
 def scene_for(obj: Any, **kwargs: Any) -> Scene:

@@ -27,6 +27,7 @@ import itertools
 import json
 import secrets
 import struct
+import sys
 import threading
 import time
 from importlib import resources
@@ -320,7 +321,12 @@ class ViewServer:
         return min(max(w, MIN_SIDE), MAX_SIZE[0]), min(max(h, MIN_SIDE), MAX_SIZE[1])
 
     def close(self) -> None:
+        """Stop the render worker, the scene's cluster (a Dask scene) and the server."""
         self.scheduler.close()
+        try:
+            self.scene.close()
+        except Exception as e:  # noqa: BLE001  (closing goes on: the server still stops)
+            print(f"clvis view: closing the scene: {type(e).__name__}: {e}", file=sys.stderr)
         loop = self._loop
         if loop is not None and not loop.is_closed():
 

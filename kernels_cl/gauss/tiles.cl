@@ -463,7 +463,8 @@ inline float pend_t(ulong k)
 /* lane l: composite its smallest pending hit */
 #define POP_LANE(l)                                                                                   \
     do {                                                                                              \
-        int q_ = --kn[l];                                                                             \
+        int q_ = hd[l]++;                                                                             \
+        --kn[l];                                                                                      \
         ulong k_ = pk[l][q_], v_ = pv[l][q_];                                                         \
         float t_ = pend_t(k_);                                                                        \
         clvis_gauss_composite(as_float((uint)(v_ >> 32)), hit_color(tf, (uint)v_, colors, (uint)k_),  \
@@ -480,7 +481,7 @@ inline float pend_t(ulong k)
 #define FRONT_LANE(l)                                                                                 \
     do {                                                                                              \
         if (kn[l] > 0 && cd[l] > 0.0f) {                                                              \
-            float h_ = pend_t(pk[l][kn[l] - 1]) * cd[l];                                              \
+            float h_ = pend_t(pk[l][hd[l]]) * cd[l];                                                  \
             front[l] = (h_ + d0[l]) + 1e-5f * (fabs(h_) + fabs(d0[l]));                               \
         } else                                                                                        \
             front[l] = INFINITY;                                                                      \
@@ -506,8 +507,10 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
     ulong last[8], ceil_k[8];   /* the last key composited; the round's ceiling */
     uint hits[8], nround[8];
     bool done[8], over[8], gone[8];   /* gone: done and taken off live */
-    int kn[8];
-    ulong pk[8][KP], pv[8][KP];   /* pending: key descending, [kn - 1] the smallest */
+    int kn[8], hd[8];
+    /* pending: pk[hd .. hd + kn - 1], key ascending, [hd] the smallest (hits
+     * come nearly in key order: the largest is appended without a shift) */
+    ulong pk[8][KP], pv[8][KP];
     float lox[8], loy[8], loz[8], ldx[8], ldy[8], ldz[8];
     uint2 range = ranges[tile];
     int live = 0;
@@ -529,6 +532,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
     while (live > 0) {
         for (int l = 0; l < 8; ++l) {
             kn[l] = 0;
+            hd[l] = 0;
             over[l] = false;
             ceil_k[l] = 0xFFFFFFFFFFFFFFFFul;
             front[l] = INFINITY;
@@ -601,18 +605,21 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
                     continue;   /* composited in an earlier round */
                 if (k >= ceil_k[l])
                     continue;   /* beyond the round's ceiling */
-                if (kn[l] == KP) {
+                if (kn[l] == KP) {   /* then hd[l] == 0 */
                     over[l] = true;
-                    if (pk[l][0] < k) {
+                    if (pk[l][KP - 1] < k) {
                         ceil_k[l] = k;   /* the new hit is the largest: drop it */
                         continue;
                     }
-                    ceil_k[l] = pk[l][0];   /* drop the largest pending hit */
-                    for (int q = 0; q < KP - 1; ++q) {
-                        pk[l][q] = pk[l][q + 1];
-                        pv[l][q] = pv[l][q + 1];
-                    }
+                    ceil_k[l] = pk[l][KP - 1];   /* drop the largest pending hit */
                     kn[l] = KP - 1;
+                }
+                if (hd[l] + kn[l] == KP) {   /* at the end: move the window to 0 */
+                    for (int q = 0; q < kn[l]; ++q) {
+                        pk[l][q] = pk[l][hd[l] + q];
+                        pv[l][q] = pv[l][hd[l] + q];
+                    }
+                    hd[l] = 0;
                 }
 #if MODEL == 1
                 float op[3] = {lop[0][l], lop[1][l], lop[2][l]}, dp[3] = {ldp[0][l], ldp[1][l], ldp[2][l]};
@@ -621,15 +628,15 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
                 float alpha = clvis_gauss_alpha_max_response(opac, lm2[l]);
 #endif
                 ulong v = (ulong)as_uint(alpha) << 32 | ti;
-                int pos = kn[l]++;
-                while (pos > 0 && pk[l][pos - 1] < k) {
+                int pos = hd[l] + kn[l]++;
+                while (pos > hd[l] && pk[l][pos - 1] > k) {
                     pk[l][pos] = pk[l][pos - 1];
                     pv[l][pos] = pv[l][pos - 1];
                     --pos;
                 }
                 pk[l][pos] = k;
                 pv[l][pos] = v;
-                if (pos == kn[l] - 1)
+                if (pos == hd[l])
                     FRONT_LANE(l);
             }
         }

@@ -21,7 +21,8 @@ def _alpha(path):
 
 
 def _run(capsys, *args):
-    rc = cli.main(["gauss", *args])
+    # --no-labels: the panels alone at --size (the tests read their pixels)
+    rc = cli.main(["gauss", *args, "--no-labels"])
     out, err = capsys.readouterr()
     return rc, out, err
 

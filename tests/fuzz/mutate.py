@@ -173,7 +173,8 @@ def las_fields(rng, data: bytes, seed) -> bytes:
         at, width = _LAS_FIELDS[int(rng.integers(0, len(_LAS_FIELDS)))]
         if width == 8 and at in (131, 155, 179, 187) and rng.integers(0, 2):  # a double
             v = float(rng.choice([0.0, -1.0, 1e-300, 1e300, np.inf, np.nan, 1e-9]))
-            struct.pack_into("<d", b, at, v)
+            if at + 8 <= len(b):  # a first operator may have truncated the header
+                struct.pack_into("<d", b, at, v)
         else:
             _put(b, at, width, _extreme(rng, width, _get(b, at, width)))
         return bytes(b)

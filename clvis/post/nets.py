@@ -346,7 +346,8 @@ class NarvisUNet(nn.Module):
                 i += 1
         return torch.cat(parts, dim=1)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def features(self, x: torch.Tensor) -> torch.Tensor:
+        """The decoder's last features (N, widths[0], H, W), before the 1x1 output."""
         g = self.inject(self.normalise(x))
         skips: list[torch.Tensor] = []
         h = torch.zeros(0)
@@ -363,7 +364,10 @@ class NarvisUNet(nn.Module):
             else:
                 h = up(h)
             h = block(torch.cat([h, skip], dim=1))
-        return torch.clamp(self.out(h), 0.0, 1.0)
+        return h
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.clamp(self.out(self.features(x)), 0.0, 1.0)
 
 
 def onehot_unfold(k: int) -> torch.Tensor:
@@ -452,22 +456,7 @@ class NarvisKPN(NarvisUNet):
         return [torch.cat(c, dim=1) for c in cols], torch.cat(masks, dim=1)
 
     def _weights(self, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        g = self.inject(self.normalise(x))
-        skips: list[torch.Tensor] = []
-        h = torch.zeros(0)
-        for i, block in enumerate(self.enc):
-            if i:
-                g = F.avg_pool2d(g, 2)
-                h = block(torch.cat([F.avg_pool2d(h, 2), g], dim=1))
-            else:
-                h = block(g)
-            skips.append(h)
-        for up, block, skip in zip(self.ups, self.dec, reversed(skips[:-1]), strict=True):
-            if self.up_mode == "bilinear":
-                h = F.interpolate(h, scale_factor=2.0, mode="bilinear", align_corners=False)
-            else:
-                h = up(h)
-            h = block(torch.cat([h, skip], dim=1))
+        h = self.features(x)
         valid = torch.cat([mask, torch.ones_like(mask[:, :1])], dim=1)
         return torch.softmax(self.out(h) - (1.0 - valid) * 1.0e4, dim=1)
 

@@ -137,6 +137,13 @@ def result(a: cla.Array, host: bool) -> np.ndarray | cla.Array:
     return a.get() if host else a
 
 
+def to_host(a: Any) -> np.ndarray:
+    """`a` as a numpy array: a device array read back (one copy), anything
+    else through np.asarray (the picture methods and other host-side readers
+    of a result's planes, whichever side they are on)."""
+    return a.get() if isinstance(a, cla.Array) else np.asarray(a)
+
+
 def on_host(a: np.ndarray | cla.Array) -> np.ndarray:
     """`a`, a plane of a result made on the host (numpy in, or ``host=True``),
     typed as the numpy array it is; TypeError for a device array (the result

@@ -49,7 +49,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import runtime
-from .._arrays import buffer_of, nonnegative_int, positive_int, resolve_queue
+from .._arrays import buffer_of, nonnegative_int, positive_int, resolve_queue, to_host
 from ..camera import Camera, ray_buffer
 from ..colormap import TransferFunction
 from ..errors import DeviceError
@@ -93,7 +93,7 @@ class GaussianImage(Picture):
     def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
         """(H, W, 4) uint8 RGBA, straight alpha (transparent where no Gaussian
         covers a pixel), or over the RGB `background` (0..255 each)."""
-        rgba = self.rgba.get() if isinstance(self.rgba, cla.Array) else self.rgba
+        rgba = to_host(self.rgba)
         return float_rgba8(rgba, background, premultiplied=True)
 
 

@@ -74,7 +74,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import limits, runtime
-from .._arrays import positive_int, resolve_queue, triple
+from .._arrays import positive_int, resolve_queue, to_host, triple
 from ..camera import Camera, ray_buffer
 from ..errors import DataError
 from ..images import Picture, float_rgba8
@@ -159,8 +159,8 @@ class IsoImage(Picture):
     def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
         """(H, W, 4) uint8 RGBA: the shaded surface where a ray hit it, transparent
         elsewhere, or over the RGB `background` (0..255 each)."""
-        rgba = np.array(self.rgba.get() if hasattr(self.rgba, "get") else self.rgba, np.float32)
-        hit = np.asarray(self.hit.get() if hasattr(self.hit, "get") else self.hit, bool)
+        rgba = np.array(to_host(self.rgba), np.float32)
+        hit = to_host(self.hit).astype(bool, copy=False)
         rgba[..., 3] = hit
         return float_rgba8(rgba, background, premultiplied=False)
 

@@ -32,7 +32,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import colormap, runtime
-from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device, triple
+from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device, to_host, triple
 from ..camera import Camera, ray_buffer
 from .render import IsoImage
 
@@ -68,7 +68,7 @@ def _facing(green: np.ndarray) -> np.ndarray:
 
 def _plane(image: IsoImage, name: str) -> np.ndarray:
     a = getattr(image, name)
-    return a.get() if is_device(a) else np.asarray(a)
+    return to_host(a)
 
 
 def sample_hits(
@@ -188,7 +188,7 @@ def color_surface(
     light, highlight = AMBIENT + DIFFUSE * x, SPECULAR * x**SHININESS
     col = np.broadcast_to(base.astype(np.float32), rgba.shape[:2] + (3,))
     if values is not None:
-        v = np.asarray(values.get() if isinstance(values, cla.Array) else values, np.float32)
+        v = to_host(values).astype(np.float32, copy=False)
         if v.shape != hit.shape:
             raise ValueError(f"values: expected shape {hit.shape}, got {v.shape}")
         if value_range is None:

@@ -28,7 +28,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import runtime
-from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device
+from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device, to_host
 from ..errors import DataError
 from ..images import Picture, rgba8
 from .render import GBuffers
@@ -284,10 +284,7 @@ class FilteredImage(Picture):
         the RGB `background` (0..255 each)."""
         from ..images import depth_image
 
-        def host(a: np.ndarray | cla.Array) -> np.ndarray:
-            return a.get() if isinstance(a, cla.Array) else a
-
-        rgba = host(self.rgba) if self.rgba is not None else depth_image(host(self.depth))
+        rgba = to_host(self.rgba) if self.rgba is not None else depth_image(to_host(self.depth))
         return rgba8(rgba, background)
 
 

@@ -44,7 +44,7 @@ import pyopencl.array as cla
 
 from .. import colormap as _colormap
 from .. import runtime
-from .._arrays import is_device, resolve_queue
+from .._arrays import is_device, resolve_queue, to_host
 from ..camera import Camera
 from ..images import Picture, rgba8
 from .inputs import (
@@ -111,7 +111,7 @@ class GBuffers(Picture):
         the RGB `background` (0..255 each)."""
         if self.rgba is None:
             raise ValueError("to_uint8: these G-buffers have no rgba plane (render(planes=...) left it out)")
-        rgba = self.rgba.get() if isinstance(self.rgba, cla.Array) else self.rgba
+        rgba = to_host(self.rgba)
         return rgba8(rgba, background)
 
     @property

@@ -44,6 +44,7 @@ laspy = pytest.importorskip("laspy")
 
 import clvis  # noqa: E402
 from clvis.distributed import DistributedRasterizer, concatenate  # noqa: E402
+from clvis.distributed.cluster import connected_workers  # noqa: E402
 from clvis.distributed.iso import DistributedIsoRenderer  # noqa: E402
 from clvis.io import read_points  # noqa: E402
 
@@ -139,10 +140,8 @@ def _frames(benchmark, n_workers, impl, role, rounds):
             )
             best = min(stats[1:], key=lambda s: s["seconds"]["frame"])
             sec = best["seconds"]
-            managed = sum(
-                w["metrics"].get("managed_bytes", 0) for w in client.scheduler_info()["workers"].values()
-            )
-            rss = max(w["metrics"]["memory"] for w in client.scheduler_info()["workers"].values())
+            managed = sum(w["metrics"].get("managed_bytes", 0) for w in connected_workers(client).values())
+            rss = max(w["metrics"]["memory"] for w in connected_workers(client).values())
             per_worker_sent = sorted(best["bytes_sent"].values())
             benchmark.extra_info.update(
                 workers=n_workers,

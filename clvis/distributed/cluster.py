@@ -36,6 +36,7 @@ __all__ = [
     "ClusterOwner",
     "WorkerRegistry",
     "composite_task",
+    "connected_workers",
     "current_worker",
     "device_error",
     "frame_seconds",
@@ -62,6 +63,17 @@ def current_worker() -> str | None:
         return _distributed().get_worker().address
     except ValueError:
         return None
+
+
+def connected_workers(client: Any) -> dict[str, dict]:
+    """The scheduler's record of every worker now connected, by address.
+
+    Asks the scheduler directly. ``client.scheduler_info()`` returns the
+    client's cached identity, which its own periodic refresh (every 2 s, with
+    no workers in it) can overwrite between the fetch and the return: an empty
+    ``"workers"`` on a cluster of two (dask.distributed 2026.8)."""
+    info = client.sync(client.scheduler.identity, n_workers=-1)
+    return dict(info.get("workers", {}))
 
 
 def device_error(e: BaseException) -> DeviceError:

@@ -44,7 +44,15 @@ from ..camera import Camera
 from ..errors import ClusterError, ClvisError, DataError, DeviceError
 from ..iso import IsoImage, IsoRenderer
 from . import composite as _c
-from .cluster import CONNECT_TIMEOUT, REGISTRY, ClusterOwner, current_worker, device_error, frame_seconds
+from .cluster import (
+    CONNECT_TIMEOUT,
+    REGISTRY,
+    ClusterOwner,
+    connected_workers,
+    current_worker,
+    device_error,
+    frame_seconds,
+)
 
 __all__ = ["DistributedIsoRenderer", "brick_plan", "footprint", "window", "worker_plan"]
 
@@ -357,7 +365,7 @@ class DistributedIsoRenderer(ClusterOwner):
             sp = triple("spacing", default_spacing if spacing is None else spacing, positive=True)
             self.spacing, self.origin = sp, o
             self.bricks = brick_plan(self.volume_shape, brick)
-            ws = sorted(self.client.scheduler_info()["workers"]) or [None]
+            ws: list[str | None] = [*sorted(connected_workers(self.client))] or [None]
             units = worker_plan(self.bricks, len(ws)) if per_worker else [(r, 1) for r in self.bricks]
             token = uuid.uuid4().hex
             self._specs: list[dict[str, Any]] = []

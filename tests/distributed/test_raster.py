@@ -16,6 +16,7 @@ from dask_cluster import TIMEOUT, distributed, local_cluster
 
 from clvis import Camera
 from clvis.distributed import DistributedRasterizer, concatenate
+from clvis.distributed.cluster import connected_workers
 from clvis.errors import DataError, DeviceError
 from clvis.io import PointCloud, read_points, save_npz
 from clvis.raster import EMPTY, Rasterizer
@@ -99,7 +100,7 @@ def test_tiles_equal_the_single_device_render(client, tiles, compositing):
             s = got.stats
             assert s["points"] == len(whole) and s["partitions"] == 6 and s["compositing"] == compositing
             assert s["points_read"] == want.stats["points_read"] or s["batches"] >= want.stats["batches"]
-            assert set(s["bytes_sent"]) <= set(client.scheduler_info()["workers"])
+            assert set(s["bytes_sent"]) <= set(connected_workers(client))
             assert sum(s["bytes_sent"].values()) >= got.index.nbytes  # at least the frame reaches the client
         # a view from the other side: the depth order of the partitions flips
         _same(dr.render(_cam((-2.0, 3.0, -1.0)), W, H), single.render(_cam((-2.0, 3.0, -1.0)), W, H))
@@ -253,7 +254,7 @@ def test_a_worker_killed_in_the_middle_of_a_frame(tmp_path):
             assert np.array_equal(composite.ids_of(whole.key), want.index)
             assert np.array_equal(composite.depths_of(whole.key), want.depth)
             assert np.array_equal(whole.planes["rgba"], want.rgba)
-            assert victim not in c.scheduler_info()["workers"]  # it was killed, and replaced
+            assert victim not in connected_workers(c)  # it was killed, and replaced
             # and the next frames too, on whatever workers there are now
             _same(dr.render(_cam(), W, H, color_by="a"), want)
 
@@ -269,7 +270,7 @@ def test_workers_without_a_device(tmp_path, monkeypatch, tiles):
     monkeypatch.setenv("CLVIS_DEVICE", "no-such-opencl-device")  # inherited by the worker processes
     with local_cluster(n_workers=1) as cluster, distributed.Client(cluster, timeout=TIMEOUT) as c:
         c.wait_for_workers(1, timeout=TIMEOUT)
-        (addr,) = c.scheduler_info()["workers"]
+        (addr,) = connected_workers(c)
         with pytest.raises(
             DeviceError, match=f"worker {addr}: no usable OpenCL device.*no-such-opencl-device"
         ):

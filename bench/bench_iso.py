@@ -162,14 +162,15 @@ def _vtk_offscreen():
     else why not: probed once in a child process, since a failed OpenGL
     context can abort the process."""
     if "vtk_offscreen" not in _cache:
+        import re
         import subprocess
         import sys
 
         p = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=120)
         ok = p.returncode == 0 and "RenderWindow" in p.stdout
-        _cache["vtk_offscreen"] = (
-            None if ok else (p.stderr.strip().splitlines() or [f"exit {p.returncode}"])[-1]
-        )
+        # VTK's log lines carry ANSI colour codes: strip them from the skip reason
+        lines = re.sub(r"\x1b\[[0-9;]*m", "", p.stderr).strip().splitlines()
+        _cache["vtk_offscreen"] = None if ok else (lines or [f"exit {p.returncode}"])[-1]
     return _cache["vtk_offscreen"]
 
 

@@ -94,6 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         _received.clear()
         _deferred.clear()
+        _ignore_on_exit.clear()
         _on_signals(previous)
         status = _main(argv)
         _check_signals()
@@ -124,7 +125,7 @@ def entry() -> int:
     signal, not with main()'s 130/143. main() itself leaves the handlers as
     it found them (a library call changes no process-wide state)."""
     status = main()
-    if _received:
+    if _received or _ignore_on_exit:
         for sig in (signal.SIGINT, signal.SIGTERM):
             try:
                 signal.signal(sig, signal.SIG_IGN)
@@ -160,6 +161,10 @@ def _raise_signal(signum, frame):
     _deferred.clear()  # raised: no signal is sent again
     raise _Terminated if signum == signal.SIGTERM else KeyboardInterrupt
 
+
+# a command that handled a Ctrl-C itself and returns 130 (clvis.cli._common.on_workers):
+# entry() ignores the signals while the interpreter shuts down, as after _received
+_ignore_on_exit: list[int] = []
 
 # signals deferred by _raise_signal and not raised since
 _deferred: set[int] = set()

@@ -688,6 +688,12 @@ def on_workers(name: str, fn, *args) -> int:
     try:
         status = fn(*args)
     except KeyboardInterrupt:  # SIGINT stays ignored: this process is on its way out
+        from . import _ignore_on_exit
+
+        # main() puts its caller's SIGINT handler back on return; noted here,
+        # entry() ignores the signal again while the interpreter joins Dask's
+        # threads (a second Ctrl-C then would end `python -m clvis` by SIGINT)
+        _ignore_on_exit.append(signal.SIGINT)
         print(f"clvis {name}: interrupted; the Dask workers started here were stopped", file=sys.stderr)
         return 130
     if main:

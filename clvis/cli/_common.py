@@ -235,7 +235,7 @@ def add_output_options(parser: argparse.ArgumentParser, out: str, empty: str) ->
     shown on the way, alike for every command that renders. `empty` names
     what --transparent leaves clear."""
     parser.add_argument(
-        "--out", type=out_dir, default=out, metavar="DIR", help=f"folder for the PNGs (default ./{out})"
+        "-o", "--out", type=out_dir, default=out, metavar="DIR", help=f"folder for the PNGs (default ./{out})"
     )
     parser.add_argument(
         "--transparent",
@@ -270,6 +270,11 @@ def out_dir(text: str) -> str:
                     f"{text} {what}, not a folder (--out names the folder for the PNGs)"
                 )
             break
+    if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".tif", ".tiff") and not p.is_dir():
+        raise argparse.ArgumentTypeError(
+            f"{text} names an image, but --out/-o is the folder for the PNGs (a command writes "
+            f"several, and overview.png): give a folder, e.g. -o {p.parent / p.stem}"
+        )
     return text
 
 

@@ -58,7 +58,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="each panel of the networks' contact sheets (default 640x360)",
     )
     d.add_argument(
-        "--out", default="clvis-demo", metavar="DIR", help="where the PNGs go (default ./clvis-demo)"
+        "-o", "--out", default="clvis-demo", metavar="DIR", help="where the PNGs go (default ./clvis-demo)"
     )
     return d
 

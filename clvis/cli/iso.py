@@ -525,7 +525,7 @@ def _run(args) -> int:
         return 0
     print(
         f"  volume      {r.shape} = {volume.nbytes / 1e6:.1f} MB decoded, {r.volume.nbytes / 1e6:.1f} MB "
-        f"compressed, {r.volume.nblocks:,} blocks"
+        f"compressed, {r.volume.nblocks:,} blocks, spacing (z, y, x) {', '.join(f'{v:g}' for v in spacing)}"
     )
     seconds = 0.0
     for iso, shot in zip(isos, shots, strict=True):

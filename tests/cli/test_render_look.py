@@ -255,3 +255,17 @@ def test_infill_without_completion(tmp_path, capsys):
     _, err = capsys.readouterr()
     assert rc == 2 and "--infill fills the rays still running" in err
     assert not any(tmp_path.iterdir())  # before any work
+
+
+@pytest.mark.parametrize("command", [["render", "--points", "100"], ["iso"], ["gauss"]])
+def test_o_naming_an_image(tmp_path, capsys, command):
+    """-o is --out; -o picture.png (a habit from single-image tools) stops
+    before any work, suggests a folder and makes nothing."""
+    out = tmp_path / "sub" / "picture.png"
+    try:
+        rc = cli.main([*command, "-o", str(out), "--quiet"])
+    except SystemExit as e:
+        rc = e.code
+    _, err = capsys.readouterr()
+    assert rc == 2 and "names an image" in err and f"-o {tmp_path / 'sub' / 'picture'}" in err
+    assert not (tmp_path / "sub").exists()

@@ -859,7 +859,9 @@ def _render(args, progress) -> int:
     t_start = time.perf_counter()
     cloud, source, default_attribute, filter_on = _load(args, progress)
     attribute = _pick_attribute(cloud, args.attribute, default_attribute, source)
-    levels = args.depth_filter if args.depth_filter is not None else (LEVELS if filter_on else 0)
+    # --post lidar takes the depth-filtered image: the filter is on (its default levels) unless given
+    on = filter_on or args.post == "lidar"
+    levels = args.depth_filter if args.depth_filter is not None else (LEVELS if on else 0)
     lo, hi, framed = _framing(cloud, source)
     camera = camera_from_args(_world_camera_args(args, cloud.origin), lo, hi, width, height, points=framed)
     point_size, spacing = args.point_size, None
@@ -886,7 +888,8 @@ def _render(args, progress) -> int:
 
         if args.post == "lidar" and not levels:
             raise CliError(
-                f"--post {args.post}: the network takes the depth-filtered image; add --depth-filter"
+                f"--post {args.post}: the network takes the depth-filtered image; --depth-filter 0 turns "
+                f"the filter off (leave it out for {LEVELS} levels)"
             )
         if args.post == "narvis":
             if cloud.velocity is None:
@@ -1175,7 +1178,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--post",
         choices=("lidar", "narvis"),
         help="also write post-NAME.png: lidar, the depth-filtered image reconstructed by the LiDAR "
-        "RGBDA U-Net (needs the depth filter); narvis, the G-buffers turned into the Gaussian "
+        "RGBDA U-Net (turns the depth filter on, 4 levels, unless --depth-filter says otherwise); narvis, the G-buffers turned into the Gaussian "
         "renderer's image by NARVis's U-Net (needs a velocity and an attribute to colour by)",
     )
     r.add_argument(

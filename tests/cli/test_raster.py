@@ -394,8 +394,9 @@ def test_render_error_exit_status(tmp_path):
     [
         (["--post", "narvis"], "post-narvis"),
         (["--dataset", "terrain", "--depth-filter", 3, "--post", "lidar"], "post-lidar"),
+        (["--post", "lidar"], "post-lidar"),  # the depth filter comes on by itself
     ],
-    ids=["narvis", "lidar"],
+    ids=["narvis", "lidar", "lidar-default-filter"],
 )
 def test_render_post(tmp_path, capsys, args, panel):
     """--post runs the network on the device path (a render of the planes it
@@ -404,3 +405,11 @@ def test_render_post(tmp_path, capsys, args, panel):
     assert rc == 0, err
     _assert_picture(tmp_path / f"{panel}.png")
     assert "a frame from render to picture, G-buffers on the device" in out
+
+
+def test_post_lidar_with_the_filter_off(tmp_path, capsys):
+    """--post lidar --depth-filter 0: the network needs the filtered image."""
+    rc, out, err = _render(
+        capsys, "--points", 2000, "--post", "lidar", "--depth-filter", 0, "--out", tmp_path, *SMALL
+    )
+    assert rc == 2 and "--depth-filter 0 turns the filter off" in err

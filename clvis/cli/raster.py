@@ -1178,7 +1178,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--post",
         choices=("lidar", "narvis"),
         help="also write post-NAME.png: lidar, the depth-filtered image reconstructed by the LiDAR "
-        "RGBDA U-Net (turns the depth filter on, 4 levels, unless --depth-filter says otherwise); narvis, the G-buffers turned into the Gaussian "
+        "RGBDA U-Net (turns the depth filter on, 4 levels, unless --depth-filter says otherwise); "
+        "narvis, the G-buffers turned into the Gaussian "
         "renderer's image by NARVis's U-Net (needs a velocity and an attribute to colour by)",
     )
     r.add_argument(

@@ -460,7 +460,9 @@ def _run(args) -> int:
                 completion=args.completion,
                 speculation=not args.no_speculation,
                 queue=q,
-                camera=lambda lo, hi: camera_from_args(args, lo, hi, w, h),
+                camera=lambda lo, hi: camera_from_args(
+                    args, lo, hi, w, h, points=_surface_points(volume, isos, spacing, origin)
+                ),
                 progress=progress,
                 host=not args.infill,  # the in-fill network takes the image where it is
             )
@@ -513,7 +515,7 @@ def _run(args) -> int:
     if args.orbit is not None and r is not None:  # the turntable (clvis.cli.orbit)
         from .orbit import iso_orbit
 
-        orbit = iso_orbit(args, r, isos[0], out, progress_from_args(args, "clvis iso"))
+        orbit = iso_orbit(args, r, isos[0], out, progress_from_args(args, "clvis iso"), base=cam)
     values = ", ".join(f"{v:g}" for v in isos)
     print(
         f"clvis iso: {source}, isovalue{'s' if len(isos) > 1 else ''} {values}, ZFP rate {args.rate}, {w}x{h}"
@@ -571,6 +573,30 @@ def _run(args) -> int:
         return 0
     print(f"wrote {path}{os.sep if path.is_dir() else ''}")
     return 0
+
+
+def _surface_points(volume, isos, spacing, origin, most: int = 65536) -> np.ndarray | None:
+    """Up to `most` world positions of voxels the isosurfaces pass beside (a
+    sign change to a neighbour), for the fit view to frame the surface, not
+    the whole volume (a small surface in a corner of its volume would fill a
+    corner of the picture); None when the volume is no NumPy array or no cell
+    holds an isovalue."""
+    if not isinstance(volume, np.ndarray) or volume.ndim != 3 or min(volume.shape) < 2:
+        return None
+    near = np.zeros(volume.shape, bool)
+    for iso in isos:
+        above = volume >= iso
+        for axis in range(3):
+            head = [slice(None)] * 3
+            tail = [slice(None)] * 3
+            head[axis], tail[axis] = slice(None, -1), slice(1, None)
+            near[tuple(head)] |= above[tuple(head)] != above[tuple(tail)]
+    idx = np.flatnonzero(near)
+    if idx.size == 0:
+        return None
+    idx = idx[:: -(-idx.size // most)]
+    zyx = np.stack(np.unravel_index(idx, volume.shape), axis=1).astype(np.float64)
+    return np.asarray(origin, np.float64) + (zyx * np.asarray(spacing, np.float64))[:, ::-1]
 
 
 def _warn_isovalue(iso: float, vmin: float, vmax: float) -> None:

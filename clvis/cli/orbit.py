@@ -88,7 +88,10 @@ def encoder() -> Any:
 def turn(camera: Any, lo: npt.ArrayLike, hi: npt.ArrayLike, degrees: float, args: argparse.Namespace) -> Any:
     """`camera` turned by `degrees` about the vertical axis (z, or --up)
     through the centre of the box [lo, hi]; its projection kept, near and far
-    enclosing the box again (clvis.cli._common's rule for --eye)."""
+    enclosing the box again (clvis.cli._common's rule for --eye); a turn by a
+    whole number of circles is the camera itself."""
+    if degrees % 360.0 == 0.0:
+        return camera
     lo_, hi_ = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     centre = 0.5 * (lo_ + hi_)
     axis = np.asarray(args.up if getattr(args, "up", None) is not None else (0.0, 0.0, 1.0), np.float64)
@@ -199,17 +202,24 @@ def report(files: Sequence[Path], movie: Path | None) -> None:
 
 
 def iso_orbit(
-    args: argparse.Namespace, renderer: Any, isovalue: float, out: Path, progress: Progress
+    args: argparse.Namespace,
+    renderer: Any,
+    isovalue: float,
+    out: Path,
+    progress: Progress,
+    base: Any = None,
 ) -> tuple[list[Path], Path | None]:
     """`clvis iso --orbit N`: the isosurface from N cameras around the volume,
-    each frame as iso.png shows it (its band unless --no-labels)."""
+    each frame as iso.png shows it (its band unless --no-labels); the first
+    is `base`, iso.png's camera (default: the options' camera of the volume)."""
     from .iso import labelled
 
     w, h = args.size
     origin = np.asarray(renderer.origin, np.float64)
     lo = origin
     hi = origin + (np.array(renderer.shape[::-1]) - 1) * np.asarray(renderer.spacing, np.float64)[::-1]
-    base = camera_from_args(args, lo, hi, w, h)
+    if base is None:
+        base = camera_from_args(args, lo, hi, w, h)
 
     def frame(k: int, degrees: float) -> np.ndarray:
         img = renderer.render(

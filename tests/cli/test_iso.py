@@ -102,3 +102,33 @@ def test_iso_infill(tmp_path, capsys):
         a = np.asarray(im)
     assert a.shape[1] == 64 and a.std() > 1
     assert not ((a[..., 0] == 255) & (a[..., 1] == 0) & (a[..., 2] == 255)).any()  # no magenta left
+
+
+def test_the_fit_view_frames_the_surface_not_the_volume(tmp_path, capsys):
+    """A small sphere in a corner of its volume fills the fit view's picture
+    (the view frames the voxels the surface passes, not the volume's box)."""
+    z, y, x = np.mgrid[0:64, 0:64, 0:64].astype(np.float32)
+    vol = np.sqrt((z - 8) ** 2 + (y - 9) ** 2 + (x - 10) ** 2)  # distance to a point near a corner
+    np.save(tmp_path / "ball.npy", vol)
+    rc = cli.main(
+        [
+            "iso",
+            str(tmp_path / "ball.npy"),
+            "--isovalue",
+            "5",
+            "--size",
+            "160x120",
+            "--no-labels",
+            "--quiet",
+            "--out",
+            str(tmp_path / "o"),
+        ]
+    )
+    capsys.readouterr()
+    assert rc == 0
+    rgba = np.asarray(Image.open(tmp_path / "o" / "iso.png"))
+    drawn = (rgba[..., :3].astype(int) - rgba[0, 0, :3]).any(axis=2)
+    assert drawn.mean() > 0.2, drawn.mean()  # the ball's box seen whole: a quarter or more of the frame
+    rows, cols = np.flatnonzero(drawn.any(axis=1)), np.flatnonzero(drawn.any(axis=0))
+    # and about the middle of the picture
+    assert abs((rows[0] + rows[-1]) / 2 - 60) < 15 and abs((cols[0] + cols[-1]) / 2 - 80) < 20

@@ -74,9 +74,11 @@ def test_turning_a_full_circle_gives_the_camera_back():
     args = argparse.Namespace(view=("fit", 0), up=None)
     cam = Camera.look_at((3, -4, 2), (0.5, 0.5, 0.5), (0, 0, 1), 40, 1.5, 0.1, 20)
     lo, hi = (0, 0, 0), (1, 1, 1)
-    back = orbit.turn(cam, lo, hi, 360.0, args)
-    np.testing.assert_allclose(back.eye, cam.eye, atol=1e-9)
+    assert orbit.turn(cam, lo, hi, 360.0, args) is cam  # no turn: the camera itself, near and far too
     half = orbit.turn(cam, lo, hi, 180.0, args)
+    back = orbit.turn(half, lo, hi, 180.0, args)
+    np.testing.assert_allclose(back.eye, cam.eye, atol=1e-9)
+    np.testing.assert_allclose(orbit.turn(cam, lo, hi, 120.0 + 240.0 - 1e-9, args).eye, cam.eye, atol=1e-6)
     np.testing.assert_allclose(half.eye, (-2, 5, 2), atol=1e-9)  # about the vertical through (0.5, 0.5)
     np.testing.assert_allclose(half.forward[2], cam.forward[2], atol=1e-9)
 

@@ -76,7 +76,8 @@ matplotlib's tab10). --color-by FIELD colours the surfaces by a second volume
 (a file as above: on the same grid, or any grid stretched over the same box),
 sampled on the device where each ray hit, through --colormap over --range,
 with a colour bar under the image. A constant volume has no isosurface: it
-is reported and no surface is drawn.
+is reported and no surface is drawn. The fit view frames the voxels the
+isosurfaces pass, not the whole volume.
 
 """
     + VIEWS_HELP

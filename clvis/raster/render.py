@@ -89,11 +89,11 @@ class GBuffers(Picture):
     screen velocity in pixels per unit time (x right, y down), vel_angle
     (atan2(vy, vx), radians) and vel_speed (its length), NaN where empty;
     radius_px: the splat radius in pixels. Planes the cloud has no data for
-    (and the velocity planes of ``render(screen_velocity=False)``) are None. stats: points, batches, batches_drawn, points_read, and
-    points_nonfinite (points never drawn because a coordinate is NaN or
-    infinite). ``to_uint8(background=None)`` and ``save_png(path)``: the
-    rgba plane as a picture, as for every image type
-    (:class:`clvis.images.Picture`).
+    (and the velocity planes of ``render(screen_velocity=False)``) are None.
+    stats: points, batches, batches_drawn, points_read, and points_nonfinite
+    (points never drawn because a coordinate is NaN or infinite).
+    ``to_uint8(background=None)`` and ``save_png(path)``: the rgba plane as
+    a picture, as for every image type (:class:`clvis.images.Picture`).
     """
 
     index: np.ndarray | cla.Array

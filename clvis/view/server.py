@@ -33,6 +33,7 @@ import time
 from importlib import resources
 from typing import Any, cast
 
+import numpy as np
 import numpy.typing as npt
 
 from ..camera import hemisphere_cameras
@@ -79,11 +80,40 @@ def token_ok(expected: str | None, given: str | None) -> bool:
     return hmac.compare_digest(expected.encode(), given.encode())
 
 
+def _rgbx(image: np.ndarray) -> np.ndarray | None:
+    """The C-contiguous (H, W, 4) array whose first three channels `image`
+    (an (H, W, 3) uint8 view) is, or None (what scenes._over_background
+    gives: PIL reads it as RGBX without a copy)."""
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+        return None
+    h, w = image.shape[:2]
+    if image.strides != (4 * w, 4, 1):
+        return None
+    start = image.__array_interface__["data"][0]
+    base = image.base
+    while isinstance(base, np.ndarray):
+        if (
+            base.flags.c_contiguous
+            and base.nbytes == 4 * h * w
+            and base.__array_interface__["data"][0] == start
+        ):
+            return base
+        base = base.base
+    return None
+
+
 def encode_jpeg(image: Any, quality: int) -> bytes:
+    """`image` (H, W, 3) uint8 as JPEG: 4:2:0 below quality 90, else 4:4:4."""
     from PIL import Image
 
     buf = io.BytesIO()
-    Image.fromarray(image).save(buf, format="JPEG", quality=quality, subsampling=0 if quality >= 90 else 2)
+    rgbx = _rgbx(image) if isinstance(image, np.ndarray) else None
+    if rgbx is not None:
+        h, w = image.shape[:2]
+        pic = Image.frombuffer("RGB", (w, h), rgbx, "raw", "RGBX", 0, 1)
+    else:
+        pic = Image.fromarray(image)
+    pic.save(buf, format="JPEG", quality=quality, subsampling=0 if quality >= 90 else 2)
     return buf.getvalue()
 
 

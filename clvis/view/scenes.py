@@ -46,6 +46,7 @@ __all__ = [
     "psnr",
     "scene_for",
     "split",
+    "view_frames",
 ]
 
 COLORMAPS = ("viridis", "magma", "inferno", "plasma", "cividis", "turbo", "coolwarm", "gray")
@@ -81,6 +82,9 @@ class Scene:
     fit_points: np.ndarray | None = None  # what the first view frames (None: the box)
     description = ""
     device = ""
+    # the modes whose frames() yields one frame per pass (see view_frames: a
+    # still view of these starts with a smaller first pass)
+    progressive: frozenset[str] = frozenset()
 
     def update(self, changes: dict) -> None:
         """Apply settings from the page; ValueError for an unknown key or value."""
@@ -247,8 +251,10 @@ class PointScene(Scene):
         g = self._render(camera, width, height, settings, 1, screen_velocity=mode == "narvis", host=False)
         src = depth_filter(g) if mode == "lidar" else g
         t1 = time.perf_counter()
-        rgba = self._net(mode)(src)
+        net = self._net(mode)
+        rgba = net(src)
         t2 = time.perf_counter()
+        info["inference ms"] = round(1e3 * net.stats.get("inference", 0.0), 1)
         yield Frame(
             _premultiplied_over_background(rgba), info=info, times={"render": t1 - t0, "post": t2 - t1}
         )
@@ -338,6 +344,7 @@ class VolumeScene(Scene):
         self.hi = self.lo + (np.array(data.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
         self.description = f"{description}: {'x'.join(map(str, data.shape[::-1]))} samples"
         self.modes = ["iso", "iso+infill", "gaussians", "infill|iso"]
+        self.progressive = frozenset(("iso", "iso+infill"))
         self.settings = {"mode": "iso", "isovalue": float(isovalue), "lod": "medium"}
         self.choices = {
             "mode": self.modes,
@@ -433,6 +440,38 @@ class VolumeScene(Scene):
         if build > 1e-3:
             times["build"] = build
         return Frame(img.to_uint8(BACKGROUND)[..., :3], info={"gaussians": count}, times=times)
+
+
+def view_frames(
+    scene: Scene,
+    camera: Camera,
+    width: int,
+    height: int,
+    settings: dict,
+    superseded: Callable[[], bool],
+    preview: tuple[Camera, int, int] | None = None,
+) -> Iterator[Frame]:
+    """The frames of one view: ``scene.frames``, led, for a mode in
+    ``scene.progressive`` and a `preview` (camera, width, height; the server
+    gives the interaction size for a still view), by the first pass at that
+    size (``final`` False, ``info["preview"]`` its size), so that a frame is on
+    the screen after a pass over a quarter of the pixels; then the passes at
+    full size, the last of which is the still frame (unchanged)."""
+    if preview is not None and settings.get("mode") in scene.progressive:
+        cam, w, h = preview
+        if (w, h) != (width, height):
+            passes = scene.frames(cam, w, h, settings, superseded)
+            first = next(passes, None)
+            close = getattr(passes, "close", None)  # a generator: let its passes go
+            if close is not None:
+                close()
+            if first is not None:
+                first.final = False
+                first.info = {**first.info, "preview": f"{w}x{h}"}
+                yield first
+                if superseded():
+                    return
+    yield from scene.frames(camera, width, height, settings, superseded)
 
 
 # the modes a Dask scene renders on the workers (clvis.distributed); the others

@@ -6,7 +6,8 @@ event updates the shared view state at once and asks for a frame; the worker
 renders the newest state when it gets to it, so a burst of mouse events
 costs one frame, not one each. While the pointer drags, frames are rendered
 at ``interactive_scale`` of the page's size and sent as lower-quality JPEG;
-when it stops, at full size. Each frame is one binary message: a 4-byte
+when it stops, at full size (a progressive mode's still view starts with its
+first pass at the interaction size: scenes.view_frames). Each frame is one binary message: a 4-byte
 big-endian header length, the header (JSON: camera, figures, seconds per
 stage), then the JPEG.
 
@@ -38,7 +39,7 @@ import numpy.typing as npt
 
 from ..camera import hemisphere_cameras
 from .orbit import Orbit
-from .scenes import Frame, Scene
+from .scenes import Frame, Scene, view_frames
 from .schedule import LatestWins, Outbox
 
 __all__ = ["LOOPBACK", "ViewServer", "access_token", "needs_token", "token_ok"]
@@ -301,25 +302,33 @@ class ViewServer:
         """Ask for a frame of the current state (the newest request wins)."""
         return self.scheduler.submit(self._render)
 
+    def interaction_size(self, w: int, h: int) -> tuple[int, int]:
+        """The size of an interaction frame for a page of w x h."""
+        s = self.interactive_scale
+        return max(MIN_SIDE, round(w * s)), max(MIN_SIDE, round(h * s))
+
     def _render(self, superseded) -> None:
         with self._lock:
             interactive = self.interacting
             w, h = self.size
+            preview = None
             if interactive:
-                w = max(MIN_SIDE, round(w * self.interactive_scale))
-                h = max(MIN_SIDE, round(h * self.interactive_scale))
+                w, h = self.interaction_size(w, h)
+            else:  # a progressive mode's still view starts with its first pass at the interaction size
+                pw, ph = self.interaction_size(w, h)
+                preview = (self.orbit.camera(pw / ph), pw, ph)
             camera = self.orbit.camera(w / h)
             state = self.orbit.state()
             settings = dict(self.scene.settings)
             seq = self.seq
-        for frame in self.scene.frames(camera, w, h, settings, superseded):
+        for frame in view_frames(self.scene, camera, w, h, settings, superseded, preview):
             self._emit(frame, interactive, settings, state, seq)
             if superseded():
                 return
 
     def _emit(self, frame: Frame, interactive: bool, settings: dict, state: dict, seq: int) -> None:
         t0 = time.perf_counter()
-        jpeg = encode_jpeg(frame.image, _QUALITY[interactive])
+        jpeg = encode_jpeg(frame.image, _QUALITY[interactive or "preview" in frame.info])
         times = {k: round(v * 1000, 2) for k, v in frame.times.items()}
         times["encode"] = round((time.perf_counter() - t0) * 1000, 2)
         times["send"] = round(self.last_send * 1000, 2)  # the previous frame's

@@ -180,3 +180,26 @@ def test_jpeg_of_a_composited_frame_reads_its_pixels_in_place():
     assert _rgbx(flat) is None and _rgbx(rgba[1:, :, :3]) is None
     for q in (75, 92):
         assert encode_jpeg(image, q) == encode_jpeg(flat, q)
+
+
+def test_a_still_progressive_view_starts_with_its_first_pass_at_the_preview_size(points):
+    from clvis.view.scenes import view_frames
+
+    v = VolumeScene(clvis.datasets.marschner_lobb(32)["volume"], isovalue=0.5)
+    orbit = Orbit(v.lo, v.hi)
+    cam, small = orbit.camera(96 / 64), (orbit.camera(48 / 32), 48, 32)
+    frames = list(view_frames(v, cam, 96, 64, v.settings, lambda: False, small))
+    first, rest = frames[0], frames[1:]
+    assert first.image.shape == (32, 48, 3) and not first.final
+    assert first.info["preview"] == "48x32" and first.info["pass"] == 1
+    plain = list(v.frames(cam, 96, 64, v.settings, lambda: False))
+    assert len(rest) == len(plain) >= 2 and rest[-1].final
+    for a, b in zip(rest, plain, strict=True):  # then the full-size passes, unchanged
+        np.testing.assert_array_equal(a.image, b.image)
+    cut = list(view_frames(v, cam, 96, 64, v.settings, lambda: True, small))
+    assert len(cut) == 1 and "preview" in cut[0].info  # superseded: the preview only
+    # not progressive (one frame a view): the frame alone
+    s = PointScene(points)
+    pcam = Orbit(s.lo, s.hi, points=s.fit_points).camera(1.5)
+    only = list(view_frames(s, pcam, 96, 64, s.settings, lambda: False, (pcam, 48, 32)))
+    assert len(only) == 1 and only[0].image.shape == (64, 96, 3) and "preview" not in only[0].info

@@ -250,6 +250,7 @@ class PointScene(Scene):
         # read back, nothing uploaded again); NARVis needs the screen velocity
         g = self._render(camera, width, height, settings, 1, screen_velocity=mode == "narvis", host=False)
         src = depth_filter(g) if mode == "lidar" else g
+        self.raster.queue.finish()  # the render's own time in "render", not in "post"
         t1 = time.perf_counter()
         net = self._net(mode)
         rgba = net(src)

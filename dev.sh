@@ -93,7 +93,7 @@ test | bench)
     fi
     if [ "$cmd" = bench ]; then
         case "${1:-}" in
-        primitives | raster | gauss | iso | post | distributed)
+        primitives | raster | gauss | iso | post | distributed | view)
             exec .venv-test/bin/clvis bench "$@"
             ;;
         esac
@@ -102,7 +102,8 @@ test | bench)
         .venv-test/bin/clvis bench gauss "$@"
         .venv-test/bin/clvis bench iso "$@"
         .venv-test/bin/clvis bench post "$@"
-        exec .venv-test/bin/clvis bench distributed "$@"
+        .venv-test/bin/clvis bench distributed "$@"
+        exec .venv-test/bin/clvis bench view "$@"
     fi
     # CLVIS_LARGE=1: the 2^27-element tests too (~1.5 min, ~8 GB)
     export CLVIS_LARGE=${CLVIS_LARGE:-1} CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001}

@@ -77,6 +77,9 @@ class Target:
 SORT_OP = "radix_sort[uint32 keys + uint32 values]"
 ISO_OP = "iso[turbulence 256^3, 512x512, to 100%]"
 DISTRIBUTED_OP = "distributed[2^26 points, 16 LAS tiles, 1920x1080]"
+VIEW_POINTS_OP = "view_points[hurricane 2,000,000 points, 640x360 interaction]"
+VIEW_NARVIS_OP = "view_narvis[hurricane 2,000,000 points, 512x512]"
+VIEW_ISO_OP = "view_iso[marschner-lobb 64^3, 1280x720 still: first frame after a stop]"
 TARGETS = {
     "primitives": [
         # on PoCL's CPU device (2 cores). "np.cumsum" as users call it
@@ -146,6 +149,19 @@ TARGETS = {
             1,
             "cpu",
             label="cloud bytes / each worker's memory_limit (it rendered)",
+        ),
+    ],
+    "view": [
+        # issue 28, on PoCL's CPU device (2 cores): wall time, so other tenants count
+        Target(VIEW_POINTS_OP, "info:fps", 10, "cpu", label="interaction frames per second"),
+        Target(VIEW_NARVIS_OP, "info:fps", 3, "cpu", label="NARVis frames per second"),
+        Target(
+            VIEW_ISO_OP,
+            "info:median_ms",
+            300,
+            "cpu",
+            at_most=True,
+            label="ms to the first frame after a stop",
         ),
     ],
     "gauss": [

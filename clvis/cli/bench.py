@@ -36,8 +36,8 @@ def _report(path: str) -> tuple[list[Row], dict]:
         ) from None
 
 
-# the suites: bench/bench_<family>.py
-FAMILIES = ("primitives", "raster", "gauss", "iso", "post", "distributed")
+# the suites: bench/bench_<family>.py (and the layers' distributed and view)
+FAMILIES = ("primitives", "raster", "gauss", "iso", "post", "distributed", "view")
 
 
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:

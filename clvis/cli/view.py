@@ -100,7 +100,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         metavar="MODES",
         help="serve nothing: print the frame budget of the modes named (comma-separated; default "
         "all): render, post, JPEG encode; interaction frames at half --size, then still frames; "
-        "iso: the first pass after a camera stop and the last",
+        "iso: the first frame after a camera stop (its first pass at half size), the first at "
+        "full size and the last",
     )
     p.add_argument(
         "--size",
@@ -254,8 +255,12 @@ def _measure(scene, args) -> int:
     from ..view.measure import measure
 
     w, h = args.size
-    print(f"clvis view --measure: {scene.description} on {scene.device}, page {w}x{h}")
-    print("mode          frame      first ms  last ms  frames  fps    CPU ms  stages of the first frame (ms)")
+    load = " / ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "?"
+    print(f"clvis view --measure: {scene.description} on {scene.device}, page {w}x{h}, load average {load}")
+    print(
+        "mode          frame      first ms  full ms  last ms  frames  fps    CPU ms  "
+        "stages of the first frame (ms)"
+    )
     modes = scene.modes if args.measure == "all" else args.measure.split(",")
     unknown = [m for m in modes if m not in scene.modes]
     if unknown and scene.device.startswith("Dask workers"):
@@ -269,10 +274,12 @@ def _measure(scene, args) -> int:
         for interactive in (True, False):
             r = measure(scene, w, h, mode, interactive=interactive)
             stages = " / ".join(f"{k} {v:.1f}" for k, v in r["stages_ms"].items())
+            if "inference ms" in r["info"]:
+                stages += f" (inference {r['info']['inference ms']:.1f})"
             kind = "interaction" if interactive else "still"
             print(
-                f"{mode:13} {kind:10} {r['first_ms']:8.1f} {r['last_ms']:8.1f} {r['frames']:6g} "
-                f"{r['fps']:6.1f} {r['cpu_ms']:7.1f}  {r['size']}: {stages}",
+                f"{mode:13} {kind:10} {r['first_ms']:8.1f} {r['first_full_ms']:8.1f} {r['last_ms']:8.1f} "
+                f"{r['frames']:6g} {r['fps']:6.1f} {r['cpu_ms']:7.1f}  {r['size']}: {stages}",
                 flush=True,
             )
     return 0

@@ -88,12 +88,12 @@ class GBuffers(Picture):
     (float32, NaN where empty; uint8, 0 where empty). vel2d: float32 [H, W, 2]
     screen velocity in pixels per unit time (x right, y down), vel_angle
     (atan2(vy, vx), radians) and vel_speed (its length), NaN where empty;
-    radius_px: the splat radius in pixels. Planes the cloud has no data for are
-    None. stats: points, batches, batches_drawn, points_read, and
-    points_nonfinite (points never drawn because a coordinate is NaN or
-    infinite). ``to_uint8(background=None)`` and ``save_png(path)``: the
-    rgba plane as a picture, as for every image type
-    (:class:`clvis.images.Picture`).
+    radius_px: the splat radius in pixels. Planes the cloud has no data for
+    (and the velocity planes of ``render(screen_velocity=False)``) are None.
+    stats: points, batches, batches_drawn, points_read, and points_nonfinite
+    (points never drawn because a coordinate is NaN or infinite).
+    ``to_uint8(background=None)`` and ``save_png(path)``: the rgba plane as
+    a picture, as for every image type (:class:`clvis.images.Picture`).
     """
 
     index: np.ndarray | cla.Array
@@ -418,6 +418,7 @@ class Rasterizer:
         soft_z: bool | float | None = None,
         planes: Any = None,
         point_size: int = 1,
+        screen_velocity: bool = True,
         host: bool = True,
     ) -> GBuffers:
         """Render and resolve one view; numpy G-buffers (host=False: the planes
@@ -441,6 +442,11 @@ class Rasterizer:
         further right and down: px - (N-1)//2 .. px + N//2), depth-tested per
         pixel like a point of size 1. A point whose own pixel is outside the
         image draws nothing.
+
+        screen_velocity: False leaves out the screen velocity planes of a cloud
+        with a velocity (vel2d, vel_angle and vel_speed are None, as for a
+        cloud without one): a picture that needs only rgba, depth and index
+        skips the per-pixel gather of the winner's position and velocity.
         """
         cam, near, far, W, H = self._program_args(camera, width, height)
         ps = check_point_size(point_size)
@@ -448,11 +454,12 @@ class Rasterizer:
         names = self._planes(planes)
         tf = self._tf(color_by, colormap, value_range)
         focal = np.float32(0.5 * H * float(np.asarray(camera.projection)[1, 1]))
+        vel = self.has_velocity and bool(screen_velocity)
         with runtime.pinned(self.config):
             f32, u8, df, du = self._plane_buffers(names)
-            self._check_memory(W, H, len(f32), len(u8), tol is not None and self.n > 0, host)
+            self._check_memory(W, H, len(f32), len(u8), tol is not None and self.n > 0, host, vel)
             vis, drawn, cam_d = self._render(cam, near, far, W, H, ps)
-            out = self._resolve(vis, cam_d, W, H, focal, tf, tol, near, far, ps, f32, u8, df, du)
+            out = self._resolve(vis, cam_d, W, H, focal, tf, tol, near, far, ps, f32, u8, df, du, vel)
         if not host:
             return _gbuffers(out, f32, u8, names, lambda a: a)
         g = _gbuffers(out, f32, u8, names, lambda a: a.get())
@@ -467,21 +474,39 @@ class Rasterizer:
         }
         return g
 
-    def _check_memory(self, W: int, H: int, nf: int, nu: int, soft: bool, host: bool) -> None:
+    def _check_memory(
+        self, W: int, H: int, nf: int, nu: int, soft: bool, host: bool, velocity: bool = True
+    ) -> None:
         """Device and host bytes of one render, checked before anything is
         allocated: the visibility buffer (8 B a pixel), the soft z accumulation
         (20), index, depth, rgba (4 each), the attribute planes (4 or 1 each),
         velocity (8 + 4 + 4) and radius (4); with host=True every plane but the
         visibility buffer and the accumulation is read back."""
         npix = W * H
-        planes = 12 + 4 * nf + nu + (16 if self.has_velocity else 0) + (4 if self.has_radius else 0)
+        vel = self.has_velocity and velocity
+        planes = 12 + 4 * nf + nu + (16 if vel else 0) + (4 if self.has_radius else 0)
         device = npix * (8 + (20 if soft else 0) + planes)
         runtime.check_memory(
             self.queue, f"raster image {W}x{H}", device_bytes=device, host_bytes=npix * planes if host else 0
         )
 
     def _resolve(
-        self, vis, cam_d, W, H, focal, tf, tol, near, far, point_size, f32_names, u8_names, attr_f32, attr_u8
+        self,
+        vis,
+        cam_d,
+        W,
+        H,
+        focal,
+        tf,
+        tol,
+        near,
+        far,
+        point_size,
+        f32_names,
+        u8_names,
+        attr_f32,
+        attr_u8,
+        velocity=True,
     ):
         q = self.queue
         npix = W * H
@@ -518,7 +543,7 @@ class Rasterizer:
                 scale,
                 accum.base_data,
             )
-        flags = (1 if self.has_velocity else 0) | (2 if self.has_radius else 0)
+        flags = (1 if self.has_velocity and velocity else 0) | (2 if self.has_radius else 0)
         nf, nu = len(f32_names), len(u8_names)
         e = runtime.empty
         out: dict[str, cla.Array | None] = {

@@ -46,11 +46,13 @@ __all__ = [
     "psnr",
     "scene_for",
     "split",
+    "view_frames",
 ]
 
 COLORMAPS = ("viridis", "magma", "inferno", "plasma", "cividis", "turbo", "coolwarm", "gray")
 _BG = np.array(BACKGROUND, np.uint8)
-_ACTIVE = np.array((70, 40, 75), np.uint8)  # iso: rays still running at this pass
+_BG32 = np.array((*BACKGROUND, 0), np.uint8).view(np.uint32)[0]  # as a pixel of an (H, W, 4) array
+_ACTIVE32 = np.array((70, 40, 75, 0), np.uint8).view(np.uint32)[0]  # iso: rays still running
 _MAX_POINT_SIZE = 16
 SPLIT_COMPLETION = 0.85  # infill|iso: the fast side stops at this fraction of the rays
 _FIT_SAMPLE = 20_000  # points the first view frames (every k-th)
@@ -80,6 +82,9 @@ class Scene:
     fit_points: np.ndarray | None = None  # what the first view frames (None: the box)
     description = ""
     device = ""
+    # the modes whose frames() yields one frame per pass (see view_frames: a
+    # still view of these starts with a smaller first pass)
+    progressive: frozenset[str] = frozenset()
 
     def update(self, changes: dict) -> None:
         """Apply settings from the page; ValueError for an unknown key or value."""
@@ -110,14 +115,32 @@ class Scene:
 
 
 def _over_background(rgb: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8: `rgb` where `covered`, the background elsewhere.
+    rgb: (H, W, 3) or (H, W, 4) uint8 (the fourth channel ignored); from four
+    channels the result is the RGB view of an (H, W, 4) array, made by one
+    pass over 32-bit pixels (server.encode_jpeg reads that layout as is)."""
+    if rgb.shape[-1] == 4:
+        px = np.where(covered, np.ascontiguousarray(rgb).view(np.uint32)[..., 0], _BG32)
+        return px.view(np.uint8).reshape(px.shape + (4,))[..., :3]
     out = np.empty(covered.shape + (3,), np.uint8)
     out[...] = _BG
-    out[covered] = rgb[covered]
+    np.copyto(out, rgb, where=covered[..., None])
     return out
+
+
+def _float_rgb8(rgba: np.ndarray) -> np.ndarray:
+    """(H, W, 4) uint8 of float colours in [0, 1]: each channel rint(255 v),
+    clipped to 0..255 (the alpha channel too; callers use the first three)."""
+    f = np.multiply(rgba, np.float32(255), dtype=np.float32)
+    np.rint(f, out=f)
+    np.clip(f, 0, 255, out=f)
+    return f.astype(np.uint8)
 
 
 def _premultiplied_over_background(rgba8: np.ndarray) -> np.ndarray:
     """A network's RGBA8 picture (colour premultiplied over black) over the background."""
+    if rgba8[..., 3].min(initial=255) == 255:  # opaque everywhere (NARVis, LiDAR): the colour itself
+        return rgba8[..., :3]
     a = rgba8[..., 3:4].astype(np.float32) / 255
     rgb = rgba8[..., :3].astype(np.float32) + (1 - a) * _BG.astype(np.float32)
     return np.clip(np.rint(rgb), 0, 255).astype(np.uint8)
@@ -194,11 +217,11 @@ class PointScene(Scene):
             self._nets[name] = post.load(name, queue=self.raster.queue)
         return self._nets[name]
 
-    def _render(self, camera, w, h, s, point_size=None):
+    def _render(self, camera, w, h, s, point_size=None, **kw):
         attr = None if s["color_by"] == "rgb" else s["color_by"]
         ps = s["point_size"] if point_size is None else point_size
         return self.raster.render(
-            camera, w, h, color_by=attr, colormap=s["colormap"], point_size=ps, planes=[]
+            camera, w, h, color_by=attr, colormap=s["colormap"], point_size=ps, planes=[], **kw
         )
 
     def frames(
@@ -212,19 +235,27 @@ class PointScene(Scene):
         if mode == "narvis|gaussians":
             yield self._split(camera, width, height, settings)
             return
-        g = self._render(camera, width, height, settings, 1 if mode != "points" else None)
-        info = {"points": len(self.cloud.positions), "points read": g.stats.get("points_read", 0)}
+        info: dict[str, Any] = {"points": len(self.cloud.positions)}
         if mode == "points":
+            # rgba and coverage only: no screen velocity; index, depth and rgba read back
+            g = self._render(camera, width, height, settings, screen_velocity=False)
+            info["points read"] = g.stats.get("points_read", 0)
             t1 = time.perf_counter()
-            image = _over_background(g.rgba[..., :3], g.index != 0xFFFFFFFF)
+            image = _over_background(g.rgba, g.index != 0xFFFFFFFF)
             yield Frame(image, info=info, times={"render": t1 - t0})
             return
         from .. import depth_filter
 
+        # the networks read the G-buffers where they are (host=False: nothing
+        # read back, nothing uploaded again); NARVis needs the screen velocity
+        g = self._render(camera, width, height, settings, 1, screen_velocity=mode == "narvis", host=False)
         src = depth_filter(g) if mode == "lidar" else g
+        self.raster.queue.finish()  # the render's own time in "render", not in "post"
         t1 = time.perf_counter()
-        rgba = self._net(mode)(src)
+        net = self._net(mode)
+        rgba = net(src)
         t2 = time.perf_counter()
+        info["inference ms"] = round(1e3 * net.stats.get("inference", 0.0), 1)
         yield Frame(
             _premultiplied_over_background(rgba), info=info, times={"render": t1 - t0, "post": t2 - t1}
         )
@@ -314,6 +345,7 @@ class VolumeScene(Scene):
         self.hi = self.lo + (np.array(data.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
         self.description = f"{description}: {'x'.join(map(str, data.shape[::-1]))} samples"
         self.modes = ["iso", "iso+infill", "gaussians", "infill|iso"]
+        self.progressive = frozenset(("iso", "iso+infill"))
         self.settings = {"mode": "iso", "isovalue": float(isovalue), "lod": "medium"}
         self.choices = {
             "mode": self.modes,
@@ -354,9 +386,11 @@ class VolumeScene(Scene):
                 times["post"] = time.perf_counter() - t1
             else:
                 hit = on_host(img.hit)
-                rgb = np.clip(np.rint(on_host(img.rgba)[..., :3] * 255), 0, 255).astype(np.uint8)
+                rgb = _float_rgb8(on_host(img.rgba))
+                if not done:  # rays still running: their colour (one 32-bit pixel each)
+                    rgb.view(np.uint32)[..., 0][on_host(img.active) & ~hit] = _ACTIVE32
+                    hit = hit | on_host(img.active)
                 image = _over_background(rgb, hit)
-                image[on_host(img.active) & ~hit] = _ACTIVE
             yield Frame(image, final=done, info=info, times=times)
             if superseded():
                 return
@@ -377,9 +411,7 @@ class VolumeScene(Scene):
         fast = _premultiplied_over_background(self._infill(part))
         t2 = time.perf_counter()
         full = self.iso.render(camera, w, h, s["isovalue"])
-        slow = _over_background(
-            np.clip(np.rint(on_host(full.rgba)[..., :3] * 255), 0, 255).astype(np.uint8), on_host(full.hit)
-        )
+        slow = _over_background(_float_rgb8(on_host(full.rgba)), on_host(full.hit))
         t3 = time.perf_counter()
         info = {
             "psnr dB": round(psnr(fast, slow), 2),
@@ -409,6 +441,38 @@ class VolumeScene(Scene):
         if build > 1e-3:
             times["build"] = build
         return Frame(img.to_uint8(BACKGROUND)[..., :3], info={"gaussians": count}, times=times)
+
+
+def view_frames(
+    scene: Scene,
+    camera: Camera,
+    width: int,
+    height: int,
+    settings: dict,
+    superseded: Callable[[], bool],
+    preview: tuple[Camera, int, int] | None = None,
+) -> Iterator[Frame]:
+    """The frames of one view: ``scene.frames``, led, for a mode in
+    ``scene.progressive`` and a `preview` (camera, width, height; the server
+    gives the interaction size for a still view), by the first pass at that
+    size (``final`` False, ``info["preview"]`` its size), so that a frame is on
+    the screen after a pass over a quarter of the pixels; then the passes at
+    full size, the last of which is the still frame (unchanged)."""
+    if preview is not None and settings.get("mode") in scene.progressive:
+        cam, w, h = preview
+        if (w, h) != (width, height):
+            passes = scene.frames(cam, w, h, settings, superseded)
+            first = next(passes, None)
+            close = getattr(passes, "close", None)  # a generator: let its passes go
+            if close is not None:
+                close()
+            if first is not None:
+                first.final = False
+                first.info = {**first.info, "preview": f"{w}x{h}"}
+                yield first
+                if superseded():
+                    return
+    yield from scene.frames(camera, width, height, settings, superseded)
 
 
 # the modes a Dask scene renders on the workers (clvis.distributed); the others
@@ -480,7 +544,7 @@ class DaskPointScene(Scene):
             planes=[],
         )
         t1 = time.perf_counter()
-        image = _over_background(on_host(g.rgba)[..., :3], on_host(g.index) != 0xFFFFFFFF)
+        image = _over_background(on_host(g.rgba), on_host(g.index) != 0xFFFFFFFF)
         info = {"points": self.dr.n, "points read": g.stats.get("points_read", 0), **_dask_info(g.stats)}
         yield Frame(image, info=info, times={"render": t1 - t0})
 
@@ -534,7 +598,7 @@ class DaskVolumeScene(Scene):
         t0 = time.perf_counter()
         img = self.last = self.dr.render(camera, width, height, settings["isovalue"])
         t1 = time.perf_counter()
-        rgb = np.clip(np.rint(on_host(img.rgba)[..., :3] * 255), 0, 255).astype(np.uint8)
+        rgb = _float_rgb8(on_host(img.rgba))
         info = {"bricks": len(self.dr.bricks), "completion": 1.0, **_dask_info(img.stats)}
         yield Frame(_over_background(rgb, on_host(img.hit)), info=info, times={"render": t1 - t0})
 

@@ -6,7 +6,8 @@ event updates the shared view state at once and asks for a frame; the worker
 renders the newest state when it gets to it, so a burst of mouse events
 costs one frame, not one each. While the pointer drags, frames are rendered
 at ``interactive_scale`` of the page's size and sent as lower-quality JPEG;
-when it stops, at full size. Each frame is one binary message: a 4-byte
+when it stops, at full size (a progressive mode's still view starts with its
+first pass at the interaction size: scenes.view_frames). Each frame is one binary message: a 4-byte
 big-endian header length, the header (JSON: camera, figures, seconds per
 stage), then the JPEG.
 
@@ -33,11 +34,12 @@ import time
 from importlib import resources
 from typing import Any, cast
 
+import numpy as np
 import numpy.typing as npt
 
 from ..camera import hemisphere_cameras
 from .orbit import Orbit
-from .scenes import Frame, Scene
+from .scenes import Frame, Scene, view_frames
 from .schedule import LatestWins, Outbox
 
 __all__ = ["LOOPBACK", "ViewServer", "access_token", "needs_token", "token_ok"]
@@ -79,11 +81,40 @@ def token_ok(expected: str | None, given: str | None) -> bool:
     return hmac.compare_digest(expected.encode(), given.encode())
 
 
+def _rgbx(image: np.ndarray) -> np.ndarray | None:
+    """The C-contiguous (H, W, 4) array whose first three channels `image`
+    (an (H, W, 3) uint8 view) is, or None (what scenes._over_background
+    gives: PIL reads it as RGBX without a copy)."""
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+        return None
+    h, w = image.shape[:2]
+    if image.strides != (4 * w, 4, 1):
+        return None
+    start = image.__array_interface__["data"][0]
+    base = image.base
+    while isinstance(base, np.ndarray):
+        if (
+            base.flags.c_contiguous
+            and base.nbytes == 4 * h * w
+            and base.__array_interface__["data"][0] == start
+        ):
+            return base
+        base = base.base
+    return None
+
+
 def encode_jpeg(image: Any, quality: int) -> bytes:
+    """`image` (H, W, 3) uint8 as JPEG: 4:2:0 below quality 90, else 4:4:4."""
     from PIL import Image
 
     buf = io.BytesIO()
-    Image.fromarray(image).save(buf, format="JPEG", quality=quality, subsampling=0 if quality >= 90 else 2)
+    rgbx = _rgbx(image) if isinstance(image, np.ndarray) else None
+    if rgbx is not None:
+        h, w = image.shape[:2]
+        pic = Image.frombuffer("RGB", (w, h), rgbx, "raw", "RGBX", 0, 1)
+    else:
+        pic = Image.fromarray(image)
+    pic.save(buf, format="JPEG", quality=quality, subsampling=0 if quality >= 90 else 2)
     return buf.getvalue()
 
 
@@ -271,25 +302,33 @@ class ViewServer:
         """Ask for a frame of the current state (the newest request wins)."""
         return self.scheduler.submit(self._render)
 
+    def interaction_size(self, w: int, h: int) -> tuple[int, int]:
+        """The size of an interaction frame for a page of w x h."""
+        s = self.interactive_scale
+        return max(MIN_SIDE, round(w * s)), max(MIN_SIDE, round(h * s))
+
     def _render(self, superseded) -> None:
         with self._lock:
             interactive = self.interacting
             w, h = self.size
+            preview = None
             if interactive:
-                w = max(MIN_SIDE, round(w * self.interactive_scale))
-                h = max(MIN_SIDE, round(h * self.interactive_scale))
+                w, h = self.interaction_size(w, h)
+            else:  # a progressive mode's still view starts with its first pass at the interaction size
+                pw, ph = self.interaction_size(w, h)
+                preview = (self.orbit.camera(pw / ph), pw, ph)
             camera = self.orbit.camera(w / h)
             state = self.orbit.state()
             settings = dict(self.scene.settings)
             seq = self.seq
-        for frame in self.scene.frames(camera, w, h, settings, superseded):
+        for frame in view_frames(self.scene, camera, w, h, settings, superseded, preview):
             self._emit(frame, interactive, settings, state, seq)
             if superseded():
                 return
 
     def _emit(self, frame: Frame, interactive: bool, settings: dict, state: dict, seq: int) -> None:
         t0 = time.perf_counter()
-        jpeg = encode_jpeg(frame.image, _QUALITY[interactive])
+        jpeg = encode_jpeg(frame.image, _QUALITY[interactive or "preview" in frame.info])
         times = {k: round(v * 1000, 2) for k, v in frame.times.items()}
         times["encode"] = round((time.perf_counter() - t0) * 1000, 2)
         times["send"] = round(self.last_send * 1000, 2)  # the previous frame's

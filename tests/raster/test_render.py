@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 import clvis
 from clvis import raster, runtime
+from clvis._arrays import to_host
 from clvis.camera import CAMERA_DTYPE, Camera, camera_buffer
 from clvis.reference import raster as ref
 
@@ -546,6 +547,14 @@ def test_planes_default_and_bit_identical(queue):
     np.testing.assert_array_equal(part.rgba, full.rgba)
     dev = r.render(cam, W, H, planes=["pressure"], host=False)
     np.testing.assert_array_equal(dev.attributes["pressure"].get(), full.attributes["pressure"])
+    # without the screen velocity: those planes are None, every other is the same
+    for host in (True, False):
+        g = r.render(cam, W, H, color_by="label", screen_velocity=False, host=host)
+        assert g.vel2d is None and g.vel_angle is None and g.vel_speed is None
+        for name in ("index", "depth", "rgba"):
+            np.testing.assert_array_equal(to_host(getattr(g, name)), getattr(full, name))
+        for k in full.attributes:
+            np.testing.assert_array_equal(to_host(g.attributes[k]), full.attributes[k])
 
 
 # ---------------------------------------------------------------------------

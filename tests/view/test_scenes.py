@@ -128,3 +128,78 @@ def test_split_views_show_both_sides_and_the_psnr():
     v.update({"mode": "infill|iso"})
     f = next(v.frames(Orbit(v.lo, v.hi).camera(1.0), 64, 64, v.settings, lambda: False))
     assert f.info["completion"] >= 0.85 and f.info["psnr dB"] > 15 and f.final
+
+
+def test_frames_are_the_renderers_pictures_over_the_background():
+    """What a still frame shows, written out in NumPy from the renderers' own
+    outputs: the fast paths (no screen velocity for points, 32-bit pixel
+    compositing, device G-buffers for the networks) change no pixel."""
+    from clvis.images import BACKGROUND
+
+    bg = np.array(BACKGROUND, np.uint8)
+    d = clvis.datasets.hurricane(20_000)
+    cloud = clvis.PointCloud(d["positions"], attributes=d["attributes"], velocity=d["velocity"])
+    s = PointScene(cloud)
+    s.update({"color_by": "temperature", "point_size": 2})
+    cam = Orbit(s.lo, s.hi, points=s.fit_points).camera(80 / 64)
+    g = s.raster.render(cam, 80, 64, color_by="temperature", point_size=2)
+    f = next(s.frames(cam, 80, 64, s.settings, lambda: False))
+    want = np.where((g.index != 0xFFFFFFFF)[..., None], g.rgba[..., :3], bg)
+    assert f.image.shape == (64, 80, 3) and f.image.dtype == np.uint8
+    np.testing.assert_array_equal(f.image, want)
+    assert f.info["points read"] > 0
+
+    s.update({"mode": "narvis"})
+    f = next(s.frames(cam, 80, 64, s.settings, lambda: False))
+    g1 = s.raster.render(cam, 80, 64, color_by="temperature", point_size=1, planes=[])
+    rgba = s._net("narvis")(g1)  # host G-buffers in
+    assert (rgba[..., 3] == 255).all()
+    np.testing.assert_array_equal(f.image, rgba[..., :3])
+
+    v = VolumeScene(clvis.datasets.marschner_lobb(32)["volume"], isovalue=0.5)
+    vcam = Orbit(v.lo, v.hi).camera(1.0)
+    frames = list(v.frames(vcam, 64, 64, v.settings, lambda: False))
+    passes = list(v.iso.passes(vcam, 64, 64, 0.5))
+    assert len(frames) == len(passes) >= 2
+    for fr, img in zip(frames, passes, strict=True):
+        rgb = np.clip(np.rint(img.rgba[..., :3] * 255), 0, 255).astype(np.uint8)
+        want = np.where(img.hit[..., None], rgb, bg)
+        want[img.active & ~img.hit] = (70, 40, 75)
+        np.testing.assert_array_equal(fr.image, want)
+
+
+def test_jpeg_of_a_composited_frame_reads_its_pixels_in_place():
+    from clvis.view.scenes import _over_background
+    from clvis.view.server import _rgbx, encode_jpeg
+
+    rng = np.random.default_rng(5)
+    rgba = rng.integers(0, 256, (40, 56, 4), dtype=np.uint8)
+    image = _over_background(rgba, rng.random((40, 56)) < 0.5)
+    assert _rgbx(image) is not None  # the (H, W, 4) array under the RGB view
+    flat = np.ascontiguousarray(image)
+    assert _rgbx(flat) is None and _rgbx(rgba[1:, :, :3]) is None
+    for q in (75, 92):
+        assert encode_jpeg(image, q) == encode_jpeg(flat, q)
+
+
+def test_a_still_progressive_view_starts_with_its_first_pass_at_the_preview_size(points):
+    from clvis.view.scenes import view_frames
+
+    v = VolumeScene(clvis.datasets.marschner_lobb(32)["volume"], isovalue=0.5)
+    orbit = Orbit(v.lo, v.hi)
+    cam, small = orbit.camera(96 / 64), (orbit.camera(48 / 32), 48, 32)
+    frames = list(view_frames(v, cam, 96, 64, v.settings, lambda: False, small))
+    first, rest = frames[0], frames[1:]
+    assert first.image.shape == (32, 48, 3) and not first.final
+    assert first.info["preview"] == "48x32" and first.info["pass"] == 1
+    plain = list(v.frames(cam, 96, 64, v.settings, lambda: False))
+    assert len(rest) == len(plain) >= 2 and rest[-1].final
+    for a, b in zip(rest, plain, strict=True):  # then the full-size passes, unchanged
+        np.testing.assert_array_equal(a.image, b.image)
+    cut = list(view_frames(v, cam, 96, 64, v.settings, lambda: True, small))
+    assert len(cut) == 1 and "preview" in cut[0].info  # superseded: the preview only
+    # not progressive (one frame a view): the frame alone
+    s = PointScene(points)
+    pcam = Orbit(s.lo, s.hi, points=s.fit_points).camera(1.5)
+    only = list(view_frames(s, pcam, 96, 64, s.settings, lambda: False, (pcam, 48, 32)))
+    assert len(only) == 1 and only[0].image.shape == (64, 96, 3) and "preview" not in only[0].info

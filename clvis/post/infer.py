@@ -31,6 +31,14 @@ picture's 4 down (tests/post/test_transfers.py holds the documented
 pipelines to it). ``stats`` holds the last call's seconds per stage (pack,
 inference, unpack).
 
+``net(image, guard=True)`` (the default where the spec says so: LiDAR)
+checks the network against its classical fills on this frame
+(clvis.post.guard): the planes are read back, the network and push-pull run
+on the input with some known pixels withheld and on the whole of it, and
+the frame is blended, tile by tile, toward whichever did best; ``stats``
+then adds ``guard`` (its own seconds) and ``guard_NAME``, the share of the
+tiles each candidate took.
+
 onnxruntime runs on its CPU provider by default (CUDA's first when the
 installed onnxruntime has it), with one intra-op thread per core and its
 worker threads' spinning off, since it alternates with OpenCL work.

@@ -104,7 +104,8 @@ def test_metrics_module():
 
 def test_eval_cli_parses(capsys):
     assert main(["eval", "--help"]) == 0
-    assert "held-out suite" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "held-out suite" in out and "--guard, --no-guard" in out
     assert main(["eval", "nope"]) == 2
 
 
@@ -118,6 +119,8 @@ def test_shipped_cards_carry_their_suite_table(name):
     # U-Net predates the training flows: the hurricane alone), none in the suite
     assert suite["trained_on"] and set(suite["trained_on"]) <= set(ev.TRAINED[name])
     assert not set(suite["trained_on"]) & set(ev.FAMILIES[name])
+    # scored as the network is called by default: with its guard or without
+    assert suite.get("guard", False) == bool(post.load(name, threads=1).guard)
     rows = suite["rows"]
     assert {r["family"] for r in rows} == set(ev.FAMILIES[name])
     for r in rows:

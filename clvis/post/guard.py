@@ -7,23 +7,31 @@ paints the background rays still running; a smooth terrain, where push-pull
 beats the LiDAR U-Net by 5 dB). The guard lets the frame itself say which
 fill to trust, tile by tile:
 
-1. *withhold*: a deterministic pseudo-random subset of the known pixels
-   (finished rays for in-fill, kept points for LiDAR) is marked unknown:
-   ``WITHHOLD`` of them, drawn by a hash of the pixel's coordinates (no
-   random state; the same frame gives the same subset on every run and
-   machine);
+1. *withhold*: some known pixels are marked unknown. LiDAR: a fraction
+   (10 %) of the kept points, drawn by a hash of the pixel's coordinates
+   (:func:`withheld`: no random state, the same subset on every run and
+   machine). In-fill: the finished rays within ``ring`` (8) pixels of a
+   running one (:func:`ring`), bands of the holes' own shapes; a random
+   pixel subset is an isolated-hole problem the network never trained on,
+   and push-pull wins it everywhere;
 2. *score*: the network and each classical candidate fill that reduced
-   input; per tile of ``TILE`` x ``TILE`` pixels, each candidate's mean
-   squared RGB error on the withheld pixels, shrunk toward its error over
-   the whole frame with ``PRIOR`` pseudo-pixels (a tile with few withheld
-   pixels follows the frame);
+   input; per tile (LiDAR 64 x 64 pixels, in-fill 32 x 32), each
+   candidate's mean squared RGB error on the withheld pixels, shrunk toward
+   its error over the whole frame with ``prior`` pseudo-pixels (a tile
+   with few withheld pixels follows the frame);
 3. *blend*: each tile puts its weight on the candidate of the lowest error
    (the network keeps a tile unless a classical fill's error is below
-   ``1 - MARGIN`` times its own); the tile weights are interpolated
-   bilinearly between tile centres (no seams), and the frame is
-   ``sum_k w_k candidate_k`` of the full input. In-fill: the finished rays
-   keep their values exactly (only the rays still running are blended);
-   LiDAR: every pixel (the network's output replaces the scan's pixels too).
+   ``1 - margin`` times its own: LiDAR 0.5, in-fill 0); the tile weights
+   are interpolated bilinearly between tile centres (no seams), and the
+   frame is ``sum_k w_k candidate_k`` of the full input (only the
+   candidates some tile took are run). In-fill: the finished rays keep
+   their values exactly (only the rays still running are blended); LiDAR:
+   every pixel (the network's output replaces the scan's pixels too).
+
+Each network's settings are ``PARAMS[name]``; the module constants are
+:func:`blend`'s generic defaults. Whether a network's call uses the guard
+by default is its spec's ``guard`` (clvis.post.specs: on for LiDAR, off for
+in-fill, where it is not reliable: bench/results/post-guard.md).
 
 Candidates: in-fill, the network, push-pull of the finished rays and the
 partial image itself (the running rays left empty); LiDAR, the network and
@@ -32,8 +40,9 @@ clvis.post.pushpull; the rest is NumPy.
 
 The parameters were chosen on frames of the training families only
 (clvis.training.data's "waves", "ripples", "blobs" volumes and "town"
-scenes; never the held-out suite's): ``bench/results/post-guard.md`` has
-the sweep and the command.
+scenes; never the held-out suite's), with the shipped networks and with
+networks made bad on purpose: ``bench/guard_sweep.py``, whose output
+``bench/results/post-guard.md`` shows.
 """
 
 from __future__ import annotations
@@ -68,9 +77,8 @@ PRIOR = 8.0
 #: a classical fill takes a tile from the network where its error is below
 #: (1 - MARGIN) x the network's
 MARGIN = 0.0
-#: the in-fill guard withholds the finished rays this many pixels or fewer
-#: from a running one
-RING = 4
+#: :func:`ring`'s default width, pixels
+RING = 8
 
 #: each network's parameters, chosen on its training families
 #: (bench/results/post-guard.md)
@@ -95,7 +103,7 @@ def withheld(known: np.ndarray, fraction: float = WITHHOLD) -> np.ndarray:
         v ^= v >> np.uint32(12)
         v *= np.uint32(0x297A2D39)
         v ^= v >> np.uint32(15)
-    return known & (v < np.uint32(fraction * 2.0**32))
+    return known & (v < np.uint32(min(fraction * 2.0**32, 2.0**32 - 1)))
 
 
 def ring(known: np.ndarray, holes: np.ndarray, width: int = RING) -> np.ndarray:
@@ -106,7 +114,7 @@ def ring(known: np.ndarray, holes: np.ndarray, width: int = RING) -> np.ndarray:
 
     if width < 1:
         raise ValueError(f"width: expected a whole number >= 1, got {width!r}")
-    near = maximum_filter(holes.view(np.uint8), size=2 * width + 1, mode="constant") > 0
+    near = maximum_filter(np.asarray(holes, bool).view(np.uint8), size=2 * width + 1, mode="constant") > 0
     return known & near
 
 

@@ -5,6 +5,9 @@ IO binding -> unpack path, against torch eager on the same input, push-pull
 (the classical baseline) and the slow path each network replaces, in one
 session.
 
+The networks are timed alone (``guard=False``) and, fp32, with their guard
+(``fp32+guard``: clvis.post.guard's self-check, LiDAR's default).
+
 - infill[...]: an IsoImage of a held-out gyroid volume (64^3) stopped at 85 %
   (no speculation); the slow path is IsoRenderer.render to 100 % (with
   speculation, cold cache), and "render to 85 % + network" is the fast path
@@ -126,7 +129,7 @@ def _torch_net(name):
 
 
 NARVIS_IMPLS = (*IMPLS, "fast", "16-256", "64-1024")
-CASES = [(n, s, i) for n in ("infill", "lidar") for s in SIZES for i in IMPLS]
+CASES = [(n, s, i) for n in ("infill", "lidar") for s in SIZES for i in (*IMPLS, "fp32+guard")]
 CASES += [("narvis", "512x512", i) for i in NARVIS_IMPLS]
 
 
@@ -142,17 +145,18 @@ def test_post(benchmark, queue, name, size, impl):
         scene, ras, gr, cam, image = _narvis(queue, w, h)
     if name == "narvis" and impl in ("fast", "16-256", "64-1024"):
         return _narvis_extra(benchmark, queue, impl, op, w, h, scene, ras, cam, image)
-    if impl in ("fp32", "fp16", "int8"):
+    if impl in ("fp32", "fp16", "int8", "fp32+guard"):
+        precision, guard = impl.split("+")[0], impl.endswith("+guard")
         try:
-            net = post.load(name, impl, queue=queue)
+            net = post.load(name, precision, queue=queue)
         except DataError:  # int8 not shipped (it lost more than 0.3 dB)
             pytest.skip(f"{name}: no {impl} variant shipped (see its card)")
-        net(image)
+        net(image, guard=guard)
         run(
             benchmark,
-            lambda: net(image),
+            lambda: net(image, guard=guard),
             op=op,
-            impl=f"onnxruntime {impl}",
+            impl=f"onnxruntime {precision}" + (" with its guard (clvis.post.guard)" if guard else ""),
             role="clvis" if impl == "fp32" else "clvis-host",
             n=w * h,
             nbytes=w * h * (5 * 4 + 4),

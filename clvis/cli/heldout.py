@@ -36,6 +36,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     )
     p.add_argument("--quick", action="store_true", help="one size and one frame per family (what train runs)")
     p.add_argument("--write-card", action="store_true", help="write the table into the model's card")
+    p.add_argument(
+        "--guard",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="call the network with its guard on or off (clvis.post.guard; default: the network's own)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -45,7 +51,9 @@ def cmd(args: argparse.Namespace) -> int:
 
     log = None if args.quiet else (lambda s: print(f"clvis eval: {s}", file=sys.stderr, flush=True))
     try:
-        result = ev.evaluate(args.model, model_dir=args.model_dir, quick=args.quick, log=log)
+        result = ev.evaluate(
+            args.model, model_dir=args.model_dir, quick=args.quick, guard=args.guard, log=log
+        )
     except ImportError as e:
         raise CliError(f"clvis eval needs onnxruntime: {e}") from None
     print(ev.table(result))
@@ -53,5 +61,7 @@ def cmd(args: argparse.Namespace) -> int:
     print(f"\n{len(below)} of {len(result['rows'])} rows below the best baseline ({result['seconds']:.0f} s)")
     if args.write_card:
         command = ["clvis", "eval", args.model] + (["--quick"] if args.quick else [])
+        if args.guard is not None:
+            command.append("--guard" if args.guard else "--no-guard")
         print(f"card: {ev.write_card(result, args.model_dir, command)}")
     return 0

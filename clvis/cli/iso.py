@@ -157,6 +157,14 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="also write iso-infill.png: the rays still running filled in by the in-fill network "
         "(clvis.post; use with --completion below 1)",
     )
+    p.add_argument(
+        "--post-guard",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="with --infill: check the network against push-pull and the partial image on this frame "
+        "(the finished rays beside the running ones withheld) and keep, tile by tile, the better "
+        "(clvis.post.guard; default: the network's own, PostNetwork.guard)",
+    )
     p.add_argument("--no-speculation", action="store_true", help="one candidate block per ray and pass")
     p.add_argument(
         "--size", type=size, default=(1280, 720), metavar="WxH", help=f"{SIZE_RULE} (default 1280x720)"
@@ -408,6 +416,8 @@ def _run(args) -> int:
             "--infill fills the rays still running when the render stops; with --completion 1 every "
             "ray finishes and there is nothing to fill (add --completion 0.85)"
         )
+    if args.post_guard is not None and not args.infill:
+        raise CliError("--post-guard guards the in-fill network: add --infill")
     if args.color_by is None:
         for name in ("colormap", "range"):
             if getattr(args, name) is not None:
@@ -499,7 +509,7 @@ def _run(args) -> int:
         from .. import post
 
         net = post.load("infill", queue=q)
-        filled = net(img)
+        filled = net(img, guard=args.post_guard)
         # iso.png shows the colour, hit and active planes: only these come back
         dev = typing.cast(typing.Any, img)  # rendered with host=False: device planes
         img = dataclasses.replace(img, rgba=dev.rgba.get(), hit=dev.hit.get(), active=dev.active.get())

@@ -883,6 +883,8 @@ def _render(args, progress) -> int:
         raise CliError(
             "--compare: it scores the narvis network against the Gaussian renderer; add --post narvis"
         )
+    if args.post_guard is not None and args.post is None:
+        raise CliError("--post-guard guards a post network: add --post lidar")
     if args.post is not None:
         from .. import post
 
@@ -900,7 +902,11 @@ def _render(args, progress) -> int:
                 raise CliError(
                     "--post narvis: the network takes points coloured by an attribute; add --attribute"
                 )
+        if args.post_guard and args.post == "narvis":
+            raise CliError("--post-guard: the narvis network has no guard (the in-fill and LiDAR ones have)")
         net = post.load(args.post, queue=q)
+        if args.post_guard is not None:
+            net.guard = args.post_guard
     look = _look(args, cloud, attribute, point_size, q)
     fields = _raster_fields(cloud, attribute)
     if look.classes is not None:  # the class colours travel as the points' colours
@@ -1181,6 +1187,14 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "RGBDA U-Net (turns the depth filter on, 4 levels, unless --depth-filter says otherwise); "
         "narvis, the G-buffers turned into the Gaussian "
         "renderer's image by NARVis's U-Net (needs a velocity and an attribute to colour by)",
+    )
+    r.add_argument(
+        "--post-guard",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="with --post lidar: check the network against push-pull on this frame (some scan points "
+        "withheld) and keep, tile by tile, the better (clvis.post.guard; default: the network's own, "
+        "PostNetwork.guard)",
     )
     r.add_argument(
         "--compare",

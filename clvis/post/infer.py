@@ -31,6 +31,14 @@ picture's 4 down (tests/post/test_transfers.py holds the documented
 pipelines to it). ``stats`` holds the last call's seconds per stage (pack,
 inference, unpack).
 
+``net(image, guard=True)`` (the default where the spec says so: LiDAR)
+checks the network against its classical fills on this frame
+(clvis.post.guard): the planes are read back, the network and push-pull run
+on the input with some known pixels withheld and on the whole of it, and
+the frame is blended, tile by tile, toward whichever did best; ``stats``
+then adds ``guard`` (its own seconds) and ``guard_NAME``, the share of the
+tiles each candidate took.
+
 onnxruntime runs on its CPU provider by default (CUDA's first when the
 installed onnxruntime has it), with one intra-op thread per core and its
 worker threads' spinning off, since it alternates with OpenCL work.
@@ -59,9 +67,10 @@ import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import limits
-from .._arrays import buffer_of, resolve_queue
+from .._arrays import buffer_of, resolve_queue, to_host
 from ..errors import DataError
-from .inputs import PostInput
+from . import guard as guard_mod
+from .inputs import IsoImageLike, PostInput
 from .names import GBUFFER_PLANES
 from .pack import padded_shape, unpack_rgba8
 from .specs import spec
@@ -218,6 +227,9 @@ class PostNetwork:
         self.channels_out = int(card["channels_out"])
         self.queue = resolve_queue(queue)
         self.stats: dict[str, float] = {}
+        #: the call's default for ``guard`` (clvis.post.guard): the spec's
+        #: (on for LiDAR, off for in-fill; NARVis has none)
+        self.guard = bool(self.spec.guard)
         self._buffers: dict[tuple[int, int], tuple[cla.Array, cla.Array]] = {}
 
     def __repr__(self) -> str:
@@ -290,16 +302,81 @@ class PostNetwork:
         for infill, 3 for lidar and narvis), padded to the stride."""
         return self._run(image)[0].get()
 
-    def __call__(self, image: PostInput) -> np.ndarray:
+    def __call__(self, image: PostInput, *, guard: bool | None = None) -> np.ndarray:
         """(H, W, 4) uint8 RGBA: the network's picture of `image` (the unpack
         kernel reads the network's output where onnxruntime wrote it; the
-        picture is the one read-back)."""
+        picture is the one read-back).
+
+        guard: check the network against its classical fills on this frame
+        and take, tile by tile, the one that did best (clvis.post.guard; the
+        planes are read back and the network runs twice); None: the
+        network's default (:attr:`guard`). In-fill and LiDAR only."""
+        if guard is None:
+            guard = self.guard
+        if not isinstance(guard, bool):
+            raise TypeError(f"guard: expected True, False or None, got {guard!r}")
+        if guard:
+            return self._guarded(image)
         output, h, w = self._run(image)
         t0 = time.perf_counter()
         rgba = unpack_rgba8(output, h, w, queue=self.queue)
         picture = rgba.get() if isinstance(rgba, cla.Array) else rgba
         self.stats["unpack"] = time.perf_counter() - t0
         return picture
+
+    def _host(self, image: PostInput) -> np.ndarray:
+        """The network's output for `image` as (H, W, C) float32 on the host."""
+        output, h, w = self._run(image)
+        return np.ascontiguousarray(np.moveaxis(output.get()[0, :, :h, :w], 0, -1))
+
+    def _guarded(self, image: PostInput) -> np.ndarray:
+        if self.spec.guard is None:
+            raise ValueError(f"guard: the {self.name} network has no guard (in-fill and LiDAR have)")
+        t0 = time.perf_counter()
+        self._size(image)  # TypeError / DataError before any read-back
+        stats: dict[str, float] = {"pack": 0.0, "inference": 0.0}
+
+        def timed(x: PostInput) -> np.ndarray:
+            out = self._host(x)
+            for k in stats:
+                stats[k] += self.stats[k]
+            return out
+
+        if self.name == "infill":
+            planes = typing.cast(IsoImageLike, image)
+            rgba = np.asarray(to_host(planes.rgba), np.float32)
+            hit = to_host(planes.hit).astype(bool)
+            active = to_host(planes.active).astype(bool)
+            if not np.isfinite(rgba[hit & ~active][:, :3]).all():
+                raise DataError("rgba: a hit pixel with a NaN or infinite r, g or b")
+
+            def run_iso(values: np.ndarray, hit: np.ndarray, active: np.ndarray) -> np.ndarray:
+                return timed(_IsoPlanes(values, hit, active))
+
+            frame, share = guard_mod.infill(run_iso, rgba, hit, active, self.queue)
+        else:
+            rgbda = np.asarray(to_host(getattr(image, "rgbda", image)), np.float32)
+            frame, share = guard_mod.lidar(timed, rgbda, self.queue)
+        t1 = time.perf_counter()
+        v = np.nan_to_num(np.clip(frame, np.float32(0), np.float32(1)), nan=0.0)
+        picture = np.rint(v * np.float32(255)).astype(np.uint8)
+        if picture.shape[2] == 3:
+            picture = np.concatenate([picture, np.full(picture.shape[:2] + (1,), 255, np.uint8)], axis=2)
+        t2 = time.perf_counter()
+        self.stats = {
+            **stats,
+            "unpack": t2 - t1,
+            "guard": t2 - t0 - stats["pack"] - stats["inference"],
+            **{f"guard_{k}": v for k, v in share.items()},
+        }
+        return picture
+
+
+class _IsoPlanes:
+    """Host planes in an IsoImage's shape (the guard's inputs to the network)."""
+
+    def __init__(self, rgba: np.ndarray, hit: np.ndarray, active: np.ndarray) -> None:
+        self.rgba, self.hit, self.active = rgba, hit, active
 
 
 def load(

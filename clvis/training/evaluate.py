@@ -260,23 +260,27 @@ def evaluate(
     quick: bool = False,
     cases: Sequence[Case] | None = None,
     seed: int = 2026,
+    guard: bool | None = None,
     log: Callable[[str], None] | None = print,
 ) -> dict:
     """Score network `name` (from `model_dir`, default the shipped models)
-    on its held-out suite (`cases`: a subset of your own). Returns
-    {"model", "quick", "seconds", "rows": [{family, size, setting, sampler,
-    frames, network: {psnr, ssim, worst_psnr}, <baseline>: {...}, ...}]}."""
+    on its held-out suite (`cases`: a subset of your own), called with
+    `guard` (clvis.post.guard; None: the network's default). Returns
+    {"model", "quick", "guard", "seconds", "rows": [{family, size, setting,
+    sampler, frames, network: {psnr, ssim, worst_psnr}, <baseline>: {...},
+    ...}]}."""
     from .. import post
 
     if name not in FAMILIES:
         raise ValueError(f"model: expected one of {tuple(FAMILIES)}, got {name!r}")
     net = post.load(name, directory=model_dir, threads=int(os.environ.get("CLVIS_EVAL_THREADS", "0")) or None)
+    guarded = net.guard if guard is None else guard
     t0 = time.perf_counter()
     out_rows = []
     for i, case in enumerate(cases if cases is not None else suite(name, quick)):
         per: dict[str, dict[str, list]] = {}
         for label, x, target, base in _frames(name, case, seed + 7919 * i, net.planes or ()):
-            got = net(x)[..., :3] / np.float32(255)
+            got = net(x, guard=guarded)[..., :3] / np.float32(255)
             scores = {"network": metrics(got, target), **{k: metrics(v, target) for k, v in base.items()}}
             for k, v in scores.items():
                 per.setdefault(label, {}).setdefault(k, []).append(v)
@@ -292,7 +296,13 @@ def evaluate(
             out_rows.append(row)
             if log is not None:
                 log(_line(name, row))
-    return {"model": name, "quick": quick, "seconds": round(time.perf_counter() - t0, 1), "rows": out_rows}
+    return {
+        "model": name,
+        "quick": quick,
+        "guard": guarded,
+        "seconds": round(time.perf_counter() - t0, 1),
+        "rows": out_rows,
+    }
 
 
 def _best_baseline(name: str, row: dict) -> tuple[str, dict]:
@@ -351,6 +361,7 @@ def write_card(
     card["held_out_suite"] = {
         "command": list(command) if command else None,
         "quick": result["quick"],
+        "guard": result.get("guard", False),
         "seconds": result["seconds"],
         "trained_on": list(TRAINED[result["model"]]),
         "rows": result["rows"],

@@ -102,6 +102,18 @@ def test_iso_infill(tmp_path, capsys):
         a = np.asarray(im)
     assert a.shape[1] == 64 and a.std() > 1
     assert not ((a[..., 0] == 255) & (a[..., 1] == 0) & (a[..., 2] == 255)).any()  # no magenta left
+    # --post-guard: the network checked against push-pull and the partial
+    # image (clvis.post.guard); the finished rays' pixels stay the network's
+    assert cli.main([*args, "--infill", "--post-guard", "--no-labels", "--out", str(tmp_path / "g")]) == 0
+    assert cli.main([*args, "--infill", "--no-post-guard", "--no-labels", "--out", str(tmp_path / "n")]) == 0
+    with (
+        Image.open(tmp_path / "g" / "iso-infill.png") as g,
+        Image.open(tmp_path / "n" / "iso-infill.png") as n,
+    ):
+        g, n = np.asarray(g), np.asarray(n)
+    assert g.shape == n.shape and (g == n).all(axis=-1).mean() > 0.8
+    assert cli.main([*args, "--post-guard", "--out", str(tmp_path / "x")]) == 2
+    assert "--post-guard guards the in-fill network: add --infill" in capsys.readouterr().err
 
 
 def test_the_fit_view_frames_the_surface_not_the_volume(tmp_path, capsys):

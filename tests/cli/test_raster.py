@@ -407,6 +407,21 @@ def test_render_post(tmp_path, capsys, args, panel):
     assert "a frame from render to picture, G-buffers on the device" in out
 
 
+def test_render_post_guard(tmp_path, capsys):
+    """--post-guard / --no-post-guard: the LiDAR network with and without its
+    self-check (clvis.post.guard; on by default); refused without --post and
+    for narvis, which has none."""
+    base = ["--dataset", "terrain", "--points", 20000, "--depth-filter", 3, "--post", "lidar", *SMALL]
+    for flag in ("--post-guard", "--no-post-guard"):
+        rc, out, err = _render(capsys, *base, flag, "--out", tmp_path / flag)
+        assert rc == 0, err
+        _assert_picture(tmp_path / flag / "post-lidar.png")
+    rc, _, err = _render(capsys, "--post-guard", "--out", tmp_path, *SMALL)
+    assert rc == 2 and "--post-guard guards a post network: add --post lidar" in err
+    rc, _, err = _render(capsys, "--post", "narvis", "--post-guard", "--out", tmp_path, *SMALL)
+    assert rc == 2 and "the narvis network has no guard" in err
+
+
 def test_post_lidar_with_the_filter_off(tmp_path, capsys):
     """--post lidar --depth-filter 0: the network needs the filtered image."""
     rc, out, err = _render(

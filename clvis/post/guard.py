@@ -1,0 +1,356 @@
+"""The guard: an inference-time self-check of the in-fill and LiDAR networks
+against their classical fills, from the network's own input alone.
+
+A network may fill data it never saw worse than the classical method it
+replaces (issue 21: shapes at 95 % completion, where the in-fill network
+paints the background rays still running; a smooth terrain, where push-pull
+beats the LiDAR U-Net by 5 dB). The guard lets the frame itself say which
+fill to trust, tile by tile:
+
+1. *withhold*: some known pixels are marked unknown. LiDAR: a fraction
+   (10 %) of the kept points, drawn by a hash of the pixel's coordinates
+   (:func:`withheld`: no random state, the same subset on every run and
+   machine). In-fill: the finished rays within ``ring`` (8) pixels of a
+   running one (:func:`ring`), bands of the holes' own shapes; a random
+   pixel subset is an isolated-hole problem the network never trained on,
+   and push-pull wins it everywhere;
+2. *score*: the network and each classical candidate fill that reduced
+   input; per tile (LiDAR 64 x 64 pixels, in-fill 32 x 32), each
+   candidate's mean squared RGB error on the withheld pixels, shrunk toward
+   its error over the whole frame with ``prior`` pseudo-pixels (a tile
+   with few withheld pixels follows the frame);
+3. *blend*: each tile puts its weight on the candidate of the lowest error
+   (the network keeps a tile unless a classical fill's error is below
+   ``1 - margin`` times its own: LiDAR 0.5, in-fill 0); the tile weights
+   are interpolated bilinearly between tile centres (no seams), and the
+   frame is ``sum_k w_k candidate_k`` of the full input (only the
+   candidates some tile took are run). In-fill: the finished rays keep
+   their values exactly (only the rays still running are blended); LiDAR:
+   every pixel (the network's output replaces the scan's pixels too).
+
+Each network's settings are ``PARAMS[name]``; the module constants are
+:func:`blend`'s generic defaults. Whether a network's call uses the guard
+by default is its spec's ``guard`` (clvis.post.specs: on for LiDAR, off for
+in-fill, where it is not reliable: bench/results/post-guard.md).
+
+Candidates: in-fill, the network, push-pull of the finished rays and the
+partial image itself (the running rays left empty); LiDAR, the network and
+push-pull of the kept points' colours. Push-pull is the OpenCL kernel of
+clvis.post.pushpull; the rest is NumPy.
+
+The parameters were chosen on frames of the training families only
+(clvis.training.data's "waves", "ripples", "blobs" volumes and "town"
+scenes; never the held-out suite's), with the shipped networks and with
+networks made bad on purpose: ``bench/guard_sweep.py``, whose output
+``bench/results/post-guard.md`` shows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+import pyopencl as cl
+
+__all__ = [
+    "MARGIN",
+    "PARAMS",
+    "PRIOR",
+    "RING",
+    "TILE",
+    "WITHHOLD",
+    "blend",
+    "infill",
+    "interpolate",
+    "lidar",
+    "ring",
+    "tile_weights",
+    "withheld",
+]
+
+#: side of a scoring tile, pixels (defaults of :func:`blend`)
+TILE = 32
+#: the fraction of the known pixels withheld for the check
+WITHHOLD = 0.1
+#: pseudo-pixels of the frame's own error added to each tile's
+PRIOR = 8.0
+#: a classical fill takes a tile from the network where its error is below
+#: (1 - MARGIN) x the network's
+MARGIN = 0.0
+#: :func:`ring`'s default width, pixels
+RING = 8
+
+#: each network's parameters, chosen on its training families
+#: (bench/results/post-guard.md)
+PARAMS: dict[str, dict[str, float]] = {
+    "infill": {"tile": 32, "prior": 4.0, "margin": 0.0, "ring": 8},
+    "lidar": {"tile": 64, "prior": 16.0, "margin": 0.5, "fraction": 0.1},
+}
+
+
+def withheld(known: np.ndarray, fraction: float = WITHHOLD) -> np.ndarray:
+    """(H, W) bool: about `fraction` of the `known` pixels, picked by a
+    hash of (row, column): the same pixels for the same shape every time."""
+    if not 0.0 < fraction < 1.0:
+        raise ValueError(f"fraction: expected a number in (0, 1), got {fraction!r}")
+    h, w = known.shape
+    y = np.arange(h, dtype=np.uint32)[:, None]
+    x = np.arange(w, dtype=np.uint32)[None, :]
+    with np.errstate(over="ignore"):
+        v = y * np.uint32(0x9E3779B1) ^ x * np.uint32(0x85EBCA77)
+        v ^= v >> np.uint32(15)
+        v *= np.uint32(0x2C1B3C6D)
+        v ^= v >> np.uint32(12)
+        v *= np.uint32(0x297A2D39)
+        v ^= v >> np.uint32(15)
+    return known & (v < np.uint32(min(fraction * 2.0**32, 2.0**32 - 1)))
+
+
+def ring(known: np.ndarray, holes: np.ndarray, width: int = RING) -> np.ndarray:
+    """(H, W) bool: the `known` pixels within `width` pixels (Chebyshev) of
+    a hole: bands beside the holes, of the holes' own shapes (the in-fill
+    guard's withheld pixels)."""
+    from scipy.ndimage import maximum_filter
+
+    if width < 1:
+        raise ValueError(f"width: expected a whole number >= 1, got {width!r}")
+    near = maximum_filter(np.asarray(holes, bool).view(np.uint8), size=2 * width + 1, mode="constant") > 0
+    return known & near
+
+
+def tile_weights(
+    errors: Sequence[np.ndarray],
+    mask: np.ndarray,
+    *,
+    tile: int = TILE,
+    prior: float = PRIOR,
+    margin: float = MARGIN,
+) -> np.ndarray:
+    """(K, ty, tx) float32 one-hot weights per tile: candidate 0 (the
+    network) unless candidate k's shrunk mean error is below (1 - margin) x
+    its own and the lowest. errors: K (H, W) squared errors, read where
+    `mask` (the withheld pixels)."""
+    ys, xs = np.nonzero(mask)
+    return _weights([e[ys, xs] for e in errors], ys, xs, mask.shape, tile, prior, margin)
+
+
+def _weights(
+    errors: Sequence[np.ndarray],
+    ys: np.ndarray,
+    xs: np.ndarray,
+    shape: tuple[int, ...],
+    tile: int,
+    prior: float,
+    margin: float,
+) -> np.ndarray:
+    """tile_weights from the errors at the withheld pixels (ys, xs) alone."""
+    h, w = shape
+    ty, tx = -(-h // tile), -(-w // tile)
+    where = (ys // tile) * tx + xs // tile
+    count = np.bincount(where, minlength=ty * tx).astype(np.float64)
+    scores = []
+    for e in errors:
+        sums = np.bincount(where, weights=e.astype(np.float64), minlength=ty * tx)
+        frame = float(sums.sum()) / max(float(count.sum()), 1.0)
+        scores.append((sums + prior * frame) / np.maximum(count + prior, 1e-12))
+    sc = np.stack(scores)
+    best = np.argmin(sc, axis=0)
+    # the network keeps a tile unless the winner beats it by the margin
+    beaten = sc[best, np.arange(ty * tx)] < (1.0 - margin) * sc[0]
+    best = np.where(beaten, best, 0)
+    out = np.zeros(sc.shape, np.float32)
+    out[best, np.arange(ty * tx)] = 1.0
+    return out.reshape(len(errors), ty, tx)
+
+
+def _axis(n: int, tiles: int, tile: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bilinear interpolation from tile centres to the pixels 0..n-1 (edges
+    clamped): each pixel's two tiles and the second's weight."""
+    f = np.clip((np.arange(n) + 0.5) / tile - 0.5, 0, tiles - 1)
+    i0 = np.floor(f).astype(np.int64)
+    return i0, np.minimum(i0 + 1, tiles - 1), (f - i0).astype(np.float32)
+
+
+def interpolate(weights: np.ndarray, h: int, w: int, tile: int = TILE) -> np.ndarray:
+    """(K, H, W) float32: per-tile weights (K, ty, tx) interpolated
+    bilinearly between tile centres; they still sum to 1 at every pixel."""
+    k, ty, tx = weights.shape
+    y0, y1, ay = _axis(h, ty, tile)
+    x0, x1, ax = _axis(w, tx, tile)
+    rows = weights[:, y0] * (1 - ay)[None, :, None] + weights[:, y1] * ay[None, :, None]  # (K, H, tx)
+    return rows[:, :, x0] * (1 - ax) + rows[:, :, x1] * ax
+
+
+def _at(weights: np.ndarray, ys: np.ndarray, xs: np.ndarray, tile: int) -> np.ndarray:
+    """(K, N) float32: :func:`interpolate`'s weights at the pixels (ys, xs)."""
+    k, ty, tx = weights.shape
+    y0, y1, ay = _axis(int(ys.max()) + 1, ty, tile)
+    x0, x1, ax = _axis(int(xs.max()) + 1, tx, tile)
+    a, b = ay[ys], ax[xs]
+    return (
+        weights[:, y0[ys], x0[xs]] * ((1 - a) * (1 - b))
+        + weights[:, y0[ys], x1[xs]] * ((1 - a) * b)
+        + weights[:, y1[ys], x0[xs]] * (a * (1 - b))
+        + weights[:, y1[ys], x1[xs]] * (a * b)
+    )
+
+
+def blend(
+    fill: Callable[[np.ndarray, Sequence[int]], list[np.ndarray | None]],
+    truth: np.ndarray,
+    known: np.ndarray,
+    *,
+    names: Sequence[str],
+    tile: int = TILE,
+    fraction: float = WITHHOLD,
+    prior: float = PRIOR,
+    margin: float = MARGIN,
+    held: np.ndarray | None = None,
+    where: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict[str, float]]:
+    """The guarded frame (steps 1-3 of the module doc), and the share of
+    the frame's tiles each candidate took.
+
+    fill(known', wanted) -> the candidates' frames (H, W, C) float32 of the
+    input with only the pixels ``known'`` known, those of the indices
+    `wanted` (None for the others); candidate 0 is the network. truth
+    (H, W, 3): the known pixels' RGB. held: the known pixels to withhold
+    (default: :func:`withheld`'s `fraction`). where: the pixels to blend
+    (default all), the candidates being equal elsewhere."""
+    names = list(names)
+    everyone = range(len(names))
+    if held is None:
+        held = withheld(known, fraction)
+    h, w = known.shape
+    if not held.any():  # nothing to check against: the network's frame
+        return _first(fill(known, [0])), {n: float(i == 0) for i, n in enumerate(names)}
+    ys, xs = np.nonzero(held)
+    t = truth[ys, xs]
+    reduced = fill(known & ~held, everyone)
+    errors = [np.sum((_first([c])[ys, xs, :3] - t) ** 2, axis=-1) for c in reduced]
+    weights = _weights(errors, ys, xs, (h, w), tile, prior, margin)
+    share = {n: float(weights[i].mean()) for i, n in enumerate(names)}
+    used = [i for i in everyone if weights[i].any()]
+    full = [f for f in fill(known, used) if f is not None]
+    if len(used) == 1:  # every tile took the same candidate
+        return full[0], share
+    if where is None:
+        wp = interpolate(weights[used], h, w, tile)
+        out = wp[0][..., None] * full[0]
+        for j in range(1, len(used)):
+            out += wp[j][..., None] * full[j]
+        return out, share
+    # outside `where` the candidates agree (the known pixels): the first's
+    out = full[0].copy()
+    py, px = np.nonzero(where)
+    if len(py):
+        wp = _at(weights[used], py, px, tile)
+        acc = wp[0][:, None] * full[0][py, px]
+        for j in range(1, len(used)):
+            acc += wp[j][:, None] * full[j][py, px]
+        out[py, px] = acc
+    return out, share
+
+
+def _first(frames: Sequence[np.ndarray | None]) -> np.ndarray:
+    f = frames[0]
+    assert f is not None, "the candidate asked for"
+    return f
+
+
+def infill(
+    run: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
+    rgba: np.ndarray,
+    hit: np.ndarray,
+    active: np.ndarray,
+    queue: cl.CommandQueue | None = None,
+    **params: float,
+) -> tuple[np.ndarray, dict[str, float]]:
+    """The guarded in-fill frame (H, W, 4) float32 (RGB premultiplied over
+    black, coverage) of host planes rgba (H, W, 4), hit and active (H, W
+    bool); run(rgba, hit, active) -> the network's (H, W, 4). The finished
+    rays keep their values exactly. Candidates: "network", "pushpull",
+    "input" (the partial image, the running rays empty). The withheld pixels:
+    the finished rays within ``ring`` pixels of a running one; params
+    override ``PARAMS["infill"]``."""
+    from .pushpull import pushpull
+
+    done = ~active
+    shown = hit & done
+    values = np.concatenate([rgba[..., :3] * shown[..., None], shown[..., None]], axis=2).astype(np.float32)
+
+    def fill(known: np.ndarray, wanted: Sequence[int]) -> list[np.ndarray | None]:
+        out: list[np.ndarray | None] = [None, None, None]
+        if 0 in wanted:
+            out[0] = run(values, hit & known, ~known)
+        if 1 in wanted:
+            out[1] = np.asarray(pushpull(values, known, queue=queue))
+        if 2 in wanted:
+            out[2] = values * known[..., None]
+        return out
+
+    p = _settings("infill", params)
+    held = ring(done, active, int(p["ring"]))
+    # blended at the running rays alone: every candidate passes the
+    # finished ones through (the network in its graph's last blend)
+    return blend(
+        fill,
+        values[..., :3],
+        done,
+        names=("network", "pushpull", "input"),
+        held=held,
+        where=active,
+        tile=int(p["tile"]),
+        prior=p["prior"],
+        margin=p["margin"],
+    )
+
+
+def lidar(
+    run: Callable[[np.ndarray], np.ndarray],
+    rgbda: np.ndarray,
+    queue: cl.CommandQueue | None = None,
+    **params: float,
+) -> tuple[np.ndarray, dict[str, float]]:
+    """The guarded LiDAR frame (H, W, 3) float32 of host rgbda (H, W, 5);
+    run(rgbda) -> the network's (H, W, 3). Candidates: "network",
+    "pushpull" (of the kept points' colours). The withheld pixels: a hashed
+    ``fraction`` of the kept points; params override ``PARAMS["lidar"]``."""
+    from .pushpull import pushpull
+
+    kept = (rgbda[..., 4] > 0) & np.isfinite(rgbda[..., 3])
+    rgb = np.ascontiguousarray(rgbda[..., :3], np.float32)
+
+    def fill(known: np.ndarray, wanted: Sequence[int]) -> list[np.ndarray | None]:
+        out: list[np.ndarray | None] = [None, None]
+        if 0 in wanted:
+            x = rgbda
+            if not np.array_equal(known, kept):
+                x = rgbda.copy()
+                x[~known, 4] = 0.0
+            out[0] = run(x)
+        if 1 in wanted:
+            out[1] = np.asarray(pushpull(rgb, known, queue=queue))
+        return out
+
+    p = _settings("lidar", params)
+    return blend(
+        fill,
+        rgb,
+        kept,
+        names=("network", "pushpull"),
+        tile=int(p["tile"]),
+        prior=p["prior"],
+        margin=p["margin"],
+        fraction=p["fraction"],
+    )
+
+
+def _settings(name: str, params: dict[str, float]) -> dict[str, float]:
+    """PARAMS[name] with `params` over it; TypeError for a name it has not."""
+    unknown = set(params) - set(PARAMS[name])
+    if unknown:
+        raise TypeError(
+            f"guard parameters of {name}: unknown {sorted(unknown)} (it has {sorted(PARAMS[name])})"
+        )
+    return {k: float(v) for k, v in {**PARAMS[name], **params}.items()}

@@ -1,0 +1,193 @@
+"""clvis.post.guard: the in-fill and LiDAR networks' self-check against
+their classical fills (withheld pixels, per-tile scores, bilinear weights),
+on synthetic frames with stand-in networks (garbage ones fall back to
+push-pull, perfect ones are kept), and through PostNetwork's call."""
+
+import numpy as np
+import pytest
+
+from clvis import post
+from clvis.errors import DataError
+from clvis.post import guard
+from clvis.training import data
+from clvis.training import evaluate as ev
+
+
+def _psnr(a, b):
+    return float(10 * np.log10(1 / np.mean((np.clip(a, 0, 1) - b) ** 2)))
+
+
+def test_withheld_is_a_fixed_hashed_subset_of_the_known_pixels():
+    rng = np.random.default_rng(0)
+    known = rng.random((200, 300)) < 0.4
+    a = guard.withheld(known, 0.1)
+    np.testing.assert_array_equal(a, guard.withheld(known.copy(), 0.1))  # no random state
+    assert not (a & ~known).any()
+    assert a.sum() == pytest.approx(0.1 * known.sum(), rel=0.1)
+    assert guard.withheld(known, 0.2).sum() > 1.5 * a.sum()
+    for bad in (0.0, 1.0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="fraction"):
+            guard.withheld(known, bad)
+
+
+def test_ring_withholds_the_known_pixels_beside_the_holes():
+    holes = np.zeros((40, 40), bool)
+    holes[20, 10:30] = True
+    known = ~holes
+    r = guard.ring(known, holes, 3)
+    assert not (r & holes).any()
+    assert r[17:24, 7:33].sum() == 7 * 26 - 20 and not r[:17].any() and not r[24:].any()
+    assert not guard.ring(known, np.zeros_like(holes), 3).any()
+    with pytest.raises(ValueError, match="width"):
+        guard.ring(known, holes, 0)
+
+
+def test_tile_weights_take_the_lowest_error_the_network_keeping_ties():
+    mask = np.ones((64, 64), bool)
+    e_net = np.full((64, 64), 1.0)
+    e_pp = np.full((64, 64), 1.0)
+    e_pp[:32, :32] = 0.1  # push-pull better in the first tile
+    w = guard.tile_weights([e_net, e_pp], mask, tile=32, prior=0.0)
+    assert w.shape == (2, 2, 2) and w.dtype == np.float32
+    np.testing.assert_array_equal(w[1], [[1, 0], [0, 0]])  # ties stay with the network
+    np.testing.assert_array_equal(w.sum(0), 1)
+    # a margin: push-pull must beat the network's error by it
+    e_pp[:32, :32] = 0.95
+    assert guard.tile_weights([e_net, e_pp], mask, tile=32, prior=0.0, margin=0.1)[1].sum() == 0
+    assert guard.tile_weights([e_net, e_pp], mask, tile=32, prior=0.0, margin=0.0)[1, 0, 0] == 1
+    # a tile with nothing withheld follows the frame's own scores
+    sparse = np.zeros((64, 64), bool)
+    sparse[:32, :32] = True
+    e_pp[:32, :32] = 0.1
+    w = guard.tile_weights([e_net, e_pp], sparse, tile=32, prior=4.0)
+    np.testing.assert_array_equal(w[1], 1)
+
+
+def test_interpolated_weights_have_no_seams():
+    w = np.zeros((2, 3, 4), np.float32)
+    w[0] = 1
+    w[:, 1, 2] = (0, 1)
+    up = guard.interpolate(w, 90, 120, tile=32)
+    assert up.shape == (2, 90, 120)
+    np.testing.assert_allclose(up.sum(0), 1, atol=1e-6)
+    assert up[1, 47:49, 79:81].min() > 0.96  # around a tile's centre (47.5, 79.5) its weight
+    assert up[1, 5, 5] == 0 and up[1, 48, 40] == 0
+    # bilinear between centres: a step of at most 1 / tile from pixel to pixel
+    assert np.abs(np.diff(up[1], axis=0)).max() <= 1 / 32 + 1e-6
+    assert np.abs(np.diff(up[1], axis=1)).max() <= 1 / 32 + 1e-6
+
+
+def _smooth_picture(h, w):
+    y, x = np.mgrid[0:h, 0:w] / np.float32(max(h, w))
+    return np.stack([0.5 + 0.4 * np.sin(6 * x), 0.5 + 0.4 * np.cos(5 * y), 0.3 + 0.3 * x * y], -1).astype(
+        np.float32
+    )
+
+
+def _lidar_frame(h=160, w=224, density=0.1):
+    truth = _smooth_picture(h, w)
+    kept = np.random.default_rng(3).random((h, w)) < density
+    rgbda = np.zeros((h, w, 5), np.float32)
+    rgbda[..., :3] = np.where(kept[..., None], truth, 0)
+    rgbda[..., 3] = np.where(kept, 10.0, np.inf)
+    rgbda[..., 4] = kept
+    return truth, rgbda, kept
+
+
+def test_lidar_guard_drops_a_garbage_network_for_pushpull(queue):
+    """A network that outputs noise ends within 0.5 dB of push-pull; a
+    perfect one is kept as it is."""
+    truth, rgbda, kept = _lidar_frame()
+    pp = np.asarray(post.pushpull(np.ascontiguousarray(rgbda[..., :3]), kept, queue=queue))
+    rng = np.random.default_rng(1)
+    garbage = lambda x: rng.random(truth.shape).astype(np.float32)  # noqa: E731
+    out, share = guard.lidar(garbage, rgbda, queue)
+    assert out.shape == truth.shape and share["pushpull"] > 0.95
+    assert _psnr(out, truth) >= _psnr(pp, truth) - 0.5 and _psnr(garbage(None), truth) < 12
+    perfect = lambda x: truth  # noqa: E731
+    out, share = guard.lidar(perfect, rgbda, queue)
+    assert share == {"network": 1.0, "pushpull": 0.0}
+    np.testing.assert_array_equal(out, truth)
+
+
+def _iso_frame(h=144, w=192, band=3):
+    """A shaded disc on black, the rays in a band around its rim running."""
+    y, x = np.mgrid[0:h, 0:w]
+    r = np.hypot(y - h / 2, x - w / 2)
+    rim = min(h, w) / 3
+    hit = r < rim
+    truth = np.where(hit[..., None], _smooth_picture(h, w), 0).astype(np.float32)
+    active = np.abs(r - rim) < band
+    rgba = np.concatenate([truth, hit[..., None].astype(np.float32)], -1)
+    rgba[active] = 0
+    return truth, rgba, hit & ~active, active
+
+
+def test_infill_guard_drops_a_garbage_network_and_keeps_a_perfect_one(queue):
+    truth, rgba, hit, active = _iso_frame()
+    rng = np.random.default_rng(2)
+
+    def garbage(values, hit_, active_):
+        return np.where(active_[..., None], rng.random(values.shape, np.float32), values)
+
+    out, share = guard.infill(garbage, rgba, hit, active, queue)
+    pp = np.asarray(post.pushpull(rgba, ~active, queue=queue))
+    assert out.shape == rgba.shape and share["network"] < 0.05
+    assert _psnr(out[..., :3], truth) >= _psnr(pp[..., :3], truth) - 0.5
+    np.testing.assert_array_equal(out[~active], rgba[~active])  # the finished rays, exactly
+
+    full = np.concatenate([truth, (np.abs(truth).sum(-1) > 0)[..., None]], -1).astype(np.float32)
+
+    def perfect(values, hit_, active_):
+        return np.where(active_[..., None], full, values)
+
+    out, share = guard.infill(perfect, rgba, hit, active, queue)
+    assert share["network"] == 1.0
+    np.testing.assert_array_equal(out, full)
+
+
+def _iso_input():
+    f = data.iso_frames(("shapes",), 1, 7, 160, 96, views=1, n=32)[0]
+    rgba, hit, active = f.planes(0.9)
+    return f, ev._Iso(rgba, hit, active)
+
+
+def test_network_call_with_the_guard(queue):
+    f, x = _iso_input()
+    net = post.load("infill", queue=queue, threads=1)
+    a = net(x, guard=True)
+    assert {"pack", "inference", "unpack", "guard", "guard_network", "guard_pushpull", "guard_input"} <= set(
+        net.stats
+    )
+    b = net(x, guard=True)
+    np.testing.assert_array_equal(a, b)  # deterministic
+    assert a.shape == (96, 160, 4) and a.dtype == np.uint8
+    plain = net(x, guard=False)
+    done = ~x.active
+    np.testing.assert_array_equal(a[done], plain[done])  # the finished rays as the network leaves them
+    assert net(x).tolist() == (a if net.guard else plain).tolist()
+    with pytest.raises(TypeError, match="guard"):
+        net(x, guard="yes")
+    with pytest.raises(TypeError, match="IsoImage"):
+        net(np.zeros((8, 8, 4), np.float32), guard=True)
+    bad = ev._Iso(x.rgba.copy(), x.hit, x.active)
+    bad.rgba[x.hit & done] = np.nan
+    with pytest.raises(DataError, match="NaN"):
+        net(bad, guard=True)
+
+
+def test_lidar_network_call_with_the_guard(queue):
+    _, rgbda, _ = _lidar_frame(96, 128)
+    net = post.load("lidar", queue=queue, threads=1)
+    a = net(rgbda, guard=True)
+    assert a.shape == (96, 128, 4) and (a[..., 3] == 255).all()
+    np.testing.assert_array_equal(a, net(rgbda, guard=True))
+    with pytest.raises(ValueError, match=r"\(H, W, 5\)"):
+        net(rgbda[..., :4], guard=True)
+
+
+def test_narvis_has_no_guard():
+    net = post.load("narvis", threads=1)
+    assert net.guard is False
+    with pytest.raises(ValueError, match="no guard"):
+        net(object(), guard=True)

@@ -27,9 +27,8 @@
  *                 and the winner, hence the image, is the same whatever the
  *                 order of the groups (pass.cl's View order puts a ray's nearer
  *                 blocks first so that most of these items are skipped). The
- *                 read is an atomic (atom_add of 0, no data race with the other
- *                 groups' atomic mins); the key only decreases, so a value read
- *                 before a nearer hit is recorded only skips less.
+ *                 read is a plain load racing with the other groups' atomic
+ *                 mins, a documented benign race (iso-skip, in the kernel).
  *   REFINE_STEPS  Illinois steps of the root refinement (default 8; the
  *                 reference docstring asks for >= 6)
  * Includes clvis/camera.h (the 22-float camera-ray buffer and clvis_camera_ray),
@@ -253,9 +252,20 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
 #endif
         const float t_in = ray_t[e];
 #if ITEMS && CLVIS_INT64_ATOMICS
-        /* the t of the pixel's nearest hit so far (NaN: none yet); a hit of
-         * this item would lie at t >= t_in, so it cannot win when t_in > t_best */
-        const float t_best = as_float((uint)(atom_add(hitkey + p, (ulong)0) >> 32));
+        /* benign race (iso-skip): t_best, the t of the pixel's nearest hit so
+         * far (all ones, a NaN, before any hit), is the high word of hitkey[p]
+         * read with a plain (volatile) 32-bit load while other groups update
+         * the entry with the atomic min below (Oclgrind reports each such
+         * pair). The entry only ever decreases, so the value read, current or
+         * stale, is >= the t the pixel ends with; this item's hit would lie at
+         * t >= t_in, so when t_in > t_best it could not win and is skipped. A
+         * stale value only skips less; it never skips an item that would win,
+         * so the winner is what the atomics alone give. One aligned 32-bit
+         * word (little-endian entries, clvis_hi_word of clvis/atomics.h), read
+         * whole: the high half of a value the entry did hold. Not an atomic
+         * read: OpenCL 1.2's only one is a read-modify-write (atom_add of 0),
+         * measured to take back half of what the skip saves on PoCL. */
+        const float t_best = as_float(((volatile global uint *)hitkey)[clvis_hi_word(p)]);
         if (t_in > t_best)
             continue;
 #else

@@ -1,10 +1,10 @@
 """Per-kernel split of one IsoRenderer frame (bench_iso's scene: turbulence
-N^3, ZFP rate 8, 512x512, to 100%, cold block cache), from OpenCL event
+N^3, ZFP rate 8, 512x512 or --size, to 100%, cold block cache), from OpenCL event
 profiling and, with --cpu, the process CPU time around each launch (each
 launch is then waited for before the next: the renderer's queue is in order,
 so this changes little).
 
-    python bench/profile_iso.py [--n 256] [--rounds 3] [--cpu]
+    python bench/profile_iso.py [--n 256] [--rounds 3] [--size 512x512] [--cpu]
 
 A measuring script, not a test: it wraps pyopencl.enqueue_nd_range_kernel
 (through which clvis.runtime.launch enqueues) for the life of this process.
@@ -33,8 +33,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, default=256)
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--size", default="512x512", help="WxH (the camera's aspect follows)")
     ap.add_argument("--cpu", action="store_true", help="CPU time per kernel (waits after each launch)")
     a = ap.parse_args()
+    w, h = (int(v) for v in a.size.lower().split("x"))
 
     events: list[tuple[str, cl.Event]] = []
     cpus: dict[str, float] = collections.defaultdict(float)
@@ -57,14 +59,14 @@ def main() -> None:
     r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"])
     lo = np.asarray(d["origin"], np.float64)
     hi = lo + (np.array(d["volume"].shape[::-1]) - 1) * np.asarray(d["spacing"][::-1])
-    cam = Camera.fit(lo, hi, direction=(-0.6, 1.0, -0.45), aspect=1.0, fov_y=35)
-    r.render(cam, 512, 512, 0.5)  # builds the kernels
+    cam = Camera.fit(lo, hi, direction=(-0.6, 1.0, -0.45), aspect=w / h, fov_y=35)
+    r.render(cam, w, h, 0.5)  # builds the kernels
     for i in range(a.rounds):
         events.clear()
         cpus.clear()
         r.reset_cache()
         c0, t0 = _cpu(), time.perf_counter()
-        img = r.render(cam, 512, 512, 0.5)
+        img = r.render(cam, w, h, 0.5)
         wall, cpu = time.perf_counter() - t0, _cpu() - c0
         span = img.stats["seconds"]
         per: dict[str, float] = collections.defaultdict(float)

@@ -9,11 +9,14 @@ A pass, for the rays still active (kernels_cl/iso/):
    n_spec = min(floor(W H s / active rays), 64), s the starting count; 1
    without speculation);
 2. grouping: the (ray, candidate) items are compacted and sorted by block
-   (clvis.compact_indices, clvis.radix_sort);
+   (clvis.compact_indices, clvis.radix_sort), the blocks in a front-to-back
+   order for the frame's rays (pass.cl's View order, :func:`view_flips`);
 3. the LRU block cache (clvis.iso.cache) decodes the blocks the pass needs
    (the candidates and their +x/+y/+z neighbours) that it does not hold;
 4. block raytracing (raytrace.cl, ITEMS mode): a work-group per block with
    its 5^3 dual brick in local memory, the first root of each cell's cubic;
+   with 64-bit atomics an item behind its ray's nearest hit so far stops
+   (it could not win; the front-to-back order makes these the common case);
 5. resolve (pass.cl): each ray keeps its nearest hit over its candidates,
    by a 64-bit atomic min of (t bits << 32 | item) where the device has
    64-bit atomics, else by scanning its candidates in order (same result);
@@ -115,7 +118,7 @@ HOST_PIXEL_BYTES = 16 + 4 + 1 + 4 + 1
 _PASS = "iso/pass.cl"
 _PASS_KERNELS = (
     "valid_items",
-    "gather_u32",
+    "item_keys",
     "group_heads",
     "group_info",
     "resolve_hits",
@@ -259,12 +262,38 @@ class _DeviceImage:
         self.mark_active(tile.p0, active, int(active.size))
 
 
+def view_flips(
+    camera: Camera, shape: Sequence[int], spacing: Sequence[float], origin: Sequence[float]
+) -> int:
+    """The `flip` of pass.cl's view order (its View order): bit a set where the
+    rays run towards lower indices along axis a (x, y, z) -- for a pinhole
+    camera outside the volume's slab along a, the side of the eye (every ray
+    that meets the box runs the same way); else the sign of the view
+    direction. Only the order of the work changes with it, not the image."""
+    n = np.array(shape[::-1], np.float64)  # nx, ny, nz
+    lo = np.asarray(origin, np.float64)
+    hi = lo + (n - 1) * np.asarray(spacing, np.float64)[::-1]
+    flip = 0
+    for a in range(3):
+        if not camera.orthographic and camera.eye[a] > hi[a]:
+            down = True
+        elif not camera.orthographic and camera.eye[a] < lo[a]:
+            down = False
+        else:
+            down = bool(camera.forward[a] < 0)
+        flip |= int(down) << a
+    return flip
+
+
 class _Tile:
     """The device state of one tile's rays: pixels p0 .. p0 + n - 1."""
 
-    def __init__(self, q, p0, n, cam, w, h, shape, spacing, origin, int64, rays=None) -> None:
-        """`rays`: init_rays' (ray_t, ids, count) of this tile when the caller has them."""
+    def __init__(self, q, p0, n, cam, w, h, shape, spacing, origin, int64, rays=None, flip=0) -> None:
+        """`rays`: init_rays' (ray_t, ids, count) of this tile when the caller has them;
+        `flip`: the view order of the pass's groups (pass.cl)."""
         self.q, self.p0, self.n, self.cam, self.w = q, p0, n, cam, w
+        nb = [(int(s) + 3) // 4 for s in shape[::-1]]
+        self.order = (np.uint32(nb[0]), np.uint32(nb[1]), np.uint32(nb[2]), np.uint32(flip))
         if rays is None:
             rays = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
         self.ray_t, active_all, count = rays
@@ -511,6 +540,7 @@ class IsoRenderer:
         start = runtime.marker(q)
         cam = runtime.empty(q, 22, np.float32, "camera rays")
         cam.set(ray_buffer(camera, w, h), queue=q)
+        flip = view_flips(camera, shape, spacing, origin)
         out = _HostImage(npix) if host else _DeviceImage(self, npix)
         # the rays entering the volume, tile by tile: the totals of completion
         # and progress, and the active mask of the tiles not traced yet
@@ -554,7 +584,9 @@ class IsoRenderer:
             n_enter = entering[ti]
             if n_enter == 0:
                 continue
-            state = _Tile(q, p0, n, cam, w, h, shape, spacing, origin, int64, first_rays if ti == 0 else None)
+            state = _Tile(
+                q, p0, n, cam, w, h, shape, spacing, origin, int64, first_rays if ti == 0 else None, flip
+            )
             first_rays = None
             n_active = n_enter
             tile_done = False
@@ -652,7 +684,13 @@ class IsoRenderer:
         if m:
             keys = runtime.empty(q, m, np.uint32, "item blocks")
             self._launch(
-                "gather_u32", m, cand_block.base_data, item_ids.base_data, np.uint32(m), keys.base_data
+                "item_keys",
+                m,
+                cand_block.base_data,
+                item_ids.base_data,
+                np.uint32(m),
+                *t.order,
+                keys.base_data,
             )
             skeys, sitems = radix_sort(keys, item_ids, queue=q)
             heads = runtime.empty(q, m, np.uint8, "group heads")
@@ -669,6 +707,7 @@ class IsoRenderer:
                 starts.base_data,
                 np.uint32(ngroups),
                 np.uint32(m),
+                *t.order,
                 gblocks.base_data,
                 gcounts.base_data,
             )

@@ -14,18 +14,34 @@
  * kernel valid_items(global const uint *cand_block, uint n, global uchar *valid)
  *     valid[e] = cand_block[e] != 0xFFFFFFFF.
  *
- * kernel gather_u32(global const uint *src, global const uint *index, uint n, global uint *dst)
- *     dst[j] = src[index[j]].
+ * View order. The items are grouped by block in a front-to-back order of
+ * the blocks, so that raytrace.cl (ITEMS mode with CLVIS_INT64_ATOMICS) meets
+ * a ray's nearer candidates first and can skip the farther ones once the ray
+ * has a nearer hit. The order is that of the block key
+ *     key(b) = x' + nbx (y' + nby z'),  x' = (flip & 1) ? nbx - 1 - bx : bx,
+ *     y' = (flip & 2) ? nby - 1 - by : by,  z' = (flip & 4) ? nbz - 1 - bz : bz
+ * for block b = bx + nbx (by + nby bz): a bijection of the block ids, its own
+ * inverse (flip = 0: key(b) = b; clvis.reference.iso.traverse.view_key).
+ * The host sets bit a of flip where the rays run towards lower indices along
+ * axis a (clvis.iso.render.view_flips); a ray whose direction is < 0 along
+ * the flipped axes and >= 0 along the others meets its blocks in ascending
+ * key order. Any flip gives the same image: only the order of the groups
+ * depends on it.
+ *
+ * kernel item_keys(global const uint *cand_block, global const uint *index, uint n,
+ *                  uint nbx, uint nby, uint nbz, uint flip, global uint *keys)
+ *     keys[j] = key(cand_block[index[j]]).
  *
  * kernel group_heads(global const uint *keys, uint n, global uchar *heads)
  *     heads[j] = 1 where j == 0 or keys[j] != keys[j - 1] (keys sorted: the
  *     items' block ids), else 0.
  *
  * kernel group_info(global const uint *keys, global const uint *starts, uint ngroups, uint n,
+ *                   uint nbx, uint nby, uint nbz, uint flip,
  *                   global uint *group_blocks, global uint *group_counts)
  *     For group g (starts: the positions of the heads, ascending):
- *     group_blocks[g] = keys[starts[g]], group_counts[g] = (g + 1 < ngroups ?
- *     starts[g + 1] : n) - starts[g].
+ *     group_blocks[g] = key(keys[starts[g]]) (the block id: key is its own
+ *     inverse), group_counts[g] = (g + 1 < ngroups ? starts[g + 1] : n) - starts[g].
  *
  * kernel resolve_hits(global const uint *active, uint count, uint n_spec,
  *                     global const uchar *item_hit, global const float *item_t,
@@ -68,11 +84,25 @@ kernel void valid_items(global const uint *cand_block, uint n, global uchar *val
         valid[e] = cand_block[e] != 0xFFFFFFFFu ? 1 : 0;
 }
 
-kernel void gather_u32(global const uint *src, global const uint *index, uint n, global uint *dst)
+/* the view-order key of block b (see View order); key(key(b)) = b */
+inline uint view_key(uint b, uint nbx, uint nby, uint nbz, uint flip)
+{
+    uint bx = b % nbx, by = b / nbx % nby, bz = b / nbx / nby;
+    if (flip & 1u)
+        bx = nbx - 1u - bx;
+    if (flip & 2u)
+        by = nby - 1u - by;
+    if (flip & 4u)
+        bz = nbz - 1u - bz;
+    return bx + nbx * (by + nby * bz);
+}
+
+kernel void item_keys(global const uint *cand_block, global const uint *index, uint n,
+                      uint nbx, uint nby, uint nbz, uint flip, global uint *keys)
 {
     uint j = get_global_id(0);
     if (j < n)
-        dst[j] = src[index[j]];
+        keys[j] = view_key(cand_block[index[j]], nbx, nby, nbz, flip);
 }
 
 kernel void group_heads(global const uint *keys, uint n, global uchar *heads)
@@ -83,13 +113,14 @@ kernel void group_heads(global const uint *keys, uint n, global uchar *heads)
 }
 
 kernel void group_info(global const uint *keys, global const uint *starts, uint ngroups, uint n,
+                       uint nbx, uint nby, uint nbz, uint flip,
                        global uint *group_blocks, global uint *group_counts)
 {
     uint g = get_global_id(0);
     if (g >= ngroups)
         return;
     uint s = starts[g];
-    group_blocks[g] = keys[s];
+    group_blocks[g] = view_key(keys[s], nbx, nby, nbz, flip);
     group_counts[g] = (g + 1u < ngroups ? starts[g + 1u] : n) - s;
 }
 

@@ -17,6 +17,18 @@
  *                 atom_min(hitkey[p], as_uint(t) << 32 | e): the pixel's
  *                 nearest hit over its items (the host fills hitkey with ones
  *                 first); without it, pass.cl's resolve scans the items.
+ *                 Early exit (ITEMS with CLVIS_INT64_ATOMICS): an item reads
+ *                 t_best, the t of hitkey[p] (the high word; all ones, a NaN,
+ *                 before any hit), when it starts; it is skipped when its
+ *                 ray_t[e] > t_best, and its march stops at the first cell
+ *                 entered at t > t_best. Its hit would lie at t >= that entry,
+ *                 after the pixel's nearest hit, so it could not win: such an
+ *                 item writes no outputs (ray_hit[e] stays as the host set it)
+ *                 and the winner, hence the image, is the same whatever the
+ *                 order of the groups (pass.cl's View order puts a ray's nearer
+ *                 blocks first so that most of these items are skipped). The
+ *                 read is a plain load racing with the other groups' atomic
+ *                 mins, a documented benign race (iso-skip, in the kernel).
  *   REFINE_STEPS  Illinois steps of the root refinement (default 8; the
  *                 reference docstring asks for >= 6)
  * Includes clvis/camera.h (the 22-float camera-ray buffer and clvis_camera_ray),
@@ -160,13 +172,18 @@ inline int cell_corners(local const float *brick, const int *c, const int *b0, f
 /* A ray through the block's cells [clo, chi] from cell c at t_in. Returns 1 at
  * a hit: *t = t_in + s of the hit cell, v its corners, u the local position
  * where the ray entered it, *s the root. Else 0 with *t the ray's new ray_t:
- * the t where it leaves the block, or +INFINITY when it leaves the volume. */
+ * the t where it leaves the block, or +INFINITY when it leaves the volume or
+ * enters a cell at t > t_stop (ITEMS' early exit; NaN: never). */
 inline int march_cells(local const float *brick, const int *n, const int *b0, const int *clo,
                        const int *chi, const float *O, const float *D, const float *inv,
-                       float t_exit, float isovalue, float t_in, int *c,
+                       float t_exit, float isovalue, float t_stop, float t_in, int *c,
                        float *v, float *u, float *s, float *t)
 {
     for (;;) {
+        if (t_in > t_stop) {   /* ITEMS: past the pixel's nearest hit (never for NaN) */
+            *t = INFINITY;
+            return 0;
+        }
         int axis;
         const float t_out = cell_exit(c, O, inv, t_in, t_exit, &axis);
         if (cell_corners(brick, c, b0, isovalue, v)) {
@@ -233,13 +250,33 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
 #else
         const uint p = ray_ids[offset + r], e = p;      /* outputs and state per pixel */
 #endif
+        const float t_in = ray_t[e];
+#if ITEMS && CLVIS_INT64_ATOMICS
+        /* benign race (iso-skip): t_best, the t of the pixel's nearest hit so
+         * far (all ones, a NaN, before any hit), is the high word of hitkey[p]
+         * read with a plain (volatile) 32-bit load while other groups update
+         * the entry with the atomic min below (Oclgrind reports each such
+         * pair). The entry only ever decreases, so the value read, current or
+         * stale, is >= the t the pixel ends with; this item's hit would lie at
+         * t >= t_in, so when t_in > t_best it could not win and is skipped. A
+         * stale value only skips less; it never skips an item that would win,
+         * so the winner is what the atomics alone give. One aligned 32-bit
+         * word (little-endian entries, clvis_hi_word of clvis/atomics.h), read
+         * whole: the high half of a value the entry did hold. Not an atomic
+         * read: OpenCL 1.2's only one is a read-modify-write (atom_add of 0),
+         * measured to take back half of what the skip saves on PoCL. */
+        const float t_best = as_float(((volatile global uint *)hitkey)[clvis_hi_word(p)]);
+        if (t_in > t_best)
+            continue;
+#else
+        const float t_best = NAN;
+#endif
         float o[3], d[3], O[3], D[3], inv[3], t_enter, t_exit;
         clvis_iso_ray_setup(cam, p0 + p, W, n, sp, org, o, d, O, D, inv, &t_enter, &t_exit);
-        const float t_in = ray_t[e];
         int c[3];
         first_cell(O, D, t_in, clo, chi, c);
         float v[8], u[3], s, t;
-        if (!march_cells(brick, n, b0, clo, chi, O, D, inv, t_exit, isovalue, t_in, c, v, u, &s, &t)) {
+        if (!march_cells(brick, n, b0, clo, chi, O, D, inv, t_exit, isovalue, t_best, t_in, c, v, u, &s, &t)) {
 #if !ITEMS
             ray_t[p] = t;
 #endif

@@ -364,3 +364,57 @@ def test_candidates_through_raytrace_blocks_match_the_reference(queue, name, n_s
     assert agree["ok"], agree
     assert image.hit.mean() > 0.3
     assert rounds >= (3 if n_spec == 1 else 1)
+
+
+@pytest.mark.parametrize("flip", range(8))
+def test_view_key_is_an_involution_of_the_block_ids(flip):
+    nb = (5, 3, 4)
+    ids = np.arange(5 * 3 * 4, dtype=np.uint32)
+    k = ref.view_key(ids, nb, flip)
+    assert sorted(k.tolist()) == ids.tolist()
+    assert np.array_equal(ref.view_key(k, nb, flip), ids)
+    assert np.array_equal(k, ids) == (flip == 0)
+
+
+@pytest.mark.parametrize(
+    "eye, ortho",
+    [
+        ((1.7, -2.2, 1.5), False),
+        ((-1.9, 2.3, -1.4), False),
+        ((0.1, -2.5, 0.2), False),  # eye inside the x and z slabs: the view direction decides
+        ((-2.0, -0.5, 1.8), True),
+    ],
+)
+def test_view_key_orders_candidates_front_to_back(eye, ortho):
+    """clvis.iso.render.view_flips's order: along every ray whose direction
+    has the flipped signs (all of them, for an eye outside every slab), the
+    candidate blocks come in ascending view key; the other rays are counted
+    to show the case is not vacuous."""
+    from clvis.iso.render import view_flips
+
+    ds, z = _volume("turbulence", 30)
+    fb = iso.block_ranges(zfp.decode(z))
+    fine, coarse = np.stack(fb, -1), np.stack(iso.coarse_ranges(fb), -1)
+    w, h = 24, 20
+    make = Camera.ortho if ortho else Camera.look_at
+    cam = make(eye, (0.0, 0.0, 0.0), (0, 0, 1), 2.2 if ortho else 40, near=0.1, far=20)
+    flip = view_flips(cam, z.shape, ds["spacing"], ds["origin"])
+    buf = ray_buffer(cam, w, h).astype(np.float32)
+    rt, enters = ref.init_rays(buf, w, h, z.shape, ds["spacing"], ds["origin"])
+    act = np.flatnonzero(enters).astype(np.uint32)
+    blocks, _, _ = ref.macro_traverse(
+        z.shape, ds["spacing"], ds["origin"], 0.5, buf, w, fine, coarse, act, rt, 64
+    )
+    _, d = camera_rays(buf, w, h)
+    signs = np.stack([(d[act, a] < 0) == bool(flip >> a & 1) for a in range(3)], axis=1).all(axis=1)
+    nb = [(s + 3) // 4 for s in z.shape[::-1]]
+    checked = 0
+    for row, ok in zip(blocks, signs, strict=True):
+        row = row[row != NO]
+        if ok and row.size > 1:
+            keys = ref.view_key(row, nb, flip).astype(np.int64)
+            assert (np.diff(keys) > 0).all()
+            checked += 1
+    assert checked > 0.25 * len(act)
+    if not ortho and min(abs(e) for e in eye) > 1:  # outside every slab of the box [-1, 1]^3
+        assert signs.all()

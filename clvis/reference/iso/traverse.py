@@ -28,7 +28,7 @@ import numpy.typing as npt
 
 from ..camera import camera_rays
 
-__all__ = ["NO_BLOCK", "init_rays", "macro_traverse", "ray_setup"]
+__all__ = ["NO_BLOCK", "init_rays", "macro_traverse", "ray_setup", "view_key"]
 
 NO_BLOCK = np.uint32(0xFFFFFFFF)
 _TINY = np.float32(1e-20)  # clvis/ray.h CLVIS_RAY_TINY_DIR
@@ -175,3 +175,20 @@ def macro_traverse(
             t = np.where(walk, t_out, t)
     ray_t[active] = resume
     return cand_block, cand_t, ray_t
+
+
+def view_key(blocks: npt.ArrayLike, nb: Sequence[int], flip: int) -> np.ndarray:
+    """The view-order key of block ids (kernels_cl/iso/pass.cl, View order):
+    block b = bx + nbx (by + nby bz) with each axis a whose bit of `flip` is
+    set mirrored (b_a -> nb_a - 1 - b_a), renumbered in the same way. nb =
+    (nbx, nby, nbz). A bijection of [0, nbx nby nbz), its own inverse; a ray
+    whose direction is < 0 along the flipped axes and >= 0 along the others
+    meets its candidate blocks in ascending key order (along the ray each
+    mirrored block coordinate only grows). uint32, the shape of `blocks`."""
+    b = np.asarray(blocks, np.int64)
+    nbx, nby, nbz = (int(v) for v in nb)
+    c = [b % nbx, b // nbx % nby, b // nbx // nby]
+    for a, m in enumerate((nbx, nby, nbz)):
+        if int(flip) >> a & 1:
+            c[a] = m - 1 - c[a]
+    return (c[0] + nbx * (c[1] + nby * c[2])).astype(np.uint32)

@@ -74,6 +74,14 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "(default $XDG_CACHE_HOME/clvis/train or ~/.cache/clvis/train)",
     )
     p.add_argument("--no-cache", action="store_true", help="render every frame, keep none")
+    p.add_argument(
+        "--time-limit",
+        type=count(1, 10**7),
+        default=None,
+        metavar="S",
+        help="stop training after S seconds (rendering not counted) if --steps are not done by then; "
+        "the learning rate's schedule ends with whichever comes first",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -88,6 +96,8 @@ def _command(args: argparse.Namespace) -> list[str]:
         c += ["--frame-size", f"{args.frame_size[0]}x{args.frame_size[1]}"]
     if args.points is not None:
         c += ["--points", str(args.points)]
+    if args.time_limit is not None:
+        c += ["--time-limit", str(args.time_limit)]
     return c + ["--eval", args.eval]
 
 
@@ -162,6 +172,7 @@ def cmd(args: argparse.Namespace) -> int:
         command=_command(args),
         log=log,
         cache=None if args.no_cache else (args.cache or default_cache()),
+        time_limit=args.time_limit,
     )
     print(f"{args.out}/{card['name']}.onnx: held-out frames, mean per row")
     print(held_out_table(card["held_out"]))

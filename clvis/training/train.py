@@ -69,18 +69,19 @@ SPECS: dict[str, dict[str, Any]] = {
     "narvis": {
         "arch": {
             "planes": ["rgb", "depth", "vel2d"],
-            "widths": [12, 24, 48, 96, 192],
+            "widths": [8, 16, 32, 64, 128],
             "up": "bilinear",
-            "kernels": [[5, 1], [3, 2], [3, 4]],
+            "kernels": [[3, 1], [3, 2], [3, 4], [3, 8]],
+            "depth_select": True,
         },
         "frames": 12,  # hurricane hemisphere views (of the 64 at every other azimuth)
         "views": 1,
         "held_out": 4,  # grid-sampler views and storm views, each
         "points": 2_000_000,
         "looks": True,  # random colormaps and value ranges per training view
-        "flow_scenes": 2,  # of each training flow
-        "flow_views": 4,  # of each flow scene
-        "flow_sizes": [256, 384],  # a flow scene's frames are N x N, N one of these
+        "flow_scenes": 1,  # of each training flow
+        "flow_views": 2,  # of each flow scene (x frames / 12)
+        "flow_sizes": [256],  # a flow scene's frames are N x N, N one of these
         "densities": [0.25, 4.0],  # x the hurricane's particles a pixel, log-uniform
         "frame_size": (512, 512),
         "batch": 4,
@@ -530,6 +531,7 @@ def train(
     command: Sequence[str] | None = None,
     log: Callable[[str], None] = print,
     cache: str | os.PathLike | None = None,
+    time_limit: float | None = None,
 ) -> dict:
     """Train network `name` for `steps` steps on `size` x `size` crops, export
     it into `out` (NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx where int8
@@ -537,7 +539,10 @@ def train(
     returns the card. points: the NARVis scenes' particles (default
     the release run's 2M). cache: a directory NARVis's rendered frames are
     kept in and read back from on a later run with the same data arguments
-    (cached_frames; None: render them every time)."""
+    (cached_frames; None: render them every time). time_limit: seconds of
+    training (the data's rendering not counted) after which the run stops
+    short of `steps`; the learning rate's cosine follows whichever of the
+    two ends first."""
     import torch
 
     from ..post import nets
@@ -595,27 +600,38 @@ def train(
 
     net = trainer.build(**spec["arch"])
     opt = torch.optim.Adam(net.parameters(), lr=spec["lr"])
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=spec["lr"] / 100)
+    lr0, lr1 = spec["lr"], spec["lr"] / 100
     loss_fn = _loss_fn(spec["loss"], size)
     curve: list[list[float]] = []
     every = max(1, steps // 50)
-    running = 0.0
+    running, done = 0.0, 0
     t0 = time.perf_counter()
     net.train()
     for step in range(1, steps + 1):
+        # cosine from lr0 to lr1 over the run: its steps, or its time limit if that comes first
+        progress = (step - 1) / max(steps, 1)
+        if time_limit is not None:
+            progress = max(progress, (time.perf_counter() - t0) / time_limit)
+            if progress >= 1.0:
+                log(f"time limit {time_limit:.0f} s: stopped after {step - 1} of {steps} steps")
+                break
+        for g in opt.param_groups:
+            g["lr"] = lr1 + (lr0 - lr1) * 0.5 * (1.0 + math.cos(math.pi * progress))
         xb, yb = _batch(pairs, spec["batch"], size, rng)
         x, y = _augment(xb, yb, rng, name, getattr(net, "layout", ()))
         loss = loss_fn(net(x), y)
         opt.zero_grad()
         loss.backward()
         opt.step()
-        sched.step()
         running += loss.item()
+        done = step
         if step % every == 0 or step == steps:
             n = every if step % every == 0 else step % every
             curve.append([step, round(running / n, 5)])
             running = 0.0
             log(f"step {step}/{steps} loss {curve[-1][1]:.4f} ({time.perf_counter() - t0:.0f} s)")
+    if done % every and done != steps and running:  # the steps since the last point of a stopped run
+        curve.append([done, round(running / (done % every), 5)])
     train_seconds = time.perf_counter() - t0
     net.eval()
 
@@ -670,10 +686,12 @@ def train(
             "generation_seconds": round(data_seconds, 1),
         },
         "training": {
-            "steps": steps,
+            "steps": done,
+            "steps_asked": steps,
+            "time_limit_seconds": time_limit,
             "batch": spec["batch"],
             "crop": size,
-            "optimizer": f"Adam lr {spec['lr']}, cosine to {spec['lr'] / 100}",
+            "optimizer": f"Adam lr {spec['lr']}, cosine to {spec['lr'] / 100} (steps or time limit)",
             "loss": spec["loss"],
             "loss_curve": curve,
             "seconds": round(train_seconds, 1),

@@ -356,9 +356,11 @@ def test_narvis_kernel_prediction_restated():
 
 
 def test_narvis_depth_select_restated():
-    """depth_select: each candidate's logit gains gamma x its nearness (the
-    normalised depth, 1 nearest; a block's: the mean over its covered
-    pixels), gamma = depth_scale x softplus(the extra output channel)."""
+    """depth_select: each candidate's bounded logit gains gamma x its
+    nearness (the normalised depth, 1 nearest; a block's: the mean over its
+    covered pixels) less the pixel's nearest candidate's, gamma =
+    depth_scale x softplus(the extra output channel); an untrained network
+    leans to the nearest of the finest scale."""
     torch.manual_seed(12)
     kernels = ((3, 1), (3, 2), (3, 8))
     net = nets.NarvisKPN(widths=(4, 4, 4, 4, 4), kernels=kernels, depth_select=True).eval()
@@ -379,15 +381,25 @@ def test_narvis_depth_select_restated():
     xn = np.zeros_like(x)
     xn[0, 0], xn[0, 3] = near[0], x[0, 3]
     cand_near, _ = _kpn_candidates(xn, kernels)
+    near_rel = cand_near[:, 0] - cand_near[:, 0].max(0)  # <= 0: behind the pixel's nearest candidate
     gamma = net.depth_scale * np.log1p(np.exp(logits[0][k + 1]))
-    lg = np.concatenate([logits[0][:k] + gamma * cand_near[:, 0], logits[0][k : k + 1]])
     b = nets.NarvisKPN.LOGIT_BOUND
-    lg = np.where(np.concatenate([valid, np.ones((1, *valid.shape[1:]), bool)]), b * np.tanh(lg / b), -np.inf)
+    lg = b * np.tanh(logits[0][: k + 1] / b)
+    lg[:k] += gamma * near_rel
+    lg = np.where(np.concatenate([valid, np.ones((1, *valid.shape[1:]), bool)]), lg, -np.inf)
     wts = np.exp(lg - lg.max(0))
     wts /= wts.sum(0)
     np.testing.assert_allclose(got, np.einsum("khw,kchw->chw", wts[:-1], cols), atol=2e-5, rtol=0)
     with pytest.raises(ValueError, match="depth_select"):
         nets.NarvisKPN(planes=("rgb", "vel2d"), depth_select=True)
+    # untrained: the nearest of each pixel's 3 x 3 weighs the most
+    net0 = nets.NarvisKPN(widths=(4, 4, 4, 4, 4), kernels=kernels, depth_select=True).eval()
+    w = _torch_weights(net0, x)
+    cand0, _ = _kpn_candidates(xn, ((3, 1),))
+    inner = (slice(None), slice(2, -2), slice(2, -2))
+    nearest = cand0[:, 0][inner].argmax(0)
+    both = valid[:9][inner].sum(0) >= 2  # pixels with a choice to make
+    assert (w[:9][inner].argmax(0) == nearest)[both].mean() > 0.95
 
 
 def test_shifted_is_the_neighbourhood():

@@ -89,6 +89,26 @@ def test_narvis_frames_are_rendered_once_per_key(tmp_path):
     assert len(train.cached_frames(tmp_path, key, make)) == 3 and calls == [0, 1, 0, 0]  # replaced
 
 
+def test_train_stops_at_its_time_limit(tmp_path):
+    """--time-limit: the run stops short of its steps when the time is up;
+    the card says how many it made, and the loss curve ends there."""
+    lines = []
+    card = train.train(
+        "infill",
+        steps=10**6,
+        size=64,
+        out=tmp_path,
+        frames=1,
+        frame_size=(96, 64),
+        time_limit=2,
+        log=lines.append,
+    )
+    t = card["training"]
+    assert 1 <= t["steps"] < t["steps_asked"] == 10**6 and t["time_limit_seconds"] == 2
+    assert t["loss_curve"][-1][0] == t["steps"] and t["seconds"] < 30
+    assert any("time limit" in line for line in lines)
+
+
 def test_train_rejects_crops_larger_than_frames(tmp_path, capsys):
     assert main(["train", "infill", "--size", "512", "--frame-size", "96x64", "--out", str(tmp_path)]) == 2
     assert "larger than the frames" in capsys.readouterr().err

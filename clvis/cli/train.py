@@ -66,6 +66,22 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         default="quick",
         help="then score the model on its held-out suite (clvis eval) into its card (default quick)",
     )
+    p.add_argument(
+        "--cache",
+        default=None,
+        metavar="DIR",
+        help="narvis: keep the rendered frames in DIR and read them back on a run with the same data "
+        "(default $XDG_CACHE_HOME/clvis/train or ~/.cache/clvis/train)",
+    )
+    p.add_argument("--no-cache", action="store_true", help="render every frame, keep none")
+    p.add_argument(
+        "--time-limit",
+        type=count(1, 10**7),
+        default=None,
+        metavar="S",
+        help="stop training after S seconds (rendering not counted) if --steps are not done by then; "
+        "the learning rate's schedule ends with whichever comes first",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -80,7 +96,18 @@ def _command(args: argparse.Namespace) -> list[str]:
         c += ["--frame-size", f"{args.frame_size[0]}x{args.frame_size[1]}"]
     if args.points is not None:
         c += ["--points", str(args.points)]
+    if args.time_limit is not None:
+        c += ["--time-limit", str(args.time_limit)]
     return c + ["--eval", args.eval]
+
+
+def default_cache() -> str:
+    """Where clvis train keeps rendered frames unless told: $XDG_CACHE_HOME/clvis/train
+    (~/.cache/clvis/train)."""
+    import os
+
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "clvis", "train")
 
 
 def _missing(module: str) -> bool:
@@ -144,6 +171,8 @@ def cmd(args: argparse.Namespace) -> int:
         points=args.points,
         command=_command(args),
         log=log,
+        cache=None if args.no_cache else (args.cache or default_cache()),
+        time_limit=args.time_limit,
     )
     print(f"{args.out}/{card['name']}.onnx: held-out frames, mean per row")
     print(held_out_table(card["held_out"]))

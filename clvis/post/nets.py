@@ -63,6 +63,7 @@ __all__ = [
     "count_parameters",
     "gbuffer_channels",
     "onehot_unfold",
+    "shifted",
 ]
 
 
@@ -348,7 +349,11 @@ class NarvisUNet(nn.Module):
 
     def features(self, x: torch.Tensor) -> torch.Tensor:
         """The decoder's last features (N, widths[0], H, W), before the 1x1 output."""
-        g = self.inject(self.normalise(x))
+        return self._features(self.normalise(x))
+
+    def _features(self, nx: torch.Tensor) -> torch.Tensor:
+        """features() of the normalised planes `nx`."""
+        g = self.inject(nx)
         skips: list[torch.Tensor] = []
         h = torch.zeros(0)
         for i, block in enumerate(self.enc):
@@ -381,6 +386,26 @@ def onehot_unfold(k: int) -> torch.Tensor:
     return w
 
 
+def shifted(p: torch.Tensor, k: int, s: int = 1) -> torch.Tensor:
+    """(N, k*k, H, W): the plane `p` (N, 1, H, W) shifted so that channel
+    j = dy * k + dx holds the pixel at offset ((dy - k // 2) * s,
+    (dx - k // 2) * s) (zero beyond the border): the k x k neighbourhood at
+    spacing s, as one padding (a 1 x 1 convolution by 1 with pads) and k*k
+    Slices with constant bounds (no shape arithmetic, no Gather; for s = 1
+    the channels of a convolution with :func:`onehot_unfold`, without its
+    k**4 multiply-adds a pixel)."""
+    r = (k // 2) * s
+    # zero padding as a 1 x 1 identity convolution with pads (F.pad exports shape arithmetic)
+    pp = F.conv2d(p, torch.ones(1, 1, 1, 1, dtype=p.dtype, device=p.device), padding=r)
+    outs = []
+    for dy in range(k):
+        for dx in range(k):
+            y0, x0 = dy * s, dx * s
+            y1, x1 = y0 - 2 * r, x0 - 2 * r  # <= 0: counted from the end
+            outs.append(pp[:, :, y0 : (y1 or None), x0 : (x1 or None)])
+    return torch.cat(outs, dim=1)
+
+
 class NarvisKPN(NarvisUNet):
     """NARVis by per-pixel kernel prediction: the gated U-Net of
     :class:`NarvisUNet` predicts, per output pixel, softmax weights over the
@@ -394,19 +419,34 @@ class NarvisKPN(NarvisUNet):
       themselves), the candidates of each output pixel those around its
       block. A block's colour is the mean of its covered pixels; a
       candidate with no covered pixel is masked out of the softmax.
-    - Candidates are gathered by fixed one-hot convolutions
-      (:func:`onehot_unfold`, grouped over R, G, B and the mask) and nearest
-      2**j up-sampling, so the graph is Conv, AveragePool, Resize and
-      element-wise arithmetic (no Gather).
+    - Candidates are gathered by :func:`shifted` (Pad and constant Slices)
+      of the block planes, up-sampled (nearest, 2**j) before the shift, so
+      the graph is Conv, AveragePool, Resize, Pad, Slice and element-wise
+      arithmetic (no Gather).
+    - ``depth_select``: each candidate's (bounded) logit also gets
+      ``gamma`` x its nearness less that of the pixel's nearest candidate
+      (<= 0; the nearness is NarvisUNet.normalise's depth, 1 nearest; a
+      block's: the mean of its covered pixels'), gamma >= 0 predicted per
+      pixel (softplus of one more output channel, x ``depth_scale``). One
+      pixel per point lets far points show between near ones where the
+      Gaussian renderer's near splats cover them; this gives the network
+      the visibility test as a single number a pixel to learn (on a
+      hurricane view, the nearest of each 3 x 3 alone scores 25 dB against
+      the Gaussian renderer where their mean scores 19).
     - The head's last 1x1 convolution starts at zero weights with a bias of
       ``prior`` on the finest scale's candidates: an untrained network is a
-      box filter of the covered pixels around each one (a splat).
+      box filter of the covered pixels around each one (a splat; with
+      ``depth_select``, the coarser scales' at -``prior``, leaning to the
+      nearest of them).
 
     No int8 variant (``int8 = False``): static int8 activations cannot hold
     both the logits and the -1e4 that masks an empty candidate out of the
     softmax, so empty candidates leak in (the release run's int8 lost 1.7 dB)."""
 
     int8 = False
+    #: the logits pass through LOGIT_BOUND * tanh(. / LOGIT_BOUND): weights
+    #: within a factor e**12 of each other, and exp within fp16's range
+    LOGIT_BOUND = 6.0
 
     def __init__(
         self,
@@ -415,6 +455,8 @@ class NarvisKPN(NarvisUNet):
         up: str = "bilinear",
         kernels: tuple[tuple[int, int], ...] = ((5, 1), (3, 2), (3, 4)),
         prior: float = 2.0,
+        depth_select: bool = False,
+        depth_scale: float = 20.0,
     ) -> None:
         super().__init__(planes, widths, up)
         ks = tuple((int(k), int(s)) for k, s in kernels)
@@ -422,54 +464,97 @@ class NarvisKPN(NarvisUNet):
             raise ValueError(
                 f"kernels: expected (odd k, power-of-two s <= {self.stride}) pairs, got {kernels!r}"
             )
+        if depth_select and "depth" not in self.layout:
+            raise ValueError("depth_select: needs the 'depth' plane in planes")
         self.kernels = ks
         self.candidates = sum(k * k for k, _ in ks)
-        self.out = nn.Conv2d(self.widths[0], self.candidates + 1, 1)
+        self.depth_select = bool(depth_select)
+        self.depth_scale = float(depth_scale)
+        self.out = nn.Conv2d(self.widths[0], self.candidates + 1 + int(self.depth_select), 1)
         nn.init.zeros_(self.out.weight)
         with torch.no_grad():
             self.out.bias.zero_()
             self.out.bias[: ks[0][0] ** 2] = prior
-        for i, (k, _) in enumerate(ks):
-            self.register_buffer(f"unfold{i}", onehot_unfold(k).repeat(4, 1, 1, 1), persistent=False)
+            if self.depth_select:  # the coarser scales start out of the way of the nearest-point prior
+                self.out.bias[ks[0][0] ** 2 : self.candidates] = -prior
 
-    def gather(self, x: torch.Tensor) -> tuple[list[torch.Tensor], torch.Tensor]:
+    def gather(
+        self, x: torch.Tensor, nx: torch.Tensor | None = None
+    ) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor | None]:
         """The candidates of every output pixel: ([R, G, B] each (N, K, H, W),
-        mask (N, K, H, W)), K = ``candidates``, in ``kernels``' order."""
+        mask (N, K, H, W), nearness (N, K, H, W) or None without
+        ``depth_select``), K = ``candidates``, in ``kernels``' order. The
+        nearness is relative to the pixel's nearest candidate (<= 0; 0: the
+        nearest), so the depth term of a logit is never positive. `nx`:
+        normalise(x) where the caller has it."""
         cov = x[:, 3:4]
-        rgb = x[:, 0:3] * cov
-        cols: list[list[torch.Tensor]] = [[], [], []]
-        masks = []
-        for i, (k, s) in enumerate(self.kernels):
+        planes = [x[:, 0:3] * cov]
+        if self.depth_select:
+            nx = self.normalise(x) if nx is None else nx
+            d = self.layout.index("depth")
+            planes.append(nx[:, d : d + 1])  # nearness, 0 where empty
+        p = torch.cat(planes, dim=1)
+        c = p.shape[1]
+        parts: list[list[torch.Tensor]] = [[] for _ in range(c + 1)]  # R, G, B, (nearness,) mask
+        refs: list[torch.Tensor] = []
+        for k, s in self.kernels:
             if s > 1:
-                c = F.avg_pool2d(cov, s)
-                colour = F.avg_pool2d(rgb, s) / torch.clamp(c, min=1e-12)
-                m = torch.clamp(c * float(4 * s * s), max=1.0)
+                n = F.avg_pool2d(cov, s)
+                blocks = F.avg_pool2d(p, s) / torch.clamp(n, min=1e-12)
+                m = torch.clamp(n * float(4 * s * s), max=1.0)
+                u = F.interpolate(torch.cat([blocks, m], dim=1), scale_factor=float(s), mode="nearest")
             else:
-                colour, m = rgb, cov
-            u = F.conv2d(torch.cat([colour, m], dim=1), getattr(self, f"unfold{i}"), padding=k // 2, groups=4)
-            if s > 1:
-                u = F.interpolate(u, scale_factor=float(s), mode="nearest")
-            n = k * k
-            for j in range(3):
-                cols[j].append(u[:, j * n : (j + 1) * n])
-            masks.append(u[:, 3 * n : 4 * n])
-        return [torch.cat(c, dim=1) for c in cols], torch.cat(masks, dim=1)
+                u = torch.cat([p, cov], dim=1)
+            for i in range(c + 1):
+                parts[i].append(shifted(u[:, i : i + 1], k, s))
+            if self.depth_select:  # the nearest candidate of this scale: a k x k max-pool of its blocks
+                if s > 1:
+                    r = F.max_pool2d(blocks[:, 3:4], k, stride=1, padding=k // 2)
+                    refs.append(F.interpolate(r, scale_factor=float(s), mode="nearest"))
+                else:
+                    refs.append(F.max_pool2d(p[:, 3:4], k, stride=1, padding=k // 2))
+        out = [torch.cat(q, dim=1) for q in parts]
+        if not self.depth_select:
+            return out[:3], out[c], None
+        ref = refs[0]
+        for r in refs[1:]:
+            ref = torch.maximum(ref, r)
+        return out[:3], out[c], out[3] - ref
 
-    def _weights(self, x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        h = self.features(x)
-        valid = torch.cat([mask, torch.ones_like(mask[:, :1])], dim=1)
-        return torch.softmax(self.out(h) - (1.0 - valid) * 1.0e4, dim=1)
+    def _weights(self, nx: torch.Tensor, mask: torch.Tensor, near: torch.Tensor | None) -> torch.Tensor:
+        h = self._features(nx)
+        o = self.out(h)
+        k = self.candidates
+        # softmax over the valid candidates and the background, written out:
+        # onnxruntime's Softmax and ReduceSum over the channel axis transpose
+        # NCHW (3/4 of a 512^2 frame's time); the logits are bounded by
+        # LOGIT_BOUND * tanh, so exp needs no max subtracted (fp16 included)
+        logits = self.LOGIT_BOUND * torch.tanh(o[:, : k + 1] * (1.0 / self.LOGIT_BOUND))
+        if near is not None:  # near <= 0: behind the pixel's nearest candidate
+            gamma = F.softplus(o[:, k + 1 :]) * self.depth_scale
+            logits = torch.cat([logits[:, :k] + gamma * near, logits[:, k:]], dim=1)
+        e = torch.exp(logits) * torch.cat([mask, torch.ones_like(mask[:, :1])], dim=1)
+        return e / _channel_sum(e, k + 1)
 
     def weights(self, x: torch.Tensor) -> torch.Tensor:
         """The per-pixel softmax weights (N, K + 1, H, W): the candidates'
         (zero where masked), then the background's."""
-        return self._weights(x, self.gather(x)[1])
+        nx = self.normalise(x)
+        _, mask, near = self.gather(x, nx)
+        return self._weights(nx, mask, near)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        cols, mask = self.gather(x)
-        w = self._weights(x, mask)[:, : self.candidates]
-        out = torch.cat([torch.sum(w * c, dim=1, keepdim=True) for c in cols], dim=1)
+        nx = self.normalise(x)
+        cols, mask, near = self.gather(x, nx)
+        w = self._weights(nx, mask, near)[:, : self.candidates]
+        out = torch.cat([_channel_sum(w * c, self.candidates) for c in cols], dim=1)
         return torch.clamp(out, 0.0, 1.0)
+
+
+def _channel_sum(x: torch.Tensor, n: int) -> torch.Tensor:
+    """(N, 1, H, W): the sum over the `n` channels of `x`, as a 1 x 1
+    convolution by ones (onnxruntime's ReduceSum over axis 1 transposes)."""
+    return F.conv2d(x, torch.ones(1, n, 1, 1, dtype=x.dtype, device=x.device))
 
 
 #: the torch module of each shipped network, by name

@@ -15,6 +15,7 @@ Needs the ``train`` extra (torch==2.13.0, onnx, pytorch-msssim).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -68,18 +69,19 @@ SPECS: dict[str, dict[str, Any]] = {
     "narvis": {
         "arch": {
             "planes": ["rgb", "depth", "vel2d"],
-            "widths": [12, 24, 48, 96, 192],
+            "widths": [8, 16, 32, 64, 128],
             "up": "bilinear",
-            "kernels": [[5, 1], [3, 2], [3, 4]],
+            "kernels": [[3, 1], [3, 2], [3, 4], [3, 8]],
+            "depth_select": True,
         },
         "frames": 12,  # hurricane hemisphere views (of the 64 at every other azimuth)
         "views": 1,
         "held_out": 4,  # grid-sampler views and storm views, each
         "points": 2_000_000,
         "looks": True,  # random colormaps and value ranges per training view
-        "flow_scenes": 2,  # of each training flow
-        "flow_views": 4,  # of each flow scene
-        "flow_sizes": [256, 384],  # a flow scene's frames are N x N, N one of these
+        "flow_scenes": 1,  # of each training flow
+        "flow_views": 2,  # of each flow scene (x frames / 12)
+        "flow_sizes": [256],  # a flow scene's frames are N x N, N one of these
         "densities": [0.25, 4.0],  # x the hurricane's particles a pixel, log-uniform
         "frame_size": (512, 512),
         "batch": 4,
@@ -95,6 +97,95 @@ INT8_MAX_LOSS_DB = 0.3
 # data
 
 
+#: what the NARVis frames depend on besides their arguments: these sources
+#: (the generators, the scenes' datasets, both renderers and their kernels)
+#: are hashed into every cache key, so a changed renderer never reads old frames
+_FRAME_SOURCES = (
+    "clvis/training/data.py",
+    "clvis/training/flows.py",
+    "clvis/datasets.py",
+    "clvis/colormap.py",
+    "clvis/gauss",
+    "clvis/raster",
+    "clvis/post/pack.py",
+    "kernels_cl/gauss",
+    "kernels_cl/raster",
+    "kernels_cl/post",
+    "kernels_cl/include",
+)
+
+
+def _sources_digest() -> str:
+    """sha256 over the files of _FRAME_SOURCES (those that exist, in order)."""
+    root = Path(__file__).resolve().parents[2]
+    h = hashlib.sha256()
+    for name in _FRAME_SOURCES:
+        p = root / name
+        if p.is_dir():
+            files = sorted(f for f in p.rglob("*") if f.suffix in (".py", ".cl", ".h"))
+        elif p.is_file():
+            files = [p]
+        else:
+            files = []
+        for f in files:
+            h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def _save_frames(path: Path, frames: list) -> None:
+    """NARVis frames into one .npz (arrays and a JSON line of the rest; no pickle)."""
+    arrays: dict[str, Any] = {}
+    meta = []
+    for i, f in enumerate(frames):
+        arrays[f"x{i}"], arrays[f"rgb{i}"] = f.x, f.rgb
+        meta.append({"seconds": f.seconds, "source": f.source})
+    arrays["meta"] = np.array(json.dumps(meta))
+    write_replacing(path, lambda fh: np.savez(fh, **arrays))  # atomic: a killed run leaves no half file
+
+
+def _load_frames(path: Path) -> list:
+    with np.load(path, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"]))
+        return [
+            _data.NarvisFrame(z[f"x{i}"], z[f"rgb{i}"], dict(m["seconds"]), str(m["source"]))
+            for i, m in enumerate(meta)
+        ]
+
+
+def cached_frames(
+    cache: Path | None,
+    key: dict[str, Any],
+    make: Callable[[], list],
+    log: Callable[[str], None] | None = None,
+) -> list:
+    """``make()``'s NARVis frames, kept in `cache` (a directory; None: no
+    cache) under a hash of `key` (the arguments that made them) and of the
+    sources they depend on (_FRAME_SOURCES): rendering is paid once per key.
+    An unreadable cache file is rendered again and replaced."""
+    if cache is None:
+        return make()
+    digest = hashlib.sha256(
+        json.dumps({**key, "sources": _sources_digest()}, sort_keys=True, default=str).encode()
+    ).hexdigest()[:24]
+    path = Path(cache) / f"narvis-{key.get('set', 'frames')}-{digest}.npz"
+    if path.is_file():
+        try:
+            frames = _load_frames(path)
+        except (OSError, ValueError, KeyError) as e:
+            if log is not None:
+                log(f"frame cache {path}: unreadable ({e}); rendering again")
+        else:
+            if log is not None:
+                log(f"frame cache: {len(frames)} frames from {path}")
+            return frames
+    frames = make()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _save_frames(path, frames)
+    if log is not None:
+        log(f"frame cache: {len(frames)} frames into {path}")
+    return frames
+
+
 def _narvis_sets(
     count: int,
     held: int,
@@ -105,6 +196,7 @@ def _narvis_sets(
     log,
     looks: bool = False,
     flows: tuple[int, int, Sequence[int], Sequence[float]] | None = None,
+    cache: Path | None = None,
 ) -> dict[str, list]:
     """The NARVis frames: "train" and "validation" (`count` hemisphere views
     of the hurricane at every other azimuth, every tenth to validation; with
@@ -119,7 +211,10 @@ def _narvis_sets(
     particles a pixel (log-uniform in `densities`, at most 4 x `points`
     particles), `views` views
     of each from either sampler under random looks; every 8th such view goes
-    to "flows" (validation), the rest to "train"."""
+    to "flows" (validation), the rest to "train".
+
+    `cache`: a directory the rendered frames are kept in (cached_frames:
+    the hurricane's, the storm's and the flows' each under their own key)."""
     w, h = size
     hur = _data.narvis_scene("hurricane", points, seed)
     cams = _data.narvis_cameras(hur, "hemisphere", w / h)
@@ -129,12 +224,24 @@ def _narvis_sets(
     val_idx = set(range(9, len(picked), 10)) or ({len(picked) - 1} if len(picked) > 1 else set())
     grid = _data.narvis_cameras(hur, "grid", w / h)
     grid = [grid[int(i)] for i in np.sort(rng.permutation(len(grid))[:held])]
-    if looks:
-        frames = _data.narvis_frames(
-            hur, picked, w, h, planes, looks=_data.narvis_looks(hur, len(picked), rng), progress=log
-        ) + _data.narvis_frames(hur, grid, w, h, planes, progress=log)
-    else:
-        frames = _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log)
+    hur_looks = _data.narvis_looks(hur, len(picked), rng) if looks else None
+
+    def hurricane_frames() -> list:
+        if hur_looks is not None:
+            return _data.narvis_frames(
+                hur, picked, w, h, planes, looks=hur_looks, progress=log
+            ) + _data.narvis_frames(hur, grid, w, h, planes, progress=log)
+        return _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log)
+
+    key = {
+        "count": count,
+        "held": held,
+        "points": points,
+        "seed": seed,
+        "size": [w, h],
+        "planes": list(planes),
+    }
+    frames = cached_frames(cache, {"set": "hurricane", "looks": looks, **key}, hurricane_frames, log)
     storm = _data.narvis_scene("storm", points, seed + 7)
     odd = _data.narvis_cameras(storm, "hemisphere", w / h)[1::2]
     odd = [odd[int(i)] for i in np.sort(rng.permutation(len(odd))[:held])]
@@ -142,10 +249,20 @@ def _narvis_sets(
         "train": [f for i, f in enumerate(frames[: len(picked)]) if i not in val_idx],
         "validation": [f for i, f in enumerate(frames[: len(picked)]) if i in val_idx],
         "grid sampler": frames[len(picked) :],
-        "storm": _data.narvis_frames(storm, odd, w, h, planes, progress=log),
+        "storm": cached_frames(
+            cache,
+            {"set": "storm", **key},
+            lambda: _data.narvis_frames(storm, odd, w, h, planes, progress=log),
+            log,
+        ),
     }
     if flows is not None:
-        flow_frames = narvis_flow_frames(*flows, points, seed, min(w, h), planes, log)
+        flow_frames = cached_frames(
+            cache,
+            {"set": "flows", "flows": [flows[0], flows[1], list(flows[2]), list(flows[3])], **key},
+            lambda: narvis_flow_frames(*flows, points, seed, min(w, h), planes, log),
+            log,
+        )
         out["train"] += [f for i, f in enumerate(flow_frames) if i % 8 != 7]
         out["flows"] = [f for i, f in enumerate(flow_frames) if i % 8 == 7]
     return out
@@ -413,12 +530,19 @@ def train(
     points: int | None = None,
     command: Sequence[str] | None = None,
     log: Callable[[str], None] = print,
+    cache: str | os.PathLike | None = None,
+    time_limit: float | None = None,
 ) -> dict:
     """Train network `name` for `steps` steps on `size` x `size` crops, export
     it into `out` (NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx where int8
     loses at most INT8_MAX_LOSS_DB on the held-out frames) and write NAME.json;
     returns the card. points: the NARVis scenes' particles (default
-    the release run's 2M)."""
+    the release run's 2M). cache: a directory NARVis's rendered frames are
+    kept in and read back from on a later run with the same data arguments
+    (cached_frames; None: render them every time). time_limit: seconds of
+    training (the data's rendering not counted) after which the run stops
+    short of `steps`; the learning rate's cosine follows whichever of the
+    two ends first."""
     import torch
 
     from ..post import nets
@@ -460,6 +584,7 @@ def train(
             )
             if "flow_scenes" in spec
             else None,
+            Path(cache) if cache is not None else None,
         )
         train_frames = sets.pop("train")
         val_frames = [f for v in sets.values() for f in v]
@@ -475,27 +600,38 @@ def train(
 
     net = trainer.build(**spec["arch"])
     opt = torch.optim.Adam(net.parameters(), lr=spec["lr"])
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=spec["lr"] / 100)
+    lr0, lr1 = spec["lr"], spec["lr"] / 100
     loss_fn = _loss_fn(spec["loss"], size)
     curve: list[list[float]] = []
     every = max(1, steps // 50)
-    running = 0.0
+    running, done = 0.0, 0
     t0 = time.perf_counter()
     net.train()
     for step in range(1, steps + 1):
+        # cosine from lr0 to lr1 over the run: its steps, or its time limit if that comes first
+        progress = (step - 1) / max(steps, 1)
+        if time_limit is not None:
+            progress = max(progress, (time.perf_counter() - t0) / time_limit)
+            if progress >= 1.0:
+                log(f"time limit {time_limit:.0f} s: stopped after {step - 1} of {steps} steps")
+                break
+        for g in opt.param_groups:
+            g["lr"] = lr1 + (lr0 - lr1) * 0.5 * (1.0 + math.cos(math.pi * progress))
         xb, yb = _batch(pairs, spec["batch"], size, rng)
         x, y = _augment(xb, yb, rng, name, getattr(net, "layout", ()))
         loss = loss_fn(net(x), y)
         opt.zero_grad()
         loss.backward()
         opt.step()
-        sched.step()
         running += loss.item()
+        done = step
         if step % every == 0 or step == steps:
             n = every if step % every == 0 else step % every
             curve.append([step, round(running / n, 5)])
             running = 0.0
             log(f"step {step}/{steps} loss {curve[-1][1]:.4f} ({time.perf_counter() - t0:.0f} s)")
+    if done % every and done != steps and running:  # the steps since the last point of a stopped run
+        curve.append([done, round(running / (done % every), 5)])
     train_seconds = time.perf_counter() - t0
     net.eval()
 
@@ -550,10 +686,12 @@ def train(
             "generation_seconds": round(data_seconds, 1),
         },
         "training": {
-            "steps": steps,
+            "steps": done,
+            "steps_asked": steps,
+            "time_limit_seconds": time_limit,
             "batch": spec["batch"],
             "crop": size,
-            "optimizer": f"Adam lr {spec['lr']}, cosine to {spec['lr'] / 100}",
+            "optimizer": f"Adam lr {spec['lr']}, cosine to {spec['lr'] / 100} (steps or time limit)",
             "loss": spec["loss"],
             "loss_curve": curve,
             "seconds": round(train_seconds, 1),

@@ -145,13 +145,8 @@ KNOWN_BELOW = {
     # what remains is the picture's 8-bit rounding
     "lidar": {"terrain 320x240 3% scan orbit": (-0.01, -0.001)},
     "narvis": {
-        "lorenz 256x256 1x points hemisphere": (-4.39, -0.067),
-        "lorenz 256x256 1x points grid": (-5.79, -0.103),
-        "jet 256x256 1x points hemisphere": (-2.48, -0.034),
-        "jet 256x256 1x points grid": (-4.33, -0.167),
-        "ring 256x256 1x points grid": (-0.59, -0.04),
-        "hurricane/magma 256x256 1x points hemisphere": (-0.67, -0.037),
-        "hurricane/magma 256x256 1x points grid": (2.11, -0.045),
+        "lorenz 256x256 1x points hemisphere": (-3.60, -0.072),
+        "jet 256x256 1x points grid": (0.89, -0.011),
     },
 }
 
@@ -169,7 +164,7 @@ def test_shipped_cards_hold_their_suite_margins(name):
     assert set(KNOWN_BELOW[name]) <= {m[0] for m in margins}
 
 
-@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (13 rows of the three quick suites)")
+@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (8 rows of the three quick suites)")
 @pytest.mark.parametrize("name", post.NAMES)
 def test_shipped_cards_never_below_their_baseline(name):
     """Issue 21 §2: PSNR and SSIM >= the best classical baseline on every
@@ -247,18 +242,17 @@ def test_ci_lidar_on_photographs(ci_rows):
 
 def test_ci_narvis_on_a_jet(ci_rows):
     """A round jet (never trained on), hemisphere view, 128 x 128 at the
-    training's particles a pixel. Measured: 25.1 dB / 0.784 against GR
-    (plain rasterization 23.7 / 0.733, push-pull 13.8, classical splat
-    28.1 / 0.849)."""
+    training's particles a pixel. Measured (the kernel-prediction model):
+    30.7 dB / 0.867 against GR (plain rasterization 23.7 / 0.733, push-pull
+    13.8, classical splat 28.1 / 0.849; the U-Net shipped before it: 25.1 /
+    0.784, 3.0 dB below the splat)."""
     r = ci_rows["narvis"]["1x points"]
-    assert r["network"]["psnr"] > 24 and _margin(r, "raster") > 0.5 and _margin(r, "pushpull") > 6
+    assert r["network"]["psnr"] > 29 and _margin(r, "pushpull") > 6
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="targets missed (issue 21 §2): on the jet the network (25.1 dB / 0.784) is 3.0 dB below "
-    "the classical splat (28.1 / 0.849) and 1.4 dB (not 6) over the plain rasterization",
-)
 def test_ci_narvis_meets_its_targets_on_a_jet(ci_rows):
+    """Issue 21 §2 on the CI jet: not below the classical splat, 6 dB over
+    the plain rasterization, SSIM >= 0.82 (met: +2.5 dB, +7.0 dB, 0.867)."""
     r = ci_rows["narvis"]["1x points"]
-    assert _margin(r, "splat") >= 0 and _margin(r, "raster") >= 6 and r["network"]["ssim"] >= 0.82
+    assert _margin(r, "splat") >= 1 and _margin(r, "splat", "ssim") >= 0
+    assert _margin(r, "raster") >= 6 and r["network"]["ssim"] >= 0.82

@@ -327,8 +327,8 @@ def _kpn_candidates(x, kernels):
 
 def test_narvis_kernel_prediction_restated():
     """The output is sum_k softmax(logits)_k x candidate_k over the valid
-    candidates and a background (black) weight: unfolding by one-hot
-    convolutions and nearest up-sampling = the NumPy gather above."""
+    candidates and a background (black) weight: shifting by constant slices
+    and nearest up-sampling = the NumPy gather above."""
     torch.manual_seed(7)
     kernels = ((5, 1), (3, 2), (3, 4))
     net = nets.NarvisKPN(widths=(4, 4, 4, 4, 4), kernels=kernels).eval()
@@ -342,7 +342,10 @@ def test_narvis_kernel_prediction_restated():
     hook.remove()
     cols, valid = _kpn_candidates(x, kernels)
     assert cols.shape[0] == net.candidates == 25 + 9 + 9
-    lg = np.where(np.concatenate([valid, np.ones((1, *valid.shape[1:]), bool)]), logits[0], -np.inf)
+    b = nets.NarvisKPN.LOGIT_BOUND  # the logits are bounded: b * tanh(logit / b)
+    lg = np.where(
+        np.concatenate([valid, np.ones((1, *valid.shape[1:]), bool)]), b * np.tanh(logits[0] / b), -np.inf
+    )
     wts = np.exp(lg - lg.max(0))
     wts /= wts.sum(0)
     want = np.einsum("khw,kchw->chw", wts[:-1], cols)
@@ -350,6 +353,66 @@ def test_narvis_kernel_prediction_restated():
     np.testing.assert_allclose(_torch_weights(net, x), wts, atol=2e-5)
     # rows 0-1 have no covered block within reach of even the coarsest scale: black
     assert np.abs(got[:, :2]).max() == 0
+
+
+def test_narvis_depth_select_restated():
+    """depth_select: each candidate's bounded logit gains gamma x its
+    nearness (the normalised depth, 1 nearest; a block's: the mean over its
+    covered pixels) less the pixel's nearest candidate's, gamma =
+    depth_scale x softplus(the extra output channel); an untrained network
+    leans to the nearest of the finest scale."""
+    torch.manual_seed(12)
+    kernels = ((3, 1), (3, 2), (3, 8))
+    net = nets.NarvisKPN(widths=(4, 4, 4, 4, 4), kernels=kernels, depth_select=True).eval()
+    assert net.out.out_channels == net.candidates + 2
+    with torch.no_grad():
+        torch.nn.init.normal_(net.out.weight, std=0.5)
+    x = _narvis_input(np.random.default_rng(13), 32, 48)
+    x[0, :, 16:, :8] = 0
+    logits = []
+    hook = net.out.register_forward_hook(lambda m, i, o: logits.append(o.numpy()[0].astype(np.float64)))
+    got = _torch(net, x)[0]
+    hook.remove()
+    with torch.no_grad():
+        near = net.normalise(torch.from_numpy(x))[0, 4:5].numpy()  # the layout's depth channel
+    k = net.candidates
+    cols, valid = _kpn_candidates(x, kernels)
+    # the nearness of each candidate, through the same gather (a plane in the R channel)
+    xn = np.zeros_like(x)
+    xn[0, 0], xn[0, 3] = near[0], x[0, 3]
+    cand_near, _ = _kpn_candidates(xn, kernels)
+    near_rel = cand_near[:, 0] - cand_near[:, 0].max(0)  # <= 0: behind the pixel's nearest candidate
+    gamma = net.depth_scale * np.log1p(np.exp(logits[0][k + 1]))
+    b = nets.NarvisKPN.LOGIT_BOUND
+    lg = b * np.tanh(logits[0][: k + 1] / b)
+    lg[:k] += gamma * near_rel
+    lg = np.where(np.concatenate([valid, np.ones((1, *valid.shape[1:]), bool)]), lg, -np.inf)
+    wts = np.exp(lg - lg.max(0))
+    wts /= wts.sum(0)
+    np.testing.assert_allclose(got, np.einsum("khw,kchw->chw", wts[:-1], cols), atol=2e-5, rtol=0)
+    with pytest.raises(ValueError, match="depth_select"):
+        nets.NarvisKPN(planes=("rgb", "vel2d"), depth_select=True)
+    # untrained: the nearest of each pixel's 3 x 3 weighs the most
+    net0 = nets.NarvisKPN(widths=(4, 4, 4, 4, 4), kernels=kernels, depth_select=True).eval()
+    w = _torch_weights(net0, x)
+    cand0, _ = _kpn_candidates(xn, ((3, 1),))
+    inner = (slice(None), slice(2, -2), slice(2, -2))
+    nearest = cand0[:, 0][inner].argmax(0)
+    both = valid[:9][inner].sum(0) >= 2  # pixels with a choice to make
+    assert (w[:9][inner].argmax(0) == nearest)[both].mean() > 0.95
+
+
+def test_shifted_is_the_neighbourhood():
+    """nets.shifted: channel dy * k + dx is the pixel at offset
+    ((dy - k // 2) * s, (dx - k // 2) * s), zero beyond the border."""
+    x = np.random.default_rng(14).random((1, 1, 8, 12)).astype(np.float32)
+    for k, s in ((3, 1), (5, 1), (3, 2), (3, 4)):
+        u = nets.shifted(torch.from_numpy(x), k, s)[0].numpy()
+        r = (k // 2) * s
+        xp = np.pad(x[0, 0], r)
+        for j in range(k * k):
+            dy, dx = (j // k) * s, (j % k) * s
+            np.testing.assert_array_equal(u[j], xp[dy : dy + 8, dx : dx + 12])
 
 
 def _torch_weights(net, x):

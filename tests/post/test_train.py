@@ -32,6 +32,8 @@ def test_train_smoke_through_the_cli(tmp_path, name, capsys):
             "--quiet",
             "--eval",  # the held-out suite: tests/post/test_eval.py
             "none",
+            "--cache",  # not the user's cache directory
+            str(tmp_path / "cache"),
             *(["--points", "20000"] if name == "narvis" else []),
         ]
     )
@@ -44,6 +46,67 @@ def test_train_smoke_through_the_cli(tmp_path, name, capsys):
     assert train.sha256(tmp_path / f"{name}.onnx") == card["files"]["fp32"]["sha256"]
     net = post.load(name, directory=tmp_path)  # the folder clvis train wrote loads as shipped ones do
     assert net.card["seed"] == 0
+
+
+def test_narvis_frames_are_rendered_once_per_key(tmp_path):
+    """train.cached_frames: the frames come back from the cache equal (arrays,
+    seconds, source) without rendering; another key, a missing cache or an
+    unreadable cache file render again."""
+    calls = []
+
+    def make(seed=0):
+        calls.append(seed)
+        rng = np.random.default_rng(seed)
+        return [
+            data.NarvisFrame(
+                rng.random((9, 16, 32), dtype=np.float32),
+                rng.random((16, 32, 3), dtype=np.float32),
+                {"raster": 0.1, "gaussians": 2.5},
+                f"flow view {i}",
+            )
+            for i in range(3)
+        ]
+
+    key = {"set": "flows", "seed": 0, "size": [32, 16]}
+    a = train.cached_frames(tmp_path, key, make)
+    b = train.cached_frames(tmp_path, key, make)
+    assert calls == [0] and len(b) == 3
+    for f, g in zip(a, b, strict=True):
+        np.testing.assert_array_equal(f.x, g.x)
+        np.testing.assert_array_equal(f.rgb, g.rgb)
+        assert f.x.dtype == g.x.dtype == np.float32
+        assert (f.seconds, f.source) == (g.seconds, g.source)
+    train.cached_frames(tmp_path, {**key, "seed": 1}, lambda: make(1))
+    assert calls == [0, 1] and len(list(tmp_path.glob("narvis-flows-*.npz"))) == 2
+    train.cached_frames(None, key, make)
+    assert calls == [0, 1, 0]
+    for f in tmp_path.glob("narvis-flows-*.npz"):
+        f.write_bytes(b"not an npz")
+    logged = []
+    c = train.cached_frames(tmp_path, key, make, logged.append)
+    assert calls == [0, 1, 0, 0] and "unreadable" in logged[0]
+    np.testing.assert_array_equal(c[0].x, a[0].x)
+    assert len(train.cached_frames(tmp_path, key, make)) == 3 and calls == [0, 1, 0, 0]  # replaced
+
+
+def test_train_stops_at_its_time_limit(tmp_path):
+    """--time-limit: the run stops short of its steps when the time is up;
+    the card says how many it made, and the loss curve ends there."""
+    lines = []
+    card = train.train(
+        "infill",
+        steps=10**6,
+        size=64,
+        out=tmp_path,
+        frames=1,
+        frame_size=(96, 64),
+        time_limit=2,
+        log=lines.append,
+    )
+    t = card["training"]
+    assert 1 <= t["steps"] < t["steps_asked"] == 10**6 and t["time_limit_seconds"] == 2
+    assert t["loss_curve"][-1][0] == t["steps"] and t["seconds"] < 30
+    assert any("time limit" in line for line in lines)
 
 
 def test_train_rejects_crops_larger_than_frames(tmp_path, capsys):

@@ -88,6 +88,8 @@ SPECS: dict[str, dict[str, Any]] = {
     },
 }
 OPSET = 17
+#: the card's words for each NARVis target model
+_TARGET_WORDS = {"max_response": "max response", "splat": "3DGS splatting, model='splat'"}
 INT8_MAX_LOSS_DB = 0.3
 
 
@@ -105,6 +107,7 @@ def _narvis_sets(
     log,
     looks: bool = False,
     flows: tuple[int, int, Sequence[int], Sequence[float]] | None = None,
+    target: str = "max_response",
 ) -> dict[str, list]:
     """The NARVis frames: "train" and "validation" (`count` hemisphere views
     of the hurricane at every other azimuth, every tenth to validation; with
@@ -119,7 +122,8 @@ def _narvis_sets(
     particles a pixel (log-uniform in `densities`, at most 4 x `points`
     particles), `views` views
     of each from either sampler under random looks; every 8th such view goes
-    to "flows" (validation), the rest to "train"."""
+    to "flows" (validation), the rest to "train". `target`: the Gaussian
+    renderer's model for every set's targets (data.NARVIS_TARGETS)."""
     w, h = size
     hur = _data.narvis_scene("hurricane", points, seed)
     cams = _data.narvis_cameras(hur, "hemisphere", w / h)
@@ -131,10 +135,17 @@ def _narvis_sets(
     grid = [grid[int(i)] for i in np.sort(rng.permutation(len(grid))[:held])]
     if looks:
         frames = _data.narvis_frames(
-            hur, picked, w, h, planes, looks=_data.narvis_looks(hur, len(picked), rng), progress=log
-        ) + _data.narvis_frames(hur, grid, w, h, planes, progress=log)
+            hur,
+            picked,
+            w,
+            h,
+            planes,
+            looks=_data.narvis_looks(hur, len(picked), rng),
+            progress=log,
+            target=target,
+        ) + _data.narvis_frames(hur, grid, w, h, planes, progress=log, target=target)
     else:
-        frames = _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log)
+        frames = _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log, target=target)
     storm = _data.narvis_scene("storm", points, seed + 7)
     odd = _data.narvis_cameras(storm, "hemisphere", w / h)[1::2]
     odd = [odd[int(i)] for i in np.sort(rng.permutation(len(odd))[:held])]
@@ -142,10 +153,10 @@ def _narvis_sets(
         "train": [f for i, f in enumerate(frames[: len(picked)]) if i not in val_idx],
         "validation": [f for i, f in enumerate(frames[: len(picked)]) if i in val_idx],
         "grid sampler": frames[len(picked) :],
-        "storm": _data.narvis_frames(storm, odd, w, h, planes, progress=log),
+        "storm": _data.narvis_frames(storm, odd, w, h, planes, progress=log, target=target),
     }
     if flows is not None:
-        flow_frames = narvis_flow_frames(*flows, points, seed, min(w, h), planes, log)
+        flow_frames = narvis_flow_frames(*flows, points, seed, min(w, h), planes, log, target)
         out["train"] += [f for i, f in enumerate(flow_frames) if i % 8 != 7]
         out["flows"] = [f for i, f in enumerate(flow_frames) if i % 8 == 7]
     return out
@@ -161,8 +172,10 @@ def narvis_flow_frames(
     largest: int,
     planes: Sequence[str],
     log: Callable[[str], None] | None = None,
+    target: str = "max_response",
 ) -> list:
-    """NARVis frames of the training flows (see _narvis_sets' `flows`)."""
+    """NARVis frames of the training flows (see _narvis_sets' `flows`),
+    their targets rendered with the model `target`."""
     from . import flows as _flows
 
     rng = np.random.default_rng(seed + 104_729)
@@ -180,7 +193,14 @@ def narvis_flow_frames(
                 pool = _data.narvis_cameras(sc, "grid" if rng.random() < 0.4 else "hemisphere")
                 cams.append(pool[int(rng.integers(0, len(pool)))])
             out += _data.narvis_frames(
-                sc, cams, n_side, n_side, planes, looks=_data.narvis_looks(sc, views, rng), progress=log
+                sc,
+                cams,
+                n_side,
+                n_side,
+                planes,
+                looks=_data.narvis_looks(sc, views, rng),
+                progress=log,
+                target=target,
             )
     return out
 
@@ -411,6 +431,7 @@ def train(
     frames: int | None = None,
     frame_size: tuple[int, int] | None = None,
     points: int | None = None,
+    target: str = "max_response",
     command: Sequence[str] | None = None,
     log: Callable[[str], None] = print,
 ) -> dict:
@@ -418,7 +439,9 @@ def train(
     it into `out` (NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx where int8
     loses at most INT8_MAX_LOSS_DB on the held-out frames) and write NAME.json;
     returns the card. points: the NARVis scenes' particles (default
-    the release run's 2M)."""
+    the release run's 2M); target: the model the Gaussian renderer renders
+    NARVis's targets with (data.NARVIS_TARGETS: "max_response", the default,
+    or "splat", 3DGS's forward pass)."""
     import torch
 
     from ..post import nets
@@ -426,6 +449,10 @@ def train(
     if name not in SPECS:
         raise ValueError(f"model: expected one of {NAMES}, got {name!r}")
     spec, trainer = SPECS[name], TRAINERS[name]
+    if target not in _data.NARVIS_TARGETS:
+        raise ValueError(f"target: expected one of {', '.join(_data.NARVIS_TARGETS)}, got {target!r}")
+    if target != "max_response" and trainer.frames is not None:
+        raise ValueError(f"target: {name}'s targets are not Gaussian renders (only narvis takes {target!r})")
     t_start = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -460,6 +487,7 @@ def train(
             )
             if "flow_scenes" in spec
             else None,
+            target,
         )
         train_frames = sets.pop("train")
         val_frames = [f for v in sets.values() for f in v]
@@ -536,7 +564,7 @@ def train(
         "command": " ".join(command) if command else f"clvis train {name} --steps {steps} --size {size}",
         "seed": seed,
         "data": {
-            **_narvis_data(sets, train_frames, fsize, data_seconds),
+            **_narvis_data(sets, train_frames, fsize, data_seconds, target),
             "looks": list(_data.NARVIS_TRAIN_COLORMAPS) if spec.get("looks") else None,
         }
         if sets
@@ -571,17 +599,21 @@ def train(
     return card
 
 
-def _narvis_data(sets: dict, train_frames: list, fsize, seconds: float) -> dict:
+def _narvis_data(sets: dict, train_frames: list, fsize, seconds: float, target: str = "max_response") -> dict:
     """The NARVis card's data section: what each set shows and how long
-    each renderer took on it (mean seconds per frame, this machine)."""
+    each renderer took on it (mean seconds per frame, this machine);
+    "target_model" the Gaussian renderer's model (clvis eval renders its
+    targets with it)."""
 
     def mean(frames, k):
         return round(float(np.mean([f.seconds[k] for f in frames])), 4) if frames else None
 
     all_frames = {"train": train_frames, **sets}
     return {
+        "target_model": target,
         "target": (
-            f"GaussianRenderer (max response) of one Gaussian per particle: sigma {_data.NARVIS_SIGMA} x the "
+            f"GaussianRenderer ({_TARGET_WORDS[target]}) of one Gaussian per particle: "
+            f"sigma {_data.NARVIS_SIGMA} x the "
             f"median 4-NN spacing, x {_data.NARVIS_STRETCH} along the velocity, opacity "
             f"{_data.NARVIS_OPACITY}; colour by {_data.NARVIS_ATTRIBUTE} through {_data.NARVIS_COLORMAP}"
         ),

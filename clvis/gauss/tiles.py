@@ -6,7 +6,9 @@ rows:
 
 1. ``tile_count``: each Gaussian's exact projected footprint (the outline
    ellipse of its cutoff ellipsoid, inflated by 1 %) against the tiles' pixel
-   centres; the number of tiles it may touch.
+   centres, in closed form a tile row (the ellipse's extent across the row's
+   strip); the number of tiles it may touch, and the ellipse (``foot``) for
+   the render's row test.
 2. ``clvis.primitives.scan`` of the counts: each Gaussian's first key, and the
    band's key count (one small read: the band is split when it exceeds the
    budget, ``tile_keys`` of the tuning profile or ``max_keys``).
@@ -17,7 +19,9 @@ rows:
 6. ``tile_render``: per pixel, the tile's list in dmin order; a hit is
    composited once no later candidate can come before it (its depth is below
    the next candidate's dmin), through a small pending buffer, with rounds over
-   the same list when more than KP hits are pending.
+   the same list when more than KP hits are pending. ``tile_render8`` (rows of
+   8 pixels) first skips a candidate whose ellipse holds no pixel centre of
+   its row.
 
 Memory: keys and ids take 12 bytes a key plus the sort's temporaries (12
 more); the key count is known before anything is allocated for it.
@@ -25,6 +29,7 @@ more); the key count is known before anything is allocated for it.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -49,7 +54,8 @@ __all__ = ["KEY_BYTES", "PROFILES", "projection_rows", "render_tiles", "tile_lis
 # 8-pixel tiles: the same CPU time as 16 on the bench scene (fewer candidates
 # against 2.3x the keys), half of it on NARVis's 2 M needle-like Gaussians
 # (1270 candidates a pixel against 3410).
-# "splat_wg": work-items (pixels) per group of splat.cl's render.
+# The splatting model renders with splat_render8 (rows of 8 pixels, render_wg)
+# where lanes is 8, else splat_render ("splat_wg" pixels a group).
 PROFILES = {
     "cpu": {
         "ts": 8,
@@ -74,6 +80,7 @@ PROFILES = {
 }
 KEY_BYTES = 24  # key 8 + id 4, and the radix sort's copies of both
 RAY_BYTES = 28
+FOOT = 12  # floats a Gaussian of tile_count's footprints (tiles.cl's foot)
 
 
 def projection_rows(camera: Camera, width: int, height: int) -> np.ndarray:
@@ -92,7 +99,7 @@ def _kernels(q, r) -> dict:
         sd = {"TS": prof["ts"], "COLOR": int(r.colors)}
         ks = {
             name: runtime.get_kernel(q, "gauss/splat.cl", name, sd, runtime.EXACT_FP)
-            for name in ("splat_count", "splat_keys", "splat_render")
+            for name in ("splat_count", "splat_keys", "splat_render", "splat_render8")
         }
         ks["tile_ranges"] = runtime.get_kernel(
             q, "gauss/tiles.cl", "tile_ranges", {"TS": prof["ts"]}, runtime.EXACT_FP
@@ -164,10 +171,17 @@ def render_tiles(
     counts = runtime.empty(q, max(n, 1), np.uint64, "tile counts per Gaussian")
     g_items = runtime.items(q, n, prof["item_wg"])
     splat = r.model == "splat"
-    lanes = 1 if splat else prof["lanes"] if r.lanes is None else r.lanes
-    render = ks["splat_render" if splat else "tile_render8" if lanes == 8 else "tile_render"]
-    wg = runtime.local_size(q, prof["splat_wg" if splat else "render_wg"])
+    lanes = prof["lanes"] if r.lanes is None else r.lanes
+    if splat:
+        render = ks["splat_render8" if lanes == 8 else "splat_render"]
+        group = prof["render_wg" if lanes == 8 else "splat_wg"]
+    else:
+        render = ks["tile_render8" if lanes == 8 else "tile_render"]
+        group = prof["render_wg"]
+    # a divisor of a tile's work-items (a profile's 8-lane form under the other's group size)
+    wg = runtime.local_size(q, math.gcd(group, ts * ts // lanes))
     head: tuple[Any, ...]  # the count and keys kernels' leading arguments
+    foot: Any = None  # the ray models' footprints (tile_count -> tile_render8)
     if splat:
         head = (recs, np.uint32(n), projd.base_data, near, np.uint32(w), np.uint32(h))
         splats = runtime.empty(q, (max(n, 1), 8), np.float32, "2D splats")
@@ -175,6 +189,7 @@ def render_tiles(
     else:
         head = (recs, np.uint32(n), projd.base_data, near, np.float32(r.cutoff), np.uint32(w), np.uint32(h))
         count_k, keys_k = ks["tile_count"], ks["tile_keys"]
+        foot = runtime.empty(q, (max(n, 1), FOOT), np.float32, "footprints")
     if host:
         out_rgba = np.empty((h, w, 4), np.float32)
         out_depth = np.empty((h, w), np.float32)
@@ -198,6 +213,7 @@ def render_tiles(
                 np.uint32(b),
                 *((splats.base_data,) if splat else ()),
                 counts.base_data,
+                *(() if splat else (foot.base_data,)),
             )
             offsets, total_d = primitives.scan(counts[:n], return_total=True, queue=q)
             m = int(total_d.get()[0])
@@ -270,7 +286,8 @@ def render_tiles(
                 args = (recs, order, splats.base_data, *lists, *band_args, *tf_args, colors)
             else:
                 model_args = (np.float32(r.cutoff * r.cutoff), np.float32(r.density))
-                args = (recs, order, *lists, camd.base_data, *band_args, *tf_args, *model_args, colors)
+                lists8 = (*lists[:2], foot.base_data, lists[2]) if lanes == 8 else lists
+                args = (recs, order, *lists8, camd.base_data, *band_args, *tf_args, *model_args, colors)
             render_bands += 1
             e3 = runtime.launch(
                 q,

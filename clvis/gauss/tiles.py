@@ -7,8 +7,7 @@ rows:
 1. ``tile_count``: each Gaussian's exact projected footprint (the outline
    ellipse of its cutoff ellipsoid, inflated by 1 %) against the tiles' pixel
    centres, in closed form a tile row (the ellipse's extent across the row's
-   strip); the number of tiles it may touch, and the ellipse (``foot``) for
-   the render's row test.
+   strip); the number of tiles it may touch.
 2. ``clvis.primitives.scan`` of the counts: each Gaussian's first key, and the
    band's key count (one small read: the band is split when it exceeds the
    budget, ``tile_keys`` of the tuning profile or ``max_keys``).
@@ -19,9 +18,7 @@ rows:
 6. ``tile_render``: per pixel, the tile's list in dmin order; a hit is
    composited once no later candidate can come before it (its depth is below
    the next candidate's dmin), through a small pending buffer, with rounds over
-   the same list when more than KP hits are pending. ``tile_render8`` (rows of
-   8 pixels) first skips a candidate whose ellipse holds no pixel centre of
-   its row.
+   the same list when more than KP hits are pending.
 
 Memory: keys and ids take 12 bytes a key plus the sort's temporaries (12
 more); the key count is known before anything is allocated for it.
@@ -80,7 +77,6 @@ PROFILES = {
 }
 KEY_BYTES = 24  # key 8 + id 4, and the radix sort's copies of both
 RAY_BYTES = 28
-FOOT = 12  # floats a Gaussian of tile_count's footprints (tiles.cl's foot)
 
 
 def projection_rows(camera: Camera, width: int, height: int) -> np.ndarray:
@@ -181,7 +177,6 @@ def render_tiles(
     # a divisor of a tile's work-items (a profile's 8-lane form under the other's group size)
     wg = runtime.local_size(q, math.gcd(group, ts * ts // lanes))
     head: tuple[Any, ...]  # the count and keys kernels' leading arguments
-    foot: Any = None  # the ray models' footprints (tile_count -> tile_render8)
     if splat:
         head = (recs, np.uint32(n), projd.base_data, near, np.uint32(w), np.uint32(h))
         splats = runtime.empty(q, (max(n, 1), 8), np.float32, "2D splats")
@@ -189,7 +184,6 @@ def render_tiles(
     else:
         head = (recs, np.uint32(n), projd.base_data, near, np.float32(r.cutoff), np.uint32(w), np.uint32(h))
         count_k, keys_k = ks["tile_count"], ks["tile_keys"]
-        foot = runtime.empty(q, (max(n, 1), FOOT), np.float32, "footprints")
     if host:
         out_rgba = np.empty((h, w, 4), np.float32)
         out_depth = np.empty((h, w), np.float32)
@@ -213,7 +207,6 @@ def render_tiles(
                 np.uint32(b),
                 *((splats.base_data,) if splat else ()),
                 counts.base_data,
-                *(() if splat else (foot.base_data,)),
             )
             offsets, total_d = primitives.scan(counts[:n], return_total=True, queue=q)
             m = int(total_d.get()[0])
@@ -286,8 +279,7 @@ def render_tiles(
                 args = (recs, order, splats.base_data, *lists, *band_args, *tf_args, colors)
             else:
                 model_args = (np.float32(r.cutoff * r.cutoff), np.float32(r.density))
-                lists8 = (*lists[:2], foot.base_data, lists[2]) if lanes == 8 else lists
-                args = (recs, order, *lists8, camd.base_data, *band_args, *tf_args, *model_args, colors)
+                args = (recs, order, *lists, camd.base_data, *band_args, *tf_args, *model_args, colors)
             render_bands += 1
             e3 = runtime.launch(
                 q,

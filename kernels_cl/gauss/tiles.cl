@@ -31,12 +31,8 @@
  *             (ty - ty0) * tiles_x + tx
  *
  * kernel tile_count(recs, uint n, proj, float near, float cutoff, uint W, uint H,
- *                   uint ty0, uint ty1, global ulong *counts,      n
- *                   global float *foot)                            12 n
- *     counts[i] = the tiles of the band Gaussian i may touch (footprint below);
- *     foot[12 i .. 12 i + 11] = its outline ellipse for tile_render8's row test
- *     (cu, cv, pad, slack, sv, ds, euv, 1 / evv, det, evv: clvis_ellipse_rows of
- *     clvis/gauss_tiles.h; then 1, 0), all 0 when it is not an ellipse (no test).
+ *                   uint ty0, uint ty1, global ulong *counts)      n
+ *     counts[i] = the tiles of the band Gaussian i may touch (footprint below).
  * kernel tile_keys(recs, uint n, proj, float near, float cutoff, uint W, uint H,
  *                  uint ty0, uint ty1, global const ulong *offsets,  n: exclusive scan of counts
  *                  global const float *cam,                           22 floats (clvis/camera.h)
@@ -60,16 +56,12 @@
  *     composited, rounds). Global size: (tiles to render) * TS * TS, work-item i:
  *     tile tile0 + i / (TS * TS) of the band (row-major), pixel i % (TS * TS)
  *     in it (row-major); any local size dividing TS * TS.
- * kernel tile_render8(the arguments of tile_render, with global const float *foot
- *                     (tile_count's) after ids)
+ * kernel tile_render8(the arguments of tile_render)
  *     The CPU profile's form of tile_render, the same outputs: a work-item
  *     renders a row of 8 pixels of a tile in float8 lanes (TS a multiple of
  *     8). Global size: (tiles to render) * TS * TS / 8, work-item i: tile
  *     tile0 + i / (TS * TS / 8), row (i % (TS * TS / 8)) / (TS / 8), pixels
- *     8 * (i % (TS / 8)) .. + 7 of that row; any local size. A candidate
- *     whose footprint holds no pixel centre of the row (foot, the tile test
- *     of clvis_ellipse_row on the row's strip and columns) is skipped before
- *     the hit test: it cannot hit, so the image is tile_render's.
+ *     8 * (i % (TS / 8)) .. + 7 of that row; any local size.
  *
  * Footprint (tile_footprint): the Gaussian's cutoff ellipsoid, inflated by
  * 1.01 (as the BVH boxes of gaussians.cl), projected exactly: when it lies in
@@ -77,8 +69,8 @@
  * matrix E (dual conic P Q* P^T of the ellipsoid's dual quadric Q*, expanded so
  * that no term cancels), a tile is kept when E's ellipse (plus 0.01 px) holds
  * a pixel centre of it (padded by 0.05 px; clvis_ellipse_row, a closed form per
- * tile row) — every pixel whose ray can hit lies inside; otherwise (the ellipsoid straddles the eye's plane) every
- * tile of the image. Gaussians wholly nearer than the near plane have none.
+ * tile row) — every pixel whose ray can hit lies inside; otherwise (the
+ * ellipsoid straddles the eye's plane) every tile of the image. Gaussians wholly nearer than the near plane have none.
  *
  * Order (tile_render): a tile's keys are sorted by their depth bound dk. A
  * pixel's ray has origin o at view depth d0 and direction d with c = D . d > 0,
@@ -209,34 +201,15 @@ inline int tile_row(const tile_footprint *f, int ty, uint W, uint H, int *c0, in
     return *c0 <= *c1;
 }
 
-/* foot[FOOT * i ..]: what tile_render8's row test needs of the footprint (the
- * fields of clvis_ellipse_rows; flag 0: no test, the footprint is not an ellipse) */
-#define FOOT 12
-inline void foot_store(const tile_footprint *f, int fits, global float *o)
-{
-    const clvis_ellipse_rows *r = &f->r;
-    if (!(fits && f->exact)) {
-        for (int k = 0; k < FOOT; ++k)
-            o[k] = 0.0f;
-        return;
-    }
-    float v[FOOT] = {r->cu, r->cv, r->pad, r->slack, r->sv, r->ds, r->euv, r->ievv, r->det, r->evv, 1.0f, 0.0f};
-    for (int k = 0; k < FOOT; ++k)
-        o[k] = v[k];
-}
-
 kernel void tile_count(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
-                       float cutoff, uint W, uint H, uint ty0, uint ty1, global ulong *counts, global float *foot)
+                       float cutoff, uint W, uint H, uint ty0, uint ty1, global ulong *counts)
 {
     uint i = get_global_id(0);
     if (i >= n)
         return;
     tile_footprint f;
-    f.exact = 0;
     ulong cnt = 0;
-    int fits = footprint(recs + i, proj, near, cutoff, W, H, &f);
-    foot_store(&f, fits, foot + FOOT * (size_t)i);
-    if (fits) {
+    if (footprint(recs + i, proj, near, cutoff, W, H, &f)) {
         int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
         for (int ty = y0; ty <= y1; ++ty) {
             int c0, c1;
@@ -529,28 +502,8 @@ inline float pend_t(ulong k)
             front[l] = INFINITY;                                                                      \
     } while (0)
 
-/* whether record j's footprint (foot, tile_count's) holds a pixel centre of
- * the row of pixels px0 .. px0 + 7 at centre height fy (clvis_ellipse_row's
- * strip, its rows' pad; NaN: yes) */
-inline bool foot_row(global const float *e, float fy, float u0, float u1)
-{
-    if (e[10] == 0.0f)
-        return true;
-    float cu = e[0], cv = e[1], pad = e[2], slack = e[3], sv = e[4], ds = e[5], euv = e[6], ievv = e[7];
-    float det = e[8], evv = e[9];
-    float lo = (fy - pad) - cv, hi = (fy + pad) - cv;
-    if (lo > sv || hi < -sv)
-        return false;
-    lo = clvis_hi(lo, -sv);
-    hi = clvis_lo(hi, sv);
-    float dr = clvis_lo(clvis_hi(ds, lo), hi), dl = clvis_lo(clvis_hi(-ds, lo), hi);
-    float wr = sqrt(det * clvis_hi(evv - dr * dr, 0.0f)), wl = sqrt(det * clvis_hi(evv - dl * dl, 0.0f));
-    float ulo = (cu + (euv * dl - wl) * ievv) - slack, uhi = (cu + (euv * dr + wr) * ievv) + slack;
-    return !(ulo > u1) && !(uhi < u0);
-}
-
 kernel void tile_render8(global const clvis_gaussian *recs, global const uint *order, global const ulong *keys,
-                        global const uint *ids, global const float *foot,
+                        global const uint *ids,
                          global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
                          uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
                          float tf_scale, float cutoff2, float density, global const uchar4 *colors,
@@ -590,8 +543,6 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
     }
     float8 ox = vload8(0, lox), oy = vload8(0, loy), oz = vload8(0, loz);
     float8 dx = vload8(0, ldx), dy = vload8(0, ldy), dz = vload8(0, ldz);
-    /* the row's pixel centres: u in [fu0, fu1] at v = fy */
-    float fy = (float)py + 0.5f, fu0 = (float)px0 + 0.5f, fu1 = (float)min(px0 + 7, W - 1) + 0.5f;
     bool first = true;   /* round 1: every hit is beyond "last" */
     while (live > 0) {
         for (int l = 0; l < 8; ++l) {
@@ -622,8 +573,6 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
                     break;
             }
             uint j = ids[i];
-            if (!foot_row(foot + FOOT * (size_t)j, fy, fu0, fu1))
-                continue;   /* no pixel centre of the row in the footprint: no hit */
             global const clvis_gaussian *g = recs + j;
             /* clvis_gauss_hit on 8 rays */
             float8 r0 = ox - g->mean[0], r1 = oy - g->mean[1], r2 = oz - g->mean[2];

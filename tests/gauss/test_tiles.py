@@ -200,7 +200,7 @@ def test_needles_keep_only_the_tiles_their_ellipse_meets(queue, model):
     keeps the Gaussian, over 80 % of the kept (tile, Gaussian) pairs have a
     hit (93 % with 8-pixel tiles, 90 % with 16; their bounding rectangles
     would keep 1.3x / 1.7x as many: 72 % / 53 %), and the image is the BVH
-    march's (tile_render8's row test skips no hit)."""
+    march's."""
     g = _needles(60, 21)
     w, h = 64, 48
     cam = _cam(w=w, h=h)

@@ -61,6 +61,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="narvis: the scenes' particles (default 2,000,000)",
     )
     p.add_argument(
+        "--target",
+        choices=("max_response", "splat"),
+        default=None,
+        help="narvis: the Gaussian renderer's model for the targets: max_response (the ray model, "
+        "default) or splat (3DGS's forward pass, the paper's GR)",
+    )
+    p.add_argument(
         "--eval",
         choices=("quick", "full", "none"),
         default="quick",
@@ -98,6 +105,8 @@ def _command(args: argparse.Namespace) -> list[str]:
         c += ["--points", str(args.points)]
     if args.time_limit is not None:
         c += ["--time-limit", str(args.time_limit)]
+    if args.target is not None:
+        c += ["--target", args.target]
     return c + ["--eval", args.eval]
 
 
@@ -157,6 +166,8 @@ def cmd(args: argparse.Namespace) -> int:
         if args.quiet
         else (lambda s: print(f"clvis train: {s}", file=sys.stderr, flush=True))
     )
+    if args.target is not None and args.model != "narvis":
+        raise CliError(f"--target: {args.model}'s targets are not Gaussian renders (narvis only)")
     fw, fh = args.frame_size or train.SPECS[args.model]["frame_size"]
     if args.size > min(fw, fh):
         raise CliError(f"--size {args.size}: larger than the frames ({fw}x{fh})")
@@ -169,6 +180,7 @@ def cmd(args: argparse.Namespace) -> int:
         frames=args.frames,
         frame_size=args.frame_size,
         points=args.points,
+        target=args.target or "max_response",
         command=_command(args),
         log=log,
         cache=None if args.no_cache else (args.cache or default_cache()),

@@ -6,7 +6,8 @@ rows:
 
 1. ``tile_count``: each Gaussian's exact projected footprint (the outline
    ellipse of its cutoff ellipsoid, inflated by 1 %) against the tiles' pixel
-   centres; the number of tiles it may touch.
+   centres, in closed form a tile row (the ellipse's extent across the row's
+   strip); the number of tiles it may touch.
 2. ``clvis.primitives.scan`` of the counts: each Gaussian's first key, and the
    band's key count (one small read: the band is split when it exceeds the
    budget, ``tile_keys`` of the tuning profile or ``max_keys``).
@@ -25,6 +26,7 @@ more); the key count is known before anything is allocated for it.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -49,7 +51,8 @@ __all__ = ["KEY_BYTES", "PROFILES", "projection_rows", "render_tiles", "tile_lis
 # 8-pixel tiles: the same CPU time as 16 on the bench scene (fewer candidates
 # against 2.3x the keys), half of it on NARVis's 2 M needle-like Gaussians
 # (1270 candidates a pixel against 3410).
-# "splat_wg": work-items (pixels) per group of splat.cl's render.
+# The splatting model renders with splat_render8 (rows of 8 pixels, render_wg)
+# where lanes is 8, else splat_render ("splat_wg" pixels a group).
 PROFILES = {
     "cpu": {
         "ts": 8,
@@ -92,7 +95,7 @@ def _kernels(q, r) -> dict:
         sd = {"TS": prof["ts"], "COLOR": int(r.colors)}
         ks = {
             name: runtime.get_kernel(q, "gauss/splat.cl", name, sd, runtime.EXACT_FP)
-            for name in ("splat_count", "splat_keys", "splat_render")
+            for name in ("splat_count", "splat_keys", "splat_render", "splat_render8")
         }
         ks["tile_ranges"] = runtime.get_kernel(
             q, "gauss/tiles.cl", "tile_ranges", {"TS": prof["ts"]}, runtime.EXACT_FP
@@ -164,9 +167,15 @@ def render_tiles(
     counts = runtime.empty(q, max(n, 1), np.uint64, "tile counts per Gaussian")
     g_items = runtime.items(q, n, prof["item_wg"])
     splat = r.model == "splat"
-    lanes = 1 if splat else prof["lanes"] if r.lanes is None else r.lanes
-    render = ks["splat_render" if splat else "tile_render8" if lanes == 8 else "tile_render"]
-    wg = runtime.local_size(q, prof["splat_wg" if splat else "render_wg"])
+    lanes = prof["lanes"] if r.lanes is None else r.lanes
+    if splat:
+        render = ks["splat_render8" if lanes == 8 else "splat_render"]
+        group = prof["render_wg" if lanes == 8 else "splat_wg"]
+    else:
+        render = ks["tile_render8" if lanes == 8 else "tile_render"]
+        group = prof["render_wg"]
+    # a divisor of a tile's work-items (a profile's 8-lane form under the other's group size)
+    wg = runtime.local_size(q, math.gcd(group, ts * ts // lanes))
     head: tuple[Any, ...]  # the count and keys kernels' leading arguments
     if splat:
         head = (recs, np.uint32(n), projd.base_data, near, np.uint32(w), np.uint32(h))

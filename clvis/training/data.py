@@ -394,6 +394,10 @@ NARVIS_STRETCH = 4.0
 NARVIS_SIGMA = 1.0
 NARVIS_OPACITY = 0.5
 NARVIS_ATTRIBUTE = "temperature"
+#: the models GR may render NARVis's targets with (``clvis train narvis
+#: --target``): "max_response" (the ray model, the default) or "splat" (3DGS's
+#: forward pass, the paper's own GR)
+NARVIS_TARGETS = ("max_response", "splat")
 NARVIS_COLORMAP = "viridis"
 #: the generalisation set: the storm this many seconds later (the rain bands
 #: wound up by the differential rotation), from other particles
@@ -434,12 +438,15 @@ class NarvisScene:
             **kw,
         )
 
-    def gaussian_renderer(self, queue: Any = None) -> Any:
-        """The Gaussian renderer over the velocity-elongated Gaussians (GR)."""
+    def gaussian_renderer(self, queue: Any = None, model: str = "max_response") -> Any:
+        """The Gaussian renderer over the velocity-elongated Gaussians (GR),
+        rendering with `model` (one of NARVIS_TARGETS)."""
         from ..colormap import TransferFunction
         from ..gauss import GaussianRenderer, gaussians_from_points
         from ..gauss.points import knn_mean_distance
 
+        if model not in NARVIS_TARGETS:
+            raise ValueError(f"target: expected one of {', '.join(NARVIS_TARGETS)}, got {model!r}")
         pos = self.cloud.positions
         sample = pos[np.random.default_rng(0).permutation(len(pos))[:200_000]]
         # the median 4-NN distance of a subsample, scaled to the whole cloud's density
@@ -453,7 +460,7 @@ class NarvisScene:
             color_by=self.attribute,
         )
         tf = TransferFunction(self.colormap, value_range=self.value_range)
-        return GaussianRenderer(g, tf, queue=queue, colors=False)
+        return GaussianRenderer(g, tf, queue=queue, colors=False, model=model)
 
 
 def narvis_scene(kind: str, n: int, seed: int) -> NarvisScene:
@@ -589,9 +596,11 @@ def narvis_frames(
     *,
     looks: Sequence[tuple[str, tuple[float, float]]] | None = None,
     progress: Callable[[str], None] | None = None,
+    target: str = "max_response",
 ) -> list[NarvisFrame]:
     """Both renders of each camera's view; `looks`: per camera a (colormap,
-    value range) both renderers colour it with (default the scene's)."""
+    value range) both renderers colour it with (default the scene's);
+    `target`: the Gaussian renderer's model (NARVIS_TARGETS)."""
     import time
 
     from ..colormap import TransferFunction
@@ -599,8 +608,8 @@ def narvis_frames(
 
     if looks is not None and len(looks) != len(cameras):
         raise ValueError(f"looks: {len(looks)} for {len(cameras)} cameras")
+    gr = scene.gaussian_renderer(model=target)
     ras = scene.rasterizer()
-    gr = scene.gaussian_renderer()
     frames = []
     for i, cam in enumerate(cameras):
         t0 = time.perf_counter()

@@ -181,9 +181,9 @@ def _narvis_scene(family: str, n: int, seed: int) -> Any:
     return _data.narvis_flow_scene(family, n, seed)
 
 
-def _frames(name: str, case: Case, seed: int, planes: Sequence[str]):
+def _frames(name: str, case: Case, seed: int, planes: Sequence[str], target: str = "max_response"):
     """Yield (setting label, network input, target rgb, {baseline: rgb}) for
-    the case's frames."""
+    the case's frames; `target`: the Gaussian renderer's model (narvis)."""
     from ..post.pack import pack_gbuffers
     from ..post.pushpull import pushpull
 
@@ -218,7 +218,7 @@ def _frames(name: str, case: Case, seed: int, planes: Sequence[str]):
         cams = _data.narvis_cameras(sc, case.sampler, w / h)
         rng = np.random.default_rng(seed)
         cams = [cams[int(i)] for i in rng.permutation(len(cams))[: case.frames]]
-        ras, gr = sc.rasterizer(), sc.gaussian_renderer()
+        ras, gr = sc.rasterizer(), sc.gaussian_renderer(model=target)
         for cam in cams:
             g = sc.gbuffers(ras, cam, w, h, planes)
             target = np.clip(np.asarray(gr.render(cam, w, h).rgba)[..., :3], 0, 1).astype(np.float32)
@@ -275,11 +275,13 @@ def evaluate(
         raise ValueError(f"model: expected one of {tuple(FAMILIES)}, got {name!r}")
     net = post.load(name, directory=model_dir, threads=int(os.environ.get("CLVIS_EVAL_THREADS", "0")) or None)
     guarded = net.guard if guard is None else guard
+    # narvis: the targets of the model the network was trained on (its card's data)
+    model = ((net.card or {}).get("data") or {}).get("target_model", "max_response")
     t0 = time.perf_counter()
     out_rows = []
     for i, case in enumerate(cases if cases is not None else suite(name, quick)):
         per: dict[str, dict[str, list]] = {}
-        for label, x, target, base in _frames(name, case, seed + 7919 * i, net.planes or ()):
+        for label, x, target, base in _frames(name, case, seed + 7919 * i, net.planes or (), model):
             got = net(x, guard=guarded)[..., :3] / np.float32(255)
             scores = {"network": metrics(got, target), **{k: metrics(v, target) for k, v in base.items()}}
             for k, v in scores.items():

@@ -90,6 +90,8 @@ SPECS: dict[str, dict[str, Any]] = {
     },
 }
 OPSET = 17
+#: the card's words for each NARVis target model
+_TARGET_WORDS = {"max_response": "max response", "splat": "3DGS splatting, model='splat'"}
 INT8_MAX_LOSS_DB = 0.3
 
 
@@ -197,6 +199,7 @@ def _narvis_sets(
     looks: bool = False,
     flows: tuple[int, int, Sequence[int], Sequence[float]] | None = None,
     cache: Path | None = None,
+    target: str = "max_response",
 ) -> dict[str, list]:
     """The NARVis frames: "train" and "validation" (`count` hemisphere views
     of the hurricane at every other azimuth, every tenth to validation; with
@@ -211,7 +214,8 @@ def _narvis_sets(
     particles a pixel (log-uniform in `densities`, at most 4 x `points`
     particles), `views` views
     of each from either sampler under random looks; every 8th such view goes
-    to "flows" (validation), the rest to "train".
+    to "flows" (validation), the rest to "train". `target`: the Gaussian
+    renderer's model for every set's targets (data.NARVIS_TARGETS).
 
     `cache`: a directory the rendered frames are kept in (cached_frames:
     the hurricane's, the storm's and the flows' each under their own key)."""
@@ -229,9 +233,9 @@ def _narvis_sets(
     def hurricane_frames() -> list:
         if hur_looks is not None:
             return _data.narvis_frames(
-                hur, picked, w, h, planes, looks=hur_looks, progress=log
-            ) + _data.narvis_frames(hur, grid, w, h, planes, progress=log)
-        return _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log)
+                hur, picked, w, h, planes, looks=hur_looks, progress=log, target=target
+            ) + _data.narvis_frames(hur, grid, w, h, planes, progress=log, target=target)
+        return _data.narvis_frames(hur, picked + grid, w, h, planes, progress=log, target=target)
 
     key = {
         "count": count,
@@ -240,6 +244,7 @@ def _narvis_sets(
         "seed": seed,
         "size": [w, h],
         "planes": list(planes),
+        "target": target,
     }
     frames = cached_frames(cache, {"set": "hurricane", "looks": looks, **key}, hurricane_frames, log)
     storm = _data.narvis_scene("storm", points, seed + 7)
@@ -252,7 +257,7 @@ def _narvis_sets(
         "storm": cached_frames(
             cache,
             {"set": "storm", **key},
-            lambda: _data.narvis_frames(storm, odd, w, h, planes, progress=log),
+            lambda: _data.narvis_frames(storm, odd, w, h, planes, progress=log, target=target),
             log,
         ),
     }
@@ -260,7 +265,7 @@ def _narvis_sets(
         flow_frames = cached_frames(
             cache,
             {"set": "flows", "flows": [flows[0], flows[1], list(flows[2]), list(flows[3])], **key},
-            lambda: narvis_flow_frames(*flows, points, seed, min(w, h), planes, log),
+            lambda: narvis_flow_frames(*flows, points, seed, min(w, h), planes, log, target),
             log,
         )
         out["train"] += [f for i, f in enumerate(flow_frames) if i % 8 != 7]
@@ -278,8 +283,10 @@ def narvis_flow_frames(
     largest: int,
     planes: Sequence[str],
     log: Callable[[str], None] | None = None,
+    target: str = "max_response",
 ) -> list:
-    """NARVis frames of the training flows (see _narvis_sets' `flows`)."""
+    """NARVis frames of the training flows (see _narvis_sets' `flows`),
+    their targets rendered with the model `target`."""
     from . import flows as _flows
 
     rng = np.random.default_rng(seed + 104_729)
@@ -297,7 +304,14 @@ def narvis_flow_frames(
                 pool = _data.narvis_cameras(sc, "grid" if rng.random() < 0.4 else "hemisphere")
                 cams.append(pool[int(rng.integers(0, len(pool)))])
             out += _data.narvis_frames(
-                sc, cams, n_side, n_side, planes, looks=_data.narvis_looks(sc, views, rng), progress=log
+                sc,
+                cams,
+                n_side,
+                n_side,
+                planes,
+                looks=_data.narvis_looks(sc, views, rng),
+                progress=log,
+                target=target,
             )
     return out
 
@@ -528,6 +542,7 @@ def train(
     frames: int | None = None,
     frame_size: tuple[int, int] | None = None,
     points: int | None = None,
+    target: str = "max_response",
     command: Sequence[str] | None = None,
     log: Callable[[str], None] = print,
     cache: str | os.PathLike | None = None,
@@ -537,12 +552,14 @@ def train(
     it into `out` (NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx where int8
     loses at most INT8_MAX_LOSS_DB on the held-out frames) and write NAME.json;
     returns the card. points: the NARVis scenes' particles (default
-    the release run's 2M). cache: a directory NARVis's rendered frames are
-    kept in and read back from on a later run with the same data arguments
-    (cached_frames; None: render them every time). time_limit: seconds of
-    training (the data's rendering not counted) after which the run stops
-    short of `steps`; the learning rate's cosine follows whichever of the
-    two ends first."""
+    the release run's 2M); target: the model the Gaussian renderer renders
+    NARVis's targets with (data.NARVIS_TARGETS: "max_response", the default,
+    or "splat", 3DGS's forward pass). cache: a directory NARVis's rendered
+    frames are kept in and read back from on a later run with the same data
+    arguments (cached_frames; None: render them every time). time_limit:
+    seconds of training (the data's rendering not counted) after which the
+    run stops short of `steps`; the learning rate's cosine follows whichever
+    of the two ends first."""
     import torch
 
     from ..post import nets
@@ -550,6 +567,10 @@ def train(
     if name not in SPECS:
         raise ValueError(f"model: expected one of {NAMES}, got {name!r}")
     spec, trainer = SPECS[name], TRAINERS[name]
+    if target not in _data.NARVIS_TARGETS:
+        raise ValueError(f"target: expected one of {', '.join(_data.NARVIS_TARGETS)}, got {target!r}")
+    if target != "max_response" and trainer.frames is not None:
+        raise ValueError(f"target: {name}'s targets are not Gaussian renders (only narvis takes {target!r})")
     t_start = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -585,6 +606,7 @@ def train(
             if "flow_scenes" in spec
             else None,
             Path(cache) if cache is not None else None,
+            target,
         )
         train_frames = sets.pop("train")
         val_frames = [f for v in sets.values() for f in v]
@@ -672,7 +694,7 @@ def train(
         "command": " ".join(command) if command else f"clvis train {name} --steps {steps} --size {size}",
         "seed": seed,
         "data": {
-            **_narvis_data(sets, train_frames, fsize, data_seconds),
+            **_narvis_data(sets, train_frames, fsize, data_seconds, target),
             "looks": list(_data.NARVIS_TRAIN_COLORMAPS) if spec.get("looks") else None,
         }
         if sets
@@ -709,17 +731,21 @@ def train(
     return card
 
 
-def _narvis_data(sets: dict, train_frames: list, fsize, seconds: float) -> dict:
+def _narvis_data(sets: dict, train_frames: list, fsize, seconds: float, target: str = "max_response") -> dict:
     """The NARVis card's data section: what each set shows and how long
-    each renderer took on it (mean seconds per frame, this machine)."""
+    each renderer took on it (mean seconds per frame, this machine);
+    "target_model" the Gaussian renderer's model (clvis eval renders its
+    targets with it)."""
 
     def mean(frames, k):
         return round(float(np.mean([f.seconds[k] for f in frames])), 4) if frames else None
 
     all_frames = {"train": train_frames, **sets}
     return {
+        "target_model": target,
         "target": (
-            f"GaussianRenderer (max response) of one Gaussian per particle: sigma {_data.NARVIS_SIGMA} x the "
+            f"GaussianRenderer ({_TARGET_WORDS[target]}) of one Gaussian per particle: "
+            f"sigma {_data.NARVIS_SIGMA} x the "
             f"median 4-NN spacing, x {_data.NARVIS_STRETCH} along the velocity, opacity "
             f"{_data.NARVIS_OPACITY}; colour by {_data.NARVIS_ATTRIBUTE} through {_data.NARVIS_COLORMAP}"
         ),

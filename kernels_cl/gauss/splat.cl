@@ -23,7 +23,8 @@
  *     the projected mean clamped to 1.3 x the half image around its centre
  *     (3DGS's limit on the Jacobian). Culled: depth <= near, w <= 0, det(S2) <= 0.
  *     counts[i]: the band's tiles that the ellipse q <= 9 (3 sigma), inflated by
- *     1e-3 and 0.05 px, meets (tiles.cl's footprint test).
+ *     1e-3 and 0.05 px, holds a pixel centre of (tiles.cl's footprint test,
+ *     clvis_ellipse_row).
  * kernel splat_keys(same, global const float *splats, global const ulong *offsets,
  *                   global ulong *keys, global uint *ids)
  *     keys: (tile - band's first) << 32 | clvis_key_f32(depth), ids: i.
@@ -103,6 +104,7 @@ inline int splat_project(global const clvis_gaussian *g, global const float *pro
 /* the tiles (inclusive range) and the test of the ellipse q <= 9 (inflated) */
 typedef struct {
     clvis_ellipse e;
+    clvis_ellipse_rows r;
     int tx0, tx1, ty0, ty1;
 } splat_fp;
 
@@ -119,6 +121,7 @@ inline int splat_footprint(const float *s, uint W, uint H, splat_fp *f)
     if (!(euu > 0.0f && evv > 0.0f && det > 0.0f && isfinite(det)))
         return 0;
     clvis_ellipse_set(&f->e, s[0], s[1], euu, evv, euv, det);
+    clvis_ellipse_rows_set(&f->e, &f->r);
     float hu = sqrt(euu) + f->e.pad, hv = sqrt(evv) + f->e.pad;
     int r[4];
     if (!clvis_tile_rect(s[0] - hu, s[0] + hu, s[1] - hv, s[1] + hv, W, H, TS, r))
@@ -128,6 +131,17 @@ inline int splat_footprint(const float *s, uint W, uint H, splat_fp *f)
     f->ty0 = r[2];
     f->ty1 = r[3];
     return 1;
+}
+
+/* the tile columns c0 .. c1 of tile row ty that the ellipse meets; 0 when none */
+inline int splat_row(const splat_fp *f, int ty, uint W, uint H, int *c0, int *c1)
+{
+    int a, b;
+    if (!clvis_ellipse_row(&f->r, ty, W, H, TS, &a, &b))
+        return 0;
+    *c0 = max(a, f->tx0);
+    *c1 = min(b, f->tx1);
+    return *c0 <= *c1;
 }
 
 kernel void splat_count(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
@@ -144,9 +158,11 @@ kernel void splat_count(global const clvis_gaussian *recs, uint n, global const 
     ulong cnt = 0;
     if (splat_footprint(s, W, H, &f)) {
         int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
-        for (int ty = y0; ty <= y1; ++ty)
-            for (int tx = f.tx0; tx <= f.tx1; ++tx)
-                cnt += clvis_ellipse_tile(&f.e, tx, ty, W, H, TS);
+        for (int ty = y0; ty <= y1; ++ty) {
+            int c0, c1;
+            if (splat_row(&f, ty, W, H, &c0, &c1))
+                cnt += (ulong)(c1 - c0 + 1);
+        }
     }
     counts[i] = cnt;
 }
@@ -168,13 +184,16 @@ kernel void splat_keys(global const clvis_gaussian *recs, uint n, global const f
     ulong dkey = (ulong)clvis_key_f32(as_uint(s[5]));
     ulong at = offsets[i];
     int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
-    for (int ty = y0; ty <= y1; ++ty)
-        for (int tx = f.tx0; tx <= f.tx1; ++tx)
-            if (clvis_ellipse_tile(&f.e, tx, ty, W, H, TS)) {
-                keys[at] = ((ulong)(ty - (int)ty0) * tiles_x + (ulong)tx) << 32 | dkey;
-                ids[at] = i;
-                ++at;
-            }
+    for (int ty = y0; ty <= y1; ++ty) {
+        int c0, c1;
+        if (!splat_row(&f, ty, W, H, &c0, &c1))
+            continue;
+        for (int tx = c0; tx <= c1; ++tx) {
+            keys[at] = ((ulong)(ty - (int)ty0) * tiles_x + (ulong)tx) << 32 | dkey;
+            ids[at] = i;
+            ++at;
+        }
+    }
 }
 
 kernel void splat_render(global const clvis_gaussian *recs, global const uint *order, global const float *splats,
@@ -221,4 +240,90 @@ kernel void splat_render(global const clvis_gaussian *recs, global const uint *o
     rgba[pix] = (float4)(cr, cg, cb, 1.0f - T);
     depth[pix] = z;
     stats[pix] = (uint2)(hits, 1u);
+}
+
+/* ---------------------------------------------------------------- 8 lanes
+ * splat_render8: splat_render's result (the same bits), a work-item per row
+ * of 8 pixels of a tile (TS a multiple of 8; work-items as tiles.cl's
+ * tile_render8): a candidate's id and splat are read once for the 8 pixels
+ * and q is computed in float8 lanes (the same operations as splat_render,
+ * lane by lane); alpha, the stop test and compositing lane by lane for the
+ * lanes with q <= 9 only. The row ends when its 8 pixels have stopped.
+ * Same arguments as splat_render. */
+kernel void splat_render8(global const clvis_gaussian *recs, global const uint *order, global const float *splats,
+                          global const ulong *keys, global const uint *ids, global const uint2 *ranges, uint W,
+                          uint H, uint ty0, uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n,
+                          float tf_min, float tf_scale, global const uchar4 *colors, global float4 *rgba,
+                          global float *depth, global uint2 *stats)
+{
+    uint tiles_x = (W + TS - 1) / TS;
+    uint per_tile = TS * TS / 8;
+    uint tile = tile0 + get_global_id(0) / per_tile, l8 = get_global_id(0) % per_tile;
+    uint px0 = (tile % tiles_x) * TS + (l8 % (TS / 8)) * 8, row = (tile / tiles_x) * TS + l8 / (TS / 8);
+    uint py = ty0 * TS + row;
+    if (px0 >= W || row >= rows || py >= H)
+        return;
+    float fxs[8], T[8], cr[8], cg[8], cb[8], z[8];
+    uint hits[8];
+    int on[8];   /* -1: the lane still blends (a mask lane of int8), 0: stopped */
+    uint2 range = ranges[tile];
+    int live = 0;
+    for (int l = 0; l < 8; ++l) {
+        fxs[l] = (float)(px0 + l) + 0.5f;
+        T[l] = 1.0f;
+        cr[l] = cg[l] = cb[l] = 0.0f;
+        z[l] = INFINITY;
+        hits[l] = 0;
+        on[l] = px0 + l < W ? -1 : 0;
+        live += on[l] != 0;
+    }
+    float8 fx = vload8(0, fxs);
+    float fy = (float)py + 0.5f;
+    int8 on8 = vload8(0, on);
+    for (uint i = range.x; i < range.y && live > 0; ++i) {
+        uint id = ids[i];
+        global const float *s = splats + 8 * (size_t)id;
+        float8 dx = s[0] - fx;
+        float dy = s[1] - fy;
+        float8 q8 = (s[2] * dx * dx + s[4] * dy * dy) + 2.0f * s[3] * dx * dy;
+        int8 in8 = (q8 <= SPLAT_Q_MAX) & on8;
+        if (!any(in8))
+            continue;
+        global const clvis_gaussian *g = recs + id;
+        uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
+        float opac = g->opacity * tf[ti].w;
+#if COLOR == 1
+        float4 c = clvis_gauss_rgb8(colors[order[id]]);
+#else
+        float4 c = tf[ti];
+#endif
+        float q[8];
+        int in[8];
+        vstore8(q8, 0, q);
+        vstore8(in8, 0, in);
+        for (int l = 0; l < 8; ++l) {
+            if (!in[l])
+                continue;
+            float alpha = fmin(0.99f, opac * exp(-0.5f * q[l]));
+            if (alpha < 1.0f / 255.0f)
+                continue;
+            float Tn = T[l] * (1.0f - alpha);
+            if (Tn < SPLAT_T_STOP) {
+                on[l] = 0;
+                --live;
+                continue;
+            }
+            clvis_gauss_composite(alpha, c, &T[l], &cr[l], &cg[l], &cb[l]);
+            ++hits[l];
+            if (T[l] < 0.5f && z[l] == INFINITY)
+                z[l] = s[5];
+        }
+        on8 = vload8(0, on);
+    }
+    for (int l = 0; l < 8 && px0 + l < W; ++l) {
+        size_t pix = (size_t)(py - out_y0) * W + px0 + l;
+        rgba[pix] = (float4)(cr[l], cg[l], cb[l], 1.0f - T[l]);
+        depth[pix] = z[l];
+        stats[pix] = (uint2)(hits[l], 1u);
+    }
 }

@@ -67,10 +67,10 @@
  * 1.01 (as the BVH boxes of gaussians.cl), projected exactly: when it lies in
  * front of the eye's plane its outline is the ellipse with centre c and
  * matrix E (dual conic P Q* P^T of the ellipsoid's dual quadric Q*, expanded so
- * that no term cancels), a tile is kept when E's ellipse (plus 0.01 px) meets
- * the rectangle of its pixel centres (plus 0.05 px) — every pixel whose ray can
- * hit lies inside; otherwise (the ellipsoid straddles the eye's plane) every
- * tile of the image. Gaussians wholly nearer than the near plane have none.
+ * that no term cancels), a tile is kept when E's ellipse (plus 0.01 px) holds
+ * a pixel centre of it (padded by 0.05 px; clvis_ellipse_row, a closed form per
+ * tile row) — every pixel whose ray can hit lies inside; otherwise (the
+ * ellipsoid straddles the eye's plane) every tile of the image. Gaussians wholly nearer than the near plane have none.
  *
  * Order (tile_render): a tile's keys are sorted by their depth bound dk. A
  * pixel's ray has origin o at view depth d0 and direction d with c = D . d > 0,
@@ -107,6 +107,7 @@
 
 typedef struct {
     clvis_ellipse e;       /* the outline ellipse */
+    clvis_ellipse_rows r;  /* its rows' form */
     int exact;             /* 1: test tiles against the ellipse; 0: every tile of the rectangle */
     int tx0, tx1, ty0, ty1;/* tile rectangle (inclusive); empty when tx0 > tx1 */
     float dmin;
@@ -161,6 +162,7 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
         float det = euu * evv - euv * euv;
         if (euu > 0.0f && evv > 0.0f && det > 0.0f && isfinite(det) && isfinite(cu) && isfinite(cv)) {
             clvis_ellipse_set(&f->e, cu, cv, euu, evv, euv, det);
+            clvis_ellipse_rows_set(&f->e, &f->r);
             f->exact = 1;
             float hu = sqrt(euu) + f->e.pad, hv = sqrt(evv) + f->e.pad;
             ulo = cu - hu;
@@ -184,11 +186,19 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
     return 1;
 }
 
-inline int tile_kept(const tile_footprint *f, int tx, int ty, uint W, uint H)
+/* the tile columns c0 .. c1 of tile row ty that the footprint keeps; 0 when none */
+inline int tile_row(const tile_footprint *f, int ty, uint W, uint H, int *c0, int *c1)
 {
+    *c0 = f->tx0;
+    *c1 = f->tx1;
     if (!f->exact)
         return 1;
-    return clvis_ellipse_tile(&f->e, tx, ty, W, H, TS);
+    int a, b;
+    if (!clvis_ellipse_row(&f->r, ty, W, H, TS, &a, &b))
+        return 0;
+    *c0 = max(a, f->tx0);
+    *c1 = min(b, f->tx1);
+    return *c0 <= *c1;
 }
 
 kernel void tile_count(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
@@ -201,9 +211,11 @@ kernel void tile_count(global const clvis_gaussian *recs, uint n, global const f
     ulong cnt = 0;
     if (footprint(recs + i, proj, near, cutoff, W, H, &f)) {
         int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
-        for (int ty = y0; ty <= y1; ++ty)
-            for (int tx = f.tx0; tx <= f.tx1; ++tx)
-                cnt += tile_kept(&f, tx, ty, W, H);
+        for (int ty = y0; ty <= y1; ++ty) {
+            int c0, c1;
+            if (tile_row(&f, ty, W, H, &c0, &c1))
+                cnt += (ulong)(c1 - c0 + 1);
+        }
     }
     counts[i] = cnt;
 }
@@ -276,15 +288,18 @@ kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const fl
     uint tiles_x = (W + TS - 1) / TS;
     ulong at = offsets[i];
     int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
-    for (int ty = y0; ty <= y1; ++ty)
-        for (int tx = f.tx0; tx <= f.tx1; ++tx)
-            if (tile_kept(&f, tx, ty, W, H)) {
-                float dk = tile_depth(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, near, tx, ty, W, H);
-                ulong tile = (ulong)(ty - (int)ty0) * tiles_x + (ulong)tx;
-                keys[at] = tile << 32 | (ulong)clvis_key_f32(as_uint(dk));
-                ids[at] = i;
-                ++at;
-            }
+    for (int ty = y0; ty <= y1; ++ty) {
+        int c0, c1;
+        if (!tile_row(&f, ty, W, H, &c0, &c1))
+            continue;
+        for (int tx = c0; tx <= c1; ++tx) {
+            float dk = tile_depth(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, near, tx, ty, W, H);
+            ulong tile = (ulong)(ty - (int)ty0) * tiles_x + (ulong)tx;
+            keys[at] = tile << 32 | (ulong)clvis_key_f32(as_uint(dk));
+            ids[at] = i;
+            ++at;
+        }
+    }
 }
 
 kernel void tile_ranges(global const ulong *keys, uint m, global uint2 *ranges)

@@ -90,6 +90,26 @@ def test_point_clouds(queue):
         _check(queue, g, _cam(w=W, h=H))
 
 
+def test_row_and_pixel_work_shapes_agree_bit_for_bit(queue):
+    """splat_render8 (a row of 8 pixels a work-item, q in float8 lanes) gives
+    splat_render's bits (a pixel a work-item), needles and bands included;
+    the binning keeps only tiles the splat's ellipse meets."""
+    from .test_tiles import _needles
+
+    g = _needles(80, 7)
+    cam = _cam(w=45, h=38)
+    out = []
+    for lanes in (1, 8):
+        r = gr.GaussianRenderer(g, TransferFunction("jet"), model="splat", queue=queue)
+        r.lanes = lanes
+        out.append(r.render(cam, 45, 38, max_keys=200))
+        assert out[-1].stats["lanes"] == lanes
+    for a, b in ((out[0].rgba, out[1].rgba), (out[0].depth, out[1].depth), (out[0].hits, out[1].hits)):
+        np.testing.assert_array_equal(a, b)
+    img, rgba = _check(queue, g, cam, w=45, h=38)
+    assert (rgba[..., 3] > 0.05).mean() > 0.1 and img.stats["keys"] > g.n
+
+
 def test_bad_input(queue):
     g = _random(10)
     with pytest.raises(ValueError, match="needs method='tiles'"):

@@ -114,6 +114,53 @@ def test_train_rejects_crops_larger_than_frames(tmp_path, capsys):
     assert "larger than the frames" in capsys.readouterr().err
 
 
+def test_train_narvis_with_the_splat_target(tmp_path, capsys):
+    """`clvis train narvis --target splat`: a few steps on frames whose
+    targets the splatting model rendered; the card says so and repeats it."""
+    rc = main(
+        [
+            *("train", "narvis", "--steps", "2", "--size", "64", "--frames", "1", "--frame-size", "96x64"),
+            *("--out", str(tmp_path), "--quiet", "--eval", "none", "--points", "20000", "--target", "splat"),
+        ]
+    )
+    assert rc == 0
+    card = json.loads((tmp_path / "narvis.json").read_text())
+    assert card["data"]["target_model"] == "splat" and "splatting" in card["data"]["target"]
+    assert "--target splat" in card["command"] and card["training"]["steps"] == 2
+
+
+def test_train_target_is_narvis_only_and_checked(tmp_path, capsys):
+    from clvis.cli import train as train_cli
+
+    assert main(["train", "infill", "--target", "splat", "--out", str(tmp_path)]) == 2
+    assert "narvis only" in capsys.readouterr().err
+    assert main(["train", "narvis", "--target", "bvh", "--out", str(tmp_path)]) == 2
+    with pytest.raises(ValueError, match="target"):
+        train.train("narvis", steps=1, size=64, out=tmp_path, target="absorption")
+    # the CLI's choices are the training's
+    p = train_cli.add_parser(__import__("argparse").ArgumentParser().add_subparsers())
+    assert next(a for a in p._actions if a.dest == "target").choices == data.NARVIS_TARGETS
+
+
+def test_narvis_targets_render_with_the_chosen_model():
+    """target="splat" renders the frames' targets with GaussianRenderer's
+    splat model (the same image as rendering it directly), which differs
+    from the default max-response image of the same view."""
+    sc = data.narvis_scene("hurricane", 20_000, 3)
+    cam = data.narvis_cameras(sc, "hemisphere")[3]
+    planes = ("rgb", "depth", "vel2d")
+    mr = data.narvis_frames(sc, [cam], 48, 40, planes)[0]
+    sp = data.narvis_frames(sc, [cam], 48, 40, planes, target="splat")[0]
+    np.testing.assert_array_equal(mr.x, sp.x)  # the same G-buffers
+    gr = sc.gaussian_renderer(model="splat")
+    assert gr.model == "splat"
+    want = np.clip(np.asarray(gr.render(cam, 48, 40).rgba)[..., :3], 0, 1)
+    np.testing.assert_array_equal(sp.rgb, want)
+    assert sp.rgb.sum() > 0 and np.abs(sp.rgb - mr.rgb).max() > 0.05
+    with pytest.raises(ValueError, match="target"):
+        sc.gaussian_renderer(model="absorption")
+
+
 def test_iso_frames_are_deterministic_and_consistent():
     a = data.iso_frames(("waves",), 1, 3, 64, 48, views=1, n=24)[0]
     b = data.iso_frames(("waves",), 1, 3, 64, 48, views=1, n=24)[0]

@@ -11,10 +11,16 @@
  *       adj(E) = (a00, a01; a01, a11), det(E) and pad, the px added around a
  *       tile's pixel centres (CLVIS_TILE_PAD + 1e-5 (|cu| + |cv|))
  *   clvis_ellipse_set(e, cu, cv, euu, evv, euv, det): e from E = (euu, euv; euv, evv)
- *   int clvis_ellipse_meets(e, u0, u1, v0, v1): 1 when dx' adj(E) dx <= det(E)
- *       somewhere on the rectangle [u0, u1] x [v0, v1]
- *   int clvis_ellipse_tile(e, tx, ty, W, H, ts): clvis_ellipse_meets on tile
- *       (tx, ty)'s pixel centres, padded by e->pad
+ *   clvis_ellipse_rows_set(e, &r): r, what clvis_ellipse_row needs of e (once a Gaussian)
+ *   int clvis_ellipse_row(&r, ty, W, H, ts, &c0, &c1): the tile columns c0 .. c1 of
+ *       tile row ty that hold a pixel centre of the ellipse (its rows' centres,
+ *       padded by e->pad, as a strip); 0 when none. Exact (in closed form, one
+ *       strip a row, no test a tile): E's ellipse meets the strip
+ *       v in [v0, v1] in a convex set whose u-extent runs from the lower
+ *       branch's minimum to the upper branch's maximum, each at the strip's
+ *       dv nearest the ellipse's leftmost / rightmost point
+ *       (dv = -/+ euv / sqrt(euu)); widened by e->pad and 1e-3 sqrt(euu) (the
+ *       rounding of sqrt(det (evv - dv^2)) near the ends), so conservative.
  *   int clvis_tile_rect(ulo, uhi, vlo, vhi, W, H, ts, r): r = (tx0, tx1, ty0, ty1),
  *       the tiles (inclusive) of the pixels whose centre px + 0.5 lies in
  *       [ulo, uhi] x [vlo, vhi] (clamped to [-1, W + 1] x [-1, H + 1]); 0 when
@@ -69,31 +75,69 @@ inline void clvis_ellipse_set(clvis_ellipse *e, float cu, float cv, float euu, f
     e->pad = CLVIS_TILE_PAD + 1e-5f * (fabs(cu) + fabs(cv));
 }
 
-inline int clvis_ellipse_meets(const clvis_ellipse *e, float u0, float u1, float v0, float v1)
+/* what clvis_ellipse_row needs of an ellipse, computed once */
+typedef struct {
+    float cu, cv, pad;
+    float su, sv;          /* half extents sqrt(euu), sqrt(evv) */
+    float ds;              /* dv of the rightmost point: euv / su */
+    float euv, det, evv, ievv;
+    float slack;           /* pad + 1e-3 su */
+} clvis_ellipse_rows;
+
+inline void clvis_ellipse_rows_set(const clvis_ellipse *e, clvis_ellipse_rows *r)
 {
-    if (e->cu >= u0 && e->cu <= u1 && e->cv >= v0 && e->cv <= v1)
-        return 1;
-    float us[2] = {u0, u1}, vs[2] = {v0, v1};
-    for (int k = 0; k < 2; ++k) {
-        /* vertical edge u = us[k] */
-        float dx = us[k] - e->cu;
-        float dy = clamp(-(e->a01 * dx) / e->a11, v0 - e->cv, v1 - e->cv);
-        if ((e->a00 * dx * dx + 2.0f * e->a01 * dx * dy) + e->a11 * dy * dy <= e->det)
-            return 1;
-        /* horizontal edge v = vs[k] */
-        dy = vs[k] - e->cv;
-        dx = clamp(-(e->a01 * dy) / e->a00, u0 - e->cu, u1 - e->cu);
-        if ((e->a00 * dx * dx + 2.0f * e->a01 * dx * dy) + e->a11 * dy * dy <= e->det)
-            return 1;
-    }
-    return 0;
+    r->cu = e->cu;
+    r->cv = e->cv;
+    r->pad = e->pad;
+    r->su = sqrt(e->a11);
+    r->sv = sqrt(e->a00);
+    r->euv = -e->a01;
+    r->ds = r->euv / r->su;
+    r->det = e->det;
+    r->evv = e->a00;
+    r->ievv = 1.0f / e->a00;
+    r->slack = e->pad + 1e-3f * r->su;
 }
 
-inline int clvis_ellipse_tile(const clvis_ellipse *e, int tx, int ty, uint W, uint H, int ts)
+/* min / max by comparison (a NaN argument gives the other); PoCL's fmin,
+ * fmax, clamp, ceil and floor cost several times more in these loops */
+inline float clvis_lo(float a, float b)
 {
-    float u0 = (float)(tx * ts) + 0.5f, u1 = (float)min((tx + 1) * ts, (int)W) - 0.5f;
-    float v0 = (float)(ty * ts) + 0.5f, v1 = (float)min((ty + 1) * ts, (int)H) - 0.5f;
-    return clvis_ellipse_meets(e, u0 - e->pad, u1 + e->pad, v0 - e->pad, v1 + e->pad);
+    return a < b ? a : b;
+}
+
+inline float clvis_hi(float a, float b)
+{
+    return a > b ? a : b;
+}
+
+inline int clvis_ellipse_row(const clvis_ellipse_rows *e, int ty, uint W, uint H, int ts, int *c0, int *c1)
+{
+    /* the strip of the row's pixel centres, relative to the centre */
+    float lo = (((float)(ty * ts) + 0.5f) - e->pad) - e->cv;
+    float hi = (((float)min((ty + 1) * ts, (int)H) - 0.5f) + e->pad) - e->cv;
+    int meets = lo <= e->sv && hi >= -e->sv;   /* tested at the end: no branch */
+    lo = clvis_hi(lo, -e->sv);
+    hi = clvis_lo(hi, e->sv);
+    /* u(dv) = (euv dv +- sqrt(det (evv - dv^2))) / evv on the ellipse's boundary */
+    float dr = clvis_lo(clvis_hi(e->ds, lo), hi), dl = clvis_lo(clvis_hi(-e->ds, lo), hi);
+    float wr = sqrt(e->det * clvis_hi(e->evv - dr * dr, 0.0f));
+    float wl = sqrt(e->det * clvis_hi(e->evv - dl * dl, 0.0f));
+    /* the pixels px whose centre px + 0.5 lies in [ulo, uhi] + 0.5, px in
+     * [-1, W]; NaN (overflowing terms): the whole row */
+    float ulo = ((e->cu + (e->euv * dl - wl) * e->ievv) - e->slack) - 0.5f;
+    float uhi = ((e->cu + (e->euv * dr + wr) * e->ievv) + e->slack) - 0.5f;
+    ulo = ulo >= -1.0f ? ulo : -1.0f;
+    uhi = uhi <= (float)W ? uhi : (float)W;
+    uhi = uhi >= -1.0f ? uhi : -1.0f;
+    /* ceil(ulo) and floor(uhi) (at most one pixel too many: rounding of uhi + 1) */
+    int px0 = (int)ulo, px1 = (int)(uhi + 1.0f) - 1;
+    px0 += (float)px0 < ulo;
+    px0 = max(px0, 0);
+    px1 = min(px1, (int)W - 1);
+    *c0 = px0 / ts;
+    *c1 = px1 / ts;
+    return meets && px0 <= px1;
 }
 
 inline int clvis_tile_rect(float ulo, float uhi, float vlo, float vhi, uint W, uint H, int ts, int *r)

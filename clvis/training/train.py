@@ -256,7 +256,8 @@ def _narvis_sets(
         "grid sampler": frames[len(picked) :],
         "storm": cached_frames(
             cache,
-            {"set": "storm", **key},
+            # its cameras are drawn from rng after the hurricane's looks (if any)
+            {"set": "storm", "looks": looks, **key},
             lambda: _data.narvis_frames(storm, odd, w, h, planes, progress=log, target=target),
             log,
         ),

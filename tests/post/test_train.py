@@ -89,6 +89,38 @@ def test_narvis_frames_are_rendered_once_per_key(tmp_path):
     assert len(train.cached_frames(tmp_path, key, make)) == 3 and calls == [0, 1, 0, 0]  # replaced
 
 
+def test_narvis_storm_frames_are_cached_per_looks(tmp_path, monkeypatch):
+    """The storm's cameras are drawn after the hurricane's looks: a run with
+    looks and one without pick different storm views, so they must not share
+    a cache entry (rendering stubbed: each frame records its camera)."""
+    rendered = []
+
+    def frames(scene, cams, w, h, planes, *, looks=None, progress=None, target="max_response"):
+        rendered.append((scene, tuple(cams)))
+        return [
+            data.NarvisFrame(np.full((1, 2, 2), c, np.float32), np.zeros((2, 2, 3), np.float32), {}, scene)
+            for c in cams
+        ]
+
+    monkeypatch.setattr(data, "narvis_scene", lambda kind, n, seed: kind)
+    monkeypatch.setattr(data, "narvis_cameras", lambda sc, sampler, aspect=1.0: list(range(128)))
+    monkeypatch.setattr(
+        data,
+        "narvis_looks",
+        lambda sc, count, rng: [("viridis", (0.0, float(rng.random()))) for _ in range(count)],
+    )
+    monkeypatch.setattr(data, "narvis_frames", frames)
+
+    def storm(looks):
+        sets = train._narvis_sets(4, 3, 100, 0, (8, 8), ("rgb",), None, looks=looks, cache=tmp_path)
+        return [float(f.x[0, 0, 0]) for f in sets["storm"]]
+
+    plain, looked = storm(False), storm(True)
+    assert plain != looked  # other cameras ...
+    assert [s for s, _ in rendered].count("storm") == 2  # ... each rendered, not read from the other's entry
+    assert storm(True) == looked and [s for s, _ in rendered].count("storm") == 2  # then from the cache
+
+
 def test_train_stops_at_its_time_limit(tmp_path):
     """--time-limit: the run stops short of its steps when the time is up;
     the card says how many it made, and the loss curve ends there."""

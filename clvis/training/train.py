@@ -100,18 +100,30 @@ INT8_MAX_LOSS_DB = 0.3
 
 
 #: what the NARVis frames depend on besides their arguments: these sources
-#: (the generators, the scenes' datasets, both renderers and their kernels)
-#: are hashed into every cache key, so a changed renderer never reads old frames
+#: (the generators, the scenes' datasets and point clouds, the cameras, both
+#: renderers, the primitives they sort and scan with, the packing, and their
+#: kernels) are hashed into every cache key, so a changed renderer never reads
+#: old frames. "clvis/..." is read in the package, "kernels_cl/..." where the
+#: runtime builds from (runtime.KERNEL_ROOT: beside the package in a checkout,
+#: inside it in a wheel)
 _FRAME_SOURCES = (
     "clvis/training/data.py",
     "clvis/training/flows.py",
     "clvis/datasets.py",
+    "clvis/camera.py",
     "clvis/colormap.py",
+    "clvis/images.py",
+    "clvis/morton.py",
+    "clvis/primitives.py",
+    "clvis/_keys.py",
+    "clvis/io",
     "clvis/gauss",
     "clvis/raster",
+    "clvis/post/names.py",
     "clvis/post/pack.py",
     "kernels_cl/gauss",
     "kernels_cl/raster",
+    "kernels_cl/primitives",
     "kernels_cl/post",
     "kernels_cl/include",
 )
@@ -119,10 +131,14 @@ _FRAME_SOURCES = (
 
 def _sources_digest() -> str:
     """sha256 over the files of _FRAME_SOURCES (those that exist, in order)."""
-    root = Path(__file__).resolve().parents[2]
+    from ..runtime import KERNEL_ROOT
+
+    package = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
     for name in _FRAME_SOURCES:
-        p = root / name
+        top, _, rest = name.partition("/")
+        root = package if top == "clvis" else KERNEL_ROOT
+        p = root / rest
         if p.is_dir():
             files = sorted(f for f in p.rglob("*") if f.suffix in (".py", ".cl", ".h"))
         elif p.is_file():
@@ -130,7 +146,7 @@ def _sources_digest() -> str:
         else:
             files = []
         for f in files:
-            h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
+            h.update(f"{top}/{f.relative_to(root).as_posix()}".encode() + b"\0" + f.read_bytes() + b"\0")
     return h.hexdigest()
 
 

@@ -89,6 +89,22 @@ def test_narvis_frames_are_rendered_once_per_key(tmp_path):
     assert len(train.cached_frames(tmp_path, key, make)) == 3 and calls == [0, 1, 0, 0]  # replaced
 
 
+def test_frame_cache_sources_exist_and_cover_the_renderers():
+    """Every path train._FRAME_SOURCES hashes exists (one that does not would
+    drop out of the cache key unnoticed), the kernels are read where the
+    runtime builds them from, and the cameras and primitives the frames go
+    through are among them."""
+    from clvis import runtime
+
+    package = train.Path(train.__file__).resolve().parents[1]
+    for name in train._FRAME_SOURCES:
+        top, _, rest = name.partition("/")
+        assert (package if top == "clvis" else runtime.KERNEL_ROOT).joinpath(rest).exists(), name
+    for must in ("clvis/camera.py", "clvis/primitives.py", "clvis/post/names.py", "kernels_cl/primitives"):
+        assert must in train._FRAME_SOURCES
+    assert train._sources_digest() == train._sources_digest()
+
+
 def test_narvis_storm_frames_are_cached_per_looks(tmp_path, monkeypatch):
     """The storm's cameras are drawn after the hurricane's looks: a run with
     looks and one without pick different storm views, so they must not share

@@ -41,6 +41,11 @@
  *     of the Gaussian that first took T below 0.5 (+inf if none); stats =
  *     (Gaussians composited, 1). Global size and work-items as tiles.cl's
  *     tile_render (a work-item per pixel).
+ * kernel splat_render8(the arguments of splat_render)
+ *     splat_render's outputs (the same bits), a work-item per row of 8 pixels
+ *     of a tile (TS a multiple of 8; q in float8 lanes). Global size and
+ *     work-items as tiles.cl's tile_render8: (tiles to render) * TS * TS / 8,
+ *     any local size dividing TS * TS / 8.
  */
 #pragma OPENCL FP_CONTRACT OFF
 

@@ -61,7 +61,8 @@
  *     renders a row of 8 pixels of a tile in float8 lanes (TS a multiple of
  *     8). Global size: (tiles to render) * TS * TS / 8, work-item i: tile
  *     tile0 + i / (TS * TS / 8), row (i % (TS * TS / 8)) / (TS / 8), pixels
- *     8 * (i % (TS / 8)) .. + 7 of that row; any local size.
+ *     8 * (i % (TS / 8)) .. + 7 of that row; any local size dividing
+ *     TS * TS / 8.
  *
  * Footprint (tile_footprint): the Gaussian's cutoff ellipsoid, inflated by
  * 1.01 (as the BVH boxes of gaussians.cl), projected exactly: when it lies in

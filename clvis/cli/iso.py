@@ -471,8 +471,14 @@ def _run(args) -> int:
                 completion=args.completion,
                 speculation=not args.no_speculation,
                 queue=q,
+                # only the fit view frames points (the scan is a few passes over the volume)
                 camera=lambda lo, hi: camera_from_args(
-                    args, lo, hi, w, h, points=_surface_points(volume, isos, spacing, origin)
+                    args,
+                    lo,
+                    hi,
+                    w,
+                    h,
+                    points=_surface_points(volume, isos, spacing, origin) if args.view[0] == "fit" else None,
                 ),
                 progress=progress,
                 host=not args.infill,  # the in-fill network takes the image where it is

@@ -23,6 +23,7 @@ import platform
 import sys
 import time
 import warnings
+import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -189,7 +190,7 @@ def cached_frames(
     if path.is_file():
         try:
             frames = _load_frames(path)
-        except (OSError, ValueError, KeyError) as e:
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:  # a cut or foreign file
             if log is not None:
                 log(f"frame cache {path}: unreadable ({e}); rendering again")
         else:

@@ -180,7 +180,8 @@ def cached_frames(
     """``make()``'s NARVis frames, kept in `cache` (a directory; None: no
     cache) under a hash of `key` (the arguments that made them) and of the
     sources they depend on (_FRAME_SOURCES): rendering is paid once per key.
-    An unreadable cache file is rendered again and replaced."""
+    An unreadable cache file is rendered again and replaced; one that cannot
+    be written is logged and skipped (the frames are returned all the same)."""
     if cache is None:
         return make()
     digest = hashlib.sha256(
@@ -198,10 +199,15 @@ def cached_frames(
                 log(f"frame cache: {len(frames)} frames from {path}")
             return frames
     frames = make()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _save_frames(path, frames)
-    if log is not None:
-        log(f"frame cache: {len(frames)} frames into {path}")
+    try:  # a cache that cannot be written (read-only, full) costs the next run, not this one
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _save_frames(path, frames)
+    except OSError as e:
+        if log is not None:
+            log(f"frame cache {path}: not written ({e})")
+    else:
+        if log is not None:
+            log(f"frame cache: {len(frames)} frames into {path}")
     return frames
 
 

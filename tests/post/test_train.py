@@ -91,6 +91,11 @@ def test_narvis_frames_are_rendered_once_per_key(tmp_path):
         f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
     train.cached_frames(tmp_path, key, make)
     assert calls == [0, 1, 0, 0, 0]
+    blocked = tmp_path / "file"  # a cache "directory" that is a file: nothing written, the frames returned
+    blocked.write_bytes(b"")
+    logged.clear()
+    assert len(train.cached_frames(blocked / "sub", key, make, logged.append)) == 3
+    assert calls == [0, 1, 0, 0, 0, 0] and "not written" in logged[0]
 
 
 def test_frame_cache_sources_exist_and_cover_the_renderers():

@@ -366,7 +366,7 @@ class PostNetwork:
         self.stats = {
             **stats,
             "unpack": t2 - t1,
-            "guard": t2 - t0 - stats["pack"] - stats["inference"],
+            "guard": t1 - t0 - stats["pack"] - stats["inference"],  # unpack apart
             **{f"guard_{k}": v for k, v in share.items()},
         }
         return picture

@@ -3,6 +3,8 @@ their classical fills (withheld pixels, per-tile scores, bilinear weights),
 on synthetic frames with stand-in networks (garbage ones fall back to
 push-pull, perfect ones are kept), and through PostNetwork's call."""
 
+import time
+
 import numpy as np
 import pytest
 
@@ -159,7 +161,11 @@ def test_network_call_with_the_guard(queue):
     assert {"pack", "inference", "unpack", "guard", "guard_network", "guard_pushpull", "guard_input"} <= set(
         net.stats
     )
+    t0 = time.perf_counter()
     b = net(x, guard=True)
+    wall = time.perf_counter() - t0
+    # the stages split the call's time: none counted twice
+    assert sum(net.stats[k] for k in ("pack", "inference", "unpack", "guard")) <= wall
     np.testing.assert_array_equal(a, b)  # deterministic
     assert a.shape == (96, 160, 4) and a.dtype == np.uint8
     plain = net(x, guard=False)

@@ -128,6 +128,7 @@ inline int clvis_ellipse_row(const clvis_ellipse_rows *e, int ty, uint W, uint H
     float ulo = ((e->cu + (e->euv * dl - wl) * e->ievv) - e->slack) - 0.5f;
     float uhi = ((e->cu + (e->euv * dr + wr) * e->ievv) + e->slack) - 0.5f;
     ulo = ulo >= -1.0f ? ulo : -1.0f;
+    ulo = ulo <= (float)W ? ulo : (float)W;  /* no int conversion out of range (a long needle's far end) */
     uhi = uhi <= (float)W ? uhi : (float)W;
     uhi = uhi >= -1.0f ? uhi : -1.0f;
     /* ceil(ulo) and floor(uhi) (at most one pixel too many: rounding of uhi + 1) */

@@ -178,14 +178,22 @@ def cached_frames(
     log: Callable[[str], None] | None = None,
 ) -> list:
     """``make()``'s NARVis frames, kept in `cache` (a directory; None: no
-    cache) under a hash of `key` (the arguments that made them) and of the
-    sources they depend on (_FRAME_SOURCES): rendering is paid once per key.
+    cache) under a hash of `key` (the arguments that made them), of the
+    OpenCL device and of the sources they depend on (_FRAME_SOURCES):
+    rendering is paid once per key.
     An unreadable cache file is rendered again and replaced; one that cannot
     be written is logged and skipped (the frames are returned all the same)."""
     if cache is None:
         return make()
+    from .. import runtime
+
+    # the OpenCL device renders the targets: frames of another device (other
+    # rounding) are not these
+    device = runtime.describe(runtime.default_queue().device)
     digest = hashlib.sha256(
-        json.dumps({**key, "sources": _sources_digest()}, sort_keys=True, default=str).encode()
+        json.dumps(
+            {**key, "device": device, "sources": _sources_digest()}, sort_keys=True, default=str
+        ).encode()
     ).hexdigest()[:24]
     path = Path(cache) / f"narvis-{key.get('set', 'frames')}-{digest}.npz"
     if path.is_file():

@@ -77,7 +77,8 @@ matplotlib's tab10). --color-by FIELD colours the surfaces by a second volume
 sampled on the device where each ray hit, through --colormap over --range,
 with a colour bar under the image. A constant volume has no isosurface: it
 is reported and no surface is drawn. The fit view frames the voxels the
-isosurfaces pass, not the whole volume.
+isosurfaces pass, not the whole volume (on Dask workers: the volume's box,
+since the workers read a file brick by brick).
 
 """
     + VIEWS_HELP

@@ -178,6 +178,7 @@ def test_train_narvis_with_the_splat_target(tmp_path, capsys):
         [
             *("train", "narvis", "--steps", "2", "--size", "64", "--frames", "1", "--frame-size", "96x64"),
             *("--out", str(tmp_path), "--quiet", "--eval", "none", "--points", "20000", "--target", "splat"),
+            "--no-cache",  # not the user's cache directory
         ]
     )
     assert rc == 0

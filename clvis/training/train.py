@@ -196,26 +196,23 @@ def cached_frames(
         ).encode()
     ).hexdigest()[:24]
     path = Path(cache) / f"narvis-{key.get('set', 'frames')}-{digest}.npz"
+    say = log if log is not None else (lambda _: None)
     if path.is_file():
         try:
             frames = _load_frames(path)
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as e:  # a cut or foreign file
-            if log is not None:
-                log(f"frame cache {path}: unreadable ({e}); rendering again")
+            say(f"frame cache {path}: unreadable ({e}); rendering again")
         else:
-            if log is not None:
-                log(f"frame cache: {len(frames)} frames from {path}")
+            say(f"frame cache: {len(frames)} frames from {path}")
             return frames
     frames = make()
     try:  # a cache that cannot be written (read-only, full) costs the next run, not this one
         path.parent.mkdir(parents=True, exist_ok=True)
         _save_frames(path, frames)
     except OSError as e:
-        if log is not None:
-            log(f"frame cache {path}: not written ({e})")
+        say(f"frame cache {path}: not written ({e})")
     else:
-        if log is not None:
-            log(f"frame cache: {len(frames)} frames into {path}")
+        say(f"frame cache: {len(frames)} frames into {path}")
     return frames
 
 

@@ -261,11 +261,8 @@ kernel void splat_render8(global const clvis_gaussian *recs, global const uint *
                           float tf_min, float tf_scale, global const uchar4 *colors, global float4 *rgba,
                           global float *depth, global uint2 *stats)
 {
-    uint tiles_x = (W + TS - 1) / TS;
-    uint per_tile = TS * TS / 8;
-    uint tile = tile0 + get_global_id(0) / per_tile, l8 = get_global_id(0) % per_tile;
-    uint px0 = (tile % tiles_x) * TS + (l8 % (TS / 8)) * 8, row = (tile / tiles_x) * TS + l8 / (TS / 8);
-    uint py = ty0 * TS + row;
+    uint px0, py, row;
+    uint tile = clvis_tile_row8(get_global_id(0), W, ty0, tile0, TS, &px0, &py, &row);
     if (px0 >= W || row >= rows || py >= H)
         return;
     float fxs[8], T[8], cr[8], cg[8], cb[8], z[8];

@@ -170,4 +170,17 @@ inline uint clvis_tile_pixel(uint gid, uint W, uint ty0, uint tile0, uint ts, ui
     return tile;
 }
 
+/* As clvis_tile_pixel for a work-item per row of 8 pixels (ts / 8 of them a
+ * tile row): *px0 the row's first pixel. */
+inline uint clvis_tile_row8(uint gid, uint W, uint ty0, uint tile0, uint ts, uint *px0, uint *py, uint *row)
+{
+    uint tiles_x = (W + ts - 1) / ts;
+    uint per_tile = ts * ts / 8;
+    uint tile = tile0 + gid / per_tile, l8 = gid % per_tile;
+    *px0 = (tile % tiles_x) * ts + (l8 % (ts / 8)) * 8;
+    *row = (tile / tiles_x) * ts + l8 / (ts / 8);
+    *py = ty0 * ts + *row;
+    return tile;
+}
+
 #endif /* CLVIS_GAUSS_TILES_H */

@@ -33,7 +33,7 @@ import tornado.websocket  # noqa: E402
 
 import clvis  # noqa: E402
 from clvis import PointCloud, datasets  # noqa: E402
-from clvis.view import PointScene, ViewServer, VolumeScene  # noqa: E402
+from clvis.view import Frame, PointScene, Scene, ViewServer, VolumeScene  # noqa: E402
 
 WIDTH, HEIGHT = 1280, 720
 TIMEOUT = 180.0  # the first frame builds the kernels (PoCL, two busy cores)
@@ -304,4 +304,77 @@ def test_volume_progressive_iso_and_infill(browser):
         assert h["info"]["psnr dB"] > 15 and h["info"]["completion"] >= 0.85
         assert b.js("window.clvisView.error") is None
     finally:
+        server.close()
+
+
+class _Flat(Scene):
+    """A scene of one grey level a view, a new level each view: no device, no
+    kernels, just frames whose picture says which view they show."""
+
+    kind = "points"
+    modes = ["points"]
+    settings = {"mode": "points"}
+    choices = {"mode": ["points"]}
+    lo, hi = np.zeros(3), np.ones(3)
+    description = "flat"
+    device = "none"
+
+    def __init__(self):
+        self.views = 0
+
+    def frames(self, camera, width, height, settings, superseded):
+        self.views += 1
+        yield Frame(np.full((height, width, 3), 40 * self.views % 256, np.uint8))
+
+
+# createImageBitmap wrapped, before the page's own script runs: while
+# window.__hold is set, each decoded frame waits in window.__held until the
+# test lets it go (the order a loaded browser may finish its decodes in)
+_HOLD_DECODES = """(() => {
+  const make = window.createImageBitmap.bind(window);
+  window.__hold = false; window.__held = [];
+  window.createImageBitmap = (...args) => {
+    const p = make(...args);
+    if (!window.__hold) return p;
+    return new Promise((resolve, reject) => window.__held.push(() => p.then(resolve, reject)));
+  };
+})();"""
+
+
+def test_a_frame_decoded_late_does_not_replace_a_newer_one(browser):
+    """The page decodes each frame asynchronously (createImageBitmap of a Blob
+    resolves in parallel, in no set order: on a loaded machine a frame can
+    finish after the next one). The newest frame must stay on the screen, or
+    the page shows a stale picture and waits for a frame that already came
+    (the CI rehearsal's timeout in test_points_orbit_and_modes)."""
+    b = browser
+    scene = _Flat()
+    server = ViewServer(scene, size=(WIDTH, HEIGHT))
+    b.call("Page.enable")  # for the script below
+    script = b.call("Page.addScriptToEvaluateOnNewDocument", source=_HOLD_DECODES)["identifier"]
+    try:
+        b.js("window.clvisView = undefined")
+        b.call("Page.navigate", url=server.url)
+        first = _settled(b, "points")
+        b.js("window.__hold = true; window.clvisView.send({ type: 'fit' })")
+        b.wait_for("window.__held.length === 1", "the first frame to arrive")
+        b.js("window.clvisView.send({ type: 'fit' })")
+        b.wait_for("window.__held.length === 2", "the second frame to arrive")
+        level = 40 * scene.views % 256  # the newest view's grey
+        # the newer frame's decode finishes first, the older one's after it
+        b.js(
+            "(async () => { const h = window.__held; await h[1](); await h[0]();"
+            " await new Promise((r) => setTimeout(r, 100)); return true; })()"
+        )
+        h = b.js("window.clvisView.header")
+        assert h["id"] == first["id"] + 2 and h["seq"] == b.js("window.clvisView.seq"), (first, h)
+        pixel = b.js(
+            "Array.from(document.getElementById('view').getContext('2d')"
+            f".getImageData({WIDTH // 2}, {HEIGHT // 2}, 1, 1).data)"
+        )
+        assert all(abs(c - level) <= 3 for c in pixel[:3]), (pixel, level)
+        assert b.js("window.clvisView.late") == 1  # the older frame, not drawn
+        assert b.js("window.clvisView.error") is None
+    finally:
+        b.call("Page.removeScriptToEvaluateOnNewDocument", identifier=script)
         server.close()

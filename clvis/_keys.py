@@ -1,6 +1,8 @@
 """Host copies of kernels_cl/include/clvis/keys.h's float32 depth key (NumPy):
 the order-preserving uint32 of a float32 and its inverse, for code that builds
-or reads depth keys on the host (distributed compositing)."""
+or reads depth keys on the host (distributed compositing, the gauss BVH's
+bounds). The one host copy: the library writes these nowhere else (the NumPy
+references define them again, as references do)."""
 
 from __future__ import annotations
 

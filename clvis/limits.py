@@ -10,6 +10,9 @@ Every limit is a side (width or height, each at least 1) and a pixel count
   count allows: the rays are made per pixel index, not from float
   coordinates), and 2^31 - 1 pixels: traverse.cl, raytrace.cl and pass.cl
   index pixels with 32-bit integers.
+- :data:`GAUSS`: no side limit of its own (rays are made per pixel index),
+  and 2^32 - 1 pixels: march.cl, tiles.cl and splat.cl index pixels with
+  32-bit unsigned integers.
 - :data:`POST_PACK`: at most 32768 a padded side and 2^28 padded pixels, so
   a packed network input of up to 5 channels stays below 2^31 elements
   (pack.cl's 32-bit indices).
@@ -29,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ISO", "POST_INFER", "POST_PACK", "RASTER", "ImageLimits", "check_image_size"]
+__all__ = ["GAUSS", "ISO", "POST_INFER", "POST_PACK", "RASTER", "ImageLimits", "check_image_size"]
 
 
 @dataclass(frozen=True)
@@ -44,6 +47,7 @@ class ImageLimits:
 
 RASTER = ImageLimits(1 << 15, 2**31 - 1, "the kernels index pixels with 32-bit integers")
 ISO = ImageLimits(2**31 - 1, 2**31 - 1, "the kernels index pixels with 32-bit integers")
+GAUSS = ImageLimits(2**32 - 1, 2**32 - 1, "the kernels index pixels with 32-bit unsigned integers")
 POST_PACK = ImageLimits(32768, 2**28, "a 5-channel network input stays below 2^31 elements")
 POST_INFER = ImageLimits(8192, 2**25, "the networks' activations at that size take about 2.5 GB")
 

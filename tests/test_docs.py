@@ -224,7 +224,14 @@ def test_readme_layout_names_every_kernel_and_module():
             assert re.search(rf"\b{cl.stem}\b", line), (
                 f"the README's layout does not name {cl.relative_to(ROOT)}"
             )
-    for pkg in ("runtime", "io", "raster", "iso", "gauss", "post", "training", "distributed"):
+    # the public top-level modules, on the lines of top-level files (clvis/camera.py colormap.py ...)
+    files = " ".join(f"{key} {line}" for key, line in block.items() if re.fullmatch(r"clvis/\w+\.py", key))
+    for mod in sorted((ROOT / "clvis").glob("*.py")):
+        if not mod.name.startswith("_"):
+            assert re.search(rf"(^|[\s/]){re.escape(mod.name)}", files), (
+                f"the README's layout does not name {mod.relative_to(ROOT)}"
+            )
+    for pkg in ("runtime", "io", "raster", "iso", "gauss", "post", "training", "distributed", "view"):
         line = block.get(f"clvis/{pkg}/")
         assert line is not None, f"the README's layout has no clvis/{pkg}/ line"
         for mod in sorted((ROOT / "clvis" / pkg).glob("*.py")):
@@ -232,9 +239,57 @@ def test_readme_layout_names_every_kernel_and_module():
                 assert f"{mod.name}" in line, f"the README's layout does not name {mod.relative_to(ROOT)}"
 
 
-def test_design_layout_names_every_module():
+def _design_block() -> str:
     text = (ROOT / "DESIGN.md").read_text(encoding="utf-8")
-    block = text.split("## Layout: one rule", 1)[1].split("```", 4)[3]
+    return text.split("## Layout: one rule", 1)[1].split("```", 4)[3]
+
+
+def _design_entries() -> dict[str, str]:
+    """The DESIGN layout block's top-level entries: first word -> its text
+    (the entry's line and the indented lines under it)."""
+    out: dict[str, str] = {}
+    key = None
+    for line in _design_block().splitlines():
+        if line[:1] not in (" ", ""):
+            key = line.split()[0]
+            out[key] = line
+        elif key:
+            out[key] += "\n" + line
+    return out
+
+
+def _folders(root: Path) -> list[str]:
+    """The folders of `root`, less the hidden ones and build outputs."""
+    return sorted(
+        p.name
+        for p in root.iterdir()
+        if p.is_dir()
+        and not p.name.startswith((".", "_"))
+        and not p.name.endswith(".egg-info")
+        and p.name not in ("build", "dist")
+    )
+
+
+def test_design_layout_names_every_folder_and_bench_script():
+    """The repository's folders, tests/'s folders and bench/'s scripts are in
+    DESIGN.md's layout block."""
+    entries = _design_entries()
+    assert {"kernels_cl/", "clvis/", "bench/", "tests/"} <= set(entries)
+    missing = [f"{name}/" for name in _folders(ROOT) if f"{name}/" not in entries]
+    tests = entries["tests/"]
+    families = {"primitives", "raster", "iso", "gauss", "post"}  # <family>/test_<x>.py
+    missing += [f"tests/{n}/" for n in _folders(ROOT / "tests") if n not in families and f"{n}/" not in tests]
+    missing += [
+        f"bench/{p.name}"
+        for p in sorted((ROOT / "bench").glob("*.py"))
+        if p.name not in entries["bench/"]
+        and not re.fullmatch(r"bench_(primitives|raster|iso|gauss|post)\.py", p.name)
+    ]
+    assert not missing, f"DESIGN.md's layout does not name: {missing}"
+
+
+def test_design_layout_names_every_module():
+    block = _design_block()
     package = ROOT / "clvis"
     missing = [
         p.name

@@ -13,11 +13,14 @@
 - the library never imports clvis.reference (only the command line does, for
   the demo's checks against the references), and a family's references never
   import another family's references;
-- no module takes a private ``_name`` from a module of another package (a
-  check another package needs is public where it belongs).
+- no module takes a private ``_name`` from a module of another package, nor
+  anything from another package's private module (a check another package
+  needs is public where it belongs; SHARED_PRIVATE_MODULES are shared on
+  purpose).
 """
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -103,6 +106,34 @@ def test_kernel_launched_from_its_family(kernel):
     assert not strangers, f"{kernel} is launched from outside its family: {strangers}"
 
 
+def _design_exceptions() -> dict[str, str]:
+    """DESIGN.md's list of the exceptions to one kernel file, one launcher of
+    the same name: launcher path (clvis/...) -> its bullet's text."""
+    text = (PACKAGE.parent / "DESIGN.md").read_text(encoding="utf-8")
+    section = text.split("one launcher of the same name, and why they remain:", 1)[1].split("\n## ", 1)[0]
+    return {m[0]: m[1] for m in re.findall(r"^- `(clvis/[\w/]+\.py)`(.*?)(?=^- |\Z)", section, re.M | re.S)}
+
+
+@pytest.mark.parametrize("kernel", _kernel_files())
+def test_other_launchers_are_listed_in_design(kernel):
+    """A kernel file launched from a module of another name is in DESIGN.md's
+    list of exceptions, under that module, with its reason (the primitives'
+    files: clvis/primitives.py, the family's one module)."""
+    family, name = kernel.split("/")
+    exceptions = _design_exceptions()
+    assert "clvis/primitives.py" in exceptions and "clvis/raster/render.py" in exceptions
+    for path in _modules(PACKAGE):
+        if f'"{kernel}"' not in path.read_text() or path.stem == name.removesuffix(".cl"):
+            continue
+        rel = str(path.relative_to(PACKAGE.parent))
+        if family == "primitives" and rel == "clvis/primitives.py":
+            continue
+        assert rel in exceptions, f"{rel} launches {kernel}: DESIGN.md's list of exceptions does not name it"
+        assert re.search(rf"\b{re.escape(name)}", exceptions[rel]), (
+            f"{rel} launches {kernel}: its entry in DESIGN.md's list of exceptions does not name {name}"
+        )
+
+
 def test_no_family_imports_another():
     for family in FAMILIES:
         for path in _modules(PACKAGE / family):
@@ -186,14 +217,22 @@ def _private(name: str) -> bool:
 
 
 # the library's own private helper modules, shared by every package by design
-# (DESIGN.md: "_arrays.py: argument checks shared by every family")
-SHARED_PRIVATE_MODULES = {"clvis._arrays", "clvis._version"}
+# (DESIGN.md: "_arrays.py: argument checks shared by every family"; "_keys.py:
+# keys.h's float32 depth key and its inverse on the host")
+SHARED_PRIVATE_MODULES = {"clvis._arrays", "clvis._keys", "clvis._version"}
+
+
+def _private_module(module: str) -> bool:
+    """A module with a private part in its dotted name (clvis.cli._common)."""
+    return any(_private(part) for part in module.split(".")[1:])
 
 
 def private_reach(source: str, module: str, is_package: bool = False) -> list[str]:
     """Each `_name` the module `module` (dotted; `source` its text) takes from
     a module of another package: ``from x import _name`` and ``x._name``
-    after ``import x`` / ``from p import x``. A private module shared on
+    after ``import x`` / ``from p import x``; and anything taken from a
+    private module of another package (``from clvis.cli._common import
+    size``, ``import clvis.cli._common``). A private module shared on
     purpose (SHARED_PRIVATE_MODULES) may be imported, not its `_names`."""
     base_parts = module.split(".") if is_package else module.split(".")[:-1]
     own = ".".join(base_parts)
@@ -203,6 +242,13 @@ def private_reach(source: str, module: str, is_package: bool = False) -> list[st
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             for a in node.names:
+                if (
+                    a.name.startswith("clvis.")
+                    and _private_module(a.name)
+                    and a.name not in SHARED_PRIVATE_MODULES
+                    and _package_of(a.name) != own
+                ):
+                    bad.append(f"{module}:{node.lineno} imports the private module {a.name}")
                 if a.asname:
                     aliases[a.asname] = a.name
                 else:
@@ -214,6 +260,9 @@ def private_reach(source: str, module: str, is_package: bool = False) -> list[st
             else:
                 mod = node.module or ""
             if not mod.startswith("clvis"):
+                continue
+            if _private_module(mod) and mod not in SHARED_PRIVATE_MODULES and _package_of(mod) != own:
+                bad.append(f"{module}:{node.lineno} imports from the private module {mod}")
                 continue
             for a in node.names:
                 full = f"{mod}.{a.name}"
@@ -261,3 +310,12 @@ st._in_force()
     assert private_reach("from .._arrays import check_array\n", "clvis.raster.render") == []
     assert private_reach("from .. import _arrays\n", "clvis.gauss.fake") == []
     assert private_reach("from ..cli import _common\n", "clvis.training.fake") != []
+    # public names of another package's private module, by either import form
+    assert private_reach("from ..cli._common import size\n", "clvis.training.fake") == [
+        "clvis.training.fake:1 imports from the private module clvis.cli._common"
+    ]
+    assert private_reach("import clvis.cli._common as c\n", "clvis.distributed.fake") == [
+        "clvis.distributed.fake:1 imports the private module clvis.cli._common"
+    ]
+    assert private_reach("from ._common import size\n", "clvis.cli.raster") == []
+    assert private_reach("from .._keys import key_f32\n", "clvis.gauss.bvh") == []  # shared on purpose

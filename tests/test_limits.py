@@ -5,6 +5,7 @@ import pytest
 
 from clvis import limits
 from clvis.cli import _common
+from clvis.gauss import render as gauss_render
 from clvis.iso import render as iso_render
 from clvis.limits import ImageLimits, check_image_size
 from clvis.post import infer, pack
@@ -19,6 +20,9 @@ def test_families_take_their_limits_from_here():
     assert (_common.MAX_SIDE, _common.MAX_PIXELS) == (limits.RASTER.max_side, limits.RASTER.max_pixels)
     for lim in (limits.RASTER, limits.ISO, limits.POST_PACK, limits.POST_INFER):
         assert lim.max_pixels < 2**31 and lim.max_side <= lim.max_pixels and lim.why
+    # gauss: unsigned 32-bit pixel indices (gauss/render.py applies it: tests/gauss/test_render.py)
+    assert limits.GAUSS.max_pixels == limits.GAUSS.max_side == 2**32 - 1 and limits.GAUSS.why
+    assert gauss_render.LIMITS is limits.GAUSS
 
 
 def test_check_image_size():

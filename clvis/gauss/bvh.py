@@ -34,6 +34,7 @@ import pyopencl.array as cla
 
 from .. import morton, runtime
 from .._arrays import check_array, resolve_queue, to_device
+from .._keys import key_f32_inverse
 from ..errors import DataError, DeviceError
 from ..primitives import radix_sort
 
@@ -125,13 +126,6 @@ class BVH:
         return f"BVH(n={self.n}, nodes={self.nodes.shape[0]}, nbytes={self.nbytes})"  # does not wait
 
 
-def _decode_key(k: np.ndarray) -> np.ndarray:
-    """Inverse of clvis_key_f32 (keys.h) for non-NaN keys."""
-    k = np.asarray(k, np.uint32)
-    bits = np.where(k & np.uint32(0x80000000), k & np.uint32(0x7FFFFFFF), ~k).astype(np.uint32)
-    return bits.view(np.float32)
-
-
 def _read_bounds(queue, bd, n: int):
     """Run bvh_bounds; (centre lo, centre hi, box lo, box hi), or DataError on a bad row."""
     res = runtime.fill(queue, runtime.empty(queue, 16, np.uint32, "BVH bounds"), 0xFFFFFFFF)
@@ -157,8 +151,8 @@ def _read_bounds(queue, bd, n: int):
             f"boxes: row {row} is not a valid box (NaN or infinite values, lo > hi on an "
             "axis, or lo + hi overflows float32)"
         )
-    clo, chi = _decode_key(r[0:3]), _decode_key(~r[3:6])
-    blo, bhi = _decode_key(r[6:9]), _decode_key(~r[9:12])
+    clo, chi = key_f32_inverse(r[0:3]), key_f32_inverse(~r[3:6])
+    blo, bhi = key_f32_inverse(r[6:9]), key_f32_inverse(~r[9:12])
     return clo, chi, blo, bhi
 
 

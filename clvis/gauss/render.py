@@ -30,7 +30,8 @@ ray), read back into the host image before the next band; the device holds
 one band's buffers whatever the image size (the tuning profile's
 ``tile_rays``). ``runtime.check_memory`` is asked before the host image and
 the band buffers are allocated, so an impossible size is a DeviceError
-naming both figures. host=False keeps the whole image on the device: one band.
+naming both figures (a size past :data:`clvis.limits.GAUSS`, 2^32 - 1 pixels,
+is a ValueError before that). host=False keeps the whole image on the device: one band.
 
 A GaussianRenderer captures the runtime options (tuning profile, 64-bit
 atomics) and its kernels when it is made (runtime.capture). Timings in its
@@ -48,18 +49,20 @@ import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 
-from .. import runtime
+from .. import limits, runtime
 from .._arrays import buffer_of, nonnegative_int, positive_int, resolve_queue, to_host
 from ..camera import Camera, ray_buffer
 from ..colormap import TransferFunction
 from ..errors import DeviceError
 from ..images import Picture, float_rgba8
+from ..limits import check_image_size
 from .bvh import build_bvh
 from .gaussians import Gaussians, gather_records, gaussian_records
 from .tiles import PROFILES as TILE_PROFILES
 from .tiles import render_tiles
 
 __all__ = [
+    "LIMITS",
     "MODELS",
     "SPLAT",
     "GaussianImage",
@@ -70,6 +73,7 @@ __all__ = [
 MODELS = {"max_response": 0, "absorption": 1}  # the ray models (march.cl, tiles.cl)
 SPLAT = "splat"  # 3DGS's rasterizer (splat.cl), tiles only
 METHODS = ("tiles", "bvh")
+LIMITS = limits.GAUSS  # image sizes (why: clvis.limits)
 MAX_K = 64
 TILE = 8
 
@@ -317,9 +321,7 @@ class GaussianRenderer:
         mean length of a pixel's tile list) and the device time split
         bin_s (count, scan, keys), sort_s, tile_render_s (ranges, render)."""
         q = self.queue
-        w, h = positive_int("width", width), positive_int("height", height)
-        if w * h >= 2**32:
-            raise DeviceError(f"width x height: {w * h} pixels; at most 2^32 - 1")
+        w, h = check_image_size(width, height, LIMITS)
         cam = ray_buffer(camera, w, h)
         tf = transfer_function or self.transfer_function
         if not isinstance(tf, TransferFunction):

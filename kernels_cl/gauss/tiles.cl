@@ -315,12 +315,6 @@ kernel void tile_ranges(global const ulong *keys, uint m, global uint2 *ranges)
         ranges[tile].y = i + 1;
 }
 
-/* the float whose clvis_key_f32 is k */
-inline float key_to_f32(uint k)
-{
-    return as_float((k & 0x80000000u) ? (k & 0x7FFFFFFFu) : ~k);
-}
-
 inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *colors, uint id)
 {
 #if COLOR == 1
@@ -368,7 +362,7 @@ kernel void tile_render(global const clvis_gaussian *recs, global const uint *or
         uint cid = 0xFFFFFFFFu;
         for (uint i = range.x; i < range.y; ++i) {
             if (stream && kn > 0) {
-                float dm = key_to_f32((uint)keys[i]);
+                float dm = as_float(clvis_key_f32_inverse((uint)keys[i]));
                 while (kn > 0) {
                     float h = kt[kn - 1] * cd;
                     if (!((h + d0) + 1e-5f * (fabs(h) + fabs(d0)) < dm))
@@ -552,7 +546,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
             nround[l] += !done[l];
         }
         for (uint i = range.x; i < range.y && live > 0; ++i) {
-            float dm = key_to_f32((uint)keys[i]);
+            float dm = as_float(clvis_key_f32_inverse((uint)keys[i]));
             if (any(vload8(0, front) < dm)) {
                 for (int l = 0; l < 8; ++l) {
                     if (!(front[l] < dm))

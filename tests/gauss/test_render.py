@@ -364,6 +364,13 @@ def test_bad_input(queue):
         r.render("cam", 4, 4)
     with pytest.raises(ValueError, match="width"):
         r.render(_cam(), 0, 4)
+    # clvis.limits.GAUSS: 32-bit unsigned pixel indices, refused before any allocation
+    with pytest.raises(
+        ValueError, match=r"65536x65536 = 4294967296 pixels; at most 2\^32 - 1 \(the kernels index"
+    ):
+        r.render(_cam(), 2**16, 2**16)
+    with pytest.raises(TypeError, match="height: expected an int"):
+        r.render(_cam(), 4, 4.0)
     with pytest.raises(ValueError, match="opacity"):
         TransferFunction(opacity=[(0, 2.0)])
     with pytest.raises(ValueError, match="colormap"):

@@ -12,7 +12,8 @@
  *
  * clvis_key_f32_inverse(key) gives back the float bits of a clvis_key_f32
  * key (a NaN's key, all ones, gives 0x7FFFFFFF, a NaN); as_float of it is the
- * depth of a depth key (raster/render.cl, raster/resolve.cl, post/pack.cl).
+ * depth of a depth key (raster/render.cl, raster/resolve.cl, post/pack.cl,
+ * gauss/tiles.cl). Its one host copy is clvis/_keys.py.
  *
  * Only integer operations are used: no fp64 support is needed for the 64-bit
  * float keys. Radix sort moves the raw bits and calls these on the fly, so the

@@ -335,6 +335,11 @@ class ClusterOwner:
         """Make again what a lost worker took along and Dask cannot recompute
         (here: nothing; files and dask arrays have their lineage)."""
 
+    def _lost_parts(self) -> str:
+        """What of this object's data is lost now and which worker held it
+        ("" when it cannot say): for the error of a frame not recovered."""
+        return ""
+
     # -- bounded waits
     def _gather(self, futures: Sequence[Any], what: str, where: dict | None = None) -> list:
         """The results of `futures`, waited for at most self.timeout: a
@@ -444,7 +449,10 @@ class ClusterOwner:
                 break
             except _Lost as e:
                 if attempt == FRAME_RETRIES:
-                    raise ClusterError(f"{e}; still lost after {FRAME_RETRIES} recoveries") from None
+                    where = self._lost_parts()
+                    raise ClusterError(
+                        f"{e}; still lost after {FRAME_RETRIES} recoveries{'; ' + where if where else ''}"
+                    ) from None
                 self._recover()
         frame = time.perf_counter() - t0
         whole = _c.assemble(final, (view["height"], view["width"]))

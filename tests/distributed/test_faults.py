@@ -6,6 +6,7 @@ timed out), a scheduler address that refuses connections (fails in
 seconds), and a renderer used after close()."""
 
 import os
+import re
 import signal
 import socket
 import threading
@@ -17,6 +18,7 @@ from dask_cluster import TIMEOUT, distributed, local_cluster
 
 from clvis import Camera, datasets
 from clvis.distributed import DistributedIsoRenderer, DistributedRasterizer
+from clvis.distributed import cluster as dcluster
 from clvis.distributed import composite as C
 from clvis.distributed import iso as diso
 from clvis.distributed.cluster import connected_workers
@@ -46,7 +48,7 @@ def _pid(client, worker):
     return client.run(os.getpid, workers=[worker])[worker]
 
 
-def test_a_worker_killed_during_a_frame_of_an_array_volume():
+def test_a_worker_killed_during_a_frame_of_an_array_volume(monkeypatch):
     """The bricks of an in-memory array were scattered from the client: a
     worker killed with the frame's tasks in flight takes some of them along
     ("lost scattered data"). The renderer sends them again and the frame,
@@ -75,6 +77,19 @@ def test_a_worker_killed_during_a_frame_of_an_array_volume():
             pid = _pid(c, held[-1])
             threading.Timer(0.05, os.kill, (pid, signal.SIGKILL)).start()
             _same_image(dr.render(_cam(), W, H, 0.5), want)
+            _same_image(dr.render(_cam(), W, H, 0.5), want)
+            # a loss that is not recovered (no retries left): a clvis error
+            # naming the bricks and the worker that held them
+            monkeypatch.setattr(dcluster, "FRAME_RETRIES", 0)
+            victim = sorted({h.worker for h in dr._built})[0]
+            os.kill(_pid(c, victim), signal.SIGKILL)
+            deadline = time.monotonic() + TIMEOUT
+            while victim in connected_workers(c) and time.monotonic() < deadline:
+                time.sleep(0.1)
+            lost = rf"after 0 recoveries; lost: bricks \(\(\d+, \d+\), .*\(were on {re.escape(victim)}\)"
+            with pytest.raises(ClusterError, match=lost):
+                dr.render(_cam(), W, H, 0.5)
+            monkeypatch.undo()  # retries again: the next frame recovers
             _same_image(dr.render(_cam(), W, H, 0.5), want)
 
 

@@ -245,6 +245,24 @@ def test_several_files_match_attributes_by_name(tmp_path, capsys):
     assert rc == 2 and "c.npz: no attribute 'i'; it has k" in err
 
 
+def test_several_files_too_large_for_one_device_point_to_workers(tmp_path, capsys, monkeypatch):
+    """Tiles that do not fit one device are an error that says so and names
+    --workers/--scheduler (Dask is started only when asked)."""
+    from types import SimpleNamespace
+
+    from clvis import runtime
+
+    rng = np.random.default_rng(4)
+    for name in ("a", "b"):
+        save_npz(tmp_path / f"{name}.npz", PointCloud(rng.uniform(0, 1, (400, 3))))
+    tiny = SimpleNamespace(device=SimpleNamespace(global_mem_size=20_000, name="a tiny device "))
+    monkeypatch.setattr(runtime, "default_queue", lambda *a, **k: tiny)
+    rc, out, err = _run(capsys, "render", tmp_path / "a.npz", tmp_path / "b.npz", "--out", tmp_path, *SMALL)
+    assert rc == 2 and "2 files, 800 points: more than one device holds (a tiny device)" in err, err
+    assert "render them on Dask workers (--workers N or --scheduler ADDRESS)" in err
+    assert not list(tmp_path.glob("*.png"))
+
+
 def test_one_file_on_several_workers_says_so(tiles, tmp_path, capsys):
     paths, _ = tiles
     rc, out, err = _run(capsys, "render", paths[0], "--workers", 2, "--out", tmp_path, *SMALL)

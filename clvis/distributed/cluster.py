@@ -65,14 +65,18 @@ def current_worker() -> str | None:
         return None
 
 
-def connected_workers(client: Any) -> dict[str, dict]:
-    """The scheduler's record of every worker now connected, by address.
+def connected_workers(client: Any, timeout: float | None = None) -> dict[str, dict]:
+    """The scheduler's record of every worker now connected, by address,
+    waited for at most `timeout` seconds (None: no bound; ClusterTimeout).
 
     Asks the scheduler directly. ``client.scheduler_info()`` returns the
     client's cached identity, which its own periodic refresh (every 2 s, with
     no workers in it) can overwrite between the fetch and the return: an empty
     ``"workers"`` on a cluster of two (dask.distributed 2026.8)."""
-    info = client.sync(client.scheduler.identity, n_workers=-1)
+    try:
+        info = client.sync(client.scheduler.identity, n_workers=-1, callback_timeout=timeout)
+    except TimeoutError:
+        raise ClusterTimeout(f"the scheduler's list of workers: no answer within {timeout:g} s") from None
     return dict(info.get("workers", {}))
 
 

@@ -374,7 +374,7 @@ class DistributedIsoRenderer(ClusterOwner):
             sp = triple("spacing", default_spacing if spacing is None else spacing, positive=True)
             self.spacing, self.origin = sp, o
             self.bricks = brick_plan(self.volume_shape, brick)
-            ws: list[str | None] = [*sorted(connected_workers(self.client))] or [None]
+            ws: list[str | None] = [*sorted(connected_workers(self.client, self.timeout))] or [None]
             units = worker_plan(self.bricks, len(ws)) if per_worker else [(r, 1) for r in self.bricks]
             token = uuid.uuid4().hex
             self._specs: list[dict[str, Any]] = []

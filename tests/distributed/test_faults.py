@@ -9,6 +9,8 @@ import os
 import re
 import signal
 import socket
+import subprocess
+import sys
 import threading
 import time
 
@@ -123,6 +125,37 @@ def test_a_stopped_worker_times_out_with_a_clvis_error_and_close_is_bounded(tmp_
             if pid is not None:
                 os.kill(pid, signal.SIGKILL)  # the nanny starts another
             dr.close()
+
+
+def test_a_stopped_scheduler_times_out_with_a_clvis_error():
+    """The scheduler itself stops answering (SIGSTOP) after the client
+    connected: building a renderer raises ClusterTimeout within about its
+    timeout (asking it for its workers waited forever before)."""
+    port = _closed_port()
+    address = f"tcp://127.0.0.1:{port}"
+    cmd = [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1"]
+    cmd += ["--port", str(port), "--no-dashboard"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    c = None
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while c is None:
+            try:
+                c = distributed.Client(address, timeout=5)
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.5)
+        os.kill(proc.pid, signal.SIGSTOP)
+        t0 = time.monotonic()
+        with pytest.raises(ClusterTimeout, match="the scheduler's list of workers: no answer within 3 s"):
+            DistributedIsoRenderer(np.zeros((8, 8, 8), np.float32), c, brick=4, timeout=3)
+        assert time.monotonic() - t0 < 3 * 3 + 5
+    finally:
+        proc.kill()
+        proc.wait(TIMEOUT)
+        if c is not None:
+            c.close(timeout=10)
 
 
 def test_render_after_close_says_closed(tmp_path):

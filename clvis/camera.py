@@ -44,6 +44,7 @@ __all__ = [
     "point_spacing",
     "ray_buffer",
     "robust_bounds",
+    "robust_fences",
     "singular",
 ]
 
@@ -579,6 +580,31 @@ class RobustBounds:
     total: int
 
 
+ROBUST_SAMPLE = 1_000_000  # the points robust_fences' percentiles are taken of, at most
+
+
+def robust_sample_step(n: int) -> int:
+    """The stride of the sample :func:`robust_bounds` takes its percentiles
+    of, for a cloud of `n` points: every k-th point, up to ROBUST_SAMPLE."""
+    return max(1, int(n) // ROBUST_SAMPLE)
+
+
+def robust_fences(
+    sample: npt.ArrayLike, percentile: float = ROBUST_PERCENTILE, fence: float = ROBUST_FENCE
+) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi): the fences :func:`robust_bounds` keeps points within, from
+    `sample` ((m, 3), every :func:`robust_sample_step`-th point of the cloud;
+    non-finite rows are left out): per axis, the `percentile` and 100 -
+    `percentile` percentiles widened by `fence` times their distance. (A
+    cloud split over workers computes them from the same rows.)"""
+    s = np.asarray(sample).astype(np.float64)
+    s = s[np.isfinite(s).all(axis=1)]
+    if len(s) == 0:
+        raise ValueError("bounds: the cloud has no finite points")
+    a, b = np.percentile(s, [percentile, 100 - percentile], axis=0)
+    return a - fence * (b - a), b + fence * (b - a)
+
+
 def robust_bounds(
     positions: npt.ArrayLike, percentile: float = ROBUST_PERCENTILE, fence: float = ROBUST_FENCE
 ) -> RobustBounds:
@@ -596,9 +622,7 @@ def robust_bounds(
     total = int(finite.sum())
     if total == 0:
         raise ValueError("bounds: the cloud has no finite points")
-    sample = _finite_sample(p, 1_000_000)
-    a, b = np.percentile(sample, [percentile, 100 - percentile], axis=0)
-    lo_f, hi_f = a - fence * (b - a), b + fence * (b - a)
+    lo_f, hi_f = robust_fences(p[:: robust_sample_step(len(p))], percentile, fence)
     with np.errstate(invalid="ignore"):
         inside = finite & ((p >= lo_f) & (p <= hi_f)).all(axis=1)
     kept = int(inside.sum())

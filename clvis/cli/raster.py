@@ -659,15 +659,18 @@ def _render_distributed(args, progress) -> int:
         names = dr.attribute_names
         if attribute is not None and attribute not in names:
             raise CliError(f"--attribute {attribute}: the tiles have {', '.join(names) or 'no attributes'}")
-        if attribute is None:  # as for one file: intensity, else the first attribute, else the colours
-            attribute = "intensity" if "intensity" in names else (names[0] if names else None)
+        if attribute is None:
+            attribute = _attribute_on_workers(dr)
         if dr.bounds is None:
             raise CliError("the tiles hold no point with finite coordinates")
-        lo, hi = dr.bounds
-        # one framing rule with and without workers: a fit view frames the
-        # same sample of the points (every k-th of the concatenated cloud)
-        sample = dr.sample() if args.view[0] == "fit" else None
-        camera = camera_from_args(args, lo, hi, width, height, points=sample)
+        # one framing rule with and without workers: the box of the bulk
+        # (stray points left out, with the same note) and, for a fit view,
+        # the same sample of its points as one device's
+        with progress.stage("framing"):
+            lo, hi, sample, bulk, finite = dr.framing()
+        if bulk < finite:
+            _stray_note(bulk, finite, dr.bounds, (lo, hi), dr.origin)
+        camera = camera_from_args(_world_camera_args(args, dr.origin), lo, hi, width, height, points=sample)
         if attribute is None and args.range is not None:
             raise CliError(
                 "--range scales an attribute's colours; the tiles have none (add --attribute NAME)"
@@ -755,6 +758,21 @@ def _render_distributed(args, progress) -> int:
     return 0
 
 
+def _attribute_on_workers(dr) -> str | None:
+    """What the tiles are coloured by on workers without --attribute, as
+    _pick_attribute picks on one device: their colours when they vary (None),
+    else intensity, else the first attribute that varies; where one device
+    would colour by z (nothing varies), intensity or the first attribute
+    (the workers colour by attributes), else the colours."""
+    if "colors" in dr.fields and dr.colors_vary:
+        return None
+    names = dr.attribute_names
+    for cand in ["intensity", *names]:
+        if dr.varies.get(cand):
+            return cand
+    return "intensity" if "intensity" in names else (names[0] if names else None)
+
+
 def _framing(cloud, source: str):
     """(lo, hi, the points to frame): the bounds of the bulk of the cloud
     (clvis.camera.robust_bounds), with a note on stderr when stray points far
@@ -767,15 +785,19 @@ def _framing(cloud, source: str):
         raise CliError(f"{source}: no point has finite coordinates") from None
     if rb.kept == rb.total:
         return rb.lo, rb.hi, cloud.positions
-    full_lo, full_hi = cloud.bounds()
-    o = cloud.origin
+    _stray_note(rb.kept, rb.total, cloud.bounds(), (rb.lo, rb.hi), cloud.origin)
+    return rb.lo, rb.hi, cloud.positions[rb.inside]
+
+
+def _stray_note(kept: int, total: int, full, bulk, o) -> None:
+    """The note on stderr when stray points are left out of the frame
+    (full, bulk: (lo, hi) relative to the origin `o`)."""
     print(
-        f"clvis render: note: {rb.total - rb.kept:,} of {rb.total:,} points lie far outside the rest "
-        f"(the cloud spans {_box(full_lo + o, full_hi + o)}, its bulk {_box(rb.lo + o, rb.hi + o)}); "
+        f"clvis render: note: {total - kept:,} of {total:,} points lie far outside the rest "
+        f"(the cloud spans {_box(full[0] + o, full[1] + o)}, its bulk {_box(bulk[0] + o, bulk[1] + o)}); "
         "the view frames the bulk (--eye/--target to look elsewhere)",
         file=sys.stderr,
     )
-    return rb.lo, rb.hi, cloud.positions[rb.inside]
 
 
 def _box(lo, hi) -> str:

@@ -65,14 +65,18 @@ def current_worker() -> str | None:
         return None
 
 
-def connected_workers(client: Any) -> dict[str, dict]:
-    """The scheduler's record of every worker now connected, by address.
+def connected_workers(client: Any, timeout: float | None = None) -> dict[str, dict]:
+    """The scheduler's record of every worker now connected, by address,
+    waited for at most `timeout` seconds (None: no bound; ClusterTimeout).
 
     Asks the scheduler directly. ``client.scheduler_info()`` returns the
     client's cached identity, which its own periodic refresh (every 2 s, with
     no workers in it) can overwrite between the fetch and the return: an empty
     ``"workers"`` on a cluster of two (dask.distributed 2026.8)."""
-    info = client.sync(client.scheduler.identity, n_workers=-1)
+    try:
+        info = client.sync(client.scheduler.identity, n_workers=-1, callback_timeout=timeout)
+    except TimeoutError:
+        raise ClusterTimeout(f"the scheduler's list of workers: no answer within {timeout:g} s") from None
     return dict(info.get("workers", {}))
 
 
@@ -335,6 +339,11 @@ class ClusterOwner:
         """Make again what a lost worker took along and Dask cannot recompute
         (here: nothing; files and dask arrays have their lineage)."""
 
+    def _lost_parts(self) -> str:
+        """What of this object's data is lost now and which worker held it
+        ("" when it cannot say): for the error of a frame not recovered."""
+        return ""
+
     # -- bounded waits
     def _gather(self, futures: Sequence[Any], what: str, where: dict | None = None) -> list:
         """The results of `futures`, waited for at most self.timeout: a
@@ -444,7 +453,10 @@ class ClusterOwner:
                 break
             except _Lost as e:
                 if attempt == FRAME_RETRIES:
-                    raise ClusterError(f"{e}; still lost after {FRAME_RETRIES} recoveries") from None
+                    where = self._lost_parts()
+                    raise ClusterError(
+                        f"{e}; still lost after {FRAME_RETRIES} recoveries{'; ' + where if where else ''}"
+                    ) from None
                 self._recover()
         frame = time.perf_counter() - t0
         whole = _c.assemble(final, (view["height"], view["width"]))

@@ -15,11 +15,20 @@ next brick's too and give the same hits.
 Each brick is read where it is rendered: from the array given (sliced on the
 client), or from a file by slicing a memory map on the worker (.npy, .raw;
 NIfTI through nibabel's array proxy), so a volume larger than one worker's
-memory renders. Each worker keeps an :class:`clvis.iso.IsoRenderer` per
-brick (origin moved to the brick's first sample) and renders every frame
-with it; a pixel's nearest hit over the bricks wins by the smallest
-``depth key << 32 | brick number`` (:mod:`clvis.distributed.composite`),
-then direct-send or a tree as for points (:mod:`clvis.distributed.raster`).
+memory renders. By default each worker keeps one :class:`clvis.iso.IsoRenderer`
+over the union of its bricks (:func:`worker_plan`: whole z layers of bricks,
+one slab per worker; ``per_worker=False``: one per brick), its origin moved
+to the slab's first sample, and renders every frame with it, only over the
+rectangle of the frame the slab's box projects to (:func:`footprint`,
+:func:`window`); a pixel's nearest hit wins by the smallest ``depth key <<
+32 | renderer number`` (:mod:`clvis.distributed.composite`), then
+direct-send or a tree as for points (:mod:`clvis.distributed.raster`).
+
+Faults: bricks of an in-memory array are scattered from the client, which
+keeps the array: a frame whose tasks were cancelled with lost data sends
+those bricks again and rebuilds them; a loss not recovered is a
+:class:`clvis.errors.ClusterError` naming the bricks and the worker that
+held them.
 
 The image is the single device's up to float32 rounding: a brick's rays
 enter its own box, so its t and depths are rounded differently; hit masks
@@ -365,7 +374,7 @@ class DistributedIsoRenderer(ClusterOwner):
             sp = triple("spacing", default_spacing if spacing is None else spacing, positive=True)
             self.spacing, self.origin = sp, o
             self.bricks = brick_plan(self.volume_shape, brick)
-            ws: list[str | None] = [*sorted(connected_workers(self.client))] or [None]
+            ws: list[str | None] = [*sorted(connected_workers(self.client, self.timeout))] or [None]
             units = worker_plan(self.bricks, len(ws)) if per_worker else [(r, 1) for r in self.bricks]
             token = uuid.uuid4().hex
             self._specs: list[dict[str, Any]] = []
@@ -421,25 +430,34 @@ class DistributedIsoRenderer(ClusterOwner):
         client's array and built again (file bricks: Dask builds them again)."""
         if self._source is None:
             return
-        lost = [
-            i
-            for i, (h, a) in enumerate(zip(self._handles, self._arrays, strict=True))
-            if a.status != "finished" or h.status != "finished"
-        ]
+        lost = self._lost()
         for i in lost:
             self._arrays[i] = self._scatter(i)
             self._handles[i] = self._submit_build(i, self._arrays[i])
         try:
             rebuilt = self._gather([self._handles[i] for i in lost], f"rebuilding {len(lost)} lost bricks")
         except ClusterError as e:
-            gone = ", ".join(
-                f"bricks {self._specs[i]['ranges']} (were on {self._built[i].worker})" for i in lost[:4]
-            )
-            raise ClusterError(
-                f"{gone}{' ...' if len(lost) > 4 else ''}: lost and not rebuilt: {e}"
-            ) from None
+            raise ClusterError(f"{self._name_lost(lost)}: lost and not rebuilt: {e}") from None
         for i, h in zip(lost, rebuilt, strict=True):
             self._built[i] = h
+
+    def _lost(self) -> list[int]:
+        """The renderers whose handle (or scattered samples) is lost now."""
+        return [
+            i
+            for i, (h, a) in enumerate(zip(self._handles, self._arrays, strict=True))
+            if h.status != "finished" or (a is not None and a.status != "finished")
+        ]
+
+    def _name_lost(self, lost: list[int]) -> str:
+        gone = ", ".join(
+            f"bricks {self._specs[i]['ranges']} (were on {self._built[i].worker})" for i in lost[:4]
+        )
+        return gone + (" ..." if len(lost) > 4 else "")
+
+    def _lost_parts(self) -> str:
+        lost = self._lost()
+        return f"lost: {self._name_lost(lost)}" if lost else ""
 
     def render(
         self,

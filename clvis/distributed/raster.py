@@ -155,6 +155,7 @@ def _meta(cloud: PointCloud) -> dict:
     for k, v in cloud.attributes.items():
         f = v[np.isfinite(v)] if v.dtype.kind == "f" else v
         ranges[k] = (float(f.min()), float(f.max())) if f.size else None
+    c = cloud.colors
     return {
         "n": len(cloud),
         "origin": cloud.origin.copy(),
@@ -162,6 +163,10 @@ def _meta(cloud: PointCloud) -> dict:
         "dtypes": [str(v.dtype) for v in cloud.attributes.values()],
         "fields": tuple(f for f in ("colors", "velocity", "radius") if getattr(cloud, f) is not None),
         "ranges": ranges,
+        # (its first colour, whether its colours vary), None without colours or points
+        "colors": None
+        if c is None or not len(c)
+        else (c[0, :3].tolist(), bool((c[:, :3] != c[:1, :3]).any())),
     }
 
 
@@ -332,6 +337,39 @@ def _sample(handle: _Handle, arrays: Any, step: int) -> tuple[np.ndarray, np.nda
     return np.concatenate(ids), pos[idx]
 
 
+def _fenced(handle: _Handle, arrays: Any, fences: tuple, step: int | None = None, starts: Any = None) -> list:
+    """Task: the handle's points inside the fences (lo, hi), per partition in
+    order (what clvis.camera.robust_bounds keeps of the concatenated cloud).
+    step None: (offset, kept, finite, min, max) per partition (its global
+    offset, the counts of its points inside and of its finite points; min,
+    max of those inside, float32 (3,), None when it keeps none); else, with
+    `starts` (global offset → the rank among the kept points of that
+    partition's first), (ranks, positions) of the kept points whose rank
+    is a multiple of `step`."""
+    r = _rasterizer(handle, arrays)
+    pos = r.positions.get()
+    if r.inv is not None:  # Morton order on the device: back to the partitions' order
+        pos = pos[r.inv.get()]
+    lo, hi = fences
+    out: list = []
+    start = 0
+    for off, n in zip(handle.offsets, handle.ns, strict=True):
+        p = pos[start : start + n]
+        start += n
+        with np.errstate(invalid="ignore"):
+            q = p[((p >= lo) & (p <= hi)).all(axis=1)]  # NaN and inf compare False: left out
+        if step is None:
+            finite = int(np.isfinite(p).all(axis=1).sum())
+            out.append(
+                (off, len(q), finite, q.min(axis=0) if len(q) else None, q.max(axis=0) if len(q) else None)
+            )
+        else:
+            r0 = int(starts.get(off, 0)) if len(q) else 0
+            first = -r0 % step
+            out.append((r0 + np.arange(first, len(q), step, dtype=np.int64), q[first::step]))
+    return out
+
+
 # ---------------------------------------------------------------- the client's side
 
 
@@ -456,6 +494,14 @@ class DistributedRasterizer(ClusterOwner):
         self.attribute_names = metas[0]["names"]
         self.fields = metas[0]["fields"]
         self._ranges = {k: _merge_ranges([m["ranges"][k] for m in metas]) for k in self.attribute_names}
+        #: attribute name → whether it holds more than one finite value over the cloud
+        self.varies = {
+            k: len({v for m in metas if m["ranges"][k] is not None for v in m["ranges"][k]}) > 1
+            for k in self.attribute_names
+        }
+        colours = [m["colors"] for m in metas if m["colors"] is not None]
+        #: whether the cloud has colours of more than one value (red, green, blue)
+        self.colors_vary = any(v for _, v in colours) or len({tuple(f) for f, _ in colours}) > 1
         # the partitions each worker opened become one Rasterizer there: one
         # render, one resolve and one partial per worker and frame
         where = self._who_has(opened)
@@ -510,7 +556,10 @@ class DistributedRasterizer(ClusterOwner):
         self._check_open()
         if isinstance(limit, bool) or not isinstance(limit, (int, np.integer)) or limit < 1:
             raise ValueError(f"limit: expected a positive int, got {limit!r}")
-        step = max(1, self.n // int(limit))
+        return self._every(max(1, self.n // int(limit)))
+
+    def _every(self, step: int) -> np.ndarray:
+        """The points whose global id is a multiple of `step`, in order."""
         where = self._who_has(self._handles)
         futures = [
             self.client.submit(_sample, h, a, step, pure=False, **self._near(where, h))
@@ -520,6 +569,50 @@ class DistributedRasterizer(ClusterOwner):
         ids = np.concatenate([g[0] for g in got] + [np.zeros(0, np.int64)])
         pos = np.concatenate([g[1] for g in got] + [np.zeros((0, 3), np.float32)])
         return pos[np.argsort(ids, kind="stable")]
+
+    def framing(self, limit: int = 200_000) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+        """(lo, hi, points, kept, total): the framing of the concatenated cloud
+        that one device gives it (``clvis.camera.robust_bounds``: the box of
+        the bulk, stray points far outside it left out; the fences from the
+        same sample rows), with the points to fit a view to (every k-th of
+        the kept ones, as ``fit_camera`` samples them on one device), kept
+        and total counts of finite points. lo, hi float64 relative to
+        :attr:`origin`; points float32 (m, 3). ValueError when no point is
+        finite."""
+        from ..camera import robust_fences, robust_sample_step
+
+        self._check_open()
+        if isinstance(limit, bool) or not isinstance(limit, (int, np.integer)) or limit < 1:
+            raise ValueError(f"limit: expected a positive int, got {limit!r}")
+        if self.bounds is None:
+            raise ValueError("bounds: the cloud has no finite points")
+        fences = robust_fences(self._every(robust_sample_step(self.n)))
+        where = self._who_has(self._handles)
+
+        def each(step: int | None, starts: dict | None) -> list:
+            futures = [
+                self.client.submit(_fenced, h, a, fences, step, starts, pure=False, **self._near(where, h))
+                for h, a in zip(self._handles, self._arrays, strict=True)
+            ]
+            return self._gather(futures, "the points inside the framing fences")
+
+        # (offset, kept, finite, min, max) of every partition, in the global order
+        per = sorted((st for sts in each(None, None) for st in sts), key=lambda st: st[0])
+        kept, total = sum(st[1] for st in per), sum(st[2] for st in per)
+        if kept == total:  # nothing stray: every finite point, as one device frames them
+            return self.bounds[0], self.bounds[1], self.sample(limit), kept, total
+        lo = np.min([st[3] for st in per if st[1]], axis=0).astype(np.float64)
+        hi = np.max([st[4] for st in per if st[1]], axis=0).astype(np.float64)
+        # the rank of each partition's first kept point (offsets are unique
+        # among partitions that keep points; empty ones share the next's)
+        some = [st for st in per if st[1]]
+        first = np.cumsum([0] + [st[1] for st in some])[:-1]
+        rank = {st[0]: int(r) for st, r in zip(some, first, strict=True)}
+        step = max(1, kept // int(limit))
+        got = each(step, rank)
+        ids = np.concatenate([i for st in got for i, _ in st] + [np.zeros(0, np.int64)])
+        pos = np.concatenate([p for st in got for _, p in st] + [np.zeros((0, 3), np.float32)])
+        return lo, hi, pos[np.argsort(ids, kind="stable")], kept, total
 
     # -- frames
     def render(

@@ -139,6 +139,49 @@ def test_several_files_on_one_device_frame_as_on_workers(tiles, scheduler, tmp_p
         np.testing.assert_array_equal(a, b)
 
 
+def _las_tile(path, n, x0, rng, strays=0):
+    """A LAS tile of point format 3 in UTM-like coordinates (RGB, intensity),
+    with `strays` records at (0, 0, 0) far outside the rest."""
+    laspy = pytest.importorskip("laspy")
+    header = laspy.LasHeader(point_format=3, version="1.2")
+    header.scales, header.offsets = [0.01] * 3, [636000.0, 849000.0, 400.0]
+    las = laspy.LasData(header)
+    las.x = np.round(636000 + x0 + rng.random(n) * 200, 2)
+    las.y = np.round(849000 + rng.random(n) * 150, 2)
+    las.z = np.round(400 + rng.random(n) * 20, 2)
+    if strays:
+        las.x[:strays], las.y[:strays], las.z[:strays] = 0.0, 0.0, 0.0
+    las.red, las.green, las.blue = rng.integers(0, 65536, (3, n)).astype(np.uint16)
+    las.intensity = rng.integers(0, 65536, n)
+    las.write(str(path))
+    return path
+
+
+def test_las_tiles_default_and_eye_views_equal_on_workers(scheduler, tmp_path, capsys):
+    """Two georeferenced LAS tiles with colours and a few stray (0, 0, 0)
+    records: the default picture (their colours, the fit view of the bulk,
+    the note on the strays) and a view from --eye/--target in the files'
+    coordinates are the same with and without workers, bit for bit."""
+    rng = np.random.default_rng(7)
+    a = _las_tile(tmp_path / "a.las", 3000, 0, rng)
+    b = _las_tile(tmp_path / "b.las", 2000, 180, rng, strays=12)
+    eye = ["--eye", "635900,848900,700", "--target", "636190,849075,410"]
+    for name, view in (("fit", []), ("eye", eye)):
+        args = ["render", a, b, *view, *SMALL]
+        rc, out, err = _run(capsys, *args, "--out", tmp_path / name / "s")
+        assert rc == 0, err
+        rc, out_d, err_d = _run(capsys, *args, "--scheduler", scheduler, "--out", tmp_path / name / "d")
+        assert rc == 0, err_d
+        assert "on 2 Dask workers" in out_d
+        if not view:  # the strays are left out of the frame on both, with one note
+            assert "12 of 5,000 points lie far outside the rest" in err
+            assert err_d == err
+        for png in ("colors.png", "depth.png"):
+            x, y = _png(tmp_path / name / "d" / png), _png(tmp_path / name / "s" / png)
+            assert len(np.unique(x.reshape(-1, x.shape[-1]), axis=0)) > 50, (name, png)
+            np.testing.assert_array_equal(x, y, err_msg=f"{name} {png}")
+
+
 def test_look_options_on_workers_equal_one_device(tiles, scheduler, tmp_path, capsys):
     """--background, --range MIN,MAX and --edl work on workers as on one
     device; what cannot (percentiles, auto point size, the networks) is an
@@ -202,6 +245,24 @@ def test_several_files_match_attributes_by_name(tmp_path, capsys):
     assert rc == 2 and "c.npz: no attribute 'i'; it has k" in err
 
 
+def test_several_files_too_large_for_one_device_point_to_workers(tmp_path, capsys, monkeypatch):
+    """Tiles that do not fit one device are an error that says so and names
+    --workers/--scheduler (Dask is started only when asked)."""
+    from types import SimpleNamespace
+
+    from clvis import runtime
+
+    rng = np.random.default_rng(4)
+    for name in ("a", "b"):
+        save_npz(tmp_path / f"{name}.npz", PointCloud(rng.uniform(0, 1, (400, 3))))
+    tiny = SimpleNamespace(device=SimpleNamespace(global_mem_size=20_000, name="a tiny device "))
+    monkeypatch.setattr(runtime, "default_queue", lambda *a, **k: tiny)
+    rc, out, err = _run(capsys, "render", tmp_path / "a.npz", tmp_path / "b.npz", "--out", tmp_path, *SMALL)
+    assert rc == 2 and "2 files, 800 points: more than one device holds (a tiny device)" in err, err
+    assert "render them on Dask workers (--workers N or --scheduler ADDRESS)" in err
+    assert not list(tmp_path.glob("*.png"))
+
+
 def test_one_file_on_several_workers_says_so(tiles, tmp_path, capsys):
     paths, _ = tiles
     rc, out, err = _run(capsys, "render", paths[0], "--workers", 2, "--out", tmp_path, *SMALL)
@@ -218,6 +279,24 @@ def test_a_refused_scheduler_fails_in_seconds(tiles, tmp_path, capsys):
     rc, out, err = _run(capsys, "render", tiles[0][0], "--scheduler", f"tcp://127.0.0.1:{port}", *SMALL)
     assert rc == 2 and f"scheduler tcp://127.0.0.1:{port}: cannot connect" in err
     assert time.monotonic() - t0 < 5
+
+
+def test_a_silent_scheduler_fails_after_connect_timeout(tiles, tmp_path, capsys):
+    """A port that accepts and never speaks Dask: --connect-timeout bounds the wait."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)
+    port = srv.getsockname()[1]
+    try:
+        t0 = time.monotonic()
+        address = f"tcp://127.0.0.1:{port}"
+        rc, out, err = _run(
+            capsys, "render", tiles[0][0], "--scheduler", address, "--connect-timeout", 2, *SMALL
+        )
+        assert rc == 2 and f"scheduler {address}: not reached within connect_timeout=2 s" in err, err
+        assert time.monotonic() - t0 < 20
+    finally:
+        srv.close()
 
 
 def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):

@@ -6,8 +6,11 @@ timed out), a scheduler address that refuses connections (fails in
 seconds), and a renderer used after close()."""
 
 import os
+import re
 import signal
 import socket
+import subprocess
+import sys
 import threading
 import time
 
@@ -17,6 +20,7 @@ from dask_cluster import TIMEOUT, distributed, local_cluster
 
 from clvis import Camera, datasets
 from clvis.distributed import DistributedIsoRenderer, DistributedRasterizer
+from clvis.distributed import cluster as dcluster
 from clvis.distributed import composite as C
 from clvis.distributed import iso as diso
 from clvis.distributed.cluster import connected_workers
@@ -46,7 +50,7 @@ def _pid(client, worker):
     return client.run(os.getpid, workers=[worker])[worker]
 
 
-def test_a_worker_killed_during_a_frame_of_an_array_volume():
+def test_a_worker_killed_during_a_frame_of_an_array_volume(monkeypatch):
     """The bricks of an in-memory array were scattered from the client: a
     worker killed with the frame's tasks in flight takes some of them along
     ("lost scattered data"). The renderer sends them again and the frame,
@@ -75,6 +79,19 @@ def test_a_worker_killed_during_a_frame_of_an_array_volume():
             pid = _pid(c, held[-1])
             threading.Timer(0.05, os.kill, (pid, signal.SIGKILL)).start()
             _same_image(dr.render(_cam(), W, H, 0.5), want)
+            _same_image(dr.render(_cam(), W, H, 0.5), want)
+            # a loss that is not recovered (no retries left): a clvis error
+            # naming the bricks and the worker that held them
+            monkeypatch.setattr(dcluster, "FRAME_RETRIES", 0)
+            victim = sorted({h.worker for h in dr._built})[0]
+            os.kill(_pid(c, victim), signal.SIGKILL)
+            deadline = time.monotonic() + TIMEOUT
+            while victim in connected_workers(c) and time.monotonic() < deadline:
+                time.sleep(0.1)
+            lost = rf"after 0 recoveries; lost: bricks \(\(\d+, \d+\), .*\(were on {re.escape(victim)}\)"
+            with pytest.raises(ClusterError, match=lost):
+                dr.render(_cam(), W, H, 0.5)
+            monkeypatch.undo()  # retries again: the next frame recovers
             _same_image(dr.render(_cam(), W, H, 0.5), want)
 
 
@@ -108,6 +125,37 @@ def test_a_stopped_worker_times_out_with_a_clvis_error_and_close_is_bounded(tmp_
             if pid is not None:
                 os.kill(pid, signal.SIGKILL)  # the nanny starts another
             dr.close()
+
+
+def test_a_stopped_scheduler_times_out_with_a_clvis_error():
+    """The scheduler itself stops answering (SIGSTOP) after the client
+    connected: building a renderer raises ClusterTimeout within about its
+    timeout (asking it for its workers waited forever before)."""
+    port = _closed_port()
+    address = f"tcp://127.0.0.1:{port}"
+    cmd = [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1"]
+    cmd += ["--port", str(port), "--no-dashboard"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    c = None
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while c is None:
+            try:
+                c = distributed.Client(address, timeout=5)
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.5)
+        os.kill(proc.pid, signal.SIGSTOP)
+        t0 = time.monotonic()
+        with pytest.raises(ClusterTimeout, match="the scheduler's list of workers: no answer within 3 s"):
+            DistributedIsoRenderer(np.zeros((8, 8, 8), np.float32), c, brick=4, timeout=3)
+        assert time.monotonic() - t0 < 3 * 3 + 5
+    finally:
+        proc.kill()
+        proc.wait(TIMEOUT)
+        if c is not None:
+            c.close(timeout=10)
 
 
 def test_render_after_close_says_closed(tmp_path):

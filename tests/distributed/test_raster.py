@@ -143,6 +143,39 @@ def test_las_tiles_with_their_own_origins(client, tmp_path):
     _same(got, Rasterizer(whole).render(cam, W, H, color_by="intensity", planes=["classification"]))
 
 
+def test_framing_is_one_devices(client, tmp_path):
+    """framing(): the box of the bulk and the points a fit view frames, as
+    one device finds them in the concatenated cloud (robust_bounds: stray
+    points left out, non-finite ones never counted; every k-th of the kept
+    points), bit for bit, whether some points are stray or none."""
+    from clvis.camera import robust_bounds
+
+    clouds = _clouds(seed=5, dup=False)
+    calm = _files(tmp_path, clouds)
+    clouds[0].positions[3] = [40.0, 40.0, 40.0]  # strays in two partitions ...
+    clouds[2].positions[[5, 900]] = [-30.0, 2.0, 1.0]
+    clouds[5].positions[7] = np.nan  # ... and a point that is not finite
+    (tmp_path / "stray").mkdir()
+    stray = _files(tmp_path / "stray", clouds)
+    for paths, strays in ((stray, 3), (calm, 0)):
+        whole = concatenate([read_points(p) for p in paths])
+        rb = robust_bounds(whole.positions)
+        assert rb.total - rb.kept == strays
+        framed = whole.positions[rb.inside] if strays else whole.positions
+        with DistributedRasterizer(paths, client, timeout=TIMEOUT) as dr:
+            assert np.array_equal(dr.origin, whole.origin)
+            for limit in (200_000, 97):  # every point; every k-th of those kept
+                lo, hi, points, kept, total = dr.framing(limit)
+                assert (kept, total) == (rb.kept, rb.total)
+                assert lo.dtype == hi.dtype == np.float64
+                assert np.array_equal(lo, rb.lo) and np.array_equal(hi, rb.hi)
+                want = framed[:: max(1, len(framed) // limit)]
+                assert points.dtype == np.float32 and len(points) == len(want) > 30
+                assert np.array_equal(points, want, equal_nan=True)
+            with pytest.raises(ValueError, match="limit: expected a positive int"):
+                dr.framing(0)
+
+
 def test_dask_arrays(client):
     da = pytest.importorskip("dask.array")
     rng = np.random.default_rng(5)

@@ -659,8 +659,12 @@ def _render_distributed(args, progress) -> int:
         names = dr.attribute_names
         if attribute is not None and attribute not in names:
             raise CliError(f"--attribute {attribute}: the tiles have {', '.join(names) or 'no attributes'}")
-        if attribute is None:  # as for one file: intensity, else the first attribute, else the colours
-            attribute = "intensity" if "intensity" in names else (names[0] if names else None)
+        if attribute is None and "colors" not in dr.fields:
+            # as for one file: the colours (None) first (whether they vary is not
+            # known here), else intensity, else the first attribute that varies
+            # (the partitions' merged min..max), else the first
+            varies = [n for n in ("intensity", *names) if n in names and np.ptp(dr._ranges[n]) > 0]
+            attribute = varies[0] if varies else (names[0] if names else None)
         if dr.bounds is None:
             raise CliError("the tiles hold no point with finite coordinates")
         lo, hi = dr.bounds
@@ -1112,8 +1116,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--attribute",
         metavar="NAME",
         help="color by this attribute, or by a coordinate: x, y, z (default: temperature "
-        "for the hurricane, classification for the terrain; for a file intensity "
-        "if it has one, else its first attribute, else its colors, else z)",
+        "for the hurricane, classification for the terrain; for a file its colors "
+        "when they vary, else intensity, else the first attribute that varies, else z)",
     )
     r.add_argument(
         "--colormap",

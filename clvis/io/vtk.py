@@ -34,7 +34,8 @@ _MAX_RATIO = 1100  # zlib expands at most ~1032x: a header claiming more lies
 
 
 def _attrs(tag: bytes) -> dict[str, str]:
-    return {k.decode(): v.decode() for k, v in re.findall(rb'(\w+)\s*=\s*"([^"]*)"', tag)}
+    # latin-1: any byte decodes (VTK writes ASCII; a stray byte fails later, on its value)
+    return {k.decode("latin-1"): v.decode("latin-1") for k, v in re.findall(rb'(\w+)\s*=\s*"([^"]*)"', tag)}
 
 
 def _numbers(path, what, text, n, kind=float):

@@ -110,9 +110,10 @@ def _vdb_tree(tmp: Path, path: Path, compression=None, clusters=4, seed=7):
 
 
 def _vti(path: Path, data: np.ndarray, encoding: str) -> None:
-    """A .vti of (Z, Y, X) `data` as VTK's XML writer lays it out inline:
+    """A .vti of (Z, Y, X) `data` as VTK's XML writer lays it out: inline
     ascii, base64 binary (a UInt32 byte count, then the bytes) or zlib blocks
-    (its block header and the blocks base64-encoded apart)."""
+    (its block header and the blocks base64-encoded apart), or raw appended
+    (the byte count and bytes after <AppendedData>'s '_')."""
     nz, ny, nx = data.shape
     raw = data.astype("<f4").tobytes()
     comp = ""
@@ -120,6 +121,8 @@ def _vti(path: Path, data: np.ndarray, encoding: str) -> None:
         body = " ".join(f"{v:.6g}" for v in data.ravel())
     elif encoding == "binary":
         body = base64.b64encode(np.array([len(raw)], "<u4").tobytes() + raw).decode()
+    elif encoding == "appended":  # raw appended data, VTK's and ParaView's default
+        body = ""
     else:
         comp = ' compressor="vtkZLibDataCompressor"'
         blocks = [raw[i : i + 256] for i in range(0, len(raw), 256)]
@@ -127,13 +130,20 @@ def _vti(path: Path, data: np.ndarray, encoding: str) -> None:
         head = np.array([len(blocks), 256, len(blocks[-1]) % 256, *map(len, zs)], "<u4").tobytes()
         body = base64.b64encode(head).decode() + base64.b64encode(b"".join(zs)).decode()
         encoding = "binary"
-    path.write_text(
+    tail = ""
+    if encoding == "appended":
+        encoding = 'appended" offset="0'
+        tail = '<AppendedData encoding="raw">\n _'
+    text = (
         f'<?xml version="1.0"?>\n<VTKFile type="ImageData" version="0.1" byte_order="LittleEndian" '
         f'header_type="UInt32"{comp}>\n<ImageData WholeExtent="0 {nx - 1} 0 {ny - 1} 0 {nz - 1}" '
         f'Origin="1 2 3" Spacing="0.5 1 2">\n<Piece Extent="0 {nx - 1} 0 {ny - 1} 0 {nz - 1}">'
         f'<PointData Scalars="density">\n<DataArray type="Float32" Name="density" format="{encoding}">'
-        f"\n{body}\n</DataArray>\n</PointData><CellData></CellData></Piece></ImageData></VTKFile>\n"
-    )
+        f"\n{body}\n</DataArray>\n</PointData><CellData></CellData></Piece></ImageData>{tail}"
+    ).encode()
+    if tail:
+        text += np.array([len(raw)], "<u4").tobytes() + raw + b"\n</AppendedData>"
+    path.write_bytes(text + b"</VTKFile>\n")
 
 
 def _pcd(path: Path, n: int, binary: bool, seed: int = 7) -> None:
@@ -194,7 +204,7 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
     (out / "vol_6x5x4_uint16.raw").write_bytes(rng.integers(0, 65535, 120, dtype=np.uint16).tobytes())
     add("raw", "volume", out / "vol_6x5x4_uint16.raw")
     vol = rng.random((5, 4, 6)).astype(np.float32)
-    for enc in ("ascii", "binary", "zlib"):
+    for enc in ("ascii", "binary", "zlib", "appended"):
         _vti(out / f"vol-{enc}.vti", vol, enc)
         add("vti", "volume", out / f"vol-{enc}.vti")
     if (DATA / "pyvista_uniform.vtk").is_file():  # legacy binary, cell data and a field first

@@ -2,8 +2,9 @@
 tests/data): every format clvis reads, with the reader each goes to.
 
 A seed is (format, reader, path). Formats: ply, las, laz, npy, npz, nii,
-nii.gz, raw, vdb, e57 (with pye57), vti, vtk, pcd, xyz, txt, csv. Readers: points (read_points), volume (read_volume), vdb
-(read_vdb), gaussians (Gaussians.load).
+nii.gz, raw, vdb, e57 (with pye57), vti, vtk, pcd, xyz, txt, csv. Readers:
+points (read_points), volume (read_volume), vdb (read_vdb), gaussians
+(Gaussians.load).
 """
 
 from __future__ import annotations

@@ -775,15 +775,24 @@ def _framing(cloud, source: str):
     o = cloud.origin
     print(
         f"clvis render: note: {rb.total - rb.kept:,} of {rb.total:,} points lie far outside the rest "
-        f"(the cloud spans {_box(full_lo + o, full_hi + o)}, its bulk {_box(rb.lo + o, rb.hi + o)}); "
+        f"(the cloud spans {_box(full_lo, full_hi, o)}, its bulk {_box(rb.lo, rb.hi, o)}); "
         "the view frames the bulk (--eye/--target to look elsewhere)",
         file=sys.stderr,
     )
     return rb.lo, rb.hi, cloud.positions[rb.inside]
 
 
-def _box(lo, hi) -> str:
-    return " x ".join(f"{a:.10g}..{b:.10g}" for a, b in zip(lo, hi, strict=True))
+def _box(lo, hi, origin) -> str:
+    """Local (float32) bounds in the file's coordinates: each value at the
+    float32 precision it has (its shortest decimal) plus the origin, so
+    586.38 reads 586.38, not 586.3799933."""
+
+    def world(v, o):
+        return float(np.format_float_positional(np.float32(v), unique=True)) + float(o)
+
+    return " x ".join(
+        f"{world(a, o):.10g}..{world(b, o):.10g}" for a, b, o in zip(lo, hi, origin, strict=True)
+    )
 
 
 def _world_camera_args(args, origin):
@@ -977,8 +986,7 @@ def _render(args, progress) -> int:
         sized = f", points {point_size}x{point_size} pixels"
     print(f"  view      {describe_camera(args)}, {width}x{height}{sized}")
     o = cloud.origin
-    lo_w, hi_w = lo + o, hi + o
-    print(f"  bounds    {_box(lo_w, hi_w)}" + (" (the file's coordinates)" if o.any() else ""))
+    print(f"  bounds    {_box(lo, hi, o)}" + (" (the file's coordinates)" if o.any() else ""))
     if look.value_range is not None:
         a, b = (v + look.bar_offset for v in look.value_range)
         print(f"  range     {attribute} {a:.6g}..{b:.6g}")

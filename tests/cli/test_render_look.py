@@ -119,6 +119,8 @@ def test_attribute_z_bar_in_the_files_coordinates(tmp_path, capsys, monkeypatch)
         capsys, SIMPLE, "--attribute", "z", "--size", "160x90", "--quiet", "--out", tmp_path
     )
     assert rc == 0, err
+    # the bounds too, at the precision the file's values have (not 586.3799933)
+    assert "x 406.59..586.38 (the file's coordinates)" in out, out
     z = [(lo, hi) for title, lo, hi in bars if title == "z"]
     assert z and all(abs(lo - 406.59) < 0.01 and abs(hi - 586.38) < 0.01 for lo, hi in z), bars
 

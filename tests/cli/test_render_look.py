@@ -152,6 +152,20 @@ def test_robust_framing(tmp_path, capsys):
     assert _covered(tmp_path / "colors.png") == covered
 
 
+def test_sparse_cloud_notes_how_little_it_covers(tmp_path, capsys):
+    """laspy's simple.laz (1,065 points) at 1 px on a 1600x900 image covers
+    under 1/1000 of it: a note says so and names --point-size auto, which
+    draws it large enough (and then says nothing)."""
+    big = ["--size", "1600x900", "--quiet", "--no-labels"]
+    rc, out, err = _render(capsys, SIMPLE, "--out", tmp_path / "one", *big)
+    assert rc == 0, err
+    assert re.search(
+        r"note: the points cover [\d,]+ of 1,440,000 pixels \(0\.0\d* %\); --point-size auto", err
+    ), err
+    rc, out, err = _render(capsys, SIMPLE, "--point-size", "auto", "--out", tmp_path / "auto", *big)
+    assert rc == 0 and "note" not in err, err
+
+
 def test_point_size_auto_and_edl(tmp_path, capsys):
     rc, out, err = _render(capsys, SIMPLE, "--transparent", "--out", tmp_path / "one", *MID)
     assert rc == 0, err

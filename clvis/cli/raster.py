@@ -676,6 +676,10 @@ def _render_distributed(args, progress) -> int:
             raise CliError(
                 "--range scales an attribute's colours; the tiles have none (add --attribute NAME)"
             )
+        if attribute is None and args.colormap_given is not None:
+            raise CliError(
+                "--colormap colours an attribute; the tiles are shown in their own colours (add --attribute NAME)"
+            )
         if attribute is not None and args.colormap_given is None and _class_like(attribute):
             print(
                 f"clvis render: note: on workers {attribute} is coloured through {args.colormap}, "
@@ -822,11 +826,11 @@ def _look(args, cloud, attribute, point_size, queue) -> _Look:
     if args.edl is not None:
         look.edl, look.edl_radius = args.edl, max(1, (point_size + 1) // 2)
     if attribute is None:
-        if args.range is not None:
-            raise CliError(
-                "--range scales an attribute's colours; the cloud is shown in its own colours "
-                "(add --attribute NAME)"
-            )
+        for given, what in ((args.range, "--range scales"), (args.colormap, "--colormap colours")):
+            if given is not None:
+                raise CliError(
+                    f"{what} an attribute; the cloud is shown in its own colours (add --attribute NAME)"
+                )
         return look
     coordinate = attribute not in cloud.attributes
     values = cloud.positions[:, _COORDINATES.index(attribute)] if coordinate else cloud.attributes[attribute]

@@ -184,6 +184,8 @@ def test_rgb_first_on_workers_as_on_one_device(scheduler, tmp_path, capsys):
     a, b = _png(tmp_path / "d" / "colors.png"), _png(tmp_path / "s" / "colors.png")
     assert (a[..., :3] != a[0, 0, :3]).any(axis=2).sum() > 100
     np.testing.assert_array_equal(a, b)
+    rc, out, err = _run(capsys, "render", *paths, "--colormap", "magma", "--scheduler", scheduler, *SMALL)
+    assert rc == 2 and "--colormap colours an attribute" in err, err  # it would do nothing
 
 
 def test_classes_on_workers_say_they_use_a_colormap(scheduler, tmp_path, capsys):

@@ -678,7 +678,8 @@ def _render_distributed(args, progress) -> int:
             )
         if attribute is None and args.colormap_given is not None:
             raise CliError(
-                "--colormap colours an attribute; the tiles are shown in their own colours (add --attribute NAME)"
+                "--colormap colours an attribute; the tiles are shown in their own colours "
+                "(add --attribute NAME)"
             )
         if attribute is not None and args.colormap_given is None and _class_like(attribute):
             print(

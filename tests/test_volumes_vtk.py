@@ -77,11 +77,26 @@ def test_vti_errors(tmp_path):
         p.write_bytes(content)
         with pytest.raises(DataError, match=message) as e:
             read_volume(p)
-        assert str(p) in str(e.value)
+        assert str(p) in str(e.value) and str(e.value).count(str(p)) == 1  # named once
 
     bad(b"hello", "not a VTK ImageData file")
     bad(b'<!DOCTYPE x [<!ENTITY a "b">]>' + good, "DTD or entities")
-    bad(good.replace(b"</Piece>", b'</Piece><AppendedData encoding="raw">_</AppendedData>'), "appended data")
+    app = good.replace(b'format="binary">', b'format="appended" offset="0">')
+    bad(
+        app.replace(b"</VTKFile>", b'<AppendedData encoding="base64">_AAAA</AppendedData></VTKFile>'),
+        "base64",
+    )
+    bad(
+        app.replace(b"</VTKFile>", b'<AppendedData encoding="raw">_\0\0</AppendedData></VTKFile>'),
+        "truncated",
+    )
+    bad(
+        app.replace(b'offset="0"', b'offset="99999"') + b'<AppendedData encoding="raw">_\0\0\0\0\0', "outside"
+    )
+    bad(app.replace(b'offset="0"', b'offset="-3"') + b'<AppendedData encoding="raw">_\0\0\0\0\0', "outside")
+    bad(app.replace(b"</VTKFile>", b'<AppendedData encoding="raw"></AppendedData></VTKFile>'), "no '_'")
+    bad(app.replace(b'offset="0"', b'offset="x"') + b'<AppendedData encoding="raw">_\0\0\0\0\0', "offset")
+    bad(app, "format 'appended' is not read")  # no <AppendedData> at all
     bad(good.replace(b'WholeExtent="0 3', b'WholeExtent="0 30'), "the extent needs")
     bad(good.replace(b'Float32" Name="v"', b'Float16" Name="v"'), "unsupported DataArray type")
     bad(good.replace(b'Name="v"', b'Name="v" NumberOfComponents="3"'), "several components")
@@ -115,3 +130,46 @@ def test_legacy_ascii_and_errors(tmp_path):
         p.write_text(text)
         with pytest.raises(DataError, match=message):
             read_volume(p)
+
+
+@pytest.mark.parametrize(
+    "mode, compressed, header",
+    [("Appended", True, 32), ("Appended", False, 32), ("Appended", True, 64), ("Appended", False, 64),
+     ("Binary", True, 32), ("Binary", False, 64), ("Ascii", False, 32)],
+)  # fmt: skip
+def test_files_vtks_writer_makes(tmp_path, mode, compressed, header):
+    """pyvista's uniform.vtk as VTK's own reader sees it (point scalars x*y*z
+    after a cell array: the scalars at a non-zero appended offset), written
+    by VTK's XML writer in each data mode; ParaView and VTK write raw
+    appended data by default. clvis reads the values VTK reads back."""
+    vtk = pytest.importorskip("vtk", reason="vtk is in the test extra")
+    from vtk.util import numpy_support
+
+    r = vtk.vtkStructuredPointsReader()
+    r.SetFileName(str(DATA / "pyvista_uniform.vtk"))
+    r.ReadAllScalarsOn()
+    r.Update()
+    img = r.GetOutput()
+    assert img.GetCellData().GetNumberOfArrays() >= 1  # written before the point data
+    w = vtk.vtkXMLImageDataWriter()
+    path = tmp_path / f"{mode}.vti"
+    w.SetFileName(str(path))
+    w.SetInputData(img)
+    getattr(w, f"SetDataModeTo{mode}")()
+    w.SetEncodeAppendedData(False)
+    if not compressed:
+        w.SetCompressorTypeToNone()
+    if header == 64:
+        w.SetHeaderTypeToUInt64()
+    assert w.Write() == 1
+    text = path.read_bytes()
+    assert (b'format="appended"' in text) == (mode == "Appended")
+    back = vtk.vtkXMLImageDataReader()
+    back.SetFileName(str(path))
+    back.Update()
+    scalars = back.GetOutput().GetPointData().GetScalars()
+    want = numpy_support.vtk_to_numpy(scalars).reshape(back.GetOutput().GetDimensions()[::-1])
+    v = read_volume(path)
+    np.testing.assert_array_equal(v.data, want)
+    z, y, x = np.mgrid[:10, :10, :10]
+    np.testing.assert_array_equal(v.data, x * y * z)

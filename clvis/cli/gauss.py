@@ -137,7 +137,6 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     g.add_argument(
         "--colormap",
         type=colormap_name,
-        default="inferno",
         metavar="NAME",
         help="a matplotlib colormap (default inferno)",
     )
@@ -307,6 +306,7 @@ def _finite_points(cloud, args):
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
     check_orbit_args(args)
+    args.colormap_given, args.colormap = args.colormap, args.colormap or "inferno"
     if args.model == "splat" and args.method == "bvh":  # the library's own words are its API's
         raise CliError(
             "--model splat (3D Gaussian Splatting's rasterizer) draws on tiles; leave --method bvh out"
@@ -409,12 +409,13 @@ def _transfer(args, lods, sv, gaussians, samples):
     from ..io.volumes import otsu_level
 
     points = lods == ["points"]
-    if points and (args.range is not None or args.opacity is not None):
-        if gaussians is not None and gaussians.colors is not None:
-            raise CliError(
-                "--range and --opacity shape a transfer function; the points are drawn in their own "
-                "colours (add --attribute NAME to colour them by a value)"
-            )
+    given = [o for o, v in (("--range", args.range), ("--opacity", args.opacity)) if v is not None]
+    given += ["--colormap"] if getattr(args, "colormap_given", None) is not None else []
+    if points and given and gaussians is not None and gaussians.colors is not None:
+        raise CliError(
+            f"{' and '.join(given)}: the transfer function's; the points are drawn in their own "
+            "colours (add --attribute NAME to colour them by a value)"
+        )
     opacity = args.opacity
     if opacity is None and points:
         opacity = [(0.0, 1.0), (1.0, 1.0)]  # points are surfaces: fully opaque, whatever the value

@@ -675,6 +675,11 @@ def _render_distributed(args, progress) -> int:
             raise CliError(
                 "--range scales an attribute's colours; the tiles have none (add --attribute NAME)"
             )
+        if attribute is None and args.colormap_given is not None:
+            raise CliError(
+                "--colormap colours an attribute; the tiles are shown in their own colours "
+                "(add --attribute NAME)"
+            )
         if attribute is not None and args.colormap_given is None and _class_like(attribute):
             print(
                 f"clvis render: note: on workers {attribute} is coloured through {args.colormap}, "
@@ -794,14 +799,23 @@ def _stray_note(kept: int, total: int, full, bulk, o) -> None:
     (full, bulk: (lo, hi) relative to the origin `o`)."""
     print(
         f"clvis render: note: {total - kept:,} of {total:,} points lie far outside the rest "
-        f"(the cloud spans {_box(full[0] + o, full[1] + o)}, its bulk {_box(bulk[0] + o, bulk[1] + o)}); "
+        f"(the cloud spans {_box(full[0], full[1], o)}, its bulk {_box(bulk[0], bulk[1], o)}); "
         "the view frames the bulk (--eye/--target to look elsewhere)",
         file=sys.stderr,
     )
 
 
-def _box(lo, hi) -> str:
-    return " x ".join(f"{a:.10g}..{b:.10g}" for a, b in zip(lo, hi, strict=True))
+def _box(lo, hi, origin) -> str:
+    """Local (float32) bounds in the file's coordinates: each value at the
+    float32 precision it has (its shortest decimal) plus the origin, so
+    586.38 reads 586.38, not 586.3799933."""
+
+    def world(v, o):
+        return float(np.format_float_positional(np.float32(v), unique=True)) + float(o)
+
+    return " x ".join(
+        f"{world(a, o):.10g}..{world(b, o):.10g}" for a, b, o in zip(lo, hi, origin, strict=True)
+    )
 
 
 def _world_camera_args(args, origin):
@@ -831,11 +845,11 @@ def _look(args, cloud, attribute, point_size, queue) -> _Look:
     if args.edl is not None:
         look.edl, look.edl_radius = args.edl, max(1, (point_size + 1) // 2)
     if attribute is None:
-        if args.range is not None:
-            raise CliError(
-                "--range scales an attribute's colours; the cloud is shown in its own colours "
-                "(add --attribute NAME)"
-            )
+        for given, what in ((args.range, "--range scales"), (args.colormap, "--colormap colours")):
+            if given is not None:
+                raise CliError(
+                    f"{what} an attribute; the cloud is shown in its own colours (add --attribute NAME)"
+                )
         return look
     coordinate = attribute not in cloud.attributes
     values = cloud.positions[:, _COORDINATES.index(attribute)] if coordinate else cloud.attributes[attribute]
@@ -995,8 +1009,7 @@ def _render(args, progress) -> int:
         sized = f", points {point_size}x{point_size} pixels"
     print(f"  view      {describe_camera(args)}, {width}x{height}{sized}")
     o = cloud.origin
-    lo_w, hi_w = lo + o, hi + o
-    print(f"  bounds    {_box(lo_w, hi_w)}" + (" (the file's coordinates)" if o.any() else ""))
+    print(f"  bounds    {_box(lo, hi, o)}" + (" (the file's coordinates)" if o.any() else ""))
     if look.value_range is not None:
         a, b = (v + look.bar_offset for v in look.value_range)
         print(f"  range     {attribute} {a:.6g}..{b:.6g}")
@@ -1134,8 +1147,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--attribute",
         metavar="NAME",
         help="color by this attribute, or by a coordinate: x, y, z (default: temperature "
-        "for the hurricane, classification for the terrain; for a file intensity "
-        "if it has one, else its first attribute, else its colors, else z)",
+        "for the hurricane, classification for the terrain; for a file its colors "
+        "when they vary, else intensity, else the first attribute that varies, else z)",
     )
     r.add_argument(
         "--colormap",

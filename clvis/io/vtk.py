@@ -1,13 +1,13 @@
 """VTK image data volumes: XML ``.vti`` (ImageData, one piece; the first
 point-data array, or the one its ``Scalars`` names; inline ``binary``
-(base64, zlib-compressed or not) or ``ascii`` arrays) and legacy ``.vtk``
-STRUCTURED_POINTS (ASCII or BINARY; the first SCALARS).
+(base64, zlib-compressed or not), ``ascii`` arrays, or raw ``appended``
+data, which VTK's and ParaView's writers produce by default) and legacy
+``.vtk`` STRUCTURED_POINTS (ASCII or BINARY; the first SCALARS).
 
 Bounded: the header's extents and sizes are checked against the data the
 file holds before anything is decompressed or allocated; a DTD or entity
-declaration is refused (no entity expansion); appended data and several
-pieces, which VTK's own writers use for large files, raise a DataError
-saying so.
+declaration is refused (no entity expansion); base64-encoded appended data
+and several pieces raise a DataError saying so.
 """
 
 from __future__ import annotations
@@ -34,7 +34,8 @@ _MAX_RATIO = 1100  # zlib expands at most ~1032x: a header claiming more lies
 
 
 def _attrs(tag: bytes) -> dict[str, str]:
-    return {k.decode(): v.decode() for k, v in re.findall(rb'(\w+)\s*=\s*"([^"]*)"', tag)}
+    # latin-1: any byte decodes (VTK writes ASCII; a stray byte fails later, on its value)
+    return {k.decode("latin-1"): v.decode("latin-1") for k, v in re.findall(rb'(\w+)\s*=\s*"([^"]*)"', tag)}
 
 
 def _numbers(path, what, text, n, kind=float):
@@ -57,11 +58,9 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     if head is None or image is None:
         raise DataError(f'{path}: not a VTK ImageData file (no <VTKFile type="ImageData"> and <ImageData>)')
     fa, ia = _attrs(head.group(0)), _attrs(image.group(0))
-    if b"<AppendedData" in raw:
-        raise DataError(
-            f"{path}: VTK appended data is not read; save the file with inline data (binary or ascii)"
-        )
-    if len(re.findall(rb"<Piece\b", raw)) != 1:
+    at = raw.find(b"<AppendedData")
+    xml = raw if at < 0 else raw[:at]  # the appended bytes are not XML: never searched as such
+    if len(re.findall(rb"<Piece\b", xml)) != 1:
         raise DataError(f"{path}: one Piece expected (a VTK image of several pieces is not read)")
     ext = _numbers(path, "WholeExtent", ia.get("WholeExtent", ""), 6, int)
     nx, ny, nz = (ext[1] - ext[0] + 1, ext[3] - ext[2] + 1, ext[5] - ext[4] + 1)
@@ -69,8 +68,10 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
         raise DataError(f"{path}: empty WholeExtent {ext}")
     spacing = _numbers(path, "Spacing", ia.get("Spacing", "1 1 1"), 3)
     origin = _numbers(path, "Origin", ia.get("Origin", "0 0 0"), 3)
-    pd = re.search(rb"<PointData\b([^>]*)>(.*?)</PointData>", raw, re.S)
-    arrays = re.findall(rb"(<DataArray\b[^>]*>)(.*?)</DataArray>", pd.group(2), re.S) if pd else []
+    pd = re.search(rb"<PointData\b([^>]*)>(.*?)</PointData>", xml, re.S)
+    # <DataArray .../> (an appended array, as VTK writes it) or <DataArray ...>text</DataArray>
+    found = re.findall(rb"(<DataArray\b[^>]*?)(?:/>|>(.*?)</DataArray>)", pd.group(2), re.S) if pd else []
+    arrays = [(t + b">", b) for t, b in found]
     if pd is None or not arrays:
         raise DataError(f"{path}: no point data array (cell data is not read)")
     want = _attrs(b"<x " + pd.group(1) + b">").get("Scalars")
@@ -94,8 +95,10 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
             raise DataError(f"{path}: malformed ascii array: {e}") from None
     elif fmt == "binary":
         data = _inline_binary(path, body, fa, dtype, n)
+    elif fmt == "appended" and at >= 0:
+        data = _appended(path, raw, at, a, fa, dtype, n)
     else:
-        raise DataError(f"{path}: DataArray format {fmt!r} is not read (binary or ascii)")
+        raise DataError(f"{path}: DataArray format {fmt!r} is not read (binary, ascii or appended)")
     if data.size != n:
         raise DataError(f"{path}: the array holds {data.size} samples, the extent {nx}x{ny}x{nz} needs {n}")
     return (
@@ -124,27 +127,76 @@ def _inline_binary(path, body, fa, dtype, n):
         header = np.frombuffer(
             base64.b64decode(text[:hchars], validate=True)[: (3 + blocks) * hs], hdt
         ).astype(np.int64)
-        block, last, sizes = int(header[1]), int(header[2]), header[3:]
-        total = block * (blocks - 1) + (last or block) if blocks else 0
-        if total != n * dtype.itemsize:
-            raise DataError(
-                f"{path}: the compressed array holds {total} bytes, the extent needs {n * dtype.itemsize}"
-            )
-        comp = base64.b64decode(text[hchars:], validate=True)
-        if int(sizes.sum()) > len(comp) or total > _MAX_RATIO * max(len(comp), 1):
-            raise DataError(f"{path}: truncated or malformed compressed array")
-        out, pos = bytearray(), 0
-        for k, s in enumerate(sizes):
-            want = last if (k == blocks - 1 and last) else block
-            d = zlib.decompressobj()
-            chunk = d.decompress(comp[pos : pos + int(s)], want)
-            if len(chunk) != want:
-                raise DataError(f"{path}: block {k} decompresses to {len(chunk)} bytes, not {want}")
-            out += chunk
-            pos += int(s)
-        return np.frombuffer(bytes(out), dtype)
+        return _inflate(path, header, lambda: base64.b64decode(text[hchars:], validate=True), dtype, n)
+    except DataError:
+        raise
     except (binascii.Error, zlib.error, ValueError, IndexError) as e:
         raise DataError(f"{path}: malformed binary array: {e}") from None
+
+
+def _inflate(path, header, compressed, dtype, n):
+    """The zlib blocks of a compressed VTK array: `header` its (blocks, block
+    size, last block's size, compressed sizes...) as int64, `compressed()`
+    the compressed bytes (called once the header has been checked)."""
+    blocks, block, last, sizes = int(header[0]), int(header[1]), int(header[2]), header[3:]
+    total = block * (blocks - 1) + (last or block) if blocks else 0
+    if total != n * dtype.itemsize:
+        raise DataError(
+            f"{path}: the compressed array holds {total} bytes, the extent needs {n * dtype.itemsize}"
+        )
+    comp = compressed()
+    if int(sizes.sum()) > len(comp) or total > _MAX_RATIO * max(len(comp), 1):
+        raise DataError(f"{path}: truncated or malformed compressed array")
+    out, pos = bytearray(), 0
+    for k, s in enumerate(sizes):
+        want = last if (k == blocks - 1 and last) else block
+        d = zlib.decompressobj()
+        chunk = d.decompress(comp[pos : pos + int(s)], want)
+        if len(chunk) != want:
+            raise DataError(f"{path}: block {k} decompresses to {len(chunk)} bytes, not {want}")
+        out += chunk
+        pos += int(s)
+    return np.frombuffer(bytes(out), dtype)
+
+
+def _appended(path, raw, at, a, fa, dtype, n):
+    """An array in the file's <AppendedData encoding="raw">: its bytes start
+    `offset` bytes after the '_' that opens the data, a byte count (or the
+    zlib block header) first, as VTK's and ParaView's writers leave them by
+    default."""
+    tag = re.match(rb"<AppendedData\b[^>]*>\s*_", raw[at:])
+    if tag is None:
+        raise DataError(f"{path}: malformed <AppendedData> (no '_' before its data)")
+    if _attrs(tag.group(0)).get("encoding", "raw") != "raw":
+        raise DataError(
+            f"{path}: base64-encoded appended data is not read (raw appended, binary or ascii are)"
+        )
+    try:
+        start = at + tag.end() + int(a.get("offset", ""))
+    except ValueError:
+        raise DataError(f"{path}: malformed DataArray offset {a.get('offset')!r}") from None
+    hs = 8 if fa.get("header_type") == "UInt64" else 4
+    hdt = np.dtype((">" if fa.get("byte_order") == "BigEndian" else "<") + ("u8" if hs == 8 else "u4"))
+    if not at + tag.end() <= start <= len(raw) - hs:
+        raise DataError(f"{path}: the appended array's offset {a.get('offset')} lies outside the file")
+    try:
+        if fa.get("compressor") is None:
+            size = int(np.frombuffer(raw, hdt, 1, start)[0])
+            if size != n * dtype.itemsize or start + hs + size > len(raw):
+                raise DataError(f"{path}: the appended array's byte count does not match its extent")
+            return np.frombuffer(raw, dtype, n, start + hs)
+        if "ZLib" not in fa["compressor"]:
+            raise DataError(f"{path}: compressor {fa['compressor']} is not read (zlib only)")
+        blocks = int(np.frombuffer(raw, hdt, 1, start)[0])
+        end = start + (3 + blocks) * hs
+        if blocks > len(raw) or end > len(raw):
+            raise DataError(f"{path}: truncated appended array header")
+        header = np.frombuffer(raw[start:end], hdt).astype(np.int64)
+        return _inflate(path, header, lambda: raw[end:], dtype, n)
+    except DataError:
+        raise
+    except (zlib.error, ValueError, IndexError) as e:
+        raise DataError(f"{path}: malformed appended array: {e}") from None
 
 
 def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:

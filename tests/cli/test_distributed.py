@@ -207,6 +207,30 @@ def test_look_options_on_workers_equal_one_device(tiles, scheduler, tmp_path, ca
         assert rc == 2 and err.startswith(f"clvis render: error: {message}"), (extra, err)
 
 
+def test_rgb_first_on_workers_as_on_one_device(scheduler, tmp_path, capsys):
+    """laspy's simple.laz (RGB and a varying intensity) as two tiles: its
+    colours by default on workers too (they used to take intensity), the
+    same picture as one device."""
+    pytest.importorskip("laspy")
+    import shutil
+    from pathlib import Path
+
+    src = Path(__file__).parents[1] / "data" / "laspy_simple.laz"
+    paths = [tmp_path / "a.laz", tmp_path / "b.laz"]
+    for p in paths:
+        shutil.copy(src, p)
+    rc, out, err = _run(capsys, "render", *paths, "--scheduler", scheduler, "--out", tmp_path / "d", *SMALL)
+    assert rc == 0, err
+    assert {p.name for p in (tmp_path / "d").iterdir()} == {"colors.png", "depth.png", "overview.png"}
+    rc, out, err = _run(capsys, "render", *paths, "--out", tmp_path / "s", *SMALL)
+    assert rc == 0 and "its colors" in out, err
+    a, b = _png(tmp_path / "d" / "colors.png"), _png(tmp_path / "s" / "colors.png")
+    assert (a[..., :3] != a[0, 0, :3]).any(axis=2).sum() > 100
+    np.testing.assert_array_equal(a, b)
+    rc, out, err = _run(capsys, "render", *paths, "--colormap", "magma", "--scheduler", scheduler, *SMALL)
+    assert rc == 2 and "--colormap colours an attribute" in err, err  # it would do nothing
+
+
 def test_classes_on_workers_say_they_use_a_colormap(scheduler, tmp_path, capsys):
     rng = np.random.default_rng(3)
     path = tmp_path / "c.npz"

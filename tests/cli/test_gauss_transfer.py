@@ -136,3 +136,10 @@ def test_range_on_rgb_points_is_an_error(tmp_path, capsys):
     path = os.path.join(os.path.dirname(__file__), "..", "data", "laspy_simple.laz")
     rc, _, err = _run(capsys, path, "--range", "0,1", "--size", "16x16", "--out", str(tmp_path))
     assert rc == 2 and "own colours" in err and len(err.strip().splitlines()) == 1
+    rc, _, err = _run(capsys, path, "--colormap", "magma", "--size", "16x16", "--out", str(tmp_path))
+    assert rc == 2 and err.startswith("clvis gauss: error: --colormap: ") and "own colours" in err, err
+    assert not os.listdir(tmp_path)  # nothing drawn: it would have done nothing
+    rc, _, err = _run(
+        capsys, path, "--attribute", "z", "--colormap", "magma", "--size", "16x16", "--out", str(tmp_path)
+    )
+    assert rc == 0, err

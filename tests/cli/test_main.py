@@ -1,6 +1,7 @@
 """clvis info, demo and bench, and the benchmark report."""
 
 import json
+import re
 
 import pytest
 from PIL import Image
@@ -48,6 +49,22 @@ def test_demo(capsys, tmp_path):
         with Image.open(tmp_path / f"post-{name}.png") as im:
             assert im.size == (5 * 96 + 4 * 4, 64 + images.label_height(96))
         assert f"{name:7} input" in out
+    for name in ("infill", "lidar", "narvis"):  # gains over the input and over the better baseline
+        line = next(t for t in out.splitlines() if t.startswith(f"  {name:7} input"))
+        got = re.search(
+            r"network +([\d.]+) dB.*\(([-+][\d.]+) dB over the input, "
+            r"([-+][\d.]+) dB over the best baseline, (input|push-pull)\)",
+            line,
+        )
+        assert got, line
+        inp = float(re.search(r"input +([\d.]+) dB", line).group(1))
+        pp = float(re.search(r"push-pull +([\d.]+) dB", line).group(1))
+        net, over_input, over_best = (float(got.group(k)) for k in (1, 2, 3))
+        assert abs(over_input - (net - inp)) <= 0.16 and abs(over_best - (net - max(inp, pp))) <= 0.16, (
+            line
+        )  # each figure rounded to 0.1
+        if abs(inp - pp) > 0.1:  # which baseline is the better, where rounding cannot swap them
+            assert got.group(4) == ("input" if inp > pp else "push-pull"), line
     with Image.open(tmp_path / "overview.png") as im:
         assert im.width > 160
 

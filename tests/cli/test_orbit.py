@@ -170,3 +170,15 @@ def test_movie(tmp_path, capsys):
     assert w == 63 and len(frames) == 6
     assert frames[0].shape == (h + h % 2, 64, 3)  # odd sides padded to even
     assert not [p for p in movie.parent.iterdir() if p.name.startswith(".")]
+
+
+def test_orbit_progress_as_other_stages(tmp_path, capsys):
+    """--progress shows the orbit's frames as its other stages (on stderr, the
+    last redraw naming every frame done)."""
+    pytest.importorskip("laspy")
+    rc, out, err = _main(
+        capsys, "render", SIMPLE, "--size", "48x32", "--orbit", 3, "--progress", "--out", tmp_path
+    )
+    assert rc == 0, err
+    assert "clvis render: orbit: frame 3/3" in err.replace("\r", "\n")
+    assert "orbit     3 frames" in out and "frame 3/3" not in out  # the report on stdout, progress not

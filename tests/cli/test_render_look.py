@@ -17,6 +17,7 @@ from clvis.io import PointCloud, read_points, save_npz
 DATA = Path(__file__).parents[1] / "data"
 SIMPLE = DATA / "laspy_simple.laz"  # 1,065 points, RGB, classes 1 and 2, UTM coordinates
 APPEND_BUG = DATA / "laspy_append_bug.laz"  # 37,807 points; 2 records at (0, 0, 0)
+SIMPLE14 = DATA / "laspy_simple1_4_every8th.las"  # simple1_4.las's every 8th record: RGB, intensity all 0
 SMALL = ["--size", "160x90", "--quiet", "--no-labels"]  # the images alone: exactly --size
 MID = ["--size", "480x270", "--quiet", "--no-labels"]
 
@@ -59,6 +60,71 @@ def test_rgb_first(tmp_path, capsys):
     assert len(drawn) > 50 and all(tuple(c) in file_colors for c in drawn)
 
 
+def test_rgb_first_when_intensity_is_all_zero(tmp_path, capsys):
+    """laspy's simple1_4.las (LAS 1.4, point format 7; every 8th record kept):
+    its intensity is 0 everywhere, so colouring by it drew one flat colour
+    under a "0 ... 0" bar; its RGB is shown now, as the tools users know do."""
+    cloud = read_points(SIMPLE14)
+    assert np.ptp(cloud.attributes["intensity"]) == 0 and np.ptp(cloud.colors[:, :3]) > 0
+    rc, out, err = _render(capsys, SIMPLE14, "--transparent", "--out", tmp_path, *SMALL)
+    assert rc == 0, err
+    assert "2,825 points, its colors" in out
+    assert {p.name for p in tmp_path.iterdir()} == {"colors.png", "depth.png", "soft-z.png", "overview.png"}
+    a = _png(tmp_path / "colors.png")
+    drawn = a[a[..., 3] > 0][:, :3]
+    assert len(drawn) > 500 and len({tuple(c) for c in drawn}) > 50  # many colours, not one
+    assert {tuple(c) for c in drawn} <= {tuple(c) for c in cloud.colors[:, :3]}
+
+
+def test_ply_with_rgb_and_a_property_shows_its_rgb(tmp_path, capsys):
+    """A PLY as photogrammetry and stereo tools write it (x y z, red green blue
+    uchar, and one more property such as confidence): its colours, not the
+    property, by default; the property on request."""
+    from plyfile import PlyData, PlyElement
+
+    rng = np.random.default_rng(4)
+    n = 3000
+    v = np.zeros(
+        n, [(c, "f4") for c in "xyz"] + [(c, "u1") for c in ("red", "green", "blue")] + [("confidence", "f4")]
+    )
+    for c in "xyz":
+        v[c] = rng.random(n)
+    for c in ("red", "green", "blue"):
+        v[c] = rng.integers(0, 256, n)
+    v["confidence"] = rng.random(n)
+    PlyData([PlyElement.describe(v, "vertex")]).write(str(tmp_path / "stereo.ply"))
+    rc, out, err = _render(capsys, tmp_path / "stereo.ply", "--out", tmp_path / "a", *SMALL)
+    assert rc == 0, err
+    assert "3,000 points, its colors" in out and not (tmp_path / "a" / "attribute-confidence.png").exists()
+    rc, out, err = _render(
+        capsys, tmp_path / "stereo.ply", "--attribute", "confidence", "--out", tmp_path / "b", *SMALL
+    )
+    assert rc == 0 and "colored by confidence" in out, err
+
+
+def test_attribute_z_bar_in_the_files_coordinates(tmp_path, capsys, monkeypatch):
+    """--attribute z: the colour bar reads the file's heights (simple.laz:
+    406.59..586.38 m), not heights above the internal origin (0..179.79)."""
+    from clvis import images
+
+    bars = []
+    real = images.colorbar
+
+    def spy(lut, vmin, vmax, width, **kw):
+        bars.append((kw.get("title", ""), vmin, vmax))
+        return real(lut, vmin, vmax, width, **kw)
+
+    monkeypatch.setattr(images, "colorbar", spy)
+    rc, out, err = _render(
+        capsys, SIMPLE, "--attribute", "z", "--size", "160x90", "--quiet", "--out", tmp_path
+    )
+    assert rc == 0, err
+    # the bounds too, at the precision the file's values have (not 586.3799933)
+    assert "x 406.59..586.38 (the file's coordinates)" in out, out
+    z = [(lo, hi) for title, lo, hi in bars if title == "z"]
+    assert z and all(abs(lo - 406.59) < 0.01 and abs(hi - 586.38) < 0.01 for lo, hi in z), bars
+
+
 def test_constant_colors_and_attributes_passed_over(tmp_path, capsys):
     """A cloud whose colours are all one colour and whose intensity is all 0
     (laspy's simple1_4.las) is coloured by the first attribute that varies."""
@@ -84,6 +150,20 @@ def test_robust_framing(tmp_path, capsys):
     covered = int(out.split("covered")[1].split("of")[0].replace(",", ""))
     assert covered > 100  # was 2 of 14,400 before the bulk was framed
     assert _covered(tmp_path / "colors.png") == covered
+
+
+def test_sparse_cloud_notes_how_little_it_covers(tmp_path, capsys):
+    """laspy's simple.laz (1,065 points) at 1 px on a 1600x900 image covers
+    under 1/1000 of it: a note says so and names --point-size auto, which
+    draws it large enough (and then says nothing)."""
+    big = ["--size", "1600x900", "--quiet", "--no-labels"]
+    rc, out, err = _render(capsys, SIMPLE, "--out", tmp_path / "one", *big)
+    assert rc == 0, err
+    assert re.search(
+        r"note: the points cover [\d,]+ of 1,440,000 pixels \(0\.0\d* %\); --point-size auto", err
+    ), err
+    rc, out, err = _render(capsys, SIMPLE, "--point-size", "auto", "--out", tmp_path / "auto", *big)
+    assert rc == 0 and "note" not in err, err
 
 
 def test_point_size_auto_and_edl(tmp_path, capsys):
@@ -194,7 +274,8 @@ def test_eye_in_file_coordinates(tmp_path, capsys):
         (["--edl", "0"], "argument --edl: expected an eye-dome lighting strength"),
         (["--edl", "nan"], "argument --edl: expected an eye-dome lighting strength"),
         (["--point-size", "big"], "argument --point-size: expected auto or a positive integer"),
-        (["--range", "0,1"], "--range scales an attribute's colours"),
+        (["--range", "0,1"], "--range scales an attribute; the cloud is shown in its own colours"),
+        (["--colormap", "magma"], "--colormap colours an attribute; the cloud is shown in its own colours"),
         (["--transparent", "--background", "black"], "--transparent and --background"),
         (["--attribute", "classification", "--range", "0,1"], "--range: classification is shown by class"),
     ],

@@ -2,14 +2,17 @@
 tests/data): every format clvis reads, with the reader each goes to.
 
 A seed is (format, reader, path). Formats: ply, las, laz, npy, npz, nii,
-nii.gz, raw, vdb, e57 (with pye57). Readers: points (read_points), volume (read_volume), vdb
-(read_vdb), gaussians (Gaussians.load).
+nii.gz, raw, vdb, e57 (with pye57), vti, vtk, pcd, xyz, txt, csv. Readers:
+points (read_points), volume (read_volume), vdb (read_vdb), gaussians
+(Gaussians.load).
 """
 
 from __future__ import annotations
 
+import base64
 import gzip
 import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -107,6 +110,65 @@ def _vdb_tree(tmp: Path, path: Path, compression=None, clusters=4, seed=7):
         f.save(str(path), **({} if compression is None else {"compression": compression}))
 
 
+def _vti(path: Path, data: np.ndarray, encoding: str) -> None:
+    """A .vti of (Z, Y, X) `data` as VTK's XML writer lays it out: inline
+    ascii, base64 binary (a UInt32 byte count, then the bytes) or zlib blocks
+    (its block header and the blocks base64-encoded apart), or raw appended
+    (the byte count and bytes after <AppendedData>'s '_')."""
+    nz, ny, nx = data.shape
+    raw = data.astype("<f4").tobytes()
+    comp = ""
+    if encoding == "ascii":
+        body = " ".join(f"{v:.6g}" for v in data.ravel())
+    elif encoding == "binary":
+        body = base64.b64encode(np.array([len(raw)], "<u4").tobytes() + raw).decode()
+    elif encoding == "appended":  # raw appended data, VTK's and ParaView's default
+        body = ""
+    else:
+        comp = ' compressor="vtkZLibDataCompressor"'
+        blocks = [raw[i : i + 256] for i in range(0, len(raw), 256)]
+        zs = [zlib.compress(b) for b in blocks]
+        head = np.array([len(blocks), 256, len(blocks[-1]) % 256, *map(len, zs)], "<u4").tobytes()
+        body = base64.b64encode(head).decode() + base64.b64encode(b"".join(zs)).decode()
+        encoding = "binary"
+    tail = ""
+    if encoding == "appended":
+        encoding = 'appended" offset="0'
+        tail = '<AppendedData encoding="raw">\n _'
+    text = (
+        f'<?xml version="1.0"?>\n<VTKFile type="ImageData" version="0.1" byte_order="LittleEndian" '
+        f'header_type="UInt32"{comp}>\n<ImageData WholeExtent="0 {nx - 1} 0 {ny - 1} 0 {nz - 1}" '
+        f'Origin="1 2 3" Spacing="0.5 1 2">\n<Piece Extent="0 {nx - 1} 0 {ny - 1} 0 {nz - 1}">'
+        f'<PointData Scalars="density">\n<DataArray type="Float32" Name="density" format="{encoding}">'
+        f"\n{body}\n</DataArray>\n</PointData><CellData></CellData></Piece></ImageData>{tail}"
+    ).encode()
+    if tail:
+        text += np.array([len(raw)], "<u4").tobytes() + raw + b"\n</AppendedData>"
+    path.write_bytes(text + b"</VTKFile>\n")
+
+
+def _pcd(path: Path, n: int, binary: bool, seed: int = 7) -> None:
+    """A PCD v0.7 file as PCL writes it: x y z, rgb packed in a float, intensity."""
+    rng = np.random.default_rng(seed)
+    rec = np.zeros(n, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("rgb", "<u4"), ("intensity", "<f4")])
+    for c in "xyz":
+        rec[c] = rng.normal(0, 5, n)
+    rec["rgb"] = rng.integers(0, 1 << 24, n)
+    rec["intensity"] = rng.random(n)
+    head = (
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z rgb intensity\n"
+        f"SIZE 4 4 4 4 4\nTYPE F F F U F\nCOUNT 1 1 1 1 1\nWIDTH {n}\nHEIGHT 1\n"
+        f"VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {'binary' if binary else 'ascii'}\n"
+    )
+    if binary:
+        path.write_bytes(head.encode() + rec.tobytes())
+    else:
+        rows = "".join(
+            f"{r['x']:.5f} {r['y']:.5f} {r['z']:.5f} {r['rgb']} {r['intensity']:.4f}\n" for r in rec
+        )
+        path.write_text(head + rows)
+
+
 def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
     """Write the seeds into `out`; [(format, reader, path)]. Formats whose
     optional package is missing are left out."""
@@ -142,6 +204,38 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
     add("npy", "volume", out / "vol.npy")
     (out / "vol_6x5x4_uint16.raw").write_bytes(rng.integers(0, 65535, 120, dtype=np.uint16).tobytes())
     add("raw", "volume", out / "vol_6x5x4_uint16.raw")
+    vol = rng.random((5, 4, 6)).astype(np.float32)
+    for enc in ("ascii", "binary", "zlib", "appended"):
+        _vti(out / f"vol-{enc}.vti", vol, enc)
+        add("vti", "volume", out / f"vol-{enc}.vti")
+    if (DATA / "pyvista_uniform.vtk").is_file():  # legacy binary, cell data and a field first
+        add("vtk", "volume", DATA / "pyvista_uniform.vtk")
+    (out / "ascii.vtk").write_text(
+        "# vtk DataFile Version 3.0\nclvis seed\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 3 2 2\n"
+        "SPACING 1 1 2\nORIGIN 0 0 0\nPOINT_DATA 12\nSCALARS v float 1\nLOOKUP_TABLE default\n"
+        + " ".join(str(v) for v in range(12))
+        + "\n"
+    )
+    add("vtk", "volume", out / "ascii.vtk")
+    _pcd(out / "cloud-ascii.pcd", 20, binary=False)
+    add("pcd", "points", out / "cloud-ascii.pcd")
+    _pcd(out / "cloud-binary.pcd", 40, binary=True)
+    add("pcd", "points", out / "cloud-binary.pcd")
+    pts = rng.normal(0, 10, (25, 3)) + [635000.0, 848000.0, 400.0]
+    cols = rng.integers(0, 256, (25, 3))
+    np.savetxt(out / "scan.xyz", np.c_[pts, cols], fmt=["%.3f"] * 3 + ["%d"] * 3)
+    add("xyz", "points", out / "scan.xyz")
+    np.savetxt(out / "scan.txt", pts, fmt="%.3f")
+    add("txt", "points", out / "scan.txt")
+    np.savetxt(
+        out / "scan.csv",
+        np.c_[pts, rng.random(25)],
+        fmt="%.4f",
+        delimiter=",",
+        header="X,Y,Z,Intensity",
+        comments="",
+    )
+    add("csv", "points", out / "scan.csv")
     try:
         import laspy  # noqa: F401
         import lazrs  # noqa: F401

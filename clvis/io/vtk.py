@@ -34,7 +34,10 @@ _MAX_RATIO = 1100  # zlib expands at most ~1032x: a header claiming more lies
 
 
 def _attrs(tag: bytes) -> dict[str, str]:
-    return {k.decode(): v.decode() for k, v in re.findall(rb'(\w+)\s*=\s*"([^"]*)"', tag)}
+    """A tag's attributes; a value that is not UTF-8 keeps U+FFFD for its bad
+    bytes (then an unknown type or a malformed number, refused by name, not a
+    UnicodeDecodeError)."""
+    return {k.decode(): v.decode("utf-8", "replace") for k, v in re.findall(rb'(\w+)\s*=\s*"([^"]*)"', tag)}
 
 
 def _numbers(path, what, text, n, kind=float):

@@ -2,8 +2,8 @@
 tests/data): every format clvis reads, with the reader each goes to.
 
 A seed is (format, reader, path). Formats: ply, las, laz, npy, npz, nii,
-nii.gz, raw, vdb, e57 (with pye57). Readers: points (read_points), volume (read_volume), vdb
-(read_vdb), gaussians (Gaussians.load).
+nii.gz, raw, vdb, e57 (with pye57), pcd, xyz, csv, vti, vtk. Readers: points
+(read_points), volume (read_volume), vdb (read_vdb), gaussians (Gaussians.load).
 """
 
 from __future__ import annotations
@@ -197,7 +197,85 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
         add("e57", "points", out / "scan.e57")
         _e57(pye57, out / "two.e57", 40, scans=2, invalid=True)
         add("e57", "points", out / "two.e57")
+    _text_seeds(out, add)
     return seeds
+
+
+def _text_seeds(out: Path, add) -> None:
+    """PCD (ASCII and binary), text clouds (.xyz, .csv) and VTK image data
+    (.vti in ascii, base64 and zlib-compressed base64; legacy .vtk ASCII and
+    pyvista's binary file)."""
+    import base64
+    import zlib
+
+    rng = np.random.default_rng(7)
+    n = 12
+
+    def pcd_header(fields, sizes, types, data):
+        return (
+            "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\n"
+            f"FIELDS {' '.join(fields)}\nSIZE {' '.join(sizes)}\nTYPE {' '.join(types)}\n"
+            f"COUNT {' '.join(['1'] * len(fields))}\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n"
+            f"POINTS {n}\nDATA {data}\n"
+        ).encode()
+
+    rec = np.zeros(n, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("rgb", "<u4"), ("intensity", "<u2")])
+    for k in ("x", "y", "z"):
+        rec[k] = rng.normal(0, 10, n)
+    rec["rgb"] = rng.integers(0, 1 << 24, n)
+    rec["intensity"] = rng.integers(0, 65536, n)
+    fields = ["x", "y", "z", "rgb", "intensity"]
+    (out / "bin.pcd").write_bytes(
+        pcd_header(fields, ["4"] * 4 + ["2"], ["F"] * 3 + ["U", "U"], "binary") + rec.tobytes()
+    )
+    add("pcd", "points", out / "bin.pcd")
+    body = "".join(f"{r['x']:.6g} {r['y']:.6g} {r['z']:.6g} {r['rgb']} {r['intensity']}\n" for r in rec)
+    (out / "txt.pcd").write_bytes(
+        pcd_header(fields, ["4"] * 4 + ["2"], ["F"] * 3 + ["U", "U"], "ascii") + body.encode()
+    )
+    add("pcd", "points", out / "txt.pcd")
+    xyz = "x y z r g b intensity\n" + "".join(
+        f"{r['x']:.6g} {r['y']:.6g} {r['z']:.6g} {r['rgb'] & 255} {r['rgb'] >> 8 & 255} {r['rgb'] >> 16} "
+        f"{r['intensity']}\n"
+        for r in rec
+    )
+    (out / "cloud.xyz").write_text(xyz)
+    add("xyz", "points", out / "cloud.xyz")
+    (out / "cloud.csv").write_text(xyz.replace(" ", ","))
+    add("csv", "points", out / "cloud.csv")
+
+    vol = rng.random((3, 4, 5)).astype(np.float32)
+    raw = vol.tobytes()
+    for encoding in ("ascii", "binary", "zlib"):
+        comp = ""
+        if encoding == "ascii":
+            data = " ".join(f"{v:.6g}" for v in vol.ravel())
+        elif encoding == "binary":
+            data = base64.b64encode(np.array([len(raw)], "<u4").tobytes() + raw).decode()
+        else:  # zlib blocks of 64 bytes, header and data encoded separately (VTK's layout)
+            comp = ' compressor="vtkZLibDataCompressor"'
+            blocks = [raw[i : i + 64] for i in range(0, len(raw), 64)]
+            zs = [zlib.compress(b) for b in blocks]
+            head = np.array([len(blocks), 64, len(blocks[-1]) % 64, *map(len, zs)], "<u4").tobytes()
+            data = base64.b64encode(head).decode() + base64.b64encode(b"".join(zs)).decode()
+        fmt = "ascii" if encoding == "ascii" else "binary"
+        (out / f"{encoding}.vti").write_text(
+            f'<?xml version="1.0"?>\n<VTKFile type="ImageData" version="0.1" byte_order="LittleEndian" '
+            f'header_type="UInt32"{comp}>\n'
+            '<ImageData WholeExtent="0 4 0 3 0 2" Origin="5 6 7" Spacing="1 2 3">\n'
+            '<Piece Extent="0 4 0 3 0 2"><PointData Scalars="v">\n'
+            f'<DataArray type="Float32" Name="v" format="{fmt}">\n{data}\n</DataArray>\n'
+            "</PointData><CellData></CellData></Piece></ImageData></VTKFile>\n"
+        )
+        add("vti", "volume", out / f"{encoding}.vti")
+    (out / "ascii.vtk").write_text(
+        "# vtk DataFile Version 3.0\nclvis fuzz seed\nASCII\nDATASET STRUCTURED_POINTS\n"
+        "DIMENSIONS 5 4 3\nORIGIN 0 0 0\nSPACING 1 1 1\nPOINT_DATA 60\nSCALARS v float 1\n"
+        "LOOKUP_TABLE default\n" + " ".join(f"{v:.6g}" for v in vol.ravel()) + "\n"
+    )
+    add("vtk", "volume", out / "ascii.vtk")
+    if (DATA / "pyvista_uniform.vtk").is_file():
+        add("vtk", "volume", DATA / "pyvista_uniform.vtk")
 
 
 def _e57(pye57, path: Path, n: int, scans: int = 1, invalid: bool = False, seed: int = 5) -> None:

@@ -231,7 +231,7 @@ def test_nifti_without_nibabel(tmp_path, monkeypatch):
 def test_missing_unknown_and_unreadable(tmp_path):
     with pytest.raises(FileNotFoundError):
         read_volume(tmp_path / "nope_2x2x2_uint8.raw")
-    with pytest.raises(DataError, match="not a file"):
+    with pytest.raises(DataError, match=r"not a regular file \(a directory\)"):
         read_volume(tmp_path)
     other = tmp_path / "v.mha"
     other.write_bytes(b"x")

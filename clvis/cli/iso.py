@@ -89,6 +89,8 @@ _ACTIVE_COLOUR = (1.0, 0.0, 1.0)
 _FIT = FitView(direction=(-0.6, 1.0, -0.45), fov_y=35.0)
 
 
+# picture() shades this many pixels at a time
+_PICTURE_BAND_PIXELS = 1 << 20
 # host bytes a pixel `clvis iso` takes at its peak (19.7 GB was measured at 16000x16000: ~77 B)
 HOST_BYTES_PER_PIXEL = 80
 
@@ -227,11 +229,20 @@ def picture(img: IsoImage, transparent: bool = False) -> np.ndarray:
     over images.BACKGROUND (or transparent where neither)."""
     from .. import images
 
-    rgb = np.where(img.hit[..., None], img.rgba[..., :3], np.float32(0.0))
-    rgb = np.where(img.active[..., None], np.asarray(_ACTIVE_COLOUR, np.float32), rgb)
-    alpha = (img.hit | img.active)[..., None].astype(np.float32)
-    rgba = np.clip(np.rint(np.concatenate([rgb, alpha], axis=2) * 255), 0, 255).astype(np.uint8)
-    return rgba if transparent else images.opaque(rgba)
+    h, w = img.hit.shape
+    out = np.empty((h, w, 4), np.uint8)
+    # in bands of rows: the float temporaries (~70 bytes a pixel) stay those
+    # of a band, not of the whole image (HOST_BYTES_PER_PIXEL)
+    step = max(1, _PICTURE_BAND_PIXELS // max(w, 1))
+    for y0 in range(0, h, step):
+        rows = slice(y0, y0 + step)
+        hit, active = img.hit[rows], img.active[rows]
+        rgb = np.where(hit[..., None], img.rgba[rows, :, :3], np.float32(0.0))
+        rgb = np.where(active[..., None], np.asarray(_ACTIVE_COLOUR, np.float32), rgb)
+        alpha = (hit | active)[..., None].astype(np.float32)
+        rgba = np.clip(np.rint(np.concatenate([rgb, alpha], axis=2) * 255), 0, 255).astype(np.uint8)
+        out[rows] = rgba if transparent else images.opaque(rgba)
+    return out
 
 
 def labelled(
@@ -447,9 +458,16 @@ def _run(args) -> int:
     w, h = args.size
     q = runtime.default_queue()
     # the command's host memory a pixel at its peak (the renderer's host image,
-    # the labelled copy, the infill and the PNGs), refused up front
+    # the labelled copy, the infill and the PNGs) and the renderer's device
+    # tile (its rays and pass items, at most TILE_BYTES; host memory too on a
+    # CPU device), refused up front
+    from ..iso.render import ITEM_BYTES, PIXEL_BYTES, TILE_BYTES
+
     runtime.check_memory(
-        q, f"clvis iso --size {w}x{h}", host_bytes=w * h * HOST_BYTES_PER_PIXEL * (1 + (len(isos) > 1))
+        q,
+        f"clvis iso --size {w}x{h}",
+        device_bytes=min(TILE_BYTES, w * h * (PIXEL_BYTES + 2 * ITEM_BYTES)),
+        host_bytes=w * h * HOST_BYTES_PER_PIXEL * (1 + (len(isos) > 1)),
     )
     field = _field(args) if args.color_by is not None else None
     t0 = time.perf_counter()

@@ -49,6 +49,14 @@ _LAZ_LAYERED = (14, (3,), (3,))
 _LAZ_DEFAULT_CHUNK = 50_000
 
 
+def _is_panic(e: BaseException) -> bool:
+    """Whether `e` is a Rust panic raised through pyo3 (pyo3_runtime.PanicException,
+    which derives from BaseException, not Exception): lazrs panics on some corrupt
+    data, e.g. an index out of bounds decoding a chunk table whose entries were
+    overwritten."""
+    return type(e).__name__ == "PanicException" and type(e).__module__ == "pyo3_runtime"
+
+
 def _check_las_header(path: Path) -> tuple[int, int]:
     """Reject header counts the file cannot hold before laspy sees them: laspy loops
     over a corrupt VLR count (up to 2^32) reading empty records, for hours; laspy
@@ -307,6 +315,10 @@ def _check_laz_chunks(
         entries = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr))
     except (RuntimeError, ValueError, OSError, OverflowError) as e:
         raise DataError(f"{path}: malformed LAZ file: unreadable chunk table: {e}") from None
+    except BaseException as e:
+        if not _is_panic(e):
+            raise
+        raise DataError(f"{path}: malformed LAZ file: unreadable chunk table: lazrs: {e}") from None
     room = table - data_offset - 8
     if len(entries) != n_chunks or sum(b for _, b in entries) > room:
         raise DataError(
@@ -385,6 +397,10 @@ def _read_las(path: Path) -> PointCloud:
     ) as e:
         # RuntimeError / lazrs.LazrsError: lazrs's decompression errors
         raise DataError(f"{path}: malformed LAS/LAZ file: {type(e).__name__}: {e}") from e
+    except BaseException as e:  # a panic inside lazrs's decompression
+        if not _is_panic(e):
+            raise
+        raise DataError(f"{path}: malformed LAZ file: lazrs: {e}") from None
     if n != declared:
         raise DataError(
             f"{path}: truncated LAS/LAZ file: the header declares {declared} points, {n} were read"

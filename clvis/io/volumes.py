@@ -37,7 +37,6 @@ that is not 3-D or not real numbers, an unreadable path) raises
 
 from __future__ import annotations
 
-import errno
 import math
 import operator
 import os
@@ -52,6 +51,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import DataError
+from .files import regular_file
 from .npy import load_npy
 
 __all__ = ["FORMATS", "RAW_TYPES", "Volume", "otsu_level", "raw_layout", "read_volume"]
@@ -113,11 +113,7 @@ def read_volume(
     name when it does. `volume_index` picks one volume of a 4-D NIfTI file."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path: expected a str or path, got {type(path).__name__}")
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(errno.ENOENT, os.strerror(errno.ENOENT), str(path))
-    if not path.is_file():
-        raise DataError(f"{path}: not a file")
+    path = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO or device
     name = path.name.lower()
     if name.endswith(".raw"):
         return _read_raw(path, shape, dtype)

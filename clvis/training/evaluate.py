@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from ..io.files import write_replacing
 from ..metrics import metrics
 from ..post.specs import SPECS
 from . import data as _data
@@ -368,7 +369,8 @@ def write_card(
         "trained_on": list(TRAINED[result["model"]]),
         "rows": result["rows"],
     }
-    path.write_text(json.dumps(card, indent=1, allow_nan=False) + "\n")
+    text = (json.dumps(card, indent=1, allow_nan=False) + "\n").encode()
+    write_replacing(path, lambda f: f.write(text))  # atomic: a failed write keeps the card
     return path
 
 

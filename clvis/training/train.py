@@ -754,10 +754,16 @@ def train(
         "versions": _versions(),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores",
     }
-    text = (json.dumps(card, indent=1) + "\n").encode()
-    write_replacing(out / f"{name}.json", lambda f: f.write(text))  # atomic
+    write_card(out / f"{name}.json", card)
     log(f"wrote {out / (name + '.json')}")
     return card
+
+
+def write_card(path: Path, card: dict) -> None:
+    """The model card as indented JSON, replacing `path` atomically (a failed
+    write keeps the previous card and names the file)."""
+    text = (json.dumps(card, indent=1) + "\n").encode()
+    write_replacing(path, lambda f: f.write(text))
 
 
 def _narvis_data(sets: dict, train_frames: list, fsize, seconds: float, target: str = "max_response") -> dict:
@@ -933,19 +939,21 @@ def _to_int8(src: Path, dst: Path, calibration: list[np.ndarray]) -> None:
             return next(self.items, None)
 
     pre = dst.with_suffix(".pre.onnx")
-    with warnings.catch_warnings(), replacing(dst) as tmp:
-        warnings.simplefilter("ignore")
-        quant_pre_process(str(src), str(pre), skip_symbolic_shape=True)
-        quantize_static(
-            str(pre),
-            str(tmp),
-            Reader(),
-            quant_format=QuantFormat.QDQ,
-            per_channel=True,
-            activation_type=QuantType.QInt8,
-            weight_type=QuantType.QInt8,
-        )
-    pre.unlink()
+    try:
+        with warnings.catch_warnings(), replacing(dst) as tmp:
+            warnings.simplefilter("ignore")
+            quant_pre_process(str(src), str(pre), skip_symbolic_shape=True)
+            quantize_static(
+                str(pre),
+                str(tmp),
+                Reader(),
+                quant_format=QuantFormat.QDQ,
+                per_channel=True,
+                activation_type=QuantType.QInt8,
+                weight_type=QuantType.QInt8,
+            )
+    finally:  # the intermediate graph, whether or not the quantization succeeded
+        pre.unlink(missing_ok=True)
 
 
 # ---------------------------------------------------------------------------

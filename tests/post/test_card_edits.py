@@ -47,3 +47,39 @@ def test_edited_card_loads_and_runs_or_raises_a_clvis_error(tmp_path, key, value
         assert out.shape == (40, 24, 4)
     except ClvisError as e:
         assert str(tmp_path) in str(e) or str(e).startswith("lidar: no fp32 variant"), e
+
+
+def test_graph_that_loads_but_fails_when_run_raises_a_clvis_error(tmp_path):
+    # a graph that matches its card (one input of 5 channels, one output of 3) and
+    # loads, but whose first run fails (a Reshape to a fixed 3 x 3): onnxruntime's
+    # own error escaped from the first call
+    onnx = pytest.importorskip("onnx")
+    from onnx import TensorProto, helper
+
+    from clvis.post.infer import sha256
+
+    for f in MODELS.glob("lidar*"):
+        shutil.copy(f, tmp_path / f.name)
+    consts = [
+        helper.make_tensor("starts", TensorProto.INT64, [1], [0]),
+        helper.make_tensor("ends", TensorProto.INT64, [1], [3]),
+        helper.make_tensor("axes", TensorProto.INT64, [1], [1]),
+        helper.make_tensor("shape", TensorProto.INT64, [4], [1, 3, 3, 3]),
+    ]
+    graph = helper.make_graph(
+        [
+            helper.make_node("Slice", ["planes", "starts", "ends", "axes"], ["rgb"]),
+            helper.make_node("Reshape", ["rgb", "shape"], ["image"]),
+        ],
+        "fails_when_run",
+        [helper.make_tensor_value_info("planes", TensorProto.FLOAT, [1, 5, "height", "width"])],
+        [helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 3, "height", "width"])],
+        consts,
+    )
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), tmp_path / "lidar.onnx")
+    card = json.loads((tmp_path / "lidar.json").read_text())
+    card["files"]["fp32"]["sha256"] = sha256(tmp_path / "lidar.onnx")
+    (tmp_path / "lidar.json").write_text(json.dumps(card))
+    net = post.load("lidar", directory=tmp_path)
+    with pytest.raises(ClvisError, match=r"lidar\.onnx: onnxruntime failed running it"):
+        net(np.zeros((40, 24, 5), np.float32))

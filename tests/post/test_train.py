@@ -347,3 +347,86 @@ def test_narvis_flow_frames_vary_what_the_network_must_not_learn():
     assert dens[-1] / dens[0] > 2
     # the colours differ between views of one scene (random looks)
     assert any(not np.array_equal(a[i].x[:3], a[i + 1].x[:3]) for i in range(0, len(a), 2))
+
+
+def _broken_write(path_arg):
+    """A writer that leaves part of a file at the path it is given, then fails."""
+
+    def write(*args, **kwargs):
+        from pathlib import Path
+
+        Path(str(args[path_arg])).write_bytes(b"partial")
+        raise RuntimeError("the writer failed")
+
+    return write
+
+
+def test_exports_and_cards_replace_their_files_atomically(tmp_path, monkeypatch):
+    """clvis train's .onnx files (fp32, fp16, int8) and card, and clvis eval's
+    --write-card: a failed overwrite keeps the previous file and leaves no
+    temporary one (a full disk names the card)."""
+    import errno
+    import os
+
+    import onnx
+    import onnxruntime.quantization
+    import torch
+
+    import clvis.io.files as files
+    from clvis.post.infer import MODELS
+    from clvis.training import evaluate
+
+    class Net(torch.nn.Module):
+        channels_in, stride = 2, 4
+
+        def __init__(self):
+            super().__init__()
+            self.conv = torch.nn.Conv2d(2, 3, 1)
+
+        def forward(self, x):
+            return self.conv(x)
+
+    fp32, fp16, int8 = (tmp_path / f"n{s}.onnx" for s in ("", ".fp16", ".int8"))
+    train.export_onnx(Net(), fp32)
+    train._to_fp16(fp32, fp16)
+    calibration = [np.random.default_rng(i).random((1, 2, 8, 8), np.float32) for i in range(2)]
+    train._to_int8(fp32, int8, calibration)
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["n.fp16.onnx", "n.int8.onnx", "n.onnx"]
+    before = {p: p.read_bytes() for p in (fp32, fp16, int8)}
+    for p in before:  # graphs onnxruntime loads
+        assert train._session(p).get_inputs()[0].name == "planes"
+    with monkeypatch.context() as m:
+        m.setattr(torch.onnx, "export", _broken_write(2))
+        with pytest.raises(RuntimeError, match="the writer failed"):
+            train.export_onnx(Net(), fp32)
+        m.setattr(onnx, "save", _broken_write(1))
+        with pytest.raises(RuntimeError, match="the writer failed"):
+            train._to_fp16(fp32, fp16)
+        m.setattr(onnxruntime.quantization, "quantize_static", _broken_write(1))
+        with pytest.raises(RuntimeError, match="the writer failed"):
+            train._to_int8(fp32, int8, calibration)
+    assert {p: p.read_bytes() for p in before} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == names  # no .tmp, no .pre.onnx
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    card = tmp_path / "n.json"
+    train.write_card(card, {"a": 1})
+    for p in MODELS.glob("lidar.json"):
+        (tmp_path / p.name).write_bytes(p.read_bytes())
+    shipped = (tmp_path / "lidar.json").read_bytes()
+    result = {"model": "lidar", "quick": True, "seconds": 1.0, "rows": []}
+    with monkeypatch.context() as m:
+        m.setattr(files.os, "fsync", full)
+        with pytest.raises(OSError, match="n.json") as info:
+            train.write_card(card, {"a": 2})
+        assert info.value.errno == errno.ENOSPC
+        with pytest.raises(OSError, match="lidar.json"):
+            evaluate.write_card(result, tmp_path)
+    assert json.loads(card.read_text()) == {"a": 1}
+    assert (tmp_path / "lidar.json").read_bytes() == shipped
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([*names, "n.json", "lidar.json"])
+    assert evaluate.write_card(result, tmp_path) == tmp_path / "lidar.json"
+    assert json.loads((tmp_path / "lidar.json").read_text())["held_out_suite"]["rows"] == []

@@ -32,6 +32,18 @@ The run fails (exit 1) on:
 - (a full run only) a kernel of kernels_cl/<family>/*.cl that no
   configuration launched, so a new kernel cannot slip past the audit.
 
+The 64-bit atomics off configurations run only the cases whose device code
+changes with them (unless --case names the cases): a configuration with them
+off runs after the one with them on and the same tuning, and takes from it
+the kernels each case launched. A case runs again when one of its kernels
+lies in a file that reads CLVIS_INT64_ATOMICS (in its text or a header it
+includes) outside kernels_cl/primitives, or when all its kernels lie in
+kernels_cl/primitives (the primitives' own cases: scan's chained and
+reduce-then-scan paths are theirs to cover, in every configuration). The
+other cases build the same programs (the define is read nowhere in them) on
+the same inputs, so a second run would repeat the first; the summary names
+them.
+
 Documented benign races. A comment in the kernel source containing
 ``benign race (TAG)`` marks the block it opens: the line it starts on and
 the following ones, up to the first blank line or the first line indented
@@ -117,6 +129,35 @@ def marked_lines(text: str) -> dict[int, set[str]]:
                 out[j + 1].add(tag)
                 j += 1
     return dict(out)
+
+
+_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.MULTILINE)
+INT64_DEFINE = "CLVIS_INT64_ATOMICS"
+
+
+def reads_int64_define(path: Path, root: Path = KERNELS_CL, _seen: set[Path] | None = None) -> bool:
+    """Whether `path`'s program reads CLVIS_INT64_ATOMICS: its own text or a
+    header it includes (from kernels_cl/include, transitively)."""
+    seen = _seen if _seen is not None else set()
+    if path in seen or not path.is_file():
+        return False
+    seen.add(path)
+    text = _strip_comments(path.read_text())
+    if INT64_DEFINE in text:
+        return True
+    return any(reads_int64_define(root / "include" / inc, root, seen) for inc in _INCLUDE.findall(text))
+
+
+def needs_no_int64(kernels: list[str], files: dict[str, Path], root: Path = KERNELS_CL) -> bool:
+    """Whether a case that launched `kernels` (with 64-bit atomics on) must
+    run again with them off (see the module's docstring)."""
+    prims = root / "primitives"
+    paths = [files.get(k) for k in kernels]
+    if any(p is None for p in paths):
+        return True  # a kernel the tree does not define: never skip what we cannot place
+    if all(p.parent == prims for p in paths):
+        return True
+    return any(p.parent != prims and reads_int64_define(p, root) for p in paths)
 
 
 class Sources:
@@ -221,6 +262,7 @@ class RunOutput:
     launched: dict[str, int] | None
     stray: list[str]  # lines that are neither markers nor Oclgrind's
     seconds: dict[str, float] = dataclasses.field(default_factory=dict)  # per case
+    case_kernels: dict[str, list[str]] | None = None  # case -> the kernels it launched
 
 
 def _accesses(body: list[str]) -> list[Access]:
@@ -255,6 +297,7 @@ def parse(text: str) -> RunOutput:
     errors: list[tuple[str, str]] = []
     stray: list[str] = []
     launched = None
+    case_kernels = None
     seconds: dict[str, float] = {}
     case = "(start)"
     cur: Diagnostic | None = None
@@ -269,6 +312,8 @@ def parse(text: str) -> RunOutput:
                 errors.append((e["case"], e["traceback"]))
             elif kind == "launched":
                 launched = json.loads(rest)
+            elif kind == "case-kernels":
+                case_kernels = json.loads(rest)
             elif kind == "time":
                 name, _, sec = rest.partition(" ")
                 seconds[name] = float(sec)
@@ -288,7 +333,7 @@ def parse(text: str) -> RunOutput:
     for d in diags:
         d.kernel = d.field("Kernel")
         d.accesses = _accesses(d.body)
-    return RunOutput(diags, errors, launched, stray, seconds)
+    return RunOutput(diags, errors, launched, stray, seconds, case_kernels)
 
 
 # ---------------------------------------------------------------------------
@@ -354,6 +399,7 @@ class ConfigResult:
     returncode: int
     output: RunOutput
     log: str
+    skipped: list[str] = dataclasses.field(default_factory=list)  # cases left out (see the docstring)
 
     @property
     def name(self) -> str:
@@ -424,6 +470,11 @@ def report(src: Sources, results: list[ConfigResult], full: bool, out=None) -> b
             f"{counts['ignored']:3d} API queries ignored",
             file=out,
         )
+        if r.skipped:
+            print(
+                f"  not run again (the same programs as {r.tuning}/int64): {', '.join(r.skipped)}",
+                file=out,
+            )
         slow = sorted(r.output.seconds.items(), key=lambda kv: -kv[1])[:3]
         if slow:
             print("  slowest cases: " + ", ".join(f"{k} {v:.1f} s" for k, v in slow), file=out)
@@ -534,8 +585,30 @@ def main(argv=None) -> int:
         flush=True,
     )
     t0 = time.perf_counter()
+    # one chain per tuning: int64 first, then no-int64 on the cases that need it
+    chains: dict[str, list[tuple[str, str]]] = defaultdict(list)
+    for c in sorted(configs, key=lambda c: c[1] != "int64"):
+        chains[c[0]].append(c)
+
+    def run_chain(chain: list[tuple[str, str]]) -> list[ConfigResult]:
+        done: list[ConfigResult] = []
+        for tuning, atomics in chain:
+            with_int64 = next((r for r in done if r.atomics == "int64"), None)
+            by_case = with_int64.output.case_kernels if with_int64 is not None else None
+            if atomics == "no-int64" and not args.case and by_case is not None:
+                failed = {c for c, _ in with_int64.output.errors}
+                run = [c for c, ks in by_case.items() if c in failed or needs_no_int64(ks, src.kernels)]
+                run += sorted(failed - set(by_case))
+                r = run_config(oclgrind, tuning, atomics, run or ["(none)"])
+                r.skipped = sorted(set(by_case) - set(run))
+            else:
+                r = run_config(oclgrind, tuning, atomics, args.case)
+            done.append(r)
+        return done
+
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as ex:
-        results = list(ex.map(lambda c: run_config(oclgrind, c[0], c[1], args.case), configs))
+        ran = [r for rs in ex.map(run_chain, chains.values()) for r in rs]
+    results = sorted(ran, key=lambda r: configs.index((r.tuning, r.atomics)))
     if args.log_dir:
         args.log_dir.mkdir(parents=True, exist_ok=True)
         for r in results:

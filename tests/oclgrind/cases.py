@@ -8,7 +8,8 @@ It prints to stderr, where Oclgrind writes its diagnostics, a line
 ``@@case <name>`` before each case (so the audit can say which case a
 diagnostic came from), ``@@error <json>`` (the case and its traceback) when
 a case raises, ``@@time <name> <seconds>`` after each case, and at the end
-``@@launched <json>``: how often each kernel was enqueued, by name. Sizes
+``@@launched <json>``: how often each kernel was enqueued, by name, and
+``@@case-kernels <json>``: which kernels each case enqueued. Sizes
 are tiny (Oclgrind interprets every work-item) but give several work-groups
 in both work shapes, so cross-group accesses are seen.
 Results are not checked here: tests/ does that.
@@ -39,12 +40,15 @@ def _note(kind: str, text: str) -> None:
 # (clvis.runtime.launch looks it up on the module at each call)
 
 LAUNCHED: dict[str, int] = {}
+BY_CASE: dict[str, set[str]] = {}  # case -> the kernels it enqueued
+_current = ["(start)"]
 _enqueue = cl.enqueue_nd_range_kernel
 
 
 def _recording_enqueue(queue, kernel, *args, **kw):
     name = kernel.function_name
     LAUNCHED[name] = LAUNCHED.get(name, 0) + 1
+    BY_CASE.setdefault(_current[0], set()).add(name)
     return _enqueue(queue, kernel, *args, **kw)
 
 
@@ -467,6 +471,7 @@ def main(argv: list[str]) -> int:
             if only and fn.__name__ not in only:
                 continue
             _note("case", fn.__name__)
+            _current[0] = fn.__name__
             t0 = time.perf_counter()
             try:
                 fn(q)
@@ -477,6 +482,7 @@ def main(argv: list[str]) -> int:
             _note("time", f"{fn.__name__} {time.perf_counter() - t0:.2f}")
         _note("case", "(end)")
     _note("launched", json.dumps(LAUNCHED, sort_keys=True))
+    _note("case-kernels", json.dumps({c: sorted(k) for c, k in sorted(BY_CASE.items())}))
     return 1 if failed else 0
 
 

@@ -233,6 +233,24 @@ def test_case_kernels_are_parsed():
     assert out.case_kernels == {"scan": ["scan_chained", "scan_reduce"]} and not out.stray
 
 
+def test_outputs_of_several_workloads_merge():
+    a = audit.parse(
+        '@@case scan\n@@time scan 1.5\n@@launched {"scan_reduce": 2}\n'
+        '@@case-kernels {"scan": ["scan_reduce"]}\n'
+    )
+    b = audit.parse(
+        '@@case copy\n@@error {"case": "copy", "traceback": "x"}\n'
+        '@@launched {"scan_reduce": 1, "copy_bytes": 3}\n'
+    )
+    m = audit.merge([a, b])
+    assert m.launched == {"scan_reduce": 3, "copy_bytes": 3}
+    assert m.seconds == {"scan": 1.5} and m.errors == [("copy", "x")]
+    assert m.case_kernels == {"scan": ["scan_reduce"]}
+    # a workload that never said what it launched (it crashed): the merge says so too
+    assert audit.merge([a, audit.parse("@@case scan\n")]).launched is None
+    assert audit.case_names()[:3] == ["scan", "compact", "radix_sort"] and len(audit.case_names()) >= 18
+
+
 @pytest.mark.skipif(shutil.which("oclgrind") is None, reason="Oclgrind is not installed")
 def test_one_case_under_oclgrind(capsys):
     """The whole path on the smallest case: preload, the Oclgrind platform
@@ -240,3 +258,9 @@ def test_one_case_under_oclgrind(capsys):
     assert audit.main(["--config", "cpu:int64", "--case", "copy"]) == 0
     out = capsys.readouterr().out
     assert "oclgrind audit: passed" in out and "1 kernels launched" in out
+    # two workloads share the cases (one each here), and a name cases.py lacks is an error
+    assert audit.main(["--config", "cpu:int64", "--case", "copy", "--case", "histogram", "-j", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "oclgrind audit: passed" in out and re.search(r"\b[2-9] kernels launched", out)
+    assert audit.main(["--config", "cpu:int64", "--case", "copy", "--case", "nonesuch", "-j", "2"]) == 1
+    assert "case nonesuch raised" in capsys.readouterr().out

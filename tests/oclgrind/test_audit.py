@@ -258,9 +258,8 @@ def test_one_case_under_oclgrind(capsys):
     assert audit.main(["--config", "cpu:int64", "--case", "copy"]) == 0
     out = capsys.readouterr().out
     assert "oclgrind audit: passed" in out and "1 kernels launched" in out
-    # two workloads share the cases (one each here), and a name cases.py lacks is an error
-    assert audit.main(["--config", "cpu:int64", "--case", "copy", "--case", "histogram", "-j", "2"]) == 0
-    out = capsys.readouterr().out
-    assert "oclgrind audit: passed" in out and re.search(r"\b[2-9] kernels launched", out)
+    # two workloads share the cases, one each here: copy's kernel ran in one, and a name
+    # cases.py lacks is an error of the other
     assert audit.main(["--config", "cpu:int64", "--case", "copy", "--case", "nonesuch", "-j", "2"]) == 1
-    assert "case nonesuch raised" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "case nonesuch raised" in out and "1 kernels launched" in out

@@ -34,9 +34,23 @@ cd "$(dirname "$0")"
 PY=${PYTHON:-python3}
 
 venv() { # venv DIR EXTRAS
+    # pip runs only when the venv is new, pyproject.toml changed or an extra is
+    # new to it (.clvis-installed: the pyproject.toml hash, then the extras
+    # installed); the package is installed editable, so code changes need none
+    local stamp="$1/.clvis-installed" hash have="" e missing=
     [ -x "$1/bin/python" ] || "$PY" -m venv "$1"
+    hash=$(sha256sum pyproject.toml | cut -d' ' -f1)
+    if [ -f "$stamp" ] && [ "$(sed -n 1p "$stamp")" = "$hash" ]; then
+        have=$(sed -n 2p "$stamp")
+    fi
+    for e in ${2//,/ }; do
+        case ",$have," in *",$e,"*) ;; *) missing=1 ;; esac
+    done
+    [ -n "$missing" ] || return 0
+    rm -f "$stamp"
     "$1/bin/python" -m pip install -q --disable-pip-version-check --upgrade pip
     "$1/bin/python" -m pip install -q --disable-pip-version-check -e ".[$2]"
+    printf '%s\n%s\n' "$hash" "${have:+$have,}$2" > "$stamp"
 }
 
 with_intel() { # Intel's runtime only ships for x86-64 Linux

@@ -294,6 +294,9 @@ class _Tile:
         self.q, self.p0, self.n, self.cam, self.w = q, p0, n, cam, w
         nb = [(int(s) + 3) // 4 for s in shape[::-1]]
         self.order = (np.uint32(nb[0]), np.uint32(nb[1]), np.uint32(nb[2]), np.uint32(flip))
+        # the items' sort keys are view-ordered block ids (pass.cl's view_key):
+        # below nb0 * nb1 * nb2, so the sort needs only that many bits' passes
+        self.key_bits = (nb[0] * nb[1] * nb[2] - 1).bit_length()
         if rays is None:
             rays = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
         self.ray_t, active_all, count = rays
@@ -692,7 +695,7 @@ class IsoRenderer:
                 *t.order,
                 keys.base_data,
             )
-            skeys, sitems = radix_sort(keys, item_ids, queue=q)
+            skeys, sitems = radix_sort(keys, item_ids, key_bits=t.key_bits, queue=q)
             heads = runtime.empty(q, m, np.uint8, "group heads")
             self._launch("group_heads", m, skeys.base_data, np.uint32(m), heads.base_data)
             starts = compact_indices(heads, queue=q)

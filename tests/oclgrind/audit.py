@@ -32,6 +32,18 @@ The run fails (exit 1) on:
 - (a full run only) a kernel of kernels_cl/<family>/*.cl that no
   configuration launched, so a new kernel cannot slip past the audit.
 
+The 64-bit atomics off configurations run only the cases whose device code
+changes with them (unless --case names the cases): a configuration with them
+off runs after the one with them on and the same tuning, and takes from it
+the kernels each case launched. A case runs again when one of its kernels
+lies in a file that reads CLVIS_INT64_ATOMICS (in its text or a header it
+includes) outside kernels_cl/primitives, or when all its kernels lie in
+kernels_cl/primitives (the primitives' own cases: scan's chained and
+reduce-then-scan paths are theirs to cover, in every configuration). The
+other cases build the same programs (the define is read nowhere in them) on
+the same inputs, so a second run would repeat the first; the summary names
+them.
+
 Documented benign races. A comment in the kernel source containing
 ``benign race (TAG)`` marks the block it opens: the line it starts on and
 the following ones, up to the first blank line or the first line indented
@@ -48,6 +60,7 @@ clEnqueueFillBuffer as uninitialised.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -55,8 +68,9 @@ import re
 import shutil
 import subprocess
 import sys
+import threading
 import time
-from collections import defaultdict
+from collections import defaultdict, deque
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -73,6 +87,7 @@ _RACE = re.compile(r"^(Read-write|Write-write) data race at (global|local) memor
 _INVALID = re.compile(r"^Invalid (read|write) of size")
 _API = "Oclgrind - OpenCL runtime error detected"
 _AT = re.compile(r"^At line (\d+) \(column (\d+)\) of (.+):$")
+MARK_TIME = "@@time"  # cases.py's line after each case
 
 
 # ---------------------------------------------------------------------------
@@ -117,6 +132,35 @@ def marked_lines(text: str) -> dict[int, set[str]]:
                 out[j + 1].add(tag)
                 j += 1
     return dict(out)
+
+
+_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.MULTILINE)
+INT64_DEFINE = "CLVIS_INT64_ATOMICS"
+
+
+def reads_int64_define(path: Path, root: Path = KERNELS_CL, _seen: set[Path] | None = None) -> bool:
+    """Whether `path`'s program reads CLVIS_INT64_ATOMICS: its own text or a
+    header it includes (from kernels_cl/include, transitively)."""
+    seen = _seen if _seen is not None else set()
+    if path in seen or not path.is_file():
+        return False
+    seen.add(path)
+    text = _strip_comments(path.read_text())
+    if INT64_DEFINE in text:
+        return True
+    return any(reads_int64_define(root / "include" / inc, root, seen) for inc in _INCLUDE.findall(text))
+
+
+def needs_no_int64(kernels: list[str], files: dict[str, Path], root: Path = KERNELS_CL) -> bool:
+    """Whether a case that launched `kernels` (with 64-bit atomics on) must
+    run again with them off (see the module's docstring)."""
+    prims = root / "primitives"
+    paths = [files.get(k) for k in kernels]
+    if any(p is None for p in paths):
+        return True  # a kernel the tree does not define: never skip what we cannot place
+    if all(p.parent == prims for p in paths):
+        return True
+    return any(p.parent != prims and reads_int64_define(p, root) for p in paths)
 
 
 class Sources:
@@ -221,6 +265,7 @@ class RunOutput:
     launched: dict[str, int] | None
     stray: list[str]  # lines that are neither markers nor Oclgrind's
     seconds: dict[str, float] = dataclasses.field(default_factory=dict)  # per case
+    case_kernels: dict[str, list[str]] | None = None  # case -> the kernels it launched
 
 
 def _accesses(body: list[str]) -> list[Access]:
@@ -255,6 +300,7 @@ def parse(text: str) -> RunOutput:
     errors: list[tuple[str, str]] = []
     stray: list[str] = []
     launched = None
+    case_kernels = None
     seconds: dict[str, float] = {}
     case = "(start)"
     cur: Diagnostic | None = None
@@ -269,6 +315,8 @@ def parse(text: str) -> RunOutput:
                 errors.append((e["case"], e["traceback"]))
             elif kind == "launched":
                 launched = json.loads(rest)
+            elif kind == "case-kernels":
+                case_kernels = json.loads(rest)
             elif kind == "time":
                 name, _, sec = rest.partition(" ")
                 seconds[name] = float(sec)
@@ -288,7 +336,7 @@ def parse(text: str) -> RunOutput:
     for d in diags:
         d.kernel = d.field("Kernel")
         d.accesses = _accesses(d.body)
-    return RunOutput(diags, errors, launched, stray, seconds)
+    return RunOutput(diags, errors, launched, stray, seconds, case_kernels)
 
 
 # ---------------------------------------------------------------------------
@@ -354,6 +402,7 @@ class ConfigResult:
     returncode: int
     output: RunOutput
     log: str
+    skipped: list[str] = dataclasses.field(default_factory=list)  # cases left out (see the docstring)
 
     @property
     def name(self) -> str:
@@ -374,19 +423,120 @@ def _env() -> dict[str, str]:
     return env
 
 
-def run_config(oclgrind: str, tuning: str, atomics: str, cases: list[str]) -> ConfigResult:
-    t0 = time.perf_counter()
-    p = subprocess.run(
-        _command(oclgrind, tuning, atomics, cases),
-        cwd=REPO,
-        env=_env(),
-        check=False,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        errors="replace",
+def case_names() -> list[str]:
+    """The cases of cases.py, in its order (read from its source: this module
+    does not import it, which patches pyopencl)."""
+    return re.findall(r"^@case\s*\ndef (\w+)\(", CASES_PY.read_text(), re.MULTILINE)
+
+
+def merge(outputs: list[RunOutput]) -> RunOutput:
+    """One configuration's output from its workloads' (each a share of the cases)."""
+    launched: dict[str, int] | None = {}
+    by_case: dict[str, list[str]] | None = None
+    for o in outputs:
+        if o.launched is None or launched is None:
+            launched = None
+        else:
+            for k, n in o.launched.items():
+                launched[k] = launched.get(k, 0) + n
+        if o.case_kernels is not None:
+            by_case = {**(by_case or {}), **o.case_kernels}
+    return RunOutput(
+        [d for o in outputs for d in o.diagnostics],
+        [e for o in outputs for e in o.errors],
+        launched,
+        [s for o in outputs for s in o.stray],
+        {k: v for o in outputs for k, v in o.seconds.items()},
+        by_case,
     )
-    return ConfigResult(tuning, atomics, time.perf_counter() - t0, p.returncode, parse(p.stdout), p.stdout)
+
+
+def run_config(
+    oclgrind: str,
+    tuning: str,
+    atomics: str,
+    cases: list[str] | None,
+    jobs: int = 1,
+    first: dict[str, float] | None = None,
+) -> ConfigResult:
+    """Run `cases` (None: all) in one configuration. jobs > 1: that many
+    workloads at once (Oclgrind interprets a workload on one thread), each
+    given the next case as it finishes one, the slowest of `first` (seconds
+    by case) first."""
+    t0 = time.perf_counter()
+    if cases is not None and not cases:
+        return ConfigResult(tuning, atomics, 0.0, 0, RunOutput([], [], {}, [], {}, {}), "")
+    if jobs <= 1:
+        p = subprocess.run(
+            _command(oclgrind, tuning, atomics, cases or []),
+            cwd=REPO,
+            env=_env(),
+            check=False,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            errors="replace",
+        )
+        return ConfigResult(
+            tuning, atomics, time.perf_counter() - t0, p.returncode, parse(p.stdout), p.stdout
+        )
+    names = list(cases) if cases is not None else case_names()
+    names.sort(key=lambda c: -(first or {}).get(c, 0.0))
+    todo = deque(names)
+    lock = threading.Lock()
+    procs = [
+        subprocess.Popen(
+            _command(oclgrind, tuning, atomics, ["--serve"]),
+            cwd=REPO,
+            env=_env(),
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            errors="replace",
+        )
+        for _ in range(min(jobs, len(names)))
+    ]
+    logs: list[list[str]] = [[] for _ in procs]
+
+    def feed(p: subprocess.Popen) -> None:
+        assert p.stdin is not None
+        with lock:
+            if todo:
+                name = todo.popleft()
+                try:
+                    p.stdin.write(name + "\n")
+                    p.stdin.flush()
+                    return
+                except OSError:  # the workload is gone: another one takes the case
+                    todo.appendleft(name)
+            with contextlib.suppress(OSError):
+                p.stdin.close()
+
+    def drain(i: int) -> None:
+        p = procs[i]
+        assert p.stdout is not None
+        feed(p)
+        for line in p.stdout:
+            logs[i].append(line)
+            if line.startswith(f"{MARK_TIME} "):
+                feed(p)
+        p.wait()
+
+    with ThreadPoolExecutor(max_workers=len(procs) or 1) as ex:
+        list(ex.map(drain, range(len(procs))))
+    outputs = [parse("".join(lg)) for lg in logs]
+    if todo:  # every workload exited early
+        outputs.append(
+            RunOutput([], [(c, "never ran: every workload had exited") for c in todo], {}, [], {}, {})
+        )
+    failed = [p.returncode for p in procs if p.returncode]
+    # a failed workload's log last: the summary shows the end of the log
+    order = sorted(range(len(procs)), key=lambda i: procs[i].returncode != 0)
+    log = "".join("".join(logs[i]) for i in order)
+    return ConfigResult(
+        tuning, atomics, time.perf_counter() - t0, failed[0] if failed else 0, merge(outputs), log
+    )
 
 
 def _oclgrind_version(oclgrind: str) -> str:
@@ -424,6 +574,11 @@ def report(src: Sources, results: list[ConfigResult], full: bool, out=None) -> b
             f"{counts['ignored']:3d} API queries ignored",
             file=out,
         )
+        if r.skipped:
+            print(
+                f"  not run again (the same programs as {r.tuning}/int64): {', '.join(r.skipped)}",
+                file=out,
+            )
         slow = sorted(r.output.seconds.items(), key=lambda kv: -kv[1])[:3]
         if slow:
             print("  slowest cases: " + ", ".join(f"{k} {v:.1f} s" for k, v in slow), file=out)
@@ -508,7 +663,8 @@ def main(argv=None) -> int:
         "-j",
         type=int,
         default=0,
-        help="configurations run at once (default: 2 when the machine has 4 or more cores, else 1)",
+        help="workloads run at once, each a share of a configuration's cases (Oclgrind interprets "
+        "a workload on one thread; default: the machine's cores, at most 4)",
     )
     ap.add_argument("--log-dir", type=Path, help="keep each configuration's raw Oclgrind output here")
     ap.add_argument("--oclgrind", default=os.environ.get("OCLGRIND", "oclgrind"))
@@ -527,15 +683,30 @@ def main(argv=None) -> int:
                 ap.error(f"--config: expected cpu|gpu:int64|no-int64, got {c!r}")
             configs.append((t, a))
     src = Sources()
-    jobs = args.jobs or (2 if (os.cpu_count() or 1) >= 4 else 1)
+    jobs = args.jobs or min(4, os.cpu_count() or 1)
     print(
         f"oclgrind audit: {_oclgrind_version(oclgrind)}, {len(configs)} configurations, "
         f"{len(src.kernels)} kernels; {' '.join(OCLGRIND_ARGS)}",
         flush=True,
     )
     t0 = time.perf_counter()
-    with ThreadPoolExecutor(max_workers=max(1, jobs)) as ex:
-        results = list(ex.map(lambda c: run_config(oclgrind, c[0], c[1], args.case), configs))
+    # int64 first: a no-int64 configuration runs the cases that need it (the
+    # docstring), by the kernels each case launched with the same tuning
+    done: list[ConfigResult] = []
+    for tuning, atomics in sorted(configs, key=lambda c: c[1] != "int64"):
+        with_int64 = next((r for r in done if (r.tuning, r.atomics) == (tuning, "int64")), None)
+        by_case = with_int64.output.case_kernels if with_int64 is not None else None
+        first = {k: v for r in done for k, v in r.output.seconds.items()}
+        if atomics == "no-int64" and not args.case and with_int64 is not None and by_case is not None:
+            failed = {c for c, _ in with_int64.output.errors}
+            run = [c for c, ks in by_case.items() if c in failed or needs_no_int64(ks, src.kernels)]
+            run += sorted(failed - set(by_case))
+            r = run_config(oclgrind, tuning, atomics, run, max(1, jobs), first)
+            r.skipped = sorted(set(by_case) - set(run))
+        else:
+            r = run_config(oclgrind, tuning, atomics, args.case or None, max(1, jobs), first)
+        done.append(r)
+    results = sorted(done, key=lambda r: configs.index((r.tuning, r.atomics)))
     if args.log_dir:
         args.log_dir.mkdir(parents=True, exist_ok=True)
         for r in results:

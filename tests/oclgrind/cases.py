@@ -3,12 +3,17 @@ every kernel of every family, through the public Python API, in one
 configuration (tuning profile, 64-bit atomics on or off).
 
     oclgrind --data-races --check-api python tests/oclgrind/cases.py cpu int64 [CASE ...]
+    oclgrind ... python tests/oclgrind/cases.py cpu int64 --serve
+
+(--serve: the case names come on stdin, one a line, each run as it arrives,
+until stdin closes; the audit hands them to several such workloads at once.)
 
 It prints to stderr, where Oclgrind writes its diagnostics, a line
 ``@@case <name>`` before each case (so the audit can say which case a
 diagnostic came from), ``@@error <json>`` (the case and its traceback) when
 a case raises, ``@@time <name> <seconds>`` after each case, and at the end
-``@@launched <json>``: how often each kernel was enqueued, by name. Sizes
+``@@launched <json>``: how often each kernel was enqueued, by name, and
+``@@case-kernels <json>``: which kernels each case enqueued. Sizes
 are tiny (Oclgrind interprets every work-item) but give several work-groups
 in both work shapes, so cross-group accesses are seen.
 Results are not checked here: tests/ does that.
@@ -39,12 +44,15 @@ def _note(kind: str, text: str) -> None:
 # (clvis.runtime.launch looks it up on the module at each call)
 
 LAUNCHED: dict[str, int] = {}
+BY_CASE: dict[str, set[str]] = {}  # case -> the kernels it enqueued
+_current = ["(start)"]
 _enqueue = cl.enqueue_nd_range_kernel
 
 
 def _recording_enqueue(queue, kernel, *args, **kw):
     name = kernel.function_name
     LAUNCHED[name] = LAUNCHED.get(name, 0) + 1
+    BY_CASE.setdefault(_current[0], set()).add(name)
     return _enqueue(queue, kernel, *args, **kw)
 
 
@@ -447,12 +455,30 @@ def post_pack(q):
         clvis.post.pack_gbuffers(g, ("rgb", "depth", "vel2d", "t"), stride=stride, queue=q)
 
 
+def _served():
+    """The cases named on stdin, as they arrive (an unknown name: an error)."""
+    by_name = {fn.__name__: fn for fn in CASES}
+    for line in sys.stdin:
+        name = line.strip()
+        if name:
+            yield by_name.get(name) or _unknown(name)
+
+
+def _unknown(name: str):
+    def unknown(q):
+        raise ValueError(f"cases.py: no case {name!r}")
+
+    unknown.__name__ = name
+    return unknown
+
+
 def main(argv: list[str]) -> int:
     if len(argv) < 3 or argv[1] not in ("cpu", "gpu") or argv[2] not in ("int64", "no-int64"):
-        print("usage: cases.py cpu|gpu int64|no-int64 [CASE ...]", file=sys.stderr)
+        print("usage: cases.py cpu|gpu int64|no-int64 [CASE ... | --serve]", file=sys.stderr)
         return 2
     tuning, int64 = argv[1], argv[2] == "int64"
-    only = set(argv[3:])
+    serve = argv[3:] == ["--serve"]
+    only = set() if serve else set(argv[3:])
     warnings.simplefilter("ignore")  # compiler warnings are not what this run looks for
     platforms = cl.get_platforms()
     names = [p.name for p in platforms]
@@ -463,10 +489,11 @@ def main(argv: list[str]) -> int:
     failed = 0
     with runtime.configure(tuning=tuning, int64_atomics=int64):
         q = runtime.queue_for(device)
-        for fn in CASES:
+        for fn in _served() if serve else CASES:
             if only and fn.__name__ not in only:
                 continue
             _note("case", fn.__name__)
+            _current[0] = fn.__name__
             t0 = time.perf_counter()
             try:
                 fn(q)
@@ -477,6 +504,7 @@ def main(argv: list[str]) -> int:
             _note("time", f"{fn.__name__} {time.perf_counter() - t0:.2f}")
         _note("case", "(end)")
     _note("launched", json.dumps(LAUNCHED, sort_keys=True))
+    _note("case-kernels", json.dumps({c: sorted(k) for c, k in sorted(BY_CASE.items())}))
     return 1 if failed else 0
 
 

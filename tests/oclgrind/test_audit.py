@@ -201,6 +201,56 @@ something else
     assert out.launched == {"copy_bytes": 2}
 
 
+def test_which_cases_run_again_without_int64_atomics():
+    """The no-int64 configurations skip a case only when its programs do not
+    read CLVIS_INT64_ATOMICS (outside the primitives, whose own cases run in
+    every configuration)."""
+    files = audit.kernel_files()
+    reads = {p.relative_to(KERNELS_CL).as_posix() for p in set(files.values()) if audit.reads_int64_define(p)}
+    # through clvis/atomics.h (iso, raster) or in the file itself (scan)
+    assert {"raster/render.cl", "iso/raytrace.cl", "iso/pass.cl", "primitives/scan.cl"} <= reads
+    assert not reads & {"gauss/tiles.cl", "gauss/bvh.cl", "raster/edl.cl", "primitives/radix_sort.cl"}
+    need = audit.needs_no_int64
+    assert need(["batch_bounds", "render_visibility"], files)  # raster: another kernel without
+    assert need(["raytrace_blocks", "scan_chained"], files)
+    assert need(["scan_chained"], files) and need(["radix_upsweep", "scan_reduce"], files)
+    assert not need(["tile_count", "scan_chained", "tile_render8"], files)  # gauss_tiles
+    assert not need(["edl"], files)
+    assert need(["no_such_kernel"], files)
+    # the host code that reads the option lies in those families: a module
+    # that starts reading it beside kernels that do not fails here
+    pkg = KERNELS_CL.parent / "clvis"
+    readers = {
+        p.relative_to(pkg).as_posix()
+        for p in pkg.rglob("*.py")
+        if "int64_atomics" in p.read_text() and p.parts[-2] not in ("runtime", "cli")
+    }
+    assert readers == {"primitives.py", "raster/render.py", "iso/render.py"}, readers
+
+
+def test_case_kernels_are_parsed():
+    out = audit.parse('@@case scan\n@@case-kernels {"scan": ["scan_chained", "scan_reduce"]}\n')
+    assert out.case_kernels == {"scan": ["scan_chained", "scan_reduce"]} and not out.stray
+
+
+def test_outputs_of_several_workloads_merge():
+    a = audit.parse(
+        '@@case scan\n@@time scan 1.5\n@@launched {"scan_reduce": 2}\n'
+        '@@case-kernels {"scan": ["scan_reduce"]}\n'
+    )
+    b = audit.parse(
+        '@@case copy\n@@error {"case": "copy", "traceback": "x"}\n'
+        '@@launched {"scan_reduce": 1, "copy_bytes": 3}\n'
+    )
+    m = audit.merge([a, b])
+    assert m.launched == {"scan_reduce": 3, "copy_bytes": 3}
+    assert m.seconds == {"scan": 1.5} and m.errors == [("copy", "x")]
+    assert m.case_kernels == {"scan": ["scan_reduce"]}
+    # a workload that never said what it launched (it crashed): the merge says so too
+    assert audit.merge([a, audit.parse("@@case scan\n")]).launched is None
+    assert audit.case_names()[:3] == ["scan", "compact", "radix_sort"] and len(audit.case_names()) >= 18
+
+
 @pytest.mark.skipif(shutil.which("oclgrind") is None, reason="Oclgrind is not installed")
 def test_one_case_under_oclgrind(capsys):
     """The whole path on the smallest case: preload, the Oclgrind platform
@@ -208,3 +258,8 @@ def test_one_case_under_oclgrind(capsys):
     assert audit.main(["--config", "cpu:int64", "--case", "copy"]) == 0
     out = capsys.readouterr().out
     assert "oclgrind audit: passed" in out and "1 kernels launched" in out
+    # two workloads share the cases, one each here: copy's kernel ran in one, and a name
+    # cases.py lacks is an error of the other
+    assert audit.main(["--config", "cpu:int64", "--case", "copy", "--case", "nonesuch", "-j", "2"]) == 1
+    out = capsys.readouterr().out
+    assert "case nonesuch raised" in out and "1 kernels launched" in out

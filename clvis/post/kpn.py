@@ -32,7 +32,8 @@ def _kernels(kernels: Any) -> tuple[tuple[int, int], ...]:
     try:
         ks = tuple((int(k), int(s)) for k, s in kernels)
         ok = bool(ks) and all(
-            k == kk and s == ss for (k, s), (kk, ss) in zip(ks, kernels, strict=True)  # no 2.5 -> 2
+            k == kk and s == ss
+            for (k, s), (kk, ss) in zip(ks, kernels, strict=True)  # no 2.5 -> 2
         )
     except (TypeError, ValueError):
         ok, ks = False, ()
@@ -105,9 +106,13 @@ class KPNHead:
         if hp == 0 or wp == 0:
             raise DataError(f"planes: empty ({hp} x {wp} pixels)")
         if hp % self.stride or wp % self.stride:
-            raise ValueError(f"planes: {hp} x {wp} is not a multiple of the head's largest scale {self.stride}")
+            raise ValueError(
+                f"planes: {hp} x {wp} is not a multiple of the head's largest scale {self.stride}"
+            )
         if tuple(logits.shape) != (1, self.channels, hp, wp):
-            raise ValueError(f"logits: expected shape {(1, self.channels, hp, wp)}, got {tuple(logits.shape)}")
+            raise ValueError(
+                f"logits: expected shape {(1, self.channels, hp, wp)}, got {tuple(logits.shape)}"
+            )
         if self.depth_select:
             if nearness is None:
                 raise ValueError("nearness: the head selects by depth and needs the nearness plane")

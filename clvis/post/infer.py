@@ -37,8 +37,10 @@ and clvis.post.kpn's kernels apply the kernel-prediction head where they
 lie (the RGB output of the full graph within float rounding, without the
 head's ~300 full-size graph operations); C_out above is then the logits'
 and the nearness plane's channels. A card without one (a full graph, as
-NARVis cards were before issue 28) loads and runs as it was. ``stats`` holds the last call's seconds per stage (pack,
-inference, unpack).
+NARVis cards were before issue 28) loads and runs as it was.
+
+``stats`` holds the last call's seconds per stage (pack, inference, with a
+head its kernels' "head", unpack).
 
 ``net(image, guard=True)`` (the default where the spec says so: LiDAR)
 checks the network against its classical fills on this frame
@@ -305,7 +307,8 @@ class PostNetwork:
             self._buffers.clear()
             self._graph_out.clear()
             if self.head is None:
-                self._buffers[key] = self._host_visible(hp, wp, self.channels_in, self.channels_out)
+                t = self._host_visible(hp, wp, self.channels_in, self.channels_out)
+                self._buffers[key] = t[0], t[1]
             else:
                 channels = [self.head.channels] + [1] * self.head.depth_select
                 (planes, *graph) = self._host_visible(hp, wp, self.channels_in, *channels)

@@ -39,7 +39,8 @@ def _kernels(kernels: Any) -> tuple[tuple[int, int], ...]:
         ok, ks = False, ()
     if not ok or any(not 1 <= k <= MAX_K or k % 2 == 0 or not 1 <= s <= MAX_S or s & (s - 1) for k, s in ks):
         raise ValueError(
-            f"kernels: expected (k, s) pairs, k odd in 1..{MAX_K}, s a power of two <= {MAX_S}, got {kernels!r}"
+            f"kernels: expected (k, s) pairs, k odd in 1..{MAX_K}, "
+            f"s a power of two <= {MAX_S}, got {kernels!r}"
         )
     return ks
 

@@ -905,21 +905,23 @@ def _session(path: Path):
 def _image(s: Any, x: np.ndarray, head: dict | None) -> np.ndarray:
     """(1, C, H, W): the graph's image of `x` (1, C_in, H, W); where it stops
     at a kernel-prediction head's logits (`head`: the card's entry), the
-    head applied by its NumPy reference (clvis.reference.post.kpn)."""
+    head applied as inference applies it (clvis.post.kpn's kernels, on the
+    default OpenCL device)."""
     outs = s.run(None, {s.get_inputs()[0].name: x})
     if head is None:
         return outs[0]
-    from ..reference.post.kpn import kpn_head
+    from ..post.kpn import kpn_head
 
-    kernels = tuple((int(k), int(v)) for k, v in head["kernels"])
-    return kpn_head(
-        x,
-        outs[0],
-        outs[1] if head["depth_select"] else None,
-        kernels,
-        depth_select=head["depth_select"],
-        depth_scale=head["depth_scale"],
-        logit_bound=head["logit_bound"],
+    return np.asarray(
+        kpn_head(
+            x,
+            outs[0],
+            outs[1] if head["depth_select"] else None,
+            kernels=head["kernels"],
+            depth_select=head["depth_select"],
+            depth_scale=head["depth_scale"],
+            logit_bound=head["logit_bound"],
+        )
     )
 
 

@@ -67,9 +67,9 @@ def _session(path):
 
 def _run(path, x, net=None):
     """The graph's image of x; NarvisKPN's graph stops at its head's logits
-    (issue 28), so its head is applied by the head's NumPy reference
-    (clvis.reference.post.kpn, which tests/post/test_kpn.py holds the
-    OpenCL kernel and the torch module to), as clvis train's export checks."""
+    (issue 28), so its head is applied as clvis train's export check
+    applies it: clvis.post.kpn's kernels (tests/post/test_kpn.py holds them
+    to their NumPy reference and the torch module)."""
     return train._run(path, x, net.head() if hasattr(net, "trunk") else None)
 
 

@@ -26,6 +26,8 @@ _SRC = "post/kpn.cl"
 _WG = 64
 #: the largest k and s a card may ask for (the network's stride bounds s)
 MAX_K, MAX_S = 15, 1024
+#: the most scales kpn_apply unrolls
+MAX_SCALES = 8
 
 
 def _kernels(kernels: Any) -> tuple[tuple[int, int], ...]:
@@ -37,9 +39,9 @@ def _kernels(kernels: Any) -> tuple[tuple[int, int], ...]:
         )
     except (TypeError, ValueError):
         ok, ks = False, ()
-    if not ok or any(not 1 <= k <= MAX_K or k % 2 == 0 or not 1 <= s <= MAX_S or s & (s - 1) for k, s in ks):
+    if not ok or len(ks) > MAX_SCALES or any(not 1 <= k <= MAX_K or k % 2 == 0 or not 1 <= s <= MAX_S or s & (s - 1) for k, s in ks):
         raise ValueError(
-            f"kernels: expected (k, s) pairs, k odd in 1..{MAX_K}, "
+            f"kernels: expected 1..{MAX_SCALES} (k, s) pairs, k odd in 1..{MAX_K}, "
             f"s a power of two <= {MAX_S}, got {kernels!r}"
         )
     return ks
@@ -72,16 +74,18 @@ class KPNHead:
         #: the logits' channels: the candidates, the background, (gamma)
         self.channels = self.candidates + 1 + int(depth_select)
         self.stride = max(s for _, s in self.kernels)
-        self._ks: dict[int, cla.Array] = {}  # the (k, s) table on each context
+        # kpn_apply's compile-time scales (kernels_cl/post/kpn.cl's ABI)
+        self._defines: dict[str, object] = {
+            "DEPTH_SELECT": int(depth_select),
+            "WG": _WG,
+            "KPN_SCALES": len(self.kernels),
+            "KPN_CANDIDATES": self.candidates,
+        }
+        for i, (k, s) in enumerate(self.kernels):
+            self._defines[f"KPN_K{i}"], self._defines[f"KPN_S{i}"] = k, s
 
     def __repr__(self) -> str:
         return f"KPNHead({[list(k) for k in self.kernels]}, depth_select={self.depth_select})"
-
-    def _table(self, queue: cl.CommandQueue) -> cla.Array:
-        key = queue.context.int_ptr
-        if key not in self._ks:
-            self._ks[key] = cla.to_device(queue, np.array(self.kernels, np.int32).ravel())
-        return self._ks[key]
 
     def __call__(
         self,
@@ -136,14 +140,13 @@ class KPNHead:
         blocks = sum((hp // s) * (wp // s) for _, s in self.kernels if s > 1)
         blk = runtime.empty(queue, (max(blocks, 1), 4), np.float32, "kpn head blocks")
         msk = runtime.empty(queue, (max(blocks, 1),), np.float32, "kpn head block masks")
-        defines = {"DEPTH_SELECT": int(self.depth_select), "WG": _WG}
         u32 = np.uint32
         base = 0
         for _, s in self.kernels:
             if s == 1:
                 continue
             nb = (hp // s) * (wp // s)
-            k = runtime.get_kernel(queue, _SRC, "kpn_blocks", defines, runtime.EXACT_FP)
+            k = runtime.get_kernel(queue, _SRC, "kpn_blocks", self._defines, runtime.EXACT_FP)
             runtime.launch(
                 queue,
                 k,
@@ -158,7 +161,7 @@ class KPNHead:
                 buf(msk),
             )
             base += nb
-        k = runtime.get_kernel(queue, _SRC, "kpn_apply", defines, runtime.EXACT_FP)
+        k = runtime.get_kernel(queue, _SRC, "kpn_apply", self._defines, runtime.EXACT_FP)
         runtime.launch(
             queue,
             k,
@@ -168,8 +171,6 @@ class KPNHead:
             buf(d_logits),
             buf(blk),
             buf(msk),
-            buf(self._table(queue)),
-            u32(len(self.kernels)),
             u32(wp),
             u32(hp),
             np.float32(self.depth_scale),

@@ -39,7 +39,11 @@ def _kernels(kernels: Any) -> tuple[tuple[int, int], ...]:
         )
     except (TypeError, ValueError):
         ok, ks = False, ()
-    if not ok or len(ks) > MAX_SCALES or any(not 1 <= k <= MAX_K or k % 2 == 0 or not 1 <= s <= MAX_S or s & (s - 1) for k, s in ks):
+    if (
+        not ok
+        or len(ks) > MAX_SCALES
+        or any(not 1 <= k <= MAX_K or k % 2 == 0 or not 1 <= s <= MAX_S or s & (s - 1) for k, s in ks)
+    ):
         raise ValueError(
             f"kernels: expected 1..{MAX_SCALES} (k, s) pairs, k odd in 1..{MAX_K}, "
             f"s a power of two <= {MAX_S}, got {kernels!r}"
@@ -137,40 +141,30 @@ class KPNHead:
         d_planes = to_device(queue, "planes", planes)
         d_logits = to_device(queue, "logits", logits)
         d_near = to_device(queue, "nearness", nearness) if self.depth_select else d_logits
-        blocks = sum((hp // s) * (wp // s) for _, s in self.kernels if s > 1)
-        blk = runtime.empty(queue, (max(blocks, 1), 4), np.float32, "kpn head blocks")
-        msk = runtime.empty(queue, (max(blocks, 1),), np.float32, "kpn head block masks")
+        up = runtime.empty(queue, (len(self.kernels) * 5, hp, wp), np.float32, "kpn head up-sampled planes")
         u32 = np.uint32
-        base = 0
-        for _, s in self.kernels:
-            if s == 1:
-                continue
+        blocks = runtime.get_kernel(queue, _SRC, "kpn_blocks", self._defines, runtime.EXACT_FP)
+        for i, (_, s) in enumerate(self.kernels):
             nb = (hp // s) * (wp // s)
-            k = runtime.get_kernel(queue, _SRC, "kpn_blocks", self._defines, runtime.EXACT_FP)
             runtime.launch(
                 queue,
-                k,
+                blocks,
                 *runtime.items(queue, nb, _WG),
                 buf(d_planes),
                 buf(d_near),
                 u32(wp),
                 u32(hp),
                 u32(s),
-                u32(base),
-                buf(blk),
-                buf(msk),
+                u32(i),
+                buf(up),
             )
-            base += nb
         k = runtime.get_kernel(queue, _SRC, "kpn_apply", self._defines, runtime.EXACT_FP)
         runtime.launch(
             queue,
             k,
-            *runtime.items(queue, hp * wp, _WG),
-            buf(d_planes),
-            buf(d_near),
+            *runtime.items(queue, hp * wp // 8, _WG),
+            buf(up),
             buf(d_logits),
-            buf(blk),
-            buf(msk),
             u32(wp),
             u32(hp),
             np.float32(self.depth_scale),

@@ -18,36 +18,35 @@
  *                 argument and needs none of them).
  *   WG            the local size hint (any; default 64). Launch any 1-D
  *                 global size >= the item count; items past it do nothing.
+ * wp must be a multiple of 8 (the networks' strides are 16).
  * Build with -cl-fp32-correctly-rounded-divide-sqrt (block means divide).
  *
  * Tensors are (1, C, hp, wp) float32, channel c of pixel (x, y) at
  * [c*hp*wp + y*wp + x]; hp and wp are multiples of every scale s.
  * Candidate j counts the scales in order, then dy, dx (row-major).
- * A scale with s > 1 reads block planes written by kpn_blocks at `base` =
- * the sum of (hp/s')*(wp/s') over the earlier scales with s' > 1.
  *
  * kernel kpn_blocks(global const float *planes, global const float *nearness,
- *                   uint wp, uint hp, uint s, uint base,
- *                   global float4 *blk, global float *msk)
- *     One item per block of scale s (s > 1): (hp/s)*(wp/s) items, block
- *     (bx, by) = item % (wp/s), item / (wp/s). With cov = planes channel 3,
- *     p = (R*cov, G*cov, B*cov, nearness) (nearness read only with
- *     DEPTH_SELECT, else 0), n = mean cov over the block:
- *     blk[base + item] = mean(p) / max(n, 1e-12); msk[base + item] =
- *     min(4*s*s*n, 1).
+ *                   uint wp, uint hp, uint s, uint scale, global float *up)
+ *     One item per block of scale s: (hp/s)*(wp/s) items, block (bx, by) =
+ *     item % (wp/s), item / (wp/s). With cov = planes channel 3, p = (R*cov,
+ *     G*cov, B*cov, nearness) (nearness read only with DEPTH_SELECT, else 0),
+ *     n = mean cov over the block: value = mean(p) / max(n, 1e-12) and mask
+ *     = min(4*s*s*n, 1) for s > 1, p and cov themselves for s = 1, written
+ *     to every pixel of the block in the up-sampled planes of this scale:
+ *     up[(scale*5 + c)*hp*wp + pixel], c = R, G, B, nearness, mask.
  *
- * kernel kpn_apply(global const float *planes, global const float *nearness,
- *                  global const float *logits, global const float4 *blk,
- *                  global const float *msk, uint wp, uint hp, float depth_scale,
- *                  float logit_bound, global float *out)
- *     One item per pixel (hp*wp). logits: (1, K + 1 + DEPTH_SELECT, hp, wp);
- *     nearness: (1, 1, hp, wp) (not read without DEPTH_SELECT: any buffer);
- *     out: (1, 3, hp, wp), the clamped weighted sum of the candidates'
- *     colours. Scale s = 1 reads planes (and nearness) itself.
+ * kernel kpn_apply(global const float *up, global const float *logits,
+ *                  uint wp, uint hp, float depth_scale, float logit_bound,
+ *                  global float *out)
+ *     One item per 8 pixels of a row (hp*wp/8 items; wp a multiple of 8):
+ *     lanes are pixels, so every candidate is a vload8 of the up-sampled
+ *     planes (row y + (dy - k/2)*s, columns x + (dx - k/2)*s; beyond the
+ *     image: weight 0). logits: (1, K + 1 + DEPTH_SELECT, hp, wp); out: (1,
+ *     3, hp, wp), the clamped weighted sum of the candidates' colours.
  *
- * Memory traffic: kpn_blocks reads each pixel's 4 (5) values once per
- * scale; kpn_apply reads K + 2 logits, 9 x (4 + 1) values a scale (mostly
- * cached) and writes 3 floats a pixel.
+ * Memory traffic: kpn_blocks reads each pixel's 4 (5) values and writes 5
+ * per scale; kpn_apply reads K + 2 logits, k*k x 5 up-sampled values a scale
+ * (rows shared with the neighbours, cached) and writes 3 floats a pixel.
  */
 #pragma OPENCL FP_CONTRACT OFF
 
@@ -60,11 +59,9 @@
 #define KPN_S0 1
 #define KPN_CANDIDATES 1
 #endif
-/* the candidates rounded up to a multiple of 8 (the softmax's vector width) */
-#define KPN_PADDED ((KPN_CANDIDATES + 7) / 8 * 8)
 
-kernel void kpn_blocks(global const float *planes, global const float *nearness, uint wp, uint hp,
-                       uint s, uint base, global float4 *blk, global float *msk)
+kernel void kpn_blocks(global const float *planes, global const float *nearness, uint wp, uint hp, uint s,
+                       uint scale, global float *up)
 {
     const uint wb = wp / s, hb = hp / s;
     const size_t item = get_global_id(0);
@@ -87,163 +84,138 @@ kernel void kpn_blocks(global const float *planes, global const float *nearness,
             n += cov;
         }
     }
-    const float area = (float)(s * s);
-    const float mean = n / area;
-    blk[base + item] = (sum / area) / fmax(mean, 1e-12f);
-    msk[base + item] = fmin(mean * (4.0f * area), 1.0f);
-}
-
-/* candidate (oy, ox) of scale s from pixel (x, y): its value and mask, 0
- * (and *inside false) beyond the block grid; no branch on the data (the
- * index is clamped and the values zeroed), so work-items vectorize */
-static inline float4 kpn_candidate(global const float *planes, global const float *nearness,
-                                   global const float4 *blk, global const float *msk, const int wp,
-                                   const int hp, const int s, const int base, const int x, const int y,
-                                   const int oy, const int ox, float *m, bool *inside)
-{
-    const int wb = wp / s, hb = hp / s;
-    const int bx = x / s + ox, by = y / s + oy;
-    *inside = bx >= 0 && by >= 0 && bx < wb && by < hb;
-    const int cx = clamp(bx, 0, wb - 1), cy = clamp(by, 0, hb - 1);
     float4 v;
-    if (s == 1) { /* s is a compile-time constant at every call: no branch left */
-        const size_t npix = (size_t)wp * hp, i = (size_t)cy * wp + cx;
-        const float cov = planes[3 * npix + i];
-        v = (float4)(planes[i] * cov, planes[npix + i] * cov, planes[2 * npix + i] * cov, 0.0f);
-#if DEPTH_SELECT
-        v.w = nearness[i];
-#endif
-        *m = cov;
+    float m;
+    if (s == 1) { /* the pixel itself, its coverage the mask */
+        v = sum;
+        m = n;
     } else {
-        const size_t i = (size_t)base + (size_t)cy * wb + cx;
-        v = blk[i];
-        *m = msk[i];
+        const float area = (float)(s * s);
+        const float mean = n / area;
+        v = (sum / area) / fmax(mean, 1e-12f);
+        m = fmin(mean * (4.0f * area), 1.0f);
     }
-    if (!*inside) {
-        v = (float4)(0.0f);
-        *m = 0.0f;
-    }
-    return v;
-}
-
-/* one scale's candidates' colours, nearness and masks into the pixel's
- * arrays at *j (counted on) */
-static inline void kpn_scale(global const float *planes, global const float *nearness, global const float4 *blk,
-                             global const float *msk, const int wp, const int hp, const int k, const int s,
-                             const int base, const int x, const int y, int *j, float *cr, float *cg, float *cb,
-                             float *cn, float *cm)
-{
-    for (int dy = 0; dy < k; ++dy)
-        for (int dx = 0; dx < k; ++dx, ++*j) {
-            bool inside;
-            const float4 v = kpn_candidate(planes, nearness, blk, msk, wp, hp, s, base, x, y, dy - k / 2,
-                                           dx - k / 2, cm + *j, &inside);
-            cr[*j] = v.x;
-            cg[*j] = v.y;
-            cb[*j] = v.z;
-            cn[*j] = inside ? v.w : -INFINITY; /* out of the nearest's max; mask 0 */
+    global float *u = up + (size_t)scale * 5 * npix;
+    for (uint yy = 0; yy < s; ++yy) {
+        const size_t row = (size_t)(by * s + yy) * wp + (size_t)bx * s;
+        for (uint xx = 0; xx < s; ++xx) {
+            const size_t i = row + xx;
+            u[i] = v.x;
+            u[npix + i] = v.y;
+            u[2 * npix + i] = v.z;
+            u[3 * npix + i] = v.w;
+            u[4 * npix + i] = m;
         }
+    }
 }
 
-/* the scales as compile-time constants: KPN_K<i>, KPN_S<i> for i < KPN_SCALES */
-#define KPN_BASE_AFTER(b, i) ((b) + (KPN_S##i > 1 ? (hp / KPN_S##i) * (wp / KPN_S##i) : 0))
+/* plane c of the up-sampled planes u at row `row`, the 8 columns x0 + ox ..
+ * x0 + ox + 7; columns beyond the image read `outside` */
+static inline float8 kpn_row8(global const float *u, const int wp, const size_t row, const int x0, const int ox,
+                              const float outside)
+{
+    const int c0 = x0 + ox;
+    if (c0 >= 0 && c0 + 7 < wp)
+        return vload8(0, u + row + c0);
+    float lanes[8];
+    for (int l = 0; l < 8; ++l) {
+        const int c = c0 + l;
+        lanes[l] = c >= 0 && c < wp ? u[row + c] : outside;
+    }
+    return vload8(0, lanes);
+}
 
-kernel void kpn_apply(global const float *planes, global const float *nearness, global const float *logits,
-                      global const float4 *blk, global const float *msk, uint wpu, uint hpu, float depth_scale,
+/* one scale's candidates: pass 0 maxes their nearness into *ref, pass 1
+ * adds them to the softmax's sums; *j counts the logits */
+static inline void kpn_scale(global const float *up, global const float *logits, const int wp, const int hp,
+                             const int k, const int s, const int scale, const int x0, const int y, const int pass,
+                             const float8 ref, const float8 gamma, const float bound, const float inv_bound,
+                             int *j, float8 *near, float8 *total, float8 *r, float8 *g, float8 *b)
+{
+    const size_t npix = (size_t)wp * hp;
+    global const float *u = up + (size_t)scale * 5 * npix;
+    for (int dy = 0; dy < k; ++dy) {
+        const int yy = y + (dy - k / 2) * s;
+        const bool row_in = yy >= 0 && yy < hp;
+        const size_t row = (size_t)(row_in ? yy : 0) * wp;
+        for (int dx = 0; dx < k; ++dx, ++*j) {
+            if (!row_in)
+                continue; /* the whole row of candidates beyond the grid: weight 0 */
+            const int ox = (dx - k / 2) * s;
+            if (pass == 0) {
+#if DEPTH_SELECT
+                *near = fmax(*near, kpn_row8(u + 3 * npix, wp, row, x0, ox, -INFINITY));
+#endif
+                continue;
+            }
+            const float8 m = kpn_row8(u + 4 * npix, wp, row, x0, ox, 0.0f);
+            float8 l = bound * tanh(vload8(0, logits + (size_t)*j * npix + row - (size_t)(yy - y) * wp + x0) *
+                                    inv_bound);
+#if DEPTH_SELECT
+            l += gamma * fmax(kpn_row8(u + 3 * npix, wp, row, x0, ox, 0.0f) - ref, -1.0f);
+#endif
+            const float8 e = exp(l) * m; /* masked or beyond the grid: exactly 0 */
+            *total += e;
+            *r += e * kpn_row8(u, wp, row, x0, ox, 0.0f);
+            *g += e * kpn_row8(u + npix, wp, row, x0, ox, 0.0f);
+            *b += e * kpn_row8(u + 2 * npix, wp, row, x0, ox, 0.0f);
+        }
+    }
+}
+
+#define KPN_ALL_SCALES(PASS)                                                                                      \
+    do {                                                                                                          \
+        int j = 0;                                                                                                \
+        KPN_ONE(0, PASS);                                                                                         \
+        KPN_MORE(PASS)                                                                                            \
+    } while (0)
+#define KPN_ONE(i, PASS)                                                                                          \
+    kpn_scale(up, logits, wp, hp, KPN_K##i, KPN_S##i, i, x0, y, PASS, ref, gamma, bound, inv_bound, &j, &near,     \
+              &total, &r, &g, &b)
+#if KPN_SCALES == 1
+#define KPN_MORE(PASS)
+#elif KPN_SCALES == 2
+#define KPN_MORE(PASS) KPN_ONE(1, PASS);
+#elif KPN_SCALES == 3
+#define KPN_MORE(PASS) KPN_ONE(1, PASS); KPN_ONE(2, PASS);
+#elif KPN_SCALES == 4
+#define KPN_MORE(PASS) KPN_ONE(1, PASS); KPN_ONE(2, PASS); KPN_ONE(3, PASS);
+#elif KPN_SCALES == 5
+#define KPN_MORE(PASS) KPN_ONE(1, PASS); KPN_ONE(2, PASS); KPN_ONE(3, PASS); KPN_ONE(4, PASS);
+#elif KPN_SCALES == 6
+#define KPN_MORE(PASS) KPN_ONE(1, PASS); KPN_ONE(2, PASS); KPN_ONE(3, PASS); KPN_ONE(4, PASS); KPN_ONE(5, PASS);
+#elif KPN_SCALES == 7
+#define KPN_MORE(PASS)                                                                                            \
+    KPN_ONE(1, PASS); KPN_ONE(2, PASS); KPN_ONE(3, PASS); KPN_ONE(4, PASS); KPN_ONE(5, PASS); KPN_ONE(6, PASS);
+#else
+#define KPN_MORE(PASS)                                                                                            \
+    KPN_ONE(1, PASS); KPN_ONE(2, PASS); KPN_ONE(3, PASS); KPN_ONE(4, PASS); KPN_ONE(5, PASS); KPN_ONE(6, PASS);   \
+    KPN_ONE(7, PASS);
+#endif
+
+kernel void kpn_apply(global const float *up, global const float *logits, uint wpu, uint hpu, float depth_scale,
                       float bound, global float *out)
 {
     const int wp = (int)wpu, hp = (int)hpu;
     const size_t npix = (size_t)wp * hp;
-    const size_t idx = get_global_id(0);
-    if (idx >= npix)
+    const size_t item = get_global_id(0);
+    if (item >= npix / 8)
         return;
-    const int x = (int)(idx % wpu), y = (int)(idx / wpu);
+    const int x0 = (int)(item % (wpu / 8)) * 8, y = (int)(item / (wpu / 8));
+    const size_t idx = (size_t)y * wp + x0;
     const float inv_bound = 1.0f / bound;
-    /* block-plane bases: the earlier s > 1 scales' block counts */
-    const int b0 = 0;
-    const int b1 = KPN_BASE_AFTER(b0, 0);
-#if KPN_SCALES > 1
-    const int b2 = KPN_BASE_AFTER(b1, 1);
-#endif
-#if KPN_SCALES > 2
-    const int b3 = KPN_BASE_AFTER(b2, 2);
-#endif
-#if KPN_SCALES > 3
-    const int b4 = KPN_BASE_AFTER(b3, 3);
-#endif
-#if KPN_SCALES > 4
-    const int b5 = KPN_BASE_AFTER(b4, 4);
-#endif
-#if KPN_SCALES > 5
-    const int b6 = KPN_BASE_AFTER(b5, 5);
-#endif
-#if KPN_SCALES > 6
-    const int b7 = KPN_BASE_AFTER(b6, 6);
-#endif
-    (void)b1;
-
-    /* the candidates gathered, then the softmax 8 at a time (vector tanh
-     * and exp); the tail past K has mask 0 */
-    float cr[KPN_PADDED], cg[KPN_PADDED], cb[KPN_PADDED], cn[KPN_PADDED], cm[KPN_PADDED], lg[KPN_PADDED];
-    int j = 0;
-#define KPN_SCALE(i)                                                                                              \
-    kpn_scale(planes, nearness, blk, msk, wp, hp, KPN_K##i, KPN_S##i, b##i, x, y, &j, cr, cg, cb, cn, cm)
-    KPN_SCALE(0);
-#if KPN_SCALES > 1
-    KPN_SCALE(1);
-#endif
-#if KPN_SCALES > 2
-    KPN_SCALE(2);
-#endif
-#if KPN_SCALES > 3
-    KPN_SCALE(3);
-#endif
-#if KPN_SCALES > 4
-    KPN_SCALE(4);
-#endif
-#if KPN_SCALES > 5
-    KPN_SCALE(5);
-#endif
-#if KPN_SCALES > 6
-    KPN_SCALE(6);
-#endif
-#if KPN_SCALES > 7
-    KPN_SCALE(7);
-#endif
-    for (int i = 0; i < KPN_PADDED; ++i) {
-        const bool real = i < KPN_CANDIDATES;
-        lg[i] = real ? logits[(size_t)i * npix + idx] : 0.0f;
-        if (!real) {
-            cr[i] = cg[i] = cb[i] = cm[i] = 0.0f;
-            cn[i] = -INFINITY;
-        }
-    }
-    float ref = 0.0f, gamma = 0.0f;
+    float8 near = (float8)(-INFINITY), total = (float8)(0.0f), r = (float8)(0.0f), g = (float8)(0.0f),
+           b = (float8)(0.0f);
+    float8 ref = (float8)(0.0f), gamma = (float8)(0.0f);
 #if DEPTH_SELECT
-    ref = -INFINITY; /* the nearest in-grid candidate's nearness (-INFINITY beyond the grid) */
-    for (int i = 0; i < KPN_CANDIDATES; ++i)
-        ref = fmax(ref, cn[i]);
-    const float g = logits[(size_t)(KPN_CANDIDATES + 1) * npix + idx];
-    gamma = (g > 20.0f ? g : log1p(exp(g))) * depth_scale;
+    KPN_ALL_SCALES(0);
+    ref = near; /* the nearest in-grid candidate's nearness */
+    const float8 gl = vload8(0, logits + (size_t)(KPN_CANDIDATES + 1) * npix + idx);
+    gamma = select(log1p(exp(gl)), gl, gl > 20.0f) * depth_scale;
 #endif
-    float8 tot8 = (float8)(0.0f), r8 = (float8)(0.0f), g8 = (float8)(0.0f), b8 = (float8)(0.0f);
-    for (int i = 0; i < KPN_PADDED; i += 8) {
-        float8 l = bound * tanh(vload8(0, lg + i) * inv_bound);
-#if DEPTH_SELECT
-        l += gamma * fmax(vload8(0, cn + i) - ref, -1.0f); /* beyond the grid: masked */
-#endif
-        const float8 e = exp(l) * vload8(0, cm + i); /* masked: exactly 0 */
-        tot8 += e;
-        r8 += e * vload8(0, cr + i);
-        g8 += e * vload8(0, cg + i);
-        b8 += e * vload8(0, cb + i);
-    }
-#define KPN_SUM8(v) ((((v).s0 + (v).s1) + ((v).s2 + (v).s3)) + (((v).s4 + (v).s5) + ((v).s6 + (v).s7)))
-    float total = KPN_SUM8(tot8);
-    const float3 acc = (float3)(KPN_SUM8(r8), KPN_SUM8(g8), KPN_SUM8(b8));
-    total += exp(bound * tanh(logits[(size_t)KPN_CANDIDATES * npix + idx] * inv_bound)); /* the background */
-    const float3 c = clamp(acc / total, 0.0f, 1.0f);
-    out[idx] = c.x;
-    out[npix + idx] = c.y;
-    out[2 * npix + idx] = c.z;
+    KPN_ALL_SCALES(1);
+    total += exp(bound * tanh(vload8(0, logits + (size_t)KPN_CANDIDATES * npix + idx) * inv_bound));
+    vstore8(clamp(r / total, 0.0f, 1.0f), 0, out + idx);
+    vstore8(clamp(g / total, 0.0f, 1.0f), 0, out + npix + idx);
+    vstore8(clamp(b / total, 0.0f, 1.0f), 0, out + 2 * npix + idx);
 }

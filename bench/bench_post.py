@@ -22,6 +22,9 @@ The networks are timed alone (``guard=False``) and, fp32, with their guard
   (render, resolve, pack, inference, unpack) is the fast path whole. The
   wider configurations (NPBG's 16..256, the paper's text's 64..1024) are
   timed with random weights (their speed does not depend on them).
+- narvis head[...]: the kernel-prediction head alone (clvis.post.kpn's
+  kernels, applied since issue 28 to the logits the graph stops at), on the
+  same frame's tensors, against its NumPy reference.
 
 Sizes 512x512, 960x720 and 1280x720 (narvis: 512x512, the paper's;
 CLVIS_BENCH_SCALE shrinks them).
@@ -128,7 +131,7 @@ def _torch_net(name):
     return _cache[("torch", name)]
 
 
-NARVIS_IMPLS = (*IMPLS, "fast", "16-256", "64-1024")
+NARVIS_IMPLS = (*IMPLS, "fast", "16-256", "64-1024", "head", "head-numpy")
 CASES = [(n, s, i) for n in ("infill", "lidar") for s in SIZES for i in (*IMPLS, "fp32+guard")]
 CASES += [("narvis", "512x512", i) for i in NARVIS_IMPLS]
 
@@ -143,6 +146,8 @@ def test_post(benchmark, queue, name, size, impl):
         dense, scan, cam, image = _lidar(queue, w, h)
     else:
         scene, ras, gr, cam, image = _narvis(queue, w, h)
+    if name == "narvis" and impl in ("head", "head-numpy"):
+        return _narvis_head(benchmark, queue, impl, w, h, image)
     if name == "narvis" and impl in ("fast", "16-256", "64-1024"):
         return _narvis_extra(benchmark, queue, impl, op, w, h, scene, ras, cam, image)
     if impl in ("fp32", "fp16", "int8", "fp32+guard"):
@@ -224,6 +229,54 @@ def test_post(benchmark, queue, name, size, impl):
 
             impl_name = "dense render (the slow path)"
         run(benchmark, slow, op=op, impl=impl_name, role="peer", n=w * h, nbytes=w * h * 24, rounds=3)
+
+
+def _narvis_head(benchmark, queue, impl, w, h, image):
+    """The kernel-prediction head alone (issue 28: it left the ONNX graph):
+    clvis.post.kpn's kernels on the frame's device tensors where
+    onnxruntime wrote them, against its NumPy reference on the host."""
+    from clvis.reference.post.kpn import kpn_head
+
+    net = post.load("narvis", queue=queue)
+    net(image)
+    hp, wp = post.padded_shape(h, w, net.stride)
+    planes, output = net._buffers_for(hp, wp)
+    graph = net._graph_outputs(hp, wp)
+    head = net.head
+    assert head is not None
+    op = f"narvis head[{w}x{h}]"
+    if impl == "head":
+        run(
+            benchmark,
+            lambda: head(planes, *graph, out=output, queue=queue),
+            op=op,
+            impl="kpn head (OpenCL: clvis.post.kpn)",
+            role="clvis",
+            n=w * h,
+            nbytes=hp * wp * 4 * (4 + head.channels + 1 + 3),
+            queue=queue,
+            rounds=7,
+        )
+        return
+    x, logits, near = (t.get() for t in (planes, *graph))
+    run(
+        benchmark,
+        lambda: kpn_head(
+            x,
+            logits,
+            near,
+            head.kernels,
+            depth_select=head.depth_select,
+            depth_scale=head.depth_scale,
+            logit_bound=head.logit_bound,
+        ),
+        op=op,
+        impl="kpn head NumPy reference (float64)",
+        role="peer",
+        n=w * h,
+        nbytes=hp * wp * 4 * (4 + head.channels + 1 + 3),
+        rounds=3,
+    )
 
 
 def _narvis_extra(benchmark, queue, impl, op, w, h, scene, ras, cam, image):

@@ -2,12 +2,16 @@
 embedded hurricane, 2,000,000 points, mode narvis, 512x512, the camera 3
 degrees of orbit further each round): wall and process CPU time (every
 thread: PoCL's and onnxruntime's) of the G-buffer render, the pack kernel,
-onnxruntime's inference, the unpack kernel with the picture's read-back, the
-composite over the background and the JPEG encode, the median over the
-rounds; with --ops, onnxruntime's own profile of the inference by operator
-type (its op times, summed over the runs, per run).
+onnxruntime's inference, the kernel-prediction head (clvis.post.kpn's
+kernels, where the card has a "head": the shipped one since issue 28), the
+unpack kernel with the picture's read-back, the composite over the
+background and the JPEG encode, the median over the rounds; with --ops,
+onnxruntime's own profile of the inference by operator type (its op times,
+summed over the runs, per run). --model-dir: a folder with another
+narvis.json and its files (e.g. the full-graph model of before issue 28,
+for an A/B).
 
-    python bench/profile_view.py [--points 2000000] [--size 512x512] [--rounds 10] [--ops]
+    python bench/profile_view.py [--points 2000000] [--size 512x512] [--rounds 10] [--ops] [--model-dir D]
 
 A measuring script, not a test: it calls the scene's and the network's
 stages one by one, as PointScene.frames does in one go, on the default
@@ -34,7 +38,7 @@ from clvis.view import Orbit, PointScene
 from clvis.view.scenes import _premultiplied_over_background
 from clvis.view.server import _QUALITY, encode_jpeg
 
-STAGES = ("render", "pack", "inference", "unpack + read back", "composite", "encode")
+STAGES = ("render", "pack", "inference", "kpn head", "unpack + read back", "composite", "encode")
 
 
 def _clock() -> tuple[float, float]:
@@ -81,6 +85,7 @@ def main() -> None:
     ap.add_argument("--size", default="512x512", help="WxH")
     ap.add_argument("--rounds", type=int, default=10)
     ap.add_argument("--ops", action="store_true", help="onnxruntime's profile by operator type too")
+    ap.add_argument("--model-dir", default=None, help="narvis.json and its files from here")
     a = ap.parse_args()
     w, h = (int(v) for v in a.size.lower().split("x"))
     d = datasets.hurricane(a.points)
@@ -89,7 +94,11 @@ def main() -> None:
     settings = dict(scene.settings, mode="narvis")
     orbit = Orbit(scene.lo, scene.hi, points=scene.fit_points)
     orbit.fit(w / h)
-    net = scene._net("narvis")
+    net = (
+        scene._net("narvis")
+        if a.model_dir is None
+        else infer.load("narvis", directory=a.model_dir, queue=scene.raster.queue)
+    )
     q = net.queue
     rows = []
     for r in range(a.rounds + 2):  # two warm-up rounds: kernels built, buffers made
@@ -103,14 +112,23 @@ def main() -> None:
         planes, output = net._buffers_for(*padded_shape(hh, ww, net.stride))
         net.spec.pack(g, net.planes, net.stride, planes, q)
         t.append(_clock())
+        graph = net._graph_outputs(*planes.shape[2:])
         mapped_in, map_in = infer._map(q, planes, cl.map_flags.READ)
-        mapped_out, map_out = infer._map(q, output, cl.map_flags.WRITE_INVALIDATE_REGION)
         io = net.session.io_binding()
         io.bind_input(net._in, "cpu", 0, np.float32, list(planes.shape), mapped_in.ctypes.data)
-        io.bind_output(net._out, "cpu", 0, np.float32, list(output.shape), mapped_out.ctypes.data)
+        maps = []
+        for name, tensor in zip(net._outs, graph, strict=True):
+            mapped_out, map_out = infer._map(q, tensor, cl.map_flags.WRITE_INVALIDATE_REGION)
+            maps.append(map_out)
+            io.bind_output(name, "cpu", 0, np.float32, list(tensor.shape), mapped_out.ctypes.data)
         net.session.run_with_iobinding(io)
-        map_out.release()
+        for m in maps:
+            m.release()
         map_in.release()
+        t.append(_clock())
+        if net.head is not None:
+            net.head(planes, *graph, out=output, queue=q)
+            q.finish()
         t.append(_clock())
         rgba = unpack_rgba8(output, hh, ww, queue=q)
         picture = rgba.get() if isinstance(rgba, cla.Array) else rgba

@@ -28,8 +28,19 @@ maps copy nothing; on a GPU (onnxruntime has no OpenCL provider) the input's
 map is the frame's one read-back of the tensor and the output's unmap its
 one upload. Per pixel that is C_in x 4 bytes down, C_out x 4 up and the
 picture's 4 down (tests/post/test_transfers.py holds the documented
-pipelines to it). ``stats`` holds the last call's seconds per stage (pack,
-inference, unpack).
+pipelines to it).
+
+A card with a ``head`` entry (the shipped NARVis: ``{"kind": "kpn", ...}``)
+describes a graph that stops at its head's logits: onnxruntime writes the
+logits (K + 2 channels) and the nearness plane into host-visible buffers
+and clvis.post.kpn's kernels apply the kernel-prediction head where they
+lie (the RGB output of the full graph within float rounding, without the
+head's ~300 full-size graph operations); C_out above is then the logits'
+and the nearness plane's channels. A card without one (a full graph, as
+NARVis cards were before issue 28) loads and runs as it was.
+
+``stats`` holds the last call's seconds per stage (pack, inference, with a
+head its kernels' "head", unpack).
 
 ``net(image, guard=True)`` (the default where the spec says so: LiDAR)
 checks the network against its classical fills on this frame
@@ -61,6 +72,7 @@ import os
 import time
 import typing
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyopencl as cl
@@ -71,6 +83,7 @@ from .._arrays import buffer_of, resolve_queue, to_host
 from ..errors import DataError
 from . import guard as guard_mod
 from .inputs import IsoImageLike, PostInput
+from .kpn import KPNHead
 from .names import GBUFFER_PLANES
 from .pack import padded_shape, unpack_rgba8
 from .specs import spec
@@ -132,10 +145,34 @@ def _check_card(path: Path, card: dict) -> None:
         name = entry.get("file")
         if name is not None and (not name or Path(name).name != name):
             raise DataError(f"{path}: model card file {name!r} must be a plain file name beside the card")
+    head = card.get("head")
+    if head is not None:
+        _check_head(path, head)
     arch = card.get("architecture", {})
     planes = arch.get("planes", ()) if isinstance(arch, dict) else None
     if planes is None or not isinstance(planes, (list, tuple)) or not all(isinstance(p, str) for p in planes):
         raise DataError(f"{path}: model card field 'architecture' must be a dict whose 'planes' are names")
+
+
+def _check_head(path: Path, head: Any) -> None:
+    """A card's "head" entry: a kernel-prediction head clvis.post.kpn applies."""
+    if not isinstance(head, dict) or head.get("kind") != "kpn":
+        raise DataError(f"{path}: model card field 'head' must be a dict with kind 'kpn', got {head!r}")
+    ds = head.get("depth_select")
+    if not isinstance(ds, bool):
+        raise DataError(f"{path}: model card field head.depth_select must be true or false, got {ds!r}")
+    want = ["logits", "nearness"] if ds else ["logits"]
+    if head.get("outputs") != want:
+        raise DataError(f"{path}: model card field head.outputs must be {want}, got {head.get('outputs')!r}")
+    try:
+        KPNHead(
+            head.get("kernels"),
+            depth_select=ds,
+            depth_scale=head.get("depth_scale", 20.0),
+            logit_bound=head.get("logit_bound", 6.0),
+        )
+    except (TypeError, ValueError) as e:
+        raise DataError(f"{path}: model card field 'head': {e}") from None
 
 
 def _providers(providers: list[str] | None) -> list[str]:
@@ -206,17 +243,40 @@ class PostNetwork:
         except Exception as e:  # onnxruntime's own errors: a corrupt or foreign graph
             raise DataError(f"{path}: onnxruntime cannot load it ({str(e).splitlines()[0]})") from None
         inputs, outputs = self.session.get_inputs(), self.session.get_outputs()
+        head = card.get("head")
+        #: the kernel-prediction head applied to the graph's logits
+        #: (clvis.post.kpn), None for a graph whose output is the image
+        self.head = (
+            None
+            if head is None
+            else KPNHead(
+                head["kernels"],
+                depth_select=head["depth_select"],
+                depth_scale=head.get("depth_scale", 20.0),
+                logit_bound=head.get("logit_bound", 6.0),
+            )
+        )
+        wanted = (
+            [(None, card.get("channels_out"))]
+            if self.head is None
+            else [("logits", self.head.channels)] + [("nearness", 1)] * self.head.depth_select
+        )
         if (
             len(inputs) != 1
-            or len(outputs) != 1
+            or len(outputs) != len(wanted)
             or len(inputs[0].shape) != 4
-            or len(outputs[0].shape) != 4
             or inputs[0].shape[1] != card.get("channels_in")
-            or outputs[0].shape[1] not in (card.get("channels_out"), None)
-            and not isinstance(outputs[0].shape[1], str)
+            or any(
+                len(o.shape) != 4
+                or name not in (None, o.name)
+                or o.shape[1] not in (c, None)
+                and not isinstance(o.shape[1], str)
+                for o, (name, c) in zip(outputs, wanted, strict=False)
+            )
         ):
             raise DataError(f"{path}: its graph is not the one its card describes")
         self._in, self._out = inputs[0].name, outputs[0].name
+        self._outs = [o.name for o in outputs]
         self.stride = int(card["stride"])
         self.channels_in = int(card["channels_in"])
         self.planes = tuple(card.get("architecture", {}).get("planes") or ())
@@ -231,24 +291,46 @@ class PostNetwork:
         #: (on for LiDAR, off for in-fill; NARVis has none)
         self.guard = bool(self.spec.guard)
         self._buffers: dict[tuple[int, int], tuple[cla.Array, cla.Array]] = {}
+        #: the graph's outputs where a head is applied to them (logits, nearness)
+        self._graph_out: dict[tuple[int, int], list[cla.Array]] = {}
 
     def __repr__(self) -> str:
         return f"PostNetwork({self.name!r}, {self.precision}, {self.session.get_providers()[0]})"
 
     def _buffers_for(self, hp: int, wp: int) -> tuple[cla.Array, cla.Array]:
         """The host-visible (ALLOC_HOST_PTR) input and output tensors of a
-        size, as device arrays (kept for the next frame of the same size)."""
+        size, as device arrays (kept for the next frame of the same size);
+        with a head, the output is the head's (a device array) and the
+        graph's outputs are host-visible (:meth:`_graph_outputs`)."""
         key = (hp, wp)
         if key not in self._buffers:
             self._buffers.clear()
-            flags = cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR
-            tensors = []
-            for c in (self.channels_in, self.channels_out):
-                shape = (1, c, hp, wp)
-                data = cl.Buffer(self.queue.context, flags, int(np.prod(shape)) * 4)
-                tensors.append(cla.Array(self.queue, shape, np.float32, data=data))
-            self._buffers[key] = tensors[0], tensors[1]
+            self._graph_out.clear()
+            if self.head is None:
+                t = self._host_visible(hp, wp, self.channels_in, self.channels_out)
+                self._buffers[key] = t[0], t[1]
+            else:
+                channels = [self.head.channels] + [1] * self.head.depth_select
+                (planes, *graph) = self._host_visible(hp, wp, self.channels_in, *channels)
+                self._graph_out[key] = graph
+                output = cla.empty(self.queue, (1, self.channels_out, hp, wp), np.float32)
+                self._buffers[key] = planes, output
         return self._buffers[key]
+
+    def _host_visible(self, hp: int, wp: int, *channels: int) -> tuple[cla.Array, ...]:
+        flags = cl.mem_flags.READ_WRITE | cl.mem_flags.ALLOC_HOST_PTR
+        tensors = []
+        for c in channels:
+            shape = (1, c, hp, wp)
+            data = cl.Buffer(self.queue.context, flags, int(np.prod(shape)) * 4)
+            tensors.append(cla.Array(self.queue, shape, np.float32, data=data))
+        return tuple(tensors)
+
+    def _graph_outputs(self, hp: int, wp: int) -> list[cla.Array]:
+        """The tensors onnxruntime writes for a size: the output itself, or,
+        with a head, its logits (and nearness)."""
+        planes, output = self._buffers_for(hp, wp)
+        return [output] if self.head is None else self._graph_out[(hp, wp)]
 
     def _size(self, image: PostInput) -> tuple[int, int]:
         """(H, W) of an input the network takes; TypeError/ValueError/DataError else."""
@@ -278,23 +360,31 @@ class PostNetwork:
         # pointers to the two host-visible buffers (IO binding): on a CPU
         # device no copy; on a GPU the input's map is a read-back and the
         # output's unmap the upload the unpack kernel needs
+        graph = self._graph_outputs(*planes.shape[2:])
         mapped_in, map_in = _map(q, planes, cl.map_flags.READ)
+        maps: list[cl.MemoryMap] = []
         try:
-            mapped_out, map_out = _map(q, output, cl.map_flags.WRITE_INVALIDATE_REGION)
-            try:
-                io = self.session.io_binding()
-                io.bind_input(self._in, "cpu", 0, np.float32, list(planes.shape), mapped_in.ctypes.data)
-                io.bind_output(self._out, "cpu", 0, np.float32, list(output.shape), mapped_out.ctypes.data)
-                self.session.run_with_iobinding(io)
-            finally:
-                map_out.release()
+            io = self.session.io_binding()
+            io.bind_input(self._in, "cpu", 0, np.float32, list(planes.shape), mapped_in.ctypes.data)
+            for name, tensor in zip(self._outs, graph, strict=True):
+                mapped_out, map_out = _map(q, tensor, cl.map_flags.WRITE_INVALIDATE_REGION)
+                maps.append(map_out)
+                io.bind_output(name, "cpu", 0, np.float32, list(tensor.shape), mapped_out.ctypes.data)
+            self.session.run_with_iobinding(io)
         except Exception as e:  # a graph that loads but fails when run (onnxruntime's errors)
             raise DataError(
                 f"{self.path}: onnxruntime failed running it ({str(e).splitlines()[0]})"
             ) from None
         finally:
+            for m in maps:
+                m.release()
             map_in.release()
-        self.stats = {"pack": t1 - t0, "inference": time.perf_counter() - t1}
+        t2 = time.perf_counter()
+        self.stats = {"pack": t1 - t0, "inference": t2 - t1}
+        if self.head is not None:  # the head where onnxruntime wrote its logits
+            self.head(planes, *graph, out=output, queue=q)
+            q.finish()
+            self.stats["head"] = time.perf_counter() - t2
         return output, h, w
 
     def infer(self, image: PostInput) -> np.ndarray:

@@ -55,6 +55,7 @@ __all__ = [
     "GBUFFER_PLANES",
     "GatedConv2d",
     "InfillWNet",
+    "KPNTrunk",
     "NarvisKPN",
     "NarvisUNet",
     "PushPull",
@@ -543,12 +544,50 @@ class NarvisKPN(NarvisUNet):
         _, mask, near = self.gather(x, nx)
         return self._weights(nx, mask, near)
 
+    def trunk(self, x: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """What the exported graph outputs (:class:`KPNTrunk`): the head's
+        logits (N, K + 1 (+ 1 with ``depth_select``), H, W), the output of
+        ``self.out``, and with ``depth_select`` the nearness plane (N, 1, H,
+        W) of :meth:`normalise`. The rest of :meth:`forward` (gather,
+        bounded logits, masked softmax, weighted sum) is clvis.post.kpn's
+        OpenCL kernel (clvis.reference.post.kpn its NumPy reference)."""
+        nx = self.normalise(x)
+        o = self.out(self._features(nx))
+        if not self.depth_select:
+            return (o,)
+        d = self.layout.index("depth")
+        return o, nx[:, d : d + 1]
+
+    def head(self) -> dict[str, Any]:
+        """The model card's "head" entry: how clvis.post.kpn applies the head."""
+        return {
+            "kind": "kpn",
+            "kernels": [list(ks) for ks in self.kernels],
+            "depth_select": self.depth_select,
+            "depth_scale": self.depth_scale,
+            "logit_bound": self.LOGIT_BOUND,
+            "outputs": ["logits", "nearness"] if self.depth_select else ["logits"],
+        }
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         nx = self.normalise(x)
         cols, mask, near = self.gather(x, nx)
         w = self._weights(nx, mask, near)[:, : self.candidates]
         out = torch.cat([_channel_sum(w * c, self.candidates) for c in cols], dim=1)
         return torch.clamp(out, 0.0, 1.0)
+
+
+class KPNTrunk(nn.Module):
+    """A :class:`NarvisKPN` up to its head's logits: ``forward`` is the net's
+    :meth:`NarvisKPN.trunk` (what ``clvis train narvis`` exports; the
+    shipped model's graph)."""
+
+    def __init__(self, net: NarvisKPN) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        return self.net.trunk(x)
 
 
 def _channel_sum(x: torch.Tensor, n: int) -> torch.Tensor:

@@ -749,6 +749,7 @@ def train(
             "threads": torch.get_num_threads(),
         },
         "held_out": held_out,
+        **({"head": net.head()} if hasattr(net, "trunk") else {}),
         "files": files,
         "wall_seconds": round(time.perf_counter() - t_start, 1),
         "versions": _versions(),
@@ -821,21 +822,27 @@ def _versions() -> dict[str, str]:
 
 def export_onnx(net: Any, path: Path) -> None:
     """The network's fp32 graph: opset OPSET, input "planes" and output
-    "image" with dynamic height and width."""
+    "image" with dynamic height and width; a kernel-prediction network
+    (NarvisKPN: it has ``trunk``) up to its head's logits instead, outputs
+    "logits" (and "nearness"), its card's ``head`` entry saying how
+    clvis.post.kpn applies the rest (issue 28)."""
     import torch
 
+    from ..post.nets import KPNTrunk
+
     x0 = torch.zeros(1, net.channels_in, 2 * net.stride, 2 * net.stride)
+    module, outputs = (KPNTrunk(net), net.head()["outputs"]) if hasattr(net, "trunk") else (net, ["image"])
     with warnings.catch_warnings(), replacing(path) as tmp:  # atomic
         warnings.simplefilter("ignore")
         torch.onnx.export(
-            net,
+            module,
             (x0,),
             str(tmp),
             dynamo=False,
             opset_version=OPSET,
             input_names=["planes"],
-            output_names=["image"],
-            dynamic_axes={"planes": {2: "height", 3: "width"}, "image": {2: "height", 3: "width"}},
+            output_names=outputs,
+            dynamic_axes={k: {2: "height", 3: "width"} for k in ["planes", *outputs]},
         )
 
 
@@ -854,12 +861,14 @@ def export(
 
     fp32 = out / f"{name}.onnx"
     export_onnx(net, fp32)
-    # fp32: onnxruntime = torch eager on a held-out input
+    head = net.head() if hasattr(net, "trunk") else None
+    # fp32: onnxruntime (+ the head's reference where the graph stops at its
+    # logits) = torch eager on a held-out input
     x = calibration[0][None]
     with torch.no_grad():
         ref = net(torch.from_numpy(x)).numpy()
     files: dict[str, Any] = {
-        "fp32": {"file": fp32.name, "max_abs_vs_torch": float(np.abs(_run(fp32, x) - ref).max())}
+        "fp32": {"file": fp32.name, "max_abs_vs_torch": float(np.abs(_run(fp32, x, head) - ref).max())}
     }
 
     fp16 = out / f"{name}.fp16.onnx"
@@ -874,9 +883,9 @@ def export(
     else:
         files["int8"] = {"file": None, "psnr_change_db": None}
 
-    base = _psnr_of(fp32, val_pairs)
+    base = _psnr_of(fp32, val_pairs, head)
     for k in ("fp16", "int8") if quantizable else ("fp16",):
-        p = _psnr_of(out / files[k]["file"], val_pairs)
+        p = _psnr_of(out / files[k]["file"], val_pairs, head)
         files[k]["psnr_change_db"] = round(p - base, 3)
     if quantizable and files["int8"]["psnr_change_db"] < -INT8_MAX_LOSS_DB:
         log(f"int8 loses {-files['int8']['psnr_change_db']:.2f} dB > {INT8_MAX_LOSS_DB}: not shipped")
@@ -899,17 +908,39 @@ def _session(path: Path):
     return ort.InferenceSession(str(path), so, providers=["CPUExecutionProvider"])
 
 
-def _run(path: Path, x: np.ndarray) -> np.ndarray:
-    s = _session(path)
-    return s.run(None, {s.get_inputs()[0].name: x})[0]
+def _image(s: Any, x: np.ndarray, head: dict | None) -> np.ndarray:
+    """(1, C, H, W): the graph's image of `x` (1, C_in, H, W); where it stops
+    at a kernel-prediction head's logits (`head`: the card's entry), the
+    head applied as inference applies it (clvis.post.kpn's kernels, on the
+    default OpenCL device)."""
+    outs = s.run(None, {s.get_inputs()[0].name: x})
+    if head is None:
+        return outs[0]
+    from ..post.kpn import kpn_head
+
+    return np.asarray(
+        kpn_head(
+            x,
+            outs[0],
+            outs[1] if head["depth_select"] else None,
+            kernels=head["kernels"],
+            depth_select=head["depth_select"],
+            depth_scale=head["depth_scale"],
+            logit_bound=head["logit_bound"],
+        )
+    )
 
 
-def _psnr_of(path: Path, val_pairs: dict) -> float:
+def _run(path: Path, x: np.ndarray, head: dict | None = None) -> np.ndarray:
+    return _image(_session(path), x, head)
+
+
+def _psnr_of(path: Path, val_pairs: dict, head: dict | None = None) -> float:
     s = _session(path)
     vals = []
     for vp in val_pairs.values():
         for x, y in vp:
-            o = s.run(None, {s.get_inputs()[0].name: x[None]})[0][0]
+            o = _image(s, x[None], head)[0]
             vals.append(metrics(_rgb(o[:, : y.shape[1], : y.shape[2]]), _rgb(y))["psnr"])
     return float(np.mean(vals))
 

@@ -455,6 +455,24 @@ def post_pack(q):
         clvis.post.pack_gbuffers(g, ("rgb", "depth", "vel2d", "t"), stride=stride, queue=q)
 
 
+@case
+def post_kpn(q):
+    """The kernel-prediction head (kpn_blocks, kpn_apply): scales with s = 1
+    and s > 1, with and without depth_select, a grid of blocks whose edge
+    candidates fall outside it."""
+    from clvis.post.kpn import kpn_head
+
+    rng = _rng(23)
+    h, w = 16, 24
+    x = rng.random((1, 9, h, w)).astype(np.float32)
+    x[0, 3] = rng.random((h, w)) < 0.4
+    for kernels, depth_select in ((((3, 1), (3, 2), (3, 4), (3, 8)), True), (((5, 1), (3, 2)), False)):
+        k = sum(a * a for a, _ in kernels) + 1 + int(depth_select)
+        logits = rng.normal(0, 3, (1, k, h, w)).astype(np.float32)
+        near = (rng.random((1, 1, h, w)) * x[:, 3:4]).astype(np.float32) if depth_select else None
+        kpn_head(x, logits, near, kernels=kernels, depth_select=depth_select, queue=q)
+
+
 def _served():
     """The cases named on stdin, as they arrive (an unknown name: an error)."""
     by_name = {fn.__name__: fn for fn in CASES}

@@ -49,6 +49,47 @@ def test_edited_card_loads_and_runs_or_raises_a_clvis_error(tmp_path, key, value
         assert str(tmp_path) in str(e) or str(e).startswith("lidar: no fp32 variant"), e
 
 
+# the NARVis card's "head" (issue 28: its graph stops at the logits): an edit
+# that no longer describes the graph, or a head clvis.post.kpn cannot apply,
+# is a DataError naming the card; removing the head is one (the graph's two
+# outputs are not an image)
+HEAD_EDITS = (
+    [("head", v) for v in (None, 5, [], {}, {"kind": "unet"})]
+    + [
+        ("head.kernels", v)
+        for v in (None, "x", [], [[2, 1]], [[3, 3]], [[3, 1]], [[5, 1], [3, 2], [3, 4], [3, 8]])
+    ]
+    + [("head.depth_select", v) for v in (None, 1, False)]
+    + [("head.outputs", v) for v in (None, ["image"], ["nearness", "logits"])]
+    + [("head.depth_scale", v) for v in ("x", None, -1.0, 1e400)]
+    + [("head.logit_bound", v) for v in ("x", 0.0, -6.0)]
+)
+
+
+@pytest.mark.parametrize("key,value", HEAD_EDITS, ids=[f"{k}={v!r}"[:40] for k, v in HEAD_EDITS])
+def test_edited_narvis_head_raises_a_clvis_error(tmp_path, key, value):
+    for f in MODELS.glob("narvis*"):
+        shutil.copy(f, tmp_path / f.name)
+    card = json.loads((tmp_path / "narvis.json").read_text())
+    _edit(card, key, value)
+    (tmp_path / "narvis.json").write_text(json.dumps(card))
+    with pytest.raises(ClvisError) as e:
+        post.load("narvis", directory=tmp_path)
+    assert str(tmp_path) in str(e.value), e.value
+
+
+def test_narvis_head_edits_that_keep_the_graph_load(tmp_path):
+    """depth_scale and logit_bound are the head's own numbers: a card may
+    change them (the graph is the same) and the head follows."""
+    for f in MODELS.glob("narvis*"):
+        shutil.copy(f, tmp_path / f.name)
+    card = json.loads((tmp_path / "narvis.json").read_text())
+    card["head"]["depth_scale"], card["head"]["logit_bound"] = 10.0, 4.0
+    (tmp_path / "narvis.json").write_text(json.dumps(card))
+    net = post.load("narvis", directory=tmp_path)
+    assert net.head is not None and (net.head.depth_scale, net.head.logit_bound) == (10.0, 4.0)
+
+
 def test_graph_that_loads_but_fails_when_run_raises_a_clvis_error(tmp_path):
     # a graph that matches its card (one input of 5 channels, one output of 3) and
     # loads, but whose first run fails (a Reshape to a fixed 3 x 3): onnxruntime's

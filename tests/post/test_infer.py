@@ -163,23 +163,38 @@ _NARVIS_CARD = json.loads((infer.MODELS / "narvis.json").read_text())
 @pytest.mark.parametrize("precision", [p for p, e in _NARVIS_CARD["files"].items() if e["file"]])
 def test_narvis_equals_plain_onnxruntime(precision):
     """G-buffers (numpy and host=False device planes) through the pack
-    kernel, IO binding and unpack = the reference pack run by onnxruntime
-    without IO binding, then the reference unpack."""
+    kernel, IO binding, the kernel-prediction head's kernels (the card's
+    "head") and unpack = the reference pack run by onnxruntime without IO
+    binding, the head's NumPy reference (clvis.reference.post.kpn), then
+    the reference unpack."""
     import onnxruntime as ort
 
     from clvis.reference.post import pack as ref
+    from clvis.reference.post.kpn import kpn_head
 
     net = post.load("narvis", precision)
+    head = net.card["head"]
+    assert net.head is not None and head["kind"] == "kpn"
     sc, cam, g = _narvis_view()
     x = ref.pack_gbuffers(g, net.planes, stride=net.stride)
     s = ort.InferenceSession(str(net.path), providers=["CPUExecutionProvider"])
-    want_raw = s.run(None, {s.get_inputs()[0].name: x})[0]
+    assert [o.name for o in s.get_outputs()] == head["outputs"]
+    logits, nearness = s.run(None, {s.get_inputs()[0].name: x})
+    want_raw = kpn_head(
+        x,
+        logits,
+        nearness,
+        tuple(map(tuple, head["kernels"])),
+        depth_select=head["depth_select"],
+        depth_scale=head["depth_scale"],
+        logit_bound=head["logit_bound"],
+    )
     np.testing.assert_allclose(net.infer(g), want_raw, atol=1e-5, rtol=0)
     want = ref.unpack_rgba8(net.infer(g), 64, 96)
     np.testing.assert_array_equal(net(g), want)
     dev = sc.gbuffers(sc.rasterizer(), cam, 96, 64, net.planes, host=False)
     np.testing.assert_array_equal(net(dev), want)
-    assert set(net.stats) == {"pack", "inference", "unpack"}
+    assert set(net.stats) == {"pack", "inference", "head", "unpack"}
 
 
 @pytest.fixture(scope="module")

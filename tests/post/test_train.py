@@ -46,6 +46,12 @@ def test_train_smoke_through_the_cli(tmp_path, name, capsys):
     assert train.sha256(tmp_path / f"{name}.onnx") == card["files"]["fp32"]["sha256"]
     net = post.load(name, directory=tmp_path)  # the folder clvis train wrote loads as shipped ones do
     assert net.card["seed"] == 0
+    # NARVis exports the split form the shipped card has: the graph to the
+    # head's logits, the head applied by clvis.post.kpn (issue 28)
+    assert (net.head is not None) == (name == "narvis") == ("head" in card)
+    if name == "narvis":
+        shipped = json.loads((post.MODELS / "narvis.json").read_text())["head"]
+        assert card["head"].keys() == shipped.keys() and card["head"]["kind"] == "kpn"
 
 
 def test_narvis_frames_are_rendered_once_per_key(tmp_path):

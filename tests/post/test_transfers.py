@@ -20,6 +20,15 @@ to the network's stride):
   buffer);
 - down, 4 bytes per pixel: the RGBA8 picture the call returns.
 
+A network whose card has a ``head`` (NARVis since issue 28: the graph stops
+at its kernel-prediction head's logits, clvis.post.kpn's kernels apply the
+head) crosses up its graph's outputs instead of the image: the logits (K + 2
+channels: 38 for the shipped card) and the nearness plane, (K + 3) x 4
+bytes per padded pixel, each the unmap of its host-visible buffer. That is
+the floor of a head applied on the device: onnxruntime writes the logits on
+the host. (On a CPU device, what the suite measures the frame time on, the
+maps copy nothing.)
+
 Nothing else a pixel: the renderers' planes stay on the device, pack reads
 them where they are. What remains are counts that size the next launch and
 input checks, a few bytes each (SMALL in all), never a plane. So each
@@ -103,9 +112,13 @@ def test_the_counter_sees_every_transfer(device, transfers):
 
 def _floor(net, h, w):
     hp, wp = post.padded_shape(h, w, net.stride)
+    if net.head is None:
+        outputs = [net.channels_out]
+    else:  # the logits, then the nearness plane (depth_select)
+        outputs = [net.head.channels] + [1] * net.head.depth_select
     return [
         ("down", net.channels_in * 4 * hp * wp),
-        ("up", net.channels_out * 4 * hp * wp),
+        *[("up", c * 4 * hp * wp) for c in outputs],
         ("down", 4 * h * w),
     ]
 
@@ -123,12 +136,22 @@ def _hurricane(queue, w, h):
 W, H = 100, 60
 
 
+def net_head_channels():
+    """(logit channels, nearness planes) of the shipped NARVis card's head."""
+    head = post.load("narvis").head
+    assert head is not None
+    return head.channels, int(head.depth_select)
+
+
 def test_narvis_pipeline_is_at_the_floor(device, transfers):
     """README's NARVis call on the device path: G-buffers with only the
     planes the network reads, never read back. down 40 B/pixel at 512 x 512
-    (9 input channels, the picture), up 12 (3 output channels); the numpy
+    (9 input channels, the picture), up 156 (the graph's 38 logit channels
+    and the nearness plane, which the head's kernels read; 12, the 3 output
+    channels, while the head was in the graph, issue 28); the numpy
     G-buffers the same call used to take cost 80 down and 48 up. The picture
     is the host path's."""
+    assert net_head_channels() == (38, 1)
     q = runtime.queue_for(device)
     ras, cam = _hurricane(q, W, H)
     net = post.load("narvis", queue=q)

@@ -18,6 +18,7 @@ organized cloud) are kept; the renderers skip them.
 from __future__ import annotations
 
 import io
+import re
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,9 @@ _MAX_HEADER = 1 << 16
 _MAX_LZF_RATIO = 90  # an LZF back-reference of 3 bytes copies at most 264: a header claiming more lies
 _TYPES = {("F", 4): "<f4", ("F", 8): "<f8", ("I", 1): "i1", ("I", 2): "<i2", ("I", 4): "<i4", ("I", 8): "<i8",
           ("U", 1): "u1", ("U", 2): "<u2", ("U", 4): "<u4", ("U", 8): "<u8"}  # fmt: skip
+_LINE = re.compile(
+    r"[\w.+\-]+(?:\s+[\w.+\-]+)*"
+)  # words and numbers: what pypcd4's header parser takes whole
 _KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
 
 
@@ -62,7 +66,7 @@ def _header(path: Path) -> tuple[dict, int]:
         if not line or line.startswith("#"):
             continue
         key, *values = line.split()
-        if key not in _KEYS:
+        if key not in _KEYS or not _LINE.fullmatch(line):
             raise DataError(f"{path}: not a PCD file (header line {line[:60]!r})")
         if key in entries:
             raise DataError(f"{path}: malformed PCD header: {key} twice")
@@ -159,6 +163,9 @@ def _read_pcd(path: Path) -> PointCloud:
     except Exception as e:  # pydantic's ValidationError, numpy's ValueError, lzf's, ...: not a readable PCD
         why = " ".join(str(e).split())[:200]
         raise DataError(f"{path}: malformed PCD data: {type(e).__name__}: {why}") from None
+    names = tuple("_" if f.startswith("#$%&~~") else f for f in pc.metadata.fields)  # pypcd4's padding
+    if names != tuple(h["FIELDS"]) or tuple(pc.metadata.count) != tuple(counts):
+        raise DataError(f"{path}: malformed PCD header (pypcd4 reads the fields {names})")
     if data.shape[0] != points:
         raise DataError(f"{path}: {data.shape[0]} rows of data; the header declares {points} points")
     columns = {}

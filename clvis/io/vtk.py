@@ -56,16 +56,20 @@ def _vtk() -> Any:
 
 @contextlib.contextmanager
 def _quiet(core: Any) -> Iterator[list[str]]:
-    """VTK's messages kept off stderr for the duration (VTK's global warning
-    display off, put back as it was after: nothing process-wide stays
-    changed); the readers' own errors reach the list yielded through an
-    ErrorEvent observer (:func:`_observe`)."""
-    before = core.vtkObject.GetGlobalWarningDisplay()
+    """VTK's messages kept off stderr for the duration: VTK's global warning
+    display and its logger's stderr output off, put back as they were after
+    (nothing process-wide stays changed); the readers' own errors reach the
+    list yielded through an ErrorEvent observer (:func:`_observe`)."""
+    shown = core.vtkObject.GetGlobalWarningDisplay()
+    # the logger's cutoff is its stderr verbosity where no callback is added (VTK's Python has none)
+    logged = core.vtkLogger.GetCurrentVerbosityCutoff()
     core.vtkObject.GlobalWarningDisplayOff()
+    core.vtkLogger.SetStderrVerbosity(core.vtkLogger.VERBOSITY_OFF)
     try:
         yield []
     finally:
-        core.vtkObject.SetGlobalWarningDisplay(before)
+        core.vtkLogger.SetStderrVerbosity(logged)
+        core.vtkObject.SetGlobalWarningDisplay(shown)
 
 
 def _observe(core: Any, obj: Any, messages: list[str]) -> None:

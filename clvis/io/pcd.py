@@ -154,7 +154,7 @@ def _read_pcd(path: Path) -> PointCloud:
             for k in colour:
                 sizes[k] = "8"
             raw = raw[:at] + ("SIZE " + " ".join(sizes)).encode() + raw[end:]
-            pc = pypcd4.PointCloud.from_fileobj(io.BufferedReader(io.BytesIO(raw)))  # type: ignore[arg-type]
+            pc = pypcd4.PointCloud.from_fileobj(io.BufferedReader(io.BytesIO(raw)))
         else:
             pc = pypcd4.PointCloud.from_path(path)
         data = np.atleast_1d(pc.pc_data)

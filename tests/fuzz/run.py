@@ -3,8 +3,8 @@
 
 Seeds come from tests/fuzz/seeds.py (made by clvis, laspy, nibabel and
 tinyvdb, plus the third-party files of tests/data); mutants from
-tests/fuzz/mutate.py (``--formats vti,vtk,pcd``: only those seeds). Each case is read in a forked child under an
-address-space limit (4 GiB) and a timeout (harness.run_limited). Per format
+tests/fuzz/mutate.py (``--formats vti,vtk,pcd``: only those seeds). Each case
+is read in a forked child under an address-space limit (4 GiB) and a timeout (harness.run_limited). Per format
 it reports the cases, how they ended, and the largest peak resident set.
 
 A case fails when it crashes (a signal), hangs (the timeout), raises anything

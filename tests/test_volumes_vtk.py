@@ -279,3 +279,22 @@ def test_missing_vtk_names_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "vtkmodules", None)
     with pytest.raises(ImportError, match=r'pip install "clvis\[vtk\]"'):
         read_volume(path)
+
+
+def test_lz4_reads_lzma_is_refused(tmp_path):
+    """VTK's LZ4 compressor reads (its ratio bounds the header's sizes);
+    LZMA, whose ratio does not bound memory, is refused before VTK reads."""
+    vtk = pytest.importorskip("vtk", reason="vtk is in the test extra")
+    z, y, x = np.mgrid[:10, :10, :10]
+    for compressor in ("LZ4", "LZMA"):
+        w = vtk.vtkXMLImageDataWriter()
+        path = tmp_path / f"{compressor}.vti"
+        w.SetFileName(str(path))
+        w.SetInputData(_uniform())
+        getattr(w, f"SetCompressorTypeTo{compressor}")()
+        assert w.Write() == 1
+        if compressor == "LZ4":
+            np.testing.assert_array_equal(read_volume(path).data, x * y * z)
+        else:
+            with pytest.raises(DataError, match="vtkLZMADataCompressor is not read"):
+                read_volume(path)

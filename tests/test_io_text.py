@@ -1,6 +1,8 @@
 """The ASCII (.xyz/.txt/.csv) and PCD point cloud readers: what they read,
 and a clear DataError naming the file for what they cannot."""
 
+import sys
+
 import numpy as np
 import pytest
 
@@ -120,6 +122,49 @@ def test_pcd_ascii(tmp_path):
     assert "h" not in c.attributes  # a 3-count field: skipped
 
 
+def test_pcd_binary_compressed_and_pcl_ascii_rgb(tmp_path):
+    """LZF-compressed data (pypcd4 writes it as PCL does), read back equal;
+    and PCL's ascii rgb: a float field written as its packed uint32, alpha
+    0xFF (above float32's exact integers), unpacked to the exact colour; a
+    COUNT 3 field and '_' padding skipped."""
+    pypcd4 = pytest.importorskip("pypcd4", reason="pypcd4 is in the test extra (the pcd extra)")
+    rng = np.random.default_rng(3)
+    xyz = rng.integers(0, 4, size=(500, 3)).astype(np.float32)  # compressible (pypcd4 writes
+    rgb = rng.integers(0, 4, 500).astype(np.uint32) * 0x405060 | np.uint32(0xFF000000)  # binary else)
+    pc = pypcd4.PointCloud.from_points(
+        [xyz[:, 0], xyz[:, 1], xyz[:, 2], rgb.view(np.float32), xyz[:, 0] * 2],
+        ("x", "y", "z", "rgb", "intensity"),
+        (np.float32,) * 5,
+    )
+    path = tmp_path / "c.pcd"
+    pc.save(path, encoding=pypcd4.Encoding.BINARY_COMPRESSED)
+    assert b"DATA binary_compressed" in path.read_bytes()[:400]
+    c = read_points(path)
+    np.testing.assert_array_equal(c.positions + np.asarray(c.origin, np.float32), xyz)
+    np.testing.assert_array_equal(c.colors[:, 0], (rgb >> 16) & 255)
+    np.testing.assert_array_equal(c.colors[:, 2], rgb & 255)
+    np.testing.assert_allclose(c.attributes["intensity"], xyz[:, 0] * 2)
+    body = f"1 2 3 {0xFF102031} 7 8 9 0\n"  # how pcd_io.cpp writes an opaque rgb
+    path = tmp_path / "pcl.pcd"
+    path.write_bytes(
+        _pcd_header(
+            ["x", "y", "z", "rgb", "h", "_"], ["4"] * 6, ["F"] * 6, 1, "ascii", ["1"] * 4 + ["3", "1"]
+        )
+        + body.encode()
+    )
+    c = read_points(path)
+    np.testing.assert_array_equal(c.colors[0, :3], [0x10, 0x20, 0x31])
+    assert "h" not in c.attributes and "_" not in c.attributes
+
+
+def test_missing_pypcd4_names_the_extra(tmp_path, monkeypatch):
+    path = tmp_path / "a.pcd"
+    path.write_bytes(_pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 1, "ascii") + b"1 2 3\n")
+    monkeypatch.setitem(sys.modules, "pypcd4", None)
+    with pytest.raises(ImportError, match=r'pip install "clvis\[pcd\]"'):
+        read_points(path)
+
+
 @pytest.mark.parametrize(
     "head, body, message",
     [
@@ -128,7 +173,29 @@ def test_pcd_ascii(tmp_path):
         (
             _pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 2, "binary_compressed"),
             b"\0" * 40,
-            "binary_compressed",
+            "unpack to 0 bytes; 2 points of 12 bytes need 24",
+        ),
+        (  # a few bytes declaring 12 GB of points: refused before pypcd4 allocates
+            _pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 10**9, "binary_compressed"),
+            np.array([8, 12 * 10**9 % 2**32], "<u4").tobytes() + b"\0" * 8,
+            "unpack to",
+        ),
+        (
+            _pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 1000, "binary_compressed"),
+            np.array([8, 12000], "<u4").tobytes() + b"\0" * 8,
+            "truncated or malformed compressed PCD data",
+        ),
+        (
+            _pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 1, "binary_compressed"),
+            np.array([4, 12], "<u4").tobytes() + b"\xff" * 4,
+            "malformed PCD data",
+        ),
+        (b"VERSION 0.7\nVERSION 0.7\nDATA ascii\n", b"", "VERSION twice"),
+        (b"VERSION 0.7\nFIELDS x\xff\nDATA ascii\n", b"", "not ASCII"),
+        (
+            _pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 1, "binary").replace(b"WIDTH 1\n", b""),
+            b"\0" * 12,
+            "no WIDTH",
         ),
         (_pcd_header(["x", "y", "z"], ["4"] * 3, ["Q"] * 3, 1, "binary"), b"\0" * 12, "unsupported TYPE"),
         (_pcd_header(["x", "y", "z"], ["4", "4"], ["F"] * 3, 1, "binary"), b"\0" * 12, "differ in length"),
@@ -138,12 +205,18 @@ def test_pcd_ascii(tmp_path):
             b"1 2 3\n",
             "more than the file",
         ),
-        (_pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 2, "ascii"), b"1 2 3\n", "1 rows of 3 values"),
+        (
+            _pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 2, "ascii"),
+            b"1 2 3\n",
+            "1 rows of data; the header declares 2",
+        ),
         (_pcd_header(["x", "y", "z"], ["4"] * 3, ["F"] * 3, 1, "ascii"), b"1 2 x\n", "malformed PCD data"),
         (_pcd_header(["a", "b", "c"], ["4"] * 3, ["F"] * 3, 1, "binary"), b"\0" * 12, "no x, y, z column"),
     ],
 )
 def test_pcd_errors(tmp_path, head, body, message):
+    """Each a DataError naming the file; the sizes are checked before pypcd4
+    reads."""
     path = tmp_path / "bad.pcd"
     path.write_bytes(head + body)
     with pytest.raises(DataError, match=message) as e:

@@ -57,8 +57,8 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
       others named as for PLY.
     - ``.npz``: key ``positions`` (N, 3) required; ``colors``, ``velocity``,
       ``radius``, ``origin`` optional; every other key an (N,) attribute.
-    - ``.pcd``: the Point Cloud Library's format, ASCII or binary
-      (:mod:`clvis.io.pcd`).
+    - ``.pcd``: the Point Cloud Library's format, ascii, binary or
+      binary_compressed, through pypcd4 (the ``pcd`` extra; :mod:`clvis.io.pcd`).
     - ``.xyz``, ``.txt``, ``.csv``: one point a line, columns named by a header
       or by their count, positions relative to their minimum as for LAS
       (:mod:`clvis.io.ascii`).

@@ -17,6 +17,10 @@ Formats, chosen by the file name (case-insensitive):
   stored as 4-D) are dropped. A 4-D image (a time series) needs ``volume_index``
   to pick one volume; only that volume is read. The header's scale (scl_slope,
   scl_inter) is applied when set, as nibabel does.
+- ``.vti`` (VTK XML ImageData) and ``.vtk`` (legacy STRUCTURED_POINTS):
+  through VTK's own readers (the ``vtk`` extra: ``pip install "clvis[vtk]"``),
+  after clvis's checks of the header against the file (:mod:`clvis.io.vtk`);
+  the point scalars, with the file's spacing and origin.
 
 The samples are returned as stored (uint8 stays uint8: volumes can be large;
 convert where needed, e.g. ``volume.data.astype(np.float32)``), in native
@@ -24,7 +28,7 @@ byte order and C order, with the library's conventions: ``data`` [z, y, x];
 ``spacing`` (dz, dy, dx): 1 for raw and NPY files, for NIfTI the header's
 zooms (pixdim, (dx, dy, dz)) reversed, as nibabel reads them (0 as 1, a
 negative size as its absolute value; NaN or inf is an error); ``origin``
-(x, y, z) = 0 for every format (sample [k, j, i] at world (i dx, j dy, k dz)).
+(x, y, z) = 0 for every format but VTK's, which state theirs (sample [k, j, i] at world (i dx, j dy, k dz)).
 A NIfTI file's voxel-to-world affine (which may rotate or flip the axes) is
 kept, unused, in ``affine``.
 
@@ -105,8 +109,8 @@ def read_volume(
     dtype: npt.DTypeLike | None = None,
     volume_index: int | None = None,
 ) -> Volume:
-    """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``; see the
-    module docstring).
+    """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``, ``.vti``,
+    ``.vtk``; see the module docstring).
 
     `shape` (Z, Y, X) and `dtype` apply to ``.raw`` files only: they give the
     shape and the sample type when the file name does not, and override the

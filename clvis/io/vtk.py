@@ -1,22 +1,29 @@
-"""VTK image data volumes: XML ``.vti`` (ImageData, one piece; the first
-point-data array, or the one its ``Scalars`` names; inline ``binary``
-(base64, zlib-compressed or not), ``ascii`` arrays, or raw ``appended``
-data, which VTK's and ParaView's writers produce by default) and legacy
-``.vtk`` STRUCTURED_POINTS (ASCII or BINARY; the first SCALARS).
+"""VTK image data volumes, read by VTK's own readers (the ``vtk`` extra):
+XML ``.vti`` (ImageData; vtkXMLImageDataReader: ascii, inline binary,
+raw or base64 appended data, zlib- or LZ4-compressed or not, one piece or
+several) and legacy ``.vtk`` STRUCTURED_POINTS (vtkStructuredPointsReader,
+ASCII or BINARY). The volume is the point data's ``Scalars`` array (.vti:
+the one ``<PointData Scalars=...>`` names, else the first point array; .vtk:
+the first POINT_DATA SCALARS), one component.
 
-Bounded: the header's extents and sizes are checked against the data the
-file holds before anything is decompressed or allocated; a DTD or entity
-declaration is refused (no entity expansion); base64-encoded appended data
-and several pieces raise a DataError saying so.
+Bounded: before VTK reads, the header is checked against the file (the
+hardening of the other readers): the extents, the array's type and
+components, and for every piece the byte count or compressed-block header of
+the array against its extent and the bytes the file holds, so that a few
+hostile bytes cannot make VTK allocate gigabytes; a DTD or entity declaration
+is refused (no entity expansion). VTK reads only the chosen array. VTK's
+error messages become a DataError naming the file; nothing reaches stderr.
 """
 
 from __future__ import annotations
 
 import base64
 import binascii
+import contextlib
 import re
-import zlib
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +37,53 @@ _LEGACY_TYPES = {
     "unsigned_char": "u1", "char": "i1", "unsigned_short": "u2", "short": "i2", "unsigned_int": "u4",
     "int": "i4", "unsigned_long": "u8", "long": "i8", "float": "f4", "double": "f8",
 }  # fmt: skip
-_MAX_RATIO = 1100  # zlib expands at most ~1032x: a header claiming more lies
+# the most a compressed block can expand (zlib ~1032x, LZ4 ~255x): a header claiming more lies
+_MAX_RATIO = {"vtkZLibDataCompressor": 1100, "vtkLZ4DataCompressor": 260}
+
+
+def _vtk() -> Any:
+    """VTK's modules clvis uses (imported only here: the ``vtk`` extra)."""
+    try:
+        from vtkmodules import vtkCommonCore, vtkIOLegacy, vtkIOXML
+        from vtkmodules.util import numpy_support
+    except ImportError:
+        raise ImportError(
+            'reading .vti/.vtk volumes needs VTK: pip install "clvis[vtk]" (".[vtk]" in a clvis checkout, '
+            "or pip install vtk)"
+        ) from None
+    return vtkCommonCore, vtkIOLegacy, vtkIOXML, numpy_support
+
+
+@contextlib.contextmanager
+def _quiet(core: Any) -> Iterator[list[str]]:
+    """VTK's messages kept off stderr for the duration: VTK's global warning
+    display and its logger's stderr output off, put back as they were after
+    (nothing process-wide stays changed); the readers' own errors reach the
+    list yielded through an ErrorEvent observer (:func:`_observe`)."""
+    shown = core.vtkObject.GetGlobalWarningDisplay()
+    # the logger's cutoff is its stderr verbosity where no callback is added (VTK's Python has none)
+    logged = core.vtkLogger.GetCurrentVerbosityCutoff()
+    core.vtkObject.GlobalWarningDisplayOff()
+    core.vtkLogger.SetStderrVerbosity(core.vtkLogger.VERBOSITY_OFF)
+    try:
+        yield []
+    finally:
+        core.vtkLogger.SetStderrVerbosity(logged)
+        core.vtkObject.SetGlobalWarningDisplay(shown)
+
+
+def _observe(core: Any, obj: Any, messages: list[str]) -> None:
+    def seen(_obj: Any, _event: str, data: Any = None) -> None:
+        messages.append(str(data) if data is not None else "error")
+
+    seen.CallDataType = core.VTK_STRING  # type: ignore[attr-defined]  # the message as the call data
+    obj.AddObserver("ErrorEvent", seen)
+
+
+def _why(messages: list[str]) -> str:
+    text = " ".join(" ".join(messages).split())
+    text = re.sub(r"(ERROR|Warning): In [^,]*, line \d+\s*", "", text)
+    return text[:300] or "its reader failed (data that do not decode, or fewer values than declared)"
 
 
 def _attrs(tag: bytes) -> dict[str, str]:
@@ -38,7 +91,7 @@ def _attrs(tag: bytes) -> dict[str, str]:
     return {k.decode("latin-1"): v.decode("latin-1") for k, v in re.findall(rb'(\w+)\s*=\s*"([^"]*)"', tag)}
 
 
-def _numbers(path, what, text, n, kind=float):
+def _numbers(path: Path, what: str, text: str, n: int, kind: type = float) -> list:
     try:
         v = [kind(t) for t in text.split()]
     except ValueError:
@@ -48,161 +101,188 @@ def _numbers(path, what, text, n, kind=float):
     return v
 
 
-def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
-    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z))."""
-    raw = path.read_bytes()
+def _count(path: Path, what: str, ext: list[int]) -> int:
+    dims = (ext[1] - ext[0] + 1, ext[3] - ext[2] + 1, ext[5] - ext[4] + 1)
+    if min(dims) < 1:
+        raise DataError(f"{path}: empty {what} {ext}")
+    return dims[0] * dims[1] * dims[2]
+
+
+def _arrays(section: bytes) -> list[tuple[dict[str, str], bytes]]:
+    """The (attributes, body) of each <DataArray .../> (an appended array, as
+    VTK writes it) or <DataArray ...>text</DataArray> in `section`."""
+    found = re.findall(rb"(<DataArray\b[^>]*?)(?:/>|>(.*?)</DataArray>)", section, re.S)
+    return [(_attrs(t + b">"), b) for t, b in found]
+
+
+def _check_vti(path: Path, raw: bytes) -> tuple[str, int]:
+    """Check the .vti's header against the file before VTK reads it: (the
+    name of the point array that is the volume, its samples); a DataError
+    naming the file for what is not read or lies about its size."""
     if b"<!DOCTYPE" in raw[:4096] or b"<!ENTITY" in raw[:4096]:
         raise DataError(f"{path}: a VTK file with a DTD or entities is not read")
-    head = re.search(rb"<VTKFile\b[^>]*>", raw)
-    image = re.search(rb"<ImageData\b[^>]*>", raw)
-    if head is None or image is None:
-        raise DataError(f'{path}: not a VTK ImageData file (no <VTKFile type="ImageData"> and <ImageData>)')
-    fa, ia = _attrs(head.group(0)), _attrs(image.group(0))
     at = raw.find(b"<AppendedData")
     xml = raw if at < 0 else raw[:at]  # the appended bytes are not XML: never searched as such
-    if len(re.findall(rb"<Piece\b", xml)) != 1:
-        raise DataError(f"{path}: one Piece expected (a VTK image of several pieces is not read)")
-    ext = _numbers(path, "WholeExtent", ia.get("WholeExtent", ""), 6, int)
-    nx, ny, nz = (ext[1] - ext[0] + 1, ext[3] - ext[2] + 1, ext[5] - ext[4] + 1)
-    if min(nx, ny, nz) < 1:
-        raise DataError(f"{path}: empty WholeExtent {ext}")
-    spacing = _numbers(path, "Spacing", ia.get("Spacing", "1 1 1"), 3)
-    origin = _numbers(path, "Origin", ia.get("Origin", "0 0 0"), 3)
-    pd = re.search(rb"<PointData\b([^>]*)>(.*?)</PointData>", xml, re.S)
-    # <DataArray .../> (an appended array, as VTK writes it) or <DataArray ...>text</DataArray>
-    found = re.findall(rb"(<DataArray\b[^>]*?)(?:/>|>(.*?)</DataArray>)", pd.group(2), re.S) if pd else []
-    arrays = [(t + b">", b) for t, b in found]
-    if pd is None or not arrays:
-        raise DataError(f"{path}: no point data array (cell data is not read)")
-    want = _attrs(b"<x " + pd.group(1) + b">").get("Scalars")
-    tag, body = next(((t, b) for t, b in arrays if want and _attrs(t).get("Name") == want), arrays[0])
-    a = _attrs(tag)
-    t = _VTI_TYPES.get(a.get("type", ""))
-    if t is None:
-        raise DataError(f"{path}: unsupported DataArray type {a.get('type')!r}")
-    if int(a.get("NumberOfComponents", "1")) != 1:
-        raise DataError(f"{path}: array {a.get('Name')!r} has several components; a volume has one")
-    n = nx * ny * nz
-    order = ">" if fa.get("byte_order") == "BigEndian" else "<"
-    dtype = np.dtype(order + t)
+    head = re.findall(rb"<VTKFile\b[^>]*>", xml)
+    image = re.findall(rb"<ImageData\b[^>]*>", xml)
+    if len(head) != 1 or len(image) != 1 or _attrs(head[0]).get("type", "ImageData") != "ImageData":
+        raise DataError(f'{path}: not a VTK ImageData file (no <VTKFile type="ImageData"> and <ImageData>)')
+    if b"<!--" in xml or b"<![CDATA[" in xml:
+        raise DataError(f"{path}: XML comments or CDATA in a VTK file are not read")
+    fa, ia = _attrs(head[0]), _attrs(image[0])
+    whole = _numbers(path, "WholeExtent", ia.get("WholeExtent", ""), 6, int)
+    n = _count(path, "WholeExtent", whole)
+    _numbers(path, "Spacing", ia.get("Spacing", "1 1 1"), 3)
+    _numbers(path, "Origin", ia.get("Origin", "0 0 0"), 3)
+    compressor = fa.get("compressor")
+    if compressor is not None and compressor not in _MAX_RATIO:
+        raise DataError(f"{path}: compressor {compressor} is not read (zlib or LZ4)")
+    pieces = re.findall(rb"<Piece\b([^>]*)>(.*?)</Piece>", xml, re.S)
+    if not pieces or len(pieces) != len(re.findall(rb"<Piece\b", xml)):
+        raise DataError(f"{path}: malformed ImageData: no <Piece>...</Piece>")
+    name, covered = None, 0
+    for tag, body in pieces:
+        ext = _numbers(path, "Piece Extent", _attrs(tag).get("Extent", ""), 6, int)
+        pn = _count(path, "Piece Extent", ext)
+        if any(ext[k] < whole[k] for k in (0, 2, 4)) or any(ext[k] > whole[k] for k in (1, 3, 5)):
+            raise DataError(f"{path}: Piece Extent {ext} outside WholeExtent {whole}")
+        pd = re.search(rb"<PointData\b([^>]*)>(.*?)</PointData>", body, re.S)
+        arrays = _arrays(pd.group(2)) if pd else []
+        if pd is None or not arrays:
+            raise DataError(f"{path}: no point data array (cell data is not read)")
+        if name is None:  # the first piece's Scalars, or its first array
+            want = _attrs(b"<x " + pd.group(1) + b">").get("Scalars")
+            first = next((a for a, _ in arrays if want and a.get("Name") == want), arrays[0][0])
+            name = first.get("Name")
+            if not name:
+                raise DataError(f"{path}: the point data array has no Name")
+        a, text = next(((a, t) for a, t in arrays if a.get("Name") == name), ({}, b""))
+        if not a:
+            raise DataError(f"{path}: a Piece has no point array {name!r}")
+        t = _VTI_TYPES.get(a.get("type", ""))
+        if t is None:
+            raise DataError(f"{path}: unsupported DataArray type {a.get('type')!r}")
+        if a.get("NumberOfComponents", "1").strip() != "1":
+            raise DataError(f"{path}: array {name!r} has several components; a volume has one")
+        _check_array(path, raw, at, a, text, fa, pn * np.dtype(t).itemsize, pn)
+        covered += pn
+    if covered < n:
+        raise DataError(f"{path}: the pieces hold {covered} samples, the WholeExtent {whole} needs {n}")
+    return str(name), n
+
+
+def _check_array(
+    path: Path, raw: bytes, at: int, a: dict[str, str], text: bytes, fa: dict[str, str], nbytes: int, n: int
+) -> None:
+    """One piece's array: its byte count (or compressed-block header)
+    against its extent and against what the file holds."""
     fmt = a.get("format", "ascii")
-    if fmt == "ascii":
-        if n > len(body):
-            raise DataError(f"{path}: {n} samples declared, the array holds {len(body)} bytes of text")
-        try:
-            data = np.array(body.split(), dtype=np.float64).astype(dtype)
-        except ValueError as e:
-            raise DataError(f"{path}: malformed ascii array: {e}") from None
-    elif fmt == "binary":
-        data = _inline_binary(path, body, fa, dtype, n)
-    elif fmt == "appended" and at >= 0:
-        data = _appended(path, raw, at, a, fa, dtype, n)
-    else:
-        raise DataError(f"{path}: DataArray format {fmt!r} is not read (binary, ascii or appended)")
-    if data.size != n:
-        raise DataError(f"{path}: the array holds {data.size} samples, the extent {nx}x{ny}x{nz} needs {n}")
-    return (
-        data.astype(dtype.newbyteorder("=")).reshape(nz, ny, nx),
-        (spacing[2], spacing[1], spacing[0]),
-        origin,
-    )
-
-
-def _inline_binary(path, body, fa, dtype, n):
     hs = 8 if fa.get("header_type") == "UInt64" else 4
-    hdt = np.dtype(("<" if fa.get("byte_order") != "BigEndian" else ">") + ("u8" if hs == 8 else "u4"))
-    text = re.sub(rb"\s+", b"", body)
+    hdt = np.dtype((">" if fa.get("byte_order") == "BigEndian" else "<") + ("u8" if hs == 8 else "u4"))
+    compressor = fa.get("compressor")
+    if fmt == "ascii":
+        if n > len(text):
+            raise DataError(f"{path}: {n} samples declared, the array holds {len(text)} bytes of text")
+        return
+    if fmt == "binary":
+        stream, base = re.sub(rb"\s+", b"", text), True
+    elif fmt == "appended" and at >= 0:
+        tag = re.match(rb"<AppendedData\b[^>]*>\s*_", raw[at:])
+        if tag is None:
+            raise DataError(f"{path}: malformed <AppendedData> (no '_' before its data)")
+        encoding = _attrs(tag.group(0)).get("encoding", "raw")
+        if encoding not in ("raw", "base64"):
+            raise DataError(f"{path}: appended data encoding {encoding!r} is not read (raw or base64)")
+        try:
+            offset = int(a.get("offset", ""))
+        except ValueError:
+            raise DataError(f"{path}: malformed DataArray offset {a.get('offset')!r}") from None
+        stream, base = raw[at + tag.end() :], encoding == "base64"
+        if not 0 <= offset <= len(stream) - hs:
+            raise DataError(f"{path}: the appended array's offset {offset} lies outside the file")
+        stream = stream[offset:]
+    else:
+        raise DataError(
+            f"{path}: DataArray format {a.get('format')!r} is not read (binary, ascii or appended)"
+        )
+
+    def take(start: int, count: int) -> bytes:  # `count` decoded bytes from decoded byte `start`
+        if not base:
+            return stream[start : start + count]
+        chars = stream[4 * (start // 3) : 4 * -(-(start + count) // 3)]
+        return base64.b64decode(chars.split(b"=")[0] + b"==")[start % 3 : start % 3 + count]
+
+    size = len(stream) * 3 // 4 if base else len(stream)  # what the stream can hold
     try:
-        if fa.get("compressor") is None:
-            blob = base64.b64decode(text, validate=True)
-            size = int(np.frombuffer(blob[:hs], hdt)[0]) if len(blob) >= hs else -1
-            if size != n * dtype.itemsize or len(blob) < hs + size:
-                raise DataError(f"{path}: the array's byte count does not match its extent")
-            return np.frombuffer(blob[hs : hs + size], dtype)
-        if "ZLib" not in fa["compressor"]:
-            raise DataError(f"{path}: compressor {fa['compressor']} is not read (zlib only)")
-        first = base64.b64decode(text[: 4 * -(-hs // 3) + 4], validate=True)
-        blocks = int(np.frombuffer(first[:hs], hdt)[0])
-        hchars = 4 * -(-(3 + blocks) * hs // 3)
-        header = np.frombuffer(
-            base64.b64decode(text[:hchars], validate=True)[: (3 + blocks) * hs], hdt
-        ).astype(np.int64)
-        return _inflate(path, header, lambda: base64.b64decode(text[hchars:], validate=True), dtype, n)
-    except DataError:
-        raise
-    except (binascii.Error, zlib.error, ValueError, IndexError) as e:
+        if compressor is None:
+            count = int(np.frombuffer(take(0, hs), hdt, 1)[0])
+            if count != nbytes or hs + count > size:
+                raise DataError(f"{path}: the array's byte count does not match its extent, or is truncated")
+            return
+        blocks = int(np.frombuffer(take(0, hs), hdt, 1)[0])
+        if blocks > size // hs:
+            raise DataError(f"{path}: truncated or malformed compressed array header")
+        # VTK base64-encodes the block header on its own (padded), the blocks after it
+        hbytes = (3 + blocks) * hs
+        header = np.frombuffer(take(0, hbytes), hdt, 3 + blocks).astype(np.int64)
+        block, last, sizes = int(header[1]), int(header[2]), header[3:]
+        total = block * (blocks - 1) + (last or block) if blocks else 0
+        if total != nbytes or block < 1 and blocks:
+            raise DataError(f"{path}: the compressed array holds {total} bytes, the extent needs {nbytes}")
+        data = size - (4 * -(-hbytes // 3) * 3 // 4 if base else hbytes)
+        if int(sizes.sum()) > data or (sizes < 0).any() or total > _MAX_RATIO[str(compressor)] * max(data, 1):
+            raise DataError(f"{path}: truncated or malformed compressed array")
+    except (binascii.Error, ValueError, IndexError) as e:
+        if isinstance(e, DataError):
+            raise
         raise DataError(f"{path}: malformed binary array: {e}") from None
 
 
-def _inflate(path, header, compressed, dtype, n):
-    """The zlib blocks of a compressed VTK array: `header` its (blocks, block
-    size, last block's size, compressed sizes...) as int64, `compressed()`
-    the compressed bytes (called once the header has been checked)."""
-    blocks, block, last, sizes = int(header[0]), int(header[1]), int(header[2]), header[3:]
-    total = block * (blocks - 1) + (last or block) if blocks else 0
-    if total != n * dtype.itemsize:
-        raise DataError(
-            f"{path}: the compressed array holds {total} bytes, the extent needs {n * dtype.itemsize}"
-        )
-    comp = compressed()
-    if int(sizes.sum()) > len(comp) or total > _MAX_RATIO * max(len(comp), 1):
-        raise DataError(f"{path}: truncated or malformed compressed array")
-    out, pos = bytearray(), 0
-    for k, s in enumerate(sizes):
-        want = last if (k == blocks - 1 and last) else block
-        d = zlib.decompressobj()
-        chunk = d.decompress(comp[pos : pos + int(s)], want)
-        if len(chunk) != want:
-            raise DataError(f"{path}: block {k} decompresses to {len(chunk)} bytes, not {want}")
-        out += chunk
-        pos += int(s)
-    return np.frombuffer(bytes(out), dtype)
+def _image(path: Path, reader: Any, messages: list[str], name: str | None, n: int, ns: Any) -> tuple:
+    """(data (Z, Y, X), spacing zyx, origin xyz) of `reader`'s output."""
+    reader.Update()
+    img = reader.GetOutput()
+    if messages or reader.GetErrorCode() or img is None:
+        raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
+    pd = img.GetPointData()
+    arr = pd.GetScalars() if name is None else pd.GetArray(name)
+    nx, ny, nz = img.GetDimensions()
+    if arr is None or arr.GetNumberOfComponents() != 1 or arr.GetNumberOfTuples() != n or nx * ny * nz != n:
+        raise DataError(f"{path}: VTK read no {n}-sample scalar array from it")
+    data = np.array(ns.vtk_to_numpy(arr), copy=True).reshape(nz, ny, nx)
+    sx, sy, sz = img.GetSpacing()
+    return data, (sz, sy, sx), list(img.GetOrigin())
 
 
-def _appended(path, raw, at, a, fa, dtype, n):
-    """An array in the file's <AppendedData encoding="raw">: its bytes start
-    `offset` bytes after the '_' that opens the data, a byte count (or the
-    zlib block header) first, as VTK's and ParaView's writers leave them by
-    default."""
-    tag = re.match(rb"<AppendedData\b[^>]*>\s*_", raw[at:])
-    if tag is None:
-        raise DataError(f"{path}: malformed <AppendedData> (no '_' before its data)")
-    if _attrs(tag.group(0)).get("encoding", "raw") != "raw":
-        raise DataError(
-            f"{path}: base64-encoded appended data is not read (raw appended, binary or ascii are)"
-        )
-    try:
-        start = at + tag.end() + int(a.get("offset", ""))
-    except ValueError:
-        raise DataError(f"{path}: malformed DataArray offset {a.get('offset')!r}") from None
-    hs = 8 if fa.get("header_type") == "UInt64" else 4
-    hdt = np.dtype((">" if fa.get("byte_order") == "BigEndian" else "<") + ("u8" if hs == 8 else "u4"))
-    if not at + tag.end() <= start <= len(raw) - hs:
-        raise DataError(f"{path}: the appended array's offset {a.get('offset')} lies outside the file")
-    try:
-        if fa.get("compressor") is None:
-            size = int(np.frombuffer(raw, hdt, 1, start)[0])
-            if size != n * dtype.itemsize or start + hs + size > len(raw):
-                raise DataError(f"{path}: the appended array's byte count does not match its extent")
-            return np.frombuffer(raw, dtype, n, start + hs)
-        if "ZLib" not in fa["compressor"]:
-            raise DataError(f"{path}: compressor {fa['compressor']} is not read (zlib only)")
-        blocks = int(np.frombuffer(raw, hdt, 1, start)[0])
-        end = start + (3 + blocks) * hs
-        if blocks > len(raw) or end > len(raw):
-            raise DataError(f"{path}: truncated appended array header")
-        header = np.frombuffer(raw[start:end], hdt).astype(np.int64)
-        return _inflate(path, header, lambda: raw[end:], dtype, n)
-    except DataError:
-        raise
-    except (zlib.error, ValueError, IndexError) as e:
-        raise DataError(f"{path}: malformed appended array: {e}") from None
+def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
+    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of a .vti,
+    read by vtkXMLImageDataReader after the header checks."""
+    name, n = _check_vti(path, path.read_bytes())
+    core, _, xmlio, ns = _vtk()
+    with _quiet(core) as messages:
+        r = xmlio.vtkXMLImageDataReader()
+        _observe(core, r, messages)
+        r.SetFileName(str(path))
+        r.UpdateInformation()
+        if not messages:
+            r.GetPointDataArraySelection().DisableAllArrays()
+            r.GetPointDataArraySelection().EnableArray(name)
+            r.GetCellDataArraySelection().DisableAllArrays()
+            return _image(path, r, messages, name, n, ns)
+    raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
+
+
+# a legacy array's declaration: FIELD arrays (name components tuples type) and LOOKUP_TABLE name size
+_FIELD_ARRAY = re.compile(
+    rb"(?m)^[ \t]*\S+[ \t]+(\d+)[ \t]+(\d+)[ \t]+(?:unsigned_|vtk)?(?:char|short|int|long|float|double|bit|"
+    rb"string|idtype|[a-z_]*int\d+)[ \t\r]*$"
+)
 
 
 def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     """A legacy .vtk STRUCTURED_POINTS file: (data, spacing zyx, origin xyz);
-    the point data's first SCALARS (CELL_DATA and FIELD sections before it are
-    passed over)."""
+    the point data's first SCALARS, read by vtkStructuredPointsReader after
+    the header checks."""
     raw = path.read_bytes()
     lines = raw[:4096].split(b"\n")[:12]
     text = [t.decode("latin-1").strip() for t in lines]
@@ -221,8 +301,8 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     if "DIMENSIONS" not in f:
         raise DataError(f"{path}: malformed STRUCTURED_POINTS header: no DIMENSIONS")
     nx, ny, nz = _numbers(path, "DIMENSIONS", " ".join(f["DIMENSIONS"]), 3, int)
-    spacing = _numbers(path, "SPACING", " ".join(f.get("SPACING", f.get("ASPECT_RATIO", ["1", "1", "1"]))), 3)
-    origin = _numbers(path, "ORIGIN", " ".join(f.get("ORIGIN", ["0", "0", "0"])), 3)
+    _numbers(path, "SPACING", " ".join(f.get("SPACING", f.get("ASPECT_RATIO", ["1", "1", "1"]))), 3)
+    _numbers(path, "ORIGIN", " ".join(f.get("ORIGIN", ["0", "0", "0"])), 3)
     m = re.search(
         rb"(?:^|\n)POINT_DATA[ \t]+(\d+)[ \t\r]*\n+SCALARS[ \t]+(\S+)[ \t]+(\S+)(?:[ \t]+(\d+))?[ \t\r]*\n"
         rb"LOOKUP_TABLE[ \t]+\S+[ \t\r]*\n",
@@ -237,22 +317,32 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     n = nx * ny * nz
     if min(nx, ny, nz) < 1 or int(m.group(1)) != n:
         raise DataError(f"{path}: POINT_DATA {int(m.group(1))} does not match DIMENSIONS {nx} {ny} {nz}")
-    pos = m.end()
-    dtype = np.dtype(">" + t)  # legacy binary is big-endian
-    if binary:
-        if pos + n * dtype.itemsize > len(raw):
-            raise DataError(f"{path}: truncated: {n} samples of {dtype.itemsize} bytes after byte {pos}")
-        data = np.frombuffer(raw, dtype, count=n, offset=pos)
-    else:
-        tokens = raw[pos:].split(maxsplit=n)[:n]
-        if len(tokens) < n:
-            raise DataError(f"{path}: {len(tokens)} samples, DIMENSIONS needs {n}")
-        try:
-            data = np.array(tokens, dtype=np.float64).astype(dtype)
-        except ValueError as e:
-            raise DataError(f"{path}: malformed ascii samples: {e}") from None
-    return (
-        data.astype(dtype.newbyteorder("=")).reshape(nz, ny, nx),
-        (spacing[2], spacing[1], spacing[0]),
-        origin,
-    )
+    if binary and m.end() + n * np.dtype(t).itemsize > len(raw):
+        raise DataError(
+            f"{path}: truncated: {n} samples of {np.dtype(t).itemsize} bytes after byte {m.end()}"
+        )
+    if not binary and n > len(raw) - m.end():
+        raise DataError(f"{path}: truncated: {n} samples, {len(raw) - m.end()} bytes of text")
+    # what else VTK reads from the file (cell data, field arrays, lookup tables) is bounded by it too
+    for k in re.findall(rb"(?m)^[ \t]*(?:POINT_DATA|CELL_DATA)[ \t]+(\d+)", raw):
+        if int(k) > n:
+            raise DataError(f"{path}: a data section of {int(k)} values, more than the {n} points")
+    for k in re.findall(rb"(?m)^[ \t]*(?:LOOKUP_TABLE[ \t]+\S+|FIELD[ \t]+\S+)[ \t]+(\d+)[ \t\r]*$", raw):
+        if int(k) > len(raw):
+            raise DataError(f"{path}: a table or field of {int(k)} entries, more than the file's bytes")
+    for c, k in _FIELD_ARRAY.findall(raw):
+        if int(c) * int(k) > len(raw):
+            raise DataError(f"{path}: a field array of {int(c)}x{int(k)} values, more than the file's bytes")
+    for c in re.findall(rb"(?m)^[ \t]*(?:COLOR_)?SCALARS[ \t]+\S+(?:[ \t]+\S+)?[ \t]+(\d+)[ \t\r]*$", raw):
+        if int(c) > 4:
+            raise DataError(f"{path}: SCALARS of {int(c)} components (VTK reads 1 to 4)")
+    core, legacy, _, ns = _vtk()
+    with _quiet(core) as messages:
+        r = legacy.vtkStructuredPointsReader()
+        _observe(core, r, messages)
+        r.SetFileName(str(path))
+        # the name as VTK decodes it (%20 and the like: legacy names have no spaces)
+        r.SetScalarsName(
+            re.sub(r"%([0-9A-Fa-f]{2})", lambda h: chr(int(h.group(1), 16)), m.group(2).decode("latin-1"))
+        )
+        return _image(path, r, messages, None, n, ns)

@@ -3,8 +3,8 @@
 
 Seeds come from tests/fuzz/seeds.py (made by clvis, laspy, nibabel and
 tinyvdb, plus the third-party files of tests/data); mutants from
-tests/fuzz/mutate.py. Each case is read in a forked child under an
-address-space limit (4 GiB) and a timeout (harness.run_limited). Per format
+tests/fuzz/mutate.py (``--formats vti,vtk,pcd``: only those seeds). Each case
+is read in a forked child under an address-space limit (4 GiB) and a timeout (harness.run_limited). Per format
 it reports the cases, how they ended, and the largest peak resident set.
 
 A case fails when it crashes (a signal), hangs (the timeout), raises anything
@@ -64,6 +64,10 @@ def _preload():
         "plyfile",
         "tinyvdb",
         "pye57",
+        "pypcd4",
+        "vtkmodules.vtkIOXML",
+        "vtkmodules.vtkIOLegacy",
+        "vtkmodules.util.numpy_support",
         "clvis.gauss.sparse",
     ):
         try:
@@ -79,13 +83,16 @@ def fuzz(
     keep: Path,
     timeout: float = 10.0,
     log=print,
+    formats: set[str] | None = None,
 ) -> dict:
     """Run the fuzzer; {format: Counter of outcome kinds, plus 'peak' bytes},
     and the list of failures."""
     _preload()
     readers = _readers()
     work = Path(tempfile.mkdtemp(prefix="clvis-fuzz-"))
-    seeds = make_seeds(work / "seeds")
+    seeds = [s for s in make_seeds(work / "seeds") if formats is None or s[0] in formats]
+    if not seeds:
+        raise SystemExit(f"no seeds for the formats {sorted(formats or ())}")
     by_format = collections.defaultdict(list)
     for fmt, _reader, path in seeds:
         by_format[fmt].append(path.read_bytes())
@@ -161,11 +168,23 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", type=int, default=None, help="run this many mutants")
     ap.add_argument("--seed", type=int, default=int(time.time()) % 100000)
     ap.add_argument("--timeout", type=float, default=10.0, help="seconds a case may take")
+    ap.add_argument(
+        "--formats", default=None, help="only these seed formats, comma-separated (e.g. vti,vtk,pcd)"
+    )
     ap.add_argument("--keep", type=Path, default=Path(tempfile.gettempdir()) / "clvis-fuzz-failures")
     args = ap.parse_args(argv)
     minutes = args.minutes if args.minutes is not None or args.cases is not None else 5.0
     print(f"clvis fuzz: seed {args.seed}", flush=True)
-    result = fuzz(minutes, args.cases, args.seed, args.keep, args.timeout, log=lambda s: print(s, flush=True))
+    formats = set(args.formats.split(",")) if args.formats else None
+    result = fuzz(
+        minutes,
+        args.cases,
+        args.seed,
+        args.keep,
+        args.timeout,
+        log=lambda s: print(s, flush=True),
+        formats=formats,
+    )
     print(report(result))
     if result["failures"]:
         print(f"{len(result['failures'])} failures; mutants kept in {args.keep}")

@@ -122,7 +122,7 @@ def _vti(path: Path, data: np.ndarray, encoding: str) -> None:
         body = " ".join(f"{v:.6g}" for v in data.ravel())
     elif encoding == "binary":
         body = base64.b64encode(np.array([len(raw)], "<u4").tobytes() + raw).decode()
-    elif encoding == "appended":  # raw appended data, VTK's and ParaView's default
+    elif encoding in ("appended", "appended64"):  # raw appended data, VTK's and ParaView's default
         body = ""
     else:
         comp = ' compressor="vtkZLibDataCompressor"'
@@ -132,6 +132,16 @@ def _vti(path: Path, data: np.ndarray, encoding: str) -> None:
         body = base64.b64encode(head).decode() + base64.b64encode(b"".join(zs)).decode()
         encoding = "binary"
     tail = ""
+    if encoding == "appended64":  # base64 appended zlib blocks (EncodeAppendedData on)
+        comp = ' compressor="vtkZLibDataCompressor"'
+        zs = [zlib.compress(raw[i : i + 256]) for i in range(0, len(raw), 256)]
+        head = np.array([len(zs), 256, len(raw) % 256, *map(len, zs)], "<u4").tobytes()
+        encoding = 'appended" offset="0'
+        tail = (
+            '<AppendedData encoding="base64">\n _'
+            + (base64.b64encode(head) + base64.b64encode(b"".join(zs))).decode()
+            + "\n</AppendedData>"
+        )
     if encoding == "appended":
         encoding = 'appended" offset="0'
         tail = '<AppendedData encoding="raw">\n _'
@@ -142,7 +152,7 @@ def _vti(path: Path, data: np.ndarray, encoding: str) -> None:
         f'<PointData Scalars="density">\n<DataArray type="Float32" Name="density" format="{encoding}">'
         f"\n{body}\n</DataArray>\n</PointData><CellData></CellData></Piece></ImageData>{tail}"
     ).encode()
-    if tail:
+    if tail.endswith("_"):
         text += np.array([len(raw)], "<u4").tobytes() + raw + b"\n</AppendedData>"
     path.write_bytes(text + b"</VTKFile>\n")
 
@@ -205,7 +215,7 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
     (out / "vol_6x5x4_uint16.raw").write_bytes(rng.integers(0, 65535, 120, dtype=np.uint16).tobytes())
     add("raw", "volume", out / "vol_6x5x4_uint16.raw")
     vol = rng.random((5, 4, 6)).astype(np.float32)
-    for enc in ("ascii", "binary", "zlib", "appended"):
+    for enc in ("ascii", "binary", "zlib", "appended", "appended64"):
         _vti(out / f"vol-{enc}.vti", vol, enc)
         add("vti", "volume", out / f"vol-{enc}.vti")
     if (DATA / "pyvista_uniform.vtk").is_file():  # legacy binary, cell data and a field first
@@ -221,6 +231,15 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
     add("pcd", "points", out / "cloud-ascii.pcd")
     _pcd(out / "cloud-binary.pcd", 40, binary=True)
     add("pcd", "points", out / "cloud-binary.pcd")
+    try:
+        import pypcd4
+    except ImportError:
+        pass
+    else:  # LZF-compressed (binary_compressed), as pypcd4 and PCL write it; compressible values
+        xyz = rng.integers(0, 8, (60, 3)).astype(np.float32)
+        pc = pypcd4.PointCloud.from_xyzrgb_points(np.c_[xyz, np.tile(np.float32(1e-39), (60, 1))])
+        pc.save(out / "cloud-lzf.pcd", encoding=pypcd4.Encoding.BINARY_COMPRESSED)
+        add("pcd", "points", out / "cloud-lzf.pcd")
     pts = rng.normal(0, 10, (25, 3)) + [635000.0, 848000.0, 400.0]
     cols = rng.integers(0, 256, (25, 3))
     np.savetxt(out / "scan.xyz", np.c_[pts, cols], fmt=["%.3f"] * 3 + ["%d"] * 3)

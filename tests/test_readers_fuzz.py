@@ -62,7 +62,9 @@ for i in range(start, len(cases)):
     except BaseException as e:
         out = {"i": i, "outcome": "other", "detail": f"{type(e).__name__}: {e}"[:300]}
     print(json.dumps(out), flush=True)
-print(json.dumps({"maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}), flush=True)
+# VmHWM: this process's own peak (ru_maxrss keeps the parent's across exec)
+with open("/proc/self/status") as f:
+    print(json.dumps({"maxrss_kb": int(next(l.split()[1] for l in f if l.startswith("VmHWM:")))}), flush=True)
 """
 
 

@@ -102,8 +102,9 @@ kernel void pack_iso(global const float *rgba, global const uchar *hit,
 {
     const ulong plane = (ulong)wp * hp;
     const ulong first = (ulong)get_global_id(0) * ITEMS;
-    for (ulong i = first; i < plane && i < first + ITEMS; ++i) {
-        const uint y = (uint)(i / wp), x = (uint)(i - (ulong)y * wp);
+    /* the pixel's column and row, stepped (not divided) from the first */
+    uint y = (uint)(first / wp), x = (uint)(first - (ulong)y * wp);
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i, x = x + 1 < wp ? x + 1 : 0, y += x == 0) {
         float r = 0.0f, g = 0.0f, b = 0.0f, shown = 0.0f, act = 0.0f;
         if (x < w && y < h) {
             const ulong s = (ulong)y * w + x;
@@ -179,8 +180,9 @@ kernel void pack_rgbda(global const float *rgbda, const uint w, const uint h,
     const float dmax = key_to_float(stats[2]), dmin = key_to_float(~stats[3]);
     const float range = dmax - dmin;
     const ulong first = (ulong)get_global_id(0) * ITEMS;
-    for (ulong i = first; i < plane && i < first + ITEMS; ++i) {
-        const uint y = (uint)(i / wp), x = (uint)(i - (ulong)y * wp);
+    /* the pixel's column and row, stepped (not divided) from the first */
+    uint y = (uint)(first / wp), x = (uint)(first - (ulong)y * wp);
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i, x = x + 1 < wp ? x + 1 : 0, y += x == 0) {
         float r = 0.0f, g = 0.0f, b = 0.0f, a = 0.0f, dn = -1.0f;
         if (x < w && y < h) {
             global const float *p = rgbda + 5 * ((ulong)y * w + x);
@@ -207,8 +209,9 @@ kernel void pack_rgb_coverage(global const uchar *rgba, global const uint *index
 {
     const ulong plane = (ulong)wp * hp;
     const ulong first = (ulong)get_global_id(0) * ITEMS;
-    for (ulong i = first; i < plane && i < first + ITEMS; ++i) {
-        const uint y = (uint)(i / wp), x = (uint)(i - (ulong)y * wp);
+    /* the pixel's column and row, stepped (not divided) from the first */
+    uint y = (uint)(first / wp), x = (uint)(first - (ulong)y * wp);
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i, x = x + 1 < wp ? x + 1 : 0, y += x == 0) {
         float r = 0.0f, g = 0.0f, b = 0.0f, cov = 0.0f;
         if (x < w && y < h) {
             const ulong s = (ulong)y * w + x;
@@ -235,8 +238,9 @@ kernel void pack_plane(global const float *src, const ulong offset, const uint s
     const ulong plane = (ulong)wp * hp;
     const ulong first = (ulong)get_global_id(0) * ITEMS;
     uint nonfinite = 0;
-    for (ulong i = first; i < plane && i < first + ITEMS; ++i) {
-        const uint y = (uint)(i / wp), x = (uint)(i - (ulong)y * wp);
+    /* the pixel's column and row, stepped (not divided) from the first */
+    uint y = (uint)(first / wp), x = (uint)(first - (ulong)y * wp);
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i, x = x + 1 < wp ? x + 1 : 0, y += x == 0) {
         float v = 0.0f;
         if (x < w && y < h) {
             const ulong s = (ulong)y * w + x;

@@ -339,11 +339,11 @@ def unpack_rgba8(
         raise ValueError(f"width: {width} is more than the tensor's {wp} columns")
     _check_size("nchw", hp, wp, hp, wp)
     dst = _target(out, queue, (height, width, 4), np.uint8, "unpack_rgba8 output")
-    launch, _, _ = _launcher(queue)
+    launch, items, _ = _launcher(queue)
     u32 = np.uint32
     launch(
         "unpack_rgba8",
-        height * width,
+        height * -(-width // items) * items,  # a work-item a row segment of `items` pixels
         buf(to_device(queue, "nchw", nchw)),
         u32(c),
         u32(wp),

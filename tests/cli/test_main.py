@@ -119,6 +119,47 @@ def test_bench_report_command(tmp_path, capsys):
     assert cli.main(["bench", "primitives", "--report", str(path), "--check"]) == 1
 
 
+def test_post_budget_targets(tmp_path, capsys):
+    """Issue 21's speed budgets: the fp32 rows' median ms (info), and the
+    NARVis fast path (a clvis-host row named by its impl) against GR."""
+
+    def b(op, impl, role, best, median_ms=None):
+        info = {"op": op, "impl": impl, "role": role, "n": 1, "bytes": 1}
+        if median_ms is not None:
+            info["median_ms"] = median_ms
+        return {"extra_info": info, "stats": {"median": best * 1.1, "min": best, "rounds": 5}}
+
+    data = {
+        "clvis": {"device": "test device", "tuning": "cpu", "version": "x", "scale": 1},
+        "benchmarks": [
+            b("infill[512x512]", "onnxruntime fp32", "clvis", 0.09, 99.0),
+            b("infill[1280x720]", "onnxruntime fp32", "clvis", 0.30, 301.0),
+            b("lidar[512x512]", "onnxruntime fp32", "clvis", 0.1, 120.0),
+            b("narvis[512x512]", "onnxruntime fp32", "clvis", 0.2, 250.0),
+            b("narvis[512x512]", benchreport.NARVIS_FAST, "clvis-host", 1.0),
+            b("narvis[512x512]", benchreport.NARVIS_GR, "peer", 3.5),
+        ],
+    }
+    path = tmp_path / "post.json"
+    path.write_text(json.dumps(data))
+    rows, _ = benchreport.load(path)
+    checks = {
+        t.op + (f" {t.impl}" if t.impl else "") + f" {t.what}": (v, ok)
+        for t, v, ok in benchreport.check(rows, "post", "cpu")
+    }
+    assert checks["infill[512x512] info:median_ms"] == (99.0, True)
+    assert checks["infill[1280x720] info:median_ms"] == (301.0, False)  # <= 300 ms
+    assert checks["lidar[512x512] info:median_ms"] == (120.0, True)
+    assert checks["narvis[512x512] info:median_ms"] == (250.0, True)
+    # 3.5 s / 1.0 s of the fast path, not / the network alone (0.2 s: 17.5x)
+    ratio = checks[f"narvis[512x512] {benchreport.NARVIS_FAST} {benchreport.NARVIS_GR}"]
+    assert ratio == (pytest.approx(3.5), False)
+    assert cli.main(["bench", "post", "--report", str(path), "--check"]) == 1
+    out = capsys.readouterr().out
+    assert "[MISSED] infill[1280x720]: fp32 network, median ms a frame <= 300: 301" in out
+    assert f"[MISSED] narvis[512x512] ({benchreport.NARVIS_FAST}): >= 4x {benchreport.NARVIS_GR}: 3.5x" in out
+
+
 def test_bench_raster_report(tmp_path, capsys):
     assert cli.main(["bench", "raster", "--report", str(_bench_json(tmp_path))]) == 0
     assert "scan[int32]" in capsys.readouterr().out

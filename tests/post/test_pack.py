@@ -106,6 +106,10 @@ def test_pack_large(queue):
     same(pack_rgbda(x, stride=16, queue=queue), ref.pack_rgbda(x, stride=16))
     rgba, hit, active = iso_inputs((721, 1279), seed=6)
     same(pack_iso(rgba, hit, active, stride=16, queue=queue), ref.pack_iso(rgba, hit, active, stride=16))
+    # unpack's work-items are row segments of ITEMS pixels: a width that is
+    # not a multiple of them, many rows
+    t = np.random.default_rng(7).uniform(-0.25, 1.25, (1, 4, 736, 1280)).astype(np.float32)
+    same(unpack_rgba8(t, 721, 1279, queue=queue), ref.unpack_rgba8(t, 721, 1279))
 
 
 @pytest.mark.parametrize("channels", [3, 4])

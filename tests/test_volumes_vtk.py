@@ -286,6 +286,38 @@ def test_vtk_errors_become_data_errors_and_stay_off_stderr(tmp_path, capfd):
     assert vtk.vtkLogger.GetCurrentVerbosityCutoff() == cutoff
 
 
+def test_vtk_reads_in_threads_put_vtks_settings_back(tmp_path):
+    """Reads in several threads at once (a Dask worker's threads): VTK's
+    global warning display and logger cutoff are what they were after the
+    last one ends, whatever the interleaving (each read saving and restoring
+    the globals itself could leave them off)."""
+    import threading
+
+    vtk = pytest.importorskip("vtk", reason="vtk is in the test extra")
+    data = np.arange(4 * 5 * 6, dtype=np.float32).reshape(4, 5, 6)
+    paths = []
+    for i, enc in enumerate(("ascii", "zlib", "binary", "zlib")):
+        paths.append(tmp_path / f"{i}.vti")
+        paths[-1].write_bytes(_vti(data, enc))
+    before = (vtk.vtkObject.GetGlobalWarningDisplay(), vtk.vtkLogger.GetCurrentVerbosityCutoff())
+    errors: list[BaseException] = []
+
+    def reads(p):
+        try:
+            for _ in range(15):
+                np.testing.assert_array_equal(read_volume(p).data, data)
+        except BaseException as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=reads, args=(p,)) for p in paths]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert not errors, errors
+    assert (vtk.vtkObject.GetGlobalWarningDisplay(), vtk.vtkLogger.GetCurrentVerbosityCutoff()) == before
+
+
 def test_missing_vtk_names_the_extra(tmp_path, monkeypatch):
     path = tmp_path / "a.vti"
     path.write_bytes(_vti(np.zeros((2, 2, 2), np.float32), "ascii"))

@@ -21,6 +21,7 @@ import base64
 import binascii
 import contextlib
 import re
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -54,22 +55,41 @@ def _vtk() -> Any:
     return vtkCommonCore, vtkIOLegacy, vtkIOXML, numpy_support
 
 
+# _quiet's hold on VTK's two globals: the reads in flight (any thread) and what
+# the globals were before the first of them
+_QUIET_LOCK = threading.Lock()
+_quiet_held: list[Any] = []  # [(warning display, logger cutoff)] while reads are in flight
+_quiet_count = 0
+
+
 @contextlib.contextmanager
 def _quiet(core: Any) -> Iterator[list[str]]:
     """VTK's messages kept off stderr for the duration: VTK's global warning
-    display and its logger's stderr output off, put back as they were after
-    (nothing process-wide stays changed); the readers' own errors reach the
-    list yielded through an ErrorEvent observer (:func:`_observe`)."""
-    shown = core.vtkObject.GetGlobalWarningDisplay()
-    # the logger's cutoff is its stderr verbosity where no callback is added (VTK's Python has none)
-    logged = core.vtkLogger.GetCurrentVerbosityCutoff()
-    core.vtkObject.GlobalWarningDisplayOff()
-    core.vtkLogger.SetStderrVerbosity(core.vtkLogger.VERBOSITY_OFF)
+    display and its logger's stderr output off, put back as they were when
+    the last read in flight ends (counted under a lock, so reads in several
+    threads cannot restore each other's settings or leave them off; other
+    VTK code in the process is quiet while a read runs); the readers' own
+    errors reach the list yielded through an ErrorEvent observer
+    (:func:`_observe`)."""
+    global _quiet_count
+    with _QUIET_LOCK:
+        if _quiet_count == 0:
+            # the logger's cutoff is its stderr verbosity where no callback is added (VTK's Python has none)
+            _quiet_held[:] = [
+                (core.vtkObject.GetGlobalWarningDisplay(), core.vtkLogger.GetCurrentVerbosityCutoff())
+            ]
+            core.vtkObject.GlobalWarningDisplayOff()
+            core.vtkLogger.SetStderrVerbosity(core.vtkLogger.VERBOSITY_OFF)
+        _quiet_count += 1
     try:
         yield []
     finally:
-        core.vtkLogger.SetStderrVerbosity(logged)
-        core.vtkObject.SetGlobalWarningDisplay(shown)
+        with _QUIET_LOCK:
+            _quiet_count -= 1
+            if _quiet_count == 0:
+                shown, logged = _quiet_held.pop()
+                core.vtkLogger.SetStderrVerbosity(logged)
+                core.vtkObject.SetGlobalWarningDisplay(shown)
 
 
 def _observe(core: Any, obj: Any, messages: list[str]) -> None:

@@ -89,7 +89,11 @@ def test_real_runs(tmp_path, capsys, monkeypatch):
     clvis's two-thread kernels about twice as much as numpy's one-thread
     anchor, which once hid a 2x slow-down in the normalised figure (+0.7 %)."""
     base, again, slow = (str(tmp_path / f"{n}.json") for n in ("base", "again", "slow"))
-    args = ["bench", "primitives", "--scale", "0.25", "--select", "histogram"]
+    # scan: its three peers make a steadier anchor than histogram's one (two
+    # runs of the same histogram differed by +24 % in both figures in 3 of 5
+    # tries on the CI machine's twin; scan's same-code runs stay within the
+    # gate, since it needs both figures beyond 15 %)
+    args = ["bench", "primitives", "--scale", "0.25", "--select", "scan and int32"]
     assert cli.main([*args, "--json", base]) == 0
     # the same code: on a machine shared with other jobs a run can still be
     # slower beyond 15 % in both figures now and then, so one more try (the
@@ -98,7 +102,7 @@ def test_real_runs(tmp_path, capsys, monkeypatch):
     if rc != 0:
         rc = cli.main([*args, "--json", again, "--compare", base, "--fail-on", "15%"])
     assert rc == 0
-    assert "histogram[256 bins]" in capsys.readouterr().out
+    assert "scan[int32]" in capsys.readouterr().out
     monkeypatch.setenv("CLVIS_BENCH_SLOWDOWN", "3")
     assert cli.main([*args, "--json", slow, "--compare", base, "--fail-on", "15%"]) == 1
     assert "REGRESSED" in capsys.readouterr().out

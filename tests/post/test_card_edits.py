@@ -34,13 +34,19 @@ def _edit(card, key, value):
     d[parts[-1]] = value
 
 
+def _edited_copy(tmp_path, name, key, value):
+    """The shipped model `name` copied into tmp_path with its card's `key` set
+    to `value`."""
+    for f in MODELS.glob(f"{name}*"):
+        shutil.copy(f, tmp_path / f.name)
+    card = json.loads((tmp_path / f"{name}.json").read_text())
+    _edit(card, key, value)
+    (tmp_path / f"{name}.json").write_text(json.dumps(card))
+
+
 @pytest.mark.parametrize("key,value", EDITS, ids=[f"{k}={v!r}"[:40] for k, v in EDITS])
 def test_edited_card_loads_and_runs_or_raises_a_clvis_error(tmp_path, key, value):
-    for f in MODELS.glob("lidar*"):
-        shutil.copy(f, tmp_path / f.name)
-    card = json.loads((tmp_path / "lidar.json").read_text())
-    _edit(card, key, value)
-    (tmp_path / "lidar.json").write_text(json.dumps(card))
+    _edited_copy(tmp_path, "lidar", key, value)
     try:
         net = post.load("lidar", directory=tmp_path)
         out = net(np.zeros((40, 24, 5), np.float32))
@@ -68,11 +74,7 @@ HEAD_EDITS = (
 
 @pytest.mark.parametrize("key,value", HEAD_EDITS, ids=[f"{k}={v!r}"[:40] for k, v in HEAD_EDITS])
 def test_edited_narvis_head_raises_a_clvis_error(tmp_path, key, value):
-    for f in MODELS.glob("narvis*"):
-        shutil.copy(f, tmp_path / f.name)
-    card = json.loads((tmp_path / "narvis.json").read_text())
-    _edit(card, key, value)
-    (tmp_path / "narvis.json").write_text(json.dumps(card))
+    _edited_copy(tmp_path, "narvis", key, value)
     with pytest.raises(ClvisError) as e:
         post.load("narvis", directory=tmp_path)
     assert str(tmp_path) in str(e.value), e.value

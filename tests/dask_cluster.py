@@ -2,6 +2,9 @@
 CLI's): two worker processes of one thread each, dashboards on free ports, a bound on
 every wait."""
 
+import contextlib
+import socket
+
 import pytest
 
 distributed = pytest.importorskip("distributed")  # the `distributed` extra; ./dev.sh test installs it
@@ -15,3 +18,16 @@ def local_cluster(**kw):
     return distributed.LocalCluster(
         threads_per_worker=1, processes=True, dashboard_address=":0", worker_dashboard_address=":0", **kw
     )
+
+
+@contextlib.contextmanager
+def silent_scheduler():
+    """A tcp:// address on this machine that accepts connections and never
+    speaks Dask (a scheduler that hangs); closed after."""
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)
+    try:
+        yield f"tcp://127.0.0.1:{srv.getsockname()[1]}"
+    finally:
+        srv.close()

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 import pytest
-from dask_cluster import TIMEOUT, distributed, local_cluster
+from dask_cluster import TIMEOUT, distributed, local_cluster, silent_scheduler
 from PIL import Image
 
 from clvis import cli, datasets
@@ -307,20 +307,13 @@ def test_a_refused_scheduler_fails_in_seconds(tiles, tmp_path, capsys):
 
 def test_a_silent_scheduler_fails_after_connect_timeout(tiles, tmp_path, capsys):
     """A port that accepts and never speaks Dask: --connect-timeout bounds the wait."""
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen(8)
-    port = srv.getsockname()[1]
-    try:
+    with silent_scheduler() as address:
         t0 = time.monotonic()
-        address = f"tcp://127.0.0.1:{port}"
         rc, out, err = _run(
             capsys, "render", tiles[0][0], "--scheduler", address, "--connect-timeout", 2, *SMALL
         )
         assert rc == 2 and f"scheduler {address}: not reached within connect_timeout=2 s" in err, err
         assert time.monotonic() - t0 < 20
-    finally:
-        srv.close()
 
 
 def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):

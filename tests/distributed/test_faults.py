@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 import pytest
-from dask_cluster import TIMEOUT, distributed, local_cluster
+from dask_cluster import TIMEOUT, distributed, local_cluster, silent_scheduler
 
 from clvis import Camera, datasets
 from clvis.distributed import DistributedIsoRenderer, DistributedRasterizer
@@ -193,16 +193,10 @@ def test_a_refused_scheduler_fails_in_seconds():
 def test_a_silent_scheduler_fails_after_connect_timeout():
     """A port that accepts and never speaks Dask: the Client's own connect
     waits connect_timeout, not the render timeout."""
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen(8)
-    port = srv.getsockname()[1]
-    try:
+    with silent_scheduler() as address:
         t0 = time.monotonic()
-        with pytest.raises(ClusterError, match=f"scheduler tcp://127.0.0.1:{port}: not reached within"):
-            DistributedRasterizer(["x.npz"], f"tcp://127.0.0.1:{port}", timeout=600, connect_timeout=2)
+        with pytest.raises(ClusterError, match=f"scheduler {address}: not reached within"):
+            DistributedRasterizer(["x.npz"], address, timeout=600, connect_timeout=2)
         assert time.monotonic() - t0 < 20
-    finally:
-        srv.close()
     with pytest.raises(ValueError, match="connect_timeout: expected a positive number"):
         DistributedRasterizer(["x.npz"], "tcp://127.0.0.1:1", connect_timeout=0)

@@ -55,8 +55,8 @@
  * bound), each axis stepping its coarse cell while t >= that bound), placing
  * the blocks only in the active coarse cell it stops in: the same t and the
  * same candidates as locating the block after every coarse skip, with
- * ~0-1 bound products a step instead of 6+ (macro_traverse's CPU -40 % on
- * PoCL, bench/results/iso-cpu.md, 2026-11-27 15:00).
+ * ~0-1 bound products a step instead of 6+ (macro_traverse's CPU -32-41 %
+ * on PoCL: bench/replay_iso_traverse.py, bench/results/iso-cpu.md).
  * Coarse skipping gives exactly the sequence of the fine grid alone.
  *
  * Tiles. A renderer may trace the image in tiles, ranges of pixels [p0, p0 + npix)

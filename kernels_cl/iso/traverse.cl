@@ -48,6 +48,15 @@
  * along the ray) and locate again; else the block's segment is
  * [t, t_out = min(t_exit, min_a T_a(exit bound))]; an active block is a
  * candidate (entered at t); t = t_out. The ray ends when t >= t_exit.
+ * The walk keeps each axis's exit-bound T_a of the current block and
+ * recomputes it only when that axis steps (the same float32 expression, so
+ * the same value as recomputing it every step), and leaves a run of inactive
+ * coarse cells by a coarse DDA of the same form (t = min_a T_a(coarse exit
+ * bound), each axis stepping its coarse cell while t >= that bound), placing
+ * the blocks only in the active coarse cell it stops in: the same t and the
+ * same candidates as locating the block after every coarse skip, with
+ * ~0-1 bound products a step instead of 6+ (macro_traverse's CPU -32-41 %
+ * on PoCL: bench/replay_iso_traverse.py, bench/results/iso-cpu.md).
  * Coarse skipping gives exactly the sequence of the fine grid alone.
  *
  * Tiles. A renderer may trace the image in tiles, ranges of pixels [p0, p0 + npix)
@@ -124,6 +133,15 @@ inline float block_bound_t(int b, int size, int n, float O, float inv, int entry
     return ((float)x - O) * inv;
 }
 
+/* One axis of the block DDA: while the block has a successor along the ray
+ * (b != last) and t is at or past its exit bound T (te), step to it and
+ * recompute its exit bound (the same T as block_bound_t's). */
+#define CLVIS_TRAV_ADVANCE(b, te, step, last, n, O, inv)              \
+    while ((b) != (last) && t >= (te)) {                              \
+        (b) += (step);                                                \
+        (te) = block_bound_t((b), 4, (n), (O), (inv), 0);             \
+    }
+
 kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float dz,
                            float ox, float oy, float oz, float isovalue,
                            global const float *cam, uint W, uint p0,
@@ -159,31 +177,81 @@ kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float 
                    && t < block_bound_t(b[a], 4, n[a], O[a], inv[a], 1))
                 b[a] -= step;
         }
+        /* The walk keeps, per axis, the block index, its step along the ray, the
+         * last block along the ray and the T of the block's exit bound (so each
+         * bound is computed once per block entered, not once per loop step). */
+        const float Ox = O[0], Oy = O[1], Oz = O[2], ix = inv[0], iy = inv[1], iz = inv[2];
+        const int sx = ix > 0.0f ? 1 : -1, sy = iy > 0.0f ? 1 : -1, sz = iz > 0.0f ? 1 : -1;
+        const int lx = sx > 0 ? ncb[0] - 1 : 0, ly = sy > 0 ? ncb[1] - 1 : 0, lz = sz > 0 ? ncb[2] - 1 : 0;
+        int bx = b[0], by = b[1], bz = b[2];
+        const int mx = lx >> 2, my = ly >> 2, mz = lz >> 2;   /* the coarse cells of the last blocks */
+        float ex = block_bound_t(bx, 4, n[0], Ox, ix, 0), ey = block_bound_t(by, 4, n[1], Oy, iy, 0),
+              ez = block_bound_t(bz, 4, n[2], Oz, iz, 0);
         for (;;) {
             if (!(t < t_exit))
                 break;
             /* forward while t is at or past the block's exit along a (stays in range: t < t_exit) */
-            for (int a = 0; a < 3; ++a) {
-                int step = inv[a] > 0.0f ? 1 : -1;
-                while (b[a] + step >= 0 && b[a] + step < ncb[a]
-                       && t >= block_bound_t(b[a], 4, n[a], O[a], inv[a], 0))
-                    b[a] += step;
-            }
-            const int c[3] = {b[0] >> 2, b[1] >> 2, b[2] >> 2};
-            const float2 cr = coarse[c[0] + nc[0] * (c[1] + nc[1] * c[2])];
+            CLVIS_TRAV_ADVANCE(bx, ex, sx, lx, n[0], Ox, ix);
+            CLVIS_TRAV_ADVANCE(by, ey, sy, ly, n[1], Oy, iy);
+            CLVIS_TRAV_ADVANCE(bz, ez, sz, lz, n[2], Oz, iz);
+            const int cx = bx >> 2, cy = by >> 2, cz = bz >> 2;
+            const float2 cr = coarse[cx + nc[0] * (cy + nc[1] * cz)];
             if (!(cr.x <= isovalue && isovalue <= cr.y)) {
-                float tc = INFINITY;
-                for (int a = 0; a < 3; ++a)
-                    tc = fmin(tc, block_bound_t(c[a], 16, n[a], O[a], inv[a], 0));
-                if (!(tc > t))   /* cannot happen (the block's exit is > t); never loop */
+                /* The coarse walk: per axis the coarse cell and the T of its exit bound (the
+                 * exit bound of its last block along the ray, the same integer x, so the
+                 * same T), stepped like the blocks: t = the nearest coarse exit, the cells
+                 * it passes, until an active coarse cell or t_exit. The coarse cell at t
+                 * is the one holding the block at t, so this is the fine walk's sequence
+                 * of t without locating the blocks inside each inactive coarse cell. */
+                int kx = cx, ky = cy, kz = cz, stuck = 0;
+                float fx = block_bound_t(kx, 16, n[0], Ox, ix, 0), fy = block_bound_t(ky, 16, n[1], Oy, iy, 0),
+                      fz = block_bound_t(kz, 16, n[2], Oz, iz, 0);
+                for (;;) {
+                    const float tc = fmin(fmin(fmin(INFINITY, fx), fy), fz);
+                    if (!(tc > t)) {   /* cannot happen (the block's exit is > t); never loop */
+                        stuck = 1;
+                        break;
+                    }
+                    t = tc;
+                    if (!(t < t_exit))
+                        break;
+                    while (kx != mx && t >= fx) {
+                        kx += sx;
+                        fx = block_bound_t(kx, 16, n[0], Ox, ix, 0);
+                    }
+                    while (ky != my && t >= fy) {
+                        ky += sy;
+                        fy = block_bound_t(ky, 16, n[1], Oy, iy, 0);
+                    }
+                    while (kz != mz && t >= fz) {
+                        kz += sz;
+                        fz = block_bound_t(kz, 16, n[2], Oz, iz, 0);
+                    }
+                    const float2 kr = coarse[kx + nc[0] * (ky + nc[1] * kz)];
+                    if (kr.x <= isovalue && isovalue <= kr.y)
+                        break;
+                }
+                if (stuck)
                     break;
-                t = tc;
+                /* an axis that changed coarse cell restarts at that cell's first block along
+                 * the ray (its blocks before it end at or before the coarse entry <= t); the
+                 * forward moves at the top of the loop then find the block at t */
+                if (kx != cx) {
+                    bx = sx > 0 ? 4 * kx : min(4 * kx + 3, ncb[0] - 1);
+                    ex = block_bound_t(bx, 4, n[0], Ox, ix, 0);
+                }
+                if (ky != cy) {
+                    by = sy > 0 ? 4 * ky : min(4 * ky + 3, ncb[1] - 1);
+                    ey = block_bound_t(by, 4, n[1], Oy, iy, 0);
+                }
+                if (kz != cz) {
+                    bz = sz > 0 ? 4 * kz : min(4 * kz + 3, ncb[2] - 1);
+                    ez = block_bound_t(bz, 4, n[2], Oz, iz, 0);
+                }
                 continue;
             }
-            float t_out = t_exit;
-            for (int a = 0; a < 3; ++a)
-                t_out = fmin(t_out, block_bound_t(b[a], 4, n[a], O[a], inv[a], 0));
-            const uint id = (uint)b[0] + (uint)nb[0] * ((uint)b[1] + (uint)nb[1] * (uint)b[2]);
+            const float t_out = fmin(fmin(fmin(t_exit, ex), ey), ez);
+            const uint id = (uint)bx + (uint)nb[0] * ((uint)by + (uint)nb[1] * (uint)bz);
             const float2 fr = fine[id];
             if (fr.x <= isovalue && isovalue <= fr.y) {
                 cand_block[i * n_spec + found] = id;

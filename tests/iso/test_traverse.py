@@ -244,6 +244,46 @@ def test_axis_parallel_rays_on_grid_lines(queue, view):
     assert sum(map(len, seqs.values())) > 50
 
 
+@pytest.mark.parametrize("view", [(1.0, 1.0, 1.0), (-1.0, -1.0, -1.0), (1.0, 0.0, 0.0), (0.0, -1.0, 0.0)])
+def test_runs_of_inactive_coarse_cells(queue, view):
+    """The coarse walk: a volume active only near two opposite corners, so the
+    rays cross runs of inactive 16^3 coarse cells, some along coarse faces,
+    edges or through corners (the ortho rays lie on sample lines one sample
+    or two apart; the diagonal view's central ray runs through (32, 32, 32)), and
+    the last coarse cell along each axis is partial (n = 69, 66, 70 samples:
+    18, 17, 18 blocks with cells). Against the plain fine DDA and fine-only."""
+    shape = (70, 66, 69)
+    zz, yy, xx = np.meshgrid(*(np.arange(k) for k in shape), indexing="ij")
+    near = np.sqrt((xx - 5.3) ** 2 + (yy - 4.6) ** 2 + (zz - 6.1) ** 2)
+    far = np.sqrt((xx - 62.4) ** 2 + (yy - 60.2) ** 2 + (zz - 63.7) ** 2)
+    vol = np.minimum(near, far).astype(np.float32)
+    z = zfp.compress(vol, 32)
+    fine, coarse = _grids(queue, z)
+    inactive = ~((coarse[..., 0] <= 4.0) & (4.0 <= coarse[..., 1]))
+    assert inactive.sum() >= 100  # of 5 x 5 x 5: long runs to walk
+    diagonal = np.count_nonzero(view) == 3
+    view = np.array(view) / np.linalg.norm(view)
+    up = (0, 0, 1) if abs(view[2]) < 0.9 else (0, 1, 0)
+    # diagonal: rays 1 sample apart around (32, 32, 32); along an axis: rays on
+    # the even sample lines -2 .. 68 (coarse faces and edges at 16, 32, 48, 64)
+    w, h, height, target = (40, 36, 36.0, 32.0) if diagonal else (36, 36, 72.0, 33.0)
+    target = np.full(3, target)
+    cam = Camera.ortho(target - 150.0 * view, target, up, height=height, aspect=w / h, near=0.5, far=400)
+    if not diagonal:
+        o, _ = camera_rays(ray_buffer(cam, w, h), w, h)
+        across = [a for a in range(3) if view[a] == 0]
+        assert (o[:, across] == np.round(o[:, across])).all() and (o[:, across] % 2 == 0).all()
+    s = Scene(queue, shape, (1, 1, 1), (0, 0, 0), fine, coarse, cam, w, h, 4.0)
+    s2 = Scene(queue, shape, (1, 1, 1), (0, 0, 0), fine, _grids(queue, z, no_coarse=True)[1], cam, w, h, 4.0)
+    plain = _plain_dda(s)
+    for n_spec in (1, 64):
+        seqs, rounds = s.passes(n_spec)
+        seqs2, rounds2 = s2.passes(n_spec)
+        assert seqs == seqs2 and rounds == rounds2
+        _check_plain(seqs, plain)
+    assert sum(map(len, seqs.values())) > 50
+
+
 def test_rays_that_miss_the_box(queue):
     cam = Camera.look_at((3.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0, 0, 1), fov_y=80, near=0.1, far=20)
     s = _scene(queue, "marschner_lobb", 17, cam, 16, 12, 0.5)

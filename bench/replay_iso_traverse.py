@@ -1,0 +1,199 @@
+"""Replay one iso frame's macro_traverse launches on their captured inputs with
+one or more versions of kernels_cl/iso/traverse.cl, and print each version's
+per-launch process CPU time (min of --reps) and whether its outputs (candidate
+blocks, candidate t, resume t) are bit for bit those of the first version.
+
+    python bench/replay_iso_traverse.py [--n 256] [--reps 5] [--size 512x512] [SRC.cl ...]
+
+SRC defaults to this tree's traverse.cl; give older versions as files
+(`git show REV:kernels_cl/iso/traverse.cl > /tmp/old.cl`), alternated to
+average out the machine's drift. bench_iso's scene (turbulence N^3, ZFP rate
+8, to 100 %). A measuring script, not a test: it wraps
+clvis.iso.render.macro_traverse for one frame to copy its inputs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyopencl as cl
+
+import clvis.iso.render as iso_render
+from clvis import Camera, datasets, iso, zfp
+from clvis.runtime.dispatch import EXACT_FP
+from clvis.runtime.program import build_options
+
+ROOT = Path(__file__).resolve().parent.parent
+_WG = 16  # the cpu profile's local size (clvis.iso.traverse.PROFILES)
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def capture(n: int, w: int, h: int) -> tuple[cl.CommandQueue, list[dict[str, Any]]]:
+    """One frame; the host copies of each macro_traverse launch's inputs."""
+    caps: list[dict[str, Any]] = []
+    orig = iso_render.macro_traverse
+
+    def wrap(
+        q: cl.CommandQueue,
+        shape: Any,
+        spacing: Any,
+        origin: Any,
+        isov: float,
+        cam: Any,
+        width: int,
+        fine: Any,
+        coarse: Any,
+        active: Any,
+        count: Any,
+        max_rays: int,
+        ray_t: Any,
+        n_spec: int,
+        cb: Any,
+        ct: Any,
+        **kw: Any,
+    ) -> Any:
+        q.finish()
+        caps.append(
+            dict(
+                shape=shape,
+                spacing=spacing,
+                origin=origin,
+                iso=isov,
+                cam=cam.get(),
+                w=width,
+                fine=fine.get(),
+                coarse=coarse.get(),
+                active=active.get(),
+                count=count.get(),
+                max_rays=max_rays,
+                ray_t=ray_t.get(),
+                n_spec=n_spec,
+                p0=kw.get("first_pixel", 0),
+            )
+        )
+        return orig(
+            q,
+            shape,
+            spacing,
+            origin,
+            isov,
+            cam,
+            width,
+            fine,
+            coarse,
+            active,
+            count,
+            max_rays,
+            ray_t,
+            n_spec,
+            cb,
+            ct,
+            **kw,
+        )
+
+    d = datasets.turbulence(n)
+    zv = zfp.compress(d["volume"], 8)
+    r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"])
+    lo = np.asarray(d["origin"], np.float64)
+    hi = lo + (np.array(d["volume"].shape[::-1]) - 1) * np.asarray(d["spacing"][::-1])
+    cam = Camera.fit(lo, hi, direction=(-0.6, 1.0, -0.45), aspect=w / h, fov_y=35)
+    iso_render.macro_traverse = wrap  # type: ignore[assignment]
+    try:
+        r.render(cam, w, h, 0.5)
+    finally:
+        iso_render.macro_traverse = orig
+    return r.queue, caps
+
+
+def run(q: cl.CommandQueue, src: str, caps: list[dict[str, Any]], reps: int) -> tuple[list[float], list[Any]]:
+    ctx = q.context
+    k = cl.Kernel(cl.Program(ctx, src).build(options=build_options(q.device, {}, EXACT_FP)), "macro_traverse")
+    mf = cl.mem_flags
+
+    def buf(a: np.ndarray) -> cl.Buffer:
+        return cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(a))
+
+    cpus, outs = [], []
+    for c in caps:
+        fine, coarse, camb, act, cnt = (buf(c[x]) for x in ("fine", "coarse", "cam", "active", "count"))
+        m = c["max_rays"] * c["n_spec"]
+        cb, ct = cl.Buffer(ctx, mf.READ_WRITE, 4 * m), cl.Buffer(ctx, mf.READ_WRITE, 4 * m)
+        nz, ny, nx = c["shape"]
+        dz, dy, dx = c["spacing"]
+        ox, oy, oz = c["origin"]
+        gs = (c["max_rays"] + _WG - 1) // _WG * _WG
+        best = float("inf")
+        for _ in range(reps):
+            rt = buf(c["ray_t"])
+            k.set_args(
+                *(np.uint32(v) for v in (nx, ny, nz)),
+                *(np.float32(v) for v in (dx, dy, dz, ox, oy, oz)),
+                np.float32(c["iso"]),
+                camb,
+                np.uint32(c["w"]),
+                np.uint32(c["p0"]),
+                fine,
+                coarse,
+                act,
+                cnt,
+                rt,
+                np.uint32(c["n_spec"]),
+                cb,
+                ct,
+            )
+            q.finish()
+            c0 = _cpu()
+            cl.enqueue_nd_range_kernel(q, k, (gs,), (_WG,)).wait()
+            best = min(best, _cpu() - c0)
+        o = (np.empty(m, np.uint32), np.empty(m, np.uint32), np.empty(c["ray_t"].size, np.uint32))
+        for host, dev in zip(o, (cb, ct, rt), strict=True):
+            cl.enqueue_copy(q, host, dev)
+        q.finish()
+        cpus.append(best)
+        outs.append(o)
+    return cpus, outs
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("src", nargs="*", help="traverse.cl versions (default: this tree's)")
+    ap.add_argument("--n", type=int, default=256)
+    ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--size", default="512x512")
+    a = ap.parse_args()
+    w, h = (int(v) for v in a.size.lower().split("x"))
+    srcs = a.src or [str(ROOT / "kernels_cl/iso/traverse.cl")]
+    t0 = time.perf_counter()
+    q, caps = capture(a.n, w, h)
+    launches = [(int(c["count"][0]), c["n_spec"]) for c in caps]
+    scene_s = time.perf_counter() - t0
+    print(f"{q.device.name}: {len(caps)} launches (rays, n_spec) {launches}, scene {scene_s:.1f} s")
+    ref = None
+    for path in srcs:
+        cpus, outs = run(q, Path(path).read_text(), caps, a.reps)
+        if ref is None:
+            ref, same = outs, "(the reference)"
+        else:
+            same = str(
+                all(
+                    np.array_equal(x, y)
+                    for o, r in zip(outs, ref, strict=True)
+                    for x, y in zip(o, r, strict=True)
+                )
+            )
+        per = ", ".join(f"{c * 1e3:.1f}" for c in cpus)
+        total = sum(cpus) * 1e3
+        print(f"{path}: CPU per launch (min of {a.reps}) {per} ms, sum {total:.1f} ms; identical {same}")
+
+
+if __name__ == "__main__":
+    main()

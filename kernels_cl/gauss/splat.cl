@@ -289,7 +289,7 @@ kernel void splat_render8(global const clvis_gaussian *recs, global const uint *
         float dy = s[1] - fy;
         float8 q8 = (s[2] * dx * dx + s[4] * dy * dy) + 2.0f * s[3] * dx * dy;
         int8 in8 = (q8 <= SPLAT_Q_MAX) & on8;
-        if (!any(in8))
+        if (!clvis_any8(in8))
             continue;
         global const clvis_gaussian *g = recs + id;
         uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);

@@ -547,7 +547,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
         }
         for (uint i = range.x; i < range.y && live > 0; ++i) {
             float dm = as_float(clvis_key_f32_inverse((uint)keys[i]));
-            if (any(vload8(0, front) < dm)) {
+            if (clvis_any8(vload8(0, front) < dm)) {
                 for (int l = 0; l < 8; ++l) {
                     if (!(front[l] < dm))
                         continue;
@@ -581,7 +581,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
             float8 p0 = op0 + t8 * dp0, p1 = op1 + t8 * dp1, p2 = op2 + t8 * dp2;
             float8 m28 = (p0 * p0 + p1 * p1) + p2 * p2;
             int8 hit = m28 <= cutoff2;
-            if (!any(hit))
+            if (!clvis_any8(hit))
                 continue;
             /* one transfer-function entry a candidate; alphas lane by lane with
              * the scalar functions (the same bits as tile_render and march.cl) */

@@ -30,6 +30,9 @@
  *       work-item gid, a work-item per pixel of ts x ts tiles (tile tile0 + gid /
  *       ts^2, pixel gid % ts^2 of it, row-major; tile index (ty - ty0) * tiles_x
  *       + tx): its tile, pixel (px, py) and row within the band of tiles
+ *   int clvis_any8(v): any(v) of an int8 (the sign bit of the lanes' OR): PoCL
+ *       calls its any() out of line, a call, branches and a vzeroupper a
+ *       candidate in the 8-lane renderers (5 % of tile_render8's time)
  *
  * clvis.reference.gauss.tiles and clvis.reference.gauss.splat repeat them.
  */
@@ -181,6 +184,13 @@ inline uint clvis_tile_row8(uint gid, uint W, uint ty0, uint tile0, uint ts, uin
     *row = (tile / tiles_x) * ts + l8 / (ts / 8);
     *py = ty0 * ts + *row;
     return tile;
+}
+
+inline int clvis_any8(int8 v)
+{
+    int4 a = v.lo | v.hi;
+    int2 b = a.lo | a.hi;
+    return (b.x | b.y) < 0;
 }
 
 #endif /* CLVIS_GAUSS_TILES_H */

@@ -492,7 +492,7 @@ inline float pend_t(ulong k)
     do {                                                                                              \
         if (kn[l] > 0 && cd[l] > 0.0f) {                                                              \
             float h_ = pend_t(pk[l][hd[l]]) * cd[l];                                                  \
-            front[l] = (h_ + d0[l]) + 1e-5f * (fabs(h_) + fabs(d0[l]));                               \
+            front[l] = (h_ + d0[l]) + 1e-5f * (clvis_fabs(h_) + ad0[l]);                              \
         } else                                                                                        \
             front[l] = INFINITY;                                                                      \
     } while (0)
@@ -509,7 +509,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
     if (px0 >= W || row >= rows || py >= H)
         return;
 
-    float o[8][3], d[8][3], cd[8], d0[8];
+    float o[8][3], d[8][3], cd[8], d0[8], ad0[8];
     float T[8], cr[8], cg[8], cb[8], z[8], front[8];
     ulong last[8], ceil_k[8];   /* the last key composited; the round's ceiling */
     uint hits[8], nround[8];
@@ -526,6 +526,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
         clvis_camera_ray(cam, px, py, o[l], d[l]);
         cd[l] = clvis_dot3(cam[18], cam[19], cam[20], d[l][0], d[l][1], d[l][2]);
         d0[l] = clvis_dot3(cam[18], cam[19], cam[20], o[l][0], o[l][1], o[l][2]) + cam[21];
+        ad0[l] = fabs(d0[l]);
         lox[l] = o[l][0]; loy[l] = o[l][1]; loz[l] = o[l][2];
         ldx[l] = d[l][0]; ldy[l] = d[l][1]; ldz[l] = d[l][2];
         T[l] = 1.0f; cr[l] = cg[l] = cb[l] = 0.0f; z[l] = INFINITY;
@@ -577,7 +578,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
             float8 a8 = (dp0 * dp0 + dp1 * dp1) + dp2 * dp2;
             float8 b8 = (op0 * dp0 + op1 * dp1) + op2 * dp2;
             float8 ts8 = -b8 / a8;
-            float8 t8 = fmax(ts8, 0.0f);
+            float8 t8 = ts8 > 0.0f ? ts8 : 0.0f;   /* fmax(ts8, 0) (a NaN gives 0), without a call */
             float8 p0 = op0 + t8 * dp0, p1 = op1 + t8 * dp1, p2 = op2 + t8 * dp2;
             float8 m28 = (p0 * p0 + p1 * p1) + p2 * p2;
             int8 hit = m28 <= cutoff2;

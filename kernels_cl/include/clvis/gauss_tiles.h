@@ -33,6 +33,7 @@
  *   int clvis_any8(v): any(v) of an int8 (the sign bit of the lanes' OR): PoCL
  *       calls its any() out of line, a call, branches and a vzeroupper a
  *       candidate in the 8-lane renderers (5 % of tile_render8's time)
+ *   float clvis_fabs(x): fabs(x) as a bit mask, inline
  *
  * clvis.reference.gauss.tiles and clvis.reference.gauss.splat repeat them.
  */
@@ -184,6 +185,12 @@ inline uint clvis_tile_row8(uint gid, uint W, uint ty0, uint tile0, uint ts, uin
     *row = (tile / tiles_x) * ts + l8 / (ts / 8);
     *py = ty0 * ts + *row;
     return tile;
+}
+
+/* fabs(x) as a bit mask, without a call (PoCL's is out of line) */
+inline float clvis_fabs(float x)
+{
+    return as_float(as_uint(x) & 0x7FFFFFFFu);
 }
 
 inline int clvis_any8(int8 v)

@@ -161,7 +161,8 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
         float euu = nuu / f2 + EPS2, evv = nvv / f2 + EPS2, euv = nuv / f2;
         float cu = (mu * mw - S[0][2]) / fw, cv = (mv * mw - S[1][2]) / fw;
         float det = euu * evv - euv * euv;
-        if (euu > 0.0f && evv > 0.0f && det > 0.0f && isfinite(det) && isfinite(cu) && isfinite(cv)) {
+        if (euu > 0.0f && evv > 0.0f && det > 0.0f && clvis_isfinite(det) && clvis_isfinite(cu)
+            && clvis_isfinite(cv)) {
             clvis_ellipse_set(&f->e, cu, cv, euu, evv, euv, det);
             clvis_ellipse_rows_set(&f->e, &f->r);
             f->exact = 1;
@@ -170,7 +171,7 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
             uhi = cu + hu;
             vlo = cv - hv;
             vhi = cv + hv;
-        } else if (!(isfinite(cu) && isfinite(cv))) {
+        } else if (!(clvis_isfinite(cu) && clvis_isfinite(cv))) {
             /* keep the whole image */
         }
     } else if (mw <= 0.0f && fw > 1e-6f * (mw * mw)) {
@@ -197,8 +198,8 @@ inline int tile_row(const tile_footprint *f, int ty, uint W, uint H, int *c0, in
     int a, b;
     if (!clvis_ellipse_row(&f->r, ty, W, H, TS, &a, &b))
         return 0;
-    *c0 = max(a, f->tx0);
-    *c1 = min(b, f->tx1);
+    *c0 = clvis_imax(a, f->tx0);
+    *c1 = clvis_imin(b, f->tx1);
     return *c0 <= *c1;
 }
 
@@ -211,7 +212,7 @@ kernel void tile_count(global const clvis_gaussian *recs, uint n, global const f
     tile_footprint f;
     ulong cnt = 0;
     if (footprint(recs + i, proj, near, cutoff, W, H, &f)) {
-        int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
+        int y0 = clvis_imax(f.ty0, (int)ty0), y1 = clvis_imin(f.ty1, (int)ty1 - 1);
         for (int ty = y0; ty <= y1; ++ty) {
             int c0, c1;
             if (tile_row(&f, ty, W, H, &c0, &c1))
@@ -252,7 +253,7 @@ inline float tile_depth(const tile_footprint *f, float m3, float fsf, float c, f
     float h = (fdlo > 0.0f || fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : 0.0f;
     float g = fmax(fsf - h, 0.0f) + 1e-5f * fsf;
     float lo = (m3 - c * sqrt(g)) - sd;
-    return isfinite(lo) ? fmax(lo, f->dmin) : f->dmin;
+    return clvis_isfinite(lo) ? fmax(lo, f->dmin) : f->dmin;
 }
 
 kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
@@ -288,7 +289,7 @@ kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const fl
     float fsf = clvis_dot3(e[0], e[1], e[2], e[0], e[1], e[2]);
     uint tiles_x = (W + TS - 1) / TS;
     ulong at = offsets[i];
-    int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
+    int y0 = clvis_imax(f.ty0, (int)ty0), y1 = clvis_imin(f.ty1, (int)ty1 - 1);
     for (int ty = y0; ty <= y1; ++ty) {
         int c0, c1;
         if (!tile_row(&f, ty, W, H, &c0, &c1))

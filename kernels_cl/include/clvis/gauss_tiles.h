@@ -47,10 +47,9 @@
 
 #define CLVIS_TILE_PAD 0.05f
 
-/* Builtins PoCL calls out of line (min, max, fabs, isfinite, any), where
- * they run once or more a Gaussian or a candidate: by comparison or bit
- * mask, the same results */
-/* fabs(x) as a bit mask, without a call (PoCL's is out of line) */
+/* Builtins PoCL calls out of line (fabs, any, min, max, isfinite), where
+ * they run once or more a Gaussian or a candidate: by bit mask or
+ * comparison, the same results */
 inline float clvis_fabs(float x)
 {
     return as_float(as_uint(x) & 0x7FFFFFFFu);

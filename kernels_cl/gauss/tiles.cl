@@ -161,7 +161,8 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
         float euu = nuu / f2 + EPS2, evv = nvv / f2 + EPS2, euv = nuv / f2;
         float cu = (mu * mw - S[0][2]) / fw, cv = (mv * mw - S[1][2]) / fw;
         float det = euu * evv - euv * euv;
-        if (euu > 0.0f && evv > 0.0f && det > 0.0f && isfinite(det) && isfinite(cu) && isfinite(cv)) {
+        if (euu > 0.0f && evv > 0.0f && det > 0.0f && clvis_isfinite(det) && clvis_isfinite(cu)
+            && clvis_isfinite(cv)) {
             clvis_ellipse_set(&f->e, cu, cv, euu, evv, euv, det);
             clvis_ellipse_rows_set(&f->e, &f->r);
             f->exact = 1;
@@ -170,7 +171,7 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
             uhi = cu + hu;
             vlo = cv - hv;
             vhi = cv + hv;
-        } else if (!(isfinite(cu) && isfinite(cv))) {
+        } else if (!(clvis_isfinite(cu) && clvis_isfinite(cv))) {
             /* keep the whole image */
         }
     } else if (mw <= 0.0f && fw > 1e-6f * (mw * mw)) {
@@ -197,8 +198,8 @@ inline int tile_row(const tile_footprint *f, int ty, uint W, uint H, int *c0, in
     int a, b;
     if (!clvis_ellipse_row(&f->r, ty, W, H, TS, &a, &b))
         return 0;
-    *c0 = max(a, f->tx0);
-    *c1 = min(b, f->tx1);
+    *c0 = clvis_imax(a, f->tx0);
+    *c1 = clvis_imin(b, f->tx1);
     return *c0 <= *c1;
 }
 
@@ -211,7 +212,7 @@ kernel void tile_count(global const clvis_gaussian *recs, uint n, global const f
     tile_footprint f;
     ulong cnt = 0;
     if (footprint(recs + i, proj, near, cutoff, W, H, &f)) {
-        int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
+        int y0 = clvis_imax(f.ty0, (int)ty0), y1 = clvis_imin(f.ty1, (int)ty1 - 1);
         for (int ty = y0; ty <= y1; ++ty) {
             int c0, c1;
             if (tile_row(&f, ty, W, H, &c0, &c1))
@@ -252,7 +253,7 @@ inline float tile_depth(const tile_footprint *f, float m3, float fsf, float c, f
     float h = (fdlo > 0.0f || fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : 0.0f;
     float g = fmax(fsf - h, 0.0f) + 1e-5f * fsf;
     float lo = (m3 - c * sqrt(g)) - sd;
-    return isfinite(lo) ? fmax(lo, f->dmin) : f->dmin;
+    return clvis_isfinite(lo) ? fmax(lo, f->dmin) : f->dmin;
 }
 
 kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
@@ -288,7 +289,7 @@ kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const fl
     float fsf = clvis_dot3(e[0], e[1], e[2], e[0], e[1], e[2]);
     uint tiles_x = (W + TS - 1) / TS;
     ulong at = offsets[i];
-    int y0 = max(f.ty0, (int)ty0), y1 = min(f.ty1, (int)ty1 - 1);
+    int y0 = clvis_imax(f.ty0, (int)ty0), y1 = clvis_imin(f.ty1, (int)ty1 - 1);
     for (int ty = y0; ty <= y1; ++ty) {
         int c0, c1;
         if (!tile_row(&f, ty, W, H, &c0, &c1))
@@ -492,7 +493,7 @@ inline float pend_t(ulong k)
     do {                                                                                              \
         if (kn[l] > 0 && cd[l] > 0.0f) {                                                              \
             float h_ = pend_t(pk[l][hd[l]]) * cd[l];                                                  \
-            front[l] = (h_ + d0[l]) + 1e-5f * (fabs(h_) + fabs(d0[l]));                               \
+            front[l] = (h_ + d0[l]) + 1e-5f * (clvis_fabs(h_) + ad0[l]);                              \
         } else                                                                                        \
             front[l] = INFINITY;                                                                      \
     } while (0)
@@ -509,7 +510,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
     if (px0 >= W || row >= rows || py >= H)
         return;
 
-    float o[8][3], d[8][3], cd[8], d0[8];
+    float o[8][3], d[8][3], cd[8], d0[8], ad0[8];
     float T[8], cr[8], cg[8], cb[8], z[8], front[8];
     ulong last[8], ceil_k[8];   /* the last key composited; the round's ceiling */
     uint hits[8], nround[8];
@@ -526,6 +527,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
         clvis_camera_ray(cam, px, py, o[l], d[l]);
         cd[l] = clvis_dot3(cam[18], cam[19], cam[20], d[l][0], d[l][1], d[l][2]);
         d0[l] = clvis_dot3(cam[18], cam[19], cam[20], o[l][0], o[l][1], o[l][2]) + cam[21];
+        ad0[l] = fabs(d0[l]);
         lox[l] = o[l][0]; loy[l] = o[l][1]; loz[l] = o[l][2];
         ldx[l] = d[l][0]; ldy[l] = d[l][1]; ldz[l] = d[l][2];
         T[l] = 1.0f; cr[l] = cg[l] = cb[l] = 0.0f; z[l] = INFINITY;
@@ -547,7 +549,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
         }
         for (uint i = range.x; i < range.y && live > 0; ++i) {
             float dm = as_float(clvis_key_f32_inverse((uint)keys[i]));
-            if (any(vload8(0, front) < dm)) {
+            if (clvis_any8(vload8(0, front) < dm)) {
                 for (int l = 0; l < 8; ++l) {
                     if (!(front[l] < dm))
                         continue;
@@ -577,11 +579,11 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
             float8 a8 = (dp0 * dp0 + dp1 * dp1) + dp2 * dp2;
             float8 b8 = (op0 * dp0 + op1 * dp1) + op2 * dp2;
             float8 ts8 = -b8 / a8;
-            float8 t8 = fmax(ts8, 0.0f);
+            float8 t8 = ts8 > 0.0f ? ts8 : 0.0f;   /* fmax(ts8, 0) (a NaN gives 0), without a call */
             float8 p0 = op0 + t8 * dp0, p1 = op1 + t8 * dp1, p2 = op2 + t8 * dp2;
             float8 m28 = (p0 * p0 + p1 * p1) + p2 * p2;
             int8 hit = m28 <= cutoff2;
-            if (!any(hit))
+            if (!clvis_any8(hit))
                 continue;
             /* one transfer-function entry a candidate; alphas lane by lane with
              * the scalar functions (the same bits as tile_render and march.cl) */

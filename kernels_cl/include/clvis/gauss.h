@@ -83,7 +83,8 @@ inline uint clvis_gauss_tf_index(float value, float tf_min, float tf_scale, uint
 
 inline float clvis_gauss_alpha_max_response(float opac, float m2)
 {
-    return fmin(0.99f, opac * exp(-0.5f * m2));
+    float a = opac * exp(-0.5f * m2);
+    return a < 0.99f ? a : 0.99f;   /* fmin(0.99, a) (a NaN gives 0.99), without a call */
 }
 
 inline float clvis_gauss_alpha_absorption(float opac, float density, float ts, float a,

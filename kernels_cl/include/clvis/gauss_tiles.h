@@ -30,6 +30,12 @@
  *       work-item gid, a work-item per pixel of ts x ts tiles (tile tile0 + gid /
  *       ts^2, pixel gid % ts^2 of it, row-major; tile index (ty - ty0) * tiles_x
  *       + tx): its tile, pixel (px, py) and row within the band of tiles
+ *   clvis_fabs, clvis_imin, clvis_imax, clvis_isfinite, clvis_any8 (of an int8),
+ *       clvis_lo, clvis_hi: fabs, min, max, isfinite, any, fmin, fmax inline, by
+ *       comparison or bit mask (PoCL calls its builtins out of line: a call,
+ *       branches and for any() a vzeroupper each; the same results where
+ *       a NaN can only be the first argument of clvis_lo / clvis_hi: it gives
+ *       the second, as fmin / fmax)
  *
  * clvis.reference.gauss.tiles and clvis.reference.gauss.splat repeat them.
  */
@@ -40,6 +46,37 @@
 #include "clvis/gauss.h"
 
 #define CLVIS_TILE_PAD 0.05f
+
+/* Builtins PoCL calls out of line (fabs, any, min, max, isfinite), where
+ * they run once or more a Gaussian or a candidate: by bit mask or
+ * comparison, the same results */
+inline float clvis_fabs(float x)
+{
+    return as_float(as_uint(x) & 0x7FFFFFFFu);
+}
+
+inline int clvis_any8(int8 v)
+{
+    int4 a = v.lo | v.hi;
+    int2 b = a.lo | a.hi;
+    return (b.x | b.y) < 0;
+}
+
+inline int clvis_imin(int a, int b)
+{
+    return a < b ? a : b;
+}
+
+inline int clvis_imax(int a, int b)
+{
+    return a > b ? a : b;
+}
+
+/* isfinite(x) as a test of the exponent bits, without a call */
+inline int clvis_isfinite(float x)
+{
+    return (as_uint(x) & 0x7F800000u) != 0x7F800000u;
+}
 
 inline float clvis_row4(global const float *r, float x, float y, float z)
 {
@@ -72,7 +109,7 @@ inline void clvis_ellipse_set(clvis_ellipse *e, float cu, float cv, float euu, f
     e->a01 = -euv;
     e->a11 = euu;
     e->det = det;
-    e->pad = CLVIS_TILE_PAD + 1e-5f * (fabs(cu) + fabs(cv));
+    e->pad = CLVIS_TILE_PAD + 1e-5f * (clvis_fabs(cu) + clvis_fabs(cv));
 }
 
 /* what clvis_ellipse_row needs of an ellipse, computed once */
@@ -115,7 +152,7 @@ inline int clvis_ellipse_row(const clvis_ellipse_rows *e, int ty, uint W, uint H
 {
     /* the strip of the row's pixel centres, relative to the centre */
     float lo = (((float)(ty * ts) + 0.5f) - e->pad) - e->cv;
-    float hi = (((float)min((ty + 1) * ts, (int)H) - 0.5f) + e->pad) - e->cv;
+    float hi = (((float)clvis_imin((ty + 1) * ts, (int)H) - 0.5f) + e->pad) - e->cv;
     int meets = lo <= e->sv && hi >= -e->sv;   /* tested at the end: no branch */
     lo = clvis_hi(lo, -e->sv);
     hi = clvis_lo(hi, e->sv);
@@ -134,8 +171,8 @@ inline int clvis_ellipse_row(const clvis_ellipse_rows *e, int ty, uint W, uint H
     /* ceil(ulo) and floor(uhi) (at most one pixel too many: rounding of uhi + 1) */
     int px0 = (int)ulo, px1 = (int)(uhi + 1.0f) - 1;
     px0 += (float)px0 < ulo;
-    px0 = max(px0, 0);
-    px1 = min(px1, (int)W - 1);
+    px0 = clvis_imax(px0, 0);
+    px1 = clvis_imin(px1, (int)W - 1);
     *c0 = px0 / ts;
     *c1 = px1 / ts;
     return meets && px0 <= px1;
@@ -143,14 +180,23 @@ inline int clvis_ellipse_row(const clvis_ellipse_rows *e, int ty, uint W, uint H
 
 inline int clvis_tile_rect(float ulo, float uhi, float vlo, float vhi, uint W, uint H, int ts, int *r)
 {
-    ulo = fmax(ulo, -1.0f);
-    vlo = fmax(vlo, -1.0f);
-    uhi = fmin(uhi, (float)W + 1.0f);
-    vhi = fmin(vhi, (float)H + 1.0f);
+    ulo = clvis_hi(ulo, -1.0f);
+    vlo = clvis_hi(vlo, -1.0f);
+    uhi = clvis_lo(uhi, (float)W + 1.0f);
+    vhi = clvis_lo(vhi, (float)H + 1.0f);
     if (!(ulo <= uhi && vlo <= vhi))
         return 0;
-    int px0 = max((int)ceil(ulo - 0.5f), 0), px1 = min((int)floor(uhi - 0.5f), (int)W - 1);
-    int py0 = max((int)ceil(vlo - 0.5f), 0), py1 = min((int)floor(vhi - 0.5f), (int)H - 1);
+    /* ceil(ulo - 0.5) and floor(uhi - 0.5) of values in [-1.5, W + 0.5] */
+    float a = ulo - 0.5f, b = uhi - 0.5f, c = vlo - 0.5f, d = vhi - 0.5f;
+    int px0 = (int)a, px1 = (int)b, py0 = (int)c, py1 = (int)d;
+    px0 += (float)px0 < a;
+    px1 -= (float)px1 > b;
+    py0 += (float)py0 < c;
+    py1 -= (float)py1 > d;
+    px0 = clvis_imax(px0, 0);
+    px1 = clvis_imin(px1, (int)W - 1);
+    py0 = clvis_imax(py0, 0);
+    py1 = clvis_imin(py1, (int)H - 1);
     if (px0 > px1 || py0 > py1)
         return 0;
     r[0] = px0 / ts;

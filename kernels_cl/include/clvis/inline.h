@@ -37,6 +37,13 @@
  *                                      vload8(0, p): eight loads the
  *                                      compiler merges into one (p needs only
  *                                      float alignment, as for vload8)
+ *   CLVIS_IL_VLOAD8(TV, p), CLVIS_IL_VLOAD4(TV, p)
+ *                                      vload8(0, p) / vload4(0, p) as the
+ *                                      vector type TV (int8, ulong4, ...)
+ *   CLVIS_IL_VSTORE8(v, p), CLVIS_IL_VSTORE4(v, p)
+ *                                      vstore8(v, 0, p) / vstore4(v, 0, p)
+ *                                      lane by lane (the compiler merges the
+ *                                      element accesses into vector ones)
  *   uint  clvis_il_ctz64(ulong x)      trailing zero bits of x, 64 for 0
  *                                      (popcount(~x & (x - 1)) without the
  *                                      popcount call)
@@ -125,9 +132,22 @@ inline float clvis_il_floor(float x)
     return as_float(as_uint(t) | (as_uint(x) & 0x80000000u));   /* floor(-0) = -0, (-1, 0) -> -1 */
 }
 
+#define CLVIS_IL_VLOAD8(TV, p) \
+    ((TV)((p)[0], (p)[1], (p)[2], (p)[3], (p)[4], (p)[5], (p)[6], (p)[7]))
+#define CLVIS_IL_VLOAD4(TV, p) ((TV)((p)[0], (p)[1], (p)[2], (p)[3]))
+#define CLVIS_IL_VSTORE8(v, p)                                                 \
+    {                                                                          \
+        (p)[0] = (v).s0; (p)[1] = (v).s1; (p)[2] = (v).s2; (p)[3] = (v).s3;    \
+        (p)[4] = (v).s4; (p)[5] = (v).s5; (p)[6] = (v).s6; (p)[7] = (v).s7;    \
+    }
+#define CLVIS_IL_VSTORE4(v, p)                                                 \
+    {                                                                          \
+        (p)[0] = (v).s0; (p)[1] = (v).s1; (p)[2] = (v).s2; (p)[3] = (v).s3;    \
+    }
+
 inline float8 clvis_il_vload8(global const float *p)
 {
-    return (float8)(p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7]);
+    return CLVIS_IL_VLOAD8(float8, p);
 }
 
 inline uint clvis_il_ctz64(ulong x)

@@ -71,10 +71,12 @@
  *   turns the planes into coefficients; no per-bit scatter;
  * - the bits come through a 64-bit window over a private copy of the
  *   block's words, refilled only when a read needs more bits; each unary
- *   run after a group test is one trailing-zero count (popcount of the
- *   trailing-zero mask: OpenCL 1.2 has no ctz) instead of a loop per bit;
- * - dequantization is float16 arithmetic when 2^(emax - 30) is normal
- *   (nearly every block) and the per-value integer rounding otherwise.
+ *   run after a group test is one trailing-zero count (a bit count of the
+ *   trailing-zero mask, clvis_il_ctz64: OpenCL 1.2 has no ctz, and PoCL
+ *   calls popcount out of line) instead of a loop per bit;
+ * - dequantization is one multiply per value (a loop the compiler
+ *   vectorizes) when 2^(emax - 30) is normal (nearly every block) and the
+ *   per-value integer rounding otherwise.
  * One work-item still decodes one block (as zfp's CUDA decoder does): the
  * plane parser is serial by nature; the transpose and the 16-lane steps are
  * what a CPU's vector units get.

@@ -13,7 +13,7 @@
  *          cl_khr_int64_base_atomics: enables scan_chained
  *   SCAN_TEST_FALLBACK   testing only: scan_chained ignores what other
  *          groups publish, so every look-back takes the fallback
- *   Include path: -I kernels_cl/include (uses clvis/workgroup.h).
+ *   Include path: -I kernels_cl/include (uses clvis/workgroup.h, clvis/inline.h).
  *
  * Partition shared by the kernels: the n elements are split into G contiguous
  * ranges of `per_group` elements (a multiple of TILE; the last range may be
@@ -76,6 +76,7 @@
  * work-item scans ITEMS consecutive elements and a work-group scan joins the
  * work-items (the GPU form).
  */
+#include "clvis/inline.h"
 #include "clvis/workgroup.h"
 
 #ifndef T
@@ -110,8 +111,9 @@
 #define VW 8
 #endif
 #define TV CAT(T, VW)           /* e.g. int8, long4 */
-#define VLOAD CAT(vload, VW)
-#define VSTORE CAT(vstore, VW)
+/* vloadN / vstoreN written inline (clvis/inline.h: PoCL calls them out of line) */
+#define VLOAD(k, p) CAT(CLVIS_IL_VLOAD, VW)(TV, (p) + (k) * VW)
+#define VSTORE(v, k, p) CAT(CLVIS_IL_VSTORE, VW)((v), (p) + (k) * VW)
 
 #if VW == 8
 /* in-register inclusive prefix: shift by 1, 2, 4 lanes and add */
@@ -235,8 +237,10 @@ inline T scan_serial(global const T *in, global T *out, ulong base,
             b = vshift(b, VLAST(a));
             a = vshift(a, (T)0);
         }
-        VSTORE(a + carry, 0, out + base);
-        VSTORE(b + carry, 1, out + base);
+        a += carry;
+        b += carry;
+        VSTORE(a, 0, out + base);
+        VSTORE(b, 1, out + base);
         carry += sum;
     }
     for (; base < end; ++base) {
@@ -255,7 +259,7 @@ void scan_downsweep(global const T *in, global T *out, const ulong n,
 {
     const ulong g = get_group_id(0);
     const ulong start = g * per_group;
-    const ulong end = min(n, start + per_group);
+    const ulong end = clvis_il_ulmin(n, start + per_group);
     ulong base = start;
     local T scratch[WG];
     T carry = sum_before(partials, g, scratch);
@@ -263,7 +267,7 @@ void scan_downsweep(global const T *in, global T *out, const ulong n,
 #if WG > 1
     local T tile[TILE_LOCAL];
     for (; base < end; base += TILE)
-        carry += scan_tile(in, out, base, (uint)min((ulong)TILE, end - base), carry,
+        carry += scan_tile(in, out, base, (uint)clvis_il_ulmin((ulong)TILE, end - base), carry,
                            exclusive, tile, scratch);
     if (get_local_id(0) == 0 && g == get_num_groups(0) - 1)
         total[0] = carry;
@@ -306,7 +310,7 @@ void scan_chained(global const T *restrict in, global T *restrict out,
     const ulong G = get_num_groups(0);
     const ulong g = atom_inc(&status[G]);       /* ranges in start order */
     const ulong start = g * per_group;
-    const ulong end = min(n, start + per_group);
+    const ulong end = clvis_il_ulmin(n, start + per_group);
     const T sum = reduce_items(in, start, end);
     atom_xchg(&status[g], status_word(PUBLISHED_SUM, sum));
 
@@ -317,10 +321,10 @@ void scan_chained(global const T *restrict in, global T *restrict out,
             /* not published: sum range k here, chunk by chunk, until done or
              * until its group publishes after all */
             const ulong ks = (ulong)k * per_group;
-            const ulong ke = min(n, ks + per_group);
+            const ulong ke = clvis_il_ulmin(n, ks + per_group);
             T own = 0;
             for (ulong pos = ks; pos < ke && (w >> 32) == 0; pos += FALLBACK_CHUNK) {
-                own += reduce_items(in, pos, min(ke, pos + FALLBACK_CHUNK));
+                own += reduce_items(in, pos, clvis_il_ulmin(ke, pos + FALLBACK_CHUNK));
                 w = read_status(status, (ulong)k);
             }
             if ((w >> 32) == 0) {

@@ -26,6 +26,7 @@
  */
 #pragma OPENCL FP_CONTRACT OFF
 
+#include "clvis/inline.h"
 #include "clvis/morton.h"
 
 kernel void morton_codes(global const float *positions, uint n, float lox, float loy, float loz,
@@ -36,7 +37,7 @@ kernel void morton_codes(global const float *positions, uint n, float lox, float
         return;
     float x = positions[3 * (size_t)i], y = positions[3 * (size_t)i + 1],
           z = positions[3 * (size_t)i + 2];
-    if (!(isfinite(x) && isfinite(y) && isfinite(z))) {
+    if (!(clvis_il_isfinite(x) && clvis_il_isfinite(y) && clvis_il_isfinite(z))) {
         codes[i] = 0xFFFFFFFFu;
         return;
     }

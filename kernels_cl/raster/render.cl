@@ -98,6 +98,7 @@
 #include "clvis/atomics.h"
 #include "clvis/camera.h"
 #include "clvis/colormap.h"
+#include "clvis/inline.h"
 #include "clvis/keys.h"
 
 #ifndef VEC
@@ -124,12 +125,12 @@ kernel void batch_bounds(global const float *positions, uint n, uint batch, glob
     if (b >= nb)
         return;
     float3 lo = (float3)(INFINITY), hi = (float3)(-INFINITY);
-    uint end = min(n, (b + 1) * batch);
+    uint end = clvis_il_umin(n, (b + 1) * batch);
     for (uint i = b * batch; i < end; ++i) {
-        float3 p = vload3(i, positions);
-        if (isfinite(p.x) && isfinite(p.y) && isfinite(p.z)) {
-            lo = fmin(lo, p);
-            hi = fmax(hi, p);
+        float3 p = (float3)(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]);
+        if (clvis_il_isfinite(p.x) && clvis_il_isfinite(p.y) && clvis_il_isfinite(p.z)) {
+            lo = clvis_il_fmin3(lo, p);
+            hi = clvis_il_fmax3(hi, p);
         }
     }
     vstore3(lo, 0, bounds + 6 * b);
@@ -143,10 +144,10 @@ kernel void batch_nonfinite(global const float *positions, uint n, uint batch, g
     if (b >= nb)
         return;
     uint bad = 0;
-    uint end = min(n, (b + 1) * batch);
+    uint end = clvis_il_umin(n, (b + 1) * batch);
     for (uint i = b * batch; i < end; ++i) {
-        float3 p = vload3(i, positions);
-        bad += (isfinite(p.x) && isfinite(p.y) && isfinite(p.z)) ? 0u : 1u;
+        float x = positions[3 * i], y = positions[3 * i + 1], z = positions[3 * i + 2];
+        bad += (clvis_il_isfinite(x) && clvis_il_isfinite(y) && clvis_il_isfinite(z)) ? 0u : 1u;
     }
     counts[b] = bad;
 }
@@ -195,8 +196,8 @@ inline void raster_splat(int mode, uint i, uint px, uint py, uint W, uint H, uin
 #if POINT_SIZE == 1
     raster_point(mode, i, py * W + px, dkey, ids, words);
 #else
-    uint x0 = px >= SPLAT_LO ? px - SPLAT_LO : 0u, x1 = min(px + SPLAT_HI, W - 1u);
-    uint y0 = py >= SPLAT_LO ? py - SPLAT_LO : 0u, y1 = min(py + SPLAT_HI, H - 1u);
+    uint x0 = px >= SPLAT_LO ? px - SPLAT_LO : 0u, x1 = clvis_il_umin(px + SPLAT_HI, W - 1u);
+    uint y0 = py >= SPLAT_LO ? py - SPLAT_LO : 0u, y1 = clvis_il_umin(py + SPLAT_HI, H - 1u);
     for (uint y = y0; y <= y1; ++y)
         for (uint x = x0; x <= x1; ++x)
             raster_point(mode, i, y * W + x, dkey, ids, words);
@@ -220,33 +221,34 @@ inline void raster_batch(int mode, global const float *positions, global const u
     if (culled)
         return;
     float fw = (float)W, fh = (float)H;
-    uint start = b * batch, end = min(n, (b + 1) * batch), count = end - start, t = l;
+    uint start = b * batch, end = clvis_il_umin(n, (b + 1) * batch), count = end - start, t = l;
     volatile global uint *words = vis;
 #if VEC == 8
     /* 8 points a step (one work-item per batch: L == 1): the projection in
      * vector registers, then the drawn lanes one by one */
     for (; L == 1 && t + 8 <= count; t += 8) {
         uint i = reverse ? end - t - 8 : start + t;
-        float8 v0 = vload8(0, positions + 3 * (size_t)i);
-        float8 v1 = vload8(1, positions + 3 * (size_t)i);
-        float8 v2 = vload8(2, positions + 3 * (size_t)i);
+        float8 v0 = clvis_il_vload8(positions + 3 * (size_t)i);
+        float8 v1 = clvis_il_vload8(positions + 3 * (size_t)i + 8);
+        float8 v2 = clvis_il_vload8(positions + 3 * (size_t)i + 16);
         float8 x = (float8)(v0.s0, v0.s3, v0.s6, v1.s1, v1.s4, v1.s7, v2.s2, v2.s5);
         float8 y = (float8)(v0.s1, v0.s4, v0.s7, v1.s2, v1.s5, v2.s0, v2.s3, v2.s6);
         float8 z = (float8)(v0.s2, v0.s5, v1.s0, v1.s3, v1.s6, v2.s1, v2.s4, v2.s7);
         float8 sx, sy, depth;
         int8 drawn8 = clvis_project8(&c, x, y, z, near, far, fw, fh, &sx, &sy, &depth);
-        if (!any(drawn8))
+        if (!clvis_il_any8(drawn8))
             continue;
-        uint pxs[8], pys[8], key[8];
-        int ok[8];
-        vstore8(convert_uint8(sx), 0, pxs);
-        vstore8(convert_uint8(sy), 0, pys);
-        vstore8(clvis_key_f32_8(as_uint8(depth)), 0, key);
-        vstore8(drawn8, 0, ok);
+        /* the lanes through unions, not vstore8 (a call on PoCL) */
+        union { uint8 v; uint s[8]; } pxs, pys, key;
+        union { int8 v; int s[8]; } ok;
+        pxs.v = convert_uint8(sx);
+        pys.v = convert_uint8(sy);
+        key.v = clvis_key_f32_8(as_uint8(depth));
+        ok.v = drawn8;
         for (int kk = 0; kk < 8; ++kk) {
             int k = reverse ? 7 - kk : kk;
-            if (ok[k])
-                raster_splat(mode, i + k, pxs[k], pys[k], W, H, key[k], ids, words);
+            if (ok.s[k])
+                raster_splat(mode, i + k, pxs.s[k], pys.s[k], W, H, key.s[k], ids, words);
         }
     }
 #endif
@@ -325,15 +327,15 @@ kernel void soft_accumulate(global const float *positions, global const uint *id
     if (clvis_box_culled(&c, lo, hi, near, far))
         return;
     float fw = (float)W, fh = (float)H;
-    uint end = min(n, (b + 1) * batch);
+    uint end = clvis_il_umin(n, (b + 1) * batch);
     for (uint i = b * batch + l; i < end; i += L) {
         float x = positions[3 * i], y = positions[3 * i + 1], z = positions[3 * i + 2];
         float sx, sy, depth;
         if (!clvis_project(&c, x, y, z, near, far, fw, fh, &sx, &sy, &depth))
             continue;
         uint px = (uint)sx, py = (uint)sy;
-        uint x0 = px >= SPLAT_LO ? px - SPLAT_LO : 0u, x1 = min(px + SPLAT_HI, W - 1u);
-        uint y0 = py >= SPLAT_LO ? py - SPLAT_LO : 0u, y1 = min(py + SPLAT_HI, H - 1u);
+        uint x0 = px >= SPLAT_LO ? px - SPLAT_LO : 0u, x1 = clvis_il_umin(px + SPLAT_HI, W - 1u);
+        uint y0 = py >= SPLAT_LO ? py - SPLAT_LO : 0u, y1 = clvis_il_umin(py + SPLAT_HI, H - 1u);
         for (uint yy = y0; yy <= y1; ++yy)
             for (uint xx = x0; xx <= x1; ++xx)
                 soft_pixel(i, yy * W + xx, depth, ids, vis, tolerance, color_mode, colors, tf_src,

@@ -60,6 +60,7 @@
 
 #include "clvis/camera.h"
 #include "clvis/colormap.h"
+#include "clvis/inline.h"
 #include "clvis/keys.h"
 
 #define RESOLVE_VELOCITY 1u

@@ -39,6 +39,8 @@
 #ifndef CLVIS_CAMERA_H
 #define CLVIS_CAMERA_H
 
+#include "clvis/inline.h"
+
 typedef struct {
     float4 r0, r1, r2, r3;  /* rows of M */
     float4 d;               /* depth row D */
@@ -83,7 +85,8 @@ inline int clvis_project(const clvis_camera *c, float x, float y, float z,
     *sx = px;
     *sy = py;
     *depth = d;
-    return isfinite(x) && isfinite(y) && isfinite(z) && d >= near && d <= far && cw > 0.0f
+    return clvis_il_isfinite(x) && clvis_il_isfinite(y) && clvis_il_isfinite(z) && d >= near
+        && d <= far && cw > 0.0f
         && px >= 0.0f && px < fw && py >= 0.0f && py < fh;
 }
 
@@ -103,7 +106,8 @@ inline int8 clvis_project8(const clvis_camera *c, float8 x, float8 y, float8 z,
     *sx = px;
     *sy = py;
     *depth = d;
-    return isfinite(x) & isfinite(y) & isfinite(z) & (d >= near) & (d <= far) & (cw > 0.0f)
+    return clvis_il_isfinite8(x) & clvis_il_isfinite8(y) & clvis_il_isfinite8(z) & (d >= near)
+        & (d <= far) & (cw > 0.0f)
         & (px >= 0.0f) & (px < fw) & (py >= 0.0f) & (py < fh);
 }
 
@@ -118,13 +122,14 @@ inline int clvis_box_culled(const clvis_camera *c, float3 lo, float3 hi, float n
 {
     if (!(lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z))
         return 1;
-    float4 a = (float4)(fmax(fabs(lo), fabs(hi)), 1.0f);
-    float4 ax = fabs(c->r0) * a, ay = fabs(c->r1) * a, aw = fabs(c->r3) * a, ad = fabs(c->d) * a;
+    float4 a = (float4)(clvis_il_fmax3(clvis_il_fabs3(lo), clvis_il_fabs3(hi)), 1.0f);
+    float4 ax = clvis_il_fabs4(c->r0) * a, ay = clvis_il_fabs4(c->r1) * a;
+    float4 aw = clvis_il_fabs4(c->r3) * a, ad = clvis_il_fabs4(c->d) * a;
     float sw = (aw.x + aw.y) + (aw.z + aw.w);
     float mx = 1e-5f * ((ax.x + ax.y) + (ax.z + ax.w) + sw);
     float my = 1e-5f * ((ay.x + ay.y) + (ay.z + ay.w) + sw);
     float mw = 1e-5f * sw;
-    float md = 1e-5f * ((ad.x + ad.y) + (ad.z + ad.w) + fabs(near) + fabs(far));
+    float md = 1e-5f * ((ad.x + ad.y) + (ad.z + ad.w) + clvis_il_fabs(near) + clvis_il_fabs(far));
     /* bit k set: every corner so far is beyond plane k */
     uint all_out = 0x7Fu;
     for (int k = 0; k < 8; ++k) {

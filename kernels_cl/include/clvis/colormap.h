@@ -15,6 +15,8 @@
 #ifndef CLVIS_COLORMAP_H
 #define CLVIS_COLORMAP_H
 
+#include "clvis/inline.h"
+
 inline uint4 clvis_point_color(uint id, uint color_mode, global const uchar4 *colors,
                                global const float *tf_src, uint tf_stride, uint tf_offset,
                                global const uchar4 *lut, uint lut_n, float tf_min, float tf_scale)
@@ -23,10 +25,10 @@ inline uint4 clvis_point_color(uint id, uint color_mode, global const uchar4 *co
         return convert_uint4(colors[id]);
     if (color_mode == 2) {
         float v = tf_src[(size_t)id * tf_stride + tf_offset];
-        if (isnan(v))
+        if (clvis_il_isnan(v))
             return (uint4)(0);
         float t = (v - tf_min) * tf_scale;
-        float f = floor(t * (float)lut_n);
+        float f = clvis_il_floor(t * (float)lut_n);
         uint i = !(f > 0.0f) ? 0u : f >= (float)(lut_n - 1) ? lut_n - 1 : (uint)f;
         return convert_uint4(lut[i]);
     }

@@ -22,6 +22,8 @@
 #ifndef CLVIS_KEYS_H
 #define CLVIS_KEYS_H
 
+#include "clvis/inline.h"
+
 inline uint clvis_key_u32(uint bits) { return bits; }
 inline uint clvis_key_i32(uint bits) { return bits ^ 0x80000000u; }
 inline uint clvis_key_f32(uint bits)
@@ -40,8 +42,8 @@ inline uint clvis_key_f32_inverse(uint key)
 /* clvis_key_f32 on 8 lanes */
 inline uint8 clvis_key_f32_8(uint8 bits)
 {
-    uint8 key = select(bits | 0x80000000u, ~bits, (bits & 0x80000000u) != 0u);
-    return select(key, (uint8)(0xFFFFFFFFu), (bits & 0x7FFFFFFFu) > 0x7F800000u);
+    uint8 key = clvis_il_select8(bits | 0x80000000u, ~bits, (bits & 0x80000000u) != 0u);
+    return clvis_il_select8(key, (uint8)(0xFFFFFFFFu), (bits & 0x7FFFFFFFu) > 0x7F800000u);
 }
 
 inline ulong clvis_key_u64(ulong bits) { return bits; }

@@ -48,6 +48,8 @@
 #ifndef CLVIS_WORKGROUP_H
 #define CLVIS_WORKGROUP_H
 
+#include "clvis/inline.h"
+
 #define CLVIS_DEFINE_WG_SCAN(NAME, TYPE)                                        \
 inline TYPE NAME(TYPE x, local TYPE *scratch, TYPE *total)                      \
 {                                                                               \
@@ -89,7 +91,7 @@ inline void NAME(TYPE x, local TYPE *scratch, global TYPE *partials)            
 inline void clvis_group_range(const ulong n, const ulong per_group, ulong *start, ulong *end)
 {
     *start = get_group_id(0) * per_group;
-    *end = min(n, *start + per_group);
+    *end = clvis_il_ulmin(n, *start + per_group);
 }
 
 inline void clvis_wg_zero(local uint *a, const uint count)

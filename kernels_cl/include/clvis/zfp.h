@@ -2,8 +2,9 @@
  *
  * Inline functions only, for kernels that decode whole volumes
  * (iso/zfp.cl, iso/macrocell.cl) or just the blocks they need (iso/cache.cl),
- * and the block-grid helpers (iso/raytrace.cl too). No other header needed;
- * include guard CLVIS_ZFP_H. The format, as
+ * and the block-grid helpers (iso/raytrace.cl too). Includes clvis/inline.h
+ * (min and popcount inline: PoCL calls them out of line); include guard
+ * CLVIS_ZFP_H. The format, as
  * zfp 1.0 writes it in fixed-rate mode (zfp_stream_set_rate(rate, float, 3,
  * align 0); zfpy.compress_numpy(v, rate=r, write_header=False)):
  *
@@ -70,16 +71,20 @@
  *   turns the planes into coefficients; no per-bit scatter;
  * - the bits come through a 64-bit window over a private copy of the
  *   block's words, refilled only when a read needs more bits; each unary
- *   run after a group test is one trailing-zero count (popcount of the
- *   trailing-zero mask: OpenCL 1.2 has no ctz) instead of a loop per bit;
- * - dequantization is float16 arithmetic when 2^(emax - 30) is normal
- *   (nearly every block) and the per-value integer rounding otherwise.
+ *   run after a group test is one trailing-zero count (a bit count of the
+ *   trailing-zero mask, clvis_il_ctz64: OpenCL 1.2 has no ctz, and PoCL
+ *   calls popcount out of line) instead of a loop per bit;
+ * - dequantization is one multiply per value (a loop the compiler
+ *   vectorizes) when 2^(emax - 30) is normal (nearly every block) and the
+ *   per-value integer rounding otherwise.
  * One work-item still decodes one block (as zfp's CUDA decoder does): the
  * plane parser is serial by nature; the transpose and the 16-lane steps are
  * what a CPU's vector units get.
  */
 #ifndef CLVIS_ZFP_H
 #define CLVIS_ZFP_H
+
+#include "clvis/inline.h"
 
 /* clang (PoCL, Oclgrind) warns under -Wpsabi that the ulong16/int16 builtins
  * below change the ABI on an x86 target without AVX-512. Every function here
@@ -145,7 +150,7 @@ inline ulong clvis_zfp_peek(const ulong *w, uint pos)
 /* trailing zero bits of x (64 for x = 0) */
 inline uint clvis_zfp_ctz64(ulong x)
 {
-    return (uint)popcount(~x & (x - 1ul));
+    return clvis_il_ctz64(x);
 }
 
 /* Embedded decoding of 64 uint coefficients with at most `budget` bits from
@@ -166,7 +171,7 @@ inline void clvis_zfp_decode_planes(const ulong *w, uint pos, uint budget, ulong
     uint avail = 64u;
     for (int k = 31; k >= 0 && budget != 0u; --k) {
         /* the first n bits of plane k, verbatim (m <= 64) */
-        uint m = min(n, budget);
+        uint m = clvis_il_umin(n, budget);
         if (m > avail) {
             cur = clvis_zfp_peek(w, pos);
             avail = 64u;
@@ -190,7 +195,7 @@ inline void clvis_zfp_decode_planes(const ulong *w, uint pos, uint budget, ulong
             if (bit == 0ul)
                 break;
             /* zfp reads at most lim more bits, stopping after a one-bit */
-            uint lim = min(budget, 63u - n);
+            uint lim = clvis_il_umin(budget, 63u - n);
             uint z = clvis_zfp_ctz64(cur);     /* exact while z < avail */
             if (z >= avail && lim > avail) {
                 cur = clvis_zfp_peek(w, pos);
@@ -198,7 +203,7 @@ inline void clvis_zfp_decode_planes(const ulong *w, uint pos, uint budget, ulong
                 z = clvis_zfp_ctz64(cur);
             }
             uint used = z < lim ? z + 1u : lim;   /* <= 63 */
-            n += min(z, lim);
+            n += clvis_il_umin(z, lim);
             cur >>= used;
             budget -= used;
             pos += used;
@@ -238,9 +243,9 @@ constant uchar clvis_zfp_lane_of[64] = {
  * On return lane l of P is the coefficient pair (row) r(l), lane l of Q
  * row r(l) + 1, r = (0, 16, 8, 24, 4, 20, 12, 28, 2, 18, ...) (5-bit
  * reversal of 2 l); low word: coefficient r, high word: coefficient 32 + r. */
-inline void clvis_zfp_transpose(const ulong *A, ulong16 *pp, ulong16 *pq)
+inline void clvis_zfp_transpose(const ulong16 *A, ulong16 *pp, ulong16 *pq)
 {
-    ulong16 P = vload16(0, A), Q = vload16(1, A), t;
+    ulong16 P = A[0], Q = A[1], t;
     CLVIS_ZFP_TSTAGE(P, Q, 16, 0x0000ffff0000fffful)
     t = (ulong16)(P.lo, Q.lo);
     Q = (ulong16)(P.hi, Q.hi);
@@ -309,19 +314,20 @@ inline int clvis_zfp_decode_block3i(global const ulong *stream, ulong block, uin
         return CLVIS_ZFP_ZERO_BLOCK;
     }
     int emax = (int)((w[0] >> 1) & 0xfful) - CLVIS_ZFP_EBIAS;
-    ulong A[32];
-    clvis_zfp_decode_planes(w, 9u, 64u * rate - 9u, A);
+    /* planes and lanes through unions, not vload16 / vstore16 (calls on PoCL) */
+    union { ulong16 v[2]; ulong s[32]; } A;
+    clvis_zfp_decode_planes(w, 9u, 64u * rate - 9u, A.s);
     ulong16 P, Q;
-    clvis_zfp_transpose(A, &P, &Q);
+    clvis_zfp_transpose(A.v, &P, &Q);
     /* negabinary to two's complement, then each value to its block index */
     uint16 nb = (uint16)CLVIS_ZFP_NBMASK;
-    int lanes[64];
-    vstore16(as_int16((convert_uint16(P) ^ nb) - nb), 0, lanes);
-    vstore16(as_int16((convert_uint16(Q) ^ nb) - nb), 1, lanes);
-    vstore16(as_int16((convert_uint16(P >> (ulong)32) ^ nb) - nb), 2, lanes);
-    vstore16(as_int16((convert_uint16(Q >> (ulong)32) ^ nb) - nb), 3, lanes);
+    union { int16 v[4]; int s[64]; } lanes;
+    lanes.v[0] = as_int16((convert_uint16(P) ^ nb) - nb);
+    lanes.v[1] = as_int16((convert_uint16(Q) ^ nb) - nb);
+    lanes.v[2] = as_int16((convert_uint16(P >> (ulong)32) ^ nb) - nb);
+    lanes.v[3] = as_int16((convert_uint16(Q >> (ulong)32) ^ nb) - nb);
     for (uint i = 0; i < 64u; ++i)
-        q[i] = lanes[clvis_zfp_lane_of[i]];
+        q[i] = lanes.s[clvis_zfp_lane_of[i]];
     clvis_zfp_inv_xform3(q);
     return emax;
 }
@@ -369,12 +375,14 @@ inline float clvis_zfp_value(const int *q, uint k, int emax)
 inline void clvis_zfp_values(const int *q, int emax, float *v)
 {
     if (emax == CLVIS_ZFP_ZERO_BLOCK) {
-        for (uint i = 0; i < 4u; ++i)
-            vstore16((float16)(0.0f), i, v);
+        for (uint i = 0; i < 64u; ++i)
+            v[i] = 0.0f;
     } else if (emax - 30 >= -126) {
-        float16 scale = (float16)(as_float((uint)(emax - 30 + 127) << 23));
-        for (uint i = 0; i < 4u; ++i)
-            vstore16(convert_float16_rte(vload16(i, q)) * scale, i, v);
+        /* element by element, not vload16 / vstore16 (calls on PoCL): the
+         * compiler vectorizes the loop itself */
+        float scale = as_float((uint)(emax - 30 + 127) << 23);
+        for (uint i = 0; i < 64u; ++i)
+            v[i] = convert_float_rte(q[i]) * scale;
     } else {
         for (uint i = 0; i < 64u; ++i)
             v[i] = clvis_zfp_dequantize(q[i], emax);
@@ -394,8 +402,8 @@ inline void clvis_zfp_decode_brick(global const ulong *stream, uint rate, uint n
     int q[64];
     float v[64];
     clvis_zfp_values(q, clvis_zfp_decode_block3i(stream, b, rate, q), v);
-    for (uint i = 0; i < 16u; ++i)
-        vstore4(vload4(i, v), i, brick);
+    for (uint i = 0; i < 64u; ++i)
+        brick[i] = v[i];
 }
 
 /* Cell b of a grid of nx x ny x nz cells, x fastest: its (x, y, z) into c[3];
@@ -435,9 +443,9 @@ inline int clvis_zfp_decode_volume_block(global const ulong *stream, uint rate, 
     if (!clvis_zfp_grid_cell(b, clvis_zfp_blocks(nx), clvis_zfp_blocks(ny), clvis_zfp_blocks(nz), c))
         return 0;
     *emax = clvis_zfp_decode_block3i(stream, b, rate, q);
-    e[0] = min(4u, nx - 4u * c[0]);
-    e[1] = min(4u, ny - 4u * c[1]);
-    e[2] = min(4u, nz - 4u * c[2]);
+    e[0] = clvis_il_umin(4u, nx - 4u * c[0]);
+    e[1] = clvis_il_umin(4u, ny - 4u * c[1]);
+    e[2] = clvis_il_umin(4u, nz - 4u * c[2]);
     return 1;
 }
 

@@ -15,7 +15,6 @@ Needs the ``train`` extra (torch==2.13.0, onnx, pytorch-msssim).
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import math
@@ -44,7 +43,7 @@ from . import flows as _flows
 SPECS: dict[str, dict[str, Any]] = {
     "infill": {
         "arch": {},
-        "frames": 28,  # volumes (x views): 4 of each training family
+        "frames": 24,  # volumes (x views)
         "views": 2,
         "held_out": 4,
         "frame_size": (1280, 720),
@@ -350,49 +349,21 @@ def narvis_flow_frames(
 _NARVIS_POINTS_PER_PIXEL = 2_000_000 / 512**2
 
 
-def _iso_frames(
-    count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log, crop: int = 0
-):
-    """Training: the TRAIN_VOLUMES at TRAIN_COMPLETIONS, each volume's side,
-    frame size, speculation and surface colour drawn (data.IsoVariety, no
-    frame smaller than the `crop`); held out: the HELD_OUT_VOLUMES as the
-    suite renders them (64^3, `size`, no speculation, the renderer's colour)."""
-    if held_out:
-        return _data.iso_frames(_data.HELD_OUT_VOLUMES, count, seed, *size, views=views, progress=log)
-    vary = _data.IsoVariety(smallest=max(crop, _data.IsoVariety.smallest))
-    return _data.iso_frames(
-        _data.TRAIN_VOLUMES,
-        count,
-        seed,
-        *size,
-        views=views,
-        progress=log,
-        vary=vary,
-        completions=_data.TRAIN_COMPLETIONS,
-    )
+def _iso_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
+    kinds = _data.HELD_OUT_VOLUMES if held_out else _data.TRAIN_VOLUMES
+    return _data.iso_frames(kinds, count, seed, *size, views=views, progress=log)
 
 
-def _lidar_frames(
-    count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log, crop: int = 0
-):
+def _lidar_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
     scenes = ("terrain", "town") if held_out else ("town",)
     return _data.lidar_frames(scenes, count, seed, *size, views=views, progress=log)
 
 
-def _frames(
-    name: str,
-    count: int,
-    views: int,
-    seed: int,
-    size: tuple[int, int],
-    held_out: bool,
-    log,
-    crop: int = 0,
-):
+def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
     frames = TRAINERS[name].frames
     if frames is None:
         raise ValueError(f"{name}: its frames come in sets (_narvis_sets)")
-    return frames(count, views, seed, size, held_out, log, crop)
+    return frames(count, views, seed, size, held_out, log)
 
 
 def _pack_infill(frame: Any, completion: float | None, stride: int) -> tuple[Any, Any]:
@@ -669,11 +640,11 @@ def train(
         train_frames = sets.pop("train")
         val_frames = [f for v in sets.values() for f in v]
     else:
-        train_frames = _frames(name, count, spec["views"], seed, fsize, False, log, size)
+        train_frames = _frames(name, count, spec["views"], seed, fsize, False, log)
         held = max(1, min(spec["held_out"], count))
         val_frames = _frames(name, held, 1, seed + 1_000_003, fsize, True, log)
     completions = trainer.completions
-    pairs = [_pack(name, f, c) for f in train_frames for c in trainer.train_completions or completions]
+    pairs = [_pack(name, f, c) for f in train_frames for c in completions]
     pairs = [(x.astype(np.float16), y.astype(np.float16)) for x, y in pairs]
     data_seconds = time.perf_counter() - t0
     log(f"{len(pairs)} training pairs, {len(val_frames)} held-out frames in {data_seconds:.0f} s")
@@ -763,12 +734,6 @@ def train(
             "held_out_frames": len(val_frames),
             "frame_size": list(fsize),
             "completions": list(completions) if completions != (None,) else None,
-            **(
-                {"train_completions": list(trainer.train_completions)}
-                if trainer.train_completions
-                else {}
-            ),
-            **({"variety": dataclasses.asdict(_data.IsoVariety())} if name == "infill" else {}),
             "generation_seconds": round(data_seconds, 1),
         },
         "training": {
@@ -1040,9 +1005,6 @@ class Trainer:
     pack: Callable[[Any, float | None, int], tuple[Any, Any]]
     augment: Callable[..., tuple[Any, Any]]
     completions: tuple = (None,)
-    #: the completions the training pairs are taken at (None: `completions`,
-    #: which the held-out frames are scored at)
-    train_completions: tuple | None = None
     pushpull_rgba: bool = False
     trained: tuple[str, ...] = ()
     held_out: tuple[str, ...] = ()
@@ -1065,7 +1027,6 @@ TRAINERS: dict[str, Trainer] = {
         _pack_infill,
         _augment_dihedral,
         completions=_data.COMPLETIONS,
-        train_completions=_data.TRAIN_COMPLETIONS,
         pushpull_rgba=True,
         trained=_data.TRAIN_VOLUMES,
         held_out=_data.HELD_OUT_VOLUMES,

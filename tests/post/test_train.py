@@ -237,6 +237,51 @@ def test_iso_frames_are_deterministic_and_consistent():
     assert a.active[0.85].sum() >= a.active[0.9].sum() >= a.active[0.95].sum()
 
 
+@pytest.mark.parametrize("kind", data.MORE_TRAIN_VOLUMES)
+def test_more_training_volumes_are_finite_and_deterministic(kind):
+    """issue 21's added training families: never a family of the held-out suite."""
+    assert kind not in data.HELD_OUT_VOLUMES + data.EVAL_VOLUMES + data.TRAIN_VOLUMES
+    for n in (24, 40):
+        v, iso = data.procedural_volume(kind, np.random.default_rng(5), n)
+        assert v.shape == (n, n, n) and v.dtype == np.float32 and np.isfinite(v).all()
+        # a surface of some extent, not a speck: 0.5-95 % of the samples inside
+        assert v.min() < iso < v.max() and 0.005 < (v > iso).mean() < 0.95
+        w, iso_w = data.procedural_volume(kind, np.random.default_rng(5), n)
+        np.testing.assert_array_equal(v, w)
+        assert iso == iso_w
+        other, _ = data.procedural_volume(kind, np.random.default_rng(6), n)
+        assert not np.array_equal(v, other)
+
+
+def test_iso_frames_vary_what_the_network_must_not_learn():
+    """The training's variety (data.IsoVariety): volume sides, frame sizes
+    (never under `smallest`), speculation and surface colours drawn per
+    volume / view, pairs at TRAIN_COMPLETIONS; deterministic by seed."""
+    vary = data.IsoVariety(sides=(20, 28), scales=(1.0, 0.5), smallest=40, speculation=0.5, colors=1.0)
+
+    def make(seed):
+        return data.iso_frames(
+            ("csg", "labels"), 4, seed, 96, 64, views=1, vary=vary, completions=data.TRAIN_COMPLETIONS
+        )
+
+    a, b = make(7), make(7)
+    sizes = set()
+    for f, g in zip(a, b, strict=True):
+        np.testing.assert_array_equal(f.rgb, g.rgb)
+        assert f.source == g.source and "colour" in f.source
+        assert tuple(f.active) == data.TRAIN_COMPLETIONS
+        assert f.active[0.8].sum() >= f.active[0.9].sum() >= f.active[0.97].sum()
+        sizes.add(f.rgb.shape[:2])
+        # the surface in a colour of its own, not the renderer's (0.9, 0.75, 0.4):
+        # the hits' mean red / green ratio is not the renderer's
+        hit = f.hit & (f.rgb.max(-1) < 0.95)  # off the white highlight
+        if hit.sum() > 20:
+            r, g_ = f.rgb[hit, 0].mean(), f.rgb[hit, 1].mean()
+            assert abs(r / max(g_, 1e-6) - 0.9 / 0.75) > 0.02
+    assert sizes <= {(64, 96), (40, 48)} and len(sizes) == 2
+    assert [f.source for f in make(8)] != [f.source for f in a]
+
+
 def test_lidar_pairs_are_registered():
     f = data.lidar_frames(("town",), 1, 4, 80, 60, views=1, dense_points=60_000)[0]
     kept = f.rgbda[..., 4] > 0

@@ -23,6 +23,10 @@ The networks are timed alone (``guard=False``) and, fp32, with their guard
   unpack) is the fast path whole. The
   wider configurations (NPBG's 16..256, the paper's text's 64..1024) are
   timed with random weights (their speed does not depend on them).
+- narvis-scan[...]: the G-buffers (colour, depth, the kNN radius plane) of
+  a held-out LAS-like aerial strip scan (4 points a pixel) from an oblique
+  view; the slow path is the Gaussian renderer's 3DGS splat of its
+  isotropic kNN Gaussians (the target it was trained on).
 - narvis head[...]: the kernel-prediction head alone (clvis.post.kpn's
   kernels, applied since issue 28 to the logits the graph stops at), on the
   same frame's tensors, against its NumPy reference.
@@ -115,6 +119,18 @@ def _narvis(queue, w, h):
     return _cache[key]
 
 
+def _scan(queue, w, h):
+    key = ("narvis-scan", w, h)
+    if key not in _cache:
+        scene = data.scan_scene("aerial", round(data.SCAN_POINTS_PER_PIXEL * w * h), 0)
+        cam = data.scan_cameras(scene, np.random.default_rng(1), 1, w / h)[0]
+        ras = scene.rasterizer(queue=queue)
+        gr = scene.gaussian_renderer(queue=queue)
+        g = scene.gbuffers(ras, cam, w, h, post.load("narvis-scan").planes)
+        _cache[key] = (scene, ras, gr, cam, g)
+    return _cache[key]
+
+
 def _wide(widths):
     """An ONNX file of the NARVis U-Net at other widths (random weights)."""
     pytest.importorskip("torch")
@@ -150,6 +166,7 @@ def _torch_net(name):
 NARVIS_IMPLS = (*IMPLS, "fast", "16-256", "64-1024", "head", "head-numpy")
 CASES = [(n, s, i) for n in ("infill", "lidar") for s in SIZES for i in (*IMPLS, "fp32+guard")]
 CASES += [("narvis", "512x512", i) for i in NARVIS_IMPLS]
+CASES += [("narvis-scan", "512x512", i) for i in ("fp32", "fp16", "pushpull", "slow")]
 
 
 @pytest.mark.parametrize("name,size,impl", CASES, ids=[f"{n}-{s}-{i}" for n, s, i in CASES])
@@ -160,6 +177,8 @@ def test_post(benchmark, queue, name, size, impl):
         r, cam, iso, image = _iso(queue, w, h)
     elif name == "lidar":
         dense, scan, cam, image = _lidar(queue, w, h)
+    elif name == "narvis-scan":
+        scene, ras, gr, cam, image = _scan(queue, w, h)
     else:
         scene, ras, gr, cam, image = _narvis(queue, w, h)
     if name == "narvis" and impl in ("head", "head-numpy"):
@@ -207,7 +226,7 @@ def test_post(benchmark, queue, name, size, impl):
         if name == "infill":
             known = np.where((image.hit & ~image.active)[..., None], image.rgba, 0).astype(np.float32)
             valid = ~image.active
-        elif name == "narvis":
+        elif name in ("narvis", "narvis-scan"):
             known = np.ascontiguousarray(image.rgba[..., :3] / np.float32(255))
             valid = image.covered
         else:
@@ -231,7 +250,7 @@ def test_post(benchmark, queue, name, size, impl):
                 return r.render(cam, w, h, iso)
 
             impl_name = "IsoRenderer to 100 % (the slow path)"
-        elif name == "narvis":
+        elif name in ("narvis", "narvis-scan"):
             gr.render(cam, w, h)
 
             def slow():

@@ -177,6 +177,7 @@ TARGETS = {
                 ("infill[1280x720]", 300),
                 ("lidar[512x512]", 175),
                 ("narvis[512x512]", 300),
+                ("narvis-scan[512x512]", 300),  # the same graph and head as NARVis's
             )
         ),
         # MACR's G-buffers + NARVis against the Gaussian renderer on the same view

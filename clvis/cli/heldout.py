@@ -12,8 +12,9 @@ Score a post network on its held-out suite: scenes from generator families
 its training never used (in-fill: gyroid, turbulence, noise fields,
 distance fields of shapes, CT-like layers; LiDAR: the terrain, towns under
 photographs; NARVis: convection cells, the Lorenz attractor, a jet, a
-vortex ring, the hurricane through a colormap never seen), at several
-sizes, completions / densities and (NARVis) both camera samplers. Prints
+vortex ring, the hurricane through a colormap never seen; narvis-scan:
+the terrain, a LAS-like aerial strip scan, a scanned-object-like surface),
+at several sizes, completions / densities and (NARVis) both camera samplers. Prints
 per family, size and setting the network against every classical baseline
 on the same input (PSNR / SSIM, mean and the worst frame's PSNR), then the
 table in markdown. The last column is the network minus the best baseline:
@@ -26,7 +27,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
 
     p = sub.add_parser(
         "eval",
-        help="score a post network (infill, lidar, narvis) on its held-out suite",
+        help="score a post network (infill, lidar, narvis, narvis-scan) on its held-out suite",
         description=_HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

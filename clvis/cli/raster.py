@@ -382,17 +382,29 @@ def _render_panels(
     return _Rendered(g, panels, first, warm, post_s)
 
 
-def _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net, progress) -> list[str]:
+def _compare_gaussians(
+    cloud, camera, width, height, attribute, colormap, r, net, progress, scan_radius=None
+) -> list[str]:
     """--compare: the Gaussian renderer NARVis replaces, on the same view and
-    transfer function; a panel, and lines scoring the network's image and
-    the plain rasterization against it, with the time of each path."""
+    transfer function (narvis-scan: the isotropic Gaussians of the radius
+    plane, the points' colours); a panel, and lines scoring the network's
+    image and the plain rasterization against it, with the time of each path."""
     from ..colormap import value_range
     from ..metrics import metrics
-    from ..training.data import NarvisScene
+    from ..training.data import NarvisScene, ScanScene
 
-    vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
-    scene = NarvisScene(cloud, attribute, vr, colormap, "the cloud")
-    with progress.stage("Gaussian renderer (velocity-elongated Gaussians)"):
+    scene: NarvisScene | ScanScene
+    if scan_radius is not None:
+        if cloud.colors is None:
+            raise CliError("--compare: narvis-scan's Gaussians carry the points' colours; the cloud has none")
+        from ..io import PointCloud
+
+        c = PointCloud(cloud.positions, colors=cloud.colors, radius=scan_radius)
+        scene, kind = ScanScene(c, "landscape", "the cloud"), "isotropic kNN Gaussians, 3DGS splatting"
+    else:
+        vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
+        scene, kind = NarvisScene(cloud, attribute, vr, colormap, "the cloud"), "velocity-elongated Gaussians"
+    with progress.stage(f"Gaussian renderer ({kind})"):
         t0 = time.perf_counter()
         gr = scene.gaussian_renderer(queue=net.queue)
         setup = time.perf_counter() - t0
@@ -407,7 +419,7 @@ def _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net
     r.panels.append(_Panel("gaussians", "Gaussian renderer (the target)", rgba))
     g = r.gbuffers
     plain = np.where(g.covered[..., None], g.rgba[..., :3] / np.float32(255), 0).astype(np.float32)
-    post_img = next(p.image for p in r.panels if p.key == "post-narvis")
+    post_img = next(p.image for p in r.panels if p.key == f"post-{net.name}")
     m_net = metrics(post_img[..., :3] / np.float32(255), target)
     m_plain = metrics(plain, target)
     ns = net.stats
@@ -915,10 +927,20 @@ def _render(args, progress) -> int:
         q, f"clvis render --size {width}x{height}", host_bytes=width * height * HOST_BYTES_PER_PIXEL
     )
     net = None
-    if args.compare and args.post != "narvis":
+    if args.compare and args.post not in ("narvis", "narvis-scan"):
         raise CliError(
             "--compare: it scores the narvis network against the Gaussian renderer; add --post narvis"
         )
+    post_name = args.post
+    if args.post == "narvis":  # the NARVis model the cloud's planes allow
+        post_name = "narvis" if cloud.velocity is not None else "narvis-scan"
+        why = (
+            "it has a velocity: velocity-elongated Gaussians"
+            if post_name == "narvis"
+            else "no velocity: isotropic Gaussians of its kNN splat radius"
+        )
+        print(f"clvis render: --post narvis: {source}: model {post_name} ({why})", file=sys.stderr)
+    scan_radius = None
     if args.post_guard is not None and args.post is None:
         raise CliError("--post-guard guards a post network: add --post lidar")
     if args.post is not None:
@@ -929,24 +951,36 @@ def _render(args, progress) -> int:
                 f"--post {args.post}: the network takes the depth-filtered image; --depth-filter 0 turns "
                 f"the filter off (leave it out for {LEVELS} levels)"
             )
-        if args.post == "narvis":
-            if cloud.velocity is None:
-                raise CliError(
-                    f"--post narvis: {source} has no velocity (the network takes the screen velocity plane)"
-                )
+        if post_name == "narvis":
             if attribute is None:
                 raise CliError(
                     "--post narvis: the network takes points coloured by an attribute; add --attribute"
                 )
-        if args.post_guard and args.post == "narvis":
-            raise CliError("--post-guard: the narvis network has no guard (the in-fill and LiDAR ones have)")
-        net = post.load(args.post, queue=q)
+        if post_name == "narvis-scan":
+            if cloud.colors is None and attribute is None:
+                raise CliError(
+                    f"--post {args.post}: {source} has no colours; add --attribute to colour it by one"
+                )
+            from ..gauss.points import knn_sigma
+            from ..training.data import SCAN_K
+
+            # the radius plane the network was trained on: each point's mean
+            # 4-NN distance (clamped), projected to pixels by the resolve
+            with progress.stage(f"splat radius plane (mean {SCAN_K}-NN distance)"):
+                scan_radius = knn_sigma(cloud.positions, SCAN_K)
+        if args.post_guard and post_name in ("narvis", "narvis-scan"):
+            raise CliError(
+                f"--post-guard: the {post_name} network has no guard (the in-fill and LiDAR ones have)"
+            )
+        net = post.load(post_name, queue=q)
         if args.post_guard is not None:
             net.guard = args.post_guard
     look = _look(args, cloud, attribute, point_size, q)
     fields = _raster_fields(cloud, attribute)
     if look.classes is not None:  # the class colours travel as the points' colours
         fields = {**fields, "colors": look.class_colors, "attributes": {}}
+    if scan_radius is not None:
+        fields = {**fields, "radius": scan_radius}
     with progress.stage("uploading + Morton order"):
         raster = Rasterizer(cloud.positions, **fields, queue=q)
         q.finish()
@@ -967,7 +1001,9 @@ def _render(args, progress) -> int:
     )
     compared = []
     if args.compare:
-        compared = _compare_gaussians(cloud, camera, width, height, attribute, colormap, r, net, progress)
+        compared = _compare_gaussians(
+            cloud, camera, width, height, attribute, colormap, r, net, progress, scan_radius
+        )
     out = Path(args.out)
     with progress.stage("writing PNGs"):
         named = _panel_pngs(r.panels, args)
@@ -1217,11 +1253,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     )
     r.add_argument(
         "--post",
-        choices=("lidar", "narvis"),
+        choices=("lidar", "narvis", "narvis-scan"),
         help="also write post-NAME.png: lidar, the depth-filtered image reconstructed by the LiDAR "
         "RGBDA U-Net (turns the depth filter on, 4 levels, unless --depth-filter says otherwise); "
-        "narvis, the G-buffers turned into the Gaussian "
-        "renderer's image by NARVis's U-Net (needs a velocity and an attribute to colour by)",
+        "narvis, the G-buffers turned into the Gaussian renderer's image by a NARVis U-Net, the model "
+        "the cloud's planes allow (said on stderr): narvis with a velocity (and an attribute to colour "
+        "by), else narvis-scan (the points' colours and their kNN splat radius); narvis-scan: that one",
     )
     r.add_argument(
         "--post-guard",

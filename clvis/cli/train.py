@@ -17,6 +17,9 @@ Train one of the post family's networks (clvis.post) with PyTorch:
   narvis   NARVis's gated U-Net predicting per-pixel kernels over the input
            colours: rasterizer G-buffers of the hurricane and seven training
            flows to the Gaussian renderer's image of them
+  narvis-scan  the same network for clouds without velocity (LAS/LAZ/PLY
+           scans): colours, depth and the kNN splat radius plane of towns
+           and photo-textured shapes to 3DGS's splat of isotropic Gaussians
 
 The training pairs are rendered here from closed-form volumes and scenes
 with deterministic seeds (clvis.training.data); held-out frames come from kinds
@@ -32,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
 
     p = sub.add_parser(
         "train",
-        help="train a post network (infill, lidar, narvis) and export it to ONNX",
+        help="train a post network (infill, lidar, narvis, narvis-scan) and export it to ONNX",
         description=_HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -29,7 +29,14 @@ from ..errors import DataError
 from ..io import PointCloud
 from .gaussians import Gaussians
 
-__all__ = ["KNN_CLAMP_PERCENTILE", "MAX_KNN", "frames_along", "gaussians_from_points", "knn_mean_distance"]
+__all__ = [
+    "KNN_CLAMP_PERCENTILE",
+    "MAX_KNN",
+    "frames_along",
+    "gaussians_from_points",
+    "knn_mean_distance",
+    "knn_sigma",
+]
 
 KNN_CLAMP_PERCENTILE = 95.0  # isotropic kNN sigmas are clamped to this percentile of them
 MAX_KNN = 64  # neighbours per point at most (the query holds N x k distances)
@@ -56,6 +63,18 @@ def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     kk = min(k, n - 1)
     dist, _ = cKDTree(p).query(p, k=kk + 1)
     return dist[:, 1:].mean(axis=1).astype(np.float32)
+
+
+def knn_sigma(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
+    """(N,) float32: the standard deviation of each point's isotropic Gaussian
+    in :func:`gaussians_from_points` without a velocity or scale: its mean
+    distance to its k nearest neighbours, clamped to the
+    KNN_CLAMP_PERCENTILE-th percentile of those (the splat radius plane of
+    narvis-scan: ``Rasterizer(..., radius=knn_sigma(positions))``)."""
+    sigma = knn_mean_distance(positions, k).astype(np.float64)
+    if len(sigma):
+        sigma = np.minimum(sigma, np.percentile(sigma, KNN_CLAMP_PERCENTILE))
+    return sigma.astype(np.float32)
 
 
 def frames_along(directions: npt.ArrayLike) -> np.ndarray:
@@ -173,7 +192,7 @@ def gaussians_from_points(
     else:
         if scale is None:
             sigma = knn_mean_distance(positions, k).astype(np.float64)
-            if n:
+            if n:  # knn_sigma's clamp, in float64
                 sigma = np.minimum(sigma, np.percentile(sigma, KNN_CLAMP_PERCENTILE))
         else:
             sigma = _per_point("scale", scale, n)

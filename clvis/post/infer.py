@@ -16,6 +16,11 @@ whose call takes a renderer's own output and returns an RGBA8 picture:
   ``attribute_planes``: the attributes among them, what ``render(planes=)``
   needs to resolve); returns the Gaussian renderer's image of the same view
   as the network predicts it (RGB premultiplied over black, alpha 255).
+- "narvis-scan": the same for clouds without velocity (scans): G-buffers
+  with the colour, depth and radius planes, from a Rasterizer given
+  ``radius=clvis.gauss.points.knn_sigma(positions)`` (GBuffers.radius_px);
+  returns the image of isotropic Gaussians of that sigma splatted as 3DGS
+  does.
 
 One frame, the data on the device until onnxruntime needs it: the pack
 kernel (clvis.post.pack) reads device planes where they are (a numpy plane
@@ -478,7 +483,7 @@ def load(
     threads: int | None = None,
     queue: cl.CommandQueue | None = None,
 ) -> PostNetwork:
-    """The shipped network `name` ("infill", "lidar", "narvis") at `precision`
+    """The shipped network `name` ("infill", "lidar", "narvis", "narvis-scan") at `precision`
     ("fp32", "fp16", "int8"), on onnxruntime with `providers` (default: CUDA's
     when present, then the CPU's). directory: where NAME.json and its files
     are (default: the models shipped in clvis/post/models; a `clvis train

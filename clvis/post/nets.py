@@ -271,8 +271,11 @@ class NarvisUNet(nn.Module):
       the layout; R, G, B and the coverage always come first). They are
       normalised in the graph: the depth to [0, 1] over the covered pixels'
       range (nearest 1, empty 0); the screen velocity and its length divided
-      by the covered pixels' mean length, its angle by pi; any other plane
-      (an attribute) to [0, 1] over its covered range.
+      by the covered pixels' mean length, its angle by pi; the splat radius
+      in pixels (``radius_px``) as log2(1 + r) / 4, absolute (1 at 15
+      pixels: the network must know how far a point's Gaussian reaches, not
+      only how it compares with the frame's others); any other plane (an
+      attribute) to [0, 1] over its covered range.
     - A 1x1 convolution (channels kept) and four 2x2 average poolings give
       the planes at 5 resolutions; each is concatenated to the input of the
       encoder's first block at its resolution.
@@ -343,6 +346,10 @@ class NarvisUNet(nn.Module):
                 s = n / torch.clamp(torch.sum(v[:, 3:4] * cov, dim=(2, 3), keepdim=True), min=1e-20)
                 parts += [v[:, 0:2] * s, v[:, 2:3] * (1.0 / math.pi), v[:, 3:4] * s]
                 i += 4
+            elif name == "radius_px":
+                r = torch.clamp(x[:, i : i + 1], min=0.0)
+                parts.append(cov * torch.log1p(r) * (0.25 / math.log(2.0)))
+                i += 1
             else:
                 parts.append(unit(x[:, i : i + 1]))
                 i += 1
@@ -597,11 +604,16 @@ def _channel_sum(x: torch.Tensor, n: int) -> torch.Tensor:
 
 
 #: the torch module of each shipped network, by name
-NETWORKS: dict[str, type[nn.Module]] = {"infill": InfillWNet, "lidar": RgbdaUNet, "narvis": NarvisKPN}
+NETWORKS: dict[str, type[nn.Module]] = {
+    "infill": InfillWNet,
+    "lidar": RgbdaUNet,
+    "narvis": NarvisKPN,
+    "narvis-scan": NarvisKPN,
+}
 
 
 def build(name: str, **kwargs: Any) -> nn.Module:
-    """A network by its shipped name ("infill", "lidar", "narvis") with its
+    """A network by its shipped name ("infill", "lidar", "narvis", "narvis-scan") with its
     architecture arguments (InfillWNet: none; RgbdaUNet: width, depth;
     NarvisUNet: planes, widths, up)."""
     cls = NETWORKS.get(name) if isinstance(name, str) else None

@@ -224,6 +224,9 @@ def _gbuffer_sources(gbuffers: GBuffersLike, planes: tuple[str, ...]) -> list[tu
         out += [("vel_x", v, 0, 2), ("vel_y", v, 1, 2)]
         out.append(("vel_angle", need("vel2d", why, gbuffers.vel_angle), 0, 1))
         out.append(("vel_speed", need("vel2d", why, gbuffers.vel_speed), 0, 1))
+    if "radius" in planes:
+        why = "the cloud has no radius: Rasterizer(..., radius=) or PointCloud.radius"
+        out.append(("radius_px", need("radius", why, getattr(gbuffers, "radius_px", None)), 0, 1))
     attrs = gbuffers.attributes or {}
     for p in planes:
         if p in GBUFFER_PLANES:
@@ -253,7 +256,8 @@ def pack_gbuffers(
 
     R, G, B = the colour / 255 and COVERAGE = 1 where a point was drawn;
     then, where named, the view depth, the screen velocity (v'x, v'y, its
-    angle, |v'|) and any attribute planes, raw (the network normalises them
+    angle, |v'|), the splat radius in pixels ("radius": ``radius_px``) and
+    any attribute planes, raw (the network normalises them
     in its graph). Every channel is 0 at empty pixels and padding. A plane
     the G-buffers lack, or a NaN or infinite value at a covered pixel, raises
     DataError naming it (after the kernels ran).

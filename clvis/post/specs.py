@@ -135,9 +135,9 @@ class NarvisSpec(NetworkSpec[GBuffersLike]):
     title = "NARVis kernel-predicting U-Net (G-buffers -> Gaussians)"
     takes = "rasterizer G-buffers (GBuffers)"
     baselines = ("raster", "pushpull", "splat")
-    eval_families = ("convection", "lorenz", "jet", "ring", "hurricane/magma")
+    eval_families: tuple[str, ...] = ("convection", "lorenz", "jet", "ring", "hurricane/magma")
     #: the hurricane and clvis.training.flows.TRAIN_FLOWS
-    trained_families = (
+    trained_families: tuple[str, ...] = (
         "hurricane",
         "abc",
         "abc-lines",
@@ -151,7 +151,8 @@ class NarvisSpec(NetworkSpec[GBuffersLike]):
     def shape(self, image: Any) -> tuple[int, int]:
         if not all(hasattr(image, k) for k in ("index", "rgba", "depth", "attributes")):
             raise TypeError(
-                f"image: the narvis network takes rasterizer G-buffers (GBuffers), got {type(image).__name__}"
+                f"image: the {self.name} network takes rasterizer G-buffers (GBuffers), "
+                f"got {type(image).__name__}"
             )
         shape = tuple(image.index.shape)
         if len(shape) != 2:
@@ -169,7 +170,28 @@ class NarvisSpec(NetworkSpec[GBuffersLike]):
         pack_gbuffers(image, planes, stride=stride, out=out, queue=queue)
 
 
-SPECS: dict[str, NetworkSpec[Any]] = {s.name: s for s in (InfillSpec(), LidarSpec(), NarvisSpec())}
+class NarvisScanSpec(NarvisSpec):
+    """NARVis for clouds without velocity (LAS/LAZ/PLY scans): the colour,
+    the depth and the splat radius plane (GBuffers.radius_px: each point's
+    mean 4-NN distance projected to pixels) -> the image of isotropic
+    Gaussians of that sigma, splatted as 3DGS does (the paper's Morro Bay
+    mapping). The same KPN graph and head as narvis; its own weights."""
+
+    name = "narvis-scan"
+    title = "NARVis-scan kernel-predicting U-Net (scan G-buffers -> isotropic Gaussians)"
+    takes = "rasterizer G-buffers with the radius plane (a cloud with radius=knn_sigma)"
+    #: splat: each covered pixel drawn as a round Gaussian of the radius
+    #: plane's sigma (clvis.training.evaluate.splat)
+    baselines = ("raster", "pushpull", "splat")
+    #: clvis.training.data.SCAN_HELD_OUT
+    eval_families = ("terrain", "aerial", "object")
+    #: clvis.training.data.SCAN_TRAIN
+    trained_families = ("town", "photo_town", "shapes")
+
+
+SPECS: dict[str, NetworkSpec[Any]] = {
+    s.name: s for s in (InfillSpec(), LidarSpec(), NarvisSpec(), NarvisScanSpec())
+}
 assert tuple(SPECS) == NAMES, "clvis.post.names.NAMES and SPECS name the same networks"
 
 

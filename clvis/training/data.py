@@ -762,3 +762,310 @@ def narvis_frames(
         if progress is not None:
             progress(f"narvis frame {len(frames)}/{len(cameras)} ({t2 - t1:.1f} s Gaussians)")
     return frames
+
+
+# ---------------------------------------------------------------------------
+# narvis-scan: clouds without velocity (LAS/LAZ/PLY scans) -> isotropic Gaussians
+
+#: what narvis-scan trains on: the random town (height-ramp colours), the
+#: town's geometry under scikit-image's photographs, and random shapes (spheres,
+#: boxes, cylinders on a floor) textured by those photographs
+SCAN_TRAIN = ("town", "photo_town", "shapes")
+#: its held-out generator families (never in its training): the embedded
+#: terrain, a LAS-like aerial strip scan (fields, roads, roofs, trees along
+#: scan lines) and a scanned-object-like closed surface of painted albedo
+SCAN_HELD_OUT = ("terrain", "aerial", "object")
+SCAN_KINDS = SCAN_TRAIN + SCAN_HELD_OUT
+#: the target's Gaussians: isotropic, sigma the point's mean 4-NN distance
+#: (clvis.gauss.points.knn_sigma: the paper's Morro Bay mapping), this opacity,
+#: each carrying its point's colour, rendered by 3DGS's splatting (model "splat")
+SCAN_K = 4
+SCAN_OPACITY = 0.8
+#: a scan scene's points per frame pixel at density 1 (n = density x this x W x H)
+SCAN_POINTS_PER_PIXEL = 4.0
+
+
+def _photo(rng: np.random.Generator) -> np.ndarray:
+    """One of scikit-image's sample photographs (PHOTOS), float64 RGB 0..255."""
+    from skimage import data as skdata
+
+    return np.asarray(getattr(skdata, PHOTOS[int(rng.integers(0, len(PHOTOS)))])(), np.float64)[..., :3]
+
+
+def _texture(photo: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The photo's colours at (u, v) in [0, 1] (wrapped)."""
+    h, w = photo.shape[:2]
+    return photo[(np.mod(v, 1.0) * (h - 1)).astype(int), (np.mod(u, 1.0) * (w - 1)).astype(int)]
+
+
+def shapes_scene(n: int, seed: int) -> dict:
+    """Random shapes on a floor, `n` points on their surfaces (by area): 3-8
+    spheres, boxes and upright cylinders of random size over a 3 x 3 floor,
+    each surface textured by a scikit-image photograph (a random crop and
+    scale of it). positions (n, 3) float32, colors (n, 4) uint8."""
+    rng = np.random.default_rng(seed)
+    photos = [_photo(rng) for _ in range(3)]
+    prims = []
+    for _ in range(int(rng.integers(3, 9))):
+        kind = ("sphere", "box", "cylinder")[int(rng.integers(0, 3))]
+        c = np.r_[rng.uniform(-1.1, 1.1, 2), 0.0]
+        s = rng.uniform(0.15, 0.5, 3)
+        if kind == "sphere":
+            area = 4 * math.pi * s[0] ** 2
+        elif kind == "box":
+            area = 2 * (s[0] * s[1] + s[1] * s[2] + s[0] * s[2]) * 4
+        else:
+            area = 2 * math.pi * s[0] * 2 * s[2] + math.pi * s[0] ** 2
+        prims.append(
+            (kind, c, s, area, photos[int(rng.integers(0, 3))], rng.uniform(0, 1, 2), rng.uniform(0.3, 1))
+        )
+    floor_area = 9.0
+    areas = np.array([floor_area] + [p[3] for p in prims])
+    counts = rng.multinomial(n, areas / areas.sum())
+    pos_parts, col_parts = [], []
+    m = counts[0]  # the floor
+    x, y = rng.uniform(-1.5, 1.5, m), rng.uniform(-1.5, 1.5, m)
+    pos_parts.append(np.stack([x, y, np.zeros(m)], 1))
+    col_parts.append(_texture(photos[0], (x + 1.5) / 3, (1.5 - y) / 3) * 0.8)
+    for (kind, c, s, _, photo, off, zoom), m in zip(prims, counts[1:], strict=True):
+        if kind == "sphere":
+            d = rng.normal(size=(m, 3))
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            p = c + np.r_[0, 0, s[0]] + s[0] * d
+            u, v = (
+                np.arctan2(d[:, 1], d[:, 0]) / (2 * math.pi) + 0.5,
+                np.arccos(np.clip(d[:, 2], -1, 1)) / math.pi,
+            )
+        elif kind == "box":
+            q = rng.uniform(-1, 1, (m, 3))
+            face = rng.integers(0, 3, m)
+            q[np.arange(m), face] = np.where(rng.random(m) < 0.5, -1.0, 1.0)
+            p = c + np.r_[0, 0, s[2]] + q * s
+            u = np.where(face == 0, q[:, 1], q[:, 0]) * 0.5 + 0.5
+            v = np.where(face == 2, q[:, 1], q[:, 2]) * 0.5 + 0.5
+        else:
+            a = rng.uniform(0, 2 * math.pi, m)
+            side = rng.random(m) < (2 * s[2] / (2 * s[2] + s[0]))
+            r = np.where(side, s[0], s[0] * np.sqrt(rng.random(m)))
+            z = np.where(side, rng.uniform(0, 2 * s[2], m), 2 * s[2])
+            p = c + np.stack([r * np.cos(a), r * np.sin(a), z], 1)
+            u, v = a / (2 * math.pi), np.where(side, 1 - z / (2 * s[2]), r / s[0])
+        pos_parts.append(p)
+        col_parts.append(_texture(photo, off[0] + u * zoom, off[1] + v * zoom))
+    pos = np.concatenate(pos_parts).astype(np.float32)
+    col = np.concatenate(col_parts)
+    rgba = np.concatenate([np.clip(np.rint(col), 0, 255), np.full((len(pos), 1), 255.0)], 1).astype(np.uint8)
+    return {"positions": pos, "colors": rgba}
+
+
+def aerial_scene(n: int, seed: int) -> dict:
+    """A LAS-like airborne strip scan of `n` points over 300 x 300 m: the
+    returns lie along scan lines across the flight (a line every ~0.5 %
+    of the strip, jittered), over gently rolling farmland of Voronoi fields
+    (each its crop colour and row stripes), two straight roads, 4-12 box
+    buildings with red or grey roofs and clumps of dark trees."""
+    rng = np.random.default_rng(seed)
+    lines = max(int(math.sqrt(n) / 2), 8)
+    li = rng.integers(0, lines, n)
+    y = -150 + 300 * (li + 0.5 + rng.normal(0, 0.08, n)) / lines
+    x = rng.uniform(-150, 150, n)
+    bumps = [(rng.uniform(-150, 150, 2), rng.uniform(40, 120), rng.uniform(-4, 6)) for _ in range(5)]
+    z = np.zeros(n)
+    for (cx, cy), s, hgt in bumps:
+        z += hgt * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / (2 * s * s))
+    seeds = rng.uniform(-150, 150, (int(rng.integers(12, 30)), 2))
+    crop = np.array(
+        [[95, 140, 60], [150, 170, 80], [200, 180, 110], [120, 95, 60], [170, 150, 70], [80, 120, 50]]
+    )
+    field_col = crop[rng.integers(0, len(crop), len(seeds))] * rng.uniform(0.85, 1.15, (len(seeds), 1))
+    field_dir = rng.uniform(0, math.pi, len(seeds))
+    from scipy.spatial import cKDTree
+
+    f = cKDTree(seeds).query(np.stack([x, y], 1))[1]
+    stripe = 0.85 + 0.15 * np.sin(
+        (x * np.cos(field_dir[f]) + y * np.sin(field_dir[f])) * rng.uniform(1.5, 3.0)
+    )
+    col = field_col[f] * stripe[:, None]
+    for _ in range(2):  # roads
+        a, off, w = rng.uniform(0, math.pi), rng.uniform(-100, 100), rng.uniform(4, 8)
+        on = np.abs(x * math.sin(a) - y * math.cos(a) - off) < w / 2
+        col[on] = (120, 118, 115)
+    for _ in range(int(rng.integers(4, 13))):  # buildings
+        bx, by = rng.uniform(-130, 130, 2)
+        sx, sy, bh = rng.uniform(6, 18), rng.uniform(6, 18), rng.uniform(4, 15)
+        on = (np.abs(x - bx) < sx) & (np.abs(y - by) < sy)
+        z[on] += bh
+        col[on] = (170, 70, 55) if rng.random() < 0.5 else (150, 150, 155)
+    for _ in range(int(rng.integers(5, 20))):  # tree clumps
+        tx, ty, tr = rng.uniform(-140, 140), rng.uniform(-140, 140), rng.uniform(4, 12)
+        d2 = (x - tx) ** 2 + (y - ty) ** 2
+        on = d2 < tr * tr
+        z[on] += rng.uniform(8, 16) * np.sqrt(1 - d2[on] / (tr * tr))
+        col[on] = np.array([40, 75, 35]) * rng.uniform(0.8, 1.2, (int(on.sum()), 1))
+    col *= rng.uniform(0.9, 1.1, (n, 1))  # return-to-return variation
+    pos = np.stack([x, y, z + rng.normal(0, 0.05, n)], 1).astype(np.float32)
+    rgba = np.concatenate([np.clip(np.rint(col), 0, 255), np.full((n, 1), 255.0)], 1).astype(np.uint8)
+    return {"positions": pos, "colors": rgba}
+
+
+def object_scene(n: int, seed: int) -> dict:
+    """A scanned-object-like cloud: `n` points on a closed bumpy surface
+    (a sphere whose radius is modulated by 4-9 random waves over the
+    directions, stretched on random axes) with a painted albedo: hue bands
+    along a random axis, a fine noise and dark spots; the points denser
+    toward the top (a turntable scanner's), with range noise."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    d[:, 2] = np.abs(d[:, 2]) * np.where(rng.random(n) < 0.7, 1, -1)  # more returns on the upper half
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    r = np.ones(n)
+    for _ in range(int(rng.integers(4, 10))):
+        k = rng.normal(size=3)
+        k *= rng.uniform(2, 7) / np.linalg.norm(k)
+        r += rng.uniform(0.03, 0.12) * np.sin(d @ k + rng.uniform(0, 2 * math.pi))
+    p = d * r[:, None] * rng.uniform(0.6, 1.3, 3)
+    p += rng.normal(0, 0.003, p.shape)
+    axis = _random_rotation(rng)[0]
+    t = p @ axis
+    hues = rng.uniform(0, 255, (4, 3))
+    band = np.clip(((t - t.min()) / max(np.ptp(t), 1e-9) * 4).astype(int), 0, 3)
+    col = hues[band] * (0.8 + 0.2 * np.sin(p @ rng.normal(size=3) * 25))[:, None]
+    for _ in range(int(rng.integers(5, 15))):
+        c = rng.normal(size=3)
+        c /= np.linalg.norm(c)
+        col[(d @ c) > rng.uniform(0.97, 0.995)] *= 0.3
+    rgba = np.concatenate([np.clip(np.rint(col), 0, 255), np.full((n, 1), 255.0)], 1).astype(np.uint8)
+    return {"positions": p.astype(np.float32), "colors": rgba}
+
+
+@dataclass
+class ScanScene:
+    """A scan-like cloud without velocity (colours, and ``radius``: its points'
+    knn_sigma, the world radius the rasterizer projects to pixels) and how it
+    is framed: "landscape" (oblique views over it) or "object" (orbits)."""
+
+    cloud: Any
+    framing: str
+    source: str
+
+    def rasterizer(self, queue: Any = None) -> Any:
+        from ..raster import Rasterizer
+
+        return Rasterizer(self.cloud, queue=queue)
+
+    def gbuffers(
+        self, ras: Any, camera: Camera, width: int, height: int, planes: Sequence[str], **kw: Any
+    ) -> Any:
+        """The G-buffers of a view (one pixel per point, the points' own
+        colours), the splat radius in pixels among them."""
+        from ..post.names import GBUFFER_PLANES
+
+        return ras.render(camera, width, height, planes=[p for p in planes if p not in GBUFFER_PLANES], **kw)
+
+    def gaussian_renderer(self, queue: Any = None) -> Any:
+        """The target: isotropic Gaussians, sigma the radius (the mean 4-NN
+        distance, clamped), opacity SCAN_OPACITY, the points' colours,
+        rendered by 3DGS's splatting (GaussianRenderer model "splat", tiles)."""
+        from ..gauss import GaussianRenderer, gaussians_from_points
+
+        g = gaussians_from_points(self.cloud, scale=self.cloud.radius, opacity=SCAN_OPACITY, color_by="rgb")
+        return GaussianRenderer(g, queue=queue, colors=True, model="splat")
+
+
+def scan_cloud(positions: np.ndarray, colors: np.ndarray | None, **kw: Any) -> Any:
+    """A PointCloud of a scan with ``radius`` its points' knn_sigma (SCAN_K)."""
+    from ..gauss.points import knn_sigma
+    from ..io import PointCloud
+
+    return PointCloud(positions, colors=colors, radius=knn_sigma(positions, SCAN_K), **kw)
+
+
+def scan_scene(kind: str, n: int, seed: int) -> ScanScene:
+    """A narvis-scan scene of generator `kind` (SCAN_KINDS), `n` points from `seed`."""
+    if kind == "town":
+        d = town(n, seed)
+    elif kind == "photo_town":
+        d = photo_town(n, seed)
+    elif kind == "terrain":
+        d = datasets.terrain(n, seed)
+    elif kind == "aerial":
+        d = aerial_scene(n, seed)
+    elif kind == "shapes":
+        d = shapes_scene(n, seed)
+    elif kind == "object":
+        d = object_scene(n, seed)
+    else:
+        raise ValueError(f"scene: expected one of {SCAN_KINDS}, got {kind!r}")
+    framing = "object" if kind in ("shapes", "object") else "landscape"
+    cloud = scan_cloud(np.asarray(d["positions"], np.float32), d["colors"])
+    return ScanScene(cloud, framing, f"{kind} ({n:,} points, seed {seed})")
+
+
+def scan_cameras(scene: ScanScene, rng: np.random.Generator, count: int, aspect: float = 1.0) -> list[Camera]:
+    """`count` random views of a scan scene: oblique views over a landscape
+    (as the LiDAR frames', elevation 20-75 degrees, nearer or farther), orbits
+    around an object (orbit_camera, zoom 0.3-0.8)."""
+    pos = scene.cloud.positions
+    lo, hi = pos.min(0).astype(np.float64), pos.max(0).astype(np.float64)
+    cams = []
+    for _ in range(count):
+        if scene.framing == "object":
+            cams.append(orbit_camera(rng, lo, hi, aspect, (0.3, 0.8)))
+            continue
+        centre = (lo + hi) / 2
+        extent = float(np.linalg.norm(hi[:2] - lo[:2])) / 2
+        az = rng.uniform(0, 2 * np.pi)
+        el = np.radians(rng.uniform(20, 75))
+        dist = extent * rng.uniform(0.4, 1.2)
+        target = centre + np.r_[rng.uniform(-0.3, 0.3, 2) * extent, 0.0]
+        target[2] = lo[2]
+        eye = target + dist * np.array([np.cos(az) * np.cos(el), np.sin(az) * np.cos(el), np.sin(el)])
+        cams.append(
+            Camera.look_at(eye, target, (0, 0, 1), rng.uniform(40, 60), aspect, 0.01 * extent, 4 * extent)
+        )
+    return cams
+
+
+def scan_frames(
+    kinds: Sequence[str],
+    count: int,
+    seed: int,
+    width: int,
+    height: int,
+    planes: Sequence[str],
+    *,
+    views: int = 2,
+    densities: tuple[float, float] = (0.25, 4.0),
+    progress: Callable[[str], None] | None = None,
+) -> list[NarvisFrame]:
+    """`count` scan scenes (kinds in turn, each at a density log-uniform in
+    `densities` x SCAN_POINTS_PER_PIXEL points a frame pixel) x `views`
+    random views: the packed G-buffers (`planes`) and the Gaussians' splat."""
+    import time
+
+    from ..post.pack import pack_gbuffers
+
+    rng = np.random.default_rng(seed)
+    lo, hi = (math.log(float(d)) for d in densities)
+    frames = []
+    for i in range(count):
+        kind = kinds[i % len(kinds)]
+        d = math.exp(rng.uniform(lo, hi))
+        n = max(int(d * SCAN_POINTS_PER_PIXEL * width * height), 1000)
+        sc = scan_scene(kind, n, int(rng.integers(0, 2**31)))
+        sc.source += f", {d:.2f}x points a pixel"
+        ras, gr = sc.rasterizer(), sc.gaussian_renderer()
+        for v, cam in enumerate(scan_cameras(sc, rng, views, width / height)):
+            t0 = time.perf_counter()
+            g = sc.gbuffers(ras, cam, width, height, planes)
+            t1 = time.perf_counter()
+            img = gr.render(cam, width, height)
+            t2 = time.perf_counter()
+            rgb = np.clip(np.asarray(img.rgba)[..., :3], 0, 1).astype(np.float32)
+            x = np.asarray(pack_gbuffers(g, planes))[0]
+            frames.append(
+                NarvisFrame(x, rgb, {"raster": t1 - t0, "gaussians": t2 - t1}, f"{sc.source} view {v}")
+            )
+            if progress is not None:
+                progress(f"scan frame {len(frames)}/{count * views} ({t2 - t1:.1f} s Gaussians)")
+    return frames

@@ -25,6 +25,12 @@ Families (TRAINED: what the shipped networks' training used):
   training's particles a pixel; the hemisphere and grid samplers;
   baselines the plain rasterization, push-pull of its RGB, and a classical
   splat of the same G-buffers (``splat``).
+- narvis-scan (trained on "town", "photo_town", "shapes":
+  clvis.training.data.SCAN_TRAIN): "terrain" (the embedded one), "aerial"
+  (a LAS-like strip scan of farmland) and "object" (a scanned-object-like
+  painted surface); 0.25x, 1x, 4x the training's points a pixel; random
+  views; baselines the plain rasterization, push-pull of its RGB and the
+  classical splat with the radius plane as each pixel's sigma.
 
 ``--quick`` is the suite ``clvis train`` runs at its end: one size, one
 density, one frame per family. Needs no torch (onnxruntime runs the
@@ -101,6 +107,15 @@ def suite(name: str, quick: bool = False) -> list[Case]:
             for sz, ds in (((256, 256), (0.25, 1.0, 4.0)), ((512, 512), (1.0,)))
             for d in ds
         ]
+    if name == "narvis-scan":
+        if quick:
+            return [Case(f, (256, 256), 1.0, "views") for f in fam]
+        return [
+            Case(f, sz, d, "views", frames=2)
+            for f in fam
+            for sz, ds in (((256, 256), (0.25, 1.0, 4.0)), ((512, 512), (1.0,)))
+            for d in ds
+        ]
     raise ValueError(f"model: expected one of {tuple(FAMILIES)}, got {name!r}")
 
 
@@ -116,20 +131,25 @@ def splat(
     stretch: float = 4.0,
     opacity: float = 0.5,
     radius: int = 6,
+    sigma: np.ndarray | None = None,
 ) -> np.ndarray:
     """What a user would do without a network: each covered pixel drawn as a
     screen-space Gaussian ellipse, its standard deviation half the local
-    pixel spacing of the points (from the coverage around it) across the
-    flow and up to `stretch` times that along its screen velocity `vel`
-    (H, W, 2; None: round), composited order-independently (colour: the
-    weighted mean; alpha: 1 - prod(1 - opacity x weight)). rgb (H, W, 3)
-    in [0, 1]; returns (H, W, 3) premultiplied over black."""
+    pixel spacing of the points (from the coverage around it; `sigma` (H, W):
+    given per pixel instead, e.g. a scan's radius plane GBuffers.radius_px)
+    across the flow and up to `stretch` times that along its screen velocity
+    `vel` (H, W, 2; None: round), clipped to 0.5 .. radius / 2.5 pixels,
+    composited order-independently (colour: the weighted mean; alpha: 1 -
+    prod(1 - opacity x weight)). rgb (H, W, 3) in [0, 1]; returns (H, W, 3)
+    premultiplied over black."""
     from scipy.ndimage import uniform_filter
 
     h, w = covered.shape
-    cov = covered.astype(np.float64)
-    frac = uniform_filter(cov, 9, mode="constant")
-    sigma = np.clip(0.5 / np.sqrt(np.maximum(frac, 1 / 81)), 0.5, radius / 2.5)
+    if sigma is None:
+        cov = covered.astype(np.float64)
+        frac = uniform_filter(cov, 9, mode="constant")
+        sigma = 0.5 / np.sqrt(np.maximum(frac, 1 / 81))
+    sigma = np.clip(np.nan_to_num(np.asarray(sigma, np.float64), nan=0.5), 0.5, radius / 2.5)
     if vel is not None:
         speed = np.hypot(vel[..., 0], vel[..., 1])
         ref = float(np.quantile(speed[covered], 0.95)) if covered.any() else 0.0
@@ -213,6 +233,30 @@ def _frames(name: str, case: Case, seed: int, planes: Sequence[str], target: str
             rgb = np.ascontiguousarray(lf.rgbda[..., :3])
             pp = pushpull(rgb, lf.rgbda[..., 4] > 0)
             yield f"{d:.0%} scan", lf.rgbda, lf.rgb, {"input": rgb, "pushpull": pp}
+    elif name == "narvis-scan":
+        n = max(int(case.setting * _data.SCAN_POINTS_PER_PIXEL * w * h), 1000)
+        rng = np.random.default_rng(seed)
+        ssc = _data.scan_scene(case.family, n, int(rng.integers(0, 2**31)))
+        ras, gr = ssc.rasterizer(), ssc.gaussian_renderer()
+        for cam in _data.scan_cameras(ssc, rng, case.frames, w / h):
+            g = ssc.gbuffers(ras, cam, w, h, planes)
+            target = np.clip(np.asarray(gr.render(cam, w, h).rgba)[..., :3], 0, 1).astype(np.float32)
+            covered = np.asarray(g.covered)
+            plain = np.where(covered[..., None], np.asarray(g.rgba)[..., :3] / np.float32(255), 0).astype(
+                np.float32
+            )
+            yield (
+                f"{case.setting:g}x points",
+                g,
+                target,
+                {
+                    "raster": plain,
+                    "pushpull": pushpull(np.ascontiguousarray(plain), covered),
+                    "splat": splat(
+                        plain, covered, None, opacity=_data.SCAN_OPACITY, sigma=np.asarray(g.radius_px)
+                    ),
+                },
+            )
     else:
         n = max(int(case.setting * NARVIS_POINTS_PER_PIXEL * w * h), 1000)
         sc = _narvis_scene(case.family, n, seed)

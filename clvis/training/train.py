@@ -89,8 +89,37 @@ SPECS: dict[str, dict[str, Any]] = {
         "loss": {"l2": 1.0, "tv": 0.002, "ms_ssim": 0.05},
         "lr": 1e-3,
     },
+    # narvis-scan: clouds without velocity; SCAN_TRAIN scenes (random
+    # densities and views) at 256 x 256, their held-out families
+    # (data.SCAN_HELD_OUT) one scene each for the card's validation rows
+    "narvis-scan": {
+        "arch": {
+            "planes": ["rgb", "depth", "radius"],
+            "widths": [8, 16, 32, 64, 128],
+            "up": "bilinear",
+            "kernels": [[3, 1], [3, 2], [3, 4], [3, 8]],
+            "depth_select": True,
+        },
+        "frames": 24,  # scenes (x views), the training kinds in turn
+        "views": 2,
+        "held_out": 3,
+        "frame_size": (256, 256),
+        "batch": 4,
+        "loss": {"l2": 1.0, "tv": 0.002, "ms_ssim": 0.05},
+        "lr": 1e-3,
+    },
 }
 OPSET = 17
+#: the narvis-scan card's words for its target and input
+_SCAN_TARGET = (
+    "GaussianRenderer (3DGS splatting, model='splat', tiles) of one isotropic Gaussian per point: "
+    f"sigma its mean {_data.SCAN_K}-NN distance (clvis.gauss.points.knn_sigma, clamped to the 95th "
+    f"percentile), opacity {_data.SCAN_OPACITY}, the point's colour"
+)
+_SCAN_INPUT = (
+    "Rasterizer.render G-buffers (one pixel per point, the points' colours): rgb, depth and the "
+    "radius plane (radius_px: knn_sigma projected to pixels)"
+)
 #: the card's words for each NARVis target model
 _TARGET_WORDS = {"max_response": "max response", "splat": "3DGS splatting, model='splat'"}
 INT8_MAX_LOSS_DB = 0.3
@@ -357,6 +386,12 @@ def _iso_frames(count: int, views: int, seed: int, size: tuple[int, int], held_o
 def _lidar_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
     scenes = ("terrain", "town") if held_out else ("town",)
     return _data.lidar_frames(scenes, count, seed, *size, views=views, progress=log)
+
+
+def _scan_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
+    kinds = _data.SCAN_HELD_OUT if held_out else _data.SCAN_TRAIN
+    planes = SPECS["narvis-scan"]["arch"]["planes"]
+    return _data.scan_frames(kinds, count, seed, *size, planes, views=views, progress=log)
 
 
 def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
@@ -640,9 +675,19 @@ def train(
         train_frames = sets.pop("train")
         val_frames = [f for v in sets.values() for f in v]
     else:
-        train_frames = _frames(name, count, spec["views"], seed, fsize, False, log)
         held = max(1, min(spec["held_out"], count))
-        val_frames = _frames(name, held, 1, seed + 1_000_003, fsize, True, log)
+
+        def made(n: int, views: int, s: int, held_out: bool) -> list:
+            def make() -> list:
+                return _frames(name, n, views, s, fsize, held_out, log)
+
+            if not trainer.cached or cache is None:
+                return make()
+            key = {"set": f"{name}-{'held' if held_out else 'train'}", "count": n, "views": views}
+            return cached_frames(Path(cache), {**key, "seed": s, "size": list(fsize)}, make, log)
+
+        train_frames = made(count, spec["views"], seed, False)
+        val_frames = made(held, 1, seed + 1_000_003, True)
     completions = trainer.completions
     pairs = [_pack(name, f, c) for f in train_frames for c in completions]
     pairs = [(x.astype(np.float16), y.astype(np.float16)) for x, y in pairs]
@@ -728,6 +773,11 @@ def train(
         }
         if sets
         else {
+            **(
+                {"target_model": trainer.target, "target": _SCAN_TARGET, "input": _SCAN_INPUT}
+                if trainer.target
+                else {}
+            ),
             "train": list(trainer.trained),
             "held_out": list(trainer.held_out),
             "frames": len(train_frames),
@@ -1008,6 +1058,10 @@ class Trainer:
     pushpull_rgba: bool = False
     trained: tuple[str, ...] = ()
     held_out: tuple[str, ...] = ()
+    #: its frames kept in train's frame cache (cached_frames) under their arguments
+    cached: bool = False
+    #: the Gaussian renderer's model its targets are (the card's data.target_model)
+    target: str | None = None
 
 
 def _builder(cls: str) -> Callable[..., Any]:
@@ -1046,6 +1100,16 @@ TRAINERS: dict[str, Trainer] = {
         lambda x, y, rng, layout=(): _augment_narvis(x, y, rng, layout),
         trained=("hurricane", *_flows.TRAIN_FLOWS),
         held_out=("grid sampler", "storm", "flows"),
+    ),
+    "narvis-scan": Trainer(
+        _builder("NarvisKPN"),
+        _scan_frames,
+        _pack_narvis,
+        _augment_dihedral,  # round Gaussians, no velocity: rotations as well as flips
+        trained=_data.SCAN_TRAIN,
+        held_out=_data.SCAN_HELD_OUT,
+        cached=True,
+        target="splat",
     ),
 }
 assert tuple(TRAINERS) == tuple(SPECS) == NAMES

@@ -407,6 +407,35 @@ def test_render_post(tmp_path, capsys, args, panel):
     assert "a frame from render to picture, G-buffers on the device" in out
 
 
+def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
+    """--post narvis on laspy's real sample scan (no velocity) runs
+    narvis-scan (its kNN splat radius plane) and says so on stderr; on the
+    hurricane (a velocity) it runs narvis and says that; --post narvis-scan
+    names it outright, --compare scores it against its isotropic Gaussians."""
+    pytest.importorskip("laspy")
+    path = Path(__file__).parents[1] / "data" / "laspy_simple.laz"
+    rc, out, err = _render(capsys, path, "--view", "top", "--post", "narvis", "--out", tmp_path / "a", *SMALL)
+    assert rc == 0, err
+    assert "--post narvis: " in err and "model narvis-scan (no velocity" in err
+    assert "PostNetwork('narvis-scan'" in out
+    _assert_picture(tmp_path / "a" / "post-narvis-scan.png")
+    assert not (tmp_path / "a" / "post-narvis.png").exists()
+    rc, out, err = _render(
+        capsys, path, "--view", "top", "--post", "narvis-scan", "--compare", "--out", tmp_path / "b", *SMALL
+    )
+    assert rc == 0, err
+    assert "--post narvis:" not in err and "PostNetwork('narvis-scan'" in out
+    assert "compare   against the Gaussian renderer" in out
+    _assert_picture(tmp_path / "b" / "post-narvis-scan.png")
+    _assert_picture(tmp_path / "b" / "gaussians.png")
+    rc, out, err = _render(capsys, "--points", 20000, "--post", "narvis", "--out", tmp_path / "c", *SMALL)
+    assert rc == 0, err
+    assert "model narvis (it has a velocity" in err and "PostNetwork('narvis'" in out
+    _assert_picture(tmp_path / "c" / "post-narvis.png")
+    rc, _, err = _render(capsys, path, "--post", "narvis", "--post-guard", "--out", tmp_path, *SMALL)
+    assert rc == 2 and "the narvis-scan network has no guard" in err
+
+
 def test_render_post_guard(tmp_path, capsys):
     """--post-guard / --no-post-guard: the LiDAR network with and without its
     self-check (clvis.post.guard; on by default); refused without --post and

@@ -41,6 +41,15 @@ def test_suites_hold_only_families_never_trained_on():
     assert ev.TRAINED["narvis"] == ("hurricane", *flows.TRAIN_FLOWS)
     assert not set(flows.TRAIN_FLOWS) & set(flows.FLOWS)
     assert not {"magma", "magma_r"} & set(data.NARVIS_TRAIN_COLORMAPS)
+    # narvis-scan: scan generators, held out and trained disjoint; densities
+    # around the training's, a larger size too
+    assert ev.FAMILIES["narvis-scan"] == data.SCAN_HELD_OUT
+    assert ev.TRAINED["narvis-scan"] == data.SCAN_TRAIN
+    scan = ev.suite("narvis-scan")
+    assert {c.setting for c in scan} == {0.25, 1.0, 4.0} and {c.size for c in scan} == {
+        (256, 256),
+        (512, 512),
+    }
 
 
 def test_one_spec_per_network():
@@ -92,6 +101,27 @@ def test_splat_draws_an_ellipse_along_the_velocity():
     round_ = ev.splat(rgb, cov, None, radius=6)
     np.testing.assert_allclose(round_[15, :, 0], round_[:, 15, 0], atol=1e-7)
     assert not ev.splat(rgb, np.zeros_like(cov), vel).any()
+
+
+def test_splat_takes_its_sigma_from_a_radius_plane():
+    """narvis-scan's classical splat: round, each pixel's sigma the radius
+    plane's (clipped to 0.5 .. radius / 2.5), NaN (empty) read as the least."""
+    rgb = np.zeros((31, 31, 3), np.float32)
+    cov = np.zeros((31, 31), bool)
+    rgb[8, 8], rgb[22, 22], cov[8, 8], cov[22, 22] = (1, 1, 1), (1, 1, 1), True, True
+    sigma = np.full((31, 31), np.nan, np.float32)
+    sigma[8, 8], sigma[22, 22] = 0.7, 2.0
+    out = ev.splat(rgb, cov, None, sigma=sigma, opacity=0.8, radius=6)
+    small, big = out[8, 4:13, 0], out[22, 18:27, 0]
+    assert out[8, 8, 0] == pytest.approx(0.8) and out[22, 22, 0] == pytest.approx(0.8)
+    assert (big > 0.1).sum() > (small > 0.1).sum() + 2  # the wider sigma reaches further
+    np.testing.assert_allclose(out[22, 18:27, 0], out[18:27, 22, 0], atol=1e-7)  # round
+    huge, clipped = sigma.copy(), sigma.copy()
+    huge[22, 22], clipped[22, 22] = 50.0, 2.4  # clipped to radius / 2.5
+    np.testing.assert_allclose(
+        ev.splat(rgb, cov, None, sigma=huge, radius=6), ev.splat(rgb, cov, None, sigma=clipped, radius=6)
+    )
+    assert not np.allclose(ev.splat(rgb, cov, None, sigma=huge, radius=6), out)
 
 
 def test_metrics_module():
@@ -148,6 +178,13 @@ KNOWN_BELOW = {
         "lorenz 256x256 1x points hemisphere": (-3.60, -0.072),
         "jet 256x256 1x points grid": (0.89, -0.011),
     },
+    # narvis-scan (4000 steps, 61 min on 1 thread): the aerial strip scan's
+    # view is 1.15 dB below the classical splat with the radius plane; the
+    # object's is 3.0 dB over it but 0.012 below its SSIM (terrain: +5.8 dB)
+    "narvis-scan": {
+        "aerial 256x256 1x points views": (-1.15, -0.033),
+        "object 256x256 1x points views": (3.01, -0.012),
+    },
 }
 
 
@@ -164,7 +201,7 @@ def test_shipped_cards_hold_their_suite_margins(name):
     assert set(KNOWN_BELOW[name]) <= {m[0] for m in margins}
 
 
-@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (8 rows of the three quick suites)")
+@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (10 rows of the four quick suites)")
 @pytest.mark.parametrize("name", post.NAMES)
 def test_shipped_cards_never_below_their_baseline(name):
     """Issue 21 §2: PSNR and SSIM >= the best classical baseline on every
@@ -181,6 +218,7 @@ CI_CASES = {
     "infill": ev.Case("shapes", (320, 180), 64),
     "lidar": ev.Case("photo", (320, 240), 0.05),
     "narvis": ev.Case("jet", (128, 128), 1.0, "hemisphere"),
+    "narvis-scan": ev.Case("aerial", (128, 128), 1.0, "views"),
 }
 
 
@@ -256,3 +294,16 @@ def test_ci_narvis_meets_its_targets_on_a_jet(ci_rows):
     r = ci_rows["narvis"]["1x points"]
     assert _margin(r, "splat") >= 1 and _margin(r, "splat", "ssim") >= 0
     assert _margin(r, "raster") >= 6 and r["network"]["ssim"] >= 0.82
+
+
+def test_ci_narvis_scan_on_an_aerial_scan(ci_rows):
+    """A LAS-like aerial strip scan (a generator never in its training), one
+    view at 128 x 128, 4 points a pixel, against the 3DGS splat of its
+    isotropic kNN Gaussians. Measured (the shipped narvis-scan): 29.07 dB /
+    0.845 (the classical splat with the radius plane 24.36 / 0.727, push-pull
+    16.30 / 0.537, plain rasterization 13.25 / 0.238). Its card's 256 x 256
+    aerial view is 1.15 dB below the splat (KNOWN_BELOW): not every view."""
+    r = ci_rows["narvis-scan"]["1x points"]
+    assert r["network"]["psnr"] > 28 and r["network"]["ssim"] > 0.82
+    assert _margin(r, "splat") > 3.5 and _margin(r, "splat", "ssim") > 0.08
+    assert _margin(r, "raster") > 6 and _margin(r, "pushpull") > 6

@@ -27,7 +27,18 @@ def real_inputs():
     nf = data.narvis_frames(
         sc, data.narvis_cameras(sc, "hemisphere", 1.5)[7:8], 96, 64, ("rgb", "depth", "vel2d")
     )[0]
-    return {"infill": (iso, f), "lidar": (lidar, lf), "narvis": (nf.x[None], nf)}
+    planes = train.SPECS["narvis-scan"]["arch"]["planes"]
+    sf = data.scan_frames(("town",), 1, 5, 96, 64, planes, views=1, densities=(1.0, 1.0))[0]
+    return {
+        "infill": (iso, f),
+        "lidar": (lidar, lf),
+        "narvis": (nf.x[None], nf),
+        "narvis-scan": (sf.x[None], sf),
+    }
+
+
+#: the kernel-predicting NARVis networks (NarvisKPN): the flows' and the scans'
+KPN = ("narvis", "narvis-scan")
 
 
 @pytest.fixture(scope="module", params=list(train.SPECS))
@@ -41,7 +52,7 @@ def exported(request, tmp_path_factory, real_inputs):
             if isinstance(m, nets._UNet):
                 torch.nn.init.normal_(m.out.weight, std=0.2)
                 torch.nn.init.normal_(m.out.bias, std=0.05)
-    if name == "narvis":  # the kernel head starts at a fixed prior: give it a say
+    if name in KPN:  # the kernel head starts at a fixed prior: give it a say
         with torch.no_grad():
             torch.nn.init.normal_(net.out.weight, std=0.5)
     if name == "lidar":  # BN statistics other than the identity, so folding them is checked
@@ -53,7 +64,7 @@ def exported(request, tmp_path_factory, real_inputs):
     x, frame = real_inputs[name]
     y = (
         frame.rgb.transpose(2, 0, 1)
-        if name in ("lidar", "narvis")
+        if name != "infill"
         else np.concatenate([frame.rgb, frame.hit[..., None]], 2).transpose(2, 0, 1)
     )
     out = tmp_path_factory.mktemp(name)
@@ -85,8 +96,8 @@ def test_onnx_equals_torch_on_random_inputs(exported, size):
     x = rng.random((1, net.channels_in, *size), dtype=np.float32)
     if name == "infill":
         x[:, 3:5] = rng.random((1, 2, *size)) < 0.3  # hit and active are masks
-    if name == "narvis":
-        x = _narvis_input(rng, *size)
+    if name in KPN:
+        x = _narvis_input(rng, *size, planes=net.planes)
     got, want = _run(out / f"{name}.onnx", x, net), _torch(net, x)
     assert got.shape == want.shape == (1, net.channels_out, *size)
     np.testing.assert_allclose(got, want, atol=1e-4, rtol=0)
@@ -109,7 +120,7 @@ def test_fp16_and_int8_within_tolerance(exported, real_inputs):
     if files["int8"]["file"] is not None:
         np.testing.assert_allclose(_run(out / files["int8"]["file"], x, net), want, atol=0.1, rtol=0)
     # NarvisKPN makes none: int8 activations lose its softmax mask
-    assert (files["int8"]["file"] is None) == (name == "narvis")
+    assert (files["int8"]["file"] is None) == (name in KPN)
 
 
 def test_graph_is_plain_convolutions(exported):
@@ -124,7 +135,7 @@ def test_graph_is_plain_convolutions(exported):
     dims = m.graph.input[0].type.tensor_type.shape.dim
     assert dims[2].dim_param and dims[3].dim_param
     outputs = [o.name for o in m.graph.output]
-    if name == "narvis":  # up to the head's logits: no gather, softmax or weighted sum (issue 28)
+    if name in KPN:  # up to the head's logits: no gather, softmax or weighted sum (issue 28)
         assert outputs == ["logits", "nearness"] == exported[1].head()["outputs"]
         assert "Tanh" not in ops and "Softplus" not in ops and "Exp" not in ops
         assert m.graph.output[0].type.tensor_type.shape.dim[1].dim_value == exported[1].candidates + 2
@@ -257,6 +268,24 @@ def test_narvis_normalisation():
     t = x[0, 9]
     np.testing.assert_allclose(got[9], np.where(cov, (t - t[cov].min()) / np.ptp(t[cov]), 0), atol=1e-6)
     np.testing.assert_array_equal(got[:4], x[0, :4])
+
+
+def test_narvis_scan_radius_is_normalised_absolute():
+    """The splat radius in pixels (narvis-scan's radius plane) as
+    log2(1 + r) / 4 at covered pixels, 0 elsewhere: absolute, so a frame of
+    2-pixel splats and one of 8-pixel splats differ (a per-frame [0, 1]
+    would give both the same planes)."""
+    rng = np.random.default_rng(4)
+    net = nets.NarvisKPN(("rgb", "depth", "radius"), widths=(4, 4, 4, 4, 4), depth_select=True)
+    assert net.layout == ["r", "g", "b", "coverage", "depth", "radius_px"]
+    x = _narvis_input(rng, planes=net.planes)
+    cov = x[0, 3] > 0
+    x[0, 5] = np.where(cov, rng.uniform(0.3, 20, cov.shape), 0)
+    got = net.normalise(torch.from_numpy(x))[0].numpy()
+    np.testing.assert_allclose(got[5], np.where(cov, np.log2(1 + x[0, 5]) / 4, 0), rtol=1e-5, atol=1e-7)
+    y = x.copy()
+    y[0, 5] *= 4
+    assert not np.allclose(net.normalise(torch.from_numpy(y))[0, 5].numpy()[cov], got[5][cov])
 
 
 def test_narvis_multiscale_injection():

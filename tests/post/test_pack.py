@@ -350,13 +350,16 @@ def gbuffers(shape, seed, covered=0.5, attributes=("temperature",)):
     speed = np.where(cov, np.hypot(vel[..., 0], vel[..., 1]), nan).astype(np.float32)
     attrs = {a: np.where(cov, rng.uniform(200, 300, shape), nan).astype(np.float32) for a in attributes}
     attrs["class"] = np.where(cov, rng.integers(1, 9, shape), 0).astype(np.uint8)
-    return GBuffers(index, depth, rgba, attrs, vel, angle, speed)
+    radius = np.where(cov, rng.uniform(0.2, 12, shape), nan).astype(np.float32)
+    return GBuffers(index, depth, rgba, attrs, vel, angle, speed, radius)
 
 
 GBUFFER_SELECTIONS = [
     ("rgb",),
     ("rgb", "depth", "vel2d"),
     ("rgb", "vel2d", "temperature", "class", "depth"),
+    ("rgb", "depth", "radius"),  # narvis-scan's
+    ("rgb", "class", "radius", "vel2d"),
 ]
 
 
@@ -379,6 +382,35 @@ def test_pack_gbuffers(queue, shape, stride, planes):
     if "vel2d" in planes:
         c = gbuffer_channels(planes).index("vel_speed")
         np.testing.assert_array_equal(got[0, c, : shape[0], : shape[1]][cov], g.vel_speed[cov])
+    if "radius" in planes:  # after the velocity, before the attributes, whatever the order given
+        layout = gbuffer_channels(planes)
+        c = layout.index("radius_px")
+        assert layout[: c + 1][-1] == "radius_px" and not {"class", "temperature"} & set(layout[:c])
+        np.testing.assert_array_equal(got[0, c, : shape[0], : shape[1]][cov], g.radius_px[cov])
+
+
+def test_pack_gbuffers_radius_plane_of_a_scan(queue):
+    """narvis-scan's planes from a real render of a scan cloud whose radius is
+    knn_sigma: the radius channel is the resolve's radius_px (the world
+    radius x focal / depth), device planes as host ones."""
+    from clvis.post import pack_gbuffers
+    from clvis.post.names import SCAN_GBUFFER_PLANES, gbuffer_channels
+    from clvis.training import data
+
+    sc = data.scan_scene("town", 20_000, 3)
+    cam = data.scan_cameras(sc, np.random.default_rng(0), 1)[0]
+    ras = sc.rasterizer(queue=queue)
+    host = sc.gbuffers(ras, cam, 75, 41, SCAN_GBUFFER_PLANES)
+    dev = sc.gbuffers(ras, cam, 75, 41, SCAN_GBUFFER_PLANES, host=False)
+    cov = host.covered
+    assert cov.mean() > 0.05
+    want = ref.pack_gbuffers(host, SCAN_GBUFFER_PLANES, stride=16)
+    same(pack_gbuffers(dev, SCAN_GBUFFER_PLANES, stride=16, queue=queue).get(), want)
+    assert gbuffer_channels(SCAN_GBUFFER_PLANES) == ["r", "g", "b", "coverage", "depth", "radius_px"]
+    # radius_px = knn_sigma of the winning point x the focal length in pixels / its depth
+    focal = cam.focal_px(41)
+    r = sc.cloud.radius[host.index[cov]] * focal / host.depth[cov]
+    np.testing.assert_allclose(want[0, 5, :41, :75][cov], r, rtol=1e-4)
 
 
 def test_pack_gbuffers_from_the_rasterizer_on_the_device(queue):
@@ -412,6 +444,10 @@ def test_pack_gbuffers_bad_input(queue):
     no_vel.vel2d = no_vel.vel_angle = no_vel.vel_speed = None
     with pytest.raises(DataError, match="vel2d.*no velocity"):
         pack_gbuffers(no_vel, ("rgb", "vel2d"), queue=queue)
+    no_radius = gbuffers((9, 13), 1)
+    no_radius.radius_px = None
+    with pytest.raises(DataError, match="'radius' plane.*no radius"):
+        pack_gbuffers(no_radius, ("rgb", "depth", "radius"), queue=queue)
     with pytest.raises(DataError, match="no attribute plane 'pressure'.*temperature"):
         pack_gbuffers(g, ("rgb", "pressure"), queue=queue)
     with pytest.raises(ValueError, match="lacks 'rgb'"):

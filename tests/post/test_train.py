@@ -48,10 +48,56 @@ def test_train_smoke_through_the_cli(tmp_path, name, capsys):
     assert net.card["seed"] == 0
     # NARVis exports the split form the shipped card has: the graph to the
     # head's logits, the head applied by clvis.post.kpn (issue 28)
-    assert (net.head is not None) == (name == "narvis") == ("head" in card)
-    if name == "narvis":
+    assert (net.head is not None) == (name in ("narvis", "narvis-scan")) == ("head" in card)
+    if name in ("narvis", "narvis-scan"):
         shipped = json.loads((post.MODELS / "narvis.json").read_text())["head"]
         assert card["head"].keys() == shipped.keys() and card["head"]["kind"] == "kpn"
+    if name == "narvis-scan":  # its frames went through the cache; its targets are 3DGS splats
+        assert card["data"]["target_model"] == "splat" and "isotropic" in card["data"]["target"]
+        assert card["data"]["train"] == list(data.SCAN_TRAIN)
+        assert len(list((tmp_path / "cache").glob("narvis-narvis-scan-*.npz"))) == 2  # train, held out
+
+
+def test_scan_scenes_are_deterministic_scans_without_velocity():
+    """Each narvis-scan generator: finite points with colours, no velocity,
+    the radius knn_sigma of the points (what the target's Gaussians use),
+    the same cloud for the same seed and another for another seed."""
+    from clvis.gauss.points import knn_sigma
+
+    assert not set(data.SCAN_TRAIN) & set(data.SCAN_HELD_OUT)
+    for kind in data.SCAN_KINDS:
+        a, b = data.scan_scene(kind, 3000, 5), data.scan_scene(kind, 3000, 5)
+        c = a.cloud
+        assert c.velocity is None and c.colors.shape == (3000, 4) and np.isfinite(c.positions).all()
+        np.testing.assert_array_equal(c.positions, b.cloud.positions)
+        np.testing.assert_array_equal(c.radius, knn_sigma(c.positions, 4))
+        assert (c.radius > 0).all() and len(np.unique(c.colors[:, :3], axis=0)) > 8, kind
+        assert not np.array_equal(c.positions, data.scan_scene(kind, 3000, 6).cloud.positions)
+    with pytest.raises(ValueError, match="scene"):
+        data.scan_scene("hurricane", 3000, 5)
+
+
+def test_scan_pairs_are_registered():
+    """A narvis-scan pair: the packed G-buffers of the view (rgb, depth, the
+    radius plane) and the splat of isotropic Gaussians of sigma knn_sigma and
+    the points' colours, rendered from the same camera; the Gaussians' own
+    render is the target, and it covers the raster's holes."""
+    from clvis.gauss import GaussianRenderer, gaussians_from_points
+    from clvis.post.names import SCAN_GBUFFER_PLANES
+
+    f = data.scan_frames(("photo_town",), 1, 2, 64, 48, SCAN_GBUFFER_PLANES, views=1, densities=(1, 1))[0]
+    assert f.x.shape == (6, 48, 64) and f.rgb.shape == (48, 64, 3)
+    rng = np.random.default_rng(2)  # scan_frames' draws, replayed
+    rng.uniform(0, 0)
+    sc = data.scan_scene("photo_town", int(data.SCAN_POINTS_PER_PIXEL * 64 * 48), int(rng.integers(0, 2**31)))
+    cam = data.scan_cameras(sc, rng, 1, 64 / 48)[0]
+    g = gaussians_from_points(sc.cloud, opacity=data.SCAN_OPACITY, color_by="rgb")  # sigma: knn, clamped
+    np.testing.assert_allclose(g.scales[:, 0], sc.cloud.radius, rtol=1e-6)
+    gr = GaussianRenderer(g, model="splat", colors=True)
+    np.testing.assert_array_equal(f.rgb, np.clip(np.asarray(gr.render(cam, 64, 48).rgba)[..., :3], 0, 1))
+    cov = f.x[3] > 0
+    assert 0.05 < cov.mean() < 0.95 and (f.x[5][cov] > 0).all() and not f.x[5][~cov].any()
+    assert (f.rgb.sum(-1) > 0).mean() > cov.mean()  # the Gaussians fill between the points
 
 
 def test_narvis_frames_are_rendered_once_per_key(tmp_path):

@@ -26,7 +26,8 @@ pack_gbuffers (the NARVis U-Net): from rasterizer G-buffers (``index``,
 ``rgba`` and the planes named), the channels of
 clvis.post.nets.gbuffer_channels(planes): R, G, B = rgba / 255 in float32
 and COVERAGE = 1 at covered pixels (index != 0xFFFFFFFF); then depth, then
-the screen velocity (vel2d's x and y, vel_angle, vel_speed), then each other
+the screen velocity (vel2d's x and y, vel_angle, vel_speed), then the splat
+radius in pixels (``radius_px``, where "radius" is named), then each other
 named plane (an attribute, as float32) in the order given. Every channel is
 0 at empty pixels and padding. A covered pixel whose value is NaN or
 infinite is an error.
@@ -107,8 +108,10 @@ def gbuffer_sources(gbuffers: Any, planes: Sequence[str]) -> list[tuple[str, np.
             ("vel_angle", np.asarray(gbuffers.vel_angle, _F)),
             ("vel_speed", np.asarray(gbuffers.vel_speed, _F)),
         ]
+    if "radius" in planes:
+        out.append(("radius_px", np.asarray(gbuffers.radius_px, _F)))
     for p in planes:
-        if p not in ("rgb", "coverage", "depth", "vel2d"):
+        if p not in ("rgb", "coverage", "depth", "vel2d", "radius"):
             out.append((p, np.asarray(gbuffers.attributes[p]).astype(_F)))
     return out
 

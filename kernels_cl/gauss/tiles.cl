@@ -5,7 +5,8 @@
  * Data flow (clvis/gauss/tiles.py): tile_count (keys per Gaussian) -> exclusive
  * scan of the counts (clvis.primitives) -> tile_keys (one key per Gaussian and
  * tile it may touch) -> radix sort of the keys with the Gaussian ids ->
- * tile_ranges (each tile's run of keys) -> tile_render (per pixel).
+ * tile_ranges (each tile's run of keys) -> tile_gather (the keys' records in
+ * key order) -> tile_render (per pixel).
  *
  * ABI
  * ---
@@ -43,7 +44,13 @@
  * kernel tile_ranges(global const ulong *keys, uint m,   m keys sorted ascending
  *                    global uint2 *ranges)               per tile of the band, zeroed before:
  *     ranges[tile] = (first, last + 1) of the tile's keys; (0, 0) for none.
- * kernel tile_render(recs, global const uint *order (record j is Gaussian order[j]: its id
+ * kernel tile_gather(recs, global const uint *ids, uint m,    m sorted keys' ids
+ *                    global clvis_gaussian *keyrecs)           m records
+ *     keyrecs[i] = recs[ids[i]]: the keys' records in key order, so that the
+ *     render kernels stream them (one random read a key a frame, not one a
+ *     key a pixel row).
+ * kernel tile_render(global const clvis_gaussian *keyrecs (tile_gather's),
+ *                    global const uint *order (record j is Gaussian order[j]: its id
  *                    for ties and colours), global const ulong *keys, global const uint *ids,
  *                    global const uint2 *ranges, global const float *cam (22 floats,
  *                    clvis/camera.h), uint W, uint H, uint ty0, uint tile0 (the band's
@@ -316,6 +323,14 @@ kernel void tile_ranges(global const ulong *keys, uint m, global uint2 *ranges)
         ranges[tile].y = i + 1;
 }
 
+kernel void tile_gather(global const clvis_gaussian *recs, global const uint *ids, uint m,
+                        global clvis_gaussian *out)
+{
+    uint i = get_global_id(0);
+    if (i < m)
+        out[i] = recs[ids[i]];
+}
+
 inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *colors, uint id)
 {
 #if COLOR == 1
@@ -325,7 +340,7 @@ inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *c
 #endif
 }
 
-kernel void tile_render(global const clvis_gaussian *recs, global const uint *order, global const ulong *keys,
+kernel void tile_render(global const clvis_gaussian *keyrecs, global const uint *order, global const ulong *keys,
                         global const uint *ids,
                         global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
                         uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
@@ -384,7 +399,7 @@ kernel void tile_render(global const clvis_gaussian *recs, global const uint *or
                     break;
             }
             uint j = ids[i];
-            global const clvis_gaussian *g = recs + j;
+            global const clvis_gaussian *g = keyrecs + i;
             float t, m2, ts, a, op[3], dp[3];
             clvis_gauss_hit(g, o, d, &t, &m2, &ts, &a, op, dp);
             if (!(m2 <= cutoff2))
@@ -500,7 +515,7 @@ inline float pend_t(ulong k)
             front[l] = INFINITY;                                                                      \
     } while (0)
 
-kernel void tile_render8(global const clvis_gaussian *recs, global const uint *order, global const ulong *keys,
+kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint *order, global const ulong *keys,
                         global const uint *ids,
                          global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
                          uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
@@ -569,7 +584,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
                     break;
             }
             uint j = ids[i];
-            global const clvis_gaussian *g = recs + j;
+            global const clvis_gaussian *g = keyrecs + i;
             /* clvis_gauss_hit on 8 rays */
             float8 r0 = ox - g->mean[0], r1 = oy - g->mean[1], r2 = oz - g->mean[2];
             float8 op0 = (g->w[0] * r0 + g->w[1] * r1) + g->w[2] * r2;

@@ -14,8 +14,9 @@ rows:
 3. ``tile_keys``: one key ``tile << 32 | key_f32(dmin)`` per (Gaussian, tile),
    dmin a lower bound of the Gaussian's view depth.
 4. ``clvis.primitives.radix_sort`` of the keys with the Gaussian ids.
-5. ``tile_ranges``: each tile's run of keys; ``tile_gather``: the keys'
-   records in key order (the render kernels stream them).
+5. ``tile_ranges``: each tile's run of keys; ``gather_records``
+   (gaussians.cl): the keys' records in key order (the render kernels stream
+   them).
 6. ``tile_render``: per pixel, the tile's list in dmin order; a hit is
    composited once no later candidate can come before it (its depth is below
    the next candidate's dmin), through a small pending buffer, with rounds over
@@ -40,6 +41,7 @@ from .._arrays import buffer_of
 from ..camera import Camera, ray_buffer
 from ..colormap import TransferFunction
 from ..errors import DeviceError
+from .gaussians import GAUSSIAN_DTYPE, gather_records
 
 __all__ = ["KEY_BYTES", "PROFILES", "projection_rows", "render_tiles", "tile_lists"]
 
@@ -78,7 +80,7 @@ PROFILES = {
     },
 }
 KEY_BYTES = 24  # key 8 + id 4, and the radix sort's copies of both
-GATHER_BYTES = 56  # tile_gather's record a key (the hit models, not splat)
+GATHER_BYTES = GAUSSIAN_DTYPE.itemsize  # the gathered record a key (the hit models, not splat)
 RAY_BYTES = 28
 
 
@@ -112,7 +114,7 @@ def _kernels(q, r) -> dict:
     }
     return {
         name: runtime.get_kernel(q, "gauss/tiles.cl", name, defines, runtime.EXACT_FP)
-        for name in ("tile_count", "tile_keys", "tile_ranges", "tile_gather", "tile_render", "tile_render8")
+        for name in ("tile_count", "tile_keys", "tile_ranges", "tile_render", "tile_render8")
     }
 
 
@@ -257,17 +259,8 @@ def render_tiles(
                 np.uint32(m),
                 ranges.base_data,
             )
-            if not splat:
-                keyrecs = runtime.empty(q, m * GATHER_BYTES, np.uint8, "tile key records")
-                runtime.launch(
-                    q,
-                    ks["tile_gather"],
-                    *runtime.items(q, m, 256),
-                    recs,
-                    ids.base_data,
-                    np.uint32(m),
-                    keyrecs.base_data,
-                )
+            if not splat:  # the keys' records in key order
+                keyrecs = gather_records(q, r.records, ids, m)
         y0 = a * ts
         n_rows = min(b * ts, h) - y0
         lists = (

@@ -5,8 +5,8 @@
  * Data flow (clvis/gauss/tiles.py): tile_count (keys per Gaussian) -> exclusive
  * scan of the counts (clvis.primitives) -> tile_keys (one key per Gaussian and
  * tile it may touch) -> radix sort of the keys with the Gaussian ids ->
- * tile_ranges (each tile's run of keys) -> tile_gather (the keys' records in
- * key order) -> tile_render (per pixel).
+ * tile_ranges (each tile's run of keys) -> gaussians.cl's gather_records (the
+ * keys' records in key order) -> tile_render (per pixel).
  *
  * ABI
  * ---
@@ -44,12 +44,10 @@
  * kernel tile_ranges(global const ulong *keys, uint m,   m keys sorted ascending
  *                    global uint2 *ranges)               per tile of the band, zeroed before:
  *     ranges[tile] = (first, last + 1) of the tile's keys; (0, 0) for none.
- * kernel tile_gather(recs, global const uint *ids, uint m,    m sorted keys' ids
- *                    global clvis_gaussian *keyrecs)           m records
- *     keyrecs[i] = recs[ids[i]]: the keys' records in key order, so that the
- *     render kernels stream them (one random read a key a frame, not one a
- *     key a pixel row).
- * kernel tile_render(global const clvis_gaussian *keyrecs (tile_gather's),
+ * kernel tile_render(global const clvis_gaussian *keyrecs (keyrecs[i] = recs[ids[i]],
+ *                    the keys' records in key order, gaussians.cl's gather_records
+ *                    (recs, ids, m): the render kernels stream them, one random
+ *                    read a key a band, not one a key a pixel row),
  *                    global const uint *order (record j is Gaussian order[j]: its id
  *                    for ties and colours), global const ulong *keys, global const uint *ids,
  *                    global const uint2 *ranges, global const float *cam (22 floats,
@@ -321,14 +319,6 @@ kernel void tile_ranges(global const ulong *keys, uint m, global uint2 *ranges)
         ranges[tile].x = i;
     if (i == m - 1 || (uint)(keys[i + 1] >> 32) != tile)
         ranges[tile].y = i + 1;
-}
-
-kernel void tile_gather(global const clvis_gaussian *recs, global const uint *ids, uint m,
-                        global clvis_gaussian *out)
-{
-    uint i = get_global_id(0);
-    if (i < m)
-        out[i] = recs[ids[i]];
 }
 
 inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *colors, uint id)

@@ -14,14 +14,17 @@ rows:
 3. ``tile_keys``: one key ``tile << 32 | key_f32(dmin)`` per (Gaussian, tile),
    dmin a lower bound of the Gaussian's view depth.
 4. ``clvis.primitives.radix_sort`` of the keys with the Gaussian ids.
-5. ``tile_ranges``: each tile's run of keys.
+5. ``tile_ranges``: each tile's run of keys; ``gather_records``
+   (gaussians.cl): the keys' records in key order (the render kernels stream
+   them).
 6. ``tile_render``: per pixel, the tile's list in dmin order; a hit is
    composited once no later candidate can come before it (its depth is below
    the next candidate's dmin), through a small pending buffer, with rounds over
    the same list when more than KP hits are pending.
 
 Memory: keys and ids take 12 bytes a key plus the sort's temporaries (12
-more); the key count is known before anything is allocated for it.
+more), and the gathered records 56 (not the splat model); the key count is
+known before anything is allocated for it.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from .._arrays import buffer_of
 from ..camera import Camera, ray_buffer
 from ..colormap import TransferFunction
 from ..errors import DeviceError
+from .gaussians import GAUSSIAN_DTYPE, gather_records
 
 __all__ = ["KEY_BYTES", "PROFILES", "projection_rows", "render_tiles", "tile_lists"]
 
@@ -76,6 +80,7 @@ PROFILES = {
     },
 }
 KEY_BYTES = 24  # key 8 + id 4, and the radix sort's copies of both
+GATHER_BYTES = GAUSSIAN_DTYPE.itemsize  # the gathered record a key (the hit models, not splat)
 RAY_BYTES = 28
 
 
@@ -137,7 +142,8 @@ def render_tiles(
     tiles_x, tiles_y = -(-w // ts), -(-h // ts)
     budget = prof["tile_keys"] if max_keys is None else max_keys
     # a quarter of the device's memory at most for a band's keys
-    budget = max(1, min(budget, runtime.capabilities(q).global_mem_bytes // (4 * KEY_BYTES)))
+    key_bytes = KEY_BYTES + (0 if r.model == "splat" else GATHER_BYTES)
+    budget = max(1, min(budget, runtime.capabilities(q).global_mem_bytes // (4 * key_bytes)))
     rows_cap = tiles_y if not host else max(1, min(tiles_y, prof["tile_rays"] // (w * ts)))
     cam = ray_buffer(camera, w, h)
     proj = projection_rows(camera, w, h)
@@ -223,10 +229,10 @@ def render_tiles(
             )
         band_tiles = (b - a) * tiles_x
         ranges = runtime.zeros(q, (band_tiles, 2), np.uint32, "tile ranges")
-        keys = ids = None
+        keys = ids = keyrecs = None
         e1 = e2 = e0
         if m:
-            runtime.check_memory(q, f"{what}: {m} tile keys", device_bytes=m * KEY_BYTES)
+            runtime.check_memory(q, f"{what}: {m} tile keys", device_bytes=m * key_bytes)
             keys = runtime.empty(q, m, np.uint64, "tile keys")
             ids = runtime.empty(q, m, np.uint32, "tile key ids")
             extra = (splats.base_data, offsets.base_data) if splat else (offsets.base_data, camd.base_data)
@@ -253,6 +259,8 @@ def render_tiles(
                 np.uint32(m),
                 ranges.base_data,
             )
+            if not splat:  # the keys' records in key order
+                keyrecs = gather_records(q, r.records, ids, m)
         y0 = a * ts
         n_rows = min(b * ts, h) - y0
         lists = (
@@ -279,7 +287,8 @@ def render_tiles(
                 args = (recs, order, splats.base_data, *lists, *band_args, *tf_args, colors)
             else:
                 model_args = (np.float32(r.cutoff * r.cutoff), np.float32(r.density))
-                args = (recs, order, *lists, camd.base_data, *band_args, *tf_args, *model_args, colors)
+                krecs = keyrecs.base_data if keyrecs is not None else recs
+                args = (krecs, order, *lists, camd.base_data, *band_args, *tf_args, *model_args, colors)
             render_bands += 1
             e3 = runtime.launch(
                 q,

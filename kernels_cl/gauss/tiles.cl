@@ -5,7 +5,8 @@
  * Data flow (clvis/gauss/tiles.py): tile_count (keys per Gaussian) -> exclusive
  * scan of the counts (clvis.primitives) -> tile_keys (one key per Gaussian and
  * tile it may touch) -> radix sort of the keys with the Gaussian ids ->
- * tile_ranges (each tile's run of keys) -> tile_render (per pixel).
+ * tile_ranges (each tile's run of keys) -> gaussians.cl's gather_records (the
+ * keys' records in key order) -> tile_render (per pixel).
  *
  * ABI
  * ---
@@ -43,7 +44,11 @@
  * kernel tile_ranges(global const ulong *keys, uint m,   m keys sorted ascending
  *                    global uint2 *ranges)               per tile of the band, zeroed before:
  *     ranges[tile] = (first, last + 1) of the tile's keys; (0, 0) for none.
- * kernel tile_render(recs, global const uint *order (record j is Gaussian order[j]: its id
+ * kernel tile_render(global const clvis_gaussian *keyrecs (keyrecs[i] = recs[ids[i]],
+ *                    the keys' records in key order, gaussians.cl's gather_records
+ *                    (recs, ids, m): the render kernels stream them, one random
+ *                    read a key a band, not one a key a pixel row),
+ *                    global const uint *order (record j is Gaussian order[j]: its id
  *                    for ties and colours), global const ulong *keys, global const uint *ids,
  *                    global const uint2 *ranges, global const float *cam (22 floats,
  *                    clvis/camera.h), uint W, uint H, uint ty0, uint tile0 (the band's
@@ -325,7 +330,7 @@ inline float4 hit_color(global const float4 *tf, uint ti, global const uchar4 *c
 #endif
 }
 
-kernel void tile_render(global const clvis_gaussian *recs, global const uint *order, global const ulong *keys,
+kernel void tile_render(global const clvis_gaussian *keyrecs, global const uint *order, global const ulong *keys,
                         global const uint *ids,
                         global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
                         uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
@@ -384,7 +389,7 @@ kernel void tile_render(global const clvis_gaussian *recs, global const uint *or
                     break;
             }
             uint j = ids[i];
-            global const clvis_gaussian *g = recs + j;
+            global const clvis_gaussian *g = keyrecs + i;
             float t, m2, ts, a, op[3], dp[3];
             clvis_gauss_hit(g, o, d, &t, &m2, &ts, &a, op, dp);
             if (!(m2 <= cutoff2))
@@ -451,7 +456,9 @@ kernel void tile_render(global const clvis_gaussian *recs, global const uint *or
  * tile_render8: tile_render's result, a work-item per row of 8 pixels of a
  * tile (TS a multiple of 8): the hit test of a candidate runs on the 8 rays
  * at once in float8 lanes (the same operations as clvis_gauss_hit, lane by
- * lane), the pending buffers and compositing per lane. Global size:
+ * lane), so are the alphas (gauss.h's clvis_gauss_alpha_*8: float8 exp/erfc,
+ * whose last bit may differ from tile_render's scalar ones), the pending
+ * buffers and compositing per lane. Global size:
  * (tiles to render) * TS * TS / 8; work-item i: tile
  * tile0 + i / (TS * TS / 8), row (i % (TS * TS / 8)) / (TS / 8) of it, pixels
  * 8 * (i % (TS / 8)) .. + 7 of that row; any local size dividing TS * TS / 8.
@@ -498,7 +505,7 @@ inline float pend_t(ulong k)
             front[l] = INFINITY;                                                                      \
     } while (0)
 
-kernel void tile_render8(global const clvis_gaussian *recs, global const uint *order, global const ulong *keys,
+kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint *order, global const ulong *keys,
                         global const uint *ids,
                          global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
                          uint tile0, uint rows, uint out_y0, global const float4 *tf, uint tf_n, float tf_min,
@@ -567,7 +574,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
                     break;
             }
             uint j = ids[i];
-            global const clvis_gaussian *g = recs + j;
+            global const clvis_gaussian *g = keyrecs + i;
             /* clvis_gauss_hit on 8 rays */
             float8 r0 = ox - g->mean[0], r1 = oy - g->mean[1], r2 = oz - g->mean[2];
             float8 op0 = (g->w[0] * r0 + g->w[1] * r1) + g->w[2] * r2;
@@ -585,27 +592,24 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
             int8 hit = m28 <= cutoff2;
             if (!clvis_any8(hit))
                 continue;
-            /* one transfer-function entry a candidate; alphas lane by lane with
-             * the scalar functions (the same bits as tile_render and march.cl) */
+            /* one transfer-function entry a candidate; the 8 lanes' alphas in
+             * float8 (one exp for the row: PoCL calls exp out of line), the
+             * scalar functions' operations lane by lane (gauss.h's
+             * clvis_gauss_alpha_*8; the vector exp/erfc may differ from the
+             * scalar ones in the last bit) */
             uint id = order[j];
             uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
             float opac = g->opacity * tf[ti].w;
-            float lt[8], lm2[8];
+#if MODEL == 1
+            float8 alpha8 = clvis_gauss_alpha_absorption8(opac, density, ts8, a8, op0, op1, op2, dp0, dp1, dp2);
+#else
+            float8 alpha8 = clvis_gauss_alpha_max_response8(opac, m28);
+#endif
+            float lt[8], lal[8];
             int lh[8];
             vstore8(t8, 0, lt);
-            vstore8(m28, 0, lm2);
+            vstore8(alpha8, 0, lal);
             vstore8(hit, 0, lh);
-#if MODEL == 1
-            float lts[8], la[8], lop[3][8], ldp[3][8];
-            vstore8(ts8, 0, lts);
-            vstore8(a8, 0, la);
-            vstore8(op0, 0, lop[0]);
-            vstore8(op1, 0, lop[1]);
-            vstore8(op2, 0, lop[2]);
-            vstore8(dp0, 0, ldp[0]);
-            vstore8(dp1, 0, ldp[1]);
-            vstore8(dp2, 0, ldp[2]);
-#endif
             for (int l = 0; l < 8; ++l) {
                 if (!lh[l] || done[l])
                     continue;
@@ -630,13 +634,7 @@ kernel void tile_render8(global const clvis_gaussian *recs, global const uint *o
                     }
                     hd[l] = 0;
                 }
-#if MODEL == 1
-                float op[3] = {lop[0][l], lop[1][l], lop[2][l]}, dp[3] = {ldp[0][l], ldp[1][l], ldp[2][l]};
-                float alpha = clvis_gauss_alpha_absorption(opac, density, lts[l], la[l], op, dp);
-#else
-                float alpha = clvis_gauss_alpha_max_response(opac, lm2[l]);
-#endif
-                ulong v = (ulong)as_uint(alpha) << 32 | ti;
+                ulong v = (ulong)as_uint(lal[l]) << 32 | ti;
                 int pos = hd[l] + kn[l]++;
                 while (pos > hd[l] && pk[l][pos - 1] > k) {
                     pk[l][pos] = pk[l][pos - 1];

@@ -386,7 +386,7 @@ def gauss_render(q):
 
 @case
 def gauss_tiles(q):
-    """The tile renderer: count, scan, keys, sort, ranges, render (tile_render8
+    """The tile renderer: count, scan, keys, sort, ranges, gather_records, render (tile_render8
     under the cpu shape, tile_render under the gpu one)."""
     g = _gaussians(80, 16)
     w, h = 19, 13  # partial tiles on both edges

@@ -33,6 +33,9 @@
  *       = 1 - exp(-(density opac) I), I = (exp(-ms2 / 2) sqrt(pi / (2a)))
  *       erfc(-ts sqrt(a / 2)), ms2 = |o' + ts d'|^2 (op = o', dp = d' of
  *       clvis_gauss_hit)
+ *   float8 clvis_gauss_alpha_max_response8(opac, m2), clvis_gauss_alpha_absorption8(opac,
+ *       density, ts, a, op0, op1, op2, dp0, dp1, dp2): the same on 8 rays (float8 lanes;
+ *       exp/erfc/sqrt of float8 may differ from the scalar ones in the last bit)
  *   float4 clvis_gauss_rgb8(c): a per-Gaussian uchar4 colour as (r, g, b, a) / 255
  *       (correctly rounded division), used in place of the transfer function's
  *       colour when a Gaussian carries its own
@@ -93,6 +96,23 @@ inline float clvis_gauss_alpha_absorption(float opac, float density, float ts, f
     float s0 = op[0] + ts * dp[0], s1 = op[1] + ts * dp[1], s2 = op[2] + ts * dp[2];
     float ms2 = clvis_dot3(s0, s1, s2, s0, s1, s2);
     float integral = (exp(-0.5f * ms2) * sqrt(M_PI_F / (2.0f * a))) * erfc(-ts * sqrt(0.5f * a));
+    return 1.0f - exp(-((density * opac) * integral));
+}
+
+/* the two alphas on 8 lanes (tile_render8): the same operations lane by lane;
+ * float8 exp/erfc/sqrt may differ from the scalar ones in the last bit */
+inline float8 clvis_gauss_alpha_max_response8(float opac, float8 m2)
+{
+    float8 a = opac * exp(-0.5f * m2);
+    return a < 0.99f ? a : 0.99f;
+}
+
+inline float8 clvis_gauss_alpha_absorption8(float opac, float density, float8 ts, float8 a, float8 op0,
+                                            float8 op1, float8 op2, float8 dp0, float8 dp1, float8 dp2)
+{
+    float8 s0 = op0 + ts * dp0, s1 = op1 + ts * dp1, s2 = op2 + ts * dp2;
+    float8 ms2 = (s0 * s0 + s1 * s1) + s2 * s2;
+    float8 integral = (exp(-0.5f * ms2) * sqrt(M_PI_F / (2.0f * a))) * erfc(-ts * sqrt(0.5f * a));
     return 1.0f - exp(-((density * opac) * integral));
 }
 

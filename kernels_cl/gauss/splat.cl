@@ -95,7 +95,7 @@ inline int splat_project(global const clvis_gaussian *g, global const float *pro
     float b = clvis_dot3(M[0][0], M[0][1], M[0][2], M[1][0], M[1][1], M[1][2]);
     float c = clvis_dot3(M[1][0], M[1][1], M[1][2], M[1][0], M[1][1], M[1][2]) + SPLAT_LOWPASS;
     float det = a * c - b * b;
-    if (!(det > 0.0f) || !clvis_isfinite(det) || !clvis_isfinite(u) || !clvis_isfinite(v))
+    if (!(det > 0.0f) || !clvis_il_isfinite(det) || !clvis_il_isfinite(u) || !clvis_il_isfinite(v))
         return 0;
     s[0] = u;
     s[1] = v;
@@ -125,7 +125,7 @@ inline int splat_footprint(const float *s, uint W, uint H, splat_fp *f)
     float k = SPLAT_Q_MAX * 1.001f;
     float euu = k * cc / cdet, evv = k * ca / cdet, euv = -k * cb / cdet;
     float det = euu * evv - euv * euv;
-    if (!(euu > 0.0f && evv > 0.0f && det > 0.0f && clvis_isfinite(det)))
+    if (!(euu > 0.0f && evv > 0.0f && det > 0.0f && clvis_il_isfinite(det)))
         return 0;
     clvis_ellipse_set(&f->e, s[0], s[1], euu, evv, euv, det);
     clvis_ellipse_rows_set(&f->e, &f->r);
@@ -146,8 +146,8 @@ inline int splat_row(const splat_fp *f, int ty, uint W, uint H, int *c0, int *c1
     int a, b;
     if (!clvis_ellipse_row(&f->r, ty, W, H, TS, &a, &b))
         return 0;
-    *c0 = clvis_imax(a, f->tx0);
-    *c1 = clvis_imin(b, f->tx1);
+    *c0 = clvis_il_imax(a, f->tx0);
+    *c1 = clvis_il_imin(b, f->tx1);
     return *c0 <= *c1;
 }
 
@@ -164,7 +164,7 @@ kernel void splat_count(global const clvis_gaussian *recs, uint n, global const 
     splat_fp f;
     ulong cnt = 0;
     if (splat_footprint(s, W, H, &f)) {
-        int y0 = clvis_imax(f.ty0, (int)ty0), y1 = clvis_imin(f.ty1, (int)ty1 - 1);
+        int y0 = clvis_il_imax(f.ty0, (int)ty0), y1 = clvis_il_imin(f.ty1, (int)ty1 - 1);
         for (int ty = y0; ty <= y1; ++ty) {
             int c0, c1;
             if (splat_row(&f, ty, W, H, &c0, &c1))
@@ -190,7 +190,7 @@ kernel void splat_keys(global const clvis_gaussian *recs, uint n, global const f
     uint tiles_x = (W + TS - 1) / TS;
     ulong dkey = (ulong)clvis_key_f32(as_uint(s[5]));
     ulong at = offsets[i];
-    int y0 = clvis_imax(f.ty0, (int)ty0), y1 = clvis_imin(f.ty1, (int)ty1 - 1);
+    int y0 = clvis_il_imax(f.ty0, (int)ty0), y1 = clvis_il_imin(f.ty1, (int)ty1 - 1);
     for (int ty = y0; ty <= y1; ++ty) {
         int c0, c1;
         if (!splat_row(&f, ty, W, H, &c0, &c1))
@@ -291,7 +291,7 @@ kernel void splat_render8(global const clvis_gaussian *recs, global const uint *
         float dy = s[1] - fy;
         float8 q8 = (s[2] * dx * dx + s[4] * dy * dy) + 2.0f * s[3] * dx * dy;
         int8 in8 = (q8 <= SPLAT_Q_MAX) & on8;
-        if (!clvis_any8(in8))
+        if (!clvis_il_any8(in8))
             continue;
         global const clvis_gaussian *g = recs + id;
         uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);

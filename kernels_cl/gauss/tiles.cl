@@ -166,8 +166,8 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
         float euu = nuu / f2 + EPS2, evv = nvv / f2 + EPS2, euv = nuv / f2;
         float cu = (mu * mw - S[0][2]) / fw, cv = (mv * mw - S[1][2]) / fw;
         float det = euu * evv - euv * euv;
-        if (euu > 0.0f && evv > 0.0f && det > 0.0f && clvis_isfinite(det) && clvis_isfinite(cu)
-            && clvis_isfinite(cv)) {
+        if (euu > 0.0f && evv > 0.0f && det > 0.0f && clvis_il_isfinite(det) && clvis_il_isfinite(cu)
+            && clvis_il_isfinite(cv)) {
             clvis_ellipse_set(&f->e, cu, cv, euu, evv, euv, det);
             clvis_ellipse_rows_set(&f->e, &f->r);
             f->exact = 1;
@@ -176,7 +176,7 @@ inline int footprint(global const clvis_gaussian *g, global const float *proj, f
             uhi = cu + hu;
             vlo = cv - hv;
             vhi = cv + hv;
-        } else if (!(clvis_isfinite(cu) && clvis_isfinite(cv))) {
+        } else if (!(clvis_il_isfinite(cu) && clvis_il_isfinite(cv))) {
             /* keep the whole image */
         }
     } else if (mw <= 0.0f && fw > 1e-6f * (mw * mw)) {
@@ -203,8 +203,8 @@ inline int tile_row(const tile_footprint *f, int ty, uint W, uint H, int *c0, in
     int a, b;
     if (!clvis_ellipse_row(&f->r, ty, W, H, TS, &a, &b))
         return 0;
-    *c0 = clvis_imax(a, f->tx0);
-    *c1 = clvis_imin(b, f->tx1);
+    *c0 = clvis_il_imax(a, f->tx0);
+    *c1 = clvis_il_imin(b, f->tx1);
     return *c0 <= *c1;
 }
 
@@ -217,7 +217,7 @@ kernel void tile_count(global const clvis_gaussian *recs, uint n, global const f
     tile_footprint f;
     ulong cnt = 0;
     if (footprint(recs + i, proj, near, cutoff, W, H, &f)) {
-        int y0 = clvis_imax(f.ty0, (int)ty0), y1 = clvis_imin(f.ty1, (int)ty1 - 1);
+        int y0 = clvis_il_imax(f.ty0, (int)ty0), y1 = clvis_il_imin(f.ty1, (int)ty1 - 1);
         for (int ty = y0; ty <= y1; ++ty) {
             int c0, c1;
             if (tile_row(&f, ty, W, H, &c0, &c1))
@@ -258,7 +258,7 @@ inline float tile_depth(const tile_footprint *f, float m3, float fsf, float c, f
     float h = (fdlo > 0.0f || fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : 0.0f;
     float g = fmax(fsf - h, 0.0f) + 1e-5f * fsf;
     float lo = (m3 - c * sqrt(g)) - sd;
-    return clvis_isfinite(lo) ? fmax(lo, f->dmin) : f->dmin;
+    return clvis_il_isfinite(lo) ? fmax(lo, f->dmin) : f->dmin;
 }
 
 kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
@@ -294,7 +294,7 @@ kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const fl
     float fsf = clvis_dot3(e[0], e[1], e[2], e[0], e[1], e[2]);
     uint tiles_x = (W + TS - 1) / TS;
     ulong at = offsets[i];
-    int y0 = clvis_imax(f.ty0, (int)ty0), y1 = clvis_imin(f.ty1, (int)ty1 - 1);
+    int y0 = clvis_il_imax(f.ty0, (int)ty0), y1 = clvis_il_imin(f.ty1, (int)ty1 - 1);
     for (int ty = y0; ty <= y1; ++ty) {
         int c0, c1;
         if (!tile_row(&f, ty, W, H, &c0, &c1))
@@ -500,7 +500,7 @@ inline float pend_t(ulong k)
     do {                                                                                              \
         if (kn[l] > 0 && cd[l] > 0.0f) {                                                              \
             float h_ = pend_t(pk[l][hd[l]]) * cd[l];                                                  \
-            front[l] = (h_ + d0[l]) + 1e-5f * (clvis_fabs(h_) + ad0[l]);                              \
+            front[l] = (h_ + d0[l]) + 1e-5f * (clvis_il_fabs(h_) + ad0[l]);                              \
         } else                                                                                        \
             front[l] = INFINITY;                                                                      \
     } while (0)
@@ -556,7 +556,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
         }
         for (uint i = range.x; i < range.y && live > 0; ++i) {
             float dm = as_float(clvis_key_f32_inverse((uint)keys[i]));
-            if (clvis_any8(vload8(0, front) < dm)) {
+            if (clvis_il_any8(vload8(0, front) < dm)) {
                 for (int l = 0; l < 8; ++l) {
                     if (!(front[l] < dm))
                         continue;
@@ -590,7 +590,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
             float8 p0 = op0 + t8 * dp0, p1 = op1 + t8 * dp1, p2 = op2 + t8 * dp2;
             float8 m28 = (p0 * p0 + p1 * p1) + p2 * p2;
             int8 hit = m28 <= cutoff2;
-            if (!clvis_any8(hit))
+            if (!clvis_il_any8(hit))
                 continue;
             /* one transfer-function entry a candidate; the 8 lanes' alphas in
              * float8 (one exp for the row: PoCL calls exp out of line), the

@@ -30,12 +30,10 @@
  *       work-item gid, a work-item per pixel of ts x ts tiles (tile tile0 + gid /
  *       ts^2, pixel gid % ts^2 of it, row-major; tile index (ty - ty0) * tiles_x
  *       + tx): its tile, pixel (px, py) and row within the band of tiles
- *   clvis_fabs, clvis_imin, clvis_imax, clvis_isfinite, clvis_any8 (of an int8),
- *       clvis_lo, clvis_hi: fabs, min, max, isfinite, any, fmin, fmax inline, by
- *       comparison or bit mask (PoCL calls its builtins out of line: a call,
- *       branches and for any() a vzeroupper each; the same results where
- *       a NaN can only be the first argument of clvis_lo / clvis_hi: it gives
- *       the second, as fmin / fmax)
+ *   clvis_lo, clvis_hi: fmin, fmax inline by comparison (PoCL calls its
+ *       builtins out of line; the same results where a NaN can only be the
+ *       first argument: it gives the second, as fmin / fmax). fabs, min, max,
+ *       isfinite and any come from clvis/inline.h (clvis_il_*)
  *
  * clvis.reference.gauss.tiles and clvis.reference.gauss.splat repeat them.
  */
@@ -43,40 +41,10 @@
 #define CLVIS_GAUSS_TILES_H
 
 #include "clvis/camera.h"
+#include "clvis/inline.h"
 #include "clvis/gauss.h"
 
 #define CLVIS_TILE_PAD 0.05f
-
-/* Builtins PoCL calls out of line (fabs, any, min, max, isfinite), where
- * they run once or more a Gaussian or a candidate: by bit mask or
- * comparison, the same results */
-inline float clvis_fabs(float x)
-{
-    return as_float(as_uint(x) & 0x7FFFFFFFu);
-}
-
-inline int clvis_any8(int8 v)
-{
-    int4 a = v.lo | v.hi;
-    int2 b = a.lo | a.hi;
-    return (b.x | b.y) < 0;
-}
-
-inline int clvis_imin(int a, int b)
-{
-    return a < b ? a : b;
-}
-
-inline int clvis_imax(int a, int b)
-{
-    return a > b ? a : b;
-}
-
-/* isfinite(x) as a test of the exponent bits, without a call */
-inline int clvis_isfinite(float x)
-{
-    return (as_uint(x) & 0x7F800000u) != 0x7F800000u;
-}
 
 inline float clvis_row4(global const float *r, float x, float y, float z)
 {
@@ -109,7 +77,7 @@ inline void clvis_ellipse_set(clvis_ellipse *e, float cu, float cv, float euu, f
     e->a01 = -euv;
     e->a11 = euu;
     e->det = det;
-    e->pad = CLVIS_TILE_PAD + 1e-5f * (clvis_fabs(cu) + clvis_fabs(cv));
+    e->pad = CLVIS_TILE_PAD + 1e-5f * (clvis_il_fabs(cu) + clvis_il_fabs(cv));
 }
 
 /* what clvis_ellipse_row needs of an ellipse, computed once */
@@ -152,7 +120,7 @@ inline int clvis_ellipse_row(const clvis_ellipse_rows *e, int ty, uint W, uint H
 {
     /* the strip of the row's pixel centres, relative to the centre */
     float lo = (((float)(ty * ts) + 0.5f) - e->pad) - e->cv;
-    float hi = (((float)clvis_imin((ty + 1) * ts, (int)H) - 0.5f) + e->pad) - e->cv;
+    float hi = (((float)clvis_il_imin((ty + 1) * ts, (int)H) - 0.5f) + e->pad) - e->cv;
     int meets = lo <= e->sv && hi >= -e->sv;   /* tested at the end: no branch */
     lo = clvis_hi(lo, -e->sv);
     hi = clvis_lo(hi, e->sv);
@@ -171,8 +139,8 @@ inline int clvis_ellipse_row(const clvis_ellipse_rows *e, int ty, uint W, uint H
     /* ceil(ulo) and floor(uhi) (at most one pixel too many: rounding of uhi + 1) */
     int px0 = (int)ulo, px1 = (int)(uhi + 1.0f) - 1;
     px0 += (float)px0 < ulo;
-    px0 = clvis_imax(px0, 0);
-    px1 = clvis_imin(px1, (int)W - 1);
+    px0 = clvis_il_imax(px0, 0);
+    px1 = clvis_il_imin(px1, (int)W - 1);
     *c0 = px0 / ts;
     *c1 = px1 / ts;
     return meets && px0 <= px1;
@@ -193,10 +161,10 @@ inline int clvis_tile_rect(float ulo, float uhi, float vlo, float vhi, uint W, u
     px1 -= (float)px1 > b;
     py0 += (float)py0 < c;
     py1 -= (float)py1 > d;
-    px0 = clvis_imax(px0, 0);
-    px1 = clvis_imin(px1, (int)W - 1);
-    py0 = clvis_imax(py0, 0);
-    py1 = clvis_imin(py1, (int)H - 1);
+    px0 = clvis_il_imax(px0, 0);
+    px1 = clvis_il_imin(px1, (int)W - 1);
+    py0 = clvis_il_imax(py0, 0);
+    py1 = clvis_il_imin(py1, (int)H - 1);
     if (px0 > px1 || py0 > py1)
         return 0;
     r[0] = px0 / ts;

@@ -31,6 +31,7 @@
  *                                      result is the second argument, a sign
  *                                      of zero OpenCL leaves open
  *   uint  clvis_il_umin(uint a, uint b), ulong clvis_il_ulmin(a, b)   min
+ *   int   clvis_il_imin(int a, int b), clvis_il_imax(int a, int b)    min, max
  *   float clvis_il_floor(float x)      floor(x): |x| < 2^23 through int,
  *                                      -0 kept; larger, inf and NaN: x
  *   float8 clvis_il_vload8(global const float *p)
@@ -121,6 +122,16 @@ inline uint clvis_il_umin(uint a, uint b)
 inline ulong clvis_il_ulmin(ulong a, ulong b)
 {
     return a < b ? a : b;
+}
+
+inline int clvis_il_imin(int a, int b)
+{
+    return a < b ? a : b;
+}
+
+inline int clvis_il_imax(int a, int b)
+{
+    return a > b ? a : b;
 }
 
 inline float clvis_il_floor(float x)

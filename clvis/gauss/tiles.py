@@ -56,7 +56,9 @@ __all__ = ["KEY_BYTES", "PROFILES", "projection_rows", "render_tiles", "tile_lis
 # against 2.3x the keys), half of it on NARVis's 2 M needle-like Gaussians
 # (1270 candidates a pixel against 3410).
 # The splatting model renders with splat_render8 (rows of 8 pixels, render_wg)
-# where lanes is 8, else splat_render ("splat_wg" pixels a group).
+# where lanes is 8, else splat_render ("splat_wg" pixels a group); with 8 lanes
+# it bins with splat_count8 / splat_keys8 (8 Gaussians a work-item, float8),
+# else splat_count / splat_keys (one a work-item); the same keys either way.
 PROFILES = {
     "cpu": {
         "ts": 8,
@@ -100,7 +102,14 @@ def _kernels(q, r) -> dict:
         sd = {"TS": prof["ts"], "COLOR": int(r.colors)}
         ks = {
             name: runtime.get_kernel(q, "gauss/splat.cl", name, sd, runtime.EXACT_FP)
-            for name in ("splat_count", "splat_keys", "splat_render", "splat_render8")
+            for name in (
+                "splat_count",
+                "splat_keys",
+                "splat_count8",
+                "splat_keys8",
+                "splat_render",
+                "splat_render8",
+            )
         }
         ks["tile_ranges"] = runtime.get_kernel(
             q, "gauss/tiles.cl", "tile_ranges", {"TS": prof["ts"]}, runtime.EXACT_FP
@@ -186,7 +195,13 @@ def render_tiles(
     if splat:
         head = (recs, np.uint32(n), projd.base_data, near, np.uint32(w), np.uint32(h))
         splats = runtime.empty(q, (max(n, 1), 8), np.float32, "2D splats")
-        count_k, keys_k = ks["splat_count"], ks["splat_keys"]
+        # with 8 lanes the binning kernels take 8 Gaussians a work-item (float8)
+        count_k, keys_k = (
+            ks["splat_count8" if lanes == 8 else "splat_count"],
+            ks["splat_keys8" if lanes == 8 else "splat_keys"],
+        )
+        if lanes == 8:
+            g_items = runtime.items(q, -(-n // 8), prof["item_wg"])
     else:
         head = (recs, np.uint32(n), projd.base_data, near, np.float32(r.cutoff), np.uint32(w), np.uint32(h))
         count_k, keys_k = ks["tile_count"], ks["tile_keys"]

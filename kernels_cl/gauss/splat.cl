@@ -28,6 +28,11 @@
  * kernel splat_keys(same, global const float *splats, global const ulong *offsets,
  *                   global ulong *keys, global uint *ids)
  *     keys: (tile - band's first) << 32 | clvis_key_f32(depth), ids: i.
+ * kernel splat_count8(the arguments of splat_count), splat_keys8(those of splat_keys)
+ *     splat_count's and splat_keys's outputs (the same bits), a work-item per 8
+ *     consecutive Gaussians 8 g .. 8 g + 7 (global size at least ceil(n / 8),
+ *     any local size): projection, footprint and tile-row tests in float8 /
+ *     int8 lanes (the same operations lane by lane), keys written lane by lane.
  * kernel splat_render(recs, global const uint *order (record j is Gaussian order[j], for
  *                     its colour), splats, keys, ids, ranges, uint W, uint H, uint ty0,
  *                     uint tile0, uint rows, uint out_y0 (as tiles.cl's tile_render),
@@ -329,5 +334,274 @@ kernel void splat_render8(global const clvis_gaussian *recs, global const uint *
         rgba[pix] = (float4)(cr[l], cg[l], cb[l], 1.0f - T[l]);
         depth[pix] = z[l];
         stats[pix] = (uint2)(hits[l], 1u);
+    }
+}
+
+/* ---------------------------------------------------------------- 8 Gaussians a work-item
+ * splat_count8 / splat_keys8: splat_count's and splat_keys's outputs (the
+ * same bits: splats, counts, keys, ids), a work-item per 8 consecutive
+ * Gaussians 8 i .. 8 i + 7 (global size ceil(n / 8)): the projection, the
+ * footprint and each tile row's test in float8 / int8 lanes, the same
+ * operations as splat_project, splat_footprint and clvis_ellipse_row lane by
+ * lane (divisions and sqrt correctly rounded, so vector and scalar agree);
+ * the keys written lane by lane in splat_keys's order. For PoCL, which
+ * neither inlines the scalar helpers nor vectorises across work-items. */
+inline float8 splat_lo8(float8 a, float8 b)
+{
+    return a < b ? a : b;
+}
+
+inline float8 splat_hi8(float8 a, float8 b)
+{
+    return a > b ? a : b;
+}
+
+inline float8 splat_dot3_8(float8 a0, float8 a1, float8 a2, float8 b0, float8 b1, float8 b2)
+{
+    return (a0 * b0 + a1 * b1) + a2 * b2;
+}
+
+inline float8 splat_row4_8(global const float *r, float8 x, float8 y, float8 z)
+{
+    return ((r[0] * x + r[1] * y) + r[2] * z) + r[3];
+}
+
+inline int8 splat_isfinite8(float8 x)
+{
+    return (as_int8(x) & (int8)(0x7F800000)) != (int8)(0x7F800000);
+}
+
+/* splat_project on Gaussians i0 .. i0 + 7 (index clamped to n - 1): s[k] the lanes of s[k] */
+inline void splat_project8(global const clvis_gaussian *recs, uint i0, uint n, global const float *proj, float near,
+                           uint W, uint H, float8 *s)
+{
+    float f[12][8];
+    for (int l = 0; l < 8; ++l) {
+        global const clvis_gaussian *g = recs + clvis_il_umin(i0 + (uint)l, n - 1u);
+        f[0][l] = g->mean[0];
+        f[1][l] = g->mean[1];
+        f[2][l] = g->mean[2];
+        for (int k = 0; k < 9; ++k)
+            f[3 + k][l] = g->w[k];
+    }
+    float8 mx = CLVIS_IL_VLOAD8(float8, f[0]), my = CLVIS_IL_VLOAD8(float8, f[1]),
+           mz = CLVIS_IL_VLOAD8(float8, f[2]);
+    float8 w[9];
+    for (int k = 0; k < 9; ++k)
+        w[k] = CLVIS_IL_VLOAD8(float8, f[3 + k]);
+    float8 L[3][3];
+    for (int k = 0; k < 3; ++k) {
+        float8 r2 = splat_dot3_8(w[3 * k], w[3 * k + 1], w[3 * k + 2], w[3 * k], w[3 * k + 1], w[3 * k + 2]);
+        for (int j = 0; j < 3; ++j)
+            L[j][k] = w[3 * k + j] / r2;
+    }
+    global const float *Pu = proj, *Pv = proj + 4, *Pw = proj + 8, *D = proj + 12;
+    float8 pw = splat_row4_8(Pw, mx, my, mz), dep = splat_row4_8(D, mx, my, mz);
+    int8 ok = (dep > near) & (pw > 0.0f);
+    float8 u = splat_row4_8(Pu, mx, my, mz) / pw, v = splat_row4_8(Pv, mx, my, mz) / pw;
+    float hw = 0.5f * (float)W, hh = 0.5f * (float)H;
+    float8 uc = splat_lo8(splat_hi8(u, (float8)(hw - 1.3f * hw)), (float8)(hw + 1.3f * hw));
+    float8 vc = splat_lo8(splat_hi8(v, (float8)(hh - 1.3f * hh)), (float8)(hh + 1.3f * hh));
+    float8 J[2][3];
+    for (int k = 0; k < 3; ++k) {
+        J[0][k] = (Pu[k] - uc * Pw[k]) / pw;
+        J[1][k] = (Pv[k] - vc * Pw[k]) / pw;
+    }
+    float8 M[2][3];
+    for (int r = 0; r < 2; ++r)
+        for (int k = 0; k < 3; ++k)
+            M[r][k] = splat_dot3_8(J[r][0], J[r][1], J[r][2], L[0][k], L[1][k], L[2][k]);
+    float8 a = splat_dot3_8(M[0][0], M[0][1], M[0][2], M[0][0], M[0][1], M[0][2]) + SPLAT_LOWPASS;
+    float8 b = splat_dot3_8(M[0][0], M[0][1], M[0][2], M[1][0], M[1][1], M[1][2]);
+    float8 c = splat_dot3_8(M[1][0], M[1][1], M[1][2], M[1][0], M[1][1], M[1][2]) + SPLAT_LOWPASS;
+    float8 det = a * c - b * b;
+    ok &= (det > 0.0f) & splat_isfinite8(det) & splat_isfinite8(u) & splat_isfinite8(v);
+    float8 zero = (float8)(0.0f);
+    s[0] = ok ? u : zero;
+    s[1] = ok ? v : zero;
+    s[2] = ok ? c / det : zero;
+    s[3] = ok ? -b / det : zero;
+    s[4] = ok ? a / det : zero;
+    s[5] = ok ? dep : zero;
+    s[6] = ok ? (float8)(1.0f) : zero;
+    s[7] = zero;
+}
+
+/* splat_fp and clvis_ellipse_rows on 8 lanes; ok: -1 where splat_footprint gives 1 */
+typedef struct {
+    float8 cu, cv, pad, sv, ds, euv, det, evv, ievv, slack;
+    int8 tx0, tx1, ty0, ty1, ok;
+} splat_fp8;
+
+inline void splat_footprint8(const float8 *s, uint W, uint H, splat_fp8 *f)
+{
+    float8 ca = s[2], cb = s[3], cc = s[4];
+    float8 cdet = ca * cc - cb * cb;
+    float k = SPLAT_Q_MAX * 1.001f;
+    float8 euu = k * cc / cdet, evv = k * ca / cdet, euv = -k * cb / cdet;
+    float8 det = euu * evv - euv * euv;
+    int8 ok = (s[6] != 0.0f) & (euu > 0.0f) & (evv > 0.0f) & (det > 0.0f) & splat_isfinite8(det);
+    /* clvis_ellipse_set, clvis_ellipse_rows_set */
+    f->cu = s[0];
+    f->cv = s[1];
+    f->pad = CLVIS_TILE_PAD + 1e-5f * (as_float8(as_uint8(s[0]) & (uint8)(0x7FFFFFFFu)) +
+                                       as_float8(as_uint8(s[1]) & (uint8)(0x7FFFFFFFu)));
+    float8 su = sqrt(euu);
+    f->sv = sqrt(evv);
+    f->euv = -(-euv);
+    f->ds = f->euv / su;
+    f->det = det;
+    f->evv = evv;
+    f->ievv = 1.0f / evv;
+    f->slack = f->pad + 1e-3f * su;
+    /* clvis_tile_rect(s0 - hu, s0 + hu, s1 - hv, s1 + hv, W, H, TS) */
+    float8 hu = su + f->pad, hv = f->sv + f->pad;
+    float8 ulo = splat_hi8(s[0] - hu, (float8)(-1.0f)), vlo = splat_hi8(s[1] - hv, (float8)(-1.0f));
+    float8 uhi = splat_lo8(s[0] + hu, (float8)((float)W + 1.0f)), vhi = splat_lo8(s[1] + hv, (float8)((float)H + 1.0f));
+    ok &= (ulo <= uhi) & (vlo <= vhi);
+    float8 a = ulo - 0.5f, b = uhi - 0.5f, c = vlo - 0.5f, d = vhi - 0.5f;
+    /* lanes that are not ok may hold any value: zero them before the conversions */
+    float8 zero = (float8)(0.0f);
+    a = ok ? a : zero;
+    b = ok ? b : zero;
+    c = ok ? c : zero;
+    d = ok ? d : zero;
+    int8 px0 = convert_int8(a), px1 = convert_int8(b), py0 = convert_int8(c), py1 = convert_int8(d);
+    px0 -= convert_float8(px0) < a;   /* true is -1 */
+    px1 += convert_float8(px1) > b;
+    py0 -= convert_float8(py0) < c;
+    py1 += convert_float8(py1) > d;
+    px0 = px0 > 0 ? px0 : (int8)(0);
+    px1 = px1 < (int)W - 1 ? px1 : (int8)((int)W - 1);
+    py0 = py0 > 0 ? py0 : (int8)(0);
+    py1 = py1 < (int)H - 1 ? py1 : (int8)((int)H - 1);
+    ok &= (px0 <= px1) & (py0 <= py1);
+    f->tx0 = px0 / TS;
+    f->tx1 = px1 / TS;
+    f->ty0 = py0 / TS;
+    f->ty1 = py1 / TS;
+    f->ok = ok;
+}
+
+/* clvis_ellipse_row and splat_row on 8 lanes (tile row ty[l] of lane l):
+ * -1 where the lane's row holds tiles c0 .. c1 */
+inline int8 splat_row8(const splat_fp8 *f, int8 ty, uint W, uint H, int8 *c0, int8 *c1)
+{
+    int8 yh = (ty + 1) * TS;
+    yh = yh < (int)H ? yh : (int8)((int)H);
+    float8 lo = ((convert_float8(ty * TS) + 0.5f) - f->pad) - f->cv;
+    float8 hi = ((convert_float8(yh) - 0.5f) + f->pad) - f->cv;
+    int8 meets = (lo <= f->sv) & (hi >= -f->sv);
+    lo = splat_hi8(lo, -f->sv);
+    hi = splat_lo8(hi, f->sv);
+    float8 dr = splat_lo8(splat_hi8(f->ds, lo), hi), dl = splat_lo8(splat_hi8(-f->ds, lo), hi);
+    float8 wr = sqrt(f->det * splat_hi8(f->evv - dr * dr, (float8)(0.0f)));
+    float8 wl = sqrt(f->det * splat_hi8(f->evv - dl * dl, (float8)(0.0f)));
+    float8 ulo = ((f->cu + (f->euv * dl - wl) * f->ievv) - f->slack) - 0.5f;
+    float8 uhi = ((f->cu + (f->euv * dr + wr) * f->ievv) + f->slack) - 0.5f;
+    float8 m1 = (float8)(-1.0f), fw = (float8)((float)W);
+    ulo = ulo >= -1.0f ? ulo : m1;
+    ulo = ulo <= (float)W ? ulo : fw;
+    uhi = uhi <= (float)W ? uhi : fw;
+    uhi = uhi >= -1.0f ? uhi : m1;
+    int8 px0 = convert_int8(ulo), px1 = convert_int8(uhi + 1.0f) - 1;
+    px0 -= convert_float8(px0) < ulo;
+    px0 = px0 > 0 ? px0 : (int8)(0);
+    px1 = px1 < (int)W - 1 ? px1 : (int8)((int)W - 1);
+    int8 a = px0 / TS, b = px1 / TS;
+    *c0 = a > f->tx0 ? a : f->tx0;
+    *c1 = b < f->tx1 ? b : f->tx1;
+    return meets & (px0 <= px1) & (*c0 <= *c1);
+}
+
+/* the band's tile rows of each lane: y0 .. y1 (y0 > y1 where none) */
+inline void splat_rows8(const splat_fp8 *f, uint ty0, uint ty1, int8 *y0, int8 *y1)
+{
+    int8 a = f->ty0 > (int)ty0 ? f->ty0 : (int8)((int)ty0);
+    int8 b = f->ty1 < (int)ty1 - 1 ? f->ty1 : (int8)((int)ty1 - 1);
+    *y0 = f->ok ? a : (int8)(1);
+    *y1 = f->ok ? b : (int8)(0);
+}
+
+kernel void splat_count8(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
+                         uint W, uint H, uint ty0, uint ty1, global float *splats, global ulong *counts)
+{
+    uint i0 = 8 * get_global_id(0);
+    if (i0 >= n)
+        return;
+    float8 s[8];
+    splat_project8(recs, i0, n, proj, near, W, H, s);
+    int nl = (int)clvis_il_umin(8u, n - i0);
+    float sl[8][8];
+    for (int k = 0; k < 8; ++k)
+        CLVIS_IL_VSTORE8(s[k], sl[k]);
+    for (int l = 0; l < nl; ++l)
+        for (int k = 0; k < 8; ++k)
+            splats[8 * (size_t)(i0 + l) + k] = sl[k][l];
+    splat_fp8 f;
+    splat_footprint8(s, W, H, &f);
+    int8 y0, y1;
+    splat_rows8(&f, ty0, ty1, &y0, &y1);
+    int8 cnt = (int8)(0);
+    for (int8 ty = y0; clvis_il_any8(ty <= y1); ty += 1) {
+        int8 c0, c1;
+        int8 in = splat_row8(&f, ty, W, H, &c0, &c1) & (ty <= y1);
+        cnt += in ? c1 - c0 + 1 : (int8)(0);
+    }
+    int cl[8];
+    CLVIS_IL_VSTORE8(cnt, cl);
+    for (int l = 0; l < nl; ++l)
+        counts[i0 + l] = (ulong)(uint)cl[l];
+}
+
+kernel void splat_keys8(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
+                        uint W, uint H, uint ty0, uint ty1, global const float *splats,
+                        global const ulong *offsets, global ulong *keys, global uint *ids)
+{
+    uint i0 = 8 * get_global_id(0);
+    if (i0 >= n)
+        return;
+    int nl = (int)clvis_il_umin(8u, n - i0);
+    float sl[8][8];
+    for (int l = 0; l < 8; ++l) {
+        global const float *p = splats + 8 * (size_t)(i0 + (uint)clvis_il_imin(l, nl - 1));
+        for (int k = 0; k < 8; ++k)
+            sl[k][l] = p[k];
+    }
+    float8 s[8];
+    for (int k = 0; k < 8; ++k)
+        s[k] = CLVIS_IL_VLOAD8(float8, sl[k]);
+    splat_fp8 f;
+    splat_footprint8(s, W, H, &f);
+    f.ok &= (int8)(0, 1, 2, 3, 4, 5, 6, 7) < nl;
+    int8 y0, y1;
+    splat_rows8(&f, ty0, ty1, &y0, &y1);
+    uint tiles_x = (W + TS - 1) / TS;
+    ulong at[8];
+    uint dkey[8];
+    for (int l = 0; l < nl; ++l) {
+        at[l] = offsets[i0 + l];
+        dkey[l] = clvis_key_f32(as_uint(sl[5][l]));
+    }
+    for (int8 ty = y0; clvis_il_any8(ty <= y1); ty += 1) {
+        int8 c0, c1;
+        int8 in = splat_row8(&f, ty, W, H, &c0, &c1) & (ty <= y1);
+        if (!clvis_il_any8(in))
+            continue;
+        int a[8], b[8], on[8], y[8];
+        CLVIS_IL_VSTORE8(c0, a);
+        CLVIS_IL_VSTORE8(c1, b);
+        CLVIS_IL_VSTORE8(in, on);
+        CLVIS_IL_VSTORE8(ty, y);
+        for (int l = 0; l < nl; ++l) {
+            if (!on[l])
+                continue;
+            ulong row = (ulong)(y[l] - (int)ty0) * tiles_x;
+            for (int tx = a[l]; tx <= b[l]; ++tx) {
+                keys[at[l]] = (row + (ulong)tx) << 32 | (ulong)dkey[l];
+                ids[at[l]] = i0 + (uint)l;
+                ++at[l];
+            }
+        }
     }
 }

@@ -404,7 +404,8 @@ def gauss_tiles(q):
         colors=[[255, 0, 0], [0, 255, 0], [0, 0, 255]],
     )
     GaussianRenderer(around, queue=q, method="tiles").render(_gauss_cam(9, 7), 9, 7)
-    # the splatting model (splat.cl), own colours, in two bands
+    # the splatting model (splat.cl; splat_count8 / splat_keys8 under the cpu shape, 3 and 80
+    # Gaussians: idle lanes), own colours, in two bands
     GaussianRenderer(around, queue=q, model="splat").render(_gauss_cam(9, 7), 9, 7)
     GaussianRenderer(g, queue=q, model="splat").render(_gauss_cam(w, 40), w, 40, max_keys=20)
     GaussianRenderer(Gaussians(np.zeros((0, 3)), np.zeros((0, 3))), queue=q, method="tiles").render(

@@ -7,7 +7,8 @@
  *
  * Why: PoCL 3 (its CPU device) compiles these builtins as calls into its
  * kernel library instead of inline code: isfinite, isnan, fabs, fmin, fmax,
- * min, floor, any, select, popcount, and vloadN / vstoreN. Each costs a call,
+ * clamp, copysign, min, floor, any, select, popcount, and vloadN / vstoreN
+ * (and sqrt, which stays a call: see DESIGN.md). Each costs a call,
  * the argument shuffles around it, branches and, for the vector ones, a
  * vzeroupper, inside loops that run once or more per point, pixel or bit
  * run. The helpers below are the same results by comparison, bit mask or

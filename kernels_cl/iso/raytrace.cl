@@ -34,7 +34,9 @@
  * Includes clvis/camera.h (the 22-float camera-ray buffer and clvis_camera_ray),
  * clvis/iso.h (clvis_iso_ray_setup: the ray in index space and its box
  * interval; the 1/d convention of clvis/ray.h; the cell stages: cell cubic,
- * first zero, gradient, shading), clvis/zfp.h (the block grid).
+ * first zero, gradient, shading), clvis/zfp.h (the block grid). fmin, fmax, clamp,
+ * floor and min come from clvis/inline.h (exact; PoCL calls the builtins out of
+ * line, several per cell).
  *
  * Volume [nz][ny][nx] samples, nx, ny, nz >= 2; blocks (bx, by, bz) of 4^3
  * samples, block id b = bx + nbx (by + nby bz), nb_ = ceil(n_ / 4) (the ZFP
@@ -133,7 +135,7 @@ inline void load_dual_brick(local float *brick, global const float *bricks,
 inline void first_cell(const float *O, const float *D, float t_in, const int *clo, const int *chi, int *c)
 {
     for (int a = 0; a < 3; ++a) {
-        float gpos = floor(O[a] + t_in * D[a]);
+        float gpos = clvis_il_floor(O[a] + t_in * D[a]);
         c[a] = gpos >= (float)clo[a] ? (gpos <= (float)chi[a] ? (int)gpos : chi[a]) : clo[a];
     }
 }
@@ -151,7 +153,7 @@ inline float cell_exit(const int *c, const float *O, const float *inv, float t_i
     if (tn[2] < tn[ax])
         ax = 2;
     *axis = ax;
-    return fmax(t_in, fmin(tn[ax], t_exit));
+    return clvis_il_fmax(t_in, clvis_il_fmin(tn[ax], t_exit));
 }
 
 /* Cell c's corners minus the isovalue into v[8] (v[x + 2 y + 4 z]); 1 when
@@ -162,8 +164,8 @@ inline int cell_corners(local const float *brick, const int *c, const int *b0, f
     float vmin = INFINITY, vmax = -INFINITY;
     for (int k = 0; k < 8; ++k) {
         float x = brick[base + (k & 1) + BRICK_SIDE * ((k >> 1) & 1) + 25 * (k >> 2)];
-        vmin = fmin(vmin, x);
-        vmax = fmax(vmax, x);
+        vmin = clvis_il_fmin(vmin, x);
+        vmax = clvis_il_fmax(vmax, x);
         v[k] = x - isovalue;
     }
     return vmin <= isovalue && vmax >= isovalue;
@@ -239,7 +241,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
     int clo[3], chi[3];
     for (int a = 0; a < 3; ++a) {
         clo[a] = b0[a];
-        chi[a] = min(b0[a] + 3, n[a] - 2);
+        chi[a] = clvis_il_imin(b0[a] + 3, n[a] - 2);
     }
     const uint count = group_counts[g], offset = group_offsets[g];
 
@@ -285,7 +287,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         /* the hit: shade by the gradient of the cell's trilinear interpolant, world units */
         float w[3], grad[3];
         for (int a = 0; a < 3; ++a)
-            w[a] = clamp(u[a] + s * D[a], 0.0f, 1.0f);
+            w[a] = clvis_il_clamp(u[a] + s * D[a], 0.0f, 1.0f);
         clvis_iso_trilinear_gradient(v, w, grad);
         grad[0] /= dx;
         grad[1] /= dy;

@@ -12,7 +12,9 @@
  * iso_traverse.py reproduces the results bit for bit). No defines.
  * Includes clvis/camera.h (the 22-float camera-ray buffer, clvis_camera_ray),
  * clvis/iso.h (clvis_iso_ray_setup: the ray in index space and its box
- * interval; the 1/d convention of clvis/ray.h).
+ * interval; the 1/d convention of clvis/ray.h). fmin, floor and min come
+ * from clvis/inline.h (exact; PoCL calls the builtins out of line, several
+ * per block step).
  *
  * Volume [nz][ny][nx] samples, nx, ny, nz >= 2; ZFP blocks of 4^3 samples,
  * block id b = bx + nbx (by + nby bz), nb_ = ceil(n_ / 4); coarse cell id
@@ -128,7 +130,7 @@ kernel void init_rays(global const float *cam, uint W, uint p0, uint npix, uint 
 inline float block_bound_t(int b, int size, int n, float O, float inv, int entry)
 {
     int up = inv > 0.0f;
-    int hi = min(size * b + size, n - 1), lo = size * b;
+    int hi = clvis_il_imin(size * b + size, n - 1), lo = size * b;
     int x = (up != entry) ? hi : lo;
     return ((float)x - O) * inv;
 }
@@ -168,7 +170,7 @@ kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float 
     if (t < t_exit) {   /* false for +INFINITY and NaN */
         int b[3];
         for (int a = 0; a < 3; ++a) {
-            float g = floor(O[a] + t * D[a]);
+            float g = clvis_il_floor(O[a] + t * D[a]);
             int c = g >= 0.0f ? (g <= (float)(n[a] - 2) ? (int)g : n[a] - 2) : 0;
             b[a] = c >> 2;
             /* back while t is before the block's entry along a */
@@ -207,7 +209,7 @@ kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float 
                 float fx = block_bound_t(kx, 16, n[0], Ox, ix, 0), fy = block_bound_t(ky, 16, n[1], Oy, iy, 0),
                       fz = block_bound_t(kz, 16, n[2], Oz, iz, 0);
                 for (;;) {
-                    const float tc = fmin(fmin(fmin(INFINITY, fx), fy), fz);
+                    const float tc = clvis_il_fmin(clvis_il_fmin(clvis_il_fmin(INFINITY, fx), fy), fz);
                     if (!(tc > t)) {   /* cannot happen (the block's exit is > t); never loop */
                         stuck = 1;
                         break;
@@ -237,20 +239,20 @@ kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float 
                  * the ray (its blocks before it end at or before the coarse entry <= t); the
                  * forward moves at the top of the loop then find the block at t */
                 if (kx != cx) {
-                    bx = sx > 0 ? 4 * kx : min(4 * kx + 3, ncb[0] - 1);
+                    bx = sx > 0 ? 4 * kx : clvis_il_imin(4 * kx + 3, ncb[0] - 1);
                     ex = block_bound_t(bx, 4, n[0], Ox, ix, 0);
                 }
                 if (ky != cy) {
-                    by = sy > 0 ? 4 * ky : min(4 * ky + 3, ncb[1] - 1);
+                    by = sy > 0 ? 4 * ky : clvis_il_imin(4 * ky + 3, ncb[1] - 1);
                     ey = block_bound_t(by, 4, n[1], Oy, iy, 0);
                 }
                 if (kz != cz) {
-                    bz = sz > 0 ? 4 * kz : min(4 * kz + 3, ncb[2] - 1);
+                    bz = sz > 0 ? 4 * kz : clvis_il_imin(4 * kz + 3, ncb[2] - 1);
                     ez = block_bound_t(bz, 4, n[2], Oz, iz, 0);
                 }
                 continue;
             }
-            const float t_out = fmin(fmin(fmin(t_exit, ex), ey), ez);
+            const float t_out = clvis_il_fmin(clvis_il_fmin(clvis_il_fmin(t_exit, ex), ey), ez);
             const uint id = (uint)bx + (uint)nb[0] * ((uint)by + (uint)nb[1] * (uint)bz);
             const float2 fr = fine[id];
             if (fr.x <= isovalue && isovalue <= fr.y) {

@@ -48,8 +48,12 @@ kernel __attribute__((vec_type_hint(ulong16))) void decode_volume(global const u
     for (uint z = 0; z < e[2]; ++z)
         for (uint y = 0; y < e[1]; ++y) {
             global float *row = out + ((ulong)(z0 + z) * ny + (y0 + y)) * nx + x0;
-            if (e[0] == 4u)
-                vstore4(vload4(0, v + 16u * z + 4u * y), 0, row);
+            if (e[0] == 4u) {
+                /* clvis/inline.h's vload4 / vstore4 (the builtins are calls on PoCL) */
+                const float *src = v + 16u * z + 4u * y;
+                const float4 r4 = CLVIS_IL_VLOAD4(float4, src);
+                CLVIS_IL_VSTORE4(r4, row);
+            }
             else
                 for (uint x = 0; x < e[0]; ++x)
                     row[x] = v[16u * z + 4u * y + x];

@@ -7,7 +7,8 @@
  *
  * Why: PoCL 3 (its CPU device) compiles these builtins as calls into its
  * kernel library instead of inline code: isfinite, isnan, fabs, fmin, fmax,
- * min, floor, any, select, popcount, and vloadN / vstoreN. Each costs a call,
+ * clamp, copysign, min, floor, any, select, popcount, and vloadN / vstoreN
+ * (and sqrt, which stays a call: see DESIGN.md). Each costs a call,
  * the argument shuffles around it, branches and, for the vector ones, a
  * vzeroupper, inside loops that run once or more per point, pixel or bit
  * run. The helpers below are the same results by comparison, bit mask or
@@ -30,6 +31,12 @@
  *                                      a = -0, b = +0 (or the reverse) the
  *                                      result is the second argument, a sign
  *                                      of zero OpenCL leaves open
+ *   float clvis_il_clamp(x, lo, hi)    clamp(x, lo, hi) =
+ *                                      fmin(fmax(x, lo), hi) as the two above
+ *                                      (x NaN gives lo; lo > hi is undefined
+ *                                      for the builtin, here it gives hi)
+ *   float clvis_il_copysign(x, y)      copysign(x, y): |x|'s bits with y's
+ *                                      sign bit (NaN x and y included)
  *   uint  clvis_il_umin(uint a, uint b), ulong clvis_il_ulmin(a, b)   min
  *   int   clvis_il_imin(int a, int b), clvis_il_imax(int a, int b)    min, max
  *   float clvis_il_floor(float x)      floor(x): |x| < 2^23 through int,
@@ -102,6 +109,16 @@ inline float clvis_il_fmin(float a, float b)
 inline float clvis_il_fmax(float a, float b)
 {
     return (a > b || b != b) ? a : b;
+}
+
+inline float clvis_il_clamp(float x, float lo, float hi)
+{
+    return clvis_il_fmin(clvis_il_fmax(x, lo), hi);
+}
+
+inline float clvis_il_copysign(float x, float y)
+{
+    return as_float((as_uint(x) & 0x7FFFFFFFu) | (as_uint(y) & 0x80000000u));
 }
 
 inline float3 clvis_il_fmin3(float3 a, float3 b)

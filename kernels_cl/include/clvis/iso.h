@@ -10,8 +10,9 @@
  * clvis/ray.h); with t0 = (0 - O) inv, t1 = ((n - 1) - O) inv per axis
  * (clvis_ray_slab), t_enter = max(max_a min(t0, t1), 0) and t_exit =
  * min_a max(t0, t1) (the ray meets the box [0, n - 1] iff t_enter <=
- * t_exit). n, sp, org are per axis x, y, z. Includes clvis/camera.h and
- * clvis/ray.h; the including file sets FP_CONTRACT OFF before its includes
+ * t_exit). n, sp, org are per axis x, y, z. Includes clvis/camera.h,
+ * clvis/ray.h and clvis/inline.h (the cell stages take fmin, fmax, clamp,
+ * fabs and copysign from it: calls on PoCL, inline there); the including file sets FP_CONTRACT OFF before its includes
  * (clvis/reference/iso/traverse.py repeats these float32 operations).
  *
  * Cell stages. A dual cell's corners v[8] (minus the isovalue), v[x + 2 y + 4 z]
@@ -36,6 +37,7 @@
 #define CLVIS_ISO_H
 
 #include "clvis/camera.h"
+#include "clvis/inline.h"
 #include "clvis/ray.h"
 
 inline void clvis_iso_ray_setup(global const float *cam, uint p, uint W, const int *n, const float *sp,
@@ -96,7 +98,7 @@ inline int clvis_iso_has_zero(float fa, float fb)
 inline float clvis_iso_interpolate(float a, float b, float fa, float fb)
 {
     float x = fb != fa ? a - fa * (b - a) / (fb - fa) : a;
-    return clamp(x, fmin(a, b), fmax(a, b));
+    return clvis_il_clamp(x, clvis_il_fmin(a, b), clvis_il_fmax(a, b));
 }
 
 /* The first zero of the cubic c on [0, len] by the zero rule; 1 and *s if found. */
@@ -106,7 +108,7 @@ inline int clvis_iso_first_zero(const float *c, float len, int steps, float *s)
     float disc = B * B - 4.0f * A * C;
     float r1 = NAN, r2 = NAN;
     if (disc >= 0.0f) {
-        float q = -0.5f * (B + copysign(sqrt(disc), B));
+        float q = -0.5f * (B + clvis_il_copysign(sqrt(disc), B));
         if (A != 0.0f) {
             r1 = q / A;
             if (q != 0.0f)
@@ -117,7 +119,7 @@ inline int clvis_iso_first_zero(const float *c, float len, int steps, float *s)
     }
     r1 = (r1 > 0.0f && r1 < len) ? r1 : len;
     r2 = (r2 > 0.0f && r2 < len) ? r2 : len;
-    float pts[4] = {0.0f, fmin(r1, r2), fmax(r1, r2), len};
+    float pts[4] = {0.0f, clvis_il_fmin(r1, r2), clvis_il_fmax(r1, r2), len};
     float f[4];
     f[0] = c[0];
     for (int k = 1; k < 4; ++k)
@@ -176,13 +178,13 @@ inline void clvis_iso_trilinear_gradient(const float *v, const float *w, float *
 inline float4 clvis_iso_shade(const float *g, const float *d)
 {
     float len = sqrt(clvis_dot3(g[0], g[1], g[2], g[0], g[1], g[2]));
-    float x = len > 0.0f ? fabs(clvis_dot3(g[0], g[1], g[2], d[0], d[1], d[2])) / len : 1.0f;
-    x = fmin(x, 1.0f);
+    float x = len > 0.0f ? clvis_il_fabs(clvis_dot3(g[0], g[1], g[2], d[0], d[1], d[2])) / len : 1.0f;
+    x = clvis_il_fmin(x, 1.0f);
     float x2 = x * x, x4 = x2 * x2, x8 = x4 * x4, x16 = x8 * x8, x32 = x16 * x16;
     float lit = CLVIS_ISO_SHADE_AMBIENT + CLVIS_ISO_SHADE_DIFFUSE * x, spec = CLVIS_ISO_SHADE_SPECULAR * x32;
-    return (float4)(clamp(CLVIS_ISO_SHADE_BASE_R * lit + spec, 0.0f, 1.0f),
-                    clamp(CLVIS_ISO_SHADE_BASE_G * lit + spec, 0.0f, 1.0f),
-                    clamp(CLVIS_ISO_SHADE_BASE_B * lit + spec, 0.0f, 1.0f), 1.0f);
+    return (float4)(clvis_il_clamp(CLVIS_ISO_SHADE_BASE_R * lit + spec, 0.0f, 1.0f),
+                    clvis_il_clamp(CLVIS_ISO_SHADE_BASE_G * lit + spec, 0.0f, 1.0f),
+                    clvis_il_clamp(CLVIS_ISO_SHADE_BASE_B * lit + spec, 0.0f, 1.0f), 1.0f);
 }
 
 #endif /* CLVIS_ISO_H */

@@ -28,17 +28,20 @@
  *       of those products (no widening). o and inv must not be NaN.
  *
  * Include with FP_CONTRACT OFF in force (results are then bit-identical to
- * the NumPy references).
+ * the NumPy references). Includes clvis/inline.h (fabs and copysign, which
+ * PoCL calls out of line).
  */
 #ifndef CLVIS_RAY_H
 #define CLVIS_RAY_H
+
+#include "clvis/inline.h"
 
 /* |d| below this is replaced by +-CLVIS_RAY_TINY_DIR before 1/d */
 #define CLVIS_RAY_TINY_DIR 1e-20f
 
 inline float clvis_ray_safe_dir(float d)
 {
-    return fabs(d) < CLVIS_RAY_TINY_DIR ? copysign(CLVIS_RAY_TINY_DIR, d) : d;
+    return clvis_il_fabs(d) < CLVIS_RAY_TINY_DIR ? clvis_il_copysign(CLVIS_RAY_TINY_DIR, d) : d;
 }
 
 inline float clvis_ray_inv_dir(float d)

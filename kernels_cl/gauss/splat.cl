@@ -28,7 +28,8 @@
  * kernel splat_keys(same, global const float *splats, global const ulong *offsets,
  *                   global ulong *keys, global uint *ids)
  *     keys: (tile - band's first) << 32 | clvis_key_f32(depth), ids: i.
- * kernel splat_count8(the arguments of splat_count), splat_keys8(those of splat_keys)
+ * kernel splat_count8(the arguments of splat_count)
+ * kernel splat_keys8(the arguments of splat_keys)
  *     splat_count's and splat_keys's outputs (the same bits), a work-item per 8
  *     consecutive Gaussians 8 g .. 8 g + 7 (global size at least ceil(n / 8),
  *     any local size): projection, footprint and tile-row tests in float8 /

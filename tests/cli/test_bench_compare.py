@@ -94,13 +94,16 @@ def test_real_runs(tmp_path, capsys, monkeypatch):
     # tries on the CI machine's twin; scan's same-code runs stay within the
     # gate, since it needs both figures beyond 15 %)
     args = ["bench", "primitives", "--scale", "0.25", "--select", "scan and int32"]
-    assert cli.main([*args, "--json", base]) == 0
     # the same code: on a machine shared with other jobs a run can still be
-    # slower beyond 15 % in both figures now and then, so one more try (the
-    # injected slow-down below gets none)
-    rc = cli.main([*args, "--json", again, "--compare", base, "--fail-on", "15%"])
-    if rc != 0:
+    # beyond 15 % in both figures now and then, and so can the base run (a
+    # lucky base made both tries of the same code fail once, +55 %: ci8 of
+    # 2026-11-27), so one more try re-measures the base too (the injected
+    # slow-down below gets none)
+    for _ in range(2):
+        assert cli.main([*args, "--json", base]) == 0
         rc = cli.main([*args, "--json", again, "--compare", base, "--fail-on", "15%"])
+        if rc == 0:
+            break
     assert rc == 0
     assert "scan[int32]" in capsys.readouterr().out
     monkeypatch.setenv("CLVIS_BENCH_SLOWDOWN", "3")

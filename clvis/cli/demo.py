@@ -55,7 +55,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         type=size,
         default=(640, 360),
         metavar="WxH",
-        help="each panel of the networks' contact sheets (default 640x360)",
+        help="each panel of the networks' contact sheets (default 640x360; narvis-scan's: half that)",
     )
     d.add_argument(
         "-o", "--out", default="clvis-demo", metavar="DIR", help="where the PNGs go (default ./clvis-demo)"

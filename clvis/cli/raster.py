@@ -53,6 +53,9 @@ _DATASETS = {
     "terrain": ("classification", True),
 }
 _DEFAULT_POINTS = {"hurricane": 2_000_000, "terrain": 1_000_000}
+# --post narvis-scan: the kNN radius plane's seconds are said on stderr above this
+# (a big LAS takes seconds on every call; the progress display shows them anyway)
+KNN_NOTE_SECONDS = 1.0
 # --view fit looks along this direction (from the eye towards the centre):
 # from the south-south-west, about 40 degrees above the horizon, z up; the
 # field of view is Camera.fit's. Then fit moves the eye until the points
@@ -966,8 +969,17 @@ def _render(args, progress) -> int:
 
             # the radius plane the network was trained on: each point's mean
             # 4-NN distance (clamped), projected to pixels by the resolve
+            t0 = time.perf_counter()
             with progress.stage(f"splat radius plane (mean {SCAN_K}-NN distance)"):
                 scan_radius = knn_sigma(cloud.positions, SCAN_K)
+            took = time.perf_counter() - t0
+            if took > KNN_NOTE_SECONDS and not progress.enabled:
+                # the progress display shows it already; else say where the seconds went
+                print(
+                    f"clvis render: --post {args.post}: the splat radius plane (mean {SCAN_K}-NN "
+                    f"distance of {len(cloud):,} points) took {took:.1f} s; it is computed on every call",
+                    file=sys.stderr,
+                )
         if args.post_guard and post_name in ("narvis", "narvis-scan"):
             raise CliError(
                 f"--post-guard: the {post_name} network has no guard (the in-fill and LiDAR ones have)"

@@ -43,8 +43,11 @@ an event to the frame that shows it.
 
 Points (.ply, .las, .laz, .npz, an (N, 3) .npy, or --dataset hurricane|terrain):
 modes points (colour by an attribute or RGB, colormap, point size), lidar
-(depth filter + LiDAR U-Net), narvis (clouds with a velocity), gaussians,
-narvis|gaussians (split: MACR + NARVis beside the Gaussian renderer, the PSNR).
+(depth filter + LiDAR U-Net), narvis (clouds with a velocity) or narvis-scan
+(clouds without one, LAS/LAZ/PLY scans: the radius plane from the points'
+kNN distances, computed when the mode is first chosen), gaussians,
+narvis|gaussians or narvis-scan|gaussians (split: MACR + the network beside
+the Gaussian renderer it was trained on, the PSNR).
 Volumes (.raw, a 3-D .npy, NIfTI, or --dataset marschner-lobb|turbulence|
 explosion): modes iso (progressive: each pass is shown as it completes, and
 a camera move restarts the passes), iso+infill (the in-fill network on the
@@ -257,10 +260,6 @@ def _measure(scene, args) -> int:
     w, h = args.size
     load = " / ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "?"
     print(f"clvis view --measure: {scene.description} on {scene.device}, page {w}x{h}, load average {load}")
-    print(
-        "mode          frame      first ms  full ms  last ms  frames  fps    CPU ms  "
-        "stages of the first frame (ms)"
-    )
     modes = scene.modes if args.measure == "all" else args.measure.split(",")
     unknown = [m for m in modes if m not in scene.modes]
     if unknown and scene.device.startswith("Dask workers"):
@@ -270,6 +269,11 @@ def _measure(scene, args) -> int:
         )
     if unknown:
         raise CliError(f"--measure: no mode {unknown[0]!r} for this data; it has {', '.join(scene.modes)}")
+    mw = max([13] + [len(m) for m in modes])  # narvis-scan|gaussians: 21
+    print(
+        f"{'mode':{mw}} frame       first ms  full ms  last ms  frames  fps    CPU ms  "
+        "stages of the first frame (ms)"
+    )
     for mode in modes:
         for interactive in (True, False):
             r = measure(scene, w, h, mode, interactive=interactive)
@@ -278,7 +282,7 @@ def _measure(scene, args) -> int:
                 stages += f" (inference {r['info']['inference ms']:.1f})"
             kind = "interaction" if interactive else "still"
             print(
-                f"{mode:13} {kind:10} {r['first_ms']:8.1f} {r['first_full_ms']:8.1f} {r['last_ms']:8.1f} "
+                f"{mode:{mw}} {kind:11} {r['first_ms']:8.1f} {r['first_full_ms']:8.1f} {r['last_ms']:8.1f} "
                 f"{r['frames']:6g} {r['fps']:6.1f} {r['cpu_ms']:7.1f}  {r['size']}: {stages}",
                 flush=True,
             )

@@ -9,13 +9,17 @@ are made when their mode is first chosen.
 
 Point modes: ``points`` (the MACR Rasterizer's G-buffers, coloured by an
 attribute through a colormap or by the points' RGB, point size), ``lidar``
-(depth filter + the LiDAR U-Net), ``narvis`` (the NARVis U-Net on the
-G-buffers; clouds with a velocity), ``gaussians`` (Gaussians from the points,
-ray marched). Volume modes: ``iso`` (progressive isosurface: each pass as it
-completes), ``iso+infill`` (the in-fill network on each partial pass),
-``gaussians`` (the volume's Gaussians at a level of detail). Split views
-(``narvis|gaussians``, ``infill|iso``): the fast path's left half beside its
-slow target's right half, with the PSNR of the whole frames.
+(depth filter + the LiDAR U-Net), ``narvis`` (the NARVis network on the
+G-buffers; clouds with a velocity), ``narvis-scan`` (NARVis for clouds without
+one: the points' colours, depth and the splat radius plane of their
+knn_sigma, computed once per cloud when the mode is first chosen),
+``gaussians`` (Gaussians from the points, ray marched). Volume modes:
+``iso`` (progressive isosurface: each pass as it completes), ``iso+infill``
+(the in-fill network on each partial pass), ``gaussians`` (the volume's
+Gaussians at a level of detail). Split views
+(``narvis|gaussians``, ``narvis-scan|gaussians``, ``infill|iso``): the fast
+path's left half beside its slow target's right half, with the PSNR of the
+whole frames.
 """
 
 from __future__ import annotations
@@ -187,17 +191,15 @@ class PointScene(Scene):
         self.fit_points = sample[np.isfinite(sample).all(axis=1)].astype(np.float64)
         attrs = dict(cloud.attributes) if cloud.attributes else {"z": pos[:, 2]}
         self.attributes = list(attrs)
+        self._raster_attrs = None if cloud.attributes else attrs  # None: the cloud's own
         self.raster = Rasterizer(cloud, attributes=attrs) if not cloud.attributes else Rasterizer(cloud)
         self.device = self.raster.queue.device.name.strip()
         self.description = f"{description}: {len(cloud.positions):,} points"
         colours = (["rgb"] if cloud.colors is not None else []) + self.attributes
-        velocity = cloud.velocity is not None
-        self.modes = (
-            ["points", "lidar"]
-            + (["narvis"] if velocity else [])
-            + ["gaussians"]
-            + (["narvis|gaussians"] if velocity else [])
-        )
+        # the NARVis model the cloud's planes allow (as clvis render --post narvis):
+        # narvis with a velocity, narvis-scan without one
+        self.narvis = "narvis" if cloud.velocity is not None else "narvis-scan"
+        self.modes = ["points", "lidar", self.narvis, "gaussians", f"{self.narvis}|gaussians"]
         self.settings = {"mode": "points", "color_by": colours[0], "colormap": "viridis", "point_size": 1}
         self.choices = {
             "mode": self.modes,
@@ -209,6 +211,28 @@ class PointScene(Scene):
         # one entry: "gaussians" mode's (renderer, count) by colour, or the split
         # mode's (NarvisScene, renderer) by ("split", attribute, colormap)
         self._gauss: dict[str | tuple[str, ...], Any] = {}
+        #: narvis-scan's splat radius (the points' knn_sigma), once per cloud
+        self.scan_radius: np.ndarray | None = None
+
+    def _scan_raster(self) -> float:
+        """Make the Rasterizer narvis-scan reads, once: the cloud's knn_sigma
+        (clvis.training.data.SCAN_K, what the network was trained on; a radius
+        the cloud brings is not used) as the per-point radius, so that every
+        render resolves GBuffers.radius_px. It replaces the plain one (the same
+        pictures, plus that plane). Returns the seconds it took (0: made before)."""
+        if self.scan_radius is not None:
+            return 0.0
+        from .. import Rasterizer
+        from ..gauss.points import knn_sigma
+        from ..training.data import SCAN_K
+
+        t0 = time.perf_counter()
+        radius = knn_sigma(self.cloud.positions, SCAN_K)
+        self.raster = Rasterizer(
+            self.cloud, attributes=self._raster_attrs, radius=radius, queue=self.raster.queue
+        )
+        self.scan_radius = radius
+        return time.perf_counter() - t0
 
     def _net(self, name: str):
         if name not in self._nets:
@@ -235,6 +259,9 @@ class PointScene(Scene):
         if mode == "narvis|gaussians":
             yield self._split(camera, width, height, settings)
             return
+        if mode == "narvis-scan|gaussians":
+            yield self._scan_split(camera, width, height, settings)
+            return
         info: dict[str, Any] = {"points": len(self.cloud.positions)}
         if mode == "points":
             # rgba and coverage only: no screen velocity; index, depth and rgba read back
@@ -246,8 +273,11 @@ class PointScene(Scene):
             return
         from .. import depth_filter
 
+        build = self._scan_raster() if mode == "narvis-scan" else 0.0
+        t0 += build
         # the networks read the G-buffers where they are (host=False: nothing
-        # read back, nothing uploaded again); NARVis needs the screen velocity
+        # read back, nothing uploaded again); NARVis needs the screen velocity,
+        # narvis-scan the radius plane (every render of the scan Rasterizer)
         g = self._render(camera, width, height, settings, 1, screen_velocity=mode == "narvis", host=False)
         src = depth_filter(g) if mode == "lidar" else g
         self.raster.queue.finish()  # the render's own time in "render", not in "post"
@@ -256,9 +286,10 @@ class PointScene(Scene):
         rgba = net(src)
         t2 = time.perf_counter()
         info["inference ms"] = round(1e3 * net.stats.get("inference", 0.0), 1)
-        yield Frame(
-            _premultiplied_over_background(rgba), info=info, times={"render": t1 - t0, "post": t2 - t1}
-        )
+        times = {"render": t1 - t0, "post": t2 - t1}
+        if build > 1e-3:
+            times["build"] = build
+        yield Frame(_premultiplied_over_background(rgba), info=info, times=times)
 
     def _split(self, camera, w, h, s):
         """MACR + NARVis (left) beside its slow target, the Gaussian renderer
@@ -292,6 +323,52 @@ class PointScene(Scene):
         info = {"psnr dB": round(psnr(fast, slow), 2), "fast ms": round(1e3 * (t2 - t1), 1)}
         info["slow ms"] = round(1e3 * (t3 - t2), 1)
         return Frame(split(fast, slow), info=info, times=times)
+
+    def _scan_split(self, camera, w, h, s):
+        """MACR + narvis-scan (left) beside its slow target, the 3DGS splat of
+        the isotropic Gaussians it was trained on (right: sigma the radius
+        plane's knn_sigma, clvis.training.data.ScanScene, in the colours the
+        points are drawn in: their RGB or the attribute through the colormap),
+        with the PSNR of the whole frames (both over black)."""
+        from ..training.data import ScanScene
+
+        key = ("scan-split", s["color_by"], s["colormap"] if s["color_by"] != "rgb" else "")
+        t0 = time.perf_counter()
+        self._scan_raster()
+        if key not in self._gauss:
+            from ..io import PointCloud
+
+            cloud = PointCloud(self.cloud.positions, colors=self._colours(s), radius=self.scan_radius)
+            ss = ScanScene(cloud, "landscape", "view")
+            self._gauss = {key: ss.gaussian_renderer(queue=self.raster.queue)}
+        build = time.perf_counter() - t0
+        gr = self._gauss[key]
+        net = self._net("narvis-scan")
+        t1 = time.perf_counter()
+        g = self._render(camera, w, h, s, 1, screen_velocity=False, host=False)
+        self.raster.queue.finish()
+        ta = time.perf_counter()
+        fast = net(g)[..., :3]
+        t2 = time.perf_counter()
+        slow = gr.render(camera, w, h).to_uint8((0, 0, 0))[..., :3]
+        t3 = time.perf_counter()
+        times = {"render": (ta - t1) + (t3 - t2), "post": t2 - ta}
+        if build > 1e-3:
+            times["build"] = build
+        info = {"psnr dB": round(psnr(fast, slow), 2), "fast ms": round(1e3 * (t2 - t1), 1)}
+        info["slow ms"] = round(1e3 * (t3 - t2), 1)
+        return Frame(split(fast, slow), info=info, times=times)
+
+    def _colours(self, s) -> np.ndarray:
+        """(N, 4) uint8: the points' colours as the Rasterizer draws them with
+        settings `s` (their RGB, or the attribute through the colormap over its
+        finite range)."""
+        if s["color_by"] == "rgb":
+            return np.asarray(self.cloud.colors)
+        from ..colormap import apply, lut, value_range
+
+        values = (self.cloud.attributes or {"z": self.cloud.positions[:, 2]})[s["color_by"]]
+        return apply(values, lut(s["colormap"]), *value_range(values))
 
     def _gaussians(self, camera, w, h, s):
         from .. import GaussianRenderer, gaussians_from_points

@@ -2,6 +2,7 @@
 
 import io
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -418,6 +419,7 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 0, err
     assert "--post narvis: " in err and "model narvis-scan (no velocity" in err
     assert "PostNetwork('narvis-scan'" in out
+    assert "the splat radius plane" not in err  # 1,065 points: well under KNN_NOTE_SECONDS
     _assert_picture(tmp_path / "a" / "post-narvis-scan.png")
     assert not (tmp_path / "a" / "post-narvis.png").exists()
     rc, out, err = _render(
@@ -434,6 +436,31 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     _assert_picture(tmp_path / "c" / "post-narvis.png")
     rc, _, err = _render(capsys, path, "--post", "narvis", "--post-guard", "--out", tmp_path, *SMALL)
     assert rc == 2 and "the narvis-scan network has no guard" in err
+
+
+def test_render_post_narvis_scan_says_when_its_knn_radius_is_slow(tmp_path, capsys, monkeypatch):
+    """The kNN radius plane is computed on every call (seconds for a big LAS):
+    over KNN_NOTE_SECONDS the command says how long it took on stderr (with
+    --quiet too: it is not the progress display), unless the progress display
+    shows that stage's time already."""
+    pytest.importorskip("laspy")
+    from clvis.cli import raster
+
+    path = Path(__file__).parents[1] / "data" / "laspy_simple.laz"
+    monkeypatch.setattr(raster, "KNN_NOTE_SECONDS", 0.0)  # any time is over it
+    rc, _, err = _render(capsys, path, "--view", "top", "--post", "narvis", "--out", tmp_path / "a", *SMALL)
+    assert rc == 0, err
+    got = re.search(
+        r"--post narvis: the splat radius plane \(mean 4-NN distance of ([\d,]+) points\) "
+        r"took ([\d.]+) s; it is computed on every call",
+        err,
+    )
+    assert got, err
+    assert int(got.group(1).replace(",", "")) == 1065 and float(got.group(2)) >= 0
+    shown = ["--size", "160x90", "--no-labels", "--progress"]  # the progress display, into a pipe
+    rc, _, err = _render(capsys, path, "--post", "narvis-scan", "--out", tmp_path / "b", *shown)
+    assert rc == 0, err
+    assert "splat radius plane (mean 4-NN distance)" in err and "took" not in err
 
 
 def test_render_post_guard(tmp_path, capsys):

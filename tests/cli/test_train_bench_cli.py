@@ -97,3 +97,9 @@ def test_demo_gains_are_over_the_input_and_the_best_baseline():
     assert gains(_scores(20.0, 26.0, 26.5)) == (6.5, 0.5, "push-pull")
     line = _line("narvis", _scores(20.0, 17.0, 19.0), 0.01)
     assert "(-1.0 dB over the input, -1.0 dB over the best baseline, input)" in line
+    # narvis-scan: the classical splat of the radius plane is a third baseline
+    s = {**_scores(20.0, 17.0, 26.0), "splat": {"psnr": 24.5, "ssim": 0.7}}
+    assert gains(s) == (6.0, 1.5, "splat")
+    assert gains({**s, "splat": {"psnr": 16.0, "ssim": 0.4}}) == (6.0, 6.0, "input")
+    line = _line("narvis-scan", s, 0.01)
+    assert "splat  24.5 dB / 0.700" in line and "1.5 dB over the best baseline, splat)" in line

@@ -45,6 +45,11 @@ def test_third_party_point_files(name, tmp_path):
     assert scene.kind == "points" and "points" in scene.modes
     frame = next(scene.frames(_camera(scene), 64, 48, scene.settings, lambda: False))
     assert frame.image.shape == (48, 64, 3) and frame.image.std() > 0
+    # no velocity in either file: NARVis for scans (the radius plane from their knn_sigma)
+    assert "narvis-scan" in scene.modes and "narvis" not in scene.modes
+    scene.update({"mode": "narvis-scan"})
+    frame = next(scene.frames(_camera(scene), 64, 48, scene.settings, lambda: False))
+    assert frame.image.shape == (48, 64, 3) and frame.image.std() > 0 and frame.times["build"] > 0
 
 
 def test_volume_files_npy_and_nifti(tmp_path):

@@ -21,11 +21,12 @@ def points():
 
 def test_settings_are_checked(points):
     s = PointScene(points)
-    assert s.choices["color_by"] == ["height"] and s.modes == ["points", "lidar", "gaussians"]
+    assert s.choices["color_by"] == ["height"]
+    assert s.modes == ["points", "lidar", "narvis-scan", "gaussians", "narvis-scan|gaussians"]
     s.update({"colormap": "magma", "point_size": 3})
     assert s.settings["colormap"] == "magma" and s.settings["point_size"] == 3
     for bad, msg in (
-        ({"mode": "narvis"}, "mode: expected one of"),  # no velocity: no NARVis
+        ({"mode": "narvis"}, "mode: expected one of"),  # no velocity: narvis-scan, not narvis
         ({"point_size": 99}, "point_size: expected 1..16"),
         ({"point_size": "big"}, "expected a number"),
         ({"path": "/etc/passwd"}, "unknown setting 'path'"),
@@ -120,6 +121,7 @@ def test_split_views_show_both_sides_and_the_psnr():
     d = clvis.datasets.hurricane(20_000)
     cloud = clvis.PointCloud(d["positions"], attributes=d["attributes"], velocity=d["velocity"])
     s = PointScene(cloud)
+    assert s.modes == ["points", "lidar", "narvis", "gaussians", "narvis|gaussians"]  # a velocity
     s.update({"mode": "narvis|gaussians", "color_by": "temperature"})
     f = next(s.frames(Orbit(s.lo, s.hi, points=s.fit_points).camera(1.0), 64, 64, s.settings, lambda: False))
     assert 5 < f.info["psnr dB"] < 60 and f.times["post"] > 0
@@ -203,3 +205,67 @@ def test_a_still_progressive_view_starts_with_its_first_pass_at_the_preview_size
     pcam = Orbit(s.lo, s.hi, points=s.fit_points).camera(1.5)
     only = list(view_frames(s, pcam, 96, 64, s.settings, lambda: False, (pcam, 48, 32)))
     assert len(only) == 1 and only[0].image.shape == (64, 96, 3) and "preview" not in only[0].info
+
+
+@pytest.fixture(scope="module")
+def scan():
+    """A coloured cloud without velocity: a LAS-like aerial strip scan."""
+    from clvis.training.data import aerial_scene
+
+    d = aerial_scene(8000, 3)
+    return clvis.PointCloud(d["positions"], colors=d["colors"], attributes={"height": d["positions"][:, 2]})
+
+
+def test_narvis_scan_mode_for_clouds_without_velocity(scan, monkeypatch):
+    """A cloud without velocity gets narvis-scan and its split view; the radius
+    plane is the points' knn_sigma, computed once per cloud (not per frame, not
+    per mode), and the frames are the network on a Rasterizer with that radius
+    and the 3DGS splat of the isotropic Gaussians it was trained to predict."""
+    from clvis.gauss import points as gpoints
+    from clvis.training.data import SCAN_K, ScanScene
+
+    real = gpoints.knn_sigma
+    calls = []
+
+    def counted(positions, k=4):
+        calls.append(k)
+        return real(positions, k)
+
+    monkeypatch.setattr(gpoints, "knn_sigma", counted)
+    s = PointScene(scan)
+    assert s.modes == ["points", "lidar", "narvis-scan", "gaussians", "narvis-scan|gaussians"]
+    assert s.scan_radius is None and not s.raster.has_radius and calls == []  # nothing until chosen
+    cam = Orbit(s.lo, s.hi, points=s.fit_points).camera(80 / 64)
+    before = next(s.frames(cam, 80, 64, s.settings, lambda: False)).image
+    s.update({"mode": "narvis-scan"})
+    first = next(s.frames(cam, 80, 64, s.settings, lambda: False))
+    again = next(s.frames(cam, 80, 64, s.settings, lambda: False))
+    assert calls == [SCAN_K] and first.times["build"] > 0 and "build" not in again.times
+    assert first.times["post"] > 0 and first.info["inference ms"] > 0
+    radius = real(scan.positions, SCAN_K)
+    np.testing.assert_array_equal(s.scan_radius, radius)
+
+    g = clvis.Rasterizer(scan, radius=radius).render(cam, 80, 64, planes=[])  # host G-buffers
+    assert np.asarray(g.radius_px)[g.covered].min() > 0
+    rgba = s._net("narvis-scan")(g)
+    assert (rgba[..., 3] == 255).all() and rgba[..., :3].std() > 0
+    np.testing.assert_array_equal(first.image, rgba[..., :3])
+    np.testing.assert_array_equal(again.image, rgba[..., :3])
+
+    s.update({"mode": "narvis-scan|gaussians"})
+    f = next(s.frames(cam, 80, 64, s.settings, lambda: False))
+    assert calls == [SCAN_K]  # the split view reuses the radius
+    assert 5 < f.info["psnr dB"] < 60 and f.times["post"] > 0 and f.info["slow ms"] > 0
+    target = ScanScene(clvis.PointCloud(scan.positions, colors=scan.colors, radius=radius), "landscape", "t")
+    slow = target.gaussian_renderer().render(cam, 80, 64).to_uint8((0, 0, 0))[..., :3]
+    np.testing.assert_array_equal(f.image[:, :39], rgba[:, :39, :3])  # the network, a line, the target
+    np.testing.assert_array_equal(f.image[:, 41:], slow[:, 41:])
+
+    # coloured by an attribute through a colormap: both sides in those colours
+    s.update({"color_by": "height", "colormap": "magma"})
+    h = next(s.frames(cam, 80, 64, s.settings, lambda: False))
+    assert 5 < h.info["psnr dB"] < 60 and (h.image[:, 41:] != f.image[:, 41:]).any() and calls == [SCAN_K]
+
+    # the plain points from the Rasterizer with the radius: the same picture as before
+    s.update({"mode": "points", "color_by": "rgb"})
+    np.testing.assert_array_equal(next(s.frames(cam, 80, 64, s.settings, lambda: False)).image, before)

@@ -61,8 +61,15 @@ def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     if n < 2:
         return np.zeros(n, np.float32)
     kk = min(k, n - 1)
-    dist, _ = cKDTree(p).query(p, k=kk + 1)
-    return dist[:, 1:].mean(axis=1).astype(np.float32)
+    tree = cKDTree(p)
+    # queried in the tree's own leaf order, so neighbouring queries walk the
+    # same nodes (a scan's file order or a random order missed the caches:
+    # 3x the CPU time at 10^6 points); the distances do not depend on the order
+    order = tree.indices
+    dist, _ = tree.query(p[order], k=kk + 1, workers=-1)
+    out = np.empty(n, np.float32)
+    out[order] = dist[:, 1:].mean(axis=1)
+    return out
 
 
 def knn_sigma(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:

@@ -42,6 +42,24 @@ def test_points_isotropic_knn():
     np.testing.assert_array_equal(g2.values, np.arange(300, dtype=np.float32))
 
 
+def test_knn_distance_is_each_points_own_whatever_the_query_order():
+    """knn_mean_distance queries in the k-d tree's leaf order and scatters the
+    answers back: every point gets its own neighbours' mean distance, exactly
+    (brute force over all pairs), duplicates and a line of points included."""
+    rng = np.random.default_rng(9)
+    pos = np.concatenate(
+        [rng.uniform(size=(400, 3)), np.zeros((3, 3)), np.c_[np.arange(20.0), np.zeros((20, 2))]]
+    )
+    pos = pos[rng.permutation(len(pos))]
+    d = np.sqrt(((pos[:, None, :] - pos[None, :, :]) ** 2).sum(-1))
+    brute = np.sort(d, axis=1)[:, 1:5].mean(axis=1).astype(np.float32)
+    got = knn_mean_distance(pos)
+    np.testing.assert_allclose(got, brute, rtol=1e-6, atol=1e-7)
+    assert (
+        got[np.all(pos == 0, axis=1)] == np.float32(np.sort(d[np.all(pos == 0, axis=1)][0])[1:5].mean())
+    ).all()
+
+
 def test_isolated_points_are_clamped():
     """A dense cloud and a few far outliers: the outliers' kNN distance is their
     gap to the scene (~100), not the sampling; clamped to the 95th percentile

@@ -100,7 +100,8 @@
  * cell cell_exit, cell_corners, clvis_iso_cell_cubic, clvis_iso_first_zero
  * (march_cells), and at a hit clvis_iso_trilinear_gradient, clvis_iso_shade.
  * PACKET=8: load_dual_brick_rows (the same brick, by rows of float4 loads),
- * the per-lane scalar set-up, march_cells8 (first_cell, cell_exit,
+ * the set-up in float8 (rt_ray_setup8: clvis_iso_ray_setup's operations; a
+ * packet whose lanes are all empty or skipped stops here), march_cells8 (first_cell, cell_exit,
  * cell_corners, rt_cell_cubic8 and rt_bracket8 per cell, in float8; a lane
  * with a root keeps its cell's bracket and cubic and leaves the loop, and
  * rt_refine8 refines the brackets of all lanes at once after it: the same
@@ -242,7 +243,7 @@ inline int march_cells(local const float *brick, const int *n, const int *b0, co
  * divisions are correctly rounded per lane), so each ray's result is bit for
  * bit the scalar one; lanes that are done or empty compute values that are
  * never used. The comparisons give -1 / 0 lane masks; c ? a : b selects per
- * lane. The ray set-up and the hit's shading stay scalar, per lane. */
+ * lane. The hit's shading stays scalar, per lane. */
 #if PACKET != 8
 #error "PACKET is 0 or 8"
 #endif
@@ -418,6 +419,43 @@ inline float8 rt_refine8(const float8 *c, float8 a, float8 b, float8 fa, float8 
     return at_a ? a0 : r;
 }
 
+/* clvis_iso_ray_setup for the pixels p0 + pix[k] in the lanes k (the same
+ * operations per lane; t_enter is not needed) */
+inline void rt_ray_setup8(global const float *cam, uint p0, const uint *pix, uint W, const int *n,
+                          const float *sp, const float *org, float8 *o, float8 *d, float8 *O,
+                          float8 *D, float8 *inv, float8 *t_exit)
+{
+    float pu[8], pv[8];
+    for (int k = 0; k < 8; ++k) {
+        const uint p = p0 + pix[k];
+        pu[k] = (float)(p % W) + 0.5f;
+        pv[k] = (float)(p / W) + 0.5f;
+    }
+    const float8 u = CLVIS_IL_VLOAD8(float8, pu), v = CLVIS_IL_VLOAD8(float8, pv);
+    float8 dd[3];
+    for (int a = 0; a < 3; ++a) {   /* clvis_camera_ray */
+        o[a] = (cam[a] + u * cam[3 + a]) + v * cam[6 + a];
+        dd[a] = (cam[9 + a] + u * cam[12 + a]) + v * cam[15 + a];
+    }
+    const float8 len = sqrt((dd[0] * dd[0] + dd[1] * dd[1]) + dd[2] * dd[2]);
+    float8 lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+        d[a] = dd[a] / len;
+        const float8 safe = (as_float8(as_uint8(d[a]) & (uint8)(0x7FFFFFFFu)) < CLVIS_RAY_TINY_DIR)
+                                ? rt_copysign8((float8)(CLVIS_RAY_TINY_DIR), d[a])
+                                : d[a];   /* clvis_ray_safe_dir */
+        inv[a] = sp[a] / safe;
+        O[a] = (o[a] - org[a]) / sp[a];
+        D[a] = d[a] / sp[a];
+        /* clvis_ray_slab over [0, n - 1] */
+        const float8 t0 = (0.0f - O[a]) * inv[a], t1 = ((float)(n[a] - 1) - O[a]) * inv[a];
+        lo[a] = t0 < t1 ? t0 : t1;
+        hi[a] = t0 > t1 ? t0 : t1;
+    }
+    const float8 m01 = hi[0] < hi[1] ? hi[0] : hi[1];
+    *t_exit = m01 < hi[2] ? m01 : hi[2];
+}
+
 /* march_cells for the live lanes: per lane the scalar loop's result, *hit
  * (-1 at a hit) and *t (hit: t_in + s; else the new ray_t), at a hit also
  * v[8], u[3] and *s. */
@@ -559,7 +597,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
          * in flight together), then the scalar set-up */
         uint pk[8], ek[8];
         int ok[8];
-        float ok_o[8][3], ok_d[8][3], lO[3][8], lD[3][8], linv[3][8], ltin[8], ltexit[8], ltstop[8];
+        float ltin[8], ltstop[8];
         for (int k = 0; k < 8; ++k) {
             const uint r = r0 + (uint)k;
             uint p = 0, e = 0;
@@ -586,27 +624,16 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
 #endif
             ok[k] = on && !(ltin[k] > ltstop[k]) ? -1 : 0;   /* ITEMS: skipped past the nearest hit */
         }
-        for (int k = 0; k < 8; ++k) {
-            const uint p = pk[k];
-            const int on = ok[k];
-            float o[3] = {0.0f, 0.0f, 0.0f}, d[3] = {0.0f, 0.0f, 1.0f}, O[3] = {0.0f, 0.0f, 0.0f};
-            float D[3] = {0.0f, 0.0f, 1.0f}, inv[3] = {1.0f, 1.0f, 1.0f}, t_enter, t_exit = 0.0f;
-            if (on)
-                clvis_iso_ray_setup(cam, p0 + p, W, n, sp, org, o, d, O, D, inv, &t_enter, &t_exit);
-            ltexit[k] = t_exit;
-            for (int a = 0; a < 3; ++a) {
-                ok_o[k][a] = o[a];
-                ok_d[k][a] = d[a];
-                lO[a][k] = O[a];
-                lD[a][k] = D[a];
-                linv[a][k] = inv[a];
-            }
-        }
-        float8 O8[3], D8[3], inv8[3];
+        const int8 ok8 = CLVIS_IL_VLOAD8(int8, ok);
+        if (!rt_any8(ok8))
+            continue;   /* every lane empty or skipped */
+        float8 o8[3], d8[3], O8[3], D8[3], inv8[3], texit8;
+        rt_ray_setup8(cam, p0, pk, W, n, sp, org, o8, d8, O8, D8, inv8, &texit8);
+        float lo[3][8], ld[3][8], lD[3][8];
         for (int a = 0; a < 3; ++a) {
-            O8[a] = CLVIS_IL_VLOAD8(float8, lO[a]);
-            D8[a] = CLVIS_IL_VLOAD8(float8, lD[a]);
-            inv8[a] = CLVIS_IL_VLOAD8(float8, linv[a]);
+            CLVIS_IL_VSTORE8(o8[a], lo[a]);
+            CLVIS_IL_VSTORE8(d8[a], ld[a]);
+            CLVIS_IL_VSTORE8(D8[a], lD[a]);
         }
         int8 hit8;
         float8 v8[8], u8[3], s8 = 0.0f, t8;
@@ -614,9 +641,8 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
             v8[k] = 0.0f;
         for (int a = 0; a < 3; ++a)
             u8[a] = 0.0f;
-        march_cells8(brick, n, b0, clo, chi, O8, D8, inv8, CLVIS_IL_VLOAD8(float8, ltexit), isovalue,
-                     CLVIS_IL_VLOAD8(float8, ltstop), CLVIS_IL_VLOAD8(float8, ltin),
-                     CLVIS_IL_VLOAD8(int8, ok), &hit8, v8, u8, &s8, &t8);
+        march_cells8(brick, n, b0, clo, chi, O8, D8, inv8, texit8, isovalue, CLVIS_IL_VLOAD8(float8, ltstop),
+                     CLVIS_IL_VLOAD8(float8, ltin), ok8, &hit8, v8, u8, &s8, &t8);
         int lhit[8];
         float lt[8], ls[8], lu[3][8], lv[8][8];
         CLVIS_IL_VSTORE8(hit8, lhit);
@@ -637,9 +663,13 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
 #endif
                 continue;
             }
-            float v[8], w[3], grad[3];
+            float v[8], w[3], grad[3], o[3], d[3];
             for (int j = 0; j < 8; ++j)
                 v[j] = lv[j][k];
+            for (int a = 0; a < 3; ++a) {
+                o[a] = lo[a][k];
+                d[a] = ld[a][k];
+            }
             for (int a = 0; a < 3; ++a)
                 w[a] = clvis_il_clamp(lu[a][k] + ls[k] * lD[a][k], 0.0f, 1.0f);
             clvis_iso_trilinear_gradient(v, w, grad);
@@ -651,8 +681,8 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
 #if ITEMS && CLVIS_INT64_ATOMICS
             clvis_atomic_min_u64(hitkey + p, ((ulong)as_uint(t) << 32) | e);
 #endif
-            rgba[e] = clvis_iso_shade(grad, ok_d[k]);
-            depth[e] = clvis_ray_depth(cam, ok_o[k], ok_d[k], t);
+            rgba[e] = clvis_iso_shade(grad, d);
+            depth[e] = clvis_ray_depth(cam, o, d, t);
         }
     }
 #else

@@ -16,12 +16,20 @@ import pyopencl.array as cla
 
 from .. import runtime
 
-__all__ = ["PROFILES", "raytrace_blocks"]
+__all__ = ["PROFILES", "raytrace_blocks", "raytrace_kernel"]
 
 _SRC = "iso/raytrace.cl"
 # work-items per block group, per tuning profile (any size works; see the ABI)
-PROFILES = {"cpu": {"wg": 16}, "gpu": {"wg": 64}}
+# and rays a work-item traces at once in float8 lanes (PACKET: 0, one ray, or 8)
+PROFILES = {"cpu": {"wg": 2, "packet": 8}, "gpu": {"wg": 64, "packet": 0}}
 _arg = runtime.arg
+
+
+def raytrace_kernel(queue: cl.CommandQueue, refine_steps: int, items: bool) -> cl.Kernel:
+    """The raytrace_blocks kernel for the queue's tuning profile (its PACKET)."""
+    packet = PROFILES[runtime.tuning_profile(queue)]["packet"]
+    defines = {"REFINE_STEPS": int(refine_steps), "ITEMS": int(items), "PACKET": packet}
+    return runtime.get_kernel(queue, _SRC, "raytrace_blocks", defines, runtime.EXACT_FP)
 
 
 def raytrace_blocks(
@@ -71,8 +79,7 @@ def raytrace_blocks(
     ox, oy, oz = (np.float32(s) for s in origin)
     ray_hit, hit_t, rgba, depth = outputs
     wg = runtime.local_size(queue, PROFILES[runtime.tuning_profile(queue)]["wg"])
-    defines = {"REFINE_STEPS": int(refine_steps), "ITEMS": int(items is not None)}
-    k = runtime.get_kernel(queue, _SRC, "raytrace_blocks", defines, runtime.EXACT_FP)
+    k = raytrace_kernel(queue, refine_steps, items is not None)
     item_pixel, n_spec, hitkey = items if items is not None else (None, 1, None)
     return runtime.launch(
         queue,

@@ -85,7 +85,7 @@ from ..primitives import compact, compact_indices, radix_sort
 from .cache import BlockCache, mark_blocks
 from .cache import _kernel as _cache_kernel
 from .macrocell import macrocell_grids
-from .raytrace import raytrace_blocks
+from .raytrace import raytrace_blocks, raytrace_kernel
 from .traverse import init_rays, macro_traverse
 from .zfp import ZfpVolume, compress
 
@@ -372,9 +372,7 @@ class IsoRenderer:
         q = self.queue
         for name in ("init_rays", "macro_traverse"):
             runtime.get_kernel(q, "iso/traverse.cl", name, {}, runtime.EXACT_FP)
-        runtime.get_kernel(
-            q, "iso/raytrace.cl", "raytrace_blocks", {"REFINE_STEPS": 8, "ITEMS": 1}, runtime.EXACT_FP
-        )
+        raytrace_kernel(q, 8, True)
         for name in ("mark_blocks", "cache_slot_flags", "cache_missing", "cache_age"):
             _cache_kernel(q, name)
         for name in ("cache_candidate_keys", "cache_assign", "cache_decode"):

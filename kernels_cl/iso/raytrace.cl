@@ -31,6 +31,11 @@
  *                 mins, a documented benign race (iso-skip, in the kernel).
  *   REFINE_STEPS  Illinois steps of the root refinement (default 8; the
  *                 reference docstring asks for >= 6)
+ *   PACKET        0 (default; the gpu profile): one ray a work-item. 8 (the
+ *                 cpu profile): a work-item traces 8 rays at a time in float8
+ *                 lanes with a lane mask, the same float operations per lane
+ *                 in the same order, so the same results bit for bit (see
+ *                 "8-ray packets" below).
  * Includes clvis/camera.h (the 22-float camera-ray buffer and clvis_camera_ray),
  * clvis/iso.h (clvis_iso_ray_setup: the ray in index space and its box
  * interval; the 1/d convention of clvis/ray.h; the cell stages: cell cubic,
@@ -70,8 +75,10 @@
  *     global const uint *item_pixel,     ITEMS only (else unused, may be NULL): see below
  *     uint n_spec,                       ITEMS only
  *     volatile global ulong *hitkey)     ITEMS only, with CLVIS_INT64_ATOMICS (may be NULL otherwise)
- *   Global size: groups x L, local size L (any L; the host uses 64 or 16): work-group g
- *   traces block group_blocks[g], work-item i its rays i, i + L, ... < group_counts[g].
+ *   Global size: groups x L, local size L (any L; the host uses 64, or 2 with PACKET=8):
+ *   work-group g traces block group_blocks[g], work-item i its rays i, i + L, ... <
+ *   group_counts[g] (PACKET=8: the packets of rays 8 i .. 8 i + 7, 8 (i + L) .., the
+ *   rays past group_counts[g] empty lanes).
  *   Local memory: 125 floats (the dual brick).
  *   The block and its +x, +y, +z, +xy, +xz, +yz, +xyz neighbours inside the
  *   volume must be cached (their samples on the block's far faces are corners
@@ -92,6 +99,14 @@
  * The stages, in the kernel's order: load_dual_brick, first_cell, then per
  * cell cell_exit, cell_corners, clvis_iso_cell_cubic, clvis_iso_first_zero
  * (march_cells), and at a hit clvis_iso_trilinear_gradient, clvis_iso_shade.
+ * PACKET=8: load_dual_brick_rows (the same brick, by rows of float4 loads),
+ * the set-up in float8 (rt_ray_setup8: clvis_iso_ray_setup's operations; a
+ * packet whose lanes are all empty or skipped stops here), march_cells8 (first_cell, cell_exit,
+ * cell_corners, rt_cell_cubic8 and rt_bracket8 per cell, in float8; a lane
+ * with a root keeps its cell's bracket and cubic and leaves the loop, and
+ * rt_refine8 refines the brackets of all lanes at once after it: the same
+ * Illinois steps as clvis_iso_first_zero on the same values), then per lane
+ * the scalar shading.
  */
 /* before the includes: clvis_camera_ray must not contract either */
 #pragma OPENCL FP_CONTRACT OFF
@@ -106,6 +121,10 @@
 #endif
 #ifndef REFINE_STEPS
 #define REFINE_STEPS 8
+#endif
+
+#ifndef PACKET
+#define PACKET 0
 #endif
 
 #define BRICK_SIDE 5
@@ -215,6 +234,329 @@ inline int march_cells(local const float *brick, const int *n, const int *b0, co
     }
 }
 
+#if PACKET
+/* ------------------------------------------------------------- 8-ray packets
+ * PACKET=8 (the cpu profile): a work-item traces its rays 8 at a time, one
+ * per float8 / int8 lane, with a lane mask (live). Every lane performs the
+ * scalar path's float operations in the same order (the cell stages of iso.h
+ * below are written again in float8, operation for operation; sqrt and the
+ * divisions are correctly rounded per lane), so each ray's result is bit for
+ * bit the scalar one; lanes that are done or empty compute values that are
+ * never used. The comparisons give -1 / 0 lane masks; c ? a : b selects per
+ * lane. The hit's shading stays scalar, per lane. */
+#if PACKET != 8
+#error "PACKET is 0 or 8"
+#endif
+
+/* load_dual_brick by rows: the block's and its 7 neighbours' slots are read
+ * once (not per sample), each row of 5 is one float4 load from its block and
+ * one float from the +x neighbour, all independent (the bricks are cache
+ * misses: they can be in flight together), and the samples outside the volume
+ * become NaN after the loads. Work-item lid of lsize fills the z planes lid,
+ * lid + lsize, ... The same values as load_dual_brick. */
+inline void load_dual_brick_rows(local float *brick, global const float *bricks,
+                                 global const int *slot_of_block, const int *n, const int *b0,
+                                 uint nbx, uint nby, uint lid, uint lsize)
+{
+    int slot[8];
+    for (int j = 0; j < 8; ++j) {
+        const int ex = j & 1, ey = (j >> 1) & 1, ez = j >> 2;
+        const int in = b0[0] + 4 * ex < n[0] && b0[1] + 4 * ey < n[1] && b0[2] + 4 * ez < n[2];
+        slot[j] = in ? slot_of_block[clvis_zfp_block_id((uint)(b0[0] >> 2) + ex, (uint)(b0[1] >> 2) + ey,
+                                                        (uint)(b0[2] >> 2) + ez, nbx, nby)]
+                     : -1;
+    }
+    const int nxin = n[0] - b0[0];   /* samples of a row inside the volume (>= 1) */
+    for (uint lz = lid; lz < BRICK_SIDE; lz += lsize) {
+        const int z = (int)lz;
+        for (int ly = 0; ly < BRICK_SIDE; ++ly) {
+            const int j = 2 * (ly >> 2) + 4 * (z >> 2), s0 = slot[j], s1 = slot[j + 1];
+            const ulong off = (ulong)(4 * (ly & 3) + 16 * (z & 3));
+            float4 row = (float4)(NAN);
+            float last = NAN;
+            if (s0 >= 0)
+                row = *(global const float4 *)(bricks + 64ul * (ulong)s0 + off);
+            if (s1 >= 0)
+                last = bricks[64ul * (ulong)s1 + off];
+            const int in = b0[1] + ly < n[1] && b0[2] + z < n[2];
+            local float *dst = brick + BRICK_SIDE * ly + 25 * z;
+            dst[0] = in && 0 < nxin ? row.s0 : NAN;
+            dst[1] = in && 1 < nxin ? row.s1 : NAN;
+            dst[2] = in && 2 < nxin ? row.s2 : NAN;
+            dst[3] = in && 3 < nxin ? row.s3 : NAN;
+            dst[4] = in && 4 < nxin ? last : NAN;
+        }
+    }
+}
+
+inline float8 rt_fmin8(float8 a, float8 b)
+{
+    return (a < b || b != b) ? a : b;   /* clvis_il_fmin per lane */
+}
+
+inline float8 rt_fmax8(float8 a, float8 b)
+{
+    return (a > b || b != b) ? a : b;   /* clvis_il_fmax per lane */
+}
+
+inline float8 rt_clamp8(float8 x, float8 lo, float8 hi)
+{
+    return rt_fmin8(rt_fmax8(x, lo), hi);
+}
+
+inline float8 rt_copysign8(float8 x, float8 y)
+{
+    return as_float8((as_uint8(x) & (uint8)(0x7FFFFFFFu)) | (as_uint8(y) & (uint8)(0x80000000u)));
+}
+
+inline float8 rt_itof8(int8 i)
+{
+    return __builtin_convertvector(i, float8);
+}
+
+/* clvis_il_floor per lane (the truncation is used only where |x| < 2^23) */
+inline float8 rt_floor8(float8 x)
+{
+    const int8 small = (as_uint8(x) & (uint8)(0x7FFFFFFFu)) < (uint8)(0x4B000000u);
+    const int8 xi = small ? __builtin_convertvector(x, int8) : (int8)(0);
+    float8 t = rt_itof8(xi);
+    t = t > x ? t - 1.0f : t;
+    t = as_float8(as_uint8(t) | (as_uint8(x) & (uint8)(0x80000000u)));
+    return small ? t : x;
+}
+
+inline int rt_any8(int8 m)
+{
+    return clvis_il_any8(m);
+}
+
+inline float8 rt_horner8(const float8 *c, float8 s)
+{
+    return ((c[3] * s + c[2]) * s + c[1]) * s + c[0];
+}
+
+inline int8 rt_has_zero8(float8 fa, float8 fb)
+{
+    return (fa <= 0.0f && fb >= 0.0f) || (fa >= 0.0f && fb <= 0.0f);
+}
+
+inline float8 rt_interpolate8(float8 a, float8 b, float8 fa, float8 fb)
+{
+    float8 x = fb != fa ? a - fa * (b - a) / (fb - fa) : a;
+    return rt_clamp8(x, rt_fmin8(a, b), rt_fmax8(a, b));
+}
+
+/* clvis_iso_cell_cubic per lane */
+inline void rt_cell_cubic8(const float8 *v, const float8 *u, const float8 *D, float8 *cf)
+{
+    cf[0] = 0.0f;
+    cf[1] = 0.0f;
+    cf[2] = 0.0f;
+    cf[3] = 0.0f;
+    for (int k = 0; k < 8; ++k) {
+        int ix = k & 1, iy = (k >> 1) & 1, iz = k >> 2;
+        float8 ax = ix ? u[0] : 1.0f - u[0], ay = iy ? u[1] : 1.0f - u[1];
+        float8 az = iz ? u[2] : 1.0f - u[2];
+        float8 bxx = ix ? D[0] : -D[0], byy = iy ? D[1] : -D[1], bzz = iz ? D[2] : -D[2];
+        cf[0] += v[k] * (ax * ay * az);
+        cf[1] += v[k] * ((bxx * ay * az + ax * byy * az) + ax * ay * bzz);
+        cf[2] += v[k] * ((bxx * byy * az + bxx * ay * bzz) + ax * byy * bzz);
+        cf[3] += v[k] * (bxx * byy * bzz);
+    }
+}
+
+/* clvis_iso_first_zero per lane, in two stages. rt_bracket8: the lanes with a
+ * zero (-1) and their interval: the first of [0, r1], [r1, r2], [r2, len]
+ * with a sign change or zero (ends a, b, values fa, fb). */
+inline int8 rt_bracket8(const float8 *c, float8 len, float8 *a, float8 *b, float8 *fa, float8 *fb)
+{
+    const float8 A = 3.0f * c[3], B = 2.0f * c[2], C = c[1];
+    const float8 disc = B * B - 4.0f * A * C;
+    const int8 real = disc >= 0.0f, anz = A != 0.0f;
+    const float8 q = -0.5f * (B + rt_copysign8(sqrt(disc), B));
+    float8 r1 = real && anz ? q / A : (float8)(NAN);
+    float8 r2 = real && anz && q != 0.0f ? C / q : (float8)(NAN);
+    r1 = real && !anz && B != 0.0f ? -C / B : r1;
+    r1 = (r1 > 0.0f && r1 < len) ? r1 : len;
+    r2 = (r2 > 0.0f && r2 < len) ? r2 : len;
+    const float8 pts[4] = {(float8)(0.0f), rt_fmin8(r1, r2), rt_fmax8(r1, r2), len};
+    float8 f[4];
+    f[0] = c[0];
+    for (int k = 1; k < 4; ++k)
+        f[k] = rt_horner8(c, pts[k]);
+    int8 found = (int8)(0);
+    for (int k = 0; k < 3; ++k) {
+        const int8 z = rt_has_zero8(f[k], f[k + 1]) & ~found;   /* the first such interval */
+        *a = z ? pts[k] : *a;
+        *b = z ? pts[k + 1] : *b;
+        *fa = z ? f[k] : *fa;
+        *fb = z ? f[k + 1] : *fb;
+        found |= z;
+    }
+    return found;
+}
+
+/* rt_refine8: the root in a bracket: a where fa == 0, else REFINE_STEPS
+ * Illinois steps and the interpolation of the last bracket. */
+inline float8 rt_refine8(const float8 *c, float8 a, float8 b, float8 fa, float8 fb)
+{
+    const int8 at_a = fa == 0.0f;
+    const float8 a0 = a;
+    int8 last_a = (int8)(0), last_b = (int8)(0);   /* a (b) was replaced last step */
+    for (int i = 0; i < REFINE_STEPS; ++i) {
+        const float8 x = rt_interpolate8(a, b, fa, fb);
+        const float8 fx = rt_horner8(c, x);
+        const int8 same_as_a = (fx > 0.0f && fa > 0.0f) || (fx < 0.0f && fa < 0.0f);
+        const float8 fb_half = last_a ? fb * 0.5f : fb, fa_half = last_b ? fa * 0.5f : fa;
+        fb = same_as_a ? fb_half : fx;
+        fa = same_as_a ? fx : fa_half;
+        a = same_as_a ? x : a;
+        b = same_as_a ? b : x;
+        last_a = same_as_a;
+        last_b = ~same_as_a;
+    }
+    const float8 r = rt_interpolate8(a, b, fa, fb);
+    return at_a ? a0 : r;
+}
+
+/* clvis_iso_ray_setup for the pixels p0 + pix[k] in the lanes k (the same
+ * operations per lane; t_enter is not needed) */
+inline void rt_ray_setup8(global const float *cam, uint p0, const uint *pix, uint W, const int *n,
+                          const float *sp, const float *org, float8 *o, float8 *d, float8 *O,
+                          float8 *D, float8 *inv, float8 *t_exit)
+{
+    float pu[8], pv[8];
+    for (int k = 0; k < 8; ++k) {
+        const uint p = p0 + pix[k];
+        pu[k] = (float)(p % W) + 0.5f;
+        pv[k] = (float)(p / W) + 0.5f;
+    }
+    const float8 u = CLVIS_IL_VLOAD8(float8, pu), v = CLVIS_IL_VLOAD8(float8, pv);
+    float8 dd[3];
+    for (int a = 0; a < 3; ++a) {   /* clvis_camera_ray */
+        o[a] = (cam[a] + u * cam[3 + a]) + v * cam[6 + a];
+        dd[a] = (cam[9 + a] + u * cam[12 + a]) + v * cam[15 + a];
+    }
+    const float8 len = sqrt((dd[0] * dd[0] + dd[1] * dd[1]) + dd[2] * dd[2]);
+    float8 lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+        d[a] = dd[a] / len;
+        const float8 safe = (as_float8(as_uint8(d[a]) & (uint8)(0x7FFFFFFFu)) < CLVIS_RAY_TINY_DIR)
+                                ? rt_copysign8((float8)(CLVIS_RAY_TINY_DIR), d[a])
+                                : d[a];   /* clvis_ray_safe_dir */
+        inv[a] = sp[a] / safe;
+        O[a] = (o[a] - org[a]) / sp[a];
+        D[a] = d[a] / sp[a];
+        /* clvis_ray_slab over [0, n - 1] */
+        const float8 t0 = (0.0f - O[a]) * inv[a], t1 = ((float)(n[a] - 1) - O[a]) * inv[a];
+        lo[a] = t0 < t1 ? t0 : t1;
+        hi[a] = t0 > t1 ? t0 : t1;
+    }
+    const float8 m01 = hi[0] < hi[1] ? hi[0] : hi[1];
+    *t_exit = m01 < hi[2] ? m01 : hi[2];
+}
+
+/* march_cells for the live lanes: per lane the scalar loop's result, *hit
+ * (-1 at a hit) and *t (hit: t_in + s; else the new ray_t), at a hit also
+ * v[8], u[3] and *s. */
+inline void march_cells8(local const float *brick, const int *n, const int *b0, const int *clo,
+                         const int *chi, const float8 *O, const float8 *D, const float8 *inv,
+                         float8 t_exit, float isovalue, float8 t_stop, float8 t_in, int8 live,
+                         int8 *hit, float8 *v, float8 *u, float8 *s, float8 *t)
+{
+    int8 c[3], step[3], up[3];
+    for (int a = 0; a < 3; ++a) {
+        const float8 gpos = rt_floor8(O[a] + t_in * D[a]);
+        const int8 gi = __builtin_convertvector(gpos, int8);   /* used where clo <= gpos <= chi */
+        c[a] = gpos >= (float)clo[a] ? (gpos <= (float)chi[a] ? gi : (int8)(chi[a])) : (int8)(clo[a]);
+        up[a] = inv[a] > 0.0f;
+        step[a] = up[a] ? (int8)(1) : (int8)(-1);
+    }
+    float8 res = t_in, hit_in = 0.0f, ha = 0.0f, hb = 0.0f, hfa = 0.0f, hfb = 0.0f;
+    float8 hcf[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    int8 got = (int8)(0);
+    while (rt_any8(live)) {
+        const int8 stop = live & (t_in > t_stop);
+        res = stop ? (float8)(INFINITY) : res;
+        live &= ~stop;
+        /* cell_exit */
+        float8 tn[3];
+        for (int a = 0; a < 3; ++a)
+            tn[a] = (rt_itof8(c[a] - up[a]) - O[a]) * inv[a];   /* up is -1: c + 1 */
+        float8 tb = tn[0];
+        const int8 ay = tn[1] < tb;
+        tb = ay ? tn[1] : tb;
+        const int8 az = tn[2] < tb;
+        tb = az ? tn[2] : tb;
+        const int8 is_z = az, is_y = ay & ~az, is_x = ~(ay | az);
+        const float8 t_out = rt_fmax8(t_in, rt_fmin8(tb, t_exit));
+        /* cell_corners */
+        const int8 base = live ? (c[0] - b0[0]) + BRICK_SIDE * ((c[1] - b0[1]) + BRICK_SIDE * (c[2] - b0[2])) : (int8)(0);
+        float8 cv[8];
+        float8 vmin = INFINITY, vmax = -INFINITY;
+        for (int k = 0; k < 8; ++k) {
+            const int off = (k & 1) + BRICK_SIDE * ((k >> 1) & 1) + 25 * (k >> 2);
+            const float8 x = (float8)(brick[base.s0 + off], brick[base.s1 + off], brick[base.s2 + off],
+                                      brick[base.s3 + off], brick[base.s4 + off], brick[base.s5 + off],
+                                      brick[base.s6 + off], brick[base.s7 + off]);
+            vmin = rt_fmin8(vmin, x);
+            vmax = rt_fmax8(vmax, x);
+            cv[k] = x - isovalue;
+        }
+        const int8 cand = live & (vmin <= isovalue && vmax >= isovalue);
+        if (rt_any8(cand)) {
+            float8 cu[3], cf[4];
+            for (int a = 0; a < 3; ++a)
+                cu[a] = (O[a] + t_in * D[a]) - rt_itof8(c[a]);
+            rt_cell_cubic8(cv, cu, D, cf);
+            float8 a = 0.0f, b = 0.0f, fa = 0.0f, fb = 0.0f;
+            const int8 h = cand & rt_bracket8(cf, t_out - t_in, &a, &b, &fa, &fb);
+            /* a hit: the lane keeps its cell's bracket; the roots are refined
+             * once, after the loop, for all lanes together */
+            hit_in = h ? t_in : hit_in;
+            ha = h ? a : ha;
+            hb = h ? b : hb;
+            hfa = h ? fa : hfa;
+            hfb = h ? fb : hfb;
+            for (int k = 0; k < 4; ++k)
+                hcf[k] = h ? cf[k] : hcf[k];
+            for (int a = 0; a < 3; ++a)
+                u[a] = h ? cu[a] : u[a];
+            for (int k = 0; k < 8; ++k)
+                v[k] = h ? cv[k] : v[k];
+            got |= h;
+            live &= ~h;
+        }
+        const int8 out = live & (t_out >= t_exit);
+        res = out ? (float8)(INFINITY) : res;
+        live &= ~out;
+        c[0] += live & is_x ? step[0] : (int8)(0);
+        c[1] += live & is_y ? step[1] : (int8)(0);
+        c[2] += live & is_z ? step[2] : (int8)(0);
+        /* the scalar loop tests the stepped axis only */
+        const int8 is_a[3] = {is_x, is_y, is_z};
+        int8 gone = (int8)(0), left = (int8)(0);
+        for (int a = 0; a < 3; ++a) {
+            gone |= is_a[a] & (c[a] < 0 || c[a] > n[a] - 2);
+            left |= is_a[a] & (c[a] < clo[a] || c[a] > chi[a]);
+        }
+        gone &= live;
+        res = gone ? (float8)(INFINITY) : res;
+        live &= ~gone;
+        left &= live;
+        res = left ? t_out : res;
+        live &= ~left;
+        t_in = t_out;
+    }
+    if (rt_any8(got)) {
+        *s = rt_refine8(hcf, ha, hb, hfa, hfb);
+        res = got ? hit_in + *s : res;
+    }
+    *hit = got;
+    *t = res;
+}
+#endif /* PACKET */
+
 kernel void raytrace_blocks(global const float *bricks, global const int *slot_of_block,
                             uint nx, uint ny, uint nz, float dx, float dy, float dz,
                             float ox, float oy, float oz, float isovalue,
@@ -234,7 +576,11 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
     const int n[3] = {(int)nx, (int)ny, (int)nz};
     const int b0[3] = {4 * (int)bc[0], 4 * (int)bc[1], 4 * (int)bc[2]};
 
+#if PACKET
+    load_dual_brick_rows(brick, bricks, slot_of_block, n, b0, nbx, nby, lid, lsize);
+#else
     load_dual_brick(brick, bricks, slot_of_block, n, b0, nbx, nby, lid, lsize);
+#endif
     barrier(CLK_LOCAL_MEM_FENCE);
 
     const float sp[3] = {dx, dy, dz}, org[3] = {ox, oy, oz};
@@ -245,6 +591,101 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
     }
     const uint count = group_counts[g], offset = group_offsets[g];
 
+#if PACKET
+    for (uint r0 = PACKET * lid; r0 < count; r0 += PACKET * lsize) {
+        /* per lane k, ray r0 + k: first the loads of all lanes (cache misses:
+         * in flight together), then the scalar set-up */
+        uint pk[8], ek[8];
+        int ok[8];
+        float ltin[8], ltstop[8];
+        for (int k = 0; k < 8; ++k) {
+            const uint r = r0 + (uint)k;
+            uint p = 0, e = 0;
+            if (r < count) {
+#if ITEMS
+                e = ray_ids[offset + r];
+                p = item_pixel[e / n_spec];
+#else
+                p = ray_ids[offset + r];
+                e = p;
+#endif
+            }
+            pk[k] = p;
+            ek[k] = e;
+        }
+        for (int k = 0; k < 8; ++k) {
+            const int on = r0 + (uint)k < count;
+            ltin[k] = on ? ray_t[ek[k]] : 0.0f;
+#if ITEMS && CLVIS_INT64_ATOMICS
+            /* benign race (iso-skip): as in the scalar path below */
+            ltstop[k] = on ? as_float(((volatile global uint *)hitkey)[clvis_hi_word(pk[k])]) : NAN;
+#else
+            ltstop[k] = NAN;
+#endif
+            ok[k] = on && !(ltin[k] > ltstop[k]) ? -1 : 0;   /* ITEMS: skipped past the nearest hit */
+        }
+        const int8 ok8 = CLVIS_IL_VLOAD8(int8, ok);
+        if (!rt_any8(ok8))
+            continue;   /* every lane empty or skipped */
+        float8 o8[3], d8[3], O8[3], D8[3], inv8[3], texit8;
+        rt_ray_setup8(cam, p0, pk, W, n, sp, org, o8, d8, O8, D8, inv8, &texit8);
+        float lo[3][8], ld[3][8], lD[3][8];
+        for (int a = 0; a < 3; ++a) {
+            CLVIS_IL_VSTORE8(o8[a], lo[a]);
+            CLVIS_IL_VSTORE8(d8[a], ld[a]);
+            CLVIS_IL_VSTORE8(D8[a], lD[a]);
+        }
+        int8 hit8;
+        float8 v8[8], u8[3], s8 = 0.0f, t8;
+        for (int k = 0; k < 8; ++k)
+            v8[k] = 0.0f;
+        for (int a = 0; a < 3; ++a)
+            u8[a] = 0.0f;
+        march_cells8(brick, n, b0, clo, chi, O8, D8, inv8, texit8, isovalue, CLVIS_IL_VLOAD8(float8, ltstop),
+                     CLVIS_IL_VLOAD8(float8, ltin), ok8, &hit8, v8, u8, &s8, &t8);
+        int lhit[8];
+        float lt[8], ls[8], lu[3][8], lv[8][8];
+        CLVIS_IL_VSTORE8(hit8, lhit);
+        CLVIS_IL_VSTORE8(t8, lt);
+        CLVIS_IL_VSTORE8(s8, ls);
+        for (int a = 0; a < 3; ++a)
+            CLVIS_IL_VSTORE8(u8[a], lu[a]);
+        for (int j = 0; j < 8; ++j)
+            CLVIS_IL_VSTORE8(v8[j], lv[j]);
+        for (int k = 0; k < 8; ++k) {
+            if (!ok[k])
+                continue;
+            const uint p = pk[k], e = ek[k];
+            const float t = lt[k];
+            if (!lhit[k]) {
+#if !ITEMS
+                ray_t[p] = t;
+#endif
+                continue;
+            }
+            float v[8], w[3], grad[3], o[3], d[3];
+            for (int j = 0; j < 8; ++j)
+                v[j] = lv[j][k];
+            for (int a = 0; a < 3; ++a) {
+                o[a] = lo[a][k];
+                d[a] = ld[a][k];
+            }
+            for (int a = 0; a < 3; ++a)
+                w[a] = clvis_il_clamp(lu[a][k] + ls[k] * lD[a][k], 0.0f, 1.0f);
+            clvis_iso_trilinear_gradient(v, w, grad);
+            grad[0] /= dx;
+            grad[1] /= dy;
+            grad[2] /= dz;
+            ray_hit[e] = 1;
+            hit_t[e] = t;
+#if ITEMS && CLVIS_INT64_ATOMICS
+            clvis_atomic_min_u64(hitkey + p, ((ulong)as_uint(t) << 32) | e);
+#endif
+            rgba[e] = clvis_iso_shade(grad, d);
+            depth[e] = clvis_ray_depth(cam, o, d, t);
+        }
+    }
+#else
     for (uint r = lid; r < count; r += lsize) {
 #if ITEMS
         const uint e = ray_ids[offset + r];             /* the item: (ray e / n_spec, candidate) */
@@ -301,4 +742,5 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         rgba[e] = clvis_iso_shade(grad, d);
         depth[e] = clvis_ray_depth(cam, o, d, t);
     }
+#endif /* PACKET */
 }

@@ -285,3 +285,55 @@ def test_no_groups_launches_nothing(queue):
         )
         is None
     )
+
+
+_PACKET_SCENES = {
+    "marschner_lobb": lambda: (datasets.marschner_lobb(41), CAM, 48, 40, 0.5, {}),
+    "turbulence_permuted": lambda: (datasets.turbulence(30), CAM, 48, 40, 0.5, {"permute_slots": True}),
+    "sphere_partial_blocks": lambda: (
+        {
+            "volume": _sphere((29, 27, 33), (0.5,) * 3, (-8.0, -6.0, -9.0), (0.0, 0.0, -1.0)),
+            "spacing": (0.5,) * 3,
+            "origin": (-8.0, -6.0, -9.0),
+        },
+        Camera.look_at((3.0, -3.5, 1.0), (0.0, 0.0, -1.0), (0, 0, 1), fov_y=70, near=0.05, far=100),
+        40,
+        32,
+        4.0,
+        {"rate": 32},
+    ),
+    "ortho_grid_lines": lambda: (
+        {
+            "volume": _sphere((18, 17, 19), (1, 1, 1), (0, 0, 0), (8.3, 7.9, 8.6)),
+            "spacing": (1, 1, 1),
+            "origin": (0, 0, 0),
+        },
+        Camera.ortho(
+            (7.5, 7.5, 38.5), (7.5, 7.5, 8.5), (0, 1, 0), height=22.0, aspect=24 / 22, near=0.5, far=100
+        ),
+        24,
+        22,
+        6.0,
+        {"rate": 32},
+    ),
+    "absent_blocks": lambda: (datasets.marschner_lobb(17), CAM, 16, 12, 0.5, {"absent": True}),
+}
+
+
+@pytest.mark.parametrize("scene", sorted(_PACKET_SCENES))
+def test_packets_equal_one_ray_a_work_item(queue, scene):
+    """The cpu profile's 8-ray packets (PACKET=8) give every pixel's hit, t,
+    depth and colour bit for bit as one ray a work-item (the gpu profile's
+    PACKET=0) on the same device, and take the same rounds."""
+    ds, cam, w, h, level, kw = _PACKET_SCENES[scene]()
+    got = {}
+    for profile in ("cpu", "gpu"):
+        with runtime.configure(tuning=profile):
+            out, _, stats = _raycast(queue, ds["volume"], cam, w, h, level, ds["spacing"], ds["origin"], **kw)
+        got[profile] = (out, stats)
+    (a, sa), (b, sb) = got["cpu"], got["gpu"]
+    for name in ("hit", "t", "depth", "rgba"):
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    assert sa == sb
+    if scene != "absent_blocks":
+        assert a["hit"].any()

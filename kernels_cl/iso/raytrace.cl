@@ -309,16 +309,35 @@ inline float8 rt_copysign8(float8 x, float8 y)
     return as_float8((as_uint8(x) & (uint8)(0x7FFFFFFFu)) | (as_uint8(y) & (uint8)(0x80000000u)));
 }
 
+/* int8 <-> float8 lane conversions. Clang's __builtin_convertvector compiles
+ * inline (PoCL 3 calls convert_float8 / convert_int8 out of line); other
+ * compilers take the builtins, which give the same results (int -> float
+ * rounds to nearest even, float -> int truncates toward zero). */
+#if defined(__clang__) && defined(__has_builtin)
+#if __has_builtin(__builtin_convertvector)
+#define RT_CONVERTVECTOR 1
+#endif
+#endif
+#ifdef RT_CONVERTVECTOR
+#define rt_ftoi8(x) __builtin_convertvector((x), int8)
+#else
+#define rt_ftoi8(x) convert_int8(x)
+#endif
+
 inline float8 rt_itof8(int8 i)
 {
+#ifdef RT_CONVERTVECTOR
     return __builtin_convertvector(i, float8);
+#else
+    return convert_float8(i);
+#endif
 }
 
 /* clvis_il_floor per lane (the truncation is used only where |x| < 2^23) */
 inline float8 rt_floor8(float8 x)
 {
     const int8 small = (as_uint8(x) & (uint8)(0x7FFFFFFFu)) < (uint8)(0x4B000000u);
-    const int8 xi = small ? __builtin_convertvector(x, int8) : (int8)(0);
+    const int8 xi = small ? rt_ftoi8(x) : (int8)(0);
     float8 t = rt_itof8(xi);
     t = t > x ? t - 1.0f : t;
     t = as_float8(as_uint8(t) | (as_uint8(x) & (uint8)(0x80000000u)));
@@ -467,7 +486,7 @@ inline void march_cells8(local const float *brick, const int *n, const int *b0, 
     int8 c[3], step[3], up[3];
     for (int a = 0; a < 3; ++a) {
         const float8 gpos = rt_floor8(O[a] + t_in * D[a]);
-        const int8 gi = __builtin_convertvector(gpos, int8);   /* used where clo <= gpos <= chi */
+        const int8 gi = rt_ftoi8(gpos);   /* used where clo <= gpos <= chi */
         c[a] = gpos >= (float)clo[a] ? (gpos <= (float)chi[a] ? gi : (int8)(chi[a])) : (int8)(clo[a]);
         up[a] = inv[a] > 0.0f;
         step[a] = up[a] ? (int8)(1) : (int8)(-1);

@@ -336,6 +336,9 @@ def compact_indices(
 # The CPU form (WG 1) sorts MSD first from this many keys: one pass on the
 # top digit, then each bucket's remaining passes in cache (radix_sort.cl).
 MSD_MIN_N = 1 << 20
+# the widest top digit of the MSD-first form (2^12 private counters a
+# work-item in its upsweep and scatter)
+MSD_MAX_BITS = 12
 
 
 def radix_sort(
@@ -433,13 +436,24 @@ def radix_sort(
     src_k, src_v = kd, vd
     if wg == 1 and passes >= 2 and n >= MSD_MIN_N:
         # MSD first: one pass on the top digit into kbuf[0], then every
-        # bucket's remaining passes by one work-item, inside the cache
-        shift = np.uint32((passes - 1) * radix_bits)
-        runtime.launch(queue, k_up, G, 1, buf(src_k), _u64(n), _u64(per), shift, buf(hist), buf(orbits))
+        # bucket's remaining passes by one work-item, inside the cache. The
+        # top digit is what the LSD digits leave, up to MSD_MAX_BITS wide:
+        # more buckets, smaller ones (a 44-bit key: 12 + 4 x 8, not 8 bits
+        # of which 4 vary + 5 x 8)
+        lsd = max(1, -(-(sort_bits - MSD_MAX_BITS) // radix_bits))
+        msd_bits = sort_bits - lsd * radix_bits
+        shift = np.uint32(lsd * radix_bits)
+        md = {**defines, "RADIX_BITS": msd_bits}
+        k_up_m = runtime.get_kernel(queue, "primitives/radix_sort.cl", "radix_upsweep", md)
+        k_sc_m = runtime.get_kernel(queue, "primitives/radix_sort.cl", "radix_scatter", md)
+        if msd_bits != radix_bits:
+            hist = runtime.empty(queue, (1 << msd_bits) * G, np.uint32, "radix_sort histogram")
+            offsets = runtime.empty(queue, (1 << msd_bits) * G, np.uint32, "radix_sort offsets")
+        runtime.launch(queue, k_up_m, G, 1, buf(src_k), _u64(n), _u64(per), shift, buf(hist), buf(orbits))
         _scan_into(queue, hist, offsets, hist_total, exclusive=True)
         runtime.launch(
             queue,
-            k_sc,
+            k_sc_m,
             G,
             1,
             buf(src_k),
@@ -451,11 +465,13 @@ def radix_sort(
             shift,
             buf(offsets),
         )
-        k_lsd = runtime.get_kernel(queue, "primitives/radix_sort.cl", "radix_bucket_lsd", defines)
+        k_lsd = runtime.get_kernel(
+            queue, "primitives/radix_sort.cl", "radix_bucket_lsd", {**defines, "MSD_BITS": msd_bits}
+        )
         runtime.launch(
             queue,
             k_lsd,
-            radix,
+            1 << msd_bits,
             1,
             buf(kbuf[0]),
             buf(kbuf[1]),
@@ -464,9 +480,9 @@ def radix_sort(
             _u64(n),
             np.uint32(G),
             buf(offsets),
-            np.uint32(passes - 1),
+            np.uint32(lsd),
         )
-        src_k, src_v = kbuf[(passes - 1) % 2], vbuf[(passes - 1) % 2]
+        src_k, src_v = kbuf[lsd % 2], vbuf[lsd % 2]
         passes = 0
     for p in range(passes):
         dst_k, dst_v = kbuf[p % 2], vbuf[p % 2]

@@ -41,7 +41,8 @@
  *     Per pixel (px, py), its tile's list in (depth, record) order (equal
  *     depths by record position, the host's Morton order, not by id): d = (u, v) -
  *     (px + 0.5, py + 0.5), q = (A dx^2 + C dy^2) + 2 B dx dy; skipped when
- *     q > 9; alpha = min(0.99, opacity' exp(-q / 2)); skipped when alpha < 1/255;
+ *     q > 9; alpha = min(0.99, opacity' exp(-q / 2)) (splat_alpha: splat.cl's
+ *     own exp, within 2.3 x 2^-24 relative); skipped when alpha < 1/255;
  *     T' = T (1 - alpha); T' < 1e-4 ends the pixel without this Gaussian;
  *     else C += T alpha rgb, T = T'. rgba = (C, 1 - T); depth: the mean's depth
  *     of the Gaussian that first took T below 0.5 (+inf if none); stats =
@@ -68,6 +69,58 @@
 #define SPLAT_T_STOP 1e-4f
 #define SPLAT_Q_MAX 9.0f
 #define SPLAT_LOWPASS 0.3f
+
+/* The splat alpha min(0.99, opac exp(x)), x = -q / 2 in [-4.5, 0] (q <= 9),
+ * with splat.cl's own exp: n = trunc(x log2 e - 1/2), r = x - n ln 2 (ln 2 in
+ * two parts, Cody-Waite), exp(r) by its Taylor polynomial of degree 7
+ * (Horner), times 2^n from the exponent bits: within 2.3 x 2^-24 relative of
+ * exp for x in [-80, 0.5]. The scalar and the float8 forms are the same
+ * operations lane by lane (FP_CONTRACT OFF: no fused multiply-add), so
+ * splat_render and splat_render8 agree bit for bit with the alphas in float8
+ * lanes, without a call (PoCL calls its exp out of line, and its float8 exp
+ * differs from its scalar one in the last bit). min(0.99, a) by comparison:
+ * a NaN gives 0.99, as fmin. splat_alpha takes q <= 9 (its callers' test);
+ * splat_alpha8 any q, lanes above 9 (or NaN) giving a value in range. */
+#define SPLAT_LOG2E 1.44269504f
+#define SPLAT_LN2_HI 0.693145751953125f
+#define SPLAT_LN2_LO 1.428606765330187e-06f
+
+inline float splat_alpha(float opac, float q)
+{
+    float x = -0.5f * q;
+    int n = (int)(x * SPLAT_LOG2E - 0.5f);
+    float fn = (float)n;
+    float r = (x - fn * SPLAT_LN2_HI) - fn * SPLAT_LN2_LO;
+    float p = 1.0f / 5040.0f;
+    p = p * r + 1.0f / 720.0f;
+    p = p * r + 1.0f / 120.0f;
+    p = p * r + 1.0f / 24.0f;
+    p = p * r + 1.0f / 6.0f;
+    p = p * r + 0.5f;
+    p = p * r + 1.0f;
+    p = p * r + 1.0f;
+    float a = opac * (p * as_float((uint)(n + 127) << 23));
+    return a < 0.99f ? a : 0.99f;
+}
+
+inline float8 splat_alpha8(float opac, float8 q8)
+{
+    float8 q = q8 <= SPLAT_Q_MAX ? q8 : (float8)(SPLAT_Q_MAX);   /* lanes out (q > 9, NaN): any value, in range */
+    float8 x = -0.5f * q;
+    int8 n = convert_int8(x * SPLAT_LOG2E - 0.5f);
+    float8 fn = convert_float8(n);
+    float8 r = (x - fn * SPLAT_LN2_HI) - fn * SPLAT_LN2_LO;
+    float8 p = (float8)(1.0f / 5040.0f);
+    p = p * r + 1.0f / 720.0f;
+    p = p * r + 1.0f / 120.0f;
+    p = p * r + 1.0f / 24.0f;
+    p = p * r + 1.0f / 6.0f;
+    p = p * r + 0.5f;
+    p = p * r + 1.0f;
+    p = p * r + 1.0f;
+    float8 a = opac * (p * as_float8(as_uint8(n + 127) << 23));
+    return a < 0.99f ? a : (float8)(0.99f);
+}
 
 /* the 2D splat of g into s[0..7]; returns 0 when culled */
 inline int splat_project(global const clvis_gaussian *g, global const float *proj, float near, uint W, uint H,
@@ -234,7 +287,7 @@ kernel void splat_render(global const clvis_gaussian *recs, global const uint *o
             continue;
         global const clvis_gaussian *g = recs + id;
         uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
-        float alpha = fmin(0.99f, (g->opacity * tf[ti].w) * exp(-0.5f * q));
+        float alpha = splat_alpha(g->opacity * tf[ti].w, q);
         if (alpha < 1.0f / 255.0f)
             continue;
         float Tn = T * (1.0f - alpha);
@@ -260,7 +313,7 @@ kernel void splat_render(global const clvis_gaussian *recs, global const uint *o
  * of 8 pixels of a tile (TS a multiple of 8; work-items as tiles.cl's
  * tile_render8): a candidate's id and splat are read once for the 8 pixels
  * and q is computed in float8 lanes (the same operations as splat_render,
- * lane by lane); alpha, the stop test and compositing lane by lane for the
+ * lane by lane), and so are the alphas (splat_alpha8); the stop test and compositing lane by lane for the
  * lanes with q <= 9 only. The row ends when its 8 pixels have stopped.
  * Same arguments as splat_render. */
 kernel void splat_render8(global const clvis_gaussian *recs, global const uint *order, global const float *splats,
@@ -307,14 +360,14 @@ kernel void splat_render8(global const clvis_gaussian *recs, global const uint *
 #else
         float4 c = tf[ti];
 #endif
-        float q[8];
+        float al[8];
         int in[8];
-        vstore8(q8, 0, q);
+        vstore8(splat_alpha8(opac, q8), 0, al);
         vstore8(in8, 0, in);
         for (int l = 0; l < 8; ++l) {
             if (!in[l])
                 continue;
-            float alpha = fmin(0.99f, opac * exp(-0.5f * q[l]));
+            float alpha = al[l];
             if (alpha < 1.0f / 255.0f)
                 continue;
             float Tn = T[l] * (1.0f - alpha);

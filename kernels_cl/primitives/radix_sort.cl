@@ -13,6 +13,8 @@
  *   WG          work-group size, a power of two; launch with exactly
  *               this local size                                         (1)
  *   ITEMS       keys per work-item per tile (used when WG > 1)          (8)
+ *   MSD_BITS    radix_bucket_lsd only: the width of the top digit the
+ *               buckets come from (the MSD pass's RADIX_BITS)     (RADIX_BITS)
  *   Include path: -I kernels_cl/include (clvis/keys.h, clvis/workgroup.h).
  *
  * Partition (as scan.cl): n keys, 0 < n < 2^32, in G contiguous ranges of
@@ -43,10 +45,11 @@
  *                         ulong n, uint G, global const uint *offsets,
  *                         uint lsd_passes)                    (WG == 1 only)
  *     The rest of an MSD-first sort: after one upsweep -> scan -> scatter
- *     pass on the most significant digit into keys_a (vals_a), `offsets`
- *     that pass's scanned hist, bucket d (the keys of top digit d) is
- *     [offsets[d G], offsets[(d + 1) G]) (the last ends at n). Work-item d
- *     (global size RADIX, local size 1) sorts bucket d stably on digits
+ *     pass on the most significant digit (MSD_BITS wide: that pass's
+ *     kernels built with RADIX_BITS = MSD_BITS) into keys_a (vals_a),
+ *     `offsets` that pass's scanned hist, bucket d (the keys of top digit d)
+ *     is [offsets[d G], offsets[(d + 1) G]) (the last ends at n). Work-item d
+ *     (global size 2^MSD_BITS, local size 1) sorts bucket d stably on digits
  *     shift = 0, RADIX_BITS, ..., (lsd_passes - 1) RADIX_BITS, ping-ponging
  *     between a and b inside the bucket's range: the sorted bucket ends in
  *     keys_b (vals_b) when lsd_passes is odd, in keys_a when even. Nothing
@@ -69,7 +72,12 @@
  * per thread, and each store misses (write-allocate, TLB); at 2^24 pairs the
  * sort moved only 4-6 GB/s. One pass on the top digit cuts the keys into
  * RADIX buckets of ~n / RADIX; each bucket (2^16 pairs = 512 KiB at 2^24,
- * both buffers) then takes its remaining LSD passes in the core's L2.
+ * both buffers) then takes its remaining LSD passes in the core's L2. The
+ * top digit takes what the 8-bit LSD digits leave of the key's bits, 5 to
+ * 12 (clvis/primitives.py): a 44-bit key (the Gaussian tile renderer's 12
+ * bits of tile above 32 of depth) is one 12-bit pass into 4096 buckets, one
+ * a tile, then 4 LSD passes in each, not an 8-bit top digit of which only 4
+ * bits vary (16 buckets of n / 16, out of cache for their 5 LSD passes).
  *
  * With WG == 1 a work-item walks its range in order and writes each key to its
  * digit's next slot (the fast form for CPU devices; RADIX_BITS 8). With
@@ -106,6 +114,10 @@
 #define ITEMS 8
 #endif
 #define RADIX (1u << RADIX_BITS)
+#ifndef MSD_BITS
+#define MSD_BITS RADIX_BITS
+#endif
+#define MSD_RADIX (1u << MSD_BITS)
 /* the most LSD passes radix_bucket_lsd makes: all digits but the top one */
 #define LSD_MAX (8 * sizeof(KEY_T) / RADIX_BITS - 1)
 #define TILE (WG * ITEMS)
@@ -290,10 +302,12 @@ void radix_bucket_lsd(global KEY_T *restrict keys_a, global KEY_T *restrict keys
                       const uint lsd_passes)
 {
     const uint d = get_global_id(0);
-    if (d >= RADIX)
+    if (d >= MSD_RADIX)
         return;
     const ulong lo = offsets[d * G];
-    const ulong hi = d + 1u < RADIX ? offsets[(d + 1u) * G] : n;
+    const ulong hi = d + 1u < MSD_RADIX ? offsets[(d + 1u) * G] : n;
+    if (lo == hi)    /* nothing to sort, nor to read (lo may be n) */
+        return;
     global KEY_T *sk = keys_a, *dk = keys_b;
 #if HAS_VALUES
     global VAL_T *sv = vals_a, *dv = vals_b;

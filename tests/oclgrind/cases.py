@@ -128,11 +128,15 @@ def radix_sort(q):
     clvis.radix_sort(rng.integers(0, 2**36, 200, dtype=np.uint64), key_bits=36, queue=q)
     clvis.radix_sort(rng.standard_normal(50), queue=q)
     # the CPU shape's MSD-first path (radix_bucket_lsd), at a size it would
-    # otherwise leave to the LSD passes
+    # otherwise leave to the LSD passes; key_bits 20 and 44 take a 12-bit top
+    # digit (4096 buckets, most of them empty, the last one included)
     msd, clvis.primitives.MSD_MIN_N = clvis.primitives.MSD_MIN_N, 0
     try:
         k = rng.integers(0, 2**20, 700).astype(np.uint32)
         clvis.radix_sort(k, np.arange(700, dtype=np.uint32), key_bits=20, queue=q)
+        k = rng.integers(0, 2**44, 300, dtype=np.uint64)
+        k[::2] |= np.uint64((2**44 - 1) & ~(2**32 - 1))
+        clvis.radix_sort(k, np.arange(300, dtype=np.uint32), key_bits=44, queue=q)
         clvis.radix_sort(rng.integers(0, 2**40, 300, dtype=np.uint64) | np.uint64(5 << 16), queue=q)
     finally:
         clvis.primitives.MSD_MIN_N = msd

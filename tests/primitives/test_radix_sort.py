@@ -117,6 +117,23 @@ def test_msd_first_key_bits(queue, msd_always, key_bits):
     check(rng.integers(0, 1 << key_bits, 70_001, dtype=np.uint32), queue, key_bits=key_bits)
 
 
+@pytest.mark.parametrize("key_bits", [12, 13, 20, 41, 44, 47, 52])
+def test_msd_first_wide_top_digit(queue, msd_always, key_bits):
+    """The top digit takes the bits the 8-bit LSD digits leave, up to 12
+    (44 bits: 12 + 4 x 8, the tile renderer's keys): keys of a few tiles each
+    (most of the 2^12 buckets empty, the last one included), equal depths
+    inside a tile (stability), and uniform keys."""
+    assert clvis.primitives.MSD_MAX_BITS == 12
+    rng = np.random.default_rng(key_bits)
+    n = 30_011
+    low = key_bits - min(12, key_bits - 8)
+    top = (1 << (key_bits - low)) - 1  # the last bucket
+    tiles = rng.choice(np.array([0, 1, 5, top // 2, top], np.uint64), n) << np.uint64(low)
+    depth = rng.integers(0, 1 << min(low, 10), n, dtype=np.uint64) << np.uint64(max(0, low - 10))
+    check(tiles | depth, queue, key_bits=key_bits)
+    check(rng.integers(0, 1 << key_bits, n, dtype=np.uint64), queue, key_bits=key_bits)
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64], ids=lambda d: np.dtype(d).name)
 def test_float_total_order(queue, dtype):
     """-inf < ... < -0.0 < +0.0 < ... < +inf < NaN; NaNs of either sign and any

@@ -3,11 +3,13 @@ one or more versions of kernels_cl/iso/traverse.cl, and print each version's
 per-launch process CPU time (min of --reps) and whether its outputs (candidate
 blocks, candidate t, resume t) are bit for bit those of the first version.
 
-    python bench/replay_iso_traverse.py [--n 256] [--reps 5] [--size 512x512] [SRC.cl ...]
+    python bench/replay_iso_traverse.py [--n 256] [--reps 5] [--size 512x512] [SRC.cl[:WG:PACKET] ...]
 
 SRC defaults to this tree's traverse.cl; give older versions as files
 (`git show REV:kernels_cl/iso/traverse.cl > /tmp/old.cl`), alternated to
-average out the machine's drift. bench_iso's scene (turbulence N^3, ZFP rate
+average out the machine's drift. A :WG:PACKET suffix sets the local size and
+the PACKET define (rays a work-item; default 16:0, one ray a work-item, which
+an older file without PACKET also runs). bench_iso's scene (turbulence N^3, ZFP rate
 8, to 100 %). A measuring script, not a test: it wraps
 clvis.iso.render.macro_traverse for one frame to copy its inputs.
 """
@@ -114,9 +116,13 @@ def capture(n: int, w: int, h: int) -> tuple[cl.CommandQueue, list[dict[str, Any
     return r.queue, caps
 
 
-def run(q: cl.CommandQueue, src: str, caps: list[dict[str, Any]], reps: int) -> tuple[list[float], list[Any]]:
+def run(
+    q: cl.CommandQueue, src: str, caps: list[dict[str, Any]], reps: int, wg: int = _WG, packet: int = 0
+) -> tuple[list[float], list[Any]]:
     ctx = q.context
-    k = cl.Kernel(cl.Program(ctx, src).build(options=build_options(q.device, {}, EXACT_FP)), "macro_traverse")
+    opts = build_options(q.device, {"PACKET": packet}, EXACT_FP)
+    k = cl.Kernel(cl.Program(ctx, src).build(options=opts), "macro_traverse")
+    per = max(packet, 1)
     mf = cl.mem_flags
 
     def buf(a: np.ndarray) -> cl.Buffer:
@@ -130,7 +136,8 @@ def run(q: cl.CommandQueue, src: str, caps: list[dict[str, Any]], reps: int) -> 
         nz, ny, nx = c["shape"]
         dz, dy, dx = c["spacing"]
         ox, oy, oz = c["origin"]
-        gs = (c["max_rays"] + _WG - 1) // _WG * _WG
+        items = -(-c["max_rays"] // per)
+        gs = (items + wg - 1) // wg * wg
         best = float("inf")
         for _ in range(reps):
             rt = buf(c["ray_t"])
@@ -152,7 +159,7 @@ def run(q: cl.CommandQueue, src: str, caps: list[dict[str, Any]], reps: int) -> 
             )
             q.finish()
             c0 = _cpu()
-            cl.enqueue_nd_range_kernel(q, k, (gs,), (_WG,)).wait()
+            cl.enqueue_nd_range_kernel(q, k, (gs,), (wg,)).wait()
             best = min(best, _cpu() - c0)
         o = (np.empty(m, np.uint32), np.empty(m, np.uint32), np.empty(c["ray_t"].size, np.uint32))
         for host, dev in zip(o, (cb, ct, rt), strict=True):
@@ -178,8 +185,12 @@ def main() -> None:
     scene_s = time.perf_counter() - t0
     print(f"{q.device.name}: {len(caps)} launches (rays, n_spec) {launches}, scene {scene_s:.1f} s")
     ref = None
-    for path in srcs:
-        cpus, outs = run(q, Path(path).read_text(), caps, a.reps)
+    for spec in srcs:
+        path, wg, packet = spec, _WG, 0
+        parts = spec.rsplit(":", 2)
+        if len(parts) == 3 and parts[1].isdigit() and parts[2].isdigit():
+            path, wg, packet = parts[0], int(parts[1]), int(parts[2])
+        cpus, outs = run(q, Path(path).read_text(), caps, a.reps, wg, packet)
         if ref is None:
             ref, same = outs, "(the reference)"
         else:
@@ -192,7 +203,7 @@ def main() -> None:
             )
         per = ", ".join(f"{c * 1e3:.1f}" for c in cpus)
         total = sum(cpus) * 1e3
-        print(f"{path}: CPU per launch (min of {a.reps}) {per} ms, sum {total:.1f} ms; identical {same}")
+        print(f"{spec}: CPU per launch (min of {a.reps}) {per} ms, sum {total:.1f} ms; identical {same}")
 
 
 if __name__ == "__main__":

@@ -86,7 +86,7 @@ from .cache import BlockCache, mark_blocks
 from .cache import _kernel as _cache_kernel
 from .macrocell import macrocell_grids
 from .raytrace import raytrace_blocks, raytrace_kernel
-from .traverse import init_rays, macro_traverse
+from .traverse import init_rays, macro_traverse, traverse_kernel
 from .zfp import ZfpVolume, compress
 
 __all__ = [
@@ -371,7 +371,7 @@ class IsoRenderer:
         the work shape) by running them on two elements."""
         q = self.queue
         for name in ("init_rays", "macro_traverse"):
-            runtime.get_kernel(q, "iso/traverse.cl", name, {}, runtime.EXACT_FP)
+            traverse_kernel(q, name)
         raytrace_kernel(q, 8, True)
         for name in ("mark_blocks", "cache_slot_flags", "cache_missing", "cache_age"):
             _cache_kernel(q, name)

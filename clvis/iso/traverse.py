@@ -18,13 +18,26 @@ import pyopencl.array as cla
 from .. import runtime
 from ..primitives import compact_indices
 
-__all__ = ["MAX_SPEC", "PROFILES", "init_rays", "macro_traverse"]
+__all__ = ["MAX_SPEC", "PROFILES", "init_rays", "macro_traverse", "traverse_kernel"]
 
 _SRC = "iso/traverse.cl"
-# work-items per group, per tuning profile (any size works; see the ABI)
-PROFILES = {"cpu": {"wg": 16}, "gpu": {"wg": 64}}
+# work-items per group, per tuning profile (any size works; see the ABI), and
+# rays a work-item sets up at once in float8 lanes (PACKET: 0, one ray, or 8)
+PROFILES = {"cpu": {"wg": 16, "packet": 8}, "gpu": {"wg": 64, "packet": 0}}
 MAX_SPEC = 64
 _arg = runtime.arg
+
+
+def _profile(queue: cl.CommandQueue) -> tuple[int, int, dict[str, int]]:
+    """(wg, rays a work-item, kernel defines) of the queue's tuning profile."""
+    prof = PROFILES[runtime.tuning_profile(queue)]
+    packet = int(prof["packet"])
+    return int(prof["wg"]), max(packet, 1), {"PACKET": packet}
+
+
+def traverse_kernel(queue: cl.CommandQueue, name: str) -> cl.Kernel:
+    """The traverse.cl kernel `name` for the queue's tuning profile (its PACKET)."""
+    return runtime.get_kernel(queue, _SRC, name, _profile(queue)[2], runtime.EXACT_FP)
 
 
 def _volume_args(shape, spacing, origin):
@@ -63,12 +76,12 @@ def init_rays(
         raise ValueError(f"pixels: the tile ({p0}, {npix}) must lie in the {w} x {h} image")
     ray_t = runtime.empty(queue, npix, np.float32, "ray_t")
     enters = runtime.empty(queue, npix, np.uint8, "ray enters flags")
-    wg = PROFILES[runtime.tuning_profile(queue)]["wg"]
-    k = runtime.get_kernel(queue, _SRC, "init_rays", {}, runtime.EXACT_FP)
+    wg, per_item, _ = _profile(queue)
+    k = traverse_kernel(queue, "init_rays")
     runtime.launch(
         queue,
         k,
-        *runtime.items(queue, npix, wg),
+        *runtime.items(queue, -(-npix // per_item), wg),
         _arg(cam),
         np.uint32(w),
         np.uint32(p0),
@@ -126,12 +139,12 @@ def macro_traverse(
             f"cand_block, cand_t: need room for {max_rays * n_spec} entries, "
             f"got {cand_block.size} and {cand_t.size}"
         )
-    wg = PROFILES[runtime.tuning_profile(queue)]["wg"]
-    k = runtime.get_kernel(queue, _SRC, "macro_traverse", {}, runtime.EXACT_FP)
+    wg, per_item, _ = _profile(queue)
+    k = traverse_kernel(queue, "macro_traverse")
     return runtime.launch(
         queue,
         k,
-        *runtime.items(queue, max_rays, wg),
+        *runtime.items(queue, -(-max_rays // per_item), wg),
         *_volume_args(shape, spacing, origin),
         np.float32(isovalue),
         _arg(cam),

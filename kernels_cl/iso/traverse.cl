@@ -9,7 +9,11 @@
  * ---
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (FP_CONTRACT is OFF
  * below: every float operation rounds on its own, so clvis/reference/
- * iso_traverse.py reproduces the results bit for bit). No defines.
+ * iso_traverse.py reproduces the results bit for bit). Define PACKET: 0
+ * (default: one pixel / one listed ray a work-item) or 8 (the cpu profile: 8
+ * a work-item, their ray set-up, clvis_iso_ray_setup's operations, done once
+ * in float8 lanes by tr_ray_setup8; macro_traverse then walks the 8 rays one
+ * after the other). Both give the same values bit for bit.
  * Includes clvis/camera.h (the 22-float camera-ray buffer, clvis_camera_ray),
  * clvis/iso.h (clvis_iso_ray_setup: the ray in index space and its box
  * interval; the 1/d convention of clvis/ray.h). fmin, floor and min come
@@ -74,7 +78,7 @@
  *     uint nx, uint ny, uint nz, float dx, float dy, float dz, float ox, float oy, float oz,
  *     global float *ray_t,               out, per tile pixel j: t_enter, +INFINITY when the ray misses
  *     global uchar *enters)              out, per tile pixel j: 1 when the ray meets the box, else 0
- *   Global size >= npix, any local size. (The host compacts `enters` into the
+ *   Global size >= npix (PACKET=8: >= ceil(npix / 8)), any local size. (The host compacts `enters` into the
  *   active list with clvis.primitives.compact_indices: deterministic order.)
  *
  * kernel macro_traverse(
@@ -96,8 +100,9 @@
  *                                        block id of ray active[i], 0xFFFFFFFF past the last
  *     global float *cand_t)              count x n_spec: the t where the ray enters it (the
  *                                        ray_t to hand to raytrace_blocks), +INFINITY past the last
- *   Global size >= count (a multiple of the local size), one work-item per
- *   listed ray; any local size (the host uses 64, or 16 on the cpu profile).
+ *   Global size >= count (PACKET=8: >= ceil(count / 8)), a multiple of the local
+ *   size; one work-item per listed ray (PACKET=8: per 8 listed rays, active[8 g ..
+ *   8 g + 7]); any local size (the host uses 64, or 16 on the cpu profile).
  *   A ray whose ray_t is not finite or exceeds t_exit gets no candidates and
  *   ray_t = +INFINITY.
  */
@@ -110,20 +115,93 @@
 #define NO_BLOCK 0xFFFFFFFFu
 
 
+#ifndef PACKET
+#define PACKET 0
+#endif
+
+#if PACKET == 8
+/* clvis_iso_ray_setup for the pixels p0 + pix[k] in the lanes k: the same
+ * float32 operations lane by lane (so the same values; o and d are not kept) */
+inline void tr_ray_setup8(global const float *cam, uint p0, const uint *pix, uint W, const int *n,
+                          const float *sp, const float *org, float8 *O, float8 *D, float8 *inv,
+                          float8 *t_enter, float8 *t_exit)
+{
+    float pu[8], pv[8];
+    for (int k = 0; k < 8; ++k) {
+        const uint p = p0 + pix[k];
+        pu[k] = (float)(p % W) + 0.5f;
+        pv[k] = (float)(p / W) + 0.5f;
+    }
+    const float8 u = CLVIS_IL_VLOAD8(float8, pu), v = CLVIS_IL_VLOAD8(float8, pv);
+    float8 o[3], dd[3];
+    for (int a = 0; a < 3; ++a) {   /* clvis_camera_ray */
+        o[a] = (cam[a] + u * cam[3 + a]) + v * cam[6 + a];
+        dd[a] = (cam[9 + a] + u * cam[12 + a]) + v * cam[15 + a];
+    }
+    const float8 len = sqrt((dd[0] * dd[0] + dd[1] * dd[1]) + dd[2] * dd[2]);
+    float8 lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+        const float8 d = dd[a] / len;
+        const float8 safe = (as_float8(as_uint8(d) & (uint8)(0x7FFFFFFFu)) < CLVIS_RAY_TINY_DIR)
+                                ? as_float8(as_uint8((float8)(CLVIS_RAY_TINY_DIR))
+                                            | (as_uint8(d) & (uint8)(0x80000000u)))
+                                : d;   /* clvis_ray_safe_dir */
+        inv[a] = sp[a] / safe;
+        O[a] = (o[a] - org[a]) / sp[a];
+        D[a] = d / sp[a];
+        /* clvis_ray_slab over [0, n - 1] */
+        const float8 t0 = (0.0f - O[a]) * inv[a], t1 = ((float)(n[a] - 1) - O[a]) * inv[a];
+        lo[a] = t0 < t1 ? t0 : t1;
+        hi[a] = t0 > t1 ? t0 : t1;
+    }
+    const float8 l01 = lo[0] > lo[1] ? lo[0] : lo[1], l012 = l01 > lo[2] ? l01 : lo[2];
+    *t_enter = l012 > 0.0f ? l012 : 0.0f;
+    const float8 m01 = hi[0] < hi[1] ? hi[0] : hi[1];
+    *t_exit = m01 < hi[2] ? m01 : hi[2];
+}
+#endif
+
 kernel void init_rays(global const float *cam, uint W, uint p0, uint npix, uint nx, uint ny, uint nz,
                       float dx, float dy, float dz, float ox, float oy, float oz,
                       global float *ray_t, global uchar *enters)
 {
+    const int n[3] = {(int)nx, (int)ny, (int)nz};
+    const float sp[3] = {dx, dy, dz}, org[3] = {ox, oy, oz};
+#if PACKET == 8
+    const uint j0 = 8u * get_global_id(0);   /* pixels j0 .. j0 + 7 of the tile */
+    if (j0 >= npix)
+        return;
+    uint pix[8];
+    for (int k = 0; k < 8; ++k)
+        pix[k] = min(j0 + (uint)k, npix - 1u);   /* past the tile: a copy, not stored */
+    float8 O[3], D[3], inv[3], te, tx;
+    tr_ray_setup8(cam, p0, pix, W, n, sp, org, O, D, inv, &te, &tx);
+    const int8 in = te <= tx;
+    float rt[8];
+    int inl[8];
+    CLVIS_IL_VSTORE8(in ? te : (float8)(INFINITY), rt);
+    CLVIS_IL_VSTORE8(in, inl);
+    if (j0 + 8u <= npix) {
+        for (int k = 0; k < 8; ++k) {
+            ray_t[j0 + (uint)k] = rt[k];
+            enters[j0 + (uint)k] = (uchar)(inl[k] != 0);
+        }
+    } else {
+        for (uint k = 0; j0 + k < npix; ++k) {
+            ray_t[j0 + k] = rt[k];
+            enters[j0 + k] = (uchar)(inl[k] != 0);
+        }
+    }
+#else
     const uint j = get_global_id(0);
     if (j >= npix)
         return;
-    const int n[3] = {(int)nx, (int)ny, (int)nz};
-    const float sp[3] = {dx, dy, dz}, org[3] = {ox, oy, oz};
     float o[3], d[3], O[3], D[3], inv[3], te, tx;
     clvis_iso_ray_setup(cam, p0 + j, W, n, sp, org, o, d, O, D, inv, &te, &tx);
     const int in = te <= tx;
     ray_t[j] = in ? te : INFINITY;
     enters[j] = (uchar)in;
+#endif
 }
 
 /* T_a of the block b's exit bound along the ray (the entry bound when `entry`) */
@@ -144,26 +222,13 @@ inline float block_bound_t(int b, int size, int n, float O, float inv, int entry
         (te) = block_bound_t((b), 4, (n), (O), (inv), 0);             \
     }
 
-kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float dz,
-                           float ox, float oy, float oz, float isovalue,
-                           global const float *cam, uint W, uint p0,
-                           global const float2 *fine, global const float2 *coarse,
-                           global const uint *active, global const uint *count,
-                           global float *ray_t, uint n_spec,
-                           global uint *cand_block, global float *cand_t)
+/* The walk of ray active[i] (tile pixel p) from ray_t[p], given its set-up
+ * (O, D, inv per axis, t_exit): its candidates and its resume t. */
+inline void tr_walk(uint i, uint p, const int *n, const int *nb, const int *ncb, const int *nc,
+                    const float *O, const float *D, const float *inv, float t_exit, float isovalue,
+                    global const float2 *fine, global const float2 *coarse, global float *ray_t,
+                    uint n_spec, global uint *cand_block, global float *cand_t)
 {
-    const uint i = get_global_id(0);
-    if (i >= count[0])
-        return;
-    const uint p = active[i];   /* the tile's pixel: image pixel p0 + p */
-    const int n[3] = {(int)nx, (int)ny, (int)nz};
-    const float sp[3] = {dx, dy, dz}, org[3] = {ox, oy, oz};
-    const int nb[3] = {(n[0] + 3) >> 2, (n[1] + 3) >> 2, (n[2] + 3) >> 2};
-    const int ncb[3] = {(n[0] + 2) >> 2, (n[1] + 2) >> 2, (n[2] + 2) >> 2};  /* blocks with cells */
-    const int nc[3] = {(nb[0] + 3) >> 2, (nb[1] + 3) >> 2, (nb[2] + 3) >> 2};
-    float o[3], d[3], O[3], D[3], inv[3], te, t_exit;
-    clvis_iso_ray_setup(cam, p0 + p, W, n, sp, org, o, d, O, D, inv, &te, &t_exit);
-
     float t = ray_t[p];
     uint found = 0;
     float resume = INFINITY;
@@ -272,4 +337,54 @@ kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float 
         cand_t[i * n_spec + k] = INFINITY;
     }
     ray_t[p] = resume;
+}
+
+kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float dz,
+                           float ox, float oy, float oz, float isovalue,
+                           global const float *cam, uint W, uint p0,
+                           global const float2 *fine, global const float2 *coarse,
+                           global const uint *active, global const uint *count,
+                           global float *ray_t, uint n_spec,
+                           global uint *cand_block, global float *cand_t)
+{
+    const int n[3] = {(int)nx, (int)ny, (int)nz};
+    const float sp[3] = {dx, dy, dz}, org[3] = {ox, oy, oz};
+    const int nb[3] = {(n[0] + 3) >> 2, (n[1] + 3) >> 2, (n[2] + 3) >> 2};
+    const int ncb[3] = {(n[0] + 2) >> 2, (n[1] + 2) >> 2, (n[2] + 2) >> 2};  /* blocks with cells */
+    const int nc[3] = {(nb[0] + 3) >> 2, (nb[1] + 3) >> 2, (nb[2] + 3) >> 2};
+    const uint cnt = count[0];
+#if PACKET == 8
+    /* rays active[i0 .. i0 + 7]: the set-up in float8 lanes, then each lane's walk */
+    const uint i0 = 8u * get_global_id(0);
+    if (i0 >= cnt)
+        return;
+    const uint m = min(8u, cnt - i0);
+    uint pix[8];
+    for (uint k = 0; k < 8u; ++k)
+        pix[k] = active[i0 + min(k, m - 1u)];   /* past the list: a copy, not walked */
+    float8 O8[3], D8[3], inv8[3], te8, tx8;
+    tr_ray_setup8(cam, p0, pix, W, n, sp, org, O8, D8, inv8, &te8, &tx8);
+    float lO[3][8], lD[3][8], linv[3][8], ltx[8];
+    for (int a = 0; a < 3; ++a) {
+        CLVIS_IL_VSTORE8(O8[a], lO[a]);
+        CLVIS_IL_VSTORE8(D8[a], lD[a]);
+        CLVIS_IL_VSTORE8(inv8[a], linv[a]);
+    }
+    CLVIS_IL_VSTORE8(tx8, ltx);
+    for (uint k = 0; k < m; ++k) {
+        const float O[3] = {lO[0][k], lO[1][k], lO[2][k]}, D[3] = {lD[0][k], lD[1][k], lD[2][k]};
+        const float inv[3] = {linv[0][k], linv[1][k], linv[2][k]};
+        tr_walk(i0 + k, pix[k], n, nb, ncb, nc, O, D, inv, ltx[k], isovalue, fine, coarse, ray_t,
+                n_spec, cand_block, cand_t);
+    }
+#else
+    const uint i = get_global_id(0);
+    if (i >= cnt)
+        return;
+    const uint p = active[i];   /* the tile's pixel: image pixel p0 + p */
+    float o[3], d[3], O[3], D[3], inv[3], te, t_exit;
+    clvis_iso_ray_setup(cam, p0 + p, W, n, sp, org, o, d, O, D, inv, &te, &t_exit);
+    tr_walk(i, p, n, nb, ncb, nc, O, D, inv, t_exit, isovalue, fine, coarse, ray_t, n_spec,
+            cand_block, cand_t);
+#endif
 }

@@ -458,3 +458,83 @@ def test_view_key_orders_candidates_front_to_back(eye, ortho):
     assert checked > 0.25 * len(act)
     if not ortho and min(abs(e) for e in eye) > 1:  # outside every slab of the box [-1, 1]^3
         assert signs.all()
+
+
+def _profile_passes(q, s, n_spec, tile):
+    """init_rays on the tile (p0, n) and macro_traverse passes to the end, device
+    only: per round the active ids, candidates and ray_t (host copies)."""
+    p0, npix = tile
+    ray_t, active, count = init_rays(q, s.cam_d, s.w, s.h, s.shape, s.spacing, s.origin, pixels=tile)
+    cnt = int(count.get(queue=q)[0])
+    out = [ray_t.get(queue=q), active.get(queue=q)[:cnt]]
+    act = out[1]
+    while act.size:
+        assert len(out) < 400
+        # a sparse, uneven active list: every other ray this round, the rest the next
+        for part in (act[::2], act[1::2]):
+            if not part.size:
+                continue
+            cnt = len(part)
+            cb = runtime.empty(q, cnt * n_spec, np.uint32, "cand_block")
+            ct = runtime.empty(q, cnt * n_spec, np.float32, "cand_t")
+            macro_traverse(
+                q,
+                s.shape,
+                s.spacing,
+                s.origin,
+                s.iso,
+                s.cam_d,
+                s.w,
+                s.fine_d,
+                s.coarse_d,
+                _upload(q, part, np.uint32),
+                _upload(q, [cnt], np.uint32),
+                cnt,
+                ray_t,
+                n_spec,
+                cb,
+                ct,
+                first_pixel=p0,
+            )
+            out += [cb.get(queue=q), ct.get(queue=q)]
+        rt = ray_t.get(queue=q)
+        out.append(rt)
+        act = act[np.isfinite(rt[act])]
+    return out
+
+
+_PROFILE_SCENES = {
+    "turbulence": lambda: ("turbulence", 30, CAM, 21, 13, 0.5),
+    "inside": lambda: (
+        "turbulence",
+        30,
+        Camera.look_at((0.3, -0.2, 0.1), (1.0, 0.5, -0.3), (0, 0, 1), fov_y=90, near=0.01, far=20),
+        19,
+        11,
+        0.5,
+    ),
+    "marschner_lobb": lambda: ("marschner_lobb", 33, CAM, 17, 15, 0.3),
+}
+
+
+@pytest.mark.parametrize("scene", sorted(_PROFILE_SCENES))
+@pytest.mark.parametrize("n_spec", [1, 5])
+def test_packets_equal_one_ray_a_work_item(queue, scene, n_spec):
+    """The cpu profile's 8-ray set-up (PACKET=8: init_rays and macro_traverse
+    take 8 pixels / 8 listed rays a work-item, ray set-up in float8 lanes)
+    gives every ray_t, active id and candidate bit for bit as one ray a
+    work-item (the gpu profile's PACKET=0) on the same device: whole images
+    and tiles whose start and size are not multiples of 8, active lists of
+    odd lengths."""
+    name, n, cam, w, h, isovalue = _PROFILE_SCENES[scene]()
+    s = _scene(queue, name, n, cam, w, h, isovalue)
+    for tile in ((0, w * h), (3, w * h - 7), (w + 5, 2 * w + 3)):
+        got = {}
+        for profile in ("cpu", "gpu"):
+            with runtime.configure(tuning=profile):
+                got[profile] = _profile_passes(queue, s, n_spec, tile)
+        a, b = got["cpu"], got["gpu"]
+        assert len(a) == len(b)
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+        assert any(x.dtype == np.uint32 and (x != NO).any() for x in a[2:])  # cand_block arrays

@@ -30,7 +30,13 @@ unseen colormap):
 - "vortices": 2-5 tilted Rankine vortex tubes of random strengths, the scalar
   the distance to the nearest core;
 - "turbulence": a random-Fourier divergence-free field (energy ~ k^-5/3),
-  points clustered by a random scalar field which also colours them.
+  points clustered by a random scalar field which also colours them;
+- "attractors": points along trajectories of a chaotic attractor other than
+  Lorenz's, drawn per scene from Rössler's, Thomas's, Aizawa's and
+  Halvorsen's with jittered parameters (thin curves in sheets and lobes),
+  velocity its vector field, the scalar one coordinate or the time along
+  each trajectory (issue 21 §3's "attractor trajectories"; the held-out
+  Lorenz attractor is none of them).
 """
 
 from __future__ import annotations
@@ -38,7 +44,16 @@ from __future__ import annotations
 import numpy as np
 
 FLOWS = ("convection", "lorenz", "jet", "ring")
-TRAIN_FLOWS = ("abc", "abc-lines", "taylor-green", "double-gyre", "burgers", "vortices", "turbulence")
+TRAIN_FLOWS = (
+    "abc",
+    "abc-lines",
+    "taylor-green",
+    "double-gyre",
+    "burgers",
+    "vortices",
+    "turbulence",
+    "attractors",
+)
 
 
 def _result(pos: np.ndarray, vel: np.ndarray, temp: np.ndarray) -> dict:
@@ -148,7 +163,68 @@ def _fourier(rng: np.random.Generator, modes: int, kmax: float, solenoidal: bool
     return field
 
 
+def _attractor(rng: np.random.Generator):
+    """(vector field, start point, time step) of a chaotic attractor other
+    than Lorenz's, its parameters jittered a little around a chaotic set."""
+    which = int(rng.integers(0, 4))
+    j = rng.uniform(0.97, 1.03, 3)
+    if which == 0:  # Rössler
+        a, b, c = 0.2 * j[0], 0.2 * j[1], 5.7 * j[2]
+
+        def f(q):
+            return np.stack([-q[:, 1] - q[:, 2], q[:, 0] + a * q[:, 1], b + q[:, 2] * (q[:, 0] - c)], 1)
+
+        return f, (1.0, 1.0, 0.0), 0.02
+    if which == 1:  # Thomas
+        b = 0.208 * j[0]
+
+        def f(q):
+            return np.sin(q[:, [1, 2, 0]]) - b * q
+
+        return f, (0.1, 0.0, 0.0), 0.05
+    if which == 2:  # Aizawa
+        a, b, c, d, e, ff = 0.95 * j[0], 0.7 * j[1], 0.6 * j[2], 3.5, 0.25, 0.1
+
+        def f(q):
+            x, y, z = q[:, 0], q[:, 1], q[:, 2]
+            return np.stack(
+                [
+                    (z - b) * x - d * y,
+                    d * x + (z - b) * y,
+                    c + a * z - z**3 / 3 - (x**2 + y**2) * (1 + e * z) + ff * z * x**3,
+                ],
+                1,
+            )
+
+        return f, (0.1, 0.0, 0.0), 0.01
+    a = 1.89 * j[0]  # Halvorsen
+
+    def f(q):
+        x, y, z = q[:, 0], q[:, 1], q[:, 2]
+        return np.stack(
+            [-a * x - 4 * y - 4 * z - y**2, -a * y - 4 * z - 4 * x - z**2, -a * z - 4 * x - 4 * y - x**2], 1
+        )
+
+    return f, (-1.0, 0.0, 0.0), 0.005
+
+
 def _train_flow(kind: str, n: int, rng: np.random.Generator) -> dict:
+    if kind == "attractors":
+        f, start, dt = _attractor(rng)
+        m = max(n // int(rng.integers(150, 600)), 1)
+        steps = -(-n // m)
+        s = np.asarray(start, np.float64) + rng.normal(scale=0.1, size=(m, 3))
+        for _ in range(2000):  # onto the attractor
+            s = s + dt * f(s + dt / 2 * f(s))
+        out = np.empty((steps, m, 3))
+        for i in range(steps):
+            s = s + dt * f(s + dt / 2 * f(s))
+            out[i] = s
+        pos = out.reshape(-1, 3)[:n]
+        pos = pos + rng.normal(scale=0.002 * float(np.ptp(pos, axis=0).max()), size=(n, 3))
+        col = int(rng.integers(0, 4))
+        scalar = np.repeat(np.arange(steps, dtype=np.float64), m)[:n] if col == 3 else pos[:, col]
+        return _result(pos, f(pos), scalar)
     if kind == "abc":
         a, b, c = rng.uniform(0.3, 1.5, 3)
         pos = rng.uniform(0, 2 * np.pi, (n, 3))

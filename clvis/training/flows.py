@@ -171,21 +171,21 @@ def _attractor(rng: np.random.Generator):
     if which == 0:  # Rössler
         a, b, c = 0.2 * j[0], 0.2 * j[1], 5.7 * j[2]
 
-        def f(q):
+        def rossler(q):
             return np.stack([-q[:, 1] - q[:, 2], q[:, 0] + a * q[:, 1], b + q[:, 2] * (q[:, 0] - c)], 1)
 
-        return f, (1.0, 1.0, 0.0), 0.02
+        return rossler, (1.0, 1.0, 0.0), 0.02
     if which == 1:  # Thomas
         b = 0.208 * j[0]
 
-        def f(q):
+        def thomas(q):
             return np.sin(q[:, [1, 2, 0]]) - b * q
 
-        return f, (0.1, 0.0, 0.0), 0.05
+        return thomas, (0.1, 0.0, 0.0), 0.05
     if which == 2:  # Aizawa
         a, b, c, d, e, ff = 0.95 * j[0], 0.7 * j[1], 0.6 * j[2], 3.5, 0.25, 0.1
 
-        def f(q):
+        def aizawa(q):
             x, y, z = q[:, 0], q[:, 1], q[:, 2]
             return np.stack(
                 [
@@ -196,16 +196,16 @@ def _attractor(rng: np.random.Generator):
                 1,
             )
 
-        return f, (0.1, 0.0, 0.0), 0.01
+        return aizawa, (0.1, 0.0, 0.0), 0.01
     a = 1.89 * j[0]  # Halvorsen
 
-    def f(q):
+    def halvorsen(q):
         x, y, z = q[:, 0], q[:, 1], q[:, 2]
         return np.stack(
             [-a * x - 4 * y - 4 * z - y**2, -a * y - 4 * z - 4 * x - z**2, -a * z - 4 * x - 4 * y - x**2], 1
         )
 
-    return f, (-1.0, 0.0, 0.0), 0.005
+    return halvorsen, (-1.0, 0.0, 0.0), 0.005
 
 
 def _train_flow(kind: str, n: int, rng: np.random.Generator) -> dict:

@@ -174,9 +174,10 @@ KNOWN_BELOW = {
     # the terrain, where the U-Net alone is 4.94 dB / 0.011 SSIM below it;
     # what remains is the picture's 8-bit rounding
     "lidar": {"terrain 320x240 3% scan orbit": (-0.01, -0.001)},
+    # narvis (4000 steps with the 'attractors' flow): the plain rasterization
+    # is close to GR on the Lorenz attractor's hemisphere views
     "narvis": {
-        "lorenz 256x256 1x points hemisphere": (-3.60, -0.072),
-        "jet 256x256 1x points grid": (0.89, -0.011),
+        "lorenz 256x256 1x points hemisphere": (-3.73, -0.077),
     },
     # narvis-scan (4000 steps, 61 min on 1 thread): the aerial strip scan's
     # view is 1.15 dB below the classical splat with the radius plane; the
@@ -201,7 +202,7 @@ def test_shipped_cards_hold_their_suite_margins(name):
     assert set(KNOWN_BELOW[name]) <= {m[0] for m in margins}
 
 
-@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (10 rows of the four quick suites)")
+@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (9 rows of the four quick suites)")
 @pytest.mark.parametrize("name", post.NAMES)
 def test_shipped_cards_never_below_their_baseline(name):
     """Issue 21 §2: PSNR and SSIM >= the best classical baseline on every
@@ -281,7 +282,7 @@ def test_ci_lidar_on_photographs(ci_rows):
 def test_ci_narvis_on_a_jet(ci_rows):
     """A round jet (never trained on), hemisphere view, 128 x 128 at the
     training's particles a pixel. Measured (the kernel-prediction model):
-    30.7 dB / 0.867 against GR (plain rasterization 23.7 / 0.733, push-pull
+    30.8 dB / 0.858 against GR (plain rasterization 23.7 / 0.733, push-pull
     13.8, classical splat 28.1 / 0.849; the U-Net shipped before it: 25.1 /
     0.784, 3.0 dB below the splat)."""
     r = ci_rows["narvis"]["1x points"]
@@ -290,7 +291,7 @@ def test_ci_narvis_on_a_jet(ci_rows):
 
 def test_ci_narvis_meets_its_targets_on_a_jet(ci_rows):
     """Issue 21 §2 on the CI jet: not below the classical splat, 6 dB over
-    the plain rasterization, SSIM >= 0.82 (met: +2.5 dB, +7.0 dB, 0.867)."""
+    the plain rasterization, SSIM >= 0.82 (met: +2.7 dB, +7.1 dB, 0.858)."""
     r = ci_rows["narvis"]["1x points"]
     assert _margin(r, "splat") >= 1 and _margin(r, "splat", "ssim") >= 0
     assert _margin(r, "raster") >= 6 and r["network"]["ssim"] >= 0.82

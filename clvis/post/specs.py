@@ -146,6 +146,7 @@ class NarvisSpec(NetworkSpec[GBuffersLike]):
         "burgers",
         "vortices",
         "turbulence",
+        "attractors",
     )
 
     def shape(self, image: Any) -> tuple[int, int]:

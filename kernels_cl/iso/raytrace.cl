@@ -100,7 +100,7 @@
  * cell cell_exit, cell_corners, clvis_iso_cell_cubic, clvis_iso_first_zero
  * (march_cells), and at a hit clvis_iso_trilinear_gradient, clvis_iso_shade.
  * PACKET=8: load_dual_brick_rows (the same brick, by rows of float4 loads),
- * the set-up in float8 (rt_ray_setup8: clvis_iso_ray_setup's operations; a
+ * the set-up in float8 (clvis_iso_ray_setup8 in clvis/iso.h: clvis_iso_ray_setup's operations; a
  * packet whose lanes are all empty or skipped stops here), march_cells8 (first_cell, cell_exit,
  * cell_corners, rt_cell_cubic8 and rt_bracket8 per cell, in float8; a lane
  * with a root keeps its cell's bracket and cubic and leaves the loop, and
@@ -438,42 +438,6 @@ inline float8 rt_refine8(const float8 *c, float8 a, float8 b, float8 fa, float8 
     return at_a ? a0 : r;
 }
 
-/* clvis_iso_ray_setup for the pixels p0 + pix[k] in the lanes k (the same
- * operations per lane; t_enter is not needed) */
-inline void rt_ray_setup8(global const float *cam, uint p0, const uint *pix, uint W, const int *n,
-                          const float *sp, const float *org, float8 *o, float8 *d, float8 *O,
-                          float8 *D, float8 *inv, float8 *t_exit)
-{
-    float pu[8], pv[8];
-    for (int k = 0; k < 8; ++k) {
-        const uint p = p0 + pix[k];
-        pu[k] = (float)(p % W) + 0.5f;
-        pv[k] = (float)(p / W) + 0.5f;
-    }
-    const float8 u = CLVIS_IL_VLOAD8(float8, pu), v = CLVIS_IL_VLOAD8(float8, pv);
-    float8 dd[3];
-    for (int a = 0; a < 3; ++a) {   /* clvis_camera_ray */
-        o[a] = (cam[a] + u * cam[3 + a]) + v * cam[6 + a];
-        dd[a] = (cam[9 + a] + u * cam[12 + a]) + v * cam[15 + a];
-    }
-    const float8 len = sqrt((dd[0] * dd[0] + dd[1] * dd[1]) + dd[2] * dd[2]);
-    float8 lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) {
-        d[a] = dd[a] / len;
-        const float8 safe = (as_float8(as_uint8(d[a]) & (uint8)(0x7FFFFFFFu)) < CLVIS_RAY_TINY_DIR)
-                                ? rt_copysign8((float8)(CLVIS_RAY_TINY_DIR), d[a])
-                                : d[a];   /* clvis_ray_safe_dir */
-        inv[a] = sp[a] / safe;
-        O[a] = (o[a] - org[a]) / sp[a];
-        D[a] = d[a] / sp[a];
-        /* clvis_ray_slab over [0, n - 1] */
-        const float8 t0 = (0.0f - O[a]) * inv[a], t1 = ((float)(n[a] - 1) - O[a]) * inv[a];
-        lo[a] = t0 < t1 ? t0 : t1;
-        hi[a] = t0 > t1 ? t0 : t1;
-    }
-    const float8 m01 = hi[0] < hi[1] ? hi[0] : hi[1];
-    *t_exit = m01 < hi[2] ? m01 : hi[2];
-}
 
 /* march_cells for the live lanes: per lane the scalar loop's result, *hit
  * (-1 at a hit) and *t (hit: t_in + s; else the new ray_t), at a hit also
@@ -647,7 +611,8 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         if (!rt_any8(ok8))
             continue;   /* every lane empty or skipped */
         float8 o8[3], d8[3], O8[3], D8[3], inv8[3], texit8;
-        rt_ray_setup8(cam, p0, pk, W, n, sp, org, o8, d8, O8, D8, inv8, &texit8);
+        float8 tenter8;   /* not needed here */
+        clvis_iso_ray_setup8(cam, p0, pk, W, n, sp, org, o8, d8, O8, D8, inv8, &tenter8, &texit8);
         float lo[3][8], ld[3][8], lD[3][8];
         for (int a = 0; a < 3; ++a) {
             CLVIS_IL_VSTORE8(o8[a], lo[a]);

@@ -12,7 +12,7 @@
  * iso_traverse.py reproduces the results bit for bit). Define PACKET: 0
  * (default: one pixel / one listed ray a work-item) or 8 (the cpu profile: 8
  * a work-item, their ray set-up, clvis_iso_ray_setup's operations, done once
- * in float8 lanes by tr_ray_setup8; macro_traverse then walks the 8 rays one
+ * in float8 lanes by clvis_iso_ray_setup8 (clvis/iso.h); macro_traverse then walks the 8 rays one
  * after the other). Both give the same values bit for bit.
  * Includes clvis/camera.h (the 22-float camera-ray buffer, clvis_camera_ray),
  * clvis/iso.h (clvis_iso_ray_setup: the ray in index space and its box
@@ -119,48 +119,6 @@
 #define PACKET 0
 #endif
 
-#if PACKET == 8
-/* clvis_iso_ray_setup for the pixels p0 + pix[k] in the lanes k: the same
- * float32 operations lane by lane (so the same values; o and d are not kept) */
-inline void tr_ray_setup8(global const float *cam, uint p0, const uint *pix, uint W, const int *n,
-                          const float *sp, const float *org, float8 *O, float8 *D, float8 *inv,
-                          float8 *t_enter, float8 *t_exit)
-{
-    float pu[8], pv[8];
-    for (int k = 0; k < 8; ++k) {
-        const uint p = p0 + pix[k];
-        pu[k] = (float)(p % W) + 0.5f;
-        pv[k] = (float)(p / W) + 0.5f;
-    }
-    const float8 u = CLVIS_IL_VLOAD8(float8, pu), v = CLVIS_IL_VLOAD8(float8, pv);
-    float8 o[3], dd[3];
-    for (int a = 0; a < 3; ++a) {   /* clvis_camera_ray */
-        o[a] = (cam[a] + u * cam[3 + a]) + v * cam[6 + a];
-        dd[a] = (cam[9 + a] + u * cam[12 + a]) + v * cam[15 + a];
-    }
-    const float8 len = sqrt((dd[0] * dd[0] + dd[1] * dd[1]) + dd[2] * dd[2]);
-    float8 lo[3], hi[3];
-    for (int a = 0; a < 3; ++a) {
-        const float8 d = dd[a] / len;
-        const float8 safe = (as_float8(as_uint8(d) & (uint8)(0x7FFFFFFFu)) < CLVIS_RAY_TINY_DIR)
-                                ? as_float8(as_uint8((float8)(CLVIS_RAY_TINY_DIR))
-                                            | (as_uint8(d) & (uint8)(0x80000000u)))
-                                : d;   /* clvis_ray_safe_dir */
-        inv[a] = sp[a] / safe;
-        O[a] = (o[a] - org[a]) / sp[a];
-        D[a] = d / sp[a];
-        /* clvis_ray_slab over [0, n - 1] */
-        const float8 t0 = (0.0f - O[a]) * inv[a], t1 = ((float)(n[a] - 1) - O[a]) * inv[a];
-        lo[a] = t0 < t1 ? t0 : t1;
-        hi[a] = t0 > t1 ? t0 : t1;
-    }
-    const float8 l01 = lo[0] > lo[1] ? lo[0] : lo[1], l012 = l01 > lo[2] ? l01 : lo[2];
-    *t_enter = l012 > 0.0f ? l012 : 0.0f;
-    const float8 m01 = hi[0] < hi[1] ? hi[0] : hi[1];
-    *t_exit = m01 < hi[2] ? m01 : hi[2];
-}
-#endif
-
 kernel void init_rays(global const float *cam, uint W, uint p0, uint npix, uint nx, uint ny, uint nz,
                       float dx, float dy, float dz, float ox, float oy, float oz,
                       global float *ray_t, global uchar *enters)
@@ -175,7 +133,8 @@ kernel void init_rays(global const float *cam, uint W, uint p0, uint npix, uint 
     for (int k = 0; k < 8; ++k)
         pix[k] = min(j0 + (uint)k, npix - 1u);   /* past the tile: a copy, not stored */
     float8 O[3], D[3], inv[3], te, tx;
-    tr_ray_setup8(cam, p0, pix, W, n, sp, org, O, D, inv, &te, &tx);
+    float8 o_[3], d_[3];
+    clvis_iso_ray_setup8(cam, p0, pix, W, n, sp, org, o_, d_, O, D, inv, &te, &tx);
     const int8 in = te <= tx;
     float rt[8];
     int inl[8];
@@ -363,7 +322,8 @@ kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float 
     for (uint k = 0; k < 8u; ++k)
         pix[k] = active[i0 + min(k, m - 1u)];   /* past the list: a copy, not walked */
     float8 O8[3], D8[3], inv8[3], te8, tx8;
-    tr_ray_setup8(cam, p0, pix, W, n, sp, org, O8, D8, inv8, &te8, &tx8);
+    float8 o8_[3], d8_[3];
+    clvis_iso_ray_setup8(cam, p0, pix, W, n, sp, org, o8_, d8_, O8, D8, inv8, &te8, &tx8);
     float lO[3][8], lD[3][8], linv[3][8], ltx[8];
     for (int a = 0; a < 3; ++a) {
         CLVIS_IL_VSTORE8(O8[a], lO[a]);

@@ -187,4 +187,47 @@ inline float4 clvis_iso_shade(const float *g, const float *d)
                     clvis_il_clamp(CLVIS_ISO_SHADE_BASE_B * lit + spec, 0.0f, 1.0f), 1.0f);
 }
 
+/* clvis_iso_ray_setup for the 8 pixels p0 + pix[k] (k = 0..7) in float8 lanes:
+ * the same float32 operations lane by lane, so the same values (the cpu
+ * profile's 8-ray packets in init_rays, macro_traverse and raytrace_blocks;
+ * a caller ignores the outputs it does not need). o, d: the camera ray;
+ * O, D, inv, t_enter, t_exit as clvis_iso_ray_setup's. */
+inline void clvis_iso_ray_setup8(global const float *cam, uint p0, const uint *pix, uint W, const int *n,
+                                 const float *sp, const float *org, float8 *o, float8 *d, float8 *O,
+                                 float8 *D, float8 *inv, float8 *t_enter, float8 *t_exit)
+{
+    float pu[8], pv[8];
+    for (int k = 0; k < 8; ++k) {
+        const uint p = p0 + pix[k];
+        pu[k] = (float)(p % W) + 0.5f;
+        pv[k] = (float)(p / W) + 0.5f;
+    }
+    const float8 u = CLVIS_IL_VLOAD8(float8, pu), v = CLVIS_IL_VLOAD8(float8, pv);
+    float8 dd[3];
+    for (int a = 0; a < 3; ++a) {   /* clvis_camera_ray */
+        o[a] = (cam[a] + u * cam[3 + a]) + v * cam[6 + a];
+        dd[a] = (cam[9 + a] + u * cam[12 + a]) + v * cam[15 + a];
+    }
+    const float8 len = sqrt((dd[0] * dd[0] + dd[1] * dd[1]) + dd[2] * dd[2]);
+    float8 lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+        d[a] = dd[a] / len;
+        const float8 safe = (as_float8(as_uint8(d[a]) & (uint8)(0x7FFFFFFFu)) < CLVIS_RAY_TINY_DIR)
+                                ? as_float8(as_uint8((float8)(CLVIS_RAY_TINY_DIR))
+                                            | (as_uint8(d[a]) & (uint8)(0x80000000u)))
+                                : d[a];   /* clvis_ray_safe_dir */
+        inv[a] = sp[a] / safe;
+        O[a] = (o[a] - org[a]) / sp[a];
+        D[a] = d[a] / sp[a];
+        /* clvis_ray_slab over [0, n - 1] */
+        const float8 t0 = (0.0f - O[a]) * inv[a], t1 = ((float)(n[a] - 1) - O[a]) * inv[a];
+        lo[a] = t0 < t1 ? t0 : t1;
+        hi[a] = t0 > t1 ? t0 : t1;
+    }
+    const float8 l01 = lo[0] > lo[1] ? lo[0] : lo[1], l012 = l01 > lo[2] ? l01 : lo[2];
+    *t_enter = l012 > 0.0f ? l012 : 0.0f;
+    const float8 m01 = hi[0] < hi[1] ? hi[0] : hi[1];
+    *t_exit = m01 < hi[2] ? m01 : hi[2];
+}
+
 #endif /* CLVIS_ISO_H */

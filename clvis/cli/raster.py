@@ -971,7 +971,14 @@ def _render(args, progress) -> int:
             # 4-NN distance (clamped), projected to pixels by the resolve
             t0 = time.perf_counter()
             with progress.stage(f"splat radius plane (mean {SCAN_K}-NN distance)"):
-                scan_radius = knn_sigma(cloud.positions, SCAN_K)
+                # of the points drawn: one with a NaN or infinite coordinate is
+                # dropped by the renderer (and said so), its radius unused
+                finite = np.isfinite(cloud.positions).all(axis=1)
+                if finite.all():
+                    scan_radius = knn_sigma(cloud.positions, SCAN_K)
+                else:
+                    scan_radius = np.zeros(len(cloud), np.float32)
+                    scan_radius[finite] = knn_sigma(cloud.positions[finite], SCAN_K)
             took = time.perf_counter() - t0
             if took > KNN_NOTE_SECONDS and not progress.enabled:
                 # the progress display shows it already; else say where the seconds went

@@ -438,6 +438,21 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 2 and "the narvis-scan network has no guard" in err
 
 
+def test_render_post_narvis_scan_drops_non_finite_points(tmp_path, capsys):
+    """A cloud with NaN / infinite coordinates renders as it does without
+    --post (those points dropped, said so): narvis-scan's kNN radius plane is
+    of the finite points (it failed with scipy's 'data must be finite')."""
+    rng = np.random.default_rng(3)
+    pos = rng.random((3000, 3)).astype(np.float32)
+    pos[5, 0], pos[17, 2] = np.nan, np.inf
+    path = tmp_path / "holes.npy"
+    np.save(path, pos)
+    rc, out, err = _render(capsys, path, "--post", "narvis", "--out", tmp_path / "a", *SMALL)
+    assert rc == 0, err
+    assert "model narvis-scan" in err and "dropped   2 points with a NaN or infinite coordinate" in out
+    _assert_picture(tmp_path / "a" / "post-narvis-scan.png")
+
+
 def test_render_post_narvis_scan_says_when_its_knn_radius_is_slow(tmp_path, capsys, monkeypatch):
     """The kNN radius plane is computed on every call (seconds for a big LAS):
     over KNN_NOTE_SECONDS the command says how long it took on stderr (with

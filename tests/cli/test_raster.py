@@ -453,6 +453,33 @@ def test_render_post_narvis_scan_drops_non_finite_points(tmp_path, capsys):
     _assert_picture(tmp_path / "a" / "post-narvis-scan.png")
 
 
+def test_render_compare_narvis_scan_in_the_colours_drawn(tmp_path, capsys):
+    """--compare's narvis-scan target is splatted in the colours the network's
+    points were drawn in: a scan whose RGB is all black is coloured by its
+    intensity, and so is its target (it was black: the scores meant nothing);
+    a cloud without colours, coloured by z, is compared too (it was refused)."""
+    laspy = pytest.importorskip("laspy")
+    d = datasets.terrain(4000, seed=5)
+    las = laspy.create(point_format=3, file_version="1.2")  # red = green = blue = 0
+    las.header.scales = [0.01, 0.01, 0.01]
+    las.x, las.y, las.z = d["positions"].T
+    las.intensity = (d["attributes"]["intensity"] * 65535).astype(np.uint16)
+    path = tmp_path / "black.las"
+    las.write(path)
+    npy = tmp_path / "bare.npy"
+    np.save(npy, d["positions"])
+    for src, what in ((path, "colored by intensity"), (npy, "colored by z")):
+        out_dir = tmp_path / src.stem
+        rc, out, err = _render(
+            capsys, src, "--view", "top", "--post", "narvis", "--compare", "--out", out_dir, *SMALL
+        )
+        assert rc == 0, err
+        assert what in out and "model narvis-scan" in err
+        _assert_picture(out_dir / "gaussians.png")
+        net_db = float(re.search(r"NARVis U-Net +([-\d.]+) dB", out).group(1))
+        assert net_db > 15, out  # against a black target: ~10 dB
+
+
 def test_render_post_narvis_scan_says_when_its_knn_radius_is_slow(tmp_path, capsys, monkeypatch):
     """The kNN radius plane is computed on every call (seconds for a big LAS):
     over KNN_NOTE_SECONDS the command says how long it took on stderr (with

@@ -977,6 +977,8 @@ def _render(args, progress) -> int:
                 raise CliError(
                     f"--post {args.post}: {source} has no colours; add --attribute to colour it by one"
                 )
+            import scipy.spatial  # noqa: F401  (imported here, not inside the time said below)
+
             from ..gauss.points import knn_sigma
             from ..training.data import SCAN_K
 

@@ -8,10 +8,9 @@ Positions are float32, what the kernels read. float32 keeps about 7 significant
 digits, too few for georeferenced coordinates (UTM eastings of 10^5..10^6 m), so
 the LAS/LAZ reader subtracts the minimum of the points' coordinates and keeps it,
 in float64, as ``cloud.origin``: world position = origin + position; so do
-the E57 and ASCII readers, and the PLY reader for double (or 64-bit integer)
-x, y, z. Other formats take positions as stored (origin zero), except that
-files written by clvis carry their origin along (an NPZ key, a PLY header
-comment).
+the E57 and ASCII readers, and the PLY reader for double x, y, z. Other
+formats take positions as stored (origin zero), except that files written by
+clvis carry their origin along (an NPZ key, a PLY header comment).
 
 A missing file raises FileNotFoundError; a file clvis cannot read (unknown
 extension, malformed or truncated content, wrong shapes) raises

@@ -347,9 +347,9 @@ class PointScene(Scene):
             from ..io import PointCloud
 
             keep = slice(None) if self._finite is None else self._finite
-            cloud = PointCloud(
-                self.cloud.positions[keep], colors=self._colours(s)[keep], radius=self.scan_radius[keep]
-            )
+            radius = self.scan_radius
+            assert radius is not None  # made by _scan_raster above
+            cloud = PointCloud(self.cloud.positions[keep], colors=self._colours(s)[keep], radius=radius[keep])
             ss = ScanScene(cloud, "landscape", "view")
             self._gauss = {key: ss.gaussian_renderer(queue=self.raster.queue)}
         build = time.perf_counter() - t0

@@ -194,12 +194,43 @@ def test_ply_foreign_properties(tmp_path):
         [plyfile.PlyElement.describe(v, "vertex"), plyfile.PlyElement.describe(faces, "face")], byte_order=">"
     ).write(str(path))
     pc = read_points(path)
-    np.testing.assert_array_equal(pc.positions[:, 0], np.arange(n) + 0.25)
+    np.testing.assert_array_equal(pc.positions[:, 0] + pc.origin[0], np.arange(n) + 0.25)  # doubles
     np.testing.assert_array_equal(pc.colors, [[10, 20, 30, 255]] * n)
     np.testing.assert_array_equal(pc.velocity, [[0, 2, 0]] * n)
     assert pc.attribute_names == ("nx", "scalar_temp", "red")  # a lone "red" stays an attribute
     assert pc.attributes["scalar_temp"].dtype == np.float32
     np.testing.assert_array_equal(pc.attributes["scalar_temp"], -7)
+
+
+def test_ply_double_coordinates_keep_an_origin(tmp_path):
+    """Double x, y, z (Open3D's, PDAL's, georeferenced scans): positions relative
+    to their finite minimum, the origin kept in float64, as LAS files are (as
+    float32 the 5000 points of a unit cube at 1e9 fell onto one point, and
+    clvis render drew one pixel); a NaN point stays NaN; clvis's own origin
+    comment wins; float32 files keep their coordinates."""
+    rng = np.random.default_rng(2)
+    xyz = 1e9 + rng.random((5000, 3))
+    xyz[10, 1] = np.nan
+    v = np.zeros(len(xyz), [("x", "<f8"), ("y", "<f8"), ("z", "<f8")])
+    v["x"], v["y"], v["z"] = xyz.T
+    path = tmp_path / "geo.ply"
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")]).write(str(path))
+    pc = read_points(path)
+    finite = np.isfinite(xyz).all(axis=1)
+    np.testing.assert_array_equal(pc.origin, xyz[finite].min(axis=0))
+    assert np.isnan(pc.positions[10, 1]) and np.isfinite(pc.positions[finite]).all()
+    np.testing.assert_allclose(pc.positions[finite] + pc.origin, xyz[finite], rtol=0, atol=1e-6)
+    assert len(np.unique(pc.positions[finite], axis=0)) == finite.sum()
+    again = tmp_path / "again.ply"
+    write_ply(again, pc)
+    back = read_points(again)
+    np.testing.assert_array_equal(back.origin, pc.origin)
+    np.testing.assert_array_equal(back.positions, pc.positions)
+    v32 = np.zeros(3, [("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+    v32["x"] = [1e6, 2e6, 3e6]
+    plyfile.PlyData([plyfile.PlyElement.describe(v32, "vertex")]).write(str(tmp_path / "f32.ply"))
+    pc32 = read_points(tmp_path / "f32.ply")
+    assert not pc32.origin.any() and pc32.positions[:, 0].tolist() == [1e6, 2e6, 3e6]
 
 
 def test_ply_list_property_in_vertex_is_skipped(tmp_path):

@@ -386,7 +386,7 @@ def _render_panels(
 
 
 def _compare_gaussians(
-    cloud, camera, width, height, attribute, colormap, r, net, progress, scan_radius=None
+    cloud, camera, width, height, attribute, colormap, r, net, progress, look, scan_radius=None
 ) -> list[str]:
     """--compare: the Gaussian renderer NARVis replaces, on the same view and
     transfer function (narvis-scan: the isotropic Gaussians of the radius
@@ -398,11 +398,24 @@ def _compare_gaussians(
 
     scene: NarvisScene | ScanScene
     if scan_radius is not None:
-        if cloud.colors is None:
-            raise CliError("--compare: narvis-scan's Gaussians carry the points' colours; the cloud has none")
+        from ..colormap import apply, lut
         from ..io import PointCloud
 
-        c = PointCloud(cloud.positions, colors=cloud.colors, radius=scan_radius)
+        # the Gaussians in the colours the network's points were drawn in: the
+        # class colours, the attribute through the colormap over the panels'
+        # range, or the cloud's own colours (a LAS file's all-black RGB is not
+        # what the network saw when the command coloured by intensity)
+        if look.classes is not None:
+            colors = look.class_colors
+        elif attribute is not None:
+            values = _raster_fields(cloud, attribute)["attributes"][attribute]
+            colors = apply(values, lut(colormap), *(look.value_range or value_range(values)))
+        else:
+            colors = cloud.colors
+        # the finite points, as the rasterizer draws them
+        finite = np.isfinite(cloud.positions).all(axis=1)
+        keep = slice(None) if finite.all() else finite
+        c = PointCloud(cloud.positions[keep], colors=colors[keep], radius=scan_radius[keep])
         scene, kind = ScanScene(c, "landscape", "the cloud"), "isotropic kNN Gaussians, 3DGS splatting"
     else:
         vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
@@ -964,6 +977,8 @@ def _render(args, progress) -> int:
                 raise CliError(
                     f"--post {args.post}: {source} has no colours; add --attribute to colour it by one"
                 )
+            import scipy.spatial  # noqa: F401  (imported here, not inside the time said below)
+
             from ..gauss.points import knn_sigma
             from ..training.data import SCAN_K
 
@@ -971,7 +986,14 @@ def _render(args, progress) -> int:
             # 4-NN distance (clamped), projected to pixels by the resolve
             t0 = time.perf_counter()
             with progress.stage(f"splat radius plane (mean {SCAN_K}-NN distance)"):
-                scan_radius = knn_sigma(cloud.positions, SCAN_K)
+                # of the points drawn: one with a NaN or infinite coordinate is
+                # dropped by the renderer (and said so), its radius unused
+                finite = np.isfinite(cloud.positions).all(axis=1)
+                if finite.all():
+                    scan_radius = knn_sigma(cloud.positions, SCAN_K)
+                else:
+                    scan_radius = np.zeros(len(cloud), np.float32)
+                    scan_radius[finite] = knn_sigma(cloud.positions[finite], SCAN_K)
             took = time.perf_counter() - t0
             if took > KNN_NOTE_SECONDS and not progress.enabled:
                 # the progress display shows it already; else say where the seconds went
@@ -1014,7 +1036,7 @@ def _render(args, progress) -> int:
     compared = []
     if args.compare:
         compared = _compare_gaussians(
-            cloud, camera, width, height, attribute, colormap, r, net, progress, scan_radius
+            cloud, camera, width, height, attribute, colormap, r, net, progress, look, scan_radius
         )
     out = Path(args.out)
     with progress.stage("writing PNGs"):

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .._arrays import positive_int
+from .._arrays import positive_int, real_array
 from ..errors import DataError
 from ..io import PointCloud
 from .gaussians import Gaussians
@@ -52,11 +52,13 @@ def _k(k) -> int:
 def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     """(N,) float32: each point's mean distance to its k nearest other points
     (scipy.spatial.cKDTree). Fewer than k + 1 points: the mean over those there are;
-    a single point: 0. k in 1..MAX_KNN."""
+    a single point: 0. k in 1..MAX_KNN. positions: (N, 3) finite real
+    coordinates (DataError naming the first point with a NaN or infinite one,
+    or when a distance does not fit in float32)."""
     from scipy.spatial import cKDTree
 
     k = _k(k)
-    p = np.asarray(positions, np.float64)
+    p = _finite_positions(positions)
     n = len(p)
     if n < 2:
         return np.zeros(n, np.float32)
@@ -67,9 +69,33 @@ def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     # 3x the CPU time at 10^6 points); the distances do not depend on the order
     order = tree.indices
     dist, _ = tree.query(p[order], k=kk + 1, workers=-1)
+    with np.errstate(over="ignore"):  # the check below reports it
+        mean = dist[:, 1:].mean(axis=1).astype(np.float32)
+    if not np.isfinite(mean).all():
+        raise DataError(
+            "positions: the distances between points overflow float32 "
+            f"(coordinates up to {np.abs(p).max():.3g}); recentre or rescale the cloud"
+        )
     out = np.empty(n, np.float32)
-    out[order] = dist[:, 1:].mean(axis=1)
+    out[order] = mean
     return out
+
+
+def _finite_positions(positions) -> np.ndarray:
+    """positions as (N, 3) float64, every coordinate finite (ValueError,
+    TypeError or DataError naming what is wrong)."""
+    p = real_array("positions", positions)
+    if p.ndim != 2 or p.shape[1:] != (3,):
+        raise ValueError(f"positions: expected shape (N, 3), got {p.shape}")
+    p = p.astype(np.float64)
+    finite = np.isfinite(p).all(axis=1)
+    if not finite.all():
+        bad = int(np.flatnonzero(~finite)[0])
+        raise DataError(
+            f"positions: point {bad} has a NaN or infinite coordinate "
+            f"({int((~finite).sum()):,} of {len(p):,} points)"
+        )
+    return p
 
 
 def knn_sigma(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:

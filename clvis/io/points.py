@@ -7,7 +7,8 @@ laspy; LAZ needs its lazrs backend), NPY and NPZ, chosen by the file extension.
 Positions are float32, what the kernels read. float32 keeps about 7 significant
 digits, too few for georeferenced coordinates (UTM eastings of 10^5..10^6 m), so
 the LAS/LAZ reader subtracts the minimum of the points' coordinates and keeps it,
-in float64, as ``cloud.origin``: world position = origin + position. Other
+in float64, as ``cloud.origin``: world position = origin + position; so do
+the E57 and ASCII readers, and the PLY reader for double x, y, z. Other
 formats take positions as stored (origin zero), except that files written by
 clvis carry their origin along (an NPZ key, a PLY header comment).
 
@@ -48,6 +49,8 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
     - ``.ply``: the ``vertex`` element. x, y, z are required; red, green, blue
       [, alpha] (or r, g, b [, a]) become colors; vx, vy, vz (or velocity_x, ...)
       the velocity; radius the radius; every other scalar property an attribute.
+      Double x, y, z: positions relative to ``origin`` = their finite minimum
+      (unless the file carries clvis's origin comment).
     - ``.las``, ``.laz``: positions relative to ``origin`` = the minimum of the
       points' coordinates; red/green/blue become 8-bit (>> 8 when any value
       exceeds 255, else as is); every other dimension (intensity, classification,

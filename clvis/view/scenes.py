@@ -182,6 +182,10 @@ class PointScene(Scene):
         finite = np.isfinite(pos).all(axis=1)
         if not finite.any():
             raise DataError(f"{description}: no point has finite coordinates")
+        # the Gaussian modes' points: those the rasterizer draws (a NaN or
+        # infinite coordinate makes no Gaussian and no kNN neighbour)
+        self._finite = None if finite.all() else finite
+        self._gauss_cloud = cloud if self._finite is None else cloud.subset(finite)
         self.lo, self.hi = (
             pos[finite].min(axis=0).astype(np.float64),
             pos[finite].max(axis=0).astype(np.float64),
@@ -227,7 +231,11 @@ class PointScene(Scene):
         from ..training.data import SCAN_K
 
         t0 = time.perf_counter()
-        radius = knn_sigma(self.cloud.positions, SCAN_K)
+        if self._finite is None:
+            radius = knn_sigma(self.cloud.positions, SCAN_K)
+        else:  # the points drawn; the others' radius is never read
+            radius = np.zeros(len(self.cloud.positions), np.float32)
+            radius[self._finite] = knn_sigma(self._gauss_cloud.positions, SCAN_K)
         self.raster = Rasterizer(
             self.cloud, attributes=self._raster_attrs, radius=radius, queue=self.raster.queue
         )
@@ -305,7 +313,7 @@ class PointScene(Scene):
         t0 = time.perf_counter()
         if key not in self._gauss:
             vr = value_range(self.cloud.attributes[attr])
-            ns = NarvisScene(self.cloud, attr, vr, s["colormap"], "view")
+            ns = NarvisScene(self._gauss_cloud, attr, vr, s["colormap"], "view")
             self._gauss = {key: (ns, ns.gaussian_renderer(queue=self.raster.queue))}
         build = time.perf_counter() - t0
         ns, gr = self._gauss[key]
@@ -338,7 +346,10 @@ class PointScene(Scene):
         if key not in self._gauss:
             from ..io import PointCloud
 
-            cloud = PointCloud(self.cloud.positions, colors=self._colours(s), radius=self.scan_radius)
+            keep = slice(None) if self._finite is None else self._finite
+            radius = self.scan_radius
+            assert radius is not None  # made by _scan_raster above
+            cloud = PointCloud(self.cloud.positions[keep], colors=self._colours(s)[keep], radius=radius[keep])
             ss = ScanScene(cloud, "landscape", "view")
             self._gauss = {key: ss.gaussian_renderer(queue=self.raster.queue)}
         build = time.perf_counter() - t0
@@ -376,7 +387,7 @@ class PointScene(Scene):
         key = s["color_by"]
         t0 = time.perf_counter()
         if key not in self._gauss:
-            gs = gaussians_from_points(self.cloud, color_by=key if key != "rgb" else "rgb")
+            gs = gaussians_from_points(self._gauss_cloud, color_by=key if key != "rgb" else "rgb")
             self._gauss = {key: (GaussianRenderer(gs, queue=self.raster.queue), gs.n)}
         build = time.perf_counter() - t0
         renderer, count = self._gauss[key]

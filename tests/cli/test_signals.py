@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 CODE = "import sys; from clvis.cli import main; sys.exit(main())"
@@ -118,3 +119,48 @@ def test_a_signal_while_the_command_line_starts_is_one_line(tmp_path, sig, statu
         lines = [ln for ln in err.splitlines() if not re.fullmatch(r"\d+ errors? generated\.", ln)]
         assert lines == [f"clvis render: {word}"], (delay, err)
     assert len(landed) >= 5, landed
+
+
+@pytest.mark.parametrize("after", ["model narvis-scan", "splat radius plane"])  # in the kNN; after it
+def test_signal_during_post_narvis_scan(tmp_path, after):
+    """Ctrl-C while --post narvis computes the scan's kNN radius plane (scipy,
+    on all cores) or runs its network: one line, status 130, no PNG or
+    temporary file left in --out."""
+    rng = np.random.default_rng(0)
+    np.save(tmp_path / "scan.npy", rng.random((400_000, 3)).astype(np.float32))
+    out = tmp_path / "out"
+    p = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            CODE,
+            "render",
+            "scan.npy",
+            "--post",
+            "narvis",
+            "--out",
+            str(out),
+            "--progress",
+        ],
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    lines = []
+    for line in p.stderr:
+        lines.append(line)
+        if after in line:
+            time.sleep(0.2)
+            p.send_signal(signal.SIGINT)
+            break
+    t0 = time.monotonic()
+    rest = p.stderr.read()
+    p.wait(timeout=120)
+    lines += rest.splitlines(keepends=True)
+    assert p.returncode == 130, "".join(lines)
+    assert time.monotonic() - t0 < 30, "".join(lines)
+    tail = rest.strip().splitlines()
+    assert tail[-1] == "clvis render: interrupted", rest
+    assert "Traceback" not in rest
+    assert not (out.is_dir() and os.listdir(out)), os.listdir(out)

@@ -5,7 +5,13 @@ import numpy as np
 import pytest
 
 import clvis
-from clvis.gauss.points import KNN_CLAMP_PERCENTILE, frames_along, gaussians_from_points, knn_mean_distance
+from clvis.gauss.points import (
+    KNN_CLAMP_PERCENTILE,
+    frames_along,
+    gaussians_from_points,
+    knn_mean_distance,
+    knn_sigma,
+)
 from clvis.io import PointCloud
 
 
@@ -151,3 +157,45 @@ def test_frames_are_rotations():
         np.einsum("nji,njk->nik", r, r), np.broadcast_to(np.eye(3), (100, 3, 3)), atol=1e-6
     )
     np.testing.assert_allclose(np.linalg.det(r), 1, atol=1e-6)
+
+
+@pytest.mark.parametrize("f", [knn_mean_distance, knn_sigma], ids=lambda f: f.__name__)
+def test_knn_bad_positions(f):
+    """The kNN radius names what is wrong with its positions (it fed scipy's
+    'data must be finite' to the CLI) and never returns a NaN or inf."""
+    with pytest.raises(
+        clvis.DataError, match=r"positions: point 1 has a NaN or infinite coordinate \(1 of 3"
+    ):
+        f(np.array([[0, 0, 0], [np.nan, 0, 0], [1, 1, 1]]))
+    with pytest.raises(clvis.DataError, match="point 2 has a NaN or infinite"):
+        f(np.array([[0, 0, 0], [1, 0, 0], [0, -np.inf, 1]], np.float32))
+    with pytest.raises(clvis.DataError, match="overflow float32"):
+        f(np.array([[1.7e308, 0, 0], [-1.7e308, 0, 0], [0, 0, 0]]))
+    with pytest.raises(clvis.DataError, match="overflow float32"):
+        f(np.array([[3e38, 0, 0], [-3e38, 0, 0]], np.float32))
+    for bad in (np.zeros((4, 2)), np.zeros(3), np.zeros((2, 3, 1))):
+        with pytest.raises(ValueError, match=r"positions: expected shape \(N, 3\)"):
+            f(bad)
+    for bad in ("abc", np.array([[None, None, None]]), np.zeros((2, 3), bool), None):
+        with pytest.raises(TypeError, match="positions: expected"):
+            f(bad)
+
+
+@pytest.mark.parametrize("f", [knn_mean_distance, knn_sigma], ids=lambda f: f.__name__)
+def test_knn_degenerate_clouds(f):
+    """Fewer points than k + 1, duplicates (zero distances), a single point,
+    none: finite, >= 0, the mean over the neighbours there are."""
+    assert f(np.zeros((0, 3))).shape == (0,)
+    np.testing.assert_array_equal(f(np.ones((1, 3))), [0])
+    np.testing.assert_array_equal(f(np.ones((1000, 3))), np.zeros(1000))
+    d = f(np.array([[0, 0, 0], [3, 0, 0]], np.float32))
+    np.testing.assert_allclose(d, [3, 3])
+    four = np.array([[0, 0, 0], [1, 0, 0], [0, 2, 0], [0, 0, 4]], np.float64)
+    d = f(four, 4)  # 3 neighbours each, not 4
+    assert np.isfinite(d).all() and (d > 0).all()
+    np.testing.assert_allclose(knn_mean_distance(four, 4)[0], (1 + 2 + 4) / 3, rtol=1e-6)
+    pairs = np.repeat(np.random.default_rng(0).random((50, 3)), 2, axis=0)  # each point twice
+    d = f(pairs, 1)
+    np.testing.assert_array_equal(d, np.zeros(100))  # its nearest other point is its copy
+    g = gaussians_from_points(np.ones((10, 3)))
+    assert np.isfinite(g.scales).all() and (np.asarray(g.scales) == 0).all()

@@ -270,3 +270,72 @@ def test_bad_input():
         clvis.radix_sort(np.zeros(4, np.uint32), key_bits=33)
     with pytest.raises(TypeError, match="key_bits: expected an int"):
         clvis.radix_sort(np.zeros(4, np.uint32), key_bits=8.0)
+
+
+@pytest.mark.parametrize("msd", [False, True], ids=["lsd", "msd-first"])
+@pytest.mark.parametrize("dtype", [np.uint32, np.int32, np.uint64, np.int64], ids=lambda d: np.dtype(d).name)
+def test_key_bits_edges(queue, monkeypatch, msd, dtype):
+    """key_bits at its ends and at the digit boundaries (8-bit LSD digits, the
+    MSD-first top digit of up to 12 bits) for 0, 1, 2, 5 and 4097 keys, with
+    and without values: each key with one boundary bit set and the largest
+    key the promise allows sort as the reference does; a key one bit above the
+    promise raises DataError, in both forms and for a single key too."""
+    if msd:
+        monkeypatch.setattr(clvis.primitives, "MSD_MIN_N", 0)
+    dt = np.dtype(dtype)
+    nbits = dt.itemsize * 8
+    top = nbits if dt.kind == "u" else nbits - 1  # a signed key's sign bit is never a promise
+    rng = np.random.default_rng(nbits)
+    for kb in sorted({0, 1, 8, 9, 12, 13, 20, 21, 44, 63, 64, nbits - 1, nbits}):
+        if kb > nbits:
+            continue
+        for n in (0, 1, 2, 5, 4097):
+            hi = min(kb, top, 62)
+            keys = rng.integers(0, 1 << hi, n, dtype=np.uint64) if hi else np.zeros(n, np.uint64)
+            for j, b in enumerate(
+                b for b in (kb - 1, min(kb, 12) - 1, kb - 12, 8, 7) if 0 <= b < min(kb, top)
+            ):
+                if j < n:
+                    keys[j] = np.uint64(1) << np.uint64(b)
+            if n and 0 < kb <= top:
+                keys[-1] = np.uint64((1 << kb) - 1)  # the largest key the promise allows
+            keys = keys.astype(dt)
+            check(keys, queue, with_values=True, key_bits=kb)
+            check(keys, queue, with_values=False, key_bits=kb)
+            if n and kb < top:
+                bad = keys.copy()
+                bad[n // 2] = dt.type(1) << dt.type(kb)
+                with pytest.raises(clvis.DataError, match=f"key_bits={kb} "):
+                    clvis.radix_sort(bad, key_bits=kb, queue=queue)
+            if n and dt.kind == "i" and kb < nbits:
+                bad = keys.copy()
+                bad[0] = -1  # every bit set
+                with pytest.raises(clvis.DataError, match=f"key_bits={kb} "):
+                    clvis.radix_sort(bad, key_bits=kb, queue=queue)
+
+
+def test_bad_key_bits():
+    with pytest.raises(ValueError, match="key_bits: expected 0..32 for uint32 keys, got -1"):
+        clvis.radix_sort(np.zeros(4, np.uint32), key_bits=-1)
+    with pytest.raises(ValueError, match="key_bits: expected 0..64 for uint64 keys, got 65"):
+        clvis.radix_sort(np.zeros(4, np.uint64), key_bits=65)
+    with pytest.raises(ValueError, match="key_bits: expected 0..64"):
+        clvis.radix_sort(np.zeros(4, np.uint64), key_bits=2**70)
+    for bad in (True, "8", 8.5, np.float32(8)):
+        with pytest.raises(TypeError, match="key_bits: expected an int"):
+            clvis.radix_sort(np.zeros(4, np.uint32), key_bits=bad)
+    np.testing.assert_array_equal(
+        clvis.radix_sort(np.array([3, 1], np.uint64), key_bits=np.int64(64)), [1, 3]
+    )
+    with pytest.raises(TypeError, match="keys: expected an array, got str"):
+        clvis.radix_sort("abc")
+    with pytest.raises(TypeError, match="keys: expected numbers"):
+        clvis.radix_sort(np.array([1, None], object))
+    with pytest.raises(TypeError, match="keys: dtype bool"):
+        clvis.radix_sort(np.zeros(3, bool))
+    with pytest.raises(ValueError, match=r"keys: expected a 1-D array, got shape \(\)"):
+        clvis.radix_sort(np.uint32(5))
+    with pytest.raises(TypeError, match="values: dtype float64"):
+        clvis.radix_sort(np.zeros(4, np.uint32), np.zeros(4))
+    with pytest.raises(TypeError, match="queue: expected a pyopencl.CommandQueue"):
+        clvis.radix_sort(np.zeros(4, np.uint32), queue="cpu")

@@ -269,3 +269,25 @@ def test_narvis_scan_mode_for_clouds_without_velocity(scan, monkeypatch):
     # the plain points from the Rasterizer with the radius: the same picture as before
     s.update({"mode": "points", "color_by": "rgb"})
     np.testing.assert_array_equal(next(s.frames(cam, 80, 64, s.settings, lambda: False)).image, before)
+
+
+def test_gaussian_modes_take_the_finite_points(scan):
+    """A cloud with a NaN / infinite point shows in the points mode (the
+    rasterizer drops it); the Gaussian modes take the same points (they raised
+    DataError: the kNN radius and gaussians_from_points refuse them), and give
+    the pictures of the cloud without them."""
+    pos = scan.positions.copy()
+    pos[7, 0], pos[100, 2] = np.nan, -np.inf
+    holes = clvis.PointCloud(pos, colors=scan.colors, attributes=scan.attributes)
+    finite = np.isfinite(pos).all(axis=1)
+    s, clean = PointScene(holes), PointScene(holes.subset(finite))
+    cam = Orbit(clean.lo, clean.hi, points=clean.fit_points).camera(80 / 64)
+    for mode in ("gaussians", "narvis-scan", "narvis-scan|gaussians"):
+        s.update({"mode": mode})
+        clean.update({"mode": mode})
+        got = next(s.frames(cam, 80, 64, s.settings, lambda: False)).image
+        want = next(clean.frames(cam, 80, 64, clean.settings, lambda: False)).image
+        assert got.std() > 0, mode
+        np.testing.assert_array_equal(got, want, err_msg=mode)
+    assert s.scan_radius is not None and s.scan_radius[~finite].tolist() == [0, 0]
+    np.testing.assert_array_equal(s.scan_radius[finite], clean.scan_radius)

@@ -550,3 +550,40 @@ def test_launch_types_scalars_once(device, tmp_path):
     runtime.launch(q, k, 1, 1, out.data, args[0], np.uint32(3), np.int32(-1), *args[3:], None, np.uint16(1))
     assert out.get().tolist()[1:3] == [3, 0xFFFFFFFF]
     assert k._clvis_arg_dtypes[2:4] == (np.dtype(np.uint32), np.dtype(np.int32))
+
+
+@pytest.mark.parametrize(
+    "shape", [(), (0,), (5,), 7, np.int64(3), (3, 4), (5, 1, 2), (2, 0, 3), (np.int64(4), np.uint32(3))]
+)
+def test_empty_is_cla_empty(device, shape):
+    """runtime.empty builds its arrays with pyopencl's fast constructor: the
+    same array as cla.empty from the pool (shape, C strides, size, flags...)."""
+    q = runtime.queue_for(device)
+    a = runtime.empty(q, shape, np.float32, "empty test")
+    b = cla.empty(q, shape, np.float32, allocator=runtime.allocator(q))
+    for name in (
+        "shape",
+        "strides",
+        "size",
+        "nbytes",
+        "dtype",
+        "offset",
+        "queue",
+        "context",
+        "allocator",
+        "events",
+    ):
+        assert getattr(a, name) == getattr(b, name), name
+    assert type(a.size) is type(b.size) and all(type(s) is int for s in a.shape)
+    assert (a.base_data is None) == (b.base_data is None)
+    assert (a.flags.c_contiguous, a.flags.f_contiguous) == (b.flags.c_contiguous, b.flags.f_contiguous)
+    if a.size:
+        a.set(np.arange(a.size, dtype=np.float32).reshape(a.shape))
+        np.testing.assert_array_equal(a.get().ravel(), np.arange(a.size))
+
+
+@pytest.mark.parametrize("shape", [(-1,), (2.0,), (True,), (3, -2)])
+def test_empty_bad_shape(device, shape):
+    q = runtime.queue_for(device)
+    with pytest.raises(ValueError):
+        runtime.empty(q, shape, np.float32, "empty test")

@@ -29,8 +29,6 @@
  *                 blocks first so that most of these items are skipped). The
  *                 read is a plain load racing with the other groups' atomic
  *                 mins, a documented benign race (iso-skip, in the kernel).
- *                 With PACKET=8 a group whose items are all skipped by that
- *                 test when it starts returns before loading its brick.
  *   REFINE_STEPS  Illinois steps of the root refinement (default 8; the
  *                 reference docstring asks for >= 6)
  *   PACKET        0 (default; the gpu profile): one ray a work-item. 8 (the
@@ -81,8 +79,7 @@
  *   work-group g traces block group_blocks[g], work-item i its rays i, i + L, ... <
  *   group_counts[g] (PACKET=8: the packets of rays 8 i .. 8 i + 7, 8 (i + L) .., the
  *   rays past group_counts[g] empty lanes).
- *   Local memory: 125 floats (the dual brick); PACKET=8 with ITEMS and
- *   CLVIS_INT64_ATOMICS: one int more (whether any item of the group is live).
+ *   Local memory: 125 floats (the dual brick).
  *   The block and its +x, +y, +z, +xy, +xz, +yz, +xyz neighbours inside the
  *   volume must be cached (their samples on the block's far faces are corners
  *   of the block's cells); an absent one reads as NaN (no hit in those cells).
@@ -561,32 +558,6 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         return;     /* not a block of the grid (the whole group returns) */
     const int n[3] = {(int)nx, (int)ny, (int)nz};
     const int b0[3] = {4 * (int)bc[0], 4 * (int)bc[1], 4 * (int)bc[2]};
-    const uint count = group_counts[g], offset = group_offsets[g];
-
-#if PACKET && ITEMS && CLVIS_INT64_ATOMICS
-    /* A group whose items are all behind their pixels' nearest hits so far
-     * returns before its brick: each work-item looks at its share of the items
-     * until it finds one that is not skipped (the packet loop's test below),
-     * and the group goes on when any did. Every item it drops the packet loop
-     * would skip too (the hit keys only decrease), so the outputs are the
-     * same. In the frame's later passes ~40 % of the groups are dropped. */
-    local int group_live;
-    if (lid == 0)
-        group_live = 0;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    int mine = 0;
-    for (uint r = lid; r < count && !mine; r += lsize) {
-        const uint e = ray_ids[offset + r], p = item_pixel[e / n_spec];
-        /* benign race (iso-skip): as in the scalar path below */
-        const float tb = as_float(((volatile global uint *)hitkey)[clvis_hi_word(p)]);
-        mine = !(ray_t[e] > tb);
-    }
-    if (mine)
-        atomic_or(&group_live, 1);
-    barrier(CLK_LOCAL_MEM_FENCE);
-    if (!group_live)
-        return;   /* the same value in every work-item: the whole group returns */
-#endif
 
 #if PACKET
     load_dual_brick_rows(brick, bricks, slot_of_block, n, b0, nbx, nby, lid, lsize);
@@ -601,6 +572,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         clo[a] = b0[a];
         chi[a] = clvis_il_imin(b0[a] + 3, n[a] - 2);
     }
+    const uint count = group_counts[g], offset = group_offsets[g];
 
 #if PACKET
     for (uint r0 = PACKET * lid; r0 < count; r0 += PACKET * lsize) {

@@ -96,8 +96,6 @@ def test_known_benign_races_are_marked():
     assert "iso-skip" in src.tags(raytrace, read)
     read8 = _line_of(raytrace, "ltstop[k] = on ? as_float(((volatile global uint *)hitkey)")  # PACKET=8
     assert "iso-skip" in src.tags(raytrace, read8)
-    pre = _line_of(raytrace, "const float tb = as_float(((volatile global uint *)hitkey)")  # the group's pre-check
-    assert "iso-skip" in src.tags(raytrace, pre)
     assert "iso-skip" in src.tags(atomics, _line_of(atomics, "atom_min(p, v);"))
     # the early-z read only: the MODE_INDEX read has no concurrent writer
     assert not src.tags(render, _line_of(render, "if (dkey == words[clvis_hi_word(p)])"))

@@ -513,3 +513,77 @@ def test_on_host(device):
     d = cla.to_device(runtime.queue_for(device), a)
     with pytest.raises(TypeError, match="expected a host \\(numpy\\) array, got Array"):
         on_host(d)
+
+
+_SCALARS_CL = """
+kernel void scalars(global uint *out, uchar a, int b, uint c, ulong d, float e, global const uint *maybe,
+                    ushort f) {
+    out[0] = a; out[1] = (uint)b; out[2] = c; out[3] = (uint)d; out[4] = (uint)(d >> 32);
+    out[5] = as_uint(e); out[6] = maybe ? maybe[0] : 0xFFFFFFFFu; out[7] = f;
+}
+"""
+
+
+def test_launch_types_scalars_once(device, tmp_path):
+    """runtime.launch gives a kernel pyopencl's typed setter for the pattern of
+    scalars it is launched with (the untyped one costs a C++ exception per
+    try): the same bytes reach the kernel as through the untyped setter, a
+    NULL buffer too, and a new pattern at the same positions re-types it."""
+    src = tmp_path / "scalars.cl"
+    src.write_text(_SCALARS_CL)
+    q = runtime.queue_for(device)
+    k = runtime.get_kernel(q, str(src), "scalars", {})
+    out = cla.zeros(q, 8, np.uint32)
+    one = cla.to_device(q, np.array([77], np.uint32))
+    args = (np.uint8(200), np.int32(-5), np.uint32(0xDEADBEEF), np.uint64(2**63 + 9), np.float32(-1.25))
+    want = [200, 2**32 - 5, 0xDEADBEEF, 9, 2**31, int(np.float32(-1.25).view(np.uint32))]
+    for maybe, w in ((one.data, 77), (None, 0xFFFFFFFF)):
+        runtime.launch(q, k, 1, 1, out.data, *args, maybe, np.uint16(7))
+        assert out.get().tolist() == [*want, w, 7]
+        # the untyped setter of a fresh kernel object gives the same
+        plain = cl.Kernel(k.program, "scalars")
+        plain.set_args(out.data, *args, maybe, np.uint16(7))
+        cl.enqueue_nd_range_kernel(q, plain, (1,), (1,))
+        assert out.get().tolist() == [*want, w, 7]
+    assert k._clvis_arg_dtypes[1:3] == (np.dtype(np.uint8), np.dtype(np.int32))
+    # another pattern: the int position as uint32, the uint one as int32 (same bits)
+    runtime.launch(q, k, 1, 1, out.data, args[0], np.uint32(3), np.int32(-1), *args[3:], None, np.uint16(1))
+    assert out.get().tolist()[1:3] == [3, 0xFFFFFFFF]
+    assert k._clvis_arg_dtypes[2:4] == (np.dtype(np.uint32), np.dtype(np.int32))
+
+
+@pytest.mark.parametrize(
+    "shape", [(), (0,), (5,), 7, np.int64(3), (3, 4), (5, 1, 2), (2, 0, 3), (np.int64(4), np.uint32(3))]
+)
+def test_empty_is_cla_empty(device, shape):
+    """runtime.empty builds its arrays with pyopencl's fast constructor: the
+    same array as cla.empty from the pool (shape, C strides, size, flags...)."""
+    q = runtime.queue_for(device)
+    a = runtime.empty(q, shape, np.float32, "empty test")
+    b = cla.empty(q, shape, np.float32, allocator=runtime.allocator(q))
+    for name in (
+        "shape",
+        "strides",
+        "size",
+        "nbytes",
+        "dtype",
+        "offset",
+        "queue",
+        "context",
+        "allocator",
+        "events",
+    ):
+        assert getattr(a, name) == getattr(b, name), name
+    assert type(a.size) is type(b.size) and all(type(s) is int for s in a.shape)
+    assert (a.base_data is None) == (b.base_data is None)
+    assert (a.flags.c_contiguous, a.flags.f_contiguous) == (b.flags.c_contiguous, b.flags.f_contiguous)
+    if a.size:
+        a.set(np.arange(a.size, dtype=np.float32).reshape(a.shape))
+        np.testing.assert_array_equal(a.get().ravel(), np.arange(a.size))
+
+
+@pytest.mark.parametrize("shape", [(-1,), (2.0,), (True,), (3, -2)])
+def test_empty_bad_shape(device, shape):
+    q = runtime.queue_for(device)
+    with pytest.raises(ValueError):
+        runtime.empty(q, shape, np.float32, "empty test")

@@ -22,8 +22,21 @@ def launch(
     *args: Any,
     wait_for: Sequence[cl.Event] | None = None,
 ) -> cl.Event:
-    """Set `args` and enqueue a 1-D launch (serialised: kernels hold their args)."""
+    """Set `args` and enqueue a 1-D launch (serialised: kernels hold their args).
+
+    The scalar arguments are NumPy scalars (np.uint32, np.float32, ...): the
+    first launch of a kernel with a given pattern of scalar and buffer
+    arguments gives it pyopencl's typed setter for that pattern
+    (Kernel.set_scalar_arg_dtypes: each scalar packed by its dtype, the same
+    bytes). pyopencl's untyped set_args tries every argument as a memory
+    object, a local-memory size, a sampler... before it takes a scalar's
+    bytes, each failed try a C++ exception (this VM: 48 us for a 5-argument
+    call with 3 scalars, 1.8 us typed; an iso frame makes 139 launches)."""
+    sig = tuple(a.dtype if isinstance(a, np.generic) else None for a in args)
     with _lock:
+        if getattr(kernel, "_clvis_arg_dtypes", None) != sig:
+            kernel.set_scalar_arg_dtypes(sig)
+            setattr(kernel, "_clvis_arg_dtypes", sig)  # noqa: B010  (a pyopencl Kernel takes attributes; mypy does not know it)
         kernel.set_args(*args)
         return cl.enqueue_nd_range_kernel(
             queue,

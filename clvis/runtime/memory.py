@@ -5,6 +5,8 @@ and pooled, checked device arrays."""
 from __future__ import annotations
 
 import contextlib
+import inspect
+import math
 import os
 from collections.abc import Sequence
 
@@ -101,14 +103,47 @@ def check_memory(queue: cl.CommandQueue, what: str, *, device_bytes: int = 0, ho
         )
 
 
+# pyopencl.array.Array's constructor from shape, strides and size as given
+# (what pyopencl's own views use): cla.empty checks the shape with ~10 NumPy
+# calls, ~35 us of CPU an array, and a render pass makes ~60 of them
+_FAST_ARRAY = "_fast" in inspect.signature(cla.Array.__init__).parameters
+
+
+def _dims(shape: tuple) -> tuple[int, ...] | None:
+    """`shape` as Python ints where it is non-negative integers (not bools), else None."""
+    if all(isinstance(s, (int, np.integer)) and not isinstance(s, bool) and s >= 0 for s in shape):
+        return tuple(int(s) for s in shape)
+    return None
+
+
 def empty(queue: cl.CommandQueue, shape: int | Sequence[int], dtype: npt.DTypeLike, what: str) -> cla.Array:
-    """A device array from the pool, after check_alloc; DeviceError if the driver refuses."""
+    """A device array from the pool, after check_alloc; DeviceError if the driver refuses.
+    The array is cla.empty's (C strides, no offset); a shape of non-negative
+    integers takes pyopencl's fast constructor, any other goes to cla.empty and
+    its errors."""
     shape = (int(shape),) if isinstance(shape, (int, np.integer)) else tuple(shape)
     dtype = np.dtype(dtype)
-    nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    dims = _dims(shape)
+    nbytes = (math.prod(dims) if dims is not None else int(np.prod(shape, dtype=np.int64))) * dtype.itemsize
     check_alloc(queue, nbytes, what)
+    pool = allocator(queue)
     try:
-        return cla.empty(queue, shape, dtype, allocator=allocator(queue))
+        if dims is not None and _FAST_ARRAY:
+            strides = [dtype.itemsize] if dims else []
+            for s in dims[:0:-1]:
+                strides.append(strides[-1] * max(1, s))
+            return cla.Array(
+                None,
+                dims,
+                dtype,
+                allocator=pool,
+                strides=tuple(strides[::-1]),
+                _fast=True,
+                _size=math.prod(dims),
+                _context=queue.context,
+                _queue=queue,
+            )
+        return cla.empty(queue, shape, dtype, allocator=pool)
     except (cl.MemoryError, cl.Error) as e:
         raise DeviceError(f"{what}: allocating {nbytes} bytes on {describe(queue.device)} failed: {e}") from e
 

@@ -163,12 +163,13 @@ def test_shipped_cards_carry_their_suite_table(name):
 # on these), with (PSNR, SSIM) margins as measured; a card may not add a row
 # here nor fall more than 0.25 dB / 0.01 further on one
 KNOWN_BELOW = {
+    # in-fill (L2 + MS-SSIM loss): push-pull is sharper on the shapes'
+    # flat faces and rims (the L1-trained W-Net before was below on these
+    # three rows by 2.46 / 2.69 / 0.63 dB and on turbulence and noise at 95 %)
     "infill": {
-        "turbulence 320x180 64^3 at 95% orbit": (-0.01, 0.003),
-        "noise 320x180 64^3 at 95% orbit": (-0.33, -0.0),
-        "shapes 320x180 64^3 at 85% orbit": (-2.46, 0.018),
-        "shapes 320x180 64^3 at 90% orbit": (-2.69, 0.009),
-        "shapes 320x180 64^3 at 95% orbit": (-0.63, 0.01),
+        "shapes 320x180 64^3 at 85% orbit": (-2.17, 0.021),
+        "shapes 320x180 64^3 at 90% orbit": (-2.38, 0.009),
+        "shapes 320x180 64^3 at 95% orbit": (-0.13, 0.011),
     },
     # the LiDAR card is scored with its guard (on by default): push-pull on
     # the terrain, where the U-Net alone is 4.94 dB / 0.011 SSIM below it;
@@ -202,7 +203,7 @@ def test_shipped_cards_hold_their_suite_margins(name):
     assert set(KNOWN_BELOW[name]) <= {m[0] for m in margins}
 
 
-@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (9 rows of the four quick suites)")
+@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (7 rows of the four quick suites)")
 @pytest.mark.parametrize("name", post.NAMES)
 def test_shipped_cards_never_below_their_baseline(name):
     """Issue 21 §2: PSNR and SSIM >= the best classical baseline on every
@@ -238,8 +239,8 @@ def _margin(row, baseline, key="psnr"):
 
 def test_ci_infill_on_shapes(ci_rows):
     """Distance fields of random shapes (never trained on), 320 x 180.
-    Measured (Intel CPU): 85 %: 33.7 dB / 0.973 (push-pull 29.9, input
-    25.0); 90 %: 41.4 (push-pull 32.7); 95 %: 50.4 (push-pull 34.5)."""
+    Measured (Intel CPU): 85 %: 35.0 dB / 0.978 (push-pull 29.9, input
+    25.0); 90 %: 41.8 (push-pull 32.7); 95 %: 47.8 (push-pull 34.5)."""
     r = ci_rows["infill"]
     a, b, c = r["64^3 at 85%"], r["64^3 at 90%"], r["64^3 at 95%"]
     assert a["network"]["psnr"] > 25 and a["network"]["ssim"] > 0.95 and _margin(a, "pushpull") > 3
@@ -264,8 +265,8 @@ def test_ci_lidar_guard_on_the_terrain():
 
 @pytest.mark.xfail(
     strict=True,
-    reason="target missed (issue 21 §2, never below the baseline): at 95 % the network (50.4 dB) "
-    "is 16 dB below the raw partial image (66.7 dB): it paints the background rays still running",
+    reason="target missed (issue 21 §2, never below the baseline): at 95 % the network (47.8 dB) "
+    "is 19 dB below the raw partial image (66.7 dB): it paints the background rays still running",
 )
 def test_ci_infill_95_is_not_below_its_input(ci_rows):
     assert _margin(ci_rows["infill"]["64^3 at 95%"], "input") >= 0

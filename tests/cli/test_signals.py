@@ -17,12 +17,13 @@ import pytest
 CODE = "import sys; from clvis.cli import main; sys.exit(main())"
 
 
-@pytest.mark.parametrize("sig,status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
-@pytest.mark.parametrize("after", ["uploading", "soft z"])  # mid-render; while PNGs are written
-def test_signal_gives_one_line_and_no_temporary_files(tmp_path, sig, status, after):
-    out = tmp_path / "out"
+def _signal_after(args, after, sig, *, cwd=None, pause=0.0):
+    """Run `clvis ARGS` with its stderr piped, send `sig` (after `pause`
+    seconds) once a stderr line holds `after`: (process, lines before the
+    signal, the rest of stderr, seconds from the signal to the exit)."""
     p = subprocess.Popen(
-        [sys.executable, "-c", CODE, "render", "--points", "300000", "--out", str(out), "--progress"],
+        [sys.executable, "-c", CODE, *args],
+        cwd=cwd,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
@@ -31,11 +32,22 @@ def test_signal_gives_one_line_and_no_temporary_files(tmp_path, sig, status, aft
     for line in p.stderr:
         lines.append(line)
         if after in line:
+            time.sleep(pause)
             p.send_signal(sig)
             break
+    t0 = time.monotonic()
     rest = p.stderr.read()
     p.wait(timeout=120)
-    lines += rest.splitlines(keepends=True)
+    return p, lines + rest.splitlines(keepends=True), rest, time.monotonic() - t0
+
+
+@pytest.mark.parametrize("sig,status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+@pytest.mark.parametrize("after", ["uploading", "soft z"])  # mid-render; while PNGs are written
+def test_signal_gives_one_line_and_no_temporary_files(tmp_path, sig, status, after):
+    out = tmp_path / "out"
+    p, lines, rest, _ = _signal_after(
+        ["render", "--points", "300000", "--out", str(out), "--progress"], after, sig
+    )
     assert p.returncode == status, "".join(lines)
     word = "interrupted" if sig == signal.SIGINT else "terminated"
     # the one line; before it, --progress may close the step it was in ("... failed")
@@ -129,37 +141,10 @@ def test_signal_during_post_narvis_scan(tmp_path, after):
     rng = np.random.default_rng(0)
     np.save(tmp_path / "scan.npy", rng.random((400_000, 3)).astype(np.float32))
     out = tmp_path / "out"
-    p = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            CODE,
-            "render",
-            "scan.npy",
-            "--post",
-            "narvis",
-            "--out",
-            str(out),
-            "--progress",
-        ],
-        cwd=tmp_path,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    lines = []
-    for line in p.stderr:
-        lines.append(line)
-        if after in line:
-            time.sleep(0.2)
-            p.send_signal(signal.SIGINT)
-            break
-    t0 = time.monotonic()
-    rest = p.stderr.read()
-    p.wait(timeout=120)
-    lines += rest.splitlines(keepends=True)
+    args = ["render", "scan.npy", "--post", "narvis", "--out", str(out), "--progress"]
+    p, lines, rest, seconds = _signal_after(args, after, signal.SIGINT, cwd=tmp_path, pause=0.2)
     assert p.returncode == 130, "".join(lines)
-    assert time.monotonic() - t0 < 30, "".join(lines)
+    assert seconds < 30, "".join(lines)
     tail = rest.strip().splitlines()
     assert tail[-1] == "clvis render: interrupted", rest
     assert "Traceback" not in rest

@@ -233,6 +233,36 @@ def test_ply_double_coordinates_keep_an_origin(tmp_path):
     assert not pc32.origin.any() and pc32.positions[:, 0].tolist() == [1e6, 2e6, 3e6]
 
 
+def test_npy_and_npz_double_positions_keep_an_origin(tmp_path):
+    """As for PLY: (N, 3) float64 NPY, a structured NPY with double x, y, z
+    and an NPZ of float64 positions without an origin key are read relative
+    to their finite minimum (as float32 a unit cube at 1e9 fell onto one
+    point); an NPZ that carries its origin (clvis's own) and float32 arrays
+    keep their positions."""
+    rng = np.random.default_rng(3)
+    xyz = 1e9 + rng.random((4000, 3))
+    xyz[7, 2] = np.inf
+    finite = np.isfinite(xyz).all(axis=1)
+    s = np.zeros(len(xyz), [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("t", "<f4")])
+    s["x"], s["y"], s["z"] = xyz.T
+    np.save(tmp_path / "plain.npy", xyz)
+    np.save(tmp_path / "fields.npy", s)
+    np.savez(tmp_path / "geo.npz", positions=xyz)
+    for name in ("plain.npy", "fields.npy", "geo.npz"):
+        pc = read_points(tmp_path / name)
+        np.testing.assert_array_equal(pc.origin, xyz[finite].min(axis=0), err_msg=name)
+        np.testing.assert_allclose(pc.positions[finite] + pc.origin, xyz[finite], rtol=0, atol=1e-6)
+        assert len(np.unique(pc.positions[finite], axis=0)) == finite.sum(), name
+        assert np.isinf(pc.positions[7, 2]), name
+    np.savez(tmp_path / "own.npz", positions=xyz[finite] - 1e9, origin=np.full(3, 1e9))
+    own = read_points(tmp_path / "own.npz")
+    assert own.origin.tolist() == [1e9] * 3
+    np.testing.assert_array_equal(own.positions, (xyz[finite] - 1e9).astype(np.float32))
+    np.save(tmp_path / "f32.npy", np.array([[1e6, 0, 0], [2e6, 0, 0]], np.float32))
+    f32 = read_points(tmp_path / "f32.npy")
+    assert not f32.origin.any() and f32.positions[:, 0].tolist() == [1e6, 2e6]
+
+
 def test_ply_list_property_in_vertex_is_skipped(tmp_path):
     v = np.empty(2, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("nbrs", object)])
     v["x"], v["y"], v["z"] = 1, 2, 3

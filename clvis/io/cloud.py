@@ -203,6 +203,39 @@ def _cloud(path: Path, **fields: Any) -> PointCloud:
         raise DataError(f"{path}: {e}") from e
 
 
+#: positions farther from zero than this many times the cloud's extent are
+#: read relative to their minimum: float32's spacing there (|x| 2^-24) is then
+#: over 1e-5 of the extent
+FAR_FROM_ZERO = 2**24 * 1e-5
+
+
+def relative_positions(xyz: Any, origin: Any = None) -> tuple[Any, Any]:
+    """(positions, origin) of a file's (N, 3) positions: stored wider than
+    float32 (float64, int64), with no origin of their own and too far from
+    zero for float32 (FAR_FROM_ZERO), float32 relative to their finite
+    minimum and that minimum as the origin (world = origin + position), as
+    LAS, E57 and ASCII files are read (float32 of x = 1e9 + [0, 1) is 1e9 for
+    every point: the cloud fell onto one); any other as given."""
+    a = np.asarray(xyz)
+    if (
+        origin is not None
+        or a.ndim != 2
+        or a.shape[1] != 3
+        or a.dtype.kind not in "iuf"
+        or a.dtype.itemsize <= 4
+    ):
+        return xyz, origin
+    d = a.astype(np.float64)
+    finite = np.isfinite(d).all(axis=1)
+    if not finite.any():
+        return xyz, origin
+    lowest, highest = d[finite].min(axis=0), d[finite].max(axis=0)
+    reach = float(np.maximum(np.abs(lowest), np.abs(highest)).max())
+    if reach <= FAR_FROM_ZERO * float((highest - lowest).max()):
+        return xyz, origin
+    return (d - lowest).astype(np.float32), lowest.tolist()
+
+
 def _from_columns(path: Path, columns: dict[str, np.ndarray], origin: Any = None) -> PointCloud:
     """A cloud from named 1-D columns (PLY properties, structured NPY fields)."""
     missing = [c for c in "xyz" if c not in columns]
@@ -213,7 +246,8 @@ def _from_columns(path: Path, columns: dict[str, np.ndarray], origin: Any = None
     def take(names: Iterable[str]) -> np.ndarray:
         return np.stack([columns.pop(c) for c in names], axis=1)
 
-    fields: dict[str, Any] = {"positions": take("xyz"), "origin": origin}
+    positions, origin = relative_positions(take("xyz"), origin)
+    fields: dict[str, Any] = {"positions": positions, "origin": origin}
     for names in _COLOR_NAMES:
         if all(c in columns for c in names[:3]):
             fields["colors"] = take([c for c in names if c in columns])

@@ -133,20 +133,7 @@ def _read_ply(path: Path) -> PointCloud:
                 origin = [float(v) for v in c[len(_ORIGIN_COMMENT) :].split()]
             except ValueError as e:
                 raise DataError(f"{path}: malformed origin comment {c!r}") from e
-    if (
-        origin is None
-        and all(c in columns for c in "xyz")
-        and any(columns[c].dtype.itemsize > 4 for c in "xyz")
-    ):
-        # double coordinates, georeferenced ones among them: relative to their
-        # finite minimum, as LAS and ASCII files are (float32 of x = 1e9 +
-        # [0, 1) is 1e9 for every point: the cloud fell onto one)
-        xyz = np.stack([columns[c].astype(np.float64) for c in "xyz"], axis=1)
-        finite = np.isfinite(xyz).all(axis=1)
-        lowest = xyz[finite].min(axis=0) if finite.any() else np.zeros(3)
-        for k, c in enumerate("xyz"):
-            columns[c] = (xyz[:, k] - lowest[k]).astype(np.float32)
-        origin = lowest.tolist()
+    # double x, y, z far from zero: relative to their minimum (cloud.relative_positions)
     return _from_columns(path, columns, origin)
 
 

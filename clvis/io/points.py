@@ -8,7 +8,8 @@ Positions are float32, what the kernels read. float32 keeps about 7 significant
 digits, too few for georeferenced coordinates (UTM eastings of 10^5..10^6 m), so
 the LAS/LAZ reader subtracts the minimum of the points' coordinates and keeps it,
 in float64, as ``cloud.origin``: world position = origin + position; so do
-the E57 and ASCII readers, and the PLY reader for double x, y, z. Other
+the E57 and ASCII readers, and the PLY, NPY and NPZ readers for double x, y, z
+too far from zero for float32 (more than ~170 times the cloud's extent). Other
 formats take positions as stored (origin zero), except that files written by
 clvis carry their origin along (an NPZ key, a PLY header comment).
 
@@ -29,7 +30,15 @@ import numpy as np
 from ..errors import DataError
 from .ascii import SUFFIXES as _ASCII_SUFFIXES
 from .ascii import _read_ascii
-from .cloud import _NPZ_KEYS, PointCloud, _check_cloud, _cloud, _from_columns, _write_or_remove
+from .cloud import (
+    _NPZ_KEYS,
+    PointCloud,
+    _check_cloud,
+    _cloud,
+    _from_columns,
+    _write_or_remove,
+    relative_positions,
+)
 from .e57 import _read_e57
 from .files import regular_file
 from .las import _read_las
@@ -49,17 +58,19 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
     - ``.ply``: the ``vertex`` element. x, y, z are required; red, green, blue
       [, alpha] (or r, g, b [, a]) become colors; vx, vy, vz (or velocity_x, ...)
       the velocity; radius the radius; every other scalar property an attribute.
-      Double x, y, z: positions relative to ``origin`` = their finite minimum
-      (unless the file carries clvis's origin comment).
+      Double x, y, z too far from zero for float32 (more than ~170 times the
+      cloud's extent): positions relative to ``origin`` = their finite minimum
+      (unless the file carries clvis's origin comment), as for NPY and NPZ.
     - ``.las``, ``.laz``: positions relative to ``origin`` = the minimum of the
       points' coordinates; red/green/blue become 8-bit (>> 8 when any value
       exceeds 255, else as is); every other dimension (intensity, classification,
       return_number, ...) an attribute. gps_time is stored as seconds since the
       earliest point, which float32 resolves where absolute GPS time would not.
     - ``.npy``: an (N, 3) array, or a structured array with fields x, y, z and
-      others named as for PLY.
+      others named as for PLY; float64 (or int64) positions as for PLY.
     - ``.npz``: key ``positions`` (N, 3) required; ``colors``, ``velocity``,
-      ``radius``, ``origin`` optional; every other key an (N,) attribute.
+      ``radius``, ``origin`` optional; every other key an (N,) attribute;
+      float64 positions without an ``origin`` as for PLY.
     - ``.pcd``: the Point Cloud Library's format, ascii, binary or
       binary_compressed, through pypcd4 (the ``pcd`` extra; :mod:`clvis.io.pcd`).
     - ``.xyz``, ``.txt``, ``.csv``: one point a line, columns named by a header
@@ -90,7 +101,8 @@ def _read_npy(path: Path) -> PointCloud:
         raise DataError(
             f"{path}: expected an (N, 3) array or a structured array with x, y, z fields, got shape {a.shape}"
         )
-    return _cloud(path, positions=a)
+    positions, origin = relative_positions(a)
+    return _cloud(path, positions=positions, origin=origin)
 
 
 def _read_npz(path: Path) -> PointCloud:
@@ -98,6 +110,7 @@ def _read_npz(path: Path) -> PointCloud:
     if "positions" not in arrays:
         raise DataError(f"{path}: no 'positions' array (keys: {', '.join(arrays) or 'none'})")
     fields: dict[str, object] = {k: arrays.pop(k) for k in _NPZ_KEYS if k in arrays}
+    fields["positions"], fields["origin"] = relative_positions(fields["positions"], fields.get("origin"))
     fields["attributes"] = arrays
     return _cloud(path, **fields)
 

@@ -56,6 +56,18 @@ TRAIN_FLOWS = (
 )
 
 
+def _trajectories(f, s: np.ndarray, dt: float, settle: int, steps: int) -> np.ndarray:
+    """(steps, m, 3): the m points `s` moved by midpoint steps of dt along
+    f, after `settle` steps onto the attractor."""
+    for _ in range(settle):
+        s = s + dt * f(s + dt / 2 * f(s))
+    out = np.empty((steps, *s.shape))
+    for i in range(steps):
+        s = s + dt * f(s + dt / 2 * f(s))
+        out[i] = s
+    return out
+
+
 def _result(pos: np.ndarray, vel: np.ndarray, temp: np.ndarray) -> dict:
     return {
         "positions": pos.astype(np.float32),
@@ -93,12 +105,7 @@ def flow(kind: str, n: int, seed: int) -> dict:
                 1,
             )
 
-        for _ in range(400):  # onto the attractor
-            s = s + dt * f(s + dt / 2 * f(s))
-        out = np.empty((steps, m, 3))
-        for i in range(steps):
-            s = s + dt * f(s + dt / 2 * f(s))
-            out[i] = s
+        out = _trajectories(f, s, dt, 400, steps)
         pos = out.reshape(-1, 3)[:n] + rng.normal(scale=0.05, size=(n, 3))
         return _result(pos, f(pos), pos[:, 2])
     if kind == "jet":
@@ -214,12 +221,7 @@ def _train_flow(kind: str, n: int, rng: np.random.Generator) -> dict:
         m = max(n // int(rng.integers(150, 600)), 1)
         steps = -(-n // m)
         s = np.asarray(start, np.float64) + rng.normal(scale=0.1, size=(m, 3))
-        for _ in range(2000):  # onto the attractor
-            s = s + dt * f(s + dt / 2 * f(s))
-        out = np.empty((steps, m, 3))
-        for i in range(steps):
-            s = s + dt * f(s + dt / 2 * f(s))
-            out[i] = s
+        out = _trajectories(f, s, dt, 2000, steps)
         pos = out.reshape(-1, 3)[:n]
         pos = pos + rng.normal(scale=0.002 * float(np.ptp(pos, axis=0).max()), size=(n, 3))
         col = int(rng.integers(0, 4))

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..errors import DataError
 from ..gauss.render import MAX_K
 from ._common import (
     SIZE_RULE,
@@ -279,6 +280,8 @@ def _sources(args):
             g = gaussians_from_points(
                 cloud, velocity="cloud" if cloud.velocity is not None else None, color_by=args.attribute
             )
+        except DataError as e:  # what the file holds (a NaN velocity, an infinite attribute)
+            raise CliError(f"{path}: {e}") from None
         except ValueError as e:
             raise CliError(f"{path}: {e}" if args.attribute is None else f"--attribute: {e}") from None
         return ["points"], None, g, str(path), None

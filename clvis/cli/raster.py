@@ -956,6 +956,13 @@ def _render(args, progress) -> int:
             else "no velocity: isotropic Gaussians of its kNN splat radius"
         )
         print(f"clvis render: --post narvis: {source}: model {post_name} ({why})", file=sys.stderr)
+    if post_name == "narvis":
+        from ..io.cloud import check_finite
+
+        # the network reads the velocity of every point drawn (one with a NaN or
+        # infinite coordinate is not): a NaN there is the file's, said as such
+        drawn = np.isfinite(cloud.positions).all(axis=1)
+        check_finite(f"{source}: velocity", np.where(drawn[:, None], cloud.velocity, 0))
     scan_radius = None
     if args.post_guard is not None and args.post is None:
         raise CliError("--post-guard guards a post network: add --post lidar")

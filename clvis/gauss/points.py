@@ -27,6 +27,7 @@ import numpy.typing as npt
 from .._arrays import positive_int, real_array
 from ..errors import DataError
 from ..io import PointCloud
+from ..io.cloud import check_finite
 from .gaussians import Gaussians
 
 __all__ = [
@@ -154,6 +155,10 @@ def gaussians_from_points(
         "z": values = elevation; a name: values = that attribute. None: "rgb"
         when the cloud has colours and `values` is not given, else `values`
         or their default.
+
+    A NaN or infinite coordinate, velocity component or value of the attribute
+    the Gaussians are coloured by raises DataError naming it and the first
+    such point.
     """
     if isinstance(cloud, PointCloud):
         positions = cloud.positions
@@ -197,12 +202,14 @@ def gaussians_from_points(
                 have = ", ".join(["rgb"] * (cloud_colors is not None) + ["z", *attrs])
                 raise ValueError(f"color_by: the cloud has no attribute {color_by!r} (it has {have})")
             values = attrs[color_by]
+            check_finite(f"attribute {color_by!r}", values)
     elif values is None and cloud_colors is not None:
         colors = cloud_colors
     if isinstance(values, str):
         if not isinstance(cloud, PointCloud) or values not in cloud.attributes:
             raise ValueError(f"values: the cloud has no attribute {values!r}")
-        values = cloud.attributes[values]
+        name, values = values, cloud.attributes[values]
+        check_finite(f"attribute {name!r}", values)
     if colors is not None and values is None:
         values = positions[:, 2]  # the transfer function's opacity reads something real
 
@@ -210,8 +217,7 @@ def gaussians_from_points(
         vel = np.asarray(velocity, np.float64)
         if vel.shape != (n, 3):
             raise ValueError(f"velocity: expected shape ({n}, 3), got {vel.shape}")
-        if not np.isfinite(vel).all():
-            raise DataError("velocity: NaN or infinite components")
+        check_finite("velocity", vel)
         if scale is None:
             base = np.float64(np.median(knn_mean_distance(positions, k))) / stretch if n else 0.0
             base = np.full(n, base)

@@ -9,7 +9,7 @@ from PIL import Image
 
 import clvis
 from clvis import cli, datasets
-from clvis.io import PointCloud, write_ply
+from clvis.io import PointCloud, save_npz, write_ply
 
 
 def test_gauss_default(tmp_path, capsys):
@@ -148,6 +148,32 @@ def test_gauss_attribute(tmp_path, capsys):
     assert "--attribute" in err and "'nope'" in err and "intensity" in err
     assert cli.main(["gauss", "--attribute", "intensity", "--out", str(tmp_path)]) == 2
     assert "point clouds" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".npz"])
+def test_gauss_non_finite_velocity_or_attribute_names_file_attribute_and_point(tmp_path, capsys, suffix):
+    # "nanvel.ply: velocity: NaN or infinite components" named no point;
+    # an infinite attribute said "--attribute: values: row 77 ..." without the file
+    rng = np.random.default_rng(1)
+    n = 300
+    v = rng.random((n, 3))
+    v[123, 1] = np.nan
+    t = rng.random(n)
+    t[77] = np.inf
+    cloud = PointCloud(rng.random((n, 3)), velocity=v, attributes={"temp": t})
+    path = tmp_path / f"nan vel{suffix}"
+    write_ply(path, cloud) if suffix == ".ply" else save_npz(path, cloud)
+    assert cli.main(["gauss", str(path), "--size", "32x32", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: velocity: point 123 is [" in err and ", nan, " in err and "(1 of 300 points)" in err
+    v[123, 1] = 0.5
+    cloud = PointCloud(cloud.positions, velocity=v, attributes={"temp": t})
+    write_ply(path, cloud) if suffix == ".ply" else save_npz(path, cloud)
+    args = ["gauss", str(path), "--attribute", "temp", "--size", "32x32", "--out", str(tmp_path / "o")]
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: attribute 'temp': point 77 is inf, not finite (1 of 300 points)" in err
+    assert not (tmp_path / "o").exists()
 
 
 def test_gauss_lod_is_checked_by_argparse(capsys):

@@ -438,6 +438,28 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 2 and "the narvis-scan network has no guard" in err
 
 
+@pytest.mark.parametrize("suffix", [".ply", ".npz"])
+def test_render_post_narvis_names_the_first_non_finite_velocity(tmp_path, capsys, suffix):
+    """A NaN velocity of a point drawn: the file, the velocity and the point
+    (it was "vel_x: 1 covered pixels with a NaN or infinite value"); one of a
+    point never drawn (a NaN coordinate) is not the network's business."""
+    from clvis.io import PointCloud, save_npz, write_ply
+
+    rng = np.random.default_rng(4)
+    n = 2000
+    pos, v = rng.random((n, 3)), rng.random((n, 3))
+    pos[3, 0] = v[3, 2] = np.nan  # never drawn
+    v[123, 1] = np.nan
+    cloud = PointCloud(pos, velocity=v, attributes={"t": rng.random(n)})
+    path = tmp_path / f"vel{suffix}"
+    write_ply(path, cloud) if suffix == ".ply" else save_npz(path, cloud)
+    rc, _, err = _render(
+        capsys, path, "--post", "narvis", "--attribute", "t", "--out", tmp_path / "a", *SMALL
+    )
+    assert rc == 2
+    assert f"{path.name}: velocity: point 123 is [" in err and "nan" in err and "(1 of 2,000 points)" in err
+
+
 def test_render_post_narvis_scan_drops_non_finite_points(tmp_path, capsys):
     """A cloud with NaN / infinite coordinates renders as it does without
     --post (those points dropped, said so): narvis-scan's kNN radius plane is

@@ -135,6 +135,27 @@ def test_bad_k(k, error):
         knn_mean_distance(np.zeros((5, 3)), k=k)
 
 
+def test_non_finite_velocity_or_attribute_names_the_first_point():
+    # the message said "velocity: NaN or infinite components", no point; an
+    # infinite attribute "values: row 77", not which attribute
+    from clvis.io import PointCloud
+
+    rng = np.random.default_rng(0)
+    p = rng.random((50, 3))
+    v = rng.random((50, 3))
+    v[[12, 30], 1] = np.nan, np.inf
+    with pytest.raises(
+        clvis.DataError, match=r"velocity: point 12 is \[.*, nan, .*\], not finite \(2 of 50 points\)"
+    ):
+        gaussians_from_points(PointCloud(p, velocity=v), velocity="cloud")
+    t = rng.random(50)
+    t[7] = -np.inf
+    cloud = PointCloud(p, velocity=rng.random((50, 3)), attributes={"temp": t})
+    for kw in ({"color_by": "temp"}, {"values": "temp"}):
+        with pytest.raises(clvis.DataError, match=r"attribute 'temp': point 7 is -inf, not finite \(1 of 50"):
+            gaussians_from_points(cloud, velocity="cloud", **kw)
+
+
 def test_points_bad_input():
     with pytest.raises(clvis.DataError, match="point 1"):
         gaussians_from_points(np.array([[0, 0, 0], [np.nan, 0, 0]]))

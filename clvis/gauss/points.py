@@ -64,11 +64,12 @@ def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     if n < 2:
         return np.zeros(n, np.float32)
     kk = min(k, n - 1)
-    tree = cKDTree(p)
+    tree = _interruptible(cKDTree, p)
     # queried in the tree's own leaf order, so neighbouring queries walk the
     # same nodes (a scan's file order or a random order missed the caches:
     # 3x the CPU time at 10^6 points); the distances do not depend on the order
     order = tree.indices
+    # (the query's workers are Python threads that this one joins: Ctrl-C lands at once)
     dist, _ = tree.query(p[order], k=kk + 1, workers=-1)
     with np.errstate(over="ignore"):  # the check below reports it
         mean = dist[:, 1:].mean(axis=1).astype(np.float32)
@@ -80,6 +81,31 @@ def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     out = np.empty(n, np.float32)
     out[order] = mean
     return out
+
+
+def _interruptible(fn: Any, *args: Any) -> Any:
+    """fn(*args) (a call that releases the GIL and runs long in C, as
+    cKDTree's build: ~2 s at 2M points) in a thread of its own, this thread
+    waiting in an interruptible join: a Ctrl-C (or the CLI's SIGTERM) is
+    raised here at once rather than when fn returns; fn then ends in the
+    background and its result is dropped."""
+    import threading
+
+    out: list[Any] = []
+
+    def run() -> None:
+        try:
+            out.append((True, fn(*args)))
+        except BaseException as e:  # noqa: BLE001 - raised in the caller's thread below
+            out.append((False, e))
+
+    worker = threading.Thread(target=run, name="clvis-knn-build", daemon=True)
+    worker.start()
+    worker.join()
+    ok, value = out[0]
+    if not ok:
+        raise value
+    return value
 
 
 def _finite_positions(positions) -> np.ndarray:

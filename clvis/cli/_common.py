@@ -631,6 +631,22 @@ def read_volume_file(args, path):
     return np.asarray(v.data, np.float32), tuple(float(s) for s in spacing), v.origin
 
 
+def check_iso_volume(data: np.ndarray, source: str) -> None:
+    """CliError naming `source`, the count and the first sample when the
+    volume holds a NaN or infinite one: the isosurface renderer compresses it
+    with ZFP's fixed-rate mode, which cannot keep them (the library's message
+    named no file)."""
+    bad = ~np.isfinite(data)
+    if bad.any():
+        first = np.unravel_index(int(np.argmax(bad)), data.shape)  # no list of every bad sample
+        where = ", ".join(str(int(i)) for i in first)
+        raise CliError(
+            f"{source}: {int(bad.sum()):,} NaN or infinite samples, the first at [z, y, x] = ({where}): "
+            f"{data[first]} (isosurfaces are rendered from ZFP's fixed-rate compression, which cannot "
+            "keep them)"
+        )
+
+
 def finite_range(data: np.ndarray, source: str) -> tuple[float, float]:
     """(min, max) of the finite samples; ClvisError naming `source` when there
     is none (no numpy RuntimeWarning on an all-NaN volume)."""

@@ -16,6 +16,7 @@ from ._common import (
     Parser,
     add_cluster_options,
     add_volume_options,
+    check_iso_volume,
     cluster_client,
     count,
     distributed_run,
@@ -146,6 +147,7 @@ def load_scene(args: argparse.Namespace) -> Scene:
             raise CliError(f"{path}: no such file")
         if _is_volume(path):
             data, spacing, origin = read_volume_file(args, path)
+            check_iso_volume(data, str(path))
             iso = args.isovalue if args.isovalue is not None else otsu_level(data)
             return VolumeScene(data, spacing, origin, iso, args.rate, description=str(path))
         from .. import read_points

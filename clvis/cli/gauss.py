@@ -483,7 +483,7 @@ def strip(
     for name, g, img in panels:
         title = f"{name} LOD" if name in LODS else name
         tile = images.label(_picture(img, transparent), f"{title}: {g.n:,} Gaussians")
-        if getattr(g, "colors", None) is None:
+        if getattr(g, "colors", None) is None and tile.shape[1] >= 2:  # --size 1xH: no room for a bar
             bar = images.colorbar(colormap, vmin, vmax, tile.shape[1], title=value_name)
             tile = np.concatenate([tile, bar], axis=0)
         tiles.append(tile)

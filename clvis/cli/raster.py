@@ -486,11 +486,11 @@ def _tile(p: _Panel, image: np.ndarray) -> np.ndarray:
     from .. import images
 
     tile = images.label(image, p.title)
-    if p.bar is not None:
+    if p.bar is not None and tile.shape[1] >= 2:  # a bar needs two columns (--size 1xH has one)
         lut, vmin, vmax, *title = p.bar
         bar = images.colorbar(lut, vmin, vmax, tile.shape[1], title=title[0] if title else "")
         tile = np.concatenate([tile, bar], axis=0)
-    if p.legend:
+    if p.legend and tile.shape[1] >= 2:  # the same for a legend
         tile = np.concatenate([tile, images.legend(p.legend, tile.shape[1])], axis=0)
     return tile
 

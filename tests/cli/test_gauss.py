@@ -176,6 +176,15 @@ def test_gauss_non_finite_velocity_or_attribute_names_file_attribute_and_point(t
     assert not (tmp_path / "o").exists()
 
 
+def test_gauss_one_pixel_wide_has_no_colour_bar(tmp_path, capsys):
+    # --size 1x1 failed after rendering: "width: a colour bar needs at least 2 columns, got 1"
+    path = Path(__file__).parents[1] / "data" / "pyvista_ant.ply"
+    assert cli.main(["gauss", str(path), "--size", "1x1", "--out", str(tmp_path)]) == 0, (
+        capsys.readouterr().err
+    )
+    assert (tmp_path / "points.png").is_file()
+
+
 def test_gauss_lod_is_checked_by_argparse(capsys):
     from clvis.cli import gauss as cg
 

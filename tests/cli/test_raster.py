@@ -438,6 +438,18 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 2 and "the narvis-scan network has no guard" in err
 
 
+@pytest.mark.parametrize("dataset", ["hurricane", "terrain"])  # a colour bar; a class legend
+def test_render_one_pixel_wide_has_no_bar_or_legend(tmp_path, capsys, dataset):
+    # --size 1x1 rendered, then failed drawing the panel's frame: "width: a colour
+    # bar needs at least 2 columns, got 1" ("a legend" for the terrain's classes)
+    rc, _, err = _render(capsys, "--dataset", dataset, "--points", "3000", "--size", "1x3", "--out", tmp_path)
+    assert rc == 0, err
+    assert _png(tmp_path / "overview.png").shape[1] >= 1
+    assert (
+        tmp_path / ("attribute-classification.png" if dataset == "terrain" else "attribute-temperature.png")
+    ).is_file()
+
+
 @pytest.mark.parametrize("suffix", [".ply", ".npz"])
 def test_render_post_narvis_names_the_first_non_finite_velocity(tmp_path, capsys, suffix):
     """A NaN velocity of a point drawn: the file, the velocity and the point

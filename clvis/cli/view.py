@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..io.points import POINT_SUFFIXES
 from ..io.volumes import otsu_level
 from ._common import (
     CliError,
@@ -42,7 +43,8 @@ full size. The status line shows each frame's milliseconds per stage
 (render / post / encode / send), the frames per second and the latency from
 an event to the frame that shows it.
 
-Points (.ply, .las, .laz, .npz, an (N, 3) .npy, or --dataset hurricane|terrain):
+Points (.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv, .npz, an (N, 3) .npy, or
+--dataset hurricane|terrain):
 modes points (colour by an attribute or RGB, colormap, point size), lidar
 (depth filter + LiDAR U-Net), narvis (clouds with a velocity) or narvis-scan
 (clouds without one, LAS/LAZ/PLY scans: the radius plane from the points'
@@ -72,7 +74,8 @@ page must present. Only the FILE given here is ever read.
 """
 _POINT_SETS = ("hurricane", "terrain")
 _VOLUME_SETS = ("marschner-lobb", "turbulence", "explosion")
-_POINT_SUFFIXES = (".ply", ".las", ".laz", ".npz", ".xyz", ".csv", ".txt")
+# what read_points reads, but .npy: an (N, 3) array is points, a 3-D one a volume
+_POINT_SUFFIXES = tuple(s for s in POINT_SUFFIXES if s != ".npy")
 
 
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:

@@ -185,6 +185,20 @@ def test_gauss_one_pixel_wide_has_no_colour_bar(tmp_path, capsys):
     assert (tmp_path / "points.png").is_file()
 
 
+@pytest.mark.parametrize("suffix", [".pcd", ".xyz"])
+def test_gauss_reads_the_point_files_render_reads(tmp_path, capsys, suffix):
+    # .pcd, .e57 and .xyz/.txt/.csv clouds were "unknown format" to clvis gauss
+    from fuzz.seeds import _pcd
+
+    path = tmp_path / f"cloud{suffix}"
+    if suffix == ".pcd":
+        _pcd(path, 300, binary=False)
+    else:
+        np.savetxt(path, np.random.default_rng(0).random((300, 3)))
+    assert cli.main(["gauss", str(path), "--size", "32x24", "--out", str(tmp_path / "o")]) == 0
+    assert (tmp_path / "o" / "points.png").is_file(), capsys.readouterr().err
+
+
 def test_gauss_lod_is_checked_by_argparse(capsys):
     from clvis.cli import gauss as cg
 

@@ -647,6 +647,25 @@ def check_iso_volume(data: np.ndarray, source: str) -> None:
         )
 
 
+# host bytes a point of an embedded cloud takes at the peak of making it
+# (clvis.datasets' temporaries; peak RSS over 0.25M-2M points, rounded up:
+# ~190 hurricane, ~120 terrain), what clvis render then adds is less
+EMBEDDED_BYTES_PER_POINT = {"hurricane": 200, "terrain": 130}
+
+
+def check_embedded_points(name: str, n: int) -> None:
+    """DeviceError before an embedded cloud of `n` points is made when it
+    would not fit in the host memory available (--points 4000000000 ran into
+    the OOM killer after minutes of swapping)."""
+    from .. import runtime
+
+    runtime.check_memory(
+        runtime.default_queue(),
+        f"--points {n:,} (the embedded {name})",
+        host_bytes=n * EMBEDDED_BYTES_PER_POINT[name],
+    )
+
+
 def finite_range(data: np.ndarray, source: str) -> tuple[float, float]:
     """(min, max) of the finite samples; ClvisError naming `source` when there
     is none (no numpy RuntimeWarning on an all-NaN volume)."""

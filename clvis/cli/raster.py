@@ -29,6 +29,7 @@ from ._common import (
     add_output_options,
     camera_from_args,
     check_camera_args,
+    check_embedded_points,
     cluster_client,
     colormap_name,
     count,
@@ -576,6 +577,7 @@ def _load(args, progress):
         return cloud, str(args.file), None, False
     name = args.dataset or "hurricane"
     n = args.points if args.points is not None else _DEFAULT_POINTS[name]
+    check_embedded_points(name, n)
     with progress.stage(f"generating {name} ({n:,} points)"):
         cloud = _embedded(name, n)
     attribute, depth_filter_on = _DATASETS[name]
@@ -1147,6 +1149,7 @@ def demo(args: argparse.Namespace, q: cl.CommandQueue) -> bool:
         f"\nraster: the embedded hurricane, {n:,} particles at {W}x{H}, colored by {attribute} "
         "(best of 3 after a warm-up):\n"
     )
+    check_embedded_points("hurricane", n)
     cloud = _embedded("hurricane", n)
     lo, hi = cloud.bounds()
     cam = fit_camera(cloud.positions, lo, hi, direction=_FIT.direction, fov_y=_FIT.fov_y, aspect=W / H)

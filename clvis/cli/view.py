@@ -17,6 +17,7 @@ from ._common import (
     Parser,
     add_cluster_options,
     add_volume_options,
+    check_embedded_points,
     check_iso_volume,
     cluster_client,
     count,
@@ -160,6 +161,7 @@ def load_scene(args: argparse.Namespace) -> Scene:
     if name in _POINT_SETS:
         from .. import PointCloud
 
+        check_embedded_points(name, args.points)
         d = getattr(datasets, name)(args.points)
         cloud = PointCloud(
             d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"]
@@ -213,6 +215,7 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
         if name in _POINT_SETS:
             import dask.array as da
 
+            check_embedded_points(name, args.points)  # made here, then split over the workers
             d = getattr(datasets, name)(args.points)
             parts = max(1, workers)
             chunk = -(-len(d["positions"]) // parts)

@@ -438,6 +438,20 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 2 and "the narvis-scan network has no guard" in err
 
 
+@pytest.mark.parametrize("dataset", ["hurricane", "terrain"])
+def test_render_points_beyond_host_memory_are_refused_before_making_them(
+    tmp_path, capsys, monkeypatch, dataset
+):
+    # --points 4000000000 made the hurricane until the OOM killer ended it (6 min, status 137)
+    from clvis import runtime
+
+    monkeypatch.setattr(runtime.memory, "host_available_bytes", lambda: 100 << 20)
+    rc, _, err = _render(capsys, "--dataset", dataset, "--points", "2000000", "--out", tmp_path / "o", *SMALL)
+    assert rc == 2
+    assert f"--points 2,000,000 (the embedded {dataset}): needs" in err and "only 0.10 GB is available" in err
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("dataset", ["hurricane", "terrain"])  # a colour bar; a class legend
 def test_render_one_pixel_wide_has_no_bar_or_legend(tmp_path, capsys, dataset):
     # --size 1x1 rendered, then failed drawing the panel's frame: "width: a colour

@@ -68,6 +68,15 @@ def test_point_files_of_every_reader_are_points(suffix, tmp_path):
     assert scene.kind == "points"
 
 
+def test_embedded_points_beyond_host_memory_are_refused(monkeypatch):
+    # --points up to 2^31: the cloud was made whatever the memory
+    from clvis import DeviceError, runtime
+
+    monkeypatch.setattr(runtime.memory, "host_available_bytes", lambda: 100 << 20)
+    with pytest.raises(DeviceError, match=r"--points 2,000,000 \(the embedded terrain\): needs"):
+        view_cmd.load_scene(_args("--dataset", "terrain", "--points", "2000000"))
+
+
 def test_volume_files_npy_and_nifti(tmp_path):
     from clvis import datasets
 

@@ -256,9 +256,29 @@ def add_output_options(parser: argparse.ArgumentParser, out: str, empty: str) ->
     )
 
 
+def unwritable(folder: os.PathLike[str] | str) -> str | None:
+    """Why no file can be made in `folder` (or, where it does not exist yet,
+    in the nearest folder above it that does, where it would be made), or
+    None: a temporary file is made there and removed, so a read-only folder
+    is found before the work, not when its first output is written."""
+    import tempfile
+    from pathlib import Path
+
+    p = Path(folder)
+    q = next((q for q in (p, *p.parents) if q.exists()), Path("."))
+    try:
+        fd, name = tempfile.mkstemp(prefix=".clvis-probe-", dir=q)
+    except OSError as e:
+        return f"no file can be made in {q} ({e.strerror or e})"
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(name)
+    return None
+
+
 def out_dir(text: str) -> str:
     """--out: a folder (made when missing); a file of that name, or below one,
-    is an error before any work starts."""
+    or a folder no file can be made in, is an error before any work starts."""
     from pathlib import Path
 
     p = Path(text)
@@ -270,6 +290,9 @@ def out_dir(text: str) -> str:
                     f"{text} {what}, not a folder (--out names the folder for the PNGs)"
                 )
             break
+    why = unwritable(p)
+    if why is not None:
+        raise argparse.ArgumentTypeError(f"{text}: {why}")
     if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".tif", ".tiff") and not p.is_dir():
         raise argparse.ArgumentTypeError(
             f"{text} names an image, but --out/-o is the folder for the PNGs (a command writes "

@@ -438,6 +438,26 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 2 and "the narvis-scan network has no guard" in err
 
 
+@pytest.mark.parametrize(
+    "args",
+    [["--out", "/proc/self/clvis-out"], ["--orbit", "2", "--movie", "/proc/self/orbit.mp4"]],
+    ids=["out", "movie"],
+)
+def test_render_refuses_an_unwritable_folder_before_rendering(tmp_path, capsys, args):
+    # a folder no file can be made in (read-only; /proc/self for root too) failed
+    # when the first PNG was written, after the render; a --movie there after every
+    # frame, naming its temporary ".orbit.partial.mp4" ("No such file or directory")
+    if not Path("/proc/self").is_dir():
+        pytest.skip("no /proc/self here to stand for a read-only folder")
+    path = Path(__file__).parents[1] / "data" / "pyvista_ant.ply"
+    rc, out, err = _render(
+        capsys, path, *(["--out", tmp_path / "o"] if args[0] != "--out" else []), *args, *SMALL
+    )
+    assert rc == 2
+    assert "no file can be made in /proc/self" in err and "partial" not in err
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("dataset", ["hurricane", "terrain"])
 def test_render_points_beyond_host_memory_are_refused_before_making_them(
     tmp_path, capsys, monkeypatch, dataset

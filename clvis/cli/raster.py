@@ -555,6 +555,21 @@ def _save_pngs(out: Path, named) -> list[Path]:
         return list(pool.map(lambda item: images.save_png(out / item[0], item[1]), named))
 
 
+def _not_a_volume(path: str) -> None:
+    """CliError saying which commands read it when `path` names a volume
+    (read_points said "unknown point cloud format '.gz'" of brain.nii.gz)."""
+    from ..io.points import POINT_SUFFIXES
+    from ..io.volumes import FORMATS
+
+    name = path.lower()
+    if name.endswith(FORMATS) and not name.endswith(POINT_SUFFIXES):  # a .npy may be either
+        kind = next(f for f in FORMATS if name.endswith(f))
+        raise CliError(
+            f"{path}: a volume file ({kind}), not a point cloud; "
+            "clvis iso, clvis gauss and clvis view read volumes"
+        )
+
+
 def _load(args, progress):
     """(cloud, its description, default attribute, depth filter on by default)."""
     from ..io import read_points
@@ -565,6 +580,7 @@ def _load(args, progress):
         if len(args.file) > 1:
             return _load_tiles(args, progress)
         args.file = args.file[0]
+        _not_a_volume(args.file)
         with progress.stage(f"reading {Path(args.file).name}"):
             try:
                 cloud = read_points(args.file)

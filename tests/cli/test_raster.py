@@ -438,6 +438,17 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 2 and "the narvis-scan network has no guard" in err
 
 
+@pytest.mark.parametrize("name", ["brain.nii.gz", "grid.vti", "v.raw"])
+def test_render_of_a_volume_file_says_which_commands_read_it(tmp_path, capsys, name):
+    # "unknown point cloud format '.gz'; expected one of .ply, ..." of a NIfTI
+    path = tmp_path / name
+    path.write_bytes(b"\0" * 64)
+    rc, _, err = _render(capsys, path, "--out", tmp_path / "o", *SMALL)
+    assert rc == 2
+    kind = name[name.index(".") :]
+    assert f"{path}: a volume file ({kind}), not a point cloud; clvis iso, clvis gauss and clvis view" in err
+
+
 @pytest.mark.parametrize(
     "args",
     [["--out", "/proc/self/clvis-out"], ["--orbit", "2", "--movie", "/proc/self/orbit.mp4"]],

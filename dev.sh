@@ -121,9 +121,6 @@ test | bench)
     fi
     # CLVIS_LARGE=1: the 2^27-element tests too (~1.5 min, ~8 GB)
     export CLVIS_LARGE=${CLVIS_LARGE:-1} CLVIS_BENCH_SCALE=${CLVIS_BENCH_SCALE:-0.001}
-    # tests/fuzz reads each file in a forked child (tests/fuzz/harness.py): it runs in a
-    # session of its own, since the fork of a process whose thread pools exist (lazrs's
-    # rayon pool after any LAZ read, the OpenCL runtimes') can hang in the child
     # arguments that name test paths (tests/iso, tests/x.py::name) select what runs;
     # other arguments (-k, -x, -m ...) apply to the whole suite
     selected=
@@ -133,8 +130,7 @@ test | bench)
     if [ -n "$selected" ]; then
         exec .venv-test/bin/python -m pytest --benchmark-disable -q "$@"
     fi
-    .venv-test/bin/python -m pytest tests bench --ignore=tests/fuzz --benchmark-disable -q "$@"
-    exec .venv-test/bin/python -m pytest tests/fuzz -q "$@"
+    exec .venv-test/bin/python -m pytest tests bench --benchmark-disable -q "$@"
     ;;
 fuzz)
     venv .venv-test pocl,test,train,distributed

@@ -808,3 +808,10 @@ def test_binary_ply_memory_mapped_columns_copied(tmp_path, order):
         assert a.dtype.isnative and not isinstance(a, np.memmap) and not isinstance(a.base, np.memmap)
     path.unlink()  # nothing maps it any more
     assert c.attributes["value"].sum() == pytest.approx(2.5)
+
+
+def test_point_suffixes_are_the_readers():
+    # clvis gauss and clvis view choose points or a volume by POINT_SUFFIXES
+    from clvis.io import points
+
+    assert points.POINT_SUFFIXES == tuple(points._readers())

@@ -256,9 +256,29 @@ def add_output_options(parser: argparse.ArgumentParser, out: str, empty: str) ->
     )
 
 
+def unwritable(folder: os.PathLike[str] | str) -> str | None:
+    """Why no file can be made in `folder` (or, where it does not exist yet,
+    in the nearest folder above it that does, where it would be made), or
+    None: a temporary file is made there and removed, so a read-only folder
+    is found before the work, not when its first output is written."""
+    import tempfile
+    from pathlib import Path
+
+    p = Path(folder)
+    q = next((q for q in (p, *p.parents) if q.exists()), Path("."))
+    try:
+        fd, name = tempfile.mkstemp(prefix=".clvis-probe-", dir=q)
+    except OSError as e:
+        return f"no file can be made in {q} ({e.strerror or e})"
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(name)
+    return None
+
+
 def out_dir(text: str) -> str:
     """--out: a folder (made when missing); a file of that name, or below one,
-    is an error before any work starts."""
+    or a folder no file can be made in, is an error before any work starts."""
     from pathlib import Path
 
     p = Path(text)
@@ -270,6 +290,9 @@ def out_dir(text: str) -> str:
                     f"{text} {what}, not a folder (--out names the folder for the PNGs)"
                 )
             break
+    why = unwritable(p)
+    if why is not None:
+        raise argparse.ArgumentTypeError(f"{text}: {why}")
     if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".tif", ".tiff") and not p.is_dir():
         raise argparse.ArgumentTypeError(
             f"{text} names an image, but --out/-o is the folder for the PNGs (a command writes "
@@ -629,6 +652,41 @@ def read_volume_file(args, path):
     )
     spacing = v.spacing if args.spacing is None else tuple(reversed(args.spacing))
     return np.asarray(v.data, np.float32), tuple(float(s) for s in spacing), v.origin
+
+
+def check_iso_volume(data: np.ndarray, source: str) -> None:
+    """CliError naming `source`, the count and the first sample when the
+    volume holds a NaN or infinite one: the isosurface renderer compresses it
+    with ZFP's fixed-rate mode, which cannot keep them (the library's message
+    named no file)."""
+    bad = ~np.isfinite(data)
+    if bad.any():
+        first = np.unravel_index(int(np.argmax(bad)), data.shape)  # no list of every bad sample
+        where = ", ".join(str(int(i)) for i in first)
+        raise CliError(
+            f"{source}: {int(bad.sum()):,} NaN or infinite samples, the first at [z, y, x] = ({where}): "
+            f"{data[first]} (isosurfaces are rendered from ZFP's fixed-rate compression, which cannot "
+            "keep them)"
+        )
+
+
+# host bytes a point of an embedded cloud takes at the peak of making it
+# (clvis.datasets' temporaries; peak RSS over 0.25M-2M points, rounded up:
+# ~190 hurricane, ~120 terrain), what clvis render then adds is less
+EMBEDDED_BYTES_PER_POINT = {"hurricane": 200, "terrain": 130}
+
+
+def check_embedded_points(name: str, n: int) -> None:
+    """DeviceError before an embedded cloud of `n` points is made when it
+    would not fit in the host memory available (--points 4000000000 ran into
+    the OOM killer after minutes of swapping)."""
+    from .. import runtime
+
+    runtime.check_memory(
+        runtime.default_queue(),
+        f"--points {n:,} (the embedded {name})",
+        host_bytes=n * EMBEDDED_BYTES_PER_POINT[name],
+    )
 
 
 def finite_range(data: np.ndarray, source: str) -> tuple[float, float]:

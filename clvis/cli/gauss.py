@@ -14,7 +14,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..errors import DataError
 from ..gauss.render import MAX_K
+from ..io.points import POINT_SUFFIXES
 from ._common import (
     SIZE_RULE,
     VIEWS_HELP,
@@ -56,7 +58,7 @@ OPACITY_VOLUME_FILE = ((0.0, 0.0), (0.05, 0.0), (0.4, 0.25), (1.0, 1.0))
 # a volume FILE's default range ends at this percentile of its samples (a
 # scan's few hot voxels do not squeeze every colour to the bottom of the bar)
 TOP_PERCENTILE = 99.5
-_POINT_FORMATS = (".ply", ".las", ".laz", ".npy", ".npz")
+_POINT_FORMATS = POINT_SUFFIXES  # what clvis render reads
 # --view fit: from the front left, a little above, a narrow lens
 _FIT = FitView(direction=(-0.55, 1.0, -0.35), fov_y=40.0)
 _HELP = (
@@ -71,9 +73,10 @@ Without a FILE it uses an embedded explosion density (96^3, closed form).
 FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
 .nii.gz; see --shape, --volume-index) or a .vdb (float grid, needs the `vdb`
 extra: tinyvdb); a .npz of Gaussians (clvis.Gaussians.save); or a point cloud
-(.ply, .las, .laz, or an (N, 3) .npy/.npz as `clvis render` reads them: one
-Gaussian per point, stretched along the velocity when the file has one, else
-sized by the 4 nearest neighbours, clamped to their 95th percentile). A cloud's
+(.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv, or an (N, 3) .npy/.npz as
+`clvis render` reads them: one Gaussian per point, stretched along the
+velocity when the file has one, else sized by the 4 nearest neighbours,
+clamped to their 95th percentile). A cloud's
 points keep their own colours when it has them; --attribute NAME colours them
 by an attribute (e.g. intensity) or z instead; without colours or --attribute,
 by the speed when there is a velocity, else by the elevation z.
@@ -279,6 +282,8 @@ def _sources(args):
             g = gaussians_from_points(
                 cloud, velocity="cloud" if cloud.velocity is not None else None, color_by=args.attribute
             )
+        except DataError as e:  # what the file holds (a NaN velocity, an infinite attribute)
+            raise CliError(f"{path}: {e}") from None
         except ValueError as e:
             raise CliError(f"{path}: {e}" if args.attribute is None else f"--attribute: {e}") from None
         return ["points"], None, g, str(path), None
@@ -480,7 +485,7 @@ def strip(
     for name, g, img in panels:
         title = f"{name} LOD" if name in LODS else name
         tile = images.label(_picture(img, transparent), f"{title}: {g.n:,} Gaussians")
-        if getattr(g, "colors", None) is None:
+        if getattr(g, "colors", None) is None and tile.shape[1] >= 2:  # --size 1xH: no room for a bar
             bar = images.colorbar(colormap, vmin, vmax, tile.shape[1], title=value_name)
             tile = np.concatenate([tile, bar], axis=0)
         tiles.append(tile)

@@ -31,6 +31,7 @@ from ._common import (
     add_volume_options,
     camera_from_args,
     check_camera_args,
+    check_iso_volume,
     cluster_client,
     colormap_name,
     count,
@@ -208,6 +209,7 @@ def _load(args):
             raise CliError(f"{path}: no such file")
         data, spacing, origin = read_volume_file(args, path)
         value_range = finite_range(data, str(path))
+        check_iso_volume(data, str(path))
         return data, spacing, origin, otsu_level(data), value_range, str(path)
     if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index")):
         raise CliError("--shape, --dtype and --volume-index are for a volume FILE")

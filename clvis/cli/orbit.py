@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..camera import AXIS_VIEWS
-from ._common import CliError, Progress, _replaced, camera_from_args, count
+from ._common import CliError, Progress, _replaced, camera_from_args, count, unwritable
 
 MAX_FRAMES = 3600
 MOVIE_FORMATS = (".mp4", ".mkv", ".mov", ".webm")
@@ -51,7 +51,8 @@ def add_orbit_options(parser: argparse.ArgumentParser) -> None:
 
 def check_orbit_args(args: argparse.Namespace) -> None:
     """The turntable options that cannot work, before any rendering: --movie
-    without --orbit, an unknown video format, an encoder not installed."""
+    without --orbit, an unknown video format, a folder it cannot be written
+    in, an encoder not installed."""
     if getattr(args, "orbit", None) is None:
         if args.movie is not None:
             raise CliError("--movie encodes the --orbit frames; add --orbit N")
@@ -67,6 +68,9 @@ def check_orbit_args(args: argparse.Namespace) -> None:
         raise CliError(f"--movie {args.movie}: expected a video file name ending {', '.join(MOVIE_FORMATS)}")
     if movie.is_dir():
         raise CliError(f"--movie {args.movie}: is a folder, not a video file name")
+    why = unwritable(movie.parent)  # found now, not after every frame is rendered
+    if why is not None:
+        raise CliError(f"--movie {args.movie}: {why}")
     encoder()
 
 

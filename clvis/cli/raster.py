@@ -29,6 +29,7 @@ from ._common import (
     add_output_options,
     camera_from_args,
     check_camera_args,
+    check_embedded_points,
     cluster_client,
     colormap_name,
     count,
@@ -486,11 +487,11 @@ def _tile(p: _Panel, image: np.ndarray) -> np.ndarray:
     from .. import images
 
     tile = images.label(image, p.title)
-    if p.bar is not None:
+    if p.bar is not None and tile.shape[1] >= 2:  # a bar needs two columns (--size 1xH has one)
         lut, vmin, vmax, *title = p.bar
         bar = images.colorbar(lut, vmin, vmax, tile.shape[1], title=title[0] if title else "")
         tile = np.concatenate([tile, bar], axis=0)
-    if p.legend:
+    if p.legend and tile.shape[1] >= 2:  # the same for a legend
         tile = np.concatenate([tile, images.legend(p.legend, tile.shape[1])], axis=0)
     return tile
 
@@ -554,6 +555,21 @@ def _save_pngs(out: Path, named) -> list[Path]:
         return list(pool.map(lambda item: images.save_png(out / item[0], item[1]), named))
 
 
+def _not_a_volume(path: str) -> None:
+    """CliError saying which commands read it when `path` names a volume
+    (read_points said "unknown point cloud format '.gz'" of brain.nii.gz)."""
+    from ..io.points import POINT_SUFFIXES
+    from ..io.volumes import FORMATS
+
+    name = path.lower()
+    if name.endswith(FORMATS) and not name.endswith(POINT_SUFFIXES):  # a .npy may be either
+        kind = next(f for f in FORMATS if name.endswith(f))
+        raise CliError(
+            f"{path}: a volume file ({kind}), not a point cloud; "
+            "clvis iso, clvis gauss and clvis view read volumes"
+        )
+
+
 def _load(args, progress):
     """(cloud, its description, default attribute, depth filter on by default)."""
     from ..io import read_points
@@ -564,6 +580,7 @@ def _load(args, progress):
         if len(args.file) > 1:
             return _load_tiles(args, progress)
         args.file = args.file[0]
+        _not_a_volume(args.file)
         with progress.stage(f"reading {Path(args.file).name}"):
             try:
                 cloud = read_points(args.file)
@@ -576,6 +593,7 @@ def _load(args, progress):
         return cloud, str(args.file), None, False
     name = args.dataset or "hurricane"
     n = args.points if args.points is not None else _DEFAULT_POINTS[name]
+    check_embedded_points(name, n)
     with progress.stage(f"generating {name} ({n:,} points)"):
         cloud = _embedded(name, n)
     attribute, depth_filter_on = _DATASETS[name]
@@ -956,6 +974,13 @@ def _render(args, progress) -> int:
             else "no velocity: isotropic Gaussians of its kNN splat radius"
         )
         print(f"clvis render: --post narvis: {source}: model {post_name} ({why})", file=sys.stderr)
+    if post_name == "narvis":
+        from ..io.cloud import check_finite
+
+        # the network reads the velocity of every point drawn (one with a NaN or
+        # infinite coordinate is not): a NaN there is the file's, said as such
+        drawn = np.isfinite(cloud.positions).all(axis=1)
+        check_finite(f"{source}: velocity", np.where(drawn[:, None], cloud.velocity, 0))
     scan_radius = None
     if args.post_guard is not None and args.post is None:
         raise CliError("--post-guard guards a post network: add --post lidar")
@@ -1140,6 +1165,7 @@ def demo(args: argparse.Namespace, q: cl.CommandQueue) -> bool:
         f"\nraster: the embedded hurricane, {n:,} particles at {W}x{H}, colored by {attribute} "
         "(best of 3 after a warm-up):\n"
     )
+    check_embedded_points("hurricane", n)
     cloud = _embedded("hurricane", n)
     lo, hi = cloud.bounds()
     cam = fit_camera(cloud.positions, lo, hi, direction=_FIT.direction, fov_y=_FIT.fov_y, aspect=W / H)

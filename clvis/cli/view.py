@@ -10,12 +10,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..io.points import POINT_SUFFIXES
 from ..io.volumes import otsu_level
 from ._common import (
     CliError,
     Parser,
     add_cluster_options,
     add_volume_options,
+    check_embedded_points,
+    check_iso_volume,
     cluster_client,
     count,
     distributed_run,
@@ -41,7 +44,8 @@ full size. The status line shows each frame's milliseconds per stage
 (render / post / encode / send), the frames per second and the latency from
 an event to the frame that shows it.
 
-Points (.ply, .las, .laz, .npz, an (N, 3) .npy, or --dataset hurricane|terrain):
+Points (.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv, .npz, an (N, 3) .npy, or
+--dataset hurricane|terrain):
 modes points (colour by an attribute or RGB, colormap, point size), lidar
 (depth filter + LiDAR U-Net), narvis (clouds with a velocity) or narvis-scan
 (clouds without one, LAS/LAZ/PLY scans: the radius plane from the points'
@@ -71,7 +75,8 @@ page must present. Only the FILE given here is ever read.
 """
 _POINT_SETS = ("hurricane", "terrain")
 _VOLUME_SETS = ("marschner-lobb", "turbulence", "explosion")
-_POINT_SUFFIXES = (".ply", ".las", ".laz", ".npz", ".xyz", ".csv", ".txt")
+# what read_points reads, but .npy: an (N, 3) array is points, a 3-D one a volume
+_POINT_SUFFIXES = tuple(s for s in POINT_SUFFIXES if s != ".npy")
 
 
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
@@ -146,6 +151,7 @@ def load_scene(args: argparse.Namespace) -> Scene:
             raise CliError(f"{path}: no such file")
         if _is_volume(path):
             data, spacing, origin = read_volume_file(args, path)
+            check_iso_volume(data, str(path))
             iso = args.isovalue if args.isovalue is not None else otsu_level(data)
             return VolumeScene(data, spacing, origin, iso, args.rate, description=str(path))
         from .. import read_points
@@ -155,6 +161,7 @@ def load_scene(args: argparse.Namespace) -> Scene:
     if name in _POINT_SETS:
         from .. import PointCloud
 
+        check_embedded_points(name, args.points)
         d = getattr(datasets, name)(args.points)
         cloud = PointCloud(
             d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"]
@@ -208,6 +215,7 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
         if name in _POINT_SETS:
             import dask.array as da
 
+            check_embedded_points(name, args.points)  # made here, then split over the workers
             d = getattr(datasets, name)(args.points)
             parts = max(1, workers)
             chunk = -(-len(d["positions"]) // parts)

@@ -27,6 +27,7 @@ import numpy.typing as npt
 from .._arrays import positive_int, real_array
 from ..errors import DataError
 from ..io import PointCloud
+from ..io.cloud import check_finite
 from .gaussians import Gaussians
 
 __all__ = [
@@ -63,11 +64,12 @@ def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     if n < 2:
         return np.zeros(n, np.float32)
     kk = min(k, n - 1)
-    tree = cKDTree(p)
+    tree = _interruptible(cKDTree, p)
     # queried in the tree's own leaf order, so neighbouring queries walk the
     # same nodes (a scan's file order or a random order missed the caches:
     # 3x the CPU time at 10^6 points); the distances do not depend on the order
     order = tree.indices
+    # (the query's workers are Python threads that this one joins: Ctrl-C lands at once)
     dist, _ = tree.query(p[order], k=kk + 1, workers=-1)
     with np.errstate(over="ignore"):  # the check below reports it
         mean = dist[:, 1:].mean(axis=1).astype(np.float32)
@@ -79,6 +81,31 @@ def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     out = np.empty(n, np.float32)
     out[order] = mean
     return out
+
+
+def _interruptible(fn: Any, *args: Any) -> Any:
+    """fn(*args) (a call that releases the GIL and runs long in C, as
+    cKDTree's build: ~2 s at 2M points) in a thread of its own, this thread
+    waiting in an interruptible join: a Ctrl-C (or the CLI's SIGTERM) is
+    raised here at once rather than when fn returns; fn then ends in the
+    background and its result is dropped."""
+    import threading
+
+    out: list[Any] = []
+
+    def run() -> None:
+        try:
+            out.append((True, fn(*args)))
+        except BaseException as e:  # noqa: BLE001 - raised in the caller's thread below
+            out.append((False, e))
+
+    worker = threading.Thread(target=run, name="clvis-knn-build", daemon=True)
+    worker.start()
+    worker.join()
+    ok, value = out[0]
+    if not ok:
+        raise value
+    return value
 
 
 def _finite_positions(positions) -> np.ndarray:
@@ -154,6 +181,10 @@ def gaussians_from_points(
         "z": values = elevation; a name: values = that attribute. None: "rgb"
         when the cloud has colours and `values` is not given, else `values`
         or their default.
+
+    A NaN or infinite coordinate, velocity component or value of the attribute
+    the Gaussians are coloured by raises DataError naming it and the first
+    such point.
     """
     if isinstance(cloud, PointCloud):
         positions = cloud.positions
@@ -197,12 +228,14 @@ def gaussians_from_points(
                 have = ", ".join(["rgb"] * (cloud_colors is not None) + ["z", *attrs])
                 raise ValueError(f"color_by: the cloud has no attribute {color_by!r} (it has {have})")
             values = attrs[color_by]
+            check_finite(f"attribute {color_by!r}", values)
     elif values is None and cloud_colors is not None:
         colors = cloud_colors
     if isinstance(values, str):
         if not isinstance(cloud, PointCloud) or values not in cloud.attributes:
             raise ValueError(f"values: the cloud has no attribute {values!r}")
-        values = cloud.attributes[values]
+        name, values = values, cloud.attributes[values]
+        check_finite(f"attribute {name!r}", values)
     if colors is not None and values is None:
         values = positions[:, 2]  # the transfer function's opacity reads something real
 
@@ -210,8 +243,7 @@ def gaussians_from_points(
         vel = np.asarray(velocity, np.float64)
         if vel.shape != (n, 3):
             raise ValueError(f"velocity: expected shape ({n}, 3), got {vel.shape}")
-        if not np.isfinite(vel).all():
-            raise DataError("velocity: NaN or infinite components")
+        check_finite("velocity", vel)
         if scale is None:
             base = np.float64(np.median(knn_mean_distance(positions, k))) / stretch if n else 0.0
             base = np.full(n, base)

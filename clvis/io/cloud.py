@@ -203,6 +203,22 @@ def _cloud(path: Path, **fields: Any) -> PointCloud:
         raise DataError(f"{path}: {e}") from e
 
 
+def check_finite(name: str, a: Any) -> None:
+    """DataError when a per-point array (velocity (N, 3), an attribute (N,))
+    holds a NaN or infinite value: its message names `name` (the caller puts
+    the file and the attribute in it), the first such point, its value and
+    how many points have one."""
+    a = np.asarray(a)
+    if a.dtype.kind not in "fc" or not a.size:
+        return
+    bad = ~np.isfinite(a.reshape(len(a), -1)).all(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        values = [f"{v:.6g}" for v in np.ravel(a[i]).tolist()]
+        value = values[0] if a.ndim == 1 else f"[{', '.join(values)}]"
+        raise DataError(f"{name}: point {i} is {value}, not finite ({int(bad.sum()):,} of {len(a):,} points)")
+
+
 #: positions farther from zero than this many times the cloud's extent are
 #: read relative to their minimum: float32's spacing there (|x| 2^-24) is then
 #: over 1e-5 of the extent

@@ -48,8 +48,18 @@ from .ply import _read_ply, write_ply
 
 __all__ = ["PointCloud", "read_points", "save_npz", "write_ply"]
 
+#: the file name endings read_points reads (the commands pick points or a volume by them)
+POINT_SUFFIXES = (".ply", ".las", ".laz", ".npy", ".npz", ".pcd", ".e57", *_ASCII_SUFFIXES)
+
 
 # ---------------------------------------------------------------- reading
+
+
+def _readers() -> dict[str, Any]:
+    """{suffix: reader}, one for each of POINT_SUFFIXES."""
+    readers = {".ply": _read_ply, ".las": _read_las, ".laz": _read_las, ".npy": _read_npy, ".npz": _read_npz}
+    readers.update({".pcd": _read_pcd, ".e57": _read_e57, **dict.fromkeys(_ASCII_SUFFIXES, _read_ascii)})
+    return readers
 
 
 def read_points(path: str | os.PathLike[str]) -> PointCloud:
@@ -79,8 +89,7 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
     - ``.e57``: ASTM E57 scans through pye57 (the ``e57`` extra), joined,
       positions relative to their minimum as for LAS (:mod:`clvis.io.e57`).
     """
-    readers = {".ply": _read_ply, ".las": _read_las, ".laz": _read_las, ".npy": _read_npy, ".npz": _read_npz}
-    readers.update({".pcd": _read_pcd, ".e57": _read_e57, **dict.fromkeys(_ASCII_SUFFIXES, _read_ascii)})
+    readers = _readers()
     # a FIFO would block the read, /dev/zero never end, a directory fail in the parser
     path = regular_file(path)
     reader = readers.get(path.suffix.lower())

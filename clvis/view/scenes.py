@@ -199,6 +199,8 @@ class PointScene(Scene):
         self.raster = Rasterizer(cloud, attributes=attrs) if not cloud.attributes else Rasterizer(cloud)
         self.device = self.raster.queue.device.name.strip()
         self.description = f"{description}: {len(cloud.positions):,} points"
+        self._source = description
+        self._velocity_checked = False
         colours = (["rgb"] if cloud.colors is not None else []) + self.attributes
         # the NARVis model the cloud's planes allow (as clvis render --post narvis):
         # narvis with a velocity, narvis-scan without one
@@ -242,6 +244,20 @@ class PointScene(Scene):
         self.scan_radius = radius
         return time.perf_counter() - t0
 
+    def _check_velocity(self) -> None:
+        """DataError naming the file, the velocity and the first point drawn
+        whose velocity is NaN or infinite, before the narvis modes read it (the
+        network's input check said only "vel_x: 1 covered pixels ...")."""
+        if not self._velocity_checked:
+            from ..io.cloud import check_finite
+
+            v = self.cloud.velocity
+            check_finite(
+                f"{self._source}: velocity",
+                v if self._finite is None else np.where(self._finite[:, None], v, 0),
+            )
+            self._velocity_checked = True
+
     def _net(self, name: str):
         if name not in self._nets:
             from .. import post  # onnxruntime: only when a network is asked for
@@ -264,6 +280,8 @@ class PointScene(Scene):
         if mode == "gaussians":
             yield self._gaussians(camera, width, height, settings)
             return
+        if mode in ("narvis", "narvis|gaussians"):
+            self._check_velocity()
         if mode == "narvis|gaussians":
             yield self._split(camera, width, height, settings)
             return

@@ -9,7 +9,7 @@ from PIL import Image
 
 import clvis
 from clvis import cli, datasets
-from clvis.io import PointCloud, write_ply
+from clvis.io import PointCloud, save_npz, write_ply
 
 
 def test_gauss_default(tmp_path, capsys):
@@ -148,6 +148,55 @@ def test_gauss_attribute(tmp_path, capsys):
     assert "--attribute" in err and "'nope'" in err and "intensity" in err
     assert cli.main(["gauss", "--attribute", "intensity", "--out", str(tmp_path)]) == 2
     assert "point clouds" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".npz"])
+def test_gauss_non_finite_velocity_or_attribute_names_file_attribute_and_point(tmp_path, capsys, suffix):
+    # "nanvel.ply: velocity: NaN or infinite components" named no point;
+    # an infinite attribute said "--attribute: values: row 77 ..." without the file
+    rng = np.random.default_rng(1)
+    n = 300
+    v = rng.random((n, 3))
+    v[123, 1] = np.nan
+    t = rng.random(n)
+    t[77] = np.inf
+    cloud = PointCloud(rng.random((n, 3)), velocity=v, attributes={"temp": t})
+    path = tmp_path / f"nan vel{suffix}"
+    write_ply(path, cloud) if suffix == ".ply" else save_npz(path, cloud)
+    assert cli.main(["gauss", str(path), "--size", "32x32", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: velocity: point 123 is [" in err and ", nan, " in err and "(1 of 300 points)" in err
+    v[123, 1] = 0.5
+    cloud = PointCloud(cloud.positions, velocity=v, attributes={"temp": t})
+    write_ply(path, cloud) if suffix == ".ply" else save_npz(path, cloud)
+    args = ["gauss", str(path), "--attribute", "temp", "--size", "32x32", "--out", str(tmp_path / "o")]
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: attribute 'temp': point 77 is inf, not finite (1 of 300 points)" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_gauss_one_pixel_wide_has_no_colour_bar(tmp_path, capsys):
+    # --size 1x1 failed after rendering: "width: a colour bar needs at least 2 columns, got 1"
+    path = Path(__file__).parents[1] / "data" / "pyvista_ant.ply"
+    assert cli.main(["gauss", str(path), "--size", "1x1", "--out", str(tmp_path)]) == 0, (
+        capsys.readouterr().err
+    )
+    assert (tmp_path / "points.png").is_file()
+
+
+@pytest.mark.parametrize("suffix", [".pcd", ".xyz"])
+def test_gauss_reads_the_point_files_render_reads(tmp_path, capsys, suffix):
+    # .pcd, .e57 and .xyz/.txt/.csv clouds were "unknown format" to clvis gauss
+    from fuzz.seeds import _pcd
+
+    path = tmp_path / f"cloud{suffix}"
+    if suffix == ".pcd":
+        _pcd(path, 300, binary=False)
+    else:
+        np.savetxt(path, np.random.default_rng(0).random((300, 3)))
+    assert cli.main(["gauss", str(path), "--size", "32x24", "--out", str(tmp_path / "o")]) == 0
+    assert (tmp_path / "o" / "points.png").is_file(), capsys.readouterr().err
 
 
 def test_gauss_lod_is_checked_by_argparse(capsys):

@@ -82,6 +82,29 @@ def test_iso_errors(tmp_path, capsys, args, message):
     assert message in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("command", ["iso", "view"])
+def test_volume_with_nan_samples_names_the_file(tmp_path, capsys, command):
+    # a resampled NIfTI (nibabel's resampled_anat_moved.nii: NaN outside the
+    # field of view) said "volume: 153 non-finite values ..." without the file
+    if command == "view":
+        pytest.importorskip("tornado", reason="the view extra (tornado) is not installed")
+    v = datasets.marschner_lobb(12)["volume"].copy()
+    v[0, 0, :3] = np.nan
+    v[5, 6, 7] = np.inf
+    path = tmp_path / "nan v.npy"
+    np.save(path, v)
+    args = ["--size", "16x16"] + (
+        ["--out", str(tmp_path / "o")] if command == "iso" else ["--measure", "iso"]
+    )
+    assert cli.main([command, str(path), *args]) == 2
+    err = capsys.readouterr().err
+    assert (
+        f"clvis {command}: error: {path}: 4 NaN or infinite samples, the first at [z, y, x] = (0, 0, 0): nan"
+        in err
+    )
+    assert not (tmp_path / "o").exists()
+
+
 def test_iso_bad_raw(tmp_path, capsys):
     (tmp_path / "x_4x4x4_uint8.raw").write_bytes(b"\0" * 10)
     assert cli.main(["iso", str(tmp_path / "x_4x4x4_uint8.raw"), "--out", str(tmp_path)]) == 2

@@ -438,6 +438,85 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 2 and "the narvis-scan network has no guard" in err
 
 
+@pytest.mark.parametrize("name", ["brain.nii.gz", "grid.vti", "v.raw"])
+def test_render_of_a_volume_file_says_which_commands_read_it(tmp_path, capsys, name):
+    # "unknown point cloud format '.gz'; expected one of .ply, ..." of a NIfTI
+    path = tmp_path / name
+    path.write_bytes(b"\0" * 64)
+    rc, _, err = _render(capsys, path, "--out", tmp_path / "o", *SMALL)
+    assert rc == 2
+    kind = name[name.index(".") :]
+    assert f"{path}: a volume file ({kind}), not a point cloud; clvis iso, clvis gauss and clvis view" in err
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["--out", "/proc/self/clvis-out"], ["--orbit", "2", "--movie", "/proc/self/orbit.mp4"]],
+    ids=["out", "movie"],
+)
+def test_render_refuses_an_unwritable_folder_before_rendering(tmp_path, capsys, args):
+    # a folder no file can be made in (read-only; /proc/self for root too) failed
+    # when the first PNG was written, after the render; a --movie there after every
+    # frame, naming its temporary ".orbit.partial.mp4" ("No such file or directory")
+    if not Path("/proc/self").is_dir():
+        pytest.skip("no /proc/self here to stand for a read-only folder")
+    path = Path(__file__).parents[1] / "data" / "pyvista_ant.ply"
+    rc, out, err = _render(
+        capsys, path, *(["--out", tmp_path / "o"] if args[0] != "--out" else []), *args, *SMALL
+    )
+    assert rc == 2
+    assert "no file can be made in /proc/self" in err and "partial" not in err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("dataset", ["hurricane", "terrain"])
+def test_render_points_beyond_host_memory_are_refused_before_making_them(
+    tmp_path, capsys, monkeypatch, dataset
+):
+    # --points 4000000000 made the hurricane until the OOM killer ended it (6 min, status 137)
+    from clvis import runtime
+
+    monkeypatch.setattr(runtime.memory, "host_available_bytes", lambda: 100 << 20)
+    rc, _, err = _render(capsys, "--dataset", dataset, "--points", "2000000", "--out", tmp_path / "o", *SMALL)
+    assert rc == 2
+    assert f"--points 2,000,000 (the embedded {dataset}): needs" in err and "only 0.10 GB is available" in err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("dataset", ["hurricane", "terrain"])  # a colour bar; a class legend
+def test_render_one_pixel_wide_has_no_bar_or_legend(tmp_path, capsys, dataset):
+    # --size 1x1 rendered, then failed drawing the panel's frame: "width: a colour
+    # bar needs at least 2 columns, got 1" ("a legend" for the terrain's classes)
+    rc, _, err = _render(capsys, "--dataset", dataset, "--points", "3000", "--size", "1x3", "--out", tmp_path)
+    assert rc == 0, err
+    assert _png(tmp_path / "overview.png").shape[1] >= 1
+    assert (
+        tmp_path / ("attribute-classification.png" if dataset == "terrain" else "attribute-temperature.png")
+    ).is_file()
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".npz"])
+def test_render_post_narvis_names_the_first_non_finite_velocity(tmp_path, capsys, suffix):
+    """A NaN velocity of a point drawn: the file, the velocity and the point
+    (it was "vel_x: 1 covered pixels with a NaN or infinite value"); one of a
+    point never drawn (a NaN coordinate) is not the network's business."""
+    from clvis.io import PointCloud, save_npz, write_ply
+
+    rng = np.random.default_rng(4)
+    n = 2000
+    pos, v = rng.random((n, 3)), rng.random((n, 3))
+    pos[3, 0] = v[3, 2] = np.nan  # never drawn
+    v[123, 1] = np.nan
+    cloud = PointCloud(pos, velocity=v, attributes={"t": rng.random(n)})
+    path = tmp_path / f"vel{suffix}"
+    write_ply(path, cloud) if suffix == ".ply" else save_npz(path, cloud)
+    rc, _, err = _render(
+        capsys, path, "--post", "narvis", "--attribute", "t", "--out", tmp_path / "a", *SMALL
+    )
+    assert rc == 2
+    assert f"{path.name}: velocity: point 123 is [" in err and "nan" in err and "(1 of 2,000 points)" in err
+
+
 def test_render_post_narvis_scan_drops_non_finite_points(tmp_path, capsys):
     """A cloud with NaN / infinite coordinates renders as it does without
     --post (those points dropped, said so): narvis-scan's kNN radius plane is

@@ -52,6 +52,31 @@ def test_third_party_point_files(name, tmp_path):
     assert frame.image.shape == (48, 64, 3) and frame.image.std() > 0 and frame.times["build"] > 0
 
 
+@pytest.mark.parametrize("suffix", [".pcd", ".xyz", ".e57"])
+def test_point_files_of_every_reader_are_points(suffix, tmp_path):
+    # a .pcd or .e57 was taken for a volume: "unknown volume format (expected .raw, ...)"
+    from fuzz.seeds import _e57, _pcd
+
+    path = tmp_path / f"cloud{suffix}"
+    if suffix == ".pcd":
+        _pcd(path, 300, binary=True)
+    elif suffix == ".e57":
+        _e57(pytest.importorskip("pye57"), path, 300)
+    else:
+        np.savetxt(path, np.random.default_rng(0).random((300, 3)))
+    scene = view_cmd.load_scene(_args(str(path)))
+    assert scene.kind == "points"
+
+
+def test_embedded_points_beyond_host_memory_are_refused(monkeypatch):
+    # --points up to 2^31: the cloud was made whatever the memory
+    from clvis import DeviceError, runtime
+
+    monkeypatch.setattr(runtime.memory, "host_available_bytes", lambda: 100 << 20)
+    with pytest.raises(DeviceError, match=r"--points 2,000,000 \(the embedded terrain\): needs"):
+        view_cmd.load_scene(_args("--dataset", "terrain", "--points", "2000000"))
+
+
 def test_volume_files_npy_and_nifti(tmp_path):
     from clvis import datasets
 

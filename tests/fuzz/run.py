@@ -4,7 +4,8 @@
 Seeds come from tests/fuzz/seeds.py (made by clvis, laspy, nibabel and
 tinyvdb, plus the third-party files of tests/data); mutants from
 tests/fuzz/mutate.py (``--formats vti,vtk,pcd``: only those seeds). Each case
-is read in a forked child under an address-space limit (4 GiB) and a timeout (harness.run_limited). Per format
+is read in a child forked by the harness's server under an address-space limit (4 GiB) and a
+timeout (harness.run_limited). Per format
 it reports the cases, how they ended, and the largest peak resident set.
 
 A case fails when it crashes (a signal), hangs (the timeout), raises anything
@@ -49,33 +50,6 @@ def _readers():
     }
 
 
-def _preload():
-    """Import what the readers import lazily, once in the parent, so a child
-    does not (time and memory counted against the case otherwise); silence
-    nibabel's log of the header fields it fixes."""
-    import logging
-
-    logging.getLogger("nibabel").setLevel(logging.CRITICAL)
-    for name in (
-        "laspy",
-        "lazrs",
-        "nibabel",
-        "nibabel.cifti2",
-        "plyfile",
-        "tinyvdb",
-        "pye57",
-        "pypcd4",
-        "vtkmodules.vtkIOXML",
-        "vtkmodules.vtkIOLegacy",
-        "vtkmodules.util.numpy_support",
-        "clvis.gauss.sparse",
-    ):
-        try:
-            __import__(name)
-        except ImportError:
-            pass
-
-
 def fuzz(
     minutes: float | None,
     cases: int | None,
@@ -87,7 +61,6 @@ def fuzz(
 ) -> dict:
     """Run the fuzzer; {format: Counter of outcome kinds, plus 'peak' bytes},
     and the list of failures."""
-    _preload()
     readers = _readers()
     work = Path(tempfile.mkdtemp(prefix="clvis-fuzz-"))
     seeds = [s for s in make_seeds(work / "seeds") if formats is None or s[0] in formats]

@@ -61,6 +61,15 @@ def test_unchanged_laspy_files_read_within_limits():
         assert r.peak_rss < 256 * MiB
 
 
+def test_laz_case_after_a_laz_read_in_this_process_does_not_hang():
+    # a LAZ read here starts lazrs's rayon pool; a child forked from this process
+    # got the pool without its threads and waited for them until the timeout (a LAZ
+    # case after tests/test_io.py in one session); the harness's server forks instead
+    io.read_points(str(SIMPLE_COPC))  # copc: lazrs's parallel decoder
+    r = run_limited(io.read_points, str(SIMPLE_COPC), name=str(SIMPLE_COPC), timeout=10)
+    assert r.kind == "ok", r
+
+
 @pytest.mark.parametrize("src", [SIMPLE_COPC, SIMPLE_LAZ], ids=["copc", "simple"])
 def test_laz_item_type_of_another_format_is_refused(tmp_path, src):
     # item 0's type + 1 (copc: POINT14 10 -> RGB14 11), sizes still summing to the record:

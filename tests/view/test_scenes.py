@@ -132,6 +132,26 @@ def test_split_views_show_both_sides_and_the_psnr():
     assert f.info["completion"] >= 0.85 and f.info["psnr dB"] > 15 and f.final
 
 
+@pytest.mark.parametrize("mode", ["narvis", "narvis|gaussians"])
+def test_narvis_modes_name_the_file_and_point_of_a_nan_velocity(mode):
+    # "vel_x: 1 covered pixels with a NaN or infinite value" (narvis) or a
+    # velocity message without the file (the split); a point never drawn (a NaN
+    # coordinate) does not count, and the index is the file's
+    d = clvis.datasets.hurricane(5_000)
+    pos, vel = d["positions"].copy(), d["velocity"].copy()
+    pos[2, 0] = vel[2, 0] = np.nan
+    vel[40, 2] = np.inf
+    s = PointScene(clvis.PointCloud(pos, attributes=d["attributes"], velocity=vel), description="storm.ply")
+    s.update({"mode": "points", "color_by": "temperature"})
+    cam = Orbit(s.lo, s.hi, points=s.fit_points).camera(1.0)
+    assert next(s.frames(cam, 48, 48, s.settings, lambda: False)).image.std() > 0  # points mode: as ever
+    s.update({"mode": mode})
+    with pytest.raises(
+        clvis.DataError, match=r"^storm\.ply: velocity: point 40 is \[.*, inf\], not finite \(1 of"
+    ):
+        next(s.frames(cam, 48, 48, s.settings, lambda: False))
+
+
 def test_frames_are_the_renderers_pictures_over_the_background():
     """What a still frame shows, written out in NumPy from the renderers' own
     outputs: the fast paths (no screen velocity for points, 32-bit pixel

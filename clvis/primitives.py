@@ -339,6 +339,12 @@ MSD_MIN_N = 1 << 20
 # the widest top digit of the MSD-first form (2^12 private counters a
 # work-item in its upsweep and scatter)
 MSD_MAX_BITS = 12
+# radix_bucket_lsd's digits (_bucket_digits): at most 12 bits (2^12
+# counters a pass), 2^BUCKET_SLACK keys a counter or more, and the counters
+# of all its passes at most BUCKET_COUNTERS (32 KiB of private memory)
+BUCKET_MAX_BITS = 12
+BUCKET_SLACK = 4
+BUCKET_COUNTERS = 8192
 
 
 def radix_sort(
@@ -445,7 +451,14 @@ def radix_sort(
         shift = np.uint32(lsd * radix_bits)
         md = {**defines, "RADIX_BITS": msd_bits}
         k_up_m = runtime.get_kernel(queue, "primitives/radix_sort.cl", "radix_upsweep", md)
-        k_sc_m = runtime.get_kernel(queue, "primitives/radix_sort.cl", "radix_scatter", md)
+        # up to 8 top-digit bits, the scatter stages each digit's keys in a
+        # private line written whole (non-temporal): 2^8 lines of keys and
+        # values fill L1 (12 bits would be 512 KiB of lines); the lines'
+        # vector stores need buffers aligned to 16 keys
+        stage = msd_bits <= 8 and queue.device.mem_base_addr_align >= 8 * 16 * kd.dtype.itemsize
+        k_sc_m = runtime.get_kernel(
+            queue, "primitives/radix_sort.cl", "radix_scatter", {**md, "STAGE": int(stage)}
+        )
         if msd_bits != radix_bits:
             hist = runtime.empty(queue, (1 << msd_bits) * G, np.uint32, "radix_sort histogram")
             offsets = runtime.empty(queue, (1 << msd_bits) * G, np.uint32, "radix_sort offsets")
@@ -465,8 +478,12 @@ def radix_sort(
             shift,
             buf(offsets),
         )
+        lsd, lsd_bits = _bucket_digits(int(shift), n >> msd_bits, radix_bits)
         k_lsd = runtime.get_kernel(
-            queue, "primitives/radix_sort.cl", "radix_bucket_lsd", {**defines, "MSD_BITS": msd_bits}
+            queue,
+            "primitives/radix_sort.cl",
+            "radix_bucket_lsd",
+            {**defines, "MSD_BITS": msd_bits, "RADIX_BITS": lsd_bits, "LSD_PASSES": lsd},
         )
         runtime.launch(
             queue,
@@ -480,7 +497,6 @@ def radix_sort(
             _u64(n),
             np.uint32(G),
             buf(offsets),
-            np.uint32(lsd),
         )
         src_k, src_v = kbuf[lsd % 2], vbuf[lsd % 2]
         passes = 0
@@ -507,6 +523,20 @@ def radix_sort(
     if key_bits is not None and key_bits < bits:
         _check_key_bits(int(np.bitwise_or.reduce(orbits.get())), key_bits, keys.dtype)
     return _sorted_result(src_k, src_v, host)
+
+
+def _bucket_digits(bits: int, per_bucket: int, radix_bits: int) -> tuple[int, int]:
+    """(passes, digit bits) of radix_bucket_lsd for the `bits` below the top
+    digit: digits as wide as the buckets pay for (2^w counters a pass, zeroed
+    and scanned, against ~per_bucket keys: 2^w <= per_bucket / 2^BUCKET_SLACK)
+    and the counters fit (BUCKET_COUNTERS in all passes), from the LSD digit
+    (8) up to BUCKET_MAX_BITS; the passes as few as that allows, their digits
+    as even (24 bits of 2^16-key buckets: 2 x 12, not 3 x 8)."""
+    widest = min(BUCKET_MAX_BITS, per_bucket.bit_length() - 1 - BUCKET_SLACK)
+    while widest > radix_bits and -(-bits // widest) << widest > BUCKET_COUNTERS:
+        widest -= 1
+    passes = max(1, -(-bits // max(radix_bits, widest)))
+    return passes, -(-bits // passes)
 
 
 def _check_key_bits(ors: int, key_bits: int, dtype) -> None:

@@ -15,6 +15,15 @@
  *   ITEMS       keys per work-item per tile (used when WG > 1)          (8)
  *   MSD_BITS    radix_bucket_lsd only: the width of the top digit the
  *               buckets come from (the MSD pass's RADIX_BITS)     (RADIX_BITS)
+ *   LSD_PASSES  radix_bucket_lsd only, required: its passes      (none)
+ *   STAGE       radix_scatter, WG == 1 only: 1 stages each digit's keys
+ *               (values) in a private line of 16 and writes full lines
+ *               with non-temporal vector stores (where the compiler has
+ *               __builtin_nontemporal_store; plain vector stores otherwise).
+ *               keys_out and vals_out must be aligned to 16 of their
+ *               words (the host checks CL_DEVICE_MEM_BASE_ADDR_ALIGN).
+ *               For the MSD pass of arrays past the cache, RADIX_BITS <= 8
+ *               (2^RADIX_BITS lines of keys and values in private memory) (0)
  *   Include path: -I kernels_cl/include (clvis/keys.h, clvis/workgroup.h).
  *
  * Partition (as scan.cl): n keys, 0 < n < 2^32, in G contiguous ranges of
@@ -42,22 +51,24 @@
  *
  * kernel radix_bucket_lsd(global KEY_T *keys_a, global KEY_T *keys_b,
  *                         global VAL_T *vals_a, global VAL_T *vals_b,
- *                         ulong n, uint G, global const uint *offsets,
- *                         uint lsd_passes)                    (WG == 1 only)
+ *                         ulong n, uint G, global const uint *offsets)
+ *                                          (WG == 1 and LSD_PASSES only)
  *     The rest of an MSD-first sort: after one upsweep -> scan -> scatter
  *     pass on the most significant digit (MSD_BITS wide: that pass's
  *     kernels built with RADIX_BITS = MSD_BITS) into keys_a (vals_a),
  *     `offsets` that pass's scanned hist, bucket d (the keys of top digit d)
  *     is [offsets[d G], offsets[(d + 1) G]) (the last ends at n). Work-item d
  *     (global size 2^MSD_BITS, local size 1) sorts bucket d stably on digits
- *     shift = 0, RADIX_BITS, ..., (lsd_passes - 1) RADIX_BITS, ping-ponging
+ *     shift = 0, RADIX_BITS, ..., (LSD_PASSES - 1) RADIX_BITS, ping-ponging
  *     between a and b inside the bucket's range: the sorted bucket ends in
- *     keys_b (vals_b) when lsd_passes is odd, in keys_a when even. Nothing
+ *     keys_b (vals_b) when LSD_PASSES is odd, in keys_a when even. Nothing
  *     outside the bucket is read or written. One read counts every pass's
  *     digits; a pass whose digit all the bucket's keys share is skipped
  *     (clustered keys such as Morton codes), with one copy at the end when
- *     the skips leave the bucket in the other buffer. lsd_passes <= bits of
- *     KEY_T / RADIX_BITS - 1.
+ *     the skips leave the bucket in the other buffer. This kernel's
+ *     RADIX_BITS is its own digit (8 to 12; 2^RADIX_BITS x LSD_PASSES
+ *     private counters), (LSD_PASSES - 1) RADIX_BITS < bits of KEY_T; the
+ *     last digit may reach into the top digit's bits (equal in a bucket).
  *
  * A sort of B-bit keys is ceil(B / RADIX_BITS) passes with shift = 0,
  * RADIX_BITS, ..., each upsweep -> exclusive scan of hist (scan.cl with
@@ -78,6 +89,13 @@
  * bits of tile above 32 of depth) is one 12-bit pass into 4096 buckets, one
  * a tile, then 4 LSD passes in each, not an 8-bit top digit of which only 4
  * bits vary (16 buckets of n / 16, out of cache for their 5 LSD passes).
+ * The top-digit scatter (STAGE, up to 8 bits) writes whole lines with
+ * non-temporal stores: its output is read back only bucket by bucket, and a
+ * plain store to a line past the cache first reads the line (staging alone,
+ * without the non-temporal store, measured no faster). The buckets then
+ * take as few passes as their size pays for (clvis/primitives.py
+ * _bucket_digits): 24 bits of 2^16-key buckets in 2 passes of 12 bits
+ * (4096 counters, in L1) rather than 3 of 8.
  *
  * With WG == 1 a work-item walks its range in order and writes each key to its
  * digit's next slot (the fast form for CPU devices; RADIX_BITS 8). With
@@ -118,9 +136,24 @@
 #define MSD_BITS RADIX_BITS
 #endif
 #define MSD_RADIX (1u << MSD_BITS)
-/* the most LSD passes radix_bucket_lsd makes: all digits but the top one */
-#define LSD_MAX (8 * sizeof(KEY_T) / RADIX_BITS - 1)
 #define TILE (WG * ITEMS)
+#ifndef STAGE
+#define STAGE 0
+#endif
+/* radix_scatter's staged form: LINE words a digit, written as one vector */
+#define LINE 16
+#define CLVIS_CAT_(a, b) a##b
+#define CLVIS_CAT(a, b) CLVIS_CAT_(a, b)
+#define KEY_V CLVIS_CAT(KEY_T, 16)
+#define VAL_V CLVIS_CAT(VAL_T, 16)
+#if defined(__clang__) && defined(__has_builtin)
+#if __has_builtin(__builtin_nontemporal_store)
+#define NT_STORE(v, p) __builtin_nontemporal_store((v), (p))
+#endif
+#endif
+#ifndef NT_STORE
+#define NT_STORE(v, p) (*(p) = (v))
+#endif
 
 #if KEY_ORDER == 0
 #define KEY(k) (k)
@@ -198,6 +231,58 @@ void radix_scatter(global const KEY_T *restrict keys_in,
     uint next[RADIX];
     for (uint d = 0; d < RADIX; ++d)
         next[d] = offsets[d * G + g];
+#if STAGE
+    /* each digit's keys (values) gather in a private line of LINE words,
+     * written whole with a non-temporal store when it fills: no read for
+     * ownership of the destination line, no cache pollution */
+    KEY_V stk[RADIX];
+#if HAS_VALUES
+    VAL_V stv[RADIX];
+#endif
+    {
+        for (ulong i = start; i < end; ++i) {
+            const KEY_T k = keys_in[i];
+            const uint d = DIGIT(k, shift);
+            const uint p = next[d]++;
+            const uint s = p & (LINE - 1);
+            ((private KEY_T *)&stk[d])[s] = k;
+#if HAS_VALUES
+            ((private VAL_T *)&stv[d])[s] = vals_in[i];
+#endif
+            if (s == LINE - 1) {
+                const uint l0 = p - (LINE - 1);
+                const uint first = offsets[d * G + g];
+                if (l0 >= first) {
+                    NT_STORE(stk[d], (global KEY_V *)(keys_out + l0));
+#if HAS_VALUES
+                    NT_STORE(stv[d], (global VAL_V *)(vals_out + l0));
+#endif
+                } else {    /* the digit's first line starts before this range */
+                    for (uint j = first - l0; j < LINE; ++j) {
+                        keys_out[l0 + j] = ((private KEY_T *)&stk[d])[j];
+#if HAS_VALUES
+                        vals_out[l0 + j] = ((private VAL_T *)&stv[d])[j];
+#endif
+                    }
+                }
+            }
+        }
+        /* each digit's last, partial line */
+        for (uint d = 0; d < RADIX; ++d) {
+            const uint p = next[d];
+            const uint l0 = p & ~(LINE - 1u);
+            const uint first = offsets[d * G + g];
+            for (uint j = (first > l0 ? first : l0) - l0; j < p - l0; ++j) {
+                keys_out[l0 + j] = ((private KEY_T *)&stk[d])[j];
+#if HAS_VALUES
+                vals_out[l0 + j] = ((private VAL_T *)&stv[d])[j];
+#endif
+            }
+        }
+        mem_fence(CLK_GLOBAL_MEM_FENCE);
+        return;
+    }
+#endif
     for (ulong i = start; i < end; ++i) {
         const KEY_T k = keys_in[i];
         const uint p = next[DIGIT(k, shift)]++;
@@ -294,12 +379,11 @@ void radix_scatter(global const KEY_T *restrict keys_in,
 #endif
 }
 
-#if WG == 1
+#if WG == 1 && defined(LSD_PASSES)
 kernel __attribute__((reqd_work_group_size(1, 1, 1)))
 void radix_bucket_lsd(global KEY_T *restrict keys_a, global KEY_T *restrict keys_b,
                       global VAL_T *restrict vals_a, global VAL_T *restrict vals_b,
-                      const ulong n, const uint G, global const uint *restrict offsets,
-                      const uint lsd_passes)
+                      const ulong n, const uint G, global const uint *restrict offsets)
 {
     const uint d = get_global_id(0);
     if (d >= MSD_RADIX)
@@ -313,16 +397,16 @@ void radix_bucket_lsd(global KEY_T *restrict keys_a, global KEY_T *restrict keys
     global VAL_T *sv = vals_a, *dv = vals_b;
 #endif
     /* every pass's digit counts in one read of the bucket */
-    uint count[LSD_MAX][RADIX];
-    for (uint p = 0; p < lsd_passes; ++p)
+    uint count[LSD_PASSES][RADIX];
+    for (uint p = 0; p < LSD_PASSES; ++p)
         for (uint e = 0; e < RADIX; ++e)
             count[p][e] = 0;
     for (ulong i = lo; i < hi; ++i) {
         const KEY_T k = sk[i];
-        for (uint p = 0; p < lsd_passes; ++p)
+        for (uint p = 0; p < LSD_PASSES; ++p)
             count[p][DIGIT(k, p * RADIX_BITS)]++;
     }
-    for (uint p = 0; p < lsd_passes; ++p) {
+    for (uint p = 0; p < LSD_PASSES; ++p) {
         const uint shift = p * RADIX_BITS;
         uint *next = count[p];
         /* a digit every key of the bucket shares moves nothing: skip it */
@@ -351,8 +435,8 @@ void radix_bucket_lsd(global KEY_T *restrict keys_a, global KEY_T *restrict keys
         dv = tv;
 #endif
     }
-    /* the bucket must end where the host looks: b for odd lsd_passes */
-    global KEY_T *want = (lsd_passes & 1u) ? keys_b : keys_a;
+    /* the bucket must end where the host looks: b for odd LSD_PASSES */
+    global KEY_T *want = (LSD_PASSES & 1) ? keys_b : keys_a;
     if (sk != want) {
         for (ulong i = lo; i < hi; ++i) {
             dk[i] = sk[i];

@@ -138,6 +138,15 @@ def radix_sort(q):
         k[::2] |= np.uint64((2**44 - 1) & ~(2**32 - 1))
         clvis.radix_sort(k, np.arange(300, dtype=np.uint32), key_bits=44, queue=q)
         clvis.radix_sort(rng.integers(0, 2**40, 300, dtype=np.uint64) | np.uint64(5 << 16), queue=q)
+        # 32-bit pairs: the staged top-digit scatter (8 bits, non-temporal
+        # lines), then 2 passes of 12 bits a bucket (forced on these tiny
+        # buckets by BUCKET_SLACK)
+        slack, clvis.primitives.BUCKET_SLACK = clvis.primitives.BUCKET_SLACK, -12
+        try:
+            k = rng.integers(0, 2**32, 700, dtype=np.uint32)
+            clvis.radix_sort(k, np.arange(700, dtype=np.uint32), queue=q)
+        finally:
+            clvis.primitives.BUCKET_SLACK = slack
     finally:
         clvis.primitives.MSD_MIN_N = msd
 

@@ -117,6 +117,61 @@ def test_msd_first_key_bits(queue, msd_always, key_bits):
     check(rng.integers(0, 1 << key_bits, 70_001, dtype=np.uint32), queue, key_bits=key_bits)
 
 
+@pytest.mark.parametrize("dtype", KEY_DTYPES, ids=lambda d: np.dtype(d).name)
+@pytest.mark.parametrize("slack", [-8, -1], ids=["wide", "9-bit"])
+def test_msd_first_bucket_digits(queue, msd_always, monkeypatch, dtype, slack):
+    """radix_bucket_lsd's digits as wide as the buckets allow (2 x 12 bits
+    for 32-bit keys at 2^24; here forced on small buckets by BUCKET_SLACK):
+    12-bit digits (32-bit keys), 10 (64-bit keys, the counters capped), 11
+    (44-bit keys), and the 8-bit ones a narrower limit gives back; and the
+    staged top-digit scatter every one of these sorts goes through."""
+    built = []
+    get_kernel = clvis.primitives.runtime.get_kernel
+
+    def spy(queue, path, name, defines, *args):
+        built.append((name, dict(defines)))
+        return get_kernel(queue, path, name, defines, *args)
+
+    monkeypatch.setattr(clvis.primitives.runtime, "get_kernel", spy)
+    monkeypatch.setattr(clvis.primitives, "BUCKET_SLACK", slack)
+    rng = np.random.default_rng(5)
+    dt = np.dtype(dtype)
+    n = 70_001  # ~273 keys a bucket
+    keys = random_keys(n, dt, rng)
+    check(keys, queue)
+    check(keys[: n // 3], queue, with_values=False)
+    check(rng.integers(0, 3, n).astype(dt), queue)  # long runs of equal keys: stability
+    if dt.kind == "u":
+        check(
+            rng.integers(0, 1 << 44, n, dtype=np.uint64).astype(dt),
+            queue,
+            key_bits=44 if dt.itemsize == 8 else None,
+        )
+    digits = {d["RADIX_BITS"] for name, d in built if name == "radix_bucket_lsd"}
+    staged = {
+        d["STAGE"] for name, d in built if name == "radix_scatter" and "STAGE" in d and d["RADIX_BITS"] == 8
+    }
+    if clvis.runtime.tuning_profile(queue) != "cpu":  # the gpu shape sorts by LSD passes only
+        assert digits == staged == set()
+    elif slack == -8:
+        assert digits == ({12} if dt.itemsize == 4 else {10, 11} if dt.kind == "u" else {10})
+    else:
+        assert digits == {8}
+    if clvis.runtime.tuning_profile(queue) == "cpu":
+        assert staged == {int(queue.device.mem_base_addr_align >= 8 * 16 * dt.itemsize)}
+
+
+def test_bucket_digits():
+    """2^24 random 32-bit keys: an 8-bit top digit, then 2 passes of 12 bits
+    in each 2^16-key bucket; 2^22: 3 of 8 (the buckets too small for 4096
+    counters); 64-bit keys: 6 passes of 10 bits (the counters capped)."""
+    f = clvis.primitives._bucket_digits
+    assert f(24, 1 << 16, 8) == (2, 12)
+    assert f(24, 1 << 14, 8) == (3, 8)
+    assert f(56, 1 << 16, 8) == (6, 10)
+    assert f(32, 1464, 8) == (4, 8)  # the tile renderer's 44-bit keys, 6 M of them
+
+
 @pytest.mark.parametrize("key_bits", [12, 13, 20, 41, 44, 47, 52])
 def test_msd_first_wide_top_digit(queue, msd_always, key_bits):
     """The top digit takes the bits the 8-bit LSD digits leave, up to 12

@@ -373,7 +373,7 @@ class IsoRenderer:
         for name in ("init_rays", "macro_traverse"):
             traverse_kernel(q, name)
         raytrace_kernel(q, 8, True)
-        for name in ("mark_blocks", "cache_slot_flags", "cache_missing", "cache_age"):
+        for name in ("mark_blocks", "cache_slot_flags", "cache_missing"):
             _cache_kernel(q, name)
         for name in ("cache_candidate_keys", "cache_assign", "cache_decode"):
             _cache_kernel(q, name)
@@ -693,7 +693,8 @@ class IsoRenderer:
                 *t.order,
                 keys.base_data,
             )
-            skeys, sitems = radix_sort(keys, item_ids, key_bits=t.key_bits, queue=q)
+            # the keys are item_keys' view keys, below 2^key_bits by construction: no check read
+            skeys, sitems = radix_sort(keys, item_ids, key_bits=t.key_bits, check=False, queue=q)
             heads = runtime.empty(q, m, np.uint8, "group heads")
             self._launch("group_heads", m, skeys.base_data, np.uint32(m), heads.base_data)
             starts = compact_indices(heads, queue=q)

@@ -288,9 +288,13 @@ def view_flips(
 class _Tile:
     """The device state of one tile's rays: pixels p0 .. p0 + n - 1."""
 
-    def __init__(self, q, p0, n, cam, w, h, shape, spacing, origin, int64, rays=None, flip=0) -> None:
-        """`rays`: init_rays' (ray_t, ids, count) of this tile when the caller has them;
-        `flip`: the view order of the pass's groups (pass.cl)."""
+    def __init__(
+        self, q, p0, n, cam, w, h, shape, spacing, origin, int64, rays=None, flip=0, n_rays=None
+    ) -> None:
+        """`rays`: init_rays' (ray_t, ids, count) of this tile when the caller has them
+        (`n_rays`: count[0] when the caller has read it); `flip`: the view order of
+        the pass's groups (pass.cl). `count` (a 1-element device array) holds the
+        length of `active` for the pass's kernels, so no pass writes it."""
         self.q, self.p0, self.n, self.cam, self.w = q, p0, n, cam, w
         nb = [(int(s) + 3) // 4 for s in shape[::-1]]
         self.order = (np.uint32(nb[0]), np.uint32(nb[1]), np.uint32(nb[2]), np.uint32(flip))
@@ -300,7 +304,8 @@ class _Tile:
         if rays is None:
             rays = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
         self.ray_t, active_all, count = rays
-        self.active = active_all[: int(count.get()[0])]
+        self.active = active_all[: int(count.get()[0]) if n_rays is None else n_rays]
+        self.count = count
         self.hit = runtime.zeros(q, n, np.uint8, "hit mask")
         self.hit_t = runtime.empty(q, n, np.float32, "hit t")
         self.depth = runtime.empty(q, n, np.float32, "depth")
@@ -586,7 +591,19 @@ class IsoRenderer:
             if n_enter == 0:
                 continue
             state = _Tile(
-                q, p0, n, cam, w, h, shape, spacing, origin, int64, first_rays if ti == 0 else None, flip
+                q,
+                p0,
+                n,
+                cam,
+                w,
+                h,
+                shape,
+                spacing,
+                origin,
+                int64,
+                first_rays if ti == 0 else None,
+                flip,
+                n_enter if ti == 0 else None,
             )
             first_rays = None
             n_active = n_enter
@@ -647,8 +664,6 @@ class IsoRenderer:
         fine, coarse = self.grids.fine, self.grids.coarse
         assert isinstance(fine, cla.Array) and isinstance(coarse, cla.Array)  # built with host=False
         n_items = n_active * n_spec
-        cnt = runtime.empty(q, 1, np.uint32, "active count")
-        cnt.set(np.array([n_active], np.uint32), queue=q)
         cand_block = runtime.empty(q, n_items, np.uint32, "candidate blocks")
         cand_t = runtime.empty(q, n_items, np.float32, "candidate t")
         macro_traverse(
@@ -662,7 +677,7 @@ class IsoRenderer:
             fine,
             coarse,
             active,
-            cnt,
+            t.count,
             n_active,
             t.ray_t,
             n_spec,
@@ -681,7 +696,9 @@ class IsoRenderer:
         if t.hitkey is not None:
             runtime.fill(q, t.hitkey, np.uint64(0xFFFFFFFFFFFFFFFF))
         ngroups = 0
-        pass_arrays = [cnt, cand_block, cand_t, valid, item_ids, item_hit, item_t, item_rgba, item_depth]
+        # the next pass's active count (compact writes it: no pass writes a count)
+        count = runtime.empty(q, 1, np.uint32, "active count")
+        pass_arrays = [count, cand_block, cand_t, valid, item_ids, item_hit, item_t, item_rgba, item_depth]
         if m:
             keys = runtime.empty(q, m, np.uint32, "item blocks")
             self._launch(
@@ -754,7 +771,8 @@ class IsoRenderer:
             t.depth.base_data,
             still.base_data,
         )
-        t.active = compact(active, still[:n_active], queue=q)
+        active_out, count = compact(active, still[:n_active], count=count, queue=q)
+        t.active, t.count = active_out[: int(count.get()[0])], count
         return m, ngroups, decoded, runtime.nbytes(*pass_arrays)
 
     def _launch(self, name, n, *args):

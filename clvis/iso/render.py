@@ -198,10 +198,13 @@ class _HostImage:
     def write_tile(self, tile: _Tile, active: Any) -> None:
         """The tile's part of the image, `active` its rays still running (blocks)."""
         q, sl = tile.q, slice(tile.p0, tile.p0 + tile.n)
-        tile.rgba.get(queue=q, ary=self.rgba[sl])
-        tile.depth.get(queue=q, ary=self.depth[sl])
-        tile.hit.get(queue=q, ary=self.hit[sl])
+        # three reads enqueued without waiting, the fourth blocks: one wait, not four
+        events = [
+            a.get_async(queue=q, ary=b)[1]
+            for a, b in ((tile.rgba, self.rgba[sl]), (tile.depth, self.depth[sl]), (tile.hit, self.hit[sl]))
+        ]
         tile.hit_t.get(queue=q, ary=self.t[sl])
+        cl.wait_for_events(events)
         self.active[sl] = False
         self.mark_active(tile.p0, active, int(active.size))
 
@@ -394,9 +397,11 @@ class IsoRenderer:
         return self.volume.shape
 
     def reset_cache(self, capacity: int | None = None) -> None:
-        """Start over with an empty block cache (a cold start, e.g. for timings)."""
+        """Start over with an empty block cache (a cold start, e.g. for timings).
+        The compressed volume stays on the device (the new cache decodes from
+        the same stream: a cold cache, not a new upload)."""
         with runtime.pinned(self.config):
-            self.cache = BlockCache(self.volume, capacity, queue=self.queue)
+            self.cache = BlockCache(self.volume, capacity, queue=self.queue, stream=self.cache.stream)
 
     def render(
         self,

@@ -138,6 +138,21 @@ def mark_blocks(
     return needed
 
 
+def _shared_stream(stream: Any, zfp_volume: ZfpVolume, queue) -> cla.Array:
+    """`stream` checked as zfp_volume's words on the queue's context."""
+    if not is_device(stream):
+        raise TypeError("stream: expected a device array (pyopencl.array.Array) of the volume's words")
+    words = max(1, len(zfp_volume.stream) // 8)
+    if stream.dtype != np.uint64 or stream.shape != (words,) or stream.offset:
+        raise ValueError(
+            f"stream: expected the volume's {words} uint64 words without offset "
+            f"(zfp_volume.to_device), got {stream.dtype} of shape {tuple(stream.shape)}"
+        )
+    if stream.context.int_ptr != queue.context.int_ptr:
+        raise ValueError("stream: the device array belongs to another OpenCL context than the queue")
+    return stream
+
+
 def _check_needed(needed, nblocks: int):
     if not is_device(needed):
         raise TypeError("needed: expected a device array (pyopencl.array.Array)")
@@ -155,10 +170,19 @@ class BlockCache:
 
     capacity: the initial number of slots (default: 1/16 of the blocks, at
     least 64, at most the block count). The cache grows when a pass needs more.
+    stream: the volume's compressed stream already on the queue's device (another
+    cache's :attr:`stream`, or ``zfp_volume.to_device(queue)``) to decode from
+    instead of uploading it again (IsoRenderer.reset_cache: a cold cache, not a
+    new upload of the volume).
     """
 
     def __init__(
-        self, zfp_volume: ZfpVolume, capacity: int | None = None, *, queue: cl.CommandQueue | None = None
+        self,
+        zfp_volume: ZfpVolume,
+        capacity: int | None = None,
+        *,
+        queue: cl.CommandQueue | None = None,
+        stream: cla.Array | None = None,
     ):
         if not isinstance(zfp_volume, ZfpVolume):
             raise TypeError(f"zfp_volume: expected a clvis.zfp.ZfpVolume, got {type(zfp_volume).__name__}")
@@ -169,7 +193,10 @@ class BlockCache:
             capacity = default_capacity(self.nblocks)
         elif isinstance(capacity, bool) or not isinstance(capacity, (int, np.integer)) or capacity < 1:
             raise ValueError(f"capacity: expected a positive integer, got {capacity!r}")
-        self._stream = zfp_volume.to_device(q)
+        if stream is None:
+            self._stream = zfp_volume.to_device(q)
+        else:
+            self._stream = _shared_stream(stream, zfp_volume, q)
         self.capacity = int(capacity)
         self.bricks = runtime.zeros(q, (self.capacity, BRICK_VALUES), np.float32, "cache bricks")
         self.block_of_slot = runtime.fill(
@@ -191,6 +218,11 @@ class BlockCache:
         """Device bytes of the cache buffers (bricks, block_of_slot, ages,
         slot_of_block; the compressed stream not counted)."""
         return runtime.nbytes(self.bricks, self.block_of_slot, self.ages, self.slot_of_block)
+
+    @property
+    def stream(self) -> cla.Array:
+        """The compressed stream on the device (uint64 words) the cache decodes from."""
+        return self._stream
 
     @property
     def stream_nbytes(self) -> int:

@@ -180,6 +180,26 @@ def test_ages_past_one_digit(queue):
     assert cache.evicted_last == 3
 
 
+def test_shared_stream(queue):
+    """stream=: a new cache decodes from another's device stream (no upload)
+    and fills the same bricks; a stream of another volume or dtype is refused."""
+    zv = _zv((9, 10, 11))
+    first = BlockCache(zv, 4, queue=queue)
+    cache = BlockCache(zv, 4, queue=queue, stream=first.stream)
+    assert cache.stream is first.stream
+    f = np.zeros(zv.nblocks, np.uint8)
+    f[[0, 5, 26]] = 1
+    cache.update(f)
+    _check_bricks(cache, cache.get_state())
+    other = _zv((13, 8, 21)).to_device(queue)
+    with pytest.raises(ValueError, match="stream: expected the volume's"):
+        BlockCache(zv, 4, queue=queue, stream=other)
+    with pytest.raises(ValueError, match="stream: expected the volume's"):
+        BlockCache(zv, 4, queue=queue, stream=first.stream.view(np.int64))
+    with pytest.raises(TypeError, match="stream: expected a device array"):
+        BlockCache(zv, 4, queue=queue, stream=np.frombuffer(zv.stream, "<u8"))
+
+
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint32])
 def test_mark_blocks(queue, dtype):
     rng = np.random.default_rng(5)

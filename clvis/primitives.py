@@ -348,7 +348,12 @@ BUCKET_COUNTERS = 8192
 
 
 def radix_sort(
-    keys: Any, values: Any = None, *, key_bits: int | None = None, queue: cl.CommandQueue | None = None
+    keys: Any,
+    values: Any = None,
+    *,
+    key_bits: int | None = None,
+    check: bool = True,
+    queue: cl.CommandQueue | None = None,
 ) -> Any:
     """Stable LSD radix sort.
 
@@ -359,7 +364,10 @@ def radix_sort(
     the same length, moved with the keys.
     key_bits: sort on the low key_bits bits only, for integer keys known to
     lie in [0, 2**key_bits) (fewer passes). A key outside that range raises
-    DataError after the sort (the input is never modified).
+    DataError after the sort (the input is never modified); for device keys
+    that check costs one read-back, which check=False leaves out: the caller
+    then guarantees the range (keys made by its own kernel), and a key outside
+    it is not detected (the output is then some permutation of the pairs).
 
     Returns sorted keys, or (keys, values).
     """
@@ -396,7 +404,7 @@ def radix_sort(
     if n <= 1:
         ko = kd.copy() if not host else kd
         vo = (vd.copy() if not host else vd) if vd is not None else None
-        if key_bits is not None and n and key_bits < bits:
+        if check and key_bits is not None and n and key_bits < bits:
             _check_key_bits(int(kd.get().view(f"u{kd.dtype.itemsize}")[0]), key_bits, keys.dtype)
         return _sorted_result(ko, vo, host)
 
@@ -520,7 +528,7 @@ def radix_sort(
             buf(offsets),
         )
         src_k, src_v = dst_k, dst_v
-    if key_bits is not None and key_bits < bits:
+    if check and key_bits is not None and key_bits < bits:
         _check_key_bits(int(np.bitwise_or.reduce(orbits.get())), key_bits, keys.dtype)
     return _sorted_result(src_k, src_v, host)
 

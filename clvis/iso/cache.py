@@ -23,8 +23,12 @@ The policy (``clvis.reference.iso.cache`` is the same, step by step, on the host
 5. the new blocks are decoded into their slots (one work-item per block).
 
 Lists are built on the device with :func:`clvis.compact_indices` and
-:func:`clvis.radix_sort`; each step reads back one count (4 bytes). The sort
-only runs when the free slots alone do not suffice.
+:func:`clvis.radix_sort`. A pass reads back the missing count (4 bytes) and,
+only when the free slots (capacity - occupied, known on the host) do not
+suffice, the candidates' count; the sort only runs then, on keys below
+2^bits(passes seen + 1) (cache.cl's cache_candidate_keys), so a cache that
+has seen fewer than 255 passes sorts in one 8-bit digit pass. The ageing is
+done in the same launch as the slot flags.
 
 Device state: ``bricks`` (capacity, 64) float32, ``slot_of_block``
 (nblocks,) int32 (-1: absent), ``block_of_slot`` (capacity,) uint32
@@ -134,6 +138,21 @@ def mark_blocks(
     return needed
 
 
+def _shared_stream(stream: Any, zfp_volume: ZfpVolume, queue) -> cla.Array:
+    """`stream` checked as zfp_volume's words on the queue's context."""
+    if not is_device(stream):
+        raise TypeError("stream: expected a device array (pyopencl.array.Array) of the volume's words")
+    words = max(1, len(zfp_volume.stream) // 8)
+    if stream.dtype != np.uint64 or stream.shape != (words,) or stream.offset:
+        raise ValueError(
+            f"stream: expected the volume's {words} uint64 words without offset "
+            f"(zfp_volume.to_device), got {stream.dtype} of shape {tuple(stream.shape)}"
+        )
+    if stream.context.int_ptr != queue.context.int_ptr:
+        raise ValueError("stream: the device array belongs to another OpenCL context than the queue")
+    return stream
+
+
 def _check_needed(needed, nblocks: int):
     if not is_device(needed):
         raise TypeError("needed: expected a device array (pyopencl.array.Array)")
@@ -151,10 +170,19 @@ class BlockCache:
 
     capacity: the initial number of slots (default: 1/16 of the blocks, at
     least 64, at most the block count). The cache grows when a pass needs more.
+    stream: the volume's compressed stream already on the queue's device (another
+    cache's :attr:`stream`, or ``zfp_volume.to_device(queue)``) to decode from
+    instead of uploading it again (IsoRenderer.reset_cache: a cold cache, not a
+    new upload of the volume).
     """
 
     def __init__(
-        self, zfp_volume: ZfpVolume, capacity: int | None = None, *, queue: cl.CommandQueue | None = None
+        self,
+        zfp_volume: ZfpVolume,
+        capacity: int | None = None,
+        *,
+        queue: cl.CommandQueue | None = None,
+        stream: cla.Array | None = None,
     ):
         if not isinstance(zfp_volume, ZfpVolume):
             raise TypeError(f"zfp_volume: expected a clvis.zfp.ZfpVolume, got {type(zfp_volume).__name__}")
@@ -165,7 +193,10 @@ class BlockCache:
             capacity = default_capacity(self.nblocks)
         elif isinstance(capacity, bool) or not isinstance(capacity, (int, np.integer)) or capacity < 1:
             raise ValueError(f"capacity: expected a positive integer, got {capacity!r}")
-        self._stream = zfp_volume.to_device(q)
+        if stream is None:
+            self._stream = zfp_volume.to_device(q)
+        else:
+            self._stream = _shared_stream(stream, zfp_volume, q)
         self.capacity = int(capacity)
         self.bricks = runtime.zeros(q, (self.capacity, BRICK_VALUES), np.float32, "cache bricks")
         self.block_of_slot = runtime.fill(
@@ -176,6 +207,8 @@ class BlockCache:
             q, runtime.empty(q, max(self.nblocks, 1), np.int32, "cache slot_of_block"), -1
         )[: self.nblocks]
         self.occupied = 0
+        # at least every slot's age: ages rise by one a pass at most (set_ages raises it)
+        self._age_bound = 0
         self.decoded_total = 0
         self.decoded_last = 0
         self.evicted_last = 0
@@ -185,6 +218,11 @@ class BlockCache:
         """Device bytes of the cache buffers (bricks, block_of_slot, ages,
         slot_of_block; the compressed stream not counted)."""
         return runtime.nbytes(self.bricks, self.block_of_slot, self.ages, self.slot_of_block)
+
+    @property
+    def stream(self) -> cla.Array:
+        """The compressed stream on the device (uint64 words) the cache decodes from."""
+        return self._stream
 
     @property
     def stream_nbytes(self) -> int:
@@ -222,8 +260,9 @@ class BlockCache:
         runtime.fill(q, bos, FREE, start=old)
         self.bricks, self.block_of_slot, self.ages, self.capacity = bricks, bos, ages, new
 
-    def _slot_lists(self, nd):
-        """(free slots, candidate slots) device lists and their counts."""
+    def _slot_lists(self, nd, age: bool):
+        """Slot flags (free, candidate) of the cache as it stands; age: the
+        pass's ageing in the same launch (cache.cl's cache_slot_flags)."""
         q, cap = self.queue, self.capacity
         free_f = runtime.empty(q, cap, np.uint8, "cache free flags")
         cand_f = runtime.empty(q, cap, np.uint8, "cache candidate flags")
@@ -234,18 +273,33 @@ class BlockCache:
             self.block_of_slot.base_data,
             nd.base_data,
             _u32(cap),
+            _u32(int(age)),
             free_f.base_data,
             cand_f.base_data,
+            self.ages.base_data,
         )
         return free_f, cand_f
 
-    def _free_or_candidates(self, nd, m):
-        """(the first m free slots or None, the eviction candidates or None, the free count)."""
-        free_f, cand_f = self._slot_lists(nd)
-        free = compact_indices(free_f, queue=self.queue)
-        if free.size >= m:
-            return free[:m], None, int(free.size)
-        return None, compact_indices(cand_f, queue=self.queue), int(free.size)
+    def _free_or_candidates(self, nd, m, age: bool):
+        """(the first m free slots or None, the eviction candidates or None).
+        The free count is the host's (capacity - occupied), so the free slots
+        are listed without a read-back; the candidates' count is read back."""
+        free_f, cand_f = self._slot_lists(nd, age)
+        if self.capacity - self.occupied >= m:
+            count = runtime.empty(self.queue, 1, np.uint32, "cache free count")
+            free, _ = compact_indices(free_f, count=count, queue=self.queue)
+            return free[:m], None
+        return None, compact_indices(cand_f, queue=self.queue)
+
+    def set_ages(self, ages: Any) -> None:
+        """Overwrite the slots' ages (uint32, one per slot; a test's way to
+        reach saturation). Write ages only through here: the cache keeps a
+        bound of every age, which sizes its LRU sort."""
+        a = np.asarray(ages, np.uint32)
+        if a.shape != (self.capacity,):
+            raise ValueError(f"ages: expected {self.capacity} values, got shape {a.shape}")
+        self.ages.set(a, queue=self.queue)
+        self._age_bound = min(AGE_MAX, max(self._age_bound, int(a.max(initial=0))))
 
     def update(self, needed: Any) -> int:
         """One pass: cache every block flagged in `needed` (a device array of
@@ -283,28 +337,24 @@ class BlockCache:
         missing = compact_indices(miss_f, queue=q)
         m = int(missing.size)
 
-        # 2. candidate slots; grow when they do not suffice
+        # 2. candidate slots; grow when they do not suffice. 3. ages: in the
+        # same launch as the first slot flags (the flags do not read the ages;
+        # a grow copies the aged ones and its new slots are free)
         slots = None
+        nfree = self.capacity - self.occupied
         if m:
-            slots, cand, nfree = self._free_or_candidates(nd, m)
+            slots, cand = self._free_or_candidates(nd, m, age=True)
             if slots is None and cand.size < m:
                 n_needed = self.capacity - int(cand.size) + m
                 self._grow(grown_capacity(self.capacity, n_needed, nb))
-                slots, cand, nfree = self._free_or_candidates(nd, m)
+                nfree = self.capacity - self.occupied
+                slots, cand = self._free_or_candidates(nd, m, age=False)
             if slots is None and cand.size < m:  # cannot happen: grown to n_needed
                 raise DataError(f"block cache: {m} blocks to place but {cand.size} candidate slots")
-
-        # 3. ages
-        cap = self.capacity
-        runtime.launch(
-            q,
-            _kernel(q, "cache_age", nd.dtype),
-            *_items(q, cap),
-            self.block_of_slot.base_data,
-            nd.base_data,
-            _u32(cap),
-            self.ages.base_data,
-        )
+        else:
+            self._slot_lists(nd, age=True)
+        # every age is at most the passes seen so far (one ageing a pass)
+        self._age_bound = min(AGE_MAX, self._age_bound + 1)
         if not m:
             return 0
 
@@ -312,6 +362,10 @@ class BlockCache:
         if slots is None:
             c = int(cand.size)
             keys = runtime.empty(q, c, np.uint32, "cache candidate keys")
+            # keys top - age (free slots 0), below 2^bits(top): the order of
+            # 0xFFFFFFFF - age in as few digit passes as the ages allow, and
+            # no range-check read (top exceeds every age by construction)
+            top = self._age_bound + 1
             runtime.launch(
                 q,
                 _kernel(q, "cache_candidate_keys"),
@@ -320,9 +374,10 @@ class BlockCache:
                 _u32(c),
                 self.block_of_slot.base_data,
                 self.ages.base_data,
+                _u32(top),
                 keys.base_data,
             )
-            _, order = radix_sort(keys, cand, queue=q)
+            _, order = radix_sort(keys, cand, key_bits=top.bit_length(), check=False, queue=q)
             slots = order[:m]
             self.evicted_last = m - nfree
         runtime.launch(

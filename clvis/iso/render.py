@@ -198,10 +198,13 @@ class _HostImage:
     def write_tile(self, tile: _Tile, active: Any) -> None:
         """The tile's part of the image, `active` its rays still running (blocks)."""
         q, sl = tile.q, slice(tile.p0, tile.p0 + tile.n)
-        tile.rgba.get(queue=q, ary=self.rgba[sl])
-        tile.depth.get(queue=q, ary=self.depth[sl])
-        tile.hit.get(queue=q, ary=self.hit[sl])
+        # three reads enqueued without waiting, the fourth blocks: one wait, not four
+        events = [
+            a.get_async(queue=q, ary=b)[1]
+            for a, b in ((tile.rgba, self.rgba[sl]), (tile.depth, self.depth[sl]), (tile.hit, self.hit[sl]))
+        ]
         tile.hit_t.get(queue=q, ary=self.t[sl])
+        cl.wait_for_events(events)
         self.active[sl] = False
         self.mark_active(tile.p0, active, int(active.size))
 
@@ -288,9 +291,13 @@ def view_flips(
 class _Tile:
     """The device state of one tile's rays: pixels p0 .. p0 + n - 1."""
 
-    def __init__(self, q, p0, n, cam, w, h, shape, spacing, origin, int64, rays=None, flip=0) -> None:
-        """`rays`: init_rays' (ray_t, ids, count) of this tile when the caller has them;
-        `flip`: the view order of the pass's groups (pass.cl)."""
+    def __init__(
+        self, q, p0, n, cam, w, h, shape, spacing, origin, int64, rays=None, flip=0, n_rays=None
+    ) -> None:
+        """`rays`: init_rays' (ray_t, ids, count) of this tile when the caller has them
+        (`n_rays`: count[0] when the caller has read it); `flip`: the view order of
+        the pass's groups (pass.cl). `count` (a 1-element device array) holds the
+        length of `active` for the pass's kernels, so no pass writes it."""
         self.q, self.p0, self.n, self.cam, self.w = q, p0, n, cam, w
         nb = [(int(s) + 3) // 4 for s in shape[::-1]]
         self.order = (np.uint32(nb[0]), np.uint32(nb[1]), np.uint32(nb[2]), np.uint32(flip))
@@ -300,7 +307,8 @@ class _Tile:
         if rays is None:
             rays = init_rays(q, cam, w, h, shape, spacing, origin, pixels=(p0, n))
         self.ray_t, active_all, count = rays
-        self.active = active_all[: int(count.get()[0])]
+        self.active = active_all[: int(count.get()[0]) if n_rays is None else n_rays]
+        self.count = count
         self.hit = runtime.zeros(q, n, np.uint8, "hit mask")
         self.hit_t = runtime.empty(q, n, np.float32, "hit t")
         self.depth = runtime.empty(q, n, np.float32, "depth")
@@ -373,7 +381,7 @@ class IsoRenderer:
         for name in ("init_rays", "macro_traverse"):
             traverse_kernel(q, name)
         raytrace_kernel(q, 8, True)
-        for name in ("mark_blocks", "cache_slot_flags", "cache_missing", "cache_age"):
+        for name in ("mark_blocks", "cache_slot_flags", "cache_missing"):
             _cache_kernel(q, name)
         for name in ("cache_candidate_keys", "cache_assign", "cache_decode"):
             _cache_kernel(q, name)
@@ -389,9 +397,11 @@ class IsoRenderer:
         return self.volume.shape
 
     def reset_cache(self, capacity: int | None = None) -> None:
-        """Start over with an empty block cache (a cold start, e.g. for timings)."""
+        """Start over with an empty block cache (a cold start, e.g. for timings).
+        The compressed volume stays on the device (the new cache decodes from
+        the same stream: a cold cache, not a new upload)."""
         with runtime.pinned(self.config):
-            self.cache = BlockCache(self.volume, capacity, queue=self.queue)
+            self.cache = BlockCache(self.volume, capacity, queue=self.queue, stream=self.cache.stream)
 
     def render(
         self,
@@ -586,7 +596,19 @@ class IsoRenderer:
             if n_enter == 0:
                 continue
             state = _Tile(
-                q, p0, n, cam, w, h, shape, spacing, origin, int64, first_rays if ti == 0 else None, flip
+                q,
+                p0,
+                n,
+                cam,
+                w,
+                h,
+                shape,
+                spacing,
+                origin,
+                int64,
+                first_rays if ti == 0 else None,
+                flip,
+                n_enter if ti == 0 else None,
             )
             first_rays = None
             n_active = n_enter
@@ -647,8 +669,6 @@ class IsoRenderer:
         fine, coarse = self.grids.fine, self.grids.coarse
         assert isinstance(fine, cla.Array) and isinstance(coarse, cla.Array)  # built with host=False
         n_items = n_active * n_spec
-        cnt = runtime.empty(q, 1, np.uint32, "active count")
-        cnt.set(np.array([n_active], np.uint32), queue=q)
         cand_block = runtime.empty(q, n_items, np.uint32, "candidate blocks")
         cand_t = runtime.empty(q, n_items, np.float32, "candidate t")
         macro_traverse(
@@ -662,7 +682,7 @@ class IsoRenderer:
             fine,
             coarse,
             active,
-            cnt,
+            t.count,
             n_active,
             t.ray_t,
             n_spec,
@@ -681,7 +701,9 @@ class IsoRenderer:
         if t.hitkey is not None:
             runtime.fill(q, t.hitkey, np.uint64(0xFFFFFFFFFFFFFFFF))
         ngroups = 0
-        pass_arrays = [cnt, cand_block, cand_t, valid, item_ids, item_hit, item_t, item_rgba, item_depth]
+        # the next pass's active count (compact writes it: no pass writes a count)
+        count = runtime.empty(q, 1, np.uint32, "active count")
+        pass_arrays = [count, cand_block, cand_t, valid, item_ids, item_hit, item_t, item_rgba, item_depth]
         if m:
             keys = runtime.empty(q, m, np.uint32, "item blocks")
             self._launch(
@@ -693,7 +715,8 @@ class IsoRenderer:
                 *t.order,
                 keys.base_data,
             )
-            skeys, sitems = radix_sort(keys, item_ids, key_bits=t.key_bits, queue=q)
+            # the keys are item_keys' view keys, below 2^key_bits by construction: no check read
+            skeys, sitems = radix_sort(keys, item_ids, key_bits=t.key_bits, check=False, queue=q)
             heads = runtime.empty(q, m, np.uint8, "group heads")
             self._launch("group_heads", m, skeys.base_data, np.uint32(m), heads.base_data)
             starts = compact_indices(heads, queue=q)
@@ -753,7 +776,8 @@ class IsoRenderer:
             t.depth.base_data,
             still.base_data,
         )
-        t.active = compact(active, still[:n_active], queue=q)
+        active_out, count = compact(active, still[:n_active], count=count, queue=q)
+        t.active, t.count = active_out[: int(count.get()[0])], count
         return m, ngroups, decoded, runtime.nbytes(*pass_arrays)
 
     def _launch(self, name, n, *args):

@@ -46,9 +46,15 @@ def sort_key(keys: npt.ArrayLike) -> np.ndarray:
 
 
 def radix_sort(
-    keys: npt.ArrayLike, values: npt.ArrayLike | None = None, *, key_bits: int | None = None
+    keys: npt.ArrayLike,
+    values: npt.ArrayLike | None = None,
+    *,
+    key_bits: int | None = None,
+    check: bool = True,
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-    """Stable sort by sort_key (key_bits: by the low key_bits bits only)."""
+    """Stable sort by sort_key (key_bits: by the low key_bits bits only; check:
+    the device's range check, which does not change a sort whose keys keep the
+    promise)."""
     keys = np.asarray(keys)
     k = sort_key(keys)
     if key_bits is not None:

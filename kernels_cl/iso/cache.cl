@@ -36,21 +36,26 @@
  *     missing[b] = needed[b] != 0 && slot_of_block[b] < 0, for b < nblocks.
  *
  * kernel cache_slot_flags(global const uint *block_of_slot, global const NEEDED_T *needed,
- *                         uint capacity, global uchar *free_flags, global uchar *cand_flags)
+ *                         uint capacity, uint age, global uchar *free_flags,
+ *                         global uchar *cand_flags, global uint *ages)
  *     For s < capacity: free_flags[s] = slot s is free; cand_flags[s] = slot s
  *     may take a new block this pass (free, or its block is not needed).
- *
- * kernel cache_age(global const uint *block_of_slot, global const NEEDED_T *needed,
- *                  uint capacity, global uint *ages)
- *     For every occupied slot s: ages[s] = 0 if its block is needed, else
- *     min(ages[s] + 1, CACHE_AGE_MAX). Free slots are not touched.
+ *     age != 0: the pass's ageing too, in the same launch: every occupied slot
+ *     s gets ages[s] = 0 if its block is needed, else min(ages[s] + 1,
+ *     CACHE_AGE_MAX); free slots are not touched (age == 0: ages untouched;
+ *     the host ages once a pass, so the flags of a grown cache are made with
+ *     age = 0).
  *
  * kernel cache_candidate_keys(global const uint *cand_slots, uint count,
  *                             global const uint *block_of_slot, global const uint *ages,
- *                             global uint *keys)
- *     keys[j] = 0 for a free slot cand_slots[j], else 0xFFFFFFFF - ages[slot]
- *     (>= 1): ascending keys = free slots first, then the oldest. The host
- *     sorts (stably, candidates in slot order) so ties go by slot index.
+ *                             uint top, global uint *keys)
+ *     keys[j] = 0 for a free slot cand_slots[j], else top - ages[slot] (>= 1:
+ *     the host passes top > every age, top <= 0xFFFFFFFF): ascending keys =
+ *     free slots first, then the oldest. The host sorts (stably, candidates
+ *     in slot order) so ties go by slot index. The order is that of the keys
+ *     0xFFFFFFFF - age for every such top; a small top (the host's bound of
+ *     the ages: the passes the cache has seen) keeps the keys below
+ *     2^bits(top), so the sort runs fewer digit passes.
  *
  * kernel cache_assign(global const uint *ids, global const uint *slots, uint count,
  *                     global uint *block_of_slot, global int *slot_of_block,
@@ -106,39 +111,32 @@ kernel void cache_missing(global const NEEDED_T *needed, global const int *slot_
 }
 
 kernel void cache_slot_flags(global const uint *block_of_slot, global const NEEDED_T *needed,
-                             uint capacity, global uchar *free_flags, global uchar *cand_flags)
+                             uint capacity, uint age, global uchar *free_flags,
+                             global uchar *cand_flags, global uint *ages)
 {
     uint s = get_global_id(0);
     if (s >= capacity)
         return;
     uint b = block_of_slot[s];
     uchar is_free = b == CACHE_FREE;
+    uchar held = !is_free && needed[b] != (NEEDED_T)0;
     free_flags[s] = is_free;
-    cand_flags[s] = (uchar)(is_free || needed[b] == (NEEDED_T)0);
-}
-
-kernel void cache_age(global const uint *block_of_slot, global const NEEDED_T *needed,
-                      uint capacity, global uint *ages)
-{
-    uint s = get_global_id(0);
-    if (s >= capacity)
-        return;
-    uint b = block_of_slot[s];
-    if (b == CACHE_FREE)
-        return;
-    uint a = ages[s];
-    ages[s] = needed[b] != (NEEDED_T)0 ? 0u : (a >= CACHE_AGE_MAX ? CACHE_AGE_MAX : a + 1u);
+    cand_flags[s] = (uchar)!held;
+    if (age != 0u && !is_free) {
+        uint a = ages[s];
+        ages[s] = held ? 0u : (a >= CACHE_AGE_MAX ? CACHE_AGE_MAX : a + 1u);
+    }
 }
 
 kernel void cache_candidate_keys(global const uint *cand_slots, uint count,
                                  global const uint *block_of_slot, global const uint *ages,
-                                 global uint *keys)
+                                 uint top, global uint *keys)
 {
     uint j = get_global_id(0);
     if (j >= count)
         return;
     uint s = cand_slots[j];
-    keys[j] = block_of_slot[s] == CACHE_FREE ? 0u : 0xFFFFFFFFu - ages[s];
+    keys[j] = block_of_slot[s] == CACHE_FREE ? 0u : top - ages[s];
 }
 
 kernel void cache_assign(global const uint *ids, global const uint *slots, uint count,

@@ -147,7 +147,7 @@ def test_age_saturation_ties(queue):
     f[:4] = 1
     cache.update(f), model.update(f)
     ages = np.array([ref.AGE_MAX - 1, ref.AGE_MAX, 7, ref.AGE_MAX - 1], np.uint32)
-    cache.ages.set(ages, queue=queue)
+    cache.set_ages(ages)
     model.ages = ages.copy()
     for ids in ([10], [11], [12]):
         f = np.zeros(zv.nblocks, np.uint8)
@@ -156,6 +156,48 @@ def test_age_saturation_ties(queue):
         _check(cache, model, f)
     # all of 0, 1, 3 were saturated at AGE_MAX, so they went in slot order
     assert list(model.block_of_slot) == [10, 11, 2, 12]
+
+
+def test_ages_past_one_digit(queue):
+    """Over 300 passes the ages pass 255, so the LRU sort's keys (cache.cl's
+    top - age) need two 8-bit digits; the eviction order stays the model's
+    (a sort on the low 8 bits only would take slot 2 before slot 1)."""
+    zv = _zv((9, 10, 11))
+    cache, model = BlockCache(zv, 4, queue=queue), ref.BlockCache(zv.nblocks, 4)
+
+    def run(ids):
+        f = np.zeros(zv.nblocks, np.uint8)
+        f[ids] = 1
+        assert cache.update(f) == model.update(f)
+
+    run([0, 1, 2, 3])
+    for i in range(300):
+        run([1, 2] if i == 45 else [2, 3] if i == 250 else [2])
+    np.testing.assert_array_equal(cache.get_state()["ages"], [300, 254, 0, 49])
+    run([10, 11, 12])  # ages 301, 255, 1, 50: keys 2, 48, 302, 253 under top 303
+    _check(cache, model)
+    assert list(model.block_of_slot) == [10, 11, 2, 12]
+    assert cache.evicted_last == 3
+
+
+def test_shared_stream(queue):
+    """stream=: a new cache decodes from another's device stream (no upload)
+    and fills the same bricks; a stream of another volume or dtype is refused."""
+    zv = _zv((9, 10, 11))
+    first = BlockCache(zv, 4, queue=queue)
+    cache = BlockCache(zv, 4, queue=queue, stream=first.stream)
+    assert cache.stream is first.stream
+    f = np.zeros(zv.nblocks, np.uint8)
+    f[[0, 5, 26]] = 1
+    cache.update(f)
+    _check_bricks(cache, cache.get_state())
+    other = _zv((13, 8, 21)).to_device(queue)
+    with pytest.raises(ValueError, match="stream: expected the volume's"):
+        BlockCache(zv, 4, queue=queue, stream=other)
+    with pytest.raises(ValueError, match="stream: expected the volume's"):
+        BlockCache(zv, 4, queue=queue, stream=first.stream.view(np.int64))
+    with pytest.raises(TypeError, match="stream: expected a device array"):
+        BlockCache(zv, 4, queue=queue, stream=np.frombuffer(zv.stream, "<u8"))
 
 
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint32])

@@ -265,7 +265,10 @@ def test_configure_between_passes(queue, int64):
     with runtime.configure(int64_atomics=int64):
         r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
     want = r.render(_cam(), W, H, 0.5)
+    stream = r.cache.stream
     r.reset_cache()
+    # a cold cache over the same device stream (no re-upload of the volume)
+    assert r.cache.stream is stream and r.cache.occupied == r.cache.decoded_total == 0
     images = []
     saved = runtime.options()
     try:

@@ -249,6 +249,45 @@ def test_key_bits_violation(queue):
     )
 
 
+@pytest.mark.parametrize("n", [1, 5000, 70_001])
+def test_key_bits_unchecked(queue, monkeypatch, n):
+    """check=False: device keys that keep the promise sort as with the check,
+    and nothing is read back (the check's read is what it leaves out); a key
+    outside the promise is not detected and the pairs come back permuted."""
+    import pyopencl as cl
+
+    rng = np.random.default_rng(n)
+    keys = rng.integers(0, 1 << 18, n, dtype=np.uint32)
+    vals = np.arange(n, dtype=np.uint32)
+    kd, vd = cla.to_device(queue, keys), cla.to_device(queue, vals)
+    queue.finish()
+    reads = []
+    copy = cl.enqueue_copy
+
+    def counting(q, dst, src, **kw):
+        if isinstance(dst, np.ndarray):
+            reads.append(dst.nbytes)
+        return copy(q, dst, src, **kw)
+
+    monkeypatch.setattr(cl, "enqueue_copy", counting)
+    gk, gv = clvis.radix_sort(kd, vd, key_bits=18, check=False, queue=queue)
+    assert reads == []
+    monkeypatch.setattr(cl, "enqueue_copy", copy)
+    wk, wv = ref.radix_sort(keys, vals, key_bits=18, check=False)
+    np.testing.assert_array_equal(gk.get(), wk)
+    np.testing.assert_array_equal(gv.get(), wv)
+    # with the check, the same sort reads the key check back
+    monkeypatch.setattr(cl, "enqueue_copy", counting)
+    clvis.radix_sort(kd, vd, key_bits=18, queue=queue)
+    monkeypatch.setattr(cl, "enqueue_copy", copy)
+    assert reads
+    bad = keys.copy()
+    bad[n // 2] = 1 << 20
+    gk, gv = clvis.radix_sort(bad, vals, key_bits=18, check=False, queue=queue)
+    np.testing.assert_array_equal(np.sort(gv), vals)
+    np.testing.assert_array_equal(gk, bad[gv])
+
+
 def test_values_dtypes(queue):
     rng = np.random.default_rng(8)
     keys = rng.integers(0, 100, 9999).astype(np.uint32)

@@ -13,7 +13,8 @@ tie rules as the device):
    occupied slot age + 1 (saturating at AGE_MAX); free slots stay 0.
 4. the candidates in slot order are sorted stably by key (0 for a free slot,
    0xFFFFFFFF - age for an occupied one): free slots first by index, then the
-   least recently used (largest age) first, ties by slot index. The first m
+   least recently used (largest age) first, ties by slot index (the device
+   sorts top - age under a bound top of the ages: the same order). The first m
    take the missing blocks: missing[j] goes to slot order[j]; a previous
    block there is evicted (slot_of_block = -1). New blocks get age 0.
 5. the new blocks are decoded into their slots (the device does it; this

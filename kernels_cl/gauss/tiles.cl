@@ -498,7 +498,7 @@ inline ulong transpose8x8(ulong x)
     return x ^ t ^ (t << 28);
 }
 
-/* the lowest set bit's index of b (1 <= b < 2^24), without a call */
+/* the lowest set bit's index of b (b != 0), without a call */
 inline uint low_bit(uint b)
 {
     return (as_uint((float)(b & (0u - b))) >> 23) - 127u;
@@ -540,7 +540,7 @@ inline uint low_bit(uint b)
         }                                                                                             \
     } while (0)
 
-/* tile_render8 walks the candidates in chunks of up to 8 that hit a live
+/* tile_render8 walks the candidates in chunks of up to 16 that hit a live
  * lane: their hit tests and alphas in float8 lanes (kept per chunk slot),
  * then lane by lane, the lane's state in registers: its hits of the chunk
  * (sorted by rank, the keys differ) merged into its pending window from the
@@ -568,14 +568,14 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
     uint hits[8], nround[8];
     bool done[8], over[8];
     int kn[8], hd[8];
-    /* pending: pk[hd .. hd + kn - 1], key ascending, [hd] the smallest (hits
-     * come nearly in key order: the largest is appended without a shift) */
+    /* pending: pk[hd .. hd + kn - 1], key ascending, [hd] the smallest (the
+     * window moves back to 0 when it reaches the end) */
     ulong pk[8][KP], pv[8][KP];
-    ulong NK[8], NV[8], SK[8], SV[8];   /* a lane's hits of the chunk; sorted */
+    ulong NK[16], NV[16], SK[16], SV[16];   /* a lane's hits of the chunk; sorted */
     float lox[8], loy[8], loz[8], ldx[8], ldy[8], ldz[8];
     /* the chunk: per slot the candidate's t and alpha per lane, its id and tf entry */
-    float ct[8 * 8], ca[8 * 8];
-    uint cid[8], cti[8];
+    float ct[16 * 8], ca[16 * 8];
+    uint cid[16], cti[16];
     uint2 range = ranges[tile];
     int live = 0;
     uint donem = 0;   /* bit l: lane l done */
@@ -606,7 +606,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
             nround[l] += !done[l];
         }
         int nc = 0;
-        ulong chm = 0;   /* byte s: the lanes slot s hits */
+        ulong chm = 0, chm1 = 0;   /* byte s of slots 0-7 / 8-15: the lanes slot s hits */
         for (uint i = range.x; i < range.y; ++i) {
             uint j = ids[i];
             global const clvis_gaussian *g = keyrecs + i;
@@ -642,19 +642,22 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                 CLVIS_IL_VSTORE8(alpha8, ca + 8 * nc);
                 cid[nc] = order[j];
                 cti[nc] = ti;
-                chm |= (ulong)hm << (8 * nc);
+                if (nc < 8)
+                    chm |= (ulong)hm << (8 * nc);
+                else
+                    chm1 |= (ulong)hm << (8 * (nc - 8));
                 ++nc;
             }
             bool more = i + 1 < range.y;
-            if (nc < 8 && more)
+            if (nc < 16 && more)
                 continue;
             if (nc == 0)
                 break;
             /* the chunk, lane by lane */
             float dmn = more ? as_float(clvis_key_f32_inverse((uint)keys[i + 1])) : 0.0f;
-            ulong lbits = transpose8x8(chm);
+            ulong lbits = transpose8x8(chm), lbits1 = transpose8x8(chm1);
             for (int l = 0; l < 8; ++l) {
-                uint lb = (uint)(lbits >> (8 * l)) & 0xFFu;
+                uint lb = ((uint)(lbits >> (8 * l)) & 0xFFu) | ((uint)(lbits1 >> (8 * l)) & 0xFFu) << 8;
                 if (lb == 0 && !(more && front[l] < dmn))
                     continue;
                 if (done[l])
@@ -755,6 +758,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
             }
             nc = 0;
             chm = 0;
+            chm1 = 0;
             if (live == 0)
                 break;
         }

@@ -67,7 +67,10 @@
  *     8). Global size: (tiles to render) * TS * TS / 8, work-item i: tile
  *     tile0 + i / (TS * TS / 8), row (i % (TS * TS / 8)) / (TS / 8), pixels
  *     8 * (i % (TS / 8)) .. + 7 of that row; any local size dividing
- *     TS * TS / 8.
+ *     TS * TS / 8. It flushes a lane's pending hits once a chunk of up to 16
+ *     candidates (see below): the same composited hits in the same order as
+ *     a flush per candidate, but with more than KP hits pending its rounds
+ *     can differ from tile_render's.
  *
  * Footprint (tile_footprint): the Gaussian's cutoff ellipsoid, inflated by
  * 1.01 (as the BVH boxes of gaussians.cl), projected exactly: when it lies in

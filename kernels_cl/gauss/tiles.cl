@@ -124,7 +124,7 @@ typedef struct {
 
 inline float absrow4(global const float *r, float x, float y, float z)
 {
-    return ((fabs(r[0] * x) + fabs(r[1] * y)) + fabs(r[2] * z)) + fabs(r[3]);
+    return ((clvis_il_fabs(r[0] * x) + clvis_il_fabs(r[1] * y)) + clvis_il_fabs(r[2] * z)) + clvis_il_fabs(r[3]);
 }
 
 /* The footprint of record g; returns 0 when it touches no pixel. */
@@ -244,24 +244,24 @@ inline float tile_depth(const tile_footprint *f, float m3, float fsf, float c, f
 {
     if (!(f->dmin > near))
         return f->dmin;
-    float us[2] = {(float)(tx * TS) + 0.5f, (float)min((tx + 1) * TS, (int)W) - 0.5f};
-    float vs[2] = {(float)(ty * TS) + 0.5f, (float)min((ty + 1) * TS, (int)H) - 0.5f};
+    float us[2] = {(float)(tx * TS) + 0.5f, (float)clvis_il_imin((tx + 1) * TS, (int)W) - 0.5f};
+    float vs[2] = {(float)(ty * TS) + 0.5f, (float)clvis_il_imin((ty + 1) * TS, (int)H) - 0.5f};
     float qmax = 0.0f, fmin2 = INFINITY, fdlo = INFINITY, fdhi = -INFINITY;
     for (int k = 0; k < 4; ++k) {
         float u = us[k & 1], v = vs[k >> 1];
         float x0 = (a0[0] + u * au[0]) + v * av[0];
         float x1 = (a0[1] + u * au[1]) + v * av[1];
         float x2 = (a0[2] + u * au[2]) + v * av[2];
-        qmax = fmax(qmax, clvis_dot3(x0, x1, x2, x0, x1, x2));
+        qmax = clvis_il_fmax(qmax, clvis_dot3(x0, x1, x2, x0, x1, x2));
         float fd = (fd0 + u * fdu) + v * fdv;
-        fdlo = fmin(fdlo, fd);
-        fdhi = fmax(fdhi, fd);
-        fmin2 = fmin(fmin2, fd * fd);
+        fdlo = clvis_il_fmin(fdlo, fd);
+        fdhi = clvis_il_fmax(fdhi, fd);
+        fmin2 = clvis_il_fmin(fmin2, fd * fd);
     }
     float h = (fdlo > 0.0f || fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : 0.0f;
-    float g = fmax(fsf - h, 0.0f) + 1e-5f * fsf;
+    float g = clvis_il_fmax(fsf - h, 0.0f) + 1e-5f * fsf;
     float lo = (m3 - c * sqrt(g)) - sd;
-    return clvis_il_isfinite(lo) ? fmax(lo, f->dmin) : f->dmin;
+    return clvis_il_isfinite(lo) ? clvis_il_fmax(lo, f->dmin) : f->dmin;
 }
 
 kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const float *proj, float near,

@@ -67,7 +67,10 @@
  *     8). Global size: (tiles to render) * TS * TS / 8, work-item i: tile
  *     tile0 + i / (TS * TS / 8), row (i % (TS * TS / 8)) / (TS / 8), pixels
  *     8 * (i % (TS / 8)) .. + 7 of that row; any local size dividing
- *     TS * TS / 8.
+ *     TS * TS / 8. It flushes a lane's pending hits once a chunk of up to 16
+ *     candidates (see below): the same composited hits in the same order as
+ *     a flush per candidate, but with more than KP hits pending its rounds
+ *     can differ from tile_render's.
  *
  * Footprint (tile_footprint): the Gaussian's cutoff ellipsoid, inflated by
  * 1.01 (as the BVH boxes of gaussians.cl), projected exactly: when it lies in
@@ -121,7 +124,7 @@ typedef struct {
 
 inline float absrow4(global const float *r, float x, float y, float z)
 {
-    return ((fabs(r[0] * x) + fabs(r[1] * y)) + fabs(r[2] * z)) + fabs(r[3]);
+    return ((clvis_il_fabs(r[0] * x) + clvis_il_fabs(r[1] * y)) + clvis_il_fabs(r[2] * z)) + clvis_il_fabs(r[3]);
 }
 
 /* The footprint of record g; returns 0 when it touches no pixel. */
@@ -241,24 +244,24 @@ inline float tile_depth(const tile_footprint *f, float m3, float fsf, float c, f
 {
     if (!(f->dmin > near))
         return f->dmin;
-    float us[2] = {(float)(tx * TS) + 0.5f, (float)min((tx + 1) * TS, (int)W) - 0.5f};
-    float vs[2] = {(float)(ty * TS) + 0.5f, (float)min((ty + 1) * TS, (int)H) - 0.5f};
+    float us[2] = {(float)(tx * TS) + 0.5f, (float)clvis_il_imin((tx + 1) * TS, (int)W) - 0.5f};
+    float vs[2] = {(float)(ty * TS) + 0.5f, (float)clvis_il_imin((ty + 1) * TS, (int)H) - 0.5f};
     float qmax = 0.0f, fmin2 = INFINITY, fdlo = INFINITY, fdhi = -INFINITY;
     for (int k = 0; k < 4; ++k) {
         float u = us[k & 1], v = vs[k >> 1];
         float x0 = (a0[0] + u * au[0]) + v * av[0];
         float x1 = (a0[1] + u * au[1]) + v * av[1];
         float x2 = (a0[2] + u * au[2]) + v * av[2];
-        qmax = fmax(qmax, clvis_dot3(x0, x1, x2, x0, x1, x2));
+        qmax = clvis_il_fmax(qmax, clvis_dot3(x0, x1, x2, x0, x1, x2));
         float fd = (fd0 + u * fdu) + v * fdv;
-        fdlo = fmin(fdlo, fd);
-        fdhi = fmax(fdhi, fd);
-        fmin2 = fmin(fmin2, fd * fd);
+        fdlo = clvis_il_fmin(fdlo, fd);
+        fdhi = clvis_il_fmax(fdhi, fd);
+        fmin2 = clvis_il_fmin(fmin2, fd * fd);
     }
     float h = (fdlo > 0.0f || fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : 0.0f;
-    float g = fmax(fsf - h, 0.0f) + 1e-5f * fsf;
+    float g = clvis_il_fmax(fsf - h, 0.0f) + 1e-5f * fsf;
     float lo = (m3 - c * sqrt(g)) - sd;
-    return clvis_il_isfinite(lo) ? fmax(lo, f->dmin) : f->dmin;
+    return clvis_il_isfinite(lo) ? clvis_il_fmax(lo, f->dmin) : f->dmin;
 }
 
 kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
@@ -478,33 +481,78 @@ inline float pend_t(ulong k)
     return as_float((uint)(k >> 32));
 }
 
-/* lane l: composite its smallest pending hit */
-#define POP_LANE(l)                                                                                   \
+/* the lane's 8 bits of the int8 comparison v (lane l: bit l) */
+inline uint lane_bits8(int8 v)
+{
+    int8 b = v & (int8)(1, 2, 4, 8, 16, 32, 64, 128);
+    int4 a = b.lo | b.hi;
+    int2 c = a.lo | a.hi;
+    return (uint)(c.x | c.y);
+}
+
+/* the 8 x 8 bit matrix x (byte s, bit l) transposed (byte l, bit s) */
+inline ulong transpose8x8(ulong x)
+{
+    ulong t = (x ^ (x >> 7)) & 0x00AA00AA00AA00AAul;
+    x = x ^ t ^ (t << 7);
+    t = (x ^ (x >> 14)) & 0x0000CCCC0000CCCCul;
+    x = x ^ t ^ (t << 14);
+    t = (x ^ (x >> 28)) & 0x00000000F0F0F0F0ul;
+    return x ^ t ^ (t << 28);
+}
+
+/* the lowest set bit's index of b (b != 0), without a call */
+inline uint low_bit(uint b)
+{
+    return (as_uint((float)(b & (0u - b))) >> 23) - 127u;
+}
+
+/* the lane's smallest pending hit composited (lane state in L_* scalars) */
+#define POP_L()                                                                                       \
     do {                                                                                              \
-        int q_ = hd[l]++;                                                                             \
-        --kn[l];                                                                                      \
-        ulong k_ = pk[l][q_], v_ = pv[l][q_];                                                         \
-        float t_ = pend_t(k_);                                                                        \
+        int q_ = L_hd++;                                                                              \
+        --L_kn;                                                                                       \
+        ulong k_ = PK[q_], v_ = PV[q_];                                                               \
         clvis_gauss_composite(as_float((uint)(v_ >> 32)), hit_color(tf, (uint)v_, colors, (uint)k_),  \
-                              &T[l], &cr[l], &cg[l], &cb[l]);                                         \
-        ++hits[l];                                                                                    \
-        last[l] = k_;                                                                                 \
-        if (T[l] < 0.5f && z[l] == INFINITY)                                                          \
-            z[l] = clvis_ray_depth(cam, o[l], d[l], t_);                                              \
-        if (T[l] < T_STOP)                                                                            \
-            done[l] = true;                                                                           \
+                              &L_T, &L_cr, &L_cg, &L_cb);                                             \
+        ++L_hits;                                                                                     \
+        L_last = k_;                                                                                  \
+        if (L_T < 0.5f && L_z == INFINITY)                                                            \
+            L_z = clvis_ray_depth(cam, o[l], d[l], pend_t(k_));                                       \
+        if (L_T < T_STOP)                                                                             \
+            L_done = true;                                                                            \
     } while (0)
 
-/* lane l's flush threshold: the depth of its smallest pending hit, plus slack */
-#define FRONT_LANE(l)                                                                                 \
+/* the lane's flush threshold: the depth of its smallest pending hit, plus slack */
+#define FRONT_L()                                                                                     \
     do {                                                                                              \
-        if (kn[l] > 0 && cd[l] > 0.0f) {                                                              \
-            float h_ = pend_t(pk[l][hd[l]]) * cd[l];                                                  \
-            front[l] = (h_ + d0[l]) + 1e-5f * (clvis_il_fabs(h_) + ad0[l]);                              \
+        if (L_kn > 0 && L_cd > 0.0f) {                                                                \
+            float h_ = pend_t(PK[L_hd]) * L_cd;                                                       \
+            L_front = (h_ + L_d0) + 1e-5f * (clvis_il_fabs(h_) + L_ad0);                              \
         } else                                                                                        \
-            front[l] = INFINITY;                                                                      \
+            L_front = INFINITY;                                                                       \
     } while (0)
 
+/* composite the lane's pending hits below dm (march.cl's order: every later
+ * candidate's hits lie at depth >= dm) */
+#define FLUSH_L(dm)                                                                                   \
+    do {                                                                                              \
+        while (L_front < (dm) && !L_done) {                                                           \
+            POP_L();                                                                                  \
+            FRONT_L();                                                                                \
+        }                                                                                             \
+    } while (0)
+
+/* tile_render8 walks the candidates in chunks of up to 16 that hit a live
+ * lane: their hit tests and alphas in float8 lanes (kept per chunk slot),
+ * then lane by lane, the lane's state in registers: its hits of the chunk
+ * (sorted by rank, the keys differ) merged into its pending window from the
+ * end (a few pending hits move: hits come nearly in key order), then the
+ * flush for the next candidate's key. A lane composites the same hits in
+ * the same order as with a flush before each candidate: every hit of a
+ * candidate lies at depth >= its key, and the keys ascend, so a flush put
+ * off past the chunk's insertions composites the same key-order prefix.
+ * (Only the rounds can differ, when more than KP hits are pending.) */
 kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint *order, global const ulong *keys,
                         global const uint *ids,
                          global const uint2 *ranges, global const float *cam, uint W, uint H, uint ty0,
@@ -521,14 +569,19 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
     float T[8], cr[8], cg[8], cb[8], z[8], front[8];
     ulong last[8], ceil_k[8];   /* the last key composited; the round's ceiling */
     uint hits[8], nround[8];
-    bool done[8], over[8], gone[8];   /* gone: done and taken off live */
+    bool done[8], over[8];
     int kn[8], hd[8];
-    /* pending: pk[hd .. hd + kn - 1], key ascending, [hd] the smallest (hits
-     * come nearly in key order: the largest is appended without a shift) */
+    /* pending: pk[hd .. hd + kn - 1], key ascending, [hd] the smallest (the
+     * window moves back to 0 when it reaches the end) */
     ulong pk[8][KP], pv[8][KP];
+    ulong NK[16], NV[16], SK[16], SV[16];   /* a lane's hits of the chunk; sorted */
     float lox[8], loy[8], loz[8], ldx[8], ldy[8], ldz[8];
+    /* the chunk: per slot the candidate's t and alpha per lane, its id and tf entry */
+    float ct[16 * 8], ca[16 * 8];
+    uint cid[16], cti[16];
     uint2 range = ranges[tile];
     int live = 0;
+    uint donem = 0;   /* bit l: lane l done */
     for (int l = 0; l < 8; ++l) {
         uint px = min(px0 + l, W - 1);
         clvis_camera_ray(cam, px, py, o[l], d[l]);
@@ -539,11 +592,12 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
         ldx[l] = d[l][0]; ldy[l] = d[l][1]; ldz[l] = d[l][2];
         T[l] = 1.0f; cr[l] = cg[l] = cb[l] = 0.0f; z[l] = INFINITY;
         hits[l] = 0; nround[l] = 0;
-        done[l] = gone[l] = px0 + l >= W || range.x >= range.y;
+        done[l] = px0 + l >= W || range.x >= range.y;
         live += !done[l];
+        donem |= (uint)done[l] << l;
     }
-    float8 ox = vload8(0, lox), oy = vload8(0, loy), oz = vload8(0, loz);
-    float8 dx = vload8(0, ldx), dy = vload8(0, ldy), dz = vload8(0, ldz);
+    float8 ox = CLVIS_IL_VLOAD8(float8, lox), oy = CLVIS_IL_VLOAD8(float8, loy), oz = CLVIS_IL_VLOAD8(float8, loz);
+    float8 dx = CLVIS_IL_VLOAD8(float8, ldx), dy = CLVIS_IL_VLOAD8(float8, ldy), dz = CLVIS_IL_VLOAD8(float8, ldz);
     bool first = true;   /* round 1: every hit is beyond "last" */
     while (live > 0) {
         for (int l = 0; l < 8; ++l) {
@@ -554,25 +608,9 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
             front[l] = INFINITY;
             nround[l] += !done[l];
         }
-        for (uint i = range.x; i < range.y && live > 0; ++i) {
-            float dm = as_float(clvis_key_f32_inverse((uint)keys[i]));
-            if (clvis_il_any8(vload8(0, front) < dm)) {
-                for (int l = 0; l < 8; ++l) {
-                    if (!(front[l] < dm))
-                        continue;
-                    while (front[l] < dm && !done[l]) {
-                        POP_LANE(l);
-                        FRONT_LANE(l);
-                    }
-                    if (done[l] && !gone[l]) {
-                        gone[l] = true;
-                        front[l] = INFINITY;
-                        --live;
-                    }
-                }
-                if (live == 0)
-                    break;
-            }
+        int nc = 0;
+        ulong chm = 0, chm1 = 0;   /* byte s of slots 0-7 / 8-15: the lanes slot s hits */
+        for (uint i = range.x; i < range.y; ++i) {
             uint j = ids[i];
             global const clvis_gaussian *g = keyrecs + i;
             /* clvis_gauss_hit on 8 rays */
@@ -589,74 +627,161 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
             float8 t8 = ts8 > 0.0f ? ts8 : 0.0f;   /* fmax(ts8, 0) (a NaN gives 0), without a call */
             float8 p0 = op0 + t8 * dp0, p1 = op1 + t8 * dp1, p2 = op2 + t8 * dp2;
             float8 m28 = (p0 * p0 + p1 * p1) + p2 * p2;
-            int8 hit = m28 <= cutoff2;
-            if (!clvis_il_any8(hit))
-                continue;
-            /* one transfer-function entry a candidate; the 8 lanes' alphas in
-             * float8 (one exp for the row: PoCL calls exp out of line), the
-             * scalar functions' operations lane by lane (gauss.h's
-             * clvis_gauss_alpha_*8; the vector exp/erfc may differ from the
-             * scalar ones in the last bit) */
-            uint id = order[j];
-            uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
-            float opac = g->opacity * tf[ti].w;
+            uint hm = lane_bits8(m28 <= cutoff2) & ~donem;
+            if (hm != 0) {
+                /* one transfer-function entry a candidate; the 8 lanes' alphas in
+                 * float8 (one exp for the row: PoCL calls exp out of line), the
+                 * scalar functions' operations lane by lane (gauss.h's
+                 * clvis_gauss_alpha_*8; the vector exp/erfc may differ from the
+                 * scalar ones in the last bit) */
+                uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
+                float opac = g->opacity * tf[ti].w;
 #if MODEL == 1
-            float8 alpha8 = clvis_gauss_alpha_absorption8(opac, density, ts8, a8, op0, op1, op2, dp0, dp1, dp2);
+                float8 alpha8 = clvis_gauss_alpha_absorption8(opac, density, ts8, a8, op0, op1, op2, dp0, dp1, dp2);
 #else
-            float8 alpha8 = clvis_gauss_alpha_max_response8(opac, m28);
+                float8 alpha8 = clvis_gauss_alpha_max_response8(opac, m28);
 #endif
-            float lt[8], lal[8];
-            int lh[8];
-            vstore8(t8, 0, lt);
-            vstore8(alpha8, 0, lal);
-            vstore8(hit, 0, lh);
-            for (int l = 0; l < 8; ++l) {
-                if (!lh[l] || done[l])
-                    continue;
-                ulong k = pend_key(lt[l], id);
-                if (!first && k <= last[l])
-                    continue;   /* composited in an earlier round */
-                if (k >= ceil_k[l])
-                    continue;   /* beyond the round's ceiling */
-                if (kn[l] == KP) {   /* then hd[l] == 0 */
-                    over[l] = true;
-                    if (pk[l][KP - 1] < k) {
-                        ceil_k[l] = k;   /* the new hit is the largest: drop it */
-                        continue;
-                    }
-                    ceil_k[l] = pk[l][KP - 1];   /* drop the largest pending hit */
-                    kn[l] = KP - 1;
-                }
-                if (hd[l] + kn[l] == KP) {   /* at the end: move the window to 0 */
-                    for (int q = 0; q < kn[l]; ++q) {
-                        pk[l][q] = pk[l][hd[l] + q];
-                        pv[l][q] = pv[l][hd[l] + q];
-                    }
-                    hd[l] = 0;
-                }
-                ulong v = (ulong)as_uint(lal[l]) << 32 | ti;
-                int pos = hd[l] + kn[l]++;
-                while (pos > hd[l] && pk[l][pos - 1] > k) {
-                    pk[l][pos] = pk[l][pos - 1];
-                    pv[l][pos] = pv[l][pos - 1];
-                    --pos;
-                }
-                pk[l][pos] = k;
-                pv[l][pos] = v;
-                if (pos == hd[l])
-                    FRONT_LANE(l);
+                CLVIS_IL_VSTORE8(t8, ct + 8 * nc);
+                CLVIS_IL_VSTORE8(alpha8, ca + 8 * nc);
+                cid[nc] = order[j];
+                cti[nc] = ti;
+                if (nc < 8)
+                    chm |= (ulong)hm << (8 * nc);
+                else
+                    chm1 |= (ulong)hm << (8 * (nc - 8));
+                ++nc;
             }
+            bool more = i + 1 < range.y;
+            if (nc < 16 && more)
+                continue;
+            if (nc == 0)
+                break;
+            /* the chunk, lane by lane */
+            float dmn = more ? as_float(clvis_key_f32_inverse((uint)keys[i + 1])) : 0.0f;
+            ulong lbits = transpose8x8(chm), lbits1 = transpose8x8(chm1);
+            for (int l = 0; l < 8; ++l) {
+                uint lb = ((uint)(lbits >> (8 * l)) & 0xFFu) | ((uint)(lbits1 >> (8 * l)) & 0xFFu) << 8;
+                if (lb == 0 && !(more && front[l] < dmn))
+                    continue;
+                if (done[l])
+                    continue;
+                private ulong *PK = pk[l], *PV = pv[l];
+                float L_T = T[l], L_cr = cr[l], L_cg = cg[l], L_cb = cb[l], L_z = z[l], L_front = front[l];
+                float L_cd = cd[l], L_d0 = d0[l], L_ad0 = ad0[l];
+                ulong L_last = last[l], L_ceil = ceil_k[l];
+                uint L_hits = hits[l];
+                bool L_done = false, L_over = over[l];
+                int L_kn = kn[l], L_hd = hd[l];
+                /* the lane's hits of the chunk beyond "last" and below the
+                 * ceiling, in chunk order */
+                int m = 0;
+                while (lb != 0) {
+                    uint s = low_bit(lb);
+                    lb &= lb - 1u;
+                    ulong k = pend_key(ct[8 * s + l], cid[s]);
+                    int keep = (first || k > L_last) & (k < L_ceil);
+                    NK[m] = k;
+                    NV[m] = (ulong)as_uint(ca[8 * s + l]) << 32 | cti[s];
+                    m += keep;
+                }
+                if (m > 0 && L_kn + m <= KP) {
+                    /* sorted (rank of each: the keys differ), then merged
+                     * into the window from its end: hits come nearly in key
+                     * order, so few pending ones move */
+                    for (int a_ = 0; a_ < m; ++a_) {
+                        int r_ = 0;
+                        for (int b_ = 0; b_ < m; ++b_)
+                            r_ += NK[b_] < NK[a_];
+                        SK[r_] = NK[a_];
+                        SV[r_] = NV[a_];
+                    }
+                    if (L_hd + L_kn + m > KP) {   /* at the end: move the window to 0 */
+                        for (int q = 0; q < L_kn; ++q) {
+                            PK[q] = PK[L_hd + q];
+                            PV[q] = PV[L_hd + q];
+                        }
+                        L_hd = 0;
+                    }
+                    int i_ = L_hd + L_kn - 1, j_ = m - 1, w_ = L_hd + L_kn + m - 1;
+                    while (j_ >= 0) {
+                        int io_ = i_ < 0 ? 0 : i_;
+                        ulong ko_ = PK[io_], vo_ = PV[io_], kw_ = SK[j_], vw_ = SV[j_];
+                        int old_ = (i_ >= L_hd) & (ko_ > kw_);
+                        PK[w_] = old_ ? ko_ : kw_;
+                        PV[w_] = old_ ? vo_ : vw_;
+                        i_ -= old_;
+                        j_ -= 1 - old_;
+                        --w_;
+                    }
+                    L_kn += m;
+                    FRONT_L();
+                } else if (m > 0) {
+                    /* more than KP pending: one by one, the largest dropped */
+                    for (int e_ = 0; e_ < m; ++e_) {
+                        ulong k = NK[e_], v = NV[e_];
+                        if (k >= L_ceil)
+                            continue;   /* beyond the round's ceiling */
+                        if (L_kn == KP) {   /* then L_hd == 0 */
+                            L_over = true;
+                            if (PK[KP - 1] < k) {
+                                L_ceil = k;   /* the new hit is the largest: drop it */
+                                continue;
+                            }
+                            L_ceil = PK[KP - 1];   /* drop the largest pending hit */
+                            L_kn = KP - 1;
+                        }
+                        if (L_hd + L_kn == KP) {   /* at the end: move the window to 0 */
+                            for (int q = 0; q < L_kn; ++q) {
+                                PK[q] = PK[L_hd + q];
+                                PV[q] = PV[L_hd + q];
+                            }
+                            L_hd = 0;
+                        }
+                        int pos = L_hd + L_kn++;
+                        while (pos > L_hd && PK[pos - 1] > k) {
+                            PK[pos] = PK[pos - 1];
+                            PV[pos] = PV[pos - 1];
+                            --pos;
+                        }
+                        PK[pos] = k;
+                        PV[pos] = v;
+                    }
+                    FRONT_L();
+                }
+                if (more && !L_done)
+                    FLUSH_L(dmn);
+                T[l] = L_T; cr[l] = L_cr; cg[l] = L_cg; cb[l] = L_cb; z[l] = L_z; front[l] = L_front;
+                last[l] = L_last; ceil_k[l] = L_ceil; hits[l] = L_hits; over[l] = L_over;
+                kn[l] = L_kn; hd[l] = L_hd;
+                if (L_done) {
+                    done[l] = true;
+                    donem |= 1u << l;
+                    --live;
+                }
+            }
+            nc = 0;
+            chm = 0;
+            chm1 = 0;
+            if (live == 0)
+                break;
         }
         /* the rest of the round, front to back; lanes without overflow are done */
         for (int l = 0; l < 8; ++l) {
-            if (gone[l])
+            if (done[l])
                 continue;
-            while (!done[l] && kn[l] > 0)
-                POP_LANE(l);
-            if (!over[l])
+            private ulong *PK = pk[l], *PV = pv[l];
+            float L_T = T[l], L_cr = cr[l], L_cg = cg[l], L_cb = cb[l], L_z = z[l];
+            ulong L_last = last[l];
+            uint L_hits = hits[l];
+            bool L_done = false;
+            int L_kn = kn[l], L_hd = hd[l];
+            while (!L_done && L_kn > 0)
+                POP_L();
+            T[l] = L_T; cr[l] = L_cr; cg[l] = L_cg; cb[l] = L_cb; z[l] = L_z;
+            last[l] = L_last; hits[l] = L_hits;
+            if (L_done || !over[l]) {
                 done[l] = true;
-            if (done[l] && !gone[l]) {
-                gone[l] = true;
+                donem |= 1u << l;
                 --live;
             }
         }

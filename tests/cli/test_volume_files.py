@@ -116,9 +116,10 @@ def test_gauss_reads_every_format(tmp_path, capsys, kind):
 
 
 def test_gauss_unknown_format_lists_formats(tmp_path, capsys):
-    f = tmp_path / "x.txt"
+    # (.txt is a point cloud to clvis gauss, as to clvis render: a suffix no reader has)
+    f = tmp_path / "x.dat"
     f.write_text("hello")
     assert cli.main(["gauss", str(f)]) == 2
     err = capsys.readouterr().err
-    for ext in (".vdb", ".raw", ".npy", ".nii", ".nii.gz", ".npz", ".ply", ".las", ".laz"):
+    for ext in (".vdb", ".raw", ".npy", ".nii", ".nii.gz", ".npz", ".ply", ".las", ".laz", ".pcd", ".txt"):
         assert ext in err

@@ -462,8 +462,9 @@ def radix_sort(
         # up to 8 top-digit bits, the scatter stages each digit's keys in a
         # private line written whole (non-temporal): 2^8 lines of keys and
         # values fill L1 (12 bits would be 512 KiB of lines); the lines'
-        # vector stores need buffers aligned to 16 keys
-        stage = msd_bits <= 8 and queue.device.mem_base_addr_align >= 8 * 16 * kd.dtype.itemsize
+        # vector stores need buffers aligned to 16 keys (and 16 values)
+        word = max(kd.dtype.itemsize, vd.dtype.itemsize if vd is not None else 0)
+        stage = msd_bits <= 8 and queue.device.mem_base_addr_align >= 8 * 16 * word
         k_sc_m = runtime.get_kernel(
             queue, "primitives/radix_sort.cl", "radix_scatter", {**md, "STAGE": int(stage)}
         )

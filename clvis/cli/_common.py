@@ -276,6 +276,18 @@ def unwritable(folder: os.PathLike[str] | str) -> str | None:
     return None
 
 
+def clear_targets(out: os.PathLike[str] | str, names) -> None:
+    """CliError when something other than a file (a folder, say) sits where
+    one of the files `names` would be written in `out`: checked for all of
+    them before the first is written, so the outputs appear all or none."""
+    from pathlib import Path
+
+    for name in names:
+        p = Path(out) / name
+        if p.exists() and not p.is_file():
+            raise CliError(f"{p}: not a file (a folder is in the way); move it or choose another --out")
+
+
 def out_dir(text: str) -> str:
     """--out: a folder (made when missing); a file of that name, or below one,
     or a folder no file can be made in, is an error before any work starts."""

@@ -29,6 +29,7 @@ from ._common import (
     add_volume_options,
     camera_from_args,
     check_camera_args,
+    clear_targets,
     colormap_name,
     count,
     fit_box,
@@ -523,6 +524,7 @@ def _run(args) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     files = []
+    clear_targets(out, [f"{panel[0]}.png" for panel in panels] + ["gauss.png"])
     with progress.stage("writing PNGs"):
         value_name = args.attribute or "value"
         for panel in panels:  # each labelled over its colour bar, as in gauss.png (--no-labels: bare)

@@ -32,6 +32,7 @@ from ._common import (
     camera_from_args,
     check_camera_args,
     check_iso_volume,
+    clear_targets,
     cluster_client,
     colormap_name,
     count,
@@ -532,6 +533,7 @@ def _run(args) -> int:
     if field is not None or args.surface_color is not None or len(shots) > 1:
         img, bar, crange = _coloured(args, shots, cam, field, (volume.shape, spacing, origin))
     infilled = None
+    clear_targets(out, ["iso-infill.png", "iso.png"] if args.infill else ["iso.png"])
     if args.infill:
         from .. import post
 

@@ -30,6 +30,7 @@ from ._common import (
     camera_from_args,
     check_camera_args,
     check_embedded_points,
+    clear_targets,
     cluster_client,
     colormap_name,
     count,
@@ -551,6 +552,7 @@ def _save_pngs(out: Path, named) -> list[Path]:
 
     from .. import images
 
+    clear_targets(out, [name for name, _ in named])
     with ThreadPoolExecutor(max_workers=max(1, min(len(named), os.cpu_count() or 1))) as pool:
         return list(pool.map(lambda item: images.save_png(out / item[0], item[1]), named))
 

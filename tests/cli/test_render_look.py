@@ -350,3 +350,17 @@ def test_o_naming_an_image(tmp_path, capsys, command):
     _, err = capsys.readouterr()
     assert rc == 2 and "names an image" in err and f"-o {tmp_path / 'sub' / 'picture'}" in err
     assert not (tmp_path / "sub").exists()
+
+
+@pytest.mark.parametrize(
+    "command, last",
+    [(["render", "--points", "100"], "overview.png"), (["iso"], "iso.png"), (["gauss"], "gauss.png")],
+)
+def test_folder_in_the_way_writes_nothing(tmp_path, capsys, command, last):
+    """A folder named like a command's last image is refused before any PNG
+    is written: the outputs appear all or none."""
+    (tmp_path / last).mkdir()
+    rc = cli.main([*command, "--size", "32x24", "--out", str(tmp_path), "--quiet"])
+    _, err = capsys.readouterr()
+    assert rc == 2 and f"{last}: not a file" in err and err.count("\n") == 1
+    assert [p.name for p in tmp_path.iterdir()] == [last]

@@ -281,7 +281,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         if not 0 <= t < count:
             raise ValueError(
                 f"volume_index: {volume_index!r} is outside 0..{count - 1} ({path.name} holds "
-                f"{count} volume{'s' if count != 1 else ''})"
+                f"{count} volume{'s' if count != 1 else ''}; clvis iso/gauss/view: --volume-index T)"
             )
     elif series:
         raise DataError(

@@ -40,7 +40,8 @@ def test_iso_four_d_nifti_needs_an_index(tmp_path, capsys):
     assert "4-D" in err and "--volume-index" in err and len(err.strip().splitlines()) == 1
     assert cli.main(["iso", f, "--volume-index", "1", "--size", "40x30", "--out", str(tmp_path)]) == 0
     assert cli.main(["iso", f, "--volume-index", "2", "--size", "40x30", "--out", str(tmp_path)]) == 2
-    assert "outside 0..1" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "outside 0..1" in err and "--volume-index" in err
 
 
 def test_raw_shape_dtype_and_spacing(tmp_path, capsys):

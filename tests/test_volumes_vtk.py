@@ -4,6 +4,7 @@ naming the file for what is not read. VTK's readers read the files (the vtk
 extra); the header checks before them keep hostile sizes from allocating."""
 
 import base64
+import re
 import sys
 import zlib
 from pathlib import Path
@@ -115,7 +116,11 @@ def test_vti_errors(tmp_path):
     z[6] = z[6][:-8]  # the array cut short
     bad(b"\n".join(z), "truncated or malformed|malformed binary")
     bad(_vti(data, "binary").replace(b'format="binary">\n', b'format="binary">\n!!'), "VTK could not read it")
-    bad(good.replace(b"<PointData", b"<CellData").replace(b"</PointData>", b"</CellData>"), "no point data")
+    # the point array relabelled as cells: 24 points' values where 6 cells' are due
+    bad(good.replace(b"<PointData", b"<CellData").replace(b"</PointData>", b"</CellData>"), "the extent needs 24")
+    empty = re.sub(rb"<DataArray\b.*?</DataArray>", b"", good, flags=re.S)
+    assert b"<DataArray" not in empty
+    bad(empty, "no point or cell data array")
 
 
 def test_legacy_ascii_and_errors(tmp_path):
@@ -343,3 +348,43 @@ def test_lz4_reads_lzma_is_refused(tmp_path):
         else:
             with pytest.raises(DataError, match="vtkLZMADataCompressor is not read"):
                 read_volume(path)
+
+
+@pytest.mark.parametrize("mode", ["Appended", "Binary", "Ascii"])
+def test_cell_data_is_the_volume_where_no_point_array_is(tmp_path, mode):
+    """A .vti holding cell data only (a simulation's cell-centred field, as
+    pyvista's channels.vti): one sample a cell, its origin at the first
+    cell's centre; its byte count is checked against the cells, not the
+    points (a count claiming the points' is refused)."""
+    vtk = pytest.importorskip("vtk", reason="vtk is in the test extra")
+    from vtk.util import numpy_support
+
+    img = vtk.vtkImageData()
+    img.SetDimensions(5, 4, 3)  # points; cells 4 x 3 x 2
+    img.SetOrigin(1.0, 2.0, 3.0)
+    img.SetSpacing(1.0, 2.0, 3.0)
+    cells = (np.arange(24, dtype=np.int64) * 7 % 11).reshape(2, 3, 4)
+    arr = numpy_support.numpy_to_vtk(cells.ravel(), deep=True)
+    arr.SetName("facies")
+    img.GetCellData().SetScalars(arr)
+    w = vtk.vtkXMLImageDataWriter()
+    path = tmp_path / "cells.vti"
+    w.SetFileName(str(path))
+    w.SetInputData(img)
+    getattr(w, f"SetDataModeTo{mode}")()
+    w.SetCompressorTypeToNone()
+    assert w.Write() == 1
+    assert b"<CellData" in path.read_bytes()
+    v = read_volume(path)
+    np.testing.assert_array_equal(v.data, cells)
+    assert v.spacing == (3.0, 2.0, 1.0) and v.origin == (1.5, 3.0, 4.5)
+    if mode == "Binary":  # the array's byte count as if it held a value a point
+        text = path.read_bytes()
+        body = text[text.index(b"<DataArray") :]
+        start = body.index(b">") + 1
+        blob = body[start : body.index(b"</DataArray>")].strip()
+        raw = base64.b64decode(blob)[4:]  # after its 4-byte count
+        forged = base64.b64encode(np.array([60 * 8], "<u4").tobytes() + raw + bytes(36 * 8))
+        path.write_bytes(text.replace(blob, forged))
+        with pytest.raises(DataError, match="byte count"):
+            read_volume(path)

@@ -4,7 +4,10 @@ raw or base64 appended data, zlib- or LZ4-compressed or not, one piece or
 several) and legacy ``.vtk`` STRUCTURED_POINTS (vtkStructuredPointsReader,
 ASCII or BINARY). The volume is the point data's ``Scalars`` array (.vti:
 the one ``<PointData Scalars=...>`` names, else the first point array; .vtk:
-the first POINT_DATA SCALARS), one component.
+the first POINT_DATA SCALARS), one component. A .vti with no point array
+(a simulation's cell-centred field, e.g. pyvista's ``channels.vti``) gives
+its cell data the same way: one sample a cell, the origin moved to the first
+cell's centre.
 
 Bounded: before VTK reads, the header is checked against the file (the
 hardening of the other readers): the extents, the array's type and
@@ -160,25 +163,30 @@ def _check_vti(path: Path, raw: bytes) -> tuple[str, int]:
     pieces = re.findall(rb"<Piece\b([^>]*)>(.*?)</Piece>", xml, re.S)
     if not pieces or len(pieces) != len(re.findall(rb"<Piece\b", xml)):
         raise DataError(f"{path}: malformed ImageData: no <Piece>...</Piece>")
-    name, covered = None, 0
+    name, covered, where = None, 0, ""
+    if not any(_section(body, "PointData") for _, body in pieces):
+        if not any(_section(body, "CellData") for _, body in pieces):
+            raise DataError(f"{path}: no point or cell data array")
+        where = "cell"  # no point array in any piece: the cell data is the volume
+        n = _count(path, "WholeExtent", _cells(whole))
     for tag, body in pieces:
         ext = _numbers(path, "Piece Extent", _attrs(tag).get("Extent", ""), 6, int)
-        pn = _count(path, "Piece Extent", ext)
         if any(ext[k] < whole[k] for k in (0, 2, 4)) or any(ext[k] > whole[k] for k in (1, 3, 5)):
             raise DataError(f"{path}: Piece Extent {ext} outside WholeExtent {whole}")
-        pd = re.search(rb"<PointData\b([^>]*)>(.*?)</PointData>", body, re.S)
-        arrays = _arrays(pd.group(2)) if pd else []
-        if pd is None or not arrays:
-            raise DataError(f"{path}: no point data array (cell data is not read)")
+        pn = _count(path, "Piece Extent", _cells(ext) if where else ext)
+        found = _section(body, "CellData" if where else "PointData")
+        if found is None:
+            raise DataError(f"{path}: a Piece has no {where or 'point'} data array")
+        section, arrays = found
         if name is None:  # the first piece's Scalars, or its first array
-            want = _attrs(b"<x " + pd.group(1) + b">").get("Scalars")
+            want = _attrs(b"<x " + section + b">").get("Scalars")
             first = next((a for a, _ in arrays if want and a.get("Name") == want), arrays[0][0])
             name = first.get("Name")
             if not name:
-                raise DataError(f"{path}: the point data array has no Name")
+                raise DataError(f"{path}: the {where or 'point'} data array has no Name")
         a, text = next(((a, t) for a, t in arrays if a.get("Name") == name), ({}, b""))
         if not a:
-            raise DataError(f"{path}: a Piece has no point array {name!r}")
+            raise DataError(f"{path}: a Piece has no {where or 'point'} array {name!r}")
         t = _VTI_TYPES.get(a.get("type", ""))
         if t is None:
             raise DataError(f"{path}: unsupported DataArray type {a.get('type')!r}")
@@ -188,7 +196,20 @@ def _check_vti(path: Path, raw: bytes) -> tuple[str, int]:
         covered += pn
     if covered < n:
         raise DataError(f"{path}: the pieces hold {covered} samples, the WholeExtent {whole} needs {n}")
-    return str(name), n
+    return str(name), n, where
+
+
+def _section(body: bytes, tag: str) -> tuple[bytes, list] | None:
+    """(the attributes, the arrays) of a piece's <PointData> or <CellData>
+    section; None where it is missing or holds no array."""
+    m = re.search(rb"<" + tag.encode() + rb"\b([^>]*)>(.*?)</" + tag.encode() + rb">", body, re.S)
+    arrays = _arrays(m.group(2)) if m else []
+    return (m.group(1), arrays) if m and arrays else None
+
+
+def _cells(ext: list[int]) -> list[int]:
+    """The extent of the cells of a point extent (VTK: a flat axis keeps one)."""
+    return [v for k in (0, 2, 4) for v in (ext[k], max(ext[k], ext[k + 1] - 1))]
 
 
 def _check_array(
@@ -258,26 +279,33 @@ def _check_array(
         raise DataError(f"{path}: malformed binary array: {e}") from None
 
 
-def _image(path: Path, reader: Any, messages: list[str], name: str | None, n: int, ns: Any) -> tuple:
-    """(data (Z, Y, X), spacing zyx, origin xyz) of `reader`'s output."""
+def _image(
+    path: Path, reader: Any, messages: list[str], name: str | None, n: int, ns: Any, cells: bool = False
+) -> tuple:
+    """(data (Z, Y, X), spacing zyx, origin xyz) of `reader`'s output; with
+    `cells`, of its cell array: one sample a cell, at the cell's centre."""
     reader.Update()
     img = reader.GetOutput()
     if messages or reader.GetErrorCode() or img is None:
         raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
-    pd = img.GetPointData()
+    pd = img.GetCellData() if cells else img.GetPointData()
     arr = pd.GetScalars() if name is None else pd.GetArray(name)
-    nx, ny, nz = img.GetDimensions()
+    dims = img.GetDimensions()
+    nx, ny, nz = (max(d - 1, 1) for d in dims) if cells else dims
     if arr is None or arr.GetNumberOfComponents() != 1 or arr.GetNumberOfTuples() != n or nx * ny * nz != n:
         raise DataError(f"{path}: VTK read no {n}-sample scalar array from it")
     data = np.array(ns.vtk_to_numpy(arr), copy=True).reshape(nz, ny, nx)
     sx, sy, sz = img.GetSpacing()
-    return data, (sz, sy, sx), list(img.GetOrigin())
+    origin = list(img.GetOrigin())
+    if cells:  # the cell centres: half a step in along each axis that has cells
+        origin = [o + (s / 2 if d > 1 else 0.0) for o, s, d in zip(origin, (sx, sy, sz), dims, strict=True)]
+    return data, (sz, sy, sx), origin
 
 
 def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of a .vti,
     read by vtkXMLImageDataReader after the header checks."""
-    name, n = _check_vti(path, path.read_bytes())
+    name, n, where = _check_vti(path, path.read_bytes())
     core, _, xmlio, ns = _vtk()
     with _quiet(core) as messages:
         r = xmlio.vtkXMLImageDataReader()
@@ -286,9 +314,9 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
         r.UpdateInformation()
         if not messages:
             r.GetPointDataArraySelection().DisableAllArrays()
-            r.GetPointDataArraySelection().EnableArray(name)
             r.GetCellDataArraySelection().DisableAllArrays()
-            return _image(path, r, messages, name, n, ns)
+            (r.GetCellDataArraySelection() if where else r.GetPointDataArraySelection()).EnableArray(name)
+            return _image(path, r, messages, name, n, ns, cells=bool(where))
     raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
 
 

@@ -117,7 +117,8 @@ def test_vti_errors(tmp_path):
     bad(b"\n".join(z), "truncated or malformed|malformed binary")
     bad(_vti(data, "binary").replace(b'format="binary">\n', b'format="binary">\n!!'), "VTK could not read it")
     # the point array relabelled as cells: 24 points' values where 6 cells' are due
-    bad(good.replace(b"<PointData", b"<CellData").replace(b"</PointData>", b"</CellData>"), "the extent needs 24")
+    as_cells = good.replace(b"<PointData", b"<CellData").replace(b"</PointData>", b"</CellData>")
+    bad(as_cells, "the extent needs 24")
     empty = re.sub(rb"<DataArray\b.*?</DataArray>", b"", good, flags=re.S)
     assert b"<DataArray" not in empty
     bad(empty, "no point or cell data array")

@@ -138,7 +138,7 @@ def _arrays(section: bytes) -> list[tuple[dict[str, str], bytes]]:
     return [(_attrs(t + b">"), b) for t, b in found]
 
 
-def _check_vti(path: Path, raw: bytes) -> tuple[str, int]:
+def _check_vti(path: Path, raw: bytes) -> tuple[str, int, str]:
     """Check the .vti's header against the file before VTK reads it: (the
     name of the point array that is the volume, its samples); a DataError
     naming the file for what is not read or lies about its size."""
@@ -199,7 +199,7 @@ def _check_vti(path: Path, raw: bytes) -> tuple[str, int]:
     return str(name), n, where
 
 
-def _section(body: bytes, tag: str) -> tuple[bytes, list] | None:
+def _section(body: bytes, tag: str) -> tuple[bytes, list[tuple[dict[str, str], bytes]]] | None:
     """(the attributes, the arrays) of a piece's <PointData> or <CellData>
     section; None where it is missing or holds no array."""
     m = re.search(rb"<" + tag.encode() + rb"\b([^>]*)>(.*?)</" + tag.encode() + rb">", body, re.S)

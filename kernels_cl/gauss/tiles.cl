@@ -238,30 +238,69 @@ kernel void tile_count(global const clvis_gaussian *recs, uint n, global const f
  * dd(u, v) (linear in u, v), f . dd is linear and |W dd|^2 convex, so their
  * extremes over the rectangle of pixel centres are at its corners. Hits at
  * t = 0 lie on the near plane: a Gaussian reaching it keeps dmin. */
-inline float tile_depth(const tile_footprint *f, float m3, float fsf, float c, float sd, const float *a0,
-                        const float *au, const float *av, float fd0, float fdu, float fdv, float near, int tx,
-                        int ty, uint W, uint H)
+inline float8 il_fmin8(float8 a, float8 b)
 {
-    if (!(f->dmin > near))
-        return f->dmin;
-    float us[2] = {(float)(tx * TS) + 0.5f, (float)clvis_il_imin((tx + 1) * TS, (int)W) - 0.5f};
-    float vs[2] = {(float)(ty * TS) + 0.5f, (float)clvis_il_imin((ty + 1) * TS, (int)H) - 0.5f};
-    float qmax = 0.0f, fmin2 = INFINITY, fdlo = INFINITY, fdhi = -INFINITY;
+    return (a < b | b != b) ? a : b;   /* clvis_il_fmin lane by lane */
+}
+
+inline float8 il_fmax8(float8 a, float8 b)
+{
+    return (a > b | b != b) ? a : b;   /* clvis_il_fmax lane by lane */
+}
+
+/* the bound for 8 tiles (tx, ty) at once, in float8 lanes: the scalar
+ * operations lane by lane (the same bits as one tile at a time); the caller
+ * handles f->dmin <= near (every tile's bound is dmin) */
+inline float8 tile_depth8(const tile_footprint *f, float m3, float fsf, float c, float sd, const float *a0,
+                          const float *au, const float *av, float fd0, float fdu, float fdv, int8 tx, int8 ty,
+                          uint W, uint H)
+{
+    float8 us[2] = {convert_float8(tx * TS) + 0.5f, convert_float8(min((tx + 1) * TS, (int8)(int)W)) - 0.5f};
+    float8 vs[2] = {convert_float8(ty * TS) + 0.5f, convert_float8(min((ty + 1) * TS, (int8)(int)H)) - 0.5f};
+    float8 qmax = 0.0f, fmin2 = INFINITY, fdlo = INFINITY, fdhi = -INFINITY;
     for (int k = 0; k < 4; ++k) {
-        float u = us[k & 1], v = vs[k >> 1];
-        float x0 = (a0[0] + u * au[0]) + v * av[0];
-        float x1 = (a0[1] + u * au[1]) + v * av[1];
-        float x2 = (a0[2] + u * au[2]) + v * av[2];
-        qmax = clvis_il_fmax(qmax, clvis_dot3(x0, x1, x2, x0, x1, x2));
-        float fd = (fd0 + u * fdu) + v * fdv;
-        fdlo = clvis_il_fmin(fdlo, fd);
-        fdhi = clvis_il_fmax(fdhi, fd);
-        fmin2 = clvis_il_fmin(fmin2, fd * fd);
+        float8 u = us[k & 1], v = vs[k >> 1];
+        float8 x0 = (a0[0] + u * au[0]) + v * av[0];
+        float8 x1 = (a0[1] + u * au[1]) + v * av[1];
+        float8 x2 = (a0[2] + u * au[2]) + v * av[2];
+        qmax = il_fmax8(qmax, (x0 * x0 + x1 * x1) + x2 * x2);
+        float8 fd = (fd0 + u * fdu) + v * fdv;
+        fdlo = il_fmin8(fdlo, fd);
+        fdhi = il_fmax8(fdhi, fd);
+        fmin2 = il_fmin8(fmin2, fd * fd);
     }
-    float h = (fdlo > 0.0f || fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : 0.0f;
-    float g = clvis_il_fmax(fsf - h, 0.0f) + 1e-5f * fsf;
-    float lo = (m3 - c * sqrt(g)) - sd;
-    return clvis_il_isfinite(lo) ? clvis_il_fmax(lo, f->dmin) : f->dmin;
+    float8 h = (fdlo > 0.0f | fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : (float8)(0.0f);
+    float8 g = il_fmax8(fsf - h, (float8)(0.0f)) + 1e-5f * fsf;
+    float8 lo = (m3 - c * sqrt(g)) - sd;
+    float8 dmin = (float8)(f->dmin);
+    return clvis_il_isfinite8(lo) ? il_fmax8(lo, dmin) : dmin;
+}
+
+/* tile_keys' keys of the batch's n tiles (tile columns bx, rows by, lanes
+ * past n repeat the last tile) at keys[at ..] */
+inline void tile_keys_batch(const tile_footprint *f, float m3, float fsf, float c, float sd, const float *a0,
+                            const float *au, const float *av, float fd0, float fdu, float fdv, bool flat,
+                            int *bx, int *by, int n, uint W, uint H, uint ty0, uint tiles_x, uint id,
+                            global ulong *keys, global uint *ids, ulong at)
+{
+    for (int k = n; k < 8; ++k) {
+        bx[k] = bx[n - 1];
+        by[k] = by[n - 1];
+    }
+    float dk[8];
+    if (flat) {
+        for (int k = 0; k < 8; ++k)
+            dk[k] = f->dmin;
+    } else {
+        float8 d8 = tile_depth8(f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, CLVIS_IL_VLOAD8(int8, bx),
+                                CLVIS_IL_VLOAD8(int8, by), W, H);
+        CLVIS_IL_VSTORE8(d8, dk);
+    }
+    for (int k = 0; k < n; ++k) {
+        ulong tile = (ulong)(by[k] - (int)ty0) * tiles_x + (ulong)bx[k];
+        keys[at + k] = tile << 32 | (ulong)clvis_key_f32(as_uint(dk[k]));
+        ids[at + k] = id;
+    }
 }
 
 kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
@@ -297,19 +336,28 @@ kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const fl
     float fsf = clvis_dot3(e[0], e[1], e[2], e[0], e[1], e[2]);
     uint tiles_x = (W + TS - 1) / TS;
     ulong at = offsets[i];
+    bool flat = !(f.dmin > near);   /* hits at t = 0 on the near plane: every bound is dmin */
+    /* the tiles in row-major order, 8 at a time */
+    int bx[8], by[8], nb = 0;
     int y0 = clvis_il_imax(f.ty0, (int)ty0), y1 = clvis_il_imin(f.ty1, (int)ty1 - 1);
     for (int ty = y0; ty <= y1; ++ty) {
         int c0, c1;
         if (!tile_row(&f, ty, W, H, &c0, &c1))
             continue;
         for (int tx = c0; tx <= c1; ++tx) {
-            float dk = tile_depth(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, near, tx, ty, W, H);
-            ulong tile = (ulong)(ty - (int)ty0) * tiles_x + (ulong)tx;
-            keys[at] = tile << 32 | (ulong)clvis_key_f32(as_uint(dk));
-            ids[at] = i;
-            ++at;
+            bx[nb] = tx;
+            by[nb] = ty;
+            if (++nb == 8) {
+                tile_keys_batch(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, flat, bx, by, 8, W, H, ty0,
+                                tiles_x, i, keys, ids, at);
+                at += 8;
+                nb = 0;
+            }
         }
     }
+    if (nb > 0)
+        tile_keys_batch(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, flat, bx, by, nb, W, H, ty0, tiles_x, i,
+                        keys, ids, at);
 }
 
 kernel void tile_ranges(global const ulong *keys, uint m, global uint2 *ranges)

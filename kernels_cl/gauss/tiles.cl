@@ -622,7 +622,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
     /* pending: pk[hd .. hd + kn - 1], key ascending, [hd] the smallest (the
      * window moves back to 0 when it reaches the end) */
     ulong pk[8][KP], pv[8][KP];
-    ulong NK[16], NV[16], SK[16], SV[16];   /* a lane's hits of the chunk; sorted */
+    ulong NK[32], NV[32], SK[16], SV[16];   /* a lane's hits of the chunk (and the pending ones they pass); sorted */
     float lox[8], loy[8], loz[8], ldx[8], ldy[8], ldz[8];
     /* the chunk: per slot the candidate's t and alpha per lane, its id and tf entry */
     float ct[16 * 8], ca[16 * 8];
@@ -723,6 +723,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                 /* the lane's hits of the chunk beyond "last" and below the
                  * ceiling, in chunk order */
                 int m = 0;
+                ulong kmin = 0xFFFFFFFFFFFFFFFFul;   /* the smallest kept */
                 while (lb != 0) {
                     uint s = low_bit(lb);
                     lb &= lb - 1u;
@@ -730,9 +731,67 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                     int keep = (first || k > L_last) & (k < L_ceil);
                     NK[m] = k;
                     NV[m] = (ulong)as_uint(ca[8 * s + l]) << 32 | cti[s];
+                    kmin = keep && k < kmin ? k : kmin;
                     m += keep;
                 }
+                int nt = 0;   /* pending hits above kmin (they move), when the union fits 32 */
+                bool fits = false;
                 if (m > 0 && L_kn + m <= KP) {
+                    if (L_hd + L_kn + m > KP) {   /* at the end: move the window to 0 */
+                        for (int q = 0; q < L_kn; ++q) {
+                            PK[q] = PK[L_hd + q];
+                            PV[q] = PV[L_hd + q];
+                        }
+                        L_hd = 0;
+                    }
+                    int e_ = L_hd + L_kn;
+                    while (nt < L_kn && m + nt < 32 && PK[e_ - 1 - nt] > kmin) {
+                        NK[m + nt] = PK[e_ - 1 - nt];
+                        NV[m + nt] = PV[e_ - 1 - nt];
+                        ++nt;
+                    }
+                    fits = !(nt < L_kn && PK[e_ - 1 - nt] > kmin);
+                }
+                if (fits) {
+                    /* the chunk's hits and the pending ones they pass, placed by
+                     * rank in the union (the keys differ; all below 2^63:
+                     * signed 64-bit lanes), 16 or 32 at once */
+                    int u_ = m + nt;
+                    for (int p_ = u_; p_ < 32; ++p_)
+                        NK[p_] = 0x7FFFFFFFFFFFFFFFul;
+                    long8 ua = as_long8(CLVIS_IL_VLOAD8(ulong8, NK)), ub = as_long8(CLVIS_IL_VLOAD8(ulong8, NK + 8));
+                    long8 ra = 0, rb = 0, rc = 0, rd = 0;
+                    if (u_ <= 16) {
+                        for (int b_ = 0; b_ < u_; ++b_) {
+                            long8 kb = (long8)((long)NK[b_]);
+                            ra += ua > kb;
+                            rb += ub > kb;
+                        }
+                    } else {
+                        long8 uc = as_long8(CLVIS_IL_VLOAD8(ulong8, NK + 16));
+                        long8 ud = as_long8(CLVIS_IL_VLOAD8(ulong8, NK + 24));
+                        for (int b_ = 0; b_ < u_; ++b_) {
+                            long8 kb = (long8)((long)NK[b_]);
+                            ra += ua > kb;
+                            rb += ub > kb;
+                            rc += uc > kb;
+                            rd += ud > kb;
+                        }
+                    }
+                    long R[32];
+                    CLVIS_IL_VSTORE8(ra, R);
+                    CLVIS_IL_VSTORE8(rb, R + 8);
+                    CLVIS_IL_VSTORE8(rc, R + 16);
+                    CLVIS_IL_VSTORE8(rd, R + 24);
+                    int base = L_hd + L_kn - nt;
+                    for (int a_ = 0; a_ < u_; ++a_) {
+                        int w_ = base - (int)R[a_];
+                        PK[w_] = NK[a_];
+                        PV[w_] = NV[a_];
+                    }
+                    L_kn += m;
+                    FRONT_L();
+                } else if (m > 0 && L_kn + m <= KP) {
                     /* sorted (rank of each: the keys differ), then merged
                      * into the window from its end: hits come nearly in key
                      * order, so few pending ones move */

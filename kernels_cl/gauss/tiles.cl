@@ -549,6 +549,48 @@ inline ulong transpose8x8(ulong x)
     return x ^ t ^ (t << 28);
 }
 
+#define KEY_NONE 0x7FFFFFFFFFFFFFFFul   /* above every pending key: no hit, no ceiling */
+
+/* p[0], p[stride], ..., p[7 stride] as the vector type TV */
+#define CLVIS_STRIDED8(TV, p, st) \
+    ((TV)((p)[0], (p)[(st)], (p)[2 * (st)], (p)[3 * (st)], (p)[4 * (st)], (p)[5 * (st)], (p)[6 * (st)], (p)[7 * (st)]))
+
+/* hi << 32 | lo, lane by lane */
+inline long8 pack8(uint8 tb, uint8 id)
+{
+#ifdef __ENDIAN_LITTLE__
+    return as_long8((uint16)(id.s0, tb.s0, id.s1, tb.s1, id.s2, tb.s2, id.s3, tb.s3, id.s4, tb.s4, id.s5, tb.s5,
+                             id.s6, tb.s6, id.s7, tb.s7));
+#else
+    return as_long8((uint16)(tb.s0, id.s0, tb.s1, id.s1, tb.s2, id.s2, tb.s3, id.s3, tb.s4, id.s4, tb.s5, id.s5,
+                             tb.s6, id.s6, tb.s7, id.s7));
+#endif
+}
+
+/* pend_key of 8 hits (t >= 0) as signed 64-bit lanes */
+inline long8 slot_keys8(float8 t, uint8 id)
+{
+    return pack8(as_uint8(t + 0.0f), id);
+}
+
+/* the lane's 8 bits of the long8 comparison v (lane l: bit l) */
+inline uint lane_bits8l(long8 v)
+{
+    long8 b = v & (long8)(1, 2, 4, 8, 16, 32, 64, 128);
+    long4 a = b.lo | b.hi;
+    long2 c = a.lo | a.hi;
+    return (uint)(c.x | c.y);
+}
+
+/* the set bits of a 16-bit x, without a call */
+inline int popcount16(uint x)
+{
+    x = x - ((x >> 1) & 0x5555u);
+    x = (x & 0x3333u) + ((x >> 2) & 0x3333u);
+    x = (x + (x >> 4)) & 0x0F0Fu;
+    return (int)((x + (x >> 8)) & 0x1Fu);
+}
+
 /* the lowest set bit's index of b (b != 0), without a call */
 inline uint low_bit(uint b)
 {
@@ -621,12 +663,17 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
     int kn[8], hd[8];
     /* pending: pk[hd .. hd + kn - 1], key ascending, [hd] the smallest (the
      * window moves back to 0 when it reaches the end) */
-    ulong pk[8][KP], pv[8][KP];
-    ulong NK[32], NV[32], SK[16], SV[16];   /* a lane's hits of the chunk (and the pending ones they pass); sorted */
+    ulong pk[8][KP + 1], pv[8][KP + 1];   /* + 1: a spare entry (the union's unused slots) */
+    ulong NK[32], NV[32], SK[16], SV[16];   /* a lane's chunk slots' keys and the pending ones they pass; sorted */
     float lox[8], loy[8], loz[8], ldx[8], ldy[8], ldz[8];
     /* the chunk: per slot the candidate's t and alpha per lane, its id and tf entry */
     float ct[16 * 8], ca[16 * 8];
     uint cid[16], cti[16];
+    for (int s = 0; s < 16; ++s) {   /* the slots past a chunk's end are read (their lanes masked) */
+        for (int l = 0; l < 8; ++l)
+            ct[8 * s + l] = ca[8 * s + l] = 0.0f;
+        cid[s] = cti[s] = 0;
+    }
     uint2 range = ranges[tile];
     int live = 0;
     uint donem = 0;   /* bit l: lane l done */
@@ -652,7 +699,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
             kn[l] = 0;
             hd[l] = 0;
             over[l] = false;
-            ceil_k[l] = 0xFFFFFFFFFFFFFFFFul;
+            ceil_k[l] = KEY_NONE;
             front[l] = INFINITY;
             nround[l] += !done[l];
         }
@@ -721,20 +768,26 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                 bool L_done = false, L_over = over[l];
                 int L_kn = kn[l], L_hd = hd[l];
                 /* the lane's hits of the chunk beyond "last" and below the
-                 * ceiling, in chunk order */
-                int m = 0;
-                ulong kmin = 0xFFFFFFFFFFFFFFFFul;   /* the smallest kept */
-                while (lb != 0) {
-                    uint s = low_bit(lb);
-                    lb &= lb - 1u;
-                    ulong k = pend_key(ct[8 * s + l], cid[s]);
-                    int keep = (first || k > L_last) & (k < L_ceil);
-                    NK[m] = k;
-                    NV[m] = (ulong)as_uint(ca[8 * s + l]) << 32 | cti[s];
-                    kmin = keep && k < kmin ? k : kmin;
-                    m += keep;
+                 * ceiling: their keys per chunk slot (KEY_NONE: none), 16
+                 * slots in signed 64-bit lanes (keys are below 2^63) */
+                long8 sb = (long8)(1, 2, 4, 8, 16, 32, 64, 128);
+                long8 kA = slot_keys8(CLVIS_STRIDED8(float8, ct + l, 8), CLVIS_IL_VLOAD8(uint8, cid));
+                long8 kB = slot_keys8(CLVIS_STRIDED8(float8, ct + 64 + l, 8), CLVIS_IL_VLOAD8(uint8, cid + 8));
+                long8 okA = (((long8)((long)(lb & 0xFFu)) & sb) != 0) & (kA < (long)L_ceil);
+                long8 okB = (((long8)((long)(lb >> 8)) & sb) != 0) & (kB < (long)L_ceil);
+                if (!first) {
+                    okA &= kA > (long)L_last;
+                    okB &= kB > (long)L_last;
                 }
-                int nt = 0;   /* pending hits above kmin (they move), when the union fits 32 */
+                kA = okA ? kA : (long8)(KEY_NONE);
+                kB = okB ? kB : (long8)(KEY_NONE);
+                uint kept = lane_bits8l(okA) | lane_bits8l(okB) << 8;
+                int m = popcount16(kept);
+                long8 mn8 = kA < kB ? kA : kB;
+                long4 mn4 = mn8.lo < mn8.hi ? mn8.lo : mn8.hi;
+                long2 mn2 = mn4.lo < mn4.hi ? mn4.lo : mn4.hi;
+                ulong kmin = (ulong)(mn2.x < mn2.y ? mn2.x : mn2.y);   /* the smallest kept */
+                int nt = 0;   /* pending hits above kmin (they move), when they are 16 at most */
                 bool fits = false;
                 if (m > 0 && L_kn + m <= KP) {
                     if (L_hd + L_kn + m > KP) {   /* at the end: move the window to 0 */
@@ -745,35 +798,36 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                         L_hd = 0;
                     }
                     int e_ = L_hd + L_kn;
-                    while (nt < L_kn && m + nt < 32 && PK[e_ - 1 - nt] > kmin) {
-                        NK[m + nt] = PK[e_ - 1 - nt];
-                        NV[m + nt] = PV[e_ - 1 - nt];
+                    while (nt < L_kn && nt < 16 && PK[e_ - 1 - nt] > kmin) {
+                        NK[16 + nt] = PK[e_ - 1 - nt];
+                        NV[16 + nt] = PV[e_ - 1 - nt];
                         ++nt;
                     }
                     fits = !(nt < L_kn && PK[e_ - 1 - nt] > kmin);
                 }
+                CLVIS_IL_VSTORE8(kA, NK);
+                CLVIS_IL_VSTORE8(kB, NK + 8);
                 if (fits) {
-                    /* the chunk's hits and the pending ones they pass, placed by
-                     * rank in the union (the keys differ; all below 2^63:
-                     * signed 64-bit lanes), 16 or 32 at once */
-                    int u_ = m + nt;
-                    for (int p_ = u_; p_ < 32; ++p_)
-                        NK[p_] = 0x7FFFFFFFFFFFFFFFul;
-                    long8 ua = as_long8(CLVIS_IL_VLOAD8(ulong8, NK)), ub = as_long8(CLVIS_IL_VLOAD8(ulong8, NK + 8));
+                    /* the kept hits and the pending ones they pass, placed by
+                     * rank in their union (the keys differ), 16 slots and 8 or
+                     * 16 pending at once */
+                    for (int p_ = 16 + nt; p_ < 32; ++p_)
+                        NK[p_] = KEY_NONE;
+                    long8 uc = as_long8(CLVIS_IL_VLOAD8(ulong8, NK + 16));
                     long8 ra = 0, rb = 0, rc = 0, rd = 0;
-                    if (u_ <= 16) {
-                        for (int b_ = 0; b_ < u_; ++b_) {
+                    if (nt <= 8) {
+                        for (int b_ = 0; b_ < 16 + nt; ++b_) {
                             long8 kb = (long8)((long)NK[b_]);
-                            ra += ua > kb;
-                            rb += ub > kb;
+                            ra += kA > kb;
+                            rb += kB > kb;
+                            rc += uc > kb;
                         }
                     } else {
-                        long8 uc = as_long8(CLVIS_IL_VLOAD8(ulong8, NK + 16));
                         long8 ud = as_long8(CLVIS_IL_VLOAD8(ulong8, NK + 24));
-                        for (int b_ = 0; b_ < u_; ++b_) {
+                        for (int b_ = 0; b_ < 16 + nt; ++b_) {
                             long8 kb = (long8)((long)NK[b_]);
-                            ra += ua > kb;
-                            rb += ub > kb;
+                            ra += kA > kb;
+                            rb += kB > kb;
                             rc += uc > kb;
                             rd += ud > kb;
                         }
@@ -783,15 +837,38 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                     CLVIS_IL_VSTORE8(rb, R + 8);
                     CLVIS_IL_VSTORE8(rc, R + 16);
                     CLVIS_IL_VSTORE8(rd, R + 24);
+                    /* every slot written: those without a hit (rank m + nt) all
+                     * at the window's new end + 1, a spare entry */
+                    long8 vA = pack8(as_uint8(CLVIS_STRIDED8(float8, ca + l, 8)), CLVIS_IL_VLOAD8(uint8, cti));
+                    long8 vB = pack8(as_uint8(CLVIS_STRIDED8(float8, ca + 64 + l, 8)), CLVIS_IL_VLOAD8(uint8, cti + 8));
+                    long V[16];
+                    CLVIS_IL_VSTORE8(vA, V);
+                    CLVIS_IL_VSTORE8(vB, V + 8);
                     int base = L_hd + L_kn - nt;
-                    for (int a_ = 0; a_ < u_; ++a_) {
-                        int w_ = base - (int)R[a_];
-                        PK[w_] = NK[a_];
-                        PV[w_] = NV[a_];
+                    for (int s = 0; s < 16; ++s) {
+                        int w_ = base - (int)R[s];
+                        PK[w_] = NK[s];
+                        PV[w_] = (ulong)V[s];
+                    }
+                    for (int a_ = 0; a_ < nt; ++a_) {
+                        int w_ = base - (int)R[16 + a_];
+                        PK[w_] = NK[16 + a_];
+                        PV[w_] = NV[16 + a_];
                     }
                     L_kn += m;
                     FRONT_L();
-                } else if (m > 0 && L_kn + m <= KP) {
+                } else if (m > 0) {
+                    /* the kept hits in chunk order at NK[0 .. m - 1] */
+                    int c_ = 0;
+                    while (kept != 0) {
+                        uint s = low_bit(kept);
+                        kept &= kept - 1u;
+                        NK[c_] = NK[s];
+                        NV[c_] = (ulong)as_uint(ca[8 * s + l]) << 32 | cti[s];
+                        ++c_;
+                    }
+                }
+                if (!fits && m > 0 && L_kn + m <= KP) {
                     /* sorted (rank of each: the keys differ), then merged
                      * into the window from its end: hits come nearly in key
                      * order, so few pending ones move */
@@ -822,7 +899,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                     }
                     L_kn += m;
                     FRONT_L();
-                } else if (m > 0) {
+                } else if (!fits && m > 0) {
                     /* more than KP pending: one by one, the largest dropped */
                     for (int e_ = 0; e_ < m; ++e_) {
                         ulong k = NK[e_], v = NV[e_];

@@ -591,6 +591,13 @@ inline int popcount16(uint x)
     return (int)((x + (x >> 8)) & 0x1Fu);
 }
 
+/* clvis_gauss_tf_index with floor inline (clvis_il_floor: the same value) */
+inline uint tf_index_il(float value, float tf_min, float tf_scale, uint tf_n)
+{
+    float x = clvis_il_floor(((value - tf_min) * tf_scale) * (float)tf_n);
+    return x >= (float)(tf_n - 1) ? tf_n - 1 : x > 0.0f ? (uint)x : 0u;
+}
+
 /* the lowest set bit's index of b (b != 0), without a call */
 inline uint low_bit(uint b)
 {
@@ -729,7 +736,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                  * scalar functions' operations lane by lane (gauss.h's
                  * clvis_gauss_alpha_*8; the vector exp/erfc may differ from the
                  * scalar ones in the last bit) */
-                uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
+                uint ti = tf_index_il(g->value, tf_min, tf_scale, tf_n);
                 float opac = g->opacity * tf[ti].w;
 #if MODEL == 1
                 float8 alpha8 = clvis_gauss_alpha_absorption8(opac, density, ts8, a8, op0, op1, op2, dp0, dp1, dp2);

@@ -39,8 +39,9 @@
  *                  global const float *cam,                           22 floats (clvis/camera.h)
  *                  global ulong *keys, global uint *ids)              sum(counts) each
  *     keys[offsets[i] + k] = tile << 32 | clvis_key_f32(dk), ids[...] = i (record),
- *     tiles in row-major order. dk (tile_depth): a lower bound of the view
- *     depth of every hit of Gaussian i by a ray of the tile.
+ *     tiles in row-major order. dk (tile_depth8, 8 of the Gaussian's tiles at
+ *     once in float8 lanes): a lower bound of the view depth of every hit of
+ *     Gaussian i by a ray of the tile.
  * kernel tile_ranges(global const ulong *keys, uint m,   m keys sorted ascending
  *                    global uint2 *ranges)               per tile of the band, zeroed before:
  *     ranges[tile] = (first, last + 1) of the tile's keys; (0, 0) for none.
@@ -230,14 +231,6 @@ kernel void tile_count(global const clvis_gaussian *recs, uint n, global const f
     counts[i] = cnt;
 }
 
-/* A lower bound of the view depth of Gaussian g's hits by the rays of tile
- * (tx, ty). A hit at t = ts > 0 is the ray's point of least Mahalanobis
- * distance, y = x - mean with y' S^-1 d = 0 and y' S^-1 y <= c^2 (S the
- * covariance), whose depth offset f . y is at least
- * -c sqrt(f' S f - (f . d)^2 / (d' S^-1 d)). Over the tile's directions
- * dd(u, v) (linear in u, v), f . dd is linear and |W dd|^2 convex, so their
- * extremes over the rectangle of pixel centres are at its corners. Hits at
- * t = 0 lie on the near plane: a Gaussian reaching it keeps dmin. */
 inline float8 il_fmin8(float8 a, float8 b)
 {
     return (a < b | b != b) ? a : b;   /* clvis_il_fmin lane by lane */
@@ -248,15 +241,26 @@ inline float8 il_fmax8(float8 a, float8 b)
     return (a > b | b != b) ? a : b;   /* clvis_il_fmax lane by lane */
 }
 
-/* the bound for 8 tiles (tx, ty) at once, in float8 lanes: the scalar
- * operations lane by lane (the same bits as one tile at a time); the caller
- * handles f->dmin <= near (every tile's bound is dmin) */
+/* A lower bound of the view depth of Gaussian g's hits by the rays of tile
+ * (tx, ty). A hit at t = ts > 0 is the ray's point of least Mahalanobis
+ * distance, y = x - mean with y' S^-1 d = 0 and y' S^-1 y <= c^2 (S the
+ * covariance), whose depth offset f . y is at least
+ * -c sqrt(f' S f - (f . d)^2 / (d' S^-1 d)). Over the tile's directions
+ * dd(u, v) (linear in u, v), f . dd is linear and |W dd|^2 convex, so their
+ * extremes over the rectangle of pixel centres are at its corners. Hits at
+ * t = 0 lie on the near plane: a Gaussian reaching it keeps dmin.
+ * tile_depth8: the bound for 8 tiles (tx, ty) at once in float8 lanes, each
+ * lane the scalar operations of one tile (the same bits as one tile at a
+ * time); the caller handles f->dmin <= near (every tile's bound is dmin). */
 inline float8 tile_depth8(const tile_footprint *f, float m3, float fsf, float c, float sd, const float *a0,
                           const float *au, const float *av, float fd0, float fdu, float fdv, int8 tx, int8 ty,
                           uint W, uint H)
 {
-    float8 us[2] = {convert_float8(tx * TS) + 0.5f, convert_float8(min((tx + 1) * TS, (int8)(int)W)) - 0.5f};
-    float8 vs[2] = {convert_float8(ty * TS) + 0.5f, convert_float8(min((ty + 1) * TS, (int8)(int)H)) - 0.5f};
+    int8 tx1 = (tx + 1) * TS, ty1 = (ty + 1) * TS;   /* min with W, H by comparison (PoCL calls min) */
+    tx1 = tx1 < (int)W ? tx1 : (int8)((int)W);
+    ty1 = ty1 < (int)H ? ty1 : (int8)((int)H);
+    float8 us[2] = {convert_float8(tx * TS) + 0.5f, convert_float8(tx1) - 0.5f};
+    float8 vs[2] = {convert_float8(ty * TS) + 0.5f, convert_float8(ty1) - 0.5f};
     float8 qmax = 0.0f, fmin2 = INFINITY, fdlo = INFINITY, fdhi = -INFINITY;
     for (int k = 0; k < 4; ++k) {
         float8 u = us[k & 1], v = vs[k >> 1];
@@ -642,10 +646,15 @@ inline uint low_bit(uint b)
 
 /* tile_render8 walks the candidates in chunks of up to 16 that hit a live
  * lane: their hit tests and alphas in float8 lanes (kept per chunk slot),
- * then lane by lane, the lane's state in registers: its hits of the chunk
- * (sorted by rank, the keys differ) merged into its pending window from the
- * end (a few pending hits move: hits come nearly in key order), then the
- * flush for the next candidate's key. A lane composites the same hits in
+ * then lane by lane, the lane's state in registers: the chunk's 16 slots as
+ * keys in signed 64-bit lanes (a slot the lane missed, or whose hit lies at
+ * or before the last composited or at or beyond the round's ceiling: above
+ * every key), the pending hits above the smallest kept key beside them (a
+ * few: hits come nearly in key order), each placed by its rank in that
+ * union (the keys differ; the unkept slots all land on a spare entry past
+ * the window), then the flush for the next candidate's key. (More than 16
+ * such pending hits, or more than KP pending: the kept hits ranked among
+ * themselves and merged from the window's end, or inserted one by one.) A lane composites the same hits in
  * the same order as with a flush before each candidate: every hit of a
  * candidate lies at depth >= its key, and the keys ascend, so a flush put
  * off past the chunk's insertions composites the same key-order prefix.

@@ -16,6 +16,9 @@
  *   KP     the streaming k-buffer's size, 1..64 (default 16)
  *   MODEL  0 max response, 1 absorption (march.cl's, default 0)
  *   COLOR  0 transfer-function rgb, 1 colors[id] (march.cl's, default 0)
+ *   KEYS8  1: tile_keys bounds 8 of a Gaussian's tiles at once in float8
+ *          lanes (tile_depth8; PoCL's CPU profile), 0 one tile at a time
+ *          (tile_depth; default); the same keys
  *
  * Common arguments:
  *   recs      n clvis_gaussian records (clvis/gauss.h), in any order (the host
@@ -39,9 +42,9 @@
  *                  global const float *cam,                           22 floats (clvis/camera.h)
  *                  global ulong *keys, global uint *ids)              sum(counts) each
  *     keys[offsets[i] + k] = tile << 32 | clvis_key_f32(dk), ids[...] = i (record),
- *     tiles in row-major order. dk (tile_depth8, 8 of the Gaussian's tiles at
- *     once in float8 lanes): a lower bound of the view depth of every hit of
- *     Gaussian i by a ray of the tile.
+ *     tiles in row-major order. dk (tile_depth, or tile_depth8 with KEYS8): a
+ *     lower bound of the view depth of every hit of Gaussian i by a ray of
+ *     the tile.
  * kernel tile_ranges(global const ulong *keys, uint m,   m keys sorted ascending
  *                    global uint2 *ranges)               per tile of the band, zeroed before:
  *     ranges[tile] = (first, last + 1) of the tile's keys; (0, 0) for none.
@@ -110,6 +113,9 @@
 #endif
 #ifndef COLOR
 #define COLOR 0
+#endif
+#ifndef KEYS8
+#define KEYS8 0
 #endif
 #define T_STOP 1e-3f
 #define INFLATE 1.01f
@@ -231,6 +237,40 @@ kernel void tile_count(global const clvis_gaussian *recs, uint n, global const f
     counts[i] = cnt;
 }
 
+/* A lower bound of the view depth of Gaussian g's hits by the rays of tile
+ * (tx, ty). A hit at t = ts > 0 is the ray's point of least Mahalanobis
+ * distance, y = x - mean with y' S^-1 d = 0 and y' S^-1 y <= c^2 (S the
+ * covariance), whose depth offset f . y is at least
+ * -c sqrt(f' S f - (f . d)^2 / (d' S^-1 d)). Over the tile's directions
+ * dd(u, v) (linear in u, v), f . dd is linear and |W dd|^2 convex, so their
+ * extremes over the rectangle of pixel centres are at its corners. Hits at
+ * t = 0 lie on the near plane: a Gaussian reaching it keeps dmin. */
+inline float tile_depth(const tile_footprint *f, float m3, float fsf, float c, float sd, const float *a0,
+                        const float *au, const float *av, float fd0, float fdu, float fdv, float near, int tx,
+                        int ty, uint W, uint H)
+{
+    if (!(f->dmin > near))
+        return f->dmin;
+    float us[2] = {(float)(tx * TS) + 0.5f, (float)clvis_il_imin((tx + 1) * TS, (int)W) - 0.5f};
+    float vs[2] = {(float)(ty * TS) + 0.5f, (float)clvis_il_imin((ty + 1) * TS, (int)H) - 0.5f};
+    float qmax = 0.0f, fmin2 = INFINITY, fdlo = INFINITY, fdhi = -INFINITY;
+    for (int k = 0; k < 4; ++k) {
+        float u = us[k & 1], v = vs[k >> 1];
+        float x0 = (a0[0] + u * au[0]) + v * av[0];
+        float x1 = (a0[1] + u * au[1]) + v * av[1];
+        float x2 = (a0[2] + u * au[2]) + v * av[2];
+        qmax = clvis_il_fmax(qmax, clvis_dot3(x0, x1, x2, x0, x1, x2));
+        float fd = (fd0 + u * fdu) + v * fdv;
+        fdlo = clvis_il_fmin(fdlo, fd);
+        fdhi = clvis_il_fmax(fdhi, fd);
+        fmin2 = clvis_il_fmin(fmin2, fd * fd);
+    }
+    float h = (fdlo > 0.0f || fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : 0.0f;
+    float g = clvis_il_fmax(fsf - h, 0.0f) + 1e-5f * fsf;
+    float lo = (m3 - c * sqrt(g)) - sd;
+    return clvis_il_isfinite(lo) ? clvis_il_fmax(lo, f->dmin) : f->dmin;
+}
+
 inline float8 il_fmin8(float8 a, float8 b)
 {
     return (a < b | b != b) ? a : b;   /* clvis_il_fmin lane by lane */
@@ -241,15 +281,7 @@ inline float8 il_fmax8(float8 a, float8 b)
     return (a > b | b != b) ? a : b;   /* clvis_il_fmax lane by lane */
 }
 
-/* A lower bound of the view depth of Gaussian g's hits by the rays of tile
- * (tx, ty). A hit at t = ts > 0 is the ray's point of least Mahalanobis
- * distance, y = x - mean with y' S^-1 d = 0 and y' S^-1 y <= c^2 (S the
- * covariance), whose depth offset f . y is at least
- * -c sqrt(f' S f - (f . d)^2 / (d' S^-1 d)). Over the tile's directions
- * dd(u, v) (linear in u, v), f . dd is linear and |W dd|^2 convex, so their
- * extremes over the rectangle of pixel centres are at its corners. Hits at
- * t = 0 lie on the near plane: a Gaussian reaching it keeps dmin.
- * tile_depth8: the bound for 8 tiles (tx, ty) at once in float8 lanes, each
+/* tile_depth8: the bound for 8 tiles (tx, ty) at once in float8 lanes, each
  * lane the scalar operations of one tile (the same bits as one tile at a
  * time); the caller handles f->dmin <= near (every tile's bound is dmin). */
 inline float8 tile_depth8(const tile_footprint *f, float m3, float fsf, float c, float sd, const float *a0,
@@ -340,6 +372,7 @@ kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const fl
     float fsf = clvis_dot3(e[0], e[1], e[2], e[0], e[1], e[2]);
     uint tiles_x = (W + TS - 1) / TS;
     ulong at = offsets[i];
+#if KEYS8
     bool flat = !(f.dmin > near);   /* hits at t = 0 on the near plane: every bound is dmin */
     /* the tiles in row-major order, 8 at a time */
     int bx[8], by[8], nb = 0;
@@ -362,6 +395,21 @@ kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const fl
     if (nb > 0)
         tile_keys_batch(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, flat, bx, by, nb, W, H, ty0, tiles_x, i,
                         keys, ids, at);
+#else
+    int y0 = clvis_il_imax(f.ty0, (int)ty0), y1 = clvis_il_imin(f.ty1, (int)ty1 - 1);
+    for (int ty = y0; ty <= y1; ++ty) {
+        int c0, c1;
+        if (!tile_row(&f, ty, W, H, &c0, &c1))
+            continue;
+        for (int tx = c0; tx <= c1; ++tx) {
+            float dk = tile_depth(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, near, tx, ty, W, H);
+            ulong tile = (ulong)(ty - (int)ty0) * tiles_x + (ulong)tx;
+            keys[at] = tile << 32 | (ulong)clvis_key_f32(as_uint(dk));
+            ids[at] = i;
+            ++at;
+        }
+    }
+#endif
 }
 
 kernel void tile_ranges(global const ulong *keys, uint m, global uint2 *ranges)

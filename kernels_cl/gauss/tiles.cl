@@ -16,6 +16,9 @@
  *   KP     the streaming k-buffer's size, 1..64 (default 16)
  *   MODEL  0 max response, 1 absorption (march.cl's, default 0)
  *   COLOR  0 transfer-function rgb, 1 colors[id] (march.cl's, default 0)
+ *   KEYS8  1: tile_keys bounds 8 of a Gaussian's tiles at once in float8
+ *          lanes (tile_depth8; PoCL's CPU profile), 0 one tile at a time
+ *          (tile_depth; default); the same keys
  *
  * Common arguments:
  *   recs      n clvis_gaussian records (clvis/gauss.h), in any order (the host
@@ -39,8 +42,9 @@
  *                  global const float *cam,                           22 floats (clvis/camera.h)
  *                  global ulong *keys, global uint *ids)              sum(counts) each
  *     keys[offsets[i] + k] = tile << 32 | clvis_key_f32(dk), ids[...] = i (record),
- *     tiles in row-major order. dk (tile_depth): a lower bound of the view
- *     depth of every hit of Gaussian i by a ray of the tile.
+ *     tiles in row-major order. dk (tile_depth, or tile_depth8 with KEYS8): a
+ *     lower bound of the view depth of every hit of Gaussian i by a ray of
+ *     the tile.
  * kernel tile_ranges(global const ulong *keys, uint m,   m keys sorted ascending
  *                    global uint2 *ranges)               per tile of the band, zeroed before:
  *     ranges[tile] = (first, last + 1) of the tile's keys; (0, 0) for none.
@@ -109,6 +113,9 @@
 #endif
 #ifndef COLOR
 #define COLOR 0
+#endif
+#ifndef KEYS8
+#define KEYS8 0
 #endif
 #define T_STOP 1e-3f
 #define INFLATE 1.01f
@@ -264,6 +271,74 @@ inline float tile_depth(const tile_footprint *f, float m3, float fsf, float c, f
     return clvis_il_isfinite(lo) ? clvis_il_fmax(lo, f->dmin) : f->dmin;
 }
 
+inline float8 il_fmin8(float8 a, float8 b)
+{
+    return (a < b | b != b) ? a : b;   /* clvis_il_fmin lane by lane */
+}
+
+inline float8 il_fmax8(float8 a, float8 b)
+{
+    return (a > b | b != b) ? a : b;   /* clvis_il_fmax lane by lane */
+}
+
+/* tile_depth8: the bound for 8 tiles (tx, ty) at once in float8 lanes, each
+ * lane the scalar operations of one tile (the same bits as one tile at a
+ * time); the caller handles f->dmin <= near (every tile's bound is dmin). */
+inline float8 tile_depth8(const tile_footprint *f, float m3, float fsf, float c, float sd, const float *a0,
+                          const float *au, const float *av, float fd0, float fdu, float fdv, int8 tx, int8 ty,
+                          uint W, uint H)
+{
+    int8 tx1 = (tx + 1) * TS, ty1 = (ty + 1) * TS;   /* min with W, H by comparison (PoCL calls min) */
+    tx1 = tx1 < (int)W ? tx1 : (int8)((int)W);
+    ty1 = ty1 < (int)H ? ty1 : (int8)((int)H);
+    float8 us[2] = {convert_float8(tx * TS) + 0.5f, convert_float8(tx1) - 0.5f};
+    float8 vs[2] = {convert_float8(ty * TS) + 0.5f, convert_float8(ty1) - 0.5f};
+    float8 qmax = 0.0f, fmin2 = INFINITY, fdlo = INFINITY, fdhi = -INFINITY;
+    for (int k = 0; k < 4; ++k) {
+        float8 u = us[k & 1], v = vs[k >> 1];
+        float8 x0 = (a0[0] + u * au[0]) + v * av[0];
+        float8 x1 = (a0[1] + u * au[1]) + v * av[1];
+        float8 x2 = (a0[2] + u * au[2]) + v * av[2];
+        qmax = il_fmax8(qmax, (x0 * x0 + x1 * x1) + x2 * x2);
+        float8 fd = (fd0 + u * fdu) + v * fdv;
+        fdlo = il_fmin8(fdlo, fd);
+        fdhi = il_fmax8(fdhi, fd);
+        fmin2 = il_fmin8(fmin2, fd * fd);
+    }
+    float8 h = (fdlo > 0.0f | fdhi < 0.0f) ? (fmin2 / qmax) * 0.99999f : (float8)(0.0f);
+    float8 g = il_fmax8(fsf - h, (float8)(0.0f)) + 1e-5f * fsf;
+    float8 lo = (m3 - c * sqrt(g)) - sd;
+    float8 dmin = (float8)(f->dmin);
+    return clvis_il_isfinite8(lo) ? il_fmax8(lo, dmin) : dmin;
+}
+
+/* tile_keys' keys of the batch's n tiles (tile columns bx, rows by, lanes
+ * past n repeat the last tile) at keys[at ..] */
+inline void tile_keys_batch(const tile_footprint *f, float m3, float fsf, float c, float sd, const float *a0,
+                            const float *au, const float *av, float fd0, float fdu, float fdv, bool flat,
+                            int *bx, int *by, int n, uint W, uint H, uint ty0, uint tiles_x, uint id,
+                            global ulong *keys, global uint *ids, ulong at)
+{
+    for (int k = n; k < 8; ++k) {
+        bx[k] = bx[n - 1];
+        by[k] = by[n - 1];
+    }
+    float dk[8];
+    if (flat) {
+        for (int k = 0; k < 8; ++k)
+            dk[k] = f->dmin;
+    } else {
+        float8 d8 = tile_depth8(f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, CLVIS_IL_VLOAD8(int8, bx),
+                                CLVIS_IL_VLOAD8(int8, by), W, H);
+        CLVIS_IL_VSTORE8(d8, dk);
+    }
+    for (int k = 0; k < n; ++k) {
+        ulong tile = (ulong)(by[k] - (int)ty0) * tiles_x + (ulong)bx[k];
+        keys[at + k] = tile << 32 | (ulong)clvis_key_f32(as_uint(dk[k]));
+        ids[at + k] = id;
+    }
+}
+
 kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const float *proj, float near,
                       float cutoff, uint W, uint H, uint ty0, uint ty1, global const ulong *offsets,
                       global const float *cam, global ulong *keys, global uint *ids)
@@ -297,6 +372,30 @@ kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const fl
     float fsf = clvis_dot3(e[0], e[1], e[2], e[0], e[1], e[2]);
     uint tiles_x = (W + TS - 1) / TS;
     ulong at = offsets[i];
+#if KEYS8
+    bool flat = !(f.dmin > near);   /* hits at t = 0 on the near plane: every bound is dmin */
+    /* the tiles in row-major order, 8 at a time */
+    int bx[8], by[8], nb = 0;
+    int y0 = clvis_il_imax(f.ty0, (int)ty0), y1 = clvis_il_imin(f.ty1, (int)ty1 - 1);
+    for (int ty = y0; ty <= y1; ++ty) {
+        int c0, c1;
+        if (!tile_row(&f, ty, W, H, &c0, &c1))
+            continue;
+        for (int tx = c0; tx <= c1; ++tx) {
+            bx[nb] = tx;
+            by[nb] = ty;
+            if (++nb == 8) {
+                tile_keys_batch(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, flat, bx, by, 8, W, H, ty0,
+                                tiles_x, i, keys, ids, at);
+                at += 8;
+                nb = 0;
+            }
+        }
+    }
+    if (nb > 0)
+        tile_keys_batch(&f, m3, fsf, c, sd, a0, au, av, fd0, fdu, fdv, flat, bx, by, nb, W, H, ty0, tiles_x, i,
+                        keys, ids, at);
+#else
     int y0 = clvis_il_imax(f.ty0, (int)ty0), y1 = clvis_il_imin(f.ty1, (int)ty1 - 1);
     for (int ty = y0; ty <= y1; ++ty) {
         int c0, c1;
@@ -310,6 +409,7 @@ kernel void tile_keys(global const clvis_gaussian *recs, uint n, global const fl
             ++at;
         }
     }
+#endif
 }
 
 kernel void tile_ranges(global const ulong *keys, uint m, global uint2 *ranges)
@@ -501,6 +601,55 @@ inline ulong transpose8x8(ulong x)
     return x ^ t ^ (t << 28);
 }
 
+#define KEY_NONE 0x7FFFFFFFFFFFFFFFul   /* above every pending key: no hit, no ceiling */
+
+/* p[0], p[stride], ..., p[7 stride] as the vector type TV */
+#define CLVIS_STRIDED8(TV, p, st) \
+    ((TV)((p)[0], (p)[(st)], (p)[2 * (st)], (p)[3 * (st)], (p)[4 * (st)], (p)[5 * (st)], (p)[6 * (st)], (p)[7 * (st)]))
+
+/* hi << 32 | lo, lane by lane */
+inline long8 pack8(uint8 tb, uint8 id)
+{
+#ifdef __ENDIAN_LITTLE__
+    return as_long8((uint16)(id.s0, tb.s0, id.s1, tb.s1, id.s2, tb.s2, id.s3, tb.s3, id.s4, tb.s4, id.s5, tb.s5,
+                             id.s6, tb.s6, id.s7, tb.s7));
+#else
+    return as_long8((uint16)(tb.s0, id.s0, tb.s1, id.s1, tb.s2, id.s2, tb.s3, id.s3, tb.s4, id.s4, tb.s5, id.s5,
+                             tb.s6, id.s6, tb.s7, id.s7));
+#endif
+}
+
+/* pend_key of 8 hits (t >= 0) as signed 64-bit lanes */
+inline long8 slot_keys8(float8 t, uint8 id)
+{
+    return pack8(as_uint8(t + 0.0f), id);
+}
+
+/* the lane's 8 bits of the long8 comparison v (lane l: bit l) */
+inline uint lane_bits8l(long8 v)
+{
+    long8 b = v & (long8)(1, 2, 4, 8, 16, 32, 64, 128);
+    long4 a = b.lo | b.hi;
+    long2 c = a.lo | a.hi;
+    return (uint)(c.x | c.y);
+}
+
+/* the set bits of a 16-bit x, without a call */
+inline int popcount16(uint x)
+{
+    x = x - ((x >> 1) & 0x5555u);
+    x = (x & 0x3333u) + ((x >> 2) & 0x3333u);
+    x = (x + (x >> 4)) & 0x0F0Fu;
+    return (int)((x + (x >> 8)) & 0x1Fu);
+}
+
+/* clvis_gauss_tf_index with floor inline (clvis_il_floor: the same value) */
+inline uint tf_index_il(float value, float tf_min, float tf_scale, uint tf_n)
+{
+    float x = clvis_il_floor(((value - tf_min) * tf_scale) * (float)tf_n);
+    return x >= (float)(tf_n - 1) ? tf_n - 1 : x > 0.0f ? (uint)x : 0u;
+}
+
 /* the lowest set bit's index of b (b != 0), without a call */
 inline uint low_bit(uint b)
 {
@@ -545,10 +694,15 @@ inline uint low_bit(uint b)
 
 /* tile_render8 walks the candidates in chunks of up to 16 that hit a live
  * lane: their hit tests and alphas in float8 lanes (kept per chunk slot),
- * then lane by lane, the lane's state in registers: its hits of the chunk
- * (sorted by rank, the keys differ) merged into its pending window from the
- * end (a few pending hits move: hits come nearly in key order), then the
- * flush for the next candidate's key. A lane composites the same hits in
+ * then lane by lane, the lane's state in registers: the chunk's 16 slots as
+ * keys in signed 64-bit lanes (a slot the lane missed, or whose hit lies at
+ * or before the last composited or at or beyond the round's ceiling: above
+ * every key), the pending hits above the smallest kept key beside them (a
+ * few: hits come nearly in key order), each placed by its rank in that
+ * union (the keys differ; the unkept slots all land on a spare entry past
+ * the window), then the flush for the next candidate's key. (More than 16
+ * such pending hits, or more than KP pending: the kept hits ranked among
+ * themselves and merged from the window's end, or inserted one by one.) A lane composites the same hits in
  * the same order as with a flush before each candidate: every hit of a
  * candidate lies at depth >= its key, and the keys ascend, so a flush put
  * off past the chunk's insertions composites the same key-order prefix.
@@ -573,12 +727,17 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
     int kn[8], hd[8];
     /* pending: pk[hd .. hd + kn - 1], key ascending, [hd] the smallest (the
      * window moves back to 0 when it reaches the end) */
-    ulong pk[8][KP], pv[8][KP];
-    ulong NK[16], NV[16], SK[16], SV[16];   /* a lane's hits of the chunk; sorted */
+    ulong pk[8][KP + 1], pv[8][KP + 1];   /* + 1: a spare entry (the union's unused slots) */
+    ulong NK[32], NV[32], SK[16], SV[16];   /* a lane's chunk slots' keys and the pending ones they pass; sorted */
     float lox[8], loy[8], loz[8], ldx[8], ldy[8], ldz[8];
     /* the chunk: per slot the candidate's t and alpha per lane, its id and tf entry */
     float ct[16 * 8], ca[16 * 8];
     uint cid[16], cti[16];
+    for (int s = 0; s < 16; ++s) {   /* the slots past a chunk's end are read (their lanes masked) */
+        for (int l = 0; l < 8; ++l)
+            ct[8 * s + l] = ca[8 * s + l] = 0.0f;
+        cid[s] = cti[s] = 0;
+    }
     uint2 range = ranges[tile];
     int live = 0;
     uint donem = 0;   /* bit l: lane l done */
@@ -604,7 +763,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
             kn[l] = 0;
             hd[l] = 0;
             over[l] = false;
-            ceil_k[l] = 0xFFFFFFFFFFFFFFFFul;
+            ceil_k[l] = KEY_NONE;
             front[l] = INFINITY;
             nround[l] += !done[l];
         }
@@ -634,7 +793,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                  * scalar functions' operations lane by lane (gauss.h's
                  * clvis_gauss_alpha_*8; the vector exp/erfc may differ from the
                  * scalar ones in the last bit) */
-                uint ti = clvis_gauss_tf_index(g->value, tf_min, tf_scale, tf_n);
+                uint ti = tf_index_il(g->value, tf_min, tf_scale, tf_n);
                 float opac = g->opacity * tf[ti].w;
 #if MODEL == 1
                 float8 alpha8 = clvis_gauss_alpha_absorption8(opac, density, ts8, a8, op0, op1, op2, dp0, dp1, dp2);
@@ -673,18 +832,107 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                 bool L_done = false, L_over = over[l];
                 int L_kn = kn[l], L_hd = hd[l];
                 /* the lane's hits of the chunk beyond "last" and below the
-                 * ceiling, in chunk order */
-                int m = 0;
-                while (lb != 0) {
-                    uint s = low_bit(lb);
-                    lb &= lb - 1u;
-                    ulong k = pend_key(ct[8 * s + l], cid[s]);
-                    int keep = (first || k > L_last) & (k < L_ceil);
-                    NK[m] = k;
-                    NV[m] = (ulong)as_uint(ca[8 * s + l]) << 32 | cti[s];
-                    m += keep;
+                 * ceiling: their keys per chunk slot (KEY_NONE: none), 16
+                 * slots in signed 64-bit lanes (keys are below 2^63) */
+                long8 sb = (long8)(1, 2, 4, 8, 16, 32, 64, 128);
+                long8 kA = slot_keys8(CLVIS_STRIDED8(float8, ct + l, 8), CLVIS_IL_VLOAD8(uint8, cid));
+                long8 kB = slot_keys8(CLVIS_STRIDED8(float8, ct + 64 + l, 8), CLVIS_IL_VLOAD8(uint8, cid + 8));
+                long8 okA = (((long8)((long)(lb & 0xFFu)) & sb) != 0) & (kA < (long)L_ceil);
+                long8 okB = (((long8)((long)(lb >> 8)) & sb) != 0) & (kB < (long)L_ceil);
+                if (!first) {
+                    okA &= kA > (long)L_last;
+                    okB &= kB > (long)L_last;
                 }
+                kA = okA ? kA : (long8)(KEY_NONE);
+                kB = okB ? kB : (long8)(KEY_NONE);
+                uint kept = lane_bits8l(okA) | lane_bits8l(okB) << 8;
+                int m = popcount16(kept);
+                long8 mn8 = kA < kB ? kA : kB;
+                long4 mn4 = mn8.lo < mn8.hi ? mn8.lo : mn8.hi;
+                long2 mn2 = mn4.lo < mn4.hi ? mn4.lo : mn4.hi;
+                ulong kmin = (ulong)(mn2.x < mn2.y ? mn2.x : mn2.y);   /* the smallest kept */
+                int nt = 0;   /* pending hits above kmin (they move), when they are 16 at most */
+                bool fits = false;
                 if (m > 0 && L_kn + m <= KP) {
+                    if (L_hd + L_kn + m > KP) {   /* at the end: move the window to 0 */
+                        for (int q = 0; q < L_kn; ++q) {
+                            PK[q] = PK[L_hd + q];
+                            PV[q] = PV[L_hd + q];
+                        }
+                        L_hd = 0;
+                    }
+                    int e_ = L_hd + L_kn;
+                    while (nt < L_kn && nt < 16 && PK[e_ - 1 - nt] > kmin) {
+                        NK[16 + nt] = PK[e_ - 1 - nt];
+                        NV[16 + nt] = PV[e_ - 1 - nt];
+                        ++nt;
+                    }
+                    fits = !(nt < L_kn && PK[e_ - 1 - nt] > kmin);
+                }
+                CLVIS_IL_VSTORE8(kA, NK);
+                CLVIS_IL_VSTORE8(kB, NK + 8);
+                if (fits) {
+                    /* the kept hits and the pending ones they pass, placed by
+                     * rank in their union (the keys differ), 16 slots and 8 or
+                     * 16 pending at once */
+                    for (int p_ = 16 + nt; p_ < 32; ++p_)
+                        NK[p_] = KEY_NONE;
+                    long8 uc = as_long8(CLVIS_IL_VLOAD8(ulong8, NK + 16));
+                    long8 ra = 0, rb = 0, rc = 0, rd = 0;
+                    if (nt <= 8) {
+                        for (int b_ = 0; b_ < 16 + nt; ++b_) {
+                            long8 kb = (long8)((long)NK[b_]);
+                            ra += kA > kb;
+                            rb += kB > kb;
+                            rc += uc > kb;
+                        }
+                    } else {
+                        long8 ud = as_long8(CLVIS_IL_VLOAD8(ulong8, NK + 24));
+                        for (int b_ = 0; b_ < 16 + nt; ++b_) {
+                            long8 kb = (long8)((long)NK[b_]);
+                            ra += kA > kb;
+                            rb += kB > kb;
+                            rc += uc > kb;
+                            rd += ud > kb;
+                        }
+                    }
+                    long R[32];
+                    CLVIS_IL_VSTORE8(ra, R);
+                    CLVIS_IL_VSTORE8(rb, R + 8);
+                    CLVIS_IL_VSTORE8(rc, R + 16);
+                    CLVIS_IL_VSTORE8(rd, R + 24);
+                    /* every slot written: those without a hit (rank m + nt) all
+                     * at the window's new end + 1, a spare entry */
+                    long8 vA = pack8(as_uint8(CLVIS_STRIDED8(float8, ca + l, 8)), CLVIS_IL_VLOAD8(uint8, cti));
+                    long8 vB = pack8(as_uint8(CLVIS_STRIDED8(float8, ca + 64 + l, 8)), CLVIS_IL_VLOAD8(uint8, cti + 8));
+                    long V[16];
+                    CLVIS_IL_VSTORE8(vA, V);
+                    CLVIS_IL_VSTORE8(vB, V + 8);
+                    int base = L_hd + L_kn - nt;
+                    for (int s = 0; s < 16; ++s) {
+                        int w_ = base - (int)R[s];
+                        PK[w_] = NK[s];
+                        PV[w_] = (ulong)V[s];
+                    }
+                    for (int a_ = 0; a_ < nt; ++a_) {
+                        int w_ = base - (int)R[16 + a_];
+                        PK[w_] = NK[16 + a_];
+                        PV[w_] = NV[16 + a_];
+                    }
+                    L_kn += m;
+                    FRONT_L();
+                } else if (m > 0) {
+                    /* the kept hits in chunk order at NK[0 .. m - 1] */
+                    int c_ = 0;
+                    while (kept != 0) {
+                        uint s = low_bit(kept);
+                        kept &= kept - 1u;
+                        NK[c_] = NK[s];
+                        NV[c_] = (ulong)as_uint(ca[8 * s + l]) << 32 | cti[s];
+                        ++c_;
+                    }
+                }
+                if (!fits && m > 0 && L_kn + m <= KP) {
                     /* sorted (rank of each: the keys differ), then merged
                      * into the window from its end: hits come nearly in key
                      * order, so few pending ones move */
@@ -715,7 +963,7 @@ kernel void tile_render8(global const clvis_gaussian *keyrecs, global const uint
                     }
                     L_kn += m;
                     FRONT_L();
-                } else if (m > 0) {
+                } else if (!fits && m > 0) {
                     /* more than KP pending: one by one, the largest dropped */
                     for (int e_ = 0; e_ < m; ++e_) {
                         ulong k = NK[e_], v = NV[e_];

@@ -60,9 +60,10 @@ __all__ = ["KEY_BYTES", "PROFILES", "projection_rows", "render_tiles", "tile_lis
 # it bins with splat_count8 / splat_keys8 (8 Gaussians a work-item, float8),
 # else splat_count / splat_keys (one a work-item); the same keys either way.
 # The hit models' tile_keys bounds 8 tiles of a Gaussian at once in float8
-# lanes (KEYS8) where lanes is 8: PoCL 0.56x its CPU time; Intel's CPU runtime,
-# which vectorises the one-tile form across work-items itself, ~1.5x (0.034
-# against 0.022 s, on a 0.37 s render); the same keys either way.
+# lanes (KEYS8) where lanes is 8 (PoCL: 0.56x its CPU time), but not on
+# Intel's CPU runtime, which vectorises the one-tile form across work-items
+# itself (KEYS8 took ~1.5x there: 0.034 against 0.022 s, on a 0.37 s render);
+# the same keys either way.
 PROFILES = {
     "cpu": {
         "ts": 8,
@@ -125,7 +126,9 @@ def _kernels(q, r) -> dict:
         "KP": r.kp,
         "MODEL": {"max_response": 0, "absorption": 1}[r.model],
         "COLOR": int(r.colors),
-        "KEYS8": int(lanes == 8),  # tile_keys' bounds in float8 lanes with the 8-lane render
+        # tile_keys' bounds in float8 lanes with the 8-lane render, except on Intel's
+        # CPU runtime (it vectorises the one-tile form across work-items: 1.5x faster there)
+        "KEYS8": int(lanes == 8 and "intel" not in runtime.capabilities(q).platform.lower()),
     }
     return {
         name: runtime.get_kernel(q, "gauss/tiles.cl", name, defines, runtime.EXACT_FP)

@@ -135,31 +135,49 @@ def _arrays(section: bytes) -> list[tuple[dict[str, str], bytes]]:
     """The (attributes, body) of each <DataArray .../> (an appended array, as
     VTK writes it) or <DataArray ...>text</DataArray> in `section`."""
     found = re.findall(rb"(<DataArray\b[^>]*?)(?:/>|>(.*?)</DataArray>)", section, re.S)
-    return [(_attrs(t + b">"), b) for t, b in found]
+    # VTK writes a range (<InformationKey name="L2_NORM_RANGE" ...>) after some arrays' values
+    return [
+        (_attrs(t + b">"), re.sub(rb"<InformationKey\b.*?</InformationKey>", b"", b, flags=re.S))
+        for t, b in found
+    ]
+
+
+def _xml_part(path: Path, raw: bytes) -> tuple[int, bytes]:
+    """(where <AppendedData> starts or -1, the XML before it) of a VTK XML
+    file; a DataError for a DTD or entity declaration (no entity expansion)."""
+    if b"<!DOCTYPE" in raw[:4096] or b"<!ENTITY" in raw[:4096]:
+        raise DataError(f"{path}: a VTK file with a DTD or entities is not read")
+    at = raw.find(b"<AppendedData")
+    return at, raw if at < 0 else raw[:at]  # the appended bytes are not XML: never searched as such
+
+
+def _xml_head(path: Path, xml: bytes, kind: str) -> tuple[dict[str, str], dict[str, str]]:
+    """(the <VTKFile> attributes, the <`kind`> attributes) of a VTK XML file
+    of that type; a DataError for any other file, comments or CDATA, or a
+    compressor that is not read."""
+    head = re.findall(rb"<VTKFile\b[^>]*>", xml)
+    data = re.findall(rb"<" + kind.encode() + rb"\b[^>]*>", xml)
+    if len(head) != 1 or len(data) != 1 or _attrs(head[0]).get("type", kind) != kind:
+        raise DataError(f'{path}: not a VTK {kind} file (no <VTKFile type="{kind}"> and <{kind}>)')
+    if b"<!--" in xml or b"<![CDATA[" in xml:
+        raise DataError(f"{path}: XML comments or CDATA in a VTK file are not read")
+    fa = _attrs(head[0])
+    compressor = fa.get("compressor")
+    if compressor is not None and compressor not in _MAX_RATIO:
+        raise DataError(f"{path}: compressor {compressor} is not read (zlib or LZ4)")
+    return fa, _attrs(data[0])
 
 
 def _check_vti(path: Path, raw: bytes) -> tuple[str, int, str]:
     """Check the .vti's header against the file before VTK reads it: (the
     name of the point array that is the volume, its samples); a DataError
     naming the file for what is not read or lies about its size."""
-    if b"<!DOCTYPE" in raw[:4096] or b"<!ENTITY" in raw[:4096]:
-        raise DataError(f"{path}: a VTK file with a DTD or entities is not read")
-    at = raw.find(b"<AppendedData")
-    xml = raw if at < 0 else raw[:at]  # the appended bytes are not XML: never searched as such
-    head = re.findall(rb"<VTKFile\b[^>]*>", xml)
-    image = re.findall(rb"<ImageData\b[^>]*>", xml)
-    if len(head) != 1 or len(image) != 1 or _attrs(head[0]).get("type", "ImageData") != "ImageData":
-        raise DataError(f'{path}: not a VTK ImageData file (no <VTKFile type="ImageData"> and <ImageData>)')
-    if b"<!--" in xml or b"<![CDATA[" in xml:
-        raise DataError(f"{path}: XML comments or CDATA in a VTK file are not read")
-    fa, ia = _attrs(head[0]), _attrs(image[0])
+    at, xml = _xml_part(path, raw)
+    fa, ia = _xml_head(path, xml, "ImageData")
     whole = _numbers(path, "WholeExtent", ia.get("WholeExtent", ""), 6, int)
     n = _count(path, "WholeExtent", whole)
     _numbers(path, "Spacing", ia.get("Spacing", "1 1 1"), 3)
     _numbers(path, "Origin", ia.get("Origin", "0 0 0"), 3)
-    compressor = fa.get("compressor")
-    if compressor is not None and compressor not in _MAX_RATIO:
-        raise DataError(f"{path}: compressor {compressor} is not read (zlib or LZ4)")
     pieces = re.findall(rb"<Piece\b([^>]*)>(.*?)</Piece>", xml, re.S)
     if not pieces or len(pieces) != len(re.findall(rb"<Piece\b", xml)):
         raise DataError(f"{path}: malformed ImageData: no <Piece>...</Piece>")
@@ -213,16 +231,24 @@ def _cells(ext: list[int]) -> list[int]:
 
 
 def _check_array(
-    path: Path, raw: bytes, at: int, a: dict[str, str], text: bytes, fa: dict[str, str], nbytes: int, n: int
+    path: Path,
+    raw: bytes,
+    at: int,
+    a: dict[str, str],
+    text: bytes,
+    fa: dict[str, str],
+    nbytes: int | None,
+    n: int | None,
 ) -> None:
     """One piece's array: its byte count (or compressed-block header)
-    against its extent and against what the file holds."""
+    against its extent (`nbytes`, `n` values; None: any, a cell array's
+    connectivity) and against what the file holds."""
     fmt = a.get("format", "ascii")
     hs = 8 if fa.get("header_type") == "UInt64" else 4
     hdt = np.dtype((">" if fa.get("byte_order") == "BigEndian" else "<") + ("u8" if hs == 8 else "u4"))
     compressor = fa.get("compressor")
     if fmt == "ascii":
-        if n > len(text):
+        if n is not None and n > len(text):
             raise DataError(f"{path}: {n} samples declared, the array holds {len(text)} bytes of text")
         return
     if fmt == "binary":
@@ -257,7 +283,7 @@ def _check_array(
     try:
         if compressor is None:
             count = int(np.frombuffer(take(0, hs), hdt, 1)[0])
-            if count != nbytes or hs + count > size:
+            if (nbytes is not None and count != nbytes) or hs + count > size:
                 raise DataError(f"{path}: the array's byte count does not match its extent, or is truncated")
             return
         blocks = int(np.frombuffer(take(0, hs), hdt, 1)[0])
@@ -268,7 +294,7 @@ def _check_array(
         header = np.frombuffer(take(0, hbytes), hdt, 3 + blocks).astype(np.int64)
         block, last, sizes = int(header[1]), int(header[2]), header[3:]
         total = block * (blocks - 1) + (last or block) if blocks else 0
-        if total != nbytes or block < 1 and blocks:
+        if (nbytes is not None and total != nbytes) or (block < 1 and blocks):
             raise DataError(f"{path}: the compressed array holds {total} bytes, the extent needs {nbytes}")
         data = size - (4 * -(-hbytes // 3) * 3 // 4 if base else hbytes)
         if int(sizes.sum()) > data or (sizes < 0).any() or total > _MAX_RATIO[str(compressor)] * max(data, 1):
@@ -320,11 +346,168 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
 
 
-# a legacy array's declaration: FIELD arrays (name components tuples type) and LOOKUP_TABLE name size
-_FIELD_ARRAY = re.compile(
-    rb"(?m)^[ \t]*\S+[ \t]+(\d+)[ \t]+(\d+)[ \t]+(?:unsigned_|vtk)?(?:char|short|int|long|float|double|bit|"
-    rb"string|idtype|[a-z_]*int\d+)[ \t\r]*$"
-)
+#: the legacy DATASETs whose points read_points reads as a cloud (STRUCTURED_POINTS is a volume)
+POINT_DATASETS = ("POLYDATA", "UNSTRUCTURED_GRID", "STRUCTURED_GRID")
+
+
+def _legacy_lines(raw: bytes) -> list[str]:
+    return [t.decode("latin-1").strip() for t in raw[:4096].split(b"\n")[:12]]
+
+
+def legacy_dataset(path: str | Path) -> str:
+    """The DATASET of a legacy .vtk file (``STRUCTURED_POINTS``,
+    ``POLYDATA``, ...; upper case), "" where its header does not say (not a
+    legacy VTK file, unreadable): what routes a .vtk to read_volume (a
+    volume) or read_points (its points)."""
+    try:
+        with open(path, "rb") as f:
+            text = _legacy_lines(f.read(4096))
+    except OSError:
+        return ""
+    if len(text) < 4 or not text[0].startswith("# vtk DataFile") or not text[3].upper().startswith("DATASET"):
+        return ""
+    words = text[3].upper().split()
+    return words[1] if len(words) > 1 else ""
+
+
+def _legacy_head(path: Path, raw: bytes) -> tuple[str, bool, bool, list[str]]:
+    """(DATASET, binary, cells as OFFSETS/CONNECTIVITY (file version 5 on),
+    the first lines) of a legacy VTK file; a DataError for any other file."""
+    text = _legacy_lines(raw)
+    if not text or not text[0].startswith("# vtk DataFile"):
+        raise DataError(f"{path}: not a legacy VTK file (no '# vtk DataFile' line)")
+    up = [t.upper() for t in text]
+    words = up[3].split() if len(up) > 3 else []
+    if words[:1] != ["DATASET"] or len(words) != 2 or up[2] not in ("ASCII", "BINARY"):
+        raise DataError(f"{path}: malformed legacy VTK header (ASCII or BINARY, then DATASET <type>)")
+    version = re.search(r"Version\s+(\d+)", text[0])
+    return words[1], up[2] == "BINARY", bool(version and int(version.group(1)) >= 5), text
+
+
+# bytes a value of each legacy type takes in a BINARY file (vtkIdType is written as int)
+_LEGACY_SIZES = {
+    **{k: np.dtype(v).itemsize for k, v in _LEGACY_TYPES.items()},
+    "vtkidtype": 4, "vtktypeint64": 8, "vtktypeuint64": 8, "vtktypeint32": 4, "vtktypeuint32": 4,
+    "vtktypeint8": 1, "vtktypeuint8": 1, "vtktypeint16": 2, "vtktypeuint16": 2,
+    "vtktypefloat32": 4, "vtktypefloat64": 8,
+}  # fmt: skip
+_NOT_A_NUMBER = re.compile(r"[-+]?(NAN|INF)")
+_CELL_SECTIONS = ("VERTICES", "LINES", "POLYGONS", "TRIANGLE_STRIPS", "CELLS")
+# the attribute sections whose type is their third word: values a tuple
+_ATTRIBUTES = {"VECTORS": 3, "NORMALS": 3, "TENSORS": 9, "TENSORS6": 6, "GLOBAL_IDS": 1, "PEDIGREE_IDS": 1}
+_ASCII_KEY = re.compile(rb"(?m)^[ \t]*([A-Za-z_][^\r\n]*)")
+_BINARY_KEY = re.compile(rb"[ \t\r\n]*([^\r\n]*)")
+_BLANK_LINE = re.compile(rb"\n\r?\n")
+_TABLE_AFTER = re.compile(rb"[ \t\r\n]*LOOKUP_TABLE[ \t]+\S+[ \t\r]*\n", re.I)
+
+
+def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
+    """Every section of a legacy VTK file after its DATASET line, its count
+    against the bytes the file holds, before VTK reads and allocates: BINARY
+    walked section by section, each block's size exact (a count that lies
+    is caught where it lies); ASCII each section's values bounded by the
+    text after it (a value and its separator take two bytes). The points'
+    count (-1: no POINTS); a DataError naming the file for what does not
+    fit or is not read."""
+    pos = 0
+    for _ in range(4):  # the version, title, ASCII/BINARY and DATASET lines
+        pos = raw.find(b"\n", pos) + 1
+        if pos == 0:
+            raise DataError(f"{path}: malformed legacy VTK header (fewer than 4 lines)")
+    size, points, here, fields = len(raw), -1, 0, 0
+
+    def number(word: str, what: str) -> int:
+        if not word.isdigit():
+            raise DataError(f"{path}: malformed {what} count {word!r}")
+        return int(word)
+
+    def values(count: int, kind: str, what: str, at: int) -> int:
+        """Where `count` values of type `kind` from `at` end (BINARY; ASCII: `at`)."""
+        kind = kind.lower()
+        if kind == "bit":
+            nbytes = -(-count // 8)
+        elif kind in _LEGACY_SIZES:
+            nbytes = count * _LEGACY_SIZES[kind]
+        elif kind in ("string", "utf8_string") and not binary:
+            nbytes = count
+        else:
+            raise DataError(f"{path}: {what}: values of type {kind!r} are not read")
+        need = nbytes if binary else 2 * count - 1
+        if need > size - at:
+            raise DataError(
+                f"{path}: truncated or malformed: {what} declares {count} values, "
+                f"{'needs' if binary else 'at least'} {need} bytes, the file holds {size - at} after it"
+            )
+        return at + nbytes if binary else at
+
+    while True:
+        # ASCII: the next line that starts with a word (values are numbers);
+        # BINARY: the line where the last block ended
+        m = _BINARY_KEY.match(raw, pos) if binary else _ASCII_KEY.search(raw, pos)
+        if m is None or not m.group(1).strip():
+            break
+        words = m.group(1).decode("latin-1").split()
+        key, pos = words[0].upper(), m.end() + (2 if raw[m.end() : m.end() + 2] == b"\r\n" else 1)
+        what = " ".join(words)[:80]
+        if not binary and _NOT_A_NUMBER.match(key):
+            continue  # ASCII values: nan, inf
+        if key == "METADATA":  # information keys and component names, up to a blank line
+            end = _BLANK_LINE.search(raw, pos - 1)
+            pos = size if end is None else end.end()
+            continue
+        if fields:  # a FIELD's array: name components tuples type
+            fields -= 1
+            if len(words) == 1 and key == "NULL_ARRAY":
+                continue
+            if len(words) != 4:
+                raise DataError(f"{path}: malformed field array {what!r} (name components tuples type)")
+            n = number(words[1], "field array components") * number(words[2], "field array tuples")
+            pos = values(n, words[3], f"field array {words[0]!r}", pos)
+        elif key in ("DIMENSIONS", "ORIGIN", "SPACING", "ASPECT_RATIO"):
+            continue
+        elif key == "POINTS" and len(words) == 3:
+            points = number(words[1], "POINTS")
+            pos = values(3 * points, words[2], "POINTS", pos)
+        elif key in _CELL_SECTIONS and len(words) == 3:
+            cells, total = number(words[1], key), number(words[2], key)
+            if not new_cells or not binary:  # ASCII: OFFSETS and CONNECTIVITY bounded together
+                pos = values(total + (cells if new_cells else 0), "int", key, pos)
+                continue
+            for part, n in (("OFFSETS", cells), ("CONNECTIVITY", total)):  # file version 5's layout
+                m = re.compile(rb"[ \t\r\n]*" + part.encode() + rb"[ \t]+(\S+)[^\n]*\n", re.I).match(raw, pos)
+                if m is None:
+                    raise DataError(f"{path}: {key}: no {part} line after it")
+                pos = values(n, m.group(1).decode("latin-1"), f"{key} {part}", m.end())
+        elif key == "CELL_TYPES" and len(words) == 2:
+            pos = values(number(words[1], key), "int", key, pos)
+        elif key in ("POINT_DATA", "CELL_DATA") and len(words) == 2:
+            here = number(words[1], key)
+            if key == "POINT_DATA" and points >= 0 and here != points:
+                raise DataError(f"{path}: POINT_DATA {here} does not match POINTS {points}")
+            if here > size:
+                raise DataError(f"{path}: {key} {here}: more values than the file's bytes")
+        elif key == "SCALARS" and len(words) in (3, 4):
+            comps = number(words[3], "SCALARS components") if len(words) == 4 else 1
+            if not 1 <= comps <= 4:
+                raise DataError(f"{path}: SCALARS of {comps} components (VTK reads 1 to 4)")
+            m = _TABLE_AFTER.match(raw, pos)
+            pos = values(here * comps, words[2], what, m.end() if m else pos)
+        elif key == "LOOKUP_TABLE" and len(words) == 3:
+            pos = values(4 * number(words[2], key), "unsigned_char" if binary else "float", what, pos)
+        elif key == "COLOR_SCALARS" and len(words) == 3:
+            n = here * number(words[2], "COLOR_SCALARS components")
+            pos = values(n, "unsigned_char" if binary else "float", what, pos)
+        elif key == "TEXTURE_COORDINATES" and len(words) == 4:
+            pos = values(here * number(words[2], "TEXTURE_COORDINATES dimension"), words[3], what, pos)
+        elif key in _ATTRIBUTES and len(words) == 3:
+            pos = values(here * _ATTRIBUTES[key], words[2], what, pos)
+        elif key == "FIELD" and len(words) == 3:
+            fields = number(words[2], "FIELD arrays")
+            if fields > size:
+                raise DataError(f"{path}: FIELD of {fields} arrays, more than the file's bytes")
+        elif binary:  # ASCII: VTK refuses what it does not know; BINARY: what follows cannot be told
+            raise DataError(f"{path}: malformed or unknown legacy VTK section {what!r}")
+    return points
 
 
 def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
@@ -332,15 +515,16 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     the point data's first SCALARS, read by vtkStructuredPointsReader after
     the header checks."""
     raw = path.read_bytes()
-    lines = raw[:4096].split(b"\n")[:12]
-    text = [t.decode("latin-1").strip() for t in lines]
-    if not text or not text[0].startswith("# vtk DataFile"):
-        raise DataError(f"{path}: not a legacy VTK file (no '# vtk DataFile' line)")
-    up = [t.upper() for t in text]
-    if len(up) < 4 or "STRUCTURED_POINTS" not in up[3]:
-        kind = up[3] if len(up) > 3 else "?"
-        raise DataError(f"{path}: legacy VTK {kind.title()!r}: only DATASET STRUCTURED_POINTS is a volume")
-    binary = up[2] == "BINARY"
+    dataset, binary, new_cells, text = _legacy_head(path, raw)
+    if dataset != "STRUCTURED_POINTS":
+        raise DataError(
+            f"{path}: legacy VTK {dataset}: only DATASET STRUCTURED_POINTS is a volume"
+            + (
+                "; its points are a point cloud: read_points, clvis render and clvis gauss read it"
+                if dataset in POINT_DATASETS
+                else ""
+            )
+        )
     f = {}
     for line in text[4:]:
         if not line or line.split()[0].upper() in ("POINT_DATA", "CELL_DATA"):
@@ -375,15 +559,7 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     for k in re.findall(rb"(?m)^[ \t]*(?:POINT_DATA|CELL_DATA)[ \t]+(\d+)", raw):
         if int(k) > n:
             raise DataError(f"{path}: a data section of {int(k)} values, more than the {n} points")
-    for k in re.findall(rb"(?m)^[ \t]*(?:LOOKUP_TABLE[ \t]+\S+|FIELD[ \t]+\S+)[ \t]+(\d+)[ \t\r]*$", raw):
-        if int(k) > len(raw):
-            raise DataError(f"{path}: a table or field of {int(k)} entries, more than the file's bytes")
-    for c, k in _FIELD_ARRAY.findall(raw):
-        if int(c) * int(k) > len(raw):
-            raise DataError(f"{path}: a field array of {int(c)}x{int(k)} values, more than the file's bytes")
-    for c in re.findall(rb"(?m)^[ \t]*(?:COLOR_)?SCALARS[ \t]+\S+(?:[ \t]+\S+)?[ \t]+(\d+)[ \t\r]*$", raw):
-        if int(c) > 4:
-            raise DataError(f"{path}: SCALARS of {int(c)} components (VTK reads 1 to 4)")
+    _check_legacy(path, raw, binary, new_cells)
     core, legacy, _, ns = _vtk()
     with _quiet(core) as messages:
         r = legacy.vtkStructuredPointsReader()

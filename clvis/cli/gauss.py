@@ -240,6 +240,7 @@ def _sources(args):
         raise CliError(f"{path}: no such file")
     from ..io import load_npz, npy_shape
     from ..io.volumes import FORMATS as VOLUME_FORMATS
+    from ..io.vtk import POINT_DATASETS, legacy_dataset
 
     name = path.name.lower()
     if name.endswith(".vdb"):
@@ -256,6 +257,8 @@ def _sources(args):
             )
         return lods, sv, None, str(path), None
     volume = name.endswith(VOLUME_FORMATS)
+    if name.endswith(".vtk"):  # a legacy VTK volume (STRUCTURED_POINTS) or point set (POLYDATA, ...)
+        volume = legacy_dataset(path) not in POINT_DATASETS
     if name.endswith(".npy"):
         shape = npy_shape(path)
         volume = len(shape) == 3

@@ -562,9 +562,14 @@ def _not_a_volume(path: str) -> None:
     (read_points said "unknown point cloud format '.gz'" of brain.nii.gz)."""
     from ..io.points import POINT_SUFFIXES
     from ..io.volumes import FORMATS
+    from ..io.vtk import legacy_dataset
 
     name = path.lower()
-    if name.endswith(FORMATS) and not name.endswith(POINT_SUFFIXES):  # a .npy may be either
+    # a .npy may be either; a .vtk is a volume where its DATASET is STRUCTURED_POINTS, else points
+    if name.endswith(FORMATS) and (
+        not name.endswith(POINT_SUFFIXES)
+        or (name.endswith(".vtk") and legacy_dataset(path) == "STRUCTURED_POINTS")
+    ):
         kind = next(f for f in FORMATS if name.endswith(f))
         raise CliError(
             f"{path}: a volume file ({kind}), not a point cloud; "

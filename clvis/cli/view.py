@@ -75,8 +75,9 @@ page must present. Only the FILE given here is ever read.
 """
 _POINT_SETS = ("hurricane", "terrain")
 _VOLUME_SETS = ("marschner-lobb", "turbulence", "explosion")
-# what read_points reads, but .npy: an (N, 3) array is points, a 3-D one a volume
-_POINT_SUFFIXES = tuple(s for s in POINT_SUFFIXES if s != ".npy")
+# what read_points reads, but .npy (an (N, 3) array is points, a 3-D one a volume) and
+# .vtk (a volume where its DATASET is STRUCTURED_POINTS, else points)
+_POINT_SUFFIXES = tuple(s for s in POINT_SUFFIXES if s not in (".npy", ".vtk"))
 
 
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
@@ -135,6 +136,10 @@ def _is_volume(path: Path) -> bool:
         return False
     if name.endswith(".npy"):
         return np.load(path, mmap_mode="r").ndim == 3
+    if name.endswith(".vtk"):
+        from ..io.vtk import POINT_DATASETS, legacy_dataset
+
+        return legacy_dataset(path) not in POINT_DATASETS
     return True
 
 

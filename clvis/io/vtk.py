@@ -520,7 +520,7 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
         raise DataError(
             f"{path}: legacy VTK {dataset}: only DATASET STRUCTURED_POINTS is a volume"
             + (
-                "; its points are a point cloud: read_points, clvis render and clvis gauss read it"
+                "; its points are a point cloud: read_points, clvis render, clvis gauss and clvis view read it"
                 if dataset in POINT_DATASETS
                 else ""
             )

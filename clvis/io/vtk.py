@@ -517,14 +517,9 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     raw = path.read_bytes()
     dataset, binary, new_cells, text = _legacy_head(path, raw)
     if dataset != "STRUCTURED_POINTS":
-        raise DataError(
-            f"{path}: legacy VTK {dataset}: only DATASET STRUCTURED_POINTS is a volume"
-            + (
-                "; its points are a point cloud: read_points, clvis render, clvis gauss and clvis view read it"
-                if dataset in POINT_DATASETS
-                else ""
-            )
-        )
+        where = "read_points, clvis render, clvis gauss and clvis view read it"
+        points = f"; its points are a point cloud: {where}" if dataset in POINT_DATASETS else ""
+        raise DataError(f"{path}: legacy VTK {dataset}: only DATASET STRUCTURED_POINTS is a volume{points}")
     f = {}
     for line in text[4:]:
         if not line or line.split()[0].upper() in ("POINT_DATA", "CELL_DATA"):

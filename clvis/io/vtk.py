@@ -58,30 +58,39 @@ def _vtk() -> Any:
     return vtkCommonCore, vtkIOLegacy, vtkIOXML, numpy_support
 
 
-# _quiet's hold on VTK's two globals: the reads in flight (any thread) and what
+# _quiet's hold on VTK's three globals: the reads in flight (any thread) and what
 # the globals were before the first of them
 _QUIET_LOCK = threading.Lock()
-_quiet_held: list[Any] = []  # [(warning display, logger cutoff)] while reads are in flight
+_quiet_held: list[Any] = []  # [(warning display, logger cutoff, output window)] while reads are in flight
 _quiet_count = 0
 
 
 @contextlib.contextmanager
 def _quiet(core: Any) -> Iterator[list[str]]:
-    """VTK's messages kept off stderr for the duration: VTK's global warning
-    display and its logger's stderr output off, put back as they were when
-    the last read in flight ends (counted under a lock, so reads in several
-    threads cannot restore each other's settings or leave them off; other
-    VTK code in the process is quiet while a read runs); the readers' own
-    errors reach the list yielded through an ErrorEvent observer
-    (:func:`_observe`)."""
+    """VTK's messages kept off stderr for the duration: VTK's output window
+    a string window (what no observer takes goes there, unread) and its
+    logger's stderr output off, its global warning display on (VTK's error
+    macros invoke the ErrorEvent only while it is on: with it off a reader's
+    errors were lost, and a legacy file whose cells VTK could not read gave
+    its points without their data, no error), all put back as they were
+    when the last read in flight ends (counted under a lock, so reads in
+    several threads cannot restore each other's settings or leave them
+    changed; other VTK code in the process is quiet while a read runs); the
+    readers' own errors reach the list yielded through an ErrorEvent
+    observer (:func:`_observe`)."""
     global _quiet_count
     with _QUIET_LOCK:
         if _quiet_count == 0:
             # the logger's cutoff is its stderr verbosity where no callback is added (VTK's Python has none)
             _quiet_held[:] = [
-                (core.vtkObject.GetGlobalWarningDisplay(), core.vtkLogger.GetCurrentVerbosityCutoff())
+                (
+                    core.vtkObject.GetGlobalWarningDisplay(),
+                    core.vtkLogger.GetCurrentVerbosityCutoff(),
+                    core.vtkOutputWindow.GetInstance(),
+                )
             ]
-            core.vtkObject.GlobalWarningDisplayOff()
+            core.vtkOutputWindow.SetInstance(core.vtkStringOutputWindow())
+            core.vtkObject.GlobalWarningDisplayOn()
             core.vtkLogger.SetStderrVerbosity(core.vtkLogger.VERBOSITY_OFF)
         _quiet_count += 1
     try:
@@ -90,9 +99,10 @@ def _quiet(core: Any) -> Iterator[list[str]]:
         with _QUIET_LOCK:
             _quiet_count -= 1
             if _quiet_count == 0:
-                shown, logged = _quiet_held.pop()
+                shown, logged, window = _quiet_held.pop()
                 core.vtkLogger.SetStderrVerbosity(logged)
                 core.vtkObject.SetGlobalWarningDisplay(shown)
+                core.vtkOutputWindow.SetInstance(window)
 
 
 def _observe(core: Any, obj: Any, messages: list[str]) -> None:

@@ -285,6 +285,33 @@ def test_hostile_binary_legacy_is_refused_exactly(tmp_path, monkeypatch):
         assert str(path) in str(e.value)
 
 
+@pytest.mark.parametrize("binary", [True, False], ids=["binary", "ascii"])
+def test_a_cell_list_whose_point_counts_lie_is_refused(tmp_path, monkeypatch, binary):
+    """File version 4.2's cell lists (each cell's point count, then its
+    ids): ./dev.sh fuzz's bit flips in a count made VTK's reader read past
+    its buffer (SIGSEGV); the counts must add up to the list's size."""
+    path = tmp_path / "cells42.vtk"
+    w = vtk.vtkPolyDataWriter()
+    w.SetFileName(str(path))
+    w.SetInputData(_polydata())
+    w.SetFileVersion(42)
+    w.SetFileTypeToBinary() if binary else w.SetFileTypeToASCII()
+    assert w.Write() == 1
+    good = path.read_bytes()
+    at = good.index(b"VERTICES 30 60\n") + len(b"VERTICES 30 60\n")
+    _no_vtk(monkeypatch)
+    if binary:  # cell 9's point count 1 -> 0x00800001 (the fuzzer's mutant)
+        assert good[at + 72 : at + 76] == b"\0\0\0\1"
+        bad = good[: at + 72] + b"\0\x80\0\1" + good[at + 76 :]
+    else:
+        assert good[at:].startswith(b"1 0 \n1 1 \n")
+        bad = good[:at] + b"1 0 \n9 1 \n" + good[at + 10 :]
+    path.write_bytes(bad)
+    with pytest.raises(DataError, match="VERTICES 30 60: its cells' point counts do not add up to 60") as e:
+        read_points(path)
+    assert str(e.value).count(str(path)) == 1
+
+
 def _vtp(tmp_path, mode="Binary", compressor=None):
     path = tmp_path / f"{mode}-{compressor}.vtp"
     w = vtk.vtkXMLPolyDataWriter()

@@ -411,6 +411,33 @@ _BLANK_LINE = re.compile(rb"\n\r?\n")
 _TABLE_AFTER = re.compile(rb"[ \t\r\n]*LOOKUP_TABLE[ \t]+\S+[ \t\r]*\n", re.I)
 
 
+def _check_cell_list(path: Path, key: str, raw: bytes, at: int, cells: int, total: int, binary: bool) -> None:
+    """A cell list of a legacy file before version 5 (`cells` cells in
+    `total` ints from byte `at`: each cell's point count, then its point
+    ids): the counts must add up to `total` (VTK's reader trusts them and
+    reads past its buffer where one lies: a segmentation fault)."""
+    if binary:
+        ids = np.frombuffer(raw, ">i4", total, at)
+    else:
+        # a value and its separator take two bytes, at most 21 (a 64-bit int) and some spaces: 24 bounds it
+        text = raw[at : at + 24 * total + 64].decode("latin-1")
+        try:
+            ids = np.fromstring(text, dtype=np.int64, count=total, sep=" ")
+        except ValueError:
+            raise DataError(f"{path}: {key}: fewer than {total} integers or malformed ones") from None
+    k = int(ids[0]) if total else 0
+    if k >= 0 and total == cells * (k + 1) and (ids[:: k + 1] == k).all():  # one point count for every cell
+        return
+    i, n = 0, 0
+    while i < total and n < cells:
+        k = int(ids[i])
+        if k < 0:
+            break
+        i, n = i + k + 1, n + 1
+    if i != total or n != cells:
+        raise DataError(f"{path}: {key} {cells} {total}: its cells' point counts do not add up to {total}")
+
+
 def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
     """Every section of a legacy VTK file after its DATASET line, its count
     against the bytes the file holds, before VTK reads and allocates: BINARY
@@ -480,8 +507,13 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
             pos = values(3 * points, words[2], "POINTS", pos)
         elif key in _CELL_SECTIONS and len(words) == 3:
             cells, total = number(words[1], key), number(words[2], key)
-            if not new_cells or not binary:  # ASCII: OFFSETS and CONNECTIVITY bounded together
-                pos = values(total + (cells if new_cells else 0), "int", key, pos)
+            if not new_cells:
+                after = values(total, "int", key, pos)
+                _check_cell_list(path, key, raw, pos, cells, total, binary)
+                pos = after
+                continue
+            if not binary:  # ASCII: OFFSETS and CONNECTIVITY bounded together
+                pos = values(total + cells, "int", key, pos)
                 continue
             for part, n in (("OFFSETS", cells), ("CONNECTIVITY", total)):  # file version 5's layout
                 m = re.compile(rb"[ \t\r\n]*" + part.encode() + rb"[ \t]+(\S+)[^\n]*\n", re.I).match(raw, pos)

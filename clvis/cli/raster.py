@@ -1232,8 +1232,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "file",
         nargs="*",
-        help="a PLY, LAS, LAZ, E57, PCD, XYZ/TXT/CSV, NPY or NPZ point cloud (several: tiles joined into one "
-        "cloud here, or rendered on Dask workers with --workers/--scheduler)",
+        help="a PLY, LAS, LAZ, E57, PCD, XYZ/TXT/CSV, NPY, NPZ or VTK (.vtp; legacy .vtk POLYDATA or grid) "
+        "point cloud (several: tiles joined into one cloud here, or rendered on Dask workers with "
+        "--workers/--scheduler)",
     )
     r.add_argument(
         "--dataset",

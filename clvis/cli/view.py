@@ -44,16 +44,16 @@ full size. The status line shows each frame's milliseconds per stage
 (render / post / encode / send), the frames per second and the latency from
 an event to the frame that shows it.
 
-Points (.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv, .npz, an (N, 3) .npy, or
---dataset hurricane|terrain):
+Points (.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv, .npz, an (N, 3) .npy,
+.vtp, a legacy .vtk of POLYDATA or a grid, or --dataset hurricane|terrain):
 modes points (colour by an attribute or RGB, colormap, point size), lidar
 (depth filter + LiDAR U-Net), narvis (clouds with a velocity) or narvis-scan
 (clouds without one, LAS/LAZ/PLY scans: the radius plane from the points'
 kNN distances, computed when the mode is first chosen), gaussians,
 narvis|gaussians or narvis-scan|gaussians (split: MACR + the network beside
 the Gaussian renderer it was trained on, the PSNR).
-Volumes (.raw, a 3-D .npy, NIfTI, or --dataset marschner-lobb|turbulence|
-explosion): modes iso (progressive: each pass is shown as it completes, and
+Volumes (.raw, a 3-D .npy, NIfTI, .vti, a legacy .vtk of STRUCTURED_POINTS,
+or --dataset marschner-lobb|turbulence|explosion): modes iso (progressive: each pass is shown as it completes, and
 a camera move restarts the passes), iso+infill (the in-fill network on the
 partial passes), gaussians, infill|iso (split: 85 % of the rays + in-fill
 beside the complete render, the PSNR).

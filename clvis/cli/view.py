@@ -53,10 +53,10 @@ kNN distances, computed when the mode is first chosen), gaussians,
 narvis|gaussians or narvis-scan|gaussians (split: MACR + the network beside
 the Gaussian renderer it was trained on, the PSNR).
 Volumes (.raw, a 3-D .npy, NIfTI, .vti, a legacy .vtk of STRUCTURED_POINTS,
-or --dataset marschner-lobb|turbulence|explosion): modes iso (progressive: each pass is shown as it completes, and
-a camera move restarts the passes), iso+infill (the in-fill network on the
-partial passes), gaussians, infill|iso (split: 85 % of the rays + in-fill
-beside the complete render, the PSNR).
+or --dataset marschner-lobb|turbulence|explosion): modes iso (progressive:
+each pass is shown as it completes, and a camera move restarts the passes),
+iso+infill (the in-fill network on the partial passes), gaussians, infill|iso
+(split: 85 % of the rays + in-fill beside the complete render, the PSNR).
 
 Dask (--workers N: a LocalCluster of N one-thread processes started here and
 stopped with the viewer; --scheduler ADDRESS: a running cluster): the frames

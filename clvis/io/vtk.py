@@ -390,8 +390,12 @@ def _legacy_head(path: Path, raw: bytes) -> tuple[str, bool, bool, list[str]]:
     words = up[3].split() if len(up) > 3 else []
     if words[:1] != ["DATASET"] or len(words) != 2 or up[2] not in ("ASCII", "BINARY"):
         raise DataError(f"{path}: malformed legacy VTK header (ASCII or BINARY, then DATASET <type>)")
-    version = re.search(r"Version\s+(\d+)", text[0])
-    return words[1], up[2] == "BINARY", bool(version and int(version.group(1)) >= 5), text
+    # VTK reads cells as OFFSETS and CONNECTIVITY from version 5 on, and a version it cannot parse as 0:
+    # a walk of the other layout than VTK's would let a lying cell list through (./dev.sh fuzz: SIGSEGV)
+    version = re.fullmatch(r"# vtk DataFile Version (\d{1,3})\.(\d{1,3})", text[0])
+    if version is None:
+        raise DataError(f"{path}: malformed legacy VTK version line {text[0][:60]!r}")
+    return words[1], up[2] == "BINARY", int(version.group(1)) >= 5, text
 
 
 # bytes a value of each legacy type takes in a BINARY file (vtkIdType is written as int)

@@ -338,6 +338,20 @@ def _image(
     return data, (sz, sy, sx), origin
 
 
+def _opened(core: Any, reader: Any, path: Path, messages: list[str], text: bytes | None = None) -> bool:
+    """Whether VTK's XML `reader`, observed (:func:`_observe`), read the
+    information of `path` (or of `text`, what it holds as clvis gives it to
+    VTK) without an error: its arrays, to choose from."""
+    _observe(core, reader, messages)
+    if text is None:
+        reader.SetFileName(str(path))
+    else:
+        reader.ReadFromInputStringOn()
+        reader.SetInputString(text, len(text))
+    reader.UpdateInformation()
+    return not messages
+
+
 def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of a .vti,
     read by vtkXMLImageDataReader after the header checks."""
@@ -345,10 +359,7 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     core, _, xmlio, ns = _vtk()
     with _quiet(core) as messages:
         r = xmlio.vtkXMLImageDataReader()
-        _observe(core, r, messages)
-        r.SetFileName(str(path))
-        r.UpdateInformation()
-        if not messages:
+        if _opened(core, r, path, messages):
             r.GetPointDataArraySelection().DisableAllArrays()
             r.GetCellDataArraySelection().DisableAllArrays()
             (r.GetCellDataArraySelection() if where else r.GetPointDataArraySelection()).EnableArray(name)

@@ -262,6 +262,10 @@ def test_hostile_binary_legacy_is_refused_exactly(tmp_path, monkeypatch):
         (b"POINTS 30 double", b"POINTS 31 double", "truncated or malformed|unknown legacy VTK section"),
         (b"VERTICES 31 30", b"VERTICES 31 31", "truncated or malformed|no CONNECTIVITY|unknown legacy VTK"),
         (b"POINT_DATA 30", b"POINT_DATA 30\nWHATEVER 3", "unknown legacy VTK section 'WHATEVER 3'"),
+        # ./dev.sh fuzz: a line of latin-1's NEL alone split into no words (IndexError), '\xb2' (a
+        # superscript 2) passed isdigit() and failed int() (ValueError)
+        (b"POINT_DATA 30", b"\x85\nPOINT_DATA 30", "unknown legacy VTK section"),
+        (b"POINT_DATA 30", b"POINT_DATA \xb230", "malformed POINT_DATA count"),
     ):
         assert old in good
         path.write_bytes(good.replace(old, new, 1))
@@ -326,6 +330,7 @@ def test_hostile_vtp_headers_are_refused_before_vtk_reads(tmp_path, monkeypatch)
         (good, b'NumberOfPoints="30"', b'NumberOfPoints="3000000000"', "byte count does not match"),
         (good, b'NumberOfPolys="2"', b'NumberOfPolys="2000000000"', "byte count does not match"),
         (good, b'NumberOfLines="0"', b'NumberOfLines="x"', "malformed or missing"),
+        (good, b'NumberOfPoints="30"', b'NumberOfPoints="\xb230"', "malformed or missing NumberOfPoints"),
         (good, b"<PolyData>", b'<!DOCTYPE x [<!ENTITY a "b">]><PolyData>', "DTD or entities"),
         (good, b'type="PolyData"', b'type="ImageData"', "not a VTK PolyData file"),
         (good, b'Name="Points" NumberOfComponents="3"', b'Name="Points" NumberOfComponents="2"', "<Points>"),

@@ -61,7 +61,7 @@ _VELOCITY = ("velocity", "velocities", "vel")
 
 def _number(path: Path, attrs: dict[str, str], key: str, default: str | None = None) -> int:
     text = attrs.get(key, default)
-    if text is None or not text.strip().isdigit():
+    if text is None or not re.fullmatch("[0-9]+", text.strip()):  # isdigit() takes '²'; int() does not
         raise DataError(f"{path}: malformed or missing {key} {text!r}")
     return int(text)
 

@@ -469,7 +469,7 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
     size, points, here, fields = len(raw), -1, 0, 0
 
     def number(word: str, what: str) -> int:
-        if not word.isdigit():
+        if not re.fullmatch("[0-9]+", word):  # isdigit() takes '²'; int() does not
             raise DataError(f"{path}: malformed {what} count {word!r}")
         return int(word)
 
@@ -498,7 +498,9 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
         m = _BINARY_KEY.match(raw, pos) if binary else _ASCII_KEY.search(raw, pos)
         if m is None or not m.group(1).strip():
             break
-        words = m.group(1).decode("latin-1").split()
+        words = [
+            w.decode("latin-1") for w in m.group(1).split()
+        ]  # ASCII whitespace (not latin-1's \x85, \xa0)
         key, pos = words[0].upper(), m.end() + (2 if raw[m.end() : m.end() + 2] == b"\r\n" else 1)
         what = " ".join(words)[:80]
         if not binary and _NOT_A_NUMBER.match(key):

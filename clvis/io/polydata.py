@@ -23,8 +23,9 @@ its count and the bytes the file holds, no DTD or entities; legacy: every
 section's count (POINTS, the cells, CELL_TYPES, POINT_DATA, CELL_DATA,
 FIELD, SCALARS, LOOKUP_TABLE, ...) against the bytes after it, exact for
 BINARY. VTK's error messages become a DataError naming the file; nothing
-reaches stderr. VTK is given the .vtp without its cells (it trusts their
-offsets); a legacy file's cell lists are checked to add up.
+reaches stderr. VTK reads the bytes clvis checked, from memory (not the file
+again, which may have changed since): a .vtp without its cells (VTK trusts
+their offsets); a legacy file whole, its cell lists checked to add up.
 """
 
 from __future__ import annotations
@@ -169,7 +170,8 @@ def _read_legacy_points(path: Path) -> PointCloud:
     with _quiet(core) as messages:
         r = getattr(legacy, reader)()
         _observe(core, r, messages)
-        r.SetFileName(str(path))
+        r.ReadFromInputStringOn()  # the bytes checked, not the file again (it may have changed since)
+        r.SetInputString(raw, len(raw))
         for what in ("Scalars", "Vectors", "Normals", "TCoords", "ColorScalars", "Fields", "Tensors"):
             getattr(r, f"ReadAll{what}On")()
         r.Update()

@@ -376,6 +376,21 @@ def test_a_vtp_whose_cell_offsets_lie_reads_its_points(tmp_path, mode):
     assert len(cloud) == N and cloud.colors is not None
 
 
+@pytest.mark.parametrize("tag", [b"DataArray", b"Piece", b"Verts"])
+def test_unclosed_tags_take_linear_time(tmp_path, tag):
+    """30,000 unclosed tags (500 kB): regular expressions that searched for
+    each one's end took time quadratic in them (8,000 in 140 kB: 11 s of
+    CPU; these: minutes); the checks pair tags and closing tags in one pass.
+    The same helper reads .vti volumes' tags."""
+    from fuzz.harness import run_limited
+
+    path, good = _vtp(tmp_path, "Ascii")
+    where = {b"DataArray": b"</Points>", b"Piece": b"</PolyData>", b"Verts": b"</Piece>"}[tag]
+    path.write_bytes(good.replace(where, (b"<" + tag + b' a="1">') * 30000 + where, 1))
+    r = run_limited(read_points, str(path), name=str(path), limit_bytes=1 << 30, timeout=20)
+    assert r.kind in ("clvis", "ok"), r
+
+
 def test_vtks_own_errors_are_data_errors_and_stay_off_stderr(tmp_path, capfd):
     """Sound counts over bytes VTK cannot read: VTK's error is the DataError
     (a legacy file whose cells VTK could not read gave its points without

@@ -45,6 +45,7 @@ from .vtk import (
     _attrs,
     _check_array,
     _check_legacy,
+    _elements,
     _legacy_head,
     _observe,
     _opened,
@@ -74,8 +75,9 @@ def _check_vtp(path: Path, raw: bytes) -> int:
     for what is not read or lies about its size."""
     at, xml = _xml_part(path, raw)
     fa, _ = _xml_head(path, xml, "PolyData")
-    pieces = re.findall(rb"<Piece\b([^>]*)>(.*?)</Piece>", xml, re.S)
-    if len(pieces) != len(re.findall(rb"<Piece\b", xml)):
+    found, opened = _elements(xml, "Piece")
+    pieces = [(tag, body) for _, _, tag, body in found]
+    if len(pieces) != opened:
         raise DataError(f"{path}: malformed PolyData: a <Piece> without its </Piece>")
 
     def check(arrays: list[tuple[dict[str, str], bytes]], tuples: int | None, what: str) -> None:
@@ -94,8 +96,8 @@ def _check_vtp(path: Path, raw: bytes) -> int:
             _check_array(path, raw, at, a, text, fa, nbytes, None if t is None else count)
 
     def section(body: bytes, tag: str) -> list[tuple[dict[str, str], bytes]]:
-        m = re.search(rb"<" + tag.encode() + rb"\b[^>]*?(?:/>|>(.*?)</" + tag.encode() + rb">)", body, re.S)
-        return _arrays(m.group(1) or b"") if m else []
+        found = _elements(body, tag)[0]
+        return _arrays(found[0][3]) if found else []
 
     head = xml[: xml.find(b"<Piece")] if pieces else xml
     check(section(head, "FieldData"), None, "FieldData")
@@ -131,7 +133,13 @@ def _without_cells(path: Path, raw: bytes) -> bytes:
     2^63 made it allocate that: std::bad_alloc, an abort, ./dev.sh fuzz),
     and the cells are not kept."""
     at, xml = _xml_part(path, raw)
-    xml = re.sub(rb"<(Verts|Lines|Strips|Polys|CellData)\b[^>]*?(?:/>|>.*?</\1>)", b"", xml, flags=re.S)
+    spans = sorted(e[:2] for tag in (*_CELL_KINDS, "CellData") for e in _elements(xml, tag)[0])
+    kept, start = [], 0
+    for a, b in spans:
+        if a >= start:  # (an element inside one taken out already is gone with it)
+            kept.append(xml[start:a])
+            start = b
+    xml = b"".join(kept) + xml[start:]
     xml = re.sub(rb'\bNumberOf(Verts|Lines|Strips|Polys)\s*=\s*"[^"]*"', rb'NumberOf\1="0"', xml)
     return xml + (raw[at:] if at >= 0 else b"")
 

@@ -72,9 +72,10 @@ each labelled with its LOD and Gaussian count over the colormap's value range.
 
 Without a FILE it uses an embedded explosion density (96^3, closed form).
 FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
-.nii.gz; see --shape, --volume-index) or a .vdb (float grid, needs the `vdb`
-extra: tinyvdb); a .npz of Gaussians (clvis.Gaussians.save); or a point cloud
-(.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv, or an (N, 3) .npy/.npz as
+.nii.gz, .vti, a legacy .vtk of STRUCTURED_POINTS; see --shape, --volume-index)
+or a .vdb (float grid, needs the `vdb` extra: tinyvdb); a .npz of Gaussians
+(clvis.Gaussians.save); or a point cloud (.ply, .las, .laz, .e57, .pcd,
+.xyz/.txt/.csv, .vtp, a legacy .vtk of POLYDATA, or an (N, 3) .npy/.npz as
 `clvis render` reads them: one Gaussian per point, stretched along the
 velocity when the file has one, else sized by the 4 nearest neighbours,
 clamped to their 95th percentile). A cloud's
@@ -240,6 +241,7 @@ def _sources(args):
         raise CliError(f"{path}: no such file")
     from ..io import load_npz, npy_shape
     from ..io.volumes import FORMATS as VOLUME_FORMATS
+    from ..io.vtk import POINT_DATASETS, legacy_dataset
 
     name = path.name.lower()
     if name.endswith(".vdb"):
@@ -256,6 +258,8 @@ def _sources(args):
             )
         return lods, sv, None, str(path), None
     volume = name.endswith(VOLUME_FORMATS)
+    if name.endswith(".vtk"):  # a legacy VTK volume (STRUCTURED_POINTS) or point set (POLYDATA, ...)
+        volume = legacy_dataset(path) not in POINT_DATASETS
     if name.endswith(".npy"):
         shape = npy_shape(path)
         volume = len(shape) == 3

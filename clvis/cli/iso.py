@@ -67,7 +67,8 @@ Without a FILE it renders an embedded volume: marschner-lobb (64^3, iso 0.5)
 or turbulence (128^3, iso 0.5). FILE: a raw volume named like the Open SciVis
 datasets (<name>_<X>x<Y>x<Z>_<type>.raw, or any .raw with --shape and --dtype),
 a .npy volume [z, y, x], a NIfTI file (.nii, .nii.gz; a 4-D series with
---volume-index), or VTK image data (.vti, legacy .vtk structured points).
+--volume-index), or VTK image data (.vti, legacy .vtk structured points; a
+.vtp or a legacy .vtk POLYDATA is a point cloud: clvis render, clvis gauss).
 The default isovalue of a file is Otsu's threshold of its samples
 (scikit-image), which separates a scan's tissue from its background.
 

@@ -562,9 +562,14 @@ def _not_a_volume(path: str) -> None:
     (read_points said "unknown point cloud format '.gz'" of brain.nii.gz)."""
     from ..io.points import POINT_SUFFIXES
     from ..io.volumes import FORMATS
+    from ..io.vtk import legacy_dataset
 
     name = path.lower()
-    if name.endswith(FORMATS) and not name.endswith(POINT_SUFFIXES):  # a .npy may be either
+    # a .npy may be either; a .vtk is a volume where its DATASET is STRUCTURED_POINTS, else points
+    if name.endswith(FORMATS) and (
+        not name.endswith(POINT_SUFFIXES)
+        or (name.endswith(".vtk") and legacy_dataset(path) == "STRUCTURED_POINTS")
+    ):
         kind = next(f for f in FORMATS if name.endswith(f))
         raise CliError(
             f"{path}: a volume file ({kind}), not a point cloud; "
@@ -1227,8 +1232,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "file",
         nargs="*",
-        help="a PLY, LAS, LAZ, E57, PCD, XYZ/TXT/CSV, NPY or NPZ point cloud (several: tiles joined into one "
-        "cloud here, or rendered on Dask workers with --workers/--scheduler)",
+        help="a PLY, LAS, LAZ, E57, PCD, XYZ/TXT/CSV, NPY, NPZ or VTK (.vtp; legacy .vtk POLYDATA or grid) "
+        "point cloud (several: tiles joined into one cloud here, or rendered on Dask workers with "
+        "--workers/--scheduler)",
     )
     r.add_argument(
         "--dataset",

@@ -44,19 +44,19 @@ full size. The status line shows each frame's milliseconds per stage
 (render / post / encode / send), the frames per second and the latency from
 an event to the frame that shows it.
 
-Points (.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv, .npz, an (N, 3) .npy, or
---dataset hurricane|terrain):
+Points (.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv, .npz, an (N, 3) .npy,
+.vtp, a legacy .vtk of POLYDATA or a grid, or --dataset hurricane|terrain):
 modes points (colour by an attribute or RGB, colormap, point size), lidar
 (depth filter + LiDAR U-Net), narvis (clouds with a velocity) or narvis-scan
 (clouds without one, LAS/LAZ/PLY scans: the radius plane from the points'
 kNN distances, computed when the mode is first chosen), gaussians,
 narvis|gaussians or narvis-scan|gaussians (split: MACR + the network beside
 the Gaussian renderer it was trained on, the PSNR).
-Volumes (.raw, a 3-D .npy, NIfTI, or --dataset marschner-lobb|turbulence|
-explosion): modes iso (progressive: each pass is shown as it completes, and
-a camera move restarts the passes), iso+infill (the in-fill network on the
-partial passes), gaussians, infill|iso (split: 85 % of the rays + in-fill
-beside the complete render, the PSNR).
+Volumes (.raw, a 3-D .npy, NIfTI, .vti, a legacy .vtk of STRUCTURED_POINTS,
+or --dataset marschner-lobb|turbulence|explosion): modes iso (progressive:
+each pass is shown as it completes, and a camera move restarts the passes),
+iso+infill (the in-fill network on the partial passes), gaussians, infill|iso
+(split: 85 % of the rays + in-fill beside the complete render, the PSNR).
 
 Dask (--workers N: a LocalCluster of N one-thread processes started here and
 stopped with the viewer; --scheduler ADDRESS: a running cluster): the frames
@@ -75,8 +75,9 @@ page must present. Only the FILE given here is ever read.
 """
 _POINT_SETS = ("hurricane", "terrain")
 _VOLUME_SETS = ("marschner-lobb", "turbulence", "explosion")
-# what read_points reads, but .npy: an (N, 3) array is points, a 3-D one a volume
-_POINT_SUFFIXES = tuple(s for s in POINT_SUFFIXES if s != ".npy")
+# what read_points reads, but .npy (an (N, 3) array is points, a 3-D one a volume) and
+# .vtk (a volume where its DATASET is STRUCTURED_POINTS, else points)
+_POINT_SUFFIXES = tuple(s for s in POINT_SUFFIXES if s not in (".npy", ".vtk"))
 
 
 def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
@@ -135,6 +136,10 @@ def _is_volume(path: Path) -> bool:
         return False
     if name.endswith(".npy"):
         return np.load(path, mmap_mode="r").ndim == 3
+    if name.endswith(".vtk"):
+        from ..io.vtk import POINT_DATASETS, legacy_dataset
+
+        return legacy_dataset(path) not in POINT_DATASETS
     return True
 
 

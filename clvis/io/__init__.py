@@ -3,9 +3,12 @@
 - :mod:`~clvis.io.points`: point clouds (:class:`PointCloud`,
   :func:`read_points`, :func:`write_ply`, :func:`save_npz`), one module per
   format whose checks are long (:mod:`~clvis.io.ply`, :mod:`~clvis.io.las`,
-  :mod:`~clvis.io.pcd`, :mod:`~clvis.io.ascii` for .xyz/.txt/.csv);
+  :mod:`~clvis.io.pcd`, :mod:`~clvis.io.ascii` for .xyz/.txt/.csv,
+  :mod:`~clvis.io.polydata` for VTK's .vtp and legacy .vtk point sets);
 - :mod:`~clvis.io.volumes`: volumes (:func:`read_volume`, :class:`Volume`):
-  raw, NPY and NIfTI, and :func:`otsu_level` (a scan's default isovalue);
+  raw, NPY, NIfTI and VTK image data (:mod:`~clvis.io.vtk`, whose header
+  checks the VTK point sets share), and :func:`otsu_level` (a scan's
+  default isovalue);
 - :mod:`~clvis.io.npy`: NPY and NPZ read safely (:func:`load_npy`,
   :func:`load_npz`, :func:`npy_shape`), for both.
 

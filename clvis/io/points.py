@@ -1,7 +1,8 @@
 """Point cloud files: :class:`PointCloud` and the readers and writers.
 
 :func:`read_points` reads PLY (ASCII or binary, via plyfile), LAS and LAZ (via
-laspy; LAZ needs its lazrs backend), NPY and NPZ, chosen by the file extension.
+laspy; LAZ needs its lazrs backend), NPY and NPZ, PCD, E57, .xyz/.txt/.csv text and
+VTK point sets (.vtp, legacy .vtk), chosen by the file extension.
 :func:`write_ply` and :func:`save_npz` write a cloud back so that it round-trips.
 
 Positions are float32, what the kernels read. float32 keeps about 7 significant
@@ -45,11 +46,14 @@ from .las import _read_las
 from .npy import load_npy, load_npz
 from .pcd import _read_pcd
 from .ply import _read_ply, write_ply
+from .polydata import SUFFIXES as _VTK_SUFFIXES
+from .polydata import read_vtk_points
 
 __all__ = ["PointCloud", "read_points", "save_npz", "write_ply"]
 
 #: the file name endings read_points reads (the commands pick points or a volume by them)
-POINT_SUFFIXES = (".ply", ".las", ".laz", ".npy", ".npz", ".pcd", ".e57", *_ASCII_SUFFIXES)
+#: (.npy: an (N, 3) array or a volume; .vtk: a point set, or a volume where its DATASET is STRUCTURED_POINTS)
+POINT_SUFFIXES = (".ply", ".las", ".laz", ".npy", ".npz", ".pcd", ".e57", *_ASCII_SUFFIXES, *_VTK_SUFFIXES)
 
 
 # ---------------------------------------------------------------- reading
@@ -59,6 +63,7 @@ def _readers() -> dict[str, Any]:
     """{suffix: reader}, one for each of POINT_SUFFIXES."""
     readers = {".ply": _read_ply, ".las": _read_las, ".laz": _read_las, ".npy": _read_npy, ".npz": _read_npz}
     readers.update({".pcd": _read_pcd, ".e57": _read_e57, **dict.fromkeys(_ASCII_SUFFIXES, _read_ascii)})
+    readers.update(dict.fromkeys(_VTK_SUFFIXES, read_vtk_points))
     return readers
 
 
@@ -88,6 +93,12 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
       (:mod:`clvis.io.ascii`).
     - ``.e57``: ASTM E57 scans through pye57 (the ``e57`` extra), joined,
       positions relative to their minimum as for LAS (:mod:`clvis.io.e57`).
+    - ``.vtp``, ``.vtk``: VTK PolyData (XML) and legacy POLYDATA,
+      UNSTRUCTURED_GRID or STRUCTURED_GRID through VTK's readers (the ``vtk``
+      extra): the points (a mesh's vertices), unsigned-char RGB(A) point
+      data the colours, the other point arrays attributes; double positions
+      as for PLY (:mod:`clvis.io.polydata`). A legacy STRUCTURED_POINTS
+      .vtk is a volume (:func:`clvis.io.read_volume`).
     """
     readers = _readers()
     # a FIFO would block the read, /dev/zero never end, a directory fail in the parser

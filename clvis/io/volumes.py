@@ -134,6 +134,13 @@ def read_volume(
 
         data, spacing, origin = (read_vti if name.endswith(".vti") else read_legacy)(path)
         return Volume(data, tuple(float(s) for s in spacing), tuple(float(o) for o in origin), str(path))
+    from .points import POINT_SUFFIXES
+
+    if name.endswith(POINT_SUFFIXES):  # .vtp, .ply, ...: the user is told where it goes
+        raise DataError(
+            f"{path}: a point cloud file ({path.suffix}), not a volume; "
+            "read_points, clvis render, clvis gauss and clvis view read it"
+        )
     raise DataError(f"{path}: unknown volume format (expected {', '.join(FORMATS)})")
 
 

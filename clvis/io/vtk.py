@@ -58,30 +58,39 @@ def _vtk() -> Any:
     return vtkCommonCore, vtkIOLegacy, vtkIOXML, numpy_support
 
 
-# _quiet's hold on VTK's two globals: the reads in flight (any thread) and what
+# _quiet's hold on VTK's three globals: the reads in flight (any thread) and what
 # the globals were before the first of them
 _QUIET_LOCK = threading.Lock()
-_quiet_held: list[Any] = []  # [(warning display, logger cutoff)] while reads are in flight
+_quiet_held: list[Any] = []  # [(warning display, logger cutoff, output window)] while reads are in flight
 _quiet_count = 0
 
 
 @contextlib.contextmanager
 def _quiet(core: Any) -> Iterator[list[str]]:
-    """VTK's messages kept off stderr for the duration: VTK's global warning
-    display and its logger's stderr output off, put back as they were when
-    the last read in flight ends (counted under a lock, so reads in several
-    threads cannot restore each other's settings or leave them off; other
-    VTK code in the process is quiet while a read runs); the readers' own
-    errors reach the list yielded through an ErrorEvent observer
-    (:func:`_observe`)."""
+    """VTK's messages kept off stderr for the duration: VTK's output window
+    a string window (what no observer takes goes there, unread) and its
+    logger's stderr output off, its global warning display on (VTK's error
+    macros invoke the ErrorEvent only while it is on: with it off a reader's
+    errors were lost, and a legacy file whose cells VTK could not read gave
+    its points without their data, no error), all put back as they were
+    when the last read in flight ends (counted under a lock, so reads in
+    several threads cannot restore each other's settings or leave them
+    changed; other VTK code in the process is quiet while a read runs); the
+    readers' own errors reach the list yielded through an ErrorEvent
+    observer (:func:`_observe`)."""
     global _quiet_count
     with _QUIET_LOCK:
         if _quiet_count == 0:
             # the logger's cutoff is its stderr verbosity where no callback is added (VTK's Python has none)
             _quiet_held[:] = [
-                (core.vtkObject.GetGlobalWarningDisplay(), core.vtkLogger.GetCurrentVerbosityCutoff())
+                (
+                    core.vtkObject.GetGlobalWarningDisplay(),
+                    core.vtkLogger.GetCurrentVerbosityCutoff(),
+                    core.vtkOutputWindow.GetInstance(),
+                )
             ]
-            core.vtkObject.GlobalWarningDisplayOff()
+            core.vtkOutputWindow.SetInstance(core.vtkStringOutputWindow())
+            core.vtkObject.GlobalWarningDisplayOn()
             core.vtkLogger.SetStderrVerbosity(core.vtkLogger.VERBOSITY_OFF)
         _quiet_count += 1
     try:
@@ -90,9 +99,10 @@ def _quiet(core: Any) -> Iterator[list[str]]:
         with _QUIET_LOCK:
             _quiet_count -= 1
             if _quiet_count == 0:
-                shown, logged = _quiet_held.pop()
+                shown, logged, window = _quiet_held.pop()
                 core.vtkLogger.SetStderrVerbosity(logged)
                 core.vtkObject.SetGlobalWarningDisplay(shown)
+                core.vtkOutputWindow.SetInstance(window)
 
 
 def _observe(core: Any, obj: Any, messages: list[str]) -> None:
@@ -131,37 +141,79 @@ def _count(path: Path, what: str, ext: list[int]) -> int:
     return dims[0] * dims[1] * dims[2]
 
 
+def _elements(xml: bytes, tag: str) -> tuple[list[tuple[int, int, bytes, bytes]], int]:
+    """([(start, end, attributes, body)] of each <tag ...>body</tag> or
+    <tag .../> in `xml`, in order, and how many tags open one): one pass
+    over the tags and one over the closing tags, paired in order (VTK's
+    elements of one kind do not nest). Regular expressions that search for
+    each tag's end took time quadratic in the tags a hostile file leaves
+    unclosed (8,000 in 140 kB: 11 s); an unclosed one here has no body and
+    is not listed."""
+    name = tag.encode()
+    closes = [(m.start(), m.end()) for m in re.finditer(rb"</" + name + rb"\s*>", xml)]
+    found, opened, j = [], 0, 0
+    for m in re.finditer(rb"<" + name + rb"\b([^<>]*)>", xml):  # no '<' or '>' inside a tag: linear
+        opened += 1
+        if m.group(1).endswith(b"/"):
+            found.append((m.start(), m.end(), m.group(1)[:-1], b""))
+            continue
+        while j < len(closes) and closes[j][0] < m.end():
+            j += 1
+        if j < len(closes):
+            found.append((m.start(), closes[j][1], m.group(1), xml[m.end() : closes[j][0]]))
+            j += 1
+    return found, opened
+
+
 def _arrays(section: bytes) -> list[tuple[dict[str, str], bytes]]:
     """The (attributes, body) of each <DataArray .../> (an appended array, as
-    VTK writes it) or <DataArray ...>text</DataArray> in `section`."""
-    found = re.findall(rb"(<DataArray\b[^>]*?)(?:/>|>(.*?)</DataArray>)", section, re.S)
-    return [(_attrs(t + b">"), b) for t, b in found]
+    VTK writes it) or <DataArray ...>text</DataArray> in `section`; a body
+    ends where VTK's range after some arrays' values begins (<InformationKey
+    name="L2_NORM_RANGE" ...>)."""
+    return [
+        (_attrs(a), b.split(b"<InformationKey", 1)[0]) for _, _, a, b in _elements(section, "DataArray")[0]
+    ]
+
+
+def _xml_part(path: Path, raw: bytes) -> tuple[int, bytes]:
+    """(where <AppendedData> starts or -1, the XML before it) of a VTK XML
+    file; a DataError for a DTD or entity declaration (no entity expansion)."""
+    if b"<!DOCTYPE" in raw[:4096] or b"<!ENTITY" in raw[:4096]:
+        raise DataError(f"{path}: a VTK file with a DTD or entities is not read")
+    at = raw.find(b"<AppendedData")
+    return at, raw if at < 0 else raw[:at]  # the appended bytes are not XML: never searched as such
+
+
+def _xml_head(path: Path, xml: bytes, kind: str) -> tuple[dict[str, str], dict[str, str]]:
+    """(the <VTKFile> attributes, the <`kind`> attributes) of a VTK XML file
+    of that type; a DataError for any other file, comments or CDATA, or a
+    compressor that is not read."""
+    head = re.findall(rb"<VTKFile\b[^<>]*>", xml)
+    data = re.findall(rb"<" + kind.encode() + rb"\b[^<>]*>", xml)
+    if len(head) != 1 or len(data) != 1 or _attrs(head[0]).get("type", kind) != kind:
+        raise DataError(f'{path}: not a VTK {kind} file (no <VTKFile type="{kind}"> and <{kind}>)')
+    if b"<!--" in xml or b"<![CDATA[" in xml:
+        raise DataError(f"{path}: XML comments or CDATA in a VTK file are not read")
+    fa = _attrs(head[0])
+    compressor = fa.get("compressor")
+    if compressor is not None and compressor not in _MAX_RATIO:
+        raise DataError(f"{path}: compressor {compressor} is not read (zlib or LZ4)")
+    return fa, _attrs(data[0])
 
 
 def _check_vti(path: Path, raw: bytes) -> tuple[str, int, str]:
     """Check the .vti's header against the file before VTK reads it: (the
     name of the point array that is the volume, its samples); a DataError
     naming the file for what is not read or lies about its size."""
-    if b"<!DOCTYPE" in raw[:4096] or b"<!ENTITY" in raw[:4096]:
-        raise DataError(f"{path}: a VTK file with a DTD or entities is not read")
-    at = raw.find(b"<AppendedData")
-    xml = raw if at < 0 else raw[:at]  # the appended bytes are not XML: never searched as such
-    head = re.findall(rb"<VTKFile\b[^>]*>", xml)
-    image = re.findall(rb"<ImageData\b[^>]*>", xml)
-    if len(head) != 1 or len(image) != 1 or _attrs(head[0]).get("type", "ImageData") != "ImageData":
-        raise DataError(f'{path}: not a VTK ImageData file (no <VTKFile type="ImageData"> and <ImageData>)')
-    if b"<!--" in xml or b"<![CDATA[" in xml:
-        raise DataError(f"{path}: XML comments or CDATA in a VTK file are not read")
-    fa, ia = _attrs(head[0]), _attrs(image[0])
+    at, xml = _xml_part(path, raw)
+    fa, ia = _xml_head(path, xml, "ImageData")
     whole = _numbers(path, "WholeExtent", ia.get("WholeExtent", ""), 6, int)
     n = _count(path, "WholeExtent", whole)
     _numbers(path, "Spacing", ia.get("Spacing", "1 1 1"), 3)
     _numbers(path, "Origin", ia.get("Origin", "0 0 0"), 3)
-    compressor = fa.get("compressor")
-    if compressor is not None and compressor not in _MAX_RATIO:
-        raise DataError(f"{path}: compressor {compressor} is not read (zlib or LZ4)")
-    pieces = re.findall(rb"<Piece\b([^>]*)>(.*?)</Piece>", xml, re.S)
-    if not pieces or len(pieces) != len(re.findall(rb"<Piece\b", xml)):
+    elements, opened = _elements(xml, "Piece")
+    pieces = [(tag, body) for _, _, tag, body in elements]
+    if not pieces or len(pieces) != opened:
         raise DataError(f"{path}: malformed ImageData: no <Piece>...</Piece>")
     name, covered, where = None, 0, ""
     if not any(_section(body, "PointData") for _, body in pieces):
@@ -202,9 +254,9 @@ def _check_vti(path: Path, raw: bytes) -> tuple[str, int, str]:
 def _section(body: bytes, tag: str) -> tuple[bytes, list[tuple[dict[str, str], bytes]]] | None:
     """(the attributes, the arrays) of a piece's <PointData> or <CellData>
     section; None where it is missing or holds no array."""
-    m = re.search(rb"<" + tag.encode() + rb"\b([^>]*)>(.*?)</" + tag.encode() + rb">", body, re.S)
-    arrays = _arrays(m.group(2)) if m else []
-    return (m.group(1), arrays) if m and arrays else None
+    found = _elements(body, tag)[0][:1]
+    arrays = _arrays(found[0][3]) if found else []
+    return (found[0][2], arrays) if arrays else None
 
 
 def _cells(ext: list[int]) -> list[int]:
@@ -213,16 +265,24 @@ def _cells(ext: list[int]) -> list[int]:
 
 
 def _check_array(
-    path: Path, raw: bytes, at: int, a: dict[str, str], text: bytes, fa: dict[str, str], nbytes: int, n: int
+    path: Path,
+    raw: bytes,
+    at: int,
+    a: dict[str, str],
+    text: bytes,
+    fa: dict[str, str],
+    nbytes: int | None,
+    n: int | None,
 ) -> None:
     """One piece's array: its byte count (or compressed-block header)
-    against its extent and against what the file holds."""
+    against its extent (`nbytes`, `n` values; None: any, a cell array's
+    connectivity) and against what the file holds."""
     fmt = a.get("format", "ascii")
     hs = 8 if fa.get("header_type") == "UInt64" else 4
     hdt = np.dtype((">" if fa.get("byte_order") == "BigEndian" else "<") + ("u8" if hs == 8 else "u4"))
     compressor = fa.get("compressor")
     if fmt == "ascii":
-        if n > len(text):
+        if n is not None and n > len(text):
             raise DataError(f"{path}: {n} samples declared, the array holds {len(text)} bytes of text")
         return
     if fmt == "binary":
@@ -257,7 +317,7 @@ def _check_array(
     try:
         if compressor is None:
             count = int(np.frombuffer(take(0, hs), hdt, 1)[0])
-            if count != nbytes or hs + count > size:
+            if (nbytes is not None and count != nbytes) or hs + count > size:
                 raise DataError(f"{path}: the array's byte count does not match its extent, or is truncated")
             return
         blocks = int(np.frombuffer(take(0, hs), hdt, 1)[0])
@@ -268,7 +328,7 @@ def _check_array(
         header = np.frombuffer(take(0, hbytes), hdt, 3 + blocks).astype(np.int64)
         block, last, sizes = int(header[1]), int(header[2]), header[3:]
         total = block * (blocks - 1) + (last or block) if blocks else 0
-        if total != nbytes or block < 1 and blocks:
+        if (nbytes is not None and total != nbytes) or (block < 1 and blocks):
             raise DataError(f"{path}: the compressed array holds {total} bytes, the extent needs {nbytes}")
         data = size - (4 * -(-hbytes // 3) * 3 // 4 if base else hbytes)
         if int(sizes.sum()) > data or (sizes < 0).any() or total > _MAX_RATIO[str(compressor)] * max(data, 1):
@@ -302,6 +362,20 @@ def _image(
     return data, (sz, sy, sx), origin
 
 
+def _opened(core: Any, reader: Any, path: Path, messages: list[str], text: bytes | None = None) -> bool:
+    """Whether VTK's XML `reader`, observed (:func:`_observe`), read the
+    information of `path` (or of `text`, what it holds as clvis gives it to
+    VTK) without an error: its arrays, to choose from."""
+    _observe(core, reader, messages)
+    if text is None:
+        reader.SetFileName(str(path))
+    else:
+        reader.ReadFromInputStringOn()
+        reader.SetInputString(text, len(text))
+    reader.UpdateInformation()
+    return not messages
+
+
 def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of a .vti,
     read by vtkXMLImageDataReader after the header checks."""
@@ -309,10 +383,7 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     core, _, xmlio, ns = _vtk()
     with _quiet(core) as messages:
         r = xmlio.vtkXMLImageDataReader()
-        _observe(core, r, messages)
-        r.SetFileName(str(path))
-        r.UpdateInformation()
-        if not messages:
+        if _opened(core, r, path, messages):
             r.GetPointDataArraySelection().DisableAllArrays()
             r.GetCellDataArraySelection().DisableAllArrays()
             (r.GetCellDataArraySelection() if where else r.GetPointDataArraySelection()).EnableArray(name)
@@ -320,11 +391,206 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
 
 
-# a legacy array's declaration: FIELD arrays (name components tuples type) and LOOKUP_TABLE name size
-_FIELD_ARRAY = re.compile(
-    rb"(?m)^[ \t]*\S+[ \t]+(\d+)[ \t]+(\d+)[ \t]+(?:unsigned_|vtk)?(?:char|short|int|long|float|double|bit|"
-    rb"string|idtype|[a-z_]*int\d+)[ \t\r]*$"
-)
+#: the legacy DATASETs whose points read_points reads as a cloud (STRUCTURED_POINTS is a volume)
+POINT_DATASETS = ("POLYDATA", "UNSTRUCTURED_GRID", "STRUCTURED_GRID")
+
+
+def _legacy_lines(raw: bytes) -> list[str]:
+    return [t.decode("latin-1").strip() for t in raw[:4096].split(b"\n")[:12]]
+
+
+def legacy_dataset(path: str | Path) -> str:
+    """The DATASET of a legacy .vtk file (``STRUCTURED_POINTS``,
+    ``POLYDATA``, ...; upper case), "" where its header does not say (not a
+    legacy VTK file, unreadable): what routes a .vtk to read_volume (a
+    volume) or read_points (its points)."""
+    try:
+        with open(path, "rb") as f:
+            text = _legacy_lines(f.read(4096))
+    except OSError:
+        return ""
+    if len(text) < 4 or not text[0].startswith("# vtk DataFile") or not text[3].upper().startswith("DATASET"):
+        return ""
+    words = text[3].upper().split()
+    return words[1] if len(words) > 1 else ""
+
+
+def _legacy_head(path: Path, raw: bytes) -> tuple[str, bool, bool, list[str]]:
+    """(DATASET, binary, cells as OFFSETS/CONNECTIVITY (file version 5 on),
+    the first lines) of a legacy VTK file; a DataError for any other file."""
+    text = _legacy_lines(raw)
+    if not text or not text[0].startswith("# vtk DataFile"):
+        raise DataError(f"{path}: not a legacy VTK file (no '# vtk DataFile' line)")
+    up = [t.upper() for t in text]
+    words = up[3].split() if len(up) > 3 else []
+    if words[:1] != ["DATASET"] or len(words) != 2 or up[2] not in ("ASCII", "BINARY"):
+        raise DataError(f"{path}: malformed legacy VTK header (ASCII or BINARY, then DATASET <type>)")
+    # VTK reads cells as OFFSETS and CONNECTIVITY from version 5 on, and a version it cannot parse as 0:
+    # a walk of the other layout than VTK's would let a lying cell list through (./dev.sh fuzz: SIGSEGV)
+    version = re.fullmatch(r"# vtk DataFile Version (\d{1,3})\.(\d{1,3})", text[0])
+    if version is None:
+        raise DataError(f"{path}: malformed legacy VTK version line {text[0][:60]!r}")
+    return words[1], up[2] == "BINARY", int(version.group(1)) >= 5, text
+
+
+# bytes a value of each legacy type takes in a BINARY file (vtkIdType is written as int)
+_LEGACY_SIZES = {
+    **{k: np.dtype(v).itemsize for k, v in _LEGACY_TYPES.items()},
+    "vtkidtype": 4, "vtktypeint64": 8, "vtktypeuint64": 8, "vtktypeint32": 4, "vtktypeuint32": 4,
+    "vtktypeint8": 1, "vtktypeuint8": 1, "vtktypeint16": 2, "vtktypeuint16": 2,
+    "vtktypefloat32": 4, "vtktypefloat64": 8,
+}  # fmt: skip
+_NOT_A_NUMBER = re.compile(r"[-+]?(NAN|INF)")
+_CELL_SECTIONS = ("VERTICES", "LINES", "POLYGONS", "TRIANGLE_STRIPS", "CELLS")
+# the attribute sections whose type is their third word: values a tuple
+_ATTRIBUTES = {"VECTORS": 3, "NORMALS": 3, "TENSORS": 9, "TENSORS6": 6, "GLOBAL_IDS": 1, "PEDIGREE_IDS": 1}
+_ASCII_KEY = re.compile(rb"(?m)^[ \t]*([A-Za-z_][^\r\n]*)")
+_BINARY_KEY = re.compile(rb"[ \t\r\n]*([^\r\n]*)")
+_BLANK_LINE = re.compile(rb"\n\r?\n")
+_TABLE_AFTER = re.compile(rb"[ \t\r\n]*LOOKUP_TABLE[ \t]+\S+[ \t\r]*\n", re.I)
+
+
+def _check_cell_list(path: Path, key: str, raw: bytes, at: int, cells: int, total: int, binary: bool) -> None:
+    """A cell list of a legacy file before version 5 (`cells` cells in
+    `total` ints from byte `at`: each cell's point count, then its point
+    ids): the counts must add up to `total` (VTK's reader trusts them and
+    reads past its buffer where one lies: a segmentation fault)."""
+    if binary:
+        ids = np.frombuffer(raw, ">i4", total, at)
+    else:
+        # a value and its separator take two bytes, at most 21 (a 64-bit int) and some spaces: 24 bounds it
+        text = raw[at : at + 24 * total + 64].decode("latin-1")
+        try:
+            ids = np.fromstring(text, dtype=np.int64, count=total, sep=" ")
+        except ValueError:
+            raise DataError(f"{path}: {key}: fewer than {total} integers or malformed ones") from None
+    k = int(ids[0]) if total else 0
+    if k >= 0 and total == cells * (k + 1) and (ids[:: k + 1] == k).all():  # one point count for every cell
+        return
+    i, n = 0, 0
+    while i < total and n < cells:
+        k = int(ids[i])
+        if k < 0:
+            break
+        i, n = i + k + 1, n + 1
+    if i != total or n != cells:
+        raise DataError(f"{path}: {key} {cells} {total}: its cells' point counts do not add up to {total}")
+
+
+def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
+    """Every section of a legacy VTK file after its DATASET line, its count
+    against the bytes the file holds, before VTK reads and allocates: BINARY
+    walked section by section, each block's size exact (a count that lies
+    is caught where it lies); ASCII each section's values bounded by the
+    text after it (a value and its separator take two bytes). The points'
+    count (-1: no POINTS); a DataError naming the file for what does not
+    fit or is not read."""
+    pos = 0
+    for _ in range(4):  # the version, title, ASCII/BINARY and DATASET lines
+        pos = raw.find(b"\n", pos) + 1
+        if pos == 0:
+            raise DataError(f"{path}: malformed legacy VTK header (fewer than 4 lines)")
+    size, points, here, fields = len(raw), -1, 0, 0
+
+    def number(word: str, what: str) -> int:
+        if not re.fullmatch("[0-9]+", word):  # isdigit() takes '²'; int() does not
+            raise DataError(f"{path}: malformed {what} count {word!r}")
+        return int(word)
+
+    def values(count: int, kind: str, what: str, at: int) -> int:
+        """Where `count` values of type `kind` from `at` end (BINARY; ASCII: `at`)."""
+        kind = kind.lower()
+        if kind == "bit":
+            nbytes = -(-count // 8)
+        elif kind in _LEGACY_SIZES:
+            nbytes = count * _LEGACY_SIZES[kind]
+        elif kind in ("string", "utf8_string") and not binary:
+            nbytes = count
+        else:
+            raise DataError(f"{path}: {what}: values of type {kind!r} are not read")
+        need = nbytes if binary else 2 * count - 1
+        if need > size - at:
+            raise DataError(
+                f"{path}: truncated or malformed: {what} declares {count} values, "
+                f"{'needs' if binary else 'at least'} {need} bytes, the file holds {size - at} after it"
+            )
+        return at + nbytes if binary else at
+
+    while True:
+        # ASCII: the next line that starts with a word (values are numbers);
+        # BINARY: the line where the last block ended
+        m = _BINARY_KEY.match(raw, pos) if binary else _ASCII_KEY.search(raw, pos)
+        if m is None or not m.group(1).strip():
+            break
+        words = [
+            w.decode("latin-1") for w in m.group(1).split()
+        ]  # ASCII whitespace (not latin-1's \x85, \xa0)
+        key, pos = words[0].upper(), m.end() + (2 if raw[m.end() : m.end() + 2] == b"\r\n" else 1)
+        what = " ".join(words)[:80]
+        if not binary and _NOT_A_NUMBER.match(key):
+            continue  # ASCII values: nan, inf
+        if key == "METADATA":  # information keys and component names, up to a blank line
+            end = _BLANK_LINE.search(raw, pos - 1)
+            pos = size if end is None else end.end()
+            continue
+        if fields:  # a FIELD's array: name components tuples type
+            fields -= 1
+            if len(words) == 1 and key == "NULL_ARRAY":
+                continue
+            if len(words) != 4:
+                raise DataError(f"{path}: malformed field array {what!r} (name components tuples type)")
+            n = number(words[1], "field array components") * number(words[2], "field array tuples")
+            pos = values(n, words[3], f"field array {words[0]!r}", pos)
+        elif key in ("DIMENSIONS", "ORIGIN", "SPACING", "ASPECT_RATIO"):
+            continue
+        elif key == "POINTS" and len(words) == 3:
+            points = number(words[1], "POINTS")
+            pos = values(3 * points, words[2], "POINTS", pos)
+        elif key in _CELL_SECTIONS and len(words) == 3:
+            cells, total = number(words[1], key), number(words[2], key)
+            if not new_cells:
+                after = values(total, "int", key, pos)
+                _check_cell_list(path, key, raw, pos, cells, total, binary)
+                pos = after
+                continue
+            if not binary:  # ASCII: OFFSETS and CONNECTIVITY bounded together
+                pos = values(total + cells, "int", key, pos)
+                continue
+            for part, n in (("OFFSETS", cells), ("CONNECTIVITY", total)):  # file version 5's layout
+                m = re.compile(rb"[ \t\r\n]*" + part.encode() + rb"[ \t]+(\S+)[^\n]*\n", re.I).match(raw, pos)
+                if m is None:
+                    raise DataError(f"{path}: {key}: no {part} line after it")
+                pos = values(n, m.group(1).decode("latin-1"), f"{key} {part}", m.end())
+        elif key == "CELL_TYPES" and len(words) == 2:
+            pos = values(number(words[1], key), "int", key, pos)
+        elif key in ("POINT_DATA", "CELL_DATA") and len(words) == 2:
+            here = number(words[1], key)
+            if key == "POINT_DATA" and points >= 0 and here != points:
+                raise DataError(f"{path}: POINT_DATA {here} does not match POINTS {points}")
+            if here > size:
+                raise DataError(f"{path}: {key} {here}: more values than the file's bytes")
+        elif key == "SCALARS" and len(words) in (3, 4):
+            comps = number(words[3], "SCALARS components") if len(words) == 4 else 1
+            if not 1 <= comps <= 4:
+                raise DataError(f"{path}: SCALARS of {comps} components (VTK reads 1 to 4)")
+            m = _TABLE_AFTER.match(raw, pos)
+            pos = values(here * comps, words[2], what, m.end() if m else pos)
+        elif key == "LOOKUP_TABLE" and len(words) == 3:
+            pos = values(4 * number(words[2], key), "unsigned_char" if binary else "float", what, pos)
+        elif key == "COLOR_SCALARS" and len(words) == 3:
+            n = here * number(words[2], "COLOR_SCALARS components")
+            pos = values(n, "unsigned_char" if binary else "float", what, pos)
+        elif key == "TEXTURE_COORDINATES" and len(words) == 4:
+            pos = values(here * number(words[2], "TEXTURE_COORDINATES dimension"), words[3], what, pos)
+        elif key in _ATTRIBUTES and len(words) == 3:
+            pos = values(here * _ATTRIBUTES[key], words[2], what, pos)
+        elif key == "FIELD" and len(words) == 3:
+            fields = number(words[2], "FIELD arrays")
+            if fields > size:
+                raise DataError(f"{path}: FIELD of {fields} arrays, more than the file's bytes")
+        elif binary:  # ASCII: VTK refuses what it does not know; BINARY: what follows cannot be told
+            raise DataError(f"{path}: malformed or unknown legacy VTK section {what!r}")
+    return points
 
 
 def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
@@ -332,15 +598,11 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     the point data's first SCALARS, read by vtkStructuredPointsReader after
     the header checks."""
     raw = path.read_bytes()
-    lines = raw[:4096].split(b"\n")[:12]
-    text = [t.decode("latin-1").strip() for t in lines]
-    if not text or not text[0].startswith("# vtk DataFile"):
-        raise DataError(f"{path}: not a legacy VTK file (no '# vtk DataFile' line)")
-    up = [t.upper() for t in text]
-    if len(up) < 4 or "STRUCTURED_POINTS" not in up[3]:
-        kind = up[3] if len(up) > 3 else "?"
-        raise DataError(f"{path}: legacy VTK {kind.title()!r}: only DATASET STRUCTURED_POINTS is a volume")
-    binary = up[2] == "BINARY"
+    dataset, binary, new_cells, text = _legacy_head(path, raw)
+    if dataset != "STRUCTURED_POINTS":
+        where = "read_points, clvis render, clvis gauss and clvis view read it"
+        points = f"; its points are a point cloud: {where}" if dataset in POINT_DATASETS else ""
+        raise DataError(f"{path}: legacy VTK {dataset}: only DATASET STRUCTURED_POINTS is a volume{points}")
     f = {}
     for line in text[4:]:
         if not line or line.split()[0].upper() in ("POINT_DATA", "CELL_DATA"):
@@ -375,15 +637,7 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     for k in re.findall(rb"(?m)^[ \t]*(?:POINT_DATA|CELL_DATA)[ \t]+(\d+)", raw):
         if int(k) > n:
             raise DataError(f"{path}: a data section of {int(k)} values, more than the {n} points")
-    for k in re.findall(rb"(?m)^[ \t]*(?:LOOKUP_TABLE[ \t]+\S+|FIELD[ \t]+\S+)[ \t]+(\d+)[ \t\r]*$", raw):
-        if int(k) > len(raw):
-            raise DataError(f"{path}: a table or field of {int(k)} entries, more than the file's bytes")
-    for c, k in _FIELD_ARRAY.findall(raw):
-        if int(c) * int(k) > len(raw):
-            raise DataError(f"{path}: a field array of {int(c)}x{int(k)} values, more than the file's bytes")
-    for c in re.findall(rb"(?m)^[ \t]*(?:COLOR_)?SCALARS[ \t]+\S+(?:[ \t]+\S+)?[ \t]+(\d+)[ \t\r]*$", raw):
-        if int(c) > 4:
-            raise DataError(f"{path}: SCALARS of {int(c)} components (VTK reads 1 to 4)")
+    _check_legacy(path, raw, binary, new_cells)
     core, legacy, _, ns = _vtk()
     with _quiet(core) as messages:
         r = legacy.vtkStructuredPointsReader()

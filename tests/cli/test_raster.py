@@ -449,6 +449,32 @@ def test_render_of_a_volume_file_says_which_commands_read_it(tmp_path, capsys, n
     assert f"{path}: a volume file ({kind}), not a point cloud; clvis iso, clvis gauss and clvis view" in err
 
 
+@pytest.mark.parametrize("name", ["cloud-binary.vtp", "cloud-binary42.vtk"])
+def test_render_reads_vtk_point_sets(tmp_path, capsys, name):
+    """A .vtp and a legacy POLYDATA .vtk (pyvista's globe.vtk's kind) are
+    point clouds: rendered, their RGB point data the colours."""
+    pytest.importorskip("vtk", reason="vtk is in the test extra")
+    from fuzz.seeds import vtk_point_set
+
+    path = tmp_path / name
+    vtk_point_set(path, 400, name.split("-")[1].split(".")[0])
+    rc, out, err = _render(capsys, path, "--out", tmp_path / "o", *SMALL)
+    assert rc == 0, err
+    _assert_picture(tmp_path / "o" / "colors.png")
+
+
+def test_render_of_a_vtk_volume_says_which_commands_read_it(tmp_path, capsys):
+    # a .vtk is read by its DATASET: STRUCTURED_POINTS is a volume
+    path = tmp_path / "grid.vtk"
+    path.write_text(
+        "# vtk DataFile Version 3.0\nx\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 2 1 1\n"
+        "POINT_DATA 2\nSCALARS s float 1\nLOOKUP_TABLE default\n1 2\n"
+    )
+    rc, _, err = _render(capsys, path, "--out", tmp_path / "o", *SMALL)
+    assert rc == 2
+    assert f"{path}: a volume file (.vtk), not a point cloud; clvis iso, clvis gauss and clvis view" in err
+
+
 @pytest.mark.parametrize(
     "args",
     [["--out", "/proc/self/clvis-out"], ["--orbit", "2", "--movie", "/proc/self/orbit.mp4"]],

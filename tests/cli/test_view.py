@@ -68,6 +68,24 @@ def test_point_files_of_every_reader_are_points(suffix, tmp_path):
     assert scene.kind == "points"
 
 
+def test_vtk_files_go_by_their_dataset(tmp_path):
+    """A .vtp and a POLYDATA .vtk are points, a STRUCTURED_POINTS .vtk a volume."""
+    pytest.importorskip("vtk", reason="vtk is in the test extra")
+    from fuzz.seeds import vtk_point_set
+
+    vtk_point_set(tmp_path / "p.vtp", 200, "binary")
+    vtk_point_set(tmp_path / "p.vtk", 200, "binary")
+    assert view_cmd.load_scene(_args(str(tmp_path / "p.vtp"))).kind == "points"
+    assert view_cmd.load_scene(_args(str(tmp_path / "p.vtk"))).kind == "points"
+    (tmp_path / "v.vtk").write_text(
+        "# vtk DataFile Version 3.0\nx\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 3 3 3\n"
+        "POINT_DATA 27\nSCALARS s float 1\nLOOKUP_TABLE default\n"
+        + " ".join(str(k) for k in range(27))
+        + "\n"
+    )
+    assert view_cmd.load_scene(_args(str(tmp_path / "v.vtk"))).kind == "volume"
+
+
 def test_embedded_points_beyond_host_memory_are_refused(monkeypatch):
     # --points up to 2^31: the cloud was made whatever the memory
     from clvis import DeviceError, runtime

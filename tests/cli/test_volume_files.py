@@ -116,6 +116,25 @@ def test_gauss_reads_every_format(tmp_path, capsys, kind):
     assert _png(tmp_path / "o" / "gauss.png").std() > 1
 
 
+@pytest.mark.parametrize("name", ["cloud-zlib.vtp", "cloud-ascii.vtk"])
+def test_gauss_and_iso_of_vtk_point_sets(tmp_path, capsys, name):
+    """gauss makes a Gaussian a point of a .vtp or a POLYDATA .vtk; iso,
+    which reads volumes, says which commands read one (it said "only
+    DATASET STRUCTURED_POINTS is a volume", and render "a volume file")."""
+    pytest.importorskip("vtk", reason="vtk is in the test extra")
+    from fuzz.seeds import vtk_point_set
+
+    path = tmp_path / name
+    vtk_point_set(path, 300, name.split("-")[1].split(".")[0])
+    assert cli.main(["gauss", str(path), "--size", "48x48", "--out", str(tmp_path / "o")]) == 0, (
+        capsys.readouterr().err
+    )
+    assert _png(tmp_path / "o" / "gauss.png").std() > 1
+    assert cli.main(["iso", str(path), "--size", "48x48", "--out", str(tmp_path / "i")]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and "clvis render, clvis gauss and clvis view read it" in err
+
+
 def test_gauss_unknown_format_lists_formats(tmp_path, capsys):
     # (.txt is a point cloud to clvis gauss, as to clvis render: a suffix no reader has)
     f = tmp_path / "x.dat"

@@ -2,7 +2,8 @@
 tests/data): every format clvis reads, with the reader each goes to.
 
 A seed is (format, reader, path). Formats: ply, las, laz, npy, npz, nii,
-nii.gz, raw, vdb, e57 (with pye57), vti, vtk, pcd, xyz, txt, csv. Readers:
+nii.gz, raw, vdb, e57 (with pye57), vti, vtk (volumes and point sets), vtp
+(with vtk), pcd, xyz, txt, csv. Readers:
 points (read_points), volume (read_volume), vdb (read_vdb), gaussians
 (Gaussians.load).
 """
@@ -157,6 +158,54 @@ def _vti(path: Path, data: np.ndarray, encoding: str) -> None:
     path.write_bytes(text + b"</VTKFile>\n")
 
 
+def vtk_point_set(path: Path, n: int, mode: str = "binary", seed: int = 6) -> None:
+    """A VTK point set of n points (RGB colours, a float scalar, a velocity,
+    a vertex each and a triangle), written by VTK's own writers: a .vtp in
+    `mode` ascii, binary, zlib (binary, compressed), appended (raw) or
+    appended64 (base64, LZ4); a legacy .vtk POLYDATA in ascii, binary or
+    binary42 (file version 4.2)."""
+    import vtk
+    from vtk.util import numpy_support
+
+    def array(values: np.ndarray, name: str):
+        a = numpy_support.numpy_to_vtk(np.ascontiguousarray(values), deep=True)
+        a.SetName(name)
+        return a
+
+    rng = np.random.default_rng(seed)
+    pts = vtk.vtkPoints()
+    pts.SetData(numpy_support.numpy_to_vtk(rng.normal(0, 5, (n, 3)), deep=True))
+    pd = vtk.vtkPolyData()
+    pd.SetPoints(pts)
+    verts, polys = vtk.vtkCellArray(), vtk.vtkCellArray()
+    for i in range(n):
+        verts.InsertNextCell(1, [i])
+    polys.InsertNextCell(3, [0, 1, 2])
+    pd.SetVerts(verts)
+    pd.SetPolys(polys)
+    pd.GetPointData().SetScalars(array(rng.integers(0, 256, (n, 3)).astype(np.uint8), "RGB"))
+    pd.GetPointData().AddArray(array(rng.random(n).astype(np.float32), "temperature"))
+    pd.GetPointData().AddArray(array(rng.normal(size=(n, 3)).astype(np.float32), "velocity"))
+    if path.suffix == ".vtp":
+        w = vtk.vtkXMLPolyDataWriter()
+        w.SetDataModeToAscii() if mode == "ascii" else w.SetDataModeToBinary()
+        if mode.startswith("appended"):
+            w.SetDataModeToAppended()
+        w.SetEncodeAppendedData(mode == "appended64")
+        w.SetCompressorTypeToLZ4() if mode == "appended64" else w.SetCompressorTypeToNone()
+        if mode == "zlib":
+            w.SetCompressorTypeToZLib()
+    else:
+        w = vtk.vtkPolyDataWriter()
+        w.SetFileTypeToASCII() if mode == "ascii" else w.SetFileTypeToBinary()
+        if mode == "binary42":
+            w.SetFileVersion(42)
+    w.SetFileName(str(path))
+    w.SetInputData(pd)
+    if w.Write() != 1:
+        raise OSError(f"VTK could not write {path}")
+
+
 def _pcd(path: Path, n: int, binary: bool, seed: int = 7) -> None:
     """A PCD v0.7 file as PCL writes it: x y z, rgb packed in a float, intensity."""
     rng = np.random.default_rng(seed)
@@ -227,6 +276,17 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
         + "\n"
     )
     add("vtk", "volume", out / "ascii.vtk")
+    try:
+        import vtk  # noqa: F401
+    except ImportError:
+        pass
+    else:  # point sets as VTK's own writers make them: .vtp in each data mode, legacy .vtk POLYDATA
+        for mode in ("ascii", "binary", "zlib", "appended", "appended64"):
+            vtk_point_set(out / f"cloud-{mode}.vtp", 24, mode)
+            add("vtp", "points", out / f"cloud-{mode}.vtp")
+        for mode in ("ascii", "binary", "binary42"):
+            vtk_point_set(out / f"cloud-{mode}.vtk", 24, mode)
+            add("vtk", "points", out / f"cloud-{mode}.vtk")
     _pcd(out / "cloud-ascii.pcd", 20, binary=False)
     add("pcd", "points", out / "cloud-ascii.pcd")
     _pcd(out / "cloud-binary.pcd", 40, binary=True)

@@ -1,0 +1,227 @@
+"""VTK point sets as point clouds, read by VTK's own readers (the ``vtk``
+extra): XML ``.vtp`` (PolyData; vtkXMLPolyDataReader: ascii, inline binary,
+raw or base64 appended data, zlib- or LZ4-compressed or not, one piece or
+several) and legacy ``.vtk`` whose DATASET is POLYDATA, UNSTRUCTURED_GRID or
+STRUCTURED_GRID (ASCII or BINARY, file versions before 5 and from 5 on). A
+legacy STRUCTURED_POINTS file is a volume (:func:`clvis.io.read_volume`).
+
+The cloud is the points (a mesh's vertices; its cells are not kept): float32
+positions, or, stored as doubles too far from zero for float32, relative to
+their minimum kept as ``origin`` (as the other readers do). The point data
+arrays: the first unsigned-char array of 3 or 4 components becomes the
+colours (RGB or RGBA; legacy COLOR_SCALARS read as VTK reads them); a
+3-component array named velocity (or vel, Velocity, velocities) the
+velocity; a 1-component ``radius`` the radius; every other array
+attributes: one of one component by its name, one of several as one
+attribute a component (``Normals_x``, ``Normals_y``, ``Normals_z`` for 3,
+``name_0``, ``name_1``, ... otherwise). Arrays of strings are skipped.
+
+Bounded as the volume readers (:mod:`clvis.io.vtk`): before VTK reads, the
+header is checked against the file: .vtp: every piece's NumberOfPoints and
+cell counts, each DataArray's byte count or compressed-block header against
+its count and the bytes the file holds, no DTD or entities; legacy: every
+section's count (POINTS, the cells, CELL_TYPES, POINT_DATA, CELL_DATA,
+FIELD, SCALARS, LOOKUP_TABLE, ...) against the bytes after it, exact for
+BINARY. VTK's error messages become a DataError naming the file; nothing
+reaches stderr. VTK reads the bytes clvis checked, from memory (not the file
+again, which may have changed since): a .vtp without its cells (VTK trusts
+their offsets); a legacy file whole, its cell lists checked to add up.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataError
+from .cloud import PointCloud, _cloud, relative_positions
+from .vtk import (
+    _VTI_TYPES,
+    POINT_DATASETS,
+    _arrays,
+    _attrs,
+    _check_array,
+    _check_legacy,
+    _elements,
+    _legacy_head,
+    _observe,
+    _opened,
+    _quiet,
+    _vtk,
+    _why,
+    _xml_head,
+    _xml_part,
+)
+
+SUFFIXES = (".vtp", ".vtk")
+_CELL_KINDS = ("Verts", "Lines", "Strips", "Polys")
+_VELOCITY = ("velocity", "velocities", "vel")
+
+
+def _number(path: Path, attrs: dict[str, str], key: str, default: str | None = None) -> int:
+    text = attrs.get(key, default)
+    if text is None or not re.fullmatch("[0-9]+", text.strip()):  # isdigit() takes '²'; int() does not
+        raise DataError(f"{path}: malformed or missing {key} {text!r}")
+    return int(text)
+
+
+def _check_vtp(path: Path, raw: bytes) -> int:
+    """Check the .vtp's header against the file before VTK reads it: every
+    piece's counts, and each DataArray's size against its count and the
+    bytes the file holds; the points it holds. A DataError naming the file
+    for what is not read or lies about its size."""
+    at, xml = _xml_part(path, raw)
+    fa, _ = _xml_head(path, xml, "PolyData")
+    found, opened = _elements(xml, "Piece")
+    pieces = [(tag, body) for _, _, tag, body in found]
+    if len(pieces) != opened:
+        raise DataError(f"{path}: malformed PolyData: a <Piece> without its </Piece>")
+
+    def check(arrays: list[tuple[dict[str, str], bytes]], tuples: int | None, what: str) -> None:
+        for a, text in arrays:
+            t = _VTI_TYPES.get(a.get("type", ""))
+            if t is None and a.get("type") != "String":
+                raise DataError(f"{path}: {what}: unsupported DataArray type {a.get('type')!r}")
+            comps = _number(path, a, "NumberOfComponents", "1")
+            if comps < 1:
+                raise DataError(f"{path}: {what}: an array of {comps} components")
+            if tuples is None and "NumberOfTuples" in a:  # field data: the array says how many
+                count: int | None = _number(path, a, "NumberOfTuples") * comps
+            else:
+                count = None if tuples is None else tuples * comps
+            nbytes = None if count is None or t is None else count * np.dtype(t).itemsize
+            _check_array(path, raw, at, a, text, fa, nbytes, None if t is None else count)
+
+    def section(body: bytes, tag: str) -> list[tuple[dict[str, str], bytes]]:
+        found = _elements(body, tag)[0]
+        return _arrays(found[0][3]) if found else []
+
+    head = xml[: xml.find(b"<Piece")] if pieces else xml
+    check(section(head, "FieldData"), None, "FieldData")
+    total = 0
+    for tag, body in pieces:
+        pa = _attrs(tag)
+        n = _number(path, pa, "NumberOfPoints", "0")
+        cells = {k: _number(path, pa, f"NumberOf{k}", "0") for k in _CELL_KINDS}
+        points = section(body, "Points")
+        if n and (len(points) != 1 or points[0][0].get("NumberOfComponents", "1").strip() != "3"):
+            raise DataError(f"{path}: a Piece of {n} points has no <Points> array of 3 components")
+        check(points, n, "Points")
+        check(section(body, "PointData"), n, "PointData")
+        check(section(body, "CellData"), sum(cells.values()), "CellData")
+        for kind, count in cells.items():
+            arrays = section(body, kind)
+            offsets = [x for x in arrays if x[0].get("Name") == "offsets"]
+            if count and len(offsets) != 1:
+                raise DataError(f"{path}: {count} {kind} and no offsets array for them")
+            try:  # VTK writes a count of offsets (and, some versions, a leading 0 more)
+                check(offsets, count, f"{kind} offsets")
+            except DataError:
+                check(offsets, count + 1, f"{kind} offsets")
+            check([x for x in arrays if x[0].get("Name") != "offsets"], None, kind)
+        total += n
+    return total
+
+
+def _without_cells(path: Path, raw: bytes) -> bytes:
+    """The .vtp `raw` with its pieces' cells and cell data taken out of its
+    XML (the appended data, addressed from its own start, as it is): what
+    VTK reads. VTK's reader trusts a cell array's offsets (a last offset of
+    2^63 made it allocate that: std::bad_alloc, an abort, ./dev.sh fuzz),
+    and the cells are not kept."""
+    at, xml = _xml_part(path, raw)
+    spans = sorted(e[:2] for tag in (*_CELL_KINDS, "CellData") for e in _elements(xml, tag)[0])
+    kept, start = [], 0
+    for a, b in spans:
+        if a >= start:  # (an element inside one taken out already is gone with it)
+            kept.append(xml[start:a])
+            start = b
+    xml = b"".join(kept) + xml[start:]
+    xml = re.sub(rb'\bNumberOf(Verts|Lines|Strips|Polys)\s*=\s*"[^"]*"', rb'NumberOf\1="0"', xml)
+    return xml + (raw[at:] if at >= 0 else b"")
+
+
+def _read_vtp(path: Path) -> PointCloud:
+    raw = path.read_bytes()
+    n = _check_vtp(path, raw)
+    core, _, xmlio, ns = _vtk()
+    with _quiet(core) as messages:
+        r = xmlio.vtkXMLPolyDataReader()
+        if _opened(core, r, path, messages, _without_cells(path, raw)):
+            r.Update()
+        return _points(path, r, messages, n, ns)
+
+
+def _read_legacy_points(path: Path) -> PointCloud:
+    raw = path.read_bytes()
+    dataset, binary, new_cells, _ = _legacy_head(path, raw)
+    if dataset not in POINT_DATASETS:
+        if dataset == "STRUCTURED_POINTS":
+            raise DataError(
+                f"{path}: legacy VTK STRUCTURED_POINTS is a volume, not a point cloud; "
+                "read_volume, clvis iso, clvis gauss and clvis view read it"
+            )
+        raise DataError(
+            f"{path}: legacy VTK {dataset} is not read as points "
+            "(POLYDATA, UNSTRUCTURED_GRID, STRUCTURED_GRID)"
+        )
+    n = _check_legacy(path, raw, binary, new_cells)
+    core, legacy, _, ns = _vtk()
+    reader = {
+        "POLYDATA": "vtkPolyDataReader",
+        "UNSTRUCTURED_GRID": "vtkUnstructuredGridReader",
+        "STRUCTURED_GRID": "vtkStructuredGridReader",
+    }[dataset]
+    with _quiet(core) as messages:
+        r = getattr(legacy, reader)()
+        _observe(core, r, messages)
+        r.ReadFromInputStringOn()  # the bytes checked, not the file again (it may have changed since)
+        r.SetInputString(raw, len(raw))
+        for what in ("Scalars", "Vectors", "Normals", "TCoords", "ColorScalars", "Fields", "Tensors"):
+            getattr(r, f"ReadAll{what}On")()
+        r.Update()
+        return _points(path, r, messages, max(n, 0), ns)
+
+
+def _points(path: Path, reader: Any, messages: list[str], n: int, ns: Any) -> PointCloud:
+    """The cloud of `reader`'s output: its points and point data arrays."""
+    data = reader.GetOutput()
+    if messages or reader.GetErrorCode() or data is None:
+        raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
+    pts = data.GetPoints()
+    if data.GetNumberOfPoints() != n or (n and pts is None):
+        raise DataError(f"{path}: VTK read {data.GetNumberOfPoints()} points, the file declares {n}")
+    xyz = np.zeros((0, 3), np.float32) if not n else np.array(ns.vtk_to_numpy(pts.GetData()), copy=True)
+    positions, origin = relative_positions(xyz.reshape(n, 3))
+    fields: dict[str, Any] = {"positions": positions, "origin": origin, "attributes": {}}
+    pd = data.GetPointData()
+    for i in range(pd.GetNumberOfArrays()):
+        arr = pd.GetArray(i)  # None for an array of strings
+        if arr is None or arr.GetNumberOfTuples() != n:
+            continue
+        name = arr.GetName() or f"array{i}"
+        comps = arr.GetNumberOfComponents()
+        try:
+            a = np.array(ns.vtk_to_numpy(arr), copy=True).reshape(n, comps)
+        except (TypeError, ValueError, AssertionError, KeyError):  # a type numpy has not (bits)
+            continue
+        if "colors" not in fields and a.dtype == np.uint8 and comps in (3, 4):
+            fields["colors"] = a
+        elif "velocity" not in fields and comps == 3 and name.lower() in _VELOCITY:
+            fields["velocity"] = a
+        elif "radius" not in fields and comps == 1 and name == "radius":
+            fields["radius"] = a[:, 0]
+        elif comps == 1:
+            fields["attributes"][name] = a[:, 0]
+        else:
+            suffixes = "xyz" if comps == 3 else [str(j) for j in range(comps)]
+            fields["attributes"].update({f"{name}_{s}": a[:, j] for j, s in enumerate(suffixes)})
+    return _cloud(path, **fields)
+
+
+def read_vtk_points(path: Path) -> PointCloud:
+    """The cloud of a .vtp or legacy .vtk point set (see the module docstring)."""
+    return _read_vtp(path) if path.suffix.lower() == ".vtp" else _read_legacy_points(path)

@@ -6,6 +6,8 @@ blocks, candidate t, resume t) are bit for bit those of the first version.
     python bench/replay_iso_traverse.py [--n 256] [--reps 5] [--size 512x512] [SRC.cl[:WG:PACKET] ...]
 
 SRC defaults to this tree's traverse.cl; give older versions as files
+(a version whose macro_traverse takes float2 ranges, before the active bits
+of macrocell.cl's range_bits, gets the renderer's ranges)
 (`git show REV:kernels_cl/iso/traverse.cl > /tmp/old.cl`), alternated to
 average out the machine's drift. A :WG:PACKET suffix sets the local size and
 the PACKET define (rays a work-item; default 16:0, one ray a work-item, which
@@ -113,6 +115,9 @@ def capture(n: int, w: int, h: int) -> tuple[cl.CommandQueue, list[dict[str, Any
         r.render(cam, w, h, 0.5)
     finally:
         iso_render.macro_traverse = orig
+    fine_r, coarse_r = (g.get() for g in (r.grids.fine, r.grids.coarse))  # type: ignore[union-attr]
+    for c in caps:
+        c["fine_r"], c["coarse_r"] = fine_r, coarse_r
     return r.queue, caps
 
 
@@ -130,7 +135,8 @@ def run(
 
     cpus, outs = [], []
     for c in caps:
-        fine, coarse, camb, act, cnt = (buf(c[x]) for x in ("fine", "coarse", "cam", "active", "count"))
+        grids = ("fine", "coarse") if "fine_bits" in src else ("fine_r", "coarse_r")
+        fine, coarse, camb, act, cnt = (buf(c[x]) for x in (*grids, "cam", "active", "count"))
         m = c["max_rays"] * c["n_spec"]
         cb, ct = cl.Buffer(ctx, mf.READ_WRITE, 4 * m), cl.Buffer(ctx, mf.READ_WRITE, 4 * m)
         nz, ny, nx = c["shape"]

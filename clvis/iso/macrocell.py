@@ -14,7 +14,7 @@ from .. import runtime
 from .._arrays import resolve_queue
 from .zfp import ZfpVolume, _stream_buffer
 
-__all__ = ["PROFILES", "MacrocellGrids", "macrocell_grids"]
+__all__ = ["PROFILES", "MacrocellGrids", "macrocell_grids", "range_bits"]
 
 _SRC = "iso/macrocell.cl"
 # the local size of the one-item-per-block (and per coarse cell) kernels
@@ -85,3 +85,37 @@ def macrocell_grids(
     if host:
         return MacrocellGrids(fine.get(), coarse.get())
     return MacrocellGrids(fine, coarse)
+
+
+def range_bits(ranges: cla.Array, isovalue: float, *, queue: cl.CommandQueue | None = None) -> cla.Array:
+    """The active bits of a device array of float32 ranges (..., 2) for one
+    isovalue (kernels_cl/iso/macrocell.cl's range_bits): a uint32 device array
+    of ceil(n / 32) words, bit j of word w set iff range 32 w + j holds it.
+    How macro_traverse reads the macrocell grids; equal to
+    clvis.reference.iso.macrocell.range_bits."""
+    if (
+        not isinstance(ranges, cla.Array)
+        or ranges.dtype != np.float32
+        or not ranges.shape
+        or ranges.shape[-1] != 2
+    ):
+        raise TypeError("ranges: expected a float32 device array of shape (..., 2)")
+    if not ranges.flags.c_contiguous or ranges.offset:
+        raise ValueError("ranges: expected a contiguous device array at offset 0")
+    q = resolve_queue(queue, ranges=ranges)
+    n = ranges.size // 2
+    words = -(-n // 32)
+    bits = runtime.empty(q, max(words, 1), np.uint32, "macrocell bits")
+    if words:
+        k = runtime.get_kernel(q, _SRC, "range_bits", {})
+        wg = PROFILES[runtime.tuning_profile(q)]["wg"]
+        runtime.launch(
+            q,
+            k,
+            *runtime.items(q, words, wg),
+            runtime.arg(ranges),
+            np.uint32(n),
+            np.float32(isovalue),
+            bits.base_data,
+        )
+    return bits

@@ -84,7 +84,7 @@ from ..images import Picture, float_rgba8
 from ..primitives import compact, compact_indices, radix_sort
 from .cache import BlockCache, mark_blocks
 from .cache import _kernel as _cache_kernel
-from .macrocell import macrocell_grids
+from .macrocell import macrocell_grids, range_bits
 from .raytrace import raytrace_blocks, raytrace_kernel
 from .traverse import init_rays, macro_traverse, traverse_kernel
 from .zfp import ZfpVolume, compress
@@ -590,6 +590,11 @@ class IsoRenderer:
             end = runtime.marker(q)
             yield lambda copy=True: self._image(w, h, out, None, 1.0, stats, (start, end), copy)
             return
+        # the macrocell grids' active bits for this isovalue, once a frame
+        # (how macro_traverse reads them: 32 KB of bits for 2 MB of ranges at 256^3)
+        fine, coarse = self.grids.fine, self.grids.coarse
+        assert isinstance(fine, cla.Array) and isinstance(coarse, cla.Array)  # built with host=False
+        bits = (range_bits(fine, iso, queue=q), range_bits(coarse, iso, queue=q))
         finished = 0  # rays finished in the tiles before this one
         for ti, (p0, n) in enumerate(tiles):
             n_enter = entering[ti]
@@ -618,7 +623,7 @@ class IsoRenderer:
                 if speculation and stats["passes_per_tile"][ti] == 0:
                     n_spec = max(n_spec, 2)  # the paper's two macro-traversal steps in the first pass
                 stats["active_per_pass"].append(n_active)
-                m, ngroups, decoded, item_bytes = self._pass(state, iso, n_active, n_spec)
+                m, ngroups, decoded, item_bytes = self._pass(state, iso, bits, n_active, n_spec)
                 n_active = int(state.active.size)
                 stats["passes"] += 1
                 stats["passes_per_tile"][ti] += 1
@@ -660,14 +665,16 @@ class IsoRenderer:
                     w, h, out, (st, a), f, sd, ev, copy
                 )
 
-    def _pass(self, t: _Tile, iso: float, n_active: int, n_spec: int) -> tuple[int, int, int, int]:
+    def _pass(
+        self, t: _Tile, iso: float, bits: tuple[cla.Array, cla.Array], n_active: int, n_spec: int
+    ) -> tuple[int, int, int, int]:
         """One pass over the tile's active rays; t.active becomes the rays
-        still running. Returns (items, blocks, blocks decoded, pass bytes)."""
+        still running. bits: the fine and coarse grids' range_bits for iso.
+        Returns (items, blocks, blocks decoded, pass bytes)."""
         q, zv = self.queue, self.volume
         shape, spacing, origin = zv.shape, self.spacing, self.origin
         active = t.active
-        fine, coarse = self.grids.fine, self.grids.coarse
-        assert isinstance(fine, cla.Array) and isinstance(coarse, cla.Array)  # built with host=False
+        fine, coarse = bits
         n_items = n_active * n_spec
         cand_block = runtime.empty(q, n_items, np.uint32, "candidate blocks")
         cand_t = runtime.empty(q, n_items, np.float32, "candidate t")

@@ -17,6 +17,7 @@ import pyopencl.array as cla
 
 from .. import runtime
 from ..primitives import compact_indices
+from .macrocell import range_bits
 
 __all__ = ["MAX_SPEC", "PROFILES", "init_rays", "macro_traverse", "traverse_kernel"]
 
@@ -120,7 +121,9 @@ def macro_traverse(
     """Launch ``macro_traverse`` (see kernels_cl/iso/traverse.cl's ABI).
 
     fine, coarse: float32 device arrays (.., 2) (clvis.iso.macrocell_grids,
-    host=False); active uint32 pixel ids; count uint32 (1,) how many;
+    host=False), whose clvis.iso.macrocell.range_bits for isovalue are made
+    here; or those bits (uint32 device arrays), as the renderer passes them,
+    made once a frame; active uint32 pixel ids; count uint32 (1,) how many;
     max_rays an upper bound of count[0] (sizes the launch; <= active.size);
     ray_t float32 per pixel (in/out); cand_block uint32 and cand_t float32
     with room for max_rays * n_spec entries (out); first_pixel: the tile's
@@ -139,6 +142,10 @@ def macro_traverse(
             f"cand_block, cand_t: need room for {max_rays * n_spec} entries, "
             f"got {cand_block.size} and {cand_t.size}"
         )
+    if fine.dtype != np.uint32:
+        fine = range_bits(fine, isovalue, queue=queue)
+    if coarse.dtype != np.uint32:
+        coarse = range_bits(coarse, isovalue, queue=queue)
     wg, per_item, _ = _profile(queue)
     k = traverse_kernel(queue, "macro_traverse")
     return runtime.launch(

@@ -25,6 +25,11 @@
  * c = cx + ncx (cy + ncy cz), nc_ = ceil(nb_ / 4) (clvis.iso.macrocell_grids,
  * kernels_cl/iso/macrocell.cl). A float2 range is (lo, hi); a block or coarse
  * cell is active iff lo <= isovalue <= hi ((+inf, -inf) and NaN: never).
+ * macro_traverse reads that test's result, one bit a cell (macrocell.cl's
+ * range_bits for the launch's isovalue: cell id i is bit i % 32 of word
+ * i / 32): the 64^3 blocks of a 256^3 volume are 32 KB of bits instead of
+ * 2 MB of ranges, so the walk's per-block look-up stays in the CPU's L1
+ * (macro_traverse's CPU ~-15 % on PoCL, bench/results/iso-cpu.md).
  *
  * Per ray (float32, the rules of clvis/reference/iso/traverse.py): o, d from the ray
  * buffer; O = (o - origin) / spacing, D = d / spacing, inv = spacing / d_safe
@@ -85,11 +90,13 @@
  *     uint nx, uint ny, uint nz,         volume samples per axis
  *     float dx, float dy, float dz,      spacing
  *     float ox, float oy, float oz,      origin: world position of sample (0, 0, 0)
- *     float isovalue,
+ *     float isovalue,                    the isovalue fine_bits and coarse_bits were made for
+ *                                        (not read: the bits hold its tests)
  *     global const float *cam, uint W,   ray buffer, image width
  *     uint p0,                           the tile's first pixel (0: the whole image)
- *     global const float2 *fine,         nbx * nby * nbz block ranges
- *     global const float2 *coarse,       ncx * ncy * ncz coarse ranges
+ *     global const uint *fine_bits,      ceil(nbx * nby * nbz / 32) words: the active blocks
+ *                                        (range_bits of the block ranges for isovalue)
+ *     global const uint *coarse_bits,    ceil(ncx * ncy * ncz / 32) words: the active coarse cells
  *     global const uint *active,         tile pixel ids j of the rays to traverse (pixel p0 + j)
  *     global const uint *count,          count[0]: how many entries of `active`
  *     global float *ray_t,               per tile pixel j, in: resume t (t_enter for a new ray);
@@ -181,11 +188,17 @@ inline float block_bound_t(int b, int size, int n, float O, float inv, int entry
         (te) = block_bound_t((b), 4, (n), (O), (inv), 0);             \
     }
 
+/* bit i of a range_bits array: cell i is active */
+inline uint tr_bit(global const uint *bits, uint i)
+{
+    return (bits[i >> 5] >> (i & 31u)) & 1u;
+}
+
 /* The walk of ray active[i] (tile pixel p) from ray_t[p], given its set-up
  * (O, D, inv per axis, t_exit): its candidates and its resume t. */
 inline void tr_walk(uint i, uint p, const int *n, const int *nb, const int *ncb, const int *nc,
-                    const float *O, const float *D, const float *inv, float t_exit, float isovalue,
-                    global const float2 *fine, global const float2 *coarse, global float *ray_t,
+                    const float *O, const float *D, const float *inv, float t_exit,
+                    global const uint *fine_bits, global const uint *coarse_bits, global float *ray_t,
                     uint n_spec, global uint *cand_block, global float *cand_t)
 {
     float t = ray_t[p];
@@ -221,8 +234,7 @@ inline void tr_walk(uint i, uint p, const int *n, const int *nb, const int *ncb,
             CLVIS_TRAV_ADVANCE(by, ey, sy, ly, n[1], Oy, iy);
             CLVIS_TRAV_ADVANCE(bz, ez, sz, lz, n[2], Oz, iz);
             const int cx = bx >> 2, cy = by >> 2, cz = bz >> 2;
-            const float2 cr = coarse[cx + nc[0] * (cy + nc[1] * cz)];
-            if (!(cr.x <= isovalue && isovalue <= cr.y)) {
+            if (!tr_bit(coarse_bits, (uint)(cx + nc[0] * (cy + nc[1] * cz)))) {
                 /* The coarse walk: per axis the coarse cell and the T of its exit bound (the
                  * exit bound of its last block along the ray, the same integer x, so the
                  * same T), stepped like the blocks: t = the nearest coarse exit, the cells
@@ -253,8 +265,7 @@ inline void tr_walk(uint i, uint p, const int *n, const int *nb, const int *ncb,
                         kz += sz;
                         fz = block_bound_t(kz, 16, n[2], Oz, iz, 0);
                     }
-                    const float2 kr = coarse[kx + nc[0] * (ky + nc[1] * kz)];
-                    if (kr.x <= isovalue && isovalue <= kr.y)
+                    if (tr_bit(coarse_bits, (uint)(kx + nc[0] * (ky + nc[1] * kz))))
                         break;
                 }
                 if (stuck)
@@ -278,8 +289,7 @@ inline void tr_walk(uint i, uint p, const int *n, const int *nb, const int *ncb,
             }
             const float t_out = clvis_il_fmin(clvis_il_fmin(clvis_il_fmin(t_exit, ex), ey), ez);
             const uint id = (uint)bx + (uint)nb[0] * ((uint)by + (uint)nb[1] * (uint)bz);
-            const float2 fr = fine[id];
-            if (fr.x <= isovalue && isovalue <= fr.y) {
+            if (tr_bit(fine_bits, id)) {
                 cand_block[i * n_spec + found] = id;
                 cand_t[i * n_spec + found] = t;
                 ++found;
@@ -301,7 +311,7 @@ inline void tr_walk(uint i, uint p, const int *n, const int *nb, const int *ncb,
 kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float dz,
                            float ox, float oy, float oz, float isovalue,
                            global const float *cam, uint W, uint p0,
-                           global const float2 *fine, global const float2 *coarse,
+                           global const uint *fine_bits, global const uint *coarse_bits,
                            global const uint *active, global const uint *count,
                            global float *ray_t, uint n_spec,
                            global uint *cand_block, global float *cand_t)
@@ -334,7 +344,7 @@ kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float 
     for (uint k = 0; k < m; ++k) {
         const float O[3] = {lO[0][k], lO[1][k], lO[2][k]}, D[3] = {lD[0][k], lD[1][k], lD[2][k]};
         const float inv[3] = {linv[0][k], linv[1][k], linv[2][k]};
-        tr_walk(i0 + k, pix[k], n, nb, ncb, nc, O, D, inv, ltx[k], isovalue, fine, coarse, ray_t,
+        tr_walk(i0 + k, pix[k], n, nb, ncb, nc, O, D, inv, ltx[k], fine_bits, coarse_bits, ray_t,
                 n_spec, cand_block, cand_t);
     }
 #else
@@ -344,7 +354,7 @@ kernel void macro_traverse(uint nx, uint ny, uint nz, float dx, float dy, float 
     const uint p = active[i];   /* the tile's pixel: image pixel p0 + p */
     float o[3], d[3], O[3], D[3], inv[3], te, t_exit;
     clvis_iso_ray_setup(cam, p0 + p, W, n, sp, org, o, d, O, D, inv, &te, &t_exit);
-    tr_walk(i, p, n, nb, ncb, nc, O, D, inv, t_exit, isovalue, fine, coarse, ray_t, n_spec,
+    tr_walk(i, p, n, nb, ncb, nc, O, D, inv, t_exit, fine_bits, coarse_bits, ray_t, n_spec,
             cand_block, cand_t);
 #endif
 }

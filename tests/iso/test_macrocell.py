@@ -3,13 +3,16 @@ clvis.reference.iso.block_ranges / coarse_ranges of the decoded volume:
 exactly, on every device and both work shapes."""
 
 import numpy as np
+import pyopencl.array as cla
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 import clvis
 from clvis import datasets, iso, zfp
+from clvis.iso.macrocell import range_bits
 from clvis.reference import iso as ref
+from clvis.reference.iso.macrocell import range_bits as ref_range_bits
 
 
 def _expected(zv):
@@ -81,3 +84,51 @@ def test_bad_input():
         iso.macrocell_grids(np.zeros((4, 4, 4), np.float32))
     with pytest.raises(ValueError, match="2 samples"):
         iso.macrocell_grids(zfp.compress(np.zeros((1, 4, 4), np.float32), 8))
+
+
+def _ranges(n, seed):
+    """n float32 ranges (lo, hi) around 0.5, some empty (+inf, -inf), some NaN,
+    some with an end exactly at 0.5."""
+    rng = np.random.default_rng(seed)
+    lo = rng.uniform(0, 1, n).astype(np.float32)
+    hi = lo + rng.uniform(0, 0.5, n).astype(np.float32)
+    r = np.stack([lo, hi], -1)
+    k = rng.integers(0, 6, n)
+    r[k == 0] = (np.inf, -np.inf)
+    r[k == 1, 0] = np.nan
+    r[k == 2, 1] = np.float32(0.5)
+    r[k == 3, 0] = np.float32(0.5)
+    return r
+
+
+@pytest.mark.parametrize("n", [1, 5, 31, 32, 33, 64, 1000])
+def test_range_bits_match_reference(queue, n):
+    """range_bits (the grids as macro_traverse reads them) == the reference:
+    every word, bits past n zero; one bit per range's test, in order."""
+    r = _ranges(n, n).reshape(-1, 1, 2) if n % 5 else _ranges(n, n)
+    for v in (0.5, 0.25, np.inf, np.nan):
+        got = range_bits(cla.to_device(queue, np.ascontiguousarray(r)), v).get(queue=queue)
+        want = ref_range_bits(r, v)
+        assert got.dtype == np.uint32 and got.shape == (-(-n // 32),)
+        np.testing.assert_array_equal(got, want)
+        flat = r.reshape(-1, 2)
+        on = (flat[:, 0] <= np.float32(v)) & (np.float32(v) <= flat[:, 1])
+        bits = (want[np.arange(32 * want.size) // 32] >> (np.arange(32 * want.size) % 32)) & 1
+        np.testing.assert_array_equal(bits[:n], on)
+        assert not bits[n:].any()
+
+
+def test_range_bits_of_the_grids(queue):
+    zv = zfp.compress(datasets.explosion((40, 36, 33))["volume"], 8)
+    g = iso.macrocell_grids(zv, queue=queue, host=False)
+    for grid in (g.fine, g.coarse):
+        np.testing.assert_array_equal(range_bits(grid, 0.5).get(queue=queue), ref_range_bits(grid.get(), 0.5))
+
+
+def test_range_bits_bad_input(queue):
+    with pytest.raises(TypeError, match="ranges"):
+        range_bits(np.zeros((4, 2), np.float32), 0.5)
+    with pytest.raises(TypeError, match="ranges"):
+        range_bits(cla.to_device(queue, np.zeros((4, 3), np.float32)), 0.5)
+    with pytest.raises(ValueError, match="ranges"):
+        ref_range_bits(np.zeros((4, 2), np.float64), 0.5)

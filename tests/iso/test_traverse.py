@@ -14,12 +14,13 @@ from hypothesis import strategies as st
 from clvis import datasets, runtime, zfp
 from clvis._arrays import to_device
 from clvis.camera import Camera, ray_buffer
-from clvis.iso.macrocell import macrocell_grids
+from clvis.iso.macrocell import macrocell_grids, range_bits
 from clvis.iso.raytrace import raytrace_blocks
 from clvis.iso.traverse import init_rays, macro_traverse
 from clvis.reference import iso
 from clvis.reference.camera import camera_rays
 from clvis.reference.iso import traverse as ref
+from clvis.reference.iso.macrocell import range_bits as ref_range_bits
 
 NO = 0xFFFFFFFF
 CAM = Camera.look_at((1.7, -2.2, 1.5), (0, 0, 0), (0, 0, 1), fov_y=40, near=0.1, far=20)
@@ -90,6 +91,32 @@ class Scene:
             cb,
             ct,
         )
+        # the renderer's way: the grids' range_bits made once and passed in
+        rt2 = _upload(q, ray_t, np.float32)
+        cb2, ct2 = (
+            runtime.empty(q, cb.size, np.uint32, "cand_block"),
+            runtime.empty(q, ct.size, np.float32, "cand_t"),
+        )
+        bits = tuple(range_bits(g, self.iso, queue=q) for g in (self.fine_d, self.coarse_d))
+        for b, g in zip(bits, (self.fine, self.coarse), strict=True):
+            assert np.array_equal(b.get(queue=q), ref_range_bits(g, self.iso))
+        macro_traverse(
+            q,
+            self.shape,
+            self.spacing,
+            self.origin,
+            self.iso,
+            self.cam_d,
+            self.w,
+            *bits,
+            act_d,
+            count_d,
+            cnt,
+            rt2,
+            n_spec,
+            cb2,
+            ct2,
+        )
         rb, rt, rrt = ref.macro_traverse(
             self.shape,
             self.spacing,
@@ -103,10 +130,11 @@ class Scene:
             ray_t,
             n_spec,
         )
-        if cnt:
-            assert np.array_equal(cb.get(queue=q)[: cnt * n_spec].reshape(cnt, n_spec), rb)
-            assert np.array_equal(ct.get(queue=q)[: cnt * n_spec].reshape(cnt, n_spec), rt)
-        assert np.array_equal(rt_d.get(queue=q), rrt)
+        for b_d, t_d, r_d in ((cb, ct, rt_d), (cb2, ct2, rt2)):
+            if cnt:
+                assert np.array_equal(b_d.get(queue=q)[: cnt * n_spec].reshape(cnt, n_spec), rb)
+                assert np.array_equal(t_d.get(queue=q)[: cnt * n_spec].reshape(cnt, n_spec), rt)
+            assert np.array_equal(r_d.get(queue=q), rrt)
         # candidates first, then padding; padding only when the ray is done
         have = rb != NO
         assert (np.sort(~have, axis=1, kind="stable") == ~have).all()

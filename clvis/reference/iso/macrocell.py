@@ -12,7 +12,7 @@ import numpy.typing as npt
 from ..._arrays import real_array
 from ...errors import DataError
 
-__all__ = ["block_ranges", "cell_ranges", "coarse_ranges"]
+__all__ = ["block_ranges", "cell_ranges", "coarse_ranges", "range_bits"]
 
 
 def _volume(volume) -> np.ndarray:
@@ -92,3 +92,19 @@ def coarse_ranges(ranges: Sequence[npt.ArrayLike], factor: int = 4) -> tuple[np.
     if lo.ndim != 3 or lo.shape != hi.shape:
         raise ValueError(f"ranges: expected two 3-D arrays of one shape, got {lo.shape} and {hi.shape}")
     return _reduce_blocks(lo, hi, _factor("factor", factor))
+
+
+def range_bits(ranges: npt.ArrayLike, isovalue: float) -> np.ndarray:
+    """The active bits of float32 ranges (..., 2) of (lo, hi), flattened in C
+    order, for one isovalue: a uint32 array of ceil(n / 32) words whose bit
+    j of word w is 1 iff range 32 w + j holds the isovalue, lo <= isovalue <=
+    hi in float32 ((+inf, -inf) and NaN: 0), bits past n 0
+    (kernels_cl/iso/macrocell.cl's range_bits)."""
+    r = np.asarray(ranges)
+    if r.dtype != np.float32 or r.ndim < 1 or r.shape[-1] != 2:
+        raise ValueError(f"ranges: expected a float32 array of shape (..., 2), got {r.dtype} {r.shape}")
+    v = np.float32(isovalue)
+    r = r.reshape(-1, 2)
+    on = (r[:, 0] <= v) & (v <= r[:, 1])
+    on = np.concatenate([on, np.zeros(-on.size % 32, bool)]).reshape(-1, 32)
+    return (on.astype(np.uint32) << np.arange(32, dtype=np.uint32)).sum(axis=1, dtype=np.uint32)

@@ -447,10 +447,9 @@ def test_narvis_flow_frames_vary_what_the_network_must_not_learn():
 
 
 def test_narvis_flow_frames_take_scenes_per_flow():
-    """flow_scenes as {flow: scenes} (1 for a flow not named; the release
-    spec's extra attractor scenes): the last flow's extra scenes come after
-    the frames one scene of each gives, which stay as they were; a name
-    that is no training flow is refused."""
+    """flow_scenes as {flow: scenes} (1 for a flow not named): the last
+    flow's extra scenes come after the frames one scene of each gives,
+    which stay as they were; a name that is no training flow is refused."""
     from clvis.training import flows
 
     planes = ("rgb", "depth", "vel2d")
@@ -465,7 +464,6 @@ def test_narvis_flow_frames_take_scenes_per_flow():
         np.testing.assert_array_equal(f.rgb, g.rgb)
     # the extra scenes are other scenes (other particles), not the first again
     assert not np.array_equal(more[-1].x, more[-3].x)
-    assert train.SPECS["narvis"]["flow_scenes"] == {"attractors": 4}
     with pytest.raises(ValueError, match="lorenz"):
         train.narvis_flow_frames({"lorenz": 2}, 1, [32], [0.25, 4.0], 20_000, 5, 32, planes)
 

@@ -446,6 +446,28 @@ def test_narvis_flow_frames_vary_what_the_network_must_not_learn():
     assert any(not np.array_equal(a[i].x[:3], a[i + 1].x[:3]) for i in range(0, len(a), 2))
 
 
+def test_narvis_flow_frames_take_scenes_per_flow():
+    """flow_scenes as {flow: scenes} (1 for a flow not named): the last
+    flow's extra scenes come after the frames one scene of each gives,
+    which stay as they were; a name that is no training flow is refused."""
+    from clvis.training import flows
+
+    planes = ("rgb", "depth", "vel2d")
+    assert flows.TRAIN_FLOWS[-1] == "attractors"
+    one = train.narvis_flow_frames(1, 1, [32], [0.25, 4.0], 20_000, 5, 32, planes)
+    more = train.narvis_flow_frames({"attractors": 3}, 1, [32], [0.25, 4.0], 20_000, 5, 32, planes)
+    assert len(more) == len(one) + 2
+    assert [f.source.split(" ", 1)[0] for f in more[len(one) - 1 :]] == ["attractors"] * 3
+    for f, g in zip(one, more, strict=False):
+        assert f.source == g.source
+        np.testing.assert_array_equal(f.x, g.x)
+        np.testing.assert_array_equal(f.rgb, g.rgb)
+    # the extra scenes are other scenes (other particles), not the first again
+    assert not np.array_equal(more[-1].x, more[-3].x)
+    with pytest.raises(ValueError, match="lorenz"):
+        train.narvis_flow_frames({"lorenz": 2}, 1, [32], [0.25, 4.0], 20_000, 5, 32, planes)
+
+
 def _broken_write(path_arg):
     """A writer that leaves part of a file at the path it is given, then fails."""
 

@@ -4,6 +4,7 @@ export it to ONNX (fp32, fp16, int8) and write its model card."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from ._common import CliError, Parser, count, size
@@ -92,6 +93,24 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="stop training after S seconds (rendering not counted) if --steps are not done by then; "
         "the learning rate's schedule ends with whichever comes first",
     )
+    p.add_argument(
+        "--init",
+        default=None,
+        metavar="ONNX",
+        help="start from the weights of this ONNX export of the same network (e.g. the shipped "
+        "clvis/post/models/infill.onnx; default: random weights)",
+    )
+    p.add_argument(
+        "--mix",
+        type=float,
+        default=None,
+        metavar="F",
+        help="infill: take a share F (0-1) of the crops from variety frames of seven families "
+        "(random sizes, speculation, colours, 80-97 %% completion) beside the release frames",
+    )
+    p.add_argument(
+        "--lr", type=float, default=None, metavar="X", help="peak learning rate (default: the release run's)"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     return p
 
@@ -110,6 +129,12 @@ def _command(args: argparse.Namespace) -> list[str]:
         c += ["--time-limit", str(args.time_limit)]
     if args.target is not None:
         c += ["--target", args.target]
+    if args.init is not None:
+        c += ["--init", str(args.init)]
+    if args.mix is not None:
+        c += ["--mix", str(args.mix)]
+    if args.lr is not None:
+        c += ["--lr", str(args.lr)]
     return c + ["--eval", args.eval]
 
 
@@ -171,6 +196,14 @@ def cmd(args: argparse.Namespace) -> int:
     )
     if args.target is not None and args.model != "narvis":
         raise CliError(f"--target: {args.model}'s targets are not Gaussian renders (narvis only)")
+    if args.mix is not None and args.model != "infill":
+        raise CliError(f"--mix: {args.model} has no variety frames to mix in (infill only)")
+    if args.mix is not None and not 0.0 < args.mix < 1.0:
+        raise CliError(f"--mix {args.mix}: expected a share between 0 and 1")
+    if args.lr is not None and not 0.0 < args.lr < 1.0:
+        raise CliError(f"--lr {args.lr}: expected a learning rate between 0 and 1")
+    if args.init is not None and not os.path.isfile(args.init):
+        raise CliError(f"--init {args.init}: no such file")
     fw, fh = args.frame_size or train.SPECS[args.model]["frame_size"]
     if args.size > min(fw, fh):
         raise CliError(f"--size {args.size}: larger than the frames ({fw}x{fh})")
@@ -188,6 +221,9 @@ def cmd(args: argparse.Namespace) -> int:
         log=log,
         cache=None if args.no_cache else (args.cache or default_cache()),
         time_limit=args.time_limit,
+        init=args.init,
+        mix=args.mix,
+        lr=args.lr,
     )
     print(f"{args.out}/{card['name']}.onnx: held-out frames, mean per row")
     print(held_out_table(card["held_out"]))

@@ -77,7 +77,8 @@ class InfillSpec(NetworkSpec[IsoImageLike]):
     channels_out = 4
     baselines = ("input", "pushpull")
     eval_families = ("gyroid", "turbulence", "noise", "shapes", "layers")
-    trained_families = ("waves", "ripples", "blobs")
+    #: the shipped W-Net's frames and (its --mix) the variety frames of four more
+    trained_families = ("waves", "ripples", "blobs", "sinusoids", "metaballs", "csg", "labels")
     #: off: on its training families the guard costs 0.6 dB and on the CI
     #: frame of shapes it picks push-pull over the partial image it should
     #: keep (bench/results/post-guard.md)

@@ -48,9 +48,11 @@ from ..camera import Camera
 #: what the shipped in-fill W-Net trained on (``clvis train infill``)
 TRAIN_VOLUMES = ("waves", "ripples", "blobs")
 #: more training families (never held out), made for issue 21's retrain with
-#: IsoVariety and TRAIN_COMPLETIONS; that model was not shipped (it lost 1 dB
-#: on the card's 1280x720 held-out frames at 85 %: bench/results/README.md,
-#: "in-fill with more training families")
+#: IsoVariety and TRAIN_COMPLETIONS; trained on them alone with the three the
+#: W-Net lost 1 dB on the card's 1280x720 held-out frames at 85 %
+#: (bench/results/README.md, "in-fill with more training families"); the
+#: shipped W-Net takes a quarter of its last run's crops from them and the
+#: three (clvis train infill --mix: clvis.training.train.MIX_VOLUMES)
 MORE_TRAIN_VOLUMES = ("sinusoids", "metaballs", "csg", "labels")
 HELD_OUT_VOLUMES = ("gyroid", "turbulence")
 #: volume families made for ``clvis eval``'s held-out suite alone (never trained on)

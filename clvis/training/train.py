@@ -15,6 +15,7 @@ Needs the ``train`` extra (torch==2.13.0, onnx, pytorch-msssim).
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -53,6 +54,9 @@ SPECS: dict[str, dict[str, Any]] = {
         # their mean
         "loss": {"l2": 4.0, "ms_ssim": 0.5},
         "lr": 1e-3,
+        # --mix F: a share F of the crops from MIX_VOLUMES frames drawn with
+        # data.IsoVariety at data.TRAIN_COMPLETIONS, beside the frames above
+        "mix_frames": 28,  # volumes (x views): 4 of each of the seven families
     },
     "lidar": {
         "arch": {"width": 8, "depth": 4},
@@ -423,6 +427,52 @@ def _scan_frames(count: int, views: int, seed: int, size: tuple[int, int], held_
     return _data.scan_frames(kinds, count, seed, *size, planes, views=views, progress=log)
 
 
+#: the families of --mix's variety frames: the shipped three and data.MORE_TRAIN_VOLUMES
+MIX_VOLUMES = _data.TRAIN_VOLUMES + _data.MORE_TRAIN_VOLUMES
+
+
+def _mix_frames(count: int, views: int, seed: int, size: tuple[int, int], crop: int, log) -> list:
+    """--mix's frames: `count` volumes of MIX_VOLUMES (in turn) x `views`,
+    each volume's side and frame size, each view's speculation and surface
+    colour drawn (data.IsoVariety, no frame side below `crop`), snapshotted
+    at data.TRAIN_COMPLETIONS."""
+    vary = _data.IsoVariety(smallest=max(crop, _data.IsoVariety.smallest))
+    return _data.iso_frames(
+        MIX_VOLUMES,
+        count,
+        seed,
+        *size,
+        views=views,
+        progress=log,
+        vary=vary,
+        completions=_data.TRAIN_COMPLETIONS,
+    )
+
+
+def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
+    """Start `net` from the weights of an ONNX export of the same network
+    (its initializers, by the parameter names torch.onnx.export keeps); a
+    file of another network, or missing a parameter, is an error."""
+    import onnx
+    import torch
+    from onnx import numpy_helper
+
+    try:
+        graph = onnx.load(str(path)).graph
+    except Exception as e:  # onnx raises its own types for a missing or corrupt file
+        raise ValueError(f"--init {path}: not an ONNX model ({e})") from None
+    weights = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
+    state = net.state_dict()
+    missing = [k for k in state if k not in weights]
+    wrong = [k for k in state if k in weights and tuple(weights[k].shape) != tuple(state[k].shape)]
+    if missing or wrong:
+        raise ValueError(
+            f"--init {path}: not this network's weights "
+            f"(missing {missing[:3]}, other shapes {wrong[:3]} of {len(state)} parameters)"
+        )
+    net.load_state_dict({k: torch.from_numpy(np.array(weights[k], dtype=np.float32)) for k in state})
+
+
 def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
     frames = TRAINERS[name].frames
     if frames is None:
@@ -610,12 +660,16 @@ def _augment(x, y, rng: np.random.Generator, name: str, layout: Sequence[str] = 
     return TRAINERS[name].augment(x, y, rng, layout)
 
 
-def _batch(pairs, n: int, crop: int, rng: np.random.Generator):
+def _batch(pairs, n: int, crop: int, rng: np.random.Generator, extra=(), share: float = 0.0):
+    """`n` random `crop` x `crop` crops of random pairs; with `extra` pairs,
+    each crop is from one of them with probability `share` (one more draw of
+    `rng` a crop; none without `extra`, so such a run is unchanged)."""
     import torch
 
     xs, ys = [], []
     for _ in range(n):
-        x, y = pairs[int(rng.integers(0, len(pairs)))]
+        source = extra if len(extra) and rng.random() < share else pairs
+        x, y = source[int(rng.integers(0, len(source)))]
         _, h, w = x.shape
         cy, cx = int(rng.integers(0, h - crop + 1)), int(rng.integers(0, w - crop + 1))
         xs.append(x[:, cy : cy + crop, cx : cx + crop])
@@ -640,6 +694,9 @@ def train(
     log: Callable[[str], None] = print,
     cache: str | os.PathLike | None = None,
     time_limit: float | None = None,
+    init: str | os.PathLike | None = None,
+    mix: float | None = None,
+    lr: float | None = None,
 ) -> dict:
     """Train network `name` for `steps` steps on `size` x `size` crops, export
     it into `out` (NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx where int8
@@ -652,7 +709,12 @@ def train(
     arguments (cached_frames; None: render them every time). time_limit:
     seconds of training (the data's rendering not counted) after which the
     run stops short of `steps`; the learning rate's cosine follows whichever
-    of the two ends first."""
+    of the two ends first. init: an ONNX file of the same network whose
+    weights start the run (load_onnx_weights; None: random ones). mix
+    (in-fill): the share of the crops taken from _mix_frames' pairs (the
+    seven families at varied sizes, speculation, colours and completions
+    0.80-0.97) beside the release frames. lr: the peak learning rate
+    (default the SPECS')."""
     import torch
 
     from ..post import nets
@@ -664,6 +726,12 @@ def train(
         raise ValueError(f"target: expected one of {', '.join(_data.NARVIS_TARGETS)}, got {target!r}")
     if target != "max_response" and trainer.frames is not None:
         raise ValueError(f"target: {name}'s targets are not Gaussian renders (only narvis takes {target!r})")
+    if mix is not None and "mix_frames" not in spec:
+        raise ValueError(f"mix: {name} has no variety frames to mix in (infill only)")
+    if mix is not None and not 0.0 < mix < 1.0:
+        raise ValueError(f"mix: expected a share between 0 and 1 (exclusive), got {mix}")
+    if lr is not None and not 0.0 < lr < 1.0:
+        raise ValueError(f"lr: expected a learning rate between 0 and 1, got {lr}")
     t_start = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -720,12 +788,29 @@ def train(
     completions = trainer.completions
     pairs = [_pack(name, f, c) for f in train_frames for c in completions]
     pairs = [(x.astype(np.float16), y.astype(np.float16)) for x, y in pairs]
+    mix_pairs: list = []
+    mix_count = 0
+    if mix is not None:
+        mix_count = max(1, spec["mix_frames"] * count // spec["frames"])
+        mixed = _mix_frames(mix_count, spec["views"], seed + 2_000_003, fsize, size, log)
+        mix_pairs = [_pack(name, f, c) for f in mixed for c in _data.TRAIN_COMPLETIONS]
+        mix_pairs = [(x.astype(np.float16), y.astype(np.float16)) for x, y in mix_pairs]
+        log(f"{len(mix_pairs)} variety pairs ({len(mixed)} frames), {mix:.0%} of the crops")
     data_seconds = time.perf_counter() - t0
     log(f"{len(pairs)} training pairs, {len(val_frames)} held-out frames in {data_seconds:.0f} s")
 
     net = trainer.build(**spec["arch"])
-    opt = torch.optim.Adam(net.parameters(), lr=spec["lr"])
-    lr0, lr1 = spec["lr"], spec["lr"] / 100
+    start: dict[str, Any] | None = None
+    if init is not None:
+        load_onnx_weights(net, init)
+        start = {"file": Path(init).name, "sha256": sha256(Path(init))}
+        init_card = Path(init).with_suffix(".json")
+        if init_card.is_file():  # the starting model's own recipe
+            start["command"] = json.loads(init_card.read_text()).get("command")
+        log(f"started from {init}")
+    peak = float(lr if lr is not None else spec["lr"])
+    opt = torch.optim.Adam(net.parameters(), lr=peak)
+    lr0, lr1 = peak, peak / 100
     loss_fn = _loss_fn(spec["loss"], size)
     curve: list[list[float]] = []
     every = max(1, steps // 50)
@@ -742,7 +827,7 @@ def train(
                 break
         for g in opt.param_groups:
             g["lr"] = lr1 + (lr0 - lr1) * 0.5 * (1.0 + math.cos(math.pi * progress))
-        xb, yb = _batch(pairs, spec["batch"], size, rng)
+        xb, yb = _batch(pairs, spec["batch"], size, rng, mix_pairs, mix or 0.0)
         x, y = _augment(xb, yb, rng, name, getattr(net, "layout", ()))
         loss = loss_fn(net(x), y)
         opt.zero_grad()
@@ -813,6 +898,21 @@ def train(
             "held_out_frames": len(val_frames),
             "frame_size": list(fsize),
             "completions": list(completions) if completions != (None,) else None,
+            **(
+                {
+                    "mix": {
+                        "share": mix,
+                        "kinds": list(MIX_VOLUMES),
+                        "volumes": mix_count,
+                        "frames": len(mix_pairs) // len(_data.TRAIN_COMPLETIONS),
+                        "pairs": len(mix_pairs),
+                        "completions": list(_data.TRAIN_COMPLETIONS),
+                        "variety": dataclasses.asdict(_data.IsoVariety(smallest=max(size, 64))),
+                    }
+                }
+                if mix is not None
+                else {}
+            ),
             "generation_seconds": round(data_seconds, 1),
         },
         "training": {
@@ -821,7 +921,8 @@ def train(
             "time_limit_seconds": time_limit,
             "batch": spec["batch"],
             "crop": size,
-            "optimizer": f"Adam lr {spec['lr']}, cosine to {spec['lr'] / 100} (steps or time limit)",
+            "optimizer": f"Adam lr {peak}, cosine to {peak / 100} (steps or time limit)",
+            **({"init": start} if start is not None else {}),
             "loss": spec["loss"],
             "loss_curve": curve,
             "seconds": round(train_seconds, 1),

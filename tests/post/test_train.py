@@ -549,3 +549,67 @@ def test_exports_and_cards_replace_their_files_atomically(tmp_path, monkeypatch)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([*names, "n.json", "lidar.json"])
     assert evaluate.write_card(result, tmp_path) == tmp_path / "lidar.json"
     assert json.loads((tmp_path / "lidar.json").read_text())["held_out_suite"]["rows"] == []
+
+
+def test_batch_mixes_its_extra_pairs_at_their_share():
+    """_batch's extra pairs: each crop from them with probability `share`;
+    without them the draws are the release run's (no draw more)."""
+    main_pairs = [(np.zeros((1, 8, 8), np.float16), np.zeros((1, 8, 8), np.float16))]
+    extra = [(np.ones((1, 8, 8), np.float16), np.ones((1, 8, 8), np.float16))]
+    share = [
+        float(train._batch(main_pairs, 400, 4, np.random.default_rng(1), extra, s)[0].mean())
+        for s in (0.0, 0.3, 1.0)
+    ]
+    assert share[0] == 0.0 and share[2] == 1.0 and 0.22 < share[1] < 0.38, share
+    rng_a, rng_b = np.random.default_rng(2), np.random.default_rng(2)
+    train._batch(main_pairs * 3, 5, 4, rng_a)
+    for _ in range(5):  # the draws of the code before --mix: a pair, then its crop's corner
+        rng_b.integers(0, 3), rng_b.integers(0, 5), rng_b.integers(0, 5)
+    assert rng_a.random() == rng_b.random()
+
+
+def test_init_loads_an_onnx_export_of_the_same_network(tmp_path):
+    """--init: the shipped in-fill ONNX's weights start the run (torch then
+    computes what onnxruntime computes on the file); another network's file
+    is refused."""
+    import torch
+
+    net = train.TRAINERS["infill"].build(**train.SPECS["infill"]["arch"])
+    train.load_onnx_weights(net, post.MODELS / "infill.onnx")
+    x = np.random.default_rng(0).random((1, net.channels_in, 64, 64), dtype=np.float32)
+    with torch.no_grad():
+        ref = net.eval()(torch.from_numpy(x)).numpy()
+    assert np.abs(train._run(post.MODELS / "infill.onnx", x) - ref).max() < 1e-4
+    with pytest.raises(ValueError, match="not this network's weights"):
+        train.load_onnx_weights(net, post.MODELS / "lidar.onnx")
+    (tmp_path / "x.onnx").write_text("no model")
+    with pytest.raises(ValueError, match="not an ONNX model"):
+        train.load_onnx_weights(net, tmp_path / "x.onnx")
+
+
+def test_train_infill_mixed_and_from_a_model_says_so_in_its_card(tmp_path, capsys):
+    """clvis train infill --init --mix --lr: a smoke run; the card names the
+    starting file (sha256, its command), the variety pairs and the rate."""
+    init = post.MODELS / "infill.onnx"
+    args = ["train", "infill", "--steps", "2", "--size", "64", "--frames", "1", "--frame-size", "96x64"]
+    args += ["--out", str(tmp_path), "--quiet", "--eval", "none", "--init", str(init), "--mix", "0.5"]
+    assert main(args + ["--lr", "0.0003"]) == 0
+    card = json.loads((tmp_path / "infill.json").read_text())
+    t, mix = card["training"], card["data"]["mix"]
+    assert t["init"]["sha256"] == train.sha256(init) and t["init"]["file"] == "infill.onnx"
+    assert t["init"]["command"] == json.loads((post.MODELS / "infill.json").read_text())["command"]
+    assert t["optimizer"].startswith("Adam lr 0.0003,")
+    assert "--init" in card["command"] and "--mix 0.5" in card["command"]
+    assert mix["share"] == 0.5 and mix["kinds"] == list(data.TRAIN_VOLUMES + data.MORE_TRAIN_VOLUMES)
+    assert mix["volumes"] == 1 and mix["frames"] == 2 and mix["pairs"] == 2 * len(data.TRAIN_COMPLETIONS)
+    capsys.readouterr()
+    for bad, says in (
+        (["--mix", "1.5"], "between 0 and 1"),
+        (["--lr", "0"], "learning rate"),
+        (["--init", str(tmp_path / "none.onnx")], "no such file"),
+    ):
+        assert main(args[:-4] + bad) == 2
+        assert says in capsys.readouterr().err
+    lidar = ["train", "lidar", "--frames", "1", "--frame-size", "96x64", "--size", "64", "--mix", "0.5"]
+    assert main(lidar + ["--out", str(tmp_path)]) == 2
+    assert "infill only" in capsys.readouterr().err

@@ -336,6 +336,9 @@ def iso_frames(
             )
             if progress is not None:
                 progress(f"iso frame {len(frames)}/{count * views}")
+        queues = (r.queue,)
+        del r
+        _free_held(queues)
     return frames
 
 
@@ -512,6 +515,9 @@ def lidar_frames(
             )
             if progress is not None:
                 progress(f"lidar frame {len(frames)}/{count * views}")
+        queues = (dense.queue, scan.queue)
+        del dense, scan
+        _free_held(queues)
     return frames
 
 

@@ -635,3 +635,17 @@ def test_narvis_frames_give_their_scenes_buffers_back():
     want = np.clip(np.asarray(sc.gaussian_renderer().render(cam, 40, 32).rgba)[..., :3], 0, 1)
     np.testing.assert_array_equal(f.rgb, want)
     assert f.rgb.sum() > 0
+
+
+def test_iso_and_lidar_frames_give_their_scenes_buffers_back():
+    """The in-fill's and the LiDAR's training frames, volume after volume
+    (other sides) and scene after scene (other point counts), leave no
+    freed block in the default queue's pool and no array alive."""
+    from clvis import runtime
+
+    pool = runtime.allocator(runtime.default_queue())
+    active = pool.active_blocks
+    data.iso_frames(("waves", "blobs"), 2, 3, 64, 48, views=1, vary=data.IsoVariety(sides=(24, 32)))
+    assert pool.held_blocks == 0 and pool.active_blocks == active
+    data.lidar_frames(("town",), 2, 5, 64, 48, views=1, dense_points=50_000)
+    assert pool.held_blocks == 0 and pool.active_blocks == active

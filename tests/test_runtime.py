@@ -587,3 +587,19 @@ def test_empty_bad_shape(device, shape):
     q = runtime.queue_for(device)
     with pytest.raises(ValueError):
         runtime.empty(q, shape, np.float32, "empty test")
+
+
+def test_free_held_gives_back_only_the_freed_blocks(device):
+    """runtime.free_held(queue): the queue's pool gives the blocks it kept
+    back from freed arrays to the driver; arrays in use stay as they were."""
+    q = runtime.queue_for(device)
+    pool = runtime.allocator(q)
+    keep = runtime.empty(q, 1000, np.float32, "free_held test")
+    keep.set(np.arange(1000, dtype=np.float32))
+    gone = runtime.empty(q, 3000, np.float32, "free_held test")
+    active = pool.active_blocks
+    del gone
+    assert pool.held_blocks >= 1 and pool.active_blocks == active - 1
+    runtime.free_held(q)
+    assert pool.held_blocks == 0 and pool.active_blocks == active - 1
+    np.testing.assert_array_equal(keep.get(), np.arange(1000, dtype=np.float32))

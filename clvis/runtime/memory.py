@@ -39,6 +39,19 @@ def free_pools() -> None:
                 pool.free_held()
 
 
+def free_held(queue: cl.CommandQueue) -> None:
+    """Give the buffers the queue's pool holds for reuse (freed, not in use)
+    back to the driver; arrays in use stay. Call it when a job whose buffer
+    sizes differ from the next one's is done (a scene of other sizes): the
+    pool keeps a freed block of every size it has seen, so a series of
+    scenes of different sizes would otherwise grow it by each scene's
+    buffers (on a CPU device, host memory)."""
+    with _lock:
+        pool = _state(queue.context).pools.get(queue.int_ptr)
+    if pool is not None:
+        pool.free_held()
+
+
 def check_alloc(queue: cl.CommandQueue, nbytes: int, what: str) -> None:
     """DeviceError if one buffer of `nbytes` exceeds the device's max single allocation."""
     limit = capabilities(queue).max_alloc_bytes

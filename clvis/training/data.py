@@ -336,6 +336,9 @@ def iso_frames(
             )
             if progress is not None:
                 progress(f"iso frame {len(frames)}/{count * views}")
+        queues = (r.queue,)
+        del r
+        _free_held(queues)
     return frames
 
 
@@ -512,6 +515,9 @@ def lidar_frames(
             )
             if progress is not None:
                 progress(f"lidar frame {len(frames)}/{count * views}")
+        queues = (dense.queue, scan.queue)
+        del dense, scan
+        _free_held(queues)
     return frames
 
 
@@ -763,7 +769,21 @@ def narvis_frames(
         )
         if progress is not None:
             progress(f"narvis frame {len(frames)}/{len(cameras)} ({t2 - t1:.1f} s Gaussians)")
+    queues = (gr.queue, ras.queue)
+    gr = ras = g = img = None
+    _free_held(queues)
     return frames
+
+
+def _free_held(queues: Sequence[Any]) -> None:
+    """After a scene's renderers and images are dropped: give the buffers the
+    queues' memory pools kept back (the pool keeps a freed block of each
+    size, and the next scene's sizes differ: rendered one after another in
+    one process, scenes grew it by each scene's Gaussians and G-buffers)."""
+    from .. import runtime
+
+    for q in dict.fromkeys(queues):
+        runtime.free_held(q)
 
 
 # ---------------------------------------------------------------------------
@@ -1070,4 +1090,7 @@ def scan_frames(
             )
             if progress is not None:
                 progress(f"scan frame {len(frames)}/{count * views} ({t2 - t1:.1f} s Gaussians)")
+        queues = (gr.queue, ras.queue)
+        gr = ras = g = img = None
+        _free_held(queues)
     return frames

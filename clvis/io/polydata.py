@@ -41,7 +41,6 @@ from .cloud import PointCloud, _cloud, relative_positions
 from .vtk import (
     _VTI_TYPES,
     POINT_DATASETS,
-    _arrays,
     _attrs,
     _check_array,
     _check_legacy,
@@ -50,6 +49,7 @@ from .vtk import (
     _observe,
     _opened,
     _quiet,
+    _section,
     _vtk,
     _why,
     _xml_head,
@@ -96,8 +96,8 @@ def _check_vtp(path: Path, raw: bytes) -> int:
             _check_array(path, raw, at, a, text, fa, nbytes, None if t is None else count)
 
     def section(body: bytes, tag: str) -> list[tuple[dict[str, str], bytes]]:
-        found = _elements(body, tag)[0]
-        return _arrays(found[0][3]) if found else []
+        found = _section(body, tag)  # the volume reader's: its arrays, or none
+        return found[1] if found else []
 
     head = xml[: xml.find(b"<Piece")] if pieces else xml
     check(section(head, "FieldData"), None, "FieldData")

@@ -589,3 +589,34 @@ def test_a_vtu_whose_cell_offsets_lie_reads_its_points(tmp_path, kind):
     r = run_limited(read_points, str(path), name=str(path), limit_bytes=1 << 30)
     assert r.kind == "ok", r
     _check(read_points(path))
+
+
+def test_legacy_string_field_arrays_are_passed_over(tmp_path):
+    """A FIELD's string array, as vtkPolyDataWriter writes it in ASCII (one
+    value a line): values that look like a section ('POINTS 9 float', a
+    field array's 'name 1 2 float') were read as one and refused the file;
+    a string array that declares more lines than the file holds is refused."""
+    pd = vtk.vtkPolyData()
+    pd.SetPoints(_polydata().GetPoints())
+    notes = vtk.vtkStringArray()
+    notes.SetName("notes")
+    for text in ("POINTS 9 float", "a 1 2 float", "", "CELL_DATA 5"):
+        notes.InsertNextValue(text)
+    pd.GetFieldData().AddArray(notes)
+    pd.GetFieldData().AddArray(_array(np.array([1.5], np.float32), "time"))
+    pd.GetPointData().AddArray(_array(TEMP, "temperature"))
+    path = tmp_path / "notes.vtk"
+    w = vtk.vtkPolyDataWriter()
+    w.SetFileName(str(path))
+    w.SetInputData(pd)
+    w.SetFileTypeToASCII()
+    assert w.Write() == 1
+    text = path.read_bytes()
+    assert b"notes 1 4 string\nPOINTS%209%20float\n" in text
+    cloud = read_points(path)
+    assert len(cloud) == N
+    np.testing.assert_allclose(cloud.attributes["temperature"], TEMP, rtol=1e-5)  # ASCII: 6 digits
+    path.write_bytes(text[: text.index(b"a%201%202%20float\n") + 18])  # two of the four lines
+    with pytest.raises(DataError, match="declares 4 strings, one a line") as e:
+        read_points(path)
+    assert str(e.value).count(str(path)) == 1

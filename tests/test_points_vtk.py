@@ -454,3 +454,173 @@ def test_an_empty_polydata_is_an_empty_cloud(tmp_path):
     w.SetInputData(vtk.vtkPolyData())
     assert w.Write() == 1
     assert len(read_points(path)) == 0
+
+
+def _grid(kind):
+    """_polydata()'s points and point arrays as a vtkUnstructuredGrid (tetras,
+    cell data not read) or a 5 x 3 x 2 vtkStructuredGrid (cells implicit)."""
+    pd = _polydata()
+    if kind == "UnstructuredGrid":
+        grid = vtk.vtkUnstructuredGrid()
+        grid.Allocate(N)
+        for i in range(0, N - 3, 4):
+            grid.InsertNextCell(vtk.VTK_TETRA, 4, [i, i + 1, i + 2, i + 3])
+        cells = (N - 3 + 3) // 4
+    else:
+        grid = vtk.vtkStructuredGrid()
+        grid.SetDimensions(5, 3, 2)
+        cells = 4 * 2 * 1
+    grid.SetPoints(pd.GetPoints())
+    grid.GetPointData().ShallowCopy(pd.GetPointData())
+    grid.GetCellData().AddArray(_array(np.arange(cells, dtype=np.float64), "cell"))
+    return grid
+
+
+def _xml_grid(tmp_path, kind, mode="Binary", compressor=None, encode=False, pieces=1):
+    """(path, bytes) of _grid(kind) as VTK's XML writer writes it."""
+    suffix = {"UnstructuredGrid": "vtu", "StructuredGrid": "vts"}[kind]
+    path = tmp_path / f"{mode}-{compressor}-{encode}-{pieces}.{suffix}"
+    w = getattr(vtk, f"vtkXML{kind}Writer")()
+    w.SetFileName(str(path))
+    w.SetInputData(_grid(kind))
+    getattr(w, f"SetDataModeTo{mode}")()
+    w.SetEncodeAppendedData(encode)
+    w.SetCompressorTypeToNone() if compressor is None else getattr(w, f"SetCompressorTypeTo{compressor}")()
+    w.SetNumberOfPieces(pieces)
+    assert w.Write() == 1
+    return path, path.read_bytes()
+
+
+@pytest.mark.parametrize("kind", ["UnstructuredGrid", "StructuredGrid"])
+def test_vtu_and_vts_every_mode_vtks_writers_make(tmp_path, kind):
+    """A .vtu and a .vts (the files pyvista's mesh.save writes most often):
+    ascii, inline binary, raw and base64 appended, each uncompressed, zlib
+    and LZ4: their points and point arrays, the cells and cell data not."""
+    for mode, encode in (("Ascii", False), ("Binary", False), ("Appended", False), ("Appended", True)):
+        for compressor in (None, "ZLib", "LZ4"):
+            path, text = _xml_grid(tmp_path, kind, mode, compressor, encode)
+            assert (b"compressor=" in text) == (compressor is not None)
+            assert (b"<Cells>" in text) == (kind == "UnstructuredGrid") and b"<CellData>" in text
+            if mode == "Ascii":  # ASCII doubles keep 11 digits, Float32 arrays 8
+                cloud = read_points(path)
+                np.testing.assert_allclose(cloud.origin + cloud.positions, XYZ, atol=1e-5)
+                np.testing.assert_allclose(cloud.attributes["temperature"], TEMP, rtol=1e-6)
+                np.testing.assert_array_equal(cloud.colors[:, :3], RGB)
+                np.testing.assert_array_equal(cloud.attributes["id"], IDS)
+            else:
+                _check(read_points(path))
+
+
+@pytest.mark.parametrize("kind", ["UnstructuredGrid", "StructuredGrid"])
+def test_vtu_and_vts_of_several_pieces(tmp_path, kind):
+    """Three pieces: a .vts's share their boundary points and VTK's reader
+    puts them in one grid (the points once); a .vtu's are appended, as VTK's
+    own reader appends them."""
+    path, text = _xml_grid(tmp_path, kind, pieces=3)
+    assert text.count(b"<Piece") == 3
+    cloud = read_points(path)
+    if kind == "StructuredGrid":
+        _check(cloud)
+        return
+    r = vtk.vtkXMLUnstructuredGridReader()
+    r.SetFileName(str(path))
+    r.Update()
+    want = numpy_support.vtk_to_numpy(r.GetOutput().GetPoints().GetData())
+    assert len(cloud) == len(want) >= N
+    np.testing.assert_allclose(cloud.origin + cloud.positions, want, atol=1e-5)
+
+
+def test_hostile_vtu_and_vts_headers_are_refused_before_vtk_reads(tmp_path, monkeypatch):
+    vtu, u = _xml_grid(tmp_path, "UnstructuredGrid")
+    uapp, ua = _xml_grid(tmp_path, "UnstructuredGrid", "Appended", "ZLib")
+    vts, s = _xml_grid(tmp_path, "StructuredGrid")
+    sapp, sa = _xml_grid(tmp_path, "StructuredGrid", "Appended", "LZ4", True)
+    three, s3 = _xml_grid(tmp_path, "StructuredGrid", pieces=3)  # three pieces of the whole grid
+    _no_vtk(monkeypatch)
+    cases = [
+        (vtu, u, b'NumberOfPoints="30"', b'NumberOfPoints="3000000000"', "byte count does not match"),
+        (vtu, u, b'NumberOfCells="7"', b'NumberOfCells="7000000"', "byte count does not match"),
+        (vtu, u, b'Name="offsets"', b'Name="offzets"', "7 Cells and no offsets array"),
+        (vtu, u, b'Name="types"', b'Name="tipes"', "7 Cells and no types array"),
+        (vtu, u, b'type="UnstructuredGrid"', b'type="PolyData"', "not a VTK UnstructuredGrid file"),
+        (
+            vtu,
+            u,
+            b'Name="id" format',
+            b'Name="id" NumberOfComponents="2" format',
+            "byte count does not match",
+        ),
+        (uapp, ua, b'NumberOfPoints="30"', b'NumberOfPoints="31"', "compressed array holds"),
+        (vts, s, b'Piece Extent="0 4 0 2 0 1"', b'Piece Extent="0 4 0 2 0 2"', "outside WholeExtent"),
+        (
+            vts,
+            s,
+            b'WholeExtent="0 4 0 2 0 1"',
+            b'WholeExtent="0 4 0 2 0 9"',
+            "the WholeExtent [0, 4, 0, 2, 0, 9] needs 150",
+        ),
+        (vts, s, b'Piece Extent="0 4 0 2 0 1"', b'Piece Extent="0 4 0 2 0 x"', "malformed Piece Extent"),
+        (
+            three,
+            s3,
+            b'WholeExtent="0 4 0 2 0 1"',
+            b'WholeExtent="0 4 0 2 0 2"',
+            "do not cover the WholeExtent",
+        ),
+        (sapp, sa, b'type="StructuredGrid"', b'type="ImageData"', "not a VTK StructuredGrid file"),
+        (sapp, sa, b'Piece Extent="0 4 0 2 0 1"', b'Piece Extent="0 4 0 2 0 0"', "compressed array holds"),
+    ]
+    for path, text, old, new, message in cases:
+        assert old in text, old
+        path.write_bytes(text.replace(old, new, 1))
+        with pytest.raises(DataError, match=re.escape(message)) as e:
+            read_points(path)
+        assert str(e.value).count(str(path)) == 1
+
+
+def test_a_vtu_whose_cell_offsets_lie_reads_its_points(tmp_path):
+    """A .vtu's last cell offset 2^63 - 1 (VTK's reader trusts it, as a
+    .vtp's: given the cells, it aborted, std::bad_alloc): VTK is given the
+    file without its cells and cell data; the points read, in a child
+    process under a memory limit."""
+    from fuzz.harness import run_limited
+
+    path, good = _xml_grid(tmp_path, "UnstructuredGrid", "Appended")
+    # the offsets' byte count and values, raw after the connectivity
+    offsets = np.array([56], "<u4").tobytes() + np.arange(4, 29, 4, dtype="<i8").tobytes()
+    assert good.count(offsets) == 1
+    path.write_bytes(good.replace(offsets, offsets[:-8] + np.array([2**63 - 1], "<i8").tobytes()))
+    r = run_limited(read_points, str(path), name=str(path), limit_bytes=1 << 30)
+    assert r.kind == "ok", r
+    _check(read_points(path))
+
+
+def test_legacy_string_field_arrays_are_passed_over(tmp_path):
+    """A FIELD's string array, as vtkPolyDataWriter writes it in ASCII (one
+    value a line): values that look like a section ('POINTS 9 float', a
+    field array's 'name 1 2 float') were read as one and refused the file;
+    a string array that declares more lines than the file holds is refused."""
+    pd = vtk.vtkPolyData()
+    pd.SetPoints(_polydata().GetPoints())
+    notes = vtk.vtkStringArray()
+    notes.SetName("notes")
+    for text in ("POINTS 9 float", "a 1 2 float", "", "CELL_DATA 5"):
+        notes.InsertNextValue(text)
+    pd.GetFieldData().AddArray(notes)
+    pd.GetFieldData().AddArray(_array(np.array([1.5], np.float32), "time"))
+    pd.GetPointData().AddArray(_array(TEMP, "temperature"))
+    path = tmp_path / "notes.vtk"
+    w = vtk.vtkPolyDataWriter()
+    w.SetFileName(str(path))
+    w.SetInputData(pd)
+    w.SetFileTypeToASCII()
+    assert w.Write() == 1
+    text = path.read_bytes()
+    assert b"notes 1 4 string\nPOINTS%209%20float\n" in text
+    cloud = read_points(path)
+    assert len(cloud) == N
+    np.testing.assert_allclose(cloud.attributes["temperature"], TEMP, rtol=1e-5)  # ASCII: 6 digits
+    path.write_bytes(text[: text.index(b"a%201%202%20float\n") + 18])  # two of the four lines
+    with pytest.raises(DataError, match="declares 4 strings, one a line") as e:
+        read_points(path)
+    assert str(e.value).count(str(path)) == 1

@@ -45,7 +45,8 @@ full size. The status line shows each frame's milliseconds per stage
 an event to the frame that shows it.
 
 Points (.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv, .npz, an (N, 3) .npy,
-.vtp, a legacy .vtk of POLYDATA or a grid, or --dataset hurricane|terrain):
+.vtp/.vtu/.vts, a legacy .vtk of POLYDATA or a grid, or --dataset
+hurricane|terrain):
 modes points (colour by an attribute or RGB, colormap, point size), lidar
 (depth filter + LiDAR U-Net), narvis (clouds with a velocity) or narvis-scan
 (clouds without one, LAS/LAZ/PLY scans: the radius plane from the points'

@@ -4,7 +4,8 @@
   :func:`read_points`, :func:`write_ply`, :func:`save_npz`), one module per
   format whose checks are long (:mod:`~clvis.io.ply`, :mod:`~clvis.io.las`,
   :mod:`~clvis.io.pcd`, :mod:`~clvis.io.ascii` for .xyz/.txt/.csv,
-  :mod:`~clvis.io.polydata` for VTK's .vtp and legacy .vtk point sets);
+  :mod:`~clvis.io.polydata` for VTK's .vtp, .vtu, .vts and legacy .vtk point
+  sets);
 - :mod:`~clvis.io.volumes`: volumes (:func:`read_volume`, :class:`Volume`):
   raw, NPY, NIfTI and VTK image data (:mod:`~clvis.io.vtk`, whose header
   checks the VTK point sets share), and :func:`otsu_level` (a scan's

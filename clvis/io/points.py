@@ -2,7 +2,7 @@
 
 :func:`read_points` reads PLY (ASCII or binary, via plyfile), LAS and LAZ (via
 laspy; LAZ needs its lazrs backend), NPY and NPZ, PCD, E57, .xyz/.txt/.csv text and
-VTK point sets (.vtp, legacy .vtk), chosen by the file extension.
+VTK point sets (.vtp, .vtu, .vts, legacy .vtk), chosen by the file extension.
 :func:`write_ply` and :func:`save_npz` write a cloud back so that it round-trips.
 
 Positions are float32, what the kernels read. float32 keeps about 7 significant
@@ -93,9 +93,10 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
       (:mod:`clvis.io.ascii`).
     - ``.e57``: ASTM E57 scans through pye57 (the ``e57`` extra), joined,
       positions relative to their minimum as for LAS (:mod:`clvis.io.e57`).
-    - ``.vtp``, ``.vtk``: VTK PolyData (XML) and legacy POLYDATA,
-      UNSTRUCTURED_GRID or STRUCTURED_GRID through VTK's readers (the ``vtk``
-      extra): the points (a mesh's vertices), unsigned-char RGB(A) point
+    - ``.vtp``, ``.vtu``, ``.vts``, ``.vtk``: VTK PolyData, UnstructuredGrid
+      and StructuredGrid (XML) and legacy POLYDATA, UNSTRUCTURED_GRID or
+      STRUCTURED_GRID through VTK's readers (the ``vtk`` extra): the points
+      (a mesh's vertices; its cells not kept), unsigned-char RGB(A) point
       data the colours, the other point arrays attributes; double positions
       as for PLY (:mod:`clvis.io.polydata`). A legacy STRUCTURED_POINTS
       .vtk is a volume (:func:`clvis.io.read_volume`).

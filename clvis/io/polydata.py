@@ -1,9 +1,12 @@
 """VTK point sets as point clouds, read by VTK's own readers (the ``vtk``
-extra): XML ``.vtp`` (PolyData; vtkXMLPolyDataReader: ascii, inline binary,
-raw or base64 appended data, zlib- or LZ4-compressed or not, one piece or
-several) and legacy ``.vtk`` whose DATASET is POLYDATA, UNSTRUCTURED_GRID or
-STRUCTURED_GRID (ASCII or BINARY, file versions before 5 and from 5 on). A
-legacy STRUCTURED_POINTS file is a volume (:func:`clvis.io.read_volume`).
+extra): XML ``.vtp`` (PolyData), ``.vtu`` (UnstructuredGrid) and ``.vts``
+(StructuredGrid) (vtkXMLPolyDataReader, vtkXMLUnstructuredGridReader,
+vtkXMLStructuredGridReader: ascii, inline binary, raw or base64 appended
+data, zlib- or LZ4-compressed or not, one piece or several: a .vts's pieces,
+which share their boundary points, as one grid; a .vtp's or .vtu's
+appended, as VTK appends them) and legacy ``.vtk`` whose DATASET is
+POLYDATA, UNSTRUCTURED_GRID or STRUCTURED_GRID (ASCII or BINARY, file
+versions before 5 and from 5 on). A legacy STRUCTURED_POINTS file is a volume (:func:`clvis.io.read_volume`).
 
 The cloud is the points (a mesh's vertices; its cells are not kept): float32
 positions, or, stored as doubles too far from zero for float32, relative to
@@ -17,15 +20,18 @@ attribute a component (``Normals_x``, ``Normals_y``, ``Normals_z`` for 3,
 ``name_0``, ``name_1``, ... otherwise). Arrays of strings are skipped.
 
 Bounded as the volume readers (:mod:`clvis.io.vtk`): before VTK reads, the
-header is checked against the file: .vtp: every piece's NumberOfPoints and
-cell counts, each DataArray's byte count or compressed-block header against
-its count and the bytes the file holds, no DTD or entities; legacy: every
+header is checked against the file: .vtp, .vtu: every piece's
+NumberOfPoints and cell counts (.vts: its Extent, inside the WholeExtent,
+the pieces covering it), each DataArray's byte count or compressed-block
+header against its count and the bytes the file holds, no DTD or entities; legacy: every
 section's count (POINTS, the cells, CELL_TYPES, POINT_DATA, CELL_DATA,
 FIELD, SCALARS, LOOKUP_TABLE, ...) against the bytes after it, exact for
 BINARY. VTK's error messages become a DataError naming the file; nothing
 reaches stderr. VTK reads the bytes clvis checked, from memory (not the file
-again, which may have changed since): a .vtp without its cells (VTK trusts
-their offsets); a legacy file whole, its cell lists checked to add up.
+again, which may have changed since): a .vtp, .vtu or .vts without its
+cells and cell data (VTK trusts cell offsets; each reader of its own kind,
+not the XML rewritten as PolyData: a .vts's reader puts the pieces' shared
+points in one grid); a legacy file whole, its cell lists checked to add up.
 """
 
 from __future__ import annotations
@@ -42,10 +48,13 @@ from .vtk import (
     _VTI_TYPES,
     POINT_DATASETS,
     _attrs,
+    _cells,
     _check_array,
     _check_legacy,
+    _count,
     _elements,
     _legacy_head,
+    _numbers,
     _observe,
     _opened,
     _quiet,
@@ -56,7 +65,8 @@ from .vtk import (
     _xml_part,
 )
 
-SUFFIXES = (".vtp", ".vtk")
+SUFFIXES = (".vtp", ".vtu", ".vts", ".vtk")
+_XML_KINDS = {".vtp": "PolyData", ".vtu": "UnstructuredGrid", ".vts": "StructuredGrid"}
 _CELL_KINDS = ("Verts", "Lines", "Strips", "Polys")
 _VELOCITY = ("velocity", "velocities", "vel")
 
@@ -68,17 +78,19 @@ def _number(path: Path, attrs: dict[str, str], key: str, default: str | None = N
     return int(text)
 
 
-def _check_vtp(path: Path, raw: bytes) -> int:
-    """Check the .vtp's header against the file before VTK reads it: every
-    piece's counts, and each DataArray's size against its count and the
-    bytes the file holds; the points it holds. A DataError naming the file
-    for what is not read or lies about its size."""
+def _check_xml(path: Path, raw: bytes, kind: str) -> int:
+    """Check a .vtp, .vtu or .vts (`kind`: PolyData, UnstructuredGrid,
+    StructuredGrid) against the file before VTK reads it: every piece's
+    counts (a .vts piece's Extent, inside the WholeExtent, the pieces
+    covering it), and each DataArray's size against its count and the bytes
+    the file holds; the points it holds. A DataError naming the file for
+    what is not read or lies about its size."""
     at, xml = _xml_part(path, raw)
-    fa, _ = _xml_head(path, xml, "PolyData")
+    fa, da = _xml_head(path, xml, kind)
     found, opened = _elements(xml, "Piece")
     pieces = [(tag, body) for _, _, tag, body in found]
     if len(pieces) != opened:
-        raise DataError(f"{path}: malformed PolyData: a <Piece> without its </Piece>")
+        raise DataError(f"{path}: malformed {kind}: a <Piece> without its </Piece>")
 
     def check(arrays: list[tuple[dict[str, str], bytes]], tuples: int | None, what: str) -> None:
         for a, text in arrays:
@@ -99,57 +111,89 @@ def _check_vtp(path: Path, raw: bytes) -> int:
         found = _section(body, tag)  # the volume reader's: its arrays, or none
         return found[1] if found else []
 
+    def offsets(arrays: list[tuple[dict[str, str], bytes]], count: int, what: str) -> None:
+        offsets = [x for x in arrays if x[0].get("Name") == "offsets"]
+        if count and len(offsets) != 1:
+            raise DataError(f"{path}: {count} {what} and no offsets array for them")
+        try:  # VTK writes a count of offsets (and, some versions, a leading 0 more)
+            check(offsets, count, f"{what} offsets")
+        except DataError:
+            check(offsets, count + 1, f"{what} offsets")
+
+    whole = (
+        _numbers(path, "WholeExtent", da.get("WholeExtent", ""), 6, int) if kind == "StructuredGrid" else []
+    )
+    exts: list[list[int]] = []
     head = xml[: xml.find(b"<Piece")] if pieces else xml
     check(section(head, "FieldData"), None, "FieldData")
     total = 0
     for tag, body in pieces:
         pa = _attrs(tag)
-        n = _number(path, pa, "NumberOfPoints", "0")
-        cells = {k: _number(path, pa, f"NumberOf{k}", "0") for k in _CELL_KINDS}
+        if whole:  # a .vts piece: its Extent's points and cells
+            ext = _numbers(path, "Piece Extent", pa.get("Extent", ""), 6, int)
+            if any(ext[k] < whole[k] for k in (0, 2, 4)) or any(ext[k] > whole[k] for k in (1, 3, 5)):
+                raise DataError(f"{path}: Piece Extent {ext} outside WholeExtent {whole}")
+            n, cells = _count(path, "Piece Extent", ext), {"": _count(path, "Piece Extent", _cells(ext))}
+        else:
+            n = _number(path, pa, "NumberOfPoints", "0")
+            kinds = _CELL_KINDS if kind == "PolyData" else ("Cells",)
+            cells = {k: _number(path, pa, f"NumberOf{k}", "0") for k in kinds}
         points = section(body, "Points")
         if n and (len(points) != 1 or points[0][0].get("NumberOfComponents", "1").strip() != "3"):
             raise DataError(f"{path}: a Piece of {n} points has no <Points> array of 3 components")
         check(points, n, "Points")
         check(section(body, "PointData"), n, "PointData")
         check(section(body, "CellData"), sum(cells.values()), "CellData")
-        for kind, count in cells.items():
-            arrays = section(body, kind)
-            offsets = [x for x in arrays if x[0].get("Name") == "offsets"]
-            if count and len(offsets) != 1:
-                raise DataError(f"{path}: {count} {kind} and no offsets array for them")
-            try:  # VTK writes a count of offsets (and, some versions, a leading 0 more)
-                check(offsets, count, f"{kind} offsets")
-            except DataError:
-                check(offsets, count + 1, f"{kind} offsets")
-            check([x for x in arrays if x[0].get("Name") != "offsets"], None, kind)
+        for k, count in cells.items() if not whole else ():
+            arrays = section(body, k)
+            offsets(arrays, count, k)
+            types = [x for x in arrays if x[0].get("Name") == "types"]  # a .vtu's: one a cell
+            if kind == "UnstructuredGrid" and count and len(types) != 1:
+                raise DataError(f"{path}: {count} Cells and no types array for them")
+            check(types, count, "Cells types")
+            check([x for x in arrays if x[0].get("Name") not in ("offsets", "types")], None, k)
+        if whole:
+            exts.append(ext)
         total += n
+    if whole:  # the pieces (their points checked against the file's bytes) cover the WholeExtent
+        n = _count(path, "WholeExtent", whole)
+        if total < n:
+            raise DataError(f"{path}: the pieces hold {total} points, the WholeExtent {whole} needs {n}")
+        covered = np.zeros([whole[k + 1] - whole[k] + 1 for k in (4, 2, 0)], bool)
+        for ext in exts:
+            covered[tuple(slice(ext[k] - whole[k], ext[k + 1] - whole[k] + 1) for k in (4, 2, 0))] = True
+        if not covered.all():
+            raise DataError(f"{path}: the pieces do not cover the WholeExtent {whole}")
+        return n
     return total
 
 
 def _without_cells(path: Path, raw: bytes) -> bytes:
-    """The .vtp `raw` with its pieces' cells and cell data taken out of its
-    XML (the appended data, addressed from its own start, as it is): what
-    VTK reads. VTK's reader trusts a cell array's offsets (a last offset of
-    2^63 made it allocate that: std::bad_alloc, an abort, ./dev.sh fuzz),
-    and the cells are not kept."""
+    """The .vtp, .vtu or .vts `raw` with its pieces' cells and cell data
+    taken out of its XML (the appended data, addressed from its own start,
+    as it is): what VTK reads. VTK's reader trusts a cell array's offsets (a
+    last offset of 2^63 made it allocate that: std::bad_alloc, an abort,
+    ./dev.sh fuzz), and the cells are not kept (a .vts's are implicit: its
+    cell data goes)."""
     at, xml = _xml_part(path, raw)
-    spans = sorted(e[:2] for tag in (*_CELL_KINDS, "CellData") for e in _elements(xml, tag)[0])
+    tags = (*_CELL_KINDS, "Cells", "CellData")
+    spans = sorted(e[:2] for tag in tags for e in _elements(xml, tag)[0])
     kept, start = [], 0
     for a, b in spans:
         if a >= start:  # (an element inside one taken out already is gone with it)
             kept.append(xml[start:a])
             start = b
     xml = b"".join(kept) + xml[start:]
-    xml = re.sub(rb'\bNumberOf(Verts|Lines|Strips|Polys)\s*=\s*"[^"]*"', rb'NumberOf\1="0"', xml)
+    xml = re.sub(rb'\bNumberOf(Verts|Lines|Strips|Polys|Cells)\s*=\s*"[^"]*"', rb'NumberOf\1="0"', xml)
     return xml + (raw[at:] if at >= 0 else b"")
 
 
-def _read_vtp(path: Path) -> PointCloud:
+def _read_xml(path: Path, kind: str) -> PointCloud:
     raw = path.read_bytes()
-    n = _check_vtp(path, raw)
+    n = _check_xml(path, raw, kind)
     core, _, xmlio, ns = _vtk()
     with _quiet(core) as messages:
-        r = xmlio.vtkXMLPolyDataReader()
+        r = getattr(xmlio, f"vtkXML{kind}Reader")()
         if _opened(core, r, path, messages, _without_cells(path, raw)):
             r.Update()
         return _points(path, r, messages, n, ns)
@@ -223,5 +267,6 @@ def _points(path: Path, reader: Any, messages: list[str], n: int, ns: Any) -> Po
 
 
 def read_vtk_points(path: Path) -> PointCloud:
-    """The cloud of a .vtp or legacy .vtk point set (see the module docstring)."""
-    return _read_vtp(path) if path.suffix.lower() == ".vtp" else _read_legacy_points(path)
+    """The cloud of a .vtp, .vtu, .vts or legacy .vtk point set (see the module docstring)."""
+    kind = _XML_KINDS.get(path.suffix.lower())
+    return _read_xml(path, kind) if kind else _read_legacy_points(path)

@@ -508,12 +508,19 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
             nbytes = count
         else:
             raise DataError(f"{path}: {what}: values of type {kind!r} are not read")
-        need = nbytes if binary else 2 * count - 1
+        strings = kind in ("string", "utf8_string")
+        need = nbytes if binary or strings else 2 * count - 1
         if need > size - at:
             raise DataError(
                 f"{path}: truncated or malformed: {what} declares {count} values, "
                 f"{'needs' if binary else 'at least'} {need} bytes, the file holds {size - at} after it"
             )
+        if strings:  # ASCII strings: one a line (VTK writes a space as %20), any text: passed over
+            for _ in range(count):
+                at = raw.find(b"\n", at) + 1
+                if at == 0:
+                    raise DataError(f"{path}: truncated: {what} declares {count} strings, one a line")
+            return at
         return at + nbytes if binary else at
 
     while True:

@@ -449,10 +449,13 @@ def test_render_of_a_volume_file_says_which_commands_read_it(tmp_path, capsys, n
     assert f"{path}: a volume file ({kind}), not a point cloud; clvis iso, clvis gauss and clvis view" in err
 
 
-@pytest.mark.parametrize("name", ["cloud-binary.vtp", "cloud-binary42.vtk"])
+@pytest.mark.parametrize(
+    "name", ["cloud-binary.vtp", "cloud-binary42.vtk", "cloud-zlib.vtu", "cloud-appended.vts"]
+)
 def test_render_reads_vtk_point_sets(tmp_path, capsys, name):
-    """A .vtp and a legacy POLYDATA .vtk (pyvista's globe.vtk's kind) are
-    point clouds: rendered, their RGB point data the colours."""
+    """A .vtp, a .vtu, a .vts and a legacy POLYDATA .vtk (pyvista's
+    globe.vtk's kind) are point clouds: rendered, their RGB point data the
+    colours."""
     pytest.importorskip("vtk", reason="vtk is in the test extra")
     from fuzz.seeds import vtk_point_set
 

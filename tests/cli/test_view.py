@@ -69,14 +69,13 @@ def test_point_files_of_every_reader_are_points(suffix, tmp_path):
 
 
 def test_vtk_files_go_by_their_dataset(tmp_path):
-    """A .vtp and a POLYDATA .vtk are points, a STRUCTURED_POINTS .vtk a volume."""
+    """A .vtp, .vtu, .vts and a POLYDATA .vtk are points, a STRUCTURED_POINTS .vtk a volume."""
     pytest.importorskip("vtk", reason="vtk is in the test extra")
     from fuzz.seeds import vtk_point_set
 
-    vtk_point_set(tmp_path / "p.vtp", 200, "binary")
-    vtk_point_set(tmp_path / "p.vtk", 200, "binary")
-    assert view_cmd.load_scene(_args(str(tmp_path / "p.vtp"))).kind == "points"
-    assert view_cmd.load_scene(_args(str(tmp_path / "p.vtk"))).kind == "points"
+    for suffix in ("vtp", "vtu", "vts", "vtk"):
+        vtk_point_set(tmp_path / f"p.{suffix}", 204, "binary")
+        assert view_cmd.load_scene(_args(str(tmp_path / f"p.{suffix}"))).kind == "points"
     (tmp_path / "v.vtk").write_text(
         "# vtk DataFile Version 3.0\nx\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 3 3 3\n"
         "POINT_DATA 27\nSCALARS s float 1\nLOOKUP_TABLE default\n"

@@ -116,9 +116,11 @@ def test_gauss_reads_every_format(tmp_path, capsys, kind):
     assert _png(tmp_path / "o" / "gauss.png").std() > 1
 
 
-@pytest.mark.parametrize("name", ["cloud-zlib.vtp", "cloud-ascii.vtk"])
+@pytest.mark.parametrize(
+    "name", ["cloud-zlib.vtp", "cloud-ascii.vtk", "cloud-appended64.vtu", "cloud-binary.vts"]
+)
 def test_gauss_and_iso_of_vtk_point_sets(tmp_path, capsys, name):
-    """gauss makes a Gaussian a point of a .vtp or a POLYDATA .vtk; iso,
+    """gauss makes a Gaussian a point of a .vtp, .vtu, .vts or a POLYDATA .vtk; iso,
     which reads volumes, says which commands read one (it said "only
     DATASET STRUCTURED_POINTS is a volume", and render "a volume file")."""
     pytest.importorskip("vtk", reason="vtk is in the test extra")

@@ -2,8 +2,8 @@
 tests/data): every format clvis reads, with the reader each goes to.
 
 A seed is (format, reader, path). Formats: ply, las, laz, npy, npz, nii,
-nii.gz, raw, vdb, e57 (with pye57), vti, vtk (volumes and point sets), vtp
-(with vtk), pcd, xyz, txt, csv. Readers:
+nii.gz, raw, vdb, e57 (with pye57), vti, vtk (volumes and point sets), vtp,
+vtu, vts (with vtk), pcd, xyz, txt, csv. Readers:
 points (read_points), volume (read_volume), vdb (read_vdb), gaussians
 (Gaussians.load).
 """
@@ -160,7 +160,9 @@ def _vti(path: Path, data: np.ndarray, encoding: str) -> None:
 
 def vtk_point_set(path: Path, n: int, mode: str = "binary", seed: int = 6) -> None:
     """A VTK point set of n points (RGB colours, a float scalar, a velocity,
-    a vertex each and a triangle), written by VTK's own writers: a .vtp in
+    a vertex each and a triangle), written by VTK's own writers: a .vtp, a
+    .vtu (the same cells, and a cell array) or a .vts (the points as a grid
+    of n/6 x 3 x 2 where 6 divides n, else n x 1 x 1, and a cell array) in
     `mode` ascii, binary, zlib (binary, compressed), appended (raw) or
     appended64 (base64, LZ4); a legacy .vtk POLYDATA in ascii, binary or
     binary42 (file version 4.2)."""
@@ -186,8 +188,28 @@ def vtk_point_set(path: Path, n: int, mode: str = "binary", seed: int = 6) -> No
     pd.GetPointData().SetScalars(array(rng.integers(0, 256, (n, 3)).astype(np.uint8), "RGB"))
     pd.GetPointData().AddArray(array(rng.random(n).astype(np.float32), "temperature"))
     pd.GetPointData().AddArray(array(rng.normal(size=(n, 3)).astype(np.float32), "velocity"))
-    if path.suffix == ".vtp":
-        w = vtk.vtkXMLPolyDataWriter()
+    grid = pd
+    if path.suffix == ".vtu":
+        grid = vtk.vtkUnstructuredGrid()
+        grid.SetPoints(pts)
+        grid.Allocate(n + 1)
+        for i in range(n):
+            grid.InsertNextCell(vtk.VTK_VERTEX, 1, [i])
+        grid.InsertNextCell(vtk.VTK_TRIANGLE, 3, [0, 1, 2])
+    elif path.suffix == ".vts":
+        grid = vtk.vtkStructuredGrid()
+        grid.SetDimensions(*((n // 6, 3, 2) if n % 6 == 0 else (n, 1, 1)))
+        grid.SetPoints(pts)
+    if grid is not pd:
+        grid.GetPointData().ShallowCopy(pd.GetPointData())
+        grid.GetCellData().AddArray(array(np.arange(grid.GetNumberOfCells(), dtype=np.float64), "cell"))
+    if path.suffix in (".vtp", ".vtu", ".vts"):
+        w = getattr(
+            vtk,
+            {".vtp": "vtkXMLPolyDataWriter", ".vtu": "vtkXMLUnstructuredGridWriter"}.get(
+                path.suffix, "vtkXMLStructuredGridWriter"
+            ),
+        )()
         w.SetDataModeToAscii() if mode == "ascii" else w.SetDataModeToBinary()
         if mode.startswith("appended"):
             w.SetDataModeToAppended()
@@ -201,7 +223,7 @@ def vtk_point_set(path: Path, n: int, mode: str = "binary", seed: int = 6) -> No
         if mode == "binary42":
             w.SetFileVersion(42)
     w.SetFileName(str(path))
-    w.SetInputData(pd)
+    w.SetInputData(grid)
     if w.Write() != 1:
         raise OSError(f"VTK could not write {path}")
 
@@ -280,10 +302,14 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
         import vtk  # noqa: F401
     except ImportError:
         pass
-    else:  # point sets as VTK's own writers make them: .vtp in each data mode, legacy .vtk POLYDATA
+    else:  # point sets as VTK's own writers make them: .vtp in each data mode, .vtu, .vts, legacy POLYDATA
         for mode in ("ascii", "binary", "zlib", "appended", "appended64"):
             vtk_point_set(out / f"cloud-{mode}.vtp", 24, mode)
             add("vtp", "points", out / f"cloud-{mode}.vtp")
+        for suffix, modes in (("vtu", ("appended", "zlib")), ("vts", ("appended64", "ascii"))):
+            for mode in modes:  # pyvista's mesh.save writes these most often
+                vtk_point_set(out / f"cloud-{mode}.{suffix}", 24, mode)
+                add(suffix, "points", out / f"cloud-{mode}.{suffix}")
         for mode in ("ascii", "binary", "binary42"):
             vtk_point_set(out / f"cloud-{mode}.vtk", 24, mode)
             add("vtk", "points", out / f"cloud-{mode}.vtk")

@@ -1,5 +1,5 @@
 """The readers issue 27 added (.vti and legacy .vtk volumes, .pcd, .xyz/.txt/
-.csv point clouds) and the VTK point sets (.vtp, legacy .vtk POLYDATA) under
+.csv point clouds) and the VTK point sets (.vtp, .vtu, .vts, legacy .vtk POLYDATA) under
 the fuzzer's mutants (tests/fuzz/seeds.py's seeds, tests/fuzz/mutate.py's
 operators): each read, in a forked child under an
 address-space limit, ends in a clvis error naming the file or reads; never a
@@ -16,7 +16,7 @@ from fuzz.seeds import make_seeds
 import clvis.io as io
 from clvis.errors import DataError
 
-FORMATS = ("vti", "vtk", "vtp", "pcd", "xyz", "txt", "csv")
+FORMATS = ("vti", "vtk", "vtp", "vtu", "vts", "pcd", "xyz", "txt", "csv")
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,7 @@ def test_seeds_read(seeds):
         assert r.kind == "ok", (path.name, r)
 
 
-@pytest.mark.parametrize("fmt", ["vti", "vtk", "vtp", "pcd", "xyz+txt+csv"])
+@pytest.mark.parametrize("fmt", ["vti", "vtk", "vtp", "vtu+vts", "pcd", "xyz+txt+csv"])
 def test_mutants_end_in_clvis_errors(seeds, tmp_path, fmt):
     mine = [s for s in seeds if s[0] in fmt.split("+")]
     others = collections.defaultdict(list)

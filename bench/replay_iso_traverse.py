@@ -3,13 +3,17 @@ one or more versions of kernels_cl/iso/traverse.cl, and print each version's
 per-launch process CPU time (min of --reps) and whether its outputs (candidate
 blocks, candidate t, resume t) are bit for bit those of the first version.
 
-    python bench/replay_iso_traverse.py [--n 256] [--reps 5] [--size 512x512] [SRC.cl[:WG:PACKET] ...]
+    python bench/replay_iso_traverse.py [--n 256] [--reps 5] [--size 512x512] [--from-first]
+                                        [SRC.cl[:WG:PACKET] ...]
 
 SRC defaults to this tree's traverse.cl; give older versions as files
 (a version whose macro_traverse takes float2 ranges, before the active bits
 of macrocell.cl's range_bits, gets the renderer's ranges)
 (`git show REV:kernels_cl/iso/traverse.cl > /tmp/old.cl`), alternated to
-average out the machine's drift. A :WG:PACKET suffix sets the local size and
+average out the machine's drift. --from-first also replays each launch with
+every listed ray's resume t moved to its first candidate's t (from the first
+version's outputs): the same candidates, and what a perfect start-depth
+pre-pass could save at most (the walk up to the first candidate). A :WG:PACKET suffix sets the local size and
 the PACKET define (rays a work-item; default 16:0, one ray a work-item, which
 an older file without PACKET also runs). bench_iso's scene (turbulence N^3, ZFP rate
 8, to 100 %). A measuring script, not a test: it wraps
@@ -176,12 +180,24 @@ def run(
     return cpus, outs
 
 
+def from_first(c: dict[str, Any], out: Any) -> dict[str, Any]:
+    """Launch c with each listed ray's ray_t set to its first candidate's t (out: the
+    launch's outputs) where it has one: the walk from there gives the same candidates."""
+    cnt, ns = int(c["count"][0]), c["n_spec"]
+    first = out[1].view(np.float32).reshape(-1, ns)[:cnt, 0]
+    has = np.isfinite(first)
+    rt = c["ray_t"].copy()
+    rt[c["active"][:cnt][has]] = first[has]
+    return dict(c, ray_t=rt)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("src", nargs="*", help="traverse.cl versions (default: this tree's)")
     ap.add_argument("--n", type=int, default=256)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--size", default="512x512")
+    ap.add_argument("--from-first", action="store_true", help="also start each ray at its first candidate")
     a = ap.parse_args()
     w, h = (int(v) for v in a.size.lower().split("x"))
     srcs = a.src or [str(ROOT / "kernels_cl/iso/traverse.cl")]
@@ -210,6 +226,13 @@ def main() -> None:
         per = ", ".join(f"{c * 1e3:.1f}" for c in cpus)
         total = sum(cpus) * 1e3
         print(f"{spec}: CPU per launch (min of {a.reps}) {per} ms, sum {total:.1f} ms; identical {same}")
+        if a.from_first:
+            starts = [from_first(c, o) for c, o in zip(caps, ref, strict=True)]
+            cpus, outs = run(q, Path(path).read_text(), starts, a.reps, wg, packet)
+            same = all(np.array_equal(o[j], r[j]) for o, r in zip(outs, ref, strict=True) for j in (0, 1))
+            per = ", ".join(f"{c * 1e3:.1f}" for c in cpus)
+            total = sum(cpus) * 1e3
+            print(f"  started at the first candidate: {per} ms, sum {total:.1f} ms; same candidates {same}")
 
 
 if __name__ == "__main__":

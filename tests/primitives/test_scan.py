@@ -43,7 +43,11 @@ def check(x, exclusive, queue):
     out, total = clvis.scan(x, exclusive, return_total=True, queue=queue)
     want, want_total = ref.scan(x, exclusive, return_total=True)
     assert out.dtype == x.dtype and out.shape == x.shape
-    np.testing.assert_array_equal(out, want)
+    # np.array_equal first: the same verdict at 2^27 elements in a fraction of
+    # assert_array_equal's time, which then runs only to explain a mismatch
+    # (and to accept NaNs in the same places)
+    if not np.array_equal(out, want):
+        np.testing.assert_array_equal(out, want)
     assert total == want_total and np.asarray(total).dtype == x.dtype
 
 
@@ -84,7 +88,7 @@ def test_parity_2_24(device, dtype):
 @pytest.mark.parametrize("dtype", [np.int32, np.uint64], ids=lambda d: np.dtype(d).name)
 def test_2_27(device, dtype):
     queue = clvis.runtime.queue_for(device)
-    x = np.random.default_rng(27).integers(0, 1 << 20, 1 << 27).astype(dtype)
+    x = np.random.default_rng(27).integers(0, 1 << 20, 1 << 27, dtype=dtype)  # drawn in dtype: no int64 copy
     check(x, True, queue)
 
 

@@ -741,6 +741,9 @@ def train(
         raise ValueError(f"--size {size}: larger than the frames ({fsize[0]}x{fsize[1]})")
     if "flow_sizes" in spec and size > min(min(spec["flow_sizes"]), *fsize):
         raise ValueError(f"--size {size}: larger than the flows' frames ({min(spec['flow_sizes'])})")
+    stride = trainer.build(**spec["arch"]).stride  # (a few small layers: cheap)
+    if size % stride or size <= 32:  # the crop through the encoder; MS-SSIM's 5 scales need > 32
+        raise ValueError(f"--size {size}: {name}'s crops must be a multiple of {stride} and more than 32")
     torch.manual_seed(seed)
     torch.set_num_threads(int(os.environ.get("CLVIS_TRAIN_THREADS", os.cpu_count() or 1)))
     rng = np.random.default_rng(seed)

@@ -223,6 +223,17 @@ def test_train_rejects_crops_larger_than_frames(tmp_path, capsys):
     assert "larger than the frames" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("model, size", [("infill", 48), ("lidar", 40), ("narvis", 32)])
+def test_train_rejects_crops_the_network_cannot_take(tmp_path, capsys, model, size):
+    """A crop that is no multiple of the network's stride (or too small for
+    MS-SSIM's five scales) is refused before any frame is rendered (it used
+    to fail inside torch's forward pass)."""
+    assert main(["train", model, "--size", str(size), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert f"--size {size}: {model}'s crops must be a multiple of" in err and "Traceback" not in err
+    assert not list(tmp_path.iterdir())
+
+
 def test_train_narvis_with_the_splat_target(tmp_path, capsys):
     """`clvis train narvis --target splat`: a few steps on frames whose
     targets the splatting model rendered; the card says so and repeats it."""

@@ -223,13 +223,19 @@ def test_train_rejects_crops_larger_than_frames(tmp_path, capsys):
     assert "larger than the frames" in capsys.readouterr().err
 
 
-def test_train_narvis_with_the_splat_target(tmp_path, capsys):
-    """`clvis train narvis --target splat`: a few steps on frames whose
-    targets the splatting model rendered; the card says so and repeats it."""
+def test_train_narvis_with_the_splat_target(tmp_path, capsys, monkeypatch):
+    """`clvis train narvis --target splat --planes ...,radius --init`: a few
+    steps on frames whose targets the splatting model rendered, from the
+    shipped model with the radius plane added; the card says so and repeats
+    it. `clvis render --post narvis --compare` then runs that model on a
+    cloud without a radius (it computes GR's sigma for the plane)."""
+    from clvis.post import infer
+
     rc = main(
         [
             *("train", "narvis", "--steps", "2", "--size", "64", "--frames", "1", "--frame-size", "96x64"),
             *("--out", str(tmp_path), "--quiet", "--eval", "none", "--points", "20000", "--target", "splat"),
+            *("--planes", "rgb,depth,vel2d,radius", "--init", str(post.MODELS / "narvis.onnx")),
             "--no-cache",  # not the user's cache directory
         ]
     )
@@ -237,6 +243,20 @@ def test_train_narvis_with_the_splat_target(tmp_path, capsys):
     card = json.loads((tmp_path / "narvis.json").read_text())
     assert card["data"]["target_model"] == "splat" and "splatting" in card["data"]["target"]
     assert "--target splat" in card["command"] and card["training"]["steps"] == 2
+    assert card["architecture"]["planes"] == ["rgb", "depth", "vel2d", "radius"] and card["channels_in"] == 10
+    assert (
+        "--planes rgb,depth,vel2d,radius" in card["command"]
+        and card["training"]["init"]["file"] == "narvis.onnx"
+    )
+    capsys.readouterr()
+    monkeypatch.setattr(infer, "MODELS", tmp_path)
+    out_dir = tmp_path / "render"
+    args = ["render", "--points", "20000", "--post", "narvis", "--compare", "--size", "96x64", "--quiet"]
+    assert main([*args, "--out", str(out_dir)]) == 0
+    assert "against the Gaussian renderer" in capsys.readouterr().out
+    assert (out_dir / "post-narvis.png").is_file()
+    assert main(["train", "narvis", "--planes", "depth,vel2d", "--out", str(tmp_path)]) == 2
+    assert "lacks 'rgb'" in capsys.readouterr().err
 
 
 def test_train_target_is_narvis_only_and_checked(tmp_path, capsys):

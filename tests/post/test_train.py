@@ -619,12 +619,13 @@ def test_init_with_an_added_plane_starts_as_the_shipped_narvis(tmp_path):
 
     import torch
 
-    arch = train.SPECS["narvis"]["arch"]
+    card = json.loads((post.MODELS / "narvis.json").read_text())["architecture"]
+    arch = {**train.SPECS["narvis"]["arch"], "planes": card["planes"]}
     old = train.TRAINERS["narvis"].build(**arch)
     train.load_onnx_weights(old, post.MODELS / "narvis.onnx")
-    new = train.TRAINERS["narvis"].build(**{**arch, "planes": [*arch["planes"], "radius"]})
+    new = train.TRAINERS["narvis"].build(**{**arch, "planes": [*arch["planes"], "temperature"]})
     train.load_onnx_weights(new, post.MODELS / "narvis.onnx")
-    assert new.channels_in == old.channels_in + 1 and new.layout[-1] == "radius_px"
+    assert new.channels_in == old.channels_in + 1 and new.layout[-1] == "temperature"
     rng = np.random.default_rng(0)
     x = rng.random((1, new.channels_in, 32, 48), dtype=np.float32)
     x[:, 3] = x[:, 3] > 0.4  # the coverage

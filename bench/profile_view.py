@@ -92,6 +92,7 @@ def main() -> None:
     cloud = PointCloud(d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"])
     scene = PointScene(cloud)
     settings = dict(scene.settings, mode="narvis")
+    scene._flow_raster()  # the radius plane, if the shipped narvis reads it (as the viewer's frames do)
     orbit = Orbit(scene.lo, scene.hi, points=scene.fit_points)
     orbit.fit(w / h)
     net = (

@@ -387,13 +387,32 @@ def _render_panels(
     return _Rendered(g, panels, first, warm, post_s)
 
 
+def _narvis_sigma(cloud, source, progress) -> float:
+    """GR's base sigma for a narvis model with the radius plane: the same
+    number its training scenes' radius and Gaussians were made of
+    (clvis.training.data.narvis_sigma: NARVIS_SIGMA x the median 4-NN
+    distance), of the points drawn (one with a NaN or infinite coordinate is
+    dropped by the renderer). A radius the cloud brings is not used: the
+    network was trained on this one."""
+    from ..training.data import narvis_sigma
+
+    finite = np.isfinite(cloud.positions).all(axis=1)
+    with progress.stage("splat radius plane (GR's sigma: median 4-NN distance)"):
+        pos = cloud.positions if finite.all() else cloud.positions[finite]
+        if len(pos) < 2:
+            raise CliError(f"--post narvis: {source} has fewer than 2 finite points; no spacing to measure")
+        return narvis_sigma(pos)
+
+
 def _compare_gaussians(
-    cloud, camera, width, height, attribute, colormap, r, net, progress, look, scan_radius=None
+    cloud, camera, width, height, attribute, colormap, r, net, progress, look, scan_radius=None, sigma=None
 ) -> list[str]:
     """--compare: the Gaussian renderer NARVis replaces, on the same view and
     transfer function (narvis-scan: the isotropic Gaussians of the radius
-    plane, the points' colours); a panel, and lines scoring the network's
-    image and the plain rasterization against it, with the time of each path."""
+    plane, the points' colours; narvis: `sigma`, GR's base sigma when the
+    command computed it for the radius plane); a panel, and lines scoring the
+    network's image and the plain rasterization against it, with the time of
+    each path."""
     from ..colormap import value_range
     from ..metrics import metrics
     from ..training.data import NarvisScene, ScanScene
@@ -421,7 +440,10 @@ def _compare_gaussians(
         scene, kind = ScanScene(c, "landscape", "the cloud"), "isotropic kNN Gaussians, 3DGS splatting"
     else:
         vr = value_range(_raster_fields(cloud, attribute)["attributes"][attribute])
-        scene, kind = NarvisScene(cloud, attribute, vr, colormap, "the cloud"), "velocity-elongated Gaussians"
+        scene, kind = (
+            NarvisScene(cloud, attribute, vr, colormap, "the cloud", sigma),
+            "velocity-elongated Gaussians",
+        )
     with progress.stage(f"Gaussian renderer ({kind})"):
         t0 = time.perf_counter()
         gr = scene.gaussian_renderer(queue=net.queue)
@@ -989,6 +1011,7 @@ def _render(args, progress) -> int:
         drawn = np.isfinite(cloud.positions).all(axis=1)
         check_finite(f"{source}: velocity", np.where(drawn[:, None], cloud.velocity, 0))
     scan_radius = None
+    flow_sigma = None
     if args.post_guard is not None and args.post is None:
         raise CliError("--post-guard guards a post network: add --post lidar")
     if args.post is not None:
@@ -1041,12 +1064,16 @@ def _render(args, progress) -> int:
         net = post.load(post_name, queue=q)
         if args.post_guard is not None:
             net.guard = args.post_guard
+        if post_name == "narvis" and "radius" in net.planes:
+            flow_sigma = _narvis_sigma(cloud, source, progress)
     look = _look(args, cloud, attribute, point_size, q)
     fields = _raster_fields(cloud, attribute)
     if look.classes is not None:  # the class colours travel as the points' colours
         fields = {**fields, "colors": look.class_colors, "attributes": {}}
     if scan_radius is not None:
         fields = {**fields, "radius": scan_radius}
+    if flow_sigma is not None:  # the radius plane this narvis model reads: GR's sigma, every point
+        fields = {**fields, "radius": np.full(len(cloud), flow_sigma, np.float32)}
     with progress.stage("uploading + Morton order"):
         raster = Rasterizer(cloud.positions, **fields, queue=q)
         q.finish()
@@ -1068,7 +1095,7 @@ def _render(args, progress) -> int:
     compared = []
     if args.compare:
         compared = _compare_gaussians(
-            cloud, camera, width, height, attribute, colormap, r, net, progress, look, scan_radius
+            cloud, camera, width, height, attribute, colormap, r, net, progress, look, scan_radius, flow_sigma
         )
     out = Path(args.out)
     with progress.stage("writing PNGs"):

@@ -109,6 +109,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "(random sizes, speculation, colours, 80-97 %% completion) beside the release frames",
     )
     p.add_argument(
+        "--planes",
+        default=None,
+        metavar="P,Q,...",
+        help="narvis, narvis-scan: the G-buffer planes the network takes (e.g. rgb,depth,vel2d,radius; "
+        "default: the release run's)",
+    )
+    p.add_argument(
         "--lr", type=float, default=None, metavar="X", help="peak learning rate (default: the release run's)"
     )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -135,6 +142,8 @@ def _command(args: argparse.Namespace) -> list[str]:
         c += ["--mix", str(args.mix)]
     if args.lr is not None:
         c += ["--lr", str(args.lr)]
+    if args.planes is not None:
+        c += ["--planes", args.planes]
     return c + ["--eval", args.eval]
 
 
@@ -204,6 +213,17 @@ def cmd(args: argparse.Namespace) -> int:
         raise CliError(f"--lr {args.lr}: expected a learning rate between 0 and 1")
     if args.init is not None and not os.path.isfile(args.init):
         raise CliError(f"--init {args.init}: no such file")
+    planes = None
+    if args.planes is not None:
+        if "planes" not in train.SPECS[args.model]["arch"]:
+            raise CliError(f"--planes: {args.model} takes no G-buffer planes (narvis, narvis-scan only)")
+        from ..post.names import gbuffer_channels
+
+        planes = [p.strip() for p in args.planes.split(",") if p.strip()]
+        try:
+            gbuffer_channels(tuple(planes))
+        except ValueError as e:
+            raise CliError(f"--planes {args.planes}: {e}") from None
     fw, fh = args.frame_size or train.SPECS[args.model]["frame_size"]
     if args.size > min(fw, fh):
         raise CliError(f"--size {args.size}: larger than the frames ({fw}x{fh})")
@@ -224,6 +244,7 @@ def cmd(args: argparse.Namespace) -> int:
         init=args.init,
         mix=args.mix,
         lr=args.lr,
+        planes=planes,
     )
     print(f"{args.out}/{card['name']}.onnx: held-out frames, mean per row")
     print(held_out_table(card["held_out"]))

@@ -13,6 +13,8 @@ whose call takes a renderer's own output and returns an RGBA8 picture:
 - "narvis": rasterizer G-buffers (``Rasterizer.render``'s GBuffers, numpy
   or ``host=False``) with the planes the card names (``planes``: by default
   the colour, depth and screen velocity, so the cloud needs a velocity;
+  a model whose planes include "radius" reads GR's sigma in pixels: a
+  Rasterizer given ``radius=clvis.training.data.narvis_radius(positions)``;
   ``attribute_planes``: the attributes among them, what ``render(planes=)``
   needs to resolve); returns the Gaussian renderer's image of the same view
   as the network predicts it (RGB premultiplied over black, alpha 255).

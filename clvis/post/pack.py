@@ -225,7 +225,11 @@ def _gbuffer_sources(gbuffers: GBuffersLike, planes: tuple[str, ...]) -> list[tu
         out.append(("vel_angle", need("vel2d", why, gbuffers.vel_angle), 0, 1))
         out.append(("vel_speed", need("vel2d", why, gbuffers.vel_speed), 0, 1))
     if "radius" in planes:
-        why = "the cloud has no radius: Rasterizer(..., radius=) or PointCloud.radius"
+        why = (
+            "the cloud has no radius: Rasterizer(..., radius=) or PointCloud.radius; narvis reads "
+            "clvis.training.data.narvis_radius(positions), "
+            "narvis-scan clvis.gauss.points.knn_sigma(positions)"
+        )
         out.append(("radius_px", need("radius", why, getattr(gbuffers, "radius_px", None)), 0, 1))
     attrs = gbuffers.attributes or {}
     for p in planes:

@@ -543,16 +543,54 @@ NARVIS_COLORMAP = "viridis"
 NARVIS_STORM_TIME = 1200.0
 
 
+#: the subsample (seed 0) whose median 4-NN distance gives GR's spacing
+NARVIS_SPACING_SAMPLE = 200_000
+
+
+def narvis_sigma(positions: Any) -> float:
+    """GR's base standard deviation (world units) for a cloud: NARVIS_SIGMA x
+    the median distance to the 4 nearest neighbours of a subsample
+    (NARVIS_SPACING_SAMPLE points, seed 0), scaled to the whole cloud's
+    density. The one number both GR's Gaussians (across the flow; x
+    NARVIS_STRETCH along it) and the narvis radius plane (narvis_radius,
+    projected to pixels by the rasterizer: GBuffers.radius_px) are made of.
+    positions: (N, 3) finite coordinates."""
+    from ..gauss.points import knn_mean_distance
+
+    pos = np.asarray(positions)
+    sample = pos[np.random.default_rng(0).permutation(len(pos))[:NARVIS_SPACING_SAMPLE]]
+    # the median 4-NN distance of a subsample, scaled to the whole cloud's density
+    spacing = float(np.median(knn_mean_distance(sample, 4))) * (len(sample) / max(len(pos), 1)) ** (1 / 3)
+    return NARVIS_SIGMA * spacing
+
+
+def narvis_radius(positions: Any, sigma: float | None = None) -> np.ndarray:
+    """(N,) float32: every point's world radius for the rasterizer's radius
+    plane as narvis sees it, GR's sigma (narvis_sigma(positions), or `sigma`
+    when already known)."""
+    pos = np.asarray(positions)
+    return np.full(len(pos), narvis_sigma(pos) if sigma is None else sigma, np.float32)
+
+
 @dataclass
 class NarvisScene:
     """A particle cloud and how both renderers colour it: by ``attribute``
-    through ``colormap`` over ``value_range``."""
+    through ``colormap`` over ``value_range``. ``sigma``: GR's base sigma
+    (narvis_sigma of the cloud's positions, computed on first use when not
+    given)."""
 
     cloud: Any
     attribute: str
     value_range: tuple[float, float]
     colormap: str
     source: str
+    sigma: float | None = None
+
+    def gr_sigma(self) -> float:
+        """GR's base sigma (world units): ``sigma``, computed once."""
+        if self.sigma is None:
+            self.sigma = narvis_sigma(self.cloud.positions)
+        return self.sigma
 
     def rasterizer(self, queue: Any = None) -> Any:
         from ..raster import Rasterizer
@@ -582,19 +620,14 @@ class NarvisScene:
         rendering with `model` (one of NARVIS_TARGETS)."""
         from ..colormap import TransferFunction
         from ..gauss import GaussianRenderer, gaussians_from_points
-        from ..gauss.points import knn_mean_distance
 
         if model not in NARVIS_TARGETS:
             raise ValueError(f"target: expected one of {', '.join(NARVIS_TARGETS)}, got {model!r}")
-        pos = self.cloud.positions
-        sample = pos[np.random.default_rng(0).permutation(len(pos))[:200_000]]
-        # the median 4-NN distance of a subsample, scaled to the whole cloud's density
-        spacing = float(np.median(knn_mean_distance(sample, 4))) * (len(sample) / max(len(pos), 1)) ** (1 / 3)
         g = gaussians_from_points(
             self.cloud,
             velocity="cloud",
             stretch=NARVIS_STRETCH,
-            scale=NARVIS_SIGMA * spacing,
+            scale=self.gr_sigma(),
             opacity=NARVIS_OPACITY,
             color_by=self.attribute,
         )
@@ -615,11 +648,14 @@ def narvis_scene(kind: str, n: int, seed: int) -> NarvisScene:
     v = d["velocity"]
     attrs = {**d["attributes"], "vx": v[:, 0], "vy": v[:, 1], "vz": v[:, 2]}
     cloud = PointCloud(d["positions"], colors=d["colors"], attributes=attrs, velocity=v)
+    # the radius plane narvis reads: GR's sigma, the same number its Gaussians are made of
+    sigma = narvis_sigma(cloud.positions)
+    cloud.radius = narvis_radius(cloud.positions, sigma)
     a = attrs[NARVIS_ATTRIBUTE]
     vr = (float(a.min()), float(a.max()))
     t = f", t = {NARVIS_STORM_TIME:g} s" if kind == "storm" else ""
     return NarvisScene(
-        cloud, NARVIS_ATTRIBUTE, vr, NARVIS_COLORMAP, f"{kind} ({n:,} particles, seed {seed}{t})"
+        cloud, NARVIS_ATTRIBUTE, vr, NARVIS_COLORMAP, f"{kind} ({n:,} particles, seed {seed}{t})", sigma
     )
 
 
@@ -702,9 +738,16 @@ def narvis_flow_scene(kind: str, n: int, seed: int, colormap: str = NARVIS_COLOR
 
     d = flows.flow(kind, n, seed)
     cloud = PointCloud(d["positions"], attributes=d["attributes"], velocity=d["velocity"])
+    sigma = narvis_sigma(cloud.positions)
+    cloud.radius = narvis_radius(cloud.positions, sigma)
     a = d["attributes"]["temperature"]
     return NarvisScene(
-        cloud, "temperature", (float(a.min()), float(a.max())), colormap, f"{kind} ({n:,} particles)"
+        cloud,
+        "temperature",
+        (float(a.min()), float(a.max())),
+        colormap,
+        f"{kind} ({n:,} particles)",
+        sigma,
     )
 
 

@@ -451,8 +451,18 @@ def _mix_frames(count: int, views: int, seed: int, size: tuple[int, int], crop: 
 
 def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
     """Start `net` from the weights of an ONNX export of the same network
-    (its initializers, by the parameter names torch.onnx.export keeps); a
-    file of another network, or missing a parameter, is an error."""
+    (its initializers, by the parameter names torch.onnx.export keeps; a
+    KPN export's trunk, clvis.post.nets.KPNTrunk, names them under "net.");
+    a file of another network, or missing a parameter, is an error.
+
+    A G-buffer network (NARVis) may take more planes than the file's: when
+    the card beside it (NAME.json) names planes whose channel layout is the
+    start of `net`'s (e.g. ("rgb", "depth", "vel2d") -> + "radius"), the
+    added channels start with no effect: the first layer (``inject``, a
+    1 x 1 convolution) maps the old channels as the file does and passes
+    each new one through to a new channel of its own (identity, no bias),
+    and every encoder block's weights on those are zero, so the network
+    computes what the file's does until training moves them."""
     import onnx
     import torch
     from onnx import numpy_helper
@@ -463,6 +473,11 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
         raise ValueError(f"--init {path}: not an ONNX model ({e})") from None
     weights = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
     state = net.state_dict()
+    if not any(k in weights for k in state) and any(k.startswith("net.") for k in weights):
+        weights = {k[4:]: v for k, v in weights.items() if k.startswith("net.")}
+    grown = _grown_channels(net, weights, Path(path))
+    if grown:
+        weights = _with_added_channels(net, weights, grown)
     missing = [k for k in state if k not in weights]
     wrong = [k for k in state if k in weights and tuple(weights[k].shape) != tuple(state[k].shape)]
     if missing or wrong:
@@ -471,6 +486,57 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
             f"(missing {missing[:3]}, other shapes {wrong[:3]} of {len(state)} parameters)"
         )
     net.load_state_dict({k: torch.from_numpy(np.array(weights[k], dtype=np.float32)) for k in state})
+
+
+def _grown_channels(net: Any, weights: dict[str, np.ndarray], path: Path) -> int:
+    """How many input channels `net` (a G-buffer network: ``layout``,
+    ``inject``) has beyond the file's; 0 when the same or not such a
+    network. The file's card must name planes whose layout starts `net`'s."""
+    from ..post.names import gbuffer_channels
+
+    layout = getattr(net, "layout", None)
+    w = weights.get("inject.weight")
+    if layout is None or w is None or w.ndim != 4 or w.shape[1] >= len(layout):
+        return 0
+    card = path.with_suffix(".json")
+    planes = None
+    if card.is_file():
+        planes = (json.loads(card.read_text()).get("architecture") or {}).get("planes")
+    if not planes:
+        raise ValueError(
+            f"--init {path}: it takes {w.shape[1]} input channels, this network {len(layout)}; "
+            f"without its card ({card.name}) naming its planes, which channels are new is unknown"
+        )
+    old = gbuffer_channels(tuple(planes))
+    if list(layout[: len(old)]) != old or len(old) != w.shape[1]:
+        raise ValueError(
+            f"--init {path}: its planes {planes} ({', '.join(old)}) are not the first channels "
+            f"of this network's ({', '.join(layout)}); only planes added after them can start at zero"
+        )
+    return len(layout) - len(old)
+
+
+def _with_added_channels(net: Any, weights: dict[str, np.ndarray], grown: int) -> dict[str, np.ndarray]:
+    """The file's weights for `net` with `grown` more input channels (see
+    load_onnx_weights): ``inject`` passes the new channels through, the
+    encoder blocks' weights on them (the last `grown` of each block's input:
+    the planes come after the previous level's features) are zero."""
+    out = dict(weights)
+    c = net.channels_in
+    old = c - grown
+    w = weights["inject.weight"]
+    inject = np.zeros((c, c, *w.shape[2:]), np.float32)
+    inject[:old, :old] = w
+    for i in range(old, c):
+        inject[i, i] = 1.0
+    out["inject.weight"] = inject
+    out["inject.bias"] = np.concatenate([weights["inject.bias"], np.zeros(grown, np.float32)])
+    for k, v in weights.items():
+        if k.startswith("enc.") and k.endswith(".weight") and v.ndim == 4:
+            grow = np.zeros((v.shape[0], v.shape[1] + grown, *v.shape[2:]), np.float32)
+            grow[:, : v.shape[1]] = v
+            out[k] = grow
+    return out
 
 
 def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
@@ -697,6 +763,7 @@ def train(
     init: str | os.PathLike | None = None,
     mix: float | None = None,
     lr: float | None = None,
+    planes: Sequence[str] | None = None,
 ) -> dict:
     """Train network `name` for `steps` steps on `size` x `size` crops, export
     it into `out` (NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx where int8
@@ -714,7 +781,9 @@ def train(
     (in-fill): the share of the crops taken from _mix_frames' pairs (the
     seven families at varied sizes, speculation, colours and completions
     0.80-0.97) beside the release frames. lr: the peak learning rate
-    (default the SPECS')."""
+    (default the SPECS'). planes (narvis, narvis-scan): the G-buffer planes
+    the network takes (clvis.post.names.gbuffer_channels; default the
+    SPECS')."""
     import torch
 
     from ..post import nets
@@ -722,6 +791,13 @@ def train(
     if name not in SPECS:
         raise ValueError(f"model: expected one of {NAMES}, got {name!r}")
     spec, trainer = SPECS[name], TRAINERS[name]
+    if planes is not None:
+        if "planes" not in spec["arch"]:
+            raise ValueError(f"planes: {name} takes no G-buffer planes (narvis, narvis-scan only)")
+        from ..post.names import gbuffer_channels
+
+        gbuffer_channels(tuple(planes))  # a clear error for a bad selection
+        spec = {**spec, "arch": {**spec["arch"], "planes": list(planes)}}
     if target not in _data.NARVIS_TARGETS:
         raise ValueError(f"target: expected one of {', '.join(_data.NARVIS_TARGETS)}, got {target!r}")
     if target != "max_response" and trainer.frames is not None:

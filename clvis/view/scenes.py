@@ -219,6 +219,10 @@ class PointScene(Scene):
         self._gauss: dict[str | tuple[str, ...], Any] = {}
         #: narvis-scan's splat radius (the points' knn_sigma), once per cloud
         self.scan_radius: np.ndarray | None = None
+        #: GR's base sigma (clvis.training.data.narvis_sigma of the points
+        #: drawn), once per cloud: a narvis model with the radius plane reads
+        #: it as every point's radius
+        self.flow_sigma: float | None = None
 
     def _scan_raster(self) -> float:
         """Make the Rasterizer narvis-scan reads, once: the cloud's knn_sigma
@@ -242,6 +246,26 @@ class PointScene(Scene):
             self.cloud, attributes=self._raster_attrs, radius=radius, queue=self.raster.queue
         )
         self.scan_radius = radius
+        return time.perf_counter() - t0
+
+    def _flow_raster(self) -> float:
+        """Make the Rasterizer a narvis model with the radius plane reads,
+        once: GR's sigma (clvis.training.data.narvis_sigma of the points
+        drawn, what the network was trained on; a radius the cloud brings is
+        not used) as every point's radius. A model without that plane keeps
+        the plain one. Returns the seconds it took (0: made before or not needed)."""
+        if self.flow_sigma is not None or "radius" not in self._net("narvis").planes:
+            return 0.0
+        from .. import Rasterizer
+        from ..training.data import narvis_radius, narvis_sigma
+
+        t0 = time.perf_counter()
+        sigma = narvis_sigma(self._gauss_cloud.positions)
+        radius = narvis_radius(self.cloud.positions, sigma)
+        self.raster = Rasterizer(
+            self.cloud, attributes=self._raster_attrs, radius=radius, queue=self.raster.queue
+        )
+        self.flow_sigma = sigma
         return time.perf_counter() - t0
 
     def _check_velocity(self) -> None:
@@ -299,7 +323,7 @@ class PointScene(Scene):
             return
         from .. import depth_filter
 
-        build = self._scan_raster() if mode == "narvis-scan" else 0.0
+        build = {"narvis-scan": self._scan_raster, "narvis": self._flow_raster}.get(mode, lambda: 0.0)()
         t0 += build
         # the networks read the G-buffers where they are (host=False: nothing
         # read back, nothing uploaded again); NARVis needs the screen velocity,
@@ -329,9 +353,10 @@ class PointScene(Scene):
             attr = self.attributes[0]
         key = ("split", attr, s["colormap"])
         t0 = time.perf_counter()
+        self._flow_raster()
         if key not in self._gauss:
             vr = value_range(self.cloud.attributes[attr])
-            ns = NarvisScene(self._gauss_cloud, attr, vr, s["colormap"], "view")
+            ns = NarvisScene(self._gauss_cloud, attr, vr, s["colormap"], "view", self.flow_sigma)
             self._gauss = {key: (ns, ns.gaussian_renderer(queue=self.raster.queue))}
         build = time.perf_counter() - t0
         ns, gr = self._gauss[key]

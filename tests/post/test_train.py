@@ -234,13 +234,19 @@ def test_train_rejects_crops_the_network_cannot_take(tmp_path, capsys, model, si
     assert not list(tmp_path.iterdir())
 
 
-def test_train_narvis_with_the_splat_target(tmp_path, capsys):
-    """`clvis train narvis --target splat`: a few steps on frames whose
-    targets the splatting model rendered; the card says so and repeats it."""
+def test_train_narvis_with_the_splat_target(tmp_path, capsys, monkeypatch):
+    """`clvis train narvis --target splat --planes ...,radius --init`: a few
+    steps on frames whose targets the splatting model rendered, from the
+    shipped model with the radius plane added; the card says so and repeats
+    it. `clvis render --post narvis --compare` then runs that model on a
+    cloud without a radius (it computes GR's sigma for the plane)."""
+    from clvis.post import infer
+
     rc = main(
         [
             *("train", "narvis", "--steps", "2", "--size", "64", "--frames", "1", "--frame-size", "96x64"),
             *("--out", str(tmp_path), "--quiet", "--eval", "none", "--points", "20000", "--target", "splat"),
+            *("--planes", "rgb,depth,vel2d,radius", "--init", str(post.MODELS / "narvis.onnx")),
             "--no-cache",  # not the user's cache directory
         ]
     )
@@ -248,6 +254,20 @@ def test_train_narvis_with_the_splat_target(tmp_path, capsys):
     card = json.loads((tmp_path / "narvis.json").read_text())
     assert card["data"]["target_model"] == "splat" and "splatting" in card["data"]["target"]
     assert "--target splat" in card["command"] and card["training"]["steps"] == 2
+    assert card["architecture"]["planes"] == ["rgb", "depth", "vel2d", "radius"] and card["channels_in"] == 10
+    assert (
+        "--planes rgb,depth,vel2d,radius" in card["command"]
+        and card["training"]["init"]["file"] == "narvis.onnx"
+    )
+    capsys.readouterr()
+    monkeypatch.setattr(infer, "MODELS", tmp_path)
+    out_dir = tmp_path / "render"
+    args = ["render", "--points", "20000", "--post", "narvis", "--compare", "--size", "96x64", "--quiet"]
+    assert main([*args, "--out", str(out_dir)]) == 0
+    assert "against the Gaussian renderer" in capsys.readouterr().out
+    assert (out_dir / "post-narvis.png").is_file()
+    assert main(["train", "narvis", "--planes", "depth,vel2d", "--out", str(tmp_path)]) == 2
+    assert "lacks 'rgb'" in capsys.readouterr().err
 
 
 def test_train_target_is_narvis_only_and_checked(tmp_path, capsys):
@@ -596,6 +616,77 @@ def test_init_loads_an_onnx_export_of_the_same_network(tmp_path):
     (tmp_path / "x.onnx").write_text("no model")
     with pytest.raises(ValueError, match="not an ONNX model"):
         train.load_onnx_weights(net, tmp_path / "x.onnx")
+
+
+def test_init_with_an_added_plane_starts_as_the_shipped_narvis(tmp_path):
+    """--init with one more input plane (narvis + "radius"): the shipped
+    NARVis's weights (its KPN trunk's, under "net."), the new channel passed
+    through by the first layer into encoder weights of zero: the network
+    computes what the shipped one does whatever the new plane holds (within
+    float rounding), and that plane's first-layer column and encoder weights
+    are the only ones not the file's. A file without a card naming its planes,
+    or planes that are not the start of the new layout, is refused."""
+    import shutil
+
+    import torch
+
+    card = json.loads((post.MODELS / "narvis.json").read_text())["architecture"]
+    arch = {**train.SPECS["narvis"]["arch"], "planes": card["planes"]}
+    old = train.TRAINERS["narvis"].build(**arch)
+    train.load_onnx_weights(old, post.MODELS / "narvis.onnx")
+    new = train.TRAINERS["narvis"].build(**{**arch, "planes": [*arch["planes"], "temperature"]})
+    train.load_onnx_weights(new, post.MODELS / "narvis.onnx")
+    assert new.channels_in == old.channels_in + 1 and new.layout[-1] == "temperature"
+    rng = np.random.default_rng(0)
+    x = rng.random((1, new.channels_in, 32, 48), dtype=np.float32)
+    x[:, 3] = x[:, 3] > 0.4  # the coverage
+    with torch.no_grad():
+        ref = old.eval()(torch.from_numpy(x[:, :-1])).numpy()
+        got = [
+            new.eval()(torch.from_numpy(np.concatenate([x[:, :-1], x[:, -1:] * k], 1))).numpy()
+            for k in (0, 9)
+        ]
+    assert np.abs(ref).max() > 0.05
+    for g in got:
+        assert np.abs(g - ref).max() < 1e-5
+    w = new.inject.weight.detach().numpy()
+    c = old.channels_in
+    np.testing.assert_array_equal(w[:c, :c], old.inject.weight.detach().numpy())
+    assert (w[:c, c:] == 0).all() and (w[c, :c] == 0).all() and w[c, c, 0, 0] == 1
+    assert (new.enc[2].features.weight.detach().numpy()[:, -1] == 0).all()
+    # the net still learns the plane: the encoder's weights on it have a gradient
+    x_t = torch.from_numpy(x)
+    new.train()(x_t).sum().backward()
+    assert new.enc[0].features.weight.grad[:, -1].abs().sum() > 0
+    shutil.copy(post.MODELS / "narvis.onnx", tmp_path / "narvis.onnx")
+    with pytest.raises(ValueError, match="without its card"):
+        train.load_onnx_weights(new, tmp_path / "narvis.onnx")
+    (tmp_path / "narvis.json").write_text(json.dumps({"architecture": {"planes": ["rgb", "vel2d"]}}))
+    with pytest.raises(ValueError, match="not the first channels"):
+        train.load_onnx_weights(new, tmp_path / "narvis.onnx")
+
+
+def test_narvis_radius_plane_is_grs_sigma():
+    """The flow scenes' clouds carry radius = GR's base sigma (one function,
+    data.narvis_sigma, for both): the rasterizer's radius plane is that
+    sigma projected to pixels, and GR's Gaussians are made of the same
+    number (across the flow; x NARVIS_STRETCH along it)."""
+    sc = data.narvis_flow_scene("abc", 4000, 3)
+    sigma = data.narvis_sigma(sc.cloud.positions)
+    assert sigma > 0 and sc.gr_sigma() == sigma
+    np.testing.assert_array_equal(sc.cloud.radius, np.full(4000, sigma, np.float32))
+    hur = data.narvis_scene("hurricane", 5000, 1)
+    assert hur.gr_sigma() == data.narvis_sigma(hur.cloud.positions) == hur.cloud.radius[0]
+    # a scene without a sigma computes the same one
+    bare = data.NarvisScene(sc.cloud, sc.attribute, sc.value_range, sc.colormap, "bare")
+    assert bare.gr_sigma() == sigma
+    gr = bare.gaussian_renderer()
+    scales = np.sort(np.asarray(gr.gaussians.scales), axis=1)
+    np.testing.assert_allclose(scales[:, 0], sigma, rtol=1e-6)
+    cam = data.narvis_cameras(sc, "hemisphere")[3]
+    g = sc.gbuffers(sc.rasterizer(), cam, 48, 40, ("rgb", "depth", "vel2d", "radius"))
+    r = np.asarray(g.radius_px)[np.asarray(g.covered)]
+    assert len(r) and (r > 0).all()
 
 
 def test_train_infill_mixed_and_from_a_model_says_so_in_its_card(tmp_path, capsys):

@@ -124,9 +124,16 @@ def _floor(net, h, w):
 
 
 def _hurricane(queue, w, h):
+    from clvis.training.data import narvis_radius
+
     d = clvis.datasets.hurricane(20_000, 3)
     ras = Rasterizer(
-        d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"], queue=queue
+        d["positions"],
+        colors=d["colors"],
+        attributes=d["attributes"],
+        velocity=d["velocity"],
+        radius=narvis_radius(d["positions"]),  # the shipped narvis's radius plane: GR's sigma
+        queue=queue,
     )
     cam = clvis.Camera.fit(d["positions"].min(0), d["positions"].max(0), aspect=w / h)
     return ras, cam
@@ -145,8 +152,8 @@ def net_head_channels():
 
 def test_narvis_pipeline_is_at_the_floor(device, transfers):
     """README's NARVis call on the device path: G-buffers with only the
-    planes the network reads, never read back. down 40 B/pixel at 512 x 512
-    (9 input channels, the picture), up 156 (the graph's 38 logit channels
+    planes the network reads, never read back. down 44 B/pixel at 512 x 512
+    (10 input channels, the picture), up 156 (the graph's 38 logit channels
     and the nearness plane, which the head's kernels read; 12, the 3 output
     channels, while the head was in the graph, issue 28); the numpy
     G-buffers the same call used to take cost 80 down and 48 up. The picture
@@ -155,7 +162,7 @@ def test_narvis_pipeline_is_at_the_floor(device, transfers):
     q = runtime.queue_for(device)
     ras, cam = _hurricane(q, W, H)
     net = post.load("narvis", queue=q)
-    assert net.attribute_planes == ()  # the shipped card: rgb, depth, vel2d
+    assert net.attribute_planes == ()  # the shipped card: rgb, depth, vel2d, radius
     g = ras.render(cam, W, H, color_by="temperature", planes=net.attribute_planes, host=False)
     transfers.clear()
     got = net(g)
@@ -170,8 +177,9 @@ def test_narvis_pipeline_is_at_the_floor(device, transfers):
 def test_narvis_host_planes_cross_once(device, transfers):
     """numpy G-buffers: each plane the network reads is uploaded once (the
     velocity's x and y are one plane, read in place), planes it does not
-    read never: rgba 4 + index 4 + depth 4 + vel2d 8 + angle 4 + speed 4 =
-    28 bytes a pixel up, over the floor."""
+    read never: rgba 4 + index 4 + depth 4 + vel2d 8 + angle 4 + speed 4
+    (+ radius 4 for a card with that plane, the shipped one) = 28 (32)
+    bytes a pixel up, over the floor."""
     q = runtime.queue_for(device)
     ras, cam = _hurricane(q, W, H)
     net = post.load("narvis", queue=q)
@@ -182,9 +190,11 @@ def test_narvis_host_planes_cross_once(device, transfers):
     npix = W * H
     floor = _floor(net, H, W)
     uploads = [n for d, n in transfers.planes(npix)[: -len(floor)] if d == "up"]
-    assert sorted(uploads) == sorted([4 * npix, 4 * npix, 4 * npix, 8 * npix, 4 * npix, 4 * npix])
+    want = [4 * npix, 4 * npix, 4 * npix, 8 * npix, 4 * npix, 4 * npix]
+    want += [4 * npix] * ("radius" in net.planes)
+    assert sorted(uploads) == sorted(want)
     assert transfers.planes(npix)[-len(floor) :] == floor
-    assert len(transfers.planes(npix)) == len(floor) + 6
+    assert len(transfers.planes(npix)) == len(floor) + len(want)
 
 
 def test_infill_pipeline_is_at_the_floor(device, transfers):

@@ -237,7 +237,7 @@ def test_train_rejects_crops_the_network_cannot_take(tmp_path, capsys, model, si
 def test_train_narvis_with_the_splat_target(tmp_path, capsys, monkeypatch):
     """`clvis train narvis --target splat --planes ...,radius --init`: a few
     steps on frames whose targets the splatting model rendered, from the
-    shipped model with the radius plane added; the card says so and repeats
+    shipped model (which takes the radius plane); the card says so and repeats
     it. `clvis render --post narvis --compare` then runs that model on a
     cloud without a radius (it computes GR's sigma for the plane)."""
     from clvis.post import infer
@@ -619,7 +619,9 @@ def test_init_loads_an_onnx_export_of_the_same_network(tmp_path):
 
 
 def test_init_with_an_added_plane_starts_as_the_shipped_narvis(tmp_path):
-    """--init with one more input plane (narvis + "radius"): the shipped
+    """--init with one more input plane (the shipped narvis's planes +
+    "temperature"; the shipped model itself was started so, from its
+    predecessor without "radius"): the shipped
     NARVis's weights (its KPN trunk's, under "net."), the new channel passed
     through by the first layer into encoder weights of zero: the network
     computes what the shipped one does whatever the new plane holds (within

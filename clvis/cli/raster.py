@@ -1073,7 +1073,9 @@ def _render(args, progress) -> int:
     if scan_radius is not None:
         fields = {**fields, "radius": scan_radius}
     if flow_sigma is not None:  # the radius plane this narvis model reads: GR's sigma, every point
-        fields = {**fields, "radius": np.full(len(cloud), flow_sigma, np.float32)}
+        from ..training.data import narvis_radius
+
+        fields = {**fields, "radius": narvis_radius(cloud.positions, flow_sigma)}
     with progress.stage("uploading + Morton order"):
         raster = Rasterizer(cloud.positions, **fields, queue=q)
         q.finish()

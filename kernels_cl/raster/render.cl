@@ -26,7 +26,8 @@
  * points; bounds[6*b .. 6*b+5] = (min x, min y, min z, max x, max y, max z) of
  * the finite points of batch b (batch_bounds computes it; min > max for a batch
  * with none). Launch every per-batch kernel with global size nb * L and local
- * size L: group b walks batch b, item l takes points l, l + L, ... A batch
+ * size L: group g walks batch b = g (reverse = 1 in the three visibility
+ * kernels: b = nb - 1 - g), item l takes points l, l + L, ... A batch
  * whose box the camera cannot see (clvis_box_culled) reads no point at all.
  * ids: NULL, or n uints: ids[i] = the index reported for point i (its index in
  * the caller's order when the points were reordered, e.g. by Morton code).
@@ -55,9 +56,10 @@
  *     (64-bit atomics only.) Per drawn point: early-z (skip when its dkey
  *     exceeds the pixel's current dkey), else atom_min(vis + p, dkey<<32|id).
  *     drawn[b] = 1 if batch b was not culled, else 0 (written by item 0).
- *     reverse = 1 walks each batch from its last point to its first. The
- *     result is the same either way; the speed is not: early-z rejects most
- *     when near points come first. For a Morton-ordered cloud the host passes
+ *     reverse = 1 walks the batches from the last to the first, and each
+ *     batch from its last point to its first. The result is the same either
+ *     way; the speed is not: early-z rejects most when near points come
+ *     first. For a Morton-ordered cloud the host passes
  *     1 when the view direction f has f.x + 2 f.y + 4 f.z < 0 (the code's z
  *     bit is the most significant of each level, x the least), so the points
  *     of each cell come nearest first.
@@ -211,7 +213,11 @@ inline void raster_batch(int mode, global const float *positions, global const u
                          float near, float far, uint W, uint H, global uint *vis,
                          global uchar *drawn, uint reverse)
 {
-    uint b = get_group_id(0);
+    /* reverse also takes the batches last to first (group g: batch nb-1-g),
+     * so that the whole cloud, not just each batch, comes nearest first to
+     * devices that run the groups roughly in order */
+    uint nb = (n + batch - 1) / batch;
+    uint b = reverse ? nb - 1u - get_group_id(0) : get_group_id(0);
     uint l = get_local_id(0), L = get_local_size(0);
     clvis_camera c = clvis_load_camera(cam);
     float3 lo = vload3(0, bounds + 6 * b), hi = vload3(0, bounds + 6 * b + 3);

@@ -251,6 +251,36 @@ inline void raster_batch(int mode, global const float *positions, global const u
         pys.v = convert_uint8(sy);
         key.v = clvis_key_f32_8(as_uint8(depth));
         ok.v = drawn8;
+#if POINT_SIZE == 1
+        if (mode != MODE_INDEX) {
+            /* benign race (early-z): early-z of the 8 lanes at once (8
+             * independent loads, one vector compare), then raster_point on
+             * only the lanes that pass, in the same lane order. The loads are
+             * raster_point's early-z read (safe: see there), done earlier;
+             * raster_point repeats the test against the word as it is then,
+             * so a word read here before an earlier lane's atomic can only
+             * let a point through to that second test. The same points win. */
+            union { uint8 v; uint s[8]; } pix, z;
+            pix.v = clvis_il_select8((uint8)(0u), pys.v * (uint8)(W) + pxs.v, drawn8);
+            z.v = (uint8)(words[clvis_hi_word(pix.s[0])], words[clvis_hi_word(pix.s[1])],
+                          words[clvis_hi_word(pix.s[2])], words[clvis_hi_word(pix.s[3])],
+                          words[clvis_hi_word(pix.s[4])], words[clvis_hi_word(pix.s[5])],
+                          words[clvis_hi_word(pix.s[6])], words[clvis_hi_word(pix.s[7])]);
+            uint8 bit = reverse ? (uint8)(128u, 64u, 32u, 16u, 8u, 4u, 2u, 1u)
+                                : (uint8)(1u, 2u, 4u, 8u, 16u, 32u, 64u, 128u);
+            uint8 sel = bit & as_uint8(drawn8 & (key.v <= z.v));
+            uint4 m4 = sel.lo | sel.hi;
+            uint2 m2 = m4.lo | m4.hi;
+            uint m = m2.x | m2.y;
+            while (m != 0u) {
+                uint kk = clvis_il_ctz64((ulong)m);
+                uint k = reverse ? 7u - kk : kk;
+                m &= m - 1u;
+                raster_point(mode, i + k, pix.s[k], key.s[k], ids, words);
+            }
+            continue;
+        }
+#endif
         for (int kk = 0; kk < 8; ++kk) {
             int k = reverse ? 7 - kk : kk;
             if (ok.s[k])

@@ -26,7 +26,8 @@
  * points; bounds[6*b .. 6*b+5] = (min x, min y, min z, max x, max y, max z) of
  * the finite points of batch b (batch_bounds computes it; min > max for a batch
  * with none). Launch every per-batch kernel with global size nb * L and local
- * size L: group b walks batch b, item l takes points l, l + L, ... A batch
+ * size L: group g walks batch b = g (reverse = 1 in the three visibility
+ * kernels: b = nb - 1 - g), item l takes points l, l + L, ... A batch
  * whose box the camera cannot see (clvis_box_culled) reads no point at all.
  * ids: NULL, or n uints: ids[i] = the index reported for point i (its index in
  * the caller's order when the points were reordered, e.g. by Morton code).
@@ -55,9 +56,10 @@
  *     (64-bit atomics only.) Per drawn point: early-z (skip when its dkey
  *     exceeds the pixel's current dkey), else atom_min(vis + p, dkey<<32|id).
  *     drawn[b] = 1 if batch b was not culled, else 0 (written by item 0).
- *     reverse = 1 walks each batch from its last point to its first. The
- *     result is the same either way; the speed is not: early-z rejects most
- *     when near points come first. For a Morton-ordered cloud the host passes
+ *     reverse = 1 walks the batches from the last to the first, and each
+ *     batch from its last point to its first. The result is the same either
+ *     way; the speed is not: early-z rejects most when near points come
+ *     first. For a Morton-ordered cloud the host passes
  *     1 when the view direction f has f.x + 2 f.y + 4 f.z < 0 (the code's z
  *     bit is the most significant of each level, x the least), so the points
  *     of each cell come nearest first.
@@ -211,7 +213,11 @@ inline void raster_batch(int mode, global const float *positions, global const u
                          float near, float far, uint W, uint H, global uint *vis,
                          global uchar *drawn, uint reverse)
 {
-    uint b = get_group_id(0);
+    /* reverse also takes the batches last to first (group g: batch nb-1-g),
+     * so that the whole cloud, not just each batch, comes nearest first to
+     * devices that run the groups roughly in order */
+    uint nb = (n + batch - 1) / batch;
+    uint b = reverse ? nb - 1u - get_group_id(0) : get_group_id(0);
     uint l = get_local_id(0), L = get_local_size(0);
     clvis_camera c = clvis_load_camera(cam);
     float3 lo = vload3(0, bounds + 6 * b), hi = vload3(0, bounds + 6 * b + 3);
@@ -245,6 +251,36 @@ inline void raster_batch(int mode, global const float *positions, global const u
         pys.v = convert_uint8(sy);
         key.v = clvis_key_f32_8(as_uint8(depth));
         ok.v = drawn8;
+#if POINT_SIZE == 1
+        if (mode != MODE_INDEX) {
+            /* benign race (early-z): early-z of the 8 lanes at once (8
+             * independent loads, one vector compare), then raster_point on
+             * only the lanes that pass, in the same lane order. The loads are
+             * raster_point's early-z read (safe: see there), done earlier;
+             * raster_point repeats the test against the word as it is then,
+             * so a word read here before an earlier lane's atomic can only
+             * let a point through to that second test. The same points win. */
+            union { uint8 v; uint s[8]; } pix, z;
+            pix.v = clvis_il_select8((uint8)(0u), pys.v * (uint8)(W) + pxs.v, drawn8);
+            z.v = (uint8)(words[clvis_hi_word(pix.s[0])], words[clvis_hi_word(pix.s[1])],
+                          words[clvis_hi_word(pix.s[2])], words[clvis_hi_word(pix.s[3])],
+                          words[clvis_hi_word(pix.s[4])], words[clvis_hi_word(pix.s[5])],
+                          words[clvis_hi_word(pix.s[6])], words[clvis_hi_word(pix.s[7])]);
+            uint8 bit = reverse ? (uint8)(128u, 64u, 32u, 16u, 8u, 4u, 2u, 1u)
+                                : (uint8)(1u, 2u, 4u, 8u, 16u, 32u, 64u, 128u);
+            uint8 sel = bit & as_uint8(drawn8 & (key.v <= z.v));
+            uint4 m4 = sel.lo | sel.hi;
+            uint2 m2 = m4.lo | m4.hi;
+            uint m = m2.x | m2.y;
+            while (m != 0u) {
+                uint kk = clvis_il_ctz64((ulong)m);
+                uint k = reverse ? 7u - kk : kk;
+                m &= m - 1u;
+                raster_point(mode, i + k, pix.s[k], key.s[k], ids, words);
+            }
+            continue;
+        }
+#endif
         for (int kk = 0; kk < 8; ++kk) {
             int k = reverse ? 7 - kk : kk;
             if (ok.s[k])

@@ -252,6 +252,28 @@ def test_batch_culling(queue):
     assert g.covered.sum() > W * H // 3
 
 
+@pytest.mark.parametrize("int64", [True, False], ids=["int64", "no-int64"])
+def test_walk_directions(queue, int64):
+    """A Morton cloud (ties, a partial last batch, batches of a size that is no
+    multiple of 8, culled batches) seen from opposite sides: one view walks
+    the batches and their points forwards, the other backwards (render.cl's
+    reverse), and both give the reference's image."""
+    rng = np.random.default_rng(9)
+    pos = (rng.random((5000, 3)) * [8, 8, 2]).astype(np.float32)
+    pos = np.concatenate([pos, pos[rng.integers(0, 5000, 1500)]])
+    with runtime.configure(int64_atomics=int64):
+        r = clvis.Rasterizer(pos, morton=True, batch_size=333, queue=queue)
+    walks = set()
+    for eye, target in (((2, 3, 5), (2, 3, 1)), ((6, 5, -3), (6, 5, 1))):
+        cam = Camera.look_at(eye, target, (0, 1, 0), fov_y=40, aspect=W / H, near=0.1, far=50)
+        f = camera_buffer(cam)[16:19].astype(np.float64)
+        walks.add(bool(f[0] + 2 * f[1] + 4 * f[2] < 0))
+        vis, drawn = r.visibility(cam, W, H)
+        np.testing.assert_array_equal(vis.get(), ref.visibility(pos, cam, W, H))
+        assert 0 < drawn.get().sum() < r.nbatches
+    assert walks == {False, True}
+
+
 @given(seed=st.integers(0, 2**32 - 1), ortho=st.booleans(), batch=st.sampled_from([1, 7, 256, 10240]))
 def test_property_random_cameras(device, seed, ortho, batch):
     """Random clouds, random cameras (inside the cloud too), every batch size:

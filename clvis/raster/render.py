@@ -197,7 +197,9 @@ class Rasterizer:
         pos = self._upload("positions", inp.positions)
         self.ids: cla.Array | None = None
         self.inv: cla.Array | None = None
-        if morton and n > 1:
+        # Morton-ordered: render.cl's walk sets its coherent bit
+        self.coherent = bool(morton and n > 1)
+        if self.coherent:
             perm = typing.cast(cla.Array, morton_order(pos, queue=q))  # device in, device out
             self.ids = perm
             self.positions, self.inv = morton_gather(q, pos, perm)
@@ -339,9 +341,10 @@ class Rasterizer:
             return vis, drawn, cam_d
         L = _local_size(q)
         # walk batches backwards when that visits the points of each Morton
-        # cell nearest first (render.cl's ABI comment): far fewer atomics
+        # cell nearest first (render.cl's ABI comment): far fewer atomics; the
+        # 8-point early-z only for a Morton-ordered cloud, where it pays
         f = cam[16:19].astype(np.float64)  # the depth row: the view direction
-        reverse = np.uint32(f[0] + 2 * f[1] + 4 * f[2] < 0)
+        walk = np.uint32(int(f[0] + 2 * f[1] + 4 * f[2] < 0) | (2 if self.coherent else 0))
         args = (
             self.positions.base_data,
             _arg(self.ids),
@@ -355,7 +358,7 @@ class Rasterizer:
             np.uint32(H),
             vis.base_data,
             drawn.base_data,
-            reverse,
+            walk,
         )
         G = self.nbatches * L
         kernels = self._render_kernels(point_size)

@@ -26,8 +26,8 @@
  * points; bounds[6*b .. 6*b+5] = (min x, min y, min z, max x, max y, max z) of
  * the finite points of batch b (batch_bounds computes it; min > max for a batch
  * with none). Launch every per-batch kernel with global size nb * L and local
- * size L: group g walks batch b = g (reverse = 1 in the three visibility
- * kernels: b = nb - 1 - g), item l takes points l, l + L, ... A batch
+ * size L: group g walks batch b = g (walk's reverse bit in the three
+ * visibility kernels: b = nb - 1 - g), item l takes points l, l + L, ... A batch
  * whose box the camera cannot see (clvis_box_culled) reads no point at all.
  * ids: NULL, or n uints: ids[i] = the index reported for point i (its index in
  * the caller's order when the points were reordered, e.g. by Morton code).
@@ -52,20 +52,25 @@
  *
  * kernel render_visibility(positions, ids, n, batch, bounds, cam, near, far,
  *                          W, H, global ulong *vis, global uchar *drawn,
- *                          uint reverse)
+ *                          uint walk)
  *     (64-bit atomics only.) Per drawn point: early-z (skip when its dkey
  *     exceeds the pixel's current dkey), else atom_min(vis + p, dkey<<32|id).
  *     drawn[b] = 1 if batch b was not culled, else 0 (written by item 0).
- *     reverse = 1 walks the batches from the last to the first, and each
- *     batch from its last point to its first. The result is the same either
- *     way; the speed is not: early-z rejects most when near points come
- *     first. For a Morton-ordered cloud the host passes
- *     1 when the view direction f has f.x + 2 f.y + 4 f.z < 0 (the code's z
- *     bit is the most significant of each level, x the least), so the points
- *     of each cell come nearest first.
+ *     walk holds two bits; the result is the same for every value, the speed
+ *     is not. Bit 0 (reverse) walks the batches from the last to the first,
+ *     and each batch from its last point to its first: early-z rejects most
+ *     when near points come first. For a Morton-ordered cloud the host sets it
+ *     when the view direction f has f.x + 2 f.y + 4 f.z < 0 (the code's z bit
+ *     is the most significant of each level, x the least), so the points of
+ *     each cell come nearest first. Bit 1 (coherent) makes the cpu profile
+ *     test early-z for 8 points at once before their atomics (point size 1):
+ *     that pays where most points are rejected (a Morton-ordered cloud walked
+ *     nearest first) and costs where few are (a shuffled cloud), so the host
+ *     sets it for Morton-ordered clouds only. walk = 0 or 1 means what the
+ *     older `reverse` argument meant.
  *
- * kernel render_depth(... same arguments ..., global uint *vis, drawn, reverse)
- * kernel render_index(... same arguments ..., global uint *vis, drawn, reverse)
+ * kernel render_depth(... same arguments ..., global uint *vis, drawn, walk)
+ * kernel render_index(... same arguments ..., global uint *vis, drawn, walk)
  *     The fallback, in this order: render_depth takes atomic_min of dkey into
  *     word 2p + 1; render_index, for every point whose dkey equals that word,
  *     takes atomic_min of its id into word 2p. The result is the same vis
@@ -211,8 +216,9 @@ inline void raster_splat(int mode, uint i, uint px, uint py, uint W, uint H, uin
 inline void raster_batch(int mode, global const float *positions, global const uint *ids,
                          uint n, uint batch, global const float *bounds, global const float *cam,
                          float near, float far, uint W, uint H, global uint *vis,
-                         global uchar *drawn, uint reverse)
+                         global uchar *drawn, uint walk)
 {
+    uint reverse = walk & 1u;
     /* reverse also takes the batches last to first (group g: batch nb-1-g),
      * so that the whole cloud, not just each batch, comes nearest first to
      * devices that run the groups roughly in order */
@@ -252,7 +258,7 @@ inline void raster_batch(int mode, global const float *positions, global const u
         key.v = clvis_key_f32_8(as_uint8(depth));
         ok.v = drawn8;
 #if POINT_SIZE == 1
-        if (mode != MODE_INDEX) {
+        if (mode != MODE_INDEX && (walk & 2u) != 0u) {
             /* benign race (early-z): early-z of the 8 lanes at once (8
              * independent loads, one vector compare), then raster_point on
              * only the lanes that pass, in the same lane order. The loads are
@@ -302,29 +308,29 @@ inline void raster_batch(int mode, global const float *positions, global const u
 kernel void render_visibility(global const float *positions, global const uint *ids, uint n,
                               uint batch, global const float *bounds, global const float *cam,
                               float near, float far, uint W, uint H, global ulong *vis,
-                              global uchar *drawn, uint reverse)
+                              global uchar *drawn, uint walk)
 {
     raster_batch(MODE_VIS64, positions, ids, n, batch, bounds, cam, near, far, W, H,
-                 (global uint *)vis, drawn, reverse);
+                 (global uint *)vis, drawn, walk);
 }
 #endif
 
 kernel void render_depth(global const float *positions, global const uint *ids, uint n,
                          uint batch, global const float *bounds, global const float *cam,
                          float near, float far, uint W, uint H, global uint *vis,
-                         global uchar *drawn, uint reverse)
+                         global uchar *drawn, uint walk)
 {
     raster_batch(MODE_DEPTH, positions, ids, n, batch, bounds, cam, near, far, W, H, vis, drawn,
-                 reverse);
+                 walk);
 }
 
 kernel void render_index(global const float *positions, global const uint *ids, uint n,
                          uint batch, global const float *bounds, global const float *cam,
                          float near, float far, uint W, uint H, global uint *vis,
-                         global uchar *drawn, uint reverse)
+                         global uchar *drawn, uint walk)
 {
     raster_batch(MODE_INDEX, positions, ids, n, batch, bounds, cam, near, far, W, H, vis, drawn,
-                 reverse);
+                 walk);
 }
 
 /* soft_accumulate at one pixel p of point i (its depth: `depth`). */

@@ -130,7 +130,7 @@ int main(int argc, char **argv)
             passes[1] = "render_index";
         }
         const cl_mem no_ids = NULL;
-        const cl_uint reverse = 0;
+        const cl_uint walk = 0; /* render.cl: forwards, lane by lane */
         for (int p = 0; p < 2 && passes[p]; ++p) {
             cl_kernel k = kernel(prg[0], passes[p]);
             CHECK(clSetKernelArg(k, 0, sizeof d_pos, &d_pos));
@@ -145,7 +145,7 @@ int main(int argc, char **argv)
             CHECK(clSetKernelArg(k, 9, sizeof H, &H));
             CHECK(clSetKernelArg(k, 10, sizeof d_vis, &d_vis));
             CHECK(clSetKernelArg(k, 11, sizeof d_drawn, &d_drawn));
-            CHECK(clSetKernelArg(k, 12, sizeof reverse, &reverse));
+            CHECK(clSetKernelArg(k, 12, sizeof walk, &walk));
             size_t g = nb, l = 1;
             CHECK(clEnqueueNDRangeKernel(q, k, 1, NULL, &g, &l, 0, NULL, NULL));
             clReleaseKernel(k);

@@ -197,9 +197,9 @@ class Rasterizer:
         pos = self._upload("positions", inp.positions)
         self.ids: cla.Array | None = None
         self.inv: cla.Array | None = None
-        # Morton-ordered: render.cl's walk sets its coherent bit
-        self.coherent = bool(morton and n > 1)
-        if self.coherent:
+        # render.cl's walk: its coherent bit (see coherent)
+        self._coherent: bool | None = True if morton and n > 1 else None
+        if morton and n > 1:
             perm = typing.cast(cla.Array, morton_order(pos, queue=q))  # device in, device out
             self.ids = perm
             self.positions, self.inv = morton_gather(q, pos, perm)
@@ -223,6 +223,18 @@ class Rasterizer:
         self.colors = self._upload("colors", inp.colors)
         self.velocity = self._upload("velocity", inp.velocity)
         self.radius = self._upload("radius", inp.radius)
+
+    @property
+    def coherent(self) -> bool:
+        """Whether the points lie in spatially coherent batches (Morton-ordered
+        here, or sorted so by the caller): then each batch's box spans less
+        than half the cloud's (the sum of its three sides against the
+        cloud's), and render.cl's walk sets its coherent bit, the 8-point
+        early-z that pays only when most points are rejected. Judged once,
+        from the batch boxes (read back at the first call)."""
+        if self._coherent is None:
+            self._coherent = _coherent_batches(self.bounds.get()) if self.n > 1 else False
+        return self._coherent
 
     def _render_kernels(self, point_size: int) -> dict:
         """render.cl's kernels for POINT_SIZE = point_size (one build each)."""
@@ -624,6 +636,22 @@ def _items(queue, n: int) -> tuple[int, int]:
 
 def _render_defines(queue) -> dict:
     return {"VEC": PROFILES[runtime.tuning_profile(queue)]["VEC"]}
+
+
+def _coherent_batches(bounds: np.ndarray) -> bool:
+    """True when the median batch box (rows: min xyz, max xyz; empty batches
+    have min > max) spans less than half of the cloud's box, side sums
+    compared."""
+    b = bounds.astype(np.float64)
+    lo, hi = b[:, :3], b[:, 3:]
+    full = (lo <= hi).all(axis=1)
+    if full.sum() < 2:
+        return False
+    lo, hi = lo[full], hi[full]
+    span = (hi.max(axis=0) - lo.min(axis=0)).sum()
+    if not np.isfinite(span) or span <= 0:
+        return False
+    return bool(np.median((hi - lo).sum(axis=1)) < 0.5 * span)
 
 
 def _batch_bounds(queue, positions, batch: int) -> cla.Array:

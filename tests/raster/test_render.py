@@ -278,6 +278,20 @@ def test_walk_directions(queue, int64, morton):
     assert walks == {False, True}
 
 
+def test_coherent_judged_from_the_batch_boxes(queue):
+    """Points the caller sorted along the Morton curve count as coherent
+    without morton=True (render.cl's 8-point early-z); the same shuffled do
+    not; a cloud whose coordinates are all NaN is not (no batch box)."""
+    rng = np.random.default_rng(3)
+    pos = (rng.random((20000, 3)) * [50, 30, 4]).astype(np.float32)
+    order = clvis.morton_order(pos, queue=queue)
+    assert clvis.Rasterizer(pos[order], morton=False, batch_size=256, queue=queue).coherent
+    assert not clvis.Rasterizer(pos, morton=False, batch_size=256, queue=queue).coherent
+    assert clvis.Rasterizer(pos, batch_size=256, queue=queue).coherent
+    nan = np.full((600, 3), np.nan, np.float32)
+    assert not clvis.Rasterizer(nan, morton=False, batch_size=256, queue=queue).coherent
+
+
 @given(seed=st.integers(0, 2**32 - 1), ortho=st.booleans(), batch=st.sampled_from([1, 7, 256, 10240]))
 def test_property_random_cameras(device, seed, ortho, batch):
     """Random clouds, random cameras (inside the cloud too), every batch size:

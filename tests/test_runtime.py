@@ -186,6 +186,37 @@ def test_package_in_path_with_space(device, tmp_path):
         assert (include / "clvis").is_dir()
 
 
+def test_include_option_is_the_same_for_every_checkout(tmp_path):
+    """Two checkouts of the same headers build with the same -I option (the
+    drivers' and pyopencl's cache keys hold it, so a second clone builds
+    nothing again); a copy at that name that was changed, or that others may
+    write to, is never used."""
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    code = "import clvis\nprint(clvis.runtime.build_options(clvis.default_queue().device, {})[1])\n"
+    seen = []
+    for name in ("a", "b"):
+        _copy_package(tmp_path / name)
+        env = dict(os.environ, PYTHONPATH=str(tmp_path / name), TMPDIR=str(tmp))
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        seen.append(Path(out.stdout.strip()))
+    assert seen[0] == seen[1] and seen[0].parent == tmp
+    assert (seen[0] / "clvis" / "camera.h").read_bytes() == (
+        REPO / "kernels_cl/include/clvis/camera.h"
+    ).read_bytes()
+    header = seen[0] / "clvis" / "camera.h"
+    for tamper in ("contents", "mode"):
+        if tamper == "contents":
+            header.write_text(header.read_text() + "\n#error foreign\n")
+        else:
+            header.write_bytes((REPO / "kernels_cl/include/clvis/camera.h").read_bytes())
+            seen[0].chmod(0o777)
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        assert Path(out.stdout.strip()) != seen[0], tamper
+
+
 @pytest.mark.parametrize(
     "var, value",
     [

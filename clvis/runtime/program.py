@@ -6,8 +6,10 @@ driver has none of its own)."""
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import re
+import stat
 import sys
 import time
 import warnings
@@ -62,45 +64,66 @@ def _define_value(name: str, v: object) -> str:
 
 
 def _include_option() -> str:
-    """The -I path. pyopencl joins options with spaces, and no quoting works
-    everywhere (PoCL 3 passes quotes on to clang literally), so when
-    INCLUDE_DIR's path has whitespace the headers are copied once to a private
-    folder whose path has none (:func:`_private_include`). The build never
-    changes the process's working directory, which other threads read."""
-    inc = str(INCLUDE_DIR)
-    if not re.search(r"\s", inc):
+    """The -I path: a copy of INCLUDE_DIR named by a hash of the headers'
+    contents (:func:`_private_include`), so that the option, part of the
+    drivers' and pyopencl's binary cache keys, is the same for every checkout
+    and install of the same headers: a second clone, a wheel beside an
+    editable install, or CI's fresh clone on a warm cache build nothing
+    again. The copy's path also has no whitespace, which the option cannot
+    take (pyopencl joins options with spaces and PoCL 3 passes quotes on to
+    clang literally). Where no temporary folder can hold the copy, INCLUDE_DIR
+    itself when its path has no whitespace. The build never changes the
+    process's working directory, which other threads read."""
+    try:
+        return str(_private_include())
+    except (ClvisError, OSError):
+        inc = str(INCLUDE_DIR)
+        if re.search(r"\s", inc):
+            raise
         return inc
-    return str(_private_include())
 
 
 _private: Path | None = None
 
 
+def _headers_digest(root: Path) -> str:
+    digest = hashlib.sha256()
+    for f in sorted(root.rglob("*")):
+        if f.is_file():
+            digest.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes())
+    return digest.hexdigest()
+
+
 def _private_include() -> Path:
     """A copy of INCLUDE_DIR under the temporary folder (or /tmp, /var/tmp),
-    named by a hash of the headers' paths and contents: made once (renamed into
-    place, so concurrent processes never see half a copy) and shared by every
-    process of this clvis version."""
+    named by the user and a hash of the headers' paths and contents: made once
+    (renamed into place, so concurrent processes never see half a copy) and
+    shared by every process of this user with the same headers. A copy found
+    in place is used only when this user owns it, nobody else may write to
+    it, and its contents hash the same (a shared /tmp cannot hand the
+    compiler foreign headers)."""
     global _private
     if _private is not None and _private.is_dir():
         return _private
-    import hashlib
     import shutil
     import tempfile
 
-    digest = hashlib.sha256()
-    for f in sorted(INCLUDE_DIR.rglob("*")):
-        if f.is_file():
-            digest.update(f.relative_to(INCLUDE_DIR).as_posix().encode() + b"\0" + f.read_bytes())
-    name = f"clvis-include-{digest.hexdigest()[:16]}"
+    digest = _headers_digest(INCLUDE_DIR)
+    uid = os.getuid() if hasattr(os, "getuid") else 0
+    name = f"clvis-include-{uid}-{digest[:16]}"
     for base in (tempfile.gettempdir(), "/tmp", "/var/tmp"):
         if re.search(r"\s", base) or not os.path.isdir(base):
             continue
         target = Path(base) / name
         if not target.is_dir():
+            if not os.access(base, os.W_OK):
+                continue
             staging = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=base))
             try:
-                shutil.copytree(INCLUDE_DIR, staging / "include")
+                copy = staging / "include"
+                shutil.copytree(INCLUDE_DIR, copy, copy_function=shutil.copyfile)
+                for f in (copy, *copy.rglob("*")):  # nobody else may write
+                    f.chmod(0o755 if f.is_dir() else 0o644)
                 try:
                     os.replace(staging / "include", target)
                 except OSError:  # another process made it first
@@ -108,6 +131,8 @@ def _private_include() -> Path:
                         raise
             finally:
                 shutil.rmtree(staging, ignore_errors=True)
+        if not _trusted_copy(target, uid, digest):
+            continue
         _private = target
         return target
     raise ClvisError(
@@ -115,6 +140,20 @@ def _private_include() -> Path:
         "compiler's -I option cannot take, and no temporary folder without whitespace was found "
         "to copy them to; set TMPDIR to one"
     )
+
+
+def _trusted_copy(target: Path, uid: int, digest: str) -> bool:
+    """`target` is this user's, writable by nobody else, with the headers
+    hashing to `digest`."""
+    try:
+        st = target.lstat()
+        if not stat.S_ISDIR(st.st_mode) or st.st_mode & 0o022:
+            return False
+        if hasattr(os, "getuid") and st.st_uid != uid:
+            return False
+        return _headers_digest(target) == digest
+    except OSError:
+        return False
 
 
 def build_options(device: cl.Device, defines: Mapping[str, object], flags: Sequence[str] = ()) -> list[str]:

@@ -284,6 +284,14 @@ def _frames(name: str, case: Case, seed: int, planes: Sequence[str], target: str
             )
 
 
+def as_picture(rgb: np.ndarray) -> np.ndarray:
+    """A baseline's frame as the 8-bit picture a user gets (clipped to 0..1,
+    rounded to 1/255, NaN as 0), as the network's call returns its own
+    (clvis.post.infer): every method is scored on what it shows."""
+    v = np.nan_to_num(np.clip(np.asarray(rgb, np.float32), np.float32(0), np.float32(1)), nan=0.0)
+    return np.rint(v * np.float32(255)) / np.float32(255)
+
+
 #: a frame's PSNR is capped here in the means (an input equal to its target,
 #: every ray finished, scores inf)
 PSNR_CAP = 100.0
@@ -328,7 +336,10 @@ def evaluate(
         per: dict[str, dict[str, list]] = {}
         for label, x, target, base in _frames(name, case, seed + 7919 * i, net.planes or (), model):
             got = net(x, guard=guarded)[..., :3] / np.float32(255)
-            scores = {"network": metrics(got, target), **{k: metrics(v, target) for k, v in base.items()}}
+            scores = {
+                "network": metrics(got, target),
+                **{k: metrics(as_picture(v), target) for k, v in base.items()},
+            }
             for k, v in scores.items():
                 per.setdefault(label, {}).setdefault(k, []).append(v)
         for label, methods in per.items():
@@ -436,6 +447,7 @@ __all__ = [
     "BASELINES",
     "FAMILIES",
     "TRAINED",
+    "as_picture",
     "Case",
     "evaluate",
     "margins",

@@ -174,8 +174,10 @@ KNOWN_BELOW = {
     },
     # the LiDAR card is scored with its guard (on by default): push-pull on
     # the terrain, where the U-Net alone is 4.94 dB / 0.011 SSIM below it;
-    # what remains is the picture's 8-bit rounding
-    "lidar": {"terrain 320x240 3% scan orbit": (-0.01, -0.001)},
+    # every method is scored as its 8-bit picture (evaluate.as_picture), so
+    # the guard's push-pull ties push-pull there (it was 0.01 dB below when
+    # only the network's picture was rounded)
+    "lidar": {},
     # narvis (4000 steps with the 'attractors' flow, then 4000 from it with
     # the radius plane): the plain rasterization is close to GR on the Lorenz
     # attractor's hemisphere views (-3.73 / -0.077 without the plane)
@@ -205,11 +207,24 @@ def test_shipped_cards_hold_their_suite_margins(name):
     assert set(KNOWN_BELOW[name]) <= {m[0] for m in margins}
 
 
-@pytest.mark.xfail(strict=True, reason="target missed: see KNOWN_BELOW (7 rows of the four quick suites)")
-@pytest.mark.parametrize("name", post.NAMES)
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(
+            n,
+            marks=pytest.mark.xfail(
+                strict=True, reason="target missed: see KNOWN_BELOW (rows of the quick suites)"
+            ),
+        )
+        if KNOWN_BELOW[n]
+        else n
+        for n in post.NAMES
+    ],
+)
 def test_shipped_cards_never_below_their_baseline(name):
     """Issue 21 §2: PSNR and SSIM >= the best classical baseline on every
-    row of the suite. Every shipped card misses it."""
+    row of the suite. Met by the LiDAR card (with its guard); the others
+    miss it on the rows of KNOWN_BELOW (a strict xfail each)."""
     card = json.loads((post.MODELS / f"{name}.json").read_text())
     margins = ev.margins({"model": name, "rows": card["held_out_suite"]["rows"]})
     assert all(dp >= 0 and ds >= 0 for _, dp, ds in margins)

@@ -6,8 +6,10 @@ A pass, for the rays still active (kernels_cl/iso/):
 1. macrocell traversal (traverse.cl): each ray walks the coarse grid, then
    the fine grid (the ZFP blocks) inside active coarse cells, and records up
    to n_spec candidate blocks whose range holds the isovalue (speculation:
-   n_spec = min(floor(W H s / active rays), 64), s the starting count; 1
-   without speculation);
+   n_spec = min(floor(W H s / active rays), 64), s the starting count, at
+   least 2 in the first pass, on the gpu profile, the paper's; the cpu
+   profile halves the budget, floor(W H s / (2 active rays)), and takes 3 in
+   the first pass: see PROFILES; 1 without speculation);
 2. grouping: the (ray, candidate) items are compacted and sorted by block
    (clvis.compact_indices, clvis.radix_sort), the blocks in a front-to-back
    order for the frame's rays (pass.cl's View order, :func:`view_flips`);
@@ -125,9 +127,19 @@ _PASS_KERNELS = (
     "tile_image",
     "mark_active",
 )
-# the local size of pass.cl's one-item-per-element kernels (a fixed one: PoCL
-# would compile a work-group function for every size the driver chose)
-PROFILES = {"cpu": {"wg": 64}, "gpu": {"wg": 64}}
+# wg: the local size of pass.cl's one-item-per-element kernels (a fixed one:
+# PoCL would compile a work-group function for every size the driver chose).
+# The speculation schedule (see _n_spec): spec_div divides the pass's item
+# budget (the tile's pixels x start_speculation), spec_first is the first
+# pass's candidates per ray. gpu: the paper's (fill the device: n_spec = W H s /
+# active rays, two in the first pass); cpu: half the items a pass after the
+# first, three in the first: fewer items for the same three passes at 256^3,
+# 512x512 (bench/results/iso-cpu.md, 2026-11-28 session 4). Only the passes
+# change with it, not the image.
+PROFILES = {
+    "cpu": {"wg": 64, "spec_div": 2, "spec_first": 3},
+    "gpu": {"wg": 64, "spec_div": 1, "spec_first": 2},
+}
 
 
 def _real(name: str, v: Any) -> float:
@@ -367,7 +379,9 @@ class IsoRenderer:
             self._kernels = {name: runtime.get_kernel(q, _PASS, name, {}) for name in _PASS_KERNELS}
             self._build_kernels()
             self.build_seconds = time.perf_counter() - t0
-            self._wg = PROFILES[self.config.tuning]["wg"]
+            profile = PROFILES[self.config.tuning]
+            self._wg = profile["wg"]
+            self._spec = (profile["spec_div"], profile["spec_first"])
             self.grids = macrocell_grids(zv, queue=q, host=False)
             self.cache = BlockCache(zv, cache_capacity, queue=q)
 
@@ -619,9 +633,7 @@ class IsoRenderer:
             n_active = n_enter
             tile_done = False
             while not tile_done:
-                n_spec = min(MAX_SPEC, max(1, (n * s) // n_active)) if speculation else 1
-                if speculation and stats["passes_per_tile"][ti] == 0:
-                    n_spec = max(n_spec, 2)  # the paper's two macro-traversal steps in the first pass
+                n_spec = self._n_spec(n, s, n_active, stats["passes_per_tile"][ti]) if speculation else 1
                 stats["active_per_pass"].append(n_active)
                 m, ngroups, decoded, item_bytes = self._pass(state, iso, bits, n_active, n_spec)
                 n_active = int(state.active.size)
@@ -664,6 +676,19 @@ class IsoRenderer:
                 yield lambda copy=True, st=st, a=a, f=frac, sd=sd, ev=ev: self._image(
                     w, h, out, (st, a), f, sd, ev, copy
                 )
+
+    def _n_spec(self, n: int, s: int, n_active: int, done: int) -> int:
+        """Candidates per ray of a tile's pass with speculation: n tile pixels,
+        s start_speculation, n_active rays, `done` passes before it. The
+        items (n_active x n_spec) stay within the tile's budget, n x max(s, 2)
+        (tile_plan): n // spec_div x s over the active rays, at least 1, at
+        most MAX_SPEC; the first pass at least spec_first (the paper's two
+        macro-traversal steps on the gpu profile) where the budget allows."""
+        div, first = self._spec
+        n_spec = min(MAX_SPEC, max(1, (n * s) // (div * n_active)))
+        if done == 0:
+            n_spec = max(n_spec, min(first, (n * max(s, 2)) // n_active, MAX_SPEC))
+        return n_spec
 
     def _pass(
         self, t: _Tile, iso: float, bits: tuple[cla.Array, cla.Array], n_active: int, n_spec: int

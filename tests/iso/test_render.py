@@ -61,6 +61,51 @@ def test_speculation_cuts_passes(queue):
     np.testing.assert_array_equal(a.depth, b.depth)
 
 
+def test_speculation_schedules_same_image(queue):
+    """The cpu and gpu profiles' speculation schedules (render.PROFILES) give
+    the same image bit for bit: the candidates do not depend on the passes."""
+    import clvis.iso.render as render_mod
+
+    d = _TURB
+    zv = zfp.compress(d["volume"], 12)
+    r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
+    imgs = []
+    for profile in ("gpu", "cpu"):
+        p = render_mod.PROFILES[profile]
+        r._spec = (p["spec_div"], p["spec_first"])
+        r.reset_cache()
+        img = r.render(_cam(), W, H, 0.5)
+        st = img.stats
+        assert st["n_spec_per_pass"] == [
+            r._n_spec(W * H, 1, a, i) for i, a in enumerate(st["active_per_pass"])
+        ]
+        imgs.append(img)
+    assert imgs[0].stats["n_spec_per_pass"] != imgs[1].stats["n_spec_per_pass"]
+    assert imgs[0].hit.mean() > 0.2
+    for name in ("hit", "depth", "t", "rgba"):
+        np.testing.assert_array_equal(getattr(imgs[1], name), getattr(imgs[0], name))
+
+
+@pytest.mark.parametrize("profile", ["cpu", "gpu"])
+def test_n_spec_within_the_tile_budget(profile):
+    """_n_spec: the pass's items stay within tile_plan's n x max(s, 2); the gpu
+    profile's schedule is the paper's."""
+    import clvis.iso.render as render_mod
+
+    p = render_mod.PROFILES[profile]
+    r = object.__new__(iso.IsoRenderer)
+    r._spec = (p["spec_div"], p["spec_first"])
+    for n in (1, 7, 100, 262144):
+        for s in (1, 2, 3, 64):
+            for n_active in {min(2, n), max(1, n // 3), max(1, n - 1), n}:
+                for done in (0, 1):
+                    k = r._n_spec(n, s, n_active, done)
+                    assert 1 <= k <= render_mod.MAX_SPEC and n_active * k <= n * max(s, 2)
+                    if profile == "gpu":
+                        paper = min(64, max(1, n * s // n_active))
+                        assert k == (max(paper, 2) if done == 0 else paper)
+
+
 def test_without_int64_atomics_same_image(device):
     d = _ML
     zv = zfp.compress(d["volume"], 16)

@@ -120,12 +120,15 @@ def test_nan_inf_never_drawn(queue):
     bad = rng.random(pos.shape) < 0.05
     pos[bad] = rng.choice(np.array([np.nan, np.inf, -np.inf], np.float32), int(bad.sum()))
     pos[:20_000] = np.nan  # whole batches with no finite point
-    cam = _cam()
-    want = ref.visibility(pos, cam, W, H)
-    ids = want[want != np.iinfo(np.uint64).max] & np.uint64(0xFFFFFFFF)
-    assert np.isfinite(pos[ids.astype(np.int64)]).all()
-    for morton in (False, True):
-        np.testing.assert_array_equal(_vis(queue, pos, cam, morton=morton, batch_size=4096), want)
+    # perspective: render.cl's float8 loop takes clip w as the depth; the
+    # orthographic camera's depth row is its own (clvis_project8's w_depth)
+    ortho = Camera.ortho((0.3, -6.0, 1.2), (0, 0, 0), (0, 0, 1), height=6.0, aspect=W / H, near=0.5, far=20)
+    for cam in (_cam(), ortho):
+        want = ref.visibility(pos, cam, W, H)
+        ids = want[want != np.iinfo(np.uint64).max] & np.uint64(0xFFFFFFFF)
+        assert len(ids) > W * H // 4 and np.isfinite(pos[ids.astype(np.int64)]).all()
+        for morton in (False, True):
+            np.testing.assert_array_equal(_vis(queue, pos, cam, morton=morton, batch_size=4096), want)
 
 
 def test_fallback_without_int64_atomics(device):

@@ -91,23 +91,31 @@ inline int clvis_project(const clvis_camera *c, float x, float y, float z,
 }
 
 /* clvis_project on 8 points at once (the same operations lane by lane, so
- * the same results); returns -1 in the lanes drawn, 0 elsewhere. */
+ * the same results); returns -1 in the lanes drawn, 0 elsewhere. near and far
+ * must be finite. Then the finiteness test of x, y, z is left out: it is
+ * implied by near <= depth <= far, since a NaN or infinite coordinate makes
+ * every sum it enters, so depth, NaN or infinite (0 * inf is NaN).
+ * w_depth: the caller has found the clip w row equal to the depth row, value
+ * by value (a perspective camera: M's last row is -view[2, :] = D), and depth
+ * is taken to be clip w. Both sums then agree in value at every step, and in
+ * their bits unless the result is a zero (its sign may differ); a drawn point
+ * has clip w > 0, so its depth is the same float either way, and each lane's
+ * tests give the same answer (-0 == +0). */
 inline int8 clvis_project8(const clvis_camera *c, float8 x, float8 y, float8 z,
                            float near, float far, float fw, float fh,
-                           float8 *sx, float8 *sy, float8 *depth)
+                           float8 *sx, float8 *sy, float8 *depth, int w_depth)
 {
     float8 cx = ((c->r0.x * x + c->r0.y * y) + c->r0.z * z) + c->r0.w;
     float8 cy = ((c->r1.x * x + c->r1.y * y) + c->r1.z * z) + c->r1.w;
     float8 cw = ((c->r3.x * x + c->r3.y * y) + c->r3.z * z) + c->r3.w;
-    float8 d = ((c->d.x * x + c->d.y * y) + c->d.z * z) + c->d.w;
+    float8 d = w_depth ? cw : ((c->d.x * x + c->d.y * y) + c->d.z * z) + c->d.w;
     float8 r = 1.0f / cw;
     float8 px = ((cx * r) * 0.5f + 0.5f) * fw;
     float8 py = (0.5f - (cy * r) * 0.5f) * fh;
     *sx = px;
     *sy = py;
     *depth = d;
-    return clvis_il_isfinite8(x) & clvis_il_isfinite8(y) & clvis_il_isfinite8(z) & (d >= near)
-        & (d <= far) & (cw > 0.0f)
+    return (d >= near) & (d <= far) & (cw > 0.0f)
         & (px >= 0.0f) & (px < fw) & (py >= 0.0f) & (py < fh);
 }
 

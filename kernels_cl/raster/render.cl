@@ -217,8 +217,12 @@ inline void raster_splat(int mode, uint i, uint px, uint py, uint W, uint H, uin
  * vector registers, then the drawn lanes one by one. Returns how many points
  * it took (a multiple of 8; the rest go to the scalar loop). w_depth: the
  * camera's clip w row equals its depth row (clvis_project8 then reuses clip
- * w as the depth). */
-inline uint raster_steps8(int mode, int w_depth, global const float *positions,
+ * w as the depth). inside (a constant at each call site: one loop for the
+ * batches whose box lies inside the view, one for the others): the batch
+ * box passed clvis_box_inside (clvis_project8 then tests only the depth
+ * range). */
+__attribute__((always_inline))
+inline uint raster_steps8(int mode, int w_depth, int inside, global const float *positions,
                           global const uint *ids, const clvis_camera *c, float near, float far,
                           uint W, uint H, uint start, uint end, uint walk,
                           volatile global uint *words)
@@ -235,7 +239,8 @@ inline uint raster_steps8(int mode, int w_depth, global const float *positions,
         float8 y = (float8)(v0.s1, v0.s4, v0.s7, v1.s2, v1.s5, v2.s0, v2.s3, v2.s6);
         float8 z = (float8)(v0.s2, v0.s5, v1.s0, v1.s3, v1.s6, v2.s1, v2.s4, v2.s7);
         float8 sx, sy, depth;
-        int8 drawn8 = clvis_project8(&cc, x, y, z, near, far, fw, fh, &sx, &sy, &depth, w_depth);
+        int8 drawn8 = clvis_project8(&cc, x, y, z, near, far, fw, fh, &sx, &sy, &depth, w_depth,
+                                      inside);
         if (!clvis_il_any8(drawn8))
             continue;
         /* the lanes through unions, not vstore8 (a call on PoCL) */
@@ -319,10 +324,15 @@ inline void raster_batch(int mode, global const float *positions, global const u
 #if VEC == 8
     if (L == 1) {
         /* a perspective camera's clip w row is its depth row (equal values:
-         * clvis_project8's w_depth) */
+         * clvis_project8's w_depth); always_inline (PoCL would call one
+         * function with `inside` as an argument, and test it per point) */
         int w_depth = c.r3.x == c.d.x && c.r3.y == c.d.y && c.r3.z == c.d.z && c.r3.w == c.d.w;
-        t = raster_steps8(mode, w_depth, positions, ids, &c, near, far, W, H, start, end, walk,
-                          words);
+        if (clvis_box_inside(&c, lo, hi))
+            t = raster_steps8(mode, w_depth, 1, positions, ids, &c, near, far, W, H, start, end,
+                              walk, words);
+        else
+            t = raster_steps8(mode, w_depth, 0, positions, ids, &c, near, far, W, H, start, end,
+                              walk, words);
     }
 #endif
     for (; t < count; t += L) {

@@ -23,7 +23,7 @@
  *
  * Points and batches. positions: n points, 3 floats each (x, y, z), in render
  * order. They are cut into nb = ceil(n / batch) batches of `batch` consecutive
- * points; bounds[6*b .. 6*b+5] = (min x, min y, min z, max x, max y, max z) of
+ * points (1 <= batch <= 2^24); bounds[6*b .. 6*b+5] = (min x, min y, min z, max x, max y, max z) of
  * the finite points of batch b (batch_bounds computes it; min > max for a batch
  * with none). Launch every per-batch kernel with global size nb * L and local
  * size L: group g walks batch b = g (walk's reverse bit in the three
@@ -232,12 +232,31 @@ inline uint raster_steps8(int mode, int w_depth, int inside, global const float 
     clvis_camera cc = *c;   /* in registers, not reloaded after each atomic */
     for (; t + 8 <= count; t += 8) {
         uint i = reverse ? end - t - 8 : start + t;
-        float8 v0 = clvis_il_vload8(positions + 3 * (size_t)i);
-        float8 v1 = clvis_il_vload8(positions + 3 * (size_t)i + 8);
-        float8 v2 = clvis_il_vload8(positions + 3 * (size_t)i + 16);
-        float8 x = (float8)(v0.s0, v0.s3, v0.s6, v1.s1, v1.s4, v1.s7, v2.s2, v2.s5);
-        float8 y = (float8)(v0.s1, v0.s4, v0.s7, v1.s2, v1.s5, v2.s0, v2.s3, v2.s6);
-        float8 z = (float8)(v0.s2, v0.s5, v1.s0, v1.s3, v1.s6, v2.s1, v2.s4, v2.s7);
+        /* the 8 points' x, y, z (point k in lane k): 4-float loads into the
+         * two 128-bit halves, m03 = x0 y0 z0 x1 | x4 y4 z4 x5, m14 = y1 z1
+         * x2 y2 | y5 z5 x6 y6, m25 = z2 x3 y3 z3 | z6 x7 y7 z7, then five
+         * in-half shuffles (one vshufps each on AVX). `zero` (0: count <=
+         * batch <= 2^24) is XORed in after the loads and after the first
+         * shuffles so that the compiler can neither see the lanes as
+         * single floats of memory nor merge the two levels of shuffles:
+         * PoCL's LLVM 14 turns them back into 24 one-float loads, or ~35
+         * blends and permutes. */
+        global const float *p = positions + 3 * (size_t)i;
+        uint8 zero = (uint8)(count >> 31);
+        float8 m03 = as_float8(as_uint8((float8)(CLVIS_IL_VLOAD4(float4, p),
+                                                  CLVIS_IL_VLOAD4(float4, p + 12))) ^ zero);
+        float8 m14 = as_float8(as_uint8((float8)(CLVIS_IL_VLOAD4(float4, p + 4),
+                                                  CLVIS_IL_VLOAD4(float4, p + 16))) ^ zero);
+        float8 m25 = as_float8(as_uint8((float8)(CLVIS_IL_VLOAD4(float4, p + 8),
+                                                  CLVIS_IL_VLOAD4(float4, p + 20))) ^ zero);
+        float8 xy = (float8)(m14.s2, m14.s3, m25.s1, m25.s2, m14.s6, m14.s7, m25.s5, m25.s6);
+        float8 yz = (float8)(m03.s1, m03.s2, m14.s0, m14.s1, m03.s5, m03.s6, m14.s4, m14.s5);
+        /* xy = x2 y2 x3 y3 | x6 y6 x7 y7, yz = y0 z0 y1 z1 | y4 z4 y5 z5 */
+        xy = as_float8(as_uint8(xy) ^ zero);
+        yz = as_float8(as_uint8(yz) ^ zero);
+        float8 x = (float8)(m03.s0, m03.s3, xy.s0, xy.s2, m03.s4, m03.s7, xy.s4, xy.s6);
+        float8 y = (float8)(yz.s0, yz.s2, xy.s1, xy.s3, yz.s4, yz.s6, xy.s5, xy.s7);
+        float8 z = (float8)(yz.s1, yz.s3, m25.s0, m25.s3, yz.s5, yz.s7, m25.s4, m25.s7);
         float8 sx, sy, depth;
         int8 drawn8 = clvis_project8(&cc, x, y, z, near, far, fw, fh, &sx, &sy, &depth, w_depth,
                                       inside);

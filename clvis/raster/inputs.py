@@ -50,6 +50,10 @@ def check_camera(camera: Any) -> tuple[np.ndarray, np.float32, np.float32]:
     near, far = float(camera.near), float(camera.far)
     if not (math.isfinite(near) and math.isfinite(far) and near < far):
         raise ValueError(f"camera: needs finite near < far, got near={near}, far={far}")
+    with np.errstate(over="ignore"):  # render.cl takes them as finite floats
+        near_far32 = np.array([near, far], np.float32)
+    if not np.isfinite(near_far32).all():
+        raise ValueError(f"camera: near and far must be finite in float32, got near={near}, far={far}")
     try:
         m = np.array(camera.matrix, np.float64)
         d = np.array(camera.depth_row, np.float64)

@@ -23,7 +23,7 @@
  *
  * Points and batches. positions: n points, 3 floats each (x, y, z), in render
  * order. They are cut into nb = ceil(n / batch) batches of `batch` consecutive
- * points; bounds[6*b .. 6*b+5] = (min x, min y, min z, max x, max y, max z) of
+ * points (1 <= batch <= 2^24); bounds[6*b .. 6*b+5] = (min x, min y, min z, max x, max y, max z) of
  * the finite points of batch b (batch_bounds computes it; min > max for a batch
  * with none). Launch every per-batch kernel with global size nb * L and local
  * size L: group g walks batch b = g (walk's reverse bit in the three
@@ -33,8 +33,8 @@
  * the caller's order when the points were reordered, e.g. by Morton code).
  * Ties (equal depth) go to the lowest id.
  *
- * Camera: cam, 20 floats (clvis/camera.h); near, far; W, H: image size
- * (1 <= W, H <= 2^24).
+ * Camera: cam, 20 floats (clvis/camera.h); near, far: finite floats; W, H:
+ * image size (1 <= W, H <= 2^24).
  *
  * Visibility buffer vis: W*H ulongs, vis[py*W + px] = dkey << 32 | id, dkey =
  * clvis_key_f32(bits of depth) (order-preserving; for positive depths the
@@ -211,6 +211,111 @@ inline void raster_splat(int mode, uint i, uint px, uint py, uint W, uint H, uin
 #endif
 }
 
+#if VEC == 8
+/* raster_batch's steps of 8 points (one work-item per batch: L == 1) over
+ * the batch's points start .. end - 1 (walk as there): the projection in
+ * vector registers, then the drawn lanes one by one. Returns how many points
+ * it took (a multiple of 8; the rest go to the scalar loop). w_depth: the
+ * camera's clip w row equals its depth row (clvis_project8 then reuses clip
+ * w as the depth). inside (a constant at each call site: one loop for the
+ * batches whose box lies inside the view, one for the others): the batch
+ * box passed clvis_box_inside (clvis_project8 then tests only the depth
+ * range). */
+__attribute__((always_inline))
+inline uint raster_steps8(int mode, int w_depth, int inside, global const float *positions,
+                          global const uint *ids, const clvis_camera *c, float near, float far,
+                          uint W, uint H, uint start, uint end, uint walk,
+                          volatile global uint *words)
+{
+    uint reverse = walk & 1u, count = end - start, t = 0;
+    float fw = (float)W, fh = (float)H;
+    clvis_camera cc = *c;   /* in registers, not reloaded after each atomic */
+    for (; t + 8 <= count; t += 8) {
+        uint i = reverse ? end - t - 8 : start + t;
+        /* the 8 points' x, y, z (point k in lane k): 4-float loads into the
+         * two 128-bit halves, m03 = x0 y0 z0 x1 | x4 y4 z4 x5, m14 = y1 z1
+         * x2 y2 | y5 z5 x6 y6, m25 = z2 x3 y3 z3 | z6 x7 y7 z7, then five
+         * in-half shuffles (one vshufps each on AVX). `zero` (0: count <=
+         * batch <= 2^24) is XORed in after the loads and after the first
+         * shuffles so that the compiler can neither see the lanes as
+         * single floats of memory nor merge the two levels of shuffles:
+         * PoCL's LLVM 14 turns them back into 24 one-float loads, or ~35
+         * blends and permutes. */
+        global const float *p = positions + 3 * (size_t)i;
+        uint8 zero = (uint8)(count >> 31);
+        float8 m03 = as_float8(as_uint8((float8)(CLVIS_IL_VLOAD4(float4, p),
+                                                  CLVIS_IL_VLOAD4(float4, p + 12))) ^ zero);
+        float8 m14 = as_float8(as_uint8((float8)(CLVIS_IL_VLOAD4(float4, p + 4),
+                                                  CLVIS_IL_VLOAD4(float4, p + 16))) ^ zero);
+        float8 m25 = as_float8(as_uint8((float8)(CLVIS_IL_VLOAD4(float4, p + 8),
+                                                  CLVIS_IL_VLOAD4(float4, p + 20))) ^ zero);
+        float8 xy = (float8)(m14.s2, m14.s3, m25.s1, m25.s2, m14.s6, m14.s7, m25.s5, m25.s6);
+        float8 yz = (float8)(m03.s1, m03.s2, m14.s0, m14.s1, m03.s5, m03.s6, m14.s4, m14.s5);
+        /* xy = x2 y2 x3 y3 | x6 y6 x7 y7, yz = y0 z0 y1 z1 | y4 z4 y5 z5 */
+        xy = as_float8(as_uint8(xy) ^ zero);
+        yz = as_float8(as_uint8(yz) ^ zero);
+        float8 x = (float8)(m03.s0, m03.s3, xy.s0, xy.s2, m03.s4, m03.s7, xy.s4, xy.s6);
+        float8 y = (float8)(yz.s0, yz.s2, xy.s1, xy.s3, yz.s4, yz.s6, xy.s5, xy.s7);
+        float8 z = (float8)(yz.s1, yz.s3, m25.s0, m25.s3, yz.s5, yz.s7, m25.s4, m25.s7);
+        float8 sx, sy, depth;
+        int8 drawn8 = clvis_project8(&cc, x, y, z, near, far, fw, fh, &sx, &sy, &depth, w_depth,
+                                      inside);
+        if (!clvis_il_any8(drawn8))
+            continue;
+        /* the lanes through unions, not vstore8 (a call on PoCL) */
+        union { uint8 v; uint s[8]; } pxs, pys, key;
+        union { int8 v; int s[8]; } ok;
+        /* 0 <= sx < W <= 2^24 in the drawn lanes: the int conversion is exact */
+        pxs.v = as_uint8(convert_int8(sx));
+        pys.v = as_uint8(convert_int8(sy));
+        /* w_depth: depth = clip w > 0 in the drawn lanes, whose key is then
+         * the float bits with the sign bit set (clvis_key_f32) */
+        key.v = w_depth ? as_uint8(depth) | (uint8)(0x80000000u)
+                        : clvis_key_f32_8(as_uint8(depth));
+        ok.v = drawn8;
+#if POINT_SIZE == 1
+        if (mode != MODE_INDEX && (walk & 2u) != 0u) {
+            /* benign race (early-z): early-z of the 8 lanes at once (8
+             * independent loads, one vector compare), then raster_point on
+             * only the lanes that pass, in the same lane order. The loads are
+             * raster_point's early-z read (safe: see there), done earlier;
+             * raster_point repeats the test against the word as it is then,
+             * so a word read here before an earlier lane's atomic can only
+             * let a point through to that second test. The same points win. */
+            union { uint8 v; uint s[8]; } pix, z;
+            pix.v = clvis_il_select8((uint8)(0u), pys.v * (uint8)(W) + pxs.v, drawn8);
+            z.v = (uint8)(words[clvis_hi_word(pix.s[0])], words[clvis_hi_word(pix.s[1])],
+                          words[clvis_hi_word(pix.s[2])], words[clvis_hi_word(pix.s[3])],
+                          words[clvis_hi_word(pix.s[4])], words[clvis_hi_word(pix.s[5])],
+                          words[clvis_hi_word(pix.s[6])], words[clvis_hi_word(pix.s[7])]);
+            int8 pass = drawn8 & (key.v <= z.v);
+            if (!clvis_il_any8(pass))
+                continue;
+            uint8 bit = reverse ? (uint8)(128u, 64u, 32u, 16u, 8u, 4u, 2u, 1u)
+                                : (uint8)(1u, 2u, 4u, 8u, 16u, 32u, 64u, 128u);
+            uint8 sel = bit & as_uint8(pass);
+            uint4 m4 = sel.lo | sel.hi;
+            uint2 m2 = m4.lo | m4.hi;
+            uint m = m2.x | m2.y;
+            while (m != 0u) {
+                uint kk = clvis_il_ctz64((ulong)m);
+                uint k = reverse ? 7u - kk : kk;
+                m &= m - 1u;
+                raster_point(mode, i + k, pix.s[k], key.s[k], ids, words);
+            }
+            continue;
+        }
+#endif
+        for (int kk = 0; kk < 8; ++kk) {
+            int k = reverse ? 7 - kk : kk;
+            if (ok.s[k])
+                raster_splat(mode, i + k, pxs.s[k], pys.s[k], W, H, key.s[k], ids, words);
+        }
+    }
+    return t;
+}
+#endif
+
 /* The body of the three visibility kernels; `mode` is a constant at each call
  * site, so each kernel compiles to its own loop. */
 inline void raster_batch(int mode, global const float *positions, global const uint *ids,
@@ -236,62 +341,17 @@ inline void raster_batch(int mode, global const float *positions, global const u
     uint start = b * batch, end = clvis_il_umin(n, (b + 1) * batch), count = end - start, t = l;
     volatile global uint *words = vis;
 #if VEC == 8
-    /* 8 points a step (one work-item per batch: L == 1): the projection in
-     * vector registers, then the drawn lanes one by one */
-    for (; L == 1 && t + 8 <= count; t += 8) {
-        uint i = reverse ? end - t - 8 : start + t;
-        float8 v0 = clvis_il_vload8(positions + 3 * (size_t)i);
-        float8 v1 = clvis_il_vload8(positions + 3 * (size_t)i + 8);
-        float8 v2 = clvis_il_vload8(positions + 3 * (size_t)i + 16);
-        float8 x = (float8)(v0.s0, v0.s3, v0.s6, v1.s1, v1.s4, v1.s7, v2.s2, v2.s5);
-        float8 y = (float8)(v0.s1, v0.s4, v0.s7, v1.s2, v1.s5, v2.s0, v2.s3, v2.s6);
-        float8 z = (float8)(v0.s2, v0.s5, v1.s0, v1.s3, v1.s6, v2.s1, v2.s4, v2.s7);
-        float8 sx, sy, depth;
-        int8 drawn8 = clvis_project8(&c, x, y, z, near, far, fw, fh, &sx, &sy, &depth);
-        if (!clvis_il_any8(drawn8))
-            continue;
-        /* the lanes through unions, not vstore8 (a call on PoCL) */
-        union { uint8 v; uint s[8]; } pxs, pys, key;
-        union { int8 v; int s[8]; } ok;
-        pxs.v = convert_uint8(sx);
-        pys.v = convert_uint8(sy);
-        key.v = clvis_key_f32_8(as_uint8(depth));
-        ok.v = drawn8;
-#if POINT_SIZE == 1
-        if (mode != MODE_INDEX && (walk & 2u) != 0u) {
-            /* benign race (early-z): early-z of the 8 lanes at once (8
-             * independent loads, one vector compare), then raster_point on
-             * only the lanes that pass, in the same lane order. The loads are
-             * raster_point's early-z read (safe: see there), done earlier;
-             * raster_point repeats the test against the word as it is then,
-             * so a word read here before an earlier lane's atomic can only
-             * let a point through to that second test. The same points win. */
-            union { uint8 v; uint s[8]; } pix, z;
-            pix.v = clvis_il_select8((uint8)(0u), pys.v * (uint8)(W) + pxs.v, drawn8);
-            z.v = (uint8)(words[clvis_hi_word(pix.s[0])], words[clvis_hi_word(pix.s[1])],
-                          words[clvis_hi_word(pix.s[2])], words[clvis_hi_word(pix.s[3])],
-                          words[clvis_hi_word(pix.s[4])], words[clvis_hi_word(pix.s[5])],
-                          words[clvis_hi_word(pix.s[6])], words[clvis_hi_word(pix.s[7])]);
-            uint8 bit = reverse ? (uint8)(128u, 64u, 32u, 16u, 8u, 4u, 2u, 1u)
-                                : (uint8)(1u, 2u, 4u, 8u, 16u, 32u, 64u, 128u);
-            uint8 sel = bit & as_uint8(drawn8 & (key.v <= z.v));
-            uint4 m4 = sel.lo | sel.hi;
-            uint2 m2 = m4.lo | m4.hi;
-            uint m = m2.x | m2.y;
-            while (m != 0u) {
-                uint kk = clvis_il_ctz64((ulong)m);
-                uint k = reverse ? 7u - kk : kk;
-                m &= m - 1u;
-                raster_point(mode, i + k, pix.s[k], key.s[k], ids, words);
-            }
-            continue;
-        }
-#endif
-        for (int kk = 0; kk < 8; ++kk) {
-            int k = reverse ? 7 - kk : kk;
-            if (ok.s[k])
-                raster_splat(mode, i + k, pxs.s[k], pys.s[k], W, H, key.s[k], ids, words);
-        }
+    if (L == 1) {
+        /* a perspective camera's clip w row is its depth row (equal values:
+         * clvis_project8's w_depth); always_inline (PoCL would call one
+         * function with `inside` as an argument, and test it per point) */
+        int w_depth = c.r3.x == c.d.x && c.r3.y == c.d.y && c.r3.z == c.d.z && c.r3.w == c.d.w;
+        if (clvis_box_inside(&c, lo, hi))
+            t = raster_steps8(mode, w_depth, 1, positions, ids, &c, near, far, W, H, start, end,
+                              walk, words);
+        else
+            t = raster_steps8(mode, w_depth, 0, positions, ids, &c, near, far, W, H, start, end,
+                              walk, words);
     }
 #endif
     for (; t < count; t += L) {

@@ -1,6 +1,8 @@
 """clvis.raster.inputs: the raster input rules, public for every caller (the
 Rasterizer, the distributed layer). Host-only checks: no device needed."""
 
+import types
+
 import numpy as np
 import pytest
 
@@ -19,6 +21,13 @@ def test_check_camera():
     assert buf.dtype == np.float32 and buf.size == 20 and (near, far) == (np.float32(0.5), np.float32(20))
     with pytest.raises(TypeError, match="expected a clvis.Camera"):
         inputs.check_camera("camera")
+    # render.cl takes near and far as finite floats (its vector projection
+    # relies on it): a camera-like object whose far overflows float32 is refused
+    c = _cam()
+    far = types.SimpleNamespace(**{k: getattr(c, k) for k in ("matrix", "depth_row", "near", "projection")})
+    far.far = 1e39
+    with pytest.raises(ValueError, match="finite in float32"):
+        inputs.check_camera(far)
 
 
 def test_check_size_and_point_size():

@@ -114,18 +114,24 @@ def test_near_far_behind_and_edges(queue):
         )
 
 
-def test_nan_inf_never_drawn(queue):
-    pos = _scene(50_000, seed=3)
+@pytest.mark.parametrize("spread", [1.0, 0.3])
+def test_nan_inf_never_drawn(queue, spread):
+    pos = _scene(50_000, seed=3, spread=spread)
     rng = np.random.default_rng(3)
     bad = rng.random(pos.shape) < 0.05
     pos[bad] = rng.choice(np.array([np.nan, np.inf, -np.inf], np.float32), int(bad.sum()))
     pos[:20_000] = np.nan  # whole batches with no finite point
-    cam = _cam()
-    want = ref.visibility(pos, cam, W, H)
-    ids = want[want != np.iinfo(np.uint64).max] & np.uint64(0xFFFFFFFF)
-    assert np.isfinite(pos[ids.astype(np.int64)]).all()
-    for morton in (False, True):
-        np.testing.assert_array_equal(_vis(queue, pos, cam, morton=morton, batch_size=4096), want)
+    # perspective: render.cl's float8 loop takes clip w as the depth; the
+    # orthographic camera's depth row is its own (clvis_project8's w_depth).
+    # spread 0.3: every batch box lies inside the view (clvis_box_inside), so
+    # the float8 loop tests only the depth range, which must reject them too
+    ortho = Camera.ortho((0.3, -6.0, 1.2), (0, 0, 0), (0, 0, 1), height=6.0, aspect=W / H, near=0.5, far=20)
+    for cam in (_cam(), ortho):
+        want = ref.visibility(pos, cam, W, H)
+        ids = want[want != np.iinfo(np.uint64).max] & np.uint64(0xFFFFFFFF)
+        assert len(ids) > 200 and np.isfinite(pos[ids.astype(np.int64)]).all()
+        for morton in (False, True):
+            np.testing.assert_array_equal(_vis(queue, pos, cam, morton=morton, batch_size=4096), want)
 
 
 def test_fallback_without_int64_atomics(device):

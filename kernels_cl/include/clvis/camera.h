@@ -91,23 +91,37 @@ inline int clvis_project(const clvis_camera *c, float x, float y, float z,
 }
 
 /* clvis_project on 8 points at once (the same operations lane by lane, so
- * the same results); returns -1 in the lanes drawn, 0 elsewhere. */
+ * the same results); returns -1 in the lanes drawn, 0 elsewhere. near and far
+ * must be finite. Then the finiteness test of x, y, z is left out: it is
+ * implied by near <= depth <= far, since a NaN or infinite coordinate makes
+ * every sum it enters, so depth, NaN or infinite (0 * inf is NaN).
+ * w_depth: the caller has found the clip w row equal to the depth row, value
+ * by value (a perspective camera: M's last row is -view[2, :] = D), and depth
+ * is taken to be clip w. Both sums then agree in value at every step, and in
+ * their bits unless the result is a zero (its sign may differ); a drawn point
+ * has clip w > 0, so its depth is the same float either way, and each lane's
+ * tests give the same answer (-0 == +0).
+ * inside: the caller has found (clvis_box_inside) that every finite point of
+ * the points' box has clip w > 0 and its pixel inside the image; then only
+ * near <= depth <= far is tested, which also rejects the non-finite points
+ * (above): the same lanes are drawn. */
 inline int8 clvis_project8(const clvis_camera *c, float8 x, float8 y, float8 z,
                            float near, float far, float fw, float fh,
-                           float8 *sx, float8 *sy, float8 *depth)
+                           float8 *sx, float8 *sy, float8 *depth, int w_depth, int inside)
 {
     float8 cx = ((c->r0.x * x + c->r0.y * y) + c->r0.z * z) + c->r0.w;
     float8 cy = ((c->r1.x * x + c->r1.y * y) + c->r1.z * z) + c->r1.w;
     float8 cw = ((c->r3.x * x + c->r3.y * y) + c->r3.z * z) + c->r3.w;
-    float8 d = ((c->d.x * x + c->d.y * y) + c->d.z * z) + c->d.w;
+    float8 d = w_depth ? cw : ((c->d.x * x + c->d.y * y) + c->d.z * z) + c->d.w;
     float8 r = 1.0f / cw;
     float8 px = ((cx * r) * 0.5f + 0.5f) * fw;
     float8 py = (0.5f - (cy * r) * 0.5f) * fh;
     *sx = px;
     *sy = py;
     *depth = d;
-    return clvis_il_isfinite8(x) & clvis_il_isfinite8(y) & clvis_il_isfinite8(z) & (d >= near)
-        & (d <= far) & (cw > 0.0f)
+    if (inside)
+        return (d >= near) & (d <= far);
+    return (d >= near) & (d <= far) & (cw > 0.0f)
         & (px >= 0.0f) & (px < fw) & (py >= 0.0f) & (py < fh);
 }
 
@@ -151,6 +165,41 @@ inline int clvis_box_culled(const clvis_camera *c, float3 lo, float3 hi, float n
         all_out &= out;
     }
     return all_out != 0u;
+}
+
+/* 1 when every point of the box [lo, hi] has clip w > 0 and its pixel
+ * position inside the image (0 <= sx < W, 0 <= sy < H) as clvis_project
+ * computes them, so that for the finite points of the box only
+ * near <= depth <= far is left to test. Each corner must lie inside the
+ * planes x = -w, x = w, y = -w, y = w and above w = 0 by a margin of 1e-4
+ * of the largest magnitude the sums can take over the box (as in
+ * clvis_box_culled) plus 1e-30. The conditions are linear in the point, so
+ * what holds at the corners holds in the box; a point's computed clip x and
+ * w are within 4.0001 * 2^-24 of those magnitudes of the exact ones (four
+ * rounded operations), so the computed |x / w| stays below 1 - 5e-5, and
+ * the rounding of 1 / w, the quotient and the pixel arithmetic (a few
+ * 2^-24 relative) cannot reach the image edge. Degenerate (NaN, infinite)
+ * magnitudes make it 0. */
+inline int clvis_box_inside(const clvis_camera *c, float3 lo, float3 hi)
+{
+    float4 a = (float4)(clvis_il_fmax3(clvis_il_fabs3(lo), clvis_il_fabs3(hi)), 1.0f);
+    float4 ax = clvis_il_fabs4(c->r0) * a, ay = clvis_il_fabs4(c->r1) * a;
+    float4 aw = clvis_il_fabs4(c->r3) * a;
+    float sw = (aw.x + aw.y) + (aw.z + aw.w);
+    float mx = 1e-4f * ((ax.x + ax.y) + (ax.z + ax.w) + sw) + 1e-30f;
+    float my = 1e-4f * ((ay.x + ay.y) + (ay.z + ay.w) + sw) + 1e-30f;
+    float mw = 1e-4f * sw + 1e-30f;
+    int in = lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z;
+    for (int k = 0; k < 8; ++k) {
+        float x = (k & 1) ? hi.x : lo.x;
+        float y = (k & 2) ? hi.y : lo.y;
+        float z = (k & 4) ? hi.z : lo.z;
+        float cx = clvis_row_dot(c->r0, x, y, z);
+        float cy = clvis_row_dot(c->r1, x, y, z);
+        float cw = clvis_row_dot(c->r3, x, y, z);
+        in &= (cw - cx > mx) && (cw + cx > mx) && (cw - cy > my) && (cw + cy > my) && (cw > mw);
+    }
+    return in;
 }
 
 /* ---------------------------------------------------------------- camera rays */

@@ -91,9 +91,10 @@ from ..errors import DataError
 from . import guard as guard_mod
 from .inputs import IsoImageLike, PostInput
 from .kpn import KPNHead
-from .names import GBUFFER_PLANES
+from .names import GBUFFER_PLANES, gbuffer_channels
 from .pack import padded_shape, unpack_rgba8
 from .specs import spec
+from .subpixel import subpixel_blend
 
 __all__ = ["MAX_PIXELS", "MAX_SIDE", "MODELS", "PRECISIONS", "PostNetwork", "load", "sha256"]
 
@@ -297,6 +298,14 @@ class PostNetwork:
         #: the call's default for ``guard`` (clvis.post.guard): the spec's
         #: (on for LiDAR, off for in-fill; NARVis has none)
         self.guard = bool(self.spec.guard)
+        #: the spec's sub-pixel rule (clvis.post.subpixel: NARVis's output
+        #: blended toward the raster where GR's sigma is under a pixel),
+        #: applied after every run where the network reads the radius plane;
+        #: set False to see the network's own output
+        self.subpixel = self.spec.subpixel is not None and "radius" in self.planes
+        self._radius_channel = (
+            gbuffer_channels(self.planes).index("radius_px") if "radius" in self.planes else -1
+        )
         self._buffers: dict[tuple[int, int], tuple[cla.Array, cla.Array]] = {}
         #: the graph's outputs where a head is applied to them (logits, nearness)
         self._graph_out: dict[tuple[int, int], list[cla.Array]] = {}
@@ -392,6 +401,21 @@ class PostNetwork:
             self.head(planes, *graph, out=output, queue=q)
             q.finish()
             self.stats["head"] = time.perf_counter() - t2
+        if self.subpixel and self.spec.subpixel is not None:
+            t3 = time.perf_counter()
+            lo, hi, reach = self.spec.subpixel
+            subpixel_blend(
+                planes,
+                output,
+                radius_channel=self._radius_channel,
+                lo=lo,
+                hi=hi,
+                reach=reach,
+                out=output,
+                queue=q,
+            )
+            q.finish()
+            self.stats["subpixel"] = time.perf_counter() - t3
         return output, h, w
 
     def infer(self, image: PostInput) -> np.ndarray:

@@ -49,6 +49,11 @@ class NetworkSpec(Generic[InputT]):
     #: whether its call checks it against its classical fills by default
     #: (clvis.post.guard; PostNetwork.guard); None: it has no guard
     guard: bool | None = None
+    #: (lo, hi, reach): the sub-pixel rule of a network that reads the radius
+    #: plane (clvis.post.subpixel: its output blended toward the raster's
+    #: colours, weight 1 where the window's mean sigma is <= lo pixels, 0 at
+    #: >= hi); None: none
+    subpixel: tuple[float, float, int] | None = None
 
     def shape(self, image: object) -> tuple[int, int]:
         """(H, W) of an input; TypeError / ValueError where it is not one."""
@@ -149,6 +154,9 @@ class NarvisSpec(NetworkSpec[GBuffersLike]):
         "turbulence",
         "attractors",
     )
+    #: chosen on training-family frames only (the hurricane at 256 x 256,
+    #: attractors, abc-lines, burgers, abc, turbulence: bench/results/README.md)
+    subpixel: tuple[float, float, int] | None = (0.2, 0.6, 16)
 
     def shape(self, image: Any) -> tuple[int, int]:
         if not all(hasattr(image, k) for k in ("index", "rgba", "depth", "attributes")):
@@ -189,6 +197,8 @@ class NarvisScanSpec(NarvisSpec):
     eval_families = ("terrain", "aerial", "object")
     #: clvis.training.data.SCAN_TRAIN
     trained_families = ("town", "photo_town", "shapes")
+    #: its isotropic splat targets were not measured under the rule: none
+    subpixel = None
 
 
 SPECS: dict[str, NetworkSpec[Any]] = {

@@ -187,8 +187,10 @@ def test_narvis_equals_plain_onnxruntime(name, precision):
     the reference unpack."""
     import onnxruntime as ort
 
+    from clvis.post.names import gbuffer_channels
     from clvis.reference.post import pack as ref
     from clvis.reference.post.kpn import kpn_head
+    from clvis.reference.post.subpixel import subpixel_blend
 
     net = post.load(name, precision)
     head = net.card["head"]
@@ -209,12 +211,20 @@ def test_narvis_equals_plain_onnxruntime(name, precision):
         depth_scale=head["depth_scale"],
         logit_bound=head["logit_bound"],
     )
+    if name == "narvis":  # the spec's sub-pixel rule after the head (clvis.post.subpixel)
+        assert net.subpixel and net.spec.subpixel is not None
+        lo, hi, reach = net.spec.subpixel
+        want_raw = subpixel_blend(x, want_raw, gbuffer_channels(net.planes).index("radius_px"), lo, hi, reach)
+    else:
+        assert not net.subpixel
     np.testing.assert_allclose(net.infer(g), want_raw, atol=1e-5, rtol=0)
     want = ref.unpack_rgba8(net.infer(g), 64, 96)
     np.testing.assert_array_equal(net(g), want)
     dev = sc.gbuffers(sc.rasterizer(), cam, 96, 64, net.planes, host=False)
     np.testing.assert_array_equal(net(dev), want)
-    assert set(net.stats) == {"pack", "inference", "head", "unpack"}
+    assert set(net.stats) == {"pack", "inference", "head", "unpack"} | (
+        {"subpixel"} if net.subpixel else set()
+    )
 
 
 @pytest.fixture(scope="module")

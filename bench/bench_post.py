@@ -30,6 +30,9 @@ The networks are timed alone (``guard=False``) and, fp32, with their guard
 - narvis head[...]: the kernel-prediction head alone (clvis.post.kpn's
   kernels, applied since issue 28 to the logits the graph stops at), on the
   same frame's tensors, against its NumPy reference.
+- narvis sub-pixel rule[...]: the blend toward the raster where GR's sigma
+  is under a pixel (clvis.post.subpixel, after the head), on the same
+  frame's tensors, against its NumPy reference.
 
 Sizes 512x512, 960x720 and 1280x720 (narvis: 512x512, the paper's;
 CLVIS_BENCH_SCALE shrinks them). Each row records its median in ms and the
@@ -163,7 +166,7 @@ def _torch_net(name):
     return _cache[("torch", name)]
 
 
-NARVIS_IMPLS = (*IMPLS, "fast", "16-256", "64-1024", "head", "head-numpy")
+NARVIS_IMPLS = (*IMPLS, "fast", "16-256", "64-1024", "head", "head-numpy", "subpixel", "subpixel-numpy")
 CASES = [(n, s, i) for n in ("infill", "lidar") for s in SIZES for i in (*IMPLS, "fp32+guard")]
 CASES += [("narvis", "512x512", i) for i in NARVIS_IMPLS]
 CASES += [("narvis-scan", "512x512", i) for i in ("fp32", "fp16", "pushpull", "slow")]
@@ -183,6 +186,8 @@ def test_post(benchmark, queue, name, size, impl):
         scene, ras, gr, cam, image = _narvis(queue, w, h)
     if name == "narvis" and impl in ("head", "head-numpy"):
         return _narvis_head(benchmark, queue, impl, w, h, image)
+    if name == "narvis" and impl in ("subpixel", "subpixel-numpy"):
+        return _narvis_subpixel(benchmark, queue, impl, w, h, image)
     if name == "narvis" and impl in ("fast", "16-256", "64-1024"):
         return _narvis_extra(benchmark, queue, impl, op, w, h, scene, ras, cam, image)
     if impl in ("fp32", "fp16", "int8", "fp32+guard"):
@@ -310,6 +315,48 @@ def _narvis_head(benchmark, queue, impl, w, h, image):
         role="peer",
         n=w * h,
         nbytes=hp * wp * 4 * (4 + head.channels + 1 + 3),
+        rounds=3,
+    )
+
+
+def _narvis_subpixel(benchmark, queue, impl, w, h, image):
+    """NARVis's sub-pixel rule alone (clvis.post.subpixel, after the head)
+    on the same frame's device tensors, against its NumPy reference."""
+    from clvis.post.subpixel import subpixel_blend
+    from clvis.reference.post import subpixel as ref
+
+    net = post.load("narvis", queue=queue)
+    net(image)
+    hp, wp = post.padded_shape(h, w, net.stride)
+    planes, output = net._buffers_for(hp, wp)
+    lo, hi, reach = net.spec.subpixel
+    c = net._radius_channel
+    op = f"narvis sub-pixel rule[{w}x{h}]"
+    nbytes = hp * wp * 4 * (2 * 5 + 2 * 2 + 6)  # planes read twice, sums written and read, image
+    if impl == "subpixel":
+        run(
+            benchmark,
+            lambda: subpixel_blend(
+                planes, output, radius_channel=c, lo=lo, hi=hi, reach=reach, out=output, queue=queue
+            ),
+            op=op,
+            impl="sub-pixel rule (OpenCL: clvis.post.subpixel)",
+            role="clvis",
+            n=w * h,
+            nbytes=nbytes,
+            queue=queue,
+            rounds=7,
+        )
+        return
+    x, y = planes.get(), output.get()
+    run(
+        benchmark,
+        lambda: ref.subpixel_blend(x, y, c, lo, hi, reach),
+        op=op,
+        impl="sub-pixel rule NumPy reference (float64)",
+        role="peer",
+        n=w * h,
+        nbytes=nbytes,
         rounds=3,
     )
 

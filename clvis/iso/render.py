@@ -22,7 +22,12 @@ A pass, for the rays still active (kernels_cl/iso/):
 5. resolve (pass.cl): each ray keeps its nearest hit over its candidates,
    by a 64-bit atomic min of (t bits << 32 | item) where the device has
    64-bit atomics, else by scanning its candidates in order (same result);
-   rays without a hit go on from where the traversal left them.
+   rays without a hit go on from where the traversal left them: at the
+   entry of their next candidate block, which the traversal walked on to
+   find; a ray with no candidate block left cannot hit, so it is finished
+   (no hit) in the pass that traced its last candidate, not one pass later
+   (at a given completion fewer of the rays still running are such sure
+   misses; to 95 % without speculation, 2 passes fewer over 6 frames).
 
 Tiles. Each ray is independent of the others, so the image is traced in
 tiles: ranges of `tile_pixels` pixels in row-major order (bands of whole rows

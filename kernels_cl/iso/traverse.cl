@@ -59,6 +59,11 @@
  * along the ray) and locate again; else the block's segment is
  * [t, t_out = min(t_exit, min_a T_a(exit bound))]; an active block is a
  * candidate (entered at t); t = t_out. The ray ends when t >= t_exit.
+ * After the n_spec-th candidate the walk goes on to the next candidate and
+ * stops at its entry t (the resume t: the next pass locates that block
+ * first, so the walk to it is done once); it ends without one where no block
+ * whose range holds the isovalue is left on the ray (ray_t +INFINITY: the
+ * ray cannot hit, so it is finished in this pass, not one pass later).
  * The walk keeps each axis's exit-bound T_a of the current block and
  * recomputes it only when that axis steps (the same float32 expression, so
  * the same value as recomputing it every step), and leaves a run of inactive
@@ -100,8 +105,11 @@
  *     global const uint *active,         tile pixel ids j of the rays to traverse (pixel p0 + j)
  *     global const uint *count,          count[0]: how many entries of `active`
  *     global float *ray_t,               per tile pixel j, in: resume t (t_enter for a new ray);
- *                                        out: the exit t of the last candidate when n_spec
- *                                        were recorded and the ray goes on, else +INFINITY
+ *                                        out: where the ray has a candidate after the n_spec
+ *                                        it recorded, the t where it enters that one (the walk
+ *                                        goes on past the n_spec-th to find it); else +INFINITY:
+ *                                        a ray with no candidate block left cannot hit, so it
+ *                                        is finished (no hit) in this pass, not in the next
  *     uint n_spec,                       1..64 candidates per ray
  *     global uint *cand_block,           count x n_spec: [i * n_spec + k] the k-th candidate
  *                                        block id of ray active[i], 0xFFFFFFFF past the last
@@ -290,13 +298,13 @@ inline void tr_walk(uint i, uint p, const int *n, const int *nb, const int *ncb,
             const float t_out = clvis_il_fmin(clvis_il_fmin(clvis_il_fmin(t_exit, ex), ey), ez);
             const uint id = (uint)bx + (uint)nb[0] * ((uint)by + (uint)nb[1] * (uint)bz);
             if (tr_bit(fine_bits, id)) {
+                if (found == n_spec) {   /* the next pass's first candidate: resume at its entry */
+                    resume = t;
+                    break;
+                }
                 cand_block[i * n_spec + found] = id;
                 cand_t[i * n_spec + found] = t;
                 ++found;
-                if (found == n_spec) {
-                    resume = t_out < t_exit ? t_out : INFINITY;
-                    break;
-                }
             }
             t = t_out;
         }

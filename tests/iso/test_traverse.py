@@ -150,7 +150,12 @@ class Scene:
         while act.size:
             rounds += 1
             assert rounds <= 200
+            resume = ray_t[act].copy()
             rb, rt, ray_t = self.step(ray_t, act, n_spec)
+            if rounds > 1:
+                # a ray left running has a candidate left, entered at its resume t
+                # (one without is finished at once: it cannot hit)
+                assert (rb[:, 0] != NO).all() and np.array_equal(rt[:, 0], resume)
             for i, p in enumerate(act):
                 seqs[int(p)] += [(int(b), float(t)) for b, t in zip(rb[i], rt[i], strict=True) if b != NO]
             act = act[np.isfinite(ray_t[act])]

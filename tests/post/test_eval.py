@@ -259,13 +259,17 @@ def _margin(row, baseline, key="psnr"):
 
 def test_ci_infill_on_shapes(ci_rows):
     """Distance fields of random shapes (never trained on), 320 x 180.
-    Measured (Intel CPU): 85 %: 35.3 dB / 0.978 (push-pull 29.9, input
-    25.0); 90 %: 41.3 (push-pull 32.7); 95 %: 45.6 (push-pull 34.5)."""
+    Measured (Intel CPU), since a ray with no candidate block left is
+    finished at once (traverse.cl: 90 % is reached in the pass that reaches
+    85 %, 95 % one pass earlier than before): 85 % and 90 %: 35.7 dB / 0.981
+    (push-pull 31.9, input 25.0); 95 %: 42.2 / 0.994 (push-pull 34.2, input
+    33.7). Before: 85 %: 35.3 (push-pull 29.9); 90 %: 41.3 (32.7); 95 %:
+    45.6 (34.5)."""
     r = ci_rows["infill"]
     a, b, c = r["64^3 at 85%"], r["64^3 at 90%"], r["64^3 at 95%"]
     assert a["network"]["psnr"] > 25 and a["network"]["ssim"] > 0.95 and _margin(a, "pushpull") > 3
-    assert _margin(b, "pushpull") > 6 and b["network"]["ssim"] > 0.98
-    assert _margin(c, "pushpull") > 10 and c["network"]["ssim"] > 0.99
+    assert _margin(b, "pushpull") > 3 and b["network"]["ssim"] > 0.975
+    assert _margin(c, "pushpull") > 6 and c["network"]["ssim"] > 0.99
 
 
 def test_ci_lidar_guard_on_the_terrain():
@@ -283,12 +287,16 @@ def test_ci_lidar_guard_on_the_terrain():
         assert on[k] == off[k]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="target missed (issue 21 §2, never below the baseline): at 95 % the network (45.6 dB) "
-    "is 21 dB below the raw partial image (66.7 dB): it paints the background rays still running",
-)
 def test_ci_infill_95_is_not_below_its_input(ci_rows):
+    """Issue 21 §2 at 95 % on the CI frame. It was missed (a strict xfail):
+    the network (45.6 dB) was 21 dB below the raw partial image (66.7 dB),
+    whose running rays were nearly all background rays, many of them with no
+    candidate block left, which it painted. Such a ray cannot hit and is now
+    finished at once (traverse.cl), so 95 % is reached one pass earlier and
+    no sure miss is shown as a hole: measured 42.2 dB against the input's
+    33.7 (the same pass's hits as the old 90 % frame, where the network had
+    41.3). Running rays that will miss with candidates left can still be
+    painted; this frame does not show it."""
     assert _margin(ci_rows["infill"]["64^3 at 95%"], "input") >= 0
 
 

@@ -14,9 +14,12 @@ the block is located (the raytrace first-cell rule, floor and clamp, then
 corrected per axis by those half-open intervals); a coarse cell (4^3 blocks)
 whose range excludes the isovalue is left at once (t = its exit); a block
 whose range holds it is a candidate entered at t; t moves on to the block's
-exit. Blocks with a zero-length segment (where the plain block DDA steps two
-axes at one t) are never candidates, so the candidate sequence does not
-depend on how the passes split it.
+exit. After the n_spec-th candidate the walk goes on to the next one and
+the ray resumes at its entry t; where none is left the ray cannot hit and
+its ray_t is +inf (finished in this pass). Blocks with a zero-length
+segment (where the plain block DDA steps two axes at one t) are never
+candidates, so the candidate sequence does not depend on how the passes
+split it.
 """
 
 from __future__ import annotations
@@ -165,13 +168,14 @@ def macro_traverse(
             ids = b[:, 0] + nb[0] * (b[:, 1] + nb[1] * b[:, 2])
             fr = fine[np.where(walk, ids, 0)]
             cand = walk & (fr[:, 0] <= iso) & (iso <= fr[:, 1])
-            k = np.nonzero(cand)[0]
+            # the candidate after the n_spec-th: the next pass resumes at its entry
+            nxt_cand = cand & (found == n_spec)
+            resume[nxt_cand] = t[nxt_cand]
+            live &= ~nxt_cand
+            k = np.nonzero(cand & ~nxt_cand)[0]
             cand_block[k, found[k]] = ids[k].astype(np.uint32)
             cand_t[k, found[k]] = t[k]
             found[k] += 1
-            full = cand & (found == n_spec)
-            resume[full] = np.where(t_out[full] < t_exit[full], t_out[full], _F(np.inf))
-            live &= ~full
             t = np.where(walk, t_out, t)
     ray_t[active] = resume
     return cand_block, cand_t, ray_t

@@ -174,10 +174,14 @@ class Sources:
 
     def resolve(self, kernel: str, file: str) -> Path | None:
         """The file an Oclgrind location names: input.cl is the kernel's
-        program source; headers are named by their include path."""
+        program source; headers are named by their include path (the -I
+        copy's, clvis-include-<uid>-<hash>/..., maps to kernels_cl/include)."""
         if file == "input.cl":
             return self.kernels.get(kernel)
-        if "kernels_cl/" in file:
+        m = re.search(r"(?:^|/)clvis-include-[^/]+/(.+)$", file)
+        if m:  # the build's -I copy of kernels_cl/include (clvis.runtime.program)
+            p = self.root / "include" / m.group(1)
+        elif "kernels_cl/" in file:
             p = self.root / file.rsplit("kernels_cl/", 1)[1]
         else:
             p = Path(file)

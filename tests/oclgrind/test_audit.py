@@ -127,6 +127,21 @@ def _render_lines():
     return render, read, amin
 
 
+def test_header_paths_resolve_to_kernels_cl_include():
+    """A header is named by the path the build included it from: the
+    checkout's kernels_cl/include, or clvis.runtime's -I copy of it
+    (clvis-include-<uid>-<hash>/, absolute or relative)."""
+    src = audit.Sources()
+    want = audit.KERNELS_CL / "include" / "clvis" / "atomics.h"
+    for name in (
+        "/tmp/clvis-include-0-0123456789abcdef/clvis/atomics.h",
+        "clvis-include-0-0123456789abcdef/clvis/atomics.h",
+        "/elsewhere/kernels_cl/include/clvis/atomics.h",
+    ):
+        assert src.resolve("render_visibility", name) == want, name
+    assert src.resolve("render_visibility", "clvis-include-0-x/clvis/nope.h") is None
+
+
 def test_judge_races():
     src = audit.Sources()
     render, read, amin = _render_lines()

@@ -474,7 +474,9 @@ class Rasterizer:
             f32, u8, df, du = self._plane_buffers(names)
             self._check_memory(W, H, len(f32), len(u8), tol is not None and self.n > 0, host, vel)
             vis, drawn, cam_d = self._render(cam, near, far, W, H, ps)
-            out = self._resolve(vis, cam_d, W, H, focal, tf, tol, near, far, ps, f32, u8, df, du, vel)
+            out = self._resolve(
+                vis, cam_d, W, H, focal, tf, tol, near, far, ps, f32, u8, df, du, vel, camera.orthographic
+            )
         if not host:
             return _gbuffers(out, f32, u8, names, lambda a: a)
         g = _gbuffers(out, f32, u8, names, lambda a: a.get())
@@ -522,6 +524,7 @@ class Rasterizer:
         attr_f32,
         attr_u8,
         velocity=True,
+        ortho=False,
     ):
         q = self.queue
         npix = W * H
@@ -558,7 +561,8 @@ class Rasterizer:
                 scale,
                 accum.base_data,
             )
-        flags = (1 if self.has_velocity and velocity else 0) | (2 if self.has_radius else 0)
+        # 4: radius_px of an orthographic camera (no division by the depth)
+        flags = (1 if self.has_velocity and velocity else 0) | ((6 if ortho else 2) if self.has_radius else 0)
         nf, nu = len(f32_names), len(u8_names)
         e = runtime.empty
         out: dict[str, cla.Array | None] = {

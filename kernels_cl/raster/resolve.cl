@@ -50,7 +50,9 @@
  *       angle_out[p]    atan2(vy, vx) / NaN
  *       speed_out[p]    sqrt(vx * vx + vy * vy) / NaN
  *     flags & 2 (radius, 1 float a point, world units; focal = 0.5 * H * P[1][1]):
- *       radius_out[p]   (radius[id] * focal) / depth, the splat radius in pixels / NaN
+ *       radius_out[p]   (radius[id] * focal) / depth, the splat radius in pixels / NaN;
+ *       with flags & 4 (an orthographic camera: pixels a world unit at every
+ *       depth) radius[id] * focal
  *     Buffers of disabled outputs (and of nf = 0, nu = 0) may be NULL.
  *
  * Memory traffic per pixel: 8 bytes of vis, the winner's data (a random read),
@@ -65,6 +67,7 @@
 
 #define RESOLVE_VELOCITY 1u
 #define RESOLVE_RADIUS 2u
+#define RESOLVE_ORTHOGRAPHIC 4u
 
 inline float resolve_depth(uint dkey)
 {
@@ -155,5 +158,6 @@ kernel void resolve_attributes(global const uint *vis, uint W, uint H,
         speed_out[p] = sqrt(vx * vx + vy * vy);
     }
     if (flags & RESOLVE_RADIUS)
-        radius_out[p] = (radius[id] * focal) / resolve_depth(dkey);
+        radius_out[p] = (flags & RESOLVE_ORTHOGRAPHIC) ? radius[id] * focal
+                                                      : (radius[id] * focal) / resolve_depth(dkey);
 }

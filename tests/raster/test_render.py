@@ -189,6 +189,22 @@ def test_gbuffers_parity(queue, morton):
     np.testing.assert_allclose(got.vel_speed[c], np.hypot(got.vel2d[c, 0], got.vel2d[c, 1]), rtol=1e-6)
 
 
+def test_radius_plane_of_an_orthographic_camera(queue):
+    """An orthographic camera draws a world unit as focal_px pixels at every
+    depth: radius_px is radius x focal_px, not divided by the depth (as a
+    perspective camera's is); the kernel matches the reference."""
+    pos, colors, attrs, vel, radius = _full_cloud(20_000, seed=4)
+    cam = Camera.ortho((0.3, -6.0, 1.2), (0.0, 0.0, 0.0), (0, 0, 1), 3.0, W / H, 0.1, 20.0)
+    got = clvis.rasterize(pos, cam, W, H, radius=radius, queue=queue)
+    want = ref.rasterize(pos, cam, W, H, radius=radius)
+    _assert_gbuffers(got, want)
+    c = got.covered
+    assert c.sum() > W * H // 8
+    np.testing.assert_allclose(
+        got.radius_px[c], radius[got.index[c]] * np.float32(cam.focal_px(H)), rtol=1e-6
+    )
+
+
 def test_screen_velocity_is_the_pixel_motion(device):
     """vel2d is the derivative of the pixel position: compare with a finite
     difference of the projection."""

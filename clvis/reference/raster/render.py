@@ -181,6 +181,7 @@ def rasterize(
         focal = np.float32(0.5 * H * float(np.asarray(camera.projection)[1, 1]))
         r = np.asarray(radius, np.float32)[win]
         rp = np.full(H * W, np.nan, np.float32)
-        rp[covered] = (r * focal) / depth[covered]
+        # an orthographic camera draws a world unit as `focal` pixels at every depth
+        rp[covered] = r * focal if camera.orthographic else (r * focal) / depth[covered]
         out.radius_px = rp.reshape(H, W)
     return out

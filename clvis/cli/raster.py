@@ -384,7 +384,23 @@ def _render_panels(
             t0 = time.perf_counter()
             panels.append(_Panel(f"post-{post.name}", title, frame()))
             post_s = time.perf_counter() - t0
+        _say_unlike_training(post, g)
     return _Rendered(g, panels, first, warm, post_s)
+
+
+def _say_unlike_training(post, g: GBuffers) -> None:
+    """A warning on stderr when the view's splat radius lies far outside the
+    post network's training frames (its spec's unlike_training)."""
+    if post.spec.radius_px_trained is None or g.radius_px is None:
+        return
+    from .._arrays import on_host
+
+    covered = on_host(g.covered)
+    if not covered.any():
+        return
+    why = post.spec.unlike_training(float(np.median(on_host(g.radius_px)[covered])))
+    if why is not None:
+        print(f"clvis render: --post {post.name}: warning: {why}", file=sys.stderr)
 
 
 def _narvis_sigma(cloud, source, progress) -> float:

@@ -54,10 +54,33 @@ class NetworkSpec(Generic[InputT]):
     #: colours, weight 1 where the window's mean sigma is <= lo pixels, 0 at
     #: >= hi); None: none
     subpixel: tuple[float, float, int] | None = None
+    #: (lo, hi): the range of its training frames' median splat radius in
+    #: pixels (the radius plane's median over the covered pixels of a frame;
+    #: bench/scan_radius_range.py measures it); None: not measured
+    radius_px_trained: tuple[float, float] | None = None
 
     def shape(self, image: object) -> tuple[int, int]:
         """(H, W) of an input; TypeError / ValueError where it is not one."""
         raise NotImplementedError
+
+    def unlike_training(self, median_radius_px: float) -> str | None:
+        """Why a frame whose covered pixels' median splat radius is
+        `median_radius_px` lies far outside what the network trained on
+        (over twice the training frames' largest median, or under half their
+        smallest), or None. Its output there may be worse than the classical
+        splat (``clvis render --compare`` scores both)."""
+        if self.radius_px_trained is None or not np.isfinite(median_radius_px):
+            return None
+        lo, hi = self.radius_px_trained
+        if lo / 2 <= median_radius_px <= 2 * hi:
+            return None
+        side = "sparser" if median_radius_px > 2 * hi else "denser"
+        return (
+            f"the points' median splat radius is {median_radius_px:.2f} pixels, far outside the "
+            f"{lo:g}-{hi:g} pixels of the {self.name} network's training frames (the cloud is "
+            f"{side} on screen than any it learned from); its picture may be worse than the "
+            f"classical splat: --compare scores both"
+        )
 
     def pack(
         self, image: InputT, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue
@@ -199,6 +222,10 @@ class NarvisScanSpec(NarvisSpec):
     trained_families = ("town", "photo_town", "shapes")
     #: its isotropic splat targets were not measured under the rule: none
     subpixel = None
+    #: the training frames' median radius: 0.35-3.28 pixels over 36 frames of
+    #: the three training kinds at 0.25x / 1x / 4x SCAN_POINTS_PER_PIXEL,
+    #: 256 and 512 pixels square (bench/scan_radius_range.py)
+    radius_px_trained = (0.35, 3.3)
 
 
 SPECS: dict[str, NetworkSpec[Any]] = {

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from clvis import cli, datasets
+from clvis import cli, datasets, post
 from clvis.camera import fit_camera
 from clvis.cli import _common, raster
 from clvis.io import PointCloud, save_npz, write_ply
@@ -419,6 +419,7 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 0, err
     assert "--post narvis: " in err and "model narvis-scan (no velocity" in err
     assert "PostNetwork('narvis-scan'" in out
+    assert "warning" not in err  # its median splat radius is inside the training's
     assert "the splat radius plane" not in err  # 1,065 points: well under KNN_NOTE_SECONDS
     _assert_picture(tmp_path / "a" / "post-narvis-scan.png")
     assert not (tmp_path / "a" / "post-narvis.png").exists()
@@ -436,6 +437,29 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     _assert_picture(tmp_path / "c" / "post-narvis.png")
     rc, _, err = _render(capsys, path, "--post", "narvis", "--post-guard", "--out", tmp_path, *SMALL)
     assert rc == 2 and "the narvis-scan network has no guard" in err
+
+
+def test_render_post_narvis_scan_warns_of_a_cloud_far_sparser_than_its_training(tmp_path, capsys):
+    """A few hundred points at 320x240 (pyvista's nut.ply: tens of pixels
+    apart) are splats far wider than any narvis-scan trained on: the render
+    still runs, and says so with the measured radius."""
+    pos = np.random.default_rng(3).random((300, 3)).astype(np.float32)
+    np.save(tmp_path / "sparse.npy", pos)
+    rc, out, err = _render(
+        capsys,
+        tmp_path / "sparse.npy",
+        "--post",
+        "narvis-scan",
+        "--out",
+        tmp_path,
+        "--size",
+        "320x240",
+        "--quiet",
+    )
+    assert rc == 0, err
+    m = re.search(r"--post narvis-scan: warning: the points' median splat radius is ([\d.]+) pixels", err)
+    assert m and float(m.group(1)) > 2 * post.specs.spec("narvis-scan").radius_px_trained[1], err
+    _assert_picture(tmp_path / "post-narvis-scan.png", (320, 240))
 
 
 @pytest.mark.parametrize("name", ["brain.nii.gz", "grid.vti", "v.raw"])

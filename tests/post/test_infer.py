@@ -325,3 +325,23 @@ def test_missing_and_corrupt_model_files(tmp_path):
     (tmp_path / "infill.json").write_text("{")
     with pytest.raises(DataError, match="unreadable model card"):
         post.load("infill", directory=tmp_path)
+
+
+def test_narvis_scan_knows_its_training_radius_range():
+    """unlike_training: silent inside [lo / 2, 2 hi], a sentence naming the
+    measured radius outside; a frame of a training kind at a training
+    density lies inside radius_px_trained (bench/scan_radius_range.py
+    measures the whole range)."""
+    sp = post.specs.spec("narvis-scan")
+    lo, hi = sp.radius_px_trained
+    assert sp.unlike_training(1.0) is None and sp.unlike_training(lo / 2) is None
+    assert sp.unlike_training(2 * hi) is None and sp.unlike_training(float("nan")) is None
+    assert "77.00 pixels" in sp.unlike_training(77.0) and "sparser" in sp.unlike_training(77.0)
+    assert "denser" in sp.unlike_training(lo / 3)
+    assert post.specs.spec("lidar").unlike_training(77.0) is None  # no radius plane
+    planes = post.load("narvis-scan").planes
+    sc = data.scan_scene("town", int(data.SCAN_POINTS_PER_PIXEL * 128 * 128), 11)
+    cam = data.scan_cameras(sc, np.random.default_rng(2), 1, 1.0)[0]
+    g = sc.gbuffers(sc.rasterizer(), cam, 128, 128, planes)
+    med = float(np.median(np.asarray(g.radius_px)[np.asarray(g.covered)]))
+    assert lo / 2 <= med <= 2 * hi and sp.unlike_training(med) is None, med

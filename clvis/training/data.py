@@ -473,10 +473,13 @@ def lidar_frames(
     views: int = 3,
     dense_points: int = 3_000_000,
     sparse: tuple[float, float] = (0.03, 0.12),
+    point_size: int | tuple[int, int] = 1,
     progress: Callable[[str], None] | None = None,
 ) -> list[LidarFrame]:
     """`count` scenes ("town": a random town per scene; "terrain": the
-    embedded terrain) x `views` oblique views each."""
+    embedded terrain) x `views` oblique views each; the scan's points are
+    drawn `point_size` pixels a side before the depth filter (lo, hi: drawn
+    per view from lo..hi)."""
     from ..raster import Rasterizer, depth_filter
 
     rng = np.random.default_rng(seed)
@@ -509,7 +512,12 @@ def lidar_frames(
             cam = Camera.look_at(eye, target, (0, 0, 1), rng.uniform(40, 60), width / height, 1.0, 4 * extent)
             g = dense.render(cam, width, height, point_size=3, planes=[])
             rgb = np.where((g.index != 0xFFFFFFFF)[..., None], g.rgba[..., :3] / np.float32(255), 0)
-            f = depth_filter(scan.render(cam, width, height, planes=[]))
+            ps = (
+                int(rng.integers(point_size[0], point_size[1] + 1))
+                if isinstance(point_size, tuple)
+                else point_size
+            )
+            f = depth_filter(scan.render(cam, width, height, point_size=ps, planes=[]))
             frames.append(
                 LidarFrame(np.asarray(f.rgbda), rgb.astype(np.float32), f"{kind} seed {s} view {v}")
             )

@@ -66,13 +66,16 @@ NARVIS_POINTS_PER_PIXEL = 2_000_000 / 512**2
 class Case:
     """One row of a suite: a family at a size (w, h), a setting (in-fill:
     the volume's side, its completions are rows of their own; LiDAR: the
-    scan density; NARVis: the density factor), a sampler and frame count."""
+    scan density; NARVis: the density factor), a sampler and frame count;
+    LiDAR: the scan's point size (pixels a side, as ``clvis render
+    --point-size``)."""
 
     family: str
     size: tuple[int, int]
     setting: float
     sampler: str = "orbit"
     frames: int = 1
+    point_size: int = 1
 
 
 def suite(name: str, quick: bool = False) -> list[Case]:
@@ -89,11 +92,19 @@ def suite(name: str, quick: bool = False) -> list[Case]:
         ]
     if name == "lidar":
         if quick:
-            return [Case(f, (320, 240), d) for f in fam for d in (0.03, 0.1)]
+            return [Case(f, (320, 240), d) for f in fam for d in (0.03, 0.1)] + [
+                Case(f, (320, 240), 0.03, point_size=3) for f in fam
+            ]
         return [
             Case(f, s, d, frames=2)
             for f in fam
             for s in ((320, 240), (640, 480))
+            for d in (0.01, 0.03, 0.1, 0.3)
+        ] + [
+            # points drawn 2 and 3 pixels a side (the training's scans are 1)
+            Case(f, (320, 240), d, frames=2, point_size=p)
+            for f in fam
+            for p in (2, 3)
             for d in (0.01, 0.03, 0.1, 0.3)
         ]
     if name == "narvis":
@@ -228,11 +239,20 @@ def _frames(name: str, case: Case, seed: int, planes: Sequence[str], target: str
         d = float(case.setting)
         dense = int(4 * w * h * 2)  # ~8 points a pixel, as the training's 3 M at 960 x 720 is 4.3
         for lf in _data.lidar_frames(
-            (case.family,), case.frames, seed, w, h, views=1, dense_points=dense, sparse=(d, d)
+            (case.family,),
+            case.frames,
+            seed,
+            w,
+            h,
+            views=1,
+            dense_points=dense,
+            sparse=(d, d),
+            point_size=case.point_size,
         ):
             rgb = np.ascontiguousarray(lf.rgbda[..., :3])
             pp = pushpull(rgb, lf.rgbda[..., 4] > 0)
-            yield f"{d:.0%} scan", lf.rgbda, lf.rgb, {"input": rgb, "pushpull": pp}
+            label = f"{d:.0%} scan" + (f", {case.point_size} px" if case.point_size > 1 else "")
+            yield label, lf.rgbda, lf.rgb, {"input": rgb, "pushpull": pp}
     elif name == "narvis-scan":
         n = max(int(case.setting * _data.SCAN_POINTS_PER_PIXEL * w * h), 1000)
         rng = np.random.default_rng(seed)

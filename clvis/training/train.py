@@ -67,6 +67,9 @@ SPECS: dict[str, dict[str, Any]] = {
         "batch": 4,
         "loss": {"l1": 0.9, "ms_ssim": 0.1},
         "lr": 1e-3,
+        # the scan's points drawn lo..hi pixels a side, per view (as
+        # ``clvis render --point-size``; the held-out suite has 1, 2 and 3)
+        "point_sizes": (1, 3),
     },
     # NARVis: hemisphere views of the hurricane (random looks), 9:1
     # train/validation by view, beside the training flows
@@ -418,7 +421,10 @@ def _iso_frames(count: int, views: int, seed: int, size: tuple[int, int], held_o
 
 def _lidar_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
     scenes = ("terrain", "town") if held_out else ("town",)
-    return _data.lidar_frames(scenes, count, seed, *size, views=views, progress=log)
+    ps = tuple(SPECS["lidar"].get("point_sizes", (1, 1)))
+    return _data.lidar_frames(
+        scenes, count, seed, *size, views=views, point_size=(ps[0], ps[1]), progress=log
+    )
 
 
 def _scan_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
@@ -977,6 +983,7 @@ def train(
             "held_out_frames": len(val_frames),
             "frame_size": list(fsize),
             "completions": list(completions) if completions != (None,) else None,
+            **({"point_sizes": list(spec["point_sizes"])} if "point_sizes" in spec else {}),
             **(
                 {
                     "mix": {

@@ -753,3 +753,16 @@ def test_iso_and_lidar_frames_give_their_scenes_buffers_back():
     assert pool.held_blocks == 0 and pool.active_blocks == active
     data.lidar_frames(("town",), 2, 5, 64, 48, views=1, dense_points=50_000)
     assert pool.held_blocks == 0 and pool.active_blocks == active
+
+
+def test_lidar_frames_draw_the_scan_at_its_point_size():
+    """point_size: the scan's points drawn that many pixels a side before
+    the depth filter (the same dense target); (lo, hi): drawn per view."""
+    kw = {"views": 1, "dense_points": 20_000, "sparse": (0.1, 0.1)}
+    one = data.lidar_frames(("town",), 1, 3, 96, 72, **kw)[0]
+    three = data.lidar_frames(("town",), 1, 3, 96, 72, point_size=3, **kw)[0]
+    np.testing.assert_array_equal(one.rgb, three.rgb)
+    kept = [int((f.rgbda[..., 4] > 0).sum()) for f in (one, three)]
+    assert kept[1] > 2 * kept[0] > 0, kept
+    drawn = data.lidar_frames(("town",), 1, 3, 96, 72, point_size=(3, 3), **kw)[0]
+    assert int((drawn.rgbda[..., 4] > 0).sum()) > 2 * kept[0]

@@ -54,6 +54,11 @@ class NetworkSpec(Generic[InputT]):
     #: colours, weight 1 where the window's mean sigma is <= lo pixels, 0 at
     #: >= hi); None: none
     subpixel: tuple[float, float, int] | None = None
+    #: (tau, c_lo, c_hi, f_lo, f_hi): the sub-pixel rule's volume score, read
+    #: where the network also takes the depth plane (clvis.post.subpixel: the
+    #: blend held back where the window is densely covered and its colours
+    #: vary between neighbours at one depth); None: the sigma rule alone
+    subpixel_volume: tuple[float, float, float, float, float] | None = None
 
     def shape(self, image: object) -> tuple[int, int]:
         """(H, W) of an input; TypeError / ValueError where it is not one."""
@@ -157,6 +162,9 @@ class NarvisSpec(NetworkSpec[GBuffersLike]):
     #: chosen on training-family frames only (the hurricane at 256 x 256,
     #: attractors, abc-lines, burgers, abc, turbulence: bench/results/README.md)
     subpixel: tuple[float, float, int] | None = (0.2, 0.6, 16)
+    #: chosen on training-family frames only (issue 21 narvis21h: TRAIN_FLOWS
+    #: and the hurricane at 0.25x-4x, both samplers: bench/results/README.md)
+    subpixel_volume: tuple[float, float, float, float, float] | None = (0.005, 0.02, 0.04, 0.9, 0.95)
 
     def shape(self, image: Any) -> tuple[int, int]:
         if not all(hasattr(image, k) for k in ("index", "rgba", "depth", "attributes")):
@@ -199,6 +207,7 @@ class NarvisScanSpec(NarvisSpec):
     trained_families = ("town", "photo_town", "shapes")
     #: its isotropic splat targets were not measured under the rule: none
     subpixel = None
+    subpixel_volume = None
 
 
 SPECS: dict[str, NetworkSpec[Any]] = {

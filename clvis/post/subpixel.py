@@ -16,7 +16,17 @@ side m = 16 covers the head's reach (15 pixels: the 3 x 3 blocks of its
 coarsest scale, 8 pixels), so a pixel whose window covers nothing is one
 the network paints black anyway. lo, hi and m were chosen on frames of the
 training families only (bench/results/README.md, issue 21 narvis21g); they
-are NarvisSpec.subpixel. Definitions: clvis.reference.post.subpixel.
+are NarvisSpec.subpixel.
+
+The volume score (issue 21 narvis21h, NarvisSpec.subpixel_volume): sigma
+alone does not tell a thin curve or sheet of points from a volume of many
+points a pixel, where GR blends several Gaussians along each ray and the
+raster shows the front one (the network's smoothing is right there: the
+held-out hurricane at 4x lost 0.06 SSIM under the sigma rule). Where the
+window is densely covered and its colours jump between neighbours at one
+depth (a volume's front points are scattered; a curve's colour changes
+smoothly along it), the blend is held back. Definitions:
+clvis.reference.post.subpixel.
 """
 
 from __future__ import annotations

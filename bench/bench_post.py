@@ -31,8 +31,9 @@ The networks are timed alone (``guard=False``) and, fp32, with their guard
   kernels, applied since issue 28 to the logits the graph stops at), on the
   same frame's tensors, against its NumPy reference.
 - narvis sub-pixel rule[...]: the blend toward the raster where GR's sigma
-  is under a pixel (clvis.post.subpixel, after the head), on the same
-  frame's tensors, against its NumPy reference.
+  is under a pixel, held back where the window looks like a volume
+  (clvis.post.subpixel, after the head, the shipped spec's parameters), on
+  the same frame's tensors, against its NumPy reference.
 
 Sizes 512x512, 960x720 and 1280x720 (narvis: 512x512, the paper's;
 CLVIS_BENCH_SCALE shrinks them). Each row records its median in ms and the
@@ -330,14 +331,25 @@ def _narvis_subpixel(benchmark, queue, impl, w, h, image):
     hp, wp = post.padded_shape(h, w, net.stride)
     planes, output = net._buffers_for(hp, wp)
     lo, hi, reach = net.spec.subpixel
-    c = net._radius_channel
+    c, dc, vol = net._radius_channel, net._depth_channel, net.spec.subpixel_volume
     op = f"narvis sub-pixel rule[{w}x{h}]"
-    nbytes = hp * wp * 4 * (2 * 5 + 2 * 2 + 6)  # planes read twice, sums written and read, image
+    # terms: 6 plane floats read (the neighbours' cached), 32 bytes written; rows: 32 read, 32 written;
+    # blend: 2 x 32 read (sliding), 6 floats read, 3 written
+    nbytes = hp * wp * (6 * 4 + 32 + 64 + 64 + 9 * 4)
     if impl == "subpixel":
         run(
             benchmark,
             lambda: subpixel_blend(
-                planes, output, radius_channel=c, lo=lo, hi=hi, reach=reach, out=output, queue=queue
+                planes,
+                output,
+                radius_channel=c,
+                lo=lo,
+                hi=hi,
+                reach=reach,
+                depth_channel=dc,
+                volume=vol,
+                out=output,
+                queue=queue,
             ),
             op=op,
             impl="sub-pixel rule (OpenCL: clvis.post.subpixel)",
@@ -351,7 +363,7 @@ def _narvis_subpixel(benchmark, queue, impl, w, h, image):
     x, y = planes.get(), output.get()
     run(
         benchmark,
-        lambda: ref.subpixel_blend(x, y, c, lo, hi, reach),
+        lambda: ref.subpixel_blend(x, y, c, lo, hi, reach, dc, vol),
         op=op,
         impl="sub-pixel rule NumPy reference (float64)",
         role="peer",

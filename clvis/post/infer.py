@@ -306,6 +306,7 @@ class PostNetwork:
         self._radius_channel = (
             gbuffer_channels(self.planes).index("radius_px") if "radius" in self.planes else -1
         )
+        self._depth_channel = gbuffer_channels(self.planes).index("depth") if "depth" in self.planes else None
         self._buffers: dict[tuple[int, int], tuple[cla.Array, cla.Array]] = {}
         #: the graph's outputs where a head is applied to them (logits, nearness)
         self._graph_out: dict[tuple[int, int], list[cla.Array]] = {}
@@ -411,6 +412,8 @@ class PostNetwork:
                 lo=lo,
                 hi=hi,
                 reach=reach,
+                depth_channel=self._depth_channel,
+                volume=self.spec.subpixel_volume if self._depth_channel is not None else None,
                 out=output,
                 queue=q,
             )

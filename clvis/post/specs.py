@@ -58,6 +58,11 @@ class NetworkSpec(Generic[InputT]):
     #: pixels (the radius plane's median over the covered pixels of a frame;
     #: bench/scan_radius_range.py measures it); None: not measured
     radius_px_trained: tuple[float, float] | None = None
+    #: (tau, c_lo, c_hi, f_lo, f_hi): the sub-pixel rule's volume score, read
+    #: where the network also takes the depth plane (clvis.post.subpixel: the
+    #: blend held back where the window is densely covered and its colours
+    #: vary between neighbours at one depth); None: the sigma rule alone
+    subpixel_volume: tuple[float, float, float, float, float] | None = None
 
     def shape(self, image: object) -> tuple[int, int]:
         """(H, W) of an input; TypeError / ValueError where it is not one."""
@@ -180,6 +185,9 @@ class NarvisSpec(NetworkSpec[GBuffersLike]):
     #: chosen on training-family frames only (the hurricane at 256 x 256,
     #: attractors, abc-lines, burgers, abc, turbulence: bench/results/README.md)
     subpixel: tuple[float, float, int] | None = (0.2, 0.6, 16)
+    #: chosen on training-family frames only (issue 21 narvis21h: TRAIN_FLOWS
+    #: and the hurricane at 0.25x-4x, both samplers: bench/results/README.md)
+    subpixel_volume: tuple[float, float, float, float, float] | None = (0.005, 0.02, 0.04, 0.9, 0.95)
 
     def shape(self, image: Any) -> tuple[int, int]:
         if not all(hasattr(image, k) for k in ("index", "rgba", "depth", "attributes")):
@@ -226,6 +234,7 @@ class NarvisScanSpec(NarvisSpec):
     #: the three training kinds at 0.25x / 1x / 4x SCAN_POINTS_PER_PIXEL,
     #: 256 and 512 pixels square (bench/scan_radius_range.py)
     radius_px_trained = (0.35, 3.3)
+    subpixel_volume = None
 
 
 SPECS: dict[str, NetworkSpec[Any]] = {

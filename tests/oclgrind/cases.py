@@ -489,9 +489,10 @@ def post_kpn(q):
 
 @case
 def post_subpixel(q):
-    """NARVis's sub-pixel rule (subpixel_rows, subpixel_blend): windows
-    clipped at every edge (reach larger than the image on one axis), pixels
-    whose window covers nothing, on host and device arrays in place."""
+    """NARVis's sub-pixel rule (subpixel_terms, subpixel_rows, subpixel_blend),
+    with and without the volume score: windows clipped at every edge (reach
+    larger than the image on one axis), pixels whose window covers nothing,
+    neighbours off the image, on host and device arrays in place."""
     import pyopencl.array as cl_array
 
     from clvis.post.subpixel import subpixel_blend
@@ -499,13 +500,29 @@ def post_subpixel(q):
     rng = _rng(29)
     h, w = 13, 21
     planes = rng.random((1, 6, h, w)).astype(np.float32)
-    planes[0, 3] = rng.random((h, w)) < 0.3
+    planes[0, 3] = rng.random((h, w)) < 0.6
     planes[0, 3, :, :5] = 0  # a band with no coverage in its windows
     planes[0, 5] *= 1.2
+    planes[0, 4] = 10 + rng.choice([0.0, 0.01, 1.0], (h, w))
     image = rng.random((1, 3, h, w)).astype(np.float32)
     subpixel_blend(planes, image, radius_channel=5, lo=0.2, hi=0.6, reach=2, queue=q)
+    vol = (0.005, 0.2, 0.5, 0.3, 0.8)
+    subpixel_blend(
+        planes, image, radius_channel=5, lo=0.2, hi=0.6, reach=2, depth_channel=4, volume=vol, queue=q
+    )
     d_planes, d_image = cl_array.to_device(q, planes), cl_array.to_device(q, image)
-    subpixel_blend(d_planes, d_image, radius_channel=5, lo=0.2, hi=0.6, reach=16, out=d_image, queue=q)
+    subpixel_blend(
+        d_planes,
+        d_image,
+        radius_channel=5,
+        lo=0.2,
+        hi=0.6,
+        reach=16,
+        depth_channel=4,
+        volume=vol,
+        out=d_image,
+        queue=q,
+    )
 
 
 def _served():

@@ -189,7 +189,8 @@ KNOWN_BELOW = {
     # hemisphere view, where GR is close to the plain rasterization; with the
     # sub-pixel rule (clvis.post.subpixel) the network is 2.16 dB over the
     # raster there but 0.008 below its SSIM (-3.59 / -0.071 without the rule,
-    # -3.73 / -0.077 without the plane)
+    # -3.73 / -0.077 without the plane; the rule's volume score, narvis21h,
+    # leaves the row as it was)
     "narvis": {
         "lorenz 256x256 1x points hemisphere": (2.16, -0.008),
     },

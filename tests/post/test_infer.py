@@ -214,7 +214,17 @@ def test_narvis_equals_plain_onnxruntime(name, precision):
     if name == "narvis":  # the spec's sub-pixel rule after the head (clvis.post.subpixel)
         assert net.subpixel and net.spec.subpixel is not None
         lo, hi, reach = net.spec.subpixel
-        want_raw = subpixel_blend(x, want_raw, gbuffer_channels(net.planes).index("radius_px"), lo, hi, reach)
+        layout = gbuffer_channels(net.planes)
+        want_raw = subpixel_blend(
+            x,
+            want_raw,
+            layout.index("radius_px"),
+            lo,
+            hi,
+            reach,
+            layout.index("depth"),
+            net.spec.subpixel_volume,
+        )
     else:
         assert not net.subpixel
     np.testing.assert_allclose(net.infer(g), want_raw, atol=1e-5, rtol=0)

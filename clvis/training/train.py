@@ -43,9 +43,9 @@ from . import flows as _flows
 # --frames and --frame-size shrink the data for smoke runs
 SPECS: dict[str, dict[str, Any]] = {
     "infill": {
-        # candidates=True: a sixth input plane, the candidate blocks left on
-        # each running ray (IsoImage.candidates; issue 21)
-        "arch": {},
+        # candidates: a sixth input plane, the candidate blocks left on each
+        # running ray (IsoImage.candidates; issue 21)
+        "arch": {"candidates": True},
         "frames": 24,  # volumes (x views)
         "views": 2,
         "held_out": 4,

@@ -671,6 +671,7 @@ def _empty(w: int, h: int) -> IsoImage:
         np.zeros((h, w), bool),
         1.0,
         {},
+        np.zeros((h, w), np.uint8),
     )
 
 

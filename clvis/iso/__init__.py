@@ -9,12 +9,13 @@ from . import zfp
 from .cache import BlockCache, mark_blocks
 from .macrocell import MacrocellGrids, macrocell_grids
 from .raytrace import raytrace_blocks
-from .render import IsoImage, IsoRenderer
+from .render import CANDIDATES, IsoImage, IsoRenderer
 from .surface import SURFACE_COLOR, color_surface, composite, sample_hits, surface_colors
 from .traverse import init_rays, macro_traverse
 from .zfp import ZfpVolume
 
 __all__ = [
+    "CANDIDATES",
     "BlockCache",
     "IsoImage",
     "IsoRenderer",

@@ -97,6 +97,7 @@ from .traverse import init_rays, macro_traverse, traverse_kernel
 from .zfp import ZfpVolume, compress
 
 __all__ = [
+    "CANDIDATES",
     "HOST_PIXEL_BYTES",
     "ITEM_BYTES",
     "MAX_PIXELS",
@@ -120,8 +121,11 @@ PIXEL_BYTES = 4 + 1 + 4 + 4 + 1 + 1 + 4 + 4 + 16 + 8
 ITEM_BYTES = 4 + 4 + 1 + 4 + 1 + 4 + 16 + 4 + 4 + 4 + 4 + 1 + 4 + 16
 # the default device budget of one tile's rays and pass items
 TILE_BYTES = 256 * 2**20
-# host bytes per image pixel: rgba, depth, hit, t, active
-HOST_PIXEL_BYTES = 16 + 4 + 1 + 4 + 1
+# host bytes per image pixel: rgba, depth, hit, t, active, candidates
+HOST_PIXEL_BYTES = 16 + 4 + 1 + 4 + 1 + 1
+# IsoImage.candidates counts the candidate blocks left on a running ray up to
+# this many (a macro_traverse with n_spec = CANDIDATES from its resume t)
+CANDIDATES = 8
 _PASS = "iso/pass.cl"
 _PASS_KERNELS = (
     "valid_items",
@@ -131,6 +135,7 @@ _PASS_KERNELS = (
     "resolve_hits",
     "tile_image",
     "mark_active",
+    "mark_candidates",
 )
 # wg: the local size of pass.cl's one-item-per-element kernels (a fixed one:
 # PoCL would compile a work-group function for every size the driver chose).
@@ -163,8 +168,13 @@ class IsoImage(Picture):
     from the ray's origin on the near plane; +inf elsewhere), ``active``
     (H, W) bool (rays still running),
     ``completion`` (the fraction of the rays entering the volume that are
-    finished) and ``stats``. From ``render(..., host=False)`` the five planes
-    are ``pyopencl.array.Array`` of the same shapes and dtypes.
+    finished), ``stats`` and ``candidates`` (H, W) uint8: per running ray the
+    candidate blocks (range holds the isovalue) left on it from where it
+    resumes, counted up to CANDIDATES (8: 8 or more; >= 1, since a ray with
+    none left is finished at once), 0 elsewhere and, in ``passes()``, at the
+    rays of tiles not traced yet; None for an image not from the renderer.
+    From ``render(..., host=False)`` the six planes are
+    ``pyopencl.array.Array`` of the same shapes and dtypes.
     ``to_uint8(background=None)`` and ``save_png(path)``: the shaded surface
     as a picture, as for every image type (:class:`clvis.images.Picture`)."""
 
@@ -175,6 +185,7 @@ class IsoImage(Picture):
     active: np.ndarray | cla.Array
     completion: float
     stats: dict[str, Any]
+    candidates: np.ndarray | cla.Array | None = None
 
     def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
         """(H, W, 4) uint8 RGBA: the shaded surface where a ray hit it, transparent
@@ -194,6 +205,7 @@ class _HostImage:
         self.hit = np.zeros(npix, np.uint8)
         self.t = np.full(npix, np.inf, np.float32)
         self.active = np.zeros(npix, bool)
+        self.candidates = np.zeros(npix, np.uint8)
 
     def image(self, w: int, h: int, copy: bool) -> IsoImage:
         c = np.copy if copy else (lambda a: a)
@@ -205,6 +217,7 @@ class _HostImage:
             c(self.active).reshape(h, w),
             1.0,
             {},
+            c(self.candidates).reshape(h, w),
         )
 
     def mark_active(self, p0: int, ids: Any, count: int) -> None:
@@ -224,6 +237,11 @@ class _HostImage:
         cl.wait_for_events(events)
         self.active[sl] = False
         self.mark_active(tile.p0, active, int(active.size))
+        cand = tile.candidates(active)
+        if cand is None:
+            self.candidates[sl] = 0
+        else:
+            cand.get(queue=q, ary=self.candidates[sl])
 
 
 class _DeviceImage:
@@ -239,6 +257,7 @@ class _DeviceImage:
         self.hit = runtime.zeros(q, npix, np.uint8, "iso image hit mask")
         self.t = runtime.empty(q, npix, np.float32, "iso image t")
         self.active = runtime.zeros(q, npix, np.uint8, "iso image active mask")
+        self.candidates = runtime.zeros(q, npix, np.uint8, "iso image candidates left")
         for a in (self.depth, self.t):
             runtime.fill(q, a, np.float32(np.inf))
 
@@ -254,6 +273,7 @@ class _DeviceImage:
             c(self.active).view(np.bool_).reshape(h, w),
             1.0,
             {},
+            c(self.candidates).reshape(h, w),
         )
 
     def mark_active(self, p0: int, ids: Any, count: int) -> None:
@@ -280,6 +300,8 @@ class _DeviceImage:
             self.active.base_data,
         )
         self.mark_active(tile.p0, active, int(active.size))
+        runtime.fill(self.q, self.candidates[tile.p0 : tile.p0 + tile.n], np.uint8(0))
+        tile.candidates(active, self.candidates, tile.p0)
 
 
 def view_flips(
@@ -316,6 +338,9 @@ class _Tile:
         the pass's groups (pass.cl). `count` (a 1-element device array) holds the
         length of `active` for the pass's kernels, so no pass writes it."""
         self.q, self.p0, self.n, self.cam, self.w = q, p0, n, cam, w
+        self.volume = (shape, spacing, origin)
+        #: (isovalue, (fine, coarse) range bits): set by the pass loop; candidates() walks with them
+        self.walk: tuple[float, tuple[cla.Array, cla.Array]] | None = None
         nb = [(int(s) + 3) // 4 for s in shape[::-1]]
         self.order = (np.uint32(nb[0]), np.uint32(nb[1]), np.uint32(nb[2]), np.uint32(flip))
         # the items' sort keys are view-ordered block ids (pass.cl's view_key):
@@ -342,6 +367,55 @@ class _Tile:
         default the tile's own list) into `out` (a host image: blocks until
         it is there; a device image: two launches)."""
         out.write_tile(self, self.active if active is None else active)
+
+    def candidates(self, active: Any, img: cla.Array | None = None, p0: int = 0) -> cla.Array | None:
+        """The candidate blocks left on each running ray (`active`: the
+        tile's list, its count in self.count), counted up to CANDIDATES: a
+        macro_traverse with n_spec = CANDIDATES from a copy of the rays'
+        resume t (the tile's own rays do not move), then pass.cl's
+        mark_candidates into `img` at p0 + id (default: a zeroed uint8 array
+        of the tile's pixels, returned). None when no ray is running and no
+        `img` is given."""
+        n = int(active.size)
+        if n == 0 or self.walk is None:
+            return img
+        q = self.q
+        iso, (fine, coarse) = self.walk
+        if img is None:
+            img = runtime.zeros(q, self.n, np.uint8, "candidates left")
+        cand_block = runtime.empty(q, n * CANDIDATES, np.uint32, "candidates left: blocks")
+        cand_t = runtime.empty(q, n * CANDIDATES, np.float32, "candidates left: t")
+        ray_t = self.ray_t.copy(queue=q)
+        macro_traverse(
+            q,
+            *self.volume,
+            iso,
+            self.cam,
+            self.w,
+            fine,
+            coarse,
+            active,
+            self.count,
+            n,
+            ray_t,
+            CANDIDATES,
+            cand_block,
+            cand_t,
+            first_pixel=self.p0,
+        )
+        k = runtime.get_kernel(q, _PASS, "mark_candidates", {})
+        runtime.launch(
+            q,
+            k,
+            *runtime.items(q, n, PROFILES[runtime.tuning_profile(q)]["wg"]),
+            np.uint32(p0),
+            active.base_data,
+            np.uint32(n),
+            np.uint32(CANDIDATES),
+            cand_block.base_data,
+            img.base_data,
+        )
+        return img
 
 
 class IsoRenderer:
@@ -634,6 +708,7 @@ class IsoRenderer:
                 flip,
                 n_enter if ti == 0 else None,
             )
+            state.walk = (iso, bits)
             first_rays = None
             n_active = n_enter
             tile_done = False

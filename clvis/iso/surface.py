@@ -34,7 +34,7 @@ import pyopencl.array as cla
 from .. import colormap, runtime
 from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device, to_host, triple
 from ..camera import Camera, ray_buffer
-from .render import IsoImage
+from .render import CANDIDATES, IsoImage
 
 __all__ = ["SURFACE_COLOR", "color_surface", "composite", "sample_hits", "surface_colors"]
 
@@ -218,7 +218,9 @@ def composite(
     coloured by color_surface in its image's colour (`colors`, one per image;
     default surface_colors), or taken from `planes` ((H, W, 4) each, one per
     image, e.g. color_surface(image, values=...); then `colors` is not used).
-    ``active``: rays still running in any image; ``completion``: the least
+    ``active``: rays still running in any image; ``candidates``: the sum of
+    the images' (the candidate blocks left over every isovalue), capped at
+    CANDIDATES, None where an image has none; ``completion``: the least
     of the images'; ``stats``: {"images": their stats}."""
     imgs = list(images)
     if not imgs or not all(isinstance(i, IsoImage) for i in imgs):
@@ -239,6 +241,11 @@ def composite(
     depth = np.where(hits, np.stack([_plane(i, "depth") for i in imgs]), np.inf).astype(np.float32)
     t = np.where(hits, np.stack([_plane(i, "t") for i in imgs]), np.inf).astype(np.float32)
     sel = np.argmin(depth, axis=0)[None]
+    # the candidate blocks left over every isovalue's ray, up to CANDIDATES (None: an image has none)
+    left = None
+    if all(getattr(i, "candidates", None) is not None for i in imgs):
+        total = np.stack([_plane(i, "candidates").astype(np.int64) for i in imgs]).sum(axis=0)
+        left = np.minimum(total, CANDIDATES).astype(np.uint8)
     return IsoImage(
         rgba=np.take_along_axis(rgba, sel[..., None], axis=0)[0],
         depth=np.take_along_axis(depth, sel, axis=0)[0],
@@ -247,4 +254,5 @@ def composite(
         active=np.asarray(np.stack([_plane(i, "active").astype(bool) for i in imgs]).any(axis=0)),
         completion=min(float(i.completion) for i in imgs),
         stats={"images": [i.stats for i in imgs]},
+        candidates=left,
     )

@@ -473,9 +473,12 @@ class PostNetwork:
             active = to_host(planes.active).astype(bool)
             if not np.isfinite(rgba[hit & ~active][:, :3]).all():
                 raise DataError("rgba: a hit pixel with a NaN or infinite r, g or b")
+            # the candidates plane: read back only for a model that takes it (channels_in 6)
+            cand = getattr(planes, "candidates", None) if self.channels_in == 6 else None
+            left = None if cand is None else np.asarray(to_host(cand), np.uint8)
 
             def run_iso(values: np.ndarray, hit: np.ndarray, active: np.ndarray) -> np.ndarray:
-                return timed(_IsoPlanes(values, hit, active))
+                return timed(_IsoPlanes(values, hit, active, left))
 
             frame, share = guard_mod.infill(run_iso, rgba, hit, active, self.queue)
         else:
@@ -497,10 +500,14 @@ class PostNetwork:
 
 
 class _IsoPlanes:
-    """Host planes in an IsoImage's shape (the guard's inputs to the network)."""
+    """Host planes in an IsoImage's shape (the guard's inputs to the network).
+    candidates: the image's (None: it has none); a finished pixel the guard
+    withholds reads 0 there (no count is known for a ray that has ended)."""
 
-    def __init__(self, rgba: np.ndarray, hit: np.ndarray, active: np.ndarray) -> None:
-        self.rgba, self.hit, self.active = rgba, hit, active
+    def __init__(
+        self, rgba: np.ndarray, hit: np.ndarray, active: np.ndarray, candidates: np.ndarray | None = None
+    ) -> None:
+        self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
 
 
 def load(

@@ -23,7 +23,8 @@ adds).
   small U-Nets in sequence with encoder blocks of 4, 8 and 16 channels, a
   32-channel bottleneck and decoder blocks of 16, 8 and 4 (one 3x3
   convolution + ReLU each, average-pool down, nearest up). Input: the partial
-  isosurface image as 5 planes (R, G, B, hit, active; clvis.post.pack.pack_iso);
+  isosurface image as 5 planes (R, G, B, hit, active; clvis.post.pack.pack_iso;
+  with ``candidates=True`` a sixth, the candidate blocks left on each running ray);
   each U-Net sees the input beside the current estimate. Output: 4 planes
   (R, G, B premultiplied over black, coverage) in which the finished pixels
   keep their input values exactly and the active ones take the network's
@@ -184,23 +185,27 @@ def _zero_last(unet: _UNet) -> _UNet:
 
 class InfillWNet(nn.Module):
     """In-fill of a partial isosurface image: 5 planes in (R, G, B, hit,
-    active), 4 out (R, G, B, coverage), finished pixels passed through.
+    active; ``candidates=True``: 6, + the candidate blocks left on each
+    running ray, clvis.post.pack.pack_iso's CANDIDATES), 4 out (R, G, B,
+    coverage), finished pixels passed through.
 
     The finished pixels are first push-pulled into the holes (:class:`PushPull`,
     5 levels); each U-Net sees the input beside the current estimate and adds
     a correction to it (its last convolution starts at zero, so an untrained
     network is the push-pull baseline)."""
 
-    channels_in = 5
     channels_out = 4
 
-    def __init__(self, enc: tuple[int, ...] = (4, 8, 16), mid: int = 32, levels: int = 5) -> None:
+    def __init__(
+        self, enc: tuple[int, ...] = (4, 8, 16), mid: int = 32, levels: int = 5, candidates: bool = False
+    ) -> None:
         super().__init__()
+        self.channels_in = 6 if candidates else 5
         dec = tuple(reversed(enc))
         kw = {"bn": False, "convs": 1, "up": "nearest", "pool": "avg"}
         self.fill = PushPull(levels)
-        self.first = _zero_last(_UNet(5 + 4, 4, enc, mid, dec, **kw))  # type: ignore[arg-type]
-        self.second = _zero_last(_UNet(5 + 4, 4, enc, mid, dec, **kw))  # type: ignore[arg-type]
+        self.first = _zero_last(_UNet(self.channels_in + 4, 4, enc, mid, dec, **kw))  # type: ignore[arg-type]
+        self.second = _zero_last(_UNet(self.channels_in + 4, 4, enc, mid, dec, **kw))  # type: ignore[arg-type]
         self.stride = max(self.first.stride, 2**levels)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:

@@ -35,6 +35,7 @@ from .inputs import GBuffersLike
 from .names import GBUFFER_PLANES, gbuffer_channels
 
 __all__ = [
+    "CANDIDATES_CAP",
     "MAX_PIXELS",
     "MAX_SIDE",
     "pack_gbuffers",
@@ -46,6 +47,8 @@ __all__ = [
 
 MAX_SIDE = limits.POST_PACK.max_side  # 32768 a padded side (why: clvis.limits)
 MAX_PIXELS = limits.POST_PACK.max_pixels  # 2^28 padded pixels
+#: pack_iso's CANDIDATES channel saturates here (the renderer's count limit, clvis.iso.CANDIDATES)
+CANDIDATES_CAP = 8
 
 _SRC = "post/pack.cl"
 
@@ -115,42 +118,57 @@ def pack_iso(
     hit: Any,
     active: Any,
     *,
+    candidates: Any = None,
     stride: int = 1,
     out: cla.Array | None = None,
     queue: cl.CommandQueue | None = None,
 ) -> np.ndarray | cla.Array:
-    """The in-fill network's input: (1, 5, Hp, Wp) float32 = R, G, B, HIT, ACTIVE.
+    """The in-fill network's input: (1, 5, Hp, Wp) float32 = R, G, B, HIT,
+    ACTIVE; with `candidates`, (1, 6, Hp, Wp): + CANDIDATES.
 
     rgba: H x W x 4 float32 (an IsoImage's shaded colour; alpha unused); hit,
     active: H x W bool or uint8 (nonzero = true). Hp, Wp: H, W rounded up to
     multiples of `stride`. At pixels that are hit and not active: the colour's
     r, g, b and HIT 1; elsewhere 0, 0, 0, 0. ACTIVE: 1 where active, else 0.
+    candidates: H x W uint8 (an IsoImage's ``candidates``: the candidate
+    blocks left on each running ray); CANDIDATES = min(candidates,
+    CANDIDATES_CAP) / CANDIDATES_CAP where active, else 0 (CANDIDATES_CAP 8).
     Padding pixels: all 0. A non-finite r, g or b at a hit pixel (active or
     not) raises DataError after the kernel ran.
     """
-    queue = resolve_queue(queue, rgba=rgba, hit=hit, active=active, out=out)
-    host = not (is_device(rgba) or is_device(hit) or is_device(active))
+    queue = resolve_queue(queue, rgba=rgba, hit=hit, active=active, candidates=candidates, out=out)
+    host = not any(is_device(a) for a in (rgba, hit, active, candidates))
     rgba = check_array("rgba", rgba, dtypes=[np.float32], ndim=3)
     hit = check_array("hit", hit, dtypes=[np.bool_, np.uint8], ndim=2)
     active = check_array("active", active, dtypes=[np.bool_, np.uint8], ndim=2)
+    masks = [("hit", hit), ("active", active)]
+    if candidates is not None:
+        candidates = check_array("candidates", candidates, dtypes=[np.uint8], ndim=2)
+        masks.append(("candidates", candidates))
     h, w, c = (int(s) for s in rgba.shape)
     if c != 4:
         raise ValueError(f"rgba: expected 4 channels, got shape {tuple(rgba.shape)}")
-    for name, m in (("hit", hit), ("active", active)):
+    for name, m in masks:
         if tuple(m.shape) != (h, w):
             raise ValueError(f"{name}: shape {tuple(m.shape)} differs from rgba's {(h, w)}")
     hp, wp = padded_shape(h, w, stride)
     _check_size("rgba", h, w, hp, wp)
-    dst = _target(out, queue, (1, 5, hp, wp), np.float32, "pack_iso output")
+    channels = 5 if candidates is None else 6
+    dst = _target(out, queue, (1, channels, hp, wp), np.float32, "pack_iso output")
     bad = runtime.zeros(queue, 1, np.uint32, "pack_iso input check")
     launch, _, _ = _launcher(queue)
     u32 = np.uint32
+    rgba_d, hit_d, active_d = (
+        to_device(queue, "rgba", rgba),
+        _mask(queue, "hit", hit),
+        _mask(queue, "active", active),
+    )
     launch(
         "pack_iso",
         hp * wp,
-        buf(to_device(queue, "rgba", rgba)),
-        buf(_mask(queue, "hit", hit)),
-        buf(_mask(queue, "active", active)),
+        buf(rgba_d),
+        buf(hit_d),
+        buf(active_d),
         u32(w),
         u32(h),
         u32(wp),
@@ -158,6 +176,20 @@ def pack_iso(
         buf(dst),
         buf(bad),
     )
+    if candidates is not None:
+        launch(
+            "pack_count",
+            hp * wp,
+            buf(to_device(queue, "candidates", candidates)),
+            buf(active_d),
+            u32(CANDIDATES_CAP),
+            u32(w),
+            u32(h),
+            u32(wp),
+            u32(hp),
+            u32(5),
+            buf(dst),
+        )
     nonfinite = int(bad.get()[0])
     if nonfinite:
         raise DataError(f"rgba: {nonfinite} hit pixels with a NaN or infinite r, g or b")

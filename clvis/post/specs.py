@@ -20,6 +20,7 @@ import numpy as np
 import pyopencl as cl
 import pyopencl.array as cla
 
+from ..errors import DataError
 from .inputs import GBuffersLike, IsoImageLike, LidarInput
 from .names import NAMES
 from .pack import pack_gbuffers, pack_iso, pack_rgbda
@@ -133,7 +134,18 @@ class InfillSpec(NetworkSpec[IsoImageLike]):
         out: cla.Array,
         queue: cl.CommandQueue,
     ) -> None:
-        pack_iso(image.rgba, image.hit, image.active, stride=stride, out=out, queue=queue)
+        # a model card's channels_in 6: the candidates plane (InfillWNet(candidates=True))
+        candidates = None
+        if out.shape[1] == 6:
+            candidates = getattr(image, "candidates", None)
+            if candidates is None:
+                raise DataError(
+                    "image: this in-fill model reads the candidate blocks left on each running ray "
+                    "(IsoImage.candidates, from IsoRenderer); the image has none"
+                )
+        pack_iso(
+            image.rgba, image.hit, image.active, candidates=candidates, stride=stride, out=out, queue=queue
+        )
 
 
 class LidarSpec(NetworkSpec[LidarInput]):

@@ -8,7 +8,7 @@ small steps) and snapshotted after the first pass that reaches each asked
 completion; the target is the same render run to the end. A finished ray's
 pixel is the complete render's (IsoRenderer's rule, asserted here), so a
 frame keeps the complete image and, per completion, the mask of the rays
-still running.
+still running and the candidate blocks left on each (IsoImage.candidates).
 
 Volume kinds: "waves" (sums of rotated sine products of random
 frequencies, the embedded turbulence's form with random parameters),
@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -255,13 +255,16 @@ class IsoFrame:
     """One in-fill frame: the complete render (``rgb`` premultiplied over
     black, float32 (H, W, 3); ``hit`` bool), per completion the rays still
     running (``active[c]``) and the render's device seconds to reach it
-    (``seconds[c]``, 1.0 for the complete one); what it shows (``source``)."""
+    (``seconds[c]``, 1.0 for the complete one); what it shows (``source``);
+    per completion the candidate blocks left on each running ray
+    (``candidates[c]``, uint8: IsoImage.candidates)."""
 
     rgb: np.ndarray
     hit: np.ndarray
     active: dict[float, np.ndarray]
     seconds: dict[float, float]
     source: str
+    candidates: dict[float, np.ndarray] = field(default_factory=dict)
 
     def planes(self, completion: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rgba, hit, active) of the partial image: what pack_iso takes."""
@@ -269,6 +272,10 @@ class IsoFrame:
         rgba = np.concatenate([self.rgb, self.hit[..., None].astype(np.float32)], axis=2)
         rgba[a] = 0.0
         return rgba, self.hit & ~a, a
+
+    def candidates_at(self, completion: float) -> np.ndarray:
+        """IsoImage.candidates of the partial image (H, W) uint8."""
+        return self.candidates[completion]
 
 
 def iso_frames(
@@ -320,19 +327,22 @@ def iso_frames(
             seconds[1.0] = float(img.stats["seconds"])
             shaded = img.rgba[..., :3] if color is None else color_surface(img, color)[..., :3]
             rgb = np.where(img.hit[..., None], shaded, np.float32(0)).astype(np.float32)
-            active = {}
+            active, left = {}, {}
             for c in completions:
                 s = snaps.get(c, img)
                 done = ~s.active
                 # a finished ray's pixel is the complete render's
                 assert np.array_equal(s.hit[done], img.hit[done])
                 active[c] = s.active.copy()
+                left[c] = s.candidates.copy()
             extra = ""
             if vary is not None:
                 extra = f" {side}^3 {w}x{h}" + (" speculation" if speculate else "")
                 extra += f" colour {tuple(round(float(c), 2) for c in color)}" if color is not None else ""
             frames.append(
-                IsoFrame(rgb, img.hit.copy(), active, seconds, f"{kind} #{i} view {v} iso {iso:.4g}{extra}")
+                IsoFrame(
+                    rgb, img.hit.copy(), active, seconds, f"{kind} #{i} view {v} iso {iso:.4g}{extra}", left
+                )
             )
             if progress is not None:
                 progress(f"iso frame {len(frames)}/{count * views}")

@@ -198,8 +198,10 @@ def splat(
 
 
 class _Iso:
-    def __init__(self, rgba: np.ndarray, hit: np.ndarray, active: np.ndarray) -> None:
-        self.rgba, self.hit, self.active = rgba, hit, active
+    def __init__(
+        self, rgba: np.ndarray, hit: np.ndarray, active: np.ndarray, candidates: np.ndarray | None = None
+    ) -> None:
+        self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
 
 
 def _narvis_scene(family: str, n: int, seed: int) -> Any:
@@ -228,7 +230,7 @@ def _frames(name: str, case: Case, seed: int, planes: Sequence[str], target: str
                 pp = pushpull(rgba, ~active)[..., :3]
                 yield (
                     f"{int(case.setting)}^3 at {c:.0%}",
-                    _Iso(rgba, hit, active),
+                    _Iso(rgba, hit, active, f.candidates_at(c)),
                     f.rgb,
                     {
                         "input": rgba[..., :3],

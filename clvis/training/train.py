@@ -43,7 +43,9 @@ from . import flows as _flows
 # --frames and --frame-size shrink the data for smoke runs
 SPECS: dict[str, dict[str, Any]] = {
     "infill": {
-        "arch": {},
+        # candidates: a sixth input plane, the candidate blocks left on each
+        # running ray (IsoImage.candidates; issue 21)
+        "arch": {"candidates": True},
         "frames": 24,  # volumes (x views)
         "views": 2,
         "held_out": 4,
@@ -468,7 +470,13 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
     1 x 1 convolution) maps the old channels as the file does and passes
     each new one through to a new channel of its own (identity, no bias),
     and every encoder block's weights on those are zero, so the network
-    computes what the file's does until training moves them."""
+    computes what the file's does until training moves them.
+
+    The in-fill W-Net with its candidates plane (``candidates=True``, 6
+    channels) starts from a 5-channel file the same way: each U-Net's first
+    convolution gets a zero input channel for it (the network's input comes
+    before the estimate in the U-Nets' input), so it computes the file's
+    network until training moves them."""
     import onnx
     import torch
     from onnx import numpy_helper
@@ -484,6 +492,7 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
     grown = _grown_channels(net, weights, Path(path))
     if grown:
         weights = _with_added_channels(net, weights, grown)
+    weights = _infill_candidates_channel(net, weights)
     missing = [k for k in state if k not in weights]
     wrong = [k for k in state if k in weights and tuple(weights[k].shape) != tuple(state[k].shape)]
     if missing or wrong:
@@ -522,6 +531,21 @@ def _grown_channels(net: Any, weights: dict[str, np.ndarray], path: Path) -> int
     return len(layout) - len(old)
 
 
+def _infill_candidates_channel(net: Any, weights: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """A 5-channel in-fill file's weights for a 6-channel InfillWNet: a zero
+    column at input channel 5 of each U-Net's first convolution; else the
+    weights as they are."""
+    if type(net).__name__ != "InfillWNet" or net.channels_in != 6:
+        return weights
+    out = dict(weights)
+    for u in ("first", "second"):
+        k = f"{u}.enc.0.0.weight"
+        w = weights.get(k)
+        if w is not None and w.ndim == 4 and w.shape[1] == 5 + 4:
+            out[k] = np.concatenate([w[:, :5], np.zeros_like(w[:, :1]), w[:, 5:]], axis=1)
+    return out
+
+
 def _with_added_channels(net: Any, weights: dict[str, np.ndarray], grown: int) -> dict[str, np.ndarray]:
     """The file's weights for `net` with `grown` more input channels (see
     load_onnx_weights): ``inject`` passes the new channels through, the
@@ -555,7 +579,8 @@ def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int],
 def _pack_infill(frame: Any, completion: float | None, stride: int) -> tuple[Any, Any]:
     from ..post.pack import pack_iso
 
-    x = pack_iso(*frame.planes(completion), stride=stride)[0]
+    # every plane the in-fill can take (the candidates last); _pack keeps the network's first channels
+    x = pack_iso(*frame.planes(completion), candidates=frame.candidates_at(completion), stride=stride)[0]
     return x, np.concatenate([frame.rgb, frame.hit[..., None].astype(np.float32)], axis=2)
 
 
@@ -606,12 +631,22 @@ def held_out_line(row: dict) -> str:
 
 
 def _pack(
-    name: str, frame: Any, completion: float | None = None, stride: int = 1
+    name: str, frame: Any, completion: float | None = None, stride: int = 1, channels: int | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """(input (C, Hp, Wp), target (C, H, W)) float32 of one frame, through
-    the pack kernels the inference uses (padded to a multiple of `stride`)."""
+    the pack kernels the inference uses (padded to a multiple of `stride`);
+    `channels`: the input's first ones only (the network's channels_in: the
+    in-fill packs its optional candidates plane last)."""
     x, y = TRAINERS[name].pack(frame, completion, stride)
-    return np.asarray(x, np.float32), np.ascontiguousarray(y.transpose(2, 0, 1), np.float32)
+    x = np.asarray(x, np.float32)
+    if channels is not None:
+        x = x[:channels]
+    return x, np.ascontiguousarray(y.transpose(2, 0, 1), np.float32)
+
+
+def _half(pair: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """A training pair in float16 (how the run keeps them)."""
+    return pair[0].astype(np.float16), pair[1].astype(np.float16)
 
 
 # ---------------------------------------------------------------------------
@@ -823,7 +858,8 @@ def train(
         raise ValueError(f"--size {size}: larger than the frames ({fsize[0]}x{fsize[1]})")
     if "flow_sizes" in spec and size > min(min(spec["flow_sizes"]), *fsize):
         raise ValueError(f"--size {size}: larger than the flows' frames ({min(spec['flow_sizes'])})")
-    stride = trainer.build(**spec["arch"]).stride  # (a few small layers: cheap)
+    probe = trainer.build(**spec["arch"])  # (a few small layers: cheap)
+    stride, channels_in = probe.stride, probe.channels_in
     if size % stride or size <= 32:  # the crop through the encoder; MS-SSIM's 5 scales need > 32
         raise ValueError(f"--size {size}: {name}'s crops must be a multiple of {stride} and more than 32")
     torch.manual_seed(seed)
@@ -871,15 +907,16 @@ def train(
         train_frames = made(count, spec["views"], seed, False)
         val_frames = made(held, 1, seed + 1_000_003, True)
     completions = trainer.completions
-    pairs = [_pack(name, f, c) for f in train_frames for c in completions]
-    pairs = [(x.astype(np.float16), y.astype(np.float16)) for x, y in pairs]
+    # float16 pair by pair (all the float32 pairs at once held twice the memory)
+    pairs = [_half(_pack(name, f, c, channels=channels_in)) for f in train_frames for c in completions]
     mix_pairs: list = []
     mix_count = 0
     if mix is not None:
         mix_count = max(1, spec["mix_frames"] * count // spec["frames"])
         mixed = _mix_frames(mix_count, spec["views"], seed + 2_000_003, fsize, size, log)
-        mix_pairs = [_pack(name, f, c) for f in mixed for c in _data.TRAIN_COMPLETIONS]
-        mix_pairs = [(x.astype(np.float16), y.astype(np.float16)) for x, y in mix_pairs]
+        mix_pairs = [
+            _half(_pack(name, f, c, channels=channels_in)) for f in mixed for c in _data.TRAIN_COMPLETIONS
+        ]
         log(f"{len(mix_pairs)} variety pairs ({len(mixed)} frames), {mix:.0%} of the crops")
     data_seconds = time.perf_counter() - t0
     log(f"{len(pairs)} training pairs, {len(val_frames)} held-out frames in {data_seconds:.0f} s")
@@ -934,10 +971,12 @@ def train(
     stride = net.stride
     held_out: dict[str, Any] = {}
     if sets:
-        val_pairs: dict[Any, list] = {k: [_pack(name, f, None, stride) for f in v] for k, v in sets.items()}
+        val_pairs: dict[Any, list] = {
+            k: [_pack(name, f, None, stride, channels_in) for f in v] for k, v in sets.items()
+        }
     else:
         own = _distinct_frames(val_frames, completions, log)
-        val_pairs = {c: [_pack(name, f, c, stride) for f in own[c]] for c in completions}
+        val_pairs = {c: [_pack(name, f, c, stride, channels_in) for f in own[c]] for c in completions}
     val_pairs = {k: v for k, v in val_pairs.items() if v}  # a smoke run's sets may be empty
     for c, vp in val_pairs.items():
         rows = []

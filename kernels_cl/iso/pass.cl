@@ -74,6 +74,14 @@
  * kernel mark_active(uint p0, global const uint *active, uint count, global uchar *img_active)
  *     img_active[p0 + active[i]] = 1 for i < count (the tile's rays still
  *     running; run after tile_image).
+ *
+ * kernel mark_candidates(uint p0, global const uint *active, uint count, uint n_spec,
+ *                        global const uint *cand_block, global uchar *img_cand)
+ *     img_cand[p0 + active[i]] = the number of k < n_spec with
+ *     cand_block[i * n_spec + k] != 0xFFFFFFFF, for i < count (n_spec <= 255):
+ *     the candidate blocks a macro_traverse from the rays' resume t found
+ *     (IsoImage.candidates, the blocks left on each running ray, counted up
+ *     to n_spec). The host zeroes the tile's img_cand first.
  */
 #include "clvis/atomics.h"
 
@@ -180,4 +188,16 @@ kernel void mark_active(uint p0, global const uint *active, uint count, global u
     uint i = get_global_id(0);
     if (i < count)
         img_active[p0 + active[i]] = 1;
+}
+
+kernel void mark_candidates(uint p0, global const uint *active, uint count, uint n_spec,
+                            global const uint *cand_block, global uchar *img_cand)
+{
+    uint i = get_global_id(0);
+    if (i >= count)
+        return;
+    uint k = 0;
+    for (uint e = i * n_spec; e < (i + 1u) * n_spec; ++e)
+        k += cand_block[e] != 0xFFFFFFFFu;
+    img_cand[p0 + active[i]] = (uchar)k;
 }

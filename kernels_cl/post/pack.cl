@@ -28,6 +28,14 @@
  *     ACTIVE = active ? 1 : 0. Padding: all 0. bad[0] += the number of hit
  *     pixels whose r, g or b is not finite (the host zeroes it first).
  *
+ * kernel pack_count(global const uchar *count, global const uchar *active, uint cap,
+ *                   uint w, uint h, uint wp, uint hp, uint channel, global float *out)
+ *     One more channel of pack_iso's tensor (the in-fill network with a
+ *     candidates plane): out[channel] at pixel (x, y) = (float)min(count,
+ *     cap) / (float)cap where active (count: w*h uchars, the candidate
+ *     blocks left on the running ray, clvis.iso.IsoImage.candidates), else
+ *     0; padding 0. cap >= 1. Other channels are not touched.
+ *
  * kernel rgbda_range(global const float *rgbda, ulong n, global uint *stats)
  *     rgbda: n pixels of 5 floats {r, g, b, depth, alpha}. Adds to stats
  *     (4 uints, zeroed by the host):
@@ -127,6 +135,24 @@ kernel void pack_iso(global const float *rgba, global const uchar *hit,
         out[2 * plane + i] = b;
         out[3 * plane + i] = shown;
         out[4 * plane + i] = act;
+    }
+}
+
+kernel void pack_count(global const uchar *count, global const uchar *active, const uint cap,
+                       const uint w, const uint h, const uint wp, const uint hp, const uint channel,
+                       global float *out)
+{
+    const ulong plane = (ulong)wp * hp;
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    uint y = (uint)(first / wp), x = (uint)(first - (ulong)y * wp);
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i, x = x + 1 < wp ? x + 1 : 0, y += x == 0) {
+        float v = 0.0f;
+        if (x < w && y < h) {
+            const ulong s = (ulong)y * w + x;
+            if (active[s] != 0)
+                v = (float)min((uint)count[s], cap) / (float)cap;
+        }
+        out[channel * plane + i] = v;
     }
 }
 

@@ -12,6 +12,7 @@ import clvis
 from clvis import Camera, datasets, iso, runtime, zfp
 from clvis._arrays import to_device
 from clvis.reference import iso as ref
+from clvis.reference.iso import traverse as ref_traverse
 
 W, H = 48, 40
 
@@ -182,6 +183,47 @@ def test_partial_completion(queue, completion):
     # finished rays are final: a partial image agrees with the full one where it has hits
     np.testing.assert_array_equal(part.depth[part.hit], full.depth[part.hit])
     assert not (part.hit & part.active).any()
+
+
+@pytest.mark.parametrize("host", [True, False], ids=["host", "device"])
+def test_candidates_left_match_the_reference(queue, host):
+    """IsoImage.candidates: without speculation a pass takes one candidate
+    block per running ray, so after pass P a running ray has P of its
+    candidates behind it; the plane is then min(all - P, CANDIDATES), all =
+    the ray's candidate blocks (the reference traversal from its box entry),
+    and 0 where the ray is not running. Over tiles too (the tiles not traced
+    yet read 0)."""
+    d = _TURB
+    zv = zfp.compress(d["volume"], 12)
+    r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
+    g = iso.macrocell_grids(zv, queue=queue)
+    fine, coarse = g.fine, g.coarse
+    buf = clvis.camera.ray_buffer(_cam(), W, H)
+    rt, enters = ref_traverse.init_rays(buf, W, H, zv.shape, d["spacing"], d["origin"])
+    ids = np.nonzero(enters)[0]
+    blocks, _, after = ref_traverse.macro_traverse(
+        zv.shape, d["spacing"], d["origin"], 0.5, buf, W, fine, coarse, ids, rt, iso.traverse.MAX_SPEC
+    )
+    assert np.isinf(after[ids]).all()  # every candidate listed
+    total = np.zeros(W * H, np.int64)
+    total[ids] = (blocks != ref_traverse.NO_BLOCK).sum(axis=1)
+    tiles = 5 * W
+    seen = 0
+    for img in r.passes(_cam(), W, H, 0.5, speculation=False, tile_pixels=tiles, host=host):
+        got = (_got(img) if not host else img).candidates.ravel()
+        active = (img.active.get() if not host else img.active).ravel()
+        assert got.dtype == np.uint8
+        st = img.stats
+        ti = max(i for i, n in enumerate(st["passes_per_tile"]) if n)
+        want = np.zeros(W * H, np.int64)
+        if st["passes_per_tile"][ti] and active[ti * tiles : (ti + 1) * tiles].any():
+            sl = slice(ti * tiles, (ti + 1) * tiles)
+            left = total[sl] - st["passes_per_tile"][ti]
+            want[sl] = np.where(active[sl], np.minimum(left, iso.CANDIDATES), 0)
+            seen += int(active[sl].sum())
+        # the finished tiles and those not traced yet: 0 (the traced tile's running rays: >= 1)
+        np.testing.assert_array_equal(got, want)
+    assert seen > 100 and (total > iso.CANDIDATES).any()
 
 
 def test_passes_are_progressive(queue):
@@ -364,7 +406,7 @@ def test_stats_timings_and_bytes(queue):
 
 
 def _same(a, b):
-    for name in ("rgba", "depth", "hit", "t", "active"):
+    for name in ("rgba", "depth", "hit", "t", "active", "candidates"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
 
 
@@ -436,7 +478,7 @@ def test_device_image_is_the_host_image(queue, kw):
     host = r.render(_cam(), W, H, 0.5, **kw)
     dev = r.render(_cam(), W, H, 0.5, host=False, **kw)
     assert dev.completion == host.completion and dev.stats["passes"] == host.stats["passes"]
-    for name in ("rgba", "depth", "hit", "t", "active"):
+    for name in ("rgba", "depth", "hit", "t", "active", "candidates"):
         a = getattr(dev, name)
         assert isinstance(a, cla.Array) and a.dtype == getattr(host, name).dtype
     _same(_got(dev), host)
@@ -451,7 +493,8 @@ def test_device_image_is_the_host_image(queue, kw):
 
 def _got(image):
     """A device IsoImage's planes read back."""
-    return type(image)(*(getattr(image, k).get() for k in ("rgba", "depth", "hit", "t", "active")), 1.0, {})
+    planes = [getattr(image, k).get() for k in ("rgba", "depth", "hit", "t", "active")]
+    return type(image)(*planes, 1.0, {}, image.candidates.get())
 
 
 def test_tile_plan_and_memory_check(queue, monkeypatch):

@@ -185,6 +185,11 @@ def test_composite_takes_the_nearest_hit(rendered):
     p = iso.composite([a, b], planes=planes)
     assert (p.rgba[first] == 0.25).all() and (p.rgba[second] == 0.75).all()
     assert iso.surface_colors(12)[0] == iso.SURFACE_COLOR and len(set(iso.surface_colors(10))) == 10
+    # the candidate blocks left: summed over the isovalues, capped at CANDIDATES; None if one has none
+    ca = np.arange(H * W).reshape(H, W).astype(np.uint8) % 7
+    left = iso.composite([dataclasses.replace(a, candidates=ca), dataclasses.replace(b, candidates=ca)])
+    np.testing.assert_array_equal(left.candidates, np.minimum(2 * ca, iso.CANDIDATES))
+    assert iso.composite([a, dataclasses.replace(b, candidates=None)]).candidates is None
 
 
 def test_bad_arguments(rendered):

@@ -293,7 +293,7 @@ def iso_render(q):
     r.render(_iso_cam(8, 8, (-20.0, 30.0, -10.0)), 8, 8, 0.5, completion=0.9, speculation=False)
     # tiles of 37 pixels: every kernel starts mid-row at a tile's first pixel
     r.render(_iso_cam(w, h), w, h, 0.3, tile_pixels=37)
-    # the image on the device (tile_image, mark_active): tiles stopped early,
+    # the image on the device (tile_image, mark_active, mark_candidates): tiles stopped early,
     # and the passes' snapshots with tiles not started yet
     r.render(_iso_cam(w, h), w, h, 0.3, completion=0.5, speculation=False, tile_pixels=37, host=False)
     for _ in r.passes(_iso_cam(w, h), w, h, 0.3, tile_pixels=97, host=False):
@@ -449,6 +449,9 @@ def post_pack(q):
     hit, active = rng.random((h, w)) < 0.6, rng.random((h, w)) < 0.2
     for stride in (1, 8):
         clvis.post.pack_iso(rgba, hit, active, stride=stride, queue=q)
+    # the candidates plane (pack_count), counts past the cap too
+    cand = rng.integers(0, 12, (h, w)).astype(np.uint8)
+    clvis.post.pack_iso(rgba, hit, active, candidates=cand, stride=8, queue=q)
     x = np.zeros((h, w, 5), np.float32)
     keep = rng.random((h, w)) < 0.5
     x[..., :3] = rng.random((h, w, 3))

@@ -74,7 +74,9 @@ def test_infill_equals_plain_onnxruntime(iso_pair, precision):
     h, w = part.hit.shape
     assert rgba.shape == (h, w, 4) and rgba.dtype == np.uint8
     s = ort.InferenceSession(str(net.path), providers=["CPUExecutionProvider"])
-    want = s.run(None, {"planes": post.pack_iso(part.rgba, part.hit, part.active, stride=net.stride)})[0]
+    cand = part.candidates if net.channels_in == 6 else None  # a model with the candidates plane
+    planes = post.pack_iso(part.rgba, part.hit, part.active, candidates=cand, stride=net.stride)
+    want = s.run(None, {"planes": planes})[0]
     np.testing.assert_array_equal(net.infer(part), want)
     want8 = np.rint(np.clip(want[0, :, :h, :w].transpose(1, 2, 0), 0, 1) * 255).astype(np.uint8)
     np.testing.assert_array_equal(rgba, want8)
@@ -93,7 +95,7 @@ def test_infill_quality_on_held_out_volume():
     within 2 dB of push-pull either way, which README states.)"""
     f = data.iso_frames(("gyroid",), 1, 8, 640, 360, views=1, completions=(0.85,))[0]
     rgba, hit, active = f.planes(0.85)
-    out = post.load("infill")(_Iso(rgba, hit, active))[..., :3] / np.float32(255)
+    out = post.load("infill")(_Iso(rgba, hit, active, f.candidates_at(0.85)))[..., :3] / np.float32(255)
     pp = post.pushpull(rgba, ~active)[..., :3]
     net_m, pp_m, raw = (train.metrics(x, f.rgb) for x in (out, pp, rgba[..., :3]))
     assert net_m["psnr"] > pp_m["psnr"] + 1 and net_m["psnr"] > raw["psnr"] + 6
@@ -269,8 +271,8 @@ def test_narvis_storm_view_reaches_25_db(storm_view_scores):
 
 
 class _Iso:
-    def __init__(self, rgba, hit, active):
-        self.rgba, self.hit, self.active = rgba, hit, active
+    def __init__(self, rgba, hit, active, candidates=None):
+        self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
 
 
 class _Filtered:

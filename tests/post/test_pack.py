@@ -60,6 +60,36 @@ def test_pack_iso(queue, shape, stride):
     same(pack_iso(rgba, hit.astype(np.uint8) * 3, active.astype(np.uint8), stride=stride, queue=queue), want)
 
 
+@pytest.mark.parametrize("shape", [(1, 1), (17, 33), (37, 53)])
+@pytest.mark.parametrize("stride", [1, 16])
+def test_pack_iso_candidates(queue, shape, stride):
+    """The sixth channel: min(candidates, 8) / 8 where active, else 0 (every
+    count 0..255, on running and finished pixels), the first five as without
+    it; numpy, device and out= inputs."""
+    rgba, hit, active = iso_inputs(shape, seed=hash((shape, stride, 6)) % 2**32)
+    cand = np.random.default_rng(5).integers(0, 256, shape).astype(np.uint8)
+    cand.ravel()[: min(cand.size, 12)] = np.arange(min(cand.size, 12))  # 0..11 around the cap
+    got = pack_iso(rgba, hit, active, candidates=cand, stride=stride, queue=queue)
+    want = ref.pack_iso(rgba, hit, active, candidates=cand, stride=stride)
+    same(got, want)
+    hp, wp = padded_shape(*shape, stride)
+    assert got.shape == (1, 6, hp, wp)
+    assert pack_module.CANDIDATES_CAP == ref.CANDIDATES_CAP == clvis.iso.CANDIDATES
+    same(got[:, :5], ref.pack_iso(rgba, hit, active, stride=stride))
+    c = got[0, 5, : shape[0], : shape[1]]
+    want_c = np.where(active, np.minimum(cand, 8) / np.float32(8), 0).astype(np.float32)
+    np.testing.assert_array_equal(c, want_c)
+    assert not got[0, 5, shape[0] :].any() and not got[0, 5, :, shape[1] :].any()
+    out = cla.empty(queue, want.shape, np.float32)
+    dev = pack_iso(rgba, hit, active, candidates=cla.to_device(queue, cand), stride=stride, out=out)
+    assert dev is out
+    same(out.get(), want)
+    with pytest.raises(TypeError, match="candidates: dtype"):
+        pack_iso(rgba, hit, active, candidates=cand.astype(np.int32), queue=queue)
+    with pytest.raises(ValueError, match="candidates: shape"):
+        pack_iso(rgba, hit, active, candidates=cand[:, :0], queue=queue)
+
+
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("stride", STRIDES)
 def test_pack_rgbda(queue, shape, stride):

@@ -310,6 +310,15 @@ def test_iso_frames_are_deterministic_and_consistent():
         np.testing.assert_array_equal(a.active[c], b.active[c])
         rgba, hit, active = a.planes(c)
         assert not (hit & active).any() and (rgba[active] == 0).all()
+        # the candidate blocks left: 1..8 on each running ray, 0 elsewhere (the pairs' sixth plane)
+        left = a.candidates_at(c)
+        np.testing.assert_array_equal(left, b.candidates_at(c))
+        assert left.dtype == np.uint8 and (left[~active] == 0).all() and (left[active] >= 1).all()
+        assert left.max() <= 8
+        x, _ = train._pack("infill", a, c)
+        np.testing.assert_array_equal(x[5], np.minimum(left, 8) / np.float32(8))
+        assert x.shape[0] == 6 and train._pack("infill", a, c, channels=5)[0].shape[0] == 5
+    assert a.active[0.85].any() and (a.candidates_at(0.85) > 1).any()
     # fewer rays run at higher completion
     assert a.active[0.85].sum() >= a.active[0.9].sum() >= a.active[0.95].sum()
 
@@ -616,6 +625,48 @@ def test_init_loads_an_onnx_export_of_the_same_network(tmp_path):
     (tmp_path / "x.onnx").write_text("no model")
     with pytest.raises(ValueError, match="not an ONNX model"):
         train.load_onnx_weights(net, tmp_path / "x.onnx")
+
+
+def test_init_adds_the_infill_candidates_plane_at_zero(tmp_path):
+    """--init of the in-fill W-Net with its candidates plane (6 channels)
+    from a 5-channel file: each U-Net's first convolution gets a zero column
+    for the new channel, the rest is the file's, so the network computes
+    the file's (onnxruntime's, within float rounding) whatever the plane
+    holds, and the plane's weights still learn."""
+    import torch
+
+    from clvis.post import nets
+
+    old = nets.InfillWNet()
+    torch.manual_seed(3)
+    with torch.no_grad():
+        for p in old.parameters():  # (the zero last layers too: a network that is not push-pull)
+            p.add_(0.05 * torch.randn_like(p))
+    train.export_onnx(old, tmp_path / "infill.onnx")
+    new = nets.InfillWNet(candidates=True)
+    train.load_onnx_weights(new, tmp_path / "infill.onnx")
+    assert new.channels_in == 6 and old.channels_in == 5
+    rng = np.random.default_rng(0)
+    x = rng.random((1, 6, 64, 64), dtype=np.float32)
+    x[:, 4] = x[:, 4] > 0.6  # the running rays
+    with torch.no_grad():
+        ref = old.eval()(torch.from_numpy(x[:, :5])).numpy()
+        got = [
+            new.eval()(torch.from_numpy(np.concatenate([x[:, :5], x[:, 5:] * k], 1))).numpy() for k in (0, 1)
+        ]
+    assert np.abs(train._run(tmp_path / "infill.onnx", x[:, :5]) - ref).max() < 1e-4
+    assert np.abs(ref - x[:, :4]).max() > 0.05  # the running pixels are filled
+    for g in got:
+        np.testing.assert_array_equal(g, ref)
+    for u in (new.first, new.second):
+        w = u.enc[0][0].weight.detach().numpy()
+        assert w.shape[1] == 6 + 4 and (w[:, 5] == 0).all()
+    np.testing.assert_array_equal(
+        new.first.enc[0][0].weight.detach().numpy()[:, [0, 1, 2, 3, 4, 6, 7, 8, 9]],
+        old.first.enc[0][0].weight.detach().numpy(),
+    )
+    new.train()(torch.from_numpy(x)).sum().backward()
+    assert new.first.enc[0][0].weight.grad[:, 5].abs().sum() > 0
 
 
 def test_init_with_an_added_plane_starts_as_the_shipped_narvis(tmp_path):

@@ -309,6 +309,8 @@ def test_guarded_infill_pipeline_is_counted(device, transfers):
     want = net(r.render(cam, W, H, isovalue=0.5, completion=0.85, speculation=False), guard=True)
     transfers.clear()
     got = net(part, guard=True)
-    assert transfers.planes(W * H) == _guard_accounting(net, H, W, [16, 1, 1], [16, 1, 1], 16)
+    # rgba, hit, active and (the 6-channel model's) candidates
+    planes = [16, 1, 1] + [1] * (net.channels_in - 5)
+    assert transfers.planes(W * H) == _guard_accounting(net, H, W, planes, planes, 16)
     assert transfers.small(W * H) <= SMALL
     np.testing.assert_array_equal(got, want)

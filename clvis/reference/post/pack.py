@@ -12,6 +12,10 @@ shaded colour at hits), ``hit`` and ``active`` (H x W, nonzero = true),
 channels R, G, B, HIT, ACTIVE. A pixel is shown where hit and not active:
 R, G, B = its r, g, b and HIT = 1; elsewhere R = G = B = HIT = 0. ACTIVE = 1
 where active, else 0. Padding: all 0. A hit pixel's r, g, b must be finite.
+With ``candidates`` (H x W uint8, clvis.iso.IsoImage.candidates: the
+candidate blocks left on each running ray) a sixth channel CANDIDATES =
+min(candidates, CANDIDATES_CAP) / CANDIDATES_CAP in float32 where active,
+else 0 (CANDIDATES_CAP = 8, the renderer's count limit clvis.iso.CANDIDATES).
 
 pack_rgbda (the LiDAR U-Net, following the LiDAR paper's authors'
 conventions): from ``rgbda`` (H x W x 5 [r, g, b, depth, alpha], a
@@ -49,6 +53,8 @@ from ...errors import DataError
 
 MAX_SIDE = 32768
 MAX_PIXELS = 2**28
+#: pack_iso's CANDIDATES channel saturates here (clvis.iso.CANDIDATES)
+CANDIDATES_CAP = 8
 
 _F = np.float32
 
@@ -66,7 +72,12 @@ def _nchw(planes: list[np.ndarray], hp: int, wp: int, fill: list[float]) -> np.n
 
 
 def pack_iso(
-    rgba: npt.ArrayLike, hit: npt.ArrayLike, active: npt.ArrayLike, *, stride: int = 1
+    rgba: npt.ArrayLike,
+    hit: npt.ArrayLike,
+    active: npt.ArrayLike,
+    *,
+    candidates: npt.ArrayLike | None = None,
+    stride: int = 1,
 ) -> np.ndarray:
     rgba = np.asarray(rgba, _F)
     hit, active = np.asarray(hit).astype(bool), np.asarray(active).astype(bool)
@@ -75,7 +86,11 @@ def pack_iso(
     shown = hit & ~active
     rgb = [np.where(shown, rgba[..., c], _F(0)) for c in range(3)]
     hp, wp = padded_shape(shown.shape[0], shown.shape[1], stride)
-    return _nchw([*rgb, shown.astype(_F), active.astype(_F)], hp, wp, [0, 0, 0, 0, 0])
+    planes = [*rgb, shown.astype(_F), active.astype(_F)]
+    if candidates is not None:
+        k = np.minimum(np.asarray(candidates).astype(np.uint32), CANDIDATES_CAP)
+        planes.append(np.where(active, k.astype(_F) / _F(CANDIDATES_CAP), _F(0)))
+    return _nchw(planes, hp, wp, [0] * len(planes))
 
 
 def pack_rgbda(rgbda: npt.ArrayLike, *, stride: int = 1) -> np.ndarray:

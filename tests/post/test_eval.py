@@ -270,10 +270,12 @@ def test_ci_infill_on_shapes(ci_rows):
     Measured (Intel CPU), since a ray with no candidate block left is
     finished at once (traverse.cl: 90 % is reached in the pass that reaches
     85 %, 95 % one pass earlier than before), with the model fine-tuned on
-    such frames: 85 % and 90 %: 36.3 dB / 0.982 (push-pull 31.9, input
-    25.0); 95 %: 43.1 / 0.995 (push-pull 34.2, input 33.7). The model before
-    it on these frames: 35.7 / 0.981 and 42.2 / 0.994. Before both: 85 %:
-    35.3 (push-pull 29.9); 90 %: 41.3 (32.7); 95 %: 45.6 (34.5)."""
+    such frames, then with the candidates plane (IsoImage.candidates):
+    85 % and 90 %: 36.5 dB / 0.983 (push-pull 31.9, input 25.0); 95 %: 43.8
+    / 0.995 (push-pull 34.2, input 33.7). Without the plane: 36.3 / 0.982
+    and 43.1 / 0.995; the model before that: 35.7 / 0.981 and 42.2 / 0.994.
+    Before all three: 85 %: 35.3 (push-pull 29.9); 90 %: 41.3 (32.7); 95 %:
+    45.6 (34.5)."""
     r = ci_rows["infill"]
     a, b, c = r["64^3 at 85%"], r["64^3 at 90%"], r["64^3 at 95%"]
     assert a["network"]["psnr"] > 25 and a["network"]["ssim"] > 0.95 and _margin(a, "pushpull") > 3
@@ -303,9 +305,10 @@ def test_ci_infill_95_is_not_below_its_input(ci_rows):
     whose running rays were nearly all background rays, many of them with no
     candidate block left, which it painted. Such a ray cannot hit and is now
     finished at once (traverse.cl), so 95 % is reached one pass earlier and
-    no sure miss is shown as a hole: measured 43.1 dB against the input's
-    33.7 (42.2 with the model before; the same pass's hits as the old 90 %
-    frame, where the network had 41.3). Running rays that will miss with candidates left can still be
+    no sure miss is shown as a hole: measured 43.8 dB against the input's
+    33.7 (43.1 without the candidates plane, 42.2 with the model before
+    that; the same pass's hits as the old 90 % frame, where the network had
+    41.3). Running rays that will miss with candidates left can still be
     painted; this frame does not show it."""
     assert _margin(ci_rows["infill"]["64^3 at 95%"], "input") >= 0
 

@@ -423,10 +423,8 @@ def _iso_frames(count: int, views: int, seed: int, size: tuple[int, int], held_o
 
 def _lidar_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
     scenes = ("terrain", "town") if held_out else ("town",)
-    ps = tuple(SPECS["lidar"].get("point_sizes", (1, 1)))
-    return _data.lidar_frames(
-        scenes, count, seed, *size, views=views, point_size=(ps[0], ps[1]), progress=log
-    )
+    lo, hi = SPECS["lidar"]["point_sizes"]
+    return _data.lidar_frames(scenes, count, seed, *size, views=views, point_size=(lo, hi), progress=log)
 
 
 def _scan_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):

@@ -87,9 +87,15 @@ def suite(name: str, quick: bool = False) -> list[Case]:
     if name == "infill":
         if quick:
             return [Case(f, (320, 180), 64) for f in fam]
-        return [Case(f, s, 64, frames=2) for f in fam for s in ((320, 180), (640, 360), (1280, 720))] + [
-            Case(f, (640, 360), n) for f in fam for n in (32, 128)
-        ]
+        # issue 21's range: 320x180 to 1920x1080, volumes of 32^3 to 256^3
+        # (the rows added last, so the others keep their seeds: a case's
+        # frames are drawn from its index)
+        return (
+            [Case(f, s, 64, frames=2) for f in fam for s in ((320, 180), (640, 360), (1280, 720))]
+            + [Case(f, (640, 360), n) for f in fam for n in (32, 128)]
+            + [Case(f, (1920, 1080), 64) for f in fam]
+            + [Case(f, (640, 360), 256) for f in fam]
+        )
     if name == "lidar":
         if quick:
             return [Case(f, (320, 240), d) for f in fam for d in (0.03, 0.1)] + [

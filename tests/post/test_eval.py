@@ -26,6 +26,10 @@ def test_suites_hold_only_families_never_trained_on():
             cases = ev.suite(name, quick)
             assert {c.family for c in cases} == set(ev.FAMILIES[name])
     assert not set(data.EVAL_VOLUMES) & set(data.TRAIN_VOLUMES)
+    # the in-fill suite spans the sizes and volumes
+    infill = ev.suite("infill")
+    assert {c.size for c in infill} == {(320, 180), (640, 360), (1280, 720), (1920, 1080)}
+    assert {c.setting for c in infill} == {32, 64, 128, 256}
     # the NARVis suite has both samplers and densities around the training's
     full = ev.suite("narvis")
     assert {c.sampler for c in full} == {"hemisphere", "grid"}

@@ -59,6 +59,8 @@ SPECS: dict[str, dict[str, Any]] = {
         # --mix F: a share F of the crops from MIX_VOLUMES frames drawn with
         # data.IsoVariety at data.TRAIN_COMPLETIONS, beside the frames above
         "mix_frames": 28,  # volumes (x views): 4 of each of the seven families
+        # the share of those volumes given acquisition noise (data.IsoVariety.noise)
+        "mix_noise": 0.5,
     },
     "lidar": {
         "arch": {"width": 8, "depth": 4},
@@ -437,12 +439,15 @@ def _scan_frames(count: int, views: int, seed: int, size: tuple[int, int], held_
 MIX_VOLUMES = _data.TRAIN_VOLUMES + _data.MORE_TRAIN_VOLUMES
 
 
-def _mix_frames(count: int, views: int, seed: int, size: tuple[int, int], crop: int, log) -> list:
+def _mix_frames(
+    count: int, views: int, seed: int, size: tuple[int, int], crop: int, log, noise: float = 0.0
+) -> list:
     """--mix's frames: `count` volumes of MIX_VOLUMES (in turn) x `views`,
-    each volume's side and frame size, each view's speculation and surface
-    colour drawn (data.IsoVariety, no frame side below `crop`), snapshotted
-    at data.TRAIN_COMPLETIONS."""
-    vary = _data.IsoVariety(smallest=max(crop, _data.IsoVariety.smallest))
+    each volume's side, frame size and acquisition noise (with probability
+    `noise`), each view's speculation and surface colour drawn
+    (data.IsoVariety, no frame side below `crop`), snapshotted at
+    data.TRAIN_COMPLETIONS."""
+    vary = _data.IsoVariety(smallest=max(crop, _data.IsoVariety.smallest), noise=noise)
     return _data.iso_frames(
         MIX_VOLUMES,
         count,
@@ -911,7 +916,9 @@ def train(
     mix_count = 0
     if mix is not None:
         mix_count = max(1, spec["mix_frames"] * count // spec["frames"])
-        mixed = _mix_frames(mix_count, spec["views"], seed + 2_000_003, fsize, size, log)
+        mixed = _mix_frames(
+            mix_count, spec["views"], seed + 2_000_003, fsize, size, log, spec.get("mix_noise", 0.0)
+        )
         mix_pairs = [
             _half(_pack(name, f, c, channels=channels_in)) for f in mixed for c in _data.TRAIN_COMPLETIONS
         ]
@@ -1030,7 +1037,9 @@ def train(
                         "frames": len(mix_pairs) // len(_data.TRAIN_COMPLETIONS),
                         "pairs": len(mix_pairs),
                         "completions": list(_data.TRAIN_COMPLETIONS),
-                        "variety": dataclasses.asdict(_data.IsoVariety(smallest=max(size, 64))),
+                        "variety": dataclasses.asdict(
+                            _data.IsoVariety(smallest=max(size, 64), noise=spec.get("mix_noise", 0.0))
+                        ),
                     }
                 }
                 if mix is not None

@@ -368,6 +368,31 @@ def test_iso_frames_vary_what_the_network_must_not_learn():
     assert [f.source for f in make(8)] != [f.source for f in a]
 
 
+def test_acquisition_noise_is_smoothed_scaled_and_seeded():
+    """IsoVariety.noisy: with probability `noise`, smoothed white noise of
+    `noise_amp` x the volume's standard deviation; none (and no draw) at 0,
+    so the frames drawn without it stay as they were."""
+    vol, _ = data.procedural_volume("blobs", np.random.default_rng(3), 32)
+    vary = data.IsoVariety(noise=1.0, noise_amp=(0.1, 0.1), noise_sigma=(1.0, 1.0))
+    a, amp = vary.noisy(vol, np.random.default_rng(9))
+    b, _ = vary.noisy(vol, np.random.default_rng(9))
+    np.testing.assert_array_equal(a, b)
+    assert amp == pytest.approx(0.1) and a.dtype == np.float32
+    d = a.astype(np.float64) - vol
+    assert d.std() == pytest.approx(0.1 * vol.std(), rel=1e-3)
+    # smoothed: neighbouring voxels' noise is correlated (white noise's is not)
+    assert np.corrcoef(d[:, :, 1:].ravel(), d[:, :, :-1].ravel())[0, 1] > 0.5
+    assert abs(np.corrcoef(d[:, :, 0].ravel(), d[:, :, 16].ravel())[0, 1]) < 0.2  # but not far ones
+    rng = np.random.default_rng(4)
+    same, zero = data.IsoVariety().noisy(vol, rng)
+    assert same is vol and zero == 0.0
+    assert rng.random() == np.random.default_rng(4).random()  # nothing drawn
+    # with probability 0.5, some volumes get noise and some do not
+    half = data.IsoVariety(noise=0.5)
+    got = [half.noisy(vol, np.random.default_rng(s))[1] > 0 for s in range(40)]
+    assert 5 < sum(got) < 35
+
+
 def test_lidar_pairs_are_registered():
     f = data.lidar_frames(("town",), 1, 4, 80, 60, views=1, dense_points=60_000)[0]
     kept = f.rgbda[..., 4] > 0

@@ -10,14 +10,16 @@ with the mean PSNR and SSIM and the worst frame's PSNR of each.
 
 Families (TRAINED: what the shipped networks' training used):
 
-- in-fill (trained on "waves", "ripples" (Marschner–Lobb), "blobs"):
+- in-fill (trained on "waves", "ripples" (Marschner–Lobb), "blobs", and
+  with --mix data.MORE_TRAIN_VOLUMES):
   "gyroid", "turbulence", "noise" (smoothed noise fields), "shapes"
   (distance fields of random spheres and boxes), "layers" (CT-like nested
   shells); completions 0.85, 0.9, 0.95; baseline push-pull (and the raw
   partial image).
 - LiDAR (trained on "town"): "terrain" (the embedded one), "photo" (a
   town's geometry under scikit-image's sample photographs); scan densities
-  1-30 %; baselines push-pull and the depth-filtered input.
+  1-30 %, points 1-3 pixels a side; baselines push-pull and the
+  depth-filtered input.
 - NARVis (trained on the hurricane, hemisphere views, viridis over
   temperature): flows of other geometries (clvis.training.flows:
   "convection", "lorenz", "jet", "ring") and "hurricane/magma" (the

@@ -74,6 +74,10 @@ SPECS: dict[str, dict[str, Any]] = {
         # the scan's points drawn lo..hi pixels a side, per view (as
         # ``clvis render --point-size``; the held-out suite has 1, 2 and 3)
         "point_sizes": (1, 3),
+        # the training scenes, in turn: towns coloured by height, and towns
+        # under a procedural natural-image-like texture (data.texture_town;
+        # the held-out "photo" family drapes photographs, never trained on)
+        "scenes": ("town", "texture_town"),
     },
     # NARVis: hemisphere views of the hurricane (random looks), 9:1
     # train/validation by view, beside the training flows
@@ -424,7 +428,7 @@ def _iso_frames(count: int, views: int, seed: int, size: tuple[int, int], held_o
 
 
 def _lidar_frames(count: int, views: int, seed: int, size: tuple[int, int], held_out: bool, log):
-    scenes = ("terrain", "town") if held_out else ("town",)
+    scenes = ("terrain", "town") if held_out else tuple(SPECS["lidar"]["scenes"])
     lo, hi = SPECS["lidar"]["point_sizes"]
     return _data.lidar_frames(scenes, count, seed, *size, views=views, point_size=(lo, hi), progress=log)
 
@@ -1352,7 +1356,7 @@ TRAINERS: dict[str, Trainer] = {
         _lidar_frames,
         _pack_lidar,
         _augment_lidar,
-        trained=("town",),
+        trained=tuple(SPECS["lidar"]["scenes"]),
         held_out=("terrain", "town (unseen seeds)"),
     ),
     "narvis": Trainer(

@@ -393,6 +393,25 @@ def test_acquisition_noise_is_smoothed_scaled_and_seeded():
     assert 5 < sum(got) < 35
 
 
+def test_procedural_texture_has_a_photographs_statistics():
+    """data.procedural_texture: seeded, 0..255 RGB, its luminance spectrum
+    falling with frequency as a photograph's (power ~ 1/f^2, not white),
+    coloured (not grey); texture_town drapes it over a town."""
+    a = data.procedural_texture(np.random.default_rng(1), 128)
+    np.testing.assert_array_equal(a, data.procedural_texture(np.random.default_rng(1), 128))
+    assert not np.array_equal(a, data.procedural_texture(np.random.default_rng(2), 128))
+    assert a.shape == (128, 128, 3) and a.min() >= 0 and a.max() <= 255
+    p = np.abs(np.fft.fft2(a.mean(-1) - a.mean())) ** 2
+    f = np.hypot(*np.meshgrid(np.fft.fftfreq(128), np.fft.fftfreq(128)))
+    low, high = p[(f > 0.02) & (f < 0.05)].mean(), p[(f > 0.3) & (f < 0.45)].mean()
+    assert low > 30 * high
+    assert np.abs(a - a.mean(-1, keepdims=True)).mean() > 5  # not grey
+    t = data.texture_town(20_000, 4)
+    plain = data.town(20_000, 4)
+    np.testing.assert_array_equal(t["positions"], plain["positions"])
+    assert not np.array_equal(t["colors"], plain["colors"])
+
+
 def test_lidar_pairs_are_registered():
     f = data.lidar_frames(("town",), 1, 4, 80, 60, views=1, dense_points=60_000)[0]
     kept = f.rgbda[..., 4] > 0

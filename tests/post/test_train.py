@@ -85,6 +85,8 @@ def test_scan_lines_are_anisotropic_and_seeded():
     and the same seed keeps the same points (another seed others)."""
     from scipy.spatial import cKDTree
 
+    from clvis.post.names import SCAN_GBUFFER_PLANES
+
     u = np.random.default_rng(0).uniform(0, 1, (80_000, 2))
     pos = np.c_[u, np.zeros(len(u))]
     keep, info = data.scan_line_sample(pos, 10_000, np.random.default_rng(1), (6.0, 6.0))
@@ -111,6 +113,15 @@ def test_scan_lines_are_anisotropic_and_seeded():
     assert len(a.cloud.positions) == 3000 and "scan lines" in a.source
     full = data.town(24_000, 5)["positions"]
     assert np.isin(a.cloud.positions[:, 0], full[:, 0]).all()
+    # scan_frames: a share 1 puts every scene on scan lines, 0 none
+    lines = {"share": 1.0, "gap": (2.0, 8.0), "oversample": 8}
+    on, off = (
+        data.scan_frames(
+            ("town",), 1, 2, 64, 48, SCAN_GBUFFER_PLANES, views=1, densities=(1, 1), scan_lines=s
+        )
+        for s in (lines, {**lines, "share": 0.0})
+    )
+    assert "scan lines" in on[0].source and "scan lines" not in off[0].source
 
 
 def test_scan_pairs_are_registered():

@@ -130,8 +130,8 @@ SPECS: dict[str, dict[str, Any]] = {
         # kept, the planes `gap` (lo..hi, log-uniform) x the points' uniform
         # nearest-neighbour distance apart (data.scan_line_sample). Off (share
         # 0: the shipped run's frames): at 0.5 the aerial 1x rows rose over the
-        # splat but the terrain's and the object's margins fell, from scratch
-        # and fine-tuned (bench/results/README.md, scan21j): not shipped
+        # splat but the family means fell, within what another seed moves
+        # them (bench/results/README.md, scan21j): not shipped
         "scan_lines": {"share": 0.0, "gap": (2.0, 8.0), "oversample": 8},
     },
 }

@@ -1152,8 +1152,53 @@ def scan_cloud(positions: np.ndarray, colors: np.ndarray | None, **kw: Any) -> A
     return PointCloud(positions, colors=colors, radius=knn_sigma(positions, SCAN_K), **kw)
 
 
-def scan_scene(kind: str, n: int, seed: int) -> ScanScene:
-    """A narvis-scan scene of generator `kind` (SCAN_KINDS), `n` points from `seed`."""
+def scan_line_sample(
+    positions: np.ndarray, n: int, rng: np.random.Generator, gap: tuple[float, float]
+) -> tuple[np.ndarray, dict]:
+    """The indices of `n` of `positions` (a cloud sampled uniformly by area,
+    several times denser than `n`) that lie nearest a family of parallel
+    vertical planes: scan lines, as an airborne or terrestrial scanner's
+    returns (dense along a line, a gap between lines). The planes' normal is
+    horizontal at a random angle, their phase random, their spacing `gap`
+    (lo, hi: log-uniform) times the median nearest-neighbour distance of `n`
+    points drawn uniformly (estimated on a subset). Returns (sorted indices,
+    {"gap": the spacing in world units, "normal": (3,), "spacing": that
+    nearest-neighbour distance})."""
+    from scipy.spatial import cKDTree
+
+    pos = np.asarray(positions, np.float64)
+    if not 0 < n <= len(pos):
+        raise ValueError(f"scan lines: {n} points of {len(pos)}")
+    sub = pos[rng.choice(len(pos), size=min(n, 20_000), replace=False)]
+    nn = cKDTree(sub).query(sub, k=2)[0][:, 1]
+    spacing = float(np.median(nn)) * math.sqrt(len(sub) / n)  # a surface's: as 1 / sqrt(density)
+    g = spacing * math.exp(rng.uniform(math.log(gap[0]), math.log(gap[1])))
+    a = rng.uniform(0, math.pi)
+    normal = np.array([math.cos(a), math.sin(a), 0.0])
+    t = pos @ normal / g + rng.uniform(0, 1)
+    keep = np.sort(np.argpartition(np.abs(t - np.rint(t)), n - 1)[:n])
+    return keep, {"gap": g, "normal": normal, "spacing": spacing}
+
+
+def scan_scene(kind: str, n: int, seed: int, scan_lines: tuple[float, float, int] | None = None) -> ScanScene:
+    """A narvis-scan scene of generator `kind` (SCAN_KINDS), `n` points from
+    `seed`; `scan_lines` (gap lo, gap hi, oversample): the generator drawn
+    with oversample x `n` points and `n` of them kept along scan lines
+    (scan_line_sample, its draws seeded by `seed`)."""
+    framing = "object" if kind in ("shapes", "object") else "landscape"
+    if scan_lines is None:
+        d = _scan_points(kind, n, seed)
+        cloud = scan_cloud(np.asarray(d["positions"], np.float32), d["colors"])
+        return ScanScene(cloud, framing, f"{kind} ({n:,} points, seed {seed})")
+    lo, hi, over = scan_lines
+    d = _scan_points(kind, n * int(over), seed)
+    keep, info = scan_line_sample(d["positions"], n, np.random.default_rng([seed, 1]), (lo, hi))
+    cloud = scan_cloud(np.asarray(d["positions"][keep], np.float32), d["colors"][keep])
+    apart = info["gap"] / info["spacing"]
+    return ScanScene(cloud, framing, f"{kind} ({n:,} points on scan lines {apart:.1f}x apart, seed {seed})")
+
+
+def _scan_points(kind: str, n: int, seed: int) -> dict:
     if kind == "town":
         d = town(n, seed)
     elif kind == "photo_town":
@@ -1168,9 +1213,7 @@ def scan_scene(kind: str, n: int, seed: int) -> ScanScene:
         d = object_scene(n, seed)
     else:
         raise ValueError(f"scene: expected one of {SCAN_KINDS}, got {kind!r}")
-    framing = "object" if kind in ("shapes", "object") else "landscape"
-    cloud = scan_cloud(np.asarray(d["positions"], np.float32), d["colors"])
-    return ScanScene(cloud, framing, f"{kind} ({n:,} points, seed {seed})")
+    return d
 
 
 def scan_cameras(scene: ScanScene, rng: np.random.Generator, count: int, aspect: float = 1.0) -> list[Camera]:
@@ -1208,11 +1251,15 @@ def scan_frames(
     *,
     views: int = 2,
     densities: tuple[float, float] = (0.25, 4.0),
+    scan_lines: dict | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> list[NarvisFrame]:
     """`count` scan scenes (kinds in turn, each at a density log-uniform in
     `densities` x SCAN_POINTS_PER_PIXEL points a frame pixel) x `views`
-    random views: the packed G-buffers (`planes`) and the Gaussians' splat."""
+    random views: the packed G-buffers (`planes`) and the Gaussians' splat.
+    `scan_lines` ({"share", "gap": (lo, hi), "oversample"}; None: none): that
+    share of the scenes sampled along scan lines (scan_scene), each scene's
+    choice drawn from its own seed."""
     import time
 
     from ..post.pack import pack_gbuffers
@@ -1224,7 +1271,11 @@ def scan_frames(
         kind = kinds[i % len(kinds)]
         d = math.exp(rng.uniform(lo, hi))
         n = max(int(d * SCAN_POINTS_PER_PIXEL * width * height), 1000)
-        sc = scan_scene(kind, n, int(rng.integers(0, 2**31)))
+        s = int(rng.integers(0, 2**31))
+        lines = None
+        if scan_lines is not None and np.random.default_rng([s, 2]).random() < scan_lines["share"]:
+            lines = (*scan_lines["gap"], scan_lines["oversample"])
+        sc = scan_scene(kind, n, s, lines)
         sc.source += f", {d:.2f}x points a pixel"
         ras, gr = sc.rasterizer(), sc.gaussian_renderer()
         for v, cam in enumerate(scan_cameras(sc, rng, views, width / height)):

@@ -56,6 +56,7 @@ def test_train_smoke_through_the_cli(tmp_path, name, capsys):
         assert card["data"]["target_model"] == "splat" and "isotropic" in card["data"]["target"]
         assert card["data"]["train"] == list(data.SCAN_TRAIN)
         assert len(list((tmp_path / "cache").glob("narvis-narvis-scan-*.npz"))) == 2  # train, held out
+        assert card["data"]["scan_lines"] == json.loads(json.dumps(train.SPECS[name]["scan_lines"]))
 
 
 def test_scan_scenes_are_deterministic_scans_without_velocity():
@@ -75,6 +76,52 @@ def test_scan_scenes_are_deterministic_scans_without_velocity():
         assert not np.array_equal(c.positions, data.scan_scene(kind, 3000, 6).cloud.positions)
     with pytest.raises(ValueError, match="scene"):
         data.scan_scene("hurricane", 3000, 5)
+
+
+def test_scan_lines_are_anisotropic_and_seeded():
+    """scan_line_sample keeps the points of a uniform cloud nearest parallel
+    vertical planes: their phase across the planes bunches (a uniform subset's
+    does not), the gap between lines is many times the spacing along them,
+    and the same seed keeps the same points (another seed others)."""
+    from scipy.spatial import cKDTree
+
+    from clvis.post.names import SCAN_GBUFFER_PLANES
+
+    u = np.random.default_rng(0).uniform(0, 1, (80_000, 2))
+    pos = np.c_[u, np.zeros(len(u))]
+    keep, info = data.scan_line_sample(pos, 10_000, np.random.default_rng(1), (6.0, 6.0))
+    assert len(keep) == 10_000 and (np.diff(keep) > 0).all()
+    np.testing.assert_allclose(info["spacing"], np.sqrt(np.log(2) / (np.pi * 10_000)), rtol=0.15)  # Poisson's
+    np.testing.assert_allclose(info["gap"], 6 * info["spacing"])
+    assert info["normal"][2] == 0 and abs(np.linalg.norm(info["normal"]) - 1) < 1e-12
+
+    def bunching(p):  # the mean resultant of the points' phases across the planes
+        return abs(np.exp(2j * np.pi * (p @ info["normal"]) / info["gap"]).mean())
+
+    assert bunching(pos[keep]) > 0.9 and bunching(pos[:10_000]) < 0.05
+    along = np.median(cKDTree(pos[keep]).query(pos[keep], k=2)[0][:, 1])
+    assert info["gap"] > 4 * along
+    again, _ = data.scan_line_sample(pos, 10_000, np.random.default_rng(1), (6.0, 6.0))
+    other, _ = data.scan_line_sample(pos, 10_000, np.random.default_rng(2), (6.0, 6.0))
+    np.testing.assert_array_equal(keep, again)
+    assert not np.array_equal(keep, other)
+    with pytest.raises(ValueError, match="scan lines"):
+        data.scan_line_sample(pos, 100_000, np.random.default_rng(1), (6.0, 6.0))
+    # a scene on scan lines: n of oversample x n generated points, by seed
+    a, b = (data.scan_scene("town", 3000, 5, (2.0, 8.0, 8)) for _ in range(2))
+    np.testing.assert_array_equal(a.cloud.positions, b.cloud.positions)
+    assert len(a.cloud.positions) == 3000 and "scan lines" in a.source
+    full = data.town(24_000, 5)["positions"]
+    assert np.isin(a.cloud.positions[:, 0], full[:, 0]).all()
+    # scan_frames: a share 1 puts every scene on scan lines, 0 none
+    lines = {"share": 1.0, "gap": (2.0, 8.0), "oversample": 8}
+    on, off = (
+        data.scan_frames(
+            ("town",), 1, 2, 64, 48, SCAN_GBUFFER_PLANES, views=1, densities=(1, 1), scan_lines=s
+        )
+        for s in (lines, {**lines, "share": 0.0})
+    )
+    assert "scan lines" in on[0].source and "scan lines" not in off[0].source
 
 
 def test_scan_pairs_are_registered():

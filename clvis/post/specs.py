@@ -154,7 +154,7 @@ class LidarSpec(NetworkSpec[LidarInput]):
     takes = "a FilteredImage or its rgbda (H, W, 5)"
     baselines = ("input", "pushpull")
     eval_families = ("terrain", "photo")
-    trained_families = ("town", "texture_town")
+    trained_families = ("town",)
     #: on: push-pull where the U-Net loses to it (the terrain), the U-Net
     #: elsewhere (bench/results/post-guard.md)
     guard = True

@@ -16,10 +16,10 @@ Families (TRAINED: what the shipped networks' training used):
   (distance fields of random spheres and boxes), "layers" (CT-like nested
   shells); completions 0.85, 0.9, 0.95; baseline push-pull (and the raw
   partial image).
-- LiDAR (trained on "town" and "texture_town", a town under a procedural
-  texture): "terrain" (the embedded one), "photo" (a town's geometry under
-  scikit-image's sample photographs); scan densities 1-30 %, points 1-3
-  pixels a side; baselines push-pull and the depth-filtered input.
+- LiDAR (trained on "town"): "terrain" (the embedded one), "photo" (a
+  town's geometry under scikit-image's sample photographs); scan densities
+  1-30 %, points 1-3 pixels a side; baselines push-pull and the
+  depth-filtered input.
 - NARVis (trained on the hurricane, hemisphere views, viridis over
   temperature): flows of other geometries (clvis.training.flows:
   "convection", "lorenz", "jet", "ring") and "hurricane/magma" (the

@@ -35,7 +35,11 @@ in-fill, where it is not reliable: bench/results/post-guard.md).
 
 Candidates: in-fill, the network, push-pull of the finished rays and the
 partial image itself (the running rays left empty); LiDAR, the network and
-push-pull of the kept points' colours. Push-pull is the OpenCL kernel of
+push-pull of the kept points' colours, black beyond a reach of every kept
+point (2.5 % of the frame's longer side, at least 16 pixels and 3 x the
+kept pixels' mean spacing over the frame): push-pull
+extrapolates into every empty pixel, and a tile that took it painted the
+scan's blurred colours into the empty sky beside a real scan's edge. Push-pull is the OpenCL kernel of
 clvis.post.pushpull; the rest is NumPy.
 
 The parameters were chosen on frames of the training families only
@@ -47,6 +51,7 @@ networks made bad on purpose: ``bench/guard_sweep.py``, whose output
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -56,6 +61,7 @@ __all__ = [
     "MARGIN",
     "PARAMS",
     "PRIOR",
+    "REACH_MIN",
     "RING",
     "TILE",
     "WITHHOLD",
@@ -84,8 +90,14 @@ RING = 8
 #: (bench/results/post-guard.md)
 PARAMS: dict[str, dict[str, float]] = {
     "infill": {"tile": 32, "prior": 4.0, "margin": 0.0, "ring": 8},
-    "lidar": {"tile": 64, "prior": 16.0, "margin": 0.5, "fraction": 0.1},
+    # reach: push-pull's candidate is black farther than this share of the
+    # frame's longer side (at least REACH_MIN pixels, and `spacing` x the
+    # kept pixels' spacing over the frame) from every kept point
+    "lidar": {"tile": 64, "prior": 16.0, "margin": 0.5, "fraction": 0.1, "reach": 0.025, "spacing": 3.0},
 }
+#: the least reach of LiDAR's push-pull candidate, pixels (a 1 % scan's
+#: points are ~10 pixels apart)
+REACH_MIN = 16.0
 
 
 def withheld(known: np.ndarray, fraction: float = WITHHOLD) -> np.ndarray:
@@ -314,12 +326,18 @@ def lidar(
 ) -> tuple[np.ndarray, dict[str, float]]:
     """The guarded LiDAR frame (H, W, 3) float32 of host rgbda (H, W, 5);
     run(rgbda) -> the network's (H, W, 3). Candidates: "network",
-    "pushpull" (of the kept points' colours). The withheld pixels: a hashed
-    ``fraction`` of the kept points; params override ``PARAMS["lidar"]``."""
+    "pushpull" (of the kept points' colours, black farther than ``reach`` x
+    the frame's longer side, at least REACH_MIN pixels and ``spacing`` x the
+    kept pixels' mean spacing over the frame, from every kept point). The
+    withheld pixels: a hashed ``fraction`` of the kept points; params
+    override ``PARAMS["lidar"]``."""
+    from scipy.ndimage import distance_transform_edt
+
     from .pushpull import pushpull
 
     kept = (rgbda[..., 4] > 0) & np.isfinite(rgbda[..., 3])
     rgb = np.ascontiguousarray(rgbda[..., :3], np.float32)
+    far: list[np.ndarray] = []  # beyond the reach of every kept point (made once, when first needed)
 
     def fill(known: np.ndarray, wanted: Sequence[int]) -> list[np.ndarray | None]:
         out: list[np.ndarray | None] = [None, None]
@@ -330,10 +348,25 @@ def lidar(
                 x[~known, 4] = 0.0
             out[0] = run(x)
         if 1 in wanted:
-            out[1] = np.asarray(pushpull(rgb, known, queue=queue))
+            pp = np.asarray(pushpull(rgb, known, queue=queue))
+            # beyond the reach of every kept point push-pull extrapolates
+            # the scan's colours into empty sky (the halos a guarded frame
+            # showed beside a real scan's edge): nothing is there. The
+            # scores read the withheld pixels alone, kept points all, so the
+            # kept points' reach serves the reduced input too
+            if not far:
+                far.append(distance_transform_edt(~kept) > reach)
+            if far[0].any():
+                pp = pp.copy()
+                pp[far[0]] = 0.0
+            out[1] = pp
         return out
 
     p = _settings("lidar", params)
+    # and at least `spacing` x the kept pixels' mean spacing were they spread
+    # over the whole frame (a sparse scan's holes are a few spacings wide)
+    spacing = math.sqrt(kept.size / max(int(kept.sum()), 1))
+    reach = max(REACH_MIN, float(p["reach"]) * max(kept.shape), float(p["spacing"]) * spacing)
     return blend(
         fill,
         rgb,

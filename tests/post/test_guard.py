@@ -112,6 +112,35 @@ def test_lidar_guard_drops_a_garbage_network_for_pushpull(queue):
     np.testing.assert_array_equal(out, truth)
 
 
+def test_lidar_guard_keeps_pushpull_off_the_empty_frame(queue):
+    """Push-pull extrapolates a scan's colours into every empty pixel; the
+    guard's push-pull candidate is black beyond its reach of every kept
+    point (a cloud in the left third of the frame, the rest empty sky), so
+    a tile that takes it paints no halo there, while the holes inside the
+    cloud are filled."""
+    from scipy.ndimage import distance_transform_edt
+
+    h, w = 160, 448
+    truth, rgbda, kept = _lidar_frame(h, w)
+    kept[:, w // 3 :] = False
+    rgbda[~kept] = (0, 0, 0, np.inf, 0)
+    rng = np.random.default_rng(1)
+    garbage = lambda x: rng.random(truth.shape).astype(np.float32)  # noqa: E731
+    out, share = guard.lidar(garbage, rgbda, queue)
+    assert share["pushpull"] > 0.95
+    p = guard.PARAMS["lidar"]
+    spacing = np.sqrt(kept.size / kept.sum())
+    reach = max(guard.REACH_MIN, p["reach"] * w, p["spacing"] * spacing)
+    d = distance_transform_edt(~kept)
+    far = d > reach + 64  # past the reach and the blend's tile
+    assert far.sum() > 0.4 * far.size and np.abs(out[far]).max() == 0.0
+    pp = np.asarray(post.pushpull(np.ascontiguousarray(rgbda[..., :3]), kept, queue=queue))
+    assert pp[far].max() > 0.1  # push-pull alone paints there
+    inside = ~kept & (d < reach)
+    inside[:, w // 3 - 64 :] = False  # away from the tiles that straddle the edge
+    assert np.abs(out[inside] - truth[inside]).mean() < 0.05
+
+
 def _iso_frame(h=144, w=192, band=3):
     """A shaded disc on black, the rays in a band around its rim running."""
     y, x = np.mgrid[0:h, 0:w]

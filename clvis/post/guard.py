@@ -37,10 +37,10 @@ Candidates: in-fill, the network, push-pull of the finished rays and the
 partial image itself (the running rays left empty); LiDAR, the network and
 push-pull of the kept points' colours, black beyond a reach of every kept
 point (2.5 % of the frame's longer side, at least 16 pixels and 3 x the
-kept pixels' mean spacing over the frame): push-pull
-extrapolates into every empty pixel, and a tile that took it painted the
-scan's blurred colours into the empty sky beside a real scan's edge. Push-pull is the OpenCL kernel of
-clvis.post.pushpull; the rest is NumPy.
+kept pixels' mean spacing over the frame): push-pull extrapolates into
+every empty pixel, and a tile that took it painted the scan's blurred
+colours into the empty sky beside a real scan's edge. Push-pull is the
+OpenCL kernel of clvis.post.pushpull; the rest is NumPy.
 
 The parameters were chosen on frames of the training families only
 (clvis.training.data's "waves", "ripples", "blobs" volumes and "town"
@@ -335,7 +335,7 @@ def lidar(
 
     kept = (rgbda[..., 4] > 0) & np.isfinite(rgbda[..., 3])
     rgb = np.ascontiguousarray(rgbda[..., :3], np.float32)
-    far: list[np.ndarray] = []  # beyond the reach of every kept point (made once, when first needed)
+    far: list[np.ndarray] = []  # beyond every kept point's reach (made once, when first needed)
 
     def fill(known: np.ndarray, wanted: Sequence[int]) -> list[np.ndarray | None]:
         out: list[np.ndarray | None] = [None, None]

@@ -478,16 +478,21 @@ def photo_town(n: int, seed: int) -> dict:
     trained on, for the held-out suite."""
     from skimage import data as skdata
 
-    cloud = town(n, seed)
     rng = np.random.default_rng(seed)
     photo = np.asarray(getattr(skdata, PHOTOS[int(rng.integers(0, len(PHOTOS)))])(), np.float64)[..., :3]
-    pos = cloud["positions"]
-    h, w = photo.shape[:2]
+    return _draped_town(n, seed, photo)
+
+
+def _draped_town(n: int, seed: int, image: np.ndarray) -> dict:
+    """``town(n, seed)``'s geometry under `image` ((H, W, 3) RGB 0..255)
+    draped from above over its 200 x 200 m, its walls (town's last n // 10
+    points) a darker shade (0.6) of the image at their foot."""
+    pos = town(n, seed)["positions"]
+    h, w = image.shape[:2]
     u = np.clip(((pos[:, 0] + 100) / 200 * (w - 1)).astype(int), 0, w - 1)
     v = np.clip(((100 - pos[:, 1]) / 200 * (h - 1)).astype(int), 0, h - 1)
-    col = photo[v, u]
-    wall = np.arange(n) >= n - n // 10
-    col[wall] *= 0.6
+    col = image[v, u]
+    col[np.arange(n) >= n - n // 10] *= 0.6
     rgba = np.concatenate([np.clip(np.rint(col), 0, 255), np.full((n, 1), 255.0)], 1).astype(np.uint8)
     return {"positions": pos, "colors": rgba}
 
@@ -537,16 +542,7 @@ def texture_town(n: int, seed: int) -> dict:
     texture at their foot, as ``photo_town`` drapes a photograph: the
     LiDAR network's training sees natural-image statistics without the
     held-out suite's photographs."""
-    cloud = town(n, seed)
-    tex = procedural_texture(np.random.default_rng(seed + 1))
-    pos = cloud["positions"]
-    h, w = tex.shape[:2]
-    u = np.clip(((pos[:, 0] + 100) / 200 * (w - 1)).astype(int), 0, w - 1)
-    v = np.clip(((100 - pos[:, 1]) / 200 * (h - 1)).astype(int), 0, h - 1)
-    col = tex[v, u]
-    col[np.arange(n) >= n - n // 10] *= 0.6
-    rgba = np.concatenate([np.clip(np.rint(col), 0, 255), np.full((n, 1), 255.0)], 1).astype(np.uint8)
-    return {"positions": pos, "colors": rgba}
+    return _draped_town(n, seed, procedural_texture(np.random.default_rng(seed + 1)))
 
 
 @dataclass

@@ -37,10 +37,13 @@ Candidates: in-fill, the network, push-pull of the finished rays and the
 partial image itself (the running rays left empty); LiDAR, the network and
 push-pull of the kept points' colours, black beyond a reach of every kept
 point (2.5 % of the frame's longer side, at least 16 pixels and 3 x the
-kept pixels' mean spacing over the frame): push-pull extrapolates into
-every empty pixel, and a tile that took it painted the scan's blurred
-colours into the empty sky beside a real scan's edge. Push-pull is the
-OpenCL kernel of clvis.post.pushpull; the rest is NumPy.
+kept pixels' mean spacing over the frame) and, outside the cloud's
+footprint, beyond 3 x the kept points' local spacing (at least 4 pixels):
+push-pull extrapolates into every empty pixel, and a tile that took it
+painted the scan's blurred colours into the empty sky beside a real scan's
+edge, first as blobs, then (within the reach) as a fringe 16-32 pixels
+wide. Push-pull is the OpenCL kernel of clvis.post.pushpull; the rest is
+NumPy.
 
 The parameters were chosen on frames of the training families only
 (clvis.training.data's "waves", "ripples", "blobs" volumes and "town"
@@ -58,6 +61,7 @@ import numpy as np
 import pyopencl as cl
 
 __all__ = [
+    "EDGE_MIN",
     "MARGIN",
     "PARAMS",
     "PRIOR",
@@ -92,12 +96,25 @@ PARAMS: dict[str, dict[str, float]] = {
     "infill": {"tile": 32, "prior": 4.0, "margin": 0.0, "ring": 8},
     # reach: push-pull's candidate is black farther than this share of the
     # frame's longer side (at least REACH_MIN pixels, and `spacing` x the
-    # kept pixels' spacing over the frame) from every kept point
-    "lidar": {"tile": 64, "prior": 16.0, "margin": 0.5, "fraction": 0.1, "reach": 0.025, "spacing": 3.0},
+    # kept pixels' spacing over the frame) from every kept point; edge:
+    # outside the cloud's footprint, farther than `edge` x the kept points'
+    # local spacing (at least EDGE_MIN pixels)
+    "lidar": {
+        "tile": 64,
+        "prior": 16.0,
+        "margin": 0.5,
+        "fraction": 0.1,
+        "reach": 0.025,
+        "spacing": 3.0,
+        "edge": 3.0,
+    },
 }
 #: the least reach of LiDAR's push-pull candidate, pixels (a 1 % scan's
 #: points are ~10 pixels apart)
 REACH_MIN = 16.0
+#: the least reach of that candidate outside the cloud's footprint, pixels
+#: (two of the distance transform's 2 x 2 blocks)
+EDGE_MIN = 4.0
 
 
 def withheld(known: np.ndarray, fraction: float = WITHHOLD) -> np.ndarray:
@@ -328,7 +345,9 @@ def lidar(
     run(rgbda) -> the network's (H, W, 3). Candidates: "network",
     "pushpull" (of the kept points' colours, black farther than ``reach`` x
     the frame's longer side, at least REACH_MIN pixels and ``spacing`` x the
-    kept pixels' mean spacing over the frame, from every kept point). The
+    kept pixels' mean spacing over the frame, from every kept point, and
+    outside the cloud's footprint farther than ``edge`` x the kept points'
+    local spacing, at least EDGE_MIN pixels: :func:`_beyond`). The
     withheld pixels: a hashed ``fraction`` of the kept points; params
     override ``PARAMS["lidar"]``."""
     from .pushpull import pushpull
@@ -353,7 +372,7 @@ def lidar(
             # scores read the withheld pixels alone, kept points all, so the
             # kept points' reach serves the reduced input too
             if not far:
-                far.append(_beyond(kept, reach))
+                far.append(_beyond(kept, reach, float(p["edge"]), EDGE_MIN))
             if far[0].any():
                 pp = pp.copy()
                 pp[far[0]] = 0.0
@@ -377,19 +396,45 @@ def lidar(
     )
 
 
-def _beyond(known: np.ndarray, reach: float) -> np.ndarray:
+def _beyond(known: np.ndarray, reach: float, spacing: float = 0.0, least: float = 0.0) -> np.ndarray:
     """(H, W) bool: the pixels farther than `reach` pixels from every
-    `known` one, by the distance transform of the 2 x 2 blocks' (a block is
-    known where any of its pixels is; the distance is within 1.5 pixels of
-    the full-resolution one, at a quarter of its cost)."""
-    from scipy.ndimage import distance_transform_edt
+    `known` one and, with `spacing`, also the pixels outside the known
+    pixels' footprint farther than `spacing` x the known pixels' local
+    spacing around the nearest of them (at least `least`, at most `reach`).
+    The footprint is the known pixels closed by a disc of radius `reach`
+    (the holes and inlets narrower than twice the reach filled); outside it
+    is what of the rest reaches the frame's border (the empty sky beside a
+    cloud, not a hole inside it, which keeps the whole reach). The local
+    spacing: the square root of the area a known pixel has in a window
+    twice the reach wide. Distances come from the distance transforms of
+    the 2 x 2 blocks (a block is known where any of its pixels is; within
+    1.5 pixels of the full-resolution distance, at a quarter of its cost)."""
+    from scipy.ndimage import distance_transform_edt, label, uniform_filter
 
     h, w = known.shape
     k = np.zeros(((h + 1) // 2 * 2, (w + 1) // 2 * 2), bool)
     k[:h, :w] = known
-    blocks = k.reshape(k.shape[0] // 2, 2, k.shape[1] // 2, 2).any(axis=(1, 3))
-    d = distance_transform_edt(~blocks) * 2.0
-    return np.repeat(np.repeat(d > reach, 2, axis=0), 2, axis=1)[:h, :w]
+    count = k.reshape(k.shape[0] // 2, 2, k.shape[1] // 2, 2).sum(axis=(1, 3), dtype=np.float32)
+    blocks = count > 0
+    if not blocks.any():  # (scipy's transform of an array without a zero is not a distance)
+        return np.ones((h, w), bool)
+    d, nearest = distance_transform_edt(~blocks, return_indices=True)
+    d *= 2.0
+    far = d > reach
+    if spacing > 0.0 and far.any():  # (none far: all of the frame is in the footprint)
+        # closing = the dilation by the reach (~far), eroded by the reach
+        # (less a block's slack: the block distances' rounding)
+        closed = distance_transform_edt(~far) * 2.0 > reach - 2.0
+        open_, _ = label(~closed)
+        rim = np.concatenate([open_[0], open_[-1], open_[:, 0], open_[:, -1]])
+        outside = np.isin(open_, rim[rim > 0])
+        if outside.any():
+            # (a window of `reach` blocks is twice the reach wide in pixels)
+            share = uniform_filter(count / 4.0, size=max(3, int(reach) | 1), mode="constant")
+            local = spacing / np.sqrt(np.maximum(share, 1e-6))
+            local = np.clip(local[nearest[0], nearest[1]], least, reach)
+            far |= outside & (d > local)
+    return np.repeat(np.repeat(far, 2, axis=0), 2, axis=1)[:h, :w]
 
 
 def _settings(name: str, params: dict[str, float]) -> dict[str, float]:

@@ -141,6 +141,39 @@ def test_lidar_guard_keeps_pushpull_off_the_empty_frame(queue):
     assert np.abs(out[inside] - truth[inside]).mean() < 0.05
 
 
+def test_lidar_guard_leaves_no_fringe_beside_the_cloud_and_fills_its_holes(queue):
+    """Within its reach of the cloud push-pull blurs the scan's colours out
+    past the cloud's edge (a fringe as wide as the reach, 32 pixels at
+    1280x720 on a real scan) as much as into its holes. Outside the cloud's
+    footprint the guard's push-pull candidate is black nearer: farther than
+    `edge` x the kept points' local spacing (2 pixels at this edge), while a
+    hole inside the cloud narrower than twice the reach is filled as
+    before."""
+    from scipy.ndimage import distance_transform_edt
+
+    h, w = 256, 768
+    truth, rgbda, kept = _lidar_frame(h, w, density=0.5)
+    y, x = np.mgrid[0:h, 0:w]
+    kept &= x < w // 2
+    hole = np.hypot(y - h / 2, x - w / 4) < 16  # 32 pixels across
+    kept &= ~hole
+    rgbda[~kept] = (0, 0, 0, np.inf, 0)
+    garbage = lambda x: np.full(truth.shape, 0.5, np.float32)  # noqa: E731
+    out, share = guard.lidar(garbage, rgbda, queue)
+    assert share["pushpull"] > 0.95
+    p = guard.PARAMS["lidar"]
+    reach = max(guard.REACH_MIN, p["reach"] * w, p["spacing"] * np.sqrt(kept.size / kept.sum()))
+    edge = p["edge"] * np.sqrt(1 / (0.5 * 0.5))  # half the window kept, at half the density
+    assert reach > 19 and edge < 7
+    d = distance_transform_edt(~kept)
+    pp = np.asarray(post.pushpull(np.ascontiguousarray(rgbda[..., :3]), kept, queue=queue))
+    fringe = (x >= w // 2) & (d > edge + 3) & (d < reach - 2)  # 2-3: the 2 x 2 blocks' rounding
+    fringe[:64] = fringe[-64:] = False  # away from the tiles that straddle the cloud's corners
+    assert fringe.sum() > 500 and pp[fringe].min() > 0.1  # push-pull alone paints there
+    assert np.abs(out[fringe]).max() == 0.0
+    assert np.abs(out[hole] - truth[hole]).mean() < 0.1 and out[hole].sum(-1).min() > 0.1
+
+
 def _iso_frame(h=144, w=192, band=3):
     """A shaded disc on black, the rays in a band around its rim running."""
     y, x = np.mgrid[0:h, 0:w]

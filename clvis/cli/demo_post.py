@@ -164,7 +164,7 @@ def _scan(out_dir: Path, q: cl.CommandQueue, size: tuple[int, int]) -> bool:
     the radius plane as each pixel's sigma (clvis eval's baselines)."""
     from .. import post
     from ..training import data
-    from ..training.evaluate import splat
+    from ..post.splat import splat
 
     w, h = size
     n = int(data.SCAN_POINTS_PER_PIXEL * w * h)  # the training's points a pixel

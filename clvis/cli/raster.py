@@ -1073,9 +1073,10 @@ def _render(args, progress) -> int:
                     f"distance of {len(cloud):,} points) took {took:.1f} s; it is computed on every call",
                     file=sys.stderr,
                 )
-        if args.post_guard and post_name in ("narvis", "narvis-scan"):
+        if args.post_guard and post_name == "narvis":
             raise CliError(
-                f"--post-guard: the {post_name} network has no guard (the in-fill and LiDAR ones have)"
+                f"--post-guard: the {post_name} network has no guard (the in-fill, LiDAR and narvis-scan "
+                "ones have)"
             )
         net = post.load(post_name, queue=q)
         if args.post_guard is not None:
@@ -1379,8 +1380,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         action=argparse.BooleanOptionalAction,
         default=None,
         help="with --post lidar: check the network against push-pull on this frame (some scan points "
-        "withheld) and keep, tile by tile, the better (clvis.post.guard; default: the network's own, "
-        "PostNetwork.guard)",
+        "withheld) and keep, tile by tile, the better (narvis-scan: against the classical splat; "
+        "clvis.post.guard; default: the network's own, PostNetwork.guard)",
     )
     r.add_argument(
         "--compare",

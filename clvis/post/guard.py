@@ -1,5 +1,6 @@
-"""The guard: an inference-time self-check of the in-fill and LiDAR networks
-against their classical fills, from the network's own input alone.
+"""The guard: an inference-time self-check of the in-fill, LiDAR and
+narvis-scan networks against their classical fills, from the network's own
+input alone.
 
 A network may fill data it never saw worse than the classical method it
 replaces (issue 21: shapes at 95 % completion, where the in-fill network
@@ -27,6 +28,12 @@ fill to trust, tile by tile:
    candidates some tile took are run). In-fill: the finished rays keep
    their values exactly (only the rays still running are blended); LiDAR:
    every pixel (the network's output replaces the scan's pixels too).
+
+narvis-scan (:func:`narvis_scan`; its spec has it off): the network and
+the classical splat of clvis.post.splat, 5 % of the covered pixels
+withheld, scored not on the withheld points' colours but on each
+candidate's self-consistency (its frame of the reduced input against its
+own frame of the full one): bench/results/README.md, 2026-11-28 session 7.
 
 Each network's settings are ``PARAMS[name]``; the module constants are
 :func:`blend`'s generic defaults. Whether a network's call uses the guard
@@ -73,6 +80,7 @@ __all__ = [
     "infill",
     "interpolate",
     "lidar",
+    "narvis_scan",
     "ring",
     "tile_weights",
     "withheld",
@@ -108,6 +116,9 @@ PARAMS: dict[str, dict[str, float]] = {
         "spacing": 3.0,
         "edge": 3.0,
     },
+    # opacity: the splat candidate's, the targets' (clvis.training.data.SCAN_OPACITY);
+    # chosen on training-family frames (town, photo_town, shapes; seeds 101, 202)
+    "narvis-scan": {"tile": 64, "prior": 64.0, "margin": 0.8, "fraction": 0.05, "opacity": 0.8},
 }
 #: the least reach of LiDAR's push-pull candidate, pixels (a 1 % scan's
 #: points are ~10 pixels apart)
@@ -394,6 +405,59 @@ def lidar(
         margin=p["margin"],
         fraction=p["fraction"],
     )
+
+
+def narvis_scan(
+    run: Callable[[np.ndarray], np.ndarray],
+    index: np.ndarray,
+    rgba: np.ndarray,
+    radius_px: np.ndarray,
+    **params: float,
+) -> tuple[np.ndarray, dict[str, float]]:
+    """The guarded narvis-scan frame (H, W, 3) float32 of the host G-buffer
+    planes index (H, W) uint32 (0xFFFFFFFF where empty), rgba (H, W, 4)
+    uint8 and radius_px (H, W) float32; run(index') -> the network's (H, W,
+    3) of the same G-buffers with only the pixels index' marks covered.
+    Candidates: "network", "splat" (clvis.post.splat: each covered pixel a
+    round Gaussian of the radius plane's sigma, ``opacity``). The withheld
+    pixels: a hashed ``fraction`` of the covered ones. Scores: each
+    candidate's own *self-consistency*, its reduced input's frame against
+    its full input's at the withheld pixels, not the points' colours (a
+    withheld pixel's point colour is not the Gaussian render the network
+    was trained on: on training frames that score picked the splat in 52 %
+    of the tiles where the target says 17 %, bench/results/README.md).
+    Both candidates run on both inputs; params override
+    ``PARAMS["narvis-scan"]``."""
+    from .splat import splat
+
+    p = _settings("narvis-scan", params)
+    empty = np.uint32(0xFFFFFFFF)
+    covered = index != empty
+    rgb = np.where(covered[..., None], rgba[..., :3] / np.float32(255), np.float32(0)).astype(np.float32)
+    sigma = np.asarray(radius_px, np.float32)
+    names = ("network", "splat")
+
+    def candidates(known: np.ndarray) -> list[np.ndarray]:
+        return [
+            np.asarray(run(index if known is covered else np.where(known, index, empty)), np.float32),
+            splat(rgb * known[..., None], known, None, opacity=p["opacity"], sigma=sigma),
+        ]
+
+    full = candidates(covered)
+    held = withheld(covered, p["fraction"])
+    h, w = covered.shape
+    if not held.any():  # nothing to check against: the network's frame
+        return full[0], {"network": 1.0, "splat": 0.0}
+    ys, xs = np.nonzero(held)
+    reduced = candidates(covered & ~held)
+    errors = [np.sum((r[ys, xs] - f[ys, xs]) ** 2, axis=-1) for r, f in zip(reduced, full, strict=True)]
+    tile = int(p["tile"])
+    weights = _weights(errors, ys, xs, (h, w), tile, p["prior"], p["margin"])
+    share = {n: float(weights[i].mean()) for i, n in enumerate(names)}
+    if not weights[1].any():
+        return full[0], share
+    wp = interpolate(weights, h, w, tile)
+    return wp[0][..., None] * full[0] + wp[1][..., None] * full[1], share
 
 
 def _beyond(known: np.ndarray, reach: float, spacing: float = 0.0, least: float = 0.0) -> np.ndarray:

@@ -51,8 +51,9 @@ head its kernels' "head", unpack).
 
 ``net(image, guard=True)`` (the default where the spec says so: LiDAR)
 checks the network against its classical fills on this frame
-(clvis.post.guard): the planes are read back, the network and push-pull run
-on the input with some known pixels withheld and on the whole of it, and
+(clvis.post.guard): the planes are read back, the network and push-pull
+(narvis-scan: the classical splat) run on the input with some known pixels
+withheld and on the whole of it, and
 the frame is blended, tile by tile, toward whichever did best; ``stats``
 then adds ``guard`` (its own seconds) and ``guard_NAME``, the share of the
 tiles each candidate took.
@@ -89,7 +90,7 @@ from .. import limits
 from .._arrays import buffer_of, resolve_queue, to_host
 from ..errors import DataError
 from . import guard as guard_mod
-from .inputs import IsoImageLike, PostInput
+from .inputs import GBuffersLike, IsoImageLike, PostInput
 from .kpn import KPNHead
 from .names import GBUFFER_PLANES, gbuffer_channels
 from .pack import padded_shape, unpack_rgba8
@@ -296,7 +297,7 @@ class PostNetwork:
         self.queue = resolve_queue(queue)
         self.stats: dict[str, float] = {}
         #: the call's default for ``guard`` (clvis.post.guard): the spec's
-        #: (on for LiDAR, off for in-fill; NARVis has none)
+        #: (on for LiDAR, off for in-fill and narvis-scan; NARVis has none)
         self.guard = bool(self.spec.guard)
         #: the spec's sub-pixel rule (clvis.post.subpixel: NARVis's output
         #: blended toward the raster where GR's sigma is under a pixel),
@@ -434,7 +435,7 @@ class PostNetwork:
         guard: check the network against its classical fills on this frame
         and take, tile by tile, the one that did best (clvis.post.guard; the
         planes are read back and the network runs twice); None: the
-        network's default (:attr:`guard`). In-fill and LiDAR only."""
+        network's default (:attr:`guard`). In-fill, LiDAR and narvis-scan only."""
         if guard is None:
             guard = self.guard
         if not isinstance(guard, bool):
@@ -455,7 +456,9 @@ class PostNetwork:
 
     def _guarded(self, image: PostInput) -> np.ndarray:
         if self.spec.guard is None:
-            raise ValueError(f"guard: the {self.name} network has no guard (in-fill and LiDAR have)")
+            raise ValueError(
+                f"guard: the {self.name} network has no guard (in-fill, LiDAR and narvis-scan have)"
+            )
         t0 = time.perf_counter()
         self._size(image)  # TypeError / DataError before any read-back
         stats: dict[str, float] = {"pack": 0.0, "inference": 0.0}
@@ -481,6 +484,14 @@ class PostNetwork:
                 return timed(_IsoPlanes(values, hit, active, left))
 
             frame, share = guard_mod.infill(run_iso, rgba, hit, active, self.queue)
+        elif self.name == "narvis-scan":
+            g = typing.cast(GBuffersLike, image)
+            host = _ScanPlanes(g, self.planes)
+
+            def run_scan(index: np.ndarray) -> np.ndarray:
+                return timed(host.covering(index))
+
+            frame, share = guard_mod.narvis_scan(run_scan, host.index, host.rgba, host.radius_px)
         else:
             rgbda = np.asarray(to_host(getattr(image, "rgbda", image)), np.float32)
             frame, share = guard_mod.lidar(timed, rgbda, self.queue)
@@ -497,6 +508,38 @@ class PostNetwork:
             **{f"guard_{k}": v for k, v in share.items()},
         }
         return picture
+
+
+class _ScanPlanes:
+    """Host copies of the G-buffer planes narvis-scan reads (the guard's
+    inputs to the network); :meth:`covering` gives them with another index
+    plane (the guard's withheld pixels marked empty)."""
+
+    def __init__(self, g: GBuffersLike, planes: tuple[str, ...]) -> None:
+        for name in ("index", "rgba", "attributes"):
+            if not hasattr(g, name):
+                raise TypeError(f"gbuffers: expected clvis.raster.GBuffers, got {type(g).__name__}")
+        self.index = np.asarray(to_host(g.index))
+        self.rgba = np.asarray(to_host(g.rgba))
+        if self.index.dtype != np.uint32 or self.index.ndim != 2:
+            raise DataError(f"index: expected (H, W) uint32, got {self.index.dtype} {self.index.shape}")
+        r = getattr(g, "radius_px", None)
+        if r is None:
+            raise DataError(
+                "planes: the G-buffers have no 'radius' plane (the narvis-scan guard's splat reads it: "
+                "a cloud with radius=knn_sigma)"
+            )
+        self.radius_px = np.asarray(to_host(r), np.float32)
+        self.depth = None if g.depth is None else np.asarray(to_host(g.depth))
+        attrs = g.attributes or {}
+        self.attributes = {k: np.asarray(to_host(attrs[k])) for k in planes if k in attrs}
+        self.vel2d = self.vel_angle = self.vel_speed = None
+
+    def covering(self, index: np.ndarray) -> _ScanPlanes:
+        out = object.__new__(_ScanPlanes)
+        out.__dict__.update(self.__dict__)
+        out.index = index
+        return out
 
 
 class _IsoPlanes:

@@ -435,8 +435,10 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 0, err
     assert "model narvis (it has a velocity" in err and "PostNetwork('narvis'" in out
     _assert_picture(tmp_path / "c" / "post-narvis.png")
-    rc, _, err = _render(capsys, path, "--post", "narvis", "--post-guard", "--out", tmp_path, *SMALL)
-    assert rc == 2 and "the narvis-scan network has no guard" in err
+    # narvis-scan's guard (off by default) against the classical splat
+    rc, out, err = _render(capsys, path, "--post", "narvis", "--post-guard", "--out", tmp_path / "d", *SMALL)
+    assert rc == 0, err
+    _assert_picture(tmp_path / "d" / "post-narvis-scan.png")
 
 
 def test_render_post_narvis_scan_warns_of_a_cloud_far_sparser_than_its_training(tmp_path, capsys):

@@ -254,6 +254,70 @@ def test_lidar_network_call_with_the_guard(queue):
         net(rgbda[..., :4], guard=True)
 
 
+def _scan_planes(h=128, w=160, density=0.5):
+    """G-buffer planes of a smooth picture drawn by about `density` of the
+    pixels, each a point of sigma 1 pixel."""
+    truth = _smooth_picture(h, w)
+    covered = np.random.default_rng(4).random((h, w)) < density
+    index = np.where(covered, np.arange(h * w, dtype=np.uint32).reshape(h, w), np.uint32(0xFFFFFFFF))
+    rgba = np.zeros((h, w, 4), np.uint8)
+    rgba[covered] = np.concatenate([np.rint(truth[covered] * 255), np.full((covered.sum(), 1), 255)], -1)
+    radius = np.where(covered, np.float32(1.0), np.float32(np.nan)).astype(np.float32)
+    return truth, index, rgba, radius
+
+
+def test_narvis_scan_guard_drops_a_garbage_network_for_the_splat():
+    """Scored on each candidate's own frame with some points withheld
+    against its frame of them all: a network whose frame changes with the
+    input's every point (noise) gives the frame to the classical splat; one
+    whose frame is steady is kept as it is."""
+    from clvis.post.splat import splat
+
+    truth, index, rgba, radius = _scan_planes()
+    covered = index != np.uint32(0xFFFFFFFF)
+    rgb = np.where(covered[..., None], rgba[..., :3] / np.float32(255), 0).astype(np.float32)
+    sp = splat(rgb, covered, None, opacity=0.8, sigma=radius)
+    rng = np.random.default_rng(1)
+    seen = []
+
+    def garbage(ix):
+        seen.append(int((ix != np.uint32(0xFFFFFFFF)).sum()))
+        return rng.random(truth.shape).astype(np.float32)
+
+    out, share = guard.narvis_scan(garbage, index, rgba, radius)
+    assert share["splat"] > 0.95 and out.shape == truth.shape
+    assert _psnr(out, truth) > _psnr(garbage(index), truth) + 5
+    assert np.abs(out - sp).mean() < 0.01  # the splat's frame
+    # the network ran on the full input and on it with a hashed share withheld
+    frac = guard.PARAMS["narvis-scan"]["fraction"]
+    assert seen[0] == covered.sum() and seen[1] == pytest.approx((1 - frac) * covered.sum(), rel=0.05)
+    steady = lambda ix: truth  # noqa: E731
+    out, share = guard.narvis_scan(steady, index, rgba, radius)
+    assert share == {"network": 1.0, "splat": 0.0}
+    np.testing.assert_array_equal(out, truth)
+    with pytest.raises(TypeError, match="unknown"):
+        guard.narvis_scan(steady, index, rgba, radius, ring=8)
+    # the splat candidate draws the targets' opacity (post cannot import training)
+    assert guard.PARAMS["narvis-scan"]["opacity"] == data.SCAN_OPACITY
+
+
+def test_narvis_scan_network_call_with_the_guard(queue):
+    """narvis-scan's call with its guard, on a real scan frame: the guard's
+    stats, the same picture each time; the network's own default is the
+    spec's."""
+    from clvis.post.specs import spec
+
+    sc = data.scan_scene("town", 12_000, 5)
+    cam = data.scan_cameras(sc, np.random.default_rng(5), 1, 96 / 64)[0]
+    net = post.load("narvis-scan", queue=queue, threads=1)
+    g = sc.gbuffers(sc.rasterizer(queue=queue), cam, 96, 64, net.planes)
+    assert net.guard is bool(spec("narvis-scan").guard)
+    a = net(g, guard=True)
+    assert a.shape == (64, 96, 4) and (a[..., 3] == 255).all()
+    assert {"guard", "guard_network", "guard_splat"} <= set(net.stats)
+    np.testing.assert_array_equal(a, net(g, guard=True))
+
+
 def test_narvis_has_no_guard():
     net = post.load("narvis", threads=1)
     assert net.guard is False

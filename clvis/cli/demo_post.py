@@ -163,8 +163,8 @@ def _scan(out_dir: Path, q: cl.CommandQueue, size: tuple[int, int]) -> bool:
     that target beside the raster, push-pull and the classical splat with
     the radius plane as each pixel's sigma (clvis eval's baselines)."""
     from .. import post
-    from ..training import data
     from ..post.splat import splat
+    from ..training import data
 
     w, h = size
     n = int(data.SCAN_POINTS_PER_PIXEL * w * h)  # the training's points a pixel

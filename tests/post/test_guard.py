@@ -323,3 +323,20 @@ def test_narvis_has_no_guard():
     assert net.guard is False
     with pytest.raises(ValueError, match="no guard"):
         net(object(), guard=True)
+
+
+def test_lidar_guard_reach_mask_on_empty_and_covered_frames():
+    """The reach mask of a frame without a kept point is all far (push-pull
+    has nothing to extrapolate); of a frame whose points are nowhere far
+    apart, nothing is far nor outside the footprint (scipy's transform of an
+    array without a zero is not a distance: a covered frame once came out
+    with its border blacked)."""
+    none = np.zeros((40, 64), bool)
+    assert guard._beyond(none, 16.0, 3.0, guard.EDGE_MIN).all()
+    covered = np.ones((64, 96), bool)
+    covered[:, :12] = False  # a strip 12 pixels wide along the border: within the reach
+    assert not guard._beyond(covered, 16.0, 3.0, guard.EDGE_MIN).any()
+    one = np.zeros((40, 64), bool)
+    one[20, 10] = True
+    far = guard._beyond(one, 16.0, 3.0, guard.EDGE_MIN)
+    assert far[20, 40] and not far[20, 12]  # far past the reach; the point's own neighbourhood kept

@@ -237,7 +237,7 @@ def _at(weights: np.ndarray, ys: np.ndarray, xs: np.ndarray, tile: int) -> np.nd
 
 def blend(
     fill: Callable[[np.ndarray, Sequence[int]], list[np.ndarray | None]],
-    truth: np.ndarray,
+    truth: np.ndarray | None,
     known: np.ndarray,
     *,
     names: Sequence[str],
@@ -254,7 +254,9 @@ def blend(
     fill(known', wanted) -> the candidates' frames (H, W, C) float32 of the
     input with only the pixels ``known'`` known, those of the indices
     `wanted` (None for the others); candidate 0 is the network. truth
-    (H, W, 3): the known pixels' RGB. held: the known pixels to withhold
+    (H, W, 3): the known pixels' RGB; None: each candidate is scored by its
+    self-consistency, its frame of the reduced input against its own frame
+    of the whole input at the withheld pixels. held: the known pixels to withhold
     (default: :func:`withheld`'s `fraction`). where: the pixels to blend
     (default all), the candidates being equal elsewhere."""
     names = list(names)
@@ -265,13 +267,20 @@ def blend(
     if not held.any():  # nothing to check against: the network's frame
         return _first(fill(known, [0])), {n: float(i == 0) for i, n in enumerate(names)}
     ys, xs = np.nonzero(held)
-    t = truth[ys, xs]
+    # what the withheld pixels are held to: their truth, or each
+    # candidate's own frame of the whole input (made first, kept for the blend)
+    whole = None
+    if truth is not None:
+        refs = [truth[ys, xs]] * len(names)
+    else:
+        whole = fill(known, everyone)
+        refs = [_first([f])[ys, xs, :3] for f in whole]
     reduced = fill(known & ~held, everyone)
-    errors = [np.sum((_first([c])[ys, xs, :3] - t) ** 2, axis=-1) for c in reduced]
+    errors = [np.sum((_first([c])[ys, xs, :3] - r) ** 2, axis=-1) for c, r in zip(reduced, refs, strict=True)]
     weights = _weights(errors, ys, xs, (h, w), tile, prior, margin)
     share = {n: float(weights[i].mean()) for i, n in enumerate(names)}
     used = [i for i in everyone if weights[i].any()]
-    full = [f for f in fill(known, used) if f is not None]
+    full = [f for f in (fill(known, used) if whole is None else [whole[i] for i in used]) if f is not None]
     if len(used) == 1:  # every tile took the same candidate
         return full[0], share
     if where is None:
@@ -435,29 +444,25 @@ def narvis_scan(
     covered = index != empty
     rgb = np.where(covered[..., None], rgba[..., :3] / np.float32(255), np.float32(0)).astype(np.float32)
     sigma = np.asarray(radius_px, np.float32)
-    names = ("network", "splat")
 
-    def candidates(known: np.ndarray) -> list[np.ndarray]:
-        return [
-            np.asarray(run(index if known is covered else np.where(known, index, empty)), np.float32),
-            splat(rgb * known[..., None], known, None, opacity=p["opacity"], sigma=sigma),
-        ]
+    def fill(known: np.ndarray, wanted: Sequence[int]) -> list[np.ndarray | None]:
+        out: list[np.ndarray | None] = [None, None]
+        if 0 in wanted:
+            out[0] = np.asarray(run(index if known is covered else np.where(known, index, empty)), np.float32)
+        if 1 in wanted:
+            out[1] = splat(rgb * known[..., None], known, None, opacity=p["opacity"], sigma=sigma)
+        return out
 
-    full = candidates(covered)
-    held = withheld(covered, p["fraction"])
-    h, w = covered.shape
-    if not held.any():  # nothing to check against: the network's frame
-        return full[0], {"network": 1.0, "splat": 0.0}
-    ys, xs = np.nonzero(held)
-    reduced = candidates(covered & ~held)
-    errors = [np.sum((r[ys, xs] - f[ys, xs]) ** 2, axis=-1) for r, f in zip(reduced, full, strict=True)]
-    tile = int(p["tile"])
-    weights = _weights(errors, ys, xs, (h, w), tile, p["prior"], p["margin"])
-    share = {n: float(weights[i].mean()) for i, n in enumerate(names)}
-    if not weights[1].any():
-        return full[0], share
-    wp = interpolate(weights, h, w, tile)
-    return wp[0][..., None] * full[0] + wp[1][..., None] * full[1], share
+    return blend(
+        fill,
+        None,
+        covered,
+        names=("network", "splat"),
+        tile=int(p["tile"]),
+        prior=p["prior"],
+        margin=p["margin"],
+        fraction=p["fraction"],
+    )
 
 
 def _beyond(known: np.ndarray, reach: float, spacing: float = 0.0, least: float = 0.0) -> np.ndarray:

@@ -211,12 +211,15 @@ KNOWN_BELOW = {
     "narvis": {
         "lorenz 256x256 1x points hemisphere": (2.16, -0.008),
     },
-    # narvis-scan (4000 steps, 61 min on 1 thread): the aerial strip scan's
-    # view is 1.15 dB below the classical splat with the radius plane; the
-    # object's is 3.0 dB over it but 0.012 below its SSIM (terrain: +5.8 dB)
+    # narvis-scan (4000 steps, 61 min on 1 thread, then 4000 more from it
+    # at a lower rate, 21 min): the aerial strip scan's view ties the
+    # classical splat with the radius plane (+0.04 dB) but is 0.009 below its
+    # SSIM; the object's is 3.3 dB over it but 0.008 below its SSIM
+    # (terrain: +5.5 dB). The 4000-step model before it: aerial -1.14 dB /
+    # -0.033, object +3.01 / -0.012.
     "narvis-scan": {
-        "aerial 256x256 1x points views": (-1.15, -0.033),
-        "object 256x256 1x points views": (3.01, -0.012),
+        "aerial 256x256 1x points views": (0.04, -0.009),
+        "object 256x256 1x points views": (3.31, -0.008),
     },
 }
 
@@ -361,10 +364,11 @@ def test_ci_narvis_meets_its_targets_on_a_jet(ci_rows):
 def test_ci_narvis_scan_on_an_aerial_scan(ci_rows):
     """A LAS-like aerial strip scan (a generator never in its training), one
     view at 128 x 128, 4 points a pixel, against the 3DGS splat of its
-    isotropic kNN Gaussians. Measured (the shipped narvis-scan): 29.07 dB /
-    0.845 (the classical splat with the radius plane 24.36 / 0.727, push-pull
-    16.30 / 0.537, plain rasterization 13.25 / 0.238). Its card's 256 x 256
-    aerial view is 1.15 dB below the splat (KNOWN_BELOW): not every view."""
+    isotropic kNN Gaussians. Measured (the shipped narvis-scan): 28.85 dB /
+    0.848 (the model before it, 4000 steps less: 29.07 / 0.845; the classical
+    splat with the radius plane 24.36 / 0.727, push-pull 16.30 / 0.537, plain
+    rasterization 13.25 / 0.238). Its card's 256 x 256 aerial view ties the
+    splat and is 0.009 below its SSIM (KNOWN_BELOW): not every view."""
     r = ci_rows["narvis-scan"]["1x points"]
     assert r["network"]["psnr"] > 28 and r["network"]["ssim"] > 0.82
     assert _margin(r, "splat") > 3.5 and _margin(r, "splat", "ssim") > 0.08

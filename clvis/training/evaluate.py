@@ -225,6 +225,13 @@ def _frames(name: str, case: Case, seed: int, planes: Sequence[str], target: str
                     ),
                 },
             )
+        # the case's scene is done: drop its renderers and give back what the
+        # queues' pools kept of them (each scene's Gaussians, BVH and tile
+        # keys are other sizes, so the pools held every case's: the full
+        # NARVis suite grew past 21 GB here and was killed beside a training)
+        queues = (gr.queue, ras.queue)
+        gr = ras = g = None
+        _data._free_held(queues)
     else:
         n = max(int(case.setting * NARVIS_POINTS_PER_PIXEL * w * h), 1000)
         sc = _narvis_scene(case.family, n, seed)
@@ -250,6 +257,10 @@ def _frames(name: str, case: Case, seed: int, planes: Sequence[str], target: str
                     "splat": splat(plain, covered, np.stack([x[4], x[5]], -1)),
                 },
             )
+        # as in the narvis-scan branch: the scene's blocks back to the pools
+        queues = (gr.queue, ras.queue)
+        gr = ras = g = None
+        _data._free_held(queues)
 
 
 def as_picture(rgb: np.ndarray) -> np.ndarray:

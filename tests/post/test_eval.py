@@ -373,3 +373,29 @@ def test_ci_narvis_scan_on_an_aerial_scan(ci_rows):
     assert r["network"]["psnr"] > 28 and r["network"]["ssim"] > 0.82
     assert _margin(r, "splat") > 3.5 and _margin(r, "splat", "ssim") > 0.08
     assert _margin(r, "raster") > 6 and _margin(r, "pushpull") > 6
+
+
+@pytest.mark.parametrize(
+    "name, case",
+    [
+        ("narvis", ev.Case("ring", (48, 40), 0.25, "hemisphere", frames=1)),
+        ("narvis-scan", ev.Case("object", (48, 40), 0.25, "views", frames=1)),
+    ],
+)
+def test_eval_gives_each_case_scene_buffers_back(name, case):
+    """`clvis eval narvis` renders 40 cases' scenes one after another in one
+    process; the default queue's memory pool kept a freed block of each
+    size, so the full suite grew past 21 GB here and was killed. After each
+    case nothing is held back and no array is left alive."""
+    from clvis import runtime
+
+    pool = runtime.allocator(runtime.default_queue())
+    planes = json.loads((post.MODELS / f"{name}.json").read_text())["architecture"]["planes"]
+    active = pool.active_blocks
+    for seed in (1, 2):
+        frames = 0
+        for _label, _x, target, _base in ev._frames(name, case, seed, planes):
+            frames += 1
+            assert target.shape == (40, 48, 3)
+        assert frames == 1
+        assert pool.held_blocks == 0 and pool.active_blocks == active

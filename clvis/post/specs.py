@@ -247,10 +247,11 @@ class NarvisScanSpec(NarvisSpec):
     #: 256 and 512 pixels square (bench/scan_radius_range.py)
     radius_px_trained = (0.35, 3.3)
     subpixel_volume = None
-    #: off: the guard against the classical splat (clvis.post.guard.narvis_scan)
-    #: fixes the object 512x512 row (SSIM -0.089 -> +0.025) but costs that row
-    #: 2.3 dB, the object family's mean margin 0.75 dB and the shapes training
-    #: family 0.50 dB, and leaves the aerial row below (bench/results/README.md,
+    #: off: the guard against the classical splat (clvis.post.guard.narvis_scan),
+    #: measured on the 4000-step model before this one, fixed the object
+    #: 512x512 row (SSIM -0.089 -> +0.025) but cost that row 2.3 dB, the
+    #: object family's mean margin 0.75 dB and the shapes training family
+    #: 0.50 dB, and left the aerial row below (bench/results/README.md,
     #: 2026-11-28 session 7)
     guard = False
 

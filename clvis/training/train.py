@@ -493,7 +493,9 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
     """Start `net` from the weights of an ONNX export of the same network
     (its initializers, by the parameter names torch.onnx.export keeps; a
     KPN export's trunk, clvis.post.nets.KPNTrunk, names them under "net.");
-    a file of another network, or missing a parameter, is an error.
+    a file of another network, or missing a parameter, is an error, as is
+    the export of a network with batch norms (the LiDAR U-Net: the export
+    folds them into its convolutions).
 
     A G-buffer network (NARVis) may take more planes than the file's: when
     the card beside it (NAME.json) names planes whose channel layout is the
@@ -519,6 +521,15 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
         raise ValueError(f"--init {path}: not an ONNX model ({e})") from None
     weights = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
     state = net.state_dict()
+    if any(k.endswith("running_mean") for k in state) and any(k.startswith("onnx::") for k in weights):
+        # torch.onnx.export folds each eval-mode batch norm into the
+        # convolution before it and names the results "onnx::Conv_N": the
+        # running statistics and the split between conv and norm are gone
+        raise ValueError(
+            f"--init {path}: its export folded the network's batch norms into its "
+            "convolutions (the LiDAR U-Net's); a training cannot start from it: "
+            "train from random weights (no --init)"
+        )
     if not any(k in weights for k in state) and any(k.startswith("net.") for k in weights):
         weights = {k[4:]: v for k, v in weights.items() if k.startswith("net.")}
     grown = _grown_channels(net, weights, Path(path))

@@ -718,6 +718,15 @@ def test_init_loads_an_onnx_export_of_the_same_network(tmp_path):
         train.load_onnx_weights(net, tmp_path / "x.onnx")
 
 
+def test_init_refuses_an_export_with_its_batch_norms_folded():
+    """The LiDAR U-Net's export folds its batch norms into the convolutions
+    ("onnx::Conv_N" initializers): --init with it says so, instead of
+    listing missing parameters."""
+    net = train.TRAINERS["lidar"].build(**train.SPECS["lidar"]["arch"])
+    with pytest.raises(ValueError, match="folded the network's batch norms"):
+        train.load_onnx_weights(net, post.MODELS / "lidar.onnx")
+
+
 def test_init_adds_the_infill_candidates_plane_at_zero(tmp_path):
     """--init of the in-fill W-Net with its candidates plane (6 channels)
     from a 5-channel file: each U-Net's first convolution gets a zero column

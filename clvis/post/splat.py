@@ -5,8 +5,9 @@ beside the network (clvis.post.guard.narvis_scan).
 :func:`splat` draws each covered pixel of the raster's G-buffers as a
 screen-space Gaussian ellipse. The exact definition is the docstring of
 :mod:`clvis.reference.post.splat` (float64, a NumPy scatter); the kernel is
-``kernels_cl/post/splat.cl`` (splat_gather: one work-item per output pixel
-gathering the (2 radius + 1)^2 sources around it, float32, no atomics),
+``kernels_cl/post/splat.cl`` (splat_gather: one work-item per 8 output pixels of
+a row gathering the (2 radius + 1)^2 sources around each, float8 lanes, from
+padded source planes; float32, no atomics),
 within float32 rounding of it. The per-pixel ellipse (the coverage filter's
 sigma, the 95th-percentile speed, the angle) stays host-side NumPy: O(H W),
 a few ms at 512 x 512, and the percentile needs the whole frame.
@@ -94,19 +95,21 @@ def splat(
         raise DataError("vel: NaN or infinite values at covered pixels; velocities must be finite")
 
     sig, along, ca, sa = params(cov, vel, stretch=stretch, radius=int(radius), sigma=sigma)
-    par = np.stack([ca, sa, along, sig], -1).astype(np.float32)
+    r = int(radius)
+    pw, ph = w + 2 * r + 8, h + 2 * r
+    src = np.zeros((8, ph, pw), np.float32)  # the kernel's 8 padded source planes
+    for k, plane in enumerate((ca, sa, 1 / along, 1 / sig, cov, *np.moveaxis(rgb, -1, 0))):
+        src[k, r : r + h, r : r + w] = np.where(cov, plane, 0)
     out = runtime.empty(queue, (h, w, 3), np.float32, "splat output")
-    drgb = to_device(queue, "rgb", np.ascontiguousarray(rgb, np.float32))
-    dcov = to_device(queue, "covered", cov.view(np.uint8))
-    dpar = to_device(queue, "splat ellipses", par)
-    k = runtime.get_kernel(queue, _SRC, "splat_gather", {"R": int(radius)})
+    dsrc = to_device(queue, "splat sources", src)
+    kern = runtime.get_kernel(queue, _SRC, "splat_gather", {"R": r})
     runtime.launch(
         queue,
-        k,
-        *runtime.items(queue, h * w, _WG),
-        buf(drgb),
-        buf(dcov),
-        buf(dpar),
+        kern,
+        *runtime.items(queue, h * -(-w // 8), _WG),
+        buf(dsrc),
+        np.uint32(pw),
+        np.uint32(ph),
         np.uint32(w),
         np.uint32(h),
         np.float32(opacity),

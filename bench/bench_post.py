@@ -170,7 +170,10 @@ def _torch_net(name):
 NARVIS_IMPLS = (*IMPLS, "fast", "16-256", "64-1024", "head", "head-numpy", "subpixel", "subpixel-numpy")
 CASES = [(n, s, i) for n in ("infill", "lidar") for s in SIZES for i in (*IMPLS, "fp32+guard")]
 CASES += [("narvis", "512x512", i) for i in NARVIS_IMPLS]
-CASES += [("narvis-scan", "512x512", i) for i in ("fp32", "fp16", "pushpull", "slow")]
+CASES += [
+    ("narvis-scan", "512x512", i)
+    for i in ("fp32", "fp32+guard", "fp16", "pushpull", "splat", "splat-numpy", "slow")
+]
 
 
 @pytest.mark.parametrize("name,size,impl", CASES, ids=[f"{n}-{s}-{i}" for n, s, i in CASES])
@@ -185,6 +188,8 @@ def test_post(benchmark, queue, name, size, impl):
         scene, ras, gr, cam, image = _scan(queue, w, h)
     else:
         scene, ras, gr, cam, image = _narvis(queue, w, h)
+    if name == "narvis-scan" and impl in ("splat", "splat-numpy"):
+        return _scan_splat(benchmark, queue, impl, w, h, image)
     if name == "narvis" and impl in ("head", "head-numpy"):
         return _narvis_head(benchmark, queue, impl, w, h, image)
     if name == "narvis" and impl in ("subpixel", "subpixel-numpy"):
@@ -317,6 +322,37 @@ def _narvis_head(benchmark, queue, impl, w, h, image):
         n=w * h,
         nbytes=hp * wp * 4 * (4 + head.channels + 1 + 3),
         rounds=3,
+    )
+
+
+def _scan_splat(benchmark, queue, impl, w, h, g):
+    """The classical splat alone (clvis.post.splat: narvis-scan's eval
+    baseline and its guard's candidate, which runs it twice) on the frame's
+    covered colours with the radius plane as sigma, the guard's call,
+    against its NumPy reference (the scatter it was until splat44)."""
+    from clvis.post.splat import splat
+    from clvis.reference.post.splat import splat as splat_numpy
+
+    covered = np.asarray(g.covered)
+    rgb = np.where(covered[..., None], np.asarray(g.rgba)[..., :3] / np.float32(255), np.float32(0))
+    rgb = rgb.astype(np.float32)
+    sigma = np.asarray(g.radius_px, np.float32)
+    kw = dict(opacity=data.SCAN_OPACITY, sigma=sigma)
+    op = f"narvis-scan splat[{w}x{h}]"
+    if impl == "splat":
+        splat(rgb, covered, None, queue=queue, **kw)
+        fn, name, role, rounds = (lambda: splat(rgb, covered, None, queue=queue, **kw)), "OpenCL", "clvis", 5
+    else:
+        fn, name, role, rounds = (lambda: splat_numpy(rgb, covered, None, **kw)), "NumPy reference", "peer", 3
+    run(
+        benchmark,
+        fn,
+        op=op,
+        impl=f"classical splat ({name})",
+        role=role,
+        n=w * h,
+        nbytes=w * h * 32,
+        rounds=rounds,
     )
 
 

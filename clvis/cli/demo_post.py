@@ -163,6 +163,7 @@ def _scan(out_dir: Path, q: cl.CommandQueue, size: tuple[int, int]) -> bool:
     that target beside the raster, push-pull and the classical splat with
     the radius plane as each pixel's sigma (clvis eval's baselines)."""
     from .. import post
+    from .._arrays import on_host
     from ..post.splat import splat
     from ..training import data
 
@@ -176,7 +177,7 @@ def _scan(out_dir: Path, q: cl.CommandQueue, size: tuple[int, int]) -> bool:
     covered = np.asarray(g.covered)
     inp = np.where(covered[..., None], np.asarray(g.rgba)[..., :3] / np.float32(255), 0).astype(np.float32)
     pp = np.asarray(post.pushpull(np.ascontiguousarray(inp), covered, queue=q))
-    sp = splat(inp, covered, None, opacity=data.SCAN_OPACITY, sigma=np.asarray(g.radius_px))
+    sp = on_host(splat(inp, covered, None, opacity=data.SCAN_OPACITY, sigma=np.asarray(g.radius_px)))
     got = net(g)
     out = got[..., :3].astype(np.float32) / 255
     s = _scores(inp, pp, out, target, sp)

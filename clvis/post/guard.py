@@ -437,6 +437,7 @@ def narvis_scan(
     of the tiles where the target says 17 %, bench/results/README.md).
     Both candidates run on both inputs; params override
     ``PARAMS["narvis-scan"]``."""
+    from .._arrays import on_host
     from .splat import splat
 
     p = _settings("narvis-scan", params)
@@ -450,7 +451,7 @@ def narvis_scan(
         if 0 in wanted:
             out[0] = np.asarray(run(index if known is covered else np.where(known, index, empty)), np.float32)
         if 1 in wanted:
-            out[1] = splat(rgb * known[..., None], known, None, opacity=p["opacity"], sigma=sigma)
+            out[1] = on_host(splat(rgb * known[..., None], known, None, opacity=p["opacity"], sigma=sigma))
         return out
 
     return blend(

@@ -1,71 +1,118 @@
-"""The classical splat the NARVis networks are measured against (``clvis
-eval``'s "splat" baseline) and narvis-scan's guard runs beside the network
-(clvis.post.guard.narvis_scan): each covered pixel of the raster's G-buffers
-drawn as a screen-space Gaussian ellipse. NumPy (and scipy's uniform filter
-for the spacing); no kernel, no torch.
+"""The classical splat (post family): the baseline the NARVis networks are
+measured against (``clvis eval``'s "splat") and narvis-scan's guard runs
+beside the network (clvis.post.guard.narvis_scan).
+
+:func:`splat` draws each covered pixel of the raster's G-buffers as a
+screen-space Gaussian ellipse. The exact definition is the docstring of
+:mod:`clvis.reference.post.splat` (float64, a NumPy scatter); the kernel is
+``kernels_cl/post/splat.cl`` (splat_gather: one work-item per 8 output pixels of
+a row gathering the (2 radius + 1)^2 sources around each, float8 lanes, from
+padded source planes; float32, no atomics),
+within float32 rounding of it. The per-pixel ellipse (the coverage filter's
+sigma, the 95th-percentile speed, the angle) stays host-side NumPy: O(H W),
+a few ms at 512 x 512, and the percentile needs the whole frame.
+numpy in: numpy out; device arrays in: read back, a device array out.
 """
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
 
-__all__ = ["splat"]
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+
+from .. import runtime
+from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device, to_host
+from ..errors import DataError
+from ..reference.post.splat import params
+
+__all__ = ["MAX_RADIUS", "splat"]
+
+MAX_RADIUS = 32
+_SRC = "post/splat.cl"
+_WG = 64
+_REALS = [np.float32, np.float64]
 
 
 def splat(
-    rgb: np.ndarray,
-    covered: np.ndarray,
-    vel: np.ndarray | None = None,
+    rgb: Any,
+    covered: Any,
+    vel: Any = None,
     *,
     stretch: float = 4.0,
     opacity: float = 0.5,
     radius: int = 6,
-    sigma: np.ndarray | None = None,
-) -> np.ndarray:
+    sigma: Any = None,
+    queue: cl.CommandQueue | None = None,
+) -> np.ndarray | cla.Array:
     """What a user would do without a network: each covered pixel drawn as a
     screen-space Gaussian ellipse, its standard deviation half the local
     pixel spacing of the points (from the coverage around it; `sigma` (H, W):
-    given per pixel instead, e.g. a scan's radius plane GBuffers.radius_px)
-    across the flow and up to `stretch` times that along its screen velocity
-    `vel` (H, W, 2; None: round), clipped to 0.5 .. radius / 2.5 pixels,
-    composited order-independently (colour: the weighted mean; alpha: 1 -
-    prod(1 - opacity x weight)). rgb (H, W, 3) in [0, 1]; returns (H, W, 3)
-    premultiplied over black."""
-    from scipy.ndimage import uniform_filter
+    given per pixel instead, e.g. a scan's radius plane GBuffers.radius_px,
+    NaN meaning 0.5) across the flow and up to `stretch` (>= 1) times that
+    along its screen velocity `vel` (H, W, 2; None: round), clipped to 0.5 ..
+    radius / 2.5 pixels, composited order-independently (colour: the
+    weighted mean; alpha: 1 - prod(1 - opacity x weight), opacity in 0..1).
 
-    h, w = covered.shape
-    if sigma is None:
-        cov = covered.astype(np.float64)
-        frac = uniform_filter(cov, 9, mode="constant")
-        sigma = 0.5 / np.sqrt(np.maximum(frac, 1 / 81))
-    sigma = np.clip(np.nan_to_num(np.asarray(sigma, np.float64), nan=0.5), 0.5, radius / 2.5)
+    rgb (H, W, 3) float32 or float64, finite at covered pixels (values
+    elsewhere are never read); covered (H, W) bool or uint8 (nonzero =
+    covered); radius 1..32 (an int). Returns (H, W, 3) float32 premultiplied
+    over black; all zeros where nothing is covered.
+    """
+    queue = resolve_queue(queue, rgb=rgb, covered=covered, vel=vel, sigma=sigma)
+    host = not any(is_device(a) for a in (rgb, covered, vel, sigma))
+    rgb = to_host(check_array("rgb", rgb, dtypes=_REALS, ndim=3))
+    covered = to_host(check_array("covered", covered, dtypes=[np.bool_, np.uint8], ndim=2))
+    h, w = (int(s) for s in covered.shape)
+    if tuple(rgb.shape) != (h, w, 3):
+        raise ValueError(f"rgb: shape {tuple(rgb.shape)}; expected {(h, w, 3)} (covered's {(h, w)} x 3)")
     if vel is not None:
-        speed = np.hypot(vel[..., 0], vel[..., 1])
-        ref = float(np.quantile(speed[covered], 0.95)) if covered.any() else 0.0
-        rel = np.clip(speed / ref, 0, 1) if ref > 0 else np.zeros_like(speed)
-        ang = np.arctan2(vel[..., 1], vel[..., 0])
-    else:
-        rel, ang = np.zeros((h, w)), np.zeros((h, w))
-    along = sigma * (1 + (stretch - 1) * rel)
-    ca, sa = np.cos(ang), np.sin(ang)
-    ys, xs = np.nonzero(covered)
-    src_sig, src_along = sigma[ys, xs], along[ys, xs]
-    src_c, src_s, col = ca[ys, xs], sa[ys, xs], rgb[ys, xs].astype(np.float64)
-    acc = np.zeros((h, w, 3))
-    wsum = np.zeros((h, w))
-    logt = np.zeros((h, w))
-    for dy in range(-radius, radius + 1):
-        for dx in range(-radius, radius + 1):
-            ty, tx = ys + dy, xs + dx
-            ok = (ty >= 0) & (ty < h) & (tx >= 0) & (tx < w)
-            d_al = dx * src_c[ok] + dy * src_s[ok]
-            d_ac = -dx * src_s[ok] + dy * src_c[ok]
-            wt = np.exp(-0.5 * ((d_al / src_along[ok]) ** 2 + (d_ac / src_sig[ok]) ** 2))
-            # one offset sends distinct sources to distinct pixels: plain += adds
-            at = (ty[ok], tx[ok])
-            wsum[at] += wt
-            logt[at] += np.log1p(-opacity * wt)
-            acc[at] += wt[:, None] * col[ok]
-    alpha = 1 - np.exp(logt)
-    mean = acc / np.maximum(wsum, 1e-12)[..., None]
-    return (mean * alpha[..., None]).astype(np.float32)
+        vel = to_host(check_array("vel", vel, dtypes=_REALS, ndim=3))
+        if tuple(vel.shape) != (h, w, 2):
+            raise ValueError(f"vel: shape {tuple(vel.shape)}; expected {(h, w, 2)}")
+    if sigma is not None:
+        sigma = to_host(check_array("sigma", sigma, dtypes=_REALS, ndim=2))
+        if tuple(sigma.shape) != (h, w):
+            raise ValueError(f"sigma: shape {tuple(sigma.shape)} differs from covered's {(h, w)}")
+    if isinstance(radius, bool) or not isinstance(radius, (int, np.integer)):
+        raise TypeError(f"radius: expected an int, got {type(radius).__name__}")
+    if not 1 <= radius <= MAX_RADIUS:
+        raise ValueError(f"radius: expected 1..{MAX_RADIUS} pixels, got {radius}")
+    stretch, opacity = float(stretch), float(opacity)
+    if not (np.isfinite(stretch) and stretch >= 1):
+        raise ValueError(f"stretch: expected a finite value >= 1, got {stretch}")
+    if not 0 <= opacity <= 1:
+        raise ValueError(f"opacity: expected 0..1, got {opacity}")
+    if h == 0 or w == 0:
+        raise DataError(f"covered: empty ({h} x {w} pixels); the splat needs at least one pixel")
+    if h * w >= 2**32:
+        raise DataError(f"covered: {h} x {w} pixels; at most 2^32 - 1")
+    cov = covered != 0
+    if not np.isfinite(rgb[cov]).all():
+        raise DataError("rgb: NaN or infinite values at covered pixels; the colours splatted must be finite")
+    if vel is not None and not np.isfinite(vel[cov]).all():
+        raise DataError("vel: NaN or infinite values at covered pixels; velocities must be finite")
+
+    sig, along, ca, sa = params(cov, vel, stretch=stretch, radius=int(radius), sigma=sigma)
+    r = int(radius)
+    pw, ph = w + 2 * r + 8, h + 2 * r
+    src = np.zeros((8, ph, pw), np.float32)  # the kernel's 8 padded source planes
+    for k, plane in enumerate((ca, sa, 1 / along, 1 / sig, cov, *np.moveaxis(rgb, -1, 0))):
+        src[k, r : r + h, r : r + w] = np.where(cov, plane, 0)
+    out = runtime.empty(queue, (h, w, 3), np.float32, "splat output")
+    dsrc = to_device(queue, "splat sources", src)
+    kern = runtime.get_kernel(queue, _SRC, "splat_gather", {"R": r})
+    runtime.launch(
+        queue,
+        kern,
+        *runtime.items(queue, h * -(-w // 8), _WG),
+        buf(dsrc),
+        np.uint32(pw),
+        np.uint32(ph),
+        np.uint32(w),
+        np.uint32(h),
+        np.float32(opacity),
+        buf(out),
+    )
+    return result(out, host)

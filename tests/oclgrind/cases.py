@@ -442,6 +442,20 @@ def post_pushpull(q):
 
 
 @case
+def post_splat(q):
+    from clvis.post.splat import splat
+
+    rng = _rng(23)
+    h, w = 13, 17
+    rgb = rng.random((h, w, 3)).astype(np.float32)
+    cov = rng.random((h, w)) < 0.4
+    cov[0, 0] = cov[h - 1, w - 1] = True  # sources at the corners: the gather's bounds
+    vel = rng.normal(size=(h, w, 2)).astype(np.float32)
+    splat(rgb, cov, vel, radius=3, queue=q)
+    splat(rgb, cov, None, radius=1, sigma=rng.random((h, w)).astype(np.float32), queue=q)
+
+
+@case
 def post_pack(q):
     rng = _rng(22)
     h, w = 13, 19

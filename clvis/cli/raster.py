@@ -480,15 +480,16 @@ def _compare_gaussians(
     m_plain = metrics(plain, target)
     ns = net.stats
     fast = r.post_s
+    ratio = f"{gr_s / fast:.1f}x faster" if fast <= gr_s else f"{fast / gr_s:.1f}x slower"
     return [
         f"  compare   against the Gaussian renderer ({gr.n:,} Gaussians; set up in {setup:.1f} s):",
         f"            plain rasterization {m_plain['psnr']:.2f} dB, SSIM {m_plain['ssim']:.3f}",
-        f"            NARVis U-Net        {m_net['psnr']:.2f} dB, SSIM {m_net['ssim']:.3f}",
-        f"            MACR + U-Net {fast * 1e3:.0f} ms (render on the device "
+        f"            {net.name + ' network':<20}{m_net['psnr']:.2f} dB, SSIM {m_net['ssim']:.3f}",
+        f"            MACR + network {fast * 1e3:.0f} ms (render on the device "
         f"{(fast - ns['pack'] - ns['inference'] - ns['unpack']) * 1e3:.0f}, "
         f"pack {ns['pack'] * 1e3:.0f}, inference {ns['inference'] * 1e3:.0f}, "
         f"unpack {ns['unpack'] * 1e3:.0f}) against Gaussians "
-        f"{gr_s * 1e3:.0f} ms: {gr_s / fast:.1f}x faster",
+        f"{gr_s * 1e3:.0f} ms: {ratio}",
     ]
 
 

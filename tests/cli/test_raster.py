@@ -610,8 +610,11 @@ def test_render_compare_narvis_scan_in_the_colours_drawn(tmp_path, capsys):
         assert rc == 0, err
         assert what in out and "model narvis-scan" in err
         _assert_picture(out_dir / "gaussians.png")
-        net_db = float(re.search(r"NARVis U-Net +([-\d.]+) dB", out).group(1))
+        net_db = float(re.search(r"narvis-scan network +([-\d.]+) dB", out).group(1))
         assert net_db > 15, out  # against a black target: ~10 dB
+        # the speed against GR as a ratio >= 1, "faster" or "slower" (it said "0.2x faster")
+        ratio = re.search(r"ms: ([\d.]+)x (faster|slower)", out)
+        assert ratio and float(ratio.group(1)) >= 1.0, out
 
 
 def test_render_post_narvis_scan_says_when_its_knn_radius_is_slow(tmp_path, capsys, monkeypatch):

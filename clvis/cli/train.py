@@ -98,8 +98,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         default=None,
         metavar="ONNX",
         help="start from the weights of this ONNX export of the same network (e.g. the shipped "
-        "clvis/post/models/infill.onnx; not lidar's, whose export folds its batch norms into "
-        "its convolutions; default: random weights)",
+        "clvis/post/models/infill.onnx; lidar's export folded its batch norms into its "
+        "convolutions: they start as those and stay frozen; default: random weights)",
     )
     p.add_argument(
         "--mix",

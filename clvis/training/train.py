@@ -493,9 +493,10 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
     """Start `net` from the weights of an ONNX export of the same network
     (its initializers, by the parameter names torch.onnx.export keeps; a
     KPN export's trunk, clvis.post.nets.KPNTrunk, names them under "net.");
-    a file of another network, or missing a parameter, is an error, as is
-    the export of a network with batch norms (the LiDAR U-Net: the export
-    folds them into its convolutions).
+    a file of another network, or missing a parameter, is an error. The
+    export of a network with batch norms (the LiDAR U-Net) folded them into
+    its convolutions: :func:`_load_folded` starts such a network with its
+    norms frozen.
 
     A G-buffer network (NARVis) may take more planes than the file's: when
     the card beside it (NAME.json) names planes whose channel layout is the
@@ -522,14 +523,8 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
     weights = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
     state = net.state_dict()
     if any(k.endswith("running_mean") for k in state) and any(k.startswith("onnx::") for k in weights):
-        # torch.onnx.export folds each eval-mode batch norm into the
-        # convolution before it and names the results "onnx::Conv_N": the
-        # running statistics and the split between conv and norm are gone
-        raise ValueError(
-            f"--init {path}: its export folded the network's batch norms into its "
-            "convolutions (the LiDAR U-Net's); a training cannot start from it: "
-            "train from random weights (no --init)"
-        )
+        _load_folded(net, graph, weights, path)
+        return
     if not any(k in weights for k in state) and any(k.startswith("net.") for k in weights):
         weights = {k[4:]: v for k, v in weights.items() if k.startswith("net.")}
     grown = _grown_channels(net, weights, Path(path))
@@ -544,6 +539,79 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
             f"(missing {missing[:3]}, other shapes {wrong[:3]} of {len(state)} parameters)"
         )
     net.load_state_dict({k: torch.from_numpy(np.array(weights[k], dtype=np.float32)) for k in state})
+
+
+def _load_folded(net: Any, graph: Any, weights: dict[str, np.ndarray], path: str | os.PathLike) -> None:
+    """`net` (with batch norms) from an export that folded each eval-mode
+    norm into the convolution before it ("onnx::Conv_N" initializers: the
+    LiDAR U-Net's). The graph's convolutions are matched, in the order they
+    run, to `net`'s (hooks on a forward pass of a small input); each one
+    followed by a norm gets the folded weight, and its norm becomes the
+    folded bias: weight 1, bias b, running mean 0 and variance 1 - eps, so
+    the eval-mode network computes the file's exactly. The norms are then
+    frozen (``net.frozen_norms``: training keeps them in eval mode, their
+    scale and shift still learned): batch statistics would change what the
+    network computes at the first step."""
+    import torch
+    from torch import nn
+
+    convs = [n for n in graph.node if n.op_type == "Conv"]
+    order: list[nn.Conv2d] = []
+    hooks = [
+        m.register_forward_hook(lambda m, i, o: order.append(m))
+        for m in net.modules()
+        if isinstance(m, nn.Conv2d)
+    ]
+    try:
+        side = 2 * int(getattr(net, "stride", 1))
+        with torch.no_grad():
+            net.eval()(torch.zeros(1, net.channels_in, side, side))
+    finally:
+        for h in hooks:
+            h.remove()
+    norm_after: dict[int, nn.BatchNorm2d] = {}
+    for seq in net.modules():
+        kids = list(seq.children()) if isinstance(seq, nn.Sequential) else []
+        for a, b in zip(kids, kids[1:], strict=False):
+            if isinstance(a, nn.Conv2d) and isinstance(b, nn.BatchNorm2d):
+                norm_after[id(a)] = b
+    if len(order) != len(convs) or len(set(map(id, order))) != len(order):
+        raise ValueError(
+            f"--init {path}: not this network's weights ({len(convs)} convolutions in the file, "
+            f"{len(order)} run by this network)"
+        )
+    for conv, node in zip(order, convs, strict=True):
+        w = weights.get(node.input[1])
+        b = weights.get(node.input[2]) if len(node.input) > 2 else None
+        if w is None or tuple(w.shape) != tuple(conv.weight.shape) or b is None or b.shape != (w.shape[0],):
+            name = node.name or node.input[1]
+            raise ValueError(f"--init {path}: not this network's weights (convolution {name})")
+        bn = norm_after.get(id(conv))
+        with torch.no_grad():
+            conv.weight.copy_(torch.from_numpy(np.array(w, dtype=np.float32)))
+            if bn is None:
+                if conv.bias is None:
+                    raise ValueError(f"--init {path}: not this network's weights (a bias without a norm)")
+                conv.bias.copy_(torch.from_numpy(np.array(b, dtype=np.float32)))
+            else:
+                bn.weight.fill_(1.0)
+                bn.bias.copy_(torch.from_numpy(np.array(b, dtype=np.float32)))
+                bn.running_mean.zero_()
+                bn.running_var.fill_(1.0 - bn.eps)
+    net.frozen_norms = True
+
+
+def train_mode(net: Any) -> None:
+    """`net` in training mode, but for the batch norms of a network started
+    from a folded export (``frozen_norms``, :func:`_load_folded`), which stay
+    in eval mode."""
+    from torch import nn
+
+    net.train()
+    if getattr(net, "frozen_norms", False):
+        for m in net.modules():
+            if isinstance(m, nn.BatchNorm2d):
+                m.eval()
 
 
 def _grown_channels(net: Any, weights: dict[str, np.ndarray], path: Path) -> int:
@@ -983,7 +1051,7 @@ def train(
     every = max(1, steps // 50)
     running, done = 0.0, 0
     t0 = time.perf_counter()
-    net.train()
+    train_mode(net)
     for step in range(1, steps + 1):
         # cosine from lr0 to lr1 over the run: its steps, or its time limit if that comes first
         progress = (step - 1) / max(steps, 1)

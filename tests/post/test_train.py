@@ -718,13 +718,29 @@ def test_init_loads_an_onnx_export_of_the_same_network(tmp_path):
         train.load_onnx_weights(net, tmp_path / "x.onnx")
 
 
-def test_init_refuses_an_export_with_its_batch_norms_folded():
+def test_init_starts_from_an_export_with_its_batch_norms_folded():
     """The LiDAR U-Net's export folds its batch norms into the convolutions
-    ("onnx::Conv_N" initializers): --init with it says so, instead of
-    listing missing parameters."""
+    ("onnx::Conv_N" initializers): --init matches the graph's convolutions to
+    the network's in the order they run, puts each folded bias in its norm,
+    and freezes the norms; the network then computes what onnxruntime
+    computes on the file, in eval mode and in training mode alike."""
+    import torch
+
     net = train.TRAINERS["lidar"].build(**train.SPECS["lidar"]["arch"])
-    with pytest.raises(ValueError, match="folded the network's batch norms"):
-        train.load_onnx_weights(net, post.MODELS / "lidar.onnx")
+    train.load_onnx_weights(net, post.MODELS / "lidar.onnx")
+    assert net.frozen_norms
+    rng = np.random.default_rng(0)
+    x = rng.random((1, net.channels_in, 64, 64), dtype=np.float32)
+    x[:, 3] = rng.random((64, 64)) < 0.2  # the kept mask
+    want = train._run(post.MODELS / "lidar.onnx", x)
+    with torch.no_grad():
+        got = net.eval()(torch.from_numpy(x)).numpy()
+        train.train_mode(net)
+        trained = net(torch.from_numpy(x)).numpy()
+    assert np.abs(got - want).max() < 1e-4 and np.abs(trained - want).max() < 1e-4
+    other = train.TRAINERS["lidar"].build(**{**train.SPECS["lidar"]["arch"], "width": 4})
+    with pytest.raises(ValueError, match="not this network's weights"):
+        train.load_onnx_weights(other, post.MODELS / "lidar.onnx")
 
 
 def test_init_adds_the_infill_candidates_plane_at_zero(tmp_path):

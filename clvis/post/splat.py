@@ -25,7 +25,6 @@ import pyopencl.array as cla
 from .. import runtime
 from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device, to_host
 from ..errors import DataError
-from ..reference.post.splat import params
 
 __all__ = ["MAX_RADIUS", "splat"]
 
@@ -33,6 +32,31 @@ MAX_RADIUS = 32
 _SRC = "post/splat.cl"
 _WG = 64
 _REALS = [np.float32, np.float64]
+
+
+def _ellipses(
+    cov: np.ndarray, vel: np.ndarray | None, stretch: float, radius: int, sigma: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each pixel's ellipse as the reference defines it (float64, host):
+    its standard deviations across and along the flow and the direction of
+    its long axis, (sigma, along, cos, sin). The parts that need the whole
+    frame, so the kernel does not: the coverage box filter and the covered
+    pixels' 95th-percentile speed."""
+    from scipy.ndimage import uniform_filter
+
+    if sigma is None:  # half the local spacing: the covered share of a 9 x 9 box
+        share = uniform_filter(cov.astype(np.float64), 9, mode="constant")
+        sigma = 0.5 / np.sqrt(np.maximum(share, 1 / 81))
+    sig = np.clip(np.nan_to_num(np.asarray(sigma, np.float64), nan=0.5), 0.5, radius / 2.5)
+    if vel is None:
+        zero = np.zeros_like(sig)
+        return sig, sig, zero + 1.0, zero
+    vx, vy = np.asarray(vel[..., 0], np.float64), np.asarray(vel[..., 1], np.float64)
+    speed = np.hypot(vx, vy)
+    top = float(np.quantile(speed[cov], 0.95)) if cov.any() else 0.0
+    rel = np.clip(speed / top, 0, 1) if top > 0 else np.zeros_like(speed)
+    ang = np.arctan2(vy, vx)
+    return sig, sig * (1 + (stretch - 1) * rel), np.cos(ang), np.sin(ang)
 
 
 def splat(
@@ -94,7 +118,7 @@ def splat(
     if vel is not None and not np.isfinite(vel[cov]).all():
         raise DataError("vel: NaN or infinite values at covered pixels; velocities must be finite")
 
-    sig, along, ca, sa = params(cov, vel, stretch=stretch, radius=int(radius), sigma=sigma)
+    sig, along, ca, sa = _ellipses(cov, vel, stretch, int(radius), sigma)
     r = int(radius)
     pw, ph = w + 2 * r + 8, h + 2 * r
     src = np.zeros((8, ph, pw), np.float32)  # the kernel's 8 padded source planes

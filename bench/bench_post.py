@@ -26,7 +26,9 @@ The networks are timed alone (``guard=False``) and, fp32, with their guard
 - narvis-scan[...]: the G-buffers (colour, depth, the kNN radius plane) of
   a held-out LAS-like aerial strip scan (4 points a pixel) from an oblique
   view; the slow path is the Gaussian renderer's 3DGS splat of its
-  isotropic kNN Gaussians (the target it was trained on).
+  isotropic kNN Gaussians (the target it was trained on); "fp32+filter" is
+  its pipeline whole: the spec's depth filter on the G-buffers, then the
+  network.
 - narvis head[...]: the kernel-prediction head alone (clvis.post.kpn's
   kernels, applied since issue 28 to the logits the graph stops at), on the
   same frame's tensors, against its NumPy reference.
@@ -172,7 +174,7 @@ CASES = [(n, s, i) for n in ("infill", "lidar") for s in SIZES for i in (*IMPLS,
 CASES += [("narvis", "512x512", i) for i in NARVIS_IMPLS]
 CASES += [
     ("narvis-scan", "512x512", i)
-    for i in ("fp32", "fp32+guard", "fp16", "pushpull", "splat", "splat-numpy", "slow")
+    for i in ("fp32", "fp32+filter", "fp32+guard", "fp16", "pushpull", "splat", "splat-numpy", "slow")
 ]
 
 
@@ -190,6 +192,8 @@ def test_post(benchmark, queue, name, size, impl):
         scene, ras, gr, cam, image = _narvis(queue, w, h)
     if name == "narvis-scan" and impl in ("splat", "splat-numpy"):
         return _scan_splat(benchmark, queue, impl, w, h, image)
+    if name == "narvis-scan" and impl == "fp32+filter":
+        return _scan_filtered(benchmark, queue, op, w, h, image)
     if name == "narvis" and impl in ("head", "head-numpy"):
         return _narvis_head(benchmark, queue, impl, w, h, image)
     if name == "narvis" and impl in ("subpixel", "subpixel-numpy"):
@@ -275,6 +279,32 @@ def test_post(benchmark, queue, name, size, impl):
 
             impl_name = "dense render (the slow path)"
         run(benchmark, slow, op=op, impl=impl_name, role="peer", n=w * h, nbytes=w * h * 24, rounds=3)
+
+
+def _scan_filtered(benchmark, queue, op, w, h, image):
+    """narvis-scan's pipeline as clvis render and clvis eval run it: its
+    spec's depth filter on the G-buffers (clvis.raster.filter_gbuffers: the
+    mask on the device, the planes selected on the host), then the network."""
+    from clvis.raster import filter_gbuffers
+
+    net = post.load("narvis-scan", queue=queue)
+    levels, strength = net.spec.depth_filter
+
+    def frame():
+        return net(filter_gbuffers(image, levels, strength, queue=queue))
+
+    frame()
+    run(
+        benchmark,
+        frame,
+        op=op,
+        impl=f"depth filter ({levels} levels, strength {strength:g}) + onnxruntime fp32",
+        role="clvis-host",
+        n=w * h,
+        nbytes=w * h * (5 * 4 + 4),
+        rounds=5,
+    )
+    benchmark.extra_info["stages"] = dict(net.stats)
 
 
 def _narvis_head(benchmark, queue, impl, w, h, image):

@@ -178,6 +178,10 @@ def _scan(out_dir: Path, q: cl.CommandQueue, size: tuple[int, int]) -> bool:
     inp = np.where(covered[..., None], np.asarray(g.rgba)[..., :3] / np.float32(255), 0).astype(np.float32)
     pp = np.asarray(post.pushpull(np.ascontiguousarray(inp), covered, queue=q))
     sp = on_host(splat(inp, covered, None, opacity=data.SCAN_OPACITY, sigma=np.asarray(g.radius_px)))
+    if net.spec.depth_filter is not None:  # the network's pipeline: the depth filter first
+        from ..raster import filter_gbuffers
+
+        g = filter_gbuffers(g, *net.spec.depth_filter, queue=q)
     got = net(g)
     out = got[..., :3].astype(np.float32) / 255
     s = _scores(inp, pp, out, target, sp)

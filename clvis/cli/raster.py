@@ -232,6 +232,7 @@ class _Rendered:
     first_s: float  # the first render (it may build the kernels)
     warm_s: float  # the same render again
     post_s: float = 0.0  # the network's frame on the device path: render + network
+    post_removed: int | None = None  # the pixels its depth filter emptied (narvis-scan)
 
 
 def _safe_name(name: str) -> str:
@@ -293,7 +294,7 @@ def _render_panels(
 ) -> _Rendered:
     """Render one view; the G-buffers and the images a person looks at."""
     from .. import images
-    from ..raster import EMPTY, depth_filter, edl
+    from ..raster import EMPTY, depth_filter, edl, filter_gbuffers
 
     look = look or _Look()
     color_by = None if look.classes is not None else attribute
@@ -367,15 +368,21 @@ def _render_panels(
         kept = typing.cast(np.ndarray, filtered.rgba)  # G-buffers in: the rgba is there
         panels.append(_keyed(_Panel("depth-filtered", f"depth filter ({levels} levels)", kept), panels))
     post_s = 0.0
+    removed: list[int | None] = [None]
     if post is not None:
 
         def frame() -> np.ndarray:
             """The documented pipeline, on the device from render to network:
             G-buffers with only the planes the network reads, never read back
-            (the panels above are the host render's)."""
+            (the panels above are the host render's); narvis-scan: its
+            spec's depth filter first (the planes it reads come back once)."""
             gd = raster.render(camera, width, height, **kw, planes=post.attribute_planes, host=False)
             if post.name == "lidar":  # device planes in, device planes out
                 return post(depth_filter(gd, levels))
+            if post.spec.depth_filter is not None:
+                gf = filter_gbuffers(gd, *post.spec.depth_filter)
+                removed[0] = gf.stats["depth_filter_removed"]
+                return post(gf)
             return post(gd)
 
         title = post.spec.title
@@ -385,7 +392,7 @@ def _render_panels(
             panels.append(_Panel(f"post-{post.name}", title, frame()))
             post_s = time.perf_counter() - t0
         _say_unlike_training(post, g)
-    return _Rendered(g, panels, first, warm, post_s)
+    return _Rendered(g, panels, first, warm, post_s, removed[0])
 
 
 def _say_unlike_training(post, g: GBuffers) -> None:
@@ -481,11 +488,12 @@ def _compare_gaussians(
     ns = net.stats
     fast = r.post_s
     ratio = f"{gr_s / fast:.1f}x faster" if fast <= gr_s else f"{fast / gr_s:.1f}x slower"
+    stage = "render on the device" if net.spec.depth_filter is None else "render and depth filter"
     return [
         f"  compare   against the Gaussian renderer ({gr.n:,} Gaussians; set up in {setup:.1f} s):",
         f"            plain rasterization {m_plain['psnr']:.2f} dB, SSIM {m_plain['ssim']:.3f}",
         f"            {net.name + ' network':<20}{m_net['psnr']:.2f} dB, SSIM {m_net['ssim']:.3f}",
-        f"            MACR + network {fast * 1e3:.0f} ms (render on the device "
+        f"            MACR + network {fast * 1e3:.0f} ms ({stage} "
         f"{(fast - ns['pack'] - ns['inference'] - ns['unpack']) * 1e3:.0f}, "
         f"pack {ns['pack'] * 1e3:.0f}, inference {ns['inference'] * 1e3:.0f}, "
         f"unpack {ns['unpack'] * 1e3:.0f}) against Gaussians "
@@ -1178,9 +1186,16 @@ def _render(args, progress) -> int:
     )
     if net is not None:
         ns = net.stats
+        where = "G-buffers on the device"
+        if net.spec.depth_filter is not None:
+            lv, st = net.spec.depth_filter
+            where = (
+                f"the G-buffers through its depth filter ({lv} levels, strength {st:g}; "
+                f"{r.post_removed:,} far-side points removed) on the host"
+            )
         print(
             f"  post      {net!r}: {r.post_s * 1e3:.1f} ms a frame from render to picture, "
-            f"G-buffers on the device (pack {ns['pack'] * 1e3:.1f} ms, inference "
+            f"{where} (pack {ns['pack'] * 1e3:.1f} ms, inference "
             f"{ns['inference'] * 1e3:.1f} ms, unpack {ns['unpack'] * 1e3:.1f} ms)"
         )
     for line in compared:

@@ -50,6 +50,12 @@ class NetworkSpec(Generic[InputT]):
     #: whether its call checks it against its classical fills by default
     #: (clvis.post.guard; PostNetwork.guard); None: it has no guard
     guard: bool | None = None
+    #: (levels, filter_strength) of the depth filter its pipeline runs on
+    #: the G-buffers before it (clvis.raster.filter_gbuffers: far-side points
+    #: seen through a sparse near surface leave the frame); ``clvis render``
+    #: and ``clvis eval`` apply it, a caller of ``net(g)`` filters ``g``
+    #: itself (post does not import the raster family). None: no filter
+    depth_filter: tuple[int, float] | None = None
     #: (lo, hi, reach): the sub-pixel rule of a network that reads the radius
     #: plane (clvis.post.subpixel: its output blended toward the raster's
     #: colours, weight 1 where the window's mean sigma is <= lo pixels, 0 at
@@ -180,7 +186,7 @@ class NarvisSpec(NetworkSpec[GBuffersLike]):
     name = "narvis"
     title = "NARVis kernel-predicting U-Net (G-buffers -> Gaussians)"
     takes = "rasterizer G-buffers (GBuffers)"
-    baselines = ("raster", "pushpull", "splat")
+    baselines: tuple[str, ...] = ("raster", "pushpull", "splat")
     eval_families: tuple[str, ...] = ("convection", "lorenz", "jet", "ring", "hurricane/magma")
     #: the hurricane and clvis.training.flows.TRAIN_FLOWS
     trained_families: tuple[str, ...] = (
@@ -235,7 +241,17 @@ class NarvisScanSpec(NarvisSpec):
     takes = "rasterizer G-buffers with the radius plane (a cloud with radius=knn_sigma)"
     #: splat: each covered pixel drawn as a round Gaussian of the radius
     #: plane's sigma (clvis.post.splat)
-    baselines = ("raster", "pushpull", "splat")
+    #: filtered-splat: the splat of the depth-filtered G-buffers (the
+    #: network's own input, :attr:`depth_filter`)
+    baselines = ("raster", "pushpull", "splat", "filtered-splat")
+    #: the depth filter before the network (4 levels, strength 1.4). Picked
+    #: on views of the training families (town, photo_town, shapes; 24 views,
+    #: two seeds) among strengths 1.025-2.0 with the shipped network: 1.4 had
+    #: the best mean (+0.06 / +0.19 dB over the unfiltered G-buffers) with the
+    #: worst view at -0.54 dB; 1.025 (the LiDAR default) cost -1.48 dB on
+    #: average, removing grazing surface points; >= 2 removes nearly nothing
+    #: (bench/results/README.md, 2026-11-29)
+    depth_filter = (4, 1.4)
     #: clvis.training.data.SCAN_HELD_OUT
     eval_families = ("terrain", "aerial", "object")
     #: clvis.training.data.SCAN_TRAIN

@@ -4,7 +4,7 @@ input rules the Rasterizer and the distributed layer share), and the
 hierarchical depth filter (depth_filter.py: depth_filter.cl), and eye-dome
 lighting (edl.py: edl.cl)."""
 
-from .depth_filter import FilteredImage, depth_filter, depth_filter_mask, rgbda
+from .depth_filter import FilteredImage, depth_filter, depth_filter_mask, filter_gbuffers, rgbda
 from .edl import edl
 from .inputs import MAX_ATTRIBUTES, MAX_IMAGE_SIDE, MAX_POINT_SIZE
 from .morton import morton_order
@@ -30,6 +30,7 @@ __all__ = [
     "depth_filter",
     "depth_filter_mask",
     "edl",
+    "filter_gbuffers",
     "morton_order",
     "rasterize",
     "rgbda",

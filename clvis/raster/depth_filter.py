@@ -4,7 +4,9 @@ A point cloud rasterized with one pixel per point shows background points
 through the holes between foreground points. :func:`depth_filter_mask` finds
 them with the min-pooled depth pyramid of Vanherck, Zoomers et al., "Real-time
 Neural Rendering of LiDAR Point Clouds" (Eurographics 2025 short papers), and
-:func:`rgbda` assembles the filtered RGBDA image their network takes.
+:func:`rgbda` assembles the filtered RGBDA image their network takes;
+:func:`filter_gbuffers` empties the removed points in every plane of a
+G-buffer set (the input of the NARVis scan network, clvis.post.specs).
 
 The exact definition (and which parts follow the paper) is the docstring of
 :mod:`clvis.reference.raster.depth_filter`; the kernels are
@@ -31,7 +33,7 @@ from .. import runtime
 from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device, to_host
 from ..errors import DataError
 from ..images import Picture, rgba8
-from .render import GBuffers
+from .render import EMPTY, GBuffers
 
 __all__ = [
     "EDGE_THRESHOLD",
@@ -41,6 +43,7 @@ __all__ = [
     "FilteredImage",
     "depth_filter",
     "depth_filter_mask",
+    "filter_gbuffers",
     "level_shapes",
     "rgbda",
 ]
@@ -351,3 +354,64 @@ def depth_filter(
             buf(kept_rgba if kept_rgba is not None else kept_depth),
         )
     return FilteredImage(keep=keep.view(np.bool_), depth=kept_depth, rgba=kept_rgba, rgbda=out_rgbda)
+
+
+def filter_gbuffers(
+    gbuffers: GBuffers,
+    levels: int = LEVELS,
+    filter_strength: float = FILTER_STRENGTH,
+    *,
+    edge_threshold: float = EDGE_THRESHOLD,
+    queue: cl.CommandQueue | None = None,
+) -> GBuffers:
+    """The G-buffers with the points :func:`depth_filter_mask` removes taken
+    out of every plane: where a point was drawn but not kept, the index is
+    EMPTY, the depth +inf, the rgba (0, 0, 0, 0), float planes (attributes,
+    screen velocity, radius) NaN and uint8 attribute planes 0, as the
+    renderer leaves a pixel no point reached. Pixels kept are bit for bit
+    the input's; ``stats`` is the input's plus ``depth_filter_removed``
+    (the pixels emptied). The NARVis scan network's pipeline
+    (clvis.post.specs: its ``depth_filter``): far-side points seen through
+    the gaps of a sparse near surface leave the frame before it.
+
+    The mask is computed on the device (the depth plane crosses once when
+    it is on the host); the planes come back as numpy arrays (device planes,
+    ``render(host=False)``, are read back once)."""
+    if not isinstance(gbuffers, GBuffers):
+        raise TypeError(f"gbuffers: expected GBuffers, got {type(gbuffers).__name__}")
+
+    keep = to_host(
+        depth_filter_mask(gbuffers.depth, levels, filter_strength, edge_threshold=edge_threshold, queue=queue)
+    ).astype(np.bool_)
+    index = np.asarray(to_host(gbuffers.index))
+    if index.shape != keep.shape:
+        raise ValueError(f"index: shape {index.shape} differs from the depth plane's {keep.shape}")
+    removed = (index != EMPTY) & ~keep
+
+    def emptied(plane: Any) -> Any:
+        if plane is None:
+            return None
+        a = np.asarray(to_host(plane))
+        if a.shape[:2] != keep.shape:
+            raise ValueError(f"plane of shape {a.shape}: expected {keep.shape} first (the depth plane's)")
+        m = removed.reshape(removed.shape + (1,) * (a.ndim - 2))
+        if a.dtype == np.uint32:
+            fill = EMPTY
+        elif a.dtype.kind == "f":
+            fill = np.inf if plane is gbuffers.depth else np.nan
+        else:
+            fill = 0
+        return np.where(m, a.dtype.type(fill), a)
+
+    return dataclasses.replace(
+        gbuffers,
+        index=emptied(gbuffers.index),
+        depth=emptied(gbuffers.depth),
+        rgba=emptied(gbuffers.rgba),
+        attributes={k: emptied(v) for k, v in gbuffers.attributes.items()},
+        vel2d=emptied(gbuffers.vel2d),
+        vel_angle=emptied(gbuffers.vel_angle),
+        vel_speed=emptied(gbuffers.vel_speed),
+        radius_px=emptied(gbuffers.radius_px),
+        stats={**gbuffers.stats, "depth_filter_removed": int(removed.sum())},
+    )

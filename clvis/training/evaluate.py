@@ -31,8 +31,11 @@ Families (TRAINED: what the shipped networks' training used):
   clvis.training.data.SCAN_TRAIN): "terrain" (the embedded one), "aerial"
   (a LAS-like strip scan of farmland) and "object" (a scanned-object-like
   painted surface); 0.25x, 1x, 4x the training's points a pixel; random
-  views; baselines the plain rasterization, push-pull of its RGB and the
-  classical splat with the radius plane as each pixel's sigma.
+  views; the network reads the G-buffers through its depth filter (the
+  spec's ``depth_filter``: clvis.raster.filter_gbuffers); baselines the
+  plain rasterization, push-pull of its RGB, the classical splat with the
+  radius plane as each pixel's sigma, and that splat of the filtered
+  G-buffers (``filtered-splat``).
 
 ``--quick`` is the suite ``clvis train`` runs at its end: one size, one
 density, one frame per family. Needs no torch (onnxruntime runs the
@@ -53,8 +56,9 @@ import numpy as np
 
 from ..io.files import write_replacing
 from ..metrics import metrics
-from ..post.specs import SPECS
+from ..post.specs import SPECS, spec
 from ..post.splat import splat
+from ..raster.depth_filter import filter_gbuffers
 from . import data as _data
 from . import flows as _flows
 
@@ -206,25 +210,32 @@ def _frames(name: str, case: Case, seed: int, planes: Sequence[str], target: str
         rng = np.random.default_rng(seed)
         ssc = _data.scan_scene(case.family, n, int(rng.integers(0, 2**31)))
         ras, gr = ssc.rasterizer(), ssc.gaussian_renderer()
+        prefilter = spec(name).depth_filter
         for cam in _data.scan_cameras(ssc, rng, case.frames, w / h):
             g = ssc.gbuffers(ras, cam, w, h, planes)
             target = np.clip(np.asarray(gr.render(cam, w, h).rgba)[..., :3], 0, 1).astype(np.float32)
-            covered = np.asarray(g.covered)
-            plain = np.where(covered[..., None], np.asarray(g.rgba)[..., :3] / np.float32(255), 0).astype(
-                np.float32
-            )
-            yield (
-                f"{case.setting:g}x points",
-                g,
-                target,
-                {
-                    "raster": plain,
-                    "pushpull": pushpull(np.ascontiguousarray(plain), covered),
-                    "splat": splat(
-                        plain, covered, None, opacity=_data.SCAN_OPACITY, sigma=np.asarray(g.radius_px)
-                    ),
-                },
-            )
+
+            def drawn(g):
+                covered = np.asarray(g.covered)
+                rgb = np.where(covered[..., None], np.asarray(g.rgba)[..., :3] / np.float32(255), 0)
+                return rgb.astype(np.float32), covered
+
+            def splatted(g):
+                rgb, covered = drawn(g)
+                return splat(rgb, covered, None, opacity=_data.SCAN_OPACITY, sigma=np.asarray(g.radius_px))
+
+            plain, covered = drawn(g)
+            base = {
+                "raster": plain,
+                "pushpull": pushpull(np.ascontiguousarray(plain), covered),
+                "splat": splatted(g),
+            }
+            if prefilter is not None:
+                # the network's pipeline: the depth filter first; the splat
+                # of the same filtered G-buffers is a baseline of its own
+                g = filter_gbuffers(g, *prefilter, queue=ras.queue)
+                base["filtered-splat"] = splatted(g)
+            yield f"{case.setting:g}x points", g, target, base
         # the case's scene is done: drop its renderers and give back what the
         # queues' pools kept of them (each scene's Gaussians, BVH and tile
         # keys are other sizes, so the pools held every case's: the full

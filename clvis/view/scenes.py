@@ -333,7 +333,7 @@ class PointScene(Scene):
         self.raster.queue.finish()  # the render's own time in "render", not in "post"
         t1 = time.perf_counter()
         net = self._net(mode)
-        rgba = net(src)
+        rgba = net(_prefiltered(net, src))
         t2 = time.perf_counter()
         info["inference ms"] = round(1e3 * net.stats.get("inference", 0.0), 1)
         times = {"render": t1 - t0, "post": t2 - t1}
@@ -402,7 +402,7 @@ class PointScene(Scene):
         g = self._render(camera, w, h, s, 1, screen_velocity=False, host=False)
         self.raster.queue.finish()
         ta = time.perf_counter()
-        fast = net(g)[..., :3]
+        fast = net(_prefiltered(net, g))[..., :3]
         t2 = time.perf_counter()
         slow = gr.render(camera, w, h).to_uint8((0, 0, 0))[..., :3]
         t3 = time.perf_counter()
@@ -756,3 +756,15 @@ def scene_for(obj: Any, **kwargs: Any) -> Scene:
         f"clvis.view: expected a clvis.PointCloud, (N, 3) positions or a 3-D volume, "
         f"got {type(obj).__name__} of shape {getattr(a, 'shape', None)}"
     )
+
+
+def _prefiltered(net, g):
+    """The network's input as its pipeline has it: narvis-scan's G-buffers
+    through its spec's depth filter (clvis.raster.filter_gbuffers: far-side
+    points seen through a sparse near surface removed; the planes come back
+    to the host), every other network's as they are."""
+    if net.spec.depth_filter is None:
+        return g
+    from ..raster import filter_gbuffers
+
+    return filter_gbuffers(g, *net.spec.depth_filter)

@@ -419,6 +419,10 @@ def test_render_post_narvis_picks_the_model_the_planes_allow(tmp_path, capsys):
     assert rc == 0, err
     assert "--post narvis: " in err and "model narvis-scan (no velocity" in err
     assert "PostNetwork('narvis-scan'" in out
+    # its pipeline: the depth filter before the network (clvis.post.specs)
+    assert re.search(
+        r"through its depth filter \(4 levels, strength 1.4; [\d,]+ far-side points removed\)", out
+    )
     assert "warning" not in err  # its median splat radius is inside the training's
     assert "the splat radius plane" not in err  # 1,065 points: well under KNN_NOTE_SECONDS
     _assert_picture(tmp_path / "a" / "post-narvis-scan.png")

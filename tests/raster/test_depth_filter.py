@@ -224,6 +224,83 @@ def test_depth_filter_empty_and_bad(queue):
         clvis.depth_filter(_device_gbuffers(queue, _gbuffers(x, np.zeros((4, 5, 4), np.uint8))))
 
 
+def _full_gbuffers(depth, seed):
+    """G-buffers with every plane kind: index, depth, rgba, a float and a
+    uint8 attribute, the velocity planes and the radius (empty pixels as the
+    renderer leaves them)."""
+    rng = np.random.default_rng(seed)
+    h, w = depth.shape
+    cov = np.isfinite(depth)
+
+    def f32(*shape):
+        return np.where(
+            cov.reshape(cov.shape + (1,) * len(shape)), rng.random((h, w, *shape)), np.nan
+        ).astype(np.float32)
+
+    vel = f32(2)
+    return clvis.GBuffers(
+        index=np.where(cov, rng.integers(0, 1000, (h, w)), 0xFFFFFFFF).astype(np.uint32),
+        depth=depth,
+        rgba=np.where(cov[..., None], rng.integers(1, 256, (h, w, 4)), 0).astype(np.uint8),
+        attributes={"t": f32(), "class": np.where(cov, rng.integers(1, 9, (h, w)), 0).astype(np.uint8)},
+        vel2d=vel,
+        vel_angle=np.arctan2(vel[..., 1], vel[..., 0]),
+        vel_speed=np.hypot(vel[..., 0], vel[..., 1]),
+        radius_px=f32(),
+        stats={"points": 1000},
+    )
+
+
+@pytest.mark.parametrize("levels,strength", [(0, 1.025), (2, 1.025), (4, 1.4)])
+def test_filter_gbuffers(queue, levels, strength):
+    """filter_gbuffers empties, in every plane, the pixels the mask removes
+    (as the renderer leaves a pixel no point reached) and keeps the rest bit
+    for bit; device planes in, host planes out."""
+    d = layered((37, 29), 0.7, seed=5)
+    g = _full_gbuffers(d, 3)
+    keep = ref.depth_filter_mask(d, levels, strength)
+    removed = np.isfinite(d) & ~keep
+    assert removed.any() or levels == 0
+    for src in (g, _device_gbuffers(queue, g)):
+        f = clvis.raster.filter_gbuffers(src, levels, strength, queue=queue)
+        assert isinstance(f.index, np.ndarray) and f.stats == {
+            **src.stats,
+            "depth_filter_removed": removed.sum(),
+        }
+        np.testing.assert_array_equal(f.covered, np.isfinite(d) & keep)
+        np.testing.assert_array_equal(f.index, np.where(keep, g.index, 0xFFFFFFFF))
+        np.testing.assert_array_equal(f.depth, np.where(keep, d, INF))
+        np.testing.assert_array_equal(f.rgba, np.where(keep[..., None], g.rgba, 0))
+        if src is not g:
+            continue  # _device_gbuffers carries index, depth and rgba only
+        for name, a, b in [
+            ("t", f.attributes["t"], g.attributes["t"]),
+            ("radius", f.radius_px, g.radius_px),
+            ("vel2d", f.vel2d, g.vel2d),
+            ("angle", f.vel_angle, g.vel_angle),
+            ("speed", f.vel_speed, g.vel_speed),
+        ]:
+            m = keep.reshape(keep.shape + (1,) * (a.ndim - 2))
+            np.testing.assert_array_equal(a, np.where(m, b, np.nan), err_msg=name)
+        np.testing.assert_array_equal(f.attributes["class"], np.where(keep, g.attributes["class"], 0))
+
+
+def test_filter_gbuffers_bad_input(queue):
+    d = layered((6, 5), 0.5, seed=1)
+    with pytest.raises(TypeError, match="gbuffers: expected GBuffers"):
+        clvis.raster.filter_gbuffers(d, queue=queue)
+    g = _full_gbuffers(d, 1)
+    with pytest.raises(ValueError, match="filter_strength"):
+        clvis.raster.filter_gbuffers(g, 4, 0.5, queue=queue)
+    bad = _full_gbuffers(d.copy(), 1)
+    bad.depth[2, 2] = np.nan
+    with pytest.raises(clvis.DataError, match="1 NaN"):
+        clvis.raster.filter_gbuffers(bad, queue=queue)
+    short = clvis.GBuffers(index=g.index[:5], depth=d, rgba=g.rgba, attributes={})
+    with pytest.raises(ValueError, match="index: shape"):
+        clvis.raster.filter_gbuffers(short, queue=queue)
+
+
 @given(
     d=hnp.arrays(
         np.float32,

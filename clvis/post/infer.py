@@ -22,7 +22,12 @@ whose call takes a renderer's own output and returns an RGBA8 picture:
   with the colour, depth and radius planes, from a Rasterizer given
   ``radius=clvis.gauss.points.knn_sigma(positions)`` (GBuffers.radius_px);
   returns the image of isotropic Gaussians of that sigma splatted as 3DGS
-  does.
+  does. Its pipeline filters the G-buffers first (``spec.depth_filter``:
+  ``clvis.raster.filter_gbuffers(g, *net.spec.depth_filter)``, as ``clvis
+  render``, ``clvis eval`` and the viewer do): on a close view of a sparse
+  surface the raster shows its far side through the gaps, which the 3DGS
+  splat hides; post does not import the raster family, so the call does
+  not filter by itself.
 
 One frame, the data on the device until onnxruntime needs it: the pack
 kernel (clvis.post.pack) reads device planes where they are (a numpy plane

@@ -1248,6 +1248,7 @@ def scan_frames(
     views: int = 2,
     densities: tuple[float, float] = (0.25, 4.0),
     scan_lines: dict | None = None,
+    depth_filter: tuple[int, float] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> list[NarvisFrame]:
     """`count` scan scenes (kinds in turn, each at a density log-uniform in
@@ -1255,10 +1256,13 @@ def scan_frames(
     random views: the packed G-buffers (`planes`) and the Gaussians' splat.
     `scan_lines` ({"share", "gap": (lo, hi), "oversample"}; None: none): that
     share of the scenes sampled along scan lines (scan_scene), each scene's
-    choice drawn from its own seed."""
+    choice drawn from its own seed. `depth_filter` (levels, strength; None:
+    none): the G-buffers go through clvis.raster.filter_gbuffers first, as
+    narvis-scan's pipeline has them (clvis.post.specs)."""
     import time
 
     from ..post.pack import pack_gbuffers
+    from ..raster.depth_filter import filter_gbuffers
 
     rng = np.random.default_rng(seed)
     lo, hi = (math.log(float(d)) for d in densities)
@@ -1277,6 +1281,8 @@ def scan_frames(
         for v, cam in enumerate(scan_cameras(sc, rng, views, width / height)):
             t0 = time.perf_counter()
             g = sc.gbuffers(ras, cam, width, height, planes)
+            if depth_filter is not None:
+                g = filter_gbuffers(g, *depth_filter, queue=ras.queue)
             t1 = time.perf_counter()
             img = gr.render(cam, width, height)
             t2 = time.perf_counter()

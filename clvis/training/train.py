@@ -455,8 +455,25 @@ def _scan_frames(count: int, views: int, seed: int, size: tuple[int, int], held_
     spec = SPECS["narvis-scan"]
     lines = None if held_out else spec.get("scan_lines")
     return _data.scan_frames(
-        kinds, count, seed, *size, spec["arch"]["planes"], views=views, scan_lines=lines, progress=log
+        kinds,
+        count,
+        seed,
+        *size,
+        spec["arch"]["planes"],
+        views=views,
+        scan_lines=lines,
+        depth_filter=_scan_depth_filter(),
+        progress=log,
     )
+
+
+def _scan_depth_filter() -> tuple[int, float] | None:
+    """The depth filter of narvis-scan's pipeline (clvis.post.specs): its
+    training and validation frames are filtered as ``clvis render`` and
+    ``clvis eval`` filter what it reads."""
+    from ..post.specs import spec as post_spec
+
+    return post_spec("narvis-scan").depth_filter
 
 
 #: the families of --mix's variety frames: the shipped three and data.MORE_TRAIN_VOLUMES
@@ -1015,6 +1032,8 @@ def train(
             key = {"set": f"{name}-{'held' if held_out else 'train'}", "count": n, "views": views}
             if not held_out and "scan_lines" in spec:
                 key["scan_lines"] = spec["scan_lines"]
+            if name == "narvis-scan" and _scan_depth_filter() is not None:
+                key["depth_filter"] = list(_scan_depth_filter() or ())
             return cached_frames(Path(cache), {**key, "seed": s, "size": list(fsize)}, make, log)
 
         train_frames = made(count, spec["views"], seed, False)
@@ -1137,6 +1156,11 @@ def train(
             "completions": list(completions) if completions != (None,) else None,
             **({"point_sizes": list(spec["point_sizes"])} if "point_sizes" in spec else {}),
             **({"scan_lines": spec["scan_lines"]} if "scan_lines" in spec else {}),
+            **(
+                {"depth_filter": list(_scan_depth_filter() or ())}
+                if name == "narvis-scan" and _scan_depth_filter() is not None
+                else {}
+            ),
             **(
                 {
                     "mix": {

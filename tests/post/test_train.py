@@ -57,6 +57,8 @@ def test_train_smoke_through_the_cli(tmp_path, name, capsys):
         assert card["data"]["train"] == list(data.SCAN_TRAIN)
         assert len(list((tmp_path / "cache").glob("narvis-narvis-scan-*.npz"))) == 2  # train, held out
         assert card["data"]["scan_lines"] == json.loads(json.dumps(train.SPECS[name]["scan_lines"]))
+        # its frames are filtered as its pipeline filters what it reads (clvis.post.specs)
+        assert card["data"]["depth_filter"] == list(post.specs.spec(name).depth_filter)
 
 
 def test_scan_scenes_are_deterministic_scans_without_velocity():
@@ -145,6 +147,16 @@ def test_scan_pairs_are_registered():
     cov = f.x[3] > 0
     assert 0.05 < cov.mean() < 0.95 and (f.x[5][cov] > 0).all() and not f.x[5][~cov].any()
     assert (f.rgb.sum(-1) > 0).mean() > cov.mean()  # the Gaussians fill between the points
+    # depth_filter: the same view's G-buffers through filter_gbuffers, the target unchanged
+    from clvis.raster import filter_gbuffers
+
+    ff = data.scan_frames(
+        ("photo_town",), 1, 2, 64, 48, SCAN_GBUFFER_PLANES, views=1, densities=(1, 1), depth_filter=(2, 1.0)
+    )[0]
+    np.testing.assert_array_equal(ff.rgb, f.rgb)
+    want = filter_gbuffers(sc.gbuffers(sc.rasterizer(), cam, 64, 48, SCAN_GBUFFER_PLANES), 2, 1.0)
+    assert want.stats["depth_filter_removed"] > 0
+    np.testing.assert_array_equal(ff.x[3] > 0, np.asarray(want.covered))
 
 
 def test_narvis_frames_are_rendered_once_per_key(tmp_path):

@@ -7,9 +7,15 @@ G-buffers through clvis.raster.filter_gbuffers (4 levels) at each strength,
 against the 3DGS splat target, and prints per row the change each strength
 makes (PSNR dB / SSIM), then the mean and the worst row per strength.
 
-    python bench/scan_depth_filter.py KINDS STRENGTHS [SEED]
-    python bench/scan_depth_filter.py town,photo_town,shapes 1.025,1.05,1.1,1.2,1.4 777
-    python bench/scan_depth_filter.py town,photo_town,shapes 1.3,1.4,1.6,2.0 778
+    python bench/scan_depth_filter.py KINDS STRENGTHS [SEED [MODEL_DIR]]
+    python bench/scan_depth_filter.py town,photo_town,shapes 1.025,1.05,1.1,1.2,1.4 777 DIR
+    python bench/scan_depth_filter.py town,photo_town,shapes 1.3,1.4,1.6,2.0 778 DIR
+
+MODEL_DIR: where narvis-scan.json is (default: the shipped model). The
+strength was picked with the model before the filter (its last run trained
+on unfiltered frames): ``mkdir DIR; for f in narvis-scan.json
+narvis-scan.onnx narvis-scan.fp16.onnx; do git show
+31cf69f:clvis/post/models/$f > DIR/$f; done``.
 
 The strength is picked on the training kinds (clvis.training.data.SCAN_TRAIN);
 the held-out kinds (terrain, aerial, object) are `clvis eval narvis-scan`'s.
@@ -28,11 +34,8 @@ from clvis.raster.depth_filter import LEVELS
 from clvis.training import evaluate as ev
 
 
-def main(kinds: list[str], strengths: list[float], seed: int) -> None:
-    net = post.load("narvis-scan")
-    # the suite's frames as they were before the filter (this script's own
-    # process: the spec object is the one clvis.training.evaluate reads)
-    post.specs.spec("narvis-scan").depth_filter = None
+def main(kinds: list[str], strengths: list[float], seed: int, model_dir: str | None = None) -> None:
+    net = post.load("narvis-scan", directory=model_dir)
     cases = [
         ev.Case(k, size, d, "views", frames=2)
         for k in kinds
@@ -42,7 +45,8 @@ def main(kinds: list[str], strengths: list[float], seed: int) -> None:
     change: dict[float, list[tuple[float, float]]] = {s: [] for s in strengths}
     for i, case in enumerate(cases):
         per: dict[object, list[dict[str, float]]] = {}
-        for _label, raw, target, _base in ev._frames("narvis-scan", case, seed + 7919 * i, net.planes):
+        frames = ev._frames("narvis-scan", case, seed + 7919 * i, net.planes, depth_filter=None)
+        for _label, raw, target, _base in frames:
             per.setdefault("raw", []).append(metrics(net(raw)[..., :3] / np.float32(255), target))
             for s in strengths:
                 f = filter_gbuffers(raw, LEVELS, s)
@@ -68,4 +72,9 @@ def main(kinds: list[str], strengths: list[float], seed: int) -> None:
 if __name__ == "__main__":
     kinds = sys.argv[1].split(",") if len(sys.argv) > 1 else ["town", "photo_town", "shapes"]
     strengths = [float(s) for s in sys.argv[2].split(",")] if len(sys.argv) > 2 else [1.025, 1.4, 2.0]
-    main(kinds, strengths, int(sys.argv[3]) if len(sys.argv) > 3 else 777)
+    main(
+        kinds,
+        strengths,
+        int(sys.argv[3]) if len(sys.argv) > 3 else 777,
+        sys.argv[4] if len(sys.argv) > 4 else None,
+    )

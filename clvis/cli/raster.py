@@ -231,7 +231,7 @@ class _Rendered:
     panels: list
     first_s: float  # the first render (it may build the kernels)
     warm_s: float  # the same render again
-    post_s: float = 0.0  # the network's frame on the device path: render + network
+    post_s: float = 0.0  # the network's frame, render + network (narvis-scan: + its depth filter)
     post_removed: int | None = None  # the pixels its depth filter emptied (narvis-scan)
 
 
@@ -372,10 +372,10 @@ def _render_panels(
     if post is not None:
 
         def frame() -> np.ndarray:
-            """The documented pipeline, on the device from render to network:
-            G-buffers with only the planes the network reads, never read back
-            (the panels above are the host render's); narvis-scan: its
-            spec's depth filter first (the planes it reads come back once)."""
+            """The documented pipeline: G-buffers with only the planes the
+            network reads, rendered on the device (the panels above are the
+            host render's); read back never, but for narvis-scan, whose
+            spec's depth filter runs first and brings its planes back once."""
             gd = raster.render(camera, width, height, **kw, planes=post.attribute_planes, host=False)
             if post.name == "lidar":  # device planes in, device planes out
                 return post(depth_filter(gd, levels))

@@ -47,6 +47,7 @@ from __future__ import annotations
 import json
 import os
 import time
+import typing
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -165,9 +166,36 @@ def _narvis_scene(family: str, n: int, seed: int) -> Any:
     return _data.narvis_flow_scene(family, n, seed)
 
 
-def _frames(name: str, case: Case, seed: int, planes: Sequence[str], target: str = "max_response"):
+#: _frames' depth_filter default: the network's spec's
+_SPEC = "spec"
+
+
+def _scan_drawn(g: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The raster's RGB (0 where empty) and coverage of scan G-buffers."""
+    covered = np.asarray(g.covered)
+    rgb = np.where(covered[..., None], np.asarray(g.rgba)[..., :3] / np.float32(255), 0)
+    return rgb.astype(np.float32), covered
+
+
+def _scan_splat(g: Any) -> np.ndarray:
+    """The classical splat of scan G-buffers: each covered pixel a round
+    Gaussian of the radius plane's sigma."""
+    rgb, covered = _scan_drawn(g)
+    return np.asarray(splat(rgb, covered, None, opacity=_data.SCAN_OPACITY, sigma=np.asarray(g.radius_px)))
+
+
+def _frames(
+    name: str,
+    case: Case,
+    seed: int,
+    planes: Sequence[str],
+    target: str = "max_response",
+    depth_filter: tuple[int, float] | None | str = _SPEC,
+):
     """Yield (setting label, network input, target rgb, {baseline: rgb}) for
-    the case's frames; `target`: the Gaussian renderer's model (narvis)."""
+    the case's frames; `target`: the Gaussian renderer's model (narvis);
+    `depth_filter` (narvis-scan): (levels, strength) of the filter before
+    the network, None for none, by default its spec's."""
     from ..post.pack import pack_gbuffers
     from ..post.pushpull import pushpull
 
@@ -210,31 +238,22 @@ def _frames(name: str, case: Case, seed: int, planes: Sequence[str], target: str
         rng = np.random.default_rng(seed)
         ssc = _data.scan_scene(case.family, n, int(rng.integers(0, 2**31)))
         ras, gr = ssc.rasterizer(), ssc.gaussian_renderer()
-        prefilter = spec(name).depth_filter
+        prefilter = spec(name).depth_filter if depth_filter == _SPEC else depth_filter
         for cam in _data.scan_cameras(ssc, rng, case.frames, w / h):
             g = ssc.gbuffers(ras, cam, w, h, planes)
             target = np.clip(np.asarray(gr.render(cam, w, h).rgba)[..., :3], 0, 1).astype(np.float32)
-
-            def drawn(g):
-                covered = np.asarray(g.covered)
-                rgb = np.where(covered[..., None], np.asarray(g.rgba)[..., :3] / np.float32(255), 0)
-                return rgb.astype(np.float32), covered
-
-            def splatted(g):
-                rgb, covered = drawn(g)
-                return splat(rgb, covered, None, opacity=_data.SCAN_OPACITY, sigma=np.asarray(g.radius_px))
-
-            plain, covered = drawn(g)
+            plain, covered = _scan_drawn(g)
             base = {
                 "raster": plain,
                 "pushpull": pushpull(np.ascontiguousarray(plain), covered),
-                "splat": splatted(g),
+                "splat": _scan_splat(g),
             }
             if prefilter is not None:
                 # the network's pipeline: the depth filter first; the splat
                 # of the same filtered G-buffers is a baseline of its own
-                g = filter_gbuffers(g, *prefilter, queue=ras.queue)
-                base["filtered-splat"] = splatted(g)
+                levels, strength = typing.cast(tuple, prefilter)
+                g = filter_gbuffers(g, levels, strength, queue=ras.queue)
+                base["filtered-splat"] = _scan_splat(g)
             yield f"{case.setting:g}x points", g, target, base
         # the case's scene is done: drop its renderers and give back what the
         # queues' pools kept of them (each scene's Gaussians, BVH and tile
@@ -362,20 +381,21 @@ def _best_baseline(name: str, row: dict) -> tuple[str, dict]:
 
 def _line(name: str, row: dict) -> str:
     cells = [f"{row['family']:<16} {row['size']:>9} {row['setting']:<13} {row['sampler']:<10}"]
-    for k in ("network", *BASELINES[name]):
+    for k in ("network", *(b for b in BASELINES[name] if b in row)):
         m = row[k]
         cells.append(f"{k} {m['psnr']:5.2f}/{m['ssim']:.3f} (worst {m['worst_psnr']:5.2f})")
     b, bm = _best_baseline(name, row)
     d = row["network"]["psnr"] - bm["psnr"]
-    best_ssim = max(row[k]["ssim"] for k in BASELINES[name])
+    best_ssim = max(row[k]["ssim"] for k in BASELINES[name] if k in row)
     flag = "  BELOW" if d < 0 or row["network"]["ssim"] < best_ssim else ""
     return " | ".join(cells) + f" | vs {b} {d:+.2f} dB{flag}"
 
 
 def table(result: dict) -> str:
     """The result as a markdown table: per row, each method's mean PSNR /
-    SSIM and worst-frame PSNR, and the network's margin over the best
-    baseline (negative: the network loses to it)."""
+    SSIM and worst-frame PSNR ("-" for a baseline the row has not: the
+    filtered splat of a run without the depth filter), and the network's
+    margin over the best baseline (negative: the network loses to it)."""
     name = result["model"]
     methods = ("network", *BASELINES[name])
     head = (
@@ -388,9 +408,10 @@ def table(result: dict) -> str:
         b, bm = _best_baseline(name, row)
         cells = [row["family"], row["size"], row["setting"], row["sampler"]]
         cells += [
-            f"{row[k]['psnr']:.2f} / {row[k]['ssim']:.3f} ({row[k]['worst_psnr']:.2f})" for k in methods
+            f"{row[k]['psnr']:.2f} / {row[k]['ssim']:.3f} ({row[k]['worst_psnr']:.2f})" if k in row else "-"
+            for k in methods
         ]
-        best_ssim = max(row[k]["ssim"] for k in BASELINES[name])
+        best_ssim = max(row[k]["ssim"] for k in BASELINES[name] if k in row)
         net = row["network"]
         cells.append(f"{net['psnr'] - bm['psnr']:+.2f} dB ({b}), SSIM {net['ssim'] - best_ssim:+.3f}")
         lines.append("| " + " | ".join(cells) + " |")

@@ -158,7 +158,8 @@ _SCAN_TARGET = (
 )
 _SCAN_INPUT = (
     "Rasterizer.render G-buffers (one pixel per point, the points' colours): rgb, depth and the "
-    "radius plane (radius_px: knn_sigma projected to pixels)"
+    "radius plane (radius_px: knn_sigma projected to pixels), through the depth filter of its "
+    "pipeline where the card's data names one (clvis.raster.filter_gbuffers)"
 )
 #: the card's words for each NARVis target model
 _TARGET_WORDS = {"max_response": "max response", "splat": "3DGS splatting, model='splat'"}
@@ -960,6 +961,8 @@ def train(
     if name not in SPECS:
         raise ValueError(f"model: expected one of {NAMES}, got {name!r}")
     spec, trainer = SPECS[name], TRAINERS[name]
+    # narvis-scan: the depth filter its frames go through (its pipeline's)
+    scan_filter = _scan_depth_filter() if name == "narvis-scan" else None
     if planes is not None:
         if "planes" not in spec["arch"]:
             raise ValueError(f"planes: {name} takes no G-buffer planes (narvis, narvis-scan only)")
@@ -1032,8 +1035,8 @@ def train(
             key = {"set": f"{name}-{'held' if held_out else 'train'}", "count": n, "views": views}
             if not held_out and "scan_lines" in spec:
                 key["scan_lines"] = spec["scan_lines"]
-            if name == "narvis-scan" and _scan_depth_filter() is not None:
-                key["depth_filter"] = list(_scan_depth_filter() or ())
+            if scan_filter is not None:
+                key["depth_filter"] = list(scan_filter)
             return cached_frames(Path(cache), {**key, "seed": s, "size": list(fsize)}, make, log)
 
         train_frames = made(count, spec["views"], seed, False)
@@ -1156,11 +1159,7 @@ def train(
             "completions": list(completions) if completions != (None,) else None,
             **({"point_sizes": list(spec["point_sizes"])} if "point_sizes" in spec else {}),
             **({"scan_lines": spec["scan_lines"]} if "scan_lines" in spec else {}),
-            **(
-                {"depth_filter": list(_scan_depth_filter() or ())}
-                if name == "narvis-scan" and _scan_depth_filter() is not None
-                else {}
-            ),
+            **({"depth_filter": list(scan_filter)} if scan_filter is not None else {}),
             **(
                 {
                     "mix": {

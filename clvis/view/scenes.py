@@ -326,8 +326,10 @@ class PointScene(Scene):
         build = {"narvis-scan": self._scan_raster, "narvis": self._flow_raster}.get(mode, lambda: 0.0)()
         t0 += build
         # the networks read the G-buffers where they are (host=False: nothing
-        # read back, nothing uploaded again); NARVis needs the screen velocity,
-        # narvis-scan the radius plane (every render of the scan Rasterizer)
+        # read back, nothing uploaded again; narvis-scan: its depth filter
+        # reads the planes back once, _prefiltered); NARVis needs the screen
+        # velocity, narvis-scan the radius plane (every render of the scan
+        # Rasterizer)
         g = self._render(camera, width, height, settings, 1, screen_velocity=mode == "narvis", host=False)
         src = depth_filter(g) if mode == "lidar" else g
         self.raster.queue.finish()  # the render's own time in "render", not in "post"

@@ -380,24 +380,28 @@ def test_narvis_scan_reads_the_depth_filtered_gbuffers():
     G-buffers through the spec's depth filter (on a close view of the
     scanned object its far side shows through the near surface's gaps and
     the filter empties those pixels), and scores the splat of the same
-    filtered G-buffers beside the splat of the raw ones."""
-    from clvis.raster import filter_gbuffers
+    filtered G-buffers beside the splat of the raw ones; with the filter
+    off (depth_filter=None) the network reads the raw G-buffers."""
+    from clvis.training import data
 
-    levels, strength = post.specs.spec("narvis-scan").depth_filter
     planes = json.loads((post.MODELS / "narvis-scan.json").read_text())["architecture"]["planes"]
+    case = ev.Case("object", (96, 96), 0.25, "views", 2)
+    filtered = list(ev._frames("narvis-scan", case, 5, planes))
+    raw = list(ev._frames("narvis-scan", case, 5, planes, depth_filter=None))
     removed = 0
-    for _label, x, _target, base in ev._frames(
-        "narvis-scan", ev.Case("object", (96, 96), 0.25, "views", 2), 5, planes
-    ):
-        assert set(base) == set(ev.BASELINES["narvis-scan"])
+    for (_, x, t, base), (_, x0, t0, base0) in zip(filtered, raw, strict=True):
+        assert set(base) == set(ev.BASELINES["narvis-scan"]) and set(base0) == set(base) - {"filtered-splat"}
+        np.testing.assert_array_equal(t, t0)
+        np.testing.assert_array_equal(base["splat"], base0["splat"])
         n = x.stats["depth_filter_removed"]
         removed += n
-        # filtering again removes nothing more: x is the filter's output
-        assert filter_gbuffers(x, levels, strength).stats["depth_filter_removed"] == 0
-        covered = np.asarray(x.covered)
-        assert not np.asarray(base["filtered-splat"])[~covered].all()
-        if n:
-            assert not np.array_equal(base["filtered-splat"], base["splat"])
+        assert "depth_filter_removed" not in x0.stats
+        assert np.asarray(x.covered).sum() == np.asarray(x0.covered).sum() - n
+        # the filtered splat is the splat of the network's input
+        cov = np.asarray(x.covered)
+        rgb = np.where(cov[..., None], np.asarray(x.rgba)[..., :3] / np.float32(255), 0).astype(np.float32)
+        want = ev.splat(rgb, cov, None, opacity=data.SCAN_OPACITY, sigma=np.asarray(x.radius_px))
+        np.testing.assert_array_equal(base["filtered-splat"], want)
     assert removed > 0
 
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import clvis
+from clvis.raster import filter_gbuffers
 from clvis.view import Orbit, PointScene, VolumeScene, scene_for
 
 pytest.importorskip("tornado", reason="the view extra (tornado) is not installed")
@@ -236,6 +237,30 @@ def scan():
     return clvis.PointCloud(d["positions"], colors=d["colors"], attributes={"height": d["positions"][:, 2]})
 
 
+def test_the_viewer_filters_what_narvis_scan_reads():
+    """The viewer's narvis-scan frames read the G-buffers through the
+    network's depth filter (its spec's): on a close view of the scanned
+    object its far side shows through the near surface's gaps and the
+    filter empties those pixels; the other networks read theirs as given."""
+    from clvis import post
+    from clvis.training import data
+    from clvis.view.scenes import _prefiltered
+
+    sc = data.scan_scene("object", 30000, 11)
+    cams = data.scan_cameras(sc, np.random.default_rng(4), 4, 1.0)
+    net = post.load("narvis-scan")
+    removed = 0
+    for cam in cams:
+        g = sc.gbuffers(sc.rasterizer(), cam, 96, 96, net.planes)
+        f = _prefiltered(net, g)
+        want = filter_gbuffers(g, *net.spec.depth_filter)
+        np.testing.assert_array_equal(np.asarray(f.index), want.index)
+        removed += f.stats["depth_filter_removed"]
+    assert removed > 0
+    lidar = post.load("lidar")
+    assert lidar.spec.depth_filter is None and _prefiltered(lidar, g) is g
+
+
 def test_narvis_scan_mode_for_clouds_without_velocity(scan, monkeypatch):
     """A cloud without velocity gets narvis-scan and its split view; the radius
     plane is the points' knn_sigma, computed once per cloud (not per frame, not
@@ -267,7 +292,8 @@ def test_narvis_scan_mode_for_clouds_without_velocity(scan, monkeypatch):
 
     g = clvis.Rasterizer(scan, radius=radius).render(cam, 80, 64, planes=[])  # host G-buffers
     assert np.asarray(g.radius_px)[g.covered].min() > 0
-    rgba = s._net("narvis-scan")(g)
+    net = s._net("narvis-scan")
+    rgba = net(filter_gbuffers(g, *net.spec.depth_filter))  # its pipeline: the depth filter first
     assert (rgba[..., 3] == 255).all() and rgba[..., :3].std() > 0
     np.testing.assert_array_equal(first.image, rgba[..., :3])
     np.testing.assert_array_equal(again.image, rgba[..., :3])

@@ -99,13 +99,15 @@ def test_real_runs(tmp_path, capsys, monkeypatch):
     # lucky base made both tries of the same code fail once, +55 %: ci8 of
     # 2026-11-27), so one more try re-measures the base too (the injected
     # slow-down below gets none)
+    # the gate is 50 %, not 15 %: three same-code pairs were +26.6 % apart on a
+    # loaded CI machine (ci63 of 2026-11-29); a 3x slow-down is +200 %, far past it
     for _ in range(3):  # (ci22 of 2026-11-28: +27 % / +34 % twice, with the CPU times equal)
         assert cli.main([*args, "--json", base]) == 0
-        rc = cli.main([*args, "--json", again, "--compare", base, "--fail-on", "15%"])
+        rc = cli.main([*args, "--json", again, "--compare", base, "--fail-on", "50%"])
         if rc == 0:
             break
     assert rc == 0
     assert "scan[int32]" in capsys.readouterr().out
     monkeypatch.setenv("CLVIS_BENCH_SLOWDOWN", "3")
-    assert cli.main([*args, "--json", slow, "--compare", base, "--fail-on", "15%"]) == 1
+    assert cli.main([*args, "--json", slow, "--compare", base, "--fail-on", "50%"]) == 1
     assert "REGRESSED" in capsys.readouterr().out

@@ -172,6 +172,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "(the finished rays beside the running ones withheld) and keep, tile by tile, the better "
         "(clvis.post.guard; default: the network's own, PostNetwork.guard)",
     )
+    p.add_argument(
+        "--compare",
+        action="store_true",
+        help="with --infill: also render the view to completion (iso-complete.png) and score the "
+        "network's picture, push-pull's and the partial image against it (PSNR, SSIM)",
+    )
     p.add_argument("--no-speculation", action="store_true", help="one candidate block per ray and pass")
     p.add_argument(
         "--size", type=size, default=(1280, 720), metavar="WxH", help=f"{SIZE_RULE} (default 1280x720)"
@@ -435,6 +441,10 @@ def _run(args) -> int:
         )
     if args.post_guard is not None and not args.infill:
         raise CliError("--post-guard guards the in-fill network: add --infill")
+    if args.compare and not args.infill:
+        raise CliError("--compare scores the in-fill network against the complete render: add --infill")
+    if args.compare and args.orbit is not None:
+        raise CliError("--compare scores one view: leave out --orbit")
     if args.color_by is None:
         for name in ("colormap", "range"):
             if getattr(args, name) is not None:
@@ -472,7 +482,7 @@ def _run(args) -> int:
         q,
         f"clvis iso --size {w}x{h}",
         device_bytes=min(TILE_BYTES, w * h * (PIXEL_BYTES + 2 * ITEM_BYTES)),
-        host_bytes=w * h * HOST_BYTES_PER_PIXEL * (1 + (len(isos) > 1)),
+        host_bytes=w * h * HOST_BYTES_PER_PIXEL * (1 + (len(isos) > 1) + bool(args.compare)),
     )
     field = _field(args) if args.color_by is not None else None
     t0 = time.perf_counter()
@@ -535,7 +545,9 @@ def _run(args) -> int:
     if field is not None or args.surface_color is not None or len(shots) > 1:
         img, bar, crange = _coloured(args, shots, cam, field, (volume.shape, spacing, origin))
     infilled = None
-    clear_targets(out, ["iso-infill.png", "iso.png"] if args.infill else ["iso.png"])
+    targets = ["iso-infill.png", "iso.png"] if args.infill else ["iso.png"]
+    clear_targets(out, targets + (["iso-complete.png"] if args.compare else []))
+    scores = None
     if args.infill:
         from .. import post
 
@@ -544,6 +556,8 @@ def _run(args) -> int:
         # iso.png shows the colour, hit and active planes: only these come back
         dev = typing.cast(typing.Any, img)  # rendered with host=False: device planes
         img = dataclasses.replace(img, rgba=dev.rgba.get(), hit=dev.hit.get(), active=dev.active.get())
+        if args.compare and r is not None and cam is not None:
+            scores = _compare(args, r, cam, isos[0], img, filled, out)
         filled = filled if args.transparent else images.opaque(filled)
         text = f"isovalue {isos[0]:g}, completion {img.completion:.3f}, in-filled by the network"
         infilled = images.save_png(
@@ -611,10 +625,53 @@ def _run(args) -> int:
             f"  in-fill     {net!r}: pack {ns['pack'] * 1e3:.1f} ms, "
             f"inference {ns['inference'] * 1e3:.1f} ms, unpack {ns['unpack'] * 1e3:.1f} ms"
         )
+        if scores is not None:
+            (done, seconds_full, complete), table = scores
+            print(
+                f"  compare     against the complete render (completion {done:.3f}, "
+                f"{seconds_full * 1e3:.1f} ms of passes), PSNR dB / SSIM:"
+            )
+            for name, m in table.items():
+                print(f"              {name:9s} {m['psnr']:6.2f} / {m['ssim']:.3f}")
+            print(f"wrote {path}, {infilled} and {complete}")
+            return 0
         print(f"wrote {path} and {infilled}")
         return 0
     print(f"wrote {path}{os.sep if path.is_dir() else ''}")
     return 0
+
+
+def _compare(args, r, cam, iso: float, img, filled: np.ndarray, out: Path):
+    """--compare: the view rendered to completion (the renderer's cache is
+    warm), written as iso-complete.png, and the in-fill network's picture
+    (`filled`, uint8 RGBA), push-pull's and the partial image (running rays
+    black) scored against it, each as an 8-bit picture premultiplied over
+    black, as ``clvis eval infill`` scores them. Returns ((completion,
+    seconds, path), {name: {psnr, ssim}})."""
+    from .. import images
+    from ..metrics import metrics
+    from ..post.pushpull import pushpull
+
+    w, h = args.size
+    full = r.render(cam, w, h, iso, completion=1.0, speculation=not args.no_speculation)
+    target = np.where(full.hit[..., None], full.rgba[..., :3], np.float32(0)).astype(np.float32)
+    kept = img.hit & ~img.active
+    partial = np.concatenate(
+        [np.where(kept[..., None], img.rgba[..., :3], np.float32(0)), kept[..., None]], axis=2
+    ).astype(np.float32)
+    filled_pp = pushpull(partial, ~img.active)[..., :3]
+
+    def as8(x: np.ndarray) -> np.ndarray:
+        return np.round(np.clip(x, 0, 1) * 255) / 255
+
+    table = {
+        "network": metrics(filled[..., :3] / np.float32(255), target),
+        "push-pull": metrics(as8(filled_pp), target),
+        "partial": metrics(as8(partial[..., :3]), target),
+    }
+    picture_ = labelled(full, [iso], args.transparent, bare=args.no_labels)
+    path = images.save_png(out / "iso-complete.png", picture_)
+    return (float(full.completion), float(full.stats["seconds"]), path), table
 
 
 def _surface_points(volume, isos, spacing, origin, most: int = 65536) -> np.ndarray | None:

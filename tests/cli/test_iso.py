@@ -139,6 +139,36 @@ def test_iso_infill(tmp_path, capsys):
     assert "--post-guard guards the in-fill network: add --infill" in capsys.readouterr().err
 
 
+def test_iso_infill_compare(tmp_path, capsys):
+    """--compare: the view rendered to completion (iso-complete.png, no rays
+    left running) and the network, push-pull and the partial image scored
+    against it; the fills recover most of what the partial image lacks."""
+    args = ["iso", "--dataset", "turbulence", "--no-speculation", "--completion", "0.8", "--size", "96x64"]
+    assert cli.main([*args, "--infill", "--compare", "--no-labels", "--out", str(tmp_path / "c")]) == 0
+    out = capsys.readouterr().out
+    assert "against the complete render (completion 1.000" in out and "iso-complete.png" in out
+    got = {
+        line.split()[0]: tuple(float(v) for v in line.split()[1::2])
+        for line in out.splitlines()
+        if line.strip().split(" ")[0] in ("network", "push-pull", "partial")
+    }
+    assert set(got) == {"network", "push-pull", "partial"}
+    for name in ("network", "push-pull"):
+        psnr, ssim = got[name]
+        assert psnr > got["partial"][0] + 3 and 0 < ssim <= 1, (name, got)
+    with Image.open(tmp_path / "c" / "iso-complete.png") as im:
+        a = np.asarray(im)
+    assert a.shape[:2] == (64, 96) and a.std() > 1
+    assert not ((a[..., 0] == 255) & (a[..., 1] == 0) & (a[..., 2] == 255)).any()  # every ray finished
+    assert cli.main([*args, "--compare", "--out", str(tmp_path / "x")]) == 2
+    assert "--compare scores the in-fill network against the complete render: add --infill" in (
+        capsys.readouterr().err
+    )
+    assert cli.main([*args, "--infill", "--compare", "--orbit", "2", "--out", str(tmp_path / "x")]) == 2
+    assert "--compare scores one view" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
 def test_the_fit_view_frames_the_surface_not_the_volume(tmp_path, capsys):
     """A small sphere in a corner of its volume fills the fit view's picture
     (the view frames the voxels the surface passes, not the volume's box)."""

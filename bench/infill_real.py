@@ -32,6 +32,7 @@ from clvis import post
 from clvis.io.volumes import otsu_level, read_volume
 from clvis.iso import IsoRenderer
 from clvis.metrics import metrics
+from clvis.post.pack import crossing_rate
 from clvis.post.pushpull import pushpull
 from clvis.training import data
 from clvis.training.evaluate import as_picture
@@ -40,8 +41,9 @@ COMPLETIONS = (0.85, 0.9, 0.95)
 
 
 class _Iso:
-    def __init__(self, rgba, hit, active, candidates):
+    def __init__(self, rgba, hit, active, candidates, tested):
         self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
+        self.crossing_rate = crossing_rate(hit, active, tested)
 
 
 def _volume(path: str) -> tuple[np.ndarray, tuple[float, float, float]]:
@@ -94,15 +96,21 @@ def main() -> None:
             for img in r.passes(cam, w, h, iso, speculation=a.speculation):
                 for c in COMPLETIONS:
                     if c not in snaps and img.completion >= c:
-                        snaps[c] = (img.rgba.copy(), img.hit.copy(), img.active.copy(), img.candidates.copy())
+                        snaps[c] = (
+                            img.active.copy(),
+                            img.candidates.copy(),
+                            int(sum(img.stats["items_per_pass"])),
+                        )
             assert img is not None
             target = np.where(img.hit[..., None], img.rgba[..., :3], np.float32(0)).astype(np.float32)
             for c in COMPLETIONS:
-                rgba, hit, active, cand = snaps.get(c, (img.rgba, img.hit, img.active, img.candidates))
+                active, cand, tested = snaps.get(
+                    c, (img.active, img.candidates, int(sum(img.stats["items_per_pass"])))
+                )
                 rgba = np.concatenate([target, img.hit[..., None].astype(np.float32)], axis=2)
                 rgba[active] = 0.0
                 hit = img.hit & ~active
-                x = _Iso(rgba, hit, active, cand)
+                x = _Iso(rgba, hit, active, cand, tested)
                 running[c].append(float(active.mean()))
                 # the network's uint8 picture; the baselines as 8-bit pictures too
                 out = {

@@ -99,7 +99,7 @@ from .inputs import GBuffersLike, IsoImageLike, PostInput
 from .kpn import KPNHead
 from .names import GBUFFER_PLANES, gbuffer_channels
 from .pack import padded_shape, unpack_rgba8
-from .specs import spec
+from .specs import image_crossing_rate, spec
 from .subpixel import subpixel_blend
 
 __all__ = ["MAX_PIXELS", "MAX_SIDE", "MODELS", "PRECISIONS", "PostNetwork", "load", "sha256"]
@@ -481,12 +481,14 @@ class PostNetwork:
             active = to_host(planes.active).astype(bool)
             if not np.isfinite(rgba[hit & ~active][:, :3]).all():
                 raise DataError("rgba: a hit pixel with a NaN or infinite r, g or b")
-            # the candidates plane: read back only for a model that takes it (channels_in 6)
-            cand = getattr(planes, "candidates", None) if self.channels_in == 6 else None
+            # the candidates plane: read back only for a model that takes it (channels_in 6, 7)
+            cand = getattr(planes, "candidates", None) if self.channels_in >= 6 else None
             left = None if cand is None else np.asarray(to_host(cand), np.uint8)
+            # the hit-prior plane (channels_in 7): the whole frame's crossing rate, not the reduced planes'
+            rate = image_crossing_rate(planes) if self.channels_in == 7 else None
 
             def run_iso(values: np.ndarray, hit: np.ndarray, active: np.ndarray) -> np.ndarray:
-                return timed(_IsoPlanes(values, hit, active, left))
+                return timed(_IsoPlanes(values, hit, active, left, rate))
 
             frame, share = guard_mod.infill(run_iso, rgba, hit, active, self.queue)
         elif self.name == "narvis-scan":
@@ -550,12 +552,19 @@ class _ScanPlanes:
 class _IsoPlanes:
     """Host planes in an IsoImage's shape (the guard's inputs to the network).
     candidates: the image's (None: it has none); a finished pixel the guard
-    withholds reads 0 there (no count is known for a ray that has ended)."""
+    withholds reads 0 there (no count is known for a ray that has ended).
+    crossing_rate: the whole image's (None: not read)."""
 
     def __init__(
-        self, rgba: np.ndarray, hit: np.ndarray, active: np.ndarray, candidates: np.ndarray | None = None
+        self,
+        rgba: np.ndarray,
+        hit: np.ndarray,
+        active: np.ndarray,
+        candidates: np.ndarray | None = None,
+        crossing_rate: float | None = None,
     ) -> None:
         self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
+        self.crossing_rate = crossing_rate
 
 
 def load(

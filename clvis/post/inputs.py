@@ -30,7 +30,13 @@ Plane: TypeAlias = np.ndarray | cla.Array
 
 
 class IsoImageLike(Protocol):
-    """The in-fill network's input: an iso image's shaded colour and masks."""
+    """The in-fill network's input: an iso image's shaded colour and masks.
+
+    A model of 6 planes also reads ``candidates`` ((H, W) uint8, the
+    candidate blocks left on each running ray); one of 7 the frame's crossing
+    rate too, from ``stats["items_per_pass"]`` (the render's pass items) or
+    a ``crossing_rate`` attribute (clvis.post.specs.image_crossing_rate).
+    IsoRenderer's IsoImage has all of them."""
 
     @property
     def rgba(self) -> Plane:

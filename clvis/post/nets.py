@@ -186,7 +186,8 @@ def _zero_last(unet: _UNet) -> _UNet:
 class InfillWNet(nn.Module):
     """In-fill of a partial isosurface image: 5 planes in (R, G, B, hit,
     active; ``candidates=True``: 6, + the candidate blocks left on each
-    running ray, clvis.post.pack.pack_iso's CANDIDATES), 4 out (R, G, B,
+    running ray, clvis.post.pack.pack_iso's CANDIDATES; ``prior=True``: 7,
+    + its HIT_PRIOR, from the frame's crossing rate), 4 out (R, G, B,
     coverage), finished pixels passed through.
 
     The finished pixels are first push-pulled into the holes (:class:`PushPull`,
@@ -197,10 +198,17 @@ class InfillWNet(nn.Module):
     channels_out = 4
 
     def __init__(
-        self, enc: tuple[int, ...] = (4, 8, 16), mid: int = 32, levels: int = 5, candidates: bool = False
+        self,
+        enc: tuple[int, ...] = (4, 8, 16),
+        mid: int = 32,
+        levels: int = 5,
+        candidates: bool = False,
+        prior: bool = False,
     ) -> None:
         super().__init__()
-        self.channels_in = 6 if candidates else 5
+        if prior and not candidates:
+            raise ValueError("prior: the hit-prior plane comes after the candidates plane (candidates=True)")
+        self.channels_in = 7 if prior else 6 if candidates else 5
         dec = tuple(reversed(enc))
         kw = {"bn": False, "convs": 1, "up": "nearest", "pool": "avg"}
         self.fill = PushPull(levels)

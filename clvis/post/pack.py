@@ -29,7 +29,7 @@ import pyopencl as cl
 import pyopencl.array as cla
 
 from .. import limits, runtime
-from .._arrays import buf, check_array, is_device, positive_int, resolve_queue, result, to_device
+from .._arrays import buf, check_array, is_device, positive_int, resolve_queue, result, to_device, to_host
 from ..errors import DataError
 from .inputs import GBuffersLike
 from .names import GBUFFER_PLANES, gbuffer_channels
@@ -37,6 +37,7 @@ from .names import GBUFFER_PLANES, gbuffer_channels
 __all__ = [
     "CANDIDATES_CAP",
     "MAX_PIXELS",
+    "crossing_rate",
     "MAX_SIDE",
     "pack_gbuffers",
     "pack_iso",
@@ -119,12 +120,14 @@ def pack_iso(
     active: Any,
     *,
     candidates: Any = None,
+    crossing_rate: float | None = None,
     stride: int = 1,
     out: cla.Array | None = None,
     queue: cl.CommandQueue | None = None,
 ) -> np.ndarray | cla.Array:
     """The in-fill network's input: (1, 5, Hp, Wp) float32 = R, G, B, HIT,
-    ACTIVE; with `candidates`, (1, 6, Hp, Wp): + CANDIDATES.
+    ACTIVE; with `candidates`, (1, 6, Hp, Wp): + CANDIDATES; with
+    `crossing_rate` too, (1, 7, Hp, Wp): + HIT_PRIOR.
 
     rgba: H x W x 4 float32 (an IsoImage's shaded colour; alpha unused); hit,
     active: H x W bool or uint8 (nonzero = true). Hp, Wp: H, W rounded up to
@@ -133,6 +136,10 @@ def pack_iso(
     candidates: H x W uint8 (an IsoImage's ``candidates``: the candidate
     blocks left on each running ray); CANDIDATES = min(candidates,
     CANDIDATES_CAP) / CANDIDATES_CAP where active, else 0 (CANDIDATES_CAP 8).
+    crossing_rate: rho in [0, 1], the frame's finished hits per candidate
+    block tested (:func:`crossing_rate`); HIT_PRIOR = 1 - (1 - rho)^k where
+    active, k = min(candidates, CANDIDATES_CAP), else 0: the chance that a
+    running ray with k blocks left ends on the surface.
     Padding pixels: all 0. A non-finite r, g or b at a hit pixel (active or
     not) raises DataError after the kernel ran.
     """
@@ -142,6 +149,13 @@ def pack_iso(
     hit = check_array("hit", hit, dtypes=[np.bool_, np.uint8], ndim=2)
     active = check_array("active", active, dtypes=[np.bool_, np.uint8], ndim=2)
     masks = [("hit", hit), ("active", active)]
+    if crossing_rate is not None:
+        if candidates is None:
+            raise ValueError("crossing_rate: the hit-prior plane needs candidates")
+        if isinstance(crossing_rate, bool) or not isinstance(crossing_rate, (int, float, np.floating)):
+            raise TypeError(f"crossing_rate: expected a number, got {type(crossing_rate).__name__}")
+        if not 0.0 <= float(crossing_rate) <= 1.0:  # NaN fails too
+            raise ValueError(f"crossing_rate: expected a number in [0, 1], got {crossing_rate}")
     if candidates is not None:
         candidates = check_array("candidates", candidates, dtypes=[np.uint8], ndim=2)
         masks.append(("candidates", candidates))
@@ -153,7 +167,7 @@ def pack_iso(
             raise ValueError(f"{name}: shape {tuple(m.shape)} differs from rgba's {(h, w)}")
     hp, wp = padded_shape(h, w, stride)
     _check_size("rgba", h, w, hp, wp)
-    channels = 5 if candidates is None else 6
+    channels = 5 if candidates is None else 6 if crossing_rate is None else 7
     dst = _target(out, queue, (1, channels, hp, wp), np.float32, "pack_iso output")
     bad = runtime.zeros(queue, 1, np.uint32, "pack_iso input check")
     launch, _, _ = _launcher(queue)
@@ -177,10 +191,11 @@ def pack_iso(
         buf(bad),
     )
     if candidates is not None:
+        cand_d = to_device(queue, "candidates", candidates)
         launch(
             "pack_count",
             hp * wp,
-            buf(to_device(queue, "candidates", candidates)),
+            buf(cand_d),
             buf(active_d),
             u32(CANDIDATES_CAP),
             u32(w),
@@ -190,10 +205,41 @@ def pack_iso(
             u32(5),
             buf(dst),
         )
+        if crossing_rate is not None:
+            launch(
+                "pack_prior",
+                hp * wp,
+                buf(cand_d),
+                buf(active_d),
+                np.float32(np.float32(1) - np.float32(crossing_rate)),
+                u32(CANDIDATES_CAP),
+                u32(w),
+                u32(h),
+                u32(wp),
+                u32(hp),
+                u32(6),
+                buf(dst),
+            )
     nonfinite = int(bad.get()[0])
     if nonfinite:
         raise DataError(f"rgba: {nonfinite} hit pixels with a NaN or infinite r, g or b")
     return dst if out is not None else result(dst, host)
+
+
+def crossing_rate(hit: Any, active: Any, tested: int) -> float:
+    """A frame's crossing rate, pack_iso's `crossing_rate`: its finished rays
+    that hit (hit and not active) per candidate block the render has tested
+    (`tested`: its pass items, the sum of IsoImage.stats["items_per_pass"]),
+    at most 1; 0 where nothing was tested. hit, active: H x W bool or uint8,
+    numpy or device arrays (read back)."""
+    h = np.asarray(to_host(hit)).astype(bool)
+    a = np.asarray(to_host(active)).astype(bool)
+    if h.shape != a.shape:
+        raise ValueError(f"active: shape {a.shape} differs from hit's {h.shape}")
+    if isinstance(tested, bool) or not isinstance(tested, (int, np.integer)) or tested < 0:
+        raise ValueError(f"tested: expected a count >= 0, got {tested!r}")
+    hits = int(np.count_nonzero(h & ~a))
+    return min(hits / int(tested), 1.0) if tested > 0 else 0.0
 
 
 def pack_rgbda(

@@ -23,7 +23,7 @@ import pyopencl.array as cla
 from ..errors import DataError
 from .inputs import GBuffersLike, IsoImageLike, LidarInput
 from .names import NAMES
-from .pack import pack_gbuffers, pack_iso, pack_rgbda
+from .pack import crossing_rate, pack_gbuffers, pack_iso, pack_rgbda
 
 __all__ = ["SPECS", "NetworkSpec", "spec"]
 
@@ -140,18 +140,46 @@ class InfillSpec(NetworkSpec[IsoImageLike]):
         out: cla.Array,
         queue: cl.CommandQueue,
     ) -> None:
-        # a model card's channels_in 6: the candidates plane (InfillWNet(candidates=True))
-        candidates = None
-        if out.shape[1] == 6:
+        # a model card's channels_in 6: the candidates plane (InfillWNet(candidates=True));
+        # 7: the hit-prior plane too (InfillWNet(prior=True)), from the frame's crossing rate
+        candidates = rate = None
+        if out.shape[1] >= 6:
             candidates = getattr(image, "candidates", None)
             if candidates is None:
                 raise DataError(
                     "image: this in-fill model reads the candidate blocks left on each running ray "
                     "(IsoImage.candidates, from IsoRenderer); the image has none"
                 )
+        if out.shape[1] == 7:
+            rate = image_crossing_rate(image)
         pack_iso(
-            image.rgba, image.hit, image.active, candidates=candidates, stride=stride, out=out, queue=queue
+            image.rgba,
+            image.hit,
+            image.active,
+            candidates=candidates,
+            crossing_rate=rate,
+            stride=stride,
+            out=out,
+            queue=queue,
         )
+
+
+def image_crossing_rate(image: Any) -> float:
+    """The crossing rate of an IsoImage (clvis.post.pack.crossing_rate): its
+    finished hits per candidate block its render tested, the blocks counted
+    from its ``stats["items_per_pass"]``; an image with a ``crossing_rate``
+    attribute (the guard's reduced planes, training frames) gives its own;
+    DataError where it has neither."""
+    fixed = getattr(image, "crossing_rate", None)
+    if fixed is not None:
+        return float(fixed)
+    tested = (getattr(image, "stats", None) or {}).get("items_per_pass")
+    if tested is None:
+        raise DataError(
+            "image: this in-fill model reads the frame's crossing rate, from the candidate blocks "
+            'its render tested (IsoImage.stats["items_per_pass"], from IsoRenderer); the image has none'
+        )
+    return crossing_rate(image.hit, image.active, int(sum(int(t) for t in tested)))
 
 
 class LidarSpec(NetworkSpec[LidarInput]):

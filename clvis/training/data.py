@@ -265,6 +265,9 @@ class IsoFrame:
     seconds: dict[float, float]
     source: str
     candidates: dict[float, np.ndarray] = field(default_factory=dict)
+    #: per completion the candidate blocks the render had tested (its pass
+    #: items; clvis.post.pack.crossing_rate)
+    tested: dict[float, int] = field(default_factory=dict)
 
     def planes(self, completion: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rgba, hit, active) of the partial image: what pack_iso takes."""
@@ -276,6 +279,13 @@ class IsoFrame:
     def candidates_at(self, completion: float) -> np.ndarray:
         """IsoImage.candidates of the partial image (H, W) uint8."""
         return self.candidates[completion]
+
+    def crossing_rate(self, completion: float) -> float:
+        """The partial image's crossing rate (clvis.post.pack.crossing_rate)."""
+        from ..post.pack import crossing_rate
+
+        a = self.active[completion]
+        return crossing_rate(self.hit & ~a, a, self.tested[completion])
 
 
 def iso_frames(
@@ -320,12 +330,14 @@ def iso_frames(
             color = vary.color(rng) if vary is not None else None
             snaps: dict[float, Any] = {}
             seconds: dict[float, float] = {}
+            tested: dict[float, int] = {}
             img = None
             for img in r.passes(cam, w, h, iso, speculation=speculate):
                 for c in completions:
                     if c not in snaps and img.completion >= c:
                         snaps[c] = img
                         seconds[c] = float(img.stats["seconds"])
+                        tested[c] = int(sum(img.stats["items_per_pass"]))
             assert img is not None
             seconds[1.0] = float(img.stats["seconds"])
             shaded = img.rgba[..., :3] if color is None else color_surface(img, color)[..., :3]
@@ -338,6 +350,7 @@ def iso_frames(
                 assert np.array_equal(s.hit[done], img.hit[done])
                 active[c] = s.active.copy()
                 left[c] = s.candidates.copy()
+                tested.setdefault(c, int(sum(img.stats["items_per_pass"])))
             extra = ""
             if vary is not None:
                 extra = f" {side}^3 {w}x{h}" + (" speculation" if speculate else "")
@@ -345,7 +358,13 @@ def iso_frames(
                 extra += f" colour {tuple(round(float(c), 2) for c in color)}" if color is not None else ""
             frames.append(
                 IsoFrame(
-                    rgb, img.hit.copy(), active, seconds, f"{kind} #{i} view {v} iso {iso:.4g}{extra}", left
+                    rgb,
+                    img.hit.copy(),
+                    active,
+                    seconds,
+                    f"{kind} #{i} view {v} iso {iso:.4g}{extra}",
+                    left,
+                    tested,
                 )
             )
             if progress is not None:

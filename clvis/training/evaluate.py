@@ -150,9 +150,15 @@ def suite(name: str, quick: bool = False) -> list[Case]:
 
 class _Iso:
     def __init__(
-        self, rgba: np.ndarray, hit: np.ndarray, active: np.ndarray, candidates: np.ndarray | None = None
+        self,
+        rgba: np.ndarray,
+        hit: np.ndarray,
+        active: np.ndarray,
+        candidates: np.ndarray | None = None,
+        crossing_rate: float | None = None,
     ) -> None:
         self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
+        self.crossing_rate = crossing_rate
 
 
 def _narvis_scene(family: str, n: int, seed: int) -> Any:
@@ -208,7 +214,7 @@ def _frames(
                 pp = pushpull(rgba, ~active)[..., :3]
                 yield (
                     f"{int(case.setting)}^3 at {c:.0%}",
-                    _Iso(rgba, hit, active, f.candidates_at(c)),
+                    _Iso(rgba, hit, active, f.candidates_at(c), f.crossing_rate(c)),
                     f.rgb,
                     {
                         "input": rgba[..., :3],

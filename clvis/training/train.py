@@ -661,17 +661,22 @@ def _grown_channels(net: Any, weights: dict[str, np.ndarray], path: Path) -> int
 
 
 def _infill_candidates_channel(net: Any, weights: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """A 5-channel in-fill file's weights for a 6-channel InfillWNet: a zero
-    column at input channel 5 of each U-Net's first convolution; else the
+    """A 5- or 6-channel in-fill file's weights for an InfillWNet of more
+    input planes (6: + candidates, 7: + the hit prior): zero columns for the
+    planes it lacks, after its own, in each U-Net's first convolution (whose
+    input is the planes, then the 4 channels of the estimate); else the
     weights as they are."""
-    if type(net).__name__ != "InfillWNet" or net.channels_in != 6:
+    if type(net).__name__ != "InfillWNet" or net.channels_in <= 5:
         return weights
+    c = net.channels_in
     out = dict(weights)
     for u in ("first", "second"):
         k = f"{u}.enc.0.0.weight"
         w = weights.get(k)
-        if w is not None and w.ndim == 4 and w.shape[1] == 5 + 4:
-            out[k] = np.concatenate([w[:, :5], np.zeros_like(w[:, :1]), w[:, 5:]], axis=1)
+        if w is not None and w.ndim == 4 and 5 + 4 <= w.shape[1] < c + 4:
+            old = w.shape[1] - 4
+            zeros = np.zeros((w.shape[0], c - old, *w.shape[2:]), w.dtype)
+            out[k] = np.concatenate([w[:, :old], zeros, w[:, old:]], axis=1)
     return out
 
 
@@ -708,8 +713,14 @@ def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int],
 def _pack_infill(frame: Any, completion: float | None, stride: int) -> tuple[Any, Any]:
     from ..post.pack import pack_iso
 
-    # every plane the in-fill can take (the candidates last); _pack keeps the network's first channels
-    x = pack_iso(*frame.planes(completion), candidates=frame.candidates_at(completion), stride=stride)[0]
+    # every plane the in-fill can take (the candidates, then the hit prior);
+    # _pack keeps the network's first channels
+    x = pack_iso(
+        *frame.planes(completion),
+        candidates=frame.candidates_at(completion),
+        crossing_rate=frame.crossing_rate(completion),
+        stride=stride,
+    )[0]
     return x, np.concatenate([frame.rgb, frame.hit[..., None].astype(np.float32)], axis=2)
 
 

@@ -36,6 +36,15 @@
  *     blocks left on the running ray, clvis.iso.IsoImage.candidates), else
  *     0; padding 0. cap >= 1. Other channels are not touched.
  *
+ * kernel pack_prior(global const uchar *count, global const uchar *active, float miss,
+ *                   uint cap, uint w, uint h, uint wp, uint hp, uint channel,
+ *                   global float *out)
+ *     One more channel (the in-fill network with a hit-prior plane): out[channel]
+ *     at pixel (x, y) = 1 - miss^k where active, k = min(count, cap), the power
+ *     taken as k float32 products 1 * miss * miss ... in order (miss: 1 - the
+ *     frame's crossing rate, in [0, 1]); else 0; padding 0. Other channels are
+ *     not touched.
+ *
  * kernel rgbda_range(global const float *rgbda, ulong n, global uint *stats)
  *     rgbda: n pixels of 5 floats {r, g, b, depth, alpha}. Adds to stats
  *     (4 uints, zeroed by the host):
@@ -151,6 +160,29 @@ kernel void pack_count(global const uchar *count, global const uchar *active, co
             const ulong s = (ulong)y * w + x;
             if (active[s] != 0)
                 v = (float)min((uint)count[s], cap) / (float)cap;
+        }
+        out[channel * plane + i] = v;
+    }
+}
+
+kernel void pack_prior(global const uchar *count, global const uchar *active, const float miss,
+                       const uint cap, const uint w, const uint h, const uint wp, const uint hp,
+                       const uint channel, global float *out)
+{
+    const ulong plane = (ulong)wp * hp;
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    uint y = (uint)(first / wp), x = (uint)(first - (ulong)y * wp);
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i, x = x + 1 < wp ? x + 1 : 0, y += x == 0) {
+        float v = 0.0f;
+        if (x < w && y < h) {
+            const ulong s = (ulong)y * w + x;
+            if (active[s] != 0) {
+                const uint k = min((uint)count[s], cap);
+                float p = 1.0f;
+                for (uint j = 0; j < k; ++j)
+                    p = p * miss;
+                v = 1.0f - p;
+            }
         }
         out[channel * plane + i] = v;
     }

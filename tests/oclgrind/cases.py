@@ -466,6 +466,8 @@ def post_pack(q):
     # the candidates plane (pack_count), counts past the cap too
     cand = rng.integers(0, 12, (h, w)).astype(np.uint8)
     clvis.post.pack_iso(rgba, hit, active, candidates=cand, stride=8, queue=q)
+    # the hit-prior plane (pack_prior)
+    clvis.post.pack_iso(rgba, hit, active, candidates=cand, crossing_rate=0.3, stride=8, queue=q)
     x = np.zeros((h, w, 5), np.float32)
     keep = rng.random((h, w)) < 0.5
     x[..., :3] = rng.random((h, w, 3))

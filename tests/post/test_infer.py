@@ -12,6 +12,7 @@ import pytest
 from clvis import post
 from clvis.errors import DataError
 from clvis.post import infer
+from clvis.post.specs import image_crossing_rate
 from clvis.training import data, train
 
 SHIPPED = sorted(p.stem for p in infer.MODELS.glob("*.json"))
@@ -74,8 +75,11 @@ def test_infill_equals_plain_onnxruntime(iso_pair, precision):
     h, w = part.hit.shape
     assert rgba.shape == (h, w, 4) and rgba.dtype == np.uint8
     s = ort.InferenceSession(str(net.path), providers=["CPUExecutionProvider"])
-    cand = part.candidates if net.channels_in == 6 else None  # a model with the candidates plane
-    planes = post.pack_iso(part.rgba, part.hit, part.active, candidates=cand, stride=net.stride)
+    cand = part.candidates if net.channels_in >= 6 else None  # a model with the candidates plane
+    rate = image_crossing_rate(part) if net.channels_in == 7 else None  # ... and the hit prior
+    planes = post.pack_iso(
+        part.rgba, part.hit, part.active, candidates=cand, crossing_rate=rate, stride=net.stride
+    )
     want = s.run(None, {"planes": planes})[0]
     np.testing.assert_array_equal(net.infer(part), want)
     want8 = np.rint(np.clip(want[0, :, :h, :w].transpose(1, 2, 0), 0, 1) * 255).astype(np.uint8)
@@ -95,7 +99,8 @@ def test_infill_quality_on_held_out_volume():
     within 2 dB of push-pull either way, which README states.)"""
     f = data.iso_frames(("gyroid",), 1, 8, 640, 360, views=1, completions=(0.85,))[0]
     rgba, hit, active = f.planes(0.85)
-    out = post.load("infill")(_Iso(rgba, hit, active, f.candidates_at(0.85)))[..., :3] / np.float32(255)
+    x = _Iso(rgba, hit, active, f.candidates_at(0.85), f.crossing_rate(0.85))
+    out = post.load("infill")(x)[..., :3] / np.float32(255)
     pp = post.pushpull(rgba, ~active)[..., :3]
     net_m, pp_m, raw = (train.metrics(x, f.rgb) for x in (out, pp, rgba[..., :3]))
     assert net_m["psnr"] > pp_m["psnr"] + 1 and net_m["psnr"] > raw["psnr"] + 6
@@ -271,8 +276,9 @@ def test_narvis_storm_view_reaches_25_db(storm_view_scores):
 
 
 class _Iso:
-    def __init__(self, rgba, hit, active, candidates=None):
+    def __init__(self, rgba, hit, active, candidates=None, crossing_rate=None):
         self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
+        self.crossing_rate = crossing_rate
 
 
 class _Filtered:
@@ -313,6 +319,51 @@ def test_bad_inputs():
     cam = Camera.look_at((0.5, 0.5, 3), (0.5, 0.5, 0.5), (0, 1, 0), 40, 1.0, 0.1, 10)
     with pytest.raises(DataError, match="vel2d.*no velocity"):
         narvis(still.render(cam, 32, 32, color_by="t"))
+
+
+def test_infill_with_the_hit_prior_plane(tmp_path, iso_pair):
+    """A 7-plane in-fill model (InfillWNet(candidates=True, prior=True), its
+    card's channels_in 7): the call packs the hit prior from the image's own
+    crossing rate (its renderer's pass items), gives what onnxruntime gives
+    on that tensor, runs guarded, and names what an image without the
+    count lacks."""
+    import onnxruntime as ort
+    import torch
+
+    from clvis.post import nets, pack
+
+    for f in infer.MODELS.glob("infill*"):
+        shutil.copy(f, tmp_path / f.name)
+    net7 = nets.InfillWNet(candidates=True, prior=True)
+    train.load_onnx_weights(net7, infer.MODELS / "infill.onnx")
+    with torch.no_grad():  # the prior plane's weights, made to matter
+        for u in (net7.first, net7.second):
+            u.enc[0][0].weight[:, 6] = 0.5
+    train.export_onnx(net7, tmp_path / "infill.onnx")
+    card = json.loads((tmp_path / "infill.json").read_text())
+    card["channels_in"], card["architecture"] = 7, {"candidates": True, "prior": True}
+    card["files"]["fp32"]["sha256"] = train.sha256(tmp_path / "infill.onnx")
+    card["files"]["fp32"]["bytes"] = (tmp_path / "infill.onnx").stat().st_size
+    (tmp_path / "infill.json").write_text(json.dumps(card))
+    net = post.load("infill", directory=tmp_path)
+    assert net.channels_in == 7
+    part, _ = iso_pair
+    rate = image_crossing_rate(part)
+    tested = sum(part.stats["items_per_pass"])
+    assert 0 < rate <= 1 and rate == pack.crossing_rate(part.hit, part.active, tested)
+    planes = post.pack_iso(
+        part.rgba, part.hit, part.active, candidates=part.candidates, crossing_rate=rate, stride=net.stride
+    )
+    want = ort.InferenceSession(str(net.path), providers=["CPUExecutionProvider"]).run(
+        None, {"planes": planes}
+    )[0]
+    np.testing.assert_array_equal(net.infer(part), want)
+    six = post.load("infill").infer(part)  # the plane moves the picture
+    assert six.shape == want.shape and np.abs(want - six).max() > 1e-3
+    guarded = net(part, guard=True)
+    assert guarded.shape == part.rgba.shape and guarded.dtype == np.uint8
+    with pytest.raises(DataError, match="crossing rate"):
+        net(_Iso(part.rgba, part.hit, part.active, part.candidates))
 
 
 def test_missing_and_corrupt_model_files(tmp_path):

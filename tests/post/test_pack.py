@@ -90,6 +90,74 @@ def test_pack_iso_candidates(queue, shape, stride):
         pack_iso(rgba, hit, active, candidates=cand[:, :0], queue=queue)
 
 
+@pytest.mark.parametrize("shape", [(1, 1), (17, 33), (37, 53)])
+@pytest.mark.parametrize("rate", [0.0, 0.2, 1 / 3, 0.5, 0.97, 1.0])
+def test_pack_iso_prior(queue, shape, rate):
+    """The seventh channel: 1 - (1 - rate)^min(candidates, 8) where active
+    (the power as k float32 products in order), else 0, bit for bit; the
+    first six as without it; numpy, device and out= inputs."""
+    rgba, hit, active = iso_inputs(shape, seed=hash((shape, rate, 7)) % 2**32)
+    cand = np.random.default_rng(7).integers(0, 256, shape).astype(np.uint8)
+    cand.ravel()[: min(cand.size, 12)] = np.arange(min(cand.size, 12))  # 0..11 around the cap
+    got = pack_iso(rgba, hit, active, candidates=cand, crossing_rate=rate, stride=16, queue=queue)
+    want = ref.pack_iso(rgba, hit, active, candidates=cand, crossing_rate=rate, stride=16)
+    same(got, want)
+    assert got.shape[1] == 7
+    same(got[:, :6], ref.pack_iso(rgba, hit, active, candidates=cand, stride=16))
+    prior = got[0, 6, : shape[0], : shape[1]]
+    k = np.minimum(cand, 8).astype(np.float64)
+    np.testing.assert_allclose(prior, np.where(active, 1 - (1 - rate) ** k, 0), atol=2e-7)
+    assert (
+        (prior[~active] == 0).all() and not got[0, 6, shape[0] :].any() and not got[0, 6, :, shape[1] :].any()
+    )
+    if rate in (0.0, 1.0):  # no chance to cross: 0; certain: 1 wherever a block is left
+        np.testing.assert_array_equal(prior, np.where(active & (cand > 0), np.float32(rate), 0))
+    out = cla.empty(queue, want.shape, np.float32)
+    dev = pack_iso(
+        cla.to_device(queue, rgba),
+        hit,
+        active,
+        candidates=cla.to_device(queue, cand),
+        crossing_rate=np.float32(rate),
+        stride=16,
+        out=out,
+    )
+    assert dev is out
+    same(out.get(), want)
+
+
+def test_pack_iso_prior_bad_input(queue):
+    rgba, hit, active = iso_inputs((5, 7), seed=3)
+    cand = np.ones((5, 7), np.uint8)
+    for bad in (-0.01, 1.01, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="crossing_rate: expected a number in"):
+            pack_iso(rgba, hit, active, candidates=cand, crossing_rate=bad, queue=queue)
+    for bad in (True, "0.5", [0.5]):
+        with pytest.raises(TypeError, match="crossing_rate: expected a number"):
+            pack_iso(rgba, hit, active, candidates=cand, crossing_rate=bad, queue=queue)
+    with pytest.raises(ValueError, match="needs candidates"):
+        pack_iso(rgba, hit, active, crossing_rate=0.5, queue=queue)
+    with pytest.raises(ValueError, match="needs candidates"):
+        ref.pack_iso(rgba, hit, active, crossing_rate=0.5)
+
+
+def test_crossing_rate(queue):
+    """Finished hits per candidate block tested, at most 1, 0 with none
+    tested; host and device masks; bad counts and shapes named."""
+    hit = np.array([[1, 1, 0, 1], [0, 1, 1, 0]], bool)
+    active = np.array([[0, 1, 0, 0], [0, 0, 1, 1]], bool)  # finished hits: 3
+    assert pack_module.crossing_rate(hit, active, 12) == 0.25
+    assert pack_module.crossing_rate(hit.astype(np.uint8) * 7, active.astype(np.uint8), 12) == 0.25
+    assert pack_module.crossing_rate(cla.to_device(queue, hit.view(np.uint8)), active, 6) == 0.5
+    assert pack_module.crossing_rate(hit, active, 2) == 1.0  # more hits than tests counted: clipped
+    assert pack_module.crossing_rate(hit, active, 0) == 0.0
+    for bad in (-1, 2.5, True, None):
+        with pytest.raises(ValueError, match="tested: expected a count"):
+            pack_module.crossing_rate(hit, active, bad)
+    with pytest.raises(ValueError, match="active: shape"):
+        pack_module.crossing_rate(hit, active[:, :3], 4)
+
+
 @pytest.mark.parametrize("shape", SHAPES)
 @pytest.mark.parametrize("stride", STRIDES)
 def test_pack_rgbda(queue, shape, stride):

@@ -10,6 +10,7 @@ pytest.importorskip("torch", reason="the train extra (torch==2.13.0) is part of 
 
 from clvis import post  # noqa: E402
 from clvis.cli import main  # noqa: E402
+from clvis.reference.post import pack as ref_pack  # noqa: E402
 from clvis.training import data, train  # noqa: E402
 
 
@@ -376,7 +377,14 @@ def test_iso_frames_are_deterministic_and_consistent():
         assert left.max() <= 8
         x, _ = train._pack("infill", a, c)
         np.testing.assert_array_equal(x[5], np.minimum(left, 8) / np.float32(8))
-        assert x.shape[0] == 6 and train._pack("infill", a, c, channels=5)[0].shape[0] == 5
+        # the hit prior: the frame's finished hits per candidate block its render tested
+        assert a.tested[c] == b.tested[c] > 0
+        rate = a.crossing_rate(c)
+        assert 0 < rate <= 1 and rate == (hit & ~active).sum() / a.tested[c]
+        np.testing.assert_array_equal(
+            x[6], ref_pack.pack_iso(rgba, hit, active, candidates=left, crossing_rate=rate)[0, 6]
+        )
+        assert x.shape[0] == 7 and train._pack("infill", a, c, channels=5)[0].shape[0] == 5
     assert a.active[0.85].any() and (a.candidates_at(0.85) > 1).any()
     # fewer rays run at higher completion
     assert a.active[0.85].sum() >= a.active[0.9].sum() >= a.active[0.95].sum()
@@ -795,6 +803,41 @@ def test_init_adds_the_infill_candidates_plane_at_zero(tmp_path):
     )
     new.train()(torch.from_numpy(x)).sum().backward()
     assert new.first.enc[0][0].weight.grad[:, 5].abs().sum() > 0
+
+
+@pytest.mark.parametrize("planes", [5, 6])
+def test_infill_init_adds_the_hit_prior_plane_at_zero(tmp_path, planes):
+    """A 7-plane W-Net (candidates and hit prior) from a 5- or 6-plane file:
+    zero columns for the planes the file lacks, so it computes the file's
+    network whatever those planes hold; their weights still learn. A hit
+    prior without the candidates plane is refused."""
+    import torch
+
+    from clvis.post import nets
+
+    old = nets.InfillWNet(candidates=planes == 6)
+    torch.manual_seed(4)
+    with torch.no_grad():
+        for p in old.parameters():
+            p.add_(0.05 * torch.randn_like(p))
+    train.export_onnx(old, tmp_path / "infill.onnx")
+    new = nets.InfillWNet(candidates=True, prior=True)
+    assert new.channels_in == 7
+    train.load_onnx_weights(new, tmp_path / "infill.onnx")
+    rng = np.random.default_rng(1)
+    x = rng.random((1, 7, 64, 64), dtype=np.float32)
+    x[:, 4] = x[:, 4] > 0.6
+    with torch.no_grad():
+        ref = old.eval()(torch.from_numpy(x[:, :planes])).numpy()
+        got = new.eval()(torch.from_numpy(x)).numpy()
+    np.testing.assert_array_equal(got, ref)
+    for u in (new.first, new.second):
+        w = u.enc[0][0].weight.detach().numpy()
+        assert w.shape[1] == 7 + 4 and (w[:, planes:7] == 0).all()
+    new.train()(torch.from_numpy(x)).sum().backward()
+    assert new.first.enc[0][0].weight.grad[:, 6].abs().sum() > 0
+    with pytest.raises(ValueError, match="candidates=True"):
+        nets.InfillWNet(prior=True)
 
 
 def test_init_with_an_added_plane_starts_as_the_shipped_narvis(tmp_path):

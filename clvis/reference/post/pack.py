@@ -16,6 +16,12 @@ With ``candidates`` (H x W uint8, clvis.iso.IsoImage.candidates: the
 candidate blocks left on each running ray) a sixth channel CANDIDATES =
 min(candidates, CANDIDATES_CAP) / CANDIDATES_CAP in float32 where active,
 else 0 (CANDIDATES_CAP = 8, the renderer's count limit clvis.iso.CANDIDATES).
+With ``crossing_rate`` too (rho in [0, 1]: the frame's finished rays that hit
+per candidate block the render has tested, clvis.post.pack.crossing_rate) a seventh
+channel HIT_PRIOR = 1 - (1 - rho)^k where active, else 0, k =
+min(candidates, CANDIDATES_CAP): how likely a running ray with k blocks left
+is to end on the surface if each block is crossed with probability rho. The
+power is k float32 products 1 * m * m ... (m = float32(1 - rho)) in order.
 
 pack_rgbda (the LiDAR U-Net, following the LiDAR paper's authors'
 conventions): from ``rgbda`` (H x W x 5 [r, g, b, depth, alpha], a
@@ -77,6 +83,7 @@ def pack_iso(
     active: npt.ArrayLike,
     *,
     candidates: npt.ArrayLike | None = None,
+    crossing_rate: float | None = None,
     stride: int = 1,
 ) -> np.ndarray:
     rgba = np.asarray(rgba, _F)
@@ -90,6 +97,14 @@ def pack_iso(
     if candidates is not None:
         k = np.minimum(np.asarray(candidates).astype(np.uint32), CANDIDATES_CAP)
         planes.append(np.where(active, k.astype(_F) / _F(CANDIDATES_CAP), _F(0)))
+        if crossing_rate is not None:
+            miss = _F(1) - _F(crossing_rate)
+            p = np.ones(k.shape, _F)
+            for j in range(CANDIDATES_CAP):
+                p = np.where(k > j, p * miss, p)
+            planes.append(np.where(active, _F(1) - p, _F(0)))
+    elif crossing_rate is not None:
+        raise ValueError("crossing_rate: the hit-prior plane needs candidates")
     return _nchw(planes, hp, wp, [0] * len(planes))
 
 

@@ -752,7 +752,10 @@ class IsoRenderer:
                         }
                     )
                 # the image after this pass, made only when the caller asks for it
-                st, a, sd, ev = (None if tile_done else state), state.active, dict(stats), (start, end)
+                # the stats as of this pass: the per-pass lists copied, not shared with
+                # the images of later passes (a held image keeps its own counts)
+                sd = {k: list(v) if isinstance(v, list) else v for k, v in stats.items()}
+                st, a, ev = (None if tile_done else state), state.active, (start, end)
                 yield lambda copy=True, st=st, a=a, f=frac, sd=sd, ev=ev: self._image(
                     w, h, out, (st, a), f, sd, ev, copy
                 )

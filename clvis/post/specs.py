@@ -172,7 +172,9 @@ def image_crossing_rate(image: Any) -> float:
     DataError where it has neither."""
     fixed = getattr(image, "crossing_rate", None)
     if fixed is not None:
-        return float(fixed)
+        if isinstance(fixed, bool) or not isinstance(fixed, (int, float, np.floating)):
+            raise TypeError(f"image.crossing_rate: expected a number, got {type(fixed).__name__}")
+        return float(fixed)  # pack_iso checks its range
     tested = (getattr(image, "stats", None) or {}).get("items_per_pass")
     if tested is None:
         raise DataError(

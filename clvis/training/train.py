@@ -526,10 +526,11 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
     computes what the file's does until training moves them.
 
     The in-fill W-Net with its candidates plane (``candidates=True``, 6
-    channels) starts from a 5-channel file the same way: each U-Net's first
-    convolution gets a zero input channel for it (the network's input comes
-    before the estimate in the U-Nets' input), so it computes the file's
-    network until training moves them."""
+    channels) or its hit-prior plane too (``prior=True``, 7) starts from a
+    5- or 6-channel file the same way: each U-Net's first convolution gets a
+    zero input channel for each plane the file lacks (the network's input
+    comes before the estimate in the U-Nets' input), so it computes the
+    file's network until training moves them."""
     import onnx
     import torch
     from onnx import numpy_helper
@@ -776,7 +777,7 @@ def _pack(
     """(input (C, Hp, Wp), target (C, H, W)) float32 of one frame, through
     the pack kernels the inference uses (padded to a multiple of `stride`);
     `channels`: the input's first ones only (the network's channels_in: the
-    in-fill packs its optional candidates plane last)."""
+    in-fill packs its optional candidates and hit-prior planes last)."""
     x, y = TRAINERS[name].pack(frame, completion, stride)
     x = np.asarray(x, np.float32)
     if channels is not None:

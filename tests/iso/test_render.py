@@ -239,6 +239,26 @@ def test_passes_are_progressive(queue):
     assert prev.completion == 1.0
 
 
+def test_held_pass_images_keep_their_own_stats(queue):
+    """Each image of passes() keeps the counts as of its pass: a held image's
+    per-pass lists do not grow with the passes after it (the in-fill's
+    crossing rate reads items_per_pass), and they equal a render stopped at
+    that image's completion."""
+    d = _ML
+    zv = zfp.compress(d["volume"], 16)
+    r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
+    held = list(r.passes(_cam(), W, H, 0.5, speculation=False))
+    assert len(held) >= 3
+    for i, img in enumerate(held):
+        assert img.stats["passes"] == i + 1
+        for key in ("active_per_pass", "n_spec_per_pass", "items_per_pass", "passes_per_tile"):
+            v = img.stats[key]
+            assert len(v) == (1 if key == "passes_per_tile" else i + 1), key
+            assert all(v is not other.stats[key] for other in held if other is not img), key
+    again = r.render(_cam(), W, H, 0.5, completion=held[1].completion, speculation=False)
+    assert again.stats["items_per_pass"] == held[1].stats["items_per_pass"]
+
+
 def test_camera_inside_and_orthographic(queue):
     d = _TURB
     zv = zfp.compress(d["volume"], 16)

@@ -364,6 +364,14 @@ def test_infill_with_the_hit_prior_plane(tmp_path, iso_pair):
     assert guarded.shape == part.rgba.shape and guarded.dtype == np.uint8
     with pytest.raises(DataError, match="crossing rate"):
         net(_Iso(part.rgba, part.hit, part.active, part.candidates))
+    with pytest.raises(TypeError, match="image.crossing_rate: expected a number"):
+        net(_Iso(part.rgba, part.hit, part.active, part.candidates, "0.3"))
+    with pytest.raises(ValueError, match=r"crossing_rate: expected a number in \[0, 1\]"):
+        net(_Iso(part.rgba, part.hit, part.active, part.candidates, 1.5))
+    # the attribute, where given, is the rate the plane reads
+    np.testing.assert_array_equal(
+        net.infer(_Iso(part.rgba, part.hit, part.active, part.candidates, rate)), want
+    )
 
 
 def test_missing_and_corrupt_model_files(tmp_path):

@@ -92,18 +92,19 @@ def test_pack_iso_candidates(queue, shape, stride):
 
 @pytest.mark.parametrize("shape", [(1, 1), (17, 33), (37, 53)])
 @pytest.mark.parametrize("rate", [0.0, 0.2, 1 / 3, 0.5, 0.97, 1.0])
-def test_pack_iso_prior(queue, shape, rate):
+@pytest.mark.parametrize("stride", [1, 16])
+def test_pack_iso_prior(queue, shape, rate, stride):
     """The seventh channel: 1 - (1 - rate)^min(candidates, 8) where active
     (the power as k float32 products in order), else 0, bit for bit; the
     first six as without it; numpy, device and out= inputs."""
     rgba, hit, active = iso_inputs(shape, seed=hash((shape, rate, 7)) % 2**32)
     cand = np.random.default_rng(7).integers(0, 256, shape).astype(np.uint8)
     cand.ravel()[: min(cand.size, 12)] = np.arange(min(cand.size, 12))  # 0..11 around the cap
-    got = pack_iso(rgba, hit, active, candidates=cand, crossing_rate=rate, stride=16, queue=queue)
-    want = ref.pack_iso(rgba, hit, active, candidates=cand, crossing_rate=rate, stride=16)
+    got = pack_iso(rgba, hit, active, candidates=cand, crossing_rate=rate, stride=stride, queue=queue)
+    want = ref.pack_iso(rgba, hit, active, candidates=cand, crossing_rate=rate, stride=stride)
     same(got, want)
     assert got.shape[1] == 7
-    same(got[:, :6], ref.pack_iso(rgba, hit, active, candidates=cand, stride=16))
+    same(got[:, :6], ref.pack_iso(rgba, hit, active, candidates=cand, stride=stride))
     prior = got[0, 6, : shape[0], : shape[1]]
     k = np.minimum(cand, 8).astype(np.float64)
     np.testing.assert_allclose(prior, np.where(active, 1 - (1 - rate) ** k, 0), atol=2e-7)
@@ -119,7 +120,7 @@ def test_pack_iso_prior(queue, shape, rate):
         active,
         candidates=cla.to_device(queue, cand),
         crossing_rate=np.float32(rate),
-        stride=16,
+        stride=stride,
         out=out,
     )
     assert dev is out
@@ -151,11 +152,17 @@ def test_crossing_rate(queue):
     assert pack_module.crossing_rate(cla.to_device(queue, hit.view(np.uint8)), active, 6) == 0.5
     assert pack_module.crossing_rate(hit, active, 2) == 1.0  # more hits than tests counted: clipped
     assert pack_module.crossing_rate(hit, active, 0) == 0.0
-    for bad in (-1, 2.5, True, None):
-        with pytest.raises(ValueError, match="tested: expected a count"):
+    with pytest.raises(ValueError, match="tested: expected a count >= 0"):
+        pack_module.crossing_rate(hit, active, -1)
+    for bad in (2.5, True, None, "4"):
+        with pytest.raises(TypeError, match="tested: expected an integer"):
             pack_module.crossing_rate(hit, active, bad)
     with pytest.raises(ValueError, match="active: shape"):
         pack_module.crossing_rate(hit, active[:, :3], 4)
+    with pytest.raises(TypeError, match="hit: dtype"):
+        pack_module.crossing_rate(np.where(hit, 1.0, np.nan), active, 4)  # NaN would count as a hit
+    with pytest.raises(ValueError, match="active"):
+        pack_module.crossing_rate(hit, active[None], 4)
 
 
 @pytest.mark.parametrize("shape", SHAPES)

@@ -390,6 +390,26 @@ def test_iso_frames_are_deterministic_and_consistent():
     assert a.active[0.85].sum() >= a.active[0.9].sum() >= a.active[0.95].sum()
 
 
+def test_training_frames_crossing_rate_is_the_renders():
+    """The hit prior a training frame packs is the one the network gets at
+    run time: a frame's crossing rate at each completion equals that of the
+    same view rendered by IsoRenderer.render(completion=c), read from the
+    image (clvis.post.specs.image_crossing_rate); the frame's draws redone."""
+    from clvis.iso import IsoRenderer
+    from clvis.post.specs import image_crossing_rate
+
+    f = data.iso_frames(("waves",), 1, 3, 64, 48, views=1, n=24)[0]
+    rng = np.random.default_rng(3)
+    vol, iso = data.procedural_volume("waves", rng, 24)
+    step = 2.0 / 23
+    r = IsoRenderer(vol, rate=8, spacing=(step, step, step), origin=(-1.0, -1.0, -1.0))
+    cam = data.orbit_camera(rng, (-1, -1, -1), (1, 1, 1), 64 / 48, (0.45, 0.95))
+    for c in data.COMPLETIONS:
+        img = r.render(cam, 64, 48, iso, completion=c, speculation=False)
+        np.testing.assert_array_equal(img.active, f.active[c])
+        assert image_crossing_rate(img) == f.crossing_rate(c) > 0
+
+
 @pytest.mark.parametrize("kind", data.MORE_TRAIN_VOLUMES)
 def test_more_training_volumes_are_finite_and_deterministic(kind):
     """issue 21's added training families: never a family of the held-out suite."""

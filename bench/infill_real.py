@@ -40,12 +40,6 @@ from clvis.training.evaluate import as_picture
 COMPLETIONS = (0.85, 0.9, 0.95)
 
 
-class _Iso:
-    def __init__(self, rgba, hit, active, candidates, tested):
-        self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
-        self.crossing_rate = crossing_rate(hit, active, tested)
-
-
 def _volume(path: str) -> tuple[np.ndarray, tuple[float, float, float]]:
     name = path.lower()
     v = read_volume(path, volume_index=0 if name.endswith((".nii", ".nii.gz")) and _is4d(path) else None)
@@ -110,7 +104,7 @@ def main() -> None:
                 rgba = np.concatenate([target, img.hit[..., None].astype(np.float32)], axis=2)
                 rgba[active] = 0.0
                 hit = img.hit & ~active
-                x = _Iso(rgba, hit, active, cand, tested)
+                x = post.IsoPlanes(rgba, hit, active, cand, crossing_rate(hit, active, tested))
                 running[c].append(float(active.mean()))
                 # the network's uint8 picture; the baselines as 8-bit pictures too
                 out = {

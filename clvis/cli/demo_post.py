@@ -11,7 +11,6 @@ third baseline."""
 from __future__ import annotations
 
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pyopencl as cl
@@ -112,14 +111,7 @@ def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (640, 
     inp = np.where(active[..., None], np.array([1.0, 0.0, 1.0], np.float32), rgba[..., :3])
     pp = np.asarray(post.pushpull(rgba, ~active, queue=q))[..., :3]
     net = post.load("infill", queue=q)
-    planes = SimpleNamespace(
-        rgba=rgba,
-        hit=hit,
-        active=active,
-        candidates=f.candidates_at(0.85),
-        crossing_rate=f.crossing_rate(0.85),
-    )
-    got = net(planes)
+    got = net(post.IsoPlanes(rgba, hit, active, f.candidates_at(0.85), f.crossing_rate(0.85)))
     out = got[..., :3].astype(np.float32) / 255
     s = _scores(np.where(active[..., None], 0, rgba[..., :3]), pp, out, target)
     print(_line("infill", s, net.stats["inference"]) + f"   ({f.source}, 85% of the rays)")

@@ -8,11 +8,13 @@ the tests that compare the exported graphs with their PyTorch modules.
 """
 
 from .infer import MODELS, PRECISIONS, PostNetwork, load
+from .inputs import IsoPlanes
 from .names import NAMES
 from .pack import pack_gbuffers, pack_iso, pack_rgbda, padded_shape, unpack_rgba8
 from .pushpull import pushpull
 
 __all__ = [
+    "IsoPlanes",
     "MODELS",
     "NAMES",
     "PRECISIONS",

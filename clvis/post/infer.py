@@ -95,7 +95,7 @@ from .. import limits
 from .._arrays import buffer_of, resolve_queue, to_host
 from ..errors import DataError
 from . import guard as guard_mod
-from .inputs import GBuffersLike, IsoImageLike, PostInput
+from .inputs import GBuffersLike, IsoImageLike, IsoPlanes, PostInput
 from .kpn import KPNHead
 from .names import GBUFFER_PLANES, gbuffer_channels
 from .pack import padded_shape, unpack_rgba8
@@ -488,7 +488,7 @@ class PostNetwork:
             rate = image_crossing_rate(planes) if self.channels_in == 7 else None
 
             def run_iso(values: np.ndarray, hit: np.ndarray, active: np.ndarray) -> np.ndarray:
-                return timed(_IsoPlanes(values, hit, active, left, rate))
+                return timed(IsoPlanes(values, hit, active, left, rate))
 
             frame, share = guard_mod.infill(run_iso, rgba, hit, active, self.queue)
         elif self.name == "narvis-scan":
@@ -547,24 +547,6 @@ class _ScanPlanes:
         out.__dict__.update(self.__dict__)
         out.index = index
         return out
-
-
-class _IsoPlanes:
-    """Host planes in an IsoImage's shape (the guard's inputs to the network).
-    candidates: the image's (None: it has none); a finished pixel the guard
-    withholds reads 0 there (no count is known for a ray that has ended).
-    crossing_rate: the whole image's (None: not read)."""
-
-    def __init__(
-        self,
-        rgba: np.ndarray,
-        hit: np.ndarray,
-        active: np.ndarray,
-        candidates: np.ndarray | None = None,
-        crossing_rate: float | None = None,
-    ) -> None:
-        self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
-        self.crossing_rate = crossing_rate
 
 
 def load(

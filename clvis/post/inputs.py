@@ -18,12 +18,21 @@ in :mod:`clvis.post.specs` and :mod:`clvis.post.pack`.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Protocol, TypeAlias
 
 import numpy as np
 import pyopencl.array as cla
 
-__all__ = ["FilteredImageLike", "GBuffersLike", "IsoImageLike", "LidarInput", "Plane", "PostInput"]
+__all__ = [
+    "FilteredImageLike",
+    "GBuffersLike",
+    "IsoImageLike",
+    "IsoPlanes",
+    "LidarInput",
+    "Plane",
+    "PostInput",
+]
 
 #: a plane on the host or on the device
 Plane: TypeAlias = np.ndarray | cla.Array
@@ -52,6 +61,21 @@ class IsoImageLike(Protocol):
     def active(self) -> Plane:
         """(H, W) bool or uint8: the ray is still running."""
         ...
+
+
+@dataclass
+class IsoPlanes:
+    """An IsoImageLike of planes you hold (the guard's reduced inputs, the
+    held-out suite's frames, a caller's own): ``rgba``, ``hit``, ``active``;
+    ``candidates`` for a 6- or 7-plane model; ``crossing_rate`` for a
+    7-plane one (clvis.post.pack.crossing_rate: it stands for an IsoImage's
+    ``stats``)."""
+
+    rgba: Plane
+    hit: Plane
+    active: Plane
+    candidates: Plane | None = None
+    crossing_rate: float | None = None
 
 
 class FilteredImageLike(Protocol):

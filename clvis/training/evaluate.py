@@ -57,6 +57,7 @@ import numpy as np
 
 from ..io.files import write_replacing
 from ..metrics import metrics
+from ..post.inputs import IsoPlanes
 from ..post.specs import SPECS, spec
 from ..post.splat import splat
 from ..raster.depth_filter import filter_gbuffers
@@ -148,19 +149,6 @@ def suite(name: str, quick: bool = False) -> list[Case]:
 # frames of each network's suite: (input for the network, target, baselines)
 
 
-class _Iso:
-    def __init__(
-        self,
-        rgba: np.ndarray,
-        hit: np.ndarray,
-        active: np.ndarray,
-        candidates: np.ndarray | None = None,
-        crossing_rate: float | None = None,
-    ) -> None:
-        self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
-        self.crossing_rate = crossing_rate
-
-
 def _narvis_scene(family: str, n: int, seed: int) -> Any:
     if family == "hurricane/magma":
         sc = _data.narvis_scene("hurricane", n, seed)
@@ -214,7 +202,7 @@ def _frames(
                 pp = pushpull(rgba, ~active)[..., :3]
                 yield (
                     f"{int(case.setting)}^3 at {c:.0%}",
-                    _Iso(rgba, hit, active, f.candidates_at(c), f.crossing_rate(c)),
+                    IsoPlanes(rgba, hit, active, f.candidates_at(c), f.crossing_rate(c)),
                     f.rgb,
                     {
                         "input": rgba[..., :3],

@@ -12,7 +12,6 @@ from clvis import post
 from clvis.errors import DataError
 from clvis.post import guard
 from clvis.training import data
-from clvis.training import evaluate as ev
 
 
 def _psnr(a, b):
@@ -213,7 +212,7 @@ def test_infill_guard_drops_a_garbage_network_and_keeps_a_perfect_one(queue):
 def _iso_input():
     f = data.iso_frames(("shapes",), 1, 7, 160, 96, views=1, n=32)[0]
     rgba, hit, active = f.planes(0.9)
-    return f, ev._Iso(rgba, hit, active, f.candidates_at(0.9), f.crossing_rate(0.9))
+    return f, post.IsoPlanes(rgba, hit, active, f.candidates_at(0.9), f.crossing_rate(0.9))
 
 
 def test_network_call_with_the_guard(queue):
@@ -238,7 +237,7 @@ def test_network_call_with_the_guard(queue):
         net(x, guard="yes")
     with pytest.raises(TypeError, match="IsoImage"):
         net(np.zeros((8, 8, 4), np.float32), guard=True)
-    bad = ev._Iso(x.rgba.copy(), x.hit, x.active)
+    bad = post.IsoPlanes(x.rgba.copy(), x.hit, x.active)
     bad.rgba[x.hit & done] = np.nan
     with pytest.raises(DataError, match="NaN"):
         net(bad, guard=True)

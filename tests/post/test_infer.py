@@ -99,7 +99,7 @@ def test_infill_quality_on_held_out_volume():
     within 2 dB of push-pull either way, which README states.)"""
     f = data.iso_frames(("gyroid",), 1, 8, 640, 360, views=1, completions=(0.85,))[0]
     rgba, hit, active = f.planes(0.85)
-    x = _Iso(rgba, hit, active, f.candidates_at(0.85), f.crossing_rate(0.85))
+    x = post.IsoPlanes(rgba, hit, active, f.candidates_at(0.85), f.crossing_rate(0.85))
     out = post.load("infill")(x)[..., :3] / np.float32(255)
     pp = post.pushpull(rgba, ~active)[..., :3]
     net_m, pp_m, raw = (train.metrics(x, f.rgb) for x in (out, pp, rgba[..., :3]))
@@ -275,12 +275,6 @@ def test_narvis_storm_view_reaches_25_db(storm_view_scores):
     assert storm_view_scores[0]["psnr"] > 25
 
 
-class _Iso:
-    def __init__(self, rgba, hit, active, candidates=None, crossing_rate=None):
-        self.rgba, self.hit, self.active, self.candidates = rgba, hit, active, candidates
-        self.crossing_rate = crossing_rate
-
-
 class _Filtered:
     def __init__(self, rgbda):
         self.rgbda = rgbda
@@ -363,14 +357,14 @@ def test_infill_with_the_hit_prior_plane(tmp_path, iso_pair):
     guarded = net(part, guard=True)
     assert guarded.shape == part.rgba.shape and guarded.dtype == np.uint8
     with pytest.raises(DataError, match="crossing rate"):
-        net(_Iso(part.rgba, part.hit, part.active, part.candidates))
+        net(post.IsoPlanes(part.rgba, part.hit, part.active, part.candidates))
     with pytest.raises(TypeError, match="image.crossing_rate: expected a number"):
-        net(_Iso(part.rgba, part.hit, part.active, part.candidates, "0.3"))
+        net(post.IsoPlanes(part.rgba, part.hit, part.active, part.candidates, "0.3"))
     with pytest.raises(ValueError, match=r"crossing_rate: expected a number in \[0, 1\]"):
-        net(_Iso(part.rgba, part.hit, part.active, part.candidates, 1.5))
+        net(post.IsoPlanes(part.rgba, part.hit, part.active, part.candidates, 1.5))
     # the attribute, where given, is the rate the plane reads
     np.testing.assert_array_equal(
-        net.infer(_Iso(part.rgba, part.hit, part.active, part.candidates, rate)), want
+        net.infer(post.IsoPlanes(part.rgba, part.hit, part.active, part.candidates, rate)), want
     )
 
 

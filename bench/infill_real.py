@@ -31,11 +31,10 @@ import numpy as np
 from clvis import post
 from clvis.io.volumes import otsu_level, read_volume
 from clvis.iso import IsoRenderer
-from clvis.metrics import metrics
+from clvis.metrics import as_picture, metrics
 from clvis.post.pack import crossing_rate
 from clvis.post.pushpull import pushpull
 from clvis.training import data
-from clvis.training.evaluate import as_picture
 
 COMPLETIONS = (0.85, 0.9, 0.95)
 

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-__all__ = ["metrics"]
+__all__ = ["as_picture", "metrics"]
 
 
 def metrics(output: np.ndarray, target: np.ndarray) -> dict[str, float]:
@@ -23,3 +23,12 @@ def metrics(output: np.ndarray, target: np.ndarray) -> dict[str, float]:
     psnr = float(peak_signal_noise_ratio(t, o, data_range=1.0)) if not np.array_equal(o, t) else math.inf
     ssim = float(structural_similarity(t, o, data_range=1.0, channel_axis=2))
     return {"psnr": psnr, "ssim": ssim}
+
+
+def as_picture(rgb: np.ndarray) -> np.ndarray:
+    """A float image as the 8-bit picture a user gets (clipped to 0..1,
+    rounded to 1/255, NaN as 0), as a network's call returns its own
+    (clvis.post.infer): ``clvis eval`` and ``clvis iso --compare`` score
+    every method on what it shows."""
+    v = np.nan_to_num(np.clip(np.asarray(rgb, np.float32), np.float32(0), np.float32(1)), nan=0.0)
+    return np.rint(v * np.float32(255)) / np.float32(255)

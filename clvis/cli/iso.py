@@ -649,7 +649,7 @@ def _compare(args, r, cam, iso: float, img, filled: np.ndarray, out: Path):
     black, as ``clvis eval infill`` scores them. Returns ((completion,
     seconds, path), {name: {psnr, ssim}})."""
     from .. import images
-    from ..metrics import metrics
+    from ..metrics import as_picture, metrics
     from ..post.pushpull import pushpull
 
     w, h = args.size
@@ -661,13 +661,10 @@ def _compare(args, r, cam, iso: float, img, filled: np.ndarray, out: Path):
     ).astype(np.float32)
     filled_pp = pushpull(partial, ~img.active)[..., :3]
 
-    def as8(x: np.ndarray) -> np.ndarray:
-        return np.round(np.clip(x, 0, 1) * 255) / 255
-
     table = {
         "network": metrics(filled[..., :3] / np.float32(255), target),
-        "push-pull": metrics(as8(filled_pp), target),
-        "partial": metrics(as8(partial[..., :3]), target),
+        "push-pull": metrics(as_picture(filled_pp), target),
+        "partial": metrics(as_picture(partial[..., :3]), target),
     }
     picture_ = labelled(full, [iso], args.transparent, bare=args.no_labels)
     path = images.save_png(out / "iso-complete.png", picture_)

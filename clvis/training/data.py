@@ -284,8 +284,7 @@ class IsoFrame:
         """The partial image's crossing rate (clvis.post.pack.crossing_rate)."""
         from ..post.pack import crossing_rate
 
-        a = self.active[completion]
-        return crossing_rate(self.hit & ~a, a, self.tested[completion])
+        return crossing_rate(self.hit, self.active[completion], self.tested[completion])
 
 
 def iso_frames(

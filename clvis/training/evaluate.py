@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 
 from ..io.files import write_replacing
-from ..metrics import metrics
+from ..metrics import as_picture, metrics
 from ..post.inputs import IsoPlanes
 from ..post.specs import SPECS, spec
 from ..post.splat import splat
@@ -285,14 +285,6 @@ def _frames(
         queues = (gr.queue, ras.queue)
         gr = ras = g = None
         _data._free_held(queues)
-
-
-def as_picture(rgb: np.ndarray) -> np.ndarray:
-    """A baseline's frame as the 8-bit picture a user gets (clipped to 0..1,
-    rounded to 1/255, NaN as 0), as the network's call returns its own
-    (clvis.post.infer): every method is scored on what it shows."""
-    v = np.nan_to_num(np.clip(np.asarray(rgb, np.float32), np.float32(0), np.float32(1)), nan=0.0)
-    return np.rint(v * np.float32(255)) / np.float32(255)
 
 
 #: a frame's PSNR is capped here in the means (an input equal to its target,

@@ -191,7 +191,7 @@ KNOWN_BELOW = {
     },
     # the LiDAR card is scored with its guard (on by default): push-pull on
     # the terrain, where the U-Net alone is 4.94 dB / 0.011 SSIM below it;
-    # every method is scored as its 8-bit picture (evaluate.as_picture), so
+    # every method is scored as its 8-bit picture (clvis.metrics.as_picture), so
     # the guard's push-pull ties push-pull there (it was 0.01 dB below when
     # only the network's picture was rounded). Points drawn 3 pixels a side
     # on the photographs: the model trained on 1..3-pixel scans is 0.05 dB

@@ -28,14 +28,10 @@ import itertools
 import numpy as np
 
 from clvis import post
+from clvis.post import IsoPlanes
 from clvis.post import guard as G
 from clvis.post.pushpull import pushpull
 from clvis.training import data
-
-
-class _Iso:
-    def __init__(self, rgba, hit, active):
-        self.rgba, self.hit, self.active = rgba, hit, active
 
 
 def _psnr(a, b):
@@ -77,7 +73,13 @@ def main() -> None:
         ]
         frames = []
         for f in data.iso_frames(data.TRAIN_VOLUMES, args.frames or 6, 331, 320, 180, views=1):
-            frames += [(f"{f.source} {c:.0%}", f.rgb, *f.planes(c)) for c in data.COMPLETIONS]
+            # + the candidates plane the shipped 6-plane W-Net reads; the
+            # withheld rays take their nearest running ray's count, as
+            # the guard gives them (guard.nearest_running)
+            for c in data.COMPLETIONS:
+                rgba, hit, active = f.planes(c)
+                near = G.nearest_running(f.candidates_at(c), active)
+                frames.append((f"{f.source} {c:.0%}", f.rgb, rgba, hit, active, near))
     else:
         bad = ("none", "noise", "swap")
         grid = [
@@ -102,14 +104,19 @@ def main() -> None:
 
     def candidates(item, known, kind, seed):
         if name == "infill":
-            _, _, rgba, hit, active = item
+            _, _, rgba, hit, active, near = item
             shown = hit & ~active
             vals = np.concatenate([rgba[..., :3] * shown[..., None], shown[..., None]], 2).astype(np.float32)
             over = None
             if kind == "overpaint":
                 sp = np.asarray(pushpull(np.ascontiguousarray(vals[..., :3]), hit & known))
                 over = np.concatenate([sp, np.ones_like(sp[..., :1])], -1)
-            n = _bad(run(_Iso(vals, hit & known, ~known)), kind, seed, over)
+            n = _bad(
+                run(IsoPlanes(vals, hit & known, ~known, near if net.channels_in >= 6 else None)),
+                kind,
+                seed,
+                over,
+            )
             n = np.where(known[..., None], vals, n).astype(np.float32)
             return [n, np.asarray(pushpull(vals, known)), vals * known[..., None]], vals[..., :3]
         rgbda = item[2].copy()

@@ -81,6 +81,7 @@ __all__ = [
     "interpolate",
     "lidar",
     "narvis_scan",
+    "nearest_running",
     "ring",
     "tile_weights",
     "withheld",
@@ -156,6 +157,31 @@ def ring(known: np.ndarray, holes: np.ndarray, width: int = RING) -> np.ndarray:
         raise ValueError(f"width: expected a whole number >= 1, got {width!r}")
     near = maximum_filter(np.asarray(holes, bool).view(np.uint8), size=2 * width + 1, mode="constant") > 0
     return known & near
+
+
+def nearest_running(candidates: np.ndarray, active: np.ndarray) -> np.ndarray:
+    """(H, W) uint8: `candidates` (an IsoImage's candidate blocks left per
+    running ray) with every finished pixel given the count of its nearest
+    running ray (Euclidean; ties as scipy's distance transform breaks them).
+
+    The in-fill guard withholds finished rays and hands them to the network
+    as running ones. Their own count is 0, and to a network that reads the
+    CANDIDATES plane a running ray with no block left is a ray that misses:
+    the network painted the withheld pixels as background and lost the
+    guard's check there. The nearest running ray's count is what a ray in
+    that band would have had. On the held-out suite (bench/results/README.md,
+    2026-11-29 session 9) the guarded frame's margin over push-pull rose with
+    it; the network alone is still better on average."""
+    from scipy.ndimage import distance_transform_edt
+
+    candidates = np.asarray(candidates, np.uint8)
+    active = np.asarray(active, bool)
+    if candidates.shape != active.shape:
+        raise ValueError(f"candidates: expected the shape of active {active.shape}, got {candidates.shape}")
+    if not active.any() or active.all():
+        return candidates.copy()
+    _, (iy, ix) = distance_transform_edt(~active, return_indices=True)
+    return np.where(active, candidates, candidates[iy, ix]).astype(np.uint8)
 
 
 def tile_weights(

@@ -484,6 +484,10 @@ class PostNetwork:
             # the candidates plane: read back only for a model that takes it (channels_in 6, 7)
             cand = getattr(planes, "candidates", None) if self.channels_in >= 6 else None
             left = None if cand is None else np.asarray(to_host(cand), np.uint8)
+            if left is not None and left.shape == active.shape:
+                # the withheld finished rays run with their nearest running
+                # ray's count, not 0 (a ray with no block left misses)
+                left = guard_mod.nearest_running(left, active)
             # the hit-prior plane (channels_in 7): the whole frame's crossing rate, not the reduced planes'
             rate = image_crossing_rate(planes) if self.channels_in == 7 else None
 

@@ -43,6 +43,25 @@ def test_ring_withholds_the_known_pixels_beside_the_holes():
         guard.ring(known, holes, 0)
 
 
+def test_nearest_running_gives_finished_pixels_their_nearest_running_rays_count():
+    active = np.zeros((5, 9), bool)
+    active[2, 1] = active[2, 7] = True
+    cand = np.zeros((5, 9), np.uint8)
+    cand[2, 1], cand[2, 7] = 3, 9
+    got = guard.nearest_running(cand, active)
+    assert got.dtype == np.uint8 and got.shape == cand.shape
+    np.testing.assert_array_equal(got[:, :4], 3)  # nearer (2, 1)
+    np.testing.assert_array_equal(got[:, 5:], 9)  # nearer (2, 7)
+    np.testing.assert_array_equal(got[active], cand[active])  # running rays keep their own
+    # nothing running, or everything: the plane as it was (a copy)
+    for a in (np.zeros_like(active), np.ones_like(active)):
+        out = guard.nearest_running(cand, a)
+        np.testing.assert_array_equal(out, cand)
+        assert out is not cand
+    with pytest.raises(ValueError, match="candidates"):
+        guard.nearest_running(cand[:4], active)
+
+
 def test_tile_weights_take_the_lowest_error_the_network_keeping_ties():
     mask = np.ones((64, 64), bool)
     e_net = np.full((64, 64), 1.0)
@@ -241,6 +260,33 @@ def test_network_call_with_the_guard(queue):
     bad.rgba[x.hit & done] = np.nan
     with pytest.raises(DataError, match="NaN"):
         net(bad, guard=True)
+
+
+def test_guarded_call_runs_withheld_rays_with_their_nearest_running_rays_count(queue, monkeypatch):
+    # the withheld finished rays go to the network as running ones: with the
+    # count of blocks left of the nearest running ray, not their own 0 (to the
+    # network, a ray with no block left misses)
+    f, x = _iso_input()
+    net = post.load("infill", queue=queue, threads=1)
+    assert net.channels_in >= 6
+    seen = []
+    host = net._host
+
+    def spy(planes):
+        seen.append((np.asarray(planes.active, bool).copy(), np.asarray(planes.candidates).copy()))
+        return host(planes)
+
+    monkeypatch.setattr(net, "_host", spy)
+    net(x, guard=True)
+    active = np.asarray(x.active, bool)
+    want = guard.nearest_running(np.asarray(x.candidates), active)
+    reduced = [(a, c) for a, c in seen if (a & ~active).any()]
+    assert reduced, "the guard ran the network on a reduced input"
+    for a, c in reduced:
+        held = a & ~active
+        np.testing.assert_array_equal(c[a], want[a])
+        assert (c[held] > 0).mean() > 0.5  # their running neighbours have blocks left
+        np.testing.assert_array_equal(c[active], np.asarray(x.candidates)[active])
 
 
 def test_lidar_network_call_with_the_guard(queue):

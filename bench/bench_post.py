@@ -28,7 +28,7 @@ The networks are timed alone (``guard=False``) and, fp32, with their guard
   view; the slow path is the Gaussian renderer's 3DGS splat of its
   isotropic kNN Gaussians (the target it was trained on); "fp32+filter" is
   its pipeline whole: the spec's depth filter on the G-buffers, then the
-  network.
+  network; "fast" is that after rasterizing the G-buffers, against GR.
 - narvis head[...]: the kernel-prediction head alone (clvis.post.kpn's
   kernels, applied since issue 28 to the logits the graph stops at), on the
   same frame's tensors, against its NumPy reference.
@@ -53,7 +53,7 @@ import numpy as np
 import pytest
 from benchutil import scaled
 
-from clvis import datasets, post
+from clvis import benchreport, datasets, post
 from clvis.errors import DataError
 from clvis.training import data
 
@@ -174,7 +174,7 @@ CASES = [(n, s, i) for n in ("infill", "lidar") for s in SIZES for i in (*IMPLS,
 CASES += [("narvis", "512x512", i) for i in NARVIS_IMPLS]
 CASES += [
     ("narvis-scan", "512x512", i)
-    for i in ("fp32", "fp32+filter", "fp32+guard", "fp16", "pushpull", "splat", "splat-numpy", "slow")
+    for i in ("fp32", "fp32+filter", "fp32+guard", "fp16", "pushpull", "splat", "splat-numpy", "slow", "fast")
 ]
 
 
@@ -194,6 +194,8 @@ def test_post(benchmark, queue, name, size, impl):
         return _scan_splat(benchmark, queue, impl, w, h, image)
     if name == "narvis-scan" and impl == "fp32+filter":
         return _scan_filtered(benchmark, queue, op, w, h, image)
+    if name == "narvis-scan" and impl == "fast":
+        return _scan_fast(benchmark, queue, op, w, h, scene, ras, cam)
     if name == "narvis" and impl in ("head", "head-numpy"):
         return _narvis_head(benchmark, queue, impl, w, h, image)
     if name == "narvis" and impl in ("subpixel", "subpixel-numpy"):
@@ -305,6 +307,44 @@ def _scan_filtered(benchmark, queue, op, w, h, image):
         rounds=5,
     )
     benchmark.extra_info["stages"] = dict(net.stats)
+
+
+def _scan_fast(benchmark, queue, op, w, h, scene, ras, cam):
+    """narvis-scan's fast path whole, as "MACR + NARVis" is NARVis's: the
+    scan's G-buffers rasterized (colour, depth, the kNN radius plane; left
+    on the device), its spec's depth filter, then the network; against the
+    Gaussian renderer of the same isotropic Gaussians (the "slow" row)."""
+    from clvis.raster import filter_gbuffers
+
+    net = post.load("narvis-scan", queue=queue)
+    levels, strength = net.spec.depth_filter
+    stages = {}
+
+    def fast():
+        import time
+
+        t0 = time.perf_counter()
+        g = scene.gbuffers(ras, cam, w, h, net.planes, host=False)
+        queue.finish()
+        t1 = time.perf_counter()
+        g = filter_gbuffers(g, levels, strength, queue=queue)
+        t2 = time.perf_counter()
+        out = net(g)
+        stages.update(render=t1 - t0, filter=t2 - t1, **net.stats)
+        return out
+
+    fast()
+    run(
+        benchmark,
+        fast,
+        op=op,
+        impl=benchreport.SCAN_FAST,
+        role="clvis-host",
+        n=w * h,
+        nbytes=w * h * 24,
+        rounds=5,
+        stages=stages,
+    )
 
 
 def _narvis_head(benchmark, queue, impl, w, h, image):

@@ -82,6 +82,9 @@ VIEW_NARVIS_OP = "view_narvis[hurricane 2,000,000 points, 512x512]"
 VIEW_ISO_OP = "view_iso[marschner-lobb 64^3, 1280x720 still: first frame after a stop]"
 NARVIS_FAST = "MACR render + NARVis fp32 (the fast path)"
 NARVIS_GR = "Gaussian renderer, 2,000,000 Gaussians (the slow path)"
+SCAN_FAST = "MACR render + depth filter + narvis-scan fp32 (the fast path)"
+#: the aerial scan at 4 points a pixel of 512 x 512 (bench/bench_post.py)
+SCAN_GR = "Gaussian renderer, 1,048,576 Gaussians (the slow path)"
 TARGETS = {
     "primitives": [
         # on PoCL's CPU device (2 cores). "np.cumsum" as users call it
@@ -182,6 +185,9 @@ TARGETS = {
         ),
         # MACR's G-buffers + NARVis against the Gaussian renderer on the same view
         Target("narvis[512x512]", NARVIS_GR, 4, "cpu", impl=NARVIS_FAST),
+        # the same for scans; their Gaussians are small and round, so GR's tile
+        # renderer is cheap (bench/results/README.md, 2026-11-29 session 9)
+        Target("narvis-scan[512x512]", SCAN_GR, 4, "cpu", impl=SCAN_FAST),
     ],
     "gauss": [
         # on PoCL's CPU device (2 cores)

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .._arrays import to_host
 from ..io.volumes import otsu_level
 from ..iso.zfp import MAX_RATE, MIN_RATE
 from ._common import (
@@ -532,7 +533,7 @@ def _run(args) -> int:
         shots.append(img)
     total = time.perf_counter() - t0
     out = Path(args.out)
-    if args.completion < 1.0 and not args.no_speculation:
+    if args.completion < 1.0 and not args.no_speculation and not constant:
         past = max(float(i.completion) for i in shots)
         if past > args.completion + 0.05:
             print(
@@ -554,8 +555,11 @@ def _run(args) -> int:
         net = post.load("infill", queue=q)
         filled = net(img, guard=args.post_guard)
         # iso.png shows the colour, hit and active planes: only these come back
-        dev = typing.cast(typing.Any, img)  # rendered with host=False: device planes
-        img = dataclasses.replace(img, rgba=dev.rgba.get(), hit=dev.hit.get(), active=dev.active.get())
+        # (device planes from render(host=False); a volume with no surface
+        # gets a host image without rendering)
+        img = dataclasses.replace(
+            img, rgba=to_host(img.rgba), hit=to_host(img.hit), active=to_host(img.active)
+        )
         if args.compare and r is not None and cam is not None:
             scores = _compare(args, r, cam, isos[0], img, filled, out)
         filled = filled if args.transparent else images.opaque(filled)
@@ -579,7 +583,7 @@ def _run(args) -> int:
     print(f"  device      {runtime.describe(q.device)}")
     if r is None:
         print(f"  volume      {volume.shape}, constant ({vmin:g}): no isosurface, nothing rendered")
-        print(f"wrote {path}{os.sep if path.is_dir() else ''}")
+        print(f"wrote {path}{os.sep if path.is_dir() else ''}" + (f" and {infilled}" if infilled else ""))
         return 0
     print(
         f"  volume      {r.shape} = {volume.nbytes / 1e6:.1f} MB decoded, {r.volume.nbytes / 1e6:.1f} MB "

@@ -174,6 +174,24 @@ def test_constant_volume_warns_and_draws_nothing(tmp_path, capsys):
         assert "warning: the volume is constant (3)" in err and "nothing rendered" in out
         a = _png(tmp_path / iso / "iso.png")[images.label_height(W) :]
         assert not _surface(a).any()
+    # --infill on it: nothing to fill (the image never went to the device),
+    # no note about the stop, both pictures written and named
+    rc, out, err = _run(
+        capsys,
+        str(tmp_path / "c.npy"),
+        "--infill",
+        "--completion",
+        "0.3",
+        "--size",
+        f"{W}x{H}",
+        "--out",
+        str(tmp_path / "fill"),
+    )
+    assert rc == 0, err
+    assert "warning: the volume is constant (3)" in err and "well past" not in err
+    assert "iso-infill.png" in out
+    for name in ("iso.png", "iso-infill.png"):
+        assert not _surface(_png(tmp_path / "fill" / name)[images.label_height(W) :]).any()
 
 
 def test_isovalue_at_the_end_of_the_range_warns(tmp_path, capsys):

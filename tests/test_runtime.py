@@ -634,3 +634,44 @@ def test_free_held_gives_back_only_the_freed_blocks(device):
     runtime.free_held(q)
     assert pool.held_blocks == 0 and pool.active_blocks == active - 1
     np.testing.assert_array_equal(keep.get(), np.arange(1000, dtype=np.float32))
+
+
+_SIGACTION = """
+import ctypes, signal, sys
+
+class SA(ctypes.Structure):  # glibc's struct sigaction: the handler first
+    _fields_ = [("handler", ctypes.c_void_p), ("mask", ctypes.c_ulong * 16), ("flags", ctypes.c_int),
+                ("restorer", ctypes.c_void_p)]
+
+libc = ctypes.CDLL(None)
+
+def installed(sig):
+    sa = SA()
+    assert libc.sigaction(int(sig), None, ctypes.byref(sa)) == 0
+    return sa.handler, sa.flags & 0xFFFFFFFF
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads glibc's struct sigaction")
+def test_opening_devices_keeps_pythons_signal_handlers():
+    """PoCL (loaded by platform enumeration) and Intel's CPU runtime (at its
+    first context) put one-shot (SA_RESETHAND) SIGINT / SIGTERM handlers in
+    front of Python's: a second signal while the first was being passed on
+    ended the process by the default action, mid-write (`clvis gauss` left
+    its .gauss.png.<random>.tmp, 2 of 8 times signalled as `timeout` does:
+    the process, then its group). clvis puts Python's back."""
+    code = _SIGACTION + (
+        "import signal, clvis\n"
+        "signal.signal(signal.SIGTERM, lambda s, f: None)\n"
+        "before = {s: installed(s) for s in (signal.SIGINT, signal.SIGTERM)}\n"
+        "from clvis import runtime\n"
+        "for d in runtime.devices():\n"
+        "    runtime.queue_for(d)\n"
+        "runtime.default_queue()\n"
+        "after = {s: installed(s) for s in (signal.SIGINT, signal.SIGTERM)}\n"
+        "print(len(runtime.devices()), before == after, before, after)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    n, same, *rest = out.stdout.split(" ", 2)
+    assert int(n) >= 1 and same == "True", out.stdout

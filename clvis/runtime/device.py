@@ -8,8 +8,9 @@ import contextlib
 import dataclasses
 import os
 import re
+import signal
 import threading
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import pyopencl as cl
 
@@ -17,18 +18,47 @@ from ..errors import DeviceError
 from .settings import _in_force
 
 
+@contextlib.contextmanager
+def _python_signal_handlers() -> Iterator[None]:
+    """Python's SIGINT and SIGTERM handlers as they were before the block.
+
+    OpenCL runtimes put their own handlers in front of Python's, below
+    Python's view of them (``signal.getsignal`` still names Python's): PoCL
+    when the ICD loader loads it (platform enumeration), Intel's CPU runtime
+    at its first context. Both are one-shot (SA_RESETHAND, SA_NODEFER): the
+    first signal resets the action to the default before their handler
+    passes it on to Python's, so a second one in that moment (``timeout``
+    signals the process and then its group; a double Ctrl-C) ended the
+    process by the default action, silently, in the middle of writing a
+    file. Installing Python's handlers again leaves the process's signal
+    handling as it was before the call. Main thread only (elsewhere Python
+    cannot set a handler)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in saved.items():
+            if h is not None:  # None: a handler not set from Python, left alone
+                with contextlib.suppress(ValueError, OSError, TypeError):
+                    signal.signal(s, h)
+
+
 def devices() -> list[cl.Device]:
     """Every OpenCL device of every platform, in platform order."""
-    try:
-        platforms = cl.get_platforms()
-    except cl.Error:  # no ICD at all: PLATFORM_NOT_FOUND_KHR
-        return []
-    out = []
-    for p in platforms:
+    with _python_signal_handlers():
         try:
-            out.extend(p.get_devices())
-        except cl.Error:
-            pass
+            platforms = cl.get_platforms()
+        except cl.Error:  # no ICD at all: PLATFORM_NOT_FOUND_KHR
+            return []
+        out = []
+        for p in platforms:
+            try:
+                out.extend(p.get_devices())
+            except cl.Error:
+                pass
     return out
 
 
@@ -65,7 +95,8 @@ def select_device(spec: str | int | None = None) -> cl.Device:
         raise DeviceError(f"CLVIS_DEVICE={spec_s!r} matches no device ({_listing(found)})")
     if os.environ.get("PYOPENCL_CTX"):
         try:
-            return cl.create_some_context(interactive=False).devices[0]
+            with _python_signal_handlers():
+                return cl.create_some_context(interactive=False).devices[0]
         except (cl.Error, RuntimeError, ValueError) as e:
             raise DeviceError(f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']!r}: {e}") from e
     if not found:
@@ -111,11 +142,14 @@ def queue_for(device: cl.Device) -> cl.CommandQueue:
         q = _queues.get(device.int_ptr)
         if q is None:
             try:
-                ctx = cl.Context([device])
-                try:
-                    q = cl.CommandQueue(ctx, device, properties=cl.command_queue_properties.PROFILING_ENABLE)
-                except cl.Error:  # a driver without profiling: stats' timings are then None
-                    q = cl.CommandQueue(ctx, device)
+                with _python_signal_handlers():
+                    ctx = cl.Context([device])
+                    try:
+                        q = cl.CommandQueue(
+                            ctx, device, properties=cl.command_queue_properties.PROFILING_ENABLE
+                        )
+                    except cl.Error:  # a driver without profiling: stats' timings are then None
+                        q = cl.CommandQueue(ctx, device)
             except cl.Error as e:
                 raise DeviceError(f"cannot open {describe(device)}: {e}") from e
             _queues[device.int_ptr] = q

@@ -329,3 +329,25 @@ def test_nifti_time_series_volume_index(tmp_path):
 
     ex = os.path.join(os.path.dirname(nibabel.__file__), "tests", "data", "example4d.nii.gz")
     assert read_volume(ex, volume_index=1).data.shape == (24, 96, 128)
+
+
+def test_otsu_level_sits_between_the_samples_it_separates():
+    from skimage.filters import threshold_otsu
+
+    from clvis.io.volumes import otsu_level
+
+    mask = np.zeros((20, 20, 20), np.uint8)
+    mask[5:15, 5:15, 5:15] = 1
+    # scikit-image's bin centre is 1/512 of the range above the background
+    assert threshold_otsu(mask.astype(np.float64)) < 0.01
+    assert otsu_level(mask) == 0.5
+    assert otsu_level(mask * np.uint8(255)) == 127.5
+    labels = np.random.default_rng(1).integers(0, 5, 100_000)
+    assert otsu_level(labels) % 1 == 0.5  # halfway between two labels
+    # continuous data: the same threshold, within the gap between samples
+    r = np.random.default_rng(0).normal(size=100_000)
+    t, s = otsu_level(r), threshold_otsu(r)
+    assert abs(t - s) < 1e-3 and (r <= t).sum() == (r <= s).sum()
+    assert otsu_level(np.full(8, 3.0)) == 3.0
+    with pytest.raises(ValueError, match="no finite sample"):
+        otsu_level(np.full(8, np.nan))

@@ -448,6 +448,8 @@ def _transfer(args, lods, sv, gaussians, samples):
         return (lo, hi), opacity, f"range p{a:g}..p{b:g} of the samples: {lo:.6g}..{hi:.6g}"
     if args.file is not None and samples is not None:
         # a scan: its background (the lower of Otsu's two classes) stays clear
+        if not np.isfinite(samples).any():
+            raise CliError(f"{args.file}: no finite value (every sample is NaN or infinite)")
         level = otsu_level(samples)
         top = float(np.nanpercentile(samples, TOP_PERCENTILE))
         if top > level:

@@ -705,7 +705,10 @@ def _warn_isovalue(iso: float, vmin: float, vmax: float) -> None:
     if vmin == vmax:
         why = f"the volume is constant ({vmin:g}): it has no isosurface, and none is drawn"
     elif not vmin <= iso <= vmax:
-        why = f"isovalue {iso:g} is outside the data range [{vmin:g}, {vmax:g}]: no surface can show"
+        why = (
+            f"isovalue {iso:g} is outside the data range [{vmin:g}, {vmax:g}]: the data has no surface "
+            "there; what shows, if anything, is ZFP's compression error (less at a higher --rate)"
+        )
     elif iso in (vmin, vmax):
         end = "minimum" if iso == vmin else "maximum"
         why = (

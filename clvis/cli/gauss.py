@@ -60,6 +60,8 @@ OPACITY_VOLUME_FILE = ((0.0, 0.0), (0.05, 0.0), (0.4, 0.25), (1.0, 1.0))
 # scan's few hot voxels do not squeeze every colour to the bottom of the bar)
 TOP_PERCENTILE = 99.5
 _POINT_FORMATS = POINT_SUFFIXES  # what clvis render reads
+#: how far past its centre each Gaussian of the finest LOD the view frames, in sigmas
+FRAME_SIGMAS = 2.0
 # --view fit: from the front left, a little above, a narrow lens
 _FIT = FitView(direction=(-0.55, 1.0, -0.35), fov_y=40.0)
 _HELP = (
@@ -379,6 +381,11 @@ def render_panels(
     lo = np.min([g.bounds(1.0)[0] for g in allg], axis=0)
     hi = np.max([g.bounds(1.0)[1] for g in allg], axis=0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
+    # the view frames the finest LOD's Gaussians out to FRAME_SIGMAS (what they
+    # draw): their centres' box, as before, cut the splats at the panel's edges
+    # (a volume's corner, an L-shaped mask seen from the front); the coarser
+    # LODs' few wide Gaussians would leave the data small
+    lo, hi = max(allg, key=lambda g: g.n).bounds(FRAME_SIGMAS)
     cam = camera(lo, hi) if camera is not None else fit_box(lo, hi, width, height, _FIT)
     if value_range is None:
         vals = np.concatenate([g.values for g in allg])

@@ -294,6 +294,9 @@ def _sources(args):
             raise CliError(f"{path}: {e}") from None
         except ValueError as e:
             raise CliError(f"{path}: {e}" if args.attribute is None else f"--attribute: {e}") from None
+        # what the colour bar names: the attribute, else what gaussians_from_points
+        # coloured by (the speed with a velocity, else the elevation)
+        args.value_name = args.attribute or ("speed" if cloud.velocity is not None else "z")
         return ["points"], None, g, str(path), None
     raise CliError(
         f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
@@ -540,7 +543,7 @@ def _run(args) -> int:
     files = []
     clear_targets(out, [f"{panel[0]}.png" for panel in panels] + ["gauss.png"])
     with progress.stage("writing PNGs"):
-        value_name = args.attribute or "value"
+        value_name = args.attribute or getattr(args, "value_name", None) or "value"
         for panel in panels:  # each labelled over its colour bar, as in gauss.png (--no-labels: bare)
             one = _picture(panel[2], args.transparent) if args.no_labels else None
             if one is None:
@@ -549,7 +552,7 @@ def _run(args) -> int:
         files.append(
             images.save_png(
                 out / "gauss.png",
-                strip(panels, args.colormap, args.transparent, args.attribute or "value", vr),
+                strip(panels, args.colormap, args.transparent, value_name, vr),
             )
         )
     if args.orbit is not None:  # the turntable (clvis.cli.orbit)
@@ -563,7 +566,7 @@ def _run(args) -> int:
     if gaussians is not None and gaussians.colors is not None:
         print("  colour    the points' own rgb")
     elif lods == ["points"]:
-        print(f"  colour    {args.attribute or 'the default value'} through {args.colormap}")
+        print(f"  colour    {value_name} through {args.colormap}")
     if why:
         print(f"  transfer  {why}")
     if getattr(args, "dropped", 0):

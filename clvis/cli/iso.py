@@ -453,8 +453,16 @@ def _run(args) -> int:
     volume, spacing, origin, default_iso, (vmin, vmax), source = _load(args)
     isos = args.isovalue if args.isovalue is not None else [default_iso]
     if args.infill and (len(isos) > 1 or args.color_by is not None or args.surface_color is not None):
+        given = (
+            f"{len(isos)} isovalues"
+            if len(isos) > 1
+            else "--color-by"
+            if args.color_by is not None
+            else "--surface-color"
+        )
         raise CliError(
-            "--infill: with one isovalue in the renderer's colours (no --color-by or --surface-color)"
+            f"--infill: not with {given}: the network in-fills one isovalue's surface in the "
+            "renderer's colours (one --isovalue, no --color-by or --surface-color)"
         )
     if args.orbit is not None and (
         len(isos) > 1 or args.color_by is not None or args.surface_color is not None

@@ -236,7 +236,11 @@ def test_completion_stop_far_past_the_target_is_noted(tmp_path, capsys):
         (["--isovalue", "0.3,x"], "--isovalue"),
         (["--isovalue", "0.3,0.6", "--surface-color", "blue"], "once per isovalue"),
         (["--surface-color", "nocolour"], "--surface-color"),
-        (["--isovalue", "0.3,0.6", "--completion", "0.8", "--infill"], "--infill: with one isovalue"),
+        (["--isovalue", "0.3,0.6", "--completion", "0.8", "--infill"], "--infill: not with 2 isovalues"),
+        (
+            ["--surface-color", "blue", "--completion", "0.8", "--infill"],
+            "--infill: not with --surface-color",
+        ),
         (["--isovalue", "0.3,0.6", "--workers", "1"], "--isovalue: one value on workers"),
     ],
 )

@@ -314,23 +314,30 @@ def _scan_fast(benchmark, queue, op, w, h, scene, ras, cam):
     scan's G-buffers rasterized (colour, depth, the kNN radius plane; left
     on the device), its spec's depth filter, then the network; against the
     Gaussian renderer of the same isotropic Gaussians (the "slow" row)."""
+    net = post.load("narvis-scan", queue=queue)
+    _fast_path(benchmark, queue, op, benchreport.SCAN_FAST, w, h, scene, ras, cam, net, net.spec.depth_filter)
+
+
+def _fast_path(benchmark, queue, op, impl, w, h, scene, ras, cam, net, prefilter=None):
+    """A fast path whole: the G-buffers rasterized (left on the device), the
+    depth filter (levels, strength) when given, the network; its stages'
+    seconds in extra_info "stages"."""
+    import time
+
     from clvis.raster import filter_gbuffers
 
-    net = post.load("narvis-scan", queue=queue)
-    levels, strength = net.spec.depth_filter
     stages = {}
 
     def fast():
-        import time
-
         t0 = time.perf_counter()
         g = scene.gbuffers(ras, cam, w, h, net.planes, host=False)
         queue.finish()
         t1 = time.perf_counter()
-        g = filter_gbuffers(g, levels, strength, queue=queue)
+        if prefilter is not None:
+            g = filter_gbuffers(g, *prefilter, queue=queue)
         t2 = time.perf_counter()
         out = net(g)
-        stages.update(render=t1 - t0, filter=t2 - t1, **net.stats)
+        stages.update(render=t1 - t0, **({"filter": t2 - t1} if prefilter else {}), **net.stats)
         return out
 
     fast()
@@ -338,7 +345,7 @@ def _scan_fast(benchmark, queue, op, w, h, scene, ras, cam):
         benchmark,
         fast,
         op=op,
-        impl=benchreport.SCAN_FAST,
+        impl=impl,
         role="clvis-host",
         n=w * h,
         nbytes=w * h * 24,
@@ -483,31 +490,7 @@ def _narvis_extra(benchmark, queue, impl, op, w, h, scene, ras, cam, image):
     """The fast path whole, and the wider configurations' inference."""
     if impl == "fast":
         net = post.load("narvis", queue=queue)
-        stages = {}
-
-        def fast():
-            import time
-
-            t0 = time.perf_counter()
-            g = scene.gbuffers(ras, cam, w, h, net.planes, host=False)
-            queue.finish()
-            t1 = time.perf_counter()
-            out = net(g)
-            stages.update(render=t1 - t0, **net.stats)
-            return out
-
-        fast()
-        run(
-            benchmark,
-            fast,
-            op=op,
-            impl="MACR render + NARVis fp32 (the fast path)",
-            role="clvis-host",
-            n=w * h,
-            nbytes=w * h * 24,
-            rounds=5,
-            stages=stages,
-        )
+        _fast_path(benchmark, queue, op, benchreport.NARVIS_FAST, w, h, scene, ras, cam, net)
         return
     import onnxruntime as ort
 

@@ -479,6 +479,7 @@ def _run(args) -> int:
     constant = vmin == vmax
     for iso in isos:
         _warn_isovalue(iso, vmin, vmax)
+    _warn_scale(vmin, vmax)
     w, h = args.size
     q = runtime.default_queue()
     # the command's host memory a pixel at its peak (the renderer's host image,
@@ -705,6 +706,30 @@ def _surface_points(volume, isos, spacing, origin, most: int = 65536) -> np.ndar
     idx = idx[:: -(-idx.size // most)]
     zyx = np.stack(np.unravel_index(idx, volume.shape), axis=1).astype(np.float64)
     return np.asarray(origin, np.float64) + (zyx * np.asarray(spacing, np.float64))[:, ::-1]
+
+
+#: the data's magnitudes past which the renderer's float32 gradients (its
+#: shading normals) overflow or underflow: the same sphere's distance field
+#: scaled by 1e-20..1e20 renders the same picture, by 1e22 (or 1e-22) an unlit one
+SCALE_LIMITS = (1e-20, 1e20)
+
+
+def _warn_scale(vmin: float, vmax: float) -> None:
+    """A warning on stderr for data whose values are too large, or whose
+    range is too small, for the shading's float32 arithmetic."""
+    big = max(abs(vmin), abs(vmax))
+    if big > SCALE_LIMITS[1]:
+        why = f"the data reach {big:.3g}"
+    elif vmin != vmax and vmax - vmin < SCALE_LIMITS[0]:
+        why = f"the data span only {vmax - vmin:.3g}"
+    else:
+        return
+    print(
+        f"clvis iso: warning: {why}: the shading's float32 gradients overflow or underflow past "
+        f"{SCALE_LIMITS[0]:g}..{SCALE_LIMITS[1]:g}, and the surface comes out unlit or missing; scale the "
+        "values (e.g. numpy: v / abs(v).max()) and the isovalue with them",
+        file=sys.stderr,
+    )
 
 
 def _warn_isovalue(iso: float, vmin: float, vmax: float) -> None:

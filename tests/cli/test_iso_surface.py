@@ -194,6 +194,22 @@ def test_constant_volume_warns_and_draws_nothing(tmp_path, capsys):
         assert not _surface(_png(tmp_path / "fill" / name)[images.label_height(W) :]).any()
 
 
+@pytest.mark.parametrize("scale", [1e22, 1e-22])
+def test_values_past_float32s_shading_range_warn(tmp_path, capsys, scale):
+    z, y, x = np.mgrid[-1:1:12j, -1:1:12j, -1:1:12j]
+    v = ((np.sqrt(x * x + y * y + z * z) - 0.6) * scale).astype(np.float32)
+    np.save(tmp_path / "v.npy", v)
+    rc, _, err = _run(
+        capsys, str(tmp_path / "v.npy"), "--isovalue", "0", "--size", "32x24", "--out", str(tmp_path)
+    )
+    assert rc == 0 and "float32 gradients" in err and "scale the values" in err, err
+    np.save(tmp_path / "ok.npy", (v / scale).astype(np.float32))
+    rc, _, err = _run(
+        capsys, str(tmp_path / "ok.npy"), "--isovalue", "0", "--size", "32x24", "--out", str(tmp_path)
+    )
+    assert rc == 0 and "float32" not in err
+
+
 def test_isovalue_at_the_end_of_the_range_warns(tmp_path, capsys):
     v = np.zeros((12, 12, 12), np.float32)
     v[4:8, 4:8, 4:8] = 1.0

@@ -380,15 +380,22 @@ def colorbar(
     text = np.empty((label_height(width), width, 4), np.uint8)
     text[:] = _colour("background", background) + (255,)
     size = _text_size(width)
-    ends = [(_number(lo), "left"), (_number(hi), "right")]
+    ends = list(zip(_numbers(lo, hi), ("left", "right"), strict=True))
     f = _font(size)
     room = width - 2 * max(2, size // 3) - f.getlength(ends[0][0] + ends[1][0]) - 2 * size
     pieces = ends + ([(title, "centre")] if title and f.getlength(title) <= room else [])
     return np.concatenate([ramp, _draw_text(text, pieces, size)], axis=0)
 
 
-def _number(v: float) -> str:
-    return f"{v:.4g}"
+def _numbers(lo: float, hi: float) -> tuple[str, str]:
+    """The colour bar's two ends, 4 significant digits, more (up to 12) until
+    they differ where lo != hi (a cloud's z at 1e9 + 0..50 read "1e+09" at
+    both ends)."""
+    for digits in range(4, 13):
+        a, b = f"{lo:.{digits}g}", f"{hi:.{digits}g}"
+        if a != b or lo == hi:
+            return a, b
+    return a, b
 
 
 def compose(

@@ -437,3 +437,12 @@ def test_legend():
         images.legend([((300, 0, 0), "x")], 100)
     with pytest.raises(ValueError, match="width"):
         images.legend(entries, 1)
+
+
+def test_colorbar_ends_differ_where_the_values_do():
+    from clvis.images import _numbers
+
+    assert _numbers(177.5, 576.0) == ("177.5", "576")  # 4 significant digits
+    lo, hi = _numbers(1e9, 1e9 + 50)  # a cloud's z far from the origin
+    assert lo != hi and float(hi) == 1e9 + 50
+    assert _numbers(3.0, 3.0) == ("3", "3")

@@ -815,3 +815,21 @@ def test_point_suffixes_are_the_readers():
     from clvis.io import points
 
     assert points.POINT_SUFFIXES == tuple(points._readers())
+
+
+def test_las_truncated_before_its_extended_vlrs_says_so(tmp_path):
+    from laspy.vlrs.vlrlist import VLRList
+
+    path = tmp_path / "e.las"
+    las = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))
+    las.x, las.y, las.z = np.arange(50.0), np.arange(50.0), np.arange(50.0)
+    las.evlrs = VLRList([laspy.VLR(user_id="clvis", record_id=7, record_data=b"x" * 20)])
+    las.write(str(path))
+    data = path.read_bytes()
+    start = laspy.read(str(path)).header.start_of_first_evlr
+    assert len(read_points(path)) == 50
+    for cut, words in ((start - 100, "should start at byte"), (start + 10, "do not fit")):
+        short = tmp_path / f"cut{cut}.las"
+        short.write_bytes(data[:cut])
+        with pytest.raises(DataError, match=f"truncated LAS/LAZ file.*{words}"):
+            read_points(short)

@@ -87,10 +87,15 @@ def _check_las_header(path: Path) -> tuple[int, int]:
         if (head[24], head[25]) >= (1, 4) and header_size >= 375:
             evlr_start, n_evlr, count64 = struct.unpack_from("<QIQ", head, 235)
             count = count64 or count
+            if n_evlr and evlr_start >= size:
+                raise DataError(
+                    f"{path}: truncated LAS/LAZ file: its {n_evlr} extended VLRs should start at byte "
+                    f"{evlr_start}, the file has {size} bytes"
+                )
             if n_evlr and evlr_start + 60 * n_evlr > size:
                 raise DataError(
-                    f"{path}: malformed LAS/LAZ header: {n_evlr} extended VLRs from byte "
-                    f"{evlr_start} of {size}"
+                    f"{path}: truncated LAS/LAZ file, or a wrong header: {n_evlr} extended VLRs "
+                    f"from byte {evlr_start} do not fit in its {size} bytes"
                 )
         vlrs = _las_records(f, path, header_size, n_vlr, data_offset, 54, "<H", "VLR")
         if n_evlr:

@@ -72,7 +72,9 @@ a .npy volume [z, y, x], a NIfTI file (.nii, .nii.gz; a 4-D series with
 .vtp, .vtu, .vts or a legacy .vtk POLYDATA or grid is a point cloud: clvis
 render, clvis gauss, clvis view).
 The default isovalue of a file is Otsu's threshold of its samples
-(scikit-image), which separates a scan's tissue from its background.
+(scikit-image), which separates a scan's tissue from its background, moved
+to the middle of the gap between the sample values on either side of it (a
+0/1 mask: 0.5).
 
 Several isovalues (--isovalue 0.3,0.6) are rendered one after the other and
 composited, the nearest surface in each pixel, each in its own colour

@@ -653,7 +653,15 @@ def installed(sig):
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads glibc's struct sigaction")
-def test_opening_devices_keeps_pythons_signal_handlers():
+@pytest.mark.parametrize(
+    "setup",
+    [
+        "signal.signal(signal.SIGTERM, lambda s, f: None)",  # Python's handlers
+        # a handler Python does not know of (signal.getsignal says SIG_DFL): kept too
+        "import faulthandler; faulthandler.register(signal.SIGTERM)",
+    ],
+)
+def test_opening_devices_keeps_pythons_signal_handlers(setup):
     """PoCL (loaded by platform enumeration) and Intel's CPU runtime (at its
     first context) put one-shot (SA_RESETHAND) SIGINT / SIGTERM handlers in
     front of Python's: a second signal while the first was being passed on
@@ -662,7 +670,7 @@ def test_opening_devices_keeps_pythons_signal_handlers():
     the process, then its group). clvis puts Python's back."""
     code = _SIGACTION + (
         "import signal, clvis\n"
-        "signal.signal(signal.SIGTERM, lambda s, f: None)\n"
+        f"{setup}\n"
         "before = {s: installed(s) for s in (signal.SIGINT, signal.SIGTERM)}\n"
         "from clvis import runtime\n"
         "for d in runtime.devices():\n"

@@ -61,7 +61,7 @@ OPACITY_VOLUME_FILE = ((0.0, 0.0), (0.05, 0.0), (0.4, 0.25), (1.0, 1.0))
 TOP_PERCENTILE = 99.5
 _POINT_FORMATS = POINT_SUFFIXES  # what clvis render reads
 #: how far past its centre each Gaussian of the finest LOD the view frames, in sigmas
-FRAME_SIGMAS = 2.0
+FRAME_SIGMAS = 3.0
 # --view fit: from the front left, a little above, a narrow lens
 _FIT = FitView(direction=(-0.55, 1.0, -0.35), fov_y=40.0)
 _HELP = (
@@ -295,8 +295,12 @@ def _sources(args):
         except ValueError as e:
             raise CliError(f"{path}: {e}" if args.attribute is None else f"--attribute: {e}") from None
         # what the colour bar names: the attribute, else what gaussians_from_points
-        # coloured by (the speed with a velocity, else the elevation)
-        args.value_name = args.attribute or ("speed" if cloud.velocity is not None else "z")
+        # coloured by: the speed with a velocity, else the elevation, which is
+        # relative to the cloud's origin (a LAS file's lowest point)
+        oz = float(cloud.origin[2]) if cloud.origin is not None else 0.0
+        args.value_name = args.attribute or (
+            "speed" if cloud.velocity is not None else "z" if oz == 0.0 else f"z - {oz:.10g}"
+        )
         return ["points"], None, g, str(path), None
     raise CliError(
         f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
@@ -385,9 +389,9 @@ def render_panels(
     hi = np.max([g.bounds(1.0)[1] for g in allg], axis=0)
     diag = float(np.linalg.norm(hi - lo)) or 1.0
     # the view frames the finest LOD's Gaussians out to FRAME_SIGMAS (what they
-    # draw): their centres' box, as before, cut the splats at the panel's edges
-    # (a volume's corner, an L-shaped mask seen from the front); the coarser
-    # LODs' few wide Gaussians would leave the data small
+    # draw): every LOD's 1-sigma box, as before, cut the splats at the panel's
+    # edges (a volume's corner, an L-shaped mask seen from the front); the
+    # coarser LODs' few wide Gaussians would leave the data small
     lo, hi = max(allg, key=lambda g: g.n).bounds(FRAME_SIGMAS)
     cam = camera(lo, hi) if camera is not None else fit_box(lo, hi, width, height, _FIT)
     if value_range is None:

@@ -10,17 +10,46 @@ import os
 import re
 import signal
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 import pyopencl as cl
 
 from ..errors import DeviceError
 from .settings import _in_force
 
+_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def _raw_sigaction() -> Callable[[int, bytes | None], bytes] | None:
+    """sigaction(sig, new) -> the old action's raw bytes, through libc
+    (glibc's struct sigaction on Linux x86-64 and aarch64: handler, mask,
+    flags, restorer), or None elsewhere."""
+    import ctypes
+    import platform
+    import sys
+
+    if not sys.platform.startswith("linux") or platform.machine() not in ("x86_64", "aarch64"):
+        return None
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        call = libc.sigaction
+    except (OSError, AttributeError):
+        return None
+    size = 8 + 128 + 8 + 8  # handler, sigset_t (1024 bits), flags (padded), restorer
+
+    def action(sig: int, new: bytes | None) -> bytes:
+        old = ctypes.create_string_buffer(size)
+        buf = None if new is None else ctypes.create_string_buffer(new, size)
+        if call(int(sig), buf, old) != 0:
+            raise OSError(ctypes.get_errno(), "sigaction")
+        return old.raw
+
+    return action
+
 
 @contextlib.contextmanager
 def _python_signal_handlers() -> Iterator[None]:
-    """Python's SIGINT and SIGTERM handlers as they were before the block.
+    """SIGINT's and SIGTERM's handlers as they were before the block.
 
     OpenCL runtimes put their own handlers in front of Python's, below
     Python's view of them (``signal.getsignal`` still names Python's): PoCL
@@ -30,20 +59,45 @@ def _python_signal_handlers() -> Iterator[None]:
     passes it on to Python's, so a second one in that moment (``timeout``
     signals the process and then its group; a double Ctrl-C) ended the
     process by the default action, silently, in the middle of writing a
-    file. Installing Python's handlers again leaves the process's signal
-    handling as it was before the call. Main thread only (elsewhere Python
-    cannot set a handler)."""
+    file. On Linux the actions the block changed are put back byte for byte
+    (libc's sigaction: a handler Python does not know of, faulthandler's or
+    an embedding application's, stays); elsewhere Python's own handlers are
+    installed again where they are Python functions or SIG_IGN. Main thread
+    only (elsewhere Python cannot set a handler, and another thread's
+    changes could be undone)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    raw = _raw_sigaction()
+    if raw is not None:
+        try:
+            before = {s: raw(s, None) for s in _SIGNALS}
+        except OSError:
+            raw = None
+    if raw is None:
+        python = {s: signal.getsignal(s) for s in _SIGNALS}
     try:
         yield
     finally:
-        for s, h in saved.items():
-            if h is not None:  # None: a handler not set from Python, left alone
-                with contextlib.suppress(ValueError, OSError, TypeError):
-                    signal.signal(s, h)
+        # a signal raised inside the restore (a pending KeyboardInterrupt)
+        # must not leave the other signal's action unrestored: each is tried
+        # twice, the first exception raised once both are done
+        pending: BaseException | None = None
+        for s in _SIGNALS:
+            for _ in range(2):
+                try:
+                    if raw is not None:
+                        if raw(s, None) != before[s]:
+                            raw(s, before[s])
+                    elif callable(python[s]) or python[s] == signal.SIG_IGN:
+                        signal.signal(s, python[s])
+                    break
+                except (ValueError, OSError, TypeError):
+                    break
+                except BaseException as e:  # noqa: BLE001 (KeyboardInterrupt, raised again below)
+                    pending = pending or e
+        if pending is not None:
+            raise pending
 
 
 def devices() -> list[cl.Device]:

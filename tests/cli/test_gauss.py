@@ -214,3 +214,47 @@ def test_gauss_progress_on_stderr(tmp_path, capsys):
     assert "building kernels" in err and "1,600 / 1,600 rays" in err
     assert cli.main(["gauss", "--lod", "low", "--size", "40x40", "--out", str(tmp_path)]) == 0
     assert capsys.readouterr().err == ""  # not a terminal: no progress
+
+
+def test_gauss_names_what_a_clouds_colour_bar_shows(tmp_path, capsys):
+    # a cloud far from the origin, no colours, no velocity: coloured by its
+    # elevation relative to the cloud's origin, and the bar says so
+    rng = np.random.default_rng(3)
+    pos = rng.random((400, 3)) * [10, 10, 2] + [0, 0, 1e9]
+    np.save(tmp_path / "far.npy", pos)
+    assert (
+        cli.main(["gauss", str(tmp_path / "far.npy"), "--size", "48x48", "--out", str(tmp_path / "o")]) == 0
+    )
+    out = capsys.readouterr().out
+    assert "colour    z - 1000000000 through inferno" in out, out
+    np.save(tmp_path / "near.npy", pos - [0, 0, 1e9])
+    assert (
+        cli.main(["gauss", str(tmp_path / "near.npy"), "--size", "48x48", "--out", str(tmp_path / "n")]) == 0
+    )
+    out = capsys.readouterr().out
+    assert ("colour    z through inferno" in out) or ("colour    z - " in out), out
+
+
+def test_gauss_all_nan_volume_names_the_file(tmp_path, capsys):
+    np.save(tmp_path / "nan.npy", np.full((6, 6, 6), np.nan, np.float32))
+    assert cli.main(["gauss", str(tmp_path / "nan.npy"), "--size", "32x32", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "nan.npy" in err and "no finite value" in err, err
+
+
+def test_gauss_frames_the_whole_volume(tmp_path, capsys):
+    """An L-shaped mask seen from the front fills the panel without touching
+    its edges (the view framed every LOD's 1-sigma boxes and cut the L's
+    splats on every side)."""
+    v = np.zeros((24, 24, 24), np.float32)  # [z, y, x]; the front view looks along +y
+    v[2:22, 8:16, 2:8] = 1.0  # the upright bar
+    v[2:8, 8:16, 2:22] = 1.0  # the foot
+    np.save(tmp_path / "l.npy", v)
+    args = ["gauss", str(tmp_path / "l.npy"), "--lod", "high", "--view", "front", "--no-labels"]
+    assert cli.main([*args, "--size", "96x96", "--out", str(tmp_path)]) == 0
+    with Image.open(tmp_path / "high.png") as im:
+        a = np.asarray(im.convert("RGB")).astype(np.float64).mean(axis=2)
+    lit = a > BACKGROUND.mean() + 12
+    assert lit.mean() > 0.15  # the L is drawn
+    border = np.concatenate([lit[0], lit[-1], lit[:, 0], lit[:, -1]])
+    assert border.mean() < 0.05, border.mean()  # and not cut at the panel's edges (was 0.60)

@@ -385,9 +385,9 @@ def render_panels(
     allg = [g for _, g in items if g.n]
     if not allg:
         raise CliError("no Gaussians: the volume has no active voxel")
-    lo = np.min([g.bounds(1.0)[0] for g in allg], axis=0)
-    hi = np.max([g.bounds(1.0)[1] for g in allg], axis=0)
-    diag = float(np.linalg.norm(hi - lo)) or 1.0
+    # the default density scales with the diagonal of every LOD's 1-sigma boxes
+    boxes = np.array([g.bounds(1.0) for g in allg])  # (LODs, lo / hi, xyz)
+    diag = float(np.linalg.norm(boxes[:, 1].max(axis=0) - boxes[:, 0].min(axis=0))) or 1.0
     # the view frames the finest LOD's Gaussians out to FRAME_SIGMAS (what they
     # draw): every LOD's 1-sigma box, as before, cut the splats at the panel's
     # edges (a volume's corner, an L-shaped mask seen from the front); the

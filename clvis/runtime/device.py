@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import os
 import re
 import signal
@@ -20,10 +21,11 @@ from .settings import _in_force
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
+@functools.cache
 def _raw_sigaction() -> Callable[[int, bytes | None], bytes] | None:
     """sigaction(sig, new) -> the old action's raw bytes, through libc
     (glibc's struct sigaction on Linux x86-64 and aarch64: handler, mask,
-    flags, restorer), or None elsewhere."""
+    flags, restorer), or None elsewhere. Looked up once a process."""
     import ctypes
     import platform
     import sys

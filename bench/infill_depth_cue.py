@@ -21,6 +21,14 @@ finished hit's t (what it does not); and where the squared RGB error of
 push-pull and of the shipped network falls among the three kinds of ray, with
 the network's error over push-pull's on each.
 
+``--gates``: a second table. Could the gap be used without training, as a
+rule at inference? Per family, the running rays' squared RGB error of the
+network against push-pull's, in dB (positive: the network is better), for the
+network alone and for frames that take push-pull's colour where
+|gap| <= T voxels and at least K candidate blocks are left (the rays most
+likely continuing their neighbours' surface), the network's elsewhere; and the
+oracle that takes push-pull's colour exactly on the *same* rays.
+
 The next candidate's t is not in an IsoImage: this script wraps the
 renderer's private step that counts the candidates left
 (``clvis.iso.render._Tile.candidates``) and runs its traverse once more to
@@ -124,16 +132,44 @@ def _rays(fam: str, frames: int, w: int, h: int, net) -> dict[str, np.ndarray]:
     return {k: np.concatenate(v) for k, v in out.items()}
 
 
+#: (T voxels, K blocks) of the --gates table: push-pull where |gap| <= T and k >= K
+GATES = ((1, 1), (2, 1), (4, 1), (1, 4), (2, 4), (1, 8), (2, 8))
+
+
+def _gates(families: list[str], frames: int, w: int, h: int, net) -> None:
+    step = 2.0 / (SIDE - 1)
+    heads = ["network"] + [f"T{t} K{k}" for t, k in GATES] + ["oracle"]
+    print("family     " + " ".join(f"{c:>8s}" for c in heads))
+    total = np.zeros(len(heads))
+    for fam in families:
+        d = _rays(fam, frames, w, h, net)
+        epp, enet = d["epp"], d["enet"]
+        errs = [enet.sum()]
+        for t, k in GATES:
+            gate = (np.abs(d["gap"]) <= t * step) & (d["k"] >= k)
+            errs.append(np.where(gate, epp, enet).sum())
+        same = ~d["miss"] & ~d["far"]
+        errs.append(np.where(same, epp, enet).sum())
+        db = -10.0 * np.log10(np.asarray(errs) / max(epp.sum(), 1e-12))
+        total += db
+        print(f"{fam:10s} " + " ".join(f"{v:+8.2f}" for v in db), flush=True)
+    print(f"{'mean':10s} " + " ".join(f"{v:+8.2f}" for v in total / len(families)))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     s = spec("infill")
     ap.add_argument("families", nargs="?", default=",".join(s.trained_families + s.eval_families))
     ap.add_argument("--frames", type=int, default=4)
     ap.add_argument("--size", default="640x360")
+    ap.add_argument("--gates", action="store_true", help="the gating table instead (see above)")
     a = ap.parse_args()
     w, h = (int(v) for v in a.size.split("x"))
     R._Tile.candidates = _candidates_and_next_t
     net = post.load("infill")
+    if a.gates:
+        _gates(a.families.split(","), a.frames, w, h, net)
+        return
     print(
         "family      rays   miss  elsewhere | AUC miss: k  gap | AUC elsewhere: k  gap |"
         " push-pull error: miss / same / elsewhere | network / push-pull: miss / same / elsewhere"

@@ -331,6 +331,28 @@ def test_nifti_time_series_volume_index(tmp_path):
     assert read_volume(ex, volume_index=1).data.shape == (24, 96, 128)
 
 
+@pytest.mark.parametrize("suffix", [".nii", ".nii.gz"])
+def test_nifti_truncated_series_says_so_before_asking_for_an_index(tmp_path, suffix):
+    """A 4-D file cut short: the error says it is truncated and which volumes
+    are whole, not "choose a volume" (the index asked for would then fail)."""
+    rng = np.random.default_rng(0)
+    data = rng.integers(-3000, 3000, (16, 12, 10, 3), dtype=np.int16)  # hardly compressible
+    whole = tmp_path / f"whole{suffix}"
+    nibabel.save(nibabel.Nifti1Image(data, np.eye(4)), whole)
+    raw = gzip.decompress(whole.read_bytes()) if suffix.endswith(".gz") else whole.read_bytes()
+    volume = 16 * 12 * 10 * 2
+    cut = raw[: len(raw) - volume - 100]  # volume 0 whole, volume 1 cut, volume 2 missing
+    path = tmp_path / f"cut{suffix}"
+    path.write_bytes(gzip.compress(cut) if suffix.endswith(".gz") else cut)
+    with pytest.raises(
+        DataError, match=r"truncated NIfTI file: the header declares 3 volumes.*volume 0 is whole"
+    ):
+        read_volume(path)
+    np.testing.assert_array_equal(read_volume(path, volume_index=0).data, data[..., 0].transpose(2, 1, 0))
+    with pytest.raises(DataError, match="4-D NIfTI image of 3 volumes .*volume_index"):
+        read_volume(whole)  # whole: the index is what is missing
+
+
 def test_otsu_level_sits_between_the_samples_it_separates():
     from skimage.filters import threshold_otsu
 

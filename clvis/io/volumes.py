@@ -276,7 +276,9 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         header = img.header
         shape = tuple(int(s) for s in header.get_data_shape())
         dtype = np.dtype(header.get_data_dtype())
-        offset = int(header.get_data_offset())
+        # where nibabel reads the data from (a single file's vox_offset 0 means
+        # "after the header and its extensions": the proxy knows the byte)
+        offset = int(getattr(img.dataobj, "offset", header.get_data_offset()))
         zooms = tuple(float(z) for z in header.get_zooms())
         affine = np.array(img.affine, dtype=np.float64)
     except errors as e:
@@ -291,11 +293,17 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
                 f"{count} volume{'s' if count != 1 else ''}; clvis iso/gauss/view: --volume-index T)"
             )
     elif series:
+        # a truncated file is said first: asked for an index, a user would
+        # pick one only to be told then that the file is cut short
+        _check_nifti_series_whole(path, shape, dtype, offset)
         raise DataError(
             f"{path}: a 4-D NIfTI image of {shape[3]} volumes {shape[:3]} (i, j, k); "
             "choose one with volume_index (clvis iso/gauss: --volume-index T)"
         )
-    _check_nifti_layout(path, shape[:3] + shape[4:] if series else shape, dtype, offset, shape)
+    # a series' volume t needs the file up to its end only (volumes are
+    # contiguous in a 4-D file; a 5-D one interleaves the fifth axis)
+    stored = shape[:3] + (t + 1,) if series and len(shape) == 4 else shape
+    _check_nifti_layout(path, shape[:3] + shape[4:] if series else shape, dtype, offset, stored)
     try:
         if series:
             data = np.asanyarray(img.dataobj[:, :, :, t])
@@ -374,6 +382,53 @@ def _check_nifti_head(path: Path) -> None:
         raise
     except (OSError, EOFError, zlib.error, struct.error) as e:
         raise DataError(f"{path}: not a readable NIfTI file: {type(e).__name__}: {e}") from e
+
+
+def _check_nifti_series_whole(path: Path, shape: tuple, dtype: np.dtype, offset: int) -> None:
+    """A 4-D NIfTI file's data against what its header declares: a DataError
+    naming the volumes it holds whole when it is cut short. A .gz file is
+    decompressed as a stream to count (nothing is kept: memory stays bounded)."""
+    import gzip
+
+    volume = math.prod(shape[:3]) * dtype.itemsize * math.prod(shape[4:])
+    need = offset + volume * shape[3]
+    if volume <= 0 or offset < 0:
+        return  # the layout check that follows says what is wrong
+    if path.name.lower().endswith(".gz"):
+        have = 0
+        try:
+            with gzip.open(path, "rb") as f:
+                while have < need:
+                    # small reads: the one that meets the cut loses what it decompressed
+                    chunk = f.read(min(1 << 16, need - have))
+                    if not chunk:
+                        break
+                    have += len(chunk)
+        except (OSError, EOFError, zlib.error):
+            pass  # cut short or corrupt here: `have` is what decompressed
+    else:
+        have = path.stat().st_size
+    if have >= need:
+        return
+    whole = max(have - offset, 0) // volume
+    held = (
+        f"volumes 0..{whole - 1} are whole"
+        if whole > 1
+        else "volume 0 is whole"
+        if whole
+        else "no volume is whole"
+    )
+    raise DataError(
+        f"{path}: truncated NIfTI file: the header declares {shape[3]} volumes {shape[:3]} {dtype} "
+        f"= {need - offset} bytes from byte {offset}, the file holds "
+        + (
+            f"about {max(have - offset, 0)} (decompressed)"
+            if path.name.lower().endswith(".gz")
+            else f"{max(have - offset, 0)}"
+        )
+        + f"; {held}"
+        + (" (clvis iso/gauss: --volume-index T reads one)" if whole else "")
+    )
 
 
 def _check_nifti_layout(

@@ -190,6 +190,16 @@ def _informative(a) -> bool:
     return finite.size > 0 and bool(finite.min() != finite.max())
 
 
+def _colors_title(colors: np.ndarray | None) -> str:
+    """The point-colour panel's title; it names the colour when the file gives
+    every point the same one (LAS files often store RGB 0 where the scanner
+    took no photograph: a black panel would look like a broken render)."""
+    if colors is None or colors.shape[0] == 0 or _informative(colors[:, :3]):
+        return "point colors"
+    rgb = ", ".join(f"{float(v):.3g}" for v in colors[0, :3])
+    return f"point colors (all ({rgb}) in the file)"
+
+
 def _pick_attribute(cloud, requested: str | None, default: str | None, source: str) -> str | None:
     """The attribute to color by: the one asked for (it must exist; x, y and z
     name the coordinates unless the cloud has attributes of those names);
@@ -337,7 +347,7 @@ def _render_panels(
             colors = np.zeros_like(g.rgba)
             hit = g.index != EMPTY
             colors[hit] = cloud.colors[g.index[hit]]
-        panels.append(_Panel("colors", "point colors", shaded(colors)))
+        panels.append(_Panel("colors", _colors_title(cloud.colors), shaded(colors)))
     panels.append(_depth_panel(g.depth))
     if g.vel2d is not None:
         angle, magnitude = images.velocity_images(g.vel2d)

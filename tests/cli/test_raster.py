@@ -691,3 +691,16 @@ def test_post_lidar_with_the_filter_off(tmp_path, capsys):
         capsys, "--points", 2000, "--post", "lidar", "--depth-filter", 0, "--out", tmp_path, *SMALL
     )
     assert rc == 2 and "--depth-filter 0 turns the filter off" in err
+
+
+def test_point_colors_panel_names_a_colour_the_file_gives_every_point():
+    """LAS files store RGB 0 where no photograph was taken (laspy's plane.laz):
+    the colours panel says so rather than look like a failed render."""
+    from clvis.cli.raster import _colors_title
+
+    assert _colors_title(np.zeros((5, 3), np.float32)) == "point colors (all (0, 0, 0) in the file)"
+    assert _colors_title(np.full((5, 4), 0.5, np.float32)) == "point colors (all (0.5, 0.5, 0.5) in the file)"
+    varied = np.zeros((5, 3), np.float32)
+    varied[2, 1] = 1.0
+    assert _colors_title(varied) == "point colors"
+    assert _colors_title(None) == "point colors"

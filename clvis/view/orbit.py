@@ -128,20 +128,28 @@ class Orbit:
                 raise ValueError(f"camera: fov must be in 1..170 degrees, got {fov_y!r}")
             self.fov_y = f
 
-    def state(self) -> dict:
-        """JSON-ready: eye, target, up, fov, and the same view as command-line options."""
+    def state(self, origin: npt.ArrayLike | None = None) -> dict:
+        """JSON-ready: eye, target, up, fov, and the same view as command-line
+        options. `origin`: where the orbit's coordinates start in the data's own
+        (a point cloud's origin: its positions are kept relative to it, the
+        commands' --eye/--target are in the file's coordinates); eye and target
+        are given in those."""
+        shift = np.zeros(3) if origin is None else np.asarray(origin, np.float64).reshape(3)
+        # written to a millionth of the data's size: enough digits for
+        # coordinates far from 0 (UTM eastings: 6 significant digits drop the
+        # decimals), rounding noise (1e-14 where a coordinate is 0) written as 0
+        quantum = 10.0 ** math.floor(math.log10(self.radius * 1e-6))
 
         def v(a) -> str:
-            # rounding noise (1e-14 where a coordinate is 0) is written as 0
-            return ",".join(f"{0.0 if abs(x) < 1e-9 * self.radius else x:.6g}" for x in a)
+            return ",".join(f"{round(x / quantum) * quantum + 0.0:.15g}" for x in a)
 
-        eye = self.eye
+        eye, target = self.eye + shift, self.target + shift
         return {
             "eye": [float(x) for x in eye],
-            "target": [float(x) for x in self.target],
+            "target": [float(x) for x in target],
             "up": [0.0, 0.0, 1.0],
             "fov": self.fov_y,
             "azimuth": self.azimuth,
             "elevation": self.elevation,
-            "cli": f"--eye {v(eye)} --target {v(self.target)} --up 0,0,1 --fov {self.fov_y:g}",
+            "cli": f"--eye {v(eye)} --target {v(target)} --up 0,0,1 --fov {self.fov_y:g}",
         }

@@ -84,6 +84,9 @@ class Scene:
     lo: np.ndarray
     hi: np.ndarray
     fit_points: np.ndarray | None = None  # what the first view frames (None: the box)
+    #: where the scene's coordinates start in the file's (a point cloud's
+    #: origin); the camera the page shows and takes is in the file's
+    file_origin: np.ndarray = np.zeros(3)
     description = ""
     device = ""
     # the modes whose frames() yields one frame per pass (see view_frames: a
@@ -178,6 +181,7 @@ class PointScene(Scene):
         if len(cloud.positions) == 0:
             raise DataError(f"{description}: no points to show")
         self.cloud = cloud
+        self.file_origin = np.asarray(cloud.origin, np.float64)
         pos = cloud.positions
         finite = np.isfinite(pos).all(axis=1)
         if not finite.any():
@@ -643,6 +647,7 @@ class DaskPointScene(Scene):
                 raise DataError(f"{description}: no point has finite coordinates")
             lo, hi = self.dr.bounds
             self.lo, self.hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+            self.file_origin = np.asarray(self.dr.origin, np.float64)
             self.fit_points = self.dr.sample(_FIT_SAMPLE).astype(np.float64)
         except BaseException:
             self.dr.close()

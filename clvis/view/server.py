@@ -222,7 +222,7 @@ class ViewServer:
             "choices": s.choices,
             "description": s.description,
             "device": s.device,
-            "camera": self.orbit.state(),
+            "camera": self.orbit.state(self.scene.file_origin),
         }
 
     def opened(self, sock: Any) -> None:
@@ -265,7 +265,7 @@ class ViewServer:
                 # the page's JSON as it came: Orbit.set rejects anything but two
                 # finite 3-vectors (None included) with a ValueError
                 eye, target = cast(npt.ArrayLike, msg.get("eye")), cast(npt.ArrayLike, msg.get("target"))
-                self.orbit.set(eye, target, msg.get("fov"))
+                self.orbit.set(*_local(self.scene.file_origin, eye, target), msg.get("fov"))
                 self.interacting, self.moved = False, True
             elif kind == "preset":  # one of the NARVis samplers' 128 hemisphere views
                 k = msg.get("hemisphere")
@@ -318,7 +318,7 @@ class ViewServer:
                 pw, ph = self.interaction_size(w, h)
                 preview = (self.orbit.camera(pw / ph), pw, ph)
             camera = self.orbit.camera(w / h)
-            state = self.orbit.state()
+            state = self.orbit.state(self.scene.file_origin)
             settings = dict(self.scene.settings)
             seq = self.seq
         for frame in view_frames(self.scene, camera, w, h, settings, superseded, preview):
@@ -378,6 +378,22 @@ class ViewServer:
 
             loop.call_soon_threadsafe(stop)
             self.thread.join(5)
+
+
+def _local(origin: np.ndarray, eye: Any, target: Any) -> tuple[Any, Any]:
+    """A typed camera (the file's coordinates) in the scene's: `origin`
+    subtracted; anything but two finite 3-vectors passes unchanged for
+    Orbit.set to refuse."""
+    out = []
+    for v in (eye, target):
+        try:
+            a = np.asarray(v, np.float64)
+        except (TypeError, ValueError):
+            return eye, target
+        if a.shape != (3,):
+            return eye, target
+        out.append(a - origin)
+    return out[0], out[1]
 
 
 def _number(v: Any, default: float = 0.0) -> float:

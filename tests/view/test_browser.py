@@ -150,6 +150,11 @@ class Browser:
             self.mouse("mouseMoved", x0 + (x1 - x0) * i / steps, y0 + (y1 - y0) * i / steps)
         self.mouse("mouseReleased", x1, y1, buttons=0)
 
+    def key(self, key: str, code: str, vk: int):
+        """One key press, to whatever has the focus (as a person typing)."""
+        for kind in ("keyDown", "keyUp"):
+            self.call("Input.dispatchKeyEvent", type=kind, key=key, code=code, windowsVirtualKeyCode=vk)
+
     def choose(self, select: str, value: str):
         """Pick `value` in the page's <select id=select>, as a person does."""
         self.js(
@@ -216,6 +221,17 @@ def test_points_orbit_and_modes(browser, tmp_path):
         assert (first["width"], first["height"]) == (WIDTH, HEIGHT)
         assert set(first["ms"]) >= {"render", "encode", "send"}
         cam0, img0 = first["camera"], b.canvas_hash()
+
+        # keys work before any click on the view (a right arrow turns it), then f frames it again
+        b.key("ArrowRight", "ArrowRight", 39)
+        turned = _settled(b, "points")["camera"]
+        assert abs(turned["azimuth"] - cam0["azimuth"]) > 5, (cam0, turned)
+        b.key("f", "KeyF", 70)
+        b.wait_for(
+            f"Math.abs(window.clvisView.camera.azimuth - ({cam0['azimuth']})) < 1e-6 || null",
+            "the fit view again",
+        )
+        _settled(b, "points")
 
         # drag to orbit: interaction frames at half size, then a full one
         b.js(

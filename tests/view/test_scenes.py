@@ -1,6 +1,7 @@
 """Scenes and the Python entry point (no browser)."""
 
 import json
+import re
 import urllib.request
 
 import numpy as np
@@ -337,3 +338,40 @@ def test_gaussian_modes_take_the_finite_points(scan):
         np.testing.assert_array_equal(got, want, err_msg=mode)
     assert s.scan_radius is not None and s.scan_radius[~finite].tolist() == [0, 0]
     np.testing.assert_array_equal(s.scan_radius[finite], clean.scan_radius)
+
+
+def test_the_camera_text_of_a_georeferenced_cloud_renders_it_with_clvis_render(tmp_path, capsys):
+    """A LAS-like cloud far from 0 (UTM): the viewer keeps positions relative
+    to the cloud's origin, the camera it shows is in the file's coordinates,
+    to enough digits, and `clvis render` with it draws the points (the text
+    once gave the local coordinates: a blank picture). A camera typed in
+    the page is in the file's coordinates too."""
+    from clvis import cli
+    from clvis.view import ViewServer
+
+    rng = np.random.default_rng(3)
+    world = rng.uniform((635_000.0, 4_850_000.0, 100.0), (635_300.0, 4_850_200.0, 160.0), (4000, 3))
+    origin = world.min(axis=0)
+    path = tmp_path / "utm.npz"
+    np.savez(path, positions=world)
+    s = ViewServer(PointScene(clvis.PointCloud(world - origin, origin=origin)))
+    try:
+        state = s.orbit.state(s.scene.file_origin)
+        assert np.allclose(state["eye"], s.orbit.eye + origin) and np.allclose(
+            state["target"], s.orbit.target + origin
+        )
+        cli_text = state["cli"]
+        eye = [float(v) for v in cli_text.split("--eye ")[1].split()[0].split(",")]
+        assert abs(eye[0] - state["eye"][0]) < 1e-3  # not 6 significant digits (635155 for 635155.219)
+        s.orbit.zoom(0.5)  # move away, then type the camera back in
+        s.handle({"type": "camera", "eye": state["eye"], "target": state["target"]})
+        assert np.allclose(s.orbit.eye + origin, state["eye"]) and np.allclose(
+            s.orbit.target + origin, state["target"]
+        )
+    finally:
+        s.close()
+    rc = cli.main(["render", str(path), *cli_text.split(), "--size", "96x64", "--out", str(tmp_path / "png")])
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    covered = re.search(r"covered\s+([\d,]+) of", out)
+    assert covered is not None and int(covered.group(1).replace(",", "")) > 200, out

@@ -1210,7 +1210,13 @@ def _render(args, progress) -> int:
         )
     for line in compared:
         print(line)
-    if covered * _SPARSE_FRACTION < width * height and covered < n:
+    if covered == 0 and (args.eye is not None or args.target is not None):
+        print(
+            "clvis render: note: no point is in view of this camera; --eye and --target are in "
+            f"the file's coordinates (the points span {_box(lo, hi, cloud.origin)})",
+            file=sys.stderr,
+        )
+    elif covered * _SPARSE_FRACTION < width * height and covered < n:
         print(
             f"clvis render: note: the points cover {covered:,} of {width * height:,} pixels "
             f"({100 * covered / (width * height):.2g} %)"

@@ -704,3 +704,17 @@ def test_point_colors_panel_names_a_colour_the_file_gives_every_point():
     varied[2, 1] = 1.0
     assert _colors_title(varied) == "point colors"
     assert _colors_title(None) == "point colors"
+
+
+def test_render_says_when_a_given_camera_sees_no_point(tmp_path, capsys):
+    """A camera looking away from a georeferenced cloud (e.g. one given in
+    the cloud's local coordinates): the note says where the points are, not
+    to draw bigger points."""
+    world = np.random.default_rng(1).uniform((635_000, 4_850_000, 100), (635_300, 4_850_200, 160), (2000, 3))
+    path = tmp_path / "utm.npz"
+    np.savez(path, positions=world)
+    args = ("--eye", "-400,-300,300", "--target", "150,100,30", "--out", tmp_path / "png", *SMALL)
+    rc, out, err = _render(capsys, path, *args)
+    assert rc == 0, err
+    assert "no point is in view of this camera; --eye and --target are in the file's coordinates" in err
+    assert "points span 635" in err and "--point-size auto" not in err

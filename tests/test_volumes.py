@@ -129,12 +129,20 @@ def test_npy_round_trip(tmp_path, dtype):
     np.testing.assert_array_equal(f.data, a)
 
 
+def test_npy_mask_reads_as_zeros_and_ones(tmp_path):
+    """A boolean mask (a segmentation saved as seg > t) is a 0/1 volume."""
+    mask = np.zeros((4, 5, 6), bool)
+    mask[1:3, 2:4, 1:5] = True
+    v = read_volume(_npy(tmp_path, mask))
+    assert v.data.dtype == np.uint8
+    np.testing.assert_array_equal(v.data, mask.astype(np.uint8))
+
+
 @pytest.mark.parametrize(
     "a, message",
     [
         (np.zeros((3, 4)), "expected a 3-D volume"),
         (np.zeros((2, 3, 4, 5)), "expected a 3-D volume"),
-        (np.zeros((2, 3, 4), bool), "real numbers"),
         (np.zeros((2, 3, 4), np.complex64), "real numbers"),
         (np.zeros((2, 0, 4)), "empty"),
     ],

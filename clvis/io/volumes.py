@@ -223,7 +223,10 @@ def _read_raw(path: Path, shape, dtype) -> Volume:
 
 
 def _real_volume(path: Path, a: np.ndarray) -> np.ndarray:
-    if a.dtype == np.bool_ or a.dtype.kind not in "iuf":
+    if a.dtype == np.bool_:
+        # a mask (np.save("mask.npy", seg > t)): 0 and 1, its surface at the default 0.5
+        a = a.view(np.uint8)
+    if a.dtype.kind not in "iuf":
         raise DataError(f"{path}: expected real numbers, got dtype {a.dtype}")
     if a.ndim != 3:
         raise DataError(f"{path}: expected a 3-D volume, got shape {a.shape}")
@@ -298,7 +301,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         _check_nifti_series_whole(path, shape, dtype, offset)
         raise DataError(
             f"{path}: a 4-D NIfTI image of {shape[3]} volumes {shape[:3]} (i, j, k); "
-            "choose one with volume_index (clvis iso/gauss: --volume-index T)"
+            "choose one: --volume-index T (clvis iso, gauss and view), volume_index=T in Python"
         )
     # a series' volume t needs the file up to its end only (volumes are
     # contiguous in a 4-D file; a 5-D one interleaves the fifth axis)
@@ -427,7 +430,7 @@ def _check_nifti_series_whole(path: Path, shape: tuple, dtype: np.dtype, offset:
             else f"{max(have - offset, 0)}"
         )
         + f"; {held}"
-        + (" (clvis iso/gauss: --volume-index T reads one)" if whole else "")
+        + (" (clvis iso, gauss and view: --volume-index T reads one)" if whole else "")
     )
 
 

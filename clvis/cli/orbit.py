@@ -13,6 +13,8 @@ import argparse
 import contextlib
 import math
 import os
+import re
+import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -145,16 +147,41 @@ def write_orbit(
     from .. import images
 
     out = Path(out)
-    files = []
+    files: list[Path] = []
     label = _Frames(n)
-    with progress.stage(label):
-        for k in range(n):
-            files.append(images.save_png(out / f"orbit-{k:04d}.png", frame(k, 360.0 * k / n)))
-            label.done = k + 1
+    # frames numbered past this turntable's, left by an earlier one in the
+    # same folder: said (not removed), since orbit-%04d.png would pick them up
+    stale = _stale_frames(out, n)
+    try:
+        with progress.stage(label):
+            for k in range(n):
+                files.append(images.save_png(out / f"orbit-{k:04d}.png", frame(k, 360.0 * k / n)))
+                label.done = k + 1
+    except KeyboardInterrupt:
+        done = f"orbit-0000.png .. {files[-1].name}" if files else "none"
+        print(f"clvis: interrupted after {len(files)} of {n} orbit frames ({done}) in {out}", file=sys.stderr)
+        raise
+    finally:
+        if stale:
+            print(
+                f"clvis: note: {len(stale)} orbit frame{'s' if len(stale) != 1 else ''} of an earlier, "
+                f"longer turntable stay in {out} ({stale[0].name} .. {stale[-1].name}); a movie of "
+                "orbit-%04d.png would take them too",
+                file=sys.stderr,
+            )
     if movie is None:
         return files, None
     with progress.stage(f"encoding {Path(movie).name}"):
         return files, encode(files, movie, fps)
+
+
+def _stale_frames(out: Path, n: int) -> list[Path]:
+    """out/orbit-KKKK.png with K >= n, in order (none when out is not a folder)."""
+    try:
+        names = [p for p in out.glob("orbit-*.png") if re.fullmatch(r"orbit-\d{4,}\.png", p.name)]
+    except OSError:
+        return []
+    return sorted((p for p in names if int(p.name[6:-4]) >= n), key=lambda p: int(p.name[6:-4]))
 
 
 def encode(frames: Sequence[Path], movie: str | os.PathLike[str], fps: int) -> Path:

@@ -136,10 +136,26 @@ def test_ctrl_c_during_the_orbit_leaves_complete_frames(tmp_path, capsys, monkey
     monkeypatch.setattr(orbit, "turn", turn)
     rc, out, err = _main(capsys, "iso", "--size", "48x32", "--orbit", 5, "--quiet", "--out", tmp_path)
     assert rc == 130 and err.strip().endswith("clvis iso: interrupted")
+    assert f"interrupted after 2 of 5 orbit frames (orbit-0000.png .. orbit-0001.png) in {tmp_path}" in err
     assert _frames(tmp_path) == ["orbit-0000.png", "orbit-0001.png"]
     for name in _frames(tmp_path):
         assert _png(tmp_path / name).shape[1] == 48  # complete PNGs
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_a_shorter_turntable_names_the_frames_an_earlier_one_left(tmp_path, capsys):
+    """orbit-%04d.png in a folder holding a longer turntable's frames: the
+    ones past this run's are named (a movie of the pattern would mix them)."""
+    args = ("iso", "--size", "48x32", "--quiet", "--out", tmp_path)
+    rc, out, err = _main(capsys, *args, "--orbit", 5)
+    assert rc == 0, err
+    assert "earlier" not in err
+    rc, out, err = _main(capsys, *args, "--orbit", 2)
+    assert rc == 0, err
+    stay = f"3 orbit frames of an earlier, longer turntable stay in {tmp_path}"
+    assert f"{stay} (orbit-0002.png .. orbit-0004.png)" in err
+    rc, out, err = _main(capsys, *args, "--orbit", 5)
+    assert rc == 0 and "earlier" not in err
 
 
 def test_movie(tmp_path, capsys):

@@ -361,6 +361,32 @@ def test_nifti_truncated_series_says_so_before_asking_for_an_index(tmp_path, suf
         read_volume(whole)  # whole: the index is what is missing
 
 
+@pytest.mark.parametrize("suffix", [".mgz", ".mgh"])
+@pytest.mark.parametrize("dtype", [np.uint8, np.float32])
+def test_mgh_round_trip(tmp_path, suffix, dtype):
+    """FreeSurfer's MGH (brain.mgz, aseg.mgz) through nibabel, as NIfTI is read:
+    [i, j, k] to [z, y, x], the voxel sizes reversed; nibabel's own test.mgz
+    is 4-D and needs volume_index; a cut .mgh says it is truncated."""
+    data = _sample((6, 5, 4), np.dtype(dtype), seed=4)
+    affine = np.diag([0.5, 1.0, 2.0, 1.0])
+    path = tmp_path / f"brain{suffix}"
+    nibabel.save(nibabel.MGHImage(data, affine), path)
+    v = read_volume(path)
+    np.testing.assert_array_equal(v.data, data.transpose(2, 1, 0))
+    assert v.spacing == (2.0, 1.0, 0.5)
+    if suffix == ".mgh":
+        cut = tmp_path / "cut.mgh"
+        cut.write_bytes(path.read_bytes()[: 284 + data.nbytes // 2])
+        with pytest.raises(DataError, match="truncated MGH file"):
+            read_volume(cut)
+    import os
+
+    test = os.path.join(os.path.dirname(nibabel.__file__), "tests", "data", "test.mgz")
+    with pytest.raises(DataError, match="a 4-D MGH image of 2 volumes"):
+        read_volume(test)
+    assert read_volume(test, volume_index=1).data.shape == (5, 4, 3)
+
+
 def test_otsu_level_sits_between_the_samples_it_separates():
     from skimage.filters import threshold_otsu
 

@@ -68,7 +68,7 @@ Without a FILE it renders an embedded volume: marschner-lobb (64^3, iso 0.5)
 or turbulence (128^3, iso 0.5). FILE: a raw volume named like the Open SciVis
 datasets (<name>_<X>x<Y>x<Z>_<type>.raw, or any .raw with --shape and --dtype),
 a .npy volume [z, y, x], a NIfTI file (.nii, .nii.gz; a 4-D series with
---volume-index), or VTK image data (.vti, legacy .vtk structured points; a
+--volume-index), FreeSurfer's MGH (.mgz, .mgh), or VTK image data (.vti, legacy .vtk structured points; a
 .vtp, .vtu, .vts or a legacy .vtk POLYDATA or grid is a point cloud: clvis
 render, clvis gauss, clvis view).
 The default isovalue of a file is Otsu's threshold of its samples

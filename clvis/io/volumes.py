@@ -17,6 +17,9 @@ Formats, chosen by the file name (case-insensitive):
   stored as 4-D) are dropped. A 4-D image (a time series) needs ``volume_index``
   to pick one volume; only that volume is read. The header's scale (scl_slope,
   scl_inter) is applied when set, as nibabel does.
+- ``.mgz``, ``.mgh``: FreeSurfer's MGH format (brain.mgz, aseg.mgz) through
+  nibabel, read as NIfTI is (the same axes, ``volume_index`` for a 4-D one;
+  ``.mgz`` is gzip-compressed).
 - ``.vti`` (VTK XML ImageData) and ``.vtk`` (legacy STRUCTURED_POINTS):
   through VTK's own readers (the ``vtk`` extra: ``pip install "clvis[vtk]"``),
   after clvis's checks of the header against the file (:mod:`clvis.io.vtk`);
@@ -99,7 +102,7 @@ class Volume:
         )
 
 
-FORMATS = (".raw", ".npy", ".nii", ".nii.gz", ".vti", ".vtk")
+FORMATS = (".raw", ".npy", ".nii", ".nii.gz", ".mgz", ".mgh", ".vti", ".vtk")
 
 
 def read_volume(
@@ -109,12 +112,12 @@ def read_volume(
     dtype: npt.DTypeLike | None = None,
     volume_index: int | None = None,
 ) -> Volume:
-    """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``, ``.vti``,
-    ``.vtk``; see the module docstring).
+    """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``, ``.mgz``,
+    ``.mgh``, ``.vti``, ``.vtk``; see the module docstring).
 
     `shape` (Z, Y, X) and `dtype` apply to ``.raw`` files only: they give the
     shape and the sample type when the file name does not, and override the
-    name when it does. `volume_index` picks one volume of a 4-D NIfTI file."""
+    name when it does. `volume_index` picks one volume of a 4-D NIfTI or MGH file."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path: expected a str or path, got {type(path).__name__}")
     path = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO or device
@@ -123,10 +126,10 @@ def read_volume(
         return _read_raw(path, shape, dtype)
     if shape is not None or dtype is not None:
         raise ValueError(f"shape, dtype: only for .raw files, not {path.name}")
-    if name.endswith((".nii", ".nii.gz")):
+    if name.endswith((".nii", ".nii.gz", ".mgz", ".mgh")):
         return _read_nifti(path, volume_index)
     if volume_index is not None:
-        raise ValueError(f"volume_index: only for 4-D NIfTI files, not {path.name}")
+        raise ValueError(f"volume_index: only for 4-D NIfTI or MGH files, not {path.name}")
     if name.endswith(".npy"):
         return _read_npy(path)
     if name.endswith((".vti", ".vtk")):
@@ -245,12 +248,23 @@ def _read_npy(path: Path) -> Volume:
 _DEFLATE_MAX_RATIO = 1032
 
 
+def _gzipped(path: Path) -> bool:
+    """Whether a NIfTI or MGH file is gzip-compressed (.nii.gz, .mgz)."""
+    return path.name.lower().endswith((".gz", ".mgz"))
+
+
+def _kind(path: Path) -> str:
+    return "MGH" if path.name.lower().endswith((".mgz", ".mgh")) else "NIfTI"
+
+
 def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
+    """A NIfTI or (the same reading, nibabel's MGHImage) an MGH file."""
+    kind = _kind(path)
     try:
         import nibabel
     except ImportError:
         raise ImportError(
-            f'reading {path.name} (NIfTI) needs nibabel: pip install ".[nifti]" in a clvis checkout '
+            f'reading {path.name} ({kind}) needs nibabel: pip install ".[nifti]" in a clvis checkout '
             "(or pip install nibabel)"
         ) from None
     from nibabel.filebasedimages import ImageFileError
@@ -285,7 +299,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         zooms = tuple(float(z) for z in header.get_zooms())
         affine = np.array(img.affine, dtype=np.float64)
     except errors as e:
-        raise DataError(f"{path}: not a readable NIfTI file: {type(e).__name__}: {e}") from e
+        raise DataError(f"{path}: not a readable {kind} file: {type(e).__name__}: {e}") from e
     series = len(shape) == 4 and shape[3] > 1
     if volume_index is not None:
         t = _index(volume_index) if not isinstance(volume_index, bool) else -1
@@ -300,7 +314,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         # pick one only to be told then that the file is cut short
         _check_nifti_series_whole(path, shape, dtype, offset)
         raise DataError(
-            f"{path}: a 4-D NIfTI image of {shape[3]} volumes {shape[:3]} (i, j, k); "
+            f"{path}: a 4-D {kind} image of {shape[3]} volumes {shape[:3]} (i, j, k); "
             "choose one: --volume-index T (clvis iso, gauss and view), volume_index=T in Python"
         )
     # a series' volume t needs the file up to its end only (volumes are
@@ -313,7 +327,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         else:
             data = np.asanyarray(img.dataobj)
     except errors as e:
-        raise DataError(f"{path}: not a readable NIfTI file: {type(e).__name__}: {e}") from e
+        raise DataError(f"{path}: not a readable {kind} file: {type(e).__name__}: {e}") from e
     if data.ndim > 3 and all(s == 1 for s in data.shape[3:]):
         data = data.reshape(data.shape[:3])
     if data.ndim != 3:
@@ -339,7 +353,7 @@ def _check_nifti_head(path: Path) -> None:
     intent codes (nibabel gives a CIFTI image, without a volume's header)."""
     import gzip
 
-    gz = path.name.lower().endswith(".gz")
+    gz = _gzipped(path)
     size = path.stat().st_size
     # what the data after the header can be: the file, or what gzip expands it to
     available = size * _DEFLATE_MAX_RATIO if gz else size
@@ -397,7 +411,7 @@ def _check_nifti_series_whole(path: Path, shape: tuple, dtype: np.dtype, offset:
     need = offset + volume * shape[3]
     if volume <= 0 or offset < 0:
         return  # the layout check that follows says what is wrong
-    if path.name.lower().endswith(".gz"):
+    if _gzipped(path):
         have = 0
         try:
             with gzip.open(path, "rb") as f:
@@ -422,13 +436,9 @@ def _check_nifti_series_whole(path: Path, shape: tuple, dtype: np.dtype, offset:
         else "no volume is whole"
     )
     raise DataError(
-        f"{path}: truncated NIfTI file: the header declares {shape[3]} volumes {shape[:3]} {dtype} "
+        f"{path}: truncated {_kind(path)} file: the header declares {shape[3]} volumes {shape[:3]} {dtype} "
         f"= {need - offset} bytes from byte {offset}, the file holds "
-        + (
-            f"about {max(have - offset, 0)} (decompressed)"
-            if path.name.lower().endswith(".gz")
-            else f"{max(have - offset, 0)}"
-        )
+        + (f"about {max(have - offset, 0)} (decompressed)" if _gzipped(path) else f"{max(have - offset, 0)}")
         + f"; {held}"
         + (" (clvis iso, gauss and view: --volume-index T reads one)" if whole else "")
     )
@@ -441,7 +451,7 @@ def _check_nifti_layout(
     allocates the data (it allocates what the header declares, then reads).
     `shape` is what will be read, `stored` (default `shape`) what the file holds."""
     if dtype == np.bool_ or dtype.kind not in "iuf":
-        raise DataError(f"{path}: expected real numbers, got NIfTI data type {dtype}")
+        raise DataError(f"{path}: expected real numbers, got {_kind(path)} data type {dtype}")
     if len(shape) > 3 and any(s != 1 for s in shape[3:]) or len(shape) < 3:
         raise DataError(f"{path}: expected a 3-D volume, got shape {shape} (i, j, k, ...)")
     if min(shape) < 1:
@@ -450,7 +460,7 @@ def _check_nifti_layout(
         raise DataError(f"{path}: malformed NIfTI header: data offset (vox_offset) {offset}")
     size = path.stat().st_size
     nbytes = math.prod(stored or shape) * dtype.itemsize
-    if path.name.lower().endswith(".gz"):
+    if _gzipped(path):
         if offset + nbytes > size * _DEFLATE_MAX_RATIO:
             raise DataError(
                 f"{path}: the header declares {shape} {dtype} samples = {nbytes} bytes from "
@@ -459,7 +469,7 @@ def _check_nifti_layout(
             )
     elif offset + nbytes > size:
         raise DataError(
-            f"{path}: truncated NIfTI file: the header declares {shape} {dtype} samples = "
+            f"{path}: truncated {_kind(path)} file: the header declares {shape} {dtype} samples = "
             f"{nbytes} bytes from byte {offset}, the file has {size} bytes"
         )
 

@@ -670,7 +670,13 @@ def check_iso_volume(data: np.ndarray, source: str) -> None:
     """CliError naming `source`, the count and the first sample when the
     volume holds a NaN or infinite one: the isosurface renderer compresses it
     with ZFP's fixed-rate mode, which cannot keep them (the library's message
-    named no file)."""
+    named no file); and when an axis has a single sample (a slice: no
+    surface to find between samples)."""
+    if data.ndim == 3 and min(data.shape) < 2:
+        raise CliError(
+            f"{source}: shape {tuple(data.shape)} (z, y, x): an isosurface lies between samples, so it "
+            "needs 2 or more along every axis (clvis gauss draws a single slice)"
+        )
     bad = ~np.isfinite(data)
     if bad.any():
         first = np.unravel_index(int(np.argmax(bad)), data.shape)  # no list of every bad sample

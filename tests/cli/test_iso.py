@@ -105,6 +105,24 @@ def test_volume_with_nan_samples_names_the_file(tmp_path, capsys, command):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("command", ["iso", "view"])
+def test_a_single_slice_names_the_file_and_what_draws_it(tmp_path, capsys, command):
+    if command == "view":
+        pytest.importorskip("tornado", reason="the view extra (tornado) is not installed")
+    path = tmp_path / "slice.npy"
+    np.save(path, np.random.default_rng(0).random((1, 16, 16)).astype(np.float32))
+    args = ["--size", "16x16"] + (
+        ["--out", str(tmp_path / "o")] if command == "iso" else ["--measure", "iso"]
+    )
+    assert cli.main([command, str(path), *args]) == 2
+    err = capsys.readouterr().err
+    assert (
+        f"clvis {command}: error: {path}: shape (1, 16, 16) (z, y, x): an isosurface lies between samples"
+        in err
+    )
+    assert not (tmp_path / "o").exists()
+
+
 def test_iso_bad_raw(tmp_path, capsys):
     (tmp_path / "x_4x4x4_uint8.raw").write_bytes(b"\0" * 10)
     assert cli.main(["iso", str(tmp_path / "x_4x4x4_uint8.raw"), "--out", str(tmp_path)]) == 2

@@ -29,10 +29,7 @@ network alone and for frames that take push-pull's colour where
 likely continuing their neighbours' surface), the network's elsewhere; and the
 oracle that takes push-pull's colour exactly on the *same* rays.
 
-The next candidate's t is not in an IsoImage: this script wraps the
-renderer's private step that counts the candidates left
-(``clvis.iso.render._Tile.candidates``) and runs its traverse once more to
-read the t's (the image is unchanged). bench/results/README.md has the output.
+The next candidate's t is IsoImage.next_t. bench/results/README.md has the output.
 A measuring script, not a test.
 """
 
@@ -43,7 +40,6 @@ import argparse
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-import clvis.iso.render as R
 from clvis import post
 from clvis.iso import IsoRenderer
 from clvis.post import IsoPlanes
@@ -54,31 +50,6 @@ from clvis.training import data
 #: a surface this many voxels (in t) from the neighbours' is "elsewhere"
 FAR_VOXELS = 4.0
 SIDE = 64
-
-_NEXT: dict[str, np.ndarray] = {}
-_count_candidates = R._Tile.candidates
-
-
-def _candidates_and_next_t(self, active, img=None, p0=0):
-    """_Tile.candidates, then the same traverse again from the rays' resume
-    t, keeping each running ray's first candidate block's t in _NEXT."""
-    out = _count_candidates(self, active, img, p0)
-    n = int(active.size)
-    if n == 0 or self.walk is None:
-        return out
-    q = self.q
-    iso, (fine, coarse) = self.walk
-    blocks = R.runtime.empty(q, n * R.CANDIDATES, np.uint32, "depth cue: blocks")
-    ts = R.runtime.empty(q, n * R.CANDIDATES, np.float32, "depth cue: t")
-    R.macro_traverse(
-        q, *self.volume, iso, self.cam, self.w, fine, coarse, active, self.count, n,
-        self.ray_t.copy(queue=q), R.CANDIDATES, blocks, ts, first_pixel=self.p0,
-    )  # fmt: skip
-    count = int(self.count.get()[0])
-    ids = self.p0 + active[:count].get().astype(np.int64)
-    first = blocks.get().reshape(n, R.CANDIDATES)[:count, 0] != 0xFFFFFFFF
-    _NEXT["t"][ids] = np.where(first, ts.get().reshape(n, R.CANDIDATES)[:count, 0], np.inf)
-    return out
 
 
 def _auc(score: np.ndarray, label: np.ndarray) -> float:
@@ -102,12 +73,11 @@ def _rays(fam: str, frames: int, w: int, h: int, net) -> dict[str, np.ndarray]:
         vol, iso = data.procedural_volume(fam, rng, SIDE)
         r = IsoRenderer(vol, rate=8, spacing=(step,) * 3, origin=(-1.0, -1.0, -1.0))
         cam = data.orbit_camera(rng, (-1, -1, -1), (1, 1, 1), w / h, (0.45, 0.95))
-        _NEXT["t"] = np.full(w * h, np.inf, np.float32)
         snaps, img = {}, None
         for img in r.passes(cam, w, h, iso, speculation=False):
             for c in data.COMPLETIONS:
                 if c not in snaps and img.completion >= c:
-                    snaps[c] = (img.active.copy(), img.candidates.copy(), img.t.copy(), _NEXT["t"].copy())
+                    snaps[c] = (img.active.copy(), img.candidates.copy(), img.t.copy(), img.next_t.copy())
         assert img is not None
         rgb = np.where(img.hit[..., None], img.rgba[..., :3], 0).astype(np.float32)
         for active, cand, t, nxt in snaps.values():
@@ -117,7 +87,7 @@ def _rays(fam: str, frames: int, w: int, h: int, net) -> dict[str, np.ndarray]:
                 continue
             _, (iy, ix) = distance_transform_edt(~shown, return_indices=True)
             near_t = t[iy, ix]
-            gap = nxt.reshape(h, w) - near_t
+            gap = nxt - near_t
             vals = np.concatenate([rgb * shown[..., None], shown[..., None]], 2).astype(np.float32)
             pp = np.asarray(pushpull(vals, ~run))[..., :3]
             got = net(IsoPlanes(vals, shown, run, cand))[..., :3] / np.float32(255)
@@ -165,7 +135,6 @@ def main() -> None:
     ap.add_argument("--gates", action="store_true", help="the gating table instead (see above)")
     a = ap.parse_args()
     w, h = (int(v) for v in a.size.split("x"))
-    R._Tile.candidates = _candidates_and_next_t
     net = post.load("infill")
     if a.gates:
         _gates(a.families.split(","), a.frames, w, h, net)

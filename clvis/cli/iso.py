@@ -768,6 +768,7 @@ def _empty(w: int, h: int) -> IsoImage:
         1.0,
         {},
         np.zeros((h, w), np.uint8),
+        np.full((h, w), np.inf, np.float32),
     )
 
 

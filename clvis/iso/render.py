@@ -121,8 +121,8 @@ PIXEL_BYTES = 4 + 1 + 4 + 4 + 1 + 1 + 4 + 4 + 16 + 8
 ITEM_BYTES = 4 + 4 + 1 + 4 + 1 + 4 + 16 + 4 + 4 + 4 + 4 + 1 + 4 + 16
 # the default device budget of one tile's rays and pass items
 TILE_BYTES = 256 * 2**20
-# host bytes per image pixel: rgba, depth, hit, t, active, candidates
-HOST_PIXEL_BYTES = 16 + 4 + 1 + 4 + 1 + 1
+# host bytes per image pixel: rgba, depth, hit, t, active, candidates, next_t
+HOST_PIXEL_BYTES = 16 + 4 + 1 + 4 + 1 + 1 + 4
 # IsoImage.candidates counts the candidate blocks left on a running ray up to
 # this many (a macro_traverse with n_spec = CANDIDATES from its resume t)
 CANDIDATES = 8
@@ -173,7 +173,11 @@ class IsoImage(Picture):
     resumes, counted up to CANDIDATES (8: 8 or more; >= 1, since a ray with
     none left is finished at once), 0 elsewhere and, in ``passes()``, at the
     rays of tiles not traced yet; None for an image not from the renderer.
-    From ``render(..., host=False)`` the six planes are
+    ``next_t`` (H, W) float32: per running ray the ray parameter t where its
+    next candidate block begins (the first of those ``candidates`` counts;
+    the finished hits' ``t`` is on the same scale), +inf elsewhere and where
+    ``candidates`` is 0; None for an image not from the renderer.
+    From ``render(..., host=False)`` the seven planes are
     ``pyopencl.array.Array`` of the same shapes and dtypes.
     ``to_uint8(background=None)`` and ``save_png(path)``: the shaded surface
     as a picture, as for every image type (:class:`clvis.images.Picture`)."""
@@ -186,6 +190,7 @@ class IsoImage(Picture):
     completion: float
     stats: dict[str, Any]
     candidates: np.ndarray | cla.Array | None = None
+    next_t: np.ndarray | cla.Array | None = None
 
     def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
         """(H, W, 4) uint8 RGBA: the shaded surface where a ray hit it, transparent
@@ -206,6 +211,7 @@ class _HostImage:
         self.t = np.full(npix, np.inf, np.float32)
         self.active = np.zeros(npix, bool)
         self.candidates = np.zeros(npix, np.uint8)
+        self.next_t = np.full(npix, np.inf, np.float32)
 
     def image(self, w: int, h: int, copy: bool) -> IsoImage:
         c = np.copy if copy else (lambda a: a)
@@ -218,6 +224,7 @@ class _HostImage:
             1.0,
             {},
             c(self.candidates).reshape(h, w),
+            c(self.next_t).reshape(h, w),
         )
 
     def mark_active(self, p0: int, ids: Any, count: int) -> None:
@@ -237,11 +244,15 @@ class _HostImage:
         cl.wait_for_events(events)
         self.active[sl] = False
         self.mark_active(tile.p0, active, int(active.size))
-        cand = tile.candidates(active)
-        if cand is None:
+        left = tile.candidates(active)
+        if left is None:
             self.candidates[sl] = 0
+            self.next_t[sl] = np.inf
         else:
-            cand.get(queue=q, ary=self.candidates[sl])
+            cand, next_t = left
+            ev = cand.get_async(queue=q, ary=self.candidates[sl])[1]
+            next_t.get(queue=q, ary=self.next_t[sl])
+            ev.wait()
 
 
 class _DeviceImage:
@@ -258,7 +269,8 @@ class _DeviceImage:
         self.t = runtime.empty(q, npix, np.float32, "iso image t")
         self.active = runtime.zeros(q, npix, np.uint8, "iso image active mask")
         self.candidates = runtime.zeros(q, npix, np.uint8, "iso image candidates left")
-        for a in (self.depth, self.t):
+        self.next_t = runtime.empty(q, npix, np.float32, "iso image next candidate t")
+        for a in (self.depth, self.t, self.next_t):
             runtime.fill(q, a, np.float32(np.inf))
 
     def image(self, w: int, h: int, copy: bool) -> IsoImage:
@@ -274,6 +286,7 @@ class _DeviceImage:
             1.0,
             {},
             c(self.candidates).reshape(h, w),
+            c(self.next_t).reshape(h, w),
         )
 
     def mark_active(self, p0: int, ids: Any, count: int) -> None:
@@ -300,8 +313,10 @@ class _DeviceImage:
             self.active.base_data,
         )
         self.mark_active(tile.p0, active, int(active.size))
-        runtime.fill(self.q, self.candidates[tile.p0 : tile.p0 + tile.n], np.uint8(0))
-        tile.candidates(active, self.candidates, tile.p0)
+        sl = slice(tile.p0, tile.p0 + tile.n)
+        runtime.fill(self.q, self.candidates[sl], np.uint8(0))
+        runtime.fill(self.q, self.next_t[sl], np.float32(np.inf))
+        tile.candidates(active, (self.candidates, self.next_t), tile.p0)
 
 
 def view_flips(
@@ -368,21 +383,27 @@ class _Tile:
         it is there; a device image: two launches)."""
         out.write_tile(self, self.active if active is None else active)
 
-    def candidates(self, active: Any, img: cla.Array | None = None, p0: int = 0) -> cla.Array | None:
+    def candidates(
+        self, active: Any, img: tuple[cla.Array, cla.Array] | None = None, p0: int = 0
+    ) -> tuple[cla.Array, cla.Array] | None:
         """The candidate blocks left on each running ray (`active`: the
-        tile's list, its count in self.count), counted up to CANDIDATES: a
-        macro_traverse with n_spec = CANDIDATES from a copy of the rays'
-        resume t (the tile's own rays do not move), then pass.cl's
-        mark_candidates into `img` at p0 + id (default: a zeroed uint8 array
-        of the tile's pixels, returned). None when no ray is running and no
-        `img` is given."""
+        tile's list, its count in self.count), counted up to CANDIDATES, and
+        the first one's t: a macro_traverse with n_spec = CANDIDATES from a
+        copy of the rays' resume t (the tile's own rays do not move), then
+        pass.cl's mark_candidates into `img` = (uint8 counts, float32 t's) at
+        p0 + id (default: a zeroed and an +inf array of the tile's pixels,
+        returned). None when no ray is running and no `img` is given."""
         n = int(active.size)
         if n == 0 or self.walk is None:
             return img
         q = self.q
         iso, (fine, coarse) = self.walk
         if img is None:
-            img = runtime.zeros(q, self.n, np.uint8, "candidates left")
+            img = (
+                runtime.zeros(q, self.n, np.uint8, "candidates left"),
+                runtime.empty(q, self.n, np.float32, "next candidate t"),
+            )
+            runtime.fill(q, img[1], np.float32(np.inf))
         cand_block = runtime.empty(q, n * CANDIDATES, np.uint32, "candidates left: blocks")
         cand_t = runtime.empty(q, n * CANDIDATES, np.float32, "candidates left: t")
         ray_t = self.ray_t.copy(queue=q)
@@ -413,7 +434,9 @@ class _Tile:
             np.uint32(n),
             np.uint32(CANDIDATES),
             cand_block.base_data,
-            img.base_data,
+            cand_t.base_data,
+            img[0].base_data,
+            img[1].base_data,
         )
         return img
 

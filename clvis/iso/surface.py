@@ -220,7 +220,8 @@ def composite(
     image, e.g. color_surface(image, values=...); then `colors` is not used).
     ``active``: rays still running in any image; ``candidates``: the sum of
     the images' (the candidate blocks left over every isovalue), capped at
-    CANDIDATES, None where an image has none; ``completion``: the least
+    CANDIDATES, None where an image has none; ``next_t``: the nearest of the
+    images' (None where an image has none); ``completion``: the least
     of the images'; ``stats``: {"images": their stats}."""
     imgs = list(images)
     if not imgs or not all(isinstance(i, IsoImage) for i in imgs):
@@ -246,6 +247,10 @@ def composite(
     if all(getattr(i, "candidates", None) is not None for i in imgs):
         total = np.stack([_plane(i, "candidates").astype(np.int64) for i in imgs]).sum(axis=0)
         left = np.minimum(total, CANDIDATES).astype(np.uint8)
+    # where the next candidate block begins over every isovalue's ray: the nearest
+    next_t = None
+    if all(getattr(i, "next_t", None) is not None for i in imgs):
+        next_t = np.stack([_plane(i, "next_t") for i in imgs]).min(axis=0).astype(np.float32)
     return IsoImage(
         rgba=np.take_along_axis(rgba, sel[..., None], axis=0)[0],
         depth=np.take_along_axis(depth, sel, axis=0)[0],
@@ -255,4 +260,5 @@ def composite(
         completion=min(float(i.completion) for i in imgs),
         stats={"images": [i.stats for i in imgs]},
         candidates=left,
+        next_t=next_t,
     )

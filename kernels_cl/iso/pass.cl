@@ -76,12 +76,16 @@
  *     running; run after tile_image).
  *
  * kernel mark_candidates(uint p0, global const uint *active, uint count, uint n_spec,
- *                        global const uint *cand_block, global uchar *img_cand)
+ *                        global const uint *cand_block, global const float *cand_t,
+ *                        global uchar *img_cand, global float *img_next_t)
  *     img_cand[p0 + active[i]] = the number of k < n_spec with
  *     cand_block[i * n_spec + k] != 0xFFFFFFFF, for i < count (n_spec <= 255):
  *     the candidate blocks a macro_traverse from the rays' resume t found
  *     (IsoImage.candidates, the blocks left on each running ray, counted up
- *     to n_spec). The host zeroes the tile's img_cand first.
+ *     to n_spec); img_next_t[p0 + active[i]] = cand_t[i * n_spec], the first
+ *     one's t (IsoImage.next_t: where the ray's next candidate block begins),
+ *     +inf when it found none. The host zeroes the tile's img_cand and fills
+ *     its img_next_t with +inf first.
  */
 #include "clvis/atomics.h"
 
@@ -191,7 +195,8 @@ kernel void mark_active(uint p0, global const uint *active, uint count, global u
 }
 
 kernel void mark_candidates(uint p0, global const uint *active, uint count, uint n_spec,
-                            global const uint *cand_block, global uchar *img_cand)
+                            global const uint *cand_block, global const float *cand_t,
+                            global uchar *img_cand, global float *img_next_t)
 {
     uint i = get_global_id(0);
     if (i >= count)
@@ -199,5 +204,7 @@ kernel void mark_candidates(uint p0, global const uint *active, uint count, uint
     uint k = 0;
     for (uint e = i * n_spec; e < (i + 1u) * n_spec; ++e)
         k += cand_block[e] != 0xFFFFFFFFu;
-    img_cand[p0 + active[i]] = (uchar)k;
+    uint p = p0 + active[i];
+    img_cand[p] = (uchar)k;
+    img_next_t[p] = cand_block[i * n_spec] != 0xFFFFFFFFu ? cand_t[i * n_spec] : INFINITY;
 }

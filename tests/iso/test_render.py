@@ -192,7 +192,8 @@ def test_candidates_left_match_the_reference(queue, host):
     candidates behind it; the plane is then min(all - P, CANDIDATES), all =
     the ray's candidate blocks (the reference traversal from its box entry),
     and 0 where the ray is not running. Over tiles too (the tiles not traced
-    yet read 0)."""
+    yet read 0). IsoImage.next_t: the t of that ray's next candidate, the
+    reference's (P+1)-th (+inf where the ray is not running)."""
     d = _TURB
     zv = zfp.compress(d["volume"], 12)
     r = iso.IsoRenderer(zv, spacing=d["spacing"], origin=d["origin"], queue=queue)
@@ -201,28 +202,36 @@ def test_candidates_left_match_the_reference(queue, host):
     buf = clvis.camera.ray_buffer(_cam(), W, H)
     rt, enters = ref_traverse.init_rays(buf, W, H, zv.shape, d["spacing"], d["origin"])
     ids = np.nonzero(enters)[0]
-    blocks, _, after = ref_traverse.macro_traverse(
+    blocks, block_t, after = ref_traverse.macro_traverse(
         zv.shape, d["spacing"], d["origin"], 0.5, buf, W, fine, coarse, ids, rt, iso.traverse.MAX_SPEC
     )
     assert np.isinf(after[ids]).all()  # every candidate listed
     total = np.zeros(W * H, np.int64)
     total[ids] = (blocks != ref_traverse.NO_BLOCK).sum(axis=1)
+    row = np.full(W * H, -1, np.int64)
+    row[ids] = np.arange(len(ids))
     tiles = 5 * W
     seen = 0
     for img in r.passes(_cam(), W, H, 0.5, speculation=False, tile_pixels=tiles, host=host):
-        got = (_got(img) if not host else img).candidates.ravel()
+        plain = _got(img) if not host else img
+        got, got_t = plain.candidates.ravel(), plain.next_t.ravel()
         active = (img.active.get() if not host else img.active).ravel()
-        assert got.dtype == np.uint8
+        assert got.dtype == np.uint8 and got_t.dtype == np.float32
         st = img.stats
         ti = max(i for i, n in enumerate(st["passes_per_tile"]) if n)
         want = np.zeros(W * H, np.int64)
+        want_t = np.full(W * H, np.inf, np.float32)
         if st["passes_per_tile"][ti] and active[ti * tiles : (ti + 1) * tiles].any():
             sl = slice(ti * tiles, (ti + 1) * tiles)
-            left = total[sl] - st["passes_per_tile"][ti]
+            done = st["passes_per_tile"][ti]
+            left = total[sl] - done
             want[sl] = np.where(active[sl], np.minimum(left, iso.CANDIDATES), 0)
+            run = np.nonzero(active[sl])[0] + ti * tiles
+            want_t[run] = block_t[row[run], done]
             seen += int(active[sl].sum())
         # the finished tiles and those not traced yet: 0 (the traced tile's running rays: >= 1)
         np.testing.assert_array_equal(got, want)
+        np.testing.assert_allclose(got_t, want_t, rtol=1e-5)
     assert seen > 100 and (total > iso.CANDIDATES).any()
 
 
@@ -514,7 +523,7 @@ def test_device_image_is_the_host_image(queue, kw):
 def _got(image):
     """A device IsoImage's planes read back."""
     planes = [getattr(image, k).get() for k in ("rgba", "depth", "hit", "t", "active")]
-    return type(image)(*planes, 1.0, {}, image.candidates.get())
+    return type(image)(*planes, 1.0, {}, image.candidates.get(), image.next_t.get())
 
 
 def test_tile_plan_and_memory_check(queue, monkeypatch):

@@ -190,6 +190,15 @@ def test_composite_takes_the_nearest_hit(rendered):
     left = iso.composite([dataclasses.replace(a, candidates=ca), dataclasses.replace(b, candidates=ca)])
     np.testing.assert_array_equal(left.candidates, np.minimum(2 * ca, iso.CANDIDATES))
     assert iso.composite([a, dataclasses.replace(b, candidates=None)]).candidates is None
+    # where the next candidate block begins: the nearest over the isovalues; None if one has none
+    ta = np.linspace(1, 2, H * W, dtype=np.float32).reshape(H, W)
+    tb = ta[::-1, ::-1].copy()
+    tb[0, 0] = np.inf
+    near = iso.composite([dataclasses.replace(a, next_t=ta), dataclasses.replace(b, next_t=tb)])
+    np.testing.assert_array_equal(near.next_t, np.minimum(ta, tb))
+    assert (
+        iso.composite([dataclasses.replace(a, next_t=ta), dataclasses.replace(b, next_t=None)]).next_t is None
+    )
 
 
 def test_bad_arguments(rendered):

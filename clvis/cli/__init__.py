@@ -207,6 +207,31 @@ def _check_signals() -> None:
         raise _Terminated if _received[0] == signal.SIGTERM else KeyboardInterrupt
 
 
+# words a user may type for what is an option of the commands
+_OPTION_WORDS = {
+    "orbit": "a turntable is an option: clvis render|iso|gauss FILE --orbit N [--movie turn.mp4]",
+    "movie": "a movie is an option: clvis render|iso|gauss FILE --orbit N --movie turn.mp4",
+    "infill": "the in-fill network is an option: clvis iso FILE --completion 0.85 --infill",
+    "post": "the networks are options: clvis render FILE --post lidar|narvis, clvis iso FILE --infill",
+}
+
+
+def _unknown_command(p: argparse.ArgumentParser, word: str, commands: list[str]) -> int:
+    """argparse's usage and one line: no such command, the closest ones or
+    the option meant (`clvis orbit`: --orbit); exit status 2."""
+    import difflib
+
+    hint = _OPTION_WORDS.get(word.lower())
+    if hint is None and (os.path.exists(word) or os.path.splitext(word)[1]):
+        hint = f"a file goes after the command: clvis view {word}, or clvis render|iso|gauss {word}"
+    if hint is None:
+        close = difflib.get_close_matches(word.lower(), commands, n=2, cutoff=0.75)
+        hint = f"did you mean {' or '.join(close)}?" if close else f"the commands: {', '.join(commands)}"
+    p.print_usage(sys.stderr)
+    sys.stderr.write(f"clvis: error: no command {word!r}; {hint}\n")
+    return 2
+
+
 def _interrupted(argv: list[str], sig: signal.Signals) -> int:
     _deferred.clear()
     # a second Ctrl-C while exiting would print a traceback
@@ -236,6 +261,8 @@ def _main(argv: list[str]) -> int:
         if not tok.startswith("-"):
             if tok in commands:
                 argv[i + 1 :] = glue_values(commands[tok], argv[i + 1 :])
+            else:
+                return _unknown_command(p, tok, list(commands))
             break
     try:
         args = p.parse_args(argv)

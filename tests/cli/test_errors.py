@@ -136,9 +136,23 @@ def test_version(capsys):
     assert rc == 0 and out == f"clvis {clvis.__version__}\n"
 
 
-def test_unknown_command(capsys):
+def test_unknown_command(capsys, tmp_path):
+    """No such command: the commands, the closest one, the option meant
+    (`clvis orbit`), or where a file goes (`clvis scan.las`)."""
     rc, _, err = _main(capsys, "paint")
-    assert rc == 2 and "invalid choice: 'paint'" in err
+    assert (
+        rc == 2 and err.startswith("usage: clvis") and "no command 'paint'; the commands: info, demo" in err
+    )
+    rc, _, err = _main(capsys, "rendr", "x.las")
+    assert rc == 2 and "no command 'rendr'; did you mean render?" in err
+    rc, _, err = _main(capsys, "orbit", "x.las")
+    assert (
+        rc == 2
+        and "no command 'orbit'; a turntable is an option: clvis render|iso|gauss FILE --orbit N" in err
+    )
+    scan = tmp_path / "scan.las"
+    rc, _, err = _main(capsys, str(scan))
+    assert rc == 2 and f"a file goes after the command: clvis view {scan}, or clvis render|iso|gauss" in err
 
 
 def test_broken_pipe_is_quiet(capsys, monkeypatch):

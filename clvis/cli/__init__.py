@@ -207,6 +207,15 @@ def _check_signals() -> None:
         raise _Terminated if _received[0] == signal.SIGTERM else KeyboardInterrupt
 
 
+def _ctrl_c_handled() -> None:
+    """A command for which Ctrl-C is the way to stop (clvis view) has
+    stopped by it: main() returns the command's status, not 130, and does
+    not say "interrupted" after the command's own line."""
+    if _received and _received[0] == signal.SIGINT:
+        _received.clear()
+        _deferred.clear()
+
+
 # words a user may type for what is an option of the commands
 _OPTION_WORDS = {
     "orbit": "a turntable is an option: clvis render|iso|gauss FILE --orbit N [--movie turn.mp4]",

@@ -338,5 +338,8 @@ def _serve(args: argparse.Namespace) -> int:
     if not args.no_browser and _has_display():
         viewer.show()
     viewer.wait()
+    from . import _ctrl_c_handled
+
+    _ctrl_c_handled()  # Ctrl-C is how a viewer stops: one line, status 0
     print("clvis view: stopped", file=sys.stderr)
     return 0

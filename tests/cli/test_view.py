@@ -115,3 +115,32 @@ def _camera(scene):
 
     o = Orbit(scene.lo, scene.hi, points=scene.fit_points)
     return o.camera(4 / 3)
+
+
+def test_ctrl_c_stops_the_viewer_with_one_line_and_status_0(tmp_path):
+    """Ctrl-C is how a viewer stops: "stopped", exit status 0, not also
+    "interrupted" and 130."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    np.save(tmp_path / "p.npy", np.random.default_rng(0).random((2000, 3)).astype(np.float32))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "clvis", "view", str(tmp_path / "p.npy"), "--no-browser"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        line = ""
+        while "Ctrl-C stops" not in line and time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            assert line or proc.poll() is None, proc.stderr.read()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert err.strip().splitlines()[-1] == "clvis view: stopped" and "interrupted" not in err

@@ -78,7 +78,7 @@ FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
 --volume-index)
 or a .vdb (float grid, needs the `vdb` extra: tinyvdb); a .npz of Gaussians
 (clvis.Gaussians.save); or a point cloud (.ply, .las, .laz, .e57, .pcd,
-.xyz/.txt/.csv, .vtp/.vtu/.vts, a legacy .vtk of POLYDATA or a grid, or an
+.xyz/.txt/.csv, .vtp/.vtu/.vts, a legacy .vtk of POLYDATA, UNSTRUCTURED_GRID or STRUCTURED_GRID, or an
 (N, 3) .npy/.npz as
 `clvis render` reads them: one Gaussian per point, stretched along the
 velocity when the file has one, else sized by the 4 nearest neighbours,

@@ -1310,8 +1310,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "file",
         nargs="*",
-        help="a PLY, LAS, LAZ, E57, PCD, XYZ/TXT/CSV, NPY, NPZ or VTK (.vtp/.vtu/.vts; legacy .vtk POLYDATA "
-        "or grid) "
+        help="a PLY, LAS, LAZ, E57, PCD, XYZ/TXT/CSV, NPY, NPZ or VTK (.vtp/.vtu/.vts; legacy .vtk POLYDATA, "
+        "UNSTRUCTURED_GRID or STRUCTURED_GRID) "
         "point cloud (several: tiles joined into one cloud here, or rendered on Dask workers with "
         "--workers/--scheduler)",
     )

@@ -525,8 +525,11 @@ def _depth_panel(depth) -> _Panel:
     from ..colormap import lut, value_range
 
     near, far = value_range(depth)
-    bar = (lut("magma")[::-1], near, max(far, near), "view depth")
-    return _Panel("depth", "depth (near = bright)", images.depth_image(depth), bar)
+    if near == far:  # one depth (one point): the colormap's middle, not its black end
+        pad = max(abs(near) * 1e-3, 1e-6)
+        near, far = near - pad, far + pad
+    bar = (lut("magma")[::-1], near, far, "view depth")
+    return _Panel("depth", "depth (near = bright)", images.depth_image(depth, near=near, far=far), bar)
 
 
 def _framed(p: _Panel, transparent: bool = False, background=None) -> np.ndarray:
@@ -992,6 +995,12 @@ def _look(args, cloud, attribute, point_size, queue) -> _Look:
         else:
             lo, hi = a - offset, b - offset
         look.value_range = (lo, hi)
+    else:
+        from ..colormap import value_range
+
+        lo, hi = value_range(values)
+        if lo == hi:  # one value (one point, a level plane by z): the colormap's middle, not its dark end
+            look.value_range = (lo - 1.0, hi + 1.0)
     return look
 
 

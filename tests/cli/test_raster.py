@@ -273,6 +273,14 @@ def test_render_degenerate_clouds(tmp_path, capsys, view):
     assert rc == 0, err
     if view in ("fit", "top", "front", "side"):
         assert "covered   1 of" in out
+        # one value to colour (z, depth): the colormaps' middle, not their dark ends
+        from clvis.colormap import lut
+
+        for name, cmap in (("attribute-z", "viridis"), ("depth", "magma")):
+            with Image.open(tmp_path / "one" / f"{name}.png") as im:
+                px = np.asarray(im.convert("RGB")).reshape(-1, 3)
+            middle = lut(cmap)[len(lut(cmap)) // 2, :3].astype(int)
+            assert (np.abs(px.astype(int) - middle).max(axis=1) <= 12).any(), name
     nan = tmp_path / "nan.npy"
     p = _small_cloud(1000).positions.copy()
     p[::7] = np.nan

@@ -40,7 +40,10 @@ class Orbit:
         self.hi = np.asarray(hi, np.float64)
         if self.lo.shape != (3,) or self.hi.shape != (3,) or not np.isfinite([self.lo, self.hi]).all():
             raise ValueError(f"orbit bounds: expected two finite 3-vectors, got {lo!r}, {hi!r}")
-        self.radius = max(float(np.linalg.norm(self.hi - self.lo)) / 2, 1e-6)
+        # one point (or all in one place) has no size to frame: a unit sphere
+        # around it, so the view stands off and the wheel zooms (1e-6 did neither)
+        extent = float(np.linalg.norm(self.hi - self.lo)) / 2
+        self.radius = extent if extent > 1e-6 else 1.0
         self.fov_y = float(fov_y)
         self._home = (float(azimuth), float(elevation))
         # what fit() frames: a sample of the points where given (a round cloud
@@ -70,7 +73,8 @@ class Orbit:
         f, r, u = rel @ fwd, np.abs(rel @ right), np.abs(rel @ up)
         # a point is inside when |r| <= (distance + f) tan_x and |u| <= (distance + f) tan_y
         need = np.maximum(r / tan_x, u / tan_y) - f
-        self.distance = max(float(need.max()), self.radius * 1e-3)
+        # nothing to frame (one point): the unit sphere around it fills the view
+        self.distance = max(float(need.max()), self.radius * 1e-3) if need.max() > 0 else self.radius / tan_y
 
     @property
     def eye(self) -> np.ndarray:

@@ -52,3 +52,16 @@ def test_typed_camera_round_trips_and_its_cli_options():
     assert s["cli"].startswith("--eye 20,5,8 --target 5,5,5 --up 0,0,1 --fov 30")
     with pytest.raises(ValueError, match="same point"):
         o.set((1, 1, 1), (1, 1, 1))
+
+
+def test_one_point_is_framed_from_a_distance_and_zooms():
+    """All points in one place: no size to frame; the view stands off (a unit
+    sphere around the point) and the wheel changes the distance."""
+    o = Orbit((5, 5, 5), (5, 5, 5), points=np.array([[5.0, 5.0, 5.0]]))
+    assert o.radius == 1.0 and 1.0 < o.distance < 5.0
+    d = o.distance
+    o.zoom(0.5)
+    assert math.isclose(o.distance, d / 2)
+    cam = o.camera(16 / 9)
+    p = cam.project(np.array([[5.0, 5.0, 5.0]]), 160, 90)
+    assert p.visible.all() and abs(p.sx[0] - 80) < 1 and abs(p.sy[0] - 45) < 1

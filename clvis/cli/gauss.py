@@ -575,7 +575,10 @@ def _run(args) -> int:
     if why:
         print(f"  transfer  {why}")
     if getattr(args, "dropped", 0):
-        print(f"  dropped   {args.dropped:,} points with a NaN or infinite coordinate (never drawn)")
+        print(
+            f"  dropped   {args.dropped:,} point{'s' if args.dropped != 1 else ''} with a NaN or infinite "
+            "coordinate (never drawn)"
+        )
     print(f"  build     {timings['build_s']:.2f} s (kernels, once per process; not in the render times)")
     method = panels[0][2].stats.get("method", "bvh")
     print(

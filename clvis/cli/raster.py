@@ -1176,7 +1176,7 @@ def _render(args, progress) -> int:
         colored = f"colored by {attribute} ({colormap})"
     else:
         colored = "its colors"
-    print(f"clvis render: {source}, {n:,} points, {colored}")
+    print(f"clvis render: {source}, {n:,} point{'s' if n != 1 else ''}, {colored}")
     print(f"  device    {runtime.describe(q.device)}")
     sized = ""
     if spacing is not None:
@@ -1193,7 +1193,10 @@ def _render(args, progress) -> int:
         print(f"  edl       eye-dome lighting, strength {look.edl:g}, radius {look.edl_radius}")
     dropped = stats.get("points_nonfinite", 0)
     if dropped:
-        print(f"  dropped   {dropped:,} points with a NaN or infinite coordinate (never drawn)")
+        print(
+            f"  dropped   {dropped:,} point{'s' if dropped != 1 else ''} with a NaN or infinite coordinate "
+            "(never drawn)"
+        )
     print(f"  covered   {covered:,} of {width * height:,} pixels ({100 * covered / (width * height):.1f} %)")
     print(
         f"  batches   {stats['batches_drawn']:,} drawn, {stats['batches'] - stats['batches_drawn']:,} "

@@ -271,6 +271,7 @@ def test_render_degenerate_clouds(tmp_path, capsys, view):
     np.save(one, np.array([[1000.0, -2000.0, 50.0]], np.float32))
     rc, out, err = _render(capsys, one, "--view", view, "--out", tmp_path / "one", *SMALL)
     assert rc == 0, err
+    assert "one.npy, 1 point, colored by" in out
     if view in ("fit", "top", "front", "side"):
         assert "covered   1 of" in out
         # one value to colour (z, depth): the colormaps' middle, not their dark ends

@@ -511,6 +511,21 @@ def fit_box(lo, hi, width: int, height: int, fit: FitView):
     )
 
 
+def world_camera_args(args, origin):
+    """args with --eye and --target (given in the file's coordinates) moved
+    into a point cloud's local ones (`origin`: clvis.PointCloud.origin): the
+    origin is an internal detail that keeps float32 positions precise, never
+    something a user types (clvis view's camera text is in the file's)."""
+    if origin is None or not np.asarray(origin).any() or (args.eye is None and args.target is None):
+        return args
+    local = argparse.Namespace(**vars(args))
+    for name in ("eye", "target"):
+        v = getattr(args, name)
+        if v is not None:
+            setattr(local, name, tuple(float(a - b) for a, b in zip(v, origin, strict=True)))
+    return local
+
+
 def camera_from_args(args, lo, hi, width: int, height: int, points=None):
     """The camera the options ask for, framing the box [lo, hi] (for --view
     fit, the `points` themselves when given, else the box's corners)."""

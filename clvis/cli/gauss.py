@@ -37,6 +37,7 @@ from ._common import (
     read_volume_file,
     real,
     size,
+    world_camera_args,
 )
 from .orbit import add_orbit_options, check_orbit_args
 from .raster import _value_range as value_range_arg
@@ -299,6 +300,8 @@ def _sources(args):
         # coloured by: the speed with a velocity, else the elevation, which is
         # relative to the cloud's origin (a LAS file's lowest point)
         oz = float(cloud.origin[2]) if cloud.origin is not None else 0.0
+        # --eye/--target are in the file's coordinates (as clvis render and clvis view's text)
+        args.camera_origin = cloud.origin
         args.value_name = args.attribute or (
             "speed" if cloud.velocity is not None else "z" if oz == 0.0 else f"z - {oz:.10g}"
         )
@@ -541,7 +544,9 @@ def _run(args) -> int:
         value_range=vr,
         progress=progress,
         timings=timings,
-        camera=lambda lo, hi: camera_from_args(args, lo, hi, width, height),
+        camera=lambda lo, hi: camera_from_args(
+            world_camera_args(args, getattr(args, "camera_origin", None)), lo, hi, width, height
+        ),
     )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..camera import AXIS_VIEWS
-from ._common import CliError, Progress, _replaced, camera_from_args, count, unwritable
+from ._common import CliError, Progress, _replaced, camera_from_args, count, unwritable, world_camera_args
 
 MAX_FRAMES = 3600
 MOVIE_FORMATS = (".mp4", ".mkv", ".mov", ".webm")
@@ -300,7 +300,13 @@ def gauss_orbit(
             queue=queue,
             opacity=opacity,
             value_range=value_range,
-            camera=lambda lo, hi: turn(camera_from_args(args, lo, hi, w, h), lo, hi, degrees, args),
+            camera=lambda lo, hi: turn(
+                camera_from_args(world_camera_args(args, getattr(args, "camera_origin", None)), lo, hi, w, h),
+                lo,
+                hi,
+                degrees,
+                args,
+            ),
         )
         if args.no_labels:
             return images.compose([_picture(img, args.transparent) for _, _, img in panels])

@@ -40,6 +40,7 @@ from ._common import (
     progress_from_args,
     size,
     timed,
+    world_camera_args,
 )
 from .orbit import add_orbit_options, check_orbit_args
 
@@ -783,7 +784,7 @@ def _render_distributed(args, progress) -> int:
             lo, hi, sample, bulk, finite = dr.framing()
         if bulk < finite:
             _stray_note(bulk, finite, dr.bounds, (lo, hi), dr.origin)
-        camera = camera_from_args(_world_camera_args(args, dr.origin), lo, hi, width, height, points=sample)
+        camera = camera_from_args(world_camera_args(args, dr.origin), lo, hi, width, height, points=sample)
         if attribute is None and args.range is not None:
             raise CliError(
                 "--range scales an attribute's colours; the tiles have none (add --attribute NAME)"
@@ -931,20 +932,6 @@ def _box(lo, hi, origin) -> str:
     )
 
 
-def _world_camera_args(args, origin):
-    """args with --eye and --target (given in the file's coordinates) moved
-    into the cloud's local ones: the origin is an internal detail that keeps
-    float32 positions precise, never something a user types."""
-    if not np.asarray(origin).any() or (args.eye is None and args.target is None):
-        return args
-    local = argparse.Namespace(**vars(args))
-    for name in ("eye", "target"):
-        v = getattr(args, name)
-        if v is not None:
-            setattr(local, name, tuple(float(a - b) for a, b in zip(v, origin, strict=True)))
-    return local
-
-
 def _class_like(attribute: str) -> bool:
     """Whether an attribute's name says it holds class codes."""
     return attribute.lower() in ("classification", "class", "classes", "label")
@@ -1018,7 +1005,7 @@ def _render(args, progress) -> int:
     on = filter_on or args.post == "lidar"
     levels = args.depth_filter if args.depth_filter is not None else (LEVELS if on else 0)
     lo, hi, framed = _framing(cloud, source)
-    camera = camera_from_args(_world_camera_args(args, cloud.origin), lo, hi, width, height, points=framed)
+    camera = camera_from_args(world_camera_args(args, cloud.origin), lo, hi, width, height, points=framed)
     point_size, spacing = args.point_size, None
     if point_size == "auto":
         from ..camera import point_spacing

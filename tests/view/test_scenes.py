@@ -375,3 +375,9 @@ def test_the_camera_text_of_a_georeferenced_cloud_renders_it_with_clvis_render(t
     assert rc == 0, err
     covered = re.search(r"covered\s+([\d,]+) of", out)
     assert covered is not None and int(covered.group(1).replace(",", "")) > 200, out
+    # clvis gauss reads the same text in the same coordinates
+    rc = cli.main(["gauss", str(path), *cli_text.split(), "--size", "96x64", "--out", str(tmp_path / "g")])
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    row = [line.split() for line in out.splitlines() if line.startswith("  points ")][-1]
+    assert float(row[-2]) > 0.5, out  # hits a ray

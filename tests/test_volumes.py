@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from clvis import DataError
+from clvis.io import volumes
 from clvis.io.volumes import RAW_TYPES, Volume, read_volume
 
 
@@ -340,24 +341,32 @@ def test_nifti_time_series_volume_index(tmp_path):
 
 
 @pytest.mark.parametrize("suffix", [".nii", ".nii.gz"])
-def test_nifti_truncated_series_says_so_before_asking_for_an_index(tmp_path, suffix):
-    """A 4-D file cut short: the error says it is truncated and which volumes
-    are whole, not "choose a volume" (the index asked for would then fail)."""
+def test_nifti_truncated_series_says_so_before_asking_for_an_index(tmp_path, suffix, monkeypatch):
+    """A 4-D file cut short (its bytes cut, as a broken download leaves a
+    .gz): the error says it is truncated and which volumes are whole, not
+    "choose a volume" (the index asked for would then fail); an index past
+    the cut says truncated too. A whole .gz is not decompressed to say
+    "choose one" (its gzip trailer gives the size)."""
     rng = np.random.default_rng(0)
-    data = rng.integers(-3000, 3000, (16, 12, 10, 3), dtype=np.int16)  # hardly compressible
+    data = rng.integers(-3000, 3000, (16, 12, 10, 6), dtype=np.int16)  # hardly compressible
     whole = tmp_path / f"whole{suffix}"
     nibabel.save(nibabel.Nifti1Image(data, np.eye(4)), whole)
-    raw = gzip.decompress(whole.read_bytes()) if suffix.endswith(".gz") else whole.read_bytes()
-    volume = 16 * 12 * 10 * 2
-    cut = raw[: len(raw) - volume - 100]  # volume 0 whole, volume 1 cut, volume 2 missing
+    raw = whole.read_bytes()
     path = tmp_path / f"cut{suffix}"
-    path.write_bytes(gzip.compress(cut) if suffix.endswith(".gz") else cut)
+    path.write_bytes(raw[: int(len(raw) * 0.55)])  # volumes 0..2 whole (about 3.3 of 6 held)
     with pytest.raises(
-        DataError, match=r"truncated NIfTI file: the header declares 3 volumes.*volume 0 is whole"
+        DataError, match=r"truncated NIfTI file: the header declares 6 volumes.*volumes 0..2 are whole"
     ):
         read_volume(path)
-    np.testing.assert_array_equal(read_volume(path, volume_index=0).data, data[..., 0].transpose(2, 1, 0))
-    with pytest.raises(DataError, match="4-D NIfTI image of 3 volumes .*volume_index"):
+    for t in range(3):
+        np.testing.assert_array_equal(read_volume(path, volume_index=t).data, data[..., t].transpose(2, 1, 0))
+    with pytest.raises(DataError, match="truncated NIfTI file"):
+        read_volume(path, volume_index=4)
+    if suffix.endswith(".gz"):  # the reader's own zlib (nibabel's gzip keeps the real one)
+        fake = type("Zlib", (), {"error": volumes.zlib.error})()
+        fake.decompressobj = lambda *a, **k: pytest.fail("decompressed")
+        monkeypatch.setattr(volumes, "zlib", fake)
+    with pytest.raises(DataError, match="4-D NIfTI image of 6 volumes .*volume_index"):
         read_volume(whole)  # whole: the index is what is missing
 
 
@@ -374,11 +383,14 @@ def test_mgh_round_trip(tmp_path, suffix, dtype):
     v = read_volume(path)
     np.testing.assert_array_equal(v.data, data.transpose(2, 1, 0))
     assert v.spacing == (2.0, 1.0, 0.5)
-    if suffix == ".mgh":
-        cut = tmp_path / "cut.mgh"
-        cut.write_bytes(path.read_bytes()[: 284 + data.nbytes // 2])
-        with pytest.raises(DataError, match="truncated MGH file"):
-            read_volume(cut)
+    cut = tmp_path / f"cut{suffix}"
+    cut.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])
+    with pytest.raises(DataError, match="truncated MGH file"):
+        read_volume(cut)
+    bad = tmp_path / f"bad{suffix}"
+    bad.write_bytes(b"not an MGH file at all" * 20)
+    with pytest.raises(DataError, match="not a readable MGH file"):
+        read_volume(bad)
     import os
 
     test = os.path.join(os.path.dirname(nibabel.__file__), "tests", "data", "test.mgz")

@@ -232,7 +232,16 @@ def _unknown_command(p: argparse.ArgumentParser, word: str, commands: list[str])
 
     hint = _OPTION_WORDS.get(word.lower())
     if hint is None and (os.path.exists(word) or os.path.splitext(word)[1]):
-        hint = f"a file goes after the command: clvis view {word}, or clvis render|iso|gauss {word}"
+        from ..io.points import POINT_SUFFIXES
+        from ..io.volumes import FORMATS
+
+        name = word.lower()
+        volume = name.endswith(FORMATS) or name.endswith((".vdb", ".vtk"))
+        points = name.endswith(POINT_SUFFIXES)
+        which = "iso|gauss" if volume and not points else "render|gauss" if points and not volume else None
+        hint = "a file goes after the command: " + (
+            f"clvis view {word}, or clvis {which} {word}" if which else f"clvis view|render|iso|gauss {word}"
+        )
     if hint is None:
         close = difflib.get_close_matches(word.lower(), commands, n=2, cutoff=0.75)
         hint = f"did you mean {' or '.join(close)}?" if close else f"the commands: {', '.join(commands)}"

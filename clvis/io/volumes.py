@@ -299,6 +299,8 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         zooms = tuple(float(z) for z in header.get_zooms())
         affine = np.array(img.affine, dtype=np.float64)
     except errors as e:
+        if isinstance(e, EOFError):  # nibabel reads an MGH file's footer, after its data
+            raise DataError(f"{path}: truncated {kind} file ({e})") from e
         raise DataError(f"{path}: not a readable {kind} file: {type(e).__name__}: {e}") from e
     series = len(shape) == 4 and shape[3] > 1
     if volume_index is not None:
@@ -327,6 +329,10 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         else:
             data = np.asanyarray(img.dataobj)
     except errors as e:
+        if series:  # a .gz cut before volume t: say so (the layout check cannot see into gzip)
+            _check_nifti_series_whole(path, shape, dtype, offset)
+        if isinstance(e, EOFError):
+            raise DataError(f"{path}: truncated {kind} file ({e})") from e
         raise DataError(f"{path}: not a readable {kind} file: {type(e).__name__}: {e}") from e
     if data.ndim > 3 and all(s == 1 for s in data.shape[3:]):
         data = data.reshape(data.shape[:3])
@@ -397,34 +403,62 @@ def _check_nifti_head(path: Path) -> None:
                 pos += esize
     except DataError:
         raise
-    except (OSError, EOFError, zlib.error, struct.error) as e:
-        raise DataError(f"{path}: not a readable NIfTI file: {type(e).__name__}: {e}") from e
+    except EOFError as e:
+        raise DataError(f"{path}: truncated {_kind(path)} file ({e})") from e
+    except (OSError, zlib.error, struct.error) as e:
+        raise DataError(f"{path}: not a readable {_kind(path)} file: {type(e).__name__}: {e}") from e
+
+
+def _gz_bytes(path: Path, need: int) -> int:
+    """How many bytes the gzip file `path` decompresses to, counted up to
+    `need` (a stream: compressed chunks in, at most 1 MiB out at a time,
+    nothing kept); a cut or corrupt stream counts what came out before it.
+    A whole single-member file whose trailer (ISIZE: the size mod 2^32) says
+    `need` is not decompressed at all."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        if size >= 18:
+            f.seek(size - 4)
+            if struct.unpack("<I", f.read(4))[0] == need % 2**32:
+                return need
+            f.seek(0)
+        have = 0
+        d = zlib.decompressobj(wbits=31)
+        while have < need:
+            data = f.read(1 << 16)
+            if not data:
+                return have  # cut short: the stream never ended
+            while data and have < need:
+                try:
+                    out = d.decompress(data, 1 << 20)
+                except zlib.error:
+                    return have
+                have += len(out)
+                data = d.unconsumed_tail
+                if d.eof:  # another gzip member may follow
+                    data, d = d.unused_data + data, zlib.decompressobj(wbits=31)
+        return have
 
 
 def _check_nifti_series_whole(path: Path, shape: tuple, dtype: np.dtype, offset: int) -> None:
-    """A 4-D NIfTI file's data against what its header declares: a DataError
-    naming the volumes it holds whole when it is cut short. A .gz file is
-    decompressed as a stream to count (nothing is kept: memory stays bounded)."""
-    import gzip
-
+    """A 4-D NIfTI or MGH file's data against what its header declares: a
+    DataError naming the volumes it holds whole when it is cut short (a .gz
+    decompressed as a stream to count, see _gz_bytes)."""
     volume = math.prod(shape[:3]) * dtype.itemsize * math.prod(shape[4:])
     need = offset + volume * shape[3]
     if volume <= 0 or offset < 0:
         return  # the layout check that follows says what is wrong
-    if _gzipped(path):
-        have = 0
-        try:
-            with gzip.open(path, "rb") as f:
-                while have < need:
-                    # small reads: the one that meets the cut loses what it decompressed
-                    chunk = f.read(min(1 << 16, need - have))
-                    if not chunk:
-                        break
-                    have += len(chunk)
-        except (OSError, EOFError, zlib.error):
-            pass  # cut short or corrupt here: `have` is what decompressed
-    else:
-        have = path.stat().st_size
+    gz = _gzipped(path)
+    if gz and need > path.stat().st_size * _DEFLATE_MAX_RATIO:
+        raise DataError(
+            f"{path}: the header declares {shape[3]} volumes {shape[:3]} {dtype} = {need - offset} bytes "
+            f"from byte {offset}, more than a gzip file of {path.stat().st_size} bytes can hold "
+            f"(at most {_DEFLATE_MAX_RATIO}:1)"
+        )
+    try:
+        have = _gz_bytes(path, need) if gz else path.stat().st_size
+    except OSError as e:
+        raise DataError(f"{path}: not a readable {_kind(path)} file: {type(e).__name__}: {e}") from e
     if have >= need:
         return
     whole = max(have - offset, 0) // volume
@@ -437,8 +471,8 @@ def _check_nifti_series_whole(path: Path, shape: tuple, dtype: np.dtype, offset:
     )
     raise DataError(
         f"{path}: truncated {_kind(path)} file: the header declares {shape[3]} volumes {shape[:3]} {dtype} "
-        f"= {need - offset} bytes from byte {offset}, the file holds "
-        + (f"about {max(have - offset, 0)} (decompressed)" if _gzipped(path) else f"{max(have - offset, 0)}")
+        f"= {need - offset} bytes from byte {offset}, the file holds {max(have - offset, 0)}"
+        + (" (decompressed)" if gz else "")
         + f"; {held}"
         + (" (clvis iso, gauss and view: --volume-index T reads one)" if whole else "")
     )
@@ -457,19 +491,19 @@ def _check_nifti_layout(
     if min(shape) < 1:
         raise DataError(f"{path}: the volume is empty, shape {shape} (i, j, k, ...)")
     if offset < 0:
-        raise DataError(f"{path}: malformed NIfTI header: data offset (vox_offset) {offset}")
+        raise DataError(f"{path}: malformed {_kind(path)} header: data offset {offset}")
     size = path.stat().st_size
     nbytes = math.prod(stored or shape) * dtype.itemsize
     if _gzipped(path):
         if offset + nbytes > size * _DEFLATE_MAX_RATIO:
             raise DataError(
-                f"{path}: the header declares {shape} {dtype} samples = {nbytes} bytes from "
+                f"{path}: the header declares {stored or shape} {dtype} samples = {nbytes} bytes from "
                 f"byte {offset}, more than a gzip file of {size} bytes can hold "
                 f"(at most {_DEFLATE_MAX_RATIO}:1)"
             )
     elif offset + nbytes > size:
         raise DataError(
-            f"{path}: truncated {_kind(path)} file: the header declares {shape} {dtype} samples = "
+            f"{path}: truncated {_kind(path)} file: the header declares {stored or shape} {dtype} samples = "
             f"{nbytes} bytes from byte {offset}, the file has {size} bytes"
         )
 

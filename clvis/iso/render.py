@@ -43,7 +43,7 @@ pixel p0 is a kernel argument), so a tiled image is the untiled one: the same
 hits, t, depths and colours, bit for bit. n_spec is a tile's own (its pixels
 and its active rays); the candidates do not depend on how they are split into
 passes, so that changes the passes, not the image. The host image (rgba,
-depth, hit, t, active: HOST_PIXEL_BYTES per pixel) is allocated once and
+depth, hit, t, active, candidates, next_t: HOST_PIXEL_BYTES per pixel) is allocated once and
 each tile is read back into it when it is done (host=False: the same planes
 on the device, each tile written into them by pass.cl's tile_image and
 mark_active, nothing read back but the pass loop's counts);

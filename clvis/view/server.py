@@ -271,8 +271,14 @@ class ViewServer:
                 k = msg.get("hemisphere")
                 if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < HEMISPHERE_VIEWS:
                     raise ValueError(f"hemisphere: expected a view 0..{HEMISPHERE_VIEWS - 1}, got {k!r}")
-                cam = next(itertools.islice(hemisphere_cameras(self.orbit.lo, self.orbit.hi), k, None))
-                self.orbit.set(cam.eye, (self.orbit.lo + self.orbit.hi) / 2)
+                lo, hi = self.orbit.lo, self.orbit.hi
+                if (
+                    float(np.linalg.norm(hi - lo)) / 2 < self.orbit.radius
+                ):  # one point: the orbit's unit sphere
+                    half = self.orbit.radius / np.sqrt(3.0)
+                    lo, hi = (lo + hi) / 2 - half, (lo + hi) / 2 + half
+                cam = next(itertools.islice(hemisphere_cameras(lo, hi), k, None))
+                self.orbit.set(cam.eye, (lo + hi) / 2)
                 self.interacting, self.moved = False, True
             elif kind == "set":
                 self.scene.update(msg.get("settings") or {})

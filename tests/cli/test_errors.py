@@ -150,9 +150,13 @@ def test_unknown_command(capsys, tmp_path):
         rc == 2
         and "no command 'orbit'; a turntable is an option: clvis render|iso|gauss FILE --orbit N" in err
     )
-    scan = tmp_path / "scan.las"
+    scan, brain = tmp_path / "scan.las", tmp_path / "brain.nii.gz"
     rc, _, err = _main(capsys, str(scan))
-    assert rc == 2 and f"a file goes after the command: clvis view {scan}, or clvis render|iso|gauss" in err
+    assert (
+        rc == 2 and f"a file goes after the command: clvis view {scan}, or clvis render|gauss {scan}" in err
+    )
+    rc, _, err = _main(capsys, str(brain))
+    assert rc == 2 and f"a file goes after the command: clvis view {brain}, or clvis iso|gauss {brain}" in err
 
 
 def test_broken_pipe_is_quiet(capsys, monkeypatch):

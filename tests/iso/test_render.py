@@ -435,7 +435,7 @@ def test_stats_timings_and_bytes(queue):
 
 
 def _same(a, b):
-    for name in ("rgba", "depth", "hit", "t", "active", "candidates"):
+    for name in ("rgba", "depth", "hit", "t", "active", "candidates", "next_t"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
 
 
@@ -507,7 +507,7 @@ def test_device_image_is_the_host_image(queue, kw):
     host = r.render(_cam(), W, H, 0.5, **kw)
     dev = r.render(_cam(), W, H, 0.5, host=False, **kw)
     assert dev.completion == host.completion and dev.stats["passes"] == host.stats["passes"]
-    for name in ("rgba", "depth", "hit", "t", "active", "candidates"):
+    for name in ("rgba", "depth", "hit", "t", "active", "candidates", "next_t"):
         a = getattr(dev, name)
         assert isinstance(a, cla.Array) and a.dtype == getattr(host, name).dtype
     _same(_got(dev), host)

@@ -110,6 +110,12 @@ def test_hemisphere_presets_are_the_narvis_views(points):
                 s.handle({"type": "preset", "hemisphere": bad})
     finally:
         s.close()
+    one = ViewServer(PointScene(np.array([[1.0, 2.0, 3.0]], np.float32)))
+    try:  # one point: the presets look from the orbit's unit sphere too, not from 1e-4 away
+        one.handle({"type": "preset", "hemisphere": 3})
+        assert 1.0 < one.orbit.distance < 10.0
+    finally:
+        one.close()
 
 
 def test_split_views_show_both_sides_and_the_psnr():

@@ -513,7 +513,7 @@ def fit_box(lo, hi, width: int, height: int, fit: FitView):
 
 def world_camera_args(args, origin):
     """args with --eye and --target (given in the file's coordinates) moved
-    into a point cloud's local ones (`origin`: clvis.PointCloud.origin): the
+    into a point cloud's local ones (`origin`: a clvis.PointCloud's origin): the
     origin is an internal detail that keeps float32 positions precise, never
     something a user types (clvis view's camera text is in the file's)."""
     if origin is None or not np.asarray(origin).any() or (args.eye is None and args.target is None):

@@ -333,11 +333,14 @@ def _serve(args: argparse.Namespace) -> int:
         scene.close()
         raise
     viewer = Viewer(server)
-    print(f"clvis view: {scene.description} on {scene.device}")
-    print(f"clvis view: open {viewer.url}   (Ctrl-C stops)", flush=True)
-    if not args.no_browser and _has_display():
-        viewer.show()
-    viewer.wait()
+    try:  # a Ctrl-C from the line that says it stops the viewer on (wait() takes one itself)
+        print(f"clvis view: {scene.description} on {scene.device}")
+        print(f"clvis view: open {viewer.url}   (Ctrl-C stops)", flush=True)
+        if not args.no_browser and _has_display():
+            viewer.show()
+        viewer.wait()
+    except KeyboardInterrupt:
+        viewer.close()
     from . import _ctrl_c_handled
 
     _ctrl_c_handled()  # Ctrl-C is how a viewer stops: one line, status 0

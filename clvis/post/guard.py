@@ -159,10 +159,12 @@ def ring(known: np.ndarray, holes: np.ndarray, width: int = RING) -> np.ndarray:
     return known & near
 
 
-def nearest_running(candidates: np.ndarray, active: np.ndarray) -> np.ndarray:
-    """(H, W) uint8: `candidates` (an IsoImage's candidate blocks left per
-    running ray) with every finished pixel given the count of its nearest
-    running ray (Euclidean; ties as scipy's distance transform breaks them).
+def nearest_running(candidates: np.ndarray, active: np.ndarray, name: str = "candidates") -> np.ndarray:
+    """(H, W) `candidates` (an IsoImage's candidate blocks left per running
+    ray, uint8; or another per-running-ray plane, e.g. its next_t, named
+    `name` in errors) with every finished pixel given the value of its
+    nearest running ray (Euclidean; ties as scipy's distance transform
+    breaks them), in the plane's dtype.
 
     The in-fill guard withholds finished rays and hands them to the network
     as running ones. Their own count is 0, and to a network that reads the
@@ -174,14 +176,14 @@ def nearest_running(candidates: np.ndarray, active: np.ndarray) -> np.ndarray:
     it; the network alone is still better on average."""
     from scipy.ndimage import distance_transform_edt
 
-    candidates = np.asarray(candidates, np.uint8)
+    candidates = np.asarray(candidates)
     active = np.asarray(active, bool)
     if candidates.shape != active.shape:
-        raise ValueError(f"candidates: expected the shape of active {active.shape}, got {candidates.shape}")
+        raise ValueError(f"{name}: expected the shape of active {active.shape}, got {candidates.shape}")
     if not active.any() or active.all():
         return candidates.copy()
     _, (iy, ix) = distance_transform_edt(~active, return_indices=True)
-    return np.where(active, candidates, candidates[iy, ix]).astype(np.uint8)
+    return np.where(active, candidates, candidates[iy, ix]).astype(candidates.dtype)
 
 
 def tile_weights(

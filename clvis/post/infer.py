@@ -490,9 +490,19 @@ class PostNetwork:
                 left = guard_mod.nearest_running(left, active)
             # the hit-prior plane (channels_in 7): the whole frame's crossing rate, not the reduced planes'
             rate = image_crossing_rate(planes) if self.channels_in == 7 else None
+            # the depth planes (channels_in 8): the withheld finished rays, run
+            # as running ones, take their nearest running ray's next_t too (the
+            # reduced hit mask leaves their own t out of DEPTH)
+            t = nxt = None
+            t_plane, next_plane = getattr(planes, "t", None), getattr(planes, "next_t", None)
+            if self.channels_in == 8 and t_plane is not None and next_plane is not None:
+                t = np.asarray(to_host(t_plane), np.float32)
+                nxt = np.asarray(to_host(next_plane), np.float32)
+                if nxt.shape == active.shape:
+                    nxt = guard_mod.nearest_running(nxt, active, "next_t")
 
             def run_iso(values: np.ndarray, hit: np.ndarray, active: np.ndarray) -> np.ndarray:
-                return timed(IsoPlanes(values, hit, active, left, rate))
+                return timed(IsoPlanes(values, hit, active, left, rate, t, nxt))
 
             frame, share = guard_mod.infill(run_iso, rgba, hit, active, self.queue)
         elif self.name == "narvis-scan":

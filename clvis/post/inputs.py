@@ -44,7 +44,9 @@ class IsoImageLike(Protocol):
     A model of 6 planes also reads ``candidates`` ((H, W) uint8, the
     candidate blocks left on each running ray); one of 7 the frame's crossing
     rate too, from ``stats["items_per_pass"]`` (the render's pass items) or
-    a ``crossing_rate`` attribute (clvis.post.specs.image_crossing_rate).
+    a ``crossing_rate`` attribute (clvis.post.specs.image_crossing_rate); one
+    of 8 the candidates, ``t`` and ``next_t`` ((H, W) float32: a finished
+    hit's ray parameter, where a running ray's next candidate block begins).
     IsoRenderer's IsoImage has all of them."""
 
     @property
@@ -67,15 +69,17 @@ class IsoImageLike(Protocol):
 class IsoPlanes:
     """An IsoImageLike of planes you hold (the guard's reduced inputs, the
     held-out suite's frames, a caller's own): ``rgba``, ``hit``, ``active``;
-    ``candidates`` for a 6- or 7-plane model; ``crossing_rate`` for a
+    ``candidates`` for a 6-, 7- or 8-plane model; ``crossing_rate`` for a
     7-plane one (clvis.post.pack.crossing_rate: it stands for an IsoImage's
-    ``stats``)."""
+    ``stats``); ``t`` and ``next_t`` for an 8-plane one (IsoImage's)."""
 
     rgba: Plane
     hit: Plane
     active: Plane
     candidates: Plane | None = None
     crossing_rate: float | None = None
+    t: Plane | None = None
+    next_t: Plane | None = None
 
 
 class FilteredImageLike(Protocol):

@@ -187,13 +187,18 @@ class InfillWNet(nn.Module):
     """In-fill of a partial isosurface image: 5 planes in (R, G, B, hit,
     active; ``candidates=True``: 6, + the candidate blocks left on each
     running ray, clvis.post.pack.pack_iso's CANDIDATES; ``prior=True``: 7,
-    + its HIT_PRIOR, from the frame's crossing rate), 4 out (R, G, B,
+    + its HIT_PRIOR, from the frame's crossing rate; ``depth=True``: 8, the
+    candidates plane + pack_iso's DEPTH and NEXT, the finished hits' t and
+    the running rays' next candidate t on one scale), 4 out (R, G, B,
     coverage), finished pixels passed through.
 
     The finished pixels are first push-pulled into the holes (:class:`PushPull`,
     5 levels); each U-Net sees the input beside the current estimate and adds
     a correction to it (its last convolution starts at zero, so an untrained
-    network is the push-pull baseline)."""
+    network is the push-pull baseline). With ``depth`` the U-Nets also see the
+    gap: at each running ray with a block left, NEXT minus the finished hits'
+    DEPTH push-pulled to it (where the ray's next chance to hit lies against
+    the surface its neighbours show: bench/infill_depth_cue.py)."""
 
     channels_out = 4
 
@@ -204,21 +209,33 @@ class InfillWNet(nn.Module):
         levels: int = 5,
         candidates: bool = False,
         prior: bool = False,
+        depth: bool = False,
     ) -> None:
         super().__init__()
         if prior and not candidates:
             raise ValueError("prior: the hit-prior plane comes after the candidates plane (candidates=True)")
-        self.channels_in = 7 if prior else 6 if candidates else 5
+        if depth and (prior or not candidates):
+            raise ValueError("depth: the two depth planes come after the candidates plane, without the prior")
+        self.depth = depth
+        self.channels_in = 8 if depth else 7 if prior else 6 if candidates else 5
+        # depth: the U-Nets also see the gap, computed here: the running rays'
+        # next candidate t minus the finished hits' t push-pulled to them
+        unet_in = self.channels_in + 4 + int(depth)
         dec = tuple(reversed(enc))
         kw = {"bn": False, "convs": 1, "up": "nearest", "pool": "avg"}
         self.fill = PushPull(levels)
-        self.first = _zero_last(_UNet(self.channels_in + 4, 4, enc, mid, dec, **kw))  # type: ignore[arg-type]
-        self.second = _zero_last(_UNet(self.channels_in + 4, 4, enc, mid, dec, **kw))  # type: ignore[arg-type]
+        self.first = _zero_last(_UNet(unet_in, 4, enc, mid, dec, **kw))  # type: ignore[arg-type]
+        self.second = _zero_last(_UNet(unet_in, 4, enc, mid, dec, **kw))  # type: ignore[arg-type]
         self.stride = max(self.first.stride, 2**levels)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         known = x[:, 0:4]  # R, G, B, hit: the finished rays' values
         active = x[:, 4:5]
+        if self.depth:
+            hit = x[:, 3:4]
+            near = self.fill(x[:, 6:7], hit)  # the finished hits' depth, spread
+            has_next = (x[:, 5:6] > 0.0).to(x.dtype)
+            x = torch.cat([x, has_next * (x[:, 7:8] - near)], dim=1)
         y = self.fill(known, 1.0 - active)
         y = torch.clamp(y + self.first(torch.cat([x, y], dim=1)), 0.0, 1.0)
         y = torch.clamp(y + self.second(torch.cat([x, y], dim=1)), 0.0, 1.0)

@@ -121,13 +121,15 @@ def pack_iso(
     *,
     candidates: Any = None,
     crossing_rate: float | None = None,
+    depth: tuple[Any, Any] | None = None,
     stride: int = 1,
     out: cla.Array | None = None,
     queue: cl.CommandQueue | None = None,
 ) -> np.ndarray | cla.Array:
     """The in-fill network's input: (1, 5, Hp, Wp) float32 = R, G, B, HIT,
     ACTIVE; with `candidates`, (1, 6, Hp, Wp): + CANDIDATES; with
-    `crossing_rate` too, (1, 7, Hp, Wp): + HIT_PRIOR.
+    `crossing_rate` too, (1, 7, Hp, Wp): + HIT_PRIOR; with `depth` (and
+    `candidates`, not `crossing_rate`), (1, 8, Hp, Wp): + DEPTH, NEXT.
 
     rgba: H x W x 4 float32 (an IsoImage's shaded colour; alpha unused); hit,
     active: H x W bool or uint8 (nonzero = true). Hp, Wp: H, W rounded up to
@@ -144,11 +146,23 @@ def pack_iso(
     ray's hit, and their number follows the device's speculation schedule
     (about 7-8 % more items, so a lower rate, on the CPU profile than on the
     GPU one for the same view); without speculation they do not depend on it.
+    depth: (t, next_t), H x W float32 each (an IsoImage's ``t`` and
+    ``next_t``: a finished hit's ray parameter, where a running ray's next
+    candidate block begins); with lo, hi the extremes of the finite t where
+    hit and not active and the finite next_t where active (computed on the
+    device, iso_depth_range), DEPTH = (t - lo) / (hi - lo) at those finished
+    hits and NEXT = (next_t - lo) / (hi - lo) at those running rays, in
+    float32; 0 elsewhere, and everywhere when hi - lo is not > 0: the frame's
+    depths on one scale in [0, 1], where a running ray may end beside the
+    surfaces its neighbours show.
     Padding pixels: all 0. A non-finite r, g or b at a hit pixel (active or
     not) raises DataError after the kernel ran.
     """
-    queue = resolve_queue(queue, rgba=rgba, hit=hit, active=active, candidates=candidates, out=out)
-    host = not any(is_device(a) for a in (rgba, hit, active, candidates))
+    t_plane, next_plane = (None, None) if depth is None else _pair("depth", depth)
+    queue = resolve_queue(
+        queue, rgba=rgba, hit=hit, active=active, candidates=candidates, t=t_plane, next_t=next_plane, out=out
+    )
+    host = not any(is_device(a) for a in (rgba, hit, active, candidates, t_plane, next_plane))
     rgba = check_array("rgba", rgba, dtypes=[np.float32], ndim=3)
     hit = check_array("hit", hit, dtypes=[np.bool_, np.uint8], ndim=2)
     active = check_array("active", active, dtypes=[np.bool_, np.uint8], ndim=2)
@@ -163,6 +177,12 @@ def pack_iso(
     if candidates is not None:
         candidates = check_array("candidates", candidates, dtypes=[np.uint8], ndim=2)
         masks.append(("candidates", candidates))
+    if depth is not None:
+        if candidates is None or crossing_rate is not None:
+            raise ValueError("depth: the depth planes come after the candidates plane, without crossing_rate")
+        t_plane = check_array("depth[0] (t)", t_plane, dtypes=[np.float32], ndim=2)
+        next_plane = check_array("depth[1] (next_t)", next_plane, dtypes=[np.float32], ndim=2)
+        masks += [("depth[0] (t)", t_plane), ("depth[1] (next_t)", next_plane)]
     h, w, c = (int(s) for s in rgba.shape)
     if c != 4:
         raise ValueError(f"rgba: expected 4 channels, got shape {tuple(rgba.shape)}")
@@ -171,7 +191,7 @@ def pack_iso(
             raise ValueError(f"{name}: shape {tuple(m.shape)} differs from rgba's {(h, w)}")
     hp, wp = padded_shape(h, w, stride)
     _check_size("rgba", h, w, hp, wp)
-    channels = 5 if candidates is None else 6 if crossing_rate is None else 7
+    channels = 5 if candidates is None else 8 if depth is not None else 6 if crossing_rate is None else 7
     dst = _target(out, queue, (1, channels, hp, wp), np.float32, "pack_iso output")
     bad = runtime.zeros(queue, 1, np.uint32, "pack_iso input check")
     launch, _, _ = _launcher(queue)
@@ -224,10 +244,44 @@ def pack_iso(
                 u32(6),
                 buf(dst),
             )
+    if depth is not None:
+        t_d, next_d = to_device(queue, "t", t_plane), to_device(queue, "next_t", next_plane)
+        stats = runtime.zeros(queue, 2, np.uint32, "pack_iso depth range")
+        launch(
+            "iso_depth_range",
+            h * w,
+            buf(t_d),
+            buf(next_d),
+            buf(hit_d),
+            buf(active_d),
+            np.uint64(h * w),
+            buf(stats),
+        )
+        launch(
+            "pack_depth",
+            hp * wp,
+            buf(t_d),
+            buf(next_d),
+            buf(hit_d),
+            buf(active_d),
+            u32(w),
+            u32(h),
+            u32(wp),
+            u32(hp),
+            u32(6),
+            buf(stats),
+            buf(dst),
+        )
     nonfinite = int(bad.get()[0])
     if nonfinite:
         raise DataError(f"rgba: {nonfinite} hit pixels with a NaN or infinite r, g or b")
     return dst if out is not None else result(dst, host)
+
+
+def _pair(name: str, v: Any) -> tuple[Any, Any]:
+    if not isinstance(v, (tuple, list)) or len(v) != 2:
+        raise TypeError(f"{name}: expected a pair of planes (t, next_t), got {type(v).__name__}")
+    return v[0], v[1]
 
 
 def crossing_rate(hit: Any, active: Any, tested: int) -> float:

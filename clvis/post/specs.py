@@ -141,8 +141,9 @@ class InfillSpec(NetworkSpec[IsoImageLike]):
         queue: cl.CommandQueue,
     ) -> None:
         # a model card's channels_in 6: the candidates plane (InfillWNet(candidates=True));
-        # 7: the hit-prior plane too (InfillWNet(prior=True)), from the frame's crossing rate
-        candidates = rate = None
+        # 7: the hit-prior plane too (InfillWNet(prior=True)), from the frame's crossing rate;
+        # 8: the candidates and the depth planes (InfillWNet(depth=True)), from t and next_t
+        candidates = rate = depth = None
         if out.shape[1] >= 6:
             candidates = getattr(image, "candidates", None)
             if candidates is None:
@@ -152,12 +153,22 @@ class InfillSpec(NetworkSpec[IsoImageLike]):
                 )
         if out.shape[1] == 7:
             rate = image_crossing_rate(image)
+        if out.shape[1] == 8:
+            t, next_t = getattr(image, "t", None), getattr(image, "next_t", None)
+            if t is None or next_t is None:
+                raise DataError(
+                    "image: this in-fill model reads the hits' t and where each running ray's next "
+                    "candidate block begins (IsoImage.t and .next_t, from IsoRenderer); the image has "
+                    + ("neither" if t is None and next_t is None else "no t" if t is None else "no next_t")
+                )
+            depth = (t, next_t)
         pack_iso(
             image.rgba,
             image.hit,
             image.active,
             candidates=candidates,
             crossing_rate=rate,
+            depth=depth,
             stride=stride,
             out=out,
             queue=queue,

@@ -257,7 +257,10 @@ class IsoFrame:
     running (``active[c]``) and the render's device seconds to reach it
     (``seconds[c]``, 1.0 for the complete one); what it shows (``source``);
     per completion the candidate blocks left on each running ray
-    (``candidates[c]``, uint8: IsoImage.candidates)."""
+    (``candidates[c]``, uint8: IsoImage.candidates) and where the next one
+    begins (``next_t[c]``, float32: IsoImage.next_t); the complete render's
+    hits' ray parameter (``t``: IsoImage.t, the same at a partial image's
+    finished hits)."""
 
     rgb: np.ndarray
     hit: np.ndarray
@@ -268,6 +271,8 @@ class IsoFrame:
     #: per completion the candidate blocks the render had tested (its pass
     #: items; clvis.post.pack.crossing_rate)
     tested: dict[float, int] = field(default_factory=dict)
+    t: np.ndarray | None = None
+    next_t: dict[float, np.ndarray] = field(default_factory=dict)
 
     def planes(self, completion: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(rgba, hit, active) of the partial image: what pack_iso takes."""
@@ -341,7 +346,7 @@ def iso_frames(
             seconds[1.0] = float(img.stats["seconds"])
             shaded = img.rgba[..., :3] if color is None else color_surface(img, color)[..., :3]
             rgb = np.where(img.hit[..., None], shaded, np.float32(0)).astype(np.float32)
-            active, left = {}, {}
+            active, left, nexts = {}, {}, {}
             for c in completions:
                 s = snaps.get(c, img)
                 done = ~s.active
@@ -349,6 +354,7 @@ def iso_frames(
                 assert np.array_equal(s.hit[done], img.hit[done])
                 active[c] = s.active.copy()
                 left[c] = s.candidates.copy()
+                nexts[c] = s.next_t.copy()
                 tested.setdefault(c, int(sum(img.stats["items_per_pass"])))
             extra = ""
             if vary is not None:
@@ -364,6 +370,8 @@ def iso_frames(
                     f"{kind} #{i} view {v} iso {iso:.4g}{extra}",
                     left,
                     tested,
+                    img.t.copy(),
+                    nexts,
                 )
             )
             if progress is not None:

@@ -202,7 +202,7 @@ def _frames(
                 pp = pushpull(rgba, ~active)[..., :3]
                 yield (
                     f"{int(case.setting)}^3 at {c:.0%}",
-                    IsoPlanes(rgba, hit, active, f.candidates_at(c), f.crossing_rate(c)),
+                    IsoPlanes(rgba, hit, active, f.candidates_at(c), f.crossing_rate(c), f.t, f.next_t[c]),
                     f.rgb,
                     {
                         "input": rgba[..., :3],

@@ -44,8 +44,10 @@ from . import flows as _flows
 SPECS: dict[str, dict[str, Any]] = {
     "infill": {
         # candidates: a sixth input plane, the candidate blocks left on each
-        # running ray (IsoImage.candidates; issue 21)
-        "arch": {"candidates": True},
+        # running ray (IsoImage.candidates; issue 21); depth: two more, the
+        # finished hits' t and where each running ray's next candidate block
+        # begins (IsoImage.t, .next_t), and the gap between them
+        "arch": {"candidates": True, "depth": True},
         "frames": 24,  # volumes (x views)
         "views": 2,
         "held_out": 4,
@@ -663,13 +665,15 @@ def _grown_channels(net: Any, weights: dict[str, np.ndarray], path: Path) -> int
 
 def _infill_candidates_channel(net: Any, weights: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """A 5- or 6-channel in-fill file's weights for an InfillWNet of more
-    input planes (6: + candidates, 7: + the hit prior): zero columns for the
-    planes it lacks, after its own, in each U-Net's first convolution (whose
-    input is the planes, then the 4 channels of the estimate); else the
+    input planes (6: + candidates, 7: + the hit prior, 8: + the depth planes,
+    and the gap its U-Nets also see): zero columns for the inputs it lacks,
+    after its own, in each U-Net's first convolution (whose input is the
+    planes, (depth) the gap, then the 4 channels of the estimate); else the
     weights as they are."""
     if type(net).__name__ != "InfillWNet" or net.channels_in <= 5:
         return weights
-    c = net.channels_in
+    # the U-Nets' own input: the planes, (depth) the gap, then the estimate
+    c = net.channels_in + int(getattr(net, "depth", False))
     out = dict(weights)
     for u in ("first", "second"):
         k = f"{u}.enc.0.0.weight"
@@ -711,15 +715,29 @@ def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int],
     return frames(count, views, seed, size, held_out, log)
 
 
-def _pack_infill(frame: Any, completion: float | None, stride: int) -> tuple[Any, Any]:
+def _pack_infill(frame: Any, completion: float | None, stride: int, prior: bool = False) -> tuple[Any, Any]:
+    """(8 planes: + candidates, depth; `prior`: 7, + candidates, hit prior), target."""
     from ..post.pack import pack_iso
 
-    # every plane the in-fill can take (the candidates, then the hit prior);
-    # _pack keeps the network's first channels
+    if prior:
+        x = pack_iso(
+            *frame.planes(completion),
+            candidates=frame.candidates_at(completion),
+            crossing_rate=frame.crossing_rate(completion),
+            stride=stride,
+        )[0]
+        return x, np.concatenate([frame.rgb, frame.hit[..., None].astype(np.float32)], axis=2)
+
+    # every plane the in-fill can take after the candidates: the depth
+    # planes; _pack keeps the network's first channels (the hit-prior plane
+    # of a 7-plane network is not packed here)
+    rgba, hit, active = frame.planes(completion)
     x = pack_iso(
-        *frame.planes(completion),
+        rgba,
+        hit,
+        active,
         candidates=frame.candidates_at(completion),
-        crossing_rate=frame.crossing_rate(completion),
+        depth=(frame.t, frame.next_t[completion]),
         stride=stride,
     )[0]
     return x, np.concatenate([frame.rgb, frame.hit[..., None].astype(np.float32)], axis=2)
@@ -778,7 +796,10 @@ def _pack(
     the pack kernels the inference uses (padded to a multiple of `stride`);
     `channels`: the input's first ones only (the network's channels_in: the
     in-fill packs its optional candidates and hit-prior planes last)."""
-    x, y = TRAINERS[name].pack(frame, completion, stride)
+    if name == "infill" and channels == 7:  # the hit-prior W-Net's planes
+        x, y = _pack_infill(frame, completion, stride, prior=True)
+    else:
+        x, y = TRAINERS[name].pack(frame, completion, stride)
     x = np.asarray(x, np.float32)
     if channels is not None:
         x = x[:channels]

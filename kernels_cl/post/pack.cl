@@ -45,6 +45,29 @@
  *     frame's crossing rate, in [0, 1]); else 0; padding 0. Other channels are
  *     not touched.
  *
+ * kernel iso_depth_range(global const float *t, global const float *next_t,
+ *                         global const uchar *hit, global const uchar *active,
+ *                         ulong n, global uint *stats)
+ *     The depth range of an iso image (n pixels): its values are t[i] where
+ *     hit && !active (a finished hit's ray parameter, clvis.iso.IsoImage.t)
+ *     and next_t[i] where active (where a running ray's next candidate block
+ *     begins, IsoImage.next_t), the finite ones only. stats (2 uints, zeroed
+ *     by the host): stats[0] = max(stats[0], key(v)), stats[1] =
+ *     max(stats[1], ~key(v)) over them, key() clvis_key_f32 (0: no value).
+ *     Global size: a multiple of WG >= ceil(n / ITEMS); local size WG.
+ *
+ * kernel pack_depth(global const float *t, global const float *next_t,
+ *                   global const uchar *hit, global const uchar *active,
+ *                   uint w, uint h, uint wp, uint hp, uint channel,
+ *                   global const uint *stats, global float *out)
+ *     Two more channels of pack_iso's tensor (the in-fill network with depth
+ *     planes): with lo, hi the extremes decoded from iso_depth_range's stats
+ *     (on the same planes) and range = hi - lo, out[channel] = (t - lo) /
+ *     range where hit && !active and t is finite, out[channel + 1] =
+ *     (next_t - lo) / range where active and next_t is finite; 0 elsewhere,
+ *     at padding, and everywhere when range is not > 0. Other channels are
+ *     not touched.
+ *
  * kernel rgbda_range(global const float *rgbda, ulong n, global uint *stats)
  *     rgbda: n pixels of 5 floats {r, g, b, depth, alpha}. Adds to stats
  *     (4 uints, zeroed by the host):
@@ -185,6 +208,68 @@ kernel void pack_prior(global const uchar *count, global const uchar *active, co
             }
         }
         out[channel * plane + i] = v;
+    }
+}
+
+kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
+void iso_depth_range(global const float *t, global const float *next_t, global const uchar *hit,
+                     global const uchar *active, const ulong n, global uint *stats)
+{
+    local uint hi[WG], lo[WG];      /* max key, max ~key: 0 = no value */
+    const uint lid = get_local_id(0);
+    uint kmax = 0, kminv = 0;
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    for (ulong i = first; i < n && i < first + ITEMS; ++i) {
+        const int running = active[i] != 0;
+        const float v = running ? next_t[i] : t[i];
+        if ((running || hit[i] != 0) && isfinite(v)) {
+            const uint k = clvis_key_f32(as_uint(v));
+            kmax = max(kmax, k);
+            kminv = max(kminv, ~k);
+        }
+    }
+    hi[lid] = kmax;
+    lo[lid] = kminv;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (uint s = WG / 2; s > 0; s >>= 1) {
+        if (lid < s) {
+            hi[lid] = max(hi[lid], hi[lid + s]);
+            lo[lid] = max(lo[lid], lo[lid + s]);
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid == 0) {
+        if (hi[0])
+            atomic_max(&stats[0], hi[0]);
+        if (lo[0])
+            atomic_max(&stats[1], lo[0]);
+    }
+}
+
+kernel void pack_depth(global const float *t, global const float *next_t, global const uchar *hit,
+                       global const uchar *active, const uint w, const uint h, const uint wp,
+                       const uint hp, const uint channel, global const uint *stats,
+                       global float *out)
+{
+    const ulong plane = (ulong)wp * hp;
+    /* no value at all: stats 0, range not > 0, every pixel 0 */
+    const float vmax = key_to_float(stats[0]), vmin = key_to_float(~stats[1]);
+    const float range = stats[0] ? vmax - vmin : 0.0f;
+    const ulong first = (ulong)get_global_id(0) * ITEMS;
+    uint y = (uint)(first / wp), x = (uint)(first - (ulong)y * wp);
+    for (ulong i = first; i < plane && i < first + ITEMS; ++i, x = x + 1 < wp ? x + 1 : 0, y += x == 0) {
+        float done = 0.0f, next = 0.0f;
+        if (x < w && y < h && range > 0.0f) {
+            const ulong s = (ulong)y * w + x;
+            if (active[s] != 0) {
+                if (isfinite(next_t[s]))
+                    next = (next_t[s] - vmin) / range;
+            } else if (hit[s] != 0 && isfinite(t[s])) {
+                done = (t[s] - vmin) / range;
+            }
+        }
+        out[channel * plane + i] = done;
+        out[(channel + 1) * plane + i] = next;
     }
 }
 

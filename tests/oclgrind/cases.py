@@ -468,6 +468,12 @@ def post_pack(q):
     clvis.post.pack_iso(rgba, hit, active, candidates=cand, stride=8, queue=q)
     # the hit-prior plane (pack_prior)
     clvis.post.pack_iso(rgba, hit, active, candidates=cand, crossing_rate=0.3, stride=8, queue=q)
+    # the depth planes (iso_depth_range, pack_depth), non-finite values among them; none at all
+    t = rng.uniform(0, 9, (h, w)).astype(np.float32)
+    nxt = np.where(rng.random((h, w)) < 0.2, np.inf, rng.uniform(1, 12, (h, w))).astype(np.float32)
+    clvis.post.pack_iso(rgba, hit, active, candidates=cand, depth=(t, nxt), stride=8, queue=q)
+    none = np.full((h, w), np.inf, np.float32)
+    clvis.post.pack_iso(rgba, hit, active, candidates=cand, depth=(none, none), queue=q)
     x = np.zeros((h, w, 5), np.float32)
     keep = rng.random((h, w)) < 0.5
     x[..., :3] = rng.random((h, w, 3))

@@ -328,10 +328,11 @@ def test_infill_with_the_hit_prior_plane(tmp_path, iso_pair):
 
     for f in infer.MODELS.glob("infill*"):
         shutil.copy(f, tmp_path / f.name)
+    torch.manual_seed(7)
     net7 = nets.InfillWNet(candidates=True, prior=True)
-    train.load_onnx_weights(net7, infer.MODELS / "infill.onnx")
-    with torch.no_grad():  # the prior plane's weights, made to matter
+    with torch.no_grad():  # corrections other than zero, and the prior plane's weights made to matter
         for u in (net7.first, net7.second):
+            torch.nn.init.normal_(u.out.weight, std=0.2)
             u.enc[0][0].weight[:, 6] = 0.5
     train.export_onnx(net7, tmp_path / "infill.onnx")
     card = json.loads((tmp_path / "infill.json").read_text())
@@ -352,8 +353,12 @@ def test_infill_with_the_hit_prior_plane(tmp_path, iso_pair):
         None, {"planes": planes}
     )[0]
     np.testing.assert_array_equal(net.infer(part), want)
-    six = post.load("infill").infer(part)  # the plane moves the picture
-    assert six.shape == want.shape and np.abs(want - six).max() > 1e-3
+    with torch.no_grad():  # the plane moves the picture
+        net7.first.enc[0][0].weight[:, 6] = 0.0
+        net7.second.enc[0][0].weight[:, 6] = 0.0
+    train.export_onnx(net7, tmp_path / "without.onnx")
+    without = ort.InferenceSession(str(tmp_path / "without.onnx"), providers=["CPUExecutionProvider"])
+    assert np.abs(want - without.run(None, {"planes": planes})[0]).max() > 1e-3
     guarded = net(part, guard=True)
     assert guarded.shape == part.rgba.shape and guarded.dtype == np.uint8
     with pytest.raises(DataError, match="crossing rate"):
@@ -366,6 +371,55 @@ def test_infill_with_the_hit_prior_plane(tmp_path, iso_pair):
     np.testing.assert_array_equal(
         net.infer(post.IsoPlanes(part.rgba, part.hit, part.active, part.candidates, rate)), want
     )
+
+
+def test_infill_with_the_depth_planes(tmp_path, iso_pair):
+    """An 8-plane in-fill model (InfillWNet(candidates=True, depth=True), its
+    card's channels_in 8): the call packs the image's t and next_t, gives
+    what onnxruntime gives on that tensor, runs guarded, and names what an
+    image without them lacks."""
+    import onnxruntime as ort
+    import torch
+
+    from clvis.post import nets
+
+    for f in infer.MODELS.glob("infill*"):
+        shutil.copy(f, tmp_path / f.name)
+    torch.manual_seed(8)
+    net8 = nets.InfillWNet(candidates=True, depth=True)
+    with torch.no_grad():
+        for u in (net8.first, net8.second):
+            torch.nn.init.normal_(u.out.weight, std=0.2)
+    train.export_onnx(net8, tmp_path / "infill.onnx")
+    card = json.loads((tmp_path / "infill.json").read_text())
+    card["channels_in"], card["architecture"] = 8, {"candidates": True, "depth": True}
+    card["files"] = {"fp32": {"file": "infill.onnx", "sha256": train.sha256(tmp_path / "infill.onnx")}}
+    card["files"]["fp32"]["bytes"] = (tmp_path / "infill.onnx").stat().st_size
+    (tmp_path / "infill.json").write_text(json.dumps(card))
+    net = post.load("infill", directory=tmp_path)
+    assert net.channels_in == 8
+    part, _ = iso_pair
+    assert part.next_t is not None and np.isfinite(part.next_t[part.active]).any()
+    planes = post.pack_iso(
+        part.rgba,
+        part.hit,
+        part.active,
+        candidates=part.candidates,
+        depth=(part.t, part.next_t),
+        stride=net.stride,
+    )
+    want = ort.InferenceSession(str(net.path), providers=["CPUExecutionProvider"]).run(
+        None, {"planes": planes}
+    )[0]
+    np.testing.assert_array_equal(net.infer(part), want)
+    guarded = net(part, guard=True)
+    assert guarded.shape == part.rgba.shape and guarded.dtype == np.uint8
+    with pytest.raises(DataError, match="IsoImage.t and .next_t.*the image has neither"):
+        net(post.IsoPlanes(part.rgba, part.hit, part.active, part.candidates))
+    got = net.infer(
+        post.IsoPlanes(part.rgba, part.hit, part.active, part.candidates, None, part.t, part.next_t)
+    )
+    np.testing.assert_array_equal(got, want)
 
 
 def test_missing_and_corrupt_model_files(tmp_path):

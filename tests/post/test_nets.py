@@ -20,7 +20,8 @@ from clvis.training import data, train  # noqa: E402
 def real_inputs():
     """A real partial iso image and a real depth-filtered scan, packed."""
     f = data.iso_frames(("blobs",), 1, 5, 96, 64, views=1, n=32)[0]
-    iso = pack_iso(*f.planes(0.85), candidates=f.candidates_at(0.85), stride=32)  # the 6-plane W-Net's input
+    # the 8-plane W-Net's input (candidates and depth planes)
+    iso = pack_iso(*f.planes(0.85), candidates=f.candidates_at(0.85), depth=(f.t, f.next_t[0.85]), stride=32)
     lf = data.lidar_frames(("town",), 1, 5, 96, 64, views=1, dense_points=100_000)[0]
     lidar = pack_rgbda(lf.rgbda, stride=32)
     sc = data.narvis_scene("hurricane", 30_000, 5)

@@ -127,6 +127,75 @@ def test_pack_iso_prior(queue, shape, rate, stride):
     same(out.get(), want)
 
 
+@pytest.mark.parametrize("shape", [(1, 1), (3, 5), (17, 33), (37, 53)])
+@pytest.mark.parametrize("stride", [1, 16])
+@pytest.mark.parametrize("kind", ["mixed", "none", "one value"])
+def test_pack_iso_depth(queue, shape, stride, kind):
+    """The seventh and eighth channels: the finished hits' t and the running
+    rays' next_t on one [0, 1] scale over the frame's finite values of both
+    (a reduction on the device), 0 elsewhere; no finite value or a single
+    one: 0 everywhere. Bit for bit; the first six as without them; numpy,
+    device and out= inputs."""
+    rgba, hit, active = iso_inputs(shape, seed=hash((shape, stride, 8)) % 2**32)
+    rng = np.random.default_rng(8)
+    cand = rng.integers(0, 12, shape).astype(np.uint8)
+    t = rng.uniform(-3.0, 40.0, shape).astype(np.float32)
+    nxt = rng.uniform(0.5, 60.0, shape).astype(np.float32)
+    flat = t.ravel(), nxt.ravel()
+    for a in flat:  # a few non-finite values, never in the range
+        a[::7] = np.inf
+        a[3::11] = np.nan
+    if kind == "none":
+        t[:], nxt[:] = np.inf, np.nan
+    elif kind == "one value":
+        t[:], nxt[:] = np.float32(2.5), np.float32(2.5)
+    got = pack_iso(rgba, hit, active, candidates=cand, depth=(t, nxt), stride=stride, queue=queue)
+    want = ref.pack_iso(rgba, hit, active, candidates=cand, depth=(t, nxt), stride=stride)
+    same(got, want)
+    assert got.shape[1] == 8
+    same(got[:, :6], ref.pack_iso(rgba, hit, active, candidates=cand, stride=stride))
+    d, n = got[0, 6, : shape[0], : shape[1]], got[0, 7, : shape[0], : shape[1]]
+    done, run = hit & ~active & np.isfinite(t), active & np.isfinite(nxt)
+    assert not d[~done].any() and not n[~run].any()
+    assert not got[0, 6:, shape[0] :].any() and not got[0, 6:, :, shape[1] :].any()
+    vals = np.concatenate([t[done], nxt[run]]).astype(np.float64)
+    if kind == "mixed" and vals.size > 1 and np.ptp(vals) > 0:
+        np.testing.assert_allclose(d[done], (t[done] - vals.min()) / np.ptp(vals), atol=1e-6)
+        np.testing.assert_allclose(n[run], (nxt[run] - vals.min()) / np.ptp(vals), atol=1e-6)
+        assert min(d[done].min(initial=1), n[run].min(initial=1)) == 0
+        assert max(d[done].max(initial=0), n[run].max(initial=0)) == 1
+    else:
+        assert not got[0, 6:].any()
+    out = cla.empty(queue, want.shape, np.float32)
+    dev = pack_iso(
+        cla.to_device(queue, rgba),
+        hit,
+        active,
+        candidates=cand,
+        depth=(cla.to_device(queue, t), nxt),
+        stride=stride,
+        out=out,
+    )
+    assert dev is out
+    same(out.get(), want)
+
+
+def test_pack_iso_depth_bad_input(queue):
+    rgba, hit, active = iso_inputs((4, 5), seed=3)
+    cand = np.ones((4, 5), np.uint8)
+    t = np.ones((4, 5), np.float32)
+    with pytest.raises(ValueError, match="depth: the depth planes come after the candidates plane"):
+        pack_iso(rgba, hit, active, depth=(t, t), queue=queue)
+    with pytest.raises(ValueError, match="depth: the depth planes come after the candidates plane"):
+        pack_iso(rgba, hit, active, candidates=cand, crossing_rate=0.5, depth=(t, t), queue=queue)
+    with pytest.raises(TypeError, match="depth: expected a pair"):
+        pack_iso(rgba, hit, active, candidates=cand, depth=t, queue=queue)
+    with pytest.raises(TypeError, match=r"depth\[1\] \(next_t\): dtype"):
+        pack_iso(rgba, hit, active, candidates=cand, depth=(t, t.astype(np.float64)), queue=queue)
+    with pytest.raises(ValueError, match=r"depth\[0\] \(t\): shape"):
+        pack_iso(rgba, hit, active, candidates=cand, depth=(t[:3], t), queue=queue)
+
+
 def test_pack_iso_prior_bad_input(queue):
     rgba, hit, active = iso_inputs((5, 7), seed=3)
     cand = np.ones((5, 7), np.uint8)

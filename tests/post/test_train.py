@@ -377,14 +377,23 @@ def test_iso_frames_are_deterministic_and_consistent():
         assert left.max() <= 8
         x, _ = train._pack("infill", a, c)
         np.testing.assert_array_equal(x[5], np.minimum(left, 8) / np.float32(8))
-        # the hit prior: the frame's finished hits per candidate block its render tested
+        # the depth planes: the hits' t, where each running ray's next candidate block begins
+        nxt = a.next_t[c]
+        np.testing.assert_array_equal(nxt, b.next_t[c])
+        assert np.isfinite(nxt[active]).all() and np.isinf(nxt[~active]).all()
+        assert (nxt[active & a.hit] <= a.t[active & a.hit]).all()  # a block before the hit in it
+        np.testing.assert_array_equal(
+            x[6:], ref_pack.pack_iso(rgba, hit, active, candidates=left, depth=(a.t, nxt))[0, 6:]
+        )
+        assert x.shape[0] == 8 and train._pack("infill", a, c, channels=5)[0].shape[0] == 5
+        # the hit prior (a 7-plane W-Net): the frame's finished hits per candidate block its render tested
         assert a.tested[c] == b.tested[c] > 0
         rate = a.crossing_rate(c)
         assert 0 < rate <= 1 and rate == (hit & ~active).sum() / a.tested[c]
+        x7, _ = train._pack("infill", a, c, channels=7)
         np.testing.assert_array_equal(
-            x[6], ref_pack.pack_iso(rgba, hit, active, candidates=left, crossing_rate=rate)[0, 6]
+            x7[6], ref_pack.pack_iso(rgba, hit, active, candidates=left, crossing_rate=rate)[0, 6]
         )
-        assert x.shape[0] == 7 and train._pack("infill", a, c, channels=5)[0].shape[0] == 5
     assert a.active[0.85].any() and (a.candidates_at(0.85) > 1).any()
     # fewer rays run at higher completion
     assert a.active[0.85].sum() >= a.active[0.9].sum() >= a.active[0.95].sum()

@@ -22,6 +22,14 @@ channel HIT_PRIOR = 1 - (1 - rho)^k where active, else 0, k =
 min(candidates, CANDIDATES_CAP): how likely a running ray with k blocks left
 is to end on the surface if each block is crossed with probability rho. The
 power is k float32 products 1 * m * m ... (m = float32(1 - rho)) in order.
+With ``depth`` = (t, next_t) instead of ``crossing_rate`` (H x W float32:
+clvis.iso.IsoImage.t, a finished hit's ray parameter, and .next_t, where a
+running ray's next candidate block begins) a seventh and eighth channel
+DEPTH, NEXT: with lo, hi the minimum and maximum of the finite t where hit
+and not active and the finite next_t where active, DEPTH = (t - lo) / (hi -
+lo) at those finished hits, NEXT = (next_t - lo) / (hi - lo) at those running
+rays, in float32 (one subtraction, one division); 0 elsewhere, and
+everywhere when hi - lo is not > 0.
 
 pack_rgbda (the LiDAR U-Net, following the LiDAR paper's authors'
 conventions): from ``rgbda`` (H x W x 5 [r, g, b, depth, alpha], a
@@ -84,6 +92,7 @@ def pack_iso(
     *,
     candidates: npt.ArrayLike | None = None,
     crossing_rate: float | None = None,
+    depth: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
     stride: int = 1,
 ) -> np.ndarray:
     rgba = np.asarray(rgba, _F)
@@ -103,8 +112,25 @@ def pack_iso(
             for j in range(CANDIDATES_CAP):
                 p = np.where(k > j, p * miss, p)
             planes.append(np.where(active, _F(1) - p, _F(0)))
+        if depth is not None:
+            if crossing_rate is not None:
+                raise ValueError(
+                    "depth: the depth planes come after the candidates plane, without crossing_rate"
+                )
+            t, nxt = (np.asarray(a, _F) for a in depth)
+            done = shown & np.isfinite(t)
+            run = active & np.isfinite(nxt)
+            vals = np.concatenate([t[done], nxt[run]])
+            lo = vals.min() if vals.size else _F(0)
+            span = _F(vals.max() - lo) if vals.size else _F(0)
+            with np.errstate(invalid="ignore", over="ignore"):
+                d = np.where(done, (t - lo) / span, _F(0)) if span > 0 else np.zeros(t.shape, _F)
+                n = np.where(run, (nxt - lo) / span, _F(0)) if span > 0 else np.zeros(t.shape, _F)
+            planes += [d.astype(_F), n.astype(_F)]
     elif crossing_rate is not None:
         raise ValueError("crossing_rate: the hit-prior plane needs candidates")
+    elif depth is not None:
+        raise ValueError("depth: the depth planes come after the candidates plane, without crossing_rate")
     return _nchw(planes, hp, wp, [0] * len(planes))
 
 

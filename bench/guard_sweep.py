@@ -73,13 +73,14 @@ def main() -> None:
         ]
         frames = []
         for f in data.iso_frames(data.TRAIN_VOLUMES, args.frames or 6, 331, 320, 180, views=1):
-            # + the candidates plane the shipped 6-plane W-Net reads; the
-            # withheld rays take their nearest running ray's count, as
-            # the guard gives them (guard.nearest_running)
+            # + the candidates and depth planes the shipped 8-plane W-Net
+            # reads; the withheld rays take their nearest running ray's
+            # count and next_t, as the guard gives them (guard.nearest_running)
             for c in data.COMPLETIONS:
                 rgba, hit, active = f.planes(c)
                 near = G.nearest_running(f.candidates_at(c), active)
-                frames.append((f"{f.source} {c:.0%}", f.rgb, rgba, hit, active, near))
+                nxt = G.nearest_running(f.next_t[c], active, "next_t")
+                frames.append((f"{f.source} {c:.0%}", f.rgb, rgba, hit, active, (near, f.t, nxt)))
     else:
         bad = ("none", "noise", "swap")
         grid = [
@@ -104,7 +105,7 @@ def main() -> None:
 
     def candidates(item, known, kind, seed):
         if name == "infill":
-            _, _, rgba, hit, active, near = item
+            _, _, rgba, hit, active, (near, t, nxt) = item
             shown = hit & ~active
             vals = np.concatenate([rgba[..., :3] * shown[..., None], shown[..., None]], 2).astype(np.float32)
             over = None
@@ -112,7 +113,7 @@ def main() -> None:
                 sp = np.asarray(pushpull(np.ascontiguousarray(vals[..., :3]), hit & known))
                 over = np.concatenate([sp, np.ones_like(sp[..., :1])], -1)
             n = _bad(
-                run(IsoPlanes(vals, hit & known, ~known, near if net.channels_in >= 6 else None)),
+                run(IsoPlanes(vals, hit & known, ~known, near if net.channels_in >= 6 else None, None, t, nxt)),
                 kind,
                 seed,
                 over,

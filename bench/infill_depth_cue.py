@@ -90,7 +90,7 @@ def _rays(fam: str, frames: int, w: int, h: int, net) -> dict[str, np.ndarray]:
             gap = nxt - near_t
             vals = np.concatenate([rgb * shown[..., None], shown[..., None]], 2).astype(np.float32)
             pp = np.asarray(pushpull(vals, ~run))[..., :3]
-            got = net(IsoPlanes(vals, shown, run, cand))[..., :3] / np.float32(255)
+            got = net(IsoPlanes(vals, shown, run, cand, None, t, nxt))[..., :3] / np.float32(255)
             out["k"].append(cand[run].astype(np.float64))
             out["gap"].append(np.where(np.isfinite(gap), gap, 1e3)[run])
             out["miss"].append(~img.hit[run])

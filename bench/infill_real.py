@@ -93,17 +93,18 @@ def main() -> None:
                             img.active.copy(),
                             img.candidates.copy(),
                             int(sum(img.stats["items_per_pass"])),
+                            img.next_t.copy(),
                         )
             assert img is not None
             target = np.where(img.hit[..., None], img.rgba[..., :3], np.float32(0)).astype(np.float32)
             for c in COMPLETIONS:
-                active, cand, tested = snaps.get(
-                    c, (img.active, img.candidates, int(sum(img.stats["items_per_pass"])))
+                active, cand, tested, next_t = snaps.get(
+                    c, (img.active, img.candidates, int(sum(img.stats["items_per_pass"])), img.next_t)
                 )
                 rgba = np.concatenate([target, img.hit[..., None].astype(np.float32)], axis=2)
                 rgba[active] = 0.0
                 hit = img.hit & ~active
-                x = post.IsoPlanes(rgba, hit, active, cand, crossing_rate(hit, active, tested))
+                x = post.IsoPlanes(rgba, hit, active, cand, crossing_rate(hit, active, tested), img.t, next_t)
                 running[c].append(float(active.mean()))
                 # the network's uint8 picture; the baselines as 8-bit pictures too
                 out = {

@@ -111,7 +111,9 @@ def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (640, 
     inp = np.where(active[..., None], np.array([1.0, 0.0, 1.0], np.float32), rgba[..., :3])
     pp = np.asarray(post.pushpull(rgba, ~active, queue=q))[..., :3]
     net = post.load("infill", queue=q)
-    got = net(post.IsoPlanes(rgba, hit, active, f.candidates_at(0.85), f.crossing_rate(0.85)))
+    got = net(
+        post.IsoPlanes(rgba, hit, active, f.candidates_at(0.85), f.crossing_rate(0.85), f.t, f.next_t[0.85])
+    )
     out = got[..., :3].astype(np.float32) / 255
     s = _scores(np.where(active[..., None], 0, rgba[..., :3]), pp, out, target)
     print(_line("infill", s, net.stats["inference"]) + f"   ({f.source}, 85% of the rays)")

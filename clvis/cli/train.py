@@ -113,8 +113,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--planes",
         default=None,
         metavar="P,Q,...",
-        help="narvis, narvis-scan: the G-buffer planes the network takes (e.g. rgb,depth,vel2d,radius; "
-        "default: the release run's)",
+        help="narvis, narvis-scan: the G-buffer planes the network takes (e.g. rgb,depth,vel2d,radius); "
+        "infill: its optional input planes, candidates then prior or depth (e.g. candidates,depth); "
+        "default: the release run's",
     )
     p.add_argument(
         "--lr", type=float, default=None, metavar="X", help="peak learning rate (default: the release run's)"
@@ -215,7 +216,13 @@ def cmd(args: argparse.Namespace) -> int:
     if args.init is not None and not os.path.isfile(args.init):
         raise CliError(f"--init {args.init}: no such file")
     planes = None
-    if args.planes is not None:
+    if args.planes is not None and args.model == "infill":
+        planes = [p.strip() for p in args.planes.split(",") if p.strip()]
+        try:
+            train.infill_planes(planes)
+        except ValueError as e:
+            raise CliError(f"--planes {args.planes}: {e}") from None
+    elif args.planes is not None:
         if "planes" not in train.SPECS[args.model]["arch"]:
             raise CliError(f"--planes: {args.model} takes no G-buffer planes (narvis, narvis-scan only)")
         from ..post.names import gbuffer_channels

@@ -996,9 +996,13 @@ def train(
     spec, trainer = SPECS[name], TRAINERS[name]
     # narvis-scan: the depth filter its frames go through (its pipeline's)
     scan_filter = _scan_depth_filter() if name == "narvis-scan" else None
-    if planes is not None:
+    if planes is not None and name == "infill":
+        spec = {**spec, "arch": {**spec["arch"], **infill_planes(planes)}}
+    elif planes is not None:
         if "planes" not in spec["arch"]:
-            raise ValueError(f"planes: {name} takes no G-buffer planes (narvis, narvis-scan only)")
+            raise ValueError(
+                f"planes: {name} takes no G-buffer planes (narvis, narvis-scan; infill: {INFILL_PLANES})"
+            )
         from ..post.names import gbuffer_channels
 
         gbuffer_channels(tuple(planes))  # a clear error for a bad selection
@@ -1487,6 +1491,30 @@ class Trainer:
     cached: bool = False
     #: the Gaussian renderer's model its targets are (the card's data.target_model)
     target: str | None = None
+
+
+#: the in-fill W-Net's optional input planes, in their channel order (InfillWNet's flags)
+INFILL_PLANES = ("candidates", "prior", "depth")
+
+
+def infill_planes(planes: Sequence[str]) -> dict[str, bool]:
+    """InfillWNet's flags for the optional planes named (`--planes` of
+    `clvis train infill`: candidates, then prior or depth); ValueError for
+    another name or a combination the W-Net does not take."""
+    chosen = [p.strip() for p in planes if p.strip()]
+    unknown = [p for p in chosen if p not in INFILL_PLANES]
+    if unknown:
+        raise ValueError(
+            f"planes: {', '.join(unknown)}: the in-fill W-Net's optional planes are {INFILL_PLANES}"
+        )
+    flags = {p: p in chosen for p in INFILL_PLANES}
+    if (flags["prior"] or flags["depth"]) and not flags["candidates"]:
+        raise ValueError(
+            "planes: prior and depth come after the candidates plane (candidates,prior or candidates,depth)"
+        )
+    if flags["prior"] and flags["depth"]:
+        raise ValueError("planes: the W-Net takes the hit prior or the depth planes, not both")
+    return flags
 
 
 def _builder(cls: str) -> Callable[..., Any]:

@@ -1017,3 +1017,25 @@ def test_lidar_frames_draw_the_scan_at_its_point_size():
     assert kept[1] > 2 * kept[0] > 0, kept
     drawn = data.lidar_frames(("town",), 1, 3, 96, 72, point_size=(3, 3), **kw)[0]
     assert int((drawn.rgbda[..., 4] > 0).sum()) > 2 * kept[0]
+
+
+def test_infill_planes_choose_the_w_nets_inputs(capsys):
+    """--planes for the in-fill: the W-Net's optional planes by name."""
+    assert train.infill_planes(["candidates", "depth"]) == {"candidates": True, "prior": False, "depth": True}
+    assert train.infill_planes(["candidates"]) == {"candidates": True, "prior": False, "depth": False}
+    assert train.infill_planes([]) == {"candidates": False, "prior": False, "depth": False}
+    for bad, message in (
+        (["depth"], "after the candidates plane"),
+        (["candidates", "prior", "depth"], "not both"),
+        (["colour"], "optional planes are"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            train.infill_planes(bad)
+    for planes, channels in ((["candidates", "depth"], 8), (["candidates", "prior"], 7), ([], 5)):
+        assert train.TRAINERS["infill"].build(**train.infill_planes(planes)).channels_in == channels
+    from clvis import cli
+
+    assert cli.main(["train", "infill", "--planes", "depth", "--steps", "1"]) == 2
+    assert (
+        "--planes depth: planes: prior and depth come after the candidates plane" in capsys.readouterr().err
+    )

@@ -49,7 +49,7 @@
  *                         global const uchar *hit, global const uchar *active,
  *                         ulong n, global uint *stats)
  *     The depth range of an iso image (n pixels): its values are t[i] where
- *     hit && !active (a finished hit's ray parameter, clvis.iso.IsoImage.t)
+ *     hit && !active (a finished hit's ray parameter, an IsoImage's t)
  *     and next_t[i] where active (where a running ray's next candidate block
  *     begins, IsoImage.next_t), the finite ones only. stats (2 uints, zeroed
  *     by the host): stats[0] = max(stats[0], key(v)), stats[1] =

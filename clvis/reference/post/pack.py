@@ -23,7 +23,7 @@ min(candidates, CANDIDATES_CAP): how likely a running ray with k blocks left
 is to end on the surface if each block is crossed with probability rho. The
 power is k float32 products 1 * m * m ... (m = float32(1 - rho)) in order.
 With ``depth`` = (t, next_t) instead of ``crossing_rate`` (H x W float32:
-clvis.iso.IsoImage.t, a finished hit's ray parameter, and .next_t, where a
+an IsoImage's t, a finished hit's ray parameter, and its next_t, where a
 running ray's next candidate block begins) a seventh and eighth channel
 DEPTH, NEXT: with lo, hi the minimum and maximum of the finite t where hit
 and not active and the finite next_t where active, DEPTH = (t - lo) / (hi -

@@ -113,7 +113,9 @@ def main() -> None:
                 sp = np.asarray(pushpull(np.ascontiguousarray(vals[..., :3]), hit & known))
                 over = np.concatenate([sp, np.ones_like(sp[..., :1])], -1)
             n = _bad(
-                run(IsoPlanes(vals, hit & known, ~known, near if net.channels_in >= 6 else None, None, t, nxt)),
+                run(
+                    IsoPlanes(vals, hit & known, ~known, near if net.channels_in >= 6 else None, None, t, nxt)
+                ),
                 kind,
                 seed,
                 over,

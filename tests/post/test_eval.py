@@ -172,23 +172,12 @@ def test_shipped_cards_carry_their_suite_table(name):
 # on these), with (PSNR, SSIM) margins as measured; a card may not add a row
 # here nor fall more than 0.25 dB / 0.01 further on one
 KNOWN_BELOW = {
-    # in-fill (L2 + MS-SSIM loss): push-pull is sharper on the shapes'
-    # flat faces and rims (the L1-trained W-Net before was below on these
-    # three rows by 2.46 / 2.69 / 0.63 dB and on turbulence and noise at 95 %;
-    # the L2 one without --mix by 2.17 / 2.38 / 0.13 dB; the model before
-    # this one, on frames where rays without a candidate left still ran, by
-    # 1.89 / 2.05 / 0.06 dB; the 5-plane model before this one, without the
-    # candidates plane, by 2.02 / 2.02 dB; the 6-plane model before this
-    # one, without acquisition noise and 1920x1080 frames in its variety, by
-    # 0.74 / 0.74 dB; the one before this one, 6538 steps less from it, by
-    # 0.41 / 0.41 dB: this one falls 0.29 dB further on this one frame while
-    # the full suite's shapes rows at 1920x1080 rise from -2.51 / -2.19 to
-    # -0.20 / +0.75 dB and its rows below go from 7 to 6 of 105).
-    # Both rows' snapshots fall on the same pass.
-    "infill": {
-        "shapes 320x180 64^3 at 85% orbit": (-0.70, 0.018),
-        "shapes 320x180 64^3 at 90% orbit": (-0.70, 0.018),
-    },
+    # in-fill: none since the W-Net with the depth planes (stop 48). The
+    # 6-plane model before it was below push-pull on the shapes' 85 and 90 %
+    # rows by 0.70 dB (the same frame: both snapshots fall on the same pass),
+    # the depth model's first run (d1) by 0.13 dB; the full suite's rows
+    # below went from 6 to 7 of 105 (bench/results/README.md).
+    "infill": {},
     # the LiDAR card is scored with its guard (on by default): push-pull on
     # the terrain, where the U-Net alone is 4.94 dB / 0.011 SSIM below it;
     # every method is scored as its 8-bit picture (clvis.metrics.as_picture), so

@@ -231,7 +231,9 @@ def test_infill_guard_drops_a_garbage_network_and_keeps_a_perfect_one(queue):
 def _iso_input():
     f = data.iso_frames(("shapes",), 1, 7, 160, 96, views=1, n=32)[0]
     rgba, hit, active = f.planes(0.9)
-    return f, post.IsoPlanes(rgba, hit, active, f.candidates_at(0.9), f.crossing_rate(0.9))
+    return f, post.IsoPlanes(
+        rgba, hit, active, f.candidates_at(0.9), f.crossing_rate(0.9), f.t, f.next_t[0.9]
+    )
 
 
 def test_network_call_with_the_guard(queue):

@@ -77,8 +77,9 @@ def test_infill_equals_plain_onnxruntime(iso_pair, precision):
     s = ort.InferenceSession(str(net.path), providers=["CPUExecutionProvider"])
     cand = part.candidates if net.channels_in >= 6 else None  # a model with the candidates plane
     rate = image_crossing_rate(part) if net.channels_in == 7 else None  # ... and the hit prior
+    depth = (part.t, part.next_t) if net.channels_in == 8 else None  # ... or the depth planes
     planes = post.pack_iso(
-        part.rgba, part.hit, part.active, candidates=cand, crossing_rate=rate, stride=net.stride
+        part.rgba, part.hit, part.active, candidates=cand, crossing_rate=rate, depth=depth, stride=net.stride
     )
     want = s.run(None, {"planes": planes})[0]
     np.testing.assert_array_equal(net.infer(part), want)
@@ -99,7 +100,7 @@ def test_infill_quality_on_held_out_volume():
     within 2 dB of push-pull either way, which README states.)"""
     f = data.iso_frames(("gyroid",), 1, 8, 640, 360, views=1, completions=(0.85,))[0]
     rgba, hit, active = f.planes(0.85)
-    x = post.IsoPlanes(rgba, hit, active, f.candidates_at(0.85), f.crossing_rate(0.85))
+    x = post.IsoPlanes(rgba, hit, active, f.candidates_at(0.85), f.crossing_rate(0.85), f.t, f.next_t[0.85])
     out = post.load("infill")(x)[..., :3] / np.float32(255)
     pp = post.pushpull(rgba, ~active)[..., :3]
     net_m, pp_m, raw = (train.metrics(x, f.rgb) for x in (out, pp, rgba[..., :3]))

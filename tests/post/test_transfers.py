@@ -294,12 +294,11 @@ def test_guarded_lidar_pipeline_is_counted(device, transfers):
 
 def test_guarded_infill_pipeline_is_counted(device, transfers):
     """README's in-fill call with guard=True (off by default; clvis iso
-    --infill --post-guard): the rgba, hit and active planes come back once
-    (18 B/pixel), the network runs twice on host planes (18 up, its tensors,
-    its float output read back: 16 a padded pixel), push-pull once or twice
-    (16 + 1 up, 16 down). At 512x512: 106 B/pixel down and 85 up with
-    push-pull once, against the unguarded call's 24 and 16. Held to exactly
-    that."""
+    --infill --post-guard): the input's planes come back once (rgba, hit,
+    active, candidates, t, next_t for the 8-plane model: 27 B/pixel), the
+    network runs twice on host planes (the same up, its tensors, its float
+    output read back: 16 a padded pixel), push-pull once or twice (16 + 1
+    up, 16 down). Held to exactly that."""
     q = runtime.queue_for(device)
     d = clvis.datasets.marschner_lobb(32)
     r = clvis.IsoRenderer(d["volume"], spacing=d["spacing"], origin=d["origin"], queue=q)
@@ -309,8 +308,8 @@ def test_guarded_infill_pipeline_is_counted(device, transfers):
     want = net(r.render(cam, W, H, isovalue=0.5, completion=0.85, speculation=False), guard=True)
     transfers.clear()
     got = net(part, guard=True)
-    # rgba, hit, active and (the 6-channel model's) candidates
-    planes = [16, 1, 1] + [1] * (net.channels_in - 5)
+    # rgba, hit, active, (a 6- or 8-channel model's) candidates, (an 8-channel one's) t and next_t
+    planes = [16, 1, 1] + [1] * (min(net.channels_in, 6) - 5) + ([4, 4] if net.channels_in == 8 else [])
     assert transfers.planes(W * H) == _guard_accounting(net, H, W, planes, planes, 16)
     assert transfers.small(W * H) <= SMALL
     np.testing.assert_array_equal(got, want)

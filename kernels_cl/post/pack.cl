@@ -131,6 +131,31 @@ static inline float key_to_float(const uint key)
     return as_float(clvis_key_f32_inverse(key));
 }
 
+/* The work-group's largest key and largest ~key (its range's two ends;
+ * 0: no value), each atomically maxed into range[0] and range[1].
+ * Called by every work-item of the group (barriers). */
+static void key_range_reduce(local uint *hi, local uint *lo, const uint kmax, const uint kminv,
+                             global uint *range)
+{
+    const uint lid = get_local_id(0);
+    hi[lid] = kmax;
+    lo[lid] = kminv;
+    barrier(CLK_LOCAL_MEM_FENCE);
+    for (uint s = WG / 2; s > 0; s >>= 1) {
+        if (lid < s) {
+            hi[lid] = max(hi[lid], hi[lid + s]);
+            lo[lid] = max(lo[lid], lo[lid + s]);
+        }
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (lid == 0) {
+        if (hi[0])
+            atomic_max(&range[0], hi[0]);
+        if (lo[0])
+            atomic_max(&range[1], lo[0]);
+    }
+}
+
 static inline int rgbda_kept(const float depth, const float alpha)
 {
     return alpha > 0.0f && isfinite(depth);
@@ -216,7 +241,6 @@ void iso_depth_range(global const float *t, global const float *next_t, global c
                      global const uchar *active, const ulong n, global uint *stats)
 {
     local uint hi[WG], lo[WG];      /* max key, max ~key: 0 = no value */
-    const uint lid = get_local_id(0);
     uint kmax = 0, kminv = 0;
     const ulong first = (ulong)get_global_id(0) * ITEMS;
     for (ulong i = first; i < n && i < first + ITEMS; ++i) {
@@ -228,22 +252,7 @@ void iso_depth_range(global const float *t, global const float *next_t, global c
             kminv = max(kminv, ~k);
         }
     }
-    hi[lid] = kmax;
-    lo[lid] = kminv;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    for (uint s = WG / 2; s > 0; s >>= 1) {
-        if (lid < s) {
-            hi[lid] = max(hi[lid], hi[lid + s]);
-            lo[lid] = max(lo[lid], lo[lid + s]);
-        }
-        barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    if (lid == 0) {
-        if (hi[0])
-            atomic_max(&stats[0], hi[0]);
-        if (lo[0])
-            atomic_max(&stats[1], lo[0]);
-    }
+    key_range_reduce(hi, lo, kmax, kminv, stats);
 }
 
 kernel void pack_depth(global const float *t, global const float *next_t, global const uchar *hit,
@@ -277,7 +286,6 @@ kernel __attribute__((reqd_work_group_size(WG, 1, 1)))
 void rgbda_range(global const float *rgbda, const ulong n, global uint *stats)
 {
     local uint hi[WG], lo[WG];      /* max key, max ~key: 0 = no kept pixel */
-    const uint lid = get_local_id(0);
     uint kmax = 0, kminv = 0, nan = 0, neg = 0;
     const ulong first = (ulong)get_global_id(0) * ITEMS;
     for (ulong i = first; i < n && i < first + ITEMS; ++i) {
@@ -297,22 +305,7 @@ void rgbda_range(global const float *rgbda, const ulong n, global uint *stats)
         atomic_add(&stats[0], nan);
     if (neg)
         atomic_add(&stats[1], neg);
-    hi[lid] = kmax;
-    lo[lid] = kminv;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    for (uint s = WG / 2; s > 0; s >>= 1) {
-        if (lid < s) {
-            hi[lid] = max(hi[lid], hi[lid + s]);
-            lo[lid] = max(lo[lid], lo[lid + s]);
-        }
-        barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    if (lid == 0) {
-        if (hi[0])
-            atomic_max(&stats[2], hi[0]);
-        if (lo[0])
-            atomic_max(&stats[3], lo[0]);
-    }
+    key_range_reduce(hi, lo, kmax, kminv, stats + 2);
 }
 
 kernel void pack_rgbda(global const float *rgbda, const uint w, const uint h,

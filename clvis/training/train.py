@@ -716,30 +716,18 @@ def _frames(name: str, count: int, views: int, seed: int, size: tuple[int, int],
 
 
 def _pack_infill(frame: Any, completion: float | None, stride: int, prior: bool = False) -> tuple[Any, Any]:
-    """(8 planes: + candidates, depth; `prior`: 7, + candidates, hit prior), target."""
+    """(input, target): the planes after the candidates are the depth planes
+    (8 in all), or with `prior` the hit prior (7); _pack keeps the network's
+    first channels."""
     from ..post.pack import pack_iso
 
-    if prior:
-        x = pack_iso(
-            *frame.planes(completion),
-            candidates=frame.candidates_at(completion),
-            crossing_rate=frame.crossing_rate(completion),
-            stride=stride,
-        )[0]
-        return x, np.concatenate([frame.rgb, frame.hit[..., None].astype(np.float32)], axis=2)
-
-    # every plane the in-fill can take after the candidates: the depth
-    # planes; _pack keeps the network's first channels (the hit-prior plane
-    # of a 7-plane network is not packed here)
     rgba, hit, active = frame.planes(completion)
-    x = pack_iso(
-        rgba,
-        hit,
-        active,
-        candidates=frame.candidates_at(completion),
-        depth=(frame.t, frame.next_t[completion]),
-        stride=stride,
-    )[0]
+    after = (
+        {"crossing_rate": frame.crossing_rate(completion)}
+        if prior
+        else {"depth": (frame.t, frame.next_t[completion])}
+    )
+    x = pack_iso(rgba, hit, active, candidates=frame.candidates_at(completion), stride=stride, **after)[0]
     return x, np.concatenate([frame.rgb, frame.hit[..., None].astype(np.float32)], axis=2)
 
 
@@ -795,7 +783,8 @@ def _pack(
     """(input (C, Hp, Wp), target (C, H, W)) float32 of one frame, through
     the pack kernels the inference uses (padded to a multiple of `stride`);
     `channels`: the input's first ones only (the network's channels_in: the
-    in-fill packs its optional candidates and hit-prior planes last)."""
+    in-fill packs its optional candidates and depth planes last, a 7-plane
+    W-Net's hit prior in their place)."""
     if name == "infill" and channels == 7:  # the hit-prior W-Net's planes
         x, y = _pack_infill(frame, completion, stride, prior=True)
     else:

@@ -63,6 +63,10 @@ SPECS: dict[str, dict[str, Any]] = {
         "mix_frames": 28,  # volumes (x views): 4 of each of the seven families
         # the share of those volumes given acquisition noise (data.IsoVariety.noise)
         "mix_noise": 0.5,
+        # the volume sides of those frames (data.IsoVariety.sides): the held-out
+        # suite's volumes go from 32^3 to 256^3, and 32^3 carried 3 of the
+        # shipped d2 model's 7 rows below push-pull
+        "mix_sides": (32, 48, 64, 96),
     },
     "lidar": {
         "arch": {"width": 8, "depth": 4},
@@ -483,14 +487,23 @@ def _scan_depth_filter() -> tuple[int, float] | None:
 MIX_VOLUMES = _data.TRAIN_VOLUMES + _data.MORE_TRAIN_VOLUMES
 
 
-def _mix_variety(crop: int, noise: float) -> Any:
+def _mix_variety(crop: int, noise: float, sides: Sequence[int] | None = None) -> Any:
     """--mix's data.IsoVariety: no frame side below `crop`, acquisition noise
-    on a share `noise` of the volumes (what the card's data.mix.variety says)."""
-    return _data.IsoVariety(smallest=max(crop, _data.IsoVariety.smallest), noise=noise)
+    on a share `noise` of the volumes, volume sides from `sides` (None: the
+    variety's own) (what the card's data.mix.variety says)."""
+    more = {} if sides is None else {"sides": tuple(int(n) for n in sides)}
+    return _data.IsoVariety(smallest=max(crop, _data.IsoVariety.smallest), noise=noise, **more)
 
 
 def _mix_frames(
-    count: int, views: int, seed: int, size: tuple[int, int], crop: int, log, noise: float = 0.0
+    count: int,
+    views: int,
+    seed: int,
+    size: tuple[int, int],
+    crop: int,
+    log,
+    noise: float = 0.0,
+    sides: Sequence[int] | None = None,
 ) -> list:
     """--mix's frames: `count` volumes of MIX_VOLUMES (in turn) x `views`,
     each volume's side, frame size and acquisition noise (with probability
@@ -504,7 +517,7 @@ def _mix_frames(
         *size,
         views=views,
         progress=log,
-        vary=_mix_variety(crop, noise),
+        vary=_mix_variety(crop, noise, sides),
         completions=_data.TRAIN_COMPLETIONS,
     )
 
@@ -1074,7 +1087,16 @@ def train(
     mix_count = 0
     if mix is not None:
         mix_count = max(1, spec["mix_frames"] * count // spec["frames"])
-        mixed = _mix_frames(mix_count, spec["views"], seed + 2_000_003, fsize, size, log, spec["mix_noise"])
+        mixed = _mix_frames(
+            mix_count,
+            spec["views"],
+            seed + 2_000_003,
+            fsize,
+            size,
+            log,
+            spec["mix_noise"],
+            spec.get("mix_sides"),
+        )
         mix_pairs = [
             _half(_pack(name, f, c, channels=channels_in)) for f in mixed for c in _data.TRAIN_COMPLETIONS
         ]
@@ -1195,7 +1217,9 @@ def train(
                         "frames": len(mix_pairs) // len(_data.TRAIN_COMPLETIONS),
                         "pairs": len(mix_pairs),
                         "completions": list(_data.TRAIN_COMPLETIONS),
-                        "variety": dataclasses.asdict(_mix_variety(size, spec["mix_noise"])),
+                        "variety": dataclasses.asdict(
+                            _mix_variety(size, spec["mix_noise"], spec.get("mix_sides"))
+                        ),
                     }
                 }
                 if mix is not None

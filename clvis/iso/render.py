@@ -112,9 +112,15 @@ MAX_SPEC = 64
 # width x height stays below this: the kernels index pixels (and pass items
 # within a tile) with 32-bit integers (clvis.limits.ISO)
 MAX_PIXELS = limits.ISO.max_pixels + 1
+# IsoImage.candidates counts the candidate blocks left on a running ray up to
+# this many (a macro_traverse with n_spec = CANDIDATES from its resume t)
+CANDIDATES = 8
 # device bytes per tile pixel: ray t, enters flag, active id (and its
-# compacted copy), still flag, hit, hit t, depth, rgba, 64-bit hit key
-PIXEL_BYTES = 4 + 1 + 4 + 4 + 1 + 1 + 4 + 4 + 16 + 8
+# compacted copy), still flag, hit, hit t, depth, rgba, 64-bit hit key; and
+# the candidates step after the tile's passes (_Tile.candidates): counts and
+# next t (the host path's), the copy of ray t, and CANDIDATES blocks and t's
+# for each running ray (at most one a pixel)
+PIXEL_BYTES = 4 + 1 + 4 + 4 + 1 + 1 + 4 + 4 + 16 + 8 + (1 + 4 + 4 + 8 * CANDIDATES)
 # device bytes per pass item: candidate block and t, valid flag, item id, item
 # hit / t / rgba / depth, sort key, sorted key and item, group head, group
 # start, and the radix sort's and compaction's working copies
@@ -123,9 +129,6 @@ ITEM_BYTES = 4 + 4 + 1 + 4 + 1 + 4 + 16 + 4 + 4 + 4 + 4 + 1 + 4 + 16
 TILE_BYTES = 256 * 2**20
 # host bytes per image pixel: rgba, depth, hit, t, active, candidates, next_t
 HOST_PIXEL_BYTES = 16 + 4 + 1 + 4 + 1 + 1 + 4
-# IsoImage.candidates counts the candidate blocks left on a running ray up to
-# this many (a macro_traverse with n_spec = CANDIDATES from its resume t)
-CANDIDATES = 8
 _PASS = "iso/pass.cl"
 _PASS_KERNELS = (
     "valid_items",

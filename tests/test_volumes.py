@@ -391,12 +391,46 @@ def test_mgh_round_trip(tmp_path, suffix, dtype):
     bad.write_bytes(b"not an MGH file at all" * 20)
     with pytest.raises(DataError, match="not a readable MGH file"):
         read_volume(bad)
+    if suffix == ".mgh":  # a zero dimension (big-endian int32 at byte 4): nibabel's MGHError
+        raw = bytearray(path.read_bytes())
+        raw[4:8] = (0).to_bytes(4, "big")
+        bad.write_bytes(bytes(raw))
+        with pytest.raises(DataError, match="not a readable MGH file: MGHError"):
+            read_volume(bad)
     import os
 
     test = os.path.join(os.path.dirname(nibabel.__file__), "tests", "data", "test.mgz")
     with pytest.raises(DataError, match="a 4-D MGH image of 2 volumes"):
         read_volume(test)
     assert read_volume(test, volume_index=1).data.shape == (5, 4, 3)
+
+
+@pytest.mark.parametrize("image", ["AnalyzeImage", "Nifti1Pair"])
+def test_analyze_pair_read_by_either_name(tmp_path, image):
+    """An Analyze 7.5 header and data file (.hdr/.img; a NIfTI-1 pair alike)
+    through nibabel, read as NIfTI is, by either name; the other file
+    missing, or the data cut short, is named."""
+    data = _sample((6, 5, 4), np.dtype(np.int16), seed=5)
+    path = tmp_path / "scan.hdr"
+    nibabel.save(getattr(nibabel, image)(data, np.diag([0.5, 1.0, 2.0, 1.0])), path)
+    assert (tmp_path / "scan.img").is_file()
+    for name in ("scan.hdr", "scan.img"):
+        v = read_volume(tmp_path / name)
+        np.testing.assert_array_equal(v.data, data.transpose(2, 1, 0))
+        assert v.spacing == (2.0, 1.0, 0.5)
+    raw = (tmp_path / "scan.img").read_bytes()
+    (tmp_path / "scan.img").write_bytes(raw[: len(raw) // 2])
+    with pytest.raises(DataError, match=r"scan\.hdr: truncated Analyze file: .*the data file scan\.img has"):
+        read_volume(path)
+    (tmp_path / "scan.img").unlink()
+    with pytest.raises(DataError, match=r"scan\.hdr: an Analyze header; its data file scan\.img is missing"):
+        read_volume(path)
+    (tmp_path / "lone.img").write_bytes(b"\0" * 64)
+    with pytest.raises(DataError, match=r"lone\.img: .*its header file lone\.hdr is missing"):
+        read_volume(tmp_path / "lone.img")
+    (tmp_path / "lone.hdr").write_bytes(b"not an Analyze header")
+    with pytest.raises(DataError, match=r"lone\.img: not a readable Analyze file"):
+        read_volume(tmp_path / "lone.img")
 
 
 def test_otsu_level_sits_between_the_samples_it_separates():

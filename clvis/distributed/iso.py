@@ -139,7 +139,9 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
             if len(shp) != 3:
                 raise DataError(f"{path}: expected a 3-D volume, got shape {shp}")
             return {"kind": "npy", "shape": tuple(shp), "spacing": (1.0, 1.0, 1.0)}
-        if name.endswith((".nii", ".nii.gz", ".mgz", ".mgh")):  # nibabel's proxy slices both alike
+        if name.endswith(volumes.NIBABEL_FORMATS):  # nibabel's proxy slices them alike
+            if name.endswith((".hdr", ".img")):
+                volumes.analyze_pair(p)  # the other file of the pair, or a DataError naming it
             import nibabel
 
             img = nibabel.load(p)
@@ -152,7 +154,9 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
         raise
     except (OSError, ValueError, TypeError, ImportError) as e:
         raise DataError(f"{path}: cannot read its header: {type(e).__name__}: {e}") from e
-    raise DataError(f"{path}: unknown volume format (expected .npy, .raw, .nii, .nii.gz, .mgz, .mgh)")
+    raise DataError(
+        f"{path}: unknown volume format (expected .npy, .raw, {', '.join(volumes.NIBABEL_FORMATS)})"
+    )
 
 
 def _read_brick(spec: dict) -> np.ndarray:

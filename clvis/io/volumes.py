@@ -20,6 +20,8 @@ Formats, chosen by the file name (case-insensitive):
 - ``.mgz``, ``.mgh``: FreeSurfer's MGH format (brain.mgz, aseg.mgz) through
   nibabel, read as NIfTI is (the same axes, ``volume_index`` for a 4-D one;
   ``.mgz`` is gzip-compressed).
+- ``.hdr`` / ``.img``: an Analyze 7.5 (or NIfTI-1 pair) header and its data
+  file beside it, through nibabel, read as NIfTI is; either name may be given.
 - ``.vti`` (VTK XML ImageData) and ``.vtk`` (legacy STRUCTURED_POINTS):
   through VTK's own readers (the ``vtk`` extra: ``pip install "clvis[vtk]"``),
   after clvis's checks of the header against the file (:mod:`clvis.io.vtk`);
@@ -102,7 +104,9 @@ class Volume:
         )
 
 
-FORMATS = (".raw", ".npy", ".nii", ".nii.gz", ".mgz", ".mgh", ".vti", ".vtk")
+#: the volume files read through nibabel (NIfTI, MGH, Analyze header/data pairs)
+NIBABEL_FORMATS = (".nii", ".nii.gz", ".mgz", ".mgh", ".hdr", ".img")
+FORMATS = (".raw", ".npy", *NIBABEL_FORMATS, ".vti", ".vtk")
 
 
 def read_volume(
@@ -113,7 +117,7 @@ def read_volume(
     volume_index: int | None = None,
 ) -> Volume:
     """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``, ``.mgz``,
-    ``.mgh``, ``.vti``, ``.vtk``; see the module docstring).
+    ``.mgh``, ``.hdr``/``.img``, ``.vti``, ``.vtk``; see the module docstring).
 
     `shape` (Z, Y, X) and `dtype` apply to ``.raw`` files only: they give the
     shape and the sample type when the file name does not, and override the
@@ -126,10 +130,10 @@ def read_volume(
         return _read_raw(path, shape, dtype)
     if shape is not None or dtype is not None:
         raise ValueError(f"shape, dtype: only for .raw files, not {path.name}")
-    if name.endswith((".nii", ".nii.gz", ".mgz", ".mgh")):
+    if name.endswith(NIBABEL_FORMATS):
         return _read_nifti(path, volume_index)
     if volume_index is not None:
-        raise ValueError(f"volume_index: only for 4-D NIfTI or MGH files, not {path.name}")
+        raise ValueError(f"volume_index: only for 4-D NIfTI, MGH or Analyze files, not {path.name}")
     if name.endswith(".npy"):
         return _read_npy(path)
     if name.endswith((".vti", ".vtk")):
@@ -254,12 +258,36 @@ def _gzipped(path: Path) -> bool:
 
 
 def _kind(path: Path) -> str:
-    return "MGH" if path.name.lower().endswith((".mgz", ".mgh")) else "NIfTI"
+    name = path.name.lower()
+    if name.endswith((".mgz", ".mgh")):
+        return "MGH"
+    return "Analyze" if name.endswith((".hdr", ".img")) else "NIfTI"
+
+
+def analyze_pair(path: Path) -> tuple[Path, Path]:
+    """(header, data) files of an Analyze or NIfTI-1 pair named by either
+    (nibabel's rule: the other's suffix in the same case); a DataError when
+    the other is missing (nibabel said FileNotFoundError of a name the user
+    never gave)."""
+    header = path.name.lower().endswith(".hdr")
+    ext = path.suffix
+    other = ".img" if header else ".hdr"
+    sibling = path.with_suffix(other.upper() if ext.isupper() else other)
+    if not sibling.is_file():
+        what = "data" if header else "header"
+        raise DataError(
+            f"{path}: an Analyze {'header' if header else 'data file'}; its {what} file "
+            f"{sibling.name} is missing (the pair is read from the same folder)"
+        )
+    return (path, sibling) if header else (sibling, path)
 
 
 def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
-    """A NIfTI or (the same reading, nibabel's MGHImage) an MGH file."""
+    """A NIfTI or (the same reading, nibabel's MGHImage) an MGH file, or an
+    Analyze (NIfTI-1 pair) header and data file, named by either."""
     kind = _kind(path)
+    # where the header and the data are (one file but for a pair)
+    head, data_file = analyze_pair(path) if kind == "Analyze" else (path, path)
     try:
         import nibabel
     except ImportError:
@@ -268,12 +296,15 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
             "(or pip install nibabel)"
         ) from None
     from nibabel.filebasedimages import ImageFileError
+    from nibabel.freesurfer.mghformat import MGHError
     from nibabel.spatialimages import HeaderDataError
 
     # what nibabel raises on malformed headers and data (OverflowError: an infinite
-    # vox_offset; HeaderDataError: an unknown datatype code)
+    # vox_offset; HeaderDataError: an unknown datatype code; MGHError: an MGH
+    # header's zero dimension)
     errors = (
         ImageFileError,
+        MGHError,
         HeaderDataError,
         OSError,
         EOFError,
@@ -285,7 +316,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         IndexError,
         struct.error,
     )
-    _check_nifti_head(path)
+    _check_nifti_head(head)
     try:
         img = nibabel.load(path)  # the header only; the data is read below
         if isinstance(img, nibabel.cifti2.Cifti2Image):
@@ -314,7 +345,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
     elif series:
         # a truncated file is said first: asked for an index, a user would
         # pick one only to be told then that the file is cut short
-        _check_nifti_series_whole(path, shape, dtype, offset)
+        _check_nifti_series_whole(path, shape, dtype, offset, data_file)
         raise DataError(
             f"{path}: a 4-D {kind} image of {shape[3]} volumes {shape[:3]} (i, j, k); "
             "choose one: --volume-index T (clvis iso, gauss and view), volume_index=T in Python"
@@ -322,7 +353,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
     # a series' volume t needs the file up to its end only (volumes are
     # contiguous in a 4-D file; a 5-D one interleaves the fifth axis)
     stored = shape[:3] + (t + 1,) if series and len(shape) == 4 else shape
-    _check_nifti_layout(path, shape[:3] + shape[4:] if series else shape, dtype, offset, stored)
+    _check_nifti_layout(path, shape[:3] + shape[4:] if series else shape, dtype, offset, stored, data_file)
     try:
         if series:
             data = np.asanyarray(img.dataobj[:, :, :, t])
@@ -330,7 +361,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
             data = np.asanyarray(img.dataobj)
     except errors as e:
         if series:  # a .gz cut before volume t: say so (the layout check cannot see into gzip)
-            _check_nifti_series_whole(path, shape, dtype, offset)
+            _check_nifti_series_whole(path, shape, dtype, offset, data_file)
         if isinstance(e, EOFError):
             raise DataError(f"{path}: truncated {kind} file ({e})") from e
         raise DataError(f"{path}: not a readable {kind} file: {type(e).__name__}: {e}") from e
@@ -440,23 +471,35 @@ def _gz_bytes(path: Path, need: int) -> int:
         return have
 
 
-def _check_nifti_series_whole(path: Path, shape: tuple, dtype: np.dtype, offset: int) -> None:
+def _data_file(path: Path, data: Path | None) -> tuple[Path, str]:
+    """(the file holding the data, how a message names it): `path` itself
+    ("the file"), or a pair's data file beside it."""
+    if data is None or data == path:
+        return path, "the file"
+    return data, f"the data file {data.name}"
+
+
+def _check_nifti_series_whole(
+    path: Path, shape: tuple, dtype: np.dtype, offset: int, data: Path | None = None
+) -> None:
     """A 4-D NIfTI or MGH file's data against what its header declares: a
     DataError naming the volumes it holds whole when it is cut short (a .gz
-    decompressed as a stream to count, see _gz_bytes)."""
+    decompressed as a stream to count, see _gz_bytes); `data`: where the data
+    is when not in `path` (an Analyze pair's .img)."""
     volume = math.prod(shape[:3]) * dtype.itemsize * math.prod(shape[4:])
     need = offset + volume * shape[3]
     if volume <= 0 or offset < 0:
         return  # the layout check that follows says what is wrong
-    gz = _gzipped(path)
-    if gz and need > path.stat().st_size * _DEFLATE_MAX_RATIO:
+    data, named = _data_file(path, data)
+    gz = _gzipped(data)
+    if gz and need > data.stat().st_size * _DEFLATE_MAX_RATIO:
         raise DataError(
             f"{path}: the header declares {shape[3]} volumes {shape[:3]} {dtype} = {need - offset} bytes "
-            f"from byte {offset}, more than a gzip file of {path.stat().st_size} bytes can hold "
+            f"from byte {offset}, more than a gzip file of {data.stat().st_size} bytes can hold "
             f"(at most {_DEFLATE_MAX_RATIO}:1)"
         )
     try:
-        have = _gz_bytes(path, need) if gz else path.stat().st_size
+        have = _gz_bytes(data, need) if gz else data.stat().st_size
     except OSError as e:
         raise DataError(f"{path}: not a readable {_kind(path)} file: {type(e).__name__}: {e}") from e
     if have >= need:
@@ -471,7 +514,7 @@ def _check_nifti_series_whole(path: Path, shape: tuple, dtype: np.dtype, offset:
     )
     raise DataError(
         f"{path}: truncated {_kind(path)} file: the header declares {shape[3]} volumes {shape[:3]} {dtype} "
-        f"= {need - offset} bytes from byte {offset}, the file holds {max(have - offset, 0)}"
+        f"= {need - offset} bytes from byte {offset}, {named} holds {max(have - offset, 0)}"
         + (" (decompressed)" if gz else "")
         + f"; {held}"
         + (" (clvis iso, gauss and view: --volume-index T reads one)" if whole else "")
@@ -479,11 +522,17 @@ def _check_nifti_series_whole(path: Path, shape: tuple, dtype: np.dtype, offset:
 
 
 def _check_nifti_layout(
-    path: Path, shape: tuple, dtype: np.dtype, offset: int, stored: tuple | None = None
+    path: Path,
+    shape: tuple,
+    dtype: np.dtype,
+    offset: int,
+    stored: tuple | None = None,
+    data: Path | None = None,
 ) -> None:
     """The header's shape, type and data offset against the file, before nibabel
     allocates the data (it allocates what the header declares, then reads).
-    `shape` is what will be read, `stored` (default `shape`) what the file holds."""
+    `shape` is what will be read, `stored` (default `shape`) what the file
+    holds, `data` where when not in `path` (an Analyze pair's .img)."""
     if dtype == np.bool_ or dtype.kind not in "iuf":
         raise DataError(f"{path}: expected real numbers, got {_kind(path)} data type {dtype}")
     if len(shape) > 3 and any(s != 1 for s in shape[3:]) or len(shape) < 3:
@@ -492,9 +541,10 @@ def _check_nifti_layout(
         raise DataError(f"{path}: the volume is empty, shape {shape} (i, j, k, ...)")
     if offset < 0:
         raise DataError(f"{path}: malformed {_kind(path)} header: data offset {offset}")
-    size = path.stat().st_size
+    data, named = _data_file(path, data)
+    size = data.stat().st_size
     nbytes = math.prod(stored or shape) * dtype.itemsize
-    if _gzipped(path):
+    if _gzipped(data):
         if offset + nbytes > size * _DEFLATE_MAX_RATIO:
             raise DataError(
                 f"{path}: the header declares {stored or shape} {dtype} samples = {nbytes} bytes from "
@@ -504,7 +554,7 @@ def _check_nifti_layout(
     elif offset + nbytes > size:
         raise DataError(
             f"{path}: truncated {_kind(path)} file: the header declares {stored or shape} {dtype} samples = "
-            f"{nbytes} bytes from byte {offset}, the file has {size} bytes"
+            f"{nbytes} bytes from byte {offset}, {named} has {size} bytes"
         )
 
 

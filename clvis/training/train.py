@@ -491,8 +491,8 @@ def _mix_variety(crop: int, noise: float, sides: Sequence[int] | None = None) ->
     """--mix's data.IsoVariety: no frame side below `crop`, acquisition noise
     on a share `noise` of the volumes, volume sides from `sides` (None: the
     variety's own) (what the card's data.mix.variety says)."""
-    more = {} if sides is None else {"sides": tuple(int(n) for n in sides)}
-    return _data.IsoVariety(smallest=max(crop, _data.IsoVariety.smallest), noise=noise, **more)
+    vary = _data.IsoVariety(smallest=max(crop, _data.IsoVariety.smallest), noise=noise)
+    return vary if sides is None else dataclasses.replace(vary, sides=tuple(int(n) for n in sides))
 
 
 def _mix_frames(

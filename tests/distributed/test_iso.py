@@ -116,7 +116,7 @@ def test_auto_compositing_is_direct_send_bit_for_bit_on_two_workers(client):
         assert imgs["auto"].hit.sum() > 200
 
 
-@pytest.mark.parametrize("fmt", ["npy", "raw", "nii", "mgz"])
+@pytest.mark.parametrize("fmt", ["npy", "raw", "nii", "mgz", "hdr"])
 def test_files_read_brick_by_brick_on_the_workers(client, single, tmp_path, fmt):
     v, sp, org = _ML["volume"].astype(np.float32), _ML["spacing"], _ML["origin"]
     kw = {}
@@ -129,7 +129,7 @@ def test_files_read_brick_by_brick_on_the_workers(client, single, tmp_path, fmt)
     else:
         nib = pytest.importorskip("nibabel")
         path = tmp_path / f"ml.{fmt}"
-        image = nib.Nifti1Image if fmt == "nii" else nib.MGHImage
+        image = {"nii": nib.Nifti1Image, "mgz": nib.MGHImage, "hdr": nib.AnalyzeImage}[fmt]
         nib.save(image(v.transpose(2, 1, 0), np.eye(4)), str(path))
     with DistributedIsoRenderer(
         path, client, rate=RATE, spacing=sp, origin=org, brick=16, timeout=TIMEOUT, **kw

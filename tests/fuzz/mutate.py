@@ -433,6 +433,7 @@ FIELD_AWARE = {
     "laz": las_fields,
     "nii": nifti_fields,
     "nii.gz": nifti_fields,
+    "hdr": nifti_fields,  # an Analyze 7.5 header: the layout NIfTI-1 extends (348 bytes)
     "npz": zip_fields,
     "npy": npy_header,
     "vdb": vdb_fields,

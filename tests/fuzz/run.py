@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from harness import LIMIT_BYTES, run_limited  # noqa: E402
 from mutate import mutate  # noqa: E402
-from seeds import make_seeds  # noqa: E402
+from seeds import companion, make_seeds  # noqa: E402
 
 RSS_LIMIT = 256 << 20  # bytes, for a file under 1 MB
 SMALL_FILE = 1 << 20
@@ -92,6 +92,9 @@ def fuzz(
         data, ops = mutate(rng, path.read_bytes(), fmt, by_format[fmt])
         case = work / f"m{i % 4}-{path.name}"
         case.write_bytes(data)
+        other = companion(path)
+        if other is not None:  # the pair's other file, unchanged, beside the mutant
+            case.with_suffix(other.suffix).write_bytes(other.read_bytes())
         r = run_limited(readers[reader], str(case), name=str(case), timeout=timeout)
         kind = r.kind
         if kind in ("ok", "clvis") and len(data) < SMALL_FILE and r.peak_rss > RSS_LIMIT:
@@ -101,9 +104,13 @@ def fuzz(
         if kind not in ("ok", "clvis"):
             saved = keep / f"{kind}-{i}-{path.name}"
             saved.write_bytes(data)
+            if other is not None:
+                saved.with_suffix(other.suffix).write_bytes(other.read_bytes())
             failures.append((fmt, ops, str(saved), r))
             log(f"#{i} {fmt} {ops}: {kind}: {r.detail[:400]} (peak {r.peak_rss >> 20} MiB) -> {saved}")
         case.unlink()
+        if other is not None:
+            case.with_suffix(other.suffix).unlink()
         i += 1
         if i % 1000 == 0:
             log(f"... {i} mutants, {time.monotonic() - t0:.0f} s")

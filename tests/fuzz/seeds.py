@@ -2,8 +2,9 @@
 tests/data): every format clvis reads, with the reader each goes to.
 
 A seed is (format, reader, path). Formats: ply, las, laz, npy, npz, nii,
-nii.gz, raw, vdb, e57 (with pye57), vti, vtk (volumes and point sets), vtp,
-vtu, vts (with vtk), pcd, xyz, txt, csv. Readers:
+nii.gz, hdr and img (Analyze and NIfTI-1 pairs), mgh, mgz, raw, vdb, e57
+(with pye57), vti, vtk (volumes and point sets), vtp, vtu, vts (with vtk),
+pcd, xyz, txt, csv. Readers:
 points (read_points), volume (read_volume), vdb (read_vdb), gaussians
 (Gaussians.load).
 """
@@ -250,6 +251,13 @@ def _pcd(path: Path, n: int, binary: bool, seed: int = 7) -> None:
         path.write_text(head + rows)
 
 
+def companion(path: Path) -> Path | None:
+    """The other file of a two-file seed (an Analyze pair's .img beside its
+    .hdr, and the reverse), which a mutant of it needs beside it; or None."""
+    other = {".hdr": ".img", ".img": ".hdr"}.get(path.suffix)
+    return None if other is None else path.with_suffix(other)
+
+
 def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
     """Write the seeds into `out`; [(format, reader, path)]. Formats whose
     optional package is missing are left out."""
@@ -375,6 +383,17 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
         add("nii", "volume", out / "vol2.nii")
         (out / "volz.nii.gz").write_bytes(gzip.compress((out / "vol.nii").read_bytes()))
         add("nii.gz", "volume", out / "volz.nii.gz")
+        # Analyze and NIfTI-1 pairs: the header and the data file each mutated,
+        # the other copied beside the case (companion)
+        nibabel.save(nibabel.AnalyzeImage(data, np.diag([0.5, 1.0, 2.0, 1.0])), out / "ana.hdr")
+        nibabel.save(nibabel.Nifti1Pair(data, np.eye(4)), out / "pair.hdr")
+        for name in ("ana", "pair"):
+            add("hdr", "volume", out / f"{name}.hdr")
+            add("img", "volume", out / f"{name}.img")
+        nibabel.save(nibabel.MGHImage(data, np.eye(4)), out / "vol.mgh")
+        add("mgh", "volume", out / "vol.mgh")
+        nibabel.save(nibabel.MGHImage(data, np.eye(4)), out / "vol.mgz")
+        add("mgz", "volume", out / "vol.mgz")
     try:
         import tinyvdb  # noqa: F401
     except ImportError:

@@ -139,6 +139,16 @@ def test_metrics_module():
     assert _metrics.metrics(a * 0.9, a)["psnr"] < 40
     with pytest.raises(ValueError, match="H, W, 3"):
         _metrics.metrics(a[..., :2], a[..., :2])
+    # uint8 pictures (what the networks return) are 0..255: the same scores as their floats
+    u = np.rint(a * 255).astype(np.uint8)
+    v = np.clip(u.astype(np.int16) + 9, 0, 255).astype(np.uint8)
+    assert _metrics.metrics(v, u) == pytest.approx(_metrics.metrics(v / 255.0, u / 255.0))
+    assert 25 < _metrics.metrics(v, u)["psnr"] < 30
+    assert _metrics.metrics(u, a)["psnr"] > 45  # one of each
+    with pytest.raises(TypeError, match="int16"):
+        _metrics.metrics(u.astype(np.int16), a)
+    with pytest.raises(ValueError, match=r"\[\.\.\., :3\]"):
+        _metrics.metrics(np.dstack([u, u[..., :1]]), u)
 
 
 def test_eval_cli_parses(capsys):

@@ -52,8 +52,8 @@ def _k(k) -> int:
 
 def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     """(N,) float32: each point's mean distance to its k nearest other points
-    (scipy.spatial.cKDTree). Fewer than k + 1 points: the mean over those there are;
-    a single point: 0. k in 1..MAX_KNN. positions: (N, 3) finite real
+    (scipy.spatial.cKDTree), copies of a point counted as one point. Fewer
+    than k + 1 distinct points: the mean over those there are; a single one: 0. k in 1..MAX_KNN. positions: (N, 3) finite real
     coordinates (DataError naming the first point with a NaN or infinite one,
     or when a distance does not fit in float32)."""
     from scipy.spatial import cKDTree
@@ -71,6 +71,12 @@ def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     order = tree.indices
     # (the query's workers are Python threads that this one joins: Ctrl-C lands at once)
     dist, _ = tree.query(p[order], k=kk + 1, workers=-1)
+    if not dist[:, 1].all():
+        # copies of a point (merged scans, mesh vertices) are one point: at
+        # distance 0 from each other, k copies made a Gaussian of no width
+        # (np.unique only here: it costs about what the query does)
+        unique, inverse = np.unique(p, axis=0, return_inverse=True)
+        return knn_mean_distance(unique, k)[inverse.ravel()]
     with np.errstate(over="ignore"):  # the check below reports it
         mean = dist[:, 1:].mean(axis=1).astype(np.float32)
     if not np.isfinite(mean).all():

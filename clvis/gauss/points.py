@@ -53,9 +53,10 @@ def _k(k) -> int:
 def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     """(N,) float32: each point's mean distance to its k nearest other points
     (scipy.spatial.cKDTree), copies of a point counted as one point. Fewer
-    than k + 1 distinct points: the mean over those there are; a single one: 0. k in 1..MAX_KNN. positions: (N, 3) finite real
-    coordinates (DataError naming the first point with a NaN or infinite one,
-    or when a distance does not fit in float32)."""
+    than k + 1 distinct points: the mean over those there are; a single one:
+    0. k in 1..MAX_KNN. positions: (N, 3) finite real coordinates
+    (DataError naming the first point with a NaN or infinite one, or when a
+    distance does not fit in float32)."""
     from scipy.spatial import cKDTree
 
     k = _k(k)

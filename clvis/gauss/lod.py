@@ -84,11 +84,7 @@ def _as_sparse(volume_or_sparse, threshold, mask, spacing, origin) -> SparseVolu
             )
         return volume_or_sparse
     return SparseVolume.from_dense(
-        volume_or_sparse,
-        threshold=threshold,
-        mask=mask,
-        spacing=(1.0, 1.0, 1.0) if spacing is None else spacing,
-        origin=(0.0, 0.0, 0.0) if origin is None else origin,
+        volume_or_sparse, threshold=threshold, mask=mask, spacing=spacing, origin=origin
     )
 
 
@@ -190,10 +186,11 @@ def gaussians_from_volume(
 ) -> Gaussians:
     """The Gaussians of a volume at level of detail `lod` ("low", "medium" or "high").
 
-    volume_or_sparse: a [Z, Y, X] numpy volume (made sparse with
-    :meth:`SparseVolume.from_dense`: active voxels by ``threshold`` (value >
-    threshold) or a bool ``mask``, all voxels with neither; ``spacing`` (dz,
-    dy, dx) default (1, 1, 1), ``origin`` (ox, oy, oz) default (0, 0, 0)), or a
+    volume_or_sparse: a [Z, Y, X] numpy volume or a clvis.Volume (made sparse
+    with :meth:`SparseVolume.from_dense`: active voxels by ``threshold``
+    (value > threshold) or a bool ``mask``, all voxels with neither;
+    ``spacing`` (dz, dy, dx) default a Volume's or (1, 1, 1), ``origin`` (ox,
+    oy, oz) default a Volume's or (0, 0, 0)), or a
     :class:`SparseVolume` (then threshold, mask, spacing and origin must be
     None). Returns float32 :class:`Gaussians` (module docstring for the rules
     and the order). A non-finite active value raises DataError naming the voxel.

@@ -30,6 +30,7 @@ from .._arrays import triple
 from ..errors import DataError
 from ..io.files import regular_file
 from ..io.vdb import check_vdb
+from ..io.volumes import volume_parts
 
 __all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb"]
 
@@ -226,16 +227,19 @@ class SparseVolume:
         volume: Any,
         threshold: float | None = None,
         mask: Any = None,
-        spacing: Sequence[float] = (1.0, 1.0, 1.0),
-        origin: Sequence[float] = (0.0, 0.0, 0.0),
+        spacing: Sequence[float] | None = None,
+        origin: Sequence[float] | None = None,
     ) -> SparseVolume:
-        """The sparse layout of a [Z, Y, X] volume (any real dtype, stored as float32).
+        """The sparse layout of a [Z, Y, X] volume (any real dtype, stored as
+        float32), or of a clvis.Volume (clvis.read_volume's: its data, and its
+        spacing and origin where they are None; else (1, 1, 1) and (0, 0, 0)).
 
         Active voxels: ``volume > threshold`` (NaN is never above it), or
         ``mask`` (a bool array of the volume's shape), not both; with neither,
         every voxel is active. A non-finite active value raises DataError
         naming the voxel.
         """
+        volume, spacing, origin = volume_parts(volume, spacing, origin)
         vol = _check_volume(volume)
         act = _active(vol, threshold, mask)
         spacing = triple("spacing", spacing, positive=True)

@@ -63,7 +63,7 @@ from ..errors import DataError
 from .files import regular_file
 from .npy import load_npy
 
-__all__ = ["FORMATS", "RAW_TYPES", "Volume", "otsu_level", "raw_layout", "read_volume"]
+__all__ = ["FORMATS", "RAW_TYPES", "Volume", "otsu_level", "raw_layout", "read_volume", "volume_parts"]
 
 RAW_TYPES = {
     name: np.dtype(name)
@@ -102,6 +102,32 @@ class Volume:
         return (
             f"Volume({self.path!r}, shape={self.data.shape}, dtype={self.data.dtype}, spacing={self.spacing})"
         )
+
+
+def volume_parts(
+    volume: object, spacing: Sequence[float] | None, origin: Sequence[float] | None
+) -> tuple[object, Sequence[float], Sequence[float]]:
+    """(samples, spacing, origin) of what a renderer was given: a
+    :class:`Volume` (read_volume's) gives its data, and its spacing and origin
+    where they are not given (None); anything else is the samples, with
+    (1, 1, 1) and (0, 0, 0) for what is not given. A path is refused, naming
+    read_volume."""
+    if isinstance(volume, Volume):
+        return (
+            volume.data,
+            volume.spacing if spacing is None else spacing,
+            volume.origin if origin is None else origin,
+        )
+    if isinstance(volume, (str, os.PathLike)):
+        raise TypeError(
+            f"volume: expected an array or a clvis.Volume, got a path ({volume!r}): "
+            "clvis.read_volume reads it"
+        )
+    return (
+        volume,
+        (1.0, 1.0, 1.0) if spacing is None else spacing,
+        (0.0, 0.0, 0.0) if origin is None else origin,
+    )
 
 
 #: the volume files read through nibabel (NIfTI, MGH, Analyze header/data pairs)

@@ -88,6 +88,7 @@ from .._arrays import positive_int, resolve_queue, to_host, triple
 from ..camera import Camera, ray_buffer
 from ..errors import DataError
 from ..images import Picture, float_rgba8
+from ..io.volumes import volume_parts
 from ..primitives import compact, compact_indices, radix_sort
 from .cache import BlockCache, mark_blocks
 from .cache import _kernel as _cache_kernel
@@ -451,9 +452,11 @@ class IsoRenderer:
     Parameters
     ----------
     volume_or_zfp : a 3-D [z, y, x] array (compressed with `rate` through
-        clvis.zfp.compress) or a clvis.zfp.ZfpVolume.
+        clvis.zfp.compress), a clvis.Volume (clvis.read_volume's: its data,
+        spacing and origin) or a clvis.zfp.ZfpVolume.
     rate : ZFP fixed rate in bits per value (1..32).
-    spacing : (dz, dy, dx); origin : world (x, y, z) of sample [0, 0, 0].
+    spacing : (dz, dy, dx); origin : world (x, y, z) of sample [0, 0, 0];
+        None: a Volume's own, else (1, 1, 1) and (0, 0, 0).
     cache_capacity : initial block-cache slots (default: BlockCache's); the
         cache grows when a pass needs more.
 
@@ -465,14 +468,15 @@ class IsoRenderer:
         self,
         volume_or_zfp: ZfpVolume | Any,
         rate: int = 8,
-        spacing: Sequence[float] = (1.0, 1.0, 1.0),
-        origin: Sequence[float] = (0.0, 0.0, 0.0),
+        spacing: Sequence[float] | None = None,
+        origin: Sequence[float] | None = None,
         *,
         cache_capacity: int | None = None,
         queue: cl.CommandQueue | None = None,
     ) -> None:
         self.queue = q = resolve_queue(queue)
         self.config = runtime.capture(q)
+        volume_or_zfp, spacing, origin = volume_parts(volume_or_zfp, spacing, origin)
         zv = volume_or_zfp if isinstance(volume_or_zfp, ZfpVolume) else compress(volume_or_zfp, rate)
         if min(zv.shape) < 2:
             raise DataError(f"volume: every axis needs at least 2 samples, got shape {zv.shape}")

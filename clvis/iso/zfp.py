@@ -39,6 +39,7 @@ import pyopencl.array as cla
 from .. import runtime
 from .._arrays import is_device, nonnegative_int, resolve_queue, result
 from ..errors import DataError
+from ..io.volumes import Volume
 
 __all__ = [
     "BRICK_VALUES",
@@ -209,13 +210,15 @@ class ZfpVolume:
 
 
 def compress(volume: Any, rate: int) -> ZfpVolume:
-    """Compress a 3-D volume ([Z, Y, X]) with zfp at a fixed integer `rate`
+    """Compress a 3-D volume ([Z, Y, X]; or a clvis.Volume's data) with zfp at a fixed integer `rate`
     (bits per value, 1..32). float32 is compressed as it is; float64, float16
     and integer volumes are converted to float32 first. A non-finite value
     (after the conversion: float64 beyond float32's range too) raises
     DataError naming how many and the first. Needs zfpy."""
     rate = _check_rate(rate)
     v = volume.get() if is_device(volume) else volume
+    if isinstance(v, Volume):  # clvis.read_volume's: its samples
+        v = v.data
     if isinstance(v, (str, bytes)) or v is None:
         raise TypeError(f"volume: expected an array, got {type(v).__name__}")
     v = np.asarray(v)

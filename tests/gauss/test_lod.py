@@ -208,6 +208,24 @@ def test_sparse_layout_details():
     np.testing.assert_array_equal(sv.active_masks()[1].reshape(8, 8, 8)[:, :, 1:], False)
 
 
+def test_a_volume_read_from_a_file_brings_its_spacing_and_origin(queue):
+    """gaussians_from_volume / SparseVolume.from_dense of a clvis.Volume: its
+    data, spacing and origin, as if passed; given ones win."""
+    from clvis.io import Volume
+
+    data = np.random.default_rng(3).random((9, 10, 11)).astype(F32)
+    vol = Volume(data, (0.5, 1.0, 2.0), (-3.0, 1.0, 0.25))
+    sv = SparseVolume.from_dense(vol, threshold=0.5)
+    assert sv.spacing == (0.5, 1.0, 2.0) and sv.origin == (-3.0, 1.0, 0.25)
+    assert SparseVolume.from_dense(vol, spacing=(1, 1, 1)).spacing == (1.0, 1.0, 1.0)
+    got = gaussians_from_volume(vol, "medium", threshold=0.5, queue=queue)
+    want = gaussians_from_volume(
+        data, "medium", threshold=0.5, spacing=(0.5, 1.0, 2.0), origin=(-3.0, 1.0, 0.25), queue=queue
+    )
+    np.testing.assert_array_equal(got.means, want.means)
+    np.testing.assert_array_equal(got.scales, want.scales)
+
+
 def test_bad_input():
     vol = np.ones((4, 5, 6), F32)
     with pytest.raises(ValueError, match="volume: expected a 3-D"):

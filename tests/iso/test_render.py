@@ -317,6 +317,28 @@ def test_dense_input_and_bad_arguments(queue):
         iso.IsoRenderer(v, spacing=(1, 0, 1), queue=queue)
 
 
+def test_a_volume_read_from_a_file_brings_its_spacing_and_origin(queue):
+    """IsoRenderer(clvis.read_volume(path)): the Volume's data, spacing and
+    origin (the same image as passing them), given ones win; zfp.compress
+    takes its data; a path is refused, naming read_volume."""
+    from clvis.io import Volume
+
+    v = datasets.marschner_lobb(17)["volume"]
+    vol = Volume(v, (0.5, 1.0, 2.0), (-3.0, 1.0, 0.25))
+    cam = Camera.fit((-3, 1, 0.25), (29, 17, 8.25))
+    got = iso.IsoRenderer(vol, rate=16, queue=queue)
+    assert got.spacing == (0.5, 1.0, 2.0) and got.origin == (-3.0, 1.0, 0.25)
+    want = iso.IsoRenderer(v, 16, (0.5, 1.0, 2.0), (-3.0, 1.0, 0.25), queue=queue)
+    a, b = got.render(cam, W, H, 0.5), want.render(cam, W, H, 0.5)
+    assert a.hit.sum() > 100
+    np.testing.assert_array_equal(a.hit, b.hit)
+    np.testing.assert_array_equal(a.rgba, b.rgba)
+    assert iso.IsoRenderer(vol, spacing=(1, 1, 1), queue=queue).spacing == (1.0, 1.0, 1.0)
+    assert bytes(zfp.compress(vol, 8).stream) == bytes(zfp.compress(v, 8).stream)
+    with pytest.raises(TypeError, match="read_volume"):
+        iso.IsoRenderer("scan.nii.gz", queue=queue)
+
+
 def test_hits_lie_on_the_marching_cubes_mesh(queue):
     """The renderer's hit points (o + t d) against scikit-image's mesh of the decoded volume."""
     from meshes import mesh_distance as _mesh_distance

@@ -78,6 +78,8 @@ def test_pointcloud_colors():
     p = np.zeros((2, 3))
     u16 = PointCloud(p, colors=np.array([[65535, 256, 255], [0, 511, 32768]], dtype=np.uint16))
     np.testing.assert_array_equal(u16.colors, [[255, 1, 0, 255], [0, 1, 128, 255]])
+    big = PointCloud(p, colors=np.array([[65535, 256, 255], [0, 511, 32768]], dtype=">u2"))  # big-endian
+    np.testing.assert_array_equal(big.colors, u16.colors)
     rgba = PointCloud(p, colors=np.array([[1, 2, 3, 4], [5, 6, 7, 8]], dtype=np.uint8))
     np.testing.assert_array_equal(rgba.colors, [[1, 2, 3, 4], [5, 6, 7, 8]])
     ints = PointCloud(p, colors=[[255, 0, 10], [1, 2, 3]])  # int64 within 0..255

@@ -19,6 +19,7 @@ transfer function always has something to show.
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
@@ -196,7 +197,12 @@ def gaussians_from_points(
     if isinstance(cloud, PointCloud):
         positions = cloud.positions
     else:
-        positions = np.asarray(cloud)
+        if isinstance(cloud, (str, os.PathLike)):
+            raise TypeError(
+                f"cloud: expected a PointCloud or (N, 3) positions, got a path ({cloud!r}): "
+                "clvis.read_points reads it"
+            )
+        positions = real_array("cloud", cloud)  # complex, bool, object and strings refused
         if positions.ndim != 2 or positions.shape[1:] != (3,):
             raise ValueError(f"cloud: expected a PointCloud or (N, 3) positions, got shape {positions.shape}")
         positions = positions.astype(np.float32)

@@ -45,6 +45,8 @@ def _colors(a: npt.ArrayLike, n: int) -> np.ndarray:
     if a.ndim != 2 or a.shape[1] not in (3, 4):
         raise ValueError(f"colors: expected shape (N, 3) or (N, 4), got {a.shape}")
     _check_length("colors", len(a), n)
+    if not a.dtype.isnative:  # a big-endian uint16 is uint16
+        a = a.astype(a.dtype.newbyteorder("="))
     if a.dtype == np.uint16:
         a = (a >> 8).astype(np.uint8)
     elif a.dtype.kind == "f":

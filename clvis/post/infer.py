@@ -237,9 +237,12 @@ class PostNetwork:
         self.card = card = _card(directory, name)
         entry = card["files"].get(precision) or {}
         if not entry.get("file"):
+            change = entry.get("psnr_change_db")
+            said = "none was made" if change is None else f"it changed PSNR by {change:+.2f} dB"
+            shipped = ", ".join(k for k, v in card["files"].items() if (v or {}).get("file"))
             raise DataError(
                 f"{name}: no {precision} variant (int8 ships only where it loses at most 0.3 dB; "
-                f"the card says: {entry.get('psnr_change_db', 'none made')} dB)"
+                f"the card says {said}); shipped: {shipped}"
             )
         self.path = path = directory / entry["file"]
         if not path.is_file():

@@ -8,6 +8,7 @@ tolerance."""
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -136,9 +137,15 @@ class RasterInput:
             radius = radius if radius is not None else getattr(cloud, "radius", None)
         else:
             positions = cloud
+        if isinstance(positions, (str, os.PathLike)):
+            raise TypeError(
+                f"cloud_or_positions: expected a PointCloud or an (N, 3) array, got a path ({positions!r}): "
+                "clvis.read_points reads it"
+            )
         if not is_device(positions) and not isinstance(positions, np.ndarray):
             positions = np.asarray(positions)
-        if not is_device(positions) and positions.dtype == np.float64:
+        if not is_device(positions) and positions.dtype.kind in "fiu" and positions.dtype != np.float32:
+            # float64 (either byte order), float16 and integer coordinates: float32, as PointCloud takes them
             positions = positions.astype(np.float32)
         self.positions = check_array("positions", positions, dtypes=[np.float32], ndim=2)
         if self.positions.shape[1] != 3:

@@ -130,7 +130,7 @@ class Rasterizer:
 
     cloud_or_positions: a ``clvis.PointCloud`` (its colors, attributes,
     velocity and radius are used unless given here) or positions, float32
-    (N, 3) (float64 is converted; a ``pyopencl.array.Array`` stays on the
+    (N, 3) (float64, float16 and integers are converted; a ``pyopencl.array.Array`` stays on the
     device). colors: uint8 (N, 4) or (N, 3). attributes: up to 8 name → (N,)
     arrays (uint8/bool kept as uint8, other numbers as float32); a
     PointCloud's own attributes may be more (a LAS file has 13 or more).

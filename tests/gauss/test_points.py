@@ -206,6 +206,10 @@ def test_points_bad_input():
         gaussians_from_points(np.zeros((3, 2)))
     with pytest.raises(ValueError, match="no velocity"):
         gaussians_from_points(PointCloud(np.zeros((3, 3))), velocity="cloud")
+    with pytest.raises(TypeError, match="real numbers"):
+        gaussians_from_points(np.zeros((3, 3), np.complex64))
+    with pytest.raises(TypeError, match="read_points"):
+        gaussians_from_points("scan.las")
 
 
 def test_frames_are_rotations():

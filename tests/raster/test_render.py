@@ -3,6 +3,7 @@ exactly (the velocity angle within atan2's few ulp), on every device and both
 work shapes, through the 64-bit path and the two-pass fallback."""
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pyopencl as cl
@@ -436,7 +437,19 @@ def test_bad_input(queue):
     cam = _cam()
     pos = _scene(10)
     with pytest.raises(TypeError, match="positions"):
-        clvis.rasterize(pos.astype(np.int32), cam, W, H, queue=queue)
+        clvis.rasterize(pos.astype(bool), cam, W, H, queue=queue)
+    with pytest.raises(TypeError, match="positions"):
+        clvis.rasterize(pos.astype(np.complex64), cam, W, H, queue=queue)
+    with pytest.raises(TypeError, match="read_points"):
+        clvis.rasterize(Path("scan.las"), cam, W, H, queue=queue)
+    # other real coordinates are float32's, as PointCloud takes them (big-endian float64 too)
+    want = clvis.rasterize(np.round(pos).astype(np.float32), cam, W, H, queue=queue).index
+    for other in (
+        np.round(pos).astype(np.int32),
+        np.round(pos).astype(">f8"),
+        np.round(pos).astype(np.float16),
+    ):
+        np.testing.assert_array_equal(clvis.rasterize(other, cam, W, H, queue=queue).index, want)
     with pytest.raises(ValueError, match="positions"):
         clvis.rasterize(pos[:, :2], cam, W, H, queue=queue)
     with pytest.raises(ValueError, match="colors"):

@@ -323,7 +323,10 @@ class Camera:
         It looks at the box centre along `direction` (the view direction, from the
         eye towards the centre: the default looks down from the +x, +y, +z side),
         from the distance at which the box's bounding sphere fits the narrower of
-        the two fields of view. near and far enclose the sphere with margin.
+        the two fields of view. near and far enclose the sphere with margin. A
+        long box (a strip of scan, a tall volume) then fills part of the frame:
+        ``clvis.camera.fit_camera(corners, lo, hi)`` with the box's 8 corners
+        (or the points themselves) frames it tightly from the same direction.
         """
         lo, hi = _bounds(bounds_min, bounds_max)
         direction, up = _vec3("direction", direction), _vec3("up", up)

@@ -118,10 +118,11 @@ MAX_PIXELS = limits.ISO.max_pixels + 1
 CANDIDATES = 8
 # device bytes per tile pixel: ray t, enters flag, active id (and its
 # compacted copy), still flag, hit, hit t, depth, rgba, 64-bit hit key; and
-# the candidates step after the tile's passes (_Tile.candidates): counts and
-# next t (the host path's), the copy of ray t, and CANDIDATES blocks and t's
-# for each running ray (at most one a pixel)
-PIXEL_BYTES = 4 + 1 + 4 + 4 + 1 + 1 + 4 + 4 + 16 + 8 + (1 + 4 + 4 + 8 * CANDIDATES)
+# the candidates step after a pass (_Tile.candidates): counts and next t (the
+# host path's) and the copy of ray t. Its CANDIDATES blocks and t's a running
+# ray reuse the pool's memory the pass's items went back to (at least one
+# item a pixel, ITEM_BYTES = 71, against 8 * CANDIDATES = 64 bytes a ray)
+PIXEL_BYTES = 4 + 1 + 4 + 4 + 1 + 1 + 4 + 4 + 16 + 8 + (1 + 4 + 4)
 # device bytes per pass item: candidate block and t, valid flag, item id, item
 # hit / t / rgba / depth, sort key, sorted key and item, group head, group
 # start, and the radix sort's and compaction's working copies

@@ -17,7 +17,15 @@
  * Images are row-major, row 0 on top, w x h pixels, channels interleaved.
  * A tensor is (1, C, hp, wp) float32 with hp >= h, wp >= w: channel c of
  * pixel (x, y) at [c*hp*wp + y*wp + x]. Pixels with x >= w or y >= h are
- * padding. Kernels over a tensor run one item per tensor pixel (hp*wp).
+ * padding. The in-fill kernels (pack_iso, pack_count, pack_prior,
+ * pack_depth) write it as finished rays that missed (0 in every channel).
+ * The LiDAR and NARVis kernels (pack_rgbda, pack_rgb_coverage, pack_plane)
+ * pack it as the image pixel (mirror(x, w), mirror(y, h)): the image
+ * reflected about its last column and row (numpy.pad's "symmetric" mode:
+ * ... n-1 | n-1 n-2 ..., with period 2n), so the network sees the scan go on
+ * past its edge, not an empty band (which no network saw in training; the
+ * LiDAR U-Net painted the last rows dark). Kernels over a tensor run one
+ * item per tensor pixel (hp*wp).
  *
  * kernel pack_iso(global const float *rgba, global const uchar *hit,
  *                 global const uchar *active, uint w, uint h, uint wp, uint hp,
@@ -85,24 +93,24 @@
  *     given and D = range > 0 ? (depth - dmin) / range : 0, range = dmax -
  *     dmin, dmin and dmax the kept depths' extremes decoded from stats[3]
  *     and stats[2] (rgbda_range's, on the same rgbda). Elsewhere (not kept,
- *     padding): R = G = B = A = 0, D = -1.
+ *     padding, as its mirrored pixel): R = G = B = A = 0, D = -1.
  *
  * kernel pack_rgb_coverage(global const uchar *rgba, global const uint *index,
  *                           uint w, uint h, uint wp, uint hp, global float *out)
  *     The NARVis U-Net's first 4 channels from rasterizer G-buffers: rgba
  *     w*h*4 uchars, index w*h uints (0xFFFFFFFF = empty). out: (1, C, hp, wp)
  *     with C >= 4; channels 0..3 = R, G, B, COVERAGE: at covered pixels
- *     (index != 0xFFFFFFFF) r / 255.0f, g / 255.0f, b / 255.0f and 1; else,
- *     and at padding, 0. Other channels are not touched.
+ *     (index != 0xFFFFFFFF) r / 255.0f, g / 255.0f, b / 255.0f and 1; else
+ *     0. Other channels are not touched.
  *
  * kernel pack_plane(global const float *src, ulong offset, uint step,
  *                   global const uint *index, uint w, uint h, uint wp, uint hp,
  *                   uint channel, global float *out, global uint *bad)
  *     One more channel of the same tensor: out[channel] at pixel (x, y) =
- *     src[offset + step * (y*w + x)] where covered, 0 elsewhere and at
- *     padding; channel >= 4. A covered pixel whose value is NaN or infinite
- *     gets 0 and bad[channel - 4] += 1 (the host zeroes bad first and raises
- *     an error naming the plane).
+ *     src[offset + step * (y*w + x)] where covered, 0 elsewhere; channel >= 4.
+ *     A covered pixel whose value is NaN or infinite gets 0 and bad[channel -
+ *     4] += 1, once a pixel (the host zeroes bad first and raises an error
+ *     naming the plane).
  *
  * kernel unpack_rgba8(global const float *nchw, uint channels, uint wp,
  *                     uint hp, uint w, uint h, global uchar *out)
@@ -154,6 +162,15 @@ static void key_range_reduce(local uint *hi, local uint *lo, const uint kmax, co
         if (lo[0])
             atomic_max(&range[1], lo[0]);
     }
+}
+
+/* numpy.pad's "symmetric" index of i on an axis of n samples (n >= 1) */
+static inline uint mirror(const uint i, const uint n)
+{
+    if (i < n)
+        return i;
+    const uint j = i % (2 * n);
+    return j < n ? j : 2 * n - 1 - j;
 }
 
 static inline int rgbda_kept(const float depth, const float alpha)
@@ -320,8 +337,8 @@ kernel void pack_rgbda(global const float *rgbda, const uint w, const uint h,
     uint y = (uint)(first / wp), x = (uint)(first - (ulong)y * wp);
     for (ulong i = first; i < plane && i < first + ITEMS; ++i, x = x + 1 < wp ? x + 1 : 0, y += x == 0) {
         float r = 0.0f, g = 0.0f, b = 0.0f, a = 0.0f, dn = -1.0f;
-        if (x < w && y < h) {
-            global const float *p = rgbda + 5 * ((ulong)y * w + x);
+        {
+            global const float *p = rgbda + 5 * ((ulong)mirror(y, h) * w + mirror(x, w));
             const float d = p[3];
             if (rgbda_kept(d, p[4])) {
                 r = p[0];
@@ -349,8 +366,8 @@ kernel void pack_rgb_coverage(global const uchar *rgba, global const uint *index
     uint y = (uint)(first / wp), x = (uint)(first - (ulong)y * wp);
     for (ulong i = first; i < plane && i < first + ITEMS; ++i, x = x + 1 < wp ? x + 1 : 0, y += x == 0) {
         float r = 0.0f, g = 0.0f, b = 0.0f, cov = 0.0f;
-        if (x < w && y < h) {
-            const ulong s = (ulong)y * w + x;
+        {
+            const ulong s = (ulong)mirror(y, h) * w + mirror(x, w);
             if (index[s] != 0xFFFFFFFFu) {
                 const uchar4 c = vload4(s, rgba);
                 r = (float)c.x / 255.0f;
@@ -378,12 +395,12 @@ kernel void pack_plane(global const float *src, const ulong offset, const uint s
     uint y = (uint)(first / wp), x = (uint)(first - (ulong)y * wp);
     for (ulong i = first; i < plane && i < first + ITEMS; ++i, x = x + 1 < wp ? x + 1 : 0, y += x == 0) {
         float v = 0.0f;
-        if (x < w && y < h) {
-            const ulong s = (ulong)y * w + x;
+        {
+            const ulong s = (ulong)mirror(y, h) * w + mirror(x, w);
             if (index[s] != 0xFFFFFFFFu) {
                 v = src[offset + (ulong)step * s];
                 if (!isfinite(v)) {
-                    ++nonfinite;
+                    nonfinite += x < w && y < h;  /* each pixel once, not its mirror images */
                     v = 0.0f;
                 }
             }

@@ -11,7 +11,9 @@ fill to trust, tile by tile:
 1. *withhold*: some known pixels are marked unknown. LiDAR: a fraction
    (10 %) of the kept points, drawn by a hash of the pixel's coordinates
    (:func:`withheld`: no random state, the same subset on every run and
-   machine). In-fill: the finished rays within ``ring`` (8) pixels of a
+   machine), each with its whole footprint (:func:`footprints`: a point
+   drawn 2 or 3 pixels wide, withheld a pixel at a time, left its other
+   pixels known, and every fill copied them back: the check was a tie). In-fill: the finished rays within ``ring`` (8) pixels of a
    running one (:func:`ring`), bands of the holes' own shapes; a random
    pixel subset is an isolated-hole problem the network never trained on,
    and push-pull wins it everywhere;
@@ -77,6 +79,7 @@ __all__ = [
     "TILE",
     "WITHHOLD",
     "blend",
+    "footprints",
     "infill",
     "interpolate",
     "lidar",
@@ -145,6 +148,39 @@ def withheld(known: np.ndarray, fraction: float = WITHHOLD) -> np.ndarray:
         v *= np.uint32(0x297A2D39)
         v ^= v >> np.uint32(15)
     return known & (v < np.uint32(min(fraction * 2.0**32, 2.0**32 - 1)))
+
+
+def footprints(known: np.ndarray, values: np.ndarray, fraction: float = WITHHOLD, reach: int = 2) -> np.ndarray:
+    """(H, W) bool: whole points withheld, about `fraction` of them. A point
+    drawn s x s pixels wide (``point_size`` s) leaves s^2 pixels of one
+    colour and depth; withholding one of them left its neighbours known, and
+    every fill copies them back (the LiDAR guard scored 2 and 3 px scans as
+    a tie). Each footprint is found from its top-left pixel (a `known` pixel
+    whose upper and left neighbours are not known with its `values`), a
+    hashed `fraction` of those taken (:func:`withheld`), and grown right and
+    down up to `reach` pixels over the known pixels of the same values
+    (point sizes up to reach + 1). values: (H, W, C), compared exactly."""
+    known = np.asarray(known, bool)
+    v = np.asarray(values)
+    h, w = known.shape
+
+    def same(dy: int, dx: int) -> np.ndarray:
+        """(H, W): pixel p known, p + (dy, dx) inside, known, and of p's values."""
+        out = np.zeros((h, w), bool)
+        ys, yd = slice(max(0, -dy), h - max(0, dy)), slice(max(0, dy), h - max(0, -dy))
+        xs, xd = slice(max(0, -dx), w - max(0, dx)), slice(max(0, dx), w - max(0, -dx))
+        out[ys, xs] = known[ys, xs] & known[yd, xd] & np.all(v[ys, xs] == v[yd, xd], axis=-1)
+        return out
+
+    corner = known & ~same(-1, 0) & ~same(0, -1)
+    seeds = withheld(corner, fraction)
+    held = seeds.copy()
+    for dy in range(reach + 1):
+        for dx in range(reach + 1):
+            if dy or dx:
+                grow = seeds & same(dy, dx)  # the seed's pixel (dy, dx) away is of its point
+                held[dy:, dx:] |= grow[: h - dy, : w - dx]
+    return held
 
 
 def ring(known: np.ndarray, holes: np.ndarray, width: int = RING) -> np.ndarray:
@@ -440,7 +476,7 @@ def lidar(
         tile=int(p["tile"]),
         prior=p["prior"],
         margin=p["margin"],
-        fraction=p["fraction"],
+        held=footprints(kept, rgbda[..., :4], float(p["fraction"])),
     )
 
 

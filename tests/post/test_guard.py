@@ -31,6 +31,35 @@ def test_withheld_is_a_fixed_hashed_subset_of_the_known_pixels():
             guard.withheld(known, bad)
 
 
+@pytest.mark.parametrize("size", [1, 2, 3])
+def test_footprints_withhold_whole_points(size):
+    """Points drawn size x size pixels (one colour and depth each, the later
+    drawn over the earlier): a withheld point whose square shows whole is
+    withheld whole (one drawn over may show as pieces, each its own), about
+    the fraction of the points, none of the others."""
+    rng = np.random.default_rng(size)
+    h, w, n = 120, 160, 700
+    values = np.zeros((h, w, 4), np.float32)
+    owner = np.full((h, w), -1)
+    ys, xs = rng.integers(0, h - size, n), rng.integers(0, w - size, n)
+    for i, (y, x) in enumerate(zip(ys, xs, strict=True)):
+        values[y : y + size, x : x + size] = rng.random(4)
+        owner[y : y + size, x : x + size] = i
+    known = owner >= 0
+    held = guard.footprints(known, values, 0.1)
+    assert not (held & ~known).any()
+    taken = np.unique(owner[held])
+    whole = np.bincount(owner[known], minlength=n) == size * size
+    for i in taken[whole[taken]]:
+        np.testing.assert_array_equal(held[owner == i], True)
+    assert whole[taken].sum() > 0.5 * len(taken)
+    shown = np.unique(owner[known])
+    assert len(taken) == pytest.approx(0.1 * len(shown), rel=0.35)
+    np.testing.assert_array_equal(held, guard.footprints(known, values.copy(), 0.1))  # no random state
+    if size == 1:  # one pixel a point: the pixels withheld() picks among the points' own
+        assert held.sum() == len(taken)
+
+
 def test_ring_withholds_the_known_pixels_beside_the_holes():
     holes = np.zeros((40, 40), bool)
     holes[20, 10:30] = True

@@ -13,8 +13,9 @@ fill to trust, tile by tile:
    (:func:`withheld`: no random state, the same subset on every run and
    machine), each with its whole footprint (:func:`footprints`: a point
    drawn 2 or 3 pixels wide, withheld a pixel at a time, left its other
-   pixels known, and every fill copied them back: the check was a tie). In-fill: the finished rays within ``ring`` (8) pixels of a
-   running one (:func:`ring`), bands of the holes' own shapes; a random
+   pixels known, and every fill copied them back: the check was a tie).
+   In-fill: the finished rays within ``ring`` (8) pixels of a running one
+   (:func:`ring`), bands of the holes' own shapes; a random
    pixel subset is an isolated-hole problem the network never trained on,
    and push-pull wins it everywhere;
 2. *score*: the network and each classical candidate fill that reduced
@@ -150,7 +151,9 @@ def withheld(known: np.ndarray, fraction: float = WITHHOLD) -> np.ndarray:
     return known & (v < np.uint32(min(fraction * 2.0**32, 2.0**32 - 1)))
 
 
-def footprints(known: np.ndarray, values: np.ndarray, fraction: float = WITHHOLD, reach: int = 2) -> np.ndarray:
+def footprints(
+    known: np.ndarray, values: np.ndarray, fraction: float = WITHHOLD, reach: int = 2
+) -> np.ndarray:
     """(H, W) bool: whole points withheld, about `fraction` of them. A point
     drawn s x s pixels wide (``point_size`` s) leaves s^2 pixels of one
     colour and depth; withholding one of them left its neighbours known, and

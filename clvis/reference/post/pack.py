@@ -43,8 +43,9 @@ conventions): from ``rgbda`` (H x W x 5 [r, g, b, depth, alpha], a
 FilteredImage's), channels R, G, B, A, D. A pixel is kept where alpha > 0 and
 depth is finite: R, G, B, A as given, ``D = (depth - dmin) / (dmax - dmin)``
 in float32 with dmin, dmax the minimum and maximum depth over the kept pixels
-of this image (D = 0 when dmax == dmin). Elsewhere R = G = B = A = 0, D = -1. No kept pixel: every pixel empty. Errors: a NaN
-anywhere, a depth of -inf where alpha > 0.
+of this image (D = 0 when dmax == dmin). Elsewhere R = G = B = A = 0, D =
+-1. No kept pixel: every pixel empty. Errors: a NaN anywhere, a depth of
+-inf where alpha > 0.
 
 pack_gbuffers (the NARVis U-Net): from rasterizer G-buffers (``index``,
 ``rgba`` and the planes named), the channels of

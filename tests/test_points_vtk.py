@@ -185,7 +185,8 @@ def test_a_globe_as_pyvista_ships_it(tmp_path):
     np.testing.assert_allclose(radii, 6.371e9, rtol=1e-6)  # within float32's reach: no origin
     assert {"Texture Coordinates_0", "Texture Coordinates_1"} <= set(cloud.attributes)
     with pytest.raises(
-        DataError, match=r"POLYDATA: only DATASET STRUCTURED_POINTS is a volume; .*clvis render"
+        DataError,
+        match=r"POLYDATA: only DATASET STRUCTURED_POINTS or RECTILINEAR_GRID is a volume; .*clvis render",
     ):
         read_volume(path)
 
@@ -223,7 +224,7 @@ LEGACY = (
         ("s float 1", "s float 9", "SCALARS of 9 components"),
         ("s float 1", "s float16 1", "values of type 'float16' are not read"),
         ("POINTS 4 float", "POINTS -4 float", "malformed POINTS count"),
-        ("DATASET POLYDATA", "DATASET RECTILINEAR_GRID", "RECTILINEAR_GRID is not read as points"),
+        ("DATASET POLYDATA", "DATASET RECTILINEAR_GRID", "RECTILINEAR_GRID is a volume, not a point cloud"),
         ("ASCII", "TEXT", "malformed legacy VTK header"),
         # VTK reads a version it cannot parse as 0, its cells in the layout before 5: ./dev.sh fuzz's SIGSEGV
         ("Version 5.1", "Version 5\xfc1", "malformed legacy VTK version line"),

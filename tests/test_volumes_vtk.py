@@ -1,4 +1,5 @@
-"""VTK image data volumes (.vti, legacy .vtk STRUCTURED_POINTS) through
+"""VTK image data volumes (.vti, legacy .vtk STRUCTURED_POINTS and evenly
+spaced RECTILINEAR_GRID) through
 read_volume: pyvista's own file, the encodings VTK writes, and a DataError
 naming the file for what is not read. VTK's readers read the files (the vtk
 extra); the header checks before them keep hostile sizes from allocating."""
@@ -139,13 +140,61 @@ def test_legacy_ascii_and_errors(tmp_path):
         (head.replace("POINT_DATA", "CELL_DATA 99999\nPOINT_DATA") + "0 " * 12, "more than the 12 points"),
         (head.replace("POINT_DATA 12", "POINT_DATA 11") + "0 " * 12, "does not match DIMENSIONS"),
         (head.replace("float 1", "float 3") + "0 " * 36, "one component"),
-        (head.replace("STRUCTURED_POINTS", "POLYDATA"), "only DATASET STRUCTURED_POINTS"),
+        (head.replace("STRUCTURED_POINTS", "POLYDATA"), "only DATASET STRUCTURED_POINTS or RECTILINEAR_GRID"),
         (head.replace("ASCII", "BINARY") + "\0" * 8, "truncated"),
         ("hello\n", "not a legacy VTK file"),
         (head.replace("SCALARS s float 1\nLOOKUP_TABLE default\n", ""), "no POINT_DATA SCALARS"),
     ):
         p.write_text(text)
         with pytest.raises(DataError, match=message):
+            read_volume(p)
+
+
+def _rectilinear(path, x, y, z, values, binary):
+    """A legacy RECTILINEAR_GRID as VTK's own writer makes it (what
+    pyvista's RectilinearGrid.save writes)."""
+    from vtkmodules.util import numpy_support as ns
+    from vtkmodules.vtkCommonDataModel import vtkRectilinearGrid
+    from vtkmodules.vtkIOLegacy import vtkRectilinearGridWriter
+
+    g = vtkRectilinearGrid()
+    g.SetDimensions(len(x), len(y), len(z))
+    g.SetXCoordinates(ns.numpy_to_vtk(np.asarray(x, np.float64), deep=True))
+    g.SetYCoordinates(ns.numpy_to_vtk(np.asarray(y, np.float64), deep=True))
+    g.SetZCoordinates(ns.numpy_to_vtk(np.asarray(z, np.float64), deep=True))
+    a = ns.numpy_to_vtk(values, deep=True)
+    a.SetName("v")
+    g.GetPointData().SetScalars(a)
+    w = vtkRectilinearGridWriter()
+    w.SetFileName(str(path))
+    w.SetInputData(g)
+    w.SetFileTypeToBinary() if binary else w.SetFileTypeToASCII()
+    assert w.Write() == 1
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_rectilinear_grid_of_even_coordinates_is_a_volume(tmp_path, binary):
+    """A legacy RECTILINEAR_GRID (VTK's writer; pyvista's RectilinearGrid
+    saves one): evenly spaced coordinates give the spacing and origin;
+    uneven or decreasing ones are refused naming the axis; a hostile
+    coordinate count is refused before VTK reads."""
+    x, y, z = np.arange(4) * 0.5 + 1, np.arange(3) * 2.0 - 3, np.linspace(0, 1, 5)
+    values = np.arange(4 * 3 * 5, dtype=np.float32)
+    p = tmp_path / "grid.vtk"
+    _rectilinear(p, x, y, z, values, binary)
+    v = read_volume(p)
+    np.testing.assert_array_equal(v.data, values.reshape(5, 3, 4))
+    assert v.spacing == pytest.approx((0.25, 2.0, 0.5)) and v.origin == pytest.approx((1.0, -3.0, 0.0))
+    _rectilinear(p, x, [0.0, 1.0, 3.0], z, values, binary)
+    with pytest.raises(DataError, match=r"grid\.vtk: RECTILINEAR_GRID with uneven Y_COORDINATES"):
+        read_volume(p)
+    _rectilinear(p, x[::-1], y, z, values, binary)
+    with pytest.raises(DataError, match="X_COORDINATES must increase"):
+        read_volume(p)
+    if not binary:
+        _rectilinear(p, x, y, z, values, binary)
+        p.write_text(p.read_text().replace("X_COORDINATES 4", "X_COORDINATES 999999999", 1))
+        with pytest.raises(DataError, match="X_COORDINATES declares 999999999 values"):
             read_volume(p)
 
 

@@ -75,7 +75,8 @@ each labelled with its LOD and Gaussian count over the colormap's value range.
 
 Without a FILE it uses an embedded explosion density (96^3, closed form).
 FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
-.nii.gz, .mgz, .mgh, Analyze .hdr/.img, .vti, a legacy .vtk of STRUCTURED_POINTS; see --shape,
+.nii.gz, .mgz, .mgh, Analyze .hdr/.img, .vti, a legacy .vtk of STRUCTURED_POINTS or an evenly
+spaced RECTILINEAR_GRID; see --shape,
 --volume-index)
 or a .vdb (float grid, needs the `vdb` extra: tinyvdb); a .npz of Gaussians
 (clvis.Gaussians.save); or a point cloud (.ply, .las, .laz, .e57, .pcd,
@@ -263,7 +264,7 @@ def _sources(args):
             )
         return lods, sv, None, str(path), None
     volume = name.endswith(VOLUME_FORMATS)
-    if name.endswith(".vtk"):  # a legacy VTK volume (STRUCTURED_POINTS) or point set (POLYDATA, ...)
+    if name.endswith(".vtk"):  # a legacy VTK volume (STRUCTURED_POINTS, RECTILINEAR_GRID) or point set
         volume = legacy_dataset(path) not in POINT_DATASETS
     if name.endswith(".npy"):
         shape = npy_shape(path)

@@ -623,13 +623,14 @@ def _not_a_volume(path: str) -> None:
     (read_points said "unknown point cloud format '.gz'" of brain.nii.gz)."""
     from ..io.points import POINT_SUFFIXES
     from ..io.volumes import FORMATS
-    from ..io.vtk import legacy_dataset
+    from ..io.vtk import VOLUME_DATASETS, legacy_dataset
 
     name = path.lower()
-    # a .npy may be either; a .vtk is a volume where its DATASET is STRUCTURED_POINTS, else points
+    # a .npy may be either; a .vtk is a volume where its DATASET is STRUCTURED_POINTS or
+    # RECTILINEAR_GRID, else points
     if name.endswith(FORMATS) and (
         not name.endswith(POINT_SUFFIXES)
-        or (name.endswith(".vtk") and legacy_dataset(path) == "STRUCTURED_POINTS")
+        or (name.endswith(".vtk") and legacy_dataset(path) in VOLUME_DATASETS)
     ):
         kind = next(f for f in FORMATS if name.endswith(f))
         raise CliError(

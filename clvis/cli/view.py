@@ -54,7 +54,8 @@ kNN distances, computed when the mode is first chosen), gaussians,
 narvis|gaussians or narvis-scan|gaussians (split: MACR + the network beside
 the Gaussian renderer it was trained on, the PSNR).
 Volumes (.raw, a 3-D .npy, NIfTI, MGH (.mgz, .mgh), Analyze .hdr/.img, .vti, a legacy .vtk of
-STRUCTURED_POINTS, or --dataset marschner-lobb|turbulence|explosion): modes iso (progressive:
+STRUCTURED_POINTS or RECTILINEAR_GRID, or --dataset marschner-lobb|turbulence|explosion): modes
+iso (progressive:
 each pass is shown as it completes, and a camera move restarts the passes),
 iso+infill (the in-fill network on the partial passes), gaussians, infill|iso
 (split: 85 % of the rays + in-fill beside the complete render, the PSNR).
@@ -77,7 +78,7 @@ page must present. Only the FILE given here is ever read.
 _POINT_SETS = ("hurricane", "terrain")
 _VOLUME_SETS = ("marschner-lobb", "turbulence", "explosion")
 # what read_points reads, but .npy (an (N, 3) array is points, a 3-D one a volume) and
-# .vtk (a volume where its DATASET is STRUCTURED_POINTS, else points)
+# .vtk (a volume where its DATASET is STRUCTURED_POINTS or RECTILINEAR_GRID, else points)
 _POINT_SUFFIXES = tuple(s for s in POINT_SUFFIXES if s not in (".npy", ".vtk"))
 
 

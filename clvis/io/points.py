@@ -52,7 +52,8 @@ from .polydata import read_vtk_points
 __all__ = ["PointCloud", "read_points", "save_npz", "write_ply"]
 
 #: the file name endings read_points reads (the commands pick points or a volume by them)
-#: (.npy: an (N, 3) array or a volume; .vtk: a point set, or a volume where its DATASET is STRUCTURED_POINTS)
+#: (.npy: an (N, 3) array or a volume; .vtk: a point set, or a volume where its DATASET
+#: is STRUCTURED_POINTS or RECTILINEAR_GRID)
 POINT_SUFFIXES = (".ply", ".las", ".laz", ".npy", ".npz", ".pcd", ".e57", *_ASCII_SUFFIXES, *_VTK_SUFFIXES)
 
 
@@ -99,7 +100,7 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
       (a mesh's vertices; its cells not kept), unsigned-char RGB(A) point
       data the colours, the other point arrays attributes; double positions
       as for PLY (:mod:`clvis.io.polydata`). A legacy STRUCTURED_POINTS
-      .vtk is a volume (:func:`clvis.io.read_volume`).
+      or RECTILINEAR_GRID .vtk is a volume (:func:`clvis.io.read_volume`).
     """
     readers = _readers()
     # a FIFO would block the read, /dev/zero never end, a directory fail in the parser

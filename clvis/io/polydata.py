@@ -47,6 +47,7 @@ from .cloud import PointCloud, _cloud, relative_positions
 from .vtk import (
     _VTI_TYPES,
     POINT_DATASETS,
+    VOLUME_DATASETS,
     _attrs,
     _cells,
     _check_array,
@@ -203,9 +204,9 @@ def _read_legacy_points(path: Path) -> PointCloud:
     raw = path.read_bytes()
     dataset, binary, new_cells, _ = _legacy_head(path, raw)
     if dataset not in POINT_DATASETS:
-        if dataset == "STRUCTURED_POINTS":
+        if dataset in VOLUME_DATASETS:
             raise DataError(
-                f"{path}: legacy VTK STRUCTURED_POINTS is a volume, not a point cloud; "
+                f"{path}: legacy VTK {dataset} is a volume, not a point cloud; "
                 "read_volume, clvis iso, clvis gauss and clvis view read it"
             )
         raise DataError(

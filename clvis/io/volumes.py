@@ -22,7 +22,8 @@ Formats, chosen by the file name (case-insensitive):
   ``.mgz`` is gzip-compressed).
 - ``.hdr`` / ``.img``: an Analyze 7.5 (or NIfTI-1 pair) header and its data
   file beside it, through nibabel, read as NIfTI is; either name may be given.
-- ``.vti`` (VTK XML ImageData) and ``.vtk`` (legacy STRUCTURED_POINTS):
+- ``.vti`` (VTK XML ImageData) and ``.vtk`` (legacy STRUCTURED_POINTS, or a
+  RECTILINEAR_GRID whose coordinates are evenly spaced):
   through VTK's own readers (the ``vtk`` extra: ``pip install "clvis[vtk]"``),
   after clvis's checks of the header against the file (:mod:`clvis.io.vtk`);
   the point scalars, with the file's spacing and origin.

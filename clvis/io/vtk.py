@@ -2,7 +2,10 @@
 XML ``.vti`` (ImageData; vtkXMLImageDataReader: ascii, inline binary,
 raw or base64 appended data, zlib- or LZ4-compressed or not, one piece or
 several) and legacy ``.vtk`` STRUCTURED_POINTS (vtkStructuredPointsReader,
-ASCII or BINARY). The volume is the point data's ``Scalars`` array (.vti:
+ASCII or BINARY) or RECTILINEAR_GRID (vtkRectilinearGridReader) whose
+coordinates are evenly spaced along each axis (pyvista writes a
+RectilinearGrid so; uneven ones are refused, naming the axis: clvis volumes
+are uniform grids). The volume is the point data's ``Scalars`` array (.vti:
 the one ``<PointData Scalars=...>`` names, else the first point array; .vtk:
 the first POINT_DATA SCALARS), one component. A .vti with no point array
 (a simulation's cell-centred field, e.g. pyvista's ``channels.vti``) gives
@@ -391,8 +394,13 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
 
 
-#: the legacy DATASETs whose points read_points reads as a cloud (STRUCTURED_POINTS is a volume)
+#: the legacy DATASETs whose points read_points reads as a cloud
 POINT_DATASETS = ("POLYDATA", "UNSTRUCTURED_GRID", "STRUCTURED_GRID")
+#: the legacy DATASETs read_volume reads (a rectilinear grid whose coordinates are evenly spaced)
+VOLUME_DATASETS = ("STRUCTURED_POINTS", "RECTILINEAR_GRID")
+# how far a rectilinear grid's coordinate may lie from the even step (a share
+# of the step): what float32 coordinates written by pyvista keep
+_EVEN = 1e-4
 
 
 def _legacy_lines(raw: bytes) -> list[str]:
@@ -550,6 +558,8 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
             pos = values(n, words[3], f"field array {words[0]!r}", pos)
         elif key in ("DIMENSIONS", "ORIGIN", "SPACING", "ASPECT_RATIO"):
             continue
+        elif key in ("X_COORDINATES", "Y_COORDINATES", "Z_COORDINATES") and len(words) == 3:
+            pos = values(number(words[1], key), words[2], key, pos)
         elif key == "POINTS" and len(words) == 3:
             points = number(words[1], "POINTS")
             pos = values(3 * points, words[2], "POINTS", pos)
@@ -601,22 +611,26 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
 
 
 def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
-    """A legacy .vtk STRUCTURED_POINTS file: (data, spacing zyx, origin xyz);
-    the point data's first SCALARS, read by vtkStructuredPointsReader after
-    the header checks."""
+    """A legacy .vtk STRUCTURED_POINTS or (evenly spaced) RECTILINEAR_GRID
+    file: (data, spacing zyx, origin xyz); the point data's first SCALARS,
+    read by vtkStructuredPointsReader or vtkRectilinearGridReader after the
+    header checks."""
     raw = path.read_bytes()
     dataset, binary, new_cells, text = _legacy_head(path, raw)
-    if dataset != "STRUCTURED_POINTS":
+    if dataset not in VOLUME_DATASETS:
         where = "read_points, clvis render, clvis gauss and clvis view read it"
         points = f"; its points are a point cloud: {where}" if dataset in POINT_DATASETS else ""
-        raise DataError(f"{path}: legacy VTK {dataset}: only DATASET STRUCTURED_POINTS is a volume{points}")
+        raise DataError(
+            f"{path}: legacy VTK {dataset}: only DATASET STRUCTURED_POINTS or RECTILINEAR_GRID is a "
+            f"volume{points}"
+        )
     f = {}
     for line in text[4:]:
         if not line or line.split()[0].upper() in ("POINT_DATA", "CELL_DATA"):
             break
         f[line.split()[0].upper()] = line.split()[1:]
     if "DIMENSIONS" not in f:
-        raise DataError(f"{path}: malformed STRUCTURED_POINTS header: no DIMENSIONS")
+        raise DataError(f"{path}: malformed {dataset} header: no DIMENSIONS")
     nx, ny, nz = _numbers(path, "DIMENSIONS", " ".join(f["DIMENSIONS"]), 3, int)
     _numbers(path, "SPACING", " ".join(f.get("SPACING", f.get("ASPECT_RATIO", ["1", "1", "1"]))), 3)
     _numbers(path, "ORIGIN", " ".join(f.get("ORIGIN", ["0", "0", "0"])), 3)
@@ -647,11 +661,51 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     _check_legacy(path, raw, binary, new_cells)
     core, legacy, _, ns = _vtk()
     with _quiet(core) as messages:
-        r = legacy.vtkStructuredPointsReader()
+        structured = dataset == "STRUCTURED_POINTS"
+        r = legacy.vtkStructuredPointsReader() if structured else legacy.vtkRectilinearGridReader()
         _observe(core, r, messages)
         r.SetFileName(str(path))
         # the name as VTK decodes it (%20 and the like: legacy names have no spaces)
         r.SetScalarsName(
             re.sub(r"%([0-9A-Fa-f]{2})", lambda h: chr(int(h.group(1), 16)), m.group(2).decode("latin-1"))
         )
-        return _image(path, r, messages, None, n, ns)
+        if dataset == "STRUCTURED_POINTS":
+            return _image(path, r, messages, None, n, ns)
+        return _rectilinear(path, r, messages, n, ns)
+
+
+def _rectilinear(path: Path, reader: Any, messages: list[str], n: int, ns: Any) -> tuple:
+    """(data (Z, Y, X), spacing zyx, origin xyz) of a vtkRectilinearGridReader's
+    output, its coordinates evenly spaced along each axis (within _EVEN of a
+    step), else a DataError naming the axis."""
+    reader.Update()
+    grid = reader.GetOutput()
+    if messages or reader.GetErrorCode() or grid is None:
+        raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
+    arr = grid.GetPointData().GetScalars()
+    nx, ny, nz = grid.GetDimensions()
+    if arr is None or arr.GetNumberOfComponents() != 1 or arr.GetNumberOfTuples() != n or nx * ny * nz != n:
+        raise DataError(f"{path}: VTK read no {n}-sample scalar array from it")
+    steps, origin = [], []
+    for axis, count, coords in (
+        ("X", nx, grid.GetXCoordinates()),
+        ("Y", ny, grid.GetYCoordinates()),
+        ("Z", nz, grid.GetZCoordinates()),
+    ):
+        c = np.asarray(ns.vtk_to_numpy(coords), np.float64) if coords is not None else np.zeros(0)
+        if len(c) != count or not np.isfinite(c).all():
+            raise DataError(f"{path}: {axis}_COORDINATES: expected {count} finite values, got {len(c)}")
+        step = (c[-1] - c[0]) / (count - 1) if count > 1 else 1.0
+        if count > 1 and not step > 0:
+            raise DataError(f"{path}: {axis}_COORDINATES must increase ({c[0]:g} .. {c[-1]:g})")
+        off = float(np.abs(c - (c[0] + step * np.arange(count))).max()) if count > 1 else 0.0
+        if off > _EVEN * step:
+            raise DataError(
+                f"{path}: RECTILINEAR_GRID with uneven {axis}_COORDINATES (a sample {off:.3g} from an even "
+                f"step of {step:.6g}); clvis volumes are uniform grids: resample it (e.g. pyvista's "
+                "ImageData.sample)"
+            )
+        steps.append(float(step))
+        origin.append(float(c[0]))
+    data = np.array(ns.vtk_to_numpy(arr), copy=True).reshape(nz, ny, nx)
+    return data, (steps[2], steps[1], steps[0]), origin

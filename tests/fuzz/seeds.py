@@ -306,6 +306,27 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
         + "\n"
     )
     add("vtk", "volume", out / "ascii.vtk")
+    for name, head in (("rect-ascii.vtk", "ASCII"), ("rect-binary.vtk", "BINARY")):
+        # a RECTILINEAR_GRID as VTK writes it (evenly spaced coordinates: a volume)
+        coords = {"X": np.arange(3.0), "Y": np.arange(2.0) * 2, "Z": np.arange(2.0) * 0.5}
+        body = b"".join(
+            f"{k}_COORDINATES {len(c)} float\n".encode()
+            + (" ".join(f"{v:g}" for v in c).encode() if head == "ASCII" else c.astype(">f4").tobytes())
+            + b"\n"
+            for k, c in coords.items()
+        )
+        samples = np.arange(12, dtype=np.float32)
+        text = " ".join(f"{v:g}" for v in samples).encode()
+        data = text if head == "ASCII" else samples.astype(">f4").tobytes()
+        (out / name).write_bytes(
+            f"# vtk DataFile Version 3.0\nclvis seed\n{head}\n".encode()
+            + b"DATASET RECTILINEAR_GRID\nDIMENSIONS 3 2 2\n"
+            + body
+            + b"POINT_DATA 12\nSCALARS v float 1\nLOOKUP_TABLE default\n"
+            + data
+            + b"\n"
+        )
+        add("vtk", "volume", out / name)
     try:
         import vtk  # noqa: F401
     except ImportError:

@@ -481,6 +481,7 @@ def post_pack(q):
     x[..., 4] = keep
     packed = clvis.post.pack_rgbda(x, stride=8, queue=q)
     clvis.post.pack_rgbda(x[:1, :3], queue=q)
+    clvis.post.pack_rgbda(x[:1, :3], stride=8, queue=q)  # padding past twice the image: mirrored again
     for channels in (3, 4):
         clvis.post.unpack_rgba8(packed[:, :channels].copy(), h, w, queue=q)
     # G-buffers of a small cloud with a velocity: pack_rgb_coverage, pack_plane

@@ -11,7 +11,8 @@ fill to trust, tile by tile:
 1. *withhold*: some known pixels are marked unknown. LiDAR: a fraction
    (10 %) of the kept points, drawn by a hash of the pixel's coordinates
    (:func:`withheld`: no random state, the same subset on every run and
-   machine), each with its whole footprint (:func:`footprints`: a point
+   machine); with the G-buffers' point index (a FilteredImage's ``index``)
+   a hashed 10 % of the points, each whole (:func:`points_withheld`: a point
    drawn 2 or 3 pixels wide, withheld a pixel at a time, left its other
    pixels known, and every fill copied them back: the check was a tie).
    In-fill: the finished rays within ``ring`` (8) pixels of a running one
@@ -80,7 +81,7 @@ __all__ = [
     "TILE",
     "WITHHOLD",
     "blend",
-    "footprints",
+    "points_withheld",
     "infill",
     "interpolate",
     "lidar",
@@ -151,39 +152,24 @@ def withheld(known: np.ndarray, fraction: float = WITHHOLD) -> np.ndarray:
     return known & (v < np.uint32(min(fraction * 2.0**32, 2.0**32 - 1)))
 
 
-def footprints(
-    known: np.ndarray, values: np.ndarray, fraction: float = WITHHOLD, reach: int = 2
-) -> np.ndarray:
-    """(H, W) bool: whole points withheld, about `fraction` of them. A point
-    drawn s x s pixels wide (``point_size`` s) leaves s^2 pixels of one
-    colour and depth; withholding one of them left its neighbours known, and
-    every fill copies them back (the LiDAR guard scored 2 and 3 px scans as
-    a tie). Each footprint is found from its top-left pixel (a `known` pixel
-    whose upper and left neighbours are not known with its `values`), a
-    hashed `fraction` of those taken (:func:`withheld`), and grown right and
-    down up to `reach` pixels over the known pixels of the same values
-    (point sizes up to reach + 1). values: (H, W, C), compared exactly."""
-    known = np.asarray(known, bool)
-    v = np.asarray(values)
-    h, w = known.shape
-
-    def same(dy: int, dx: int) -> np.ndarray:
-        """(H, W): pixel p known, p + (dy, dx) inside, known, and of p's values."""
-        out = np.zeros((h, w), bool)
-        ys, yd = slice(max(0, -dy), h - max(0, dy)), slice(max(0, dy), h - max(0, -dy))
-        xs, xd = slice(max(0, -dx), w - max(0, dx)), slice(max(0, dx), w - max(0, -dx))
-        out[ys, xs] = known[ys, xs] & known[yd, xd] & np.all(v[ys, xs] == v[yd, xd], axis=-1)
-        return out
-
-    corner = known & ~same(-1, 0) & ~same(0, -1)
-    seeds = withheld(corner, fraction)
-    held = seeds.copy()
-    for dy in range(reach + 1):
-        for dx in range(reach + 1):
-            if dy or dx:
-                grow = seeds & same(dy, dx)  # the seed's pixel (dy, dx) away is of its point
-                held[dy:, dx:] |= grow[: h - dy, : w - dx]
-    return held
+def points_withheld(known: np.ndarray, index: np.ndarray, fraction: float = WITHHOLD) -> np.ndarray:
+    """(H, W) bool: the `known` pixels of about `fraction` of the points, each
+    point whole: a hash of the point's index (the G-buffers' ``index``, which
+    point each pixel shows) picks it, so every pixel of a point drawn 2 or 3
+    pixels wide goes with it (withheld a pixel at a time, a point left its
+    other pixels known and every fill copied them back: the check tied). No
+    random state: the same points every run."""
+    if not 0.0 < fraction < 1.0:
+        raise ValueError(f"fraction: expected a number in (0, 1), got {fraction!r}")
+    v = np.asarray(index).astype(np.uint32)
+    with np.errstate(over="ignore"):
+        v = v * np.uint32(0x9E3779B1)
+        v ^= v >> np.uint32(15)
+        v *= np.uint32(0x2C1B3C6D)
+        v ^= v >> np.uint32(12)
+        v *= np.uint32(0x297A2D39)
+        v ^= v >> np.uint32(15)
+    return np.asarray(known, bool) & (v < np.uint32(min(fraction * 2.0**32, 2.0**32 - 1)))
 
 
 def ring(known: np.ndarray, holes: np.ndarray, width: int = RING) -> np.ndarray:
@@ -426,6 +412,7 @@ def lidar(
     run: Callable[[np.ndarray], np.ndarray],
     rgbda: np.ndarray,
     queue: cl.CommandQueue | None = None,
+    index: np.ndarray | None = None,
     **params: float,
 ) -> tuple[np.ndarray, dict[str, float]]:
     """The guarded LiDAR frame (H, W, 3) float32 of host rgbda (H, W, 5);
@@ -435,8 +422,9 @@ def lidar(
     kept pixels' mean spacing over the frame, from every kept point, and
     outside the cloud's footprint farther than ``edge`` x the kept points'
     local spacing, at least EDGE_MIN pixels: :func:`_beyond`). The
-    withheld pixels: a hashed ``fraction`` of the kept points; params
-    override ``PARAMS["lidar"]``."""
+    withheld pixels: a hashed ``fraction`` of the kept points, whole by
+    their `index` (the G-buffers', (H, W)) where it is given, else a hashed
+    ``fraction`` of the kept pixels; params override ``PARAMS["lidar"]``."""
     from .pushpull import pushpull
 
     kept = (rgbda[..., 4] > 0) & np.isfinite(rgbda[..., 3])
@@ -471,15 +459,23 @@ def lidar(
     # over the whole frame (a sparse scan's holes are a few spacings wide)
     spacing = math.sqrt(kept.size / max(int(kept.sum()), 1))
     reach = max(REACH_MIN, float(p["reach"]) * max(kept.shape), float(p["spacing"]) * spacing)
+    held, prior = None, float(p["prior"])
+    if index is not None:
+        held = points_withheld(kept, index, float(p["fraction"]))
+        # the prior counts points, as it did when each withheld pixel was one: a
+        # point's pixels err together, so a tile's few points weigh no more
+        points = len(np.unique(np.asarray(index)[held]))
+        prior *= float(held.sum()) / max(points, 1)
     return blend(
         fill,
         rgb,
         kept,
         names=("network", "pushpull"),
         tile=int(p["tile"]),
-        prior=p["prior"],
+        prior=prior,
         margin=p["margin"],
-        held=footprints(kept, rgbda[..., :4], float(p["fraction"])),
+        fraction=p["fraction"],
+        held=held,
     )
 
 

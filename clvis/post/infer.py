@@ -518,7 +518,12 @@ class PostNetwork:
             frame, share = guard_mod.narvis_scan(run_scan, host.index, host.rgba, host.radius_px)
         else:
             rgbda = np.asarray(to_host(getattr(image, "rgbda", image)), np.float32)
-            frame, share = guard_mod.lidar(timed, rgbda, self.queue)
+            # a FilteredImage's point index: the guard withholds whole points by it
+            index = getattr(image, "index", None)
+            index = None if index is None else np.asarray(to_host(index))
+            if index is not None and index.shape != rgbda.shape[:2]:
+                raise ValueError(f"index: shape {index.shape} differs from the rgbda's {rgbda.shape[:2]}")
+            frame, share = guard_mod.lidar(timed, rgbda, self.queue, index)
         t1 = time.perf_counter()
         v = np.nan_to_num(np.clip(frame, np.float32(0), np.float32(1)), nan=0.0)
         picture = np.rint(v * np.float32(255)).astype(np.uint8)

@@ -275,12 +275,16 @@ class FilteredImage(Picture):
     of the same shapes and dtypes, on the input's queue.
     ``to_uint8(background=None)`` and ``save_png(path)``: the kept points as a
     picture (their colours; the kept depth in grey for a depth-only input), as
-    for every image type (:class:`clvis.images.Picture`)."""
+    for every image type (:class:`clvis.images.Picture`). index: the
+    G-buffers' uint32 [H, W] point index as given (which point each pixel
+    shows, 0xFFFFFFFF none; read where ``keep``), None for a depth-only input:
+    the LiDAR guard withholds whole points by it."""
 
     keep: np.ndarray | cla.Array
     depth: np.ndarray | cla.Array
     rgba: np.ndarray | cla.Array | None
     rgbda: np.ndarray | cla.Array
+    index: np.ndarray | cla.Array | None = None
 
     def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
         """(H, W, 4) uint8 RGBA of what is kept, transparent elsewhere, or over
@@ -311,8 +315,9 @@ def depth_filter(
     depth and colour), nothing read back but the 8-byte input check."""
     if isinstance(gbuffers_or_depth, GBuffers):
         depth, rgba = gbuffers_or_depth.depth, gbuffers_or_depth.rgba
+        index = gbuffers_or_depth.index
     else:
-        depth, rgba = gbuffers_or_depth, None
+        depth, rgba, index = gbuffers_or_depth, None, None
     queue = resolve_queue(queue, depth=depth, rgba=rgba)
     host = not (is_device(depth) or is_device(rgba))
     depth = check_array("depth", depth, dtypes=[np.float32], ndim=2)
@@ -337,6 +342,7 @@ def depth_filter(
             depth=np.where(kept, depth, np.float32(np.inf)).astype(np.float32),
             rgba=None if rgba is None else np.where(kept[..., None], rgba, 0).astype(np.uint8),
             rgbda=out_rgbda.get(),
+            index=index,
         )
     kept_depth = runtime.empty(queue, (h, w), np.float32, "depth_filter kept depth")
     kept_rgba = None if rd is None else runtime.empty(queue, rd.shape, np.uint8, "depth_filter kept rgba")
@@ -353,7 +359,9 @@ def depth_filter(
             np.uint32(0 if rd is None else rd.shape[2]),
             buf(kept_rgba if kept_rgba is not None else kept_depth),
         )
-    return FilteredImage(keep=keep.view(np.bool_), depth=kept_depth, rgba=kept_rgba, rgbda=out_rgbda)
+    return FilteredImage(
+        keep=keep.view(np.bool_), depth=kept_depth, rgba=kept_rgba, rgbda=out_rgbda, index=index
+    )
 
 
 def filter_gbuffers(

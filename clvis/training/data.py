@@ -575,11 +575,22 @@ def texture_town(n: int, seed: int) -> dict:
 class LidarFrame:
     """One LiDAR frame: ``rgbda`` (H, W, 5) float32, the depth-filtered sparse
     scan (FilteredImage.rgbda); ``rgb`` (H, W, 3) float32 in [0, 1], the dense
-    render; ``source``."""
+    render; ``source``; ``index``: the scan's G-buffer point index (H, W)
+    uint32 where lidar_frames was asked for it (the guard's whole points),
+    else None."""
 
     rgbda: np.ndarray
     rgb: np.ndarray
     source: str
+    index: np.ndarray | None = None
+
+    def filtered(self) -> Any:
+        """The frame's scan as the FilteredImage a network's call takes
+        (rgbda and the point index)."""
+        from ..raster.depth_filter import FilteredImage
+
+        kept = self.rgbda[..., 4] > 0
+        return FilteredImage(kept, self.rgbda[..., 3], None, self.rgbda, self.index)
 
 
 def lidar_frames(
@@ -594,11 +605,12 @@ def lidar_frames(
     sparse: tuple[float, float] = (0.03, 0.12),
     point_size: int | tuple[int, int] = 1,
     progress: Callable[[str], None] | None = None,
+    index: bool = False,
 ) -> list[LidarFrame]:
     """`count` scenes ("town": a random town per scene; "terrain": the
     embedded terrain) x `views` oblique views each; the scan's points are
     drawn `point_size` pixels a side before the depth filter (lo, hi: drawn
-    per view from lo..hi)."""
+    per view from lo..hi); `index`: keep each scan's point index (LidarFrame.index)."""
     from ..raster import Rasterizer, depth_filter
 
     rng = np.random.default_rng(seed)
@@ -640,7 +652,12 @@ def lidar_frames(
             )
             f = depth_filter(scan.render(cam, width, height, point_size=ps, planes=[]))
             frames.append(
-                LidarFrame(np.asarray(f.rgbda), rgb.astype(np.float32), f"{kind} seed {s} view {v}")
+                LidarFrame(
+                    np.asarray(f.rgbda),
+                    rgb.astype(np.float32),
+                    f"{kind} seed {s} view {v}",
+                    np.asarray(f.index).copy() if index and f.index is not None else None,
+                )
             )
             if progress is not None:
                 progress(f"lidar frame {len(frames)}/{count * views}")

@@ -222,11 +222,13 @@ def _frames(
             dense_points=dense,
             sparse=(d, d),
             point_size=case.point_size,
+            index=True,
         ):
             rgb = np.ascontiguousarray(lf.rgbda[..., :3])
             pp = pushpull(rgb, lf.rgbda[..., 4] > 0)
             label = f"{d:.0%} scan" + (f", {case.point_size} px" if case.point_size > 1 else "")
-            yield label, lf.rgbda, lf.rgb, {"input": rgb, "pushpull": pp}
+            # the scan as depth_filter gives it: rgbda and the point index (the guard's whole points)
+            yield label, lf.filtered(), lf.rgb, {"input": rgb, "pushpull": pp}
     elif name == "narvis-scan":
         n = max(int(case.setting * _data.SCAN_POINTS_PER_PIXEL * w * h), 1000)
         rng = np.random.default_rng(seed)

@@ -191,7 +191,7 @@ KNOWN_BELOW = {
     # LiDAR: none since its tensor pads past the frame by reflection (the
     # quick suite's 240 rows were padded to 256 with an empty band: photo 3 %
     # 3 px went from +0.05 dB / -0.001 SSIM to +0.10 / +0.001) and its guard
-    # withholds whole points (clvis.post.guard.footprints). Before: the card
+    # withholds whole points (clvis.post.guard.points_withheld). Before: the card
     # is scored with its guard (on by default): push-pull on
     # the terrain, where the U-Net alone is 4.94 dB / 0.011 SSIM below it;
     # every method is scored as its 8-bit picture (clvis.metrics.as_picture), so

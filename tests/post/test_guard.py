@@ -32,32 +32,52 @@ def test_withheld_is_a_fixed_hashed_subset_of_the_known_pixels():
 
 
 @pytest.mark.parametrize("size", [1, 2, 3])
-def test_footprints_withhold_whole_points(size):
-    """Points drawn size x size pixels (one colour and depth each, the later
-    drawn over the earlier): a withheld point whose square shows whole is
-    withheld whole (one drawn over may show as pieces, each its own), about
-    the fraction of the points, none of the others."""
+def test_points_withheld_whole_by_their_index(size):
+    """Points drawn size x size pixels, the later over the earlier, and a
+    flat region where neighbouring points share one colour (what the
+    values cannot tell apart): by the point index every pixel a withheld
+    point shows goes with it, about the fraction of the points, none of the
+    pixels not known, the same every run."""
     rng = np.random.default_rng(size)
-    h, w, n = 120, 160, 700
-    values = np.zeros((h, w, 4), np.float32)
-    owner = np.full((h, w), -1)
+    h, w, n = 120, 160, 2000
+    index = np.full((h, w), 0xFFFFFFFF, np.uint32)
     ys, xs = rng.integers(0, h - size, n), rng.integers(0, w - size, n)
     for i, (y, x) in enumerate(zip(ys, xs, strict=True)):
-        values[y : y + size, x : x + size] = rng.random(4)
-        owner[y : y + size, x : x + size] = i
-    known = owner >= 0
-    held = guard.footprints(known, values, 0.1)
+        index[y : y + size, x : x + size] = i
+    known = index != 0xFFFFFFFF
+    held = guard.points_withheld(known, index, 0.1)
     assert not (held & ~known).any()
-    taken = np.unique(owner[held])
-    whole = np.bincount(owner[known], minlength=n) == size * size
-    for i in taken[whole[taken]]:
-        np.testing.assert_array_equal(held[owner == i], True)
-    assert whole[taken].sum() > 0.5 * len(taken)
-    shown = np.unique(owner[known])
-    assert len(taken) == pytest.approx(0.1 * len(shown), rel=0.35)
-    np.testing.assert_array_equal(held, guard.footprints(known, values.copy(), 0.1))  # no random state
-    if size == 1:  # one pixel a point: the pixels withheld() picks among the points' own
-        assert held.sum() == len(taken)
+    taken = np.unique(index[held])
+    for i in taken:
+        np.testing.assert_array_equal(held[index == i], True)
+    shown = np.unique(index[known])
+    assert len(taken) == pytest.approx(0.1 * len(shown), rel=0.25)
+    np.testing.assert_array_equal(held, guard.points_withheld(known.copy(), index.copy(), 0.1))
+    assert guard.points_withheld(known, index, 0.3).sum() > 2 * held.sum()
+    for bad in (0.0, 1.0, float("nan")):
+        with pytest.raises(ValueError, match="fraction"):
+            guard.points_withheld(known, index, bad)
+
+
+def test_lidar_guard_withholds_whole_points_given_the_index(queue):
+    """guard.lidar with the point index: the pixels withheld from the network's
+    input are whole points (a FilteredImage's index), without it single pixels."""
+    truth, rgbda, kept = _lidar_frame(96, 128)
+    index = np.where(kept, (np.arange(kept.size).reshape(kept.shape) // 2).astype(np.uint32), 0xFFFFFFFF)
+    seen = []
+
+    def run(x):
+        seen.append(x[..., 4] > 0)
+        return x[..., :3]
+
+    guard.lidar(run, rgbda, queue, index)
+    withheld = [kept & ~k for k in seen if (kept & ~k).any()]
+    assert withheld
+    got = withheld[0]
+    np.testing.assert_array_equal(got, guard.points_withheld(kept, index, guard.PARAMS["lidar"]["fraction"]))
+    seen.clear()
+    guard.lidar(run, rgbda, queue)
+    assert any((kept & ~k).any() and not np.array_equal(kept & ~k, got) for k in seen)
 
 
 def test_ring_withholds_the_known_pixels_beside_the_holes():

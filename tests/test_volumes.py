@@ -431,6 +431,11 @@ def test_analyze_pair_read_by_either_name(tmp_path, image):
     (tmp_path / "lone.hdr").write_bytes(b"not an Analyze header")
     with pytest.raises(DataError, match=r"lone\.img: not a readable Analyze file"):
         read_volume(tmp_path / "lone.img")
+    # a single-file NIfTI named .hdr: said so, not "its data file is missing"
+    nibabel.save(nibabel.Nifti1Image(data, np.eye(4)), tmp_path / "one.nii")
+    (tmp_path / "one.hdr").write_bytes((tmp_path / "one.nii").read_bytes())
+    with pytest.raises(DataError, match=r"one\.hdr: a single-file NIfTI .*name it \.nii"):
+        read_volume(tmp_path / "one.hdr")
 
 
 def test_otsu_level_sits_between_the_samples_it_separates():

@@ -658,7 +658,7 @@ def add_volume_options(parser: argparse.ArgumentParser) -> None:
         type=count(0, 2**31 - 1),
         default=None,
         metavar="T",
-        help="the volume of a 4-D NIfTI or MGH time series to read (0 first)",
+        help="the volume of a 4-D NIfTI, MGH or Analyze time series to read (0 first)",
     )
 
 

@@ -144,9 +144,12 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
                 volumes.analyze_pair(p)  # the other file of the pair, or a DataError naming it
             import nibabel
 
-            img = nibabel.load(p)
-            s = tuple(int(v) for v in img.header.get_data_shape())
-            zooms = tuple(float(z) for z in img.header.get_zooms())[:3]
+            try:
+                img = nibabel.load(p)
+                s = tuple(int(v) for v in img.header.get_data_shape())
+                zooms = tuple(float(z) for z in img.header.get_zooms())[:3]
+            except volumes.nibabel_errors() as e:
+                raise DataError(f"{path}: not a readable volume header: {type(e).__name__}: {e}") from e
             if len(s) < 3 or any(v != 1 for v in s[3:]) and volume_index is None:
                 raise DataError(f"{path}: expected a 3-D volume (or volume_index), got shape {s}")
             return {"kind": "nifti", "shape": s[:3][::-1], "spacing": zooms[::-1], "index": volume_index}

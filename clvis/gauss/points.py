@@ -58,10 +58,15 @@ def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     0. k in 1..MAX_KNN. positions: (N, 3) finite real coordinates
     (DataError naming the first point with a NaN or infinite one, or when a
     distance does not fit in float32)."""
+    return _knn_mean(_finite_positions(positions), _k(k), True)
+
+
+def _knn_mean(p: np.ndarray, k: int, merge: bool) -> np.ndarray:
+    """knn_mean_distance of checked float64 positions; `merge`: copies of a
+    point (found where a distance is 0) are merged once, then not again (two
+    points 1e-200 apart are distance 0 but not copies)."""
     from scipy.spatial import cKDTree
 
-    k = _k(k)
-    p = _finite_positions(positions)
     n = len(p)
     if n < 2:
         return np.zeros(n, np.float32)
@@ -73,12 +78,12 @@ def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     order = tree.indices
     # (the query's workers are Python threads that this one joins: Ctrl-C lands at once)
     dist, _ = tree.query(p[order], k=kk + 1, workers=-1)
-    if not dist[:, 1].all():
+    if merge and not dist[:, 1].all():
         # copies of a point (merged scans, mesh vertices) are one point: at
         # distance 0 from each other, k copies made a Gaussian of no width
         # (np.unique only here: it costs about what the query does)
         unique, inverse = np.unique(p, axis=0, return_inverse=True)
-        return knn_mean_distance(unique, k)[inverse.ravel()]
+        return _knn_mean(unique, k, False)[inverse.ravel()]
     with np.errstate(over="ignore"):  # the check below reports it
         mean = dist[:, 1:].mean(axis=1).astype(np.float32)
     if not np.isfinite(mean).all():

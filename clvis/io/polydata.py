@@ -6,7 +6,8 @@ data, zlib- or LZ4-compressed or not, one piece or several: a .vts's pieces,
 which share their boundary points, as one grid; a .vtp's or .vtu's
 appended, as VTK appends them) and legacy ``.vtk`` whose DATASET is
 POLYDATA, UNSTRUCTURED_GRID or STRUCTURED_GRID (ASCII or BINARY, file
-versions before 5 and from 5 on). A legacy STRUCTURED_POINTS file is a volume (:func:`clvis.io.read_volume`).
+versions before 5 and from 5 on). A legacy STRUCTURED_POINTS or
+RECTILINEAR_GRID file is a volume (:func:`clvis.io.read_volume`).
 
 The cloud is the points (a mesh's vertices; its cells are not kept): float32
 positions, or, stored as doubles too far from zero for float32, relative to

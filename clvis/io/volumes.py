@@ -148,7 +148,8 @@ def read_volume(
 
     `shape` (Z, Y, X) and `dtype` apply to ``.raw`` files only: they give the
     shape and the sample type when the file name does not, and override the
-    name when it does. `volume_index` picks one volume of a 4-D NIfTI or MGH file."""
+    name when it does. `volume_index` picks one volume of a 4-D NIfTI, MGH or
+    Analyze file."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path: expected a str or path, got {type(path).__name__}")
     path = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO or device
@@ -291,12 +292,46 @@ def _kind(path: Path) -> str:
     return "Analyze" if name.endswith((".hdr", ".img")) else "NIfTI"
 
 
+def nibabel_errors() -> tuple[type[BaseException], ...]:
+    """What nibabel raises on malformed headers and data (OverflowError: an
+    infinite vox_offset; HeaderDataError: an unknown datatype code; MGHError:
+    an MGH header's zero dimension): each becomes a DataError naming the file."""
+    from nibabel.filebasedimages import ImageFileError
+    from nibabel.freesurfer.mghformat import MGHError
+    from nibabel.spatialimages import HeaderDataError
+
+    return (
+        ImageFileError,
+        MGHError,
+        HeaderDataError,
+        OSError,
+        EOFError,
+        ValueError,
+        zlib.error,
+        KeyError,
+        OverflowError,
+        TypeError,
+        IndexError,
+        struct.error,
+    )
+
+
 def analyze_pair(path: Path) -> tuple[Path, Path]:
     """(header, data) files of an Analyze or NIfTI-1 pair named by either
     (nibabel's rule: the other's suffix in the same case); a DataError when
     the other is missing (nibabel said FileNotFoundError of a name the user
     never gave)."""
     header = path.name.lower().endswith(".hdr")
+    if header:
+        try:
+            with open(path, "rb") as f:
+                magic = f.read(348)[344:348]
+        except OSError as e:
+            raise DataError(f"{path}: cannot read: {e.strerror or e}") from e
+        if magic in (b"n+1\0", b"n+2\0"):  # a single-file NIfTI named .hdr
+            raise DataError(
+                f"{path}: a single-file NIfTI (magic {magic[:3].decode()}), not a pair: name it .nii"
+            )
     ext = path.suffix
     other = ".img" if header else ".hdr"
     sibling = path.with_suffix(other.upper() if ext.isupper() else other)
@@ -322,27 +357,7 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
             f'reading {path.name} ({kind}) needs nibabel: pip install ".[nifti]" in a clvis checkout '
             "(or pip install nibabel)"
         ) from None
-    from nibabel.filebasedimages import ImageFileError
-    from nibabel.freesurfer.mghformat import MGHError
-    from nibabel.spatialimages import HeaderDataError
-
-    # what nibabel raises on malformed headers and data (OverflowError: an infinite
-    # vox_offset; HeaderDataError: an unknown datatype code; MGHError: an MGH
-    # header's zero dimension)
-    errors = (
-        ImageFileError,
-        MGHError,
-        HeaderDataError,
-        OSError,
-        EOFError,
-        ValueError,
-        zlib.error,
-        KeyError,
-        OverflowError,
-        TypeError,
-        IndexError,
-        struct.error,
-    )
+    errors = nibabel_errors()
     _check_nifti_head(head)
     try:
         img = nibabel.load(path)  # the header only; the data is read below

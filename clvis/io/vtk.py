@@ -558,9 +558,10 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
             pos = values(n, words[3], f"field array {words[0]!r}", pos)
         elif key in ("DIMENSIONS", "ORIGIN", "SPACING", "ASPECT_RATIO"):
             continue
-        elif key in ("X_COORDINATES", "Y_COORDINATES", "Z_COORDINATES") and len(words) == 3:
+        elif key in ("X_COORDINATES", "Y_COORDINATES", "Z_COORDINATES") and len(words) >= 3:
+            # (VTK reads the count and type, whatever follows on the line)
             pos = values(number(words[1], key), words[2], key, pos)
-        elif key == "POINTS" and len(words) == 3:
+        elif key == "POINTS" and len(words) >= 3:  # (VTK reads the count and type, not the rest)
             points = number(words[1], "POINTS")
             pos = values(3 * points, words[2], "POINTS", pos)
         elif key in _CELL_SECTIONS and len(words) == 3:
@@ -693,8 +694,10 @@ def _rectilinear(path: Path, reader: Any, messages: list[str], n: int, ns: Any) 
         ("Z", nz, grid.GetZCoordinates()),
     ):
         c = np.asarray(ns.vtk_to_numpy(coords), np.float64) if coords is not None else np.zeros(0)
-        if len(c) != count or not np.isfinite(c).all():
-            raise DataError(f"{path}: {axis}_COORDINATES: expected {count} finite values, got {len(c)}")
+        if len(c) != count:
+            raise DataError(f"{path}: {axis}_COORDINATES: expected {count} values, got {len(c)}")
+        if not np.isfinite(c).all():
+            raise DataError(f"{path}: {axis}_COORDINATES: a NaN or infinite coordinate")
         step = (c[-1] - c[0]) / (count - 1) if count > 1 else 1.0
         if count > 1 and not step > 0:
             raise DataError(f"{path}: {axis}_COORDINATES must increase ({c[0]:g} .. {c[-1]:g})")

@@ -1,7 +1,10 @@
 """Images to and from the networks' tensors (post family), for ONNX Runtime.
 
 The networks take one NCHW float32 tensor (batch 1) whose height and width
-are multiples of their stride; the padding pixels read as "empty".
+are multiples of their stride. The padding pixels past the image: the
+in-fill's are finished rays that missed (0); the LiDAR and NARVis tensors
+reflect the image past its last row and column (numpy's "symmetric" pad),
+so the network sees the scan go on, not an empty band.
 :func:`pack_iso` builds the in-fill network's input from an iso image,
 :func:`pack_rgbda` the LiDAR U-Net's from a depth-filtered point image,
 :func:`pack_gbuffers` the NARVis U-Net's from rasterizer G-buffers, and
@@ -315,7 +318,7 @@ def pack_rgbda(
     D = (depth - dmin) / (dmax - dmin) in float32, dmin and dmax the kept
     depths' extremes in this frame, computed on the device by a reduction
     kernel (rgbda_range; no host round trip), D = 0 where dmax == dmin.
-    Elsewhere, and at padding pixels: R = G = B = A = 0, D = -1. No kept pixel
+    Elsewhere R = G = B = A = 0, D = -1; padding reflects the image. No kept pixel
     at all gives an all-empty tensor, not an error. A NaN anywhere, or a
     depth of -inf where alpha > 0, raises DataError after the kernels ran.
     """
@@ -402,7 +405,8 @@ def pack_gbuffers(
     then, where named, the view depth, the screen velocity (v'x, v'y, its
     angle, |v'|), the splat radius in pixels ("radius": ``radius_px``) and
     any attribute planes, raw (the network normalises them
-    in its graph). Every channel is 0 at empty pixels and padding. A plane
+    in its graph). Every channel is 0 at empty pixels; padding reflects the
+    image. A plane
     the G-buffers lack, or a NaN or infinite value at a covered pixel, raises
     DataError naming it (after the kernels ran).
     """

@@ -747,8 +747,8 @@ def _pack_infill(frame: Any, completion: float | None, stride: int, prior: bool 
 def _pack_narvis(frame: Any, completion: float | None, stride: int) -> tuple[Any, Any]:
     c, h, w = frame.x.shape
     hp, wp = -(-h // stride) * stride, -(-w // stride) * stride
-    x = np.zeros((c, hp, wp), np.float32)
-    x[:, :h, :w] = frame.x
+    # padded as the inference packs it (clvis.post.pack: the image reflected past its edge)
+    x = np.pad(frame.x, ((0, 0), (0, hp - h), (0, wp - w)), mode="symmetric").astype(np.float32)
     return x, frame.rgb
 
 

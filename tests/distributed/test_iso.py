@@ -159,6 +159,11 @@ def test_bad_files_and_arguments(client, tmp_path):
         DistributedIsoRenderer(nan, client, brick=4, timeout=TIMEOUT)
     with pytest.raises(DataError, match="nowhere.npy: no such file"):
         DistributedIsoRenderer(tmp_path / "nowhere.npy", client, timeout=TIMEOUT)
+    cut = tmp_path / "cut.hdr"  # a truncated Analyze header: nibabel's own error, named
+    cut.write_bytes(b"\x5c\x01\x00\x00" + b"\0" * 40)
+    (tmp_path / "cut.img").write_bytes(b"\0" * 64)
+    with pytest.raises(DataError, match="cut.hdr: "):
+        DistributedIsoRenderer(cut, client, timeout=TIMEOUT)
     with pytest.raises(ValueError, match="brick: expected a multiple of 4"):
         DistributedIsoRenderer(np.zeros((8, 8, 8)), client, brick=6)
     with pytest.raises(DataError, match="at least 2 samples"):

@@ -263,5 +263,8 @@ def test_knn_degenerate_clouds(f):
     single = np.random.default_rng(0).random((50, 3))
     # (knn_sigma's clamp, a percentile over every point, moves by the interpolation alone)
     np.testing.assert_allclose(f(np.repeat(single, 5, axis=0), 4), np.repeat(f(single, 4), 5), rtol=1e-4)
+    # distance 0 without being copies (the square underflows): merged once, not forever
+    tiny = np.array([[0.0, 0.0, 0.0], [1e-200, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    assert np.isfinite(f(tiny, 1)).all()
     g = gaussians_from_points(np.ones((10, 3)))
     assert np.isfinite(g.scales).all() and (np.asarray(g.scales) == 0).all()

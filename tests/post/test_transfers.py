@@ -269,10 +269,11 @@ def _guard_accounting(net, h, w, reads, uploads, pushpull):
 def test_guarded_lidar_pipeline_is_counted(device, transfers):
     """README's LiDAR one-liner as written, post.load("lidar")(depth_filter(g)):
     the guard is on by default for LiDAR and works on the host (clvis.post.guard),
-    so it is not at the floor: the RGBDA image comes back once (20 B/pixel),
+    so it is not at the floor: the RGBDA image comes back once (20 B/pixel)
+    and the G-buffers' point index (4: the guard withholds whole points),
     the network runs twice on host input (20 up, its tensors, and its
     float output read back: 12 a padded pixel), push-pull once or twice
-    (12 + 1 up, 12 down). At 512x512 (no padding) that is 96 B/pixel down
+    (12 + 1 up, 12 down). At 512x512 (no padding) that is 100 B/pixel down
     and 77 up with push-pull once, against the unguarded call's 24 and 12;
     held here to exactly that, so the guard's traffic cannot grow unnoticed.
     The picture is the host path's."""
@@ -287,7 +288,7 @@ def test_guarded_lidar_pipeline_is_counted(device, transfers):
     image = depth_filter(g, 4)
     transfers.clear()
     got = net(image)
-    assert transfers.planes(W * H) == _guard_accounting(net, H, W, [20], [20], 12)
+    assert transfers.planes(W * H) == _guard_accounting(net, H, W, [20, 4], [20], 12)
     assert transfers.small(W * H) <= SMALL
     np.testing.assert_array_equal(got, want)
 

@@ -186,7 +186,8 @@ KNOWN_BELOW = {
     # 6-plane model before it was below push-pull on the shapes' 85 and 90 %
     # rows by 0.70 dB (the same frame: both snapshots fall on the same pass),
     # the depth model's first run (d1) by 0.13 dB; the full suite's rows
-    # below went from 6 to 7 of 105 (bench/results/README.md).
+    # below went from 6 to 7 of 105, then 5 with 32^3 volumes in the
+    # variety (stop 49; bench/results/README.md).
     "infill": {},
     # LiDAR: none since its tensor pads past the frame by reflection (the
     # quick suite's 240 rows were padded to 256 with an empty band: photo 3 %
@@ -287,7 +288,9 @@ def test_ci_infill_on_shapes(ci_rows):
     such frames, then with the candidates plane (IsoImage.candidates), then
     with acquisition noise and 1920x1080 frames in its variety: 85 % and
     90 %: 36.4 dB / 0.982 (push-pull 31.9, input 25.0); 95 %: 44.1 / 0.995
-    (push-pull 34.2, input 33.7). The model before: 36.5 / 0.983 and 43.8 /
+    (push-pull 34.2, input 33.7). With the depth planes (stop 48): 35.6 /
+    0.981 and 43.3 / 0.995; and 32^3 volumes in the variety (stop 49): 36.0 /
+    0.982 and 43.9 / 0.995. The model before: 36.5 / 0.983 and 43.8 /
     0.995; without the plane: 36.3 / 0.982 and 43.1 / 0.995; the model
     before that: 35.7 / 0.981 and 42.2 / 0.994.
     Before all three: 85 %: 35.3 (push-pull 29.9); 90 %: 41.3 (32.7); 95 %:

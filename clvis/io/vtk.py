@@ -342,22 +342,32 @@ def _check_array(
         raise DataError(f"{path}: malformed binary array: {e}") from None
 
 
+def _scalars(
+    path: Path, reader: Any, messages: list[str], name: str | None, n: int, ns: Any, cells: bool = False
+) -> tuple[Any, np.ndarray]:
+    """(the reader's output, its `n`-sample one-component array as (Z, Y, X)):
+    the named one, else the scalars; of the cells with `cells`. A DataError
+    for VTK's errors, or an array not of that size."""
+    reader.Update()
+    out = reader.GetOutput()
+    if messages or reader.GetErrorCode() or out is None:
+        raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
+    pd = out.GetCellData() if cells else out.GetPointData()
+    arr = pd.GetScalars() if name is None else pd.GetArray(name)
+    dims = out.GetDimensions()
+    nx, ny, nz = (max(d - 1, 1) for d in dims) if cells else dims
+    if arr is None or arr.GetNumberOfComponents() != 1 or arr.GetNumberOfTuples() != n or nx * ny * nz != n:
+        raise DataError(f"{path}: VTK read no {n}-sample scalar array from it")
+    return out, np.array(ns.vtk_to_numpy(arr), copy=True).reshape(nz, ny, nx)
+
+
 def _image(
     path: Path, reader: Any, messages: list[str], name: str | None, n: int, ns: Any, cells: bool = False
 ) -> tuple:
     """(data (Z, Y, X), spacing zyx, origin xyz) of `reader`'s output; with
     `cells`, of its cell array: one sample a cell, at the cell's centre."""
-    reader.Update()
-    img = reader.GetOutput()
-    if messages or reader.GetErrorCode() or img is None:
-        raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
-    pd = img.GetCellData() if cells else img.GetPointData()
-    arr = pd.GetScalars() if name is None else pd.GetArray(name)
+    img, data = _scalars(path, reader, messages, name, n, ns, cells)
     dims = img.GetDimensions()
-    nx, ny, nz = (max(d - 1, 1) for d in dims) if cells else dims
-    if arr is None or arr.GetNumberOfComponents() != 1 or arr.GetNumberOfTuples() != n or nx * ny * nz != n:
-        raise DataError(f"{path}: VTK read no {n}-sample scalar array from it")
-    data = np.array(ns.vtk_to_numpy(arr), copy=True).reshape(nz, ny, nx)
     sx, sy, sz = img.GetSpacing()
     origin = list(img.GetOrigin())
     if cells:  # the cell centres: half a step in along each axis that has cells
@@ -679,14 +689,8 @@ def _rectilinear(path: Path, reader: Any, messages: list[str], n: int, ns: Any) 
     """(data (Z, Y, X), spacing zyx, origin xyz) of a vtkRectilinearGridReader's
     output, its coordinates evenly spaced along each axis (within _EVEN of a
     step), else a DataError naming the axis."""
-    reader.Update()
-    grid = reader.GetOutput()
-    if messages or reader.GetErrorCode() or grid is None:
-        raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
-    arr = grid.GetPointData().GetScalars()
+    grid, data = _scalars(path, reader, messages, None, n, ns)
     nx, ny, nz = grid.GetDimensions()
-    if arr is None or arr.GetNumberOfComponents() != 1 or arr.GetNumberOfTuples() != n or nx * ny * nz != n:
-        raise DataError(f"{path}: VTK read no {n}-sample scalar array from it")
     steps, origin = [], []
     for axis, count, coords in (
         ("X", nx, grid.GetXCoordinates()),
@@ -710,5 +714,4 @@ def _rectilinear(path: Path, reader: Any, messages: list[str], n: int, ns: Any) 
             )
         steps.append(float(step))
         origin.append(float(c[0]))
-    data = np.array(ns.vtk_to_numpy(arr), copy=True).reshape(nz, ny, nx)
     return data, (steps[2], steps[1], steps[0]), origin

@@ -137,19 +137,12 @@ EDGE_MIN = 4.0
 def withheld(known: np.ndarray, fraction: float = WITHHOLD) -> np.ndarray:
     """(H, W) bool: about `fraction` of the `known` pixels, picked by a
     hash of (row, column): the same pixels for the same shape every time."""
-    if not 0.0 < fraction < 1.0:
-        raise ValueError(f"fraction: expected a number in (0, 1), got {fraction!r}")
     h, w = known.shape
     y = np.arange(h, dtype=np.uint32)[:, None]
     x = np.arange(w, dtype=np.uint32)[None, :]
     with np.errstate(over="ignore"):
         v = y * np.uint32(0x9E3779B1) ^ x * np.uint32(0x85EBCA77)
-        v ^= v >> np.uint32(15)
-        v *= np.uint32(0x2C1B3C6D)
-        v ^= v >> np.uint32(12)
-        v *= np.uint32(0x297A2D39)
-        v ^= v >> np.uint32(15)
-    return known & (v < np.uint32(min(fraction * 2.0**32, 2.0**32 - 1)))
+    return known & _hashed_below(v, fraction)
 
 
 def points_withheld(known: np.ndarray, index: np.ndarray, fraction: float = WITHHOLD) -> np.ndarray:
@@ -159,17 +152,23 @@ def points_withheld(known: np.ndarray, index: np.ndarray, fraction: float = WITH
     pixels wide goes with it (withheld a pixel at a time, a point left its
     other pixels known and every fill copied them back: the check tied). No
     random state: the same points every run."""
+    with np.errstate(over="ignore"):
+        v = np.asarray(index).astype(np.uint32) * np.uint32(0x9E3779B1)
+    return np.asarray(known, bool) & _hashed_below(v, fraction)
+
+
+def _hashed_below(v: np.ndarray, fraction: float) -> np.ndarray:
+    """Where the uint32 keys `v`, mixed (a murmur-style finaliser), fall in
+    the lowest `fraction` of the range: withheld's and points_withheld's pick."""
     if not 0.0 < fraction < 1.0:
         raise ValueError(f"fraction: expected a number in (0, 1), got {fraction!r}")
-    v = np.asarray(index).astype(np.uint32)
     with np.errstate(over="ignore"):
-        v = v * np.uint32(0x9E3779B1)
-        v ^= v >> np.uint32(15)
+        v = v ^ (v >> np.uint32(15))
         v *= np.uint32(0x2C1B3C6D)
         v ^= v >> np.uint32(12)
         v *= np.uint32(0x297A2D39)
         v ^= v >> np.uint32(15)
-    return np.asarray(known, bool) & (v < np.uint32(min(fraction * 2.0**32, 2.0**32 - 1)))
+    return v < np.uint32(min(fraction * 2.0**32, 2.0**32 - 1))
 
 
 def ring(known: np.ndarray, holes: np.ndarray, width: int = RING) -> np.ndarray:

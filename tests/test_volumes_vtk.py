@@ -438,3 +438,87 @@ def test_cell_data_is_the_volume_where_no_point_array_is(tmp_path, mode):
         path.write_bytes(text.replace(blob, forged))
         with pytest.raises(DataError, match="byte count"):
             read_volume(path)
+
+
+def _vtr(path, x, y, z, values, mode, cells=False, compress=True):
+    """A .vtr (XML RectilinearGrid) as VTK's writer makes it (what pyvista's
+    RectilinearGrid.save("x.vtr") writes): `values` a point (or `cells`: a
+    cell) array named "v", in `mode` (Ascii, Binary, Appended)."""
+    from vtkmodules.util import numpy_support as ns
+    from vtkmodules.vtkCommonDataModel import vtkRectilinearGrid
+    from vtkmodules.vtkIOXML import vtkXMLRectilinearGridWriter
+
+    g = vtkRectilinearGrid()
+    g.SetDimensions(len(x), len(y), len(z))
+    g.SetXCoordinates(ns.numpy_to_vtk(np.asarray(x, np.float64), deep=True))
+    g.SetYCoordinates(ns.numpy_to_vtk(np.asarray(y, np.float64), deep=True))
+    g.SetZCoordinates(ns.numpy_to_vtk(np.asarray(z, np.float64), deep=True))
+    a = ns.numpy_to_vtk(values, deep=True)
+    a.SetName("v")
+    (g.GetCellData() if cells else g.GetPointData()).SetScalars(a)
+    w = vtkXMLRectilinearGridWriter()
+    w.SetFileName(str(path))
+    w.SetInputData(g)
+    getattr(w, f"SetDataModeTo{mode}")()
+    if not compress:
+        w.SetCompressorTypeToNone()
+    assert w.Write() == 1
+
+
+@pytest.mark.parametrize("mode", ["Ascii", "Binary", "Appended"])
+def test_vtr_of_even_coordinates_is_a_volume(tmp_path, mode):
+    """An XML RectilinearGrid (.vtr) reads as the legacy one does: evenly
+    spaced coordinates give the spacing and origin, its point array the
+    samples, or its cell array (no point array) one sample a cell at the
+    cells' centres; uneven or decreasing coordinates are refused naming the
+    axis."""
+    x, y, z = np.arange(4) * 0.5 + 1, np.arange(3) * 2.0 - 3, np.linspace(0, 1, 5)
+    values = np.arange(4 * 3 * 5, dtype=np.float32) * 3 % 17
+    p = tmp_path / "grid.vtr"
+    _vtr(p, x, y, z, values, mode)
+    v = read_volume(p)
+    np.testing.assert_array_equal(v.data, values.reshape(5, 3, 4))
+    assert v.data.dtype == np.float32
+    assert v.spacing == pytest.approx((0.25, 2.0, 0.5)) and v.origin == pytest.approx((1.0, -3.0, 0.0))
+    cells = np.arange(3 * 2 * 4, dtype=np.int16)
+    _vtr(p, x, y, z, cells, mode, cells=True)
+    v = read_volume(p)
+    np.testing.assert_array_equal(v.data, cells.reshape(4, 2, 3))
+    assert v.spacing == pytest.approx((0.25, 2.0, 0.5)) and v.origin == pytest.approx((1.25, -2.0, 0.125))
+    _vtr(p, x, [0.0, 1.0, 3.0], z, values, mode)
+    with pytest.raises(DataError, match=r"grid\.vtr: a RectilinearGrid with uneven Y coordinates"):
+        read_volume(p)
+    _vtr(p, x, y, z[::-1], values, mode)
+    with pytest.raises(DataError, match="the Z coordinates must increase"):
+        read_volume(p)
+
+
+def test_vtr_header_lies_are_refused_before_vtk_reads(tmp_path):
+    """A .vtr whose coordinate arrays do not match its extent (too few, a
+    byte count of another size, a missing <Coordinates>) or whose extent
+    claims more samples than the file holds is a DataError naming it."""
+    x, y, z = np.arange(4.0), np.arange(3.0), np.arange(2.0)
+    values = np.arange(24, dtype=np.float32)
+    p = tmp_path / "lie.vtr"
+    _vtr(p, x, y, z, values, "Binary", compress=False)
+    good = p.read_bytes()
+    assert read_volume(p).shape == (2, 3, 4)
+
+    def bad(content, message):
+        p.write_bytes(content)
+        with pytest.raises(DataError, match=message):
+            read_volume(p)
+
+    big = good.replace(b'WholeExtent="0 3 0 2 0 1"', b'WholeExtent="0 3 0 2 0 99999"')
+    bad(big.replace(b'Extent="0 3 0 2 0 1"', b'Extent="0 3 0 2 0 99999"'), "byte count")
+    coords = good[good.index(b"<Coordinates>") : good.index(b"</Coordinates>") + len(b"</Coordinates>")]
+    bad(good.replace(coords, b""), "three <Coordinates> arrays")
+    first = coords.index(b"<DataArray")
+    end = coords.index(b"</DataArray>") + len(b"</DataArray>")
+    bad(good.replace(coords, coords[:first] + coords[end:]), "three <Coordinates> arrays")
+    # the X coordinates' byte count claims 5 doubles where the extent has 4 points
+    blob = coords[coords.index(b">", first) + 1 : coords.index(b"</DataArray>")].strip()
+    raw = base64.b64decode(blob)
+    forged = base64.b64encode(np.array([5 * 8], "<u4").tobytes() + raw[4:] + bytes(8))
+    bad(good.replace(blob, forged), "byte count")
+    bad(good.replace(b'type="RectilinearGrid"', b'type="ImageData"', 1), "not a VTK RectilinearGrid file")

@@ -75,8 +75,8 @@ each labelled with its LOD and Gaussian count over the colormap's value range.
 
 Without a FILE it uses an embedded explosion density (96^3, closed form).
 FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
-.nii.gz, .mgz, .mgh, Analyze .hdr/.img, .vti, a legacy .vtk of STRUCTURED_POINTS or an evenly
-spaced RECTILINEAR_GRID; see --shape,
+.nii.gz, .mgz, .mgh, Analyze .hdr/.img, .vti, an evenly spaced .vtr, a legacy .vtk of
+STRUCTURED_POINTS or an evenly spaced RECTILINEAR_GRID; see --shape,
 --volume-index)
 or a .vdb (float grid, needs the `vdb` extra: tinyvdb); a .npz of Gaussians
 (clvis.Gaussians.save); or a point cloud (.ply, .las, .laz, .e57, .pcd,

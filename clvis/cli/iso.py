@@ -69,9 +69,10 @@ or turbulence (128^3, iso 0.5). FILE: a raw volume named like the Open SciVis
 datasets (<name>_<X>x<Y>x<Z>_<type>.raw, or any .raw with --shape and --dtype),
 a .npy volume [z, y, x], a NIfTI file (.nii, .nii.gz; a 4-D series with
 --volume-index), FreeSurfer's MGH (.mgz, .mgh), Analyze (.hdr with its .img), or VTK
-image data (.vti, legacy .vtk structured points or an evenly spaced rectilinear grid; a
-.vtp, .vtu, .vts or a legacy .vtk POLYDATA, UNSTRUCTURED_GRID or STRUCTURED_GRID is a point
-cloud: clvis render, clvis gauss, clvis view).
+image data (.vti, legacy .vtk structured points, or an evenly spaced rectilinear
+grid: .vtr or legacy .vtk; a .vtp, .vtu, .vts or a legacy .vtk POLYDATA,
+UNSTRUCTURED_GRID or STRUCTURED_GRID is a point cloud: clvis render, clvis gauss,
+clvis view).
 The default isovalue of a file is Otsu's threshold of its samples
 (scikit-image), which separates a scan's tissue from its background, moved
 to the middle of the gap between the sample values on either side of it (a

@@ -53,7 +53,7 @@ modes points (colour by an attribute or RGB, colormap, point size), lidar
 kNN distances, computed when the mode is first chosen), gaussians,
 narvis|gaussians or narvis-scan|gaussians (split: MACR + the network beside
 the Gaussian renderer it was trained on, the PSNR).
-Volumes (.raw, a 3-D .npy, NIfTI, MGH (.mgz, .mgh), Analyze .hdr/.img, .vti, a legacy .vtk of
+Volumes (.raw, a 3-D .npy, NIfTI, MGH (.mgz, .mgh), Analyze .hdr/.img, .vti, .vtr, a legacy .vtk of
 STRUCTURED_POINTS or RECTILINEAR_GRID, or --dataset marschner-lobb|turbulence|explosion): modes
 iso (progressive:
 each pass is shown as it completes, and a camera move restarts the passes),

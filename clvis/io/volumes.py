@@ -22,8 +22,9 @@ Formats, chosen by the file name (case-insensitive):
   ``.mgz`` is gzip-compressed).
 - ``.hdr`` / ``.img``: an Analyze 7.5 (or NIfTI-1 pair) header and its data
   file beside it, through nibabel, read as NIfTI is; either name may be given.
-- ``.vti`` (VTK XML ImageData) and ``.vtk`` (legacy STRUCTURED_POINTS, or a
-  RECTILINEAR_GRID whose coordinates are evenly spaced):
+- ``.vti`` (VTK XML ImageData), ``.vtr`` (VTK XML RectilinearGrid) and
+  ``.vtk`` (legacy STRUCTURED_POINTS or RECTILINEAR_GRID), a rectilinear
+  grid only where its coordinates are evenly spaced:
   through VTK's own readers (the ``vtk`` extra: ``pip install "clvis[vtk]"``),
   after clvis's checks of the header against the file (:mod:`clvis.io.vtk`);
   the point scalars, with the file's spacing and origin.
@@ -133,7 +134,7 @@ def volume_parts(
 
 #: the volume files read through nibabel (NIfTI, MGH, Analyze header/data pairs)
 NIBABEL_FORMATS = (".nii", ".nii.gz", ".mgz", ".mgh", ".hdr", ".img")
-FORMATS = (".raw", ".npy", *NIBABEL_FORMATS, ".vti", ".vtk")
+FORMATS = (".raw", ".npy", *NIBABEL_FORMATS, ".vti", ".vtr", ".vtk")
 
 
 def read_volume(
@@ -144,7 +145,7 @@ def read_volume(
     volume_index: int | None = None,
 ) -> Volume:
     """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``, ``.mgz``,
-    ``.mgh``, ``.hdr``/``.img``, ``.vti``, ``.vtk``; see the module docstring).
+    ``.mgh``, ``.hdr``/``.img``, ``.vti``, ``.vtr``, ``.vtk``; see the module docstring).
 
     `shape` (Z, Y, X) and `dtype` apply to ``.raw`` files only: they give the
     shape and the sample type when the file name does not, and override the
@@ -164,10 +165,11 @@ def read_volume(
         raise ValueError(f"volume_index: only for 4-D NIfTI, MGH or Analyze files, not {path.name}")
     if name.endswith(".npy"):
         return _read_npy(path)
-    if name.endswith((".vti", ".vtk")):
-        from .vtk import read_legacy, read_vti
+    if name.endswith((".vti", ".vtr", ".vtk")):
+        from .vtk import read_legacy, read_vti, read_vtr
 
-        data, spacing, origin = (read_vti if name.endswith(".vti") else read_legacy)(path)
+        reader = {".vti": read_vti, ".vtr": read_vtr}.get(name[-4:], read_legacy)
+        data, spacing, origin = reader(path)
         return Volume(data, tuple(float(s) for s in spacing), tuple(float(o) for o in origin), str(path))
     from .points import POINT_SUFFIXES
 

@@ -1,21 +1,24 @@
 """VTK image data volumes, read by VTK's own readers (the ``vtk`` extra):
 XML ``.vti`` (ImageData; vtkXMLImageDataReader: ascii, inline binary,
 raw or base64 appended data, zlib- or LZ4-compressed or not, one piece or
-several) and legacy ``.vtk`` STRUCTURED_POINTS (vtkStructuredPointsReader,
-ASCII or BINARY) or RECTILINEAR_GRID (vtkRectilinearGridReader) whose
-coordinates are evenly spaced along each axis (pyvista writes a
-RectilinearGrid so; uneven ones are refused, naming the axis: clvis volumes
-are uniform grids). The volume is the point data's ``Scalars`` array (.vti:
-the one ``<PointData Scalars=...>`` names, else the first point array; .vtk:
-the first POINT_DATA SCALARS), one component. A .vti with no point array
-(a simulation's cell-centred field, e.g. pyvista's ``channels.vti``) gives
-its cell data the same way: one sample a cell, the origin moved to the first
-cell's centre.
+several), XML ``.vtr`` (RectilinearGrid, vtkXMLRectilinearGridReader, the
+same encodings) and legacy ``.vtk`` STRUCTURED_POINTS
+(vtkStructuredPointsReader, ASCII or BINARY) or RECTILINEAR_GRID
+(vtkRectilinearGridReader); a rectilinear grid only where its coordinates
+are evenly spaced along each axis (pyvista writes a RectilinearGrid so;
+uneven ones are refused, naming the axis: clvis volumes are uniform grids).
+The volume is the point data's ``Scalars`` array (.vti, .vtr: the one
+``<PointData Scalars=...>`` names, else the first point array; .vtk: the
+first POINT_DATA SCALARS), one component. A .vti or .vtr with no point
+array (a simulation's cell-centred field, e.g. pyvista's ``channels.vti``)
+gives its cell data the same way: one sample a cell, the origin moved to
+the first cell's centre.
 
 Bounded: before VTK reads, the header is checked against the file (the
 hardening of the other readers): the extents, the array's type and
 components, and for every piece the byte count or compressed-block header of
-the array against its extent and the bytes the file holds, so that a few
+the array (and of a .vtr's coordinate arrays) against its extent and the
+bytes the file holds, so that a few
 hostile bytes cannot make VTK allocate gigabytes; a DTD or entity declaration
 is refused (no entity expansion). VTK reads only the chosen array. VTK's
 error messages become a DataError naming the file; nothing reaches stderr.
@@ -204,20 +207,24 @@ def _xml_head(path: Path, xml: bytes, kind: str) -> tuple[dict[str, str], dict[s
     return fa, _attrs(data[0])
 
 
-def _check_vti(path: Path, raw: bytes) -> tuple[str, int, str]:
-    """Check the .vti's header against the file before VTK reads it: (the
-    name of the point array that is the volume, its samples); a DataError
-    naming the file for what is not read or lies about its size."""
+def _check_grid(path: Path, raw: bytes, kind: str = "ImageData") -> tuple[str, int, str]:
+    """Check a .vti's (`kind` "ImageData") or .vtr's ("RectilinearGrid")
+    header against the file before VTK reads it: (the name of the array
+    that is the volume, its samples, "cell" where it is cell data else "");
+    a DataError naming the file for what is not read or lies about its
+    size. A .vtr's pieces hold their coordinates too: three one-component
+    arrays of their extent's points along X, Y and Z, checked the same way."""
     at, xml = _xml_part(path, raw)
-    fa, ia = _xml_head(path, xml, "ImageData")
+    fa, ia = _xml_head(path, xml, kind)
     whole = _numbers(path, "WholeExtent", ia.get("WholeExtent", ""), 6, int)
     n = _count(path, "WholeExtent", whole)
-    _numbers(path, "Spacing", ia.get("Spacing", "1 1 1"), 3)
-    _numbers(path, "Origin", ia.get("Origin", "0 0 0"), 3)
+    if kind == "ImageData":
+        _numbers(path, "Spacing", ia.get("Spacing", "1 1 1"), 3)
+        _numbers(path, "Origin", ia.get("Origin", "0 0 0"), 3)
     elements, opened = _elements(xml, "Piece")
     pieces = [(tag, body) for _, _, tag, body in elements]
     if not pieces or len(pieces) != opened:
-        raise DataError(f"{path}: malformed ImageData: no <Piece>...</Piece>")
+        raise DataError(f"{path}: malformed {kind}: no <Piece>...</Piece>")
     name, covered, where = None, 0, ""
     if not any(_section(body, "PointData") for _, body in pieces):
         if not any(_section(body, "CellData") for _, body in pieces):
@@ -229,6 +236,8 @@ def _check_vti(path: Path, raw: bytes) -> tuple[str, int, str]:
         if any(ext[k] < whole[k] for k in (0, 2, 4)) or any(ext[k] > whole[k] for k in (1, 3, 5)):
             raise DataError(f"{path}: Piece Extent {ext} outside WholeExtent {whole}")
         pn = _count(path, "Piece Extent", _cells(ext) if where else ext)
+        if kind == "RectilinearGrid":
+            _check_coordinates(path, raw, at, fa, body, ext)
         found = _section(body, "CellData" if where else "PointData")
         if found is None:
             raise DataError(f"{path}: a Piece has no {where or 'point'} data array")
@@ -252,6 +261,23 @@ def _check_vti(path: Path, raw: bytes) -> tuple[str, int, str]:
     if covered < n:
         raise DataError(f"{path}: the pieces hold {covered} samples, the WholeExtent {whole} needs {n}")
     return str(name), n, where
+
+
+def _check_coordinates(
+    path: Path, raw: bytes, at: int, fa: dict[str, str], body: bytes, ext: list[int]
+) -> None:
+    """A .vtr piece's <Coordinates>: three arrays of one component, of
+    ext's point counts along X, Y and Z, each checked against the file."""
+    found = _elements(body, "Coordinates")[0][:1]
+    arrays = _arrays(found[0][3]) if found else []
+    if len(arrays) != 3:
+        raise DataError(f"{path}: a RectilinearGrid Piece without its three <Coordinates> arrays")
+    for axis, (a, text), k in zip("XYZ", arrays, (0, 2, 4), strict=True):
+        t = _VTI_TYPES.get(a.get("type", ""))
+        if t is None or a.get("NumberOfComponents", "1").strip() != "1":
+            raise DataError(f"{path}: the {axis} coordinates: one component of a numeric type expected")
+        count = ext[k + 1] - ext[k] + 1
+        _check_array(path, raw, at, a, text, fa, count * np.dtype(t).itemsize, count)
 
 
 def _section(body: bytes, tag: str) -> tuple[bytes, list[tuple[dict[str, str], bytes]]] | None:
@@ -392,7 +418,7 @@ def _opened(core: Any, reader: Any, path: Path, messages: list[str], text: bytes
 def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of a .vti,
     read by vtkXMLImageDataReader after the header checks."""
-    name, n, where = _check_vti(path, path.read_bytes())
+    name, n, where = _check_grid(path, path.read_bytes())
     core, _, xmlio, ns = _vtk()
     with _quiet(core) as messages:
         r = xmlio.vtkXMLImageDataReader()
@@ -401,6 +427,24 @@ def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
             r.GetCellDataArraySelection().DisableAllArrays()
             (r.GetCellDataArraySelection() if where else r.GetPointDataArraySelection()).EnableArray(name)
             return _image(path, r, messages, name, n, ns, cells=bool(where))
+    raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
+
+
+def read_vtr(path: Path) -> tuple[np.ndarray, tuple, list]:
+    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of a .vtr
+    (XML RectilinearGrid, as pyvista's RectilinearGrid.save writes it)
+    whose coordinates are evenly spaced along each axis, read by
+    vtkXMLRectilinearGridReader after the header checks; its cell data where
+    it has no point array, as for a .vti."""
+    name, n, where = _check_grid(path, path.read_bytes(), "RectilinearGrid")
+    core, _, xmlio, ns = _vtk()
+    with _quiet(core) as messages:
+        r = xmlio.vtkXMLRectilinearGridReader()
+        if _opened(core, r, path, messages):
+            r.GetPointDataArraySelection().DisableAllArrays()
+            r.GetCellDataArraySelection().DisableAllArrays()
+            (r.GetCellDataArraySelection() if where else r.GetPointDataArraySelection()).EnableArray(name)
+            return _rectilinear(path, r, messages, n, ns, name, cells=bool(where))
     raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
 
 
@@ -685,33 +729,51 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
         return _rectilinear(path, r, messages, n, ns)
 
 
-def _rectilinear(path: Path, reader: Any, messages: list[str], n: int, ns: Any) -> tuple:
-    """(data (Z, Y, X), spacing zyx, origin xyz) of a vtkRectilinearGridReader's
-    output, its coordinates evenly spaced along each axis (within _EVEN of a
-    step), else a DataError naming the axis."""
-    grid, data = _scalars(path, reader, messages, None, n, ns)
+def _rectilinear(
+    path: Path,
+    reader: Any,
+    messages: list[str],
+    n: int,
+    ns: Any,
+    name: str | None = None,
+    cells: bool = False,
+) -> tuple:
+    """(data (Z, Y, X), spacing zyx, origin xyz) of a legacy or XML
+    rectilinear grid reader's output (the array `name`, else the scalars;
+    with `cells`, of its cell array: one sample a cell, at the cell's
+    centre), its coordinates evenly spaced along each axis (within _EVEN of
+    a step), else a DataError naming the axis."""
+    grid, data = _scalars(path, reader, messages, name, n, ns, cells)
     nx, ny, nz = grid.GetDimensions()
+    legacy = name is None
     steps, origin = [], []
     for axis, count, coords in (
         ("X", nx, grid.GetXCoordinates()),
         ("Y", ny, grid.GetYCoordinates()),
         ("Z", nz, grid.GetZCoordinates()),
     ):
+        what = f"{axis}_COORDINATES" if legacy else f"the {axis} coordinates"
         c = np.asarray(ns.vtk_to_numpy(coords), np.float64) if coords is not None else np.zeros(0)
         if len(c) != count:
-            raise DataError(f"{path}: {axis}_COORDINATES: expected {count} values, got {len(c)}")
+            raise DataError(f"{path}: {what}: expected {count} values, got {len(c)}")
         if not np.isfinite(c).all():
-            raise DataError(f"{path}: {axis}_COORDINATES: a NaN or infinite coordinate")
+            raise DataError(f"{path}: {what}: a NaN or infinite coordinate")
         step = (c[-1] - c[0]) / (count - 1) if count > 1 else 1.0
         if count > 1 and not step > 0:
-            raise DataError(f"{path}: {axis}_COORDINATES must increase ({c[0]:g} .. {c[-1]:g})")
+            raise DataError(f"{path}: {what} must increase ({c[0]:g} .. {c[-1]:g})")
         off = float(np.abs(c - (c[0] + step * np.arange(count))).max()) if count > 1 else 0.0
         if off > _EVEN * step:
+            uneven = (
+                f"RECTILINEAR_GRID with uneven {what}"
+                if legacy
+                else f"a RectilinearGrid with uneven {axis} coordinates"
+            )
             raise DataError(
-                f"{path}: RECTILINEAR_GRID with uneven {axis}_COORDINATES (a sample {off:.3g} from an even "
+                f"{path}: {uneven} (a sample {off:.3g} from an even "
                 f"step of {step:.6g}); clvis volumes are uniform grids: resample it (e.g. pyvista's "
                 "ImageData.sample)"
             )
         steps.append(float(step))
-        origin.append(float(c[0]))
+        # a cell array's samples lie at the cells' centres: half a step in along an axis with cells
+        origin.append(float(c[0]) + (float(step) / 2 if cells and count > 1 else 0.0))
     return data, (steps[2], steps[1], steps[0]), origin

@@ -3,7 +3,7 @@ tests/data): every format clvis reads, with the reader each goes to.
 
 A seed is (format, reader, path). Formats: ply, las, laz, npy, npz, nii,
 nii.gz, hdr and img (Analyze and NIfTI-1 pairs), mgh, mgz, raw, vdb, e57
-(with pye57), vti, vtk (volumes and point sets), vtp, vtu, vts (with vtk),
+(with pye57), vti, vtr, vtk (volumes and point sets), vtp, vtu, vts (with vtk),
 pcd, xyz, txt, csv. Readers:
 points (read_points), volume (read_volume), vdb (read_vdb), gaussians
 (Gaussians.load).
@@ -157,6 +157,30 @@ def _vti(path: Path, data: np.ndarray, encoding: str) -> None:
     if tail.endswith("_"):
         text += np.array([len(raw)], "<u4").tobytes() + raw + b"\n</AppendedData>"
     path.write_bytes(text + b"</VTKFile>\n")
+
+
+def _vtr(path: Path, mode: str, cells: bool) -> None:
+    """A .vtr (XML RectilinearGrid) of evenly spaced coordinates as VTK's
+    writer makes it, in `mode` (Ascii, Binary: zlib, Appended: raw), its
+    samples a point array, or with `cells` a cell array."""
+    import vtk
+    from vtk.util import numpy_support
+
+    g = vtk.vtkRectilinearGrid()
+    g.SetDimensions(4, 3, 2)
+    for axis, c in zip("XYZ", (np.arange(4.0), np.arange(3.0) * 2, np.arange(2.0) * 0.5), strict=True):
+        getattr(g, f"Set{axis}Coordinates")(numpy_support.numpy_to_vtk(c, deep=True))
+    a = numpy_support.numpy_to_vtk(np.arange(6.0 if cells else 24.0, dtype=np.float32), deep=True)
+    a.SetName("v")
+    (g.GetCellData() if cells else g.GetPointData()).SetScalars(a)
+    w = vtk.vtkXMLRectilinearGridWriter()
+    w.SetFileName(str(path))
+    w.SetInputData(g)
+    getattr(w, f"SetDataModeTo{mode}")()
+    if mode == "Appended":
+        w.SetCompressorTypeToNone()
+        w.EncodeAppendedDataOff()
+    assert w.Write() == 1
 
 
 def vtk_point_set(path: Path, n: int, mode: str = "binary", seed: int = 6) -> None:
@@ -342,6 +366,9 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
         for mode in ("ascii", "binary", "binary42"):
             vtk_point_set(out / f"cloud-{mode}.vtk", 24, mode)
             add("vtk", "points", out / f"cloud-{mode}.vtk")
+        for mode, cells in (("Appended", False), ("Binary", True), ("Ascii", False)):
+            _vtr(out / f"vol-{mode.lower()}.vtr", mode, cells)  # pyvista's RectilinearGrid.save("x.vtr")
+            add("vtr", "volume", out / f"vol-{mode.lower()}.vtr")
     _pcd(out / "cloud-ascii.pcd", 20, binary=False)
     add("pcd", "points", out / "cloud-ascii.pcd")
     _pcd(out / "cloud-binary.pcd", 40, binary=True)

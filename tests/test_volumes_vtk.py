@@ -150,12 +150,11 @@ def test_legacy_ascii_and_errors(tmp_path):
             read_volume(p)
 
 
-def _rectilinear(path, x, y, z, values, binary):
-    """A legacy RECTILINEAR_GRID as VTK's own writer makes it (what
-    pyvista's RectilinearGrid.save writes)."""
+def _grid(x, y, z, values, cells=False):
+    """A vtkRectilinearGrid of those coordinates, `values` its point (or
+    `cells`: cell) array "v"."""
     from vtkmodules.util import numpy_support as ns
     from vtkmodules.vtkCommonDataModel import vtkRectilinearGrid
-    from vtkmodules.vtkIOLegacy import vtkRectilinearGridWriter
 
     g = vtkRectilinearGrid()
     g.SetDimensions(len(x), len(y), len(z))
@@ -164,35 +163,66 @@ def _rectilinear(path, x, y, z, values, binary):
     g.SetZCoordinates(ns.numpy_to_vtk(np.asarray(z, np.float64), deep=True))
     a = ns.numpy_to_vtk(values, deep=True)
     a.SetName("v")
-    g.GetPointData().SetScalars(a)
+    (g.GetCellData() if cells else g.GetPointData()).SetScalars(a)
+    return g
+
+
+def _rectilinear(path, x, y, z, values, binary):
+    """A legacy RECTILINEAR_GRID as VTK's own writer makes it (what
+    pyvista's RectilinearGrid.save writes)."""
+    from vtkmodules.vtkIOLegacy import vtkRectilinearGridWriter
+
     w = vtkRectilinearGridWriter()
     w.SetFileName(str(path))
-    w.SetInputData(g)
+    w.SetInputData(_grid(x, y, z, values))
     w.SetFileTypeToBinary() if binary else w.SetFileTypeToASCII()
     assert w.Write() == 1
 
 
-@pytest.mark.parametrize("binary", [False, True])
-def test_rectilinear_grid_of_even_coordinates_is_a_volume(tmp_path, binary):
-    """A legacy RECTILINEAR_GRID (VTK's writer; pyvista's RectilinearGrid
-    saves one): evenly spaced coordinates give the spacing and origin;
-    uneven or decreasing ones are refused naming the axis; a hostile
+@pytest.mark.parametrize("mode", ["legacy-ascii", "legacy-binary", "Ascii", "Binary", "Appended"])
+def test_rectilinear_grid_of_even_coordinates_is_a_volume(tmp_path, mode):
+    """A legacy RECTILINEAR_GRID or an XML RectilinearGrid (.vtr, in each of
+    VTK's data modes; pyvista's RectilinearGrid.save writes either):
+    evenly spaced coordinates give the spacing and origin; uneven or
+    decreasing ones are refused naming the axis; a .vtr's cell array (no
+    point array) is one sample a cell at the cells' centres; a hostile
     coordinate count is refused before VTK reads."""
+    legacy = mode.startswith("legacy")
+    p = tmp_path / ("grid.vtk" if legacy else "grid.vtr")
+
+    def write(x, y, z, values, cells=False):
+        if legacy:
+            _rectilinear(p, x, y, z, values, mode == "legacy-binary")
+        else:
+            _vtr(p, x, y, z, values, mode, cells)
+
     x, y, z = np.arange(4) * 0.5 + 1, np.arange(3) * 2.0 - 3, np.linspace(0, 1, 5)
-    values = np.arange(4 * 3 * 5, dtype=np.float32)
-    p = tmp_path / "grid.vtk"
-    _rectilinear(p, x, y, z, values, binary)
+    values = np.arange(4 * 3 * 5, dtype=np.float32) * 3 % 17
+    write(x, y, z, values)
     v = read_volume(p)
     np.testing.assert_array_equal(v.data, values.reshape(5, 3, 4))
+    assert v.data.dtype == np.float32
     assert v.spacing == pytest.approx((0.25, 2.0, 0.5)) and v.origin == pytest.approx((1.0, -3.0, 0.0))
-    _rectilinear(p, x, [0.0, 1.0, 3.0], z, values, binary)
-    with pytest.raises(DataError, match=r"grid\.vtk: RECTILINEAR_GRID with uneven Y_COORDINATES"):
+    uneven, decreasing = (
+        (r"grid\.vtk: RECTILINEAR_GRID with uneven Y_COORDINATES", "X_COORDINATES must increase")
+        if legacy
+        else (r"grid\.vtr: a RectilinearGrid with uneven Y coordinates", "the X coordinates must increase")
+    )
+    write(x, [0.0, 1.0, 3.0], z, values)
+    with pytest.raises(DataError, match=uneven):
         read_volume(p)
-    _rectilinear(p, x[::-1], y, z, values, binary)
-    with pytest.raises(DataError, match="X_COORDINATES must increase"):
+    write(x[::-1], y, z, values)
+    with pytest.raises(DataError, match=decreasing):
         read_volume(p)
-    if not binary:
-        _rectilinear(p, x, y, z, values, binary)
+    if not legacy:
+        cells = np.arange(3 * 2 * 4, dtype=np.int16)
+        write(x, y, z, cells, cells=True)
+        v = read_volume(p)
+        np.testing.assert_array_equal(v.data, cells.reshape(4, 2, 3))
+        assert v.spacing == pytest.approx((0.25, 2.0, 0.5))
+        assert v.origin == pytest.approx((1.25, -2.0, 0.125))
+    if mode == "legacy-ascii":
+        write(x, y, z, values)
         p.write_text(p.read_text().replace("X_COORDINATES 4", "X_COORDINATES 999999999", 1))
         with pytest.raises(DataError, match="X_COORDINATES declares 999999999 values"):
             read_volume(p)
@@ -444,53 +474,15 @@ def _vtr(path, x, y, z, values, mode, cells=False, compress=True):
     """A .vtr (XML RectilinearGrid) as VTK's writer makes it (what pyvista's
     RectilinearGrid.save("x.vtr") writes): `values` a point (or `cells`: a
     cell) array named "v", in `mode` (Ascii, Binary, Appended)."""
-    from vtkmodules.util import numpy_support as ns
-    from vtkmodules.vtkCommonDataModel import vtkRectilinearGrid
     from vtkmodules.vtkIOXML import vtkXMLRectilinearGridWriter
 
-    g = vtkRectilinearGrid()
-    g.SetDimensions(len(x), len(y), len(z))
-    g.SetXCoordinates(ns.numpy_to_vtk(np.asarray(x, np.float64), deep=True))
-    g.SetYCoordinates(ns.numpy_to_vtk(np.asarray(y, np.float64), deep=True))
-    g.SetZCoordinates(ns.numpy_to_vtk(np.asarray(z, np.float64), deep=True))
-    a = ns.numpy_to_vtk(values, deep=True)
-    a.SetName("v")
-    (g.GetCellData() if cells else g.GetPointData()).SetScalars(a)
     w = vtkXMLRectilinearGridWriter()
     w.SetFileName(str(path))
-    w.SetInputData(g)
+    w.SetInputData(_grid(x, y, z, values, cells))
     getattr(w, f"SetDataModeTo{mode}")()
     if not compress:
         w.SetCompressorTypeToNone()
     assert w.Write() == 1
-
-
-@pytest.mark.parametrize("mode", ["Ascii", "Binary", "Appended"])
-def test_vtr_of_even_coordinates_is_a_volume(tmp_path, mode):
-    """An XML RectilinearGrid (.vtr) reads as the legacy one does: evenly
-    spaced coordinates give the spacing and origin, its point array the
-    samples, or its cell array (no point array) one sample a cell at the
-    cells' centres; uneven or decreasing coordinates are refused naming the
-    axis."""
-    x, y, z = np.arange(4) * 0.5 + 1, np.arange(3) * 2.0 - 3, np.linspace(0, 1, 5)
-    values = np.arange(4 * 3 * 5, dtype=np.float32) * 3 % 17
-    p = tmp_path / "grid.vtr"
-    _vtr(p, x, y, z, values, mode)
-    v = read_volume(p)
-    np.testing.assert_array_equal(v.data, values.reshape(5, 3, 4))
-    assert v.data.dtype == np.float32
-    assert v.spacing == pytest.approx((0.25, 2.0, 0.5)) and v.origin == pytest.approx((1.0, -3.0, 0.0))
-    cells = np.arange(3 * 2 * 4, dtype=np.int16)
-    _vtr(p, x, y, z, cells, mode, cells=True)
-    v = read_volume(p)
-    np.testing.assert_array_equal(v.data, cells.reshape(4, 2, 3))
-    assert v.spacing == pytest.approx((0.25, 2.0, 0.5)) and v.origin == pytest.approx((1.25, -2.0, 0.125))
-    _vtr(p, x, [0.0, 1.0, 3.0], z, values, mode)
-    with pytest.raises(DataError, match=r"grid\.vtr: a RectilinearGrid with uneven Y coordinates"):
-        read_volume(p)
-    _vtr(p, x, y, z[::-1], values, mode)
-    with pytest.raises(DataError, match="the Z coordinates must increase"):
-        read_volume(p)
 
 
 def test_vtr_header_lies_are_refused_before_vtk_reads(tmp_path):

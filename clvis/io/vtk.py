@@ -418,16 +418,7 @@ def _opened(core: Any, reader: Any, path: Path, messages: list[str], text: bytes
 def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
     """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of a .vti,
     read by vtkXMLImageDataReader after the header checks."""
-    name, n, where = _check_grid(path, path.read_bytes())
-    core, _, xmlio, ns = _vtk()
-    with _quiet(core) as messages:
-        r = xmlio.vtkXMLImageDataReader()
-        if _opened(core, r, path, messages):
-            r.GetPointDataArraySelection().DisableAllArrays()
-            r.GetCellDataArraySelection().DisableAllArrays()
-            (r.GetCellDataArraySelection() if where else r.GetPointDataArraySelection()).EnableArray(name)
-            return _image(path, r, messages, name, n, ns, cells=bool(where))
-    raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
+    return _read_xml(path, "ImageData")
 
 
 def read_vtr(path: Path) -> tuple[np.ndarray, tuple, list]:
@@ -436,14 +427,22 @@ def read_vtr(path: Path) -> tuple[np.ndarray, tuple, list]:
     whose coordinates are evenly spaced along each axis, read by
     vtkXMLRectilinearGridReader after the header checks; its cell data where
     it has no point array, as for a .vti."""
-    name, n, where = _check_grid(path, path.read_bytes(), "RectilinearGrid")
+    return _read_xml(path, "RectilinearGrid")
+
+
+def _read_xml(path: Path, kind: str) -> tuple[np.ndarray, tuple, list]:
+    """A .vti (`kind` "ImageData") or .vtr ("RectilinearGrid") read by VTK's
+    XML reader of that kind after _check_grid, only the chosen array enabled."""
+    name, n, where = _check_grid(path, path.read_bytes(), kind)
     core, _, xmlio, ns = _vtk()
     with _quiet(core) as messages:
-        r = xmlio.vtkXMLRectilinearGridReader()
+        r = getattr(xmlio, f"vtkXML{kind}Reader")()
         if _opened(core, r, path, messages):
             r.GetPointDataArraySelection().DisableAllArrays()
             r.GetCellDataArraySelection().DisableAllArrays()
             (r.GetCellDataArraySelection() if where else r.GetPointDataArraySelection()).EnableArray(name)
+            if kind == "ImageData":
+                return _image(path, r, messages, name, n, ns, cells=bool(where))
             return _rectilinear(path, r, messages, n, ns, name, cells=bool(where))
     raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
 

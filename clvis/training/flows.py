@@ -37,6 +37,20 @@ unseen colormap):
   velocity its vector field, the scalar one coordinate or the time along
   each trajectory (issue 21 §3's "attractor trajectories"; the held-out
   Lorenz attractor is none of them).
+
+Three more geometries, in neither list (PROBE_FLOWS): never trained on
+and not in the suite, so that a change tuned on the suite can still be
+checked on flows it never scored (``python bench/narvis_unseen.py``; keep
+them out of TRAIN_FLOWS):
+
+- "street": a von Kármán vortex street (alternating vortices of a smoothed
+  core along x in a slab, a uniform stream), the scalar each vortex's sign
+  and strength;
+- "hill": Hill's spherical vortex in a uniform stream (its interior
+  solution inside the unit sphere, a dipole outside), points denser inside,
+  the scalar its stream-function-like interior weight;
+- "shear": a Kelvin–Helmholtz shear layer rolled up into billows (tanh
+  profile, periodic roll-ups along x), the scalar the layer's tanh.
 """
 
 from __future__ import annotations
@@ -54,6 +68,8 @@ TRAIN_FLOWS = (
     "turbulence",
     "attractors",
 )
+#: flows in neither FLOWS nor TRAIN_FLOWS (bench/narvis_unseen.py)
+PROBE_FLOWS = ("street", "hill", "shear")
 
 
 def _trajectories(f, s: np.ndarray, dt: float, settle: int, steps: int) -> np.ndarray:
@@ -135,7 +151,47 @@ def flow(kind: str, n: int, seed: int) -> dict:
         return _result(pos, vel, np.exp(-((rho / core) ** 2)))
     if kind in TRAIN_FLOWS:
         return _train_flow(kind, n, rng)
-    raise ValueError(f"flow: expected one of {FLOWS + TRAIN_FLOWS}, got {kind!r}")
+    if kind in PROBE_FLOWS:
+        return _probe_flow(kind, n, rng)
+    raise ValueError(f"flow: expected one of {FLOWS + TRAIN_FLOWS + PROBE_FLOWS}, got {kind!r}")
+
+
+def _probe_flow(kind: str, n: int, rng: np.random.Generator) -> dict:
+    """The flows of PROBE_FLOWS (see the module docstring)."""
+    if kind == "street":
+        x, y, z = rng.uniform(0, 8, n), rng.normal(0, 0.8, n), rng.uniform(0, 1, n)
+        u, v, temp = np.ones(n), np.zeros(n), np.zeros(n)
+        for k in range(8):  # alternating vortices, staggered across the wake
+            sign = (-1) ** k
+            dx, dy = x - (k + 0.5), y - 0.35 * sign
+            r2 = dx**2 + dy**2 + 0.05
+            g = sign * (1 - np.exp(-r2 / 0.08)) / r2  # a Lamb-Oseen-like smoothed core
+            u, v = u - g * dy, v + g * dx
+            temp = temp + sign * np.exp(-r2 / 0.15)
+        w = 0.2 * np.sin(2 * np.pi * z)
+        return _result(np.stack([x, y, z], 1), np.stack([u, v, w], 1), temp)
+    if kind == "hill":
+        q = rng.normal(size=(n, 3))
+        q /= np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-12)
+        pos = q * (1.2 * rng.uniform(0, 1.6, n) ** 0.7)[:, None]
+        x, y, z = pos.T
+        rho2 = x**2 + y**2
+        r2 = rho2 + z**2
+        inside = r2 < 1
+        far = np.maximum(r2, 1) ** 2.5
+        uz = np.where(inside, 1.5 * (1 - 2 * rho2 - z**2), 1 - (2 * z**2 - rho2) / (2 * far))
+        ur = np.where(inside, 1.5 * z, 1.5 * z / far)
+        rho = np.sqrt(rho2) + 1e-9
+        vel = np.stack([ur * x / rho, ur * y / rho, uz], 1)
+        return _result(pos, vel, np.where(inside, 1 - r2, 0.0) + 0.1 * z)
+    # "shear"
+    x, y, zeta = rng.uniform(0, 6, n), rng.uniform(0, 3, n), rng.normal(0, 0.6, n)
+    phase = np.pi * x  # a billow every 2 units along x
+    z = zeta + 0.4 * np.sin(phase + 2 * zeta) * np.exp(-(zeta**2))
+    u = np.tanh(2 * z) + 0.5 * np.cos(phase) * np.exp(-(z**2))
+    w = 0.5 * np.sin(phase) * np.exp(-(z**2))
+    v = 0.05 * np.sin(2 * np.pi * y / 3)
+    return _result(np.stack([x, y, z], 1), np.stack([u, v, w], 1), np.tanh(2 * z))
 
 
 def _abc(q: np.ndarray, a: float, b: float, c: float) -> np.ndarray:

@@ -44,6 +44,8 @@ def test_suites_hold_only_families_never_trained_on():
     # family of its suite (the hurricane through magma: a colormap never drawn)
     assert ev.TRAINED["narvis"] == ("hurricane", *flows.TRAIN_FLOWS)
     assert not set(flows.TRAIN_FLOWS) & set(flows.FLOWS)
+    # the probe flows (bench/narvis_unseen.py) are in neither
+    assert not set(flows.PROBE_FLOWS) & set(flows.FLOWS + flows.TRAIN_FLOWS)
     assert not {"magma", "magma_r"} & set(data.NARVIS_TRAIN_COLORMAPS)
     # narvis-scan: scan generators, held out and trained disjoint; densities
     # around the training's, a larger size too
@@ -76,7 +78,7 @@ def test_one_spec_per_network():
         specs.spec("lidar").shape(np.zeros((4, 4, 4), np.float32))
 
 
-@pytest.mark.parametrize("kind", flows.FLOWS + flows.TRAIN_FLOWS)
+@pytest.mark.parametrize("kind", flows.FLOWS + flows.TRAIN_FLOWS + flows.PROBE_FLOWS)
 def test_flows_are_finite_particles_with_a_velocity(kind):
     d = flows.flow(kind, 2000, 3)
     assert d["positions"].shape == d["velocity"].shape == (2000, 3)

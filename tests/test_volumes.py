@@ -191,6 +191,46 @@ def test_nifti_round_trip(tmp_path, suffix, dtype):
     np.testing.assert_allclose(v.affine, np.diag([0.5, 0.75, 2.0, 1.0]))
 
 
+@pytest.mark.parametrize("suffix", [".nii", ".mgz"])
+def test_nifti_and_mgh_come_in_ras_order_not_mirrored(tmp_path, suffix):
+    """One subject stored in three voxel orders (RAS, LAS: x reversed, and
+    SAR: axes permuted, as FreeSurfer's test.mgz) reads as one volume: the
+    same samples [z, y, x] along superior, anterior, right, the spacing
+    following the axes, and an affine that maps each returned voxel to the
+    same world point."""
+    ras = _sample((6, 5, 4), np.dtype(np.float32), seed=7)  # i right, j anterior, k superior
+    zooms = np.array([0.5, 1.0, 2.0])
+    shift = np.array([-3.0, 4.0, 5.0])
+
+    def save(name, data, affine):
+        path = tmp_path / f"{name}{suffix}"
+        image = nibabel.Nifti1Image if suffix == ".nii" else nibabel.MGHImage
+        nibabel.save(image(data, affine), path)
+        return read_volume(path)
+
+    a = np.diag([*zooms, 1.0])
+    a[:3, 3] = shift
+    las = a.copy()
+    las[0, 0] = -zooms[0]
+    las[0, 3] = shift[0] + zooms[0] * 5  # voxel i = 5 - i' at the same world x
+    sar = np.zeros((4, 4))
+    sar[3, 3] = 1
+    sar[2, 0], sar[1, 1], sar[0, 2] = zooms[2], zooms[1], zooms[0]  # i superior, j anterior, k right
+    sar[:3, 3] = shift
+    vols = [
+        save("ras", ras, a),
+        save("las", np.ascontiguousarray(ras[::-1]), las),
+        save("sar", np.ascontiguousarray(ras.transpose(2, 1, 0)), sar),
+    ]
+    for v in vols:
+        np.testing.assert_array_equal(v.data, ras.transpose(2, 1, 0))
+        assert v.spacing == (2.0, 1.0, 0.5)  # (dz, dy, dx)
+        assert v.data.flags.c_contiguous
+        # voxel (i, j, k) = (x, y, z) index of the returned data -> the world point of RAS's
+        np.testing.assert_allclose(v.affine @ [5, 0, 3, 1], a @ [5, 0, 3, 1])
+        assert nibabel.aff2axcodes(v.affine) == ("R", "A", "S")
+
+
 def test_nifti_scaling_and_trailing_axes(tmp_path):
     ijk = np.arange(24, dtype=np.int16).reshape(4, 3, 2)
     v = read_volume(_nifti(tmp_path / "s.nii", ijk, slope=2.0))
@@ -402,7 +442,8 @@ def test_mgh_round_trip(tmp_path, suffix, dtype):
     test = os.path.join(os.path.dirname(nibabel.__file__), "tests", "data", "test.mgz")
     with pytest.raises(DataError, match="a 4-D MGH image of 2 volumes"):
         read_volume(test)
-    assert read_volume(test, volume_index=1).data.shape == (5, 4, 3)
+    # stored (i, j, k) = (3, 4, 5) along S, A, R: in RAS+ order (5, 4, 3), [z, y, x] (3, 4, 5)
+    assert read_volume(test, volume_index=1).data.shape == (3, 4, 5)
 
 
 @pytest.mark.parametrize("image", ["AnalyzeImage", "Nifti1Pair"])
@@ -414,9 +455,12 @@ def test_analyze_pair_read_by_either_name(tmp_path, image):
     path = tmp_path / "scan.hdr"
     nibabel.save(getattr(nibabel, image)(data, np.diag([0.5, 1.0, 2.0, 1.0])), path)
     assert (tmp_path / "scan.img").is_file()
+    # an Analyze header keeps no affine: nibabel's is radiological (x toward
+    # the left, LAS), so the RAS+ volume is x-reversed; a NIfTI pair keeps its own
+    expected = data[::-1] if image == "AnalyzeImage" else data
     for name in ("scan.hdr", "scan.img"):
         v = read_volume(tmp_path / name)
-        np.testing.assert_array_equal(v.data, data.transpose(2, 1, 0))
+        np.testing.assert_array_equal(v.data, expected.transpose(2, 1, 0))
         assert v.spacing == (2.0, 1.0, 0.5)
     raw = (tmp_path / "scan.img").read_bytes()
     (tmp_path / "scan.img").write_bytes(raw[: len(raw) // 2])

@@ -148,11 +148,25 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
                 img = nibabel.load(p)
                 s = tuple(int(v) for v in img.header.get_data_shape())
                 zooms = tuple(float(z) for z in img.header.get_zooms())[:3]
+                affine = np.asarray(img.affine, np.float64)
             except volumes.nibabel_errors() as e:
                 raise DataError(f"{path}: not a readable volume header: {type(e).__name__}: {e}") from e
             if len(s) < 3 or any(v != 1 for v in s[3:]) and volume_index is None:
                 raise DataError(f"{path}: expected a 3-D volume (or volume_index), got shape {s}")
-            return {"kind": "nifti", "shape": s[:3][::-1], "spacing": zooms[::-1], "index": volume_index}
+            # as read_volume returns it: the closest RAS+ order of its affine
+            ornt = volumes.ras_orientation(affine)
+            ras, rz = list(s[:3]), list(zooms)
+            if ornt is not None:
+                for axis, (to, _) in enumerate(ornt):
+                    ras[int(to)], rz[int(to)] = s[axis], zooms[axis]
+            return {
+                "kind": "nifti",
+                "shape": tuple(ras[::-1]),
+                "spacing": tuple(rz[::-1]),
+                "index": volume_index,
+                "stored": s[:3],
+                "ornt": None if ornt is None else ornt.tolist(),
+            }
     except ClvisError:
         raise
     except (OSError, ValueError, TypeError, ImportError) as e:
@@ -180,9 +194,22 @@ def _read_brick(spec: dict) -> np.ndarray:
             import nibabel
 
             proxy = nibabel.load(path).dataobj
-            sl = (slice(x0, x1), slice(y0, y1), slice(z0, z1))
+            want = ((x0, x1), (y0, y1), (z0, z1))  # along R, A, S (the volume as read_volume gives it)
+            ornt = lay.get("ornt")
+            if ornt is None:
+                sl = tuple(slice(lo, hi) for lo, hi in want)
+            else:  # each stored axis: the range of it that lands in the brick
+                sl = tuple(
+                    slice(*want[int(to)]) if flip > 0 else slice(n - want[int(to)][1], n - want[int(to)][0])
+                    for (to, flip), n in zip(ornt, lay["stored"], strict=True)
+                )
             a = np.asarray(proxy[sl + ((lay["index"],) if lay.get("index") is not None else ())])
-            a = a.reshape(a.shape[:3]).transpose(2, 1, 0)
+            a = a.reshape(a.shape[:3])
+            if ornt is not None:
+                from nibabel.orientations import apply_orientation
+
+                a = apply_orientation(a, np.asarray(ornt))
+            a = a.transpose(2, 1, 0)
         if a.dtype.kind not in "iuf":
             raise DataError(f"{path}: expected real numbers, got dtype {a.dtype}")
         out = np.ascontiguousarray(a, np.float32)

@@ -36,8 +36,13 @@ byte order and C order, with the library's conventions: ``data`` [z, y, x];
 zooms (pixdim, (dx, dy, dz)) reversed, as nibabel reads them (0 as 1, a
 negative size as its absolute value; NaN or inf is an error); ``origin``
 (x, y, z) = 0 for every format but VTK's, which state theirs (sample [k, j, i] at world (i dx, j dy, k dz)).
-A NIfTI file's voxel-to-world affine (which may rotate or flip the axes) is
-kept, unused, in ``affine``.
+NIfTI, MGH and Analyze volumes come in the closest RAS+ orientation of their
+voxel-to-world affine (x toward the subject's right, y anterior, z superior:
+the voxel axes permuted and flipped as nibabel's ``as_closest_canonical``
+does, never resampled), so that a scan stored left-to-right (LAS, Analyze's
+default) is not drawn as its mirror image; ``affine`` is the voxel-to-world
+map of the axes as returned (a rotation beyond their order and signs stays
+in it, unused), and ``spacing`` follows the axes.
 
 A missing file raises FileNotFoundError (as :func:`clvis.read_points` does);
 a file clvis cannot read (an unknown extension, a raw name without shape or
@@ -86,7 +91,8 @@ class Volume:
     spacing : (dz, dy, dx) floats.
     origin : (x, y, z) floats, (0, 0, 0).
     path : the file it came from.
-    affine : (4, 4) float64 voxel [i, j, k, 1] -> world of a NIfTI file, else None.
+    affine : (4, 4) float64 voxel [i, j, k, 1] -> world of a NIfTI, MGH or
+        Analyze file (of its axes as returned: closest RAS+), else None.
     """
 
     data: np.ndarray
@@ -416,8 +422,49 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
     spacing = zooms[:3]
     if len(spacing) != 3 or not all(np.isfinite(z) and z > 0 for z in spacing):
         raise DataError(f"{path}: the voxel size (pixdim) must be three positive numbers, got {zooms[:3]}")
+    data, spacing, affine = _canonical(data, spacing, affine)
     data = _real_volume(path, data.transpose(2, 1, 0))
     return Volume(data, spacing[::-1], (0.0, 0.0, 0.0), str(path), affine)
+
+
+def ras_orientation(affine: np.ndarray) -> np.ndarray | None:
+    """nibabel's orientation array (per stored voxel axis: the RAS+ axis it
+    goes to, and +1 or -1) that turns a volume of this voxel-to-world
+    `affine` into its closest RAS+ order (i toward the right, j anterior, k
+    superior: nibabel's io_orientation, as as_closest_canonical uses it);
+    None where it is the stored order already, or the affine is not finite
+    or leaves an axis undetermined (the stored order is kept)."""
+    from nibabel import orientations
+
+    affine = np.asarray(affine, np.float64)
+    if affine.shape != (4, 4) or not np.isfinite(affine).all():
+        return None
+    try:
+        ornt = orientations.io_orientation(affine)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    if ornt.shape != (3, 2) or not np.isfinite(ornt).all() or (ornt == [[0, 1], [1, 1], [2, 1]]).all():
+        return None
+    return ornt
+
+
+def _canonical(data: np.ndarray, zooms: tuple, affine: np.ndarray) -> tuple[np.ndarray, tuple, np.ndarray]:
+    """(data, zooms, affine) of a stored (i, j, k) volume in its closest
+    RAS+ order (:func:`ras_orientation`): the voxel axes permuted and
+    flipped, never resampled (a rotation beyond the axes' order and signs
+    stays in the affine), the affine that of the new voxel axes. Stored
+    order (a LAS scan, Analyze's default) drew a mirror image of the
+    subject."""
+    from nibabel import orientations
+
+    ornt = ras_orientation(affine)
+    if ornt is None:
+        return data, zooms, affine
+    out = orientations.apply_orientation(data, ornt)
+    new_zooms = [0.0, 0.0, 0.0]
+    for axis, (to, _) in enumerate(ornt):
+        new_zooms[int(to)] = zooms[axis]
+    return out, tuple(new_zooms), affine @ orientations.inv_ornt_aff(ornt, data.shape)
 
 
 # NIFTI_INTENT_CONNECTIVITY_*: the intent codes of CIFTI-2 files (matrices over

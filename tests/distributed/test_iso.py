@@ -138,6 +138,39 @@ def test_files_read_brick_by_brick_on_the_workers(client, single, tmp_path, fmt)
         _check(dr.render(_cam(), W, H, 0.5), single, _EYES[0])
 
 
+@pytest.mark.parametrize("order", ["las", "sar", "analyze"])
+def test_a_nifti_file_is_sliced_in_the_order_read_volume_gives(tmp_path, order):
+    """The workers' bricks of a NIfTI / MGH / Analyze file stored out of RAS+
+    order (x reversed: LAS, as Analyze's default; axes permuted: SAR, as
+    FreeSurfer's) are the bricks of the volume read_volume returns (its
+    closest RAS+ order), so a cluster and one process draw the same,
+    unmirrored, subject. Layout and brick reads are the workers' tasks,
+    called here directly."""
+    from clvis.distributed.iso import _layout, _read_brick
+    from clvis.io import read_volume
+
+    nib = pytest.importorskip("nibabel")
+    ijk = np.random.default_rng(3).random((7, 6, 5)).astype(np.float32)
+    if order == "las":
+        path, image, affine = tmp_path / "v.nii", nib.Nifti1Image, np.diag([-1.0, 1.0, 1.0, 1.0])
+    elif order == "sar":
+        path, image = tmp_path / "v.mgz", nib.MGHImage
+        affine = np.array([[0, 0, 2.0, 0], [0, 1.0, 0, 0], [0.5, 0, 0, 0], [0, 0, 0, 1]])
+    else:
+        path, image, affine = tmp_path / "v.hdr", nib.AnalyzeImage, np.eye(4)
+    nib.save(image(ijk, affine), str(path))
+    whole = read_volume(path)
+    lay = _layout(str(path), None, None, None)
+    assert lay["shape"] == whole.shape and lay["spacing"] == pytest.approx(whole.spacing)
+    # not stored in RAS+ order: read_volume reorders it
+    assert whole.shape != (5, 6, 7) or not np.array_equal(whole.data, ijk.transpose(2, 1, 0))
+    z, y, x = whole.shape
+    for ranges in (((0, z), (0, y), (0, x)), ((1, z - 1), (2, y), (0, x - 3))):
+        got = _read_brick({"ranges": ranges, "source": (str(path), lay)})
+        want = whole.data[tuple(slice(*r) for r in ranges)]
+        np.testing.assert_array_equal(got, want)
+
+
 def test_bad_files_and_arguments(client, tmp_path):
     bad = tmp_path / "broken.npy"
     bad.write_bytes(b"\x93NUMPY garbage")

@@ -538,10 +538,23 @@ def test_npz_attribute_named_like_savez_keywords(tmp_path):
     assert not (tmp_path / "d.npz").exists()
 
 
+def test_npz_of_one_unnamed_array_reads_as_a_npy(tmp_path):
+    """np.savez(path, xyz) keeps the array as arr_0: an archive of one array
+    is read as a .npy of it is ((N, 3), or x, y, z fields)."""
+    xyz = np.random.default_rng(1).random((5, 3))
+    np.savez(tmp_path / "one.npz", xyz)
+    np.testing.assert_allclose(read_points(tmp_path / "one.npz").positions, xyz, rtol=1e-6)
+    rec = np.zeros(4, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("intensity", "f4")])
+    rec["intensity"] = [1, 2, 3, 4]
+    np.savez(tmp_path / "rec.npz", points=rec)
+    np.testing.assert_array_equal(read_points(tmp_path / "rec.npz").attributes["intensity"], [1, 2, 3, 4])
+
+
 @pytest.mark.parametrize(
     "arrays,match",
     [
-        ({"points": np.zeros((3, 3))}, "positions"),
+        ({"points": np.zeros((3, 3)), "rgb": np.zeros((3, 3))}, "np.savez(path, positions=xyz"),
+        ({"points": np.zeros((3, 2))}, "(N, 3) array"),  # one array: read as a .npy is
         ({"positions": np.zeros((3, 2))}, "positions"),
         ({"positions": np.zeros((3, 3)), "colors": np.zeros((4, 3), np.uint8)}, "colors"),
         ({"positions": np.zeros((3, 3)), "extra": np.zeros((3, 2))}, "extra"),

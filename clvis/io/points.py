@@ -86,7 +86,9 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
       others named as for PLY; float64 (or int64) positions as for PLY.
     - ``.npz``: key ``positions`` (N, 3) required; ``colors``, ``velocity``,
       ``radius``, ``origin`` optional; every other key an (N,) attribute;
-      float64 positions without an ``origin`` as for PLY.
+      float64 positions without an ``origin`` as for PLY. An archive of one
+      array under any other name (``np.savez(path, xyz)``: ``arr_0``) is
+      read as a ``.npy`` of it.
     - ``.pcd``: the Point Cloud Library's format, ascii, binary or
       binary_compressed, through pypcd4 (the ``pcd`` extra; :mod:`clvis.io.pcd`).
     - ``.xyz``, ``.txt``, ``.csv``: one point a line, columns named by a header
@@ -114,7 +116,12 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
 
 
 def _read_npy(path: Path) -> PointCloud:
-    a = load_npy(path)
+    return _from_array(path, load_npy(path))
+
+
+def _from_array(path: Path, a: np.ndarray) -> PointCloud:
+    """The cloud of one array: (N, 3) positions, or a structured array's
+    x, y, z (and other) fields."""
     if a.dtype.names:
         if a.ndim != 1:
             raise DataError(f"{path}: expected a 1-D structured array, got shape {a.shape}")
@@ -130,7 +137,13 @@ def _read_npy(path: Path) -> PointCloud:
 def _read_npz(path: Path) -> PointCloud:
     arrays = load_npz(path)
     if "positions" not in arrays:
-        raise DataError(f"{path}: no 'positions' array (keys: {', '.join(arrays) or 'none'})")
+        if len(arrays) == 1:  # np.savez(path, xyz) or one array of any name: read as a .npy is
+            return _from_array(path, next(iter(arrays.values())))
+        raise DataError(
+            f"{path}: no 'positions' array (keys: {', '.join(arrays) or 'none'}); name the (N, 3) "
+            "array positions, the others colors, velocity, radius or an attribute's name: "
+            "np.savez(path, positions=xyz, colors=rgb, intensity=i)"
+        )
     fields: dict[str, object] = {k: arrays.pop(k) for k in _NPZ_KEYS if k in arrays}
     fields["positions"], fields["origin"] = relative_positions(fields["positions"], fields.get("origin"))
     fields["attributes"] = arrays

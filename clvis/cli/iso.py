@@ -127,7 +127,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         action="append",
         default=None,
         metavar="COLOR",
-        help="the surface's colour: a name, #RRGGBB or R,G,B (0..255); give it once per "
+        help="the surface's colour: a CSS name (red, skyblue, ...), #RRGGBB, #RGB or R,G,B (0..255); "
+        "give it once per "
         "isovalue (default the renderer's sand, then matplotlib's tab10)",
     )
     p.add_argument(

@@ -143,17 +143,26 @@ _COLOUR_NAMES = {
 
 
 def _colour(text: str) -> tuple[int, int, int]:
-    """A colour name, #RRGGBB or R,G,B (0..255 each)."""
+    """A colour name (clvis's own above, else a CSS/X11 name as matplotlib
+    and PyVista take them: red, tomato, ...), #RRGGBB, #RGB or R,G,B (0..255
+    each)."""
+    from matplotlib.colors import CSS4_COLORS
+
     t = text.strip().lower()
     if t in _COLOUR_NAMES:
         return _COLOUR_NAMES[t]
+    if t in CSS4_COLORS:
+        t = str(CSS4_COLORS[t]).lower()  # "#rrggbb"
+    if re.fullmatch(r"#[0-9a-f]{3}", t):
+        t = "#" + "".join(c * 2 for c in t[1:])
     if re.fullmatch(r"#[0-9a-f]{6}", t):
         return int(t[1:3], 16), int(t[3:5], 16), int(t[5:7], 16)
     m = re.fullmatch(r"(\d{1,3}),(\d{1,3}),(\d{1,3})", t.replace(" ", ""))
     if m and all(int(v) <= 255 for v in m.groups()):
         return int(m[1]), int(m[2]), int(m[3])
     raise argparse.ArgumentTypeError(
-        f"expected a colour: {', '.join(sorted(_COLOUR_NAMES))}, #RRGGBB or R,G,B (0..255), got {text!r}"
+        "expected a colour: a name (black, white, darkgrey: the UI's grey, red, skyblue and the other "
+        f"CSS names), #RRGGBB, #RGB or R,G,B (0..255), got {text!r}"
     )
 
 
@@ -1353,7 +1362,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--background",
         type=_colour,
         metavar="COLOR",
-        help="the colour behind the points: a name (black, white, grey, ...), #RRGGBB or R,G,B "
+        help="the colour behind the points: a name (black, white, red and the CSS names; darkgrey is "
+        "the UI's), #RRGGBB, #RGB or R,G,B "
         "(default a dark grey)",
     )
     r.add_argument(

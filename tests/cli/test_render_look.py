@@ -364,3 +364,21 @@ def test_folder_in_the_way_writes_nothing(tmp_path, capsys, command, last):
     _, err = capsys.readouterr()
     assert rc == 2 and f"{last}: not a file" in err and err.count("\n") == 1
     assert [p.name for p in tmp_path.iterdir()] == [last]
+
+
+def test_colour_names_are_the_css_ones_beside_clvis_own():
+    """--background / --surface-color take the CSS names matplotlib and
+    PyVista take (red, tomato), #RGB beside #RRGGBB and R,G,B; clvis's own
+    darkgrey stays the UI's grey; anything else is refused."""
+    import argparse
+
+    from clvis.cli.raster import _colour
+
+    assert _colour("red") == (255, 0, 0)
+    assert _colour("Tomato") == (255, 99, 71)
+    assert _colour("#FFF") == (255, 255, 255) and _colour("#e04020") == (224, 64, 32)
+    assert _colour("10, 20, 30") == (10, 20, 30)
+    assert _colour("darkgrey") == (24, 24, 28)  # the UI's, not CSS's (169, 169, 169)
+    for bad in ("mauve-ish", "#ff", "#12345", "300,0,0", "#ffffff80"):
+        with pytest.raises(argparse.ArgumentTypeError, match="expected a colour"):
+            _colour(bad)

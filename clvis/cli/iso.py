@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._arrays import to_host
+from ..errors import DataError
 from ..io.volumes import otsu_level
 from ..iso.zfp import MAX_RATE, MIN_RATE
 from ._common import (
@@ -137,6 +138,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         metavar="FIELD",
         help="colour the surface by a second volume file (read as FILE is; the same grid, or "
         "stretched over the same box), sampled where each ray hit, with a colour bar",
+    )
+    p.add_argument(
+        "--color-by-volume-index",
+        type=count(0, 2**31 - 1),
+        default=None,
+        metavar="T",
+        help="the volume of a 4-D --color-by file to read (0 first; --volume-index is FILE's)",
     )
     p.add_argument(
         "--colormap",
@@ -365,7 +373,7 @@ def _run_distributed(args) -> int:
         raise CliError("--completion: on workers every ray finishes (leave it out)")
     if args.isovalue is not None and len(args.isovalue) > 1:
         raise CliError("--isovalue: one value on workers (several are composited on one device)")
-    for name in ("surface_color", "color_by", "colormap", "range"):
+    for name in ("surface_color", "color_by", "color_by_volume_index", "colormap", "range"):
         if getattr(args, name) is not None:
             raise CliError(f"--{name.replace('_', '-')}: not on workers (leave out --workers/--scheduler)")
     client, workers = cluster_client(args)
@@ -452,9 +460,11 @@ def _run(args) -> int:
     if args.compare and args.orbit is not None:
         raise CliError("--compare scores one view: leave out --orbit")
     if args.color_by is None:
-        for name in ("colormap", "range"):
+        for name in ("colormap", "range", "color_by_volume_index"):
             if getattr(args, name) is not None:
-                raise CliError(f"--{name} colours the surface by a field: add --color-by FIELD")
+                flag = "--" + name.replace("_", "-")
+                what = "picks a volume of" if name == "color_by_volume_index" else "colours the surface by"
+                raise CliError(f"{flag} {what} a field: add --color-by FIELD")
     volume, spacing, origin, default_iso, (vmin, vmax), source = _load(args)
     isos = args.isovalue if args.isovalue is not None else [default_iso]
     if args.infill and (len(isos) > 1 or args.color_by is not None or args.surface_color is not None):
@@ -780,7 +790,21 @@ def _field(args) -> np.ndarray:
     path = Path(args.color_by)
     if not path.exists():
         raise CliError(f"--color-by: {path}: no such file")
-    data, _, _ = read_volume_file(args, path)
+    # FILE's --volume-index is not the field's
+    field_args = argparse.Namespace(**{**vars(args), "volume_index": args.color_by_volume_index})
+    try:
+        data, _, _ = read_volume_file(field_args, path)
+    except (DataError, ValueError) as e:  # read_volume's words for the field's option
+        text = (
+            str(e)
+            .replace(
+                "--volume-index T (clvis iso, gauss and view), volume_index=T in Python",
+                "--color-by-volume-index T",
+            )
+            .replace("volume_index:", "--color-by-volume-index:")
+            .replace("; clvis iso/gauss/view: --volume-index T)", ")")
+        )
+        raise CliError(f"--color-by: {text}") from e
     if data.ndim != 3 or min(data.shape) < 2:
         raise CliError(
             f"--color-by: {path}: expected a 3-D volume with 2 samples per axis or more, got {data.shape}"

@@ -125,6 +125,24 @@ def test_color_by_nifti(tmp_path, capsys):
     assert a.shape[0] > H + images.label_height(W)
 
 
+def test_color_by_a_4d_series_picks_its_volume(tmp_path, capsys):
+    """A 4-D --color-by file needs --color-by-volume-index (FILE's
+    --volume-index is not the field's, and the error says which option)."""
+    nibabel = pytest.importorskip("nibabel")
+    series = tmp_path / "series.nii"
+    field = np.random.default_rng(2).random((6, 7, 8, 3)).astype(np.float32)
+    nibabel.save(nibabel.Nifti1Image(field, np.eye(4)), series)
+    base = [UNIFORM, "--color-by", str(series), "--size", f"{W}x{H}", "--out", str(tmp_path)]
+    rc, out, err = _run(capsys, *base)
+    assert rc == 2 and "--color-by: " in err and "choose one: --color-by-volume-index T" in err, err
+    rc, out, err = _run(capsys, *base, "--color-by-volume-index", "3")
+    assert rc == 2 and "--color-by-volume-index: 3 is outside 0..2" in err, err
+    rc, out, err = _run(capsys, *base, "--color-by-volume-index", "2")
+    assert rc == 0, err
+    rc, out, err = _run(capsys, UNIFORM, "--color-by-volume-index", "2", "--out", str(tmp_path))
+    assert rc == 2 and "--color-by-volume-index picks a volume of a field: add --color-by" in err
+
+
 def test_several_isovalues(tmp_path, capsys):
     """Two isovalues of x*y*z: two surfaces in their colours, the nearer in
     front, a legend under the image, each one's passes printed."""

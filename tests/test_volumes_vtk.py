@@ -514,3 +514,58 @@ def test_vtr_header_lies_are_refused_before_vtk_reads(tmp_path):
     forged = base64.b64encode(np.array([5 * 8], "<u4").tobytes() + raw[4:] + bytes(8))
     bad(good.replace(blob, forged), "byte count")
     bad(good.replace(b'type="RectilinearGrid"', b'type="ImageData"', 1), "not a VTK RectilinearGrid file")
+
+
+def test_array_picks_a_vtk_files_data_array(tmp_path):
+    """read_volume(array=NAME): a .vti's or .vtr's point array by name, else
+    its cell array; a legacy .vtk's point SCALARS of that name (not the
+    first); Volume.array names the array read (the default's too); a name
+    the file lacks is a DataError listing what it has; other formats refuse
+    the keyword."""
+    from vtkmodules.util import numpy_support as ns
+    from vtkmodules.vtkCommonDataModel import vtkImageData
+    from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
+
+    img = vtkImageData()
+    img.SetDimensions(4, 3, 2)
+    values = {"a": np.arange(24, dtype=np.float32), "b": np.arange(24, dtype=np.float32) * -2}
+    for k, v in values.items():
+        arr = ns.numpy_to_vtk(v, deep=True)
+        arr.SetName(k)
+        img.GetPointData().AddArray(arr)
+    img.GetPointData().SetActiveScalars("a")
+    cells = ns.numpy_to_vtk(np.arange(6, dtype=np.int32) + 100, deep=True)
+    cells.SetName("c")
+    img.GetCellData().AddArray(cells)
+    w = vtkXMLImageDataWriter()
+    w.SetFileName(str(tmp_path / "v.vti"))
+    w.SetInputData(img)
+    assert w.Write() == 1
+    p = tmp_path / "v.vti"
+    assert read_volume(p).array == "a"
+    v = read_volume(p, array="b")
+    assert v.array == "b"
+    np.testing.assert_array_equal(v.data, values["b"].reshape(2, 3, 4))
+    c = read_volume(p, array="c")
+    np.testing.assert_array_equal(c.data, (np.arange(6) + 100).reshape(1, 2, 3))
+    with pytest.raises(DataError, match=r"v\.vti: no array 'nope' \(point arrays: a, b; cell arrays: c\)"):
+        read_volume(p, array="nope")
+    x, y, z = np.arange(4.0), np.arange(3.0), np.arange(2.0)
+    _vtr(tmp_path / "g.vtr", x, y, z, values["a"], "Binary")
+    assert read_volume(tmp_path / "g.vtr", array="v").array == "v"
+    legacy = tmp_path / "two.vtk"
+    text = " ".join(map(str, range(24)))
+    legacy.write_text(
+        "# vtk DataFile Version 3.0\ntwo\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 4 3 2\n"
+        f"SPACING 1 1 1\nORIGIN 0 0 0\nPOINT_DATA 24\nSCALARS first float 1\nLOOKUP_TABLE default\n{text}\n"
+        f"SCALARS second%20one int 1\nLOOKUP_TABLE default\n{' '.join(str(-i) for i in range(24))}\n"
+    )
+    assert read_volume(legacy).array == "first"
+    v = read_volume(legacy, array="second one")  # legacy names encode a space as %20
+    np.testing.assert_array_equal(v.data, -np.arange(24).reshape(2, 3, 4))
+    assert v.array == "second one"
+    with pytest.raises(DataError, match=r"no point SCALARS 'third' \(its SCALARS: first, second one"):
+        read_volume(legacy, array="third")
+    np.save(tmp_path / "v.npy", np.zeros((2, 2, 2)))
+    with pytest.raises(ValueError, match="array: a data array's name"):
+        read_volume(tmp_path / "v.npy", array="a")

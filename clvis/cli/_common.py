@@ -628,7 +628,7 @@ def raw_shape(text: str) -> tuple[int, int, int]:
 
 
 def add_volume_options(parser: argparse.ArgumentParser) -> None:
-    """--spacing, --shape, --dtype and --volume-index: how to read a volume FILE."""
+    """--spacing, --shape, --dtype, --volume-index and --array: how to read a volume FILE."""
     from ..io.volumes import RAW_TYPES
 
     g = parser.add_argument_group("volume files")
@@ -660,25 +660,46 @@ def add_volume_options(parser: argparse.ArgumentParser) -> None:
         metavar="T",
         help="the volume of a 4-D NIfTI, MGH or Analyze time series to read (0 first)",
     )
+    g.add_argument(
+        "--array",
+        default=None,
+        metavar="NAME",
+        help="the data array of a .vti, .vtr or legacy .vtk file to read (default: its point "
+        "scalars, else its first point array, else its first cell array; the summary names it)",
+    )
 
 
 def read_volume_file(args, path):
-    """The Volume of `path` with the volume options applied (spacing replaced,
-    samples as float32). CliError for options that do not fit the file."""
+    """(samples as float32, spacing, origin) of `path` with the volume
+    options applied (spacing replaced); see :func:`read_volume_of`."""
+    v = read_volume_of(args, path)
+    return np.asarray(v.data, np.float32), v.spacing, v.origin
+
+
+def read_volume_of(args, path):
+    """The Volume of `path` with the volume options applied (--spacing
+    replaces the file's; --array picks a VTK file's array). CliError for
+    options that do not fit the file."""
+    import dataclasses
+
     from ..io.volumes import read_volume
 
     name = str(path).lower()
     raw = name.endswith(".raw")
     if not raw and (args.shape is not None or args.dtype is not None):
         raise CliError(f"--shape and --dtype are for .raw files, not {path}")
+    array = getattr(args, "array", None)
+    if array is not None and not name.endswith((".vti", ".vtr", ".vtk")):
+        raise CliError(f"--array picks a data array of a VTK file (.vti, .vtr, .vtk), not {path}")
     v = read_volume(
         path,
         shape=args.shape if raw else None,
         dtype=args.dtype if raw else None,
         volume_index=args.volume_index,
+        array=array,
     )
     spacing = v.spacing if args.spacing is None else tuple(reversed(args.spacing))
-    return np.asarray(v.data, np.float32), tuple(float(s) for s in spacing), v.origin
+    return dataclasses.replace(v, spacing=tuple(float(s) for s in spacing))
 
 
 def check_iso_volume(data: np.ndarray, source: str) -> None:

@@ -44,6 +44,7 @@ from ._common import (
     on_workers,
     progress_from_args,
     read_volume_file,
+    read_volume_of,
     real,
     size,
 )
@@ -230,12 +231,14 @@ def _load(args):
         path = Path(args.file)
         if not path.exists():
             raise CliError(f"{path}: no such file")
-        data, spacing, origin = read_volume_file(args, path)
+        v = read_volume_of(args, path)
+        data = np.asarray(v.data, np.float32)
         value_range = finite_range(data, str(path))
         check_iso_volume(data, str(path))
-        return data, spacing, origin, otsu_level(data), value_range, str(path)
-    if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index")):
-        raise CliError("--shape, --dtype and --volume-index are for a volume FILE")
+        source = str(path) if v.array is None else f"{path} (array {v.array})"
+        return data, v.spacing, v.origin, otsu_level(data), value_range, source
+    if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index", "array")):
+        raise CliError("--shape, --dtype, --volume-index and --array are for a volume FILE")
     name = args.dataset or "marschner-lobb"
     d = datasets.marschner_lobb(64) if name == "marschner-lobb" else datasets.turbulence(128)
     spacing = d["spacing"] if args.spacing is None else tuple(reversed(args.spacing))

@@ -163,7 +163,12 @@ def load_scene(args: argparse.Namespace) -> Scene:
             return VolumeScene(data, spacing, origin, iso, args.rate, description=str(path))
         from .. import read_points
 
+        if args.array is not None:
+            raise CliError(f"--array picks a data array of a VTK volume file; {path} is a point cloud")
+
         return PointScene(read_points(path), description=str(path))
+    if args.array is not None:
+        raise CliError("--array picks a data array of a VTK volume FILE (.vti, .vtr, .vtk)")
     name = args.dataset or "hurricane"
     if name in _POINT_SETS:
         from .. import PointCloud
@@ -192,6 +197,8 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
     from .. import datasets
     from ..view import DaskPointScene, DaskVolumeScene
 
+    if args.array is not None:
+        raise CliError("--array: not on workers (they read .npy, .raw and NIfTI volumes)")
     client, workers = cluster_client(args)
     if args.brick % 4:
         raise CliError(f"--brick: {args.brick} is not a multiple of 4 (ZFP's block edge)")

@@ -93,6 +93,7 @@ class Volume:
     path : the file it came from.
     affine : (4, 4) float64 voxel [i, j, k, 1] -> world of a NIfTI, MGH or
         Analyze file (of its axes as returned: closest RAS+), else None.
+    array : the name of the data array read from a VTK file, else None.
     """
 
     data: np.ndarray
@@ -100,6 +101,7 @@ class Volume:
     origin: tuple = (0.0, 0.0, 0.0)
     path: str | None = None
     affine: np.ndarray | None = None
+    array: str | None = None
 
     @property
     def shape(self) -> tuple:
@@ -149,6 +151,7 @@ def read_volume(
     shape: Sequence[int] | None = None,
     dtype: npt.DTypeLike | None = None,
     volume_index: int | None = None,
+    array: str | None = None,
 ) -> Volume:
     """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``, ``.mgz``,
     ``.mgh``, ``.hdr``/``.img``, ``.vti``, ``.vtr``, ``.vtk``; see the module docstring).
@@ -156,7 +159,10 @@ def read_volume(
     `shape` (Z, Y, X) and `dtype` apply to ``.raw`` files only: they give the
     shape and the sample type when the file name does not, and override the
     name when it does. `volume_index` picks one volume of a 4-D NIfTI, MGH or
-    Analyze file."""
+    Analyze file. `array` picks a VTK file's data array by name (.vti and
+    .vtr: a point array, else a cell array; a legacy .vtk: a point SCALARS;
+    by default the point scalars, see the module docstring); the one read
+    is ``Volume.array``."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path: expected a str or path, got {type(path).__name__}")
     path = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO or device
@@ -165,18 +171,25 @@ def read_volume(
         return _read_raw(path, shape, dtype)
     if shape is not None or dtype is not None:
         raise ValueError(f"shape, dtype: only for .raw files, not {path.name}")
+    vtk = name.endswith((".vti", ".vtr", ".vtk"))
+    if array is not None and (not isinstance(array, str) or not vtk):
+        raise ValueError(
+            f"array: a data array's name (a str) for .vti, .vtr and .vtk files, got {array!r} for {path.name}"
+        )
     if name.endswith(NIBABEL_FORMATS):
         return _read_nifti(path, volume_index)
     if volume_index is not None:
         raise ValueError(f"volume_index: only for 4-D NIfTI, MGH or Analyze files, not {path.name}")
     if name.endswith(".npy"):
         return _read_npy(path)
-    if name.endswith((".vti", ".vtr", ".vtk")):
+    if vtk:
         from .vtk import read_legacy, read_vti, read_vtr
 
         reader = {".vti": read_vti, ".vtr": read_vtr}.get(name[-4:], read_legacy)
-        data, spacing, origin = reader(path)
-        return Volume(data, tuple(float(s) for s in spacing), tuple(float(o) for o in origin), str(path))
+        data, spacing, origin, chosen = reader(path, array)
+        return Volume(
+            data, tuple(float(s) for s in spacing), tuple(float(o) for o in origin), str(path), array=chosen
+        )
     from .points import POINT_SUFFIXES
 
     if name.endswith(POINT_SUFFIXES):  # .vtp, .ply, ...: the user is told where it goes

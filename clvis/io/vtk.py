@@ -207,13 +207,17 @@ def _xml_head(path: Path, xml: bytes, kind: str) -> tuple[dict[str, str], dict[s
     return fa, _attrs(data[0])
 
 
-def _check_grid(path: Path, raw: bytes, kind: str = "ImageData") -> tuple[str, int, str]:
+def _check_grid(
+    path: Path, raw: bytes, kind: str = "ImageData", array: str | None = None
+) -> tuple[str, int, str]:
     """Check a .vti's (`kind` "ImageData") or .vtr's ("RectilinearGrid")
     header against the file before VTK reads it: (the name of the array
     that is the volume, its samples, "cell" where it is cell data else "");
     a DataError naming the file for what is not read or lies about its
-    size. A .vtr's pieces hold their coordinates too: three one-component
-    arrays of their extent's points along X, Y and Z, checked the same way."""
+    size. `array`: that point (else cell) array, by name; by default the
+    point data's Scalars, else its first array, else the cell data's. A
+    .vtr's pieces hold their coordinates too: three one-component arrays of
+    their extent's points along X, Y and Z, checked the same way."""
     at, xml = _xml_part(path, raw)
     fa, ia = _xml_head(path, xml, kind)
     whole = _numbers(path, "WholeExtent", ia.get("WholeExtent", ""), 6, int)
@@ -226,7 +230,22 @@ def _check_grid(path: Path, raw: bytes, kind: str = "ImageData") -> tuple[str, i
     if not pieces or len(pieces) != opened:
         raise DataError(f"{path}: malformed {kind}: no <Piece>...</Piece>")
     name, covered, where = None, 0, ""
-    if not any(_section(body, "PointData") for _, body in pieces):
+    if array is not None:  # the named array, among the first piece's point arrays, else its cell arrays
+        names = {
+            tag: [a.get("Name") for a, _ in (_section(pieces[0][1], tag) or (b"", []))[1]]
+            for tag in ("PointData", "CellData")
+        }
+        if array in names["PointData"]:
+            name = array
+        elif array in names["CellData"]:
+            name, where = array, "cell"
+            n = _count(path, "WholeExtent", _cells(whole))
+        else:
+            listed = "; ".join(
+                f"{t[:-4].lower()} arrays: {', '.join(map(str, v))}" for t, v in names.items() if v
+            )
+            raise DataError(f"{path}: no array {array!r} ({listed or 'no arrays'})")
+    elif not any(_section(body, "PointData") for _, body in pieces):
         if not any(_section(body, "CellData") for _, body in pieces):
             raise DataError(f"{path}: no point or cell data array")
         where = "cell"  # no point array in any piece: the cell data is the volume
@@ -415,25 +434,26 @@ def _opened(core: Any, reader: Any, path: Path, messages: list[str], text: bytes
     return not messages
 
 
-def read_vti(path: Path) -> tuple[np.ndarray, tuple, list]:
-    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of a .vti,
-    read by vtkXMLImageDataReader after the header checks."""
-    return _read_xml(path, "ImageData")
+def read_vti(path: Path, array: str | None = None) -> tuple[np.ndarray, tuple, list, str]:
+    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z), the array's
+    name) of a .vti (`array`: that one, by name), read by
+    vtkXMLImageDataReader after the header checks."""
+    return _read_xml(path, "ImageData", array)
 
 
-def read_vtr(path: Path) -> tuple[np.ndarray, tuple, list]:
-    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of a .vtr
+def read_vtr(path: Path, array: str | None = None) -> tuple[np.ndarray, tuple, list, str]:
+    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z), the array's name) of a .vtr
     (XML RectilinearGrid, as pyvista's RectilinearGrid.save writes it)
     whose coordinates are evenly spaced along each axis, read by
     vtkXMLRectilinearGridReader after the header checks; its cell data where
     it has no point array, as for a .vti."""
-    return _read_xml(path, "RectilinearGrid")
+    return _read_xml(path, "RectilinearGrid", array)
 
 
-def _read_xml(path: Path, kind: str) -> tuple[np.ndarray, tuple, list]:
+def _read_xml(path: Path, kind: str, array: str | None) -> tuple[np.ndarray, tuple, list, str]:
     """A .vti (`kind` "ImageData") or .vtr ("RectilinearGrid") read by VTK's
     XML reader of that kind after _check_grid, only the chosen array enabled."""
-    name, n, where = _check_grid(path, path.read_bytes(), kind)
+    name, n, where = _check_grid(path, path.read_bytes(), kind, array)
     core, _, xmlio, ns = _vtk()
     with _quiet(core) as messages:
         r = getattr(xmlio, f"vtkXML{kind}Reader")()
@@ -442,8 +462,8 @@ def _read_xml(path: Path, kind: str) -> tuple[np.ndarray, tuple, list]:
             r.GetCellDataArraySelection().DisableAllArrays()
             (r.GetCellDataArraySelection() if where else r.GetPointDataArraySelection()).EnableArray(name)
             if kind == "ImageData":
-                return _image(path, r, messages, name, n, ns, cells=bool(where))
-            return _rectilinear(path, r, messages, n, ns, name, cells=bool(where))
+                return (*_image(path, r, messages, name, n, ns, cells=bool(where)), name)
+            return (*_rectilinear(path, r, messages, n, ns, name, cells=bool(where)), name)
     raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
 
 
@@ -664,11 +684,12 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
     return points
 
 
-def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
+def read_legacy(path: Path, array: str | None = None) -> tuple[np.ndarray, tuple, list, str]:
     """A legacy .vtk STRUCTURED_POINTS or (evenly spaced) RECTILINEAR_GRID
-    file: (data, spacing zyx, origin xyz); the point data's first SCALARS,
-    read by vtkStructuredPointsReader or vtkRectilinearGridReader after the
-    header checks."""
+    file: (data, spacing zyx, origin xyz, the array's name); the point
+    data's first SCALARS (`array`: the point SCALARS of that name), read by
+    vtkStructuredPointsReader or vtkRectilinearGridReader after the header
+    checks."""
     raw = path.read_bytes()
     dataset, binary, new_cells, text = _legacy_head(path, raw)
     if dataset not in VOLUME_DATASETS:
@@ -695,13 +716,16 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
     )
     if m is None:
         raise DataError(f"{path}: no POINT_DATA SCALARS with a LOOKUP_TABLE (cell data is not read)")
+    count = int(m.group(1))  # POINT_DATA's
+    if array is not None and _decoded(m.group(2)) != array:
+        m = _named_scalars(path, raw, m, array)
     t = _LEGACY_TYPES.get(m.group(3).decode("latin-1").lower())
     if t is None or (m.group(4) is not None and m.group(4) != b"1"):
         scalars = m.group(0).splitlines()[-2].decode("latin-1")
         raise DataError(f"{path}: {scalars!r}: one component of a numeric type expected")
     n = nx * ny * nz
-    if min(nx, ny, nz) < 1 or int(m.group(1)) != n:
-        raise DataError(f"{path}: POINT_DATA {int(m.group(1))} does not match DIMENSIONS {nx} {ny} {nz}")
+    if min(nx, ny, nz) < 1 or count != n:
+        raise DataError(f"{path}: POINT_DATA {count} does not match DIMENSIONS {nx} {ny} {nz}")
     if binary and m.end() + n * np.dtype(t).itemsize > len(raw):
         raise DataError(
             f"{path}: truncated: {n} samples of {np.dtype(t).itemsize} bytes after byte {m.end()}"
@@ -719,13 +743,37 @@ def read_legacy(path: Path) -> tuple[np.ndarray, tuple, list]:
         r = legacy.vtkStructuredPointsReader() if structured else legacy.vtkRectilinearGridReader()
         _observe(core, r, messages)
         r.SetFileName(str(path))
-        # the name as VTK decodes it (%20 and the like: legacy names have no spaces)
-        r.SetScalarsName(
-            re.sub(r"%([0-9A-Fa-f]{2})", lambda h: chr(int(h.group(1), 16)), m.group(2).decode("latin-1"))
-        )
+        name = _decoded(m.group(2))
+        r.SetScalarsName(name)
         if dataset == "STRUCTURED_POINTS":
-            return _image(path, r, messages, None, n, ns)
-        return _rectilinear(path, r, messages, n, ns)
+            return (*_image(path, r, messages, None, n, ns), name)
+        return (*_rectilinear(path, r, messages, n, ns), name)
+
+
+def _decoded(name: bytes) -> str:
+    """A legacy array name as VTK decodes it (%20 and the like: legacy names have no spaces)."""
+    return re.sub(r"%([0-9A-Fa-f]{2})", lambda h: chr(int(h.group(1), 16)), name.decode("latin-1"))
+
+
+_LEGACY_SCALARS = re.compile(
+    rb"(?:^|\n)(POINT_DATA[ \t]+\d+[ \t\r]*\n+)?SCALARS[ \t]+(\S+)[ \t]+(\S+)(?:[ \t]+(\d+))?[ \t\r]*\n"
+    rb"LOOKUP_TABLE[ \t]+\S+[ \t\r]*\n"
+)
+
+
+def _named_scalars(path: Path, raw: bytes, first: re.Match, array: str) -> re.Match:
+    """The SCALARS header named `array` in the point data section that
+    `first` (the POINT_DATA line and its first SCALARS) opens, up to a
+    CELL_DATA line; a DataError listing the point SCALARS there without it.
+    Its groups 2-4 are `first`'s: name, type, components."""
+    cell = re.compile(rb"(?:^|\n)CELL_DATA[ \t]").search(raw, first.end())
+    end = cell.start() if cell else len(raw)
+    found = list(_LEGACY_SCALARS.finditer(raw, first.start(), end))
+    for s in found:
+        if _decoded(s.group(2)) == array:
+            return s
+    names = ", ".join(dict.fromkeys(_decoded(s.group(2)) for s in found))
+    raise DataError(f"{path}: no point SCALARS {array!r} (its SCALARS: {names}; FIELD arrays are not read)")
 
 
 def _rectilinear(

@@ -143,6 +143,37 @@ def test_color_by_a_4d_series_picks_its_volume(tmp_path, capsys):
     assert rc == 2 and "--color-by-volume-index picks a volume of a field: add --color-by" in err
 
 
+def test_array_picks_the_vtk_array_and_the_summary_names_it(tmp_path, capsys):
+    """clvis iso FILE.vti: the summary names the array read (the default, or
+    --array's); --array on another format is refused."""
+    from vtkmodules.util import numpy_support as ns
+    from vtkmodules.vtkCommonDataModel import vtkImageData
+    from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
+
+    img = vtkImageData()
+    img.SetDimensions(12, 12, 12)
+    z, y, x = np.mgrid[:12, :12, :12] / 11.0 * 2 - 1
+    for name, v in (("r2", x**2 + y**2 + z**2), ("xcoord", x)):
+        arr = ns.numpy_to_vtk(np.ascontiguousarray(v, np.float32).ravel(), deep=True)
+        arr.SetName(name)
+        img.GetPointData().AddArray(arr)
+    w = vtkXMLImageDataWriter()
+    path = tmp_path / "two.vti"
+    w.SetFileName(str(path))
+    w.SetInputData(img)
+    assert w.Write() == 1
+    base = ["--size", f"{W}x{H}", "--out", str(tmp_path / "o")]
+    rc, out, err = _run(capsys, str(path), *base)
+    assert rc == 0 and "two.vti (array r2)" in out, (out, err)
+    rc, out, err = _run(capsys, str(path), "--array", "xcoord", *base)
+    assert rc == 0 and "two.vti (array xcoord), isovalue 0," in out, (out, err)
+    rc, out, err = _run(capsys, str(path), "--array", "nope", *base)
+    assert rc == 2 and "no array 'nope' (point arrays: r2, xcoord)" in err
+    np.save(tmp_path / "v.npy", np.zeros((4, 4, 4), np.float32))
+    rc, out, err = _run(capsys, str(tmp_path / "v.npy"), "--array", "r2", *base)
+    assert rc == 2 and "--array picks a data array of a VTK file" in err
+
+
 def test_several_isovalues(tmp_path, capsys):
     """Two isovalues of x*y*z: two surfaces in their colours, the nearer in
     front, a legend under the image, each one's passes printed."""

@@ -33,6 +33,7 @@ from ._common import (
     colormap_name,
     count,
     fit_box,
+    frame_bulk,
     progress_from_args,
     read_volume_file,
     real,
@@ -229,6 +230,7 @@ def _sources(args):
     from .. import datasets
     from ..gauss import Gaussians, SparseVolume, read_vdb
     from ..io import read_points
+    from ..io.files import regular_file
 
     lods = args.lod or list(LODS)
     if args.attribute is not None and not (args.file and args.file.lower().endswith(_POINT_FORMATS)):
@@ -245,6 +247,7 @@ def _sources(args):
     path = Path(args.file)
     if not path.exists():
         raise CliError(f"{path}: no such file")
+    regular_file(path)  # a directory, a FIFO: named as clvis render and clvis view name them
     from ..io import load_npz, npy_shape
     from ..io.volumes import FORMATS as VOLUME_FORMATS
     from ..io.vtk import POINT_DATASETS, legacy_dataset
@@ -297,15 +300,20 @@ def _sources(args):
             raise CliError(f"{path}: {e}") from None
         except ValueError as e:
             raise CliError(f"{path}: {e}" if args.attribute is None else f"--attribute: {e}") from None
+        # the view frames the bulk of the cloud, as clvis render's does (stray
+        # points far outside it left out, with the same note)
+        _, _, _, inside = frame_bulk(cloud, str(path), "clvis gauss")
+        args.frame = None if inside is None else g.subset(np.flatnonzero(inside))
         # what the colour bar names: the attribute, else what gaussians_from_points
-        # coloured by: the speed with a velocity, else the elevation, which is
-        # relative to the cloud's origin (a LAS file's lowest point)
-        oz = float(cloud.origin[2]) if cloud.origin is not None else 0.0
+        # coloured by: the speed with a velocity, else the elevation z. The
+        # Gaussians' z is relative to the cloud's origin (a LAS file's lowest
+        # point): --range takes and the bar and summary show the file's z (as
+        # clvis render's), the origin added back
+        by_z = args.attribute == "z" or (args.attribute is None and cloud.velocity is None)
+        args.value_offset = float(cloud.origin[2]) if by_z and cloud.origin is not None else 0.0
         # --eye/--target are in the file's coordinates (as clvis render and clvis view's text)
         args.camera_origin = cloud.origin
-        args.value_name = args.attribute or (
-            "speed" if cloud.velocity is not None else "z" if oz == 0.0 else f"z - {oz:.10g}"
-        )
+        args.value_name = args.attribute or ("speed" if cloud.velocity is not None else "z")
         return ["points"], None, g, str(path), None
     raise CliError(
         f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
@@ -371,6 +379,7 @@ def render_panels(
     value_range: tuple[float, float] | None = None,
     progress: Progress | None = None,
     timings: dict[str, float] | None = None,
+    frame: Gaussians | None = None,
 ) -> list[tuple[str, Gaussians, GaussianImage]]:
     """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given
     Gaussians), seen by camera(lo, hi) of their bounds (default: the fit view).
@@ -379,7 +388,9 @@ def render_panels(
     ramp that keeps low densities faint); value_range: the values it spans
     (default the Gaussians' min..max); progress: a Progress showing each panel's rays done;
     timings: a dict given "build_s", the wall time of the kernel build (the
-    first renderer and frame, on a tiny scene)."""
+    first renderer and frame, on a tiny scene); frame: the Gaussians the view
+    frames and the default density scales with (default: all; a point cloud's
+    bulk, its stray points left out, as clvis render frames it)."""
     from ..colormap import TransferFunction
     from ..gauss import GaussianRenderer, gaussians_from_volume
 
@@ -390,14 +401,15 @@ def render_panels(
     allg = [g for _, g in items if g.n]
     if not allg:
         raise CliError("no Gaussians: the volume has no active voxel")
+    framed = [frame] if frame is not None and frame.n else allg
     # the default density scales with the diagonal of every LOD's 1-sigma boxes
-    boxes = np.array([g.bounds(1.0) for g in allg])  # (LODs, lo / hi, xyz)
+    boxes = np.array([g.bounds(1.0) for g in framed])  # (LODs, lo / hi, xyz)
     diag = float(np.linalg.norm(boxes[:, 1].max(axis=0) - boxes[:, 0].min(axis=0))) or 1.0
     # the view frames the finest LOD's Gaussians out to FRAME_SIGMAS (what they
     # draw): every LOD's 1-sigma box, as before, cut the splats at the panel's
     # edges (a volume's corner, an L-shaped mask seen from the front); the
     # coarser LODs' few wide Gaussians would leave the data small
-    lo, hi = max(allg, key=lambda g: g.n).bounds(FRAME_SIGMAS)
+    lo, hi = max(framed, key=lambda g: g.n).bounds(FRAME_SIGMAS)
     cam = camera(lo, hi) if camera is not None else fit_box(lo, hi, width, height, _FIT)
     if value_range is None:
         vals = np.concatenate([g.values for g in allg])
@@ -449,10 +461,13 @@ def _transfer(args, lods, sv, gaussians, samples):
     opacity = args.opacity
     if opacity is None and points:
         opacity = [(0.0, 1.0), (1.0, 1.0)]  # points are surfaces: fully opaque, whatever the value
+    # a point cloud coloured by z: --range is in the file's coordinates, the
+    # Gaussians' values relative to its origin (0 otherwise)
+    off = getattr(args, "value_offset", 0.0)
     if args.range is not None:
         kind, a, b = args.range
         if kind == "values":
-            return (a, b), opacity, f"range {a:g}..{b:g}"
+            return (a - off, b - off), opacity, f"range {a:.15g}..{b:.15g}"
         # percentiles of the volume's samples, else of the Gaussians' values
         if samples is not None:
             values = np.asarray(samples)
@@ -464,7 +479,7 @@ def _transfer(args, lods, sv, gaussians, samples):
         if not values.size:
             raise CliError("--range: the data has no finite value")
         lo, hi = (float(v) for v in np.percentile(values, [a, b]))
-        return (lo, hi), opacity, f"range p{a:g}..p{b:g} of the samples: {lo:.6g}..{hi:.6g}"
+        return (lo, hi), opacity, f"range p{a:g}..p{b:g} of the samples: {lo + off:.6g}..{hi + off:.6g}"
     if args.file is not None and samples is not None:
         # a scan: its background (the lower of Otsu's two classes) stays clear
         if not np.isfinite(samples).any():
@@ -496,11 +511,13 @@ def strip(
     transparent: bool = False,
     value_name: str = "value",
     value_range: tuple[float, float] | None = None,
+    value_offset: float = 0.0,
 ) -> np.ndarray:
     """render_panels' images side by side, each labelled with its LOD and
     Gaussian count, over a colour bar of the transfer function's range
     (`value_range`, default the values' min..max; none for Gaussians drawn in
-    their own colours)."""
+    their own colours), `value_offset` added to the bar's ends (a point
+    cloud's origin along z: the bar reads the file's coordinates)."""
     from .. import images
     from ..colormap import value_range as finite_range
 
@@ -513,10 +530,18 @@ def strip(
         title = f"{name} LOD" if name in LODS else name
         tile = images.label(_picture(img, transparent), f"{title}: {g.n:,} Gaussians")
         if getattr(g, "colors", None) is None and tile.shape[1] >= 2:  # --size 1xH: no room for a bar
-            bar = images.colorbar(colormap, vmin, vmax, tile.shape[1], title=value_name)
+            bar = images.colorbar(
+                colormap, vmin + value_offset, vmax + value_offset, tile.shape[1], title=value_name
+            )
             tile = np.concatenate([tile, bar], axis=0)
         tiles.append(tile)
     return images.compose(tiles)
+
+
+def bar_title(args) -> str:
+    """What the colour bar names: --attribute, else what a point cloud is
+    coloured by (speed or z), else "value"."""
+    return args.attribute or getattr(args, "value_name", None) or "value"
 
 
 def _run(args) -> int:
@@ -545,6 +570,7 @@ def _run(args) -> int:
         value_range=vr,
         progress=progress,
         timings=timings,
+        frame=getattr(args, "frame", None),
         camera=lambda lo, hi: camera_from_args(
             world_camera_args(args, getattr(args, "camera_origin", None)), lo, hi, width, height
         ),
@@ -554,16 +580,17 @@ def _run(args) -> int:
     files = []
     clear_targets(out, [f"{panel[0]}.png" for panel in panels] + ["gauss.png"])
     with progress.stage("writing PNGs"):
-        value_name = args.attribute or getattr(args, "value_name", None) or "value"
+        value_name = bar_title(args)
+        off = getattr(args, "value_offset", 0.0)
         for panel in panels:  # each labelled over its colour bar, as in gauss.png (--no-labels: bare)
             one = _picture(panel[2], args.transparent) if args.no_labels else None
             if one is None:
-                one = strip([panel], args.colormap, args.transparent, value_name, vr)
+                one = strip([panel], args.colormap, args.transparent, value_name, vr, off)
             files.append(images.save_png(out / f"{panel[0]}.png", one))
         files.append(
             images.save_png(
                 out / "gauss.png",
-                strip(panels, args.colormap, args.transparent, value_name, vr),
+                strip(panels, args.colormap, args.transparent, value_name, vr, off),
             )
         )
     if args.orbit is not None:  # the turntable (clvis.cli.orbit)

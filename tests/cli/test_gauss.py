@@ -216,23 +216,64 @@ def test_gauss_progress_on_stderr(tmp_path, capsys):
     assert capsys.readouterr().err == ""  # not a terminal: no progress
 
 
-def test_gauss_names_what_a_clouds_colour_bar_shows(tmp_path, capsys):
-    # a cloud far from the origin, no colours, no velocity: coloured by its
-    # elevation relative to the cloud's origin, and the bar says so
+def _lit(path) -> float:
+    """The fraction of a --no-labels picture's pixels well above the background."""
+    with Image.open(path) as im:
+        a = np.asarray(im.convert("RGB")).astype(np.float64)
+    return float((np.abs(a - BACKGROUND).sum(axis=2) > 30).mean())
+
+
+def test_gauss_frames_the_bulk_of_a_cloud_with_stray_points(tmp_path, capsys):
+    """laspy's simple.las with 3 points moved to (0, 0, 0), 10^6 m away: the
+    view framed every Gaussian and points.png was background only; it frames
+    the bulk now, as clvis render does, with render's note (gauss's name)."""
+    cloud = clvis.read_points(Path(__file__).parents[1] / "data" / "laspy_simple.laz")
+    world = cloud.positions.astype(np.float64) + cloud.origin
+    np.save(tmp_path / "bulk.npy", world)
+    world[[5, 500, 1000]] = 0.0
+    np.save(tmp_path / "stray.npy", world)
+    small = ["--size", "80x60", "--no-labels"]
+    assert cli.main(["gauss", str(tmp_path / "stray.npy"), *small, "--out", str(tmp_path / "s")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("clvis gauss: note: 3 of 1,065 points lie far outside the rest (the cloud spans 0.")
+    assert "the view frames the bulk (--eye/--target to look elsewhere)" in err
+    assert cli.main(["gauss", str(tmp_path / "bulk.npy"), *small, "--out", str(tmp_path / "b")]) == 0
+    assert "note" not in capsys.readouterr().err
+    stray, bulk = _lit(tmp_path / "s" / "points.png"), _lit(tmp_path / "b" / "points.png")
+    assert bulk > 0.2 and stray > 0.5 * bulk, (stray, bulk)  # was 0 of the frame
+
+
+def test_gauss_colours_by_z_in_the_files_coordinates(tmp_path, capsys, monkeypatch):
+    """A cloud far from the origin, no colours, no velocity: coloured by its
+    z, which --range, the summary and the colour bar give in the file's
+    coordinates (they were relative to the cloud's internal origin: "z -
+    1000000000", and --range 1000000000.5,1000000001.5 saturated every point)."""
+    from clvis import images
+
+    bars = []
+    colorbar = images.colorbar
+    monkeypatch.setattr(images, "colorbar", lambda *a, **k: bars.append(a[1:3]) or colorbar(*a, **k))
     rng = np.random.default_rng(3)
-    pos = rng.random((400, 3)) * [10, 10, 2] + [0, 0, 1e9]
-    np.save(tmp_path / "far.npy", pos)
-    assert (
-        cli.main(["gauss", str(tmp_path / "far.npy"), "--size", "48x48", "--out", str(tmp_path / "o")]) == 0
-    )
-    out = capsys.readouterr().out
-    assert "colour    z - 1000000000 through inferno" in out, out
-    np.save(tmp_path / "near.npy", pos - [0, 0, 1e9])
-    assert (
-        cli.main(["gauss", str(tmp_path / "near.npy"), "--size", "48x48", "--out", str(tmp_path / "n")]) == 0
-    )
-    out = capsys.readouterr().out
-    assert ("colour    z through inferno" in out) or ("colour    z - " in out), out
+    pos = rng.random((400, 3)) * [10, 10, 2]
+    np.save(tmp_path / "far.npy", pos + [0, 0, 1e9])
+    np.save(tmp_path / "near.npy", pos)
+    small = ["--size", "48x48", "--no-labels"]
+    for name, rng_ in (("far", "1000000000.5,1000000001.5"), ("near", "0.5,1.5")):
+        args = ["gauss", str(tmp_path / f"{name}.npy"), *small, "--range", rng_, "-o", str(tmp_path / name)]
+        assert cli.main(args) == 0
+        out = capsys.readouterr().out
+        assert "colour    z through inferno" in out, out
+        assert f"transfer  range {rng_.replace(',', '..')}" in out, out
+    assert bars == [(1000000000.5, 1000000001.5), (0.5, 1.5)]  # gauss.png's (--no-labels: not points.png)
+    # the same picture: the range is the same z in both files' coordinates
+    with Image.open(tmp_path / "far" / "points.png") as a, Image.open(tmp_path / "near" / "points.png") as b:
+        assert np.abs(np.asarray(a).astype(int) - np.asarray(b)).mean() < 1
+    # percentiles are of the z's, shown in the file's coordinates too
+    args = ["gauss", str(tmp_path / "far.npy"), *small, "--range", "p0,p100", "--out", str(tmp_path / "p")]
+    assert cli.main(args) == 0
+    (lo, hi), z = bars[-1], pos[:, 2] + 1e9
+    assert abs(lo - z.min()) < 1e-3 and abs(hi - z.max()) < 1e-3, (lo, hi)
+    assert "of the samples: 1e+09" in capsys.readouterr().out
 
 
 def test_gauss_all_nan_volume_names_the_file(tmp_path, capsys):

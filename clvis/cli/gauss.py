@@ -83,9 +83,10 @@ or a .vdb (float grid, needs the `vdb` extra: tinyvdb); a .npz of Gaussians
 (clvis.Gaussians.save); or a point cloud (.ply, .las, .laz, .e57, .pcd,
 .xyz/.txt/.csv, .vtp/.vtu/.vts, a legacy .vtk of POLYDATA, UNSTRUCTURED_GRID or STRUCTURED_GRID, or an
 (N, 3) .npy/.npz as
-`clvis render` reads them: one Gaussian per point, stretched along the
-velocity when the file has one, else sized by the 4 nearest neighbours,
-clamped to their 95th percentile). A cloud's
+`clvis render` reads them: one Gaussian per point; with a velocity, as wide
+as the points' median 4-nearest-neighbour distance and 4 times that along
+the velocity (NARVis's), else sized by the 4 nearest neighbours, clamped
+to their 95th percentile). A cloud's
 points keep their own colours when it has them; --attribute NAME colours them
 by an attribute (e.g. intensity) or z instead; without colours or --attribute,
 by the speed when there is a velocity, else by the elevation z.

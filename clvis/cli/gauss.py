@@ -125,7 +125,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--threshold",
         type=real(),
         default=None,
-        help="voxels above this are active (default: > 0 for dense volumes)",
+        help="volumes: voxels above this are active (default: > 0 for dense volumes)",
     )
     g.add_argument(
         "--model",
@@ -143,9 +143,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     )
     g.add_argument(
         "--density",
-        type=real(0.0),
+        type=real(0.0, open_lo=True),
         default=None,
-        help="extinction scale of the absorption model (default 6 / volume diagonal)",
+        help="extinction scale of the absorption model, > 0 (default 6 / volume diagonal)",
     )
     g.add_argument(
         "--colormap",
@@ -184,7 +184,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--k",
         type=count(1, MAX_K),
         default=None,
-        help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)",
+        help=f"k-buffer size of the ray models, 1..{MAX_K}: hits a round of the BVH march, the tile "
+        "renderer's pending hits (default: the device profile's; not --model splat, which blends "
+        "each tile's splats in depth order)",
     )
     add_output_options(g, "clvis-gauss", "empty pixels")
     add_orbit_options(g)
@@ -323,9 +325,14 @@ def _sources(args):
 
 
 def _no_lod(args, path, what: str) -> None:
-    """--lod makes levels of detail from a volume: an error for other files."""
+    """--lod makes levels of detail from a volume and --threshold picks its
+    active voxels: an error for other files."""
     if args.lod is not None:
         raise CliError(f"--lod: levels of detail are made from a volume; {path} is {what} (leave --lod out)")
+    if args.threshold is not None:
+        raise CliError(
+            f"--threshold: a volume's voxels above it are active; {path} is {what} (leave --threshold out)"
+        )
 
 
 def _finite_points(cloud, args):
@@ -344,6 +351,16 @@ def cmd(args: argparse.Namespace) -> int:
     if args.model == "splat" and args.method == "bvh":  # the library's own words are its API's
         raise CliError(
             "--model splat (3D Gaussian Splatting's rasterizer) draws on tiles; leave --method bvh out"
+        )
+    if args.density is not None and args.model != "absorption":
+        raise CliError(
+            f"--density: the absorption model's extinction scale; --model {args.model} does not use it "
+            "(leave --density out)"
+        )
+    if args.k is not None and args.model == "splat":
+        raise CliError(
+            "--k: the k-buffer of the ray models (max_response, absorption); --model splat blends each "
+            "tile's splats in depth order (leave --k out)"
         )
     return _run(args)
 
@@ -385,6 +402,8 @@ def render_panels(
     """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given
     Gaussians), seen by camera(lo, hi) of their bounds (default: the fit view).
 
+    k: the ray models' k-buffer (the march's hits a round, the tile renderer's
+    pending hits; None: the device profile's);
     opacity: the transfer function's opacity points (default OPACITY_DEFAULT, a
     ramp that keeps low densities faint); value_range: the values it spans
     (default the Gaussians' min..max); progress: a Progress showing each panel's rays done;
@@ -426,7 +445,7 @@ def render_panels(
     t0 = time.perf_counter()
     with progress.stage("building kernels"):
         GaussianRenderer(
-            allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k, queue=queue, method=method
+            allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k, kp=k, queue=queue, method=method
         ).render(cam, 8, 8)
     if timings is not None:
         timings["build_s"] = time.perf_counter() - t0
@@ -434,7 +453,7 @@ def render_panels(
     for name, g in items:
         label = _Label(f"{name}: {g.n:,} Gaussians")
         with progress.stage(label):
-            r = GaussianRenderer(g, tf, model=model, density=dens, k=k, queue=queue, method=method)
+            r = GaussianRenderer(g, tf, model=model, density=dens, k=k, kp=k, queue=queue, method=method)
             label.text = f"{name}: rendering"
 
             def done(rays, total, label=label, name=name):

@@ -317,3 +317,39 @@ def test_gauss_velocity_cloud_covers_as_much_as_without(tmp_path, capsys):
         lit[name] = _lit(tmp_path / name / "points.png")
     capsys.readouterr()
     assert lit["plain"] > 0.1 and lit["vel"] > 0.6 * lit["plain"], lit
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        # --density 0 drew three empty panels
+        (["--density", "0"], "argument --density: expected a number > 0 (finite), got '0'"),
+        # options the input or model does not use were ignored (the same image)
+        (["--model", "splat", "--density", "500"], "--density: the absorption model's extinction scale"),
+        (["--model", "max_response", "--density", "5"], "--model max_response does not use it"),
+        (["--model", "splat", "--k", "1"], "--k: the k-buffer of the ray models"),
+        (["POINTS", "--threshold", "100"], "--threshold: a volume's voxels above it are active; "),
+        (["GAUSSIANS", "--threshold", "1"], "a file of Gaussians, drawn as they are (leave --threshold out)"),
+    ],
+)
+def test_gauss_refuses_options_that_do_not_apply(tmp_path, capsys, args, message):
+    write_ply(tmp_path / "p.ply", PointCloud(np.random.default_rng(0).normal(size=(50, 3))))
+    clvis.gaussians_from_volume(datasets.explosion((8, 8, 8))["volume"], lod="low").save(tmp_path / "g.npz")
+    files = {"POINTS": str(tmp_path / "p.ply"), "GAUSSIANS": str(tmp_path / "g.npz")}
+    args = [files.get(a, a) for a in args]
+    assert cli.main(["gauss", *args, "--size", "16x16", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("clvis gauss: error: ") and message in err and "Traceback" not in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_gauss_k_sizes_the_tile_renderers_buffer(tmp_path):
+    """--k sized only the BVH march's k-buffer: with the tiles (the default)
+    it was ignored; it sizes the tile renderer's pending hits now (the same
+    image)."""
+    from clvis.cli.gauss import render_panels
+
+    sv = clvis.SparseVolume.from_dense(datasets.explosion((16, 16, 16))["volume"], threshold=0.0)
+    imgs = [render_panels(["low"], sv, None, 24, 24, k=k, method="tiles")[0][2] for k in (3, None)]
+    assert imgs[0].stats["kp"] == 3 and imgs[1].stats["kp"] != 3
+    np.testing.assert_array_equal(imgs[0].rgba, imgs[1].rgba)

@@ -17,6 +17,7 @@ import numpy as np
 from ..errors import DataError
 from ..gauss.render import MAX_K
 from ..io.points import POINT_SUFFIXES
+from ..io.volumes import FORMATS as VOLUME_FORMATS
 from ._common import (
     SIZE_RULE,
     VIEWS_HELP,
@@ -107,7 +108,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         description=_HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    g.add_argument("file", nargs="?", help="a .vdb, .npy, Gaussians .npz or point cloud file")
+    g.add_argument(
+        "file",
+        nargs="?",
+        help=f"a volume ({', '.join(('.vdb', *VOLUME_FORMATS))}), a .npz of Gaussians "
+        f"(clvis.Gaussians.save) or a point cloud ({', '.join(_POINT_FORMATS)}); "
+        "see the description above (default: the embedded explosion)",
+    )
     g.add_argument(
         "--lod",
         type=_lods,
@@ -224,6 +231,9 @@ def _lods(text: str) -> list[str]:
     bad = [t for t in out if t not in LODS]
     if bad or not out:
         raise argparse.ArgumentTypeError(f"expected some of {', '.join(LODS)}, got {text!r}")
+    twice = sorted({t for t in out if out.count(t) > 1}, key=LODS.index)
+    if twice:  # each would be rendered and listed again, written over its own PNG
+        raise argparse.ArgumentTypeError(f"{', '.join(twice)} given more than once in {text!r}")
     return out
 
 
@@ -252,7 +262,6 @@ def _sources(args):
         raise CliError(f"{path}: no such file")
     regular_file(path)  # a directory, a FIFO: named as clvis render and clvis view name them
     from ..io import load_npz, npy_shape
-    from ..io.volumes import FORMATS as VOLUME_FORMATS
     from ..io.vtk import POINT_DATASETS, legacy_dataset
 
     name = path.name.lower()

@@ -353,3 +353,35 @@ def test_gauss_k_sizes_the_tile_renderers_buffer(tmp_path):
     imgs = [render_panels(["low"], sv, None, 24, 24, k=k, method="tiles")[0][2] for k in (3, None)]
     assert imgs[0].stats["kp"] == 3 and imgs[1].stats["kp"] != 3
     np.testing.assert_array_equal(imgs[0].rgba, imgs[1].rgba)
+
+
+def test_gauss_refuses_a_level_given_twice(tmp_path, capsys):
+    """--lod low,low rendered the low level twice and listed low.png twice."""
+    assert cli.main(["gauss", "--lod", "low,high,low", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "argument --lod: low given more than once in 'low,high,low'" in err, err
+
+
+def test_gauss_names_a_directory_as_render_does(tmp_path, capsys):
+    """A directory was 'unknown format (expected ...)'; gauss names it as
+    clvis render and clvis view do."""
+    (tmp_path / "adir").mkdir()
+    for command in ("gauss", "render"):
+        assert cli.main([command, str(tmp_path / "adir"), "--out", str(tmp_path / "o")]) == 2
+        assert capsys.readouterr().err == (
+            f"clvis {command}: error: {tmp_path / 'adir'}: not a regular file (a directory)\n"
+        )
+
+
+def test_gauss_file_help_names_every_format_it_reads(capsys):
+    """The positional FILE's help named .vdb, .npy, .npz and 'point cloud'
+    while the description lists every volume and point format: it names
+    them all now."""
+    from clvis.io.points import POINT_SUFFIXES
+    from clvis.io.volumes import FORMATS
+
+    assert cli.main(["gauss", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    usage = text.split("positional arguments:")[1].split("options:")[0]
+    for suffix in (".vdb", *FORMATS, *POINT_SUFFIXES):
+        assert f"{suffix}," in usage or f"{suffix})" in usage, suffix

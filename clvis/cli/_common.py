@@ -753,6 +753,47 @@ def finite_range(data: np.ndarray, source: str) -> tuple[float, float]:
     return float(vals.min()), float(vals.max())
 
 
+def frame_bulk(cloud, source: str, prog: str):
+    """(lo, hi, the points to frame, the mask of the points kept or None when
+    all are): the bounds of the bulk of a point cloud (clvis.camera.robust_bounds),
+    with a note on stderr, prefixed with the command `prog`, when stray points far
+    outside it are left out of the frame (clvis render and clvis gauss frame alike)."""
+    from ..camera import robust_bounds
+
+    try:
+        rb = robust_bounds(cloud.positions)
+    except ValueError:
+        raise CliError(f"{source}: no point has finite coordinates") from None
+    if rb.kept == rb.total:
+        return rb.lo, rb.hi, cloud.positions, None
+    stray_note(prog, rb.kept, rb.total, cloud.bounds(), (rb.lo, rb.hi), cloud.origin)
+    return rb.lo, rb.hi, cloud.positions[rb.inside], rb.inside
+
+
+def stray_note(prog: str, kept: int, total: int, full, bulk, o) -> None:
+    """The note on stderr when stray points are left out of the frame
+    (full, bulk: (lo, hi) relative to the origin `o`)."""
+    print(
+        f"{prog}: note: {total - kept:,} of {total:,} points lie far outside the rest "
+        f"(the cloud spans {world_box(full[0], full[1], o)}, its bulk {world_box(bulk[0], bulk[1], o)}); "
+        "the view frames the bulk (--eye/--target to look elsewhere)",
+        file=sys.stderr,
+    )
+
+
+def world_box(lo, hi, origin) -> str:
+    """Local (float32) bounds in the file's coordinates: each value at the
+    float32 precision it has (its shortest decimal) plus the origin, so
+    586.38 reads 586.38, not 586.3799933."""
+
+    def world(v, o):
+        return float(np.format_float_positional(np.float32(v), unique=True)) + float(o)
+
+    return " x ".join(
+        f"{world(a, o):.10g}..{world(b, o):.10g}" for a, b, o in zip(lo, hi, origin, strict=True)
+    )
+
+
 def add_cluster_options(parser: argparse.ArgumentParser) -> None:
     """--workers N / --scheduler ADDRESS: render on Dask workers (clvis.distributed)."""
     g = parser.add_mutually_exclusive_group()

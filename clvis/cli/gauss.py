@@ -17,6 +17,7 @@ import numpy as np
 from ..errors import DataError
 from ..gauss.render import MAX_K
 from ..io.points import POINT_SUFFIXES
+from ..io.volumes import FORMATS as VOLUME_FORMATS
 from ._common import (
     SIZE_RULE,
     VIEWS_HELP,
@@ -33,6 +34,7 @@ from ._common import (
     colormap_name,
     count,
     fit_box,
+    frame_bulk,
     progress_from_args,
     read_volume_file,
     real,
@@ -82,9 +84,10 @@ or a .vdb (float grid, needs the `vdb` extra: tinyvdb); a .npz of Gaussians
 (clvis.Gaussians.save); or a point cloud (.ply, .las, .laz, .e57, .pcd,
 .xyz/.txt/.csv, .vtp/.vtu/.vts, a legacy .vtk of POLYDATA, UNSTRUCTURED_GRID or STRUCTURED_GRID, or an
 (N, 3) .npy/.npz as
-`clvis render` reads them: one Gaussian per point, stretched along the
-velocity when the file has one, else sized by the 4 nearest neighbours,
-clamped to their 95th percentile). A cloud's
+`clvis render` reads them: one Gaussian per point; with a velocity, as wide
+as the points' median 4-nearest-neighbour distance and 4 times that along
+the velocity (NARVis's), else sized by the 4 nearest neighbours, clamped
+to their 95th percentile). A cloud's
 points keep their own colours when it has them; --attribute NAME colours them
 by an attribute (e.g. intensity) or z instead; without colours or --attribute,
 by the speed when there is a velocity, else by the elevation z.
@@ -105,7 +108,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         description=_HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    g.add_argument("file", nargs="?", help="a .vdb, .npy, Gaussians .npz or point cloud file")
+    g.add_argument(
+        "file",
+        nargs="?",
+        help=f"a volume ({', '.join(('.vdb', *VOLUME_FORMATS))}), a .npz of Gaussians "
+        f"(clvis.Gaussians.save) or a point cloud ({', '.join(_POINT_FORMATS)}); "
+        "see the description above (default: the embedded explosion)",
+    )
     g.add_argument(
         "--lod",
         type=_lods,
@@ -123,7 +132,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--threshold",
         type=real(),
         default=None,
-        help="voxels above this are active (default: > 0 for dense volumes)",
+        help="volumes: voxels above this are active (default: > 0 for dense volumes)",
     )
     g.add_argument(
         "--model",
@@ -141,9 +150,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     )
     g.add_argument(
         "--density",
-        type=real(0.0),
+        type=real(0.0, open_lo=True),
         default=None,
-        help="extinction scale of the absorption model (default 6 / volume diagonal)",
+        help="extinction scale of the absorption model, > 0 (default 6 / volume diagonal)",
     )
     g.add_argument(
         "--colormap",
@@ -182,7 +191,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--k",
         type=count(1, MAX_K),
         default=None,
-        help=f"k-buffer size, 1..{MAX_K} (default: the device profile's)",
+        help=f"k-buffer size of the ray models, 1..{MAX_K}: hits a round of the BVH march, the tile "
+        "renderer's pending hits (default: the device profile's; not --model splat, which blends "
+        "each tile's splats in depth order)",
     )
     add_output_options(g, "clvis-gauss", "empty pixels")
     add_orbit_options(g)
@@ -220,6 +231,9 @@ def _lods(text: str) -> list[str]:
     bad = [t for t in out if t not in LODS]
     if bad or not out:
         raise argparse.ArgumentTypeError(f"expected some of {', '.join(LODS)}, got {text!r}")
+    twice = sorted({t for t in out if out.count(t) > 1}, key=LODS.index)
+    if twice:  # each would be rendered and listed again, written over its own PNG
+        raise argparse.ArgumentTypeError(f"{', '.join(twice)} given more than once in {text!r}")
     return out
 
 
@@ -229,6 +243,7 @@ def _sources(args):
     from .. import datasets
     from ..gauss import Gaussians, SparseVolume, read_vdb
     from ..io import read_points
+    from ..io.files import regular_file
 
     lods = args.lod or list(LODS)
     if args.attribute is not None and not (args.file and args.file.lower().endswith(_POINT_FORMATS)):
@@ -245,8 +260,8 @@ def _sources(args):
     path = Path(args.file)
     if not path.exists():
         raise CliError(f"{path}: no such file")
+    regular_file(path)  # a directory, a FIFO: named as clvis render and clvis view name them
     from ..io import load_npz, npy_shape
-    from ..io.volumes import FORMATS as VOLUME_FORMATS
     from ..io.vtk import POINT_DATASETS, legacy_dataset
 
     name = path.name.lower()
@@ -297,15 +312,20 @@ def _sources(args):
             raise CliError(f"{path}: {e}") from None
         except ValueError as e:
             raise CliError(f"{path}: {e}" if args.attribute is None else f"--attribute: {e}") from None
+        # the view frames the bulk of the cloud, as clvis render's does (stray
+        # points far outside it left out, with the same note)
+        _, _, _, inside = frame_bulk(cloud, str(path), "clvis gauss")
+        args.frame = None if inside is None else g.subset(np.flatnonzero(inside))
         # what the colour bar names: the attribute, else what gaussians_from_points
-        # coloured by: the speed with a velocity, else the elevation, which is
-        # relative to the cloud's origin (a LAS file's lowest point)
-        oz = float(cloud.origin[2]) if cloud.origin is not None else 0.0
+        # coloured by: the speed with a velocity, else the elevation z. The
+        # Gaussians' z is relative to the cloud's origin (a LAS file's lowest
+        # point): --range takes and the bar and summary show the file's z (as
+        # clvis render's), the origin added back
+        by_z = args.attribute == "z" or (args.attribute is None and cloud.velocity is None)
+        args.value_offset = float(cloud.origin[2]) if by_z and cloud.origin is not None else 0.0
         # --eye/--target are in the file's coordinates (as clvis render and clvis view's text)
         args.camera_origin = cloud.origin
-        args.value_name = args.attribute or (
-            "speed" if cloud.velocity is not None else "z" if oz == 0.0 else f"z - {oz:.10g}"
-        )
+        args.value_name = args.attribute or ("speed" if cloud.velocity is not None else "z")
         return ["points"], None, g, str(path), None
     raise CliError(
         f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
@@ -314,9 +334,14 @@ def _sources(args):
 
 
 def _no_lod(args, path, what: str) -> None:
-    """--lod makes levels of detail from a volume: an error for other files."""
+    """--lod makes levels of detail from a volume and --threshold picks its
+    active voxels: an error for other files."""
     if args.lod is not None:
         raise CliError(f"--lod: levels of detail are made from a volume; {path} is {what} (leave --lod out)")
+    if args.threshold is not None:
+        raise CliError(
+            f"--threshold: a volume's voxels above it are active; {path} is {what} (leave --threshold out)"
+        )
 
 
 def _finite_points(cloud, args):
@@ -335,6 +360,16 @@ def cmd(args: argparse.Namespace) -> int:
     if args.model == "splat" and args.method == "bvh":  # the library's own words are its API's
         raise CliError(
             "--model splat (3D Gaussian Splatting's rasterizer) draws on tiles; leave --method bvh out"
+        )
+    if args.density is not None and args.model != "absorption":
+        raise CliError(
+            f"--density: the absorption model's extinction scale; --model {args.model} does not use it "
+            "(leave --density out)"
+        )
+    if args.k is not None and args.model == "splat":
+        raise CliError(
+            "--k: the k-buffer of the ray models (max_response, absorption); --model splat blends each "
+            "tile's splats in depth order (leave --k out)"
         )
     return _run(args)
 
@@ -371,15 +406,20 @@ def render_panels(
     value_range: tuple[float, float] | None = None,
     progress: Progress | None = None,
     timings: dict[str, float] | None = None,
+    frame: Gaussians | None = None,
 ) -> list[tuple[str, Gaussians, GaussianImage]]:
     """[(name, Gaussians, GaussianImage)] for each LOD of `sv` (or the given
     Gaussians), seen by camera(lo, hi) of their bounds (default: the fit view).
 
+    k: the ray models' k-buffer (the march's hits a round, the tile renderer's
+    pending hits; None: the device profile's);
     opacity: the transfer function's opacity points (default OPACITY_DEFAULT, a
     ramp that keeps low densities faint); value_range: the values it spans
     (default the Gaussians' min..max); progress: a Progress showing each panel's rays done;
     timings: a dict given "build_s", the wall time of the kernel build (the
-    first renderer and frame, on a tiny scene)."""
+    first renderer and frame, on a tiny scene); frame: the Gaussians the view
+    frames and the default density scales with (default: all; a point cloud's
+    bulk, its stray points left out, as clvis render frames it)."""
     from ..colormap import TransferFunction
     from ..gauss import GaussianRenderer, gaussians_from_volume
 
@@ -390,14 +430,15 @@ def render_panels(
     allg = [g for _, g in items if g.n]
     if not allg:
         raise CliError("no Gaussians: the volume has no active voxel")
+    framed = [frame] if frame is not None and frame.n else allg
     # the default density scales with the diagonal of every LOD's 1-sigma boxes
-    boxes = np.array([g.bounds(1.0) for g in allg])  # (LODs, lo / hi, xyz)
+    boxes = np.array([g.bounds(1.0) for g in framed])  # (LODs, lo / hi, xyz)
     diag = float(np.linalg.norm(boxes[:, 1].max(axis=0) - boxes[:, 0].min(axis=0))) or 1.0
     # the view frames the finest LOD's Gaussians out to FRAME_SIGMAS (what they
     # draw): every LOD's 1-sigma box, as before, cut the splats at the panel's
     # edges (a volume's corner, an L-shaped mask seen from the front); the
     # coarser LODs' few wide Gaussians would leave the data small
-    lo, hi = max(allg, key=lambda g: g.n).bounds(FRAME_SIGMAS)
+    lo, hi = max(framed, key=lambda g: g.n).bounds(FRAME_SIGMAS)
     cam = camera(lo, hi) if camera is not None else fit_box(lo, hi, width, height, _FIT)
     if value_range is None:
         vals = np.concatenate([g.values for g in allg])
@@ -413,7 +454,7 @@ def render_panels(
     t0 = time.perf_counter()
     with progress.stage("building kernels"):
         GaussianRenderer(
-            allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k, queue=queue, method=method
+            allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k, kp=k, queue=queue, method=method
         ).render(cam, 8, 8)
     if timings is not None:
         timings["build_s"] = time.perf_counter() - t0
@@ -421,7 +462,7 @@ def render_panels(
     for name, g in items:
         label = _Label(f"{name}: {g.n:,} Gaussians")
         with progress.stage(label):
-            r = GaussianRenderer(g, tf, model=model, density=dens, k=k, queue=queue, method=method)
+            r = GaussianRenderer(g, tf, model=model, density=dens, k=k, kp=k, queue=queue, method=method)
             label.text = f"{name}: rendering"
 
             def done(rays, total, label=label, name=name):
@@ -449,10 +490,13 @@ def _transfer(args, lods, sv, gaussians, samples):
     opacity = args.opacity
     if opacity is None and points:
         opacity = [(0.0, 1.0), (1.0, 1.0)]  # points are surfaces: fully opaque, whatever the value
+    # a point cloud coloured by z: --range is in the file's coordinates, the
+    # Gaussians' values relative to its origin (0 otherwise)
+    off = getattr(args, "value_offset", 0.0)
     if args.range is not None:
         kind, a, b = args.range
         if kind == "values":
-            return (a, b), opacity, f"range {a:g}..{b:g}"
+            return (a - off, b - off), opacity, f"range {a:.15g}..{b:.15g}"
         # percentiles of the volume's samples, else of the Gaussians' values
         if samples is not None:
             values = np.asarray(samples)
@@ -464,7 +508,7 @@ def _transfer(args, lods, sv, gaussians, samples):
         if not values.size:
             raise CliError("--range: the data has no finite value")
         lo, hi = (float(v) for v in np.percentile(values, [a, b]))
-        return (lo, hi), opacity, f"range p{a:g}..p{b:g} of the samples: {lo:.6g}..{hi:.6g}"
+        return (lo, hi), opacity, f"range p{a:g}..p{b:g} of the samples: {lo + off:.6g}..{hi + off:.6g}"
     if args.file is not None and samples is not None:
         # a scan: its background (the lower of Otsu's two classes) stays clear
         if not np.isfinite(samples).any():
@@ -496,11 +540,13 @@ def strip(
     transparent: bool = False,
     value_name: str = "value",
     value_range: tuple[float, float] | None = None,
+    value_offset: float = 0.0,
 ) -> np.ndarray:
     """render_panels' images side by side, each labelled with its LOD and
     Gaussian count, over a colour bar of the transfer function's range
     (`value_range`, default the values' min..max; none for Gaussians drawn in
-    their own colours)."""
+    their own colours), `value_offset` added to the bar's ends (a point
+    cloud's origin along z: the bar reads the file's coordinates)."""
     from .. import images
     from ..colormap import value_range as finite_range
 
@@ -513,10 +559,18 @@ def strip(
         title = f"{name} LOD" if name in LODS else name
         tile = images.label(_picture(img, transparent), f"{title}: {g.n:,} Gaussians")
         if getattr(g, "colors", None) is None and tile.shape[1] >= 2:  # --size 1xH: no room for a bar
-            bar = images.colorbar(colormap, vmin, vmax, tile.shape[1], title=value_name)
+            bar = images.colorbar(
+                colormap, vmin + value_offset, vmax + value_offset, tile.shape[1], title=value_name
+            )
             tile = np.concatenate([tile, bar], axis=0)
         tiles.append(tile)
     return images.compose(tiles)
+
+
+def bar_title(args) -> str:
+    """What the colour bar names: --attribute, else what a point cloud is
+    coloured by (speed or z), else "value"."""
+    return args.attribute or getattr(args, "value_name", None) or "value"
 
 
 def _run(args) -> int:
@@ -545,6 +599,7 @@ def _run(args) -> int:
         value_range=vr,
         progress=progress,
         timings=timings,
+        frame=getattr(args, "frame", None),
         camera=lambda lo, hi: camera_from_args(
             world_camera_args(args, getattr(args, "camera_origin", None)), lo, hi, width, height
         ),
@@ -554,16 +609,17 @@ def _run(args) -> int:
     files = []
     clear_targets(out, [f"{panel[0]}.png" for panel in panels] + ["gauss.png"])
     with progress.stage("writing PNGs"):
-        value_name = args.attribute or getattr(args, "value_name", None) or "value"
+        value_name = bar_title(args)
+        off = getattr(args, "value_offset", 0.0)
         for panel in panels:  # each labelled over its colour bar, as in gauss.png (--no-labels: bare)
             one = _picture(panel[2], args.transparent) if args.no_labels else None
             if one is None:
-                one = strip([panel], args.colormap, args.transparent, value_name, vr)
+                one = strip([panel], args.colormap, args.transparent, value_name, vr, off)
             files.append(images.save_png(out / f"{panel[0]}.png", one))
         files.append(
             images.save_png(
                 out / "gauss.png",
-                strip(panels, args.colormap, args.transparent, value_name, vr),
+                strip(panels, args.colormap, args.transparent, value_name, vr, off),
             )
         )
     if args.orbit is not None:  # the turntable (clvis.cli.orbit)

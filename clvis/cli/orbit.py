@@ -281,7 +281,7 @@ def gauss_orbit(
     layout) from N cameras around the Gaussians, through the transfer function
     gauss.png used (its opacity points and value range)."""
     from .. import images
-    from .gauss import _picture, render_panels, strip
+    from .gauss import _picture, bar_title, render_panels, strip
 
     w, h = args.size
 
@@ -300,6 +300,7 @@ def gauss_orbit(
             queue=queue,
             opacity=opacity,
             value_range=value_range,
+            frame=getattr(args, "frame", None),
             camera=lambda lo, hi: turn(
                 camera_from_args(world_camera_args(args, getattr(args, "camera_origin", None)), lo, hi, w, h),
                 lo,
@@ -310,7 +311,14 @@ def gauss_orbit(
         )
         if args.no_labels:
             return images.compose([_picture(img, args.transparent) for _, _, img in panels])
-        return strip(panels, args.colormap, args.transparent, args.attribute or "value", value_range)
+        return strip(
+            panels,
+            args.colormap,
+            args.transparent,
+            bar_title(args),
+            value_range,
+            getattr(args, "value_offset", 0.0),
+        )
 
     return write_orbit(out, args.orbit, frame, progress, args.movie, args.fps)
 

@@ -36,10 +36,13 @@ from ._common import (
     count,
     describe_camera,
     distributed_run,
+    frame_bulk,
     on_workers,
     progress_from_args,
     size,
+    stray_note,
     timed,
+    world_box,
     world_camera_args,
 )
 from .orbit import add_orbit_options, check_orbit_args
@@ -793,7 +796,7 @@ def _render_distributed(args, progress) -> int:
         with progress.stage("framing"):
             lo, hi, sample, bulk, finite = dr.framing()
         if bulk < finite:
-            _stray_note(bulk, finite, dr.bounds, (lo, hi), dr.origin)
+            stray_note("clvis render", bulk, finite, dr.bounds, (lo, hi), dr.origin)
         camera = camera_from_args(world_camera_args(args, dr.origin), lo, hi, width, height, points=sample)
         if attribute is None and args.range is not None:
             raise CliError(
@@ -902,46 +905,6 @@ def _attribute_on_workers(dr) -> str | None:
     return "intensity" if "intensity" in names else (names[0] if names else None)
 
 
-def _framing(cloud, source: str):
-    """(lo, hi, the points to frame): the bounds of the bulk of the cloud
-    (clvis.camera.robust_bounds), with a note on stderr when stray points far
-    outside it are left out of the frame."""
-    from ..camera import robust_bounds
-
-    try:
-        rb = robust_bounds(cloud.positions)
-    except ValueError:
-        raise CliError(f"{source}: no point has finite coordinates") from None
-    if rb.kept == rb.total:
-        return rb.lo, rb.hi, cloud.positions
-    _stray_note(rb.kept, rb.total, cloud.bounds(), (rb.lo, rb.hi), cloud.origin)
-    return rb.lo, rb.hi, cloud.positions[rb.inside]
-
-
-def _stray_note(kept: int, total: int, full, bulk, o) -> None:
-    """The note on stderr when stray points are left out of the frame
-    (full, bulk: (lo, hi) relative to the origin `o`)."""
-    print(
-        f"clvis render: note: {total - kept:,} of {total:,} points lie far outside the rest "
-        f"(the cloud spans {_box(full[0], full[1], o)}, its bulk {_box(bulk[0], bulk[1], o)}); "
-        "the view frames the bulk (--eye/--target to look elsewhere)",
-        file=sys.stderr,
-    )
-
-
-def _box(lo, hi, origin) -> str:
-    """Local (float32) bounds in the file's coordinates: each value at the
-    float32 precision it has (its shortest decimal) plus the origin, so
-    586.38 reads 586.38, not 586.3799933."""
-
-    def world(v, o):
-        return float(np.format_float_positional(np.float32(v), unique=True)) + float(o)
-
-    return " x ".join(
-        f"{world(a, o):.10g}..{world(b, o):.10g}" for a, b, o in zip(lo, hi, origin, strict=True)
-    )
-
-
 def _class_like(attribute: str) -> bool:
     """Whether an attribute's name says it holds class codes."""
     return attribute.lower() in ("classification", "class", "classes", "label")
@@ -1014,7 +977,7 @@ def _render(args, progress) -> int:
     # --post lidar takes the depth-filtered image: the filter is on (its default levels) unless given
     on = filter_on or args.post == "lidar"
     levels = args.depth_filter if args.depth_filter is not None else (LEVELS if on else 0)
-    lo, hi, framed = _framing(cloud, source)
+    lo, hi, framed, _ = frame_bulk(cloud, source, "clvis render")
     camera = camera_from_args(world_camera_args(args, cloud.origin), lo, hi, width, height, points=framed)
     point_size, spacing = args.point_size, None
     if point_size == "auto":
@@ -1182,7 +1145,7 @@ def _render(args, progress) -> int:
         sized = f", points {point_size}x{point_size} pixels"
     print(f"  view      {describe_camera(args)}, {width}x{height}{sized}")
     o = cloud.origin
-    print(f"  bounds    {_box(lo, hi, o)}" + (" (the file's coordinates)" if o.any() else ""))
+    print(f"  bounds    {world_box(lo, hi, o)}" + (" (the file's coordinates)" if o.any() else ""))
     if look.value_range is not None:
         a, b = (v + look.bar_offset for v in look.value_range)
         print(f"  range     {attribute} {a:.6g}..{b:.6g}")
@@ -1222,7 +1185,7 @@ def _render(args, progress) -> int:
     if covered == 0 and (args.eye is not None or args.target is not None):
         print(
             "clvis render: note: no point is in view of this camera; --eye and --target are in "
-            f"the file's coordinates (the points span {_box(lo, hi, cloud.origin)})",
+            f"the file's coordinates (the points span {world_box(lo, hi, cloud.origin)})",
             file=sys.stderr,
         )
     elif covered * _SPARSE_FRACTION < width * height and covered < n:

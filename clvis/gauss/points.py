@@ -33,6 +33,7 @@ from .gaussians import Gaussians
 
 __all__ = [
     "KNN_CLAMP_PERCENTILE",
+    "STRETCH",
     "MAX_KNN",
     "frames_along",
     "gaussians_from_points",
@@ -42,6 +43,9 @@ __all__ = [
 
 KNN_CLAMP_PERCENTILE = 95.0  # isotropic kNN sigmas are clamped to this percentile of them
 MAX_KNN = 64  # neighbours per point at most (the query holds N x k distances)
+#: how many times longer than across a velocity-elongated Gaussian is along
+#: the velocity by default: NARVis's (clvis.training.data.NARVIS_STRETCH)
+STRETCH = 4.0
 
 
 def _k(k) -> int:
@@ -169,7 +173,7 @@ def gaussians_from_points(
     cloud: PointCloud | Any,
     *,
     velocity: Any = None,
-    stretch: float = 250.0,
+    stretch: float = STRETCH,
     scale: Any = None,
     k: int = 4,
     values: Any = None,
@@ -185,7 +189,9 @@ def gaussians_from_points(
         the k nearest neighbours (1..MAX_KNN), clamped to the
         KNN_CLAMP_PERCENTILE-th percentile of those distances (see the module doc).
     scale : float or (N,) base sigma. For anisotropic Gaussians it defaults to
-        the median k-nearest-neighbour distance / stretch.
+        the median k-nearest-neighbour distance: across the flow a Gaussian
+        is as wide as the points are apart (NARVis's GR), `stretch` times
+        that along it.
     values : (N,) or an attribute name of the cloud; default (see color_by) the
         speed |velocity| with a velocity, else the elevation z.
     opacity : float or (N,) in [0, 1].
@@ -263,7 +269,9 @@ def gaussians_from_points(
             raise ValueError(f"velocity: expected shape ({n}, 3), got {vel.shape}")
         check_finite("velocity", vel)
         if scale is None:
-            base = np.float64(np.median(knn_mean_distance(positions, k))) / stretch if n else 0.0
+            # the cross-section keeps the point spacing (it was the spacing /
+            # stretch: needles 1/250 of the spacing thick, a blank picture)
+            base = np.float64(np.median(knn_mean_distance(positions, k))) if n else 0.0
             base = np.full(n, base)
         else:
             base = _per_point("scale", scale, n)

@@ -29,9 +29,10 @@ def _one_line_error(err, command):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["gauss", "--density", "-1"], "argument --density: expected a number >= 0 (finite), got '-1'"),
-        (["gauss", "--density", "nan"], "argument --density: expected a number >= 0 (finite), got 'nan'"),
+        (["gauss", "--density", "-1"], "argument --density: expected a number > 0 (finite), got '-1'"),
+        (["gauss", "--density", "nan"], "argument --density: expected a number > 0 (finite), got 'nan'"),
         (["gauss", "--k", "0"], "argument --k: expected a positive integer in 1..64, got '0'"),
+        (["gauss", "--density", "0"], "argument --density: expected a number > 0 (finite), got '0'"),
         (["gauss", "--threshold", "nan"], "argument --threshold: expected a number (finite), got 'nan'"),
         (["gauss", "--colormap", "nope"], "argument --colormap: unknown colormap 'nope'"),
         (["render", "--colormap", "viridiss"], "closest: viridis"),

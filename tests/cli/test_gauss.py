@@ -216,23 +216,64 @@ def test_gauss_progress_on_stderr(tmp_path, capsys):
     assert capsys.readouterr().err == ""  # not a terminal: no progress
 
 
-def test_gauss_names_what_a_clouds_colour_bar_shows(tmp_path, capsys):
-    # a cloud far from the origin, no colours, no velocity: coloured by its
-    # elevation relative to the cloud's origin, and the bar says so
+def _lit(path) -> float:
+    """The fraction of a --no-labels picture's pixels well above the background."""
+    with Image.open(path) as im:
+        a = np.asarray(im.convert("RGB")).astype(np.float64)
+    return float((np.abs(a - BACKGROUND).sum(axis=2) > 30).mean())
+
+
+def test_gauss_frames_the_bulk_of_a_cloud_with_stray_points(tmp_path, capsys):
+    """laspy's simple.las with 3 points moved to (0, 0, 0), 10^6 m away: the
+    view framed every Gaussian and points.png was background only; it frames
+    the bulk now, as clvis render does, with render's note (gauss's name)."""
+    cloud = clvis.read_points(Path(__file__).parents[1] / "data" / "laspy_simple.laz")
+    world = cloud.positions.astype(np.float64) + cloud.origin
+    np.save(tmp_path / "bulk.npy", world)
+    world[[5, 500, 1000]] = 0.0
+    np.save(tmp_path / "stray.npy", world)
+    small = ["--size", "80x60", "--no-labels"]
+    assert cli.main(["gauss", str(tmp_path / "stray.npy"), *small, "--out", str(tmp_path / "s")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("clvis gauss: note: 3 of 1,065 points lie far outside the rest (the cloud spans 0.")
+    assert "the view frames the bulk (--eye/--target to look elsewhere)" in err
+    assert cli.main(["gauss", str(tmp_path / "bulk.npy"), *small, "--out", str(tmp_path / "b")]) == 0
+    assert "note" not in capsys.readouterr().err
+    stray, bulk = _lit(tmp_path / "s" / "points.png"), _lit(tmp_path / "b" / "points.png")
+    assert bulk > 0.2 and stray > 0.5 * bulk, (stray, bulk)  # was 0 of the frame
+
+
+def test_gauss_colours_by_z_in_the_files_coordinates(tmp_path, capsys, monkeypatch):
+    """A cloud far from the origin, no colours, no velocity: coloured by its
+    z, which --range, the summary and the colour bar give in the file's
+    coordinates (they were relative to the cloud's internal origin: "z -
+    1000000000", and --range 1000000000.5,1000000001.5 saturated every point)."""
+    from clvis import images
+
+    bars = []
+    colorbar = images.colorbar
+    monkeypatch.setattr(images, "colorbar", lambda *a, **k: bars.append(a[1:3]) or colorbar(*a, **k))
     rng = np.random.default_rng(3)
-    pos = rng.random((400, 3)) * [10, 10, 2] + [0, 0, 1e9]
-    np.save(tmp_path / "far.npy", pos)
-    assert (
-        cli.main(["gauss", str(tmp_path / "far.npy"), "--size", "48x48", "--out", str(tmp_path / "o")]) == 0
-    )
-    out = capsys.readouterr().out
-    assert "colour    z - 1000000000 through inferno" in out, out
-    np.save(tmp_path / "near.npy", pos - [0, 0, 1e9])
-    assert (
-        cli.main(["gauss", str(tmp_path / "near.npy"), "--size", "48x48", "--out", str(tmp_path / "n")]) == 0
-    )
-    out = capsys.readouterr().out
-    assert ("colour    z through inferno" in out) or ("colour    z - " in out), out
+    pos = rng.random((400, 3)) * [10, 10, 2]
+    np.save(tmp_path / "far.npy", pos + [0, 0, 1e9])
+    np.save(tmp_path / "near.npy", pos)
+    small = ["--size", "48x48", "--no-labels"]
+    for name, rng_ in (("far", "1000000000.5,1000000001.5"), ("near", "0.5,1.5")):
+        args = ["gauss", str(tmp_path / f"{name}.npy"), *small, "--range", rng_, "-o", str(tmp_path / name)]
+        assert cli.main(args) == 0
+        out = capsys.readouterr().out
+        assert "colour    z through inferno" in out, out
+        assert f"transfer  range {rng_.replace(',', '..')}" in out, out
+    assert bars == [(1000000000.5, 1000000001.5), (0.5, 1.5)]  # gauss.png's (--no-labels: not points.png)
+    # the same picture: the range is the same z in both files' coordinates
+    with Image.open(tmp_path / "far" / "points.png") as a, Image.open(tmp_path / "near" / "points.png") as b:
+        assert np.abs(np.asarray(a).astype(int) - np.asarray(b)).mean() < 1
+    # percentiles are of the z's, shown in the file's coordinates too
+    args = ["gauss", str(tmp_path / "far.npy"), *small, "--range", "p0,p100", "--out", str(tmp_path / "p")]
+    assert cli.main(args) == 0
+    (lo, hi), z = bars[-1], pos[:, 2] + 1e9
+    assert abs(lo - z.min()) < 1e-3 and abs(hi - z.max()) < 1e-3, (lo, hi)
+    assert "of the samples: 1e+09" in capsys.readouterr().out
 
 
 def test_gauss_all_nan_volume_names_the_file(tmp_path, capsys):
@@ -258,3 +299,89 @@ def test_gauss_frames_the_whole_volume(tmp_path, capsys):
     assert lit.mean() > 0.15  # the L is drawn
     border = np.concatenate([lit[0], lit[-1], lit[:, 0], lit[:, -1]])
     assert border.mean() < 0.05, border.mean()  # and not cut at the panel's edges (was 0.60)
+
+
+def test_gauss_velocity_cloud_covers_as_much_as_without(tmp_path, capsys):
+    """5,000 points with a random velocity: their Gaussians were needles 1/250
+    of the point spacing thick (almost nothing drawn); now as wide as the
+    spacing across the velocity, they cover about what the same points
+    without a velocity do."""
+    rng = np.random.default_rng(7)
+    pos = rng.normal(size=(5000, 3))
+    write_ply(tmp_path / "vel.ply", PointCloud(pos, velocity=rng.normal(size=(5000, 3))))
+    write_ply(tmp_path / "plain.ply", PointCloud(pos))
+    lit = {}
+    for name in ("vel", "plain"):
+        args = ["gauss", str(tmp_path / f"{name}.ply"), "--size", "80x60", "--no-labels"]
+        assert cli.main([*args, "--out", str(tmp_path / name)]) == 0
+        lit[name] = _lit(tmp_path / name / "points.png")
+    capsys.readouterr()
+    assert lit["plain"] > 0.1 and lit["vel"] > 0.6 * lit["plain"], lit
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        # --density 0 drew three empty panels
+        (["--density", "0"], "argument --density: expected a number > 0 (finite), got '0'"),
+        # options the input or model does not use were ignored (the same image)
+        (["--model", "splat", "--density", "500"], "--density: the absorption model's extinction scale"),
+        (["--model", "max_response", "--density", "5"], "--model max_response does not use it"),
+        (["--model", "splat", "--k", "1"], "--k: the k-buffer of the ray models"),
+        (["POINTS", "--threshold", "100"], "--threshold: a volume's voxels above it are active; "),
+        (["GAUSSIANS", "--threshold", "1"], "a file of Gaussians, drawn as they are (leave --threshold out)"),
+    ],
+)
+def test_gauss_refuses_options_that_do_not_apply(tmp_path, capsys, args, message):
+    write_ply(tmp_path / "p.ply", PointCloud(np.random.default_rng(0).normal(size=(50, 3))))
+    clvis.gaussians_from_volume(datasets.explosion((8, 8, 8))["volume"], lod="low").save(tmp_path / "g.npz")
+    files = {"POINTS": str(tmp_path / "p.ply"), "GAUSSIANS": str(tmp_path / "g.npz")}
+    args = [files.get(a, a) for a in args]
+    assert cli.main(["gauss", *args, "--size", "16x16", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("clvis gauss: error: ") and message in err and "Traceback" not in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_gauss_k_sizes_the_tile_renderers_buffer(tmp_path):
+    """--k sized only the BVH march's k-buffer: with the tiles (the default)
+    it was ignored; it sizes the tile renderer's pending hits now (the same
+    image)."""
+    from clvis.cli.gauss import render_panels
+
+    sv = clvis.SparseVolume.from_dense(datasets.explosion((16, 16, 16))["volume"], threshold=0.0)
+    imgs = [render_panels(["low"], sv, None, 24, 24, k=k, method="tiles")[0][2] for k in (3, None)]
+    assert imgs[0].stats["kp"] == 3 and imgs[1].stats["kp"] != 3
+    np.testing.assert_array_equal(imgs[0].rgba, imgs[1].rgba)
+
+
+def test_gauss_refuses_a_level_given_twice(tmp_path, capsys):
+    """--lod low,low rendered the low level twice and listed low.png twice."""
+    assert cli.main(["gauss", "--lod", "low,high,low", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "argument --lod: low given more than once in 'low,high,low'" in err, err
+
+
+def test_gauss_names_a_directory_as_render_does(tmp_path, capsys):
+    """A directory was 'unknown format (expected ...)'; gauss names it as
+    clvis render and clvis view do."""
+    (tmp_path / "adir").mkdir()
+    for command in ("gauss", "render"):
+        assert cli.main([command, str(tmp_path / "adir"), "--out", str(tmp_path / "o")]) == 2
+        assert capsys.readouterr().err == (
+            f"clvis {command}: error: {tmp_path / 'adir'}: not a regular file (a directory)\n"
+        )
+
+
+def test_gauss_file_help_names_every_format_it_reads(capsys):
+    """The positional FILE's help named .vdb, .npy, .npz and 'point cloud'
+    while the description lists every volume and point format: it names
+    them all now."""
+    from clvis.io.points import POINT_SUFFIXES
+    from clvis.io.volumes import FORMATS
+
+    assert cli.main(["gauss", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    usage = text.split("positional arguments:")[1].split("options:")[0]
+    for suffix in (".vdb", *FORMATS, *POINT_SUFFIXES):
+        assert f"{suffix}," in usage or f"{suffix})" in usage, suffix

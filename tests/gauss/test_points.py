@@ -32,6 +32,24 @@ def test_points_anisotropic():
     assert np.isclose(u @ cov @ u, 2.5**2, rtol=1e-4)
 
 
+def test_points_anisotropic_default_keeps_the_point_spacing_across():
+    """Without a scale, a velocity-elongated Gaussian is as wide as the median
+    4-NN distance across the flow and STRETCH (NARVis's) times that along it;
+    it was the spacing along and the spacing / 250 across: needles that left
+    `clvis gauss` of a velocity cloud almost blank."""
+    from clvis.gauss.points import STRETCH
+    from clvis.training.data import NARVIS_STRETCH
+
+    rng = np.random.default_rng(5)
+    pos = rng.uniform(size=(400, 3))
+    g = gaussians_from_points(pos, velocity=rng.normal(size=(400, 3)))
+    spacing = float(np.median(knn_mean_distance(pos)))
+    assert STRETCH == NARVIS_STRETCH == 4.0
+    np.testing.assert_allclose(g.scales, np.tile([STRETCH * spacing, spacing, spacing], (400, 1)), rtol=1e-5)
+    g8 = gaussians_from_points(pos, velocity=rng.normal(size=(400, 3)), stretch=8)
+    np.testing.assert_allclose(g8.scales[:, 0], 8 * spacing, rtol=1e-5)
+
+
 def test_points_isotropic_knn():
     from scipy.spatial import cKDTree
 

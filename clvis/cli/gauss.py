@@ -248,6 +248,8 @@ def _sources(args):
     lods = args.lod or list(LODS)
     if args.attribute is not None and not (args.file and args.file.lower().endswith(_POINT_FORMATS)):
         raise CliError("--attribute is for point clouds (.ply, .las, .laz, .npy, .npz of points)")
+    if args.array is not None and not (args.file and args.file.lower().endswith((".vti", ".vtr", ".vtk"))):
+        raise CliError("--array picks a data array of a VTK volume FILE (.vti, .vtr, .vtk)")
     if args.file is None:
         e = datasets.explosion()
         sv = SparseVolume.from_dense(
@@ -288,6 +290,8 @@ def _sources(args):
             raise CliError(
                 f"{path}: expected a 3-D volume [z, y, x] or an (N, 3) point array, got shape {shape}"
             )
+    if args.array is not None and not volume:
+        raise CliError(f"--array picks a data array of a VTK volume file; {path} is a point set")
     if volume:
         data, spacing, origin = read_volume_file(args, path)
         sv = SparseVolume.from_dense(

@@ -385,3 +385,18 @@ def test_gauss_file_help_names_every_format_it_reads(capsys):
     usage = text.split("positional arguments:")[1].split("options:")[0]
     for suffix in (".vdb", *FORMATS, *POINT_SUFFIXES):
         assert f"{suffix}," in usage or f"{suffix})" in usage, suffix
+
+
+def test_array_is_for_a_vtk_volume_file(tmp_path, capsys):
+    """--array picks a VTK volume's array (a name the file lacks is listed);
+    without a file, or with a point set, it is refused, not ignored."""
+    vtk_uniform = Path(__file__).resolve().parents[1] / "data" / "pyvista_uniform.vtk"
+    out = ["--size", "64x48", "--out", str(tmp_path / "o")]
+    assert cli.main(["gauss", str(vtk_uniform), "--array", "nope", *out]) == 2
+    assert "no point SCALARS 'nope'" in capsys.readouterr().err
+    assert cli.main(["gauss", "--array", "v", *out]) == 2
+    assert "--array picks a data array of a VTK volume FILE" in capsys.readouterr().err
+    pts = tmp_path / "p.npy"
+    np.save(pts, np.random.default_rng(0).random((50, 3)))
+    assert cli.main(["gauss", str(pts), "--array", "v", *out]) == 2
+    assert "--array picks a data array of a VTK volume" in capsys.readouterr().err

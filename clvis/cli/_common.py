@@ -753,6 +753,31 @@ def finite_range(data: np.ndarray, source: str) -> tuple[float, float]:
     return float(vals.min()), float(vals.max())
 
 
+#: what --attribute may name beside a cloud's attributes: its per-point size
+#: (PointCloud.radius: a file's "radius" array) and its velocity's magnitude
+PLANE_ATTRIBUTES = ("radius", "speed")
+
+
+def plane_attribute(cloud, name: str | None) -> None:
+    """Make --attribute `name` colour by the cloud's radius or speed: the
+    readers keep a file's "radius" array (and "velocity") as the cloud's
+    planes, not as attributes, so --attribute radius found nothing. Adds
+    it to cloud.attributes when the cloud has the plane and no attribute of
+    that name."""
+    if name not in PLANE_ATTRIBUTES or name in cloud.attributes:
+        return
+    if name == "radius" and cloud.radius is not None:
+        cloud.attributes["radius"] = np.asarray(cloud.radius, np.float32)
+    elif name == "speed" and cloud.velocity is not None:
+        cloud.attributes["speed"] = np.linalg.norm(np.asarray(cloud.velocity, np.float32), axis=1)
+
+
+def plane_names(cloud) -> list[str]:
+    """The names plane_attribute makes for this cloud (it has the plane)."""
+    have = {"radius": cloud.radius is not None, "speed": cloud.velocity is not None}
+    return [k for k in PLANE_ATTRIBUTES if have[k] and k not in cloud.attributes]
+
+
 def frame_bulk(cloud, source: str, prog: str):
     """(lo, hi, the points to frame, the mask of the points kept or None when
     all are): the bounds of the bulk of a point cloud (clvis.camera.robust_bounds),

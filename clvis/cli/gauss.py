@@ -35,6 +35,8 @@ from ._common import (
     count,
     fit_box,
     frame_bulk,
+    plane_attribute,
+    plane_names,
     progress_from_args,
     read_volume_file,
     real,
@@ -308,6 +310,12 @@ def _sources(args):
         cloud = _finite_points(read_points(path), args)
         if len(cloud) == 0:
             raise CliError(f"{path}: the file holds no points")
+        plane_attribute(cloud, args.attribute)  # --attribute radius / speed: the cloud's planes
+        if args.attribute not in (None, "rgb", "z") and args.attribute not in cloud.attributes:
+            have = ["rgb"] * (cloud.colors is not None) + ["z", *cloud.attributes, *plane_names(cloud)]
+            raise CliError(
+                f"--attribute: no attribute {args.attribute!r} in {path}; it has {', '.join(have)}"
+            )
         try:
             g = gaussians_from_points(
                 cloud, velocity="cloud" if cloud.velocity is not None else None, color_by=args.attribute

@@ -38,6 +38,8 @@ from ._common import (
     distributed_run,
     frame_bulk,
     on_workers,
+    plane_attribute,
+    plane_names,
     progress_from_args,
     size,
     stray_note,
@@ -223,7 +225,9 @@ def _pick_attribute(cloud, requested: str | None, default: str | None, source: s
     over: it shows nothing."""
     names = list(cloud.attributes)
     if requested is not None:
+        plane_attribute(cloud, requested)
         if requested not in cloud.attributes and requested not in _COORDINATES:
+            names += plane_names(cloud)
             raise CliError(
                 f"no attribute {requested!r} in {source}; it has "
                 f"{', '.join(names) + ' and ' if names else ''}the coordinates x, y, z"
@@ -699,13 +703,13 @@ def _load_tiles(args, progress):
                 raise CliError(f"{f}: no such file") from None
             except IsADirectoryError:
                 raise CliError(f"{f}: is a folder, not a point cloud file") from None
-    names = [k for k in clouds[0].attributes if all(k in c.attributes for c in clouds[1:])]
     if args.attribute is not None:
         for f, c in zip(args.file, clouds, strict=True):
+            plane_attribute(c, args.attribute)
             if args.attribute not in c.attributes and args.attribute not in _COORDINATES:
-                raise CliError(
-                    f"{f}: no attribute {args.attribute!r}; it has {', '.join(c.attributes) or 'none'}"
-                )
+                have = [*c.attributes, *plane_names(c)]
+                raise CliError(f"{f}: no attribute {args.attribute!r}; it has {', '.join(have) or 'none'}")
+    names = [k for k in clouds[0].attributes if all(k in c.attributes for c in clouds[1:])]
     for k in names:
         kinds = {str(c.attributes[k].dtype) for c in clouds}
         if len(kinds) > 1:

@@ -382,3 +382,33 @@ def test_colour_names_are_the_css_ones_beside_clvis_own():
     for bad in ("mauve-ish", "#ff", "#12345", "300,0,0", "#ffffff80"):
         with pytest.raises(argparse.ArgumentTypeError, match="expected a colour"):
             _colour(bad)
+
+
+def test_attribute_radius_and_speed_colour_by_the_clouds_planes(tmp_path, capsys):
+    """A file's "radius" and "velocity" arrays become the cloud's planes, not
+    attributes: --attribute radius and --attribute speed (|velocity|)
+    colour by them in render and gauss; a missing name lists them."""
+    from clvis import cli
+    from clvis.io import PointCloud, save_npz
+
+    rng = np.random.default_rng(4)
+    n = 400
+    path = tmp_path / "planes.npz"
+    save_npz(
+        path, PointCloud(rng.random((n, 3)), radius=rng.random(n) * 0.05, velocity=rng.normal(size=(n, 3)))
+    )
+    for name in ("radius", "speed"):
+        rc, out, err = _render(capsys, str(path), "--attribute", name, "--out", tmp_path / name, *SMALL)
+        assert rc == 0 and f"colored by {name}" in out, (out, err)
+        assert (tmp_path / name / f"attribute-{name}.png").is_file()
+        assert (
+            cli.main(
+                ["gauss", str(path), "--attribute", name, "--size", "64x48", "--out", str(tmp_path / "g")]
+            )
+            == 0
+        )
+        assert f"colour    {name} through" in capsys.readouterr().out
+    rc, out, err = _render(capsys, str(path), "--attribute", "velocity", "--out", tmp_path / "v", *SMALL)
+    assert rc == 2 and "no attribute 'velocity'" in err and "radius, speed" in err
+    assert cli.main(["gauss", str(path), "--attribute", "nope", "--out", str(tmp_path / "g")]) == 2
+    assert "--attribute: no attribute 'nope' in" in capsys.readouterr().err

@@ -128,7 +128,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--attribute",
         default=None,
         metavar="NAME",
-        help="point clouds: colour by this attribute (or z) instead of the cloud's rgb",
+        help="point clouds: colour by this attribute (or z, or the points' radius or speed where "
+        "the file has them) instead of the cloud's rgb",
     )
     g.add_argument(
         "--threshold",

@@ -1305,7 +1305,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     r.add_argument(
         "--attribute",
         metavar="NAME",
-        help="color by this attribute, or by a coordinate: x, y, z (default: temperature "
+        help="color by this attribute, by a coordinate: x, y, z, or by the points' radius or speed "
+        "(|velocity|) where the file has them (default: temperature "
         "for the hurricane, classification for the terrain; for a file its colors "
         "when they vary, else intensity, else the first attribute that varies, else z)",
     )

@@ -1071,6 +1071,14 @@ def _render(args, progress) -> int:
                 "ones have)"
             )
         net = post.load(post_name, queue=q)
+        if args.transparent or args.background is not None:
+            # the network predicts colour alone (no coverage): what is empty cannot be told apart
+            print(
+                f"clvis render: note: post-{post_name}.png is the {post_name} network's opaque frame over "
+                f"black (it predicts no coverage); --{'transparent' if args.transparent else 'background'} "
+                "applies to the other pictures",
+                file=sys.stderr,
+            )
         if args.post_guard is not None:
             net.guard = args.post_guard
         if post_name == "narvis" and "radius" in net.planes:

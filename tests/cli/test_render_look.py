@@ -412,3 +412,14 @@ def test_attribute_radius_and_speed_colour_by_the_clouds_planes(tmp_path, capsys
     assert rc == 2 and "no attribute 'velocity'" in err and "radius, speed" in err
     assert cli.main(["gauss", str(path), "--attribute", "nope", "--out", str(tmp_path / "g")]) == 2
     assert "--attribute: no attribute 'nope' in" in capsys.readouterr().err
+
+
+def test_post_panel_over_black_is_said_with_background(tmp_path, capsys):
+    """The LiDAR network predicts colour alone: with --background its panel
+    stays over black, and clvis render says so rather than ignore it."""
+    rc, out, err = _render(
+        capsys, SIMPLE, "--post", "lidar", "--background", "white", "--out", tmp_path, *SMALL
+    )
+    assert rc == 0, err
+    assert "note: post-lidar.png is the lidar network's opaque frame over black" in err
+    assert "--background applies to the other pictures" in err

@@ -283,7 +283,9 @@ def _main(argv: list[str]) -> int:
                 return _unknown_command(p, tok, list(commands))
             break
     try:
-        args = p.parse_args(argv)
+        args, extra = p.parse_known_args(argv)
+        if extra:  # said by the command's parser (argparse's top level printed clvis's usage)
+            _unrecognized(commands.get(args.cmd) or p, extra)
         if args.cmd is None:  # only options, such as `clvis --verbose`
             p.print_help()
             return 0
@@ -293,6 +295,21 @@ def _main(argv: list[str]) -> int:
     except BrokenPipeError:  # `clvis info | head -1`: the reader has all it wanted
         _quiet_stdout()
         return 141  # 128 + SIGPIPE, as a pipeline reports a process it stopped
+
+
+def _unrecognized(parser, extra: list[str]) -> None:
+    """The command's one-line error for words it does not take, with the
+    nearest option for a misspelt one (--sise: --size); exits 2."""
+    import difflib
+
+    options = [s for s in parser._option_string_actions if s.startswith("--")]
+    hints = []
+    for word in extra:
+        if word.startswith("--"):
+            near = difflib.get_close_matches(word.split("=", 1)[0], options, n=1, cutoff=0.6)
+            if near:
+                hints.append(f"{word.split('=', 1)[0]}: did you mean {near[0]}?")
+    parser.error(f"unrecognized arguments: {' '.join(extra)}" + (f" ({'; '.join(hints)})" if hints else ""))
 
 
 def _quiet_stdout():

@@ -160,6 +160,18 @@ def test_unknown_command(capsys, tmp_path):
     assert rc == 2 and f"a file goes after the command: clvis view {brain}, or clvis iso|gauss {brain}" in err
 
 
+def test_unrecognized_arguments_are_the_commands_error(capsys, tmp_path):
+    """A word the command does not take is its one-line error (not clvis's
+    top-level usage), with the nearest option for a misspelt one."""
+    rc, _, err = _main(capsys, "render", "--sise", "10x10")
+    assert rc == 2 and err.startswith("clvis render: error: unrecognized arguments: --sise"), err
+    assert "did you mean --size?" in err and "usage:" not in err
+    rc, _, err = _main(capsys, "iso", "a.npy", "b.npy")
+    assert rc == 2 and err.startswith("clvis iso: error: unrecognized arguments: b.npy"), err
+    rc, _, err = _main(capsys, "--bogus")
+    assert rc == 2 and "clvis: error: unrecognized arguments: --bogus" in err
+
+
 def test_broken_pipe_is_quiet(capsys, monkeypatch):
     class ClosedPipe(io.StringIO):
         def write(self, text):

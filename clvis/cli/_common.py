@@ -819,6 +819,10 @@ def world_box(lo, hi, origin) -> str:
     )
 
 
+#: --connect-timeout's default (seconds)
+CONNECT_TIMEOUT = 10.0
+
+
 def add_cluster_options(parser: argparse.ArgumentParser) -> None:
     """--workers N / --scheduler ADDRESS: render on Dask workers (clvis.distributed)."""
     g = parser.add_mutually_exclusive_group()
@@ -836,8 +840,8 @@ def add_cluster_options(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--connect-timeout",
-        type=float,
-        default=10.0,
+        type=real(0, open_lo=True, what="seconds"),
+        default=None,
         metavar="SECONDS",
         help="with --scheduler: seconds to reach it (a refused connection fails at once; default 10)",
     )
@@ -851,6 +855,8 @@ def cluster_client(args) -> tuple[object, int]:
         raise CliError(
             "--workers and --scheduler need dask.distributed: pip install 'clvis[distributed]'"
         ) from None
+    if args.connect_timeout is None:
+        args.connect_timeout = CONNECT_TIMEOUT
     if args.scheduler is not None:
         return args.scheduler, 1
     return None, args.workers
@@ -885,5 +891,10 @@ def on_workers(name: str, fn, *args) -> int:
 
 
 def distributed_run(args) -> bool:
-    """True when --workers or --scheduler asks for Dask workers."""
+    """True when --workers or --scheduler asks for Dask workers; a CliError
+    for --connect-timeout without --scheduler (it would be ignored)."""
+    if getattr(args, "connect_timeout", None) is not None and getattr(args, "scheduler", None) is None:
+        raise CliError(
+            "--connect-timeout: the wait for a --scheduler; add --scheduler ADDRESS or leave it out"
+        )
     return getattr(args, "workers", None) is not None or getattr(args, "scheduler", None) is not None

@@ -94,12 +94,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     p.add_argument(
         "--points",
         type=count(1, 2**31),
-        default=2_000_000,
+        default=None,
         metavar="N",
-        help="points of an embedded cloud (default 2000000)",
+        help=f"points of an embedded cloud (default {POINTS:,})",
     )
     p.add_argument("--isovalue", type=real(), default=None, help="default: 0.5 embedded, else Otsu's")
-    p.add_argument("--rate", type=count(1, 32), default=8, help="ZFP bits per value (default 8)")
+    p.add_argument("--rate", type=count(1, 32), default=None, help=f"ZFP bits per value (default {RATE})")
     p.add_argument("--host", default="127.0.0.1", help="the address to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=count(0, 65535), default=0, help="default 0: a free port")
     p.add_argument("--no-browser", action="store_true", help="print the URL only")
@@ -132,6 +132,22 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     return p
 
 
+#: --points' and --rate's defaults
+POINTS = 2_000_000
+RATE = 8
+
+
+def _fits(args: argparse.Namespace, volume: bool, what: str) -> None:
+    """A CliError for the options the scene would ignore: --points beside a
+    volume or a point file, --isovalue and --rate beside a point cloud."""
+    if args.points is not None and (volume or args.file is not None):
+        kind = "a volume" if volume else "read whole"
+        raise CliError(f"--points: the size of an embedded point cloud; {what} is {kind}")
+    given = [f for f, v in (("--isovalue", args.isovalue), ("--rate", args.rate)) if v is not None]
+    if given and not volume:
+        raise CliError(f"{' and '.join(given)}: for a volume's isosurface; {what} is a point cloud")
+
+
 def _is_volume(path: Path) -> bool:
     name = path.name.lower()
     if name.endswith(_POINT_SUFFIXES):
@@ -156,11 +172,13 @@ def load_scene(args: argparse.Namespace) -> Scene:
         path = Path(args.file)
         if not path.exists():
             raise CliError(f"{path}: no such file")
-        if _is_volume(path):
+        volume = _is_volume(path)
+        _fits(args, volume, str(path))
+        if volume:
             data, spacing, origin = read_volume_file(args, path)
             check_iso_volume(data, str(path))
             iso = args.isovalue if args.isovalue is not None else otsu_level(data)
-            return VolumeScene(data, spacing, origin, iso, args.rate, description=str(path))
+            return VolumeScene(data, spacing, origin, iso, args.rate or RATE, description=str(path))
         from .. import read_points
 
         if args.array is not None:
@@ -170,11 +188,12 @@ def load_scene(args: argparse.Namespace) -> Scene:
     if args.array is not None:
         raise CliError("--array picks a data array of a VTK volume FILE (.vti, .vtr, .vtk)")
     name = args.dataset or "hurricane"
+    _fits(args, name not in _POINT_SETS, f"the embedded {name}")
     if name in _POINT_SETS:
         from .. import PointCloud
 
-        check_embedded_points(name, args.points)
-        d = getattr(datasets, name)(args.points)
+        check_embedded_points(name, args.points or POINTS)
+        d = getattr(datasets, name)(args.points or POINTS)
         cloud = PointCloud(
             d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"]
         )
@@ -187,7 +206,7 @@ def load_scene(args: argparse.Namespace) -> Scene:
         iso = 0.5
     iso = args.isovalue if args.isovalue is not None else iso
     return VolumeScene(
-        d["volume"], d["spacing"], d["origin"], iso, args.rate, description=f"the embedded {name}"
+        d["volume"], d["spacing"], d["origin"], iso, args.rate or RATE, description=f"the embedded {name}"
     )
 
 
@@ -209,7 +228,9 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
         path = Path(args.file)
         if not path.exists():
             raise CliError(f"{path}: no such file")
-        if not _is_volume(path):
+        volume = _is_volume(path)
+        _fits(args, volume, str(path))
+        if not volume:
             try:
                 return DaskPointScene([str(path)], client, description=str(path), **common)
             except OSError as e:
@@ -226,11 +247,12 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
         what, iso, vrange, origin = str(path), args.isovalue, None, (0.0, 0.0, 0.0)
     else:
         name = args.dataset or "hurricane"
+        _fits(args, name not in _POINT_SETS, f"the embedded {name}")
         if name in _POINT_SETS:
             import dask.array as da
 
-            check_embedded_points(name, args.points)  # made here, then split over the workers
-            d = getattr(datasets, name)(args.points)
+            check_embedded_points(name, args.points or POINTS)  # made here, then split over the workers
+            d = getattr(datasets, name)(args.points or POINTS)
             parts = max(1, workers)
             chunk = -(-len(d["positions"]) // parts)
 
@@ -265,7 +287,7 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
             isovalue=iso,
             vrange=vrange,
             description=what,
-            rate=args.rate,
+            rate=args.rate or RATE,
             spacing=spacing,
             origin=origin,
             brick=args.brick,

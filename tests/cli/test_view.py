@@ -144,3 +144,18 @@ def test_ctrl_c_stops_the_viewer_with_one_line_and_status_0(tmp_path):
         proc.kill()
     assert proc.returncode == 0, err
     assert err.strip().splitlines()[-1] == "clvis view: stopped" and "interrupted" not in err
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--dataset", "marschner-lobb", "--points", "5"], "--points: the size of an embedded point cloud"),
+        (["--dataset", "hurricane", "--isovalue", "3"], "--isovalue: for a volume's isosurface"),
+        (["--dataset", "hurricane", "--rate", "4"], "--rate: for a volume's isosurface"),
+        (["--connect-timeout", "3"], "--connect-timeout: the wait for a --scheduler"),
+    ],
+)
+def test_options_the_scene_would_ignore_are_refused(capsys, args, message):
+    """Options that the chosen scene does not use are an error, not ignored."""
+    assert cli.main(["view", *args, "--measure", "points", "--no-browser"]) == 2
+    assert message in capsys.readouterr().err

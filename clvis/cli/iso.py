@@ -113,7 +113,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         description=_HELP,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("file", nargs="?", help="a .raw (Open SciVis naming), .npy or NIfTI volume")
+    p.add_argument(
+        "file",
+        nargs="?",
+        help="a volume: .raw (Open SciVis naming), .npy, NIfTI (.nii, .nii.gz), MGH (.mgz, .mgh), "
+        "Analyze .hdr/.img, VTK .vti, .vtr or legacy .vtk",
+    )
     p.add_argument("--dataset", choices=_DATASETS, help="an embedded volume (default marschner-lobb)")
     p.add_argument(
         "--isovalue",

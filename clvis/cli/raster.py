@@ -663,6 +663,15 @@ def _load(args, progress):
         if args.dataset is not None or args.points is not None:
             raise CliError("--dataset and --points choose an embedded cloud; leave them out with a FILE")
         if len(args.file) > 1:
+            # the same file twice would draw every point twice (a shell glob and a name, say)
+            seen: dict[str, str] = {}
+            for f in args.file:
+                key = os.path.realpath(f)
+                if key in seen:
+                    raise CliError(
+                        f"{f}: given twice (as {seen[key]} too); each file's points are drawn once"
+                    )
+                seen[key] = f
             return _load_tiles(args, progress)
         args.file = args.file[0]
         _not_a_volume(args.file)

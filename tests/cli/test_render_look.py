@@ -423,3 +423,11 @@ def test_post_panel_over_black_is_said_with_background(tmp_path, capsys):
     assert rc == 0, err
     assert "note: post-lidar.png is the lidar network's opaque frame over black" in err
     assert "--background applies to the other pictures" in err
+
+
+def test_a_file_given_twice_is_refused(tmp_path, capsys):
+    """render A A would draw every point twice: refused, naming it."""
+    rc, out, err = _render(
+        capsys, SIMPLE, str(Path(SIMPLE).parent / ".." / "data" / Path(SIMPLE).name), *SMALL
+    )
+    assert rc == 2 and "given twice" in err, err

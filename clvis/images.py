@@ -382,8 +382,11 @@ def colorbar(
     size = _text_size(width)
     ends = list(zip(_numbers(lo, hi), ("left", "right"), strict=True))
     f = _font(size)
-    room = width - 2 * max(2, size // 3) - f.getlength(ends[0][0] + ends[1][0]) - 2 * size
-    pieces = ends + ([(title, "centre")] if title and f.getlength(title) <= room else [])
+    # the title is centred: each half of it must clear the longer end label
+    # by a font size (the room between the ends is off-centre when one end
+    # is longer: "value" ran into "1.301e+04" at 160 px)
+    half = width / 2 - max(2, size // 3) - max(f.getlength(e) for e, _ in ends) - size
+    pieces = ends + ([(title, "centre")] if title and f.getlength(title) / 2 <= half else [])
     return np.concatenate([ramp, _draw_text(text, pieces, size)], axis=0)
 
 

@@ -446,3 +446,24 @@ def test_colorbar_ends_differ_where_the_values_do():
     lo, hi = _numbers(1e9, 1e9 + 50)  # a cloud's z far from the origin
     assert lo != hi and float(hi) == 1e9 + 50
     assert _numbers(3.0, 3.0) == ("3", "3")
+
+
+@pytest.mark.parametrize("width", [120, 160, 200, 320])
+def test_colorbar_title_never_runs_into_an_end(width):
+    """The centred title is drawn only where it clears both end labels: the
+    text under the ramp is the ends' own runs of columns, plus the title's
+    apart from them, never a title fused to the longer end ("value1.301e+04"
+    at 160 px)."""
+
+    def runs(bar):
+        band = bar[bar.shape[0] - images.label_height(width) :, :, :3].astype(int)
+        ink = (np.abs(band - band[0, 0]).sum(axis=2) > 60).any(axis=0)
+        cols = np.flatnonzero(ink)
+        # columns with text, the glyphs of one word within 5 px of each other
+        cuts = np.flatnonzero(np.diff(cols) > 5)
+        return list(zip(cols[np.r_[0, cuts + 1]], cols[np.r_[cuts, len(cols) - 1]], strict=True))
+
+    plain = runs(images.colorbar("viridis", 0.0, 13010.0, width))
+    titled = runs(images.colorbar("viridis", 0.0, 13010.0, width, title="value"))
+    assert len(plain) == 2 and titled[0] == plain[0] and titled[-1] == plain[-1], (plain, titled)
+    assert len(titled) in (2, 3)

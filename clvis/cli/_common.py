@@ -627,6 +627,11 @@ def raw_shape(text: str) -> tuple[int, int, int]:
     return xyz[2], xyz[1], xyz[0]
 
 
+def add_volume_index(parser, flag: str, what: str) -> None:
+    """A volume-index option `flag` (T: 0 first) on `parser` (or a group)."""
+    parser.add_argument(flag, type=count(0, 2**31 - 1), default=None, metavar="T", help=f"{what} (0 first)")
+
+
 def add_volume_options(parser: argparse.ArgumentParser) -> None:
     """--spacing, --shape, --dtype, --volume-index and --array: how to read a volume FILE."""
     from ..io.volumes import RAW_TYPES
@@ -653,13 +658,7 @@ def add_volume_options(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="sample type of a .raw file whose name does not say",
     )
-    g.add_argument(
-        "--volume-index",
-        type=count(0, 2**31 - 1),
-        default=None,
-        metavar="T",
-        help="the volume of a 4-D NIfTI, MGH or Analyze time series to read (0 first)",
-    )
+    add_volume_index(g, "--volume-index", "the volume of a 4-D NIfTI, MGH or Analyze time series to read")
     g.add_argument(
         "--array",
         default=None,

@@ -30,6 +30,7 @@ from ._common import (
     add_camera_options,
     add_cluster_options,
     add_output_options,
+    add_volume_index,
     add_volume_options,
     camera_from_args,
     check_camera_args,
@@ -145,12 +146,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="colour the surface by a second volume file (read as FILE is; the same grid, or "
         "stretched over the same box), sampled where each ray hit, with a colour bar",
     )
-    p.add_argument(
-        "--color-by-volume-index",
-        type=count(0, 2**31 - 1),
-        default=None,
-        metavar="T",
-        help="the volume of a 4-D --color-by file to read (0 first; --volume-index is FILE's)",
+    add_volume_index(
+        p, "--color-by-volume-index", "the volume of a 4-D --color-by file (--volume-index: FILE's)"
     )
     p.add_argument(
         "--colormap",

@@ -6,7 +6,9 @@ turn is fitted, not its first view: the camera steps back along its line of
 sight (an orthographic one widens) as far as every frame needs to hold the
 data's box, the same distance in all of them (unless --eye placed it). The frames
 are PNGs written as they are made (each file complete or absent, a Ctrl-C
-leaves the ones done), the progress shown as for other long work; with
+leaves the ones done; once all are, the frames past N an earlier, longer
+turntable left in the folder are removed, and that said), the progress shown
+as for other long work; with
 --movie they are also encoded into a video by imageio's ffmpeg plugin (the
 `movie` extra: imageio, imageio-ffmpeg)."""
 
@@ -197,36 +199,65 @@ def write_orbit(
     out = Path(out)
     files: list[Path] = []
     label = _Frames(n)
-    # frames numbered past this turntable's, left by an earlier one in the
-    # same folder: said (not removed), since orbit-%04d.png would pick them up
-    stale = _stale_frames(out, n)
     try:
         with progress.stage(label):
             for k in range(n):
                 files.append(images.save_png(out / f"orbit-{k:04d}.png", frame(k, 360.0 * k / n)))
                 label.done = k + 1
-    except KeyboardInterrupt:
-        done = f"orbit-0000.png .. {files[-1].name}" if files else "none"
-        print(f"clvis: interrupted after {len(files)} of {n} orbit frames ({done}) in {out}", file=sys.stderr)
-        raise
-    finally:
-        if stale:
+    except BaseException as e:
+        if isinstance(e, KeyboardInterrupt):
+            done = f"orbit-0000.png .. {files[-1].name}" if files else "none"
             print(
-                f"clvis: note: {len(stale)} orbit frame{'s' if len(stale) != 1 else ''} of an earlier, "
-                f"longer turntable stay in {out} ({stale[0].name} .. {stale[-1].name}); a movie of "
-                "orbit-%04d.png would take them too",
+                f"clvis: interrupted after {len(files)} of {n} orbit frames ({done}) in {out}",
                 file=sys.stderr,
             )
+        _stale_note(out, _stale_frames(out, n), "stay")  # a turntable cut short takes nothing away
+        raise
+    _remove_stale(out, n)
     if movie is None:
         return files, None
     with progress.stage(f"encoding {Path(movie).name}"):
         return files, encode(files, movie, fps)
 
 
+def _remove_stale(out: Path, n: int) -> None:
+    """The frames numbered past a turntable of `n` (an earlier, longer one's
+    in the same folder, which orbit-%04d.png would take into a movie)
+    removed, and said on stderr; those that cannot be removed are named."""
+    stale = _stale_frames(out, n)
+    kept = []
+    for p in stale:
+        try:
+            p.unlink()
+        except FileNotFoundError:
+            pass
+        except OSError:
+            kept.append(p)
+    removed = len(stale) - len(kept)
+    if removed:
+        s = "s" if removed != 1 else ""
+        print(f"clvis: removed {removed} stale orbit frame{s} from an earlier run in {out}", file=sys.stderr)
+    _stale_note(out, kept, "could not be removed and stay")
+
+
+def _stale_note(out: Path, stale: Sequence[Path], what: str) -> None:
+    """The warning naming the frames of an earlier, longer turntable left in `out`."""
+    if stale:
+        s = "s" if len(stale) != 1 else ""
+        print(
+            f"clvis: warning: {len(stale)} orbit frame{s} of an earlier, longer turntable {what} in "
+            f"{out} ({stale[0].name} .. {stale[-1].name}); a movie of orbit-%04d.png would take them too",
+            file=sys.stderr,
+        )
+
+
 def _stale_frames(out: Path, n: int) -> list[Path]:
-    """out/orbit-KKKK.png with K >= n, in order (none when out is not a folder)."""
+    """The files out/orbit-KKKK.png with K >= n, in order (none when out is not a folder)."""
     try:
-        names = [p for p in out.glob("orbit-*.png") if re.fullmatch(r"orbit-\d{4,}\.png", p.name)]
+        # only the names write_orbit gives (MAX_FRAMES < 10,000: four digits), and files
+        names = [
+            p for p in out.glob("orbit-*.png") if re.fullmatch(r"orbit-\d{4}\.png", p.name) and p.is_file()
+        ]
     except OSError:
         return []
     return sorted((p for p in names if int(p.name[6:-4]) >= n), key=lambda p: int(p.name[6:-4]))

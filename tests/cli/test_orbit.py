@@ -224,19 +224,65 @@ def test_ctrl_c_during_the_orbit_leaves_complete_frames(tmp_path, capsys, monkey
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
-def test_a_shorter_turntable_names_the_frames_an_earlier_one_left(tmp_path, capsys):
+def test_a_shorter_turntable_removes_the_frames_an_earlier_one_left(tmp_path, capsys):
     """orbit-%04d.png in a folder holding a longer turntable's frames: the
-    ones past this run's are named (a movie of the pattern would mix them)."""
+    ones past this run's are removed once the run is done (a movie of the
+    pattern would mix them), and that is said; other files are left alone."""
     args = ("iso", "--size", "48x32", "--quiet", "--out", tmp_path)
     rc, out, err = _main(capsys, *args, "--orbit", 5)
     assert rc == 0, err
     assert "earlier" not in err
+    others = ["orbit-00007.png", "orbit-0009.jpg", "my-orbit-0008.png", "orbit-0006.png.bak"]
+    for name in others:
+        (tmp_path / name).write_bytes(b"mine")
+    (tmp_path / "orbit-0007.png").mkdir()  # not a frame clvis wrote
     rc, out, err = _main(capsys, *args, "--orbit", 2)
     assert rc == 0, err
-    stay = f"3 orbit frames of an earlier, longer turntable stay in {tmp_path}"
-    assert f"{stay} (orbit-0002.png .. orbit-0004.png)" in err
-    rc, out, err = _main(capsys, *args, "--orbit", 5)
+    assert f"clvis: removed 3 stale orbit frames from an earlier run in {tmp_path}" in err
+    assert _frames(tmp_path) == ["orbit-0000.png", "orbit-00007.png", "orbit-0001.png", "orbit-0007.png"]
+    assert all((tmp_path / name).read_bytes() == b"mine" for name in others)
+    assert (tmp_path / "orbit-0007.png").is_dir()
+    rc, out, err = _main(capsys, *args, "--orbit", 3)
     assert rc == 0 and "earlier" not in err
+
+
+def test_frames_that_cannot_be_removed_are_named(tmp_path, capsys, monkeypatch):
+    args = ("iso", "--size", "48x32", "--quiet", "--out", tmp_path)
+    rc, out, err = _main(capsys, *args, "--orbit", 4)
+    assert rc == 0, err
+    real = Path.unlink
+
+    def unlink(self, *a, **k):
+        if self.name == "orbit-0003.png":
+            raise PermissionError(13, "Permission denied")
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(Path, "unlink", unlink)
+    rc, out, err = _main(capsys, *args, "--orbit", 2)
+    assert rc == 0, err
+    assert "removed 1 stale orbit frame from an earlier run" in err
+    assert (
+        "warning: 1 orbit frame of an earlier, longer turntable could not be removed and stay in "
+        f"{tmp_path} (orbit-0003.png .. orbit-0003.png)" in err
+    )
+
+
+def test_an_interrupted_turntable_removes_nothing(tmp_path, capsys, monkeypatch):
+    args = ("iso", "--size", "48x32", "--quiet", "--out", tmp_path)
+    rc, out, err = _main(capsys, *args, "--orbit", 4)
+    assert rc == 0, err
+    real = orbit.turn
+
+    def turn(camera, lo, hi, degrees, a):
+        if degrees:
+            raise KeyboardInterrupt
+        return real(camera, lo, hi, degrees, a)
+
+    monkeypatch.setattr(orbit, "turn", turn)
+    rc, out, err = _main(capsys, *args, "--orbit", 2)
+    assert rc == 130
+    assert f"2 orbit frames of an earlier, longer turntable stay in {tmp_path}" in err
+    assert _frames(tmp_path) == [f"orbit-{k:04d}.png" for k in range(4)]
 
 
 def test_movie(tmp_path, capsys):

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..camera import _FIT_MARGIN, AXIS_VIEWS, Camera, box_corners
+from ..camera import AXIS_VIEWS, FIT_MARGIN, Camera, box_corners
 from ._common import CliError, Progress, _replaced, camera_from_args, count, unwritable, world_camera_args
 
 MAX_FRAMES = 3600
@@ -149,11 +149,11 @@ def whole_turn(
         if camera.orthographic:
             half = max(half, float(np.max(np.maximum(np.abs(x) * tan_y / tan_x, np.abs(y)))))
         else:  # in frame at depth z + back when |x| <= tan_x (z + back), |y| likewise
-            need = _FIT_MARGIN * np.maximum(np.abs(x) / tan_x, np.abs(y) / tan_y) - z
+            need = FIT_MARGIN * np.maximum(np.abs(x) / tan_x, np.abs(y) / tan_y) - z
             back = max(back, float(np.max(need)), float(np.max(-z)) * (1 + 1e-6))
     up = camera.view[1, :3]
     if camera.orthographic:
-        height = 2.0 * _FIT_MARGIN * half
+        height = 2.0 * FIT_MARGIN * half
         if height <= 2.0 * tan_y:
             return camera
         target = camera.eye + camera.forward

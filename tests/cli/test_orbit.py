@@ -115,20 +115,8 @@ def test_every_orbit_frame_holds_the_whole_box(tmp_path, capsys, monkeypatch, vi
     assert len(seen) == 8 and all(_in_frame(cam, lo, hi, 160, 48) for cam, lo, hi in seen)
 
     seen.clear()
-    rc, out, err = _main(
-        capsys,
-        "gauss",
-        "--lod",
-        "low",
-        *view,
-        "--size",
-        "96x32",
-        "--orbit",
-        6,
-        "--quiet",
-        "-o",
-        tmp_path / "g",
-    )
+    gauss = ("gauss", "--lod", "low", *view, "--size", "96x32")
+    rc, out, err = _main(capsys, *gauss, "--orbit", 6, "--quiet", "--out", tmp_path / "g")
     assert rc == 0, err
     assert seen and all(_in_frame(cam, lo, hi, 96, 32) for cam, lo, hi in seen)
 
@@ -159,20 +147,8 @@ def test_iso_and_gauss_orbit(tmp_path, capsys):
     assert _frames(tmp_path / "i") == ["orbit-0000.png", "orbit-0001.png", "orbit-0002.png"]
     a, b = _png(tmp_path / "i" / "orbit-0000.png"), _png(tmp_path / "i" / "iso.png")
     np.testing.assert_array_equal(a, b)  # the first frame is iso.png's view, band and all
-    rc, out, err = _main(
-        capsys,
-        "gauss",
-        "--lod",
-        "low",
-        *eye,
-        "--size",
-        "48x48",
-        "--orbit",
-        2,
-        "--quiet",
-        "-o",
-        tmp_path / "g",
-    )
+    gauss = ("gauss", "--lod", "low", *eye, "--size", "48x48")
+    rc, out, err = _main(capsys, *gauss, "--orbit", 2, "--quiet", "--out", tmp_path / "g")
     assert rc == 0, err
     assert _frames(tmp_path / "g") == ["orbit-0000.png", "orbit-0001.png"]
     np.testing.assert_array_equal(_png(tmp_path / "g" / "orbit-0000.png"), _png(tmp_path / "g" / "gauss.png"))

@@ -50,7 +50,7 @@ __all__ = [
 
 # Camera.fit frames the bounding sphere enlarged by this factor, so rounding never
 # pushes a box corner out of the image.
-_FIT_MARGIN = 1.05
+FIT_MARGIN = 1.05
 # A box smaller than this (relative to its distance from the origin, or absolute
 # below 1) is treated as a sphere of this radius, so a single point still gets a
 # camera whose float32 matrices resolve it.
@@ -337,7 +337,7 @@ class Camera:
         centre, radius = _sphere(lo, hi)
         half_y = math.radians(fov_y) / 2
         half = min(half_y, math.atan(aspect * math.tan(half_y)))
-        dist = _FIT_MARGIN * radius / math.sin(half)
+        dist = FIT_MARGIN * radius / math.sin(half)
         eye = centre - dist * direction / length
         return cls.look_at(eye, centre, up, fov_y, aspect, *_sphere_depths(dist, radius))
 
@@ -694,7 +694,7 @@ def fit_camera(
         return max(
             float(
                 np.max(
-                    _FIT_MARGIN * np.maximum(np.abs(a - shift[0]) / tan_x, np.abs(b - shift[1]) / tan_y) - c
+                    FIT_MARGIN * np.maximum(np.abs(a - shift[0]) / tan_x, np.abs(b - shift[1]) / tan_y) - c
                 )
             ),
             float(np.max(-c)) + 1e-3 * radius,
@@ -738,7 +738,7 @@ def axis_camera(
     width, height, depth = (float(np.abs(v) @ ext) for v in (right, up, direction))
     centre = 0.5 * (lo + hi)
     scale = max(width, height, depth, min_extent(centre))
-    frame = _FIT_MARGIN * max(height, width / aspect, 1e-3 * scale)
+    frame = FIT_MARGIN * max(height, width / aspect, 1e-3 * scale)
     back = 0.5 * depth + 0.1 * scale  # the eye sits outside the box
     return Camera.ortho(
         centre - back * direction,

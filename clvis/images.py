@@ -18,6 +18,7 @@ no font file is read.
 from __future__ import annotations
 
 import functools
+import math
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -297,24 +298,38 @@ def label_height(width: int) -> int:
     return int(round(_text_size(width) * 1.5)) + 2
 
 
+def _gap(f, size: int) -> float:
+    """The space between words: the font's own, but at least 0.4 of its
+    size (Pillow's default font's space is 2 pixels at 8 to 11, which read
+    "rays still" as "raysstill" in a shrunk label)."""
+    return max(float(f.getlength(" ")), math.ceil(0.4 * size))
+
+
+def _length(f, text: str, size: int) -> float:
+    """The width of `text` drawn word by word with _gap between the words."""
+    words = text.split(" ")
+    return sum(float(f.getlength(w)) for w in words) + _gap(f, size) * (len(words) - 1)
+
+
 def _fit_text(text: str, size: int, width: int):
-    """(font, text) with the text fitting `width` pixels: the font shrunk down
-    to MIN_TEXT, then the text cut with an ellipsis."""
+    """(font, text, size) with the text fitting `width` pixels: the font
+    shrunk down to MIN_TEXT, then the text cut with an ellipsis."""
     while True:
         f = _font(size)
-        if f.getlength(text) <= width or size <= MIN_TEXT:
+        if _length(f, text, size) <= width or size <= MIN_TEXT:
             break
         size -= 1
-    if f.getlength(text) <= width:
-        return f, text
-    while text and f.getlength(text + "\u2026") > width:
+    if _length(f, text, size) <= width:
+        return f, text, size
+    while text and _length(f, text + "\u2026", size) > width:
         text = text[:-1]
-    return f, (text + "\u2026") if text else ""
+    return f, ((text.rstrip() + "\u2026") if text else ""), size
 
 
 def _draw_text(band: np.ndarray, pieces, size: int, colour=TEXT) -> np.ndarray:
     """`pieces`: [(text, "left" | "centre" | "right")] written on `band`
-    (RGBA), vertically centred, with a margin of a third of the font size."""
+    (RGBA), vertically centred, with a margin of a third of the font size;
+    words drawn one by one, _gap apart."""
     from PIL import Image, ImageDraw
 
     im = Image.fromarray(band)
@@ -322,16 +337,21 @@ def _draw_text(band: np.ndarray, pieces, size: int, colour=TEXT) -> np.ndarray:
     h, w = band.shape[:2]
     margin = max(2, size // 3)
     for text, where in pieces:
-        f, text = _fit_text(text, size, max(1, w - 2 * margin))
+        f, text, fitted = _fit_text(text, size, max(1, w - 2 * margin))
         if not text:
             continue
-        left, _, right, _ = draw.textbbox((0, 0), text, font=f)
+        left = draw.textbbox((0, 0), text, font=f)[0]
+        length = _length(f, text, fitted)
         _, top, _, bottom = draw.textbbox((0, 0), "Hg", font=f)  # one baseline for every text
-        x = {"left": margin - left, "right": w - margin - right, "centre": (w - (right - left)) // 2 - left}[
-            where
-        ]
+        x = {
+            "left": margin - left,
+            "right": w - margin - left - length,
+            "centre": (w - length) / 2 - left,
+        }[where]
         y = (h - (bottom - top)) // 2 - top
-        draw.text((x, y), text, fill=tuple(colour) + (255,), font=f)
+        for word in text.split(" "):
+            draw.text((round(x), y), word, fill=tuple(colour) + (255,), font=f)
+            x += float(f.getlength(word)) + _gap(f, fitted)
     return np.asarray(im)
 
 

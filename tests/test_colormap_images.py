@@ -363,6 +363,22 @@ def test_label_adds_a_band_above(width):
         assert band >= 18
 
 
+@pytest.mark.parametrize("width", [240, 320, 400])
+def test_a_shrunk_label_keeps_its_spaces(width):
+    """A label shrunk to fit (clvis iso's title at 320 pixels) keeps a visible
+    space between its words: Pillow's default font draws a 2-pixel space at
+    8 to 11 pixels, which read "rays still running" as "raysstill running"."""
+    text = "isovalue 5.5, completion 0.830 (magenta: rays still running)"
+    band = images.label(_panel(10, width), text)[: images.label_height(width), :, :3].astype(int)
+    ink = (np.abs(band - images.BAND).sum(axis=2) > 60).any(axis=0)
+    blank, runs = 0, []  # the runs of empty columns between the first and last ink
+    for c in ink[int(np.argmax(ink)) :]:
+        if c and blank:
+            runs.append(blank)
+        blank = 0 if c else blank + 1
+    assert sorted(runs, reverse=True)[: text.count(" ")][-1] >= 3, runs
+
+
 def test_label_cuts_text_that_does_not_fit():
     out = images.label(_panel(10, 20), "a very long label " * 20)
     assert out.shape[1] == 20

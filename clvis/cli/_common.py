@@ -288,12 +288,23 @@ def clear_targets(out: os.PathLike[str] | str, names) -> None:
             raise CliError(f"{p}: not a file (a folder is in the way); move it or choose another --out")
 
 
+def folder(text: str) -> str:
+    """A folder option's value, refused when empty (an unset $OUTDIR would
+    otherwise put the outputs in the current folder unnoticed)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(
+            f"expected a folder, got {text!r} (an unset variable?); give . for the current folder"
+        )
+    return text
+
+
 def out_dir(text: str) -> str:
-    """--out: a folder (made when missing); a file of that name, or below one,
-    or a folder no file can be made in, is an error before any work starts."""
+    """--out: a folder (made when missing); an empty name, a file of that
+    name, or below one, or a folder no file can be made in, is an error
+    before any work starts."""
     from pathlib import Path
 
-    p = Path(text)
+    p = Path(folder(text))
     for q in (p, *p.parents):
         if q.exists():
             if not q.is_dir():

@@ -12,7 +12,7 @@ import numpy as np
 import pyopencl.array as cla
 
 from . import demo_post, gauss, iso, raster
-from ._common import Parser, count, size, timed
+from ._common import Parser, count, folder, size, timed
 from .raster import MAX_POINTS
 
 MAX_N = 2**32 - 1  # the primitives count in uint
@@ -58,7 +58,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="each panel of the networks' contact sheets (default 640x360; narvis-scan's: half that)",
     )
     d.add_argument(
-        "-o", "--out", default="clvis-demo", metavar="DIR", help="where the PNGs go (default ./clvis-demo)"
+        "-o",
+        "--out",
+        type=folder,
+        default="clvis-demo",
+        metavar="DIR",
+        help="where the PNGs go (default ./clvis-demo)",
     )
     return d
 

@@ -604,7 +604,8 @@ def _run(args) -> int:
     if args.orbit is not None and r is not None:  # the turntable (clvis.cli.orbit)
         from .orbit import iso_orbit
 
-        orbit = iso_orbit(args, r, isos[0], out, progress_from_args(args, "clvis iso"), base=cam)
+        surface = _surface_box(volume, isos[:1], spacing, origin)
+        orbit = iso_orbit(args, r, isos[0], out, progress_from_args(args, "clvis iso"), cam, surface)
     values = ", ".join(f"{v:g}" for v in isos)
     print(
         f"clvis iso: {source}, isovalue{'s' if len(isos) > 1 else ''} {values}, ZFP rate {args.rate}, {w}x{h}"
@@ -710,6 +711,19 @@ def _surface_points(volume, isos, spacing, origin, most: int = 65536) -> np.ndar
     the whole volume (a small surface in a corner of its volume would fill a
     corner of the picture); None when the volume is no NumPy array or no cell
     holds an isovalue."""
+    near = _beside_surface(volume, isos)
+    if near is None:
+        return None
+    idx = np.flatnonzero(near)
+    idx = idx[:: -(-idx.size // most)]
+    zyx = np.stack(np.unravel_index(idx, volume.shape), axis=1).astype(np.float64)
+    return np.asarray(origin, np.float64) + (zyx * np.asarray(spacing, np.float64))[:, ::-1]
+
+
+def _beside_surface(volume, isos) -> np.ndarray | None:
+    """The voxels the isosurfaces pass beside (a sign change to the next one
+    along an axis), (Z, Y, X) bool; None when the volume is no NumPy array or
+    no cell holds an isovalue."""
     if not isinstance(volume, np.ndarray) or volume.ndim != 3 or min(volume.shape) < 2:
         return None
     near = np.zeros(volume.shape, bool)
@@ -720,12 +734,24 @@ def _surface_points(volume, isos, spacing, origin, most: int = 65536) -> np.ndar
             tail = [slice(None)] * 3
             head[axis], tail[axis] = slice(None, -1), slice(1, None)
             near[tuple(head)] |= above[tuple(head)] != above[tuple(tail)]
-    idx = np.flatnonzero(near)
-    if idx.size == 0:
+    return near if near.any() else None
+
+
+def _surface_box(volume, isos, spacing, origin) -> tuple[np.ndarray, np.ndarray] | None:
+    """(lo, hi), world x, y, z: a box holding the isosurfaces (the cells
+    beside the voxels they pass), for --orbit to keep in every frame; None as
+    _beside_surface."""
+    near = _beside_surface(volume, isos)
+    if near is None:
         return None
-    idx = idx[:: -(-idx.size // most)]
-    zyx = np.stack(np.unravel_index(idx, volume.shape), axis=1).astype(np.float64)
-    return np.asarray(origin, np.float64) + (zyx * np.asarray(spacing, np.float64))[:, ::-1]
+    first, last = [], []
+    for axis in range(3):
+        idx = np.flatnonzero(near.any(axis=tuple(a for a in range(3) if a != axis)))
+        first.append(idx[0])
+        last.append(min(idx[-1] + 1, near.shape[axis] - 1))
+    step = np.asarray(spacing, np.float64)[::-1]
+    o = np.asarray(origin, np.float64)
+    return o + np.array(first[::-1], np.float64) * step, o + np.array(last[::-1], np.float64) * step
 
 
 #: the data's magnitudes past which the renderer's float32 gradients (its

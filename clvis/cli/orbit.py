@@ -1,9 +1,14 @@
 """--orbit N [--movie FILE]: a turntable of the data, shared by `clvis render`,
 `clvis iso` and `clvis gauss`. The command's own view (--view, --eye, ...)
 is the first frame; each next one turns the camera by 360/N degrees about the
-vertical axis (z, or --up) through the centre of the data's bounds. The frames
+vertical axis (z, or --up) through the centre of the data's bounds. The whole
+turn is fitted, not its first view: the camera steps back along its line of
+sight (an orthographic one widens) as far as every frame needs to hold the
+data's box, the same distance in all of them (unless --eye placed it). The frames
 are PNGs written as they are made (each file complete or absent, a Ctrl-C
-leaves the ones done), the progress shown as for other long work; with
+leaves the ones done; once all are, the frames past N an earlier, longer
+turntable left in the folder are removed, and that said), the progress shown
+as for other long work; with
 --movie they are also encoded into a video by imageio's ffmpeg plugin (the
 `movie` extra: imageio, imageio-ffmpeg)."""
 
@@ -22,7 +27,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..camera import AXIS_VIEWS
+from ..camera import AXIS_VIEWS, FIT_MARGIN, Camera, box_corners
 from ._common import CliError, Progress, _replaced, camera_from_args, count, unwritable, world_camera_args
 
 MAX_FRAMES = 3600
@@ -39,7 +44,8 @@ def add_orbit_options(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="N",
         help="also render N frames around the data (360/N degrees apart about the vertical "
-        "axis through its centre, the view given being the first) as orbit-0000.png ... in --out",
+        "axis through its centre, the view given being the first, from as far back as keeps the "
+        "data in every frame unless --eye is given) as orbit-0000.png ... in --out",
     )
     g.add_argument(
         "--movie",
@@ -96,6 +102,11 @@ def turn(camera: Any, lo: npt.ArrayLike, hi: npt.ArrayLike, degrees: float, args
     through the centre of the box [lo, hi]; its projection kept, near and far
     enclosing the box again (clvis.cli._common's rule for --eye); a turn by a
     whole number of circles is the camera itself."""
+    return _turn(camera, lo, hi, degrees, args)
+
+
+def _turn(camera: Any, lo: npt.ArrayLike, hi: npt.ArrayLike, degrees: float, args: argparse.Namespace) -> Any:
+    """turn(), which the frames call (and tests watch), for whole_turn to try the frames with."""
     if degrees % 360.0 == 0.0:
         return camera
     lo_, hi_ = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
@@ -114,6 +125,45 @@ def turn(camera: Any, lo: npt.ArrayLike, hi: npt.ArrayLike, degrees: float, args
     )
     p = camera.projection
     return _replaced(camera, kind, turned, lo_, hi_, float(p[1, 1] / p[0, 0]))
+
+
+def whole_turn(
+    camera: Any, lo: npt.ArrayLike, hi: npt.ArrayLike, n: int, args: argparse.Namespace, box: Any = None
+) -> Any:
+    """`camera` framing the whole turntable of `n` frames (turn() by 360 k / n
+    degrees) rather than its first view: a perspective camera moved back along
+    its line of sight, an orthographic one widened, as little as puts the
+    corners of `box` (lo, hi; default [lo, hi], the box turned about) inside
+    every frame, with Camera.fit's margin. The camera itself when every frame
+    holds them already, or when --eye placed it (the user's position kept)."""
+    if getattr(args, "eye", None) is not None:
+        return camera
+    corners = box_corners(*(box if box is not None else (lo, hi)))
+    p = camera.projection
+    tan_x, tan_y = 1.0 / float(p[0, 0]), 1.0 / float(p[1, 1])  # half extents at depth 1 (or in world)
+    back, half = 0.0, 0.0
+    for k in range(n):
+        c = _turn(camera, lo, hi, 360.0 * k / n, args)
+        o = corners - c.eye
+        x, y, z = o @ c.view[0, :3], o @ c.view[1, :3], o @ c.forward
+        if camera.orthographic:
+            half = max(half, float(np.max(np.maximum(np.abs(x) * tan_y / tan_x, np.abs(y)))))
+        else:  # in frame at depth z + back when |x| <= tan_x (z + back), |y| likewise
+            need = FIT_MARGIN * np.maximum(np.abs(x) / tan_x, np.abs(y) / tan_y) - z
+            back = max(back, float(np.max(need)), float(np.max(-z)) * (1 + 1e-6))
+    up = camera.view[1, :3]
+    if camera.orthographic:
+        height = 2.0 * FIT_MARGIN * half
+        if height <= 2.0 * tan_y:
+            return camera
+        target = camera.eye + camera.forward
+        aspect = tan_x / tan_y
+        return Camera.ortho(camera.eye, target, up, height, aspect, near=camera.near, far=camera.far)
+    if back <= 0.0:
+        return camera
+    eye = camera.eye - back * camera.forward
+    moved = argparse.Namespace(eye=tuple(eye), target=tuple(eye + camera.forward), up=tuple(up))
+    return _replaced(camera, args.view[0], moved, lo, hi, tan_x / tan_y)
 
 
 def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -149,36 +199,65 @@ def write_orbit(
     out = Path(out)
     files: list[Path] = []
     label = _Frames(n)
-    # frames numbered past this turntable's, left by an earlier one in the
-    # same folder: said (not removed), since orbit-%04d.png would pick them up
-    stale = _stale_frames(out, n)
     try:
         with progress.stage(label):
             for k in range(n):
                 files.append(images.save_png(out / f"orbit-{k:04d}.png", frame(k, 360.0 * k / n)))
                 label.done = k + 1
-    except KeyboardInterrupt:
-        done = f"orbit-0000.png .. {files[-1].name}" if files else "none"
-        print(f"clvis: interrupted after {len(files)} of {n} orbit frames ({done}) in {out}", file=sys.stderr)
-        raise
-    finally:
-        if stale:
+    except BaseException as e:
+        if isinstance(e, KeyboardInterrupt):
+            done = f"orbit-0000.png .. {files[-1].name}" if files else "none"
             print(
-                f"clvis: note: {len(stale)} orbit frame{'s' if len(stale) != 1 else ''} of an earlier, "
-                f"longer turntable stay in {out} ({stale[0].name} .. {stale[-1].name}); a movie of "
-                "orbit-%04d.png would take them too",
+                f"clvis: interrupted after {len(files)} of {n} orbit frames ({done}) in {out}",
                 file=sys.stderr,
             )
+        _stale_note(out, _stale_frames(out, n), "stay")  # a turntable cut short takes nothing away
+        raise
+    _remove_stale(out, n)
     if movie is None:
         return files, None
     with progress.stage(f"encoding {Path(movie).name}"):
         return files, encode(files, movie, fps)
 
 
+def _remove_stale(out: Path, n: int) -> None:
+    """The frames numbered past a turntable of `n` (an earlier, longer one's
+    in the same folder, which orbit-%04d.png would take into a movie)
+    removed, and said on stderr; those that cannot be removed are named."""
+    stale = _stale_frames(out, n)
+    kept = []
+    for p in stale:
+        try:
+            p.unlink()
+        except FileNotFoundError:
+            pass
+        except OSError:
+            kept.append(p)
+    removed = len(stale) - len(kept)
+    if removed:
+        s = "s" if removed != 1 else ""
+        print(f"clvis: removed {removed} stale orbit frame{s} from an earlier run in {out}", file=sys.stderr)
+    _stale_note(out, kept, "could not be removed and stay")
+
+
+def _stale_note(out: Path, stale: Sequence[Path], what: str) -> None:
+    """The warning naming the frames of an earlier, longer turntable left in `out`."""
+    if stale:
+        s = "s" if len(stale) != 1 else ""
+        print(
+            f"clvis: warning: {len(stale)} orbit frame{s} of an earlier, longer turntable {what} in "
+            f"{out} ({stale[0].name} .. {stale[-1].name}); a movie of orbit-%04d.png would take them too",
+            file=sys.stderr,
+        )
+
+
 def _stale_frames(out: Path, n: int) -> list[Path]:
-    """out/orbit-KKKK.png with K >= n, in order (none when out is not a folder)."""
+    """The files out/orbit-KKKK.png with K >= n, in order (none when out is not a folder)."""
     try:
-        names = [p for p in out.glob("orbit-*.png") if re.fullmatch(r"orbit-\d{4,}\.png", p.name)]
+        # only the names write_orbit gives (MAX_FRAMES < 10,000: four digits), and files
+        names = [
+            p for p in out.glob("orbit-*.png") if re.fullmatch(r"orbit-\d{4}\.png", p.name) and p.is_file()
+        ]
     except OSError:
         return []
     return sorted((p for p in names if int(p.name[6:-4]) >= n), key=lambda p: int(p.name[6:-4]))
@@ -239,10 +318,13 @@ def iso_orbit(
     out: Path,
     progress: Progress,
     base: Any = None,
+    surface: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
 ) -> tuple[list[Path], Path | None]:
     """`clvis iso --orbit N`: the isosurface from N cameras around the volume,
     each frame as iso.png shows it (its band unless --no-labels); the first
-    is `base`, iso.png's camera (default: the options' camera of the volume)."""
+    looks as `base`, iso.png's camera (default: the options' camera of the
+    volume), from as far back as the whole turn needs to hold the box
+    `surface` (lo, hi: the isosurface's; default the volume's)."""
     from .iso import labelled
 
     w, h = args.size
@@ -251,6 +333,7 @@ def iso_orbit(
     hi = origin + (np.array(renderer.shape[::-1]) - 1) * np.asarray(renderer.spacing, np.float64)[::-1]
     if base is None:
         base = camera_from_args(args, lo, hi, w, h)
+    base = whole_turn(base, lo, hi, args.orbit, args, surface)
 
     def frame(k: int, degrees: float) -> np.ndarray:
         img = renderer.render(
@@ -278,12 +361,22 @@ def gauss_orbit(
     value_range: tuple[float, float] | None = None,
 ) -> tuple[list[Path], Path | None]:
     """`clvis gauss --orbit N`: the LOD panels side by side (gauss.png's
-    layout) from N cameras around the Gaussians, through the transfer function
-    gauss.png used (its opacity points and value range)."""
+    layout) from N cameras around the Gaussians (each holding their whole
+    box: whole_turn), through the transfer function gauss.png used (its
+    opacity points and value range)."""
     from .. import images
     from .gauss import _picture, bar_title, render_panels, strip
 
     w, h = args.size
+    cameras: dict[bytes, Any] = {}  # a LOD's bounds -> its whole turn's camera, fitted once
+
+    def fitted(lo: npt.ArrayLike, hi: npt.ArrayLike) -> Any:
+        key = np.asarray([lo, hi], np.float64).tobytes()
+        if key not in cameras:
+            local = world_camera_args(args, getattr(args, "camera_origin", None))
+            cam = camera_from_args(local, lo, hi, w, h)
+            cameras[key] = whole_turn(cam, lo, hi, args.orbit, args)
+        return cameras[key]
 
     def frame(k: int, degrees: float) -> np.ndarray:
         panels = render_panels(
@@ -301,13 +394,7 @@ def gauss_orbit(
             opacity=opacity,
             value_range=value_range,
             frame=getattr(args, "frame", None),
-            camera=lambda lo, hi: turn(
-                camera_from_args(world_camera_args(args, getattr(args, "camera_origin", None)), lo, hi, w, h),
-                lo,
-                hi,
-                degrees,
-                args,
-            ),
+            camera=lambda lo, hi: turn(fitted(lo, hi), lo, hi, degrees, args),
         )
         if args.no_labels:
             return images.compose([_picture(img, args.transparent) for _, _, img in panels])
@@ -333,7 +420,9 @@ def render_orbit(
     progress: Progress,
 ) -> tuple[list[Path], Path | None]:
     """`clvis render --orbit N`: draw(camera) (the first panel as its PNG
-    shows it) from N cameras around the cloud's bounds [lo, hi]."""
+    shows it) from N cameras around the cloud's bounds [lo, hi], each
+    holding the whole box (whole_turn)."""
+    camera = whole_turn(camera, lo, hi, args.orbit, args)
 
     def frame(k: int, degrees: float) -> np.ndarray:
         return draw(turn(camera, lo, hi, degrees, args))

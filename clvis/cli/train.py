@@ -7,7 +7,7 @@ import argparse
 import os
 import sys
 
-from ._common import CliError, Parser, count, size
+from ._common import CliError, Parser, count, folder, size
 
 _HELP = """\
 Train one of the post family's networks (clvis.post) with PyTorch:
@@ -45,7 +45,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     p.add_argument(
         "--size", type=count(32, 4096), default=256, metavar="N", help="training crops N x N (default 256)"
     )
-    p.add_argument("--out", default=".", metavar="DIR", help="where the model and its card go (default .)")
+    p.add_argument(
+        "--out", type=folder, default=".", metavar="DIR", help="where the model and its card go (default .)"
+    )
     p.add_argument("--seed", type=count(0, 2**31 - 1), default=0, help="the data's and the weights' seed")
     p.add_argument(
         "--frames",

@@ -70,6 +70,18 @@ def test_bad_values(tmp_path, capsys, monkeypatch, args, message):
     assert not loads and not (tmp_path / "out").exists()  # nothing loaded, nothing written
 
 
+@pytest.mark.parametrize("command", [["render", "x.ply"], ["iso"], ["gauss"], ["demo"], ["train", "infill"]])
+@pytest.mark.parametrize("value", ["", "  "])
+def test_an_empty_out_folder_is_refused(tmp_path, capsys, monkeypatch, command, value):
+    """-o "" (an unset $OUTDIR) would write into the current folder unnoticed."""
+    monkeypatch.chdir(tmp_path)
+    rc, out, err = _main(capsys, *command, "--out", value)
+    assert rc == 2 and out == ""
+    _one_line_error(err, command[0])
+    assert f"argument --out: expected a folder, got {value!r} (an unset variable?)" in err.replace("-o/", "")
+    assert not list(tmp_path.iterdir())
+
+
 def test_colormap_message_lists_names(capsys):
     rc, _, err = _main(capsys, "gauss", "--colormap", "zzzzzz")
     assert rc == 2

@@ -58,8 +58,7 @@ def test_render_orbit_turns_around_the_cloud(tmp_path, capsys):
     assert _frames(tmp_path) == [f"orbit-{k:04d}.png" for k in range(4)]
     assert "orbit     4 frames, orbit-0000.png .. orbit-0003.png" in out
     frames = [_png(tmp_path / f"orbit-{k:04d}.png") for k in range(4)]
-    # the first frame is the view given, as colors.png shows it; the others turn
-    np.testing.assert_array_equal(frames[0], _png(tmp_path / "colors.png"))
+    # the first frame looks as colors.png does, from as far back as the whole turn needs
     for f in frames[1:]:
         assert f.shape == (64, 96, 4) and not np.array_equal(f, frames[0])
         assert (f[..., :3] != (24, 24, 28)).any(axis=2).sum() > 100  # the cloud stays in view
@@ -83,15 +82,73 @@ def test_turning_a_full_circle_gives_the_camera_back():
     np.testing.assert_allclose(half.forward[2], cam.forward[2], atol=1e-9)
 
 
+def _recorded_turns(monkeypatch):
+    """orbit.turn wrapped: the list of (camera, lo, hi) of every frame turned."""
+    real, seen = orbit.turn, []
+
+    def turn(camera, lo, hi, degrees, args):
+        cam = real(camera, lo, hi, degrees, args)
+        seen.append((cam, lo, hi))
+        return cam
+
+    monkeypatch.setattr(orbit, "turn", turn)
+    return seen
+
+
+def _in_frame(cam, lo, hi, w, h):
+    from clvis.camera import box_corners
+
+    return bool(cam.project(box_corners(lo, hi), w, h).visible.all())
+
+
+@pytest.mark.parametrize("view", [[], ["--view", "hemisphere:3"], ["--view", "top"]])
+def test_every_orbit_frame_holds_the_whole_box(tmp_path, capsys, monkeypatch, view):
+    """The turntable is fitted over the whole turn, not its first view only:
+    every frame's camera has the 8 corners of the data's box in the picture
+    (a wide picture of a long strip cut it off at the sides it turned to)."""
+    pytest.importorskip("laspy")
+    seen = _recorded_turns(monkeypatch)
+    rc, out, err = _main(
+        capsys, "render", SIMPLE, *view, "--size", "160x48", "--orbit", 8, "--quiet", "--out", tmp_path / "r"
+    )
+    assert rc == 0, err
+    assert len(seen) == 8 and all(_in_frame(cam, lo, hi, 160, 48) for cam, lo, hi in seen)
+
+    seen.clear()
+    gauss = ("gauss", "--lod", "low", *view, "--size", "96x32")
+    rc, out, err = _main(capsys, *gauss, "--orbit", 6, "--quiet", "--out", tmp_path / "g")
+    assert rc == 0, err
+    assert seen and all(_in_frame(cam, lo, hi, 96, 32) for cam, lo, hi in seen)
+
+    boxes = []
+    real_iso = orbit.iso_orbit
+
+    def iso_orbit(*a, **k):
+        boxes.append(a[6])  # the isosurface's box, which each frame must hold
+        return real_iso(*a, **k)
+
+    monkeypatch.setattr(orbit, "iso_orbit", iso_orbit)
+    seen.clear()
+    rc, out, err = _main(
+        capsys, "iso", *view, "--size", "128x40", "--orbit", 6, "--quiet", "--out", tmp_path / "i"
+    )
+    assert rc == 0, err
+    (lo, hi), frames = boxes[0], [cam for cam, _, _ in seen]
+    assert len(frames) == 6 and all(_in_frame(cam, lo, hi, 128, 40) for cam in frames)
+
+
 def test_iso_and_gauss_orbit(tmp_path, capsys):
-    rc, out, err = _main(capsys, "iso", "--size", "64x48", "--orbit", 3, "--quiet", "--out", tmp_path / "i")
+    # with --eye the camera stays where it was put: the first frame is iso.png's
+    eye = ("--eye", "3,-4,2")
+    rc, out, err = _main(
+        capsys, "iso", *eye, "--size", "64x48", "--orbit", 3, "--quiet", "--out", tmp_path / "i"
+    )
     assert rc == 0, err
     assert _frames(tmp_path / "i") == ["orbit-0000.png", "orbit-0001.png", "orbit-0002.png"]
     a, b = _png(tmp_path / "i" / "orbit-0000.png"), _png(tmp_path / "i" / "iso.png")
     np.testing.assert_array_equal(a, b)  # the first frame is iso.png's view, band and all
-    rc, out, err = _main(
-        capsys, "gauss", "--lod", "low", "--size", "48x48", "--orbit", 2, "--quiet", "--out", tmp_path / "g"
-    )
+    gauss = ("gauss", "--lod", "low", *eye, "--size", "48x48")
+    rc, out, err = _main(capsys, *gauss, "--orbit", 2, "--quiet", "--out", tmp_path / "g")
     assert rc == 0, err
     assert _frames(tmp_path / "g") == ["orbit-0000.png", "orbit-0001.png"]
     np.testing.assert_array_equal(_png(tmp_path / "g" / "orbit-0000.png"), _png(tmp_path / "g" / "gauss.png"))
@@ -143,19 +200,65 @@ def test_ctrl_c_during_the_orbit_leaves_complete_frames(tmp_path, capsys, monkey
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
-def test_a_shorter_turntable_names_the_frames_an_earlier_one_left(tmp_path, capsys):
+def test_a_shorter_turntable_removes_the_frames_an_earlier_one_left(tmp_path, capsys):
     """orbit-%04d.png in a folder holding a longer turntable's frames: the
-    ones past this run's are named (a movie of the pattern would mix them)."""
+    ones past this run's are removed once the run is done (a movie of the
+    pattern would mix them), and that is said; other files are left alone."""
     args = ("iso", "--size", "48x32", "--quiet", "--out", tmp_path)
     rc, out, err = _main(capsys, *args, "--orbit", 5)
     assert rc == 0, err
     assert "earlier" not in err
+    others = ["orbit-00007.png", "orbit-0009.jpg", "my-orbit-0008.png", "orbit-0006.png.bak"]
+    for name in others:
+        (tmp_path / name).write_bytes(b"mine")
+    (tmp_path / "orbit-0007.png").mkdir()  # not a frame clvis wrote
     rc, out, err = _main(capsys, *args, "--orbit", 2)
     assert rc == 0, err
-    stay = f"3 orbit frames of an earlier, longer turntable stay in {tmp_path}"
-    assert f"{stay} (orbit-0002.png .. orbit-0004.png)" in err
-    rc, out, err = _main(capsys, *args, "--orbit", 5)
+    assert f"clvis: removed 3 stale orbit frames from an earlier run in {tmp_path}" in err
+    assert _frames(tmp_path) == ["orbit-0000.png", "orbit-00007.png", "orbit-0001.png", "orbit-0007.png"]
+    assert all((tmp_path / name).read_bytes() == b"mine" for name in others)
+    assert (tmp_path / "orbit-0007.png").is_dir()
+    rc, out, err = _main(capsys, *args, "--orbit", 3)
     assert rc == 0 and "earlier" not in err
+
+
+def test_frames_that_cannot_be_removed_are_named(tmp_path, capsys, monkeypatch):
+    args = ("iso", "--size", "48x32", "--quiet", "--out", tmp_path)
+    rc, out, err = _main(capsys, *args, "--orbit", 4)
+    assert rc == 0, err
+    real = Path.unlink
+
+    def unlink(self, *a, **k):
+        if self.name == "orbit-0003.png":
+            raise PermissionError(13, "Permission denied")
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(Path, "unlink", unlink)
+    rc, out, err = _main(capsys, *args, "--orbit", 2)
+    assert rc == 0, err
+    assert "removed 1 stale orbit frame from an earlier run" in err
+    assert (
+        "warning: 1 orbit frame of an earlier, longer turntable could not be removed and stay in "
+        f"{tmp_path} (orbit-0003.png .. orbit-0003.png)" in err
+    )
+
+
+def test_an_interrupted_turntable_removes_nothing(tmp_path, capsys, monkeypatch):
+    args = ("iso", "--size", "48x32", "--quiet", "--out", tmp_path)
+    rc, out, err = _main(capsys, *args, "--orbit", 4)
+    assert rc == 0, err
+    real = orbit.turn
+
+    def turn(camera, lo, hi, degrees, a):
+        if degrees:
+            raise KeyboardInterrupt
+        return real(camera, lo, hi, degrees, a)
+
+    monkeypatch.setattr(orbit, "turn", turn)
+    rc, out, err = _main(capsys, *args, "--orbit", 2)
+    assert rc == 130
+    assert f"2 orbit frames of an earlier, longer turntable stay in {tmp_path}" in err
+    assert _frames(tmp_path) == [f"orbit-{k:04d}.png" for k in range(4)]
 
 
 def test_movie(tmp_path, capsys):

@@ -48,8 +48,11 @@ def test_select_device(monkeypatch):
     assert runtime.select_device() == d
     with pytest.raises(clvis.DeviceError, match="matches no device"):
         runtime.select_device("no-such-device-anywhere")
-    with pytest.raises(clvis.DeviceError, match=f"there are {len(devs)} devices"):
-        runtime.select_device(len(devs) + 3)
+    n = len(devs)
+    with pytest.raises(
+        clvis.DeviceError, match=f"there {'is' if n == 1 else 'are'} {n} device{'s' * (n != 1)} "
+    ):
+        runtime.select_device(n + 3)
 
 
 def test_default_order(monkeypatch):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from ._common import Parser
 
@@ -22,8 +23,8 @@ def cmd(args: argparse.Namespace) -> int:
         return 1
     try:
         chosen = runtime.default_queue().device
-    except ClvisError as e:
-        print(f"error: {e}")
+    except ClvisError as e:  # the devices are listed below: the error says what CLVIS_DEVICE missed
+        print(f"clvis info: error: {e}", file=sys.stderr)
         chosen = None
     print("devices (CLVIS_DEVICE takes the index or part of the name):")
     for i, d in enumerate(devs):

@@ -359,6 +359,11 @@ def _serve(args: argparse.Namespace) -> int:
             scene.close()
     try:
         server = ViewServer(scene, args.host, args.port)
+    except OSError as e:  # an address that does not resolve, a port in use: name them
+        scene.close()
+        raise CliError(
+            f"--host {args.host} --port {args.port}: cannot listen there ({e.strerror or e})"
+        ) from None
     except BaseException:
         scene.close()
         raise

@@ -214,7 +214,8 @@ def raw_layout(
             raise DataError(
                 f"{path}: the name does not give the shape; expected "
                 f"<name>_<X>x<Y>x<Z>_<type>.raw (e.g. bonsai_256x256x256_uint8.raw), "
-                f"or pass shape=(Z, Y, X)"
+                "or give the shape: shape=(Z, Y, X) in Python, --shape XxYxZ --dtype TYPE in the "
+                "clvis commands"
             )
         shape = (int(m["z"]), int(m["y"]), int(m["x"]))
     else:

@@ -144,7 +144,8 @@ def select_device(spec: str | int | None = None) -> cl.Device:
             i = int(spec_s)
             if i < len(found):
                 return found[i]
-            raise DeviceError(f"CLVIS_DEVICE={spec_s}: there are {len(found)} devices ({_listing(found)})")
+            count = f"is {len(found)} device" if len(found) == 1 else f"are {len(found)} devices"
+            raise DeviceError(f"CLVIS_DEVICE={spec_s}: there {count} ({_listing(found)})")
         for d in found:
             if spec_s.lower() in f"{d.platform.name} {d.name}".lower():
                 return d

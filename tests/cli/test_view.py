@@ -159,3 +159,9 @@ def test_options_the_scene_would_ignore_are_refused(capsys, args, message):
     """Options that the chosen scene does not use are an error, not ignored."""
     assert cli.main(["view", *args, "--measure", "points", "--no-browser"]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_an_address_it_cannot_listen_on_is_named(capsys):
+    """--host that does not resolve: one line naming the host and port."""
+    assert cli.main(["view", "--dataset", "marschner-lobb", "--host", "256.1.1.1", "--no-browser"]) == 2
+    assert "--host 256.1.1.1 --port 0: cannot listen there" in capsys.readouterr().err

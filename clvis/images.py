@@ -299,10 +299,10 @@ def label_height(width: int) -> int:
 
 
 def _gap(f, size: int) -> float:
-    """The space between words: the font's own, but at least 0.4 of its
+    """The space between words: the font's own, but at least 0.3 of its
     size (Pillow's default font's space is 2 pixels at 8 to 11, which read
     "rays still" as "raysstill" in a shrunk label)."""
-    return max(float(f.getlength(" ")), math.ceil(0.4 * size))
+    return max(float(f.getlength(" ")), math.ceil(0.3 * size))
 
 
 def _length(f, text: str, size: int) -> float:

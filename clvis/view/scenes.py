@@ -218,9 +218,10 @@ class PointScene(Scene):
             "point_size": {"min": 1, "max": _MAX_POINT_SIZE},
         }
         self._nets: dict[str, Any] = {}
-        # one entry: "gaussians" mode's (renderer, count) by colour, or the split
-        # mode's (NarvisScene, renderer) by ("split", attribute, colormap)
-        self._gauss: dict[str | tuple[str, ...], Any] = {}
+        # one entry: "gaussians" mode's (renderer, count) by ("gaussians",
+        # colour, colormap), or the split mode's (NarvisScene, renderer) by
+        # ("split", attribute, colormap)
+        self._gauss: dict[tuple[str, ...], Any] = {}
         #: narvis-scan's splat radius (the points' knn_sigma), once per cloud
         self.scan_radius: np.ndarray | None = None
         #: GR's base sigma (clvis.training.data.narvis_sigma of the points
@@ -431,13 +432,15 @@ class PointScene(Scene):
         return apply(values, lut(s["colormap"]), *value_range(values))
 
     def _gaussians(self, camera, w, h, s):
-        from .. import GaussianRenderer, gaussians_from_points
+        from .. import GaussianRenderer, TransferFunction, gaussians_from_points
 
-        key = s["color_by"]
+        # the colormap matters to an attribute's colours, not to the points' RGB
+        key = ("gaussians", s["color_by"], s["colormap"] if s["color_by"] != "rgb" else "")
         t0 = time.perf_counter()
         if key not in self._gauss:
-            gs = gaussians_from_points(self._gauss_cloud, color_by=key if key != "rgb" else "rgb")
-            self._gauss = {key: (GaussianRenderer(gs, queue=self.raster.queue), gs.n)}
+            gs = gaussians_from_points(self._gauss_cloud, color_by=s["color_by"])
+            tf = TransferFunction(s["colormap"])
+            self._gauss = {key: (GaussianRenderer(gs, tf, queue=self.raster.queue), gs.n)}
         build = time.perf_counter() - t0
         renderer, count = self._gauss[key]
         img = renderer.render(camera, w, h)

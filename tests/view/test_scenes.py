@@ -387,3 +387,18 @@ def test_the_camera_text_of_a_georeferenced_cloud_renders_it_with_clvis_render(t
     assert rc == 0, err
     row = [line.split() for line in out.splitlines() if line.startswith("  points ")][-1]
     assert float(row[-2]) > 0.5, out  # hits a ray
+
+
+def test_gaussians_mode_takes_the_colormap(points):
+    # it drew viridis whatever the page's colormap
+    s = PointScene(points)
+    cam = Orbit(s.lo, s.hi, points=s.fit_points).camera(1.0)
+    pictures = {}
+    for cmap in ("viridis", "turbo", "viridis"):
+        s.update({"mode": "gaussians", "colormap": cmap})
+        f = next(s.frames(cam, 48, 48, s.settings, lambda: False))
+        if cmap in pictures:  # back to viridis: the same picture again
+            assert (f.image == pictures[cmap]).all()
+        pictures[cmap] = f.image
+    diff = np.abs(pictures["turbo"].astype(int) - pictures["viridis"].astype(int)).max(axis=2)
+    assert (diff > 30).mean() > 0.02

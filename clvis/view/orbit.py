@@ -90,11 +90,34 @@ class Orbit:
         near = max(to_centre - 1.2 * self.radius, far * 1e-4)
         return Camera.look_at(self.eye, self.target, _UP, self.fov_y, aspect, near, far)
 
+    def _apply(self, what: str, **state: Any) -> None:
+        """Set the attributes `state` (target, distance, azimuth, elevation,
+        fov_y) only if the camera they make is finite; else ValueError naming
+        `what`, and the orbit stays as it was (a pan of 1e300 pixels made
+        every later frame fail with "near: must be finite")."""
+        old = {k: getattr(self, k) for k in state}
+        for k, v in state.items():
+            setattr(self, k, v)
+        try:
+            with np.errstate(all="ignore"):
+                ok = bool(np.isfinite(self.eye).all() and np.isfinite(self.target).all())
+                if ok:
+                    self.camera(1.0)
+        except (ValueError, ArithmeticError):
+            ok = False
+        if not ok:
+            for k, v in old.items():
+                setattr(self, k, v)
+            raise ValueError(f"{what}: the camera would not be finite; the view is unchanged")
+
     def orbit(self, dx: float, dy: float, height: int) -> None:
         """Turn by a drag of (dx, dy) pixels in a view `height` pixels high."""
         k = _DEGREES_PER_HEIGHT / max(int(height), 1)
-        self.azimuth = (self.azimuth - dx * k + 180.0) % 360.0 - 180.0
-        self.elevation = min(_MAX_ELEVATION, max(-_MAX_ELEVATION, self.elevation + dy * k))
+        self._apply(
+            "orbit",
+            azimuth=(self.azimuth - dx * k + 180.0) % 360.0 - 180.0,
+            elevation=min(_MAX_ELEVATION, max(-_MAX_ELEVATION, self.elevation + dy * k)),
+        )
 
     def pan(self, dx: float, dy: float, height: int) -> None:
         """Move the target with the pointer: (dx, dy) pixels."""
@@ -104,17 +127,21 @@ class Orbit:
         right = np.cross(fwd, _UP)
         right /= np.linalg.norm(right)
         up = np.cross(right, fwd)
-        self.target = self.target - per_px * (dx * right - dy * up)
+        with np.errstate(all="ignore"):  # a move too far for a float: refused by _apply
+            target = self.target - per_px * (dx * right - dy * up)
+        self._apply("pan", target=target)
 
     def zoom(self, factor: float) -> None:
         """Distance times `factor` (< 1: closer)."""
         f = float(factor)
         if not (math.isfinite(f) and f > 0):
             raise ValueError(f"zoom factor: expected a positive number, got {factor!r}")
-        self.distance = min(max(self.distance * f, self.radius * 1e-3), self.radius * 1e3)
+        self._apply("zoom", distance=min(max(self.distance * f, self.radius * 1e-3), self.radius * 1e3))
 
     def set(self, eye: npt.ArrayLike, target: npt.ArrayLike, fov_y: float | None = None) -> None:
-        """A typed camera: the orbit that looks from `eye` at `target` (z up)."""
+        """A typed camera: the orbit that looks from `eye` at `target` (z up).
+        Everything is checked before anything changes: a refused camera
+        (ValueError) leaves the view as it was."""
         eye_a, target_a = np.asarray(eye, np.float64), np.asarray(target, np.float64)
         if eye_a.shape != (3,) or target_a.shape != (3,) or not np.isfinite([eye_a, target_a]).all():
             raise ValueError("camera: eye and target must be finite 3-vectors")
@@ -122,15 +149,23 @@ class Orbit:
         dist = float(np.linalg.norm(d))
         if dist == 0:
             raise ValueError("camera: eye and target are the same point")
-        self.target, self.distance = target_a, dist
-        self.azimuth = math.degrees(math.atan2(d[1], d[0]))
-        el = math.degrees(math.asin(max(-1.0, min(1.0, d[2] / dist))))
-        self.elevation = min(_MAX_ELEVATION, max(-_MAX_ELEVATION, el))
+        fov = self.fov_y
         if fov_y is not None:
-            f = float(fov_y)
-            if not 1.0 <= f <= 170.0:
+            try:
+                fov = float(fov_y)
+            except (TypeError, ValueError, OverflowError):
+                fov = math.nan
+            if not 1.0 <= fov <= 170.0:
                 raise ValueError(f"camera: fov must be in 1..170 degrees, got {fov_y!r}")
-            self.fov_y = f
+        el = math.degrees(math.asin(max(-1.0, min(1.0, d[2] / dist))))
+        self._apply(
+            "camera",
+            target=target_a,
+            distance=dist,
+            azimuth=math.degrees(math.atan2(d[1], d[0])),
+            elevation=min(_MAX_ELEVATION, max(-_MAX_ELEVATION, el)),
+            fov_y=fov,
+        )
 
     def state(self, origin: npt.ArrayLike | None = None) -> dict:
         """JSON-ready: eye, target, up, fov, and the same view as command-line

@@ -24,6 +24,7 @@ whole frames.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -94,7 +95,11 @@ class Scene:
     progressive: frozenset[str] = frozenset()
 
     def update(self, changes: dict) -> None:
-        """Apply settings from the page; ValueError for an unknown key or value."""
+        """Apply settings from the page (a dict); ValueError for anything else,
+        an unknown key or value (a number must be finite: not a bool, a string,
+        NaN, an infinity or an integer too large for a float)."""
+        if not isinstance(changes, dict):
+            raise ValueError(f"settings: expected an object, got {type(changes).__name__}")
         new = dict(self.settings)
         for key, value in changes.items():
             if key not in self.settings:
@@ -104,9 +109,13 @@ class Scene:
                 raise ValueError(f"{key}: expected one of {allowed}, got {value!r}")
             if isinstance(allowed, dict):  # a number range
                 try:
+                    if isinstance(value, bool) or not isinstance(value, (int, float)):
+                        raise TypeError
+                    if not math.isfinite(value):  # an int too large for a float: OverflowError
+                        raise ValueError
                     value = type(self.settings[key])(value)
-                except (TypeError, ValueError):
-                    raise ValueError(f"{key}: expected a number, got {value!r}") from None
+                except (TypeError, ValueError, OverflowError):
+                    raise ValueError(f"{key}: expected a number, got {value!r:.40}") from None
                 if not allowed["min"] <= value <= allowed["max"]:
                     raise ValueError(f"{key}: expected {allowed['min']}..{allowed['max']}, got {value!r}")
             new[key] = value

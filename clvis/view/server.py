@@ -26,6 +26,7 @@ import hmac
 import io
 import itertools
 import json
+import math
 import secrets
 import struct
 import sys
@@ -47,6 +48,8 @@ __all__ = ["LOOPBACK", "ViewServer", "access_token", "needs_token", "token_ok"]
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 MAX_SIZE = (3840, 2160)
 MIN_SIDE = 16
+MAX_NUMBER = 1e6  # the largest |number| an event takes (pixels of a drag, a page's side, a zoom factor)
+_MAX_ERROR = 300  # characters of an error message sent back (the value it names may be long)
 HEMISPHERE_VIEWS = 128  # clvis.hemisphere_cameras: 4 polar angles x 32 azimuths
 _QUALITY = {True: 75, False: 92}  # JPEG quality while dragging, when still
 
@@ -118,8 +121,27 @@ def encode_jpeg(image: Any, quality: int) -> bytes:
     return buf.getvalue()
 
 
+def _finite(obj: Any) -> Any:
+    """`obj` (JSON-ready) with each non-finite float as the string the page
+    shows ("inf", "-inf", "nan": a split view's two identical halves have a
+    PSNR of inf)."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return "nan" if obj != obj else ("inf" if obj > 0 else "-inf")
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def to_json(obj: Any) -> str:
+    """Strict JSON, what the page's JSON.parse reads: json.dumps writes an
+    infinite float as Infinity, which it refuses (the view froze); see _finite."""
+    return json.dumps(_finite(obj), separators=(",", ":"), allow_nan=False)
+
+
 def pack_message(header: dict, payload: bytes) -> bytes:
-    h = json.dumps(header, separators=(",", ":")).encode()
+    h = to_json(header).encode()
     return struct.pack(">I", len(h)) + h + payload
 
 
@@ -187,6 +209,7 @@ class ViewServer:
             app = tornado.web.Application(
                 [(r"/", page, {"server": self}), (r"/ws", socket, {"server": self})],
                 websocket_ping_interval=20,
+                log_function=_log_request,
             )
             self._server = tornado.httpserver.HTTPServer(app, max_body_size=1 << 16)
             self._server.listen(port, address=self.host)
@@ -227,34 +250,45 @@ class ViewServer:
 
     def opened(self, sock: Any) -> None:
         self._sockets.add(sock)
-        sock.write_message(json.dumps(self._config()))
+        with self._lock:  # a drag another page left unfinished ends here
+            self.interacting = False
+        sock.write_message(to_json(self._config()))
         self.request()
 
     def closed(self, sock: Any) -> None:
+        """A page went away: a drag it did not end (no ``end`` before the
+        socket closed) ends, or every page's frames stayed at the interaction size."""
         self._sockets.discard(sock)
+        with self._lock:
+            was, self.interacting = self.interacting, False
+        if was and self._sockets:
+            self.request()
 
     def handle(self, msg: dict) -> None:
-        """An event from the page (on the loop's thread)."""
+        """An event from the page (on the loop's thread). ValueError for a
+        malformed one (a wrong type, a number out of range, a camera that
+        would not be finite); the view is then as it was."""
         kind = msg.get("type")
         interactive = False
         reply = None
         with self._lock:
-            if isinstance(msg.get("seq"), int):
-                self.seq = msg["seq"]
+            seq = msg.get("seq")
+            if isinstance(seq, int) and not isinstance(seq, bool) and 0 <= seq < 2**53:
+                self.seq = seq
             h = self.size[1]
             if kind == "size":
                 self.size = self._clamp_size(msg.get("width"), msg.get("height"))
                 if not self.moved:  # the page's own shape: frame the data for it
                     self.orbit.fit(self.size[0] / self.size[1])
             elif kind == "drag":
-                dx, dy = _number(msg.get("dx")), _number(msg.get("dy"))
+                dx, dy = _number(msg.get("dx"), "dx"), _number(msg.get("dy"), "dy")
                 if msg.get("pan"):
                     self.orbit.pan(dx, dy, h)
                 else:
                     self.orbit.orbit(dx, dy, h)
                 self.interacting = interactive = self.moved = True
             elif kind == "zoom":
-                self.orbit.zoom(min(max(_number(msg.get("factor"), 1.0), 0.2), 5.0))
+                self.orbit.zoom(min(max(_number(msg.get("factor"), "factor", 1.0), 0.2), 5.0))
                 self.interacting = interactive = self.moved = True
             elif kind == "end":
                 self.interacting = False
@@ -281,12 +315,12 @@ class ViewServer:
                 self.orbit.set(cam.eye, (lo + hi) / 2)
                 self.interacting, self.moved = False, True
             elif kind == "set":
-                self.scene.update(msg.get("settings") or {})
+                self.scene.update(msg.get("settings", {}))
                 reply = {"type": "settings", "settings": self.scene.settings}
             else:
                 raise ValueError(f"unknown event {kind!r}")
         if reply is not None:
-            self._send_text(json.dumps(reply))
+            self._send_text(to_json(reply))
         self.request(interactive)
 
     def _send_text(self, text: str) -> None:
@@ -298,7 +332,7 @@ class ViewServer:
             sock.outbox.put(data)
 
     def _report(self, e: BaseException) -> None:
-        text = json.dumps({"type": "error", "message": f"{type(e).__name__}: {e}"})
+        text = to_json({"type": "error", "message": f"{type(e).__name__}: {e}"[:_MAX_ERROR]})
         if self._loop is not None and not self._loop.is_closed():
             self._loop.call_soon_threadsafe(self._send_text, text)
 
@@ -362,8 +396,16 @@ class ViewServer:
     # -----------------------------------------------------------------------------
 
     def _clamp_size(self, w: Any, h: Any) -> tuple[int, int]:
-        w, h = int(_number(w, 960)), int(_number(h, 540))
-        return min(max(w, MIN_SIDE), MAX_SIZE[0]), min(max(h, MIN_SIDE), MAX_SIZE[1])
+        """The frame size for a page of w x h: at least MIN_SIDE, and a page
+        larger than MAX_SIZE scaled down by one factor (its aspect kept: the
+        page draws the frame over its whole canvas)."""
+        w = max(_number(w, "width", 960), MIN_SIDE)
+        h = max(_number(h, "height", 540), MIN_SIDE)
+        k = min(1.0, MAX_SIZE[0] / w, MAX_SIZE[1] / h)
+        return (
+            min(max(round(w * k), MIN_SIDE), MAX_SIZE[0]),
+            min(max(round(h * k), MIN_SIDE), MAX_SIZE[1]),
+        )
 
     def close(self) -> None:
         """Stop the render worker, the scene's cluster (a Dask scene) and the server."""
@@ -402,11 +444,45 @@ def _local(origin: np.ndarray, eye: Any, target: Any) -> tuple[Any, Any]:
     return out[0], out[1]
 
 
-def _number(v: Any, default: float = 0.0) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
+def _short(v: Any) -> str:
+    text = repr(v)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _number(v: Any, name: str, default: float = 0.0) -> float:
+    """An event's number `v` (absent: `default`); ValueError naming `name`
+    for anything but a finite number within ±MAX_NUMBER (a bool, a string,
+    an integer too large for a float)."""
+    if v is None:
         return default
-    f = float(v)
-    return f if f == f and abs(f) != float("inf") else default
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"{name}: expected a number, got {_short(v)}")
+    try:
+        f = float(v)
+    except OverflowError:
+        f = math.inf
+    if not (math.isfinite(f) and abs(f) <= MAX_NUMBER):
+        raise ValueError(f"{name}: expected a finite number within ±{MAX_NUMBER:g}, got {_short(v)}")
+    return f
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"message: {name} is not a JSON number")
+
+
+def _summary(request: Any) -> str:
+    """A request as the log shows it: the path without the query (the token)."""
+    return f"{request.method} {request.path} ({request.remote_ip})"
+
+
+def _log_request(handler: Any) -> None:
+    """tornado's access log line, with the path only (its own writes the
+    URI, and with it the token: a secret in the logs)."""
+    from tornado.log import access_log
+
+    status = handler.get_status()
+    log = access_log.info if status < 400 else access_log.warning if status < 500 else access_log.error
+    log("%d %s %.2fms", status, _summary(handler.request), 1000.0 * handler.request.request_time())
 
 
 def _page() -> bytes:
@@ -417,8 +493,21 @@ def _page() -> bytes:
 def _handlers():
     import tornado.web
     import tornado.websocket
+    from tornado.log import app_log
 
-    class PageHandler(tornado.web.RequestHandler):
+    class Redacted(tornado.web.RequestHandler):
+        """tornado's log lines without the query (the token): its own name the URI."""
+
+        def _request_summary(self) -> str:
+            return _summary(self.request)
+
+        def log_exception(self, typ, value, tb) -> None:
+            if isinstance(value, tornado.web.HTTPError):
+                super().log_exception(typ, value, tb)  # one line, through _request_summary
+            else:  # tornado's adds repr(request), the URI in it
+                app_log.error("Uncaught exception %s", _summary(self.request), exc_info=(typ, value, tb))
+
+    class PageHandler(Redacted):
         def initialize(self, server: ViewServer) -> None:
             self.server = server
 
@@ -431,7 +520,7 @@ def _handlers():
             self.set_header("Cache-Control", "no-store")
             self.finish(_page())
 
-    class SocketHandler(tornado.websocket.WebSocketHandler):
+    class SocketHandler(tornado.websocket.WebSocketHandler, Redacted):
         def initialize(self, server: ViewServer) -> None:
             self.server = server
             self.outbox = Outbox(self._send)
@@ -444,13 +533,30 @@ def _handlers():
             self.server.opened(self)
 
         def on_message(self, message) -> None:
+            """One event; whatever goes wrong with it is an error message to
+            this page, and the connection stays open."""
+            msg: Any = None
             try:
-                msg = json.loads(message)
+                try:
+                    msg = json.loads(message, parse_constant=_no_constant)
+                except RecursionError:
+                    raise ValueError("message: nested too deeply") from None
                 if not isinstance(msg, dict):
                     raise ValueError("expected a JSON object")
                 self.server.handle(msg)
             except (ValueError, TypeError) as e:
-                self.write_message(json.dumps({"type": "error", "message": str(e)}))
+                self._error(str(e))
+            except Exception as e:  # noqa: BLE001  (a bug: the page hears of it, the socket lives)
+                kind = msg.get("type") if isinstance(msg, dict) else None
+                text = f"{type(e).__name__}: {e}"[:_MAX_ERROR]
+                print(f"clvis view: event {_short(kind)}: {text}", file=sys.stderr)
+                self._error(text)
+
+        def _error(self, message: str) -> None:
+            try:
+                self.write_message(to_json({"type": "error", "message": message[:_MAX_ERROR]}))
+            except tornado.websocket.WebSocketClosedError:
+                pass
 
         def on_close(self) -> None:
             self.server.closed(self)

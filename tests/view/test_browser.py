@@ -404,3 +404,33 @@ def test_a_frame_decoded_late_does_not_replace_a_newer_one(browser):
     finally:
         b.call("Page.removeScriptToEvaluateOnNewDocument", identifier=script)
         server.close()
+
+
+class _Square(_Flat):
+    """A square frame whatever the page's shape, with a PSNR of inf (a split
+    view's identical halves): the page must read the header and draw the
+    frame at its own aspect."""
+
+    def frames(self, camera, width, height, settings, superseded):
+        yield Frame(np.full((100, 100, 3), 200, np.uint8), info={"psnr dB": float("inf")})
+
+
+def test_the_page_shows_an_infinite_psnr_and_draws_a_frame_at_its_aspect(browser):
+    b = browser
+    server = ViewServer(_Square(), size=(WIDTH, HEIGHT))
+    try:
+        b.js("window.clvisView = undefined")
+        b.call("Page.navigate", url=server.url)
+        _settled(b, "points")
+        assert b.js("window.clvisView.error") is None
+        assert "psnr dB inf" in b.js("document.getElementById('status').textContent")
+
+        def pixel(x, y):
+            ctx = "document.getElementById('view').getContext('2d')"
+            return b.js(f"Array.from({ctx}.getImageData({x}, {y}, 1, 1).data)")
+
+        # the square in the middle of the wide canvas, the page's background beside it
+        assert all(abs(c - 200) <= 3 for c in pixel(WIDTH // 2, HEIGHT // 2)[:3])
+        assert pixel(4, HEIGHT // 2)[:3] == [0x18, 0x18, 0x1C]
+    finally:
+        server.close()

@@ -580,7 +580,7 @@ def strip(
     return images.compose(tiles)
 
 
-def bar_title(args) -> str:
+def bar_title(args: argparse.Namespace) -> str:
     """What the colour bar names: --attribute, else what a point cloud is
     coloured by (speed or z), else "value"."""
     return args.attribute or getattr(args, "value_name", None) or "value"

@@ -434,3 +434,27 @@ def test_the_page_shows_an_infinite_psnr_and_draws_a_frame_at_its_aspect(browser
         assert pixel(4, HEIGHT // 2)[:3] == [0x18, 0x18, 0x1C]
     finally:
         server.close()
+
+
+def test_a_cleared_number_field_sends_nothing(browser):
+    """Clearing the isovalue field (a user about to type another) is not
+    isovalue 0: nothing is sent and the field shows the setting again."""
+    d = datasets.marschner_lobb(24)
+    server = ViewServer(VolumeScene(d["volume"], d["spacing"], d["origin"], 0.5, description="ml"))
+    try:
+        b = browser
+        b.js("window.clvisView = undefined")
+        b.call("Page.navigate", url=server.url)
+        b.wait_for("window.clvisView && window.clvisView.config", "the page to connect")
+        _settled(b, "iso")
+        before = b.js("window.clvisView.seq")
+        b.js(
+            "(() => { const f = document.getElementById('set-isovalue'); f.value = '';"
+            " f.dispatchEvent(new Event('change')); })()"
+        )
+        time.sleep(0.5)
+        assert b.js("window.clvisView.seq") == before
+        assert b.js("document.getElementById('set-isovalue').value") == "0.5"
+        assert b.js("window.clvisView.settings.isovalue") == 0.5
+    finally:
+        server.close()

@@ -402,3 +402,26 @@ def test_gaussians_mode_takes_the_colormap(points):
         pictures[cmap] = f.image
     diff = np.abs(pictures["turbo"].astype(int) - pictures["viridis"].astype(int)).max(axis=2)
     assert (diff > 30).mean() > 0.02
+
+
+def test_a_resized_window_does_not_grow_the_memory_pool():
+    """Frames at many sizes (a window edge dragged): the queue's pool keeps
+    held blocks of the last two sizes only, not one set a size (a volume
+    grew the server by ~20 MB a size)."""
+    from clvis import runtime
+
+    s = VolumeScene(clvis.datasets.marschner_lobb(24)["volume"], isovalue=0.5)
+    pool = runtime.allocator(s.iso.queue)
+    held = []
+    for i in range(8):
+        w, h = 96 + 8 * i, 64 + 4 * i
+        for _ in s.frames(Orbit(s.lo, s.hi).camera(w / h), w, h, dict(s.settings), lambda: False):
+            pass
+        held.append(pool.held_blocks)
+    assert max(held[3:]) <= max(held[:3]) + 2, held
+    # the still and the interaction size alternating keep their blocks
+    s._sizes = ()
+    for w in (120, 60, 120, 60):
+        for _ in s.frames(Orbit(s.lo, s.hi).camera(2.0), w, w // 2, dict(s.settings), lambda: False):
+            pass
+    assert s._sizes == ((120, 60), (60, 30))

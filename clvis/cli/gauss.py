@@ -679,7 +679,8 @@ def _run(args) -> int:
     if args.orbit is not None:
         report(*orbit)
     print(f"  total     {time.perf_counter() - t0:.2f} s")
-    print(f"wrote {len(files)} PNGs to {out}{os.sep}")
+    frames = f" and {len(orbit[0])} orbit frames" if args.orbit is not None and orbit[0] else ""
+    print(f"wrote {len(files)} PNGs to {out}{os.sep}{frames}")
     for p in files:
         print(f"  {p.name}")
     return 0

@@ -152,6 +152,8 @@ def test_iso_and_gauss_orbit(tmp_path, capsys):
     assert rc == 0, err
     assert _frames(tmp_path / "g") == ["orbit-0000.png", "orbit-0001.png"]
     np.testing.assert_array_equal(_png(tmp_path / "g" / "orbit-0000.png"), _png(tmp_path / "g" / "gauss.png"))
+    rc, out, err = _main(capsys, *gauss, "--orbit", 2, "--out", tmp_path / "g2")
+    assert rc == 0 and "PNGs to " in out and " and 2 orbit frames" in out, out  # as render says it
 
 
 @pytest.mark.parametrize(

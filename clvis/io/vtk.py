@@ -467,6 +467,12 @@ def _read_xml(path: Path, kind: str, array: str | None) -> tuple[np.ndarray, tup
     raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
 
 
+#: a legacy SCALARS header and its LOOKUP_TABLE line: (name, type, components)
+_SCALARS = (
+    rb"SCALARS[ \t]+(\S+)[ \t]+(\S+)(?:[ \t]+(\d+))?[ \t\r]*\n"
+    rb"LOOKUP_TABLE[ \t]+\S+[ \t\r]*\n"
+)
+
 #: the legacy DATASETs whose points read_points reads as a cloud
 POINT_DATASETS = ("POLYDATA", "UNSTRUCTURED_GRID", "STRUCTURED_GRID")
 #: the legacy DATASETs read_volume reads (a rectilinear grid whose coordinates are evenly spaced)
@@ -709,11 +715,7 @@ def read_legacy(path: Path, array: str | None = None) -> tuple[np.ndarray, tuple
     nx, ny, nz = _numbers(path, "DIMENSIONS", " ".join(f["DIMENSIONS"]), 3, int)
     _numbers(path, "SPACING", " ".join(f.get("SPACING", f.get("ASPECT_RATIO", ["1", "1", "1"]))), 3)
     _numbers(path, "ORIGIN", " ".join(f.get("ORIGIN", ["0", "0", "0"])), 3)
-    m = re.search(
-        rb"(?:^|\n)POINT_DATA[ \t]+(\d+)[ \t\r]*\n+SCALARS[ \t]+(\S+)[ \t]+(\S+)(?:[ \t]+(\d+))?[ \t\r]*\n"
-        rb"LOOKUP_TABLE[ \t]+\S+[ \t\r]*\n",
-        raw,
-    )
+    m = re.search(rb"(?:^|\n)POINT_DATA[ \t]+(\d+)[ \t\r]*\n+" + _SCALARS, raw)
     if m is None:
         raise DataError(f"{path}: no POINT_DATA SCALARS with a LOOKUP_TABLE (cell data is not read)")
     count = int(m.group(1))  # POINT_DATA's
@@ -755,10 +757,7 @@ def _decoded(name: bytes) -> str:
     return re.sub(r"%([0-9A-Fa-f]{2})", lambda h: chr(int(h.group(1), 16)), name.decode("latin-1"))
 
 
-_LEGACY_SCALARS = re.compile(
-    rb"(?:^|\n)(POINT_DATA[ \t]+\d+[ \t\r]*\n+)?SCALARS[ \t]+(\S+)[ \t]+(\S+)(?:[ \t]+(\d+))?[ \t\r]*\n"
-    rb"LOOKUP_TABLE[ \t]+\S+[ \t\r]*\n"
-)
+_LEGACY_SCALARS = re.compile(rb"(?:^|\n)(POINT_DATA[ \t]+\d+[ \t\r]*\n+)?" + _SCALARS)
 
 
 def _named_scalars(path: Path, raw: bytes, first: re.Match, array: str) -> re.Match:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import collections
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -63,57 +64,60 @@ def fuzz(
     and the list of failures."""
     readers = _readers()
     work = Path(tempfile.mkdtemp(prefix="clvis-fuzz-"))
-    seeds = [s for s in make_seeds(work / "seeds") if formats is None or s[0] in formats]
-    if not seeds:
-        raise SystemExit(f"no seeds for the formats {sorted(formats or ())}")
-    by_format = collections.defaultdict(list)
-    for fmt, _reader, path in seeds:
-        by_format[fmt].append(path.read_bytes())
-    # the seeds themselves read, within the limits
-    stats: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
-    peaks: dict[str, int] = collections.defaultdict(int)
-    failures = []
-    for fmt, reader, path in seeds:
-        r = run_limited(readers[reader], str(path), name=str(path), timeout=timeout)
-        if r.kind != "ok" or r.peak_rss > RSS_LIMIT:
-            failures.append((fmt, "seed", str(path), r))
-            log(f"seed {path.name}: {r.kind} {r.detail[:300]} peak {r.peak_rss >> 20} MiB")
-    rng = np.random.default_rng(seed)
-    deadline = None if minutes is None else time.monotonic() + 60 * minutes
-    t0 = time.monotonic()
-    keep.mkdir(parents=True, exist_ok=True)
-    i = 0
-    while True:
-        if cases is not None and i >= cases:
-            break
-        if deadline is not None and time.monotonic() >= deadline:
-            break
-        fmt, reader, path = seeds[int(rng.integers(0, len(seeds)))]
-        data, ops = mutate(rng, path.read_bytes(), fmt, by_format[fmt])
-        case = work / f"m{i % 4}-{path.name}"
-        case.write_bytes(data)
-        other = companion(path)
-        if other is not None:  # the pair's other file, unchanged, beside the mutant
-            case.with_suffix(other.suffix).write_bytes(other.read_bytes())
-        r = run_limited(readers[reader], str(case), name=str(case), timeout=timeout)
-        kind = r.kind
-        if kind in ("ok", "clvis") and len(data) < SMALL_FILE and r.peak_rss > RSS_LIMIT:
-            kind = "rss"
-        stats[fmt][kind] += 1
-        peaks[fmt] = max(peaks[fmt], r.peak_rss)
-        if kind not in ("ok", "clvis"):
-            saved = keep / f"{kind}-{i}-{path.name}"
-            saved.write_bytes(data)
+    try:
+        seeds = [s for s in make_seeds(work / "seeds") if formats is None or s[0] in formats]
+        if not seeds:
+            raise SystemExit(f"no seeds for the formats {sorted(formats or ())}")
+        by_format = collections.defaultdict(list)
+        for fmt, _reader, path in seeds:
+            by_format[fmt].append(path.read_bytes())
+        # the seeds themselves read, within the limits
+        stats: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+        peaks: dict[str, int] = collections.defaultdict(int)
+        failures = []
+        for fmt, reader, path in seeds:
+            r = run_limited(readers[reader], str(path), name=str(path), timeout=timeout)
+            if r.kind != "ok" or r.peak_rss > RSS_LIMIT:
+                failures.append((fmt, "seed", str(path), r))
+                log(f"seed {path.name}: {r.kind} {r.detail[:300]} peak {r.peak_rss >> 20} MiB")
+        rng = np.random.default_rng(seed)
+        deadline = None if minutes is None else time.monotonic() + 60 * minutes
+        t0 = time.monotonic()
+        keep.mkdir(parents=True, exist_ok=True)
+        i = 0
+        while True:
+            if cases is not None and i >= cases:
+                break
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+            fmt, reader, path = seeds[int(rng.integers(0, len(seeds)))]
+            data, ops = mutate(rng, path.read_bytes(), fmt, by_format[fmt])
+            case = work / f"m{i % 4}-{path.name}"
+            case.write_bytes(data)
+            other = companion(path)
+            if other is not None:  # the pair's other file, unchanged, beside the mutant
+                case.with_suffix(other.suffix).write_bytes(other.read_bytes())
+            r = run_limited(readers[reader], str(case), name=str(case), timeout=timeout)
+            kind = r.kind
+            if kind in ("ok", "clvis") and len(data) < SMALL_FILE and r.peak_rss > RSS_LIMIT:
+                kind = "rss"
+            stats[fmt][kind] += 1
+            peaks[fmt] = max(peaks[fmt], r.peak_rss)
+            if kind not in ("ok", "clvis"):
+                saved = keep / f"{kind}-{i}-{path.name}"
+                saved.write_bytes(data)
+                if other is not None:
+                    saved.with_suffix(other.suffix).write_bytes(other.read_bytes())
+                failures.append((fmt, ops, str(saved), r))
+                log(f"#{i} {fmt} {ops}: {kind}: {r.detail[:400]} (peak {r.peak_rss >> 20} MiB) -> {saved}")
+            case.unlink()
             if other is not None:
-                saved.with_suffix(other.suffix).write_bytes(other.read_bytes())
-            failures.append((fmt, ops, str(saved), r))
-            log(f"#{i} {fmt} {ops}: {kind}: {r.detail[:400]} (peak {r.peak_rss >> 20} MiB) -> {saved}")
-        case.unlink()
-        if other is not None:
-            case.with_suffix(other.suffix).unlink()
-        i += 1
-        if i % 1000 == 0:
-            log(f"... {i} mutants, {time.monotonic() - t0:.0f} s")
+                case.with_suffix(other.suffix).unlink()
+            i += 1
+            if i % 1000 == 0:
+                log(f"... {i} mutants, {time.monotonic() - t0:.0f} s")
+    finally:  # the seeds and the last mutant go with the run
+        shutil.rmtree(work, ignore_errors=True)
     elapsed = time.monotonic() - t0
     return {"stats": stats, "peaks": peaks, "failures": failures, "cases": i, "seconds": elapsed}
 

@@ -151,7 +151,10 @@ def _wide(widths):
     if key not in _cache:
         card = post.load("narvis").card["architecture"]
         net = nets.build("narvis", planes=card["planes"], widths=widths, up=card.get("up", "bilinear")).eval()
-        path = Path(tempfile.mkdtemp()) / "wide.onnx"
+        # the folder is removed with the process (its finalizer), not left in /tmp
+        if "tmp" not in _cache:
+            _cache["tmp"] = tempfile.TemporaryDirectory(prefix="clvis-bench-")
+        path = Path(_cache["tmp"].name) / f"wide-{'-'.join(map(str, widths))}.onnx"
         export_onnx(net, path)
         _cache[key] = (path, nets.count_parameters(net))
     return _cache[key]

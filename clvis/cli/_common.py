@@ -405,6 +405,11 @@ class FitView:
     fov_y: float
 
 
+# --view fit of a point cloud, in clvis render and clvis gauss alike (one file,
+# one default view): from the south-south-west, about 40 degrees above the
+# horizon, z up; fit then moves the eye until the points fill the frame
+POINTS_FIT = FitView(direction=(0.45, 1.0, -0.9), fov_y=60.0)
+
 SAMPLER_CAMERAS = {"hemisphere": 128, "grid": 384}  # grid_cameras with count=4
 
 VIEWS_HELP = """\
@@ -466,8 +471,9 @@ def fov(text: str) -> float:
     return f
 
 
-def add_camera_options(parser: argparse.ArgumentParser, fit: FitView):
-    """--view, --eye, --target, --up and --fov; `fit` is the command's default view."""
+def add_camera_options(parser: argparse.ArgumentParser, fit: FitView, fov_note: str = ""):
+    """--view, --eye, --target, --up and --fov; `fit` is the command's default
+    view (`fov_note`: what --fov's help adds to its default)."""
     g = parser.add_argument_group("camera", "the view (see above), and parts of it replaced")
     g.add_argument(
         "--view",
@@ -487,7 +493,7 @@ def add_camera_options(parser: argparse.ArgumentParser, fit: FitView):
         "--fov",
         type=fov,
         metavar="DEG",
-        help=f"vertical field of view of a perspective view (default {fit.fov_y:g})",
+        help=f"vertical field of view of a perspective view (default {fit.fov_y:g}{fov_note})",
     )
     parser.set_defaults(fit_view=fit)
 

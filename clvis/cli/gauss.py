@@ -19,6 +19,7 @@ from ..gauss.render import MAX_K
 from ..io.points import POINT_SUFFIXES
 from ..io.volumes import FORMATS as VOLUME_FORMATS
 from ._common import (
+    POINTS_FIT,
     SIZE_RULE,
     VIEWS_HELP,
     CliError,
@@ -67,7 +68,8 @@ TOP_PERCENTILE = 99.5
 _POINT_FORMATS = POINT_SUFFIXES  # what clvis render reads
 #: how far past its centre each Gaussian of the finest LOD the view frames, in sigmas
 FRAME_SIGMAS = 3.0
-# --view fit: from the front left, a little above, a narrow lens
+# --view fit of a volume or of Gaussians: from the front left, a little above,
+# a narrow lens (a point cloud gets clvis render's view, POINTS_FIT)
 _FIT = FitView(direction=(-0.55, 1.0, -0.35), fov_y=40.0)
 _HELP = (
     """\
@@ -200,7 +202,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     )
     add_output_options(g, "clvis-gauss", "empty pixels")
     add_orbit_options(g)
-    add_camera_options(g, _FIT)
+    add_camera_options(g, _FIT, f"; {POINTS_FIT.fov_y:g} for a point cloud, as in clvis render")
     add_volume_options(g)
     return g
 
@@ -329,6 +331,10 @@ def _sources(args):
         # points far outside it left out, with the same note)
         _, _, _, inside = frame_bulk(cloud, str(path), "clvis gauss")
         args.frame = None if inside is None else g.subset(np.flatnonzero(inside))
+        # --view fit from clvis render's direction, through its lens (framing
+        # the Gaussians' box, as for a volume: fitted to the points, the
+        # splats at the edges were cut)
+        args.fit_view = POINTS_FIT
         # what the colour bar names: the attribute, else what gaussians_from_points
         # coloured by: the speed with a velocity, else the elevation z. The
         # Gaussians' z is relative to the cloud's origin (a LAS file's lowest
@@ -614,7 +620,11 @@ def _run(args) -> int:
         timings=timings,
         frame=getattr(args, "frame", None),
         camera=lambda lo, hi: camera_from_args(
-            world_camera_args(args, getattr(args, "camera_origin", None)), lo, hi, width, height
+            world_camera_args(args, getattr(args, "camera_origin", None)),
+            lo,
+            hi,
+            width,
+            height,
         ),
     )
     out = Path(args.out)

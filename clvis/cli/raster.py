@@ -18,10 +18,10 @@ import numpy as np
 
 from ..camera import fit_camera
 from ._common import (
+    POINTS_FIT,
     SIZE_RULE,
     VIEWS_HELP,
     CliError,
-    FitView,
     Parser,
     Progress,
     add_camera_options,
@@ -64,11 +64,8 @@ _DEFAULT_POINTS = {"hurricane": 2_000_000, "terrain": 1_000_000}
 # --post narvis-scan: the kNN radius plane's seconds are said on stderr above this
 # (a big LAS takes seconds on every call; the progress display shows them anyway)
 KNN_NOTE_SECONDS = 1.0
-# --view fit looks along this direction (from the eye towards the centre):
-# from the south-south-west, about 40 degrees above the horizon, z up; the
-# field of view is Camera.fit's. Then fit moves the eye until the points
-# themselves fill the frame.
-_FIT = FitView(direction=(0.45, 1.0, -0.9), fov_y=60.0)
+# --view fit: the point clouds' default view, clvis gauss's too
+_FIT = POINTS_FIT
 _SOFT_Z_FACTOR = 1.01
 _OVERVIEW_WIDTH = 2880  # the overview is shrunk by an integer factor to fit this
 _COORDINATES = ("x", "y", "z")  # --attribute takes these too

@@ -400,3 +400,34 @@ def test_array_is_for_a_vtk_volume_file(tmp_path, capsys):
     np.save(pts, np.random.default_rng(0).random((50, 3)))
     assert cli.main(["gauss", str(pts), "--array", "v", *out]) == 2
     assert "--array picks a data array of a VTK volume" in capsys.readouterr().err
+
+
+def test_gauss_frames_a_point_cloud_as_render_does(tmp_path, capsys):
+    """One point file, one default view: clvis gauss drew a point cloud from
+    the volumes' direction (front left, 40 degrees) while clvis render drew it
+    from the south-south-west through a 60-degree lens, so the two pictures of
+    one file showed different sides of it. Now the shapes of gauss's
+    points.png and render's colors.png (each cut to its lit box: gauss frames
+    the splats' box, render the points) mostly coincide."""
+    rng = np.random.default_rng(3)
+    # an L of two unequal slabs: seen from another side, another shape
+    a = rng.uniform((0, 0, 0), (10, 2, 1), size=(6000, 3))
+    b = rng.uniform((0, 2, 0), (2, 6, 3), size=(3000, 3))
+    write_ply(
+        tmp_path / "l.ply", PointCloud(np.concatenate([a, b]), colors=np.full((9000, 3), 200, np.uint8))
+    )
+    size = ["--size", "144x96", "--no-labels"]
+    assert cli.main(["gauss", str(tmp_path / "l.ply"), *size, "--out", str(tmp_path / "g")]) == 0
+    assert cli.main(["render", str(tmp_path / "l.ply"), *size, "--out", str(tmp_path / "r")]) == 0
+    capsys.readouterr()
+
+    def shape(path):
+        with Image.open(path) as im:
+            lit = np.asarray(im.convert("L")) > 60
+        ys, xs = np.nonzero(lit)
+        box = Image.fromarray(255 * lit[ys.min() : ys.max() + 1, xs.min() : xs.max() + 1].astype(np.uint8))
+        return np.asarray(box.resize((24, 16), Image.Resampling.BOX)) > 50  # render's points are sparse
+
+    g, r = shape(tmp_path / "g" / "points.png"), shape(tmp_path / "r" / "colors.png")
+    iou = (g & r).sum() / max((g | r).sum(), 1)
+    assert iou > 0.65, iou  # 0.81; was 0.44

@@ -425,3 +425,28 @@ def test_a_resized_window_does_not_grow_the_memory_pool():
         for _ in s.frames(Orbit(s.lo, s.hi).camera(2.0), w, w // 2, dict(s.settings), lambda: False):
             pass
     assert s._sizes == ((120, 60), (60, 30))
+
+
+def test_the_pages_sizes_keep_their_blocks_and_a_closed_pages_go_back():
+    """Two pages (the server sets kept_sizes to 4): their still and
+    interaction sizes keep the pool's blocks; when one closes, release()
+    drops its sizes and the pool gives back what it holds. However many
+    pages, the kept sizes stay within KEEP_PIXELS."""
+    from clvis import runtime
+    from clvis.view.scenes import KEEP_PIXELS
+
+    s = VolumeScene(clvis.datasets.marschner_lobb(24)["volume"], isovalue=0.5)
+    pool = runtime.allocator(s.iso.queue)
+    s.kept_sizes = 4
+    sizes = [(96, 64), (48, 32), (80, 80), (40, 40)]
+    for _ in range(2):
+        for w, h in sizes:
+            for _ in s.frames(Orbit(s.lo, s.hi).camera(w / h), w, h, dict(s.settings), lambda: False):
+                pass
+    assert sorted(s._sizes) == sorted(sizes) and pool.held_blocks > 0
+    s.release([(96, 64), (48, 32)])
+    assert sorted(s._sizes) == [(40, 40), (80, 80)] and pool.held_blocks == 0
+    s.kept_sizes = 16  # 8 pages of the largest frames: not 16 sizes of blocks
+    for w, h in ((3840, 2160), (1920, 1080), (3840, 2000), (1920, 1000)):
+        s._sized(s.iso.queue, w, h)
+    assert sum(w * h for w, h in s._sizes) <= KEEP_PIXELS and s._sizes[-1] == (1920, 1000)

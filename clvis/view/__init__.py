@@ -95,6 +95,7 @@ def view(
     width: int = 960,
     height: int = 540,
     interactive_scale: float = 0.5,
+    max_pages: int = 8,
     **scene_options: Any,
 ) -> Viewer:
     """Serve an interactive view of `obj` and return its :class:`Viewer`.
@@ -103,10 +104,18 @@ def view(
     ``spacing``, ``origin``, ``isovalue``, ``rate``) or a Scene. host: the
     interface to listen on (127.0.0.1; any other needs the printed token),
     port 0: a free one. width x height: the notebook frame's size.
+    max_pages: the pages (tabs) served at once, each with its own camera and
+    size (the settings are shared).
     """
     scene = scene_for(obj, **scene_options)
     server = ViewServer(
-        scene, host, port, token=token, interactive_scale=interactive_scale, size=(width, height)
+        scene,
+        host,
+        port,
+        token=token,
+        interactive_scale=interactive_scale,
+        size=(width, height),
+        max_pages=max_pages,
     )
     return Viewer(server, width, height)
 

@@ -60,6 +60,9 @@ _BG32 = np.array((*BACKGROUND, 0), np.uint8).view(np.uint32)[0]  # as a pixel of
 _ACTIVE32 = np.array((70, 40, 75, 0), np.uint8).view(np.uint32)[0]  # iso: rays still running
 _MAX_POINT_SIZE = 16
 SPLIT_COMPLETION = 0.85  # infill|iso: the fast side stops at this fraction of the rays
+# the held blocks the pool keeps (Scene._sized): about one largest page's
+# (3840x2160) still and interaction sizes, however many pages are open
+KEEP_PIXELS = 3840 * 2160 * 5 // 4
 _FIT_SAMPLE = 20_000  # points the first view frames (every k-th)
 
 
@@ -94,23 +97,43 @@ class Scene:
     # still view of these starts with a smaller first pass)
     progressive: frozenset[str] = frozenset()
 
-    # the last two frame sizes (a still view's and an interaction's)
+    # the frame sizes whose held blocks the queue's pool keeps, the most recent last
     _sizes: tuple = ()
+    #: how many sizes keep their held blocks: a still and an interaction size
+    #: a page (the server sets it to twice the pages open)
+    kept_sizes = 2
+    _pool_queue: Any = None  # the queue whose pool _sized watches
 
     def _sized(self, queue: Any, width: int, height: int) -> None:
-        """Before a frame of `width` x `height`: when it is a third size (the
-        page's window was resized), the queue's memory pool gives back the
-        blocks it holds for reuse. The pool keeps a freed block of every size
-        it has seen, so a window dragged through 70 sizes grew the server by
-        800 MB; the still and the interaction sizes keep theirs."""
+        """Before a frame of `width` x `height`: when it is a size beyond the
+        kept ones (``kept_sizes``, their pixels within KEEP_PIXELS: a page's
+        window was resized, or a page opened), the queue's memory pool gives
+        back the blocks it holds for reuse. The pool keeps a freed block of
+        every size it has seen, so a window dragged through 70 sizes grew the
+        server by 800 MB; the pages' still and interaction sizes keep theirs."""
+        self._pool_queue = queue
         size = (width, height)
         if size in self._sizes:
+            self._sizes = (*(s for s in self._sizes if s != size), size)
             return
-        if len(self._sizes) >= 2:
+        kept = (*self._sizes, size)[-max(1, self.kept_sizes) :]
+        while len(kept) > 1 and sum(w * h for w, h in kept) > KEEP_PIXELS:
+            kept = kept[1:]
+        if len(kept) <= len(self._sizes):  # a size no longer kept: its blocks go back
             from ..runtime import free_held
 
             free_held(queue)
-        self._sizes = (*self._sizes, size)[-2:]
+        self._sizes = kept
+
+    def release(self, sizes: Any = ()) -> None:
+        """A page went away (on the render thread): its frame `sizes` are no
+        longer kept, and the pool gives back the blocks it holds (those of
+        the other pages' sizes too: their next frames allocate them again)."""
+        self._sizes = tuple(s for s in self._sizes if s not in set(sizes))
+        if self._pool_queue is not None:
+            from ..runtime import free_held
+
+            free_held(self._pool_queue)
 
     def update(self, changes: dict) -> None:
         """Apply settings from the page (a dict); ValueError for anything else,
@@ -567,7 +590,12 @@ class VolumeScene(Scene):
 
     def _split(self, camera, w, h, s):
         """The render stopped at SPLIT_COMPLETION of the rays with the in-fill
-        network (left) beside the complete render (right), and their PSNR."""
+        network (left) beside the complete render (right), and their PSNR:
+        one frame, final. The fast side's passes go without speculation, as
+        the in-fill network's pairs and clvis eval's were made (a pass tests
+        one candidate block a ray: the completion grows in small steps); with
+        it the second pass already finished 97-99 % of the rays, and the left
+        half was in-fill over 1-3 % instead of 15 %."""
         from .._arrays import on_host
 
         if self._infill is None:
@@ -575,7 +603,7 @@ class VolumeScene(Scene):
 
             self._infill = post.load("infill", queue=self.iso.queue)
         t0 = time.perf_counter()
-        part = self.iso.render(camera, w, h, s["isovalue"], completion=SPLIT_COMPLETION)
+        part = self.iso.render(camera, w, h, s["isovalue"], completion=SPLIT_COMPLETION, speculation=False)
         t1 = time.perf_counter()
         fast = _premultiplied_over_background(self._infill(part))
         t2 = time.perf_counter()
@@ -586,7 +614,9 @@ class VolumeScene(Scene):
             "psnr dB": round(psnr(fast, slow), 2),
             "fast ms": round(1e3 * (t2 - t0), 1),
             "slow ms": round(1e3 * (t3 - t2), 1),
-            "completion": round(float(part.completion), 3),
+            # each side's fraction of the rays: the fast one's stop, the slow one complete
+            "fast completion": round(float(part.completion), 3),
+            "slow completion": round(float(full.completion), 3),
         }
         return Frame(split(fast, slow), info=info, times={"render": (t1 - t0) + (t3 - t2), "post": t2 - t1})
 

@@ -1,10 +1,12 @@
 """The viewer's server: the page over HTTP, frames and events over a WebSocket.
 
 Tornado runs on its own thread with its own event loop (so a Jupyter kernel's
-loop is never touched); renders run on the LatestWins worker thread. Every
-event updates the shared view state at once and asks for a frame; the worker
-renders the newest state when it gets to it, so a burst of mouse events
-costs one frame, not one each. While the pointer drags, frames are rendered
+loop is never touched); renders run on the LatestWins worker thread. Each
+page has its own view (:class:`View`: camera, frame size, drag state); the
+settings are the scene's, one set for every page. Every event updates its
+page's view (or the settings) at once and asks for a frame; the worker
+renders the newest state of each view when it gets to it, so a burst of mouse
+events costs one frame, not one each. While the pointer drags, frames are rendered
 at ``interactive_scale`` of the page's size and sent as lower-quality JPEG;
 when it stops, at full size (a progressive mode's still view starts with its
 first pass at the interaction size: scenes.view_frames). Each frame is one binary message: a 4-byte
@@ -32,6 +34,7 @@ import struct
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from importlib import resources
 from typing import Any, cast
 
@@ -43,7 +46,7 @@ from .orbit import Orbit
 from .scenes import Frame, Scene, view_frames
 from .schedule import LatestWins, Outbox
 
-__all__ = ["LOOPBACK", "ViewServer", "access_token", "needs_token", "token_ok"]
+__all__ = ["LOOPBACK", "MAX_PAGES", "View", "ViewServer", "access_token", "needs_token", "token_ok"]
 
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 MAX_SIZE = (3840, 2160)
@@ -52,6 +55,8 @@ MAX_NUMBER = 1e6  # the largest |number| an event takes (pixels of a drag, a pag
 _MAX_ERROR = 300  # characters of an error message sent back (the value it names may be long)
 HEMISPHERE_VIEWS = 128  # clvis.hemisphere_cameras: 4 polar angles x 32 azimuths
 _QUALITY = {True: 75, False: 92}  # JPEG quality while dragging, when still
+MAX_PAGES = 8  # pages (sockets) a server shows at once, each its own view
+_FULL = 1013  # the WebSocket close code "try again later": a page beyond max_pages
 
 
 def needs_token(host: str) -> bool:
@@ -145,11 +150,30 @@ def pack_message(header: dict, payload: bytes) -> bytes:
     return struct.pack(">I", len(h)) + h + payload
 
 
+class View:
+    """One page's view: its camera (an orbit), frame size, drag state and the
+    last event it reflects; `sock` the page's socket (None: the server's own
+    view, the one ``ViewServer.handle`` without a page changes)."""
+
+    def __init__(self, scene: Scene, size: tuple[int, int], sock: Any = None) -> None:
+        self.orbit = Orbit(scene.lo, scene.hi, points=scene.fit_points)
+        self.size = size
+        self.orbit.fit(size[0] / size[1])
+        self.interacting = False
+        self.moved = False  # by the person: until then a resize frames the data again
+        self.seq = 0  # the last event applied
+        self.sock = sock
+        self.last_send = 0.0  # seconds the page's previous frame took to send
+
+
 class ViewServer:
     """Serve `scene` at http://host:port/ (port 0: a free one).
 
     ``url`` is the address to open (with the token when there is one).
-    ``close()`` stops the server and the render worker.
+    ``close()`` stops the server and the render worker. Each page (socket)
+    gets its own :class:`View`; at most `max_pages` at once (one more is
+    told so and closed). ``view`` is the server's own view (``handle(msg)``
+    without a page; ``orbit``, ``size`` and ``interacting`` are its).
     """
 
     def __init__(
@@ -161,6 +185,7 @@ class ViewServer:
         token: str | None = None,
         interactive_scale: float = 0.5,
         size: tuple[int, int] = (1280, 720),
+        max_pages: int = MAX_PAGES,
     ) -> None:
         try:
             import tornado  # noqa: F401
@@ -170,20 +195,17 @@ class ViewServer:
             raise ClvisError("clvis view needs tornado: pip install 'clvis[view]'") from None
         if not 0 < interactive_scale <= 1:
             raise ValueError(f"interactive_scale: expected a fraction in (0, 1], got {interactive_scale!r}")
+        if isinstance(max_pages, bool) or not isinstance(max_pages, int) or max_pages < 1:
+            raise ValueError(f"max_pages: expected a positive integer, got {max_pages!r}")
         self.scene, self.host, self.token = scene, host, access_token(host, token)
         self.interactive_scale = float(interactive_scale)
-        self.orbit = Orbit(scene.lo, scene.hi, points=scene.fit_points)
-        self.size = self._clamp_size(*size)
-        self.orbit.fit(self.size[0] / self.size[1])
-        self.interacting = False
-        self.moved = False  # by the person: until then a resize frames the data again
-        self.seq = 0  # the last event applied
+        self.max_pages = max_pages
+        self.size0 = self._clamp_size(*size)  # a page's frame size until it sends its own
+        self.view = View(scene, self.size0)
         self.frames = 0
-        self.last_send = 0.0
         self._lock = threading.Lock()
-        self._sockets: set[Any] = set()
-        self._error: str | None = None
-        self.scheduler = LatestWins(on_error=self._report)
+        self._views: dict[Any, View] = {}  # the open pages' views by socket (the loop's thread)
+        self.scheduler = LatestWins()
         self._ready = threading.Event()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server: Any = None
@@ -235,7 +257,25 @@ class ViewServer:
             host = socket.gethostname()
         return f"http://{host}:{self.port}/" + (f"?token={self.token}" if self.token else "")
 
-    def _config(self) -> dict:
+    # the server's own view (what tests and Python callers of handle() read)
+    @property
+    def orbit(self) -> Orbit:
+        return self.view.orbit
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.view.size
+
+    @property
+    def interacting(self) -> bool:
+        return self.view.interacting
+
+    @property
+    def pages(self) -> int:
+        """The pages open now."""
+        return len(self._views)
+
+    def _config(self, view: View) -> dict:
         s = self.scene
         return {
             "type": "config",
@@ -245,133 +285,189 @@ class ViewServer:
             "choices": s.choices,
             "description": s.description,
             "device": s.device,
-            "camera": self.orbit.state(self.scene.file_origin),
+            "camera": view.orbit.state(self.scene.file_origin),
         }
 
-    def opened(self, sock: Any) -> None:
-        self._sockets.add(sock)
-        with self._lock:  # a drag another page left unfinished ends here
-            self.interacting = False
-        sock.write_message(to_json(self._config()))
-        self.request()
+    def opened(self, sock: Any) -> bool:
+        """A page opened its socket: its own view, at the start camera, and
+        its first frame; False (the page told why, its socket closed) when
+        `max_pages` are open already."""
+        if len(self._views) >= self.max_pages:
+            message = (
+                f"this viewer shows at most {self.max_pages} pages at once, each its own view: "
+                "close one and reload this page"
+            )
+            sock.write_message(to_json({"type": "error", "message": message}))
+            sock.close(_FULL, f"at most {self.max_pages} pages at once: close one and reload")
+            return False
+        view = self._views[sock] = View(self.scene, self.size0, sock)
+        self._keep_sizes()
+        sock.write_message(to_json(self._config(view)))
+        self.request(view)
+        return True
 
     def closed(self, sock: Any) -> None:
-        """A page went away: a drag it did not end (no ``end`` before the
-        socket closed) ends, or every page's frames stayed at the interaction size."""
-        self._sockets.discard(sock)
+        """A page went away: its view's frames stop (one in progress too) and,
+        on the render thread, the memory pool gives back the blocks held for
+        its frame sizes."""
+        view = self._views.pop(sock, None)
+        if view is None:
+            return
+        self.scheduler.cancel(view)
+        self._keep_sizes()
         with self._lock:
-            was, self.interacting = self.interacting, False
-        if was and self._sockets:
-            self.request()
+            sizes = (view.size, self.interaction_size(*view.size))
+        try:
+            self.scheduler.submit(lambda _superseded: self.scene.release(sizes), key=("closed", view))
+        except RuntimeError:  # the server is closing: nothing renders any more
+            pass
 
-    def handle(self, msg: dict) -> None:
-        """An event from the page (on the loop's thread). ValueError for a
-        malformed one (a wrong type, a number out of range, a camera that
-        would not be finite); the view is then as it was."""
+    def _keep_sizes(self) -> None:
+        # the pool keeps its blocks for a still and an interaction size a page
+        self.scene.kept_sizes = 2 * max(1, len(self._views))
+
+    def handle(self, msg: dict, sock: Any = None) -> None:
+        """An event from the page of socket `sock` (None: the server's own
+        view), on the loop's thread. ValueError for a malformed one (a wrong
+        type, a number out of range, a camera that would not be finite); the
+        view is then as it was. A view event changes that page's view only;
+        ``set`` changes the scene's settings, and every page gets them and a
+        new frame."""
+        view = self.view if sock is None else self._views.get(sock)
+        if view is None:  # a message after the page was refused or closed
+            return
         kind = msg.get("type")
-        interactive = False
         reply = None
         with self._lock:
             seq = msg.get("seq")
             if isinstance(seq, int) and not isinstance(seq, bool) and 0 <= seq < 2**53:
-                self.seq = seq
-            h = self.size[1]
+                view.seq = seq
+            orbit, h = view.orbit, view.size[1]
             if kind == "size":
-                self.size = self._clamp_size(msg.get("width"), msg.get("height"))
-                if not self.moved:  # the page's own shape: frame the data for it
-                    self.orbit.fit(self.size[0] / self.size[1])
+                view.size = self._clamp_size(msg.get("width"), msg.get("height"))
+                if not view.moved:  # the page's own shape: frame the data for it
+                    orbit.fit(view.size[0] / view.size[1])
             elif kind == "drag":
                 dx, dy = _number(msg.get("dx"), "dx"), _number(msg.get("dy"), "dy")
                 if msg.get("pan"):
-                    self.orbit.pan(dx, dy, h)
+                    orbit.pan(dx, dy, h)
                 else:
-                    self.orbit.orbit(dx, dy, h)
-                self.interacting = interactive = self.moved = True
+                    orbit.orbit(dx, dy, h)
+                view.interacting = view.moved = True
             elif kind == "zoom":
-                self.orbit.zoom(min(max(_number(msg.get("factor"), "factor", 1.0), 0.2), 5.0))
-                self.interacting = interactive = self.moved = True
+                orbit.zoom(min(max(_number(msg.get("factor"), "factor", 1.0), 0.2), 5.0))
+                view.interacting = view.moved = True
             elif kind == "end":
-                self.interacting = False
+                view.interacting = False
             elif kind == "fit":
-                self.orbit.fit(self.size[0] / self.size[1])
-                self.interacting = False
+                orbit.fit(view.size[0] / view.size[1])
+                view.interacting = False
             elif kind == "camera":
                 # the page's JSON as it came: Orbit.set rejects anything but two
                 # finite 3-vectors (None included) with a ValueError
                 eye, target = cast(npt.ArrayLike, msg.get("eye")), cast(npt.ArrayLike, msg.get("target"))
-                self.orbit.set(*_local(self.scene.file_origin, eye, target), msg.get("fov"))
-                self.interacting, self.moved = False, True
+                orbit.set(*_local(self.scene.file_origin, eye, target), msg.get("fov"))
+                view.interacting, view.moved = False, True
             elif kind == "preset":  # one of the NARVis samplers' 128 hemisphere views
                 k = msg.get("hemisphere")
                 if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < HEMISPHERE_VIEWS:
                     raise ValueError(f"hemisphere: expected a view 0..{HEMISPHERE_VIEWS - 1}, got {k!r}")
-                lo, hi = self.orbit.lo, self.orbit.hi
-                if (
-                    float(np.linalg.norm(hi - lo)) / 2 < self.orbit.radius
-                ):  # one point: the orbit's unit sphere
-                    half = self.orbit.radius / np.sqrt(3.0)
+                lo, hi = orbit.lo, orbit.hi
+                if float(np.linalg.norm(hi - lo)) / 2 < orbit.radius:  # one point: the orbit's unit sphere
+                    half = orbit.radius / np.sqrt(3.0)
                     lo, hi = (lo + hi) / 2 - half, (lo + hi) / 2 + half
                 cam = next(itertools.islice(hemisphere_cameras(lo, hi), k, None))
-                self.orbit.set(cam.eye, (lo + hi) / 2)
-                self.interacting, self.moved = False, True
+                orbit.set(cam.eye, (lo + hi) / 2)
+                view.interacting, view.moved = False, True
             elif kind == "set":
                 self.scene.update(msg.get("settings", {}))
                 reply = {"type": "settings", "settings": self.scene.settings}
             else:
                 raise ValueError(f"unknown event {kind!r}")
-        if reply is not None:
-            self._send_text(to_json(reply))
-        self.request(interactive)
+        if reply is None:
+            self.request(view)
+            return
+        # the settings are the scene's: every page shows them
+        self._send_text(to_json(reply))
+        for other in list(self._views.values()) or [self.view]:
+            self.request(other)
 
     def _send_text(self, text: str) -> None:
-        for sock in list(self._sockets):
+        """`text` to every page."""
+        for sock in list(self._views):
             sock.write_message(text)
 
-    def _broadcast(self, data: bytes) -> None:
-        for sock in list(self._sockets):
-            sock.outbox.put(data)
+    def _deliver(self, view: View, data: bytes) -> None:
+        """A frame to its page (on the loop's thread), unless the page went away."""
+        if view.sock is not None and self._views.get(view.sock) is view:
+            view.sock.outbox.put(data)
 
-    def _report(self, e: BaseException) -> None:
+    def _report(self, e: BaseException, view: View) -> None:
+        """A frame of `view` failed: the error to its page (the server's own
+        view: to every page)."""
         text = to_json({"type": "error", "message": f"{type(e).__name__}: {e}"[:_MAX_ERROR]})
-        if self._loop is not None and not self._loop.is_closed():
-            self._loop.call_soon_threadsafe(self._send_text, text)
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            return
+
+        def send() -> None:
+            if view.sock is None:
+                self._send_text(text)
+            elif self._views.get(view.sock) is view:
+                view.sock.write_message(text)
+
+        loop.call_soon_threadsafe(send)
 
     # -- the render worker's thread ------------------------------------------------
 
-    def request(self, interactive: bool = False) -> int:
-        """Ask for a frame of the current state (the newest request wins)."""
-        return self.scheduler.submit(self._render)
+    def request(self, view: View | None = None) -> int:
+        """Ask for a frame of `view`'s current state (None: the server's own
+        view); the newest request of each view wins."""
+        view = self.view if view is None else view
+        return self.scheduler.submit(functools.partial(self._frames, view), key=view)
+
+    def _frames(self, view: View, superseded) -> Iterator[None]:
+        """`view`'s frames, one step of the worker each (the pages take turns
+        between frames); an error is that page's message."""
+        try:
+            yield from self._render(view, superseded)
+        except Exception as e:
+            self._report(e, view)
+            raise
 
     def interaction_size(self, w: int, h: int) -> tuple[int, int]:
         """The size of an interaction frame for a page of w x h."""
         s = self.interactive_scale
         return max(MIN_SIDE, round(w * s)), max(MIN_SIDE, round(h * s))
 
-    def _render(self, superseded) -> None:
+    def _render(self, view: View, superseded) -> Iterator[None]:
         with self._lock:
-            interactive = self.interacting
-            w, h = self.size
+            interactive = view.interacting
+            w, h = view.size
             preview = None
             if interactive:
                 w, h = self.interaction_size(w, h)
             else:  # a progressive mode's still view starts with its first pass at the interaction size
                 pw, ph = self.interaction_size(w, h)
-                preview = (self.orbit.camera(pw / ph), pw, ph)
-            camera = self.orbit.camera(w / h)
-            state = self.orbit.state(self.scene.file_origin)
+                preview = (view.orbit.camera(pw / ph), pw, ph)
+            camera = view.orbit.camera(w / h)
+            state = view.orbit.state(self.scene.file_origin)
             settings = dict(self.scene.settings)
-            seq = self.seq
+            seq = view.seq
         for frame in view_frames(self.scene, camera, w, h, settings, superseded, preview):
-            self._emit(frame, interactive, settings, state, seq)
+            self._emit(view, frame, interactive, settings, state, seq)
             if superseded():
                 return
+            yield
 
-    def _emit(self, frame: Frame, interactive: bool, settings: dict, state: dict, seq: int) -> None:
+    def _emit(
+        self, view: View, frame: Frame, interactive: bool, settings: dict, state: dict, seq: int
+    ) -> None:
         t0 = time.perf_counter()
         jpeg = encode_jpeg(frame.image, _QUALITY[interactive or "preview" in frame.info])
         times = {k: round(v * 1000, 2) for k, v in frame.times.items()}
         times["encode"] = round((time.perf_counter() - t0) * 1000, 2)
-        times["send"] = round(self.last_send * 1000, 2)  # the previous frame's
+        times["send"] = round(view.last_send * 1000, 2)  # the page's previous frame's
         self.frames += 1
         header = {
             "type": "frame",
@@ -391,7 +487,7 @@ class ViewServer:
         data = pack_message(header, jpeg)
         loop = self._loop
         if loop is not None and not loop.is_closed():
-            loop.call_soon_threadsafe(self._broadcast, data)
+            loop.call_soon_threadsafe(self._deliver, view, data)
 
     # -----------------------------------------------------------------------------
 
@@ -420,7 +516,7 @@ class ViewServer:
             def stop():
                 if self._server is not None:
                     self._server.stop()
-                for sock in list(self._sockets):
+                for sock in list(self._views):
                     sock.close()
                 loop.stop()
 
@@ -543,7 +639,7 @@ def _handlers():
                     raise ValueError("message: nested too deeply") from None
                 if not isinstance(msg, dict):
                     raise ValueError("expected a JSON object")
-                self.server.handle(msg)
+                self.server.handle(msg, self)
             except (ValueError, TypeError) as e:
                 self._error(str(e))
             except Exception as e:  # noqa: BLE001  (a bug: the page hears of it, the socket lives)
@@ -569,7 +665,9 @@ def _handlers():
                 return
 
             def done(_f) -> None:
-                self.server.last_send = time.perf_counter() - t0
+                view = self.server._views.get(self)
+                if view is not None:
+                    view.last_send = time.perf_counter() - t0
                 self.outbox.done()
 
             fut.add_done_callback(done)

@@ -314,6 +314,10 @@ def test_volume_progressive_iso_and_infill(browser):
         )
         first = _settled(b, "iso")
         assert first["info"]["completion"] == 1.0
+        # the last pass says the view is done
+        assert b.js("document.getElementById('status').textContent").startswith(
+            f"iso {WIDTH}x{HEIGHT} done |"
+        )
         img0 = b.canvas_hash()
         b.drag(*_px(640, 360), *_px(500, 360))
         after = _settled(b, "iso")
@@ -327,7 +331,11 @@ def test_volume_progressive_iso_and_infill(browser):
         assert h["info"]["completion"] == 1.0
         b.choose("mode", "infill|iso")
         h = _settled(b, "infill|iso")
-        assert h["info"]["psnr dB"] > 15 and h["info"]["completion"] >= 0.85
+        assert h["info"]["psnr dB"] > 15 and h["info"]["fast completion"] >= 0.85
+        assert h["info"]["slow completion"] == 1  # the right half: the complete render
+        assert b.js("document.getElementById('status').textContent").startswith(
+            f"infill|iso {WIDTH}x{HEIGHT} done |"
+        )
         assert b.js("window.clvisView.error") is None
     finally:
         server.close()
@@ -456,5 +464,103 @@ def test_a_cleared_number_field_sends_nothing(browser):
         assert b.js("window.clvisView.seq") == before
         assert b.js("document.getElementById('set-isovalue').value") == "0.5"
         assert b.js("window.clvisView.settings.isovalue") == 0.5
+    finally:
+        server.close()
+
+
+class _Busy(_Flat):
+    """A point scene's controls (four settings of long values) and a long
+    description without a space, no device: what the bar must fit."""
+
+    modes = ["points", "lidar", "narvis-scan", "gaussians", "narvis-scan|gaussians"]
+    description = (
+        "/data/scans/a/very/long/path/without/any/space/scan_2024_north_tile_0042.laz: 12,345,678 points"
+    )
+
+    def __init__(self):
+        super().__init__()
+        self.settings = {
+            "mode": "points",
+            "color_by": "classification",
+            "colormap": "viridis",
+            "point_size": 1,
+        }
+        self.choices = {
+            "mode": self.modes,
+            "color_by": ["classification", "intensity", "return_number", "gps_time"],
+            "colormap": ["viridis", "magma", "coolwarm"],
+            "point_size": {"min": 1, "max": 16},
+        }
+
+
+@pytest.mark.parametrize("size", [(640, 400), (320, 240)])
+def test_every_control_is_reachable_in_a_small_window(browser, size):
+    """A small window: the bar wraps (and scrolls past half the height), the
+    camera box and the status line wrap inside the window; each control can
+    be scrolled to and is the element under its own centre (the camera box's
+    field ran 70 px past a 640 px window, and a short window hid the bar's
+    last rows). A screenshot of the page at that size comes back whole."""
+    from PIL import Image
+
+    b = browser
+    w, h = size
+    server = ViewServer(_Busy(), size=size)
+    try:
+        b.call("Emulation.setDeviceMetricsOverride", width=w, height=h, deviceScaleFactor=1, mobile=False)
+        b.js("window.clvisView = undefined")
+        b.call("Page.navigate", url=server.url)
+        _settled(b, "points")
+        b.js("document.getElementById('copy').click()")  # the camera box too
+        b.wait_for("document.getElementById('camera-text').value.includes('--eye')", "the camera text")
+        check = """(() => {
+          const out = [], sel = '#bar select, #bar input, #bar button, #camera input, #camera button';
+          for (const el of document.querySelectorAll(sel)) {
+            el.scrollIntoView({block: 'nearest', inline: 'nearest'});
+            const r = el.getBoundingClientRect(), cx = (r.left + r.right) / 2, cy = (r.top + r.bottom) / 2;
+            const inside = r.width > 0 && r.left >= 0 && r.top >= 0
+                           && r.right <= innerWidth && r.bottom <= innerHeight;
+            const top = document.elementFromPoint(cx, cy);
+            if (!inside || !(top === el || el.contains(top)))
+              out.push([el.id || el.textContent, Math.round(r.left), Math.round(r.top), Math.round(r.right),
+                        Math.round(r.bottom), top ? top.id || top.tagName : null]);
+          }
+          const s = document.getElementById('status'), sr = s.getBoundingClientRect();
+          if (s.scrollWidth > s.clientWidth + 1 || sr.bottom > innerHeight + 0.5)
+            out.push(['status', s.scrollWidth, s.clientWidth]);
+          return out;
+        })()"""
+        assert b.js(check) == []
+        assert b.js("document.getElementById('status').textContent").startswith(f"points {w}x{h} done |")
+        shot = Image.open(io.BytesIO(b.screenshot()))
+        assert shot.size == size
+    finally:
+        b.call(
+            "Emulation.setDeviceMetricsOverride",
+            width=WIDTH,
+            height=HEIGHT,
+            deviceScaleFactor=1,
+            mobile=False,
+        )
+        server.close()
+
+
+def test_a_page_beyond_the_most_the_server_shows_says_why(browser):
+    server = ViewServer(_Flat(), size=(WIDTH, HEIGHT), max_pages=1)
+    b = browser
+
+    async def connect():  # another page holds the one place
+        return await tornado.websocket.websocket_connect(f"ws://127.0.0.1:{server.port}/ws")
+
+    try:
+        other = b.loop.run_until_complete(connect())
+        b.js("window.clvisView = undefined")
+        b.call("Page.navigate", url=server.url)
+        text = b.wait_for(
+            "(() => { const e = document.getElementById('status'), t = e && e.textContent;"
+            " return t && t.startsWith('disconnected') ? t : null; })()",
+            "the page to be refused",
+        )
+        assert text == "disconnected: at most 1 pages at once: close one and reload"
+        other.close()
     finally:
         server.close()

@@ -90,3 +90,59 @@ def test_outbox_sends_one_at_a_time_latest_wins():
     box.done()  # d arrived, nothing waits
     box.put("e")
     assert sent == ["a", "d", "e"] and box.sent == 3
+
+
+def test_keys_take_turns_and_each_keeps_its_newest_job():
+    """Two pages' views: each key's newest job runs; a job that is an
+    iterator (a progressive render's frames) is stepped one item a turn, so
+    one key's passes do not hold the other's back."""
+    gate = threading.Event()
+    steps = []
+
+    def frames(name, n):
+        def job(superseded):
+            for i in range(n):
+                gate.wait(5)
+                steps.append((name, i))
+                yield
+                if superseded():
+                    return
+
+        return job
+
+    w = LatestWins()
+    try:
+        w.submit(frames("a", 4), key="a")
+        w.submit(frames("b", 2), key="b")
+        w.submit(frames("b-newer", 2), key="b")  # replaces b's waiting job
+        gate.set()
+        assert w.wait_idle(5)
+        assert steps == [("a", 0), ("b-newer", 0), ("a", 1), ("b-newer", 1), ("a", 2), ("a", 3)]
+        assert w.dropped == 1 and not w._latest
+    finally:
+        w.close()
+
+
+def test_a_cancelled_key_stops_and_its_iterator_is_closed():
+    started, gate = threading.Event(), threading.Event()
+    closed = []
+
+    def job(superseded):
+        try:
+            for _ in range(100):
+                started.set()
+                gate.wait(5)
+                yield
+        finally:
+            closed.append(superseded())
+
+    w = LatestWins()
+    try:
+        w.submit(job, key="page")
+        assert started.wait(5)
+        w.cancel("page")  # the page went away
+        gate.set()
+        assert w.wait_idle(5)
+        assert closed == [True] and not w._latest and not w._ready
+    finally:
+        w.close()

@@ -224,25 +224,165 @@ def test_a_refused_camera_changes_nothing():
     assert np.allclose(o.eye, 5) and o.fov_y == 30
 
 
-def test_a_page_that_goes_away_in_the_middle_of_a_drag_ends_it(server):
+def test_each_page_has_its_own_frame_size_and_camera(server):
+    """Two pages of other sizes: each gets frames at its own size and aspect,
+    and one page's drag turns its own camera only (they shared one size and
+    one camera: the last page's size made the other's frames the wrong
+    aspect, and a drag moved both)."""
+
     async def go():
         a, b = await Page.open(server), await Page.open(server)
-        await b.frame("b's first frame")
-        await a.send({"type": "drag", "dx": 5, "dy": 0})
-        await b.frame("an interaction frame", interactive=True, width=160, height=90)
-        a.ws.close()  # no "end"
-        # the other page gets the still frame at full size
-        await b.frame("a full-size frame after a closed", interactive=False, width=320, height=180)
-        await b.send({"type": "drag", "dx": 5, "dy": 0})
-        await b.frame("an interaction frame", interactive=True)
-        # a page that opens now starts at full size
-        c = await Page.open(server)
-        await c.frame("c's full-size frame", interactive=False, width=320, height=180)
+        await a.send({"type": "size", "width": 320, "height": 180, "seq": 1})
+        await a.frame("a's frame at its size", width=320, height=180, seq=1)
+        await b.send({"type": "size", "width": 200, "height": 200, "seq": 1})
+        still_b = await b.frame("b's frame at its size", width=200, height=200, seq=1)
+        await a.send({"type": "drag", "dx": 40, "dy": 0, "seq": 2})
+        moved_a = await a.frame("a's interaction frame", interactive=True, width=160, height=90, seq=2)
+        await a.send({"type": "end", "seq": 3})
+        await a.frame("a's still frame", interactive=False, width=320, height=180, seq=3)
+        assert moved_a["camera"]["azimuth"] != still_b["camera"]["azimuth"]
+        # b asks for a frame: its own size, its own camera, not a's
+        await b.send({"type": "end", "seq": 2})
+        h = await b.frame("b's frame after a's drag", seq=2)
+        assert (h["width"], h["height"], h["interactive"]) == (200, 200, False)
+        assert h["camera"] == still_b["camera"]
+        a.ws.close()  # in the middle of nothing: b goes on
+        await b.send({"type": "drag", "dx": 5, "dy": 0, "seq": 3})
+        await b.frame("b's interaction frame", interactive=True, width=100, height=100, seq=3)
         b.ws.close()
-        c.ws.close()
 
     asyncio.run(go())
-    assert not server.interacting
+    # the server's own view (handle() without a page) is neither page's
+    assert server.size == (320, 180) and not server.interacting
+
+
+def test_settings_are_the_scenes_every_page_gets_them_and_a_frame(server):
+    async def go():
+        a, b = await Page.open(server), await Page.open(server)
+        await b.send({"type": "size", "width": 200, "height": 100, "seq": 1})
+        await b.frame("b's frame at its size", width=200, height=100)
+        await a.send({"type": "set", "settings": {"point_size": 3}})
+        got = await b.next(lambda k, m: k == "settings", "the settings a page changed")
+        assert got["settings"]["point_size"] == 3
+        await b.frame("b's frame of the new settings", width=200, height=100, interactive=False)
+        a.ws.close()
+        b.ws.close()
+
+    asyncio.run(go())
+    assert server.scene.settings["point_size"] == 3
+
+
+def test_a_page_beyond_max_pages_is_told_and_closed():
+    s = ViewServer(_Grey(), size=(64, 48), max_pages=2)
+
+    async def go():
+        a, b = await Page.open(s), await Page.open(s)
+        await a.frame("a's first frame")
+        await b.frame("b's first frame")
+        c = await Page.open(s)
+        assert "at most 2 pages at once" in await c.error()
+        assert await c.ws.read_message() is None  # closed, "try again later"
+        assert c.ws.close_code == 1013 and "at most 2 pages" in c.ws.close_reason
+        assert s.pages == 2
+        a.ws.close()
+        for _ in range(100):  # the server hears of it
+            if s.pages == 1:
+                break
+            await asyncio.sleep(0.05)
+        d = await Page.open(s)  # room again
+        await d.frame("d's first frame")
+        await b.send({"type": "fit"})
+        await b.frame("b still served")
+        b.ws.close()
+        d.ws.close()
+
+    try:
+        asyncio.run(go())
+    finally:
+        s.close()
+
+
+class _Sized(_Grey):
+    """_Grey that records what the server tells it of the pages' sizes."""
+
+    def __init__(self):
+        super().__init__()
+        self.released: list = []
+
+    def release(self, sizes=()):
+        self.released.append(tuple(sizes))
+
+
+def test_a_closed_page_gives_its_frame_sizes_back():
+    s = ViewServer(_Sized(), size=(64, 48))
+
+    async def go():
+        a, b = await Page.open(s), await Page.open(s)
+        await a.send({"type": "size", "width": 120, "height": 80, "seq": 1})
+        await a.frame("a's frame", width=120, seq=1)
+        await b.frame("b's first frame")
+        assert s.scene.kept_sizes == 4  # a still and an interaction size a page
+        views = list(s._views.values())
+        a.ws.close()
+        for _ in range(100):
+            if s.scene.released:
+                break
+            await asyncio.sleep(0.05)
+        assert s.scene.released == [((120, 80), (60, 40))]
+        assert s.scene.kept_sizes == 2 and s.pages == 1
+        # nothing of a's view is left in the render worker
+        assert s.scheduler.wait_idle(WAIT)
+        assert not s.scheduler._latest and not s.scheduler._ready
+        assert views[0] not in s._views.values()
+        b.ws.close()
+
+    try:
+        asyncio.run(go())
+    finally:
+        s.close()
+
+
+class _Passes(_Grey):
+    """A progressive mode: `n` passes a view, `seconds` each."""
+
+    progressive = frozenset(("points",))
+
+    def __init__(self, n: int, seconds: float):
+        super().__init__()
+        self.n, self.seconds = n, seconds
+
+    def frames(self, camera, width, height, settings, superseded):
+        import time
+
+        for i in range(self.n):
+            time.sleep(self.seconds)
+            yield Frame(
+                np.full((height, width, 3), 90, np.uint8), final=i == self.n - 1, info={"pass": i + 1}
+            )
+            if superseded():
+                return
+
+
+def test_a_pages_progressive_render_does_not_hold_another_pages_frames_back():
+    s = ViewServer(_Passes(40, 0.05), size=(64, 48))  # 2 s a view
+
+    async def go():
+        a = await Page.open(s)
+        await a.send({"type": "size", "width": 80, "height": 60, "seq": 1})
+        await a.frame("a's first pass", seq=1, width=80)
+        b = await Page.open(s)  # while a's passes run
+        b_first = await b.frame("b's first frame")
+        a_last = await a.frame("a's last pass", seq=1, final=True, width=80)
+        await b.frame("b's last pass", final=True)
+        # the pages took turns: b's first frame did not wait for a's 2 s of passes
+        assert b_first["id"] < a_last["id"]
+        a.ws.close()
+        b.ws.close()
+
+    try:
+        asyncio.run(go())
+    finally:
+        s.close()
 
 
 @pytest.mark.parametrize(

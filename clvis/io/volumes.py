@@ -32,7 +32,10 @@ Formats, chosen by the file name (case-insensitive):
   grid only where its coordinates are evenly spaced:
   through VTK's own readers (the ``vtk`` extra: ``pip install "clvis[vtk]"``),
   after clvis's checks of the header against the file (:mod:`clvis.io.vtk`);
-  the point scalars, with the file's spacing and origin.
+  the point scalars (a legacy file's first SCALARS, else its first FIELD
+  array of one component), with the file's spacing and origin; a file
+  without point arrays gives its cell data (one sample a cell, the origin
+  at the first cell's centre).
 
 The samples are returned as stored (uint8 stays uint8: volumes can be large;
 convert where needed, e.g. ``volume.data.astype(np.float32)``), in native
@@ -169,10 +172,10 @@ def read_volume(
     `shape` (Z, Y, X) and `dtype` apply to ``.raw`` files only: they give the
     shape and the sample type when the file name does not, and override the
     name when it does. `volume_index` picks one volume of a 4-D NIfTI, MGH or
-    Analyze file. `array` picks a VTK file's data array by name (.vti and
-    .vtr: a point array, else a cell array; a legacy .vtk: a point SCALARS;
-    by default the point scalars, see the module docstring); the one read
-    is ``Volume.array``."""
+    Analyze file. `array` picks a VTK file's data array by name (a point
+    array, else a cell array; a legacy .vtk's SCALARS and FIELD arrays; by
+    default the point scalars, see the module docstring); the one read is
+    ``Volume.array``."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path: expected a str or path, got {type(path).__name__}")
     path = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO or device

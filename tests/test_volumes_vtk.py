@@ -618,6 +618,40 @@ def test_legacy_field_header_lies_are_refused_before_vtk_reads(tmp_path):
         read_volume(p)
 
 
+@pytest.mark.parametrize(
+    "line, after",
+    [
+        ("FIELD FieldS 2 float", "0 2\n"),  # ./dev.sh fuzz's mutant (a bit flip and a splice): SIGSEGV
+        ("Y_COORDINATES 2", "float\n"),  # VTK reads the type from the next line
+        ("POINT_DATA 12 13", ""),
+    ],
+)
+def test_a_known_section_line_not_as_vtk_writes_it_is_refused(tmp_path, line, after):
+    """VTK reads a legacy file's sections word by word across lines; the
+    checks walk them line by line: an ASCII line of a section they know
+    with other words than VTK writes (a FIELD line of four words, whose
+    fourth VTK took for the first array's name and crashed on) is a
+    DataError, read in a child process, before VTK reads."""
+    from fuzz.harness import run_limited
+
+    coords = "X_COORDINATES 3 float\n0 1 2\nY_COORDINATES 2 float\n0 2\nZ_COORDINATES 2 float\n0 0.5\n"
+    text = (
+        "# vtk DataFile Version 3.0\nclvis seed\nASCII\nDATASET RECTILINEAR_GRID\nDIMENSIONS 3 2 2\n"
+        + coords
+        + "POINT_DATA 12\nSCALARS v float 1\nLOOKUP_TABLE default\n0 1 2 3 4 5 6 7 8 9 10 11\n"
+    )
+    path = tmp_path / "grid.vtk"
+    path.write_text(text)
+    assert read_volume(path).shape == (2, 2, 3)
+    if line.startswith("FIELD"):
+        text = text.replace("Y_COORDINATES 2 float\n0 2\n", f"Y_COORDINATE5 -2\n{line}\n{after}")
+    else:  # the section's line as VTK wrote it, replaced
+        text = re.sub(rf"(?m)^{line.split()[0]} [^\n]*\n", lambda _: f"{line}\n{after}", text, count=1)
+    path.write_text(text)
+    r = run_limited(read_volume, str(path), name=str(path), limit_bytes=1 << 30)
+    assert r.kind == "clvis" and "malformed or unknown legacy VTK section" in r.detail, r
+
+
 def _vtr(path, x, y, z, values, mode, cells=False, compress=True):
     """A .vtr (XML RectilinearGrid) as VTK's writer makes it (what pyvista's
     RectilinearGrid.save("x.vtr") writes): `values` a point (or `cells`: a

@@ -528,6 +528,12 @@ _NOT_A_NUMBER = re.compile(r"[-+]?(NAN|INF)")
 _CELL_SECTIONS = ("VERTICES", "LINES", "POLYGONS", "TRIANGLE_STRIPS", "CELLS")
 # the attribute sections whose type is their third word: values a tuple
 _ATTRIBUTES = {"VECTORS": 3, "NORMALS": 3, "TENSORS": 9, "TENSORS6": 6, "GLOBAL_IDS": 1, "PEDIGREE_IDS": 1}
+# the sections _check_legacy walks: a line of one of these it does not read is malformed, ASCII too
+_SECTION_KEYS = {
+    "X_COORDINATES", "Y_COORDINATES", "Z_COORDINATES", "POINTS", *_CELL_SECTIONS, "CELL_TYPES",
+    "POINT_DATA", "CELL_DATA", "SCALARS", "LOOKUP_TABLE", "COLOR_SCALARS", "TEXTURE_COORDINATES",
+    *_ATTRIBUTES, "FIELD",
+}  # fmt: skip
 _ASCII_KEY = re.compile(rb"(?m)^[ \t]*([A-Za-z_][^\r\n]*)")
 _BINARY_KEY = re.compile(rb"[ \t\r\n]*([^\r\n]*)")
 _BLANK_LINE = re.compile(rb"\n\r?\n")
@@ -721,7 +727,10 @@ def _check_legacy(
             fields, field_where = number(words[2], "FIELD arrays"), where
             if fields > size:
                 raise DataError(f"{path}: FIELD of {fields} arrays, more than the file's bytes")
-        elif binary:  # ASCII: VTK refuses what it does not know; BINARY: what follows cannot be told
+        elif binary or key in _SECTION_KEYS:
+            # ASCII: VTK refuses a word it does not know; a section it knows whose line is not as
+            # VTK writes it, VTK reads word by word across lines, as the walk does not (a FIELD
+            # line of four words: its fourth the first array's name to VTK, a SIGSEGV)
             raise DataError(f"{path}: malformed or unknown legacy VTK section {what!r}")
     return points
 

@@ -482,6 +482,73 @@ def test_analyze_pair_read_by_either_name(tmp_path, image):
         read_volume(tmp_path / "one.hdr")
 
 
+def test_compressed_and_any_case_pairs_read_as_nibabel_reads_them(tmp_path):
+    """A .hdr.gz/.img.gz pair (nibabel writes and reads them) is read by
+    either name; suffixes in upper or mixed case are read (nibabel pairs
+    scan.HDR with scan.IMG but looks for brain.nii.gz when given
+    brain.Nii.gz, and for scan.hdr and scan.img when given scan.Hdr: clvis
+    reads the files there are); a pair whose other half is missing, is
+    compressed where this one is not, or is ambiguous, is a DataError
+    naming it."""
+    data = _sample((6, 5, 4), np.dtype(np.int16), seed=7)
+    nibabel.save(nibabel.AnalyzeImage(data, np.diag([0.5, 1.0, 2.0, 1.0])), tmp_path / "plain.hdr")
+    want = read_volume(tmp_path / "plain.hdr")
+    nibabel.save(nibabel.AnalyzeImage(data, np.diag([0.5, 1.0, 2.0, 1.0])), tmp_path / "z.hdr.gz")
+    assert sorted(p.name for p in tmp_path.glob("z.*")) == ["z.hdr.gz", "z.img.gz"]
+    head, img = (tmp_path / "plain.hdr").read_bytes(), (tmp_path / "plain.img").read_bytes()
+    cases = {
+        "UP.HDR.GZ": "UP.IMG.GZ",
+        "up.HDR": "up.IMG",
+        "scan.Hdr": "SCAN.IMG",
+        "Mixed.hDr.Gz": "mixed.IMG.gz",
+    }
+    for h, i in cases.items():
+        (tmp_path / h).write_bytes(gzip.compress(head) if h.lower().endswith(".gz") else head)
+        (tmp_path / i).write_bytes(gzip.compress(img) if i.lower().endswith(".gz") else img)
+    for name in ("z.hdr.gz", "z.img.gz", *cases, *cases.values()):
+        v = read_volume(tmp_path / name)
+        np.testing.assert_array_equal(v.data, want.data)
+        assert v.spacing == want.spacing and np.array_equal(v.affine, want.affine), name
+    nii = nibabel.Nifti1Image(data, np.diag([0.5, 1.0, 2.0, 1.0]))
+    for name in ("brain.Nii.Gz", "BRAIN.NII.GZ", "brain.nii.GZ", "brain.Nii"):
+        nibabel.save(nii, tmp_path / "tmp.nii.gz" if name.lower().endswith(".gz") else tmp_path / "tmp.nii")
+        (tmp_path / ("tmp.nii.gz" if name.lower().endswith(".gz") else "tmp.nii")).rename(tmp_path / name)
+        np.testing.assert_array_equal(read_volume(tmp_path / name).data, data.transpose(2, 1, 0))
+    # the other half compressed where this one is not, and the reverse: said so
+    (tmp_path / "half.hdr.gz").write_bytes(gzip.compress(head))
+    (tmp_path / "half.img").write_bytes(img)
+    with pytest.raises(
+        DataError, match=r"half\.hdr\.gz: .*its data file half\.img\.gz is missing; half\.img is there"
+    ):
+        read_volume(tmp_path / "half.hdr.gz")
+    with pytest.raises(
+        DataError, match=r"half\.img: .*its header file half\.hdr is missing; half\.hdr\.gz is there"
+    ):
+        read_volume(tmp_path / "half.img")
+    (tmp_path / "lone.IMG.gz").write_bytes(gzip.compress(img))
+    with pytest.raises(DataError, match=r"lone\.IMG\.gz: .*its header file lone\.HDR\.gz is missing \("):
+        read_volume(tmp_path / "lone.IMG.gz")
+    # two files that could be the data file, neither nibabel's name for it (two.img)
+    (tmp_path / "two.Hdr").write_bytes(head)
+    for name in ("TWO.IMG", "Two.Img"):
+        (tmp_path / name).write_bytes(img)
+    with pytest.raises(
+        DataError, match=r"two\.Hdr: .*several files could be its data file \(TWO\.IMG, Two\.Img\)"
+    ):
+        read_volume(tmp_path / "two.Hdr")
+    (tmp_path / "two.img").write_bytes(img)  # nibabel's own name: the pair
+    np.testing.assert_array_equal(read_volume(tmp_path / "two.Hdr").data, want.data)
+    # a cut .img.gz and a header that is not gzip: DataErrors naming the file
+    (tmp_path / "cut.hdr.gz").write_bytes(gzip.compress(head))
+    (tmp_path / "cut.img.gz").write_bytes(gzip.compress(img)[:40])
+    with pytest.raises(DataError, match=r"cut\.hdr\.gz: "):
+        read_volume(tmp_path / "cut.hdr.gz")
+    (tmp_path / "notgz.hdr.gz").write_bytes(head)
+    (tmp_path / "notgz.img.gz").write_bytes(gzip.compress(img))
+    with pytest.raises(DataError, match=r"notgz\.hdr\.gz: cannot read"):
+        read_volume(tmp_path / "notgz.hdr.gz")
+
+
 def test_otsu_level_sits_between_the_samples_it_separates():
     from skimage.filters import threshold_otsu
 

@@ -134,16 +134,19 @@ def test_legacy_ascii_and_errors(tmp_path):
     np.testing.assert_array_equal(v.data, np.arange(12, dtype=np.float32).reshape(2, 3, 2))
     assert v.spacing == (3.0, 2.0, 1.0)
     for text, message in (
-        (head + "1 2 3\n", "truncated: 12 samples, 6 bytes"),
+        (head + "1 2 3\n", "truncated or malformed: SCALARS s float 1 declares 12 values"),
         (head + "1 2 3 4 5 6 7 8 9 10 11\n", "VTK (could not read it|read no 12-sample)"),
         (head.replace("POINT_DATA", "FIELD f 1\na 3 900000000 float\nPOINT_DATA") + "0 " * 12, "field array"),
-        (head.replace("POINT_DATA", "CELL_DATA 99999\nPOINT_DATA") + "0 " * 12, "more than the 12 points"),
+        (
+            head.replace("POINT_DATA", "CELL_DATA 99999\nPOINT_DATA") + "0 " * 12,
+            r"CELL_DATA 99999 does not match DIMENSIONS 2 3 2 \(2 cells\)",
+        ),
         (head.replace("POINT_DATA 12", "POINT_DATA 11") + "0 " * 12, "does not match DIMENSIONS"),
         (head.replace("float 1", "float 3") + "0 " * 36, "one component"),
         (head.replace("STRUCTURED_POINTS", "POLYDATA"), "only DATASET STRUCTURED_POINTS or RECTILINEAR_GRID"),
         (head.replace("ASCII", "BINARY") + "\0" * 8, "truncated"),
         ("hello\n", "not a legacy VTK file"),
-        (head.replace("SCALARS s float 1\nLOOKUP_TABLE default\n", ""), "no POINT_DATA SCALARS"),
+        (head.replace("SCALARS s float 1\nLOOKUP_TABLE default\n", ""), "no point or cell data array"),
     ):
         p.write_text(text)
         with pytest.raises(DataError, match=message):
@@ -167,14 +170,14 @@ def _grid(x, y, z, values, cells=False):
     return g
 
 
-def _rectilinear(path, x, y, z, values, binary):
+def _rectilinear(path, x, y, z, values, binary, cells=False):
     """A legacy RECTILINEAR_GRID as VTK's own writer makes it (what
-    pyvista's RectilinearGrid.save writes)."""
+    pyvista's RectilinearGrid.save writes); `cells`: `values` its cell data."""
     from vtkmodules.vtkIOLegacy import vtkRectilinearGridWriter
 
     w = vtkRectilinearGridWriter()
     w.SetFileName(str(path))
-    w.SetInputData(_grid(x, y, z, values))
+    w.SetInputData(_grid(x, y, z, values, cells))
     w.SetFileTypeToBinary() if binary else w.SetFileTypeToASCII()
     assert w.Write() == 1
 
@@ -470,6 +473,185 @@ def test_cell_data_is_the_volume_where_no_point_array_is(tmp_path, mode):
             read_volume(path)
 
 
+def _structured_points(path, point=(), cell=(), binary=False):
+    """A legacy STRUCTURED_POINTS file of 4 x 3 x 2 points (3 x 2 x 1 cells)
+    as VTK's writer makes it: `point` and `cell` [(name, values, scalars)],
+    each array the section's SCALARS where `scalars`, else (as VTK writes
+    every other array) a FIELD array."""
+    from vtkmodules.util import numpy_support as ns
+    from vtkmodules.vtkCommonDataModel import vtkImageData
+    from vtkmodules.vtkIOLegacy import vtkStructuredPointsWriter
+
+    img = vtkImageData()
+    img.SetDimensions(4, 3, 2)
+    img.SetSpacing(1.0, 2.0, 3.0)
+    img.SetOrigin(1.0, 2.0, 3.0)
+    for data, arrays in ((img.GetPointData(), point), (img.GetCellData(), cell)):
+        for name, values, scalars in arrays:
+            a = ns.numpy_to_vtk(np.ascontiguousarray(values), deep=True)
+            a.SetName(name)
+            data.SetScalars(a) if scalars else data.AddArray(a)
+    w = vtkStructuredPointsWriter()
+    w.SetFileName(str(path))
+    w.SetInputData(img)
+    w.SetFileTypeToBinary() if binary else w.SetFileTypeToASCII()
+    assert w.Write() == 1
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_legacy_cell_data_and_field_arrays(tmp_path, binary):
+    """A legacy .vtk whose point data has no SCALARS gives its first FIELD
+    array of one component (VTK writes every array but the scalars as a
+    FIELD); one without point arrays gives its cell data (one sample a
+    cell, the origin at the first cell's centre), as a .vti does;
+    array=NAME finds point, then cell, SCALARS and FIELD arrays, and a name
+    the file lacks lists the arrays it has."""
+    p = tmp_path / "v.vtk"
+    pts, cells = np.arange(24, dtype=np.float32) * 3 % 7, np.arange(6, dtype=np.int16) - 3
+    _structured_points(p, cell=[("c", cells, True)], binary=binary)
+    v = read_volume(p)
+    assert v.array == "c" and v.data.dtype == np.int16
+    np.testing.assert_array_equal(v.data, cells.reshape(1, 2, 3))
+    assert v.spacing == (3.0, 2.0, 1.0) and v.origin == (1.5, 3.0, 4.5)
+    _structured_points(p, point=[("f", pts, False), ("g", -pts, False)], binary=binary)
+    assert b"FIELD FieldData 2" in p.read_bytes() and b"SCALARS" not in p.read_bytes()
+    v = read_volume(p)
+    assert v.array == "f" and v.origin == (1.0, 2.0, 3.0)
+    np.testing.assert_array_equal(v.data, pts.reshape(2, 3, 4))
+    np.testing.assert_array_equal(read_volume(p, array="g").data, -pts.reshape(2, 3, 4))
+    vectors = np.arange(72, dtype=np.float64).reshape(24, 3)
+    _structured_points(
+        p,
+        point=[("s", pts, True), ("vec", vectors, False)],
+        cell=[("cs", cells, True), ("cf", cells * 2, False)],
+        binary=binary,
+    )
+    assert read_volume(p).array == "s"
+    for name, want in (("cs", cells), ("cf", cells * 2)):
+        v = read_volume(p, array=name)
+        assert v.array == name and v.origin == (1.5, 3.0, 4.5)
+        np.testing.assert_array_equal(v.data, want.reshape(1, 2, 3))
+    with pytest.raises(
+        DataError, match=r"v\.vtk: no array 'nope' \(point arrays: s, vec; cell arrays: cs, cf\)"
+    ):
+        read_volume(p, array="nope")
+    with pytest.raises(DataError, match=r"point FIELD 'vec' \(3 components of type double\): one component"):
+        read_volume(p, array="vec")
+    # only arrays of several components: none is the default, the arrays listed
+    _structured_points(p, point=[("vec", vectors, False)], binary=binary)
+    with pytest.raises(
+        DataError, match=r"no SCALARS or FIELD array of one component .*\(point arrays: vec\)"
+    ):
+        read_volume(p)
+    # a RECTILINEAR_GRID's cell data alike
+    x, y, z = np.arange(4) * 0.5 + 1, np.arange(3) * 2.0 - 3, np.linspace(0, 1, 5)
+    grid_cells = np.arange(3 * 2 * 4, dtype=np.float32)
+    _rectilinear(tmp_path / "g.vtk", x, y, z, grid_cells, binary, cells=True)
+    v = read_volume(tmp_path / "g.vtk")
+    np.testing.assert_array_equal(v.data, grid_cells.reshape(4, 2, 3))
+    assert v.spacing == pytest.approx((0.25, 2.0, 0.5)) and v.origin == pytest.approx((1.25, -2.0, 0.125))
+
+
+def test_pyvista_uniform_cell_field_array():
+    """pyvista's uniform.vtk: its cell data is a FIELD array (Spatial Cell
+    Data, before the point SCALARS), read by name as VTK reads it."""
+    from vtkmodules.util import numpy_support as ns
+    from vtkmodules.vtkIOLegacy import vtkStructuredPointsReader
+
+    v = read_volume(DATA / "pyvista_uniform.vtk", array="Spatial Cell Data")
+    r = vtkStructuredPointsReader()
+    r.SetFileName(str(DATA / "pyvista_uniform.vtk"))
+    r.Update()
+    want = ns.vtk_to_numpy(r.GetOutput().GetCellData().GetArray("Spatial Cell Data"))
+    assert v.shape == (9, 9, 9) and v.origin == (0.5, 0.5, 0.5) and v.array == "Spatial Cell Data"
+    np.testing.assert_array_equal(v.data.ravel(), want)
+    with pytest.raises(DataError, match="point arrays: Spatial Point Data; cell arrays: Spatial Cell Data"):
+        read_volume(DATA / "pyvista_uniform.vtk", array="nope")
+
+
+def test_legacy_field_header_lies_are_refused_before_vtk_reads(tmp_path):
+    """A FIELD array's hostile counts (more tuples than the file holds, a
+    negative count, a count that is not the section's) and data sections
+    that are not the grid's are DataErrors naming what is wrong, before VTK
+    reads or allocates."""
+    head = "# vtk DataFile Version 3.0\nx\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 2 3 2\n"
+    head += "SPACING 1 1 1\nORIGIN 0 0 0\n"
+    values = " ".join(str(k) for k in range(12)) + "\n"
+    good = head + "POINT_DATA 12\nFIELD FieldData 1\nf 1 12 float\n" + values
+    p = tmp_path / "f.vtk"
+    p.write_text(good)
+    np.testing.assert_array_equal(read_volume(p).data.ravel(), np.arange(12))
+    for text, message in (
+        (good.replace("f 1 12 float", "f 1 2000000000 float"), "field array 'f' declares 2000000000 values"),
+        (good.replace("f 1 12 float", "f 1 -12 float"), "malformed field array tuples count '-12'"),
+        (good.replace("f 1 12 float", "f -1 12 float"), "malformed field array components count '-1'"),
+        (
+            good.replace("f 1 12 float", "f 1 6 float"),
+            "point FIELD array 'f' holds 6 tuples, the point data 12",
+        ),
+        (
+            good.replace("f 1 12 float\n" + values, "f 1 12 string\n" + "a\n" * 12),
+            "one component of a numeric",
+        ),
+        (good.replace("FieldData 1", "FieldData 4000000000"), "FIELD of 4000000000 arrays"),
+        (good.replace("POINT_DATA 12", "POINT_DATA 4000000000"), "POINT_DATA 4000000000 does not match"),
+        (
+            good.replace("POINT_DATA 12", "CELL_DATA 12"),
+            r"CELL_DATA 12 does not match DIMENSIONS 2 3 2 \(2 cells\)",
+        ),
+        (good + "CELL_DATA 2\nFIELD c 1\nc 1 99999999 int\n0 0\n", "field array 'c' declares 99999999"),
+    ):
+        p.write_text(text)
+        with pytest.raises(DataError, match=message):
+            read_volume(p)
+    binary = (
+        head.replace("ASCII", "BINARY").encode()
+        + b"CELL_DATA 2\nFIELD FieldData 1\nc 1 2 double\n"
+        + np.array([5.0, -1.0], ">f8").tobytes()
+        + b"\n"
+    )
+    p.write_bytes(binary)
+    v = read_volume(p)
+    np.testing.assert_array_equal(v.data, [[[5.0], [-1.0]]])  # cells (x, y, z) = (1, 2, 1)
+    p.write_bytes(binary.replace(b"c 1 2 double", b"c 1 3 double"))
+    with pytest.raises(DataError, match="truncated or malformed: field array 'c' declares 3 values"):
+        read_volume(p)
+
+
+@pytest.mark.parametrize(
+    "line, after",
+    [
+        ("FIELD FieldS 2 float", "0 2\n"),  # ./dev.sh fuzz's mutant (a bit flip and a splice): SIGSEGV
+        ("Y_COORDINATES 2", "float\n"),  # VTK reads the type from the next line
+        ("POINT_DATA 12 13", ""),
+    ],
+)
+def test_a_known_section_line_not_as_vtk_writes_it_is_refused(tmp_path, line, after):
+    """VTK reads a legacy file's sections word by word across lines; the
+    checks walk them line by line: an ASCII line of a section they know
+    with other words than VTK writes (a FIELD line of four words, whose
+    fourth VTK took for the first array's name and crashed on) is a
+    DataError, read in a child process, before VTK reads."""
+    from fuzz.harness import run_limited
+
+    coords = "X_COORDINATES 3 float\n0 1 2\nY_COORDINATES 2 float\n0 2\nZ_COORDINATES 2 float\n0 0.5\n"
+    text = (
+        "# vtk DataFile Version 3.0\nclvis seed\nASCII\nDATASET RECTILINEAR_GRID\nDIMENSIONS 3 2 2\n"
+        + coords
+        + "POINT_DATA 12\nSCALARS v float 1\nLOOKUP_TABLE default\n0 1 2 3 4 5 6 7 8 9 10 11\n"
+    )
+    path = tmp_path / "grid.vtk"
+    path.write_text(text)
+    assert read_volume(path).shape == (2, 2, 3)
+    if line.startswith("FIELD"):
+        text = text.replace("Y_COORDINATES 2 float\n0 2\n", f"Y_COORDINATE5 -2\n{line}\n{after}")
+    else:  # the section's line as VTK wrote it, replaced
+        text = re.sub(rf"(?m)^{line.split()[0]} [^\n]*\n", lambda _: f"{line}\n{after}", text, count=1)
+    path.write_text(text)
+    r = run_limited(read_volume, str(path), name=str(path), limit_bytes=1 << 30)
+    assert r.kind == "clvis" and "malformed or unknown legacy VTK section" in r.detail, r
+
+
 def _vtr(path, x, y, z, values, mode, cells=False, compress=True):
     """A .vtr (XML RectilinearGrid) as VTK's writer makes it (what pyvista's
     RectilinearGrid.save("x.vtr") writes): `values` a point (or `cells`: a
@@ -564,7 +746,7 @@ def test_array_picks_a_vtk_files_data_array(tmp_path):
     v = read_volume(legacy, array="second one")  # legacy names encode a space as %20
     np.testing.assert_array_equal(v.data, -np.arange(24).reshape(2, 3, 4))
     assert v.array == "second one"
-    with pytest.raises(DataError, match=r"no point SCALARS 'third' \(its SCALARS: first, second one"):
+    with pytest.raises(DataError, match=r"two\.vtk: no array 'third' \(point arrays: first, second one\)"):
         read_volume(legacy, array="third")
     np.save(tmp_path / "v.npy", np.zeros((2, 2, 2)))
     with pytest.raises(ValueError, match="array: a data array's name"):

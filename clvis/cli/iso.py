@@ -71,7 +71,8 @@ Without a FILE it renders an embedded volume: marschner-lobb (64^3, iso 0.5)
 or turbulence (128^3, iso 0.5). FILE: a raw volume named like the Open SciVis
 datasets (<name>_<X>x<Y>x<Z>_<type>.raw, or any .raw with --shape and --dtype),
 a .npy volume [z, y, x], a NIfTI file (.nii, .nii.gz; a 4-D series with
---volume-index), FreeSurfer's MGH (.mgz, .mgh), Analyze (.hdr with its .img), or VTK
+--volume-index), FreeSurfer's MGH (.mgz, .mgh), Analyze (.hdr with its .img, or
+.hdr.gz with its .img.gz), or VTK
 image data (.vti, legacy .vtk structured points, or an evenly spaced rectilinear
 grid: .vtr or legacy .vtk; a .vtp, .vtu, .vts or a legacy .vtk POLYDATA,
 UNSTRUCTURED_GRID or STRUCTURED_GRID is a point cloud: clvis render, clvis gauss,
@@ -118,7 +119,7 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "file",
         nargs="?",
         help="a volume: .raw (Open SciVis naming), .npy, NIfTI (.nii, .nii.gz), MGH (.mgz, .mgh), "
-        "Analyze .hdr/.img, VTK .vti, .vtr or legacy .vtk",
+        "Analyze .hdr/.img (.hdr.gz/.img.gz), VTK .vti, .vtr or legacy .vtk",
     )
     p.add_argument("--dataset", choices=_DATASETS, help="an embedded volume (default marschner-lobb)")
     p.add_argument(

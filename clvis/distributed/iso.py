@@ -140,15 +140,14 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
                 raise DataError(f"{path}: expected a 3-D volume, got shape {shp}")
             return {"kind": "npy", "shape": tuple(shp), "spacing": (1.0, 1.0, 1.0)}
         if name.endswith(volumes.NIBABEL_FORMATS):  # nibabel's proxy slices them alike
-            if name.endswith((".hdr", ".img")):
-                volumes.analyze_pair(p)  # the other file of the pair, or a DataError naming it
-            import nibabel
-
             try:
-                img = nibabel.load(p)
+                # as read_volume finds them (a pair's other file, or a DataError naming it)
+                img = volumes.nibabel_image(p)[0]
                 s = tuple(int(v) for v in img.header.get_data_shape())
                 zooms = tuple(float(z) for z in img.header.get_zooms())[:3]
                 affine = np.asarray(img.affine, np.float64)
+            except DataError:
+                raise
             except volumes.nibabel_errors() as e:
                 raise DataError(f"{path}: not a readable volume header: {type(e).__name__}: {e}") from e
             if len(s) < 3 or any(v != 1 for v in s[3:]) and volume_index is None:
@@ -191,9 +190,9 @@ def _read_brick(spec: dict) -> np.ndarray:
             m = np.memmap(path, dtype=np.dtype(lay["dtype"]), mode="r", shape=tuple(lay["shape"]))
             a = m[z0:z1, y0:y1, x0:x1]
         else:
-            import nibabel
+            from ..io.volumes import nibabel_image
 
-            proxy = nibabel.load(path).dataobj
+            proxy = nibabel_image(Path(path))[0].dataobj
             want = ((x0, x1), (y0, y1), (z0, z1))  # along R, A, S (the volume as read_volume gives it)
             ornt = lay.get("ornt")
             if ornt is None:

@@ -20,14 +20,22 @@ Formats, chosen by the file name (case-insensitive):
 - ``.mgz``, ``.mgh``: FreeSurfer's MGH format (brain.mgz, aseg.mgz) through
   nibabel, read as NIfTI is (the same axes, ``volume_index`` for a 4-D one;
   ``.mgz`` is gzip-compressed).
-- ``.hdr`` / ``.img``: an Analyze 7.5 (or NIfTI-1 pair) header and its data
-  file beside it, through nibabel, read as NIfTI is; either name may be given.
+- ``.hdr`` / ``.img`` (or ``.hdr.gz`` / ``.img.gz``, both compressed): an
+  Analyze 7.5 (or NIfTI-1 pair) header and its data file beside it, through
+  nibabel, read as NIfTI is; either name may be given. The other file is
+  nibabel's name for it (``scan.HDR`` pairs with ``scan.IMG``, ``scan.hdr``
+  with ``scan.img``), else the one file of that name in another case
+  (``scan.Hdr`` with ``SCAN.IMG``, which nibabel alone does not pair); its
+  absence is a DataError naming it.
 - ``.vti`` (VTK XML ImageData), ``.vtr`` (VTK XML RectilinearGrid) and
   ``.vtk`` (legacy STRUCTURED_POINTS or RECTILINEAR_GRID), a rectilinear
   grid only where its coordinates are evenly spaced:
   through VTK's own readers (the ``vtk`` extra: ``pip install "clvis[vtk]"``),
   after clvis's checks of the header against the file (:mod:`clvis.io.vtk`);
-  the point scalars, with the file's spacing and origin.
+  the point scalars (a legacy file's first SCALARS, else its first FIELD
+  array of one component), with the file's spacing and origin; a file
+  without point arrays gives its cell data (one sample a cell, the origin
+  at the first cell's centre).
 
 The samples are returned as stored (uint8 stays uint8: volumes can be large;
 convert where needed, e.g. ``volume.data.astype(np.float32)``), in native
@@ -62,6 +70,7 @@ import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -140,8 +149,11 @@ def volume_parts(
     )
 
 
+#: Analyze (and NIfTI-1 pair) header and data files: nibabel pairs a .hdr with a
+#: .img, a .hdr.gz with a .img.gz
+_PAIR_FORMATS = (".hdr", ".img", ".hdr.gz", ".img.gz")
 #: the volume files read through nibabel (NIfTI, MGH, Analyze header/data pairs)
-NIBABEL_FORMATS = (".nii", ".nii.gz", ".mgz", ".mgh", ".hdr", ".img")
+NIBABEL_FORMATS = (".nii", ".nii.gz", ".mgz", ".mgh", *_PAIR_FORMATS)
 FORMATS = (".raw", ".npy", *NIBABEL_FORMATS, ".vti", ".vtr", ".vtk")
 
 
@@ -154,15 +166,16 @@ def read_volume(
     array: str | None = None,
 ) -> Volume:
     """Read a volume file (``.raw``, ``.npy``, ``.nii``, ``.nii.gz``, ``.mgz``,
-    ``.mgh``, ``.hdr``/``.img``, ``.vti``, ``.vtr``, ``.vtk``; see the module docstring).
+    ``.mgh``, ``.hdr``/``.img``, ``.hdr.gz``/``.img.gz``, ``.vti``, ``.vtr``,
+    ``.vtk``, in any case; see the module docstring).
 
     `shape` (Z, Y, X) and `dtype` apply to ``.raw`` files only: they give the
     shape and the sample type when the file name does not, and override the
     name when it does. `volume_index` picks one volume of a 4-D NIfTI, MGH or
-    Analyze file. `array` picks a VTK file's data array by name (.vti and
-    .vtr: a point array, else a cell array; a legacy .vtk: a point SCALARS;
-    by default the point scalars, see the module docstring); the one read
-    is ``Volume.array``."""
+    Analyze file. `array` picks a VTK file's data array by name (a point
+    array, else a cell array; a legacy .vtk's SCALARS and FIELD arrays; by
+    default the point scalars, see the module docstring); the one read is
+    ``Volume.array``."""
     if isinstance(path, bytes) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path: expected a str or path, got {type(path).__name__}")
     path = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO or device
@@ -311,7 +324,7 @@ def _kind(path: Path) -> str:
     name = path.name.lower()
     if name.endswith((".mgz", ".mgh")):
         return "MGH"
-    return "Analyze" if name.endswith((".hdr", ".img")) else "NIfTI"
+    return "Analyze" if name.endswith(_PAIR_FORMATS) else "NIfTI"
 
 
 def nibabel_errors() -> tuple[type[BaseException], ...]:
@@ -338,40 +351,141 @@ def nibabel_errors() -> tuple[type[BaseException], ...]:
     )
 
 
+def _nibabel_name(name: str) -> tuple[str, str, str]:
+    """(stem, suffix, trailing) of a file name nibabel reads, in the name's
+    own case: "scan.Hdr.gz" -> ("scan", ".Hdr", ".gz"); the suffix "" where
+    it is none of NIBABEL_FORMATS'."""
+    low = name.lower()
+    trail = ".gz" if low.endswith(".gz") and not low.endswith(".mgz") else ""
+    base = name[: len(name) - len(trail)]
+    for suffix in (".nii", ".hdr", ".img", ".mgz", ".mgh"):
+        if base.lower().endswith(suffix):
+            return base[: -len(suffix)], base[-len(suffix) :], name[len(base) :]
+    return name, "", ""
+
+
+def _nibabel_rule(path: Path, suffix: str) -> Path:
+    """The file beside `path` that nibabel names with `suffix` (".hdr",
+    ".img", ".nii"): the suffix in upper case where `path`'s is, else in
+    lower case (a mixed-case one too), the trailing .gz as it is."""
+    stem, ext, trail = _nibabel_name(path.name)
+    return path.with_name(stem + (suffix.upper() if ext.isupper() else suffix) + trail)
+
+
+def _beside(want: Path) -> list[Path]:
+    """The files in `want`'s folder named as `want` is but for case."""
+    key = want.name.lower()
+    try:
+        return sorted(p for p in want.parent.iterdir() if p.name.lower() == key and p.is_file())
+    except OSError:
+        return []
+
+
 def analyze_pair(path: Path) -> tuple[Path, Path]:
-    """(header, data) files of an Analyze or NIfTI-1 pair named by either
-    (nibabel's rule: the other's suffix in the same case); a DataError when
-    the other is missing (nibabel said FileNotFoundError of a name the user
-    never gave)."""
-    header = path.name.lower().endswith(".hdr")
+    """(header, data) files of an Analyze or NIfTI-1 pair (.hdr/.img, or
+    .hdr.gz/.img.gz: nibabel pairs compressed with compressed) named by
+    either: the other is nibabel's name for it (its suffix in upper case
+    where the given one is, else in lower case), else the one file in the
+    folder of that name in another case (scan.Hdr and SCAN.IMG; nibabel
+    reads only the first kind); a DataError when the other is missing or
+    several files could be it (nibabel said FileNotFoundError of a name the
+    user never gave)."""
+    import gzip
+
+    stem, ext, trail = _nibabel_name(path.name)
+    header = ext.lower() == ".hdr"
     if header:
         try:
-            with open(path, "rb") as f:
+            with gzip.open(path, "rb") if trail else open(path, "rb") as f:
                 magic = f.read(348)[344:348]
-        except OSError as e:
-            raise DataError(f"{path}: cannot read: {e.strerror or e}") from e
+        except (OSError, EOFError, zlib.error) as e:
+            raise DataError(f"{path}: cannot read: {getattr(e, 'strerror', None) or e}") from e
         if magic in (b"n+1\0", b"n+2\0"):  # a single-file NIfTI named .hdr
             raise DataError(
-                f"{path}: a single-file NIfTI (magic {magic[:3].decode()}), not a pair: name it .nii"
+                f"{path}: a single-file NIfTI (magic {magic[:3].decode()}), not a pair: name it .nii{trail}"
             )
-    ext = path.suffix
-    other = ".img" if header else ".hdr"
-    sibling = path.with_suffix(other.upper() if ext.isupper() else other)
-    if not sibling.is_file():
-        what = "data" if header else "header"
+    want = _nibabel_rule(path, ".img" if header else ".hdr")
+    found = [want] if want.is_file() else _beside(want)
+    what = "data" if header else "header"
+    if len(found) > 1:
+        raise DataError(
+            f"{path}: an Analyze {'header' if header else 'data file'}; several files could be its "
+            f"{what} file ({', '.join(p.name for p in found)}): keep one"
+        )
+    if not found:
+        # the pair's other half compressed where this one is not, or the reverse
+        other = want.with_name(want.name[: -len(trail)] if trail else want.name + ".gz")
+        near = _beside(other)
+        hint = (
+            f"; {near[0].name} is there, but nibabel pairs a .hdr.gz with a .img.gz and a .hdr with "
+            "a .img: compress both or neither"
+            if near
+            else " (the pair is read from the same folder)"
+        )
         raise DataError(
             f"{path}: an Analyze {'header' if header else 'data file'}; its {what} file "
-            f"{sibling.name} is missing (the pair is read from the same folder)"
+            f"{want.name} is missing{hint}"
         )
-    return (path, sibling) if header else (sibling, path)
+    return (path, found[0]) if header else (found[0], path)
+
+
+def nibabel_image(path: Path) -> tuple[Any, Path]:
+    """(nibabel's image of the NIfTI, MGH or Analyze file `path` (either file
+    of a pair), its data not read; the file the data is in), after the checks
+    of its header against the file (:func:`_check_nifti_head`). nibabel.load
+    where it finds the files by `path`'s name; where it would not (a suffix in
+    mixed case, "brain.Nii.gz", for which nibabel looks for "brain.nii.gz";
+    a pair found in another case, see :func:`analyze_pair`), nibabel's own
+    choice of image class (the first whose header the file may hold, in
+    nibabel's order) reads the files clvis found. ImportError without
+    nibabel; nibabel's errors (:func:`nibabel_errors`) pass through."""
+    import nibabel
+
+    stem, ext, trail = _nibabel_name(path.name)
+    pair = ext.lower() in (".hdr", ".img")
+    head, data = analyze_pair(path) if pair else (path, path)
+    _check_nifti_head(head)
+    own = ext.lower() if ext.lower() in (".hdr", ".img", ".nii") else None
+    if own is None or (
+        _nibabel_rule(path, own) == path
+        and (not pair or (_nibabel_rule(path, ".hdr"), _nibabel_rule(path, ".img")) == (head, data))
+    ):
+        return nibabel.load(path), data
+    return _load_mapped(path, head, data), data
+
+
+def _load_mapped(path: Path, head: Path, data: Path) -> Any:
+    """nibabel.load's image of `head` and `data`, named as nibabel would not
+    name them: the first of nibabel's image classes that reads `path`'s
+    suffix and may hold the header `head` holds (nibabel.load's test),
+    reading these files (an SPM Analyze image's .mat: nibabel's name beside
+    the header)."""
+    from nibabel.filebasedimages import ImageFileError
+    from nibabel.filename_parser import splitext_addext
+    from nibabel.imageclasses import all_image_classes
+    from nibabel.openers import ImageOpener
+
+    sniff = b""
+    for klass in all_image_classes:
+        if splitext_addext(path.name, klass._compressed_suffixes)[1].lower() not in klass.valid_exts:
+            continue
+        if hasattr(klass.header_class, "may_contain_header"):
+            need = klass._meta_sniff_len
+            if len(sniff) < need:
+                with ImageOpener(str(head), "rb") as f:
+                    sniff = f.read(max(need, 1024))
+            if len(sniff) < need or not klass.header_class.may_contain_header(sniff):
+                continue
+        types = dict(klass.files_types)
+        files = {"image": str(data), "header": str(head), "mat": str(_nibabel_rule(head, ".mat"))}
+        return klass.from_file_map(klass.make_file_map({k: v for k, v in files.items() if k in types}))
+    raise ImageFileError(f'Cannot work out file type of "{path}"')
 
 
 def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
     """A NIfTI or (the same reading, nibabel's MGHImage) an MGH file, or an
     Analyze (NIfTI-1 pair) header and data file, named by either."""
     kind = _kind(path)
-    # where the header and the data are (one file but for a pair)
-    head, data_file = analyze_pair(path) if kind == "Analyze" else (path, path)
     try:
         import nibabel
     except ImportError:
@@ -380,9 +494,8 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
             "(or pip install nibabel)"
         ) from None
     errors = nibabel_errors()
-    _check_nifti_head(head)
     try:
-        img = nibabel.load(path)  # the header only; the data is read below
+        img, data_file = nibabel_image(path)  # the header only; the data is read below
         if isinstance(img, nibabel.cifti2.Cifti2Image):
             raise DataError(f"{path}: a CIFTI-2 file (a matrix over brain grayordinates), not a volume")
         header = img.header
@@ -393,6 +506,8 @@ def _read_nifti(path: Path, volume_index: int | None = None) -> Volume:
         offset = int(getattr(img.dataobj, "offset", header.get_data_offset()))
         zooms = tuple(float(z) for z in header.get_zooms())
         affine = np.array(img.affine, dtype=np.float64)
+    except DataError:
+        raise
     except errors as e:
         if isinstance(e, EOFError):  # nibabel reads an MGH file's footer, after its data
             raise DataError(f"{path}: truncated {kind} file ({e})") from e

@@ -9,10 +9,13 @@ are evenly spaced along each axis (pyvista writes a RectilinearGrid so;
 uneven ones are refused, naming the axis: clvis volumes are uniform grids).
 The volume is the point data's ``Scalars`` array (.vti, .vtr: the one
 ``<PointData Scalars=...>`` names, else the first point array; .vtk: the
-first POINT_DATA SCALARS), one component. A .vti or .vtr with no point
-array (a simulation's cell-centred field, e.g. pyvista's ``channels.vti``)
-gives its cell data the same way: one sample a cell, the origin moved to
-the first cell's centre.
+first POINT_DATA SCALARS, else the first one-component FIELD array of the
+point data: VTK writes every array but the scalars as a FIELD), one
+component. A file with no point array (a simulation's cell-centred field,
+e.g. pyvista's ``channels.vti``) gives its cell data the same way: one
+sample a cell, the origin moved to the first cell's centre. ``array=NAME``
+picks a point array, else a cell array, by name (a legacy file's SCALARS
+or FIELD arrays); a name the file lacks is a DataError listing its arrays.
 
 Bounded: before VTK reads, the header is checked against the file (the
 hardening of the other readers): the extents, the array's type and
@@ -33,7 +36,7 @@ import re
 import threading
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -467,12 +470,6 @@ def _read_xml(path: Path, kind: str, array: str | None) -> tuple[np.ndarray, tup
     raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
 
 
-#: a legacy SCALARS header and its LOOKUP_TABLE line: (name, type, components)
-_SCALARS = (
-    rb"SCALARS[ \t]+(\S+)[ \t]+(\S+)(?:[ \t]+(\d+))?[ \t\r]*\n"
-    rb"LOOKUP_TABLE[ \t]+\S+[ \t\r]*\n"
-)
-
 #: the legacy DATASETs whose points read_points reads as a cloud
 POINT_DATASETS = ("POLYDATA", "UNSTRUCTURED_GRID", "STRUCTURED_GRID")
 #: the legacy DATASETs read_volume reads (a rectilinear grid whose coordinates are evenly spaced)
@@ -531,6 +528,12 @@ _NOT_A_NUMBER = re.compile(r"[-+]?(NAN|INF)")
 _CELL_SECTIONS = ("VERTICES", "LINES", "POLYGONS", "TRIANGLE_STRIPS", "CELLS")
 # the attribute sections whose type is their third word: values a tuple
 _ATTRIBUTES = {"VECTORS": 3, "NORMALS": 3, "TENSORS": 9, "TENSORS6": 6, "GLOBAL_IDS": 1, "PEDIGREE_IDS": 1}
+# the sections _check_legacy walks: a line of one of these it does not read is malformed, ASCII too
+_SECTION_KEYS = {
+    "X_COORDINATES", "Y_COORDINATES", "Z_COORDINATES", "POINTS", *_CELL_SECTIONS, "CELL_TYPES",
+    "POINT_DATA", "CELL_DATA", "SCALARS", "LOOKUP_TABLE", "COLOR_SCALARS", "TEXTURE_COORDINATES",
+    *_ATTRIBUTES, "FIELD",
+}  # fmt: skip
 _ASCII_KEY = re.compile(rb"(?m)^[ \t]*([A-Za-z_][^\r\n]*)")
 _BINARY_KEY = re.compile(rb"[ \t\r\n]*([^\r\n]*)")
 _BLANK_LINE = re.compile(rb"\n\r?\n")
@@ -564,20 +567,53 @@ def _check_cell_list(path: Path, key: str, raw: bytes, at: int, cells: int, tota
         raise DataError(f"{path}: {key} {cells} {total}: its cells' point counts do not add up to {total}")
 
 
-def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
+class _LegacyArray(NamedTuple):
+    """An array of a legacy file's POINT_DATA or CELL_DATA section, as its
+    header line declares it."""
+
+    where: str  # "point" or "cell"
+    kind: str  # SCALARS, FIELD, VECTORS, ...
+    name: str  # as VTK decodes it (%20: a space)
+    type: str  # the legacy type word, lower case
+    components: int
+    tuples: int  # a FIELD array's own count; the section's for the others
+    section: int  # the section's POINT_DATA or CELL_DATA count
+
+
+def _check_legacy(
+    path: Path, raw: bytes, binary: bool, new_cells: bool, arrays: list[_LegacyArray] | None = None
+) -> int:
     """Every section of a legacy VTK file after its DATASET line, its count
     against the bytes the file holds, before VTK reads and allocates: BINARY
     walked section by section, each block's size exact (a count that lies
     is caught where it lies); ASCII each section's values bounded by the
     text after it (a value and its separator take two bytes). The points'
     count (-1: no POINTS); a DataError naming the file for what does not
-    fit or is not read."""
+    fit or is not read. `arrays`, where given, gets each array of the
+    POINT_DATA and CELL_DATA sections (a dataset's own FIELD before them is
+    none), in the file's order."""
     pos = 0
     for _ in range(4):  # the version, title, ASCII/BINARY and DATASET lines
         pos = raw.find(b"\n", pos) + 1
         if pos == 0:
             raise DataError(f"{path}: malformed legacy VTK header (fewer than 4 lines)")
     size, points, here, fields = len(raw), -1, 0, 0
+    where, field_where = "", ""  # the data section we are in ("point", "cell"), the FIELD's
+
+    def note(kind: str, name: str, type_word: str, components: int, tuples: int, data: str) -> None:
+        """An array of the `data` section ("point", "cell"; "": none, not noted) into `arrays`."""
+        if arrays is not None and data:
+            arrays.append(
+                _LegacyArray(
+                    data,
+                    kind,
+                    _decoded(name.encode("latin-1")),
+                    type_word.lower(),
+                    components,
+                    tuples,
+                    here,
+                )
+            )
 
     def number(word: str, what: str) -> int:
         if not re.fullmatch("[0-9]+", word):  # isdigit() takes '²'; int() does not
@@ -633,8 +669,9 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
                 continue
             if len(words) != 4:
                 raise DataError(f"{path}: malformed field array {what!r} (name components tuples type)")
-            n = number(words[1], "field array components") * number(words[2], "field array tuples")
-            pos = values(n, words[3], f"field array {words[0]!r}", pos)
+            comps, tuples = number(words[1], "field array components"), number(words[2], "field array tuples")
+            pos = values(comps * tuples, words[3], f"field array {words[0]!r}", pos)
+            note("FIELD", words[0], words[3], comps, tuples, field_where)
         elif key in ("DIMENSIONS", "ORIGIN", "SPACING", "ASPECT_RATIO"):
             continue
         elif key in ("X_COORDINATES", "Y_COORDINATES", "Z_COORDINATES") and len(words) >= 3:
@@ -661,7 +698,7 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
         elif key == "CELL_TYPES" and len(words) == 2:
             pos = values(number(words[1], key), "int", key, pos)
         elif key in ("POINT_DATA", "CELL_DATA") and len(words) == 2:
-            here = number(words[1], key)
+            here, where = number(words[1], key), key.split("_")[0].lower()
             if key == "POINT_DATA" and points >= 0 and here != points:
                 raise DataError(f"{path}: POINT_DATA {here} does not match POINTS {points}")
             if here > size:
@@ -672,30 +709,42 @@ def _check_legacy(path: Path, raw: bytes, binary: bool, new_cells: bool) -> int:
                 raise DataError(f"{path}: SCALARS of {comps} components (VTK reads 1 to 4)")
             m = _TABLE_AFTER.match(raw, pos)
             pos = values(here * comps, words[2], what, m.end() if m else pos)
+            note(key, words[1], words[2], comps, here, where)
         elif key == "LOOKUP_TABLE" and len(words) == 3:
             pos = values(4 * number(words[2], key), "unsigned_char" if binary else "float", what, pos)
         elif key == "COLOR_SCALARS" and len(words) == 3:
-            n = here * number(words[2], "COLOR_SCALARS components")
-            pos = values(n, "unsigned_char" if binary else "float", what, pos)
+            comps = number(words[2], "COLOR_SCALARS components")
+            pos = values(here * comps, "unsigned_char" if binary else "float", what, pos)
+            note(key, words[1], "unsigned_char" if binary else "float", comps, here, where)
         elif key == "TEXTURE_COORDINATES" and len(words) == 4:
-            pos = values(here * number(words[2], "TEXTURE_COORDINATES dimension"), words[3], what, pos)
+            comps = number(words[2], "TEXTURE_COORDINATES dimension")
+            pos = values(here * comps, words[3], what, pos)
+            note(key, words[1], words[3], comps, here, where)
         elif key in _ATTRIBUTES and len(words) == 3:
             pos = values(here * _ATTRIBUTES[key], words[2], what, pos)
+            note(key, words[1], words[2], _ATTRIBUTES[key], here, where)
         elif key == "FIELD" and len(words) == 3:
-            fields = number(words[2], "FIELD arrays")
+            fields, field_where = number(words[2], "FIELD arrays"), where
             if fields > size:
                 raise DataError(f"{path}: FIELD of {fields} arrays, more than the file's bytes")
-        elif binary:  # ASCII: VTK refuses what it does not know; BINARY: what follows cannot be told
+        elif binary or key in _SECTION_KEYS:
+            # ASCII: VTK refuses a word it does not know; a section it knows whose line is not as
+            # VTK writes it, VTK reads word by word across lines, as the walk does not (a FIELD
+            # line of four words: its fourth the first array's name to VTK, a SIGSEGV)
             raise DataError(f"{path}: malformed or unknown legacy VTK section {what!r}")
     return points
 
 
 def read_legacy(path: Path, array: str | None = None) -> tuple[np.ndarray, tuple, list, str]:
     """A legacy .vtk STRUCTURED_POINTS or (evenly spaced) RECTILINEAR_GRID
-    file: (data, spacing zyx, origin xyz, the array's name); the point
-    data's first SCALARS (`array`: the point SCALARS of that name), read by
+    file: (data, spacing zyx, origin xyz, the array's name), read by
     vtkStructuredPointsReader or vtkRectilinearGridReader after the header
-    checks."""
+    checks. The array (one component of a numeric type): `array`, a point
+    array of that name (SCALARS or a FIELD array: VTK writes the arrays that
+    are not the scalars so), else a cell array; by default the point data's
+    first SCALARS, else its first FIELD array of one component; a file without
+    either in its point data gives its cell data's the same way (one sample
+    a cell, the origin at the first cell's centre), as a .vti does."""
     raw = path.read_bytes()
     dataset, binary, new_cells, text = _legacy_head(path, raw)
     if dataset not in VOLUME_DATASETS:
@@ -715,64 +764,93 @@ def read_legacy(path: Path, array: str | None = None) -> tuple[np.ndarray, tuple
     nx, ny, nz = _numbers(path, "DIMENSIONS", " ".join(f["DIMENSIONS"]), 3, int)
     _numbers(path, "SPACING", " ".join(f.get("SPACING", f.get("ASPECT_RATIO", ["1", "1", "1"]))), 3)
     _numbers(path, "ORIGIN", " ".join(f.get("ORIGIN", ["0", "0", "0"])), 3)
-    m = re.search(rb"(?:^|\n)POINT_DATA[ \t]+(\d+)[ \t\r]*\n+" + _SCALARS, raw)
-    if m is None:
-        raise DataError(f"{path}: no POINT_DATA SCALARS with a LOOKUP_TABLE (cell data is not read)")
-    count = int(m.group(1))  # POINT_DATA's
-    if array is not None and _decoded(m.group(2)) != array:
-        m = _named_scalars(path, raw, m, array)
-    t = _LEGACY_TYPES.get(m.group(3).decode("latin-1").lower())
-    if t is None or (m.group(4) is not None and m.group(4) != b"1"):
-        scalars = m.group(0).splitlines()[-2].decode("latin-1")
-        raise DataError(f"{path}: {scalars!r}: one component of a numeric type expected")
+    if min(nx, ny, nz) < 1:
+        raise DataError(f"{path}: empty DIMENSIONS {nx} {ny} {nz}")
     n = nx * ny * nz
-    if min(nx, ny, nz) < 1 or count != n:
-        raise DataError(f"{path}: POINT_DATA {count} does not match DIMENSIONS {nx} {ny} {nz}")
-    if binary and m.end() + n * np.dtype(t).itemsize > len(raw):
+    counts = {"point": n, "cell": max(nx - 1, 1) * max(ny - 1, 1) * max(nz - 1, 1)}
+    # every data section VTK reads holds a value a point or a cell (bounded by the file too, below)
+    for key, k in re.findall(rb"(?im)^[ \t]*(POINT_DATA|CELL_DATA)[ \t]+(\d+)", raw):
+        _check_section(path, key.decode("latin-1").upper(), int(k), counts, (nx, ny, nz))
+    arrays: list[_LegacyArray] = []
+    _check_legacy(path, raw, binary, new_cells, arrays)
+    chosen = _legacy_array(path, arrays, array)
+    _check_section(path, f"{chosen.where.upper()}_DATA", chosen.section, counts, (nx, ny, nz))
+    if chosen.tuples != chosen.section:
         raise DataError(
-            f"{path}: truncated: {n} samples of {np.dtype(t).itemsize} bytes after byte {m.end()}"
+            f"{path}: {chosen.where} {chosen.kind} array {chosen.name!r} holds {chosen.tuples} tuples, "
+            f"the {chosen.where} data {chosen.section}"
         )
-    if not binary and n > len(raw) - m.end():
-        raise DataError(f"{path}: truncated: {n} samples, {len(raw) - m.end()} bytes of text")
-    # what else VTK reads from the file (cell data, field arrays, lookup tables) is bounded by it too
-    for k in re.findall(rb"(?m)^[ \t]*(?:POINT_DATA|CELL_DATA)[ \t]+(\d+)", raw):
-        if int(k) > n:
-            raise DataError(f"{path}: a data section of {int(k)} values, more than the {n} points")
-    _check_legacy(path, raw, binary, new_cells)
+    cells = chosen.where == "cell"
     core, legacy, _, ns = _vtk()
     with _quiet(core) as messages:
         structured = dataset == "STRUCTURED_POINTS"
         r = legacy.vtkStructuredPointsReader() if structured else legacy.vtkRectilinearGridReader()
         _observe(core, r, messages)
         r.SetFileName(str(path))
-        name = _decoded(m.group(2))
-        r.SetScalarsName(name)
-        if dataset == "STRUCTURED_POINTS":
-            return (*_image(path, r, messages, None, n, ns), name)
-        return (*_rectilinear(path, r, messages, n, ns), name)
+        if chosen.kind == "SCALARS":  # VTK reads the first SCALARS of a section, else the one named
+            r.SetScalarsName(chosen.name)
+        count = counts[chosen.where]
+        if structured:
+            return (*_image(path, r, messages, chosen.name, count, ns, cells), chosen.name)
+        return (*_rectilinear(path, r, messages, count, ns, chosen.name, cells, legacy=True), chosen.name)
+
+
+def _check_section(path: Path, key: str, count: int, counts: dict[str, int], dims: tuple) -> None:
+    """A DataError where a POINT_DATA or CELL_DATA `key`'s `count` is not the
+    grid's (`counts`: its points and cells, of DIMENSIONS `dims`)."""
+    what = key.split("_")[0].lower()
+    if count != counts[what]:
+        raise DataError(
+            f"{path}: {key} {count} does not match DIMENSIONS {' '.join(map(str, dims))} "
+            f"({counts[what]} {what}s)"
+        )
+
+
+def _readable(a: _LegacyArray) -> bool:
+    """Whether a legacy array can be a volume: one component of a numeric type."""
+    return a.components == 1 and a.type in _LEGACY_TYPES
+
+
+def _legacy_array(path: Path, arrays: list[_LegacyArray], name: str | None) -> _LegacyArray:
+    """The array read_legacy reads (see there); a DataError listing the
+    file's arrays where there is none, or none by that name, or where the
+    one chosen has several components or is not of a numeric type."""
+    listed = "; ".join(
+        f"{where} arrays: {', '.join(dict.fromkeys(a.name for a in arrays if a.where == where))}"
+        for where in ("point", "cell")
+        if any(a.where == where for a in arrays)
+    )
+    if name is not None:
+        found = [a for where in ("point", "cell") for a in arrays if a.where == where and a.name == name]
+        if not found:
+            raise DataError(f"{path}: no array {name!r} ({listed or 'no arrays'})")
+        chosen = found[0]
+    else:
+        candidates = [
+            a
+            for where in ("point", "cell")
+            for kind in ("SCALARS", "FIELD")
+            for a in arrays
+            if a.where == where and a.kind == kind and (kind == "SCALARS" or _readable(a))
+        ]
+        if not candidates:
+            if not arrays:
+                raise DataError(f"{path}: no point or cell data array")
+            raise DataError(
+                f"{path}: no SCALARS or FIELD array of one component of a numeric type ({listed})"
+            )
+        chosen = candidates[0]
+    if not _readable(chosen):
+        raise DataError(
+            f"{path}: {chosen.where} {chosen.kind} {chosen.name!r} ({chosen.components} components of "
+            f"type {chosen.type}): one component of a numeric type expected ({listed})"
+        )
+    return chosen
 
 
 def _decoded(name: bytes) -> str:
     """A legacy array name as VTK decodes it (%20 and the like: legacy names have no spaces)."""
     return re.sub(r"%([0-9A-Fa-f]{2})", lambda h: chr(int(h.group(1), 16)), name.decode("latin-1"))
-
-
-_LEGACY_SCALARS = re.compile(rb"(?:^|\n)(POINT_DATA[ \t]+\d+[ \t\r]*\n+)?" + _SCALARS)
-
-
-def _named_scalars(path: Path, raw: bytes, first: re.Match, array: str) -> re.Match:
-    """The SCALARS header named `array` in the point data section that
-    `first` (the POINT_DATA line and its first SCALARS) opens, up to a
-    CELL_DATA line; a DataError listing the point SCALARS there without it.
-    Its groups 2-4 are `first`'s: name, type, components."""
-    cell = re.compile(rb"(?:^|\n)CELL_DATA[ \t]").search(raw, first.end())
-    end = cell.start() if cell else len(raw)
-    found = list(_LEGACY_SCALARS.finditer(raw, first.start(), end))
-    for s in found:
-        if _decoded(s.group(2)) == array:
-            return s
-    names = ", ".join(dict.fromkeys(_decoded(s.group(2)) for s in found))
-    raise DataError(f"{path}: no point SCALARS {array!r} (its SCALARS: {names}; FIELD arrays are not read)")
 
 
 def _rectilinear(
@@ -783,15 +861,16 @@ def _rectilinear(
     ns: Any,
     name: str | None = None,
     cells: bool = False,
+    legacy: bool = False,
 ) -> tuple:
     """(data (Z, Y, X), spacing zyx, origin xyz) of a legacy or XML
     rectilinear grid reader's output (the array `name`, else the scalars;
     with `cells`, of its cell array: one sample a cell, at the cell's
     centre), its coordinates evenly spaced along each axis (within _EVEN of
-    a step), else a DataError naming the axis."""
+    a step), else a DataError naming the axis (`legacy`: as a legacy file
+    names it, X_COORDINATES)."""
     grid, data = _scalars(path, reader, messages, name, n, ns, cells)
     nx, ny, nz = grid.GetDimensions()
-    legacy = name is None
     steps, origin = [], []
     for axis, count, coords in (
         ("X", nx, grid.GetXCoordinates()),

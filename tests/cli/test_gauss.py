@@ -393,7 +393,9 @@ def test_array_is_for_a_vtk_volume_file(tmp_path, capsys):
     vtk_uniform = Path(__file__).resolve().parents[1] / "data" / "pyvista_uniform.vtk"
     out = ["--size", "64x48", "--out", str(tmp_path / "o")]
     assert cli.main(["gauss", str(vtk_uniform), "--array", "nope", *out]) == 2
-    assert "no point SCALARS 'nope'" in capsys.readouterr().err
+    assert "no array 'nope' (point arrays: Spatial Point Data; cell arrays: Spatial Cell Data)" in (
+        capsys.readouterr().err
+    )
     assert cli.main(["gauss", "--array", "v", *out]) == 2
     assert "--array picks a data array of a VTK volume FILE" in capsys.readouterr().err
     pts = tmp_path / "p.npy"

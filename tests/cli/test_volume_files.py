@@ -2,6 +2,7 @@
 --volume-index), the default isovalue of a scan, and the formats gauss reads,
 on nibabel's bundled NIfTI files and on generated ones."""
 
+import gzip
 import os
 import warnings
 
@@ -42,6 +43,28 @@ def test_iso_four_d_nifti_needs_an_index(tmp_path, capsys):
     assert cli.main(["iso", f, "--volume-index", "2", "--size", "40x30", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "outside 0..1" in err and "--volume-index" in err
+
+
+def test_iso_of_compressed_and_mixed_case_analyze_pairs(tmp_path, capsys):
+    """clvis iso reads a .hdr.gz/.img.gz pair and a pair in mixed case
+    (scan.Hdr with SCAN.IMG) as read_volume does; a missing half is one
+    line naming it; clvis render says such a pair is a volume."""
+    v = datasets.marschner_lobb(20)["volume"].astype(np.float32)
+    nibabel.save(nibabel.AnalyzeImage(v.transpose(2, 1, 0), np.eye(4)), tmp_path / "ml.hdr.gz")
+    (tmp_path / "scan.Hdr").write_bytes(gzip.decompress((tmp_path / "ml.hdr.gz").read_bytes()))
+    (tmp_path / "SCAN.IMG").write_bytes(gzip.decompress((tmp_path / "ml.img.gz").read_bytes()))
+    for name in ("ml.hdr.gz", "ml.img.gz", "scan.Hdr", "SCAN.IMG"):
+        out = tmp_path / name.replace(".", "-")
+        args = ["iso", str(tmp_path / name), "--isovalue", "0.5", "--size", "40x30", "--out", str(out)]
+        assert cli.main(args) == 0, capsys.readouterr().err
+        assert _png(out / "iso.png").std() > 1
+    assert cli.main(["render", str(tmp_path / "ml.hdr.gz")]) == 2
+    assert "a volume file (.hdr.gz), not a point cloud" in capsys.readouterr().err
+    (tmp_path / "SCAN.IMG").unlink()
+    assert cli.main(["iso", str(tmp_path / "scan.Hdr"), "--size", "40x30", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "scan.Hdr: an Analyze header; its data file scan.img is missing" in err
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_raw_shape_dtype_and_spacing(tmp_path, capsys):

@@ -6,6 +6,8 @@ the reference's reliable pixels, and against the single device's image),
 whether the volume comes as an array or as a .npy, .raw or NIfTI file read
 brick by brick on the workers."""
 
+import gzip
+
 import numpy as np
 import pytest
 from dask_cluster import TIMEOUT
@@ -169,6 +171,37 @@ def test_a_nifti_file_is_sliced_in_the_order_read_volume_gives(tmp_path, order):
         got = _read_brick({"ranges": ranges, "source": (str(path), lay)})
         want = whole.data[tuple(slice(*r) for r in ranges)]
         np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("names", [("v.hdr.gz", "v.img.gz"), ("v.Hdr", "V.IMG"), ("v.Nii.Gz",)])
+def test_compressed_and_any_case_files_are_sliced_as_read_volume_reads_them(tmp_path, names):
+    """A .hdr.gz/.img.gz pair, a pair in mixed case (which nibabel.load
+    alone does not find) and a mixed-case .nii.gz: the workers' layout and
+    bricks are those of the volume read_volume returns, by either name of
+    a pair; a missing half is named as read_volume names it."""
+    from clvis.distributed.iso import _layout, _read_brick
+    from clvis.io import read_volume
+
+    nib = pytest.importorskip("nibabel")
+    ijk = np.random.default_rng(4).random((7, 6, 5)).astype(np.float32)
+    image = nib.Nifti1Image if len(names) == 1 else nib.AnalyzeImage
+    saved = tmp_path / ("t.nii.gz" if len(names) == 1 else "t.hdr.gz")
+    nib.save(image(ijk, np.diag([-1.0, 1.0, 2.0, 1.0])), str(saved))
+    for name, made in zip(names, [saved, saved.with_name("t.img.gz")], strict=False):
+        raw = made.read_bytes()
+        (tmp_path / name).write_bytes(raw if name.lower().endswith(".gz") else gzip.decompress(raw))
+    whole = read_volume(tmp_path / names[0])
+    for name in names:
+        lay = _layout(str(tmp_path / name), None, None, None)
+        assert lay["shape"] == whole.shape and lay["spacing"] == pytest.approx(whole.spacing)
+        z, y, x = whole.shape
+        ranges = ((1, z), (0, y - 1), (2, x))
+        got = _read_brick({"ranges": ranges, "source": (str(tmp_path / name), lay)})
+        np.testing.assert_array_equal(got, whole.data[tuple(slice(*r) for r in ranges)])
+    if len(names) == 2:
+        (tmp_path / names[1]).unlink()
+        with pytest.raises(DataError, match=f"{names[0]}: an Analyze header; its data file .* is missing"):
+            _layout(str(tmp_path / names[0]), None, None, None)
 
 
 def test_bad_files_and_arguments(client, tmp_path):

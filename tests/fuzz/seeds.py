@@ -351,6 +351,31 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
             + b"\n"
         )
         add("vtk", "volume", out / name)
+    for name, head in (("fields-ascii.vtk", "ASCII"), ("fields-binary.vtk", "BINARY")):
+        # point data as FIELD arrays (as VTK writes all but the scalars), cell data as SCALARS and FIELD
+        def block(a: np.ndarray, head: str = head) -> bytes:
+            return (
+                " ".join(f"{v:g}" for v in a.ravel()).encode() if head == "ASCII" else a.tobytes()
+            ) + b"\n"
+
+        (out / name).write_bytes(
+            f"# vtk DataFile Version 3.0\nclvis seed\n{head}\n".encode()
+            + b"DATASET STRUCTURED_POINTS\nDIMENSIONS 3 2 2\nSPACING 1 1 2\nORIGIN 0 0 0\n"
+            + b"POINT_DATA 12\nFIELD FieldData 2\nf 1 12 float\n"
+            + block(np.arange(12, dtype=">f4"))
+            + b"g 3 12 short\n"
+            + block(np.arange(36, dtype=">i2"))
+            + b"CELL_DATA 2\nSCALARS c double\nLOOKUP_TABLE default\n"
+            + block(np.array([1.5, -2.0], ">f8"))
+            + b"FIELD FieldData 1\nd 1 2 int\n"
+            + block(np.array([7, 8], ">i4"))
+        )
+        add("vtk", "volume", out / name)
+    (out / "cells-only.vtk").write_text(  # cell data only: the volume is a sample a cell
+        "# vtk DataFile Version 3.0\nclvis seed\nASCII\nDATASET STRUCTURED_POINTS\nDIMENSIONS 3 3 2\n"
+        "SPACING 1 1 1\nORIGIN 0 0 0\nCELL_DATA 4\nFIELD FieldData 1\nc 1 4 float\n1 2 3 4\n"
+    )
+    add("vtk", "volume", out / "cells-only.vtk")
     try:
         import vtk  # noqa: F401
     except ImportError:

@@ -288,10 +288,13 @@ class ViewServer:
             "camera": view.orbit.state(self.scene.file_origin),
         }
 
-    def opened(self, sock: Any) -> bool:
+    def opened(self, sock: Any, size: tuple[Any, Any] | None = None) -> bool:
         """A page opened its socket: its own view, at the start camera, and
-        its first frame; False (the page told why, its socket closed) when
-        `max_pages` are open already."""
+        its first frame, at `size` (the page's canvas, sent with the socket's
+        URL: the first frame is not one of the default size, thrown away when
+        the page's ``size`` event comes; None: the server's size); False (the
+        page told why, its socket closed) when `max_pages` are open already.
+        ValueError for a size that is not two finite numbers."""
         if len(self._views) >= self.max_pages:
             message = (
                 f"this viewer shows at most {self.max_pages} pages at once, each its own view: "
@@ -300,7 +303,8 @@ class ViewServer:
             sock.write_message(to_json({"type": "error", "message": message}))
             sock.close(_FULL, f"at most {self.max_pages} pages at once: close one and reload")
             return False
-        view = self._views[sock] = View(self.scene, self.size0, sock)
+        first = self.size0 if size is None else self._clamp_size(*size)
+        view = self._views[sock] = View(self.scene, first, sock)
         self._keep_sizes()
         sock.write_message(to_json(self._config(view)))
         self.request(view)
@@ -626,7 +630,17 @@ def _handlers():
                 raise tornado.web.HTTPError(403)
 
         def open(self) -> None:
-            self.server.opened(self)
+            # the page's canvas size, in the URL (?width=W&height=H): its
+            # first frame at that size; none, or not two numbers: the
+            # server's size until a size event
+            w, h = self.get_query_argument("width", None), self.get_query_argument("height", None)
+            size = None
+            if w is not None and h is not None:
+                try:
+                    size = self.server._clamp_size(float(w), float(h))
+                except ValueError:
+                    size = None
+            self.server.opened(self, size)
 
         def on_message(self, message) -> None:
             """One event; whatever goes wrong with it is an error message to

@@ -198,7 +198,7 @@ def _settled(b: Browser, mode: str) -> dict:
     expr = (
         "(() => { const s = window.clvisView, h = s && s.header;"
         f" return h && !h.interactive && h.final && h.mode === {json.dumps(mode)}"
-        " && s.seq && h.seq >= s.seq ? h : null; })()"
+        " && (!s.seq || h.seq >= s.seq) ? h : null; })()"  # no event sent yet: the first frame
     )
     return b.wait_for(expr, f"a still frame of {mode}")
 
@@ -219,6 +219,8 @@ def test_points_orbit_and_modes(browser, tmp_path):
         b.call("Page.navigate", url=server.url)
         first = _settled(b, "points")
         assert (first["width"], first["height"]) == (WIDTH, HEIGHT)
+        # the page's size came with its socket: no frame of the server's 1280x720 first
+        assert server.frames == 1 and first["id"] == 1, first
         assert set(first["ms"]) >= {"render", "encode", "send"}
         cam0, img0 = first["camera"], b.canvas_hash()
 

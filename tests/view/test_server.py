@@ -58,9 +58,10 @@ class Page:
         self.ws = ws
 
     @classmethod
-    async def open(cls, server: ViewServer, token: str | None = None) -> Page:
-        q = f"?token={token}" if token else ""
-        return cls(await tornado.websocket.websocket_connect(f"ws://127.0.0.1:{server.port}/ws{q}"))
+    async def open(cls, server: ViewServer, token: str | None = None, query: str = "") -> Page:
+        q = "&".join(([f"token={token}"] if token else []) + ([query] if query else []))
+        url = f"ws://127.0.0.1:{server.port}/ws" + (f"?{q}" if q else "")
+        return cls(await tornado.websocket.websocket_connect(url))
 
     async def send(self, msg) -> None:
         await self.ws.write_message(msg if isinstance(msg, str) else json.dumps(msg))
@@ -435,3 +436,27 @@ def test_the_log_lines_do_not_show_the_token(caplog, monkeypatch):
     assert any(line.startswith("403 GET /ws (127.0.0.1)") for line in lines), lines
     assert "Uncaught exception GET /ws (127.0.0.1)" in lines, lines
     assert not [line for line in lines if "t0ken" in line], lines
+
+
+@pytest.mark.parametrize(
+    "query, first",
+    [
+        ("width=200&height=100", (200, 100)),  # the page's canvas
+        ("width=9999&height=1000", (3840, 384)),  # one factor, as a size event's
+        ("width=nan&height=100", (320, 180)),  # not a size: the server's until the page sends one
+        ("width=200", (320, 180)),
+    ],
+)
+def test_a_page_that_opens_with_its_size_gets_its_first_frame_at_that_size(server, query, first):
+    """The page sends its canvas size with the socket's URL: its first frame
+    is at that size (it was rendered at the server's default size, then
+    thrown away when the page's size event came; 1280x720 for clvis view)."""
+
+    async def go():
+        page = await Page.open(server, query=query)
+        h = await page.frame("the first frame")
+        assert (h["width"], h["height"]) == first
+        page.ws.close()
+
+    asyncio.run(go())
+    assert server.frames == 1

@@ -46,6 +46,8 @@ __all__ = [
 
 CONNECT_TIMEOUT = 10.0  # seconds to reach a scheduler given by address
 FRAME_RETRIES = 2  # frames submitted again after data was lost with a worker
+STALL_CHECK = 1.0  # seconds between looks for tasks Dask left waiting for workers that are gone
+WORKERS_PER_CORE = 4  # a LocalCluster started here: at most this many worker processes per CPU core
 
 
 def _distributed() -> Any:
@@ -345,23 +347,43 @@ class ClusterOwner:
         return ""
 
     # -- bounded waits
-    def _gather(self, futures: Sequence[Any], what: str, where: dict | None = None) -> list:
+    def _gather(
+        self, futures: Sequence[Any], what: str, where: dict | None = None, names: Sequence[str] | None = None
+    ) -> list:
         """The results of `futures`, waited for at most self.timeout: a
         ClusterTimeout naming `what` and the workers of the unfinished
         (`where`: future key → worker); a task's own error as it is (the first
-        in order); futures cancelled because their data was lost: ClusterError."""
+        in order); futures cancelled because their data was lost: ClusterError
+        (_Lost); tasks Dask keeps for workers that are gone (_stalled):
+        _Stalled; a task whose workers all died running it (Dask's
+        KilledWorker): ClusterError naming it (`names[i]`: what future i is)."""
         d = _distributed()
         futures = list(futures)
         deadline = time.monotonic() + self.timeout
-        try:
-            d.wait(futures, timeout=self.timeout, return_when="ALL_COMPLETED")
-        except TimeoutError:
-            self._timed_out(futures, what, where)
-        except d.CancelledError:
-            pass  # the statuses below say which
-        for f in futures:  # the first failure in the partitions' order, whichever failed first
+        while True:
+            left = deadline - time.monotonic()
+            try:
+                d.wait(futures, timeout=max(min(left, STALL_CHECK), 0.001), return_when="ALL_COMPLETED")
+                break
+            except TimeoutError:
+                if time.monotonic() >= deadline:
+                    self._timed_out(futures, what, where)
+                stuck = self._stalled(
+                    futures, min(self._close_timeout, max(deadline - time.monotonic(), 0.1))
+                )
+                if stuck:
+                    raise _Stalled(
+                        f"{what}: {len(stuck)} of {len(futures)} tasks left waiting for workers now gone",
+                        stuck,
+                    ) from None
+            except d.CancelledError:
+                break  # the statuses below say which
+        for i, f in enumerate(futures):  # the first failure in the partitions' order, whichever failed first
             if f.status == "error":
-                f.result(timeout=max(deadline - time.monotonic(), 1.0))
+                try:
+                    f.result(timeout=max(deadline - time.monotonic(), 1.0))
+                except d.KilledWorker as e:
+                    raise self._killed(what, names[i] if names else None, e) from None
         lost = [f for f in futures if f.status != "finished"]
         if lost:
             raise _Lost(f"{what}: {len(lost)} of {len(futures)} tasks cancelled (data lost with a worker)")
@@ -374,6 +396,77 @@ class ClusterOwner:
             except d.CancelledError as e:
                 raise _Lost(f"{what}: cancelled ({e})") from None
         return out
+
+    def _stalled(self, futures: Sequence[Any], wait: float) -> list[int]:
+        """The indices of `futures` whose tasks wait in Dask's no-worker
+        state while a worker runs (asking the scheduler, `wait` seconds at
+        most each time): pinned (``workers=``, loose) to workers that are
+        gone when none ran, Dask never gives them to a worker that joins
+        later (dask.distributed 2026.8), so they would wait out the whole
+        timeout."""
+        pending = [i for i, f in enumerate(futures) if f.status in ("pending", "lost")]
+        if not pending:
+            return []
+        try:
+            states = self._sync(
+                "the scheduler's task states",
+                self.client.scheduler.get_task_status,
+                keys=[futures[i].key for i in pending],
+                timeout=wait,
+            )
+            stuck = [i for i in pending if states.get(futures[i].key) == "no-worker"]
+            if not stuck:
+                return []
+            workers = connected_workers(self.client, wait).values()
+        except ClusterError:
+            return []  # a scheduler that does not answer: the wait's own bound says so, in time
+        running = any(info.get("status", "running") == "running" for info in workers)
+        return stuck if running else []  # none running (paused, starting): they wait for one, bounded
+
+    def _gather_built(
+        self, handles: list, what: str, resubmit: Callable[[int], Any], names: Sequence[str] | None = None
+    ) -> list:
+        """The results of build tasks (`handles`, futures replaced in place
+        when submitted again), as _gather gives them; a build that Dask left
+        waiting for workers that are gone (its pin: the worker it was meant
+        for died while no other ran) is submitted again by ``resubmit(i)``
+        (FRAME_RETRIES times at most). Built, the handles lose their pins, so
+        that a handle lost with its worker is made again on any worker (Dask
+        recomputes it from its lineage; pinned to a worker that is gone, it
+        would never run again when no other worker ran at the loss)."""
+        for attempt in range(FRAME_RETRIES + 1):
+            try:
+                out = self._gather(handles, what, names=names)
+                break
+            except _Stalled as e:
+                if attempt == FRAME_RETRIES:
+                    raise ClusterError(f"{e}; still so after {FRAME_RETRIES} new submissions") from None
+                for i in e.indices:
+                    handles[i].cancel()
+                    handles[i] = resubmit(i)
+        with contextlib.suppress(ClusterError, KeyError):
+            self._sync(
+                "the scheduler's restrictions",
+                self.client.scheduler.set_restrictions,
+                worker={h.key: None for h in handles},
+            )
+        return out
+
+    def _killed(self, what: str, name: str | None, e: BaseException) -> ClusterError:
+        """The ClusterError of a task whose workers all died running it (a
+        worker past 95 % of its memory limit is restarted by its nanny)."""
+        try:
+            workers = list(connected_workers(self.client, 5.0).values())
+        except ClusterError:
+            workers = []
+        limits = [int(m) for info in workers if (m := info.get("memory_limit"))]
+        limit = f"; their memory limit: {max(limits) / 2**20:,.0f} MiB" if limits else ""
+        tries = getattr(e, "allowed_failures", None)
+        times = f"{tries + 1} times" if isinstance(tries, int) else "each time"
+        return ClusterError(
+            f"{what}: {name + ': ' if name else ''}the worker running it died, {times} (out of memory? "
+            f"a worker is restarted past 95 % of its memory limit{limit})"
+        )
 
     def _timed_out(self, futures: Sequence[Any], what: str, where: dict | None) -> None:
         left = [f for f in futures if f.status not in ("finished", "error", "cancelled")]
@@ -514,6 +607,15 @@ class ClusterOwner:
 class _Lost(ClusterError):
     """Futures cancelled: their inputs were lost with a worker (a frame
     tries again after _recover)."""
+
+
+class _Stalled(_Lost):
+    """Futures whose tasks Dask keeps for workers that are gone (see
+    ClusterOwner._stalled); `indices`: which of those gathered."""
+
+    def __init__(self, message: str, indices: list[int]) -> None:
+        super().__init__(message)
+        self.indices = indices
 
 
 @contextlib.contextmanager

@@ -435,7 +435,12 @@ class DistributedIsoRenderer(ClusterOwner):
             arrays = [self._scatter(i, place[i]) for i in range(n)]
             handles = [self._submit_build(i, a, place[i]) for i, a in enumerate(arrays)]
             self.hold(handles, arrays, tokens)
-            self._built = self._gather(handles, f"building {n} renderers of {len(self.bricks)} bricks")
+            self._built = self._gather_built(
+                self._handles,
+                f"building {n} renderers of {len(self.bricks)} bricks",
+                lambda i: self._submit_build(i, self._arrays[i]),
+                [self._brick_name(i) for i in range(n)],
+            )
             self.compressed_bytes = int(sum(h.compressed_bytes for h in self._built))
         except BaseException:
             self.close()
@@ -468,12 +473,24 @@ class DistributedIsoRenderer(ClusterOwner):
         for i in lost:
             self._arrays[i] = self._scatter(i)
             self._handles[i] = self._submit_build(i, self._arrays[i])
+        handles = [self._handles[i] for i in lost]
         try:
-            rebuilt = self._gather([self._handles[i] for i in lost], f"rebuilding {len(lost)} lost bricks")
+            rebuilt = self._gather_built(
+                handles,
+                f"rebuilding {len(lost)} lost bricks",
+                lambda k: self._submit_build(lost[k], self._arrays[lost[k]]),
+                [self._brick_name(i) for i in lost],
+            )
         except ClusterError as e:
             raise ClusterError(f"{self._name_lost(lost)}: lost and not rebuilt: {e}") from None
-        for i, h in zip(lost, rebuilt, strict=True):
-            self._built[i] = h
+        for i, f, h in zip(lost, handles, rebuilt, strict=True):
+            self._handles[i], self._built[i] = f, h
+
+    def _brick_name(self, i: int) -> str:
+        """What renderer i renders, for an error: its samples, and the file."""
+        spec = self._specs[i]
+        src = spec["source"]
+        return f"{src[0] + ' ' if src is not None else ''}samples {spec['ranges']}"
 
     def _lost(self) -> list[int]:
         """The renderers whose handle (or scattered samples) is lost now."""

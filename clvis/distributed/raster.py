@@ -508,25 +508,27 @@ class DistributedRasterizer(ClusterOwner):
         groups: dict = {}
         for i, f in enumerate(opened):
             groups.setdefault(where.get(f.key), []).append(i)
-        handles, held = [], []
-        for w, idx in groups.items():
-            a = [arrays[i] for i in idx] if arrays[idx[0]] is not None else None
-            handles.append(
-                client.submit(
-                    _build,
-                    [specs[i] for i in idx],
-                    origin,
-                    [int(offsets[i]) for i in idx],
-                    [int(counts[i]) for i in idx],
-                    options,
-                    a,
-                    pure=False,
-                    **self._pin(w),
-                )
+        members = list(groups.values())
+        held = [[arrays[i] for i in idx] if arrays[idx[0]] is not None else None for idx in members]
+
+        def build(k: int, worker: str | None = None) -> Any:
+            idx = members[k]
+            return client.submit(
+                _build,
+                [specs[i] for i in idx],
+                origin,
+                [int(offsets[i]) for i in idx],
+                [int(counts[i]) for i in idx],
+                options,
+                held[k],
+                pure=False,
+                **self._pin(worker),
             )
-            held.append(a)
+
+        handles = [build(k, w) for k, w in enumerate(groups)]
         self.npartitions = len(specs)
-        built = self._gather(handles, f"building {len(handles)} Rasterizers")
+        names = [", ".join(specs[i]["path"] or f"partition {i}" for i in idx) for idx in members]
+        built = self._gather_built(handles, f"building {len(handles)} Rasterizers", build, names)
         self.device_bytes = int(sum(h.device_bytes for h in built))
         b = [h.bounds for h in built if h.bounds is not None]
         self.bounds = (  # of the float32 positions the workers hold: the concatenated cloud's, exactly

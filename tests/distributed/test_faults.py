@@ -225,3 +225,92 @@ def test_a_silent_scheduler_fails_after_connect_timeout():
         assert time.monotonic() - t0 < 20
     with pytest.raises(ValueError, match="connect_timeout: expected a positive number"):
         DistributedRasterizer(["x.npz"], "tcp://127.0.0.1:1", connect_timeout=0)
+
+
+def _wait_replaced(c, victim):
+    """Until the scheduler has dropped `victim` and the nanny's new worker has joined."""
+    deadline = time.monotonic() + TIMEOUT
+    while time.monotonic() < deadline:
+        now = connected_workers(c)
+        if victim not in now and now:
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"{victim} not replaced within {TIMEOUT} s")
+
+
+@pytest.mark.parametrize("kind", ["points", "volume file"])
+def test_the_only_worker_killed_between_and_during_frames(tmp_path, kind):
+    """One worker (clvis render --workers 1): SIGKILL it and its nanny
+    starts another. What it held is made again there: the next frames, and
+    a frame in flight at the kill, equal the undisturbed one. (The handles
+    were pinned to the dead worker, and Dask never gives a task whose
+    pinned workers are gone to a worker that joins later: every frame
+    after waited out its whole timeout.)"""
+    if kind == "points":
+        rng = np.random.default_rng(5)
+        src = tmp_path / "p.npz"
+        save_npz(src, PointCloud(rng.uniform(-1, 1, (3000, 3)), attributes={"a": rng.random(3000)}))
+    else:
+        src = tmp_path / "v.npy"
+        np.save(src, _ML["volume"].astype(np.float32))
+    with local_cluster(n_workers=1) as cluster, distributed.Client(cluster, timeout=TIMEOUT) as c:
+        c.wait_for_workers(1, timeout=TIMEOUT)
+        if kind == "points":
+            dr = DistributedRasterizer([src], c, timeout=20)
+            view = dr._view(_cam(), W, H, "a", "viridis", None, None, 1)
+
+            def render():
+                g = dr.render(_cam(), W, H, color_by="a")
+                return g.index, g.depth, g.rgba
+        else:
+            dr = DistributedIsoRenderer(
+                src, c, rate=16, spacing=_ML["spacing"], origin=_ML["origin"], brick=8, timeout=20
+            )
+            view = {"camera": _cam(), "width": W, "height": H, "isovalue": 0.5, "speculation": True}
+
+            def render():
+                img = dr.render(_cam(), W, H, 0.5)
+                return img.hit, img.depth, img.rgba
+
+        with dr:
+            want = render()
+            for during in (False, True):
+                (victim,) = connected_workers(c)
+                inflight = dr.submit_frame(render_one_of(dr), view)[0] if during else None
+                os.kill(_pid(c, victim), signal.SIGKILL)
+                _wait_replaced(c, victim)
+                t0 = time.monotonic()
+                if inflight is not None:  # the frame in flight at the kill completes
+                    whole = C.assemble(dr._gather(inflight, "the frame in flight"), (H, W))
+                    assert np.array_equal(whole.planes["rgba"], want[2])
+                for got, exp in zip(render(), want, strict=True):
+                    assert np.array_equal(got, exp)
+                assert time.monotonic() - t0 < 15
+
+
+def render_one_of(dr):
+    from clvis.distributed import raster
+
+    return raster.render_one if isinstance(dr, DistributedRasterizer) else diso.render_one
+
+
+def test_a_worker_out_of_its_memory_limit_is_a_clvis_error_in_seconds(tmp_path):
+    """A partition larger than a worker's memory limit: its nanny restarts
+    the worker each time it builds it, and the build fails with a
+    ClusterError naming the file, in seconds (it waited out the whole
+    timeout: Dask kept the build for the first, dead, worker)."""
+    rng = np.random.default_rng(1)
+    path = tmp_path / "big.npz"
+    n = 3_000_000  # ~50 MB of points, ~250 MB on a worker with its device buffers
+    save_npz(path, PointCloud(rng.random((n, 3), np.float32), attributes={"i": rng.random(n, np.float32)}))
+    with (
+        local_cluster(n_workers=1, memory_limit="250MB") as cluster,
+        distributed.Client(cluster, timeout=TIMEOUT) as c,
+    ):
+        c.wait_for_workers(1, timeout=TIMEOUT)
+        t0 = time.monotonic()
+        with pytest.raises(
+            ClusterError, match=r"big\.npz: the worker running it died, \d+ times \(out of memory"
+        ):
+            DistributedRasterizer([path], c, timeout=40)
+        assert time.monotonic() - t0 < 30

@@ -44,7 +44,7 @@ __all__ = [
     "start_cluster",
 ]
 
-CONNECT_TIMEOUT = 10.0  # seconds to reach a scheduler given by address
+CONNECT_TIMEOUT = 10.0  # seconds to reach a scheduler given by address (and for it to have a worker)
 FRAME_RETRIES = 2  # frames submitted again after data was lost with a worker
 STALL_CHECK = 1.0  # seconds between looks for tasks Dask left waiting for workers that are gone
 WORKERS_PER_CORE = 4  # a LocalCluster started here: at most this many worker processes per CPU core
@@ -217,14 +217,22 @@ def start_cluster(workers: int, **kw: Any) -> Any:
 def _probe(address: str, timeout: float) -> None:
     """Fail fast on a tcp:// scheduler that refuses or does not answer."""
     parts = urlsplit(address if "://" in address else "tcp://" + address)
-    if parts.scheme != "tcp" or parts.hostname is None:
-        return  # tls://, inproc://, ucx://: Dask's own connect, bounded by the timeout
+    known = _schemes()
+    if known and parts.scheme not in known:
+        raise ClusterError(
+            f"scheduler {address}: not a Dask address (scheme {parts.scheme + '://'!r}; Dask's: "
+            f"{', '.join(s + '://' for s in known)})"
+        )
+    if parts.scheme not in ("tcp", "tls", "ws", "wss"):
+        return  # inproc://, ucx://: Dask's own connect, bounded by the timeout
     try:
         port = parts.port
     except ValueError:
-        raise ClusterError(f"scheduler {address}: not a host:port address") from None
-    if port is None:
-        return
+        port = -1
+    if port is None or port < 0 or not parts.hostname:
+        raise ClusterError(f"scheduler {address}: not a host:port address")
+    if parts.scheme != "tcp":
+        return  # tls://, ws://, wss://: Dask's own connect, bounded by the timeout
     try:
         with socket.create_connection((parts.hostname, port), timeout=timeout):
             pass
@@ -232,6 +240,21 @@ def _probe(address: str, timeout: float) -> None:
         raise ClusterTimeout(f"scheduler {address}: no answer within connect_timeout={timeout:g} s") from None
     except OSError as e:
         raise ClusterError(f"scheduler {address}: cannot connect ({e.strerror or e})") from None
+
+
+def _schemes() -> list[str]:
+    """The address schemes this Dask knows (tcp, tls, inproc, ws, ...)."""
+    try:
+        from distributed.comm.registry import backends
+    except ImportError:  # pragma: no cover - a Dask that moved it: its own connect says
+        return []
+    return sorted(backends)
+
+
+def _line(e: BaseException, most: int = 200) -> str:
+    """e's first line, at most `most` characters."""
+    text = (str(e).strip().splitlines() or [""])[0]
+    return text if len(text) <= most else text[: most - 3] + "..."
 
 
 def _connect(address: str, timeout: float) -> Any:
@@ -262,11 +285,36 @@ def _connect(address: str, timeout: float) -> Any:
     e = box.get("error")
     if isinstance(e, (OSError, TimeoutError)):
         raise (ClusterTimeout if isinstance(e, TimeoutError) else ClusterError)(
-            f"scheduler {address}: not reached within connect_timeout={timeout:g} s ({type(e).__name__}: {e})"
+            f"scheduler {address}: not reached within connect_timeout={timeout:g} s "
+            f"({type(e).__name__}: {_line(e)})"
+        ) from None
+    if isinstance(e, ValueError):  # Dask's own check of the address
+        raise ClusterError(f"scheduler {address}: {_line(e)}") from None
+    if isinstance(e, Exception):
+        # something else answered: an HTTP server's reply read as a Dask
+        # message's length is a MemoryError of exabytes; a web server on
+        # ws:// a WebSocketError
+        raise ClusterError(
+            f"scheduler {address}: what answered there is not a Dask scheduler "
+            f"({type(e).__name__}: {_line(e)})"
         ) from None
     if e is not None:
         raise e
     return box["client"]
+
+
+def _await_a_worker(client: Any, address: str, timeout: float) -> None:
+    """Return once the scheduler at `address` has a worker, waited for at
+    most `timeout` seconds (ClusterError: none joined): tasks on a
+    scheduler without workers would wait out the whole render timeout."""
+    deadline = time.monotonic() + timeout
+    while not connected_workers(client, timeout):
+        if time.monotonic() >= deadline:
+            raise ClusterError(
+                f"scheduler {address}: no worker joined it within connect_timeout={timeout:g} s "
+                f"(start some: dask worker {address})"
+            )
+        time.sleep(0.2)
 
 
 class ClusterOwner:
@@ -316,9 +364,16 @@ class ClusterOwner:
                 raise
             self._own_client = True
         elif isinstance(client, str):
-            _probe(client, self.connect_timeout)
-            client = _connect(client, self.connect_timeout)
+            address = client
+            _probe(address, self.connect_timeout)
+            client = _connect(address, self.connect_timeout)
             self._own_client = True
+            try:
+                _await_a_worker(client, address, self.connect_timeout)
+            except BaseException:
+                with _quiet_logs(), contextlib.suppress(Exception):
+                    client.close(timeout=self._close_timeout)
+                raise
         elif not isinstance(client, d.Client):
             raise TypeError(f"client: expected a dask.distributed.Client, an address or None, got {client!r}")
         self.client = client
@@ -472,6 +527,9 @@ class ClusterOwner:
         left = [f for f in futures if f.status not in ("finished", "error", "cancelled")]
         workers = sorted({w for f in left if (w := (where or {}).get(f.key)) is not None})
         on = f" (waiting on {', '.join(workers)})" if workers else ""
+        with contextlib.suppress(ClusterError):
+            if not connected_workers(self.client, min(self._close_timeout, 2.0)):
+                on += " (the scheduler has no workers)"
         raise ClusterTimeout(
             f"{what}: {len(left)} of {len(futures)} tasks not done within timeout={self.timeout:g} s{on}"
         ) from None

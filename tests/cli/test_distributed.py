@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 import pytest
-from dask_cluster import TIMEOUT, distributed, local_cluster, silent_scheduler
+from dask_cluster import TIMEOUT, distributed, http_like_server, local_cluster, silent_scheduler
 from PIL import Image
 
 from clvis import cli, datasets
@@ -314,6 +314,15 @@ def test_a_silent_scheduler_fails_after_connect_timeout(tiles, tmp_path, capsys)
         )
         assert rc == 2 and f"scheduler {address}: not reached within connect_timeout=2 s" in err, err
         assert time.monotonic() - t0 < 20
+
+
+def test_a_port_where_no_dask_scheduler_answers(tiles, capsys):
+    """A web server's reply read as a Dask message: "out of host memory:
+    Unable to allocate 3.07 EiB" before."""
+    with http_like_server() as hostport:
+        rc, out, err = _run(capsys, "render", tiles[0][0], "--scheduler", hostport, *SMALL)
+    assert rc == 2 and err.count("\n") == 1, err
+    assert f"scheduler {hostport}: what answered there is not a Dask scheduler" in err
 
 
 def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 import pytest
-from dask_cluster import TIMEOUT, distributed, local_cluster, silent_scheduler
+from dask_cluster import TIMEOUT, distributed, http_like_server, local_cluster, silent_scheduler
 
 from clvis import Camera, datasets
 from clvis.distributed import DistributedIsoRenderer, DistributedRasterizer
@@ -314,3 +314,30 @@ def test_a_worker_out_of_its_memory_limit_is_a_clvis_error_in_seconds(tmp_path):
         ):
             DistributedRasterizer([path], c, timeout=40)
         assert time.monotonic() - t0 < 30
+
+
+def test_a_port_where_no_dask_scheduler_answers_is_a_clvis_error():
+    """A web server's port: its reply, read as Dask's, was a MemoryError of
+    exabytes ("out of host memory" on the command line); an http:// or a
+    port-less address was Dask's bare ValueError."""
+    with http_like_server() as hostport:
+        address = f"tcp://{hostport}"
+        with pytest.raises(ClusterError, match=f"scheduler {address}: what answered there is not a Dask sch"):
+            DistributedRasterizer(["x.npz"], address, timeout=TIMEOUT, connect_timeout=5)
+        with pytest.raises(ClusterError, match=r"not a Dask address \(scheme 'http://'; Dask's: .*tcp://"):
+            DistributedIsoRenderer(np.zeros((8, 8, 8), np.float32), f"http://{hostport}", timeout=TIMEOUT)
+    for address in ("localhost", "tcp://127.0.0.1:99999"):
+        with pytest.raises(ClusterError, match=f"scheduler {re.escape(address)}: not a host:port address"):
+            DistributedRasterizer(["x.npz"], address, timeout=TIMEOUT)
+
+
+def test_a_scheduler_without_workers_fails_after_connect_timeout():
+    """Its tasks would wait out the whole timeout (then: not done)."""
+    with distributed.LocalCluster(n_workers=0, dashboard_address=":0") as cluster:
+        t0 = time.monotonic()
+        address = cluster.scheduler_address
+        with pytest.raises(
+            ClusterError, match=f"scheduler {address}: no worker joined it within connect_timeout=2 s"
+        ):
+            DistributedRasterizer(["x.npz"], address, timeout=30, connect_timeout=2)
+        assert time.monotonic() - t0 < 15

@@ -878,6 +878,15 @@ def cluster_client(args) -> tuple[object, int]:
     return None, args.workers
 
 
+def cluster_failed(args, e: OSError) -> CliError:
+    """The one-line error of an OSError out of starting or reaching the Dask
+    cluster (clvis's own errors, ClusterTimeout among them, say what they
+    waited for themselves and go through as they are)."""
+    if args.scheduler is not None:
+        return CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})")
+    return CliError(f"--workers {args.workers}: the local Dask cluster did not start ({e})")
+
+
 def on_workers(name: str, fn, *args) -> int:
     """fn(*args), a Ctrl-C as one line on stderr and exit status 130: the
     renderer's close (unwinding) stops the Dask workers started here, which

@@ -325,6 +325,24 @@ def test_a_port_where_no_dask_scheduler_answers(tiles, capsys):
     assert f"scheduler {hostport}: what answered there is not a Dask scheduler" in err
 
 
+def test_a_cluster_timeout_says_what_it_waited_for(tiles, capsys, monkeypatch):
+    """Every OSError of the renderer was "--scheduler ADDRESS: cannot reach
+    it", ClusterTimeout (a TimeoutError) included: "--scheduler None:
+    cannot reach it (building 2 Rasterizers: ... not done ...)" with
+    --workers."""
+    import clvis.distributed
+    from clvis.errors import ClusterTimeout
+
+    def timed_out(*a, **k):
+        raise ClusterTimeout("building 2 Rasterizers: 1 of 2 tasks not done within timeout=300 s")
+
+    monkeypatch.setattr(clvis.distributed, "DistributedRasterizer", timed_out)
+    rc, out, err = _run(capsys, "render", *tiles[0], "--workers", 2, *SMALL)
+    assert rc == 2 and err == (
+        "clvis render: error: building 2 Rasterizers: 1 of 2 tasks not done within timeout=300 s\n"
+    )
+
+
 def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):
     """SIGINT to the whole process group (a terminal's Ctrl-C) once the
     LocalCluster's workers run: one line on stderr, exit status 130, and no

@@ -875,6 +875,15 @@ def cluster_client(args) -> tuple[object, int]:
         args.connect_timeout = CONNECT_TIMEOUT
     if args.scheduler is not None:
         return args.scheduler, 1
+    from ..distributed.cluster import WORKERS_PER_CORE, local_workers_max
+
+    most = local_workers_max()
+    if args.workers > most:
+        raise CliError(
+            f"--workers {args.workers}: at most {most} on this machine ({WORKERS_PER_CORE} per CPU core: "
+            "more worker processes only compete for the cores and memory); for more, start a Dask "
+            "cluster on several machines and give --scheduler ADDRESS"
+        )
     return None, args.workers
 
 

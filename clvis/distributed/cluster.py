@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import signal
 import socket
 import threading
@@ -193,6 +194,33 @@ def _quiet_workers() -> Any:
     return IgnoreSigint()
 
 
+def local_workers_max() -> int:
+    """The most worker processes a LocalCluster started here may have:
+    WORKERS_PER_CORE per CPU core this process may run on (one-thread
+    workers beyond that only compete for the cores, and each costs its own
+    memory: a few thousand would take the machine down)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not Linux
+        cores = os.cpu_count() or 1
+    return WORKERS_PER_CORE * max(1, cores)
+
+
+def check_local_workers(workers: Any) -> int:
+    """`workers` for a LocalCluster started here: a positive int, at most
+    local_workers_max() (ValueError saying why)."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected a positive int, got {workers!r}")
+    most = local_workers_max()
+    if workers > most:
+        raise ValueError(
+            f"workers: {workers} local worker processes; at most {most} here ({WORKERS_PER_CORE} per CPU "
+            "core: more only compete for the cores and memory; a cluster of several machines: give its "
+            "scheduler's address)"
+        )
+    return workers
+
+
 def start_cluster(workers: int, **kw: Any) -> Any:
     """A LocalCluster of `workers` processes, one thread each, the dashboard
     on a free port. Its worker processes ignore SIGINT: a terminal's Ctrl-C
@@ -353,9 +381,7 @@ class ClusterOwner:
         self._tokens: list = []
         self.client: Any = None
         if client is None:
-            if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-                raise ValueError(f"workers: expected a positive int, got {workers!r}")
-            self._cluster = start_cluster(workers)
+            self._cluster = start_cluster(check_local_workers(workers))
             try:
                 client = d.Client(self._cluster, timeout=self.connect_timeout)
                 client.register_plugin(_quiet_workers())

@@ -343,6 +343,22 @@ def test_a_cluster_timeout_says_what_it_waited_for(tiles, capsys, monkeypatch):
     )
 
 
+def test_workers_beyond_the_cores_are_refused(tiles, tmp_path, capsys, monkeypatch):
+    """--workers 4096 started 4096 worker processes (on any machine)."""
+    from clvis.distributed import cluster
+
+    def refuse(workers, **kw):
+        raise AssertionError(f"a LocalCluster of {workers} workers was started")
+
+    monkeypatch.setattr(cluster, "start_cluster", refuse)
+    most = cluster.local_workers_max()
+    np.save(tmp_path / "v.npy", np.zeros((8, 8, 8), np.float32))
+    for args in (["render", tiles[0][0]], ["iso", tmp_path / "v.npy", "--isovalue", 0]):
+        rc, out, err = _run(capsys, *args, "--workers", most + 1, *SMALL)
+        assert rc == 2, err
+        assert err.startswith(f"clvis {args[0]}: error: --workers {most + 1}: at most {most} on this machine")
+
+
 def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):
     """SIGINT to the whole process group (a terminal's Ctrl-C) once the
     LocalCluster's workers run: one line on stderr, exit status 130, and no

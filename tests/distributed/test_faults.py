@@ -341,3 +341,11 @@ def test_a_scheduler_without_workers_fails_after_connect_timeout():
         ):
             DistributedRasterizer(["x.npz"], address, timeout=30, connect_timeout=2)
         assert time.monotonic() - t0 < 15
+
+
+def test_local_workers_are_bounded_by_the_cores():
+    """workers=100000 started that many processes (the machine went down first)."""
+    most = dcluster.local_workers_max()
+    assert most >= dcluster.WORKERS_PER_CORE
+    with pytest.raises(ValueError, match=f"workers: {most + 1} local worker processes; at most {most} here"):
+        DistributedRasterizer(["x.npz"], workers=most + 1)

@@ -142,6 +142,8 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
         if name.endswith(volumes.NIBABEL_FORMATS):  # nibabel's proxy slices them alike
             if name.endswith((".hdr", ".img")):
                 volumes.analyze_pair(p)  # the other file of the pair, or a DataError naming it
+            with open(p, "rb"):  # nibabel says "Cannot work out file type" of a file it may not read
+                pass
             import nibabel
 
             try:
@@ -152,7 +154,14 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
             except volumes.nibabel_errors() as e:
                 raise DataError(f"{path}: not a readable volume header: {type(e).__name__}: {e}") from e
             if len(s) < 3 or any(v != 1 for v in s[3:]) and volume_index is None:
-                raise DataError(f"{path}: expected a 3-D volume (or volume_index), got shape {s}")
+                raise DataError(
+                    f"{path}: expected a 3-D volume, got shape {s}"
+                    + (
+                        f"; choose one of its {s[3]} volumes: volume_index=T (--volume-index T)"
+                        if len(s) == 4
+                        else ""
+                    )
+                )
             # as read_volume returns it: the closest RAS+ order of its affine
             ornt = volumes.ras_orientation(affine)
             ras, rz = list(s[:3]), list(zooms)
@@ -169,10 +178,17 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
             }
     except ClvisError:
         raise
-    except (OSError, ValueError, TypeError, ImportError) as e:
+    except OSError as e:
+        if e.strerror is None:
+            raise DataError(f"{path}: cannot read its header: {type(e).__name__}: {e}") from e
+        # the worker's reason (a permission it lacks)
+        raise DataError(f"{path}: cannot read it on worker {current_worker()}: {e.strerror}") from e
+    except (ValueError, TypeError, ImportError) as e:
         raise DataError(f"{path}: cannot read its header: {type(e).__name__}: {e}") from e
     raise DataError(
-        f"{path}: unknown volume format (expected .npy, .raw, {', '.join(volumes.NIBABEL_FORMATS)})"
+        f"{path}: not a volume format the workers slice brick by brick (.npy, .raw, "
+        f"{', '.join(volumes.NIBABEL_FORMATS)}); one device reads the others (clvis.read_volume; "
+        "the command without --workers/--scheduler)"
     )
 
 

@@ -128,7 +128,12 @@ def _read(spec: dict) -> PointCloud:
         except ClvisError as e:
             msg = str(e)
             raise DataError(msg if path in msg else f"{path}: {msg}") from e
-        except (OSError, ValueError, TypeError) as e:
+        except OSError as e:
+            if e.strerror is None:
+                raise DataError(f"{path}: cannot read it as a point cloud: {e}") from e
+            # the worker's reason (a permission it lacks, a file gone bad)
+            raise DataError(f"{path}: cannot read it on worker {current_worker()}: {e.strerror}") from e
+        except (ValueError, TypeError) as e:
             raise DataError(f"{path}: cannot read it as a point cloud: {e}") from e
         keep = spec["fields"]
         if keep is not None:

@@ -359,6 +359,21 @@ def test_workers_beyond_the_cores_are_refused(tiles, tmp_path, capsys, monkeypat
         assert err.startswith(f"clvis {args[0]}: error: --workers {most + 1}: at most {most} on this machine")
 
 
+def test_volume_files_the_workers_cannot_slice_say_what_to_do(scheduler, tmp_path, capsys):
+    """A .vtk volume (one device reads it) was an "unknown volume format";
+    a 4-D NIfTI named volume_index, not --volume-index."""
+    nibabel = pytest.importorskip("nibabel")
+    vtk = tmp_path / "v.vtk"
+    vtk.write_text("# vtk DataFile Version 3.0\n")
+    rc, out, err = _run(capsys, "iso", vtk, "--scheduler", scheduler, "--isovalue", 0, *SMALL)
+    assert rc == 2 and "v.vtk: not a volume format the workers slice brick by brick" in err, err
+    assert "without --workers/--scheduler" in err
+    nii = tmp_path / "4d.nii"
+    nibabel.save(nibabel.Nifti1Image(np.zeros((8, 8, 8, 2), np.float32), np.eye(4)), nii)
+    rc, out, err = _run(capsys, "iso", nii, "--scheduler", scheduler, "--isovalue", 0, *SMALL)
+    assert rc == 2 and "choose one of its 2 volumes: volume_index=T (--volume-index T)" in err, err
+
+
 def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):
     """SIGINT to the whole process group (a terminal's Ctrl-C) once the
     LocalCluster's workers run: one line on stderr, exit status 130, and no

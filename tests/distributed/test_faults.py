@@ -349,3 +349,45 @@ def test_local_workers_are_bounded_by_the_cores():
     assert most >= dcluster.WORKERS_PER_CORE
     with pytest.raises(ValueError, match=f"workers: {most + 1} local worker processes; at most {most} here"):
         DistributedRasterizer(["x.npz"], workers=most + 1)
+
+
+def _deny_on_worker(name):
+    """Run on a worker: opening a path that ends with `name` raises
+    PermissionError, as for a file whose mode changed after the client
+    looked (a test running as root reads any file)."""
+    import builtins
+
+    real = builtins.open
+
+    def guarded(file, *a, **k):
+        if str(file).endswith(name):
+            raise PermissionError(13, "Permission denied", str(file))
+        return real(file, *a, **k)
+
+    builtins.open = guarded
+
+
+def test_a_file_a_worker_may_not_read_names_it_and_the_reason(tmp_path):
+    """NIfTI said "Cannot work out file type" (nibabel's guess, the reason
+    lost); point files said neither where nor that it was a permission."""
+    nibabel = pytest.importorskip("nibabel")
+    pytest.importorskip("laspy")
+    from pathlib import Path
+
+    nii = tmp_path / "locked.nii"
+    nibabel.save(nibabel.Nifti1Image(np.zeros((8, 8, 8), np.float32), np.eye(4)), nii)
+    las = tmp_path / "locked.laz"
+    las.write_bytes((Path(__file__).parents[1] / "data" / "laspy_simple.laz").read_bytes())
+    with local_cluster(n_workers=1) as cluster, distributed.Client(cluster, timeout=TIMEOUT) as c:
+        c.wait_for_workers(1, timeout=TIMEOUT)
+        (w,) = connected_workers(c)
+        c.run(_deny_on_worker, "locked.nii")
+        c.run(_deny_on_worker, "locked.laz")
+        with pytest.raises(
+            ClvisError, match=f"{re.escape(str(nii))}: cannot read it on worker {w}: Permission denied$"
+        ):
+            DistributedIsoRenderer(nii, c, brick=8, timeout=TIMEOUT)
+        with pytest.raises(
+            ClvisError, match=f"{re.escape(str(las))}: cannot read it on worker {w}: Permission denied$"
+        ):
+            DistributedRasterizer([las], c, timeout=TIMEOUT)

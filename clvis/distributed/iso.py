@@ -411,7 +411,8 @@ class DistributedIsoRenderer(ClusterOwner):
         self._source = None if is_path else v
         try:
             if is_path:
-                path = str(volume_or_bricks)
+                # absolute: workers started elsewhere read the file the client named
+                path = os.path.abspath(volume_or_bricks)
                 lay = self._gather(
                     [self.client.submit(_layout, path, shape, dtype, volume_index, pure=False)],
                     f"reading the header of {path}",

@@ -43,7 +43,6 @@ from __future__ import annotations
 import os
 import uuid
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -470,7 +469,9 @@ class DistributedRasterizer(ClusterOwner):
         for s in sources:
             if not isinstance(s, (str, os.PathLike)):
                 raise TypeError(f"sources: expected point file paths or a dask array, got {type(s).__name__}")
-            paths.append(str(Path(s)))
+            # absolute: workers started elsewhere (dask worker in another
+            # folder, on a shared file system) read the file the client checked
+            paths.append(os.path.abspath(s))
         if not paths:
             raise ValueError("sources: no partition given")
         keep = None if fields is None else [str(f) for f in fields]

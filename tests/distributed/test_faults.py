@@ -1,9 +1,12 @@
 """Faults and waits of the distributed renderers on real, bounded
 LocalClusters: a worker killed during a frame of a volume built from an
-array (its bricks are sent again from the client), a worker stopped
-(SIGSTOP) during a frame and at close (bounded waits, errors that say what
-timed out), a scheduler address that refuses connections (fails in
-seconds), and a renderer used after close()."""
+array (its bricks are sent again from the client), the only worker killed
+(its partitions and bricks are made again on the one that replaces it), a
+worker that runs out of its memory limit, a worker stopped (SIGSTOP)
+during a frame and at close (bounded waits, errors that say what timed
+out), scheduler addresses that refuse connections, are no Dask scheduler
+or have no workers (fail in seconds), files a worker cannot read or finds
+elsewhere, and a renderer used after close()."""
 
 import os
 import re
@@ -391,3 +394,20 @@ def test_a_file_a_worker_may_not_read_names_it_and_the_reason(tmp_path):
             ClvisError, match=f"{re.escape(str(las))}: cannot read it on worker {w}: Permission denied$"
         ):
             DistributedRasterizer([las], c, timeout=TIMEOUT)
+
+
+def test_relative_paths_are_read_where_the_client_found_them(tmp_path, monkeypatch):
+    """Workers started in another folder (a dask worker elsewhere, on a
+    shared file system) were sent the paths as given: "no such file"."""
+    rng = np.random.default_rng(3)
+    (tmp_path / "d").mkdir()
+    save_npz(tmp_path / "d" / "t.npz", PointCloud(rng.uniform(0, 1, (500, 3))))
+    np.save(tmp_path / "d" / "v.npy", _ML["volume"].astype(np.float32))
+    with local_cluster(n_workers=1) as cluster, distributed.Client(cluster, timeout=TIMEOUT) as c:
+        c.wait_for_workers(1, timeout=TIMEOUT)
+        monkeypatch.chdir(tmp_path / "d")  # the client's folder; the worker's is another
+        assert str(tmp_path / "d") not in c.run(os.getcwd).values()
+        with DistributedRasterizer(["t.npz"], c, timeout=TIMEOUT) as dr:
+            assert dr.n == 500
+        with DistributedIsoRenderer("v.npy", c, brick=8, timeout=TIMEOUT) as di:
+            assert di.volume_shape == _ML["volume"].shape

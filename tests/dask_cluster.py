@@ -31,3 +31,38 @@ def silent_scheduler():
         yield f"tcp://127.0.0.1:{srv.getsockname()[1]}"
     finally:
         srv.close()
+
+
+@contextlib.contextmanager
+def http_like_server():
+    """A tcp:// address on this machine where something that is not Dask
+    answers, as a web server does: a 400 reply to whatever it is sent
+    (read as a Dask message, its first bytes are a length of exabytes);
+    closed after."""
+    import threading
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)
+    srv.settimeout(0.2)
+    stop = threading.Event()
+
+    def serve():
+        while not stop.is_set():
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                continue
+            with conn, contextlib.suppress(OSError):
+                conn.settimeout(5)
+                conn.recv(4096)
+                conn.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 11\r\n\r\nBad Request")
+
+    t = threading.Thread(target=serve, daemon=True)
+    t.start()
+    try:
+        yield f"127.0.0.1:{srv.getsockname()[1]}"
+    finally:
+        stop.set()
+        t.join(5)
+        srv.close()

@@ -875,7 +875,25 @@ def cluster_client(args) -> tuple[object, int]:
         args.connect_timeout = CONNECT_TIMEOUT
     if args.scheduler is not None:
         return args.scheduler, 1
+    from ..distributed.cluster import WORKERS_PER_CORE, local_workers_max
+
+    most = local_workers_max()
+    if args.workers > most:
+        raise CliError(
+            f"--workers {args.workers}: at most {most} on this machine ({WORKERS_PER_CORE} per CPU core: "
+            "more worker processes only compete for the cores and memory); for more, start a Dask "
+            "cluster on several machines and give --scheduler ADDRESS"
+        )
     return None, args.workers
+
+
+def cluster_failed(args, e: OSError) -> CliError:
+    """The one-line error of an OSError out of starting or reaching the Dask
+    cluster (clvis's own errors, ClusterTimeout among them, say what they
+    waited for themselves and go through as they are)."""
+    if args.scheduler is not None:
+        return CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})")
+    return CliError(f"--workers {args.workers}: the local Dask cluster did not start ({e})")
 
 
 def on_workers(name: str, fn, *args) -> int:

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._arrays import to_host
-from ..errors import DataError
+from ..errors import ClvisError, DataError
 from ..io.volumes import otsu_level
 from ..iso.zfp import MAX_RATE, MIN_RATE
 from ._common import (
@@ -37,6 +37,7 @@ from ._common import (
     check_iso_volume,
     clear_targets,
     cluster_client,
+    cluster_failed,
     colormap_name,
     count,
     distributed_run,
@@ -426,8 +427,10 @@ def _run_distributed(args) -> int:
             connect_timeout=args.connect_timeout,
             **kw,
         )
+    except ClvisError:
+        raise
     except OSError as e:
-        raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
+        raise cluster_failed(args, e) from None
     with dr:
         lo = np.asarray(dr.origin, np.float64)
         hi = lo + (np.array(dr.volume_shape[::-1]) - 1) * np.asarray(dr.spacing, np.float64)[::-1]

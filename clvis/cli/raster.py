@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..camera import fit_camera
+from ..errors import ClvisError
 from ._common import (
     POINTS_FIT,
     SIZE_RULE,
@@ -32,6 +33,7 @@ from ._common import (
     check_embedded_points,
     clear_targets,
     cluster_client,
+    cluster_failed,
     colormap_name,
     count,
     describe_camera,
@@ -789,8 +791,10 @@ def _render_distributed(args, progress) -> int:
             dr = DistributedRasterizer(
                 args.file, client, workers=workers, fields=fields, connect_timeout=args.connect_timeout
             )
+        except ClvisError:
+            raise
         except OSError as e:
-            raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
+            raise cluster_failed(args, e) from None
     with dr:
         attribute = args.attribute
         names = dr.attribute_names

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..errors import ClvisError
 from ..io.points import POINT_SUFFIXES
 from ..io.volumes import otsu_level
 from ._common import (
@@ -20,6 +21,7 @@ from ._common import (
     check_embedded_points,
     check_iso_volume,
     cluster_client,
+    cluster_failed,
     count,
     distributed_run,
     on_workers,
@@ -233,8 +235,10 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
         if not volume:
             try:
                 return DaskPointScene([str(path)], client, description=str(path), **common)
+            except ClvisError:
+                raise
             except OSError as e:
-                raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
+                raise cluster_failed(args, e) from None
         if args.isovalue is None:
             raise CliError(
                 "--isovalue: needed with a volume FILE on workers (Otsu's reads every sample here)"
@@ -269,8 +273,10 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
                     description=f"the embedded {name}",
                     **common,
                 )
+            except ClvisError:
+                raise
             except OSError as e:
-                raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
+                raise cluster_failed(args, e) from None
         if name == "explosion":
             d, iso = datasets.explosion(), 0.2
         else:
@@ -294,8 +300,10 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
             **common,
             **kw,
         )
+    except ClvisError:
+        raise
     except OSError as e:
-        raise CliError(f"--scheduler {args.scheduler}: cannot reach it ({e})") from None
+        raise cluster_failed(args, e) from None
 
 
 def _measure(scene, args) -> int:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import signal
 import socket
 import threading
@@ -44,8 +45,10 @@ __all__ = [
     "start_cluster",
 ]
 
-CONNECT_TIMEOUT = 10.0  # seconds to reach a scheduler given by address
+CONNECT_TIMEOUT = 10.0  # seconds to reach a scheduler given by address (and for it to have a worker)
 FRAME_RETRIES = 2  # frames submitted again after data was lost with a worker
+STALL_CHECK = 1.0  # seconds between looks for tasks Dask left waiting for workers that are gone
+WORKERS_PER_CORE = 4  # a LocalCluster started here: at most this many worker processes per CPU core
 
 
 def _distributed() -> Any:
@@ -191,6 +194,33 @@ def _quiet_workers() -> Any:
     return IgnoreSigint()
 
 
+def local_workers_max() -> int:
+    """The most worker processes a LocalCluster started here may have:
+    WORKERS_PER_CORE per CPU core this process may run on (one-thread
+    workers beyond that only compete for the cores, and each costs its own
+    memory: a few thousand would take the machine down)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not Linux
+        cores = os.cpu_count() or 1
+    return WORKERS_PER_CORE * max(1, cores)
+
+
+def check_local_workers(workers: Any) -> int:
+    """`workers` for a LocalCluster started here: a positive int, at most
+    local_workers_max() (ValueError saying why)."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected a positive int, got {workers!r}")
+    most = local_workers_max()
+    if workers > most:
+        raise ValueError(
+            f"workers: {workers} local worker processes; at most {most} here ({WORKERS_PER_CORE} per CPU "
+            "core: more only compete for the cores and memory; a cluster of several machines: give its "
+            "scheduler's address)"
+        )
+    return workers
+
+
 def start_cluster(workers: int, **kw: Any) -> Any:
     """A LocalCluster of `workers` processes, one thread each, the dashboard
     on a free port. Its worker processes ignore SIGINT: a terminal's Ctrl-C
@@ -215,14 +245,22 @@ def start_cluster(workers: int, **kw: Any) -> Any:
 def _probe(address: str, timeout: float) -> None:
     """Fail fast on a tcp:// scheduler that refuses or does not answer."""
     parts = urlsplit(address if "://" in address else "tcp://" + address)
-    if parts.scheme != "tcp" or parts.hostname is None:
-        return  # tls://, inproc://, ucx://: Dask's own connect, bounded by the timeout
+    known = _schemes()
+    if known and parts.scheme not in known:
+        raise ClusterError(
+            f"scheduler {address}: not a Dask address (scheme {parts.scheme + '://'!r}; Dask's: "
+            f"{', '.join(s + '://' for s in known)})"
+        )
+    if parts.scheme not in ("tcp", "tls", "ws", "wss"):
+        return  # inproc://, ucx://: Dask's own connect, bounded by the timeout
     try:
         port = parts.port
     except ValueError:
-        raise ClusterError(f"scheduler {address}: not a host:port address") from None
-    if port is None:
-        return
+        port = -1
+    if port is None or port < 0 or not parts.hostname:
+        raise ClusterError(f"scheduler {address}: not a host:port address")
+    if parts.scheme != "tcp":
+        return  # tls://, ws://, wss://: Dask's own connect, bounded by the timeout
     try:
         with socket.create_connection((parts.hostname, port), timeout=timeout):
             pass
@@ -230,6 +268,21 @@ def _probe(address: str, timeout: float) -> None:
         raise ClusterTimeout(f"scheduler {address}: no answer within connect_timeout={timeout:g} s") from None
     except OSError as e:
         raise ClusterError(f"scheduler {address}: cannot connect ({e.strerror or e})") from None
+
+
+def _schemes() -> list[str]:
+    """The address schemes this Dask knows (tcp, tls, inproc, ws, ...)."""
+    try:
+        from distributed.comm.registry import backends
+    except ImportError:  # pragma: no cover - a Dask that moved it: its own connect says
+        return []
+    return sorted(backends)
+
+
+def _line(e: BaseException, most: int = 200) -> str:
+    """e's first line, at most `most` characters."""
+    text = (str(e).strip().splitlines() or [""])[0]
+    return text if len(text) <= most else text[: most - 3] + "..."
 
 
 def _connect(address: str, timeout: float) -> Any:
@@ -260,11 +313,36 @@ def _connect(address: str, timeout: float) -> Any:
     e = box.get("error")
     if isinstance(e, (OSError, TimeoutError)):
         raise (ClusterTimeout if isinstance(e, TimeoutError) else ClusterError)(
-            f"scheduler {address}: not reached within connect_timeout={timeout:g} s ({type(e).__name__}: {e})"
+            f"scheduler {address}: not reached within connect_timeout={timeout:g} s "
+            f"({type(e).__name__}: {_line(e)})"
+        ) from None
+    if isinstance(e, ValueError):  # Dask's own check of the address
+        raise ClusterError(f"scheduler {address}: {_line(e)}") from None
+    if isinstance(e, Exception):
+        # something else answered: an HTTP server's reply read as a Dask
+        # message's length is a MemoryError of exabytes; a web server on
+        # ws:// a WebSocketError
+        raise ClusterError(
+            f"scheduler {address}: what answered there is not a Dask scheduler "
+            f"({type(e).__name__}: {_line(e)})"
         ) from None
     if e is not None:
         raise e
     return box["client"]
+
+
+def _await_a_worker(client: Any, address: str, timeout: float) -> None:
+    """Return once the scheduler at `address` has a worker, waited for at
+    most `timeout` seconds (ClusterError: none joined): tasks on a
+    scheduler without workers would wait out the whole render timeout."""
+    deadline = time.monotonic() + timeout
+    while not connected_workers(client, timeout):
+        if time.monotonic() >= deadline:
+            raise ClusterError(
+                f"scheduler {address}: no worker joined it within connect_timeout={timeout:g} s "
+                f"(start some: dask worker {address})"
+            )
+        time.sleep(0.2)
 
 
 class ClusterOwner:
@@ -303,9 +381,7 @@ class ClusterOwner:
         self._tokens: list = []
         self.client: Any = None
         if client is None:
-            if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-                raise ValueError(f"workers: expected a positive int, got {workers!r}")
-            self._cluster = start_cluster(workers)
+            self._cluster = start_cluster(check_local_workers(workers))
             try:
                 client = d.Client(self._cluster, timeout=self.connect_timeout)
                 client.register_plugin(_quiet_workers())
@@ -314,9 +390,16 @@ class ClusterOwner:
                 raise
             self._own_client = True
         elif isinstance(client, str):
-            _probe(client, self.connect_timeout)
-            client = _connect(client, self.connect_timeout)
+            address = client
+            _probe(address, self.connect_timeout)
+            client = _connect(address, self.connect_timeout)
             self._own_client = True
+            try:
+                _await_a_worker(client, address, self.connect_timeout)
+            except BaseException:
+                with _quiet_logs(), contextlib.suppress(Exception):
+                    client.close(timeout=self._close_timeout)
+                raise
         elif not isinstance(client, d.Client):
             raise TypeError(f"client: expected a dask.distributed.Client, an address or None, got {client!r}")
         self.client = client
@@ -345,23 +428,43 @@ class ClusterOwner:
         return ""
 
     # -- bounded waits
-    def _gather(self, futures: Sequence[Any], what: str, where: dict | None = None) -> list:
+    def _gather(
+        self, futures: Sequence[Any], what: str, where: dict | None = None, names: Sequence[str] | None = None
+    ) -> list:
         """The results of `futures`, waited for at most self.timeout: a
         ClusterTimeout naming `what` and the workers of the unfinished
         (`where`: future key → worker); a task's own error as it is (the first
-        in order); futures cancelled because their data was lost: ClusterError."""
+        in order); futures cancelled because their data was lost: ClusterError
+        (_Lost); tasks Dask keeps for workers that are gone (_stalled):
+        _Stalled; a task whose workers all died running it (Dask's
+        KilledWorker): ClusterError naming it (`names[i]`: what future i is)."""
         d = _distributed()
         futures = list(futures)
         deadline = time.monotonic() + self.timeout
-        try:
-            d.wait(futures, timeout=self.timeout, return_when="ALL_COMPLETED")
-        except TimeoutError:
-            self._timed_out(futures, what, where)
-        except d.CancelledError:
-            pass  # the statuses below say which
-        for f in futures:  # the first failure in the partitions' order, whichever failed first
+        while True:
+            left = deadline - time.monotonic()
+            try:
+                d.wait(futures, timeout=max(min(left, STALL_CHECK), 0.001), return_when="ALL_COMPLETED")
+                break
+            except TimeoutError:
+                if time.monotonic() >= deadline:
+                    self._timed_out(futures, what, where)
+                stuck = self._stalled(
+                    futures, min(self._close_timeout, max(deadline - time.monotonic(), 0.1))
+                )
+                if stuck:
+                    raise _Stalled(
+                        f"{what}: {len(stuck)} of {len(futures)} tasks left waiting for workers now gone",
+                        stuck,
+                    ) from None
+            except d.CancelledError:
+                break  # the statuses below say which
+        for i, f in enumerate(futures):  # the first failure in the partitions' order, whichever failed first
             if f.status == "error":
-                f.result(timeout=max(deadline - time.monotonic(), 1.0))
+                try:
+                    f.result(timeout=max(deadline - time.monotonic(), 1.0))
+                except d.KilledWorker as e:
+                    raise self._killed(what, names[i] if names else None, e) from None
         lost = [f for f in futures if f.status != "finished"]
         if lost:
             raise _Lost(f"{what}: {len(lost)} of {len(futures)} tasks cancelled (data lost with a worker)")
@@ -375,10 +478,84 @@ class ClusterOwner:
                 raise _Lost(f"{what}: cancelled ({e})") from None
         return out
 
+    def _stalled(self, futures: Sequence[Any], wait: float) -> list[int]:
+        """The indices of `futures` whose tasks wait in Dask's no-worker
+        state while a worker runs (asking the scheduler, `wait` seconds at
+        most each time): pinned (``workers=``, loose) to workers that are
+        gone when none ran, Dask never gives them to a worker that joins
+        later (dask.distributed 2026.8), so they would wait out the whole
+        timeout."""
+        pending = [i for i, f in enumerate(futures) if f.status in ("pending", "lost")]
+        if not pending:
+            return []
+        try:
+            states = self._sync(
+                "the scheduler's task states",
+                self.client.scheduler.get_task_status,
+                keys=[futures[i].key for i in pending],
+                timeout=wait,
+            )
+            stuck = [i for i in pending if states.get(futures[i].key) == "no-worker"]
+            if not stuck:
+                return []
+            workers = connected_workers(self.client, wait).values()
+        except ClusterError:
+            return []  # a scheduler that does not answer: the wait's own bound says so, in time
+        running = any(info.get("status", "running") == "running" for info in workers)
+        return stuck if running else []  # none running (paused, starting): they wait for one, bounded
+
+    def _gather_built(
+        self, handles: list, what: str, resubmit: Callable[[int], Any], names: Sequence[str] | None = None
+    ) -> list:
+        """The results of build tasks (`handles`, futures replaced in place
+        when submitted again), as _gather gives them; a build that Dask left
+        waiting for workers that are gone (its pin: the worker it was meant
+        for died while no other ran) is submitted again by ``resubmit(i)``
+        (FRAME_RETRIES times at most). Built, the handles lose their pins, so
+        that a handle lost with its worker is made again on any worker (Dask
+        recomputes it from its lineage; pinned to a worker that is gone, it
+        would never run again when no other worker ran at the loss)."""
+        for attempt in range(FRAME_RETRIES + 1):
+            try:
+                out = self._gather(handles, what, names=names)
+                break
+            except _Stalled as e:
+                if attempt == FRAME_RETRIES:
+                    raise ClusterError(f"{e}; still so after {FRAME_RETRIES} new submissions") from None
+                for i in e.indices:
+                    handles[i].cancel()
+                    handles[i] = resubmit(i)
+        with contextlib.suppress(ClusterError, KeyError):
+            self._sync(
+                "the scheduler's restrictions",
+                self.client.scheduler.set_restrictions,
+                worker={h.key: None for h in handles},
+            )
+        return out
+
+    def _killed(self, what: str, name: str | None, e: BaseException) -> ClusterError:
+        """The ClusterError of a task whose workers all died running it (a
+        worker past 95 % of its memory limit is restarted by its nanny)."""
+        try:
+            workers = list(connected_workers(self.client, 5.0).values())
+        except ClusterError:
+            workers = []
+        limits = [int(m) for info in workers if (m := info.get("memory_limit"))]
+        limit = f"; their memory limit: {max(limits) / 2**20:,.0f} MiB" if limits else ""
+        tries = getattr(e, "allowed_failures", None)
+        times = f"{tries + 1} times" if isinstance(tries, int) else "each time"
+        return ClusterError(
+            f"{what}: {name + ': ' if name else ''}the worker running it died, {times} (out of memory? "
+            f"a worker is restarted past 95 % of its memory limit{limit})"
+        )
+
     def _timed_out(self, futures: Sequence[Any], what: str, where: dict | None) -> None:
         left = [f for f in futures if f.status not in ("finished", "error", "cancelled")]
         workers = sorted({w for f in left if (w := (where or {}).get(f.key)) is not None})
         on = f" (waiting on {', '.join(workers)})" if workers else ""
+        with contextlib.suppress(ClusterError):
+            if not connected_workers(self.client, min(self._close_timeout, 2.0)):
+                on += " (the scheduler has no workers)"
         raise ClusterTimeout(
             f"{what}: {len(left)} of {len(futures)} tasks not done within timeout={self.timeout:g} s{on}"
         ) from None
@@ -514,6 +691,15 @@ class ClusterOwner:
 class _Lost(ClusterError):
     """Futures cancelled: their inputs were lost with a worker (a frame
     tries again after _recover)."""
+
+
+class _Stalled(_Lost):
+    """Futures whose tasks Dask keeps for workers that are gone (see
+    ClusterOwner._stalled); `indices`: which of those gathered."""
+
+    def __init__(self, message: str, indices: list[int]) -> None:
+        super().__init__(message)
+        self.indices = indices
 
 
 @contextlib.contextmanager

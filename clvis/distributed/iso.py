@@ -140,6 +140,8 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
                 raise DataError(f"{path}: expected a 3-D volume, got shape {shp}")
             return {"kind": "npy", "shape": tuple(shp), "spacing": (1.0, 1.0, 1.0)}
         if name.endswith(volumes.NIBABEL_FORMATS):  # nibabel's proxy slices them alike
+            with open(p, "rb"):  # nibabel says "Cannot work out file type" of a file it may not read
+                pass
             try:
                 # as read_volume finds them (a pair's other file, or a DataError naming it)
                 img = volumes.nibabel_image(p)[0]
@@ -151,7 +153,14 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
             except volumes.nibabel_errors() as e:
                 raise DataError(f"{path}: not a readable volume header: {type(e).__name__}: {e}") from e
             if len(s) < 3 or any(v != 1 for v in s[3:]) and volume_index is None:
-                raise DataError(f"{path}: expected a 3-D volume (or volume_index), got shape {s}")
+                raise DataError(
+                    f"{path}: expected a 3-D volume, got shape {s}"
+                    + (
+                        f"; choose one of its {s[3]} volumes: volume_index=T (--volume-index T)"
+                        if len(s) == 4
+                        else ""
+                    )
+                )
             # as read_volume returns it: the closest RAS+ order of its affine
             ornt = volumes.ras_orientation(affine)
             ras, rz = list(s[:3]), list(zooms)
@@ -168,10 +177,17 @@ def _layout(path: str, shape: Any, dtype: Any, volume_index: Any) -> dict:
             }
     except ClvisError:
         raise
-    except (OSError, ValueError, TypeError, ImportError) as e:
+    except OSError as e:
+        if e.strerror is None:
+            raise DataError(f"{path}: cannot read its header: {type(e).__name__}: {e}") from e
+        # the worker's reason (a permission it lacks)
+        raise DataError(f"{path}: cannot read it on worker {current_worker()}: {e.strerror}") from e
+    except (ValueError, TypeError, ImportError) as e:
         raise DataError(f"{path}: cannot read its header: {type(e).__name__}: {e}") from e
     raise DataError(
-        f"{path}: unknown volume format (expected .npy, .raw, {', '.join(volumes.NIBABEL_FORMATS)})"
+        f"{path}: not a volume format the workers slice brick by brick (.npy, .raw, "
+        f"{', '.join(volumes.NIBABEL_FORMATS)}); one device reads the others (clvis.read_volume; "
+        "the command without --workers/--scheduler)"
     )
 
 
@@ -394,7 +410,8 @@ class DistributedIsoRenderer(ClusterOwner):
         self._source = None if is_path else v
         try:
             if is_path:
-                path = str(volume_or_bricks)
+                # absolute: workers started elsewhere read the file the client named
+                path = os.path.abspath(volume_or_bricks)
                 lay = self._gather(
                     [self.client.submit(_layout, path, shape, dtype, volume_index, pure=False)],
                     f"reading the header of {path}",
@@ -434,7 +451,12 @@ class DistributedIsoRenderer(ClusterOwner):
             arrays = [self._scatter(i, place[i]) for i in range(n)]
             handles = [self._submit_build(i, a, place[i]) for i, a in enumerate(arrays)]
             self.hold(handles, arrays, tokens)
-            self._built = self._gather(handles, f"building {n} renderers of {len(self.bricks)} bricks")
+            self._built = self._gather_built(
+                self._handles,
+                f"building {n} renderers of {len(self.bricks)} bricks",
+                lambda i: self._submit_build(i, self._arrays[i]),
+                [self._brick_name(i) for i in range(n)],
+            )
             self.compressed_bytes = int(sum(h.compressed_bytes for h in self._built))
         except BaseException:
             self.close()
@@ -467,12 +489,24 @@ class DistributedIsoRenderer(ClusterOwner):
         for i in lost:
             self._arrays[i] = self._scatter(i)
             self._handles[i] = self._submit_build(i, self._arrays[i])
+        handles = [self._handles[i] for i in lost]
         try:
-            rebuilt = self._gather([self._handles[i] for i in lost], f"rebuilding {len(lost)} lost bricks")
+            rebuilt = self._gather_built(
+                handles,
+                f"rebuilding {len(lost)} lost bricks",
+                lambda k: self._submit_build(lost[k], self._arrays[lost[k]]),
+                [self._brick_name(i) for i in lost],
+            )
         except ClusterError as e:
             raise ClusterError(f"{self._name_lost(lost)}: lost and not rebuilt: {e}") from None
-        for i, h in zip(lost, rebuilt, strict=True):
-            self._built[i] = h
+        for i, f, h in zip(lost, handles, rebuilt, strict=True):
+            self._handles[i], self._built[i] = f, h
+
+    def _brick_name(self, i: int) -> str:
+        """What renderer i renders, for an error: its samples, and the file."""
+        spec = self._specs[i]
+        src = spec["source"]
+        return f"{src[0] + ' ' if src is not None else ''}samples {spec['ranges']}"
 
     def _lost(self) -> list[int]:
         """The renderers whose handle (or scattered samples) is lost now."""

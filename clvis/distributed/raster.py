@@ -43,7 +43,6 @@ from __future__ import annotations
 import os
 import uuid
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -128,7 +127,12 @@ def _read(spec: dict) -> PointCloud:
         except ClvisError as e:
             msg = str(e)
             raise DataError(msg if path in msg else f"{path}: {msg}") from e
-        except (OSError, ValueError, TypeError) as e:
+        except OSError as e:
+            if e.strerror is None:
+                raise DataError(f"{path}: cannot read it as a point cloud: {e}") from e
+            # the worker's reason (a permission it lacks, a file gone bad)
+            raise DataError(f"{path}: cannot read it on worker {current_worker()}: {e.strerror}") from e
+        except (ValueError, TypeError) as e:
             raise DataError(f"{path}: cannot read it as a point cloud: {e}") from e
         keep = spec["fields"]
         if keep is not None:
@@ -465,7 +469,9 @@ class DistributedRasterizer(ClusterOwner):
         for s in sources:
             if not isinstance(s, (str, os.PathLike)):
                 raise TypeError(f"sources: expected point file paths or a dask array, got {type(s).__name__}")
-            paths.append(str(Path(s)))
+            # absolute: workers started elsewhere (dask worker in another
+            # folder, on a shared file system) read the file the client checked
+            paths.append(os.path.abspath(s))
         if not paths:
             raise ValueError("sources: no partition given")
         keep = None if fields is None else [str(f) for f in fields]
@@ -508,25 +514,27 @@ class DistributedRasterizer(ClusterOwner):
         groups: dict = {}
         for i, f in enumerate(opened):
             groups.setdefault(where.get(f.key), []).append(i)
-        handles, held = [], []
-        for w, idx in groups.items():
-            a = [arrays[i] for i in idx] if arrays[idx[0]] is not None else None
-            handles.append(
-                client.submit(
-                    _build,
-                    [specs[i] for i in idx],
-                    origin,
-                    [int(offsets[i]) for i in idx],
-                    [int(counts[i]) for i in idx],
-                    options,
-                    a,
-                    pure=False,
-                    **self._pin(w),
-                )
+        members = list(groups.values())
+        held = [[arrays[i] for i in idx] if arrays[idx[0]] is not None else None for idx in members]
+
+        def build(k: int, worker: str | None = None) -> Any:
+            idx = members[k]
+            return client.submit(
+                _build,
+                [specs[i] for i in idx],
+                origin,
+                [int(offsets[i]) for i in idx],
+                [int(counts[i]) for i in idx],
+                options,
+                held[k],
+                pure=False,
+                **self._pin(worker),
             )
-            held.append(a)
+
+        handles = [build(k, w) for k, w in enumerate(groups)]
         self.npartitions = len(specs)
-        built = self._gather(handles, f"building {len(handles)} Rasterizers")
+        names = [", ".join(specs[i]["path"] or f"partition {i}" for i in idx) for idx in members]
+        built = self._gather_built(handles, f"building {len(handles)} Rasterizers", build, names)
         self.device_bytes = int(sum(h.device_bytes for h in built))
         b = [h.bounds for h in built if h.bounds is not None]
         self.bounds = (  # of the float32 positions the workers hold: the concatenated cloud's, exactly

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 import pytest
-from dask_cluster import TIMEOUT, distributed, local_cluster, silent_scheduler
+from dask_cluster import TIMEOUT, distributed, http_like_server, local_cluster, silent_scheduler
 from PIL import Image
 
 from clvis import cli, datasets
@@ -314,6 +314,64 @@ def test_a_silent_scheduler_fails_after_connect_timeout(tiles, tmp_path, capsys)
         )
         assert rc == 2 and f"scheduler {address}: not reached within connect_timeout=2 s" in err, err
         assert time.monotonic() - t0 < 20
+
+
+def test_a_port_where_no_dask_scheduler_answers(tiles, capsys):
+    """A web server's reply read as a Dask message: "out of host memory:
+    Unable to allocate 3.07 EiB" before."""
+    with http_like_server() as hostport:
+        rc, out, err = _run(capsys, "render", tiles[0][0], "--scheduler", hostport, *SMALL)
+    assert rc == 2 and err.count("\n") == 1, err
+    assert f"scheduler {hostport}: what answered there is not a Dask scheduler" in err
+
+
+def test_a_cluster_timeout_says_what_it_waited_for(tiles, capsys, monkeypatch):
+    """Every OSError of the renderer was "--scheduler ADDRESS: cannot reach
+    it", ClusterTimeout (a TimeoutError) included: "--scheduler None:
+    cannot reach it (building 2 Rasterizers: ... not done ...)" with
+    --workers."""
+    import clvis.distributed
+    from clvis.errors import ClusterTimeout
+
+    def timed_out(*a, **k):
+        raise ClusterTimeout("building 2 Rasterizers: 1 of 2 tasks not done within timeout=300 s")
+
+    monkeypatch.setattr(clvis.distributed, "DistributedRasterizer", timed_out)
+    rc, out, err = _run(capsys, "render", *tiles[0], "--workers", 2, *SMALL)
+    assert rc == 2 and err == (
+        "clvis render: error: building 2 Rasterizers: 1 of 2 tasks not done within timeout=300 s\n"
+    )
+
+
+def test_workers_beyond_the_cores_are_refused(tiles, tmp_path, capsys, monkeypatch):
+    """--workers 4096 started 4096 worker processes (on any machine)."""
+    from clvis.distributed import cluster
+
+    def refuse(workers, **kw):
+        raise AssertionError(f"a LocalCluster of {workers} workers was started")
+
+    monkeypatch.setattr(cluster, "start_cluster", refuse)
+    most = cluster.local_workers_max()
+    np.save(tmp_path / "v.npy", np.zeros((8, 8, 8), np.float32))
+    for args in (["render", tiles[0][0]], ["iso", tmp_path / "v.npy", "--isovalue", 0]):
+        rc, out, err = _run(capsys, *args, "--workers", most + 1, *SMALL)
+        assert rc == 2, err
+        assert err.startswith(f"clvis {args[0]}: error: --workers {most + 1}: at most {most} on this machine")
+
+
+def test_volume_files_the_workers_cannot_slice_say_what_to_do(scheduler, tmp_path, capsys):
+    """A .vtk volume (one device reads it) was an "unknown volume format";
+    a 4-D NIfTI named volume_index, not --volume-index."""
+    nibabel = pytest.importorskip("nibabel")
+    vtk = tmp_path / "v.vtk"
+    vtk.write_text("# vtk DataFile Version 3.0\n")
+    rc, out, err = _run(capsys, "iso", vtk, "--scheduler", scheduler, "--isovalue", 0, *SMALL)
+    assert rc == 2 and "v.vtk: not a volume format the workers slice brick by brick" in err, err
+    assert "without --workers/--scheduler" in err
+    nii = tmp_path / "4d.nii"
+    nibabel.save(nibabel.Nifti1Image(np.zeros((8, 8, 8, 2), np.float32), np.eye(4)), nii)
+    rc, out, err = _run(capsys, "iso", nii, "--scheduler", scheduler, "--isovalue", 0, *SMALL)
+    assert rc == 2 and "choose one of its 2 volumes: volume_index=T (--volume-index T)" in err, err
 
 
 def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):

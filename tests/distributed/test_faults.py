@@ -1,9 +1,12 @@
 """Faults and waits of the distributed renderers on real, bounded
 LocalClusters: a worker killed during a frame of a volume built from an
-array (its bricks are sent again from the client), a worker stopped
-(SIGSTOP) during a frame and at close (bounded waits, errors that say what
-timed out), a scheduler address that refuses connections (fails in
-seconds), and a renderer used after close()."""
+array (its bricks are sent again from the client), the only worker killed
+(its partitions and bricks are made again on the one that replaces it), a
+worker that runs out of its memory limit, a worker stopped (SIGSTOP)
+during a frame and at close (bounded waits, errors that say what timed
+out), scheduler addresses that refuse connections, are no Dask scheduler
+or have no workers (fail in seconds), files a worker cannot read or finds
+elsewhere, and a renderer used after close()."""
 
 import os
 import re
@@ -16,7 +19,7 @@ import time
 
 import numpy as np
 import pytest
-from dask_cluster import TIMEOUT, distributed, local_cluster, silent_scheduler
+from dask_cluster import TIMEOUT, distributed, http_like_server, local_cluster, silent_scheduler
 
 from clvis import Camera, datasets
 from clvis.distributed import DistributedIsoRenderer, DistributedRasterizer
@@ -225,3 +228,186 @@ def test_a_silent_scheduler_fails_after_connect_timeout():
         assert time.monotonic() - t0 < 20
     with pytest.raises(ValueError, match="connect_timeout: expected a positive number"):
         DistributedRasterizer(["x.npz"], "tcp://127.0.0.1:1", connect_timeout=0)
+
+
+def _wait_replaced(c, victim):
+    """Until the scheduler has dropped `victim` and the nanny's new worker has joined."""
+    deadline = time.monotonic() + TIMEOUT
+    while time.monotonic() < deadline:
+        now = connected_workers(c)
+        if victim not in now and now:
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"{victim} not replaced within {TIMEOUT} s")
+
+
+@pytest.mark.parametrize("kind", ["points", "volume file"])
+def test_the_only_worker_killed_between_and_during_frames(tmp_path, kind):
+    """One worker (clvis render --workers 1): SIGKILL it and its nanny
+    starts another. What it held is made again there: the next frames, and
+    a frame in flight at the kill, equal the undisturbed one. (The handles
+    were pinned to the dead worker, and Dask never gives a task whose
+    pinned workers are gone to a worker that joins later: every frame
+    after waited out its whole timeout.)"""
+    if kind == "points":
+        rng = np.random.default_rng(5)
+        src = tmp_path / "p.npz"
+        save_npz(src, PointCloud(rng.uniform(-1, 1, (3000, 3)), attributes={"a": rng.random(3000)}))
+    else:
+        src = tmp_path / "v.npy"
+        np.save(src, _ML["volume"].astype(np.float32))
+    with local_cluster(n_workers=1) as cluster, distributed.Client(cluster, timeout=TIMEOUT) as c:
+        c.wait_for_workers(1, timeout=TIMEOUT)
+        if kind == "points":
+            dr = DistributedRasterizer([src], c, timeout=20)
+            view = dr._view(_cam(), W, H, "a", "viridis", None, None, 1)
+
+            def render():
+                g = dr.render(_cam(), W, H, color_by="a")
+                return g.index, g.depth, g.rgba
+        else:
+            dr = DistributedIsoRenderer(
+                src, c, rate=16, spacing=_ML["spacing"], origin=_ML["origin"], brick=8, timeout=20
+            )
+            view = {"camera": _cam(), "width": W, "height": H, "isovalue": 0.5, "speculation": True}
+
+            def render():
+                img = dr.render(_cam(), W, H, 0.5)
+                return img.hit, img.depth, img.rgba
+
+        with dr:
+            want = render()
+            for during in (False, True):
+                (victim,) = connected_workers(c)
+                inflight = dr.submit_frame(render_one_of(dr), view)[0] if during else None
+                os.kill(_pid(c, victim), signal.SIGKILL)
+                _wait_replaced(c, victim)
+                t0 = time.monotonic()
+                if inflight is not None:  # the frame in flight at the kill completes
+                    whole = C.assemble(dr._gather(inflight, "the frame in flight"), (H, W))
+                    assert np.array_equal(whole.planes["rgba"], want[2])
+                for got, exp in zip(render(), want, strict=True):
+                    assert np.array_equal(got, exp)
+                assert time.monotonic() - t0 < 15
+
+
+def render_one_of(dr):
+    from clvis.distributed import raster
+
+    return raster.render_one if isinstance(dr, DistributedRasterizer) else diso.render_one
+
+
+def test_a_worker_out_of_its_memory_limit_is_a_clvis_error_in_seconds(tmp_path):
+    """A partition larger than a worker's memory limit: its nanny restarts
+    the worker each time it builds it, and the build fails with a
+    ClusterError naming the file, in seconds (it waited out the whole
+    timeout: Dask kept the build for the first, dead, worker)."""
+    rng = np.random.default_rng(1)
+    path = tmp_path / "big.npz"
+    n = 3_000_000  # ~50 MB of points, ~250 MB on a worker with its device buffers
+    save_npz(path, PointCloud(rng.random((n, 3), np.float32), attributes={"i": rng.random(n, np.float32)}))
+    with (
+        local_cluster(n_workers=1, memory_limit="250MB") as cluster,
+        distributed.Client(cluster, timeout=TIMEOUT) as c,
+    ):
+        c.wait_for_workers(1, timeout=TIMEOUT)
+        t0 = time.monotonic()
+        with pytest.raises(
+            ClusterError, match=r"big\.npz: the worker running it died, \d+ times \(out of memory"
+        ):
+            DistributedRasterizer([path], c, timeout=40)
+        assert time.monotonic() - t0 < 30
+
+
+def test_a_port_where_no_dask_scheduler_answers_is_a_clvis_error():
+    """A web server's port: its reply, read as Dask's, was a MemoryError of
+    exabytes ("out of host memory" on the command line); an http:// or a
+    port-less address was Dask's bare ValueError."""
+    with http_like_server() as hostport:
+        address = f"tcp://{hostport}"
+        with pytest.raises(ClusterError, match=f"scheduler {address}: what answered there is not a Dask sch"):
+            DistributedRasterizer(["x.npz"], address, timeout=TIMEOUT, connect_timeout=5)
+        with pytest.raises(ClusterError, match=r"not a Dask address \(scheme 'http://'; Dask's: .*tcp://"):
+            DistributedIsoRenderer(np.zeros((8, 8, 8), np.float32), f"http://{hostport}", timeout=TIMEOUT)
+    for address in ("localhost", "tcp://127.0.0.1:99999"):
+        with pytest.raises(ClusterError, match=f"scheduler {re.escape(address)}: not a host:port address"):
+            DistributedRasterizer(["x.npz"], address, timeout=TIMEOUT)
+
+
+def test_a_scheduler_without_workers_fails_after_connect_timeout():
+    """Its tasks would wait out the whole timeout (then: not done)."""
+    with distributed.LocalCluster(n_workers=0, dashboard_address=":0") as cluster:
+        t0 = time.monotonic()
+        address = cluster.scheduler_address
+        with pytest.raises(
+            ClusterError, match=f"scheduler {address}: no worker joined it within connect_timeout=2 s"
+        ):
+            DistributedRasterizer(["x.npz"], address, timeout=30, connect_timeout=2)
+        assert time.monotonic() - t0 < 15
+
+
+def test_local_workers_are_bounded_by_the_cores():
+    """workers=100000 started that many processes (the machine went down first)."""
+    most = dcluster.local_workers_max()
+    assert most >= dcluster.WORKERS_PER_CORE
+    with pytest.raises(ValueError, match=f"workers: {most + 1} local worker processes; at most {most} here"):
+        DistributedRasterizer(["x.npz"], workers=most + 1)
+
+
+def _deny_on_worker(name):
+    """Run on a worker: opening a path that ends with `name` raises
+    PermissionError, as for a file whose mode changed after the client
+    looked (a test running as root reads any file)."""
+    import builtins
+
+    real = builtins.open
+
+    def guarded(file, *a, **k):
+        if str(file).endswith(name):
+            raise PermissionError(13, "Permission denied", str(file))
+        return real(file, *a, **k)
+
+    builtins.open = guarded
+
+
+def test_a_file_a_worker_may_not_read_names_it_and_the_reason(tmp_path):
+    """NIfTI said "Cannot work out file type" (nibabel's guess, the reason
+    lost); point files said neither where nor that it was a permission."""
+    nibabel = pytest.importorskip("nibabel")
+    pytest.importorskip("laspy")
+    from pathlib import Path
+
+    nii = tmp_path / "locked.nii"
+    nibabel.save(nibabel.Nifti1Image(np.zeros((8, 8, 8), np.float32), np.eye(4)), nii)
+    las = tmp_path / "locked.laz"
+    las.write_bytes((Path(__file__).parents[1] / "data" / "laspy_simple.laz").read_bytes())
+    with local_cluster(n_workers=1) as cluster, distributed.Client(cluster, timeout=TIMEOUT) as c:
+        c.wait_for_workers(1, timeout=TIMEOUT)
+        (w,) = connected_workers(c)
+        c.run(_deny_on_worker, "locked.nii")
+        c.run(_deny_on_worker, "locked.laz")
+        with pytest.raises(
+            ClvisError, match=f"{re.escape(str(nii))}: cannot read it on worker {w}: Permission denied$"
+        ):
+            DistributedIsoRenderer(nii, c, brick=8, timeout=TIMEOUT)
+        with pytest.raises(
+            ClvisError, match=f"{re.escape(str(las))}: cannot read it on worker {w}: Permission denied$"
+        ):
+            DistributedRasterizer([las], c, timeout=TIMEOUT)
+
+
+def test_relative_paths_are_read_where_the_client_found_them(tmp_path, monkeypatch):
+    """Workers started in another folder (a dask worker elsewhere, on a
+    shared file system) were sent the paths as given: "no such file"."""
+    rng = np.random.default_rng(3)
+    (tmp_path / "d").mkdir()
+    save_npz(tmp_path / "d" / "t.npz", PointCloud(rng.uniform(0, 1, (500, 3))))
+    np.save(tmp_path / "d" / "v.npy", _ML["volume"].astype(np.float32))
+    with local_cluster(n_workers=1) as cluster, distributed.Client(cluster, timeout=TIMEOUT) as c:
+        c.wait_for_workers(1, timeout=TIMEOUT)
+        monkeypatch.chdir(tmp_path / "d")  # the client's folder; the worker's is another
+        assert str(tmp_path / "d") not in c.run(os.getcwd).values()
+        with DistributedRasterizer(["t.npz"], c, timeout=TIMEOUT) as dr:
+            assert dr.n == 500
+        with DistributedIsoRenderer("v.npy", c, brick=8, timeout=TIMEOUT) as di:
+            assert di.volume_shape == _ML["volume"].shape

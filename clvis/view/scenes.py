@@ -35,6 +35,7 @@ import numpy as np
 from ..camera import Camera
 from ..errors import DataError
 from ..images import BACKGROUND
+from ..io.volumes import otsu_level
 
 if TYPE_CHECKING:  # clvis.post (onnxruntime) is imported only when a network is asked for
     from ..post import PostNetwork
@@ -504,7 +505,10 @@ class PointScene(Scene):
 
 
 class VolumeScene(Scene):
-    """A volume [z, y, x], compressed with ZFP and raycast progressively."""
+    """A volume [z, y, x], compressed with ZFP and raycast progressively; the
+    isovalue by default Otsu's threshold of its samples, as ``clvis iso`` and
+    ``clvis view FILE`` choose it (the middle of the range showed a few blobs
+    of a scan: ``clvis.view(array)`` drew other surfaces than the commands)."""
 
     kind = "volume"
 
@@ -528,7 +532,7 @@ class VolumeScene(Scene):
             raise DataError(f"{description}: no finite sample")
         vmin, vmax = float(finite.min()), float(finite.max())
         if isovalue is None:
-            isovalue = (vmin + vmax) / 2
+            isovalue = otsu_level(finite)
         self.volume, self.spacing, self.origin = data, tuple(spacing), tuple(origin)
         self.iso = IsoRenderer(data, rate, spacing, origin)
         self.device = self.iso.queue.device.name.strip()

@@ -61,6 +61,22 @@ def test_progressive_iso_stops_when_superseded():
     assert len(cut) == 1 and not cut[0].final
 
 
+def test_a_volumes_default_isovalue_is_the_commands_otsu_threshold():
+    """clvis.view(array) took the middle of the range, clvis iso and clvis view
+    FILE Otsu's threshold: on a scan with a bright outlier (nibabel's
+    anatomical.nii: the middle drew a few blobs) the Python call drew another
+    surface than the commands."""
+    from clvis.io.volumes import otsu_level
+
+    rng = np.random.default_rng(0)
+    vol = rng.normal(100.0, 10.0, (24, 24, 24)).astype(np.float32)
+    vol[6:18, 6:18, 6:18] += 300.0  # the tissue
+    vol[0, 0, 0] = 5000.0  # one bright sample: the range's middle is 2500, above every tissue sample
+    s = scene_for(vol)
+    assert s.settings["isovalue"] == pytest.approx(otsu_level(vol))
+    assert 150.0 < s.settings["isovalue"] < 350.0
+
+
 def test_scene_for_rejects_what_it_cannot_show():
     with pytest.raises(TypeError, match="clvis.view: expected"):
         scene_for(np.zeros((4, 4)))

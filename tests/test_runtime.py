@@ -639,6 +639,57 @@ def test_free_held_gives_back_only_the_freed_blocks(device):
     np.testing.assert_array_equal(keep.get(), np.arange(1000, dtype=np.float32))
 
 
+def test_free_held_trims_the_c_heap(device, monkeypatch):
+    """A CPU device's buffers are host memory: freed, glibc kept their pages
+    in its heap (a viewer grew 4 MB a window size). free_held trims it."""
+    from clvis.runtime import memory
+
+    calls = []
+    monkeypatch.setattr(memory, "trim_heap", lambda: calls.append(1) or True)
+    q = runtime.queue_for(device)
+    gone = runtime.empty(q, 3000, np.float32, "free_held test")
+    del gone
+    runtime.free_held(q)
+    assert calls == [1]
+
+
+_TRIM = """
+import ctypes, os, sys
+from clvis.runtime import memory
+
+libc = ctypes.CDLL(None)
+libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+libc.free.argtypes = [ctypes.c_void_p]
+
+def rss():
+    return int(open("/proc/self/statm").read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+libc.free(libc.malloc(16 << 20))  # a large block freed: glibc's mmap threshold rises to it (<= 32 MB)
+blocks = [libc.malloc(2 << 20) for _ in range(60)]  # now from the heap, as a pool's buffers were
+for b in blocks:
+    ctypes.memset(b, 1, 2 << 20)
+for b in blocks[::2]:  # every other one freed: holes between live blocks, which only a trim gives back
+    libc.free(b)
+before = rss()
+assert memory.trim_heap()
+print(before - rss())
+"""
+
+
+@pytest.mark.skipif(
+    not sys.platform.startswith("linux") or os.confstr("CS_GNU_LIBC_VERSION") is None,
+    reason="malloc_trim is glibc's",
+)
+def test_trim_heap_gives_freed_heap_pages_back():
+    # glibc's defaults (a LocalCluster's nanny set MALLOC_TRIM_THRESHOLD_ in a
+    # test process's environment before clvis put it back; a fixed threshold
+    # turns off the dynamic mmap threshold this relies on)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    out = subprocess.run([sys.executable, "-c", _TRIM], capture_output=True, text=True, env=env)
+    assert out.returncode == 0, out.stderr
+    assert int(out.stdout) > 40 << 20  # of the 60 MB freed (0 without the trim)
+
+
 _SIGACTION = """
 import ctypes, signal, sys
 

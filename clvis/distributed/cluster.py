@@ -221,6 +221,42 @@ def check_local_workers(workers: Any) -> int:
     return workers
 
 
+# what Dask sets in this process's own environment to pass to the workers it
+# spawns: its nanny's pre-spawn variables (MALLOC_TRIM_THRESHOLD_,
+# OMP_NUM_THREADS, MKL_NUM_THREADS, OPENBLAS_NUM_THREADS by default) and
+# __DASK_PARENT_PID
+_DASK_PARENT = "__DASK_PARENT_PID"
+
+
+def dask_environ_keys() -> tuple[str, ...]:
+    """The environment variables Dask's nanny sets in the process that starts
+    a LocalCluster (``distributed.nanny.pre-spawn-environ``, and the parent
+    pid that names the workers' process titles)."""
+    import dask
+
+    spawn = dask.config.get("distributed.nanny.pre-spawn-environ", default={}) or {}
+    return (*sorted(str(k) for k in spawn), _DASK_PARENT)
+
+
+def environ_snapshot() -> dict[str, str | None]:
+    """The values of dask_environ_keys() now (None: unset)."""
+    return {k: os.environ.get(k) for k in dask_environ_keys()}
+
+
+def restore_environ(snapshot: dict[str, str | None]) -> None:
+    """The variables of `snapshot` as they were: Dask's nanny updates this
+    process's os.environ before it spawns a worker (so that the worker
+    inherits OMP_NUM_THREADS=1, MALLOC_TRIM_THRESHOLD_=65536) and never
+    restores it, so that a user's later subprocesses (a training, a
+    compiler) ran single-threaded and with another malloc; a library call
+    must leave the process as it found it."""
+    for k, v in snapshot.items():
+        if v is None:
+            os.environ.pop(k, None)
+        elif os.environ.get(k) != v:
+            os.environ[k] = v
+
+
 def start_cluster(workers: int, **kw: Any) -> Any:
     """A LocalCluster of `workers` processes, one thread each, the dashboard
     on a free port. Its worker processes ignore SIGINT: a terminal's Ctrl-C
@@ -235,9 +271,11 @@ def start_cluster(workers: int, **kw: Any) -> Any:
     kw.setdefault("silence_logs", logging.CRITICAL)
     main = threading.current_thread() is threading.main_thread()
     old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    environ = environ_snapshot()
     try:
         return d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw)
     finally:
+        restore_environ(environ)  # the workers have theirs; this process keeps its own
         if main:
             signal.signal(signal.SIGINT, old)
 
@@ -376,6 +414,9 @@ class ClusterOwner:
         self._cluster = None
         self._own_client = False
         self._closed = False
+        # this process's variables that Dask's nanny sets when it spawns (or
+        # restarts) a worker: put back after each frame and at close
+        self._environ = environ_snapshot()
         self._handles: list = []
         self._arrays: list = []
         self._tokens: list = []
@@ -635,6 +676,8 @@ class ClusterOwner:
                         f"{e}; still lost after {FRAME_RETRIES} recoveries{'; ' + where if where else ''}"
                     ) from None
                 self._recover()
+            finally:  # a worker restarted meanwhile: its nanny set its variables here again
+                restore_environ(self._environ)
         frame = time.perf_counter() - t0
         whole = _c.assemble(final, (view["height"], view["width"]))
         sent = dict(whole.sent)
@@ -680,6 +723,7 @@ class ClusterOwner:
                 with _quiet_logs(), contextlib.suppress(Exception):
                     self.client.close(timeout=self._close_timeout)
             self._close_cluster()
+            restore_environ(self._environ)
 
     def __enter__(self) -> Any:
         return self

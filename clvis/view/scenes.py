@@ -104,6 +104,7 @@ class Scene:
     #: a page (the server sets it to twice the pages open)
     kept_sizes = 2
     _pool_queue: Any = None  # the queue whose pool _sized watches
+    _trim = False  # _sized gave blocks back: view_frames trims the C heap after the frames
 
     def _sized(self, queue: Any, width: int, height: int) -> None:
         """Before a frame of `width` x `height`: when it is a size beyond the
@@ -124,6 +125,7 @@ class Scene:
             from ..runtime import free_held
 
             free_held(queue)
+            self._trim = True  # and, after this frame, the old size's host arrays' pages (view_frames)
         self._sizes = kept
 
     def release(self, sizes: Any = ()) -> None:
@@ -676,6 +678,11 @@ def view_frames(
                 if superseded():
                     return
     yield from scene.frames(camera, width, height, settings, superseded)
+    if scene._trim:  # a new size's frames are done: the C heap's free pages go back (trim_heap)
+        from ..runtime.memory import trim_heap
+
+        scene._trim = False
+        trim_heap()
 
 
 # the modes a Dask scene renders on the workers (clvis.distributed); the others

@@ -200,6 +200,32 @@ def test_render_after_close_says_closed(tmp_path):
     dr.close()  # twice: harmless
 
 
+def test_a_local_cluster_leaves_this_processs_environment_as_it_was(tmp_path, monkeypatch):
+    """Dask's nanny sets its pre-spawn variables (OMP_NUM_THREADS=1,
+    MALLOC_TRIM_THRESHOLD_=65536, ...) and __DASK_PARENT_PID in the process
+    that starts a LocalCluster and never takes them back: after a
+    DistributedRasterizer(workers=1) every later subprocess of the user's ran
+    on one OpenMP thread. Now the variables are as they were, while the
+    cluster runs (after each frame) and after it closed."""
+    from clvis.distributed.cluster import dask_environ_keys
+
+    keys = dask_environ_keys()
+    assert {"OMP_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_", "__DASK_PARENT_PID"} <= set(keys)
+    for k in keys:  # the user's own: one unset, one of theirs
+        monkeypatch.delenv(k, raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "7")
+    before = {k: os.environ.get(k) for k in keys}
+    rng = np.random.default_rng(0)
+    path = tmp_path / "t.npz"
+    save_npz(path, PointCloud(rng.uniform(0, 1, (500, 3))))
+    with DistributedRasterizer([path], workers=1, timeout=TIMEOUT) as dr:
+        assert {k: os.environ.get(k) for k in keys} == before
+        cam = Camera.look_at((3, -2, 2), (0.5, 0.5, 0.5), (0, 0, 1), aspect=W / H)
+        dr.render(cam, W, H)
+        assert {k: os.environ.get(k) for k in keys} == before
+    assert {k: os.environ.get(k) for k in keys} == before
+
+
 def _closed_port():
     s = socket.socket()
     s.bind(("127.0.0.1", 0))

@@ -77,6 +77,26 @@ def test_a_volumes_default_isovalue_is_the_commands_otsu_threshold():
     assert 150.0 < s.settings["isovalue"] < 350.0
 
 
+def test_a_new_frame_size_trims_the_c_heap_after_its_frames(monkeypatch):
+    """A size beyond the kept ones gives the pool's held blocks back; after
+    that size's frames the C heap is trimmed too (trim_heap): the freed
+    buffers' and arrays' pages stayed in glibc's heap, 3.6 MB a window size."""
+    from clvis.runtime import memory
+    from clvis.view.scenes import view_frames
+
+    trims = []
+    monkeypatch.setattr(memory, "trim_heap", lambda: trims.append(1) or True)
+    s = VolumeScene(clvis.datasets.marschner_lobb(16)["volume"], isovalue=0.5)
+    cam = Orbit(s.lo, s.hi).camera(1.0)
+    for size in ((40, 40), (48, 48), (40, 40), (48, 48)):  # the kept sizes: no trim
+        list(view_frames(s, cam, *size, s.settings, lambda: False))
+    assert trims == []
+    list(view_frames(s, cam, 56, 56, s.settings, lambda: False))  # a third size
+    assert trims == [1, 1]  # free_held's, before its frames, and view_frames', after them
+    list(view_frames(s, cam, 56, 56, s.settings, lambda: False))
+    assert trims == [1, 1]
+
+
 def test_scene_for_rejects_what_it_cannot_show():
     with pytest.raises(TypeError, match="clvis.view: expected"):
         scene_for(np.zeros((4, 4)))

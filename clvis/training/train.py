@@ -16,6 +16,7 @@ Needs the ``train`` extra (torch==2.13.0, onnx, pytorch-msssim).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -950,6 +951,27 @@ def _batch(pairs, n: int, crop: int, rng: np.random.Generator, extra=(), share: 
     )
 
 
+def _keeps_torch_state(fn: Callable[..., dict]) -> Callable[..., dict]:
+    """fn with torch's process-wide state as it found it: the thread count
+    (train sets CLVIS_TRAIN_THREADS or every core) and the default random
+    generator (train seeds it), so that a notebook's own torch work after a
+    clvis.training.train call runs as before."""
+
+    @functools.wraps(fn)
+    def kept(*args: Any, **kwargs: Any) -> dict:
+        import torch
+
+        threads = torch.get_num_threads()
+        try:
+            with torch.random.fork_rng(devices=[]):
+                return fn(*args, **kwargs)
+        finally:
+            torch.set_num_threads(threads)
+
+    return kept
+
+
+@_keeps_torch_state
 def train(
     name: str,
     *,

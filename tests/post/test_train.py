@@ -278,6 +278,27 @@ def test_train_stops_at_its_time_limit(tmp_path):
     assert any("time limit" in line for line in lines)
 
 
+def test_train_leaves_torchs_threads_and_random_state_as_it_found_them(tmp_path):
+    """clvis.training.train set torch's thread count (every core, or
+    CLVIS_TRAIN_THREADS) and seeded torch's default generator for the rest
+    of the process: a notebook's own torch work after it ran on other
+    threads and drew other numbers."""
+    torch = pytest.importorskip("torch")
+    threads = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        torch.manual_seed(1234)
+        want = torch.rand(3)
+        torch.manual_seed(1234)
+        train.train(
+            "infill", steps=1, size=64, out=tmp_path, frames=1, frame_size=(96, 64), log=lambda _: None
+        )
+        assert torch.get_num_threads() == 1
+        assert torch.equal(torch.rand(3), want)
+    finally:
+        torch.set_num_threads(threads)
+
+
 def test_train_rejects_crops_larger_than_frames(tmp_path, capsys):
     assert main(["train", "infill", "--size", "512", "--frame-size", "96x64", "--out", str(tmp_path)]) == 2
     assert "larger than the frames" in capsys.readouterr().err

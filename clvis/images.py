@@ -466,14 +466,23 @@ def _rgba(name: str, x) -> np.ndarray:
 
 
 def _colour(name: str, c) -> tuple[int, int, int]:
+    """Three integers 0..255. Floats are refused, whole ones too: (1.0, 1.0,
+    1.0), white in the 0..1 convention of matplotlib and Open3D, would
+    otherwise draw near-black."""
     try:
-        t = tuple(int(v) for v in c)
-        ok = len(t) == 3 and all(0 <= v <= 255 and v == c_ for v, c_ in zip(t, c, strict=True))
-    except (TypeError, ValueError):
+        vals = list(c)
+        ok = len(vals) == 3 and all(
+            isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)) and 0 <= v <= 255
+            for v in vals
+        )
+    except TypeError:
         ok = False
     if not ok:
-        raise ValueError(f"{name}: expected an RGB colour of three integers 0..255, got {c!r}")
-    return t[0], t[1], t[2]
+        hint = ""
+        if isinstance(c, (tuple, list, np.ndarray)) and any(isinstance(v, (float, np.floating)) for v in c):
+            hint = " (a 0..1 float colour: multiply by 255 and round)"
+        raise ValueError(f"{name}: expected an RGB colour of three integers 0..255, got {c!r}{hint}")
+    return int(vals[0]), int(vals[1]), int(vals[2])
 
 
 def legend(

@@ -70,3 +70,13 @@ def test_the_conventions_agree():
     assert tuple(g.to_uint8((0, 0, 0))[0, 0]) == (64, 0, 128, 255)
     with pytest.raises(ValueError, match="background"):
         g.to_uint8((0, 0, 300))
+
+
+@pytest.mark.parametrize("bg", [(1.0, 1.0, 1.0), (0.5, 0.5, 0.5), np.array([1.0, 1.0, 1.0]), (True, 0, 0)])
+def test_a_float_background_is_refused_not_drawn_near_black(bg):
+    """background=(1.0, 1.0, 1.0), white to a matplotlib or Open3D user, was
+    taken as (1, 1, 1): a near-black background."""
+    g = GaussianImage(np.array([[[0.25, 0.0, 0.5, 0.5]]], np.float32), np.zeros((1, 1)), None, None)
+    with pytest.raises(ValueError, match="background"):
+        g.to_uint8(bg)
+    assert tuple(g.to_uint8(np.array([255, 255, 255]))[0, 0])[3] == 255  # integer arrays still do

@@ -394,6 +394,8 @@ class Rasterizer:
     def _tf(self, color_by, colormap, value_range):
         """(color_mode, tf_src, stride, offset, lut, lut_n, vmin, scale)."""
         if color_by is None:
+            if colormap != "viridis":  # unused, but a misspelt name says so (no upload)
+                _colormap.lut(colormap, 1)
             return (1 if self.has_colors else 0), None, 0, 0, None, 0, np.float32(0), np.float32(0)
         if color_by not in self._host_attr:
             raise ValueError(

@@ -20,9 +20,9 @@ from __future__ import annotations
 import functools
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -69,6 +69,28 @@ class Picture:
 
     def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
         raise NotImplementedError
+
+    def __repr__(self) -> str:
+        """One line: each plane's shape and dtype (``device`` for a device
+        array), a long dict (the stats) by its keys; never the pixels."""
+
+        def short(v: Any) -> str:
+            shape, dtype = getattr(v, "shape", None), getattr(v, "dtype", None)
+            if shape is not None and dtype is not None:
+                where = "" if isinstance(v, np.ndarray) else " device"
+                return f"<{'x'.join(map(str, shape))} {np.dtype(dtype).name}{where}>"
+            if isinstance(v, Mapping):
+                text = "{" + ", ".join(f"{k!r}: {short(v[k])}" for k in v.keys()) + "}"
+                return text if len(text) <= 120 else f"{{{len(v)} entries: {', '.join(map(str, v.keys()))}}}"
+            text = repr(v)
+            return text if len(text) <= 40 else text[:37] + "..."
+
+        import dataclasses
+
+        if not dataclasses.is_dataclass(self):
+            return object.__repr__(self)
+        parts = [f"{f.name}={short(getattr(self, f.name))}" for f in dataclasses.fields(self)]
+        return f"{type(self).__name__}({', '.join(parts)})"
 
     def save_png(self, path: str | os.PathLike[str], background: Sequence[int] | None = None) -> Path:
         """Write :meth:`to_uint8` of `background` to the PNG file `path`; the path."""

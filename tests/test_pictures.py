@@ -80,3 +80,27 @@ def test_a_float_background_is_refused_not_drawn_near_black(bg):
     with pytest.raises(ValueError, match="background"):
         g.to_uint8(bg)
     assert tuple(g.to_uint8(np.array([255, 255, 255]))[0, 0])[3] == 255  # integer arrays still do
+
+
+def test_an_images_repr_is_one_line_of_shapes_not_its_pixels():
+    """repr(img) in a notebook printed every plane's numbers (the dataclass
+    repr): dozens of lines for a 64x64 GBuffers."""
+    g = GaussianImage(
+        np.zeros((48, 64, 4), np.float32), np.zeros((48, 64), np.float32), None, None, {"k": 64}
+    )
+    assert repr(g) == (
+        "GaussianImage(rgba=<48x64x4 float32>, depth=<48x64 float32>, "
+        "hits=None, rounds=None, stats={'k': 64})"
+    )
+    stats = {f"key{i}": list(range(10)) for i in range(20)}
+    iso = IsoImage(
+        np.zeros((2, 3, 4)),
+        np.zeros((2, 3)),
+        np.zeros((2, 3), bool),
+        np.zeros((2, 3)),
+        np.zeros((2, 3), bool),
+        1,
+        stats,
+    )
+    r = repr(iso)
+    assert "\n" not in r and "hit=<2x3 bool>" in r and "stats={20 entries: key0, key1" in r and len(r) < 400

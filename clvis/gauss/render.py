@@ -78,7 +78,7 @@ MAX_K = 64
 TILE = 8
 
 
-@dataclass
+@dataclass(repr=False)
 class GaussianImage(Picture):
     """A rendered frame: ``rgba`` (H, W, 4) float32 premultiplied, alpha = 1 - T;
     ``depth`` (H, W) float32 view depth where T first fell below 0.5 (+inf

@@ -165,7 +165,7 @@ def _real(name: str, v: Any) -> float:
     return float(v)
 
 
-@dataclass
+@dataclass(repr=False)
 class IsoImage(Picture):
     """The image after a pass: ``rgba`` (H, W, 4) float32 (shaded surface,
     alpha 1 at hits), ``depth`` (H, W) view depth (+inf where no hit yet),

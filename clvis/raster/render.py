@@ -78,7 +78,7 @@ VIS_DTYPE = np.dtype([("id", "<u4"), ("dkey", "<u4")])
 PROFILES = {"cpu": {"L": 1, "VEC": 8, "item_wg": 64}, "gpu": {"L": 256, "VEC": 1, "item_wg": 256}}
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(repr=False)
 class GBuffers(Picture):
     """The G-buffers of one view, [H, W] planes, row 0 on top.
 

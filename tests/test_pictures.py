@@ -104,3 +104,14 @@ def test_an_images_repr_is_one_line_of_shapes_not_its_pixels():
     )
     r = repr(iso)
     assert "\n" not in r and "hit=<2x3 bool>" in r and "stats={20 entries: key0, key1" in r and len(r) < 400
+
+
+def test_the_renderers_repr_says_what_they_hold():
+    """repr(Rasterizer(...)) was '<clvis.raster.render.Rasterizer object at 0x...>'."""
+    pos = np.random.default_rng(0).random((10, 3)).astype(np.float32)
+    r = Rasterizer(pos, attributes={"h": pos[:, 2]})
+    assert repr(r).startswith("Rasterizer(10 points, attributes=['h'], device=")
+    iso = IsoRenderer(datasets.marschner_lobb(8)["volume"], spacing=(1.0, 2.0, 3.0))
+    assert repr(iso).startswith("IsoRenderer(shape=(8, 8, 8), rate=8, spacing=(1.0, 2.0, 3.0), origin=(0.0,")
+    g = GaussianRenderer(Gaussians(pos, np.full((10, 3), 0.1), values=pos[:, 0]))
+    assert repr(g).startswith("GaussianRenderer(10 Gaussians, model='max_response'")

@@ -156,6 +156,12 @@ class GaussianRenderer:
     kp : the tile renderer's pending-hit buffer (1..64); None: its profile's.
     """
 
+    def __repr__(self) -> str:
+        return (
+            f"GaussianRenderer({self.n:,} Gaussians, model={self.model!r}, density={self.density}, "
+            f"{self.transfer_function!r}, device={self.queue.device.name.strip()!r})"
+        )
+
     def __init__(
         self,
         gaussians: Gaussians,

@@ -465,6 +465,12 @@ class IsoRenderer:
     (runtime.capture); a configure() change applies to renderers made after it.
     """
 
+    def __repr__(self) -> str:
+        return (
+            f"IsoRenderer(shape={tuple(self.volume.shape)}, rate={self.volume.rate}, "
+            f"spacing={self.spacing}, origin={self.origin}, device={self.queue.device.name.strip()!r})"
+        )
+
     def __init__(
         self,
         volume_or_zfp: ZfpVolume | Any,

@@ -145,6 +145,14 @@ class Rasterizer:
     them, so the result does not depend on the order.
     """
 
+    def __repr__(self) -> str:
+        has = [w for w, h in (("colors", self.has_colors), ("velocity", self.has_velocity)) if h]
+        attrs = f", attributes={list(self.attribute_names)}" if self.attribute_names else ""
+        return (
+            f"Rasterizer({self.n:,} points{''.join(', ' + w for w in has)}{attrs}, "
+            f"device={self.queue.device.name.strip()!r})"
+        )
+
     def __init__(
         self,
         cloud_or_positions: Any,

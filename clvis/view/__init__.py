@@ -22,6 +22,8 @@ import types
 import webbrowser
 from typing import Any
 
+import numpy as np
+
 from .orbit import Orbit
 from .scenes import DaskPointScene, DaskVolumeScene, Frame, PointScene, Scene, VolumeScene, scene_for
 from .schedule import LatestWins, Outbox
@@ -115,6 +117,10 @@ def view(
     max_pages: the pages (tabs) served at once, each with its own camera and
     size (the settings are shared).
     """
+    for name, side in (("width", width), ("height", height)):
+        if isinstance(side, bool) or not isinstance(side, (int, np.integer)) or side < 1:
+            raise ValueError(f"{name}: the notebook frame's size, expected a positive integer, got {side!r}")
+    width, height = int(width), int(height)
     scene = scene_for(obj, **scene_options)
     server = ViewServer(
         scene,

@@ -520,3 +520,12 @@ def test_a_viewer_is_a_context_manager(points):
         assert v.url.startswith("http://127.0.0.1:")
     v.server.thread.join(10)
     assert not v.server.thread.is_alive()  # closed at the block's end
+
+
+@pytest.mark.parametrize("size", [{"width": 0}, {"height": -5}, {"width": 640.5}, {"height": "360"}])
+def test_the_notebook_frames_size_is_checked(points, size):
+    """width=0 gave an invisible iframe without a word."""
+    with clvis.view(points, width=np.int64(320)) as v:  # numpy integers do
+        assert v.width == 320
+    with pytest.raises(ValueError, match="notebook frame"):
+        clvis.view(points, **size)

@@ -20,9 +20,9 @@ from __future__ import annotations
 import functools
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -69,6 +69,28 @@ class Picture:
 
     def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
         raise NotImplementedError
+
+    def __repr__(self) -> str:
+        """One line: each plane's shape and dtype (``device`` for a device
+        array), a long dict (the stats) by its keys; never the pixels."""
+
+        def short(v: Any) -> str:
+            shape, dtype = getattr(v, "shape", None), getattr(v, "dtype", None)
+            if shape is not None and dtype is not None:
+                where = "" if isinstance(v, np.ndarray) else " device"
+                return f"<{'x'.join(map(str, shape))} {np.dtype(dtype).name}{where}>"
+            if isinstance(v, Mapping):
+                text = "{" + ", ".join(f"{k!r}: {short(v[k])}" for k in v.keys()) + "}"
+                return text if len(text) <= 120 else f"{{{len(v)} entries: {', '.join(map(str, v.keys()))}}}"
+            text = repr(v)
+            return text if len(text) <= 40 else text[:37] + "..."
+
+        import dataclasses
+
+        if not dataclasses.is_dataclass(self):
+            return object.__repr__(self)
+        parts = [f"{f.name}={short(getattr(self, f.name))}" for f in dataclasses.fields(self)]
+        return f"{type(self).__name__}({', '.join(parts)})"
 
     def save_png(self, path: str | os.PathLike[str], background: Sequence[int] | None = None) -> Path:
         """Write :meth:`to_uint8` of `background` to the PNG file `path`; the path."""
@@ -466,14 +488,23 @@ def _rgba(name: str, x) -> np.ndarray:
 
 
 def _colour(name: str, c) -> tuple[int, int, int]:
+    """Three integers 0..255. Floats are refused, whole ones too: (1.0, 1.0,
+    1.0), white in the 0..1 convention of matplotlib and Open3D, would
+    otherwise draw near-black."""
     try:
-        t = tuple(int(v) for v in c)
-        ok = len(t) == 3 and all(0 <= v <= 255 and v == c_ for v, c_ in zip(t, c, strict=True))
-    except (TypeError, ValueError):
+        vals = list(c)
+        ok = len(vals) == 3 and all(
+            isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)) and 0 <= v <= 255
+            for v in vals
+        )
+    except TypeError:
         ok = False
     if not ok:
-        raise ValueError(f"{name}: expected an RGB colour of three integers 0..255, got {c!r}")
-    return t[0], t[1], t[2]
+        hint = ""
+        if isinstance(c, (tuple, list, np.ndarray)) and any(isinstance(v, (float, np.floating)) for v in c):
+            hint = " (a 0..1 float colour: multiply by 255 and round)"
+        raise ValueError(f"{name}: expected an RGB colour of three integers 0..255, got {c!r}{hint}")
+    return int(vals[0]), int(vals[1]), int(vals[2])
 
 
 def legend(

@@ -80,11 +80,32 @@ def test_pointcloud_colors():
     np.testing.assert_array_equal(u16.colors, [[255, 1, 0, 255], [0, 1, 128, 255]])
     big = PointCloud(p, colors=np.array([[65535, 256, 255], [0, 511, 32768]], dtype=">u2"))  # big-endian
     np.testing.assert_array_equal(big.colors, u16.colors)
+    # 8-bit colours in 16-bit fields (laspy's simple.las, autzen): as is, as read_points
+    # takes them from a LAS file; >> 8 made the cloud black
+    low = np.array([[249, 0, 10], [1, 2, 255]], dtype=np.uint16)
+    np.testing.assert_array_equal(PointCloud(p, colors=low).colors, [[249, 0, 10, 255], [1, 2, 255, 255]])
     rgba = PointCloud(p, colors=np.array([[1, 2, 3, 4], [5, 6, 7, 8]], dtype=np.uint8))
     np.testing.assert_array_equal(rgba.colors, [[1, 2, 3, 4], [5, 6, 7, 8]])
     ints = PointCloud(p, colors=[[255, 0, 10], [1, 2, 3]])  # int64 within 0..255
     np.testing.assert_array_equal(ints.colors, [[255, 0, 10, 255], [1, 2, 3, 255]])
     assert ints.colors.dtype == np.uint8
+
+
+def test_a_laspy_users_colours_match_read_points():
+    """PointCloud(xyz, colors=np.c_[las.red, las.green, las.blue]) of laspy's
+    simple.laz (8-bit colours in 16-bit fields) was black; read_points drew it
+    in colour."""
+    from pathlib import Path
+
+    laspy = pytest.importorskip("laspy")
+    path = Path(__file__).parent / "data" / "laspy_simple.laz"
+    las = laspy.read(str(path))
+    rgb = np.stack([np.asarray(las.red), np.asarray(las.green), np.asarray(las.blue)], axis=1)
+    assert rgb.dtype == np.uint16 and 0 < rgb.max() <= 255
+    pc = PointCloud(
+        np.stack([las.x, las.y, las.z], axis=1) - [las.x.min(), las.y.min(), las.z.min()], colors=rgb
+    )
+    np.testing.assert_array_equal(pc.colors, read_points(path).colors)
 
 
 def test_bounds_and_subset():

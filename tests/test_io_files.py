@@ -70,6 +70,22 @@ def test_gaussians_save_replaces_atomically(tmp_path, monkeypatch):
     assert [p.name for p in tmp_path.iterdir()] == ["g.npz"]
 
 
+def test_gaussians_save_says_where_and_load_finds_it_by_the_same_name(tmp_path):
+    """save("g") wrote g.npz and returned None, and load("g") then said no
+    such file; save("g.ply") wrote g.ply.npz, not the splat file a 3DGS user
+    expects."""
+    g = Gaussians(np.zeros((3, 3)), np.ones((3, 3)))
+    assert g.save(tmp_path / "g") == tmp_path / "g.npz"
+    assert len(Gaussians.load(tmp_path / "g").means) == 3
+    assert len(Gaussians.load(str(tmp_path / "g.npz")).means) == 3
+    for name in ("g.ply", "g.SPLAT", "g.spz"):
+        with pytest.raises(ValueError, match="not a .* splat file"):
+            g.save(tmp_path / name)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["g.npz"]
+    with pytest.raises(FileNotFoundError):
+        Gaussians.load(tmp_path / "h")
+
+
 def test_write_into_a_missing_folder_names_the_target(tmp_path):
     path = tmp_path / "no" / "c.ply"
     with pytest.raises(FileNotFoundError) as info:

@@ -70,3 +70,48 @@ def test_the_conventions_agree():
     assert tuple(g.to_uint8((0, 0, 0))[0, 0]) == (64, 0, 128, 255)
     with pytest.raises(ValueError, match="background"):
         g.to_uint8((0, 0, 300))
+
+
+@pytest.mark.parametrize("bg", [(1.0, 1.0, 1.0), (0.5, 0.5, 0.5), np.array([1.0, 1.0, 1.0]), (True, 0, 0)])
+def test_a_float_background_is_refused_not_drawn_near_black(bg):
+    """background=(1.0, 1.0, 1.0), white to a matplotlib or Open3D user, was
+    taken as (1, 1, 1): a near-black background."""
+    g = GaussianImage(np.array([[[0.25, 0.0, 0.5, 0.5]]], np.float32), np.zeros((1, 1)), None, None)
+    with pytest.raises(ValueError, match="background"):
+        g.to_uint8(bg)
+    assert tuple(g.to_uint8(np.array([255, 255, 255]))[0, 0])[3] == 255  # integer arrays still do
+
+
+def test_an_images_repr_is_one_line_of_shapes_not_its_pixels():
+    """repr(img) in a notebook printed every plane's numbers (the dataclass
+    repr): dozens of lines for a 64x64 GBuffers."""
+    g = GaussianImage(
+        np.zeros((48, 64, 4), np.float32), np.zeros((48, 64), np.float32), None, None, {"k": 64}
+    )
+    assert repr(g) == (
+        "GaussianImage(rgba=<48x64x4 float32>, depth=<48x64 float32>, "
+        "hits=None, rounds=None, stats={'k': 64})"
+    )
+    stats = {f"key{i}": list(range(10)) for i in range(20)}
+    iso = IsoImage(
+        np.zeros((2, 3, 4)),
+        np.zeros((2, 3)),
+        np.zeros((2, 3), bool),
+        np.zeros((2, 3)),
+        np.zeros((2, 3), bool),
+        1,
+        stats,
+    )
+    r = repr(iso)
+    assert "\n" not in r and "hit=<2x3 bool>" in r and "stats={20 entries: key0, key1" in r and len(r) < 400
+
+
+def test_the_renderers_repr_says_what_they_hold():
+    """repr(Rasterizer(...)) was '<clvis.raster.render.Rasterizer object at 0x...>'."""
+    pos = np.random.default_rng(0).random((10, 3)).astype(np.float32)
+    r = Rasterizer(pos, attributes={"h": pos[:, 2]})
+    assert repr(r).startswith("Rasterizer(10 points, attributes=['h'], device=")
+    iso = IsoRenderer(datasets.marschner_lobb(8)["volume"], spacing=(1.0, 2.0, 3.0))
+    assert repr(iso).startswith("IsoRenderer(shape=(8, 8, 8), rate=8, spacing=(1.0, 2.0, 3.0), origin=(0.0,")
+    g = GaussianRenderer(Gaussians(pos, np.full((10, 3), 0.1), values=pos[:, 0]))
+    assert repr(g).startswith("GaussianRenderer(10 Gaussians, model='max_response'")

@@ -196,9 +196,20 @@ class Gaussians:
             cat([p.colors for p in parts]) if all(have) else None,
         )
 
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Write a .npz (means, scales, rotations, values, opacities, and colors when present)."""
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write a .npz (means, scales, rotations, values, opacities, and colors
+        when present) and return its path: `path`, with ``.npz`` added when it
+        has not that suffix (as np.savez names it; :meth:`load` finds it by
+        either name). A 3DGS splat name (.ply, .splat, .spz) is refused: this
+        is not that format."""
         from ..io.files import write_replacing
+
+        suffix = Path(os.fspath(path)).suffix.lower()
+        if suffix in (".ply", ".splat", ".spz"):
+            raise ValueError(
+                f"path: Gaussians.save writes a NumPy .npz archive, not a {suffix} splat file; "
+                f"got {os.fspath(path)!r}"
+            )
 
         extra: dict[str, Any] = {} if self.colors is None else {"colors": self.colors}
         arrays = dict(
@@ -214,6 +225,7 @@ class Gaussians:
             target += ".npz"
         # atomic: a failed overwrite keeps the previous file
         write_replacing(target, lambda f: np.savez(f, **arrays))
+        return Path(target)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Gaussians:
@@ -221,6 +233,8 @@ class Gaussians:
         from ..io import load_npz
 
         path = Path(path)
+        if not path.exists() and path.suffix != ".npz" and Path(f"{path}.npz").exists():
+            path = Path(f"{path}.npz")  # what save(path) wrote
         z = load_npz(path)
         missing = [k for k in ("means", "scales") if k not in z]
         if missing:

@@ -78,7 +78,7 @@ MAX_K = 64
 TILE = 8
 
 
-@dataclass
+@dataclass(repr=False)
 class GaussianImage(Picture):
     """A rendered frame: ``rgba`` (H, W, 4) float32 premultiplied, alpha = 1 - T;
     ``depth`` (H, W) float32 view depth where T first fell below 0.5 (+inf
@@ -155,6 +155,12 @@ class GaussianRenderer:
         tuning profile's (the faster one measured). Both give the same image.
     kp : the tile renderer's pending-hit buffer (1..64); None: its profile's.
     """
+
+    def __repr__(self) -> str:
+        return (
+            f"GaussianRenderer({self.n:,} Gaussians, model={self.model!r}, density={self.density}, "
+            f"{self.transfer_function!r}, device={self.queue.device.name.strip()!r})"
+        )
 
     def __init__(
         self,

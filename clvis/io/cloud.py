@@ -48,7 +48,9 @@ def _colors(a: npt.ArrayLike, n: int) -> np.ndarray:
     if not a.dtype.isnative:  # a big-endian uint16 is uint16
         a = a.astype(a.dtype.newbyteorder("="))
     if a.dtype == np.uint16:
-        a = (a >> 8).astype(np.uint8)
+        # as read_points reads a LAS file: many (laspy's simple.las, autzen)
+        # keep 8-bit colours in their 16-bit fields, which >> 8 would make black
+        a = (a >> 8 if a.size and a.max() > 255 else a).astype(np.uint8)
     elif a.dtype.kind == "f":
         if not ((a >= 0) & (a <= 1)).all():  # NaN fails too
             raise ValueError("colors: float colors must lie in [0, 1]")
@@ -57,7 +59,7 @@ def _colors(a: npt.ArrayLike, n: int) -> np.ndarray:
         if a.size and (a.min() < 0 or a.max() > 255):
             raise ValueError(
                 f"colors: {a.dtype} colors must lie in 0..255 "
-                "(uint16 colors are scaled down; pass them as uint16)"
+                "(16-bit colors are scaled down; pass them as uint16)"
             )
         a = a.astype(np.uint8)
     if a.shape[1] == 3:
@@ -93,7 +95,9 @@ class PointCloud:
     positions : (N, 3) real array
         Stored as float32, C-contiguous.
     colors : (N, 3) or (N, 4) array, optional
-        uint8 as is; uint16 scaled down (>> 8); float in [0, 1] scaled by 255 and
+        uint8 as is; uint16 scaled down (>> 8) unless none is above 255 (8-bit
+        colours in 16-bit fields, as LAS files often have them: as is, as
+        read_points reads them); float in [0, 1] scaled by 255 and
         rounded; other integers in 0..255 as is. Stored as (N, 4) uint8 RGBA
         (alpha 255 when not given).
     attributes : dict of str -> (N,) array, optional

@@ -165,7 +165,7 @@ def _real(name: str, v: Any) -> float:
     return float(v)
 
 
-@dataclass
+@dataclass(repr=False)
 class IsoImage(Picture):
     """The image after a pass: ``rgba`` (H, W, 4) float32 (shaded surface,
     alpha 1 at hits), ``depth`` (H, W) view depth (+inf where no hit yet),
@@ -464,6 +464,12 @@ class IsoRenderer:
     ``config`` holds the runtime options captured at construction
     (runtime.capture); a configure() change applies to renderers made after it.
     """
+
+    def __repr__(self) -> str:
+        return (
+            f"IsoRenderer(shape={tuple(self.volume.shape)}, rate={self.volume.rate}, "
+            f"spacing={self.spacing}, origin={self.origin}, device={self.queue.device.name.strip()!r})"
+        )
 
     def __init__(
         self,

@@ -264,7 +264,7 @@ def rgbda(
     return result(out, host)
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(repr=False)
 class FilteredImage(Picture):
     """What :func:`depth_filter` keeps. keep: bool [H, W] (a point is there and
     kept); depth: float32, +inf where removed or empty; rgba: uint8 [H, W, 4]

@@ -78,7 +78,7 @@ VIS_DTYPE = np.dtype([("id", "<u4"), ("dkey", "<u4")])
 PROFILES = {"cpu": {"L": 1, "VEC": 8, "item_wg": 64}, "gpu": {"L": 256, "VEC": 1, "item_wg": 256}}
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(repr=False)
 class GBuffers(Picture):
     """The G-buffers of one view, [H, W] planes, row 0 on top.
 
@@ -144,6 +144,14 @@ class Rasterizer:
     still refer to the caller's order, and ties still go to the lowest of
     them, so the result does not depend on the order.
     """
+
+    def __repr__(self) -> str:
+        has = [w for w, h in (("colors", self.has_colors), ("velocity", self.has_velocity)) if h]
+        attrs = f", attributes={list(self.attribute_names)}" if self.attribute_names else ""
+        return (
+            f"Rasterizer({self.n:,} points{''.join(', ' + w for w in has)}{attrs}, "
+            f"device={self.queue.device.name.strip()!r})"
+        )
 
     def __init__(
         self,
@@ -394,6 +402,8 @@ class Rasterizer:
     def _tf(self, color_by, colormap, value_range):
         """(color_mode, tf_src, stride, offset, lut, lut_n, vmin, scale)."""
         if color_by is None:
+            if colormap != "viridis":  # unused, but a misspelt name says so (no upload)
+                _colormap.lut(colormap, 1)
             return (1 if self.has_colors else 0), None, 0, 0, None, 0, np.float32(0), np.float32(0)
         if color_by not in self._host_attr:
             raise ValueError(

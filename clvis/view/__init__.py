@@ -22,6 +22,8 @@ import types
 import webbrowser
 from typing import Any
 
+import numpy as np
+
 from .orbit import Orbit
 from .scenes import DaskPointScene, DaskVolumeScene, Frame, PointScene, Scene, VolumeScene, scene_for
 from .schedule import LatestWins, Outbox
@@ -47,7 +49,8 @@ __all__ = [
 
 
 class Viewer:
-    """A running viewer: ``url``, ``server``; shows inline in a notebook."""
+    """A running viewer: ``url``, ``server``; shows inline in a notebook.
+    ``with clvis.view(obj) as v:`` closes it at the block's end."""
 
     def __init__(self, server: ViewServer, width: int = 960, height: int = 540) -> None:
         self.server = server
@@ -85,6 +88,12 @@ class Viewer:
     def close(self) -> None:
         self.server.close()
 
+    def __enter__(self) -> Viewer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
 
 def view(
     obj: Any,
@@ -101,12 +110,17 @@ def view(
     """Serve an interactive view of `obj` and return its :class:`Viewer`.
 
     obj: a clvis.PointCloud, (N, 3) positions, a 3-D volume [z, y, x] (with
-    ``spacing``, ``origin``, ``isovalue``, ``rate``) or a Scene. host: the
+    ``spacing``, ``origin``, ``isovalue``, ``rate``), a clvis.Volume
+    (read_volume's: its spacing and origin) or a Scene. host: the
     interface to listen on (127.0.0.1; any other needs the printed token),
     port 0: a free one. width x height: the notebook frame's size.
     max_pages: the pages (tabs) served at once, each with its own camera and
     size (the settings are shared).
     """
+    for name, side in (("width", width), ("height", height)):
+        if isinstance(side, bool) or not isinstance(side, (int, np.integer)) or side < 1:
+            raise ValueError(f"{name}: the notebook frame's size, expected a positive integer, got {side!r}")
+    width, height = int(width), int(height)
     scene = scene_for(obj, **scene_options)
     server = ViewServer(
         scene,

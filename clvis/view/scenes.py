@@ -25,6 +25,7 @@ whole frames.
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -535,6 +536,10 @@ class VolumeScene(Scene):
         vmin, vmax = float(finite.min()), float(finite.max())
         if isovalue is None:
             isovalue = otsu_level(finite)
+        elif isinstance(isovalue, bool) or not isinstance(isovalue, (int, float, np.integer, np.floating)):
+            raise TypeError(f"isovalue: expected a real number, got {type(isovalue).__name__}")
+        elif not math.isfinite(isovalue):
+            raise ValueError(f"isovalue: expected a finite number, got {isovalue!r}")
         self.volume, self.spacing, self.origin = data, tuple(spacing), tuple(origin)
         self.iso = IsoRenderer(data, rate, spacing, origin)
         self.device = self.iso.queue.device.name.strip()
@@ -820,13 +825,26 @@ class DaskVolumeScene(Scene):
 def scene_for(obj: Any, **kwargs: Any) -> Scene:
     """A scene for `obj`: a Scene as is, a clvis.PointCloud or (N, 3) positions
     (points), a 3-D array [z, y, x] (a volume; kwargs: spacing, origin,
-    isovalue, rate)."""
+    isovalue, rate) or a clvis.Volume (read_volume's, with its spacing and
+    origin unless kwargs give them). A path is refused, naming the readers."""
     from .. import PointCloud
+    from ..io.volumes import Volume
 
     if isinstance(obj, Scene):
         return obj
     if isinstance(obj, PointCloud):
         return PointScene(obj, **kwargs)
+    if isinstance(obj, Volume):  # read_volume's: its spacing and origin unless given
+        kwargs.setdefault("spacing", obj.spacing)
+        kwargs.setdefault("origin", obj.origin)
+        if obj.path is not None:
+            kwargs.setdefault("description", str(obj.path))
+        return VolumeScene(obj.data, **kwargs)
+    if isinstance(obj, (str, bytes, os.PathLike)):
+        raise TypeError(
+            f"clvis.view: expected data, got a path ({obj!r}): clvis.read_points or "
+            "clvis.read_volume reads it"
+        )
     a = np.asarray(obj)
     if a.ndim == 2 and a.shape[1] == 3:
         return PointScene(PointCloud(a), **kwargs)

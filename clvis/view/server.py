@@ -197,6 +197,12 @@ class ViewServer:
             raise ValueError(f"interactive_scale: expected a fraction in (0, 1], got {interactive_scale!r}")
         if isinstance(max_pages, bool) or not isinstance(max_pages, int) or max_pages < 1:
             raise ValueError(f"max_pages: expected a positive integer, got {max_pages!r}")
+        # the socket layer would take 70000 as 70000 % 65536 = 4464, and "8080" as is
+        if isinstance(port, bool) or not isinstance(port, (int, np.integer)):
+            raise TypeError(f"port: expected an int in [0, 65535], got {type(port).__name__}")
+        if not 0 <= port <= 65535:
+            raise ValueError(f"port: expected an int in [0, 65535] (0: a free one), got {port}")
+        port = int(port)
         self.scene, self.host, self.token = scene, host, access_token(host, token)
         self.interactive_scale = float(interactive_scale)
         self.max_pages = max_pages

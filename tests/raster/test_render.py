@@ -433,6 +433,17 @@ def test_depth_filter(queue):
     assert f2.rgba is None
 
 
+def test_a_misspelt_colormap_is_refused_without_color_by(queue):
+    """colormap="nope" with no color_by (the cloud's colours or white) drew
+    without a word: a typo went unnoticed until color_by was added."""
+    pos, cam = _scene(10), _cam()
+    with pytest.raises(ValueError, match="unknown colormap 'viridi'"):
+        clvis.rasterize(pos, cam, W, H, colormap="viridi", queue=queue)
+    with pytest.raises(TypeError, match="colormap name"):
+        clvis.Rasterizer(pos, queue=queue).render(cam, W, H, colormap=None)  # type: ignore[arg-type]
+    assert clvis.rasterize(pos, cam, W, H, colormap="magma", queue=queue).rgba.shape == (H, W, 4)
+
+
 def test_bad_input(queue):
     cam = _cam()
     pos = _scene(10)

@@ -502,3 +502,50 @@ def test_the_pages_sizes_keep_their_blocks_and_a_closed_pages_go_back():
     for w, h in ((3840, 2160), (1920, 1080), (3840, 2000), (1920, 1000)):
         s._sized(s.iso.queue, w, h)
     assert sum(w * h for w, h in s._sizes) <= KEEP_PIXELS and s._sizes[-1] == (1920, 1000)
+
+
+def test_clvis_view_takes_read_volumes_volume_with_its_spacing(tmp_path):
+    """clvis.view(clvis.read_volume(path)) said 'expected ... a 3-D volume,
+    got Volume of shape ()', though IsoRenderer(vol) takes it."""
+    from clvis.io.volumes import Volume
+
+    data = clvis.datasets.marschner_lobb(16)["volume"]
+    vol = Volume(data, spacing=(2.0, 1.0, 0.5), origin=(1.0, 2.0, 3.0), path="ml.nii")
+    s = scene_for(vol, isovalue=0.5)
+    assert s.spacing == (2.0, 1.0, 0.5) and s.origin == (1.0, 2.0, 3.0)
+    np.testing.assert_allclose(s.hi, np.array((1.0, 2.0, 3.0)) + 15 * np.array((0.5, 1.0, 2.0)))
+    assert "ml.nii" in s.description
+    assert scene_for(vol, spacing=(1.0, 1.0, 1.0)).spacing == (1.0, 1.0, 1.0)  # a given one wins
+    with pytest.raises(TypeError, match="read_volume reads it"):
+        scene_for(str(tmp_path / "head.nii"))
+
+
+@pytest.mark.parametrize(
+    "bad, err", [(float("nan"), ValueError), (float("inf"), ValueError), ("0.5", TypeError)]
+)
+def test_a_volumes_isovalue_is_checked(bad, err):
+    with pytest.raises(err, match="isovalue"):
+        VolumeScene(clvis.datasets.marschner_lobb(16)["volume"], isovalue=bad)
+
+
+@pytest.mark.parametrize("port, err", [(70000, ValueError), (-1, ValueError), ("8080", TypeError)])
+def test_a_port_outside_the_range_is_refused_not_wrapped(points, port, err):
+    """port=70000 served on 4464 (70000 % 65536)."""
+    with pytest.raises(err, match="port"):
+        clvis.view(points, port=port)
+
+
+def test_a_viewer_is_a_context_manager(points):
+    with clvis.view(points) as v:
+        assert v.url.startswith("http://127.0.0.1:")
+    v.server.thread.join(10)
+    assert not v.server.thread.is_alive()  # closed at the block's end
+
+
+@pytest.mark.parametrize("size", [{"width": 0}, {"height": -5}, {"width": 640.5}, {"height": "360"}])
+def test_the_notebook_frames_size_is_checked(points, size):
+    """width=0 gave an invisible iframe without a word."""
+    with clvis.view(points, width=np.int64(320)) as v:  # numpy integers do
+        assert v.width == 320
+    with pytest.raises(ValueError, match="notebook frame"):
+        clvis.view(points, **size)

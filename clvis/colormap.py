@@ -250,6 +250,29 @@ ASPRS_CLASSES: dict[int, tuple[str, tuple[int, int, int]]] = {
 }
 
 
+def named_colour(name: str, text: str) -> tuple[float, float, float]:
+    """The colour `text` names, (r, g, b) in 0..1: a CSS/X11 name ("white",
+    "steelblue"), matplotlib's "tab:blue" or "C0", or "#rrggbb" / "#rgb", as
+    matplotlib reads them (a user of PyVista or matplotlib writes
+    color="red"). ValueError naming the argument `name` otherwise."""
+    from matplotlib.colors import to_rgb
+
+    try:
+        r, g, b = to_rgb(text.strip())
+    except ValueError:
+        close = difflib.get_close_matches(text.strip().lower(), _colour_names(), n=3)
+        hint = f"; did you mean {', '.join(close)}?" if close else ""
+        raise ValueError(f"{name}: {text!r} is not a colour name or #rrggbb{hint}") from None
+    return float(r), float(g), float(b)
+
+
+@functools.cache
+def _colour_names() -> list[str]:
+    from matplotlib.colors import CSS4_COLORS
+
+    return sorted(CSS4_COLORS)
+
+
 def class_palette() -> np.ndarray:
     """``(256, 4)`` uint8 RGBA: the ASPRS class colours for codes 0..18, and for
     the user-definable codes 19..255 hues a golden angle apart (distinct

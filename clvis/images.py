@@ -488,9 +488,13 @@ def _rgba(name: str, x) -> np.ndarray:
 
 
 def _colour(name: str, c) -> tuple[int, int, int]:
-    """Three integers 0..255. Floats are refused, whole ones too: (1.0, 1.0,
+    """Three integers 0..255, or a colour's name ("white", "#1e1e1e":
+    colormap.named_colour). Floats are refused, whole ones too: (1.0, 1.0,
     1.0), white in the 0..1 convention of matplotlib and Open3D, would
     otherwise draw near-black."""
+    if isinstance(c, str):
+        r, g, b = cm.named_colour(name, c)
+        return round(255 * r), round(255 * g), round(255 * b)
     try:
         vals = list(c)
         ok = len(vals) == 3 and all(

@@ -82,6 +82,32 @@ def test_a_float_background_is_refused_not_drawn_near_black(bg):
     assert tuple(g.to_uint8(np.array([255, 255, 255]))[0, 0])[3] == 255  # integer arrays still do
 
 
+def test_a_background_or_surface_colour_may_be_named():
+    """background="white" and color="red", as PyVista and matplotlib take
+    them: the background was refused as not three integers, and
+    color_surface(img, "red") gave numpy's "could not convert string to
+    float" without naming the argument."""
+    from clvis.iso import color_surface
+
+    g = GaussianImage(np.array([[[0.25, 0.0, 0.5, 0.5]]], np.float32), np.zeros((1, 1)), None, None)
+    assert tuple(g.to_uint8("white")[0, 0]) == tuple(g.to_uint8((255, 255, 255))[0, 0])
+    assert tuple(g.to_uint8("#1e1e1e")[0, 0]) == tuple(g.to_uint8((30, 30, 30))[0, 0])
+    with pytest.raises(
+        ValueError, match=r"background: 'whit' is not a colour name or #rrggbb; did you mean white"
+    ):
+        g.to_uint8("whit")
+    rgba = np.zeros((1, 2, 4), np.float32)
+    rgba[0, 0] = (0.0, 1.0, 0.0, 1.0)  # a hit facing the eye
+    iso = IsoImage(
+        rgba, np.zeros((1, 2)), np.array([[True, False]]), np.zeros((1, 2)), np.zeros((1, 2), bool), 1, {}
+    )
+    np.testing.assert_array_equal(color_surface(iso, "red"), color_surface(iso, (1.0, 0.0, 0.0)))
+    with pytest.raises(ValueError, match="color: 'redd' is not a colour name"):
+        color_surface(iso, "redd")
+    with pytest.raises(ValueError, match=r"color: expected \(r, g, b\) in 0..1 or a colour name"):
+        color_surface(iso, [1, "a", 2])
+
+
 def test_an_images_repr_is_one_line_of_shapes_not_its_pixels():
     """repr(img) in a notebook printed every plane's numbers (the dataclass
     repr): dozens of lines for a 64x64 GBuffers."""

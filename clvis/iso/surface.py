@@ -148,10 +148,16 @@ def sample_hits(
 
 
 def _rgb(name: str, c: Any) -> np.ndarray:
-    """An rgb colour: three numbers in 0..1."""
-    a = np.asarray(c, np.float64)
+    """An rgb colour: three numbers in 0..1, or a colour's name ("red",
+    "#e04020": colormap.named_colour)."""
+    if isinstance(c, str):
+        return np.array(colormap.named_colour(name, c), np.float64)
+    try:
+        a = np.asarray(c, np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected (r, g, b) in 0..1 or a colour name, got {c!r}") from None
     if a.shape != (3,) or not np.isfinite(a).all() or (a < 0).any() or (a > 1).any():
-        raise ValueError(f"{name}: expected (r, g, b) in 0..1, got {c!r}")
+        raise ValueError(f"{name}: expected (r, g, b) in 0..1 or a colour name, got {c!r}")
     return a
 
 

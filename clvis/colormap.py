@@ -258,6 +258,8 @@ def named_colour(name: str, text: str) -> tuple[float, float, float]:
     from matplotlib.colors import to_rgb
 
     try:
+        if text.strip().startswith("#") and len(text.strip()) not in (4, 7):
+            raise ValueError("not #rgb or #rrggbb")  # matplotlib drops an #rrggbbaa's alpha
         r, g, b = to_rgb(text.strip())
     except ValueError:
         close = difflib.get_close_matches(text.strip().lower(), _colour_names(), n=3)

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..camera import fit_camera
+from ..colormap import named_colour
 from ..errors import ClvisError
 from ._common import (
     POINTS_FIT,
@@ -148,26 +149,22 @@ _COLOUR_NAMES = {
 
 def _colour(text: str) -> tuple[int, int, int]:
     """A colour name (clvis's own above, else a CSS/X11 name as matplotlib
-    and PyVista take them: red, tomato, ...), #RRGGBB, #RGB or R,G,B (0..255
-    each)."""
-    from matplotlib.colors import CSS4_COLORS
-
+    and PyVista take them: red, tomato, ...; colormap.named_colour), #RRGGBB,
+    #RGB or R,G,B (0..255 each)."""
     t = text.strip().lower()
     if t in _COLOUR_NAMES:
         return _COLOUR_NAMES[t]
-    if t in CSS4_COLORS:
-        t = str(CSS4_COLORS[t]).lower()  # "#rrggbb"
-    if re.fullmatch(r"#[0-9a-f]{3}", t):
-        t = "#" + "".join(c * 2 for c in t[1:])
-    if re.fullmatch(r"#[0-9a-f]{6}", t):
-        return int(t[1:3], 16), int(t[3:5], 16), int(t[5:7], 16)
     m = re.fullmatch(r"(\d{1,3}),(\d{1,3}),(\d{1,3})", t.replace(" ", ""))
     if m and all(int(v) <= 255 for v in m.groups()):
         return int(m[1]), int(m[2]), int(m[3])
-    raise argparse.ArgumentTypeError(
-        "expected a colour: a name (black, white, darkgrey: the UI's grey, red, skyblue and the other "
-        f"CSS names), #RRGGBB, #RGB or R,G,B (0..255), got {text!r}"
-    )
+    try:
+        r, g, b = named_colour("colour", t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            "expected a colour: a name (black, white, darkgrey: the UI's grey, red, skyblue and the other "
+            f"CSS names), #RRGGBB, #RGB or R,G,B (0..255), got {text!r}"
+        ) from None
+    return round(255 * r), round(255 * g), round(255 * b)
 
 
 def _edl_strength(text: str) -> float:

@@ -2,10 +2,14 @@
 (``clvis.view.scenes.view_frames``, as the server renders them) at N sizes
 one after another, as a window dragged wider and taller, the process's RSS
 every five sizes. Each new size gives the pool's held blocks back and trims
-the C heap after its frames; what is left growing is what the driver and
-the interpreter keep.
+the C heap after its frames.
 
-    python bench/view_memory.py [--sizes 40] [--volume 64]
+    python bench/view_memory.py [--sizes 40] [--volume 64] [--pattern grow|wander]
+
+``grow`` (the default) widens the window by 7x5 pixels a size, so the
+frames themselves grow (900x600 .. 1173x795 over 40 sizes): RSS follows the
+largest frame. ``wander`` gives as many sizes, each new, drawn at random
+(seeded) from grow's range at 40 sizes: a leak would grow here too.
 
 bench/results/README.md has the output. A measuring script, not a test.
 """
@@ -14,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import random
 import time
 
 from clvis import datasets
@@ -30,13 +35,24 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", type=int, default=40)
     ap.add_argument("--volume", type=int, default=64, help="the Marschner-Lobb volume's side")
+    ap.add_argument("--pattern", choices=("grow", "wander"), default="grow")
     args = ap.parse_args(argv)
     d = datasets.marschner_lobb(args.volume)
     scene = VolumeScene(d["volume"], d["spacing"], d["origin"], 0.5)
     orbit = Orbit(scene.lo, scene.hi)
     t0, first = time.perf_counter(), None
-    for i in range(args.sizes):
-        w, h = 900 + 7 * i, 600 + 5 * i
+    if args.pattern == "grow":
+        sizes = [(900 + 7 * i, 600 + 5 * i) for i in range(args.sizes)]
+    else:  # each size new, from grow's range, in a random order
+        pick = random.Random(0)
+        seen: set[tuple[int, int]] = set()
+        sizes = []
+        while len(sizes) < args.sizes:
+            s = (900 + pick.randrange(274), 600 + pick.randrange(196))
+            if s not in seen:
+                seen.add(s)
+                sizes.append(s)
+    for i, (w, h) in enumerate(sizes):
         for _ in view_frames(scene, orbit.camera(w / h), w, h, scene.settings, lambda: False):
             pass
         if i % 5 == 4:

@@ -76,7 +76,8 @@ def trim_heap() -> bool:
     host memory: freed, glibc keeps them in the heap (its mmap threshold
     grows with every large block freed, so later buffers of a few MB come
     from the heap, not from mmap), and a viewer whose window went through 35
-    sizes grew by 3.6 MB a size (1.4 MB with the trim; bench/results/README.md).
+    sizes grew by 3.6 MB a size; with the trim, new sizes within one range
+    keep its memory level (bench/results/README.md).
     It changes no setting: the heap is as after many frees."""
     trim = _malloc_trim()
     if trim is None:

@@ -256,6 +256,7 @@ class _Rendered:
     warm_s: float  # the same render again
     post_s: float = 0.0  # the network's frame, render + network (narvis-scan: + its depth filter)
     post_removed: int | None = None  # the pixels its depth filter emptied (narvis-scan)
+    post_scale: int = 1  # the network's frame rendered this many times smaller, its picture resized up
 
 
 def _safe_name(name: str) -> str:
@@ -314,9 +315,14 @@ def _render_panels(
     point_size=1,
     post=None,
     look: _Look | None = None,
+    post_scale: int | None = None,
 ) -> _Rendered:
-    """Render one view; the G-buffers and the images a person looks at."""
+    """Render one view; the G-buffers and the images a person looks at.
+    post_scale: the network's frame rendered that many times smaller and its
+    picture resized up to the view (None: its spec's render_scale for the
+    view's splat radius, 1 for a network without one)."""
     from .. import images
+    from ..post import MIN_SCALED_SIDE, resized
     from ..raster import EMPTY, depth_filter, edl, filter_gbuffers
 
     look = look or _Look()
@@ -392,43 +398,73 @@ def _render_panels(
         panels.append(_keyed(_Panel("depth-filtered", f"depth filter ({levels} levels)", kept), panels))
     post_s = 0.0
     removed: list[int | None] = [None]
+    scale = 1
     if post is not None:
+        median = post.median_radius_px(g)
+        # the network's frame keeps MIN_SCALED_SIDE pixels a side (and so the view's aspect within 1 %)
+        if post_scale is None:
+            scale = post.render_scale(g)
+        else:
+            scale = min(post_scale, min(width, height) // MIN_SCALED_SIDE)
+        scale = max(scale, 1)
+        pw, ph = (width, height) if scale == 1 else (round(width / scale), round(height / scale))
 
         def frame() -> np.ndarray:
             """The documented pipeline: G-buffers with only the planes the
             network reads, rendered on the device (the panels above are the
             host render's); read back never, but for narvis-scan, whose
-            spec's depth filter runs first and brings its planes back once."""
-            gd = raster.render(camera, width, height, **kw, planes=post.attribute_planes, host=False)
+            spec's depth filter runs first and brings its planes back once.
+            At a scale, the picture is resized up to the view (bilinear)."""
+            gd = raster.render(camera, pw, ph, **kw, planes=post.attribute_planes, host=False)
             if post.name == "lidar":  # device planes in, device planes out
-                return post(depth_filter(gd, levels))
-            if post.spec.depth_filter is not None:
+                picture = post(depth_filter(gd, levels))
+            elif post.spec.depth_filter is not None:
                 gf = filter_gbuffers(gd, *post.spec.depth_filter)
                 removed[0] = gf.stats["depth_filter_removed"]
-                return post(gf)
-            return post(gd)
+                picture = post(gf)
+            else:
+                picture = post(gd)
+            return picture if scale == 1 else resized(picture, width, height)
 
         title = post.spec.title
-        with progress.stage(f"{post.name} network"):
+        with progress.stage(f"{post.name} network" + (f" at {pw}x{ph}" if scale > 1 else "")):
             frame()  # the first call sizes its buffers
             t0 = time.perf_counter()
             panels.append(_Panel(f"post-{post.name}", title, frame()))
             post_s = time.perf_counter() - t0
-        _say_unlike_training(post, g)
-    return _Rendered(g, panels, first, warm, post_s, removed[0])
+        _say_unlike_training(post, median, scale, post_scale is not None)
+    return _Rendered(g, panels, first, warm, post_s, removed[0], scale)
 
 
-def _say_unlike_training(post, g: GBuffers) -> None:
-    """A warning on stderr when the view's splat radius lies far outside the
-    post network's training frames (its spec's unlike_training)."""
-    if post.spec.radius_px_trained is None or g.radius_px is None:
+def _post_scale(text: str) -> int | None:
+    """--post-scale: a whole number 1..64, or auto (None)."""
+    t = text.strip().lower()
+    if t == "auto":
+        return None
+    try:
+        n = int(t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number 1..64 or auto, got {text!r}") from None
+    if not 1 <= n <= 64:
+        raise argparse.ArgumentTypeError(f"expected a whole number 1..64 or auto, got {text!r}")
+    return n
+
+
+def _say_unlike_training(post, median: float, scale: int, asked: bool) -> None:
+    """On stderr: the scale the network's frame was rendered at, and why
+    (unless --post-scale `asked` for it); a warning when the view's splat
+    radius (at that scale) still lies far outside the post network's
+    training frames (its spec's unlike_training)."""
+    if not np.isfinite(median):
         return
-    from .._arrays import on_host
-
-    covered = on_host(g.covered)
-    if not covered.any():
-        return
-    why = post.spec.unlike_training(float(np.median(on_host(g.radius_px)[covered])))
+    if scale > 1 and not asked:
+        print(
+            f"clvis render: --post {post.name}: its frame rendered {scale}x smaller and resized up: the "
+            f"points' median splat radius, {median:.2f} pixels, is over the "
+            f"{post.spec.radius_px_trained[1]:g} of its training frames (--post-scale 1: full size)",
+            file=sys.stderr,
+        )
+    why = post.spec.unlike_training(median / scale)
     if why is not None:
         print(f"clvis render: --post {post.name}: warning: {why}", file=sys.stderr)
 
@@ -1027,6 +1063,8 @@ def _render(args, progress) -> int:
         check_finite(f"{source}: velocity", np.where(drawn[:, None], cloud.velocity, 0))
     scan_radius = None
     flow_sigma = None
+    if args.post_scale is not None and args.post is None:
+        raise CliError("--post-scale scales a post network's frame: add --post")
     if args.post_guard is not None and args.post is None:
         raise CliError("--post-guard guards a post network: add --post lidar")
     if args.post is not None:
@@ -1117,6 +1155,7 @@ def _render(args, progress) -> int:
         point_size,
         net,
         look,
+        args.post_scale,
     )
     compared = []
     if args.compare:
@@ -1194,8 +1233,12 @@ def _render(args, progress) -> int:
                 f"the G-buffers through its depth filter ({lv} levels, strength {st:g}; "
                 f"{r.post_removed:,} far-side points removed) on the host"
             )
+        scaled = ""
+        if r.post_scale > 1:
+            pw, ph = round(width / r.post_scale), round(height / r.post_scale)
+            scaled = f"at {pw}x{ph} ({r.post_scale}x smaller, resized up), "
         print(
-            f"  post      {net!r}: {r.post_s * 1e3:.1f} ms a frame from render to picture, "
+            f"  post      {net!r}: {r.post_s * 1e3:.1f} ms a frame from render to picture, {scaled}"
             f"{where} (pack {ns['pack'] * 1e3:.1f} ms, inference "
             f"{ns['inference'] * 1e3:.1f} ms, unpack {ns['unpack'] * 1e3:.1f} ms)"
         )
@@ -1407,6 +1450,16 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="with --post lidar: check the network against push-pull on this frame (some scan points "
         "withheld) and keep, tile by tile, the better (narvis-scan: against the classical splat; "
         "clvis.post.guard; default: the network's own, PostNetwork.guard)",
+    )
+    r.add_argument(
+        "--post-scale",
+        type=_post_scale,
+        default=None,
+        metavar="N|auto",
+        help="with --post: render the network's frame N times smaller and resize its picture up to the "
+        "view; auto (the default): narvis-scan's frame is made smaller where the points' median splat "
+        "radius is over its training frames' (a sparse cloud: the network draws wide Gaussians as "
+        "squares), said on stderr; 1 everywhere else",
     )
     r.add_argument(
         "--compare",

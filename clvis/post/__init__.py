@@ -7,7 +7,7 @@ Inference needs onnxruntime only; torch is imported by ``clvis train`` and
 the tests that compare the exported graphs with their PyTorch modules.
 """
 
-from .infer import MODELS, PRECISIONS, PostNetwork, load
+from .infer import MIN_SCALED_SIDE, MODELS, PRECISIONS, PostNetwork, load, resized
 from .inputs import IsoPlanes
 from .names import NAMES
 from .pack import pack_gbuffers, pack_iso, pack_rgbda, padded_shape, unpack_rgba8
@@ -15,6 +15,7 @@ from .pushpull import pushpull
 
 __all__ = [
     "IsoPlanes",
+    "MIN_SCALED_SIDE",
     "MODELS",
     "NAMES",
     "PRECISIONS",
@@ -25,5 +26,6 @@ __all__ = [
     "pack_rgbda",
     "padded_shape",
     "pushpull",
+    "resized",
     "unpack_rgba8",
 ]

@@ -457,6 +457,33 @@ class PostNetwork:
         self.stats["unpack"] = time.perf_counter() - t0
         return picture
 
+    def render_scale(self, gbuffers: GBuffersLike) -> int:
+        """The factor to render this view's G-buffers smaller by for this
+        network (its picture then resized up to the view with
+        :func:`resized`): the spec's ``render_scale`` of the view's median
+        splat radius over its covered pixels (``gbuffers``: a render of the
+        view at full size, host or device, with the radius plane). 1 for a
+        network without a training radius range (all but narvis-scan), a
+        view without the radius plane or without a covered pixel; at most
+        what keeps MIN_SCALED_SIDE pixels a side (and so the view's aspect
+        within 1 %)."""
+        h, w = gbuffers.index.shape[:2]
+        scale = self.spec.render_scale(self.median_radius_px(gbuffers))
+        return max(1, min(scale, min(w, h) // MIN_SCALED_SIDE))
+
+    def median_radius_px(self, gbuffers: GBuffersLike) -> float:
+        """The view's median splat radius in pixels over its covered pixels
+        (``gbuffers``: host or device, with the radius plane); NaN for a
+        network without a training radius range, a view without the radius
+        plane or without a covered pixel."""
+        radius = getattr(gbuffers, "radius_px", None)  # GBuffers' (clvis.raster), when resolved
+        if self.spec.radius_px_trained is None or radius is None:
+            return float("nan")
+        covered = to_host(gbuffers.index) != 0xFFFFFFFF
+        if not covered.any():
+            return float("nan")
+        return float(np.median(to_host(radius)[covered]))
+
     def _host(self, image: PostInput) -> np.ndarray:
         """The network's output for `image` as (H, W, C) float32 on the host."""
         output, h, w = self._run(image)
@@ -591,3 +618,26 @@ def load(
         raise ValueError(f"precision: expected one of {PRECISIONS}, got {precision!r}")
     d = MODELS if directory is None else Path(directory)
     return PostNetwork(name, precision, d, providers, threads, queue)
+
+
+#: a network's frame rendered smaller (PostNetwork.render_scale) keeps this
+#: many pixels a side at least
+MIN_SCALED_SIDE = 64
+
+
+def resized(picture: np.ndarray, width: int, height: int) -> np.ndarray:
+    """An (h, w, C) uint8 picture (a network's, rendered smaller:
+    :meth:`PostNetwork.render_scale`) resized to (height, width, C):
+    Pillow's bilinear filter, each channel on its own (so an alpha channel
+    weighs nothing in; Pillow's RGBA resize would premultiply it)."""
+    from PIL import Image
+
+    a = np.asarray(picture)
+    if a.ndim != 3 or a.dtype != np.uint8 or 0 in a.shape:
+        raise ValueError(f"picture: expected an (h, w, C) uint8 array, got {a.dtype} {a.shape}")
+    width, height = limits.check_image_size(width, height, limits.POST_PACK)
+    out = np.empty((height, width, a.shape[2]), np.uint8)
+    for c in range(a.shape[2]):
+        band = Image.fromarray(np.ascontiguousarray(a[..., c]), mode="L")
+        out[..., c] = np.asarray(band.resize((width, height), Image.Resampling.BILINEAR))
+    return out

@@ -14,6 +14,7 @@ Protocols of clvis.post.inputs): ``shape`` checks any object at run time,
 
 from __future__ import annotations
 
+import math
 from typing import Any, Generic, TypeVar
 
 import numpy as np
@@ -93,6 +94,21 @@ class NetworkSpec(Generic[InputT]):
             f"{side} on screen than any it learned from); its picture may be worse than the "
             f"classical splat: --compare scores both"
         )
+
+    def render_scale(self, median_radius_px: float) -> int:
+        """The factor to render a frame's G-buffers smaller by (the
+        network's picture then resized up to the frame) so that its covered
+        pixels' median splat radius, `median_radius_px` at full size, comes
+        within the training frames' range: ceil(median / hi) where the median
+        is over hi (radius_px_trained), else 1. A cloud sparser on screen
+        than any training frame gives Gaussians wider than the network's
+        kernels reach, which it draws as squares; a smaller frame brings them
+        back into reach (bench/results/README.md, narvis-scan on sparse
+        clouds). 1 for a network without a measured range."""
+        if self.radius_px_trained is None or not np.isfinite(median_radius_px):
+            return 1
+        hi = self.radius_px_trained[1]
+        return max(1, math.ceil(median_radius_px / hi)) if median_radius_px > hi else 1
 
     def pack(
         self, image: InputT, planes: tuple[str, ...], stride: int, out: cla.Array, queue: cl.CommandQueue

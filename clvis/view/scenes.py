@@ -395,7 +395,23 @@ class PointScene(Scene):
         self.raster.queue.finish()  # the render's own time in "render", not in "post"
         t1 = time.perf_counter()
         net = self._net(mode)
+        scale = net.render_scale(src) if mode == "narvis-scan" else 1
+        if scale > 1:  # a cloud sparse on screen: its frame smaller (PostNetwork.render_scale)
+            src = self._render(
+                camera,
+                round(width / scale),
+                round(height / scale),
+                settings,
+                1,
+                screen_velocity=False,
+                host=False,
+            )
+            info["post scale"] = scale
         rgba = net(_prefiltered(net, src))
+        if scale > 1:
+            from ..post import resized
+
+            rgba = resized(rgba, width, height)
         t2 = time.perf_counter()
         info["inference ms"] = round(1e3 * net.stats.get("inference", 0.0), 1)
         times = {"render": t1 - t0, "post": t2 - t1}
@@ -463,8 +479,18 @@ class PointScene(Scene):
         t1 = time.perf_counter()
         g = self._render(camera, w, h, s, 1, screen_velocity=False, host=False)
         self.raster.queue.finish()
+        scale = net.render_scale(g)
+        if scale > 1:  # a cloud sparse on screen: its frame smaller (PostNetwork.render_scale)
+            g = self._render(
+                camera, round(w / scale), round(h / scale), s, 1, screen_velocity=False, host=False
+            )
+            self.raster.queue.finish()
         ta = time.perf_counter()
         fast = net(_prefiltered(net, g))[..., :3]
+        if scale > 1:
+            from ..post import resized
+
+            fast = resized(fast, w, h)
         t2 = time.perf_counter()
         slow = gr.render(camera, w, h).to_uint8((0, 0, 0))[..., :3]
         t3 = time.perf_counter()
@@ -473,6 +499,8 @@ class PointScene(Scene):
             times["build"] = build
         info = {"psnr dB": round(psnr(fast, slow), 2), "fast ms": round(1e3 * (t2 - t1), 1)}
         info["slow ms"] = round(1e3 * (t3 - t2), 1)
+        if scale > 1:
+            info["post scale"] = scale
         return Frame(split(fast, slow), info=info, times=times)
 
     def _colours(self, s) -> np.ndarray:

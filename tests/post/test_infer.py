@@ -447,6 +447,44 @@ def test_missing_and_corrupt_model_files(tmp_path):
         post.load("infill", directory=tmp_path)
 
 
+def test_narvis_scan_renders_a_sparse_view_smaller():
+    """render_scale: 1 within the training radius range, ceil(median / hi)
+    over it, capped so the frame keeps MIN_SCALED_SIDE pixels a side; 1 for
+    a network without a range and for a view without a covered pixel.
+    resized: bilinear up, a flat picture stays flat, bad input refused."""
+    sp = post.specs.spec("narvis-scan")
+    hi = sp.radius_px_trained[1]
+    assert sp.render_scale(hi) == 1 and sp.render_scale(0.1) == 1 and sp.render_scale(float("nan")) == 1
+    assert sp.render_scale(hi * 1.01) == 2 and sp.render_scale(8.08) == 3 and sp.render_scale(77.0) == 24
+    assert post.specs.spec("lidar").render_scale(77.0) == 1
+
+    class View:  # GBuffers-like: index, radius_px
+        def __init__(self, w, h, radius):
+            self.index = np.full((h, w), 0xFFFFFFFF, np.uint32)
+            self.index[::7, ::5] = 1
+            self.radius_px = np.full((h, w), radius, np.float32)
+
+    net = post.load("narvis-scan")
+    assert net.median_radius_px(View(480, 320, 8.0)) == 8.0
+    assert net.render_scale(View(480, 320, 8.0)) == 3
+    assert net.render_scale(View(1920, 1080, 77.0)) == 1080 // post.MIN_SCALED_SIDE == 16
+    assert net.render_scale(View(100, 60, 77.0)) == 1  # under 64 pixels a side already
+    empty = View(480, 320, 8.0)
+    empty.index[:] = 0xFFFFFFFF
+    assert net.render_scale(empty) == 1 and np.isnan(net.median_radius_px(empty))
+    assert post.load("lidar").render_scale(View(480, 320, 8.0)) == 1
+    flat = np.full((4, 6, 4), (10, 200, 30, 255), np.uint8)
+    up = post.resized(flat, 18, 12)
+    assert up.shape == (12, 18, 4) and up.dtype == np.uint8 and (up == flat[0, 0]).all()
+    ramp = np.repeat(np.arange(0, 250, 50, dtype=np.uint8)[None, :, None], 3, axis=2)  # (1, 5, 3)
+    row = post.resized(np.repeat(ramp, 2, axis=0), 10, 4)[0, :, 0].astype(int)
+    assert (np.diff(row) >= 0).all() and row[0] == 0 and row[-1] == 200 and len(set(row)) > 5
+    with pytest.raises(ValueError, match="picture: expected an"):
+        post.resized(flat.astype(np.float32), 8, 8)
+    with pytest.raises(ValueError, match="width"):
+        post.resized(flat, 0, 8)
+
+
 def test_narvis_scan_knows_its_training_radius_range():
     """unlike_training: silent inside [lo / 2, 2 hi], a sentence naming the
     measured radius outside; a frame of a training kind at a training

@@ -549,3 +549,27 @@ def test_the_notebook_frames_size_is_checked(points, size):
         assert v.width == 320
     with pytest.raises(ValueError, match="notebook frame"):
         clvis.view(points, **size)
+
+
+def test_narvis_scan_mode_renders_a_sparse_cloud_smaller():
+    """A cloud sparse on screen (300 points in a 320x240 window: a median
+    splat radius far over narvis-scan's training frames') gets the network's
+    frame rendered smaller and resized up (PostNetwork.render_scale), in its
+    mode and in its split view; the frame says the scale."""
+    from clvis import post
+
+    rng = np.random.default_rng(3)
+    cloud = clvis.PointCloud(rng.random((300, 3)).astype(np.float32), colors=rng.integers(0, 255, (300, 3)))
+    s = PointScene(cloud)
+    cam = Orbit(s.lo, s.hi, points=s.fit_points).camera(320 / 240)
+    s.update({"mode": "narvis-scan"})
+    f = next(s.frames(cam, 320, 240, s.settings, lambda: False))
+    assert f.info["post scale"] == 3 and f.image.shape == (240, 320, 3)
+    net = s._net("narvis-scan")
+    small = s.raster.render(cam, 107, 80, planes=[])
+    want = post.resized(net(filter_gbuffers(small, *net.spec.depth_filter)), 320, 240)
+    np.testing.assert_array_equal(f.image, want[..., :3])
+    s.update({"mode": "narvis-scan|gaussians"})
+    f = next(s.frames(cam, 320, 240, s.settings, lambda: False))
+    assert f.info["post scale"] == 3
+    np.testing.assert_array_equal(f.image[:, :159], want[:, :159, :3])

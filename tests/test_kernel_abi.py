@@ -1,0 +1,192 @@
+"""The ABI comment at the top of every kernels_cl/<family>/<x>.cl agrees with
+the kernels below it: each ``kernel name(...)`` line there lists the kernel's
+arguments in the signature's order, by the signature's names, and where it
+gives a type, the signature's type (address space, base type, pointer; const,
+restrict and volatile aside). An application that lifts a .cl file binds its
+arguments from that comment alone (README.md, "Embedding the kernels").
+
+Shorthands the comments use, and how they are checked:
+
+- ``kernel k(the arguments of j)``: k's signature is j's, exactly;
+- ``kernel k(... same arguments ..., global uint *vis, drawn, walk)`` or
+  ``kernel k(same, ...)``: the arguments written out after the shorthand are
+  the signature's last ones, in order;
+- a name without a type (``recs, uint n, proj, ...``): the name and its place
+  only (its type is given elsewhere in the comment);
+- words two or more spaces after an argument's comma, to the end of the line
+  (``uint n,   n x 3``), are a note and skipped.
+"""
+
+import re
+from pathlib import Path
+
+import pytest
+
+from clvis import runtime
+
+QUALIFIERS = {"const", "restrict", "__restrict", "volatile"}
+ADDRESS_SPACES = {"global", "local", "constant", "private"}
+TYPE_WORD = re.compile(
+    r"\*|global|local|constant|private|const|restrict|volatile"
+    r"|(u?char|u?short|u?int|u?long|float|double|half|bool|size_t)(2|3|4|8|16)?"
+    r"|clvis_\w+|T|[A-Z]+_T"
+)
+SHORTHAND = {"same", "..."}
+
+
+def _kernel_files() -> list[Path]:
+    return sorted(p for p in runtime.KERNEL_ROOT.glob("*/*.cl") if p.parent.name != "include")
+
+
+def _inside_parentheses(text: str, open_at: int) -> str:
+    """The text between the '(' at open_at and its matching ')'."""
+    depth = 0
+    for i in range(open_at, len(text)):
+        if text[i] == "(":
+            depth += 1
+        elif text[i] == ")":
+            depth -= 1
+            if depth == 0:
+                return text[open_at + 1 : i]
+    raise AssertionError(f"unbalanced parentheses after: {text[open_at : open_at + 80]!r}")
+
+
+def _type(tokens: list[str]) -> list[str]:
+    return [t for t in tokens if t not in QUALIFIERS]
+
+
+def signatures(code: str) -> dict[str, list[tuple[str, list[str]]]]:
+    """kernel name -> [(argument name, its type tokens)] of the source's
+    ``kernel ... void name(...)`` definitions (the first of a name: a kernel
+    defined under #if branches takes the same arguments in each)."""
+    out: dict[str, list[tuple[str, list[str]]]] = {}
+    for m in re.finditer(r"^kernel\b[^;{]*?\bvoid\s+(\w+)\s*\(", code, re.M | re.S):
+        args = []
+        for part in _inside_parentheses(code, m.end() - 1).split(","):
+            tokens = re.findall(r"\w+|\*", part)
+            args.append((tokens[-1], _type(tokens[:-1])))
+        out.setdefault(m[1], args)
+    return out
+
+
+def documented(comment: str) -> dict[str, str]:
+    """kernel name -> the text between the parentheses of its ``kernel
+    name(...)`` line in the ABI comment (the comment's leading '*' removed)."""
+    text = re.sub(r"^[ \t]*\*", "", comment, flags=re.M)
+    out: dict[str, str] = {}
+    for m in re.finditer(r"\bkernel\s+(\w+)\s*\(", text):
+        out.setdefault(m[1], _inside_parentheses(text, m.end() - 1))
+    return out
+
+
+def _documented_type(tokens: list[str], at: int) -> list[str]:
+    """The type words right before tokens[at] (a name), from the address space
+    on where there is one (words before it are a note on the line above)."""
+    j = at
+    while j > 0 and TYPE_WORD.fullmatch(tokens[j - 1]):
+        j -= 1
+    words = tokens[j:at]
+    spaces = [i for i, t in enumerate(words) if t in ADDRESS_SPACES]
+    if spaces:
+        words = words[spaces[0] :]
+    return _type(words)
+
+
+def _check_in_order(kernel: str, args, tokens: list[str]) -> list[str]:
+    errors, pos = [], 0
+    for name, typ in args:
+        try:
+            at = tokens.index(name, pos)
+        except ValueError:
+            errors.append(
+                f"kernel {kernel}: argument {' '.join(typ)} {name} is missing from the ABI comment "
+                "or out of the signature's order there"
+            )
+            return errors
+        doc_type = _documented_type(tokens, at)
+        if doc_type and doc_type != typ[-len(doc_type) :]:
+            errors.append(
+                f"kernel {kernel}: argument {name} is {' '.join(typ)} in the signature, "
+                f"{' '.join(doc_type)} in the ABI comment"
+            )
+        pos = at + 1
+    return errors
+
+
+def abi_errors(source: str) -> list[str]:
+    """Disagreements between a .cl file's ABI comment and its kernels."""
+    end = source.index("*/")
+    actual, doc = signatures(source[end:]), documented(source[:end])
+    errors = []
+    for kernel, args in actual.items():
+        if kernel not in doc:
+            errors.append(f"kernel {kernel}: not in the ABI comment")
+            continue
+        text = doc[kernel]
+        alias = re.fullmatch(r"\s*the arguments of (\w+)\s*", text)
+        if alias:
+            if actual.get(alias[1]) != args:
+                errors.append(f"kernel {kernel}: documented as the arguments of {alias[1]}, which differ")
+            continue
+        # a note after an argument: two or more spaces after its comma, to the line's end
+        text = re.sub(r",[ \t]{2,}[^\n]*", ",", text)
+        tokens = re.findall(r"\.\.\.|\w+|\*|,", text)
+        short = [i for i, t in enumerate(tokens) if t in SHORTHAND]
+        if short:
+            tail = tokens[short[-1] + 1 :]
+            # the names written out: words followed by a comma or the end
+            named = [
+                t
+                for i, t in enumerate(tail)
+                if re.fullmatch(r"\w+", t) and tail[i + 1 : i + 2] in ([","], [])
+            ]
+            if not named or len(named) > len(args):
+                errors.append(
+                    f"kernel {kernel}: the arguments after the shorthand do not match its signature"
+                )
+                continue
+            errors += _check_in_order(kernel, args[-len(named) :], tail)
+            if [n for n, _ in args[-len(named) :]] != named:
+                errors.append(
+                    f"kernel {kernel}: the ABI comment ends its arguments with {named}, "
+                    f"the signature with {[n for n, _ in args[-len(named) :]]}"
+                )
+        else:
+            errors += _check_in_order(kernel, args, tokens)
+    for kernel in doc:
+        if kernel not in actual:
+            errors.append(f"kernel {kernel}: in the ABI comment but not defined in the file")
+    return errors
+
+
+@pytest.mark.parametrize("path", _kernel_files(), ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_abi_comment_matches_the_signatures(path):
+    assert abi_errors(path.read_text(encoding="utf-8")) == []
+
+
+def test_the_check_finds_what_it_should():
+    """The check is not vacuous: a swapped pair, a renamed argument, a wrong
+    type, a kernel left out and a stale alias are each reported."""
+    good = """/* ABI
+ * kernel k(global const float *in, uint n,   n x 3
+ *          global uint *out)
+ * kernel k8(the arguments of k)
+ * kernel j(... same arguments ..., global uint *out)
+ */
+kernel void k(global const float *restrict in, const uint n, global uint *out) {}
+kernel void k8(global const float *in, uint n, global uint *out) {}
+kernel void j(global const float *in, uint n, global uint *out) {}
+"""
+    assert abi_errors(good) == []
+    bad = {
+        "swapped": good.replace("global const float *in, uint n,", "uint n, global const float *in,"),
+        "renamed": good.replace("uint n,   n x 3", "uint count,   n x 3"),
+        "type": good.replace("global uint *out)\n * kernel k8", "global int *out)\n * kernel k8"),
+        "space": good.replace("global const float *in, uint n,  ", "local const float *in, uint n,  "),
+        "missing": good.replace(" * kernel j(... same arguments ..., global uint *out)\n", ""),
+        "alias": good.replace("k8(global const float *in, uint n,", "k8(global const float *in, ulong n,"),
+        "tail": good.replace("arguments ..., global uint *out)", "arguments ..., global uint *res)"),
+        "stale": good.replace(" */\n", " * kernel gone(uint n)\n */\n"),
+    }
+    for what, source in bad.items():
+        assert abi_errors(source), what

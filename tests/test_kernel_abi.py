@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 
+import clvis
 from clvis import runtime
 
 QUALIFIERS = {"const", "restrict", "__restrict", "volatile"}
@@ -190,3 +191,60 @@ kernel void j(global const float *in, uint n, global uint *out) {}
     }
     for what, source in bad.items():
         assert abi_errors(source), what
+
+
+def _exact_fp_builds() -> set[str]:
+    """The kernels_cl files the library builds with runtime.EXACT_FP (its
+    get_kernel / get_program calls: the file a string or a module-level name,
+    the flags runtime.EXACT_FP or a name assigned from it)."""
+    import ast
+
+    package = Path(clvis.__file__).parent
+    out = set()
+    for module in package.rglob("*.py"):
+        tree = ast.parse(module.read_text(encoding="utf-8"))
+        strings = {
+            t.id: node.value.value
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant)
+            for t in node.targets
+            if isinstance(t, ast.Name) and isinstance(node.value.value, str)
+        }
+        exact = {
+            t.id
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Assign)
+            and isinstance(node.value, ast.Attribute)
+            and node.value.attr == "EXACT_FP"
+            for t in node.targets
+            if isinstance(t, ast.Name)
+        }
+        for call in ast.walk(tree):
+            if not (isinstance(call, ast.Call) and isinstance(call.func, ast.Attribute)):
+                continue
+            if call.func.attr not in ("get_kernel", "get_program") or len(call.args) < 2:
+                continue
+            flags = call.args[4] if call.func.attr == "get_kernel" and len(call.args) > 4 else None
+            if call.func.attr == "get_program" and len(call.args) > 3:
+                flags = call.args[3]
+            flags = next((k.value for k in call.keywords if k.arg == "flags"), flags)
+            is_exact = (isinstance(flags, ast.Attribute) and flags.attr == "EXACT_FP") or (
+                isinstance(flags, ast.Name) and flags.id in exact
+            )
+            src = call.args[1]
+            rel = src.value if isinstance(src, ast.Constant) else strings.get(getattr(src, "id", ""))
+            if is_exact and isinstance(rel, str) and rel.endswith(".cl"):
+                out.add(rel)
+    return out
+
+
+def test_exact_fp_builds_are_named_in_the_abi_comment():
+    """A file the library builds with -cl-fp32-correctly-rounded-divide-sqrt
+    says so in its ABI comment: an application that builds it from the
+    comment alone gets the same bits."""
+    built = _exact_fp_builds()
+    assert {"post/pushpull.cl", "gauss/tiles.cl", "raster/resolve.cl"} <= built  # the scan finds them
+    flag = "-cl-fp32-correctly-rounded-divide-sqrt"
+    comments = {rel: (runtime.KERNEL_ROOT / rel).read_text().split("*/")[0] for rel in sorted(built)}
+    missing = [rel for rel, comment in comments.items() if flag not in comment]
+    assert missing == [], f"built with runtime.EXACT_FP, the ABI comment does not say so: {missing}"

@@ -248,3 +248,15 @@ def test_exact_fp_builds_are_named_in_the_abi_comment():
     comments = {rel: (runtime.KERNEL_ROOT / rel).read_text().split("*/")[0] for rel in sorted(built)}
     missing = [rel for rel, comment in comments.items() if flag not in comment]
     assert missing == [], f"built with runtime.EXACT_FP, the ABI comment does not say so: {missing}"
+
+
+@pytest.mark.parametrize("path", _kernel_files(), ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_includes_are_named_in_the_abi_comment(path):
+    """A file that includes clvis/ headers names the include path (as a
+    compiler option) and each header it includes in its ABI comment."""
+    source = path.read_text(encoding="utf-8")
+    headers = sorted(set(re.findall(r'^#include "(clvis/\w+\.h)"', source, re.M)))
+    comment = source[: source.index("*/")]
+    if headers:
+        assert "-I kernels_cl/include" in comment, "the ABI comment does not name -I kernels_cl/include"
+    assert [h for h in headers if h not in comment] == [], "headers the ABI comment does not name"

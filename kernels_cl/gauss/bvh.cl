@@ -8,7 +8,7 @@
  *
  * ABI
  * ---
- * No defines. Include path: kernels_cl/include (clvis/bvh.h, clvis/keys.h,
+ * No defines. Include path: -I kernels_cl/include (clvis/bvh.h, clvis/keys.h,
  * clvis/morton.h). Every kernel is 1-D, any local size; the global size may
  * exceed the item count (extra items return). Buffers are whole cl_mem
  * objects (offset 0).

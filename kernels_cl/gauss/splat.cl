@@ -6,6 +6,8 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/gauss.h,
+ *     clvis/gauss_tiles.h, clvis/keys.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt.
  * Defines: TS (tile side in pixels, default 16); COLOR (0: transfer-function
  * rgb, 1: colors[id], as march.cl; default 0).

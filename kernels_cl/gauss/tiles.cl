@@ -15,6 +15,8 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/gauss.h,
+ *     clvis/gauss_tiles.h, clvis/keys.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt.
  * Defines:
  *   TS     tile side in pixels (default 16)

@@ -4,6 +4,7 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/zfp.h).
  * No compiler flags. Defines:
  *   NEEDED_T  the element type of the `needed` flags: uchar (default) or uint;
  *             a block is needed when its flag is nonzero.

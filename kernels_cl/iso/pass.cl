@@ -4,7 +4,8 @@
  *
  * ABI
  * ---
- * Includes clvis/atomics.h. Defines: CLVIS_INT64_ATOMICS (set by the clvis
+ * Include path: -I kernels_cl/include (includes clvis/atomics.h).
+ * Defines: CLVIS_INT64_ATOMICS (set by the clvis
  * runtime where the device has 64-bit atomics and they are not forced off)
  * selects how resolve_hits finds the nearest hit (see there). One work-item
  * per element; global size >= the element count, any local size.

@@ -4,6 +4,8 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/atomics.h,
+ *     clvis/camera.h, clvis/iso.h, clvis/zfp.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (FP_CONTRACT is OFF
  * below: every float operation rounds on its own).
  * Defines:

@@ -7,6 +7,7 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/camera.h, clvis/iso.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (FP_CONTRACT is OFF
  * below: every float operation rounds on its own, so clvis/reference/
  * iso_traverse.py reproduces the results bit for bit). Define PACKET: 0

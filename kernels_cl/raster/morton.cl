@@ -3,6 +3,8 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/inline.h,
+ *     clvis/morton.h).
  * No defines. Includes clvis/morton.h. One work-item per point: global size >= n, any local size.
  *
  * kernel morton_codes(global const float *positions, uint n,

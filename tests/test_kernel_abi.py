@@ -260,3 +260,20 @@ def test_includes_are_named_in_the_abi_comment(path):
     if headers:
         assert "-I kernels_cl/include" in comment, "the ABI comment does not name -I kernels_cl/include"
     assert [h for h in headers if h not in comment] == [], "headers the ABI comment does not name"
+
+
+def test_paths_named_in_kernel_comments_exist():
+    """Every repository path a kernel file or shared header names (a reference,
+    a test, a benchmark, another kernel) exists: the comments send an
+    embedder there for the definitions."""
+    root = runtime.KERNEL_ROOT.parent
+    files = _kernel_files() + sorted((runtime.KERNEL_ROOT / "include" / "clvis").glob("*.h"))
+    missing, named = [], 0
+    for path in files:
+        text = re.sub(r"/\n\s*\*\s*", "/", path.read_text(encoding="utf-8"))  # a path wrapped after a '/'
+        for m in re.finditer(r"(?<![\w/.])((?:clvis|kernels_cl|tests|bench|docs)/[\w./-]*\w)", text):
+            rel, named = m[1], named + 1
+            if not (root / rel).exists() and not (runtime.KERNEL_ROOT / "include" / rel).exists():
+                missing.append(f"{path.relative_to(root)}: {rel}")
+    assert named > 50  # the scan finds the comments' paths
+    assert missing == []

@@ -277,3 +277,19 @@ def test_paths_named_in_kernel_comments_exist():
                 missing.append(f"{path.relative_to(root)}: {rel}")
     assert named > 50  # the scan finds the comments' paths
     assert missing == []
+
+
+def test_int64_atomics_define_is_tested_by_definedness_everywhere():
+    """CLVIS_INT64_ATOMICS means one thing in every file: defined or not
+    (#ifdef, defined(...)), never its value. iso/pass.cl and iso/raytrace.cl
+    work as a pair: when one read the value and the other definedness, a host
+    passing -DCLVIS_INT64_ATOMICS=0 got an image with no hits."""
+    files = _kernel_files() + sorted((runtime.KERNEL_ROOT / "include" / "clvis").glob("*.h"))
+    by_value = []
+    for path in files:
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            if not re.match(r"\s*#\s*(el)?if\b", line) or "CLVIS_INT64_ATOMICS" not in line:
+                continue
+            if re.search(r"(?<!defined\()(?<!defined )\bCLVIS_INT64_ATOMICS\b", line):
+                by_value.append(f"{path.relative_to(runtime.KERNEL_ROOT)}:{number}: {line.strip()}")
+    assert by_value == []

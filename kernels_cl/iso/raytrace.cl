@@ -15,7 +15,10 @@
  *                 k-th candidate block of active ray i (pixel item_pixel[i]);
  *                 ray_t[e] is the t where item e enters its block (cand_t of
  *                 traverse.cl; read only), and ray_hit / hit_t / rgba / depth
- *                 are per item. With CLVIS_INT64_ATOMICS, a hit also does
+ *                 are per item. With CLVIS_INT64_ATOMICS defined (its
+ *                 value is not read, here or in pass.cl: build both files
+ *                 alike; -DCLVIS_INT64_ATOMICS=0 turns it on, leave it
+ *                 undefined for off), a hit also does
  *                 atom_min(hitkey[p], as_uint(t) << 32 | e): the pixel's
  *                 nearest hit over its items (the host fills hitkey with ones
  *                 first); without it, pass.cl's resolve scans the items.
@@ -601,7 +604,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         for (int k = 0; k < 8; ++k) {
             const int on = r0 + (uint)k < count;
             ltin[k] = on ? ray_t[ek[k]] : 0.0f;
-#if ITEMS && CLVIS_INT64_ATOMICS
+#if ITEMS && defined(CLVIS_INT64_ATOMICS)
             /* benign race (iso-skip): as in the scalar path below */
             ltstop[k] = on ? as_float(((volatile global uint *)hitkey)[clvis_hi_word(pk[k])]) : NAN;
 #else
@@ -664,7 +667,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
             grad[2] /= dz;
             ray_hit[e] = 1;
             hit_t[e] = t;
-#if ITEMS && CLVIS_INT64_ATOMICS
+#if ITEMS && defined(CLVIS_INT64_ATOMICS)
             clvis_atomic_min_u64(hitkey + p, ((ulong)as_uint(t) << 32) | e);
 #endif
             rgba[e] = clvis_iso_shade(grad, d);
@@ -680,7 +683,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         const uint p = ray_ids[offset + r], e = p;      /* outputs and state per pixel */
 #endif
         const float t_in = ray_t[e];
-#if ITEMS && CLVIS_INT64_ATOMICS
+#if ITEMS && defined(CLVIS_INT64_ATOMICS)
         /* benign race (iso-skip): t_best, the t of the pixel's nearest hit so
          * far (all ones, a NaN, before any hit), is the high word of hitkey[p]
          * read with a plain (volatile) 32-bit load while other groups update
@@ -721,7 +724,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         grad[2] /= dz;
         ray_hit[e] = 1;
         hit_t[e] = t;   /* ray_t stays */
-#if ITEMS && CLVIS_INT64_ATOMICS
+#if ITEMS && defined(CLVIS_INT64_ATOMICS)
         /* the nearest hit of the pixel's items: t >= 0, so its bits order as uints */
         clvis_atomic_min_u64(hitkey + p, ((ulong)as_uint(t) << 32) | e);
 #endif

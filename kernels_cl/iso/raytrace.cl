@@ -54,7 +54,9 @@
  * x + 4 y + 16 z = sample (4 bx + x, 4 by + y, 4 bz + z) (clvis.zfp.decode_blocks).
  *
  * kernel raytrace_blocks(
- *     global const float *bricks,        slots x 64 floats: the block cache
+ *     global const float *bricks,        slots x 64 floats: the block cache (16-byte
+ *                                        aligned, as a whole cl_mem is: PACKET=8 loads
+ *                                        its rows as float4)
  *     global const int *slot_of_block,   nblocks: block id -> cache slot, -1 if absent
  *     uint nx, uint ny, uint nz,         volume samples per axis
  *     float dx, float dy, float dz,      spacing (world units per sample step)

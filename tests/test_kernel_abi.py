@@ -15,6 +15,12 @@ Shorthands the comments use, and how they are checked:
   only (its type is given elsewhere in the comment);
 - words two or more spaces after an argument's comma, to the end of the line
   (``uint n,   n x 3``), are a note and skipped.
+
+And the rest a build from the comment needs: the comment names
+-cl-fp32-correctly-rounded-divide-sqrt where the library builds the file with
+it, -I kernels_cl/include and each clvis/ header the file includes; every
+repository path the kernel comments name exists; CLVIS_INT64_ATOMICS, which
+files built together must read alike, is tested for definedness only.
 """
 
 import re

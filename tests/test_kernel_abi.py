@@ -19,8 +19,9 @@ Shorthands the comments use, and how they are checked:
 And the rest a build from the comment needs: the comment names
 -cl-fp32-correctly-rounded-divide-sqrt where the library builds the file with
 it, -I kernels_cl/include and each clvis/ header the file includes; every
-repository path the kernel comments name exists; CLVIS_INT64_ATOMICS, which
-files built together must read alike, is tested for definedness only.
+repository path the kernel comments name exists; each define a comment lists
+is read; CLVIS_INT64_ATOMICS, which files built together must read alike, is
+tested for definedness only.
 """
 
 import re
@@ -299,3 +300,37 @@ def test_int64_atomics_define_is_tested_by_definedness_everywhere():
             if re.search(r"(?<!defined\()(?<!defined )\bCLVIS_INT64_ATOMICS\b", line):
                 by_value.append(f"{path.relative_to(runtime.KERNEL_ROOT)}:{number}: {line.strip()}")
     assert by_value == []
+
+
+def _with_headers(source: str) -> str:
+    """source and the text of every clvis/ header it includes, transitively."""
+    text, seen = source, set()
+    stack = re.findall(r'^#include "(clvis/\w+\.h)"', source, re.M)
+    while stack:
+        header = stack.pop()
+        if header in seen:
+            continue
+        seen.add(header)
+        body = (runtime.KERNEL_ROOT / "include" / header).read_text(encoding="utf-8")
+        text += body
+        stack += re.findall(r'^#include "(clvis/\w+\.h)"', body, re.M)
+    return text
+
+
+def test_documented_defines_are_read():
+    """Each define an ABI comment lists as an entry (``NAME   what it does``)
+    is read by the file or a header it includes: a host sets no define that
+    does nothing (kpn.cl and subpixel.cl listed a WG that no line read)."""
+    unread, listed = [], 0
+    for path in _kernel_files():
+        source = path.read_text(encoding="utf-8")
+        end = source.index("*/")
+        code = _with_headers(source[end:])
+        for name in re.findall(r"^ \*\s{1,5}([A-Z][A-Z0-9_]*)(?:\s{2,}|\s+\d)", source[:end], re.M):
+            if name == "ABI":
+                continue
+            listed += 1
+            if not re.search(rf"\b{name}\b", code):
+                unread.append(f"{path.relative_to(runtime.KERNEL_ROOT)}: {name}")
+    assert listed > 30  # the scan finds the comments' define lists
+    assert unread == []

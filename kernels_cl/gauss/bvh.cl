@@ -8,7 +8,7 @@
  *
  * ABI
  * ---
- * No defines. Include path: kernels_cl/include (clvis/bvh.h, clvis/keys.h,
+ * No defines. Include path: -I kernels_cl/include (clvis/bvh.h, clvis/keys.h,
  * clvis/morton.h). Every kernel is 1-D, any local size; the global size may
  * exceed the item count (extra items return). Buffers are whole cl_mem
  * objects (offset 0).
@@ -43,7 +43,8 @@
  *      c (as above), q_a = clamp(trunc((c_a - lo_a) * s_a), 0, 1023) in float32
  *      (clvis_morton_quantize of clvis/morton.h),
  *      exactly as raster/morton.cl's morton_codes: lo = the min centre and s_a
- *      = (float)(1023.0 / (double)(max_a - lo_a)), or 0 for a flat axis.
+ *      = (float)(1023.0 / ((double)max_a - (double)lo_a)) (the extent too
+ *      in double: clvis.morton.scale), or 0 for a flat axis.
  *      iota[i] = i.
  *
  *    The host then sorts (codes, iota) by code, stably (clvis.radix_sort):

@@ -2,6 +2,7 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/gauss.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (the whitening matrix
  * is bit-identical to clvis/reference/gauss/render.py). No defines.
  * One work-item per Gaussian: global size >= n, any local size.

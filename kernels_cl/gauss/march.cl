@@ -4,6 +4,8 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/bvh.h, clvis/gauss.h,
+ *     clvis/ray.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt.
  * Defines:
  *   K      the k-buffer size, 1..64 (default 16): hits gathered per round at most

@@ -6,10 +6,16 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/gauss.h,
+ *     clvis/gauss_tiles.h, clvis/keys.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt.
  * Defines: TS (tile side in pixels, default 16); COLOR (0: transfer-function
  * rgb, 1: colors[id], as march.cl; default 0).
- * Arguments as tiles.cl's (recs, proj, near, W, H, ty0, ty1), and:
+ * Arguments as tiles.cl's (recs, proj, near, W, H, ty0, ty1), and its data
+ * flow (scan of the counts, sort of the keys with the ids, tile_ranges), with
+ * splat_count and splat_keys in place of tile_count and tile_keys (no
+ * gather_records: splat_render reads recs by id); splat_count and splat_keys
+ * take one work-item per Gaussian: global size >= n, any local size. And:
  *   splats  n x 8 floats per Gaussian, written by splat_count:
  *           u, v (the projected mean, continuous pixel coordinates, centres at
  *           integer + 0.5), A, B, C (the conic: the inverse of the 2D

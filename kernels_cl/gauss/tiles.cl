@@ -3,13 +3,20 @@
  * march.cl (same hit test, same alpha, same compositing), without a BVH.
  *
  * Data flow (clvis/gauss/tiles.py): tile_count (keys per Gaussian) -> exclusive
- * scan of the counts (clvis.primitives) -> tile_keys (one key per Gaussian and
- * tile it may touch) -> radix sort of the keys with the Gaussian ids ->
+ * scan of the counts (clvis.primitives; from C: primitives/scan.cl with
+ * T = ulong, its total m = the number of keys) -> tile_keys (one key per
+ * Gaussian and tile it may touch) -> radix sort of the keys with the Gaussian
+ * ids (primitives/radix_sort.cl with KEY_T = ulong, HAS_VALUES = 1, VAL_T =
+ * uint; the keys use their low 32 + ceil(log2(tiles of the band)) bits) ->
  * tile_ranges (each tile's run of keys) -> gaussians.cl's gather_records (the
- * keys' records in key order) -> tile_render (per pixel).
+ * keys' records in key order) -> tile_render (per pixel). With m = 0 skip
+ * tile_keys, the sort and tile_ranges (a zero global size is not a valid
+ * launch): every range stays (0, 0).
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/gauss.h,
+ *     clvis/gauss_tiles.h, clvis/keys.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt.
  * Defines:
  *   TS     tile side in pixels (default 16)
@@ -33,6 +40,9 @@
  *   W, H      image size; tiles_x = ceil(W / TS)
  *   ty0, ty1  the band: tile rows ty0 .. ty1 - 1 are binned; a key's tile is
  *             (ty - ty0) * tiles_x + tx
+ * tile_count and tile_keys: one work-item per Gaussian, global size >= n
+ * (items past n return), any local size. tile_ranges: one work-item per key,
+ * global size >= m, any local size.
  *
  * kernel tile_count(recs, uint n, proj, float near, float cutoff, uint W, uint H,
  *                   uint ty0, uint ty1, global ulong *counts)      n
@@ -46,7 +56,7 @@
  *     lower bound of the view depth of every hit of Gaussian i by a ray of
  *     the tile.
  * kernel tile_ranges(global const ulong *keys, uint m,   m keys sorted ascending
- *                    global uint2 *ranges)               per tile of the band, zeroed before:
+ *                    global uint2 *ranges)               tiles_x * (ty1 - ty0), zeroed before:
  *     ranges[tile] = (first, last + 1) of the tile's keys; (0, 0) for none.
  * kernel tile_render(global const clvis_gaussian *keyrecs (keyrecs[i] = recs[ids[i]],
  *                    the keys' records in key order, gaussians.cl's gather_records

@@ -4,6 +4,7 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/zfp.h).
  * No compiler flags. Defines:
  *   NEEDED_T  the element type of the `needed` flags: uchar (default) or uint;
  *             a block is needed when its flag is nonzero.
@@ -18,7 +19,8 @@
  *   uint  block_of_slot[C]     block id in slot s, CACHE_FREE (0xFFFFFFFF) if free
  *   int   slot_of_block[nblocks]  slot of block b, -1 if not cached
  *   uint  ages[C]              passes since the slot's block was last needed
- *                              (0 for free slots; saturates at CACHE_AGE_MAX)
+ *                              (0 for free slots; saturates at CACHE_AGE_MAX,
+ *                              0xFFFFFFFE)
  * Invariant: slot_of_block[b] = s >= 0  <=>  block_of_slot[s] = b.
  *
  * Every kernel: one work-item per element, global size >= the element count

@@ -3,6 +3,7 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/zfp.h).
  * No defines, no compiler flags. Includes clvis/zfp.h (stream layout, the
  * per-block decode). Volume [nz][ny][nx], blocks (bx, by, bz) of 4^3 samples,
  * block b = bx + nbx (by + nby bz), nb_ = ceil(n_ / 4), as in zfp.cl.

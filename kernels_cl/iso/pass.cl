@@ -4,9 +4,12 @@
  *
  * ABI
  * ---
- * Includes clvis/atomics.h. Defines: CLVIS_INT64_ATOMICS (set by the clvis
+ * Include path: -I kernels_cl/include (includes clvis/atomics.h).
+ * Defines: CLVIS_INT64_ATOMICS (set by the clvis
  * runtime where the device has 64-bit atomics and they are not forced off)
- * selects how resolve_hits finds the nearest hit (see there). One work-item
+ * selects how resolve_hits finds the nearest hit (see there). Whether it is
+ * defined counts, not its value (-DCLVIS_INT64_ATOMICS=0 turns it on), as in
+ * raytrace.cl, which must be built alike. One work-item
  * per element; global size >= the element count, any local size.
  * An item e = i * n_spec + k is the k-th candidate block of active ray i
  * (kernels_cl/iso/traverse.cl writes cand_block[e], cand_t[e]).

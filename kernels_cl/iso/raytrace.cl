@@ -4,6 +4,8 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/atomics.h,
+ *     clvis/camera.h, clvis/iso.h, clvis/zfp.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (FP_CONTRACT is OFF
  * below: every float operation rounds on its own).
  * Defines:
@@ -13,7 +15,10 @@
  *                 k-th candidate block of active ray i (pixel item_pixel[i]);
  *                 ray_t[e] is the t where item e enters its block (cand_t of
  *                 traverse.cl; read only), and ray_hit / hit_t / rgba / depth
- *                 are per item. With CLVIS_INT64_ATOMICS, a hit also does
+ *                 are per item. With CLVIS_INT64_ATOMICS defined (its
+ *                 value is not read, here or in pass.cl: build both files
+ *                 alike; -DCLVIS_INT64_ATOMICS=0 turns it on, leave it
+ *                 undefined for off), a hit also does
  *                 atom_min(hitkey[p], as_uint(t) << 32 | e): the pixel's
  *                 nearest hit over its items (the host fills hitkey with ones
  *                 first); without it, pass.cl's resolve scans the items.
@@ -49,7 +54,9 @@
  * x + 4 y + 16 z = sample (4 bx + x, 4 by + y, 4 bz + z) (clvis.zfp.decode_blocks).
  *
  * kernel raytrace_blocks(
- *     global const float *bricks,        slots x 64 floats: the block cache
+ *     global const float *bricks,        slots x 64 floats: the block cache (16-byte
+ *                                        aligned, as a whole cl_mem is: PACKET=8 loads
+ *                                        its rows as float4)
  *     global const int *slot_of_block,   nblocks: block id -> cache slot, -1 if absent
  *     uint nx, uint ny, uint nz,         volume samples per axis
  *     float dx, float dy, float dz,      spacing (world units per sample step)
@@ -599,7 +606,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         for (int k = 0; k < 8; ++k) {
             const int on = r0 + (uint)k < count;
             ltin[k] = on ? ray_t[ek[k]] : 0.0f;
-#if ITEMS && CLVIS_INT64_ATOMICS
+#if ITEMS && defined(CLVIS_INT64_ATOMICS)
             /* benign race (iso-skip): as in the scalar path below */
             ltstop[k] = on ? as_float(((volatile global uint *)hitkey)[clvis_hi_word(pk[k])]) : NAN;
 #else
@@ -662,7 +669,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
             grad[2] /= dz;
             ray_hit[e] = 1;
             hit_t[e] = t;
-#if ITEMS && CLVIS_INT64_ATOMICS
+#if ITEMS && defined(CLVIS_INT64_ATOMICS)
             clvis_atomic_min_u64(hitkey + p, ((ulong)as_uint(t) << 32) | e);
 #endif
             rgba[e] = clvis_iso_shade(grad, d);
@@ -678,7 +685,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         const uint p = ray_ids[offset + r], e = p;      /* outputs and state per pixel */
 #endif
         const float t_in = ray_t[e];
-#if ITEMS && CLVIS_INT64_ATOMICS
+#if ITEMS && defined(CLVIS_INT64_ATOMICS)
         /* benign race (iso-skip): t_best, the t of the pixel's nearest hit so
          * far (all ones, a NaN, before any hit), is the high word of hitkey[p]
          * read with a plain (volatile) 32-bit load while other groups update
@@ -719,7 +726,7 @@ kernel void raytrace_blocks(global const float *bricks, global const int *slot_o
         grad[2] /= dz;
         ray_hit[e] = 1;
         hit_t[e] = t;   /* ray_t stays */
-#if ITEMS && CLVIS_INT64_ATOMICS
+#if ITEMS && defined(CLVIS_INT64_ATOMICS)
         /* the nearest hit of the pixel's items: t >= 0, so its bits order as uints */
         clvis_atomic_min_u64(hitkey + p, ((ulong)as_uint(t) << 32) | e);
 #endif

@@ -7,6 +7,7 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/camera.h).
  * Defines: none. Built with FP_CONTRACT OFF (below) and
  * -cl-fp32-correctly-rounded-divide-sqrt (runtime.EXACT_FP), as the other iso
  * kernels, so that the rays are clvis/camera.h's to the bit.

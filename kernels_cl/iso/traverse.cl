@@ -7,9 +7,10 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/camera.h, clvis/iso.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (FP_CONTRACT is OFF
- * below: every float operation rounds on its own, so clvis/reference/
- * iso_traverse.py reproduces the results bit for bit). Define PACKET: 0
+ * below: every float operation rounds on its own, so
+ * clvis/reference/iso/traverse.py reproduces the results bit for bit). Define PACKET: 0
  * (default: one pixel / one listed ray a work-item) or 8 (the cpu profile: 8
  * a work-item, their ray set-up, clvis_iso_ray_setup's operations, done once
  * in float8 lanes by clvis_iso_ray_setup8 (clvis/iso.h); macro_traverse then walks the 8 rays one

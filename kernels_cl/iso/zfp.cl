@@ -2,6 +2,7 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/zfp.h).
  * No defines, no compiler flags. The block-decoding kernels carry
  * vec_type_hint(ulong16): they do their own vector work (zfp.h's transpose
  * and dequantization), and the hint keeps Intel's CPU compiler from also

@@ -10,14 +10,24 @@
  * Defines:
  *   DEPTH_SELECT  0 or 1 (default 0): the candidates' logits get gamma x
  *                 their nearness behind the pixel's nearest candidate.
- *   KPN_SCALES    the number of scales, 1..8 (kpn_apply only; default 1).
- *   KPN_K<i>, KPN_S<i>  scale i's k (odd) and s (a power of two), i <
- *                 KPN_SCALES; KPN_CANDIDATES = K, the sum of their k*k.
- *                 Compile-time, so the candidate loops unroll and the
- *                 block arithmetic is shifts (kpn_blocks takes s as an
- *                 argument and needs none of them).
- *   WG            the local size hint (any; default 64). Launch any 1-D
- *                 global size >= the item count; items past it do nothing.
+ *   KPN_SCALES    the number of scales, 1..8 (kpn_apply only).
+ *   KPN_K<i>, KPN_S<i>  scale i's k (odd) and s (a power of two), for
+ *                 every i < KPN_SCALES.
+ *   KPN_CANDIDATES  K, the sum of the scales' k*k (the logits' candidate
+ *                 channels; the background's is channel K).
+ *                 With KPN_SCALES defined, every KPN_K<i>, KPN_S<i> and
+ *                 KPN_CANDIDATES must be defined too (the file computes
+ *                 none of them: a missing one fails the build); without
+ *                 KPN_SCALES the file sets one scale, KPN_K0 = KPN_S0 =
+ *                 KPN_CANDIDATES = 1. Compile-time, so the candidate loops
+ *                 unroll and the block arithmetic is shifts (kpn_blocks
+ *                 takes s as an argument and needs none of them).
+ *                 Example, scales (k, s) = (3, 1), (5, 4): -DKPN_SCALES=2
+ *                 -DKPN_K0=3 -DKPN_S0=1 -DKPN_K1=5 -DKPN_S1=4
+ *                 -DKPN_CANDIDATES=34.
+ * Launch sizes: any 1-D global size >= the kernel's item count (below);
+ * items past it do nothing; any local size (clvis: 64; a WG define that
+ * clvis passes is not read by the kernels).
  * wp must be a multiple of 8 (the networks' strides are 16).
  * Build with -cl-fp32-correctly-rounded-divide-sqrt (block means divide).
  *
@@ -36,8 +46,12 @@
  *     up[(scale*5 + c)*hp*wp + pixel], c = R, G, B, nearness, mask.
  *
  * kernel kpn_apply(global const float *up, global const float *logits,
- *                  uint wp, uint hp, float depth_scale, float logit_bound,
+ *                  uint wpu, uint hpu, float depth_scale, float bound,
  *                  global float *out)
+ *     wpu, hpu: wp, hp; bound: the logit bound B, l = B tanh(logit / B)
+ *     (> 0); depth_scale: gamma's factor (DEPTH_SELECT only, else unread).
+ *     up: kpn_blocks' planes of all KPN_SCALES scales (5 * KPN_SCALES *
+ *     hp*wp floats; with DEPTH_SELECT 0 the nearness planes are not read).
  *     One item per 8 pixels of a row (hp*wp/8 items; wp a multiple of 8):
  *     lanes are pixels, so every candidate is a vload8 of the up-sampled
  *     planes (row y + (dy - k/2)*s, columns x + (dx - k/2)*s; beyond the

@@ -4,6 +4,7 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/keys.h).
  * Defines (optional):
  *   ITEMS   pixels per work-item (default 1): work-item g handles the pixels
  *           g*ITEMS .. g*ITEMS + ITEMS - 1 in row-major order. Launch any

@@ -20,8 +20,12 @@
  *           coverage fraction) holds the blend back; 0 (default): the
  *           sigma rule alone (tau, c_lo, c_hi, f_lo, f_hi and the depth
  *           channel are not read).
- *   WG      the local size hint (any; default 64). Launch any 1-D global
- *           size >= the item count; items past it do nothing.
+ * Launch sizes: any 1-D global size >= the kernel's item count (below);
+ * items past it do nothing; any local size (clvis: 64; a WG define that
+ * clvis passes is not read by the kernels).
+ * Build with -cl-fp32-correctly-rounded-divide-sqrt (the radius, noise and
+ * coverage means and the blend's ramps divide); the file sets FP_CONTRACT
+ * OFF itself.
  *
  * planes: the network's input (1, C, hp, wp) float32, channel c of pixel
  * (x, y) at [c*hp*wp + y*wp + x]: 0..2 R, G, B, 3 the coverage (covered:

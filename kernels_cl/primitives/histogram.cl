@@ -2,6 +2,7 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/workgroup.h).
  * Defines (all optional):
  *   KEY_T       key type: uint or int                              (default uint)
  *   WG          work-group size; launch with exactly this local size (default 1)

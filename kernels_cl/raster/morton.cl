@@ -3,16 +3,23 @@
  *
  * ABI
  * ---
- * No defines. Includes clvis/morton.h. One work-item per point: global size >= n, any local size.
+ * Include path: -I kernels_cl/include (includes clvis/inline.h,
+ *     clvis/morton.h).
+ * No defines. One work-item per point: global size >= n, any local size.
  *
  * kernel morton_codes(global const float *positions, uint n,
  *                     float lox, float loy, float loz,
  *                     float sx, float sy, float sz, global uint *codes)
  *     positions: n points of 3 floats. q_a = (a - lo_a) * s_a (float32), clamped
- *     to [0, 1023] and truncated (s_a = 1023 / extent_a, or 0 for a flat axis;
- *     clvis_morton_quantize); codes[i] = clvis_morton3(qx, qy, qz) (clvis/morton.h,
- *     30 bits), or
+ *     to [0, 1023] and truncated (clvis_morton_quantize); codes[i] =
+ *     clvis_morton3(qx, qy, qz) (clvis/morton.h, 30 bits), or
  *     0xFFFFFFFF for a point with a NaN or infinite coordinate (sorted last).
+ *     The kernel takes lo and s as given. clvis's codes (clvis.morton.scale,
+ *     clvis/reference/morton.py) use lo_a, hi_a = the min and max of the
+ *     finite points' coordinates (0, 0 when none is finite) and
+ *     s_a = (float)(1023.0 / ((double)hi_a - (double)lo_a)), the extent and
+ *     the division in double, or 0 for a flat axis; 1023.0f / (hi_a - lo_a)
+ *     in float32 can round differently and move a few points to another cell.
  *
  * kernel gather_points(global const float *src, global const uint *perm, uint n,
  *                      global float *dst)

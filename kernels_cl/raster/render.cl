@@ -4,6 +4,8 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/atomics.h,
+ *     clvis/camera.h, clvis/colormap.h, clvis/inline.h, clvis/keys.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (for pixels
  * bit-identical to the NumPy reference; see clvis/camera.h). The clvis
  * runtime adds -DCLVIS_INT64_ATOMICS=1 when the device has 64-bit atomics;

@@ -3,6 +3,8 @@
  *
  * ABI
  * ---
+ * Include path: -I kernels_cl/include (includes clvis/camera.h,
+ *     clvis/colormap.h, clvis/inline.h, clvis/keys.h).
  * Build options: -cl-fp32-correctly-rounded-divide-sqrt (bit-identical screen
  * velocity and splat radius; see clvis/camera.h). No defines.
  *

@@ -2,7 +2,9 @@
  *
  * CLVIS_INT64_ATOMICS (set by the clvis runtime when the device reports both
  * cl_khr_int64_base_atomics and cl_khr_int64_extended_atomics, and not
- * forced off) enables clvis_atomic_min_u64. Without it, kernels must take
+ * forced off) enables clvis_atomic_min_u64. Every file tests whether it is
+ * defined, never its value (-DCLVIS_INT64_ATOMICS=0 turns it on; leave it
+ * undefined for off). Without it, kernels must take
  * their documented fallback path; clvis_has_atomic_min_u64() tells which
  * build this is at compile time (as a constant the compiler folds).
  *

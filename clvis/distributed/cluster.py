@@ -257,27 +257,88 @@ def restore_environ(snapshot: dict[str, str | None]) -> None:
             os.environ[k] = v
 
 
-def start_cluster(workers: int, **kw: Any) -> Any:
+def _block_sigint() -> None:
+    """SIGINT held back (blocked) in this thread, and so in the threads it
+    starts and the processes they spawn (a signal mask is inherited through
+    thread creation, fork and exec); POSIX only.
+
+    multiprocessing's resource tracker is started first, if it does not run
+    yet: the first spawn starts it and unblocks SIGINT in the spawning thread
+    after (Python 3.11), which would be Dask's IO loop thread, so that the
+    threads it starts next, and the workers they spawn, would see SIGINT."""
+    if not hasattr(signal, "pthread_sigmask"):
+        return
+    with contextlib.suppress(Exception):
+        from multiprocessing import resource_tracker
+
+        resource_tracker.ensure_running()
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+
+
+def start_cluster(workers: int, *, close_timeout: float = CONNECT_TIMEOUT, **kw: Any) -> Any:
     """A LocalCluster of `workers` processes, one thread each, the dashboard
-    on a free port. Its worker processes ignore SIGINT: a terminal's Ctrl-C
-    reaches the whole process group, and the process that started them
-    stops them (their tracebacks would say nothing). They inherit the
-    ignoring through exec, so SIGINT is ignored here while they start: a
-    Ctrl-C in those seconds is lost (press it again)."""
+    on a free port.
+
+    Its worker processes never see SIGINT: a terminal's Ctrl-C reaches the
+    whole process group, and the process that started them stops them
+    (their tracebacks would say nothing). The cluster is started in a thread
+    of its own that blocks SIGINT; Dask's IO loop thread, the threads that
+    spawn the workers and so the workers inherit the mask (and a worker
+    plugin, ClusterOwner's, makes them ignore it as well). The calling
+    thread and the caller's SIGINT handler are left as they are: a Ctrl-C
+    while the cluster starts (the handler's KeyboardInterrupt, or whatever
+    else the wait raises) lets the start run to its end (Dask's start cut
+    at an arbitrary point would leave its worker processes behind), closes
+    the cluster (waiting at most `close_timeout` seconds), puts this
+    process's environment back (restore_environ) and is raised then."""
     d = _distributed()
     kw.setdefault("processes", True)
     # the workers report their failures through the futures; their own logs
     # (a cluster stopped on purpose: heartbeats to a closed scheduler) say nothing more
     kw.setdefault("silence_logs", logging.CRITICAL)
-    main = threading.current_thread() is threading.main_thread()
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     environ = environ_snapshot()
+    # handed over by single list operations (atomic under the GIL, and a
+    # signal's handler runs between them, never inside): the starting thread
+    # puts the cluster in `made`, then closes it itself if the caller has
+    # given up on it meanwhile; the caller that gives up marks `abandoned`,
+    # then closes what `made` holds. Whichever pops the cluster closes it.
+    made: list = []
+    failed: list = []
+    abandoned: list = []
+
+    def close_abandoned() -> None:
+        try:
+            cluster = made.pop()
+        except IndexError:
+            return
+        with _quiet_logs(), contextlib.suppress(Exception):
+            cluster.close(timeout=close_timeout)
+
+    def start() -> None:
+        try:
+            _block_sigint()
+            made.append(d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw))
+        except BaseException as e:  # noqa: BLE001 - handed to the caller's thread
+            failed.append(e)
+        if abandoned:
+            close_abandoned()
+
+    t = threading.Thread(target=start, name="clvis-start-cluster", daemon=True)
     try:
-        return d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw)
-    finally:
+        t.start()
+        t.join()
         restore_environ(environ)  # the workers have theirs; this process keeps its own
-        if main:
-            signal.signal(signal.SIGINT, old)
+    except BaseException:  # a Ctrl-C: raised once the start has ended and been undone
+        abandoned.append(True)
+        close_abandoned()
+        while t.is_alive():  # the start's end and the cluster's close, whichever thread does it
+            with contextlib.suppress(BaseException):  # another Ctrl-C: the first is raised
+                t.join()
+        restore_environ(environ)
+        raise
+    if failed:
+        raise failed[0]
+    return made.pop()
 
 
 def _probe(address: str, timeout: float) -> None:
@@ -422,7 +483,7 @@ class ClusterOwner:
         self._tokens: list = []
         self.client: Any = None
         if client is None:
-            self._cluster = start_cluster(check_local_workers(workers))
+            self._cluster = start_cluster(check_local_workers(workers), close_timeout=self._close_timeout)
             try:
                 client = d.Client(self._cluster, timeout=self.connect_timeout)
                 client.register_plugin(_quiet_workers())

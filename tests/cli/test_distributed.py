@@ -392,7 +392,7 @@ def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):
         deadline = time.monotonic() + TIMEOUT
         while len(_group(p.pid)) < 3 and p.poll() is None and time.monotonic() < deadline:
             time.sleep(0.2)  # the worker processes have started
-        while p.poll() is None and time.monotonic() < deadline:  # a Ctrl-C while the cluster starts is lost
+        while p.poll() is None and time.monotonic() < deadline:  # one is enough; more are harmless
             os.killpg(p.pid, signal.SIGINT)
             try:
                 p.wait(1.0)
@@ -417,6 +417,42 @@ def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):
     )
     lines = [ln for ln in err.splitlines() if not any(re.fullmatch(pat, ln) for pat in native)]
     assert lines == ["clvis render: interrupted; the Dask workers started here were stopped"], err
+    deadline = time.monotonic() + 10
+    while _group(p.pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _group(p.pid)
+
+
+def test_ctrl_c_while_the_local_cluster_starts_stops_the_command(tmp_path):
+    """SIGINT to the whole process group (a terminal's Ctrl-C) while the
+    LocalCluster of --workers starts: it was ignored then (so that the
+    workers inherited the ignoring), and the render ran to its end. Now:
+    exit status 130 within seconds, one line, no PNG written, no process of
+    the group left."""
+    path = tmp_path / "t.npz"
+    save_npz(path, PointCloud(np.random.default_rng(1).uniform(0, 1, (2000, 3))))
+    out_dir = tmp_path / "o"
+    cmd = [sys.executable, "-m", "clvis", "render", str(path), "--workers", "1", "--out", str(out_dir)]
+    p = subprocess.Popen(
+        [*cmd, "--quiet"], start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        # the cluster's start has begun: its first process (multiprocessing's
+        # resource tracker, then the worker, which joins a second or more later)
+        while len(_group(p.pid)) < 2 and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        sent = time.monotonic()
+        os.killpg(p.pid, signal.SIGINT)
+        out, err = p.communicate(timeout=TIMEOUT)
+        took = time.monotonic() - sent
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 130, err
+    assert err.splitlines() == ["clvis render: interrupted; the Dask workers started here were stopped"], err
+    assert took < 15, f"{took:.1f} s from the Ctrl-C to the exit"
+    assert not (out_dir.exists() and list(out_dir.iterdir()))
     deadline = time.monotonic() + 10
     while _group(p.pid) and time.monotonic() < deadline:
         time.sleep(0.2)

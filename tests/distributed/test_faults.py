@@ -19,7 +19,13 @@ import time
 
 import numpy as np
 import pytest
-from dask_cluster import TIMEOUT, distributed, http_like_server, local_cluster, silent_scheduler
+from dask_cluster import (
+    TIMEOUT,
+    distributed,
+    http_like_server,
+    local_cluster,
+    silent_scheduler,
+)
 
 from clvis import Camera, datasets
 from clvis.distributed import DistributedIsoRenderer, DistributedRasterizer
@@ -224,6 +230,141 @@ def test_a_local_cluster_leaves_this_processs_environment_as_it_was(tmp_path, mo
         dr.render(cam, W, H)
         assert {k: os.environ.get(k) for k in keys} == before
     assert {k: os.environ.get(k) for k in keys} == before
+
+
+def _children():
+    """This process's child processes but multiprocessing's own helpers
+    (the resource tracker, the forkserver: one per process, not workers)."""
+    psutil = pytest.importorskip("psutil")  # a dependency of dask.distributed
+    out = set()
+    for p in psutil.Process().children(recursive=True):
+        try:
+            cmd = " ".join(p.cmdline())
+            if p.status() == psutil.STATUS_ZOMBIE:
+                continue
+        except psutil.Error:  # gone meanwhile
+            continue
+        if "resource_tracker" not in cmd and "forkserver" not in cmd:
+            out.add(p.pid)
+    return out
+
+
+def _ctrl_c_while_starting(start):
+    """start() with SIGINT sent to this process (from another thread, as a
+    terminal's Ctrl-C) as soon as a worker process of the LocalCluster it
+    starts exists: the start then waits for that worker to join (its
+    imports: a second or more). The SIGINT handler meanwhile records the
+    signal and raises KeyboardInterrupt while start() runs. Returns (what
+    start returned or the exception it raised, seconds from the signal to
+    start's end, the handlers' record, the handler start left installed)."""
+    got: list = []
+    armed = [True]
+
+    def handler(signum, frame):
+        got.append(signum)
+        if armed:
+            raise KeyboardInterrupt
+
+    before = _children()
+    sent: list = []
+
+    def watch():
+        deadline = time.monotonic() + TIMEOUT
+        while time.monotonic() < deadline and not done:
+            if _children() - before:
+                sent.append(time.monotonic())
+                os.kill(os.getpid(), signal.SIGINT)
+                return
+            time.sleep(0.01)
+
+    done: list = []
+    old = signal.signal(signal.SIGINT, handler)
+    watcher = threading.Thread(target=watch, daemon=True)
+    try:
+        watcher.start()
+        try:
+            out = start()
+        except BaseException as e:  # noqa: BLE001 - what the test looks at
+            out = e
+        ended = time.monotonic()
+        armed.clear()
+        done.append(True)
+        watcher.join(TIMEOUT)
+        left_installed = signal.getsignal(signal.SIGINT)
+    finally:
+        signal.signal(signal.SIGINT, old)
+    assert sent, "no worker process started"
+    return out, ended - sent[0], got, left_installed, handler
+
+
+def _no_worker_left(started_before):
+    deadline = time.monotonic() + 10
+    while (left := _children() - started_before) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return not left
+
+
+def test_a_ctrl_c_while_a_local_cluster_starts_stops_it():
+    """SIGINT was ignored while the LocalCluster started (so that its
+    workers inherited the ignoring): a Ctrl-C in those seconds was lost and
+    the render ran to its end. Now the start runs in a thread of its own,
+    the caller's handler sees the Ctrl-C at once, the started cluster is
+    closed (no worker process left) and the KeyboardInterrupt is raised;
+    the handler and the environment are as they were."""
+    from clvis.distributed.cluster import dask_environ_keys
+
+    env = {k: os.environ.get(k) for k in dask_environ_keys()}
+    before = _children()
+    out, took, got, installed, handler = _ctrl_c_while_starting(lambda: dcluster.start_cluster(1))
+    if not isinstance(out, BaseException):
+        out.close()
+    assert isinstance(out, KeyboardInterrupt), out
+    assert got == [signal.SIGINT] and installed is handler
+    assert took < 15, f"{took:.1f} s from the Ctrl-C to the KeyboardInterrupt"
+    assert {k: os.environ.get(k) for k in dask_environ_keys()} == env
+    assert _no_worker_left(before)
+
+
+def test_a_ctrl_c_while_a_renderers_local_cluster_starts_stops_it(tmp_path):
+    """The same through DistributedRasterizer(workers=1), as `clvis render
+    --workers 1` builds it: no renderer, no worker process left."""
+    path = tmp_path / "t.npz"
+    save_npz(path, PointCloud(np.random.default_rng(0).uniform(0, 1, (500, 3))))
+    before = _children()
+    out, took, got, installed, handler = _ctrl_c_while_starting(
+        lambda: DistributedRasterizer([path], workers=1, timeout=TIMEOUT, connect_timeout=10)
+    )
+    if not isinstance(out, BaseException):
+        out.close()
+    assert isinstance(out, KeyboardInterrupt), out
+    assert got == [signal.SIGINT] and installed is handler
+    assert took < 15, f"{took:.1f} s from the Ctrl-C to the KeyboardInterrupt"
+    assert _no_worker_left(before)
+
+
+def test_local_workers_never_see_sigint():
+    """A terminal's Ctrl-C reaches the whole process group: the workers of
+    a LocalCluster started here hold SIGINT back (blocked; the thread that
+    starts the cluster blocks it and Dask's threads and the workers inherit
+    the mask) from their first instruction, in a fresh process too (where
+    multiprocessing's resource tracker, started by the first spawn,
+    unblocked it in the spawning thread: the workers saw SIGINT)."""
+    if not sys.platform.startswith("linux"):
+        pytest.skip("reads /proc/PID/status")
+    code = (
+        "import psutil\n"
+        "from clvis.distributed.cluster import start_cluster\n"
+        "c = start_cluster(2)\n"
+        "for p in psutil.Process().children():\n"
+        "    if 'resource_tracker' not in ' '.join(p.cmdline()):\n"
+        "        st = dict(ln.split(':', 1) for ln in open(f'/proc/{p.pid}/status'))\n"
+        "        print(int(st['SigBlk'], 16) | int(st['SigIgn'], 16))\n"
+        "c.close()\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=TIMEOUT)
+    assert r.returncode == 0, r.stderr
+    masks = [int(x) for x in r.stdout.split()]
+    assert len(masks) == 2 and all(m & (1 << (signal.SIGINT - 1)) for m in masks), r.stdout
 
 
 def _closed_port():

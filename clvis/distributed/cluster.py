@@ -23,6 +23,7 @@ import logging
 import os
 import signal
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -48,6 +49,8 @@ __all__ = [
 CONNECT_TIMEOUT = 10.0  # seconds to reach a scheduler given by address (and for it to have a worker)
 FRAME_RETRIES = 2  # frames submitted again after data was lost with a worker
 STALL_CHECK = 1.0  # seconds between looks for tasks Dask left waiting for workers that are gone
+PROBE_QUIET = 1.0  # seconds a tcp:// scheduler address may stay silent before it is asked as a web server is
+PROBE_REQUEST = b"HEAD / HTTP/1.0\r\n\r\n"  # what it is asked then: a Dask scheduler speaks first
 WORKERS_PER_CORE = 4  # a LocalCluster started here: at most this many worker processes per CPU core
 
 
@@ -361,12 +364,78 @@ def _probe(address: str, timeout: float) -> None:
     if parts.scheme != "tcp":
         return  # tls://, ws://, wss://: Dask's own connect, bounded by the timeout
     try:
-        with socket.create_connection((parts.hostname, port), timeout=timeout):
-            pass
+        sock = socket.create_connection((parts.hostname, port), timeout=timeout)
     except TimeoutError:
         raise ClusterTimeout(f"scheduler {address}: no answer within connect_timeout={timeout:g} s") from None
     except OSError as e:
         raise ClusterError(f"scheduler {address}: cannot connect ({e.strerror or e})") from None
+    with sock:
+        said = _first_words(sock, min(PROBE_QUIET, timeout))
+    if said:
+        raise ClusterError(
+            f"scheduler {address}: what answered there is not a Dask scheduler (it said {said!r})"
+        )
+
+
+def _first_words(sock: socket.socket, quiet: float) -> str:
+    """What the peer of `sock` (just connected) says, when that is not the
+    start of a Dask message; "" when it is, or says nothing.
+
+    A Dask scheduler speaks first: its handshake, at once. A peer that says
+    nothing for `quiet` seconds is asked what a web client asks (``HEAD /``),
+    for a web server (``python -m http.server``) answers only a whole
+    request: Dask's own handshake is none, and the Client waited out its
+    connect_timeout to say "not reached". A peer silent after that too, or
+    that closes, is left to Dask's own connect (bounded by its timeout). A
+    Dask scheduler too busy to speak within `quiet` still speaks first; the
+    request then costs it one connection that it drops."""
+    data = _read_some(sock, quiet)
+    if data is None:
+        return ""
+    if not data:
+        with contextlib.suppress(OSError):
+            sock.sendall(PROBE_REQUEST)
+            data = _read_some(sock, quiet) or b""
+    if len(data) < 8 or _dask_prelude(data):
+        return ""  # nothing, or too little to tell: Dask's own connect says
+    line = (data.decode("ascii", "replace").strip().splitlines() or [""])[0][:60]
+    return line if line and line.isprintable() else data[:16].hex(" ")
+
+
+def _read_some(sock: socket.socket, wait: float) -> bytes | None:
+    """The first bytes (16 at least, when it sends that many) that the peer
+    sends within `wait` seconds; b"" when it sent nothing, None when it
+    closed without a word."""
+    data = b""
+    deadline = time.monotonic() + wait
+    while len(data) < 16:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            break
+        sock.settimeout(left)
+        try:
+            chunk = sock.recv(64 - len(data))
+        except TimeoutError:
+            break
+        except OSError:  # reset
+            return data or None
+        if not chunk:
+            return data or None
+        data += chunk
+    return data
+
+
+def _dask_prelude(data: bytes) -> bool:
+    """Whether `data` (8 bytes at least) can start a Dask TCP message: its
+    length in bytes, then its number of frames (each 8 bytes in this
+    machine's order, struct's "Q"), then each frame's length."""
+    (total,) = struct.unpack("Q", data[:8])
+    if not 16 <= total < 2**40:
+        return False
+    if len(data) < 16:
+        return True
+    (frames,) = struct.unpack("Q", data[8:16])
+    return 0 < frames < 2**20 and 8 + 8 * frames <= total
 
 
 def _schemes() -> list[str]:

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 import pytest
-from dask_cluster import TIMEOUT, distributed, http_like_server, local_cluster, silent_scheduler
+from dask_cluster import TIMEOUT, distributed, http_like_server, local_cluster, silent_scheduler, web_server
 from PIL import Image
 
 from clvis import cli, datasets
@@ -323,6 +323,22 @@ def test_a_port_where_no_dask_scheduler_answers(tiles, capsys):
         rc, out, err = _run(capsys, "render", tiles[0][0], "--scheduler", hostport, *SMALL)
     assert rc == 2 and err.count("\n") == 1, err
     assert f"scheduler {hostport}: what answered there is not a Dask scheduler" in err
+
+
+def test_a_web_server_that_waits_for_a_request_is_no_scheduler_in_seconds(tiles, tmp_path, capsys):
+    """`python -m http.server` as --scheduler: "not reached within
+    connect_timeout=10 s" after 10 s before; now one line saying what
+    answered, in seconds."""
+    with web_server(tmp_path) as hostport:
+        t0 = time.monotonic()
+        rc, out, err = _run(capsys, "render", tiles[0][0], "--scheduler", hostport, *SMALL)
+        took = time.monotonic() - t0
+    assert rc == 2 and err.count("\n") == 1, err
+    assert (
+        f"scheduler {hostport}: what answered there is not a Dask scheduler (it said 'HTTP/1.0 200 OK')"
+        in err
+    )
+    assert took < 5
 
 
 def test_a_cluster_timeout_says_what_it_waited_for(tiles, capsys, monkeypatch):

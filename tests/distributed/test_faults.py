@@ -21,10 +21,12 @@ import numpy as np
 import pytest
 from dask_cluster import (
     TIMEOUT,
+    banner_server,
     distributed,
     http_like_server,
     local_cluster,
     silent_scheduler,
+    web_server,
 )
 
 from clvis import Camera, datasets
@@ -499,6 +501,44 @@ def test_a_port_where_no_dask_scheduler_answers_is_a_clvis_error():
     for address in ("localhost", "tcp://127.0.0.1:99999"):
         with pytest.raises(ClusterError, match=f"scheduler {re.escape(address)}: not a host:port address"):
             DistributedRasterizer(["x.npz"], address, timeout=TIMEOUT)
+
+
+def test_a_web_server_that_waits_for_a_request_is_no_dask_scheduler_in_seconds(tmp_path):
+    """`python -m http.server` answers only a whole HTTP request: Dask's
+    handshake is none, so the Client waited out connect_timeout (10 s) and
+    said "not reached". Now the probe asks it as a web client would once it
+    stays silent (a Dask scheduler speaks first): a ClusterError in about a
+    second. A server that speaks first (an SSH banner) is told at once; a
+    real scheduler still connects."""
+    with web_server(tmp_path) as hostport:
+        for address in (hostport, f"tcp://{hostport}"):
+            t0 = time.monotonic()
+            said = r"what answered there is not a Dask scheduler \(it said 'HTTP/1\.0 200 OK'\)"
+            with pytest.raises(ClusterError, match=rf"scheduler {address}: {said}"):
+                DistributedRasterizer(["x.npz"], address, timeout=TIMEOUT, connect_timeout=10)
+            assert time.monotonic() - t0 < 5
+    with banner_server() as hostport:
+        with pytest.raises(ClusterError, match=r"not a Dask scheduler \(it said 'SSH-2\.0-OpenSSH_9\.6'\)"):
+            DistributedIsoRenderer(
+                np.zeros((8, 8, 8), np.float32), hostport, timeout=TIMEOUT, connect_timeout=10
+            )
+        t0 = time.monotonic()
+        with pytest.raises(ClusterError, match="not a Dask scheduler"):
+            dcluster._probe(hostport, 10.0)
+        assert time.monotonic() - t0 < dcluster.PROBE_QUIET  # told before the probe would ask anything
+
+
+def test_the_probe_takes_a_dask_schedulers_first_words_as_dask():
+    """The probe reads a scheduler's handshake (it speaks first) and
+    leaves: nothing sent, no error, in well under the wait for a silent
+    peer; a bare scheduler, no worker needed."""
+    with distributed.LocalCluster(n_workers=0, dashboard_address=":0") as cluster:
+        for _ in range(3):
+            t0 = time.monotonic()
+            dcluster._probe(cluster.scheduler_address, 10.0)
+            assert time.monotonic() - t0 < dcluster.PROBE_QUIET
+        with distributed.Client(cluster.scheduler_address, timeout=TIMEOUT) as c:
+            assert c.scheduler_info()["address"] == cluster.scheduler_address
 
 
 def test_a_scheduler_without_workers_fails_after_connect_timeout():

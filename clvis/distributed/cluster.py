@@ -48,6 +48,7 @@ __all__ = [
 
 CONNECT_TIMEOUT = 10.0  # seconds to reach a scheduler given by address (and for it to have a worker)
 FRAME_RETRIES = 2  # frames submitted again after data was lost with a worker
+START_POLL = 0.02  # seconds between looks at a LocalCluster's start (start_cluster)
 STALL_CHECK = 1.0  # seconds between looks for tasks Dask left waiting for workers that are gone
 PROBE_QUIET = 1.0  # seconds a tcp:// scheduler address may stay silent before it is asked as a web server is
 PROBE_REQUEST = b"HEAD / HTTP/1.0\r\n\r\n"  # what it is asked then: a Dask scheduler speaks first
@@ -300,48 +301,61 @@ def start_cluster(workers: int, *, close_timeout: float = CONNECT_TIMEOUT, **kw:
     # (a cluster stopped on purpose: heartbeats to a closed scheduler) say nothing more
     kw.setdefault("silence_logs", logging.CRITICAL)
     environ = environ_snapshot()
-    # handed over by single list operations (atomic under the GIL, and a
-    # signal's handler runs between them, never inside): the starting thread
-    # puts the cluster in `made`, then closes it itself if the caller has
-    # given up on it meanwhile; the caller that gives up marks `abandoned`,
-    # then closes what `made` holds. Whichever pops the cluster closes it.
+    # shared by single list operations (atomic under the GIL; a signal's
+    # handler runs between them, never inside). The starting thread notes
+    # that it runs (`ran`), then starts nothing if the caller has given up
+    # already (`abandoned`), puts the cluster in `made` (its error in
+    # `failed`) and notes its end (`done`). The caller that gives up notes
+    # it, then waits for `done` if the thread ran (if it did not, it will
+    # see `abandoned`) and closes what `made` holds. The caller waits by
+    # polling: Thread.join() interrupted by a signal's exception marks the
+    # thread stopped while it runs (CPython 3.11, bpo-45274's fix), and
+    # is_alive() says False from then on.
+    ran: list = []
     made: list = []
     failed: list = []
+    done: list = []
     abandoned: list = []
 
-    def close_abandoned() -> None:
-        try:
-            cluster = made.pop()
-        except IndexError:
-            return
-        with _quiet_logs(), contextlib.suppress(Exception):
-            cluster.close(timeout=close_timeout)
-
     def start() -> None:
+        ran.append(True)
         try:
-            _block_sigint()
-            made.append(d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw))
+            if not abandoned:
+                _block_sigint()
+                made.append(
+                    d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw)
+                )
         except BaseException as e:  # noqa: BLE001 - handed to the caller's thread
             failed.append(e)
-        if abandoned:
-            close_abandoned()
+        finally:
+            done.append(True)
 
-    t = threading.Thread(target=start, name="clvis-start-cluster", daemon=True)
     try:
-        t.start()
-        t.join()
+        threading.Thread(target=start, name="clvis-start-cluster", daemon=True).start()
+        while not done:
+            time.sleep(START_POLL)
         restore_environ(environ)  # the workers have theirs; this process keeps its own
-    except BaseException:  # a Ctrl-C: raised once the start has ended and been undone
+        if failed:
+            raise failed[0]
+        return made[0]  # the caller's from here on: an interrupt before, and the cluster is closed below
+    except BaseException:  # a Ctrl-C, or the start's error: raised once the start ended and was undone
         abandoned.append(True)
-        close_abandoned()
-        while t.is_alive():  # the start's end and the cluster's close, whichever thread does it
-            with contextlib.suppress(BaseException):  # another Ctrl-C: the first is raised
-                t.join()
-        restore_environ(environ)
+        cluster = None
+        while True:
+            try:  # another Ctrl-C meanwhile is taken as the first one (raised below), not as a way out
+                if ran and not done:
+                    time.sleep(START_POLL)
+                    continue
+                if cluster is None and made:
+                    cluster = made.pop()
+                if cluster is not None:
+                    with _quiet_logs(), contextlib.suppress(Exception):
+                        cluster.close(timeout=close_timeout)
+                restore_environ(environ)
+                break
+            except BaseException:  # noqa: BLE001 - see above
+                continue
         raise
-    if failed:
-        raise failed[0]
-    return made.pop()
 
 
 def _probe(address: str, timeout: float) -> None:

@@ -256,9 +256,14 @@ def _ctrl_c_while_starting(start):
     terminal's Ctrl-C) as soon as a worker process of the LocalCluster it
     starts exists: the start then waits for that worker to join (its
     imports: a second or more). The SIGINT handler meanwhile records the
-    signal and raises KeyboardInterrupt while start() runs. Returns (what
-    start returned or the exception it raised, seconds from the signal to
-    start's end, the handlers' record, the handler start left installed)."""
+    signal and raises KeyboardInterrupt while start() runs. Returns what
+    start returned or raised ("out"), the seconds from the signal to its end
+    ("took"), the signals the handler saw ("got"), whether the handler was
+    still the one installed ("kept"), the LocalClusters made meanwhile and
+    not closed when start() ended ("open") and clvis's starting threads
+    still running then ("starting")."""
+    from distributed.deploy.spec import SpecCluster
+
     got: list = []
     armed = [True]
 
@@ -268,7 +273,9 @@ def _ctrl_c_while_starting(start):
             raise KeyboardInterrupt
 
     before = _children()
+    clusters = set(SpecCluster._instances)
     sent: list = []
+    done: list = []
 
     def watch():
         deadline = time.monotonic() + TIMEOUT
@@ -279,7 +286,6 @@ def _ctrl_c_while_starting(start):
                 return
             time.sleep(0.01)
 
-    done: list = []
     old = signal.signal(signal.SIGINT, handler)
     watcher = threading.Thread(target=watch, daemon=True)
     try:
@@ -290,13 +296,24 @@ def _ctrl_c_while_starting(start):
             out = e
         ended = time.monotonic()
         armed.clear()
+        opened = [repr(c) for c in set(SpecCluster._instances) - clusters if c.status.name != "closed"]
+        starting = [t.name for t in threading.enumerate() if t.name == "clvis-start-cluster"]
         done.append(True)
         watcher.join(TIMEOUT)
-        left_installed = signal.getsignal(signal.SIGINT)
+        kept = signal.getsignal(signal.SIGINT) is handler
     finally:
         signal.signal(signal.SIGINT, old)
+    if not isinstance(out, BaseException):
+        out.close()
     assert sent, "no worker process started"
-    return out, ended - sent[0], got, left_installed, handler
+    return {
+        "out": out,
+        "took": ended - sent[0],
+        "got": got,
+        "kept": kept,
+        "open": opened,
+        "starting": starting,
+    }
 
 
 def _no_worker_left(started_before):
@@ -306,25 +323,29 @@ def _no_worker_left(started_before):
     return not left
 
 
+def _check_stopped(r, before):
+    """A Ctrl-C while starting stopped it: KeyboardInterrupt, no cluster
+    open and no start running when it was raised, no worker left."""
+    assert isinstance(r["out"], KeyboardInterrupt), r["out"]
+    assert r["got"] == [signal.SIGINT] and r["kept"]
+    assert r["took"] < 15, f"{r['took']:.1f} s from the Ctrl-C to the KeyboardInterrupt"
+    assert not r["open"] and not r["starting"], r
+    assert _no_worker_left(before)
+
+
 def test_a_ctrl_c_while_a_local_cluster_starts_stops_it():
     """SIGINT was ignored while the LocalCluster started (so that its
     workers inherited the ignoring): a Ctrl-C in those seconds was lost and
     the render ran to its end. Now the start runs in a thread of its own,
     the caller's handler sees the Ctrl-C at once, the started cluster is
-    closed (no worker process left) and the KeyboardInterrupt is raised;
-    the handler and the environment are as they were."""
+    closed (no worker process left) and the KeyboardInterrupt is raised
+    then, not before; the handler and the environment are as they were."""
     from clvis.distributed.cluster import dask_environ_keys
 
     env = {k: os.environ.get(k) for k in dask_environ_keys()}
     before = _children()
-    out, took, got, installed, handler = _ctrl_c_while_starting(lambda: dcluster.start_cluster(1))
-    if not isinstance(out, BaseException):
-        out.close()
-    assert isinstance(out, KeyboardInterrupt), out
-    assert got == [signal.SIGINT] and installed is handler
-    assert took < 15, f"{took:.1f} s from the Ctrl-C to the KeyboardInterrupt"
+    _check_stopped(_ctrl_c_while_starting(lambda: dcluster.start_cluster(1)), before)
     assert {k: os.environ.get(k) for k in dask_environ_keys()} == env
-    assert _no_worker_left(before)
 
 
 def test_a_ctrl_c_while_a_renderers_local_cluster_starts_stops_it(tmp_path):
@@ -333,15 +354,10 @@ def test_a_ctrl_c_while_a_renderers_local_cluster_starts_stops_it(tmp_path):
     path = tmp_path / "t.npz"
     save_npz(path, PointCloud(np.random.default_rng(0).uniform(0, 1, (500, 3))))
     before = _children()
-    out, took, got, installed, handler = _ctrl_c_while_starting(
+    r = _ctrl_c_while_starting(
         lambda: DistributedRasterizer([path], workers=1, timeout=TIMEOUT, connect_timeout=10)
     )
-    if not isinstance(out, BaseException):
-        out.close()
-    assert isinstance(out, KeyboardInterrupt), out
-    assert got == [signal.SIGINT] and installed is handler
-    assert took < 15, f"{took:.1f} s from the Ctrl-C to the KeyboardInterrupt"
-    assert _no_worker_left(before)
+    _check_stopped(r, before)
 
 
 def test_local_workers_never_see_sigint():

@@ -359,7 +359,8 @@ def start_cluster(workers: int, *, close_timeout: float = CONNECT_TIMEOUT, **kw:
 
 
 def _probe(address: str, timeout: float) -> None:
-    """Fail fast on a tcp:// scheduler that refuses or does not answer."""
+    """Fail fast on a tcp:// scheduler that refuses, does not answer or is
+    no Dask scheduler (_first_words)."""
     parts = urlsplit(address if "://" in address else "tcp://" + address)
     known = _schemes()
     if known and parts.scheme not in known:
@@ -401,8 +402,10 @@ def _first_words(sock: socket.socket, quiet: float) -> str:
     request: Dask's own handshake is none, and the Client waited out its
     connect_timeout to say "not reached". A peer silent after that too, or
     that closes, is left to Dask's own connect (bounded by its timeout). A
-    Dask scheduler too busy to speak within `quiet` still speaks first; the
-    request then costs it one connection that it drops."""
+    Dask scheduler too busy to speak within `quiet` (stopped for 1.5 s:
+    measured) still speaks first and is taken as one; it reads the request
+    as a message of exabytes and drops that connection, with a MemoryError
+    in its log."""
     data = _read_some(sock, quiet)
     if data is None:
         return ""

@@ -66,3 +66,65 @@ def http_like_server():
         stop.set()
         t.join(5)
         srv.close()
+
+
+@contextlib.contextmanager
+def web_server(directory):
+    """Python's own web server (``python -m http.server``) on a free port of
+    this machine, in a thread: it answers only a whole HTTP request, and
+    stays silent until then; its "host:port", closed after."""
+    import functools
+    import http.server
+    import threading
+
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def log_message(self, *args):  # no line on stderr per request
+            pass
+
+    srv = http.server.ThreadingHTTPServer(
+        ("127.0.0.1", 0), functools.partial(Quiet, directory=str(directory))
+    )
+    t = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.1}, daemon=True)
+    t.start()
+    try:
+        yield f"127.0.0.1:{srv.server_address[1]}"
+    finally:
+        srv.shutdown()
+        srv.server_close()
+        t.join(5)
+
+
+@contextlib.contextmanager
+def banner_server(banner=b"SSH-2.0-OpenSSH_9.6\r\n"):
+    """A tcp:// "host:port" on this machine where something that is not Dask
+    speaks first, as an SSH server does (its banner, then silence until it
+    is closed); closed after."""
+    import threading
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(8)
+    srv.settimeout(0.2)
+    stop = threading.Event()
+
+    def serve():
+        conns = []
+        while not stop.is_set():
+            try:
+                conn, _ = srv.accept()
+            except OSError:
+                continue
+            with contextlib.suppress(OSError):
+                conn.sendall(banner)
+            conns.append(conn)
+        for c in conns:
+            c.close()
+
+    t = threading.Thread(target=serve, daemon=True)
+    t.start()
+    try:
+        yield f"127.0.0.1:{srv.getsockname()[1]}"
+    finally:
+        stop.set()
+        t.join(5)
+        srv.close()

@@ -23,6 +23,7 @@ import logging
 import os
 import signal
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -47,7 +48,10 @@ __all__ = [
 
 CONNECT_TIMEOUT = 10.0  # seconds to reach a scheduler given by address (and for it to have a worker)
 FRAME_RETRIES = 2  # frames submitted again after data was lost with a worker
+START_POLL = 0.02  # seconds between looks at a LocalCluster's start (start_cluster)
 STALL_CHECK = 1.0  # seconds between looks for tasks Dask left waiting for workers that are gone
+PROBE_QUIET = 1.0  # seconds a tcp:// scheduler address may stay silent before it is asked as a web server is
+PROBE_REQUEST = b"HEAD / HTTP/1.0\r\n\r\n"  # what it is asked then: a Dask scheduler speaks first
 WORKERS_PER_CORE = 4  # a LocalCluster started here: at most this many worker processes per CPU core
 
 
@@ -257,31 +261,106 @@ def restore_environ(snapshot: dict[str, str | None]) -> None:
             os.environ[k] = v
 
 
-def start_cluster(workers: int, **kw: Any) -> Any:
+def _block_sigint() -> None:
+    """SIGINT held back (blocked) in this thread, and so in the threads it
+    starts and the processes they spawn (a signal mask is inherited through
+    thread creation, fork and exec); POSIX only.
+
+    multiprocessing's resource tracker is started first, if it does not run
+    yet: the first spawn starts it and unblocks SIGINT in the spawning thread
+    after (Python 3.11), which would be Dask's IO loop thread, so that the
+    threads it starts next, and the workers they spawn, would see SIGINT."""
+    if not hasattr(signal, "pthread_sigmask"):
+        return
+    with contextlib.suppress(Exception):
+        from multiprocessing import resource_tracker
+
+        resource_tracker.ensure_running()
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+
+
+def start_cluster(workers: int, *, close_timeout: float = CONNECT_TIMEOUT, **kw: Any) -> Any:
     """A LocalCluster of `workers` processes, one thread each, the dashboard
-    on a free port. Its worker processes ignore SIGINT: a terminal's Ctrl-C
-    reaches the whole process group, and the process that started them
-    stops them (their tracebacks would say nothing). They inherit the
-    ignoring through exec, so SIGINT is ignored here while they start: a
-    Ctrl-C in those seconds is lost (press it again)."""
+    on a free port.
+
+    Its worker processes never see SIGINT: a terminal's Ctrl-C reaches the
+    whole process group, and the process that started them stops them
+    (their tracebacks would say nothing). The cluster is started in a thread
+    of its own that blocks SIGINT; Dask's IO loop thread, the threads that
+    spawn the workers and so the workers inherit the mask (and a worker
+    plugin, ClusterOwner's, makes them ignore it as well). The calling
+    thread and the caller's SIGINT handler are left as they are: a Ctrl-C
+    while the cluster starts (the handler's KeyboardInterrupt, or whatever
+    else the wait raises) lets the start run to its end (Dask's start cut
+    at an arbitrary point would leave its worker processes behind), closes
+    the cluster (waiting at most `close_timeout` seconds), puts this
+    process's environment back (restore_environ) and is raised then."""
     d = _distributed()
     kw.setdefault("processes", True)
     # the workers report their failures through the futures; their own logs
     # (a cluster stopped on purpose: heartbeats to a closed scheduler) say nothing more
     kw.setdefault("silence_logs", logging.CRITICAL)
-    main = threading.current_thread() is threading.main_thread()
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     environ = environ_snapshot()
+    # shared by single list operations (atomic under the GIL; a signal's
+    # handler runs between them, never inside). The starting thread notes
+    # that it runs (`ran`), then starts nothing if the caller has given up
+    # already (`abandoned`), puts the cluster in `made` (its error in
+    # `failed`) and notes its end (`done`). The caller that gives up notes
+    # it, then waits for `done` if the thread ran (if it did not, it will
+    # see `abandoned`) and closes what `made` holds. The caller waits by
+    # polling: Thread.join() interrupted by a signal's exception marks the
+    # thread stopped while it runs (CPython 3.11, bpo-45274's fix), and
+    # is_alive() says False from then on.
+    ran: list = []
+    made: list = []
+    failed: list = []
+    done: list = []
+    abandoned: list = []
+
+    def start() -> None:
+        ran.append(True)
+        try:
+            if not abandoned:
+                _block_sigint()
+                made.append(
+                    d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw)
+                )
+        except BaseException as e:  # noqa: BLE001 - handed to the caller's thread
+            failed.append(e)
+        finally:
+            done.append(True)
+
     try:
-        return d.LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=":0", **kw)
-    finally:
+        threading.Thread(target=start, name="clvis-start-cluster", daemon=True).start()
+        while not done:
+            time.sleep(START_POLL)
         restore_environ(environ)  # the workers have theirs; this process keeps its own
-        if main:
-            signal.signal(signal.SIGINT, old)
+        if failed:
+            raise failed[0]
+        return made[0]  # the caller's from here on: an interrupt before, and the cluster is closed below
+    except BaseException:  # a Ctrl-C, or the start's error: raised once the start ended and was undone
+        abandoned.append(True)
+        cluster = None
+        while True:
+            try:  # another Ctrl-C meanwhile is taken as the first one (raised below), not as a way out
+                if ran and not done:
+                    time.sleep(START_POLL)
+                    continue
+                if cluster is None and made:
+                    cluster = made.pop()
+                if cluster is not None:
+                    with _quiet_logs(), contextlib.suppress(Exception):
+                        cluster.close(timeout=close_timeout)
+                restore_environ(environ)
+                break
+            except BaseException:  # noqa: BLE001 - see above
+                continue
+        raise
 
 
 def _probe(address: str, timeout: float) -> None:
-    """Fail fast on a tcp:// scheduler that refuses or does not answer."""
+    """Fail fast on a tcp:// scheduler that refuses, does not answer or is
+    no Dask scheduler (_first_words)."""
     parts = urlsplit(address if "://" in address else "tcp://" + address)
     known = _schemes()
     if known and parts.scheme not in known:
@@ -300,12 +379,80 @@ def _probe(address: str, timeout: float) -> None:
     if parts.scheme != "tcp":
         return  # tls://, ws://, wss://: Dask's own connect, bounded by the timeout
     try:
-        with socket.create_connection((parts.hostname, port), timeout=timeout):
-            pass
+        sock = socket.create_connection((parts.hostname, port), timeout=timeout)
     except TimeoutError:
         raise ClusterTimeout(f"scheduler {address}: no answer within connect_timeout={timeout:g} s") from None
     except OSError as e:
         raise ClusterError(f"scheduler {address}: cannot connect ({e.strerror or e})") from None
+    with sock:
+        said = _first_words(sock, min(PROBE_QUIET, timeout))
+    if said:
+        raise ClusterError(
+            f"scheduler {address}: what answered there is not a Dask scheduler (it said {said!r})"
+        )
+
+
+def _first_words(sock: socket.socket, quiet: float) -> str:
+    """What the peer of `sock` (just connected) says, when that is not the
+    start of a Dask message; "" when it is, or says nothing.
+
+    A Dask scheduler speaks first: its handshake, at once. A peer that says
+    nothing for `quiet` seconds is asked what a web client asks (``HEAD /``),
+    for a web server (``python -m http.server``) answers only a whole
+    request: Dask's own handshake is none, and the Client waited out its
+    connect_timeout to say "not reached". A peer silent after that too, or
+    that closes, is left to Dask's own connect (bounded by its timeout). A
+    Dask scheduler too busy to speak within `quiet` (stopped for 1.5 s:
+    measured) still speaks first and is taken as one; it reads the request
+    as a message of exabytes and drops that connection, with a MemoryError
+    in its log."""
+    data = _read_some(sock, quiet)
+    if data is None:
+        return ""
+    if not data:
+        with contextlib.suppress(OSError):
+            sock.sendall(PROBE_REQUEST)
+            data = _read_some(sock, quiet) or b""
+    if len(data) < 8 or _dask_prelude(data):
+        return ""  # nothing, or too little to tell: Dask's own connect says
+    line = (data.decode("ascii", "replace").strip().splitlines() or [""])[0][:60]
+    return line if line and line.isprintable() else data[:16].hex(" ")
+
+
+def _read_some(sock: socket.socket, wait: float) -> bytes | None:
+    """The first bytes (16 at least, when it sends that many) that the peer
+    sends within `wait` seconds; b"" when it sent nothing, None when it
+    closed without a word."""
+    data = b""
+    deadline = time.monotonic() + wait
+    while len(data) < 16:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            break
+        sock.settimeout(left)
+        try:
+            chunk = sock.recv(64 - len(data))
+        except TimeoutError:
+            break
+        except OSError:  # reset
+            return data or None
+        if not chunk:
+            return data or None
+        data += chunk
+    return data
+
+
+def _dask_prelude(data: bytes) -> bool:
+    """Whether `data` (8 bytes at least) can start a Dask TCP message: its
+    length in bytes, then its number of frames (each 8 bytes in this
+    machine's order, struct's "Q"), then each frame's length."""
+    (total,) = struct.unpack("Q", data[:8])
+    if not 16 <= total < 2**40:
+        return False
+    if len(data) < 16:
+        return True
+    (frames,) = struct.unpack("Q", data[8:16])
+    return 0 < frames < 2**20 and 8 + 8 * frames <= total
 
 
 def _schemes() -> list[str]:
@@ -422,7 +569,7 @@ class ClusterOwner:
         self._tokens: list = []
         self.client: Any = None
         if client is None:
-            self._cluster = start_cluster(check_local_workers(workers))
+            self._cluster = start_cluster(check_local_workers(workers), close_timeout=self._close_timeout)
             try:
                 client = d.Client(self._cluster, timeout=self.connect_timeout)
                 client.register_plugin(_quiet_workers())

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 import pytest
-from dask_cluster import TIMEOUT, distributed, http_like_server, local_cluster, silent_scheduler
+from dask_cluster import TIMEOUT, distributed, http_like_server, local_cluster, silent_scheduler, web_server
 from PIL import Image
 
 from clvis import cli, datasets
@@ -325,6 +325,22 @@ def test_a_port_where_no_dask_scheduler_answers(tiles, capsys):
     assert f"scheduler {hostport}: what answered there is not a Dask scheduler" in err
 
 
+def test_a_web_server_that_waits_for_a_request_is_no_scheduler_in_seconds(tiles, tmp_path, capsys):
+    """`python -m http.server` as --scheduler: "not reached within
+    connect_timeout=10 s" after 10 s before; now one line saying what
+    answered, in seconds."""
+    with web_server(tmp_path) as hostport:
+        t0 = time.monotonic()
+        rc, out, err = _run(capsys, "render", tiles[0][0], "--scheduler", hostport, *SMALL)
+        took = time.monotonic() - t0
+    assert rc == 2 and err.count("\n") == 1, err
+    assert (
+        f"scheduler {hostport}: what answered there is not a Dask scheduler (it said 'HTTP/1.0 200 OK')"
+        in err
+    )
+    assert took < 5
+
+
 def test_a_cluster_timeout_says_what_it_waited_for(tiles, capsys, monkeypatch):
     """Every OSError of the renderer was "--scheduler ADDRESS: cannot reach
     it", ClusterTimeout (a TimeoutError) included: "--scheduler None:
@@ -392,7 +408,7 @@ def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):
         deadline = time.monotonic() + TIMEOUT
         while len(_group(p.pid)) < 3 and p.poll() is None and time.monotonic() < deadline:
             time.sleep(0.2)  # the worker processes have started
-        while p.poll() is None and time.monotonic() < deadline:  # a Ctrl-C while the cluster starts is lost
+        while p.poll() is None and time.monotonic() < deadline:  # one is enough; more are harmless
             os.killpg(p.pid, signal.SIGINT)
             try:
                 p.wait(1.0)
@@ -417,6 +433,42 @@ def test_ctrl_c_on_workers_prints_one_line_and_leaves_no_workers(tmp_path):
     )
     lines = [ln for ln in err.splitlines() if not any(re.fullmatch(pat, ln) for pat in native)]
     assert lines == ["clvis render: interrupted; the Dask workers started here were stopped"], err
+    deadline = time.monotonic() + 10
+    while _group(p.pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _group(p.pid)
+
+
+def test_ctrl_c_while_the_local_cluster_starts_stops_the_command(tmp_path):
+    """SIGINT to the whole process group (a terminal's Ctrl-C) while the
+    LocalCluster of --workers starts: it was ignored then (so that the
+    workers inherited the ignoring), and the render ran to its end. Now:
+    exit status 130 within seconds, one line, no PNG written, no process of
+    the group left."""
+    path = tmp_path / "t.npz"
+    save_npz(path, PointCloud(np.random.default_rng(1).uniform(0, 1, (2000, 3))))
+    out_dir = tmp_path / "o"
+    cmd = [sys.executable, "-m", "clvis", "render", str(path), "--workers", "1", "--out", str(out_dir)]
+    p = subprocess.Popen(
+        [*cmd, "--quiet"], start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        # the cluster's start has begun: its first process (multiprocessing's
+        # resource tracker, then the worker, which joins a second or more later)
+        while len(_group(p.pid)) < 2 and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        sent = time.monotonic()
+        os.killpg(p.pid, signal.SIGINT)
+        out, err = p.communicate(timeout=TIMEOUT)
+        took = time.monotonic() - sent
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 130, err
+    assert err.splitlines() == ["clvis render: interrupted; the Dask workers started here were stopped"], err
+    assert took < 15, f"{took:.1f} s from the Ctrl-C to the exit"
+    assert not (out_dir.exists() and list(out_dir.iterdir()))
     deadline = time.monotonic() + 10
     while _group(p.pid) and time.monotonic() < deadline:
         time.sleep(0.2)

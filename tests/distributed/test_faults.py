@@ -19,7 +19,15 @@ import time
 
 import numpy as np
 import pytest
-from dask_cluster import TIMEOUT, distributed, http_like_server, local_cluster, silent_scheduler
+from dask_cluster import (
+    TIMEOUT,
+    banner_server,
+    distributed,
+    http_like_server,
+    local_cluster,
+    silent_scheduler,
+    web_server,
+)
 
 from clvis import Camera, datasets
 from clvis.distributed import DistributedIsoRenderer, DistributedRasterizer
@@ -226,6 +234,157 @@ def test_a_local_cluster_leaves_this_processs_environment_as_it_was(tmp_path, mo
     assert {k: os.environ.get(k) for k in keys} == before
 
 
+def _children():
+    """This process's child processes but multiprocessing's own helpers
+    (the resource tracker, the forkserver: one per process, not workers)."""
+    psutil = pytest.importorskip("psutil")  # a dependency of dask.distributed
+    out = set()
+    for p in psutil.Process().children(recursive=True):
+        try:
+            cmd = " ".join(p.cmdline())
+            if p.status() == psutil.STATUS_ZOMBIE:
+                continue
+        except psutil.Error:  # gone meanwhile
+            continue
+        if "resource_tracker" not in cmd and "forkserver" not in cmd:
+            out.add(p.pid)
+    return out
+
+
+def _ctrl_c_while_starting(start):
+    """start() with SIGINT sent to this process (from another thread, as a
+    terminal's Ctrl-C) as soon as a worker process of the LocalCluster it
+    starts exists: the start then waits for that worker to join (its
+    imports: a second or more). The SIGINT handler meanwhile records the
+    signal and raises KeyboardInterrupt while start() runs. Returns what
+    start returned or raised ("out"), the seconds from the signal to its end
+    ("took"), the signals the handler saw ("got"), whether the handler was
+    still the one installed ("kept"), the LocalClusters made meanwhile and
+    not closed when start() ended ("open") and clvis's starting threads
+    still running then ("starting")."""
+    from distributed.deploy.spec import SpecCluster
+
+    got: list = []
+    armed = [True]
+
+    def handler(signum, frame):
+        got.append(signum)
+        if armed:
+            raise KeyboardInterrupt
+
+    before = _children()
+    clusters = set(SpecCluster._instances)
+    sent: list = []
+    done: list = []
+
+    def watch():
+        deadline = time.monotonic() + TIMEOUT
+        while time.monotonic() < deadline and not done:
+            if _children() - before:
+                sent.append(time.monotonic())
+                os.kill(os.getpid(), signal.SIGINT)
+                return
+            time.sleep(0.01)
+
+    old = signal.signal(signal.SIGINT, handler)
+    watcher = threading.Thread(target=watch, daemon=True)
+    try:
+        watcher.start()
+        try:
+            out = start()
+        except BaseException as e:  # noqa: BLE001 - what the test looks at
+            out = e
+        ended = time.monotonic()
+        armed.clear()
+        opened = [repr(c) for c in set(SpecCluster._instances) - clusters if c.status.name != "closed"]
+        starting = [t.name for t in threading.enumerate() if t.name == "clvis-start-cluster"]
+        done.append(True)
+        watcher.join(TIMEOUT)
+        kept = signal.getsignal(signal.SIGINT) is handler
+    finally:
+        signal.signal(signal.SIGINT, old)
+    if not isinstance(out, BaseException):
+        out.close()
+    assert sent, "no worker process started"
+    return {
+        "out": out,
+        "took": ended - sent[0],
+        "got": got,
+        "kept": kept,
+        "open": opened,
+        "starting": starting,
+    }
+
+
+def _no_worker_left(started_before):
+    deadline = time.monotonic() + 10
+    while (left := _children() - started_before) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return not left
+
+
+def _check_stopped(r, before):
+    """A Ctrl-C while starting stopped it: KeyboardInterrupt, no cluster
+    open and no start running when it was raised, no worker left."""
+    assert isinstance(r["out"], KeyboardInterrupt), r["out"]
+    assert r["got"] == [signal.SIGINT] and r["kept"]
+    assert r["took"] < 15, f"{r['took']:.1f} s from the Ctrl-C to the KeyboardInterrupt"
+    assert not r["open"] and not r["starting"], r
+    assert _no_worker_left(before)
+
+
+def test_a_ctrl_c_while_a_local_cluster_starts_stops_it():
+    """SIGINT was ignored while the LocalCluster started (so that its
+    workers inherited the ignoring): a Ctrl-C in those seconds was lost and
+    the render ran to its end. Now the start runs in a thread of its own,
+    the caller's handler sees the Ctrl-C at once, the started cluster is
+    closed (no worker process left) and the KeyboardInterrupt is raised
+    then, not before; the handler and the environment are as they were."""
+    from clvis.distributed.cluster import dask_environ_keys
+
+    env = {k: os.environ.get(k) for k in dask_environ_keys()}
+    before = _children()
+    _check_stopped(_ctrl_c_while_starting(lambda: dcluster.start_cluster(1)), before)
+    assert {k: os.environ.get(k) for k in dask_environ_keys()} == env
+
+
+def test_a_ctrl_c_while_a_renderers_local_cluster_starts_stops_it(tmp_path):
+    """The same through DistributedRasterizer(workers=1), as `clvis render
+    --workers 1` builds it: no renderer, no worker process left."""
+    path = tmp_path / "t.npz"
+    save_npz(path, PointCloud(np.random.default_rng(0).uniform(0, 1, (500, 3))))
+    before = _children()
+    r = _ctrl_c_while_starting(
+        lambda: DistributedRasterizer([path], workers=1, timeout=TIMEOUT, connect_timeout=10)
+    )
+    _check_stopped(r, before)
+
+
+def test_local_workers_never_see_sigint():
+    """A terminal's Ctrl-C reaches the whole process group: the workers of
+    a LocalCluster started here hold SIGINT back (blocked; the thread that
+    starts the cluster blocks it and Dask's threads and the workers inherit
+    the mask) from their first instruction, in a fresh process too (where
+    multiprocessing's resource tracker, started by the first spawn,
+    unblocked it in the spawning thread: the workers saw SIGINT)."""
+    if not sys.platform.startswith("linux"):
+        pytest.skip("reads /proc/PID/status")
+    code = (
+        "import psutil\n"
+        "from clvis.distributed.cluster import start_cluster\n"
+        "c = start_cluster(2)\n"
+        "for p in psutil.Process().children():\n"
+        "    if 'resource_tracker' not in ' '.join(p.cmdline()):\n"
+        "        st = dict(ln.split(':', 1) for ln in open(f'/proc/{p.pid}/status'))\n"
+        "        print(int(st['SigBlk'], 16) | int(st['SigIgn'], 16))\n"
+        "c.close()\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=TIMEOUT)
+    assert r.returncode == 0, r.stderr
+    masks = [int(x) for x in r.stdout.split()]
+    assert len(masks) == 2 and all(m & (1 << (signal.SIGINT - 1)) for m in masks), r.stdout
+
+
 def _closed_port():
     s = socket.socket()
     s.bind(("127.0.0.1", 0))
@@ -358,6 +517,44 @@ def test_a_port_where_no_dask_scheduler_answers_is_a_clvis_error():
     for address in ("localhost", "tcp://127.0.0.1:99999"):
         with pytest.raises(ClusterError, match=f"scheduler {re.escape(address)}: not a host:port address"):
             DistributedRasterizer(["x.npz"], address, timeout=TIMEOUT)
+
+
+def test_a_web_server_that_waits_for_a_request_is_no_dask_scheduler_in_seconds(tmp_path):
+    """`python -m http.server` answers only a whole HTTP request: Dask's
+    handshake is none, so the Client waited out connect_timeout (10 s) and
+    said "not reached". Now the probe asks it as a web client would once it
+    stays silent (a Dask scheduler speaks first): a ClusterError in about a
+    second. A server that speaks first (an SSH banner) is told at once; a
+    real scheduler still connects."""
+    with web_server(tmp_path) as hostport:
+        for address in (hostport, f"tcp://{hostport}"):
+            t0 = time.monotonic()
+            said = r"what answered there is not a Dask scheduler \(it said 'HTTP/1\.0 200 OK'\)"
+            with pytest.raises(ClusterError, match=rf"scheduler {address}: {said}"):
+                DistributedRasterizer(["x.npz"], address, timeout=TIMEOUT, connect_timeout=10)
+            assert time.monotonic() - t0 < 5
+    with banner_server() as hostport:
+        with pytest.raises(ClusterError, match=r"not a Dask scheduler \(it said 'SSH-2\.0-OpenSSH_9\.6'\)"):
+            DistributedIsoRenderer(
+                np.zeros((8, 8, 8), np.float32), hostport, timeout=TIMEOUT, connect_timeout=10
+            )
+        t0 = time.monotonic()
+        with pytest.raises(ClusterError, match="not a Dask scheduler"):
+            dcluster._probe(hostport, 10.0)
+        assert time.monotonic() - t0 < dcluster.PROBE_QUIET  # told before the probe would ask anything
+
+
+def test_the_probe_takes_a_dask_schedulers_first_words_as_dask():
+    """The probe reads a scheduler's handshake (it speaks first) and
+    leaves: nothing sent, no error, in well under the wait for a silent
+    peer; a bare scheduler, no worker needed."""
+    with distributed.LocalCluster(n_workers=0, dashboard_address=":0") as cluster:
+        for _ in range(3):
+            t0 = time.monotonic()
+            dcluster._probe(cluster.scheduler_address, 10.0)
+            assert time.monotonic() - t0 < dcluster.PROBE_QUIET
+        with distributed.Client(cluster.scheduler_address, timeout=TIMEOUT) as c:
+            assert c.scheduler_info()["address"] == cluster.scheduler_address
 
 
 def test_a_scheduler_without_workers_fails_after_connect_timeout():

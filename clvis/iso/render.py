@@ -85,7 +85,7 @@ import pyopencl.array as cla
 
 from .. import limits, runtime
 from .._arrays import positive_int, resolve_queue, to_host, triple
-from ..camera import Camera, ray_buffer
+from ..camera import Camera, check_aspect, ray_buffer
 from ..errors import DataError
 from ..images import Picture, float_rgba8
 from ..io.volumes import volume_parts
@@ -676,6 +676,7 @@ class IsoRenderer:
             device_bytes=tile_bytes + (0 if host else image_bytes),
             host_bytes=image_bytes if host else 0,
         )
+        check_aspect(camera, w, h)  # the arguments are good and the image fits: the render goes on
         q, zv = self.queue, self.volume
         shape, spacing, origin = zv.shape, self.spacing, self.origin
         start = runtime.marker(q)

@@ -577,6 +577,7 @@ class DistributedIsoRenderer(ClusterOwner):
                 "seconds": frame_seconds(frame, whole.seconds),
                 "bytes_sent": sent,
             },
+            camera=camera,
         )
 
 

@@ -151,7 +151,9 @@ def test_empty_and_one(queue):
     one = Gaussians([[0, 0, 0]], [[0.5, 0.2, 0.8]], values=[1.0])
     _pair(queue, one, _cam(w=W, h=H))
     behind = Gaussians([[0, -9, 0]], [[0.3] * 3], values=[0.0])
-    img = gr.GaussianRenderer(behind, method="tiles", queue=queue).render(_cam(eye=(0, -6, 0), w=W, h=H), W, H)
+    img = gr.GaussianRenderer(behind, method="tiles", queue=queue).render(
+        _cam(eye=(0, -6, 0), w=W, h=H), W, H
+    )
     assert (img.rgba == 0).all() and img.stats["keys"] == 0
 
 

@@ -225,10 +225,9 @@ def _projection_aspect(projection) -> float | None:
     return ratio if math.isfinite(ratio) and ratio > 0 else None
 
 
-# clvis's own renders that pass on a camera the user's render was already
-# checked for (a distributed frame's workers, Rasterizer.render under
-# rasterize): no second warning. A context variable, so it holds for the
-# thread (or task) that set it only.
+# clvis's own renders of a camera already checked (a distributed frame's
+# workers and their windows, a throwaway warm-up frame): no second warning.
+# A context variable, so it holds for the thread (or task) that set it only.
 _ASPECT_CHECKED: contextvars.ContextVar[bool] = contextvars.ContextVar("clvis_aspect_checked", default=False)
 
 
@@ -247,8 +246,8 @@ _PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
 
 
 def _caller_stacklevel() -> int:
-    """The stacklevel of the first frame outside the clvis package (the
-    user's call), counted from check_aspect's caller's caller."""
+    """The stacklevel, as warnings.warn in check_aspect counts it, of the
+    first frame outside the clvis package: the user's call."""
     frame: FrameType | None = sys._getframe(2)  # check_aspect's caller
     level = 2
     while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):

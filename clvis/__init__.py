@@ -18,7 +18,7 @@ if TYPE_CHECKING:  # the names for type checkers; at run time __getattr__ import
     from . import datasets
     from .camera import Camera, grid_cameras, hemisphere_cameras
     from .colormap import TransferFunction
-    from .errors import ClvisError, DataError, DeviceError, KernelBuildError
+    from .errors import AspectWarning, ClvisError, DataError, DeviceError, KernelBuildError
     from .gauss import (
         GaussianImage,
         GaussianRenderer,
@@ -46,7 +46,9 @@ if TYPE_CHECKING:  # the names for type checkers; at run time __getattr__ import
 _WHERE = {
     **dict.fromkeys(["Camera", "grid_cameras", "hemisphere_cameras"], ".camera"),
     "TransferFunction": ".colormap",
-    **dict.fromkeys(["ClvisError", "DataError", "DeviceError", "KernelBuildError"], ".errors"),
+    **dict.fromkeys(
+        ["AspectWarning", "ClvisError", "DataError", "DeviceError", "KernelBuildError"], ".errors"
+    ),
     **dict.fromkeys(
         [
             "GaussianImage",
@@ -70,6 +72,7 @@ _WHERE = {
 }
 
 __all__ = [
+    "AspectWarning",
     "Camera",
     "ClvisError",
     "DataError",

@@ -19,24 +19,33 @@ NARVis training viewpoints (z is up); :func:`fit_camera` and
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
+import os
+import sys
+import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from types import FrameType
 
 import numpy as np
 import numpy.typing as npt
 
 from ._arrays import positive_int, real_array
-from .errors import DataError
+from .errors import AspectWarning, DataError
 
 __all__ = [
+    "ASPECT_TOLERANCE",
     "AXIS_VIEWS",
     "CAMERA_DTYPE",
     "Camera",
     "Projected",
+    "aspect_checked",
     "axis_camera",
     "box_corners",
     "camera_buffer",
+    "check_aspect",
     "fit_camera",
     "grid_cameras",
     "hemisphere_cameras",
@@ -45,12 +54,18 @@ __all__ = [
     "ray_buffer",
     "robust_bounds",
     "robust_fences",
+    "same_camera",
     "singular",
 ]
 
 # Camera.fit frames the bounding sphere enlarged by this factor, so rounding never
 # pushes a box corner out of the image.
 FIT_MARGIN = 1.05
+# The renderers warn (AspectWarning) when a camera's aspect and the image's
+# width / height differ by more than this fraction (the larger over the
+# smaller, less 1): a picture stretched by 1 % is hard to see, by 2 % a
+# circle is visibly an ellipse. Rounding a size to whole pixels stays far below.
+ASPECT_TOLERANCE = 0.01
 # A box smaller than this (relative to its distance from the origin, or absolute
 # below 1) is treated as a sphere of this radius, so a single point still gets a
 # camera whose float32 matrices resolve it.
@@ -188,6 +203,100 @@ def _ortho(height: float, aspect: float, near: float, far: float) -> np.ndarray:
     return p
 
 
+def _projection_aspect(projection) -> float | None:
+    """width / height of the view volume `projection` maps onto clip space
+    (|P[1, 1] / P[0, 0]|: gluPerspective's and glOrtho's `aspect`), or None
+    where it has none: x and y mixed (P[0, 1], P[1, 0], or w depending on x
+    or y), a zero scale, a ratio not finite."""
+    try:
+        p = np.asarray(projection, np.float64)
+    except (TypeError, ValueError):
+        return None
+    if p.shape != (4, 4) or not np.isfinite(p).all():
+        return None
+    sx, sy = abs(float(p[0, 0])), abs(float(p[1, 1]))
+    mixed = max(abs(float(p[0, 1])), abs(float(p[1, 0])))
+    if sx == 0 or sy == 0 or mixed > 1e-9 * max(sx, sy):
+        return None
+    if max(abs(float(p[3, 0])), abs(float(p[3, 1]))) > 1e-9 * max(abs(float(p[3, 2])), abs(float(p[3, 3]))):
+        return None
+    with np.errstate(all="ignore"):
+        ratio = sy / sx
+    return ratio if math.isfinite(ratio) and ratio > 0 else None
+
+
+# clvis's own renders of a camera already checked (a distributed frame's
+# workers and their windows, a throwaway warm-up frame): no second warning.
+# A context variable, so it holds for the thread (or task) that set it only.
+_ASPECT_CHECKED: contextvars.ContextVar[bool] = contextvars.ContextVar("clvis_aspect_checked", default=False)
+
+
+@contextlib.contextmanager
+def aspect_checked() -> Iterator[None]:
+    """Within it, :func:`check_aspect` does not warn (in this thread or task
+    only): for clvis's renders of a camera already checked."""
+    token = _ASPECT_CHECKED.set(True)
+    try:
+        yield
+    finally:
+        _ASPECT_CHECKED.reset(token)
+
+
+_PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+
+def _caller_stacklevel() -> int:
+    """The stacklevel, as warnings.warn in check_aspect counts it, of the
+    first frame outside the clvis package: the user's call."""
+    frame: FrameType | None = sys._getframe(2)  # check_aspect's caller
+    level = 2
+    while frame is not None and os.path.abspath(frame.f_code.co_filename).startswith(_PACKAGE):
+        frame = frame.f_back
+        level += 1
+    return level
+
+
+def check_aspect(camera, width: int, height: int) -> None:
+    """Warn (:class:`clvis.AspectWarning`) when `camera`'s aspect
+    (:attr:`Camera.aspect`) and ``width / height`` differ by more than
+    ASPECT_TOLERANCE: the picture would come out stretched. A projection
+    without an aspect (x and y mixed on purpose) is not checked. The
+    public renderers call it once per render."""
+    if _ASPECT_CHECKED.get():
+        return
+    have = _projection_aspect(getattr(camera, "projection", None))
+    if have is None:
+        return
+    want = int(width) / int(height)
+    if max(have, want) / min(have, want) - 1 <= ASPECT_TOLERANCE + 1e-12:  # 101 x 100: 1 %, not more
+        return
+    warnings.warn(
+        f"camera: its aspect (width / height) is {have:.4g} but the image is {int(width)} x "
+        f"{int(height)} (aspect {want:.4g}): the picture is stretched "
+        f"{'horizontally' if want > have else 'vertically'}. Render with "
+        f"camera.with_aspect({int(width)} / {int(height)}), or build the camera with "
+        f"aspect={int(width)} / {int(height)}; for a projection made so on purpose, "
+        "warnings.filterwarnings('ignore', category=clvis.AspectWarning)",
+        AspectWarning,
+        stacklevel=_caller_stacklevel(),
+    )
+
+
+def same_camera(a: Camera, b: Camera) -> bool:
+    """Whether two cameras give the same rays: the same kind and view and
+    projection matrices equal within 1e-9 of each matrix's largest entry
+    (float64 rounding, far below what float32 rays resolve)."""
+    if a is b:
+        return True
+    if a.orthographic != b.orthographic:
+        return False
+    for x, y in ((a.view, b.view), (a.projection, b.projection)):
+        scale = max(1.0, float(np.abs(x).max()), float(np.abs(y).max()))
+        if float(np.abs(x - y).max()) > 1e-9 * scale:
+            return False
+    return True
+
+
 @dataclass(frozen=True)
 class Projected:
     """Points in pixels, as :meth:`Camera.project` defines them; arrays of length N.
@@ -212,6 +321,13 @@ class Camera:
 
     Build one with :meth:`look_at`, :meth:`ortho` or :meth:`fit`. The arrays are
     read-only float64 copies.
+
+    A camera is made for one image shape: its ``aspect`` (width / height,
+    default 1) is part of the projection. Render it at that width / height;
+    for another size, ``camera.with_aspect(width / height)`` is the same
+    camera (eye, target, up, vertical field of view or height, near, far)
+    for it. The renderers warn (:class:`clvis.AspectWarning`) when the two
+    differ by more than 1 %: the picture would be stretched.
 
     Attributes
     ----------
@@ -283,9 +399,12 @@ class Camera:
         eye, target, up = _vec3("eye", eye), _vec3("target", target), _vec3("up", up)
         fov_y, aspect = _fov(fov_y), _positive("aspect", aspect)
         near, far = _near_far(near, far, perspective=True)
-        return cls(
+        cam = cls(
             _view_matrix(eye, target, up), _perspective(fov_y, aspect, near, far), near, far, False, eye
         )
+        # what with_aspect builds again (exactly look_at's matrices for the new aspect)
+        object.__setattr__(cam, "_made", ("look_at", eye, target, up, fov_y, near, far))
+        return cam
 
     @classmethod
     def ortho(
@@ -306,7 +425,9 @@ class Camera:
         eye, target, up = _vec3("eye", eye), _vec3("target", target), _vec3("up", up)
         height, aspect = _positive("height", height), _positive("aspect", aspect)
         near, far = _near_far(near, far, perspective=False)
-        return cls(_view_matrix(eye, target, up), _ortho(height, aspect, near, far), near, far, True, eye)
+        cam = cls(_view_matrix(eye, target, up), _ortho(height, aspect, near, far), near, far, True, eye)
+        object.__setattr__(cam, "_made", ("ortho", eye, target, up, height, near, far))
+        return cam
 
     @classmethod
     def fit(
@@ -345,6 +466,41 @@ class Camera:
     def matrix(self) -> np.ndarray:
         """projection @ view, (4, 4) float64."""
         return self.projection @ self.view
+
+    @property
+    def aspect(self) -> float | None:
+        """The width / height the projection is made for (look_at's, ortho's
+        and fit's `aspect`): ``|projection[1, 1] / projection[0, 0]|``. None
+        for a projection that has none (one given as a matrix that mixes x
+        and y). Render at a width / height equal to it, or see
+        :meth:`with_aspect`."""
+        return _projection_aspect(self.projection)
+
+    def with_aspect(self, aspect: float) -> Camera:
+        """The same camera for an image of another width / height `aspect`
+        (e.g. ``camera.with_aspect(640 / 360)``): the same eye, view
+        direction, up, near and far, and the same vertical extent (field of
+        view, or an orthographic camera's height); the horizontal extent
+        follows the new aspect. A camera from look_at, ortho or fit comes
+        out exactly as made with that aspect (fit's distance is not
+        recomputed: call fit again to frame the box for the new shape).
+        One made from matrices has its projection's x row scaled
+        (``aspect`` must not be None)."""
+        aspect = _positive("aspect", aspect)
+        made = self.__dict__.get("_made")
+        if made is not None:
+            kind, eye, target, up, size, near, far = made
+            build = Camera.look_at if kind == "look_at" else Camera.ortho
+            return build(eye, target, up, size, aspect, near, far)
+        have = self.aspect
+        if have is None:
+            raise ValueError(
+                "camera: its projection has no aspect to change (it mixes x and y, or a scale is "
+                "zero); build it with Camera.look_at / Camera.ortho and the aspect you need"
+            )
+        p = np.array(self.projection)
+        p[0, :] *= have / aspect
+        return Camera(self.view, p, self.near, self.far, self.orthographic, self.eye)
 
     @property
     def depth_row(self) -> np.ndarray:

@@ -4,7 +4,8 @@ Every error clvis raises on purpose is a :class:`ClvisError` (or, for a wrong
 argument type or value, a :class:`TypeError` / :class:`ValueError` naming the
 argument). Catch ``ClvisError`` to handle all of clvis's own failures.
 Settings clvis could not use and ignored (a bad environment variable) are
-reported with a :class:`ClvisWarning`.
+reported with a :class:`ClvisWarning`; a camera whose aspect ratio is not the
+image's (a stretched picture) with an :class:`AspectWarning`.
 """
 
 from __future__ import annotations
@@ -47,6 +48,15 @@ class DataError(ClvisError, ValueError):
 class ClvisWarning(UserWarning):
     """A setting clvis could not use and ignored; the message names it, the
     values it accepts and what clvis used instead."""
+
+
+class AspectWarning(UserWarning):
+    """A renderer was given a camera whose aspect ratio (``Camera.aspect``,
+    width / height of its projection) differs from the image's width /
+    height by more than 1 %: the picture comes out stretched. The message
+    names both ratios; ``camera.with_aspect(width / height)`` is the same
+    camera for that image. A projection made so on purpose: filter it,
+    ``warnings.filterwarnings("ignore", category=clvis.AspectWarning)``."""
 
 
 class ClusterError(ClvisError):

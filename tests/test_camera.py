@@ -1,11 +1,22 @@
 """Camera matrices, the float32 pixel convention, the viewpoint samplers, bad input."""
 
 import math
+import warnings
 
 import numpy as np
 import pytest
 
-from clvis.camera import Camera, grid_cameras, hemisphere_cameras
+import clvis
+from clvis.camera import (
+    Camera,
+    _projection_aspect,
+    aspect_checked,
+    axis_camera,
+    check_aspect,
+    grid_cameras,
+    hemisphere_cameras,
+)
+from clvis.errors import AspectWarning
 
 
 def _h(m, p):
@@ -490,3 +501,141 @@ def test_point_spacing():
     # nothing in view: 0
     away = Camera.ortho((500, 500, 10), (500, 500, 0), (0, 1, 0), height=10, aspect=1.0, near=1, far=20)
     assert point_spacing(away, p, 100, 100) == 0.0
+
+
+# ---------------------------------------------------------------- aspect: one camera, one image shape
+
+_EYE, _TARGET = (2.2, -2.6, 1.8), (0.0, 0.0, 0.0)
+
+
+def test_aspect_is_the_projections():
+    assert Camera.look_at(_EYE, _TARGET).aspect == 1.0  # the default
+    assert Camera.look_at(_EYE, _TARGET, aspect=16 / 9).aspect == pytest.approx(16 / 9, rel=1e-15)
+    assert Camera.ortho(_EYE, _TARGET, height=3, aspect=0.5).aspect == pytest.approx(0.5, rel=1e-15)
+    assert Camera.fit((0, 0, 0), (1, 2, 3), aspect=2.5).aspect == pytest.approx(2.5, rel=1e-15)
+    assert axis_camera("top", (0, 0, 0), (4, 1, 1), aspect=3.0).aspect == pytest.approx(3.0, rel=1e-15)
+    # a projection that mixes x and y (an image rotated on screen, a projective x) has none
+    c = Camera.look_at(_EYE, _TARGET)
+    for i, j in ((0, 1), (1, 0), (3, 0)):
+        p = np.array(c.projection)
+        p[i, j] = 0.3
+        assert Camera(c.view, p, c.near, c.far, False, c.eye).aspect is None
+    # a mirrored projection keeps its ratio
+    p = np.array(c.projection)
+    p[0] *= -2.0
+    assert Camera(c.view, p, c.near, c.far, False, c.eye).aspect == pytest.approx(0.5)
+    # odd matrices: None, never inf or NaN (nor an exception)
+    huge = np.diag([1e-320, 1e300, 1.0, 1.0])
+    for m in (huge, np.diag([0.0, 1, 1, 1]), np.full((4, 4), np.nan), np.eye(3), "x", None):
+        assert _projection_aspect(m) is None
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda a: Camera.look_at(_EYE, _TARGET, (0, 0, 1), 40, a, 0.05, 20),
+        lambda a: Camera.ortho(_EYE, _TARGET, (0, 0, 1), 3.0, a, -1.0, 20),
+        lambda a: Camera.fit((-1, -1, -1), (1, 1, 1), aspect=a),
+    ],
+    ids=["look_at", "ortho", "fit"],
+)
+def test_with_aspect_is_the_camera_made_for_that_aspect(make):
+    """look_at / ortho / fit (aspect >= 1: the vertical extent decides the
+    distance) made square, then given 640 / 360, are the cameras made for
+    640 / 360, bit for bit: the same pictures."""
+    square, wide = make(1.0), make(640 / 360)
+    got = square.with_aspect(640 / 360)
+    assert got.aspect == pytest.approx(640 / 360, rel=1e-15)
+    np.testing.assert_array_equal(got.view, wide.view)
+    np.testing.assert_array_equal(got.projection, wide.projection)
+    np.testing.assert_array_equal(got.eye, square.eye)
+    assert (got.near, got.far, got.orthographic) == (square.near, square.far, square.orthographic)
+    assert got.focal_px(360) == square.focal_px(360)  # the vertical extent is kept
+    back = got.with_aspect(1.0)
+    np.testing.assert_array_equal(back.projection, square.projection)
+
+
+def test_with_aspect_of_a_matrix_camera():
+    """A camera made from matrices: the projection's x row scaled, the
+    rest (view, y, depth) kept; one without an aspect cannot change it."""
+    c = Camera.look_at(_EYE, _TARGET, fov_y=50, aspect=1.25, near=0.1, far=30)
+    raw = Camera(c.view, c.projection, c.near, c.far, False, c.eye)
+    got = raw.with_aspect(2.0)
+    assert got.aspect == pytest.approx(2.0)
+    np.testing.assert_allclose(
+        got.projection,
+        Camera.look_at(_EYE, _TARGET, fov_y=50, aspect=2.0, near=0.1, far=30).projection,
+        rtol=1e-14,
+    )
+    np.testing.assert_array_equal(got.projection[1:], raw.projection[1:])
+    np.testing.assert_array_equal(got.view, raw.view)
+    p = np.array(c.projection)
+    p[0, 1] = 0.3
+    with pytest.raises(ValueError, match="no aspect"):
+        Camera(c.view, p, c.near, c.far, False, c.eye).with_aspect(2.0)
+    for bad in (0, -1.5, float("inf"), float("nan")):
+        with pytest.raises(ValueError, match="aspect"):
+            c.with_aspect(bad)
+    with pytest.raises(TypeError, match="aspect"):
+        c.with_aspect("16/9")
+
+
+def test_check_aspect_warns_beyond_one_percent():
+    square = Camera.look_at(_EYE, _TARGET)  # aspect 1
+    with pytest.warns(AspectWarning) as caught:
+        check_aspect(square, 640, 360)
+    assert len(caught) == 1
+    text = str(caught[0].message)
+    assert "1.778" in text and " 1 " in text and "640 x 360" in text
+    assert "camera.with_aspect(640 / 360)" in text and "filterwarnings" in text
+    assert caught[0].filename == __file__  # the caller's line, not clvis's
+    assert issubclass(AspectWarning, UserWarning) and clvis.AspectWarning is AspectWarning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", AspectWarning)
+        check_aspect(square, 360, 360)
+        check_aspect(square, 101, 100)  # within 1 %
+        check_aspect(square.with_aspect(640 / 360), 640, 360)
+        check_aspect(Camera.look_at(_EYE, _TARGET, aspect=1.77), 640, 360)  # 0.4 %: rounding a size
+        p = np.array(square.projection)
+        p[0, 1] = 0.3  # no aspect: a projection made so on purpose is not checked
+        check_aspect(Camera(square.view, p, square.near, square.far, False, square.eye), 640, 360)
+        with aspect_checked():  # clvis's own renders of a camera already checked
+            check_aspect(square, 640, 360)
+    with pytest.warns(AspectWarning):
+        check_aspect(square, 360, 640)  # and back on after it
+
+
+def test_renderers_warn_once_per_render_of_a_stretched_camera():
+    """Every public renderer given a camera of another aspect than the
+    image's warns, once a call (not per tile or pass), at the caller's
+    line; with the camera's with_aspect nothing is said; the warning can
+    be filtered."""
+    from clvis import datasets
+    from clvis.gauss.points import gaussians_from_points
+
+    W, H = 40, 22
+    square = Camera.look_at(_EYE, _TARGET, (0, 0, 1), 40, 1.0, 0.05, 20)
+    pos = np.random.default_rng(3).uniform(-1, 1, (200, 3)).astype(np.float32)
+    ml = datasets.marschner_lobb(9)
+    r = clvis.Rasterizer(pos)
+    ir = clvis.IsoRenderer(ml["volume"], rate=16, spacing=ml["spacing"], origin=ml["origin"])
+    gr = clvis.GaussianRenderer(gaussians_from_points(pos))
+    renders = {
+        "rasterize": lambda cam: clvis.rasterize(pos, cam, W, H),
+        "Rasterizer.render": lambda cam: r.render(cam, W, H),
+        "Rasterizer.visibility": lambda cam: r.visibility(cam, W, H),
+        "IsoRenderer.render": lambda cam: ir.render(cam, W, H, 0.5, tile_pixels=W * 4),
+        "IsoRenderer.passes": lambda cam: list(ir.passes(cam, W, H, 0.5, tile_pixels=W * 4)),
+        "GaussianRenderer.render": lambda cam: gr.render(cam, W, H, tile_rows=8),
+        "render_gaussians": lambda cam: clvis.render_gaussians(gaussians_from_points(pos), cam, W, H),
+    }
+    for name, render in renders.items():
+        with pytest.warns(AspectWarning, match=r"camera\.with_aspect\(40 / 22\)") as caught:
+            render(square)
+        assert len(caught) == 1, name  # once, whatever the tiles and passes
+        assert caught[0].filename == __file__, (name, caught[0].filename)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", AspectWarning)
+            render(square.with_aspect(W / H))
+            warnings.filterwarnings("ignore", category=AspectWarning)  # the docstring's way out
+            render(square)

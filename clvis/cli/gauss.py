@@ -439,6 +439,7 @@ def render_panels(
     first renderer and frame, on a tiny scene); frame: the Gaussians the view
     frames and the default density scales with (default: all; a point cloud's
     bulk, its stray points left out, as clvis render frames it)."""
+    from ..camera import aspect_checked
     from ..colormap import TransferFunction
     from ..gauss import GaussianRenderer, gaussians_from_volume
 
@@ -471,7 +472,7 @@ def render_panels(
     # warm-up: build the kernels on a tiny scene (the build is timed apart
     # from the renders), so the figures below are the work itself
     t0 = time.perf_counter()
-    with progress.stage("building kernels"):
+    with progress.stage("building kernels"), aspect_checked():  # a throwaway 8 x 8 of the panels' camera
         GaussianRenderer(
             allg[0].subset(slice(0, 2)), tf, model=model, density=dens, k=k, kp=k, queue=queue, method=method
         ).render(cam, 8, 8)

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from .._arrays import on_host, triple
-from ..camera import Camera
+from ..camera import Camera, aspect_checked, check_aspect
 from ..errors import ClusterError, ClvisError, DataError, DeviceError
 from ..iso import IsoImage, IsoRenderer
 from . import composite as _c
@@ -346,9 +346,10 @@ def render_one(handle: _Handle, data: Any, view: dict) -> _c.Partial:
         }
         return _c.Partial((r0, r1), key, planes, worker, counts=counts, cols=(c0, c1), empty=EMPTY_PLANES)
     cam = view["camera"] if rect == (0, H, 0, W) else window(view["camera"], W, H, rect)
-    img = _renderer(handle, data).render(
-        cam, c1 - c0, r1 - r0, view["isovalue"], speculation=view["speculation"]
-    )
+    with aspect_checked():  # the client's render() checked the camera; a window keeps its aspect
+        img = _renderer(handle, data).render(
+            cam, c1 - c0, r1 - r0, view["isovalue"], speculation=view["speculation"]
+        )
     counts["passes"] = int(img.stats.get("passes", 0))
     hit = on_host(img.hit)
     planes = {"rgba": on_host(img.rgba), "t": on_host(img.t)}
@@ -548,6 +549,7 @@ class DistributedIsoRenderer(ClusterOwner):
         if not isinstance(camera, Camera):
             raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
         width, height = check_image_size(width, height, ISO)
+        check_aspect(camera, width, height)
         if isinstance(isovalue, bool) or not isinstance(isovalue, (int, float, np.integer, np.floating)):
             raise TypeError(f"isovalue: expected a real number, got {type(isovalue).__name__}")
         view = {
@@ -575,6 +577,7 @@ class DistributedIsoRenderer(ClusterOwner):
                 "seconds": frame_seconds(frame, whole.seconds),
                 "bytes_sent": sent,
             },
+            camera=camera,
         )
 
 

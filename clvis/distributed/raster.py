@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._arrays import on_host
-from ..camera import Camera
+from ..camera import Camera, aspect_checked, check_aspect
 from ..errors import ClvisError, DataError, DeviceError
 from ..io import PointCloud, read_points
 from ..raster import EMPTY, GBuffers, Rasterizer
@@ -295,16 +295,17 @@ def render_one(handle: _Handle, arrays: Any, view: dict) -> _c.Partial:
     """The full-frame partial of one handle's Rasterizer (cluster.render_partial
     composites a worker's): index and depth travel in the key, global ids."""
     r = _rasterizer(handle, arrays)
-    g = r.render(
-        view["camera"],
-        view["width"],
-        view["height"],
-        color_by=view["color_by"],
-        colormap=view["colormap"],
-        value_range=view["value_range"],
-        planes=view["planes"],
-        point_size=view["point_size"],
-    )
+    with aspect_checked():  # the client's render() checked the camera: no warning per partition
+        g = r.render(
+            view["camera"],
+            view["width"],
+            view["height"],
+            color_by=view["color_by"],
+            colormap=view["colormap"],
+            value_range=view["value_range"],
+            planes=view["planes"],
+            point_size=view["point_size"],
+        )
     covered = on_host(g.index) != EMPTY
     index = handle.global_ids(on_host(g.index))
     planes = {}  # index and depth travel in the key
@@ -662,6 +663,7 @@ class DistributedRasterizer(ClusterOwner):
 
         check_camera(camera)
         width, height = check_size(width, height)
+        check_aspect(camera, width, height)
         check_point_size(point_size)
         if color_by is not None and color_by not in self.attribute_names:
             raise ValueError(

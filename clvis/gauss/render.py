@@ -51,7 +51,7 @@ import pyopencl.array as cla
 
 from .. import limits, runtime
 from .._arrays import buffer_of, nonnegative_int, positive_int, resolve_queue, to_host
-from ..camera import Camera, ray_buffer
+from ..camera import Camera, check_aspect, ray_buffer
 from ..colormap import TransferFunction
 from ..errors import DeviceError
 from ..images import Picture, float_rgba8
@@ -343,6 +343,7 @@ class GaussianRenderer:
             raise TypeError(f"progress: expected a callable, got {type(progress).__name__}")
         if max_keys is not None:
             max_keys = positive_int("max_keys", max_keys)
+        check_aspect(camera, w, h)  # the arguments are good: the render goes on
         if self.method == "tiles":
             with runtime.pinned(self.config):
                 return _tiles_image(self, camera, w, h, tf, host, max_keys, progress)

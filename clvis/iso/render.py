@@ -85,7 +85,7 @@ import pyopencl.array as cla
 
 from .. import limits, runtime
 from .._arrays import positive_int, resolve_queue, to_host, triple
-from ..camera import Camera, ray_buffer
+from ..camera import Camera, check_aspect, ray_buffer
 from ..errors import DataError
 from ..images import Picture, float_rgba8
 from ..io.volumes import volume_parts
@@ -182,6 +182,9 @@ class IsoImage(Picture):
     next candidate block begins (the first of those ``candidates`` counts;
     the finished hits' ``t`` is on the same scale), +inf elsewhere and where
     ``candidates`` is 0; None for an image not from the renderer.
+    ``camera``: the :class:`clvis.Camera` the image was rendered with (its
+    rays give ``t`` its meaning: :func:`clvis.iso.sample_hits` uses it); None
+    for an image made by hand.
     From ``render(..., host=False)`` the seven planes are
     ``pyopencl.array.Array`` of the same shapes and dtypes.
     ``to_uint8(background=None)`` and ``save_png(path)``: the shaded surface
@@ -196,6 +199,7 @@ class IsoImage(Picture):
     stats: dict[str, Any]
     candidates: np.ndarray | cla.Array | None = None
     next_t: np.ndarray | cla.Array | None = None
+    camera: Camera | None = None
 
     def to_uint8(self, background: Sequence[int] | None = None) -> np.ndarray:
         """(H, W, 4) uint8 RGBA: the shaded surface where a ray hit it, transparent
@@ -676,6 +680,7 @@ class IsoRenderer:
             device_bytes=tile_bytes + (0 if host else image_bytes),
             host_bytes=image_bytes if host else 0,
         )
+        check_aspect(camera, w, h)  # the arguments are good and the image fits: the render goes on
         q, zv = self.queue, self.volume
         shape, spacing, origin = zv.shape, self.spacing, self.origin
         start = runtime.marker(q)
@@ -718,7 +723,7 @@ class IsoRenderer:
         decoded0 = self.cache.decoded_total
         if n_total == 0:  # no ray meets the volume: the (empty) image at once
             end = runtime.marker(q)
-            yield lambda copy=True: self._image(w, h, out, None, 1.0, stats, (start, end), copy)
+            yield lambda copy=True: self._image(w, h, camera, out, None, 1.0, stats, (start, end), copy)
             return
         # the macrocell grids' active bits for this isovalue, once a frame
         # (how macro_traverse reads them: 32 KB of bits for 2 MB of ranges at 256^3)
@@ -794,7 +799,7 @@ class IsoRenderer:
                 sd = {k: list(v) if isinstance(v, list) else v for k, v in stats.items()}
                 st, a, ev = (None if tile_done else state), state.active, (start, end)
                 yield lambda copy=True, st=st, a=a, f=frac, sd=sd, ev=ev: self._image(
-                    w, h, out, (st, a), f, sd, ev, copy
+                    w, h, camera, out, (st, a), f, sd, ev, copy
                 )
 
     def _n_spec(self, n: int, s: int, n_active: int, done: int) -> int:
@@ -935,10 +940,10 @@ class IsoRenderer:
     def _launch(self, name, n, *args):
         runtime.launch(self.queue, self._kernels[name], *runtime.items(self.queue, n, self._wg), *args)
 
-    def _image(self, w, h, out, tile, frac, stats, events, copy) -> IsoImage:
+    def _image(self, w, h, camera, out, tile, frac, stats, events, copy) -> IsoImage:
         if tile is not None and tile[0] is not None:  # a tile still running: its part as it stands
             tile[0].read(out, tile[1])
         image = out.image(w, h, copy)
-        image.completion, image.stats = frac, stats
+        image.completion, image.stats, image.camera = frac, stats, camera
         stats["seconds"] = runtime.seconds(*events)  # read back: the events are done
         return image

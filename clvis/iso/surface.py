@@ -14,7 +14,7 @@ white; SURFACE_COLOR gives back the image's own colours (within 1e-5).
 
     r = clvis.IsoRenderer(volume)
     img = r.render(cam, 640, 480, 0.5)
-    vals = clvis.iso.sample_hits(img, cam, temperature)   # NaN off the surface
+    vals = clvis.iso.sample_hits(img, field=temperature)  # NaN off the surface
     rgba = clvis.iso.color_surface(img, values=vals, colormap="coolwarm")
     two = clvis.iso.composite([r.render(cam, 640, 480, v) for v in (0.3, 0.6)],
                               colors=[(0.9, 0.3, 0.2), (0.3, 0.6, 1.0)])
@@ -33,7 +33,7 @@ import pyopencl.array as cla
 
 from .. import colormap, runtime
 from .._arrays import buf, check_array, is_device, resolve_queue, result, to_device, to_host, triple
-from ..camera import Camera, ray_buffer
+from ..camera import Camera, ray_buffer, same_camera
 from .render import CANDIDATES, IsoImage
 
 __all__ = ["SURFACE_COLOR", "color_surface", "composite", "sample_hits", "surface_colors"]
@@ -73,8 +73,8 @@ def _plane(image: IsoImage, name: str) -> np.ndarray:
 
 def sample_hits(
     image: IsoImage,
-    camera: Camera,
-    field: Any,
+    camera: Camera | None = None,
+    field: Any = None,
     spacing: Sequence[float] = (1.0, 1.0, 1.0),
     origin: Sequence[float] = (0.0, 0.0, 0.0),
     *,
@@ -82,14 +82,40 @@ def sample_hits(
 ) -> np.ndarray | cla.Array:
     """(H, W) float32: `field` (a 3-D [z, y, x] array, numpy or device; any
     grid: `spacing` (dz, dy, dx) and `origin` (x, y, z) place it in the
-    world) at the point where each pixel's ray hit the surface of `image`
-    (rendered by `camera`), by trilinear interpolation; NaN at pixels without
-    a hit and at hits outside the field's box. A host image gives numpy, a
-    device image (render(host=False)) a device array on the same queue."""
+    world) at the point where each pixel's ray hit the surface of `image`,
+    by trilinear interpolation; NaN at pixels without a hit and at hits
+    outside the field's box. A host image gives numpy, a device image
+    (render(host=False)) a device array on the same queue.
+
+    The rays are those of the camera the image was rendered with
+    (``image.camera``, which the renderer records): ``sample_hits(img,
+    field=f)`` or ``sample_hits(img, None, f)``. A `camera` given must be
+    that one (the same view and projection, to 1e-9): another camera's rays
+    would put each hit somewhere else, so it is a ValueError. An image made
+    by hand (``image.camera`` None) needs its `camera`."""
     if not isinstance(image, IsoImage):
         raise TypeError(f"image: expected a clvis.iso.IsoImage, got {type(image).__name__}")
-    if not isinstance(camera, Camera):
-        raise TypeError(f"camera: expected a clvis.Camera, got {type(camera).__name__}")
+    if camera is not None and not isinstance(camera, Camera):
+        hint = " (the field goes third, or as field=...)" if field is None else ""
+        raise TypeError(f"camera: expected a clvis.Camera or None, got {type(camera).__name__}{hint}")
+    if field is None:
+        raise TypeError("field: the field to sample is missing (sample_hits(image, field=...))")
+    recorded = getattr(image, "camera", None)
+    if recorded is not None and not isinstance(recorded, Camera):
+        raise TypeError(f"image.camera: expected a clvis.Camera or None, got {type(recorded).__name__}")
+    if camera is None:
+        if recorded is None:
+            raise ValueError(
+                "camera: the image records no camera (it was not made by IsoRenderer); pass the "
+                "camera it was rendered with: sample_hits(image, camera, field)"
+            )
+        camera = recorded
+    elif recorded is not None and not same_camera(camera, recorded):
+        raise ValueError(
+            f"camera: {camera!r} is not the camera the image was rendered with ({recorded!r}; "
+            "its rays would put the hits elsewhere): leave camera out (sample_hits(image, "
+            "field=...)) to use the image's own"
+        )
     host = not is_device(image.hit)
     queue = resolve_queue(queue, hit=image.hit, t=image.t, field=field)
     if not is_device(field):
@@ -228,13 +254,22 @@ def composite(
     the images' (the candidate blocks left over every isovalue), capped at
     CANDIDATES, None where an image has none; ``next_t``: the nearest of the
     images' (None where an image has none); ``completion``: the least
-    of the images'; ``stats``: {"images": their stats}."""
+    of the images'; ``stats``: {"images": their stats}; ``camera``: the
+    images' (ValueError where two record different cameras; None where one
+    records none)."""
     imgs = list(images)
     if not imgs or not all(isinstance(i, IsoImage) for i in imgs):
         raise TypeError("images: expected a non-empty sequence of clvis.iso.IsoImage")
     shape = tuple(imgs[0].hit.shape)
     if any(tuple(i.hit.shape) != shape for i in imgs):
         raise ValueError(f"images: expected one size, got {[tuple(i.hit.shape) for i in imgs]}")
+    cams = [getattr(i, "camera", None) for i in imgs]
+    known = [c for c in cams if c is not None]
+    if any(not same_camera(known[0], c) for c in known[1:]):
+        raise ValueError(
+            "images: rendered with different cameras; their depths do not compare (composite "
+            "images of one camera and size)"
+        )
     if planes is not None:
         rgba = np.stack([np.asarray(p, np.float32) for p in planes])
         if rgba.shape != (len(imgs), *shape, 4):
@@ -267,4 +302,5 @@ def composite(
         stats={"images": [i.stats for i in imgs]},
         candidates=left,
         next_t=next_t,
+        camera=cams[0] if len(known) == len(cams) else None,
     )

@@ -45,7 +45,7 @@ import pyopencl.array as cla
 from .. import colormap as _colormap
 from .. import runtime
 from .._arrays import is_device, resolve_queue, to_host
-from ..camera import Camera
+from ..camera import Camera, check_aspect
 from ..images import Picture, rgba8
 from .inputs import (
     MAX_ATTRIBUTES,
@@ -347,6 +347,7 @@ class Rasterizer:
         drawn flags (uint8), both on the device. point_size: as in render."""
         cam, near, far, W, H = self._program_args(camera, width, height)
         ps = check_point_size(point_size)
+        check_aspect(camera, W, H)
         with runtime.pinned(self.config):
             vis, drawn, _ = self._render(cam, near, far, W, H, ps)
         return vis, drawn
@@ -483,6 +484,7 @@ class Rasterizer:
         with runtime.pinned(self.config):
             f32, u8, df, du = self._plane_buffers(names)
             self._check_memory(W, H, len(f32), len(u8), tol is not None and self.n > 0, host, vel)
+            check_aspect(camera, W, H)  # the arguments are good and the image fits: the render goes on
             vis, drawn, cam_d = self._render(cam, near, far, W, H, ps)
             out = self._resolve(
                 vis, cam_d, W, H, focal, tf, tol, near, far, ps, f32, u8, df, du, vel, camera.orthographic

@@ -106,15 +106,15 @@ def test_volume_files_npy_and_nifti(tmp_path):
     nib.save(nib.Nifti1Image(vol.transpose(2, 1, 0), np.diag([2.0, 2.0, 2.0, 1.0])), tmp_path / "v.nii.gz")
     scene = view_cmd.load_scene(_args(str(tmp_path / "v.nii.gz")))
     assert scene.kind == "volume" and np.allclose(scene.hi - scene.lo, 2.0 * 23)
-    frames = list(scene.frames(_camera(scene), 48, 32, scene.settings, lambda: False))
+    frames = list(scene.frames(_camera(scene, 48 / 32), 48, 32, scene.settings, lambda: False))
     assert frames[-1].final and frames[-1].info["completion"] == 1.0
 
 
-def _camera(scene):
+def _camera(scene, aspect=4 / 3):
     from clvis.view import Orbit
 
     o = Orbit(scene.lo, scene.hi, points=scene.fit_points)
-    return o.camera(4 / 3)
+    return o.camera(aspect)
 
 
 def test_ctrl_c_stops_the_viewer_with_one_line_and_status_0(tmp_path):

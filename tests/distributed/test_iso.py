@@ -296,3 +296,30 @@ def test_worker_plan_makes_one_slab_per_worker_of_whole_brick_layers():
     assert plan[0][0] == ((0, 28), (0, 30), (0, 17)) and plan[1][0] == ((24, 41), (0, 30), (0, 17))
     assert worker_plan(bricks, 6) == [(r, 1) for r in bricks]  # fewer layers than workers: the bricks
     assert [c for _, c in worker_plan(bricks, 5)] == [8] * 5
+
+
+def test_a_stretched_camera_warns_once_and_the_image_records_its_camera(client):
+    """A camera of another aspect than the frame's: one AspectWarning, at
+    the caller's line (not one per brick or window); the image records the
+    frame's camera, and sample_hits takes it from there."""
+    import warnings
+
+    from clvis import iso
+    from clvis.errors import AspectWarning
+
+    v, sp, org = _ML["volume"], _ML["spacing"], _ML["origin"]
+    with DistributedIsoRenderer(
+        v, client, rate=RATE, spacing=sp, origin=org, brick=20, timeout=TIMEOUT
+    ) as dr:
+        square = _cam().with_aspect(1.0)
+        with pytest.warns(AspectWarning, match=r"with_aspect\(48 / 40\)") as caught:
+            dr.render(square, W, H, 0.5)
+        assert len(caught) == 1 and caught[0].filename == __file__
+        cam = _cam()
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", AspectWarning)
+            img = dr.render(cam, W, H, 0.5)
+    assert img.camera is cam
+    vals = iso.sample_hits(img, field=v, spacing=sp, origin=org)
+    assert img.hit.sum() > 200
+    np.testing.assert_allclose(vals[img.hit], 0.5, atol=0.02)

@@ -320,3 +320,20 @@ def test_a_local_cluster_of_its_own(tiles):
         _same(got, want)
         assert got.stats["workers"] == 1 and (got.index != EMPTY).any()
     assert dr.client.status == "closed" and cluster.status.name == "closed"
+
+
+def test_a_stretched_camera_warns_once(client, tiles):
+    """A camera of another aspect than the frame's: one AspectWarning on the
+    client, at the caller's line (the workers' renders say nothing more)."""
+    import warnings
+
+    from clvis.errors import AspectWarning
+
+    paths, _ = tiles
+    with DistributedRasterizer(paths, client, timeout=TIMEOUT) as dr:
+        with pytest.warns(AspectWarning, match=r"with_aspect\(64 / 48\)") as caught:
+            dr.render(_cam().with_aspect(1.0), W, H)
+        assert len(caught) == 1 and caught[0].filename == __file__
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", AspectWarning)
+            dr.render(_cam(), W, H)

@@ -165,7 +165,7 @@ def test_impossible_size_is_a_device_error(queue, monkeypatch):
     r = gr.GaussianRenderer(_random(10), queue=queue)
     monkeypatch.setattr(runtime.memory, "host_available_bytes", lambda: 10**6)
     with pytest.raises(clvis.DeviceError, match=r"GB on the device and .* GB on the host"):
-        r.render(_cam(), 4000, 4000)
+        r.render(_cam(w=4000, h=4000), 4000, 4000)
 
 
 def test_heavy_overlap(queue):

@@ -72,7 +72,7 @@ def test_near_plane_orthographic_bands(queue):
     """Means behind the near plane are culled (3DGS), orthographic cameras,
     and key bands give the same image."""
     g = _random(200, seed=5)
-    _check(queue, g, _cam(eye=(0.0, -0.5, 0.0), target=(0, 1, 0), near=0.3))
+    _check(queue, g, _cam(eye=(0.0, -0.5, 0.0), target=(0, 1, 0), near=0.3, w=W, h=H))
     cam = Camera.ortho((0.2, -6, 0.5), (0, 0, 0), (0, 0, 1), height=5.0, aspect=W / H, near=0.5, far=20)
     _check(queue, g, cam)
     whole, _ = _check(queue, g, _cam(w=40, h=70), w=40, h=70)

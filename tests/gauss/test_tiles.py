@@ -78,10 +78,10 @@ def test_near_plane_and_eye_inside(queue, model):
     big = Gaussians([[0.0, 0.1, 0.0]], [[2.0, 1.5, 1.0]], values=[0.5], opacities=[0.3])
     side = Gaussians([[1.5, 0.05, 0.2]], [[0.3, 0.2, 0.3]], values=[0.2], opacities=[0.8])
     g = Gaussians.concatenate([around, big, side])
-    cam = _cam(eye=(0.0, 0.0, 0.0), target=(0, 1, 0), near=0.1)
+    cam = _cam(eye=(0.0, 0.0, 0.0), target=(0, 1, 0), near=0.1, w=W, h=H)
     a, _ = _pair(queue, g, cam, model=model)
     assert a.rgba[..., 3].min() > 0.1
-    _check(queue, g, cam, model=model)
+    _check(queue, g, cam, w=W, h=H, model=model)
 
 
 def test_huge_and_tiny(queue):
@@ -137,8 +137,8 @@ def test_bands_bound_the_keys(queue, max_keys):
 def test_device_output(queue):
     g = _random(100, seed=10)
     r = gr.GaussianRenderer(g, method="tiles", queue=queue)
-    host = r.render(_cam(), W, H)
-    dev = r.render(_cam(), W, H, host=False)
+    host = r.render(_cam(w=W, h=H), W, H)
+    dev = r.render(_cam(w=W, h=H), W, H, host=False)
     np.testing.assert_array_equal(dev.rgba.get(), host.rgba)
     np.testing.assert_array_equal(dev.depth.get(), host.depth)
     np.testing.assert_array_equal(dev.stats["ray_stats"].get()[..., 0], host.hits)
@@ -146,12 +146,14 @@ def test_device_output(queue):
 
 def test_empty_and_one(queue):
     empty = Gaussians(np.zeros((0, 3)), np.zeros((0, 3)))
-    img = gr.GaussianRenderer(empty, method="tiles", queue=queue).render(_cam(), W, H)
+    img = gr.GaussianRenderer(empty, method="tiles", queue=queue).render(_cam(w=W, h=H), W, H)
     assert (img.rgba == 0).all() and np.isinf(img.depth).all() and img.stats["keys"] == 0
     one = Gaussians([[0, 0, 0]], [[0.5, 0.2, 0.8]], values=[1.0])
-    _pair(queue, one, _cam())
+    _pair(queue, one, _cam(w=W, h=H))
     behind = Gaussians([[0, -9, 0]], [[0.3] * 3], values=[0.0])
-    img = gr.GaussianRenderer(behind, method="tiles", queue=queue).render(_cam(eye=(0, -6, 0)), W, H)
+    img = gr.GaussianRenderer(behind, method="tiles", queue=queue).render(
+        _cam(eye=(0, -6, 0), w=W, h=H), W, H
+    )
     assert (img.rgba == 0).all() and img.stats["keys"] == 0
 
 
@@ -226,7 +228,7 @@ def test_bad_input(queue):
         gr.GaussianRenderer(g, kp="4", queue=queue)
     r = gr.GaussianRenderer(g, method="tiles", queue=queue)
     with pytest.raises(ValueError, match="max_keys"):
-        r.render(_cam(), W, H, max_keys=0)
+        r.render(_cam(w=W, h=H), W, H, max_keys=0)
     with pytest.raises(ValueError, match="not 'tiles'"):
         gt.tile_lists(gr.GaussianRenderer(g, method="bvh", queue=queue), _cam(), W, H)
 
@@ -237,7 +239,7 @@ def test_impossible_size_is_a_device_error(queue, monkeypatch):
     r = gr.GaussianRenderer(_random(10), method="tiles", queue=queue)
     monkeypatch.setattr(runtime.memory, "host_available_bytes", lambda: 10**6)
     with pytest.raises(clvis.DeviceError, match=r"GB on the device and .* GB on the host"):
-        r.render(_cam(), 4000, 4000)
+        r.render(_cam(w=4000, h=4000), 4000, 4000)
 
 
 @settings(max_examples=15, deadline=None)

@@ -325,7 +325,7 @@ def test_a_volume_read_from_a_file_brings_its_spacing_and_origin(queue):
 
     v = datasets.marschner_lobb(17)["volume"]
     vol = Volume(v, (0.5, 1.0, 2.0), (-3.0, 1.0, 0.25))
-    cam = Camera.fit((-3, 1, 0.25), (29, 17, 8.25))
+    cam = Camera.fit((-3, 1, 0.25), (29, 17, 8.25), aspect=W / H)
     got = iso.IsoRenderer(vol, rate=16, queue=queue)
     assert got.spacing == (0.5, 1.0, 2.0) and got.origin == (-3.0, 1.0, 0.25)
     want = iso.IsoRenderer(v, 16, (0.5, 1.0, 2.0), (-3.0, 1.0, 0.25), queue=queue)
@@ -574,7 +574,7 @@ def test_isovalue_must_be_a_number(queue):
             r.render(_cam(), 4, 4, bad)
     with pytest.raises(TypeError, match="completion"):
         r.render(_cam(), 4, 4, 0.5, completion="1")
-    assert r.render(_cam(), 4, 4, np.float32(0.5)).hit.shape == (4, 4)
+    assert r.render(_cam().with_aspect(1.0), 4, 4, np.float32(0.5)).hit.shape == (4, 4)
 
 
 _MEMORY_CHILD = """

@@ -226,3 +226,67 @@ def test_bad_arguments(rendered):
         iso.composite([img, img], colors=[(1, 0, 0)])
     with pytest.raises(TypeError, match="images"):
         iso.composite([])
+
+
+def test_the_image_records_its_camera(queue):
+    """The renderer records the camera in every image it makes (render,
+    passes, host=False, composite); sample_hits takes it when no camera is
+    given, and the same values as with the camera passed."""
+    d = _ML
+    r = iso.IsoRenderer(d["volume"], rate=16, spacing=d["spacing"], origin=d["origin"], queue=queue)
+    cam = _cam()
+    img = r.render(cam, W, H, 0.5, tile_pixels=W * 8)
+    assert img.camera is cam
+    assert all(p.camera is cam for p in r.passes(cam, W, H, 0.5, tile_pixels=W * 8))
+    dev = r.render(cam, W, H, 0.5, host=False)
+    assert dev.camera is cam
+    field = d["volume"][::-1].copy()  # a second field on the volume's grid
+    want = iso.sample_hits(img, cam, field, d["spacing"], d["origin"], queue=queue)
+    for got in (
+        iso.sample_hits(img, None, field, d["spacing"], d["origin"], queue=queue),
+        iso.sample_hits(img, field=field, spacing=d["spacing"], origin=d["origin"], queue=queue),
+        iso.sample_hits(img, _cam(), field, d["spacing"], d["origin"], queue=queue),  # an equal camera
+        iso.sample_hits(dev, field=field, spacing=d["spacing"], origin=d["origin"]).get(),
+    ):
+        np.testing.assert_array_equal(got, want)
+    assert np.isfinite(want).any()
+    assert iso.composite([img, r.render(cam, W, H, 0.3)]).camera is cam
+    # a hand-made image records none: the composite neither
+    bare = dataclasses.replace(img, camera=None)
+    assert iso.composite([img, bare]).camera is None
+
+
+def test_sample_hits_refuses_another_camera(rendered):
+    """The Python-API trial's case: a camera made square (look_at's default
+    aspect) for an image rendered at W x H, or another view, gave values at
+    the wrong points, silently; now a ValueError naming the camera. A
+    hand-made image without a camera needs one."""
+    vol, d, imgs = rendered
+    img = imgs[0.5]
+    square = Camera.look_at((2.2, -2.6, 1.8), (0, 0, 0), (0, 0, 1), fov_y=40, near=0.05, far=20)  # aspect 1
+    with pytest.raises(ValueError, match="not the camera the image was rendered with"):
+        iso.sample_hits(img, square, vol, d["spacing"], d["origin"])
+    others = (
+        _cam().with_aspect(1.0),
+        _cam(eye=(2.2, -2.6, 1.9)),
+        Camera.look_at((2.2, -2.6, 1.8), (0, 0, 0), (0, 0, 1), fov_y=41, aspect=W / H, near=0.05, far=20),
+    )
+    for other in others:
+        with pytest.raises(ValueError, match="not the camera the image was rendered with"):
+            iso.sample_hits(img, other, vol, d["spacing"], d["origin"])
+    bare = dataclasses.replace(img, camera=None)
+    with pytest.raises(ValueError, match="records no camera"):
+        iso.sample_hits(bare, None, vol, d["spacing"], d["origin"])
+    with pytest.raises(ValueError, match="records no camera"):
+        iso.sample_hits(bare, field=vol)
+    # with its camera given, a hand-made image works as before
+    np.testing.assert_array_equal(
+        iso.sample_hits(bare, _cam(), vol, d["spacing"], d["origin"]),
+        iso.sample_hits(img, field=vol, spacing=d["spacing"], origin=d["origin"]),
+    )
+    with pytest.raises(TypeError, match="field"):
+        iso.sample_hits(img)
+    with pytest.raises(TypeError, match="field goes third"):
+        iso.sample_hits(img, vol)
+    with pytest.raises(ValueError, match="different cameras"):
+        iso.composite([img, dataclasses.replace(imgs[0.3], camera=others[1])])

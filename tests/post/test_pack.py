@@ -587,7 +587,7 @@ def test_pack_gbuffers_radius_plane_of_a_scan(queue):
     from clvis.training import data
 
     sc = data.scan_scene("town", 20_000, 3)
-    cam = data.scan_cameras(sc, np.random.default_rng(0), 1)[0]
+    cam = data.scan_cameras(sc, np.random.default_rng(0), 1, 75 / 41)[0]
     ras = sc.rasterizer(queue=queue)
     host = sc.gbuffers(ras, cam, 75, 41, SCAN_GBUFFER_PLANES)
     dev = sc.gbuffers(ras, cam, 75, 41, SCAN_GBUFFER_PLANES, host=False)
@@ -610,7 +610,7 @@ def test_pack_gbuffers_from_the_rasterizer_on_the_device(queue):
 
     sc = data.narvis_scene("hurricane", 20_000, 1)
     ras = sc.rasterizer(queue=queue)
-    cam = data.narvis_cameras(sc, "hemisphere")[20]
+    cam = data.narvis_cameras(sc, "hemisphere", 75 / 41)[20]
     planes = ("rgb", "depth", "vel2d", "pressure")
     host = sc.gbuffers(ras, cam, 75, 41, planes)
     dev = sc.gbuffers(ras, cam, 75, 41, planes, host=False)

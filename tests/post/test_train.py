@@ -369,7 +369,7 @@ def test_narvis_targets_render_with_the_chosen_model():
     splat model (the same image as rendering it directly), which differs
     from the default max-response image of the same view."""
     sc = data.narvis_scene("hurricane", 20_000, 3)
-    cam = data.narvis_cameras(sc, "hemisphere")[3]
+    cam = data.narvis_cameras(sc, "hemisphere", 48 / 40)[3]
     planes = ("rgb", "depth", "vel2d")
     mr = data.narvis_frames(sc, [cam], 48, 40, planes)[0]
     sp = data.narvis_frames(sc, [cam], 48, 40, planes, target="splat")[0]
@@ -549,7 +549,7 @@ def test_narvis_pairs_are_registered():
     camera, so the image is bright where points were drawn and black far
     from any; the storm is the hurricane's flow at another time."""
     sc = data.narvis_scene("hurricane", 30_000, 2)
-    cams = data.narvis_cameras(sc, "hemisphere")
+    cams = data.narvis_cameras(sc, "hemisphere", 80 / 60)
     assert len(cams) == 128
     f = data.narvis_frames(sc, cams[10:11], 80, 60, ("rgb", "depth", "vel2d"))[0]
     assert f.x.shape == (9, 60, 80) and f.rgb.shape == (60, 80, 3)
@@ -957,7 +957,7 @@ def test_narvis_radius_plane_is_grs_sigma():
     gr = bare.gaussian_renderer()
     scales = np.sort(np.asarray(gr.gaussians.scales), axis=1)
     np.testing.assert_allclose(scales[:, 0], sigma, rtol=1e-6)
-    cam = data.narvis_cameras(sc, "hemisphere")[3]
+    cam = data.narvis_cameras(sc, "hemisphere", 48 / 40)[3]
     g = sc.gbuffers(sc.rasterizer(), cam, 48, 40, ("rgb", "depth", "vel2d", "radius"))
     r = np.asarray(g.radius_px)[np.asarray(g.covered)]
     assert len(r) and (r > 0).all()
@@ -1005,7 +1005,7 @@ def test_narvis_frames_give_their_scenes_buffers_back():
     active = pool.active_blocks
     for n in (3000, 9000):
         sc = data.narvis_flow_scene("abc", n, 7)
-        cam = data.narvis_cameras(sc, "hemisphere")[3]
+        cam = data.narvis_cameras(sc, "hemisphere", 40 / 32)[3]
         f = data.narvis_frames(sc, [cam], 40, 32, planes)[0]
         assert pool.held_blocks == 0 and pool.active_blocks == active
     want = np.clip(np.asarray(sc.gaussian_renderer().render(cam, 40, 32).rgba)[..., :3], 0, 1)

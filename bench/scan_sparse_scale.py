@@ -37,7 +37,7 @@ def _row(label, net, scene, cam, w, h):
     target = np.clip(np.asarray(gr.render(cam, w, h).rgba)[..., :3], 0, 1).astype(np.float32)
 
     def filtered(width, height):
-        g = scene.gbuffers(ras, cam, width, height, net.planes)
+        g = scene.gbuffers(ras, cam.with_aspect(width / height), width, height, net.planes)
         return filter_gbuffers(g, *net.spec.depth_filter, queue=ras.queue)
 
     g = filtered(w, h)

@@ -408,6 +408,7 @@ def _render_panels(
             scale = min(post_scale, min(width, height) // MIN_SCALED_SIDE)
         scale = max(scale, 1)
         pw, ph = (width, height) if scale == 1 else (round(width / scale), round(height / scale))
+        post_camera = camera if scale == 1 else camera.with_aspect(pw / ph)  # the rounded size's
 
         def frame() -> np.ndarray:
             """The documented pipeline: G-buffers with only the planes the
@@ -415,7 +416,7 @@ def _render_panels(
             host render's); read back never, but for narvis-scan, whose
             spec's depth filter runs first and brings its planes back once.
             At a scale, the picture is resized up to the view (bilinear)."""
-            gd = raster.render(camera, pw, ph, **kw, planes=post.attribute_planes, host=False)
+            gd = raster.render(post_camera, pw, ph, **kw, planes=post.attribute_planes, host=False)
             if post.name == "lidar":  # device planes in, device planes out
                 picture = post(depth_filter(gd, levels))
             elif post.spec.depth_filter is not None:

@@ -397,14 +397,9 @@ class PointScene(Scene):
         net = self._net(mode)
         scale = net.render_scale(src) if mode == "narvis-scan" else 1
         if scale > 1:  # a cloud sparse on screen: its frame smaller (PostNetwork.render_scale)
+            sw, sh = round(width / scale), round(height / scale)
             src = self._render(
-                camera,
-                round(width / scale),
-                round(height / scale),
-                settings,
-                1,
-                screen_velocity=False,
-                host=False,
+                camera.with_aspect(sw / sh), sw, sh, settings, 1, screen_velocity=False, host=False
             )
             info["post scale"] = scale
         rgba = net(_prefiltered(net, src))
@@ -481,9 +476,8 @@ class PointScene(Scene):
         self.raster.queue.finish()
         scale = net.render_scale(g)
         if scale > 1:  # a cloud sparse on screen: its frame smaller (PostNetwork.render_scale)
-            g = self._render(
-                camera, round(w / scale), round(h / scale), s, 1, screen_velocity=False, host=False
-            )
+            sw, sh = round(w / scale), round(h / scale)
+            g = self._render(camera.with_aspect(sw / sh), sw, sh, s, 1, screen_velocity=False, host=False)
             self.raster.queue.finish()
         ta = time.perf_counter()
         fast = net(_prefiltered(net, g))[..., :3]

@@ -34,11 +34,10 @@ def silent_scheduler():
 
 
 @contextlib.contextmanager
-def http_like_server():
-    """A tcp:// address on this machine where something that is not Dask
-    answers, as a web server does: a 400 reply to whatever it is sent
-    (read as a Dask message, its first bytes are a length of exabytes);
-    closed after."""
+def _served(answer):
+    """A "host:port" on this machine whose connections a thread hands to
+    `answer(conn)` as they come (each kept open until the server closes,
+    its OSErrors ignored); closed after."""
     import threading
 
     srv = socket.socket()
@@ -48,15 +47,17 @@ def http_like_server():
     stop = threading.Event()
 
     def serve():
+        conns = []
         while not stop.is_set():
             try:
                 conn, _ = srv.accept()
             except OSError:
                 continue
-            with conn, contextlib.suppress(OSError):
-                conn.settimeout(5)
-                conn.recv(4096)
-                conn.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 11\r\n\r\nBad Request")
+            conns.append(conn)
+            with contextlib.suppress(OSError):
+                answer(conn)
+        for c in conns:
+            c.close()
 
     t = threading.Thread(target=serve, daemon=True)
     t.start()
@@ -66,6 +67,23 @@ def http_like_server():
         stop.set()
         t.join(5)
         srv.close()
+
+
+@contextlib.contextmanager
+def http_like_server():
+    """A tcp:// address on this machine where something that is not Dask
+    answers, as a web server does: a 400 reply to whatever it is sent
+    (read as a Dask message, its first bytes are a length of exabytes);
+    closed after."""
+
+    def answer(conn):
+        conn.settimeout(5)
+        conn.recv(4096)
+        conn.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 11\r\n\r\nBad Request")
+        conn.close()
+
+    with _served(answer) as address:
+        yield address
 
 
 @contextlib.contextmanager
@@ -99,32 +117,5 @@ def banner_server(banner=b"SSH-2.0-OpenSSH_9.6\r\n"):
     """A tcp:// "host:port" on this machine where something that is not Dask
     speaks first, as an SSH server does (its banner, then silence until it
     is closed); closed after."""
-    import threading
-
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen(8)
-    srv.settimeout(0.2)
-    stop = threading.Event()
-
-    def serve():
-        conns = []
-        while not stop.is_set():
-            try:
-                conn, _ = srv.accept()
-            except OSError:
-                continue
-            with contextlib.suppress(OSError):
-                conn.sendall(banner)
-            conns.append(conn)
-        for c in conns:
-            c.close()
-
-    t = threading.Thread(target=serve, daemon=True)
-    t.start()
-    try:
-        yield f"127.0.0.1:{srv.getsockname()[1]}"
-    finally:
-        stop.set()
-        t.join(5)
-        srv.close()
+    with _served(lambda conn: conn.sendall(banner)) as address:
+        yield address

@@ -168,6 +168,21 @@ def _check_card(path: Path, card: dict) -> None:
         raise DataError(f"{path}: model card field 'architecture' must be a dict whose 'planes' are names")
 
 
+def _check_network(path: Path, card: dict, network: Any) -> None:
+    """The card is one of `network`'s (clvis.post.specs): its name, where it
+    gives one, and its output channels. Another network's card and graph
+    copied in as NAME.json (lidar's as infill's: its graph loads and runs on
+    infill's 5-channel pack) would otherwise make a picture of garbage."""
+    named = card.get("name", network.name)
+    if named != network.name:
+        raise DataError(f"{path}: the model card is for {named!r}, not {network.name!r}")
+    if card["channels_out"] != network.channels_out:
+        raise DataError(
+            f"{path}: model card field 'channels_out' is {card['channels_out']}; "
+            f"{network.name} writes {network.channels_out}"
+        )
+
+
 def _check_head(path: Path, head: Any) -> None:
     """A card's "head" entry: a kernel-prediction head clvis.post.kpn applies."""
     if not isinstance(head, dict) or head.get("kind") != "kpn":
@@ -235,6 +250,7 @@ class PostNetwork:
         #: the network's spec (clvis.post.specs): input check, pack, baselines
         self.spec = spec(name)
         self.card = card = _card(directory, name)
+        _check_network(directory / f"{name}.json", card, self.spec)
         entry = card["files"].get(precision) or {}
         if not entry.get("file"):
             change = entry.get("psnr_change_db")

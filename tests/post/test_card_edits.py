@@ -126,3 +126,24 @@ def test_graph_that_loads_but_fails_when_run_raises_a_clvis_error(tmp_path):
     net = post.load("lidar", directory=tmp_path)
     with pytest.raises(ClvisError, match=r"lidar\.onnx: onnxruntime failed running it"):
         net(np.zeros((40, 24, 5), np.float32))
+
+
+@pytest.mark.parametrize("other,name", [("lidar", "infill"), ("narvis-scan", "narvis"), ("narvis", "lidar")])
+def test_another_networks_model_copied_in_is_refused(tmp_path, other, name):
+    # lidar's card and graph saved as infill.json / infill.onnx loaded and ran
+    # on infill's 5-channel pack: a picture of garbage, no error (clvis eval
+    # infill --model-dir scored it 20 dB under push-pull and exited 0)
+    for f in MODELS.glob(f"{other}.*"):
+        shutil.copy(f, tmp_path / f.name.replace(other, name, 1))
+    with pytest.raises(ClvisError, match=f"model card is for '{other}', not '{name}'"):
+        post.load(name, directory=tmp_path)
+
+
+def test_card_without_a_name_of_other_channels_out_is_refused(tmp_path):
+    for f in MODELS.glob("lidar.*"):
+        shutil.copy(f, tmp_path / f.name.replace("lidar", "infill", 1))
+    card = json.loads((tmp_path / "infill.json").read_text())
+    del card["name"]
+    (tmp_path / "infill.json").write_text(json.dumps(card))
+    with pytest.raises(ClvisError, match="'channels_out' is 3; infill writes 4"):
+        post.load("infill", directory=tmp_path)

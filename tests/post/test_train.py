@@ -1060,3 +1060,67 @@ def test_infill_planes_choose_the_w_nets_inputs(capsys):
     assert (
         "--planes depth: planes: prior and depth come after the candidates plane" in capsys.readouterr().err
     )
+
+
+def _tiny_infill(out, **kw):
+    return train.train(
+        "infill", steps=1, size=64, out=out, frames=1, frame_size=(96, 64), log=lambda _: None, **kw
+    )
+
+
+def _folder(path):
+    return {p.name: p.read_bytes() for p in sorted(path.iterdir())}
+
+
+@pytest.mark.parametrize("stage", ["_to_fp16", "write_card"])
+def test_a_run_stopped_while_exporting_keeps_the_previous_model_whole(tmp_path, monkeypatch, stage):
+    """Ctrl-C (or any failure) after NAME.onnx was written and before the
+    card: the folder held the new NAME.onnx beside the previous model's card
+    and variants (post.load: "does not match its model card's sha256"; the
+    previous model lost). Now the folder is as it was, no temporary file."""
+    _tiny_infill(tmp_path)
+    before = _folder(tmp_path)
+    assert sorted(before) == ["infill.fp16.onnx", "infill.int8.onnx", "infill.json", "infill.onnx"]
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(train, stage, interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        _tiny_infill(tmp_path, seed=1)  # another model: other bytes
+    assert _folder(tmp_path) == before
+    post.load("infill", directory=tmp_path)
+
+
+def test_onnxruntime_failing_while_exporting_is_one_error_and_writes_nothing(tmp_path, monkeypatch):
+    """The release run's int8 calibration (its held-out frames whole, 1280x720)
+    ran out of memory under an 8 GB limit: onnxruntime's Fail came out of
+    clvis train as a traceback and left infill.onnx and infill.fp16.onnx
+    without a card."""
+    from onnxruntime.capi.onnxruntime_pybind11_state import Fail
+
+    def oom(*args, **kwargs):
+        raise Fail("[ONNXRuntimeError] : 1 : FAIL : bfc_arena.cc:360 Failed to allocate memory")
+
+    monkeypatch.setattr(train, "_to_int8", oom)
+    with pytest.raises(MemoryError, match="exporting infill: onnxruntime ran out of memory.*96x64"):
+        _tiny_infill(tmp_path)
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setattr(train, "_to_int8", lambda *a: (_ for _ in ()).throw(Fail("bad graph")))
+    rc = main(
+        ["train", "infill", "--steps", "1", "--size", "64", "--frames", "1", "--frame-size", "96x64"]
+        + ["--out", str(tmp_path), "--eval", "none", "--quiet"]
+    )
+    assert rc == 2 and list(tmp_path.iterdir()) == []
+
+
+def test_a_new_model_replaces_all_of_the_previous_ones_files(tmp_path, monkeypatch):
+    """An int8 that loses too much is not shipped: the previous model's int8
+    goes too (the new card names none), the rest is the new model's."""
+    _tiny_infill(tmp_path)
+    monkeypatch.setattr(train, "INT8_MAX_LOSS_DB", -1.0)  # every int8 loses too much
+    card = _tiny_infill(tmp_path, seed=1)
+    assert card["files"]["int8"]["file"] is None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["infill.fp16.onnx", "infill.json", "infill.onnx"]
+    post.load("infill", directory=tmp_path)
+    post.load("infill", "fp16", directory=tmp_path)

@@ -560,6 +560,9 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
     except Exception as e:  # onnx raises its own types for a missing or corrupt file
         raise ValueError(f"--init {path}: not an ONNX model ({e})") from None
     weights = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
+    nonfinite = [k for k, v in weights.items() if v.dtype.kind == "f" and not np.isfinite(v).all()]
+    if nonfinite:  # training would carry them on, the export's int8 calibration fail on them
+        raise ValueError(f"--init {path}: weights that are not finite (NaN or infinity: {nonfinite[:3]})")
     state = net.state_dict()
     if any(k.endswith("running_mean") for k in state) and any(k.startswith("onnx::") for k in weights):
         _load_folded(net, graph, weights, path)
@@ -1175,6 +1178,15 @@ def train(
     if done % every and done != steps and running:  # the steps since the last point of a stopped run
         curve.append([done, round(running / (done % every), 5)])
     train_seconds = time.perf_counter() - t0
+    nonfinite = [
+        k for k, v in net.state_dict().items() if v.is_floating_point() and not torch.isfinite(v).all()
+    ]
+    if nonfinite:  # diverged: nothing is exported (the int8 calibration failed on it with a traceback)
+        last = f", last loss {curve[-1][1]}" if curve else ""
+        raise ValueError(
+            f"training diverged: weights that are not finite after {done} steps ({nonfinite[0]}{last}); "
+            "nothing was written (a lower --lr may help)"
+        )
     net.eval()
 
     # held-out: the network against push-pull and the raw input, per completion
@@ -1213,7 +1225,7 @@ def train(
         try:
             files = export(net, name, stage, [x for vp in val_pairs.values() for x, _ in vp], val_pairs, log)
         except Exception as e:
-            if not type(e).__module__.startswith("onnxruntime"):
+            if not _from_onnxruntime(e):
                 raise
             raise _export_failed(name, e, fsize) from None
         card = {
@@ -1333,6 +1345,19 @@ def _install(stage: Path, out: Path, name: str, files: dict) -> None:
             with contextlib.suppress(OSError):
                 os.replace(previous / f, out / f)
         raise
+
+
+def _from_onnxruntime(e: BaseException) -> bool:
+    """Whether `e` is onnxruntime's: of its types, or raised in its code (its
+    quantization's assertions)."""
+    if type(e).__module__.startswith("onnxruntime"):
+        return True
+    tb = e.__traceback__
+    while tb is not None:
+        if f"{os.sep}onnxruntime{os.sep}" in tb.tb_frame.f_code.co_filename:
+            return True
+        tb = tb.tb_next
+    return False
 
 
 def _export_failed(name: str, e: Exception, fsize: Sequence[int]) -> Exception:

@@ -1124,3 +1124,31 @@ def test_a_new_model_replaces_all_of_the_previous_ones_files(tmp_path, monkeypat
     assert sorted(p.name for p in tmp_path.iterdir()) == ["infill.fp16.onnx", "infill.json", "infill.onnx"]
     post.load("infill", directory=tmp_path)
     post.load("infill", "fp16", directory=tmp_path)
+
+
+def test_init_with_weights_that_are_not_finite_is_refused(tmp_path):
+    """An --init file with NaN weights trained on and then failed in the
+    int8 calibration with onnxruntime's AssertionError("scale issue"), a
+    traceback."""
+    import onnx
+    from onnx import numpy_helper
+
+    from clvis.post.infer import MODELS
+
+    m = onnx.load(str(MODELS / "infill.onnx"))
+    first = m.graph.initializer[0]
+    a = numpy_helper.to_array(first).copy()
+    a.flat[0] = np.nan
+    first.CopyFrom(numpy_helper.from_array(a, first.name))
+    onnx.save(m, str(tmp_path / "nan.onnx"))
+    out = tmp_path / "out"
+    with pytest.raises(ValueError, match="nan.onnx: weights that are not finite"):
+        _tiny_infill(out, init=tmp_path / "nan.onnx")
+    assert list(out.iterdir()) == []
+
+
+def test_a_diverged_run_writes_nothing(tmp_path, monkeypatch):
+    monkeypatch.setattr(train, "_loss_fn", lambda weights, crop: lambda pred, target: (pred * np.nan).mean())
+    with pytest.raises(ValueError, match="training diverged: weights that are not finite after 1 steps"):
+        _tiny_infill(tmp_path)
+    assert list(tmp_path.iterdir()) == []

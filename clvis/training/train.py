@@ -559,6 +559,11 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
         graph = onnx.load(str(path)).graph
     except Exception as e:  # onnx raises its own types for a missing or corrupt file
         raise ValueError(f"--init {path}: not an ONNX model ({e})") from None
+    if any(n.op_type in ("QuantizeLinear", "DequantizeLinear") for n in graph.node):
+        raise ValueError(
+            f"--init {path}: a quantized (int8) export, whose weights are int8 steps: start from "
+            "the fp32 NAME.onnx (or NAME.fp16.onnx) beside it"
+        )
     weights = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
     nonfinite = [k for k, v in weights.items() if v.dtype.kind == "f" and not np.isfinite(v).all()]
     if nonfinite:  # training would carry them on, the export's int8 calibration fail on them

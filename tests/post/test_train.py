@@ -1152,3 +1152,14 @@ def test_a_diverged_run_writes_nothing(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="training diverged: weights that are not finite after 1 steps"):
         _tiny_infill(tmp_path)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", ["infill", "lidar"])
+def test_init_from_an_int8_export_says_so(name):
+    # was "not this network's weights (missing [...])": it is, quantized
+    from clvis.post.infer import MODELS
+
+    spec = train.SPECS[name]
+    net = train.TRAINERS[name].build(**spec["arch"])
+    with pytest.raises(ValueError, match=rf"{name}\.int8\.onnx: a quantized \(int8\) export"):
+        train.load_onnx_weights(net, MODELS / f"{name}.int8.onnx")

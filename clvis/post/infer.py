@@ -270,6 +270,10 @@ class PostNetwork:
         so.inter_op_num_threads = 1
         so.add_session_config_entry("session.intra_op.allow_spinning", "0")
         so.add_session_config_entry("session.inter_op.allow_spinning", "0")
+        # this session's own log (not onnxruntime's process-wide default): fatal
+        # only, since its errors come back as clvis errors; a foreign graph's
+        # warnings and errors otherwise went to stderr in colour before them
+        so.log_severity_level = 4
         chosen = _providers(providers)
         try:
             self.session = ort.InferenceSession(str(path), so, providers=chosen)

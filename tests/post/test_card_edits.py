@@ -147,3 +147,31 @@ def test_card_without_a_name_of_other_channels_out_is_refused(tmp_path):
     (tmp_path / "infill.json").write_text(json.dumps(card))
     with pytest.raises(ClvisError, match="'channels_out' is 3; infill writes 4"):
         post.load("infill", directory=tmp_path)
+
+
+def test_a_failing_graph_leaves_stderr_to_the_clvis_error(tmp_path, capfd):
+    """onnxruntime logged its own coloured warning (a graph whose declared
+    output shape is not its computed one) and error lines on stderr before
+    clvis's one-line error."""
+    onnx = pytest.importorskip("onnx")
+    from onnx import TensorProto, helper
+
+    from clvis.post.infer import sha256
+
+    for f in MODELS.glob("lidar*"):
+        shutil.copy(f, tmp_path / f.name)
+    graph = helper.make_graph(
+        [helper.make_node("Concat", ["planes", "planes"], ["image"], axis=1)],  # 10 channels, not 3
+        "concat",
+        [helper.make_tensor_value_info("planes", TensorProto.FLOAT, [1, 5, "height", "width"])],
+        [helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 3, "height", "width"])],
+    )
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), tmp_path / "lidar.onnx")
+    card = json.loads((tmp_path / "lidar.json").read_text())
+    card["files"]["fp32"]["sha256"] = sha256(tmp_path / "lidar.onnx")
+    (tmp_path / "lidar.json").write_text(json.dumps(card))
+    capfd.readouterr()
+    net = post.load("lidar", directory=tmp_path)
+    with pytest.raises(ClvisError, match=r"lidar\.onnx: onnxruntime failed running it"):
+        net(np.zeros((40, 24, 5), np.float32), guard=False)
+    assert "onnxruntime" not in capfd.readouterr().err

@@ -1029,6 +1029,13 @@ def train(
 
     if name not in SPECS:
         raise ValueError(f"model: expected one of {NAMES}, got {name!r}")
+    _check_counts(steps=steps, size=size, frames=frames, points=points, seed=seed)
+    if time_limit is not None and (
+        isinstance(time_limit, bool)
+        or not isinstance(time_limit, (int, float))
+        or not 0 < time_limit < math.inf
+    ):
+        raise ValueError(f"time_limit: expected a positive number of seconds, got {time_limit!r}")
     spec, trainer = SPECS[name], TRAINERS[name]
     # narvis-scan: the depth filter its frames go through (its pipeline's)
     scan_filter = _scan_depth_filter() if name == "narvis-scan" else None
@@ -1308,6 +1315,17 @@ def train(
         shutil.rmtree(stage, ignore_errors=True)
     log(f"wrote {out / (name + '.json')}")
     return card
+
+
+def _check_counts(**counts: Any) -> None:
+    """train's whole-number arguments (None: the default): steps=0 or -3
+    exported an untrained network with a card, frames=-1 failed in numpy."""
+    least = {"steps": 1, "size": 1, "frames": 1, "points": 1, "seed": 0}
+    for key, v in counts.items():
+        if v is None and key in ("frames", "points"):
+            continue
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least[key]:
+            raise ValueError(f"{key}: expected a whole number of at least {least[key]}, got {v!r}")
 
 
 def _staging(out: Path, name: str) -> Path:

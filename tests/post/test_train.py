@@ -1063,9 +1063,8 @@ def test_infill_planes_choose_the_w_nets_inputs(capsys):
 
 
 def _tiny_infill(out, **kw):
-    return train.train(
-        "infill", steps=1, size=64, out=out, frames=1, frame_size=(96, 64), log=lambda _: None, **kw
-    )
+    args = {"steps": 1, "size": 64, "out": out, "frames": 1, "frame_size": (96, 64), "log": lambda _: None}
+    return train.train("infill", **{**args, **kw})
 
 
 def _folder(path):
@@ -1163,3 +1162,26 @@ def test_init_from_an_int8_export_says_so(name):
     net = train.TRAINERS[name].build(**spec["arch"])
     with pytest.raises(ValueError, match=rf"{name}\.int8\.onnx: a quantized \(int8\) export"):
         train.load_onnx_weights(net, MODELS / f"{name}.int8.onnx")
+
+
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        ({"steps": 0}, "steps: expected a whole number of at least 1, got 0"),
+        ({"steps": -3}, "steps: expected"),
+        ({"steps": 1.5}, "steps: expected"),
+        ({"frames": -1}, "frames: expected"),
+        ({"frames": 0}, "frames: expected"),
+        ({"seed": -1}, "seed: expected"),
+        ({"time_limit": 0}, "time_limit: expected a positive number of seconds, got 0"),
+        ({"time_limit": -1.0}, "time_limit: expected"),
+        ({"time_limit": float("nan")}, "time_limit: expected"),
+    ],
+)
+def test_train_checks_its_counts(tmp_path, change, message):
+    # steps=0 or -3 exported an untrained network with its card; time_limit=0
+    # raised ZeroDivisionError, -1 or nan was no limit; frames=-1 failed in numpy
+    out = tmp_path / "out"
+    with pytest.raises(ValueError, match=message):
+        _tiny_infill(out, **change)
+    assert not out.exists() or list(out.iterdir()) == []

@@ -1062,8 +1062,6 @@ def train(
         raise ValueError(f"lr: expected a learning rate between 0 and 1, got {lr}")
     t_start = time.perf_counter()
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    shutil.rmtree(_staging(out, name))  # a folder it cannot write to: an error now, not after training
     fsize = tuple(frame_size or spec["frame_size"])
     count = int(frames or spec["frames"])
     if size > min(fsize):
@@ -1074,6 +1072,10 @@ def train(
     stride, channels_in = probe.stride, probe.channels_in
     if size % stride or size <= 32:  # the crop through the encoder; MS-SSIM's 5 scales need > 32
         raise ValueError(f"--size {size}: {name}'s crops must be a multiple of {stride} and more than 32")
+    if init is not None:  # a file of another network: an error now, not after rendering the data
+        load_onnx_weights(probe, init)
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(_staging(out, name))  # a folder it cannot write to: an error now, not after training
     torch.manual_seed(seed)
     torch.set_num_threads(int(os.environ.get("CLVIS_TRAIN_THREADS", os.cpu_count() or 1)))
     rng = np.random.default_rng(seed)

@@ -1185,3 +1185,18 @@ def test_train_checks_its_counts(tmp_path, change, message):
     with pytest.raises(ValueError, match=message):
         _tiny_infill(out, **change)
     assert not out.exists() or list(out.iterdir()) == []
+
+
+def test_init_of_another_network_fails_before_the_data_is_rendered(tmp_path, monkeypatch):
+    # the file was read after rendering the training frames (90 s at the
+    # release run's sizes on a quiet machine) and the out folder made
+    from clvis.post.infer import MODELS
+
+    def rendered(*args, **kwargs):
+        raise AssertionError("rendered the data first")
+
+    monkeypatch.setattr(train, "_frames", rendered)
+    out = tmp_path / "out"
+    with pytest.raises(ValueError, match="lidar.onnx: not this network's weights"):
+        _tiny_infill(out, init=MODELS / "lidar.onnx")
+    assert not out.exists()

@@ -2,6 +2,7 @@
 the training pairs' rules."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -1200,3 +1201,46 @@ def test_init_of_another_network_fails_before_the_data_is_rendered(tmp_path, mon
     with pytest.raises(ValueError, match="lidar.onnx: not this network's weights"):
         _tiny_infill(out, init=MODELS / "lidar.onnx")
     assert not out.exists()
+
+
+def test_install_puts_the_previous_model_back_when_a_move_fails(tmp_path, monkeypatch):
+    """_install's every os.replace failing in turn (a full or vanishing disk,
+    an interrupt between two moves): the folder keeps the previous model."""
+    import os
+
+    out = tmp_path / "out"
+    out.mkdir()
+    old = {"infill.json": b"old card", "infill.onnx": b"old fp32", "infill.int8.onnx": b"old int8", "x": b"x"}
+    for k, v in old.items():
+        (out / k).write_bytes(v)
+    files = {"fp32": {"file": "infill.onnx"}, "fp16": {"file": "infill.fp16.onnx"}, "int8": {"file": None}}
+    real = os.replace
+    for fail_at in range(1, 10):
+        stage = train._staging(out, "infill")
+        for k in ("infill.json", "infill.onnx", "infill.fp16.onnx"):
+            (stage / k).write_bytes(b"new " + k.encode())
+
+        def replace(a, b, calls=[], fail_at=fail_at):  # noqa: B006 (its own list per pass)
+            calls.append(a)
+            if len(calls) == fail_at:
+                raise KeyboardInterrupt
+            real(a, b)
+
+        monkeypatch.setattr(train.os, "replace", replace)
+        try:
+            train._install(stage, out, "infill", files)
+        except KeyboardInterrupt:
+            monkeypatch.setattr(train.os, "replace", real)
+            assert {p.name: p.read_bytes() for p in out.iterdir() if p != stage} == old, fail_at
+            shutil.rmtree(stage)
+            continue
+        monkeypatch.setattr(train.os, "replace", real)
+        shutil.rmtree(stage)
+        break
+    assert fail_at > 3  # it did fail part-way a few times before it got through
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == {
+        "infill.json": b"new infill.json",
+        "infill.onnx": b"new infill.onnx",
+        "infill.fp16.onnx": b"new infill.fp16.onnx",
+        "x": b"x",
+    }

@@ -232,6 +232,8 @@ def cmd(args: argparse.Namespace) -> int:
         planes = [p.strip() for p in args.planes.split(",") if p.strip()]
         try:
             gbuffer_channels(tuple(planes))
+            # the network itself (its head's depth selection needs "depth"): said as --planes'
+            train.TRAINERS[args.model].build(**{**train.SPECS[args.model]["arch"], "planes": planes})
         except ValueError as e:
             raise CliError(f"--planes {args.planes}: {e}") from None
     fw, fh = args.frame_size or train.SPECS[args.model]["frame_size"]

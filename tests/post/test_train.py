@@ -350,6 +350,9 @@ def test_train_narvis_with_the_splat_target(tmp_path, capsys, monkeypatch):
     assert (out_dir / "post-narvis.png").is_file()
     assert main(["train", "narvis", "--planes", "depth,vel2d", "--out", str(tmp_path)]) == 2
     assert "lacks 'rgb'" in capsys.readouterr().err
+    # was "depth_select: needs the 'depth' plane in planes", not naming the option
+    assert main(["train", "narvis", "--planes", "rgb,vel2d", "--out", str(tmp_path)]) == 2
+    assert "--planes rgb,vel2d: depth_select: needs the 'depth' plane" in capsys.readouterr().err
 
 
 def test_train_target_is_narvis_only_and_checked(tmp_path, capsys):

@@ -46,7 +46,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--size", type=count(32, 4096), default=256, metavar="N", help="training crops N x N (default 256)"
     )
     p.add_argument(
-        "--out", type=folder, default=".", metavar="DIR", help="where the model and its card go (default .)"
+        "--out",
+        type=folder,
+        default=".",
+        metavar="DIR",
+        help="where the model and its card go (default .); a model of the same name there is replaced "
+        "once the new one is written whole (a run stopped before that leaves it as it was)",
     )
     p.add_argument("--seed", type=count(0, 2**31 - 1), default=0, help="the data's and the weights' seed")
     p.add_argument(

@@ -176,6 +176,17 @@ def _check_network(path: Path, card: dict, network: Any) -> None:
     named = card.get("name", network.name)
     if named != network.name:
         raise DataError(f"{path}: the model card is for {named!r}, not {network.name!r}")
+    planes = tuple(card.get("architecture", {}).get("planes") or ())
+    try:
+        accepted = network.channels_in(planes)
+    except ValueError as e:
+        raise DataError(f"{path}: model card field 'architecture': {e}") from None
+    if card["channels_in"] not in accepted:
+        raise DataError(
+            f"{path}: model card field 'channels_in' is {card['channels_in']}; {network.name}"
+            + (f" with planes {list(planes)}" if planes else "")
+            + f" takes {' or '.join(map(str, accepted))}"
+        )
     if card["channels_out"] != network.channels_out:
         raise DataError(
             f"{path}: model card field 'channels_out' is {card['channels_out']}; "

@@ -269,7 +269,16 @@ def cmd(args: argparse.Namespace) -> int:
         from ..training import evaluate as ev
 
         quick = args.eval == "quick"
-        result = ev.evaluate(args.model, model_dir=args.out, quick=quick, log=log)
+        try:
+            result = ev.evaluate(args.model, model_dir=args.out, quick=quick, log=log)
+        except BaseException:  # Ctrl-C or an error: the model is written all the same; say so
+            print(
+                f"clvis train: {args.out}/{card['name']}.onnx and its card are written; its held-out "
+                f"suite is not (clvis eval {args.model} --model-dir {args.out}"
+                f"{' --quick' if quick else ''} --write-card)",
+                file=sys.stderr,
+            )
+            raise
         print(ev.table(result))
         ev.write_card(
             result,

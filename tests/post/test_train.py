@@ -1247,3 +1247,20 @@ def test_install_puts_the_previous_model_back_when_a_move_fails(tmp_path, monkey
         "infill.fp16.onnx": b"new infill.fp16.onnx",
         "x": b"x",
     }
+
+
+def test_train_stopped_in_its_eval_says_the_model_is_written(tmp_path, monkeypatch, capsys):
+    # Ctrl-C in --eval quick said "interrupted" alone, after the model and its
+    # card had been written
+    from clvis.training import evaluate
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(evaluate, "evaluate", interrupted)
+    args = ["train", "infill", "--steps", "1", "--size", "64", "--frames", "1", "--frame-size", "96x64"]
+    assert main([*args, "--out", str(tmp_path), "--quiet"]) == 130
+    err = capsys.readouterr().err
+    assert f"{tmp_path}/infill.onnx and its card are written; its held-out suite is not" in err
+    assert f"clvis eval infill --model-dir {tmp_path} --quick --write-card" in err
+    post.load("infill", directory=tmp_path)

@@ -184,6 +184,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "(clvis.post; use with --completion below 1)",
     )
     p.add_argument(
+        "--model-dir",
+        default=None,
+        metavar="DIR",
+        help="with --infill: the in-fill network's model card and files from DIR (a `clvis train "
+        "--out` folder; default: the shipped model)",
+    )
+    p.add_argument(
         "--post-guard",
         action=argparse.BooleanOptionalAction,
         default=None,
@@ -464,6 +471,8 @@ def _run(args) -> int:
         )
     if args.post_guard is not None and not args.infill:
         raise CliError("--post-guard guards the in-fill network: add --infill")
+    if args.model_dir is not None and not args.infill:
+        raise CliError("--model-dir: where the in-fill network's model is: add --infill")
     if args.compare and not args.infill:
         raise CliError("--compare scores the in-fill network against the complete render: add --infill")
     if args.compare and args.orbit is not None:
@@ -585,7 +594,7 @@ def _run(args) -> int:
     if args.infill:
         from .. import post
 
-        net = post.load("infill", queue=q)
+        net = post.load("infill", queue=q, directory=args.model_dir)
         filled = net(img, guard=args.post_guard)
         # iso.png shows the colour, hit and active planes: only these come back
         # (device planes from render(host=False); a volume with no surface

@@ -1068,6 +1068,8 @@ def _render(args, progress) -> int:
         raise CliError("--post-scale scales a post network's frame: add --post")
     if args.post_guard is not None and args.post is None:
         raise CliError("--post-guard guards a post network: add --post lidar")
+    if args.model_dir is not None and args.post is None:
+        raise CliError("--model-dir: where a post network's model is: add --post lidar|narvis|narvis-scan")
     if args.post is not None:
         from .. import post
 
@@ -1116,7 +1118,7 @@ def _render(args, progress) -> int:
                 f"--post-guard: the {post_name} network has no guard (the in-fill, LiDAR and narvis-scan "
                 "ones have)"
             )
-        net = post.load(post_name, queue=q)
+        net = post.load(post_name, queue=q, directory=args.model_dir)
         if args.transparent or args.background is not None:
             # the network predicts colour alone (no coverage): what is empty cannot be told apart
             print(
@@ -1443,6 +1445,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "narvis, the G-buffers turned into the Gaussian renderer's image by a NARVis U-Net, the model "
         "the cloud's planes allow (said on stderr): narvis with a velocity (and an attribute to colour "
         "by), else narvis-scan (the points' colours and their kNN splat radius); narvis-scan: that one",
+    )
+    r.add_argument(
+        "--model-dir",
+        default=None,
+        metavar="DIR",
+        help="with --post: the network's model card and files from DIR (a `clvis train --out` folder; "
+        "default: the shipped models)",
     )
     r.add_argument(
         "--post-guard",

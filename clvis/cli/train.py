@@ -46,7 +46,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--size", type=count(32, 4096), default=256, metavar="N", help="training crops N x N (default 256)"
     )
     p.add_argument(
-        "--out", type=folder, default=".", metavar="DIR", help="where the model and its card go (default .)"
+        "--out",
+        type=folder,
+        default=".",
+        metavar="DIR",
+        help="where the model and its card go (default .); a model of the same name there is replaced "
+        "once the new one is written whole (a run stopped before that leaves it as it was)",
     )
     p.add_argument("--seed", type=count(0, 2**31 - 1), default=0, help="the data's and the weights' seed")
     p.add_argument(
@@ -232,6 +237,8 @@ def cmd(args: argparse.Namespace) -> int:
         planes = [p.strip() for p in args.planes.split(",") if p.strip()]
         try:
             gbuffer_channels(tuple(planes))
+            # the network itself (its head's depth selection needs "depth"): said as --planes'
+            train.TRAINERS[args.model].build(**{**train.SPECS[args.model]["arch"], "planes": planes})
         except ValueError as e:
             raise CliError(f"--planes {args.planes}: {e}") from None
     fw, fh = args.frame_size or train.SPECS[args.model]["frame_size"]
@@ -262,7 +269,16 @@ def cmd(args: argparse.Namespace) -> int:
         from ..training import evaluate as ev
 
         quick = args.eval == "quick"
-        result = ev.evaluate(args.model, model_dir=args.out, quick=quick, log=log)
+        try:
+            result = ev.evaluate(args.model, model_dir=args.out, quick=quick, log=log)
+        except BaseException:  # Ctrl-C or an error: the model is written all the same; say so
+            print(
+                f"clvis train: {args.out}/{card['name']}.onnx and its card are written; its held-out "
+                f"suite is not (clvis eval {args.model} --model-dir {args.out}"
+                f"{' --quick' if quick else ''} --write-card)",
+                file=sys.stderr,
+            )
+            raise
         print(ev.table(result))
         ev.write_card(
             result,

@@ -168,6 +168,32 @@ def _check_card(path: Path, card: dict) -> None:
         raise DataError(f"{path}: model card field 'architecture' must be a dict whose 'planes' are names")
 
 
+def _check_network(path: Path, card: dict, network: Any) -> None:
+    """The card is one of `network`'s (clvis.post.specs): its name, where it
+    gives one, and its output channels. Another network's card and graph
+    copied in as NAME.json (lidar's as infill's: its graph loads and runs on
+    infill's 5-channel pack) would otherwise make a picture of garbage."""
+    named = card.get("name", network.name)
+    if named != network.name:
+        raise DataError(f"{path}: the model card is for {named!r}, not {network.name!r}")
+    planes = tuple(card.get("architecture", {}).get("planes") or ())
+    try:
+        accepted = network.channels_in(planes)
+    except ValueError as e:
+        raise DataError(f"{path}: model card field 'architecture': {e}") from None
+    if card["channels_in"] not in accepted:
+        raise DataError(
+            f"{path}: model card field 'channels_in' is {card['channels_in']}; {network.name}"
+            + (f" with planes {list(planes)}" if planes else "")
+            + f" takes {' or '.join(map(str, accepted))}"
+        )
+    if card["channels_out"] != network.channels_out:
+        raise DataError(
+            f"{path}: model card field 'channels_out' is {card['channels_out']}; "
+            f"{network.name} writes {network.channels_out}"
+        )
+
+
 def _check_head(path: Path, head: Any) -> None:
     """A card's "head" entry: a kernel-prediction head clvis.post.kpn applies."""
     if not isinstance(head, dict) or head.get("kind") != "kpn":
@@ -235,6 +261,7 @@ class PostNetwork:
         #: the network's spec (clvis.post.specs): input check, pack, baselines
         self.spec = spec(name)
         self.card = card = _card(directory, name)
+        _check_network(directory / f"{name}.json", card, self.spec)
         entry = card["files"].get(precision) or {}
         if not entry.get("file"):
             change = entry.get("psnr_change_db")
@@ -254,6 +281,10 @@ class PostNetwork:
         so.inter_op_num_threads = 1
         so.add_session_config_entry("session.intra_op.allow_spinning", "0")
         so.add_session_config_entry("session.inter_op.allow_spinning", "0")
+        # this session's own log (not onnxruntime's process-wide default): fatal
+        # only, since its errors come back as clvis errors; a foreign graph's
+        # warnings and errors otherwise went to stderr in colour before them
+        so.log_severity_level = 4
         chosen = _providers(providers)
         try:
             self.session = ort.InferenceSession(str(path), so, providers=chosen)

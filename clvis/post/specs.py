@@ -23,7 +23,7 @@ import pyopencl.array as cla
 
 from ..errors import DataError
 from .inputs import GBuffersLike, IsoImageLike, LidarInput
-from .names import NAMES
+from .names import NAMES, gbuffer_channels
 from .pack import crossing_rate, pack_gbuffers, pack_iso, pack_rgbda
 
 __all__ = ["SPECS", "NetworkSpec", "spec"]
@@ -71,6 +71,12 @@ class NetworkSpec(Generic[InputT]):
     #: blend held back where the window is densely covered and its colours
     #: vary between neighbours at one depth); None: the sigma rule alone
     subpixel_volume: tuple[float, float, float, float, float] | None = None
+
+    def channels_in(self, planes: tuple[str, ...]) -> tuple[int, ...]:
+        """The input channels its pack writes for a model card's planes (each
+        count a card's channels_in may give); ValueError for planes it cannot
+        take."""
+        raise NotImplementedError
 
     def shape(self, image: object) -> tuple[int, int]:
         """(H, W) of an input; TypeError / ValueError where it is not one."""
@@ -139,6 +145,9 @@ class InfillSpec(NetworkSpec[IsoImageLike]):
     #: frame of shapes it picks push-pull over the partial image it should
     #: keep (bench/results/post-guard.md)
     guard = False
+
+    def channels_in(self, planes: tuple[str, ...]) -> tuple[int, ...]:
+        return (5, 6, 7, 8)  # pack_iso: base, + candidates, + the hit prior, or + the depths
 
     def shape(self, image: Any) -> tuple[int, int]:
         if not all(hasattr(image, k) for k in ("rgba", "hit", "active")):
@@ -222,6 +231,9 @@ class LidarSpec(NetworkSpec[LidarInput]):
     #: elsewhere (bench/results/post-guard.md)
     guard = True
 
+    def channels_in(self, planes: tuple[str, ...]) -> tuple[int, ...]:
+        return (5,)  # pack_rgbda
+
     def shape(self, image: Any) -> tuple[int, int]:
         rgbda = getattr(image, "rgbda", image)
         if not isinstance(rgbda, (np.ndarray, cla.Array)):
@@ -263,6 +275,9 @@ class NarvisSpec(NetworkSpec[GBuffersLike]):
     #: chosen on training-family frames only (issue 21 narvis21h: TRAIN_FLOWS
     #: and the hurricane at 0.25x-4x, both samplers: bench/results/README.md)
     subpixel_volume: tuple[float, float, float, float, float] | None = (0.005, 0.02, 0.04, 0.9, 0.95)
+
+    def channels_in(self, planes: tuple[str, ...]) -> tuple[int, ...]:
+        return (len(gbuffer_channels(planes)),)
 
     def shape(self, image: Any) -> tuple[int, int]:
         if not all(hasattr(image, k) for k in ("index", "rgba", "depth", "attributes")):

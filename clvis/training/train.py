@@ -15,6 +15,7 @@ Needs the ``train`` extra (torch==2.13.0, onnx, pytorch-msssim).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import hashlib
@@ -22,7 +23,9 @@ import json
 import math
 import os
 import platform
+import shutil
 import sys
+import tempfile
 import time
 import warnings
 import zipfile
@@ -33,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import ClvisError
 from ..io.files import replacing, write_replacing
 from ..metrics import metrics
 from ..post.infer import sha256
@@ -555,7 +559,15 @@ def load_onnx_weights(net: Any, path: str | os.PathLike) -> None:
         graph = onnx.load(str(path)).graph
     except Exception as e:  # onnx raises its own types for a missing or corrupt file
         raise ValueError(f"--init {path}: not an ONNX model ({e})") from None
+    if any(n.op_type in ("QuantizeLinear", "DequantizeLinear") for n in graph.node):
+        raise ValueError(
+            f"--init {path}: a quantized (int8) export, whose weights are int8 steps: start from "
+            "the fp32 NAME.onnx (or NAME.fp16.onnx) beside it"
+        )
     weights = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
+    nonfinite = [k for k, v in weights.items() if v.dtype.kind == "f" and not np.isfinite(v).all()]
+    if nonfinite:  # training would carry them on, the export's int8 calibration fail on them
+        raise ValueError(f"--init {path}: weights that are not finite (NaN or infinity: {nonfinite[:3]})")
     state = net.state_dict()
     if any(k.endswith("running_mean") for k in state) and any(k.startswith("onnx::") for k in weights):
         _load_folded(net, graph, weights, path)
@@ -1017,6 +1029,13 @@ def train(
 
     if name not in SPECS:
         raise ValueError(f"model: expected one of {NAMES}, got {name!r}")
+    _check_counts(steps=steps, size=size, frames=frames, points=points, seed=seed)
+    if time_limit is not None and (
+        isinstance(time_limit, bool)
+        or not isinstance(time_limit, (int, float))
+        or not 0 < time_limit < math.inf
+    ):
+        raise ValueError(f"time_limit: expected a positive number of seconds, got {time_limit!r}")
     spec, trainer = SPECS[name], TRAINERS[name]
     # narvis-scan: the depth filter its frames go through (its pipeline's)
     scan_filter = _scan_depth_filter() if name == "narvis-scan" else None
@@ -1043,7 +1062,6 @@ def train(
         raise ValueError(f"lr: expected a learning rate between 0 and 1, got {lr}")
     t_start = time.perf_counter()
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     fsize = tuple(frame_size or spec["frame_size"])
     count = int(frames or spec["frames"])
     if size > min(fsize):
@@ -1054,6 +1072,10 @@ def train(
     stride, channels_in = probe.stride, probe.channels_in
     if size % stride or size <= 32:  # the crop through the encoder; MS-SSIM's 5 scales need > 32
         raise ValueError(f"--size {size}: {name}'s crops must be a multiple of {stride} and more than 32")
+    if init is not None:  # a file of another network: an error now, not after rendering the data
+        load_onnx_weights(probe, init)
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(_staging(out, name))  # a folder it cannot write to: an error now, not after training
     torch.manual_seed(seed)
     torch.set_num_threads(int(os.environ.get("CLVIS_TRAIN_THREADS", os.cpu_count() or 1)))
     rng = np.random.default_rng(seed)
@@ -1170,6 +1192,15 @@ def train(
     if done % every and done != steps and running:  # the steps since the last point of a stopped run
         curve.append([done, round(running / (done % every), 5)])
     train_seconds = time.perf_counter() - t0
+    nonfinite = [
+        k for k, v in net.state_dict().items() if v.is_floating_point() and not torch.isfinite(v).all()
+    ]
+    if nonfinite:  # diverged: nothing is exported (the int8 calibration failed on it with a traceback)
+        last = f", last loss {curve[-1][1]}" if curve else ""
+        raise ValueError(
+            f"training diverged: weights that are not finite after {done} steps ({nonfinite[0]}{last}); "
+            "nothing was written (a lower --lr may help)"
+        )
     net.eval()
 
     # held-out: the network against push-pull and the raw input, per completion
@@ -1199,79 +1230,171 @@ def train(
         }
         log(f"held-out {key}: " + held_out_line(held_out[key]))
 
-    files = export(net, name, out, [x for vp in val_pairs.values() for x, _ in vp], val_pairs, log)
-    card = {
-        "name": name,
-        "network": type(net).__name__,
-        "architecture": spec["arch"],
-        "parameters": nets.count_parameters(net),
-        "stride": stride,
-        "channels_in": net.channels_in,
-        "channels_out": net.channels_out,
-        "command": " ".join(command) if command else f"clvis train {name} --steps {steps} --size {size}",
-        "seed": seed,
-        "data": {
-            **_narvis_data(sets, train_frames, fsize, data_seconds, target),
-            "looks": list(_data.NARVIS_TRAIN_COLORMAPS) if spec.get("looks") else None,
-        }
-        if sets
-        else {
-            **(
-                {"target_model": trainer.target, "target": _SCAN_TARGET, "input": _SCAN_INPUT}
-                if trainer.target
-                else {}
-            ),
-            "train": list(trainer.trained),
-            "held_out": list(trainer.held_out),
-            "frames": len(train_frames),
-            "held_out_frames": len(val_frames),
-            "frame_size": list(fsize),
-            "completions": list(completions) if completions != (None,) else None,
-            **({"point_sizes": list(spec["point_sizes"])} if "point_sizes" in spec else {}),
-            **({"scan_lines": spec["scan_lines"]} if "scan_lines" in spec else {}),
-            **({"depth_filter": list(scan_filter)} if scan_filter is not None else {}),
-            **(
-                {
-                    "mix": {
-                        "share": mix,
-                        "kinds": list(MIX_VOLUMES),
-                        "volumes": mix_count,
-                        "frames": len(mix_pairs) // len(_data.TRAIN_COMPLETIONS),
-                        "pairs": len(mix_pairs),
-                        "completions": list(_data.TRAIN_COMPLETIONS),
-                        "variety": dataclasses.asdict(
-                            _mix_variety(size, spec["mix_noise"], spec.get("mix_sides"))
-                        ),
+    # the files go into a staging folder inside `out` and are moved in, the
+    # card last, once all of them are written: a run that fails or is
+    # interrupted while exporting leaves `out` as it found it (a model there
+    # before stays whole, its card matching its files) and no temporary file
+    stage = _staging(out, name)
+    try:
+        try:
+            files = export(net, name, stage, [x for vp in val_pairs.values() for x, _ in vp], val_pairs, log)
+        except Exception as e:
+            if not _from_onnxruntime(e):
+                raise
+            raise _export_failed(name, e, fsize) from None
+        card = {
+            "name": name,
+            "network": type(net).__name__,
+            "architecture": spec["arch"],
+            "parameters": nets.count_parameters(net),
+            "stride": stride,
+            "channels_in": net.channels_in,
+            "channels_out": net.channels_out,
+            "command": " ".join(command) if command else f"clvis train {name} --steps {steps} --size {size}",
+            "seed": seed,
+            "data": {
+                **_narvis_data(sets, train_frames, fsize, data_seconds, target),
+                "looks": list(_data.NARVIS_TRAIN_COLORMAPS) if spec.get("looks") else None,
+            }
+            if sets
+            else {
+                **(
+                    {"target_model": trainer.target, "target": _SCAN_TARGET, "input": _SCAN_INPUT}
+                    if trainer.target
+                    else {}
+                ),
+                "train": list(trainer.trained),
+                "held_out": list(trainer.held_out),
+                "frames": len(train_frames),
+                "held_out_frames": len(val_frames),
+                "frame_size": list(fsize),
+                "completions": list(completions) if completions != (None,) else None,
+                **({"point_sizes": list(spec["point_sizes"])} if "point_sizes" in spec else {}),
+                **({"scan_lines": spec["scan_lines"]} if "scan_lines" in spec else {}),
+                **({"depth_filter": list(scan_filter)} if scan_filter is not None else {}),
+                **(
+                    {
+                        "mix": {
+                            "share": mix,
+                            "kinds": list(MIX_VOLUMES),
+                            "volumes": mix_count,
+                            "frames": len(mix_pairs) // len(_data.TRAIN_COMPLETIONS),
+                            "pairs": len(mix_pairs),
+                            "completions": list(_data.TRAIN_COMPLETIONS),
+                            "variety": dataclasses.asdict(
+                                _mix_variety(size, spec["mix_noise"], spec.get("mix_sides"))
+                            ),
+                        }
                     }
-                }
-                if mix is not None
-                else {}
-            ),
-            "generation_seconds": round(data_seconds, 1),
-        },
-        "training": {
-            "steps": done,
-            "steps_asked": steps,
-            "time_limit_seconds": time_limit,
-            "batch": spec["batch"],
-            "crop": size,
-            "optimizer": f"Adam lr {peak}, cosine to {peak / 100} (steps or time limit)",
-            **({"init": start} if start is not None else {}),
-            "loss": spec["loss"],
-            "loss_curve": curve,
-            "seconds": round(train_seconds, 1),
-            "threads": torch.get_num_threads(),
-        },
-        "held_out": held_out,
-        **({"head": net.head()} if hasattr(net, "trunk") else {}),
-        "files": files,
-        "wall_seconds": round(time.perf_counter() - t_start, 1),
-        "versions": _versions(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
-    }
-    write_card(out / f"{name}.json", card)
+                    if mix is not None
+                    else {}
+                ),
+                "generation_seconds": round(data_seconds, 1),
+            },
+            "training": {
+                "steps": done,
+                "steps_asked": steps,
+                "time_limit_seconds": time_limit,
+                "batch": spec["batch"],
+                "crop": size,
+                "optimizer": f"Adam lr {peak}, cosine to {peak / 100} (steps or time limit)",
+                **({"init": start} if start is not None else {}),
+                "loss": spec["loss"],
+                "loss_curve": curve,
+                "seconds": round(train_seconds, 1),
+                "threads": torch.get_num_threads(),
+            },
+            "held_out": held_out,
+            **({"head": net.head()} if hasattr(net, "trunk") else {}),
+            "files": files,
+            "wall_seconds": round(time.perf_counter() - t_start, 1),
+            "versions": _versions(),
+            "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+        }
+        write_card(stage / f"{name}.json", card)
+        _install(stage, out, name, files)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
     log(f"wrote {out / (name + '.json')}")
     return card
+
+
+def _check_counts(**counts: Any) -> None:
+    """train's whole-number arguments (None: the default): steps=0 or -3
+    exported an untrained network with a card, frames=-1 failed in numpy."""
+    least = {"steps": 1, "size": 1, "frames": 1, "points": 1, "seed": 0}
+    for key, v in counts.items():
+        if v is None and key in ("frames", "points"):
+            continue
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least[key]:
+            raise ValueError(f"{key}: expected a whole number of at least {least[key]}, got {v!r}")
+
+
+def _staging(out: Path, name: str) -> Path:
+    """A new hidden folder inside `out` that train exports into before
+    :func:`_install` moves the files in; OSError naming `out` where it
+    cannot be written to."""
+    try:
+        return Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".train.tmp", dir=out))
+    except OSError as e:
+        raise OSError(e.errno, f"cannot write the model there ({e.strerror})", str(out)) from None
+
+
+def _install(stage: Path, out: Path, name: str, files: dict) -> None:
+    """Move the files train exported into `stage` (`files`: the card's
+    entries) and the card NAME.json into `out`, replacing a model of the same
+    name there: its card first (until the new card is in, `out` holds no card,
+    which post.load refuses, never a card with files not its own), its
+    variants the new model lacks too (an int8 that lost too much), the new
+    card last. A failure or interrupt on the way puts back what was there."""
+    card = f"{name}.json"
+    new = [e["file"] for e in files.values() if e.get("file")] + [card]
+    ours = [card] + [f"{name}{v}.onnx" for v in ("", ".fp16", ".int8")]
+    previous = stage / "previous"
+    previous.mkdir()
+    kept: list[str] = []
+    moved: list[str] = []
+    try:
+        for f in ours:
+            if (out / f).exists():
+                os.replace(out / f, previous / f)
+                kept.append(f)
+        for f in new:
+            os.replace(stage / f, out / f)
+            moved.append(f)
+    except BaseException:
+        for f in reversed(moved):
+            with contextlib.suppress(OSError):
+                os.replace(out / f, stage / f)
+        for f in kept:
+            with contextlib.suppress(OSError):
+                os.replace(previous / f, out / f)
+        raise
+
+
+def _from_onnxruntime(e: BaseException) -> bool:
+    """Whether `e` is onnxruntime's: of its types, or raised in its code (its
+    quantization's assertions)."""
+    if type(e).__module__.startswith("onnxruntime"):
+        return True
+    tb = e.__traceback__
+    while tb is not None:
+        if f"{os.sep}onnxruntime{os.sep}" in tb.tb_frame.f_code.co_filename:
+            return True
+        tb = tb.tb_next
+    return False
+
+
+def _export_failed(name: str, e: Exception, fsize: Sequence[int]) -> Exception:
+    """onnxruntime's own error while exporting (its int8 calibration runs the
+    held-out frames whole) as one a caller (and clvis train's one line) reads."""
+    text = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+    if "Failed to allocate" in str(e) or "bfc_arena" in str(e):
+        return MemoryError(
+            f"exporting {name}: onnxruntime ran out of memory on the held-out frames "
+            f"({fsize[0]}x{fsize[1]}; a smaller --frame-size needs less); nothing was written"
+        )
+    return ClvisError(f"exporting {name}: onnxruntime failed ({text}); nothing was written")
 
 
 def write_card(path: Path, card: dict) -> None:

@@ -215,3 +215,31 @@ def test_the_fit_view_frames_the_surface_not_the_volume(tmp_path, capsys):
     rows, cols = np.flatnonzero(drawn.any(axis=1)), np.flatnonzero(drawn.any(axis=0))
     # and about the middle of the picture
     assert abs((rows[0] + rows[-1]) / 2 - 60) < 15 and abs((cols[0] + cols[-1]) / 2 - 80) < 20
+
+
+def test_iso_infill_reads_a_model_dir(tmp_path, capsys):
+    """--model-dir: a `clvis train --out` folder's in-fill model, not the
+    shipped one (the CLI had no way to run a retrained network)."""
+    import shutil
+
+    from clvis.post.infer import MODELS
+
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    for f in MODELS.glob("infill.*"):
+        shutil.copy(f, mine / f.name)
+    args = ["iso", "--dataset", "turbulence", "--no-speculation", "--completion", "0.8", "--size", "64x48"]
+    assert cli.main([*args, "--infill", "--model-dir", str(mine), "--out", str(tmp_path / "a")]) == 0
+    assert cli.main([*args, "--infill", "--out", str(tmp_path / "b")]) == 0
+    with (
+        Image.open(tmp_path / "a" / "iso-infill.png") as a,
+        Image.open(tmp_path / "b" / "iso-infill.png") as b,
+    ):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    capsys.readouterr()
+    for f in MODELS.glob("lidar.*"):  # another network's model where infill's was
+        shutil.copy(f, mine / f.name.replace("lidar", "infill", 1))
+    assert cli.main([*args, "--infill", "--model-dir", str(mine), "--out", str(tmp_path / "c")]) == 2
+    assert f"{mine / 'infill.json'}: the model card is for 'lidar', not 'infill'" in capsys.readouterr().err
+    assert cli.main([*args, "--model-dir", str(mine), "--out", str(tmp_path / "d")]) == 2
+    assert "--model-dir: where the in-fill network's model is: add --infill" in capsys.readouterr().err

@@ -753,3 +753,29 @@ def test_render_says_when_a_given_camera_sees_no_point(tmp_path, capsys):
     assert rc == 0, err
     assert "no point is in view of this camera; --eye and --target are in the file's coordinates" in err
     assert "points span 635" in err and "--point-size auto" not in err
+
+
+def test_render_post_reads_a_model_dir(tmp_path, capsys):
+    """--model-dir: a `clvis train --out` folder's model, not the shipped one
+    (the CLI had no way to run a retrained network: only post.load(directory=))."""
+    import shutil
+
+    from clvis.post.infer import MODELS
+
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    for f in MODELS.glob("lidar.*"):
+        shutil.copy(f, mine / f.name)
+    args = ["--points", 20000, "--post", "lidar", "--no-post-guard", *SMALL]
+    rc, out, err = _render(capsys, *args, "--model-dir", mine, "--out", tmp_path / "a")
+    assert rc == 0, err
+    rc, out, err = _render(capsys, *args, "--out", tmp_path / "b")
+    assert rc == 0, err
+    np.testing.assert_array_equal(
+        _png(tmp_path / "a" / "post-lidar.png"), _png(tmp_path / "b" / "post-lidar.png")
+    )
+    (mine / "lidar.onnx").unlink()
+    rc, out, err = _render(capsys, *args, "--model-dir", mine, "--out", tmp_path / "c")
+    assert rc == 2 and err == f"clvis render: error: {mine / 'lidar.onnx'}: model file missing\n"
+    rc, out, err = _render(capsys, "--points", 20000, "--model-dir", mine, *SMALL, "--out", tmp_path / "d")
+    assert rc == 2 and "--model-dir: where a post network's model is: add --post" in err

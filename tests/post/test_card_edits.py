@@ -126,3 +126,96 @@ def test_graph_that_loads_but_fails_when_run_raises_a_clvis_error(tmp_path):
     net = post.load("lidar", directory=tmp_path)
     with pytest.raises(ClvisError, match=r"lidar\.onnx: onnxruntime failed running it"):
         net(np.zeros((40, 24, 5), np.float32))
+
+
+@pytest.mark.parametrize("other,name", [("lidar", "infill"), ("narvis-scan", "narvis"), ("narvis", "lidar")])
+def test_another_networks_model_copied_in_is_refused(tmp_path, other, name):
+    # lidar's card and graph saved as infill.json / infill.onnx loaded and ran
+    # on infill's 5-channel pack: a picture of garbage, no error (clvis eval
+    # infill --model-dir scored it 20 dB under push-pull and exited 0)
+    for f in MODELS.glob(f"{other}.*"):
+        shutil.copy(f, tmp_path / f.name.replace(other, name, 1))
+    with pytest.raises(ClvisError, match=f"model card is for '{other}', not '{name}'"):
+        post.load(name, directory=tmp_path)
+
+
+def test_card_without_a_name_of_other_channels_out_is_refused(tmp_path):
+    for f in MODELS.glob("lidar.*"):
+        shutil.copy(f, tmp_path / f.name.replace("lidar", "infill", 1))
+    card = json.loads((tmp_path / "infill.json").read_text())
+    del card["name"]
+    (tmp_path / "infill.json").write_text(json.dumps(card))
+    with pytest.raises(ClvisError, match="'channels_out' is 3; infill writes 4"):
+        post.load("infill", directory=tmp_path)
+
+
+def test_a_failing_graph_leaves_stderr_to_the_clvis_error(tmp_path, capfd):
+    """onnxruntime logged its own coloured warning (a graph whose declared
+    output shape is not its computed one) and error lines on stderr before
+    clvis's one-line error."""
+    onnx = pytest.importorskip("onnx")
+    from onnx import TensorProto, helper
+
+    from clvis.post.infer import sha256
+
+    for f in MODELS.glob("lidar*"):
+        shutil.copy(f, tmp_path / f.name)
+    graph = helper.make_graph(
+        [helper.make_node("Concat", ["planes", "planes"], ["image"], axis=1)],  # 10 channels, not 3
+        "concat",
+        [helper.make_tensor_value_info("planes", TensorProto.FLOAT, [1, 5, "height", "width"])],
+        [helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 3, "height", "width"])],
+    )
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), tmp_path / "lidar.onnx")
+    card = json.loads((tmp_path / "lidar.json").read_text())
+    card["files"]["fp32"]["sha256"] = sha256(tmp_path / "lidar.onnx")
+    (tmp_path / "lidar.json").write_text(json.dumps(card))
+    capfd.readouterr()
+    net = post.load("lidar", directory=tmp_path)
+    with pytest.raises(ClvisError, match=r"lidar\.onnx: onnxruntime failed running it"):
+        net(np.zeros((40, 24, 5), np.float32), guard=False)
+    assert "onnxruntime" not in capfd.readouterr().err
+
+
+def test_a_graph_and_card_of_channels_its_pack_does_not_write_are_refused(tmp_path):
+    """A graph of 6 input channels with a card saying so loaded as lidar (whose
+    pack writes 5): the call failed with pack's ValueError ("out: expected
+    shape (1, 5, ...)"), not a clvis error naming the card."""
+    onnx = pytest.importorskip("onnx")
+    from onnx import TensorProto, helper
+
+    from clvis.post.infer import sha256
+
+    for f in MODELS.glob("lidar*"):
+        shutil.copy(f, tmp_path / f.name)
+    consts = [
+        helper.make_tensor("starts", TensorProto.INT64, [1], [0]),
+        helper.make_tensor("ends", TensorProto.INT64, [1], [3]),
+        helper.make_tensor("axes", TensorProto.INT64, [1], [1]),
+    ]
+    graph = helper.make_graph(
+        [helper.make_node("Slice", ["planes", "starts", "ends", "axes"], ["image"])],
+        "six",
+        [helper.make_tensor_value_info("planes", TensorProto.FLOAT, [1, 6, "height", "width"])],
+        [helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 3, "height", "width"])],
+        consts,
+    )
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), tmp_path / "lidar.onnx")
+    card = json.loads((tmp_path / "lidar.json").read_text())
+    card["files"]["fp32"]["sha256"] = sha256(tmp_path / "lidar.onnx")
+    card["channels_in"] = 6
+    (tmp_path / "lidar.json").write_text(json.dumps(card))
+    with pytest.raises(ClvisError, match="'channels_in' is 6; lidar takes 5"):
+        post.load("lidar", directory=tmp_path)
+
+
+def test_narvis_card_planes_must_give_its_channels(tmp_path):
+    for f in MODELS.glob("narvis.*"):
+        shutil.copy(f, tmp_path / f.name)
+    card = json.loads((tmp_path / "narvis.json").read_text())
+    card["architecture"]["planes"] = ["rgb", "depth", "radius"]  # 6 channels; the graph takes 10
+    (tmp_path / "narvis.json").write_text(json.dumps(card))
+    with pytest.raises(
+        ClvisError, match=r"'channels_in' is 10; narvis with planes \['rgb', 'depth', 'radius'\] takes 6"
+    ):
+        post.load("narvis", directory=tmp_path)

@@ -2,6 +2,7 @@
 the training pairs' rules."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -349,6 +350,9 @@ def test_train_narvis_with_the_splat_target(tmp_path, capsys, monkeypatch):
     assert (out_dir / "post-narvis.png").is_file()
     assert main(["train", "narvis", "--planes", "depth,vel2d", "--out", str(tmp_path)]) == 2
     assert "lacks 'rgb'" in capsys.readouterr().err
+    # was "depth_select: needs the 'depth' plane in planes", not naming the option
+    assert main(["train", "narvis", "--planes", "rgb,vel2d", "--out", str(tmp_path)]) == 2
+    assert "--planes rgb,vel2d: depth_select: needs the 'depth' plane" in capsys.readouterr().err
 
 
 def test_train_target_is_narvis_only_and_checked(tmp_path, capsys):
@@ -1060,3 +1064,203 @@ def test_infill_planes_choose_the_w_nets_inputs(capsys):
     assert (
         "--planes depth: planes: prior and depth come after the candidates plane" in capsys.readouterr().err
     )
+
+
+def _tiny_infill(out, **kw):
+    args = {"steps": 1, "size": 64, "out": out, "frames": 1, "frame_size": (96, 64), "log": lambda _: None}
+    return train.train("infill", **{**args, **kw})
+
+
+def _folder(path):
+    return {p.name: p.read_bytes() for p in sorted(path.iterdir())}
+
+
+@pytest.mark.parametrize("stage", ["_to_fp16", "write_card"])
+def test_a_run_stopped_while_exporting_keeps_the_previous_model_whole(tmp_path, monkeypatch, stage):
+    """Ctrl-C (or any failure) after NAME.onnx was written and before the
+    card: the folder held the new NAME.onnx beside the previous model's card
+    and variants (post.load: "does not match its model card's sha256"; the
+    previous model lost). Now the folder is as it was, no temporary file."""
+    _tiny_infill(tmp_path)
+    before = _folder(tmp_path)
+    assert sorted(before) == ["infill.fp16.onnx", "infill.int8.onnx", "infill.json", "infill.onnx"]
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(train, stage, interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        _tiny_infill(tmp_path, seed=1)  # another model: other bytes
+    assert _folder(tmp_path) == before
+    post.load("infill", directory=tmp_path)
+
+
+def test_onnxruntime_failing_while_exporting_is_one_error_and_writes_nothing(tmp_path, monkeypatch):
+    """The release run's int8 calibration (its held-out frames whole, 1280x720)
+    ran out of memory under an 8 GB limit: onnxruntime's Fail came out of
+    clvis train as a traceback and left infill.onnx and infill.fp16.onnx
+    without a card."""
+    from onnxruntime.capi.onnxruntime_pybind11_state import Fail
+
+    def oom(*args, **kwargs):
+        raise Fail("[ONNXRuntimeError] : 1 : FAIL : bfc_arena.cc:360 Failed to allocate memory")
+
+    monkeypatch.setattr(train, "_to_int8", oom)
+    with pytest.raises(MemoryError, match="exporting infill: onnxruntime ran out of memory.*96x64"):
+        _tiny_infill(tmp_path)
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setattr(train, "_to_int8", lambda *a: (_ for _ in ()).throw(Fail("bad graph")))
+    rc = main(
+        ["train", "infill", "--steps", "1", "--size", "64", "--frames", "1", "--frame-size", "96x64"]
+        + ["--out", str(tmp_path), "--eval", "none", "--quiet"]
+    )
+    assert rc == 2 and list(tmp_path.iterdir()) == []
+
+
+def test_a_new_model_replaces_all_of_the_previous_ones_files(tmp_path, monkeypatch):
+    """An int8 that loses too much is not shipped: the previous model's int8
+    goes too (the new card names none), the rest is the new model's."""
+    _tiny_infill(tmp_path)
+    monkeypatch.setattr(train, "INT8_MAX_LOSS_DB", -1.0)  # every int8 loses too much
+    card = _tiny_infill(tmp_path, seed=1)
+    assert card["files"]["int8"]["file"] is None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["infill.fp16.onnx", "infill.json", "infill.onnx"]
+    post.load("infill", directory=tmp_path)
+    post.load("infill", "fp16", directory=tmp_path)
+
+
+def test_init_with_weights_that_are_not_finite_is_refused(tmp_path):
+    """An --init file with NaN weights trained on and then failed in the
+    int8 calibration with onnxruntime's AssertionError("scale issue"), a
+    traceback."""
+    import onnx
+    from onnx import numpy_helper
+
+    from clvis.post.infer import MODELS
+
+    m = onnx.load(str(MODELS / "infill.onnx"))
+    first = m.graph.initializer[0]
+    a = numpy_helper.to_array(first).copy()
+    a.flat[0] = np.nan
+    first.CopyFrom(numpy_helper.from_array(a, first.name))
+    onnx.save(m, str(tmp_path / "nan.onnx"))
+    out = tmp_path / "out"
+    with pytest.raises(ValueError, match="nan.onnx: weights that are not finite"):
+        _tiny_infill(out, init=tmp_path / "nan.onnx")
+    assert not out.exists()
+
+
+def test_a_diverged_run_writes_nothing(tmp_path, monkeypatch):
+    monkeypatch.setattr(train, "_loss_fn", lambda weights, crop: lambda pred, target: (pred * np.nan).mean())
+    with pytest.raises(ValueError, match="training diverged: weights that are not finite after 1 steps"):
+        _tiny_infill(tmp_path)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", ["infill", "lidar"])
+def test_init_from_an_int8_export_says_so(name):
+    # was "not this network's weights (missing [...])": it is, quantized
+    from clvis.post.infer import MODELS
+
+    spec = train.SPECS[name]
+    net = train.TRAINERS[name].build(**spec["arch"])
+    with pytest.raises(ValueError, match=rf"{name}\.int8\.onnx: a quantized \(int8\) export"):
+        train.load_onnx_weights(net, MODELS / f"{name}.int8.onnx")
+
+
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        ({"steps": 0}, "steps: expected a whole number of at least 1, got 0"),
+        ({"steps": -3}, "steps: expected"),
+        ({"steps": 1.5}, "steps: expected"),
+        ({"frames": -1}, "frames: expected"),
+        ({"frames": 0}, "frames: expected"),
+        ({"seed": -1}, "seed: expected"),
+        ({"time_limit": 0}, "time_limit: expected a positive number of seconds, got 0"),
+        ({"time_limit": -1.0}, "time_limit: expected"),
+        ({"time_limit": float("nan")}, "time_limit: expected"),
+    ],
+)
+def test_train_checks_its_counts(tmp_path, change, message):
+    # steps=0 or -3 exported an untrained network with its card; time_limit=0
+    # raised ZeroDivisionError, -1 or nan was no limit; frames=-1 failed in numpy
+    out = tmp_path / "out"
+    with pytest.raises(ValueError, match=message):
+        _tiny_infill(out, **change)
+    assert not out.exists() or list(out.iterdir()) == []
+
+
+def test_init_of_another_network_fails_before_the_data_is_rendered(tmp_path, monkeypatch):
+    # the file was read after rendering the training frames (90 s at the
+    # release run's sizes on a quiet machine) and the out folder made
+    from clvis.post.infer import MODELS
+
+    def rendered(*args, **kwargs):
+        raise AssertionError("rendered the data first")
+
+    monkeypatch.setattr(train, "_frames", rendered)
+    out = tmp_path / "out"
+    with pytest.raises(ValueError, match="lidar.onnx: not this network's weights"):
+        _tiny_infill(out, init=MODELS / "lidar.onnx")
+    assert not out.exists()
+
+
+def test_install_puts_the_previous_model_back_when_a_move_fails(tmp_path, monkeypatch):
+    """_install's every os.replace failing in turn (a full or vanishing disk,
+    an interrupt between two moves): the folder keeps the previous model."""
+    import os
+
+    out = tmp_path / "out"
+    out.mkdir()
+    old = {"infill.json": b"old card", "infill.onnx": b"old fp32", "infill.int8.onnx": b"old int8", "x": b"x"}
+    for k, v in old.items():
+        (out / k).write_bytes(v)
+    files = {"fp32": {"file": "infill.onnx"}, "fp16": {"file": "infill.fp16.onnx"}, "int8": {"file": None}}
+    real = os.replace
+    for fail_at in range(1, 10):
+        stage = train._staging(out, "infill")
+        for k in ("infill.json", "infill.onnx", "infill.fp16.onnx"):
+            (stage / k).write_bytes(b"new " + k.encode())
+
+        def replace(a, b, calls=[], fail_at=fail_at):  # noqa: B006 (its own list per pass)
+            calls.append(a)
+            if len(calls) == fail_at:
+                raise KeyboardInterrupt
+            real(a, b)
+
+        monkeypatch.setattr(train.os, "replace", replace)
+        try:
+            train._install(stage, out, "infill", files)
+        except KeyboardInterrupt:
+            monkeypatch.setattr(train.os, "replace", real)
+            assert {p.name: p.read_bytes() for p in out.iterdir() if p != stage} == old, fail_at
+            shutil.rmtree(stage)
+            continue
+        monkeypatch.setattr(train.os, "replace", real)
+        shutil.rmtree(stage)
+        break
+    assert fail_at > 3  # it did fail part-way a few times before it got through
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == {
+        "infill.json": b"new infill.json",
+        "infill.onnx": b"new infill.onnx",
+        "infill.fp16.onnx": b"new infill.fp16.onnx",
+        "x": b"x",
+    }
+
+
+def test_train_stopped_in_its_eval_says_the_model_is_written(tmp_path, monkeypatch, capsys):
+    # Ctrl-C in --eval quick said "interrupted" alone, after the model and its
+    # card had been written
+    from clvis.training import evaluate
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(evaluate, "evaluate", interrupted)
+    args = ["train", "infill", "--steps", "1", "--size", "64", "--frames", "1", "--frame-size", "96x64"]
+    assert main([*args, "--out", str(tmp_path), "--quiet"]) == 130
+    err = capsys.readouterr().err
+    assert f"{tmp_path}/infill.onnx and its card are written; its held-out suite is not" in err
+    assert f"clvis eval infill --model-dir {tmp_path} --quick --write-card" in err
+    post.load("infill", directory=tmp_path)

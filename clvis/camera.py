@@ -256,7 +256,7 @@ def _caller_stacklevel() -> int:
     return level
 
 
-def check_aspect(camera, width: int, height: int) -> None:
+def check_aspect(camera: Camera, width: int, height: int) -> None:
     """Warn (:class:`clvis.AspectWarning`) when `camera`'s aspect
     (:attr:`Camera.aspect`) and ``width / height`` differ by more than
     ASPECT_TOLERANCE: the picture would come out stretched. A projection

@@ -129,6 +129,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         default=64,
         help="with --workers/--scheduler, a volume: cells per brick edge, a multiple of 4 (default 64)",
     )
+    p.add_argument(
+        "--model-dir",
+        metavar="DIR",
+        help="where the networks' models are (clvis train --out writes them; default: the ones "
+        "clvis ships), for the network modes",
+    )
     add_volume_options(p)
     add_cluster_options(p)
     return p
@@ -180,13 +186,15 @@ def load_scene(args: argparse.Namespace) -> Scene:
             data, spacing, origin = read_volume_file(args, path)
             check_iso_volume(data, str(path))
             iso = args.isovalue if args.isovalue is not None else otsu_level(data)
-            return VolumeScene(data, spacing, origin, iso, args.rate or RATE, description=str(path))
+            return VolumeScene(
+                data, spacing, origin, iso, args.rate or RATE, description=str(path), model_dir=args.model_dir
+            )
         from .. import read_points
 
         if args.array is not None:
             raise CliError(f"--array picks a data array of a VTK volume file; {path} is a point cloud")
 
-        return PointScene(read_points(path), description=str(path))
+        return PointScene(read_points(path), description=str(path), model_dir=args.model_dir)
     if args.array is not None:
         raise CliError("--array picks a data array of a VTK volume FILE (.vti, .vtr, .vtk)")
     name = args.dataset or "hurricane"
@@ -199,7 +207,7 @@ def load_scene(args: argparse.Namespace) -> Scene:
         cloud = PointCloud(
             d["positions"], colors=d["colors"], attributes=d["attributes"], velocity=d["velocity"]
         )
-        return PointScene(cloud, description=f"the embedded {name}")
+        return PointScene(cloud, description=f"the embedded {name}", model_dir=args.model_dir)
     if name == "explosion":
         d = datasets.explosion()
         iso = 0.2
@@ -208,7 +216,13 @@ def load_scene(args: argparse.Namespace) -> Scene:
         iso = 0.5
     iso = args.isovalue if args.isovalue is not None else iso
     return VolumeScene(
-        d["volume"], d["spacing"], d["origin"], iso, args.rate or RATE, description=f"the embedded {name}"
+        d["volume"],
+        d["spacing"],
+        d["origin"],
+        iso,
+        args.rate or RATE,
+        description=f"the embedded {name}",
+        model_dir=args.model_dir,
     )
 
 
@@ -220,6 +234,8 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
 
     if args.array is not None:
         raise CliError("--array: not on workers (they read .npy, .raw and NIfTI volumes)")
+    if args.model_dir is not None:
+        raise CliError("--model-dir: on workers the viewer runs no network (points and iso modes)")
     client, workers = cluster_client(args)
     if args.brick % 4:
         raise CliError(f"--brick: {args.brick} is not a multiple of 4 (ZFP's block edge)")

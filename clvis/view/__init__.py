@@ -115,7 +115,8 @@ def view(
     interface to listen on (127.0.0.1; any other needs the printed token),
     port 0: a free one. width x height: the notebook frame's size.
     max_pages: the pages (tabs) served at once, each with its own camera and
-    size (the settings are shared).
+    size (the settings are shared). model_dir (a scene option): where the
+    network modes' models are (``clvis train --out``; default the package's).
     """
     for name, side in (("width", width), ("height", height)):
         if isinstance(side, bool) or not isinstance(side, (int, np.integer)) or side < 1:

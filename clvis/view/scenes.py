@@ -29,6 +29,7 @@ import os
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -227,8 +228,12 @@ class PointScene(Scene):
 
     kind = "points"
 
-    def __init__(self, cloud: Any, description: str = "points") -> None:
+    def __init__(self, cloud: Any, description: str = "points", model_dir: Any = None) -> None:
+        """model_dir: where its networks' models are (clvis train --out; None:
+        the package's), loaded when a network's mode is first chosen."""
         from .. import PointCloud, Rasterizer
+
+        self.model_dir = _model_dir(model_dir)
 
         if not isinstance(cloud, PointCloud):
             cloud = PointCloud(np.asarray(cloud))
@@ -345,7 +350,7 @@ class PointScene(Scene):
         if name not in self._nets:
             from .. import post  # onnxruntime: only when a network is asked for
 
-            self._nets[name] = post.load(name, queue=self.raster.queue)
+            self._nets[name] = post.load(name, queue=self.raster.queue, directory=self.model_dir)
         return self._nets[name]
 
     def _render(self, camera, w, h, s, point_size=None, **kw):
@@ -545,8 +550,13 @@ class VolumeScene(Scene):
         isovalue: float | None = None,
         rate: int = 8,
         description: str = "volume",
+        model_dir: Any = None,
     ) -> None:
+        """model_dir: where the in-fill network's model is (clvis train --out;
+        None: the package's), loaded when an in-fill mode is first chosen."""
         from .. import IsoRenderer
+
+        self.model_dir = _model_dir(model_dir)
 
         data = np.asarray(volume)
         if data.ndim != 3:
@@ -593,7 +603,7 @@ class VolumeScene(Scene):
         if mode == "iso+infill" and self._infill is None:
             from .. import post
 
-            self._infill = post.load("infill", queue=self.iso.queue)
+            self._infill = post.load("infill", queue=self.iso.queue, directory=self.model_dir)
         from .._arrays import on_host
 
         t0 = time.perf_counter()
@@ -634,7 +644,7 @@ class VolumeScene(Scene):
         if self._infill is None:
             from .. import post
 
-            self._infill = post.load("infill", queue=self.iso.queue)
+            self._infill = post.load("infill", queue=self.iso.queue, directory=self.model_dir)
         t0 = time.perf_counter()
         part = self.iso.render(camera, w, h, s["isovalue"], completion=SPLIT_COMPLETION, speculation=False)
         t1 = time.perf_counter()
@@ -844,11 +854,26 @@ class DaskVolumeScene(Scene):
         self.dr.close()
 
 
+def _model_dir(directory: Any) -> Path | None:
+    """A scene's model_dir: None, or an existing folder (checked up front:
+    its networks load when their mode is first chosen, in the render worker)."""
+    if directory is None:
+        return None
+    if not isinstance(directory, (str, os.PathLike)):
+        raise TypeError(f"model_dir: expected a folder's path or None, got {type(directory).__name__}")
+    path = Path(directory)
+    if not path.is_dir():
+        raise DataError(f"model_dir: {path} is not a folder (clvis train --out writes one)")
+    return path
+
+
 def scene_for(obj: Any, **kwargs: Any) -> Scene:
     """A scene for `obj`: a Scene as is, a clvis.PointCloud or (N, 3) positions
     (points), a 3-D array [z, y, x] (a volume; kwargs: spacing, origin,
     isovalue, rate) or a clvis.Volume (read_volume's, with its spacing and
-    origin unless kwargs give them). A path is refused, naming the readers."""
+    origin unless kwargs give them). A path is refused, naming the readers.
+    kwargs for both: description, model_dir (where the networks' models are:
+    clvis train --out)."""
     from .. import PointCloud
     from ..io.volumes import Volume
 

@@ -36,6 +36,23 @@ def test_errors_are_one_line(capsys, tmp_path):
     assert "leave it out" in capsys.readouterr().err
 
 
+def test_model_dir(capsys, tmp_path):
+    """--model-dir: the network modes' models from a `clvis train --out`
+    folder (a copy of the shipped in-fill model measures as the shipped one);
+    a folder that is not one, and --model-dir on workers, are one line."""
+    from clvis.post.infer import MODELS
+
+    for f in MODELS.glob("infill.*"):
+        shutil.copy(f, tmp_path / f.name)
+    args = ["view", "--dataset", "marschner-lobb", "--measure", "iso+infill", "--size", "96x64"]
+    assert cli.main([*args, "--model-dir", str(tmp_path)]) == 0
+    assert "iso+infill" in capsys.readouterr().out
+    assert cli.main([*args, "--model-dir", str(tmp_path / "nowhere")]) == 2
+    assert f"model_dir: {tmp_path / 'nowhere'} is not a folder" in capsys.readouterr().err
+    assert cli.main([*args, "--model-dir", str(tmp_path), "--workers", "1"]) == 2
+    assert "--model-dir: on workers the viewer runs no network" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("name", ["pyvista_ant.ply", "laspy_simple.laz"])
 def test_third_party_point_files(name, tmp_path):
     pytest.importorskip("laspy")

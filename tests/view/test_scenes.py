@@ -573,3 +573,41 @@ def test_narvis_scan_mode_renders_a_sparse_cloud_smaller():
     f = next(s.frames(cam, 320, 240, s.settings, lambda: False))
     assert f.info["post scale"] == 3
     np.testing.assert_array_equal(f.image[:, :159], want[:, :159, :3])
+
+
+def test_scenes_load_their_networks_from_a_model_dir(tmp_path):
+    """model_dir (clvis view --model-dir): the network modes load the models
+    of a `clvis train --out` folder, not the package's: a copy of the shipped
+    ones gives the same frames, another network's model put in its place is
+    refused when the mode is chosen, and a folder that is not one is refused
+    when the scene is made."""
+    import shutil
+
+    from clvis.errors import DataError
+    from clvis.post.infer import MODELS
+
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    for f in [*MODELS.glob("infill.*"), *MODELS.glob("lidar.*")]:
+        shutil.copy(f, mine / f.name)
+    d = clvis.datasets.marschner_lobb(32)
+    frames = []
+    for where in (None, mine):
+        v = VolumeScene(d["volume"], isovalue=0.5, model_dir=where)
+        v.update({"mode": "infill|iso"})
+        frames.append(next(v.frames(Orbit(v.lo, v.hi).camera(1.0), 64, 64, v.settings, lambda: False)))
+    np.testing.assert_array_equal(frames[0].image, frames[1].image)
+    for f in MODELS.glob("lidar.*"):  # another network's model where infill's was
+        shutil.copy(f, mine / f.name.replace("lidar", "infill", 1))
+    v = VolumeScene(d["volume"], isovalue=0.5, model_dir=mine)
+    v.update({"mode": "infill|iso"})
+    with pytest.raises(DataError, match="the model card is for 'lidar', not 'infill'"):
+        next(v.frames(Orbit(v.lo, v.hi).camera(1.0), 64, 64, v.settings, lambda: False))
+    cloud = clvis.PointCloud(np.random.default_rng(1).random((500, 3)).astype(np.float32))
+    s = scene_for(cloud, model_dir=mine)
+    s.update({"mode": "lidar"})
+    assert s._net("lidar").path == mine / "lidar.onnx"
+    with pytest.raises(DataError, match="is not a folder"):
+        PointScene(cloud, model_dir=tmp_path / "nowhere")
+    with pytest.raises(TypeError, match="model_dir: expected a folder's path or None"):
+        VolumeScene(d["volume"], isovalue=0.5, model_dir=3)

@@ -38,7 +38,8 @@ class Row:
 
     @property
     def cpu_s(self) -> float | None:
-        """The best round's process CPU time (user + system), where recorded."""
+        """The least process CPU time (user + system, all its threads) of the
+        timed rounds, where recorded (not necessarily the round of min_s)."""
         cpu = self.info.get("cpu_s")
         return min(cpu) * float(self.info.get("time_scale", 1.0)) if cpu else None
 
@@ -229,6 +230,14 @@ def load(path: str | os.PathLike[str]) -> tuple[list[Row], dict]:
                 info=info,
             )
         )
+    # one clvis row and one copy kernel an op: the ratios and --compare divide by them
+    for role in ("clvis", "copy"):
+        seen: dict[str, str] = {}
+        for r in rows:
+            if r.role == role and r.op in seen:
+                raise ValueError(f"{r.op}: two rows of role {role!r} ({seen[r.op]!r}, {r.impl!r})")
+            if r.role == role:
+                seen[r.op] = r.impl
     copy = {r.op: r.gbs for r in rows if r.role == "copy"}
     for r in rows:
         r.copy_gbs = copy.get(r.op)
@@ -280,6 +289,10 @@ def format_table(rows: list[Row], meta: dict | None = None) -> str:
             f"device: {meta.get('device', '?')}   tuning: {meta.get('tuning', '?')}   "
             f"clvis {meta.get('version', '?')}   scale {meta.get('scale', 1)}"
         )
+        # cases of the suite that failed or were skipped (a peer's library
+        # missing, ...): no row, no ratio, so the table says so
+        for m in meta.get("not_measured", []):
+            lines.append(f"not measured: {m.get('test', '?')} ({m.get('outcome', '?')}: {m.get('why', '')})")
     head = (
         f"{'implementation':38} {'best':>9} {'median':>9} {'throughput':>14} {'GB/s':>7} "
         f"{'% copy':>7} {'clvis speed-up':>15} {'cpu':>9}"
@@ -288,6 +301,7 @@ def format_table(rows: list[Row], meta: dict | None = None) -> str:
         ops = [r for r in rows if r.op == op]
         n = ops[0].n
         lines += ["", f"{op}   n = {n:,}", head, "-" * len(head)]
+        notes: list[str] = []
         for r in sorted(ops, key=lambda r: ["clvis", "clvis-host", "peer", "copy"].index(r.role)):
             name = r.impl if r.role != "clvis" else "clvis (device arrays)"
             if r.role == "clvis-host":  # a variant with its own name (e.g. a precision) keeps it
@@ -295,10 +309,14 @@ def format_table(rows: list[Row], meta: dict | None = None) -> str:
             pct = f"{r.copy_pct:6.0f}%" if r.copy_pct is not None else "      -"
             speed = f"{rat[(op, r.impl)]:14.1f}x" if (op, r.impl) in rat else ""
             cpu = f"{r.cpu_s * 1e3:7.2f}ms" if r.cpu_s is not None else ""
+            if r.info.get("cpu_not_recorded"):
+                cpu = "-"
+                notes.append(f"cpu of {name}: not recorded ({r.info['cpu_not_recorded']})")
             lines.append(
                 f"{name:38} {r.min_s * 1e3:7.2f}ms {r.median_s * 1e3:7.2f}ms "
                 f"{_si(r.elems_per_s) + 'el/s':>14} {r.gbs:7.1f} {pct} {speed:>15} {cpu:>9}"
             )
+        lines += notes
     return "\n".join(lines)
 
 
@@ -330,6 +348,7 @@ class Change:
     base_s: float  # clvis's best time in seconds, baseline and now
     now_s: float
     fail_on: float | None
+    note: str = ""  # anchors measured in one run only (left out of both figures), said, not dropped
 
     @property
     def change(self) -> float:
@@ -349,6 +368,25 @@ class Change:
         return self.fail_on is not None and self.change > self.fail_on and self.change_s > self.fail_on
 
 
+def _anchors(rows: list[Row], op: str) -> dict[str, Row]:
+    """impl -> row of the op's copy kernel and peers (its anchors)."""
+    return {a.impl: a for a in rows if a.op == op and a.role in ("copy", "peer") and a.min_s > 0}
+
+
+def _figure(clv: Row, anchors: list[Row]) -> tuple[float, str]:
+    """(clvis best / geometric mean of the anchors' bests, the anchors' name);
+    with no anchor, (clvis best in seconds, "none")."""
+    if not anchors:
+        return clv.min_s, "none"
+    gm = math.exp(sum(math.log(a.min_s) for a in anchors) / len(anchors))
+    copies = sum(a.role == "copy" for a in anchors)
+    peers = len(anchors) - copies
+    name = " + ".join(
+        (["copy kernel"] if copies else []) + ([f"{peers} peer{'s' if peers > 1 else ''}"] if peers else [])
+    )
+    return clv.min_s / gm, name
+
+
 def normalised(rows: list[Row]) -> dict[str, tuple[float, str, float]]:
     """op -> (clvis best / anchor, anchor's name, clvis best in seconds).
 
@@ -359,30 +397,44 @@ def normalised(rows: list[Row]) -> dict[str, tuple[float, str, float]]:
     time in seconds (anchor "none")."""
     out = {}
     for r in rows:
-        if r.role != "clvis":
-            continue
-        anchors = [a for a in rows if a.op == r.op and a.role in ("copy", "peer") and a.min_s > 0]
-        if anchors:
-            gm = math.exp(sum(math.log(a.min_s) for a in anchors) / len(anchors))
-            copies = sum(a.role == "copy" for a in anchors)
-            peers = len(anchors) - copies
-            name = " + ".join(
-                (["copy kernel"] if copies else [])
-                + ([f"{peers} peer{'s' if peers > 1 else ''}"] if peers else [])
-            )
-            out[r.op] = (r.min_s / gm, name, r.min_s)
-        else:
-            out[r.op] = (r.min_s, "none", r.min_s)
+        if r.role == "clvis":
+            value, name = _figure(r, list(_anchors(rows, r.op).values()))
+            out[r.op] = (value, name, r.min_s)
     return out
 
 
 def compare(base: list[Row], now: list[Row], fail_on: float | None = None) -> list[Change]:
-    """Each op of `now` also in `base` (with the same anchors): its figures in both."""
-    b, n = normalised(base), normalised(now)
+    """Each op of `now` also in `base` with the same element count: its figures
+    in both, normalised to the anchors measured in both runs (an anchor in one
+    run only, e.g. a peer whose library is missing there, is left out of both
+    figures and named in the Change's note). Ops left out: uncompared()."""
+    bc = {r.op: r for r in base if r.role == "clvis"}
     out = []
-    for op, (value, anchor, secs) in n.items():
-        if op in b and b[op][1] == anchor and b[op][0] > 0 and b[op][2] > 0:
-            out.append(Change(op, anchor, b[op][0], value, b[op][2], secs, fail_on))
+    for r in now:
+        b = bc.get(r.op)
+        if r.role != "clvis" or b is None or b.n != r.n or b.min_s <= 0 or r.min_s <= 0:
+            continue
+        ab, an = _anchors(base, r.op), _anchors(now, r.op)
+        common = [k for k in an if k in ab]
+        vb, name = _figure(b, [ab[k] for k in common])
+        vn, _ = _figure(r, [an[k] for k in common])
+        notes = [f"{k}: not in the baseline" for k in an if k not in ab]
+        notes += [f"{k}: not in this run" for k in ab if k not in an]
+        out.append(Change(r.op, name, vb, vn, b.min_s, r.min_s, fail_on, "; ".join(notes)))
+    return out
+
+
+def uncompared(base: list[Row], now: list[Row]) -> list[str]:
+    """Why each op measured in either run is not in compare()'s list."""
+    bc = {r.op: r for r in base if r.role == "clvis"}
+    nc = {r.op: r for r in now if r.role == "clvis"}
+    out = [f"{op}: not in the baseline" for op in nc if op not in bc]
+    out += [f"{op}: not in this run" for op in bc if op not in nc]
+    out += [
+        f"{op}: n = {bc[op].n:,} in the baseline, {r.n:,} now (another size)"
+        for op, r in nc.items()
+        if op in bc and bc[op].n != r.n
+    ]
     return out
 
 
@@ -394,4 +446,6 @@ def format_compare(changes: list[Change]) -> str:
             f"{c.op[:56]:56} {c.anchor[:24]:24} {c.base:9.3g} {c.now:9.3g} {100 * c.change:+7.1f}% "
             f"{100 * c.change_s:+7.1f}%{flag}"
         )
+        if c.note:
+            lines.append(f"    (left out of both figures: {c.note})")
     return "\n".join(lines)

@@ -195,9 +195,20 @@ def cmd(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
             return 2
+        # a smoke run (CLVIS_BENCH_SCALE / --scale) against a full one compares other sizes
+        if float(base_meta.get("scale", 1)) != float(meta.get("scale", 1)):
+            print(
+                f"clvis bench: error: --compare: the baseline ran at scale {base_meta.get('scale', 1)}, "
+                f"this run at scale {meta.get('scale', 1)} (other sizes)",
+                file=sys.stderr,
+            )
+            return 2
         changes = benchreport.compare(base_rows, rows, args.fail_on)
         print("\ncompared with the baseline (normalised: clvis best / anchor best, same run):")
         print(benchreport.format_compare(changes))
+        left = benchreport.uncompared(base_rows, rows)
+        if left:
+            print("not compared:\n" + "\n".join(f"  {w}" for w in left))
         regressed = any(c.regressed for c in changes)
         if regressed:
             print(f"\nregression beyond {100 * args.fail_on:g}%", file=sys.stderr)

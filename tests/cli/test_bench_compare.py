@@ -12,16 +12,16 @@ from clvis import benchreport, cli
 OP = "scan[int32]"
 
 
-def _json(path, *, clvis=1e-3, copy=0.5e-3, peers=(3e-3, 4e-3), device="cpu-a"):
+def _json(path, *, clvis=1e-3, copy=0.5e-3, peers=(3e-3, 4e-3), device="cpu-a", n=1000, scale=1):
     def b(impl, role, t):
         return {
-            "extra_info": {"op": OP, "impl": impl, "role": role, "n": 1000, "bytes": 8000, "cpu_s": [t]},
+            "extra_info": {"op": OP, "impl": impl, "role": role, "n": n, "bytes": 8 * n, "cpu_s": [t]},
             "stats": {"median": t * 1.1, "min": t, "rounds": 5},
         }
 
     rows = [b("clvis", "clvis", clvis), b("copy kernel", "copy", copy)]
     rows += [b(f"peer {i}", "peer", t) for i, t in enumerate(peers)]
-    meta = {"device": device, "device_slug": device, "tuning": "cpu", "version": "x", "scale": 1}
+    meta = {"device": device, "device_slug": device, "tuning": "cpu", "version": "x", "scale": scale}
     path.write_text(json.dumps({"clvis": meta, "benchmarks": rows}))
     return str(path)
 
@@ -72,6 +72,32 @@ def test_compare_errors(tmp_path, capsys):
     assert "needs the baseline's path" in capsys.readouterr().err
     assert cli.main(["bench", "primitives", "--report", base, "--compare", base, "--fail-on", "x%"]) == 2
     assert "not a percentage" in capsys.readouterr().err
+
+
+def test_peer_missing_from_one_run_is_said_not_dropped(tmp_path, capsys):
+    """A peer measured in the baseline only (its library missing now): the op
+    is still compared, on the anchors both runs have, and the peer is named;
+    it used to vanish from the comparison, a 2x slow-down passing --fail-on."""
+    rc, out = _compare(tmp_path, capsys, clvis=2e-3, peers=(3e-3,))
+    assert rc == 1 and "REGRESSED" in out.out and "copy kernel + 1 peer " in out.out
+    assert "peer 1: not in this run" in out.out
+    base = _json(tmp_path / "b2.json", peers=(3e-3,))
+    now = _json(tmp_path / "n2.json", peers=(3e-3, 4e-3))
+    assert cli.main(["bench", "primitives", "--report", now, "--compare", base]) == 0
+    assert "peer 1: not in the baseline" in capsys.readouterr().out
+
+
+def test_other_sizes_are_not_compared(tmp_path, capsys):
+    """A smoke run (CLVIS_BENCH_SCALE=0.001) against a full one: refused, not
+    a -99 % "speed-up"; an op measured at another n is listed, not compared."""
+    base = _json(tmp_path / "base.json")
+    tiny = _json(tmp_path / "tiny.json", clvis=2e-3, n=10, scale=0.001)
+    assert cli.main(["bench", "primitives", "--report", tiny, "--compare", base, "--fail-on", "15%"]) == 2
+    assert "baseline ran at scale 1, this run at scale 0.001" in capsys.readouterr().err
+    other = _json(tmp_path / "other.json", clvis=2e-3, n=10)
+    assert cli.main(["bench", "primitives", "--report", other, "--compare", base, "--fail-on", "15%"]) == 0
+    out = capsys.readouterr().out
+    assert f"{OP}: n = 1,000 in the baseline, 10 now" in out and "REGRESSED" not in out
 
 
 def test_normalised_anchor_is_the_geometric_mean(tmp_path):

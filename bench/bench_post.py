@@ -163,11 +163,10 @@ def _wide(widths):
 def _torch_net(name):
     """The shipped architecture in torch eager (its weights do not change
     the time: random ones)."""
-    torch = pytest.importorskip("torch")
+    pytest.importorskip("torch")
     from clvis.post import nets
 
     if ("torch", name) not in _cache:
-        torch.set_num_threads(os.cpu_count() or 1)
         _cache[("torch", name)] = nets.build(name, **post.load(name).card["architecture"]).eval()
     return _cache[("torch", name)]
 
@@ -232,16 +231,17 @@ def test_post(benchmark, queue, name, size, impl):
             with torch.no_grad():
                 return net(x)
 
-        run(
-            benchmark,
-            eager,
-            op=op,
-            impl="torch eager (fp32)",
-            role="peer",
-            n=w * h,
-            nbytes=w * h * 24,
-            rounds=3,
-        )
+        with benchutil.threads(torch=os.cpu_count() or 1):  # torch's count given back after the case
+            run(
+                benchmark,
+                eager,
+                op=op,
+                impl="torch eager (fp32)",
+                role="peer",
+                n=w * h,
+                nbytes=w * h * 24,
+                rounds=3,
+            )
     elif impl == "pushpull":
         if name == "infill":
             known = np.where((image.hit & ~image.active)[..., None], image.rgba, 0).astype(np.float32)

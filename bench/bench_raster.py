@@ -30,7 +30,7 @@ copy kernel over its 12 bytes per pixel (depth and rgba in, rgba out):
 import numpy as np
 import pyopencl.array as cla
 import pytest
-from benchutil import run, scaled
+from benchutil import run, scaled, threads
 
 import clvis
 from clvis import datasets
@@ -200,29 +200,27 @@ def test_raster(benchmark, queue, order, impl):
             rounds=3,
         )
     elif impl == "numba":
-        import numba
-
-        numba.set_num_threads(NUMBA_THREADS)
-        render = numba_render()
-        f32 = np.float32
-        m = camera.matrix.astype(f32).ravel()
-        d = camera.depth_row.astype(f32)
-        c = np.array([camera.near, camera.far, W, H, 0.5, 1.0], f32)
-        bufs = np.empty((NUMBA_THREADS, W * H), np.uint64)
-        vis = np.empty(W * H, np.uint64)
-        render(points, m, d, c, bufs, vis)  # compile, and check the winners against clvis's
-        want = rasterizer(queue, order).render(camera, W, H).index.ravel()
-        assert np.array_equal((vis & np.uint64(0xFFFFFFFF)).astype(np.uint32), want)
-        run(
-            benchmark,
-            lambda: render(points, m, d, c, bufs, vis),
-            op=op,
-            impl=f"numba parallel ({NUMBA_THREADS} threads, visibility only)",
-            role="peer",
-            n=N,
-            nbytes=model,
-            rounds=5,
-        )
+        with threads(numba=NUMBA_THREADS):  # numba's count given back after the case
+            render = numba_render()
+            f32 = np.float32
+            m = camera.matrix.astype(f32).ravel()
+            d = camera.depth_row.astype(f32)
+            c = np.array([camera.near, camera.far, W, H, 0.5, 1.0], f32)
+            bufs = np.empty((NUMBA_THREADS, W * H), np.uint64)
+            vis = np.empty(W * H, np.uint64)
+            render(points, m, d, c, bufs, vis)  # compile, and check the winners against clvis's
+            want = rasterizer(queue, order).render(camera, W, H).index.ravel()
+            assert np.array_equal((vis & np.uint64(0xFFFFFFFF)).astype(np.uint32), want)
+            run(
+                benchmark,
+                lambda: render(points, m, d, c, bufs, vis),
+                op=op,
+                impl=f"numba parallel ({NUMBA_THREADS} threads, visibility only)",
+                role="peer",
+                n=N,
+                nbytes=model,
+                rounds=5,
+            )
     else:
         src = _cache.get("copy")
         if src is None:

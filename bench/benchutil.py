@@ -1,5 +1,7 @@
 """Helpers shared by the bench/ suites."""
 
+import contextlib
+import importlib
 import os
 import resource
 
@@ -11,15 +13,18 @@ def scaled(n: int) -> int:
     return max(1024, int(n * scale))
 
 
-def run(benchmark, fn, *, op, impl, role, n, nbytes, queue=None, rounds=11, **info):
+def run(benchmark, fn, *, op, impl, role, n, nbytes, queue=None, rounds=11, cpu=True, **info):
     """Time fn (finishing `queue` inside the timing) and record what the
     report needs: op (the benchmark group), impl, role ("clvis", "clvis-host",
     "peer" or "copy"), n elements and the bytes model; and the process's CPU
-    time (user + system) of each round, as extra_info "cpu_s" (other tenants
-    of a shared machine do not inflate it the way they inflate wall time)."""
+    time (user + system, all its threads) of each timed round, as extra_info
+    "cpu_s" (other tenants of a shared machine do not inflate it the way they
+    inflate wall time). cpu=False, or a reason string, where this process's
+    CPU time is not the op's (its work runs in other processes): no "cpu_s",
+    and the reason as "cpu_not_recorded"."""
     benchmark.group = op
     benchmark.extra_info.update(op=op, impl=impl, role=role, n=int(n), bytes=int(nbytes), **info)
-    cpu: list[float] = []
+    times: list[float] = []
     # CLVIS_BENCH_SLOWDOWN=k runs each clvis case k times a round: a real,
     # known slow-down for testing `clvis bench --compare --fail-on`
     repeat = int(os.environ.get("CLVIS_BENCH_SLOWDOWN", "1")) if role == "clvis" else 1
@@ -34,11 +39,16 @@ def run(benchmark, fn, *, op, impl, role, n, nbytes, queue=None, rounds=11, **in
         if queue is not None:
             queue.finish()
         r1 = resource.getrusage(resource.RUSAGE_SELF)
-        cpu.append(r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime)
+        times.append(r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime)
         return r
 
     benchmark.pedantic(call, rounds=rounds, warmup_rounds=1, iterations=1)
-    benchmark.extra_info["cpu_s"] = cpu[-rounds:] if cpu else []
+    if cpu is not True:
+        benchmark.extra_info["cpu_not_recorded"] = cpu or "the op's work runs in other processes"
+        return
+    # the timed rounds come after the warm-up one; --benchmark-cprofile calls
+    # fn once more after them (profiled), --benchmark-disable only once
+    benchmark.extra_info["cpu_s"] = times[1 : 1 + rounds] if len(times) > rounds else times
 
 
 def run_copy(benchmark, queue, op, xd, n, out=None):
@@ -56,3 +66,19 @@ def run_copy(benchmark, queue, op, xd, n, out=None):
         nbytes=2 * xd.nbytes,
         queue=queue,
     )
+
+
+@contextlib.contextmanager
+def threads(**counts):
+    """Run a peer with `counts` threads per library (numba=2, torch=4), then
+    give each library back the count it had: a case's setting must not carry
+    into the cases after it, nor into the rest of a pytest session."""
+    mods = {name: importlib.import_module(name) for name in counts}
+    before = {name: m.get_num_threads() for name, m in mods.items()}
+    try:
+        for name, m in mods.items():
+            m.set_num_threads(counts[name])
+        yield
+    finally:
+        for name, m in mods.items():
+            m.set_num_threads(before[name])

@@ -41,7 +41,10 @@ class Row:
         """The least process CPU time (user + system, all its threads) of the
         timed rounds, where recorded (not necessarily the round of min_s)."""
         cpu = self.info.get("cpu_s")
-        return min(cpu) * float(self.info.get("time_scale", 1.0)) if cpu else None
+        # a peer timed on a subset scales its CPU time as its time ("time_scale"); an
+        # ideal n-thread peer (its time / n) does not: the threads' CPU adds up ("cpu_scale")
+        scale = self.info.get("cpu_scale", self.info.get("time_scale", 1.0))
+        return min(cpu) * float(scale) if cpu else None
 
     @property
     def elems_per_s(self) -> float:

@@ -102,3 +102,13 @@ def test_cluster_gives_back_the_pocl_variables(bench_path, monkeypatch):
     assert seen == {"POCL_CPU_MAX_CU_COUNT": "1", "POCL_MAX_PTHREAD_COUNT": "1"}
     assert os.environ["POCL_MAX_PTHREAD_COUNT"] == "7" and "POCL_CPU_MAX_CU_COUNT" not in os.environ
     sys.modules.pop("bench_distributed", None)
+
+
+def test_ideal_two_thread_peer_keeps_its_cpu_time():
+    """bench_iso's "2 x zfpy" row halves zfpy's time (two ideal threads); its
+    CPU time is the serial run's, not halved with it. A ray-subset peer's
+    (time_scale alone) scales both."""
+    two = benchreport.Row("o", "2 x zfpy", "peer", 1, 1, 1, 1, 1, info={"cpu_s": [4.0], "time_scale": 0.5})
+    assert two.cpu_s == 2.0
+    two.info["cpu_scale"] = 1.0
+    assert two.cpu_s == 4.0

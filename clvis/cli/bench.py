@@ -150,6 +150,10 @@ def cmd(args: argparse.Namespace) -> int:
                 return 2
             baseline = benchreport.load(out)
         out.parent.mkdir(parents=True, exist_ok=True)
+        # pytest-benchmark writes its JSON even when cases failed: written beside
+        # `out` and moved over it only when the run passed, a failed run leaves
+        # the saved one (the default --compare baseline) as it was
+        part = out.with_name(f".{out.name}.{os.getpid()}.part")
         env = dict(os.environ)
         if args.scale is not None:
             env["CLVIS_BENCH_SCALE"] = str(args.scale)
@@ -161,23 +165,29 @@ def cmd(args: argparse.Namespace) -> int:
             "-q",
             "-p",
             "no:cacheprovider",
-            f"--benchmark-json={out}",
+            f"--benchmark-json={part}",
             "--benchmark-disable-gc",
             *(["-k", args.select] if args.select else []),
         ]
         print("running:", " ".join(cmd), flush=True)
-        r = subprocess.run(
-            cmd,
-            check=False,
-            cwd=bench.parent,
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
-        if r.returncode != 0:
-            print(r.stdout[-4000:])
-            return r.returncode
+        try:
+            r = subprocess.run(
+                cmd,
+                check=False,
+                cwd=bench.parent,
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+            )
+            if r.returncode != 0:
+                print(r.stdout[-4000:])
+                kept = "left as it was" if out.is_file() else "not written"
+                print(f"clvis bench: the suite failed (exit {r.returncode}); {out} {kept}", file=sys.stderr)
+                return r.returncode
+            os.replace(part, out)
+        finally:
+            part.unlink(missing_ok=True)
         rows, meta = benchreport.load(out)
         print(f"results: {out}")
     print(benchreport.format_table(rows, meta))

@@ -4,6 +4,7 @@ the peers) exits 1; a machine slower for the whole run, a noisy anchor or two
 runs of the same code do not."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -137,3 +138,23 @@ def test_real_runs(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("CLVIS_BENCH_SLOWDOWN", "3")
     assert cli.main([*args, "--json", slow, "--compare", base, "--fail-on", "50%"]) == 1
     assert "REGRESSED" in capsys.readouterr().out
+
+
+def test_a_failed_run_keeps_the_saved_json(tmp_path, capsys, monkeypatch):
+    """pytest-benchmark writes its JSON even when a case fails (a peer's
+    library missing): `clvis bench` used to leave that partial run in place of
+    the saved one, the baseline of the next --compare."""
+    import subprocess
+
+    saved = tmp_path / "primitives.json"
+    saved.write_text("the saved run")
+
+    def suite(cmd, **kw):
+        path = next(a.split("=", 1)[1] for a in cmd if a.startswith("--benchmark-json="))
+        Path(path).write_text("a partial run")
+        return subprocess.CompletedProcess(cmd, 1, "1 failed, 5 passed", None)
+
+    monkeypatch.setattr(subprocess, "run", suite)
+    assert cli.main(["bench", "primitives", "--json", str(saved)]) == 1
+    assert saved.read_text() == "the saved run" and sorted(tmp_path.iterdir()) == [saved]
+    assert "left as it was" in capsys.readouterr().err

@@ -98,6 +98,14 @@ def _missing(module: str) -> bool:
         return True
 
 
+def _env_scale() -> float | None:
+    """CLVIS_BENCH_SCALE as the suites read it (1 when unset; None when not a number)."""
+    try:
+        return float(os.environ.get("CLVIS_BENCH_SCALE") or 1)
+    except ValueError:
+        return None
+
+
 def _bench_dir() -> Path | None:
     for cand in (Path.cwd() / "bench", Path(__file__).resolve().parents[2] / "bench"):
         if (cand / "bench_primitives.py").is_file():
@@ -144,6 +152,16 @@ def cmd(args: argparse.Namespace) -> int:
             if args.json
             else (bench / "results" / runtime.device_slug(q) / f"{args.family}.json")
         )
+        scale = args.scale if args.scale is not None else _env_scale()
+        if not args.json and (args.select or scale != 1) and out.is_file():
+            # a smoke or selected run would replace the saved full run (in a clone, the committed figures)
+            why = f"--select {args.select!r}" if args.select else f"scale {scale}"
+            print(
+                f"clvis bench: error: a run at {why} would replace the full run saved at {out}; "
+                "give --json PATH for it (--compare BASELINE still compares with the saved one)",
+                file=sys.stderr,
+            )
+            return 2
         if baseline is SAVED:
             if not out.is_file():
                 print(f"clvis bench: error: --compare: no saved run at {out}", file=sys.stderr)

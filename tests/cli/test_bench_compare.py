@@ -158,3 +158,25 @@ def test_a_failed_run_keeps_the_saved_json(tmp_path, capsys, monkeypatch):
     assert cli.main(["bench", "primitives", "--json", str(saved)]) == 1
     assert saved.read_text() == "the saved run" and sorted(tmp_path.iterdir()) == [saved]
     assert "left as it was" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [["--select", "histogram"], ["--scale", "0.001"]])
+def test_a_partial_run_does_not_replace_the_saved_full_run(tmp_path, capsys, monkeypatch, args):
+    """`clvis bench iso --select zfp_decode` (README) or a --scale smoke run
+    used to overwrite bench/results/<device>/<family>.json, the committed
+    full-size figures, with a few tiny rows; now it asks for --json."""
+    import subprocess
+
+    import clvis
+    from clvis.cli import bench as cli_bench
+
+    (tmp_path / "bench_primitives.py").write_text("")
+    saved = tmp_path / "results" / clvis.runtime.device_slug(clvis.default_queue()) / "primitives.json"
+    saved.parent.mkdir(parents=True)
+    saved.write_text("the full run")
+    monkeypatch.setattr(cli_bench, "_bench_dir", lambda: tmp_path)
+    monkeypatch.setattr(subprocess, "run", lambda *a, **k: pytest.fail("the suite ran"))
+    monkeypatch.delenv("CLVIS_BENCH_SCALE", raising=False)
+    assert cli.main(["bench", "primitives", *args]) == 2
+    assert "would replace the full run saved at" in capsys.readouterr().err
+    assert saved.read_text() == "the full run"

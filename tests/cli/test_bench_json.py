@@ -14,7 +14,7 @@ from clvis import benchreport
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _run(tmp_path, *args, env=None):
+def _run(tmp_path, *args, env=None, cwd=None):
     e = {**os.environ, "CLVIS_BENCH_SCALE": "0.001", **(env or {})}
     e["PYTHONPATH"] = os.pathsep.join([str(tmp_path), str(ROOT), e.get("PYTHONPATH", "")])
     cmd = [
@@ -26,9 +26,9 @@ def _run(tmp_path, *args, env=None):
         "-p",
         "no:cacheprovider",
     ]
-    # from tmp_path: pytest-benchmark 5.3 fails (INTERNALERROR) to warn about a
-    # saved run's other machine_info when its storage is outside the working directory
-    return subprocess.run([*cmd, *args], cwd=tmp_path, env=e, capture_output=True, text=True, timeout=300)
+    # from tmp_path, not the clone: nothing written there
+    cwd = cwd or tmp_path
+    return subprocess.run([*cmd, *args], cwd=cwd, env=e, capture_output=True, text=True, timeout=300)
 
 
 def test_json_names_the_device_and_what_was_not_measured(tmp_path):
@@ -36,6 +36,7 @@ def test_json_names_the_device_and_what_was_not_measured(tmp_path):
     (tmp_path / "no_numba.py").write_text("import sys\nsys.modules['numba'] = None\n")
     out = tmp_path / "run.json"
     store = tmp_path / "store"
+    (tmp_path / "elsewhere").mkdir()
     p = _run(
         tmp_path,
         "-p",
@@ -64,6 +65,19 @@ def test_json_names_the_device_and_what_was_not_measured(tmp_path):
     p = _run(tmp_path, "-k", "histogram and clvis", "--benchmark-storage=file://store", "--benchmark-compare")
     assert p.returncode == 0, p.stdout[-2000:]
     assert "machine_info is different" in p.stdout + p.stderr and "Other platform" in p.stdout + p.stderr
+    assert "clvis: the saved run is of Other platform / other device at scale 0.001" in p.stdout + p.stderr
+    # the storage outside the working directory: pytest-benchmark's own warning
+    # fails there (INTERNALERROR, exit 3); clvis's still says it
+    p = _run(
+        tmp_path,
+        "-k",
+        "histogram and clvis",
+        f"--benchmark-storage=file://{store}",
+        "--benchmark-compare",
+        cwd=str(tmp_path / "elsewhere"),
+    )
+    assert p.returncode == 0, p.stdout[-2000:]
+    assert "clvis: the saved run is of Other platform" in p.stdout + p.stderr
 
 
 def test_a_case_gives_back_the_thread_count_it_set(tmp_path):

@@ -170,7 +170,8 @@ def cmd(args: argparse.Namespace) -> int:
         out.parent.mkdir(parents=True, exist_ok=True)
         # pytest-benchmark writes its JSON even when cases failed: written beside
         # `out` and moved over it only when the run passed, a failed run leaves
-        # the saved one (the default --compare baseline) as it was
+        # the saved one (the default --compare baseline) as it was and its own
+        # JSON as <family>.failed.json
         part = out.with_name(f".{out.name}.{os.getpid()}.part")
         env = dict(os.environ)
         if args.scale is not None:
@@ -201,6 +202,10 @@ def cmd(args: argparse.Namespace) -> int:
             if r.returncode != 0:
                 print(r.stdout[-4000:])
                 kept = "left as it was" if out.is_file() else "not written"
+                failed = out.with_name(f"{out.stem}.failed.json")
+                if part.is_file():  # what did run, for --report (its not_measured names the failures)
+                    os.replace(part, failed)
+                    kept += f"; what ran is in {failed}"
                 print(f"clvis bench: the suite failed (exit {r.returncode}); {out} {kept}", file=sys.stderr)
                 return r.returncode
             os.replace(part, out)

@@ -156,8 +156,10 @@ def test_a_failed_run_keeps_the_saved_json(tmp_path, capsys, monkeypatch):
 
     monkeypatch.setattr(subprocess, "run", suite)
     assert cli.main(["bench", "primitives", "--json", str(saved)]) == 1
-    assert saved.read_text() == "the saved run" and sorted(tmp_path.iterdir()) == [saved]
-    assert "left as it was" in capsys.readouterr().err
+    assert saved.read_text() == "the saved run"
+    failed = tmp_path / "primitives.failed.json"  # what ran, kept apart for --report
+    assert sorted(tmp_path.iterdir()) == [failed, saved] and failed.read_text() == "a partial run"
+    assert f"left as it was; what ran is in {failed}" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("args", [["--select", "histogram"], ["--scale", "0.001"]])

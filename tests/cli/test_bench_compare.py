@@ -182,3 +182,15 @@ def test_a_partial_run_does_not_replace_the_saved_full_run(tmp_path, capsys, mon
     assert cli.main(["bench", "primitives", *args]) == 2
     assert "would replace the full run saved at" in capsys.readouterr().err
     assert saved.read_text() == "the full run"
+
+
+def test_targets_are_not_judged_at_another_scale(tmp_path, capsys):
+    """The targets are full-size figures: a smoke run (scale 0.001) used to
+    print them as [MISSED] and fail --check."""
+    tiny = _json(tmp_path / "tiny.json", scale=0.001)
+    assert cli.main(["bench", "primitives", "--report", tiny]) == 0
+    out = capsys.readouterr().out
+    assert "targets: not judged (they are set for scale 1; this run is at scale 0.001)" in out
+    assert "MISSED" not in out
+    assert cli.main(["bench", "primitives", "--report", tiny, "--check"]) == 2
+    assert "--check needs a run at scale 1" in capsys.readouterr().err

@@ -80,6 +80,24 @@ def test_edited_narvis_head_raises_a_clvis_error(tmp_path, key, value):
     assert str(tmp_path) in str(e.value), e.value
 
 
+def _lidar_folder_with(folder, graph):
+    """The shipped lidar model copied into `folder` with `graph` (an onnx
+    GraphProto) as its lidar.onnx and the card's sha256 made to match; the
+    card (a dict) to edit further, written back as it is now."""
+    import onnx
+    from onnx import helper
+
+    from clvis.post.infer import sha256
+
+    for f in MODELS.glob("lidar*"):
+        shutil.copy(f, folder / f.name)
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), folder / "lidar.onnx")
+    card = json.loads((folder / "lidar.json").read_text())
+    card["files"]["fp32"]["sha256"] = sha256(folder / "lidar.onnx")
+    (folder / "lidar.json").write_text(json.dumps(card))
+    return card
+
+
 def test_narvis_head_edits_that_keep_the_graph_load(tmp_path):
     """depth_scale and logit_bound are the head's own numbers: a card may
     change them (the graph is the same) and the head follows."""
@@ -96,13 +114,9 @@ def test_graph_that_loads_but_fails_when_run_raises_a_clvis_error(tmp_path):
     # a graph that matches its card (one input of 5 channels, one output of 3) and
     # loads, but whose first run fails (a Reshape to a fixed 3 x 3): onnxruntime's
     # own error escaped from the first call
-    onnx = pytest.importorskip("onnx")
+    pytest.importorskip("onnx")
     from onnx import TensorProto, helper
 
-    from clvis.post.infer import sha256
-
-    for f in MODELS.glob("lidar*"):
-        shutil.copy(f, tmp_path / f.name)
     consts = [
         helper.make_tensor("starts", TensorProto.INT64, [1], [0]),
         helper.make_tensor("ends", TensorProto.INT64, [1], [3]),
@@ -119,10 +133,7 @@ def test_graph_that_loads_but_fails_when_run_raises_a_clvis_error(tmp_path):
         [helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 3, "height", "width"])],
         consts,
     )
-    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), tmp_path / "lidar.onnx")
-    card = json.loads((tmp_path / "lidar.json").read_text())
-    card["files"]["fp32"]["sha256"] = sha256(tmp_path / "lidar.onnx")
-    (tmp_path / "lidar.json").write_text(json.dumps(card))
+    _lidar_folder_with(tmp_path, graph)
     net = post.load("lidar", directory=tmp_path)
     with pytest.raises(ClvisError, match=r"lidar\.onnx: onnxruntime failed running it"):
         net(np.zeros((40, 24, 5), np.float32))
@@ -153,23 +164,16 @@ def test_a_failing_graph_leaves_stderr_to_the_clvis_error(tmp_path, capfd):
     """onnxruntime logged its own coloured warning (a graph whose declared
     output shape is not its computed one) and error lines on stderr before
     clvis's one-line error."""
-    onnx = pytest.importorskip("onnx")
+    pytest.importorskip("onnx")
     from onnx import TensorProto, helper
 
-    from clvis.post.infer import sha256
-
-    for f in MODELS.glob("lidar*"):
-        shutil.copy(f, tmp_path / f.name)
     graph = helper.make_graph(
         [helper.make_node("Concat", ["planes", "planes"], ["image"], axis=1)],  # 10 channels, not 3
         "concat",
         [helper.make_tensor_value_info("planes", TensorProto.FLOAT, [1, 5, "height", "width"])],
         [helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 3, "height", "width"])],
     )
-    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), tmp_path / "lidar.onnx")
-    card = json.loads((tmp_path / "lidar.json").read_text())
-    card["files"]["fp32"]["sha256"] = sha256(tmp_path / "lidar.onnx")
-    (tmp_path / "lidar.json").write_text(json.dumps(card))
+    _lidar_folder_with(tmp_path, graph)
     capfd.readouterr()
     net = post.load("lidar", directory=tmp_path)
     with pytest.raises(ClvisError, match=r"lidar\.onnx: onnxruntime failed running it"):
@@ -181,13 +185,9 @@ def test_a_graph_and_card_of_channels_its_pack_does_not_write_are_refused(tmp_pa
     """A graph of 6 input channels with a card saying so loaded as lidar (whose
     pack writes 5): the call failed with pack's ValueError ("out: expected
     shape (1, 5, ...)"), not a clvis error naming the card."""
-    onnx = pytest.importorskip("onnx")
+    pytest.importorskip("onnx")
     from onnx import TensorProto, helper
 
-    from clvis.post.infer import sha256
-
-    for f in MODELS.glob("lidar*"):
-        shutil.copy(f, tmp_path / f.name)
     consts = [
         helper.make_tensor("starts", TensorProto.INT64, [1], [0]),
         helper.make_tensor("ends", TensorProto.INT64, [1], [3]),
@@ -200,9 +200,7 @@ def test_a_graph_and_card_of_channels_its_pack_does_not_write_are_refused(tmp_pa
         [helper.make_tensor_value_info("image", TensorProto.FLOAT, [1, 3, "height", "width"])],
         consts,
     )
-    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), tmp_path / "lidar.onnx")
-    card = json.loads((tmp_path / "lidar.json").read_text())
-    card["files"]["fp32"]["sha256"] = sha256(tmp_path / "lidar.onnx")
+    card = _lidar_folder_with(tmp_path, graph)
     card["channels_in"] = 6
     (tmp_path / "lidar.json").write_text(json.dumps(card))
     with pytest.raises(ClvisError, match="'channels_in' is 6; lidar takes 5"):

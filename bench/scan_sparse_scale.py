@@ -45,7 +45,9 @@ def _row(label, net, scene, cam, w, h):
     full = net(g)[..., :3]
     small = full
     if scale > 1:
-        small = post.resized(net(filtered(round(w / scale), round(h / scale))), w, h)[..., :3]
+        small = post.resized(
+            net(filtered(round(w / scale), round(h / scale))), w, h, smooth=post.SCALED_SMOOTH
+        )[..., :3]
     splat = _scan_splat(g)
     m = [metrics(x, target) for x in (full, small, splat)]
     cells = " | ".join(f"{r['psnr']:5.2f} / {r['ssim']:.3f}" for r in m)

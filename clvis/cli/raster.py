@@ -322,7 +322,7 @@ def _render_panels(
     picture resized up to the view (None: its spec's render_scale for the
     view's splat radius, 1 for a network without one)."""
     from .. import images
-    from ..post import MIN_SCALED_SIDE, resized
+    from ..post import MIN_SCALED_SIDE, SCALED_SMOOTH, resized
     from ..raster import EMPTY, depth_filter, edl, filter_gbuffers
 
     look = look or _Look()
@@ -425,7 +425,7 @@ def _render_panels(
                 picture = post(gf)
             else:
                 picture = post(gd)
-            return picture if scale == 1 else resized(picture, width, height)
+            return picture if scale == 1 else resized(picture, width, height, smooth=SCALED_SMOOTH)
 
         title = post.spec.title
         with progress.stage(f"{post.name} network" + (f" at {pw}x{ph}" if scale > 1 else "")):

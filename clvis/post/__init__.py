@@ -7,7 +7,7 @@ Inference needs onnxruntime only; torch is imported by ``clvis train`` and
 the tests that compare the exported graphs with their PyTorch modules.
 """
 
-from .infer import MIN_SCALED_SIDE, MODELS, PRECISIONS, PostNetwork, load, resized
+from .infer import MIN_SCALED_SIDE, MODELS, PRECISIONS, SCALED_SMOOTH, PostNetwork, load, resized
 from .inputs import IsoPlanes
 from .names import NAMES
 from .pack import pack_gbuffers, pack_iso, pack_rgbda, padded_shape, unpack_rgba8
@@ -20,6 +20,7 @@ __all__ = [
     "NAMES",
     "PRECISIONS",
     "PostNetwork",
+    "SCALED_SMOOTH",
     "load",
     "pack_gbuffers",
     "pack_iso",

@@ -409,9 +409,9 @@ class PointScene(Scene):
             info["post scale"] = scale
         rgba = net(_prefiltered(net, src))
         if scale > 1:
-            from ..post import resized
+            from ..post import SCALED_SMOOTH, resized
 
-            rgba = resized(rgba, width, height)
+            rgba = resized(rgba, width, height, smooth=SCALED_SMOOTH)
         t2 = time.perf_counter()
         info["inference ms"] = round(1e3 * net.stats.get("inference", 0.0), 1)
         times = {"render": t1 - t0, "post": t2 - t1}
@@ -487,9 +487,9 @@ class PointScene(Scene):
         ta = time.perf_counter()
         fast = net(_prefiltered(net, g))[..., :3]
         if scale > 1:
-            from ..post import resized
+            from ..post import SCALED_SMOOTH, resized
 
-            fast = resized(fast, w, h)
+            fast = resized(fast, w, h, smooth=SCALED_SMOOTH)
         t2 = time.perf_counter()
         slow = gr.render(camera, w, h).to_uint8((0, 0, 0))[..., :3]
         t3 = time.perf_counter()

@@ -479,6 +479,14 @@ def test_narvis_scan_renders_a_sparse_view_smaller():
     ramp = np.repeat(np.arange(0, 250, 50, dtype=np.uint8)[None, :, None], 3, axis=2)  # (1, 5, 3)
     row = post.resized(np.repeat(ramp, 2, axis=0), 10, 4)[0, :, 0].astype(int)
     assert (np.diff(row) >= 0).all() and row[0] == 0 and row[-1] == 200 and len(set(row)) > 5
+    assert (post.resized(flat, 18, 12, smooth=post.SCALED_SMOOTH) == flat[0, 0]).all()
+    dot = np.zeros((9, 9, 1), np.uint8)
+    dot[4, 4] = 255
+    sharp, soft = post.resized(dot, 27, 27), post.resized(dot, 27, 27, smooth=1.0)
+    assert soft.max() < sharp.max() and (soft > 0).sum() > (sharp > 0).sum()  # spread, not moved
+    assert np.unravel_index(soft.argmax(), soft.shape)[:2] == (13, 13)
+    with pytest.raises(ValueError, match="smooth: expected a standard deviation"):
+        post.resized(flat, 8, 8, smooth=-1)
     with pytest.raises(ValueError, match="picture: expected an"):
         post.resized(flat.astype(np.float32), 8, 8)
     with pytest.raises(ValueError, match="width"):

@@ -567,7 +567,9 @@ def test_narvis_scan_mode_renders_a_sparse_cloud_smaller():
     assert f.info["post scale"] == 3 and f.image.shape == (240, 320, 3)
     net = s._net("narvis-scan")
     small = s.raster.render(cam.with_aspect(107 / 80), 107, 80, planes=[])
-    want = post.resized(net(filter_gbuffers(small, *net.spec.depth_filter)), 320, 240)
+    want = post.resized(
+        net(filter_gbuffers(small, *net.spec.depth_filter)), 320, 240, smooth=post.SCALED_SMOOTH
+    )
     np.testing.assert_array_equal(f.image, want[..., :3])
     s.update({"mode": "narvis-scan|gaussians"})
     f = next(s.frames(cam, 320, 240, s.settings, lambda: False))

@@ -437,6 +437,22 @@ def test_vdb_grids_and_transforms(tmp_path):
         read_vdb(only_int)
 
 
+def test_vdb_leaves_tinyvdb_loses_are_refused(tmp_path):
+    """tinyvdb 0.9 returns at most 64 leaves of a 16^3 node: a 40x32x32 block
+    (80 leaves, all in the file: clvis's walk of the leaf masks counts them)
+    came back as 32^3 voxels and was drawn cut. Refused, naming both counts;
+    a 32^3 block (64 leaves) still reads whole."""
+    grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
+    whole = np.argwhere(np.ones((32, 32, 32)))[:, ::-1]
+    path = _write_vdb(tmp_path, "whole", grids, {0: (whole, np.ones(len(whole)))})
+    assert read_vdb(path).n_active == 32**3
+    block = np.argwhere(np.ones((32, 32, 40)))[:, ::-1]  # x 0..39: 5 x 4 x 4 leaves
+    path = _write_vdb(tmp_path, "block", grids, {0: (block, np.ones(len(block)))})
+    with pytest.raises(clvis.DataError, match=r"read 32,768 active voxels of the 40,960") as e:
+        read_vdb(path)
+    assert str(path) in str(e.value) and "'density'" in str(e.value)
+
+
 def test_vdb_malformed(tmp_path):
     _, _, ijk, vals, _ = _random_voxels(seed=9)
     grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]

@@ -298,6 +298,7 @@ def _sources(args):
             sv = _restrict(
                 sv, args.threshold, None if args.spacing is None else tuple(reversed(args.spacing))
             )
+        sv = _local(sv, args)
         return lods, sv, None, str(path) if args.grid is None else f"{path}, grid {args.grid!r}", None
     volume = name.endswith(VOLUME_FORMATS)
     if name.endswith(".vtk"):  # a legacy VTK volume (STRUCTURED_POINTS, RECTILINEAR_GRID) or point set
@@ -316,7 +317,7 @@ def _sources(args):
         sv = SparseVolume.from_dense(
             data, threshold=0.0 if args.threshold is None else args.threshold, spacing=spacing, origin=origin
         )
-        return lods, sv, None, str(path), data
+        return lods, _local(sv, args), None, str(path), data
     if name.endswith(".npz") and "means" in load_npz(path):
         _no_lod(args, path, "a file of Gaussians, drawn as they are")
         return ["file"], None, Gaussians.load(path), str(path), None
@@ -363,6 +364,22 @@ def _sources(args):
     raise CliError(
         f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
         f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})"
+    )
+
+
+def _local(sv: SparseVolume, args) -> SparseVolume:
+    """The volume moved to start at the world origin, its origin kept in
+    args.camera_origin (--eye and --target stay in the file's coordinates, as
+    for a point cloud): the Gaussians are float32, so a grid placed at map
+    coordinates (a translation of 4,000,000) lost its detail, and the view,
+    framing a box that large numbers round, showed it as a dot."""
+    from ..gauss import SparseVolume
+
+    if not any(sv.origin):
+        return sv
+    args.camera_origin = np.asarray(sv.origin, np.float64)
+    return SparseVolume(
+        sv.shape, sv.spacing, (0.0, 0.0, 0.0), sv.coords, sv.masks, sv.tiles, sv.tile_values, sv.values
     )
 
 

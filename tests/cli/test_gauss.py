@@ -488,3 +488,31 @@ def test_gauss_vdb_threshold_and_spacing_stay_sparse(tmp_path, capsys):
     assert _leaves(capsys.readouterr().out) == 5  # x > 8: the 4 leaves of x 8..15, and the far voxel
     with Image.open(tmp_path / "d" / "low.png") as im:
         assert np.asarray(im).std() > 1
+
+
+def test_gauss_vdb_far_from_the_origin_is_drawn_as_near_it(tmp_path, capsys):
+    """A grid placed at map coordinates (translation 500,000, 4,000,000, 100;
+    0.25 voxels) is drawn as the same grid at the origin: its float32
+    Gaussians lost their detail there and the view showed a dot. --eye and
+    --target stay in the file's coordinates."""
+    pytest.importorskip("tinyvdb")
+    from gauss.test_lod import _scale_translate, _write_vdb
+
+    zyx = np.argwhere(np.ones((16, 16, 16)))
+    ijk, vals = zyx[:, ::-1], 1.0 + zyx[:, 2] / 16.0
+    lit = []
+    for name, t in (("near", (0.0, 0.0, 0.0)), ("far", (500000.0, 4000000.0, 100.0))):
+        grids = [("density", "Tree_float_5_4_3", _scale_translate((0.25, 0.25, 0.25), t))]
+        path = _write_vdb(tmp_path, name, grids, {0: (ijk, vals)})
+        args = ["gauss", str(path), "--lod", "high", "--size", "48x48", "--no-labels", "--quiet"]
+        assert cli.main([*args, "--out", str(tmp_path / name)]) == 0
+        lit.append(_lit(tmp_path / name / "high.png"))
+        eye = ",".join(f"{c + 2:.17g}" for c in np.add(t, [-6.0, -8.0, 5.0]))  # in the file's coordinates
+        target = ",".join(f"{c + 2:.17g}" for c in t)
+        assert (
+            cli.main([*args, "--eye", eye, "--target", target, "--out", str(tmp_path / f"{name}-eye")]) == 0
+        )
+        lit.append(_lit(tmp_path / f"{name}-eye" / "high.png"))
+    capsys.readouterr()
+    assert lit[0] > 0.2 and lit[1] > 0.2
+    np.testing.assert_allclose(lit[2:], lit[:2], atol=0.02)

@@ -5,6 +5,7 @@ tinyvdb."""
 
 import struct
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from hypothesis import strategies as st
 
 import clvis
 from clvis import runtime
+from clvis.errors import ClvisWarning
 from clvis.gauss.gaussians import Gaussians
 from clvis.gauss.lod import (
     BYTES_PER_AXIS_ALIGNED_GAUSSIAN,
@@ -487,3 +489,16 @@ def test_vdb_needs_tinyvdb(monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, "tinyvdb", None)
     with pytest.raises(ImportError, match=r"pip install \".\[vdb\]\" in a clvis checkout"):
         read_vdb(tmp_path / "x.vdb")
+
+
+def test_a_volume_float32_cannot_resolve_is_warned(queue):
+    """A grid at map coordinates (origin 500,000, 4,000,000, 100; voxels of
+    0.25) gave Gaussians a render showed fully transparent, without a word:
+    now a ClvisWarning says so; the same grid near the origin says nothing."""
+    vol = np.ones((8, 8, 8), F32)
+    with pytest.warns(ClvisWarning, match="cannot resolve"):
+        gaussians_from_volume(vol, "high", spacing=(0.25,) * 3, origin=(5e5, 4e6, 100.0), queue=queue)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gaussians_from_volume(vol, "high", spacing=(0.25,) * 3, origin=(-200.0, 100.0, 30.0), queue=queue)
+        gaussians_from_volume(vol, "high", spacing=(1e-6,) * 3, queue=queue)  # small, at the origin

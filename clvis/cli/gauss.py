@@ -298,8 +298,9 @@ def _sources(args):
             sv = _restrict(
                 sv, args.threshold, None if args.spacing is None else tuple(reversed(args.spacing))
             )
-        sv = _local(sv, args)
-        return lods, sv, None, str(path) if args.grid is None else f"{path}, grid {args.grid!r}", None
+        source = str(path) if args.grid is None else f"{path}, grid {args.grid!r}"
+        _some_active(sv, source, args.threshold, "its grid has no active voxel")
+        return lods, _local(sv, args), None, source, None
     volume = name.endswith(VOLUME_FORMATS)
     if name.endswith(".vtk"):  # a legacy VTK volume (STRUCTURED_POINTS, RECTILINEAR_GRID) or point set
         volume = legacy_dataset(path) not in POINT_DATASETS
@@ -317,6 +318,8 @@ def _sources(args):
         sv = SparseVolume.from_dense(
             data, threshold=0.0 if args.threshold is None else args.threshold, spacing=spacing, origin=origin
         )
+        if np.isfinite(data).any():  # else the transfer function's 'no finite value'
+            _some_active(sv, str(path), args.threshold, "no sample above 0 (the default --threshold)")
         return lods, _local(sv, args), None, str(path), data
     if name.endswith(".npz") and "means" in load_npz(path):
         _no_lod(args, path, "a file of Gaussians, drawn as they are")
@@ -365,6 +368,14 @@ def _sources(args):
         f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
         f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})"
     )
+
+
+def _some_active(sv: SparseVolume, source: str, threshold: float | None, empty: str) -> None:
+    """A volume FILE without an active voxel: an error naming the file and the
+    threshold (it was 'no Gaussians: the volume has no active voxel', neither)."""
+    if sv.n_leaves == 0:
+        why = empty if threshold is None else f"no active voxel above --threshold {threshold:g}"
+        raise CliError(f"{source}: {why}; nothing to draw")
 
 
 def _local(sv: SparseVolume, args) -> SparseVolume:

@@ -110,7 +110,7 @@ def test_gauss_bad_npy(tmp_path, capsys):
     assert "junk.npy" in capsys.readouterr().err
     np.save(tmp_path / "empty.npy", np.zeros((8, 8, 8), np.float32))
     assert cli.main(["gauss", str(tmp_path / "empty.npy"), "--out", str(tmp_path)]) == 2
-    assert "no active voxel" in capsys.readouterr().err
+    assert "empty.npy: no sample above 0" in capsys.readouterr().err
 
 
 BACKGROUND = np.array([0.06, 0.06, 0.08]) * 255  # clvis gauss's background, grey level ~16.7
@@ -516,3 +516,18 @@ def test_gauss_vdb_far_from_the_origin_is_drawn_as_near_it(tmp_path, capsys):
     capsys.readouterr()
     assert lit[0] > 0.2 and lit[1] > 0.2
     np.testing.assert_allclose(lit[2:], lit[:2], atol=0.02)
+
+
+def test_gauss_a_volume_file_with_nothing_active_names_the_file(tmp_path, capsys):
+    """It said 'no Gaussians: the volume has no active voxel', naming neither
+    the file nor the threshold."""
+    path = tmp_path / "low.npy"
+    np.save(path, -np.ones((8, 8, 8), np.float32))
+    assert cli.main(["gauss", str(path), "--out", str(tmp_path / "a")]) == 2
+    assert f"{path}: no sample above 0 (the default --threshold)" in capsys.readouterr().err
+    assert cli.main(["gauss", str(path), "--threshold", "2", "--out", str(tmp_path / "a")]) == 2
+    assert f"{path}: no active voxel above --threshold 2" in capsys.readouterr().err
+    vdb = _vdb_file(tmp_path, first=False)
+    assert cli.main(["gauss", str(vdb), "--threshold", "50", "--out", str(tmp_path / "a")]) == 2
+    assert f"{vdb}: no active voxel above --threshold 50" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists()

@@ -111,13 +111,13 @@ class _Reader:
         return on
 
 
-def check_vdb(path: str | Path) -> list[int | None]:
+def check_vdb(path: str | Path) -> list[tuple[int, int] | None]:
     """Refuse (DataError) an OpenVDB file whose counts the file cannot hold.
 
-    Returns, per grid in file order, the active voxels its leaves' value
-    masks hold (what a reader of leaf voxels must return), or None for a grid
-    not walked to its leaves (another value type or tree configuration, a
-    file version before 222)."""
+    Returns, per grid in file order, (the active voxels its leaves' value
+    masks hold, what a reader of leaf voxels must return; its leaves), or
+    None for a grid not walked to its leaves (another value type or tree
+    configuration, a file version before 222)."""
     p = Path(path)
     with open(p, "rb") as f:
         size = os.fstat(f.fileno()).st_size
@@ -127,7 +127,7 @@ def check_vdb(path: str | Path) -> list[int | None]:
             return _check(p, data, size)
 
 
-def _check(p: Path, data, size: int) -> list[int | None]:
+def _check(p: Path, data, size: int) -> list[tuple[int, int] | None]:
     r = _Reader(p, data, size)
     magic = r.take("<q", "magic")
     if magic != _MAGIC:
@@ -158,8 +158,8 @@ def _check(p: Path, data, size: int) -> list[int | None]:
     return [_check_root(p, data, end_pos, kind, grid_pos) for kind, grid_pos, end_pos in grids]
 
 
-def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> int | None:
-    """Check a grid; the active voxels of its leaves, None where not walked."""
+def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> tuple[int, int] | None:
+    """Check a grid; the active voxels of its leaves and its leaves, None where not walked."""
     half = kind.endswith("_HalfFloat")  # floats saved as half floats
     parts = kind.removesuffix("_HalfFloat").split("_")
     value_bytes = _VALUE_BYTES.get(parts[1]) if len(parts) > 1 and parts[0] == "Tree" else None
@@ -210,7 +210,7 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> int | None
             r.pos += 12 + 64
         else:
             tree.values(3, on)
-    return active
+    return active, len(tree.leaves)
 
 
 class _Tree:

@@ -502,3 +502,27 @@ def test_a_volume_float32_cannot_resolve_is_warned(queue):
         warnings.simplefilter("error")
         gaussians_from_volume(vol, "high", spacing=(0.25,) * 3, origin=(-200.0, 100.0, 30.0), queue=queue)
         gaussians_from_volume(vol, "high", spacing=(1e-6,) * 3, queue=queue)  # small, at the origin
+
+
+def test_vdb_too_large_for_host_memory_is_refused_before_tinyvdb(tmp_path, monkeypatch):
+    """read_vdb estimates the host memory a file's grids take from clvis's
+    walk of its leaves (bytes a leaf and a voxel) and refuses, naming both
+    figures, before tinyvdb reads a leaf (it read whatever the file held)."""
+    import tinyvdb
+
+    import clvis.gauss.sparse as sparse
+
+    _, _, ijk, vals, _ = _random_voxels(seed=3)
+    grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
+    path = _write_vdb(tmp_path, "big", grids, {0: (ijk, vals)})
+    assert read_vdb(path).n_active == len(ijk)
+    monkeypatch.setattr(sparse, "_BYTES_PER_VOXEL", 1 << 40)  # as if each voxel took a TB
+
+    def opened(*a, **k):
+        raise AssertionError("tinyvdb opened the file")
+
+    monkeypatch.setattr(tinyvdb, "open", opened)
+    match = rf"{len(ijk):,} active voxels in \d+ leaves needs about"
+    with pytest.raises(clvis.DeviceError, match=match) as e:
+        read_vdb(path)
+    assert str(path) in str(e.value) and "GB of host memory" in str(e.value)

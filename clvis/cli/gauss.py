@@ -84,7 +84,7 @@ FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
 .nii.gz, .mgz, .mgh, Analyze .hdr/.img, .vti, an evenly spaced .vtr, a legacy .vtk of
 STRUCTURED_POINTS or an evenly spaced RECTILINEAR_GRID; see --shape,
 --volume-index)
-or a .vdb (float grid, needs the `vdb` extra: tinyvdb); a .npz of Gaussians
+or a .vdb (a float grid, --grid; needs the `vdb` extra: tinyvdb); a .npz of Gaussians
 (clvis.Gaussians.save); or a point cloud (.ply, .las, .laz, .e57, .pcd,
 .xyz/.txt/.csv, .vtp/.vtu/.vts, a legacy .vtk of POLYDATA, UNSTRUCTURED_GRID or STRUCTURED_GRID, or an
 (N, 3) .npy/.npz as
@@ -137,7 +137,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--threshold",
         type=real(),
         default=None,
-        help="volumes: voxels above this are active (default: > 0 for dense volumes)",
+        help="volumes: voxels above this are active (default: > 0 for dense volumes; a .vdb "
+        "grid: its active voxels, of which this keeps those above it)",
     )
     g.add_argument(
         "--model",
@@ -204,7 +205,22 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     add_orbit_options(g)
     add_camera_options(g, _FIT, f"; {POINTS_FIT.fov_y:g} for a point cloud, as in clvis render")
     add_volume_options(g)
+    g.add_argument(
+        "--grid",
+        type=_grid,
+        default=None,
+        metavar="NAME|INDEX",
+        help="the grid of a .vdb file to read: its name, or its index (0 first) (default: the "
+        "first float grid; an error lists the file's grids)",
+    )
     return g
+
+
+def _grid(text: str) -> str | int:
+    """The --grid argument type: a grid's name, or digits for its index."""
+    if not text:
+        raise argparse.ArgumentTypeError("expected a grid name or index, got ''")
+    return int(text) if text.isdigit() else text
 
 
 def _points_text(points: Sequence[tuple[float, float]]) -> str:
@@ -255,6 +271,8 @@ def _sources(args):
         raise CliError("--attribute is for point clouds (.ply, .las, .laz, .npy, .npz of points)")
     if args.array is not None and not (args.file and args.file.lower().endswith((".vti", ".vtr", ".vtk"))):
         raise CliError("--array picks a data array of a VTK volume FILE (.vti, .vtr, .vtk)")
+    if args.grid is not None and not (args.file and args.file.lower().endswith(".vdb")):
+        raise CliError("--grid picks a grid of a .vdb FILE")
     if args.file is None:
         e = datasets.explosion()
         sv = SparseVolume.from_dense(
@@ -275,16 +293,14 @@ def _sources(args):
     if name.endswith(".vdb"):
         if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index")):
             raise CliError("--shape, --dtype and --volume-index are for .raw and NIfTI volumes, not .vdb")
-        sv = read_vdb(path)
-        spacing = sv.spacing if args.spacing is None else tuple(reversed(args.spacing))
+        sv = read_vdb(path, grid=args.grid)
         if args.threshold is not None or args.spacing is not None:
-            sv = SparseVolume.from_dense(
-                sv.to_dense(),
-                threshold=0.0 if args.threshold is None else args.threshold,
-                spacing=spacing,
-                origin=sv.origin,
+            sv = _restrict(
+                sv, args.threshold, None if args.spacing is None else tuple(reversed(args.spacing))
             )
-        return lods, sv, None, str(path), None
+        source = str(path) if args.grid is None else f"{path}, grid {args.grid!r}"
+        _some_active(sv, source, args.threshold, "its grid has no active voxel")
+        return lods, _local(sv, args), None, source, None
     volume = name.endswith(VOLUME_FORMATS)
     if name.endswith(".vtk"):  # a legacy VTK volume (STRUCTURED_POINTS, RECTILINEAR_GRID) or point set
         volume = legacy_dataset(path) not in POINT_DATASETS
@@ -302,7 +318,9 @@ def _sources(args):
         sv = SparseVolume.from_dense(
             data, threshold=0.0 if args.threshold is None else args.threshold, spacing=spacing, origin=origin
         )
-        return lods, sv, None, str(path), data
+        if np.isfinite(data).any():  # else the transfer function's 'no finite value'
+            _some_active(sv, str(path), args.threshold, "no sample above 0 (the default --threshold)")
+        return lods, _local(sv, args), None, str(path), data
     if name.endswith(".npz") and "means" in load_npz(path):
         _no_lod(args, path, "a file of Gaussians, drawn as they are")
         return ["file"], None, Gaussians.load(path), str(path), None
@@ -349,6 +367,51 @@ def _sources(args):
     raise CliError(
         f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
         f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})"
+    )
+
+
+def _some_active(sv: SparseVolume, source: str, threshold: float | None, empty: str) -> None:
+    """A volume FILE without an active voxel: an error naming the file and the
+    threshold (it was 'no Gaussians: the volume has no active voxel', neither)."""
+    if sv.n_leaves == 0:
+        why = empty if threshold is None else f"no active voxel above --threshold {threshold:g}"
+        raise CliError(f"{source}: {why}; nothing to draw")
+
+
+def _local(sv: SparseVolume, args) -> SparseVolume:
+    """The volume moved to start at the world origin, its origin kept in
+    args.camera_origin (--eye and --target stay in the file's coordinates, as
+    for a point cloud): the Gaussians are float32, so a grid placed at map
+    coordinates (a translation of 4,000,000) lost its detail, and the view,
+    framing a box that large numbers round, showed it as a dot."""
+    from ..gauss import SparseVolume
+
+    if not any(sv.origin):
+        return sv
+    args.camera_origin = np.asarray(sv.origin, np.float64)
+    return SparseVolume(
+        sv.shape, sv.spacing, (0.0, 0.0, 0.0), sv.coords, sv.masks, sv.tiles, sv.tile_values, sv.values
+    )
+
+
+def _restrict(sv: SparseVolume, threshold: float | None, spacing) -> SparseVolume:
+    """A .vdb's grid with --threshold (of its active voxels, those above it)
+    and --spacing ((dz, dy, dx)) applied leaf by leaf: a sparse grid is never
+    made dense (a grid spanning 10^4 voxels an axis is 4 TB dense), and
+    --spacing alone keeps every active voxel (a level set's negative values)."""
+    from ..gauss import SparseVolume
+
+    values, active = sv.leaf_values(), sv.active_masks()
+    if threshold is not None:
+        active &= np.greater(values, np.float64(threshold))  # as SparseVolume.from_dense compares
+    keep = active.any(axis=1)
+    return SparseVolume._from_leaves(
+        sv.shape,
+        sv.spacing if spacing is None else spacing,
+        sv.origin,
+        sv.coords[keep],
+        values[keep],
+        active[keep],
     )
 
 

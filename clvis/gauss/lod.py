@@ -27,6 +27,7 @@ so the results equal ``clvis.reference.gauss.lod`` bit for bit.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
@@ -35,7 +36,7 @@ import pyopencl as cl
 
 from .. import runtime
 from .._arrays import resolve_queue
-from ..errors import DeviceError
+from ..errors import ClvisWarning, DeviceError
 from ..primitives import scan
 from .gaussians import Gaussians
 from .sparse import SparseVolume
@@ -200,7 +201,33 @@ def gaussians_from_volume(
     queue = resolve_queue(queue)
     if sv.n_leaves == 0:
         return _empty_gaussians()
+    _warn_far(sv)
     return _DeviceLeaves(queue, sv).emit(lod_i)
+
+
+# float32 steps are 2^-23 of a position: past this many voxels from the world
+# origin a voxel spans fewer than 16 of them
+_FAR_VOXELS = 2**19
+
+
+def _warn_far(sv: SparseVolume) -> None:
+    """ClvisWarning for a volume whose float32 Gaussians cannot resolve its
+    voxels: a grid at map coordinates (translation 4,000,000, voxels of 0.25)
+    rendered fully transparent."""
+    ends = [
+        max(abs(o), abs(o + d * n))
+        for o, d, n in zip(sv.origin, sv.spacing[::-1], sv.shape[::-1], strict=True)
+    ]
+    step = min(sv.spacing)
+    if max(ends) > _FAR_VOXELS * step:
+        warnings.warn(
+            ClvisWarning(
+                f"the volume reaches {max(ends):g} from the world origin with voxels of {step:g}: its "
+                "float32 Gaussians cannot resolve them there (drawn blurred, or not at all); give it an "
+                "origin near (0, 0, 0) and move the camera by the same offset"
+            ),
+            stacklevel=3,
+        )
 
 
 @dataclasses.dataclass(frozen=True)

@@ -111,25 +111,30 @@ class _Reader:
         return on
 
 
-def check_vdb(path: str | Path) -> None:
-    """Refuse (DataError) an OpenVDB file whose counts the file cannot hold."""
+def check_vdb(path: str | Path) -> list[tuple[int, int] | None]:
+    """Refuse (DataError) an OpenVDB file whose counts the file cannot hold.
+
+    Returns, per grid in file order, (the active voxels its leaves' value
+    masks hold, what a reader of leaf voxels must return; its leaves), or
+    None for a grid not walked to its leaves (another value type or tree
+    configuration, a file version before 222)."""
     p = Path(path)
     with open(p, "rb") as f:
         size = os.fstat(f.fileno()).st_size
         if size == 0:
             raise DataError(f"{p}: not an OpenVDB file (empty)")
         with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
-            _check(p, data, size)
+            return _check(p, data, size)
 
 
-def _check(p: Path, data, size: int) -> None:
+def _check(p: Path, data, size: int) -> list[tuple[int, int] | None]:
     r = _Reader(p, data, size)
     magic = r.take("<q", "magic")
     if magic != _MAGIC:
         raise DataError(f"{p}: not an OpenVDB file (magic {magic:#x})")
     version = r.take("<I", "file version")
     if version < 222:
-        return  # older layouts: tinyvdb's own checks
+        return []  # older layouts: tinyvdb's own checks
     r.take("<II", "library version")
     r.take("<B", "grid offsets flag")
     r.need(36, "UUID")
@@ -150,16 +155,16 @@ def _check(p: Path, data, size: int) -> None:
             )
         grids.append((kind, grid_pos, end_pos))
         r.pos = end_pos  # the next descriptor follows the grid
-    for kind, grid_pos, end_pos in grids:
-        _check_root(p, data, end_pos, kind, grid_pos)
+    return [_check_root(p, data, end_pos, kind, grid_pos) for kind, grid_pos, end_pos in grids]
 
 
-def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> None:
+def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> tuple[int, int] | None:
+    """Check a grid; the active voxels of its leaves and its leaves, None where not walked."""
     half = kind.endswith("_HalfFloat")  # floats saved as half floats
     parts = kind.removesuffix("_HalfFloat").split("_")
     value_bytes = _VALUE_BYTES.get(parts[1]) if len(parts) > 1 and parts[0] == "Tree" else None
     if value_bytes is None:
-        return  # a tree type clvis does not read: tinyvdb's checks
+        return None  # a tree type clvis does not read: tinyvdb's checks
     r = _Reader(p, data, end)
     r.pos = grid_pos
     compression = r.take("<I", "grid compression flags")
@@ -167,7 +172,7 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> None:
     map_type = r.string("transform type")
     doubles = _MAP_DOUBLES.get(map_type)
     if doubles is None:
-        return  # a map clvis refuses later, by name
+        return None  # a map clvis refuses later, by name
     r.need(8 * doubles, f"{map_type} values")
     r.pos += 8 * doubles
     r.take("<I", "buffer count")
@@ -182,12 +187,13 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> None:
             f"{end - r.pos} bytes after them"
         )
     if parts[2:] != _LOG2DIMS:
-        return  # another tree configuration: tinyvdb's checks
+        return None  # another tree configuration: tinyvdb's checks
     r.pos += tiles * (12 + value_bytes + 1)
     tree = _Tree(r, compression, value_bytes, half and parts[1] == "float")
     for _ in range(children):
         r.take("<3i", "root child origin")
         tree.internal(0)
+    active = 0
     for leaf in tree.leaves:
         at = r.pos
         r.need(64, "leaf buffer value mask")
@@ -197,11 +203,14 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> None:
                 f"topology's at byte {leaf}"
             )
         r.pos += 64
+        on = int.from_bytes(data[leaf : leaf + 64], "little").bit_count()
+        active += on
         if parts[1] == "bool":  # origin, then the values as a bit mask
             r.need(12 + 64, "bool leaf buffer")
             r.pos += 12 + 64
         else:
-            tree.values(3, int.from_bytes(data[leaf : leaf + 64], "little").bit_count())
+            tree.values(3, on)
+    return active, len(tree.leaves)
 
 
 class _Tree:

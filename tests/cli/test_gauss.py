@@ -110,7 +110,7 @@ def test_gauss_bad_npy(tmp_path, capsys):
     assert "junk.npy" in capsys.readouterr().err
     np.save(tmp_path / "empty.npy", np.zeros((8, 8, 8), np.float32))
     assert cli.main(["gauss", str(tmp_path / "empty.npy"), "--out", str(tmp_path)]) == 2
-    assert "no active voxel" in capsys.readouterr().err
+    assert "empty.npy: no sample above 0" in capsys.readouterr().err
 
 
 BACKGROUND = np.array([0.06, 0.06, 0.08]) * 255  # clvis gauss's background, grey level ~16.7
@@ -433,3 +433,101 @@ def test_gauss_frames_a_point_cloud_as_render_does(tmp_path, capsys):
     g, r = shape(tmp_path / "g" / "points.png"), shape(tmp_path / "r" / "colors.png")
     iou = (g & r).sum() / max((g | r).sum(), 1)
     assert iou > 0.65, iou  # 0.81; was 0.44
+
+
+def _vdb_file(tmp_path, first=True):
+    """A .vdb of two float grids (written by tinyvdb from a hand-made template,
+    as tests/gauss/test_lod.py's): 'temperature', 5 voxels (not with
+    first=False); 'density', a 16^3 block at the origin valued x - 8 (8
+    leaves, half of them <= 0, as a level set's inside is) and one voxel
+    20,000 voxels out along each axis (1.3 * 10^13 voxels dense)."""
+    pytest.importorskip("tinyvdb")
+    from gauss.test_lod import _scale_translate, _write_vdb
+
+    block = np.argwhere(np.ones((16, 16, 16)))[:, ::-1]
+    ijk = np.concatenate([block, [[20000, 20000, 20000]]])
+    vals = np.concatenate([block[:, 0] - 8.0, [5.0]])
+    names = ("temperature", "density") if first else ("density",)
+    grids = [(name, "Tree_float_5_4_3", _scale_translate((0.5, 0.5, 0.5), (0, 0, 0))) for name in names]
+    fill = {len(names) - 1: (ijk, vals)} | ({0: (block[:5], np.ones(5))} if first else {})
+    return _write_vdb(tmp_path, "two", grids, fill)
+
+
+def _leaves(out: str) -> int:
+    line = next(x for x in out.splitlines() if x.strip().startswith("volume"))
+    return int(line.split(",")[-1].split()[0])
+
+
+def test_gauss_vdb_grid(tmp_path, capsys):
+    """--grid picks a .vdb's grid by name or index (it was always the first
+    float grid, with no way to name another)."""
+    path = _vdb_file(tmp_path)
+    base = ["gauss", str(path), "--lod", "low", "--size", "32x32", "--quiet"]
+    assert cli.main([*base, "--out", str(tmp_path / "a")]) == 0
+    assert _leaves(capsys.readouterr().out) == 1  # the first float grid: temperature
+    for grid in ("density", "1"):
+        assert cli.main([*base, "--grid", grid, "--out", str(tmp_path / "b")]) == 0
+        out = capsys.readouterr().out
+        assert _leaves(out) == 9 and "grid" in out.splitlines()[0]
+    assert cli.main([*base, "--grid", "nope", "--out", str(tmp_path / "e")]) == 2
+    err = capsys.readouterr().err
+    assert "no grid named 'nope'" in err and "'density'" in err and not (tmp_path / "e").exists()
+    assert cli.main(["gauss", "--grid", "density", "--out", str(tmp_path / "f")]) == 2
+    assert "--grid picks a grid of a .vdb FILE" in capsys.readouterr().err
+
+
+def test_gauss_vdb_threshold_and_spacing_stay_sparse(tmp_path, capsys):
+    """--threshold and --spacing work on the sparse grid (they made it dense:
+    out of host memory for a grid spanning 20,000 voxels an axis), and
+    --spacing alone keeps every active voxel (it dropped those <= 0)."""
+    path = _vdb_file(tmp_path, first=False)
+    base = ["gauss", str(path), "--lod", "low", "--size", "32x32", "--quiet"]
+    assert cli.main([*base, "--spacing", "2,2,2", "--out", str(tmp_path / "c")]) == 0
+    assert _leaves(capsys.readouterr().out) == 9
+    assert cli.main([*base, "--threshold", "0", "--out", str(tmp_path / "d")]) == 0
+    assert _leaves(capsys.readouterr().out) == 5  # x > 8: the 4 leaves of x 8..15, and the far voxel
+    with Image.open(tmp_path / "d" / "low.png") as im:
+        assert np.asarray(im).std() > 1
+
+
+def test_gauss_vdb_far_from_the_origin_is_drawn_as_near_it(tmp_path, capsys):
+    """A grid placed at map coordinates (translation 500,000, 4,000,000, 100;
+    0.25 voxels) is drawn as the same grid at the origin: its float32
+    Gaussians lost their detail there and the view showed a dot. --eye and
+    --target stay in the file's coordinates."""
+    pytest.importorskip("tinyvdb")
+    from gauss.test_lod import _scale_translate, _write_vdb
+
+    zyx = np.argwhere(np.ones((16, 16, 16)))
+    ijk, vals = zyx[:, ::-1], 1.0 + zyx[:, 2] / 16.0
+    lit = []
+    for name, t in (("near", (0.0, 0.0, 0.0)), ("far", (500000.0, 4000000.0, 100.0))):
+        grids = [("density", "Tree_float_5_4_3", _scale_translate((0.25, 0.25, 0.25), t))]
+        path = _write_vdb(tmp_path, name, grids, {0: (ijk, vals)})
+        args = ["gauss", str(path), "--lod", "high", "--size", "48x48", "--no-labels", "--quiet"]
+        assert cli.main([*args, "--out", str(tmp_path / name)]) == 0
+        lit.append(_lit(tmp_path / name / "high.png"))
+        eye = ",".join(f"{c + 2:.17g}" for c in np.add(t, [-6.0, -8.0, 5.0]))  # in the file's coordinates
+        target = ",".join(f"{c + 2:.17g}" for c in t)
+        assert (
+            cli.main([*args, "--eye", eye, "--target", target, "--out", str(tmp_path / f"{name}-eye")]) == 0
+        )
+        lit.append(_lit(tmp_path / f"{name}-eye" / "high.png"))
+    capsys.readouterr()
+    assert lit[0] > 0.2 and lit[1] > 0.2
+    np.testing.assert_allclose(lit[2:], lit[:2], atol=0.02)
+
+
+def test_gauss_a_volume_file_with_nothing_active_names_the_file(tmp_path, capsys):
+    """It said 'no Gaussians: the volume has no active voxel', naming neither
+    the file nor the threshold."""
+    path = tmp_path / "low.npy"
+    np.save(path, -np.ones((8, 8, 8), np.float32))
+    assert cli.main(["gauss", str(path), "--out", str(tmp_path / "a")]) == 2
+    assert f"{path}: no sample above 0 (the default --threshold)" in capsys.readouterr().err
+    assert cli.main(["gauss", str(path), "--threshold", "2", "--out", str(tmp_path / "a")]) == 2
+    assert f"{path}: no active voxel above --threshold 2" in capsys.readouterr().err
+    vdb = _vdb_file(tmp_path, first=False)
+    assert cli.main(["gauss", str(vdb), "--threshold", "50", "--out", str(tmp_path / "a")]) == 2
+    assert f"{vdb}: no active voxel above --threshold 50" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists()

@@ -5,6 +5,7 @@ tinyvdb."""
 
 import struct
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from hypothesis import strategies as st
 
 import clvis
 from clvis import runtime
+from clvis.errors import ClvisWarning
 from clvis.gauss.gaussians import Gaussians
 from clvis.gauss.lod import (
     BYTES_PER_AXIS_ALIGNED_GAUSSIAN,
@@ -437,6 +439,22 @@ def test_vdb_grids_and_transforms(tmp_path):
         read_vdb(only_int)
 
 
+def test_vdb_leaves_tinyvdb_loses_are_refused(tmp_path):
+    """tinyvdb 0.9 returns at most 64 leaves of a 16^3 node: a 40x32x32 block
+    (80 leaves, all in the file: clvis's walk of the leaf masks counts them)
+    came back as 32^3 voxels and was drawn cut. Refused, naming both counts;
+    a 32^3 block (64 leaves) still reads whole."""
+    grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
+    whole = np.argwhere(np.ones((32, 32, 32)))[:, ::-1]
+    path = _write_vdb(tmp_path, "whole", grids, {0: (whole, np.ones(len(whole)))})
+    assert read_vdb(path).n_active == 32**3
+    block = np.argwhere(np.ones((32, 32, 40)))[:, ::-1]  # x 0..39: 5 x 4 x 4 leaves
+    path = _write_vdb(tmp_path, "block", grids, {0: (block, np.ones(len(block)))})
+    with pytest.raises(clvis.DataError, match=r"read 32,768 active voxels of the 40,960") as e:
+        read_vdb(path)
+    assert str(path) in str(e.value) and "'density'" in str(e.value)
+
+
 def test_vdb_malformed(tmp_path):
     _, _, ijk, vals, _ = _random_voxels(seed=9)
     grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
@@ -471,3 +489,40 @@ def test_vdb_needs_tinyvdb(monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, "tinyvdb", None)
     with pytest.raises(ImportError, match=r"pip install \".\[vdb\]\" in a clvis checkout"):
         read_vdb(tmp_path / "x.vdb")
+
+
+def test_a_volume_float32_cannot_resolve_is_warned(queue):
+    """A grid at map coordinates (origin 500,000, 4,000,000, 100; voxels of
+    0.25) gave Gaussians a render showed fully transparent, without a word:
+    now a ClvisWarning says so; the same grid near the origin says nothing."""
+    vol = np.ones((8, 8, 8), F32)
+    with pytest.warns(ClvisWarning, match="cannot resolve"):
+        gaussians_from_volume(vol, "high", spacing=(0.25,) * 3, origin=(5e5, 4e6, 100.0), queue=queue)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gaussians_from_volume(vol, "high", spacing=(0.25,) * 3, origin=(-200.0, 100.0, 30.0), queue=queue)
+        gaussians_from_volume(vol, "high", spacing=(1e-6,) * 3, queue=queue)  # small, at the origin
+
+
+def test_vdb_too_large_for_host_memory_is_refused_before_tinyvdb(tmp_path, monkeypatch):
+    """read_vdb estimates the host memory a file's grids take from clvis's
+    walk of its leaves (bytes a leaf and a voxel) and refuses, naming both
+    figures, before tinyvdb reads a leaf (it read whatever the file held)."""
+    import tinyvdb
+
+    import clvis.gauss.sparse as sparse
+
+    _, _, ijk, vals, _ = _random_voxels(seed=3)
+    grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
+    path = _write_vdb(tmp_path, "big", grids, {0: (ijk, vals)})
+    assert read_vdb(path).n_active == len(ijk)
+    monkeypatch.setattr(sparse, "_BYTES_PER_VOXEL", 1 << 40)  # as if each voxel took a TB
+
+    def opened(*a, **k):
+        raise AssertionError("tinyvdb opened the file")
+
+    monkeypatch.setattr(tinyvdb, "open", opened)
+    match = rf"{len(ijk):,} active voxels in \d+ leaves needs about"
+    with pytest.raises(clvis.DeviceError, match=match) as e:
+        read_vdb(path)
+    assert str(path) in str(e.value) and "GB of host memory" in str(e.value)

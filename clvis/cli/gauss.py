@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 import typing
 from collections.abc import Callable, Sequence
@@ -691,6 +692,7 @@ def _run(args) -> int:
             height,
         ),
     )
+    _say_if_empty(panels, width, height)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     files = []
@@ -758,6 +760,25 @@ def _run(args) -> int:
     for p in files:
         print(f"  {p.name}")
     return 0
+
+
+def _say_if_empty(panels, width: int, height: int) -> None:
+    """A note on stderr when every panel came out (nearly) empty, under one
+    pixel in 1000 drawn (no ray met a Gaussian but a few: they are smaller
+    than a pixel at this size, or out of view), so that a blank PNG does not
+    look like a broken render (clvis render says the same of sparse points)."""
+    from .._arrays import to_host
+
+    drawn = max(int((to_host(img.rgba)[..., 3] >= 0.5 / 255).sum()) for _, _, img in panels)
+    if drawn * 1000 >= width * height:
+        return
+    print(
+        f"clvis gauss: note: the picture is {'empty' if drawn == 0 else 'nearly empty'}: "
+        f"{drawn:,} of {width * height:,} pixels drawn at {width}x{height} (the Gaussians are few, "
+        "smaller than a pixel here, or out of view); a larger --size, a closer view (--eye/--target, "
+        "--fov) or --lod low (fewer, larger Gaussians) draws more of them",
+        file=sys.stderr,
+    )
 
 
 def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (480, 480)) -> bool:

@@ -531,3 +531,21 @@ def test_gauss_a_volume_file_with_nothing_active_names_the_file(tmp_path, capsys
     assert cli.main(["gauss", str(vdb), "--threshold", "50", "--out", str(tmp_path / "a")]) == 2
     assert f"{vdb}: no active voxel above --threshold 50" in capsys.readouterr().err
     assert not (tmp_path / "a").exists()
+
+
+def test_gauss_says_when_the_picture_is_nearly_empty(tmp_path, capsys):
+    """Three voxels of a 128^3 volume at 32x32 draw 1 pixel: a blank PNG
+    looked like a broken render; a note on stderr says why and what draws
+    more. A picture with something in it gets no note."""
+    v = np.zeros((128, 128, 128), np.float32)
+    v[3, 5, 7] = v[120, 100, 90] = v[60, 64, 70] = 1
+    np.save(tmp_path / "tiny.npy", v)
+    small = ["--size", "32x32", "--out"]
+    assert cli.main(["gauss", str(tmp_path / "tiny.npy"), *small, str(tmp_path / "a")]) == 0
+    err = capsys.readouterr().err
+    assert "clvis gauss: note: the picture is nearly empty: 1 of 1,024 pixels drawn at 32x32" in err
+    assert "a larger --size, a closer view" in err
+    v[40:90, 40:90, 40:90] = 1
+    np.save(tmp_path / "block.npy", v)
+    assert cli.main(["gauss", str(tmp_path / "block.npy"), *small, str(tmp_path / "b")]) == 0
+    assert "empty" not in capsys.readouterr().err

@@ -400,10 +400,15 @@ def _render_panels(
     removed: list[int | None] = [None]
     scale = 1
     if post is not None:
-        median = post.median_radius_px(g)
+        # the splat radius as the network reads the view: narvis-scan's through its
+        # depth filter (what the viewer measures too; no other network has a range)
+        seen = g
+        if post.spec.radius_px_trained is not None and post.spec.depth_filter is not None:
+            seen = filter_gbuffers(g, *post.spec.depth_filter)
+        median = post.median_radius_px(seen)
         # the network's frame keeps MIN_SCALED_SIDE pixels a side (and so the view's aspect within 1 %)
         if post_scale is None:
-            scale = post.render_scale(g)
+            scale = post.render_scale(seen)
         else:
             scale = min(post_scale, min(width, height) // MIN_SCALED_SIDE)
         scale = max(scale, 1)

@@ -492,8 +492,9 @@ class PostNetwork:
         """The factor to render this view's G-buffers smaller by for this
         network (its picture then resized up to the view with
         :func:`resized`): the spec's ``render_scale`` of the view's median
-        splat radius over its covered pixels (``gbuffers``: a render of the
-        view at full size, host or device, with the radius plane). 1 for a
+        splat radius over its covered pixels (``gbuffers``: the view at full
+        size as the network reads it, after its spec's depth filter; host or
+        device, with the radius plane). 1 for a
         network without a training radius range (all but narvis-scan), a
         view without the radius plane or without a covered pixel; at most
         what keeps MIN_SCALED_SIDE pixels a side (and so the view's aspect

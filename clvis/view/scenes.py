@@ -400,18 +400,12 @@ class PointScene(Scene):
         self.raster.queue.finish()  # the render's own time in "render", not in "post"
         t1 = time.perf_counter()
         net = self._net(mode)
-        scale = net.render_scale(src) if mode == "narvis-scan" else 1
-        if scale > 1:  # a cloud sparse on screen: its frame smaller (PostNetwork.render_scale)
-            sw, sh = round(width / scale), round(height / scale)
-            src = self._render(
-                camera.with_aspect(sw / sh), sw, sh, settings, 1, screen_velocity=False, host=False
-            )
-            info["post scale"] = scale
-        rgba = net(_prefiltered(net, src))
-        if scale > 1:
-            from ..post import SCALED_SMOOTH, resized
-
-            rgba = resized(rgba, width, height, smooth=SCALED_SMOOTH)
+        if mode == "narvis-scan":
+            rgba, scale = self._scan_picture(net, src, camera, width, height, settings)
+            if scale > 1:
+                info["post scale"] = scale
+        else:
+            rgba = net(src)
         t2 = time.perf_counter()
         info["inference ms"] = round(1e3 * net.stats.get("inference", 0.0), 1)
         times = {"render": t1 - t0, "post": t2 - t1}
@@ -479,17 +473,9 @@ class PointScene(Scene):
         t1 = time.perf_counter()
         g = self._render(camera, w, h, s, 1, screen_velocity=False, host=False)
         self.raster.queue.finish()
-        scale = net.render_scale(g)
-        if scale > 1:  # a cloud sparse on screen: its frame smaller (PostNetwork.render_scale)
-            sw, sh = round(w / scale), round(h / scale)
-            g = self._render(camera.with_aspect(sw / sh), sw, sh, s, 1, screen_velocity=False, host=False)
-            self.raster.queue.finish()
         ta = time.perf_counter()
-        fast = net(_prefiltered(net, g))[..., :3]
-        if scale > 1:
-            from ..post import SCALED_SMOOTH, resized
-
-            fast = resized(fast, w, h, smooth=SCALED_SMOOTH)
+        picture, scale = self._scan_picture(net, g, camera, w, h, s)
+        fast = picture[..., :3]
         t2 = time.perf_counter()
         slow = gr.render(camera, w, h).to_uint8((0, 0, 0))[..., :3]
         t3 = time.perf_counter()
@@ -501,6 +487,23 @@ class PointScene(Scene):
         if scale > 1:
             info["post scale"] = scale
         return Frame(split(fast, slow), info=info, times=times)
+
+    def _scan_picture(self, net, g, camera, w, h, s) -> tuple[np.ndarray, int]:
+        """narvis-scan's picture of the view whose full-size device G-buffers
+        are `g`, and the scale it was made at: its depth filter first (the
+        planes come back once, _prefiltered), then, where the view is sparser
+        on screen than its training frames (PostNetwork.render_scale, read off
+        those host planes: no further read-back), the same through a frame
+        rendered that many times smaller, resized up smoothed."""
+        gf = _prefiltered(net, g)
+        scale = net.render_scale(gf)
+        if scale == 1:
+            return net(gf), 1
+        from ..post import SCALED_SMOOTH, resized
+
+        sw, sh = round(w / scale), round(h / scale)
+        small = self._render(camera.with_aspect(sw / sh), sw, sh, s, 1, screen_velocity=False, host=False)
+        return resized(net(_prefiltered(net, small)), w, h, smooth=SCALED_SMOOTH), scale
 
     def _colours(self, s) -> np.ndarray:
         """(N, 4) uint8: the points' colours as the Rasterizer draws them with

@@ -296,8 +296,10 @@ def _sources(args):
             raise CliError("--shape, --dtype and --volume-index are for .raw and NIfTI volumes, not .vdb")
         sv = read_vdb(path, grid=args.grid)
         if args.threshold is not None or args.spacing is not None:
-            sv = _restrict(
-                sv, args.threshold, None if args.spacing is None else tuple(reversed(args.spacing))
+            # leaf by leaf: a sparse grid is never made dense (10^4 voxels an axis: 4 TB),
+            # and --spacing alone keeps every active voxel (a level set's negative values)
+            sv = sv.restricted(
+                args.threshold, None if args.spacing is None else tuple(reversed(args.spacing))
             )
         source = str(path) if args.grid is None else f"{path}, grid {args.grid!r}"
         _some_active(sv, source, args.threshold, "its grid has no active voxel")
@@ -392,27 +394,6 @@ def _local(sv: SparseVolume, args) -> SparseVolume:
     args.camera_origin = np.asarray(sv.origin, np.float64)
     return SparseVolume(
         sv.shape, sv.spacing, (0.0, 0.0, 0.0), sv.coords, sv.masks, sv.tiles, sv.tile_values, sv.values
-    )
-
-
-def _restrict(sv: SparseVolume, threshold: float | None, spacing) -> SparseVolume:
-    """A .vdb's grid with --threshold (of its active voxels, those above it)
-    and --spacing ((dz, dy, dx)) applied leaf by leaf: a sparse grid is never
-    made dense (a grid spanning 10^4 voxels an axis is 4 TB dense), and
-    --spacing alone keeps every active voxel (a level set's negative values)."""
-    from ..gauss import SparseVolume
-
-    values, active = sv.leaf_values(), sv.active_masks()
-    if threshold is not None:
-        active &= np.greater(values, np.float64(threshold))  # as SparseVolume.from_dense compares
-    keep = active.any(axis=1)
-    return SparseVolume._from_leaves(
-        sv.shape,
-        sv.spacing if spacing is None else spacing,
-        sv.origin,
-        sv.coords[keep],
-        values[keep],
-        active[keep],
     )
 
 

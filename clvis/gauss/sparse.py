@@ -264,6 +264,27 @@ class SparseVolume:
         coords = np.stack([idx // (nly * nlx), idx // nlx % nly, idx % nlx], axis=1) * LEAF
         return cls._from_leaves(vol.shape, spacing, origin, coords, lv[keep], la[keep])
 
+    def restricted(
+        self, threshold: float | None = None, spacing: Sequence[float] | None = None
+    ) -> SparseVolume:
+        """This volume with, leaf by leaf (never made dense): only its active
+        voxels above `threshold` (None: all of them, a level set's negative
+        values too), compared as :meth:`from_dense` compares, and `spacing`
+        ((dz, dy, dx); None: its own). Leaves left without an active voxel
+        are dropped."""
+        values, active = self.leaf_values(), self.active_masks()
+        if threshold is not None:
+            active &= np.greater(values, np.float64(threshold))
+        keep = active.any(axis=1)
+        return self._from_leaves(
+            self.shape,
+            self.spacing if spacing is None else spacing,
+            self.origin,
+            self.coords[keep],
+            values[keep],
+            active[keep],
+        )
+
     @classmethod
     def _from_leaves(cls, shape, spacing, origin, coords, lv, la) -> SparseVolume:
         """From (L, 512) leaf values and active flags (leaves already in order)."""

@@ -29,7 +29,7 @@ import numpy as np
 from .._arrays import triple
 from ..errors import DataError
 from ..io.files import regular_file
-from ..io.vdb import check_vdb
+from ..io.vdb import GridLeaves, vdb_leaves
 from ..io.volumes import volume_parts
 
 __all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb"]
@@ -375,8 +375,9 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     affine map without rotation) are accepted.
 
     Active tiles of the VDB tree (regions stored above leaf level) are not
-    read: tinyvdb exposes leaf voxels only; a grid of which tinyvdb returns
-    fewer voxels than the file's leaf masks hold raises DataError. A missing
+    read: tinyvdb exposes leaf voxels only. Each leaf is placed by clvis's
+    walk of the file (clvis.io.vdb.vdb_leaves) and its values are tinyvdb's;
+    a leaf where the two disagree raises DataError. A missing
     file raises FileNotFoundError; a malformed one DataError naming the file;
     one whose leaves would not fit in host memory DeviceError, before tinyvdb
     reads them.
@@ -385,7 +386,7 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
         raise TypeError(f"grid: expected a name, an index or None, got {type(grid).__name__}")
     tinyvdb = _tinyvdb()
     p = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO, device
-    walked = check_vdb(p)  # counts the file cannot hold, before tinyvdb allocates them
+    walked = vdb_leaves(p)  # counts the file cannot hold, before tinyvdb allocates them
     _check_memory(p, walked)
     try:
         f = tinyvdb.open(str(p))
@@ -413,13 +414,13 @@ _BYTES_PER_LEAF = 3 * 2048 + 512
 _BYTES_PER_VOXEL = 160
 
 
-def _check_memory(p: Path, walked: list[tuple[int, int] | None]) -> None:
+def _check_memory(p: Path, walked: list[GridLeaves | None]) -> None:
     """DeviceError (as clvis's other host-memory refusals) before tinyvdb
     reads a file whose leaves and voxels would not fit in host memory."""
     from ..errors import DeviceError
     from ..runtime import host_available_bytes
 
-    counts = [w for w in walked if w is not None]
+    counts = [(w.active, len(w)) for w in walked if w is not None]
     if not counts:
         return
     need = sum(v * _BYTES_PER_VOXEL + n * _BYTES_PER_LEAF for v, n in counts)
@@ -434,7 +435,7 @@ def _check_memory(p: Path, walked: list[tuple[int, int] | None]) -> None:
         )
 
 
-def _read_grid(f, p: Path, grid, walked: list[tuple[int, int] | None]) -> SparseVolume:
+def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolume:
     f.read_grids()
     n = int(f.grid_count)
     names = [f.grid_name(i) for i in range(n)]
@@ -455,23 +456,16 @@ def _read_grid(f, p: Path, grid, walked: list[tuple[int, int] | None]) -> Sparse
         raise DataError(f"{p}: grid {names[idx]!r} is a {types[idx]}, not a float grid")
     g = f.grid(idx)
     voxel_size, translation = _transform(p, g.transform)
-    sp = g.to_sparse()
-    count = int(sp["count"])
-    ijk = np.frombuffer(sp["coords"], np.int32).reshape(-1, 3).astype(np.int64)
-    vals = np.frombuffer(sp["values"], np.float32)
-    if len(ijk) != count or len(vals) != count:
-        raise DataError(f"{p}: grid {names[idx]!r}: inconsistent voxel data")
-    w = walked[idx] if len(walked) == n else None
-    leaf_voxels = None if w is None else w[0]
-    if leaf_voxels is not None and leaf_voxels != count:
-        # tinyvdb 0.9's to_sparse drops leaves of some trees (a 16^3 node of more
-        # than 64 leaves gives 64 of them: a 40x32x32 block came back as 32^3;
-        # 42 of 2,389 scattered leaves): refused, not drawn in part
-        raise DataError(
-            f"{p}: grid {names[idx]!r}: tinyvdb read {count:,} active voxels of the "
-            f"{leaf_voxels:,} its leaves hold (tinyvdb 0.9 drops leaves of some trees, "
-            "e.g. past 64 in a 16^3 node); not drawn in part"
-        )
+    leaves = walked[idx] if len(walked) == n else None
+    if leaves is not None:
+        ijk, vals = _leaf_voxels(p, names[idx], g, leaves)
+    else:  # a tree clvis's walk does not follow: tinyvdb's own list
+        sp = g.to_sparse()
+        ijk = np.frombuffer(sp["coords"], np.int32).reshape(-1, 3).astype(np.int64)
+        vals = np.frombuffer(sp["values"], np.float32)
+        if len(ijk) != int(sp["count"]) or len(vals) != len(ijk):
+            raise DataError(f"{p}: grid {names[idx]!r}: inconsistent voxel data")
+    count = len(ijk)
     spacing = (voxel_size[2], voxel_size[1], voxel_size[0])
     if count == 0:
         return SparseVolume(
@@ -512,6 +506,44 @@ def _read_grid(f, p: Path, grid, walked: list[tuple[int, int] | None]) -> Sparse
     off_xyz = off[::-1].astype(np.float64)
     origin = tuple(float(t + s * o) for t, s, o in zip(translation, voxel_size, off_xyz, strict=True))
     return SparseVolume._from_leaves(shape, spacing, origin, coords * LEAF, lv, la)
+
+
+def _leaf_voxels(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray, np.ndarray]:
+    """The active voxels of a walked grid: (ijk (N, 3) int64, values (N,)
+    float32), leaf by leaf in file order.
+
+    Where each leaf is and which of its voxels are active come from clvis's
+    walk of the file (GridLeaves); the values from tinyvdb's tree, which holds
+    every leaf's 512 values decompressed (zip, blosc, half floats). tinyvdb
+    0.9's own voxel list (VDBGrid.to_sparse) drops leaves of many trees: of a
+    16^3 node of more than 64 leaves it returns 64, and a level-set sphere of
+    radius 40 voxels written by OpenVDB 10 came back with 87,614 of its
+    120,414 voxels. The two sources are checked leaf by leaf (the count of
+    leaves, each leaf's active count) before any value is used."""
+    tree = g.tree
+    nodes = (tree.node(i) for i in range(int(tree.num_nodes)))
+    counts = np.unpackbits(leaves.masks, axis=1).sum(axis=1, dtype=np.int64)
+    values = np.empty((len(leaves), LEAF_VOXELS), np.float32)
+    k = 0
+    for node in nodes:
+        if node.type != "leaf":
+            continue
+        if k == len(leaves):
+            raise DataError(f"{p}: grid {name!r}: tinyvdb read more leaves than the file's {len(leaves):,}")
+        data = node.data
+        if data is None or len(data) != 4 * LEAF_VOXELS or int(node.active_voxel_count) != counts[k]:
+            raise DataError(
+                f"{p}: grid {name!r}: tinyvdb's leaf {k:,} does not match the file's "
+                f"({int(node.active_voxel_count)} active voxels, {counts[k]} in its value mask)"
+            )
+        values[k] = np.frombuffer(data, np.float32)
+        k += 1
+    if k != len(leaves):
+        raise DataError(f"{p}: grid {name!r}: tinyvdb read {k:,} leaves of the file's {len(leaves):,}")
+    active = np.unpackbits(leaves.masks, axis=1, bitorder="little").view(bool)
+    leaf, voxel = np.nonzero(active)
+    local = np.stack([voxel >> 6, (voxel >> 3) & 7, voxel & 7], axis=1)
+    return leaves.origins[leaf] + local, values[leaf, voxel]
 
 
 def _listing(names, types) -> str:

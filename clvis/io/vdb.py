@@ -44,11 +44,14 @@ from __future__ import annotations
 import mmap
 import os
 import struct
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from ..errors import DataError
 
-__all__ = ["check_vdb"]
+__all__ = ["GridLeaves", "check_vdb", "vdb_leaves"]
 
 _MAGIC = 0x56444220
 # doubles each map type stores after its name
@@ -65,6 +68,26 @@ _VALUE_BYTES = {"float": 4, "double": 8, "int32": 4, "int64": 8, "bool": 1, "vec
 _CHILD_MIN = 12 + 2 * 4096  # origin, then the 32^3 node's child and value masks
 _ZIP, _ACTIVE_MASK, _BLOSC = 1, 2, 4
 _LOG2DIMS = ["5", "4", "3"]  # the tree configuration walked (OpenVDB's standard one)
+# log2 of the voxels a child of each internal level spans a side: a 32^3
+# node's children are 16^3 nodes of 8^3 leaves (2^7), a 16^3 node's leaves 2^3
+_CHILD_SPAN = [4 + 3, 3]
+
+
+@dataclass(frozen=True)
+class GridLeaves:
+    """A walked grid's leaves, in file order (the order of its leaf buffers).
+
+    active: the active voxels the leaves' value masks hold; origins: (L, 3)
+    int64 index coordinates (i, j, k) of each leaf's first voxel; masks: (L,
+    64) uint8, each leaf's value mask as stored (bit n = voxel (i, j, k) =
+    origin + (n >> 6, (n >> 3) & 7, n & 7))."""
+
+    active: int
+    origins: np.ndarray
+    masks: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.origins)
 
 
 class _Reader:
@@ -118,6 +141,12 @@ def check_vdb(path: str | Path) -> list[tuple[int, int] | None]:
     masks hold, what a reader of leaf voxels must return; its leaves), or
     None for a grid not walked to its leaves (another value type or tree
     configuration, a file version before 222)."""
+    return [None if g is None else (g.active, len(g)) for g in vdb_leaves(path)]
+
+
+def vdb_leaves(path: str | Path) -> list[GridLeaves | None]:
+    """:func:`check_vdb`'s walk, returning each walked grid's leaves (their
+    origins and value masks, GridLeaves), None for a grid not walked."""
     p = Path(path)
     with open(p, "rb") as f:
         size = os.fstat(f.fileno()).st_size
@@ -127,7 +156,7 @@ def check_vdb(path: str | Path) -> list[tuple[int, int] | None]:
             return _check(p, data, size)
 
 
-def _check(p: Path, data, size: int) -> list[tuple[int, int] | None]:
+def _check(p: Path, data, size: int) -> list[GridLeaves | None]:
     r = _Reader(p, data, size)
     magic = r.take("<q", "magic")
     if magic != _MAGIC:
@@ -158,8 +187,8 @@ def _check(p: Path, data, size: int) -> list[tuple[int, int] | None]:
     return [_check_root(p, data, end_pos, kind, grid_pos) for kind, grid_pos, end_pos in grids]
 
 
-def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> tuple[int, int] | None:
-    """Check a grid; the active voxels of its leaves and its leaves, None where not walked."""
+def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves | None:
+    """Check a grid; its leaves, None where not walked."""
     half = kind.endswith("_HalfFloat")  # floats saved as half floats
     parts = kind.removesuffix("_HalfFloat").split("_")
     value_bytes = _VALUE_BYTES.get(parts[1]) if len(parts) > 1 and parts[0] == "Tree" else None
@@ -191,8 +220,8 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> tuple[int,
     r.pos += tiles * (12 + value_bytes + 1)
     tree = _Tree(r, compression, value_bytes, half and parts[1] == "float")
     for _ in range(children):
-        r.take("<3i", "root child origin")
-        tree.internal(0)
+        origin = r.take("<3i", "root child origin")
+        tree.internal(0, np.array(origin, np.int64))
     active = 0
     for leaf in tree.leaves:
         at = r.pos
@@ -210,7 +239,9 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> tuple[int,
             r.pos += 12 + 64
         else:
             tree.values(3, on)
-    return active, len(tree.leaves)
+    masks = np.frombuffer(b"".join(tree.masks), np.uint8).reshape(-1, 64)
+    origins = np.concatenate(tree.origins) if tree.origins else np.zeros((0, 3), np.int64)
+    return GridLeaves(active, origins, masks)
 
 
 class _Tree:
@@ -220,18 +251,31 @@ class _Tree:
     def __init__(self, r: _Reader, compression: int, value_bytes: int, half: bool) -> None:
         self.r, self.compression, self.value_bytes, self.half = r, compression, value_bytes, half
         self.leaves: list[int] = []  # where each leaf's topology value mask is
+        self.origins: list[np.ndarray] = []  # their origins, (n, 3) per 16^3 node
+        self.masks: list[bytes] = []  # their value masks, 64 bytes each, per 16^3 node
 
-    def internal(self, level: int) -> None:
+    def internal(self, level: int, origin: np.ndarray) -> None:
         r, log2 = self.r, int(_LOG2DIMS[level])
         nbytes = (1 << 3 * log2) // 8
+        at = r.pos
         children = r.mask(nbytes, f"{1 << log2}^3 node child mask")
+        # the children, in the order their nodes follow: ascending bit n, at
+        # local (n >> 2 log2, (n >> log2) & (2^log2 - 1), n & (2^log2 - 1))
+        bits = np.flatnonzero(
+            np.unpackbits(np.frombuffer(bytes(r.data[at : at + nbytes]), np.uint8), bitorder="little")
+        )
+        side = (1 << log2) - 1
+        local = np.stack([bits >> 2 * log2, (bits >> log2) & side, bits & side], axis=1)
+        child_origins = origin + (local.astype(np.int64) << _CHILD_SPAN[level])
         self.values(log2, r.mask(nbytes, f"{1 << log2}^3 node value mask"))
         if level == 0:
-            for _ in range(children):
-                self.internal(1)
+            for o in child_origins:
+                self.internal(1, o)
         else:  # each child a leaf, its topology its value mask
             r.need(64 * children, f"{children} leaf value masks")
             self.leaves.extend(range(r.pos, r.pos + 64 * children, 64))
+            self.origins.append(child_origins)
+            self.masks.append(bytes(r.data[r.pos : r.pos + 64 * children]))
             r.pos += 64 * children
 
     def values(self, log2: int, active: int) -> None:

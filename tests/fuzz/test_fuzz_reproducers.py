@@ -308,9 +308,9 @@ def _tree_fields(data: bytes) -> dict[str, int]:
 @pytest.fixture(scope="module")
 def vdb_tree(tmp_path_factory):
     """A 1 MB grid of ~40 32^3 nodes, ~160 16^3 nodes and ~2400 leaves (zip,
-    active mask) that read_vdb takes within 256 MB: tinyvdb 0.9 returns 9,287
-    of its 9,439 voxels, which read_vdb refuses as that (its own DataError),
-    the whole file walked and read."""
+    active mask) that read_vdb reads whole within 256 MB (tinyvdb 0.9's own
+    voxel list returns 9,287 of its 9,439 voxels; read_vdb places the leaves
+    by its walk of the file)."""
     tinyvdb = pytest.importorskip("tinyvdb")
     from fuzz.seeds import _vdb_tree
 
@@ -321,9 +321,9 @@ def vdb_tree(tmp_path_factory):
     path = tmp / "tree.vdb"
     _vdb_tree(tmp, path, compression=tinyvdb.COMPRESS_ZIP | tinyvdb.COMPRESS_ACTIVE_MASK, clusters=20)
     assert 500_000 < path.stat().st_size < 3_000_000
-    check_vdb(path)
+    assert sum(w[0] for w in check_vdb(path) if w is not None) == 9_439
     ok = run_limited(read_vdb, str(path))
-    assert ok.kind == "clvis" and "its leaves hold" in ok.detail and ok.peak_rss < 256 * MiB, ok
+    assert ok.kind == "ok" and ok.peak_rss < 256 * MiB, ok
     return path
 
 

@@ -6,6 +6,7 @@ tinyvdb."""
 import struct
 import sys
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -439,20 +440,93 @@ def test_vdb_grids_and_transforms(tmp_path):
         read_vdb(only_int)
 
 
-def test_vdb_leaves_tinyvdb_loses_are_refused(tmp_path):
-    """tinyvdb 0.9 returns at most 64 leaves of a 16^3 node: a 40x32x32 block
-    (80 leaves, all in the file: clvis's walk of the leaf masks counts them)
-    came back as 32^3 voxels and was drawn cut. Refused, naming both counts;
-    a 32^3 block (64 leaves) still reads whole."""
+def test_vdb_leaves_past_tinyvdbs_voxel_list_are_read(tmp_path):
+    """tinyvdb 0.9's own voxel list (to_sparse) returns at most 64 leaves of a
+    16^3 node: a 40x32x32 block (80 leaves) came back as 32^3 voxels, and
+    read_vdb refused the grid. read_vdb now places each leaf by clvis's walk
+    of the file and takes its values from tinyvdb's tree: the whole block,
+    every value where it was written."""
     grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
-    whole = np.argwhere(np.ones((32, 32, 32)))[:, ::-1]
-    path = _write_vdb(tmp_path, "whole", grids, {0: (whole, np.ones(len(whole)))})
-    assert read_vdb(path).n_active == 32**3
-    block = np.argwhere(np.ones((32, 32, 40)))[:, ::-1]  # x 0..39: 5 x 4 x 4 leaves
-    path = _write_vdb(tmp_path, "block", grids, {0: (block, np.ones(len(block)))})
-    with pytest.raises(clvis.DataError, match=r"read 32,768 active voxels of the 40,960") as e:
-        read_vdb(path)
-    assert str(path) in str(e.value) and "'density'" in str(e.value)
+    block = np.argwhere(np.ones((32, 32, 40)))[:, ::-1]  # (x, y, z), x 0..39: 5 x 4 x 4 leaves
+    vals = (np.arange(len(block)) % 997).astype(F32)
+    path = _write_vdb(tmp_path, "block", grids, {0: (block, vals)})
+    sv = read_vdb(path)
+    assert sv.n_active == 40 * 32 * 32 and sv.shape == (32, 32, 40) and sv.n_leaves == 80
+    want = np.zeros((32, 32, 40), F32)
+    want[block[:, 2], block[:, 1], block[:, 0]] = vals
+    np.testing.assert_array_equal(sv.to_dense(), want)
+
+
+def test_vdb_tinyvdb_tree_that_disagrees_with_the_file_is_refused(tmp_path):
+    """The walk's leaves and tinyvdb's are matched leaf by leaf: a leaf too
+    many or too few, or a leaf whose active count is not its value mask's,
+    is a DataError naming the file and the grid, never voxels misplaced."""
+    from clvis.gauss import sparse
+    from clvis.io.vdb import vdb_leaves
+
+    grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
+    _, _, ijk, vals, _ = _random_voxels(seed=5)
+    path = _write_vdb(tmp_path, "rnd", grids, {0: (ijk, vals)})
+    walked = vdb_leaves(path)[0]
+    assert walked is not None and len(walked) > 2
+
+    class Node:
+        def __init__(self, kind, count=0):
+            self.type, self.active_voxel_count = kind, count
+            self.data = None if kind != "leaf" else np.zeros(512, F32).tobytes()
+
+    class Tree:
+        def __init__(self, nodes):
+            self.nodes, self.num_nodes = nodes, len(nodes)
+
+        def node(self, i):
+            return self.nodes[i]
+
+    class Grid:
+        def __init__(self, nodes):
+            self.tree = Tree(nodes)
+
+    counts = [int(np.unpackbits(m).sum()) for m in walked.masks]
+    good = [Node("root"), Node("internal")] + [Node("leaf", c) for c in counts]
+    got_ijk, got_vals = sparse._leaf_voxels(path, "density", Grid(good), walked)
+    assert len(got_ijk) == walked.active == len(ijk) and not got_vals.any()
+    np.testing.assert_array_equal(np.unique(got_ijk, axis=0), np.unique(ijk, axis=0))
+    for nodes, match in [
+        (good[:-1], f"tinyvdb read {len(counts) - 1} leaves of the file's {len(counts)}"),
+        (good + [Node("leaf", 1)], "more leaves than the file's"),
+        (good[:3] + [Node("leaf", counts[1] + 1)] + good[4:], "leaf 1 does not match the file's"),
+    ]:
+        with pytest.raises(clvis.DataError, match=match) as e:
+            sparse._leaf_voxels(path, "density", Grid(nodes), walked)
+        assert str(path) in str(e.value) and "'density'" in str(e.value)
+
+
+def test_vdb_written_by_openvdb():
+    """tests/data/openvdb_small.vdb, written by the OpenVDB library (10.0.1;
+    tests/data/make_openvdb_small.py): a level-set sphere whose 94 leaves share
+    one 16^3 node (tinyvdb 0.9's own voxel list returns 8,534 of its 12,790
+    voxels) and a fog ball saved as half floats, both against their formulas."""
+    path = Path(__file__).parents[1] / "data" / "openvdb_small.vdb"
+    surface = read_vdb(path)  # the first float grid
+    assert surface.n_active == 12_790 and surface.spacing == (1.0, 1.0, 1.0)
+    act = surface.active()
+    idx = np.argwhere(act)[:, ::-1]  # (x, y, z)
+    world = np.asarray(surface.origin) + idx * np.asarray(surface.spacing)[::-1]
+    sdf = np.linalg.norm(world - [60.0, 61.0, 62.0], axis=1) - 16.0
+    np.testing.assert_allclose(surface.to_dense()[act], sdf, atol=1e-4)
+    assert np.abs(sdf).max() <= 2.0 + 1e-6  # the narrow band: half width 2 voxels
+
+    fog = read_vdb(path, grid="density")
+    assert fog.n_active == 7_208 and fog.spacing == (0.25, 0.25, 0.25)
+    act = fog.active()
+    idx = np.argwhere(act)[:, ::-1]
+    ijk = np.rint((np.asarray(fog.origin) + idx * 0.25) / 0.25).astype(int) - [-30, 4, 9]
+    r = np.linalg.norm(ijk - 11.5, axis=1)
+    want = np.clip(1 - r / 12, 0, 1).astype(F32).astype(np.float16).astype(F32)
+    np.testing.assert_array_equal(fog.to_dense()[act], want)
+    assert ((ijk >= 0) & (ijk < 24)).all() and (want > 0).all()
+    for lod in LODS:
+        _same(gaussians_from_volume(fog, lod), ref.gaussians_from_volume(fog, lod))
 
 
 def test_vdb_malformed(tmp_path):

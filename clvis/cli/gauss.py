@@ -85,7 +85,7 @@ FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
 .nii.gz, .mgz, .mgh, Analyze .hdr/.img, .vti, an evenly spaced .vtr, a legacy .vtk of
 STRUCTURED_POINTS or an evenly spaced RECTILINEAR_GRID; see --shape,
 --volume-index)
-or a .vdb (a float grid, --grid; needs the `vdb` extra: tinyvdb); a .npz of Gaussians
+or a .vdb (a float grid, --grid; needs the `vdb` extra: tinyvdb, blosc); a .npz of Gaussians
 (clvis.Gaussians.save); or a point cloud (.ply, .las, .laz, .e57, .pcd,
 .xyz/.txt/.csv, .vtp/.vtu/.vts, a legacy .vtk of POLYDATA, UNSTRUCTURED_GRID or STRUCTURED_GRID, or an
 (N, 3) .npy/.npz as

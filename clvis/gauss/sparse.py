@@ -12,8 +12,9 @@ sample [z, y, x] sits at world position (x*dx, y*dy, z*dz) + origin, origin
 being (ox, oy, oz) (DESIGN.md).
 
 :func:`read_vdb` reads a float grid of an OpenVDB file into this layout
-through the optional ``tinyvdb`` package (``pip install ".[vdb]"`` from a clvis
-checkout, or ``pip install tinyvdb``).
+through the optional ``tinyvdb`` package and, for blosc-compressed active
+tiles, ``blosc`` (``pip install ".[vdb]"`` from a clvis
+checkout, or ``pip install tinyvdb blosc``).
 """
 
 from __future__ import annotations
@@ -374,10 +375,12 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     (translation + voxel size * off). Only scale/translate transforms (or an
     affine map without rotation) are accepted.
 
-    Active tiles of the VDB tree (regions stored above leaf level) are not
-    read: tinyvdb exposes leaf voxels only. Each leaf is placed by clvis's
-    walk of the file (clvis.io.vdb.vdb_leaves) and its values are tinyvdb's;
-    a leaf where the two disagree raises DataError. A missing
+    Each leaf is placed by clvis's walk of the file (clvis.io.vdb.vdb_leaves)
+    and its values are tinyvdb's; a leaf where the two disagree raises
+    DataError. Active tiles (uniform regions stored above the leaves, 8^3,
+    128^3 or 4096^3 voxels), which tinyvdb does not read, are decoded by the
+    walk (blosc-compressed ones need the blosc package) and become tile
+    leaves. A missing
     file raises FileNotFoundError; a malformed one DataError naming the file;
     one whose leaves would not fit in host memory DeviceError, before tinyvdb
     reads them.
@@ -420,17 +423,19 @@ def _check_memory(p: Path, walked: list[GridLeaves | None]) -> None:
     from ..errors import DeviceError
     from ..runtime import host_available_bytes
 
-    counts = [(w.active, len(w)) for w in walked if w is not None]
+    counts = [(w.active, len(w), w.tile_leaves) for w in walked if w is not None]
     if not counts:
         return
-    need = sum(v * _BYTES_PER_VOXEL + n * _BYTES_PER_LEAF for v, n in counts)
+    # an active tile's leaves are made whole in read_vdb's leaf arrays (no voxel arrays)
+    need = sum(v * _BYTES_PER_VOXEL + (n + t) * _BYTES_PER_LEAF for v, n, t in counts)
     if need < 1 << 26:
         return
     avail = host_available_bytes()
     if avail is not None and need > avail:
-        voxels, leaves = sum(v for v, _ in counts), sum(n for _, n in counts)
+        voxels, leaves, tiled = (sum(c[i] for c in counts) for i in range(3))
+        tiles = f" and {tiled:,} leaves of active tiles" if tiled else ""
         raise DeviceError(
-            f"{p}: reading its {voxels:,} active voxels in {leaves:,} leaves needs about "
+            f"{p}: reading its {voxels:,} active voxels in {leaves:,} leaves{tiles} needs about "
             f"{need / 1e9:.2f} GB of host memory, and only {avail / 1e9:.2f} GB is available"
         )
 
@@ -465,9 +470,9 @@ def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolum
         vals = np.frombuffer(sp["values"], np.float32)
         if len(ijk) != int(sp["count"]) or len(vals) != len(ijk):
             raise DataError(f"{p}: grid {names[idx]!r}: inconsistent voxel data")
-    count = len(ijk)
+    tile_ijk, tile_vals = _tile_leaves(leaves)
     spacing = (voxel_size[2], voxel_size[1], voxel_size[0])
-    if count == 0:
+    if len(ijk) + len(tile_ijk) == 0:
         return SparseVolume(
             (0, 0, 0),
             spacing,
@@ -478,20 +483,22 @@ def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolum
             np.zeros(0, np.float32),
             np.zeros((0, LEAF_VOXELS), np.float32),
         )
-    zyx = ijk[:, ::-1]
-    off = np.floor_divide(zyx.min(axis=0), LEAF) * LEAF
-    zyx = zyx - off
-    shape = tuple(int(s) for s in zyx.max(axis=0) + 1)
+    for where, v in ((ijk, vals), (tile_ijk, tile_vals)):
+        bad = ~np.isfinite(v)
+        if bad.any():
+            what = "active voxel" if where is ijk else "active tile's leaf at"
+            at = where[np.flatnonzero(bad)[0]].tolist()
+            raise DataError(f"{p}: grid {names[idx]!r}: {what} (x, y, z) = {at} is not finite")
+    zyx, tile_zyx = ijk[:, ::-1], tile_ijk[:, ::-1]
+    lo = np.min([a.min(axis=0) for a in (zyx, tile_zyx) if len(a)], axis=0)
+    hi = np.max([a.max(axis=0) + d for a, d in ((zyx, 0), (tile_zyx, LEAF - 1)) if len(a)], axis=0)
+    off = np.floor_divide(lo, LEAF) * LEAF
+    shape = tuple(int(s) for s in hi - off + 1)
     if max(shape) > _MAX_SIDE:
         raise DataError(
             f"{p}: grid {names[idx]!r} spans {shape[::-1]} voxels (x, y, z); at most {_MAX_SIDE} per axis"
         )
-    bad = ~np.isfinite(vals)
-    if bad.any():
-        raise DataError(
-            f"{p}: grid {names[idx]!r}: active voxel (x, y, z) = "
-            f"{ijk[np.flatnonzero(bad)[0]].tolist()} is not finite"
-        )
+    zyx = zyx - off
     leaf = zyx // LEAF
     coords, inv = np.unique(leaf, axis=0, return_inverse=True)
     inv = inv.reshape(-1)
@@ -503,9 +510,33 @@ def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolum
         raise DataError(f"{p}: grid {names[idx]!r}: a voxel appears twice")
     lv[inv, li] = vals
     la[inv, li] = True
+    if len(tile_ijk):  # each active tile's leaves, whole, beside the stored leaves
+        coords = np.concatenate([coords, (tile_zyx - off) // LEAF])
+        lv = np.concatenate([lv, np.repeat(tile_vals[:, None], LEAF_VOXELS, axis=1)])
+        la = np.concatenate([la, np.ones((len(tile_ijk), LEAF_VOXELS), bool)])
+        coords, first = np.unique(coords, axis=0, return_index=True)
+        if len(first) != len(lv):
+            raise DataError(f"{p}: grid {names[idx]!r}: a voxel appears twice (an active tile over a leaf)")
+        lv, la = lv[first], la[first]
     off_xyz = off[::-1].astype(np.float64)
     origin = tuple(float(t + s * o) for t, s, o in zip(translation, voxel_size, off_xyz, strict=True))
     return SparseVolume._from_leaves(shape, spacing, origin, coords * LEAF, lv, la)
+
+
+def _tile_leaves(leaves: GridLeaves | None) -> tuple[np.ndarray, np.ndarray]:
+    """The leaves the grid's active tiles cover: ((N, 3) int64 (i, j, k) of
+    each leaf's first voxel, (N,) float32 the tile's value)."""
+    if leaves is None or not leaves.tile_blocks:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.float32)
+    origins, log2, values = leaves.tile_origins, leaves.tile_log2, leaves.tile_values()
+    parts, part_values = [], []
+    for k in np.unique(log2):
+        pick = log2 == k
+        side = 1 << (int(k) - 3)  # leaves a side
+        grid = np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), axis=-1).reshape(-1, 3) * LEAF
+        parts.append((origins[pick][:, None, :] + grid[None]).reshape(-1, 3))
+        part_values.append(np.repeat(values[pick], len(grid)))
+    return np.concatenate(parts), np.concatenate(part_values)
 
 
 def _leaf_voxels(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray, np.ndarray]:

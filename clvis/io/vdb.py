@@ -44,6 +44,7 @@ from __future__ import annotations
 import mmap
 import os
 import struct
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -74,20 +75,68 @@ _CHILD_SPAN = [4 + 3, 3]
 
 
 @dataclass(frozen=True)
+class _TileBlock:
+    """One node's active tiles: their origins, side (log2) and where their
+    values are in the node's stored values (decoded on demand)."""
+
+    origins: np.ndarray  # (t, 3) int64
+    log2: int
+    picks: np.ndarray  # (t,) indices into the decoded values
+    block: bytes  # the values as stored
+    count: int  # values the block holds
+    codec: str | None  # "zip", "blosc", None (raw)
+    half: bool
+    what: str  # where it is, for an error
+
+
+@dataclass(frozen=True)
 class GridLeaves:
-    """A walked grid's leaves, in file order (the order of its leaf buffers).
+    """A walked grid's leaves, in file order (the order of its leaf buffers),
+    and its active tiles.
 
     active: the active voxels the leaves' value masks hold; origins: (L, 3)
     int64 index coordinates (i, j, k) of each leaf's first voxel; masks: (L,
     64) uint8, each leaf's value mask as stored (bit n = voxel (i, j, k) =
-    origin + (n >> 6, (n >> 3) & 7, n & 7))."""
+    origin + (n >> 6, (n >> 3) & 7, n & 7)).
 
+    Active tiles (a float grid's; none for other types): a region of one
+    value stored above the leaves, e.g. a fog volume's uniform inside.
+    tile_origins (T, 3) int64 (i, j, k) of each tile's first voxel,
+    tile_log2 (T,) its side: 2^3 (a 16^3 node's entry), 2^7 (a 32^3 node's)
+    or 2^12 (the root's); :meth:`tile_values` decodes their values."""
+
+    path: Path
     active: int
     origins: np.ndarray
     masks: np.ndarray
+    tile_blocks: tuple[_TileBlock, ...] = ()
 
     def __len__(self) -> int:
         return len(self.origins)
+
+    @property
+    def tile_origins(self) -> np.ndarray:
+        if not self.tile_blocks:
+            return np.zeros((0, 3), np.int64)
+        return np.concatenate([b.origins for b in self.tile_blocks])
+
+    @property
+    def tile_log2(self) -> np.ndarray:
+        return np.array([b.log2 for b in self.tile_blocks for _ in range(len(b.origins))], np.int64)
+
+    @property
+    def tile_leaves(self) -> int:
+        """The 8^3 leaves the active tiles cover."""
+        return sum(len(b.origins) << 3 * (b.log2 - 3) for b in self.tile_blocks)
+
+    def tile_values(self) -> np.ndarray:
+        """(T,) float32: each active tile's value, decoded from the node
+        values it is stored among (OpenVDB's codecs: zlib, blosc; half
+        floats widened). A block that does not decode to what its node
+        declares is a DataError."""
+        if not self.tile_blocks:
+            return np.zeros(0, np.float32)
+        return np.concatenate([_decode(self.path, b)[b.picks] for b in self.tile_blocks])
 
 
 class _Reader:
@@ -217,8 +266,25 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
         )
     if parts[2:] != _LOG2DIMS:
         return None  # another tree configuration: tinyvdb's checks
-    r.pos += tiles * (12 + value_bytes + 1)
-    tree = _Tree(r, compression, value_bytes, half and parts[1] == "float")
+    tree = _Tree(r, compression, value_bytes, half and parts[1] == "float", parts[1] == "float")
+    for _ in range(tiles):  # origin, value (never as half), active byte
+        origin = r.take("<3i", "root tile origin")
+        value = struct.unpack_from("<f", data, r.pos)[0] if tree.want_tiles else 0.0  # in the need above
+        r.pos += value_bytes
+        if r.take("<B", "root tile active flag") and tree.want_tiles:
+            block = struct.pack("<f", value)
+            tree.tiles.append(
+                _TileBlock(
+                    np.array([origin], np.int64),
+                    12,
+                    np.zeros(1, np.int64),
+                    block,
+                    1,
+                    None,
+                    False,
+                    "a root tile",
+                )
+            )
     for _ in range(children):
         origin = r.take("<3i", "root child origin")
         tree.internal(0, np.array(origin, np.int64))
@@ -241,15 +307,19 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
             tree.values(3, on)
     masks = np.frombuffer(b"".join(tree.masks), np.uint8).reshape(-1, 64)
     origins = np.concatenate(tree.origins) if tree.origins else np.zeros((0, 3), np.int64)
-    return GridLeaves(active, origins, masks)
+    return GridLeaves(p, active, origins, masks, tuple(tree.tiles))
 
 
 class _Tree:
     """Walks a 5-4-3 tree's nodes as tinyvdb reads them, checking each against
     the bytes left before tinyvdb would allocate what it declares."""
 
-    def __init__(self, r: _Reader, compression: int, value_bytes: int, half: bool) -> None:
+    def __init__(
+        self, r: _Reader, compression: int, value_bytes: int, half: bool, tiles: bool = False
+    ) -> None:
         self.r, self.compression, self.value_bytes, self.half = r, compression, value_bytes, half
+        self.want_tiles = tiles  # a float tree: its active tiles kept
+        self.tiles: list[_TileBlock] = []
         self.leaves: list[int] = []  # where each leaf's topology value mask is
         self.origins: list[np.ndarray] = []  # their origins, (n, 3) per 16^3 node
         self.masks: list[bytes] = []  # their value masks, 64 bytes each, per 16^3 node
@@ -261,13 +331,31 @@ class _Tree:
         children = r.mask(nbytes, f"{1 << log2}^3 node child mask")
         # the children, in the order their nodes follow: ascending bit n, at
         # local (n >> 2 log2, (n >> log2) & (2^log2 - 1), n & (2^log2 - 1))
-        bits = np.flatnonzero(
-            np.unpackbits(np.frombuffer(bytes(r.data[at : at + nbytes]), np.uint8), bitorder="little")
-        )
+        bits = _bits(r.data, at, nbytes)
         side = (1 << log2) - 1
         local = np.stack([bits >> 2 * log2, (bits >> log2) & side, bits & side], axis=1)
         child_origins = origin + (local.astype(np.int64) << _CHILD_SPAN[level])
-        self.values(log2, r.mask(nbytes, f"{1 << log2}^3 node value mask"))
+        at = r.pos
+        on = r.mask(nbytes, f"{1 << log2}^3 node value mask")
+        stored = self.values(log2, on)
+        if on and self.want_tiles:  # active tiles: value-mask entries that are not children
+            on_bits = _bits(r.data, at, nbytes)
+            tile = np.setdiff1d(on_bits, bits, assume_unique=True)
+            if len(tile):
+                count, start, size, codec = stored
+                tl = np.stack([tile >> 2 * log2, (tile >> log2) & side, tile & side], axis=1).astype(np.int64)
+                self.tiles.append(
+                    _TileBlock(
+                        origin + (tl << _CHILD_SPAN[level]),
+                        _CHILD_SPAN[level],
+                        tile if count == 1 << 3 * log2 else np.searchsorted(on_bits, tile),
+                        bytes(r.data[start : start + size]),
+                        count,
+                        codec,
+                        self.half,
+                        f"the {1 << log2}^3 node values at byte {at + nbytes}",
+                    )
+                )
         if level == 0:
             for o in child_origins:
                 self.internal(1, o)
@@ -278,8 +366,10 @@ class _Tree:
             self.masks.append(bytes(r.data[r.pos : r.pos + 64 * children]))
             r.pos += 64 * children
 
-    def values(self, log2: int, active: int) -> None:
-        """A node's values: metadata, inactive values, selection mask, the values."""
+    def values(self, log2: int, active: int) -> tuple[int, int, int, str | None]:
+        """A node's values: metadata, inactive values, selection mask, the
+        values. Returns where its values are: (the values stored, the byte
+        where they start, their bytes there, "zip", "blosc" or None for raw)."""
         r, n = self.r, 1 << 3 * log2
         what = f"{1 << log2}^3 node values"
         at = r.pos
@@ -295,7 +385,7 @@ class _Tree:
         count = active if self.compression & _ACTIVE_MASK and meta != 6 else n
         raw = count * value_bytes
         if self.half and count == 0:
-            return  # nothing stored, not even a compressed size
+            return 0, r.pos, 0, None  # nothing stored, not even a compressed size
         if self.compression & (_ZIP | _BLOSC):
             at = r.pos
             stored = r.take("<q", f"{what}' compressed size")
@@ -306,6 +396,48 @@ class _Tree:
                 )
             r.need(abs(stored), f"{what}' compressed block")
             r.pos += abs(stored)
+            codec = None if stored <= 0 else "blosc" if self.compression & _BLOSC else "zip"
+            return count, r.pos - abs(stored), abs(stored), codec
+        r.need(raw, what)
+        r.pos += raw
+        return count, r.pos - raw, raw, None
+
+
+def _decode(path: Path, b: _TileBlock) -> np.ndarray:
+    """The float values a node's values block stores, as float32."""
+    raw = b.count * (2 if b.half else 4)
+    try:
+        if b.codec == "zip":
+            out = zlib.decompressobj().decompress(b.block, raw + 1)  # never more than the values take
+        elif b.codec == "blosc":
+            # blosc's header: the bytes it decompresses to (at 4), its own size (at 12)
+            if len(b.block) < 16 or struct.unpack_from("<I", b.block, 4)[0] != raw:
+                raise ValueError(f"a blosc block not of {raw} bytes")
+            if struct.unpack_from("<I", b.block, 12)[0] != len(b.block):
+                raise ValueError(f"a blosc block of {len(b.block)} bytes stating another size")
+            out = _blosc(path).decompress(b.block)
         else:
-            r.need(raw, what)
-            r.pos += raw
+            out = b.block
+    except (zlib.error, ValueError, RuntimeError) as e:  # blosc: ValueError, RuntimeError
+        raise DataError(f"{path}: malformed VDB file: {b.what}: {e}") from None
+    if len(out) != raw:
+        raise DataError(f"{path}: malformed VDB file: {b.what}: {len(out)} bytes for {b.count} values")
+    return np.frombuffer(out, "<f2" if b.half else "<f4").astype(np.float32)
+
+
+def _bits(data, at: int, nbytes: int) -> np.ndarray:
+    """The set bits of the mask of `nbytes` at byte `at`, ascending."""
+    return np.flatnonzero(
+        np.unpackbits(np.frombuffer(bytes(data[at : at + nbytes]), np.uint8), bitorder="little")
+    )
+
+
+def _blosc(path: Path):
+    try:
+        import blosc
+    except ImportError:
+        raise ImportError(
+            f"{path}: its active tiles are blosc-compressed, which needs the blosc package: "
+            'pip install ".[vdb]" in a clvis checkout (or pip install blosc)'
+        ) from None
+    return blosc

@@ -1,15 +1,24 @@
 """Writes tests/data/openvdb_small.vdb with the OpenVDB library itself
 (Debian's python3-openvdb 10.0.1: ``apt install python3-openvdb``, run with
-/usr/bin/python3; clvis does not depend on it). Two float grids:
+/usr/bin/python3; clvis does not depend on it). Three float grids:
 
 - "surface": OpenVDB's narrow-band level set of a sphere, radius 16 voxels
   centred at (60, 61, 62), voxel size 1, half width 2 (12,790 active voxels
   in 94 leaves, all in one 16^3 node: tinyvdb 0.9's own voxel list returns
   8,534 of them);
 - "density": a fog ball, 1 - r / 12 over a 24^3 block at index (-30, 4, 9),
-  voxel size 0.25, saved as half floats (7,208 active voxels).
+  voxel size 0.25, saved as half floats (7,208 active voxels);
+- "block": 0.5 over a 160^3 block at index (0, 0, 0), but (i + 2 j + 3 k)
+  mod 7 / 7 + 0.25 where i, j, k >= 140 (counted from 140); OpenVDB stores
+  the uniform part as active tiles (a 128^3 one of a 32^3 node, 8^3 ones of
+  16^3 nodes), which tinyvdb 0.9 does not read (4,096,000 active voxels,
+  27 leaves).
 
-The tests check what read_vdb returns against these formulas."""
+The tests check what read_vdb returns against these formulas.
+
+Also tests/data/openvdb_tiles.vdb, a fuzzing seed of active tiles: "tiles",
+0.5 over a 40^3 block at index (0, 0, 0) but (i + 2 j + 3 k) mod 5 / 5 in
+its first 8^3 (124 8^3 tiles and one leaf, blosc-compressed)."""
 
 import numpy as np
 import pyopenvdb as vdb
@@ -23,4 +32,18 @@ density.copyFromArray(np.clip(1 - r / 12, 0, 1).astype(np.float32), ijk=(-30, 4,
 density.name = "density"
 density.transform = vdb.createLinearTransform(voxelSize=0.25)
 density.saveFloatAsHalf = True
-vdb.write("openvdb_small.vdb", grids=[surface, density])
+b = np.full((160, 160, 160), 0.5, np.float32)
+i, j, k = np.mgrid[:20, :20, :20]
+b[140:, 140:, 140:] = (i + 2 * j + 3 * k) % 7 / 7 + 0.25
+block = vdb.FloatGrid()
+block.copyFromArray(b, ijk=(0, 0, 0), tolerance=0.0)
+block.name = "block"
+vdb.write("openvdb_small.vdb", grids=[surface, density, block])
+
+t = np.full((40, 40, 40), 0.5, np.float32)
+i, j, k = np.mgrid[:8, :8, :8]
+t[:8, :8, :8] = (i + 2 * j + 3 * k) % 5 / 5
+tiles = vdb.FloatGrid()
+tiles.copyFromArray(t, ijk=(0, 0, 0), tolerance=0.0)
+tiles.name = "tiles"
+vdb.write("openvdb_tiles.vdb", grids=[tiles])

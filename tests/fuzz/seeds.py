@@ -479,6 +479,8 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
         # internal nodes and leaves of several kinds, zipped with the active mask
         _vdb_tree(out, out / "tree.vdb", compression=tinyvdb.COMPRESS_ZIP | tinyvdb.COMPRESS_ACTIVE_MASK)
         add("vdb", "vdb", out / "tree.vdb")
+        # written by OpenVDB: 124 active tiles, blosc-compressed (tests/data/make_openvdb_small.py)
+        add("vdb", "vdb", DATA / "openvdb_tiles.vdb")
     try:
         import pye57
     except ImportError:

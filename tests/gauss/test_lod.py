@@ -329,14 +329,17 @@ def _affine(m) -> bytes:
     return _s("AffineMap") + struct.pack("<16d", *np.asarray(m, float).ravel())
 
 
-def _vdb_template(grids) -> bytes:
-    """An OpenVDB (format 224) file of empty grids: (name, type, transform bytes)."""
+def _vdb_template(grids, root_tiles=()) -> bytes:
+    """An OpenVDB (format 224) file of empty grids: (name, type, transform
+    bytes); root_tiles: each float grid's root tiles ((i, j, k), value, active)."""
     out = struct.pack("<qIIIB", 0x56444220, 224, 11, 0, 1) + b"0EA4B2C5-0F55-4B24-9C25-5CFD16E1E1CE"
     out += struct.pack("<II", 0, len(grids))  # no file metadata; grid count
     for name, type_name, transform in grids:
         body = struct.pack("<II", 0, 0) + transform + struct.pack("<I", 1)  # no compression, no metadata
         body += struct.pack("<i" if "int" in type_name else "<f", 0)  # background
-        body += struct.pack("<ii", 0, 0)  # no root tiles, no children
+        tiles = root_tiles if "float" in type_name else ()
+        body += struct.pack("<ii", len(tiles), 0)  # root tiles, no children
+        body += b"".join(struct.pack("<3ifB", *ijk, value, active) for ijk, value, active in tiles)
         out += _s(name) + _s(type_name) + _s("")
         pos = len(out) + 24
         out += struct.pack("<qqq", pos, pos + len(body), pos + len(body)) + body
@@ -527,6 +530,101 @@ def test_vdb_written_by_openvdb():
     assert ((ijk >= 0) & (ijk < 24)).all() and (want > 0).all()
     for lod in LODS:
         _same(gaussians_from_volume(fog, lod), ref.gaussians_from_volume(fog, lod))
+
+    # uniform regions stored as active tiles, a 128^3 one and 8^3 ones
+    # (tinyvdb reads no tile: the grid came back as its 27 leaves)
+    block = read_vdb(path, grid="block")
+    want = np.full((160, 160, 160), 0.5, F32)
+    i, j, k = np.mgrid[:20, :20, :20]
+    want[140:, 140:, 140:] = ((i + 2 * j + 3 * k) % 7 / 7 + 0.25).astype(F32)
+    assert block.shape == (160, 160, 160) and block.n_active == 160**3 and block.active().all()
+    np.testing.assert_array_equal(block.to_dense(), want.transpose(2, 1, 0))  # [z, y, x] of (i, j, k)
+    assert block.n_leaves == 20**3 and block.n_tiles == 20**3 - 27
+
+
+@pytest.mark.parametrize(
+    "compression", ["ZIP | ACTIVE_MASK", "ZIP", "NONE", "ACTIVE_MASK", "BLOSC | ACTIVE_MASK"]
+)
+def test_vdb_active_tiles_under_each_compression(tmp_path, compression):
+    """openvdb_small.vdb's "block" (a 128^3 tile, 8^3 tiles and 27 leaves)
+    saved again by tinyvdb under each of OpenVDB's compressions: the tiles'
+    values are decoded from their nodes' value blocks (zlib, blosc or raw; all
+    values or the active ones), the same volume every time."""
+    import tinyvdb
+
+    src = Path(__file__).parents[1] / "data" / "openvdb_small.vdb"
+    flags = 0
+    for name in compression.split(" | "):
+        flags |= getattr(tinyvdb, f"COMPRESS_{name}")
+    path = tmp_path / "block.vdb"
+    with tinyvdb.open(str(src)) as f:
+        f.read_grids()
+        f.save(str(path), compression=flags)
+    want = np.full((160, 160, 160), 0.5, F32)
+    i, j, k = np.mgrid[:20, :20, :20]
+    want[140:, 140:, 140:] = ((i + 2 * j + 3 * k) % 7 / 7 + 0.25).astype(F32)
+    block = read_vdb(path, grid="block")
+    assert block.n_tiles == 20**3 - 27
+    np.testing.assert_array_equal(block.to_dense(), want.transpose(2, 1, 0))
+    seed = read_vdb(src.with_name("openvdb_tiles.vdb"))  # the fuzzing seed of tiles
+    want = np.full((40, 40, 40), 0.5, F32)
+    i, j, k = np.mgrid[:8, :8, :8]
+    want[:8, :8, :8] = ((i + 2 * j + 3 * k) % 5 / 5).astype(F32)
+    assert seed.n_tiles == 124
+    np.testing.assert_array_equal(seed.to_dense(), want.transpose(2, 1, 0))
+
+
+def test_vdb_tile_blocks_that_do_not_decode_are_refused(tmp_path, monkeypatch):
+    """A tile's values block that is not what its node declares (zlib that
+    fails or decompresses to more, a blosc header of another size, raw bytes
+    short) is a DataError naming the file and the node; without the blosc
+    package a blosc-compressed tile is an ImportError saying what to install,
+    never a grid read without its tiles."""
+    import zlib
+
+    from clvis.io import vdb
+
+    def block(data, count, codec, half=False):
+        return vdb._TileBlock(
+            np.zeros((1, 3), np.int64), 3, np.zeros(1, np.int64), data, count, codec, half, "node X"
+        )
+
+    vals = np.arange(4, dtype="<f4")
+    np.testing.assert_array_equal(vdb._decode(tmp_path, block(zlib.compress(vals.tobytes()), 4, "zip")), vals)
+    np.testing.assert_array_equal(
+        vdb._decode(tmp_path, block(vals.astype("<f2").tobytes(), 4, None, True)), vals
+    )
+    for bad, match in [
+        (block(b"not zlib at all", 4, "zip"), "node X: Error"),
+        (block(zlib.compress(np.zeros(1000, "<f4").tobytes()), 4, "zip"), "node X: 17 bytes for 4 values"),
+        (
+            block(b"\x02\x01\x01\x04" + (99).to_bytes(4, "little") + bytes(8), 4, "blosc"),
+            "node X: a blosc block not of 16",
+        ),
+        (block(vals.tobytes()[:12], 4, None), "node X: 12 bytes for 4 values"),
+    ]:
+        with pytest.raises(clvis.DataError, match=f"malformed VDB file: {match}") as e:
+            vdb._decode(tmp_path, bad)
+        assert str(tmp_path) in str(e.value)
+    path = Path(__file__).parents[1] / "data" / "openvdb_small.vdb"
+    monkeypatch.setitem(sys.modules, "blosc", None)
+    with pytest.raises(ImportError, match=r"blosc-compressed, which needs the blosc package: pip install"):
+        read_vdb(path, grid="block")
+    assert read_vdb(path, grid="density").n_active == 7_208  # no tiles: no blosc needed
+
+
+def test_vdb_active_root_tile_is_refused_for_its_memory(tmp_path):
+    """An active tile of the root node covers 4096^3 voxels (512^3 leaves):
+    refused before anything is read, naming the tiles' leaves; an inactive
+    one is nothing."""
+    grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
+    path = tmp_path / "root.vdb"
+    path.write_bytes(_vdb_template(grids, [((4096, 0, -4096), 0.5, 1)]))
+    with pytest.raises(clvis.DeviceError, match=r"134,217,728 leaves of active tiles needs about") as e:
+        read_vdb(path)
+    assert str(path) in str(e.value)
+    path.write_bytes(_vdb_template(grids, [((4096, 0, -4096), 0.5, 0)]))
+    assert read_vdb(path).n_active == 0
 
 
 def test_vdb_malformed(tmp_path):

@@ -462,17 +462,30 @@ def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolum
     g = f.grid(idx)
     voxel_size, translation = _transform(p, g.transform)
     leaves = walked[idx] if len(walked) == n else None
+    name = names[idx]
     if leaves is not None:
-        ijk, vals = _leaf_voxels(p, names[idx], g, leaves)
-    else:  # a tree clvis's walk does not follow: tinyvdb's own list
+        at, lv, la = _leaf_values(p, name, g, leaves)
+    else:  # a tree clvis's walk does not follow: tinyvdb's own list of voxels
         sp = g.to_sparse()
         ijk = np.frombuffer(sp["coords"], np.int32).reshape(-1, 3).astype(np.int64)
         vals = np.frombuffer(sp["values"], np.float32)
         if len(ijk) != int(sp["count"]) or len(vals) != len(ijk):
-            raise DataError(f"{p}: grid {names[idx]!r}: inconsistent voxel data")
-    tile_ijk, tile_vals = _tile_leaves(leaves)
+            raise DataError(f"{p}: grid {name!r}: inconsistent voxel data")
+        at, lv, la = _voxel_leaves(p, name, ijk, vals)
+    tile_at, tile_vals = _tile_leaves(leaves)
+    if len(tile_at):  # each active tile's leaves, whole, after the stored leaves
+        at = np.concatenate([at, tile_at])
+        lv = np.concatenate([lv, np.repeat(tile_vals[:, None], LEAF_VOXELS, axis=1)])
+        la = np.concatenate([la, np.ones((len(tile_at), LEAF_VOXELS), bool)])
+    if (at % LEAF).any():  # the root's child or tile origins are the file's
+        raise DataError(
+            f"{p}: grid {name!r}: a leaf at (x, y, z) = {at[(at % LEAF).any(axis=1)][0].tolist()} "
+            "is not on the 8-voxel grid"
+        )
+    keep = la.any(axis=1)  # a VDB leaf may hold no active voxel
+    at, lv, la = at[keep], lv[keep], la[keep]
     spacing = (voxel_size[2], voxel_size[1], voxel_size[0])
-    if len(ijk) + len(tile_ijk) == 0:
+    if len(at) == 0:
         return SparseVolume(
             (0, 0, 0),
             spacing,
@@ -483,44 +496,49 @@ def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolum
             np.zeros(0, np.float32),
             np.zeros((0, LEAF_VOXELS), np.float32),
         )
-    for where, v in ((ijk, vals), (tile_ijk, tile_vals)):
-        bad = ~np.isfinite(v)
-        if bad.any():
-            what = "active voxel" if where is ijk else "active tile's leaf at"
-            at = where[np.flatnonzero(bad)[0]].tolist()
-            raise DataError(f"{p}: grid {names[idx]!r}: {what} (x, y, z) = {at} is not finite")
-    zyx, tile_zyx = ijk[:, ::-1], tile_ijk[:, ::-1]
-    lo = np.min([a.min(axis=0) for a in (zyx, tile_zyx) if len(a)], axis=0)
-    hi = np.max([a.max(axis=0) + d for a, d in ((zyx, 0), (tile_zyx, LEAF - 1)) if len(a)], axis=0)
-    off = np.floor_divide(lo, LEAF) * LEAF
-    shape = tuple(int(s) for s in hi - off + 1)
+    bad = la & ~np.isfinite(lv)
+    if bad.any():
+        leaf, voxel = (int(v[0]) for v in np.nonzero(bad))
+        xyz = (at[leaf] + [voxel % LEAF, voxel // LEAF % LEAF, voxel // (LEAF * LEAF)]).tolist()
+        raise DataError(f"{p}: grid {name!r}: active voxel (x, y, z) = {xyz} is not finite")
+    # leaves [z, y, x]-major inside (clvis's layout); the bounds of the active voxels
+    zyx = at[:, ::-1]
+    cube = la.reshape(-1, LEAF, LEAF, LEAF)
+    rows: list[np.ndarray] = [
+        np.any(cube, axis=axes) for axes in ((2, 3), (1, 3), (1, 2))
+    ]  # (L, 8) per z, y, x
+    last = np.stack([LEAF - 1 - np.argmax(r[:, ::-1], axis=1) for r in rows], axis=1)
+    off = zyx.min(axis=0)  # leaf-aligned: the leaf origins are multiples of 8
+    shape = tuple(int(s) for s in (zyx + last).max(axis=0) - off + 1)
     if max(shape) > _MAX_SIDE:
         raise DataError(
-            f"{p}: grid {names[idx]!r} spans {shape[::-1]} voxels (x, y, z); at most {_MAX_SIDE} per axis"
+            f"{p}: grid {name!r} spans {shape[::-1]} voxels (x, y, z); at most {_MAX_SIDE} per axis"
         )
-    zyx = zyx - off
-    leaf = zyx // LEAF
-    coords, inv = np.unique(leaf, axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
-    local = zyx % LEAF
-    li = local[:, 0] * 64 + local[:, 1] * 8 + local[:, 2]
-    lv = np.zeros((len(coords), LEAF_VOXELS), np.float32)
-    la = np.zeros((len(coords), LEAF_VOXELS), bool)
-    if (np.bincount(inv * LEAF_VOXELS + li, minlength=1) > 1).any():
-        raise DataError(f"{p}: grid {names[idx]!r}: a voxel appears twice")
-    lv[inv, li] = vals
-    la[inv, li] = True
-    if len(tile_ijk):  # each active tile's leaves, whole, beside the stored leaves
-        coords = np.concatenate([coords, (tile_zyx - off) // LEAF])
-        lv = np.concatenate([lv, np.repeat(tile_vals[:, None], LEAF_VOXELS, axis=1)])
-        la = np.concatenate([la, np.ones((len(tile_ijk), LEAF_VOXELS), bool)])
-        coords, first = np.unique(coords, axis=0, return_index=True)
-        if len(first) != len(lv):
-            raise DataError(f"{p}: grid {names[idx]!r}: a voxel appears twice (an active tile over a leaf)")
-        lv, la = lv[first], la[first]
+    coords, first = np.unique((zyx - off) // LEAF, axis=0, return_index=True)
+    if len(first) != len(at):
+        raise DataError(
+            f"{p}: grid {name!r}: a voxel appears twice (two leaves, or a tile and a leaf, at one place)"
+        )
     off_xyz = off[::-1].astype(np.float64)
     origin = tuple(float(t + s * o) for t, s, o in zip(translation, voxel_size, off_xyz, strict=True))
-    return SparseVolume._from_leaves(shape, spacing, origin, coords * LEAF, lv, la)
+    return SparseVolume._from_leaves(shape, spacing, origin, coords * LEAF, lv[first], la[first])
+
+
+def _voxel_leaves(p: Path, name: str, ijk: np.ndarray, vals: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(N, 3) voxel coordinates (i, j, k) and their values as leaves: ((L,
+    3) int64 leaf origins (i, j, k), (L, 512) float32 values and bool
+    activity, [z, y, x]-major inside)."""
+    leaf, inv = np.unique(np.floor_divide(ijk, LEAF), axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    x, y, z = (np.mod(ijk, LEAF)).T
+    li = z * 64 + y * 8 + x
+    if (np.bincount(inv * LEAF_VOXELS + li, minlength=1) > 1).any():
+        raise DataError(f"{p}: grid {name!r}: a voxel appears twice")
+    lv = np.zeros((len(leaf), LEAF_VOXELS), np.float32)
+    la = np.zeros((len(leaf), LEAF_VOXELS), bool)
+    lv[inv, li] = vals
+    la[inv, li] = True
+    return leaf * LEAF, lv, la
 
 
 def _tile_leaves(leaves: GridLeaves | None) -> tuple[np.ndarray, np.ndarray]:
@@ -539,9 +557,9 @@ def _tile_leaves(leaves: GridLeaves | None) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(parts), np.concatenate(part_values)
 
 
-def _leaf_voxels(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray, np.ndarray]:
-    """The active voxels of a walked grid: (ijk (N, 3) int64, values (N,)
-    float32), leaf by leaf in file order.
+def _leaf_values(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray, ...]:
+    """A walked grid's leaves, in file order: ((L, 3) int64 origins (i, j,
+    k), (L, 512) float32 values and bool activity, [z, y, x]-major inside).
 
     Where each leaf is and which of its voxels are active come from clvis's
     walk of the file (GridLeaves); the values from tinyvdb's tree, which holds
@@ -553,7 +571,9 @@ def _leaf_voxels(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray,
     leaves, each leaf's active count) before any value is used."""
     tree = g.tree
     nodes = (tree.node(i) for i in range(int(tree.num_nodes)))
-    counts = np.unpackbits(leaves.masks, axis=1).sum(axis=1, dtype=np.int64)
+    # a VDB leaf is [x, y, z]-major (bit n: x = n >> 6, y = (n >> 3) & 7, z = n & 7)
+    active = np.unpackbits(leaves.masks, axis=1, bitorder="little").view(bool)
+    counts = active.sum(axis=1, dtype=np.int64)
     values = np.empty((len(leaves), LEAF_VOXELS), np.float32)
     k = 0
     for node in nodes:
@@ -571,10 +591,13 @@ def _leaf_voxels(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray,
         k += 1
     if k != len(leaves):
         raise DataError(f"{p}: grid {name!r}: tinyvdb read {k:,} leaves of the file's {len(leaves):,}")
-    active = np.unpackbits(leaves.masks, axis=1, bitorder="little").view(bool)
-    leaf, voxel = np.nonzero(active)
-    local = np.stack([voxel >> 6, (voxel >> 3) & 7, voxel & 7], axis=1)
-    return leaves.origins[leaf] + local, values[leaf, voxel]
+
+    def zyx(a: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(a.reshape(-1, LEAF, LEAF, LEAF).transpose(0, 3, 2, 1)).reshape(
+            -1, LEAF_VOXELS
+        )
+
+    return leaves.origins, zyx(values), zyx(active)
 
 
 def _listing(names, types) -> str:

@@ -491,16 +491,18 @@ def test_vdb_tinyvdb_tree_that_disagrees_with_the_file_is_refused(tmp_path):
 
     counts = [int(np.unpackbits(m).sum()) for m in walked.masks]
     good = [Node("root"), Node("internal")] + [Node("leaf", c) for c in counts]
-    got_ijk, got_vals = sparse._leaf_voxels(path, "density", Grid(good), walked)
-    assert len(got_ijk) == walked.active == len(ijk) and not got_vals.any()
-    np.testing.assert_array_equal(np.unique(got_ijk, axis=0), np.unique(ijk, axis=0))
+    at, lv, la = sparse._leaf_values(path, "density", Grid(good), walked)
+    assert la.sum() == walked.active == len(ijk) and not lv.any()
+    z, y, x = np.unravel_index(np.nonzero(la)[1], (8, 8, 8))
+    got = at[np.nonzero(la)[0]] + np.stack([x, y, z], axis=1)
+    np.testing.assert_array_equal(np.unique(got, axis=0), np.unique(ijk, axis=0))
     for nodes, match in [
         (good[:-1], f"tinyvdb read {len(counts) - 1} leaves of the file's {len(counts)}"),
         (good + [Node("leaf", 1)], "more leaves than the file's"),
         (good[:3] + [Node("leaf", counts[1] + 1)] + good[4:], "leaf 1 does not match the file's"),
     ]:
         with pytest.raises(clvis.DataError, match=match) as e:
-            sparse._leaf_voxels(path, "density", Grid(nodes), walked)
+            sparse._leaf_values(path, "density", Grid(nodes), walked)
         assert str(path) in str(e.value) and "'density'" in str(e.value)
 
 
@@ -611,6 +613,43 @@ def test_vdb_tile_blocks_that_do_not_decode_are_refused(tmp_path, monkeypatch):
     with pytest.raises(ImportError, match=r"blosc-compressed, which needs the blosc package: pip install"):
         read_vdb(path, grid="block")
     assert read_vdb(path, grid="density").n_active == 7_208  # no tiles: no blosc needed
+
+
+def test_vdb_tree_clvis_does_not_walk_is_read_from_tinyvdbs_voxel_list(tmp_path, monkeypatch):
+    """A tree clvis's walk does not follow (a file version before 222, another
+    tree configuration) is read from tinyvdb's own voxel list: the same
+    volume as the walk gives where that list is whole."""
+    from clvis.gauss import sparse
+
+    _, _, ijk, vals, _ = _random_voxels(seed=6)
+    grids = [("density", "Tree_float_5_4_3", _scale_translate((0.5, 1, 2), (1, 2, 3)))]
+    path = _write_vdb(tmp_path, "rnd", grids, {0: (ijk, vals)})
+    walked = read_vdb(path)
+    monkeypatch.setattr(sparse, "vdb_leaves", lambda p: [])  # as for a version-221 file
+    listed = read_vdb(path)
+    assert (listed.shape, listed.spacing, listed.origin) == (walked.shape, walked.spacing, walked.origin)
+    np.testing.assert_array_equal(listed.to_dense(), walked.to_dense())
+    np.testing.assert_array_equal(listed.active(), walked.active())
+
+
+def test_vdb_non_finite_voxel_and_misplaced_node_are_refused(tmp_path):
+    """A NaN among the active voxels is a DataError naming its (x, y, z);
+    a root child whose origin is off the 8-voxel grid (a damaged file:
+    OpenVDB's are multiples of 4096) is refused, not drawn shifted."""
+    grids = [("density", "Tree_float_5_4_3", _scale_translate((1, 1, 1), (0, 0, 0)))]
+    ijk = np.array([[0, 0, 0], [5, 6, 7], [-9, 3, 12]])
+    path = _write_vdb(tmp_path, "nan", grids, {0: (ijk, [1.0, np.nan, 2.0])})
+    with pytest.raises(clvis.DataError, match=r"active voxel \(x, y, z\) = \[5, 6, 7\] is not finite") as e:
+        read_vdb(path)
+    assert str(path) in str(e.value)
+    path = _write_vdb(tmp_path, "one", grids, {0: (ijk[:1], [1.0])})
+    data = path.read_bytes()
+    at = data.index(struct.pack("<ii3i", 0, 1, 0, 0, 0))  # no root tiles, one child at (0, 0, 0)
+    path.write_bytes(data[: at + 8] + struct.pack("<3i", 3, 0, 0) + data[at + 20 :])
+    with pytest.raises(
+        clvis.DataError, match=r"a leaf at \(x, y, z\) = \[3, 0, 0\] is not on the 8-voxel grid"
+    ):
+        read_vdb(path)
 
 
 def test_vdb_active_root_tile_is_refused_for_its_memory(tmp_path):

@@ -36,7 +36,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--model-dir", default=None, metavar="DIR", help="where NAME.json is (default: the shipped models)"
     )
     p.add_argument("--quick", action="store_true", help="one size and one frame per family (what train runs)")
-    p.add_argument("--write-card", action="store_true", help="write the table into the model's card")
+    p.add_argument(
+        "--write-card",
+        action="store_true",
+        help="write the table into the card of the model in --model-dir (which it needs: the shipped "
+        "models' card is rewritten only when their folder is given as --model-dir)",
+    )
     p.add_argument(
         "--guard",
         action=argparse.BooleanOptionalAction,
@@ -50,6 +55,16 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
 def cmd(args: argparse.Namespace) -> int:
     from ..training import evaluate as ev
 
+    if args.write_card and args.model_dir is None:
+        # the shipped models' folder is the installed package's: a pip-installed
+        # clvis's files, not the user's, edited on purpose only (the release
+        # flow, from a clone, names it)
+        from ..post.infer import MODELS
+
+        raise CliError(
+            f"--write-card: give --model-dir DIR, the folder of the card to write; the shipped "
+            f"{args.model} card is the installed package's (to rewrite it on purpose: --model-dir {MODELS})"
+        )
     log = None if args.quiet else (lambda s: print(f"clvis eval: {s}", file=sys.stderr, flush=True))
     try:
         result = ev.evaluate(
@@ -62,7 +77,21 @@ def cmd(args: argparse.Namespace) -> int:
     print(f"\n{len(below)} of {len(result['rows'])} rows below the best baseline ({result['seconds']:.0f} s)")
     if args.write_card:
         command = ["clvis", "eval", args.model] + (["--quick"] if args.quick else [])
+        if not _shipped(args.model_dir):  # the command that scores that model again
+            command[3:3] = ["--model-dir", str(args.model_dir)]
         if args.guard is not None:
             command.append("--guard" if args.guard else "--no-guard")
         print(f"card: {ev.write_card(result, args.model_dir, command)}")
     return 0
+
+
+def _shipped(model_dir: str) -> bool:
+    """Whether `model_dir` is the shipped models' folder (clvis eval's default)."""
+    import os
+
+    from ..post.infer import MODELS
+
+    try:
+        return os.path.samefile(model_dir, MODELS)
+    except OSError:
+        return False

@@ -51,7 +51,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         default=".",
         metavar="DIR",
         help="where the model and its card go (default .); a model of the same name there is replaced "
-        "once the new one is written whole (a run stopped before that leaves it as it was)",
+        "once the new one is written whole (a run stopped before that leaves it as it was); one run "
+        "of a network into a folder at a time: a second is refused, naming the first",
     )
     p.add_argument("--seed", type=count(0, 2**31 - 1), default=0, help="the data's and the weights' seed")
     p.add_argument(
@@ -244,28 +245,16 @@ def cmd(args: argparse.Namespace) -> int:
     fw, fh = args.frame_size or train.SPECS[args.model]["frame_size"]
     if args.size > min(fw, fh):
         raise CliError(f"--size {args.size}: larger than the frames ({fw}x{fh})")
-    card = train.train(
-        args.model,
-        steps=args.steps,
-        size=args.size,
-        out=args.out,
-        seed=args.seed,
-        frames=args.frames,
-        frame_size=args.frame_size,
-        points=args.points,
-        target=args.target or "max_response",
-        command=_command(args),
-        log=log,
-        cache=None if args.no_cache else (args.cache or default_cache()),
-        time_limit=args.time_limit,
-        init=args.init,
-        mix=args.mix,
-        lr=args.lr,
-        planes=planes,
-    )
-    print(f"{args.out}/{card['name']}.onnx: held-out frames, mean per row")
-    print(held_out_table(card["held_out"]))
-    if args.eval != "none":
+
+    def evaluated(card: dict) -> None:
+        """The table of the card's held-out rows, then (--eval) the held-out
+        suite into the card: run by train while the model's folder is still
+        this run's (train._claim), so a second run cannot replace the model
+        between the two."""
+        print(f"{args.out}/{card['name']}.onnx: held-out frames, mean per row")
+        print(held_out_table(card["held_out"]))
+        if args.eval == "none":
+            return
         from ..training import evaluate as ev
 
         quick = args.eval == "quick"
@@ -285,4 +274,27 @@ def cmd(args: argparse.Namespace) -> int:
             args.out,
             ["clvis", "eval", args.model, "--model-dir", str(args.out)] + (["--quick"] if quick else []),
         )
+
+    train.train(
+        args.model,
+        steps=args.steps,
+        size=args.size,
+        out=args.out,
+        seed=args.seed,
+        frames=args.frames,
+        frame_size=args.frame_size,
+        points=args.points,
+        target=args.target or "max_response",
+        command=_command(args),
+        log=log,
+        cache=None if args.no_cache else (args.cache or default_cache()),
+        time_limit=args.time_limit,
+        init=args.init,
+        mix=args.mix,
+        lr=args.lr,
+        planes=planes,
+        after=evaluated,
+        # what it removes of killed runs is said even with --quiet
+        say=lambda s: print(f"clvis train: {s}", file=sys.stderr, flush=True),
+    )
     return 0

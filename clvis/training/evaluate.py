@@ -408,14 +408,18 @@ def table(result: dict) -> str:
     return "\n".join(lines)
 
 
-def write_card(
-    result: dict, model_dir: str | os.PathLike | None = None, command: Sequence[str] | None = None
-) -> Path:
-    """Put the result into the model's card (``held_out_suite``); the card's
-    file entries and their sha256 are left as they are."""
-    from ..post.infer import MODELS
-
-    path = Path(model_dir or MODELS) / f"{result['model']}.json"
+def write_card(result: dict, model_dir: str | os.PathLike, command: Sequence[str] | None = None) -> Path:
+    """Put the result into the card of the model in `model_dir`
+    (``held_out_suite``); the card's file entries and their sha256 are left
+    as they are. The folder is never taken as the shipped models' unasked
+    (they are the installed package's files): give clvis.post.MODELS to
+    rewrite theirs."""
+    if model_dir is None:
+        raise ValueError(
+            "model_dir: the folder of the card to write (the shipped models' is clvis.post.MODELS, "
+            "given on purpose)"
+        )
+    path = Path(model_dir) / f"{result['model']}.json"
     card = json.loads(path.read_text())
     card["held_out_suite"] = {
         "command": list(command) if command else None,

@@ -23,13 +23,15 @@ import json
 import math
 import os
 import platform
+import re
 import shutil
+import socket
 import sys
 import tempfile
 import time
 import warnings
 import zipfile
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -1003,6 +1005,8 @@ def train(
     mix: float | None = None,
     lr: float | None = None,
     planes: Sequence[str] | None = None,
+    after: Callable[[dict], Any] | None = None,
+    say: Callable[[str], None] | None = None,
 ) -> dict:
     """Train network `name` for `steps` steps on `size` x `size` crops, export
     it into `out` (NAME.onnx, NAME.fp16.onnx, NAME.int8.onnx where int8
@@ -1022,7 +1026,12 @@ def train(
     0.80-0.97) beside the release frames. lr: the peak learning rate
     (default the SPECS'). planes (narvis, narvis-scan): the G-buffer planes
     the network takes (clvis.post.names.gbuffer_channels; default the
-    SPECS')."""
+    SPECS'). The run holds NAME in `out` (_claim) from before its data is
+    rendered: a second run of the same network into the same folder
+    meanwhile is refused at once, naming this one. after: called with the
+    card once the model is in, before that hold ends (clvis train's
+    held-out suite, written into the card). say: where the staging folders
+    of killed runs that it removes are told (default: log)."""
     import torch
 
     from ..post import nets
@@ -1075,247 +1084,257 @@ def train(
     if init is not None:  # a file of another network: an error now, not after rendering the data
         load_onnx_weights(probe, init)
     out.mkdir(parents=True, exist_ok=True)
-    shutil.rmtree(_staging(out, name))  # a folder it cannot write to: an error now, not after training
-    torch.manual_seed(seed)
-    torch.set_num_threads(int(os.environ.get("CLVIS_TRAIN_THREADS", os.cpu_count() or 1)))
-    rng = np.random.default_rng(seed)
+    # NAME in `out` is this run's until its model is in (and, through `after`,
+    # clvis train's held-out suite in its card): a second run is refused, and
+    # the staging folders of runs killed before they could remove them go
+    with _claim(out, name, say or log):
+        shutil.rmtree(_staging(out, name))  # a folder it cannot write to: an error now, not after training
+        torch.manual_seed(seed)
+        torch.set_num_threads(int(os.environ.get("CLVIS_TRAIN_THREADS", os.cpu_count() or 1)))
+        rng = np.random.default_rng(seed)
 
-    t0 = time.perf_counter()
-    sets: dict[str, list] = {}
-    if trainer.frames is None:  # NARVis: its sets of views
-        npoints = int(points or spec["points"])
-        sets = _narvis_sets(
-            count,
-            spec["held_out"],
-            npoints,
-            seed,
-            fsize,
-            spec["arch"]["planes"],
-            log,
-            spec.get("looks", False),
-            (
-                spec["flow_scenes"],
-                max(1, spec["flow_views"] * count // spec["frames"]),
-                spec["flow_sizes"],
-                spec["densities"],
+        t0 = time.perf_counter()
+        sets: dict[str, list] = {}
+        if trainer.frames is None:  # NARVis: its sets of views
+            npoints = int(points or spec["points"])
+            sets = _narvis_sets(
+                count,
+                spec["held_out"],
+                npoints,
+                seed,
+                fsize,
+                spec["arch"]["planes"],
+                log,
+                spec.get("looks", False),
+                (
+                    spec["flow_scenes"],
+                    max(1, spec["flow_views"] * count // spec["frames"]),
+                    spec["flow_sizes"],
+                    spec["densities"],
+                )
+                if "flow_scenes" in spec
+                else None,
+                Path(cache) if cache is not None else None,
+                target,
             )
-            if "flow_scenes" in spec
-            else None,
-            Path(cache) if cache is not None else None,
-            target,
-        )
-        train_frames = sets.pop("train")
-        val_frames = [f for v in sets.values() for f in v]
-    else:
-        held = max(1, min(spec["held_out"], count))
+            train_frames = sets.pop("train")
+            val_frames = [f for v in sets.values() for f in v]
+        else:
+            held = max(1, min(spec["held_out"], count))
 
-        def made(n: int, views: int, s: int, held_out: bool) -> list:
-            def make() -> list:
-                return _frames(name, n, views, s, fsize, held_out, log)
+            def made(n: int, views: int, s: int, held_out: bool) -> list:
+                def make() -> list:
+                    return _frames(name, n, views, s, fsize, held_out, log)
 
-            if not trainer.cached or cache is None:
-                return make()
-            key = {"set": f"{name}-{'held' if held_out else 'train'}", "count": n, "views": views}
-            if not held_out and "scan_lines" in spec:
-                key["scan_lines"] = spec["scan_lines"]
-            if scan_filter is not None:
-                key["depth_filter"] = list(scan_filter)
-            return cached_frames(Path(cache), {**key, "seed": s, "size": list(fsize)}, make, log)
+                if not trainer.cached or cache is None:
+                    return make()
+                key = {"set": f"{name}-{'held' if held_out else 'train'}", "count": n, "views": views}
+                if not held_out and "scan_lines" in spec:
+                    key["scan_lines"] = spec["scan_lines"]
+                if scan_filter is not None:
+                    key["depth_filter"] = list(scan_filter)
+                return cached_frames(Path(cache), {**key, "seed": s, "size": list(fsize)}, make, log)
 
-        train_frames = made(count, spec["views"], seed, False)
-        val_frames = made(held, 1, seed + 1_000_003, True)
-    completions = trainer.completions
-    # float16 pair by pair (all the float32 pairs at once held twice the memory)
-    pairs = [_half(_pack(name, f, c, channels=channels_in)) for f in train_frames for c in completions]
-    mix_pairs: list = []
-    mix_count = 0
-    if mix is not None:
-        mix_count = max(1, spec["mix_frames"] * count // spec["frames"])
-        mixed = _mix_frames(
-            mix_count,
-            spec["views"],
-            seed + 2_000_003,
-            fsize,
-            size,
-            log,
-            spec["mix_noise"],
-            spec.get("mix_sides"),
-        )
-        mix_pairs = [
-            _half(_pack(name, f, c, channels=channels_in)) for f in mixed for c in _data.TRAIN_COMPLETIONS
+            train_frames = made(count, spec["views"], seed, False)
+            val_frames = made(held, 1, seed + 1_000_003, True)
+        completions = trainer.completions
+        # float16 pair by pair (all the float32 pairs at once held twice the memory)
+        pairs = [_half(_pack(name, f, c, channels=channels_in)) for f in train_frames for c in completions]
+        mix_pairs: list = []
+        mix_count = 0
+        if mix is not None:
+            mix_count = max(1, spec["mix_frames"] * count // spec["frames"])
+            mixed = _mix_frames(
+                mix_count,
+                spec["views"],
+                seed + 2_000_003,
+                fsize,
+                size,
+                log,
+                spec["mix_noise"],
+                spec.get("mix_sides"),
+            )
+            mix_pairs = [
+                _half(_pack(name, f, c, channels=channels_in)) for f in mixed for c in _data.TRAIN_COMPLETIONS
+            ]
+            log(f"{len(mix_pairs)} variety pairs ({len(mixed)} frames), {mix:.0%} of the crops")
+        data_seconds = time.perf_counter() - t0
+        log(f"{len(pairs)} training pairs, {len(val_frames)} held-out frames in {data_seconds:.0f} s")
+
+        net = trainer.build(**spec["arch"])
+        start: dict[str, Any] | None = None
+        if init is not None:
+            load_onnx_weights(net, init)
+            start = {"file": Path(init).name, "sha256": sha256(Path(init))}
+            init_card = Path(init).with_suffix(".json")
+            if init_card.is_file():  # the starting model's own recipe
+                start["command"] = json.loads(init_card.read_text()).get("command")
+            log(f"started from {init}")
+        peak = float(lr if lr is not None else spec["lr"])
+        opt = torch.optim.Adam(net.parameters(), lr=peak)
+        lr0, lr1 = peak, peak / 100
+        loss_fn = _loss_fn(spec["loss"], size)
+        curve: list[list[float]] = []
+        every = max(1, steps // 50)
+        running, done = 0.0, 0
+        t0 = time.perf_counter()
+        train_mode(net)
+        for step in range(1, steps + 1):
+            # cosine from lr0 to lr1 over the run: its steps, or its time limit if that comes first
+            progress = (step - 1) / max(steps, 1)
+            if time_limit is not None:
+                progress = max(progress, (time.perf_counter() - t0) / time_limit)
+                if progress >= 1.0:
+                    log(f"time limit {time_limit:.0f} s: stopped after {step - 1} of {steps} steps")
+                    break
+            for g in opt.param_groups:
+                g["lr"] = lr1 + (lr0 - lr1) * 0.5 * (1.0 + math.cos(math.pi * progress))
+            xb, yb = _batch(pairs, spec["batch"], size, rng, mix_pairs, mix or 0.0)
+            x, y = _augment(xb, yb, rng, name, getattr(net, "layout", ()))
+            loss = loss_fn(net(x), y)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            running += loss.item()
+            done = step
+            if step % every == 0 or step == steps:
+                n = every if step % every == 0 else step % every
+                curve.append([step, round(running / n, 5)])
+                running = 0.0
+                log(f"step {step}/{steps} loss {curve[-1][1]:.4f} ({time.perf_counter() - t0:.0f} s)")
+        if done % every and done != steps and running:  # the steps since the last point of a stopped run
+            curve.append([done, round(running / (done % every), 5)])
+        train_seconds = time.perf_counter() - t0
+        nonfinite = [
+            k for k, v in net.state_dict().items() if v.is_floating_point() and not torch.isfinite(v).all()
         ]
-        log(f"{len(mix_pairs)} variety pairs ({len(mixed)} frames), {mix:.0%} of the crops")
-    data_seconds = time.perf_counter() - t0
-    log(f"{len(pairs)} training pairs, {len(val_frames)} held-out frames in {data_seconds:.0f} s")
+        if nonfinite:  # diverged: nothing is exported (the int8 calibration failed on it with a traceback)
+            last = f", last loss {curve[-1][1]}" if curve else ""
+            raise ValueError(
+                f"training diverged: weights that are not finite after {done} steps ({nonfinite[0]}{last}); "
+                "nothing was written (a lower --lr may help)"
+            )
+        net.eval()
 
-    net = trainer.build(**spec["arch"])
-    start: dict[str, Any] | None = None
-    if init is not None:
-        load_onnx_weights(net, init)
-        start = {"file": Path(init).name, "sha256": sha256(Path(init))}
-        init_card = Path(init).with_suffix(".json")
-        if init_card.is_file():  # the starting model's own recipe
-            start["command"] = json.loads(init_card.read_text()).get("command")
-        log(f"started from {init}")
-    peak = float(lr if lr is not None else spec["lr"])
-    opt = torch.optim.Adam(net.parameters(), lr=peak)
-    lr0, lr1 = peak, peak / 100
-    loss_fn = _loss_fn(spec["loss"], size)
-    curve: list[list[float]] = []
-    every = max(1, steps // 50)
-    running, done = 0.0, 0
-    t0 = time.perf_counter()
-    train_mode(net)
-    for step in range(1, steps + 1):
-        # cosine from lr0 to lr1 over the run: its steps, or its time limit if that comes first
-        progress = (step - 1) / max(steps, 1)
-        if time_limit is not None:
-            progress = max(progress, (time.perf_counter() - t0) / time_limit)
-            if progress >= 1.0:
-                log(f"time limit {time_limit:.0f} s: stopped after {step - 1} of {steps} steps")
-                break
-        for g in opt.param_groups:
-            g["lr"] = lr1 + (lr0 - lr1) * 0.5 * (1.0 + math.cos(math.pi * progress))
-        xb, yb = _batch(pairs, spec["batch"], size, rng, mix_pairs, mix or 0.0)
-        x, y = _augment(xb, yb, rng, name, getattr(net, "layout", ()))
-        loss = loss_fn(net(x), y)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        running += loss.item()
-        done = step
-        if step % every == 0 or step == steps:
-            n = every if step % every == 0 else step % every
-            curve.append([step, round(running / n, 5)])
-            running = 0.0
-            log(f"step {step}/{steps} loss {curve[-1][1]:.4f} ({time.perf_counter() - t0:.0f} s)")
-    if done % every and done != steps and running:  # the steps since the last point of a stopped run
-        curve.append([done, round(running / (done % every), 5)])
-    train_seconds = time.perf_counter() - t0
-    nonfinite = [
-        k for k, v in net.state_dict().items() if v.is_floating_point() and not torch.isfinite(v).all()
-    ]
-    if nonfinite:  # diverged: nothing is exported (the int8 calibration failed on it with a traceback)
-        last = f", last loss {curve[-1][1]}" if curve else ""
-        raise ValueError(
-            f"training diverged: weights that are not finite after {done} steps ({nonfinite[0]}{last}); "
-            "nothing was written (a lower --lr may help)"
-        )
-    net.eval()
-
-    # held-out: the network against push-pull and the raw input, per completion
-    stride = net.stride
-    held_out: dict[str, Any] = {}
-    if sets:
-        val_pairs: dict[Any, list] = {
-            k: [_pack(name, f, None, stride, channels_in) for f in v] for k, v in sets.items()
-        }
-    else:
-        own = _distinct_frames(val_frames, completions, log)
-        val_pairs = {c: [_pack(name, f, c, stride, channels_in) for f in own[c]] for c in completions}
-    val_pairs = {k: v for k, v in val_pairs.items() if v}  # a smoke run's sets may be empty
-    for c, vp in val_pairs.items():
-        rows = []
-        for x, y in vp:
-            with torch.no_grad():
-                o = net(torch.from_numpy(x)[None])[0].numpy()
-            o = o[:, : y.shape[1], : y.shape[2]]
-            row = _baselines(name, x, y)
-            row["network"] = metrics(_rgb(o), _rgb(y))
-            rows.append(row)
-        key = c if isinstance(c, str) else f"completion {c}" if c is not None else "all"
-        held_out[key] = {
-            k: {m: float(np.mean([r[k][m] for r in rows])) for m in ("psnr", "ssim")}
-            for k in ("input", "pushpull", "network")
-        }
-        log(f"held-out {key}: " + held_out_line(held_out[key]))
-
-    # the files go into a staging folder inside `out` and are moved in, the
-    # card last, once all of them are written: a run that fails or is
-    # interrupted while exporting leaves `out` as it found it (a model there
-    # before stays whole, its card matching its files) and no temporary file
-    stage = _staging(out, name)
-    try:
-        try:
-            files = export(net, name, stage, [x for vp in val_pairs.values() for x, _ in vp], val_pairs, log)
-        except Exception as e:
-            if not _from_onnxruntime(e):
-                raise
-            raise _export_failed(name, e, fsize) from None
-        card = {
-            "name": name,
-            "network": type(net).__name__,
-            "architecture": spec["arch"],
-            "parameters": nets.count_parameters(net),
-            "stride": stride,
-            "channels_in": net.channels_in,
-            "channels_out": net.channels_out,
-            "command": " ".join(command) if command else f"clvis train {name} --steps {steps} --size {size}",
-            "seed": seed,
-            "data": {
-                **_narvis_data(sets, train_frames, fsize, data_seconds, target),
-                "looks": list(_data.NARVIS_TRAIN_COLORMAPS) if spec.get("looks") else None,
+        # held-out: the network against push-pull and the raw input, per completion
+        stride = net.stride
+        held_out: dict[str, Any] = {}
+        if sets:
+            val_pairs: dict[Any, list] = {
+                k: [_pack(name, f, None, stride, channels_in) for f in v] for k, v in sets.items()
             }
-            if sets
-            else {
-                **(
-                    {"target_model": trainer.target, "target": _SCAN_TARGET, "input": _SCAN_INPUT}
-                    if trainer.target
-                    else {}
-                ),
-                "train": list(trainer.trained),
-                "held_out": list(trainer.held_out),
-                "frames": len(train_frames),
-                "held_out_frames": len(val_frames),
-                "frame_size": list(fsize),
-                "completions": list(completions) if completions != (None,) else None,
-                **({"point_sizes": list(spec["point_sizes"])} if "point_sizes" in spec else {}),
-                **({"scan_lines": spec["scan_lines"]} if "scan_lines" in spec else {}),
-                **({"depth_filter": list(scan_filter)} if scan_filter is not None else {}),
-                **(
-                    {
-                        "mix": {
-                            "share": mix,
-                            "kinds": list(MIX_VOLUMES),
-                            "volumes": mix_count,
-                            "frames": len(mix_pairs) // len(_data.TRAIN_COMPLETIONS),
-                            "pairs": len(mix_pairs),
-                            "completions": list(_data.TRAIN_COMPLETIONS),
-                            "variety": dataclasses.asdict(
-                                _mix_variety(size, spec["mix_noise"], spec.get("mix_sides"))
-                            ),
+        else:
+            own = _distinct_frames(val_frames, completions, log)
+            val_pairs = {c: [_pack(name, f, c, stride, channels_in) for f in own[c]] for c in completions}
+        val_pairs = {k: v for k, v in val_pairs.items() if v}  # a smoke run's sets may be empty
+        for c, vp in val_pairs.items():
+            rows = []
+            for x, y in vp:
+                with torch.no_grad():
+                    o = net(torch.from_numpy(x)[None])[0].numpy()
+                o = o[:, : y.shape[1], : y.shape[2]]
+                row = _baselines(name, x, y)
+                row["network"] = metrics(_rgb(o), _rgb(y))
+                rows.append(row)
+            key = c if isinstance(c, str) else f"completion {c}" if c is not None else "all"
+            held_out[key] = {
+                k: {m: float(np.mean([r[k][m] for r in rows])) for m in ("psnr", "ssim")}
+                for k in ("input", "pushpull", "network")
+            }
+            log(f"held-out {key}: " + held_out_line(held_out[key]))
+
+        # the files go into a staging folder inside `out` and are moved in, the
+        # card last, once all of them are written: a run that fails or is
+        # interrupted while exporting leaves `out` as it found it (a model there
+        # before stays whole, its card matching its files) and no temporary file
+        stage = _staging(out, name)
+        try:
+            try:
+                files = export(
+                    net, name, stage, [x for vp in val_pairs.values() for x, _ in vp], val_pairs, log
+                )
+            except Exception as e:
+                if not _from_onnxruntime(e):
+                    raise
+                raise _export_failed(name, e, fsize) from None
+            card = {
+                "name": name,
+                "network": type(net).__name__,
+                "architecture": spec["arch"],
+                "parameters": nets.count_parameters(net),
+                "stride": stride,
+                "channels_in": net.channels_in,
+                "channels_out": net.channels_out,
+                "command": " ".join(command)
+                if command
+                else f"clvis train {name} --steps {steps} --size {size}",
+                "seed": seed,
+                "data": {
+                    **_narvis_data(sets, train_frames, fsize, data_seconds, target),
+                    "looks": list(_data.NARVIS_TRAIN_COLORMAPS) if spec.get("looks") else None,
+                }
+                if sets
+                else {
+                    **(
+                        {"target_model": trainer.target, "target": _SCAN_TARGET, "input": _SCAN_INPUT}
+                        if trainer.target
+                        else {}
+                    ),
+                    "train": list(trainer.trained),
+                    "held_out": list(trainer.held_out),
+                    "frames": len(train_frames),
+                    "held_out_frames": len(val_frames),
+                    "frame_size": list(fsize),
+                    "completions": list(completions) if completions != (None,) else None,
+                    **({"point_sizes": list(spec["point_sizes"])} if "point_sizes" in spec else {}),
+                    **({"scan_lines": spec["scan_lines"]} if "scan_lines" in spec else {}),
+                    **({"depth_filter": list(scan_filter)} if scan_filter is not None else {}),
+                    **(
+                        {
+                            "mix": {
+                                "share": mix,
+                                "kinds": list(MIX_VOLUMES),
+                                "volumes": mix_count,
+                                "frames": len(mix_pairs) // len(_data.TRAIN_COMPLETIONS),
+                                "pairs": len(mix_pairs),
+                                "completions": list(_data.TRAIN_COMPLETIONS),
+                                "variety": dataclasses.asdict(
+                                    _mix_variety(size, spec["mix_noise"], spec.get("mix_sides"))
+                                ),
+                            }
                         }
-                    }
-                    if mix is not None
-                    else {}
-                ),
-                "generation_seconds": round(data_seconds, 1),
-            },
-            "training": {
-                "steps": done,
-                "steps_asked": steps,
-                "time_limit_seconds": time_limit,
-                "batch": spec["batch"],
-                "crop": size,
-                "optimizer": f"Adam lr {peak}, cosine to {peak / 100} (steps or time limit)",
-                **({"init": start} if start is not None else {}),
-                "loss": spec["loss"],
-                "loss_curve": curve,
-                "seconds": round(train_seconds, 1),
-                "threads": torch.get_num_threads(),
-            },
-            "held_out": held_out,
-            **({"head": net.head()} if hasattr(net, "trunk") else {}),
-            "files": files,
-            "wall_seconds": round(time.perf_counter() - t_start, 1),
-            "versions": _versions(),
-            "machine": f"{platform.machine()}, {os.cpu_count()} cores",
-        }
-        write_card(stage / f"{name}.json", card)
-        _install(stage, out, name, files)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
-    log(f"wrote {out / (name + '.json')}")
+                        if mix is not None
+                        else {}
+                    ),
+                    "generation_seconds": round(data_seconds, 1),
+                },
+                "training": {
+                    "steps": done,
+                    "steps_asked": steps,
+                    "time_limit_seconds": time_limit,
+                    "batch": spec["batch"],
+                    "crop": size,
+                    "optimizer": f"Adam lr {peak}, cosine to {peak / 100} (steps or time limit)",
+                    **({"init": start} if start is not None else {}),
+                    "loss": spec["loss"],
+                    "loss_curve": curve,
+                    "seconds": round(train_seconds, 1),
+                    "threads": torch.get_num_threads(),
+                },
+                "held_out": held_out,
+                **({"head": net.head()} if hasattr(net, "trunk") else {}),
+                "files": files,
+                "wall_seconds": round(time.perf_counter() - t_start, 1),
+                "versions": _versions(),
+                "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+            }
+            write_card(stage / f"{name}.json", card)
+            _install(stage, out, name, files)
+        finally:
+            shutil.rmtree(stage, ignore_errors=True)
+        log(f"wrote {out / (name + '.json')}")
+        if after is not None:
+            after(card)
     return card
 
 
@@ -1332,12 +1351,199 @@ def _check_counts(**counts: Any) -> None:
 
 def _staging(out: Path, name: str) -> Path:
     """A new hidden folder inside `out` that train exports into before
-    :func:`_install` moves the files in; OSError naming `out` where it
-    cannot be written to."""
+    :func:`_install` moves the files in, with owner.json naming this run
+    (_remove_stale's); OSError naming `out` where it cannot be written to."""
     try:
-        return Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".train.tmp", dir=out))
+        stage = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".train.tmp", dir=out))
     except OSError as e:
         raise OSError(e.errno, f"cannot write the model there ({e.strerror})", str(out)) from None
+    try:
+        (stage / _OWNER).write_text(json.dumps(_owner()))
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    return stage
+
+
+#: the file, in a staging folder, naming the run that made it (_owner)
+_OWNER = "owner.json"
+
+
+def _staging_pattern(name: str) -> re.Pattern[str]:
+    """The names :func:`_staging` gives (tempfile.mkdtemp's 8 random
+    characters between its prefix and suffix)."""
+    return re.compile(rf"\.{re.escape(name)}\.[a-z0-9_]{{8}}\.train\.tmp")
+
+
+def _start_ticks(pid: int) -> int | None:
+    """When process `pid` started, in clock ticks since boot (Linux's
+    /proc/PID/stat, field 22); None where that cannot be read."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            text = f.read().decode(errors="replace")
+        return int(text[text.rindex(")") + 2 :].split()[19])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _owner() -> dict:
+    """This process as a staging folder and the lock file record it: pid,
+    host and start (_start_ticks: a later process given the same pid is not
+    taken for this one), and since when, for the line naming it."""
+    return {
+        "pid": os.getpid(),
+        "host": socket.gethostname(),
+        "start": _start_ticks(os.getpid()),
+        "since": time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime()),
+    }
+
+
+def _alive(owner: Any) -> bool:
+    """Whether the run an owner record (_owner) names may still be running:
+    True unless it is known to be gone (on this host, no process of that
+    pid, or one started at another time)."""
+    if not isinstance(owner, dict) or not isinstance(owner.get("pid"), int) or owner["pid"] <= 0:
+        return False
+    if owner.get("host") != socket.gethostname():
+        return True  # another machine's process: not ours to judge
+    try:
+        os.kill(owner["pid"], 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: another user's process of that pid
+        pass
+    start = owner.get("start")
+    return start is None or _start_ticks(owner["pid"]) in (None, start)
+
+
+def _holder(text: bytes) -> str:
+    """An owner record (_owner) as words."""
+    try:
+        o = json.loads(text)
+        return f"pid {o['pid']} on {o['host']}, since {o['since']}"
+    except (ValueError, TypeError, KeyError):
+        return "its pid not written yet"
+
+
+@contextlib.contextmanager
+def _claim(out: Path, name: str, say: Callable[[str], None]) -> Iterator[None]:
+    """Hold NAME in `out` for the block: an advisory lock (flock) on
+    `out`/.NAME.train.lock, which the kernel drops when the process ends,
+    however it ends (SIGKILL included), so no hold outlives its run.
+
+    A second run of the same network into the same folder is refused at
+    once with one line naming the first, not made to wait: a run takes
+    minutes to hours, a command waiting silently that long looks hung, and
+    its model would replace the first's as soon as it was in; refused before
+    its data is rendered, it has cost nothing. Other networks into the same
+    folder write other files and are not held up.
+
+    Holding the lock, it removes the staging folders killed runs left
+    (_remove_stale). The lock file goes when the block ends, removed while
+    still locked; a run that got the lock of a removed file tries again with
+    the file now there. One a killed run left is taken over as it is."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock, and no staging folder known to be dead
+        yield
+        return
+    path = out / f".{name}.train.lock"
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    while True:
+        try:
+            fd = os.open(path, flags, 0o644)
+        except OSError as e:
+            raise OSError(e.errno, f"cannot write the model there ({e.strerror})", str(out)) from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            mine = os.fstat(fd)
+        except BlockingIOError:
+            holder = _holder(os.read(fd, 4096))
+            os.close(fd)
+            raise ClvisError(
+                f"{out}: another clvis train {name} is writing its model there ({holder}); "
+                "wait for it to end, or give another --out"
+            ) from None
+        except BaseException:
+            os.close(fd)
+            raise
+        try:
+            now = os.stat(path, follow_symlinks=False)
+        except FileNotFoundError:
+            now = None
+        if now is not None and (now.st_dev, now.st_ino) == (mine.st_dev, mine.st_ino):
+            break
+        os.close(fd)  # the file of a run that has just ended, removed: the one there now
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, json.dumps(_owner()).encode())
+        _remove_stale(out, name, say)
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(path)  # while still locked (see above)
+        os.close(fd)
+
+
+def _remove_stale(out: Path, name: str, say: Callable[[str], None]) -> None:
+    """Remove from `out` the staging folders (_staging) of runs of `name`
+    that ended without removing theirs (SIGKILL, a power cut), saying so.
+    Called holding NAME's lock (_claim), which every run holds from before
+    it makes its folder until after it has removed it, so none is a live
+    run's. Only what is clearly such a folder goes: a folder (not a link)
+    of _staging's name whose run (its owner.json) is not running, holding
+    only files of the names train writes there. One whose previous/ holds
+    files (a run killed while moving its model in: the model it was
+    replacing) is left, and said so, for the user to look at."""
+    pattern = _staging_pattern(name)
+    try:
+        entries = sorted(out.iterdir())
+    except OSError:
+        return
+    for p in entries:
+        if not pattern.fullmatch(p.name) or p.is_symlink() or not p.is_dir():
+            continue
+        why = _not_stale(p, name)
+        if why:
+            say(f"left {p}: {why}")
+            continue
+        try:
+            shutil.rmtree(p)
+        except OSError as e:
+            say(f"could not remove {p}, the staging folder of a stopped run: {e.strerror or e}")
+            continue
+        say(f"removed {p}: the staging folder of a run stopped before it could remove it")
+
+
+def _not_stale(stage: Path, name: str) -> str | None:
+    """Why staging folder `stage` is not one _remove_stale may remove
+    (None: it may)."""
+    try:
+        entries = list(stage.iterdir())
+        owner = (stage / _OWNER).read_bytes() if (stage / _OWNER).is_file() else None
+        for e in entries:
+            if e.name == "previous" and e.is_dir() and not e.is_symlink():
+                if any(e.iterdir()):
+                    return (
+                        "a run stopped while moving its model in; previous/ there holds the model "
+                        f"it was replacing (move its files back into {stage.parent}, or remove the folder)"
+                    )
+            elif not (
+                e.is_file()
+                and not e.is_symlink()
+                and (e.name == _OWNER or e.name.startswith((f"{name}.", f".{name}.")))
+            ):
+                return f"holds {e.name}, which clvis train does not write there"
+    except OSError as e:
+        return f"cannot be read ({e.strerror or e})"
+    if owner is not None:
+        try:
+            record = json.loads(owner)
+        except ValueError:
+            record = None
+        if _alive(record):
+            return f"its run ({_holder(owner)}) may still be running"
+    return None
 
 
 def _install(stage: Path, out: Path, name: str, files: dict) -> None:

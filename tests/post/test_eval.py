@@ -435,3 +435,44 @@ def test_eval_gives_each_case_scene_buffers_back(name, case):
             assert target.shape == (40, 48, 3)
         assert frames == 1
         assert pool.held_blocks == 0 and pool.active_blocks == active
+
+
+def test_write_card_needs_the_model_dir(tmp_path, monkeypatch, capsys):
+    """`clvis eval NAME --write-card` without --model-dir rewrote the shipped
+    card, clvis/post/models/NAME.json: a pip-installed clvis's own file.
+    Now it is refused before scoring, with the line that writes the
+    shipped card on purpose (the release flow: --model-dir naming their
+    folder), which records the command as before; another folder's card
+    records --model-dir."""
+    from clvis.post import infer
+
+    shipped, mine = tmp_path / "shipped", tmp_path / "mine"
+    for d in (shipped, mine):
+        d.mkdir()
+        (d / "infill.json").write_bytes((post.MODELS / "infill.json").read_bytes())
+    monkeypatch.setattr(infer, "MODELS", shipped)  # the package's folder, as the CLI finds it
+    calls = []
+
+    def scored(name, model_dir=None, quick=False, **kw):
+        calls.append(model_dir)
+        return {"model": name, "rows": [], "seconds": 1.0, "quick": quick, "guard": False}
+
+    monkeypatch.setattr(ev, "evaluate", scored)
+    before = (shipped / "infill.json").read_bytes()
+    assert main(["eval", "infill", "--quick", "--write-card", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        "clvis eval: error: --write-card: give --model-dir DIR, the folder of the card to write; the "
+        f"shipped infill card is the installed package's (to rewrite it on purpose: --model-dir {shipped})\n"
+    )
+    assert calls == [] and (shipped / "infill.json").read_bytes() == before
+    with pytest.raises(ValueError, match="model_dir: the folder of the card to write"):
+        ev.write_card(scored("infill"), None)
+    assert (shipped / "infill.json").read_bytes() == before
+    for d, command in (
+        (shipped, ["clvis", "eval", "infill", "--quick"]),
+        (mine, ["clvis", "eval", "infill", "--model-dir", str(mine), "--quick"]),
+    ):
+        assert main(["eval", "infill", "--model-dir", str(d), "--quick", "--write-card", "--quiet"]) == 0
+        assert f"card: {d / 'infill.json'}" in capsys.readouterr().out
+        assert json.loads((d / "infill.json").read_text())["held_out_suite"]["command"] == command

@@ -1264,3 +1264,147 @@ def test_train_stopped_in_its_eval_says_the_model_is_written(tmp_path, monkeypat
     assert f"{tmp_path}/infill.onnx and its card are written; its held-out suite is not" in err
     assert f"clvis eval infill --model-dir {tmp_path} --quick --write-card" in err
     post.load("infill", directory=tmp_path)
+
+
+# a `clvis train infill` run in another process (the tiny run above), with
+# `patch` run first inside it: what a run killed or still going does
+_CHILD = """
+import os, signal, sys, time
+from pathlib import Path
+from clvis.cli import main
+from clvis.training import train
+out = sys.argv[1]
+{patch}
+sys.exit(main(["train", "infill", "--steps", "1", "--size", "64", "--frames", "1",
+               "--frame-size", "96x64", "--out", out, "--eval", "none", "--quiet"]))
+"""
+
+
+def _child(out, patch):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import clvis
+
+    env = {**os.environ, "PYTHONPATH": str(Path(clvis.__file__).parents[1]), "CLVIS_TRAIN_THREADS": "1"}
+    code = _CHILD.format(patch=patch)
+    return subprocess.Popen(
+        [sys.executable, "-c", code, str(out)], env=env, stderr=subprocess.PIPE, text=True
+    )
+
+
+def test_a_killed_runs_staging_folder_is_removed_by_the_next_run(tmp_path, capsys):
+    """A run SIGKILLed (or a power cut) after exporting left its hidden
+    staging folder in --out for ever, the next runs into the same folder
+    beside it. Now the next run removes it and says so; it leaves what is
+    not clearly such a folder: a live run's, one holding other files,
+    another network's, a link."""
+    import os
+    import signal
+
+    out = tmp_path / "out"
+    killed = _child(out, "train._install = lambda *a: os.kill(os.getpid(), signal.SIGKILL)")
+    assert killed.wait(timeout=600) == -signal.SIGKILL, killed.stderr.read()
+    (stale,) = out.glob(".infill.*.train.tmp")
+    assert {p.name for p in stale.iterdir()} >= {"infill.onnx", "infill.fp16.onnx", "infill.json"}
+    live = train._staging(out, "infill")  # this (live) process's
+    (live / "infill.onnx").write_bytes(b"x")
+    user = out / ".infill.abcdefgh.train.tmp"  # the name, and a file train does not write
+    user.mkdir()
+    (user / "notes.txt").write_text("mine")
+    lidar = out / ".lidar.abcdefgh.train.tmp"  # another network's: not this run's to judge
+    lidar.mkdir()
+    link = out / ".infill.linklink.train.tmp"
+    link.symlink_to(tmp_path)
+    args = ["train", "infill", "--steps", "1", "--size", "64", "--frames", "1", "--frame-size", "96x64"]
+    assert main([*args, "--out", str(out), "--eval", "none", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert not stale.exists()
+    assert f"clvis train: removed {stale}: the staging folder of a run stopped" in err, err
+    assert f"left {live}: its run (pid {os.getpid()} on" in err and "may still be running" in err
+    assert f"left {user}: holds notes.txt, which clvis train does not write there" in err
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        ["infill.fp16.onnx", "infill.int8.onnx", "infill.json", "infill.onnx", live.name, user.name]
+        + [lidar.name, link.name]
+    )
+    assert (user / "notes.txt").read_text() == "mine" and link.is_symlink() and lidar.is_dir()
+    post.load("infill", directory=out)
+
+
+def test_a_folder_of_a_run_killed_while_moving_its_model_in_is_left(tmp_path):
+    """Killed between two of _install's moves: previous/ holds the model it
+    was replacing, which is not thrown away; the folder is left and said."""
+    import subprocess
+    import sys
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()  # a pid no process has now
+    stage = train._staging(tmp_path, "infill")
+    owner = json.loads((stage / train._OWNER).read_text())
+    (stage / train._OWNER).write_text(json.dumps({**owner, "pid": dead.pid}))
+    (stage / "previous").mkdir()
+    (stage / "previous" / "infill.json").write_text("{}")
+    said = []
+    with train._claim(tmp_path, "infill", said.append):
+        assert (tmp_path / ".infill.train.lock").exists()
+    assert said == [
+        f"left {stage}: a run stopped while moving its model in; previous/ there holds the model it "
+        f"was replacing (move its files back into {tmp_path}, or remove the folder)"
+    ]
+    assert (stage / "previous" / "infill.json").exists() and not (tmp_path / ".infill.train.lock").exists()
+    (stage / "previous" / "infill.json").unlink()  # an empty previous/: the run's, dead
+    with train._claim(tmp_path, "infill", said.append):
+        pass
+    assert said[1] == f"removed {stage}: the staging folder of a run stopped before it could remove it"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_second_run_into_the_same_folder_is_refused_while_the_first_runs(tmp_path, capsys):
+    """Two runs of one network into one --out at once interleaved their
+    installs (the second's files among the first's). Now the second is
+    refused at once, naming the first; the first goes on and installs its
+    model, and leaves no lock file; other networks are not held up."""
+    import socket
+    import time
+
+    out = tmp_path / "out"
+    wait = (  # in its data's rendering, holding the folder, until the test says go
+        "real = train._frames\n"
+        "def paused(*a, **k):\n"
+        "    Path(out).parent.joinpath('ready').touch()\n"
+        "    while not Path(out).parent.joinpath('go').exists():\n"
+        "        time.sleep(0.05)\n"
+        "    return real(*a, **k)\n"
+        "train._frames = paused"
+    )
+    first = _child(out, wait)
+    try:
+        t0 = time.monotonic()
+        while not (tmp_path / "ready").exists():
+            assert first.poll() is None, first.stderr.read()
+            assert time.monotonic() - t0 < 600
+            time.sleep(0.1)
+        args = ["train", "infill", "--steps", "1", "--size", "64", "--frames", "1", "--frame-size", "96x64"]
+        assert main([*args, "--out", str(out), "--eval", "none", "--quiet"]) == 2
+        err = capsys.readouterr().err
+        host = socket.gethostname()
+        assert err.startswith(
+            f"clvis train: error: {out}: another clvis train infill is writing its model there "
+            f"(pid {first.pid} on {host}, since "
+        ), err
+        assert err.endswith(" UTC); wait for it to end, or give another --out\n") and err.count("\n") == 1, (
+            err
+        )
+        assert not list(out.glob(".infill.*.train.tmp"))  # refused before it made anything
+        # another network into the same folder meanwhile: not held up
+        assert main(["train", "lidar", *args[2:], "--out", str(out), "--eval", "none", "--quiet"]) == 0
+    finally:
+        (tmp_path / "go").touch()
+    assert first.wait(timeout=600) == 0, first.stderr.read()
+    # the two models (an int8 where it kept its PSNR), no lock file, no staging folder
+    names = {p.name for p in out.iterdir()} - {"infill.int8.onnx", "lidar.int8.onnx"}
+    assert names == {f"{n}{v}" for n in ("infill", "lidar") for v in (".json", ".onnx", ".fp16.onnx")}, names
+    post.load("infill", directory=out)
+    post.load("lidar", directory=out)

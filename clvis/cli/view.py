@@ -61,6 +61,9 @@ iso (progressive:
 each pass is shown as it completes, and a camera move restarts the passes),
 iso+infill (the in-fill network on the partial passes), gaussians, infill|iso
 (split: 85 % of the rays + in-fill beside the complete render, the PSNR).
+Sparse volumes (a .vdb float grid, --grid; the `vdb` extra): mode gaussians
+(Sharma & Schmalstieg: the active voxels' Gaussians at a level of detail,
+never made dense), and a threshold: the active voxels above it are drawn.
 
 Dask (--workers N: a LocalCluster of N one-thread processes started here and
 stopped with the viewer; --scheduler ADDRESS: a running cluster): the frames
@@ -135,6 +138,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         help="where the networks' models are (clvis train --out writes them; default: the ones "
         "clvis ships), for the network modes",
     )
+    p.add_argument(
+        "--grid",
+        default=None,
+        metavar="NAME",
+        help="the grid of a .vdb file: its name, or its index (0 first) (default: the first float grid)",
+    )
     add_volume_options(p)
     add_cluster_options(p)
     return p
@@ -180,6 +189,10 @@ def load_scene(args: argparse.Namespace) -> Scene:
         path = Path(args.file)
         if not path.exists():
             raise CliError(f"{path}: no such file")
+        if path.name.lower().endswith(".vdb"):
+            return _vdb_scene(args, path)
+        if args.grid is not None:
+            raise CliError(f"--grid picks a grid of a .vdb file; {path} is not one")
         volume = _is_volume(path)
         _fits(args, volume, str(path))
         if volume:
@@ -195,6 +208,8 @@ def load_scene(args: argparse.Namespace) -> Scene:
             raise CliError(f"--array picks a data array of a VTK volume file; {path} is a point cloud")
 
         return PointScene(read_points(path), description=str(path), model_dir=args.model_dir)
+    if args.grid is not None:
+        raise CliError("--grid picks a grid of a .vdb FILE")
     if args.array is not None:
         raise CliError("--array picks a data array of a VTK volume FILE (.vti, .vtr, .vtk)")
     name = args.dataset or "hurricane"
@@ -226,12 +241,47 @@ def load_scene(args: argparse.Namespace) -> Scene:
     )
 
 
+def _vdb_scene(args: argparse.Namespace, path: Path) -> Scene:
+    """A .vdb's float grid as a SparseScene (its Gaussians)."""
+    from ..gauss import read_vdb
+    from ..view import SparseScene
+
+    given = [
+        f
+        for f, v in (
+            ("--isovalue", args.isovalue),
+            ("--rate", args.rate),
+            ("--points", args.points),
+            ("--spacing", args.spacing),
+            ("--shape", args.shape),
+            ("--dtype", args.dtype),
+            ("--volume-index", args.volume_index),
+            ("--array", args.array),
+            ("--model-dir", args.model_dir),
+        )
+        if v is not None
+    ]
+    if given:
+        raise CliError(
+            f"{' and '.join(given)}: not for a .vdb (its grid is drawn as Gaussians, mode gaussians; "
+            "the threshold is set in the page)"
+        )
+    grid = args.grid
+    if grid is not None and grid.lstrip("-").isdigit():
+        grid = int(grid)
+    return SparseScene(read_vdb(path, grid=grid), description=str(path))
+
+
 def load_dask_scene(args: argparse.Namespace) -> Scene:
     """The FILE or --dataset on Dask workers (--workers/--scheduler):
     points mode or iso mode, the data read on the workers where it is a FILE."""
     from .. import datasets
     from ..view import DaskPointScene, DaskVolumeScene
 
+    if args.file is not None and str(args.file).lower().endswith(".vdb"):
+        raise CliError(
+            "--workers/--scheduler: a .vdb is drawn on one device (mode gaussians); leave them out"
+        )
     if args.array is not None:
         raise CliError("--array: not on workers (they read .npy, .raw and NIfTI volumes)")
     if args.model_dir is not None:

@@ -25,7 +25,16 @@ from typing import Any
 import numpy as np
 
 from .orbit import Orbit
-from .scenes import DaskPointScene, DaskVolumeScene, Frame, PointScene, Scene, VolumeScene, scene_for
+from .scenes import (
+    DaskPointScene,
+    DaskVolumeScene,
+    Frame,
+    PointScene,
+    Scene,
+    SparseScene,
+    VolumeScene,
+    scene_for,
+)
 from .schedule import LatestWins, Outbox
 from .server import ViewServer, needs_token, token_ok
 
@@ -38,6 +47,7 @@ __all__ = [
     "Outbox",
     "PointScene",
     "Scene",
+    "SparseScene",
     "ViewServer",
     "Viewer",
     "VolumeScene",
@@ -111,7 +121,8 @@ def view(
 
     obj: a clvis.PointCloud, (N, 3) positions, a 3-D volume [z, y, x] (with
     ``spacing``, ``origin``, ``isovalue``, ``rate``), a clvis.Volume
-    (read_volume's: its spacing and origin) or a Scene. host: the
+    (read_volume's: its spacing and origin), a clvis.SparseVolume
+    (read_vdb's: its Gaussians, ``colormap``) or a Scene. host: the
     interface to listen on (127.0.0.1; any other needs the printed token),
     port 0: a free one. width x height: the notebook frame's size.
     max_pages: the pages (tabs) served at once, each with its own camera and

@@ -16,7 +16,8 @@ knn_sigma, computed once per cloud when the mode is first chosen),
 ``gaussians`` (Gaussians from the points, ray marched). Volume modes:
 ``iso`` (progressive isosurface: each pass as it completes), ``iso+infill``
 (the in-fill network on each partial pass), ``gaussians`` (the volume's
-Gaussians at a level of detail). Split views
+Gaussians at a level of detail). A sparse volume (an OpenVDB grid,
+:class:`SparseScene`): ``gaussians`` only, never made dense. Split views
 (``narvis|gaussians``, ``narvis-scan|gaussians``, ``infill|iso``): the fast
 path's left half beside its slow target's right half, with the PSNR of the
 whole frames.
@@ -50,6 +51,7 @@ __all__ = [
     "Frame",
     "PointScene",
     "Scene",
+    "SparseScene",
     "VolumeScene",
     "psnr",
     "scene_for",
@@ -688,6 +690,84 @@ class VolumeScene(Scene):
         return Frame(img.to_uint8(BACKGROUND)[..., :3], info={"gaussians": count}, times=times)
 
 
+class SparseScene(Scene):
+    """A sparse volume (clvis.SparseVolume: read_vdb's OpenVDB grid) as the
+    Gaussians of its active voxels (Sharma & Schmalstieg), never made dense:
+    mode ``gaussians``, its level of detail, and ``threshold``: the active
+    voxels above it are drawn (at its least value, the default: every active
+    voxel, a level set's negative values too). The colours span the grid's
+    active values whatever the threshold, so a colour keeps its value as the
+    threshold moves. The Gaussians are made when a level of detail or a
+    threshold is first shown (the last one kept)."""
+
+    kind = "sparse volume"
+
+    def __init__(
+        self,
+        volume: Any,
+        colormap: str = "viridis",
+        description: str = "sparse volume",
+        model_dir: Any = None,
+    ) -> None:
+        """model_dir: accepted for scene_for's sake (no network runs on a sparse volume)."""
+        from .. import runtime
+        from ..gauss.sparse import SparseVolume
+
+        if not isinstance(volume, SparseVolume):
+            raise TypeError(f"volume: expected a clvis.SparseVolume, got {type(volume).__name__}")
+        if colormap not in COLORMAPS:
+            raise ValueError(f"colormap: expected one of {', '.join(COLORMAPS)}, got {colormap!r}")
+        _model_dir(model_dir)
+        if volume.n_active == 0:
+            raise DataError(f"{description}: no active voxel")
+        values = volume.leaf_values()[volume.active_masks()]
+        self.sparse, self.colormap = volume, colormap
+        self.vmin, self.vmax = float(values.min()), float(values.max())
+        self.queue = runtime.default_queue()
+        self.device = self.queue.device.name.strip()
+        spacing = np.asarray(volume.spacing, np.float64)[::-1]  # (dx, dy, dz)
+        self.lo = np.asarray(volume.origin, np.float64)
+        self.hi = self.lo + (np.array(volume.shape[::-1]) - 1) * spacing
+        self.description = (
+            f"{description}: {'x'.join(map(str, volume.shape[::-1]))} voxels, "
+            f"{volume.n_active:,} active in {volume.n_leaves:,} leaves"
+        )
+        self.modes = ["gaussians"]
+        self.settings = {"mode": "gaussians", "lod": "medium", "threshold": self.vmin}
+        self.choices = {
+            "mode": self.modes,
+            "lod": ["low", "medium", "high"],
+            "threshold": {"min": self.vmin, "max": self.vmax},
+        }
+        self._gauss: dict[tuple, Any] = {}
+
+    def frames(
+        self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
+    ) -> Iterator[Frame]:
+        from .. import GaussianRenderer, TransferFunction, gaussians_from_volume
+
+        self._sized(self.queue, width, height)
+        threshold = settings["threshold"]
+        key = (settings["lod"], threshold)
+        t0 = time.perf_counter()
+        if key not in self._gauss:
+            self._gauss = {}  # the previous Gaussians go before the next are made
+            sv = self.sparse if threshold <= self.vmin else self.sparse.restricted(threshold=threshold)
+            gs = gaussians_from_volume(sv, settings["lod"], queue=self.queue)
+            if gs.n == 0:
+                raise DataError(f"no active voxel above the threshold {threshold:g}: no Gaussians")
+            tf = TransferFunction(self.colormap, value_range=(self.vmin, self.vmax))
+            self._gauss = {key: (GaussianRenderer(gs, tf, queue=self.queue), gs.n)}
+        build = time.perf_counter() - t0
+        renderer, count = self._gauss[key]
+        img = renderer.render(camera, width, height)
+        t1 = time.perf_counter()
+        times = {"render": t1 - t0 - build}
+        if build > 1e-3:
+            times["build"] = build
+        yield Frame(img.to_uint8(BACKGROUND)[..., :3], info={"gaussians": count}, times=times)
+
+
 def view_frames(
     scene: Scene,
     camera: Camera,
@@ -873,17 +953,21 @@ def _model_dir(directory: Any) -> Path | None:
 def scene_for(obj: Any, **kwargs: Any) -> Scene:
     """A scene for `obj`: a Scene as is, a clvis.PointCloud or (N, 3) positions
     (points), a 3-D array [z, y, x] (a volume; kwargs: spacing, origin,
-    isovalue, rate) or a clvis.Volume (read_volume's, with its spacing and
-    origin unless kwargs give them). A path is refused, naming the readers.
+    isovalue, rate), a clvis.Volume (read_volume's, with its spacing and
+    origin unless kwargs give them) or a clvis.SparseVolume (read_vdb's: its
+    Gaussians; kwargs: colormap). A path is refused, naming the readers.
     kwargs for both: description, model_dir (where the networks' models are:
     clvis train --out)."""
     from .. import PointCloud
+    from ..gauss.sparse import SparseVolume
     from ..io.volumes import Volume
 
     if isinstance(obj, Scene):
         return obj
     if isinstance(obj, PointCloud):
         return PointScene(obj, **kwargs)
+    if isinstance(obj, SparseVolume):  # read_vdb's: as Gaussians, never dense
+        return SparseScene(obj, **kwargs)
     if isinstance(obj, Volume):  # read_volume's: its spacing and origin unless given
         kwargs.setdefault("spacing", obj.spacing)
         kwargs.setdefault("origin", obj.origin)

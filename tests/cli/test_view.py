@@ -182,3 +182,29 @@ def test_an_address_it_cannot_listen_on_is_named(capsys):
     """--host that does not resolve: one line naming the host and port."""
     assert cli.main(["view", "--dataset", "marschner-lobb", "--host", "256.1.1.1", "--no-browser"]) == 2
     assert "--host 256.1.1.1 --port 0: cannot listen there" in capsys.readouterr().err
+
+
+def test_view_vdb(capsys):
+    """clvis view FILE.vdb [--grid]: the grid's Gaussians (--measure here);
+    the options of dense volumes, points and workers are one line, as is
+    --grid with another file."""
+    vdb = str(DATA / "openvdb_small.vdb")
+    assert cli.main(["view", vdb, "--grid", "density", "--measure", "--size", "96x64"]) == 0
+    out = capsys.readouterr().out
+    assert "openvdb_small.vdb: 26x28x25 voxels, 7,208 active in 44 leaves" in out  # from leaf-aligned corners
+    assert [line.split()[0] for line in out.splitlines() if line.startswith("gaussians ")] == [
+        "gaussians"
+    ] * 2
+    assert cli.main(["view", vdb, "--grid", "2", "--measure", "--size", "96x64"]) == 0  # by index: "block"
+    assert "160x160x160 voxels, 4,096,000 active" in capsys.readouterr().out
+    for argv, msg in [
+        (["--isovalue", "0.5"], "--isovalue: not for a .vdb"),
+        (["--spacing", "1,1,1"], "--spacing: not for a .vdb"),
+        (["--workers", "1"], "a .vdb is drawn on one device"),
+        (["--grid", "nope"], "no grid named 'nope'"),
+    ]:
+        assert cli.main(["view", vdb, *argv, "--measure"]) == 2
+        err = capsys.readouterr().err
+        assert msg in err and len(err.strip().splitlines()) == 1, err
+    assert cli.main(["view", str(DATA / "pyvista_ant.ply"), "--grid", "x", "--measure"]) == 2
+    assert "--grid picks a grid of a .vdb file" in capsys.readouterr().err

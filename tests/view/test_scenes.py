@@ -613,3 +613,38 @@ def test_scenes_load_their_networks_from_a_model_dir(tmp_path):
         PointScene(cloud, model_dir=tmp_path / "nowhere")
     with pytest.raises(TypeError, match="model_dir: expected a folder's path or None"):
         VolumeScene(d["volume"], isovalue=0.5, model_dir=3)
+
+
+def test_sparse_volume_scene_draws_an_openvdb_grid_and_its_threshold():
+    """A .vdb grid (read_vdb's SparseVolume) in the viewer: mode gaussians,
+    never made dense; the threshold drops the active voxels at or below it,
+    the colours keep the grid's whole range; a threshold above every voxel is
+    an error for the page, not a crash."""
+    from pathlib import Path
+
+    from clvis.images import BACKGROUND
+    from clvis.view import SparseScene
+
+    path = Path(__file__).resolve().parents[1] / "data" / "openvdb_small.vdb"
+    sv = clvis.read_vdb(path, grid="surface")  # a level set: -2..2 around the sphere
+    s = scene_for(sv, description=str(path))
+    assert isinstance(s, SparseScene) and s.modes == ["gaussians"]
+    assert "12,790 active in 94 leaves" in s.description
+    assert s.choices["threshold"]["min"] == s.settings["threshold"] < 0 < s.choices["threshold"]["max"]
+    cam = Orbit(s.lo, s.hi).camera(1.0)
+    bg = np.array(BACKGROUND)
+    s.update({"lod": "high"})
+    whole = next(s.frames(cam, 64, 64, s.settings, lambda: False))
+    assert whole.info["gaussians"] == 12_790 and (whole.image != bg).any(axis=2).mean() > 0.2
+    s.update({"threshold": 0.0})  # the outer half of the band
+    outer = next(s.frames(cam, 64, 64, s.settings, lambda: False))
+    kept = int((sv.leaf_values()[sv.active_masks()] > 0).sum())
+    assert outer.info["gaussians"] == kept and 0 < kept < 12_790
+    assert not np.array_equal(outer.image, whole.image)
+    s.update({"threshold": s.choices["threshold"]["max"]})
+    with pytest.raises(clvis.DataError, match="no active voxel above the threshold"):
+        next(s.frames(cam, 64, 64, s.settings, lambda: False))
+    with pytest.raises(ValueError, match="threshold: expected"):
+        s.update({"threshold": 99.0})
+    with pytest.raises(TypeError, match="expected a clvis.SparseVolume"):
+        SparseScene(np.zeros((8, 8, 8)))

@@ -174,6 +174,24 @@ class Scene:
     ) -> Iterator[Frame]:
         raise NotImplementedError
 
+    _gauss: dict[tuple, Any]
+
+    def _gaussian_frame(self, key: tuple, make: Callable[[], tuple[Any, int]], camera, w, h) -> Frame:
+        """A gaussians mode's frame: the renderer of `key` (made by `make`,
+        (GaussianRenderer, count), when the key is new: the previous one goes
+        first), its render, and the build's time apart from the render's."""
+        t0 = time.perf_counter()
+        if key not in self._gauss:
+            self._gauss = {}
+            self._gauss = {key: make()}
+        build = time.perf_counter() - t0
+        renderer, count = self._gauss[key]
+        img = renderer.render(camera, w, h)
+        times = {"render": time.perf_counter() - t0 - build}
+        if build > 1e-3:
+            times["build"] = build
+        return Frame(img.to_uint8(BACKGROUND)[..., :3], info={"gaussians": count}, times=times)
+
     def close(self) -> None:
         """Let go of what the scene holds outside this process (a Dask scene: its cluster)."""
 
@@ -523,20 +541,12 @@ class PointScene(Scene):
 
         # the colormap matters to an attribute's colours, not to the points' RGB
         key = ("gaussians", s["color_by"], s["colormap"] if s["color_by"] != "rgb" else "")
-        t0 = time.perf_counter()
-        if key not in self._gauss:
+
+        def make():
             gs = gaussians_from_points(self._gauss_cloud, color_by=s["color_by"])
-            tf = TransferFunction(s["colormap"])
-            self._gauss = {key: (GaussianRenderer(gs, tf, queue=self.raster.queue), gs.n)}
-        build = time.perf_counter() - t0
-        renderer, count = self._gauss[key]
-        img = renderer.render(camera, w, h)
-        t1 = time.perf_counter()
-        out = img.to_uint8(BACKGROUND)[..., :3]
-        times = {"render": t1 - t0 - build}
-        if build > 1e-3:
-            times["build"] = build
-        return Frame(out, info={"gaussians": count}, times=times)
+            return GaussianRenderer(gs, TransferFunction(s["colormap"]), queue=self.raster.queue), gs.n
+
+        return self._gaussian_frame(key, make, camera, w, h)
 
 
 class VolumeScene(Scene):
@@ -671,23 +681,15 @@ class VolumeScene(Scene):
     def _gaussians(self, camera, w, h, s):
         from .. import GaussianRenderer, gaussians_from_volume
 
-        key = (s["lod"], s["isovalue"])
-        t0 = time.perf_counter()
-        if key not in self._gauss:
+        def make():
             gs = gaussians_from_volume(
                 self.volume, s["lod"], threshold=s["isovalue"], spacing=self.spacing, origin=self.origin
             )
             if gs.n == 0:
                 raise DataError(f"no voxel above the isovalue {s['isovalue']:g}: no Gaussians")
-            self._gauss = {key: (GaussianRenderer(gs, queue=self.iso.queue), gs.n)}
-        build = time.perf_counter() - t0
-        renderer, count = self._gauss[key]
-        img = renderer.render(camera, w, h)
-        t1 = time.perf_counter()
-        times = {"render": t1 - t0 - build}
-        if build > 1e-3:
-            times["build"] = build
-        return Frame(img.to_uint8(BACKGROUND)[..., :3], info={"gaussians": count}, times=times)
+            return GaussianRenderer(gs, queue=self.iso.queue), gs.n
+
+        return self._gaussian_frame((s["lod"], s["isovalue"]), make, camera, w, h)
 
 
 class SparseScene(Scene):
@@ -748,24 +750,16 @@ class SparseScene(Scene):
 
         self._sized(self.queue, width, height)
         threshold = settings["threshold"]
-        key = (settings["lod"], threshold)
-        t0 = time.perf_counter()
-        if key not in self._gauss:
-            self._gauss = {}  # the previous Gaussians go before the next are made
+
+        def make():
             sv = self.sparse if threshold <= self.vmin else self.sparse.restricted(threshold=threshold)
             gs = gaussians_from_volume(sv, settings["lod"], queue=self.queue)
             if gs.n == 0:
                 raise DataError(f"no active voxel above the threshold {threshold:g}: no Gaussians")
             tf = TransferFunction(self.colormap, value_range=(self.vmin, self.vmax))
-            self._gauss = {key: (GaussianRenderer(gs, tf, queue=self.queue), gs.n)}
-        build = time.perf_counter() - t0
-        renderer, count = self._gauss[key]
-        img = renderer.render(camera, width, height)
-        t1 = time.perf_counter()
-        times = {"render": t1 - t0 - build}
-        if build > 1e-3:
-            times["build"] = build
-        yield Frame(img.to_uint8(BACKGROUND)[..., :3], info={"gaussians": count}, times=times)
+            return GaussianRenderer(gs, tf, queue=self.queue), gs.n
+
+        yield self._gaussian_frame((settings["lod"], threshold), make, camera, width, height)
 
 
 def view_frames(

@@ -66,9 +66,13 @@ FIT_MARGIN = 1.05
 # smaller, less 1): a picture stretched by 1 % is hard to see, by 2 % a
 # circle is visibly an ellipse. Rounding a size to whole pixels stays far below.
 ASPECT_TOLERANCE = 0.01
-# A box smaller than this (relative to its distance from the origin, or absolute
-# below 1) is treated as a sphere of this radius, so a single point still gets a
-# camera whose float32 matrices resolve it.
+# A box smaller than this fraction of its coordinates' magnitude (the largest
+# |x|, |y|, |z| of its corners) is treated as a sphere of that radius, so a single
+# point still gets a camera whose float32 matrices resolve it; relative, so a
+# volume of micrometre voxels given in metres (a box 1e-5 wide at the origin)
+# fills the frame as it does in micrometres (an absolute 1e-4 below magnitude 1
+# drew it as a dot). A box with no magnitude at all (one point at the origin)
+# gets _MIN_RADIUS itself.
 _MIN_RADIUS = 1e-4
 
 
@@ -157,10 +161,9 @@ def _bounds(bounds_min, bounds_max) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _sphere(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, float]:
-    """Centre and radius of the box's bounding sphere (radius at least _MIN_RADIUS-scaled)."""
+    """Centre and radius of the box's bounding sphere (radius at least min_extent(lo, hi))."""
     centre = 0.5 * (lo + hi)
-    floor = _MIN_RADIUS * max(1.0, float(np.abs(centre).max()))
-    return centre, max(0.5 * float(np.linalg.norm(hi - lo)), floor)
+    return centre, max(0.5 * float(np.linalg.norm(hi - lo)), min_extent(lo, hi))
 
 
 def _view_matrix(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
@@ -702,10 +705,21 @@ def box_corners(bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike) -> np.ndar
     )
 
 
-def min_extent(centre: npt.ArrayLike) -> float:
-    """An extent too small to frame on its own around `centre`: below it
-    float32 cameras no longer resolve the points (Camera.fit's floor)."""
-    return _MIN_RADIUS * max(1.0, float(np.abs(np.asarray(centre, np.float64)).max()))
+def min_extent(bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike | None = None) -> float:
+    """An extent too small to frame on its own in the box [bounds_min,
+    bounds_max] (or around the point `bounds_min`): _MIN_RADIUS times the
+    largest magnitude of its coordinates, below which float32 cameras no
+    longer resolve the points (Camera.fit's floor); relative, so data of
+    any scale (micrometres in metres) is framed alike; _MIN_RADIUS itself
+    for the origin alone (no scale to take)."""
+    lo = np.asarray(bounds_min, np.float64)
+    hi = lo if bounds_max is None else np.asarray(bounds_max, np.float64)
+    magnitude = float(max(np.abs(lo).max(), np.abs(hi).max()))
+    # a magnitude under 1e-6 counts as 1e-6: a camera framing less than 1e-10
+    # has a projection too ill-conditioned to invert (singular(): its condition
+    # number grows as 1 / near), so data of sub-angstrom extent in metres is
+    # framed small, and a point at 1e-300 still gets a camera
+    return _MIN_RADIUS * max(magnitude, 1e-6) if magnitude > 0 else _MIN_RADIUS
 
 
 def _finite_sample(positions: npt.ArrayLike, limit: int = 200_000) -> np.ndarray:
@@ -832,7 +846,7 @@ def fit_camera(
     p = _finite_sample(positions)
     lo, hi = np.asarray(bounds_min, np.float64), np.asarray(bounds_max, np.float64)
     centre = 0.5 * (lo + hi)
-    if len(p) == 0 or np.ptp(p, axis=0).max() <= min_extent(centre):
+    if len(p) == 0 or np.ptp(p, axis=0).max() <= min_extent(lo, hi):
         return cam  # (about) one point: Camera.fit's own framing
     right, up, forward = cam.view[0, :3], cam.view[1, :3], cam.forward
     o = p - centre
@@ -843,7 +857,7 @@ def fit_camera(
     # a point is in frame when |a - sx| <= tan_x (D + c) and |b - sy| <=
     # tan_y (D + c), and in front when D + c > 0
     a, b = o @ right, o @ up
-    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-6)
+    radius = max(0.5 * float(np.linalg.norm(hi - lo)), min_extent(lo, hi))
     shift = np.zeros(2)
 
     def distance() -> float:
@@ -893,8 +907,12 @@ def axis_camera(
     ext = hi - lo
     width, height, depth = (float(np.abs(v) @ ext) for v in (right, up, direction))
     centre = 0.5 * (lo + hi)
-    scale = max(width, height, depth, min_extent(centre))
-    frame = FIT_MARGIN * max(height, width / aspect, 1e-3 * scale)
+    floor = min_extent(lo, hi)
+    scale = max(width, height, depth, floor)
+    # a box with no width across the view (one point) gets Camera.fit's floor:
+    # 1e-3 of it was finer than float32 resolves there (the point drawn off
+    # the picture at 4e6 from the origin)
+    frame = FIT_MARGIN * max(height, width / aspect, 1e-3 * scale, 2 * floor)
     back = 0.5 * depth + 0.1 * scale  # the eye sits outside the box
     return Camera.ortho(
         centre - back * direction,

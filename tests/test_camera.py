@@ -464,6 +464,54 @@ def test_fit_camera_frames_the_points():
     np.testing.assert_array_equal(got.matrix, want.matrix)
 
 
+@pytest.mark.parametrize("scale", [1e-6, 1e-9])
+@pytest.mark.parametrize("offset", [0.0, -0.5])  # from the origin, and centred on it
+def test_framing_is_the_same_at_any_scale(scale, offset):
+    """A box of micrometre voxels given in metres (1e-5 wide) fills the frame
+    as the same box in micrometres does: the floor on the framed radius is
+    relative to the coordinates' magnitude. An absolute 1e-4 below magnitude
+    1 drew it as a dot (Camera.fit, fit_camera and the axis views)."""
+    from clvis.camera import axis_camera, fit_camera
+
+    lo, hi = np.array([0.0, 0.0, 0.0]) + offset, np.array([10.0, 6.0, 4.0]) + offset
+
+    def screens(s):
+        corners = _corners(lo * s, hi * s)
+        cams = [
+            Camera.fit(lo * s, hi * s, aspect=1.5),
+            fit_camera(corners, lo * s, hi * s, aspect=1.5),
+            axis_camera("front", lo * s, hi * s, aspect=1.5),
+        ]
+        out = []
+        for cam in cams:
+            r = cam.project(corners, 300, 200)
+            assert r.visible.all()
+            out.append(np.c_[r.sx, r.sy])
+        return out
+
+    for unit, tiny in zip(screens(1.0), screens(scale), strict=True):
+        np.testing.assert_allclose(tiny, unit, atol=1e-3)
+
+
+@pytest.mark.parametrize(
+    "point",
+    [(0, 0, 0), (1e-6, 0, 0), (1e-12, 1e-12, 1e-12), (1e-300, 0, 0), (1e7, 1e7, 1e7), (-3e5, 4e6, 10)],
+)
+def test_one_point_gets_a_camera_at_any_scale(point):
+    """One point (a box of no size) at the origin, at micro scale, below
+    float32's range, or far from the origin: a finite camera that sees it
+    in the middle of the picture, and finite float32 rays. (The top view of
+    a point 4e6 from the origin framed 1e-3 of Camera.fit's floor, finer
+    than float32 resolves there, and drew it off the picture.)"""
+    from clvis.camera import axis_camera, fit_camera, ray_buffer
+
+    p = np.array(point, np.float64)
+    for cam in (Camera.fit(p, p), fit_camera(p[None], p, p), axis_camera("top", p, p)):
+        assert np.isfinite(ray_buffer(cam, 8, 8)).all()
+        r = cam.project(p[None], 100, 100)
+        assert r.visible.all() and abs(r.sx[0] - 50) < 1 and abs(r.sy[0] - 50) < 1
+
+
 def test_robust_bounds_leaves_out_stray_points():
     from clvis.camera import robust_bounds
 

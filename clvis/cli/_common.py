@@ -600,7 +600,7 @@ def _replaced(cam, kind, args, lo, hi, aspect: float):
     corners = box_corners(lo, hi)
     depths = (corners - eye) @ forward
     scale = max(
-        float(np.linalg.norm(hi - lo)), min_extent(centre), float(np.linalg.norm(target - eye)) * 1e-3
+        float(np.linalg.norm(hi - lo)), min_extent(lo, hi), float(np.linalg.norm(target - eye)) * 1e-3
     )
     if cam.orthographic:
         return Camera.ortho(

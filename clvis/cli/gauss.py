@@ -5,6 +5,7 @@ panels side by side."""
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import time
@@ -63,6 +64,18 @@ LODS = ("low", "medium", "high")
 # entry 0, and a haze of them along a ray adds up)
 OPACITY_DEFAULT = ((0.0, 0.05), (0.35, 0.35), (1.0, 1.0))
 OPACITY_VOLUME_FILE = ((0.0, 0.0), (0.05, 0.0), (0.4, 0.25), (1.0, 1.0))
+# the absorption model's default extinction scale, over the diagonal of the
+# Gaussians' 1-sigma boxes
+DENSITY_DEFAULT = 240.0
+# what the note on a mostly dark picture suggests (a fog: a haze of low values
+# in front of the rest): a quarter of the extinction and opacity that stays
+# low over the bottom of the range (fog balls, smoke and the explosion come out
+# glowing; kept as options, not defaults: a scan's faint tissue and a level
+# set's surface lose detail under them)
+DARK_SHARE = 0.5
+FOG_DENSITY_FACTOR = 0.25
+FOG_OPACITY = ((0.0, 0.0), (0.35, 0.05), (0.7, 0.35), (1.0, 1.0))
+FOG_OPACITY_VOLUME_FILE = ((0.0, 0.0), (0.05, 0.0), (0.4, 0.05), (0.7, 0.35), (1.0, 1.0))
 # a volume FILE's default range ends at this percentile of its samples (a
 # scan's few hot voxels do not squeeze every colour to the bottom of the bar)
 TOP_PERCENTILE = 99.5
@@ -159,7 +172,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--density",
         type=real(0.0, open_lo=True),
         default=None,
-        help="extinction scale of the absorption model, > 0 (default 6 / volume diagonal)",
+        help="extinction scale of the absorption model, > 0 (default "
+        f"{DENSITY_DEFAULT:g} / the diagonal of the Gaussians' 1-sigma boxes; lower: a thinner haze)",
     )
     g.add_argument(
         "--colormap",
@@ -481,7 +495,8 @@ def render_panels(
     ramp that keeps low densities faint); value_range: the values it spans
     (default the Gaussians' min..max); progress: a Progress showing each panel's rays done;
     timings: a dict given "build_s", the wall time of the kernel build (the
-    first renderer and frame, on a tiny scene); frame: the Gaussians the view
+    first renderer and frame, on a tiny scene), and "density", the absorption
+    model's extinction scale used; frame: the Gaussians the view
     frames and the default density scales with (default: all; a point cloud's
     bulk, its stray points left out, as clvis render frames it)."""
     from ..camera import aspect_checked
@@ -512,7 +527,7 @@ def render_panels(
     if opacity is None:
         opacity = OPACITY_DEFAULT
     tf = TransferFunction(colormap, opacity=opacity, value_range=vr)
-    dens = density if density is not None else 6.0 / diag * 40
+    dens = density if density is not None else DENSITY_DEFAULT / diag
     progress = progress or Progress(False)
     # warm-up: build the kernels on a tiny scene (the build is timed apart
     # from the renders), so the figures below are the work itself
@@ -523,6 +538,7 @@ def render_panels(
         ).render(cam, 8, 8)
     if timings is not None:
         timings["build_s"] = time.perf_counter() - t0
+        timings["density"] = dens
     out = []
     for name, g in items:
         label = _Label(f"{name}: {g.n:,} Gaussians")
@@ -673,7 +689,8 @@ def _run(args) -> int:
             height,
         ),
     )
-    _say_if_empty(panels, width, height)
+    if not _say_if_empty(panels, width, height):
+        _say_if_dark(panels, args, opacity, timings["density"])
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     files = []
@@ -743,16 +760,17 @@ def _run(args) -> int:
     return 0
 
 
-def _say_if_empty(panels, width: int, height: int) -> None:
+def _say_if_empty(panels, width: int, height: int) -> bool:
     """A note on stderr when every panel came out (nearly) empty, under one
     pixel in 1000 drawn (no ray met a Gaussian but a few: they are smaller
     than a pixel at this size, or out of view), so that a blank PNG does not
-    look like a broken render (clvis render says the same of sparse points)."""
+    look like a broken render (clvis render says the same of sparse points).
+    Whether it said so."""
     from .._arrays import to_host
 
     drawn = max(int((to_host(img.rgba)[..., 3] >= 0.5 / 255).sum()) for _, _, img in panels)
     if drawn * 1000 >= width * height:
-        return
+        return False
     print(
         f"clvis gauss: note: the picture is {'empty' if drawn == 0 else 'nearly empty'}: "
         f"{drawn:,} of {width * height:,} pixels drawn at {width}x{height} (the Gaussians are few, "
@@ -760,6 +778,65 @@ def _say_if_empty(panels, width: int, height: int) -> None:
         "--fov) or --lod low (fewer, larger Gaussians) draws more of them",
         file=sys.stderr,
     )
+    return True
+
+
+def _say_if_dark(panels, args, opacity, density: float) -> None:
+    """A note on stderr when the default transfer function drew a picture
+    that is mostly the bottom of the colours (over DARK_SHARE of the drawn
+    pixels darker than a quarter of the way up the colormap): a fog, a smoke
+    or a density ball, most of it low values, hides its bright inside
+    behind a shell of them. It names the options that show the inside
+    (a fainter haze); nothing is said when --range, --opacity or --density
+    was given (the user's choice)."""
+    if any(getattr(args, k, None) is not None for k in ("range", "opacity", "density")):
+        return
+    if panels[0][0] == "points":  # opaque surfaces coloured by an attribute: dark is what they are
+        return
+    share = _dark_share(panels, args.colormap)
+    if share is None or share <= DARK_SHARE:
+        return
+    file_default = opacity is not None and [tuple(p) for p in opacity] == list(OPACITY_VOLUME_FILE)
+    fog = _points_text(FOG_OPACITY_VOLUME_FILE if file_default else FOG_OPACITY)
+    thinner = f"--density {density * FOG_DENSITY_FACTOR:.3g} " if args.model == "absorption" else ""
+    print(
+        f"clvis gauss: note: the picture is mostly dark: {share:.0%} of the pixels drawn show the "
+        "lowest quarter of the colours (low values in front hide the rest, as in a fog or a "
+        f"density ball); a fainter haze shows the inside: {thinner}--opacity {fog} (or --range "
+        "to start the colours higher)",
+        file=sys.stderr,
+    )
+
+
+def _dark_share(panels, colormap: str) -> float | None:
+    """The share of the drawn pixels (alpha at least 1/2, over every panel)
+    whose colour is darker than the colormap a quarter of the way up its
+    range: near 1 when the picture shows little but the bottom of the
+    colours. None for Gaussians in their own colours, a colormap that does
+    not run from dark to bright (its luminance rising by under 0.3), or
+    fewer than 100 pixels drawn. Measured on every k-th row and column, up
+    to about 10^6 pixels a panel (no full-size float64 copy of a large one)."""
+    from .._arrays import to_host
+    from ..colormap import lut
+
+    if any(getattr(g, "colors", None) is not None for _, g, _ in panels):
+        return None
+    weights = np.array([0.2126, 0.7152, 0.0722])
+    table = lut(colormap).astype(np.float64)[:, :3] / 255 @ weights
+    if table[-1] - table[0] < 0.3:
+        return None
+    dark = float(table[len(table) // 4])
+    drawn = below = 0
+    for _, _, img in panels:
+        rgba = to_host(img.rgba)
+        step = max(1, math.ceil(math.sqrt(rgba.shape[0] * rgba.shape[1] / 1e6)))
+        rgba = np.asarray(rgba[::step, ::step], np.float64)
+        a = rgba[..., 3]
+        keep = a >= 0.5
+        lum = (rgba[..., :3][keep] / a[keep][:, None]) @ weights
+        drawn += int(keep.sum())
+        below += int((lum < dark).sum())
+    return below / drawn if drawn >= 100 else None
 
 
 def demo(out_dir: str | Path, q: cl.CommandQueue, size: tuple[int, int] = (480, 480)) -> bool:

@@ -41,9 +41,12 @@ class Orbit:
         if self.lo.shape != (3,) or self.hi.shape != (3,) or not np.isfinite([self.lo, self.hi]).all():
             raise ValueError(f"orbit bounds: expected two finite 3-vectors, got {lo!r}, {hi!r}")
         # one point (or all in one place) has no size to frame: a unit sphere
-        # around it, so the view stands off and the wheel zooms (1e-6 did neither)
+        # around it, so the view stands off and the wheel zooms (1e-6 did neither).
+        # "No size" is relative below 1: a box 1e-7 wide at the origin (micrometre
+        # data in metres) is framed as itself (a unit sphere drew it as a dot)
         extent = float(np.linalg.norm(self.hi - self.lo)) / 2
-        self.radius = extent if extent > 1e-6 else 1.0
+        magnitude = float(np.abs([self.lo, self.hi]).max())
+        self.radius = extent if extent > 1e-6 * min(1.0, magnitude) else 1.0
         self.fov_y = float(fov_y)
         self._home = (float(azimuth), float(elevation))
         # what fit() frames: a sample of the points where given (a round cloud

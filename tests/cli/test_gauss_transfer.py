@@ -143,3 +143,57 @@ def test_range_on_rgb_points_is_an_error(tmp_path, capsys):
         capsys, path, "--attribute", "z", "--colormap", "magma", "--size", "16x16", "--out", str(tmp_path)
     )
     assert rc == 0, err
+
+
+def _fog_ball(tmp_path):
+    """A fog ball: density 1 - r / 30 over 64^3 (most of it low values)."""
+    z, y, x = np.mgrid[:64, :64, :64]
+    r = np.sqrt((x - 31.5) ** 2 + (y - 31.5) ** 2 + (z - 31.5) ** 2)
+    path = tmp_path / "fog.npy"
+    np.save(path, np.clip(1 - r / 30, 0, 1).astype(np.float32))
+    return str(path)
+
+
+def _luminance(path):
+    """The mean luminance (0..1) of a --transparent picture's drawn pixels."""
+    with Image.open(path) as im:
+        a = np.asarray(im).astype(float) / 255
+    drawn = a[..., 3] > 0.5
+    return float((a[..., :3][drawn] @ [0.2126, 0.7152, 0.0722]).mean())
+
+
+def test_a_dark_fog_says_which_options_show_its_inside(tmp_path, capsys):
+    """A fog ball under the default transfer function is a dark purple disc
+    (its shell of low values hides the bright inside): a note on stderr says
+    so and names the options that show it; with them the picture is bright
+    and the note is gone. A bright ball in a noisy scan gets no note."""
+    fog = _fog_ball(tmp_path)
+    args = [fog, "--lod", "high", "--size", "64x64", "--transparent"]
+    rc, out, err = _run(capsys, *args, "--out", str(tmp_path / "dark"))
+    assert rc == 0, err
+    note = [line for line in err.splitlines() if "note: the picture is mostly dark" in line]
+    assert len(note) == 1, err
+    assert "the lowest quarter of the colours" in note[0] and "--range" in note[0]
+    options = note[0].split("shows the inside: ", 1)[1].split(" (or", 1)[0].split()
+    assert options[0] == "--density" and options[2] == "--opacity", options
+    rc, out, err = _run(capsys, *args, *options, "--out", str(tmp_path / "bright"))
+    assert rc == 0, err
+    assert "note" not in err
+    dark, bright = _luminance(tmp_path / "dark" / "high.png"), _luminance(tmp_path / "bright" / "high.png")
+    assert dark < 0.15 and bright > 2 * dark, (dark, bright)
+    rc, out, err = _run(capsys, fog, *args[1:], "--opacity", "0:0,1:1", "--out", str(tmp_path / "given"))
+    assert rc == 0 and "note" not in err  # the user's own transfer function: nothing said
+
+
+def test_a_bright_volume_gets_no_dark_note(tmp_path, capsys, scan):
+    rc, out, err = _run(capsys, scan, "--lod", "high", "--size", "64x64", "--out", str(tmp_path))
+    assert rc == 0 and "note" not in err, err
+
+
+def test_a_level_set_gets_no_dark_note(tmp_path, capsys):
+    """OpenVDB's level-set sphere (values -3..3 about its surface): a bright
+    surface, no note."""
+    pytest.importorskip("tinyvdb")
+    vdb = os.path.join(os.path.dirname(__file__), "..", "data", "openvdb_small.vdb")
+    rc, out, err = _run(capsys, vdb, "--grid", "surface", "--size", "64x64", "--out", str(tmp_path))
+    assert rc == 0 and "note" not in err, err

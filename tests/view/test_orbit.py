@@ -65,3 +65,19 @@ def test_one_point_is_framed_from_a_distance_and_zooms():
     cam = o.camera(16 / 9)
     p = cam.project(np.array([[5.0, 5.0, 5.0]]), 160, 90)
     assert p.visible.all() and abs(p.sx[0] - 80) < 1 and abs(p.sy[0] - 45) < 1
+
+
+@pytest.mark.parametrize("scale", [1e-7, 1e-10])
+def test_a_micro_scale_box_is_framed_as_at_unit_scale(scale):
+    """A box 1e-7 wide (nanometre data in metres) fills the view as the same
+    box 1 wide does: it was taken for one point (extent under an absolute
+    1e-6), given a unit sphere and drawn as a dot."""
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-2, 2) for z in (0, 3)], np.float64)
+
+    def screen(s):
+        cam = Orbit((-s, -2 * s, 0), (s, 2 * s, 3 * s)).camera(16 / 9)
+        p = cam.project(corners * s, 640, 360)
+        assert p.visible.all()
+        return np.c_[p.sx, p.sy]
+
+    np.testing.assert_allclose(screen(scale), screen(1.0), atol=1e-2)

@@ -394,6 +394,7 @@ def gauss_orbit(
             opacity=opacity,
             value_range=value_range,
             frame=getattr(args, "frame", None),
+            density_scale=getattr(args, "density_scale", 1.0),
             camera=lambda lo, hi: turn(fitted(lo, hi), lo, hi, degrees, args),
         )
         if args.no_labels:

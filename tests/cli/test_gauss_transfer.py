@@ -86,10 +86,11 @@ def test_opacity_zero_draws_nothing_and_range_shows(tmp_path, capsys, scan):
     assert 50 < lo < 60 and 150 < hi <= 1050, line
 
 
-def test_embedded_default_is_unchanged(tmp_path, capsys):
+def test_embedded_default_says_it_is_drawn_as_a_fog(tmp_path, capsys):
     rc, out, err = _run(capsys, "--lod", "low", "--size", "32x32", "--out", str(tmp_path))
     assert rc == 0, err
-    assert "transfer" not in out
+    line = next(ln for ln in out.splitlines() if "transfer" in ln)
+    assert "the embedded explosion drawn as a fog" in line
 
 
 def test_anatomical_mri(tmp_path, capsys):

@@ -11,7 +11,9 @@
   checks the VTK point sets share), and :func:`otsu_level` (a scan's
   default isovalue);
 - :mod:`~clvis.io.npy`: NPY and NPZ read safely (:func:`load_npy`,
-  :func:`load_npz`, :func:`npy_shape`), for both.
+  :func:`load_npz`, :func:`npy_shape`), for both;
+- :mod:`~clvis.io.objects`: data other libraries hold in memory
+  (:func:`from_vtk`: a VTK or pyvista point set or image).
 
 :func:`~clvis.gauss.read_vdb` (OpenVDB, into the Gaussian family's sparse
 layout) lives with :class:`~clvis.gauss.SparseVolume`.
@@ -19,6 +21,7 @@ layout) lives with :class:`~clvis.gauss.SparseVolume`.
 
 from .cloud import PointCloud
 from .npy import load_npy, load_npz, npy_shape
+from .objects import from_vtk
 from .ply import write_ply
 from .points import read_points, save_npz
 from .volumes import FORMATS, RAW_TYPES, Volume, otsu_level, raw_layout, read_volume
@@ -28,6 +31,7 @@ __all__ = [
     "RAW_TYPES",
     "PointCloud",
     "Volume",
+    "from_vtk",
     "load_npy",
     "load_npz",
     "npy_shape",

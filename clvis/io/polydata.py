@@ -237,9 +237,18 @@ def _points(path: Path, reader: Any, messages: list[str], n: int, ns: Any) -> Po
     data = reader.GetOutput()
     if messages or reader.GetErrorCode() or data is None:
         raise DataError(f"{path}: VTK could not read it: {_why(messages)}")
-    pts = data.GetPoints()
-    if data.GetNumberOfPoints() != n or (n and pts is None):
+    if data.GetNumberOfPoints() != n or (n and data.GetPoints() is None):
         raise DataError(f"{path}: VTK read {data.GetNumberOfPoints()} points, the file declares {n}")
+    return cloud_of(data, path, ns)
+
+
+def cloud_of(data: Any, what: Any, ns: Any) -> PointCloud:
+    """The cloud of a VTK point set `data` (vtkPointSet: a file's, or one a
+    program made, such as a pyvista mesh): its points and point data arrays
+    as the module docstring says; `what` names it in a DataError; ns: VTK's
+    numpy_support."""
+    n = int(data.GetNumberOfPoints())
+    pts = data.GetPoints()
     xyz = np.zeros((0, 3), np.float32) if not n else np.array(ns.vtk_to_numpy(pts.GetData()), copy=True)
     positions, origin = relative_positions(xyz.reshape(n, 3))
     fields: dict[str, Any] = {"positions": positions, "origin": origin, "attributes": {}}
@@ -265,7 +274,7 @@ def _points(path: Path, reader: Any, messages: list[str], n: int, ns: Any) -> Po
         else:
             suffixes = "xyz" if comps == 3 else [str(j) for j in range(comps)]
             fields["attributes"].update({f"{name}_{s}": a[:, j] for j, s in enumerate(suffixes)})
-    return _cloud(path, **fields)
+    return _cloud(what, **fields)
 
 
 def read_vtk_points(path: Path) -> PointCloud:

@@ -948,16 +948,20 @@ def scene_for(obj: Any, **kwargs: Any) -> Scene:
     """A scene for `obj`: a Scene as is, a clvis.PointCloud or (N, 3) positions
     (points), a 3-D array [z, y, x] (a volume; kwargs: spacing, origin,
     isovalue, rate), a clvis.Volume (read_volume's, with its spacing and
-    origin unless kwargs give them) or a clvis.SparseVolume (read_vdb's: its
-    Gaussians; kwargs: colormap). A path is refused, naming the readers.
+    origin unless kwargs give them), a clvis.SparseVolume (read_vdb's: its
+    Gaussians; kwargs: colormap) or a VTK dataset (a pyvista mesh, point set
+    or image: clvis.from_vtk's cloud or volume). A path is refused, naming the readers.
     kwargs for both: description, model_dir (where the networks' models are:
     clvis train --out)."""
     from .. import PointCloud
     from ..gauss.sparse import SparseVolume
+    from ..io.objects import from_vtk, is_vtk_dataset
     from ..io.volumes import Volume
 
     if isinstance(obj, Scene):
         return obj
+    if is_vtk_dataset(obj):  # a VTK dataset (a pyvista mesh or image): its points or its volume
+        obj = from_vtk(obj)
     if isinstance(obj, PointCloud):
         return PointScene(obj, **kwargs)
     if isinstance(obj, SparseVolume):  # read_vdb's: as Gaussians, never dense

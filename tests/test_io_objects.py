@@ -1,0 +1,91 @@
+"""clvis.from_vtk: VTK datasets made in memory (what pyvista's meshes, point
+sets and images are) as clvis data, read as the file readers read the same
+data written by VTK; its refusals; and clvis.view taking them."""
+
+import numpy as np
+import pytest
+
+import clvis
+from clvis.errors import DataError
+
+vtk = pytest.importorskip("vtk", reason="vtk is in the test extra")
+from test_points_vtk import N, _check, _polydata  # noqa: E402
+from vtk.util import numpy_support  # noqa: E402
+
+
+def _image(values, spacing=(0.5, 2.0, 1.0), origin=(10.0, -3.0, 7.5), cells=False, name="density"):
+    """vtkImageData of `values` [z, y, x] (x fastest, as VTK orders points);
+    as cell data with `cells` (then one more point a side)."""
+    img = vtk.vtkImageData()
+    nz, ny, nx = values.shape
+    img.SetDimensions(*((nx + 1, ny + 1, nz + 1) if cells else (nx, ny, nz)))
+    img.SetSpacing(*spacing)
+    img.SetOrigin(*origin)
+    a = numpy_support.numpy_to_vtk(np.ascontiguousarray(values).ravel(), deep=True)
+    a.SetName(name)
+    (img.GetCellData() if cells else img.GetPointData()).SetScalars(a)
+    return img
+
+
+def test_a_point_set_is_read_as_its_file_is(tmp_path):
+    """A vtkPolyData (a pyvista PolyData) as the .vtp reader reads it
+    written: far-from-zero doubles relative to their minimum, RGB as colours,
+    velocity, the other point arrays as attributes; the arrays copied."""
+    pd = _polydata()
+    cloud = clvis.from_vtk(pd)
+    _check(cloud)
+    w = vtk.vtkXMLPolyDataWriter()
+    w.SetFileName(str(tmp_path / "p.vtp"))
+    w.SetInputData(pd)
+    assert w.Write() == 1
+    written = clvis.read_points(tmp_path / "p.vtp")
+    np.testing.assert_array_equal(cloud.positions, written.positions)
+    np.testing.assert_array_equal(cloud.origin, written.origin)
+    assert sorted(cloud.attributes) == sorted(written.attributes)
+    numpy_support.vtk_to_numpy(pd.GetPointData().GetArray("temperature"))[:] = -1  # the dataset changes
+    assert (cloud.attributes["temperature"] >= 0).all()  # the cloud does not
+    ug = vtk.vtkUnstructuredGrid()  # a point set of another kind, no arrays
+    ug.SetPoints(pd.GetPoints())
+    assert len(clvis.from_vtk(ug)) == N and clvis.from_vtk(ug).colors is None
+
+
+def test_image_data_is_a_volume():
+    """vtkImageData (a pyvista ImageData) as a Volume [z, y, x] with its
+    spacing (dz, dy, dx) and origin: its active point scalars, an array by
+    name, or its cell data (one sample a cell, at the cell's centre)."""
+    rng = np.random.default_rng(3)
+    values = rng.random((4, 5, 6)).astype(np.float32)
+    v = clvis.from_vtk(_image(values))
+    np.testing.assert_array_equal(v.data, values)
+    assert v.spacing == (1.0, 2.0, 0.5) and v.origin == (10.0, -3.0, 7.5) and v.array == "density"
+    img = _image(values)
+    other = numpy_support.numpy_to_vtk((values * 2).ravel(), deep=True)
+    other.SetName("twice")
+    img.GetPointData().AddArray(other)
+    np.testing.assert_array_equal(clvis.from_vtk(img, array="twice").data, values * 2)
+    cells = clvis.from_vtk(_image(values, cells=True))
+    np.testing.assert_array_equal(cells.data, values)
+    assert cells.origin == (10.25, -2.0, 8.0)  # half a step in along each axis
+    scene = clvis.view.scene_for(_image(values))  # clvis.view takes it as the volume it is
+    assert type(scene).__name__ == "VolumeScene" and scene.spacing == (1.0, 2.0, 0.5)
+    assert type(clvis.view.scene_for(_polydata())).__name__ == "PointScene"
+
+
+def test_what_from_vtk_refuses():
+    values = np.zeros((3, 3, 3), np.float32)
+    with pytest.raises(TypeError, match="expected a VTK dataset .* got ndarray"):
+        clvis.from_vtk(values)
+    with pytest.raises(TypeError, match="a vtkRectilinearGrid: resample it to image data"):
+        clvis.from_vtk(vtk.vtkRectilinearGrid())
+    with pytest.raises(ValueError, match="array: picks an image's scalar array; vtkPolyData is a point set"):
+        clvis.from_vtk(_polydata(), array="temperature")
+    with pytest.raises(DataError, match=r"no array named 'nope' \(arrays: density \(1 components\)\)"):
+        clvis.from_vtk(_image(values), array="nope")
+    img = _image(values)
+    img.GetPointData().RemoveArray("density")
+    with pytest.raises(DataError, match=r"vtkImageData 3x3x3: no one-component scalar array \(arrays: none"):
+        clvis.from_vtk(img)
+    img = _image(values)
+    img.SetDirectionMatrix(0, -1, 0, 1, 0, 0, 0, 0, 1)  # x and y swapped: a rotated image
+    with pytest.raises(DataError, match="its axes are rotated"):
+        clvis.from_vtk(img)

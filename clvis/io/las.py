@@ -145,6 +145,8 @@ def _check_extra_bytes(
     total = 0
     for i in range(length // 192):
         kind, options = raw[192 * i + 2], raw[192 * i + 3]
+        if not raw[192 * i + 4 : 192 * i + 36].split(b"\0", 1)[0]:  # laspy lists it, then cannot give it
+            raise DataError(f"{path}: malformed LAS/LAZ file: extra bytes field {i} has no name")
         if kind == 0:
             size = options
         elif kind <= 30:

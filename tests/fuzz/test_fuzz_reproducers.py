@@ -182,6 +182,24 @@ def test_extra_bytes_of_data_type_0_without_bytes_are_refused(tmp_path, field, o
     assert "extra bytes" in r.detail
 
 
+def test_extra_bytes_field_without_a_name_is_refused(tmp_path):
+    # laspy listed the field "" among the dimensions and then could not give
+    # it: a bare ValueError "no field of name " (fuzz seed 334, splice+las_fields)
+    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.4"))
+    las.add_extra_dims([laspy.ExtraBytesParams("a", "f4"), laspy.ExtraBytesParams("b", "u1")])
+    n = 20
+    las.x, las.y, las.z = np.arange(3 * n, dtype=float).reshape(3, n)
+    src = tmp_path / "eb.las"
+    las.write(str(src))
+
+    def edit(d):
+        at = _vlr(d, (b"LASF_Spec", 4)) + 192
+        d[at + 4 : at + 36] = bytes(32)  # the second field's name: empty
+
+    r = _refused(_edited(tmp_path, src, "noname.las", edit))
+    assert "extra bytes field 1 has no name" in r.detail, r
+
+
 def _nifti_with_extension(tmp_path, name, esize, vox_offset=368.0):
     img = nibabel.Nifti1Image(np.random.default_rng(0).random((4, 3, 2)).astype(np.float32), np.eye(4))
     nibabel.save(img, tmp_path / "v.nii")

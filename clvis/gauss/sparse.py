@@ -464,7 +464,9 @@ def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolum
     leaves = walked[idx] if len(walked) == n else None
     name = names[idx]
     if leaves is not None:
-        at, lv, la = _leaf_values(p, name, g, leaves)
+        # an instance grid has no tree of its own: its parent's (tinyvdb's is empty)
+        tree_grid = g if leaves.parent is None else f.grid(leaves.parent)
+        at, lv, la = _leaf_values(p, name, tree_grid, leaves)
     else:  # a tree clvis's walk does not follow: tinyvdb's own list of voxels
         sp = g.to_sparse()
         ijk = np.frombuffer(sp["coords"], np.int32).reshape(-1, 3).astype(np.int64)

@@ -13,7 +13,9 @@ The layout (OpenVDB file format, version 222 and later):
   minor (uint32 each), a grid-offsets flag (uint8), the UUID (36 ASCII bytes);
   file metadata (below); the grid count (uint32);
 - per grid: name, type and instance-parent strings (uint32 length + bytes),
-  then the grid, block and end offsets (int64 each);
+  then the grid, block and end offsets (int64 each); an instance (a grid
+  sharing the tree of the earlier grid its instance parent names) stores only
+  its compression flags, metadata and transform, and a block offset of 0;
 - at a grid's offset: its compression flags (uint32: 1 zip, 2 active mask,
   4 blosc), its metadata (a count, then per entry a name and a type string
   and a uint32-sized value), its transform (a type name string, then the
@@ -27,7 +29,8 @@ The layout (OpenVDB file format, version 222 and later):
 - the buffers: per leaf, in the same order, its value mask again (tinyvdb
   keeps the topology's, OpenVDB reads this one: they must agree) and its 512
   values (a bool leaf: 3 int32 and a 64-byte bit mask);
-- values: a metadata byte (0-6), up to two inactive values, a selection mask
+- values: a metadata byte (0-6), up to two inactive values (of the tree's
+  type, half floats or not), a selection mask
   (metadata 3-5), then all the node's values, or only the active ones (the
   value mask's count) under the active-mask flag unless the metadata is 6;
   compressed (zip, blosc) as an int64 byte count and the bytes (a count <= 0:
@@ -45,7 +48,7 @@ import mmap
 import os
 import struct
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -103,13 +106,18 @@ class GridLeaves:
     value stored above the leaves, e.g. a fog volume's uniform inside.
     tile_origins (T, 3) int64 (i, j, k) of each tile's first voxel,
     tile_log2 (T,) its side: 2^3 (a 16^3 node's entry), 2^7 (a 32^3 node's)
-    or 2^12 (the root's); :meth:`tile_values` decodes their values."""
+    or 2^12 (the root's); :meth:`tile_values` decodes their values.
+
+    parent: for an instance grid (one OpenVDB wrote sharing the tree of an
+    earlier grid: it stores only its metadata and transform), the index of
+    the grid whose tree (these leaves and tiles) it is; else None."""
 
     path: Path
     active: int
     origins: np.ndarray
     masks: np.ndarray
     tile_blocks: tuple[_TileBlock, ...] = ()
+    parent: int | None = None  # an instance grid: the index of the grid whose tree it shares
 
     def __len__(self) -> int:
         return len(self.origins)
@@ -220,20 +228,41 @@ def _check(p: Path, data, size: int) -> list[GridLeaves | None]:
     r.metadata("file metadata")
     n_grids = r.take("<I", "grid count")
     r.need(36 * n_grids, f"{n_grids} grid descriptors")
-    grids = []
-    for _ in range(n_grids):
-        r.string("grid name")
+    out: list[GridLeaves | None] = []
+    names: list[str] = []
+    kinds: list[str] = []
+    for i in range(n_grids):
+        names.append(r.string("grid name"))
         kind = r.string("grid type")
-        r.string("instance parent")
+        kinds.append(kind)
+        parent = r.string("instance parent")
         grid_pos, block_pos, end_pos = r.take("<qqq", "grid offsets")
-        if not 0 <= grid_pos <= block_pos <= end_pos <= size:
+        # an instance (a grid sharing an earlier grid's tree) stores no tree:
+        # its block offset is 0 and its tree is its parent's
+        if not 0 <= grid_pos <= (grid_pos if parent else block_pos) <= end_pos <= size:
             raise DataError(
                 f"{p}: malformed VDB file: grid offsets {grid_pos}, {block_pos}, {end_pos} "
                 f"outside the file's {size} bytes"
             )
-        grids.append((kind, grid_pos, end_pos))
+        if parent:
+            if parent not in names[:i]:
+                raise DataError(
+                    f"{p}: malformed VDB file: grid {names[i]!r} is an instance of grid {parent!r}, "
+                    "which no grid before it is"
+                )
+            j = names.index(parent)
+            if kinds[j] != kind:
+                raise DataError(
+                    f"{p}: malformed VDB file: grid {names[i]!r} ({kind}) is an instance of grid "
+                    f"{parent!r}, a {kinds[j]}"
+                )
+            shared = out[j]
+            root = j if shared is None or shared.parent is None else shared.parent
+            out.append(None if shared is None else replace(shared, parent=root))
+        else:
+            out.append(_check_root(p, data, end_pos, kind, grid_pos))
         r.pos = end_pos  # the next descriptor follows the grid
-    return [_check_root(p, data, end_pos, kind, grid_pos) for kind, grid_pos, end_pos in grids]
+    return out
 
 
 def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves | None:
@@ -376,10 +405,13 @@ class _Tree:
         meta = r.take("<B", f"{what}' metadata")
         if meta > 6:
             raise DataError(f"{r.path}: malformed VDB file: {what}' metadata {meta} at byte {at} (0 to 6)")
-        value_bytes = 2 if self.half else self.value_bytes
+        # the inactive values are stored whole, as the tree's type, even in a
+        # grid saved as half floats (OpenVDB writes them truncated to half
+        # precision but as floats); the values after them as half floats
         inactive = {2: 1, 4: 1, 5: 2}.get(meta, 0)
-        r.need(inactive * value_bytes, f"{what}' inactive values")
-        r.pos += inactive * value_bytes
+        r.need(inactive * self.value_bytes, f"{what}' inactive values")
+        r.pos += inactive * self.value_bytes
+        value_bytes = 2 if self.half else self.value_bytes
         if meta in (3, 4, 5):
             r.mask(n // 8, f"{what}' selection mask")
         count = active if self.compression & _ACTIVE_MASK and meta != 6 else n

@@ -544,6 +544,68 @@ def test_vdb_written_by_openvdb():
     assert block.n_leaves == 20**3 and block.n_tiles == 20**3 - 27
 
 
+def test_vdb_instance_grids_share_their_parents_tree(tmp_path):
+    """tests/data/openvdb_instance.vdb (OpenVDB 10.0.1): "inst" shares the
+    tree of "orig" (grid.copy()), which OpenVDB writes once: the instance
+    stores only its transform, and a block offset of 0. The walk refused the
+    whole file ("grid offsets ... outside the file"), every grid of it; now
+    an instance is its parent's tree under its own transform."""
+    from clvis.io.vdb import check_vdb
+
+    path = Path(__file__).parents[1] / "data" / "openvdb_instance.vdb"
+    assert check_vdb(path) == [(60, 1), (60, 1), (1, 1)]
+    want = np.zeros((16, 16, 24), F32)  # [z, y, x] from x = -16
+    want[:, :, :16] = 0.5  # eight active 8^3 tiles over (-16..-1, 0..15, 0..15)
+    i, j, k = np.mgrid[:5, :4, :3]
+    want[5 + k, 4 + j, 19 + i] = ((i + 2 * j + 3 * k) % 11 / 11).astype(F32)
+    act = want != 0
+    act[5:8, 4:8, 19:24] = True  # (0, 0, 0) of the formula is 0, and active
+    for name, spacing, origin in [("orig", 1.0, (-16, 0, 0)), ("inst", 0.5, (1 - 8, 2, 3))]:
+        sv = read_vdb(path, grid=name)
+        assert sv.spacing == (spacing,) * 3 and sv.origin == origin and sv.n_tiles == 8
+        np.testing.assert_array_equal(sv.active(), act)
+        np.testing.assert_array_equal(sv.to_dense(), want)
+    other = read_vdb(path, grid=2)
+    assert other.n_active == 1 and other.to_dense()[-1, -1, -1] == 7.0 and other.origin == (-8, -8, -8)
+
+    # an instance of a grid the file does not hold before it, or of another type
+    data = path.read_bytes()
+    desc = data.index(b"inst\x10\x00\x00\x00Tree_float_5_4_3\x04\x00\x00\x00orig")
+    bad = tmp_path / "bad.vdb"
+    for old, new, match in [
+        (b"orig", b"oris", "grid 'inst' is an instance of grid 'oris', which no grid before it is"),
+        (b"float", b"int32", r"grid 'inst' \(Tree_int32_5_4_3\) is an instance of grid 'orig', a Tree_float"),
+    ]:
+        at = data.index(old, desc + 4)
+        bad.write_bytes(data[:at] + new + data[at + len(old) :])
+        with pytest.raises(clvis.DataError, match=match) as e:
+            check_vdb(bad)
+        assert str(bad) in str(e.value)
+
+
+def test_vdb_half_float_nodes_with_an_inactive_value_are_walked():
+    """A grid saved as half floats stores a node's inactive values (metadata
+    2, 4, 5: one or two values other than the background) as floats, 4 bytes
+    each, not as halves: the walk skipped 2 bytes each, then read the next
+    block from the wrong byte and refused the file as malformed
+    (tests/data/openvdb_half_inactive.vdb, OpenVDB 10.0.1: a 16^3 node of
+    active and inactive 8^3 tiles and a leaf with inactive voxels of 6.0)."""
+    from clvis.io.vdb import vdb_leaves
+
+    path = Path(__file__).parents[1] / "data" / "openvdb_half_inactive.vdb"
+    (g,) = vdb_leaves(path)
+    assert g is not None and g.active == 64 + 27
+    np.testing.assert_array_equal(g.origins, [[40, 0, 0], [56, 0, 0]])
+    np.testing.assert_array_equal(g.tile_origins, [[0, 0, 0], [8, 0, 0]])
+    np.testing.assert_array_equal(g.tile_log2, [3, 3])
+    np.testing.assert_array_equal(g.tile_values(), [5.0, 5.0])
+    bits = np.unpackbits(g.masks, axis=1, bitorder="little").reshape(2, 8, 8, 8)  # [leaf, x, y, z]
+    want = np.zeros((2, 8, 8, 8), np.uint8)
+    want[0, :4, :4, :4] = 1  # 1.5 over (40..43, 0..3, 0..3)
+    want[1, 4:7, :3, :3] = 1  # 2.5 over (60..62, 0..2, 0..2)
+    np.testing.assert_array_equal(bits, want)
+
+
 @pytest.mark.parametrize(
     "compression", ["ZIP | ACTIVE_MASK", "ZIP", "NONE", "ACTIVE_MASK", "BLOSC | ACTIVE_MASK"]
 )

@@ -13,7 +13,7 @@ being (ox, oy, oz) (DESIGN.md).
 
 :func:`read_vdb` reads a float grid of an OpenVDB file into this layout
 through the optional ``tinyvdb`` package and, for blosc-compressed active
-tiles, ``blosc`` (``pip install ".[vdb]"`` from a clvis
+tiles and leaves of grids saved as half floats, ``blosc`` (``pip install ".[vdb]"`` from a clvis
 checkout, or ``pip install tinyvdb blosc``).
 """
 
@@ -376,8 +376,9 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     affine map without rotation) are accepted.
 
     Each leaf is placed by clvis's walk of the file (clvis.io.vdb.vdb_leaves)
-    and its values are tinyvdb's; a leaf where the two disagree raises
-    DataError. Active tiles (uniform regions stored above the leaves, 8^3,
+    and its values are tinyvdb's (a grid saved as half floats: the walk's,
+    tinyvdb 0.9 reading half floats' subnormals as half their value); a leaf
+    where the two disagree raises DataError. Active tiles (uniform regions stored above the leaves, 8^3,
     128^3 or 4096^3 voxels), which tinyvdb does not read, are decoded by the
     walk (blosc-compressed ones need the blosc package) and become tile
     leaves. A missing
@@ -565,7 +566,9 @@ def _leaf_values(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray,
 
     Where each leaf is and which of its voxels are active come from clvis's
     walk of the file (GridLeaves); the values from tinyvdb's tree, which holds
-    every leaf's 512 values decompressed (zip, blosc, half floats). tinyvdb
+    every leaf's 512 values decompressed (zip, blosc, half floats: but a
+    half float's subnormal comes back as half its value, so a half-float
+    grid's values are the walk's, GridLeaves.half_leaf_values). tinyvdb
     0.9's own voxel list (VDBGrid.to_sparse) drops leaves of many trees: of a
     16^3 node of more than 64 leaves it returns 64, and a level-set sphere of
     radius 40 voxels written by OpenVDB 10 came back with 87,614 of its
@@ -593,6 +596,9 @@ def _leaf_values(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray,
         k += 1
     if k != len(leaves):
         raise DataError(f"{p}: grid {name!r}: tinyvdb read {k:,} leaves of the file's {len(leaves):,}")
+    own = leaves.half_leaf_values()
+    if own is not None:  # half floats: clvis's decoding (tinyvdb 0.9 halves the subnormals)
+        values = own
 
     def zyx(a: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(a.reshape(-1, LEAF, LEAF, LEAF).transpose(0, 3, 2, 1)).reshape(

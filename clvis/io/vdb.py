@@ -77,6 +77,10 @@ _LOG2DIMS = ["5", "4", "3"]  # the tree configuration walked (OpenVDB's standard
 _CHILD_SPAN = [4 + 3, 3]
 
 
+_NO_ORIGINS = np.zeros((0, 3), np.int64)
+_NO_PICKS = np.zeros(0, np.int64)
+
+
 @dataclass(frozen=True)
 class _TileBlock:
     """One node's active tiles: their origins, side (log2) and where their
@@ -118,6 +122,24 @@ class GridLeaves:
     masks: np.ndarray
     tile_blocks: tuple[_TileBlock, ...] = ()
     parent: int | None = None  # an instance grid: the index of the grid whose tree it shares
+    half_leaves: tuple[_TileBlock, ...] = ()  # a half-float grid's leaf values, as stored
+
+    def half_leaf_values(self) -> np.ndarray | None:
+        """(L, 512) float32: a half-float grid's leaf values, decoded here
+        (VDB order: value n at (n >> 6, (n >> 3) & 7, n & 7) from the leaf's
+        origin; where only the active values are stored, the inactive ones
+        are 0); None for a grid not saved as half floats."""
+        if not self.half_leaves:
+            return None
+        out = np.zeros((len(self), 512), np.float32)
+        active = np.unpackbits(self.masks, axis=1, bitorder="little").view(bool)
+        for k, b in enumerate(self.half_leaves):
+            values = _decode(self.path, b)
+            if b.count == 512:
+                out[k] = values
+            else:  # the active ones, as many as the value mask's bits (the walk's count)
+                out[k, active[k]] = values
+        return out
 
     def __len__(self) -> int:
         return len(self.origins)
@@ -318,6 +340,7 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
         origin = r.take("<3i", "root child origin")
         tree.internal(0, np.array(origin, np.int64))
     active = 0
+    half_leaves: list[_TileBlock] = []
     for leaf in tree.leaves:
         at = r.pos
         r.need(64, "leaf buffer value mask")
@@ -333,10 +356,23 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
             r.need(12 + 64, "bool leaf buffer")
             r.pos += 12 + 64
         else:
-            tree.values(3, on)
+            count, start, nbytes, codec = tree.values(3, on)
+            if tree.half:  # tinyvdb 0.9 halves half floats' subnormals: decoded here
+                half_leaves.append(
+                    _TileBlock(
+                        _NO_ORIGINS,
+                        3,
+                        _NO_PICKS,
+                        bytes(data[start : start + nbytes]),
+                        count,
+                        codec,
+                        True,
+                        f"the leaf values at byte {start}",
+                    )
+                )
     masks = np.frombuffer(b"".join(tree.masks), np.uint8).reshape(-1, 64)
     origins = np.concatenate(tree.origins) if tree.origins else np.zeros((0, 3), np.int64)
-    return GridLeaves(p, active, origins, masks, tuple(tree.tiles))
+    return GridLeaves(p, active, origins, masks, tuple(tree.tiles), half_leaves=tuple(half_leaves))
 
 
 class _Tree:
@@ -469,7 +505,8 @@ def _blosc(path: Path):
         import blosc
     except ImportError:
         raise ImportError(
-            f"{path}: its active tiles are blosc-compressed, which needs the blosc package: "
+            f"{path}: its active tiles or half-float leaves are blosc-compressed, which needs "
+            "the blosc package: "
             'pip install ".[vdb]" in a clvis checkout (or pip install blosc)'
         ) from None
     return blosc

@@ -20,10 +20,11 @@ Also tests/data/openvdb_tiles.vdb, a fuzzing seed of active tiles: "tiles",
 0.5 over a 40^3 block at index (0, 0, 0) but (i + 2 j + 3 k) mod 5 / 5 in
 its first 8^3 (124 8^3 tiles and one leaf, blosc-compressed).
 
-And tests/data/openvdb_instance.vdb (instance grids) and
+And tests/data/openvdb_instance.vdb (instance grids),
 tests/data/openvdb_half_inactive.vdb (half floats with inactive values other
-than the background), described where they are written below. Each run
-writes new UUIDs: regenerate only the files a change needs."""
+than the background) and tests/data/openvdb_half_subnormal.vdb, described
+where they are written below. Each run writes new UUIDs: regenerate only the
+files a change needs."""
 
 import numpy as np
 import pyopenvdb as vdb
@@ -86,3 +87,16 @@ half.fill((60, 0, 0), (62, 2, 2), 2.5)
 half.name = "half"
 half.saveFloatAsHalf = True
 vdb.write("openvdb_half_inactive.vdb", grids=[half])
+
+# tests/data/openvdb_half_subnormal.vdb: "tiny", saved as half floats, whose
+# values are half floats' subnormals and normals: voxel (i, j, 0) for i, j in
+# 0..7 holds (1 + i + 8 j) * 2^-24 (half's smallest subnormal times 1..64),
+# voxel (i, j, 1) the negated value times 2^10 (normal halves up to 2^-8)
+tiny = vdb.FloatGrid()
+acc = tiny.getAccessor()
+for i, j in np.ndindex(8, 8):
+    acc.setValueOn((i, j, 0), float((1 + i + 8 * j) * 2.0**-24))
+    acc.setValueOn((i, j, 1), float(-(1 + i + 8 * j) * 2.0**-14))
+tiny.name = "tiny"
+tiny.saveFloatAsHalf = True
+vdb.write("openvdb_half_subnormal.vdb", grids=[tiny])

@@ -606,6 +606,21 @@ def test_vdb_half_float_nodes_with_an_inactive_value_are_walked():
     np.testing.assert_array_equal(bits, want)
 
 
+def test_vdb_half_float_subnormals_are_read_at_their_value():
+    """tinyvdb 0.9 widens a half float's subnormal (below 2^-14) to half its
+    value: tests/data/openvdb_half_subnormal.vdb (OpenVDB 10.0.1, saved as
+    half floats) came back with 2^-24 as 2^-25, every subnormal halved and
+    no error. A half-float grid's leaf values are now decoded by clvis's walk,
+    bit for bit what OpenVDB reads."""
+    path = Path(__file__).parents[1] / "data" / "openvdb_half_subnormal.vdb"
+    sv = read_vdb(path)
+    assert sv.shape == (2, 8, 8) and sv.n_active == 128 and sv.active().all()
+    n = 1 + np.arange(8)[None, :] + 8 * np.arange(8)[:, None]  # [y, x] = 1 + x + 8 y
+    want = np.stack([n * 2.0**-24, -n * 2.0**-14]).astype(F32)
+    assert np.abs(want[0]).max() < 2.0**-14  # every value of z = 0 a subnormal half
+    np.testing.assert_array_equal(sv.to_dense().view(np.uint32), want.view(np.uint32))
+
+
 @pytest.mark.parametrize(
     "compression", ["ZIP | ACTIVE_MASK", "ZIP", "NONE", "ACTIVE_MASK", "BLOSC | ACTIVE_MASK"]
 )
@@ -674,7 +689,9 @@ def test_vdb_tile_blocks_that_do_not_decode_are_refused(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "blosc", None)
     with pytest.raises(ImportError, match=r"blosc-compressed, which needs the blosc package: pip install"):
         read_vdb(path, grid="block")
-    assert read_vdb(path, grid="density").n_active == 7_208  # no tiles: no blosc needed
+    with pytest.raises(ImportError, match=r"half-float leaves are blosc-compressed, which needs the blosc"):
+        read_vdb(path, grid="density")  # half floats: its leaves decoded by clvis
+    assert read_vdb(path, grid="surface").n_active == 12_790  # no tiles, floats: no blosc needed
 
 
 def test_vdb_tree_clvis_does_not_walk_is_read_from_tinyvdbs_voxel_list(tmp_path, monkeypatch):

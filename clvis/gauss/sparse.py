@@ -395,15 +395,28 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     try:
         f = tinyvdb.open(str(p))
     except (RuntimeError, ValueError, OSError, MemoryError, IndexError) as e:
-        raise DataError(f"{p}: not a readable VDB file: {e}") from None
+        raise DataError(f"{p}: not a readable VDB file: {e}{_why_tinyvdb_fails(walked)}") from None
     try:
         return _read_grid(f, p, grid, walked)
     except DataError:
         raise
     except (RuntimeError, ValueError, OSError, MemoryError, IndexError, KeyError, TypeError) as e:
-        raise DataError(f"{p}: not a readable VDB file: {e}") from None
+        raise DataError(f"{p}: not a readable VDB file: {e}{_why_tinyvdb_fails(walked)}") from None
     finally:
         f.close()
+
+
+def _why_tinyvdb_fails(walked: list[GridLeaves | None]) -> str:
+    """What the walk found that tinyvdb 0.9 cannot read (its own error says
+    "OOM" or "Failed to read BLOSC data"), or ""."""
+    bad = [i for i, w in enumerate(walked) if w is not None and w.half_inactive and w.parent is None]
+    if not bad:
+        return ""
+    return (
+        f" (tinyvdb 0.9 cannot read grid{'s' if len(bad) > 1 else ''} {', '.join(map(str, bad))}: saved "
+        "as half floats, with nodes storing inactive values other than the background; "
+        "OpenVDB can re-save the file with full floats)"
+    )
 
 
 def _is_float(type_name: str) -> bool:

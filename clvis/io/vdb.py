@@ -123,6 +123,9 @@ class GridLeaves:
     tile_blocks: tuple[_TileBlock, ...] = ()
     parent: int | None = None  # an instance grid: the index of the grid whose tree it shares
     half_leaves: tuple[_TileBlock, ...] = ()  # a half-float grid's leaf values, as stored
+    # a half-float grid's nodes that store inactive values other than the
+    # background (value metadata 2, 4, 5), which tinyvdb 0.9 cannot read
+    half_inactive: int = 0
 
     def half_leaf_values(self) -> np.ndarray | None:
         """(L, 512) float32: a half-float grid's leaf values, decoded here
@@ -372,7 +375,15 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
                 )
     masks = np.frombuffer(b"".join(tree.masks), np.uint8).reshape(-1, 64)
     origins = np.concatenate(tree.origins) if tree.origins else np.zeros((0, 3), np.int64)
-    return GridLeaves(p, active, origins, masks, tuple(tree.tiles), half_leaves=tuple(half_leaves))
+    return GridLeaves(
+        p,
+        active,
+        origins,
+        masks,
+        tuple(tree.tiles),
+        half_leaves=tuple(half_leaves),
+        half_inactive=tree.half_inactive,
+    )
 
 
 class _Tree:
@@ -384,6 +395,7 @@ class _Tree:
     ) -> None:
         self.r, self.compression, self.value_bytes, self.half = r, compression, value_bytes, half
         self.want_tiles = tiles  # a float tree: its active tiles kept
+        self.half_inactive = 0  # half-float nodes storing inactive values (tinyvdb 0.9 misreads them)
         self.tiles: list[_TileBlock] = []
         self.leaves: list[int] = []  # where each leaf's topology value mask is
         self.origins: list[np.ndarray] = []  # their origins, (n, 3) per 16^3 node
@@ -445,6 +457,8 @@ class _Tree:
         # grid saved as half floats (OpenVDB writes them truncated to half
         # precision but as floats); the values after them as half floats
         inactive = {2: 1, 4: 1, 5: 2}.get(meta, 0)
+        if inactive and self.half:
+            self.half_inactive += 1
         r.need(inactive * self.value_bytes, f"{what}' inactive values")
         r.pos += inactive * self.value_bytes
         value_bytes = 2 if self.half else self.value_bytes

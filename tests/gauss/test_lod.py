@@ -589,7 +589,8 @@ def test_vdb_half_float_nodes_with_an_inactive_value_are_walked():
     each, not as halves: the walk skipped 2 bytes each, then read the next
     block from the wrong byte and refused the file as malformed
     (tests/data/openvdb_half_inactive.vdb, OpenVDB 10.0.1: a 16^3 node of
-    active and inactive 8^3 tiles and a leaf with inactive voxels of 6.0)."""
+    active and inactive 8^3 tiles and a leaf with inactive voxels of 6.0).
+    tinyvdb 0.9 misreads them too: read_vdb says so."""
     from clvis.io.vdb import vdb_leaves
 
     path = Path(__file__).parents[1] / "data" / "openvdb_half_inactive.vdb"
@@ -604,6 +605,14 @@ def test_vdb_half_float_nodes_with_an_inactive_value_are_walked():
     want[0, :4, :4, :4] = 1  # 1.5 over (40..43, 0..3, 0..3)
     want[1, 4:7, :3, :3] = 1  # 2.5 over (60..62, 0..2, 0..2)
     np.testing.assert_array_equal(bits, want)
+    assert g.half_inactive == 2  # the 16^3 node and the first leaf
+    # tinyvdb 0.9 cannot read such a file ("Failed to read BLOSC data", or
+    # "OOM"): a DataError that says why
+    with pytest.raises(
+        clvis.DataError, match=r"tinyvdb 0.9 cannot read grid 0: saved as half floats, with"
+    ) as e:
+        read_vdb(path)
+    assert str(path) in str(e.value)
 
 
 def test_vdb_half_float_subnormals_are_read_at_their_value():

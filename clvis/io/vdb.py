@@ -55,7 +55,7 @@ import numpy as np
 
 from ..errors import DataError
 
-__all__ = ["GridLeaves", "check_vdb", "vdb_leaves"]
+__all__ = ["GridLeaves", "check_vdb", "vdb_grids", "vdb_leaves"]
 
 _MAGIC = 0x56444220
 # doubles each map type stores after its name
@@ -77,8 +77,8 @@ _LOG2DIMS = ["5", "4", "3"]  # the tree configuration walked (OpenVDB's standard
 _CHILD_SPAN = [4 + 3, 3]
 
 
-_NO_ORIGINS = np.zeros((0, 3), np.int64)
-_NO_PICKS = np.zeros(0, np.int64)
+_CODECS: list[str | None] = [None, "zip", "blosc"]  # a leaf_blocks row's codec
+_ALL = np.arange(512, dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -122,26 +122,47 @@ class GridLeaves:
     masks: np.ndarray
     tile_blocks: tuple[_TileBlock, ...] = ()
     parent: int | None = None  # an instance grid: the index of the grid whose tree it shares
-    half_leaves: tuple[_TileBlock, ...] = ()  # a half-float grid's leaf values, as stored
     # a half-float grid's nodes that store inactive values other than the
     # background (value metadata 2, 4, 5), which tinyvdb 0.9 cannot read
     half_inactive: int = 0
+    half: bool = False  # a float grid saved as half floats
+    # a float grid's leaf values as stored: per leaf (start byte, bytes, values, codec)
+    leaf_blocks: np.ndarray | None = None
+    transform: dict | None = None  # its map, as tinyvdb's VDBGrid.transform gives it
 
     def half_leaf_values(self) -> np.ndarray | None:
-        """(L, 512) float32: a half-float grid's leaf values, decoded here
+        """:meth:`leaf_values` of a grid saved as half floats, else None."""
+        return self.leaf_values() if self.half else None
+
+    def leaf_values(self) -> np.ndarray:
+        """(L, 512) float32: a float grid's leaf values, decoded from the file
         (VDB order: value n at (n >> 6, (n >> 3) & 7, n & 7) from the leaf's
         origin; where only the active values are stored, the inactive ones
-        are 0); None for a grid not saved as half floats."""
-        if not self.half_leaves:
-            return None
+        are 0)."""
+        if self.leaf_blocks is None:
+            raise ValueError("leaf_values: not a float grid")
         out = np.zeros((len(self), 512), np.float32)
+        if not len(out):
+            return out
         active = np.unpackbits(self.masks, axis=1, bitorder="little").view(bool)
-        for k, b in enumerate(self.half_leaves):
-            values = _decode(self.path, b)
-            if b.count == 512:
-                out[k] = values
-            else:  # the active ones, as many as the value mask's bits (the walk's count)
-                out[k, active[k]] = values
+        with open(self.path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            for k, (start, nbytes, count, codec) in enumerate(self.leaf_blocks.tolist()):
+                what = f"the leaf values at byte {start}"
+                b = _TileBlock(
+                    self.origins[k : k + 1],
+                    3,
+                    _ALL,
+                    bytes(data[start : start + nbytes]),
+                    count,
+                    _CODECS[codec],
+                    self.half,
+                    what,
+                )
+                values = _decode(self.path, b)
+                if count == 512:
+                    out[k] = values
+                else:  # the active ones, as many as the value mask's bits (the walk's count)
+                    out[k, active[k]] = values
         return out
 
     def __len__(self) -> int:
@@ -229,6 +250,12 @@ def check_vdb(path: str | Path) -> list[tuple[int, int] | None]:
 def vdb_leaves(path: str | Path) -> list[GridLeaves | None]:
     """:func:`check_vdb`'s walk, returning each walked grid's leaves (their
     origins and value masks, GridLeaves), None for a grid not walked."""
+    return [leaves for _, _, leaves in vdb_grids(path)]
+
+
+def vdb_grids(path: str | Path) -> list[tuple[str, str, GridLeaves | None]]:
+    """:func:`vdb_leaves` with each grid's name (without the suffix OpenVDB
+    gives a repeated name) and type name: (name, type, leaves or None)."""
     p = Path(path)
     with open(p, "rb") as f:
         size = os.fstat(f.fileno()).st_size
@@ -238,7 +265,7 @@ def vdb_leaves(path: str | Path) -> list[GridLeaves | None]:
             return _check(p, data, size)
 
 
-def _check(p: Path, data, size: int) -> list[GridLeaves | None]:
+def _check(p: Path, data, size: int) -> list[tuple[str, str, GridLeaves | None]]:
     r = _Reader(p, data, size)
     magic = r.take("<q", "magic")
     if magic != _MAGIC:
@@ -283,11 +310,38 @@ def _check(p: Path, data, size: int) -> list[GridLeaves | None]:
                 )
             shared = out[j]
             root = j if shared is None or shared.parent is None else shared.parent
-            out.append(None if shared is None else replace(shared, parent=root))
+            own = _Reader(p, data, end_pos)  # its own compression flags, metadata and transform
+            own.pos = grid_pos
+            own.take("<I", "grid compression flags")
+            own.metadata("grid metadata")
+            transform = _read_map(own)
+            out.append(None if shared is None else replace(shared, parent=root, transform=transform))
         else:
             out.append(_check_root(p, data, end_pos, kind, grid_pos))
         r.pos = end_pos  # the next descriptor follows the grid
-    return out
+    # a repeated name is written with a suffix: "\x1e" and a number
+    return [(n.split("\x1e")[0], k, g) for n, k, g in zip(names, kinds, out, strict=True)]
+
+
+def _read_map(r: _Reader) -> dict | None:
+    """A grid's transform (its map's type name and doubles) as tinyvdb gives
+    it: {"type", "voxel_size", "translation"} or {"type": "affine",
+    "matrix"}; None for a map of another type (not skipped)."""
+    map_type = r.string("transform type")
+    n = _MAP_DOUBLES.get(map_type)
+    if n is None:
+        return None
+    r.need(8 * n, f"{map_type} values")
+    d = struct.unpack_from(f"<{n}d", r.data, r.pos)
+    r.pos += 8 * n
+    if map_type == "AffineMap":  # the 4x4 matrix, row by row, translation in the last row
+        return {"type": "affine", "matrix": [list(d[i : i + 4]) for i in range(0, 16, 4)]}
+    if map_type == "TranslationMap":
+        return {"type": "translation", "voxel_size": (1.0, 1.0, 1.0), "translation": d[0:3]}
+    # the scale (signed), then the voxel size (its absolute value), ...
+    if n == 18:  # (Uniform)ScaleTranslateMap: the translation first
+        return {"type": "scale_translate", "scale": d[3:6], "voxel_size": d[6:9], "translation": d[0:3]}
+    return {"type": "scale", "scale": d[0:3], "voxel_size": d[3:6], "translation": (0.0, 0.0, 0.0)}
 
 
 def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves | None:
@@ -301,12 +355,9 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
     r.pos = grid_pos
     compression = r.take("<I", "grid compression flags")
     r.metadata("grid metadata")
-    map_type = r.string("transform type")
-    doubles = _MAP_DOUBLES.get(map_type)
-    if doubles is None:
+    transform = _read_map(r)
+    if transform is None:
         return None  # a map clvis refuses later, by name
-    r.need(8 * doubles, f"{map_type} values")
-    r.pos += 8 * doubles
     r.take("<I", "buffer count")
     r.need(value_bytes, "background value")
     r.pos += value_bytes
@@ -343,7 +394,7 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
         origin = r.take("<3i", "root child origin")
         tree.internal(0, np.array(origin, np.int64))
     active = 0
-    half_leaves: list[_TileBlock] = []
+    blocks: list[tuple[int, int, int, int]] = []  # a float grid's leaf values: start, bytes, count, codec
     for leaf in tree.leaves:
         at = r.pos
         r.need(64, "leaf buffer value mask")
@@ -360,19 +411,8 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
             r.pos += 12 + 64
         else:
             count, start, nbytes, codec = tree.values(3, on)
-            if tree.half:  # tinyvdb 0.9 halves half floats' subnormals: decoded here
-                half_leaves.append(
-                    _TileBlock(
-                        _NO_ORIGINS,
-                        3,
-                        _NO_PICKS,
-                        bytes(data[start : start + nbytes]),
-                        count,
-                        codec,
-                        True,
-                        f"the leaf values at byte {start}",
-                    )
-                )
+            if tree.want_tiles:  # a float grid
+                blocks.append((start, nbytes, count, _CODECS.index(codec)))
     masks = np.frombuffer(b"".join(tree.masks), np.uint8).reshape(-1, 64)
     origins = np.concatenate(tree.origins) if tree.origins else np.zeros((0, 3), np.int64)
     return GridLeaves(
@@ -381,8 +421,10 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
         origins,
         masks,
         tuple(tree.tiles),
-        half_leaves=tuple(half_leaves),
         half_inactive=tree.half_inactive,
+        half=tree.half,
+        leaf_blocks=np.array(blocks, np.int64).reshape(-1, 4) if tree.want_tiles else None,
+        transform=transform,
     )
 
 

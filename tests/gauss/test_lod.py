@@ -409,6 +409,19 @@ def test_vdb_round_trip(tmp_path):
     assert sv.n_leaves == SparseVolume.from_dense(dense, mask=active).n_leaves
     for lod in LODS:
         _same(gaussians_from_volume(sv, lod), ref.gaussians_from_volume(sv, lod))
+    _same_as_walked(path, "density", sv)
+
+
+def _same_as_walked(path, grid, sv):
+    """The grid as clvis's walk alone reads it (read_vdb's way for a file
+    tinyvdb cannot read: names, transform, values, all from the walk) is sv."""
+    from clvis.gauss import sparse
+    from clvis.io.vdb import vdb_grids
+
+    walked = sparse._read_walked(path, grid, vdb_grids(path), "why")
+    assert (walked.shape, walked.spacing, walked.origin) == (sv.shape, sv.spacing, sv.origin)
+    np.testing.assert_array_equal(walked.to_dense().view(np.uint32), sv.to_dense().view(np.uint32))
+    np.testing.assert_array_equal(walked.active(), sv.active())
 
 
 def test_vdb_grids_and_transforms(tmp_path):
@@ -425,9 +438,26 @@ def test_vdb_grids_and_transforms(tmp_path):
     assert sv.spacing == (4.0, 3.0, 2.0) and sv.shape == (18, 4, 9)
     np.testing.assert_allclose(sv.origin, [5 - 16, 6, 7])
     np.testing.assert_array_equal(sv.to_dense()[17, 3, 0], 2.0)
+    _same_as_walked(path, "diag", sv)  # an affine map, from the walk
     with pytest.raises(clvis.DataError, match="rotates or shears") as e:
         read_vdb(path)  # the first float grid is "rot"
     assert str(path) in str(e.value)
+    with pytest.raises(clvis.DataError, match="rotates or shears"):
+        _same_as_walked(path, None, sv)
+    # a mirrored axis: OpenVDB's scale map stores the scale (-2, 3, 4) and the
+    # voxel size (2, 3, 4); read by the voxel size the grid came out
+    # unmirrored, each voxel at the wrong place, and no error
+    vs, sc = np.array([2.0, 3.0, 4.0]), np.array([-2.0, 3.0, 4.0])
+    mirror = _s("ScaleTranslateMap") + b"".join(
+        struct.pack("<3d", *v) for v in (np.zeros(3), sc, vs, 1 / sc, 1 / sc**2, 0.5 / sc)
+    )
+    mirrored = [("mirrored", "Tree_float_5_4_3", mirror)]
+    mpath = _write_vdb(tmp_path, "mirror", mirrored, {0: (ijk, [1, 2])})
+    with pytest.raises(clvis.DataError, match=r"mirrors an axis \(scale \(-2.0, 3.0, 4.0\)\)") as e:
+        read_vdb(mpath)
+    assert str(mpath) in str(e.value)
+    with pytest.raises(clvis.DataError, match="mirrors an axis"):
+        _same_as_walked(mpath, None, sv)
     with pytest.raises(clvis.DataError, match="'labels' is a Tree_int32_5_4_3, not a float grid"):
         read_vdb(path, grid="labels")
     with pytest.raises(clvis.DataError, match="no grid named 'nope'"):
@@ -590,7 +620,8 @@ def test_vdb_half_float_nodes_with_an_inactive_value_are_walked():
     block from the wrong byte and refused the file as malformed
     (tests/data/openvdb_half_inactive.vdb, OpenVDB 10.0.1: a 16^3 node of
     active and inactive 8^3 tiles and a leaf with inactive voxels of 6.0).
-    tinyvdb 0.9 misreads them too: read_vdb says so."""
+    tinyvdb 0.9 misreads them too: read_vdb reads such a file from the walk
+    alone (leaves, values, tiles, transform)."""
     from clvis.io.vdb import vdb_leaves
 
     path = Path(__file__).parents[1] / "data" / "openvdb_half_inactive.vdb"
@@ -607,12 +638,15 @@ def test_vdb_half_float_nodes_with_an_inactive_value_are_walked():
     np.testing.assert_array_equal(bits, want)
     assert g.half_inactive == 2  # the 16^3 node and the first leaf
     # tinyvdb 0.9 cannot read such a file ("Failed to read BLOSC data", or
-    # "OOM"): a DataError that says why
-    with pytest.raises(
-        clvis.DataError, match=r"tinyvdb 0.9 cannot read grid 0: saved as half floats, with"
-    ) as e:
-        read_vdb(path)
-    assert str(path) in str(e.value)
+    # "OOM"): read_vdb reads it from the walk alone
+    sv = read_vdb(path)
+    want = np.zeros((8, 8, 63), F32)  # [z, y, x]
+    want[:, :, :16] = 5.0
+    want[:4, :4, 40:44] = 1.5
+    want[:3, :3, 60:63] = 2.5
+    assert sv.shape == want.shape and sv.n_active == 1024 + 91 and sv.n_tiles == 2
+    np.testing.assert_array_equal(sv.to_dense(), want)
+    np.testing.assert_array_equal(sv.active(), want != 0)
 
 
 def test_vdb_half_float_subnormals_are_read_at_their_value():
@@ -713,7 +747,7 @@ def test_vdb_tree_clvis_does_not_walk_is_read_from_tinyvdbs_voxel_list(tmp_path,
     grids = [("density", "Tree_float_5_4_3", _scale_translate((0.5, 1, 2), (1, 2, 3)))]
     path = _write_vdb(tmp_path, "rnd", grids, {0: (ijk, vals)})
     walked = read_vdb(path)
-    monkeypatch.setattr(sparse, "vdb_leaves", lambda p: [])  # as for a version-221 file
+    monkeypatch.setattr(sparse, "vdb_grids", lambda p: [])  # as for a version-221 file
     listed = read_vdb(path)
     assert (listed.shape, listed.spacing, listed.origin) == (walked.shape, walked.spacing, walked.origin)
     np.testing.assert_array_equal(listed.to_dense(), walked.to_dense())

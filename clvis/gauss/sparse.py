@@ -396,7 +396,9 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     p = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO, device
     grids = vdb_grids(p)  # counts the file cannot hold, before tinyvdb allocates them
     walked = [leaves for _, _, leaves in grids]
-    _check_memory(p, walked)
+    # the grid read, early (its active tiles are what read_vdb makes whole)
+    selected = _select(p, [n for n, _, _ in grids], [t for _, t, _ in grids], grid) if grids else None
+    _check_memory(p, walked, selected)
     try:
         f = tinyvdb.open(str(p))
     except (RuntimeError, ValueError, OSError, MemoryError, IndexError) as e:
@@ -455,13 +457,21 @@ _BYTES_PER_LEAF = 3 * 2048 + 512
 _BYTES_PER_VOXEL = 160
 
 
-def _check_memory(p: Path, walked: list[GridLeaves | None]) -> None:
+def _check_memory(p: Path, walked: list[GridLeaves | None], selected: int | None = None) -> None:
     """DeviceError (as clvis's other host-memory refusals) before tinyvdb
-    reads a file whose leaves and voxels would not fit in host memory."""
+    reads a file whose leaves and voxels would not fit in host memory: every
+    grid's leaves (tinyvdb reads them all; an instance grid's are its
+    parent's), the active tiles of the grid `selected` (None: of every grid)."""
     from ..errors import DeviceError
     from ..runtime import host_available_bytes
 
-    counts = [(w.active, len(w), w.tile_leaves) for w in walked if w is not None]
+    counts = [
+        (w.active, len(w), w.tile_leaves if selected in (None, i) else 0)
+        if w.parent is None
+        else (0, 0, w.tile_leaves if selected == i else 0)
+        for i, w in enumerate(walked)
+        if w is not None
+    ]
     if not counts:
         return
     # an active tile's leaves are made whole in read_vdb's leaf arrays (no voxel arrays)

@@ -331,13 +331,15 @@ def _affine(m) -> bytes:
 
 def _vdb_template(grids, root_tiles=()) -> bytes:
     """An OpenVDB (format 224) file of empty grids: (name, type, transform
-    bytes); root_tiles: each float grid's root tiles ((i, j, k), value, active)."""
+    bytes); root_tiles: each float grid's root tiles ((i, j, k), value, active),
+    or {grid index: its root tiles}."""
     out = struct.pack("<qIIIB", 0x56444220, 224, 11, 0, 1) + b"0EA4B2C5-0F55-4B24-9C25-5CFD16E1E1CE"
     out += struct.pack("<II", 0, len(grids))  # no file metadata; grid count
-    for name, type_name, transform in grids:
+    for i, (name, type_name, transform) in enumerate(grids):
         body = struct.pack("<II", 0, 0) + transform + struct.pack("<I", 1)  # no compression, no metadata
         body += struct.pack("<i" if "int" in type_name else "<f", 0)  # background
-        tiles = root_tiles if "float" in type_name else ()
+        tiles = root_tiles.get(i, ()) if isinstance(root_tiles, dict) else root_tiles
+        tiles = tiles if "float" in type_name else ()
         body += struct.pack("<ii", len(tiles), 0)  # root tiles, no children
         body += b"".join(struct.pack("<3ifB", *ijk, value, active) for ijk, value, active in tiles)
         out += _s(name) + _s(type_name) + _s("")
@@ -786,6 +788,13 @@ def test_vdb_active_root_tile_is_refused_for_its_memory(tmp_path):
     assert str(path) in str(e.value)
     path.write_bytes(_vdb_template(grids, [((4096, 0, -4096), 0.5, 0)]))
     assert read_vdb(path).n_active == 0
+    # only the grid read has its tiles made whole: another grid's root tile
+    # refused the whole file (a 1-voxel grid beside it "needed 893 GB")
+    two = grids + [("small", "Tree_float_5_4_3", grids[0][2])]
+    path.write_bytes(_vdb_template(two, {0: [((4096, 0, -4096), 0.5, 1)]}))
+    assert read_vdb(path, grid="small").n_active == 0
+    with pytest.raises(clvis.DeviceError, match=r"134,217,728 leaves of active tiles needs about"):
+        read_vdb(path, grid=0)
 
 
 def test_vdb_malformed(tmp_path):

@@ -539,7 +539,11 @@ def _decode(path: Path, b: _TileBlock) -> np.ndarray:
                 raise ValueError(f"a blosc block not of {raw} bytes")
             if struct.unpack_from("<I", b.block, 12)[0] != len(b.block):
                 raise ValueError(f"a blosc block of {len(b.block)} bytes stating another size")
-            out = _blosc(path).decompress(b.block)
+            blosc = _blosc(path)
+            try:
+                out = blosc.decompress(b.block)
+            except Exception as e:  # blosc_extension.error, an Exception of its own
+                raise ValueError(f"blosc: {e}") from None
         else:
             out = b.block
     except (zlib.error, ValueError, RuntimeError) as e:  # blosc: ValueError, RuntimeError

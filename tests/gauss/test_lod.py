@@ -698,6 +698,14 @@ def test_vdb_active_tiles_under_each_compression(tmp_path, compression):
     np.testing.assert_array_equal(seed.to_dense(), want.transpose(2, 1, 0))
 
 
+def _garbled_blosc() -> bytes:
+    import blosc
+
+    c = bytearray(blosc.compress(np.arange(64, dtype="<f4").tobytes(), typesize=4, cname="lz4"))
+    c[16:] = bytes(x ^ 0xFF for x in c[16:])  # the header (sizes) kept
+    return bytes(c)
+
+
 def test_vdb_tile_blocks_that_do_not_decode_are_refused(tmp_path, monkeypatch):
     """A tile's values block that is not what its node declares (zlib that
     fails or decompresses to more, a blosc header of another size, raw bytes
@@ -726,6 +734,9 @@ def test_vdb_tile_blocks_that_do_not_decode_are_refused(tmp_path, monkeypatch):
             "node X: a blosc block not of 16",
         ),
         (block(vals.tobytes()[:12], 4, None), "node X: 12 bytes for 4 values"),
+        # a blosc header of the right sizes over bytes blosc cannot decompress
+        # (blosc's own error class, not caught: found fuzzing half-float leaves)
+        (block(_garbled_blosc(), 64, "blosc"), "node X: blosc: Error -1 while decompressing"),
     ]:
         with pytest.raises(clvis.DataError, match=f"malformed VDB file: {match}") as e:
             vdb._decode(tmp_path, bad)

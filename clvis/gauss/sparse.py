@@ -13,7 +13,7 @@ being (ox, oy, oz) (DESIGN.md).
 
 :func:`read_vdb` reads a float grid of an OpenVDB file into this layout
 through the optional ``tinyvdb`` package and, for blosc-compressed active
-tiles, ``blosc`` (``pip install ".[vdb]"`` from a clvis
+tiles and leaves of grids saved as half floats, ``blosc`` (``pip install ".[vdb]"`` from a clvis
 checkout, or ``pip install tinyvdb blosc``).
 """
 
@@ -30,7 +30,7 @@ import numpy as np
 from .._arrays import triple
 from ..errors import DataError
 from ..io.files import regular_file
-from ..io.vdb import GridLeaves, vdb_leaves
+from ..io.vdb import GridLeaves, vdb_grids
 from ..io.volumes import volume_parts
 
 __all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb"]
@@ -373,11 +373,16 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     the shape reaches the largest active coordinate. spacing is the grid's
     voxel size (dz, dy, dx), origin the world position of sample [0, 0, 0]
     (translation + voxel size * off). Only scale/translate transforms (or an
-    affine map without rotation) are accepted.
+    affine map without rotation) with positive scales are accepted (a
+    mirrored axis is a DataError).
 
     Each leaf is placed by clvis's walk of the file (clvis.io.vdb.vdb_leaves)
-    and its values are tinyvdb's; a leaf where the two disagree raises
-    DataError. Active tiles (uniform regions stored above the leaves, 8^3,
+    and its values are tinyvdb's (a grid saved as half floats: the walk's,
+    tinyvdb 0.9 reading half floats' subnormals as half their value); a leaf
+    where the two disagree raises DataError. A file tinyvdb 0.9 cannot read
+    because a grid saved as half floats stores inactive values other than
+    the background (tinyvdb reads them as half floats) is read by the walk
+    alone. Active tiles (uniform regions stored above the leaves, 8^3,
     128^3 or 4096^3 voxels), which tinyvdb does not read, are decoded by the
     walk (blosc-compressed ones need the blosc package) and become tile
     leaves. A missing
@@ -389,20 +394,55 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
         raise TypeError(f"grid: expected a name, an index or None, got {type(grid).__name__}")
     tinyvdb = _tinyvdb()
     p = regular_file(path)  # FileNotFoundError; DataError for a directory, FIFO, device
-    walked = vdb_leaves(p)  # counts the file cannot hold, before tinyvdb allocates them
-    _check_memory(p, walked)
+    grids = vdb_grids(p)  # counts the file cannot hold, before tinyvdb allocates them
+    walked = [leaves for _, _, leaves in grids]
+    # the grid read, early (its active tiles are what read_vdb makes whole)
+    selected = _select(p, [n for n, _, _ in grids], [t for _, t, _ in grids], grid) if grids else None
+    _check_memory(p, walked, selected)
     try:
         f = tinyvdb.open(str(p))
     except (RuntimeError, ValueError, OSError, MemoryError, IndexError) as e:
-        raise DataError(f"{p}: not a readable VDB file: {e}") from None
-    try:
-        return _read_grid(f, p, grid, walked)
-    except DataError:
-        raise
-    except (RuntimeError, ValueError, OSError, MemoryError, IndexError, KeyError, TypeError) as e:
-        raise DataError(f"{p}: not a readable VDB file: {e}") from None
-    finally:
-        f.close()
+        failed: Exception = e
+    else:
+        try:
+            return _read_grid(f, p, grid, walked)
+        except DataError:
+            raise
+        except (RuntimeError, ValueError, OSError, MemoryError, IndexError, KeyError, TypeError) as e:
+            failed = e
+        finally:
+            f.close()
+    why = _why_tinyvdb_fails(walked)
+    if why:  # what tinyvdb misreads: the grid as the walk alone reads it
+        return _read_walked(p, grid, grids, f"not a readable VDB file: {failed}{why}")
+    raise DataError(f"{p}: not a readable VDB file: {failed}") from None
+
+
+def _why_tinyvdb_fails(walked: list[GridLeaves | None]) -> str:
+    """What the walk found that tinyvdb 0.9 cannot read (its own error says
+    "OOM" or "Failed to read BLOSC data"), or ""."""
+    bad = [i for i, w in enumerate(walked) if w is not None and w.half_inactive and w.parent is None]
+    if not bad:
+        return ""
+    return (
+        f" (tinyvdb 0.9 cannot read grid{'s' if len(bad) > 1 else ''} {', '.join(map(str, bad))}: saved "
+        "as half floats, with nodes storing inactive values other than the background)"
+    )
+
+
+def _read_walked(p: Path, grid, grids: list[tuple[str, str, GridLeaves | None]], why: str) -> SparseVolume:
+    """A grid of a file tinyvdb cannot read, from clvis's walk alone (its
+    transform, leaves, values and tiles); `why` tinyvdb failed, in the
+    DataError for a grid the walk does not read whole."""
+    names, types = [n for n, _, _ in grids], [t for _, t, _ in grids]
+    idx = _select(p, names, types, grid)
+    leaves = grids[idx][2]
+    if leaves is None or leaves.transform is None or leaves.leaf_blocks is None:
+        raise DataError(f"{p}: {why}; clvis's walk does not read grid {names[idx]!r} alone")
+    voxel_size, translation = _transform(p, leaves.transform)
+    active = np.unpackbits(leaves.masks, axis=1, bitorder="little").view(bool)
+    at, lv, la = leaves.origins, _zyx(leaves.leaf_values()), _zyx(active)
+    return _assemble(p, names[idx], leaves, at, lv, la, voxel_size, translation)
 
 
 def _is_float(type_name: str) -> bool:
@@ -417,13 +457,21 @@ _BYTES_PER_LEAF = 3 * 2048 + 512
 _BYTES_PER_VOXEL = 160
 
 
-def _check_memory(p: Path, walked: list[GridLeaves | None]) -> None:
+def _check_memory(p: Path, walked: list[GridLeaves | None], selected: int | None = None) -> None:
     """DeviceError (as clvis's other host-memory refusals) before tinyvdb
-    reads a file whose leaves and voxels would not fit in host memory."""
+    reads a file whose leaves and voxels would not fit in host memory: every
+    grid's leaves (tinyvdb reads them all; an instance grid's are its
+    parent's), the active tiles of the grid `selected` (None: of every grid)."""
     from ..errors import DeviceError
     from ..runtime import host_available_bytes
 
-    counts = [(w.active, len(w), w.tile_leaves) for w in walked if w is not None]
+    counts = [
+        (w.active, len(w), w.tile_leaves if selected in (None, i) else 0)
+        if w.parent is None
+        else (0, 0, w.tile_leaves if selected == i else 0)
+        for i, w in enumerate(walked)
+        if w is not None
+    ]
     if not counts:
         return
     # an active tile's leaves are made whole in read_vdb's leaf arrays (no voxel arrays)
@@ -440,11 +488,9 @@ def _check_memory(p: Path, walked: list[GridLeaves | None]) -> None:
         )
 
 
-def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolume:
-    f.read_grids()
-    n = int(f.grid_count)
-    names = [f.grid_name(i) for i in range(n)]
-    types = [f.grid_type_name(i) for i in range(n)]
+def _select(p: Path, names: list[str], types: list[str], grid) -> int:
+    """The index of the float grid `grid` names (read_vdb's grid)."""
+    n = len(names)
     if grid is None:
         idx = next((i for i in range(n) if _is_float(types[i])), None)
         if idx is None:
@@ -459,12 +505,23 @@ def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolum
         idx = int(grid)
     if not _is_float(types[idx]):
         raise DataError(f"{p}: grid {names[idx]!r} is a {types[idx]}, not a float grid")
+    return idx
+
+
+def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolume:
+    f.read_grids()
+    n = int(f.grid_count)
+    names = [f.grid_name(i) for i in range(n)]
+    types = [f.grid_type_name(i) for i in range(n)]
+    idx = _select(p, names, types, grid)
     g = f.grid(idx)
     voxel_size, translation = _transform(p, g.transform)
     leaves = walked[idx] if len(walked) == n else None
     name = names[idx]
     if leaves is not None:
-        at, lv, la = _leaf_values(p, name, g, leaves)
+        # an instance grid has no tree of its own: its parent's (tinyvdb's is empty)
+        tree_grid = g if leaves.parent is None else f.grid(leaves.parent)
+        at, lv, la = _leaf_values(p, name, tree_grid, leaves)
     else:  # a tree clvis's walk does not follow: tinyvdb's own list of voxels
         sp = g.to_sparse()
         ijk = np.frombuffer(sp["coords"], np.int32).reshape(-1, 3).astype(np.int64)
@@ -472,6 +529,14 @@ def _read_grid(f, p: Path, grid, walked: list[GridLeaves | None]) -> SparseVolum
         if len(ijk) != int(sp["count"]) or len(vals) != len(ijk):
             raise DataError(f"{p}: grid {name!r}: inconsistent voxel data")
         at, lv, la = _voxel_leaves(p, name, ijk, vals)
+    return _assemble(p, name, leaves, at, lv, la, voxel_size, translation)
+
+
+def _assemble(
+    p: Path, name: str, leaves: GridLeaves | None, at, lv, la, voxel_size, translation
+) -> SparseVolume:
+    """A grid's SparseVolume from its leaves ((L, 3) origins (i, j, k), (L,
+    512) values and activity, [z, y, x]-major inside) and active tiles."""
     tile_at, tile_vals = _tile_leaves(leaves)
     if len(tile_at):  # each active tile's leaves, whole, after the stored leaves
         at = np.concatenate([at, tile_at])
@@ -563,7 +628,9 @@ def _leaf_values(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray,
 
     Where each leaf is and which of its voxels are active come from clvis's
     walk of the file (GridLeaves); the values from tinyvdb's tree, which holds
-    every leaf's 512 values decompressed (zip, blosc, half floats). tinyvdb
+    every leaf's 512 values decompressed (zip, blosc, half floats: but a
+    half float's subnormal comes back as half its value, so a half-float
+    grid's values are the walk's, GridLeaves.half_leaf_values). tinyvdb
     0.9's own voxel list (VDBGrid.to_sparse) drops leaves of many trees: of a
     16^3 node of more than 64 leaves it returns 64, and a level-set sphere of
     radius 40 voxels written by OpenVDB 10 came back with 87,614 of its
@@ -591,13 +658,18 @@ def _leaf_values(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray,
         k += 1
     if k != len(leaves):
         raise DataError(f"{p}: grid {name!r}: tinyvdb read {k:,} leaves of the file's {len(leaves):,}")
+    own = leaves.half_leaf_values()
+    if own is not None:  # half floats: clvis's decoding (tinyvdb 0.9 halves the subnormals)
+        values = own
 
-    def zyx(a: np.ndarray) -> np.ndarray:
-        return np.ascontiguousarray(a.reshape(-1, LEAF, LEAF, LEAF).transpose(0, 3, 2, 1)).reshape(
-            -1, LEAF_VOXELS
-        )
+    return leaves.origins, _zyx(values), _zyx(active)
 
-    return leaves.origins, zyx(values), zyx(active)
+
+def _zyx(a: np.ndarray) -> np.ndarray:
+    """(L, 512) in VDB's [x, y, z]-major leaf order -> [z, y, x]-major."""
+    return np.ascontiguousarray(a.reshape(-1, LEAF, LEAF, LEAF).transpose(0, 3, 2, 1)).reshape(
+        -1, LEAF_VOXELS
+    )
 
 
 def _listing(names, types) -> str:
@@ -607,7 +679,9 @@ def _listing(names, types) -> str:
 def _transform(p: Path, t: dict):
     kind = t.get("type")
     if kind in ("uniform_scale", "uniform_scale_translate", "scale", "scale_translate", "translation"):
-        vs = tuple(float(v) for v in t["voxel_size"])
+        # the scale, signed (a scale map's voxel size is its absolute value:
+        # a mirrored grid read by it would come out unmirrored, misplaced)
+        vs = tuple(float(v) for v in t.get("scale", t["voxel_size"]))
         tr = tuple(float(v) for v in t["translation"])
     elif kind == "affine":
         m = np.asarray(t["matrix"], np.float64)
@@ -621,6 +695,10 @@ def _transform(p: Path, t: dict):
         tr = tuple(float(v) for v in m[3, :3])
     else:
         raise DataError(f"{p}: unsupported grid transform {kind!r}")
+    if all(math.isfinite(v) for v in vs) and any(v < 0 for v in vs):
+        raise DataError(
+            f"{p}: the grid's transform mirrors an axis (scale {vs}); only positive scales are supported"
+        )
     if not all(math.isfinite(v) and v > 0 for v in vs) or not all(math.isfinite(v) for v in tr):
         raise DataError(
             f"{p}: the grid's voxel size {vs} / translation {tr} is not usable (needs finite sizes > 0)"

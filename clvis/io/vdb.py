@@ -13,7 +13,9 @@ The layout (OpenVDB file format, version 222 and later):
   minor (uint32 each), a grid-offsets flag (uint8), the UUID (36 ASCII bytes);
   file metadata (below); the grid count (uint32);
 - per grid: name, type and instance-parent strings (uint32 length + bytes),
-  then the grid, block and end offsets (int64 each);
+  then the grid, block and end offsets (int64 each); an instance (a grid
+  sharing the tree of the earlier grid its instance parent names) stores only
+  its compression flags, metadata and transform, and a block offset of 0;
 - at a grid's offset: its compression flags (uint32: 1 zip, 2 active mask,
   4 blosc), its metadata (a count, then per entry a name and a type string
   and a uint32-sized value), its transform (a type name string, then the
@@ -27,7 +29,8 @@ The layout (OpenVDB file format, version 222 and later):
 - the buffers: per leaf, in the same order, its value mask again (tinyvdb
   keeps the topology's, OpenVDB reads this one: they must agree) and its 512
   values (a bool leaf: 3 int32 and a 64-byte bit mask);
-- values: a metadata byte (0-6), up to two inactive values, a selection mask
+- values: a metadata byte (0-6), up to two inactive values (of the tree's
+  type, half floats or not), a selection mask
   (metadata 3-5), then all the node's values, or only the active ones (the
   value mask's count) under the active-mask flag unless the metadata is 6;
   compressed (zip, blosc) as an int64 byte count and the bytes (a count <= 0:
@@ -45,14 +48,14 @@ import mmap
 import os
 import struct
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import DataError
 
-__all__ = ["GridLeaves", "check_vdb", "vdb_leaves"]
+__all__ = ["GridLeaves", "check_vdb", "vdb_grids", "vdb_leaves"]
 
 _MAGIC = 0x56444220
 # doubles each map type stores after its name
@@ -72,6 +75,10 @@ _LOG2DIMS = ["5", "4", "3"]  # the tree configuration walked (OpenVDB's standard
 # log2 of the voxels a child of each internal level spans a side: a 32^3
 # node's children are 16^3 nodes of 8^3 leaves (2^7), a 16^3 node's leaves 2^3
 _CHILD_SPAN = [4 + 3, 3]
+
+
+_CODECS: list[str | None] = [None, "zip", "blosc"]  # a leaf_blocks row's codec
+_ALL = np.arange(512, dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -103,13 +110,60 @@ class GridLeaves:
     value stored above the leaves, e.g. a fog volume's uniform inside.
     tile_origins (T, 3) int64 (i, j, k) of each tile's first voxel,
     tile_log2 (T,) its side: 2^3 (a 16^3 node's entry), 2^7 (a 32^3 node's)
-    or 2^12 (the root's); :meth:`tile_values` decodes their values."""
+    or 2^12 (the root's); :meth:`tile_values` decodes their values.
+
+    parent: for an instance grid (one OpenVDB wrote sharing the tree of an
+    earlier grid: it stores only its metadata and transform), the index of
+    the grid whose tree (these leaves and tiles) it is; else None."""
 
     path: Path
     active: int
     origins: np.ndarray
     masks: np.ndarray
     tile_blocks: tuple[_TileBlock, ...] = ()
+    parent: int | None = None  # an instance grid: the index of the grid whose tree it shares
+    # a half-float grid's nodes that store inactive values other than the
+    # background (value metadata 2, 4, 5), which tinyvdb 0.9 cannot read
+    half_inactive: int = 0
+    half: bool = False  # a float grid saved as half floats
+    # a float grid's leaf values as stored: per leaf (start byte, bytes, values, codec)
+    leaf_blocks: np.ndarray | None = None
+    transform: dict | None = None  # its map, as tinyvdb's VDBGrid.transform gives it
+
+    def half_leaf_values(self) -> np.ndarray | None:
+        """:meth:`leaf_values` of a grid saved as half floats, else None."""
+        return self.leaf_values() if self.half else None
+
+    def leaf_values(self) -> np.ndarray:
+        """(L, 512) float32: a float grid's leaf values, decoded from the file
+        (VDB order: value n at (n >> 6, (n >> 3) & 7, n & 7) from the leaf's
+        origin; where only the active values are stored, the inactive ones
+        are 0)."""
+        if self.leaf_blocks is None:
+            raise ValueError("leaf_values: not a float grid")
+        out = np.zeros((len(self), 512), np.float32)
+        if not len(out):
+            return out
+        active = np.unpackbits(self.masks, axis=1, bitorder="little").view(bool)
+        with open(self.path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            for k, (start, nbytes, count, codec) in enumerate(self.leaf_blocks.tolist()):
+                what = f"the leaf values at byte {start}"
+                b = _TileBlock(
+                    self.origins[k : k + 1],
+                    3,
+                    _ALL,
+                    bytes(data[start : start + nbytes]),
+                    count,
+                    _CODECS[codec],
+                    self.half,
+                    what,
+                )
+                values = _decode(self.path, b)
+                if count == 512:
+                    out[k] = values
+                else:  # the active ones, as many as the value mask's bits (the walk's count)
+                    out[k, active[k]] = values
+        return out
 
     def __len__(self) -> int:
         return len(self.origins)
@@ -196,6 +250,12 @@ def check_vdb(path: str | Path) -> list[tuple[int, int] | None]:
 def vdb_leaves(path: str | Path) -> list[GridLeaves | None]:
     """:func:`check_vdb`'s walk, returning each walked grid's leaves (their
     origins and value masks, GridLeaves), None for a grid not walked."""
+    return [leaves for _, _, leaves in vdb_grids(path)]
+
+
+def vdb_grids(path: str | Path) -> list[tuple[str, str, GridLeaves | None]]:
+    """:func:`vdb_leaves` with each grid's name (without the suffix OpenVDB
+    gives a repeated name) and type name: (name, type, leaves or None)."""
     p = Path(path)
     with open(p, "rb") as f:
         size = os.fstat(f.fileno()).st_size
@@ -205,7 +265,7 @@ def vdb_leaves(path: str | Path) -> list[GridLeaves | None]:
             return _check(p, data, size)
 
 
-def _check(p: Path, data, size: int) -> list[GridLeaves | None]:
+def _check(p: Path, data, size: int) -> list[tuple[str, str, GridLeaves | None]]:
     r = _Reader(p, data, size)
     magic = r.take("<q", "magic")
     if magic != _MAGIC:
@@ -220,20 +280,68 @@ def _check(p: Path, data, size: int) -> list[GridLeaves | None]:
     r.metadata("file metadata")
     n_grids = r.take("<I", "grid count")
     r.need(36 * n_grids, f"{n_grids} grid descriptors")
-    grids = []
-    for _ in range(n_grids):
-        r.string("grid name")
+    out: list[GridLeaves | None] = []
+    names: list[str] = []
+    kinds: list[str] = []
+    for i in range(n_grids):
+        names.append(r.string("grid name"))
         kind = r.string("grid type")
-        r.string("instance parent")
+        kinds.append(kind)
+        parent = r.string("instance parent")
         grid_pos, block_pos, end_pos = r.take("<qqq", "grid offsets")
-        if not 0 <= grid_pos <= block_pos <= end_pos <= size:
+        # an instance (a grid sharing an earlier grid's tree) stores no tree:
+        # its block offset is 0 and its tree is its parent's
+        if not 0 <= grid_pos <= (grid_pos if parent else block_pos) <= end_pos <= size:
             raise DataError(
                 f"{p}: malformed VDB file: grid offsets {grid_pos}, {block_pos}, {end_pos} "
                 f"outside the file's {size} bytes"
             )
-        grids.append((kind, grid_pos, end_pos))
+        if parent:
+            if parent not in names[:i]:
+                raise DataError(
+                    f"{p}: malformed VDB file: grid {names[i]!r} is an instance of grid {parent!r}, "
+                    "which no grid before it is"
+                )
+            j = names.index(parent)
+            if kinds[j] != kind:
+                raise DataError(
+                    f"{p}: malformed VDB file: grid {names[i]!r} ({kind}) is an instance of grid "
+                    f"{parent!r}, a {kinds[j]}"
+                )
+            shared = out[j]
+            root = j if shared is None or shared.parent is None else shared.parent
+            own = _Reader(p, data, end_pos)  # its own compression flags, metadata and transform
+            own.pos = grid_pos
+            own.take("<I", "grid compression flags")
+            own.metadata("grid metadata")
+            transform = _read_map(own)
+            out.append(None if shared is None else replace(shared, parent=root, transform=transform))
+        else:
+            out.append(_check_root(p, data, end_pos, kind, grid_pos))
         r.pos = end_pos  # the next descriptor follows the grid
-    return [_check_root(p, data, end_pos, kind, grid_pos) for kind, grid_pos, end_pos in grids]
+    # a repeated name is written with a suffix: "\x1e" and a number
+    return [(n.split("\x1e")[0], k, g) for n, k, g in zip(names, kinds, out, strict=True)]
+
+
+def _read_map(r: _Reader) -> dict | None:
+    """A grid's transform (its map's type name and doubles) as tinyvdb gives
+    it: {"type", "voxel_size", "translation"} or {"type": "affine",
+    "matrix"}; None for a map of another type (not skipped)."""
+    map_type = r.string("transform type")
+    n = _MAP_DOUBLES.get(map_type)
+    if n is None:
+        return None
+    r.need(8 * n, f"{map_type} values")
+    d = struct.unpack_from(f"<{n}d", r.data, r.pos)
+    r.pos += 8 * n
+    if map_type == "AffineMap":  # the 4x4 matrix, row by row, translation in the last row
+        return {"type": "affine", "matrix": [list(d[i : i + 4]) for i in range(0, 16, 4)]}
+    if map_type == "TranslationMap":
+        return {"type": "translation", "voxel_size": (1.0, 1.0, 1.0), "translation": d[0:3]}
+    # the scale (signed), then the voxel size (its absolute value), ...
+    if n == 18:  # (Uniform)ScaleTranslateMap: the translation first
+        return {"type": "scale_translate", "scale": d[3:6], "voxel_size": d[6:9], "translation": d[0:3]}
+    return {"type": "scale", "scale": d[0:3], "voxel_size": d[3:6], "translation": (0.0, 0.0, 0.0)}
 
 
 def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves | None:
@@ -247,12 +355,9 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
     r.pos = grid_pos
     compression = r.take("<I", "grid compression flags")
     r.metadata("grid metadata")
-    map_type = r.string("transform type")
-    doubles = _MAP_DOUBLES.get(map_type)
-    if doubles is None:
+    transform = _read_map(r)
+    if transform is None:
         return None  # a map clvis refuses later, by name
-    r.need(8 * doubles, f"{map_type} values")
-    r.pos += 8 * doubles
     r.take("<I", "buffer count")
     r.need(value_bytes, "background value")
     r.pos += value_bytes
@@ -289,6 +394,7 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
         origin = r.take("<3i", "root child origin")
         tree.internal(0, np.array(origin, np.int64))
     active = 0
+    blocks: list[tuple[int, int, int, int]] = []  # a float grid's leaf values: start, bytes, count, codec
     for leaf in tree.leaves:
         at = r.pos
         r.need(64, "leaf buffer value mask")
@@ -304,10 +410,22 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
             r.need(12 + 64, "bool leaf buffer")
             r.pos += 12 + 64
         else:
-            tree.values(3, on)
+            count, start, nbytes, codec = tree.values(3, on)
+            if tree.want_tiles:  # a float grid
+                blocks.append((start, nbytes, count, _CODECS.index(codec)))
     masks = np.frombuffer(b"".join(tree.masks), np.uint8).reshape(-1, 64)
     origins = np.concatenate(tree.origins) if tree.origins else np.zeros((0, 3), np.int64)
-    return GridLeaves(p, active, origins, masks, tuple(tree.tiles))
+    return GridLeaves(
+        p,
+        active,
+        origins,
+        masks,
+        tuple(tree.tiles),
+        half_inactive=tree.half_inactive,
+        half=tree.half,
+        leaf_blocks=np.array(blocks, np.int64).reshape(-1, 4) if tree.want_tiles else None,
+        transform=transform,
+    )
 
 
 class _Tree:
@@ -319,6 +437,7 @@ class _Tree:
     ) -> None:
         self.r, self.compression, self.value_bytes, self.half = r, compression, value_bytes, half
         self.want_tiles = tiles  # a float tree: its active tiles kept
+        self.half_inactive = 0  # half-float nodes storing inactive values (tinyvdb 0.9 misreads them)
         self.tiles: list[_TileBlock] = []
         self.leaves: list[int] = []  # where each leaf's topology value mask is
         self.origins: list[np.ndarray] = []  # their origins, (n, 3) per 16^3 node
@@ -376,10 +495,15 @@ class _Tree:
         meta = r.take("<B", f"{what}' metadata")
         if meta > 6:
             raise DataError(f"{r.path}: malformed VDB file: {what}' metadata {meta} at byte {at} (0 to 6)")
-        value_bytes = 2 if self.half else self.value_bytes
+        # the inactive values are stored whole, as the tree's type, even in a
+        # grid saved as half floats (OpenVDB writes them truncated to half
+        # precision but as floats); the values after them as half floats
         inactive = {2: 1, 4: 1, 5: 2}.get(meta, 0)
-        r.need(inactive * value_bytes, f"{what}' inactive values")
-        r.pos += inactive * value_bytes
+        if inactive and self.half:
+            self.half_inactive += 1
+        r.need(inactive * self.value_bytes, f"{what}' inactive values")
+        r.pos += inactive * self.value_bytes
+        value_bytes = 2 if self.half else self.value_bytes
         if meta in (3, 4, 5):
             r.mask(n // 8, f"{what}' selection mask")
         count = active if self.compression & _ACTIVE_MASK and meta != 6 else n
@@ -415,7 +539,11 @@ def _decode(path: Path, b: _TileBlock) -> np.ndarray:
                 raise ValueError(f"a blosc block not of {raw} bytes")
             if struct.unpack_from("<I", b.block, 12)[0] != len(b.block):
                 raise ValueError(f"a blosc block of {len(b.block)} bytes stating another size")
-            out = _blosc(path).decompress(b.block)
+            blosc = _blosc(path)
+            try:
+                out = blosc.decompress(b.block)
+            except Exception as e:  # blosc_extension.error, an Exception of its own
+                raise ValueError(f"blosc: {e}") from None
         else:
             out = b.block
     except (zlib.error, ValueError, RuntimeError) as e:  # blosc: ValueError, RuntimeError
@@ -437,7 +565,8 @@ def _blosc(path: Path):
         import blosc
     except ImportError:
         raise ImportError(
-            f"{path}: its active tiles are blosc-compressed, which needs the blosc package: "
+            f"{path}: its active tiles or half-float leaves are blosc-compressed, which needs "
+            "the blosc package: "
             'pip install ".[vdb]" in a clvis checkout (or pip install blosc)'
         ) from None
     return blosc

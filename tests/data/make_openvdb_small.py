@@ -18,7 +18,13 @@ The tests check what read_vdb returns against these formulas.
 
 Also tests/data/openvdb_tiles.vdb, a fuzzing seed of active tiles: "tiles",
 0.5 over a 40^3 block at index (0, 0, 0) but (i + 2 j + 3 k) mod 5 / 5 in
-its first 8^3 (124 8^3 tiles and one leaf, blosc-compressed)."""
+its first 8^3 (124 8^3 tiles and one leaf, blosc-compressed).
+
+And tests/data/openvdb_instance.vdb (instance grids),
+tests/data/openvdb_half_inactive.vdb (half floats with inactive values other
+than the background) and tests/data/openvdb_half_subnormal.vdb, described
+where they are written below. Each run writes new UUIDs: regenerate only the
+files a change needs."""
 
 import numpy as np
 import pyopenvdb as vdb
@@ -47,3 +53,50 @@ tiles = vdb.FloatGrid()
 tiles.copyFromArray(t, ijk=(0, 0, 0), tolerance=0.0)
 tiles.name = "tiles"
 vdb.write("openvdb_tiles.vdb", grids=[tiles])
+
+# tests/data/openvdb_instance.vdb: "orig", "inst" (an instance of "orig": the
+# two grids share one tree, which OpenVDB writes once, "inst" storing only its
+# transform: voxel size 0.5, translation (1, 2, 3)) and "other"
+orig = vdb.FloatGrid()
+orig.fill((-16, 0, 0), (-1, 15, 15), 0.5)  # eight active 8^3 tiles
+acc = orig.getAccessor()
+for i, j, k in np.ndindex(5, 4, 3):
+    acc.setValueOn((3 + i, 4 + j, 5 + k), (i + 2 * j + 3 * k) % 11 / 11)
+orig.name = "orig"
+inst = orig.copy()  # shares orig's tree
+inst.transform = vdb.createLinearTransform(voxelSize=0.5)
+inst.transform.translate((1.0, 2.0, 3.0))
+inst.name = "inst"
+other = vdb.FloatGrid()
+other.getAccessor().setValueOn((-1, -2, -3), 7.0)
+other.name = "other"
+vdb.write("openvdb_instance.vdb", grids=[orig, inst, other])
+
+# tests/data/openvdb_half_inactive.vdb: "half", saved as half floats, whose
+# nodes store an inactive value other than the background (6.0; OpenVDB
+# writes it as a float, not a half): a 16^3 node of two active 8^3 tiles
+# (5.0 at (0, 0, 0) and (8, 0, 0)) and two inactive ones (6.0), a leaf of 64
+# active voxels (1.5 over (40..43, 0..3, 0..3)) and 8 inactive ones (6.0),
+# then a leaf of 27 (2.5 over (60..62, 0..2, 0..2))
+half = vdb.FloatGrid()
+half.fill((16, 0, 0), (31, 7, 7), 6.0, False)
+half.fill((0, 0, 0), (15, 7, 7), 5.0)
+half.fill((40, 0, 0), (43, 3, 3), 1.5)
+half.fill((44, 4, 4), (45, 5, 5), 6.0, False)
+half.fill((60, 0, 0), (62, 2, 2), 2.5)
+half.name = "half"
+half.saveFloatAsHalf = True
+vdb.write("openvdb_half_inactive.vdb", grids=[half])
+
+# tests/data/openvdb_half_subnormal.vdb: "tiny", saved as half floats, whose
+# values are half floats' subnormals and normals: voxel (i, j, 0) for i, j in
+# 0..7 holds (1 + i + 8 j) * 2^-24 (half's smallest subnormal times 1..64),
+# voxel (i, j, 1) the negated value times 2^10 (normal halves up to 2^-8)
+tiny = vdb.FloatGrid()
+acc = tiny.getAccessor()
+for i, j in np.ndindex(8, 8):
+    acc.setValueOn((i, j, 0), float((1 + i + 8 * j) * 2.0**-24))
+    acc.setValueOn((i, j, 1), float(-(1 + i + 8 * j) * 2.0**-14))
+tiny.name = "tiny"
+tiny.saveFloatAsHalf = True
+vdb.write("openvdb_half_subnormal.vdb", grids=[tiny])

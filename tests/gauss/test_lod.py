@@ -331,13 +331,15 @@ def _affine(m) -> bytes:
 
 def _vdb_template(grids, root_tiles=()) -> bytes:
     """An OpenVDB (format 224) file of empty grids: (name, type, transform
-    bytes); root_tiles: each float grid's root tiles ((i, j, k), value, active)."""
+    bytes); root_tiles: each float grid's root tiles ((i, j, k), value, active),
+    or {grid index: its root tiles}."""
     out = struct.pack("<qIIIB", 0x56444220, 224, 11, 0, 1) + b"0EA4B2C5-0F55-4B24-9C25-5CFD16E1E1CE"
     out += struct.pack("<II", 0, len(grids))  # no file metadata; grid count
-    for name, type_name, transform in grids:
+    for i, (name, type_name, transform) in enumerate(grids):
         body = struct.pack("<II", 0, 0) + transform + struct.pack("<I", 1)  # no compression, no metadata
         body += struct.pack("<i" if "int" in type_name else "<f", 0)  # background
-        tiles = root_tiles if "float" in type_name else ()
+        tiles = root_tiles.get(i, ()) if isinstance(root_tiles, dict) else root_tiles
+        tiles = tiles if "float" in type_name else ()
         body += struct.pack("<ii", len(tiles), 0)  # root tiles, no children
         body += b"".join(struct.pack("<3ifB", *ijk, value, active) for ijk, value, active in tiles)
         out += _s(name) + _s(type_name) + _s("")
@@ -409,6 +411,19 @@ def test_vdb_round_trip(tmp_path):
     assert sv.n_leaves == SparseVolume.from_dense(dense, mask=active).n_leaves
     for lod in LODS:
         _same(gaussians_from_volume(sv, lod), ref.gaussians_from_volume(sv, lod))
+    _same_as_walked(path, "density", sv)
+
+
+def _same_as_walked(path, grid, sv):
+    """The grid as clvis's walk alone reads it (read_vdb's way for a file
+    tinyvdb cannot read: names, transform, values, all from the walk) is sv."""
+    from clvis.gauss import sparse
+    from clvis.io.vdb import vdb_grids
+
+    walked = sparse._read_walked(path, grid, vdb_grids(path), "why")
+    assert (walked.shape, walked.spacing, walked.origin) == (sv.shape, sv.spacing, sv.origin)
+    np.testing.assert_array_equal(walked.to_dense().view(np.uint32), sv.to_dense().view(np.uint32))
+    np.testing.assert_array_equal(walked.active(), sv.active())
 
 
 def test_vdb_grids_and_transforms(tmp_path):
@@ -425,9 +440,26 @@ def test_vdb_grids_and_transforms(tmp_path):
     assert sv.spacing == (4.0, 3.0, 2.0) and sv.shape == (18, 4, 9)
     np.testing.assert_allclose(sv.origin, [5 - 16, 6, 7])
     np.testing.assert_array_equal(sv.to_dense()[17, 3, 0], 2.0)
+    _same_as_walked(path, "diag", sv)  # an affine map, from the walk
     with pytest.raises(clvis.DataError, match="rotates or shears") as e:
         read_vdb(path)  # the first float grid is "rot"
     assert str(path) in str(e.value)
+    with pytest.raises(clvis.DataError, match="rotates or shears"):
+        _same_as_walked(path, None, sv)
+    # a mirrored axis: OpenVDB's scale map stores the scale (-2, 3, 4) and the
+    # voxel size (2, 3, 4); read by the voxel size the grid came out
+    # unmirrored, each voxel at the wrong place, and no error
+    vs, sc = np.array([2.0, 3.0, 4.0]), np.array([-2.0, 3.0, 4.0])
+    mirror = _s("ScaleTranslateMap") + b"".join(
+        struct.pack("<3d", *v) for v in (np.zeros(3), sc, vs, 1 / sc, 1 / sc**2, 0.5 / sc)
+    )
+    mirrored = [("mirrored", "Tree_float_5_4_3", mirror)]
+    mpath = _write_vdb(tmp_path, "mirror", mirrored, {0: (ijk, [1, 2])})
+    with pytest.raises(clvis.DataError, match=r"mirrors an axis \(scale \(-2.0, 3.0, 4.0\)\)") as e:
+        read_vdb(mpath)
+    assert str(mpath) in str(e.value)
+    with pytest.raises(clvis.DataError, match="mirrors an axis"):
+        _same_as_walked(mpath, None, sv)
     with pytest.raises(clvis.DataError, match="'labels' is a Tree_int32_5_4_3, not a float grid"):
         read_vdb(path, grid="labels")
     with pytest.raises(clvis.DataError, match="no grid named 'nope'"):
@@ -544,6 +576,96 @@ def test_vdb_written_by_openvdb():
     assert block.n_leaves == 20**3 and block.n_tiles == 20**3 - 27
 
 
+def test_vdb_instance_grids_share_their_parents_tree(tmp_path):
+    """tests/data/openvdb_instance.vdb (OpenVDB 10.0.1): "inst" shares the
+    tree of "orig" (grid.copy()), which OpenVDB writes once: the instance
+    stores only its transform, and a block offset of 0. The walk refused the
+    whole file ("grid offsets ... outside the file"), every grid of it; now
+    an instance is its parent's tree under its own transform."""
+    from clvis.io.vdb import check_vdb
+
+    path = Path(__file__).parents[1] / "data" / "openvdb_instance.vdb"
+    assert check_vdb(path) == [(60, 1), (60, 1), (1, 1)]
+    want = np.zeros((16, 16, 24), F32)  # [z, y, x] from x = -16
+    want[:, :, :16] = 0.5  # eight active 8^3 tiles over (-16..-1, 0..15, 0..15)
+    i, j, k = np.mgrid[:5, :4, :3]
+    want[5 + k, 4 + j, 19 + i] = ((i + 2 * j + 3 * k) % 11 / 11).astype(F32)
+    act = want != 0
+    act[5:8, 4:8, 19:24] = True  # (0, 0, 0) of the formula is 0, and active
+    for name, spacing, origin in [("orig", 1.0, (-16, 0, 0)), ("inst", 0.5, (1 - 8, 2, 3))]:
+        sv = read_vdb(path, grid=name)
+        assert sv.spacing == (spacing,) * 3 and sv.origin == origin and sv.n_tiles == 8
+        np.testing.assert_array_equal(sv.active(), act)
+        np.testing.assert_array_equal(sv.to_dense(), want)
+    other = read_vdb(path, grid=2)
+    assert other.n_active == 1 and other.to_dense()[-1, -1, -1] == 7.0 and other.origin == (-8, -8, -8)
+
+    # an instance of a grid the file does not hold before it, or of another type
+    data = path.read_bytes()
+    desc = data.index(b"inst\x10\x00\x00\x00Tree_float_5_4_3\x04\x00\x00\x00orig")
+    bad = tmp_path / "bad.vdb"
+    for old, new, match in [
+        (b"orig", b"oris", "grid 'inst' is an instance of grid 'oris', which no grid before it is"),
+        (b"float", b"int32", r"grid 'inst' \(Tree_int32_5_4_3\) is an instance of grid 'orig', a Tree_float"),
+    ]:
+        at = data.index(old, desc + 4)
+        bad.write_bytes(data[:at] + new + data[at + len(old) :])
+        with pytest.raises(clvis.DataError, match=match) as e:
+            check_vdb(bad)
+        assert str(bad) in str(e.value)
+
+
+def test_vdb_half_float_nodes_with_an_inactive_value_are_walked():
+    """A grid saved as half floats stores a node's inactive values (metadata
+    2, 4, 5: one or two values other than the background) as floats, 4 bytes
+    each, not as halves: the walk skipped 2 bytes each, then read the next
+    block from the wrong byte and refused the file as malformed
+    (tests/data/openvdb_half_inactive.vdb, OpenVDB 10.0.1: a 16^3 node of
+    active and inactive 8^3 tiles and a leaf with inactive voxels of 6.0).
+    tinyvdb 0.9 misreads them too: read_vdb reads such a file from the walk
+    alone (leaves, values, tiles, transform)."""
+    from clvis.io.vdb import vdb_leaves
+
+    path = Path(__file__).parents[1] / "data" / "openvdb_half_inactive.vdb"
+    (g,) = vdb_leaves(path)
+    assert g is not None and g.active == 64 + 27
+    np.testing.assert_array_equal(g.origins, [[40, 0, 0], [56, 0, 0]])
+    np.testing.assert_array_equal(g.tile_origins, [[0, 0, 0], [8, 0, 0]])
+    np.testing.assert_array_equal(g.tile_log2, [3, 3])
+    np.testing.assert_array_equal(g.tile_values(), [5.0, 5.0])
+    bits = np.unpackbits(g.masks, axis=1, bitorder="little").reshape(2, 8, 8, 8)  # [leaf, x, y, z]
+    want = np.zeros((2, 8, 8, 8), np.uint8)
+    want[0, :4, :4, :4] = 1  # 1.5 over (40..43, 0..3, 0..3)
+    want[1, 4:7, :3, :3] = 1  # 2.5 over (60..62, 0..2, 0..2)
+    np.testing.assert_array_equal(bits, want)
+    assert g.half_inactive == 2  # the 16^3 node and the first leaf
+    # tinyvdb 0.9 cannot read such a file ("Failed to read BLOSC data", or
+    # "OOM"): read_vdb reads it from the walk alone
+    sv = read_vdb(path)
+    want = np.zeros((8, 8, 63), F32)  # [z, y, x]
+    want[:, :, :16] = 5.0
+    want[:4, :4, 40:44] = 1.5
+    want[:3, :3, 60:63] = 2.5
+    assert sv.shape == want.shape and sv.n_active == 1024 + 91 and sv.n_tiles == 2
+    np.testing.assert_array_equal(sv.to_dense(), want)
+    np.testing.assert_array_equal(sv.active(), want != 0)
+
+
+def test_vdb_half_float_subnormals_are_read_at_their_value():
+    """tinyvdb 0.9 widens a half float's subnormal (below 2^-14) to half its
+    value: tests/data/openvdb_half_subnormal.vdb (OpenVDB 10.0.1, saved as
+    half floats) came back with 2^-24 as 2^-25, every subnormal halved and
+    no error. A half-float grid's leaf values are now decoded by clvis's walk,
+    bit for bit what OpenVDB reads."""
+    path = Path(__file__).parents[1] / "data" / "openvdb_half_subnormal.vdb"
+    sv = read_vdb(path)
+    assert sv.shape == (2, 8, 8) and sv.n_active == 128 and sv.active().all()
+    n = 1 + np.arange(8)[None, :] + 8 * np.arange(8)[:, None]  # [y, x] = 1 + x + 8 y
+    want = np.stack([n * 2.0**-24, -n * 2.0**-14]).astype(F32)
+    assert np.abs(want[0]).max() < 2.0**-14  # every value of z = 0 a subnormal half
+    np.testing.assert_array_equal(sv.to_dense().view(np.uint32), want.view(np.uint32))
+
+
 @pytest.mark.parametrize(
     "compression", ["ZIP | ACTIVE_MASK", "ZIP", "NONE", "ACTIVE_MASK", "BLOSC | ACTIVE_MASK"]
 )
@@ -576,6 +698,14 @@ def test_vdb_active_tiles_under_each_compression(tmp_path, compression):
     np.testing.assert_array_equal(seed.to_dense(), want.transpose(2, 1, 0))
 
 
+def _garbled_blosc() -> bytes:
+    import blosc
+
+    c = bytearray(blosc.compress(np.arange(64, dtype="<f4").tobytes(), typesize=4, cname="lz4"))
+    c[16:] = bytes(x ^ 0xFF for x in c[16:])  # the header (sizes) kept
+    return bytes(c)
+
+
 def test_vdb_tile_blocks_that_do_not_decode_are_refused(tmp_path, monkeypatch):
     """A tile's values block that is not what its node declares (zlib that
     fails or decompresses to more, a blosc header of another size, raw bytes
@@ -604,6 +734,9 @@ def test_vdb_tile_blocks_that_do_not_decode_are_refused(tmp_path, monkeypatch):
             "node X: a blosc block not of 16",
         ),
         (block(vals.tobytes()[:12], 4, None), "node X: 12 bytes for 4 values"),
+        # a blosc header of the right sizes over bytes blosc cannot decompress
+        # (blosc's own error class, not caught: found fuzzing half-float leaves)
+        (block(_garbled_blosc(), 64, "blosc"), "node X: blosc: Error -1 while decompressing"),
     ]:
         with pytest.raises(clvis.DataError, match=f"malformed VDB file: {match}") as e:
             vdb._decode(tmp_path, bad)
@@ -612,7 +745,9 @@ def test_vdb_tile_blocks_that_do_not_decode_are_refused(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "blosc", None)
     with pytest.raises(ImportError, match=r"blosc-compressed, which needs the blosc package: pip install"):
         read_vdb(path, grid="block")
-    assert read_vdb(path, grid="density").n_active == 7_208  # no tiles: no blosc needed
+    with pytest.raises(ImportError, match=r"half-float leaves are blosc-compressed, which needs the blosc"):
+        read_vdb(path, grid="density")  # half floats: its leaves decoded by clvis
+    assert read_vdb(path, grid="surface").n_active == 12_790  # no tiles, floats: no blosc needed
 
 
 def test_vdb_tree_clvis_does_not_walk_is_read_from_tinyvdbs_voxel_list(tmp_path, monkeypatch):
@@ -625,7 +760,7 @@ def test_vdb_tree_clvis_does_not_walk_is_read_from_tinyvdbs_voxel_list(tmp_path,
     grids = [("density", "Tree_float_5_4_3", _scale_translate((0.5, 1, 2), (1, 2, 3)))]
     path = _write_vdb(tmp_path, "rnd", grids, {0: (ijk, vals)})
     walked = read_vdb(path)
-    monkeypatch.setattr(sparse, "vdb_leaves", lambda p: [])  # as for a version-221 file
+    monkeypatch.setattr(sparse, "vdb_grids", lambda p: [])  # as for a version-221 file
     listed = read_vdb(path)
     assert (listed.shape, listed.spacing, listed.origin) == (walked.shape, walked.spacing, walked.origin)
     np.testing.assert_array_equal(listed.to_dense(), walked.to_dense())
@@ -664,6 +799,13 @@ def test_vdb_active_root_tile_is_refused_for_its_memory(tmp_path):
     assert str(path) in str(e.value)
     path.write_bytes(_vdb_template(grids, [((4096, 0, -4096), 0.5, 0)]))
     assert read_vdb(path).n_active == 0
+    # only the grid read has its tiles made whole: another grid's root tile
+    # refused the whole file (a 1-voxel grid beside it "needed 893 GB")
+    two = grids + [("small", "Tree_float_5_4_3", grids[0][2])]
+    path.write_bytes(_vdb_template(two, {0: [((4096, 0, -4096), 0.5, 1)]}))
+    assert read_vdb(path, grid="small").n_active == 0
+    with pytest.raises(clvis.DeviceError, match=r"134,217,728 leaves of active tiles needs about"):
+        read_vdb(path, grid=0)
 
 
 def test_vdb_malformed(tmp_path):

@@ -618,6 +618,30 @@ def _transfer(args, lods, sv, gaussians, samples):
     return None, opacity, None
 
 
+def _one_value(sv, gaussians, lods) -> tuple[tuple[float, float], str] | None:
+    """A value range putting data of one value at the top of the colours
+    (an occupancy or mask grid, all 1; an attribute that is 0 everywhere),
+    with the line saying so; None for data of several values (or none, or in
+    their own colours). Its own min..max put it at the bottom: the darkest
+    colour, and under the volumes' opacity ramp almost transparent (a 160^3
+    grid of 0.5 drew as a near-black box)."""
+    if gaussians is not None:
+        if gaussians.colors is not None:
+            return None
+        values = np.asarray(gaussians.values)
+    elif sv is not None and sv.n_active:
+        values = sv.leaf_values()[sv.active_masks()]
+    else:
+        return None
+    values = values[np.isfinite(values)]
+    if not values.size or values.min() != values.max():
+        return None
+    v = float(values[0])
+    span = max(abs(v), 1.0)
+    what = "every point's value" if lods == ["points"] else "every active voxel"
+    return (v - span, v), f"{what} is {v:.6g}: drawn in the top colour (range {v - span:.6g}..{v:.6g})"
+
+
 def _picture(img, transparent: bool = False) -> np.ndarray:
     """(H, W, 4) uint8 of a GaussianImage, over images.BACKGROUND unless
     `transparent` (composited a band of rows at a time: no full-size float
@@ -676,6 +700,8 @@ def _run(args) -> int:
     q = runtime.default_queue()
     timings: dict = {}
     vr, opacity, why = _transfer(args, lods, sv, gaussians, samples)
+    if vr is None:
+        vr, why = _one_value(sv, gaussians, lods) or (vr, why)
     panels = render_panels(
         lods,
         sv,

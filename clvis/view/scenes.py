@@ -756,7 +756,9 @@ class SparseScene(Scene):
             gs = gaussians_from_volume(sv, settings["lod"], queue=self.queue)
             if gs.n == 0:
                 raise DataError(f"no active voxel above the threshold {threshold:g}: no Gaussians")
-            tf = TransferFunction(self.colormap, value_range=(self.vmin, self.vmax))
+            # one value (an occupancy grid): at the top of the colours, not the darkest bottom
+            lo = self.vmin if self.vmax > self.vmin else self.vmax - max(abs(self.vmax), 1.0)
+            tf = TransferFunction(self.colormap, value_range=(lo, self.vmax))
             return GaussianRenderer(gs, tf, queue=self.queue), gs.n
 
         yield self._gaussian_frame((settings["lod"], threshold), make, camera, width, height)

@@ -198,3 +198,39 @@ def test_a_level_set_gets_no_dark_note(tmp_path, capsys):
     vdb = os.path.join(os.path.dirname(__file__), "..", "data", "openvdb_small.vdb")
     rc, out, err = _run(capsys, vdb, "--grid", "surface", "--size", "64x64", "--out", str(tmp_path))
     assert rc == 0 and "note" not in err, err
+
+
+def test_data_of_one_value_is_drawn_in_the_top_colour(tmp_path, capsys):
+    """A volume of one value (an occupancy or mask grid): its own min..max
+    put it at the bottom of the colours, the darkest, almost transparent
+    under the volumes' opacity ramp (a near-black box); now at the top,
+    said on the transfer line. --range given keeps the user's choice."""
+    path = tmp_path / "mask.npy"
+    np.save(path, np.full((24, 24, 24), 0.5, np.float32))
+    rc, out, err = _run(capsys, str(path), "--lod", "medium", "--size", "48x48", "--out", str(tmp_path / "a"))
+    assert rc == 0, err
+    assert "every active voxel is 0.5: drawn in the top colour (range -0.5..0.5)" in out
+    top = _luminance(tmp_path / "a" / "medium.png")
+    assert top > 0.5  # a bright box
+    rc, out, err = _run(
+        capsys,
+        str(path),
+        "--lod",
+        "medium",
+        "--size",
+        "48x48",
+        "--range",
+        "0.5,1.5",
+        "--out",
+        str(tmp_path / "b"),
+    )
+    assert rc == 0 and "top colour" not in out, err
+    assert _luminance(tmp_path / "b" / "medium.png") < 0.15  # the bottom colour, near-transparent: dark
+
+
+def _luminance(path) -> float:
+    """The mean luminance (0..1) of the middle quarter of a picture."""
+    with Image.open(path) as im:
+        rgb = np.asarray(im.convert("RGB"), np.float64) / 255
+    h, w = rgb.shape[:2]
+    return float((rgb[h // 4 : 3 * h // 4, w // 4 : 3 * w // 4] @ [0.2126, 0.7152, 0.0722]).mean())

@@ -648,3 +648,8 @@ def test_sparse_volume_scene_draws_an_openvdb_grid_and_its_threshold():
         s.update({"threshold": 99.0})
     with pytest.raises(TypeError, match="expected a clvis.SparseVolume"):
         SparseScene(np.zeros((8, 8, 8)))
+    # one value (an occupancy grid): the top colour, not viridis's darkest
+    ones = SparseScene(clvis.SparseVolume.from_dense(np.ones((16, 16, 16), np.float32)))
+    f = next(ones.frames(Orbit(ones.lo, ones.hi).camera(1.0), 32, 32, ones.settings, lambda: False))
+    centre = f.image[8:24, 8:24].astype(float) / 255 @ [0.2126, 0.7152, 0.0722]
+    assert centre.mean() > 0.6  # viridis's yellow

@@ -212,6 +212,14 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     add_orbit_options(p)
     add_camera_options(p, _FIT)
     add_volume_options(p)
+    p.add_argument(
+        "--grid",
+        default=None,
+        metavar="NAME",
+        help="the float grid of a .vdb file: its name, or its index (0 first) (default: the first float "
+        "grid); made dense, its inactive voxels the grid's background (a level set's outside; its "
+        "default isovalue 0)",
+    )
     add_cluster_options(p)
     p.add_argument(
         "--brick",
@@ -242,6 +250,8 @@ def _load(args):
         path = Path(args.file)
         if not path.exists():
             raise CliError(f"{path}: no such file")
+        if path.name.lower().endswith(".vdb"):
+            return _load_vdb(args, path)
         v = read_volume_of(args, path)
         data = np.asarray(v.data, np.float32)
         value_range = finite_range(data, str(path))
@@ -260,6 +270,44 @@ def _load(args):
         0.5,
         finite_range(d["volume"], name),
         f"the embedded {name} ({d['volume'].shape[0]}^3)",
+    )
+
+
+def _load_vdb(args, path: Path):
+    """_load's tuple for a .vdb's float grid made dense (read_vdb_volume): a
+    level set's default isovalue 0 (its surface), another grid's Otsu's."""
+    from ..gauss import read_vdb_volume
+
+    given = [
+        f
+        for f, v in (
+            ("--shape", args.shape),
+            ("--dtype", args.dtype),
+            ("--volume-index", args.volume_index),
+            ("--array", getattr(args, "array", None)),
+        )
+        if v is not None
+    ]
+    if given:
+        raise CliError(f"{' and '.join(given)}: not for a .vdb (--grid picks its grid)")
+    grid = args.grid
+    if grid is not None and grid.lstrip("-").isdigit():
+        grid = int(grid)
+    v, grid_class = read_vdb_volume(path, grid)
+    data = np.asarray(v.data, np.float32)
+    if data.size == 0:
+        raise CliError(f"{path}: grid {v.array!r} has no active voxel")
+    spacing = v.spacing if args.spacing is None else tuple(float(s) for s in reversed(args.spacing))
+    check_iso_volume(data, str(path))
+    level_set = grid_class == "level set"
+    kind = f", a {grid_class}" if grid_class else ""
+    return (
+        data,
+        spacing,
+        v.origin,
+        0.0 if level_set else otsu_level(data),
+        finite_range(data, str(path)),
+        f"{path} (grid {v.array!r}{kind})",
     )
 
 
@@ -363,7 +411,13 @@ def render(
 def cmd(args: argparse.Namespace) -> int:
     check_camera_args(args)
     check_orbit_args(args)
+    if args.grid is not None and not str(args.file or "").lower().endswith(".vdb"):
+        raise CliError("--grid picks a grid of a .vdb FILE")
     if distributed_run(args):
+        if str(args.file or "").lower().endswith(".vdb"):
+            raise CliError(
+                "--workers/--scheduler: a .vdb is read and made dense on one device; leave them out"
+            )
         if args.orbit is not None:
             raise CliError("--orbit: not with --workers/--scheduler (one device renders the turntable)")
         args.brick = 64 if args.brick is None else args.brick

@@ -11,7 +11,7 @@ from .render import (
     GaussianRenderer,
     render_gaussians,
 )
-from .sparse import SparseVolume, read_vdb
+from .sparse import SparseVolume, read_vdb, read_vdb_volume
 
 __all__ = [
     "BVH",
@@ -30,5 +30,6 @@ __all__ = [
     "knn_mean_distance",
     "lod_table",
     "read_vdb",
+    "read_vdb_volume",
     "render_gaussians",
 ]

@@ -33,7 +33,7 @@ from ..io.files import regular_file
 from ..io.vdb import GridLeaves, vdb_grids
 from ..io.volumes import volume_parts
 
-__all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb"]
+__all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb", "read_vdb_volume"]
 
 LEAF = 8  # voxels along each side of a leaf
 LEAF_VOXELS = LEAF**3  # 512
@@ -416,6 +416,40 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     if why:  # what tinyvdb misreads: the grid as the walk alone reads it
         return _read_walked(p, grid, grids, f"not a readable VDB file: {failed}{why}")
     raise DataError(f"{p}: not a readable VDB file: {failed}") from None
+
+
+def read_vdb_volume(path: str | os.PathLike[str], grid: str | int | None = None) -> tuple[Any, str | None]:
+    """A float grid of an OpenVDB file made dense, for an isosurface
+    (``clvis iso FILE.vdb``): (a clvis.Volume [z, y, x] of :func:`read_vdb`'s
+    layout, its ``array`` the grid's name; the grid's class from its
+    metadata, e.g. "level set" or "fog volume", or None).
+
+    Voxels not active take the grid's background value: 0 for a fog volume;
+    for a level set its narrow band's outside (+half width), so that a
+    surface seen from outside is the level set's zero crossing (inside the
+    band's inner edge the fill is the outside's value too: a camera inside
+    the object sees that edge). A volume that would not fit in host memory
+    is refused (DeviceError) before it is made."""
+    from ..errors import DeviceError
+    from ..io.volumes import Volume
+    from ..runtime import host_available_bytes
+
+    sv = read_vdb(path, grid)
+    p = Path(path)
+    grids = vdb_grids(p)
+    idx = _select(p, [n for n, _, _ in grids], [t for _, t, _ in grids], grid)
+    leaves = grids[idx][2]
+    background = leaves.background if leaves is not None else 0.0
+    need = 3 * 4 * math.prod(sv.shape)  # the volume, its padded leaf view and the active mask
+    avail = host_available_bytes()
+    if avail is not None and need > avail:
+        raise DeviceError(
+            f"{p}: grid {grids[idx][0]!r} made dense is {'x'.join(map(str, sv.shape[::-1]))} voxels, "
+            f"about {need / 1e9:.2f} GB of host memory, and only {avail / 1e9:.2f} GB is available "
+            "(its Gaussians need no dense copy: clvis gauss, clvis view)"
+        )
+    volume = Volume(sv.to_dense(background), sv.spacing, sv.origin, str(p), array=grids[idx][0])
+    return volume, None if leaves is None else leaves.grid_class
 
 
 def _why_tinyvdb_fails(walked: list[GridLeaves | None]) -> str:

@@ -129,6 +129,8 @@ class GridLeaves:
     # a float grid's leaf values as stored: per leaf (start byte, bytes, values, codec)
     leaf_blocks: np.ndarray | None = None
     transform: dict | None = None  # its map, as tinyvdb's VDBGrid.transform gives it
+    grid_class: str | None = None  # its metadata's "class": "level set", "fog volume", ...
+    background: float = 0.0  # a float grid's background value (a level set's: its narrow band's outside)
 
     def half_leaf_values(self) -> np.ndarray | None:
         """:meth:`leaf_values` of a grid saved as half floats, else None."""
@@ -218,16 +220,22 @@ class _Reader:
         self.pos += n
         return s
 
-    def metadata(self, what: str) -> None:
+    def metadata(self, what: str) -> dict[str, str]:
+        """Skip a metadata block; its entries of type string (e.g. a grid's
+        "class": "level set", "fog volume")."""
         count = self.take("<I", f"{what} count")
         # each entry: two strings (4 bytes each at least) and a sized value (4)
         self.need(12 * count, f"{count} {what} entries")
+        strings = {}
         for _ in range(count):
-            self.string(f"{what} name")
-            self.string(f"{what} type")
+            name = self.string(f"{what} name")
+            kind = self.string(f"{what} type")
             n = self.take("<I", f"{what} value")
             self.need(n, f"{what} value")
+            if kind == "string" and n <= 256:
+                strings[name] = self.data[self.pos : self.pos + n].decode("latin1")
             self.pos += n
+        return strings
 
     def mask(self, nbytes: int, what: str) -> int:
         """Skip a node mask of `nbytes`; the bits it sets."""
@@ -313,9 +321,13 @@ def _check(p: Path, data, size: int) -> list[tuple[str, str, GridLeaves | None]]
             own = _Reader(p, data, end_pos)  # its own compression flags, metadata and transform
             own.pos = grid_pos
             own.take("<I", "grid compression flags")
-            own.metadata("grid metadata")
+            own_meta = own.metadata("grid metadata")
             transform = _read_map(own)
-            out.append(None if shared is None else replace(shared, parent=root, transform=transform))
+            out.append(
+                None
+                if shared is None
+                else replace(shared, parent=root, transform=transform, grid_class=own_meta.get("class"))
+            )
         else:
             out.append(_check_root(p, data, end_pos, kind, grid_pos))
         r.pos = end_pos  # the next descriptor follows the grid
@@ -354,12 +366,13 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
     r = _Reader(p, data, end)
     r.pos = grid_pos
     compression = r.take("<I", "grid compression flags")
-    r.metadata("grid metadata")
+    meta = r.metadata("grid metadata")
     transform = _read_map(r)
     if transform is None:
         return None  # a map clvis refuses later, by name
     r.take("<I", "buffer count")
     r.need(value_bytes, "background value")
+    background = struct.unpack_from("<f", data, r.pos)[0] if parts[1] == "float" else 0.0  # never as half
     r.pos += value_bytes
     tiles, children = r.take("<II", "root tile and child counts")
     need = tiles * (12 + value_bytes + 1) + children * _CHILD_MIN
@@ -425,6 +438,8 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
         half=tree.half,
         leaf_blocks=np.array(blocks, np.int64).reshape(-1, 4) if tree.want_tiles else None,
         transform=transform,
+        grid_class=meta.get("class"),
+        background=float(background),
     )
 
 

@@ -243,3 +243,31 @@ def test_iso_infill_reads_a_model_dir(tmp_path, capsys):
     assert f"{mine / 'infill.json'}: the model card is for 'lidar', not 'infill'" in capsys.readouterr().err
     assert cli.main([*args, "--model-dir", str(mine), "--out", str(tmp_path / "d")]) == 2
     assert "--model-dir: where the in-fill network's model is: add --infill" in capsys.readouterr().err
+
+
+def test_iso_of_an_openvdb_grid(tmp_path, capsys):
+    """clvis iso FILE.vdb [--grid]: the grid made dense (read_vdb_volume),
+    a level set's default isovalue 0 (its surface, seen from outside over
+    the background filled in as its outside), a fog's Otsu's; the options of
+    other files, --grid with them and workers are one line each."""
+    from pathlib import Path
+
+    vdb = str(Path(__file__).resolve().parents[1] / "data" / "openvdb_small.vdb")
+    assert cli.main(["iso", vdb, "--size", "64x64", "--no-labels", "-o", str(tmp_path / "s")]) == 0
+    out = capsys.readouterr().out
+    assert "openvdb_small.vdb (grid 'surface', a level set), isovalue 0," in out
+    hit = np.asarray(Image.open(tmp_path / "s" / "iso.png").convert("RGB")).astype(float)
+    drawn = (np.abs(hit - images.BACKGROUND).sum(axis=2) > 30).mean()
+    assert 0.2 < drawn < 0.9, drawn  # a sphere in the frame, not a box of the background fill
+    assert cli.main(["iso", vdb, "--grid", "density", "--size", "48x48", "-o", str(tmp_path / "d")]) == 0
+    assert "(grid 'density'), isovalue 0." in capsys.readouterr().out  # Otsu's, of a fog ball 0..1
+    for argv, msg in [
+        ([vdb, "--shape", "4x4x4"], "--shape: not for a .vdb"),
+        ([vdb, "--workers", "1"], "a .vdb is read and made dense on one device"),
+        ([vdb, "--grid", "nope"], "no grid named 'nope'"),
+    ]:
+        assert cli.main(["iso", *argv, "-o", str(tmp_path / "x")]) == 2
+        err = capsys.readouterr().err
+        assert msg in err and len(err.strip().splitlines()) == 1, err
+    assert cli.main(["iso", "--grid", "a", "-o", str(tmp_path / "x")]) == 2
+    assert "--grid picks a grid of a .vdb FILE" in capsys.readouterr().err

@@ -879,3 +879,20 @@ def test_vdb_too_large_for_host_memory_is_refused_before_tinyvdb(tmp_path, monke
     with pytest.raises(clvis.DeviceError, match=match) as e:
         read_vdb(path)
     assert str(path) in str(e.value) and "GB of host memory" in str(e.value)
+
+
+def test_vdb_volume_made_dense_with_the_grids_background():
+    """read_vdb_volume (clvis iso FILE.vdb): the grid dense, its inactive
+    voxels the grid's background (a level set's: its band's outside, +2
+    voxels of 1 here), its class from the file's metadata."""
+    from clvis.gauss import read_vdb_volume
+
+    path = Path(__file__).parents[1] / "data" / "openvdb_small.vdb"
+    v, grid_class = read_vdb_volume(path)
+    sv = read_vdb(path)
+    assert grid_class == "level set" and v.array == "surface"
+    assert (v.spacing, v.origin) == (sv.spacing, sv.origin)
+    np.testing.assert_array_equal(v.data, sv.to_dense(2.0))
+    assert (v.data[~sv.active()] == 2.0).all() and v.data.min() < 0
+    fog, fog_class = read_vdb_volume(path, grid="density")
+    assert fog_class is None and (fog.data[~read_vdb(path, grid="density").active()] == 0).all()

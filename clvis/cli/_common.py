@@ -685,6 +685,13 @@ def add_volume_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def grid_arg(text: str) -> str | int:
+    """The --grid argument type (a .vdb's grid): its name, or digits for its index."""
+    if not text:
+        raise argparse.ArgumentTypeError("expected a grid name or index, got ''")
+    return int(text) if text.isdigit() else text
+
+
 def read_volume_file(args, path):
     """(samples as float32, spacing, origin) of `path` with the volume
     options applied (spacing replaced); see :func:`read_volume_of`."""

@@ -38,6 +38,7 @@ from ._common import (
     count,
     fit_box,
     frame_bulk,
+    grid_arg,
     plane_attribute,
     plane_names,
     progress_from_args,
@@ -223,20 +224,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     add_volume_options(g)
     g.add_argument(
         "--grid",
-        type=_grid,
+        type=grid_arg,
         default=None,
         metavar="NAME|INDEX",
         help="the grid of a .vdb file to read: its name, or its index (0 first) (default: the "
         "first float grid; an error lists the file's grids)",
     )
     return g
-
-
-def _grid(text: str) -> str | int:
-    """The --grid argument type: a grid's name, or digits for its index."""
-    if not text:
-        raise argparse.ArgumentTypeError("expected a grid name or index, got ''")
-    return int(text) if text.isdigit() else text
 
 
 def _points_text(points: Sequence[tuple[float, float]]) -> str:

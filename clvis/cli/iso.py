@@ -43,6 +43,7 @@ from ._common import (
     distributed_run,
     finite_range,
     fit_box,
+    grid_arg,
     on_workers,
     progress_from_args,
     read_volume_file,
@@ -214,8 +215,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     add_volume_options(p)
     p.add_argument(
         "--grid",
+        type=grid_arg,
         default=None,
-        metavar="NAME",
+        metavar="NAME|INDEX",
         help="the float grid of a .vdb file: its name, or its index (0 first) (default: the first float "
         "grid); made dense, its inactive voxels the grid's background (a level set's outside; its "
         "default isovalue 0)",
@@ -291,8 +293,6 @@ def _load_vdb(args, path: Path):
     if given:
         raise CliError(f"{' and '.join(given)}: not for a .vdb (--grid picks its grid)")
     grid = args.grid
-    if grid is not None and grid.lstrip("-").isdigit():
-        grid = int(grid)
     v, grid_class = read_vdb_volume(path, grid)
     data = np.asarray(v.data, np.float32)
     if data.size == 0:

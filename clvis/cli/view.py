@@ -24,6 +24,7 @@ from ._common import (
     cluster_failed,
     count,
     distributed_run,
+    grid_arg,
     on_workers,
     read_volume_file,
     real,
@@ -140,8 +141,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     )
     p.add_argument(
         "--grid",
+        type=grid_arg,
         default=None,
-        metavar="NAME",
+        metavar="NAME|INDEX",
         help="the grid of a .vdb file: its name, or its index (0 first) (default: the first float grid)",
     )
     add_volume_options(p)
@@ -267,8 +269,6 @@ def _vdb_scene(args: argparse.Namespace, path: Path) -> Scene:
             "the threshold is set in the page)"
         )
     grid = args.grid
-    if grid is not None and grid.lstrip("-").isdigit():
-        grid = int(grid)
     return SparseScene(read_vdb(path, grid=grid), description=str(path))
 
 

@@ -381,8 +381,9 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     tinyvdb 0.9 reading half floats' subnormals as half their value); a leaf
     where the two disagree raises DataError. A file tinyvdb 0.9 cannot read
     because a grid saved as half floats stores inactive values other than
-    the background (tinyvdb reads them as half floats) is read by the walk
-    alone. Active tiles (uniform regions stored above the leaves, 8^3,
+    the background (tinyvdb reads them as half floats), or for another
+    grid (a frustum map tinyvdb cannot parse), is read by the walk alone,
+    where the walk reads the grid whole. Active tiles (uniform regions stored above the leaves, 8^3,
     128^3 or 4096^3 voxels), which tinyvdb does not read, are decoded by the
     walk (blosc-compressed ones need the blosc package) and become tile
     leaves. A missing
@@ -413,7 +414,9 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
         finally:
             f.close()
     why = _why_tinyvdb_fails(walked)
-    if why:  # what tinyvdb misreads: the grid as the walk alone reads it
+    if grids:  # the grid as the walk alone reads it, where it reads it whole
+        # (what tinyvdb misreads; a file tinyvdb refuses for another grid, such
+        # as one of a frustum map, which clvis does not read either)
         return _read_walked(p, grid, grids, f"not a readable VDB file: {failed}{why}")
     raise DataError(f"{p}: not a readable VDB file: {failed}") from None
 
@@ -466,8 +469,10 @@ def _why_tinyvdb_fails(walked: list[GridLeaves | None]) -> str:
 
 def _read_walked(p: Path, grid, grids: list[tuple[str, str, GridLeaves | None]], why: str) -> SparseVolume:
     """A grid of a file tinyvdb cannot read, from clvis's walk alone (its
-    transform, leaves, values and tiles); `why` tinyvdb failed, in the
-    DataError for a grid the walk does not read whole."""
+    transform, leaves, values and tiles; every count the walk checked, every
+    value block decoded to its declared size); `why` tinyvdb failed, in the
+    DataError for a grid the walk does not read whole (another tree or value
+    type, a map clvis does not read)."""
     names, types = [n for n, _, _ in grids], [t for _, t, _ in grids]
     idx = _select(p, names, types, grid)
     leaves = grids[idx][2]
@@ -584,6 +589,10 @@ def _assemble(
     keep = la.any(axis=1)  # a VDB leaf may hold no active voxel
     at, lv, la = at[keep], lv[keep], la[keep]
     spacing = (voxel_size[2], voxel_size[1], voxel_size[0])
+    try:  # as SparseVolume takes it (float32 > 0: a voxel size of 1e-300 is 0 there)
+        triple("spacing", spacing, positive=True)
+    except ValueError as e:
+        raise DataError(f"{p}: grid {name!r}: {e}") from None
     if len(at) == 0:
         return SparseVolume(
             (0, 0, 0),
@@ -620,7 +629,10 @@ def _assemble(
         )
     off_xyz = off[::-1].astype(np.float64)
     origin = tuple(float(t + s * o) for t, s, o in zip(translation, voxel_size, off_xyz, strict=True))
-    return SparseVolume._from_leaves(shape, spacing, origin, coords * LEAF, lv[first], la[first])
+    try:
+        return SparseVolume._from_leaves(shape, spacing, origin, coords * LEAF, lv[first], la[first])
+    except ValueError as e:  # what SparseVolume refuses (a voxel size 0 in float32: 1e-300)
+        raise DataError(f"{p}: grid {name!r}: {e}") from None
 
 
 def _voxel_leaves(p: Path, name: str, ijk: np.ndarray, vals: np.ndarray) -> tuple[np.ndarray, ...]:

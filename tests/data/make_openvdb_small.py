@@ -100,3 +100,17 @@ for i, j in np.ndindex(8, 8):
 tiny.name = "tiny"
 tiny.saveFloatAsHalf = True
 vdb.write("openvdb_half_subnormal.vdb", grids=[tiny])
+
+# tests/data/openvdb_frustum.vdb: "linear", (i + 8 j + 64 k) mod 7 + 1 over the
+# 8^3 leaf at the origin, beside "frustum", a grid of 2.0 under a frustum map
+# (which tinyvdb 0.9 cannot parse, failing the whole file, and clvis does not
+# read): the linear grid is read from clvis's walk alone
+i, j, k = np.mgrid[:8, :8, :8]
+linear = vdb.FloatGrid()
+linear.copyFromArray(((i + 8 * j + 64 * k) % 7 + 1).astype(np.float32), ijk=(0, 0, 0), tolerance=0.0)
+linear.name = "linear"
+frustum = vdb.FloatGrid()
+frustum.copyFromArray(np.full((8, 8, 8), 2.0, np.float32), tolerance=0.0)
+frustum.name = "frustum"
+frustum.transform = vdb.createFrustumTransform(xyzMin=(0, 0, 0), xyzMax=(8, 8, 8), taper=0.5, depth=4.0)
+vdb.write("openvdb_frustum.vdb", grids=[linear, frustum])

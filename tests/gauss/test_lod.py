@@ -896,3 +896,35 @@ def test_vdb_volume_made_dense_with_the_grids_background():
     assert (v.data[~sv.active()] == 2.0).all() and v.data.min() < 0
     fog, fog_class = read_vdb_volume(path, grid="density")
     assert fog_class is None and (fog.data[~read_vdb(path, grid="density").active()] == 0).all()
+
+
+def test_vdb_grid_beside_one_tinyvdb_cannot_parse_is_read_from_the_walk():
+    """tinyvdb 0.9 fails a whole file when one grid has a frustum map; the
+    file's linear grid is read from clvis's walk alone (every value where
+    it was written), and the frustum grid is refused, naming the map."""
+    path = Path(__file__).parents[1] / "data" / "openvdb_frustum.vdb"
+    sv = read_vdb(path)  # the first float grid: "linear"
+    i, j, k = np.mgrid[:8, :8, :8]
+    want = ((i + 8 * j + 64 * k) % 7 + 1).astype(F32)  # [i, j, k]
+    assert sv.shape == (8, 8, 8) and sv.n_active == 512
+    np.testing.assert_array_equal(sv.to_dense(), want.transpose(2, 1, 0))
+    with pytest.raises(
+        clvis.DataError, match="NonlinearFrustumMap; clvis's walk does not read grid 'frustum'"
+    ):
+        read_vdb(path, grid="frustum")
+
+
+def test_vdb_voxel_size_float32_cannot_hold_is_a_data_error(tmp_path):
+    """A voxel size finite and > 0 in float64 but 0 in float32 (1e-50, a
+    damaged map): a DataError naming the file and the grid, on both paths
+    (tinyvdb's, and the walk's alone: fuzzing found a bare ValueError there)."""
+    grids = [("density", "Tree_float_5_4_3", _scale_translate((1e-50, 1, 1), (0, 0, 0)))]
+    ijk = np.array([[0, 0, 0], [3, 4, 5]])
+    path = _write_vdb(tmp_path, "tiny", grids, {0: (ijk, [1.0, 2.0])})
+    with pytest.raises(clvis.DataError, match=r"grid 'density': spacing: .* must be > 0") as e:
+        read_vdb(path)
+    assert str(path) in str(e.value)
+    from clvis.gauss import sparse
+
+    with pytest.raises(clvis.DataError, match=r"grid 'density': spacing: .* must be > 0"):
+        sparse._read_walked(path, None, sparse.vdb_grids(path), "tinyvdb failed")

@@ -78,7 +78,17 @@ _CHILD_SPAN = [4 + 3, 3]
 
 
 _CODECS: list[str | None] = [None, "zip", "blosc"]  # a leaf_blocks row's codec
-_ALL = np.arange(512, dtype=np.int64)
+
+
+@dataclass(frozen=True)
+class _Values:
+    """A node's values as stored (decoded by :func:`_decode`)."""
+
+    block: bytes  # the bytes
+    count: int  # values they hold
+    codec: str | None  # "zip", "blosc", None (raw)
+    half: bool  # 2-byte half floats, else 4-byte floats
+    what: str  # where they are, for an error
 
 
 @dataclass(frozen=True)
@@ -89,11 +99,7 @@ class _TileBlock:
     origins: np.ndarray  # (t, 3) int64
     log2: int
     picks: np.ndarray  # (t,) indices into the decoded values
-    block: bytes  # the values as stored
-    count: int  # values the block holds
-    codec: str | None  # "zip", "blosc", None (raw)
-    half: bool
-    what: str  # where it is, for an error
+    values: _Values
 
 
 @dataclass(frozen=True)
@@ -149,18 +155,14 @@ class GridLeaves:
         active = np.unpackbits(self.masks, axis=1, bitorder="little").view(bool)
         with open(self.path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
             for k, (start, nbytes, count, codec) in enumerate(self.leaf_blocks.tolist()):
-                what = f"the leaf values at byte {start}"
-                b = _TileBlock(
-                    self.origins[k : k + 1],
-                    3,
-                    _ALL,
+                stored = _Values(
                     bytes(data[start : start + nbytes]),
                     count,
                     _CODECS[codec],
                     self.half,
-                    what,
+                    f"the leaf values at byte {start}",
                 )
-                values = _decode(self.path, b)
+                values = _decode(self.path, stored)
                 if count == 512:
                     out[k] = values
                 else:  # the active ones, as many as the value mask's bits (the walk's count)
@@ -192,7 +194,7 @@ class GridLeaves:
         declares is a DataError."""
         if not self.tile_blocks:
             return np.zeros(0, np.float32)
-        return np.concatenate([_decode(self.path, b)[b.picks] for b in self.tile_blocks])
+        return np.concatenate([_decode(self.path, b.values)[b.picks] for b in self.tile_blocks])
 
 
 class _Reader:
@@ -396,11 +398,7 @@ def _check_root(p: Path, data, end: int, kind: str, grid_pos: int) -> GridLeaves
                     np.array([origin], np.int64),
                     12,
                     np.zeros(1, np.int64),
-                    block,
-                    1,
-                    None,
-                    False,
-                    "a root tile",
+                    _Values(block, 1, None, False, "a root tile"),
                 )
             )
     for _ in range(children):
@@ -483,11 +481,13 @@ class _Tree:
                         origin + (tl << _CHILD_SPAN[level]),
                         _CHILD_SPAN[level],
                         tile if count == 1 << 3 * log2 else np.searchsorted(on_bits, tile),
-                        bytes(r.data[start : start + size]),
-                        count,
-                        codec,
-                        self.half,
-                        f"the {1 << log2}^3 node values at byte {at + nbytes}",
+                        _Values(
+                            bytes(r.data[start : start + size]),
+                            count,
+                            codec,
+                            self.half,
+                            f"the {1 << log2}^3 node values at byte {at + nbytes}",
+                        ),
                     )
                 )
         if level == 0:
@@ -542,7 +542,7 @@ class _Tree:
         return count, r.pos - raw, raw, None
 
 
-def _decode(path: Path, b: _TileBlock) -> np.ndarray:
+def _decode(path: Path, b: _Values) -> np.ndarray:
     """The float values a node's values block stores, as float32."""
     raw = b.count * (2 if b.half else 4)
     try:

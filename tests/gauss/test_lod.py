@@ -717,9 +717,7 @@ def test_vdb_tile_blocks_that_do_not_decode_are_refused(tmp_path, monkeypatch):
     from clvis.io import vdb
 
     def block(data, count, codec, half=False):
-        return vdb._TileBlock(
-            np.zeros((1, 3), np.int64), 3, np.zeros(1, np.int64), data, count, codec, half, "node X"
-        )
+        return vdb._Values(data, count, codec, half, "node X")
 
     vals = np.arange(4, dtype="<f4")
     np.testing.assert_array_equal(vdb._decode(tmp_path, block(zlib.compress(vals.tobytes()), 4, "zip")), vals)

@@ -391,6 +391,12 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     one whose leaves would not fit in host memory DeviceError, before tinyvdb
     reads them.
     """
+    return _read(path, grid)[0]
+
+
+def _read(path, grid) -> tuple[SparseVolume, str | None, GridLeaves | None]:
+    """read_vdb's volume, the grid's name and its walk (GridLeaves: its class
+    and background), the two None for a file the walk does not follow."""
     if grid is not None and (isinstance(grid, bool) or not isinstance(grid, (str, int, np.integer))):
         raise TypeError(f"grid: expected a name, an index or None, got {type(grid).__name__}")
     tinyvdb = _tinyvdb()
@@ -400,13 +406,14 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     # the grid read, early (its active tiles are what read_vdb makes whole)
     selected = _select(p, [n for n, _, _ in grids], [t for _, t, _ in grids], grid) if grids else None
     _check_memory(p, walked, selected)
+    name, leaves = (None, None) if selected is None else (grids[selected][0], walked[selected])
     try:
         f = tinyvdb.open(str(p))
     except (RuntimeError, ValueError, OSError, MemoryError, IndexError) as e:
         failed: Exception = e
     else:
         try:
-            return _read_grid(f, p, grid, walked)
+            return _read_grid(f, p, grid, walked), name, leaves
         except DataError:
             raise
         except (RuntimeError, ValueError, OSError, MemoryError, IndexError, KeyError, TypeError) as e:
@@ -417,7 +424,7 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     if grids:  # the grid as the walk alone reads it, where it reads it whole
         # (what tinyvdb misreads; a file tinyvdb refuses for another grid, such
         # as one of a frustum map, which clvis does not read either)
-        return _read_walked(p, grid, grids, f"not a readable VDB file: {failed}{why}")
+        return _read_walked(p, grid, grids, f"not a readable VDB file: {failed}{why}"), name, leaves
     raise DataError(f"{p}: not a readable VDB file: {failed}") from None
 
 
@@ -437,21 +444,18 @@ def read_vdb_volume(path: str | os.PathLike[str], grid: str | int | None = None)
     from ..io.volumes import Volume
     from ..runtime import host_available_bytes
 
-    sv = read_vdb(path, grid)
+    sv, name, leaves = _read(path, grid)
     p = Path(path)
-    grids = vdb_grids(p)
-    idx = _select(p, [n for n, _, _ in grids], [t for _, t, _ in grids], grid)
-    leaves = grids[idx][2]
     background = leaves.background if leaves is not None else 0.0
     need = 3 * 4 * math.prod(sv.shape)  # the volume, its padded leaf view and the active mask
     avail = host_available_bytes()
     if avail is not None and need > avail:
         raise DeviceError(
-            f"{p}: grid {grids[idx][0]!r} made dense is {'x'.join(map(str, sv.shape[::-1]))} voxels, "
+            f"{p}: grid {name!r} made dense is {'x'.join(map(str, sv.shape[::-1]))} voxels, "
             f"about {need / 1e9:.2f} GB of host memory, and only {avail / 1e9:.2f} GB is available "
             "(its Gaussians need no dense copy: clvis gauss, clvis view)"
         )
-    volume = Volume(sv.to_dense(background), sv.spacing, sv.origin, str(p), array=grids[idx][0])
+    volume = Volume(sv.to_dense(background), sv.spacing, sv.origin, str(p), array=name)
     return volume, None if leaves is None else leaves.grid_class
 
 

@@ -680,7 +680,7 @@ def _leaf_values(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray,
     walk of the file (GridLeaves); the values from tinyvdb's tree, which holds
     every leaf's 512 values decompressed (zip, blosc, half floats: but a
     half float's subnormal comes back as half its value, so a half-float
-    grid's values are the walk's, GridLeaves.half_leaf_values). tinyvdb
+    grid's values are the walk's, GridLeaves.leaf_values). tinyvdb
     0.9's own voxel list (VDBGrid.to_sparse) drops leaves of many trees: of a
     16^3 node of more than 64 leaves it returns 64, and a level-set sphere of
     radius 40 voxels written by OpenVDB 10 came back with 87,614 of its
@@ -691,7 +691,9 @@ def _leaf_values(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray,
     # a VDB leaf is [x, y, z]-major (bit n: x = n >> 6, y = (n >> 3) & 7, z = n & 7)
     active = np.unpackbits(leaves.masks, axis=1, bitorder="little").view(bool)
     counts = active.sum(axis=1, dtype=np.int64)
-    values = np.empty((len(leaves), LEAF_VOXELS), np.float32)
+    # half floats: clvis's decoding below (tinyvdb 0.9 halves the subnormals),
+    # tinyvdb's leaves only matched against the file's
+    values = None if leaves.half else np.empty((len(leaves), LEAF_VOXELS), np.float32)
     k = 0
     for node in nodes:
         if node.type != "leaf":
@@ -704,14 +706,13 @@ def _leaf_values(p: Path, name: str, g, leaves: GridLeaves) -> tuple[np.ndarray,
                 f"{p}: grid {name!r}: tinyvdb's leaf {k:,} does not match the file's "
                 f"({int(node.active_voxel_count)} active voxels, {counts[k]} in its value mask)"
             )
-        values[k] = np.frombuffer(data, np.float32)
+        if values is not None:
+            values[k] = np.frombuffer(data, np.float32)
         k += 1
     if k != len(leaves):
         raise DataError(f"{p}: grid {name!r}: tinyvdb read {k:,} leaves of the file's {len(leaves):,}")
-    own = leaves.half_leaf_values()
-    if own is not None:  # half floats: clvis's decoding (tinyvdb 0.9 halves the subnormals)
-        values = own
-
+    if values is None:
+        values = leaves.leaf_values()
     return leaves.origins, _zyx(values), _zyx(active)
 
 

@@ -138,10 +138,6 @@ class GridLeaves:
     grid_class: str | None = None  # its metadata's "class": "level set", "fog volume", ...
     background: float = 0.0  # a float grid's background value (a level set's: its narrow band's outside)
 
-    def half_leaf_values(self) -> np.ndarray | None:
-        """:meth:`leaf_values` of a grid saved as half floats, else None."""
-        return self.leaf_values() if self.half else None
-
     def leaf_values(self) -> np.ndarray:
         """(L, 512) float32: a float grid's leaf values, decoded from the file
         (VDB order: value n at (n >> 6, (n >> 3) & 7, n & 7) from the leaf's

@@ -95,7 +95,8 @@ order, and write one PNG per LOD plus gauss.png with the panels side by side,
 each labelled with its LOD and Gaussian count over the colormap's value range.
 
 Without a FILE it uses an embedded explosion density (96^3, closed form), drawn as a
-fog (a quarter of the default --density, an --opacity low over the bottom of the range).
+fog (a quarter of the default --density, an --opacity low over the bottom of the range),
+as is a .vdb grid whose class is "fog volume".
 FILE may be a volume as `clvis iso` reads them (.raw, .npy [z, y, x], .nii,
 .nii.gz, .mgz, .mgh, Analyze .hdr/.img, .vti, an evenly spaced .vtr, a legacy .vtk of
 STRUCTURED_POINTS or an evenly spaced RECTILINEAR_GRID; see --shape,
@@ -272,7 +273,7 @@ def _sources(args):
     """(panel names, sparse volume or None, Gaussians or None, description,
     the dense samples of a volume FILE or None)."""
     from .. import datasets
-    from ..gauss import Gaussians, SparseVolume, read_vdb
+    from ..gauss import Gaussians, SparseVolume, read_vdb_grid
     from ..io import read_points
     from ..io.files import regular_file
 
@@ -287,7 +288,7 @@ def _sources(args):
         # a fog: drawn as the note on dark pictures suggests (a thinner haze,
         # opacity low over the bottom of the range: _transfer), its glowing
         # inside shown; under the defaults 81 % of it was the darkest colours
-        args.density_scale = FOG_DENSITY_FACTOR
+        args.density_scale, args.fog = FOG_DENSITY_FACTOR, "the embedded explosion"
         e = datasets.explosion()
         sv = SparseVolume.from_dense(
             e["volume"],
@@ -307,7 +308,14 @@ def _sources(args):
     if name.endswith(".vdb"):
         if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index")):
             raise CliError("--shape, --dtype and --volume-index are for .raw and NIfTI volumes, not .vdb")
-        sv = read_vdb(path, grid=args.grid)
+        vdb = read_vdb_grid(path, grid=args.grid)
+        sv = vdb.volume
+        if vdb.grid_class == "fog volume":
+            # the file says it is a fog (OpenVDB's class for densities, 0
+            # outside): drawn as the embedded explosion is, its glowing
+            # inside shown (under the volume defaults a shell of low values
+            # hides it)
+            args.density_scale, args.fog = FOG_DENSITY_FACTOR, "a fog volume (the grid's class)"
         if args.threshold is not None or args.spacing is not None:
             # leaf by leaf: a sparse grid is never made dense (10^4 voxels an axis: 4 TB),
             # and --spacing alone keeps every active voxel (a level set's negative values)
@@ -603,12 +611,9 @@ def _transfer(args, lods, sv, gaussians, samples):
                 f"range {level:.6g} (Otsu's background level)..{top:.6g} (p{TOP_PERCENTILE:g}); "
                 "--range and --opacity change it",
             )
-    if args.file is None and opacity is None and not points:  # the embedded explosion, a fog
-        return (
-            None,
-            list(FOG_OPACITY),
-            "the embedded explosion drawn as a fog: --opacity and --density change it",
-        )
+    fog = getattr(args, "fog", None)
+    if fog is not None and opacity is None and not points:  # the embedded explosion, a fog volume
+        return None, list(FOG_OPACITY), f"{fog} drawn as a fog: --opacity and --density change it"
     return None, opacity, None
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +34,7 @@ from ..io.files import regular_file
 from ..io.vdb import GridLeaves, vdb_grids
 from ..io.volumes import volume_parts
 
-__all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "read_vdb", "read_vdb_volume"]
+__all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "VdbGrid", "read_vdb", "read_vdb_grid", "read_vdb_volume"]
 
 LEAF = 8  # voxels along each side of a leaf
 LEAF_VOXELS = LEAF**3  # 512
@@ -394,6 +395,32 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     return _read(path, grid)[0]
 
 
+@dataclass(frozen=True)
+class VdbGrid:
+    """A float grid of an OpenVDB file (:func:`read_vdb_grid`).
+
+    volume: its active voxels (:func:`read_vdb`); name: the grid's name;
+    grid_class: its "class" metadata ("level set", "fog volume", "staggered"
+    or "unknown"); background: the value of its inactive voxels. name and
+    grid_class are None, background 0, for a file clvis's walk does not
+    follow (a tree of another configuration, a file version before 222)."""
+
+    volume: SparseVolume
+    name: str | None
+    grid_class: str | None
+    background: float
+
+
+def read_vdb_grid(path: str | os.PathLike[str], grid: str | int | None = None) -> VdbGrid:
+    """:func:`read_vdb`'s volume with what the file says of the grid: its
+    name, class and background (e.g. to draw a fog volume as a fog and a
+    level set by its zero crossing); the same arguments and errors."""
+    sv, name, leaves = _read(path, grid)
+    if leaves is None:
+        return VdbGrid(sv, None, None, 0.0)
+    return VdbGrid(sv, name, leaves.grid_class, float(leaves.background))
+
+
 def _read(path, grid) -> tuple[SparseVolume, str | None, GridLeaves | None]:
     """read_vdb's volume, the grid's name and its walk (GridLeaves: its class
     and background), the two None for a file the walk does not follow."""
@@ -444,9 +471,9 @@ def read_vdb_volume(path: str | os.PathLike[str], grid: str | int | None = None)
     from ..io.volumes import Volume
     from ..runtime import host_available_bytes
 
-    sv, name, leaves = _read(path, grid)
+    g = read_vdb_grid(path, grid)
+    sv, name, background = g.volume, g.name, g.background
     p = Path(path)
-    background = leaves.background if leaves is not None else 0.0
     need = 3 * 4 * math.prod(sv.shape)  # the volume, its padded leaf view and the active mask
     avail = host_available_bytes()
     if avail is not None and need > avail:
@@ -456,7 +483,7 @@ def read_vdb_volume(path: str | os.PathLike[str], grid: str | int | None = None)
             "(its Gaussians need no dense copy: clvis gauss, clvis view)"
         )
     volume = Volume(sv.to_dense(background), sv.spacing, sv.origin, str(p), array=name)
-    return volume, None if leaves is None else leaves.grid_class
+    return volume, g.grid_class
 
 
 def _why_tinyvdb_fails(walked: list[GridLeaves | None]) -> str:

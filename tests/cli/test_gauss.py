@@ -233,6 +233,26 @@ def test_gauss_embedded_explosion_is_drawn_as_a_fog(tmp_path, capsys):
     assert fog > 2 * _bright(tmp_path / "dark" / "medium.png")
 
 
+def test_gauss_fog_volume_grid_is_drawn_as_a_fog(tmp_path, capsys):
+    """A .vdb grid of class "fog volume" (tests/data/openvdb_fog.vdb, written
+    by OpenVDB) is drawn as the embedded explosion is: under the volume
+    defaults its shell of low values hid the bright inside (the picture
+    mostly the darkest colours); --opacity given takes over."""
+    path = Path(__file__).parents[1] / "data" / "openvdb_fog.vdb"
+    argv = ["gauss", str(path), "--lod", "medium", "--size", "64x64", "--no-labels"]
+    assert cli.main([*argv, "--out", str(tmp_path)]) == 0
+    out, err = capsys.readouterr()
+    assert "a fog volume (the grid's class) drawn as a fog" in out and "note" not in err
+    assert cli.main([*argv, "--opacity", "0:0.05,0.35:0.35,1:1", "--out", str(tmp_path / "dark")]) == 0
+    assert "drawn as a fog" not in capsys.readouterr().out
+
+    def p90(path):  # the luminance of the picture's brightest tenth
+        rgb = np.asarray(Image.open(path).convert("RGB"), np.float64) / 255
+        return np.percentile(rgb @ [0.2126, 0.7152, 0.0722], 90)
+
+    assert p90(tmp_path / "medium.png") > 2 * p90(tmp_path / "dark" / "medium.png")  # 0.27 against 0.11
+
+
 def _bright(path) -> float:
     """The fraction of a picture's pixels brighter than mid-grey (luminance)."""
     from PIL import Image

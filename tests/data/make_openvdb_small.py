@@ -22,8 +22,9 @@ its first 8^3 (124 8^3 tiles and one leaf, blosc-compressed).
 
 And tests/data/openvdb_instance.vdb (instance grids),
 tests/data/openvdb_half_inactive.vdb (half floats with inactive values other
-than the background) and tests/data/openvdb_half_subnormal.vdb, described
-where they are written below. Each run writes new UUIDs: regenerate only the
+than the background), tests/data/openvdb_half_subnormal.vdb,
+tests/data/openvdb_frustum.vdb and tests/data/openvdb_fog.vdb (a grid of
+class "fog volume"), described where they are written below. Each run writes new UUIDs: regenerate only the
 files a change needs."""
 
 import numpy as np
@@ -114,3 +115,15 @@ frustum.copyFromArray(np.full((8, 8, 8), 2.0, np.float32), tolerance=0.0)
 frustum.name = "frustum"
 frustum.transform = vdb.createFrustumTransform(xyzMin=(0, 0, 0), xyzMax=(8, 8, 8), taper=0.5, depth=4.0)
 vdb.write("openvdb_frustum.vdb", grids=[linear, frustum])
+
+# tests/data/openvdb_fog.vdb: "density", a fog ball 1 - r / 10 over a 20^3
+# block at the origin (4,224 active voxels), its class "fog volume" (what
+# OpenVDB's sdf-to-fog conversion and fog exporters set): clvis gauss draws
+# such a grid as a fog
+i, j, k = np.mgrid[:20, :20, :20]
+r = np.sqrt((i - 9.5) ** 2 + (j - 9.5) ** 2 + (k - 9.5) ** 2)
+fog = vdb.FloatGrid()
+fog.copyFromArray(np.clip(1 - r / 10, 0, 1).astype(np.float32), ijk=(0, 0, 0), tolerance=0.0)
+fog.name = "density"
+fog.gridClass = vdb.GridClass.FOG_VOLUME
+vdb.write("openvdb_fog.vdb", grids=[fog])

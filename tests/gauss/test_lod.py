@@ -896,6 +896,26 @@ def test_vdb_volume_made_dense_with_the_grids_background():
     assert fog_class is None and (fog.data[~read_vdb(path, grid="density").active()] == 0).all()
 
 
+def test_read_vdb_grid_says_the_grids_name_class_and_background():
+    """read_vdb_grid: read_vdb's volume with the grid's name, class and
+    background as OpenVDB wrote them (a level set's background: its band's
+    half width, 2 voxels of 1; a fog volume's 0)."""
+    from clvis.gauss import read_vdb_grid
+
+    data = Path(__file__).parents[1] / "data"
+    g = read_vdb_grid(data / "openvdb_small.vdb")
+    assert (g.name, g.grid_class, g.background) == ("surface", "level set", 2.0)
+    assert g.volume.n_active == read_vdb(data / "openvdb_small.vdb").n_active == 12_790
+    fog = read_vdb_grid(data / "openvdb_fog.vdb", grid=0)
+    assert (fog.name, fog.grid_class, fog.background, fog.volume.n_active) == (
+        "density",
+        "fog volume",
+        0.0,
+        4224,
+    )
+    assert read_vdb_grid(data / "openvdb_small.vdb", grid="density").grid_class is None  # no class written
+
+
 def test_vdb_grid_beside_one_tinyvdb_cannot_parse_is_read_from_the_walk():
     """tinyvdb 0.9 fails a whole file when one grid has a frustum map; the
     file's linear grid is read from clvis's walk alone (every value where

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shlex
 import sys
 import time
 import typing
@@ -316,6 +317,7 @@ def _sources(args):
             # inside shown (under the volume defaults a shell of low values
             # hides it)
             args.density_scale, args.fog = FOG_DENSITY_FACTOR, "a fog volume (the grid's class)"
+        args.level_set = vdb.grid_class == "level set"
         if args.threshold is not None or args.spacing is not None:
             # leaf by leaf: a sparse grid is never made dense (10^4 voxels an axis: 4 TB),
             # and --spacing alone keeps every active voxel (a level set's negative values)
@@ -614,6 +616,13 @@ def _transfer(args, lods, sv, gaussians, samples):
     fog = getattr(args, "fog", None)
     if fog is not None and opacity is None and not points:  # the embedded explosion, a fog volume
         return None, list(FOG_OPACITY), f"{fog} drawn as a fog: --opacity and --density change it"
+    if getattr(args, "level_set", False):
+        # Gaussians of its narrow band (signed distances), the band's outside
+        # in front: what to run for the surface itself
+        iso = shlex.join(
+            ["clvis", "iso", args.file] + ([] if args.grid is None else ["--grid", str(args.grid)])
+        )
+        return None, opacity, f"a level set's narrow band (its distances); {iso} draws its surface"
     return None, opacity, None
 
 

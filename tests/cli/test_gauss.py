@@ -253,6 +253,20 @@ def test_gauss_fog_volume_grid_is_drawn_as_a_fog(tmp_path, capsys):
     assert p90(tmp_path / "medium.png") > 2 * p90(tmp_path / "dark" / "medium.png")  # 0.27 against 0.11
 
 
+def test_gauss_level_set_grid_names_clvis_iso_for_its_surface(tmp_path, capsys):
+    """A .vdb level set is drawn as Gaussians of its narrow band (the band's
+    outside in front, not its zero crossing), and the transfer line names
+    the command that draws its surface, with the grid picked."""
+    path = Path(__file__).parents[1] / "data" / "openvdb_small.vdb"
+    argv = ["gauss", str(path), "--lod", "low", "--size", "32x32", "--out", str(tmp_path)]
+    assert cli.main(argv) == 0
+    assert f"narrow band (its distances); clvis iso {path} draws its surface" in capsys.readouterr().out
+    assert cli.main([*argv, "--grid", "surface"]) == 0
+    assert f"clvis iso {path} --grid surface draws" in capsys.readouterr().out
+    assert cli.main([*argv, "--grid", "density"]) == 0  # no class: nothing said
+    assert "narrow band" not in capsys.readouterr().out
+
+
 def _bright(path) -> float:
     """The fraction of a picture's pixels brighter than mid-grey (luminance)."""
     from PIL import Image

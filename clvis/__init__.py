@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # the names for type checkers; at run time __getattr__ import
         read_vdb,
         render_gaussians,
     )
-    from .io import PointCloud, Volume, from_vtk, read_points, read_volume, volumes
+    from .io import PointCloud, Volume, from_open3d, from_vtk, read_points, read_volume, volumes
     from .iso import IsoImage, IsoRenderer, zfp
     from .primitives import compact, compact_indices, histogram, radix_sort, scan
     from .raster import (
@@ -62,7 +62,9 @@ _WHERE = {
         ],
         ".gauss",
     ),
-    **dict.fromkeys(["PointCloud", "Volume", "from_vtk", "read_points", "read_volume", "volumes"], ".io"),
+    **dict.fromkeys(
+        ["PointCloud", "Volume", "from_open3d", "from_vtk", "read_points", "read_volume", "volumes"], ".io"
+    ),
     **dict.fromkeys(["IsoImage", "IsoRenderer", "zfp"], ".iso"),
     **dict.fromkeys(["compact", "compact_indices", "histogram", "radix_sort", "scan"], ".primitives"),
     **dict.fromkeys(
@@ -97,6 +99,7 @@ __all__ = [
     "datasets",
     "default_queue",
     "depth_filter",
+    "from_open3d",
     "from_vtk",
     "gaussians_from_points",
     "gaussians_from_volume",

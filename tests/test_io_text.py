@@ -62,13 +62,42 @@ def test_csv_with_header_and_utm_coordinates(tmp_path):
         ("h.csv", "x,y,z,x\n1,2,3,4\n", "names a column twice"),
         ("i.xyz", "x y z r g b\n1 2 3 300000 0 0\n", "colours must be finite numbers"),
         ("j.xyz", "\0\1\2 binary", "binary data"),
+        ("k.pts", "3\n1 2 3\n4 5 6\n", "its first line declares 3 points; the file holds 2"),
+        (
+            "l.pts",
+            "2\n1 2 3 0 1 2 3\n4 5 6 0 1 2 3\n1\n7 8 9 0 1 2 3\n",
+            "line 4 holds one value: a PTS file of several",
+        ),
+        ("m.xyzn", "1 2 3 0 0 1 5\n", "7 columns; a .xyzn file holds x y z nx ny nz"),
+        ("n.xyzrgb", "1 2 3 0.5 0.5\n", "5 columns; a .xyzrgb file holds x y z red green blue"),
     ],
 )
 def test_text_errors(tmp_path, name, text, message):
+    """(.pts: its count line checked, and a second scan's count refused, not
+    misread: it was a malformed-file error naming numpy's rows; .xyzn and
+    .xyzrgb: their columns are their suffix's)"""
     path = _write(tmp_path / name, text)
     with pytest.raises(DataError, match=message) as e:
         read_points(path)
     assert str(path) in str(e.value)
+
+
+def test_pts_xyzn_xyzrgb_by_their_suffix(tmp_path):
+    """Leica's .pts (its point count first: it was read as a cloud of one
+    column and refused) and Open3D's .xyzn and .xyzrgb (unknown suffixes):
+    the columns their suffix names; colours in 0..1 or 0..255."""
+    c = read_points(_write(tmp_path / "a.pts", "2\n1 2 3 -1200 255 0 10\n4 5 6 -900 0 128 0\n"))
+    np.testing.assert_allclose(c.positions + c.origin, [[1, 2, 3], [4, 5, 6]])
+    np.testing.assert_array_equal(c.attributes["intensity"], [-1200, -900])
+    np.testing.assert_array_equal(c.colors[:, :3], [[255, 0, 10], [0, 128, 0]])
+    assert len(read_points(_write(tmp_path / "b.pts", "# scan 1\n1\n1 2 3\n"))) == 1
+    c = read_points(_write(tmp_path / "c.xyzn", "1 2 3 0 0.6 0.8\n4 5 6 1 0 0\n"))
+    assert c.colors is None and list(c.attributes) == ["nx", "ny", "nz"]
+    np.testing.assert_allclose(c.attributes["ny"], [0.6, 0])
+    c = read_points(_write(tmp_path / "d.xyzrgb", "1 2 3 1 0.5 0\n4 5 6 0 0 0.2\n"))
+    np.testing.assert_array_equal(c.colors[:, :3], [[255, 128, 0], [0, 0, 51]])
+    c = read_points(_write(tmp_path / "e.xyzrgb", "1 2 3 255 128 0\n"))
+    np.testing.assert_array_equal(c.colors[:, :3], [[255, 128, 0]])
 
 
 def _pcd_header(fields, sizes, types, n, data, counts=None):

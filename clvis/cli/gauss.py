@@ -104,8 +104,8 @@ STRUCTURED_POINTS or an evenly spaced RECTILINEAR_GRID; see --shape,
 --volume-index)
 or a .vdb (a float grid, --grid; needs the `vdb` extra: tinyvdb, blosc); a .npz of Gaussians
 (clvis.Gaussians.save); or a point cloud (.ply, .las, .laz, .e57, .pcd,
-.xyz/.txt/.csv, .vtp/.vtu/.vts, a legacy .vtk of POLYDATA, UNSTRUCTURED_GRID or STRUCTURED_GRID, or an
-(N, 3) .npy/.npz as
+.xyz/.txt/.csv/.pts/.xyzn/.xyzrgb, .vtp/.vtu/.vts, a legacy .vtk of POLYDATA,
+UNSTRUCTURED_GRID or STRUCTURED_GRID, or an (N, 3) .npy/.npz as
 `clvis render` reads them: one Gaussian per point; with a velocity, as wide
 as the points' median 4-nearest-neighbour distance and 4 times that along
 the velocity (NARVis's), else sized by the 4 nearest neighbours, clamped

@@ -47,7 +47,7 @@ full size. The status line shows each frame's milliseconds per stage
 (render / post / encode / send), the frames per second and the latency from
 an event to the frame that shows it.
 
-Points (.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv, .npz, an (N, 3) .npy,
+Points (.ply, .las, .laz, .e57, .pcd, .xyz/.txt/.csv/.pts/.xyzn/.xyzrgb, .npz, an (N, 3) .npy,
 .vtp/.vtu/.vts, a legacy .vtk of POLYDATA, UNSTRUCTURED_GRID or STRUCTURED_GRID, or --dataset
 hurricane|terrain):
 modes points (colour by an attribute or RGB, colormap, point size), lidar

@@ -1,5 +1,6 @@
 """ASCII point clouds: ``.xyz``, ``.txt``, ``.csv`` (and CloudCompare's,
-PDAL's and most scanners' text exports), one point a line.
+PDAL's and most scanners' text exports), Leica's ``.pts`` and Open3D's
+``.xyzn`` and ``.xyzrgb``, one point a line.
 
 The columns: a header line of names (``x,y,z,red,green,blue``, ``//X Y Z R G
 B`` as CloudCompare writes it, ``X Y Z Intensity``) names them, mapped as
@@ -11,6 +12,13 @@ attributes named ``column_4`` on. Separators: commas, semicolons, tabs or
 spaces. Lines starting with ``#``, ``//`` or ``%`` are comments. Positions
 are parsed in float64 and kept relative to their minimum (``cloud.origin``),
 as for LAS: text files usually hold georeferenced coordinates.
+
+The suffix names what a header cannot: ``.xyzn`` is x y z nx ny nz (the
+normals as the attributes nx, ny, nz, as a PLY's); ``.xyzrgb`` is x y z r g b,
+colours in 0..1 (Open3D's) or 0..255; a ``.pts`` file starts with its point
+count on a line of its own (checked against the points read; a file of
+several scans, each after its own count, is refused naming the line), then
+x y z [intensity] [r g b] as above.
 
 Bounded: numpy's own text parser, no Python loop per line; a row with a
 different count or a value that is not a number raises DataError naming
@@ -27,7 +35,12 @@ import numpy as np
 from ..errors import DataError
 from .cloud import PointCloud, _from_columns
 
-SUFFIXES = (".xyz", ".txt", ".csv")
+SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".xyzn", ".xyzrgb")
+# Open3D's text formats: the columns their suffix names
+_SUFFIX_NAMES = {
+    ".xyzn": ["x", "y", "z", "nx", "ny", "nz"],
+    ".xyzrgb": ["x", "y", "z", "red", "green", "blue"],
+}
 _COMMENT = ("#", "//", "%")
 _HEAD_BYTES = 1 << 16  # the header and the first data line lie in this
 
@@ -59,6 +72,8 @@ def _read_ascii(path: Path) -> PointCloud:
     names: list[str] | None = None
     skip = 0
     first = None
+    suffix = path.suffix.lower()
+    count: int | None = None  # a .pts file's declared point count
     for i, raw in enumerate(lines):
         s = raw.strip()
         if not s:
@@ -76,6 +91,9 @@ def _read_ascii(path: Path) -> PointCloud:
             continue
         if comment:
             skip = i + 1
+            continue
+        if suffix == ".pts" and count is None and len(tokens) == 1 and re.fullmatch(r"\d+", tokens[0]):
+            count, skip = int(tokens[0]), i + 1  # Leica PTS: the point count first
             continue
         first, skip = (i, sep, tokens), skip
         break
@@ -98,9 +116,21 @@ def _read_ascii(path: Path) -> PointCloud:
             encoding="utf-8-sig",
         )
     except ValueError as e:
+        several = suffix == ".pts" and re.search(r"changed from \d+ to 1 at row (\d+)", str(e))
+        if several:  # a count line further on: another scan's
+            raise DataError(
+                f"{path}: line {line_no + int(several.group(1))} holds one value: a PTS file of several "
+                "scans (each after its point count) is not read; split it into one file a scan"
+            ) from None
         raise DataError(f"{path}: malformed text point cloud: {e}") from None
     if data.shape[1] != ncol:
         raise DataError(f"{path}: {data.shape[1]} columns, the first line holds {ncol}")
+    if count is not None and count != len(data):
+        raise DataError(f"{path}: its first line declares {count:,} points; the file holds {len(data):,}")
+    if names is None and suffix in _SUFFIX_NAMES:
+        names = _SUFFIX_NAMES[suffix]
+        if ncol != len(names):
+            raise DataError(f"{path}: {ncol} columns; a {suffix} file holds {' '.join(names)}")
     if names is None:
         names = _default_names(data)
     if ncol < 3:

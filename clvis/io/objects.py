@@ -1,5 +1,6 @@
 """Data other libraries hold in memory, as clvis data: VTK datasets, and so
-pyvista's meshes, point sets and images (they are VTK objects).
+pyvista's meshes, point sets and images (they are VTK objects), and Open3D's
+point clouds and triangle meshes.
 
 :func:`from_vtk` takes a point set (vtkPolyData, vtkUnstructuredGrid,
 vtkStructuredGrid, vtkPointSet: a pyvista ``PolyData``, ``UnstructuredGrid``,
@@ -13,6 +14,15 @@ the active point scalars, else the one 1-component point array, else the same
 of the cell data (one sample a cell, at its centre). The arrays are copied:
 changing the dataset later changes nothing here. ``clvis.view(dataset)``
 takes them too.
+
+:func:`from_open3d` takes an Open3D point cloud or triangle mesh (the legacy
+``open3d.geometry.PointCloud`` / ``TriangleMesh`` and the tensor
+``open3d.t.geometry`` ones) as a :class:`~clvis.io.PointCloud`, as the
+``.ply`` reader reads the file Open3D writes of it: the points (a mesh's
+vertices), colours (Open3D's 0..1 floats) as 8-bit RGB, normals as the
+attributes nx, ny, nz, a tensor cloud's other attributes by name. Positions
+are float64 in Open3D: far from zero they are kept relative to their
+minimum (``cloud.origin``), as for LAS. clvis does not import Open3D.
 """
 
 from __future__ import annotations
@@ -22,10 +32,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from .cloud import PointCloud
+from .cloud import PointCloud, _cloud, relative_positions
 from .volumes import Volume
 
-__all__ = ["from_vtk", "is_vtk_dataset"]
+__all__ = ["from_open3d", "from_vtk", "is_open3d_geometry", "is_vtk_dataset"]
 
 
 def is_vtk_dataset(obj: Any) -> bool:
@@ -120,3 +130,91 @@ def _scalar_array(data: Any, name: str | None, n: int) -> Any:
     if arr is None or arr.GetNumberOfComponents() != 1 or arr.GetNumberOfTuples() != n:
         return None
     return arr
+
+
+def is_open3d_geometry(obj: Any) -> bool:
+    """Whether `obj` is an Open3D object (its class defined in the open3d
+    package: ``open3d.pybind...`` or ``open3d.cpu.pybind...``)."""
+    return (getattr(type(obj), "__module__", "") or "").split(".")[0] == "open3d"
+
+
+def from_open3d(geometry: Any) -> PointCloud:
+    """An Open3D point cloud or triangle mesh (legacy or tensor) as a
+    PointCloud: its points or vertices, colours, normals and (tensor
+    geometry) other per-point attributes (module docstring). Another Open3D
+    geometry (a voxel grid, a line set, an image) is a TypeError naming it;
+    colours outside 0..1 or not finite, or attributes that are not one row
+    per point, a DataError."""
+    if not is_open3d_geometry(geometry):
+        raise TypeError(
+            f"geometry: expected an Open3D PointCloud or TriangleMesh, got {type(geometry).__name__}"
+        )
+    kind = type(geometry).__name__
+    what: Any = f"Open3D {kind}"  # names it in errors, as a file's path would
+    tensor = ".t." in type(geometry).__module__ or type(geometry).__module__.startswith("open3d.t")
+    columns: dict[str, np.ndarray] = {}
+    if tensor and kind in ("PointCloud", "TriangleMesh"):
+        tmap = geometry.point if kind == "PointCloud" else geometry.vertex
+        for name in tmap:
+            t = tmap[name]
+            columns[str(name)] = np.array((t.cpu() if hasattr(t, "cpu") else t).numpy(), copy=True)
+    elif not tensor and kind in ("PointCloud", "TriangleMesh"):
+        legacy = {
+            "PointCloud": ("points", "colors", "normals"),
+            "TriangleMesh": ("vertices", "vertex_colors", "vertex_normals"),
+        }
+        for key, attr in zip(("positions", "colors", "normals"), legacy[kind], strict=True):
+            a = np.array(np.asarray(getattr(geometry, attr)), copy=True)
+            if key == "positions" or len(a):
+                columns[key] = a
+    else:
+        hint = {
+            "VoxelGrid": "; its voxels' centres as points: "
+            "[grid.get_voxel_center_coordinate(v.grid_index) for v in grid.get_voxels()]",
+            "LineSet": "; its points: line_set.points",
+        }.get(kind, "")
+        raise TypeError(
+            f"geometry: an {what}: clvis takes Open3D point clouds and triangle meshes "
+            f"(their points or vertices){hint}"
+        )
+    xyz = columns.pop("positions", None)
+    if xyz is None or xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise DataError(f"{what}: no (N, 3) positions")
+    n = len(xyz)
+    for name, a in columns.items():
+        if len(a) != n:
+            raise DataError(f"{what}: its {name} hold {len(a)} rows for {n} points")
+    positions, origin = relative_positions(xyz)
+    fields: dict[str, Any] = {"positions": positions, "origin": origin, "attributes": {}}
+    colors = columns.pop("colors", None)
+    if colors is not None:
+        fields["colors"] = _open3d_colors(colors, what)
+    normals = columns.pop("normals", None)
+    if normals is not None:
+        fields["attributes"].update(
+            {c: normals[:, k].astype(np.float32) for k, c in enumerate(("nx", "ny", "nz"))}
+        )
+    for name, a in columns.items():
+        a = a.reshape(n, -1)
+        if a.dtype.kind not in "biuf":
+            raise DataError(f"{what}: its attribute {name!r} is not numbers ({a.dtype})")
+        if a.shape[1] == 1:
+            fields["attributes"][name] = a[:, 0]
+        else:
+            suffixes = "xyz" if a.shape[1] == 3 else [str(j) for j in range(a.shape[1])]
+            fields["attributes"].update({f"{name}_{s}": a[:, j] for j, s in enumerate(suffixes)})
+    return _cloud(what, **fields)
+
+
+def _open3d_colors(colors: np.ndarray, what: str) -> np.ndarray:
+    """Open3D's colours as (N, 3) uint8: floats in 0..1 (its convention),
+    or 8-bit already (a tensor cloud's uint8 colours)."""
+    if colors.ndim != 2 or colors.shape[1] not in (3, 4):
+        raise DataError(f"{what}: colors of shape {colors.shape}; expected (N, 3)")
+    if colors.dtype == np.uint8:
+        return colors[:, :3].copy()
+    c = colors[:, :3].astype(np.float64)
+    if c.size and not (np.isfinite(c).all() and c.min() >= 0 and c.max() <= 1):
+        lo, hi = np.nanmin(c), np.nanmax(c)
+        raise DataError(f"{what}: colors must be finite numbers in 0..1 (Open3D's), got {lo:.6g}..{hi:.6g}")
+    return np.rint(c * 255).astype(np.uint8)

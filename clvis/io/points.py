@@ -1,7 +1,7 @@
 """Point cloud files: :class:`PointCloud` and the readers and writers.
 
 :func:`read_points` reads PLY (ASCII or binary, via plyfile), LAS and LAZ (via
-laspy; LAZ needs its lazrs backend), NPY and NPZ, PCD, E57, .xyz/.txt/.csv text and
+laspy; LAZ needs its lazrs backend), NPY and NPZ, PCD, E57, .xyz/.txt/.csv/.pts/.xyzn/.xyzrgb text and
 VTK point sets (.vtp, .vtu, .vts, legacy .vtk), chosen by the file extension.
 :func:`write_ply` and :func:`save_npz` write a cloud back so that it round-trips.
 
@@ -93,7 +93,8 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
       binary_compressed, through pypcd4 (the ``pcd`` extra; :mod:`clvis.io.pcd`).
     - ``.xyz``, ``.txt``, ``.csv``: one point a line, columns named by a header
       or by their count, positions relative to their minimum as for LAS
-      (:mod:`clvis.io.ascii`).
+      (:mod:`clvis.io.ascii`); so are Leica's ``.pts`` (its point count
+      first) and Open3D's ``.xyzn`` (normals) and ``.xyzrgb`` (colours).
     - ``.e57``: ASTM E57 scans through pye57 (the ``e57`` extra), joined,
       positions relative to their minimum as for LAS (:mod:`clvis.io.e57`).
     - ``.vtp``, ``.vtu``, ``.vts``, ``.vtk``: VTK PolyData, UnstructuredGrid

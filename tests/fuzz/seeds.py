@@ -4,7 +4,7 @@ tests/data): every format clvis reads, with the reader each goes to.
 A seed is (format, reader, path). Formats: ply, las, laz, npy, npz, nii,
 nii.gz, hdr and img (Analyze and NIfTI-1 pairs), mgh, mgz, raw, vdb, e57
 (with pye57), vti, vtr, vtk (volumes and point sets), vtp, vtu, vts (with vtk),
-pcd, xyz, txt, csv. Readers:
+pcd, xyz, pts, txt, csv. Readers:
 points (read_points), volume (read_volume), vdb (read_vdb), gaussians
 (Gaussians.load).
 """
@@ -411,6 +411,10 @@ def make_seeds(out: Path) -> list[tuple[str, str, Path]]:
     cols = rng.integers(0, 256, (25, 3))
     np.savetxt(out / "scan.xyz", np.c_[pts, cols], fmt=["%.3f"] * 3 + ["%d"] * 3)
     add("xyz", "points", out / "scan.xyz")
+    with open(out / "scan.pts", "w") as f:  # Leica PTS: the count, then x y z intensity r g b
+        f.write(f"{len(pts)}\n")
+        np.savetxt(f, np.c_[pts, rng.integers(-2048, 2048, 25), cols], fmt=["%.3f"] * 3 + ["%d"] * 4)
+    add("pts", "points", out / "scan.pts")
     np.savetxt(out / "scan.txt", pts, fmt="%.3f")
     add("txt", "points", out / "scan.txt")
     np.savetxt(

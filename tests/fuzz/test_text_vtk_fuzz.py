@@ -16,7 +16,7 @@ from fuzz.seeds import make_seeds
 import clvis.io as io
 from clvis.errors import DataError
 
-FORMATS = ("vti", "vtk", "vtp", "vtu", "vts", "pcd", "xyz", "txt", "csv")
+FORMATS = ("vti", "vtk", "vtp", "vtu", "vts", "pcd", "xyz", "pts", "txt", "csv")
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,7 @@ def test_seeds_read(seeds):
         assert r.kind == "ok", (path.name, r)
 
 
-@pytest.mark.parametrize("fmt", ["vti", "vtk", "vtp", "vtu+vts", "pcd", "xyz+txt+csv"])
+@pytest.mark.parametrize("fmt", ["vti", "vtk", "vtp", "vtu+vts", "pcd", "xyz+pts+txt+csv"])
 def test_mutants_end_in_clvis_errors(seeds, tmp_path, fmt):
     mine = [s for s in seeds if s[0] in fmt.split("+")]
     others = collections.defaultdict(list)

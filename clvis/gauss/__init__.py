@@ -11,7 +11,7 @@ from .render import (
     GaussianRenderer,
     render_gaussians,
 )
-from .sparse import SparseVolume, read_vdb, read_vdb_volume
+from .sparse import SparseVolume, default_isovalue, dense_volume, read_vdb, read_vdb_volume
 
 __all__ = [
     "BVH",
@@ -25,6 +25,8 @@ __all__ = [
     "LodTable",
     "SparseVolume",
     "build_bvh",
+    "default_isovalue",
+    "dense_volume",
     "gaussians_from_points",
     "gaussians_from_volume",
     "knn_mean_distance",

@@ -64,7 +64,11 @@ iso+infill (the in-fill network on the partial passes), gaussians, infill|iso
 (split: 85 % of the rays + in-fill beside the complete render, the PSNR).
 Sparse volumes (a .vdb float grid, --grid; the `vdb` extra): mode gaussians
 (Sharma & Schmalstieg: the active voxels' Gaussians at a level of detail,
-never made dense), and a threshold: the active voxels above it are drawn.
+never made dense), and a threshold: the active voxels above it are drawn;
+mode iso (clvis iso FILE.vdb's isosurface: the grid made dense when the mode
+is first chosen, its inactive voxels the grid's background; --isovalue,
+default 0 for a level set, else Otsu's; refused in the page, gaussians still
+shown, where the dense volume would not fit in host memory).
 
 Dask (--workers N: a LocalCluster of N one-thread processes started here and
 stopped with the viewer; --scheduler ADDRESS: a running cluster): the frames
@@ -244,15 +248,14 @@ def load_scene(args: argparse.Namespace) -> Scene:
 
 
 def _vdb_scene(args: argparse.Namespace, path: Path) -> Scene:
-    """A .vdb's float grid as a SparseScene (its Gaussians)."""
+    """A .vdb's float grid as a SparseScene (its Gaussians; its isosurface,
+    --isovalue and --rate, when the iso mode is chosen)."""
     from ..gauss import read_vdb
     from ..view import SparseScene
 
     given = [
         f
         for f, v in (
-            ("--isovalue", args.isovalue),
-            ("--rate", args.rate),
             ("--points", args.points),
             ("--spacing", args.spacing),
             ("--shape", args.shape),
@@ -265,11 +268,13 @@ def _vdb_scene(args: argparse.Namespace, path: Path) -> Scene:
     ]
     if given:
         raise CliError(
-            f"{' and '.join(given)}: not for a .vdb (its grid is drawn as Gaussians, mode gaussians; "
-            "the threshold is set in the page)"
+            f"{' and '.join(given)}: not for a .vdb (its grid is drawn as Gaussians, mode gaussians, "
+            "or as its isosurface, mode iso: --isovalue, --rate; the threshold is set in the page)"
         )
     grid = args.grid
-    return SparseScene(read_vdb(path, grid=grid), description=str(path))
+    return SparseScene(
+        read_vdb(path, grid=grid), description=str(path), isovalue=args.isovalue, rate=args.rate or RATE
+    )
 
 
 def load_dask_scene(args: argparse.Namespace) -> Scene:
@@ -280,7 +285,7 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
 
     if args.file is not None and str(args.file).lower().endswith(".vdb"):
         raise CliError(
-            "--workers/--scheduler: a .vdb is drawn on one device (mode gaussians); leave them out"
+            "--workers/--scheduler: a .vdb is drawn on one device (modes gaussians, iso); leave them out"
         )
     if args.array is not None:
         raise CliError("--array: not on workers (they read .npy, .raw and NIfTI volumes)")

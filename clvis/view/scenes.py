@@ -23,6 +23,10 @@ dense when the mode is first chosen, where it fits in host memory). Split views
 (``narvis|gaussians``, ``narvis-scan|gaussians``, ``infill|iso``): the fast
 path's left half beside its slow target's right half, with the PSNR of the
 whole frames.
+
+Frames lie over images.BACKGROUND where what is covered is known (the
+in-fill network gives its coverage); the LiDAR and NARVis networks predict
+colour only, over black, and their frames (and the narvis splits) stay so.
 """
 
 from __future__ import annotations

@@ -736,3 +736,32 @@ def test_an_openvdb_grid_too_large_to_make_dense_is_refused_in_iso_mode_only(mon
     s.update({"mode": "gaussians"})
     f = next(s.frames(Orbit(s.lo, s.hi).camera(1.0), 48, 48, s.settings, lambda: False))
     assert f.info["gaussians"] > 0 and (f.image != np.array(BACKGROUND)).any(axis=2).mean() > 0.1
+
+
+def test_in_fill_frames_lie_over_the_background_by_their_coverage():
+    """iso+infill's partial passes: the in-fill network's picture is colour
+    premultiplied over black with the surface's coverage as alpha, so the
+    frame is that colour over the scene's background (its empty pixels the
+    background, not black), as the finished passes are. LiDAR's and NARVis's
+    pictures have no alpha (alpha 255: colour over black): their frames are
+    the colour as predicted (test_frames_are_the_renderers_pictures_over_the_background)."""
+    from clvis.images import BACKGROUND
+
+    bg = np.array(BACKGROUND, np.float32)
+    v = VolumeScene(clvis.datasets.marschner_lobb(32)["volume"], isovalue=0.5)
+    v.update({"mode": "iso+infill"})
+    cam = Orbit(v.lo, v.hi).camera(1.0)
+    frames = list(v.frames(cam, 64, 64, v.settings, lambda: False))
+    partial = 0
+    for fr, img in zip(frames, v.iso.passes(cam, 64, 64, 0.5), strict=True):
+        if fr.final:
+            continue
+        partial += 1
+        assert v._infill is not None
+        rgba = v._infill(img)
+        a = rgba[..., 3:4].astype(np.float32) / 255
+        want = np.clip(np.rint(rgba[..., :3] + (1 - a) * bg), 0, 255).astype(np.uint8)
+        np.testing.assert_array_equal(fr.image, want)
+        empty = rgba[..., 3] == 0
+        assert empty.mean() > 0.3 and (fr.image[empty] == np.array(BACKGROUND)).all()  # not black
+    assert partial >= 1

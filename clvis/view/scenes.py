@@ -70,6 +70,8 @@ _BG = np.array(BACKGROUND, np.uint8)
 _BG32 = np.array((*BACKGROUND, 0), np.uint8).view(np.uint32)[0]  # as a pixel of an (H, W, 4) array
 _ACTIVE32 = np.array((70, 40, 75, 0), np.uint8).view(np.uint32)[0]  # iso: rays still running
 _MAX_POINT_SIZE = 16
+#: a VolumeScene's modes
+VOLUME_MODES = ("iso", "iso+infill", "gaussians", "infill|iso")
 SPLIT_COMPLETION = 0.85  # infill|iso: the fast side stops at this fraction of the rays
 # the held blocks the pool keeps (Scene._sized): about one largest page's
 # (3840x2160) still and interaction sizes, however many pages are open
@@ -572,10 +574,20 @@ class VolumeScene(Scene):
         rate: int = 8,
         description: str = "volume",
         model_dir: Any = None,
+        *,
+        modes: Any = None,
     ) -> None:
         """model_dir: where the in-fill network's model is (clvis train --out;
-        None: the package's), loaded when an in-fill mode is first chosen."""
+        None: the package's), loaded when an in-fill mode is first chosen.
+        modes: the modes offered, some of VOLUME_MODES in their order (None:
+        all); without gaussians the volume is not kept on the host (the
+        compressed copy on the device draws the others)."""
         from .. import IsoRenderer
+
+        if modes is None:
+            modes = VOLUME_MODES
+        if isinstance(modes, str) or not set(modes) <= set(VOLUME_MODES) or not modes:
+            raise ValueError(f"modes: expected some of {VOLUME_MODES}, got {modes!r}")
 
         self.model_dir = _model_dir(model_dir)
 
@@ -590,15 +602,17 @@ class VolumeScene(Scene):
         isovalue = _isovalue(isovalue)
         if isovalue is None:
             isovalue = otsu_level(finite)
-        self.volume, self.spacing, self.origin = data, tuple(spacing), tuple(origin)
+        # the gaussians mode's samples (None: not offered)
+        self.volume: np.ndarray | None = data if "gaussians" in modes else None
+        self.spacing, self.origin = tuple(spacing), tuple(origin)
         self.iso = IsoRenderer(data, rate, spacing, origin)
         self.device = self.iso.queue.device.name.strip()
         self.lo = np.asarray(origin, np.float64)
         self.hi = self.lo + (np.array(data.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
         self.description = f"{description}: {'x'.join(map(str, data.shape[::-1]))} samples"
-        self.modes = ["iso", "iso+infill", "gaussians", "infill|iso"]
+        self.modes = [m for m in VOLUME_MODES if m in modes]
         self.progressive = frozenset(("iso", "iso+infill"))
-        self.settings = {"mode": "iso", "isovalue": float(isovalue), "lod": "medium"}
+        self.settings = {"mode": self.modes[0], "isovalue": float(isovalue), "lod": "medium"}
         self.choices = {
             "mode": self.modes,
             "isovalue": {"min": vmin, "max": vmax},
@@ -685,6 +699,7 @@ class VolumeScene(Scene):
         from .. import GaussianRenderer, gaussians_from_volume
 
         def make():
+            assert self.volume is not None  # kept where the mode is offered
             gs = gaussians_from_volume(
                 self.volume, s["lod"], threshold=s["isovalue"], spacing=self.spacing, origin=self.origin
             )
@@ -791,6 +806,7 @@ class SparseScene(Scene):
                 self.settings["isovalue"],
                 self.rate,
                 description=self._source,
+                modes=["iso"],  # the dense copy goes once compressed on the device
             )
         return self._dense
 

@@ -688,6 +688,8 @@ def test_an_openvdb_grid_shows_the_isosurface_clvis_iso_draws():
     assert len(frames) == len(want) >= 2 and frames[-1].final and not frames[0].final
     for a, b in zip(frames, want, strict=True):
         np.testing.assert_array_equal(a.image, b.image)
+    assert s._dense is not None and s._dense.modes == ["iso"]
+    assert s._dense.volume is None  # the dense copy not kept on the host: compressed on the device
     drawn = (frames[-1].image != bg).any(axis=2).mean()
     assert 0.1 < drawn < 0.4, drawn  # the sphere (a quarter of the box's view), not the box
     # a still view starts with its first pass at the preview size, as a volume's iso does
@@ -715,6 +717,13 @@ def test_an_openvdb_grid_shows_the_isosurface_clvis_iso_draws():
     assert given._dense is not None and given._dense.iso.volume.rate == 4
     with pytest.raises(ValueError, match="isovalue: expected a finite number"):
         SparseScene(clvis.read_vdb(VDB), isovalue=float("nan"))
+    only = VolumeScene(v.data, modes=("iso", "iso+infill"))
+    assert only.modes == ["iso", "iso+infill"] and only.volume is None
+    with pytest.raises(ValueError, match="mode: expected one of"):
+        only.update({"mode": "gaussians"})
+    for bad in ("iso", ["isosurface"], []):
+        with pytest.raises(ValueError, match="modes: expected some of"):
+            VolumeScene(v.data, modes=bad)
 
 
 def test_an_openvdb_grid_too_large_to_make_dense_is_refused_in_iso_mode_only(monkeypatch):

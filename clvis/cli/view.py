@@ -108,7 +108,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         metavar="N",
         help=f"points of an embedded cloud (default {POINTS:,})",
     )
-    p.add_argument("--isovalue", type=real(), default=None, help="default: 0.5 embedded, else Otsu's")
+    p.add_argument(
+        "--isovalue",
+        type=real(),
+        default=None,
+        help="default: 0.5 embedded, 0 for a .vdb level set (mode iso), else Otsu's",
+    )
     p.add_argument("--rate", type=count(1, 32), default=None, help=f"ZFP bits per value (default {RATE})")
     p.add_argument("--host", default="127.0.0.1", help="the address to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=count(0, 65535), default=0, help="default 0: a free port")

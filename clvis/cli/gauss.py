@@ -274,7 +274,7 @@ def _sources(args):
     """(panel names, sparse volume or None, Gaussians or None, description,
     the dense samples of a volume FILE or None)."""
     from .. import datasets
-    from ..gauss import Gaussians, SparseVolume, read_vdb_grid
+    from ..gauss import Gaussians, SparseVolume, read_vdb
     from ..io import read_points
     from ..io.files import regular_file
 
@@ -309,15 +309,14 @@ def _sources(args):
     if name.endswith(".vdb"):
         if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index")):
             raise CliError("--shape, --dtype and --volume-index are for .raw and NIfTI volumes, not .vdb")
-        vdb = read_vdb_grid(path, grid=args.grid)
-        sv = vdb.volume
-        if vdb.grid_class == "fog volume":
+        sv = read_vdb(path, grid=args.grid)
+        if sv.grid_class == "fog volume":
             # the file says it is a fog (OpenVDB's class for densities, 0
             # outside): drawn as the embedded explosion is, its glowing
             # inside shown (under the volume defaults a shell of low values
             # hides it)
             args.density_scale, args.fog = FOG_DENSITY_FACTOR, "a fog volume (the grid's class)"
-        args.level_set = vdb.grid_class == "level set"
+        args.level_set = sv.grid_class == "level set"
         if args.threshold is not None or args.spacing is not None:
             # leaf by leaf: a sparse grid is never made dense (10^4 voxels an axis: 4 TB),
             # and --spacing alone keeps every active voxel (a level set's negative values)

@@ -278,7 +278,7 @@ def _load(args):
 def _load_vdb(args, path: Path):
     """_load's tuple for a .vdb's float grid made dense (read_vdb_volume): a
     level set's default isovalue 0 (its surface), another grid's Otsu's."""
-    from ..gauss import read_vdb_volume
+    from ..gauss import default_isovalue, read_vdb_volume
 
     given = [
         f
@@ -299,13 +299,12 @@ def _load_vdb(args, path: Path):
         raise CliError(f"{path}: grid {v.array!r} has no active voxel")
     spacing = v.spacing if args.spacing is None else tuple(float(s) for s in reversed(args.spacing))
     check_iso_volume(data, str(path))
-    level_set = grid_class == "level set"
     kind = f", a {grid_class}" if grid_class else ""
     return (
         data,
         spacing,
         v.origin,
-        0.0 if level_set else otsu_level(data),
+        default_isovalue(data, grid_class),
         finite_range(data, str(path)),
         f"{path} (grid {v.array!r}{kind})",
     )

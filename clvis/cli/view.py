@@ -64,7 +64,11 @@ iso+infill (the in-fill network on the partial passes), gaussians, infill|iso
 (split: 85 % of the rays + in-fill beside the complete render, the PSNR).
 Sparse volumes (a .vdb float grid, --grid; the `vdb` extra): mode gaussians
 (Sharma & Schmalstieg: the active voxels' Gaussians at a level of detail,
-never made dense), and a threshold: the active voxels above it are drawn.
+never made dense), and a threshold: the active voxels above it are drawn;
+mode iso (clvis iso FILE.vdb's isosurface: the grid made dense when the mode
+is first chosen, its inactive voxels the grid's background; --isovalue,
+default 0 for a level set, else Otsu's; refused in the page, gaussians still
+shown, where the dense volume would not fit in host memory).
 
 Dask (--workers N: a LocalCluster of N one-thread processes started here and
 stopped with the viewer; --scheduler ADDRESS: a running cluster): the frames
@@ -104,7 +108,12 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         metavar="N",
         help=f"points of an embedded cloud (default {POINTS:,})",
     )
-    p.add_argument("--isovalue", type=real(), default=None, help="default: 0.5 embedded, else Otsu's")
+    p.add_argument(
+        "--isovalue",
+        type=real(),
+        default=None,
+        help="default: 0.5 embedded, 0 for a .vdb level set (mode iso), else Otsu's",
+    )
     p.add_argument("--rate", type=count(1, 32), default=None, help=f"ZFP bits per value (default {RATE})")
     p.add_argument("--host", default="127.0.0.1", help="the address to listen on (default 127.0.0.1)")
     p.add_argument("--port", type=count(0, 65535), default=0, help="default 0: a free port")
@@ -244,15 +253,14 @@ def load_scene(args: argparse.Namespace) -> Scene:
 
 
 def _vdb_scene(args: argparse.Namespace, path: Path) -> Scene:
-    """A .vdb's float grid as a SparseScene (its Gaussians)."""
+    """A .vdb's float grid as a SparseScene (its Gaussians; its isosurface,
+    --isovalue and --rate, when the iso mode is chosen)."""
     from ..gauss import read_vdb
     from ..view import SparseScene
 
     given = [
         f
         for f, v in (
-            ("--isovalue", args.isovalue),
-            ("--rate", args.rate),
             ("--points", args.points),
             ("--spacing", args.spacing),
             ("--shape", args.shape),
@@ -265,11 +273,13 @@ def _vdb_scene(args: argparse.Namespace, path: Path) -> Scene:
     ]
     if given:
         raise CliError(
-            f"{' and '.join(given)}: not for a .vdb (its grid is drawn as Gaussians, mode gaussians; "
-            "the threshold is set in the page)"
+            f"{' and '.join(given)}: not for a .vdb (its grid is drawn as Gaussians, mode gaussians, "
+            "or as its isosurface, mode iso: --isovalue, --rate; the threshold is set in the page)"
         )
     grid = args.grid
-    return SparseScene(read_vdb(path, grid=grid), description=str(path))
+    return SparseScene(
+        read_vdb(path, grid=grid), description=str(path), isovalue=args.isovalue, rate=args.rate or RATE
+    )
 
 
 def load_dask_scene(args: argparse.Namespace) -> Scene:
@@ -280,7 +290,7 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
 
     if args.file is not None and str(args.file).lower().endswith(".vdb"):
         raise CliError(
-            "--workers/--scheduler: a .vdb is drawn on one device (mode gaussians); leave them out"
+            "--workers/--scheduler: a .vdb is drawn on one device (modes gaussians, iso); leave them out"
         )
     if args.array is not None:
         raise CliError("--array: not on workers (they read .npy, .raw and NIfTI volumes)")

@@ -11,7 +11,7 @@ from .render import (
     GaussianRenderer,
     render_gaussians,
 )
-from .sparse import SparseVolume, VdbGrid, read_vdb, read_vdb_grid, read_vdb_volume
+from .sparse import SparseVolume, default_isovalue, dense_volume, read_vdb, read_vdb_volume
 
 __all__ = [
     "BVH",
@@ -24,14 +24,14 @@ __all__ = [
     "LodRow",
     "LodTable",
     "SparseVolume",
-    "VdbGrid",
     "build_bvh",
+    "default_isovalue",
+    "dense_volume",
     "gaussians_from_points",
     "gaussians_from_volume",
     "knn_mean_distance",
     "lod_table",
     "read_vdb",
-    "read_vdb_grid",
     "read_vdb_volume",
     "render_gaussians",
 ]

@@ -22,7 +22,6 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +33,15 @@ from ..io.files import regular_file
 from ..io.vdb import GridLeaves, vdb_grids
 from ..io.volumes import volume_parts
 
-__all__ = ["LEAF", "LEAF_VOXELS", "SparseVolume", "VdbGrid", "read_vdb", "read_vdb_grid", "read_vdb_volume"]
+__all__ = [
+    "LEAF",
+    "LEAF_VOXELS",
+    "SparseVolume",
+    "default_isovalue",
+    "dense_volume",
+    "read_vdb",
+    "read_vdb_volume",
+]
 
 LEAF = 8  # voxels along each side of a leaf
 LEAF_VOXELS = LEAF**3  # 512
@@ -77,7 +84,18 @@ class SparseVolume:
     Active values are finite (NaN or Inf in an active voxel is a DataError).
     Build one with :meth:`from_dense` or :func:`read_vdb`; the constructor
     takes the fields above and checks them.
+
+    read_vdb also sets, from the file (else these defaults):
+
+    background : float, the grid's background value (0.0; a level set's:
+        its narrow band's outside), what :func:`dense_volume` puts where no
+        voxel is active.
+    grid_class : str or None, the grid's "class" metadata ("level set",
+        "fog volume", ...; None), which :func:`default_isovalue` reads.
     """
+
+    background: float = 0.0
+    grid_class: str | None = None
 
     def __init__(
         self,
@@ -278,7 +296,7 @@ class SparseVolume:
         if threshold is not None:
             active &= np.greater(values, np.float64(threshold))
         keep = active.any(axis=1)
-        return self._from_leaves(
+        out = self._from_leaves(
             self.shape,
             self.spacing if spacing is None else spacing,
             self.origin,
@@ -286,6 +304,8 @@ class SparseVolume:
             values[keep],
             active[keep],
         )
+        out.background, out.grid_class = self.background, self.grid_class
+        return out
 
     @classmethod
     def _from_leaves(cls, shape, spacing, origin, coords, lv, la) -> SparseVolume:
@@ -395,32 +415,6 @@ def read_vdb(path: str | os.PathLike[str], grid: str | int | None = None) -> Spa
     return _read(path, grid)[0]
 
 
-@dataclass(frozen=True)
-class VdbGrid:
-    """A float grid of an OpenVDB file (:func:`read_vdb_grid`).
-
-    volume: its active voxels (:func:`read_vdb`); name: the grid's name;
-    grid_class: its "class" metadata ("level set", "fog volume", "staggered"
-    or "unknown"); background: the value of its inactive voxels. name and
-    grid_class are None, background 0, for a file clvis's walk does not
-    follow (a tree of another configuration, a file version before 222)."""
-
-    volume: SparseVolume
-    name: str | None
-    grid_class: str | None
-    background: float
-
-
-def read_vdb_grid(path: str | os.PathLike[str], grid: str | int | None = None) -> VdbGrid:
-    """:func:`read_vdb`'s volume with what the file says of the grid: its
-    name, class and background (e.g. to draw a fog volume as a fog and a
-    level set by its zero crossing); the same arguments and errors."""
-    sv, name, leaves = _read(path, grid)
-    if leaves is None:
-        return VdbGrid(sv, None, None, 0.0)
-    return VdbGrid(sv, name, leaves.grid_class, float(leaves.background))
-
-
 def _read(path, grid) -> tuple[SparseVolume, str | None, GridLeaves | None]:
     """read_vdb's volume, the grid's name and its walk (GridLeaves: its class
     and background), the two None for a file the walk does not follow."""
@@ -440,7 +434,7 @@ def _read(path, grid) -> tuple[SparseVolume, str | None, GridLeaves | None]:
         failed: Exception = e
     else:
         try:
-            return _read_grid(f, p, grid, walked), name, leaves
+            return _with_metadata(_read_grid(f, p, grid, walked), leaves), name, leaves
         except DataError:
             raise
         except (RuntimeError, ValueError, OSError, MemoryError, IndexError, KeyError, TypeError) as e:
@@ -451,8 +445,16 @@ def _read(path, grid) -> tuple[SparseVolume, str | None, GridLeaves | None]:
     if grids:  # the grid as the walk alone reads it, where it reads it whole
         # (what tinyvdb misreads; a file tinyvdb refuses for another grid, such
         # as one of a frustum map, which clvis does not read either)
-        return _read_walked(p, grid, grids, f"not a readable VDB file: {failed}{why}"), name, leaves
+        sv = _read_walked(p, grid, grids, f"not a readable VDB file: {failed}{why}")
+        return _with_metadata(sv, leaves), name, leaves
     raise DataError(f"{p}: not a readable VDB file: {failed}") from None
+
+
+def _with_metadata(sv: SparseVolume, leaves: GridLeaves | None) -> SparseVolume:
+    """sv with the walk's background value and class of its grid (where the walk has them)."""
+    if leaves is not None:
+        sv.background, sv.grid_class = float(leaves.background), leaves.grid_class
+    return sv
 
 
 def read_vdb_volume(path: str | os.PathLike[str], grid: str | int | None = None) -> tuple[Any, str | None]:
@@ -466,24 +468,89 @@ def read_vdb_volume(path: str | os.PathLike[str], grid: str | int | None = None)
     surface seen from outside is the level set's zero crossing (inside the
     band's inner edge the fill is the outside's value too: a camera inside
     the object sees that edge). A volume that would not fit in host memory
-    is refused (DeviceError) before it is made."""
-    from ..errors import DeviceError
+    is refused (DeviceError) before it is made (:func:`dense_volume`)."""
     from ..io.volumes import Volume
+
+    sv, name, _ = _read(path, grid)
+    p = Path(path)
+    data = dense_volume(sv, f"{p}: grid {name!r}", "clvis gauss, clvis view")
+    return Volume(data, sv.spacing, sv.origin, str(p), array=name), sv.grid_class
+
+
+# host bytes a voxel of a grid made dense takes at the peak (SparseVolume.to_dense:
+# the volume, its padded leaf view and the active mask)
+DENSE_BYTES_PER_VOXEL = 12
+
+
+def dense_volume(sv: SparseVolume, what: str, instead: str) -> np.ndarray:
+    """The float32 [Z, Y, X] volume of `sv`, its background value
+    (:attr:`SparseVolume.background`) where no voxel is active, for an
+    isosurface (``clvis iso FILE.vdb``, the viewer's iso mode of a grid).
+    Refused before it is made: a volume that would not fit in host memory
+    (DeviceError, `what` naming the grid, `instead` what needs no dense copy)
+    and a background that is not finite (DataError)."""
+    from ..errors import DeviceError
     from ..runtime import host_available_bytes
 
-    g = read_vdb_grid(path, grid)
-    sv, name, background = g.volume, g.name, g.background
-    p = Path(path)
-    need = 3 * 4 * math.prod(sv.shape)  # the volume, its padded leaf view and the active mask
+    if not math.isfinite(sv.background):
+        raise DataError(f"{what}: its background value is {sv.background} (not finite): no dense volume")
+    need = DENSE_BYTES_PER_VOXEL * math.prod(sv.shape)
     avail = host_available_bytes()
     if avail is not None and need > avail:
         raise DeviceError(
-            f"{p}: grid {name!r} made dense is {'x'.join(map(str, sv.shape[::-1]))} voxels, "
+            f"{what} made dense is {'x'.join(map(str, sv.shape[::-1]))} voxels, "
             f"about {need / 1e9:.2f} GB of host memory, and only {avail / 1e9:.2f} GB is available "
-            "(its Gaussians need no dense copy: clvis gauss, clvis view)"
+            f"(its Gaussians need no dense copy: {instead})"
         )
-    volume = Volume(sv.to_dense(background), sv.spacing, sv.origin, str(p), array=name)
-    return volume, g.grid_class
+    return sv.to_dense(sv.background)
+
+
+def default_isovalue(volume: SparseVolume | np.ndarray, grid_class: str | None = None) -> float:
+    """The isovalue a grid made dense is first shown at (``clvis iso
+    FILE.vdb``, the viewer's iso mode): 0 for a level set (its surface),
+    else Otsu's threshold of the dense volume (clvis.io.volumes.otsu_level).
+
+    volume: the dense array (with the grid's `grid_class`), or the
+    SparseVolume (its own :attr:`~SparseVolume.grid_class`): its dense
+    volume's samples are read from the leaves, the very ones otsu_level
+    takes of the dense array (every k-th of at most ~2M), never made dense."""
+    from ..io.volumes import otsu_level
+
+    if isinstance(volume, SparseVolume):
+        if volume.grid_class == "level set":
+            return 0.0
+        return otsu_level(_dense_samples(volume))
+    return 0.0 if grid_class == "level set" else otsu_level(volume)
+
+
+def _dense_samples(sv: SparseVolume) -> np.ndarray:
+    """otsu_level's samples of sv's dense volume (``dense.ravel()[::step]``,
+    the background where no voxel is active), from the leaves."""
+    from ..io.volumes import OTSU_SAMPLES
+
+    Z, Y, X = sv.shape
+    size = Z * Y * X
+    step = max(1, size // OTSU_SAMPLES)
+    flat = np.arange(0, size, step, dtype=np.int64)
+    z, y, x = flat // (Y * X), flat // X % Y, flat % X
+    ny, nx = -(-Y // LEAF), -(-X // LEAF)
+    keys = (z // LEAF * ny + y // LEAF) * nx + x // LEAF
+    c = sv.coords.astype(np.int64) // LEAF
+    leaf_keys = (c[:, 0] * ny + c[:, 1]) * nx + c[:, 2]  # ascending: leaves in z-y-x order
+    row = np.searchsorted(leaf_keys, keys)
+    found = row < len(leaf_keys)
+    found[found] = leaf_keys[row[found]] == keys[found]
+    out = np.full(len(flat), np.float32(sv.background), np.float32)
+    leaf = row[found]
+    voxel = (z[found] % LEAF) * 64 + (y[found] % LEAF) * 8 + x[found] % LEAF
+    active = (sv.masks[leaf, voxel // 32] >> (voxel % 32).astype(np.uint32)) & 1 == 1
+    if len(sv.values):  # a tile's row is -1: its value is the tile's
+        stored = sv.values[np.maximum(sv.value_rows[leaf], 0), voxel]
+    else:
+        stored = np.zeros(len(leaf), np.float32)
+    value = np.where(sv.tiles[leaf], sv.tile_values[leaf], stored)
+    out[np.flatnonzero(found)[active]] = value[active]
+    return out
 
 
 def _why_tinyvdb_fails(walked: list[GridLeaves | None]) -> str:

@@ -778,6 +778,10 @@ def _check_nifti_layout(
         )
 
 
+#: otsu_level's samples at most (about: every k-th of the finite ones)
+OTSU_SAMPLES = 2_000_000
+
+
 def otsu_level(data: npt.ArrayLike) -> float:
     """Otsu's threshold of the finite samples (scikit-image), on at most ~2M of
     them: the isovalue that separates the two classes of a scan best, which
@@ -792,7 +796,7 @@ def otsu_level(data: npt.ArrayLike) -> float:
     from skimage.filters import threshold_otsu
 
     flat = np.asarray(data).ravel()
-    step = max(1, flat.size // 2_000_000)
+    step = max(1, flat.size // OTSU_SAMPLES)
     sample = flat[::step]
     sample = sample[np.isfinite(sample)]
     if not sample.size:

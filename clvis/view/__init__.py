@@ -122,7 +122,8 @@ def view(
     obj: a clvis.PointCloud, (N, 3) positions, a 3-D volume [z, y, x] (with
     ``spacing``, ``origin``, ``isovalue``, ``rate``), a clvis.Volume
     (read_volume's: its spacing and origin), a clvis.SparseVolume
-    (read_vdb's: its Gaussians, ``colormap``), a VTK dataset (a pyvista
+    (read_vdb's: its Gaussians, ``colormap``; its isosurface, ``isovalue``,
+    ``rate``), a VTK dataset (a pyvista
     mesh, point set or image: clvis.from_vtk) or a Scene. host: the
     interface to listen on (127.0.0.1; any other needs the printed token),
     port 0: a free one. width x height: the notebook frame's size.

@@ -17,10 +17,16 @@ knn_sigma, computed once per cloud when the mode is first chosen),
 ``iso`` (progressive isosurface: each pass as it completes), ``iso+infill``
 (the in-fill network on each partial pass), ``gaussians`` (the volume's
 Gaussians at a level of detail). A sparse volume (an OpenVDB grid,
-:class:`SparseScene`): ``gaussians`` only, never made dense. Split views
+:class:`SparseScene`): ``gaussians`` (its active voxels' Gaussians, never
+made dense) and ``iso`` (``clvis iso FILE.vdb``'s isosurface: the grid made
+dense when the mode is first chosen, where it fits in host memory). Split views
 (``narvis|gaussians``, ``narvis-scan|gaussians``, ``infill|iso``): the fast
 path's left half beside its slow target's right half, with the PSNR of the
 whole frames.
+
+Frames lie over images.BACKGROUND where what is covered is known (the
+in-fill network gives its coverage); the LiDAR and NARVis networks predict
+colour only, over black, and their frames (and the narvis splits) stay so.
 """
 
 from __future__ import annotations
@@ -64,6 +70,8 @@ _BG = np.array(BACKGROUND, np.uint8)
 _BG32 = np.array((*BACKGROUND, 0), np.uint8).view(np.uint32)[0]  # as a pixel of an (H, W, 4) array
 _ACTIVE32 = np.array((70, 40, 75, 0), np.uint8).view(np.uint32)[0]  # iso: rays still running
 _MAX_POINT_SIZE = 16
+#: a VolumeScene's modes
+VOLUME_MODES = ("iso", "iso+infill", "gaussians", "infill|iso")
 SPLIT_COMPLETION = 0.85  # infill|iso: the fast side stops at this fraction of the rays
 # the held blocks the pool keeps (Scene._sized): about one largest page's
 # (3840x2160) still and interaction sizes, however many pages are open
@@ -566,10 +574,20 @@ class VolumeScene(Scene):
         rate: int = 8,
         description: str = "volume",
         model_dir: Any = None,
+        *,
+        modes: Any = None,
     ) -> None:
         """model_dir: where the in-fill network's model is (clvis train --out;
-        None: the package's), loaded when an in-fill mode is first chosen."""
+        None: the package's), loaded when an in-fill mode is first chosen.
+        modes: the modes offered, some of VOLUME_MODES in their order (None:
+        all); without gaussians the volume is not kept on the host (the
+        compressed copy on the device draws the others)."""
         from .. import IsoRenderer
+
+        if modes is None:
+            modes = VOLUME_MODES
+        if isinstance(modes, str) or not set(modes) <= set(VOLUME_MODES) or not modes:
+            raise ValueError(f"modes: expected some of {VOLUME_MODES}, got {modes!r}")
 
         self.model_dir = _model_dir(model_dir)
 
@@ -581,21 +599,20 @@ class VolumeScene(Scene):
         if finite.size == 0:
             raise DataError(f"{description}: no finite sample")
         vmin, vmax = float(finite.min()), float(finite.max())
+        isovalue = _isovalue(isovalue)
         if isovalue is None:
             isovalue = otsu_level(finite)
-        elif isinstance(isovalue, bool) or not isinstance(isovalue, (int, float, np.integer, np.floating)):
-            raise TypeError(f"isovalue: expected a real number, got {type(isovalue).__name__}")
-        elif not math.isfinite(isovalue):
-            raise ValueError(f"isovalue: expected a finite number, got {isovalue!r}")
-        self.volume, self.spacing, self.origin = data, tuple(spacing), tuple(origin)
+        # the gaussians mode's samples (None: not offered)
+        self.volume: np.ndarray | None = data if "gaussians" in modes else None
+        self.spacing, self.origin = tuple(spacing), tuple(origin)
         self.iso = IsoRenderer(data, rate, spacing, origin)
         self.device = self.iso.queue.device.name.strip()
         self.lo = np.asarray(origin, np.float64)
         self.hi = self.lo + (np.array(data.shape[::-1]) - 1) * np.asarray(spacing, np.float64)[::-1]
         self.description = f"{description}: {'x'.join(map(str, data.shape[::-1]))} samples"
-        self.modes = ["iso", "iso+infill", "gaussians", "infill|iso"]
+        self.modes = [m for m in VOLUME_MODES if m in modes]
         self.progressive = frozenset(("iso", "iso+infill"))
-        self.settings = {"mode": "iso", "isovalue": float(isovalue), "lod": "medium"}
+        self.settings = {"mode": self.modes[0], "isovalue": float(isovalue), "lod": "medium"}
         self.choices = {
             "mode": self.modes,
             "isovalue": {"min": vmin, "max": vmax},
@@ -682,6 +699,7 @@ class VolumeScene(Scene):
         from .. import GaussianRenderer, gaussians_from_volume
 
         def make():
+            assert self.volume is not None  # kept where the mode is offered
             gs = gaussians_from_volume(
                 self.volume, s["lod"], threshold=s["isovalue"], spacing=self.spacing, origin=self.origin
             )
@@ -693,14 +711,23 @@ class VolumeScene(Scene):
 
 
 class SparseScene(Scene):
-    """A sparse volume (clvis.SparseVolume: read_vdb's OpenVDB grid) as the
-    Gaussians of its active voxels (Sharma & Schmalstieg), never made dense:
-    mode ``gaussians``, its level of detail, and ``threshold``: the active
+    """A sparse volume (clvis.SparseVolume: read_vdb's OpenVDB grid): mode
+    ``gaussians``, the Gaussians of its active voxels (Sharma & Schmalstieg),
+    never made dense: its level of detail, and ``threshold``: the active
     voxels above it are drawn (at its least value, the default: every active
     voxel, a level set's negative values too). The colours span the grid's
     active values whatever the threshold, so a colour keeps its value as the
     threshold moves. The Gaussians are made when a level of detail or a
-    threshold is first shown (the last one kept)."""
+    threshold is first shown (the last one kept).
+
+    Mode ``iso``: the isosurface ``clvis iso FILE.vdb`` draws, at
+    ``isovalue`` (default :func:`clvis.gauss.default_isovalue`: 0 for a level
+    set, else Otsu's of the dense volume, read from the leaves): the grid
+    made dense (:func:`clvis.gauss.dense_volume`: its inactive voxels the
+    grid's background) into a :class:`VolumeScene` when the mode is first
+    chosen, whose progressive iso mode draws it. A dense volume beyond host
+    memory is refused then (a DeviceError: the page's status line shows it),
+    and the gaussians mode goes on as before."""
 
     kind = "sparse volume"
 
@@ -710,10 +737,14 @@ class SparseScene(Scene):
         colormap: str = "viridis",
         description: str = "sparse volume",
         model_dir: Any = None,
+        isovalue: float | None = None,
+        rate: int = 8,
     ) -> None:
-        """model_dir: accepted for scene_for's sake (no network runs on a sparse volume)."""
+        """model_dir: accepted for scene_for's sake (no network runs on a
+        sparse volume). isovalue, rate: the iso mode's first isovalue (None:
+        default_isovalue's) and ZFP bits per value (VolumeScene's)."""
         from .. import runtime
-        from ..gauss.sparse import SparseVolume
+        from ..gauss.sparse import SparseVolume, default_isovalue
 
         if not isinstance(volume, SparseVolume):
             raise TypeError(f"volume: expected a clvis.SparseVolume, got {type(volume).__name__}")
@@ -722,30 +753,77 @@ class SparseScene(Scene):
         _model_dir(model_dir)
         if volume.n_active == 0:
             raise DataError(f"{description}: no active voxel")
+        isovalue = _isovalue(isovalue)
         values = volume.leaf_values()[volume.active_masks()]
-        self.sparse, self.colormap = volume, colormap
+        self.sparse, self.colormap, self.rate = volume, colormap, rate
         self.vmin, self.vmax = float(values.min()), float(values.max())
+        # the dense volume's range: the background too where a voxel is not active
+        ilo, ihi = self.vmin, self.vmax
+        if volume.n_active < math.prod(volume.shape) and math.isfinite(volume.background):
+            ilo, ihi = min(ilo, volume.background), max(ihi, volume.background)
         self.queue = runtime.default_queue()
         self.device = self.queue.device.name.strip()
         spacing = np.asarray(volume.spacing, np.float64)[::-1]  # (dx, dy, dz)
         self.lo = np.asarray(volume.origin, np.float64)
         self.hi = self.lo + (np.array(volume.shape[::-1]) - 1) * spacing
+        kind = f", a {volume.grid_class}" if volume.grid_class else ""
         self.description = (
             f"{description}: {'x'.join(map(str, volume.shape[::-1]))} voxels, "
-            f"{volume.n_active:,} active in {volume.n_leaves:,} leaves"
+            f"{volume.n_active:,} active in {volume.n_leaves:,} leaves{kind}"
         )
-        self.modes = ["gaussians"]
-        self.settings = {"mode": "gaussians", "lod": "medium", "threshold": self.vmin}
+        self._source = description
+        self.modes = ["gaussians", "iso"]
+        self.progressive = frozenset(("iso",))
+        if isovalue is None:
+            isovalue = default_isovalue(volume)
+        self.settings = {
+            "mode": "gaussians",
+            "lod": "medium",
+            "threshold": self.vmin,
+            "isovalue": float(isovalue),
+        }
         self.choices = {
             "mode": self.modes,
             "lod": ["low", "medium", "high"],
             "threshold": {"min": self.vmin, "max": self.vmax},
+            "isovalue": {"min": ilo, "max": ihi},
         }
         self._gauss: dict[tuple, Any] = {}
+        self._dense: VolumeScene | None = None  # the iso mode's, made when it is first chosen
+
+    def _iso_scene(self) -> VolumeScene:
+        """The grid made dense as a VolumeScene, once (DeviceError, before it
+        is made, where it would not fit in host memory)."""
+        if self._dense is None:
+            from ..gauss.sparse import dense_volume
+
+            sv = self.sparse
+            data = dense_volume(sv, f"{self._source}: the grid", "mode gaussians")
+            self._dense = VolumeScene(
+                data,
+                sv.spacing,
+                sv.origin,
+                self.settings["isovalue"],
+                self.rate,
+                description=self._source,
+                modes=["iso"],  # the dense copy goes once compressed on the device
+            )
+        return self._dense
 
     def frames(
         self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
     ) -> Iterator[Frame]:
+        if settings["mode"] == "iso":
+            dense = self._iso_scene()
+            dense.kept_sizes = self.kept_sizes
+            try:
+                yield from dense.frames(
+                    camera, width, height, {"mode": "iso", "isovalue": settings["isovalue"]}, superseded
+                )
+            finally:
+                if dense._trim:  # its pool gave blocks back: view_frames trims the heap after
+                    dense._trim, self._trim = False, True
+            return
         from .. import GaussianRenderer, TransferFunction, gaussians_from_volume
 
         self._sized(self.queue, width, height)
@@ -762,6 +840,11 @@ class SparseScene(Scene):
             return GaussianRenderer(gs, tf, queue=self.queue), gs.n
 
         yield self._gaussian_frame((settings["lod"], threshold), make, camera, width, height)
+
+    def release(self, sizes: Any = ()) -> None:
+        super().release(sizes)
+        if self._dense is not None:
+            self._dense.release(sizes)
 
 
 def view_frames(
@@ -933,6 +1016,17 @@ class DaskVolumeScene(Scene):
         self.dr.close()
 
 
+def _isovalue(isovalue: Any) -> float | None:
+    """A scene's isovalue argument: None (the scene's default) or a finite real number."""
+    if isovalue is None:
+        return None
+    if isinstance(isovalue, bool) or not isinstance(isovalue, (int, float, np.integer, np.floating)):
+        raise TypeError(f"isovalue: expected a real number, got {type(isovalue).__name__}")
+    if not math.isfinite(isovalue):
+        raise ValueError(f"isovalue: expected a finite number, got {isovalue!r}")
+    return float(isovalue)
+
+
 def _model_dir(directory: Any) -> Path | None:
     """A scene's model_dir: None, or an existing folder (checked up front:
     its networks load when their mode is first chosen, in the render worker)."""
@@ -951,10 +1045,10 @@ def scene_for(obj: Any, **kwargs: Any) -> Scene:
     (points), a 3-D array [z, y, x] (a volume; kwargs: spacing, origin,
     isovalue, rate), a clvis.Volume (read_volume's, with its spacing and
     origin unless kwargs give them), a clvis.SparseVolume (read_vdb's: its
-    Gaussians; kwargs: colormap) or a VTK dataset (a pyvista mesh, point set
-    or image: clvis.from_vtk's cloud or volume). A path is refused, naming the readers.
-    kwargs for both: description, model_dir (where the networks' models are:
-    clvis train --out)."""
+    Gaussians and its isosurface; kwargs: colormap, isovalue, rate) or a VTK
+    dataset (a pyvista mesh, point set or image: clvis.from_vtk's cloud or
+    volume). A path is refused, naming the readers. kwargs for all:
+    description, model_dir (where the networks' models are: clvis train --out)."""
     from .. import PointCloud
     from ..gauss.sparse import SparseVolume
     from ..io.objects import from_vtk, is_vtk_dataset
@@ -966,7 +1060,7 @@ def scene_for(obj: Any, **kwargs: Any) -> Scene:
         obj = from_vtk(obj)
     if isinstance(obj, PointCloud):
         return PointScene(obj, **kwargs)
-    if isinstance(obj, SparseVolume):  # read_vdb's: as Gaussians, never dense
+    if isinstance(obj, SparseVolume):  # read_vdb's: as Gaussians (never dense) or its isosurface
         return SparseScene(obj, **kwargs)
     if isinstance(obj, Volume):  # read_volume's: its spacing and origin unless given
         kwargs.setdefault("spacing", obj.spacing)

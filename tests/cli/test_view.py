@@ -195,10 +195,16 @@ def test_view_vdb(capsys):
     assert [line.split()[0] for line in out.splitlines() if line.startswith("gaussians ")] == [
         "gaussians"
     ] * 2
-    assert cli.main(["view", vdb, "--grid", "2", "--measure", "--size", "96x64"]) == 0  # by index: "block"
+    assert cli.main(["view", vdb, "--grid", "2", "--measure", "gaussians", "--size", "96x64"]) == 0  # "block"
     assert "160x160x160 voxels, 4,096,000 active" in capsys.readouterr().out
+    # mode iso: the grid made dense, at --isovalue (else clvis iso's default) with --rate
+    iso = ["--isovalue", "0.5", "--rate", "4", "--measure", "iso", "--size", "96x64"]
+    assert cli.main(["view", vdb, *iso]) == 0
+    out = capsys.readouterr().out
+    assert "a level set" in out
+    assert [ln.split()[0] for ln in out.splitlines() if ln.startswith("iso ")] == ["iso"] * 2
     for argv, msg in [
-        (["--isovalue", "0.5"], "--isovalue: not for a .vdb"),
+        (["--points", "5"], "--points: not for a .vdb"),
         (["--spacing", "1,1,1"], "--spacing: not for a .vdb"),
         (["--workers", "1"], "a .vdb is drawn on one device"),
         (["--grid", "nope"], "no grid named 'nope'"),

@@ -896,24 +896,38 @@ def test_vdb_volume_made_dense_with_the_grids_background():
     assert fog_class is None and (fog.data[~read_vdb(path, grid="density").active()] == 0).all()
 
 
-def test_read_vdb_grid_says_the_grids_name_class_and_background():
-    """read_vdb_grid: read_vdb's volume with the grid's name, class and
-    background as OpenVDB wrote them (a level set's background: its band's
-    half width, 2 voxels of 1; a fog volume's 0)."""
-    from clvis.gauss import read_vdb_grid
+def test_vdb_grid_keeps_its_background_and_class_and_default_isovalue():
+    """read_vdb's SparseVolume keeps the grid's background and class (the
+    viewer's iso mode makes it dense from them, as read_vdb_volume does);
+    default_isovalue: 0 for a level set, else Otsu's of the dense volume,
+    the same from the leaves (never dense) as from the dense array, where
+    otsu_level takes every k-th sample too; a background that is not finite
+    is refused before a dense volume is made."""
+    from clvis.gauss import default_isovalue, dense_volume, read_vdb_volume
+    from clvis.io.volumes import otsu_level
 
-    data = Path(__file__).parents[1] / "data"
-    g = read_vdb_grid(data / "openvdb_small.vdb")
-    assert (g.name, g.grid_class, g.background) == ("surface", "level set", 2.0)
-    assert g.volume.n_active == read_vdb(data / "openvdb_small.vdb").n_active == 12_790
-    fog = read_vdb_grid(data / "openvdb_fog.vdb", grid=0)
-    assert (fog.name, fog.grid_class, fog.background, fog.volume.n_active) == (
-        "density",
-        "fog volume",
-        0.0,
-        4224,
-    )
-    assert read_vdb_grid(data / "openvdb_small.vdb", grid="density").grid_class is None  # no class written
+    path = Path(__file__).parents[1] / "data" / "openvdb_small.vdb"
+    sv = read_vdb(path)
+    assert (sv.background, sv.grid_class) == (2.0, "level set")
+    assert default_isovalue(sv) == 0.0 == default_isovalue(read_vdb_volume(path)[0].data, "level set")
+    assert (sv.restricted(threshold=0.0).background, sv.restricted().grid_class) == (2.0, "level set")
+    fog = read_vdb(path, grid="density")
+    dense = read_vdb_volume(path, grid="density")[0].data
+    assert (fog.background, fog.grid_class) == (0.0, None)  # no class written
+    fog_class = read_vdb(path.with_name("openvdb_fog.vdb"))
+    assert (fog_class.background, fog_class.grid_class, fog_class.n_active) == (0.0, "fog volume", 4224)
+    np.testing.assert_array_equal(dense_volume(fog, "fog", "-"), dense)
+    assert default_isovalue(fog) == otsu_level(dense) == default_isovalue(dense) and 0 < otsu_level(dense) < 1
+    rng = np.random.default_rng(3)
+    vol = np.zeros((150, 160, 170), F32)  # 4.08M samples: otsu_level takes every 2nd
+    vol[20:130, 30:100, 8:150] = rng.random((110, 70, 142), F32)
+    big = clvis.SparseVolume.from_dense(vol, threshold=0.2)
+    big.background = 0.1
+    want = otsu_level(big.to_dense(0.1))
+    assert default_isovalue(big) == want != otsu_level(big.to_dense(0.0))
+    big.background = float("nan")
+    with pytest.raises(clvis.DataError, match=r"^big: its background value is nan \(not finite\)"):
+        dense_volume(big, "big", "-")
 
 
 def test_vdb_grid_beside_one_tinyvdb_cannot_parse_is_read_from_the_walk():

@@ -343,6 +343,53 @@ def test_volume_progressive_iso_and_infill(browser):
         server.close()
 
 
+def test_an_openvdb_grid_in_mode_iso_and_its_refusal(browser, monkeypatch):
+    """A .vdb grid's page lists mode iso beside gaussians with an isovalue
+    field (0: the level set's surface); choosing it draws the isosurface
+    progressively to a done frame. Where the dense volume would not fit in
+    host memory the status line says so, and gaussians still draws."""
+    from clvis.view import SparseScene
+
+    path = Path(__file__).resolve().parents[1] / "data" / "openvdb_small.vdb"
+    server = ViewServer(SparseScene(clvis.read_vdb(path), description="openvdb_small.vdb"))
+    try:
+        b = browser
+        b.js("window.clvisView = undefined")
+        b.call("Page.navigate", url=server.url)
+        first = _settled(b, "gaussians")
+        modes = b.js("[...document.getElementById('mode').options].map((o) => o.value)")
+        assert modes == ["gaussians", "iso"]
+        assert b.js("document.getElementById('set-isovalue').value") == "0"
+        b.choose("mode", "iso")
+        h = _settled(b, "iso")
+        assert h["info"]["completion"] == 1.0 and h["id"] > first["id"]
+        assert b.js("document.getElementById('status').textContent").startswith(
+            f"iso {WIDTH}x{HEIGHT} done |"
+        )
+        assert b.js("window.clvisView.error") is None
+    finally:
+        server.close()
+
+    from clvis import runtime
+
+    server = ViewServer(SparseScene(clvis.read_vdb(path), description="big.vdb"))
+    monkeypatch.setattr(runtime, "host_available_bytes", lambda: 100_000)
+    try:
+        b.js("window.clvisView = undefined")
+        b.call("Page.navigate", url=server.url)
+        _settled(b, "gaussians")
+        b.choose("mode", "iso")
+        error = b.wait_for("window.clvisView.error", "the refusal in the status line")
+        assert error.startswith("DeviceError: big.vdb: the grid made dense is 38x39x40 voxels")
+        assert b.js("document.getElementById('status').className") == "error"
+        assert "mode gaussians" in b.js("document.getElementById('status').textContent")
+        b.choose("mode", "gaussians")
+        _settled(b, "gaussians")
+        assert b.js("window.clvisView.error") is None
+    finally:
+        server.close()
+
+
 class _Flat(Scene):
     """A scene of one grey level a view, a new level each view: no device, no
     kernels, just frames whose picture says which view they show."""

@@ -3,6 +3,7 @@
 import json
 import re
 import urllib.request
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +13,8 @@ from clvis.raster import filter_gbuffers
 from clvis.view import Orbit, PointScene, VolumeScene, scene_for
 
 pytest.importorskip("tornado", reason="the view extra (tornado) is not installed")
+
+VDB = Path(__file__).resolve().parents[1] / "data" / "openvdb_small.vdb"
 
 
 @pytest.fixture(scope="module")
@@ -617,18 +620,16 @@ def test_scenes_load_their_networks_from_a_model_dir(tmp_path):
 
 def test_sparse_volume_scene_draws_an_openvdb_grid_and_its_threshold():
     """A .vdb grid (read_vdb's SparseVolume) in the viewer: mode gaussians,
-    never made dense; the threshold drops the active voxels at or below it,
+    never made dense (mode iso: the next test); the threshold drops the active voxels at or below it,
     the colours keep the grid's whole range; a threshold above every voxel is
     an error for the page, not a crash."""
-    from pathlib import Path
-
     from clvis.images import BACKGROUND
     from clvis.view import SparseScene
 
-    path = Path(__file__).resolve().parents[1] / "data" / "openvdb_small.vdb"
+    path = VDB
     sv = clvis.read_vdb(path, grid="surface")  # a level set: -2..2 around the sphere
     s = scene_for(sv, description=str(path))
-    assert isinstance(s, SparseScene) and s.modes == ["gaussians"]
+    assert isinstance(s, SparseScene) and s.settings["mode"] == "gaussians"
     assert "12,790 active in 94 leaves" in s.description
     assert s.choices["threshold"]["min"] == s.settings["threshold"] < 0 < s.choices["threshold"]["max"]
     cam = Orbit(s.lo, s.hi).camera(1.0)
@@ -653,3 +654,123 @@ def test_sparse_volume_scene_draws_an_openvdb_grid_and_its_threshold():
     f = next(ones.frames(Orbit(ones.lo, ones.hi).camera(1.0), 32, 32, ones.settings, lambda: False))
     centre = f.image[8:24, 8:24].astype(float) / 255 @ [0.2126, 0.7152, 0.0722]
     assert centre.mean() > 0.6  # viridis's yellow
+
+
+def _iso_frames(scene, size=64):
+    cam = Orbit(scene.lo, scene.hi).camera(1.0)
+    return list(scene.frames(cam, size, size, scene.settings, lambda: False))
+
+
+def test_an_openvdb_grid_shows_the_isosurface_clvis_iso_draws():
+    """A .vdb grid in the viewer showed only its Gaussians: mode iso draws
+    what clvis iso FILE.vdb draws (the grid made dense with its background,
+    read_vdb_volume's volume, through VolumeScene's progressive iso, pixel
+    for pixel), at its default isovalue (0 for the level set, Otsu's of the
+    dense volume for the fog ball); the gaussians mode is as it was."""
+    from clvis.gauss import read_vdb_volume
+    from clvis.images import BACKGROUND
+    from clvis.io.volumes import otsu_level
+    from clvis.view import SparseScene
+    from clvis.view.scenes import view_frames
+
+    bg = np.array(BACKGROUND)
+    s = scene_for(clvis.read_vdb(VDB, grid="surface"), description=str(VDB))
+    assert isinstance(s, SparseScene) and s.modes == ["gaussians", "iso"]
+    assert s.settings["mode"] == "gaussians" and s.progressive == {"iso"}
+    assert s.description.endswith("12,790 active in 94 leaves, a level set")
+    # the isovalue's range reaches the background, the level set's outside
+    assert s.settings["isovalue"] == 0.0 and s.choices["isovalue"]["max"] == 2.0
+    gaussians = next(s.frames(Orbit(s.lo, s.hi).camera(1.0), 64, 64, s.settings, lambda: False))
+    s.update({"mode": "iso"})
+    frames = _iso_frames(s)
+    v, _ = read_vdb_volume(VDB)
+    want = _iso_frames(VolumeScene(v.data, v.spacing, v.origin, isovalue=0.0))
+    assert len(frames) == len(want) >= 2 and frames[-1].final and not frames[0].final
+    for a, b in zip(frames, want, strict=True):
+        np.testing.assert_array_equal(a.image, b.image)
+    assert s._dense is not None and s._dense.modes == ["iso"]
+    assert s._dense.volume is None  # the dense copy not kept on the host: compressed on the device
+    drawn = (frames[-1].image != bg).any(axis=2).mean()
+    assert 0.1 < drawn < 0.4, drawn  # the sphere (a quarter of the box's view), not the box
+    # a still view starts with its first pass at the preview size, as a volume's iso does
+    cam = Orbit(s.lo, s.hi).camera(1.0)
+    first = next(view_frames(s, cam, 64, 64, s.settings, lambda: False, (cam, 32, 32)))
+    assert first.image.shape == (32, 32, 3) and first.info["preview"] == "32x32"
+    s.update({"isovalue": 1.0})  # the page's isovalue: a larger sphere
+    assert (_iso_frames(s)[-1].image != bg).any(axis=2).mean() > drawn
+    s.update({"mode": "gaussians"})
+    again = next(s.frames(Orbit(s.lo, s.hi).camera(1.0), 64, 64, s.settings, lambda: False))
+    np.testing.assert_array_equal(again.image, gaussians.image)
+
+    fog = scene_for(clvis.read_vdb(VDB, grid="density"))
+    d, _ = read_vdb_volume(VDB, grid="density")
+    assert fog.settings["isovalue"] == otsu_level(d.data) and 0 < fog.settings["isovalue"] < 1
+    assert fog.choices["isovalue"] == {"min": 0.0, "max": float(d.data.max())}
+    fog.update({"mode": "iso"})
+    np.testing.assert_array_equal(
+        _iso_frames(fog)[-1].image, _iso_frames(VolumeScene(d.data, d.spacing, d.origin))[-1].image
+    )
+    given = SparseScene(clvis.read_vdb(VDB), isovalue=-1.0, rate=4)
+    assert given.settings["isovalue"] == -1.0
+    given.update({"mode": "iso"})
+    _iso_frames(given, 32)
+    assert given._dense is not None and given._dense.iso.volume.rate == 4
+    with pytest.raises(ValueError, match="isovalue: expected a finite number"):
+        SparseScene(clvis.read_vdb(VDB), isovalue=float("nan"))
+    only = VolumeScene(v.data, modes=("iso", "iso+infill"))
+    assert only.modes == ["iso", "iso+infill"] and only.volume is None
+    with pytest.raises(ValueError, match="mode: expected one of"):
+        only.update({"mode": "gaussians"})
+    for bad in ("iso", ["isosurface"], []):
+        with pytest.raises(ValueError, match="modes: expected some of"):
+            VolumeScene(v.data, modes=bad)
+
+
+def test_an_openvdb_grid_too_large_to_make_dense_is_refused_in_iso_mode_only(monkeypatch):
+    """Mode iso of a grid whose dense volume would not fit in host memory: a
+    DeviceError naming its size before anything is made dense (the page
+    shows it in its status line), and the Gaussians still draw."""
+    from clvis import runtime
+    from clvis.images import BACKGROUND
+
+    s = scene_for(clvis.read_vdb(VDB), description="big.vdb")
+    monkeypatch.setattr(runtime, "host_available_bytes", lambda: 100_000)
+    made = []
+    monkeypatch.setattr(clvis.SparseVolume, "to_dense", lambda *a: made.append(1))
+    s.update({"mode": "iso"})
+    with pytest.raises(clvis.DeviceError, match=r"^big\.vdb: the grid made dense is 38x39x40 voxels") as e:
+        _iso_frames(s)
+    assert "only 0.00 GB is available (its Gaussians need no dense copy: mode gaussians)" in str(e.value)
+    assert made == [] and s._dense is None
+    s.update({"mode": "gaussians"})
+    f = next(s.frames(Orbit(s.lo, s.hi).camera(1.0), 48, 48, s.settings, lambda: False))
+    assert f.info["gaussians"] > 0 and (f.image != np.array(BACKGROUND)).any(axis=2).mean() > 0.1
+
+
+def test_in_fill_frames_lie_over_the_background_by_their_coverage():
+    """iso+infill's partial passes: the in-fill network's picture is colour
+    premultiplied over black with the surface's coverage as alpha, so the
+    frame is that colour over the scene's background (its empty pixels the
+    background, not black), as the finished passes are. LiDAR's and NARVis's
+    pictures have no alpha (alpha 255: colour over black): their frames are
+    the colour as predicted (test_frames_are_the_renderers_pictures_over_the_background)."""
+    from clvis.images import BACKGROUND
+
+    bg = np.array(BACKGROUND, np.float32)
+    v = VolumeScene(clvis.datasets.marschner_lobb(32)["volume"], isovalue=0.5)
+    v.update({"mode": "iso+infill"})
+    cam = Orbit(v.lo, v.hi).camera(1.0)
+    frames = list(v.frames(cam, 64, 64, v.settings, lambda: False))
+    partial = 0
+    for fr, img in zip(frames, v.iso.passes(cam, 64, 64, 0.5), strict=True):
+        if fr.final:
+            continue
+        partial += 1
+        assert v._infill is not None
+        rgba = v._infill(img)
+        a = rgba[..., 3:4].astype(np.float32) / 255
+        want = np.clip(np.rint(rgba[..., :3] + (1 - a) * bg), 0, 255).astype(np.uint8)
+        np.testing.assert_array_equal(fr.image, want)
+        empty = rgba[..., 3] == 0
+        assert empty.mean() > 0.3 and (fr.image[empty] == np.array(BACKGROUND)).all()  # not black
+    assert partial >= 1

@@ -1,7 +1,8 @@
 """The server as a page (or anyone who can reach its socket) talks to it, without
 a browser or a device: malformed events, strict JSON, a camera that would not
 be finite, a page that goes away in the middle of a drag, the frame size and
-the log lines."""
+the log lines (one test draws on the device: a .vdb grid's iso mode refused
+in the page)."""
 
 from __future__ import annotations
 
@@ -460,3 +461,35 @@ def test_a_page_that_opens_with_its_size_gets_its_first_frame_at_that_size(serve
 
     asyncio.run(go())
     assert server.frames == 1
+
+
+def test_an_openvdb_grid_too_large_for_its_iso_mode_is_an_error_in_the_page(monkeypatch):
+    """clvis view FILE.vdb, mode iso, where the grid made dense would not fit
+    in host memory: the page's status line gets the refusal (nothing made
+    dense, the server goes on), and back in mode gaussians it gets frames."""
+    from pathlib import Path
+
+    import clvis
+    from clvis import runtime
+    from clvis.view import SparseScene
+
+    path = Path(__file__).resolve().parents[1] / "data" / "openvdb_small.vdb"
+    s = ViewServer(SparseScene(clvis.read_vdb(path), description="big.vdb"), size=(64, 48))
+    monkeypatch.setattr(runtime, "host_available_bytes", lambda: 100_000)
+
+    async def go():
+        page = await Page.open(s)
+        await page.frame("the first frame", mode="gaussians")
+        await page.send({"type": "set", "settings": {"mode": "iso"}})
+        error = await page.error()
+        await page.send({"type": "set", "settings": {"mode": "gaussians"}})
+        await page.frame("a frame after the error", mode="gaussians")
+        page.ws.close()
+        return error
+
+    try:
+        error = asyncio.run(go())
+    finally:
+        s.close()
+    assert error.startswith("DeviceError: big.vdb: the grid made dense is 38x39x40 voxels")
+    assert "mode gaussians" in error and len(error) <= 300 and s.scene._dense is None

@@ -106,3 +106,18 @@ def test_the_files_open3d_writes(tmp_path, name, kw):
     if name.endswith(".xyzn"):
         for k in ("nx", "ny", "nz"):
             np.testing.assert_allclose(c.attributes[k], ref.attributes[k], atol=1e-6)
+
+
+def test_clvis_view_takes_open3d_geometry():
+    """clvis.view(pcd), as Open3D's draw_geometries([pcd]): the cloud a
+    PointScene of from_open3d's cloud (it was a TypeError: not an (N, 3)
+    array); a geometry from_open3d refuses is refused there too."""
+    p = _cloud()
+    scene = clvis.view.scene_for(p)
+    assert type(scene).__name__ == "PointScene"
+    np.testing.assert_array_equal(scene.cloud.positions, clvis.from_open3d(p).positions)
+    np.testing.assert_array_equal(scene.cloud.colors, clvis.from_open3d(p).colors)
+    mesh = clvis.view.scene_for(o3d.geometry.TriangleMesh.create_sphere())
+    assert len(mesh.cloud.positions) == 762
+    with pytest.raises(TypeError, match="an Open3D VoxelGrid"):
+        clvis.view.scene_for(o3d.geometry.VoxelGrid())

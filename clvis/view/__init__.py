@@ -124,7 +124,8 @@ def view(
     (read_volume's: its spacing and origin), a clvis.SparseVolume
     (read_vdb's: its Gaussians, ``colormap``; its isosurface, ``isovalue``,
     ``rate``), a VTK dataset (a pyvista
-    mesh, point set or image: clvis.from_vtk) or a Scene. host: the
+    mesh, point set or image: clvis.from_vtk), an Open3D point cloud or
+    triangle mesh (clvis.from_open3d) or a Scene. host: the
     interface to listen on (127.0.0.1; any other needs the printed token),
     port 0: a free one. width x height: the notebook frame's size.
     max_pages: the pages (tabs) served at once, each with its own camera and

@@ -1045,19 +1045,22 @@ def scene_for(obj: Any, **kwargs: Any) -> Scene:
     (points), a 3-D array [z, y, x] (a volume; kwargs: spacing, origin,
     isovalue, rate), a clvis.Volume (read_volume's, with its spacing and
     origin unless kwargs give them), a clvis.SparseVolume (read_vdb's: its
-    Gaussians and its isosurface; kwargs: colormap, isovalue, rate) or a VTK
+    Gaussians and its isosurface; kwargs: colormap, isovalue, rate), a VTK
     dataset (a pyvista mesh, point set or image: clvis.from_vtk's cloud or
-    volume). A path is refused, naming the readers. kwargs for all:
+    volume) or an Open3D point cloud or triangle mesh (clvis.from_open3d's
+    cloud). A path is refused, naming the readers. kwargs for all:
     description, model_dir (where the networks' models are: clvis train --out)."""
     from .. import PointCloud
     from ..gauss.sparse import SparseVolume
-    from ..io.objects import from_vtk, is_vtk_dataset
+    from ..io.objects import from_open3d, from_vtk, is_open3d_geometry, is_vtk_dataset
     from ..io.volumes import Volume
 
     if isinstance(obj, Scene):
         return obj
     if is_vtk_dataset(obj):  # a VTK dataset (a pyvista mesh or image): its points or its volume
         obj = from_vtk(obj)
+    elif is_open3d_geometry(obj):  # an Open3D cloud or mesh: its points (another geometry: TypeError)
+        obj = from_open3d(obj)
     if isinstance(obj, PointCloud):
         return PointScene(obj, **kwargs)
     if isinstance(obj, SparseVolume):  # read_vdb's: as Gaussians (never dense) or its isosurface

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import DataError
-from ..gauss.render import MAX_K
+from ..gauss.render import FOG_OPACITY, MAX_K
 from ..io.points import POINT_SUFFIXES
 from ..io.volumes import FORMATS as VOLUME_FORMATS
 from ._common import (
@@ -72,11 +72,11 @@ DENSITY_DEFAULT = 240.0
 # what the note on a mostly dark picture suggests (a fog: a haze of low values
 # in front of the rest): a quarter of the extinction and opacity that stays
 # low over the bottom of the range (fog balls, smoke and the explosion come out
-# glowing; kept as options, not defaults: a scan's faint tissue and a level
-# set's surface lose detail under them)
+# glowing; kept as options, not defaults, but for the explosion and a .vdb grid
+# of class "fog volume": a scan's faint tissue and a level set's surface lose
+# detail under them); FOG_OPACITY is clvis.gauss.render's (the viewer's too)
 DARK_SHARE = 0.5
 FOG_DENSITY_FACTOR = 0.25
-FOG_OPACITY = ((0.0, 0.0), (0.35, 0.05), (0.7, 0.35), (1.0, 1.0))
 FOG_OPACITY_VOLUME_FILE = ((0.0, 0.0), (0.05, 0.0), (0.4, 0.05), (0.7, 0.35), (1.0, 1.0))
 # a volume FILE's default range ends at this percentile of its samples (a
 # scan's few hot voxels do not squeeze every colour to the bottom of the bar)

@@ -75,6 +75,11 @@ SPLAT = "splat"  # 3DGS's rasterizer (splat.cl), tiles only
 METHODS = ("tiles", "bvh")
 LIMITS = limits.GAUSS  # image sizes (why: clvis.limits)
 MAX_K = 64
+#: a fog's transfer function opacity, points (x along the value range, alpha):
+#: low over the bottom of the range, so a density's shell of low values does
+#: not hide its bright inside (clvis gauss and the viewer draw a grid of
+#: class "fog volume", and clvis gauss the embedded explosion, through it)
+FOG_OPACITY = ((0.0, 0.0), (0.35, 0.05), (0.7, 0.35), (1.0, 1.0))
 TILE = 8
 
 

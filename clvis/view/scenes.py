@@ -718,7 +718,9 @@ class SparseScene(Scene):
     voxel, a level set's negative values too). The colours span the grid's
     active values whatever the threshold, so a colour keeps its value as the
     threshold moves. The Gaussians are made when a level of detail or a
-    threshold is first shown (the last one kept).
+    threshold is first shown (the last one kept). A grid of class "fog
+    volume" is drawn as a fog (clvis.gauss.render.FOG_OPACITY: its low values
+    faint, so their shell does not hide the bright inside).
 
     Mode ``iso``: the isosurface ``clvis iso FILE.vdb`` draws, at
     ``isovalue`` (default :func:`clvis.gauss.default_isovalue`: 0 for a level
@@ -825,6 +827,7 @@ class SparseScene(Scene):
                     dense._trim, self._trim = False, True
             return
         from .. import GaussianRenderer, TransferFunction, gaussians_from_volume
+        from ..gauss.render import FOG_OPACITY
 
         self._sized(self.queue, width, height)
         threshold = settings["threshold"]
@@ -836,7 +839,9 @@ class SparseScene(Scene):
                 raise DataError(f"no active voxel above the threshold {threshold:g}: no Gaussians")
             # one value (an occupancy grid): at the top of the colours, not the darkest bottom
             lo = self.vmin if self.vmax > self.vmin else self.vmax - max(abs(self.vmax), 1.0)
-            tf = TransferFunction(self.colormap, value_range=(lo, self.vmax))
+            # a fog (the grid's class): its low values faint, its bright inside shown
+            fog = FOG_OPACITY if self.sparse.grid_class == "fog volume" else None
+            tf = TransferFunction(self.colormap, value_range=(lo, self.vmax), opacity=fog)
             return GaussianRenderer(gs, tf, queue=self.queue), gs.n
 
         yield self._gaussian_frame((settings["lod"], threshold), make, camera, width, height)

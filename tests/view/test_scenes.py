@@ -774,3 +774,24 @@ def test_in_fill_frames_lie_over_the_background_by_their_coverage():
         empty = rgba[..., 3] == 0
         assert empty.mean() > 0.3 and (fr.image[empty] == np.array(BACKGROUND)).all()  # not black
     assert partial >= 1
+
+
+def test_a_fog_volume_grid_is_drawn_as_a_fog_in_the_viewer():
+    """A .vdb grid of class "fog volume" (tests/data/openvdb_fog.vdb, written
+    by OpenVDB) in mode gaussians: its low values faint (FOG_OPACITY), so its
+    bright inside shows, where the same grid of no class is drawn under the
+    default opacity: an opaque shell of its lowest values (dark colours)."""
+    from clvis.images import BACKGROUND
+
+    sv = clvis.read_vdb(VDB.with_name("openvdb_fog.vdb"))
+    plain = clvis.read_vdb(VDB.with_name("openvdb_fog.vdb"))
+    plain.grid_class = None
+    pictures = []
+    for v in (sv, plain):
+        s = scene_for(v)
+        cam = Orbit(s.lo, s.hi).camera(1.0)
+        pictures.append(next(s.frames(cam, 64, 64, s.settings, lambda: False)).image)
+    fog, shell = pictures
+    drawn = (fog != np.array(BACKGROUND)).any(axis=2)
+    lum = [(p[drawn].astype(np.float64) @ [0.2126, 0.7152, 0.0722]).max() for p in (fog, shell)]
+    assert lum[0] > 1.5 * lum[1], lum  # viridis's bright top against its dark bottom

@@ -185,6 +185,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "(clvis.post; use with --completion below 1)",
     )
     p.add_argument(
+        "--post",
+        choices=("infill",),
+        default=None,
+        help="--post infill: the same as --infill (clvis render's spelling of its networks; "
+        "without it --post was read as --post-guard)",
+    )
+    p.add_argument(
         "--model-dir",
         default=None,
         metavar="DIR",
@@ -408,6 +415,8 @@ def render(
 
 
 def cmd(args: argparse.Namespace) -> int:
+    if getattr(args, "post", None) == "infill":  # clvis render's spelling
+        args.infill = True
     check_camera_args(args)
     check_orbit_args(args)
     if args.grid is not None and not str(args.file or "").lower().endswith(".vdb"):
@@ -443,6 +452,13 @@ def _run_distributed(args) -> int:
     for name in ("surface_color", "color_by", "color_by_volume_index", "colormap", "range"):
         if getattr(args, name) is not None:
             raise CliError(f"--{name.replace('_', '-')}: not on workers (leave out --workers/--scheduler)")
+    # the in-fill network's options (they were ignored: only iso.png was written)
+    for name in ("infill", "compare", "model_dir", "post_guard"):
+        if getattr(args, name) not in (None, False):
+            raise CliError(
+                f"--{name.replace('_', '-')}: the in-fill network fills the rays a one-device render "
+                "leaves running; on workers every ray finishes (leave out --workers/--scheduler)"
+            )
     client, workers = cluster_client(args)
     w, h = args.size
     t0 = time.perf_counter()

@@ -782,6 +782,11 @@ def _load_tiles(args, progress):
 
 
 def cmd(args: argparse.Namespace) -> int:
+    if args.post == "infill":
+        raise CliError(
+            "--post infill: the in-fill network fills an isosurface's unfinished rays, not a point "
+            "cloud's image: clvis iso FILE --completion 0.85 --post infill"
+        )
     check_camera_args(args)
     if args.transparent and args.background is not None:
         raise CliError("--transparent and --background: empty pixels are either clear or a colour; give one")
@@ -1444,12 +1449,13 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
     )
     r.add_argument(
         "--post",
-        choices=("lidar", "narvis", "narvis-scan"),
+        choices=("lidar", "narvis", "narvis-scan", "infill"),
         help="also write post-NAME.png: lidar, the depth-filtered image reconstructed by the LiDAR "
         "RGBDA U-Net (turns the depth filter on, 4 levels, unless --depth-filter says otherwise); "
         "narvis, the G-buffers turned into the Gaussian renderer's image by a NARVis U-Net, the model "
         "the cloud's planes allow (said on stderr): narvis with a velocity (and an attribute to colour "
-        "by), else narvis-scan (the points' colours and their kNN splat radius); narvis-scan: that one",
+        "by), else narvis-scan (the points' colours and their kNN splat radius); narvis-scan: that one "
+        "(infill is clvis iso's: it says so)",
     )
     r.add_argument(
         "--model-dir",

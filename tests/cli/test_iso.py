@@ -143,6 +143,10 @@ def test_iso_infill(tmp_path, capsys):
         a = np.asarray(im)
     assert a.shape[1] == 64 and a.std() > 1
     assert not ((a[..., 0] == 255) & (a[..., 1] == 0) & (a[..., 2] == 255)).any()  # no magenta left
+    # clvis render's spelling, --post infill, is --infill (argparse read it as --post-guard)
+    assert cli.main([*args, "--post", "infill", "--out", str(tmp_path / "post")]) == 0
+    with Image.open(tmp_path / "post" / "iso-infill.png") as im:
+        np.testing.assert_array_equal(np.asarray(im), a)
     # --post-guard: the network checked against push-pull and the partial
     # image (clvis.post.guard); the finished rays' pixels stay the network's
     assert cli.main([*args, "--infill", "--post-guard", "--no-labels", "--out", str(tmp_path / "g")]) == 0

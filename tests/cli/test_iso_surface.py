@@ -307,6 +307,13 @@ def test_completion_stop_far_past_the_target_is_noted(tmp_path, capsys):
             "--infill: not with --surface-color",
         ),
         (["--isovalue", "0.3,0.6", "--workers", "1"], "--isovalue: one value on workers"),
+        # the in-fill network's options on workers (they were ignored: iso.png alone was written)
+        (["--infill", "--workers", "1"], "--infill: the in-fill network fills the rays a one-device render"),
+        (["--post", "infill", "--workers", "1"], "--infill: the in-fill network fills the rays"),
+        (["--compare", "--workers", "1"], "--compare: the in-fill network fills the rays"),
+        # clvis render's spelling: --post infill is --infill (it was read as --post-guard)
+        (["--post", "infill"], "--infill fills the rays still running when the render stops"),
+        (["--post", "lidar"], "argument --post: invalid choice: 'lidar'"),
     ],
 )
 def test_errors(tmp_path, capsys, args, message):

@@ -341,6 +341,7 @@ def test_shrink_keeps_points():
         (["--point-size", "0"], "argument --point-size: expected auto or a positive integer in 1..64"),
         (["--point-size", "65"], "argument --point-size: expected auto or a positive integer in 1..64"),
         (["--dataset", "moon"], "argument --dataset: invalid choice"),
+        (["--post", "infill"], "--post infill: the in-fill network fills an isosurface's unfinished rays"),
         (["missing.ply"], "missing.ply: no such file"),
         (["cloud.ply", "--points", "10"], "--dataset and --points choose an embedded cloud"),
     ],

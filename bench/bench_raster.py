@@ -22,7 +22,13 @@ per point (DESIGN.md's bytes model: xyz float + rgba), the bandwidth limit.
 
 Eye-dome lighting (clvis.raster.edl) on a 1920x1080 frame of the same scene
 (depth and rgba G-buffers on the device): clvis, its NumPy reference, and the
-copy kernel over its 12 bytes per pixel (depth and rgba in, rgba out):
+copy kernel over its 12 bytes per pixel (depth and rgba in, rgba out).
+
+Reading the scan a render starts from, as text (a Leica .pts of 2^21 of the
+terrain's points: x y z intensity r g b, the count first; a host op, bytes =
+the file's): clvis.read_points, Open3D's o3d.io.read_point_cloud (C++, what
+an Open3D user calls; it keeps positions and colours) and np.loadtxt of the
+same rows (the parser clvis's reader is built on, alone):
 
     clvis bench raster
 """
@@ -289,3 +295,43 @@ def test_edl(benchmark, queue, impl):
             nbytes=2 * src[0].nbytes,
             queue=queue,
         )
+
+
+TEXT_N = scaled(1 << 21)
+TEXT_CASES = ["clvis", "open3d", "numpy-loadtxt"]
+
+
+def text_scan(tmp_path_factory):
+    """A .pts file of TEXT_N terrain points, written once."""
+    if "pts" not in _cache:
+        d = datasets.terrain(TEXT_N, seed=0)
+        path = tmp_path_factory.mktemp("text") / "scan.pts"
+        rng = np.random.default_rng(2)
+        with open(path, "w") as f:
+            f.write(f"{TEXT_N}\n")
+            np.savetxt(
+                f,
+                np.c_[
+                    d["positions"] + [635000.0, 848000.0, 400.0],
+                    rng.integers(-2048, 2048, TEXT_N),
+                    d["colors"][:, :3],
+                ],
+                fmt=["%.4f"] * 3 + ["%d"] * 4,
+            )
+        _cache["pts"] = path
+    return _cache["pts"]
+
+
+@pytest.mark.parametrize("impl", TEXT_CASES)
+def test_read_text_cloud(benchmark, tmp_path_factory, impl):
+    path = text_scan(tmp_path_factory)
+    nbytes = path.stat().st_size
+    op = "read[.pts]"
+    if impl == "clvis":
+        fn, role = (lambda: clvis.read_points(path)), "clvis-host"
+    elif impl == "open3d":
+        o3d = pytest.importorskip("open3d", reason="open3d-cpu is in the test extra")
+        fn, role = (lambda: o3d.io.read_point_cloud(str(path), format="pts")), "peer"
+    else:
+        fn, role = (lambda: np.loadtxt(path, skiprows=1, comments="#")), "peer"
+    run(benchmark, fn, op=op, impl=impl, role=role, n=TEXT_N, nbytes=nbytes, rounds=3)

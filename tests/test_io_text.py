@@ -49,6 +49,22 @@ def test_csv_with_header_and_utm_coordinates(tmp_path):
     np.testing.assert_array_equal(c.colors[0, :3], [128, 255, 64])
 
 
+def test_comment_markers_among_the_points(tmp_path):
+    """'#', '//' and '%' comments between the points (and after them on a
+    line) are skipped; a file whose points hold none is parsed with '#'
+    alone, in numpy's C loop (three markers sent every line through Python:
+    2.1 of 3.4 s of a 2 M-point .xyz), whatever its header or BOM held."""
+    from clvis.io import ascii
+
+    c = read_points(_write(tmp_path / "a.xyz", "1 2 3\n// a note\n4 5 6 % here\n% more\n7 8 9 # end\n"))
+    np.testing.assert_allclose(c.positions + c.origin, [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
+    path = tmp_path / "b.txt"
+    path.write_bytes(b"\xef\xbb\xbf// 100% scan\n//X Y Z\n1 2 3\n# a note\n4 5 6\n")
+    np.testing.assert_allclose(read_points(path).positions, [[0, 0, 0], [3, 3, 3]])
+    assert ascii._comments(path, len(b"\xef\xbb\xbf// 100% scan\n//X Y Z\n")) == "#"
+    assert ascii._comments(path, 0) == ["#", "//", "%"]
+
+
 @pytest.mark.parametrize(
     "name, text, message",
     [

@@ -298,7 +298,7 @@ def test_edl(benchmark, queue, impl):
 
 
 TEXT_N = scaled(1 << 21)
-TEXT_CASES = ["clvis", "open3d", "numpy-loadtxt"]
+TEXT_CASES = ["clvis.read_points", "open3d", "numpy-loadtxt"]
 
 
 def text_scan(tmp_path_factory):
@@ -327,7 +327,7 @@ def test_read_text_cloud(benchmark, tmp_path_factory, impl):
     path = text_scan(tmp_path_factory)
     nbytes = path.stat().st_size
     op = "read[.pts]"
-    if impl == "clvis":
+    if impl == "clvis.read_points":
         fn, role = (lambda: clvis.read_points(path)), "clvis-host"
     elif impl == "open3d":
         o3d = pytest.importorskip("open3d", reason="open3d-cpu is in the test extra")

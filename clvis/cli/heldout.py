@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
+from pathlib import Path
 
 from ._common import CliError, Parser
 
@@ -66,6 +68,22 @@ def cmd(args: argparse.Namespace) -> int:
             f"{args.model} card is the installed package's (to rewrite it on purpose: --model-dir {MODELS})"
         )
     log = None if args.quiet else (lambda s: print(f"clvis eval: {s}", file=sys.stderr, flush=True))
+    # --write-card: the card is this command's from before the model is read until
+    # the table is in it (a clvis train into the folder meanwhile is refused, and
+    # this is refused while one runs: its model would change under the scoring)
+    held: contextlib.AbstractContextManager[None] = contextlib.nullcontext()
+    if args.write_card:
+        from ..training.train import claim
+
+        held = claim(
+            Path(args.model_dir), args.model, log or (lambda s: None), what="clvis eval --write-card"
+        )
+    with held:
+        return _score(args, ev, log)
+
+
+def _score(args: argparse.Namespace, ev, log) -> int:
+    """Score the model and print the table (and write it into the card)."""
     try:
         result = ev.evaluate(
             args.model, model_dir=args.model_dir, quick=args.quick, guard=args.guard, log=log

@@ -249,7 +249,7 @@ def cmd(args: argparse.Namespace) -> int:
     def evaluated(card: dict) -> None:
         """The table of the card's held-out rows, then (--eval) the held-out
         suite into the card: run by train while the model's folder is still
-        this run's (train._claim), so a second run cannot replace the model
+        this run's (train.claim), so a second run cannot replace the model
         between the two."""
         print(f"{args.out}/{card['name']}.onnx: held-out frames, mean per row")
         print(held_out_table(card["held_out"]))

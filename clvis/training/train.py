@@ -1026,7 +1026,7 @@ def train(
     0.80-0.97) beside the release frames. lr: the peak learning rate
     (default the SPECS'). planes (narvis, narvis-scan): the G-buffer planes
     the network takes (clvis.post.names.gbuffer_channels; default the
-    SPECS'). The run holds NAME in `out` (_claim) from before its data is
+    SPECS'). The run holds NAME in `out` (claim) from before its data is
     rendered: a second run of the same network into the same folder
     meanwhile is refused at once, naming this one. after: called with the
     card once the model is in, before that hold ends (clvis train's
@@ -1087,7 +1087,7 @@ def train(
     # NAME in `out` is this run's until its model is in (and, through `after`,
     # clvis train's held-out suite in its card): a second run is refused, and
     # the staging folders of runs killed before they could remove them go
-    with _claim(out, name, say or log):
+    with claim(out, name, say or log):
         shutil.rmtree(_staging(out, name))  # a folder it cannot write to: an error now, not after training
         torch.manual_seed(seed)
         torch.set_num_threads(int(os.environ.get("CLVIS_TRAIN_THREADS", os.cpu_count() or 1)))
@@ -1386,11 +1386,13 @@ def _start_ticks(pid: int) -> int | None:
         return None
 
 
-def _owner() -> dict:
+def _owner(what: str = "") -> dict:
     """This process as a staging folder and the lock file record it: pid,
     host and start (_start_ticks: a later process given the same pid is not
-    taken for this one), and since when, for the line naming it."""
+    taken for this one), and since when, for the line naming it; `what`
+    (the lock file's): the command holding it."""
     return {
+        **({"what": what} if what else {}),
         "pid": os.getpid(),
         "host": socket.gethostname(),
         "start": _start_ticks(os.getpid()),
@@ -1416,17 +1418,19 @@ def _alive(owner: Any) -> bool:
     return start is None or _start_ticks(owner["pid"]) in (None, start)
 
 
-def _holder(text: bytes) -> str:
-    """An owner record (_owner) as words."""
+def _holder(text: bytes) -> tuple[str, str]:
+    """An owner record (_owner) as words: (the command holding the lock, its
+    process); the command is clvis train's where the record says none."""
     try:
         o = json.loads(text)
-        return f"pid {o['pid']} on {o['host']}, since {o['since']}"
-    except (ValueError, TypeError, KeyError):
-        return "its pid not written yet"
+        what = o.get("what") if isinstance(o.get("what"), str) else None
+        return what or "clvis train", f"pid {o['pid']} on {o['host']}, since {o['since']}"
+    except (ValueError, TypeError, KeyError, AttributeError):
+        return "clvis train", "its pid not written yet"
 
 
 @contextlib.contextmanager
-def _claim(out: Path, name: str, say: Callable[[str], None]) -> Iterator[None]:
+def claim(out: Path, name: str, say: Callable[[str], None], what: str = "clvis train") -> Iterator[None]:
     """Hold NAME in `out` for the block: an advisory lock (flock) on
     `out`/.NAME.train.lock, which the kernel drops when the process ends,
     however it ends (SIGKILL included), so no hold outlives its run.
@@ -1436,7 +1440,10 @@ def _claim(out: Path, name: str, say: Callable[[str], None]) -> Iterator[None]:
     minutes to hours, a command waiting silently that long looks hung, and
     its model would replace the first's as soon as it was in; refused before
     its data is rendered, it has cost nothing. Other networks into the same
-    folder write other files and are not held up.
+    folder write other files and are not held up. ``clvis eval NAME
+    --model-dir DIR --write-card`` holds it too (`what` names it), from
+    before it reads the model until its table is in the card: a run that
+    replaced the model meanwhile would get the old model's table.
 
     Holding the lock, it removes the staging folders killed runs left
     (_remove_stale). The lock file goes when the block ends, removed while
@@ -1458,11 +1465,12 @@ def _claim(out: Path, name: str, say: Callable[[str], None]) -> Iterator[None]:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             mine = os.fstat(fd)
         except BlockingIOError:
-            holder = _holder(os.read(fd, 4096))
+            command, holder = _holder(os.read(fd, 4096))
             os.close(fd)
+            doing = "its model" if command == "clvis train" else "its card"
             raise ClvisError(
-                f"{out}: another clvis train {name} is writing its model there ({holder}); "
-                "wait for it to end, or give another --out"
+                f"{out}: another {command} {name} is writing {doing} there ({holder}); "
+                f"wait for it to end, or give another {'--out' if what == 'clvis train' else '--model-dir'}"
             ) from None
         except BaseException:
             os.close(fd)
@@ -1476,7 +1484,7 @@ def _claim(out: Path, name: str, say: Callable[[str], None]) -> Iterator[None]:
         os.close(fd)  # the file of a run that has just ended, removed: the one there now
     try:
         os.ftruncate(fd, 0)
-        os.write(fd, json.dumps(_owner()).encode())
+        os.write(fd, json.dumps(_owner(what)).encode())
         _remove_stale(out, name, say)
         yield
     finally:
@@ -1488,7 +1496,7 @@ def _claim(out: Path, name: str, say: Callable[[str], None]) -> Iterator[None]:
 def _remove_stale(out: Path, name: str, say: Callable[[str], None]) -> None:
     """Remove from `out` the staging folders (_staging) of runs of `name`
     that ended without removing theirs (SIGKILL, a power cut), saying so.
-    Called holding NAME's lock (_claim), which every run holds from before
+    Called holding NAME's lock (claim), which every run holds from before
     it makes its folder until after it has removed it, so none is a live
     run's. Only what is clearly such a folder goes: a folder (not a link)
     of _staging's name whose run (its owner.json) is not running, holding
@@ -1542,7 +1550,7 @@ def _not_stale(stage: Path, name: str) -> str | None:
         except ValueError:
             record = None
         if _alive(record):
-            return f"its run ({_holder(owner)}) may still be running"
+            return f"its run ({_holder(owner)[1]}) may still be running"
     return None
 
 

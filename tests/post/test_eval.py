@@ -8,6 +8,7 @@ meets one, its xfail passes and fails the run, so the mark must go."""
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ import pytest
 from clvis import metrics as _metrics
 from clvis import post
 from clvis.cli import main
+from clvis.errors import ClvisError
 from clvis.training import data, flows
 from clvis.training import evaluate as ev
 
@@ -476,3 +478,47 @@ def test_write_card_needs_the_model_dir(tmp_path, monkeypatch, capsys):
         assert main(["eval", "infill", "--model-dir", str(d), "--quick", "--write-card", "--quiet"]) == 0
         assert f"card: {d / 'infill.json'}" in capsys.readouterr().out
         assert json.loads((d / "infill.json").read_text())["held_out_suite"]["command"] == command
+
+
+def test_write_card_holds_the_folder_as_clvis_train_does(tmp_path, monkeypatch, capsys):
+    """`clvis eval NAME --model-dir DIR --write-card` holds NAME in DIR (clvis
+    train's lock) from before the model is read until its table is in the
+    card: while a clvis train of NAME writes there it is refused, naming the
+    run, before scoring (it scored the old model and wrote its table into
+    the card of the new one); while it scores, a clvis train of NAME into DIR
+    is refused naming it; the lock file goes with it. Another network is not
+    held up."""
+    from clvis.training import train
+
+    d = tmp_path / "mine"
+    d.mkdir()
+    (d / "infill.json").write_bytes((post.MODELS / "infill.json").read_bytes())
+    seen = []
+
+    def scored(name, model_dir=None, quick=False, **kw):
+        # scoring: a training run of the same network into the folder is refused, naming this
+        with pytest.raises(ClvisError) as e:
+            with train.claim(Path(model_dir), name, lambda s: None):
+                pass
+        seen.append(str(e.value))
+        with train.claim(Path(model_dir), "lidar", lambda s: None):  # another network: not held up
+            pass
+        return {"model": name, "rows": [], "seconds": 1.0, "quick": quick, "guard": False}
+
+    monkeypatch.setattr(ev, "evaluate", scored)
+    argv = ["eval", "infill", "--model-dir", str(d), "--quick", "--write-card", "--quiet"]
+    with train.claim(d, "infill", lambda s: None):  # a clvis train of infill writing there
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(
+            f"clvis eval: error: {d}: another clvis train infill is writing its model there (pid "
+        )
+        assert err.endswith("; wait for it to end, or give another --model-dir\n") and seen == []
+    before = json.loads((d / "infill.json").read_text()).get("held_out_suite")
+    assert main(argv) == 0
+    assert len(seen) == 1 and seen[0].startswith(
+        f"{d}: another clvis eval --write-card infill is writing its card there (pid "
+    ), seen
+    assert seen[0].endswith("; wait for it to end, or give another --out")
+    after = json.loads((d / "infill.json").read_text())["held_out_suite"]
+    assert after != before and after["rows"] == [] and not list(d.glob(".*.train.lock"))

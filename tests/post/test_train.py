@@ -1347,7 +1347,7 @@ def test_a_folder_of_a_run_killed_while_moving_its_model_in_is_left(tmp_path):
     (stage / "previous").mkdir()
     (stage / "previous" / "infill.json").write_text("{}")
     said = []
-    with train._claim(tmp_path, "infill", said.append):
+    with train.claim(tmp_path, "infill", said.append):
         assert (tmp_path / ".infill.train.lock").exists()
     assert said == [
         f"left {stage}: a run stopped while moving its model in; previous/ there holds the model it "
@@ -1355,7 +1355,7 @@ def test_a_folder_of_a_run_killed_while_moving_its_model_in_is_left(tmp_path):
     ]
     assert (stage / "previous" / "infill.json").exists() and not (tmp_path / ".infill.train.lock").exists()
     (stage / "previous" / "infill.json").unlink()  # an empty previous/: the run's, dead
-    with train._claim(tmp_path, "infill", said.append):
+    with train.claim(tmp_path, "infill", said.append):
         pass
     assert said[1] == f"removed {stage}: the staging folder of a run stopped before it could remove it"
     assert list(tmp_path.iterdir()) == []

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from clvis import DataError
-from clvis.io import volumes
+from clvis.io import read_points, volumes
 from clvis.io.volumes import RAW_TYPES, Volume, read_volume
 
 
@@ -286,7 +286,12 @@ def test_missing_unknown_and_unreadable(tmp_path):
     other.write_bytes(b"x")
     with pytest.raises(DataError, match="unknown volume format") as e:
         read_volume(other)
-    assert str(other) in str(e.value)
+    assert str(other) in str(e.value) and "triangle mesh" not in str(e.value)
+    mesh = tmp_path / "part.STL"  # a mesh: what to do with it (clvis draws points and volumes)
+    mesh.write_bytes(b"solid x\nendsolid x\n")
+    for read in (read_volume, read_points):
+        with pytest.raises(DataError, match=r"it is a triangle mesh, .*sample_points_uniformly"):
+            read(mesh)
     with pytest.raises(TypeError, match="path"):
         read_volume(None)
 

@@ -276,7 +276,7 @@ def _sources(args):
     from .. import datasets
     from ..gauss import Gaussians, SparseVolume, read_vdb
     from ..io import read_points
-    from ..io.files import regular_file
+    from ..io.files import mesh_hint, regular_file
 
     lods = args.lod or list(LODS)
     if args.attribute is not None and not (args.file and args.file.lower().endswith(_POINT_FORMATS)):
@@ -391,7 +391,7 @@ def _sources(args):
         return ["points"], None, g, str(path), None
     raise CliError(
         f"{path}: unknown format (expected a volume: .vdb, {', '.join(VOLUME_FORMATS)}; "
-        f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)})"
+        f"Gaussians: .npz of clvis.Gaussians.save; or points: {', '.join(_POINT_FORMATS)}){mesh_hint(path)}"
     )
 
 

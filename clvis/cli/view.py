@@ -204,6 +204,14 @@ def load_scene(args: argparse.Namespace) -> Scene:
             return _vdb_scene(args, path)
         if args.grid is not None:
             raise CliError(f"--grid picks a grid of a .vdb file; {path} is not one")
+        from ..io.files import mesh_hint
+        from ..io.volumes import FORMATS
+
+        if not path.name.lower().endswith((*FORMATS, *_POINT_SUFFIXES)):  # it was "unknown volume format"
+            raise CliError(
+                f"{path}: unknown format (expected a volume: .vdb, {', '.join(FORMATS)}; or points: "
+                f"{', '.join(_POINT_SUFFIXES)}){mesh_hint(path)}"
+            )
         volume = _is_volume(path)
         _fits(args, volume, str(path))
         if volume:

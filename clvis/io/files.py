@@ -28,7 +28,22 @@ from typing import IO, Any
 
 from ..errors import DataError
 
-__all__ = ["regular_file", "replacing", "write_replacing"]
+__all__ = ["MESH_SUFFIXES", "mesh_hint", "regular_file", "replacing", "write_replacing"]
+
+#: triangle mesh formats (what a PyVista or Open3D user may hold): not read
+MESH_SUFFIXES = (".stl", ".obj", ".off", ".glb", ".gltf", ".fbx", ".3ds", ".dae", ".3mf")
+
+
+def mesh_hint(path: str | os.PathLike[str]) -> str:
+    """For the message refusing a file of unknown format: where it is a
+    triangle mesh, what to do with it (clvis draws points and volumes: sample
+    its surface into points), else ""."""
+    if not str(os.fspath(path)).lower().endswith(MESH_SUFFIXES):
+        return ""
+    return (
+        "; it is a triangle mesh, and clvis draws points and volumes: sample its surface into points "
+        "(Open3D: clvis.from_open3d(o3d.io.read_triangle_mesh(path).sample_points_uniformly(n)))"
+    )
 
 
 def regular_file(path: str | os.PathLike[str]) -> Path:

@@ -41,7 +41,7 @@ from .cloud import (
     relative_positions,
 )
 from .e57 import _read_e57
-from .files import regular_file
+from .files import mesh_hint, regular_file
 from .las import _read_las
 from .npy import load_npy, load_npz
 from .pcd import _read_pcd
@@ -112,6 +112,7 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
     if reader is None:
         raise DataError(
             f"{path}: unknown point cloud format {path.suffix!r}; expected one of {', '.join(readers)}"
+            f"{mesh_hint(path)}"
         )
     return reader(path)
 

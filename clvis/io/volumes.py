@@ -76,7 +76,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import DataError
-from .files import regular_file
+from .files import mesh_hint, regular_file
 from .npy import load_npy
 
 __all__ = ["FORMATS", "RAW_TYPES", "Volume", "otsu_level", "raw_layout", "read_volume", "volume_parts"]
@@ -210,7 +210,7 @@ def read_volume(
             f"{path}: a point cloud file ({path.suffix}), not a volume; "
             "read_points, clvis render, clvis gauss and clvis view read it"
         )
-    raise DataError(f"{path}: unknown volume format (expected {', '.join(FORMATS)})")
+    raise DataError(f"{path}: unknown volume format (expected {', '.join(FORMATS)}){mesh_hint(path)}")
 
 
 def raw_layout(

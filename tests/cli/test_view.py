@@ -85,6 +85,23 @@ def test_point_files_of_every_reader_are_points(suffix, tmp_path):
     assert scene.kind == "points"
 
 
+def test_a_file_of_neither_kind_is_named_as_such(tmp_path):
+    """A file neither a volume nor points was "unknown volume format
+    (expected .raw, ...)": the viewer takes both, and says both; a triangle
+    mesh (.stl, .obj: a PyVista or Open3D user's) gets what to do with it."""
+    for name, mesh in (("shape.stl", True), ("notes.abc", False)):
+        path = tmp_path / name
+        path.write_bytes(b"solid x\nendsolid x\n")
+        with pytest.raises(view_cmd.CliError) as e:
+            view_cmd.load_scene(_args(str(path)))
+        text = str(e.value)
+        assert (
+            text.startswith(f"{path}: unknown format (expected a volume: .vdb, .raw,")
+            and "or points: .ply" in text
+        )
+        assert ("it is a triangle mesh" in text and "sample_points_uniformly" in text) == mesh
+
+
 def test_vtk_files_go_by_their_dataset(tmp_path):
     """A .vtp, .vtu, .vts and a POLYDATA .vtk are points, a STRUCTURED_POINTS .vtk a volume."""
     pytest.importorskip("vtk", reason="vtk is in the test extra")

@@ -180,8 +180,10 @@ def _is_volume(path: Path) -> bool:
     name = path.name.lower()
     if name.endswith(_POINT_SUFFIXES):
         return False
-    if name.endswith(".npy"):
-        return np.load(path, mmap_mode="r").ndim == 3
+    if name.endswith(".npy"):  # its header alone, checked (np.load's errors named no file)
+        from ..io import npy_shape
+
+        return len(npy_shape(path)) == 3
     if name.endswith(".vtk"):
         from ..io.vtk import POINT_DATASETS, legacy_dataset
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import clvis
 from clvis import cli
 from clvis.cli import view as view_cmd
 
@@ -89,6 +90,11 @@ def test_a_file_of_neither_kind_is_named_as_such(tmp_path):
     """A file neither a volume nor points was "unknown volume format
     (expected .raw, ...)": the viewer takes both, and says both; a triangle
     mesh (.stl, .obj: a PyVista or Open3D user's) gets what to do with it."""
+    # a malformed .npy: np.load's "EOF: reading array header ..." named no file
+    bad = tmp_path / "bad.npy"
+    bad.write_bytes(b"\x93NUMPY\x01\x00\x10\x00{garbage")
+    with pytest.raises(clvis.DataError, match=f"^{bad}: malformed NPY file"):
+        view_cmd.load_scene(_args(str(bad)))
     for name, mesh in (("shape.stl", True), ("notes.abc", False)):
         path = tmp_path / name
         path.write_bytes(b"solid x\nendsolid x\n")

@@ -56,7 +56,7 @@ def measure(
     size, ``first_full_ms`` the first at full size, ``last_ms`` the last).
     ``cpu_ms``: this process's CPU time for the whole view (every thread:
     the OpenCL runtime's and onnxruntime's too)."""
-    settings = dict(scene.settings, mode=mode)
+    settings = dict(scene.settings, mode=mode, interacting=interactive)  # as the server's frames
     pw, ph = max(16, round(width * scale)), max(16, round(height * scale))
     if interactive:
         width, height = pw, ph

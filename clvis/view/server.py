@@ -462,7 +462,8 @@ class ViewServer:
                 preview = (view.orbit.camera(pw / ph), pw, ph)
             camera = view.orbit.camera(w / h)
             state = view.orbit.state(self.scene.file_origin)
-            settings = dict(self.scene.settings)
+            # the camera moving: a gaussians mode draws its budget (scenes.GAUSS_BUDGET)
+            settings = {**self.scene.settings, "interacting": interactive}
             seq = view.seq
         for frame in view_frames(self.scene, camera, w, h, settings, superseded, preview):
             self._emit(view, frame, interactive, settings, state, seq)

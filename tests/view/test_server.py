@@ -493,3 +493,33 @@ def test_an_openvdb_grid_too_large_for_its_iso_mode_is_an_error_in_the_page(monk
         s.close()
     assert error.startswith("DeviceError: big.vdb: the grid made dense is 38x39x40 voxels")
     assert "mode gaussians" in error and len(error) <= 300 and s.scene._dense is None
+
+
+def test_the_scene_is_told_which_frames_are_the_cameras_moving():
+    """An interaction frame's settings say "interacting" (a gaussians mode
+    then draws its budget, scenes.GAUSS_BUDGET), a still frame's do not; the
+    page cannot set it (it is no setting of the scene's)."""
+
+    class Told(_Grey):
+        def frames(self, camera, width, height, settings, superseded):
+            seen.append(settings.get("interacting"))
+            yield from super().frames(camera, width, height, settings, superseded)
+
+    seen: list = []
+    s = ViewServer(Told(), size=(320, 180))
+
+    async def go():
+        a = await Page.open(s)
+        await a.send({"type": "size", "width": 320, "height": 180, "seq": 1})
+        await a.frame("a still frame", interactive=False, seq=1)
+        await a.send({"type": "drag", "dx": 40, "dy": 0, "seq": 2})
+        await a.frame("an interaction frame", interactive=True, seq=2)
+        await a.send({"type": "set", "settings": {"interacting": True}})
+        assert "unknown setting 'interacting'" in await a.error()
+        a.ws.close()
+
+    try:
+        asyncio.run(go())
+    finally:
+        s.close()
+    assert seen[-2:] == [False, True] and "interacting" not in s.scene.settings

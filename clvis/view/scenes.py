@@ -80,7 +80,7 @@ _FIT_SAMPLE = 20_000  # points the first view frames (every k-th)
 #: the Gaussians an interaction frame of a gaussians mode draws at most (Potree's
 #: default point budget): a fixed random subset, each sqrt(N / budget) times as
 #: wide, so a surface keeps its cover while the camera moves (16 M Gaussians took
-#: 5.7 s a frame on 2 cores); the still frame draws them all
+#: 5.7 s a frame on 2 cores); a still view shows that first, then draws them all
 GAUSS_BUDGET = 1_000_000
 
 
@@ -189,15 +189,34 @@ class Scene:
 
     _gauss: dict[tuple, Any]
 
+    def _gaussian_frames(
+        self, key: tuple, make: Callable[[], tuple[Any, int]], camera, w, h, settings: dict, superseded
+    ) -> Iterator[Frame]:
+        """A gaussians mode's frames of one view. An interaction frame (the
+        camera moving: settings["interacting"], the server's) of more than
+        GAUSS_BUDGET Gaussians draws the budget's subset (_budget; info
+        "gaussians" the count drawn, "of" all); a still view of that many
+        starts with that frame at its size (not final, info "preview"), then,
+        unless the view was superseded, draws them all."""
+        if settings.get("interacting", False):
+            yield self._gaussian_frame(key, make, camera, w, h, True)
+            return
+        first = self._gaussian_frame(key, make, camera, w, h, True)
+        if "of" not in first.info:  # within the budget: that was the whole set
+            yield first
+            return
+        first.final, first.info = False, {**first.info, "preview": "budget"}
+        yield first
+        if not superseded():
+            yield self._gaussian_frame(key, make, camera, w, h, False)
+
     def _gaussian_frame(
         self, key: tuple, make: Callable[[], tuple[Any, int]], camera, w, h, interacting: bool = False
     ) -> Frame:
         """A gaussians mode's frame: the renderer of `key` (made by `make`,
         (GaussianRenderer, count), when the key is new: the previous one goes
-        first), its render, and the build's time apart from the render's. An
-        `interacting` frame (the camera moving: settings["interacting"], the
-        server's) of more than GAUSS_BUDGET Gaussians draws the budget's
-        subset (_budget; info "gaussians" the count drawn, "of" all)."""
+        first), its render, and the build's time apart from the render's;
+        `interacting`, over GAUSS_BUDGET: the budget's subset."""
         t0 = time.perf_counter()
         if key not in self._gauss:
             self._gauss = {}
@@ -435,7 +454,7 @@ class PointScene(Scene):
         self._sized(self.raster.queue, width, height)
         t0 = time.perf_counter()
         if mode == "gaussians":
-            yield self._gaussians(camera, width, height, settings)
+            yield from self._gaussians(camera, width, height, settings, superseded)
             return
         if mode in ("narvis", "narvis|gaussians"):
             self._check_velocity()
@@ -584,7 +603,7 @@ class PointScene(Scene):
         values = (self.cloud.attributes or {"z": self.cloud.positions[:, 2]})[s["color_by"]]
         return apply(values, lut(s["colormap"]), *value_range(values))
 
-    def _gaussians(self, camera, w, h, s):
+    def _gaussians(self, camera, w, h, s, superseded):
         from .. import GaussianRenderer, TransferFunction, gaussians_from_points
 
         # the colormap matters to an attribute's colours, not to the points' RGB
@@ -594,7 +613,7 @@ class PointScene(Scene):
             gs = gaussians_from_points(self._gauss_cloud, color_by=s["color_by"])
             return GaussianRenderer(gs, TransferFunction(s["colormap"]), queue=self.raster.queue), gs.n
 
-        return self._gaussian_frame(key, make, camera, w, h, s.get("interacting", False))
+        return self._gaussian_frames(key, make, camera, w, h, s, superseded)
 
 
 class VolumeScene(Scene):
@@ -667,7 +686,7 @@ class VolumeScene(Scene):
         mode = settings["mode"]
         self._sized(self.iso.queue, width, height)
         if mode == "gaussians":
-            yield self._gaussians(camera, width, height, settings)
+            yield from self._gaussians(camera, width, height, settings, superseded)
             return
         if mode == "infill|iso":
             yield self._split(camera, width, height, settings)
@@ -735,7 +754,7 @@ class VolumeScene(Scene):
         }
         return Frame(split(fast, slow), info=info, times={"render": (t1 - t0) + (t3 - t2), "post": t2 - t1})
 
-    def _gaussians(self, camera, w, h, s):
+    def _gaussians(self, camera, w, h, s, superseded):
         from .. import GaussianRenderer, gaussians_from_volume
 
         def make():
@@ -747,9 +766,7 @@ class VolumeScene(Scene):
                 raise DataError(f"no voxel above the isovalue {s['isovalue']:g}: no Gaussians")
             return GaussianRenderer(gs, queue=self.iso.queue), gs.n
 
-        return self._gaussian_frame(
-            (s["lod"], s["isovalue"]), make, camera, w, h, s.get("interacting", False)
-        )
+        return self._gaussian_frames((s["lod"], s["isovalue"]), make, camera, w, h, s, superseded)
 
 
 class SparseScene(Scene):
@@ -886,8 +903,8 @@ class SparseScene(Scene):
             tf = TransferFunction(self.colormap, value_range=(lo, self.vmax), opacity=fog)
             return GaussianRenderer(gs, tf, queue=self.queue), gs.n
 
-        yield self._gaussian_frame(
-            (settings["lod"], threshold), make, camera, width, height, settings.get("interacting", False)
+        yield from self._gaussian_frames(
+            (settings["lod"], threshold), make, camera, width, height, settings, superseded
         )
 
     def release(self, sizes: Any = ()) -> None:

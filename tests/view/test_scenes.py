@@ -802,8 +802,9 @@ def test_a_gaussians_mode_draws_its_budget_while_the_camera_moves(monkeypatch):
     (settings["interacting"], the server's) of more Gaussians than
     GAUSS_BUDGET draws a fixed subset of that many, each sqrt(N / budget)
     times as wide, over the whole set's colours (16 M Gaussians took 5.7 s a
-    frame on 2 cores whether the camera moved or not); the still frame draws
-    them all; a set within the budget is drawn whole either way."""
+    frame on 2 cores whether the camera moved or not); a still view starts
+    with that frame at its size (not final), then draws them all unless it
+    was superseded; a set within the budget is drawn whole, once."""
     from clvis.images import BACKGROUND
     from clvis.view import scenes
 
@@ -815,16 +816,21 @@ def test_a_gaussians_mode_draws_its_budget_while_the_camera_moves(monkeypatch):
     s = scene_for(cloud)
     s.update({"mode": "gaussians", "color_by": "x"})
     cam = Orbit(s.lo, s.hi).camera(1.0)
-    still = next(s.frames(cam, 96, 96, s.settings, lambda: False))
-    moving = next(s.frames(cam, 96, 96, {**s.settings, "interacting": True}, lambda: False))
+    preview, still = s.frames(cam, 96, 96, s.settings, lambda: False)
+    (moving,) = s.frames(cam, 96, 96, {**s.settings, "interacting": True}, lambda: False)
     assert still.info == {"gaussians": 8000} and moving.info == {"gaussians": 1000, "of": 8000}
+    assert preview.info == {"gaussians": 1000, "of": 8000, "preview": "budget"} and not preview.final
+    assert np.array_equal(preview.image, moving.image) and still.final
+    (first,) = s.frames(cam, 96, 96, s.settings, lambda: True)  # superseded after it: no full frame
+    assert "preview" in first.info
     bg = np.array(BACKGROUND)
     a, b = (f.image.astype(float) for f in (still, moving))
     ca, cb = ((np.abs(img - bg).sum(axis=2) > 30) for img in (a, b))
     assert ca.mean() > 0.3 and (ca & ~cb).mean() < 0.01  # the square still covered: no holes (softer edges)
     assert np.abs(a[ca] - b[ca]).mean() < 30  # the same colours (x through viridis), not the subset's range
-    assert np.array_equal(next(s.frames(cam, 96, 96, s.settings, lambda: False)).image, still.image)
-    monkeypatch.setattr(scenes, "GAUSS_BUDGET", 8000)  # within the budget: whole
+    assert np.array_equal(list(s.frames(cam, 96, 96, s.settings, lambda: False))[-1].image, still.image)
+    monkeypatch.setattr(scenes, "GAUSS_BUDGET", 8000)  # within the budget: whole, once
     s.update({"colormap": "magma"})
-    whole = next(s.frames(cam, 96, 96, {**s.settings, "interacting": True}, lambda: False))
-    assert whole.info == {"gaussians": 8000}
+    for interacting in (True, False):
+        (whole,) = s.frames(cam, 96, 96, {**s.settings, "interacting": interacting}, lambda: False)
+        assert whole.info == {"gaussians": 8000} and whole.final

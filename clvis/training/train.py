@@ -1599,11 +1599,16 @@ def _from_onnxruntime(e: BaseException) -> bool:
     return False
 
 
+def _out_of_memory(e: BaseException) -> bool:
+    """Whether onnxruntime's error `e` is its allocator's (out of memory)."""
+    return isinstance(e, MemoryError) or "Failed to allocate" in str(e) or "bfc_arena" in str(e)
+
+
 def _export_failed(name: str, e: Exception, fsize: Sequence[int]) -> Exception:
     """onnxruntime's own error while exporting (its int8 calibration runs the
     held-out frames whole) as one a caller (and clvis train's one line) reads."""
     text = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-    if "Failed to allocate" in str(e) or "bfc_arena" in str(e):
+    if _out_of_memory(e):
         return MemoryError(
             f"exporting {name}: onnxruntime ran out of memory on the held-out frames "
             f"({fsize[0]}x{fsize[1]}; a smaller --frame-size needs less); nothing was written"
@@ -1729,8 +1734,19 @@ def export(
     int8 = out / f"{name}.int8.onnx"
     quantizable = getattr(net, "int8", True)  # NarvisKPN: its softmax mask does not survive int8
     if quantizable:
-        _to_int8(fp32, int8, [c[None] for c in calibration[:8]])
-        files["int8"] = {"file": int8.name}
+        try:
+            _to_int8(fp32, int8, [c[None] for c in calibration[:8]])
+        except Exception as e:
+            if not (_from_onnxruntime(e) and _out_of_memory(e)):
+                raise
+            # the calibration runs the held-out frames whole (1280x720: over 8 GB):
+            # the int8 variant is optional, the trained model is not lost for it
+            h, w = calibration[0].shape[-2:]
+            log(f"int8 not made: onnxruntime ran out of memory calibrating on {w}x{h} frames")
+            quantizable = False
+            files["int8"] = {"file": None, "psnr_change_db": None, "skipped": "out of memory calibrating"}
+        else:
+            files["int8"] = {"file": int8.name}
     else:
         files["int8"] = {"file": None, "psnr_change_db": None}
 

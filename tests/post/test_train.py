@@ -1099,16 +1099,28 @@ def test_onnxruntime_failing_while_exporting_is_one_error_and_writes_nothing(tmp
     """The release run's int8 calibration (its held-out frames whole, 1280x720)
     ran out of memory under an 8 GB limit: onnxruntime's Fail came out of
     clvis train as a traceback and left infill.onnx and infill.fp16.onnx
-    without a card."""
+    without a card; then it was one error and nothing written, the trained
+    model lost for its optional int8 variant. Now that variant is not made
+    (said, and in the card) and the model is written; onnxruntime's other
+    failures are one error and write nothing."""
     from onnxruntime.capi.onnxruntime_pybind11_state import Fail
 
     def oom(*args, **kwargs):
         raise Fail("[ONNXRuntimeError] : 1 : FAIL : bfc_arena.cc:360 Failed to allocate memory")
 
     monkeypatch.setattr(train, "_to_int8", oom)
-    with pytest.raises(MemoryError, match="exporting infill: onnxruntime ran out of memory.*96x64"):
-        _tiny_infill(tmp_path)
-    assert list(tmp_path.iterdir()) == []
+    said: list[str] = []
+    card = _tiny_infill(tmp_path, log=said.append)
+    assert "int8 not made: onnxruntime ran out of memory calibrating on 96x64 frames" in said
+    assert card["files"]["int8"] == {
+        "file": None,
+        "psnr_change_db": None,
+        "skipped": "out of memory calibrating",
+    }
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["infill.fp16.onnx", "infill.json", "infill.onnx"]
+    post.load("infill", directory=tmp_path)
+    for p in list(tmp_path.iterdir()):
+        p.unlink()
     monkeypatch.setattr(train, "_to_int8", lambda *a: (_ for _ in ()).throw(Fail("bad graph")))
     rc = main(
         ["train", "infill", "--steps", "1", "--size", "64", "--frames", "1", "--frame-size", "96x64"]

@@ -89,3 +89,30 @@ def test_what_from_vtk_refuses():
     img.SetDirectionMatrix(0, -1, 0, 1, 0, 0, 0, 0, 1)  # x and y swapped: a rotated image
     with pytest.raises(DataError, match="its axes are rotated"):
         clvis.from_vtk(img)
+
+
+def test_pyvista_objects_as_a_pyvista_user_holds_them():
+    """pyvista's own objects (they are VTK datasets): a mesh with a point
+    array, a point cloud with 8-bit RGB, an ImageData, and one of the files
+    pyvista's wheel carries read by pyvista; clvis.view takes them."""
+    pv = pytest.importorskip("pyvista", reason="pyvista is in the test extra")
+    from pyvista import examples
+
+    mesh = pv.Sphere(radius=2.0)
+    mesh["elev"] = mesh.points[:, 2]
+    c = clvis.from_vtk(mesh)
+    assert len(c) == mesh.n_points and "elev" in c.attributes
+    np.testing.assert_allclose(np.linalg.norm(c.positions, axis=1), 2.0, rtol=1e-5)
+    rgb = np.random.default_rng(0).integers(0, 256, (500, 3)).astype(np.uint8)
+    cloud = pv.PolyData(np.random.default_rng(1).random((500, 3)).astype(np.float32))
+    cloud["RGB"] = rgb
+    np.testing.assert_array_equal(clvis.from_vtk(cloud).colors[:, :3], rgb)
+    img = pv.ImageData(dimensions=(10, 12, 14), spacing=(0.5, 1.0, 2.0), origin=(1.0, 2.0, 3.0))
+    img["v"] = np.arange(img.n_points, dtype=np.float32)
+    v = clvis.from_vtk(img)
+    assert v.data.shape == (14, 12, 10) and v.spacing == (2.0, 1.0, 0.5) and v.origin == (1.0, 2.0, 3.0)
+    np.testing.assert_array_equal(v.data.ravel(), img["v"])
+    channels = clvis.from_vtk(pv.read(examples.__file__.replace("__init__.py", "channels.vti")))
+    assert channels.data.ndim == 3 and np.isfinite(channels.data).all()
+    assert type(clvis.view.scene_for(mesh)).__name__ == "PointScene"
+    assert type(clvis.view.scene_for(img)).__name__ == "VolumeScene"

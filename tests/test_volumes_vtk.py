@@ -153,6 +153,35 @@ def test_legacy_ascii_and_errors(tmp_path):
             read_volume(p)
 
 
+def test_legacy_header_with_blank_lines_reads_as_vtk_reads_it(tmp_path):
+    """VTK passes over blank lines after a legacy file's title (it reads the
+    header word by word): blank lines before ASCII, before DATASET and between
+    DIMENSIONS, SPACING and ORIGIN were a malformed header, or "no
+    DIMENSIONS". The title itself may be blank."""
+    from vtkmodules.vtkIOLegacy import vtkStructuredPointsReader
+
+    from clvis.io.vtk import legacy_dataset
+
+    p = tmp_path / "blank.vtk"
+    p.write_text(
+        "# vtk DataFile Version 3.0\n\n\nASCII\n\n \nDATASET STRUCTURED_POINTS\n\nDIMENSIONS 2 3 2\n\n"
+        "SPACING 1 2 3\n\nORIGIN 4 5 6\nPOINT_DATA 12\nSCALARS s float 1\nLOOKUP_TABLE default\n"
+        + " ".join(str(k) for k in range(12))
+        + "\n"
+    )
+    r = vtkStructuredPointsReader()  # VTK itself reads it
+    r.SetFileName(str(p))
+    r.Update()
+    assert r.GetOutput().GetDimensions() == (2, 3, 2)
+    assert legacy_dataset(p) == "STRUCTURED_POINTS"
+    v = read_volume(p)
+    np.testing.assert_array_equal(v.data, np.arange(12, dtype=np.float32).reshape(2, 3, 2))
+    assert v.spacing == (3.0, 2.0, 1.0) and v.origin == (4.0, 5.0, 6.0)
+    p.write_text("# vtk DataFile Version 3.0\nx\n\nASCII\n\n")  # still too short
+    with pytest.raises(DataError, match="malformed legacy VTK header"):
+        read_volume(p)
+
+
 def _grid(x, y, z, values, cells=False):
     """A vtkRectilinearGrid of those coordinates, `values` its point (or
     `cells`: cell) array "v"."""

@@ -143,6 +143,13 @@ def _numbers(path: Path, what: str, text: str, n: int, kind: type = float) -> li
     return v
 
 
+def _components(attrs: dict[str, str]) -> str:
+    """A DataArray's NumberOfComponents as written, "1" where it is absent or
+    blank: VTK's XML readers keep one component where the attribute holds no
+    number (meshio writes NumberOfComponents="")."""
+    return attrs.get("NumberOfComponents", "").strip() or "1"
+
+
 def _count(path: Path, what: str, ext: list[int]) -> int:
     dims = (ext[1] - ext[0] + 1, ext[3] - ext[2] + 1, ext[5] - ext[4] + 1)
     if min(dims) < 1:
@@ -276,7 +283,7 @@ def _check_grid(
         t = _VTI_TYPES.get(a.get("type", ""))
         if t is None:
             raise DataError(f"{path}: unsupported DataArray type {a.get('type')!r}")
-        if a.get("NumberOfComponents", "1").strip() != "1":
+        if _components(a) != "1":
             raise DataError(f"{path}: array {name!r} has several components; a volume has one")
         _check_array(path, raw, at, a, text, fa, pn * np.dtype(t).itemsize, pn)
         covered += pn
@@ -296,7 +303,7 @@ def _check_coordinates(
         raise DataError(f"{path}: a RectilinearGrid Piece without its three <Coordinates> arrays")
     for axis, (a, text), k in zip("XYZ", arrays, (0, 2, 4), strict=True):
         t = _VTI_TYPES.get(a.get("type", ""))
-        if t is None or a.get("NumberOfComponents", "1").strip() != "1":
+        if t is None or _components(a) != "1":
             raise DataError(f"{path}: the {axis} coordinates: one component of a numeric type expected")
         count = ext[k + 1] - ext[k] + 1
         _check_array(path, raw, at, a, text, fa, count * np.dtype(t).itemsize, count)
@@ -479,8 +486,26 @@ VOLUME_DATASETS = ("STRUCTURED_POINTS", "RECTILINEAR_GRID")
 _EVEN = 1e-4
 
 
-def _legacy_lines(raw: bytes) -> list[str]:
-    return [t.decode("latin-1").strip() for t in raw[:4096].split(b"\n")[:12]]
+def _legacy_lines(raw: bytes) -> tuple[list[str], int]:
+    """The first lines of a legacy VTK file as VTK's reader takes them, up
+    to 12 within its first 4096 bytes: the version line, the title (a whole
+    line, which may be blank), then the lines that are not blank (VTK reads
+    the words after the title one by one, passing over blank lines: a file
+    with a blank line before its ASCII or DATASET line is read); and where
+    the fourth of them (the DATASET line) ends, 0 where the file has fewer."""
+    lines: list[str] = []
+    end = pos = 0
+    head = raw[:4096]
+    while len(lines) < 12 and pos < len(head):
+        nl = head.find(b"\n", pos)
+        stop = len(head) if nl < 0 else nl
+        text = head[pos:stop].decode("latin-1").strip()
+        if text or len(lines) < 2:
+            lines.append(text)
+            if len(lines) == 4 and nl >= 0:
+                end = nl + 1
+        pos = stop + 1
+    return lines, end
 
 
 def legacy_dataset(path: str | Path) -> str:
@@ -490,7 +515,7 @@ def legacy_dataset(path: str | Path) -> str:
     volume) or read_points (its points)."""
     try:
         with open(path, "rb") as f:
-            text = _legacy_lines(f.read(4096))
+            text = _legacy_lines(f.read(4096))[0]
     except OSError:
         return ""
     if len(text) < 4 or not text[0].startswith("# vtk DataFile") or not text[3].upper().startswith("DATASET"):
@@ -502,7 +527,7 @@ def legacy_dataset(path: str | Path) -> str:
 def _legacy_head(path: Path, raw: bytes) -> tuple[str, bool, bool, list[str]]:
     """(DATASET, binary, cells as OFFSETS/CONNECTIVITY (file version 5 on),
     the first lines) of a legacy VTK file; a DataError for any other file."""
-    text = _legacy_lines(raw)
+    text = _legacy_lines(raw)[0]
     if not text or not text[0].startswith("# vtk DataFile"):
         raise DataError(f"{path}: not a legacy VTK file (no '# vtk DataFile' line)")
     up = [t.upper() for t in text]
@@ -592,11 +617,9 @@ def _check_legacy(
     fit or is not read. `arrays`, where given, gets each array of the
     POINT_DATA and CELL_DATA sections (a dataset's own FIELD before them is
     none), in the file's order."""
-    pos = 0
-    for _ in range(4):  # the version, title, ASCII/BINARY and DATASET lines
-        pos = raw.find(b"\n", pos) + 1
-        if pos == 0:
-            raise DataError(f"{path}: malformed legacy VTK header (fewer than 4 lines)")
+    pos = _legacy_lines(raw)[1]  # after the version, title, ASCII/BINARY and DATASET lines
+    if pos == 0:
+        raise DataError(f"{path}: malformed legacy VTK header (fewer than 4 lines)")
     size, points, here, fields = len(raw), -1, 0, 0
     where, field_where = "", ""  # the data section we are in ("point", "cell"), the FIELD's
 

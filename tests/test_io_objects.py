@@ -71,6 +71,23 @@ def test_image_data_is_a_volume():
     assert type(clvis.view.scene_for(_polydata())).__name__ == "PointScene"
 
 
+def test_image_data_of_negative_or_flat_spacing_gets_forward_steps():
+    """An image whose spacing is negative along an axis (VTK puts sample i at
+    origin + i * spacing: the axis runs backward) or 0 along a flat axis (a
+    2-D image) was a Volume that every renderer refused; now the backward
+    axis is flipped, its origin at its last sample, and the flat axis gets a
+    step of 1, as read_volume reads such a file."""
+    values = np.arange(2 * 3 * 4, dtype=np.float32).reshape(2, 3, 4)
+    v = clvis.from_vtk(_image(values, spacing=(-0.5, 2.0, 1.0), origin=(10.0, 0.0, 0.0)))
+    np.testing.assert_array_equal(v.data, values[:, :, ::-1])
+    assert v.spacing == (1.0, 2.0, 0.5) and v.origin == (8.5, 0.0, 0.0)
+    flat = clvis.from_vtk(_image(values[:1], spacing=(1.0, 1.0, 0.0)))
+    assert flat.spacing == (1.0, 1.0, 1.0)
+    clvis.gaussians_from_volume(flat)  # a renderer takes it
+    with pytest.raises(DataError, match="vtkImageData: spacing 0 along x: its 4 samples at one place"):
+        clvis.from_vtk(_image(values, spacing=(0.0, 1.0, 1.0)))
+
+
 def test_what_from_vtk_refuses():
     values = np.zeros((3, 3, 3), np.float32)
     with pytest.raises(TypeError, match="expected a VTK dataset .* got ndarray"):

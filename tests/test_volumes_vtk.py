@@ -182,6 +182,68 @@ def test_legacy_header_with_blank_lines_reads_as_vtk_reads_it(tmp_path):
         read_volume(p)
 
 
+def _world_image(dims, spacing, origin):
+    """vtkImageData whose point scalar "w" is x + 10 y + 100 z of the point
+    (VTK's own placing: origin + i * spacing)."""
+    from vtkmodules.util import numpy_support as ns
+    from vtkmodules.vtkCommonDataModel import vtkImageData
+
+    img = vtkImageData()
+    img.SetDimensions(*dims)
+    img.SetSpacing(*spacing)
+    img.SetOrigin(*origin)
+    pts = np.array([img.GetPoint(i) for i in range(img.GetNumberOfPoints())])
+    a = ns.numpy_to_vtk(pts @ np.array([1.0, 10.0, 100.0]), deep=True)
+    a.SetName("w")
+    img.GetPointData().SetScalars(a)
+    return img
+
+
+def _check_world(v):
+    """Each sample of Volume `v` at origin + index * spacing holds its x + 10 y + 100 z."""
+    assert min(v.spacing) > 0
+    z, y, x = (np.arange(n) * s for n, s in zip(v.data.shape, v.spacing, strict=True))
+    ox, oy, oz = v.origin
+    want = (ox + x)[None, None, :] + 10 * (oy + y)[None, :, None] + 100 * (oz + z)[:, None, None]
+    np.testing.assert_allclose(v.data, want, atol=1e-9)
+
+
+@pytest.mark.parametrize("suffix", [".vti", ".vtk"])
+def test_image_data_of_negative_or_flat_spacing_reads_with_forward_steps(tmp_path, suffix):
+    """VTK puts sample i at origin + i * spacing: an axis of negative spacing
+    runs backward, and a 2-D image is often written with spacing 0 along its
+    flat axis (meshio's test image 00_image.vtk: SPACING 0.5 0.5 0.0).
+    read_volume handed those spacings on and every renderer refused them
+    (clvis gauss 00_image.vtk: "spacing: (0.0, 0.5, 0.5) must be > 0 on every
+    axis", naming no file). Now a backward axis is flipped, its origin at its
+    last sample (every sample where VTK puts it), a flat axis gets a step of
+    1, and a zero step along an axis of several samples is a DataError
+    naming the file."""
+    from vtkmodules.vtkIOLegacy import vtkStructuredPointsWriter
+    from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
+
+    def write(img, name):
+        path = tmp_path / (name + suffix)
+        w = vtkXMLImageDataWriter() if suffix == ".vti" else vtkStructuredPointsWriter()
+        w.SetFileName(str(path))
+        w.SetInputData(img)
+        assert w.Write() == 1
+        return path
+
+    v = read_volume(write(_world_image((4, 3, 5), (-0.5, 2.0, -3.0), (1.0, 2.0, 3.0)), "backward"))
+    assert v.shape == (5, 3, 4) and v.spacing == (3.0, 2.0, 0.5) and v.origin == (-0.5, 2.0, -9.0)
+    _check_world(v)
+    flat = read_volume(write(_world_image((6, 4, 1), (0.5, 0.5, 0.0), (0.0, 1.0, 2.0)), "flat"))
+    assert flat.shape == (1, 4, 6) and flat.spacing == (1.0, 0.5, 0.5) and flat.origin == (0.0, 1.0, 2.0)
+    _check_world(flat)
+    import clvis
+
+    clvis.gaussians_from_volume(flat)  # a renderer takes it
+    path = write(_world_image((6, 4, 3), (0.5, 0.0, 1.0), (0.0, 0.0, 0.0)), "zero")
+    with pytest.raises(DataError, match=rf"zero{suffix}: spacing 0 along y: its 4 samples at one place"):
+        read_volume(path)
+
+
 def _grid(x, y, z, values, cells=False):
     """A vtkRectilinearGrid of those coordinates, `values` its point (or
     `cells`: cell) array "v"."""

@@ -102,7 +102,9 @@ def _volume(img: Any, kind: str, array: str | None, ns: Any) -> Volume:
             origin = [
                 o + (s / 2 if d > 1 else 0.0) for o, s, d in zip(origin, (sx, sy, sz), dims, strict=True)
             ]
-        spacing = (float(sz), float(sy), float(sx))
+        from .vtk import forward_axes  # steps > 0: a backward axis flipped, a flat one a step of 1
+
+        values, spacing, origin = forward_axes(kind, values, (sx, sy, sz), origin)
         return Volume(values, spacing, tuple(float(o) for o in origin), array=arr.GetName())
     names = [
         f"{d.GetArrayName(i)} ({d.GetArray(i).GetNumberOfComponents() if d.GetArray(i) else '?'} components)"

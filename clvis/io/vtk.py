@@ -427,7 +427,32 @@ def _image(
     origin = list(img.GetOrigin())
     if cells:  # the cell centres: half a step in along each axis that has cells
         origin = [o + (s / 2 if d > 1 else 0.0) for o, s, d in zip(origin, (sx, sy, sz), dims, strict=True)]
-    return data, (sz, sy, sx), origin
+    return forward_axes(path, data, (sx, sy, sz), origin)
+
+
+def forward_axes(what: Any, data: np.ndarray, spacing: Any, origin: Any) -> tuple[np.ndarray, tuple, list]:
+    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of image data
+    whose `spacing` and `origin` (x, y, z) are VTK's, with every step > 0, as
+    clvis's renderers take them: VTK puts sample i at origin + i * spacing, so
+    an axis of negative spacing runs backward (it is flipped, the origin
+    moved to its last sample: the same points in space); a flat axis (one
+    sample) of spacing 0, as a 2-D image is often written, gets a step of 1
+    (a rectilinear grid's lone coordinate does too). A DataError naming
+    `what` for a spacing or origin that is not finite, or a zero step along
+    an axis of several samples."""
+    steps, start = [], []
+    for k, (s, o) in enumerate(zip(spacing, origin, strict=True)):
+        s, o, axis = float(s), float(o), 2 - k
+        n = data.shape[axis]
+        if not (np.isfinite(s) and np.isfinite(o)):
+            raise DataError(f"{what}: spacing {s:g} and origin {o:g} along {'xyz'[k]}: not finite")
+        if s == 0 and n > 1:
+            raise DataError(f"{what}: spacing 0 along {'xyz'[k]}: its {n} samples at one place")
+        if s < 0 and n > 1:
+            data, o = np.flip(data, axis), o + s * (n - 1)
+        steps.append(abs(s) if s else 1.0)
+        start.append(o)
+    return np.ascontiguousarray(data), (steps[2], steps[1], steps[0]), start
 
 
 def _opened(core: Any, reader: Any, path: Path, messages: list[str], text: bytes | None = None) -> bool:

@@ -77,7 +77,7 @@ a .npy volume [z, y, x], a NIfTI file (.nii, .nii.gz; a 4-D series with
 image data (.vti, legacy .vtk structured points, or an evenly spaced rectilinear
 grid: .vtr or legacy .vtk; a .vtp, .vtu, .vts or a legacy .vtk POLYDATA,
 UNSTRUCTURED_GRID or STRUCTURED_GRID is a point cloud: clvis render, clvis gauss,
-clvis view).
+clvis view), or an OpenVDB float grid (.vdb, --grid; the vdb extra) made dense.
 The default isovalue of a file is Otsu's threshold of its samples
 (scikit-image), which separates a scan's tissue from its background, moved
 to the middle of the gap between the sample values on either side of it (a
@@ -121,7 +121,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "file",
         nargs="?",
         help="a volume: .raw (Open SciVis naming), .npy, NIfTI (.nii, .nii.gz), MGH (.mgz, .mgh), "
-        "Analyze .hdr/.img (.hdr.gz/.img.gz), VTK .vti, .vtr or legacy .vtk",
+        "Analyze .hdr/.img (.hdr.gz/.img.gz), VTK .vti, .vtr or legacy .vtk, or an OpenVDB .vdb "
+        "float grid (--grid; made dense)",
     )
     p.add_argument("--dataset", choices=_DATASETS, help="an embedded volume (default marschner-lobb)")
     p.add_argument(

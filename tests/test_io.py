@@ -225,6 +225,36 @@ def test_ply_foreign_properties(tmp_path):
     np.testing.assert_array_equal(pc.attributes["scalar_temp"], -7)
 
 
+def test_names_in_another_case_and_diffuse_colours(tmp_path):
+    """X, Y, Z (a pandas DataFrame's records, np.save(df.to_records()); some
+    PLY writers) were refused ("no x, y, z column (found X, Y, Z)"), and the
+    PLY spec's diffuse_red/green/blue (VTK's PLY reader takes them as
+    colours) were attributes. A lower-case name still wins over another case
+    (a second 'X' beside 'x' stays an attribute)."""
+    n = 4
+    rec = np.zeros(n, dtype=[("X", "f8"), ("Y", "f8"), ("Z", "f8"), ("Intensity", "f4")])
+    rec["X"], rec["Z"], rec["Intensity"] = np.arange(n), 5.0, 7.0
+    np.save(tmp_path / "records.npy", rec)
+    c = read_points(tmp_path / "records.npy")
+    np.testing.assert_array_equal(c.positions[:, 0] + c.origin[0], np.arange(n))
+    np.testing.assert_array_equal(c.positions[:, 2] + c.origin[2], 5.0)
+    assert c.attribute_names == ("Intensity",)
+    v = np.zeros(
+        n,
+        dtype=[(k, "f4") for k in ("X", "Y", "Z")]
+        + [(k, "u1") for k in ("diffuse_red", "diffuse_green", "diffuse_blue")],
+    )
+    v["Y"], v["diffuse_red"], v["diffuse_green"], v["diffuse_blue"] = 3.0, 200, 10, 30
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")]).write(str(tmp_path / "upper.ply"))
+    c = read_points(tmp_path / "upper.ply")
+    np.testing.assert_array_equal(c.positions[:, 1] + c.origin[1], 3.0)
+    np.testing.assert_array_equal(c.colors, [[200, 10, 30, 255]] * n)
+    assert c.attribute_names == ()
+    both = np.zeros(n, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("X", "f4")])
+    plyfile.PlyData([plyfile.PlyElement.describe(both, "vertex")]).write(str(tmp_path / "both.ply"))
+    assert read_points(tmp_path / "both.ply").attribute_names == ("X",)
+
+
 def test_ply_double_coordinates_keep_an_origin(tmp_path):
     """Double x, y, z (Open3D's, PDAL's, georeferenced scans): positions relative
     to their finite minimum, the origin kept in float64, as LAS files are (as

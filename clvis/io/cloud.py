@@ -16,7 +16,11 @@ from ..errors import DataError
 from .files import write_replacing
 
 # Named columns (PLY vertex properties, structured NPY fields) with a meaning.
-_COLOR_NAMES: tuple[tuple[str, ...], ...] = (("red", "green", "blue", "alpha"), ("r", "g", "b", "a"))
+_COLOR_NAMES: tuple[tuple[str, ...], ...] = (
+    ("red", "green", "blue", "alpha"),
+    ("r", "g", "b", "a"),
+    ("diffuse_red", "diffuse_green", "diffuse_blue", "diffuse_alpha"),  # the PLY spec's material colours
+)
 _VELOCITY_NAMES: tuple[tuple[str, ...], ...] = (
     ("vx", "vy", "vz"),
     ("velocity_x", "velocity_y", "velocity_z"),
@@ -259,7 +263,12 @@ def relative_positions(xyz: Any, origin: Any = None) -> tuple[Any, Any]:
 
 
 def _from_columns(path: Path, columns: dict[str, np.ndarray], origin: Any = None) -> PointCloud:
-    """A cloud from named 1-D columns (PLY properties, structured NPY fields)."""
+    """A cloud from named 1-D columns (PLY properties, structured NPY fields).
+    The names clvis reads (x, y, z, the colours, the velocity, radius) are
+    found in any case (X, Y, Z: a pandas DataFrame's records, some PLY
+    writers) where the file has no column of that name in lower case and
+    one only in another case."""
+    columns = _lower_reserved(columns)
     missing = [c for c in "xyz" if c not in columns]
     if missing:
         raise DataError(f"{path}: no {', '.join(missing)} column (found {', '.join(columns) or 'none'})")
@@ -282,6 +291,20 @@ def _from_columns(path: Path, columns: dict[str, np.ndarray], origin: Any = None
         fields["radius"] = columns.pop("radius")
     fields["attributes"] = columns
     return _cloud(path, **fields)
+
+
+def _lower_reserved(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """`columns` with each name of _RESERVED_COLUMNS it holds in another case
+    only (one column) renamed to it, in the same order."""
+    by_lower: dict[str, list[str]] = {}
+    for k in columns:
+        by_lower.setdefault(k.lower(), []).append(k)
+    rename = {
+        ks[0]: low
+        for low, ks in by_lower.items()
+        if low in _RESERVED_COLUMNS and low not in columns and len(ks) == 1
+    }
+    return {rename.get(k, k): v for k, v in columns.items()} if rename else columns
 
 
 def _write_or_remove(path: str | os.PathLike[str], write: Callable[[IO[Any]], object]) -> None:

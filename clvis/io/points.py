@@ -72,8 +72,10 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
     """Read a point cloud; the format comes from the extension (case-insensitive).
 
     - ``.ply``: the ``vertex`` element. x, y, z are required; red, green, blue
-      [, alpha] (or r, g, b [, a]) become colors; vx, vy, vz (or velocity_x, ...)
-      the velocity; radius the radius; every other scalar property an attribute.
+      [, alpha] (or r, g, b [, a], or diffuse_red, ...) become colors; vx, vy, vz
+      (or velocity_x, ...) the velocity; radius the radius (these names in any
+      case where the file has no lower-case one: X, Y, Z); every other scalar
+      property an attribute.
       Double x, y, z too far from zero for float32 (more than ~170 times the
       cloud's extent): positions relative to ``origin`` = their finite minimum
       (unless the file carries clvis's origin comment), as for NPY and NPZ.

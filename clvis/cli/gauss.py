@@ -817,11 +817,13 @@ def _say_if_empty(panels, width: int, height: int) -> bool:
     drawn = max(int((to_host(img.rgba)[..., 3] >= 0.5 / 255).sum()) for _, _, img in panels)
     if drawn * 1000 >= width * height:
         return False
+    # --lod is a volume's (a point cloud's or a saved .npz's Gaussians refuse it)
+    lod = " or --lod low (fewer, larger Gaussians)" if any(name in LODS for name, _, _ in panels) else ""
     print(
         f"clvis gauss: note: the picture is {'empty' if drawn == 0 else 'nearly empty'}: "
         f"{drawn:,} of {width * height:,} pixels drawn at {width}x{height} (the Gaussians are few, "
         "smaller than a pixel here, or out of view); a larger --size, a closer view (--eye/--target, "
-        "--fov) or --lod low (fewer, larger Gaussians) draws more of them",
+        f"--fov){lod} draws more of them",
         file=sys.stderr,
     )
     return True

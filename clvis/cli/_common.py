@@ -421,7 +421,8 @@ views (--view):
   grid:K        the K-th of the 384 NARVis grid cameras, a 4 x 4 grid (K = 0..383)
 --eye, --target and --up replace that part of the view's camera (the target
 then defaults to the centre of the scene's bounds when --eye is given, and up
-to +z, +y for top); --fov sets the field of view of a perspective view.
+to +z, +y for top or a view straight down); --fov sets the field of view of a
+perspective view.
 """
 
 
@@ -597,6 +598,10 @@ def _replaced(cam, kind, args, lo, hi, aspect: float):
     if np.array_equal(eye, target):
         raise CliError("--eye: the camera would sit on its target; give a --target too")
     forward = (target - eye) / np.linalg.norm(target - eye)
+    if args.up is None and np.linalg.norm(np.cross(forward, np.asarray(up, np.float64))) < 1e-3:
+        # straight down (or up) the default up: north (+y) up, as --view top (it was an error
+        # naming --up, which the user had not given)
+        up = (0.0, 1.0, 0.0)
     corners = box_corners(lo, hi)
     depths = (corners - eye) @ forward
     scale = max(

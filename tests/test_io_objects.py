@@ -88,6 +88,25 @@ def test_image_data_of_negative_or_flat_spacing_gets_forward_steps():
         clvis.from_vtk(_image(values, spacing=(0.0, 1.0, 1.0)))
 
 
+def test_image_data_whose_direction_permutes_and_flips_axes():
+    """A Direction that only swaps and flips axes (x and y swapped, one of
+    them reversed: a quarter turn) was refused as a rotation; it is applied
+    now, each sample where VTK puts it (origin + Direction @ (ijk * spacing)),
+    the samples transposed and flipped, never resampled."""
+    values = np.arange(2 * 3 * 4, dtype=np.float32).reshape(2, 3, 4)  # [k, j, i]
+    img = _image(values, spacing=(0.5, 2.0, 1.0), origin=(10.0, 0.0, 0.0))
+    img.SetDirectionMatrix(0, -1, 0, 1, 0, 0, 0, 0, 1)  # i along +y, j along -x
+    v = clvis.from_vtk(img)
+    assert v.shape == (2, 4, 3) and v.spacing == (1.0, 0.5, 2.0) and v.origin == (6.0, 0.0, 0.0)
+    for k in range(2):
+        for j in range(3):
+            for i in range(4):  # VTK's point of sample (i, j, k), and the Volume's sample there
+                point = img.GetPoint(i + 4 * j + 12 * k)
+                steps = zip(point, v.origin, v.spacing[::-1], strict=True)
+                ix, iy, iz = (round((p - o) / st) for p, o, st in steps)
+                assert v.data[iz, iy, ix] == values[k, j, i]
+
+
 def test_what_from_vtk_refuses():
     values = np.zeros((3, 3, 3), np.float32)
     with pytest.raises(TypeError, match="expected a VTK dataset .* got ndarray"):
@@ -103,7 +122,8 @@ def test_what_from_vtk_refuses():
     with pytest.raises(DataError, match=r"vtkImageData 3x3x3: no one-component scalar array \(arrays: none"):
         clvis.from_vtk(img)
     img = _image(values)
-    img.SetDirectionMatrix(0, -1, 0, 1, 0, 0, 0, 0, 1)  # x and y swapped: a rotated image
+    c, s = np.cos(0.3), np.sin(0.3)
+    img.SetDirectionMatrix(c, -s, 0, s, c, 0, 0, 0, 1)  # turned 0.3 rad about z: a rotated image
     with pytest.raises(DataError, match="its axes are rotated"):
         clvis.from_vtk(img)
 

@@ -182,9 +182,9 @@ def test_legacy_header_with_blank_lines_reads_as_vtk_reads_it(tmp_path):
         read_volume(p)
 
 
-def _world_image(dims, spacing, origin):
+def _world_image(dims, spacing, origin, direction=None):
     """vtkImageData whose point scalar "w" is x + 10 y + 100 z of the point
-    (VTK's own placing: origin + i * spacing)."""
+    (VTK's own placing: origin + Direction @ (i * spacing))."""
     from vtkmodules.util import numpy_support as ns
     from vtkmodules.vtkCommonDataModel import vtkImageData
 
@@ -192,6 +192,8 @@ def _world_image(dims, spacing, origin):
     img.SetDimensions(*dims)
     img.SetSpacing(*spacing)
     img.SetOrigin(*origin)
+    if direction is not None:
+        img.SetDirectionMatrix(*np.ravel(direction))
     pts = np.array([img.GetPoint(i) for i in range(img.GetNumberOfPoints())])
     a = ns.numpy_to_vtk(pts @ np.array([1.0, 10.0, 100.0]), deep=True)
     a.SetName("w")
@@ -241,6 +243,36 @@ def test_image_data_of_negative_or_flat_spacing_reads_with_forward_steps(tmp_pat
     clvis.gaussians_from_volume(flat)  # a renderer takes it
     path = write(_world_image((6, 4, 3), (0.5, 0.0, 1.0), (0.0, 0.0, 0.0)), "zero")
     with pytest.raises(DataError, match=rf"zero{suffix}: spacing 0 along y: its 4 samples at one place"):
+        read_volume(path)
+
+
+def test_a_vti_direction_that_flips_or_permutes_axes_is_applied(tmp_path):
+    """A .vti's Direction (VTK 9 writes it; a scan converted from DICOM's LPS
+    order has x and y flipped) was ignored: the volume came out mirrored or
+    turned. A Direction that permutes and flips axes is applied (each sample
+    where VTK puts it, no resampling); a rotation is a DataError naming the
+    file, as from_vtk says of such an image."""
+    from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
+
+    def write(img, name):
+        path = tmp_path / name
+        w = vtkXMLImageDataWriter()
+        w.SetFileName(str(path))
+        w.SetInputData(img)
+        assert w.Write() == 1
+        return path
+
+    lps = np.diag([-1.0, -1.0, 1.0])
+    v = read_volume(write(_world_image((4, 3, 5), (0.5, 2.0, 3.0), (1.0, 2.0, 3.0), lps), "lps.vti"))
+    assert v.shape == (5, 3, 4) and v.spacing == (3.0, 2.0, 0.5) and v.origin == (-0.5, -2.0, 3.0)
+    _check_world(v)
+    turned = [[0, -1, 0], [0, 0, 1], [1, 0, 0]]  # i along +z, j along -x, k along +y
+    v = read_volume(write(_world_image((4, 3, 5), (0.5, 2.0, 3.0), (1.0, 2.0, 3.0), turned), "t.vti"))
+    assert v.shape == (4, 5, 3) and v.spacing == (0.5, 3.0, 2.0)
+    _check_world(v)
+    c, s = np.cos(0.5), np.sin(0.5)
+    path = write(_world_image((4, 3, 5), (1, 1, 1), (0, 0, 0), [[c, -s, 0], [s, c, 0], [0, 0, 1]]), "r.vti")
+    with pytest.raises(DataError, match=r"r.vti: its axes are rotated \(Direction 0.877583 -0.479426"):
         read_volume(path)
 
 

@@ -422,12 +422,43 @@ def _image(
     """(data (Z, Y, X), spacing zyx, origin xyz) of `reader`'s output; with
     `cells`, of its cell array: one sample a cell, at the cell's centre."""
     img, data = _scalars(path, reader, messages, name, n, ns, cells)
+    return image_axes(path, img, data, cells)
+
+
+def image_axes(what: Any, img: Any, data: np.ndarray, cells: bool) -> tuple[np.ndarray, tuple, list]:
+    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of the
+    samples `data` [k, j, i] of the vtkImageData `img` (`cells`: its cell
+    data, one sample a cell, at the cell's centre) in the world's axes: VTK
+    puts sample (i, j, k) at origin + Direction @ ((i, j, k) * spacing). A
+    Direction that only permutes and flips the axes (a scan in LPS order, as
+    DICOM converters write it) is applied: the samples transposed and
+    flipped, never resampled (it was ignored: the volume came out mirrored);
+    a rotated one is a DataError naming `what` (clvis volumes are
+    axis-aligned); then forward_axes."""
     dims = img.GetDimensions()
-    sx, sy, sz = img.GetSpacing()
-    origin = list(img.GetOrigin())
+    spacing = np.asarray(img.GetSpacing(), np.float64)
+    origin = np.asarray(img.GetOrigin(), np.float64)
+    m = img.GetDirectionMatrix() if hasattr(img, "GetDirectionMatrix") else None
+    d = np.eye(3) if m is None else np.array([[m.GetElement(r, c) for c in range(3)] for r in range(3)])
+    to = np.argmax(np.abs(d), axis=0)  # the world axis each index axis runs along
+    if (
+        not np.isfinite(d).all()
+        or sorted(to.tolist()) != [0, 1, 2]
+        or not np.allclose(np.abs(d), np.eye(3)[to].T, atol=1e-6)
+    ):
+        raise DataError(
+            f"{what}: its axes are rotated (Direction {' '.join(f'{v:g}' for v in d.ravel())}); clvis "
+            "volumes are axis-aligned: resample it onto an axis-aligned grid"
+        )
     if cells:  # the cell centres: half a step in along each axis that has cells
-        origin = [o + (s / 2 if d > 1 else 0.0) for o, s, d in zip(origin, (sx, sy, sz), dims, strict=True)]
-    return forward_axes(path, data, (sx, sy, sz), origin)
+        origin = origin + d @ np.array([s / 2 if n > 1 else 0.0 for s, n in zip(spacing, dims, strict=True)])
+    sign = np.sign(d[to, [0, 1, 2]])
+    world = np.empty(3)  # each world axis's step, signed: the index axis along it, and its sense
+    order = [0, 0, 0]  # the data axis [k, j, i] that becomes each world axis's [z, y, x]
+    for a in range(3):
+        world[to[a]] = sign[a] * spacing[a]
+        order[2 - to[a]] = 2 - a
+    return forward_axes(what, np.transpose(data, order), world, origin)
 
 
 def forward_axes(what: Any, data: np.ndarray, spacing: Any, origin: Any) -> tuple[np.ndarray, tuple, list]:

@@ -837,10 +837,15 @@ def stray_note(prog: str, kept: int, total: int, full, bulk, o) -> None:
 def world_box(lo, hi, origin) -> str:
     """Local (float32) bounds in the file's coordinates: each value at the
     float32 precision it has (its shortest decimal) plus the origin, so
-    586.38 reads 586.38, not 586.3799933."""
+    586.38 reads 586.38, not 586.3799933; the sum rounded to the decimals
+    that precision holds (a stray point 6e5 from the origin, float32's step
+    there 0.06, read -0.05000000005)."""
 
     def world(v, o):
-        return float(np.format_float_positional(np.float32(v), unique=True)) + float(o)
+        f = np.float32(v)
+        w = float(np.format_float_positional(f, unique=True)) + float(o)
+        step = float(np.spacing(np.abs(f)))
+        return round(w, max(0, -math.floor(math.log10(step)))) if f and step > 0 else w
 
     return " x ".join(
         f"{world(a, o):.10g}..{world(b, o):.10g}" for a, b, o in zip(lo, hi, origin, strict=True)

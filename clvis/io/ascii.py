@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
-from .cloud import PointCloud, _from_columns
+from .cloud import PointCloud, _from_columns, bulk_origin
 
 SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".xyzn", ".xyzrgb")
 # Open3D's text formats: the columns their suffix names
@@ -220,8 +220,7 @@ def _with_origin(path: Path, columns: dict) -> PointCloud:
         if c not in columns:
             raise DataError(f"{path}: no {c} column (found {', '.join(columns)})")
     xyz = np.stack([columns[c] for c in "xyz"], axis=1)
-    finite = np.isfinite(xyz).all(axis=1)
-    origin = xyz[finite].min(axis=0) if finite.any() else np.zeros(3)
+    origin = bulk_origin(xyz)  # the finite minimum (of the bulk, where stray points lie far away)
     columns = dict(columns)
     for k, c in enumerate("xyz"):
         columns[c] = (xyz[:, k] - origin[k]).astype(np.float32)

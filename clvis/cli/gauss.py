@@ -280,7 +280,7 @@ def _sources(args):
 
     lods = args.lod or list(LODS)
     if args.attribute is not None and not (args.file and args.file.lower().endswith(_POINT_FORMATS)):
-        raise CliError("--attribute is for point clouds (.ply, .las, .laz, .npy, .npz of points)")
+        raise CliError(f"--attribute is for point clouds ({', '.join(_POINT_FORMATS)} of points)")
     if args.array is not None and not (args.file and args.file.lower().endswith((".vti", ".vtr", ".vtk"))):
         raise CliError("--array picks a data array of a VTK volume FILE (.vti, .vtr, .vtk)")
     if args.grid is not None and not (args.file and args.file.lower().endswith(".vdb")):

@@ -638,3 +638,18 @@ def test_gauss_micro_scale_volume_fills_the_frame_as_at_spacing_1(tmp_path, caps
     assert alpha["1"].mean() > 0.1
     assert abs(alpha["1e-6"].mean() - alpha["1"].mean()) < 0.02 * alpha["1"].mean()
     assert (alpha["1e-6"] != alpha["1"]).mean() < 0.01  # the same picture
+
+
+def test_attribute_for_a_volume_names_every_point_format(tmp_path, capsys):
+    """--attribute with a volume FILE: the message listed .ply, .las, .laz,
+    .npy and .npz as the point clouds, while .pcd, .e57, .xyz, .vtp and the
+    rest take --attribute too."""
+    from clvis.io.points import POINT_SUFFIXES
+
+    raw = tmp_path / "v_4x4x4_float32.raw"
+    np.ones((4, 4, 4), np.float32).tofile(raw)
+    assert cli.main(["gauss", str(raw), "--attribute", "x", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "--attribute is for point clouds" in err
+    for suffix in POINT_SUFFIXES:
+        assert suffix in err, suffix

@@ -338,6 +338,11 @@ def _sources(args):
             )
     if args.array is not None and not volume:
         raise CliError(f"--array picks a data array of a VTK volume file; {path} is a point set")
+    if args.attribute is not None and volume:  # a 3-D .npy, a legacy .vtk volume: it was ignored
+        raise CliError(
+            f"--attribute colours a point cloud's Gaussians; {path} is a volume, coloured by its values "
+            "(--range, --colormap)"
+        )
     if volume:
         data, spacing, origin = read_volume_file(args, path)
         sv = SparseVolume.from_dense(
@@ -348,6 +353,10 @@ def _sources(args):
         return lods, _local(sv, args), None, str(path), data
     if name.endswith(".npz") and "means" in load_npz(path):
         _no_lod(args, path, "a file of Gaussians, drawn as they are")
+        if args.attribute is not None:
+            raise CliError(
+                f"--attribute colours a point cloud's Gaussians; {path} holds Gaussians, drawn as saved"
+            )
         return ["file"], None, Gaussians.load(path), str(path), None
     if name.endswith(_POINT_FORMATS):
         from ..gauss import gaussians_from_points

@@ -653,3 +653,16 @@ def test_attribute_for_a_volume_names_every_point_format(tmp_path, capsys):
     assert "--attribute is for point clouds" in err
     for suffix in POINT_SUFFIXES:
         assert suffix in err, suffix
+    # a volume under a point cloud's suffix (a 3-D .npy, a legacy .vtk of STRUCTURED_POINTS): --attribute
+    # was ignored without a word
+    np.save(tmp_path / "v.npy", np.ones((4, 4, 4), np.float32))
+    vtk_volume = Path(__file__).resolve().parents[1] / "data" / "pyvista_uniform.vtk"
+    for volume in (tmp_path / "v.npy", vtk_volume):
+        assert cli.main(["gauss", str(volume), "--attribute", "x", "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert f"--attribute colours a point cloud's Gaussians; {volume} is a volume" in err, err
+    saved = tmp_path / "g.npz"  # Gaussians saved with clvis.Gaussians.save: drawn as saved
+    clvis.gaussians_from_points(clvis.PointCloud(np.random.default_rng(1).random((20, 3)))).save(saved)
+    assert cli.main(["gauss", str(saved), "--attribute", "x", "--out", str(tmp_path / "o")]) == 2
+    assert f"{saved} holds Gaussians, drawn as saved" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()

@@ -437,6 +437,18 @@ def _no_lod(args, path, what: str) -> None:
         raise CliError(
             f"--threshold: a volume's voxels above it are active; {path} is {what} (leave --threshold out)"
         )
+    given = [  # a volume file's options: they were ignored without a word
+        flag
+        for flag, key in (
+            ("--spacing", "spacing"),
+            ("--shape", "shape"),
+            ("--dtype", "dtype"),
+            ("--volume-index", "volume_index"),
+        )
+        if getattr(args, key, None) is not None
+    ]
+    if given:
+        raise CliError(f"{' and '.join(given)}: for a volume file; {path} is {what} (leave them out)")
 
 
 def _finite_points(cloud, args):

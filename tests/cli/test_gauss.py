@@ -666,3 +666,16 @@ def test_attribute_for_a_volume_names_every_point_format(tmp_path, capsys):
     assert cli.main(["gauss", str(saved), "--attribute", "x", "--out", str(tmp_path / "o")]) == 2
     assert f"{saved} holds Gaussians, drawn as saved" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "option", [["--spacing", "1,1,2"], ["--shape", "4x4x4"], ["--dtype", "uint8"], ["--volume-index", "0"]]
+)
+def test_volume_options_with_a_point_cloud_are_refused(tmp_path, capsys, option):
+    """A volume file's options with a point cloud (or saved Gaussians) were
+    ignored without a word; --lod and --threshold were refused already."""
+    ply = Path(__file__).resolve().parents[1] / "data" / "pyvista_ant.ply"
+    assert cli.main(["gauss", str(ply), *option, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{option[0]}: for a volume file; {ply} is a point cloud, one Gaussian a point" in err, err
+    assert not (tmp_path / "o").exists()

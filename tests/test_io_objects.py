@@ -153,3 +153,34 @@ def test_pyvista_objects_as_a_pyvista_user_holds_them():
     assert channels.data.ndim == 3 and np.isfinite(channels.data).all()
     assert type(clvis.view.scene_for(mesh)).__name__ == "PointScene"
     assert type(clvis.view.scene_for(img)).__name__ == "VolumeScene"
+
+
+def test_a_renderer_given_a_vtk_dataset_names_from_vtk():
+    """A pyvista user's first try, clvis.rasterize(mesh, ...) or
+    clvis.IsoRenderer(image): numpy made an object array of the dataset and
+    the TypeError said "expected numbers, got an object array (dtype
+    object)"; it names the dataset and clvis.from_vtk now (clvis.view takes
+    the dataset itself)."""
+    pd, img = _polydata(), _image(np.zeros((4, 5, 6), np.float32))
+    cam = clvis.Camera.fit((0, 0, 0), (1, 1, 1), aspect=1.0)
+    cloud_calls = (
+        lambda: clvis.rasterize(pd, cam, 16, 16),
+        lambda: clvis.Rasterizer(pd),
+        lambda: clvis.gaussians_from_points(pd),
+    )
+    for call in cloud_calls:
+        with pytest.raises(
+            TypeError, match=r"a VTK dataset \(vtkPolyData.*clvis.from_vtk\(it\) gives the PointCloud"
+        ):
+            call()
+    volume_calls = (
+        lambda: clvis.IsoRenderer(img),
+        lambda: clvis.gaussians_from_volume(img),
+        lambda: clvis.SparseVolume.from_dense(img),
+        lambda: clvis.zfp.compress(img, 8),
+    )
+    for call in volume_calls:
+        with pytest.raises(
+            TypeError, match=r"a VTK dataset \(vtkImageData.*clvis.from_vtk\(it\) gives the Volume"
+        ):
+            call()

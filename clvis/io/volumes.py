@@ -146,6 +146,11 @@ def volume_parts(
             f"volume: expected an array or a clvis.Volume, got a path ({volume!r}): "
             "clvis.read_volume reads it"
         )
+    from .objects import foreign_hint
+
+    hint = foreign_hint(volume, "Volume")
+    if hint is not None:
+        raise TypeError(f"volume: expected an array or a clvis.Volume, got {hint}")
     return (
         volume,
         (1.0, 1.0, 1.0) if spacing is None else spacing,

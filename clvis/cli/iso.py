@@ -934,10 +934,27 @@ def _field(args) -> tuple[np.ndarray, np.ndarray | None]:
     return np.ascontiguousarray(data, np.float32), v.affine
 
 
+def _voxel_to_voxel(affine: np.ndarray | None, faffine: np.ndarray | None) -> np.ndarray | None:
+    """(4, 4): the rendered volume's voxel (i, j, k, 1) to the field's, through
+    the scanner's world; None where either has no affine, or one that is
+    singular or not finite (a broken header: the field is then laid as a file
+    without one is)."""
+    if affine is None or faffine is None:
+        return None
+    a, f = np.asarray(affine, np.float64), np.asarray(faffine, np.float64)
+    if a.shape != (4, 4) or f.shape != (4, 4) or not (np.isfinite(a).all() and np.isfinite(f).all()):
+        return None
+    try:
+        m = np.linalg.solve(f, a)
+    except np.linalg.LinAlgError:
+        return None
+    return m if np.isfinite(m).all() and abs(np.linalg.det(m[:3, :3])) > 1e-12 else None
+
+
 def _placed(field, affine, shape) -> str:
     """How --color-by's field is laid over the rendered volume, in words
     (the colour line of the summary): see _field_grid."""
-    if field is not None and field[1] is not None and affine is not None:
+    if field is not None and _voxel_to_voxel(affine, field[1]) is not None:
         return "placed by the files' affines, in the scanner's world"
     if field is not None and field[0].shape == tuple(shape):
         return "on the same grid"
@@ -960,8 +977,8 @@ def _field_grid(
     data, faffine = field
     shape, spacing, origin, affine = grid
     sp = np.asarray(spacing, np.float64)
-    if faffine is not None and affine is not None:
-        m = np.linalg.inv(np.asarray(faffine, np.float64)) @ np.asarray(affine, np.float64)
+    m = _voxel_to_voxel(affine, faffine)
+    if m is not None:
         lin, shift = m[:3, :3], m[:3, 3]  # volume voxel (i, j, k) -> field voxel
         diag = np.diag(lin).copy()
         if (diag > 0).all() and np.abs(lin - np.diag(diag)).max() <= 1e-6 * diag.max():

@@ -175,6 +175,32 @@ def test_color_by_a_scan_is_placed_by_the_affines(tmp_path, capsys):
         np.testing.assert_allclose(ranges[name], ranges["same.nii"], atol=0.05, err_msg=name)
 
 
+def test_color_by_a_scan_whose_affine_is_singular_is_laid_as_one_without(tmp_path, capsys):
+    """A field whose header's sform is all zeros (a broken file nibabel still
+    reads) cannot be placed by its affine: numpy's LinAlgError ended the
+    command with 'error: Singular matrix', naming neither file; the field is
+    laid as a file without an affine is (the same grid here)."""
+    nibabel = pytest.importorskip("nibabel")
+    import struct
+
+    values = np.random.default_rng(2).random((10, 9, 8)).astype(np.float32)
+    volume = tmp_path / "v.nii"
+    nibabel.save(nibabel.Nifti1Image(values, np.diag([2.0, 2.0, 2.0, 1.0])), volume)
+    img = nibabel.Nifti1Image(values, np.diag([2.0, 2.0, 2.0, 1.0]))
+    img.header.set_sform(np.diag([2.0, 2.0, 2.0, 1.0]), code=2)
+    field = tmp_path / "broken.nii"
+    nibabel.save(img, field)
+    raw = bytearray(field.read_bytes())
+    raw[280:328] = struct.pack("<12f", *([0.0] * 12))  # srow_x, srow_y, srow_z: a singular sform
+    field.write_bytes(bytes(raw))
+    rc, out, err = _run(
+        capsys, str(volume), "--isovalue", "0.5", "--color-by", str(field),
+        "--size", f"{W}x{H}", "--out", str(tmp_path / "o"),
+    )  # fmt: skip
+    assert rc == 0, err
+    assert "the field on the same grid" in out, out
+
+
 def test_color_by_a_4d_series_picks_its_volume(tmp_path, capsys):
     """A 4-D --color-by file needs --color-by-volume-index (FILE's
     --volume-index is not the field's, and the error says which option)."""

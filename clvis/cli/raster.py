@@ -669,7 +669,37 @@ def _save_pngs(out: Path, named) -> list[Path]:
 
     clear_targets(out, [name for name, _ in named])
     with ThreadPoolExecutor(max_workers=max(1, min(len(named), os.cpu_count() or 1))) as pool:
-        return list(pool.map(lambda item: images.save_png(out / item[0], item[1]), named))
+        files = list(pool.map(lambda item: images.save_png(out / item[0], item[1]), named))
+    _note_earlier_pngs(out, {name for name, _ in named})
+    return files
+
+
+#: the PNGs clvis render writes (and overview.png, always)
+_PANEL_PNG = re.compile(
+    r"(colors|depth|soft-z|depth-filtered|velocity-angle|velocity-magnitude|gaussians|post-[a-z-]+"
+    r"|attribute-.+)\.png"
+)
+
+
+def _note_earlier_pngs(out: Path, written: set[str]) -> None:
+    """A note naming the PNGs an earlier clvis render left in `out` that this
+    one did not write (post-lidar.png, depth-filtered.png, another
+    attribute's): beside this render's they read as its own. They are kept
+    (the user's to remove)."""
+    try:
+        earlier = sorted(
+            p.name
+            for p in out.iterdir()
+            if _PANEL_PNG.fullmatch(p.name) and p.name not in written and p.is_file()
+        )
+    except OSError:
+        return
+    if earlier:
+        print(
+            f"clvis render: note: {out} also holds {', '.join(earlier)} from an earlier run, not this "
+            "render's",
+            file=sys.stderr,
+        )
 
 
 def _not_a_volume(path: str) -> None:

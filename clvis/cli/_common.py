@@ -288,6 +288,29 @@ def clear_targets(out: os.PathLike[str] | str, names) -> None:
             raise CliError(f"{p}: not a file (a folder is in the way); move it or choose another --out")
 
 
+def note_earlier_pngs(prog: str, out: os.PathLike[str] | str, written, pattern) -> None:
+    """A note naming the PNGs an earlier run of the command left in `out`
+    (file names `pattern`, a compiled regex, fully matches) that this one did
+    not write (`written`: names): beside the fresh ones they read as this
+    run's (clvis render's post-lidar.png, clvis gauss's high.png after
+    --lod low). They are kept: the user's to remove."""
+    from pathlib import Path
+
+    try:
+        earlier = sorted(
+            p.name
+            for p in Path(out).iterdir()
+            if pattern.fullmatch(p.name) and p.name not in written and p.is_file()
+        )
+    except OSError:
+        return
+    if earlier:
+        print(
+            f"{prog}: note: {out} also holds {', '.join(earlier)} from an earlier run, not this one's",
+            file=sys.stderr,
+        )
+
+
 def folder(text: str) -> str:
     """A folder option's value, refused when empty (an unset $OUTDIR would
     otherwise put the outputs in the current folder unnoticed)."""

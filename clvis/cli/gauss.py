@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import shlex
 import sys
 import time
@@ -40,6 +41,7 @@ from ._common import (
     fit_box,
     frame_bulk,
     grid_arg,
+    note_earlier_pngs,
     plane_attribute,
     plane_names,
     progress_from_args,
@@ -82,6 +84,8 @@ FOG_OPACITY_VOLUME_FILE = ((0.0, 0.0), (0.05, 0.0), (0.4, 0.05), (0.7, 0.35), (1
 # scan's few hot voxels do not squeeze every colour to the bottom of the bar)
 TOP_PERCENTILE = 99.5
 _POINT_FORMATS = POINT_SUFFIXES  # what clvis render reads
+#: the panels' PNGs (and gauss.png, always): an earlier run's that this one did not write are named
+_PANEL_PNG = re.compile(r"(low|medium|high|points|file)\.png")
 #: how far past its centre each Gaussian of the finest LOD the view frames, in sigmas
 FRAME_SIGMAS = 3.0
 # --view fit of a volume or of Gaussians: from the front left, a little above,
@@ -776,6 +780,7 @@ def _run(args) -> int:
                 strip(panels, args.colormap, args.transparent, value_name, vr, off),
             )
         )
+    note_earlier_pngs("clvis gauss", out, {p.name for p in files}, _PANEL_PNG)
     if args.orbit is not None:  # the turntable (clvis.cli.orbit)
         from .orbit import gauss_orbit, report
 

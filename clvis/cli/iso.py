@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import re
 import sys
 import time
 import typing
@@ -44,6 +45,7 @@ from ._common import (
     finite_range,
     fit_box,
     grid_arg,
+    note_earlier_pngs,
     on_workers,
     progress_from_args,
     read_volume_of,
@@ -249,6 +251,10 @@ def _isovalues(text: str) -> list[float]:
     if len(set(out)) != len(out):
         raise argparse.ArgumentTypeError(f"expected distinct values, got {text!r}")
     return out
+
+
+#: the PNGs clvis iso writes beside iso.png: an earlier run's that this one did not write are named
+_EARLIER_PNG = re.compile(r"iso-(infill|complete)\.png")
 
 
 def _load(args):
@@ -688,6 +694,8 @@ def _run(args) -> int:
     if bar is not None and not args.no_labels:
         picture_ = np.concatenate([picture_, bar], axis=0)
     path = images.save_png(out / "iso.png", picture_)
+    written = ["iso.png"] + ["iso-infill.png"] * args.infill + ["iso-complete.png"] * bool(scores)
+    note_earlier_pngs("clvis iso", out, set(written), _EARLIER_PNG)
     orbit = None
     if args.orbit is not None and r is not None:  # the turntable (clvis.cli.orbit)
         from .orbit import iso_orbit

@@ -40,6 +40,7 @@ from ._common import (
     describe_camera,
     distributed_run,
     frame_bulk,
+    note_earlier_pngs,
     on_workers,
     plane_attribute,
     plane_names,
@@ -670,7 +671,7 @@ def _save_pngs(out: Path, named) -> list[Path]:
     clear_targets(out, [name for name, _ in named])
     with ThreadPoolExecutor(max_workers=max(1, min(len(named), os.cpu_count() or 1))) as pool:
         files = list(pool.map(lambda item: images.save_png(out / item[0], item[1]), named))
-    _note_earlier_pngs(out, {name for name, _ in named})
+    note_earlier_pngs("clvis render", out, {name for name, _ in named}, _PANEL_PNG)
     return files
 
 
@@ -679,27 +680,6 @@ _PANEL_PNG = re.compile(
     r"(colors|depth|soft-z|depth-filtered|velocity-angle|velocity-magnitude|gaussians|post-[a-z-]+"
     r"|attribute-.+)\.png"
 )
-
-
-def _note_earlier_pngs(out: Path, written: set[str]) -> None:
-    """A note naming the PNGs an earlier clvis render left in `out` that this
-    one did not write (post-lidar.png, depth-filtered.png, another
-    attribute's): beside this render's they read as its own. They are kept
-    (the user's to remove)."""
-    try:
-        earlier = sorted(
-            p.name
-            for p in out.iterdir()
-            if _PANEL_PNG.fullmatch(p.name) and p.name not in written and p.is_file()
-        )
-    except OSError:
-        return
-    if earlier:
-        print(
-            f"clvis render: note: {out} also holds {', '.join(earlier)} from an earlier run, not this "
-            "render's",
-            file=sys.stderr,
-        )
 
 
 def _not_a_volume(path: str) -> None:

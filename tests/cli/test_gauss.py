@@ -679,3 +679,16 @@ def test_volume_options_with_a_point_cloud_are_refused(tmp_path, capsys, option)
     err = capsys.readouterr().err
     assert f"{option[0]}: for a volume file; {ply} is a point cloud, one Gaussian a point" in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_an_earlier_runs_levels_left_in_the_folder_are_named(tmp_path, capsys):
+    """--lod low into a folder where a run of every level wrote medium.png and
+    high.png: those stayed beside the new low.png and gauss.png and read as
+    this run's; a note names them (kept: the user's to remove)."""
+    np.save(tmp_path / "v.npy", np.random.default_rng(4).random((16, 16, 16)).astype(np.float32))
+    base = ["gauss", str(tmp_path / "v.npy"), "--size", "24x24", "--out", str(tmp_path / "o")]
+    assert cli.main(base) == 0
+    assert "earlier run" not in capsys.readouterr().err
+    assert cli.main([*base, "--lod", "low"]) == 0
+    err = capsys.readouterr().err
+    assert f"clvis gauss: note: {tmp_path / 'o'} also holds high.png, medium.png from an earlier run" in err

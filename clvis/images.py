@@ -435,8 +435,12 @@ def colorbar(
 def _numbers(lo: float, hi: float) -> tuple[str, str]:
     """The colour bar's two ends, 4 significant digits, more (up to 12) until
     they differ where lo != hi (a cloud's z at 1e9 + 0..50 read "1e+09" at
-    both ends)."""
-    for digits in range(4, 13):
+    both ends); at least the whole digits of an end of 5 to 7 of them (a
+    scan's easting 636024..637155 read "6.36e+05" and "6.372e+05", an
+    intensity of 65535 "6.554e+04")."""
+    top = max(abs(lo), abs(hi))
+    whole = len(str(int(top))) if math.isfinite(top) and top >= 1 else 0
+    for digits in range(whole if 4 < whole <= 7 else 4, 13):
         a, b = f"{lo:.{digits}g}", f"{hi:.{digits}g}"
         if a != b or lo == hi:
             return a, b

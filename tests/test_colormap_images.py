@@ -462,6 +462,9 @@ def test_colorbar_ends_differ_where_the_values_do():
     lo, hi = _numbers(1e9, 1e9 + 50)  # a cloud's z far from the origin
     assert lo != hi and float(hi) == 1e9 + 50
     assert _numbers(3.0, 3.0) == ("3", "3")
+    # 5 to 7 whole digits are all shown: a scan's easting read "6.36e+05" .. "6.372e+05"
+    assert _numbers(636024.3, 637155.9) == ("636024", "637156")
+    assert _numbers(0.0, 65535.0) == ("0", "65535") and _numbers(2816.0, 37890.0) == ("2816", "37890")
 
 
 @pytest.mark.parametrize("width", [120, 160, 200, 320])

@@ -225,6 +225,36 @@ def test_ply_foreign_properties(tmp_path):
     np.testing.assert_array_equal(pc.attributes["scalar_temp"], -7)
 
 
+def test_names_in_another_case_and_diffuse_colours(tmp_path):
+    """X, Y, Z (a pandas DataFrame's records, np.save(df.to_records()); some
+    PLY writers) were refused ("no x, y, z column (found X, Y, Z)"), and the
+    PLY spec's diffuse_red/green/blue (VTK's PLY reader takes them as
+    colours) were attributes. A lower-case name still wins over another case
+    (a second 'X' beside 'x' stays an attribute)."""
+    n = 4
+    rec = np.zeros(n, dtype=[("X", "f8"), ("Y", "f8"), ("Z", "f8"), ("Intensity", "f4")])
+    rec["X"], rec["Z"], rec["Intensity"] = np.arange(n), 5.0, 7.0
+    np.save(tmp_path / "records.npy", rec)
+    c = read_points(tmp_path / "records.npy")
+    np.testing.assert_array_equal(c.positions[:, 0] + c.origin[0], np.arange(n))
+    np.testing.assert_array_equal(c.positions[:, 2] + c.origin[2], 5.0)
+    assert c.attribute_names == ("Intensity",)
+    v = np.zeros(
+        n,
+        dtype=[(k, "f4") for k in ("X", "Y", "Z")]
+        + [(k, "u1") for k in ("diffuse_red", "diffuse_green", "diffuse_blue")],
+    )
+    v["Y"], v["diffuse_red"], v["diffuse_green"], v["diffuse_blue"] = 3.0, 200, 10, 30
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")]).write(str(tmp_path / "upper.ply"))
+    c = read_points(tmp_path / "upper.ply")
+    np.testing.assert_array_equal(c.positions[:, 1] + c.origin[1], 3.0)
+    np.testing.assert_array_equal(c.colors, [[200, 10, 30, 255]] * n)
+    assert c.attribute_names == ()
+    both = np.zeros(n, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("X", "f4")])
+    plyfile.PlyData([plyfile.PlyElement.describe(both, "vertex")]).write(str(tmp_path / "both.ply"))
+    assert read_points(tmp_path / "both.ply").attribute_names == ("X",)
+
+
 def test_ply_double_coordinates_keep_an_origin(tmp_path):
     """Double x, y, z (Open3D's, PDAL's, georeferenced scans): positions relative
     to their finite minimum, the origin kept in float64, as LAS files are (as
@@ -425,6 +455,41 @@ def test_las_round_trip(tmp_path, ext, point_format):
     assert pc.attributes["intensity"].dtype == np.float32
     np.testing.assert_array_equal(pc.attributes["gps_time"], np.arange(len(xyz)) * np.float32(0.25))
     assert not {"X", "Y", "Z", "red", "green", "blue"} & set(pc.attribute_names)
+
+
+def test_stray_records_far_away_do_not_cost_the_bulk_its_precision(tmp_path):
+    """A georeferenced scan with a few stray records at (0, 0, 0) (laspy's
+    test file append-bug-cpy.laz: 2 of 37,807): the positions were kept
+    relative to the minimum of all points, (0, 0, 0), so float32 held the
+    scan, 6.26e6 m from it, to 0.5 m (a close view drew its points in rows).
+    The origin is the bulk's minimum now: the scan keeps its 0.1 mm, and
+    the strays are still where they are, to float32 at their distance. So
+    for LAS, text and double-precision PLY files."""
+    rng = np.random.default_rng(5)
+    xyz = np.round(rng.random((300, 3)) * [50, 80, 30] * 1000) / 1000 + [698000.0, 6259000.0, 12.0]
+    xyz[:2] = 0.0
+    header = laspy.LasHeader(point_format=1, version="1.2")
+    header.scales, header.offsets = [0.001, 0.01, 0.001], [0.0, 0.0, 0.0]
+    xyz[:, 1] = np.round(xyz[:, 1], 2)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz.T
+    path = tmp_path / "stray.las"
+    las.write(str(path))
+    pc = read_points(path)
+    np.testing.assert_array_equal(pc.origin, xyz[2:].min(axis=0))
+    world = pc.origin + pc.positions.astype(np.float64)
+    np.testing.assert_allclose(world[2:], xyz[2:], rtol=0, atol=2e-4)  # it was off by up to 0.25 m
+    np.testing.assert_allclose(world[:2], 0.0, rtol=0, atol=1.0)
+    text = tmp_path / "stray.xyz"
+    np.savetxt(text, xyz, fmt="%.3f")
+    np.testing.assert_allclose(read_points(text).origin, xyz[2:].min(axis=0), atol=1e-3)
+    v = np.zeros(len(xyz), dtype=[("x", "f8"), ("y", "f8"), ("z", "f8")])
+    v["x"], v["y"], v["z"] = xyz.T
+    plyfile.PlyData([plyfile.PlyElement.describe(v, "vertex")]).write(str(tmp_path / "stray.ply"))
+    pc = read_points(tmp_path / "stray.ply")
+    np.testing.assert_allclose(pc.origin + pc.positions[2:].astype(np.float64), xyz[2:], rtol=0, atol=2e-4)
+    _write_las(path)  # no stray point: the minimum, as before
+    np.testing.assert_array_equal(read_points(path).origin, laspy.read(str(path)).xyz.min(axis=0))
 
 
 def test_las_8bit_colors_kept(tmp_path):

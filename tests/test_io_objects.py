@@ -71,6 +71,42 @@ def test_image_data_is_a_volume():
     assert type(clvis.view.scene_for(_polydata())).__name__ == "PointScene"
 
 
+def test_image_data_of_negative_or_flat_spacing_gets_forward_steps():
+    """An image whose spacing is negative along an axis (VTK puts sample i at
+    origin + i * spacing: the axis runs backward) or 0 along a flat axis (a
+    2-D image) was a Volume that every renderer refused; now the backward
+    axis is flipped, its origin at its last sample, and the flat axis gets a
+    step of 1, as read_volume reads such a file."""
+    values = np.arange(2 * 3 * 4, dtype=np.float32).reshape(2, 3, 4)
+    v = clvis.from_vtk(_image(values, spacing=(-0.5, 2.0, 1.0), origin=(10.0, 0.0, 0.0)))
+    np.testing.assert_array_equal(v.data, values[:, :, ::-1])
+    assert v.spacing == (1.0, 2.0, 0.5) and v.origin == (8.5, 0.0, 0.0)
+    flat = clvis.from_vtk(_image(values[:1], spacing=(1.0, 1.0, 0.0)))
+    assert flat.spacing == (1.0, 1.0, 1.0)
+    clvis.gaussians_from_volume(flat)  # a renderer takes it
+    with pytest.raises(DataError, match="vtkImageData: spacing 0 along x: its 4 samples at one place"):
+        clvis.from_vtk(_image(values, spacing=(0.0, 1.0, 1.0)))
+
+
+def test_image_data_whose_direction_permutes_and_flips_axes():
+    """A Direction that only swaps and flips axes (x and y swapped, one of
+    them reversed: a quarter turn) was refused as a rotation; it is applied
+    now, each sample where VTK puts it (origin + Direction @ (ijk * spacing)),
+    the samples transposed and flipped, never resampled."""
+    values = np.arange(2 * 3 * 4, dtype=np.float32).reshape(2, 3, 4)  # [k, j, i]
+    img = _image(values, spacing=(0.5, 2.0, 1.0), origin=(10.0, 0.0, 0.0))
+    img.SetDirectionMatrix(0, -1, 0, 1, 0, 0, 0, 0, 1)  # i along +y, j along -x
+    v = clvis.from_vtk(img)
+    assert v.shape == (2, 4, 3) and v.spacing == (1.0, 0.5, 2.0) and v.origin == (6.0, 0.0, 0.0)
+    for k in range(2):
+        for j in range(3):
+            for i in range(4):  # VTK's point of sample (i, j, k), and the Volume's sample there
+                point = img.GetPoint(i + 4 * j + 12 * k)
+                steps = zip(point, v.origin, v.spacing[::-1], strict=True)
+                ix, iy, iz = (round((p - o) / st) for p, o, st in steps)
+                assert v.data[iz, iy, ix] == values[k, j, i]
+
+
 def test_what_from_vtk_refuses():
     values = np.zeros((3, 3, 3), np.float32)
     with pytest.raises(TypeError, match="expected a VTK dataset .* got ndarray"):
@@ -86,7 +122,8 @@ def test_what_from_vtk_refuses():
     with pytest.raises(DataError, match=r"vtkImageData 3x3x3: no one-component scalar array \(arrays: none"):
         clvis.from_vtk(img)
     img = _image(values)
-    img.SetDirectionMatrix(0, -1, 0, 1, 0, 0, 0, 0, 1)  # x and y swapped: a rotated image
+    c, s = np.cos(0.3), np.sin(0.3)
+    img.SetDirectionMatrix(c, -s, 0, s, c, 0, 0, 0, 1)  # turned 0.3 rad about z: a rotated image
     with pytest.raises(DataError, match="its axes are rotated"):
         clvis.from_vtk(img)
 
@@ -116,3 +153,34 @@ def test_pyvista_objects_as_a_pyvista_user_holds_them():
     assert channels.data.ndim == 3 and np.isfinite(channels.data).all()
     assert type(clvis.view.scene_for(mesh)).__name__ == "PointScene"
     assert type(clvis.view.scene_for(img)).__name__ == "VolumeScene"
+
+
+def test_a_renderer_given_a_vtk_dataset_names_from_vtk():
+    """A pyvista user's first try, clvis.rasterize(mesh, ...) or
+    clvis.IsoRenderer(image): numpy made an object array of the dataset and
+    the TypeError said "expected numbers, got an object array (dtype
+    object)"; it names the dataset and clvis.from_vtk now (clvis.view takes
+    the dataset itself)."""
+    pd, img = _polydata(), _image(np.zeros((4, 5, 6), np.float32))
+    cam = clvis.Camera.fit((0, 0, 0), (1, 1, 1), aspect=1.0)
+    cloud_calls = (
+        lambda: clvis.rasterize(pd, cam, 16, 16),
+        lambda: clvis.Rasterizer(pd),
+        lambda: clvis.gaussians_from_points(pd),
+    )
+    for call in cloud_calls:
+        with pytest.raises(
+            TypeError, match=r"a VTK dataset \(vtkPolyData.*clvis.from_vtk\(it\) gives the PointCloud"
+        ):
+            call()
+    volume_calls = (
+        lambda: clvis.IsoRenderer(img),
+        lambda: clvis.gaussians_from_volume(img),
+        lambda: clvis.SparseVolume.from_dense(img),
+        lambda: clvis.zfp.compress(img, 8),
+    )
+    for call in volume_calls:
+        with pytest.raises(
+            TypeError, match=r"a VTK dataset \(vtkImageData.*clvis.from_vtk\(it\) gives the Volume"
+        ):
+            call()

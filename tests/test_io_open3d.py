@@ -121,3 +121,17 @@ def test_clvis_view_takes_open3d_geometry():
     assert len(mesh.cloud.positions) == 762
     with pytest.raises(TypeError, match="an Open3D VoxelGrid"):
         clvis.view.scene_for(o3d.geometry.VoxelGrid())
+
+
+def test_a_renderer_given_an_open3d_cloud_names_from_open3d():
+    """clvis.rasterize(o3d_cloud, ...): the TypeError said "expected numbers,
+    got an object array"; it names the geometry and clvis.from_open3d now."""
+    cam = clvis.Camera.fit((0, 0, 0), (10, 10, 10), aspect=1.0)
+    for call in (
+        lambda: clvis.rasterize(_cloud(), cam, 16, 16),
+        lambda: clvis.gaussians_from_points(_cloud()),
+    ):
+        with pytest.raises(
+            TypeError, match=r"an Open3D PointCloud: clvis.from_open3d\(it\) gives the PointCloud"
+        ):
+            call()

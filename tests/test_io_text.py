@@ -72,7 +72,21 @@ def test_comment_markers_among_the_points(tmp_path):
         ("b.xyz", "# only a comment\n", "no point in the file"),
         ("c.xyz", "1 2\n3 4\n", "2 columns; a point needs x, y, z"),
         ("d.xyz", "1 2 3\n4 5 six\n", "malformed text point cloud"),
-        ("e.xyz", "1 2 3\n4 5 6 7\n", "malformed text point cloud"),
+        (
+            "e.xyz",
+            "1 2 3\n4 5 6 7\n",
+            r"line 2 holds 4 values, line 1 3: every point needs the same columns$",
+        ),
+        (  # numpy counts rows of values: the line said is the file's
+            "e2.csv",
+            "x,y,z\n1,2,3\n# a note\n\n4,5,6\n7,8\n",
+            r"line 6 holds 2 values, line 2 3: every point needs the same columns$",
+        ),
+        (
+            "e3.txt",
+            "2\n1 2 3 0 1 2 3\n4 5 6 0 1 2 3\n",
+            r"line 2 holds 7 values, line 1 1: .* \(a point count first, as a Leica .pts file holds",
+        ),
         ("f.csv", "x,y,z,i\n1,2,3\n", "the header names 4 columns"),
         ("g.csv", "a,b,c\n1,2,3\n", "no x column"),
         ("h.csv", "x,y,z,x\n1,2,3,4\n", "names a column twice"),
@@ -84,6 +98,11 @@ def test_comment_markers_among_the_points(tmp_path):
             "2\n1 2 3 0 1 2 3\n4 5 6 0 1 2 3\n1\n7 8 9 0 1 2 3\n",
             "line 4 holds one value: a PTS file of several",
         ),
+        (
+            "l2.pts",
+            "2\n1 2 3\n4 5 6\n\n# scan 2\n1\n7 8 9\n",
+            "line 6 holds one value: a PTS file of several",
+        ),
         ("m.xyzn", "1 2 3 0 0 1 5\n", "7 columns; a .xyzn file holds x y z nx ny nz"),
         ("n.xyzrgb", "1 2 3 0.5 0.5\n", "5 columns; a .xyzrgb file holds x y z red green blue"),
     ],
@@ -91,11 +110,27 @@ def test_comment_markers_among_the_points(tmp_path):
 def test_text_errors(tmp_path, name, text, message):
     """(.pts: its count line checked, and a second scan's count refused, not
     misread: it was a malformed-file error naming numpy's rows; .xyzn and
-    .xyzrgb: their columns are their suffix's)"""
+    .xyzrgb: their columns are their suffix's; a row of another column
+    count named by its line in the file, not numpy's row of values, and
+    without numpy's advice to "use `usecols`", a keyword clvis has not)"""
     path = _write(tmp_path / name, text)
     with pytest.raises(DataError, match=message) as e:
         read_points(path)
-    assert str(path) in str(e.value)
+    assert str(path) in str(e.value) and "usecols" not in str(e.value)
+
+
+def test_a_quoted_header_names_the_columns(tmp_path):
+    """R's write.csv and spreadsheets quote a CSV's column names
+    ("X","Y","Z",...): the header was read as a line of values and refused
+    ('line 1: expected numbers')."""
+    c = read_points(
+        _write(tmp_path / "r.csv", '"X","Y","Z","Red","Green","Blue","Intensity"\n1,2,3,255,0,10,7\n')
+    )
+    np.testing.assert_allclose(c.positions + c.origin, [[1, 2, 3]])
+    np.testing.assert_array_equal(c.colors[:, :3], [[255, 0, 10]])
+    np.testing.assert_array_equal(c.attributes["intensity"], [7])
+    c = read_points(_write(tmp_path / "s.txt", "'x' 'y' 'z' 'temperature'\n1 2 3 4\n"))
+    np.testing.assert_array_equal(c.attributes["temperature"], [4])
 
 
 def test_pts_xyzn_xyzrgb_by_their_suffix(tmp_path):

@@ -625,3 +625,67 @@ def test_legacy_string_field_arrays_are_passed_over(tmp_path):
     with pytest.raises(DataError, match="declares 4 strings, one a line") as e:
         read_points(path)
     assert str(e.value).count(str(path)) == 1
+
+
+def test_blank_lines_in_a_legacy_header_are_read_as_vtk_reads_them(tmp_path):
+    """VTK reads a legacy file's words after the title one by one, passing
+    over blank lines: meshio's test mesh rbc_001.vtk (a red blood cell, "3D
+    Unstructured Grid of Triangles") has a blank line between ASCII and
+    DATASET, and was refused as a malformed header. ASCII and BINARY, points
+    and routing (legacy_dataset, which clvis render and clvis view use)."""
+    from clvis.io.vtk import legacy_dataset
+
+    grid = vtk.vtkUnstructuredGrid()
+    pts = vtk.vtkPoints()
+    near = (XYZ - XYZ.min(axis=0)).astype(np.float32)
+    pts.SetData(numpy_support.numpy_to_vtk(near, deep=True))
+    grid.SetPoints(pts)
+    grid.Allocate(1)
+    grid.InsertNextCell(vtk.VTK_TRIANGLE, 3, [0, 1, 2])
+    grid.GetPointData().SetScalars(_array(TEMP, "temperature"))
+    for binary in (False, True):
+        path = tmp_path / f"blank{binary}.vtk"
+        w = vtk.vtkUnstructuredGridWriter()
+        w.SetFileName(str(path))
+        w.SetInputData(grid)
+        w.SetFileTypeToBinary() if binary else w.SetFileTypeToASCII()
+        assert w.Write() == 1
+        head = b"BINARY\n" if binary else b"ASCII\n"
+        raw = path.read_bytes()
+        path.write_bytes(raw.replace(head, head + b"\n", 1).replace(b"\nDATASET", b"\n \nDATASET", 1))
+        r = vtk.vtkUnstructuredGridReader()  # VTK itself reads it
+        r.SetFileName(str(path))
+        r.Update()
+        assert r.GetOutput().GetNumberOfPoints() == N
+        assert legacy_dataset(path) == "UNSTRUCTURED_GRID"
+        cloud = read_points(path)
+        assert len(cloud) == N
+        np.testing.assert_allclose(cloud.positions, near, rtol=1e-5, atol=1e-4)
+        np.testing.assert_allclose(cloud.attributes["temperature"], TEMP, rtol=1e-5)
+
+
+def test_a_blank_number_of_components_is_one_as_vtk_reads_it(tmp_path):
+    """meshio writes a .vtu's cell arrays with NumberOfComponents="" (its
+    test mesh 00_raw_binary.vtu); VTK's reader takes one component where the
+    attribute holds no number, clvis refused the file ("malformed or missing
+    NumberOfComponents ''"). Its points and point arrays are read; a blank
+    NumberOfComponents of a point array is one component too."""
+    path, raw = _xml_grid(tmp_path, "UnstructuredGrid", mode="Ascii")
+    text = raw.decode()
+    arrays = re.findall(r"<DataArray[^>]*>", text)
+    blank = '<DataArray NumberOfComponents=""'
+    for a in arrays:
+        if re.search(r'Name="(offsets|types|connectivity|id)"', a):
+            bare = re.sub(r'\s*NumberOfComponents="[^"]*"', "", a)
+            text = text.replace(a, bare.replace("<DataArray", blank))
+    assert text.count('NumberOfComponents=""') == 4
+    path.write_text(text)
+    r = vtk.vtkXMLUnstructuredGridReader()  # VTK itself reads it
+    r.SetFileName(str(path))
+    r.Update()
+    assert r.GetOutput().GetNumberOfPoints() == N and r.GetOutput().GetNumberOfCells() > 0
+    cloud = read_points(path)
+    assert len(cloud) == N
+    np.testing.assert_allclose(cloud.origin + cloud.positions, XYZ, rtol=1e-6)
+    np.testing.assert_array_equal(cloud.attributes["id"], IDS)
+    np.testing.assert_allclose(cloud.attributes["temperature"], TEMP, rtol=1e-6)

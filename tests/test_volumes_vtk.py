@@ -153,6 +153,129 @@ def test_legacy_ascii_and_errors(tmp_path):
             read_volume(p)
 
 
+def test_legacy_header_with_blank_lines_reads_as_vtk_reads_it(tmp_path):
+    """VTK passes over blank lines after a legacy file's title (it reads the
+    header word by word): blank lines before ASCII, before DATASET and between
+    DIMENSIONS, SPACING and ORIGIN were a malformed header, or "no
+    DIMENSIONS". The title itself may be blank."""
+    from vtkmodules.vtkIOLegacy import vtkStructuredPointsReader
+
+    from clvis.io.vtk import legacy_dataset
+
+    p = tmp_path / "blank.vtk"
+    p.write_text(
+        "# vtk DataFile Version 3.0\n\n\nASCII\n\n \nDATASET STRUCTURED_POINTS\n\nDIMENSIONS 2 3 2\n\n"
+        "SPACING 1 2 3\n\nORIGIN 4 5 6\nPOINT_DATA 12\nSCALARS s float 1\nLOOKUP_TABLE default\n"
+        + " ".join(str(k) for k in range(12))
+        + "\n"
+    )
+    r = vtkStructuredPointsReader()  # VTK itself reads it
+    r.SetFileName(str(p))
+    r.Update()
+    assert r.GetOutput().GetDimensions() == (2, 3, 2)
+    assert legacy_dataset(p) == "STRUCTURED_POINTS"
+    v = read_volume(p)
+    np.testing.assert_array_equal(v.data, np.arange(12, dtype=np.float32).reshape(2, 3, 2))
+    assert v.spacing == (3.0, 2.0, 1.0) and v.origin == (4.0, 5.0, 6.0)
+    p.write_text("# vtk DataFile Version 3.0\nx\n\nASCII\n\n")  # still too short
+    with pytest.raises(DataError, match="malformed legacy VTK header"):
+        read_volume(p)
+
+
+def _world_image(dims, spacing, origin, direction=None):
+    """vtkImageData whose point scalar "w" is x + 10 y + 100 z of the point
+    (VTK's own placing: origin + Direction @ (i * spacing))."""
+    from vtkmodules.util import numpy_support as ns
+    from vtkmodules.vtkCommonDataModel import vtkImageData
+
+    img = vtkImageData()
+    img.SetDimensions(*dims)
+    img.SetSpacing(*spacing)
+    img.SetOrigin(*origin)
+    if direction is not None:
+        img.SetDirectionMatrix(*np.ravel(direction))
+    pts = np.array([img.GetPoint(i) for i in range(img.GetNumberOfPoints())])
+    a = ns.numpy_to_vtk(pts @ np.array([1.0, 10.0, 100.0]), deep=True)
+    a.SetName("w")
+    img.GetPointData().SetScalars(a)
+    return img
+
+
+def _check_world(v):
+    """Each sample of Volume `v` at origin + index * spacing holds its x + 10 y + 100 z."""
+    assert min(v.spacing) > 0
+    z, y, x = (np.arange(n) * s for n, s in zip(v.data.shape, v.spacing, strict=True))
+    ox, oy, oz = v.origin
+    want = (ox + x)[None, None, :] + 10 * (oy + y)[None, :, None] + 100 * (oz + z)[:, None, None]
+    np.testing.assert_allclose(v.data, want, atol=1e-9)
+
+
+@pytest.mark.parametrize("suffix", [".vti", ".vtk"])
+def test_image_data_of_negative_or_flat_spacing_reads_with_forward_steps(tmp_path, suffix):
+    """VTK puts sample i at origin + i * spacing: an axis of negative spacing
+    runs backward, and a 2-D image is often written with spacing 0 along its
+    flat axis (meshio's test image 00_image.vtk: SPACING 0.5 0.5 0.0).
+    read_volume handed those spacings on and every renderer refused them
+    (clvis gauss 00_image.vtk: "spacing: (0.0, 0.5, 0.5) must be > 0 on every
+    axis", naming no file). Now a backward axis is flipped, its origin at its
+    last sample (every sample where VTK puts it), a flat axis gets a step of
+    1, and a zero step along an axis of several samples is a DataError
+    naming the file."""
+    from vtkmodules.vtkIOLegacy import vtkStructuredPointsWriter
+    from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
+
+    def write(img, name):
+        path = tmp_path / (name + suffix)
+        w = vtkXMLImageDataWriter() if suffix == ".vti" else vtkStructuredPointsWriter()
+        w.SetFileName(str(path))
+        w.SetInputData(img)
+        assert w.Write() == 1
+        return path
+
+    v = read_volume(write(_world_image((4, 3, 5), (-0.5, 2.0, -3.0), (1.0, 2.0, 3.0)), "backward"))
+    assert v.shape == (5, 3, 4) and v.spacing == (3.0, 2.0, 0.5) and v.origin == (-0.5, 2.0, -9.0)
+    _check_world(v)
+    flat = read_volume(write(_world_image((6, 4, 1), (0.5, 0.5, 0.0), (0.0, 1.0, 2.0)), "flat"))
+    assert flat.shape == (1, 4, 6) and flat.spacing == (1.0, 0.5, 0.5) and flat.origin == (0.0, 1.0, 2.0)
+    _check_world(flat)
+    import clvis
+
+    clvis.gaussians_from_volume(flat)  # a renderer takes it
+    path = write(_world_image((6, 4, 3), (0.5, 0.0, 1.0), (0.0, 0.0, 0.0)), "zero")
+    with pytest.raises(DataError, match=rf"zero{suffix}: spacing 0 along y: its 4 samples at one place"):
+        read_volume(path)
+
+
+def test_a_vti_direction_that_flips_or_permutes_axes_is_applied(tmp_path):
+    """A .vti's Direction (VTK 9 writes it; a scan converted from DICOM's LPS
+    order has x and y flipped) was ignored: the volume came out mirrored or
+    turned. A Direction that permutes and flips axes is applied (each sample
+    where VTK puts it, no resampling); a rotation is a DataError naming the
+    file, as from_vtk says of such an image."""
+    from vtkmodules.vtkIOXML import vtkXMLImageDataWriter
+
+    def write(img, name):
+        path = tmp_path / name
+        w = vtkXMLImageDataWriter()
+        w.SetFileName(str(path))
+        w.SetInputData(img)
+        assert w.Write() == 1
+        return path
+
+    lps = np.diag([-1.0, -1.0, 1.0])
+    v = read_volume(write(_world_image((4, 3, 5), (0.5, 2.0, 3.0), (1.0, 2.0, 3.0), lps), "lps.vti"))
+    assert v.shape == (5, 3, 4) and v.spacing == (3.0, 2.0, 0.5) and v.origin == (-0.5, -2.0, 3.0)
+    _check_world(v)
+    turned = [[0, -1, 0], [0, 0, 1], [1, 0, 0]]  # i along +z, j along -x, k along +y
+    v = read_volume(write(_world_image((4, 3, 5), (0.5, 2.0, 3.0), (1.0, 2.0, 3.0), turned), "t.vti"))
+    assert v.shape == (4, 5, 3) and v.spacing == (0.5, 3.0, 2.0)
+    _check_world(v)
+    c, s = np.cos(0.5), np.sin(0.5)
+    path = write(_world_image((4, 3, 5), (1, 1, 1), (0, 0, 0), [[c, -s, 0], [s, c, 0], [0, 0, 1]]), "r.vti")
+    with pytest.raises(DataError, match=r"r.vti: its axes are rotated \(Direction 0.877583 -0.479426"):
+        read_volume(path)
+
+
 def _grid(x, y, z, values, cells=False):
     """A vtkRectilinearGrid of those coordinates, `values` its point (or
     `cells`: cell) array "v"."""

@@ -288,6 +288,29 @@ def clear_targets(out: os.PathLike[str] | str, names) -> None:
             raise CliError(f"{p}: not a file (a folder is in the way); move it or choose another --out")
 
 
+def note_earlier_pngs(prog: str, out: os.PathLike[str] | str, written, pattern) -> None:
+    """A note naming the PNGs an earlier run of the command left in `out`
+    (file names `pattern`, a compiled regex, fully matches) that this one did
+    not write (`written`: names): beside the fresh ones they read as this
+    run's (clvis render's post-lidar.png, clvis gauss's high.png after
+    --lod low). They are kept: the user's to remove."""
+    from pathlib import Path
+
+    try:
+        earlier = sorted(
+            p.name
+            for p in Path(out).iterdir()
+            if pattern.fullmatch(p.name) and p.name not in written and p.is_file()
+        )
+    except OSError:
+        return
+    if earlier:
+        print(
+            f"{prog}: note: {out} also holds {', '.join(earlier)} from an earlier run, not this one's",
+            file=sys.stderr,
+        )
+
+
 def folder(text: str) -> str:
     """A folder option's value, refused when empty (an unset $OUTDIR would
     otherwise put the outputs in the current folder unnoticed)."""
@@ -421,7 +444,8 @@ views (--view):
   grid:K        the K-th of the 384 NARVis grid cameras, a 4 x 4 grid (K = 0..383)
 --eye, --target and --up replace that part of the view's camera (the target
 then defaults to the centre of the scene's bounds when --eye is given, and up
-to +z, +y for top); --fov sets the field of view of a perspective view.
+to +z, +y for top or a view straight down); --fov sets the field of view of a
+perspective view.
 """
 
 
@@ -597,6 +621,10 @@ def _replaced(cam, kind, args, lo, hi, aspect: float):
     if np.array_equal(eye, target):
         raise CliError("--eye: the camera would sit on its target; give a --target too")
     forward = (target - eye) / np.linalg.norm(target - eye)
+    if args.up is None and np.linalg.norm(np.cross(forward, np.asarray(up, np.float64))) < 1e-3:
+        # straight down (or up) the default up: north (+y) up, as --view top (it was an error
+        # naming --up, which the user had not given)
+        up = (0.0, 1.0, 0.0)
     corners = box_corners(lo, hi)
     depths = (corners - eye) @ forward
     scale = max(
@@ -832,10 +860,15 @@ def stray_note(prog: str, kept: int, total: int, full, bulk, o) -> None:
 def world_box(lo, hi, origin) -> str:
     """Local (float32) bounds in the file's coordinates: each value at the
     float32 precision it has (its shortest decimal) plus the origin, so
-    586.38 reads 586.38, not 586.3799933."""
+    586.38 reads 586.38, not 586.3799933; the sum rounded to the decimals
+    that precision holds (a stray point 6e5 from the origin, float32's step
+    there 0.06, read -0.05000000005)."""
 
     def world(v, o):
-        return float(np.format_float_positional(np.float32(v), unique=True)) + float(o)
+        f = np.float32(v)
+        w = float(np.format_float_positional(f, unique=True)) + float(o)
+        step = float(np.spacing(np.abs(f)))
+        return round(w, max(0, -math.floor(math.log10(step)))) if f and step > 0 else w
 
     return " x ".join(
         f"{world(a, o):.10g}..{world(b, o):.10g}" for a, b, o in zip(lo, hi, origin, strict=True)

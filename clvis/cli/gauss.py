@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import shlex
 import sys
 import time
@@ -40,6 +41,7 @@ from ._common import (
     fit_box,
     frame_bulk,
     grid_arg,
+    note_earlier_pngs,
     plane_attribute,
     plane_names,
     progress_from_args,
@@ -82,6 +84,8 @@ FOG_OPACITY_VOLUME_FILE = ((0.0, 0.0), (0.05, 0.0), (0.4, 0.05), (0.7, 0.35), (1
 # scan's few hot voxels do not squeeze every colour to the bottom of the bar)
 TOP_PERCENTILE = 99.5
 _POINT_FORMATS = POINT_SUFFIXES  # what clvis render reads
+#: the panels' PNGs (and gauss.png, always): an earlier run's that this one did not write are named
+_PANEL_PNG = re.compile(r"(low|medium|high|points|file)\.png")
 #: how far past its centre each Gaussian of the finest LOD the view frames, in sigmas
 FRAME_SIGMAS = 3.0
 # --view fit of a volume or of Gaussians: from the front left, a little above,
@@ -280,7 +284,7 @@ def _sources(args):
 
     lods = args.lod or list(LODS)
     if args.attribute is not None and not (args.file and args.file.lower().endswith(_POINT_FORMATS)):
-        raise CliError("--attribute is for point clouds (.ply, .las, .laz, .npy, .npz of points)")
+        raise CliError(f"--attribute is for point clouds ({', '.join(_POINT_FORMATS)} of points)")
     if args.array is not None and not (args.file and args.file.lower().endswith((".vti", ".vtr", ".vtk"))):
         raise CliError("--array picks a data array of a VTK volume FILE (.vti, .vtr, .vtk)")
     if args.grid is not None and not (args.file and args.file.lower().endswith(".vdb")):
@@ -338,6 +342,11 @@ def _sources(args):
             )
     if args.array is not None and not volume:
         raise CliError(f"--array picks a data array of a VTK volume file; {path} is a point set")
+    if args.attribute is not None and volume:  # a 3-D .npy, a legacy .vtk volume: it was ignored
+        raise CliError(
+            f"--attribute colours a point cloud's Gaussians; {path} is a volume, coloured by its values "
+            "(--range, --colormap)"
+        )
     if volume:
         data, spacing, origin = read_volume_file(args, path)
         sv = SparseVolume.from_dense(
@@ -348,6 +357,10 @@ def _sources(args):
         return lods, _local(sv, args), None, str(path), data
     if name.endswith(".npz") and "means" in load_npz(path):
         _no_lod(args, path, "a file of Gaussians, drawn as they are")
+        if args.attribute is not None:
+            raise CliError(
+                f"--attribute colours a point cloud's Gaussians; {path} holds Gaussians, drawn as saved"
+            )
         return ["file"], None, Gaussians.load(path), str(path), None
     if name.endswith(_POINT_FORMATS):
         from ..gauss import gaussians_from_points
@@ -428,6 +441,18 @@ def _no_lod(args, path, what: str) -> None:
         raise CliError(
             f"--threshold: a volume's voxels above it are active; {path} is {what} (leave --threshold out)"
         )
+    given = [  # a volume file's options: they were ignored without a word
+        flag
+        for flag, key in (
+            ("--spacing", "spacing"),
+            ("--shape", "shape"),
+            ("--dtype", "dtype"),
+            ("--volume-index", "volume_index"),
+        )
+        if getattr(args, key, None) is not None
+    ]
+    if given:
+        raise CliError(f"{' and '.join(given)}: for a volume file; {path} is {what} (leave them out)")
 
 
 def _finite_points(cloud, args):
@@ -755,6 +780,7 @@ def _run(args) -> int:
                 strip(panels, args.colormap, args.transparent, value_name, vr, off),
             )
         )
+    note_earlier_pngs("clvis gauss", out, {p.name for p in files}, _PANEL_PNG)
     if args.orbit is not None:  # the turntable (clvis.cli.orbit)
         from .orbit import gauss_orbit, report
 
@@ -817,11 +843,13 @@ def _say_if_empty(panels, width: int, height: int) -> bool:
     drawn = max(int((to_host(img.rgba)[..., 3] >= 0.5 / 255).sum()) for _, _, img in panels)
     if drawn * 1000 >= width * height:
         return False
+    # --lod is a volume's (a point cloud's or a saved .npz's Gaussians refuse it)
+    lod = " or --lod low (fewer, larger Gaussians)" if any(name in LODS for name, _, _ in panels) else ""
     print(
         f"clvis gauss: note: the picture is {'empty' if drawn == 0 else 'nearly empty'}: "
         f"{drawn:,} of {width * height:,} pixels drawn at {width}x{height} (the Gaussians are few, "
         "smaller than a pixel here, or out of view); a larger --size, a closer view (--eye/--target, "
-        "--fov) or --lod low (fewer, larger Gaussians) draws more of them",
+        f"--fov){lod} draws more of them",
         file=sys.stderr,
     )
     return True

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import re
 import sys
 import time
 import typing
@@ -44,9 +45,9 @@ from ._common import (
     finite_range,
     fit_box,
     grid_arg,
+    note_earlier_pngs,
     on_workers,
     progress_from_args,
-    read_volume_file,
     read_volume_of,
     real,
     size,
@@ -78,7 +79,7 @@ a .npy volume [z, y, x], a NIfTI file (.nii, .nii.gz; a 4-D series with
 image data (.vti, legacy .vtk structured points, or an evenly spaced rectilinear
 grid: .vtr or legacy .vtk; a .vtp, .vtu, .vts or a legacy .vtk POLYDATA,
 UNSTRUCTURED_GRID or STRUCTURED_GRID is a point cloud: clvis render, clvis gauss,
-clvis view).
+clvis view), or an OpenVDB float grid (.vdb, --grid; the vdb extra) made dense.
 The default isovalue of a file is Otsu's threshold of its samples
 (scikit-image), which separates a scan's tissue from its background, moved
 to the middle of the gap between the sample values on either side of it (a
@@ -88,8 +89,9 @@ Several isovalues (--isovalue 0.3,0.6) are rendered one after the other and
 composited, the nearest surface in each pixel, each in its own colour
 (--surface-color, once per isovalue; default the renderer's sand, then
 matplotlib's tab10). --color-by FIELD colours the surfaces by a second volume
-(a file as above: on the same grid, or any grid stretched over the same box),
-sampled on the device where each ray hit, through --colormap over --range,
+(a file as above: two NIfTI, MGH or Analyze scans placed by their affines in
+the scanner's world, whatever their grids; else on the same grid, or any grid
+stretched over the same box), sampled on the device where each ray hit, through --colormap over --range,
 with a colour bar under the image. A constant volume has no isosurface: it
 is reported and no surface is drawn. The fit view frames the voxels the
 isosurfaces pass, not the whole volume (on Dask workers: the volume's box,
@@ -121,7 +123,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "file",
         nargs="?",
         help="a volume: .raw (Open SciVis naming), .npy, NIfTI (.nii, .nii.gz), MGH (.mgz, .mgh), "
-        "Analyze .hdr/.img (.hdr.gz/.img.gz), VTK .vti, .vtr or legacy .vtk",
+        "Analyze .hdr/.img (.hdr.gz/.img.gz), VTK .vti, .vtr or legacy .vtk, or an OpenVDB .vdb "
+        "float grid (--grid; made dense)",
     )
     p.add_argument("--dataset", choices=_DATASETS, help="an embedded volume (default marschner-lobb)")
     p.add_argument(
@@ -146,8 +149,9 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         "--color-by",
         default=None,
         metavar="FIELD",
-        help="colour the surface by a second volume file (read as FILE is; the same grid, or "
-        "stretched over the same box), sampled where each ray hit, with a colour bar",
+        help="colour the surface by a second volume file (read as FILE is; two scans placed by "
+        "their affines in the scanner's world, else the same grid, or stretched over the same box), "
+        "sampled where each ray hit, with a colour bar",
     )
     add_volume_index(
         p, "--color-by-volume-index", "the volume of a 4-D --color-by file (--volume-index: FILE's)"
@@ -249,8 +253,14 @@ def _isovalues(text: str) -> list[float]:
     return out
 
 
+#: the PNGs clvis iso writes beside iso.png: an earlier run's that this one did not write are named
+_EARLIER_PNG = re.compile(r"iso-(infill|complete)\.png")
+
+
 def _load(args):
-    """(volume, spacing, origin, default isovalue, (min, max), description)."""
+    """(volume, spacing, origin, default isovalue, (min, max), description,
+    the affine of a NIfTI, MGH or Analyze file (voxel to scanner world), else
+    None)."""
     from .. import datasets
 
     if args.file is not None:
@@ -266,7 +276,7 @@ def _load(args):
         value_range = finite_range(data, str(path))
         check_iso_volume(data, str(path))
         source = str(path) if v.array is None else f"{path} (array {v.array})"
-        return data, v.spacing, v.origin, otsu_level(data), value_range, source
+        return data, v.spacing, v.origin, otsu_level(data), value_range, source, v.affine
     if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index", "array")):
         raise CliError("--shape, --dtype, --volume-index and --array are for a volume FILE")
     name = args.dataset or "marschner-lobb"
@@ -279,6 +289,7 @@ def _load(args):
         0.5,
         finite_range(d["volume"], name),
         f"the embedded {name} ({d['volume'].shape[0]}^3)",
+        None,
     )
 
 
@@ -314,6 +325,7 @@ def _load_vdb(args, path: Path):
         default_isovalue(data, grid_class),
         finite_range(data, str(path)),
         f"{path} (grid {v.array!r}{kind})",
+        None,
     )
 
 
@@ -552,7 +564,7 @@ def _run(args) -> int:
                 flag = "--" + name.replace("_", "-")
                 what = "picks a volume of" if name == "color_by_volume_index" else "colours the surface by"
                 raise CliError(f"{flag} {what} a field: add --color-by FIELD")
-    volume, spacing, origin, default_iso, (vmin, vmax), source = _load(args)
+    volume, spacing, origin, default_iso, (vmin, vmax), source, affine = _load(args)
     isos = args.isovalue if args.isovalue is not None else [default_iso]
     if args.infill and (len(isos) > 1 or args.color_by is not None or args.surface_color is not None):
         given = (
@@ -655,7 +667,7 @@ def _run(args) -> int:
             )
     img, bar, crange = shots[0], None, None
     if field is not None or args.surface_color is not None or len(shots) > 1:
-        img, bar, crange = _coloured(args, shots, cam, field, (volume.shape, spacing, origin))
+        img, bar, crange = _coloured(args, shots, cam, field, (volume.shape, spacing, origin, affine))
     infilled = None
     targets = ["iso-infill.png", "iso.png"] if args.infill else ["iso.png"]
     clear_targets(out, targets + (["iso-complete.png"] if args.compare else []))
@@ -682,6 +694,8 @@ def _run(args) -> int:
     if bar is not None and not args.no_labels:
         picture_ = np.concatenate([picture_, bar], axis=0)
     path = images.save_png(out / "iso.png", picture_)
+    written = ["iso.png"] + ["iso-infill.png"] * args.infill + ["iso-complete.png"] * bool(scores)
+    note_earlier_pngs("clvis iso", out, set(written), _EARLIER_PNG)
     orbit = None
     if args.orbit is not None and r is not None:  # the turntable (clvis.cli.orbit)
         from .orbit import iso_orbit
@@ -727,6 +741,7 @@ def _run(args) -> int:
             f"  colour      {args.color_by} at the hits through {args.colormap or 'viridis'}, "
             f"range {crange[0]:.6g}..{crange[1]:.6g}"
         )
+        print(f"              the field {_placed(field, affine, volume.shape)}")
     print(
         f"  time        build {r.build_seconds:.2f} s, passes {seconds * 1e3:.1f} ms; "
         f"{total:.2f} s with compression and setup"
@@ -898,15 +913,17 @@ def _empty(w: int, h: int) -> IsoImage:
     )
 
 
-def _field(args) -> np.ndarray:
-    """--color-by's volume, [z, y, x] float32."""
+def _field(args) -> tuple[np.ndarray, np.ndarray | None]:
+    """--color-by's volume, [z, y, x] float32, and its affine (a NIfTI, MGH
+    or Analyze file's voxel to scanner world, else None)."""
     path = Path(args.color_by)
     if not path.exists():
         raise CliError(f"--color-by: {path}: no such file")
     # FILE's --volume-index is not the field's
     field_args = argparse.Namespace(**{**vars(args), "volume_index": args.color_by_volume_index})
     try:
-        data, _, _ = read_volume_file(field_args, path)
+        v = read_volume_of(field_args, path)
+        data = np.asarray(v.data, np.float32)
     except (DataError, ValueError) as e:  # read_volume's words for the field's option
         text = (
             str(e)
@@ -922,19 +939,86 @@ def _field(args) -> np.ndarray:
         raise CliError(
             f"--color-by: {path}: expected a 3-D volume with 2 samples per axis or more, got {data.shape}"
         )
-    return np.ascontiguousarray(data, np.float32)
+    return np.ascontiguousarray(data, np.float32), v.affine
+
+
+def _voxel_to_voxel(affine: np.ndarray | None, faffine: np.ndarray | None) -> np.ndarray | None:
+    """(4, 4): the rendered volume's voxel (i, j, k, 1) to the field's, through
+    the scanner's world; None where either has no affine, or one that is
+    singular or not finite (a broken header: the field is then laid as a file
+    without one is)."""
+    if affine is None or faffine is None:
+        return None
+    a, f = np.asarray(affine, np.float64), np.asarray(faffine, np.float64)
+    if a.shape != (4, 4) or f.shape != (4, 4) or not (np.isfinite(a).all() and np.isfinite(f).all()):
+        return None
+    try:
+        m = np.linalg.solve(f, a)
+    except np.linalg.LinAlgError:
+        return None
+    return m if np.isfinite(m).all() and abs(np.linalg.det(m[:3, :3])) > 1e-12 else None
+
+
+def _placed(field, affine, shape) -> str:
+    """How --color-by's field is laid over the rendered volume, in words
+    (the colour line of the summary): see _field_grid."""
+    if field is not None and _voxel_to_voxel(affine, field[1]) is not None:
+        return "placed by the files' affines, in the scanner's world"
+    if field is not None and field[0].shape == tuple(shape):
+        return "on the same grid"
+    return "stretched over the volume's box"
+
+
+def _field_grid(
+    field: tuple[np.ndarray, np.ndarray | None],
+    grid: tuple[tuple[int, ...], Sequence[float], Sequence[float], np.ndarray | None],
+) -> tuple[np.ndarray, tuple[float, ...], tuple[float, ...]]:
+    """(samples, spacing (dz, dy, dx), origin (x, y, z)) of --color-by's
+    field in the rendered volume's frame. Both files with an affine (NIfTI,
+    MGH, Analyze: voxel to scanner world): each field sample where the
+    scanner's world puts it (two scans of a subject rarely share a grid or a
+    box: stretching one over the other's box coloured the surface by the
+    wrong places), by its own spacing and origin where the two grids'
+    axes are parallel, else resampled (trilinear) onto the volume's grid,
+    NaN outside the field; else the volume's grid where the shapes agree,
+    and any other grid stretched over the volume's box."""
+    data, faffine = field
+    shape, spacing, origin, affine = grid
+    sp = np.asarray(spacing, np.float64)
+    m = _voxel_to_voxel(affine, faffine)
+    if m is not None:
+        lin, shift = m[:3, :3], m[:3, 3]  # volume voxel (i, j, k) -> field voxel
+        diag = np.diag(lin).copy()
+        if (diag > 0).all() and np.abs(lin - np.diag(diag)).max() <= 1e-6 * diag.max():
+            # field index f = diag * i + shift along each axis: index i = (f - shift) / diag
+            step = sp[::-1] / diag  # (x, y, z)
+            start = np.asarray(origin, np.float64) - step * shift
+            return data, tuple(float(v) for v in step[::-1]), tuple(float(v) for v in start)
+        from scipy import ndimage
+
+        flip = np.eye(3)[::-1]  # (x, y, z) <-> [z, y, x]
+        out = ndimage.affine_transform(
+            data, flip @ lin @ flip, offset=flip @ shift, output_shape=tuple(shape), order=1, cval=np.nan
+        ).astype(np.float32)
+        return out, tuple(float(v) for v in spacing), tuple(float(v) for v in origin)
+    if data.shape == tuple(shape):
+        return data, tuple(float(v) for v in spacing), tuple(float(v) for v in origin)
+    extent = (np.asarray(shape, np.float64) - 1) * sp  # stretched over the rendered volume's box
+    fspacing = tuple(float(v) for v in extent / (np.asarray(data.shape, np.float64) - 1))
+    return data, fspacing, tuple(float(v) for v in origin)
 
 
 def _coloured(
     args: argparse.Namespace,
     shots: list[IsoImage],
     cam: Camera | None,
-    field: np.ndarray | None,
-    grid: tuple[tuple[int, ...], Sequence[float], Sequence[float]],
+    field: tuple[np.ndarray, np.ndarray | None] | None,
+    grid: tuple[tuple[int, ...], Sequence[float], Sequence[float], np.ndarray | None],
 ) -> tuple[IsoImage, np.ndarray | None, tuple[float, float] | None]:
     """(the shots composited, each surface in its colour or --color-by's,
     the colour bar or None, the colormap's range or None). grid: the
-    rendered volume's (shape [z, y, x], spacing (dz, dy, dx), origin)."""
+    rendered volume's (shape [z, y, x], spacing (dz, dy, dx), origin, affine
+    or None); field: _field's."""
     from .. import images, iso
     from ..colormap import value_range
 
@@ -953,13 +1037,8 @@ def _coloured(
             ]
             key = images.legend(entries, w)
         return iso.composite(shots, colours), key, None
-    shape, spacing, origin = grid
-    if field.shape == tuple(shape):
-        fspacing = tuple(spacing)
-    else:  # stretched over the rendered volume's box
-        extent = (np.asarray(shape, np.float64) - 1) * np.asarray(spacing, np.float64)
-        fspacing = tuple(float(v) for v in extent / (np.asarray(field.shape, np.float64) - 1))
-    vals = [iso.sample_hits(s, cam, field, fspacing, origin) for s in shots]
+    fdata, fspacing, forigin = _field_grid(field, grid)
+    vals = [iso.sample_hits(s, cam, fdata, fspacing, forigin) for s in shots]
     on = np.concatenate([np.asarray(v)[np.asarray(s.hit)] for v, s in zip(vals, shots, strict=True)])
     on = on[np.isfinite(on)]
     if not on.size:

@@ -40,6 +40,7 @@ from ._common import (
     describe_camera,
     distributed_run,
     frame_bulk,
+    note_earlier_pngs,
     on_workers,
     plane_attribute,
     plane_names,
@@ -669,7 +670,16 @@ def _save_pngs(out: Path, named) -> list[Path]:
 
     clear_targets(out, [name for name, _ in named])
     with ThreadPoolExecutor(max_workers=max(1, min(len(named), os.cpu_count() or 1))) as pool:
-        return list(pool.map(lambda item: images.save_png(out / item[0], item[1]), named))
+        files = list(pool.map(lambda item: images.save_png(out / item[0], item[1]), named))
+    note_earlier_pngs("clvis render", out, {name for name, _ in named}, _PANEL_PNG)
+    return files
+
+
+#: the PNGs clvis render writes (and overview.png, always)
+_PANEL_PNG = re.compile(
+    r"(colors|depth|soft-z|depth-filtered|velocity-angle|velocity-magnitude|gaussians|post-[a-z-]+"
+    r"|attribute-.+)\.png"
+)
 
 
 def _not_a_volume(path: str) -> None:

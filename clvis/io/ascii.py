@@ -3,7 +3,8 @@ PDAL's and most scanners' text exports), Leica's ``.pts`` and Open3D's
 ``.xyzn`` and ``.xyzrgb``, one point a line.
 
 The columns: a header line of names (``x,y,z,red,green,blue``, ``//X Y Z R G
-B`` as CloudCompare writes it, ``X Y Z Intensity``) names them, mapped as
+B`` as CloudCompare writes it, ``X Y Z Intensity``, ``"X","Y","Z"`` as R's
+write.csv quotes them) names them, mapped as
 for PLY (x, y, z; red/green/blue or r/g/b the colours; vx, vy, vz the
 velocity; the rest attributes). Without one, the count decides: 3 x y z;
 4 x y z intensity; 6 x y z r g b when the last three are whole numbers in
@@ -22,7 +23,8 @@ x y z [intensity] [r g b] as above.
 
 Bounded: numpy's own text parser, no Python loop per line; a row with a
 different count or a value that is not a number raises DataError naming
-the line.
+the line (a row of another count: its line in the file, found again only
+then).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
-from .cloud import PointCloud, _from_columns
+from .cloud import PointCloud, _from_columns, bulk_origin
 
 SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".xyzn", ".xyzrgb")
 # Open3D's text formats: the columns their suffix names
@@ -57,6 +59,26 @@ def _number(t: str) -> bool:
         return True
     except ValueError:
         return False
+
+
+def _line_of_row(path: Path, first: int, row: int) -> int:
+    """The line number (1 first) of the `row`-th row of values (1 first)
+    that np.loadtxt read from line `first` (0 first) on: a line whose text
+    before a comment mark is not blank."""
+    mark = re.compile("|".join(re.escape(c) for c in _COMMENT))
+    seen = 0
+    with open(path, encoding="utf-8-sig", errors="replace") as f:
+        for k, line in enumerate(f):
+            if k >= first and mark.split(line, 1)[0].strip():
+                seen += 1
+                if seen == row:
+                    return k + 1
+    return first + row
+
+
+def _unquoted(t: str) -> str:
+    """A header name without the double or single quotes around it."""
+    return t[1:-1].strip() if len(t) >= 2 and t[0] == t[-1] and t[0] in "\"'" else t
 
 
 def _read_ascii(path: Path) -> PointCloud:
@@ -84,12 +106,13 @@ def _read_ascii(path: Path) -> PointCloud:
         body = re.sub(r"^(#|//|%)\s*", "", s) if comment else s
         sep = "," if "," in body else ";" if ";" in body else None
         tokens = [t.strip() for t in _split(body, sep)]
+        bare = [_unquoted(t) for t in tokens]  # R's write.csv and spreadsheets quote the names
         if (
             tokens
             and not all(_number(t) for t in tokens)
-            and all(re.fullmatch(r"[A-Za-z_][\w.]*", t) for t in tokens)
+            and all(re.fullmatch(r"[A-Za-z_][\w.]*", t) for t in bare)
         ):
-            names, skip = [t.lower() for t in tokens], i + 1  # a header (commented or not)
+            names, skip = [t.lower() for t in bare], i + 1  # a header (commented or not)
             continue
         if comment:
             skip = i + 1
@@ -121,13 +144,24 @@ def _read_ascii(path: Path) -> PointCloud:
             encoding="utf-8-sig",
         )
     except ValueError as e:
-        several = suffix == ".pts" and re.search(r"changed from \d+ to 1 at row (\d+)", str(e))
-        if several:  # a count line further on: another scan's
+        changed = re.search(r"changed from (\d+) to (\d+) at row (\d+)", str(e))
+        if changed is None:
+            raise DataError(f"{path}: malformed text point cloud: {e}") from None
+        # numpy's words ("use `usecols` to select a subset", a keyword of its own) and its row,
+        # which counts rows of values (not comments, not blank lines): the file's line said
+        was, now, row = (int(v) for v in changed.groups())
+        at = _line_of_row(path, line_no, row)
+        if suffix == ".pts" and now == 1:  # a count line further on: another scan's
             raise DataError(
-                f"{path}: line {line_no + int(several.group(1))} holds one value: a PTS file of several "
+                f"{path}: line {at} holds one value: a PTS file of several "
                 "scans (each after its point count) is not read; split it into one file a scan"
             ) from None
-        raise DataError(f"{path}: malformed text point cloud: {e}") from None
+        count_first = ncol == 1 and re.fullmatch(r"\d+", tokens[0]) and now >= 3
+        hint = " (a point count first, as a Leica .pts file holds: name it .pts)" if count_first else ""
+        raise DataError(
+            f"{path}: line {at} holds {now} values, line {line_no + 1} {was}: every point "
+            f"needs the same columns{hint}"
+        ) from None
     if data.shape[1] != ncol:
         raise DataError(f"{path}: {data.shape[1]} columns, the first line holds {ncol}")
     if count is not None and count != len(data):
@@ -186,8 +220,7 @@ def _with_origin(path: Path, columns: dict) -> PointCloud:
         if c not in columns:
             raise DataError(f"{path}: no {c} column (found {', '.join(columns)})")
     xyz = np.stack([columns[c] for c in "xyz"], axis=1)
-    finite = np.isfinite(xyz).all(axis=1)
-    origin = xyz[finite].min(axis=0) if finite.any() else np.zeros(3)
+    origin = bulk_origin(xyz)  # the finite minimum (of the bulk, where stray points lie far away)
     columns = dict(columns)
     for k, c in enumerate("xyz"):
         columns[c] = (xyz[:, k] - origin[k]).astype(np.float32)

@@ -16,7 +16,11 @@ from ..errors import DataError
 from .files import write_replacing
 
 # Named columns (PLY vertex properties, structured NPY fields) with a meaning.
-_COLOR_NAMES: tuple[tuple[str, ...], ...] = (("red", "green", "blue", "alpha"), ("r", "g", "b", "a"))
+_COLOR_NAMES: tuple[tuple[str, ...], ...] = (
+    ("red", "green", "blue", "alpha"),
+    ("r", "g", "b", "a"),
+    ("diffuse_red", "diffuse_green", "diffuse_blue", "diffuse_alpha"),  # the PLY spec's material colours
+)
 _VELOCITY_NAMES: tuple[tuple[str, ...], ...] = (
     ("vx", "vy", "vz"),
     ("velocity_x", "velocity_y", "velocity_z"),
@@ -231,6 +235,42 @@ def check_finite(name: str, a: Any) -> None:
 FAR_FROM_ZERO = 2**24 * 1e-5
 
 
+def bulk_origin(xyz: np.ndarray) -> np.ndarray:
+    """(3,) float64: the origin a file's wide (float64) positions `xyz`
+    ((N, 3)) are kept relative to, in float32: the minimum of the finite
+    points; where some lie far outside the bulk (a few stray records at (0, 0,
+    0) in a georeferenced scan, which clvis render leaves out of the view),
+    the minimum of the bulk (the points within :func:`clvis.camera.robust_fences`
+    of a sample, as clvis render finds it). Relative to the strays' minimum,
+    float32 quantised the bulk, 6e6 m from it, to 0.5 m: a scan drawn as rows
+    of points. Zeros for no finite point."""
+    return _bulk_box(xyz)[0]
+
+
+def _bulk_box(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) of the finite points of `xyz`, or of their bulk where some
+    lie outside it (bulk_origin); zeros for no finite point."""
+    from ..camera import robust_fences, robust_sample_step
+
+    p = np.asarray(xyz, np.float64)
+    finite = np.asarray(np.isfinite(p).all(axis=1))
+    if not finite.any():
+        return np.zeros(3), np.zeros(3)
+    lowest = np.min(p, axis=0, where=finite[:, None], initial=np.inf)
+    highest = np.max(p, axis=0, where=finite[:, None], initial=-np.inf)
+    fence_lo, fence_hi = robust_fences(p[:: robust_sample_step(len(p))])
+    if (lowest >= fence_lo).all() and (highest <= fence_hi).all():
+        return lowest, highest  # no stray point (cheap: no pass over the points but these)
+    with np.errstate(invalid="ignore"):
+        bulk = np.asarray(finite & ((p >= fence_lo) & (p <= fence_hi)).all(axis=1))
+    if not bulk.any():
+        return lowest, highest
+    return (
+        np.min(p, axis=0, where=bulk[:, None], initial=np.inf),
+        np.max(p, axis=0, where=bulk[:, None], initial=-np.inf),
+    )
+
+
 def relative_positions(xyz: Any, origin: Any = None) -> tuple[Any, Any]:
     """(positions, origin) of a file's (N, 3) positions: stored wider than
     float32 (float64, int64), with no origin of their own and too far from
@@ -251,7 +291,9 @@ def relative_positions(xyz: Any, origin: Any = None) -> tuple[Any, Any]:
     finite = np.isfinite(d).all(axis=1)
     if not finite.any():
         return xyz, origin
-    lowest, highest = d[finite].min(axis=0), d[finite].max(axis=0)
+    # the bulk's box: a few stray points far away (records at (0, 0, 0)) neither widen the extent
+    # float32 must resolve nor move the origin away from the points that are drawn
+    lowest, highest = _bulk_box(d)
     reach = float(np.maximum(np.abs(lowest), np.abs(highest)).max())
     if reach <= FAR_FROM_ZERO * float((highest - lowest).max()):
         return xyz, origin
@@ -259,7 +301,12 @@ def relative_positions(xyz: Any, origin: Any = None) -> tuple[Any, Any]:
 
 
 def _from_columns(path: Path, columns: dict[str, np.ndarray], origin: Any = None) -> PointCloud:
-    """A cloud from named 1-D columns (PLY properties, structured NPY fields)."""
+    """A cloud from named 1-D columns (PLY properties, structured NPY fields).
+    The names clvis reads (x, y, z, the colours, the velocity, radius) are
+    found in any case (X, Y, Z: a pandas DataFrame's records, some PLY
+    writers) where the file has no column of that name in lower case and
+    one only in another case."""
+    columns = _lower_reserved(columns)
     missing = [c for c in "xyz" if c not in columns]
     if missing:
         raise DataError(f"{path}: no {', '.join(missing)} column (found {', '.join(columns) or 'none'})")
@@ -282,6 +329,20 @@ def _from_columns(path: Path, columns: dict[str, np.ndarray], origin: Any = None
         fields["radius"] = columns.pop("radius")
     fields["attributes"] = columns
     return _cloud(path, **fields)
+
+
+def _lower_reserved(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """`columns` with each name of _RESERVED_COLUMNS it holds in another case
+    only (one column) renamed to it, in the same order."""
+    by_lower: dict[str, list[str]] = {}
+    for k in columns:
+        by_lower.setdefault(k.lower(), []).append(k)
+    rename = {
+        ks[0]: low
+        for low, ks in by_lower.items()
+        if low in _RESERVED_COLUMNS and low not in columns and len(ks) == 1
+    }
+    return {rename.get(k, k): v for k, v in columns.items()} if rename else columns
 
 
 def _write_or_remove(path: str | os.PathLike[str], write: Callable[[IO[Any]], object]) -> None:

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from .cloud import PointCloud, _cloud
+from .cloud import PointCloud, _cloud, bulk_origin
 
 MAX_POINTS_PER_BYTE = 64
 _XYZ = ("cartesianX", "cartesianY", "cartesianZ")
@@ -106,8 +106,7 @@ def _scans(path: Path, f: Any) -> PointCloud:
     if not positions or not sum(len(p) for p in positions):
         raise DataError(f"{path}: the E57 file's scans hold no valid points")
     p = np.concatenate(positions)
-    finite = np.isfinite(p).all(axis=1)
-    origin = p[finite].min(axis=0) if finite.any() else np.zeros(3)
+    origin = bulk_origin(p)  # the finite minimum (of the bulk, where stray points lie far away)
     out: dict[str, Any] = {"positions": p - origin, "origin": origin}
     if colours:
         c = np.concatenate(rgb)

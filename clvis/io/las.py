@@ -11,7 +11,7 @@ from typing import BinaryIO
 import numpy as np
 
 from ..errors import DataError
-from .cloud import PointCloud, _cloud
+from .cloud import PointCloud, _cloud, bulk_origin
 from .npy import _size
 
 # 10^4 (50 M points in 1.5 kB) is refused before anything is decompressed.
@@ -413,7 +413,7 @@ def _read_las(path: Path) -> PointCloud:
             f"{path}: truncated LAS/LAZ file: the header declares {declared} points, {n} were read"
         )
     xyz = np.stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)], axis=1)
-    origin = xyz.min(axis=0) if n else np.zeros(3)
+    origin = bulk_origin(xyz)  # the minimum (of the bulk, where stray records lie far away)
     dims = list(las.point_format.dimension_names)
     fields: dict[str, object] = {"positions": (xyz - origin).astype(np.float32), "origin": origin}
     if all(c in dims for c in ("red", "green", "blue")):

@@ -49,9 +49,10 @@ def from_vtk(dataset: Any, array: str | None = None) -> PointCloud | Volume:
 
     array: image data only, the scalar array to take by name. A dataset of
     another kind (a rectilinear grid, a multiblock) is a TypeError naming it
-    and what to do; an image with a rotated axis (a direction matrix that is
-    not the identity) or no one-component array, or a point set VTK cannot
-    give as numbers, a DataError."""
+    and what to do; an image whose direction matrix rotates its axes (one
+    that only permutes and flips them is applied: the samples transposed and
+    flipped) or with no one-component array, or a point set VTK cannot give
+    as numbers, a DataError."""
     if not is_vtk_dataset(dataset):
         raise TypeError(
             "dataset: expected a VTK dataset (a pyvista mesh, point set or image), "
@@ -81,11 +82,6 @@ def from_vtk(dataset: Any, array: str | None = None) -> PointCloud | Volume:
 
 
 def _volume(img: Any, kind: str, array: str | None, ns: Any) -> Volume:
-    direction = img.GetDirectionMatrix() if hasattr(img, "GetDirectionMatrix") else None
-    if direction is not None and not all(
-        direction.GetElement(i, j) == (1.0 if i == j else 0.0) for i in range(3) for j in range(3)
-    ):
-        raise DataError(f"{kind}: its axes are rotated (a direction matrix); clvis volumes are axis-aligned")
     dims = img.GetDimensions()
     for cells, data in ((False, img.GetPointData()), (True, img.GetCellData())):
         nx, ny, nz = (max(d - 1, 1) for d in dims) if cells else dims
@@ -96,13 +92,9 @@ def _volume(img: Any, kind: str, array: str | None, ns: Any) -> Volume:
             values = np.array(ns.vtk_to_numpy(arr), copy=True).reshape(nz, ny, nx)
         except (TypeError, ValueError, AssertionError, KeyError) as e:  # a type numpy has not (bits)
             raise DataError(f"{kind}: its array {arr.GetName()!r} is not numbers numpy takes ({e})") from None
-        sx, sy, sz = img.GetSpacing()
-        origin = list(img.GetOrigin())
-        if cells:  # the cell centres: half a step in along each axis that has cells
-            origin = [
-                o + (s / 2 if d > 1 else 0.0) for o, s, d in zip(origin, (sx, sy, sz), dims, strict=True)
-            ]
-        spacing = (float(sz), float(sy), float(sx))
+        from .vtk import image_axes  # the world's axes (a flipped or permuted Direction), steps > 0
+
+        values, spacing, origin = image_axes(kind, img, values, cells)
         return Volume(values, spacing, tuple(float(o) for o in origin), array=arr.GetName())
     names = [
         f"{d.GetArrayName(i)} ({d.GetArray(i).GetNumberOfComponents() if d.GetArray(i) else '?'} components)"
@@ -130,6 +122,20 @@ def _scalar_array(data: Any, name: str | None, n: int) -> Any:
     if arr is None or arr.GetNumberOfComponents() != 1 or arr.GetNumberOfTuples() != n:
         return None
     return arr
+
+
+def foreign_hint(obj: Any, what: str) -> str | None:
+    """Where a renderer was given another library's object (a pyvista/VTK
+    dataset, an Open3D geometry) for `what` ("PointCloud" or "Volume"): the
+    words naming it and the call that converts it, for its TypeError (numpy
+    made an object array of it: "expected numbers, got dtype object"); None
+    for anything else."""
+    if is_vtk_dataset(obj):
+        kind = obj.GetClassName()
+        return f"a VTK dataset ({kind}: a pyvista mesh or image): clvis.from_vtk(it) gives the {what}"
+    if is_open3d_geometry(obj):
+        return f"an Open3D {type(obj).__name__}: clvis.from_open3d(it) gives the PointCloud"
+    return None
 
 
 def is_open3d_geometry(obj: Any) -> bool:

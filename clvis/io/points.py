@@ -10,7 +10,11 @@ digits, too few for georeferenced coordinates (UTM eastings of 10^5..10^6 m), so
 the LAS/LAZ reader subtracts the minimum of the points' coordinates and keeps it,
 in float64, as ``cloud.origin``: world position = origin + position; so do
 the E57 and ASCII readers, and the PLY, NPY and NPZ readers for double x, y, z
-too far from zero for float32 (more than ~170 times the cloud's extent). Other
+too far from zero for float32 (more than ~170 times the cloud's extent). Where
+a few stray points lie far from the rest (records at (0, 0, 0) in a
+georeferenced scan), the minimum and the extent are the bulk's
+(:func:`clvis.io.cloud.bulk_origin`): relative to the strays the scan itself
+kept only 0.5 m at 6e6 m. Other
 formats take positions as stored (origin zero), except that files written by
 clvis carry their origin along (an NPZ key, a PLY header comment).
 
@@ -72,15 +76,18 @@ def read_points(path: str | os.PathLike[str]) -> PointCloud:
     """Read a point cloud; the format comes from the extension (case-insensitive).
 
     - ``.ply``: the ``vertex`` element. x, y, z are required; red, green, blue
-      [, alpha] (or r, g, b [, a]) become colors; vx, vy, vz (or velocity_x, ...)
-      the velocity; radius the radius; every other scalar property an attribute.
+      [, alpha] (or r, g, b [, a], or diffuse_red, ...) become colors; vx, vy, vz
+      (or velocity_x, ...) the velocity; radius the radius (these names in any
+      case where the file has no lower-case one: X, Y, Z); every other scalar
+      property an attribute.
       Double x, y, z too far from zero for float32 (more than ~170 times the
       cloud's extent): positions relative to ``origin`` = their finite minimum
       (unless the file carries clvis's origin comment), as for NPY and NPZ.
     - ``.las``, ``.laz``: positions relative to ``origin`` = the minimum of the
-      points' coordinates; red/green/blue become 8-bit (>> 8 when any value
-      exceeds 255, else as is); every other dimension (intensity, classification,
-      return_number, ...) an attribute. gps_time is stored as seconds since the
+      points' coordinates (of their bulk, where a few lie far away);
+      red/green/blue become 8-bit (>> 8 when any value exceeds 255, else as
+      is); every other dimension (intensity, classification, return_number,
+      ...) an attribute. gps_time is stored as seconds since the
       earliest point, which float32 resolves where absolute GPS time would not.
     - ``.npy``: an (N, 3) array, or a structured array with fields x, y, z and
       others named as for PLY; float64 (or int64) positions as for PLY.

@@ -53,6 +53,7 @@ from .vtk import (
     _cells,
     _check_array,
     _check_legacy,
+    _components,
     _count,
     _elements,
     _legacy_head,
@@ -74,8 +75,11 @@ _VELOCITY = ("velocity", "velocities", "vel")
 
 
 def _number(path: Path, attrs: dict[str, str], key: str, default: str | None = None) -> int:
-    text = attrs.get(key, default)
-    if text is None or not re.fullmatch("[0-9]+", text.strip()):  # isdigit() takes '²'; int() does not
+    """The count `key` of an element's `attrs`; `default` where the attribute is
+    absent or blank, as VTK's XML readers take it (meshio writes its cell arrays
+    with NumberOfComponents="")."""
+    text = attrs.get(key, "").strip() or default
+    if text is None or not re.fullmatch("[0-9]+", text):  # isdigit() takes '²'; int() does not
         raise DataError(f"{path}: malformed or missing {key} {text!r}")
     return int(text)
 
@@ -141,7 +145,7 @@ def _check_xml(path: Path, raw: bytes, kind: str) -> int:
             kinds = _CELL_KINDS if kind == "PolyData" else ("Cells",)
             cells = {k: _number(path, pa, f"NumberOf{k}", "0") for k in kinds}
         points = section(body, "Points")
-        if n and (len(points) != 1 or points[0][0].get("NumberOfComponents", "1").strip() != "3"):
+        if n and (len(points) != 1 or _components(points[0][0]) != "3"):
             raise DataError(f"{path}: a Piece of {n} points has no <Points> array of 3 components")
         check(points, n, "Points")
         check(section(body, "PointData"), n, "PointData")

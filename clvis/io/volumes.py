@@ -33,7 +33,11 @@ Formats, chosen by the file name (case-insensitive):
   through VTK's own readers (the ``vtk`` extra: ``pip install "clvis[vtk]"``),
   after clvis's checks of the header against the file (:mod:`clvis.io.vtk`);
   the point scalars (a legacy file's first SCALARS, else its first FIELD
-  array of one component), with the file's spacing and origin; a file
+  array of one component), with the file's spacing and origin (a .vti's
+  Direction that permutes and flips the axes applied, a rotating one an
+  error; an axis of negative spacing, which runs backward in VTK, flipped,
+  its origin at its last sample; a flat axis of spacing 0, as 2-D images are written, a step
+  of 1; a zero step along an axis of several samples an error); a file
   without point arrays gives its cell data (one sample a cell, the origin
   at the first cell's centre).
 
@@ -142,6 +146,11 @@ def volume_parts(
             f"volume: expected an array or a clvis.Volume, got a path ({volume!r}): "
             "clvis.read_volume reads it"
         )
+    from .objects import foreign_hint
+
+    hint = foreign_hint(volume, "Volume")
+    if hint is not None:
+        raise TypeError(f"volume: expected an array or a clvis.Volume, got {hint}")
     return (
         volume,
         (1.0, 1.0, 1.0) if spacing is None else spacing,

@@ -143,6 +143,13 @@ def _numbers(path: Path, what: str, text: str, n: int, kind: type = float) -> li
     return v
 
 
+def _components(attrs: dict[str, str]) -> str:
+    """A DataArray's NumberOfComponents as written, "1" where it is absent or
+    blank: VTK's XML readers keep one component where the attribute holds no
+    number (meshio writes NumberOfComponents="")."""
+    return attrs.get("NumberOfComponents", "").strip() or "1"
+
+
 def _count(path: Path, what: str, ext: list[int]) -> int:
     dims = (ext[1] - ext[0] + 1, ext[3] - ext[2] + 1, ext[5] - ext[4] + 1)
     if min(dims) < 1:
@@ -276,7 +283,7 @@ def _check_grid(
         t = _VTI_TYPES.get(a.get("type", ""))
         if t is None:
             raise DataError(f"{path}: unsupported DataArray type {a.get('type')!r}")
-        if a.get("NumberOfComponents", "1").strip() != "1":
+        if _components(a) != "1":
             raise DataError(f"{path}: array {name!r} has several components; a volume has one")
         _check_array(path, raw, at, a, text, fa, pn * np.dtype(t).itemsize, pn)
         covered += pn
@@ -296,7 +303,7 @@ def _check_coordinates(
         raise DataError(f"{path}: a RectilinearGrid Piece without its three <Coordinates> arrays")
     for axis, (a, text), k in zip("XYZ", arrays, (0, 2, 4), strict=True):
         t = _VTI_TYPES.get(a.get("type", ""))
-        if t is None or a.get("NumberOfComponents", "1").strip() != "1":
+        if t is None or _components(a) != "1":
             raise DataError(f"{path}: the {axis} coordinates: one component of a numeric type expected")
         count = ext[k + 1] - ext[k] + 1
         _check_array(path, raw, at, a, text, fa, count * np.dtype(t).itemsize, count)
@@ -415,12 +422,68 @@ def _image(
     """(data (Z, Y, X), spacing zyx, origin xyz) of `reader`'s output; with
     `cells`, of its cell array: one sample a cell, at the cell's centre."""
     img, data = _scalars(path, reader, messages, name, n, ns, cells)
+    return image_axes(path, img, data, cells)
+
+
+def image_axes(what: Any, img: Any, data: np.ndarray, cells: bool) -> tuple[np.ndarray, tuple, list]:
+    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of the
+    samples `data` [k, j, i] of the vtkImageData `img` (`cells`: its cell
+    data, one sample a cell, at the cell's centre) in the world's axes: VTK
+    puts sample (i, j, k) at origin + Direction @ ((i, j, k) * spacing). A
+    Direction that only permutes and flips the axes (a scan in LPS order, as
+    DICOM converters write it) is applied: the samples transposed and
+    flipped, never resampled (it was ignored: the volume came out mirrored);
+    a rotated one is a DataError naming `what` (clvis volumes are
+    axis-aligned); then forward_axes."""
     dims = img.GetDimensions()
-    sx, sy, sz = img.GetSpacing()
-    origin = list(img.GetOrigin())
+    spacing = np.asarray(img.GetSpacing(), np.float64)
+    origin = np.asarray(img.GetOrigin(), np.float64)
+    m = img.GetDirectionMatrix() if hasattr(img, "GetDirectionMatrix") else None
+    d = np.eye(3) if m is None else np.array([[m.GetElement(r, c) for c in range(3)] for r in range(3)])
+    to = np.argmax(np.abs(d), axis=0)  # the world axis each index axis runs along
+    if (
+        not np.isfinite(d).all()
+        or sorted(to.tolist()) != [0, 1, 2]
+        or not np.allclose(np.abs(d), np.eye(3)[to].T, atol=1e-6)
+    ):
+        raise DataError(
+            f"{what}: its axes are rotated (Direction {' '.join(f'{v:g}' for v in d.ravel())}); clvis "
+            "volumes are axis-aligned: resample it onto an axis-aligned grid"
+        )
     if cells:  # the cell centres: half a step in along each axis that has cells
-        origin = [o + (s / 2 if d > 1 else 0.0) for o, s, d in zip(origin, (sx, sy, sz), dims, strict=True)]
-    return data, (sz, sy, sx), origin
+        origin = origin + d @ np.array([s / 2 if n > 1 else 0.0 for s, n in zip(spacing, dims, strict=True)])
+    sign = np.sign(d[to, [0, 1, 2]])
+    world = np.empty(3)  # each world axis's step, signed: the index axis along it, and its sense
+    order = [0, 0, 0]  # the data axis [k, j, i] that becomes each world axis's [z, y, x]
+    for a in range(3):
+        world[to[a]] = sign[a] * spacing[a]
+        order[2 - to[a]] = 2 - a
+    return forward_axes(what, np.transpose(data, order), world, origin)
+
+
+def forward_axes(what: Any, data: np.ndarray, spacing: Any, origin: Any) -> tuple[np.ndarray, tuple, list]:
+    """(data (Z, Y, X), spacing (dz, dy, dx), origin (x, y, z)) of image data
+    whose `spacing` and `origin` (x, y, z) are VTK's, with every step > 0, as
+    clvis's renderers take them: VTK puts sample i at origin + i * spacing, so
+    an axis of negative spacing runs backward (it is flipped, the origin
+    moved to its last sample: the same points in space); a flat axis (one
+    sample) of spacing 0, as a 2-D image is often written, gets a step of 1
+    (a rectilinear grid's lone coordinate does too). A DataError naming
+    `what` for a spacing or origin that is not finite, or a zero step along
+    an axis of several samples."""
+    steps, start = [], []
+    for k, (s, o) in enumerate(zip(spacing, origin, strict=True)):
+        s, o, axis = float(s), float(o), 2 - k
+        n = data.shape[axis]
+        if not (np.isfinite(s) and np.isfinite(o)):
+            raise DataError(f"{what}: spacing {s:g} and origin {o:g} along {'xyz'[k]}: not finite")
+        if s == 0 and n > 1:
+            raise DataError(f"{what}: spacing 0 along {'xyz'[k]}: its {n} samples at one place")
+        if s < 0 and n > 1:
+            data, o = np.flip(data, axis), o + s * (n - 1)
+        steps.append(abs(s) if s else 1.0)
+        start.append(o)
+    return np.ascontiguousarray(data), (steps[2], steps[1], steps[0]), start
 
 
 def _opened(core: Any, reader: Any, path: Path, messages: list[str], text: bytes | None = None) -> bool:
@@ -479,8 +542,26 @@ VOLUME_DATASETS = ("STRUCTURED_POINTS", "RECTILINEAR_GRID")
 _EVEN = 1e-4
 
 
-def _legacy_lines(raw: bytes) -> list[str]:
-    return [t.decode("latin-1").strip() for t in raw[:4096].split(b"\n")[:12]]
+def _legacy_lines(raw: bytes) -> tuple[list[str], int]:
+    """The first lines of a legacy VTK file as VTK's reader takes them, up
+    to 12 within its first 4096 bytes: the version line, the title (a whole
+    line, which may be blank), then the lines that are not blank (VTK reads
+    the words after the title one by one, passing over blank lines: a file
+    with a blank line before its ASCII or DATASET line is read); and where
+    the fourth of them (the DATASET line) ends, 0 where the file has fewer."""
+    lines: list[str] = []
+    end = pos = 0
+    head = raw[:4096]
+    while len(lines) < 12 and pos < len(head):
+        nl = head.find(b"\n", pos)
+        stop = len(head) if nl < 0 else nl
+        text = head[pos:stop].decode("latin-1").strip()
+        if text or len(lines) < 2:
+            lines.append(text)
+            if len(lines) == 4 and nl >= 0:
+                end = nl + 1
+        pos = stop + 1
+    return lines, end
 
 
 def legacy_dataset(path: str | Path) -> str:
@@ -490,7 +571,7 @@ def legacy_dataset(path: str | Path) -> str:
     volume) or read_points (its points)."""
     try:
         with open(path, "rb") as f:
-            text = _legacy_lines(f.read(4096))
+            text = _legacy_lines(f.read(4096))[0]
     except OSError:
         return ""
     if len(text) < 4 or not text[0].startswith("# vtk DataFile") or not text[3].upper().startswith("DATASET"):
@@ -502,7 +583,7 @@ def legacy_dataset(path: str | Path) -> str:
 def _legacy_head(path: Path, raw: bytes) -> tuple[str, bool, bool, list[str]]:
     """(DATASET, binary, cells as OFFSETS/CONNECTIVITY (file version 5 on),
     the first lines) of a legacy VTK file; a DataError for any other file."""
-    text = _legacy_lines(raw)
+    text = _legacy_lines(raw)[0]
     if not text or not text[0].startswith("# vtk DataFile"):
         raise DataError(f"{path}: not a legacy VTK file (no '# vtk DataFile' line)")
     up = [t.upper() for t in text]
@@ -592,11 +673,9 @@ def _check_legacy(
     fit or is not read. `arrays`, where given, gets each array of the
     POINT_DATA and CELL_DATA sections (a dataset's own FIELD before them is
     none), in the file's order."""
-    pos = 0
-    for _ in range(4):  # the version, title, ASCII/BINARY and DATASET lines
-        pos = raw.find(b"\n", pos) + 1
-        if pos == 0:
-            raise DataError(f"{path}: malformed legacy VTK header (fewer than 4 lines)")
+    pos = _legacy_lines(raw)[1]  # after the version, title, ASCII/BINARY and DATASET lines
+    if pos == 0:
+        raise DataError(f"{path}: malformed legacy VTK header (fewer than 4 lines)")
     size, points, here, fields = len(raw), -1, 0, 0
     where, field_where = "", ""  # the data section we are in ("point", "cell"), the FIELD's
 

@@ -95,6 +95,23 @@ def test_camera_samplers_take_fov():
     assert np.isclose(np.degrees(2 * np.arctan(1 / cam.projection[1, 1])), 25.0)
 
 
+@pytest.mark.parametrize("view", ["fit", "front"])
+def test_camera_straight_down_without_up_is_north_up(view):
+    """--eye straight above the target with no --up (a look from above, in
+    perspective) was an error ("up: [0, 0, 1] is parallel to the view
+    direction ... check --up"), the default up being +z: it is +y, north
+    up, as --view top's, where the default lies along the view."""
+    centre = 0.5 * (LO + HI)
+    eye = (float(centre[0]), float(centre[1]), 50.0)
+    cam = _common.camera_from_args(_args(view=(view, 0), eye=eye), LO, HI, 64, 48)
+    assert np.allclose(cam.forward, (0, 0, -1))
+    top = _common.camera_from_args(_args(view=("top", 0)), LO, HI, 64, 48)
+    right = cam.view[0, :3]  # the camera's right and up in the world, as --view top's
+    assert np.allclose(right, top.view[0, :3]) and np.allclose(cam.view[1, :3], top.view[1, :3])
+    with pytest.raises(_common.CliError, match="up: .* is parallel to the view direction"):
+        _common.camera_from_args(_args(view=(view, 0), eye=eye, up=(0.0, 0.0, 1.0)), LO, HI, 64, 48)
+
+
 def test_camera_up_along_the_view_is_one_line(capsys, tmp_path):
     rc = cli.main(["iso", "--view", "top", "--up", "0,0,1", "--size", "16x16", "--out", str(tmp_path)])
     err = capsys.readouterr().err

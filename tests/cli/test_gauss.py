@@ -294,7 +294,9 @@ def test_gauss_frames_the_bulk_of_a_cloud_with_stray_points(tmp_path, capsys):
     small = ["--size", "80x60", "--no-labels"]
     assert cli.main(["gauss", str(tmp_path / "stray.npy"), *small, "--out", str(tmp_path / "s")]) == 0
     err = capsys.readouterr().err
-    assert err.startswith("clvis gauss: note: 3 of 1,065 points lie far outside the rest (the cloud spans 0.")
+    # (the strays' x: -0.05, float32's step 0.06 from the bulk's origin, which keeps the bulk exact)
+    note = "clvis gauss: note: 3 of 1,065 points lie far outside the rest (the cloud spans -0.05.."
+    assert err.startswith(note), err
     assert "the view frames the bulk (--eye/--target to look elsewhere)" in err
     assert cli.main(["gauss", str(tmp_path / "bulk.npy"), *small, "--out", str(tmp_path / "b")]) == 0
     assert "note" not in capsys.readouterr().err
@@ -603,7 +605,12 @@ def test_gauss_says_when_the_picture_is_nearly_empty(tmp_path, capsys):
     assert cli.main(["gauss", str(tmp_path / "tiny.npy"), *small, str(tmp_path / "a")]) == 0
     err = capsys.readouterr().err
     assert "clvis gauss: note: the picture is nearly empty: 1 of 1,024 pixels drawn at 32x32" in err
-    assert "a larger --size, a closer view" in err
+    assert "a larger --size, a closer view" in err and "--lod low" in err
+    # a point cloud's Gaussians have no level of detail: --lod is refused for them, so not offered
+    (tmp_path / "one.xyz").write_text("1 2 3\n")
+    assert cli.main(["gauss", str(tmp_path / "one.xyz"), *small, str(tmp_path / "c")]) == 0
+    err = capsys.readouterr().err
+    assert "clvis gauss: note: the picture is empty" in err and "--lod" not in err, err
     v[40:90, 40:90, 40:90] = 1
     np.save(tmp_path / "block.npy", v)
     assert cli.main(["gauss", str(tmp_path / "block.npy"), *small, str(tmp_path / "b")]) == 0
@@ -631,3 +638,57 @@ def test_gauss_micro_scale_volume_fills_the_frame_as_at_spacing_1(tmp_path, caps
     assert alpha["1"].mean() > 0.1
     assert abs(alpha["1e-6"].mean() - alpha["1"].mean()) < 0.02 * alpha["1"].mean()
     assert (alpha["1e-6"] != alpha["1"]).mean() < 0.01  # the same picture
+
+
+def test_attribute_for_a_volume_names_every_point_format(tmp_path, capsys):
+    """--attribute with a volume FILE: the message listed .ply, .las, .laz,
+    .npy and .npz as the point clouds, while .pcd, .e57, .xyz, .vtp and the
+    rest take --attribute too."""
+    from clvis.io.points import POINT_SUFFIXES
+
+    raw = tmp_path / "v_4x4x4_float32.raw"
+    np.ones((4, 4, 4), np.float32).tofile(raw)
+    assert cli.main(["gauss", str(raw), "--attribute", "x", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "--attribute is for point clouds" in err
+    for suffix in POINT_SUFFIXES:
+        assert suffix in err, suffix
+    # a volume under a point cloud's suffix (a 3-D .npy, a legacy .vtk of STRUCTURED_POINTS): --attribute
+    # was ignored without a word
+    np.save(tmp_path / "v.npy", np.ones((4, 4, 4), np.float32))
+    vtk_volume = Path(__file__).resolve().parents[1] / "data" / "pyvista_uniform.vtk"
+    for volume in (tmp_path / "v.npy", vtk_volume):
+        assert cli.main(["gauss", str(volume), "--attribute", "x", "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert f"--attribute colours a point cloud's Gaussians; {volume} is a volume" in err, err
+    saved = tmp_path / "g.npz"  # Gaussians saved with clvis.Gaussians.save: drawn as saved
+    clvis.gaussians_from_points(clvis.PointCloud(np.random.default_rng(1).random((20, 3)))).save(saved)
+    assert cli.main(["gauss", str(saved), "--attribute", "x", "--out", str(tmp_path / "o")]) == 2
+    assert f"{saved} holds Gaussians, drawn as saved" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "option", [["--spacing", "1,1,2"], ["--shape", "4x4x4"], ["--dtype", "uint8"], ["--volume-index", "0"]]
+)
+def test_volume_options_with_a_point_cloud_are_refused(tmp_path, capsys, option):
+    """A volume file's options with a point cloud (or saved Gaussians) were
+    ignored without a word; --lod and --threshold were refused already."""
+    ply = Path(__file__).resolve().parents[1] / "data" / "pyvista_ant.ply"
+    assert cli.main(["gauss", str(ply), *option, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{option[0]}: for a volume file; {ply} is a point cloud, one Gaussian a point" in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_earlier_runs_levels_left_in_the_folder_are_named(tmp_path, capsys):
+    """--lod low into a folder where a run of every level wrote medium.png and
+    high.png: those stayed beside the new low.png and gauss.png and read as
+    this run's; a note names them (kept: the user's to remove)."""
+    np.save(tmp_path / "v.npy", np.random.default_rng(4).random((16, 16, 16)).astype(np.float32))
+    base = ["gauss", str(tmp_path / "v.npy"), "--size", "24x24", "--out", str(tmp_path / "o")]
+    assert cli.main(base) == 0
+    assert "earlier run" not in capsys.readouterr().err
+    assert cli.main([*base, "--lod", "low"]) == 0
+    err = capsys.readouterr().err
+    assert f"clvis gauss: note: {tmp_path / 'o'} also holds high.png, medium.png from an earlier run" in err

@@ -275,3 +275,25 @@ def test_iso_of_an_openvdb_grid(tmp_path, capsys):
         assert msg in err and len(err.strip().splitlines()) == 1, err
     assert cli.main(["iso", "--grid", "a", "-o", str(tmp_path / "x")]) == 2
     assert "--grid picks a grid of a .vdb FILE" in capsys.readouterr().err
+
+
+def test_iso_file_help_names_the_vdb_it_reads(capsys):
+    """clvis iso reads an OpenVDB grid (README: clvis iso smoke.vdb --grid
+    density), but its FILE help and description named every volume format
+    but .vdb: they name it now."""
+    assert cli.main(["iso", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    usage = text.split("positional arguments:")[1].split("options:")[0]
+    assert ".vdb" in usage
+    assert "OpenVDB float grid (.vdb" in text.split("positional arguments:")[0]
+
+
+def test_an_earlier_runs_infill_left_in_the_folder_is_named(tmp_path, capsys):
+    """A plain render into a folder where an --infill run wrote iso-infill.png:
+    it stayed beside the new iso.png and read as this run's; a note names it."""
+    base = ["iso", "--size", "64x48", "--out", str(tmp_path)]
+    assert cli.main([*base, "--completion", "0.8", "--no-speculation", "--infill"]) == 0
+    assert "earlier run" not in capsys.readouterr().err
+    assert cli.main(base) == 0
+    err = capsys.readouterr().err
+    assert f"clvis iso: note: {tmp_path} also holds iso-infill.png from an earlier run" in err

@@ -125,6 +125,82 @@ def test_color_by_nifti(tmp_path, capsys):
     assert a.shape[0] > H + images.label_height(W)
 
 
+def test_color_by_a_scan_is_placed_by_the_affines(tmp_path, capsys):
+    """Two scans of a subject rarely share a grid or a box: --color-by
+    stretched the field's grid over FILE's box, whatever their affines said,
+    and coloured the surface by the wrong places (nibabel's anatomical.nii by
+    its resliced, moved copy: mostly the background's 0). Now a NIfTI field
+    is placed by the two affines in the scanner's world. FILE: a ball of
+    radius 8 mm on a 2 mm grid; the field: the world x coordinate, on FILE's
+    own grid (the reference), on a coarser grid over a larger, shifted box,
+    and on a grid turned 30 degrees about z (resampled onto FILE's grid):
+    the values on the surface span the same range."""
+    nibabel = pytest.importorskip("nibabel")
+
+    def scan(name, shape, affine, values):
+        ijk = np.indices(shape).reshape(3, -1)  # (i, j, k): x fastest in the returned [z, y, x]
+        world = (affine[:3, :3] @ ijk + affine[:3, 3:]).reshape(3, *shape)
+        path = tmp_path / name
+        nibabel.save(nibabel.Nifti1Image(values(world).astype(np.float32), affine), path)
+        return str(path)
+
+    ball = np.diag([2.0, 2.0, 2.0, 1.0])
+    ball[:3, 3] = -20.0
+    volume = scan("ball.nii", (21, 21, 21), ball, lambda w: np.sqrt((w**2).sum(axis=0)))
+    coarse = np.diag([3.0, 3.0, 3.0, 1.0])
+    coarse[:3, 3] = (-31.0, -26.0, -29.0)
+    turn = np.eye(4)
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    turn[:3, :3] = [[2 * c, -2 * s, 0], [2 * s, 2 * c, 0], [0, 0, 2]]
+    turn[:3, 3] = (-2.0, -30.0, -22.0)
+    ranges = {}
+    for name, shape, affine in (
+        ("same.nii", (21, 21, 21), ball),
+        ("coarse.nii", (22, 19, 20), coarse),
+        ("turned.nii", (24, 24, 23), turn),
+    ):
+        field = scan(name, shape, affine, lambda w: w[0])
+        rc, out, err = _run(
+            capsys, volume, "--isovalue", "8", "--rate", "32", "--color-by", field,
+            "--size", f"{W}x{H}", "--out", str(tmp_path / ("out-" + name)),
+        )  # fmt: skip
+        assert rc == 0, err
+        assert "the field placed by the files' affines, in the scanner's world" in out, out
+        line = next(ln for ln in out.splitlines() if ln.strip().startswith("colour"))
+        lo, hi = (float(v) for v in line.rsplit("range ", 1)[1].split(".."))
+        ranges[name] = lo, hi
+    lo, hi = ranges["same.nii"]
+    assert hi - lo > 8, ranges  # the ball's visible side spans much of its 16 mm
+    for name in ("coarse.nii", "turned.nii"):
+        np.testing.assert_allclose(ranges[name], ranges["same.nii"], atol=0.05, err_msg=name)
+
+
+def test_color_by_a_scan_whose_affine_is_singular_is_laid_as_one_without(tmp_path, capsys):
+    """A field whose header's sform is all zeros (a broken file nibabel still
+    reads) cannot be placed by its affine: numpy's LinAlgError ended the
+    command with 'error: Singular matrix', naming neither file; the field is
+    laid as a file without an affine is (the same grid here)."""
+    nibabel = pytest.importorskip("nibabel")
+    import struct
+
+    values = np.random.default_rng(2).random((10, 9, 8)).astype(np.float32)
+    volume = tmp_path / "v.nii"
+    nibabel.save(nibabel.Nifti1Image(values, np.diag([2.0, 2.0, 2.0, 1.0])), volume)
+    img = nibabel.Nifti1Image(values, np.diag([2.0, 2.0, 2.0, 1.0]))
+    img.header.set_sform(np.diag([2.0, 2.0, 2.0, 1.0]), code=2)
+    field = tmp_path / "broken.nii"
+    nibabel.save(img, field)
+    raw = bytearray(field.read_bytes())
+    raw[280:328] = struct.pack("<12f", *([0.0] * 12))  # srow_x, srow_y, srow_z: a singular sform
+    field.write_bytes(bytes(raw))
+    rc, out, err = _run(
+        capsys, str(volume), "--isovalue", "0.5", "--color-by", str(field),
+        "--size", f"{W}x{H}", "--out", str(tmp_path / "o"),
+    )  # fmt: skip
+    assert rc == 0, err
+    assert "the field on the same grid" in out, out
+
+
 def test_color_by_a_4d_series_picks_its_volume(tmp_path, capsys):
     """A 4-D --color-by file needs --color-by-volume-index (FILE's
     --volume-index is not the field's, and the error says which option)."""

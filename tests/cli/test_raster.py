@@ -106,6 +106,23 @@ def test_render_depth_filter_option(tmp_path, capsys):
     )
     assert rc == 0, err
     assert not (tmp_path / "off" / "depth-filtered.png").exists()
+    assert "note" not in err  # a folder of this render's PNGs only
+
+
+def test_an_earlier_renders_pngs_left_in_the_folder_are_named(tmp_path, capsys):
+    """A render into a folder where an earlier one wrote depth-filtered.png
+    (or post-lidar.png, another attribute's PNG): those stayed beside this
+    render's, which wrote no such panel, and read as its own; a note names
+    them (they are kept: the user's to remove)."""
+    base = ["--dataset", "terrain", "--points", 3000, "--out", tmp_path, *SMALL]
+    rc, _, err = _render(capsys, *base, "--depth-filter", 2)
+    assert rc == 0, err
+    (tmp_path / "notes.png").write_bytes(b"")  # not one of clvis render's names: not named
+    rc, _, err = _render(capsys, *base, "--depth-filter", 0, "--soft-z", "off")
+    assert rc == 0, err
+    note = f"clvis render: note: {tmp_path} also holds depth-filtered.png, soft-z.png from an earlier run"
+    assert note in err, err
+    assert (tmp_path / "depth-filtered.png").exists() and "notes.png" not in err
 
 
 def test_render_progress(tmp_path, capsys):

@@ -753,26 +753,43 @@ def read_volume_of(args, path):
     return dataclasses.replace(v, spacing=tuple(float(s) for s in spacing))
 
 
-def check_iso_volume(data: np.ndarray, source: str) -> None:
-    """CliError naming `source`, the count and the first sample when the
-    volume holds a NaN or infinite one: the isosurface renderer compresses it
-    with ZFP's fixed-rate mode, which cannot keep them (the library's message
-    named no file); and when an axis has a single sample (a slice: no
-    surface to find between samples)."""
+def check_iso_volume(data: np.ndarray, source: str) -> tuple[np.ndarray, str | None]:
+    """The volume the isosurface renderer is given, and a line saying what
+    was changed in it (None: nothing). A CliError naming `source`, the count
+    and the first sample when the volume holds an infinite sample: the
+    renderer compresses it with ZFP's fixed-rate mode, which cannot keep them
+    (the library's message named no file); and when an axis has a single
+    sample (a slice: no surface to find between samples). NaN samples (a
+    masked scan's outside: SPM and nilearn write them) are drawn as empty:
+    set, in a copy, to a value below every finite sample, so that every
+    isovalue of the data's range finds them outside and the surface closes
+    where the mask cuts it (they were refused: such a scan could not be
+    drawn); `data` itself is returned where it holds no NaN."""
     if data.ndim == 3 and min(data.shape) < 2:
         raise CliError(
             f"{source}: shape {tuple(data.shape)} (z, y, x): an isosurface lies between samples, so it "
             "needs 2 or more along every axis (clvis gauss draws a single slice)"
         )
     bad = ~np.isfinite(data)
-    if bad.any():
-        first = np.unravel_index(int(np.argmax(bad)), data.shape)  # no list of every bad sample
-        where = ", ".join(str(int(i)) for i in first)
-        raise CliError(
-            f"{source}: {int(bad.sum()):,} NaN or infinite samples, the first at [z, y, x] = ({where}): "
-            f"{data[first]} (isosurfaces are rendered from ZFP's fixed-rate compression, which cannot "
-            "keep them)"
-        )
+    if not bad.any():
+        return data, None
+    nan = np.isnan(data)
+    if not (bad & ~nan).any():  # NaN only: a mask's outside
+        lo, hi = finite_range(data, source)
+        fill = np.float32(lo - max(1.0, hi - lo))
+        if np.isfinite(fill):  # (a range too wide for a value below it: refused as before)
+            line = (
+                f"{int(nan.sum()):,} NaN samples (a mask's outside) drawn as empty: set to "
+                f"{float(fill):.6g}, below every sample"
+            )
+            return np.where(nan, fill, data).astype(np.float32, copy=False), line
+    first = np.unravel_index(int(np.argmax(bad)), data.shape)  # no list of every bad sample
+    where = ", ".join(str(int(i)) for i in first)
+    raise CliError(
+        f"{source}: {int(bad.sum()):,} NaN or infinite samples, the first at [z, y, x] = ({where}): "
+        f"{data[first]} (isosurfaces are rendered from ZFP's fixed-rate compression, which cannot "
+        "keep them)"
+    )
 
 
 # host bytes a point of an embedded cloud takes at the peak of making it

@@ -274,9 +274,12 @@ def _load(args):
         v = read_volume_of(args, path)
         data = np.asarray(v.data, np.float32)
         value_range = finite_range(data, str(path))
-        check_iso_volume(data, str(path))
+        level = otsu_level(data)  # of the finite samples, before any NaN is set
+        data, nan = check_iso_volume(data, str(path))
         source = str(path) if v.array is None else f"{path} (array {v.array})"
-        return data, v.spacing, v.origin, otsu_level(data), value_range, source, v.affine
+        if nan is not None:
+            print(f"clvis iso: {path}: {nan}", file=sys.stderr)
+        return data, v.spacing, v.origin, level, value_range, source, v.affine
     if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index", "array")):
         raise CliError("--shape, --dtype, --volume-index and --array are for a volume FILE")
     name = args.dataset or "marschner-lobb"
@@ -316,7 +319,9 @@ def _load_vdb(args, path: Path):
     if data.size == 0:
         raise CliError(f"{path}: grid {v.array!r} has no active voxel")
     spacing = v.spacing if args.spacing is None else tuple(float(s) for s in reversed(args.spacing))
-    check_iso_volume(data, str(path))
+    data, nan = check_iso_volume(data, str(path))
+    if nan is not None:
+        print(f"clvis iso: {path}: {nan}", file=sys.stderr)
     kind = f", a {grid_class}" if grid_class else ""
     return (
         data,

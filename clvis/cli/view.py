@@ -218,8 +218,10 @@ def load_scene(args: argparse.Namespace) -> Scene:
         _fits(args, volume, str(path))
         if volume:
             data, spacing, origin = read_volume_file(args, path)
-            check_iso_volume(data, str(path))
-            iso = args.isovalue if args.isovalue is not None else otsu_level(data)
+            iso = args.isovalue if args.isovalue is not None else otsu_level(data)  # of the finite ones
+            data, nan = check_iso_volume(data, str(path))
+            if nan is not None:
+                print(f"clvis view: {path}: {nan}", file=sys.stderr)
             return VolumeScene(
                 data, spacing, origin, iso, args.rate or RATE, description=str(path), model_dir=args.model_dir
             )

@@ -105,6 +105,38 @@ def test_volume_with_nan_samples_names_the_file(tmp_path, capsys, command):
     assert not (tmp_path / "o").exists()
 
 
+def test_a_masked_scan_with_nan_outside_is_drawn(tmp_path, capsys):
+    """NaN samples alone (a masked scan's outside, as SPM and nilearn write
+    it; they were refused, so such a scan could not be drawn) are drawn as
+    empty: set below every sample, said on stderr; the picture is that of
+    the same volume with its outside at that value, the default isovalue
+    Otsu's of the finite samples. clvis view draws it too."""
+    pytest.importorskip("tornado", reason="the view extra (tornado) is not installed")
+    z, y, x = np.mgrid[:24, :24, :24]
+    r = np.sqrt((x - 11.5) ** 2 + (y - 11.5) ** 2 + (z - 11.5) ** 2)
+    v = (2.0 + np.sin(x / 3.0) + np.cos(y / 4.0)).astype(np.float32)  # tissue: 0.1 .. 4
+    v[r > 9] = np.nan  # the mask's outside
+    np.save(tmp_path / "masked.npy", v)
+    lo, hi = float(np.nanmin(v)), float(np.nanmax(v))
+    np.save(tmp_path / "filled.npy", np.where(np.isnan(v), np.float32(lo - max(1.0, hi - lo)), v))
+    from clvis.io.volumes import otsu_level
+
+    iso = f"{otsu_level(v):.9g}"
+    for name in ("masked", "filled"):
+        argv = ["iso", str(tmp_path / f"{name}.npy"), "--size", "48x48", "--no-labels", "--isovalue", iso]
+        assert cli.main([*argv, "--out", str(tmp_path / name)]) == 0
+    err = capsys.readouterr().err
+    assert f"clvis iso: {tmp_path / 'masked.npy'}: {int(np.isnan(v).sum()):,} NaN samples (a mask's outside)" in err
+    with Image.open(tmp_path / "masked" / "iso.png") as a, Image.open(tmp_path / "filled" / "iso.png") as b:
+        a, b = np.asarray(a), np.asarray(b)
+    np.testing.assert_array_equal(a, b)
+    assert (np.abs(a[..., :3].astype(int) - images.BACKGROUND).sum(axis=2) > 30).mean() > 0.2  # a ball drawn
+    assert cli.main(["iso", str(tmp_path / "masked.npy"), "--size", "32x32", "--out", str(tmp_path / "d")]) == 0
+    assert f"isovalue {otsu_level(v):.6g}" in capsys.readouterr().out  # Otsu's of the finite samples
+    assert cli.main(["view", str(tmp_path / "masked.npy"), "--size", "32x32", "--measure", "iso"]) == 0
+    assert "NaN samples (a mask's outside) drawn as empty" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("command", ["iso", "view"])
 def test_a_single_slice_names_the_file_and_what_draws_it(tmp_path, capsys, command):
     if command == "view":

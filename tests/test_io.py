@@ -509,6 +509,27 @@ def test_las_without_colors(tmp_path):
     np.testing.assert_array_equal(pc.origin, [1, 3, 5])
 
 
+def test_las_extra_bytes_of_several_values_are_attributes(tmp_path):
+    """An extra-bytes field of 3 (or 2) values a point (laspy's extrabytes.las:
+    "Colors", "Flags") was dropped without a word: one attribute a value now,
+    named as a VTK array's components (_x, _y, _z; _0, _1)."""
+    path = tmp_path / "e.las"
+    header = laspy.LasHeader(point_format=1, version="1.4")
+    header.add_extra_dims(
+        [laspy.ExtraBytesParams(name="Colors", type="3u2"), laspy.ExtraBytesParams(name="Flags", type="2f4")]
+    )
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = [1.0, 2.0], [3.0, 4.0], [5.0, 6.0]
+    las.Colors = np.array([[1, 2, 3], [4, 5, 6]], np.uint16)
+    las.Flags = np.array([[0.5, 1.5], [2.5, 3.5]], np.float32)
+    las.write(str(path))
+    pc = read_points(path)
+    for k, col in zip("xyz", ([1, 4], [2, 5], [3, 6]), strict=True):
+        np.testing.assert_array_equal(pc.attributes[f"Colors_{k}"], col)
+    np.testing.assert_array_equal(pc.attributes["Flags_1"], [1.5, 3.5])
+    assert "Colors" not in pc.attributes
+
+
 @pytest.mark.parametrize("ext", ["las", "laz"])
 def test_las_truncated(tmp_path, ext):
     path = tmp_path / f"good.{ext}"

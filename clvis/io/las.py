@@ -424,7 +424,12 @@ def _read_las(path: Path) -> PointCloud:
         if name in ("X", "Y", "Z", "red", "green", "blue"):
             continue
         a = np.asarray(las[name])
-        if a.ndim != 1:  # array-valued extra bytes
+        if a.ndim == 2:  # an array-valued extra bytes field (3 colours, a normal): one attribute a value
+            # (they were dropped without a word), named as a VTK array's components are
+            suffixes = "xyz" if a.shape[1] == 3 else [str(j) for j in range(a.shape[1])]
+            attributes.update({f"{name}_{s}": np.ascontiguousarray(a[:, j]) for j, s in enumerate(suffixes)})
+            continue
+        if a.ndim != 1:
             continue
         if name == "gps_time" and n:
             a = a - a.min()

@@ -90,8 +90,9 @@ composited, the nearest surface in each pixel, each in its own colour
 (--surface-color, once per isovalue; default the renderer's sand, then
 matplotlib's tab10). --color-by FIELD colours the surfaces by a second volume
 (a file as above: two NIfTI, MGH or Analyze scans placed by their affines in
-the scanner's world, whatever their grids; else on the same grid, or any grid
-stretched over the same box), sampled on the device where each ray hit, through --colormap over --range,
+the scanner's world, whatever their grids, two VTK images by their spacing and
+origin; else on the same grid, or any grid stretched over the same box),
+sampled on the device where each ray hit, through --colormap over --range,
 with a colour bar under the image. A constant volume has no isosurface: it
 is reported and no surface is drawn. The fit view frames the voxels the
 isosurfaces pass, not the whole volume (on Dask workers: the volume's box,
@@ -150,7 +151,8 @@ def add_parser(sub: argparse._SubParsersAction[Parser]) -> Parser:
         default=None,
         metavar="FIELD",
         help="colour the surface by a second volume file (read as FILE is; two scans placed by "
-        "their affines in the scanner's world, else the same grid, or stretched over the same box), "
+        "their affines in the scanner's world, two VTK images by their spacing and origin, else the "
+        "same grid, or stretched over the same box), "
         "sampled where each ray hit, with a colour bar",
     )
     add_volume_index(
@@ -279,7 +281,7 @@ def _load(args):
         source = str(path) if v.array is None else f"{path} (array {v.array})"
         if nan is not None:
             print(f"clvis iso: {path}: {nan}", file=sys.stderr)
-        return data, v.spacing, v.origin, level, value_range, source, v.affine
+        return data, v.spacing, v.origin, level, value_range, source, _world(v)
     if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index", "array")):
         raise CliError("--shape, --dtype, --volume-index and --array are for a volume FILE")
     name = args.dataset or "marschner-lobb"
@@ -944,7 +946,22 @@ def _field(args) -> tuple[np.ndarray, np.ndarray | None]:
         raise CliError(
             f"--color-by: {path}: expected a 3-D volume with 2 samples per axis or more, got {data.shape}"
         )
-    return np.ascontiguousarray(data, np.float32), v.affine
+    return np.ascontiguousarray(data, np.float32), _world(v)
+
+
+def _world(v) -> np.ndarray | None:
+    """(4, 4) voxel (i, j, k, 1) -> world of a volume read from a file: a
+    NIfTI, MGH or Analyze file's affine; a VTK image's (its `array` named)
+    own spacing and origin (axis-aligned); None for a file that places its
+    samples nowhere (.npy, .raw: spacing 1 and origin 0 unless told)."""
+    if v.affine is not None:
+        return v.affine
+    if v.array is None:
+        return None
+    m = np.eye(4)
+    m[:3, :3] = np.diag(np.asarray(v.spacing, np.float64)[::-1])
+    m[:3, 3] = np.asarray(v.origin, np.float64)
+    return m
 
 
 def _voxel_to_voxel(affine: np.ndarray | None, faffine: np.ndarray | None) -> np.ndarray | None:
@@ -968,7 +985,7 @@ def _placed(field, affine, shape) -> str:
     """How --color-by's field is laid over the rendered volume, in words
     (the colour line of the summary): see _field_grid."""
     if field is not None and _voxel_to_voxel(affine, field[1]) is not None:
-        return "placed by the files' affines, in the scanner's world"
+        return "placed by the files' affines (a VTK image's spacing and origin), in the world"
     if field is not None and field[0].shape == tuple(shape):
         return "on the same grid"
     return "stretched over the volume's box"

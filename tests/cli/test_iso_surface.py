@@ -165,7 +165,9 @@ def test_color_by_a_scan_is_placed_by_the_affines(tmp_path, capsys):
             "--size", f"{W}x{H}", "--out", str(tmp_path / ("out-" + name)),
         )  # fmt: skip
         assert rc == 0, err
-        assert "the field placed by the files' affines, in the scanner's world" in out, out
+        assert (
+            "the field placed by the files' affines (a VTK image's spacing and origin), in the world" in out
+        )
         line = next(ln for ln in out.splitlines() if ln.strip().startswith("colour"))
         lo, hi = (float(v) for v in line.rsplit("range ", 1)[1].split(".."))
         ranges[name] = lo, hi
@@ -173,6 +175,54 @@ def test_color_by_a_scan_is_placed_by_the_affines(tmp_path, capsys):
     assert hi - lo > 8, ranges  # the ball's visible side spans much of its 16 mm
     for name in ("coarse.nii", "turned.nii"):
         np.testing.assert_allclose(ranges[name], ranges["same.nii"], atol=0.05, err_msg=name)
+
+
+def test_color_by_a_vtk_image_is_placed_by_its_spacing_and_origin(tmp_path, capsys):
+    """Two VTK images (.vti) of one region on other grids: the field was
+    stretched over FILE's box whatever their spacing and origin said; it is
+    now placed by them. FILE: a ball of radius 8 on a grid of 2 from -20; the
+    field: the world x coordinate on FILE's grid and on a grid of 3 over a
+    larger, shifted box: the values on the surface span the same range."""
+    vtk = pytest.importorskip("vtk", reason="vtk is in the test extra")
+    from vtk.util import numpy_support
+
+    def image(name, shape, step, origin, values):
+        nz, ny, nx = shape
+        z, y, x = np.meshgrid(
+            *(o + step * np.arange(n) for o, n in zip(origin[::-1], shape, strict=True)), indexing="ij"
+        )
+        img = vtk.vtkImageData()
+        img.SetDimensions(nx, ny, nz)
+        img.SetSpacing(step, step, step)
+        img.SetOrigin(*origin)
+        a = numpy_support.numpy_to_vtk(values(x, y, z).astype(np.float32).ravel(), deep=True)
+        a.SetName("v")
+        img.GetPointData().SetScalars(a)
+        w = vtk.vtkXMLImageDataWriter()
+        w.SetFileName(str(tmp_path / name))
+        w.SetInputData(img)
+        assert w.Write() == 1
+        return str(tmp_path / name)
+
+    volume = image(
+        "ball.vti", (21, 21, 21), 2.0, (-20.0, -20.0, -20.0), lambda x, y, z: np.sqrt(x**2 + y**2 + z**2)
+    )
+    ranges = {}
+    for name, shape, step, origin in (
+        ("same.vti", (21, 21, 21), 2.0, (-20.0, -20.0, -20.0)),
+        ("coarse.vti", (20, 19, 22), 3.0, (-31.0, -26.0, -29.0)),
+    ):
+        field = image(name, shape, step, origin, lambda x, y, z: x)
+        rc, out, err = _run(
+            capsys, volume, "--isovalue", "8", "--rate", "32", "--color-by", field,
+            "--size", f"{W}x{H}", "--out", str(tmp_path / ("out-" + name)),
+        )  # fmt: skip
+        assert rc == 0, err
+        assert "placed by the files' affines (a VTK image's spacing and origin)" in out, out
+        line = next(ln for ln in out.splitlines() if ln.strip().startswith("colour"))
+        ranges[name] = tuple(float(v) for v in line.rsplit("range ", 1)[1].split(".."))
+    assert ranges["same.vti"][1] - ranges["same.vti"][0] > 8, ranges
+    np.testing.assert_allclose(ranges["coarse.vti"], ranges["same.vti"], atol=0.05)
 
 
 def test_color_by_a_scan_whose_affine_is_singular_is_laid_as_one_without(tmp_path, capsys):

@@ -55,6 +55,16 @@ def _k(k) -> int:
     return k
 
 
+def _lone_sigma(positions: np.ndarray) -> float:
+    """The sigma of a cloud of one distinct point (copies of it), which has
+    no spacing to size its Gaussian by (it was 0: a Gaussian of no width,
+    a blank picture): the smallest extent a camera frames around it
+    (clvis.camera.min_extent), so that the view fitted to it shows a dot."""
+    from ..camera import min_extent
+
+    return min_extent(np.asarray(positions[0], np.float64))
+
+
 def knn_mean_distance(positions: npt.ArrayLike, k: int = 4) -> np.ndarray:
     """(N,) float32: each point's mean distance to its k nearest other points
     (scipy.spatial.cKDTree), copies of a point counted as one point. Fewer
@@ -187,7 +197,8 @@ def gaussians_from_points(
         (velocity, two normals); a point with zero velocity gets scale * (1, 1, 1).
         None: isotropic, sigma = scale, or (scale None) the mean distance to
         the k nearest neighbours (1..MAX_KNN), clamped to the
-        KNN_CLAMP_PERCENTILE-th percentile of those distances (see the module doc).
+        KNN_CLAMP_PERCENTILE-th percentile of those distances (see the module doc);
+        a cloud of one distinct point: clvis.camera.min_extent around it.
     scale : float or (N,) base sigma. For anisotropic Gaussians it defaults to
         the median k-nearest-neighbour distance: across the flow a Gaussian
         is as wide as the points are apart (NARVis's GR), `stretch` times
@@ -277,7 +288,7 @@ def gaussians_from_points(
             # the cross-section keeps the point spacing (it was the spacing /
             # stretch: needles 1/250 of the spacing thick, a blank picture)
             base = np.float64(np.median(knn_mean_distance(positions, k))) if n else 0.0
-            base = np.full(n, base)
+            base = np.full(n, base if base > 0 or not n else _lone_sigma(positions))
         else:
             base = _per_point("scale", scale, n)
         moving = np.linalg.norm(vel, axis=1) > 0
@@ -290,6 +301,8 @@ def gaussians_from_points(
             sigma = knn_mean_distance(positions, k).astype(np.float64)
             if n:  # knn_sigma's clamp, in float64
                 sigma = np.minimum(sigma, np.percentile(sigma, KNN_CLAMP_PERCENTILE))
+            if n and not sigma.any():  # one distinct point: no spacing to take
+                sigma = np.full(n, _lone_sigma(positions))
         else:
             sigma = _per_point("scale", scale, n)
         scales = np.repeat(np.asarray(sigma, np.float64)[:, None], 3, axis=1)

@@ -607,8 +607,9 @@ def test_gauss_says_when_the_picture_is_nearly_empty(tmp_path, capsys):
     assert "clvis gauss: note: the picture is nearly empty: 1 of 1,024 pixels drawn at 32x32" in err
     assert "a larger --size, a closer view" in err and "--lod low" in err
     # a point cloud's Gaussians have no level of detail: --lod is refused for them, so not offered
-    (tmp_path / "one.xyz").write_text("1 2 3\n")
-    assert cli.main(["gauss", str(tmp_path / "one.xyz"), *small, str(tmp_path / "c")]) == 0
+    (tmp_path / "few.xyz").write_text("0 0 0\n1 0 0\n0 1 0\n")
+    away = ["--eye", "0.5,0.5,5", "--target", "0.5,0.5,10"]  # the camera turned away from them
+    assert cli.main(["gauss", str(tmp_path / "few.xyz"), *away, *small, str(tmp_path / "c")]) == 0
     err = capsys.readouterr().err
     assert "clvis gauss: note: the picture is empty" in err and "--lod" not in err, err
     v[40:90, 40:90, 40:90] = 1

@@ -284,5 +284,23 @@ def test_knn_degenerate_clouds(f):
     # distance 0 without being copies (the square underflows): merged once, not forever
     tiny = np.array([[0.0, 0.0, 0.0], [1e-200, 0.0, 0.0], [1.0, 1.0, 1.0]])
     assert np.isfinite(f(tiny, 1)).all()
-    g = gaussians_from_points(np.ones((10, 3)))
-    assert np.isfinite(g.scales).all() and (np.asarray(g.scales) == 0).all()
+    g = gaussians_from_points(np.ones((10, 3)))  # one distinct point: a width a view shows (next test)
+    assert np.isfinite(g.scales).all() and (np.asarray(g.scales) > 0).all()
+
+
+def test_one_distinct_point_gets_a_gaussian_a_view_shows():
+    """One point, or copies of one point, have no spacing to size their
+    Gaussians by: sigma was 0, a Gaussian of no width, and clvis gauss drew
+    an empty picture. Now sigma is the smallest extent a camera frames
+    around the point (clvis.camera.min_extent), isotropic and along a
+    velocity alike; a cloud of two distinct points keeps its spacing."""
+    from clvis.camera import min_extent
+
+    one = np.array([[1.0, 2.0, 3.0]], np.float32)
+    for cloud in (one, np.repeat(one, 50, axis=0)):
+        g = gaussians_from_points(cloud)
+        np.testing.assert_allclose(g.scales, min_extent(cloud[0]), rtol=1e-6)
+        v = gaussians_from_points(cloud, velocity=np.tile([1.0, 0.0, 0.0], (len(cloud), 1)))
+        assert (v.scales > 0).all()
+    two = gaussians_from_points(np.array([[0, 0, 0], [2, 0, 0]], np.float32))
+    np.testing.assert_allclose(two.scales, 2.0)

@@ -126,12 +126,17 @@ def test_a_masked_scan_with_nan_outside_is_drawn(tmp_path, capsys):
         argv = ["iso", str(tmp_path / f"{name}.npy"), "--size", "48x48", "--no-labels", "--isovalue", iso]
         assert cli.main([*argv, "--out", str(tmp_path / name)]) == 0
     err = capsys.readouterr().err
-    assert f"clvis iso: {tmp_path / 'masked.npy'}: {int(np.isnan(v).sum()):,} NaN samples (a mask's outside)" in err
+    assert (
+        f"clvis iso: {tmp_path / 'masked.npy'}: {int(np.isnan(v).sum()):,} NaN samples (a mask's outside)"
+        in err
+    )
     with Image.open(tmp_path / "masked" / "iso.png") as a, Image.open(tmp_path / "filled" / "iso.png") as b:
         a, b = np.asarray(a), np.asarray(b)
     np.testing.assert_array_equal(a, b)
     assert (np.abs(a[..., :3].astype(int) - images.BACKGROUND).sum(axis=2) > 30).mean() > 0.2  # a ball drawn
-    assert cli.main(["iso", str(tmp_path / "masked.npy"), "--size", "32x32", "--out", str(tmp_path / "d")]) == 0
+    assert (
+        cli.main(["iso", str(tmp_path / "masked.npy"), "--size", "32x32", "--out", str(tmp_path / "d")]) == 0
+    )
     assert f"isovalue {otsu_level(v):.6g}" in capsys.readouterr().out  # Otsu's of the finite samples
     assert cli.main(["view", str(tmp_path / "masked.npy"), "--size", "32x32", "--measure", "iso"]) == 0
     assert "NaN samples (a mask's outside) drawn as empty" in capsys.readouterr().err

@@ -253,6 +253,17 @@ def test_names_in_another_case_and_diffuse_colours(tmp_path):
     both = np.zeros(n, dtype=[("x", "f4"), ("y", "f4"), ("z", "f4"), ("X", "f4")])
     plyfile.PlyData([plyfile.PlyElement.describe(both, "vertex")]).write(str(tmp_path / "both.ply"))
     assert read_points(tmp_path / "both.ply").attribute_names == ("X",)
+    # a lone name in another case is an attribute as it was (an amplitude "A" beside r, g, b
+    # became the alpha: float colours refused; "R" alone was renamed "r")
+    amp = np.zeros(n, dtype=[(k, "f4") for k in ("x", "y", "z", "r", "g", "b", "A")])
+    amp["A"] = 7.5
+    np.save(tmp_path / "amp.npy", amp)
+    c = read_points(tmp_path / "amp.npy")
+    assert c.attribute_names == ("A",) and (c.colors[:, 3] == 255).all()
+    lone = np.zeros(n, dtype=[(k, "f4") for k in ("X", "Y", "Z", "R", "Radius")])
+    np.save(tmp_path / "lone.npy", lone)
+    c = read_points(tmp_path / "lone.npy")
+    assert c.attribute_names == ("R", "Radius") and c.colors is None and c.radius is None
 
 
 def test_ply_double_coordinates_keep_an_origin(tmp_path):
@@ -455,6 +466,19 @@ def test_las_round_trip(tmp_path, ext, point_format):
     assert pc.attributes["intensity"].dtype == np.float32
     np.testing.assert_array_equal(pc.attributes["gps_time"], np.arange(len(xyz)) * np.float32(0.25))
     assert not {"X", "Y", "Z", "red", "green", "blue"} & set(pc.attribute_names)
+
+
+def test_few_finite_points_among_many_nan_rows_keep_their_origin(tmp_path):
+    """Two finite points among 2,000,000 NaN rows: the sample the bulk is
+    found on (every k-th row) held no finite one, and read_points escaped
+    with numpy-side 'ValueError: bounds: the cloud has no finite points';
+    the origin is the finite points' minimum, as before the bulk."""
+    q = np.full((2_000_002, 3), np.nan)
+    q[1], q[3] = [6e6, 1.0, 1.0], [6e6 + 5, 2.0, 2.0]
+    np.save(tmp_path / "few.npy", q)
+    pc = read_points(tmp_path / "few.npy")
+    np.testing.assert_array_equal(pc.origin, [6e6, 1.0, 1.0])
+    assert len(pc) == 2_000_002
 
 
 def test_stray_records_far_away_do_not_cost_the_bulk_its_precision(tmp_path):

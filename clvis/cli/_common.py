@@ -776,8 +776,13 @@ def check_iso_volume(data: np.ndarray, source: str) -> tuple[np.ndarray, str | N
     nan = np.isnan(data)
     if not (bad & ~nan).any():  # NaN only: a mask's outside
         lo, hi = finite_range(data, source)
-        fill = np.float32(lo - max(1.0, hi - lo))
-        if np.isfinite(fill):  # (a range too wide for a value below it: refused as before)
+        # just below the lowest sample, by a thousandth of the range: ZFP's fixed-rate
+        # blocks along the mask's edge keep the data's own range (a whole range below,
+        # they held twice it and drew the surface there in blocks)
+        fill = np.float32(lo - 1e-3 * (hi - lo))
+        if not fill < np.float32(lo):  # a range of 0, or too small for float32 to step by
+            fill = np.nextafter(np.float32(lo), np.float32(-np.inf))
+        if np.isfinite(fill):  # (-inf: the lowest float32, nothing below it: refused as before)
             line = (
                 f"{int(nan.sum()):,} NaN samples (a mask's outside) drawn as empty: set to "
                 f"{float(fill):.6g}, below every sample"

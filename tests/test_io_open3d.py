@@ -135,3 +135,15 @@ def test_a_renderer_given_an_open3d_cloud_names_from_open3d():
             TypeError, match=r"an Open3D PointCloud: clvis.from_open3d\(it\) gives the PointCloud"
         ):
             call()
+
+
+def test_pure_colours_open3d_writes_as_xyzrgb(tmp_path):
+    """A cloud painted one pure colour (segmentation labels, paint_uniform_color):
+    Open3D writes '1.0000000000 0.0000000000 0.0000000000', which read as
+    8-bit (1, 0, 0), near black; it is red, as from_open3d and the .ply say."""
+    p = _cloud(50)
+    p.paint_uniform_color([1.0, 0.0, 0.0])
+    assert o3d.io.write_point_cloud(str(tmp_path / "red.xyzrgb"), p)
+    got = clvis.read_points(tmp_path / "red.xyzrgb").colors[:, :3]
+    np.testing.assert_array_equal(got, clvis.from_open3d(p).colors[:, :3])
+    assert (got == [255, 0, 0]).all()

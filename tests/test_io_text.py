@@ -149,6 +149,9 @@ def test_pts_xyzn_xyzrgb_by_their_suffix(tmp_path):
     np.testing.assert_array_equal(c.colors[:, :3], [[255, 128, 0], [0, 0, 51]])
     c = read_points(_write(tmp_path / "e.xyzrgb", "1 2 3 255 128 0\n"))
     np.testing.assert_array_equal(c.colors[:, :3], [[255, 128, 0]])
+    # pure colours, as Open3D writes them (paint_uniform_color([1, 0, 0])): red, not near black
+    c = read_points(_write(tmp_path / "f.xyzrgb", "1 2 3 1.0000000000 0.0000000000 0.0000000000\n"))
+    np.testing.assert_array_equal(c.colors[:, :3], [[255, 0, 0]])
 
 
 def _pcd_header(fields, sizes, types, n, data, counts=None):

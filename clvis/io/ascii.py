@@ -176,7 +176,8 @@ def _read_ascii(path: Path) -> PointCloud:
         raise DataError(f"{path}: {ncol} columns; a point needs x, y, z")
     if len(set(names)) != len(names):
         raise DataError(f"{path}: the header names a column twice: {', '.join(names)}")
-    return _with_origin(path, {n: data[:, k] for k, n in enumerate(names)})
+    # Open3D writes a .xyzrgb's colours as fractions, pure ones too (1 0 0: red)
+    return _with_origin(path, {n: data[:, k] for k, n in enumerate(names)}, fractions=suffix == ".xyzrgb")
 
 
 def _comments(path: Path, start: int) -> str | list[str]:
@@ -213,9 +214,11 @@ def _default_names(data: np.ndarray) -> list[str]:
     return ["x", "y", "z", *(f"column_{k + 1}" for k in range(3, n))]
 
 
-def _with_origin(path: Path, columns: dict) -> PointCloud:
+def _with_origin(path: Path, columns: dict, fractions: bool = False) -> PointCloud:
     """A cloud from float64 columns: x, y, z relative to their finite minimum
-    (the origin), colours as 8-bit, the rest float32 attributes."""
+    (the origin), colours as 8-bit, the rest float32 attributes. Colours of
+    at most 1 are fractions where one is not a whole number, or where
+    `fractions` says so (a .xyzrgb: 1 0 0 is red, not 1/255 of it)."""
     for c in "xyz":
         if c not in columns:
             raise DataError(f"{path}: no {c} column (found {', '.join(columns)})")
@@ -229,7 +232,7 @@ def _with_origin(path: Path, columns: dict) -> PointCloud:
             rgb = np.stack([columns[c] for c in names], axis=1)
             if not (np.isfinite(rgb).all() and (rgb >= 0).all() and (rgb <= 65535).all()):
                 raise DataError(f"{path}: colours must be finite numbers in 0..255 (or 0..1, or 0..65535)")
-            if rgb.size and rgb.max() <= 1 and not (rgb == np.round(rgb)).all():
+            if rgb.size and rgb.max() <= 1 and (fractions or not (rgb == np.round(rgb)).all()):
                 rgb = rgb * 255  # colours as fractions
             elif rgb.size and rgb.max() > 255:
                 rgb = rgb / 257  # 16-bit colours

@@ -261,8 +261,8 @@ _EARLIER_PNG = re.compile(r"iso-(infill|complete)\.png")
 
 def _load(args):
     """(volume, spacing, origin, default isovalue, (min, max), description,
-    the affine of a NIfTI, MGH or Analyze file (voxel to scanner world), else
-    None)."""
+    its world (_world: a NIfTI, MGH or Analyze file's voxel to scanner world,
+    a VTK image's to its own), else None)."""
     from .. import datasets
 
     if args.file is not None:
@@ -920,9 +920,10 @@ def _empty(w: int, h: int) -> IsoImage:
     )
 
 
-def _field(args) -> tuple[np.ndarray, np.ndarray | None]:
-    """--color-by's volume, [z, y, x] float32, and its affine (a NIfTI, MGH
-    or Analyze file's voxel to scanner world, else None)."""
+def _field(args) -> tuple[np.ndarray, tuple[str, np.ndarray] | None]:
+    """--color-by's volume, [z, y, x] float32, and its world (_world: a
+    NIfTI, MGH or Analyze file's voxel to scanner world, a VTK image's to
+    its own, else None)."""
     path = Path(args.color_by)
     if not path.exists():
         raise CliError(f"--color-by: {path}: no such file")
@@ -949,29 +950,34 @@ def _field(args) -> tuple[np.ndarray, np.ndarray | None]:
     return np.ascontiguousarray(data, np.float32), _world(v)
 
 
-def _world(v) -> np.ndarray | None:
-    """(4, 4) voxel (i, j, k, 1) -> world of a volume read from a file: a
-    NIfTI, MGH or Analyze file's affine; a VTK image's (its `array` named)
-    own spacing and origin (axis-aligned); None for a file that places its
-    samples nowhere (.npy, .raw: spacing 1 and origin 0 unless told)."""
+def _world(v) -> tuple[str, np.ndarray] | None:
+    """(its world, (4, 4) voxel (i, j, k, 1) -> that world) of a volume read
+    from a file: "scanner" and a NIfTI, MGH or Analyze file's affine; "vtk"
+    and a VTK image's (its `array` named) own spacing and origin
+    (axis-aligned); None for a file that places its samples nowhere (.npy,
+    .raw: spacing 1 and origin 0 unless told). Two files are placed by their
+    worlds only where it is the same one (a scanner's RAS and a VTK image's
+    own frame are not)."""
     if v.affine is not None:
-        return v.affine
+        return "scanner", v.affine
     if v.array is None:
         return None
     m = np.eye(4)
     m[:3, :3] = np.diag(np.asarray(v.spacing, np.float64)[::-1])
     m[:3, 3] = np.asarray(v.origin, np.float64)
-    return m
+    return "vtk", m
 
 
-def _voxel_to_voxel(affine: np.ndarray | None, faffine: np.ndarray | None) -> np.ndarray | None:
+def _voxel_to_voxel(
+    world: tuple[str, np.ndarray] | None, fworld: tuple[str, np.ndarray] | None
+) -> np.ndarray | None:
     """(4, 4): the rendered volume's voxel (i, j, k, 1) to the field's, through
-    the scanner's world; None where either has no affine, or one that is
-    singular or not finite (a broken header: the field is then laid as a file
-    without one is)."""
-    if affine is None or faffine is None:
+    their world (_world); None where either has none, they are not the same
+    world (a scan and a VTK image), or a matrix is singular or not finite (a
+    broken header: the field is then laid as a file without one is)."""
+    if world is None or fworld is None or world[0] != fworld[0]:
         return None
-    a, f = np.asarray(affine, np.float64), np.asarray(faffine, np.float64)
+    a, f = np.asarray(world[1], np.float64), np.asarray(fworld[1], np.float64)
     if a.shape != (4, 4) or f.shape != (4, 4) or not (np.isfinite(a).all() and np.isfinite(f).all()):
         return None
     try:
@@ -992,8 +998,8 @@ def _placed(field, affine, shape) -> str:
 
 
 def _field_grid(
-    field: tuple[np.ndarray, np.ndarray | None],
-    grid: tuple[tuple[int, ...], Sequence[float], Sequence[float], np.ndarray | None],
+    field: tuple[np.ndarray, tuple[str, np.ndarray] | None],
+    grid: tuple[tuple[int, ...], Sequence[float], Sequence[float], tuple[str, np.ndarray] | None],
 ) -> tuple[np.ndarray, tuple[float, ...], tuple[float, ...]]:
     """(samples, spacing (dz, dy, dx), origin (x, y, z)) of --color-by's
     field in the rendered volume's frame. Both files with an affine (NIfTI,
@@ -1034,13 +1040,13 @@ def _coloured(
     args: argparse.Namespace,
     shots: list[IsoImage],
     cam: Camera | None,
-    field: tuple[np.ndarray, np.ndarray | None] | None,
-    grid: tuple[tuple[int, ...], Sequence[float], Sequence[float], np.ndarray | None],
+    field: tuple[np.ndarray, tuple[str, np.ndarray] | None] | None,
+    grid: tuple[tuple[int, ...], Sequence[float], Sequence[float], tuple[str, np.ndarray] | None],
 ) -> tuple[IsoImage, np.ndarray | None, tuple[float, float] | None]:
     """(the shots composited, each surface in its colour or --color-by's,
     the colour bar or None, the colormap's range or None). grid: the
-    rendered volume's (shape [z, y, x], spacing (dz, dy, dx), origin, affine
-    or None); field: _field's."""
+    rendered volume's (shape [z, y, x], spacing (dz, dy, dx), origin, world
+    (_world) or None); field: _field's."""
     from .. import images, iso
     from ..colormap import value_range
 

@@ -223,6 +223,19 @@ def test_color_by_a_vtk_image_is_placed_by_its_spacing_and_origin(tmp_path, caps
         ranges[name] = tuple(float(v) for v in line.rsplit("range ", 1)[1].split(".."))
     assert ranges["same.vti"][1] - ranges["same.vti"][0] > 8, ranges
     np.testing.assert_allclose(ranges["coarse.vti"], ranges["same.vti"], atol=0.05)
+    # a scan beside a VTK image: a scanner's RAS world and the image's own frame are not one
+    # world (they were placed by both as if they were): laid as files without one are
+    nibabel = pytest.importorskip("nibabel")
+    ball = np.sqrt(sum(g**2 for g in np.meshgrid(*[np.arange(21) * 2.0 - 20] * 3, indexing="ij")))
+    nibabel.save(
+        nibabel.Nifti1Image(ball.astype(np.float32), np.diag([2.0, 2.0, 2.0, 1.0])), tmp_path / "b.nii"
+    )
+    rc, out, err = _run(
+        capsys, str(tmp_path / "b.nii"), "--isovalue", "8", "--color-by", str(tmp_path / "same.vti"),
+        "--size", f"{W}x{H}", "--out", str(tmp_path / "mixed"),
+    )  # fmt: skip
+    assert rc == 0, err
+    assert "the field on the same grid" in out, out
 
 
 def test_color_by_a_scan_whose_affine_is_singular_is_laid_as_one_without(tmp_path, capsys):

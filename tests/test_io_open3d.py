@@ -79,6 +79,10 @@ def test_what_it_refuses():
     with pytest.raises(DataError, match=r"Open3D PointCloud: colors must be finite numbers in 0..1"):
         clvis.from_open3d(p)
     assert len(clvis.from_open3d(o3d.geometry.PointCloud())) == 0
+    assert len(clvis.from_open3d(o3d.t.geometry.PointCloud())) == 0  # was "no (N, 3) positions"
+    t = o3d.t.geometry.PointCloud(o3d.core.Tensor(np.zeros((2, 3), np.float32)))
+    t.point.colors = o3d.core.Tensor(np.array([[65535, 0, 257], [514, 65535, 0]], np.uint16))
+    np.testing.assert_array_equal(clvis.from_open3d(t).colors[:, :3], [[255, 0, 1], [2, 255, 0]])  # 16-bit
 
 
 @pytest.mark.parametrize(

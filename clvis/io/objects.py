@@ -184,6 +184,8 @@ def from_open3d(geometry: Any) -> PointCloud:
             f"(their points or vertices){hint}"
         )
     xyz = columns.pop("positions", None)
+    if xyz is None and tensor and not columns:  # an empty tensor cloud holds no positions at all
+        xyz = np.zeros((0, 3), np.float32)
     if xyz is None or xyz.ndim != 2 or xyz.shape[1] != 3:
         raise DataError(f"{what}: no (N, 3) positions")
     n = len(xyz)
@@ -219,6 +221,8 @@ def _open3d_colors(colors: np.ndarray, what: str) -> np.ndarray:
         raise DataError(f"{what}: colors of shape {colors.shape}; expected (N, 3)")
     if colors.dtype == np.uint8:
         return colors[:, :3].copy()
+    if colors.dtype == np.uint16:  # 16-bit colours (a tensor cloud's, from a 16-bit source)
+        return (colors[:, :3] // 257).astype(np.uint8)
     c = colors[:, :3].astype(np.float64)
     if c.size and not (np.isfinite(c).all() and c.min() >= 0 and c.max() <= 1):
         lo, hi = np.nanmin(c), np.nanmax(c)

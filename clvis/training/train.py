@@ -1460,7 +1460,8 @@ def claim(out: Path, name: str, say: Callable[[str], None], what: str = "clvis t
         try:
             fd = os.open(path, flags, 0o644)
         except OSError as e:
-            raise OSError(e.errno, f"cannot write the model there ({e.strerror})", str(out)) from None
+            thing = "model" if what == "clvis train" else "card"
+            raise OSError(e.errno, f"cannot write the {thing} there ({e.strerror})", str(out)) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             mine = os.fstat(fd)

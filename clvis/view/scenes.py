@@ -248,7 +248,7 @@ def _budget(renderer: Any, budget: int) -> Any:
     from ..colormap import value_range
 
     g = renderer.gaussians
-    pick = np.sort(np.random.default_rng(0).permutation(g.n)[:budget])
+    pick = np.sort(np.random.default_rng(0).choice(g.n, budget, replace=False))
     sub = g.subset(pick)
     sub.scales = (sub.scales * np.float32(math.sqrt(g.n / budget))).astype(np.float32)
     tf = renderer.transfer_function

@@ -71,7 +71,7 @@ def test_comment_markers_among_the_points(tmp_path):
         ("a.xyz", "", "no point in the file"),
         ("b.xyz", "# only a comment\n", "no point in the file"),
         ("c.xyz", "1 2\n3 4\n", "2 columns; a point needs x, y, z"),
-        ("d.xyz", "1 2 3\n4 5 six\n", "malformed text point cloud"),
+        ("d.xyz", "1 2 3\n4 5 six\n", "line 2, column 3: expected a number, got 'six'"),
         (
             "e.xyz",
             "1 2 3\n4 5 6 7\n",
@@ -93,6 +93,8 @@ def test_comment_markers_among_the_points(tmp_path):
         ("i.xyz", "x y z r g b\n1 2 3 300000 0 0\n", "colours must be finite numbers"),
         ("j.xyz", "\0\1\2 binary", "binary data"),
         ("k.pts", "3\n1 2 3\n4 5 6\n", "its first line declares 3 points; the file holds 2"),
+        # numpy's row of values (0 first) past comments and blank lines: the file's line 6
+        ("o.xyz", "x y z\n1 2 3\n# c\n\n# d\n4 abc 6\n", "line 6, column 2: expected a number, got 'abc'"),
         (
             "l.pts",
             "2\n1 2 3 0 1 2 3\n4 5 6 0 1 2 3\n1\n7 8 9 0 1 2 3\n",

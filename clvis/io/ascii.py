@@ -145,6 +145,12 @@ def _read_ascii(path: Path) -> PointCloud:
         )
     except ValueError as e:
         changed = re.search(r"changed from (\d+) to (\d+) at row (\d+)", str(e))
+        value = re.search(r"could not convert string (.*) to float64 at row (\d+), column (\d+)", str(e))
+        if value is not None:  # numpy's row (0 first here) counts rows of values: the file's line said
+            at = _line_of_row(path, line_no, int(value.group(2)) + 1)
+            raise DataError(
+                f"{path}: line {at}, column {value.group(3)}: expected a number, got {value.group(1)[:40]}"
+            ) from None
         if changed is None:
             raise DataError(f"{path}: malformed text point cloud: {e}") from None
         # numpy's words ("use `usecols` to select a subset", a keyword of its own) and its row,

@@ -207,16 +207,29 @@ class Scene:
             return
         first.final, first.info = False, {**first.info, "preview": "budget"}
         yield first
-        if not superseded():
-            yield self._gaussian_frame(key, make, camera, w, h, False)
+        if superseded():
+            return
+        try:  # the whole set, given up between its bands once a newer view supersedes it
+            full = self._gaussian_frame(key, make, camera, w, h, False, superseded)
+        except _Superseded:
+            return
+        yield full
 
     def _gaussian_frame(
-        self, key: tuple, make: Callable[[], tuple[Any, int]], camera, w, h, interacting: bool = False
+        self,
+        key: tuple,
+        make: Callable[[], tuple[Any, int]],
+        camera,
+        w,
+        h,
+        interacting: bool = False,
+        superseded: Callable[[], bool] | None = None,
     ) -> Frame:
         """A gaussians mode's frame: the renderer of `key` (made by `make`,
         (GaussianRenderer, count), when the key is new: the previous one goes
         first), its render, and the build's time apart from the render's;
-        `interacting`, over GAUSS_BUDGET: the budget's subset."""
+        `interacting`, over GAUSS_BUDGET: the budget's subset. `superseded`:
+        asked after each band of rows (_Superseded raised when it says so)."""
         t0 = time.perf_counter()
         if key not in self._gauss:
             self._gauss = {}
@@ -228,7 +241,12 @@ class Scene:
                 self._gauss[(key, "budget")] = _budget(renderer, GAUSS_BUDGET)
             renderer, info = self._gauss[(key, "budget")], {"gaussians": GAUSS_BUDGET, "of": count}
         build = time.perf_counter() - t0
-        img = renderer.render(camera, w, h)
+
+        def band(done: int, total: int) -> None:
+            if superseded is not None and done < total and superseded():
+                raise _Superseded
+
+        img = renderer.render(camera, w, h, progress=band)
         times = {"render": time.perf_counter() - t0 - build}
         if build > 1e-3:
             times["build"] = build
@@ -236,6 +254,10 @@ class Scene:
 
     def close(self) -> None:
         """Let go of what the scene holds outside this process (a Dask scene: its cluster)."""
+
+
+class _Superseded(Exception):
+    """A frame given up part-way: a newer view superseded it (_gaussian_frames)."""
 
 
 def _budget(renderer: Any, budget: int) -> Any:

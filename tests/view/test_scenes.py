@@ -823,6 +823,16 @@ def test_a_gaussians_mode_draws_its_budget_while_the_camera_moves(monkeypatch):
     assert np.array_equal(preview.image, moving.image) and still.final
     (first,) = s.frames(cam, 96, 96, s.settings, lambda: True)  # superseded after it: no full frame
     assert "preview" in first.info
+    # superseded while the whole set is drawn (640x480: two bands of rows on a CPU): given up
+    # after its first band, not drawn to the end while a new drag waits (a 5 s frame at 16 M)
+    asked = []
+
+    def later():
+        asked.append(1)
+        return len(asked) > 1  # not yet after the preview; then, at the first band, yes
+
+    frames = list(s.frames(cam.with_aspect(640 / 480), 640, 480, s.settings, later))
+    assert [f.info.get("preview") for f in frames] == ["budget"] and len(asked) == 2
     bg = np.array(BACKGROUND)
     a, b = (f.image.astype(float) for f in (still, moving))
     ca, cb = ((np.abs(img - bg).sum(axis=2) > 30) for img in (a, b))

@@ -68,7 +68,8 @@ never made dense), and a threshold: the active voxels above it are drawn;
 mode iso (clvis iso FILE.vdb's isosurface: the grid made dense when the mode
 is first chosen, its inactive voxels the grid's background; --isovalue,
 default 0 for a level set, else Otsu's; refused in the page, gaussians still
-shown, where the dense volume would not fit in host memory).
+shown, where the dense volume would not fit in host memory), and the in-fill
+network on it as on a volume (iso+infill, infill|iso; --model-dir).
 
 Dask (--workers N: a LocalCluster of N one-thread processes started here and
 stopped with the viewer; --scheduler ADDRESS: a running cluster): the frames
@@ -279,18 +280,22 @@ def _vdb_scene(args: argparse.Namespace, path: Path) -> Scene:
             ("--dtype", args.dtype),
             ("--volume-index", args.volume_index),
             ("--array", args.array),
-            ("--model-dir", args.model_dir),
         )
         if v is not None
     ]
     if given:
         raise CliError(
             f"{' and '.join(given)}: not for a .vdb (its grid is drawn as Gaussians, mode gaussians, "
-            "or as its isosurface, mode iso: --isovalue, --rate; the threshold is set in the page)"
+            "or as its isosurface, modes iso, iso+infill, infill|iso: --isovalue, --rate, --model-dir; "
+            "the threshold is set in the page)"
         )
     grid = args.grid
     return SparseScene(
-        read_vdb(path, grid=grid), description=str(path), isovalue=args.isovalue, rate=args.rate or RATE
+        read_vdb(path, grid=grid),
+        description=str(path),
+        isovalue=args.isovalue,
+        rate=args.rate or RATE,
+        model_dir=args.model_dir,
     )
 
 
@@ -302,7 +307,8 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
 
     if args.file is not None and str(args.file).lower().endswith(".vdb"):
         raise CliError(
-            "--workers/--scheduler: a .vdb is drawn on one device (modes gaussians, iso); leave them out"
+            "--workers/--scheduler: a .vdb is drawn on one device (its Gaussians and isosurface modes); "
+            "leave them out"
         )
     if args.array is not None:
         raise CliError("--array: not on workers (they read .npy, .raw and NIfTI volumes)")

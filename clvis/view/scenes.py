@@ -72,6 +72,8 @@ _ACTIVE32 = np.array((70, 40, 75, 0), np.uint8).view(np.uint32)[0]  # iso: rays 
 _MAX_POINT_SIZE = 16
 #: a VolumeScene's modes
 VOLUME_MODES = ("iso", "iso+infill", "gaussians", "infill|iso")
+#: a SparseScene's modes of its grid made dense (a VolumeScene's but gaussians)
+_SPARSE_ISO_MODES = ("iso", "iso+infill", "infill|iso")
 SPLIT_COMPLETION = 0.85  # infill|iso: the fast side stops at this fraction of the rays
 # the held blocks the pool keeps (Scene._sized): about one largest page's
 # (3840x2160) still and interaction sizes, however many pages are open
@@ -810,7 +812,9 @@ class SparseScene(Scene):
     grid's background) into a :class:`VolumeScene` when the mode is first
     chosen, whose progressive iso mode draws it. A dense volume beyond host
     memory is refused then (a DeviceError: the page's status line shows it),
-    and the gaussians mode goes on as before."""
+    and the gaussians mode goes on as before. Modes ``iso+infill`` and
+    ``infill|iso``: the in-fill network on that isosurface, as a volume's
+    (VolumeScene)."""
 
     kind = "sparse volume"
 
@@ -823,9 +827,9 @@ class SparseScene(Scene):
         isovalue: float | None = None,
         rate: int = 8,
     ) -> None:
-        """model_dir: accepted for scene_for's sake (no network runs on a
-        sparse volume). isovalue, rate: the iso mode's first isovalue (None:
-        default_isovalue's) and ZFP bits per value (VolumeScene's)."""
+        """model_dir: where the in-fill network's model is (the iso modes';
+        None: the package's). isovalue, rate: the iso modes' first isovalue
+        (None: default_isovalue's) and ZFP bits per value (VolumeScene's)."""
         from .. import runtime
         from ..gauss.sparse import SparseVolume, default_isovalue
 
@@ -833,7 +837,7 @@ class SparseScene(Scene):
             raise TypeError(f"volume: expected a clvis.SparseVolume, got {type(volume).__name__}")
         if colormap not in COLORMAPS:
             raise ValueError(f"colormap: expected one of {', '.join(COLORMAPS)}, got {colormap!r}")
-        _model_dir(model_dir)
+        self.model_dir = _model_dir(model_dir)
         if volume.n_active == 0:
             raise DataError(f"{description}: no active voxel")
         isovalue = _isovalue(isovalue)
@@ -855,8 +859,8 @@ class SparseScene(Scene):
             f"{volume.n_active:,} active in {volume.n_leaves:,} leaves{kind}"
         )
         self._source = description
-        self.modes = ["gaussians", "iso"]
-        self.progressive = frozenset(("iso",))
+        self.modes = ["gaussians", *_SPARSE_ISO_MODES]
+        self.progressive = frozenset(("iso", "iso+infill"))
         if isovalue is None:
             isovalue = default_isovalue(volume)
         self.settings = {
@@ -889,19 +893,26 @@ class SparseScene(Scene):
                 self.settings["isovalue"],
                 self.rate,
                 description=self._source,
-                modes=["iso"],  # the dense copy goes once compressed on the device
+                model_dir=self.model_dir,
+                modes=list(
+                    _SPARSE_ISO_MODES
+                ),  # no gaussians: the dense copy goes once compressed on the device
             )
         return self._dense
 
     def frames(
         self, camera: Camera, width: int, height: int, settings: dict, superseded: Callable[[], bool]
     ) -> Iterator[Frame]:
-        if settings["mode"] == "iso":
+        if settings["mode"] in _SPARSE_ISO_MODES:
             dense = self._iso_scene()
             dense.kept_sizes = self.kept_sizes
             try:
                 yield from dense.frames(
-                    camera, width, height, {"mode": "iso", "isovalue": settings["isovalue"]}, superseded
+                    camera,
+                    width,
+                    height,
+                    {"mode": settings["mode"], "isovalue": settings["isovalue"]},
+                    superseded,
                 )
             finally:
                 if dense._trim:  # its pool gave blocks back: view_frames trims the heap after

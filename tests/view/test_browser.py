@@ -358,7 +358,7 @@ def test_an_openvdb_grid_in_mode_iso_and_its_refusal(browser, monkeypatch):
         b.call("Page.navigate", url=server.url)
         first = _settled(b, "gaussians")
         modes = b.js("[...document.getElementById('mode').options].map((o) => o.value)")
-        assert modes == ["gaussians", "iso"]
+        assert modes == ["gaussians", "iso", "iso+infill", "infill|iso"]
         assert b.js("document.getElementById('set-isovalue').value") == "0"
         b.choose("mode", "iso")
         h = _settled(b, "iso")

@@ -675,8 +675,8 @@ def test_an_openvdb_grid_shows_the_isosurface_clvis_iso_draws():
 
     bg = np.array(BACKGROUND)
     s = scene_for(clvis.read_vdb(VDB, grid="surface"), description=str(VDB))
-    assert isinstance(s, SparseScene) and s.modes == ["gaussians", "iso"]
-    assert s.settings["mode"] == "gaussians" and s.progressive == {"iso"}
+    assert isinstance(s, SparseScene) and s.modes == ["gaussians", "iso", "iso+infill", "infill|iso"]
+    assert s.settings["mode"] == "gaussians" and s.progressive == {"iso", "iso+infill"}
     assert s.description.endswith("12,790 active in 94 leaves, a level set")
     # the isovalue's range reaches the background, the level set's outside
     assert s.settings["isovalue"] == 0.0 and s.choices["isovalue"]["max"] == 2.0
@@ -688,7 +688,7 @@ def test_an_openvdb_grid_shows_the_isosurface_clvis_iso_draws():
     assert len(frames) == len(want) >= 2 and frames[-1].final and not frames[0].final
     for a, b in zip(frames, want, strict=True):
         np.testing.assert_array_equal(a.image, b.image)
-    assert s._dense is not None and s._dense.modes == ["iso"]
+    assert s._dense is not None and s._dense.modes == ["iso", "iso+infill", "infill|iso"]
     assert s._dense.volume is None  # the dense copy not kept on the host: compressed on the device
     drawn = (frames[-1].image != bg).any(axis=2).mean()
     assert 0.1 < drawn < 0.4, drawn  # the sphere (a quarter of the box's view), not the box
@@ -844,3 +844,25 @@ def test_a_gaussians_mode_draws_its_budget_while_the_camera_moves(monkeypatch):
     for interacting in (True, False):
         (whole,) = s.frames(cam, 96, 96, {**s.settings, "interacting": interacting}, lambda: False)
         assert whole.info == {"gaussians": 8000} and whole.final
+
+
+def test_an_openvdb_grids_isosurface_gets_the_infill_network_as_a_volumes_does():
+    """A .vdb grid's modes iso+infill and infill|iso: the in-fill network on
+    its isosurface, frame for frame a VolumeScene's of the same dense volume
+    (it offered iso alone)."""
+    from clvis.gauss import read_vdb_volume
+
+    sv = clvis.read_vdb(VDB)
+    s = scene_for(sv, description=str(VDB))
+    v = read_vdb_volume(VDB)[0]
+    ref = scene_for(v.data, spacing=v.spacing, origin=v.origin, isovalue=s.settings["isovalue"], rate=s.rate)
+    cam = Orbit(s.lo, s.hi).camera(48 / 32)
+    for mode in ("iso+infill", "infill|iso"):
+        s.update({"mode": mode})
+        ref.update({"mode": mode})
+        got = list(s.frames(cam, 48, 32, s.settings, lambda: False))
+        want = list(ref.frames(cam, 48, 32, ref.settings, lambda: False))
+        assert len(got) == len(want) >= 1
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a.image, b.image)
+        assert got[-1].image.std() > 0

@@ -894,15 +894,22 @@ def fit_camera(
 
 
 def axis_camera(
-    kind: str, bounds_min: npt.ArrayLike, bounds_max: npt.ArrayLike, aspect: float = 1.0
+    kind: str,
+    bounds_min: npt.ArrayLike,
+    bounds_max: npt.ArrayLike,
+    aspect: float = 1.0,
+    anatomical: bool = False,
 ) -> Camera:
     """An orthographic camera along an axis (`kind`, a key of AXIS_VIEWS)
     framing the box: top looks down (north, +y, up), front looks along +y,
-    side along -x."""
+    side along -x. `anatomical` (a scan in RAS+ order, +y anterior): front
+    looks along -y, at the face (along +y it saw the back of the head)."""
     if kind not in AXIS_VIEWS:
         raise ValueError(f"kind: expected one of {', '.join(AXIS_VIEWS)}, got {kind!r}")
     lo, hi = np.asarray(bounds_min, np.float64), np.asarray(bounds_max, np.float64)
     direction, up = (np.asarray(v, np.float64) for v in AXIS_VIEWS[kind])
+    if anatomical and kind == "front":
+        direction = -direction
     right = np.cross(direction, up)
     ext = hi - lo
     width, height, depth = (float(np.abs(v) @ ext) for v in (right, up, direction))

@@ -440,6 +440,8 @@ views (--view):
   fit           the whole scene from an oblique direction, perspective (default)
   top           orthographic, looking down, north (+y) up
   front, side   orthographic, looking along +y / along -x, z up
+                (a NIfTI, MGH or Analyze scan, RAS+: front looks along -y,
+                at the face, and fit from the front too)
   hemisphere:K  the K-th of the 128 NARVis hemisphere cameras (K = 0..127)
   grid:K        the K-th of the 384 NARVis grid cameras, a 4 x 4 grid (K = 0..383)
 --eye, --target and --up replace that part of the view's camera (the target
@@ -580,7 +582,7 @@ def camera_from_args(args, lo, hi, width: int, height: int, points=None):
                 points = box_corners(lo, hi)
             cam = fit_camera(points, lo, hi, direction=fit.direction, fov_y=fov_y, aspect=aspect)
         elif kind in AXIS_VIEWS:
-            cam = axis_camera(kind, lo, hi, aspect)
+            cam = axis_camera(kind, lo, hi, aspect, anatomical=getattr(args, "anatomical", False))
         else:
             sampler = hemisphere_cameras if kind == "hemisphere" else grid_cameras
             sampled = next(itertools.islice(sampler(lo, hi, fov_y=fov_y, aspect=aspect), k, None), None)
@@ -750,7 +752,22 @@ def read_volume_of(args, path):
         array=array,
     )
     spacing = v.spacing if args.spacing is None else tuple(reversed(args.spacing))
+    if v.affine is not None:
+        face_the_scan(args)
     return dataclasses.replace(v, spacing=tuple(float(s) for s in spacing))
+
+
+def face_the_scan(args) -> None:
+    """Views of a scan read in RAS+ order (a NIfTI, MGH or Analyze file: +y
+    anterior): the default view's direction with its y reversed, and --view
+    front along -y, so both look at the face (they saw the back of the head);
+    set on `args` (args.fit_view, args.anatomical) once the file is read."""
+    fit = getattr(args, "fit_view", None)
+    if not getattr(args, "anatomical", False):
+        if fit is not None:  # (clvis view has no --view: its Orbit turns, VolumeScene's anatomical)
+            d = fit.direction
+            args.fit_view = FitView(direction=(d[0], -d[1], d[2]), fov_y=fit.fov_y)
+        args.anatomical = True
 
 
 def check_iso_volume(data: np.ndarray, source: str) -> tuple[np.ndarray, str | None]:

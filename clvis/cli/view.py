@@ -224,7 +224,14 @@ def load_scene(args: argparse.Namespace) -> Scene:
             if nan is not None:
                 print(f"clvis view: {path}: {nan}", file=sys.stderr)
             return VolumeScene(
-                data, spacing, origin, iso, args.rate or RATE, description=str(path), model_dir=args.model_dir
+                data,
+                spacing,
+                origin,
+                iso,
+                args.rate or RATE,
+                description=str(path),
+                model_dir=args.model_dir,
+                anatomical=getattr(args, "anatomical", False),  # read_volume_file: a scan, its face first
             )
         from .. import read_points
 

@@ -60,7 +60,7 @@ def measure(
     pw, ph = max(16, round(width * scale)), max(16, round(height * scale))
     if interactive:
         width, height = pw, ph
-    orbit = Orbit(scene.lo, scene.hi, points=scene.fit_points)
+    orbit = Orbit(scene.lo, scene.hi, azimuth=scene.home_azimuth, points=scene.fit_points)
     orbit.fit(width / height)
 
     def view():

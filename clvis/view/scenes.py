@@ -108,6 +108,9 @@ class Scene:
     lo: np.ndarray
     hi: np.ndarray
     fit_points: np.ndarray | None = None  # what the first view frames (None: the box)
+    #: the first view's azimuth (Orbit's, degrees): from -x, -y; a scan in RAS+
+    #: order (+y anterior) is seen from the front instead (VolumeScene anatomical)
+    home_azimuth = -115.0
     #: where the scene's coordinates start in the file's (a point cloud's
     #: origin); the camera the page shows and takes is in the file's
     file_origin: np.ndarray = np.zeros(3)
@@ -659,12 +662,15 @@ class VolumeScene(Scene):
         model_dir: Any = None,
         *,
         modes: Any = None,
+        anatomical: bool = False,
     ) -> None:
         """model_dir: where the in-fill network's model is (clvis train --out;
         None: the package's), loaded when an in-fill mode is first chosen.
         modes: the modes offered, some of VOLUME_MODES in their order (None:
         all); without gaussians the volume is not kept on the host (the
-        compressed copy on the device draws the others)."""
+        compressed copy on the device draws the others). anatomical: a scan
+        in RAS+ order (+y anterior: read_volume's NIfTI, MGH, Analyze), first
+        seen from the front (its face), not from behind."""
         from .. import IsoRenderer
 
         if modes is None:
@@ -673,6 +679,8 @@ class VolumeScene(Scene):
             raise ValueError(f"modes: expected some of {VOLUME_MODES}, got {modes!r}")
 
         self.model_dir = _model_dir(model_dir)
+        if anatomical:
+            self.home_azimuth = 115.0  # from -x, +y: the face, as the commands' default view
 
         data = np.asarray(volume)
         if data.ndim != 3:
@@ -1167,6 +1175,7 @@ def scene_for(obj: Any, **kwargs: Any) -> Scene:
     if isinstance(obj, Volume):  # read_volume's: its spacing and origin unless given
         kwargs.setdefault("spacing", obj.spacing)
         kwargs.setdefault("origin", obj.origin)
+        kwargs.setdefault("anatomical", obj.affine is not None)  # a scan in RAS+ order: its face first
         if obj.path is not None:
             kwargs.setdefault("description", str(obj.path))
         return VolumeScene(obj.data, **kwargs)

@@ -156,7 +156,7 @@ class View:
     view, the one ``ViewServer.handle`` without a page changes)."""
 
     def __init__(self, scene: Scene, size: tuple[int, int], sock: Any = None) -> None:
-        self.orbit = Orbit(scene.lo, scene.hi, points=scene.fit_points)
+        self.orbit = Orbit(scene.lo, scene.hi, azimuth=scene.home_azimuth, points=scene.fit_points)
         self.size = size
         self.orbit.fit(size[0] / size[1])
         self.interacting = False

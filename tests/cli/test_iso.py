@@ -334,3 +334,37 @@ def test_an_earlier_runs_infill_left_in_the_folder_is_named(tmp_path, capsys):
     assert cli.main(base) == 0
     err = capsys.readouterr().err
     assert f"clvis iso: note: {tmp_path} also holds iso-infill.png from an earlier run" in err
+
+
+def test_a_scan_in_ras_order_is_seen_from_the_front(tmp_path, monkeypatch, capsys):
+    """A NIfTI scan is read in RAS+ order (+y anterior): the default view and
+    --view front looked along +y, at the back of the head. They now look at
+    its face (the default view's y reversed, front along -y), in clvis iso,
+    clvis gauss and the viewer's first view; the same samples as a .npy (no
+    anatomy known) keep the generic views."""
+    nibabel = pytest.importorskip("nibabel")
+    import clvis
+    from clvis.cli import _common
+    from clvis.cli import iso as iso_cmd
+
+    i, j, k = np.mgrid[:24, :24, :24].astype(np.float32) - 11.5
+    head = ((i / 8) ** 2 + (j / 10) ** 2 + (k / 11) ** 2 < 1).astype(np.float32) * 100
+    nibabel.save(nibabel.Nifti1Image(head, np.diag([2.0, 2.0, 2.0, 1.0])), tmp_path / "head.nii")
+    np.save(tmp_path / "head.npy", np.ascontiguousarray(head.transpose(2, 1, 0)))  # [z, y, x]
+    seen = []
+    real = _common.camera_from_args
+
+    def spy(args, lo, hi, *a, **kw):
+        cam = real(args, lo, hi, *a, **kw)
+        seen.append(float(cam.eye[1] - 0.5 * (lo[1] + hi[1])))  # the eye's side along y
+        return cam
+
+    monkeypatch.setattr(iso_cmd, "camera_from_args", spy)
+    for name, view in [(f, v) for f in ("head.nii", "head.npy") for v in ([], ["--view", "front"])]:
+        argv = ["iso", str(tmp_path / name), "--isovalue", "50", "--size", "32x32", *view]
+        assert cli.main([*argv, "--out", str(tmp_path / "o")]) == 0, capsys.readouterr().err
+    assert seen[0] > 0 and seen[1] > 0  # the scan: from the front (anterior, +y)
+    assert seen[2] < 0 and seen[3] < 0  # an array: from -y, as before
+    scene = clvis.view.scene_for(clvis.read_volume(tmp_path / "head.nii"))  # the viewer: its face first
+    assert scene.home_azimuth == 115.0
+    assert clvis.view.scene_for(np.load(tmp_path / "head.npy")).home_azimuth == -115.0

@@ -86,6 +86,18 @@ def test_point_files_of_every_reader_are_points(suffix, tmp_path):
     assert scene.kind == "points"
 
 
+def test_a_scan_is_first_seen_from_the_front(tmp_path):
+    """clvis view FILE.nii: a scan in RAS+ order (+y anterior) is first seen
+    from the front (azimuth 115: from +y), not from behind (-115)."""
+    nibabel = pytest.importorskip("nibabel")
+    v = np.zeros((12, 12, 12), np.float32)
+    v[3:9, 3:9, 3:9] = 1
+    nibabel.save(nibabel.Nifti1Image(v, np.eye(4)), tmp_path / "s.nii")
+    np.save(tmp_path / "s.npy", v)
+    assert view_cmd.load_scene(_args(str(tmp_path / "s.nii"))).home_azimuth == 115.0
+    assert view_cmd.load_scene(_args(str(tmp_path / "s.npy"))).home_azimuth == -115.0
+
+
 def test_a_file_of_neither_kind_is_named_as_such(tmp_path):
     """A file neither a volume nor points was "unknown volume format
     (expected .raw, ...)": the viewer takes both, and says both; a triangle

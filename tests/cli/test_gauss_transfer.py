@@ -115,7 +115,8 @@ def test_anatomical_mri(tmp_path, capsys):
         covered = np.abs(a - [24, 24, 28]).sum(axis=2) > 30
         return a[covered].sum(axis=1).std()
 
-    assert contrast(tmp_path / "new" / "high.png") > 1.5 * contrast(tmp_path / "old" / "high.png")
+    # 1.39x from the front, where a scan is now seen from (over 1.5x from behind, as it was)
+    assert contrast(tmp_path / "new" / "high.png") > 1.3 * contrast(tmp_path / "old" / "high.png")
 
 
 @pytest.mark.parametrize(

@@ -42,6 +42,7 @@ from ._common import (
     colormap_name,
     count,
     distributed_run,
+    face_the_scan,
     finite_range,
     fit_box,
     grid_arg,
@@ -499,6 +500,10 @@ def _run_distributed(args) -> int:
         )
         if args.spacing is not None:
             spacing = tuple(reversed(args.spacing))
+        from ..io.volumes import NIBABEL_FORMATS
+
+        if str(args.file).lower().endswith(NIBABEL_FORMATS):  # read in RAS+ order on the workers too
+            face_the_scan(args)
         kw = {"shape": args.shape, "dtype": args.dtype, "volume_index": args.volume_index}
         if not str(args.file).lower().endswith(".raw"):
             kw = {"volume_index": args.volume_index} if args.volume_index is not None else {}

@@ -388,7 +388,7 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
         what, kw = f"the embedded {name}", {}
         vrange = (float(np.nanmin(d["volume"])), float(np.nanmax(d["volume"])))
     try:
-        return DaskVolumeScene(
+        scene = DaskVolumeScene(
             source,
             client,
             isovalue=iso,
@@ -401,6 +401,11 @@ def load_dask_scene(args: argparse.Namespace) -> Scene:
             **common,
             **kw,
         )
+        from ..io.volumes import NIBABEL_FORMATS
+
+        if isinstance(source, str) and source.lower().endswith(NIBABEL_FORMATS):
+            scene.home_azimuth = 115.0  # a scan, read in RAS+ order on the workers too: its face first
+        return scene
     except ClvisError:
         raise
     except OSError as e:

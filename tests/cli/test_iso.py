@@ -365,6 +365,10 @@ def test_a_scan_in_ras_order_is_seen_from_the_front(tmp_path, monkeypatch, capsy
         assert cli.main([*argv, "--out", str(tmp_path / "o")]) == 0, capsys.readouterr().err
     assert seen[0] > 0 and seen[1] > 0  # the scan: from the front (anterior, +y)
     assert seen[2] < 0 and seen[3] < 0  # an array: from -y, as before
+    pytest.importorskip("distributed", reason="the distributed extra is not installed")
+    argv = ["iso", str(tmp_path / "head.nii"), "--isovalue", "50", "--size", "32x32", "--workers", "1"]
+    assert cli.main([*argv, "--out", str(tmp_path / "w")]) == 0, capsys.readouterr().err
+    assert seen[4] > 0  # on workers too (they read it in RAS+ order as well)
     scene = clvis.view.scene_for(clvis.read_volume(tmp_path / "head.nii"))  # the viewer: its face first
     assert scene.home_azimuth == 115.0
     assert clvis.view.scene_for(np.load(tmp_path / "head.npy")).home_azimuth == -115.0

@@ -96,6 +96,12 @@ def test_a_scan_is_first_seen_from_the_front(tmp_path):
     np.save(tmp_path / "s.npy", v)
     assert view_cmd.load_scene(_args(str(tmp_path / "s.nii"))).home_azimuth == 115.0
     assert view_cmd.load_scene(_args(str(tmp_path / "s.npy"))).home_azimuth == -115.0
+    pytest.importorskip("distributed", reason="the distributed extra is not installed")
+    scene = view_cmd.load_dask_scene(_args(str(tmp_path / "s.nii"), "--workers", "1", "--isovalue", "0.5"))
+    try:  # on workers (they read it in RAS+ order too)
+        assert scene.home_azimuth == 115.0
+    finally:
+        scene.close()
 
 
 def test_a_file_of_neither_kind_is_named_as_such(tmp_path):

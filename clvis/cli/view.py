@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import ClvisError
+from ..errors import ClvisError, DeviceError
 from ..io.points import POINT_SUFFIXES
 from ..io.volumes import otsu_level
 from ._common import (
@@ -434,7 +434,15 @@ def _measure(scene, args) -> int:
     )
     for mode in modes:
         for interactive in (True, False):
-            r = measure(scene, w, h, mode, interactive=interactive)
+            try:
+                r = measure(scene, w, h, mode, interactive=interactive)
+            except DeviceError as e:
+                if args.measure != "all":
+                    raise
+                # every mode measured: one the data is too large for (a .vdb grid's
+                # isosurface, made dense) is said, the others measured (it stopped them)
+                print(f"{mode:{mw}} refused: {e}", flush=True)
+                break
             stages = " / ".join(f"{k} {v:.1f}" for k, v in r["stages_ms"].items())
             if "inference ms" in r["info"]:
                 stages += f" (inference {r['info']['inference ms']:.1f})"

@@ -254,4 +254,24 @@ def test_view_vdb(capsys):
         err = capsys.readouterr().err
         assert msg in err and len(err.strip().splitlines()) == 1, err
     assert cli.main(["view", str(DATA / "pyvista_ant.ply"), "--grid", "x", "--measure"]) == 2
+    capsys.readouterr()
     assert "--grid picks a grid of a .vdb file" in capsys.readouterr().err
+
+
+def test_measure_of_every_mode_goes_on_past_one_the_data_is_too_large_for(monkeypatch, capsys):
+    """clvis view big.vdb --measure (every mode): a grid too large to make dense
+    refused its isosurface modes and stopped the measure, the Gaussians
+    unmeasured; each refused mode is now a line and the others are measured.
+    Named alone, the refused mode is the command's error, as before."""
+    from clvis import runtime
+
+    vdb = str(DATA / "openvdb_small.vdb")
+    monkeypatch.setattr(runtime, "host_available_bytes", lambda: 100_000)
+    assert cli.main(["view", vdb, "--measure", "--size", "48x32"]) == 0
+    out = capsys.readouterr().out
+    rows = {ln.split()[0]: ln for ln in out.splitlines()[2:]}
+    assert "refused" not in rows["gaussians"]
+    for mode in ("iso", "iso+infill", "infill|iso"):
+        assert rows[mode].split()[1] == "refused:" and "host memory" in rows[mode], rows[mode]
+    assert cli.main(["view", vdb, "--measure", "iso", "--size", "48x32"]) == 2
+    assert "host memory" in capsys.readouterr().err

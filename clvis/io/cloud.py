@@ -285,6 +285,14 @@ def _bulk_box(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
+def component_columns(name: str, a: np.ndarray) -> dict[str, np.ndarray]:
+    """The attributes of an (N, C) per-point array of several components (a
+    VTK array, a LAS extra-bytes field, an Open3D tensor attribute): one a
+    component, named NAME_x, NAME_y, NAME_z for three, else NAME_0, NAME_1..."""
+    suffixes = "xyz" if a.shape[1] == 3 else [str(j) for j in range(a.shape[1])]
+    return {f"{name}_{s}": np.ascontiguousarray(a[:, j]) for j, s in enumerate(suffixes)}
+
+
 def relative_positions(xyz: Any, origin: Any = None) -> tuple[Any, Any]:
     """(positions, origin) of a file's (N, 3) positions: stored wider than
     float32 (float64, int64), with no origin of their own and too far from

@@ -11,7 +11,7 @@ from typing import BinaryIO
 import numpy as np
 
 from ..errors import DataError
-from .cloud import PointCloud, _cloud, bulk_origin
+from .cloud import PointCloud, _cloud, bulk_origin, component_columns
 from .npy import _size
 
 # 10^4 (50 M points in 1.5 kB) is refused before anything is decompressed.
@@ -426,8 +426,7 @@ def _read_las(path: Path) -> PointCloud:
         a = np.asarray(las[name])
         if a.ndim == 2:  # an array-valued extra bytes field (3 colours, a normal): one attribute a value
             # (they were dropped without a word), named as a VTK array's components are
-            suffixes = "xyz" if a.shape[1] == 3 else [str(j) for j in range(a.shape[1])]
-            attributes.update({f"{name}_{s}": np.ascontiguousarray(a[:, j]) for j, s in enumerate(suffixes)})
+            attributes.update(component_columns(name, a))
             continue
         if a.ndim != 1:
             continue

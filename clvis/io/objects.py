@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from .cloud import PointCloud, _cloud, relative_positions
+from .cloud import PointCloud, _cloud, component_columns, relative_positions
 from .volumes import Volume
 
 __all__ = ["from_open3d", "from_vtk", "is_open3d_geometry", "is_vtk_dataset"]
@@ -209,8 +209,7 @@ def from_open3d(geometry: Any) -> PointCloud:
         if a.shape[1] == 1:
             fields["attributes"][name] = a[:, 0]
         else:
-            suffixes = "xyz" if a.shape[1] == 3 else [str(j) for j in range(a.shape[1])]
-            fields["attributes"].update({f"{name}_{s}": a[:, j] for j, s in enumerate(suffixes)})
+            fields["attributes"].update(component_columns(name, a))
     return _cloud(what, **fields)
 
 

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError
-from .cloud import PointCloud, _cloud, relative_positions
+from .cloud import PointCloud, _cloud, component_columns, relative_positions
 from .vtk import (
     _VTI_TYPES,
     POINT_DATASETS,
@@ -276,8 +276,7 @@ def cloud_of(data: Any, what: Any, ns: Any) -> PointCloud:
         elif comps == 1:
             fields["attributes"][name] = a[:, 0]
         else:
-            suffixes = "xyz" if comps == 3 else [str(j) for j in range(comps)]
-            fields["attributes"].update({f"{name}_{s}": a[:, j] for j, s in enumerate(suffixes)})
+            fields["attributes"].update(component_columns(name, a))
     return _cloud(what, **fields)
 
 

@@ -224,11 +224,9 @@ def gaussians_from_points(
                 f"cloud: expected a PointCloud or (N, 3) positions, got a path ({cloud!r}): "
                 "clvis.read_points reads it"
             )
-        from ..io.objects import foreign_hint
+        from ..io.objects import refuse_foreign
 
-        hint = foreign_hint(cloud, "PointCloud")
-        if hint is not None:
-            raise TypeError(f"cloud: expected a PointCloud or (N, 3) positions, got {hint}")
+        refuse_foreign(cloud, "PointCloud", "cloud: expected a PointCloud or (N, 3) positions")
         positions = real_array("cloud", cloud)  # complex, bool, object and strings refused
         if positions.ndim != 2 or positions.shape[1:] != (3,):
             raise ValueError(f"cloud: expected a PointCloud or (N, 3) positions, got shape {positions.shape}")

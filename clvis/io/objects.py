@@ -124,18 +124,20 @@ def _scalar_array(data: Any, name: str | None, n: int) -> Any:
     return arr
 
 
-def foreign_hint(obj: Any, what: str) -> str | None:
-    """Where a renderer was given another library's object (a pyvista/VTK
-    dataset, an Open3D geometry) for `what` ("PointCloud" or "Volume"): the
-    words naming it and the call that converts it, for its TypeError (numpy
-    made an object array of it: "expected numbers, got dtype object"); None
-    for anything else."""
+def refuse_foreign(obj: Any, what: str, expected: str) -> None:
+    """A renderer's argument check: where it was given another library's
+    object (a pyvista/VTK dataset, an Open3D geometry) for `what`
+    ("PointCloud" or "Volume"), a TypeError "`expected`, got" the words naming
+    it and the call that converts it (numpy made an object array of it:
+    "expected numbers, got dtype object"); nothing for anything else."""
     if is_vtk_dataset(obj):
         kind = obj.GetClassName()
-        return f"a VTK dataset ({kind}: a pyvista mesh or image): clvis.from_vtk(it) gives the {what}"
-    if is_open3d_geometry(obj):
-        return f"an Open3D {type(obj).__name__}: clvis.from_open3d(it) gives the PointCloud"
-    return None
+        hint = f"a VTK dataset ({kind}: a pyvista mesh or image): clvis.from_vtk(it) gives the {what}"
+    elif is_open3d_geometry(obj):
+        hint = f"an Open3D {type(obj).__name__}: clvis.from_open3d(it) gives the PointCloud"
+    else:
+        return
+    raise TypeError(f"{expected}, got {hint}")
 
 
 def is_open3d_geometry(obj: Any) -> bool:

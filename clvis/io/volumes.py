@@ -146,11 +146,9 @@ def volume_parts(
             f"volume: expected an array or a clvis.Volume, got a path ({volume!r}): "
             "clvis.read_volume reads it"
         )
-    from .objects import foreign_hint
+    from .objects import refuse_foreign
 
-    hint = foreign_hint(volume, "Volume")
-    if hint is not None:
-        raise TypeError(f"volume: expected an array or a clvis.Volume, got {hint}")
+    refuse_foreign(volume, "Volume", "volume: expected an array or a clvis.Volume")
     return (
         volume,
         (1.0, 1.0, 1.0) if spacing is None else spacing,

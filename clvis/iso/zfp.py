@@ -221,11 +221,9 @@ def compress(volume: Any, rate: int) -> ZfpVolume:
         v = v.data
     if isinstance(v, (str, bytes)) or v is None:
         raise TypeError(f"volume: expected an array, got {type(v).__name__}")
-    from ..io.objects import foreign_hint
+    from ..io.objects import refuse_foreign
 
-    hint = foreign_hint(v, "Volume")
-    if hint is not None:
-        raise TypeError(f"volume: expected an array or a clvis.Volume, got {hint}")
+    refuse_foreign(v, "Volume", "volume: expected an array or a clvis.Volume")
     v = np.asarray(v)
     if v.dtype.kind not in "iuf":
         raise TypeError(f"volume: dtype {v.dtype} is not supported; expected floats or integers")

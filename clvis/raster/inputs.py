@@ -142,11 +142,11 @@ class RasterInput:
                 f"cloud_or_positions: expected a PointCloud or an (N, 3) array, got a path ({positions!r}): "
                 "clvis.read_points reads it"
             )
-        from ..io.objects import foreign_hint
+        from ..io.objects import refuse_foreign
 
-        hint = foreign_hint(positions, "PointCloud")
-        if hint is not None:
-            raise TypeError(f"cloud_or_positions: expected a PointCloud or an (N, 3) array, got {hint}")
+        refuse_foreign(
+            positions, "PointCloud", "cloud_or_positions: expected a PointCloud or an (N, 3) array"
+        )
         if not is_device(positions) and not isinstance(positions, np.ndarray):
             positions = np.asarray(positions)
         if not is_device(positions) and positions.dtype.kind in "fiu" and positions.dtype != np.float32:

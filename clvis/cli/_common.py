@@ -770,12 +770,12 @@ def face_the_scan(args) -> None:
         args.anatomical = True
 
 
-def check_iso_volume(data: np.ndarray, source: str) -> tuple[np.ndarray, str | None]:
-    """The volume the isosurface renderer is given, and a line saying what
-    was changed in it (None: nothing). A CliError naming `source`, the count
-    and the first sample when the volume holds an infinite sample: the
-    renderer compresses it with ZFP's fixed-rate mode, which cannot keep them
-    (the library's message named no file); and when an axis has a single
+def check_iso_volume(data: np.ndarray, source: str, prog: str) -> np.ndarray:
+    """The volume the isosurface renderer is given; what was changed in it
+    is said on stderr (`prog`: the command's name, `source` the file). A
+    CliError naming `source`, the count and the first sample when the
+    volume holds an infinite sample: the renderer compresses it with ZFP's
+    fixed-rate mode, which cannot keep them (the library's message named no file); and when an axis has a single
     sample (a slice: no surface to find between samples). NaN samples (a
     masked scan's outside: SPM and nilearn write them) are drawn as empty:
     set, in a copy, to a value below every finite sample, so that every
@@ -789,7 +789,7 @@ def check_iso_volume(data: np.ndarray, source: str) -> tuple[np.ndarray, str | N
         )
     bad = ~np.isfinite(data)
     if not bad.any():
-        return data, None
+        return data
     nan = np.isnan(data)
     if not (bad & ~nan).any():  # NaN only: a mask's outside
         lo, hi = finite_range(data, source)
@@ -800,11 +800,12 @@ def check_iso_volume(data: np.ndarray, source: str) -> tuple[np.ndarray, str | N
         if not fill < np.float32(lo):  # a range of 0, or too small for float32 to step by
             fill = np.nextafter(np.float32(lo), np.float32(-np.inf))
         if np.isfinite(fill):  # (-inf: the lowest float32, nothing below it: refused as before)
-            line = (
-                f"{int(nan.sum()):,} NaN samples (a mask's outside) drawn as empty: set to "
-                f"{float(fill):.6g}, below every sample"
+            print(
+                f"{prog}: {source}: {int(nan.sum()):,} NaN samples (a mask's outside) drawn as empty: "
+                f"set to {float(fill):.6g}, below every sample",
+                file=sys.stderr,
             )
-            return np.where(nan, fill, data).astype(np.float32, copy=False), line
+            return np.where(nan, fill, data).astype(np.float32, copy=False)
     first = np.unravel_index(int(np.argmax(bad)), data.shape)  # no list of every bad sample
     where = ", ".join(str(int(i)) for i in first)
     raise CliError(

@@ -278,10 +278,8 @@ def _load(args):
         data = np.asarray(v.data, np.float32)
         value_range = finite_range(data, str(path))
         level = otsu_level(data)  # of the finite samples, before any NaN is set
-        data, nan = check_iso_volume(data, str(path))
+        data = check_iso_volume(data, str(path), "clvis iso")
         source = str(path) if v.array is None else f"{path} (array {v.array})"
-        if nan is not None:
-            print(f"clvis iso: {path}: {nan}", file=sys.stderr)
         return data, v.spacing, v.origin, level, value_range, source, _world(v)
     if any(getattr(args, k) is not None for k in ("shape", "dtype", "volume_index", "array")):
         raise CliError("--shape, --dtype, --volume-index and --array are for a volume FILE")
@@ -322,9 +320,7 @@ def _load_vdb(args, path: Path):
     if data.size == 0:
         raise CliError(f"{path}: grid {v.array!r} has no active voxel")
     spacing = v.spacing if args.spacing is None else tuple(float(s) for s in reversed(args.spacing))
-    data, nan = check_iso_volume(data, str(path))
-    if nan is not None:
-        print(f"clvis iso: {path}: {nan}", file=sys.stderr)
+    data = check_iso_volume(data, str(path), "clvis iso")
     kind = f", a {grid_class}" if grid_class else ""
     return (
         data,

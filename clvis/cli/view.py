@@ -220,9 +220,7 @@ def load_scene(args: argparse.Namespace) -> Scene:
         if volume:
             data, spacing, origin = read_volume_file(args, path)
             iso = args.isovalue if args.isovalue is not None else otsu_level(data)  # of the finite ones
-            data, nan = check_iso_volume(data, str(path))
-            if nan is not None:
-                print(f"clvis view: {path}: {nan}", file=sys.stderr)
+            data = check_iso_volume(data, str(path), "clvis view")
             return VolumeScene(
                 data,
                 spacing,

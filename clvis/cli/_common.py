@@ -775,7 +775,8 @@ def check_iso_volume(data: np.ndarray, source: str, prog: str) -> np.ndarray:
     is said on stderr (`prog`: the command's name, `source` the file). A
     CliError naming `source`, the count and the first sample when the
     volume holds an infinite sample: the renderer compresses it with ZFP's
-    fixed-rate mode, which cannot keep them (the library's message named no file); and when an axis has a single
+    fixed-rate mode, which cannot keep them (the library's message named
+    no file); and when an axis has a single
     sample (a slice: no surface to find between samples). NaN samples (a
     masked scan's outside: SPM and nilearn write them) are drawn as empty:
     set, in a copy, to a value below every finite sample, so that every

@@ -73,7 +73,7 @@ _MAX_POINT_SIZE = 16
 #: a VolumeScene's modes
 VOLUME_MODES = ("iso", "iso+infill", "gaussians", "infill|iso")
 #: a SparseScene's modes of its grid made dense (a VolumeScene's but gaussians)
-_SPARSE_ISO_MODES = ("iso", "iso+infill", "infill|iso")
+_SPARSE_ISO_MODES = tuple(m for m in VOLUME_MODES if m != "gaussians")
 SPLIT_COMPLETION = 0.85  # infill|iso: the fast side stops at this fraction of the rays
 # the held blocks the pool keeps (Scene._sized): about one largest page's
 # (3840x2160) still and interaction sizes, however many pages are open
@@ -902,9 +902,8 @@ class SparseScene(Scene):
                 self.rate,
                 description=self._source,
                 model_dir=self.model_dir,
-                modes=list(
-                    _SPARSE_ISO_MODES
-                ),  # no gaussians: the dense copy goes once compressed on the device
+                # no gaussians: the dense copy goes once, compressed, on the device
+                modes=list(_SPARSE_ISO_MODES),
             )
         return self._dense
 
